@@ -1,0 +1,573 @@
+"""RINEX 2.10/2.11 and 3.02-3.05 readers for GPS navigation and observation files.
+
+Why an own parser: the subset needed here (GPS LNAV records, the L1 C/A
+pseudorange/phase/Doppler/C/N0 columns) is small; a dependency such as
+georinex pulls in xarray/pandas and parses everything; and we want exact
+control over errors.  Every problem in a file raises :class:`RinexError`,
+whose message names the file, the 1-based line number and what was wrong;
+no IndexError or bare ValueError escapes for a malformed file.
+
+Times are returned as GPS seconds since 1980-01-06 (``t_gps_s``, see
+:mod:`insnav.gnss.gpstime`) and as (GPS week, seconds of week).  Navigation
+record epochs (``toc``) of GPS records and observation epochs are taken to be
+GPS time, as the RINEX standard specifies for GPS and for files whose time
+system is GPS (the only case supported; other time systems raise).
+
+References
+----------
+W. Gurtner, L. Estey, *RINEX: The Receiver Independent Exchange Format*,
+versions 2.11 (2007) and 3.05 (IGS/RTCM RINEX WG, 2020).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .ephemeris import DEFAULT_FIT_S, Ephemerides
+from .gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar, week_tow
+
+__all__ = ["RinexError", "NavData", "ObsData", "read_rinex_nav", "read_rinex_obs"]
+
+
+class RinexError(ValueError):
+    """A malformed or unsupported RINEX file.
+
+    Attributes
+    ----------
+    path : str
+    line : int or None
+        1-based line number of the problem (None if not tied to a line).
+    """
+
+    def __init__(self, path, line, what):
+        self.path = str(path)
+        self.line = line
+        self.what = what
+        where = f"{self.path}, line {line}" if line is not None else self.path
+        super().__init__(f"{where}: {what}")
+
+
+class _Lines:
+    """Line source that remembers the 1-based line number (for error messages)."""
+
+    def __init__(self, path):
+        self.path = os.fspath(path)
+        try:
+            with open(self.path, "r", encoding="ascii", errors="replace") as fh:
+                self.lines = fh.read().splitlines()
+        except OSError as exc:
+            raise RinexError(self.path, None, f"cannot read file ({exc.strerror})") from exc
+        self.i = 0  # index of the next line
+
+    def next(self, what="a record line"):
+        if self.i >= len(self.lines):
+            raise RinexError(self.path, len(self.lines) + 1 if self.lines else 1,
+                             f"unexpected end of file while reading {what}")
+        line = self.lines[self.i]
+        self.i += 1
+        return line
+
+    def eof(self):
+        return self.i >= len(self.lines)
+
+    @property
+    def lineno(self):
+        """1-based number of the line last returned by :meth:`next`."""
+        return self.i
+
+    def error(self, what, lineno=None):
+        return RinexError(self.path, self.lineno if lineno is None else lineno, what)
+
+
+def _float(src: _Lines, text: str, what: str, blank=math.nan):
+    s = text.strip()
+    if not s:
+        return blank
+    try:
+        return float(s.replace("D", "E").replace("d", "e"))
+    except ValueError:
+        raise src.error(f"bad number {s!r} for {what}") from None
+
+
+def _int(src: _Lines, text: str, what: str):
+    s = text.strip()
+    try:
+        return int(s)
+    except ValueError:
+        raise src.error(f"bad integer {text!r} for {what}") from None
+
+
+def _read_header(src: _Lines):
+    """Read header lines up to END OF HEADER; return list of (lineno, content, label)."""
+    out = []
+    first = src.next("the header")
+    if "RINEX VERSION / TYPE" not in first[60:]:
+        raise src.error("malformed header: first line is not 'RINEX VERSION / TYPE'")
+    out.append((src.lineno, first[:60], "RINEX VERSION / TYPE"))
+    while True:
+        line = src.next("the header (no END OF HEADER)")
+        label = line[60:].strip()
+        out.append((src.lineno, line[:60].ljust(60), label))
+        if label == "END OF HEADER":
+            return out
+
+
+def _version_type(src, header):
+    lineno, text, _ = header[0]
+    vs = text[:9].strip()
+    try:
+        version = float(vs)
+    except ValueError:
+        raise src.error(f"malformed header: bad RINEX version {vs!r}", lineno) from None
+    ftype = text[20:21].upper()
+    sysc = text[40:41].upper() or " "
+    if not (2.0 <= version < 4.0):
+        raise src.error(f"unsupported RINEX version {version}", lineno)
+    return version, ftype, sysc
+
+
+# --------------------------------------------------------------------------- nav
+
+#: Order of the broadcast orbit values after (toc, af0, af1, af2) in a GPS record.
+_NAV_ORDER = (
+    "iode", "crs", "delta_n", "m0",
+    "cuc", "e", "cus", "sqrt_a",
+    "toe_sow", "cic", "omega0", "cis",
+    "i0", "crc", "omega", "omega_dot",
+    "idot", "l2_codes", "week", "l2p_flag",
+    "sv_accuracy", "health", "tgd", "iodc",
+    "transmit_sow", "fit_h", "spare1", "spare2",
+)
+
+
+@dataclass
+class NavData:
+    """Contents of a GPS (or mixed) navigation file.
+
+    Attributes
+    ----------
+    path : str
+    version : float
+    eph : Ephemerides
+        The GPS LNAV records, in file order.
+    ion_alpha, ion_beta : ndarray (4,) or None
+        Klobuchar coefficients from the header [s, s/semicircle, ...] and
+        [s, s/semicircle, ...] (IS-GPS-200 20.3.3.5.1.7); None if absent.
+    n_skipped : int
+        Records of other systems that were skipped.
+    """
+
+    path: str
+    version: float
+    eph: Ephemerides
+    ion_alpha: np.ndarray | None = None
+    ion_beta: np.ndarray | None = None
+    n_skipped: int = 0
+
+
+def _four(src, text, start, width, what):
+    return [_float(src, text[start + k * width:start + (k + 1) * width], what) for k in range(4)]
+
+
+def read_rinex_nav(path) -> NavData:
+    """Read GPS LNAV ephemerides and Klobuchar parameters from a RINEX nav file.
+
+    Supports RINEX 2.10/2.11 GPS nav (``.21n``) and RINEX 3.02-3.05 GPS or
+    mixed nav (``.rnx``/``.nav``); records of other systems in a mixed file
+    are skipped (a RINEX 3 record starts with a system letter in column 1,
+    continuation lines start with blanks, so the skip needs no knowledge of
+    each system's record length).  ``D``/``d``/``E`` exponents are accepted;
+    blank fields read as 0 (NaN for the fit interval, which then defaults
+    to 4 h).
+
+    Parameters
+    ----------
+    path : str or PathLike
+
+    Returns
+    -------
+    NavData
+
+    Raises
+    ------
+    RinexError
+        Malformed header, bad record or unexpected end of file (message gives
+        path and 1-based line number).
+    """
+    src = _Lines(path)
+    header = _read_header(src)
+    version, ftype, sysc = _version_type(src, header)
+    if ftype != "N":
+        raise src.error(f"malformed header: not a navigation file (type {ftype!r})", header[0][0])
+    if version >= 3 and sysc not in ("G", "M"):
+        raise src.error(f"malformed header: navigation file of system {sysc!r} has no GPS records", header[0][0])
+    ion_alpha = ion_beta = None
+    for lineno, text, label in header:
+        if label == "ION ALPHA" or label == "ION BETA":
+            vals = [_float(src, text[2 + 12 * k:14 + 12 * k], label) for k in range(4)]
+            if any(math.isnan(v) for v in vals):
+                raise src.error(f"malformed header: incomplete {label}", lineno)
+            if label == "ION ALPHA":
+                ion_alpha = np.array(vals)
+            else:
+                ion_beta = np.array(vals)
+        elif label == "IONOSPHERIC CORR":
+            kind = text[:4].strip()
+            if kind in ("GPSA", "GPSB"):
+                vals = [_float(src, text[5 + 12 * k:17 + 12 * k], label) for k in range(4)]
+                if any(math.isnan(v) for v in vals):
+                    raise src.error(f"malformed header: incomplete {kind} {label}", lineno)
+                if kind == "GPSA":
+                    ion_alpha = np.array(vals)
+                else:
+                    ion_beta = np.array(vals)
+
+    rec = {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}
+    n_skipped = 0
+    rinex3 = version >= 3.0
+    width0 = 23 if rinex3 else 22  # end of the epoch field on the first line
+    cont_start = 4 if rinex3 else 3
+    while not src.eof():
+        line = src.next()
+        if not line.strip():
+            continue
+        start_line = src.lineno
+        if rinex3:
+            sysid = line[0]
+            if sysid == " ":
+                raise src.error("bad record: expected a record start (system letter in column 1)")
+            if sysid != "G":
+                n_skipped += 1
+                while not src.eof() and src.lines[src.i][:1] == " ":
+                    src.i += 1
+                continue
+            prn = _int(src, line[1:3], "satellite number")
+            try:
+                y = int(line[4:8]); mo = int(line[9:11]); d = int(line[12:14])
+                h = int(line[15:17]); mi = int(line[18:20]); sec = float(line[21:23])
+            except ValueError:
+                raise src.error(f"bad record: cannot parse epoch {line[:23]!r}") from None
+        else:
+            if line[:2] == "  " and line[2:3] == " ":
+                raise src.error("bad record: expected a record start (PRN in columns 1-2)")
+            prn = _int(src, line[0:2], "satellite number")
+            try:
+                y = int(line[3:5]); mo = int(line[6:8]); d = int(line[9:11])
+                h = int(line[12:14]); mi = int(line[15:17]); sec = float(line[17:22])
+            except ValueError:
+                raise src.error(f"bad record: cannot parse epoch {line[:22]!r}") from None
+            y += 2000 if y < 80 else 1900
+        if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and 0 <= sec < 61):
+            raise src.error(f"bad record: impossible epoch {line[:width0]!r}")
+        clk = [_float(src, line[width0 + 19 * k:width0 + 19 * (k + 1)], "clock parameter") for k in range(3)]
+        vals = []
+        for k in range(7):
+            cl = src.next(f"broadcast orbit line {k + 1} of G{prn:02d} (record started on line {start_line})")
+            if cl[:1] != " " and rinex3:
+                raise src.error(f"bad record: broadcast orbit line {k + 1} of G{prn:02d} "
+                                f"(record started on line {start_line}) missing")
+            vals.extend(_four(src, cl.ljust(cont_start + 76), cont_start, 19, "broadcast orbit value"))
+        toc = gps_seconds_from_calendar(y, mo, d, h, mi, sec)
+        rec["prn"].append(prn)
+        rec["toc"].append(toc)
+        for name, v in zip(("af0", "af1", "af2"), clk):
+            rec[name].append(0.0 if math.isnan(v) else v)
+        for name, v in zip(_NAV_ORDER, vals):
+            if name != "fit_h" and math.isnan(v):
+                v = 0.0
+            rec[name].append(v)
+        if not (0.0 < rec["sqrt_a"][-1]):
+            raise src.error(f"bad record: G{prn:02d} record starting on line {start_line} has sqrt(A) <= 0")
+
+    cols = {k: np.asarray(v, dtype=float) for k, v in rec.items()}
+    n = cols["prn"].size
+    if n:
+        # Continuous toe: the record week goes with toe; guard against a week
+        # field that disagrees with toc by more than half a week.
+        toe = cols["week"] * SECONDS_PER_WEEK + cols["toe_sow"]
+        toe += SECONDS_PER_WEEK * np.round((cols["toc"] - toe) / SECONDS_PER_WEEK)
+        cols["toe"] = toe
+        fit_h = cols["fit_h"]
+        # RINEX 2/3: fit interval in hours; 0/blank -> 4 h (IS-GPS-200 20.3.4.4).
+        cols["fit_s"] = np.where(np.isfinite(fit_h) & (fit_h > 0), fit_h * 3600.0, DEFAULT_FIT_S)
+        cols["week"] = np.floor(toe / SECONDS_PER_WEEK)
+    else:
+        cols["toe"] = np.zeros(0)
+        cols["fit_s"] = np.zeros(0)
+    cols["prn"] = cols["prn"].astype(np.int64)
+    eph = Ephemerides.from_columns(cols)
+    return NavData(src.path, version, eph, ion_alpha, ion_beta, n_skipped)
+
+
+# --------------------------------------------------------------------------- obs
+
+#: Preferred RINEX 3 codes for GPS L1 C/A (first present wins), and RINEX 2 codes.
+_OBS_PREF3 = {
+    "C1": ("C1C", "C1X", "C1W", "C1P"),
+    "L1": ("L1C", "L1X", "L1W", "L1P"),
+    "D1": ("D1C", "D1X", "D1W", "D1P"),
+    "S1": ("S1C", "S1X", "S1W", "S1P"),
+}
+_OBS_PREF2 = {"C1": ("C1", "P1"), "L1": ("L1",), "D1": ("D1",), "S1": ("S1",)}
+
+
+@dataclass
+class ObsData:
+    """GPS L1 observations in long format (one row per epoch and satellite).
+
+    Attributes
+    ----------
+    path : str
+    version : float
+    codes : dict
+        Which RINEX observation code was read for each of ``C1 L1 D1 S1``
+        (None if absent from the file).
+    epoch_t_gps_s : (n,) float
+        Epoch times, GPS seconds since 1980-01-06 [s] (receiver time tags).
+    epoch_week, epoch_tow : (n,)
+        The same as GPS week and seconds of week [s].
+    epoch_flag : (n,) int
+        RINEX epoch flag (0 OK, 1 power failure, 6 cycle slips); event
+        records (flags 2-5) are skipped and not listed.
+    clock_offset_s : (n,) float
+        Receiver clock offset field of the epoch line [s], NaN if blank.
+    epoch : (m,) int
+        Row -> index into the epoch arrays.
+    t_gps_s, week, tow : (m,)
+        Row time in the three conventions.
+    prn : (m,) int
+    C1, L1, D1, S1 : (m,) float
+        Pseudorange [m], carrier phase [cycles], Doppler [Hz], C/N0 [dB-Hz];
+        NaN where missing.
+    approx_r_e : (3,) float or None
+        ``APPROX POSITION XYZ`` from the header [m].
+    """
+
+    path: str
+    version: float
+    codes: dict
+    epoch_t_gps_s: np.ndarray
+    epoch_week: np.ndarray
+    epoch_tow: np.ndarray
+    epoch_flag: np.ndarray
+    clock_offset_s: np.ndarray
+    epoch: np.ndarray
+    t_gps_s: np.ndarray
+    week: np.ndarray
+    tow: np.ndarray
+    prn: np.ndarray
+    C1: np.ndarray
+    L1: np.ndarray
+    D1: np.ndarray
+    S1: np.ndarray
+    approx_r_e: np.ndarray | None = field(default=None)
+
+
+def _obs_types_header(src, header, version):
+    """Return {system letter: [codes]} from the header."""
+    types = {}
+    if version >= 3:
+        cur_sys, cur_n = None, 0
+        for lineno, text, label in header:
+            if label != "SYS / # / OBS TYPES":
+                continue
+            if text[0] != " ":
+                cur_sys = text[0]
+                cur_n = _int(src, text[3:6], "number of observation types") if text[3:6].strip() else None
+                if cur_n is None:
+                    raise src.error("malformed header: SYS / # / OBS TYPES without a count", lineno)
+                types[cur_sys] = []
+            elif cur_sys is None:
+                raise src.error("malformed header: SYS / # / OBS TYPES continuation without a system", lineno)
+            for k in range(13):
+                c = text[7 + 4 * k:10 + 4 * k].strip()
+                if c and len(types[cur_sys]) < cur_n:
+                    types[cur_sys].append(c)
+    else:
+        n, codes = None, []
+        for lineno, text, label in header:
+            if label != "# / TYPES OF OBSERV":
+                continue
+            if text[:6].strip():
+                n = _int(src, text[:6], "number of observation types")
+                codes = []
+            elif n is None:
+                raise src.error("malformed header: # / TYPES OF OBSERV continuation before the count", lineno)
+            for k in range(9):
+                c = text[10 + 6 * k:12 + 6 * k].strip()
+                if c and len(codes) < n:
+                    codes.append(c)
+        if n is None:
+            raise src.error("malformed header: no # / TYPES OF OBSERV")
+        if len(codes) != n:
+            raise src.error(f"malformed header: # / TYPES OF OBSERV announces {n} types, lists {len(codes)}")
+        types = {"G": codes}
+    return types
+
+
+def read_rinex_obs(path) -> ObsData:
+    """Read GPS L1 observations (pseudorange, phase, Doppler, C/N0) from RINEX 2.x / 3.x.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        RINEX 2.10/2.11 or 3.02-3.05 observation file (GPS or mixed).
+
+    Returns
+    -------
+    ObsData
+        Long-format arrays; see :class:`ObsData`.  For RINEX 3 the code read
+        is the first present of C1C, C1X, C1W, C1P (likewise L/D/S); for
+        RINEX 2 ``C1`` (else ``P1``), ``L1``, ``D1``, ``S1``.
+
+    Raises
+    ------
+    RinexError
+        Malformed header, bad epoch or observation record, unexpected end of
+        file; the message names the file and the 1-based line number.
+    """
+    src = _Lines(path)
+    header = _read_header(src)
+    version, ftype, sysc = _version_type(src, header)
+    if ftype != "O":
+        raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
+    approx = None
+    for lineno, text, label in header:
+        if label == "APPROX POSITION XYZ":
+            approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label) for k in range(3)])
+        if label == "TIME OF FIRST OBS":
+            ts = text[48:51].strip()
+            if ts and ts != "GPS":
+                raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
+    types = _obs_types_header(src, header, version)
+    rinex3 = version >= 3
+    gtypes = types.get("G", [])
+    pref = _OBS_PREF3 if rinex3 else _OBS_PREF2
+    codes, cols = {}, {}
+    for key, cands in pref.items():
+        codes[key] = next((c for c in cands if c in gtypes), None)
+        cols[key] = gtypes.index(codes[key]) if codes[key] else None
+    ntypes = {s: len(v) for s, v in types.items()}
+
+    ep_t, ep_flag, ep_clk = [], [], []
+    r_ep, r_prn = [], []
+    r_val = {k: [] for k in pref}
+
+    def parse_sat(line, sat_prn, ep_index, lineno):
+        r_ep.append(ep_index)
+        r_prn.append(sat_prn)
+        base = 3 if rinex3 else 0
+        for key, col in cols.items():
+            if col is None:
+                r_val[key].append(math.nan)
+                continue
+            if rinex3:
+                txt = line[base + 16 * col: base + 16 * col + 14]
+            else:
+                txt = line[16 * (col % 5): 16 * (col % 5) + 14]
+            r_val[key].append(_float(src, txt, f"observation {codes[key]}"))
+
+    while not src.eof():
+        line = src.next()
+        if not line.strip():
+            continue
+        ep_line = src.lineno
+        if rinex3:
+            if line[0] != ">":
+                raise src.error("bad record: expected an epoch line starting with '>'")
+            try:
+                y = int(line[2:6]); mo = int(line[7:9]); d = int(line[10:12])
+                h = int(line[13:15]); mi = int(line[16:18]); sec = float(line[18:29])
+                flag = int(line[31:32]); nsat = int(line[32:35])
+            except ValueError:
+                raise src.error(f"bad record: cannot parse epoch line {line[:35]!r}") from None
+            clk = _float(src, line[41:56], "receiver clock offset")
+        else:
+            try:
+                flag = int(line[28:29])
+                nsat = int(line[29:32])
+            except ValueError:
+                raise src.error(f"bad record: cannot parse epoch flag / satellite count {line[26:32]!r}") from None
+            if flag in (2, 3, 4, 5):
+                y = mo = d = 1; h = mi = 0; sec = 0.0
+            else:
+                try:
+                    y = int(line[1:3]); mo = int(line[4:6]); d = int(line[7:9])
+                    h = int(line[10:12]); mi = int(line[13:15]); sec = float(line[15:26])
+                except ValueError:
+                    raise src.error(f"bad record: cannot parse epoch line {line[:32]!r}") from None
+                y += 2000 if y < 80 else 1900
+            clk = _float(src, line[68:80], "receiver clock offset")
+        if flag > 6 or nsat < 0:
+            raise src.error(f"bad record: epoch flag {flag} / count {nsat} out of range")
+        if flag in (2, 3, 4, 5):
+            # Event: nsat special records (header lines) follow.
+            for _ in range(nsat):
+                src.next(f"the special records of the event on line {ep_line}")
+            continue
+        if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and 0 <= sec < 61):
+            raise src.error("bad record: impossible epoch date/time")
+        t = gps_seconds_from_calendar(y, mo, d, h, mi, sec)
+        keep = flag in (0, 1)
+        e_idx = len(ep_t)
+        if rinex3:
+            for _ in range(nsat):
+                sl = src.next(f"the satellites of the epoch on line {ep_line}")
+                if sl[:1] == ">":
+                    raise src.error(f"bad record: epoch on line {ep_line} announces {nsat} satellites, found fewer")
+                sid = sl[:3]
+                s = sid[0]
+                if s not in ntypes:
+                    raise src.error(f"bad record: satellite {sid!r} of an undeclared system")
+                if s == "G" and keep:
+                    parse_sat(sl, _int(src, sid[1:3], "satellite number"), e_idx, src.lineno)
+        else:
+            sats = []
+            text = line[32:68]
+            while True:
+                for k in range(12):
+                    sid = text[3 * k:3 * k + 3]
+                    if sid.strip():
+                        sats.append(sid)
+                if len(sats) >= nsat:
+                    break
+                cl = src.next(f"the satellite list of the epoch on line {ep_line}")
+                text = cl[32:68]
+            if len(sats) != nsat:
+                raise src.error(f"bad record: epoch on line {ep_line} announces {nsat} satellites, lists {len(sats)}")
+            nlines = max(1, (ntypes["G"] + 4) // 5)
+            for sid in sats:
+                s = sid[0] if sid[0] != " " else "G"
+                obs_lines = [src.next(f"the observations of the epoch on line {ep_line}") for _ in range(nlines)]
+                if s == "G" and keep:
+                    prn = _int(src, sid[1:3], "satellite number")
+                    # assemble the obs of the requested columns line by line
+                    r_ep.append(e_idx)
+                    r_prn.append(prn)
+                    for key, col in cols.items():
+                        if col is None:
+                            r_val[key].append(math.nan)
+                            continue
+                        ol = obs_lines[col // 5]
+                        txt = ol[16 * (col % 5):16 * (col % 5) + 14]
+                        r_val[key].append(_float(src, txt, f"observation {codes[key]}"))
+        if keep:
+            ep_t.append(t)
+            ep_flag.append(flag)
+            ep_clk.append(clk)
+
+    ep_t = np.asarray(ep_t, dtype=float)
+    e = np.asarray(r_ep, dtype=np.int64)
+    wk, tw = week_tow(ep_t)
+    wk, tw = np.atleast_1d(wk), np.atleast_1d(tw)
+    return ObsData(
+        path=src.path, version=version, codes=codes,
+        epoch_t_gps_s=ep_t, epoch_week=wk, epoch_tow=tw,
+        epoch_flag=np.asarray(ep_flag, dtype=np.int64), clock_offset_s=np.asarray(ep_clk, dtype=float),
+        epoch=e, t_gps_s=ep_t[e], week=wk[e], tow=tw[e], prn=np.asarray(r_prn, dtype=np.int64),
+        C1=np.asarray(r_val["C1"]), L1=np.asarray(r_val["L1"]), D1=np.asarray(r_val["D1"]),
+        S1=np.asarray(r_val["S1"]), approx_r_e=approx,
+    )
