@@ -1,0 +1,24 @@
+// insnav._core: the private compiled module under the pure-Python API.
+#include <stdexcept>
+#include <string>
+
+#include "common.hpp"
+
+namespace py = pybind11;
+
+namespace {
+// Core precondition failures become Python exceptions instead of abort().
+void throwing_check_handler(const char* expr, const char* msg, const char* file, int line) {
+  throw std::invalid_argument(std::string("insnav: ") + msg + " [" + expr + " at " + file + ":" +
+                              std::to_string(line) + "]");
+}
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "insnav compiled core (private; use the insnav package API)";
+  m.attr("__version__") = INSNAV_VERSION;
+  insnav::set_check_handler(&throwing_check_handler);
+  insnav::py_bind::bind_math(m);
+  insnav::py_bind::bind_ins(m);
+  // one call per cpp/bindings/bind_*.cpp (declared in common.hpp)
+}

@@ -1,0 +1,114 @@
+// insnav/math/rotation.hpp -- quaternions, DCMs, 3-2-1 Euler angles and
+// rotation vectors.
+//
+// Conventions (see docs/conventions.md):
+//  * C_ab rotates a vector from frame b to frame a: v_a = C_ab * v_b.
+//  * q_ab is the unit quaternion of C_ab, scalar first (Eigen's w, x, y, z).
+//  * Euler angles are 3-2-1 (yaw psi about z, then pitch theta about the new y,
+//    then roll phi about the new x):  C_nb = Rz(yaw) * Ry(pitch) * Rx(roll).
+//  * A rotation vector phi_ab (axis * angle) gives C_ab = exp([phi x]).
+// Small-angle series are used where the closed forms lose precision
+// (Savage, "Strapdown Analytics", 2nd ed., sec. 3.2.2).
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cmath>
+
+namespace insnav {
+
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+using Quat = Eigen::Quaterniond;
+
+/// Skew-symmetric (cross-product) matrix: skew(a) * b = a x b.
+inline Mat3 skew(const Vec3& a) {
+  Mat3 S;
+  S << 0.0, -a.z(), a.y(),
+       a.z(), 0.0, -a.x(),
+       -a.y(), a.x(), 0.0;
+  return S;
+}
+
+/// Quaternion of a rotation vector phi (rad): q = [cos(|phi|/2), sin(|phi|/2) phi/|phi|].
+/// Uses the Taylor series of sin(x/2)/x below |phi| = 1e-4 rad.
+inline Quat quat_from_rotvec(const Vec3& phi) {
+  const double a2 = phi.squaredNorm();
+  double w, s;  // s = sin(a/2)/a
+  if (a2 < 1e-8) {
+    w = 1.0 - a2 / 8.0 + a2 * a2 / 384.0;
+    s = 0.5 - a2 / 48.0 + a2 * a2 / 3840.0;
+  } else {
+    const double a = std::sqrt(a2);
+    w = std::cos(0.5 * a);
+    s = std::sin(0.5 * a) / a;
+  }
+  return Quat(w, s * phi.x(), s * phi.y(), s * phi.z());
+}
+
+/// Rotation vector (rad) of a unit quaternion, angle in [0, pi].
+inline Vec3 rotvec_from_quat(const Quat& q_in) {
+  Quat q = q_in;
+  if (q.w() < 0.0) q.coeffs() = -q.coeffs();  // same rotation, angle <= pi
+  const Vec3 v = q.vec();
+  const double vn = v.norm();
+  if (vn < 1e-6) {
+    // angle / |v| = 2 atan2(|v|, w) / |v| = (2/w)(1 - |v|^2/(3 w^2) + ...)
+    const double w = q.w();
+    return v * (2.0 / w) * (1.0 - vn * vn / (3.0 * w * w));
+  }
+  return v * (2.0 * std::atan2(vn, q.w()) / vn);
+}
+
+/// C_nb from 3-2-1 Euler angles (roll, pitch, yaw) [rad].
+inline Mat3 dcm_from_euler(const Vec3& rpy) {
+  const double sr = std::sin(rpy.x()), cr = std::cos(rpy.x());
+  const double sp = std::sin(rpy.y()), cp = std::cos(rpy.y());
+  const double sy = std::sin(rpy.z()), cy = std::cos(rpy.z());
+  Mat3 C;
+  C << cp * cy, -cr * sy + sr * sp * cy, sr * sy + cr * sp * cy,
+       cp * sy, cr * cy + sr * sp * sy, -sr * cy + cr * sp * sy,
+       -sp, sr * cp, cr * cp;
+  return C;
+}
+
+/// 3-2-1 Euler angles (roll, pitch, yaw) [rad] of C_nb; yaw in (-pi, pi].
+/// Pitch uses atan2 so it stays accurate near +-90 deg; at gimbal lock the
+/// split between roll and yaw is arbitrary (roll is set from the DCM's
+/// remaining freedom), but the DCM round trip is exact.
+inline Vec3 euler_from_dcm(const Mat3& C) {
+  const double pitch = std::atan2(-C(2, 0), std::hypot(C(2, 1), C(2, 2)));
+  double roll, yaw;
+  if (std::hypot(C(2, 1), C(2, 2)) > 1e-9) {
+    roll = std::atan2(C(2, 1), C(2, 2));
+    yaw = std::atan2(C(1, 0), C(0, 0));
+  } else {  // gimbal lock: only yaw -+ roll is observable; put it all in yaw
+    roll = 0.0;
+    yaw = std::atan2(-C(0, 1), C(1, 1));
+  }
+  return Vec3(roll, pitch, yaw);
+}
+
+inline Quat quat_from_euler(const Vec3& rpy) {
+  const double hr = 0.5 * rpy.x(), hp = 0.5 * rpy.y(), hy = 0.5 * rpy.z();
+  const double sr = std::sin(hr), cr = std::cos(hr);
+  const double sp = std::sin(hp), cp = std::cos(hp);
+  const double sy = std::sin(hy), cy = std::cos(hy);
+  return Quat(cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+              cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy);
+}
+
+inline Vec3 euler_from_quat(const Quat& q) { return euler_from_dcm(q.toRotationMatrix()); }
+
+/// Rotation matrix of a rotation vector (Rodrigues, with series for small angles).
+inline Mat3 dcm_from_rotvec(const Vec3& phi) { return quat_from_rotvec(phi).toRotationMatrix(); }
+
+/// Elementary rotation about z by angle a: the frame rotation used for Earth rotation.
+inline Mat3 rot_z(double a) {
+  const double s = std::sin(a), c = std::cos(a);
+  Mat3 R;
+  R << c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0;
+  return R;
+}
+
+}  // namespace insnav

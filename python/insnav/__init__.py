@@ -1,0 +1,47 @@
+"""insnav: GNSS/INS integrated navigation.
+
+A header-only C++17/Eigen core (strapdown mechanization, EKF, RB-UKF, UKF,
+random-delay and particle filters) under a pure-Python API.
+
+Conventions: navigation frame NED, body frame forward-right-down (FRD),
+3-2-1 Euler angles (roll, pitch, yaw), IMU samples as increments over
+``(t - dt, t]``.  SI units inside; the public API and files carry the unit
+in the name (``lat_deg``, ``h_m``).  See ``docs/conventions.md``.
+
+Compiled parts are loaded lazily so that the pure-Python modules
+(``insnav.earth``, ``insnav.gnss``) import without the extension.
+"""
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0"
+
+# public name -> module that defines it (PEP 562 lazy loading)
+_LAZY = {
+    "NavState": "insnav.types",
+    "Trajectory": "insnav.types",
+    "mechanize": "insnav.ins",
+    "simulate": "insnav.sim",
+    "load_dataset": "insnav.dataset",
+    "Dataset": "insnav.dataset",
+    "run": "insnav.engine",
+    "Solution": "insnav.engine",
+    "evaluate": "insnav.evaluate",
+    "montecarlo": "insnav.montecarlo",
+}
+
+__all__ = sorted(_LAZY) + ["__version__"]
+
+
+def __getattr__(name: str):
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'insnav' has no attribute {name!r}")
+    value = getattr(importlib.import_module(mod), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return __all__

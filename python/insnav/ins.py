@@ -1,0 +1,67 @@
+"""Free-inertial strapdown mechanization over whole arrays (batch API)."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+from ._validate import as_float_array, check_finite, check_increasing
+from .types import NavState, Trajectory
+
+RAD2DEG = 180.0 / np.pi
+
+
+def mechanize(t, dtheta_b, dv_b, initial: NavState, t0: float | None = None,
+              *, coning: bool = True, sculling: bool = True) -> Trajectory:
+    """Integrate IMU increments from an initial state (no aiding).
+
+    The whole loop runs in C++ with the GIL released (NED mechanization with
+    two-sample coning and sculling corrections, see
+    ``cpp/include/insnav/ins/mechanization.hpp``).
+
+    Parameters
+    ----------
+    t : array_like (N,)
+        End time of each IMU interval [s], strictly increasing.
+    dtheta_b : array_like (N, 3)
+        Angular increments over ``(t[i-1], t[i]]`` in the body frame (FRD) [rad].
+    dv_b : array_like (N, 3)
+        Velocity (specific-force) increments over the same intervals [m/s].
+    initial : NavState
+        State at ``t0``.
+    t0 : float, optional
+        Time of ``initial`` [s]; the first interval is ``(t0, t[0]]``.
+        Default: ``t[0] - (t[1] - t[0])``.
+    coning, sculling : bool
+        Switch the two-sample corrections (for studies; keep them on).
+
+    Returns
+    -------
+    Trajectory
+        One row per IMU sample (the state at ``t[i]``).
+
+    Raises
+    ------
+    ValueError
+        On bad shapes, non-finite values or non-increasing time, naming the
+        first offending sample.
+    """
+    t = as_float_array(t, "t")
+    dtheta_b = as_float_array(dtheta_b, "dtheta_b", (3,))
+    dv_b = as_float_array(dv_b, "dv_b", (3,))
+    n = len(t)
+    if len(dtheta_b) != n or len(dv_b) != n:
+        raise ValueError(f"t, dtheta_b and dv_b must have the same length, got {n}, {len(dtheta_b)}, {len(dv_b)}")
+    if n == 0:
+        raise ValueError("no IMU samples")
+    if t0 is None:
+        if n < 2:
+            raise ValueError("t0 is required with a single IMU sample")
+        t0 = float(t[0] - (t[1] - t[0]))
+    for arr, name in ((t, "t"), (dtheta_b, "dtheta_b"), (dv_b, "dv_b")):
+        check_finite(arr, name)
+    check_increasing(t, "t", t0=float(t0))
+    out = _core.mechanize(t, dtheta_b, dv_b, float(t0), initial.pos_llh, initial.v_n, initial.rpy,
+                          coning, sculling)
+    llh, rpy = out["llh"], out["rpy"] * RAD2DEG
+    return Trajectory(t=t.copy(), lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2],
+                      v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2])
