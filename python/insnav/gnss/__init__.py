@@ -12,7 +12,7 @@ geometry      elevation/azimuth, masks, line of sight, DOP, best-GDOP subset
 corrections   Klobuchar ionosphere, Saastamoinen troposphere
 constellation :class:`Constellation` (broadcast or nominal) for the simulator
 """
-# from .constellation import Constellation, SatStates
+from .constellation import Constellation, SatStates
 from .ephemeris import (
     Ephemerides,
     sat_clock,

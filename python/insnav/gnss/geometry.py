@@ -1,0 +1,163 @@
+"""Receiver-satellite geometry: line of sight, elevation/azimuth, DOP, best-GDOP subset.
+
+Frames: ``e`` = ECEF, ``n`` = local North-East-Down at the receiver
+(:func:`insnav.earth.C_en`).  Angles in rad.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .. import earth
+
+__all__ = ["los_unit_e", "elevation_azimuth", "elevation_mask", "los_unit_n",
+           "Dop", "dop", "dop_from_los_n", "select_best_gdop"]
+
+
+def los_unit_e(r_rx_e, r_sat_e):
+    """Receiver-to-satellite unit vectors in ECEF, shape (k, 3), and ranges [m], shape (k,)."""
+    d = np.asarray(r_sat_e, dtype=float) - np.asarray(r_rx_e, dtype=float)
+    rng = np.linalg.norm(d, axis=-1)
+    return d / rng[..., None], rng
+
+
+def los_unit_n(r_rx_e, r_sat_e):
+    """Receiver-to-satellite unit vectors in the receiver's NED frame, shape (k, 3)."""
+    r_rx_e = np.asarray(r_rx_e, dtype=float)
+    lat, lon, _ = earth.ecef_to_geodetic(r_rx_e)
+    u_e, _ = los_unit_e(r_rx_e, r_sat_e)
+    # u_n = C_en^T u_e (C_en broadcasts over a (k,3) receiver array too)
+    return np.einsum("...ji,...j->...i", earth.C_en(lat, lon), u_e)
+
+
+def elevation_azimuth(r_rx_e, r_sat_e):
+    """Elevation and azimuth of satellites seen from a receiver.
+
+    Parameters
+    ----------
+    r_rx_e : array_like, shape (3,) or (k, 3)
+        Receiver ECEF position [m].
+    r_sat_e : array_like, shape (k, 3)
+        Satellite ECEF positions [m] (same frame epoch as the receiver, e.g.
+        the output of :func:`insnav.gnss.ephemeris.transmit_states`).
+
+    Returns
+    -------
+    el, az : ndarray, shape (k,)
+        Elevation above the local ellipsoidal horizon [rad] in [-pi/2, pi/2];
+        azimuth from north, clockwise (towards east) [rad] in [0, 2 pi).
+    """
+    u_n = los_unit_n(r_rx_e, r_sat_e)
+    el = np.arcsin(np.clip(-u_n[..., 2], -1.0, 1.0))
+    az = np.mod(np.arctan2(u_n[..., 1], u_n[..., 0]), 2.0 * np.pi)
+    return el, az
+
+
+def elevation_mask(el, mask_rad=np.deg2rad(10.0)):
+    """Boolean mask of satellites at or above ``mask_rad`` [rad] (default 10 deg)."""
+    return np.asarray(el) >= mask_rad
+
+
+class Dop(NamedTuple):
+    """Dilution of precision (dimensionless)."""
+
+    gdop: float | np.ndarray
+    pdop: float | np.ndarray
+    hdop: float | np.ndarray
+    vdop: float | np.ndarray
+    tdop: float | np.ndarray
+
+
+def dop_from_los_n(u_n, weights=None) -> Dop:
+    """DOP from NED line-of-sight unit vectors.
+
+    The geometry matrix has rows ``[-u_n, 1]`` (position in NED, receiver
+    clock in metres); ``Q = (G^T W G)^-1``; GDOP = sqrt(trace Q), PDOP =
+    sqrt(Q_NN + Q_EE + Q_DD), HDOP = sqrt(Q_NN + Q_EE), VDOP = sqrt(Q_DD),
+    TDOP = sqrt(Q_tt) (Misra & Enge, *Global Positioning System*, 2nd ed.,
+    sec. 6.1).
+
+    Parameters
+    ----------
+    u_n : array_like, shape (..., k, 3)
+        Batched sets of k >= 4 unit vectors.
+    weights : array_like, shape (..., k), optional
+
+    Returns
+    -------
+    Dop
+        inf where the geometry is singular.
+    """
+    u_n = np.asarray(u_n, dtype=float)
+    G = np.concatenate([-u_n, np.ones(u_n.shape[:-1] + (1,))], axis=-1)
+    Gw = G if weights is None else G * np.asarray(weights, dtype=float)[..., None]
+    N = np.einsum("...ki,...kj->...ij", Gw, G)
+    cond_ok = np.linalg.cond(N) < 1e12
+    N_safe = np.where(cond_ok[..., None, None], N, np.eye(4))
+    Q = np.linalg.inv(N_safe)
+    d = np.diagonal(Q, axis1=-2, axis2=-1)
+    inf = np.where(cond_ok, 1.0, np.inf)
+    gdop = np.sqrt(d.sum(-1)) * inf
+    pdop = np.sqrt(d[..., :3].sum(-1)) * inf
+    hdop = np.sqrt(d[..., :2].sum(-1)) * inf
+    vdop = np.sqrt(d[..., 2]) * inf
+    tdop = np.sqrt(d[..., 3]) * inf
+    if gdop.ndim == 0:
+        return Dop(float(gdop), float(pdop), float(hdop), float(vdop), float(tdop))
+    return Dop(gdop, pdop, hdop, vdop, tdop)
+
+
+def dop(r_rx_e, r_sat_e, weights=None) -> Dop:
+    """DOP of satellites ``r_sat_e`` (k, 3) seen from ``r_rx_e`` (3,), positions in ECEF [m]."""
+    return dop_from_los_n(los_unit_n(r_rx_e, r_sat_e), weights)
+
+
+def select_best_gdop(u_n, n_select: int, max_combinations: int = 5000):
+    """Choose ``n_select`` satellites minimising GDOP.
+
+    Parameters
+    ----------
+    u_n : array_like, shape (k, 3)
+        Line-of-sight unit vectors of the visible satellites (NED or ECEF:
+        GDOP is invariant under a rotation of the frame).
+    n_select : int
+        Number wanted, 4 <= n_select.  If ``n_select >= k`` all are returned.
+    max_combinations : int
+        Exhaustive search over all ``C(k, n_select)`` subsets (evaluated in
+        vectorised batches) when that number is at most ``max_combinations``
+        (e.g. C(12, 4) = 495, C(14, 6) = 3003); otherwise a greedy backward
+        elimination: start from all k and repeatedly drop the satellite whose
+        removal gives the smallest GDOP.  The greedy result is not guaranteed
+        optimal but is usually within a few per cent of it and costs
+        O(k^2) DOP evaluations.
+
+    Returns
+    -------
+    idx : ndarray of int, shape (n_select,)
+        Sorted indices into ``u_n``.
+    gdop : float
+        GDOP of the chosen subset.
+    """
+    u = np.asarray(u_n, dtype=float)
+    k = u.shape[0]
+    if n_select < 4:
+        raise ValueError("n_select must be >= 4 (3 position + clock)")
+    if n_select >= k:
+        idx = np.arange(k)
+        return idx, float(dop_from_los_n(u).gdop)
+    if math.comb(k, n_select) <= max_combinations:
+        combos = np.array(list(itertools.combinations(range(k), n_select)), dtype=np.int64)
+        g = dop_from_los_n(u[combos]).gdop
+        j = int(np.argmin(g))
+        return combos[j], float(g[j])
+    keep = list(range(k))
+    while len(keep) > n_select:
+        cand = np.array([[q for q in keep if q != drop] for drop in keep], dtype=np.int64)
+        g = dop_from_los_n(u[cand]).gdop
+        j = int(np.argmin(g))
+        keep = list(cand[j])
+    idx = np.array(sorted(keep), dtype=np.int64)
+    return idx, float(dop_from_los_n(u[idx]).gdop)
