@@ -15,7 +15,8 @@ from .corrections import klobuchar_delay, saastamoinen_delay
 from .ephemeris import C_LIGHT, Ephemerides, select_ephemeris, transmit_states
 from .geometry import elevation_azimuth
 
-__all__ = ["L1_WAVELENGTH", "Predicted", "predict_observables", "common_clock_residuals"]
+__all__ = ["L1_WAVELENGTH", "Predicted", "predict_observables", "common_clock_residuals",
+           "Residuals", "observation_residuals", "read_rtklib_pos"]
 
 #: GPS L1 carrier frequency [Hz] and wavelength [m] (IS-GPS-200 3.3.1.1).
 L1_FREQ_HZ = 1575.42e6
@@ -121,3 +122,96 @@ def common_clock_residuals(resid, epoch):
     tmp[order] = res_s
     out[ok] = tmp
     return out
+
+
+class Residuals(NamedTuple):
+    """Observation-minus-prediction residuals, one per observation row."""
+
+    pseudorange_m: np.ndarray  #: C1 residual after removing the per-epoch median [m]
+    range_rate_mps: np.ndarray  #: -lambda*D1 residual after removing the per-epoch median [m/s]
+    rx_clock_m: np.ndarray  #: (n_epochs,) per-epoch median of the raw C1 residual (c dt_rx) [m]
+    predicted: Predicted
+
+
+def observation_residuals(obs, eph: Ephemerides, r_rx_e, v_rx_e=None, **kwargs) -> Residuals:
+    """Residuals of an :class:`~insnav.gnss.rinex.ObsData` against known receiver states.
+
+    Two passes: the first, with the receiver time tags, estimates the
+    per-epoch receiver clock ``c dt_rx`` (median raw residual); the second
+    evaluates the model at the true reception time ``t_tag - dt_rx`` (a
+    1 ms receiver clock error otherwise moves satellites by ~4 m).  The
+    per-epoch median is then removed from the pseudorange and the
+    pseudorange-rate residuals (receiver clock and clock drift).
+
+    Parameters
+    ----------
+    obs : ObsData
+    eph : Ephemerides
+    r_rx_e : (n_epochs, 3) receiver ECEF positions at the observation epochs [m]
+    v_rx_e : (n_epochs, 3), optional receiver ECEF velocities [m/s]
+    **kwargs
+        Passed to :func:`predict_observables` (``iono``, ``tropo``,
+        ``ion_alpha``, ``ion_beta``, ``tgd``).
+    """
+    n_ep = obs.epoch_t_gps_s.size
+    r = np.asarray(r_rx_e, dtype=float)[obs.epoch]
+    v = None if v_rx_e is None else np.asarray(v_rx_e, dtype=float)[obs.epoch]
+    clk = np.zeros(n_ep)
+    for _ in range(2):
+        pred = predict_observables(eph, obs.t_gps_s - clk[obs.epoch] / C_LIGHT, obs.prn, r, v, **kwargs)
+        raw = obs.C1 - pred.pseudorange_m
+        ok = np.isfinite(raw)
+        sums = np.bincount(obs.epoch[ok], minlength=n_ep)
+        med = np.zeros(n_ep)
+        for e in np.flatnonzero(sums):
+            med[e] = np.median(raw[ok & (obs.epoch == e)])
+        clk = med
+    pr_res = common_clock_residuals(raw, obs.epoch)
+    rr_res = common_clock_residuals(-L1_WAVELENGTH * obs.D1 - pred.range_rate_mps, obs.epoch)
+    return Residuals(pr_res, rr_res, clk, pred)
+
+
+class RtklibPos(NamedTuple):
+    """An RTKLIB ``.pos`` solution (lat/lon/height format, GPST time)."""
+
+    t_gps_s: np.ndarray  #: (n,) [s]
+    r_e: np.ndarray  #: (n, 3) ECEF [m]
+    v_e: np.ndarray  #: (n, 3) ECEF [m/s] (NaN if the file has no velocity columns)
+    q: np.ndarray  #: (n,) quality flag (1 fix, 2 float, 5 single)
+
+
+def read_rtklib_pos(path) -> RtklibPos:
+    """Read an RTKLIB solution file with ``GPST latitude(deg) longitude(deg) height(m) Q ...``.
+
+    Velocity columns ``vn ve vu`` (m/s), when present, are converted to ECEF.
+
+    Raises
+    ------
+    insnav.gnss.RinexError
+        On a line that cannot be parsed (file path and line number).
+    """
+    from .gpstime import gps_seconds_from_calendar
+    from .rinex import RinexError
+
+    t, llh, q, vneu = [], [], [], []
+    with open(path, "r", encoding="ascii", errors="replace") as fh:
+        for lineno, line in enumerate(fh, 1):
+            if line.startswith("%") or not line.strip():
+                continue
+            p = line.split()
+            try:
+                y, mo, d = (int(x) for x in p[0].split("/"))
+                hh, mi, ss = p[1].split(":")
+                t.append(gps_seconds_from_calendar(y, mo, d, int(hh), int(mi), float(ss)))
+                llh.append([float(x) for x in p[2:5]])
+                q.append(int(float(p[5])))
+                vneu.append([float(x) for x in p[15:18]] if len(p) >= 18 else [np.nan] * 3)
+            except (ValueError, IndexError):
+                raise RinexError(path, lineno, "bad RTKLIB solution line") from None
+    llh = np.asarray(llh, dtype=float).reshape(-1, 3)
+    lat, lon = np.deg2rad(llh[:, 0]), np.deg2rad(llh[:, 1])
+    r_e = earth.geodetic_to_ecef(lat, lon, llh[:, 2])
+    vneu = np.asarray(vneu, dtype=float).reshape(-1, 3)
+    v_n = np.stack([vneu[:, 0], vneu[:, 1], -vneu[:, 2]], axis=-1)
+    v_e = earth.ned_to_ecef_vector(lat, lon, v_n)
+    return RtklibPos(np.asarray(t), r_e, v_e, np.asarray(q))

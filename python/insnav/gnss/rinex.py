@@ -82,22 +82,22 @@ class _Lines:
         return RinexError(self.path, self.lineno if lineno is None else lineno, what)
 
 
-def _float(src: _Lines, text: str, what: str, blank=math.nan):
+def _float(src: _Lines, text: str, what: str, blank=math.nan, lineno=None):
     s = text.strip()
     if not s:
         return blank
     try:
         return float(s.replace("D", "E").replace("d", "e"))
     except ValueError:
-        raise src.error(f"bad number {s!r} for {what}") from None
+        raise src.error(f"bad number {s!r} for {what}", lineno) from None
 
 
-def _int(src: _Lines, text: str, what: str):
+def _int(src: _Lines, text: str, what: str, lineno=None):
     s = text.strip()
     try:
         return int(s)
     except ValueError:
-        raise src.error(f"bad integer {text!r} for {what}") from None
+        raise src.error(f"bad integer {text!r} for {what}", lineno) from None
 
 
 def _read_header(src: _Lines):
@@ -207,7 +207,7 @@ def read_rinex_nav(path) -> NavData:
     ion_alpha = ion_beta = None
     for lineno, text, label in header:
         if label == "ION ALPHA" or label == "ION BETA":
-            vals = [_float(src, text[2 + 12 * k:14 + 12 * k], label) for k in range(4)]
+            vals = [_float(src, text[2 + 12 * k:14 + 12 * k], label, lineno=lineno) for k in range(4)]
             if any(math.isnan(v) for v in vals):
                 raise src.error(f"malformed header: incomplete {label}", lineno)
             if label == "ION ALPHA":
@@ -217,7 +217,7 @@ def read_rinex_nav(path) -> NavData:
         elif label == "IONOSPHERIC CORR":
             kind = text[:4].strip()
             if kind in ("GPSA", "GPSB"):
-                vals = [_float(src, text[5 + 12 * k:17 + 12 * k], label) for k in range(4)]
+                vals = [_float(src, text[5 + 12 * k:17 + 12 * k], label, lineno=lineno) for k in range(4)]
                 if any(math.isnan(v) for v in vals):
                     raise src.error(f"malformed header: incomplete {kind} {label}", lineno)
                 if kind == "GPSA":
@@ -376,7 +376,7 @@ def _obs_types_header(src, header, version):
                 continue
             if text[0] != " ":
                 cur_sys = text[0]
-                cur_n = _int(src, text[3:6], "number of observation types") if text[3:6].strip() else None
+                cur_n = _int(src, text[3:6], "number of observation types", lineno) if text[3:6].strip() else None
                 if cur_n is None:
                     raise src.error("malformed header: SYS / # / OBS TYPES without a count", lineno)
                 types[cur_sys] = []
@@ -392,7 +392,7 @@ def _obs_types_header(src, header, version):
             if label != "# / TYPES OF OBSERV":
                 continue
             if text[:6].strip():
-                n = _int(src, text[:6], "number of observation types")
+                n = _int(src, text[:6], "number of observation types", lineno)
                 codes = []
             elif n is None:
                 raise src.error("malformed header: # / TYPES OF OBSERV continuation before the count", lineno)
@@ -437,7 +437,7 @@ def read_rinex_obs(path) -> ObsData:
     approx = None
     for lineno, text, label in header:
         if label == "APPROX POSITION XYZ":
-            approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label) for k in range(3)])
+            approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label, lineno=lineno) for k in range(3)])
         if label == "TIME OF FIRST OBS":
             ts = text[48:51].strip()
             if ts and ts != "GPS":

@@ -1,0 +1,221 @@
+"""RINEX / SP3 / CLK readers: real files and malformed temp files."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from insnav.gnss import RinexError, read_rinex_nav, read_rinex_obs
+from insnav.gnss.gpstime import gps_seconds_from_calendar, week_tow
+from insnav.gnss.sp3 import read_rinex_clk, read_sp3
+
+DATA = Path(__file__).parents[2] / "shared" / "data"
+
+
+def need(*parts):
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"shared data not available: {p} (expected ../shared/data beside the repo)")
+    return p
+
+
+# --------------------------------------------------------------------- synthetic files
+NAV2_HEADER = (
+    "     2              NAVIGATION DATA                         RINEX VERSION / TYPE\n"
+    "    0.9313D-08  0.1490D-07 -0.5960D-07 -0.1192D-06          ION ALPHA           \n"
+    "    0.8806D+05  0.4915D+05 -0.1311D+06 -0.3277D+06          ION BETA            \n"
+    "                                                            END OF HEADER       \n"
+)
+NAV2_RECORD = (
+    " 6 21  4 28 17 59 44.0 0.109337270260D-04 0.329691829393D-11 0.000000000000D+00\n"
+    "    0.310000000000D+02-0.968750000000D+02 0.369765402213D-08 0.256518534901D+00\n"
+    "   -0.510737299919D-05 0.225707876962D-02 0.122226774692D-04 0.515375527000D+04\n"
+    "    0.323984000000D+06 0.167638063431D-07-0.294507412083D+01-0.298023223877D-07\n"
+    "    0.983895632254D+00 0.158375000000D+03-0.983603167134D+00-0.758853037846D-08\n"
+    "   -0.732173355102D-10 0.100000000000D+01 0.215500000000D+04 0.000000000000D+00\n"
+    "    0.200000000000D+01 0.000000000000D+00 0.419095158577D-08 0.310000000000D+02\n"
+    "    0.322932000000D+06 0.400000000000D+01 0.000000000000D+00 0.000000000000D+00\n"
+)
+
+
+def write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_nav2_synthetic_parses_d_exponents(tmp_path):
+    nav = read_rinex_nav(write(tmp_path, "ok.21n", NAV2_HEADER + NAV2_RECORD))
+    e = nav.eph
+    assert len(e) == 1 and e.prn[0] == 6
+    assert e.sqrt_a[0] == pytest.approx(5153.75527)
+    assert e.e[0] == pytest.approx(0.225707876962e-2)
+    assert e.toc[0] == gps_seconds_from_calendar(2021, 4, 28, 17, 59, 44.0)
+    assert week_tow(e.toe[0]) == (2155, 323984.0)
+    assert e.fit_s[0] == 4 * 3600.0
+    np.testing.assert_allclose(nav.ion_alpha, [0.9313e-8, 0.1490e-7, -0.5960e-7, -0.1192e-6])
+    np.testing.assert_allclose(nav.ion_beta, [0.8806e5, 0.4915e5, -0.1311e6, -0.3277e6])
+
+
+def test_nav_malformed_header_names_line(tmp_path):
+    bad = NAV2_HEADER.replace("0.1490D-07", "0.14x0D-07")
+    with pytest.raises(RinexError, match=r"line 2: bad number '0\.14x0D-07' for ION ALPHA") as ei:
+        read_rinex_nav(write(tmp_path, "badhdr.21n", bad))
+    assert ei.value.line == 2 and "badhdr.21n" in str(ei.value)
+    with pytest.raises(RinexError, match="line 1: malformed header"):
+        read_rinex_nav(write(tmp_path, "nover.21n", "garbage\n" + NAV2_HEADER))
+    with pytest.raises(RinexError, match=r"line 4: unexpected end of file while reading the header"):
+        read_rinex_nav(write(tmp_path, "noend.21n", "".join(NAV2_HEADER.splitlines(keepends=True)[:3])))
+
+
+def test_nav_malformed_record_names_line(tmp_path):
+    lines = NAV2_RECORD.splitlines(keepends=True)
+    lines[2] = lines[2].replace("0.122226774692D-04", "0.12222677469?D-04")
+    with pytest.raises(RinexError, match=r"line 7: bad number '0\.12222677469\?D-04'") as ei:
+        read_rinex_nav(write(tmp_path, "badrec.21n", NAV2_HEADER + "".join(lines)))
+    assert ei.value.line == 7
+    # truncated record: unexpected end of file, with the record's start line
+    trunc = NAV2_HEADER + "".join(NAV2_RECORD.splitlines(keepends=True)[:5])
+    with pytest.raises(RinexError, match=r"line 10: unexpected end of file .*record started on line 5"):
+        read_rinex_nav(write(tmp_path, "trunc.21n", trunc))
+    # garbage epoch
+    with pytest.raises(RinexError, match=r"line 5: bad integer .xx. for satellite number"):
+        read_rinex_nav(write(tmp_path, "badep.21n", NAV2_HEADER + "xx" + NAV2_RECORD[2:]))
+
+
+def _obs2(types, sats_obs, t=(21, 4, 28, 18, 0, 0.0), flag=0, clk="  .000123456"):
+    """Build a RINEX 2.11 observation file (one epoch + an event epoch)."""
+    h = ["     2.11           OBSERVATION DATA    M (MIXED)           RINEX VERSION / TYPE"]
+    for k in range(0, len(types), 9):
+        chunk = types[k:k + 9]
+        n = f"{len(types):6d}" if k == 0 else " " * 6
+        h.append((n + "".join(f"{c:>6s}" for c in chunk)).ljust(60) + "# / TYPES OF OBSERV")
+    h.append(" " * 60 + "END OF HEADER")
+    sats = list(sats_obs)
+    ep = f" {t[0]:02d} {t[1]:2d} {t[2]:2d} {t[3]:2d} {t[4]:2d}{t[5]:11.7f}  {flag}{len(sats):3d}"
+    body = []
+    for k in range(0, len(sats), 12):
+        ids = "".join(sats[k:k + 12])
+        head = ep if k == 0 else " " * 32
+        line = (head + ids).ljust(68)
+        if k == 0:
+            line += clk
+        body.append(line)
+    for s in sats:
+        vals = sats_obs[s]
+        for k in range(0, len(types), 5):
+            body.append("".join("" .ljust(16) if v is None else f"{v:14.3f}  " for v in vals[k:k + 5]).rstrip())
+    # an event epoch (flag 4) with one special record, then a second normal epoch
+    body.append(" 21  4 28 18  0  1.0000000  4  1")
+    body.append("THIS IS A COMMENT".ljust(60) + "COMMENT")
+    return "\n".join(h + body) + "\n"
+
+
+def test_obs2_continuations_and_missing(tmp_path):
+    types = ["C1", "L1", "D1", "S1", "P2", "L2", "C2", "S2", "D2", "C5"]  # 10 types: 2 header lines, 2 obs lines
+    sats = {}
+    for k in range(13):  # 13 satellites: two satellite-list lines
+        sid = f"G{k + 1:2d}" if k != 5 else "R07"
+        vals = [2.0e7 + k, 1.0e8 + k, -100.0 - k, 40.0 + k, None, None, None, None, None, 1.0]
+        sats[sid] = vals
+    sats["G 1"][2] = None  # missing Doppler
+    text = _obs2(types, sats)
+    obs = read_rinex_obs(write(tmp_path, "o.21o", text))
+    assert obs.codes == {"C1": "C1", "L1": "L1", "D1": "D1", "S1": "S1"}
+    assert obs.epoch_t_gps_s.size == 1
+    assert obs.clock_offset_s[0] == pytest.approx(0.000123456)
+    assert list(obs.prn) == [1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13]  # R07 skipped
+    assert obs.C1[0] == 2.0e7 and obs.C1[-1] == 2.0e7 + 12
+    assert np.isnan(obs.D1[0]) and obs.D1[1] == -101.0
+    assert obs.S1[5] == 46.0
+    wk, tow = week_tow(gps_seconds_from_calendar(2021, 4, 28, 18, 0, 0.0))
+    assert obs.week[0] == wk and obs.tow[0] == tow
+    # malformed observation value -> line number of that line
+    bad = text.replace(f"{1.0e8 + 3:14.3f}", "   1e8x00.000", 1)
+    with pytest.raises(RinexError, match=r"line \d+: bad number") as ei:
+        read_rinex_obs(write(tmp_path, "bad.21o", bad))
+    assert bad.splitlines()[ei.value.line - 1].find("1e8x00") >= 0
+    # truncated: epoch announces 13 satellites
+    cut = "\n".join(text.splitlines()[:12]) + "\n"
+    with pytest.raises(RinexError, match="unexpected end of file"):
+        read_rinex_obs(write(tmp_path, "cut.21o", cut))
+
+
+OBS3 = """\
+     3.04           OBSERVATION DATA    M: Mixed            RINEX VERSION / TYPE
+G   14 C1C L1C D1C S1C C2X L2X D2X S2X C5X L5X D5X S5X C1W  SYS / # / OBS TYPES
+       S1W                                                  SYS / # / OBS TYPES
+E    4 C1X L1X D1X S1X                                      SYS / # / OBS TYPES
+                                                            END OF HEADER
+> 2021 04 28 18 00  0.0000000  0  3      -0.000012345678
+G05  20576396.770   108129693.934        1064.326          51.000
+E11  21534103.024    84504436.889          72.229          48.000
+G12  22235408.974   116847854.2201      -1375.564          44.000    22235413.299
+> 2021 04 28 18 00  1.0000000  4  1
+EVENT COMMENT                                               COMMENT
+> 2021 04 28 18 00  2.0000000  0  1
+G05  20576400.000                                          50.000
+"""
+
+
+def test_obs3_types_continuation_flags_clock(tmp_path):
+    obs = read_rinex_obs(write(tmp_path, "o.rnx", OBS3))
+    assert obs.codes["C1"] == "C1C" and obs.codes["D1"] == "D1C"
+    np.testing.assert_array_equal(obs.prn, [5, 12, 5])
+    np.testing.assert_array_equal(obs.epoch, [0, 0, 1])
+    assert obs.epoch_t_gps_s[1] - obs.epoch_t_gps_s[0] == 2.0
+    assert obs.clock_offset_s[0] == pytest.approx(-1.2345678e-5)
+    assert np.isnan(obs.clock_offset_s[1])
+    assert obs.L1[1] == 116847854.220 and obs.D1[1] == -1375.564
+    assert np.isnan(obs.L1[2]) and np.isnan(obs.D1[2]) and obs.S1[2] == 50.0
+    bad = OBS3.replace("> 2021 04 28 18 00  2.0000000", "> 2021 04 28 18 0x  2.0000000")
+    with pytest.raises(RinexError, match=r"line 12: bad record: cannot parse epoch line"):
+        read_rinex_obs(write(tmp_path, "b.rnx", bad))
+    bad = OBS3.replace("E11 ", "X11 ")
+    with pytest.raises(RinexError, match=r"line 8: bad record: satellite 'X11'"):
+        read_rinex_obs(write(tmp_path, "c.rnx", bad))
+    bad = OBS3.replace("G   14 C1C", "G   1x C1C")
+    with pytest.raises(RinexError, match=r"line 2: bad integer"):
+        read_rinex_obs(write(tmp_path, "d.rnx", bad))
+
+
+def test_empty_and_missing_files(tmp_path):
+    with pytest.raises(RinexError, match="line 1: unexpected end of file"):
+        read_rinex_obs(write(tmp_path, "empty.rnx", ""))
+    with pytest.raises(RinexError, match="cannot read file"):
+        read_rinex_nav(tmp_path / "does_not_exist.rnx")
+
+
+# --------------------------------------------------------------------- real files
+def test_real_nav_files():
+    nav = read_rinex_nav(need("ephemeris_sp3_2021-118", "brdc1180.21n"))
+    assert len(nav.eph) == 105 and set(nav.eph.prn) == set(range(1, 33))
+    nav3 = read_rinex_nav(need("ephemeris_sp3_2021-118", "rinex3_2023-073", "BRDC00WRD_S_20230730000_01D_MN.rnx"))
+    assert len(nav3.eph) == 4 and nav3.n_skipped == 52  # 4 C + 38 E + 4 J + 6 R records skipped
+    assert nav3.ion_alpha is None
+    spir = read_rinex_nav(need("instinct_spirent_rtk_dynamic_SIMULATED", "RINEX_GN_Spirent.23N"))
+    assert spir.version == 3.04 and spir.ion_alpha[0] == pytest.approx(4.6566e-9)
+    assert np.all(week_tow(spir.eph.toe)[0] == 2244)
+
+
+def test_real_obs_rinex2_smartloc():
+    obs = read_rinex_obs(need("smartloc_berlin_potsdamer_platz", "Berlin_Potsdamer_Platz.obs"))
+    assert obs.version == 2.11 and obs.codes["C1"] == "C1"
+    assert obs.prn[0] == 12 and obs.C1[0] == 19834589.652 and obs.S1[0] == 49.0 and obs.D1[0] == 221.941
+    assert np.all(np.diff(obs.epoch_t_gps_s) > 0)
+
+
+def test_sp3_clk_readers():
+    s = read_sp3(need("ephemeris_sp3_2021-118", "COD0MGXFIN_20211180000_01D_05M_ORB.SP3"))
+    assert s.r_e.shape == (73, 116, 3)
+    j = s.index("G01")
+    np.testing.assert_allclose(s.r_e[0, j], [13287682.546, -15491926.575, 16545690.647])
+    assert s.clock_s[0, j] == pytest.approx(703.963460e-6)
+    # Lagrange interpolation reproduces a node exactly and a mid point to < 1 cm
+    t_mid = s.t_gps_s[30] + 150.0
+    p = s.position("G01", [s.t_gps_s[30], t_mid])
+    np.testing.assert_allclose(p[0], s.r_e[30, j], atol=1e-6)
+    p9 = s.position("G01", [t_mid], order=8)
+    assert np.linalg.norm(p[1] - p9[0]) < 0.01
+    c = read_rinex_clk(need("ephemeris_sp3_2021-118", "COD0MGXFIN_20211180000_01D_30S_CLK.CLK"))
+    assert c.clock_s.shape[0] == 121
+    assert c.clock("G01", [gps_seconds_from_calendar(2021, 4, 28, 19, 30, 0.0)])[0] == pytest.approx(0.703906926273e-3)
