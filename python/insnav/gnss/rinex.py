@@ -553,7 +553,8 @@ def read_rinex_obs(path) -> ObsData:
                             continue
                         ol = obs_lines[col // 5]
                         txt = ol[16 * (col % 5):16 * (col % 5) + 14]
-                        r_val[key].append(_float(src, txt, f"observation {codes[key]}"))
+                        r_val[key].append(_float(src, txt, f"observation {codes[key]}",
+                                                 lineno=src.lineno - nlines + 1 + col // 5))
         if keep:
             ep_t.append(t)
             ep_flag.append(flag)
