@@ -1,0 +1,134 @@
+"""Elevation/azimuth, DOP, best-GDOP selection, Klobuchar and Saastamoinen."""
+import itertools
+
+import numpy as np
+import pytest
+
+from insnav import earth
+from insnav.gnss.corrections import klobuchar_delay, saastamoinen_delay
+from insnav.gnss.ephemeris import C_LIGHT
+from insnav.gnss.geometry import (
+    dop, dop_from_los_n, elevation_azimuth, elevation_mask, los_unit_n, select_best_gdop,
+)
+
+
+def _u_n(el, az):
+    el, az = np.asarray(el, float), np.asarray(az, float)
+    return np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)], -1)
+
+
+def test_elevation_azimuth_known():
+    lat, lon, h = np.deg2rad(48.78), np.deg2rad(9.17), 320.0
+    r = earth.geodetic_to_ecef(lat, lon, h)
+    C = earth.C_en(lat, lon)
+    want = np.deg2rad([[90.0, 0.0], [30.0, 45.0], [5.0, 270.0], [-10.0, 180.0]])
+    sats = r + 2.0e7 * (C @ _u_n(want[:, 0], want[:, 1]).T).T
+    el, az = elevation_azimuth(r, sats)
+    np.testing.assert_allclose(el, want[:, 0], atol=1e-12)
+    np.testing.assert_allclose(az[1:], want[1:, 1], atol=1e-12)  # azimuth undefined at zenith
+    np.testing.assert_array_equal(elevation_mask(el, np.deg2rad(10)), [True, True, False, False])
+    np.testing.assert_allclose(np.linalg.norm(los_unit_n(r, sats), axis=1), 1.0)
+
+
+@pytest.mark.parametrize("el_ring_deg", [0.0, 30.0])
+def test_dop_symmetric_geometry(el_ring_deg):
+    """Zenith + 3 satellites at elevation t, azimuths 0/120/240 deg.
+
+    With rows [-u_n, 1]: G^T G = diag(3c^2/2, 3c^2/2) (+) [[1+3s^2, 1+3s], [1+3s, 4]],
+    c = cos t, s = sin t, so HDOP^2 = 4/(3c^2), VDOP^2 = 4/(3(1-s)^2),
+    TDOP^2 = (1+3s^2)/(3(1-s)^2).  t = 0: HDOP = VDOP = 2/sqrt(3), TDOP = 1/sqrt(3), GDOP = sqrt(3).
+    """
+    t = np.deg2rad(el_ring_deg)
+    u = _u_n([np.pi / 2, t, t, t], np.deg2rad([0, 0, 120, 240]))
+    c, s = np.cos(t), np.sin(t)
+    hd2, vd2, td2 = 4 / (3 * c * c), 4 / (3 * (1 - s) ** 2), (1 + 3 * s * s) / (3 * (1 - s) ** 2)
+    d = dop_from_los_n(u)
+    assert d.hdop == pytest.approx(np.sqrt(hd2), rel=1e-12)
+    assert d.vdop == pytest.approx(np.sqrt(vd2), rel=1e-12)
+    assert d.tdop == pytest.approx(np.sqrt(td2), rel=1e-12)
+    assert d.pdop == pytest.approx(np.sqrt(hd2 + vd2), rel=1e-12)
+    assert d.gdop == pytest.approx(np.sqrt(hd2 + vd2 + td2), rel=1e-12)
+    if el_ring_deg == 0.0:
+        assert d.gdop == pytest.approx(np.sqrt(3.0))
+    # same through ECEF positions, and singular geometry -> inf
+    lat, lon = 0.3, 1.2
+    r = earth.geodetic_to_ecef(lat, lon, 0.0)
+    sats = r + 2.2e7 * (earth.C_en(lat, lon) @ u.T).T
+    assert dop(r, sats).gdop == pytest.approx(d.gdop, rel=1e-9)
+    assert np.isinf(dop_from_los_n(_u_n([0.5] * 4, [0, 1, 2, 3])).gdop)  # all on one cone: singular
+
+
+def _brute(u, n):
+    best, arg = np.inf, None
+    for c in itertools.combinations(range(len(u)), n):
+        G = np.c_[-u[list(c)], np.ones(n)]
+        try:
+            g = np.sqrt(np.trace(np.linalg.inv(G.T @ G)))
+        except np.linalg.LinAlgError:
+            continue
+        if g < best:
+            best, arg = g, c
+    return np.array(arg), best
+
+
+def test_best_gdop_equals_brute_force():
+    rng = np.random.default_rng(7)
+    for trial in range(30):
+        k = rng.integers(5, 11)
+        n = rng.integers(4, min(k, 7) + 1)
+        u = _u_n(np.arcsin(rng.uniform(0.1, 1.0, k)), rng.uniform(0, 2 * np.pi, k))
+        idx, g = select_best_gdop(u, n)
+        bidx, bg = _brute(u, n)
+        assert g == pytest.approx(bg, rel=1e-9)
+        np.testing.assert_array_equal(idx, bidx)
+        # greedy fallback: never better than the optimum, close to it
+        gi, gg = select_best_gdop(u, n, max_combinations=0)
+        assert len(gi) == n and len(set(gi)) == n
+        assert bg - 1e-9 <= gg <= 1.5 * bg
+
+
+def test_saastamoinen_zenith_and_mapping():
+    z0 = saastamoinen_delay(np.deg2rad(45.0), 0.0, np.pi / 2)
+    assert 2.2 < z0 < 2.5  # 2.30 m hydrostatic + 0.12 m wet
+    assert z0 == pytest.approx(2.42, abs=0.02)
+    dry = saastamoinen_delay(np.deg2rad(45.0), 0.0, np.pi / 2, humidity=0.0)
+    assert dry == pytest.approx(0.002277 * 1013.25, rel=1e-6)  # D = 1 at 45 deg, h = 0
+    assert saastamoinen_delay(0.8, 2000.0, np.pi / 2) < 0.82 * z0  # ~ 20 % less air at 2 km
+    el = np.deg2rad([90, 30, 10])
+    d = saastamoinen_delay(0.8, 300.0, el)
+    assert d[1] / d[0] == pytest.approx(2.0, rel=0.01) and 5.3 < d[2] / d[0] < 5.8
+    assert np.isnan(saastamoinen_delay(0.8, 0.0, -0.1))
+
+
+def test_klobuchar_reference_and_range():
+    """Hand-computed reference (IS-GPS-200 Figure 20-4), at the equator, lon 0, zenith.
+
+    E = 0.5 sc, psi = 0.0137/0.61 - 0.022 = 4.59e-4 sc, phi_i = 4.59e-4, lambda_i = 0,
+    local time t = 50400 s (14:00, the peak), alpha = [1e-8, 0, 0, 0] -> AMP = 1e-8 s,
+    beta = [1e5, 0, 0, 0] -> PER = 1e5 s, x = 0, F = 1 + 16 (0.03)^3 = 1.000432,
+    T = F (5e-9 + 1e-8) = 1.500648e-8 s -> 4.49883 m.
+    At t = 50400 + 43200: x = 2 pi 0.432 = 2.71 > 1.57 -> night: F 5e-9 s -> 1.49961 m.
+    """
+    a, b = [1e-8, 0, 0, 0], [1e5, 0, 0, 0]
+    d = klobuchar_delay(np.array([50400.0, 93600.0]), 0.0, 0.0, np.pi / 2, 0.0, a, b)
+    assert d[0] == pytest.approx(1.000432 * 15e-9 * C_LIGHT, rel=1e-9)
+    assert d[0] == pytest.approx(4.49883, abs=1e-5)
+    assert d[1] == pytest.approx(1.000432 * 5e-9 * C_LIGHT, rel=1e-9)
+    # physical range with a real broadcast set (brdc1180.21n), random geometry and time
+    alpha = [0.9313e-08, 0.1490e-07, -0.5960e-07, -0.1192e-06]
+    beta = [0.8806e05, 0.4915e05, -0.1311e06, -0.3277e06]
+    rng = np.random.default_rng(3)
+    n = 5000
+    lat = np.arcsin(rng.uniform(-1, 1, n))
+    lon = rng.uniform(-np.pi, np.pi, n)
+    el = rng.uniform(np.deg2rad(5), np.pi / 2, n)
+    az = rng.uniform(0, 2 * np.pi, n)
+    t = rng.uniform(0, 604800.0, n)
+    d = klobuchar_delay(t, lat, lon, el, az, alpha, beta)
+    night_min = 5e-9 * C_LIGHT  # 1.499 m vertical floor, F >= 1
+    assert np.all(d >= night_min * 0.9999) and np.all(d < 3.08 * (5e-9 + 2e-7) * C_LIGHT)
+    assert 1.5 < np.median(d) < 30.0
+    # at night (local 02:00, |x| > 1.57) the delay is F * 5 ns: the ratio is the obliquity factor
+    lo = klobuchar_delay(7200.0, 0.8, 0.0, np.deg2rad(5), 0.0, alpha, beta)
+    hi = klobuchar_delay(7200.0, 0.8, 0.0, np.pi / 2, 0.0, alpha, beta)
+    assert lo / hi == pytest.approx((1 + 16 * (0.53 - 5 / 180) ** 3) / (1 + 16 * 0.03**3), rel=1e-12)
