@@ -247,7 +247,7 @@ def sat_position_velocity(eph: Ephemerides, idx, t_gps_s) -> SatPosVel:
 class SatClock(NamedTuple):
     """Satellite clock correction."""
 
-    bias_s: np.ndarray  #: (k,) dt_sv [s] (add to satellite time to get GPS time... see sat_clock)
+    bias_s: np.ndarray  #: (k,) dt_sv [s]; GPS time t = t_sv - dt_sv (IS-GPS-200 20.3.3.3.3.1)
     drift_s_s: np.ndarray  #: (k,) d(dt_sv)/dt [s/s]
     relativistic_s: np.ndarray  #: (k,) the relativistic term included in bias_s (0 if excluded) [s]
 
