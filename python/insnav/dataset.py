@@ -1,0 +1,536 @@
+"""Dataset containers and the on-disk dataset directory.
+
+A dataset directory (written by :meth:`Dataset.save`, ``insnav simulate``;
+read by :func:`load_dataset`, ``insnav run``) holds:
+
+==================  ==========================================================
+``imu.csv``         ``t_s``, ``dtheta_{x,y,z}_rad``, ``dv_{x,y,z}_mps``:
+                    increments over ``(t - dt, t]``, body FRD
+``gnss.csv``        loosely coupled fixes of the antenna: ``t_valid_s``,
+                    ``t_arrival_s``, ``lat_deg``, ``lon_deg``, ``h_m``,
+                    ``v{n,e,d}_mps``, ``sigma_{n,e,d}_m``, ``sigma_v{n,e,d}_mps``
+``gnss_raw.csv``    (tight presets only) one row per satellite and epoch, see
+                    :class:`GnssRaw`
+``truth.csv``       IMU-centre truth: ``t_s``, ``lat_deg``, ``lon_deg``,
+                    ``h_m``, ``v{n,e,d}_mps``, ``roll_deg``, ``pitch_deg``,
+                    ``yaw_deg``, ``f_{x,y,z}_mps2``, ``omega_{x,y,z}_radps``
+``imu_errors.csv``  injected biases and scale factors (see :class:`ImuErrors`)
+``scenario.toml``   the resolved scenario (``extends`` merged, seed set)
+``dataset.json``    metadata: t0, GPS time offset, lever arm, initial state,
+                    the IMU model in SI (:func:`insnav.sim.imu.imu_model_dict`)
+==================  ==========================================================
+
+Every CSV has one header line naming each column with its unit.  Writing is
+atomic: files go to a temporary sibling directory which is renamed into place,
+so a directory that exists is always complete.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .types import NavState
+
+FORMAT_VERSION = 1
+
+
+@dataclass
+class ImuData:
+    """IMU increments.
+
+    Attributes
+    ----------
+    t : ndarray (N,)
+        End of each sample interval [s].
+    dtheta_b : ndarray (N, 3)
+        Angle increments over ``(t - dt, t]``, body FRD [rad].
+    dv_b : ndarray (N, 3)
+        Velocity (specific-force) increments [m/s].
+    """
+
+    t: np.ndarray
+    dtheta_b: np.ndarray
+    dv_b: np.ndarray
+
+    COLUMNS = ("t_s", "dtheta_x_rad", "dtheta_y_rad", "dtheta_z_rad", "dv_x_mps", "dv_y_mps",
+               "dv_z_mps")
+
+    def __len__(self):
+        return len(self.t)
+
+    @property
+    def dt(self) -> float:
+        """Median sample interval [s]."""
+        return float(np.median(np.diff(self.t))) if len(self.t) > 1 else float("nan")
+
+    def to_array(self):
+        return np.column_stack([self.t, self.dtheta_b, self.dv_b])
+
+    @classmethod
+    def from_array(cls, a):
+        return cls(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy())
+
+
+@dataclass
+class GnssFixes:
+    """Loosely coupled GNSS fixes of the antenna.
+
+    Attributes
+    ----------
+    t_valid : ndarray (N,)
+        Time of validity [s].
+    t_arrival : ndarray (N,)
+        Time at which the fix reaches the filter [s] (``t_valid`` plus a
+        whole number of GNSS epochs of delay).
+    lat_deg, lon_deg, h_m : ndarray (N,)
+        Antenna position [deg, deg, m].
+    v_n : ndarray (N, 3)
+        Antenna velocity NED [m/s] (NaN when not available, e.g. RTK files).
+    sigma_pos_n : ndarray (N, 3)
+        1-sigma of the position noise, North, East, Down [m].
+    sigma_vel_n : ndarray (N, 3)
+        1-sigma of the velocity noise [m/s] (NaN when no velocity).
+    """
+
+    t_valid: np.ndarray
+    t_arrival: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    h_m: np.ndarray
+    v_n: np.ndarray
+    sigma_pos_n: np.ndarray
+    sigma_vel_n: np.ndarray
+
+    COLUMNS = ("t_valid_s", "t_arrival_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps",
+               "vd_mps", "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps",
+               "sigma_vd_mps")
+
+    def __len__(self):
+        return len(self.t_valid)
+
+    @property
+    def delay_epochs(self) -> np.ndarray:
+        """Delay in seconds ``t_arrival - t_valid`` [s]."""
+        return self.t_arrival - self.t_valid
+
+    def to_array(self):
+        return np.column_stack([self.t_valid, self.t_arrival, self.lat_deg, self.lon_deg,
+                                self.h_m, self.v_n, self.sigma_pos_n, self.sigma_vel_n])
+
+    @classmethod
+    def from_array(cls, a):
+        a = a.reshape(-1, 14)
+        return cls(a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy(), a[:, 3].copy(), a[:, 4].copy(),
+                   a[:, 5:8].copy(), a[:, 8:11].copy(), a[:, 11:14].copy())
+
+
+@dataclass
+class Truth:
+    """Truth of the IMU centre.
+
+    Attributes
+    ----------
+    t : ndarray (N,)  [s]
+    lat_deg, lon_deg, h_m : ndarray (N,)  [deg, deg, m]
+    v_n : ndarray (N, 3)  NED velocity [m/s]
+    roll_deg, pitch_deg, yaw_deg : ndarray (N,)
+        3-2-1 Euler angles [deg], yaw in (-180, 180].
+    f_ib_b : ndarray (N, 3) or None
+        True specific force, body FRD [m/s^2].
+    omega_ib_b : ndarray (N, 3) or None
+        True angular rate relative to inertial space, body FRD [rad/s].
+    """
+
+    t: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    h_m: np.ndarray
+    v_n: np.ndarray
+    roll_deg: np.ndarray
+    pitch_deg: np.ndarray
+    yaw_deg: np.ndarray
+    f_ib_b: np.ndarray | None = None
+    omega_ib_b: np.ndarray | None = None
+
+    COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg",
+               "pitch_deg", "yaw_deg", "f_x_mps2", "f_y_mps2", "f_z_mps2", "omega_x_radps",
+               "omega_y_radps", "omega_z_radps")
+
+    def __len__(self):
+        return len(self.t)
+
+    def state_at(self, i: int) -> NavState:
+        """Row ``i`` as a :class:`insnav.NavState`."""
+        return NavState(self.lat_deg[i], self.lon_deg[i], self.h_m[i], self.v_n[i],
+                        self.roll_deg[i], self.pitch_deg[i], self.yaw_deg[i])
+
+    def to_array(self):
+        n = len(self.t)
+        f = self.f_ib_b if self.f_ib_b is not None else np.full((n, 3), np.nan)
+        w = self.omega_ib_b if self.omega_ib_b is not None else np.full((n, 3), np.nan)
+        return np.column_stack([self.t, self.lat_deg, self.lon_deg, self.h_m, self.v_n,
+                                self.roll_deg, self.pitch_deg, self.yaw_deg, f, w])
+
+    @classmethod
+    def from_array(cls, a):
+        a = a.reshape(-1, 16)
+        return cls(a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy(), a[:, 3].copy(),
+                   a[:, 4:7].copy(), a[:, 7].copy(), a[:, 8].copy(), a[:, 9].copy(),
+                   a[:, 10:13].copy(), a[:, 13:16].copy())
+
+
+@dataclass
+class GnssRaw:
+    """Raw GPS observations, one row per (epoch, satellite).
+
+    Pseudorange model (what :mod:`insnav.sim.gnss_raw` simulates and the
+    tight filter inverts)::
+
+        rho  = |r_sat - r_rx| + b_rx - sat_clock_bias + e_rho
+        rhod = u . (v_sat - v_rx) + d_rx - sat_clock_drift + e_rhod,  u = (r_sat - r_rx)/|r_sat - r_rx|
+
+    where ``r_sat``/``v_sat`` are the satellite position and velocity at
+    transmission rotated into the ECEF frame at reception (Sagnac), as stored
+    in ``sat_r_e``/``sat_v_e``; ``r_rx``/``v_rx`` are the antenna ECEF position
+    and velocity at ``t``; ``b_rx`` [m], ``d_rx`` [m/s] the receiver clock.
+
+    Attributes
+    ----------
+    t : ndarray (M,)
+        Reception time (true time) [s].
+    prn : ndarray (M,) int
+    pseudorange_m, pseudorange_rate_mps : ndarray (M,)
+    sat_r_e, sat_v_e : ndarray (M, 3)
+        Satellite ECEF position [m] and velocity [m/s] at transmission, in
+        the ECEF frame at reception.
+    sat_clock_bias_m, sat_clock_drift_mps : ndarray (M,)
+        ``c dt_sv`` [m] (relativistic term included, no T_GD) and its rate [m/s].
+    elevation_deg, azimuth_deg : ndarray (M,)
+        Seen from the true antenna position [deg].
+    travel_time_s : ndarray (M,)
+        Signal travel time [s].
+    sigma_pr_m, sigma_prr_mps : ndarray (M,)
+        Noise 1-sigma [m], [m/s].
+    rx_clock_bias_m, rx_clock_drift_mps : ndarray (M,)
+        TRUE receiver clock bias ``b_rx`` [m] and drift ``d_rx`` [m/s] (for
+        evaluation; a filter must not read them).
+    """
+
+    t: np.ndarray
+    prn: np.ndarray
+    pseudorange_m: np.ndarray
+    pseudorange_rate_mps: np.ndarray
+    sat_r_e: np.ndarray
+    sat_v_e: np.ndarray
+    sat_clock_bias_m: np.ndarray
+    sat_clock_drift_mps: np.ndarray
+    elevation_deg: np.ndarray
+    azimuth_deg: np.ndarray
+    travel_time_s: np.ndarray
+    sigma_pr_m: np.ndarray
+    sigma_prr_mps: np.ndarray
+    rx_clock_bias_m: np.ndarray
+    rx_clock_drift_mps: np.ndarray
+
+    COLUMNS = ("t_s", "prn", "pseudorange_m", "pseudorange_rate_mps", "sat_x_m", "sat_y_m",
+               "sat_z_m", "sat_vx_mps", "sat_vy_mps", "sat_vz_mps", "sat_clock_bias_m",
+               "sat_clock_drift_mps", "elevation_deg", "azimuth_deg", "travel_time_s",
+               "sigma_pr_m", "sigma_prr_mps", "true_rx_clock_bias_m", "true_rx_clock_drift_mps")
+
+    def __len__(self):
+        return len(self.t)
+
+    def epochs(self):
+        """Unique epoch times [s]."""
+        return np.unique(self.t)
+
+    def to_array(self):
+        return np.column_stack([self.t, self.prn, self.pseudorange_m, self.pseudorange_rate_mps,
+                                self.sat_r_e, self.sat_v_e, self.sat_clock_bias_m,
+                                self.sat_clock_drift_mps, self.elevation_deg, self.azimuth_deg,
+                                self.travel_time_s, self.sigma_pr_m, self.sigma_prr_mps,
+                                self.rx_clock_bias_m, self.rx_clock_drift_mps])
+
+    @classmethod
+    def from_array(cls, a):
+        a = a.reshape(-1, 19)
+        c = [a[:, i].copy() for i in range(19)]
+        return cls(c[0], c[1].astype(np.int64), c[2], c[3], a[:, 4:7].copy(), a[:, 7:10].copy(),
+                   c[10], c[11], c[12], c[13], c[14], c[15], c[16], c[17], c[18])
+
+
+@dataclass
+class ImuErrors:
+    """The IMU errors injected by the simulator (SI).
+
+    Attributes
+    ----------
+    t : ndarray (K,)
+        Times [s] (the IMU samples, decimated to ``imu.errors_rate_hz``).
+    gyro_bias : ndarray (K, 3)
+        Total gyro bias (constant + turn-on + Gauss-Markov + random walk) [rad/s].
+    accel_bias : ndarray (K, 3)
+        Total accelerometer bias [m/s^2].
+    gyro_scale, accel_scale : ndarray (3,)
+        Scale-factor errors [-].
+    gyro_misalignment, accel_misalignment : ndarray (3, 3)
+        Misalignment matrices (zero diagonal) [rad].
+    """
+
+    t: np.ndarray
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    gyro_scale: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    accel_scale: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gyro_misalignment: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    accel_misalignment: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+
+    COLUMNS = ("t_s", "gyro_bias_x_radps", "gyro_bias_y_radps", "gyro_bias_z_radps",
+               "accel_bias_x_mps2", "accel_bias_y_mps2", "accel_bias_z_mps2", "gyro_scale_x",
+               "gyro_scale_y", "gyro_scale_z", "accel_scale_x", "accel_scale_y", "accel_scale_z")
+
+    def to_array(self):
+        n = len(self.t)
+        return np.column_stack([self.t, self.gyro_bias, self.accel_bias,
+                                np.broadcast_to(self.gyro_scale, (n, 3)),
+                                np.broadcast_to(self.accel_scale, (n, 3))])
+
+
+@dataclass
+class Dataset:
+    """Everything one simulation (or a converted real run) produced.
+
+    Attributes
+    ----------
+    imu : ImuData
+    gnss : GnssFixes
+        Loosely coupled fixes (possibly empty).
+    truth : Truth or None
+    gnss_raw : GnssRaw or None
+        Raw observations (tight presets only).
+    imu_errors : ImuErrors or None
+    scenario : dict
+        The resolved scenario TOML as a dictionary.
+    lever_arm_b : ndarray (3,)
+        Antenna position relative to the IMU centre, body FRD [m].
+    initial : NavState
+        True state of the IMU centre at ``t0``.
+    t0 : float
+        Start time [s]; the first IMU interval is ``(t0, t0 + dt]``.
+    gps_time_offset_s : float
+        GPS time of ``t = 0`` [s since 1980-01-06]: ``t_gps = t + offset``.
+    imu_model : dict
+        IMU noise/bias model in SI, keys documented in
+        :func:`insnav.sim.imu.imu_model_dict`.
+    name : str
+    seed : int or None
+    """
+
+    imu: ImuData
+    gnss: GnssFixes
+    truth: Truth | None
+    gnss_raw: GnssRaw | None
+    imu_errors: ImuErrors | None
+    scenario: dict
+    lever_arm_b: np.ndarray
+    initial: NavState
+    t0: float
+    gps_time_offset_s: float
+    imu_model: dict
+    name: str = ""
+    seed: int | None = None
+
+    def save(self, directory, overwrite: bool = False) -> Path:
+        """Write the dataset directory atomically (see module docstring).
+
+        Parameters
+        ----------
+        directory : str or Path
+        overwrite : bool
+            Replace an existing directory; otherwise raise ``FileExistsError``.
+
+        Returns
+        -------
+        Path
+        """
+        from .sim.scenario import dumps_toml
+
+        out = Path(directory)
+        if out.exists() and not overwrite:
+            raise FileExistsError(f"{out} exists (use overwrite=True / --overwrite)")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+        try:
+            write_csv(tmp / "imu.csv", ImuData.COLUMNS, self.imu.to_array(), "%.17g")
+            write_csv(tmp / "gnss.csv", GnssFixes.COLUMNS, self.gnss.to_array(), "%.17g")
+            if self.truth is not None:
+                write_csv(tmp / "truth.csv", Truth.COLUMNS, self.truth.to_array(), "%.17g")
+            if self.gnss_raw is not None:
+                write_csv(tmp / "gnss_raw.csv", GnssRaw.COLUMNS, self.gnss_raw.to_array(), "%.17g")
+            if self.imu_errors is not None:
+                write_csv(tmp / "imu_errors.csv", ImuErrors.COLUMNS, self.imu_errors.to_array(),
+                          "%.17g")
+            (tmp / "scenario.toml").write_text(dumps_toml(self.scenario), encoding="utf-8")
+            meta = {
+                "format": "insnav-dataset", "version": FORMAT_VERSION, "name": self.name,
+                "seed": self.seed, "t0_s": float(self.t0),
+                "gps_time_offset_s": float(self.gps_time_offset_s),
+                "lever_arm_b_m": np.asarray(self.lever_arm_b, float).tolist(),
+                "initial": {"lat_deg": self.initial.lat_deg, "lon_deg": self.initial.lon_deg,
+                            "h_m": self.initial.h_m, "v_n_mps": self.initial.v_n.tolist(),
+                            "roll_deg": self.initial.roll_deg, "pitch_deg": self.initial.pitch_deg,
+                            "yaw_deg": self.initial.yaw_deg},
+                "imu_model": self.imu_model,
+            }
+            if self.imu_errors is not None:
+                meta["imu_errors_const"] = {
+                    "gyro_scale": self.imu_errors.gyro_scale.tolist(),
+                    "accel_scale": self.imu_errors.accel_scale.tolist(),
+                    "gyro_misalignment_rad": self.imu_errors.gyro_misalignment.tolist(),
+                    "accel_misalignment_rad": self.imu_errors.accel_misalignment.tolist()}
+            (tmp / "dataset.json").write_text(json.dumps(meta, indent=1, allow_nan=True) + "\n",
+                                              encoding="utf-8")
+            old = None
+            if out.exists():
+                old = out.parent / f".{out.name}.old-{os.getpid()}"
+                os.rename(out, old)
+            os.rename(tmp, out)
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        return out
+
+
+def load_dataset(directory) -> Dataset:
+    """Read a dataset directory written by :meth:`Dataset.save`.
+
+    Raises
+    ------
+    FileNotFoundError
+        When the directory or a required file is missing.
+    ValueError
+        Naming the file, the 1-based line and the reason for a malformed file.
+    """
+    import tomllib
+
+    d = Path(directory)
+    if not d.is_dir():
+        raise FileNotFoundError(f"dataset directory {d} does not exist")
+    meta_path = d / "dataset.json"
+    if not meta_path.is_file():
+        raise FileNotFoundError(f"{meta_path} missing: not an insnav dataset directory")
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{meta_path}:{exc.lineno}: invalid JSON: {exc.msg}") from None
+    imu = ImuData.from_array(read_csv(d / "imu.csv", ImuData.COLUMNS))
+    gnss = GnssFixes.from_array(read_csv(d / "gnss.csv", GnssFixes.COLUMNS))
+    truth = (Truth.from_array(read_csv(d / "truth.csv", Truth.COLUMNS))
+             if (d / "truth.csv").is_file() else None)
+    raw = (GnssRaw.from_array(read_csv(d / "gnss_raw.csv", GnssRaw.COLUMNS))
+           if (d / "gnss_raw.csv").is_file() else None)
+    errs = None
+    if (d / "imu_errors.csv").is_file():
+        a = read_csv(d / "imu_errors.csv", ImuErrors.COLUMNS).reshape(-1, 13)
+        c = meta.get("imu_errors_const", {})
+        errs = ImuErrors(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy(),
+                         np.array(c.get("gyro_scale", a[0, 7:10] if len(a) else np.zeros(3))),
+                         np.array(c.get("accel_scale", a[0, 10:13] if len(a) else np.zeros(3))),
+                         np.array(c.get("gyro_misalignment_rad", np.zeros((3, 3)))),
+                         np.array(c.get("accel_misalignment_rad", np.zeros((3, 3)))))
+    scen = {}
+    if (d / "scenario.toml").is_file():
+        scen = tomllib.loads((d / "scenario.toml").read_text(encoding="utf-8"))
+    ini = meta["initial"]
+    initial = NavState(ini["lat_deg"], ini["lon_deg"], ini["h_m"], ini["v_n_mps"],
+                       ini["roll_deg"], ini["pitch_deg"], ini["yaw_deg"])
+    return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=raw, imu_errors=errs, scenario=scen,
+                   lever_arm_b=np.array(meta.get("lever_arm_b_m", [0.0, 0.0, 0.0])),
+                   initial=initial, t0=float(meta["t0_s"]),
+                   gps_time_offset_s=float(meta.get("gps_time_offset_s", 0.0)),
+                   imu_model=meta.get("imu_model", {}), name=meta.get("name", ""),
+                   seed=meta.get("seed"))
+
+
+# --- fast CSV --------------------------------------------------------------
+def write_csv(path, columns, data, fmt="%.17g", chunk=100_000) -> None:
+    """Write a numeric array with a one-line header of column names (fast, chunked)."""
+    data = np.asarray(data, dtype=float).reshape(-1, len(columns))
+    row = ",".join([fmt] * len(columns)) + "\n"
+    with open(path, "w", encoding="ascii", newline="\n") as f:
+        f.write(",".join(columns) + "\n")
+        for s in range(0, data.shape[0], chunk):
+            blk = data[s:s + chunk]
+            f.write((row * blk.shape[0]) % tuple(blk.ravel().tolist()))
+
+
+def parse_numeric_text(text: str, ncols: int, source: str, first_line: int = 1,
+                       sep: str | None = None, min_cols: int | None = None) -> np.ndarray:
+    """Parse whitespace/comma-separated numeric text into an (N, ncols) array.
+
+    Fast path: one ``np.fromstring`` over the whole text.  If that fails or the
+    count does not match, the text is scanned line by line to report the first
+    bad line as ``ValueError("<source>:<line>: <reason>")`` (1-based).
+    Blank lines are ignored.  With ``min_cols`` rows may have more columns
+    than ``ncols`` (only the first ``ncols`` are kept; slow path).
+    """
+    body = text.replace(",", " ") if sep in (None, ",") else text
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            vals = np.fromstring(body, sep=" ") if body.strip() else np.empty(0)
+    except (ValueError, DeprecationWarning):
+        vals = None
+    if vals is not None:
+        n_rows = body.count("\n") + (0 if body.endswith("\n") or not body else 1)
+        if "\n\n" in body or body.startswith("\n") or "\r" in body:
+            n_rows = sum(1 for ln in body.splitlines() if ln.strip())
+        if vals.size == n_rows * ncols:
+            return vals.reshape(-1, ncols)
+    # slow path: find the bad line (or collect rows with extra columns)
+    rows = []
+    for i, ln in enumerate(body.splitlines()):
+        parts = ln.split()
+        if not parts:
+            continue
+        lineno = first_line + i
+        if len(parts) != ncols and not (min_cols is not None and len(parts) >= ncols):
+            raise ValueError(f"{source}:{lineno}: expected {ncols} columns, found {len(parts)}")
+        try:
+            rows.append([float(p) for p in parts[:ncols]])
+        except ValueError:
+            bad = next(p for p in parts[:ncols] if not _is_float(p))
+            raise ValueError(f"{source}:{lineno}: not a number: {bad!r}") from None
+    return np.array(rows, dtype=float).reshape(-1, ncols)
+
+
+def _is_float(s):
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
+
+
+def read_csv(path, columns) -> np.ndarray:
+    """Read a dataset CSV, checking the header names ``columns``."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} missing")
+    text = path.read_text(encoding="ascii", errors="replace")
+    nl = text.find("\n")
+    header = (text if nl < 0 else text[:nl]).strip()
+    got = tuple(h.strip() for h in header.split(","))
+    if got != tuple(columns):
+        raise ValueError(f"{path}:1: unexpected header {header!r}; expected {','.join(columns)}")
+    body = "" if nl < 0 else text[nl + 1:]
+    return parse_numeric_text(body, len(columns), str(path), first_line=2)

@@ -1,0 +1,1 @@
+"""Preset scenario files (``*.toml``), listed by ``insnav scenarios``."""

@@ -1,0 +1,147 @@
+"""Raw GPS output for tight coupling: pseudoranges and pseudorange rates.
+
+Model (documented here because the tight filter inverts exactly this)::
+
+    tau   = |R_z(w tau) r_sat(t - tau) - r_rx(t)| / c          (light time, iterated)
+    r_sat = R_z(w tau) r_sat_e(t - tau),  v_sat = R_z(w tau) v_sat_e(t - tau)
+    rho   = |r_sat - r_rx(t)| + b_rx(t) - c dt_sv(t - tau) + e_rho
+    rhod  = u . (v_sat - v_rx(t)) + d_rx(t) - c ddt_sv(t - tau) + e_rhod
+    u     = (r_sat - r_rx) / |r_sat - r_rx|
+
+with ``w`` the IS-GPS-200 Earth rate (Sagnac rotation into the ECEF frame at
+reception), ``r_rx``/``v_rx`` the true antenna ECEF position/velocity at the
+true reception time ``t`` (the record's ``t``), ``c dt_sv`` the broadcast
+clock polynomial with the relativistic term (no T_GD), ``e_rho ~ N(0,
+sigma_pr^2)``, ``e_rhod ~ N(0, sigma_prr^2)``.  No ionosphere or troposphere.
+Satellite states come from :class:`insnav.gnss.constellation.Constellation`
+(nominal 32-satellite set re-referenced to the scenario's start, or a RINEX
+navigation file) and :func:`insnav.gnss.ephemeris.transmit_states`.
+
+Receiver clock: bias ``b`` [m] and drift ``d`` [m/s] as a two-state random
+walk, ``b' = d + w_b``, ``d' = w_d`` with white-noise densities
+``clock_bias_rw`` [m/sqrt(s)] and ``clock_drift_rw`` [(m/s)/sqrt(s)],
+discretised exactly (Brown & Hwang, *Introduction to Random Signals and
+Applied Kalman Filtering*, 4th ed., section 9.3), starting from
+``(clock_bias0_m, clock_drift0_mps)`` at ``t0``.
+
+Satellite selection per epoch: elevation at or above the mask; then, if
+``max_sats`` > 0, the best-GDOP subset of that size
+(:func:`insnav.gnss.geometry.select_best_gdop`).  Inside a
+``[[gnss_raw.windows]]`` window ``[start, end)`` exactly ``n_sats`` are
+kept: the best-GDOP subset when ``n_sats >= 4``, the ``n_sats`` highest
+satellites when fewer (GDOP is undefined), none when 0.  An epoch with fewer
+visible satellites than asked keeps all it has.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import earth
+from ..dataset import GnssRaw
+from .gnss_loose import antenna_state, gnss_epochs
+from .trajectory import Trajectory
+
+
+def simulate_clock(t, t0, b0, d0, q_b, q_d, rng: np.random.Generator):
+    """Receiver clock bias [m] and drift [m/s] at times ``t`` (increasing, > t0)."""
+    t = np.asarray(t, float)
+    dt = np.diff(np.concatenate([[t0], t]))
+    z = rng.standard_normal((t.size, 2))
+    # exact discrete process noise of [b, d] over dt
+    q11 = q_b ** 2 * dt + q_d ** 2 * dt ** 3 / 3.0
+    q12 = q_d ** 2 * dt ** 2 / 2.0
+    q22 = q_d ** 2 * dt
+    l11 = np.sqrt(q11)
+    l21 = np.where(l11 > 0, q12 / np.where(l11 > 0, l11, 1.0), 0.0)
+    l22 = np.sqrt(np.maximum(q22 - l21 ** 2, 0.0))
+    w_b = l11 * z[:, 0]
+    w_d = l21 * z[:, 0] + l22 * z[:, 1]
+    d = d0 + np.cumsum(w_d)
+    d_prev = np.concatenate([[d0], d[:-1]])
+    b = b0 + np.cumsum(d_prev * dt + w_b)
+    return b, d
+
+
+def make_constellation(spec: str, t_start_gps: float):
+    """``'nominal'`` or a RINEX navigation file path -> :class:`Constellation`."""
+    from ..gnss.constellation import Constellation
+
+    if spec == "nominal":
+        return Constellation.nominal(t0_gps_s=t_start_gps)
+    return Constellation.from_rinex_nav(spec)
+
+
+def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_s: float,
+                      rng_noise: np.random.Generator, rng_clock: np.random.Generator,
+                      constellation=None) -> GnssRaw:
+    """Simulate raw observations for the ``[gnss_raw]`` configuration ``cfg`` (SI dict)."""
+    from ..gnss.ephemeris import C_LIGHT, select_ephemeris, transmit_states
+    from ..gnss.geometry import select_best_gdop
+
+    sc = traj.sc
+    t = gnss_epochs(sc.t0, sc.t_end, sc.t0 + 1.0 / cfg["rate"], cfg["rate"])
+    if constellation is None:
+        constellation = make_constellation(cfg["constellation"], sc.t0 + gps_time_offset_s)
+    eph = constellation.eph
+    ne = t.size
+    lat, lon, _, _, r_rx_e, v_rx_e = antenna_state(traj, t, lever_arm_b)
+    prns = np.asarray(constellation.prns, dtype=np.int64)
+    ns = prns.size
+    t_gps = t + gps_time_offset_s
+    ep = np.repeat(np.arange(ne), ns)
+    prn_rows = np.tile(prns, ne)
+    if constellation.is_nominal:
+        lut = {int(p): i for i, p in enumerate(eph.prn)}
+        idx = np.tile(np.array([lut[int(p)] for p in prns], np.int64), ne)
+    else:
+        idx = select_ephemeris(eph, prn_rows, t_gps[ep])
+    ok = idx >= 0
+    ep, prn_rows, idx = ep[ok], prn_rows[ok], idx[ok]
+    ts = transmit_states(eph, idx, t_gps[ep], r_rx_e[ep])
+    d = ts.r_e - r_rx_e[ep]
+    rng = np.linalg.norm(d, axis=1)
+    u_e = d / rng[:, None]
+    u_n = earth.ecef_to_ned_vector(lat[ep], lon[ep], u_e)
+    el = np.arcsin(np.clip(-u_n[:, 2], -1.0, 1.0))
+    az = np.mod(np.arctan2(u_n[:, 1], u_n[:, 0]), 2 * np.pi)
+    keep = el >= cfg["elevation_mask"]
+
+    windows = cfg["windows"]
+    max_sats = cfg["max_sats"]
+    if max_sats or windows:
+        starts = np.searchsorted(ep, np.arange(ne))
+        ends = np.searchsorted(ep, np.arange(ne), side="right")
+        for k in range(ne):
+            in_window = [n_w for (a, b, n_w) in windows if a <= t[k] < b]
+            if not in_window and max_sats == 0:
+                continue
+            want = in_window[0] if in_window else max_sats
+            rows = np.arange(starts[k], ends[k])
+            rows = rows[keep[rows]]
+            if want >= rows.size:
+                continue  # keep all that are visible
+            keep[starts[k]:ends[k]] = False
+            if want >= 4:
+                sel, _ = select_best_gdop(u_n[rows], want)
+                keep[rows[sel]] = True
+            elif want > 0:
+                keep[rows[np.argsort(-el[rows], kind="stable")[:want]]] = True
+
+    ep, prn_rows = ep[keep], prn_rows[keep]
+    r_sat, v_sat = ts.r_e[keep], ts.v_e[keep]
+    clk_b = C_LIGHT * ts.clock_bias_s[keep]
+    clk_d = C_LIGHT * ts.clock_drift_s_s[keep]
+    rng, u_e = rng[keep], u_e[keep]
+    m = ep.size
+    b_rx, d_rx = simulate_clock(t, sc.t0, cfg["clock_bias0"], cfg["clock_drift0"],
+                                cfg["clock_bias_rw"], cfg["clock_drift_rw"], rng_clock)
+    e = rng_noise.standard_normal((m, 2))
+    pr = rng + b_rx[ep] - clk_b + cfg["sigma_pr"] * e[:, 0]
+    prr = (np.einsum("ij,ij->i", u_e, v_sat - v_rx_e[ep]) + d_rx[ep] - clk_d
+           + cfg["sigma_prr"] * e[:, 1])
+    return GnssRaw(t=t[ep], prn=prn_rows, pseudorange_m=pr, pseudorange_rate_mps=prr,
+                   sat_r_e=r_sat, sat_v_e=v_sat, sat_clock_bias_m=clk_b, sat_clock_drift_mps=clk_d,
+                   elevation_deg=np.degrees(el[keep]), azimuth_deg=np.degrees(az[keep]),
+                   travel_time_s=ts.tau[keep], sigma_pr_m=np.full(m, cfg["sigma_pr"]),
+                   sigma_prr_mps=np.full(m, cfg["sigma_prr"]), rx_clock_bias_m=b_rx[ep],
+                   rx_clock_drift_mps=d_rx[ep])

@@ -1,0 +1,405 @@
+"""Analytic truth trajectory.
+
+The motion is described by three smoothed, piecewise-constant rates -- the
+longitudinal acceleration ``a`` [m/s^2], the turn rate ``r`` [rad/s] and the
+flight-path-angle rate ``q`` [rad/s] -- whose integrals give the speed ``V``,
+the track heading ``psi`` and the flight-path angle ``gamma``:
+
+    v_n = V [cos(gamma) cos(psi), cos(gamma) sin(psi), -sin(gamma)]
+
+Each step of a rate is replaced by a quintic smoothstep
+``S(x) = 10x^3 - 15x^4 + 6x^5`` of width ``transition_s`` centred on the
+segment boundary (one-sided at the start and the end of the scenario).  Because
+``S(x) + S(1 - x) = 1`` the smoothed rate has the same integral as the step
+once the transition is over, so commanded changes (``heading_change_deg``,
+``target_speed_mps`` ...) are reached exactly.  Rates are C2, so velocity and
+attitude are C3; speed, heading and path angle are closed-form polynomials in
+``t`` (no numerical integration).
+
+Attitude (3-2-1 Euler, NED / forward-right-down):
+
+    roll  = roll_offset + bank + sum(roll oscillations)
+    pitch = gamma + pitch_offset + sum(pitch oscillations)
+    yaw   = psi + yaw_offset + sum(yaw oscillations)
+
+with ``bank = atan(V r / g_ref)`` for coordinated turns (else 0) and each
+oscillation ``A E(t) sin(2 pi (t - start) / T + phase)`` under a C2 envelope
+``E`` (smoothstep in and out over ``transition_s``).  Euler-angle rates are
+analytic too.
+
+Position (latitude, longitude, height) is the only integrated quantity:
+``h' = -v_D``, ``lat' = v_N / (R_M + h)``, ``lon' = v_E / ((R_N + h) cos lat)``.
+It is integrated on a grid that contains every transition breakpoint (so the
+integrand is C-infinity inside each grid interval) with 5-node Gauss-Legendre
+quadrature; the weak dependence of the radii on latitude is resolved by a
+fixed-point iteration, latitude inside an interval by cubic Hermite
+interpolation.  The position error is below 1e-9 m over an hour (see
+``tests/test_sim_truth.py``).
+
+Specific force and angular rate (Groves 2013, eqs. (5.44), (5.19)):
+
+    omega_ib_b = omega_nb_b + C_bn (omega_ie_n + omega_en_n)
+    f_ib_b = C_bn (dv_n/dt + (2 omega_ie_n + omega_en_n) x v_n - g_n),  g_n = [0, 0, g(lat, h)]
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import earth
+from .scenario import Scenario
+
+_GL_POS_NODES = 5
+
+
+def _S(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
+
+
+def _dS(x):
+    x = np.clip(x, 0.0, 1.0)
+    return 30.0 * x * x * (1.0 - x) ** 2
+
+
+def _I(x):
+    """Integral of S from 0 to x, for x in [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
+    return x ** 4 * (2.5 + x * (-3.0 + x))
+
+
+class _SmoothRate:
+    """A piecewise-constant rate with C2 smoothstep transitions, its integral and derivative."""
+
+    def __init__(self, t0, durations, rates, w):
+        n = len(durations)
+        bounds = t0 + np.concatenate([[0.0], np.cumsum(durations)])
+        starts = np.empty(n + 1)
+        starts[0] = bounds[0]
+        starts[1:n] = bounds[1:n] - w / 2
+        starts[n] = bounds[n] - w
+        r = np.concatenate([[0.0], np.asarray(rates, float), [0.0]])  # r[j] = rate before ramp j
+        self.s = starts
+        self.w = w
+        self.r_before = r[:-1]
+        self.delta = np.diff(r)
+        q = np.zeros(n + 1)
+        for j in range(n):
+            q[j + 1] = (q[j] + self.r_before[j] * w + self.delta[j] * w / 2
+                        + r[j + 1] * (starts[j + 1] - starts[j] - w))
+        self.q_start = q
+        self.breakpoints = np.concatenate([starts, starts + w])
+
+    def eval(self, t):
+        """Return integral Q(t) (from t0), rate(t) and d rate/dt at times ``t``."""
+        j = np.clip(np.searchsorted(self.s, t, side="right") - 1, 0, len(self.s) - 1)
+        dt = t - self.s[j]
+        x = dt / self.w
+        rb, d = self.r_before[j], self.delta[j]
+        ramp = x <= 1.0
+        x_c = np.where(ramp, x, 1.0)
+        Q = self.q_start[j] + rb * np.minimum(dt, self.w) + d * self.w * _I(x_c) \
+            + np.where(ramp, 0.0, (rb + d) * (dt - self.w))
+        Q = np.where(dt < 0, 0.0, Q)
+        rate = rb + d * _S(x)
+        drate = np.where((x > 0) & ramp, d * _dS(x) / self.w, 0.0)
+        return Q, rate, drate
+
+
+@dataclass
+class Kinematics:
+    """Analytic kinematics at a set of times (no position).
+
+    ``v_n``, ``a_n`` (N, 3) [m/s, m/s^2]; ``euler`` (N, 3) roll, pitch, yaw
+    [rad] (yaw not wrapped); ``euler_rate`` (N, 3) [rad/s].
+    """
+
+    v_n: np.ndarray
+    a_n: np.ndarray
+    euler: np.ndarray
+    euler_rate: np.ndarray
+
+
+def rotate_n_to_b(euler, x_n):
+    """``C_bn x_n`` for 3-2-1 Euler angles ``euler`` (N, 3) [rad], without forming matrices."""
+    sr, cr = np.sin(euler[:, 0]), np.cos(euler[:, 0])
+    sp, cp = np.sin(euler[:, 1]), np.cos(euler[:, 1])
+    sy, cy = np.sin(euler[:, 2]), np.cos(euler[:, 2])
+    x, y, z = x_n[:, 0], x_n[:, 1], x_n[:, 2]
+    x1 = cy * x + sy * y
+    y1 = -sy * x + cy * y
+    x2 = cp * x1 - sp * z
+    z2 = sp * x1 + cp * z
+    return np.stack([x2, cr * y1 + sr * z2, -sr * y1 + cr * z2], axis=-1)
+
+
+def rotate_b_to_n(euler, x_b):
+    """``C_nb x_b`` for 3-2-1 Euler angles ``euler`` (N, 3) [rad]."""
+    sr, cr = np.sin(euler[:, 0]), np.cos(euler[:, 0])
+    sp, cp = np.sin(euler[:, 1]), np.cos(euler[:, 1])
+    sy, cy = np.sin(euler[:, 2]), np.cos(euler[:, 2])
+    x, y, z = x_b[:, 0], x_b[:, 1], x_b[:, 2]
+    y1 = cr * y - sr * z
+    z1 = sr * y + cr * z
+    x2 = cp * x + sp * z1
+    z2 = -sp * x + cp * z1
+    return np.stack([cy * x2 - sy * y1, sy * x2 + cy * y1, z2], axis=-1)
+
+
+def euler_rate_to_omega_nb_b(euler, euler_rate):
+    """Body angular rate relative to NED from 3-2-1 Euler rates (Titterton & Weston, eq. 3.52)."""
+    sr, cr = np.sin(euler[:, 0]), np.cos(euler[:, 0])
+    sp, cp = np.sin(euler[:, 1]), np.cos(euler[:, 1])
+    dr, dp, dy = euler_rate[:, 0], euler_rate[:, 1], euler_rate[:, 2]
+    return np.stack([dr - dy * sp, dp * cr + dy * sr * cp, -dp * sr + dy * cr * cp], axis=-1)
+
+
+class Trajectory:
+    """Exact truth for a :class:`~insnav.sim.scenario.Scenario`.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Validated scenario (SI units).
+    grid_step : float, optional
+        Nominal step of the position integration grid [s]; every transition
+        breakpoint is added to the grid.
+    """
+
+    def __init__(self, scenario: Scenario, grid_step: float = 0.02):
+        sc = scenario
+        self.sc = sc
+        self.t0, self.t_end = sc.t0, sc.t_end
+        d = [s.duration for s in sc.segments]
+        w = sc.transition
+        self._acc = _SmoothRate(sc.t0, d, [s.accel for s in sc.segments], w)
+        self._turn = _SmoothRate(sc.t0, d, [s.turn_rate for s in sc.segments], w)
+        self._climb = _SmoothRate(sc.t0, d, [s.path_angle_rate for s in sc.segments], w)
+        osc = sc.oscillations
+        self._osc_axis = np.array([{"roll": 0, "pitch": 1, "yaw": 2}[o.axis] for o in osc], int)
+        self._osc = np.array([[o.amp, 2 * np.pi / o.period, o.start, o.end, o.phase] for o in osc],
+                             float).reshape(-1, 5)
+        bps = [self._acc.breakpoints, self._turn.breakpoints, self._climb.breakpoints]
+        for o in osc:
+            bps.append(np.array([o.start, o.start + w, o.end - w, o.end]))
+        n_uniform = max(1, int(np.ceil((self.t_end - self.t0) / grid_step - 1e-9)))
+        grid = np.concatenate([np.linspace(self.t0, self.t_end, n_uniform + 1)] + bps)
+        grid = np.unique(grid[(grid >= self.t0) & (grid <= self.t_end)])
+        # merge points closer than 1 us (from rounding of breakpoints)
+        keep = np.concatenate([[True], np.diff(grid) > 1e-6])
+        self._grid = grid[keep]
+        self._grid[-1] = self.t_end
+        self._integrate_position()
+
+    # -- kinematics ---------------------------------------------------------
+    def kinematics(self, t) -> Kinematics:
+        """Velocity, acceleration, Euler angles and their rates at times ``t`` [s]."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        sc = self.sc
+        Qa, a, da = self._acc.eval(t)
+        Qr, r, dr = self._turn.eval(t)
+        Qq, q, _ = self._climb.eval(t)
+        V = sc.speed0 + Qa
+        psi = sc.heading0 + Qr
+        gam = sc.path_angle0 + Qq
+        cg, sg = np.cos(gam), np.sin(gam)
+        cp, sp = np.cos(psi), np.sin(psi)
+        u = np.stack([cg * cp, cg * sp, -sg], axis=-1)
+        du_dg = np.stack([-sg * cp, -sg * sp, -cg], axis=-1)
+        du_dp = np.stack([-cg * sp, cg * cp, np.zeros_like(cg)], axis=-1)
+        v_n = V[:, None] * u
+        a_n = a[:, None] * u + V[:, None] * (q[:, None] * du_dg + r[:, None] * du_dp)
+
+        euler = np.empty((t.size, 3))
+        rate = np.empty((t.size, 3))
+        if sc.coordinated_turns:
+            x = V * r / sc.g_ref
+            euler[:, 0] = np.arctan(x)
+            rate[:, 0] = (a * r + V * dr) / sc.g_ref / (1.0 + x * x)
+        else:
+            euler[:, 0] = 0.0
+            rate[:, 0] = 0.0
+        euler[:, 0] += sc.roll_offset
+        euler[:, 1] = gam + sc.pitch_offset
+        rate[:, 1] = q
+        euler[:, 2] = psi + sc.yaw_offset
+        rate[:, 2] = r
+        w = sc.transition
+        for k in range(self._osc.shape[0]):
+            A, om, st, en, ph = self._osc[k]
+            sel = (t > st) & (t < en)
+            if not np.any(sel):
+                continue
+            ts = t[sel]
+            x1, x2 = (ts - st) / w, (en - ts) / w
+            E = _S(x1) * _S(x2)
+            dE = (_dS(x1) * _S(x2) - _S(x1) * _dS(x2)) / w
+            arg = om * (ts - st) + ph
+            ax = self._osc_axis[k]
+            euler[sel, ax] += A * E * np.sin(arg)
+            rate[sel, ax] += A * (dE * np.sin(arg) + E * om * np.cos(arg))
+        return Kinematics(v_n, a_n, euler, rate)
+
+    def _velocity(self, t):
+        t = np.asarray(t, dtype=float)
+        sc = self.sc
+        V = sc.speed0 + self._acc.eval(t)[0]
+        psi = sc.heading0 + self._turn.eval(t)[0]
+        gam = sc.path_angle0 + self._climb.eval(t)[0]
+        cg = np.cos(gam)
+        return np.stack([V * cg * np.cos(psi), V * cg * np.sin(psi), -V * np.sin(gam)], axis=-1)
+
+    # -- position -------------------------------------------------------------
+    def _integrate_position(self):
+        g = self._grid
+        sc = self.sc
+        xg, wg = np.polynomial.legendre.leggauss(_GL_POS_NODES)
+        h_int = np.diff(g)
+        mid = 0.5 * (g[1:] + g[:-1])
+        tn = mid[:, None] + 0.5 * h_int[:, None] * xg[None, :]  # (K, m)
+        wn = 0.5 * h_int[:, None] * wg[None, :]
+        vn = self._velocity(tn.ravel()).reshape(tn.shape + (3,))
+        vg = self._velocity(g)
+        self._vg = vg
+        # height: exact quadrature of -v_D
+        dh = -(wn * vn[..., 2]).sum(axis=1)
+        hg = sc.h0 + np.concatenate([[0.0], np.cumsum(dh)])
+        self._hg = hg
+        h_nodes = self._hermite(hg, -vg[:, 2], tn)
+        latg = np.full(g.shape, sc.lat0)
+        for _ in range(4):
+            R_M, _ = earth.radii(latg)
+            lat_dot_g = vg[:, 0] / (R_M + hg)
+            lat_nodes = self._hermite(latg, lat_dot_g, tn)
+            R_Mn, _ = earth.radii(lat_nodes)
+            dlat = (wn * vn[..., 0] / (R_Mn + h_nodes)).sum(axis=1)
+            latg = sc.lat0 + np.concatenate([[0.0], np.cumsum(dlat)])
+        R_M, R_N = earth.radii(latg)
+        self._latg = latg
+        self._lat_dot_g = vg[:, 0] / (R_M + hg)
+        lat_nodes = self._hermite(latg, self._lat_dot_g, tn)
+        _, R_Nn = earth.radii(lat_nodes)
+        dlon = (wn * vn[..., 1] / ((R_Nn + h_nodes) * np.cos(lat_nodes))).sum(axis=1)
+        self._long = sc.lon0 + np.concatenate([[0.0], np.cumsum(dlon)])
+        self._lon_dot_g = vg[:, 1] / ((R_N + hg) * np.cos(latg))
+
+    def _hermite(self, yg, dyg, t):
+        """Cubic Hermite interpolation of grid values ``yg`` with slopes ``dyg`` at ``t``."""
+        g = self._grid
+        k = np.clip(np.searchsorted(g, t, side="right") - 1, 0, len(g) - 2)
+        hk = g[k + 1] - g[k]
+        s = (t - g[k]) / hk
+        s2, s3 = s * s, s * s * s
+        return ((2 * s3 - 3 * s2 + 1) * yg[k] + (s3 - 2 * s2 + s) * hk * dyg[k]
+                + (-2 * s3 + 3 * s2) * yg[k + 1] + (s3 - s2) * hk * dyg[k + 1])
+
+    def position(self, t, exact: bool = True):
+        """Geodetic position of the IMU at times ``t`` [s].
+
+        Parameters
+        ----------
+        t : array_like
+            Times in ``[t0, t_end]`` [s].
+        exact : bool
+            ``True``: integrate from the nearest grid point with Gauss-Legendre
+            quadrature (error < 1e-9 m).  ``False``: cubic Hermite
+            interpolation of the grid (error ~1e-8 m; used for the gravity and
+            Earth-rate terms inside the IMU quadrature, where it is ample).
+
+        Returns
+        -------
+        lat, lon, h : ndarray
+            [rad], [rad], [m].
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if np.any(t < self.t0 - 1e-9) or np.any(t > self.t_end + 1e-9):
+            raise ValueError(f"times outside the trajectory [{self.t0}, {self.t_end}]")
+        lat = self._hermite(self._latg, self._lat_dot_g, t)
+        h = self._hermite(self._hg, -self._vg[:, 2], t)
+        lon = self._hermite(self._long, self._lon_dot_g, t)
+        if not exact:
+            return lat, lon, h
+        g = self._grid
+        k = np.clip(np.searchsorted(g, t, side="right") - 1, 0, len(g) - 2)
+        dt = t - g[k]
+        xg, wg = np.polynomial.legendre.leggauss(_GL_POS_NODES)
+        tn = g[k][:, None] + 0.5 * dt[:, None] * (xg[None, :] + 1.0)
+        wn = 0.5 * dt[:, None] * wg[None, :]
+        vn = self._velocity(tn.ravel()).reshape(tn.shape + (3,))
+        lat_n = self._hermite(self._latg, self._lat_dot_g, tn)
+        h_n = self._hermite(self._hg, -self._vg[:, 2], tn)
+        R_M, R_N = earth.radii(lat_n)
+        h = self._hg[k] - (wn * vn[..., 2]).sum(axis=1)
+        lat = self._latg[k] + (wn * vn[..., 0] / (R_M + h_n)).sum(axis=1)
+        lon = self._long[k] + (wn * vn[..., 1] / ((R_N + h_n) * np.cos(lat_n))).sum(axis=1)
+        return lat, lon, h
+
+    # -- full state -----------------------------------------------------------
+    def state(self, t, exact_position: bool = True):
+        """Full truth at ``t``: position, kinematics, ``f_ib_b`` and ``omega_ib_b``.
+
+        Returns
+        -------
+        dict
+            ``t``, ``lat``, ``lon`` [rad], ``h`` [m], ``v_n`` (N, 3) [m/s],
+            ``a_n`` (N, 3) [m/s^2], ``euler`` (N, 3) [rad], ``euler_rate``
+            (N, 3) [rad/s], ``f_ib_b`` (N, 3) [m/s^2], ``omega_ib_b`` (N, 3)
+            [rad/s], ``omega_nb_b`` (N, 3) [rad/s].
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        lat, lon, h = self.position(t, exact=exact_position)
+        kin = self.kinematics(t)
+        f_ib_b, omega_ib_b, omega_nb_b = self._imu_quantities(lat, h, kin)
+        return dict(t=t, lat=lat, lon=lon, h=h, v_n=kin.v_n, a_n=kin.a_n, euler=kin.euler,
+                    euler_rate=kin.euler_rate, f_ib_b=f_ib_b, omega_ib_b=omega_ib_b,
+                    omega_nb_b=omega_nb_b)
+
+    @staticmethod
+    def _imu_quantities(lat, h, kin: Kinematics):
+        v_n = kin.v_n
+        w_ie = earth.omega_ie_n(lat)
+        w_en = earth.omega_en_n(lat, h, v_n)
+        f_n = kin.a_n + np.cross(2.0 * w_ie + w_en, v_n)
+        f_n[:, 2] -= earth.gravity(lat, h)
+        both = np.concatenate([f_n, w_ie + w_en], axis=0)
+        eul2 = np.concatenate([kin.euler, kin.euler], axis=0)
+        rot = rotate_n_to_b(eul2, both)
+        n = lat.shape[0]
+        omega_nb_b = euler_rate_to_omega_nb_b(kin.euler, kin.euler_rate)
+        return rot[:n], omega_nb_b + rot[n:], omega_nb_b
+
+    def imu_increments(self, t_imu, nodes: int = 3, chunk: int = 200_000):
+        """Ideal IMU increments over ``(t_imu[k-1], t_imu[k]]`` by Gauss-Legendre quadrature.
+
+        Parameters
+        ----------
+        t_imu : ndarray, shape (N + 1,)
+            Sample times [s], the first being the start of the first interval.
+        nodes : int
+            Gauss-Legendre nodes per interval (exact for polynomials of degree
+            ``2 nodes - 1``).
+
+        Returns
+        -------
+        dtheta_b, dv_b : ndarray, shape (N, 3)
+            Integrals of ``omega_ib_b`` [rad] and ``f_ib_b`` [m/s] over each
+            interval.
+        """
+        xg, wg = np.polynomial.legendre.leggauss(nodes)
+        n = len(t_imu) - 1
+        dtheta = np.empty((n, 3))
+        dv = np.empty((n, 3))
+        for s in range(0, n, chunk):
+            e = min(n, s + chunk)
+            a, b = t_imu[s:e], t_imu[s + 1:e + 1]
+            half = 0.5 * (b - a)
+            tn = (0.5 * (a + b))[:, None] + half[:, None] * xg[None, :]
+            tf = tn.ravel()
+            lat, _, h = self.position(tf, exact=False)
+            kin = self.kinematics(tf)
+            f, om, _ = self._imu_quantities(lat, h, kin)
+            wn = (half[:, None] * wg[None, :])[..., None]
+            dtheta[s:e] = (om.reshape(tn.shape + (3,)) * wn).sum(axis=1)
+            dv[s:e] = (f.reshape(tn.shape + (3,)) * wn).sum(axis=1)
+        return dtheta, dv
