@@ -7,6 +7,7 @@
 #include <string>
 
 #include "insnav/core.hpp"
+#include "insnav/filter/types.hpp"
 
 namespace insnav::py_bind {
 
@@ -34,5 +35,7 @@ inline Vec3 vec3_from(const DArray& a, const char* name) {
 
 void bind_math(py::module_& m);
 void bind_ins(py::module_& m);
+void bind_loose(py::module_& m);
+ImuErrorModel imu_model_from_dict(const py::dict& d);
 
 }  // namespace insnav::py_bind

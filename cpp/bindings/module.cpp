@@ -20,5 +20,6 @@ PYBIND11_MODULE(_core, m) {
   insnav::set_check_handler(&throwing_check_handler);
   insnav::py_bind::bind_math(m);
   insnav::py_bind::bind_ins(m);
+  insnav::py_bind::bind_loose(m);
   // one call per cpp/bindings/bind_*.cpp (declared in common.hpp)
 }

@@ -73,19 +73,17 @@ inline Mat3 dcm_from_euler(const Vec3& rpy) {
 }
 
 /// 3-2-1 Euler angles (roll, pitch, yaw) [rad] of C_nb; yaw in (-pi, pi].
-/// Pitch uses atan2 so it stays accurate near +-90 deg; at gimbal lock the
-/// split between roll and yaw is arbitrary (roll is set from the DCM's
-/// remaining freedom), but the DCM round trip is exact.
+/// Pitch uses atan2 so it stays accurate near +-90 deg.  Yaw is taken from
+/// roll-compensated elements that stay O(1) at any pitch
+/// (cos(roll) C_11 - sin(roll) C_12 = cos(yaw), sin(roll) C_02 - cos(roll) C_01 = sin(yaw)),
+/// so the DCM round trip is exact even where roll itself is ill-conditioned;
+/// at gimbal lock (cos(pitch) < 1e-12) roll is set to 0 and yaw takes the rest.
 inline Vec3 euler_from_dcm(const Mat3& C) {
-  const double pitch = std::atan2(-C(2, 0), std::hypot(C(2, 1), C(2, 2)));
-  double roll, yaw;
-  if (std::hypot(C(2, 1), C(2, 2)) > 1e-9) {
-    roll = std::atan2(C(2, 1), C(2, 2));
-    yaw = std::atan2(C(1, 0), C(0, 0));
-  } else {  // gimbal lock: only yaw -+ roll is observable; put it all in yaw
-    roll = 0.0;
-    yaw = std::atan2(-C(0, 1), C(1, 1));
-  }
+  const double cp = std::hypot(C(2, 1), C(2, 2));
+  const double pitch = std::atan2(-C(2, 0), cp);
+  const double roll = cp > 1e-12 ? std::atan2(C(2, 1), C(2, 2)) : 0.0;
+  const double sr = std::sin(roll), cr = std::cos(roll);
+  const double yaw = std::atan2(sr * C(0, 2) - cr * C(0, 1), cr * C(1, 1) - sr * C(1, 2));
   return Vec3(roll, pitch, yaw);
 }
 
