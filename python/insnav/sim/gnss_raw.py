@@ -27,7 +27,8 @@ Applied Kalman Filtering*, 4th ed., section 9.3), starting from
 Satellite selection per epoch: elevation at or above the mask; then, if
 ``max_sats`` > 0, the best-GDOP subset of that size
 (:func:`insnav.gnss.geometry.select_best_gdop`).  Inside a
-``[[gnss_raw.windows]]`` window ``[start, end)`` exactly ``n_sats`` are
+``[[gnss_raw.windows]]`` window (epochs strictly inside ``(start, end)``, as for
+GNSS outages) exactly ``n_sats`` are
 kept: the best-GDOP subset when ``n_sats >= 4``, the ``n_sats`` highest
 satellites when fewer (GDOP is undefined), none when 0.  An epoch with fewer
 visible satellites than asked keeps all it has.
@@ -112,7 +113,7 @@ def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_
         starts = np.searchsorted(ep, np.arange(ne))
         ends = np.searchsorted(ep, np.arange(ne), side="right")
         for k in range(ne):
-            in_window = [n_w for (a, b, n_w) in windows if a <= t[k] < b]
+            in_window = [n_w for (a, b, n_w) in windows if a < t[k] < b]
             if not in_window and max_sats == 0:
                 continue
             want = in_window[0] if in_window else max_sats
@@ -142,6 +143,6 @@ def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_
     return GnssRaw(t=t[ep], prn=prn_rows, pseudorange_m=pr, pseudorange_rate_mps=prr,
                    sat_r_e=r_sat, sat_v_e=v_sat, sat_clock_bias_m=clk_b, sat_clock_drift_mps=clk_d,
                    elevation_deg=np.degrees(el[keep]), azimuth_deg=np.degrees(az[keep]),
-                   travel_time_s=ts.tau[keep], sigma_pr_m=np.full(m, cfg["sigma_pr"]),
+                   travel_time_s=ts.tau_s[keep], sigma_pr_m=np.full(m, cfg["sigma_pr"]),
                    sigma_prr_mps=np.full(m, cfg["sigma_prr"]), rx_clock_bias_m=b_rx[ep],
                    rx_clock_drift_mps=d_rx[ep])

@@ -122,9 +122,12 @@ def apply_errors(dx: np.ndarray, real: SensorRealisation, noise: np.ndarray,
                  dt: float) -> np.ndarray:
     """Corrupt ideal increments ``dx`` (N, 3): ``(I + diag(s) + M) dx + b dt + n``."""
     T = np.eye(3) + np.diag(real.scale) + real.misalignment
-    out = dx @ T.T
-    out += real.bias * dt
+    out = real.bias * dt
     out += noise
+    for i in range(3):  # column-wise: (N,3) @ (3,3) is slow in NumPy for tiny inner sizes
+        for j in range(3):
+            if T[i, j] != 0.0:
+                out[:, i] += T[i, j] * dx[:, j]
     return out
 
 
