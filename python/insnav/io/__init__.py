@@ -1,0 +1,1 @@
+"""File readers and writers (KF-GINS text formats: :mod:`insnav.io.kfgins`)."""
