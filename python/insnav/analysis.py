@@ -1,0 +1,79 @@
+"""Error analysis of a solution against truth: NED errors, RMS, max, reconvergence."""
+from __future__ import annotations
+
+import numpy as np
+
+from .earth import radii
+
+DEG = np.pi / 180.0
+
+
+def _wrap_deg(a):
+    return (np.asarray(a) + 180.0) % 360.0 - 180.0
+
+
+def errors(sol, truth) -> dict:
+    """Solution minus truth at the solution times (truth interpolated linearly in time).
+
+    Returns a dict of arrays: ``t``, ``pos_n_m`` (N, 3) NED, ``vel_n_mps`` (N, 3),
+    ``att_deg`` (N, 3) roll/pitch/yaw differences (yaw wrapped to +-180), and
+    the solution's 1-sigma arrays when present.
+    """
+    t = np.asarray(sol.t)
+    tt = np.asarray(truth.t)
+    if t[0] < tt[0] - 1e-9 or t[-1] > tt[-1] + 1e-9:
+        keep = (t >= tt[0] - 1e-9) & (t <= tt[-1] + 1e-9)
+    else:
+        keep = np.ones(len(t), bool)
+    t = t[keep]
+
+    def at(x):
+        x = np.asarray(x)
+        if x.ndim == 1:
+            return np.interp(t, tt, x)
+        return np.column_stack([np.interp(t, tt, x[:, i]) for i in range(x.shape[1])])
+
+    lat_t, lon_t, h_t = at(truth.lat_deg) * DEG, at(truth.lon_deg) * DEG, at(truth.h_m)
+    R_M, R_N = radii(lat_t)
+    lat, lon, h = np.asarray(sol.lat_deg)[keep] * DEG, np.asarray(sol.lon_deg)[keep] * DEG, np.asarray(sol.h_m)[keep]
+    pos = np.column_stack([(lat - lat_t) * (R_M + h_t), (lon - lon_t) * (R_N + h_t) * np.cos(lat_t), -(h - h_t)])
+    vel = np.asarray(sol.v_n)[keep] - at(truth.v_n)
+    yaw_t = np.unwrap(np.asarray(truth.yaw_deg) * DEG) / DEG
+    att = np.column_stack([_wrap_deg(np.asarray(sol.roll_deg)[keep] - at(truth.roll_deg)),
+                           _wrap_deg(np.asarray(sol.pitch_deg)[keep] - at(truth.pitch_deg)),
+                           _wrap_deg(np.asarray(sol.yaw_deg)[keep] - np.interp(t, tt, yaw_t))])
+    out = dict(t=t, pos_n_m=pos, vel_n_mps=vel, att_deg=att)
+    for k in ("sigma_pos_n_m", "sigma_vel_n_mps", "sigma_att_deg"):
+        if hasattr(sol, k):
+            out[k] = np.asarray(getattr(sol, k))[keep]
+    return out
+
+
+def rms(x, axis=0):
+    return np.sqrt(np.mean(np.square(x), axis=axis))
+
+
+def reconvergence_time(t, err, t_recover, threshold, hold_s=5.0):
+    """Time after ``t_recover`` until |err| stays below ``threshold`` for ``hold_s``.
+
+    Definition used in the results: the first time t >= t_recover from which
+    |err| <= threshold holds for at least ``hold_s`` seconds, minus t_recover.
+    Returns NaN if it never reconverges.
+    """
+    t = np.asarray(t)
+    e = np.abs(np.asarray(err))
+    sel = t >= t_recover
+    ts, es = t[sel], e[sel]
+    ok = es <= threshold
+    if not ok.any():
+        return float("nan")
+    # start of the last violation before a hold_s-long run of ok samples
+    bad_idx = np.flatnonzero(~ok)
+    for i in range(len(ts)):
+        if not ok[i]:
+            continue
+        nxt = bad_idx[bad_idx > i]
+        end_t = ts[nxt[0]] if len(nxt) else ts[-1] + hold_s
+        if end_t - ts[i] >= hold_s:
+            return float(ts[i] - t_recover)
+    return float("nan")

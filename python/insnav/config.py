@@ -1,0 +1,208 @@
+"""Run configuration: filter, initial state and its sigmas, IMU noise model,
+GNSS settings, lever arm, gating, output rate.
+
+User units at the edge (deg, deg/h, deg/sqrt(h), mg, ug/sqrt(Hz), m, m/s),
+SI inside.  :func:`load_config` reads a TOML file; unknown keys and bad values
+raise :class:`ConfigError` naming the key, the value and what is allowed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+DEG = math.pi / 180.0
+G0 = 9.80665                       # standard gravity for mg / ug [m/s^2]
+DEG_PER_H = DEG / 3600.0           # deg/h -> rad/s
+DEG_PER_SQRT_H = DEG / 60.0        # deg/sqrt(h) -> rad/sqrt(s)
+MPS_PER_SQRT_H = 1.0 / 60.0        # (m/s)/sqrt(h) -> (m/s)/sqrt(s)
+MG = 1e-3 * G0                     # mg -> m/s^2
+UG_PER_SQRT_HZ = 1e-6 * G0         # ug/sqrt(Hz) -> (m/s^2)/sqrt(Hz) = (m/s)/sqrt(s)
+
+FILTERS = ("ekf", "rbukf", "ukf")
+COUPLINGS = ("loose", "tight")
+LAYOUTS = (15, 21)
+
+
+class ConfigError(ValueError):
+    """A bad configuration key or value; the message names both."""
+
+
+@dataclass
+class ImuNoise:
+    """IMU error model given to the filter, SI.  See ``ImuErrorModel`` in
+    ``cpp/include/insnav/filter/types.hpp`` for the meaning of each field."""
+
+    gyro_arw: list = field(default_factory=lambda: [1e-4] * 3)        # rad/sqrt(s)
+    acc_vrw: list = field(default_factory=lambda: [1e-3] * 3)         # (m/s)/sqrt(s)
+    gyro_bias_sigma: list = field(default_factory=lambda: [1e-5] * 3)  # rad/s
+    acc_bias_sigma: list = field(default_factory=lambda: [1e-3] * 3)   # m/s^2
+    gyro_bias_tau: list = field(default_factory=lambda: [3600.0] * 3)  # s
+    acc_bias_tau: list = field(default_factory=lambda: [3600.0] * 3)   # s
+    gyro_bias_rw: list = field(default_factory=lambda: [0.0] * 3)
+    acc_bias_rw: list = field(default_factory=lambda: [0.0] * 3)
+    gyro_scale_sigma: list = field(default_factory=lambda: [1e-4] * 3)
+    acc_scale_sigma: list = field(default_factory=lambda: [1e-4] * 3)
+    gyro_scale_tau: list = field(default_factory=lambda: [14400.0] * 3)
+    acc_scale_tau: list = field(default_factory=lambda: [14400.0] * 3)
+
+    def as_core_dict(self) -> dict:
+        return {k: np.asarray(v, dtype=float) for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dataset_model(cls, m: dict, default_tau_s: float = 3600.0) -> "ImuNoise":
+        """The filter model matching a simulator ``imu_model`` dict (SI).
+
+        Bias states are first-order Gauss-Markov: the simulated Gauss-Markov
+        part when there is one, otherwise a slowly varying constant with the
+        total bias sigma and ``default_tau_s``.
+        """
+        def vec(key, default=0.0):
+            return np.broadcast_to(np.asarray(m.get(key, default), dtype=float), (3,)).copy()
+
+        out = cls()
+        out.gyro_arw = vec("gyro_arw").tolist()
+        out.acc_vrw = vec("accel_vrw").tolist()
+        for p, q in (("gyro", "gyro"), ("accel", "acc")):
+            gm_s, gm_tau = vec(f"{p}_gm_sigma"), vec(f"{p}_gm_tau", np.inf)
+            total = vec(f"{p}_bias_total_sigma")
+            use_gm = (gm_s > 0) & np.isfinite(gm_tau)
+            sigma = np.where(use_gm, np.maximum(gm_s, total), total)
+            tau = np.where(use_gm, gm_tau, default_tau_s)
+            setattr(out, f"{q}_bias_sigma", np.maximum(sigma, 1e-12).tolist())
+            setattr(out, f"{q}_bias_tau", tau.tolist())
+            setattr(out, f"{q}_bias_rw", vec(f"{p}_bias_rw").tolist())
+            sc = vec(f"{p}_scale_sigma")
+            setattr(out, f"{q}_scale_sigma", np.maximum(sc, 1e-7).tolist())
+        return out
+
+
+@dataclass
+class RunConfig:
+    """Everything a run needs besides the data.
+
+    Attributes (SI unless the name says otherwise)
+    ----------
+    filter : {'ekf', 'rbukf', 'ukf'}
+    coupling : {'loose', 'tight'}
+    layout : {15, 21}
+        15 states (seed 000) or 21 with scale factors (KF-GINS-like).
+    init_sigma_pos_m, init_sigma_vel_mps, init_sigma_att_deg : 3 floats
+        Initial 1-sigma of position (N, E, D), velocity, roll/pitch/yaw.
+    init_error : bool
+        Draw the initial state error from those sigmas (``init_seed``), as in
+        a Monte Carlo run; otherwise start from the given initial state.
+    imu : ImuNoise or None
+        None: derived from the dataset's IMU model.
+    lever_arm_b : 3 floats or None
+        IMU -> antenna in FRD [m]; None: the dataset's.
+    gate_chi2 : float
+        NIS gate (0 = off).  For 6 rows, 22.46 is the 0.999 quantile.
+    use_position, use_velocity : bool
+    propagation_interval_s : float
+        Error-state propagation step inside a filter cycle.
+    cycle_period_s : float or None
+        Filter cycle without GNSS (outage); None: the median GNSS interval.
+    output_decimation : int
+        Keep every k-th IMU-rate output row.
+    ut_alpha, ut_beta, ut_kappa : float
+        Unscented-transform parameters (kappa None: 3 - n, seed 000).
+    """
+
+    filter: str = "ekf"
+    coupling: str = "loose"
+    layout: int = 15
+    init_sigma_pos_m: list = field(default_factory=lambda: [2.0, 2.0, 3.0])
+    init_sigma_vel_mps: list = field(default_factory=lambda: [0.1, 0.1, 0.1])
+    init_sigma_att_deg: list = field(default_factory=lambda: [0.5, 0.5, 1.0])
+    init_error: bool = True
+    init_seed: int = 0
+    imu: ImuNoise | None = None
+    lever_arm_b: list | None = None
+    gate_chi2: float = 0.0
+    use_position: bool = True
+    use_velocity: bool = True
+    propagation_interval_s: float = 0.02
+    cycle_period_s: float | None = None
+    output_decimation: int = 1
+    ut_alpha: float = 1.0
+    ut_beta: float = 2.0
+    ut_kappa: float | None = None
+
+    def validate(self) -> "RunConfig":
+        def bad(key, value, allowed):
+            raise ConfigError(f"config key '{key}': bad value {value!r}; allowed: {allowed}")
+
+        if self.filter not in FILTERS:
+            bad("filter", self.filter, ", ".join(FILTERS))
+        if self.coupling not in COUPLINGS:
+            bad("coupling", self.coupling, ", ".join(COUPLINGS))
+        if self.layout not in LAYOUTS:
+            bad("layout", self.layout, "15, 21")
+        for key in ("init_sigma_pos_m", "init_sigma_vel_mps", "init_sigma_att_deg"):
+            v = np.asarray(getattr(self, key), dtype=float)
+            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
+                bad(key, getattr(self, key), "3 finite values > 0")
+        if not (self.propagation_interval_s > 0):
+            bad("propagation_interval_s", self.propagation_interval_s, "> 0")
+        if self.gate_chi2 < 0:
+            bad("gate_chi2", self.gate_chi2, ">= 0 (0 = off)")
+        if int(self.output_decimation) < 1:
+            bad("output_decimation", self.output_decimation, "integer >= 1")
+        if not (0 < self.ut_alpha <= 1):
+            bad("ut_alpha", self.ut_alpha, "0 < alpha <= 1")
+        return self
+
+
+_USER_UNITS = {
+    # TOML key in [imu] -> (field, factor to SI)
+    "gyro_arw_deg_per_sqrt_h": ("gyro_arw", DEG_PER_SQRT_H),
+    "acc_vrw_m_per_s_per_sqrt_h": ("acc_vrw", MPS_PER_SQRT_H),
+    "acc_vrw_ug_per_sqrt_hz": ("acc_vrw", UG_PER_SQRT_HZ),
+    "gyro_bias_sigma_deg_per_h": ("gyro_bias_sigma", DEG_PER_H),
+    "acc_bias_sigma_mg": ("acc_bias_sigma", MG),
+    "gyro_bias_tau_s": ("gyro_bias_tau", 1.0),
+    "acc_bias_tau_s": ("acc_bias_tau", 1.0),
+    "gyro_scale_sigma_ppm": ("gyro_scale_sigma", 1e-6),
+    "acc_scale_sigma_ppm": ("acc_scale_sigma", 1e-6),
+    "gyro_scale_tau_s": ("gyro_scale_tau", 1.0),
+    "acc_scale_tau_s": ("acc_scale_tau", 1.0),
+}
+
+
+def config_from_dict(d: dict, source: str = "config") -> RunConfig:
+    """Build a :class:`RunConfig` from a (TOML) dict, rejecting unknown keys."""
+    d = dict(d)
+    imu_d = d.pop("imu", None)
+    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu"}
+    for k in d:
+        if k not in names:
+            raise ConfigError(f"{source}: unknown key '{k}'; known keys: {', '.join(sorted(names | {'imu'}))}")
+    cfg = RunConfig(**d)
+    if imu_d is not None:
+        noise = ImuNoise()
+        for k, v in imu_d.items():
+            if k not in _USER_UNITS:
+                raise ConfigError(f"{source}: unknown key 'imu.{k}'; known keys: {', '.join(sorted(_USER_UNITS))}")
+            fld, factor = _USER_UNITS[k]
+            arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor
+            if not np.all(arr >= 0):
+                raise ConfigError(f"{source}: key 'imu.{k}': bad value {v!r}; allowed: values >= 0")
+            setattr(noise, fld, arr.tolist())
+        cfg.imu = noise
+    return cfg.validate()
+
+
+def load_config(path) -> RunConfig:
+    """Read an insnav TOML run configuration."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            d = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    return config_from_dict(d, source=str(path))
