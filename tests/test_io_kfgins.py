@@ -1,0 +1,75 @@
+"""KF-GINS text formats: readers on the shared data, writers round trip, error messages."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import insnav.sim as sim
+from insnav.io import kfgins
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kfgins"
+needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"KF-GINS shared data not found at {DATA}")
+
+
+@needs_data
+def test_read_real_gnss_and_config():
+    g = kfgins.read_kfgins_gnss(DATA / "real" / "GNSS-RTK.txt")
+    assert len(g) == 3413 and g.t_valid[0] == 456250.0 and g.t_valid[-1] == 459662.0
+    assert g.lat_deg[0] == pytest.approx(30.4447858054)
+    assert np.allclose(g.sigma_pos_n[0], [0.010, 0.009, 0.019])
+    assert np.all(np.isnan(g.v_n))
+    c = kfgins.read_kfgins_config(DATA / "real" / "kf-gins.yaml")
+    assert c["imudatarate_hz"] == 200.0 and c["starttime_s"] == 456300.0
+    assert np.allclose(c["antlever_b_m"], [0.136, -0.301, -0.184])
+    assert c["imunoise"]["arw_rad_per_sqrts"][0] == pytest.approx(np.radians(0.003) / 60.0)
+    assert c["imunoise"]["abstd_mps2"][0] == pytest.approx(15e-5)
+    assert c["imunoise"]["corrtime_s"] == 4 * 3600.0
+
+
+@needs_data
+def test_read_sim_imu_xz_and_truth():
+    imu = kfgins.read_kfgins_imu(DATA / "sim" / "Leador-A15-sim.txt.xz")
+    assert len(imu) == 682400
+    assert imu.t[0] == pytest.approx(456250.004412029)
+    assert np.allclose(np.diff(imu.t[:1000]), 0.005)
+    assert np.allclose(imu.dv_b[0], [-0.001767030500, -0.000744447304, -0.048924959380])
+    # gravity: the mean z increment at standstill is about -g dt
+    assert imu.dv_b[:2000, 2].mean() / 0.005 == pytest.approx(-9.79, abs=0.02)
+    tr, week = kfgins.read_kfgins_nav(DATA / "sim" / "truth-sim.nav.xz", return_week=True)
+    assert len(tr) == 682400 and week[0] == 0
+    assert tr.yaw_deg[0] == pytest.approx(176.36712688)
+    c = kfgins.read_kfgins_config(DATA / "sim" / "kf-gins-sim.yaml")
+    assert np.allclose(np.degrees(c["initpos"][:2]), [30.4447858349, 114.4718661070])
+
+
+def test_writers_roundtrip(tmp_path):
+    ds = sim.simulate("seed001-low", seed=1)
+    kfgins.write_kfgins_imu(tmp_path / "imu.txt.xz", ds.imu)
+    imu = kfgins.read_kfgins_imu(tmp_path / "imu.txt.xz")
+    assert np.allclose(imu.dtheta_b, ds.imu.dtheta_b, rtol=1e-14, atol=1e-20)
+    assert np.allclose(imu.t, ds.imu.t, atol=1e-9)
+    kfgins.write_kfgins_gnss(tmp_path / "gnss.txt", ds.gnss, with_velocity=True)
+    g = kfgins.read_kfgins_gnss(tmp_path / "gnss.txt")
+    assert np.allclose(g.lat_deg, ds.gnss.lat_deg, atol=1e-10) and np.allclose(g.v_n, ds.gnss.v_n,
+                                                                              atol=1e-5)
+    kfgins.write_kfgins_nav(tmp_path / "t.nav", ds.truth)
+    tr = kfgins.read_kfgins_nav(tmp_path / "t.nav")
+    assert np.allclose(tr.h_m, ds.truth.h_m, atol=1e-5)
+    assert np.allclose(tr.yaw_deg, ds.truth.yaw_deg, atol=1e-8)
+
+
+def test_reader_errors_name_file_and_line(tmp_path):
+    p = tmp_path / "imu.txt"
+    p.write_text("1.0 0 0 0 0 0 0\n1.005 0 0 0 0 0 0\n1.010 0 0 oops 0 0 0\n")
+    with pytest.raises(ValueError, match=r"imu\.txt:3: not a number: 'oops'"):
+        kfgins.read_kfgins_imu(p)
+    p.write_text("1.0 0 0 0 0 0 0\n1.005 0 0 0 0 0\n")
+    with pytest.raises(ValueError, match=r"imu\.txt:2: expected 7 columns, found 6"):
+        kfgins.read_kfgins_imu(p)
+    p.write_text("1.0 0 0 0 0 0 0\n0.9 0 0 0 0 0 0\n")
+    with pytest.raises(ValueError, match=r"imu\.txt:2: time .* does not increase"):
+        kfgins.read_kfgins_imu(p)
+    q = tmp_path / "g.txt"
+    q.write_text("1 2 3 4 5\n")
+    with pytest.raises(ValueError, match=r"g\.txt:1: expected 7 or 13 columns"):
+        kfgins.read_kfgins_gnss(q)

@@ -1,0 +1,63 @@
+"""Dataset directory: save/load round trip, atomic write, CLI."""
+import os
+
+import numpy as np
+import pytest
+
+import insnav.sim as sim
+from insnav.dataset import load_dataset, read_csv, ImuData
+
+
+def test_save_load_roundtrip(tmp_path):
+    ds = sim.simulate("seed003-1sat", seed=4)
+    out = ds.save(tmp_path / "d")
+    names = sorted(os.listdir(out))
+    assert names == ["dataset.json", "gnss.csv", "gnss_raw.csv", "imu.csv", "imu_errors.csv",
+                     "scenario.toml", "truth.csv"]
+    assert not [p for p in os.listdir(tmp_path) if p.startswith(".")]  # no temp dir left
+    back = load_dataset(out)
+    assert np.array_equal(back.imu.dtheta_b, ds.imu.dtheta_b)
+    assert np.array_equal(back.imu.t, ds.imu.t)
+    assert np.array_equal(back.truth.lat_deg, ds.truth.lat_deg)
+    assert np.array_equal(back.gnss.t_arrival, ds.gnss.t_arrival)
+    assert np.array_equal(back.gnss_raw.pseudorange_m, ds.gnss_raw.pseudorange_m)
+    assert np.array_equal(back.gnss_raw.prn, ds.gnss_raw.prn)
+    assert np.array_equal(back.imu_errors.gyro_bias, ds.imu_errors.gyro_bias)
+    assert np.array_equal(back.initial.v_n, ds.initial.v_n)
+    assert (back.initial.lat_deg, back.initial.yaw_deg) == (ds.initial.lat_deg, ds.initial.yaw_deg)
+    assert back.t0 == ds.t0 and back.gps_time_offset_s == ds.gps_time_offset_s
+    assert back.imu_model == ds.imu_model
+    assert back.scenario["seed"] == 4
+    # the resolved scenario reproduces the dataset
+    again = sim.simulate(out / "scenario.toml")
+    assert np.array_equal(again.imu.dv_b, ds.imu.dv_b)
+    with pytest.raises(FileExistsError):
+        ds.save(out)
+    ds.save(out, overwrite=True)
+    assert load_dataset(out).name == "seed003-1sat"
+
+
+def test_bad_csv_reports_file_and_line(tmp_path):
+    p = tmp_path / "imu.csv"
+    p.write_text(",".join(ImuData.COLUMNS) + "\n0.01,1,2,3,4,5,6\n0.02,1,2,x,4,5,6\n")
+    with pytest.raises(ValueError, match=r"imu\.csv:3: not a number: 'x'"):
+        read_csv(p, ImuData.COLUMNS)
+    p.write_text(",".join(ImuData.COLUMNS) + "\n0.01,1,2,3,4,5,6\n0.02,1,2,3,4,5\n")
+    with pytest.raises(ValueError, match=r"imu\.csv:3: expected 7 columns, found 6"):
+        read_csv(p, ImuData.COLUMNS)
+    p.write_text("t,a\n1,2\n")
+    with pytest.raises(ValueError, match=r"imu\.csv:1: unexpected header"):
+        read_csv(p, ImuData.COLUMNS)
+
+
+def test_cli_simulate_and_scenarios(tmp_path, capsys):
+    from insnav.cli import main
+
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    assert "seed000-sim" in out and "seed004-uav" in out
+    assert main(["simulate", "seed001-low", "--seed", "3", "--out", str(tmp_path / "x")]) == 0
+    assert load_dataset(tmp_path / "x").seed == 3
+    assert main(["simulate", "nope", "--out", str(tmp_path / "y")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown preset 'nope'" in err and "seed001-high" in err
