@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..dataset import Dataset, GnssFixes, ImuData, ImuErrors, Truth
-from ..types import NavState
 from .scenario import Scenario, ScenarioError, list_presets, load_scenario
 
 __all__ = ["simulate", "load_scenario", "list_presets", "Scenario", "ScenarioError",
@@ -118,7 +117,3 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
                    initial=initial, t0=sc.t0, gps_time_offset_s=sc.gps_time_offset_s,
                    imu_model=imu_model_dict(sc.gyro, sc.accel, sc.imu_rate), name=sc.name,
                    seed=int(sc.seed))
-
-
-def _navstate_type():  # pragma: no cover - re-exported for convenience
-    return NavState
