@@ -7,6 +7,8 @@
 #include "common.hpp"
 #include "insnav/engine/loose_engine.hpp"
 #include "insnav/filter/ekf.hpp"
+#include "insnav/filter/rbukf.hpp"
+#include "insnav/filter/ukf.hpp"
 
 namespace insnav::py_bind {
 
@@ -69,13 +71,21 @@ LooseConfig loose_config_from_dict(const py::dict& d) {
   if (!(c.propagation_interval > 0.0)) throw py::value_error("propagation_interval must be > 0");
   if (!(c.cycle_period > 0.0)) throw py::value_error("cycle_period must be > 0");
   if (c.output_decimation < 1) throw py::value_error("output_decimation must be >= 1");
+  static const char* known[] = {"lever_arm_b", "propagation_interval", "cycle_period", "gate_chi2", "use_position",
+                                "use_velocity", "output_decimation", "ut_alpha", "ut_beta", "ut_kappa"};
+  for (auto item : d) {
+    const std::string k = py::cast<std::string>(item.first);
+    bool ok = false;
+    for (const char* kk : known) ok = ok || (k == kk);
+    if (!ok) throw py::value_error("unknown engine config key '" + k + "'");
+  }
   return c;
 }
 
 template <class Filter>
 py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, const DArray& gnss,
                   const DArray& init, const DArray& P0, const DArray& corr0, const ImuErrorModel& model,
-                  const LooseConfig& cfg) {
+                  const LooseConfig& cfg, const UtParams& ut) {
   using L = typename Filter::Layout;
   constexpr int ns = L::kSize;
   const py::ssize_t n = t.size();
@@ -138,7 +148,7 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
   out.status = m ? o_status.mutable_data() : nullptr;
   {
     py::gil_scoped_release release;
-    auto engine = std::make_unique<LooseEngine<Filter>>(model, cfg);  // one allocation per run, not per sample
+    auto engine = std::make_unique<LooseEngine<Filter>>(model, cfg, ut);  // one allocation per run, not per sample
     engine->run(nav, P, corr, n, t.data(), dtheta_b.data(), dv_b.data(), m, fixes.data(), out);
   }
   const py::ssize_t k = out.n_out;
@@ -168,10 +178,20 @@ void bind_loose(py::module_& m) {
          const py::dict& config) {
         const ImuErrorModel mdl = imu_model_from_dict(model);
         const LooseConfig cfg = loose_config_from_dict(config);
-        if (filter == "ekf" && layout == 15)
-          return run_impl<Ekf<Layout15>>(t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg);
-        if (filter == "ekf" && layout == 21)
-          return run_impl<Ekf<Layout21>>(t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg);
+        UtParams ut;
+        ut.alpha = number(config, "ut_alpha", ut.alpha);
+        ut.beta = number(config, "ut_beta", ut.beta);
+        ut.kappa = number(config, "ut_kappa", ut.kappa);
+#define INSNAV_DISPATCH(NAME, FILTER, LAYOUT, N)                                                   \
+  if (filter == NAME && layout == N)                                                             \
+    return run_impl<FILTER<LAYOUT>>(t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut);
+        INSNAV_DISPATCH("ekf", Ekf, Layout15, 15)
+        INSNAV_DISPATCH("ekf", Ekf, Layout21, 21)
+        INSNAV_DISPATCH("rbukf", RbUkf, Layout15, 15)
+        INSNAV_DISPATCH("rbukf", RbUkf, Layout21, 21)
+        INSNAV_DISPATCH("ukf", Ukf, Layout15, 15)
+        INSNAV_DISPATCH("ukf", Ukf, Layout21, 21)
+#undef INSNAV_DISPATCH
         throw py::value_error("unsupported filter/layout combination: " + filter + "/" + std::to_string(layout));
       },
       py::arg("filter"), py::arg("layout"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("gnss"),

@@ -19,7 +19,9 @@
 
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
+#include "insnav/filter/sigma_points.hpp"
 #include "insnav/filter/types.hpp"
 #include "insnav/meas/gnss_loose.hpp"
 
@@ -71,9 +73,18 @@ class LooseEngine {
  public:
   using L = typename Filter::Layout;
 
-  LooseEngine(const ImuErrorModel& model, const LooseConfig& cfg) : filter_(model), cfg_(cfg) {}
+  /// ut is used by the sigma-point filters (RB-UKF, UKF) and ignored by the EKF.
+  LooseEngine(const ImuErrorModel& model, const LooseConfig& cfg, const UtParams& ut = {})
+      : filter_(make_filter(model, ut)), cfg_(cfg) {}
 
   Filter& filter() { return filter_; }
+
+  static Filter make_filter(const ImuErrorModel& model, const UtParams& ut) {
+    if constexpr (std::is_constructible_v<Filter, const ImuErrorModel&, const UtParams&>)
+      return Filter(model, ut);
+    else
+      return Filter(model);
+  }
 
   /// Run over n IMU samples (t, dtheta_b (n,3), dv_b (n,3)) and m GNSS fixes
   /// sorted by time.  initial is valid at initial.t (<= t[0]).
