@@ -1,0 +1,225 @@
+// Tight coupling (issue 5): pseudorange / pseudorange-rate H rows against
+// numerical derivatives of the nonlinear predicted residual, residual = H dx
+// for a known INS error, and TightEngine runs with 0..3 satellites, EKF /
+// RB-UKF / UKF, without heap allocation inside the epoch loop.
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <random>
+#include <vector>
+
+inline int g_eigen_asserts = 0;
+#define eigen_assert(x)                                            \
+  do {                                                             \
+    if (!(x)) {                                                    \
+      ++g_eigen_asserts;                                           \
+      std::printf("eigen_assert failed: %s\n", #x);                \
+    }                                                              \
+  } while (0)
+#define EIGEN_RUNTIME_NO_MALLOC
+#include <Eigen/Core>
+
+#include "insnav/core.hpp"
+#include "insnav/engine/tight_engine.hpp"
+#include "insnav/filter/ekf.hpp"
+#include "insnav/filter/rbukf.hpp"
+#include "insnav/filter/ukf.hpp"
+#include "insnav/meas/pseudorange.hpp"
+#include "test_util.hpp"
+
+using namespace insnav;
+using L = Layout17;
+
+// Satellites at GPS altitude in given (az, el) seen from r_rx_e, with ~3.9 km/s velocities.
+static std::vector<SatObservation> make_sats(double lat, double lon, const Vec3& r_rx_e, int n, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<SatObservation> out;
+  const Mat3 C_en = wgs84::C_en(lat, lon);
+  for (int i = 0; i < n; ++i) {
+    const double az = 2 * M_PI * i / n + 0.3, el = 0.25 + 1.1 * u(rng);
+    const Vec3 u_n(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), -std::sin(el));
+    const Vec3 u_e = C_en * u_n;
+    // range so that |r_sat| ~ 26560 km
+    const double b = r_rx_e.dot(u_e), c = r_rx_e.squaredNorm() - 26560e3 * 26560e3;
+    const double rho = -b + std::sqrt(b * b - c);
+    SatObservation s;
+    s.r_e = r_rx_e + rho * u_e;
+    Vec3 w = s.r_e.cross(Vec3(u(rng) - 0.5, u(rng) - 0.5, 1.0)).normalized();
+    s.v_e = 3874.0 * w;
+    s.clock_bias_m = 1e4 * (u(rng) - 0.5);
+    s.clock_drift_mps = 0.1 * (u(rng) - 0.5);
+    s.sigma_pr_m = 3.0;
+    s.sigma_prr_mps = 0.1;
+    out.push_back(s);
+  }
+  return out;
+}
+
+static void test_h_numerical() {
+  std::mt19937 rng(11);
+  NavState ins;
+  ins.lat = 0.7;
+  ins.lon = 2.0;
+  ins.h = 1200.0;
+  ins.v_n = Vec3(120.0, -60.0, 4.0);
+  ins.q_nb = quat_from_euler(Vec3(0.2, -0.1, 2.5));
+  const Vec3 w_b(0.03, -0.02, 0.1), l_b(0.8, -0.3, -1.2);
+  const Vec3 r_e = wgs84::geodetic_to_ecef(ins.lat, ins.lon, ins.h);
+  auto sats = make_sats(ins.lat, ins.lon, r_e, 8, rng);
+  for (auto& s : sats) {
+    s.pseudorange_m = 2.2e7;  // any value: H does not depend on it
+    s.pseudorange_rate_mps = 100.0;
+  }
+  sats[2].pseudorange_rate_mps = NAN;  // a missing Doppler drops one row
+  TightMeasurement<L> meas;
+  meas.set(ins, w_b, l_b, 123.0, 0.4, sats.data(), static_cast<int>(sats.size()));
+  const auto& lin = meas.linear();
+  EXPECT_TRUE(lin.rows() == 15);
+  const StateVec<L> zero = StateVec<L>::Zero();
+  EXPECT_LT(meas.predicted_residual(zero).cwiseAbs().maxCoeff(), 1e-12);
+  double worst = 0.0;
+  for (int j = 0; j < L::kSize; ++j) {
+    double eps = 1e-2;  // pos [m], vel [m/s], clock
+    // (ranges are ~2e7 m: a too small step drowns in rounding, 4e-9 m / 2 eps)
+    if (j >= L::kAtt && j < L::kAtt + 3) eps = 1e-3;
+    if (j >= L::kAccBias && j < L::kGyroBias + 3) eps = 1e-4;
+    StateVec<L> dp = zero, dm = zero;
+    dp[j] = eps;
+    dm[j] = -eps;
+    const auto num = ((meas.predicted_residual(dp) - meas.predicted_residual(dm)) / (2 * eps)).eval();
+    for (int i = 0; i < lin.rows(); ++i) {
+      const double e = std::abs(num[i] - lin.H(i, j));
+      const double tol = 1e-5 + 1e-5 * std::abs(lin.H(i, j));
+      if (e > tol) std::printf("H(%d,%d) = %.9g, numerical %.9g\n", i, j, lin.H(i, j), num[i]);
+      EXPECT_LT(e, tol);
+      worst = std::max(worst, e);
+    }
+  }
+  std::printf("H vs numerical derivative: worst abs difference %.3g\n", worst);
+  // residual from exact measurements of a true state = predicted_residual(dx) ~ H dx
+  StateVec<L> dx = zero;
+  dx.segment<3>(L::kPos) = Vec3(5.0, -3.0, 8.0);
+  dx.segment<3>(L::kVel) = Vec3(0.2, 0.1, -0.3);
+  dx.segment<3>(L::kAtt) = Vec3(1e-3, -2e-3, 5e-3);
+  dx.segment<3>(L::kGyroBias) = Vec3(1e-4, 2e-4, -1e-4);
+  dx[L::kClockBias] = 7.0;
+  dx[L::kClockDrift] = -0.05;
+  const auto z_sim = meas.predicted_residual(dx);  // INS-predicted - true-state prediction
+  const auto lin_pred = (lin.H * dx).eval();
+  EXPECT_LT((z_sim - lin_pred).cwiseAbs().maxCoeff(), 1e-3);
+  // the pseudorange row of an exact measurement of the true state
+  NavState tru = ins;
+  const wgs84::Radii rr = wgs84::radii(ins.lat);
+  tru.lat -= dx[0] / (rr.R_M + ins.h);
+  tru.lon -= dx[1] / ((rr.R_N + ins.h) * std::cos(ins.lat));
+  tru.h += dx[2];
+  const Mat3 C_true = dcm_from_euler(dx.segment<3>(L::kAtt)) * ins.q_nb.toRotationMatrix();
+  const Vec3 r_ant = wgs84::geodetic_to_ecef(tru.lat, tru.lon, tru.h) + wgs84::C_en(tru.lat, tru.lon) * C_true * l_b;
+  auto s1 = sats;
+  for (auto& s : s1) {
+    s.pseudorange_m = (s.r_e - r_ant).norm() + (123.0 - 7.0) - s.clock_bias_m;
+    s.pseudorange_rate_mps = NAN;
+  }
+  TightMeasurement<L> m2;
+  m2.set(ins, w_b, l_b, 123.0, 0.4, s1.data(), static_cast<int>(s1.size()));
+  for (int i = 0; i < m2.linear().rows(); ++i)
+    EXPECT_LT(std::abs(m2.linear().residual[i] - (m2.linear().H.row(i) * dx)(0)), 1e-4);
+}
+
+// Stationary IMU at lat, level, facing north: exact increments at rate 100 Hz.
+template <class Filter>
+static void run_stationary(int n_sats, const char* name) {
+  std::mt19937 rng(5);
+  const double lat = 0.8, lon = 0.2, h = 300.0, dt = 0.01, T = 120.0;
+  const int n = static_cast<int>(T / dt);
+  const Vec3 w_ie_n = wgs84::omega_ie_n(lat);
+  const Vec3 f_n(0.0, 0.0, -wgs84::gravity(lat, h));
+  std::vector<double> t(n), dth(3 * n), dv(3 * n);
+  for (int k = 0; k < n; ++k) {
+    t[k] = (k + 1) * dt;
+    for (int j = 0; j < 3; ++j) {
+      dth[3 * k + j] = w_ie_n[j] * dt;
+      dv[3 * k + j] = f_n[j] * dt;
+    }
+  }
+  const Vec3 r_e = wgs84::geodetic_to_ecef(lat, lon, h);
+  const auto geom = make_sats(lat, lon, r_e, 4, rng);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  std::vector<TightEpoch> ep;
+  std::vector<SatObservation> obs;
+  const double b0 = 50.0, d0 = 0.3;
+  for (int e = 1; e <= static_cast<int>(T); ++e) {
+    TightEpoch x;
+    x.t = e;
+    x.begin = static_cast<std::int64_t>(obs.size());
+    const int use = (e > 20) ? n_sats : 4;  // 4 satellites for 20 s, then n_sats
+    for (int i = 0; i < use; ++i) {
+      SatObservation s = geom[i];
+      const Vec3 d = s.r_e - r_e;
+      s.pseudorange_m = d.norm() + b0 + d0 * e - s.clock_bias_m + 3.0 * nd(rng);
+      s.pseudorange_rate_mps = d.normalized().dot(s.v_e) + d0 - s.clock_drift_mps + 0.1 * nd(rng);
+      obs.push_back(s);
+    }
+    x.end = static_cast<std::int64_t>(obs.size());
+    ep.push_back(x);
+  }
+  NavState init;
+  init.lat = lat + 3.0 / 6.4e6;
+  init.lon = lon;
+  init.h = h - 2.0;
+  init.q_nb = quat_from_euler(Vec3(1e-3, -1e-3, 5e-3));
+  ImuErrorModel model;
+  model.gyro_arw = Vec3::Constant(1e-5);
+  model.acc_vrw = Vec3::Constant(1e-3);
+  model.gyro_bias_sigma = Vec3::Constant(1e-6);
+  model.acc_bias_sigma = Vec3::Constant(1e-3);
+  model.clock_bias_psd = 0.1;
+  model.clock_drift_psd = 0.01;
+  StateVec<L> p0;
+  p0 << 5, 5, 5, 0.1, 0.1, 0.1, 2e-3, 2e-3, 1e-2, 1e-3, 1e-3, 1e-3, 1e-6, 1e-6, 1e-6, 20.0, 1.0;
+  const StateCov<L> P0 = p0.cwiseAbs2().asDiagonal();
+  TightConfig cfg;
+  auto engine = std::make_unique<TightEngine<Filter>>(model, cfg);
+  std::vector<double> o_t(n + 1), o_llh(3 * (n + 1)), o_clk(2 * (n + 1)), o_sig(17 * (n + 1)), o_res(2 * obs.size()),
+      o_nis(ep.size());
+  std::vector<std::int8_t> o_st(ep.size());
+  TightOutputs out;
+  out.t = o_t.data();
+  out.llh = o_llh.data();
+  out.clock = o_clk.data();
+  out.sigma = o_sig.data();
+  out.sat_residual = o_res.empty() ? nullptr : o_res.data();
+  out.nis = o_nis.data();
+  out.status = o_st.data();
+  Eigen::internal::set_is_malloc_allowed(false);
+  engine->run(init, P0, ImuCorrection{}, 40.0, 0.0, n, t.data(), dth.data(), dv.data(),
+              static_cast<std::int64_t>(ep.size()), ep.data(), obs.data(), out);
+  Eigen::internal::set_is_malloc_allowed(true);
+  const std::int64_t last = out.n_out - 1;
+  const double dN = (o_llh[3 * last] - lat) * 6.37e6, dE = (o_llh[3 * last + 1] - lon) * 6.37e6 * std::cos(lat);
+  const double dU = o_llh[3 * last + 2] - h;
+  const double clk_err = o_clk[2 * last] - (b0 + d0 * T), drift_err = o_clk[2 * last + 1] - d0;
+  std::printf("%s, %d sats after 20 s: final pos err N %.2f E %.2f U %.2f m, clock err %.2f m (sigma %.2f), "
+              "drift err %.3f m/s, updates %d\n",
+              name, n_sats, dN, dE, dU, clk_err, o_sig[17 * last + 15], drift_err, out.updates);
+  bool finite = true;
+  for (std::int64_t i = 0; i <= last; ++i) finite = finite && std::isfinite(o_llh[3 * i]) && std::isfinite(o_clk[2 * i]);
+  EXPECT_TRUE(finite);
+  EXPECT_TRUE(out.updates == (n_sats > 0 ? 120 : 20));
+  // clock stays bounded: within 5 sigma and within 100 m of truth
+  EXPECT_LT(std::abs(clk_err), std::max(5.0 * o_sig[17 * last + 15], 1.0));
+  EXPECT_LT(std::abs(clk_err), 100.0);
+  EXPECT_LT(std::abs(drift_err), 1.0);
+  if (n_sats >= 1) EXPECT_LT(std::hypot(dN, dE), 30.0);
+}
+
+int main() {
+  test_h_numerical();
+  for (int ns : {0, 1, 2, 3, 4}) {
+    run_stationary<Ekf<L>>(ns, "EKF");
+    run_stationary<RbUkf<L>>(ns, "RB-UKF");
+    run_stationary<Ukf<L>>(ns, "UKF");
+  }
+  EXPECT_TRUE(g_eigen_asserts == 0);
+  TEST_MAIN_END()
+}
