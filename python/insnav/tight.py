@@ -367,6 +367,9 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         r_ant = earth.geodetic_to_ecef(lat0, lon0, init.h_m) + C_en @ (C_nb @ lever)
         clock0 = _initial_clock(inputs, r_ant, C_en @ init.v_n)
     ep_t = np.asarray(inputs.epoch_t, float)
+    if ep_t.size > 1 and not np.all(np.diff(ep_t) > 0):
+        bad = int(np.argmax(~(np.diff(ep_t) > 0))) + 1
+        raise ValueError(f"GNSS epoch_t not strictly increasing at epoch {bad} (t = {ep_t[bad]:.3f} s)")
     cycle = cfg.cycle_period_s
     if cycle is None:
         cycle = float(np.median(np.diff(ep_t))) if ep_t.size > 1 else 1.0

@@ -1,0 +1,115 @@
+"""Tight coupling (issue 5): runs with 0-3 satellites, consistency with 6+
+satellites, all three filters, input validation.  H rows against numerical
+derivatives are checked in C++ (cpp/tests/test_pseudorange.cpp, run by
+tests/test_cpp.py / make cpp-test)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import insnav
+import insnav.sim as sim
+from insnav.analysis import errors, rms
+from insnav.config import RunConfig
+from insnav.tight import TightInputs, pseudorange_sigma, run_tight, tight_inputs_from_raw
+
+
+def _short(preset="seed003-4sat", duration=300.0, **raw_over):
+    base = sim.simulate(preset, seed=0, with_truth=False).scenario
+    sc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}
+    # keep the first segments up to `duration`
+    segs, tot = [], 0.0
+    for s in sc["motion"]["segments"]:
+        if tot >= duration:
+            break
+        segs.append(s)
+        tot += float(s["duration_s"])
+    sc["motion"] = dict(sc["motion"], segments=segs)
+    sc["gnss_raw"] = dict(sc["gnss_raw"], windows=[], **raw_over)
+    return sc
+
+
+@pytest.fixture(scope="module")
+def ds6():
+    return sim.simulate(_short(max_sats=8, sigma_pr_m=3.0, sigma_prr_mps=0.05), seed=7)
+
+
+def test_consistency_6plus_sats(ds6):
+    assert np.min(np.bincount(np.searchsorted(np.unique(ds6.gnss_raw.t), ds6.gnss_raw.t))) >= 6
+    sol = run_tight(ds6, RunConfig(filter="ekf", init_seed=3))
+    e = errors(sol, ds6.truth)
+    w = e["t"] > 60.0  # after the initial transient
+    ratios = []
+    for key, sk in (("pos_n_m", "sigma_pos_n_m"), ("vel_n_mps", "sigma_vel_n_mps"), ("att_deg", "sigma_att_deg")):
+        r = rms(e[key][w] / e[sk][w])
+        ratios.append(r)
+        assert np.all((r > 0.5) & (r < 1.5)), (key, r)
+    assert sol.summary["updates"] == len(sol.gnss_t)
+    nis = sol.nis / sol.rows
+    assert 0.7 < np.nanmean(nis) < 1.3
+    assert rms(np.linalg.norm(e["pos_n_m"][w], axis=1)) < 3.0
+
+
+@pytest.mark.parametrize("n_sats", [0, 1, 2, 3])
+def test_few_satellites_bounded_clock(ds6, n_sats):
+    t_ep = np.unique(ds6.gnss_raw.t)
+    raw = ds6.gnss_raw
+    inp = tight_inputs_from_raw(raw, max_sats=16)
+    # after 60 s keep only the n_sats highest satellites
+    keep = np.ones(len(inp.prn), bool)
+    ep = inp.row_epoch
+    for e in range(inp.epoch_t.size):
+        if inp.epoch_t[e] <= 60.0:
+            continue
+        rows = np.flatnonzero(ep == e)
+        order = rows[np.argsort(-inp.elevation_deg[rows])]
+        keep[order[n_sats:]] = False
+    inp = inp.select(keep)
+    assert inp.epoch_t.size == t_ep.size
+    sol = run_tight(ds6, RunConfig(init_seed=1), inputs=inp)
+    assert np.all(np.isfinite(sol.clock_bias_m)) and np.all(np.isfinite(sol.lat_deg))
+    late = sol.gnss_t > 60.0
+    if n_sats == 0:
+        assert np.all(sol.gnss_status[late] == 0) and np.all(sol.rows[late] == 0)
+    else:
+        assert np.all(sol.gnss_status[late] == 1)
+        assert np.all(sol.rows[late] == 2 * n_sats)
+    true_clk = np.interp(sol.t, raw.t, raw.rx_clock_bias_m)
+    clk_err = sol.clock_bias_m - true_clk
+    # bounded: within 5 sigma of its own uncertainty, and the uncertainty stays finite
+    assert np.all(np.abs(clk_err[sol.t > 61]) < 5 * sol.sigma_clock[sol.t > 61, 0] + 1.0)
+    assert np.max(sol.sigma_clock[:, 0]) < 1e3
+
+
+def test_filters_agree(ds6):
+    cfg = RunConfig(init_seed=2, output_decimation=10)
+    out = {f: run_tight(ds6, RunConfig(**{**cfg.__dict__, "filter": f})) for f in ("ekf", "rbukf", "ukf")}
+    pos = {f: rms(np.linalg.norm(errors(s, ds6.truth)["pos_n_m"][20:], axis=1)) for f, s in out.items()}
+    assert all(p < 3.0 for p in pos.values()), pos
+    assert max(pos.values()) < 1.3 * min(pos.values()), pos
+
+
+def test_run_routes_tight_and_loose_rejects_no_raw(ds6):
+    sol = insnav.run(ds6, filter="ekf", coupling="tight", init_seed=0, output_decimation=50)
+    assert sol.summary["coupling"] == "tight" and sol.summary["layout"] == 17
+    ds_loose = sim.simulate("seed001-low", seed=0, with_truth=False)
+    with pytest.raises(ValueError, match="gnss_raw"):
+        run_tight(ds_loose, RunConfig())
+
+
+def test_inputs_validation(ds6):
+    inp = tight_inputs_from_raw(ds6.gnss_raw)
+    bad = TightInputs(inp.epoch_t, inp.epoch_start, inp.sats.copy(), inp.prn, inp.elevation_deg)
+    bad.sats[5, 10] = 0.0  # sigma_pr = 0
+    with pytest.raises(ValueError, match="sigma_pr must be > 0 at row 5"):
+        run_tight(ds6, RunConfig(), inputs=bad)
+    bad = TightInputs(inp.epoch_t[::-1].copy(), inp.epoch_start, inp.sats, inp.prn, inp.elevation_deg)
+    with pytest.raises(ValueError, match="epoch_t"):
+        run_tight(ds6, RunConfig(), inputs=bad)
+
+
+def test_sigma_model():
+    s = pseudorange_sigma(np.deg2rad([90.0, 30.0, 1.0]), 2.0)
+    assert np.allclose(s[:2], [2.0, 4.0]) and s[2] == pytest.approx(2.0 / np.sin(np.deg2rad(5.0)))
+    s = pseudorange_sigma(np.deg2rad([90.0, 90.0, 90.0]), 2.0, cn0_dbhz=[45.0, 35.0, 50.0])
+    assert np.allclose(s, [2.0, 2.0 * np.sqrt(10.0), 2.0])
