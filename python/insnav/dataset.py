@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import tempfile
 import warnings
@@ -39,6 +40,45 @@ import numpy as np
 from .types import NavState
 
 FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class RowOrigin:
+    """Where the rows of a table came from, for error messages ("file:line").
+
+    Attributes
+    ----------
+    source : str
+        File name (or another description of the source).
+    first_line : int
+        1-based file line of row 0 when the rows are on consecutive lines.
+    lines : ndarray (N,) of int or None
+        Explicit 1-based line of each row (blank lines skipped, rows
+        inserted by a repair are 0); None: ``first_line + row``.
+    """
+
+    source: str
+    first_line: int = 1
+    lines: np.ndarray | None = None
+
+    def line(self, i: int) -> int:
+        """1-based file line of row ``i`` (0 for a row that is not in the file)."""
+        return int(self.lines[i]) if self.lines is not None else self.first_line + int(i)
+
+    def where(self, i: int) -> str:
+        """``"<source>:<line>"`` of row ``i``."""
+        ln = self.line(i)
+        return f"{self.source}:{ln}" if ln > 0 else f"{self.source} (inserted row {i})"
+
+    def all_lines(self, n: int) -> np.ndarray:
+        """Line of every one of ``n`` rows as an array."""
+        if self.lines is not None:
+            return np.asarray(self.lines, dtype=np.int64)
+        return self.first_line + np.arange(n, dtype=np.int64)
+
+    def take(self, idx, n: int) -> "RowOrigin":
+        """The origin of rows ``idx`` (index array or boolean mask) of an ``n``-row table."""
+        return RowOrigin(self.source, self.first_line, self.all_lines(n)[np.asarray(idx)])
 
 
 @dataclass
@@ -58,6 +98,8 @@ class ImuData:
     t: np.ndarray
     dtheta_b: np.ndarray
     dv_b: np.ndarray
+    #: file and line of each sample, set by the readers (see :class:`RowOrigin`)
+    origin: RowOrigin | None = field(default=None, repr=False, compare=False)
 
     COLUMNS = ("t_s", "dtheta_x_rad", "dtheta_y_rad", "dtheta_z_rad", "dv_x_mps", "dv_y_mps",
                "dv_z_mps")
@@ -107,6 +149,8 @@ class GnssFixes:
     v_n: np.ndarray
     sigma_pos_n: np.ndarray
     sigma_vel_n: np.ndarray
+    #: file and line of each record, set by the readers (see :class:`RowOrigin`)
+    origin: RowOrigin | None = field(default=None, repr=False, compare=False)
 
     COLUMNS = ("t_valid_s", "t_arrival_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps",
                "vd_mps", "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps",
@@ -432,8 +476,14 @@ def load_dataset(directory) -> Dataset:
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"{meta_path}:{exc.lineno}: invalid JSON: {exc.msg}") from None
-    imu = ImuData.from_array(read_csv(d / "imu.csv", ImuData.COLUMNS))
-    gnss = GnssFixes.from_array(read_csv(d / "gnss.csv", GnssFixes.COLUMNS))
+    a, imu_origin = read_csv(d / "imu.csv", ImuData.COLUMNS, return_origin=True)
+    check_finite_rows(a, imu_origin, ImuData.COLUMNS)
+    imu = ImuData.from_array(a)
+    imu.origin = imu_origin
+    a, gnss_origin = read_csv(d / "gnss.csv", GnssFixes.COLUMNS, return_origin=True)
+    check_finite_rows(a[:, :1], gnss_origin, GnssFixes.COLUMNS[:1])
+    gnss = GnssFixes.from_array(a)
+    gnss.origin = gnss_origin
     truth = (Truth.from_array(read_csv(d / "truth.csv", Truth.COLUMNS))
              if (d / "truth.csv").is_file() else None)
     raw = (GnssRaw.from_array(read_csv(d / "gnss_raw.csv", GnssRaw.COLUMNS))
@@ -504,7 +554,11 @@ def parse_numeric_text(text: str, ncols: int, source: str, first_line: int = 1,
             continue
         lineno = first_line + i
         if len(parts) != ncols and not (min_cols is not None and len(parts) >= ncols):
-            raise ValueError(f"{source}:{lineno}: expected {ncols} columns, found {len(parts)}")
+            hint = ""
+            if len(parts) < ncols and not body.rstrip(" \t").endswith("\n") and \
+                    not any(x.strip() for x in body.splitlines()[i + 1:]):
+                hint = " (incomplete last line: file truncated?)"
+            raise ValueError(f"{source}:{lineno}: expected {ncols} columns, found {len(parts)}{hint}")
         try:
             rows.append([float(p) for p in parts[:ncols]])
         except ValueError:
@@ -521,8 +575,32 @@ def _is_float(s):
         return False
 
 
-def read_csv(path, columns) -> np.ndarray:
-    """Read a dataset CSV, checking the header names ``columns``."""
+def row_origin(text: str, source: str, first_line: int = 1) -> RowOrigin:
+    """The :class:`RowOrigin` of the non-blank lines of ``text`` (the rows
+    :func:`parse_numeric_text` returns); explicit line numbers only when the
+    text has blank lines."""
+    if "\r" in text or _BLANK_LINE.search(text):
+        lines = [first_line + i for i, ln in enumerate(text.splitlines()) if ln.strip()]
+        return RowOrigin(source, first_line, np.array(lines, dtype=np.int64))
+    return RowOrigin(source, first_line)
+
+
+_BLANK_LINE = re.compile(r"(?:^|\n)[ \t\f\v]*\n")
+
+
+def check_finite_rows(a: np.ndarray, origin: RowOrigin, columns) -> None:
+    """Raise ``ValueError("<file>:<line>: non-finite value ...")`` for the first NaN/inf in ``a``."""
+    bad = ~np.isfinite(a)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise ValueError(f"{origin.where(int(r))}: non-finite value {a[r, c]!r} in column "
+                         f"{columns[int(c)]!r}")
+
+
+def read_csv(path, columns, return_origin: bool = False):
+    """Read a dataset CSV, checking the header names ``columns``.
+
+    With ``return_origin`` also return the :class:`RowOrigin` (file line of each row)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path} missing")
@@ -533,4 +611,7 @@ def read_csv(path, columns) -> np.ndarray:
     if got != tuple(columns):
         raise ValueError(f"{path}:1: unexpected header {header!r}; expected {','.join(columns)}")
     body = "" if nl < 0 else text[nl + 1:]
-    return parse_numeric_text(body, len(columns), str(path), first_line=2)
+    a = parse_numeric_text(body, len(columns), str(path), first_line=2)
+    if return_origin:
+        return a, row_origin(body, str(path), first_line=2)
+    return a

@@ -125,7 +125,7 @@ def _initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[N
 
 
 def run(dataset, filter: str | None = None, coupling: str | None = None, config: RunConfig | None = None,
-        **overrides) -> Solution:
+        *, sanitize: bool | dict = True, **overrides) -> Solution:
     """Run a closed-loop GNSS/INS filter over a dataset.
 
     Parameters
@@ -137,6 +137,11 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
         Overrides ``config.filter``.
     coupling : {'loose', 'tight'}, optional
     config : RunConfig, optional
+    sanitize : bool or dict
+        Check and repair the input first (:mod:`insnav.sanitize`: duplicates
+        dropped, short IMU gaps bridged, bad GNSS fixes dropped; a dict
+        overrides ``insnav.sanitize.DEFAULTS``); the counts go to
+        ``summary["sanitize"]``.  Clean data are not changed.
     **overrides
         Any :class:`RunConfig` field, e.g. ``init_seed=3``.
 
@@ -156,10 +161,18 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
             raise TypeError(f"run() got an unknown option {k!r}")
         setattr(cfg, k, v)
     cfg.validate()
+    input_report = None
+    if sanitize:
+        from .sanitize import sanitize_dataset  # issue 9
+
+        dataset, input_report = sanitize_dataset(dataset, sanitize)
     if cfg.coupling == "tight":
         from .tight import run_tight  # issue 5
 
-        return run_tight(dataset, cfg)
+        sol = run_tight(dataset, cfg)
+        if input_report is not None:
+            sol.summary["sanitize"] = input_report
+        return sol
 
     imu = dataset.imu
     t = as_float_array(imu.t, "imu.t")
@@ -217,6 +230,8 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
                    summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n, updates=int(out["updates"]),
                                 rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
+    if input_report is not None:
+        sol.summary["sanitize"] = input_report
     if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
         bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
         raise FloatingPointError(f"{cfg.filter}: the solution became non-finite at t={sol.t[bad]:.3f} s "

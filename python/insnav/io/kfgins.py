@@ -14,7 +14,12 @@ Formats (whitespace separated, one record per line, no header):
   into SI values.
 
 Files ending in ``.xz``, ``.gz`` or ``.bz2`` are decompressed transparently.
-Malformed input raises ``ValueError("<file>:<line>: <reason>")`` (1-based).
+Malformed input raises ``ValueError("<file>:<line>: <reason>")`` (1-based):
+wrong column count (an incomplete last line is flagged as a truncated file),
+non-numeric fields, NaN/inf in the IMU file or in a GNSS time, decreasing IMU
+time.  Repeated IMU times pass and are handled by :mod:`insnav.sanitize` (an
+exact duplicate is dropped and counted).  The returned data carry the file
+line of each row (``origin``) for later messages.
 The readers parse the whole text in one ``np.fromstring`` call (the 76 MB
 KF-GINS IMU file reads in about 2.5 s including xz decompression).
 """
@@ -28,12 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import GnssFixes, ImuData, Truth, parse_numeric_text
+from ..dataset import GnssFixes, ImuData, Truth, check_finite_rows, parse_numeric_text, row_origin
 
 DEG = math.pi / 180.0  #: deg -> rad
 HOUR = 3600.0  #: h -> s
 MGAL = 1e-5  #: mGal -> m/s^2
 PPM = 1e-6  #: ppm -> [-]
+
+IMU_COLUMNS = ("sow", "dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "dvel_z")
 
 __all__ = ["read_kfgins_imu", "write_kfgins_imu", "read_kfgins_gnss", "write_kfgins_gnss",
            "read_kfgins_nav", "write_kfgins_nav", "read_kfgins_config", "read_text"]
@@ -84,11 +91,16 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
     if n < 7:
         raise ValueError(f"{path}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
                          f"found {n}")
-    a = parse_numeric_text(text, n, str(path), sep=" ")
-    if a.shape[0] > 1 and np.any(np.diff(a[:, 0]) <= 0):
-        i = int(np.argmax(np.diff(a[:, 0]) <= 0)) + 2
-        raise ValueError(f"{path}:{i}: time {a[i - 1, 0]!r} does not increase")
-    return ImuData(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy())
+    a = parse_numeric_text(text, n, str(path), sep=" ")[:, :7]
+    origin = row_origin(text, str(path))
+    check_finite_rows(a, origin, IMU_COLUMNS)
+    # decreasing time is an error; equal times (duplicated records) are left to
+    # insnav.sanitize.sanitize_imu, which drops exact duplicates and counts them
+    if a.shape[0] > 1 and np.any(np.diff(a[:, 0]) < 0):
+        i = int(np.argmax(np.diff(a[:, 0]) < 0)) + 1
+        raise ValueError(f"{origin.where(i)}: time {a[i, 0]!r} does not increase "
+                         f"(previous record at {a[i - 1, 0]!r}, line {origin.line(i - 1)})")
+    return ImuData(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy(), origin=origin)
 
 
 def write_kfgins_imu(path, imu: ImuData) -> None:
@@ -112,11 +124,13 @@ def read_kfgins_gnss(path) -> GnssFixes:
         raise ValueError(f"{path}:1: expected 7 or 13 columns (sow lat lon h std_N std_E std_D"
                          f" [vN vE vD std_vN std_vE std_vD]), found {n}")
     a = parse_numeric_text(text, n, str(path), sep=" ")
+    origin = row_origin(text, str(path))
+    check_finite_rows(a[:, :1], origin, ("sow",))
     k = a.shape[0]
     v = a[:, 7:10] if n == 13 else np.full((k, 3), np.nan)
     sv = a[:, 10:13] if n == 13 else np.full((k, 3), np.nan)
     return GnssFixes(a[:, 0].copy(), a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy(),
-                     a[:, 3].copy(), v.copy(), a[:, 4:7].copy(), sv.copy())
+                     a[:, 3].copy(), v.copy(), a[:, 4:7].copy(), sv.copy(), origin=origin)
 
 
 def write_kfgins_gnss(path, fixes: GnssFixes, with_velocity: bool = False) -> None:

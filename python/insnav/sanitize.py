@@ -1,0 +1,327 @@
+"""Input sanitation before a run: check the IMU and GNSS streams, repair what
+can be repaired without inventing information, refuse the rest.
+
+:func:`insnav.run` calls both functions (``sanitize=True``, the default) and
+puts the merged report into ``Solution.summary["sanitize"]``.  On clean data
+nothing is changed and every count is zero.
+
+Policy
+------
+Every repair is counted in the report; every refusal is a ``ValueError`` whose
+message names the sample and, when the data came from a reader
+(``ImuData.origin`` / ``GnssFixes.origin``), the file and 1-based line.
+
+IMU (:func:`sanitize_imu`), nominal interval ``dt0`` = median sample interval:
+
+===================================  ==========================================
+non-finite value                     refused
+``|dtheta|/dt > max_rate_rps`` or    refused (a corrupted record: no sensor
+``|dv|/dt > max_accel_mps2``         measures it)
+time decreases                       refused (naming both lines)
+repeated time, identical record      dropped (``imu_duplicates_dropped``)
+repeated time, different record      refused (which one is right is unknown)
+gap ``dt > gap_factor * dt0`` and    bridged (``imu_gaps_bridged``), see below
+``dt <= max_gap_s``
+gap ``dt > max_gap_s``               refused
+===================================  ==========================================
+
+A gap is bridged in one of two ways, chosen per gap from the sample after it.
+An IMU that *accumulates* over a dropout delivers an increment covering the
+whole gap; a logger that *lost* records delivers one covering only ``dt0``.
+With the specific force magnitude of the neighbouring samples ``f_ref`` (it
+is never far from g for a vehicle on or near the Earth) the sample's
+``|dv|/dt`` and ``|dv|/dt0`` are compared with ``f_ref``; the closer one
+(in ratio) decides:
+
+* accumulated: the sample is kept as it is; the engine integrates it over the
+  whole gap at a constant rate (``imu_gaps_accumulated``);
+* lost: the missing interval is filled with samples at the nominal rate
+  whose angular rate and specific force are interpolated linearly between
+  the samples on either side (``imu_samples_inserted``).  The lost data are
+  unknown; the filter's process noise over a gap of at most ``max_gap_s`` is
+  what covers the interpolation error.
+
+GNSS fixes (:func:`sanitize_gnss`): a fix is an independent observation, so
+a bad one is dropped (it then acts like a short outage) rather than refused:
+
+=====================================  ========================================
+non-finite time, position or position  dropped (``gnss_invalid_dropped``)
+sigma, sigma <= 0, latitude outside
+[-90, 90], longitude outside
+[-180, 360], height outside
+[``min_h_m``, ``max_h_m``]
+non-finite or non-positive velocity    velocity removed, position kept
+or velocity sigma (some, not all NaN)  (``gnss_velocity_removed``)
+out of time order                      sorted (``gnss_reordered``)
+repeated time of validity              first kept, rest dropped
+                                       (``gnss_duplicates_dropped``)
+=====================================  ========================================
+
+A fix that is well formed but wrong (a jump, a spike) is the NIS gate's job
+(``RunConfig.gate_chi2``), not this module's.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .dataset import GnssFixes, ImuData, RowOrigin
+
+__all__ = ["sanitize_imu", "sanitize_gnss", "DEFAULTS"]
+
+G0 = 9.80665  #: standard gravity [m/s^2]
+DEG = np.pi / 180.0
+
+#: Default limits.  ``max_rate_rps`` = 2000 deg/s and ``max_accel_mps2`` = 100 g are
+#: beyond the full scale of automotive, aerial and tactical IMUs; ``max_gap_s``
+#: is 0.1 s (20 samples at 200 Hz).
+DEFAULTS = dict(max_gap_s=0.1, gap_factor=1.5, max_rate_rps=2000.0 * DEG, max_accel_mps2=100.0 * G0,
+                min_h_m=-2000.0, max_h_m=100_000.0)
+
+
+def _where(origin: RowOrigin | None, source: str, i: int) -> str:
+    if origin is not None:
+        return f"{origin.where(i)} (sample {i})"
+    return f"{source}: sample {i}"
+
+
+def _imu_report() -> dict:
+    return dict(imu_samples_in=0, imu_samples_out=0, imu_duplicates_dropped=0, imu_gaps_bridged=0,
+                imu_gaps_accumulated=0, imu_samples_inserted=0, imu_max_gap_s=0.0)
+
+
+def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
+                 gap_factor: float = DEFAULTS["gap_factor"],
+                 max_rate_rps: float = DEFAULTS["max_rate_rps"],
+                 max_accel_mps2: float = DEFAULTS["max_accel_mps2"],
+                 source: str = "imu", t0: float | None = None) -> tuple[ImuData, dict]:
+    """Check and repair an IMU increment stream (policy in the module docstring).
+
+    Parameters
+    ----------
+    imu : ImuData
+    max_gap_s : float
+        Longest gap [s] that is bridged; a longer one is refused.
+    gap_factor : float
+        An interval longer than ``gap_factor`` times the nominal one is a gap.
+    max_rate_rps : float
+        Largest plausible angular rate ``|dtheta|/dt`` [rad/s].
+    max_accel_mps2 : float
+        Largest plausible specific force ``|dv|/dt`` [m/s^2].
+    source : str
+        Name used in messages when ``imu.origin`` is not set.
+    t0 : float, optional
+        Start time of the first interval (the dataset's ``t0``) [s].
+
+    Returns
+    -------
+    ImuData
+        The input object itself when nothing was changed.
+    dict
+        Counts (see the module docstring) and ``imu_max_gap_s``.
+
+    Raises
+    ------
+    ValueError
+        Naming the sample (and file:line) and the reason.
+    """
+    rep = _imu_report()
+    origin = imu.origin
+    t = np.ascontiguousarray(imu.t, dtype=float).reshape(-1)
+    dth = np.ascontiguousarray(imu.dtheta_b, dtype=float)
+    dv = np.ascontiguousarray(imu.dv_b, dtype=float)
+    n = len(t)
+    if dth.shape != (n, 3) or dv.shape != (n, 3):
+        raise ValueError(f"{source}: expected t (N,), dtheta_b (N, 3), dv_b (N, 3); got {t.shape}, "
+                         f"{dth.shape}, {dv.shape}")
+    rep["imu_samples_in"] = rep["imu_samples_out"] = n
+    if n == 0:
+        return imu, rep
+    for arr, name in ((t, "time"), (dth, "dtheta_b"), (dv, "dv_b")):
+        bad = ~np.isfinite(arr.reshape(n, -1)).all(axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(f"{_where(origin, source, i)}: non-finite {name}: {arr[i]!r}")
+
+    d = np.diff(t)
+    if (d < 0).any():
+        i = int(np.argmax(d < 0)) + 1
+        raise ValueError(f"{_where(origin, source, i)}: time {t[i]!r} decreases (previous sample "
+                         f"{_where(origin, source, i - 1)} at {t[i - 1]!r})")
+    keep = None
+    if (d == 0).any():
+        dup = np.flatnonzero(d == 0) + 1
+        same = (dth[dup] == dth[dup - 1]).all(axis=1) & (dv[dup] == dv[dup - 1]).all(axis=1)
+        if not same.all():
+            i = int(dup[np.argmax(~same)])
+            raise ValueError(f"{_where(origin, source, i)}: repeated time {t[i]!r} with a different record "
+                             f"than {_where(origin, source, i - 1)} (which one is right is unknown)")
+        keep = np.ones(n, bool)
+        keep[dup] = False
+        rep["imu_duplicates_dropped"] = int(dup.size)
+        t, dth, dv = t[keep], dth[keep], dv[keep]
+        if origin is not None:
+            origin = origin.take(keep, n)
+        n = len(t)
+        d = np.diff(t)
+
+    # interval of every sample; the first one from t0 when given, else the nominal one
+    dt0 = float(np.median(d[:: max(1, len(d) // 200_000)])) if len(d) else np.nan
+    if not np.isfinite(dt0) or dt0 <= 0:
+        dt0 = float(t[0] - t0) if t0 is not None and t[0] > t0 else 0.0
+    if dt0 > 0:
+        dts = np.empty(n)
+        dts[1:] = d
+        dts[0] = (t[0] - t0) if (t0 is not None and t[0] > t0) else dt0
+        # absurd values: rates over the sample's own interval, but never over more
+        # than the nominal one (an accumulated gap sample is judged by its mean rate)
+        rate = np.sqrt(np.einsum("ij,ij->i", dth, dth)) / dts
+        acc = np.sqrt(np.einsum("ij,ij->i", dv, dv)) / dts
+        for val, lim, what, unit in ((rate, max_rate_rps, "angular rate |dtheta|/dt", "rad/s"),
+                                     (acc, max_accel_mps2, "specific force |dv|/dt", "m/s^2")):
+            bad = val > lim
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise ValueError(f"{_where(origin, source, i)}: {what} = {val[i]:.6g} {unit} exceeds the "
+                                 f"physical limit {lim:.6g} {unit} (corrupted record?)")
+        gaps = np.flatnonzero(dts[1:] > gap_factor * dt0) + 1
+        if gaps.size:
+            rep["imu_max_gap_s"] = float(dts[gaps].max())
+            too_long = dts[gaps] > max_gap_s
+            if too_long.any():
+                i = int(gaps[np.argmax(too_long)])
+                raise ValueError(f"{_where(origin, source, i)}: IMU gap of {dts[i]:.6g} s after t={t[i - 1]!r} "
+                                 f"is longer than max_gap_s={max_gap_s:g} s (nominal interval {dt0:.6g} s)")
+            t, dth, dv, origin, rep = _bridge(t, dth, dv, dts, gaps, dt0, origin, rep)
+    rep["imu_samples_out"] = len(t)
+    changed = rep["imu_duplicates_dropped"] or rep["imu_samples_inserted"]
+    if not changed:
+        return imu, rep
+    return ImuData(t, dth, dv, origin=origin), rep
+
+
+def _bridge(t, dth, dv, dts, gaps, dt0, origin, rep):
+    """Bridge each gap (module docstring): keep accumulated samples, fill lost ones."""
+    n = len(t)
+    spec = np.sqrt(np.einsum("ij,ij->i", dv, dv)) / dts  # specific force magnitude [m/s^2]
+    pieces_t, pieces_th, pieces_v, pieces_ln = [], [], [], []
+    lines = origin.all_lines(n) if origin is not None else None
+    start = 0
+    for k in gaps:
+        lo, hi = max(0, k - 5), min(n, k + 6)
+        nb = [j for j in range(lo, hi) if j != k and not dts[j] > 1.5 * dt0]
+        f_ref = float(np.median(spec[nb])) if nb else 0.0
+        f_acc = np.linalg.norm(dv[k]) / dts[k]   # the sample covers the whole gap
+        f_lost = np.linalg.norm(dv[k]) / dt0     # the sample covers dt0 only
+        rep["imu_gaps_bridged"] += 1
+        if f_ref > 0 and abs(np.log(max(f_acc, 1e-300) / f_ref)) < abs(np.log(max(f_lost, 1e-300) / f_ref)):
+            rep["imu_gaps_accumulated"] += 1
+            continue
+        # lost: fill (t[k-1], t[k] - dt0] with m samples of interpolated rate
+        span = dts[k] - dt0
+        m = max(1, int(round(span / dt0)))
+        ti = t[k - 1] + span * np.arange(1, m + 1) / m
+        w_prev, w_next = dth[k - 1] / dts[k - 1], dth[k] / dt0
+        f_prev, f_next = dv[k - 1] / dts[k - 1], dv[k] / dt0
+        # linear in time between the interval mid-points of the samples either side
+        h = span / m
+        mid_prev, mid_next = t[k - 1] - 0.5 * dts[k - 1], t[k] - 0.5 * dt0
+        s = ((t[k - 1] + (np.arange(1, m + 1) - 0.5) * h - mid_prev) / (mid_next - mid_prev))[:, None]
+        pieces_t += [t[start:k], ti]
+        pieces_th += [dth[start:k], h * ((1 - s) * w_prev + s * w_next)]
+        pieces_v += [dv[start:k], h * ((1 - s) * f_prev + s * f_next)]
+        if lines is not None:
+            pieces_ln += [lines[start:k], np.zeros(m, np.int64)]
+        rep["imu_samples_inserted"] += m
+        start = k
+    if start == 0:
+        return t, dth, dv, origin, rep
+    pieces_t.append(t[start:])
+    pieces_th.append(dth[start:])
+    pieces_v.append(dv[start:])
+    if lines is not None:
+        pieces_ln.append(lines[start:])
+        origin = RowOrigin(origin.source, origin.first_line, np.concatenate(pieces_ln))
+    return np.concatenate(pieces_t), np.concatenate(pieces_th), np.concatenate(pieces_v), origin, rep
+
+
+def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m: float = DEFAULTS["max_h_m"],
+                  source: str = "gnss") -> tuple[GnssFixes, dict]:
+    """Check and repair loosely coupled GNSS fixes (policy in the module docstring).
+
+    Returns
+    -------
+    GnssFixes
+        Sorted by ``t_valid``; the input object itself when nothing was changed.
+    dict
+        ``gnss_records_in``, ``gnss_records_out``, ``gnss_invalid_dropped``,
+        ``gnss_velocity_removed``, ``gnss_reordered``, ``gnss_duplicates_dropped``
+        and ``gnss_dropped_lines`` (file lines, or sample indices, of the first
+        20 records dropped).
+    """
+    n = len(g)
+    rep = dict(gnss_records_in=n, gnss_records_out=n, gnss_invalid_dropped=0, gnss_velocity_removed=0,
+               gnss_reordered=0, gnss_duplicates_dropped=0, gnss_dropped_lines=[])
+    if n == 0:
+        return g, rep
+    t = np.asarray(g.t_valid, float)
+    ta = np.asarray(g.t_arrival, float)
+    lat, lon, h = (np.asarray(a, float) for a in (g.lat_deg, g.lon_deg, g.h_m))
+    v = np.array(g.v_n, float).reshape(n, 3)
+    sp = np.asarray(g.sigma_pos_n, float).reshape(n, 3)
+    sv = np.array(g.sigma_vel_n, float).reshape(n, 3)
+    with np.errstate(invalid="ignore"):
+        ok = (np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
+              & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1)
+              & (np.abs(lat) <= 90.0) & (lon >= -180.0) & (lon <= 360.0) & (h >= min_h_m) & (h <= max_h_m))
+        vel_any = np.isfinite(v).any(axis=1) | np.isfinite(sv).any(axis=1)
+        vel_ok = np.isfinite(v).all(axis=1) & np.isfinite(sv).all(axis=1) & (sv > 0).all(axis=1)
+    bad_vel = ok & vel_any & ~vel_ok
+    changed = False
+    if bad_vel.any():
+        v[bad_vel] = np.nan
+        sv[bad_vel] = np.nan
+        rep["gnss_velocity_removed"] = int(bad_vel.sum())
+        changed = True
+    lines = g.origin.all_lines(n) if g.origin is not None else np.arange(n)
+    dropped = ~ok
+    rep["gnss_invalid_dropped"] = int(dropped.sum())
+    idx = np.flatnonzero(ok)
+    order = idx[np.argsort(t[idx], kind="stable")]
+    rep["gnss_reordered"] = int((order != idx).sum())
+    ts = t[order]
+    dup = np.concatenate([[False], np.diff(ts) == 0]) if len(ts) else np.zeros(0, bool)
+    rep["gnss_duplicates_dropped"] = int(dup.sum())
+    all_dropped = np.concatenate([np.flatnonzero(dropped), order[dup]])
+    rep["gnss_dropped_lines"] = sorted(int(lines[i]) for i in all_dropped)[:20]
+    order = order[~dup]
+    rep["gnss_records_out"] = len(order)
+    if not (changed or len(order) != n or (order != np.arange(n)).any()):
+        return g, rep
+    origin = g.origin.take(order, n) if g.origin is not None else None
+    out = GnssFixes(t[order], ta[order], lat[order], lon[order], h[order], v[order], sp[order], sv[order],
+                    origin=origin)
+    return out, rep
+
+
+def sanitize_dataset(dataset, options: dict | bool | None = True):
+    """Both sanitizers on a :class:`insnav.Dataset`: ``(dataset', report)``.
+
+    ``options`` (a dict) overrides :data:`DEFAULTS`; the dataset is returned
+    unchanged (the same object) when nothing had to be repaired.
+    """
+    opts = dict(DEFAULTS)
+    if isinstance(options, dict):
+        unknown = set(options) - set(DEFAULTS)
+        if unknown:
+            raise TypeError(f"sanitize: unknown option(s) {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+        opts.update(options)
+    imu, r1 = sanitize_imu(dataset.imu, max_gap_s=opts["max_gap_s"], gap_factor=opts["gap_factor"],
+                           max_rate_rps=opts["max_rate_rps"], max_accel_mps2=opts["max_accel_mps2"],
+                           source="imu", t0=float(dataset.t0))
+    gnss, r2 = sanitize_gnss(dataset.gnss, min_h_m=opts["min_h_m"], max_h_m=opts["max_h_m"], source="gnss")
+    rep = {**r1, **r2}
+    if imu is dataset.imu and gnss is dataset.gnss:
+        return dataset, rep
+    return dataclasses.replace(dataset, imu=imu, gnss=gnss), rep
