@@ -1,0 +1,611 @@
+// insnav/filter/upf.hpp -- the improved unscented particle filter of seed 004
+// (Shao et al. 2013): a UKF per particle builds the importance density, with
+// residual-constrained adaptive fading (fading.hpp); and the fading UKF alone.
+//
+// UKF step (per particle, and FadingUkf), seed 004 steps (2)-(5), eqs. (7)-(17):
+//   sigma points  chi = [x, x +- cols(chol((n + lambda) P))]             (eqs. (7)-(8))
+//   time update   every point through the exact nonlinear error model by RK4
+//                 (error_model_nonlinear.hpp; multi-interval steps, see
+//                 particle_filter.hpp), x^- = sum Wm chi, P^- = sum Wc (chi - x^-)(.)^T,
+//                 process noise accumulated as Q_c = Phi Q_c Phi^T + Q_d  (eqs. (9)-(10))
+//   fading        gamma = residual - h(x^-), eta = fading_factors(...)  (fading.hpp, eqs. (1)-(6));
+//                 Pbar = Lambda^1/2 P^- Lambda^1/2 + Q_c, and the propagated points'
+//                 deviations are scaled by Lambda^1/2 so they carry Pbar      (eq. (3))
+//   measurement   the augmented-UT update of ukf.hpp (seed 000 eqs. (14)-(21)):
+//                 points + (chi_0 +- cols(sqrt((n + lambda) Q_c))), z_i = h(X_i)
+//                 (h = meas.predicted_residual, nonlinear pseudorange / rate),
+//                 P_zz, P_xz, K = P_xz P_zz^-1 (llt().solve()),
+//                 x^ = x^- + K (residual - z^), P^ = Pbar - K P_zz K^T     (eqs. (11)-(17))
+// With the fading off this is exactly Ukf<L> (cpp/tests/test_upf.cpp checks it).
+//
+// UPF (van der Merwe, Doucet, de Freitas, Wan 2000; seed 004 steps (1)-(7)):
+//   particles i = 1..N each carry (x_i, P_i) and a log-weight;
+//   1. each particle's UKF step above gives the proposal q = N(x^_i, P^_i);
+//   2. sample x_i ~ q (per-particle deterministic stream, particle_filter.hpp);
+//   3. weight (eq. (18)): w_i *= p(z | x_i) p(x_i | prior_i) / q(x_i | z), with
+//        p(z | x_i)   = N(residual; h(x_i), R)  (nonlinear h),
+//        p(x | prior) = N(x_i; x^-_i, Pbar_i), the particle's UKF predictive density.
+//      The literal transition density N(x_i; f(x_{i,k-1}), Q) is NOT used: Q
+//      is zero for the random-constant gyro states and ~1e-12 for the slow
+//      Markov states, so with samples spread like P^ (>> Q) every weight but
+//      one underflows in 20 dimensions.  With the predictive density the weight
+//      is, for a linear h, exactly the particle's predictive likelihood
+//      N(z; z^_i, S_i), independent of the draw: the weights rank particles by
+//      how well their prediction explains z (a marginal / Rao-Blackwellised form).
+//   4. normalise (eq. (19)); N_eff = 1 / sum w^2 (eq. (20));
+//   5. if N_eff < threshold * N: systematic resampling (eqs. (21)-(22)).
+//      Diversity: the paper keeps it with "weight selection" (its ref. [7],
+//      Zhang, Hu, Qiao 2008), whose details are not in the extracted text.  Here
+//      a resampled copy keeps its (x_i, P_i) and the next cycle draws a new
+//      sample from its own UKF posterior, so duplicates separate by themselves
+//      at every epoch -- the UPF's proposal is its own regulariser; an optional
+//      kernel jitter (roughening, as in the bootstrap PF) is available and off
+//      by default;
+//   6. estimate (eq. (23)): x^ = sum w_i x_i; covariance of the mixture
+//      P^ = sum w_i (P_i + (x_i - x^)(x_i - x^)^T) (conservative: the sample
+//      spread and each particle's P both count).
+//   No measurement in a cycle (GPS outage): every particle keeps its UKF
+//   prediction (x_i = x^-_i, P_i = Pbar_i), weights unchanged, no sampling
+//   (sampling from the prediction would add a random walk of size P each cycle).
+// Closed loop: the engine feeds x^ back and calls reset_state(), which shifts
+// every particle by the fed-back part of x^ (x_i -= x^; Layout20's gyro Markov
+// block is not fed back, layout20.hpp).
+//
+// Cost per particle and epoch: one Cholesky for the sigma points, 2n+1 RK4
+// steps of the nonlinear model per rk4_step, 4n+1 + 2 evaluations of h, two
+// more Choleskys (sampling, predictive density).  Fixed-size per particle; the
+// vectors of particles and the per-thread workspaces are allocated once at
+// construction.
+#pragma once
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "insnav/filter/fading.hpp"
+#include "insnav/filter/particle_filter.hpp"
+#include "insnav/filter/rbukf.hpp"
+#include "insnav/filter/sigma_points.hpp"
+
+namespace insnav {
+
+/// One UKF's state: mean, covariance, its sigma points and fading memory.
+template <class L>
+struct UkfState {
+  static constexpr int kN = L::kSize;
+  StateVec<L> x = StateVec<L>::Zero();
+  StateCov<L> P = StateCov<L>::Identity();
+  StateCov<L> P_minus = StateCov<L>::Zero();  // propagated spread without Q (fading)
+  SigmaPoints<kN> chi = SigmaPoints<kN>::Zero();
+  FadingMemory fade;
+  int steps = 0;
+  bool in_cycle = false;
+  bool fresh = false;  // chi are the propagated points of (x, P)
+};
+
+/// The UKF operations on a UkfState, with their workspace (one per thread).
+template <class L>
+class UkfKernel {
+ public:
+  static constexpr int kN = L::kSize;
+  static constexpr int kAug = 4 * kN + 1;
+  using Vec = StateVec<L>;
+  using Cov = StateCov<L>;
+  using T = MeasTypes<L>;
+  using AugPoints = Eigen::Matrix<double, kN, kAug>;
+  using MeasPoints = Eigen::Matrix<double, Eigen::Dynamic, kAug, 0, kMaxMeasRows, kAug>;
+
+  explicit UkfKernel(const UtParams& ut = {}) : w_(ut) {}
+
+  const UtWeights<kN>& weights() const { return w_; }
+
+  /// Draw the sigma points of (x, P) (eq. (7)).  Returns repairs (0/1).
+  int begin(UkfState<L>& s) {
+    const int r = draw_sigma_points<kN>(s.x, s.P, w_, s.chi, factor_, repair_opt_);
+    s.steps = 0;
+    s.in_cycle = true;
+    s.fresh = false;
+    return r;
+  }
+
+  /// Advance every sigma point by one multi-interval RK4 step (eq. (9)).
+  void step(UkfState<L>& s, const MacroStep<L>& ms) {
+    for (int j = 0; j < 2 * kN + 1; ++j) {
+      tmp_ = s.chi.col(j);
+      rk4_error_step<L>(tmp_, ms.p0, ms.ph, ms.p1, ms.dt);
+      s.chi.col(j) = tmp_;
+    }
+    ut_mean<kN, 2 * kN + 1>(s.chi, w_, s.x);  // running prediction (mid-cycle output)
+    ++s.steps;
+  }
+
+  /// Predicted mean and covariance (eqs. (9)-(10)); Q = process noise of the cycle.
+  int end(UkfState<L>& s, const Cov& Q) {
+    if (!s.in_cycle) return 0;
+    s.in_cycle = false;
+    if (s.steps == 0) return 0;
+    int repairs = 0;
+    bool bad = false;
+    for (int j = 0; j < 2 * kN + 1; ++j)
+      if (!s.chi.col(j).allFinite()) {
+        bad = true;
+        if (j > 0 && s.chi.col(0).allFinite()) s.chi.col(j) = s.chi.col(0);
+        else s.chi.col(j).setZero();
+      }
+    repairs += bad ? 1 : 0;
+    ut_mean<kN, 2 * kN + 1>(s.chi, w_, s.x);
+    ut_covariance<kN, 2 * kN + 1>(s.chi, s.x, w_, dev_, s.P_minus);
+    s.P = s.P_minus + Q;
+    symmetrize<kN>(s.P);
+    if (!s.P.allFinite()) {
+      repair_covariance<kN>(s.P, repair_opt_);
+      s.P_minus = s.P;
+      ++repairs;
+    }
+    s.fresh = true;
+    return repairs;
+  }
+
+  /// Fading + augmented-UT measurement update (header comment).  After the
+  /// call prior_x() / prior_P() hold x^- and Pbar (faded) of this update;
+  /// c() and eta() the fading result.  gate_chi2 <= 0: no gating.
+  template <class Meas>
+  UpdateResult update(UkfState<L>& s, const Meas& meas, const Cov& Q_cycle, const FadingParams<kN>& fp,
+                      double gate_chi2) {
+    const LinearMeasurement<L>& lin = meas.linear();
+    UpdateResult res;
+    const int r = lin.rows();
+    res.rows = r;
+    c_ = 0.0;
+    eta_.setOnes();
+    if (r == 0) return res;
+    const double wi = w_.wi;
+    const double w0m = 1.0 - 4.0 * kN * wi;  // weights of the 4n+1 points sum to 1
+    const double w0c = w0m + 1.0 - w_.alpha * w_.alpha + w_.beta;
+
+    // augmented points (ukf.hpp eq. (14))
+    const bool fresh = s.fresh;
+    if (fresh) {
+      Qs_ = Q_cycle * w_.n_plus_lambda;
+      psd_cholesky_lower<kN>(Qs_, sqrtQ_);
+    } else {
+      res.cholesky_repairs += draw_sigma_points<kN>(s.x, s.P, w_, s.chi, factor_, repair_opt_);
+      sqrtQ_.setZero();
+    }
+    X_.template leftCols<2 * kN + 1>() = s.chi;
+    xbar_ = s.x;
+    Pbar_ = s.P;
+
+    // adaptive fading (fading.hpp), applied to the propagated spread
+    if (fp.enabled) {
+      gamma_ = lin.residual - meas.predicted_residual(s.x);
+      c_ = fading_factors<L>(gamma_, lin, fresh ? s.P_minus : s.P, fresh ? Q_cycle : zeroQ_, fp, s.fade, fws_,
+                             eta_);
+      if (eta_.maxCoeff() > 1.0) {
+        const Vec d = eta_.cwiseSqrt();
+        for (int j = 0; j < 2 * kN + 1; ++j) X_.col(j) = s.x + d.cwiseProduct(X_.col(j) - s.x);
+        Pbar_ = d.asDiagonal() * (fresh ? s.P_minus : s.P) * d.asDiagonal();
+        if (fresh) Pbar_ += Q_cycle;
+        symmetrize<kN>(Pbar_);
+      }
+    }
+    for (int i = 0; i < kN; ++i) {
+      X_.col(2 * kN + 1 + i) = X_.col(0) + sqrtQ_.col(i);
+      X_.col(3 * kN + 1 + i) = X_.col(0) - sqrtQ_.col(i);
+    }
+    // z_i = h(X_i), z^ (eqs. (11)-(12))
+    Z_.resize(r, kAug);
+    for (int i = 0; i < kAug; ++i) Z_.col(i) = meas.predicted_residual(X_.col(i));
+    zmean_ = w0m * Z_.col(0);
+    zsum_ = Z_.rightCols(kAug - 1).rowwise().sum();
+    zmean_ += wi * zsum_;
+    X_.colwise() -= s.x;
+    Z_.colwise() -= zmean_;
+    // P_xz, P_zz (eqs. (13)-(14))
+    Pxz_.noalias() = wi * X_.template rightCols<kAug - 1>() * Z_.rightCols(kAug - 1).transpose();
+    Pxz_.noalias() += w0c * X_.col(0) * Z_.col(0).transpose();
+    Pzz_.noalias() = wi * Z_.rightCols(kAug - 1) * Z_.rightCols(kAug - 1).transpose();
+    Pzz_.noalias() += w0c * Z_.col(0) * Z_.col(0).transpose();
+    Pzz_ += lin.R;
+    llt_.compute(Pzz_);
+    s.fresh = false;
+    if (llt_.info() != Eigen::Success) {
+      res.cholesky_repairs += 1;
+      return res;
+    }
+    y_ = lin.residual - zmean_;
+    v_ = llt_.matrixL().solve(y_);
+    res.nis = v_.squaredNorm();
+    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
+      res.rejected_by_gate = true;
+      return res;
+    }
+    // K = P_xz P_zz^-1 (eq. (15)); x^, P^ (eqs. (16)-(17))
+    Kt_ = Pxz_.transpose();
+    llt_.solveInPlace(Kt_);
+    K_ = Kt_.transpose();
+    s.x.noalias() += K_ * y_;
+    KP_.noalias() = K_ * Pzz_;
+    s.P = Pbar_;
+    s.P.noalias() -= KP_ * K_.transpose();
+    symmetrize<kN>(s.P);
+    if (!s.P.allFinite() || !s.x.allFinite()) {
+      if (!s.x.allFinite()) s.x = xbar_;
+      repair_covariance<kN>(s.P, repair_opt_);
+      res.cholesky_repairs += 1;
+    }
+    res.applied = true;
+    return res;
+  }
+
+  const Vec& prior_x() const { return xbar_; }
+  const Cov& prior_P() const { return Pbar_; }
+  double c() const { return c_; }
+  const Vec& eta() const { return eta_; }
+
+  // scratch used by the UPF per particle (thread-local through the kernel)
+  Cov scratch_L = Cov::Zero(), scratch_P = Cov::Zero();
+  Vec scratch_v = Vec::Zero();
+
+ private:
+  UtWeights<kN> w_;
+  RepairOptions repair_opt_{};
+  Cov factor_ = Cov::Zero(), Qs_ = Cov::Zero(), sqrtQ_ = Cov::Zero(), Pbar_ = Cov::Zero();
+  Cov zeroQ_ = Cov::Zero();
+  SigmaPoints<kN> dev_ = SigmaPoints<kN>::Zero();
+  AugPoints X_ = AugPoints::Zero();
+  MeasPoints Z_;
+  Vec tmp_ = Vec::Zero(), xbar_ = Vec::Zero(), eta_ = Vec::Ones();
+  typename T::RowVec zmean_, zsum_, y_, v_, gamma_;
+  typename T::Gain Pxz_, K_, KP_;
+  typename T::Dyn Pzz_;
+  Eigen::Matrix<double, Eigen::Dynamic, kN, 0, kMaxMeasRows, kN> Kt_;
+  Eigen::LLT<typename T::Dyn> llt_;
+  FadingWorkspace<L> fws_;
+  double c_ = 0.0;
+};
+
+/// The UKF with residual-constrained adaptive fading (seed 004 without the
+/// particles).  FadingParams::enabled = false gives the plain UKF (= Ukf<L>
+/// for rk4_step = 0) -- the seed 004 "UKF" baseline.
+template <class L>
+class FadingUkf {
+ public:
+  using Layout = L;
+  static constexpr int kN = L::kSize;
+  using Vec = StateVec<L>;
+  using Cov = StateCov<L>;
+
+  FadingUkf(const ImuErrorModel& model, const UtParams& ut = {}, const FadingParams<kN>& fp = {},
+            double rk4_step = 0.0)
+      : kernel_(ut), fp_(fp), macro_(model, rk4_step) {}
+
+  void set_trace(ParticleTrace* t) { trace_ = t; }
+  FadingParams<kN>& fading() { return fp_; }
+
+  void initialize(const Cov& P0) {
+    s_ = UkfState<L>{};
+    s_.P = P0;
+    symmetrize<kN>(s_.P);
+    Q_.setZero();
+    macro_.reset();
+  }
+  void begin_cycle() {
+    repairs_ += kernel_.begin(s_);
+    Q_.setZero();
+    macro_.reset();
+  }
+  void propagate(const InsInterval& iv) {
+    if (!s_.in_cycle) begin_cycle();
+    if (macro_.add(iv)) run_step();
+  }
+  void end_cycle() {
+    if (macro_.pending()) run_step();
+    repairs_ += kernel_.end(s_, Q_);
+  }
+  template <class Meas>
+  UpdateResult update(const Meas& meas, double gate_chi2) {
+    UpdateResult r = kernel_.update(s_, meas, Q_, fp_, gate_chi2);
+    repairs_ += r.cholesky_repairs;
+    if (trace_ && r.rows > 0) trace_->record(1.0, kernel_.c(), kernel_.eta().maxCoeff(), false);
+    return r;
+  }
+
+  const Vec& x() const { return s_.x; }
+  const Cov& P() const { return s_.P; }
+  Cov& P_mutable() { return s_.P; }
+  Vec& x_mutable() {
+    s_.fresh = false;
+    return s_.x;
+  }
+  void reset_state() {
+    zero_fed_back<L>(s_.x);
+    s_.fresh = false;
+  }
+  int cholesky_repairs() const { return repairs_; }
+  const UkfState<L>& state() const { return s_; }
+  const UkfKernel<L>& kernel() const { return kernel_; }
+  const Cov& cycle_Q() const { return Q_; }
+
+ private:
+  void run_step() {
+    macro_.prepare();
+    kernel_.step(s_, macro_);
+    work_.noalias() = macro_.phi * Q_;
+    Q_.noalias() = work_ * macro_.phi.transpose();
+    Q_ += macro_.qd;
+  }
+
+  UkfKernel<L> kernel_;
+  FadingParams<kN> fp_;
+  MacroStep<L> macro_;
+  UkfState<L> s_;
+  Cov Q_ = Cov::Zero(), work_ = Cov::Zero();
+  ParticleTrace* trace_ = nullptr;
+  int repairs_ = 0;
+};
+
+/// Settings of the UPF beyond ParticleParams.
+struct UpfOptions {
+  bool sample = true;  // false: x_i = UKF posterior mean (no draw; tests)
+};
+
+/// The improved unscented particle filter of seed 004 (header comment).
+template <class L>
+class Upf {
+ public:
+  using Layout = L;
+  static constexpr int kN = L::kSize;
+  using Vec = StateVec<L>;
+  using Cov = StateCov<L>;
+
+  /// The engines construct filters from (model, ut); a run then assigns a
+  /// fully configured Upf (engine.filter() = Upf(model, ut, pp, fp)).
+  explicit Upf(const ImuErrorModel& model, const UtParams& ut = {})
+      : Upf(model, ut, ParticleParams{}, FadingParams<kN>{}) {}
+
+  Upf(const ImuErrorModel& model, const UtParams& ut, const ParticleParams& pp, const FadingParams<kN>& fp,
+      const UpfOptions& opt = {})
+      : pp_(pp), fp_(fp), opt_(opt), macro_(model, pp.rk4_step) {
+    INSNAV_CHECK(pp.particles >= 1 && pp.particles <= pp.max_particles, "particle count out of range");
+    const int n = pp.particles;
+    int threads = 1;
+#ifdef _OPENMP
+    threads = omp_get_max_threads();
+#endif
+    kernels_.assign(threads, UkfKernel<L>(ut));
+    ps_.assign(n, UkfState<L>{});
+    ps_tmp_.assign(n, UkfState<L>{});
+    logw_.assign(n, 0.0);
+    w_.assign(n, 1.0 / n);
+    idx_.assign(n, 0);
+    c_.assign(n, 0.0);
+    etamax_.assign(n, 1.0);
+    rep_.assign(n, 0);
+  }
+
+  void set_trace(ParticleTrace* t) { trace_ = t; }
+
+  /// Every particle starts at x = 0 with P0 (the mixture of N identical
+  /// Gaussians is the prior exactly); the first draw creates the diversity.
+  void initialize(const Cov& P0) {
+    const int n = pp_.particles;
+    for (int i = 0; i < n; ++i) {
+      ps_[i] = UkfState<L>{};
+      ps_[i].P = P0;
+      symmetrize<kN>(ps_[i].P);
+      logw_[i] = 0.0;
+      w_[i] = 1.0 / n;
+    }
+    cycle_ = 0;
+    Q_.setZero();
+    macro_.reset();
+    estimate();
+  }
+
+  void begin_cycle() {
+    ++cycle_;
+    Q_.setZero();
+    macro_.reset();
+    in_cycle_ = true;
+    const int n = pp_.particles;
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) rep_[i] += kernel().begin(ps_[i]);
+  }
+
+  void propagate(const InsInterval& iv) {
+    if (!in_cycle_) begin_cycle();
+    if (macro_.add(iv)) run_step();
+  }
+
+  void end_cycle() {
+    if (!in_cycle_) return;
+    in_cycle_ = false;
+    if (macro_.pending()) run_step();
+    const int n = pp_.particles;
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) rep_[i] += kernel().end(ps_[i], Q_);
+    estimate();
+  }
+
+  template <class Meas>
+  UpdateResult update(const Meas& meas, double gate_chi2) {
+    const LinearMeasurement<L>& lin = meas.linear();
+    UpdateResult res;
+    const int m = lin.rows();
+    res.rows = m;
+    if (m == 0) return res;
+    res.nis = estimate_nis<L>(meas, x_, P_);
+    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
+      res.rejected_by_gate = true;
+      return res;
+    }
+    Dyn R = lin.R;
+    Eigen::LLT<Dyn> lltR(R);
+    if (lltR.info() != Eigen::Success) {
+      res.cholesky_repairs = 1;
+      ++repairs_;
+      return res;
+    }
+    const int n = pp_.particles;
+    const double ninf = -std::numeric_limits<double>::infinity();
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) {
+      UkfKernel<L>& k = kernel();
+      UkfState<L>& s = ps_[i];
+      const UpdateResult ri = k.update(s, meas, Q_, fp_, 0.0);
+      rep_[i] += ri.cholesky_repairs;
+      c_[i] = k.c();
+      etamax_[i] = k.eta().maxCoeff();
+      if (!ri.applied) {  // P_zz not positive definite for this particle
+        logw_[i] = ninf;
+        continue;
+      }
+      if (n == 1 && !opt_.sample) continue;
+      // proposal q = N(x^, P^): draw
+      double logq = 0.0;
+      if (opt_.sample) {
+        k.scratch_P = s.P;
+        rep_[i] += cholesky_with_repair<kN>(k.scratch_P, k.scratch_L);
+        Rng rng;
+        rng.seed(pp_.seed, cycle_, i, kRngProposal);
+        rng.fill_normal(k.scratch_v);
+        logq = -0.5 * k.scratch_v.squaredNorm() - k.scratch_L.diagonal().array().log().sum();
+        s.x.noalias() += k.scratch_L * k.scratch_v;
+      } else {
+        k.scratch_P = s.P;
+        rep_[i] += cholesky_with_repair<kN>(k.scratch_P, k.scratch_L);
+        logq = -k.scratch_L.diagonal().array().log().sum();
+      }
+      // predictive density N(x_i; x^-, Pbar)
+      k.scratch_P = k.prior_P();
+      rep_[i] += cholesky_with_repair<kN>(k.scratch_P, k.scratch_L);
+      k.scratch_v = s.x - k.prior_x();
+      k.scratch_L.template triangularView<Eigen::Lower>().solveInPlace(k.scratch_v);
+      const double logp = -0.5 * k.scratch_v.squaredNorm() - k.scratch_L.diagonal().array().log().sum();
+      // likelihood N(residual; h(x_i), R)
+      RowVec e = lin.residual - meas.predicted_residual(s.x);
+      lltR.matrixL().solveInPlace(e);
+      const double ll = -0.5 * e.squaredNorm();
+      const double inc = ll + logp - logq;
+      logw_[i] += std::isfinite(inc) ? inc : ninf;
+    }
+    finish_update();
+    res.applied = true;
+    return res;
+  }
+
+  const Vec& x() const { return x_; }
+  const Cov& P() const { return P_; }
+  void reset_state() {
+    const int n = pp_.particles;
+    for (int i = 0; i < n; ++i) {
+      subtract_fed_back<L>(ps_[i].x, x_);
+      ps_[i].fresh = false;
+    }
+    zero_fed_back<L>(x_);
+  }
+  int cholesky_repairs() const {
+    int r = repairs_;
+    for (int v : rep_) r += v;
+    return r;
+  }
+  int particles() const { return pp_.particles; }
+  const std::vector<UkfState<L>>& particle_states() const { return ps_; }
+  const std::vector<double>& weights() const { return w_; }
+  double last_ess() const { return ess_; }
+  int resample_count() const { return resamples_; }
+
+ private:
+  using Dyn = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxMeasRows, kMaxMeasRows>;
+  using RowVec = typename LinearMeasurement<L>::RowVec;
+
+  UkfKernel<L>& kernel() {
+#ifdef _OPENMP
+    return kernels_[omp_get_thread_num()];
+#else
+    return kernels_[0];
+#endif
+  }
+
+  void run_step() {
+    macro_.prepare();
+    const int n = pp_.particles;
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) kernel().step(ps_[i], macro_);
+    work_.noalias() = macro_.phi * Q_;
+    Q_.noalias() = work_ * macro_.phi.transpose();
+    Q_ += macro_.qd;
+  }
+
+  /// x^ = sum w x_i, P^ = sum w (P_i + (x_i - x^)(x_i - x^)^T)  (eq. (23)).
+  void estimate() {
+    const int n = pp_.particles;
+    x_.setZero();
+    for (int i = 0; i < n; ++i) x_.noalias() += w_[i] * ps_[i].x;
+    P_.setZero();
+    for (int i = 0; i < n; ++i) {
+      d_ = ps_[i].x - x_;
+      P_.noalias() += w_[i] * (ps_[i].P + d_ * d_.transpose());
+    }
+  }
+
+  void finish_update() {
+    const int n = pp_.particles;
+    normalize_log_weights(logw_.data(), w_.data(), n);
+    ess_ = effective_sample_size(w_.data(), n);
+    estimate();
+    double cm = 0.0, em = 0.0;
+    for (int i = 0; i < n; ++i) {
+      cm += w_[i] * c_[i];
+      em += w_[i] * etamax_[i];
+    }
+    const bool rs = n > 1 && ess_ < pp_.resample_threshold * n;
+    if (rs) {
+      Rng rng;
+      rng.seed(pp_.seed, cycle_, 0, kRngResample);
+      systematic_resample(w_.data(), n, rng.uniform(), idx_.data());
+      for (int j = 0; j < n; ++j) ps_tmp_[j] = ps_[idx_[j]];
+      ps_.swap(ps_tmp_);
+      if (pp_.roughening > 0.0) {
+        Cov Pk = P_;
+        repairs_ += cholesky_with_repair<kN>(Pk, sqrtP_);
+        sqrtP_ *= pp_.roughening;
+        for (int i = 0; i < n; ++i) {
+          Rng r;
+          r.seed(pp_.seed, cycle_, i, kRngJitter);
+          Vec xi;
+          r.fill_normal(xi);
+          ps_[i].x.noalias() += sqrtP_ * xi;
+        }
+      }
+      for (int i = 0; i < n; ++i) {
+        logw_[i] = 0.0;
+        w_[i] = 1.0 / n;
+      }
+      ++resamples_;
+    } else {
+      for (int i = 0; i < n; ++i) logw_[i] = std::log(std::max(w_[i], 1e-300));
+    }
+    if (trace_) trace_->record(ess_, cm, em, rs);
+  }
+
+  ParticleParams pp_;
+  FadingParams<kN> fp_;
+  UpfOptions opt_;
+  MacroStep<L> macro_;
+  std::vector<UkfKernel<L>> kernels_;
+  std::vector<UkfState<L>> ps_, ps_tmp_;
+  std::vector<double> logw_, w_, c_, etamax_;
+  std::vector<int> idx_, rep_;
+  Vec x_ = Vec::Zero(), d_ = Vec::Zero();
+  Cov P_ = Cov::Identity(), Q_ = Cov::Zero(), work_ = Cov::Zero(), sqrtP_ = Cov::Zero();
+  ParticleTrace* trace_ = nullptr;
+  std::uint64_t cycle_ = 0;
+  int repairs_ = 0, resamples_ = 0;
+  double ess_ = 0.0;
+  bool in_cycle_ = false;
+};
+
+}  // namespace insnav
