@@ -137,6 +137,27 @@ class RunConfig:
         def bad(key, value, allowed):
             raise ConfigError(f"config key '{key}': bad value {value!r}; allowed: {allowed}")
 
+        # types first (TOML gives any type): numbers finite and not bool, flags bool
+        for key in ("init_seed", "gate_chi2", "propagation_interval_s", "output_decimation", "ut_alpha",
+                    "ut_beta", "ut_kappa", "cycle_period_s"):
+            v = getattr(self, key)
+            if v is None and key in ("ut_kappa", "cycle_period_s"):
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(v):
+                bad(key, v, "a finite number")
+        for key in ("init_error", "use_position", "use_velocity"):
+            if not isinstance(getattr(self, key), (bool, np.bool_)):
+                bad(key, getattr(self, key), "true or false")
+        if self.lever_arm_b is not None:
+            try:
+                la = np.asarray(self.lever_arm_b, dtype=float)
+            except (TypeError, ValueError):
+                la = np.full(1, np.nan)
+            if la.shape != (3,) or not np.all(np.isfinite(la)):
+                bad("lever_arm_b", self.lever_arm_b, "3 finite values [m]")
+        if self.imu is not None and not isinstance(self.imu, ImuNoise):
+            bad("imu", self.imu, "a table of IMU noise keys")
         if self.filter not in FILTERS:
             bad("filter", self.filter, ", ".join(FILTERS))
         if self.coupling not in COUPLINGS:
@@ -144,14 +165,19 @@ class RunConfig:
         if self.layout not in LAYOUTS:
             bad("layout", self.layout, "15, 21")
         for key in ("init_sigma_pos_m", "init_sigma_vel_mps", "init_sigma_att_deg"):
-            v = np.asarray(getattr(self, key), dtype=float)
+            try:
+                v = np.asarray(getattr(self, key), dtype=float)
+            except (TypeError, ValueError):
+                bad(key, getattr(self, key), "3 finite values > 0")
             if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
                 bad(key, getattr(self, key), "3 finite values > 0")
         if not (self.propagation_interval_s > 0):
             bad("propagation_interval_s", self.propagation_interval_s, "> 0")
         if self.gate_chi2 < 0:
             bad("gate_chi2", self.gate_chi2, ">= 0 (0 = off)")
-        if int(self.output_decimation) < 1:
+        if self.cycle_period_s is not None and not self.cycle_period_s > 0:
+            bad("cycle_period_s", self.cycle_period_s, "> 0 or absent")
+        if int(self.output_decimation) != self.output_decimation or int(self.output_decimation) < 1:
             bad("output_decimation", self.output_decimation, "integer >= 1")
         if not (0 < self.ut_alpha <= 1):
             bad("ut_alpha", self.ut_alpha, "0 < alpha <= 1")
@@ -184,17 +210,22 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
             raise ConfigError(f"{source}: unknown key '{k}'; known keys: {', '.join(sorted(names | {'imu'}))}")
     cfg = RunConfig(**d)
     if imu_d is not None:
+        if not isinstance(imu_d, dict):
+            raise ConfigError(f"{source}: key 'imu': bad value {imu_d!r}; allowed: a table of IMU noise keys")
         noise = ImuNoise()
         for k, v in imu_d.items():
             if k not in _USER_UNITS:
                 raise ConfigError(f"{source}: unknown key 'imu.{k}'; known keys: {', '.join(sorted(_USER_UNITS))}")
             fld, factor = _USER_UNITS[k]
-            arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor
-            if not np.all(arr >= 0):
+            try:
+                arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor
+            except (TypeError, ValueError):
+                arr = np.full(3, np.nan)
+            if not (np.all(arr >= 0) and np.all(np.isfinite(arr))):
                 raise ConfigError(f"{source}: key 'imu.{k}': bad value {v!r}; allowed: values >= 0")
             setattr(noise, fld, arr.tolist())
         cfg.imu = noise
-    return cfg.validate()
+    return _validated(cfg, source)
 
 
 def load_config(path) -> RunConfig:
@@ -206,3 +237,10 @@ def load_config(path) -> RunConfig:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     return config_from_dict(d, source=str(path))
+
+
+def _validated(cfg: RunConfig, source: str) -> RunConfig:
+    try:
+        return cfg.validate()
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None

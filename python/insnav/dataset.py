@@ -593,7 +593,7 @@ def check_finite_rows(a: np.ndarray, origin: RowOrigin, columns) -> None:
     bad = ~np.isfinite(a)
     if bad.any():
         r, c = np.argwhere(bad)[0]
-        raise ValueError(f"{origin.where(int(r))}: non-finite value {a[r, c]!r} in column "
+        raise ValueError(f"{origin.where(int(r))}: non-finite value {float(a[r, c])!r} in column "
                          f"{columns[int(c)]!r}")
 
 

@@ -147,15 +147,15 @@ def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
     d = np.diff(t)
     if (d < 0).any():
         i = int(np.argmax(d < 0)) + 1
-        raise ValueError(f"{_where(origin, source, i)}: time {t[i]!r} decreases (previous sample "
-                         f"{_where(origin, source, i - 1)} at {t[i - 1]!r})")
+        raise ValueError(f"{_where(origin, source, i)}: time {float(t[i])!r} decreases (previous sample "
+                         f"{_where(origin, source, i - 1)} at {float(t[i - 1])!r})")
     keep = None
     if (d == 0).any():
         dup = np.flatnonzero(d == 0) + 1
         same = (dth[dup] == dth[dup - 1]).all(axis=1) & (dv[dup] == dv[dup - 1]).all(axis=1)
         if not same.all():
             i = int(dup[np.argmax(~same)])
-            raise ValueError(f"{_where(origin, source, i)}: repeated time {t[i]!r} with a different record "
+            raise ValueError(f"{_where(origin, source, i)}: repeated time {float(t[i])!r} with a different record "
                              f"than {_where(origin, source, i - 1)} (which one is right is unknown)")
         keep = np.ones(n, bool)
         keep[dup] = False
@@ -191,7 +191,7 @@ def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
             too_long = dts[gaps] > max_gap_s
             if too_long.any():
                 i = int(gaps[np.argmax(too_long)])
-                raise ValueError(f"{_where(origin, source, i)}: IMU gap of {dts[i]:.6g} s after t={t[i - 1]!r} "
+                raise ValueError(f"{_where(origin, source, i)}: IMU gap of {dts[i]:.6g} s after t={float(t[i - 1])!r} "
                                  f"is longer than max_gap_s={max_gap_s:g} s (nominal interval {dt0:.6g} s)")
             t, dth, dv, origin, rep = _bridge(t, dth, dv, dts, gaps, dt0, origin, rep)
     rep["imu_samples_out"] = len(t)

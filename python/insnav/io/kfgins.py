@@ -98,8 +98,8 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
     # insnav.sanitize.sanitize_imu, which drops exact duplicates and counts them
     if a.shape[0] > 1 and np.any(np.diff(a[:, 0]) < 0):
         i = int(np.argmax(np.diff(a[:, 0]) < 0)) + 1
-        raise ValueError(f"{origin.where(i)}: time {a[i, 0]!r} does not increase "
-                         f"(previous record at {a[i - 1, 0]!r}, line {origin.line(i - 1)})")
+        raise ValueError(f"{origin.where(i)}: time {float(a[i, 0])!r} does not increase "
+                         f"(previous record at {float(a[i - 1, 0])!r}, line {origin.line(i - 1)})")
     return ImuData(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy(), origin=origin)
 
 
@@ -187,6 +187,13 @@ def _vec(cfg, key, path, n=3):
     return np.array(v, dtype=float)
 
 
+def _num(cfg, key, default, path):
+    v = cfg.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ValueError(f"{path}: key '{key}': expected a finite number, got {v!r}")
+    return float(v)
+
+
 def read_kfgins_config(path) -> dict:
     """Read a KF-GINS YAML configuration into SI values.
 
@@ -234,10 +241,10 @@ def read_kfgins_config(path) -> dict:
     out = {
         "imupath": path_of("imupath"), "gnsspath": path_of("gnsspath"),
         "outputpath": path_of("outputpath"),
-        "imudatalen": int(cfg.get("imudatalen", 7)),
-        "imudatarate_hz": float(cfg.get("imudatarate", 200)),
-        "starttime_s": float(cfg.get("starttime", 0.0)),
-        "endtime_s": None if float(cfg.get("endtime", -1)) < 0 else float(cfg["endtime"]),
+        "imudatalen": int(_num(cfg, "imudatalen", 7, p)),
+        "imudatarate_hz": _num(cfg, "imudatarate", 200, p),
+        "starttime_s": _num(cfg, "starttime", 0.0, p),
+        "endtime_s": None if _num(cfg, "endtime", -1, p) < 0 else _num(cfg, "endtime", -1, p),
         "initpos": None if _vec(cfg, "initpos", p) is None else
         _vec(cfg, "initpos", p) * np.array([DEG, DEG, 1.0]),
         "initvel_n_mps": _vec(cfg, "initvel", p),
@@ -264,7 +271,8 @@ def read_kfgins_config(path) -> dict:
             _vec(noise, "abstd", p) * MGAL,
             "gsstd": None if _vec(noise, "gsstd", p) is None else _vec(noise, "gsstd", p) * PPM,
             "asstd": None if _vec(noise, "asstd", p) is None else _vec(noise, "asstd", p) * PPM,
-            "corrtime_s": float(noise.get("corrtime", float("nan"))) * HOUR,
+            "corrtime_s": _num(noise, "corrtime", float("nan"), p) * HOUR if "corrtime" in noise
+            else float("nan"),
         },
         "antlever_b_m": _vec(cfg, "antlever", p),
         "raw": cfg,
