@@ -35,7 +35,7 @@ DEG = np.pi / 180.0
 
 def build_and_run_cpp(hours: float, sanitize: bool) -> str:
     b = REPO / "build" / ("soak-asan" if sanitize else "soak-release")
-    args = ["cmake", "-S", str(REPO), "-B", str(b)]
+    args = ["cmake", "-S", str(REPO), "-B", str(b), "-DINSNAV_BUILD_EXAMPLES=ON"]
     args += ["-DINSNAV_SANITIZE=ON", "-DCMAKE_BUILD_TYPE=RelWithDebInfo"] if sanitize else \
         ["-DCMAKE_BUILD_TYPE=Release"]
     subprocess.run(args, check=True, capture_output=True, text=True)
