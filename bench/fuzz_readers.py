@@ -1,0 +1,164 @@
+"""Long coverage-guided fuzz run of the readers (atheris / libFuzzer).
+
+Targets (``--target``): ``imu_csv`` (insnav dataset imu.csv via read_csv +
+row checks), ``kfgins_imu``, ``kfgins_gnss``, ``kfgins_yaml``, ``rinex_nav``,
+``rinex_obs``, ``run_toml`` (RunConfig TOML), ``scenario_toml``.  The input
+bytes become the file; the property is that the reader returns or raises
+``ValueError`` (``RinexError``, ``ConfigError``, ``ScenarioError`` are
+subclasses) -- any other exception is a finding and stops the run.
+
+    pip install atheris
+    python bench/fuzz_readers.py --target kfgins_imu -atheris_runs=200000
+    python bench/fuzz_readers.py --all --seconds 60      # each target for 60 s
+
+Without atheris the same targets run under hypothesis (random, not
+coverage-guided) for ``--seconds``.  The short fixed-budget version is
+tests/test_fuzz_readers.py.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+TMP = Path(tempfile.mkdtemp(prefix="insnav-fuzz-"))
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _write(name: str, data: bytes) -> Path:
+    p = TMP / name
+    p.write_bytes(data)
+    return p
+
+
+def _imu_csv(data):
+    from insnav.dataset import ImuData, check_finite_rows, read_csv
+
+    a, origin = read_csv(_write("imu.csv", b"t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps\n"
+                                + data), ImuData.COLUMNS, return_origin=True)
+    check_finite_rows(a, origin, ImuData.COLUMNS)
+    from insnav.sanitize import sanitize_imu
+
+    sanitize_imu(ImuData.from_array(a))
+
+
+def _kfgins(kind):
+    def f(data):
+        from insnav.io import kfgins
+
+        p = _write({"imu": "imu.txt", "gnss": "gnss.txt", "yaml": "kf-gins.yaml"}[kind], data)
+        r = {"imu": kfgins.read_kfgins_imu, "gnss": kfgins.read_kfgins_gnss, "yaml": kfgins.read_kfgins_config}[kind]
+        out = r(p)
+        if kind == "imu":
+            from insnav.sanitize import sanitize_imu
+
+            sanitize_imu(out)
+    return f
+
+
+def _rinex(kind):
+    def f(data):
+        from insnav.gnss import read_rinex_nav, read_rinex_obs
+
+        (read_rinex_nav if kind == "nav" else read_rinex_obs)(_write(f"f.{kind}", data))
+    return f
+
+
+def _run_toml(data):
+    from insnav.config import load_config
+
+    load_config(_write("run.toml", data))
+
+
+def _scenario_toml(data):
+    from insnav.sim.scenario import load_scenario
+
+    load_scenario(_write("scenario.toml", data))
+
+
+TARGETS = {"imu_csv": _imu_csv, "kfgins_imu": _kfgins("imu"), "kfgins_gnss": _kfgins("gnss"),
+           "kfgins_yaml": _kfgins("yaml"), "rinex_nav": _rinex("nav"), "rinex_obs": _rinex("obs"),
+           "run_toml": _run_toml, "scenario_toml": _scenario_toml}
+
+
+def one_input(target):
+    fn = TARGETS[target]
+
+    def test(data: bytes):
+        try:
+            fn(data)
+        except (ValueError, FileNotFoundError, RecursionError):
+            pass  # the documented errors (RecursionError: tomllib on pathological nesting)
+    return test
+
+
+def _run_atheris(target, argv):
+    import atheris
+
+    with atheris.instrument_imports():
+        import insnav.config  # noqa: F401
+        import insnav.dataset  # noqa: F401
+        import insnav.gnss.rinex  # noqa: F401
+        import insnav.io.kfgins  # noqa: F401
+        import insnav.sanitize  # noqa: F401
+        import insnav.sim.scenario  # noqa: F401
+    atheris.Setup([sys.argv[0], *argv], one_input(target))
+    atheris.Fuzz()
+
+
+def _run_hypothesis(target, seconds):
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    n = 0
+    t_end = time.time() + seconds
+
+    @settings(max_examples=10**9, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(st.binary(max_size=4096))
+    def run(data):
+        nonlocal n
+        n += 1
+        if time.time() > t_end:
+            raise KeyboardInterrupt
+        one_input(target)(data)
+
+    try:
+        run()
+    except KeyboardInterrupt:
+        pass
+    print(f"{target}: {n} inputs in {seconds} s (hypothesis), no finding")
+
+
+def main():
+    args = sys.argv[1:]
+    seconds = 60
+    if "--seconds" in args:
+        i = args.index("--seconds")
+        seconds = int(args[i + 1])
+        del args[i:i + 2]
+    if "--all" in args:
+        args.remove("--all")
+        for t in TARGETS:
+            r = subprocess.run([sys.executable, __file__, "--target", t, f"-max_total_time={seconds}",
+                                "--seconds", str(seconds), *args], capture_output=True, text=True)
+            tail = [ln for ln in (r.stdout + r.stderr).splitlines() if "Done" in ln or "no finding" in ln
+                    or "Uncaught" in ln or "Error" in ln][-3:]
+            print(f"{t}: exit {r.returncode}; " + " | ".join(tail), flush=True)
+        return
+    i = args.index("--target")
+    target = args[i + 1]
+    del args[i:i + 2]
+    try:
+        import atheris  # noqa: F401
+    except ImportError:
+        _run_hypothesis(target, seconds)
+        return
+    _run_atheris(target, args)
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONHASHSEED", "0")
+    main()
