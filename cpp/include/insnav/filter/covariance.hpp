@@ -110,20 +110,19 @@ int cholesky_with_repair(SquareMat<N>& P, SquareMat<N>& L_out, const RepairOptio
 }
 
 /// Lower square-root factor of a positive *semi*-definite A (A = S S^T) by a
-/// column Cholesky that zeroes a column whose pivot is <= tol * max diag
-/// (process-noise matrices are singular: states without driving noise).
+/// column Cholesky that zeroes a column whose pivot d_j is <= tol * A(j, j)
+/// (process-noise matrices are singular: states without driving noise; the
+/// test is relative to each state's own variance because Q's diagonal spans
+/// many decades, e.g. 1e-2 m^2 against 1e-14 (rad/s)^2).
 /// n^3/6 multiplications like llt(); exact for PSD matrices whose null space is
 /// spanned by coordinate axes, approximate (to the tolerance) otherwise.
 template <int N>
-void psd_cholesky_lower(const SquareMat<N>& A, SquareMat<N>& S, double tol = 1e-14) {
+void psd_cholesky_lower(const SquareMat<N>& A, SquareMat<N>& S, double tol = 1e-10) {
   S.setZero();
-  double dmax = 0.0;
-  for (int i = 0; i < N; ++i) dmax = std::max(dmax, A(i, i));
-  const double eps = tol * dmax;
   for (int j = 0; j < N; ++j) {
     double d = A(j, j);
     for (int k = 0; k < j; ++k) d -= S(j, k) * S(j, k);
-    if (!(d > eps)) continue;  // column stays zero
+    if (!(d > tol * A(j, j)) || !(A(j, j) > 0.0)) continue;  // column stays zero
     const double sjj = std::sqrt(d);
     S(j, j) = sjj;
     for (int i = j + 1; i < N; ++i) {

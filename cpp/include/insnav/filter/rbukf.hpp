@@ -1,0 +1,283 @@
+// insnav/filter/rbukf.hpp -- Rao-Blackwellised UKF (seed 000): unscented time
+// update through the nonlinear error model, linear Kalman measurement update.
+//
+// Cycle (seed 000 sec. 4; the engine calls, see engine/loose_engine.hpp):
+//   begin_cycle()   sigma points 0, +-cols(chol((n + lambda) P)) around x
+//                   (eq. (25) after feedback, x = 0; during an outage x is the
+//                   non-zero multi-step prediction: the recursive UT of eqs. (26)-(29));
+//   propagate(iv)   every sigma point advanced by RK4 through the nonlinear
+//                   error model (error_model_nonlinear.hpp, eqs. (3)-(7)) with
+//                   the INS at the start, middle and end of the interval (eq. (10));
+//                   the process noise of the interval is accumulated as
+//                   Q_c <- Phi Q_c Phi^T + Q_d(interval), Phi and Q_d from the
+//                   linear model at the middle point (error_model_linear.hpp);
+//   end_cycle()     x = sum Wm chi, P = sum Wc (chi - x)(chi - x)^T + Q_c (eqs. (11)-(13));
+//   update(meas)    eqs. (22)-(24): y = residual - h(x) (h = meas.predicted_residual,
+//                   = H x for a linear measurement), S = H P H^T + R factorised
+//                   with llt(), K = P H^T S^-1, x += K y, then the covariance:
+//     UpdateForm::kDensePaper        P = (I - K H) P, eq. (24) literally, all n columns
+//                                    (what seed 000 counts; symmetrised afterwards);
+//     UpdateForm::kDenseJoseph       P = (I - K H) P (I - K H)^T + K R K^T, all n columns;
+//     UpdateForm::kBlockSparseJoseph (default) the same Joseph form, but with H
+//                                    non-zero only in its first c = meas.n_cols
+//                                    columns: U = P_(:,c) H_c^T, S = H_c U_(c,:) + R,
+//                                    and P = P - K U^T - U K^T + K S K^T, which is
+//                                    the Joseph expression expanded (exact for any K);
+//     UpdateForm::kBlockSparseFactored  S = L L^T, W = U L^-T, P = P - W W^T (lower
+//                                    triangle, rank-r update), K y = W (L^-1 y): the
+//                                    cheapest exact form, symmetric by construction.
+// Covariance health (covariance.hpp): P is symmetrised after every step and
+// repaired (eigenvalue clamp) whenever its Cholesky factor is needed and fails;
+// repairs are counted.  Fixed-size Eigen everywhere, workspaces are members,
+// no heap allocation (cpp/tests/test_rbukf.cpp checks with EIGEN_RUNTIME_NO_MALLOC).
+#pragma once
+
+#include <Eigen/Cholesky>
+
+#include "insnav/filter/error_model_linear.hpp"
+#include "insnav/filter/error_model_nonlinear.hpp"
+#include "insnav/filter/sigma_points.hpp"
+#include "insnav/filter/types.hpp"
+
+namespace insnav {
+
+enum class UpdateForm { kDensePaper, kDenseJoseph, kBlockSparseJoseph, kBlockSparseFactored };
+
+/// The unscented time update shared by RbUkf and Ukf (seed 000 eqs. (9)-(13), (25)-(29)).
+template <class L>
+class UnscentedPropagation {
+ public:
+  using Layout = L;
+  static constexpr int kN = L::kSize;
+  using Vec = StateVec<L>;
+  using Cov = StateCov<L>;
+  using Points = SigmaPoints<kN>;
+
+  explicit UnscentedPropagation(const ImuErrorModel& model, const UtParams& ut = {})
+      : model_(model), w_(ut) {}
+
+  void initialize(const Cov& P0) {
+    x_.setZero();
+    P_ = P0;
+    symmetrize<kN>(P_);
+    Q_cycle_.setZero();
+    in_cycle_ = false;
+    points_fresh_ = false;
+  }
+
+  /// Draw the sigma points around the current (x, P) (eq. (9) / (25)).
+  void begin_cycle() {
+    repairs_ += draw_sigma_points<kN>(x_, P_, w_, chi_, factor_, repair_opt_);
+    Q_cycle_.setZero();
+    in_cycle_ = true;
+    points_fresh_ = false;
+    n_intervals_ = 0;
+  }
+
+  /// Advance every sigma point over one interval by RK4 (eq. (10)) and
+  /// accumulate the interval's process noise.
+  void propagate(const InsInterval& iv) {
+    if (!in_cycle_) begin_cycle();
+    if (!(iv.dt > 0.0)) return;
+    p0_.set(iv.start, model_);
+    ph_.set(iv.mid, model_);
+    p1_.set(iv.end, model_);
+    for (int j = 0; j < 2 * kN + 1; ++j) {
+      tmp_ = chi_.col(j);
+      rk4_error_step<L>(tmp_, p0_, ph_, p1_, iv.dt);
+      chi_.col(j) = tmp_;
+    }
+    phi_ = transition<L>(linear_F<L>(iv.mid, model_), iv.dt);
+    qd_ = discrete_Q<L>(phi_, continuous_GQG<L>(iv.mid, model_), iv.dt);
+    work_.noalias() = phi_ * Q_cycle_;
+    Q_cycle_.noalias() = work_ * phi_.transpose();
+    Q_cycle_ += qd_;
+    ut_mean<kN, 2 * kN + 1>(chi_, w_, x_);  // the running prediction (for mid-cycle output)
+    ++n_intervals_;
+  }
+
+  /// Predicted mean and covariance, eqs. (11)-(13).
+  void end_cycle() {
+    if (!in_cycle_) return;
+    in_cycle_ = false;
+    if (n_intervals_ == 0) return;  // nothing propagated: (x, P) unchanged
+    sanitize_points();
+    ut_mean<kN, 2 * kN + 1>(chi_, w_, x_);
+    ut_covariance<kN, 2 * kN + 1>(chi_, x_, w_, dev_, P_);
+    P_ += Q_cycle_;
+    symmetrize<kN>(P_);
+    if (!P_.allFinite()) {
+      repair_covariance<kN>(P_, repair_opt_);
+      ++repairs_;
+    }
+    points_fresh_ = true;
+  }
+
+  const Vec& x() const { return x_; }
+  const Cov& P() const { return P_; }
+  Cov& P_mutable() { return P_; }
+  /// Direct access to the mean (tests; an engine that feeds back partially).
+  Vec& x_mutable() {
+    points_fresh_ = false;
+    return x_;
+  }
+  /// x = 0 after the engine fed x back into the INS (closed loop, eq. (25)).
+  void reset_state() {
+    x_.setZero();
+    points_fresh_ = false;
+  }
+  int cholesky_repairs() const { return repairs_; }
+  const UtWeights<kN>& weights() const { return w_; }
+  /// Sigma points: drawn (after begin_cycle) or propagated (after end_cycle).
+  const Points& sigma_points() const { return chi_; }
+  /// Process noise accumulated over the last cycle.
+  const Cov& cycle_Q() const { return Q_cycle_; }
+
+ protected:
+  /// A sigma point that left the domain of the model (non-finite, e.g. pitch
+  /// error at 90 deg) is replaced by the centre point; counted as a repair.
+  void sanitize_points() {
+    bool bad = false;
+    for (int j = 0; j < 2 * kN + 1; ++j)
+      if (!chi_.col(j).allFinite()) {
+        bad = true;
+        if (j > 0 && chi_.col(0).allFinite()) chi_.col(j) = chi_.col(0);
+        else chi_.col(j).setZero();
+      }
+    if (bad) ++repairs_;
+  }
+
+  ImuErrorModel model_;
+  UtWeights<kN> w_;
+  RepairOptions repair_opt_{};
+  Vec x_ = Vec::Zero();
+  Cov P_ = Cov::Identity();
+  Cov Q_cycle_ = Cov::Zero();
+  Points chi_ = Points::Zero();
+  Points dev_ = Points::Zero();
+  Cov factor_ = Cov::Zero();
+  Cov phi_ = Cov::Identity(), qd_ = Cov::Zero(), work_ = Cov::Zero();
+  Vec tmp_ = Vec::Zero();
+  NonlinearErrorPoint p0_, ph_, p1_;
+  int repairs_ = 0;
+  int n_intervals_ = 0;
+  bool in_cycle_ = false;
+  bool points_fresh_ = false;  // chi_ are the propagated points of (x_, P_) (UKF update)
+};
+
+/// Measurement-side workspace types.
+template <class L>
+struct MeasTypes {
+  static constexpr int kN = L::kSize;
+  using Dyn = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxMeasRows, kMaxMeasRows>;
+  using Gain = Eigen::Matrix<double, kN, Eigen::Dynamic, 0, kN, kMaxMeasRows>;
+  using RowVec = typename LinearMeasurement<L>::RowVec;
+};
+
+template <class L>
+class RbUkf : public UnscentedPropagation<L> {
+  using Base = UnscentedPropagation<L>;
+  using T = MeasTypes<L>;
+
+ public:
+  using typename Base::Cov;
+  using typename Base::Vec;
+  using Layout = L;
+  static constexpr int kN = L::kSize;
+
+  explicit RbUkf(const ImuErrorModel& model, const UtParams& ut = {}) : Base(model, ut) {}
+
+  /// Covariance form of the update (default kBlockSparseJoseph; the block-sparse
+  /// forms fall back to dense columns automatically when n_cols = n).
+  void set_update_form(UpdateForm f) { form_ = f; }
+  UpdateForm update_form() const { return form_; }
+
+  /// Linear Kalman update, seed 000 eqs. (22)-(24).  gate_chi2 <= 0: no gating.
+  template <class Meas>
+  UpdateResult update(const Meas& meas, double gate_chi2) {
+    const LinearMeasurement<L>& lin = meas.linear();
+    UpdateResult res;
+    const int r = lin.rows();
+    res.rows = r;
+    if (r == 0) return res;
+    Vec& x = this->x_;
+    Cov& P = this->P_;
+    y_ = lin.residual - meas.predicted_residual(x);  // = residual - H x for linear h
+    const bool dense = form_ == UpdateForm::kDensePaper || form_ == UpdateForm::kDenseJoseph;
+    const int c = dense ? kN : lin.n_cols;
+    const auto Hc = lin.H.leftCols(c);
+    U_.noalias() = P.leftCols(c) * Hc.transpose();  // P H^T (n x r)
+    S_.noalias() = Hc * U_.topRows(c);
+    S_ += lin.R;
+    llt_.compute(S_);  // reads the lower triangle: S symmetric by construction up to rounding
+    if (llt_.info() != Eigen::Success) {
+      res.cholesky_repairs = 1;  // S not PD (bad R): refuse rather than corrupt P
+      this->repairs_ += 1;
+      return res;
+    }
+    // v = L^-1 y, NIS = |v|^2
+    v_ = llt_.matrixL().solve(y_);
+    res.nis = v_.squaredNorm();
+    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
+      res.rejected_by_gate = true;
+      return res;
+    }
+    if (form_ == UpdateForm::kBlockSparseFactored) {
+      // W^T = L^-1 U^T  (r x n);  K y = W v;  P -= W W^T
+      Wt_ = U_.transpose();
+      llt_.matrixL().solveInPlace(Wt_);
+      x.noalias() += Wt_.transpose() * v_;
+      P.template selfadjointView<Eigen::Lower>().rankUpdate(Wt_.transpose(), -1.0);
+      P.template triangularView<Eigen::StrictlyUpper>() = P.transpose();
+    } else {
+      // K = U S^-1 (llt solve, never an inverse)
+      Kt_ = U_.transpose();
+      llt_.solveInPlace(Kt_);
+      K_ = Kt_.transpose();
+      x.noalias() += K_ * y_;
+      if (form_ == UpdateForm::kDensePaper) {
+        // P = (I - K H) P, eq. (24)
+        A_.setIdentity();
+        A_.noalias() -= K_ * lin.H;
+        AP_.noalias() = A_ * P;
+        P = AP_;
+      } else if (form_ == UpdateForm::kDenseJoseph) {
+        // P = (I - K H) P (I - K H)^T + K R K^T
+        A_.setIdentity();
+        A_.noalias() -= K_ * lin.H;
+        AP_.noalias() = A_ * P;
+        P.noalias() = AP_ * A_.transpose();
+        KR_.noalias() = K_ * lin.R;
+        P.noalias() += KR_ * K_.transpose();
+      } else {
+        // Joseph expanded: P - K U^T - U K^T + K S K^T  (S = H P H^T + R)
+        KR_.noalias() = K_ * S_;
+        AP_.noalias() = K_ * U_.transpose();
+        P -= AP_;
+        P -= AP_.transpose();
+        P.noalias() += KR_ * K_.transpose();
+      }
+      symmetrize<kN>(P);
+    }
+    if (!P.allFinite() || !x.allFinite()) {  // never let a NaN through
+      if (!x.allFinite()) x.setZero();
+      repair_covariance<kN>(P, this->repair_opt_);
+      res.cholesky_repairs += 1;
+      this->repairs_ += 1;
+    }
+    this->points_fresh_ = false;
+    res.applied = true;
+    return res;
+  }
+
+ private:
+  UpdateForm form_ = UpdateForm::kBlockSparseJoseph;
+  typename T::RowVec y_, v_;
+  typename T::Gain U_, K_, KR_;
+  typename T::Dyn S_;
+  Eigen::Matrix<double, Eigen::Dynamic, kN, 0, kMaxMeasRows, kN> Kt_, Wt_;
+  Eigen::LLT<typename T::Dyn> llt_;
+  Cov A_ = Cov::Identity(), AP_ = Cov::Zero();
+};
+
+}  // namespace insnav
