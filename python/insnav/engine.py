@@ -133,8 +133,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
     dataset : insnav.Dataset
         IMU increments, GNSS fixes (``t_valid`` is used; see the delay filters
         for ``t_arrival``), initial state, lever arm and IMU model.
-    filter : {'ekf', 'rbukf', 'ukf'}, optional
-        Overrides ``config.filter``.
+    filter : {'ekf', 'rbukf', 'ukf', 'upf', 'pf', 'fukf'}, optional
+        Overrides ``config.filter``.  'upf', 'pf', 'fukf' (seed 004, 20 states)
+        are tight only and take the options of
+        :func:`insnav.particle.run_tight_particle` (``particles=``, ``seed=``, ...).
     coupling : {'loose', 'tight'}, optional
     config : RunConfig, optional
     sanitize : bool or dict
@@ -151,11 +153,22 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
     """
     import dataclasses
 
+    if filter in ("kf", "rdkf", "exact"):  # delayed GNSS (seed 001), see insnav.delay
+        from .delay import run_delayed
+
+        return run_delayed(dataset, filter, config=config, **overrides)
     cfg = dataclasses.replace(config or RunConfig())
     if filter is not None:
         cfg.filter = filter
     if coupling is not None:
         cfg.coupling = coupling
+    from .particle import PARTICLE_FILTERS, PARTICLE_OPTIONS  # issue 7 (seed 004 filters)
+
+    particle_opts = {k: overrides.pop(k) for k in list(overrides) if k in PARTICLE_OPTIONS}
+    if cfg.filter in PARTICLE_FILTERS and cfg.coupling != "tight":
+        raise ValueError(f"filter {cfg.filter!r} runs tightly coupled only (coupling='tight')")
+    if particle_opts and cfg.filter not in PARTICLE_FILTERS:
+        raise TypeError(f"run() options {sorted(particle_opts)} need filter 'upf', 'pf' or 'fukf'")
     for k, v in overrides.items():
         if not hasattr(cfg, k):
             raise TypeError(f"run() got an unknown option {k!r}")
@@ -169,7 +182,12 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
     if cfg.coupling == "tight":
         from .tight import run_tight  # issue 5
 
-        sol = run_tight(dataset, cfg)
+        if cfg.filter in PARTICLE_FILTERS:
+            from .particle import run_tight_particle  # issue 7
+
+            sol = run_tight_particle(dataset, cfg, **particle_opts)
+        else:
+            sol = run_tight(dataset, cfg)
         if input_report is not None:
             sol.summary["sanitize"] = input_report
         return sol

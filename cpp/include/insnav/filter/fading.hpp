@@ -27,12 +27,19 @@
 //    recursion on tr(C_0); it is carried per row, s_k = tr(C~_0,k) / m, so it
 //    stays meaningful when satellites rise or set (the m x m recursion is not
 //    defined when the rows change).  tr(N~) = m (s_k - beta) - tr(H~ Q H~^T).
-//  * beta >= 1 is Zhou's softening factor (default 1.5): with beta = 1 the
+//  * beta >= 1 is Zhou's softening factor (default 2): with beta = 1 the
 //    factor is exactly 1 only on average and exceeds 1 on about half of the
 //    epochs through the noise of a single-epoch C_0; beta > 1 keeps eta = 1 in
 //    steady state and lets it rise on a real inconsistency.
 //  * eta_max caps the factors (default 1e3): a single wild epoch cannot blow
 //    the covariance up without bound.
+//  * alpha_i = 0 is allowed and switches the fading of state i off (eta_i = 1;
+//    Zhou's alpha_i >= 1 encode which states are expected to jump).  Fading a
+//    weakly observable state (yaw, gyro biases) multiplies its variance on
+//    every fading epoch while the measurements shrink it only slowly, so it
+//    grows without bound: on seed004-uav alpha = 1 for all 20 states makes the
+//    fading UKF diverge within 600 s; insnav.particle fades only the
+//    position, velocity and clock states (alpha = 1 there, 0 elsewhere).
 //  * Lambda is applied symmetrically, Pbar = Lambda^1/2 P^- Lambda^1/2 + Q: the
 //    diagonal gets eta_i as in Lambda P^-, and Pbar stays symmetric.
 //  * H is the measurement's analytic Jacobian (meas.linear().H); the UKF
@@ -53,9 +60,9 @@ template <int N>
 struct FadingParams {
   bool enabled = false;
   double rho = 0.95;   // forgetting factor, 0 < rho <= 1 (eq. (6))
-  double beta = 1.5;   // softening factor >= 1 (Zhou 1991)
+  double beta = 2.0;   // softening factor >= 1 (Zhou 1991)
   double eta_max = 1e3;
-  Eigen::Matrix<double, N, 1> alpha = Eigen::Matrix<double, N, 1>::Ones();  // a priori ratios, >= 1
+  Eigen::Matrix<double, N, 1> alpha = Eigen::Matrix<double, N, 1>::Ones();  // a priori ratios (0: no fading)
 };
 
 /// Per-filter (per-particle) memory of the fading recursion: s = tr(C~_0) / m.

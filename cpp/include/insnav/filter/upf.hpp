@@ -308,7 +308,7 @@ class FadingUkf {
   UpdateResult update(const Meas& meas, double gate_chi2) {
     UpdateResult r = kernel_.update(s_, meas, Q_, fp_, gate_chi2);
     repairs_ += r.cholesky_repairs;
-    if (trace_ && r.rows > 0) trace_->record(1.0, kernel_.c(), kernel_.eta().maxCoeff(), false);
+    if (trace_ && r.applied) trace_->record(1.0, kernel_.c(), kernel_.eta().maxCoeff(), false);
     return r;
   }
 

@@ -1,0 +1,229 @@
+"""Seed 004 (Shao et al. 2013): the improved unscented particle filter with
+residual-constrained adaptive fading, and its UKF and bootstrap-PF baselines,
+tightly coupled on pseudorange / pseudorange rate, 20 states.
+
+The C++ side is ``cpp/include/insnav/filter/{layout20,fading,upf,particle_filter}.hpp``
+on the tight engine and pseudorange measurement of issue 5
+(``engine/tight_engine.hpp``, ``meas/pseudorange.hpp``); the satellite
+selection and all GNSS inputs come from :mod:`insnav.tight`.
+
+Filters (``filter=``)
+---------------------
+``"upf"``   improved UPF: a UKF per particle builds the proposal, with adaptive fading
+            (``fading=False`` gives the plain UPF)
+``"pf"``    bootstrap particle filter (systematic resampling + regularisation)
+``"fukf"``  fading UKF; ``fading=False`` is the plain UKF baseline of seed 004
+
+State layout (Layout20, NED, error = computed - true; the paper is ENU):
+position error N/E/D [m], velocity error [m/s], attitude error [rad],
+accelerometer first-order Markov [m/s^2], gyro random constant [rad/s], gyro
+first-order Markov [rad/s], receiver clock bias [m] and drift [m/s].
+
+Closed loop: the weighted-mean estimate is fed back into the INS after every
+update and every particle is shifted by it (``x_i -= x_hat``); the gyro Markov
+block is not fed back (it stays in the filter, see ``layout20.hpp``).
+
+Use ``insnav.run(ds, filter="upf", coupling="tight", particles=100)`` or
+:func:`run_tight_particle` directly.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _core, earth
+from ._validate import as_float_array, check_finite, check_increasing
+from .config import DEG, DEG_PER_H, ImuNoise, RunConfig
+from .engine import RAD2DEG, _initial_state
+from .tight import (MAX_SATS, TightInputs, TightSolution, _initial_clock, _limit_sats, clock_model,
+                    tight_inputs_from_raw)
+
+__all__ = ["DEFAULT_ALPHA", "PARTICLE_FILTERS", "PARTICLE_OPTIONS", "ParticleSolution", "run_tight_particle", "layout20_model"]
+
+#: filter names handled here (``insnav.run(..., coupling="tight")`` routes them)
+PARTICLE_FILTERS = ("upf", "pf", "fukf")
+
+#: keyword options of :func:`run_tight_particle` that ``insnav.run`` passes through
+PARTICLE_OPTIONS = ("particles", "seed", "fading", "rho", "beta", "eta_max", "alpha", "resample_threshold",
+                    "roughening", "rk4_step_s", "gyro_markov_sigma_dph", "gyro_markov_tau_s", "acc_markov_tau_s",
+                    "inputs", "elevation_mask_deg", "max_sats", "clock_psd", "init_sigma_clock", "clock0")
+
+
+#: default a priori fading ratios: 1 for position, velocity, clock; 0 (not faded) elsewhere
+DEFAULT_ALPHA = np.r_[np.ones(6), np.zeros(12), np.ones(2)]
+
+
+@dataclass
+class ParticleSolution(TightSolution):
+    """:class:`insnav.tight.TightSolution` plus per-epoch filter diagnostics.
+
+    ``ess`` (E,) effective sample size after the update (before resampling;
+    1 for the UKF; NaN where no update was applied), ``fading_c`` (E,) the
+    (weighted mean) c_k of the fading factors (0 = no fading needed / off),
+    ``eta_max`` (E,) the (weighted mean) largest fading factor, ``resampled``
+    (E,) bool.  ``run_seconds``: wall time of the C++ loop.
+    """
+
+    ess: np.ndarray = None
+    fading_c: np.ndarray = None
+    eta_max: np.ndarray = None
+    resampled: np.ndarray = None
+    run_seconds: float = float("nan")
+
+
+def layout20_model(noise: ImuNoise, gyro_markov_sigma_dph: float = 1.0, gyro_markov_tau_s: float = 3600.0,
+                   acc_markov_tau_s: float = 3600.0) -> tuple[dict, np.ndarray]:
+    """C++ model dict and the 20-state sensor sigmas (acc Markov, gyro constant, gyro Markov).
+
+    The gyro bias of ``noise`` (its total sigma) becomes the random constant
+    (no driving noise; P0 only); the gyro Markov block gets
+    ``gyro_markov_sigma_dph`` and ``gyro_markov_tau_s``; the accelerometer bias
+    is first-order Markov with the sigma of ``noise`` and ``acc_markov_tau_s``.
+    """
+    model = noise.as_core_dict()
+    gyro_const = np.asarray(noise.gyro_bias_sigma, float)
+    gm = np.full(3, gyro_markov_sigma_dph * DEG_PER_H)
+    model["gyro_bias_sigma"] = gm
+    model["gyro_bias_tau"] = np.full(3, float(gyro_markov_tau_s))
+    model["acc_bias_tau"] = np.full(3, float(acc_markov_tau_s))
+    sig = np.concatenate([np.asarray(noise.acc_bias_sigma, float), gyro_const, gm])
+    return model, sig
+
+
+def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | None = None, particles: int = 100,
+                       seed: int = 1, fading: bool | None = None, rho: float = 0.95, beta: float = 2.0,
+                       eta_max: float = 1e3, alpha=None, resample_threshold: float = 0.5,
+                       roughening: float | None = None, rk4_step_s: float = 1.0,
+                       gyro_markov_sigma_dph: float = 1.0, gyro_markov_tau_s: float = 3600.0,
+                       acc_markov_tau_s: float = 3600.0, inputs: TightInputs | None = None,
+                       elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
+                       init_sigma_clock=(30.0, 1.0), clock0=None) -> ParticleSolution:
+    """Closed-loop tightly coupled run with a seed 004 filter (Layout20).
+
+    Parameters
+    ----------
+    dataset : insnav.Dataset with ``gnss_raw`` (or ``inputs``)
+    cfg : RunConfig
+        initial sigmas / perturbation (``init_seed``), IMU noise, gate,
+        propagation step, output decimation, UT parameters; ``filter`` if the
+        ``filter`` argument is not given.
+    filter : {'upf', 'pf', 'fukf'}
+    particles : int
+        N (UPF, PF; ignored by the UKF).
+    seed : int
+        Seed of the filter's random streams (sampling, resampling, noise):
+        the result is identical for the same seed.
+    fading : bool
+        Adaptive fading (default: on for 'upf' and 'fukf'; the PF has none).
+    rho, beta, eta_max, alpha : fading forgetting factor (0 < rho <= 1), softening
+        factor (>= 1), cap of the factors, a priori ratios alpha_i (1 or 20 values >= 0;
+        0 = that state is not faded).  Default :data:`DEFAULT_ALPHA`: fade position,
+        velocity and clock only (fading the weakly observable yaw and gyro states
+        makes their variance grow without bound; see ``fading.hpp``).
+    resample_threshold : resample when N_eff < threshold * N.
+    roughening : regularisation bandwidth after resampling (default 0.2 for the PF, 0 for the UPF).
+    rk4_step_s : multi-interval RK4 step of the error state [s] (0: every engine interval).
+    gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s : the Markov blocks (:func:`layout20_model`).
+    inputs, elevation_mask_deg, max_sats, clock_psd, init_sigma_clock, clock0 : as :func:`insnav.tight.run_tight`.
+
+    Returns
+    -------
+    ParticleSolution
+    """
+    cfg = dataclasses.replace(cfg or RunConfig(), coupling="tight")
+    filt = filter or cfg.filter
+    if filt not in PARTICLE_FILTERS:
+        raise ValueError(f"filter {filt!r}: expected one of {', '.join(PARTICLE_FILTERS)}")
+    cfg.filter = filt
+    cfg.validate()
+    if fading is None:
+        fading = filt in ("upf", "fukf")
+    if alpha is None:
+        alpha = DEFAULT_ALPHA
+    if roughening is None:
+        roughening = 0.2 if filt == "pf" else 0.0
+    imu = dataset.imu
+    t = as_float_array(imu.t, "imu.t")
+    dth = as_float_array(imu.dtheta_b, "imu.dtheta_b", (3,))
+    dv = as_float_array(imu.dv_b, "imu.dv_b", (3,))
+    for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
+        check_finite(a, name)
+    check_increasing(t, "imu.t", t0=float(dataset.t0))
+    if inputs is None:
+        inputs = getattr(dataset, "tight_inputs", None)
+    if inputs is None:
+        if getattr(dataset, "gnss_raw", None) is None:
+            raise ValueError(f"dataset {getattr(dataset, 'name', '')!r} has no raw GNSS data (gnss_raw)")
+        s0 = dataset.initial
+        r0 = earth.geodetic_to_ecef(s0.lat_deg * DEG, s0.lon_deg * DEG, s0.h_m)
+        inputs = tight_inputs_from_raw(dataset.gnss_raw, elevation_mask_deg=elevation_mask_deg,
+                                       max_sats=max_sats, approx_r_e=r0)
+    if inputs.n_sats().max(initial=0) > MAX_SATS:
+        inputs = _limit_sats(inputs, MAX_SATS)
+
+    rng = np.random.default_rng(cfg.init_seed)
+    init, sig0 = _initial_state(dataset, cfg, rng)
+    noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
+    model, sig_sensor = layout20_model(noise, gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s)
+    qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)
+    model["clock_bias_psd"] = float(qb)
+    model["clock_drift_psd"] = float(qd)
+    p0 = np.concatenate([sig0, sig_sensor, np.asarray(init_sigma_clock, float)])
+    P0 = np.diag(p0 ** 2)
+    lever = np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
+    lat0, lon0 = init.lat_deg * DEG, init.lon_deg * DEG
+    rpy0 = np.array([init.roll_deg, init.pitch_deg, init.yaw_deg]) * DEG
+    if clock0 is None:
+        C_en = earth.C_en(lat0, lon0)
+        C_nb = np.asarray(_core.rotation.dcm_from_euler(rpy0))
+        r_ant = earth.geodetic_to_ecef(lat0, lon0, init.h_m) + C_en @ (C_nb @ lever)
+        clock0 = _initial_clock(inputs, r_ant, C_en @ init.v_n)
+    ep_t = np.asarray(inputs.epoch_t, float)
+    cycle = cfg.cycle_period_s
+    if cycle is None:
+        cycle = float(np.median(np.diff(ep_t))) if ep_t.size > 1 else 1.0
+    init_vec = np.array([dataset.t0, lat0, lon0, init.h_m, *init.v_n, *rpy0])
+    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s, cycle_period=cycle,
+                    gate_chi2=cfg.gate_chi2, output_decimation=int(cfg.output_decimation),
+                    ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
+                    ut_kappa=(3.0 - 20) if cfg.ut_kappa is None else cfg.ut_kappa)
+    pcfg = dict(particles=int(particles), seed=int(seed), fading=bool(fading), rho=float(rho), beta=float(beta),
+                eta_max=float(eta_max), alpha=np.atleast_1d(np.asarray(alpha, float)),
+                resample_threshold=float(resample_threshold), roughening=float(roughening),
+                rk4_step=float(rk4_step_s))
+    out = _core.run_tight_particle(filt, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
+                                   np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0,
+                                   np.zeros(12), np.asarray(clock0, float), model, core_cfg, pcfg)
+    sig, err, llh, rpy = out["sigma"], out["imu_err"], out["llh"], out["rpy"] * RAD2DEG
+    # per-update traces -> per-epoch arrays (entries belong to the applied epochs in order)
+    applied = np.flatnonzero(out["status"] == 1)
+    E = ep_t.size
+
+    def per_epoch(a, fill=np.nan, dtype=float):
+        r = np.full(E, fill, dtype=dtype)
+        k = min(len(a), len(applied))
+        r[applied[:k]] = np.asarray(a)[:k]
+        return r
+
+    sol = ParticleSolution(
+        t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2], v_n=out["v_n"],
+        roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2], sigma_pos_n_m=sig[:, 0:3],
+        sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG, acc_bias_mps2=err[:, 0:3],
+        gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9], gyro_scale=err[:, 9:12], gnss_t=ep_t,
+        innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
+        summary=dict(filter=filt, coupling="tight", layout=20, particles=int(particles) if filt != "fukf" else 1,
+                     fading=bool(fading), seed=int(seed), updates=int(out["updates"]),
+                     rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
+                     resamples=int(out["resamples"]), gnss_records=int(E), sat_rows=int(len(inputs.prn)),
+                     clock0=tuple(clock0), clock_psd=(float(qb), float(qd)), run_seconds=float(out["run_seconds"])),
+        clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 18:20],
+        rows=out["rows"], inputs=inputs,
+        ess=per_epoch(out["trace_ess"]), fading_c=per_epoch(out["trace_fading_c"]),
+        eta_max=per_epoch(out["trace_eta_max"]), resampled=per_epoch(out["trace_resampled"], 0, bool),
+        run_seconds=float(out["run_seconds"]))
+    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
+        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
+        raise FloatingPointError(f"tight {filt}: the solution became non-finite at t={sol.t[bad]:.3f} s (row {bad})")
+    return sol
