@@ -37,6 +37,7 @@ void bind_math(py::module_& m);
 void bind_ins(py::module_& m);
 void bind_loose(py::module_& m);
 void bind_tight(py::module_& m);
+void bind_delay(py::module_& m);
 void bind_particle(py::module_& m);
 ImuErrorModel imu_model_from_dict(const py::dict& d);
 

@@ -22,6 +22,7 @@ PYBIND11_MODULE(_core, m) {
   insnav::py_bind::bind_ins(m);
   insnav::py_bind::bind_loose(m);
   insnav::py_bind::bind_tight(m);
+  insnav::py_bind::bind_delay(m);
   insnav::py_bind::bind_particle(m);
   // one call per cpp/bindings/bind_*.cpp (declared in common.hpp)
 }

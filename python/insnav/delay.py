@@ -1,0 +1,184 @@
+"""Delayed GNSS records (seed 001): three ways to use late fixes.
+
+Each GNSS record has a time of validity ``t_valid`` and an arrival time
+``t_arrival`` (``Dataset.gnss``; the simulator delays fixes by whole epochs
+with the scenario's ``gnss.delay_p``).  :func:`run_delayed` runs one of
+
+``"kf"``
+    The ordinary closed-loop EKF fed the records in arrival order, each
+    applied as if it were valid when it arrives (the naive use; seed 001's
+    "KF" column).
+``"rdkf"``
+    Seed 001's random-delay Kalman filter (Pan, Zhao, Li 2022, eqs. (4)-(21)):
+    it does not know ``t_valid``; it keeps the error state of the last
+    ``s + 1`` GNSS epochs and weights the possible delays with the known
+    probabilities ``p`` (``cpp/include/insnav/filter/random_delay_kf.hpp``).
+``"exact"``
+    Exact processing with the time tag: checkpoints of the whole engine
+    state every ``checkpoint_interval_s`` in a fixed ring; a late record
+    restores the checkpoint before its ``t_valid`` and the IMU data since are
+    re-processed with every record received so far at its own time
+    (``cpp/include/insnav/engine/delay_engine.hpp``).  Records older than
+    the history (``max_history_s``, bounded by the ring) are refused, counted
+    in ``summary["refused_too_old"]`` and reported with a ``RuntimeWarning``.
+
+All three return a real-time :class:`insnav.Solution`: the output at time t
+uses only the records that arrived by t.
+"""
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+
+from . import _core
+from ._validate import as_float_array, check_finite, check_increasing
+from .config import DEG, ImuNoise, RunConfig
+from .engine import RAD2DEG, Solution, _initial_state
+
+DELAY_FILTERS = ("kf", "rdkf", "exact")
+#: status codes of :attr:`Solution.gnss_status` for the delay filters
+DELAY_GNSS_STATUS = {0: "not used", 1: "applied", 2: "rejected by gate", 3: "S not positive definite",
+                     4: "outside the IMU time span", 5: "refused: older than the history"}
+MAX_DELAY_EPOCHS = 4  # RandomDelayKf<Layout15, S> is instantiated for S = 1..4
+
+
+def scenario_delay_p(dataset) -> np.ndarray:
+    """The delay distribution ``p`` of the dataset's scenario (``[1.0]`` if none)."""
+    sc = getattr(dataset, "scenario", None) or {}
+    p = (sc.get("gnss") or {}).get("delay_p", [1.0])
+    return np.asarray(p, dtype=float)
+
+
+def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfig | None = None,
+                max_history_s: float = 1.0, checkpoint_interval_s: float | None = None,
+                **overrides) -> Solution:
+    """Closed-loop loose GNSS/INS run with delayed GNSS records.
+
+    Parameters
+    ----------
+    dataset : insnav.Dataset
+        Uses ``gnss.t_valid`` and ``gnss.t_arrival``.
+    filter : {'kf', 'rdkf', 'exact'}
+        See the module docstring.
+    delay_p : sequence of float, optional
+        ``P(delay = i epochs)``, i = 0..s, s <= 4 (rdkf only).  Default: the
+        scenario's ``gnss.delay_p``.
+    config : RunConfig, optional
+        Initial state/sigmas, IMU noise, lever arm, gating, output rate (its
+        ``filter``/``coupling`` fields are ignored: the EKF, loose).
+    max_history_s : float
+        exact: refuse records older than this [s].
+    checkpoint_interval_s : float, optional
+        exact: checkpoint spacing [s] (default: the median GNSS interval).
+        History = min(max_history_s, 63 checkpoint_interval_s).
+    **overrides
+        Any :class:`RunConfig` field.
+
+    Returns
+    -------
+    Solution
+        ``gnss_status`` etc. are in the dataset's record order;
+        ``summary`` adds ``delay_p``, ``refused_too_old``, ``replays``,
+        ``replayed_samples``, ``filter_updates``, ``history_s``.
+    """
+    if filter not in DELAY_FILTERS:
+        raise ValueError(f"run_delayed: filter {filter!r}; allowed: {', '.join(DELAY_FILTERS)}")
+    cfg = dataclasses.replace(config or RunConfig())
+    for k, v in overrides.items():
+        if not hasattr(cfg, k):
+            raise TypeError(f"run_delayed() got an unknown option {k!r}")
+        setattr(cfg, k, v)
+    cfg.filter, cfg.coupling = "ekf", "loose"
+    cfg.validate()
+
+    imu = dataset.imu
+    t = as_float_array(imu.t, "imu.t")
+    dth = as_float_array(imu.dtheta_b, "imu.dtheta_b", (3,))
+    dv = as_float_array(imu.dv_b, "imu.dv_b", (3,))
+    for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
+        check_finite(a, name)
+    check_increasing(t, "imu.t", t0=float(dataset.t0))
+
+    g = dataset.gnss
+    m = len(g)
+    if m:
+        rec = np.column_stack([g.t_valid, g.t_arrival, g.lat_deg * DEG, g.lon_deg * DEG, g.h_m, g.v_n,
+                               g.sigma_pos_n, g.sigma_vel_n]).astype(float)
+        check_finite(rec[:, [0, 1, 8, 9, 10]], "gnss (times/position sigma)")
+        if np.any(rec[:, 1] < rec[:, 0] - 1e-9):
+            raise ValueError("gnss: a record arrives before its time of validity (t_arrival < t_valid)")
+        rec[:, 1] = np.maximum(rec[:, 1], rec[:, 0])
+        # arrival order; ties keep the time-of-validity order
+        order = np.lexsort((rec[:, 0], rec[:, 1]))
+        rec = np.ascontiguousarray(rec[order])
+    else:
+        rec = np.zeros((0, 14))
+        order = np.zeros(0, int)
+    t_valid_sorted = rec[:, 0]
+
+    rng = np.random.default_rng(cfg.init_seed)
+    init, sig0 = _initial_state(dataset, cfg, rng)
+    noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
+    n = cfg.layout
+    p0 = np.zeros(n)
+    p0[:9] = sig0
+    p0[9:12] = noise.acc_bias_sigma
+    p0[12:15] = noise.gyro_bias_sigma
+    if n == 21:
+        p0[15:18] = noise.acc_scale_sigma
+        p0[18:21] = noise.gyro_scale_sigma
+    P0 = np.diag(p0 ** 2)
+    lever = np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
+    tv_unique = np.unique(g.t_valid) if m else np.zeros(0)
+    period = float(np.median(np.diff(tv_unique))) if len(tv_unique) > 1 else 1.0
+    cycle = cfg.cycle_period_s if cfg.cycle_period_s is not None else period
+    init_vec = np.array([dataset.t0, init.lat_deg * DEG, init.lon_deg * DEG, init.h_m, *init.v_n,
+                         init.roll_deg * DEG, init.pitch_deg * DEG, init.yaw_deg * DEG])
+    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s,
+                    cycle_period=cycle * 1.5, gate_chi2=cfg.gate_chi2, use_position=cfg.use_position,
+                    use_velocity=cfg.use_velocity, output_decimation=int(cfg.output_decimation))
+    summary = dict(filter=filter, coupling="loose", layout=n, gnss_records=m)
+    if filter == "kf":
+        gnss13 = np.ascontiguousarray(np.delete(rec, 0, axis=1))  # t := t_arrival
+        out = _core.run_loose("ekf", n, t, dth, dv, gnss13, init_vec, P0, np.zeros(12), noise.as_core_dict(),
+                              core_cfg)
+    else:
+        p = scenario_delay_p(dataset) if delay_p is None else np.asarray(delay_p, dtype=float)
+        if filter == "rdkf":
+            if p.ndim != 1 or not 1 <= p.size <= MAX_DELAY_EPOCHS + 1:
+                raise ValueError(f"delay_p: expected 1..{MAX_DELAY_EPOCHS + 1} probabilities, got {p!r}")
+            if n != 15:
+                raise ValueError("rdkf: only the 15-state layout is available")
+            summary["delay_p"] = p.tolist()
+        else:
+            core_cfg.update(max_history_s=float(max_history_s),
+                            checkpoint_interval=float(checkpoint_interval_s or period))
+        epochs = np.unique(np.round(np.concatenate([rec[:, 0], rec[:, 1]]), 9))
+        out = _core.run_delay(filter, n, t, dth, dv, rec, epochs, init_vec, P0, np.zeros(12), noise.as_core_dict(),
+                              core_cfg, p if filter == "rdkf" else np.ones(1))
+        for k in ("refused_too_old", "replays", "replayed_samples", "filter_updates", "history_s",
+                  "max_delay_epochs"):
+            if k in out:
+                summary[k] = out[k]
+    inv = np.empty_like(order)
+    inv[order] = np.arange(len(order))
+    sig, err = out["sigma"], out["imu_err"]
+    llh, rpy = out["llh"], out["rpy"] * RAD2DEG
+    summary.update(updates=int(out["updates"]), rejected=int(out["rejected"]),
+                   cholesky_repairs=int(out["cholesky_repairs"]))
+    sol = Solution(t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2],
+                   v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],
+                   sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG,
+                   acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
+                   gyro_scale=err[:, 9:12], gnss_t=t_valid_sorted[inv], innovation=out["innovation"][inv],
+                   nis=out["nis"][inv], gnss_status=out["status"][inv], summary=summary)
+    if summary.get("refused_too_old", 0):
+        warnings.warn(f"exact: {summary['refused_too_old']} GNSS record(s) arrived more than the history "
+                      f"({summary['history_s']:.3g} s) after their time of validity and were not used",
+                      RuntimeWarning, stacklevel=2)
+    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
+        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
+        raise FloatingPointError(f"{filter}: the solution became non-finite at t={sol.t[bad]:.3f} s (row {bad})")
+    return sol
