@@ -1,0 +1,118 @@
+"""Delayed GNSS (issue 6, seed 001): delay statistics, reduction of the
+random-delay KF and of the exact engine to the ordinary KF, the three filters
+on a high-delay scenario, and the history bound of the exact engine."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import insnav
+from insnav.analysis import errors
+from insnav.delay import run_delayed, scenario_delay_p
+
+R_EARTH = 6.378e6
+
+
+@pytest.fixture(scope="module")
+def high():
+    return insnav.simulate("seed001-high", seed=11)
+
+
+def _no_delay(ds):
+    d = copy.copy(ds)
+    d.gnss = copy.copy(ds.gnss)
+    d.gnss.t_arrival = ds.gnss.t_valid.copy()
+    return d
+
+
+def _max_pos_diff_m(a, b):
+    return max(np.max(np.abs(a.lat_deg - b.lat_deg)), np.max(np.abs(a.lon_deg - b.lon_deg))) * np.pi / 180 * R_EARTH
+
+
+def test_delay_statistics(high):
+    """Delays are whole epochs distributed as the scenario's p (seed 001 eq. (4))."""
+    p = scenario_delay_p(high)
+    np.testing.assert_allclose(p, [0.2, 0.4, 0.2, 0.2])
+    d = high.gnss.delay_epochs * 10.0  # seconds -> 10 Hz epochs
+    k = np.round(d).astype(int)
+    np.testing.assert_allclose(d, k, atol=1e-6)
+    counts = np.bincount(k, minlength=p.size)
+    assert counts.size == p.size
+    n = k.size
+    sd = np.sqrt(n * p * (1 - p))
+    assert np.all(np.abs(counts - n * p) < 4 * sd), (counts, n * p)
+
+
+def test_rdkf_with_p1_is_the_kf():
+    """p = [1]: the random-delay KF, the exact engine and the arrival-order KF
+    are the ordinary EKF (no delays in the data)."""
+    ds = _no_delay(insnav.simulate("seed001-low", seed=5))
+    ref = insnav.run(ds, "ekf")
+    rd = insnav.run(ds, "rdkf", delay_p=[1.0])
+    rd2 = insnav.run(ds, "rdkf", delay_p=[1.0, 0.0, 0.0, 0.0, 0.0])
+    ex = insnav.run(ds, "exact")
+    kf = insnav.run(ds, "kf")
+    assert rd.summary["updates"] == ref.summary["updates"] == len(ds.gnss)
+    for s in (rd, rd2, ex, kf):
+        assert _max_pos_diff_m(s, ref) < 1e-8
+        np.testing.assert_allclose(s.v_n, ref.v_n, atol=1e-10)
+    assert ex.summary["replays"] == 0
+
+
+def test_exact_matches_offline_at_the_end(high):
+    """With every record known the exact engine ends where the on-time EKF
+    (records at t_valid) ends, although it learnt them late."""
+    ex = insnav.run(high, "exact")
+    late = high.gnss.t_arrival > high.imu.t[-1] + 1e-9
+    ds = copy.copy(high)
+    g = copy.copy(high.gnss)
+    for f in ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n"):
+        setattr(g, f, getattr(high.gnss, f)[~late])
+    ds.gnss = g
+    ref = insnav.run(ds, "ekf")
+    assert ex.summary["replays"] > 500
+    d_end = max(abs(ex.lat_deg[-1] - ref.lat_deg[-1]), abs(ex.lon_deg[-1] - ref.lon_deg[-1])) * np.pi / 180 * R_EARTH
+    assert d_end < 1e-6
+    assert _max_pos_diff_m(ex, ref) > 1e-4  # but the real-time output differs on the way
+    np.testing.assert_array_equal(ex.gnss_status[late], 4)
+    assert np.all(ex.gnss_status[~late] == 1)
+
+
+def test_exact_refuses_records_older_than_the_history(high):
+    with pytest.warns(RuntimeWarning, match="history"):
+        ex = run_delayed(high, "exact", max_history_s=0.15)
+    delay = high.gnss.t_arrival - high.gnss.t_valid
+    inside = high.gnss.t_arrival <= high.imu.t[-1] + 1e-9
+    expected = int(np.sum((delay > 0.15 + 1e-6) & inside))
+    assert expected > 200
+    assert ex.summary["refused_too_old"] == expected
+    assert int(np.sum(ex.gnss_status == 5)) == expected
+    assert ex.summary["history_s"] == pytest.approx(0.15)
+
+
+def test_bad_inputs(high):
+    with pytest.raises(ValueError, match="delay_p"):
+        insnav.run(high, "rdkf", delay_p=[0.5, 0.2])
+    with pytest.raises(ValueError, match="delay_p"):
+        insnav.run(high, "rdkf", delay_p=[0.2] * 5 + [0.0])
+    with pytest.raises(ValueError, match="filter"):
+        run_delayed(high, "nope")
+
+
+def test_high_delay_ordering():
+    """seed001-high, 20 Monte Carlo runs: (b) random-delay KF and (c) exact beat
+    (a) the naive KF on north position RMSE by a wide margin; (c) with the
+    time tags is at least as good as (b)."""
+    res = insnav.montecarlo("seed001-high", ("kf", "rdkf", "exact"), runs=20, seed=7, workers=2)
+    kf = res.values("kf", "pos_n_rmse_m")
+    rd = res.values("rdkf", "pos_n_rmse_m")
+    ex = res.values("exact", "pos_n_rmse_m")
+    assert kf.mean() > 10 * rd.mean()      # measured ~40x (paper: ~10x)
+    assert kf.mean() > 50 * ex.mean()      # measured ~190x
+    assert np.all(rd < kf) and np.all(ex < kf)
+    assert ex.mean() <= rd.mean()
+    assert np.mean(ex <= rd) >= 0.8
+    # velocity too
+    assert res.values("kf", "vel_n_rmse_mps").mean() > 5 * res.values("rdkf", "vel_n_rmse_mps").mean()
