@@ -178,15 +178,16 @@ The three methods (same data, same EKF, same tuning):
 ![north, high delay](seed001_high_north.png)
 
 (`seed001_low_east.png`, `seed001_high_east.png`: the same for east.)  One run
-(seed 1).  The naive KF's error jumps whenever the vehicle accelerates or
-turns: a fix that is tau epochs old differs from the current position by about
-v tau (up to 3 m at 30 m/s and 0.1 s) and from the current velocity by
-a tau, and the KF, trusting it at 0.05 m, pulls the solution back by that.  The
-random-delay KF de-weights the fix by the spread of the stored INS solutions
-over the possible delays and compares it with their p-weighted mean, so the
-spikes shrink to centimetres; the exact engine has none (its error is the
-on-time EKF's).  Mean of the per-run maximum north error, high delay: KF
-{high_kf_max:.2f} m, random-delay KF {high_rd_max:.3f} m, exact {high_ex_max:.3f} m.
+(seed 1).  With fixes trusted at 0.05 m, the naive KF follows the *delayed*
+track: its north error is a lag of about v x (mean delay) while the vehicle
+heads north (up to ~3 m at 20 m/s and a 1.4-epoch mean delay), going to zero
+on the east-bound legs, and its velocity error is about a x delay whenever
+the speed or heading changes (the paper's "spikes").  The random-delay KF
+compares the fix with the p-weighted mean of the INS solutions stored at the
+possible epochs and de-weights it by their spread, so the lag disappears; the
+exact engine's error is the on-time EKF's.  Mean of the per-run maximum north
+error, high delay: KF {high_kf_max:.2f} m, random-delay KF {high_rd_max:.3f} m,
+exact {high_ex_max:.3f} m.
 
 ## Ours against the paper
 
@@ -195,8 +196,9 @@ on-time EKF's).  Mean of the per-run maximum north error, high delay: KF
   and {high_kf_rdkf_n:.0f}x (high); the paper reports {low_paper_n:.1f}x and
   {high_paper_n:.1f}x.  The factor grows with the delay in both.
 * **Why our factors are larger.**  The absolute numbers depend on sensor and
-  receiver noise the paper does not give.  Our naive-KF errors are of the
-  paper's size (they are set by speed x delay, which the route fixes), but our
+  receiver noise the paper does not give.  Our naive-KF errors are within a
+  factor of 4 of the paper's (they are set by speed x delay; the route timing
+  and heading per leg are ours), but our
   random-delay KF and exact errors are smaller than the paper's random-delay KF
   (0.08 / 0.55 m): with RTK-like 0.05 m fixes every 0.1 s and a tactical IMU
   the estimate between fixes is very good, so removing the delay error leaves
@@ -216,6 +218,11 @@ on-time EKF's).  Mean of the per-run maximum north error, high delay: KF
   (all do), re-processing is the right tool; the random-delay KF is for links
   that lose the tag.  Its cost: 1 to 3 epochs of IMU re-processed per late fix
   (about 0.6 to 1.7x the normal mechanization work here).
+* **The random-delay KF has a heavy tail.**  Its per-run RMSE spread is about
+  its mean: most runs are at 0.01-0.04 m, a few (about 1 in 30) show a
+  transient of up to ~0.9 m.  Not investigated yet; a likely cause is a stretch
+  where the realised delays differ from p for several epochs in a row, which
+  the p-weighted innovation cannot see.
 * **Formulation notes.**  The paper's stacked transition blockdiag(Phi_k ..
   Phi_k-s) and noise blockdiag(Q .. Q) are implemented as the shift of a
   stack of the same trajectory (newest block propagated, the others copied),
