@@ -179,6 +179,7 @@ class LooseEngine {
       iv_.mid.earth.evaluate(iv_.mid.lat, iv_.mid.h, iv_.mid.v_n);
     }
     filter_.propagate(iv_);
+    sigma_dirty_ = true;
     iv_.start = iv_.end;
     interval_t0_ = s.t;
     have_mid_ = false;
@@ -195,6 +196,7 @@ class LooseEngine {
   void close_cycle() {
     flush_interval();
     filter_.end_cycle();
+    sigma_dirty_ = true;
   }
 
   void apply_fix(const GnssFix& fix_in, std::int64_t g, LooseOutputs& out) {
@@ -213,6 +215,7 @@ class LooseEngine {
       for (int i = 0; i < r.size(); ++i) out.innovation[6 * g + off + i] = r[i];
     }
     const UpdateResult res = filter_.update(meas_, cfg_.gate_chi2);
+    sigma_dirty_ = true;
     if (out.nis) out.nis[g] = res.nis;
     int st = res.applied ? 1 : (res.rejected_by_gate ? 2 : 3);
     if (out.status) out.status[g] = static_cast<std::int8_t>(st);
@@ -249,25 +252,38 @@ class LooseEngine {
     const std::int64_t i = out.n_out++;
     const NavState& s = ins_.state();
     if (out.t) out.t[i] = s.t;
-    const StateVec<L>& x = filter_.x();  // non-zero only between feedbacks (outage): report the corrected state
-    const wgs84::Radii r = wgs84::radii(s.lat);
-    const double lat = s.lat - x[L::kPos] / (r.R_M + s.h);
+    // x is zero after every feedback; between feedbacks (GNSS outage with a
+    // sigma-point filter's non-zero predicted mean) report the corrected state.
+    const StateVec<L>& x = filter_.x();
+    const bool corrected = !x.template head<9>().isZero(0.0);
+    double lat = s.lat, lon = s.lon, h = s.h;
+    Vec3 v = s.v_n;
+    Quat q = s.q_nb;
+    if (corrected) {
+      const wgs84::Radii r = wgs84::radii(s.lat);
+      lat = s.lat - x[L::kPos] / (r.R_M + s.h);
+      lon = s.lon - x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
+      h = s.h + x[L::kPos + 2];
+      v = s.v_n - x.template segment<3>(L::kVel);
+      q = quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb;
+    }
     if (out.llh) {
       out.llh[3 * i] = lat;
-      out.llh[3 * i + 1] = s.lon - x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
-      out.llh[3 * i + 2] = s.h + x[L::kPos + 2];
+      out.llh[3 * i + 1] = lon;
+      out.llh[3 * i + 2] = h;
     }
-    if (out.v_n) {
-      const Vec3 v = s.v_n - x.template segment<3>(L::kVel);
+    if (out.v_n)
       for (int j = 0; j < 3; ++j) out.v_n[3 * i + j] = v[j];
-    }
     if (out.rpy) {
-      const Vec3 e = euler_from_quat(quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb);
+      const Vec3 e = euler_from_quat(q);
       for (int j = 0; j < 3; ++j) out.rpy[3 * i + j] = e[j];
     }
     if (out.sigma) {
-      const auto& P = filter_.P();
-      for (int j = 0; j < L::kSize; ++j) out.sigma[L::kSize * i + j] = std::sqrt(std::max(P(j, j), 0.0));
+      if (sigma_dirty_) {  // P changes only at propagate/update: take the roots then
+        sigma_ = filter_.P().diagonal().cwiseMax(0.0).cwiseSqrt();
+        sigma_dirty_ = false;
+      }
+      for (int j = 0; j < L::kSize; ++j) out.sigma[L::kSize * i + j] = sigma_[j];
     }
     if (out.imu_err) {
       double* e = out.imu_err + 12 * i;
@@ -289,6 +305,8 @@ class LooseEngine {
   Vec3 omega_ib_b_ = Vec3::Zero(), f_ib_b_ = Vec3::Zero();
   double last_t_ = 0.0, cycle_start_ = 0.0, interval_t0_ = 0.0, t_mid_ = 0.0;
   bool have_mid_ = false;
+  StateVec<L> sigma_ = StateVec<L>::Zero();
+  bool sigma_dirty_ = true;
 };
 
 }  // namespace insnav

@@ -1,0 +1,100 @@
+"""Run insnav on KF-GINS data: a KF-GINS YAML configuration plus its IMU and
+GNSS files become an insnav :class:`~insnav.dataset.Dataset` and a
+:class:`~insnav.config.RunConfig` with the same initial state, initial
+sigmas, IMU noise model (Gauss-Markov biases and scale factors with KF-GINS's
+correlation time) and antenna lever arm.
+
+Frames and units are the same as KF-GINS (NED, FRD, ZYX Euler, increments
+over the preceding interval); times stay GPS seconds of week.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..config import ImuNoise, RunConfig
+from ..dataset import Dataset, GnssFixes, ImuData
+from ..types import NavState
+from .kfgins import read_kfgins_config, read_kfgins_gnss, read_kfgins_imu
+
+RAD2DEG = 180.0 / np.pi
+
+
+def _or(v, default):
+    return default if v is None else np.asarray(v, float)
+
+
+def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21):
+    """Build a dataset and run configuration from a KF-GINS YAML file.
+
+    Parameters
+    ----------
+    config_path : path
+        KF-GINS YAML (``imupath``, ``gnsspath``, ``starttime``, ``initpos`` ...).
+    imu_path, gnss_path : path, optional
+        Override the files named in the YAML (``.xz`` is read transparently).
+    layout : {15, 21}
+        21 estimates scale factors as KF-GINS does.
+
+    Returns
+    -------
+    dataset : Dataset
+    config : RunConfig
+        ``init_error=False``: the run starts from the YAML's initial state.
+    """
+    c = read_kfgins_config(config_path)
+    imu_path = imu_path or c["imupath"]
+    gnss_path = gnss_path or c["gnsspath"]
+    for p, key in ((imu_path, "imupath"), (gnss_path, "gnsspath")):
+        if p is None or not Path(p).exists():
+            alt = Path(str(p) + ".xz") if p else None
+            if alt is not None and alt.exists():
+                if key == "imupath":
+                    imu_path = alt
+                else:
+                    gnss_path = alt
+                continue
+            raise FileNotFoundError(f"{config_path}: key '{key}': file not found: {p}")
+    imu = read_kfgins_imu(imu_path, c["imudatalen"])
+    gnss = read_kfgins_gnss(gnss_path)
+    start = c["starttime_s"]
+    end = c["endtime_s"]
+    # the initial state is valid at the first IMU epoch at or after starttime
+    i0 = int(np.searchsorted(imu.t, start))
+    if i0 >= len(imu.t) - 1:
+        raise ValueError(f"{config_path}: key 'starttime': {start} is after the IMU data ({imu.t[-1]})")
+    t0 = float(imu.t[i0])
+    sel = imu.t > t0
+    if end is not None:
+        sel &= imu.t <= end
+    imu = ImuData(imu.t[sel], imu.dtheta_b[sel], imu.dv_b[sel])
+    g = (gnss.t_valid > t0) & (gnss.t_valid <= imu.t[-1])
+    gnss = GnssFixes(*(np.asarray(getattr(gnss, f))[g] for f in
+                       ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")))
+    if c["initpos"] is None or c["initatt_rad"] is None:
+        raise ValueError(f"{config_path}: keys 'initpos' and 'initatt' are required")
+    pos, att = c["initpos"], c["initatt_rad"]
+    initial = NavState(pos[0] * RAD2DEG, pos[1] * RAD2DEG, pos[2], _or(c["initvel_n_mps"], np.zeros(3)),
+                       *(att * RAD2DEG))
+    n = c["imunoise"]
+    tau = n["corrtime_s"] if np.isfinite(n["corrtime_s"]) else 3600.0
+    noise = ImuNoise(
+        gyro_arw=_or(n["arw_rad_per_sqrts"], np.full(3, 1e-4)).tolist(),
+        acc_vrw=_or(n["vrw_mps_per_sqrts"], np.full(3, 1e-3)).tolist(),
+        gyro_bias_sigma=_or(n["gbstd_radps"], np.full(3, 1e-5)).tolist(),
+        acc_bias_sigma=_or(n["abstd_mps2"], np.full(3, 1e-3)).tolist(),
+        gyro_bias_tau=[tau] * 3, acc_bias_tau=[tau] * 3,
+        gyro_scale_sigma=_or(n["gsstd"], np.full(3, 1e-4)).tolist(),
+        acc_scale_sigma=_or(n["asstd"], np.full(3, 1e-4)).tolist(),
+        gyro_scale_tau=[tau] * 3, acc_scale_tau=[tau] * 3)
+    cfg = RunConfig(filter="ekf", coupling="loose", layout=layout,
+                    init_sigma_pos_m=_or(c["initposstd_m"], np.full(3, 1.0)).tolist(),
+                    init_sigma_vel_mps=_or(c["initvelstd_mps"], np.full(3, 0.1)).tolist(),
+                    init_sigma_att_deg=(_or(c["initattstd_rad"], np.full(3, 0.01)) * RAD2DEG).tolist(),
+                    init_error=False, imu=noise,
+                    lever_arm_b=_or(c["antlever_b_m"], np.zeros(3)).tolist())
+    ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario={"kfgins_config": str(config_path)},
+                 lever_arm_b=np.asarray(cfg.lever_arm_b), initial=initial, t0=t0, gps_time_offset_s=0.0,
+                 imu_model={}, name=Path(config_path).stem)
+    return ds, cfg
