@@ -84,7 +84,7 @@ def one_run(args):
             err_at_off=np.linalg.norm(pos[np.searchsorted(t, T_ON) - 1]),
             curves=curves, run_seconds=sol.run_seconds, wall=wall, resamples=sol.summary["resamples"],
             ess_median=float(np.median(sol.ess[ok])) if ok.any() else float("nan"),
-            fading_frac=float(np.mean(sol.eta_max[ok] > 1.0)) if ok.any() else float("nan"),
+            fading_frac=float(np.mean(sol.eta_max[ok] > 1.0 + 1e-9)) if ok.any() else float("nan"),
             repairs=sol.summary["cholesky_repairs"], epochs=int(sol.gnss_t.size))
     return k, out
 
