@@ -77,3 +77,37 @@ def reconvergence_time(t, err, t_recover, threshold, hold_s=5.0):
         if end_t - ts[i] >= hold_s:
             return float(ts[i] - t_recover)
     return float("nan")
+
+
+def recovery_metrics(err: dict, t_recover: float, thresholds: dict, hold_s: float = 5.0,
+                     window_s: float | None = None) -> dict:
+    """Max error after a GNSS recovery and reconvergence time, per quantity and axis.
+
+    Parameters
+    ----------
+    err : dict
+        Output of :func:`errors`.
+    t_recover : float
+        Time GNSS returns [s].
+    thresholds : dict
+        ``{"pos_n_m": (3,), "vel_n_mps": (3,), "att_deg": (3,)}``: the band
+        that defines reconvergence (see :func:`reconvergence_time`).
+    window_s : float, optional
+        Only look at ``[t_recover, t_recover + window_s]`` (default: to the end).
+
+    Returns
+    -------
+    dict
+        ``{key: {"max": (3,), "reconv_s": (3,)}}``.
+    """
+    t = err["t"]
+    sel = t >= t_recover
+    if window_s is not None:
+        sel &= t <= t_recover + window_s
+    out = {}
+    for key, thr in thresholds.items():
+        e = err[key]
+        out[key] = {"max": np.abs(e[sel]).max(axis=0),
+                    "reconv_s": np.array([reconvergence_time(t[sel], e[sel, i], t_recover, thr[i], hold_s)
+                                          for i in range(3)])}
+    return out
