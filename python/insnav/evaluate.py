@@ -1,0 +1,152 @@
+"""``insnav evaluate``: accuracy of a solution against a truth, per axis,
+horizontal and 3-D, per outage, with reconvergence times and consistency.
+
+The same numbers from Python: :func:`evaluate` returns a dict.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .analysis import errors, reconvergence_time, rms
+
+EXAMPLES = """examples:
+  insnav evaluate run3/solution.csv run3/truth.csv --outages 50:90
+  insnav evaluate sol.csv ../shared/data/kfgins/sim/truth-sim.nav.xz --json
+
+TRUTH may be a truth.csv (insnav dataset), a dataset directory, or a KF-GINS .nav(.xz).
+Reported: RMS and max of the N/E/D position [m], velocity [m/s] and roll/pitch/yaw [deg] errors,
+horizontal and 3-D position; for each outage the max horizontal error inside it and in the
+60 s after it and the reconvergence time (first time after the outage from which the
+horizontal error stays within 1.5x its pre-outage RMS for 5 s); consistency rms(error/sigma)
+per axis (about 1 for a consistent filter)."""
+
+
+class _Sol:
+    pass
+
+
+def _read_solution(path):
+    from .dataset import read_csv
+    from .engine import Solution
+
+    a = read_csv(path, Solution.COLUMNS)
+    s = _Sol()
+    s.t, s.lat_deg, s.lon_deg, s.h_m = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
+    s.v_n = a[:, 4:7]
+    s.roll_deg, s.pitch_deg, s.yaw_deg = a[:, 7], a[:, 8], a[:, 9]
+    s.sigma_pos_n_m, s.sigma_vel_n_mps, s.sigma_att_deg = a[:, 10:13], a[:, 13:16], a[:, 16:19]
+    return s
+
+
+def _read_truth(path):
+    p = Path(path)
+    if p.is_dir():
+        from .dataset import load_dataset
+
+        t = load_dataset(p).truth
+        if t is None:
+            raise ValueError(f"{p}: the dataset has no truth.csv")
+        return t
+    if ".nav" in p.name:
+        from .io.kfgins import read_kfgins_nav
+
+        return read_kfgins_nav(p)
+    from .dataset import Truth, read_csv
+
+    return Truth.from_array(read_csv(p, Truth.COLUMNS))
+
+
+def evaluate(solution, truth, outages=()) -> dict:
+    """Accuracy figures of ``solution`` against ``truth``.
+
+    Parameters
+    ----------
+    solution : Solution-like (attributes t, lat_deg, ..., optional sigma_*)
+    truth : Truth-like
+    outages : sequence of (start_s, end_s)
+
+    Returns
+    -------
+    dict
+        ``rms`` / ``max`` per quantity (lists N,E,D or roll,pitch,yaw),
+        ``horizontal_rms_m``, ``horizontal_max_m``, ``rms_3d_m``,
+        ``consistency`` (rms(error/sigma) per quantity), ``outages`` (list of dicts).
+    """
+    e = errors(solution, truth)
+    hz = np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])
+    out = {"samples": int(len(e["t"])), "rms": {}, "max": {}, "consistency": {}}
+    for k in ("pos_n_m", "vel_n_mps", "att_deg"):
+        out["rms"][k] = rms(e[k]).tolist()
+        out["max"][k] = np.abs(e[k]).max(axis=0).tolist()
+        sk = "sigma_" + k
+        if sk in e and np.all(e[sk] > 0):
+            out["consistency"][k] = rms(e[k] / e[sk]).tolist()
+    out["horizontal_rms_m"] = float(rms(hz))
+    out["horizontal_max_m"] = float(hz.max())
+    out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"] ** 2, axis=1))))
+    out["outages"] = []
+    t = e["t"]
+    for (a, b) in outages:
+        inside = (t >= a) & (t <= b)
+        after = (t > b) & (t <= b + 60.0)
+        pre = (t < a) & (t >= a - 60.0)
+        thr = 1.5 * rms(hz[pre]) if pre.any() else np.nan
+        out["outages"].append(dict(
+            start_s=a, end_s=b,
+            max_horizontal_inside_m=float(hz[inside].max()) if inside.any() else float("nan"),
+            max_horizontal_after_60s_m=float(hz[after].max()) if after.any() else float("nan"),
+            reconvergence_s=reconvergence_time(t, hz, b, thr) if np.isfinite(thr) else float("nan")))
+    return out
+
+
+def add_evaluate_parser(sub) -> None:
+    p = sub.add_parser("evaluate", help="accuracy of a solution against a truth",
+                       description="Compare a solution CSV with a truth.", epilog=EXAMPLES,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("solution")
+    p.add_argument("truth")
+    p.add_argument("--outages", default="", help="comma-separated start:end [s], e.g. 50:90,200:240")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.set_defaults(func=cmd_evaluate)
+
+
+def _parse_outages(text: str):
+    out = []
+    for part in filter(None, text.split(",")):
+        try:
+            a, b = (float(x) for x in part.split(":"))
+        except ValueError:
+            raise ValueError(f"--outages: bad window {part!r}; expected start:end in seconds") from None
+        if not b > a:
+            raise ValueError(f"--outages: window {part!r} ends before it starts")
+        out.append((a, b))
+    return out
+
+
+def cmd_evaluate(args) -> int:
+    for p in (args.solution, args.truth):
+        if not Path(p).exists():
+            raise FileNotFoundError(f"not found: {p}")
+    res = evaluate(_read_solution(args.solution), _read_truth(args.truth), _parse_outages(args.outages))
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    names = {"pos_n_m": ("position", "m", "N/E/D"), "vel_n_mps": ("velocity", "m/s", "N/E/D"),
+             "att_deg": ("attitude", "deg", "roll/pitch/yaw")}
+    print(f"{res['samples']} samples compared")
+    for k, (n, u, ax) in names.items():
+        c = res["consistency"].get(k)
+        cs = f"   rms(err/sigma) {'/'.join(f'{x:.2f}' for x in c)}" if c else ""
+        print(f"{n:9s} [{u}] {ax}: RMS {'/'.join(f'{x:.4g}' for x in res['rms'][k])}"
+              f"   max {'/'.join(f'{x:.4g}' for x in res['max'][k])}{cs}")
+    print(f"horizontal RMS {res['horizontal_rms_m']:.4g} m, max {res['horizontal_max_m']:.4g} m; "
+          f"3-D RMS {res['rms_3d_m']:.4g} m")
+    for o in res["outages"]:
+        print(f"outage {o['start_s']:g}-{o['end_s']:g} s: max horizontal inside {o['max_horizontal_inside_m']:.4g} m, "
+              f"in the 60 s after {o['max_horizontal_after_60s_m']:.4g} m, reconverged after "
+              f"{o['reconvergence_s']:.1f} s")
+    return 0
