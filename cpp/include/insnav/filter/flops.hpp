@@ -57,12 +57,14 @@ constexpr double rbukf_dense_joseph(double m, double n) {
 }
 
 /// UpdateForm::kBlockSparseJoseph: the Joseph form expanded,
-/// P - K U^T - U K^T + K S K^T, with U and S from c columns.
+/// P - K U^T - U K^T + K S K^T, with U and S from c columns
+/// (K S K^T on the lower triangle only).
 constexpr double rbukf_block_sparse_joseph(double m, double n, double c) {
   return detail::linear_head(m, n, c) + 2.0 * m * n * n + 2.0 * m * n  // K, x
          + m * n * (2.0 * n - 1.0)                                     // K S
-         + 2.0 * m * m * (2.0 * n - 1.0)                               // K U^T, (K S) K^T
-         + 3.0 * m * m;                                                // the three additions
+         + m * m * (2.0 * n - 1.0)                                     // K U^T
+         + m * (m + 1.0) / 2.0 * 2.0 * n                               // lower (K S) K^T, added
+         + 2.0 * m * m;                                                // - K U^T - U K^T
 }
 
 /// UpdateForm::kBlockSparseFactored: W^T = L^-1 U^T, x += W v,
@@ -84,7 +86,8 @@ constexpr double ukf_update(double m, double n, double c) {
          + m * n * 2.0 * p + n * n * 2.0 * p + n * n  // P_xz, P_zz (+ R)
          + n * n * n / 3.0 + n * n + 2.0 * n        // chol(P_zz), v, NIS
          + 2.0 * m * n * n + 2.0 * m * n            // K, x
-         + m * n * (2.0 * n - 1.0) + 2.0 * m * m * n;  // K P_zz K^T subtracted
+         + m * n * (2.0 * n - 1.0)                  // K P_zz
+         + m * (m + 1.0) * n;                       // lower (K P_zz) K^T, subtracted
 }
 
 }  // namespace insnav::flops

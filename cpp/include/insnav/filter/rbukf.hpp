@@ -193,6 +193,8 @@ class RbUkf : public UnscentedPropagation<L> {
   UpdateForm update_form() const { return form_; }
 
   /// Linear Kalman update, seed 000 eqs. (22)-(24).  gate_chi2 <= 0: no gating.
+  /// The common shapes (3 or 6 rows; 6, 9 or n columns of H in use) run with
+  /// compile-time sizes; any other shape with bounded dynamic sizes.
   template <class Meas>
   UpdateResult update(const Meas& meas, double gate_chi2) {
     const LinearMeasurement<L>& lin = meas.linear();
@@ -200,64 +202,92 @@ class RbUkf : public UnscentedPropagation<L> {
     const int r = lin.rows();
     res.rows = r;
     if (r == 0) return res;
-    Vec& x = this->x_;
-    Cov& P = this->P_;
-    y_ = lin.residual - meas.predicted_residual(x);  // = residual - H x for linear h
     const bool dense = form_ == UpdateForm::kDensePaper || form_ == UpdateForm::kDenseJoseph;
     const int c = dense ? kN : lin.n_cols;
-    const auto Hc = lin.H.leftCols(c);
-    U_.noalias() = P.leftCols(c) * Hc.transpose();  // P H^T (n x r)
-    S_.noalias() = Hc * U_.topRows(c);
-    S_ += lin.R;
-    llt_.compute(S_);  // reads the lower triangle: S symmetric by construction up to rounding
-    if (llt_.info() != Eigen::Success) {
+    y_ = lin.residual - meas.predicted_residual(this->x_);  // = residual - H x for linear h
+    if (r == 6 && c == 6) return update_impl<6, 6>(lin, gate_chi2, res);
+    if (r == 3 && c == 6) return update_impl<3, 6>(lin, gate_chi2, res);
+    if (r == 6 && c == 9) return update_impl<6, 9>(lin, gate_chi2, res);
+    if (r == 3 && c == 9) return update_impl<3, 9>(lin, gate_chi2, res);
+    if (r == 6 && c == kN) return update_impl<6, kN>(lin, gate_chi2, res);
+    if (r == 3 && c == kN) return update_impl<3, kN>(lin, gate_chi2, res);
+    return update_impl<Eigen::Dynamic, Eigen::Dynamic>(lin, gate_chi2, res);
+  }
+
+ private:
+  /// R rows, C leading columns of H (Eigen::Dynamic: runtime sizes <= bounds).
+  template <int R, int C>
+  UpdateResult update_impl(const LinearMeasurement<L>& lin, double gate_chi2, UpdateResult& res) {
+    constexpr int RM = (R == Eigen::Dynamic) ? kMaxMeasRows : R;
+    constexpr int CM = (C == Eigen::Dynamic) ? kN : C;
+    using MatRR = Eigen::Matrix<double, R, R, 0, RM, RM>;
+    using MatNR = Eigen::Matrix<double, kN, R, 0, kN, RM>;
+    using MatRN = Eigen::Matrix<double, R, kN, 0, RM, kN>;
+    using MatRC = Eigen::Matrix<double, R, C, 0, RM, CM>;
+    using VecR = Eigen::Matrix<double, R, 1, 0, RM, 1>;
+    Vec& x = this->x_;
+    Cov& P = this->P_;
+    const int r = lin.rows();
+    const int c = (form_ == UpdateForm::kDensePaper || form_ == UpdateForm::kDenseJoseph) ? kN : lin.n_cols;
+    const MatRC Hc = lin.H.template block<R, C>(0, 0, r, c);
+    const VecR y = y_;
+    MatNR U;
+    U.noalias() = P.template block<kN, C>(0, 0, kN, c) * Hc.transpose();  // P H^T (n x r)
+    MatRR S;
+    S.noalias() = Hc * U.template block<C, R>(0, 0, c, r);
+    S += lin.R;
+    Eigen::LLT<MatRR> llt(S);  // reads the lower triangle
+    if (llt.info() != Eigen::Success) {
       res.cholesky_repairs = 1;  // S not PD (bad R): refuse rather than corrupt P
       this->repairs_ += 1;
       return res;
     }
     // v = L^-1 y, NIS = |v|^2
-    v_ = llt_.matrixL().solve(y_);
-    res.nis = v_.squaredNorm();
+    VecR v = y;
+    llt.matrixL().solveInPlace(v);
+    res.nis = v.squaredNorm();
     if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
       res.rejected_by_gate = true;
       return res;
     }
     if (form_ == UpdateForm::kBlockSparseFactored) {
-      // W^T = L^-1 U^T  (r x n);  K y = W v;  P -= W W^T
-      Wt_ = U_.transpose();
-      llt_.matrixL().solveInPlace(Wt_);
-      x.noalias() += Wt_.transpose() * v_;
-      P.template selfadjointView<Eigen::Lower>().rankUpdate(Wt_.transpose(), -1.0);
+      // W^T = L^-1 U^T (r x n);  K y = W v;  P -= W W^T (lower triangle, mirrored)
+      MatRN Wt = U.transpose();
+      llt.matrixL().solveInPlace(Wt);
+      x.noalias() += Wt.transpose() * v;
+      P.template triangularView<Eigen::Lower>() -= Wt.transpose() * Wt;
       P.template triangularView<Eigen::StrictlyUpper>() = P.transpose();
     } else {
       // K = U S^-1 (llt solve, never an inverse)
-      Kt_ = U_.transpose();
-      llt_.solveInPlace(Kt_);
-      K_ = Kt_.transpose();
-      x.noalias() += K_ * y_;
+      MatRN Kt = U.transpose();
+      llt.solveInPlace(Kt);
+      const MatNR K = Kt.transpose();
+      x.noalias() += K * y;
       if (form_ == UpdateForm::kDensePaper) {
         // P = (I - K H) P, eq. (24)
         A_.setIdentity();
-        A_.noalias() -= K_ * lin.H;
+        A_.noalias() -= K * lin.H.template block<R, kN>(0, 0, r, kN);
         AP_.noalias() = A_ * P;
         P = AP_;
+        symmetrize<kN>(P);
       } else if (form_ == UpdateForm::kDenseJoseph) {
         // P = (I - K H) P (I - K H)^T + K R K^T
         A_.setIdentity();
-        A_.noalias() -= K_ * lin.H;
+        A_.noalias() -= K * lin.H.template block<R, kN>(0, 0, r, kN);
         AP_.noalias() = A_ * P;
         P.noalias() = AP_ * A_.transpose();
-        KR_.noalias() = K_ * lin.R;
-        P.noalias() += KR_ * K_.transpose();
+        const MatNR KR = K * MatRR(lin.R);
+        P.noalias() += KR * K.transpose();
+        symmetrize<kN>(P);
       } else {
         // Joseph expanded: P - K U^T - U K^T + K S K^T  (S = H P H^T + R)
-        KR_.noalias() = K_ * S_;
-        AP_.noalias() = K_ * U_.transpose();
+        const MatNR KS = K * S;
+        AP_.noalias() = K * U.transpose();
         P -= AP_;
         P -= AP_.transpose();
-        P.noalias() += KR_ * K_.transpose();
+        P.template triangularView<Eigen::Lower>() += KS * K.transpose();
+        P.template triangularView<Eigen::StrictlyUpper>() = P.transpose();
       }
-      symmetrize<kN>(P);
     }
     if (!P.allFinite() || !x.allFinite()) {  // never let a NaN through
       if (!x.allFinite()) x.setZero();
@@ -270,13 +300,8 @@ class RbUkf : public UnscentedPropagation<L> {
     return res;
   }
 
- private:
   UpdateForm form_ = UpdateForm::kBlockSparseJoseph;
-  typename T::RowVec y_, v_;
-  typename T::Gain U_, K_, KR_;
-  typename T::Dyn S_;
-  Eigen::Matrix<double, Eigen::Dynamic, kN, 0, kMaxMeasRows, kN> Kt_, Wt_;
-  Eigen::LLT<typename T::Dyn> llt_;
+  typename T::RowVec y_;
   Cov A_ = Cov::Identity(), AP_ = Cov::Zero();
 };
 

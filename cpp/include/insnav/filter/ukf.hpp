@@ -47,13 +47,29 @@ class Ukf : public UnscentedPropagation<L> {
   explicit Ukf(const ImuErrorModel& model, const UtParams& ut = {}) : Base(model, ut) {}
 
   /// Augmented-UT measurement update, eqs. (14)-(21).  gate_chi2 <= 0: no gating.
+  /// 3 and 6 rows run with compile-time sizes (as RbUkf::update does).
   template <class Meas>
   UpdateResult update(const Meas& meas, double gate_chi2) {
-    const LinearMeasurement<L>& lin = meas.linear();
     UpdateResult res;
-    const int r = lin.rows();
+    const int r = meas.linear().rows();
     res.rows = r;
     if (r == 0) return res;
+    if (r == 6) return update_impl<6>(meas, gate_chi2, res);
+    if (r == 3) return update_impl<3>(meas, gate_chi2, res);
+    return update_impl<Eigen::Dynamic>(meas, gate_chi2, res);
+  }
+
+ private:
+  template <int R, class Meas>
+  UpdateResult update_impl(const Meas& meas, double gate_chi2, UpdateResult& res) {
+    constexpr int RM = (R == Eigen::Dynamic) ? kMaxMeasRows : R;
+    using MatRR = Eigen::Matrix<double, R, R, 0, RM, RM>;
+    using MatNR = Eigen::Matrix<double, kN, R, 0, kN, RM>;
+    using MatRN = Eigen::Matrix<double, R, kN, 0, RM, kN>;
+    using VecR = Eigen::Matrix<double, R, 1, 0, RM, 1>;
+    using MatRA = Eigen::Matrix<double, R, kAug, 0, RM, kAug>;
+    const LinearMeasurement<L>& lin = meas.linear();
+    const int r = lin.rows();
     Vec& x = this->x_;
     Cov& P = this->P_;
     const UtWeights<kN>& w = this->w_;
@@ -77,43 +93,45 @@ class Ukf : public UnscentedPropagation<L> {
       X_.col(3 * kN + 1 + i) = X_.col(0) - sqrtQ_.col(i);
     }
     // (15)-(16)
-    Z_.resize(r, kAug);
-    for (int i = 0; i < kAug; ++i) Z_.col(i) = meas.predicted_residual(X_.col(i));
-    zmean_ = w0m * Z_.col(0);
-    zsum_ = Z_.rightCols(kAug - 1).rowwise().sum();
-    zmean_ += wi * zsum_;
+    MatRA Z(r, kAug);
+    for (int i = 0; i < kAug; ++i) Z.col(i) = meas.predicted_residual(X_.col(i));
+    VecR zmean = w0m * Z.col(0);
+    zmean += wi * Z.template rightCols<kAug - 1>().rowwise().sum();
     // deviations (x^ = x: the augmented mean, see the header comment)
     X_.colwise() -= x;
-    Z_.colwise() -= zmean_;
+    Z.colwise() -= zmean;
     // (17)-(18)
-    Pxz_.noalias() = wi * X_.template rightCols<kAug - 1>() * Z_.rightCols(kAug - 1).transpose();
-    Pxz_.noalias() += w0c * X_.col(0) * Z_.col(0).transpose();
-    Pzz_.noalias() = wi * Z_.rightCols(kAug - 1) * Z_.rightCols(kAug - 1).transpose();
-    Pzz_.noalias() += w0c * Z_.col(0) * Z_.col(0).transpose();
-    Pzz_ += lin.R;
-    llt_.compute(Pzz_);
+    MatNR Pxz;
+    Pxz.noalias() = wi * X_.template rightCols<kAug - 1>() * Z.template rightCols<kAug - 1>().transpose();
+    Pxz.noalias() += w0c * X_.col(0) * Z.col(0).transpose();
+    MatRR Pzz;
+    Pzz.noalias() = wi * Z.template rightCols<kAug - 1>() * Z.template rightCols<kAug - 1>().transpose();
+    Pzz.noalias() += w0c * Z.col(0) * Z.col(0).transpose();
+    Pzz += lin.R;
+    Eigen::LLT<MatRR> llt(Pzz);
     this->points_fresh_ = false;
-    if (llt_.info() != Eigen::Success) {
+    if (llt.info() != Eigen::Success) {
       res.cholesky_repairs += 1;
       this->repairs_ += 1;
       return res;
     }
-    y_ = lin.residual - zmean_;
-    v_ = llt_.matrixL().solve(y_);
-    res.nis = v_.squaredNorm();
+    const VecR y = lin.residual - zmean;
+    VecR v = y;
+    llt.matrixL().solveInPlace(v);
+    res.nis = v.squaredNorm();
     if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
       res.rejected_by_gate = true;
       return res;
     }
     // (19) K = P_xz P_zz^-1
-    Kt_ = Pxz_.transpose();
-    llt_.solveInPlace(Kt_);
-    K_ = Kt_.transpose();
-    // (20)-(21)
-    x.noalias() += K_ * y_;
-    KP_.noalias() = K_ * Pzz_;
-    P.noalias() -= KP_ * K_.transpose();
-    symmetrize<kN>(P);
+    MatRN Kt = Pxz.transpose();
+    llt.solveInPlace(Kt);
+    const MatNR K = Kt.transpose();
+    // (20)-(21), the lower triangle then mirrored
+    x.noalias() += K * y;
+    const MatNR KP = K * Pzz;
+    P.template triangularView<Eigen::Lower>() -= KP * K.transpose();
+    P.template triangularView<Eigen::StrictlyUpper>() = P.transpose();
     if (!P.allFinite() || !x.allFinite()) {
       if (!x.allFinite()) x.setZero();
       repair_covariance<kN>(P, this->repair_opt_);
@@ -124,15 +142,8 @@ class Ukf : public UnscentedPropagation<L> {
     return res;
   }
 
- private:
   Cov Qs_ = Cov::Zero(), sqrtQ_ = Cov::Zero();
   AugPoints X_ = AugPoints::Zero();
-  MeasPoints Z_;
-  typename T::RowVec zmean_, zsum_, y_, v_;
-  typename T::Gain Pxz_, K_, KP_;
-  typename T::Dyn Pzz_;
-  Eigen::Matrix<double, Eigen::Dynamic, kN, 0, kMaxMeasRows, kN> Kt_;
-  Eigen::LLT<typename T::Dyn> llt_;
 };
 
 }  // namespace insnav
