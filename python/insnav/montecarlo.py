@@ -13,8 +13,34 @@ backend.
 Backends: a backend maps ``run_one`` over the task list and yields
 ``(index, result)`` pairs; ``"local"`` uses a ``ProcessPoolExecutor``
 (everything sent to workers is a picklable top-level object, so it also works
-with the ``spawn`` start method).  Another backend (e.g. Dask) is added with
-:func:`register_backend` without touching the rest.
+with the ``spawn`` start method), ``"serial"`` runs in this process and
+``"dask"`` submits every run to a Dask distributed cluster.  Another backend
+is added with :func:`register_backend` without touching the rest.
+
+Why Dask distributed (and not Ray) for the distributed backend: it is pure
+Python and pip-installable (``pip install insnav[dask]``) with no daemon or
+compiled runtime to match across machines; ``LocalCluster`` gives real
+scheduler and worker processes on one machine, so the test suite runs the
+same code path as a cluster; the same futures API (``Client.map``,
+``as_completed``) drives a laptop, an existing ``dask-scheduler`` or an HPC
+batch system through dask-jobqueue (``SLURMCluster``, ``PBSCluster``, ...),
+and it is already present in most scientific Python stacks.  Ray would work
+too, but it ships a compiled runtime (raylet, GCS server) as platform-specific
+wheels, needs hand-written launch scripts under SLURM/PBS, and its actors and
+object store bring nothing to what a Monte Carlo campaign is: independent,
+coarse tasks (a few hundred ms to minutes each) with small results, exactly
+the case Dask futures handle without extra machinery.
+
+``backend="dask"``: ``scheduler`` is the scheduler address
+(``"tcp://host:8786"``), a ``distributed.Client`` or a cluster object with a
+``scheduler_address`` (e.g. a dask-jobqueue cluster).  Without it, Dask's own
+``scheduler-address`` setting (environment ``DASK_SCHEDULER_ADDRESS``) is
+used when set; otherwise a ``LocalCluster`` of ``workers`` single-threaded
+processes is started for the campaign and closed afterwards, so
+``backend="dask"`` alone behaves like ``"local"`` (same numbers).  The
+workers need the same insnav version installed (checked before submitting);
+a scenario TOML file is read here and sent as a dictionary, so it need not
+exist on the workers.  Dask is imported only when this backend is used.
 
 Metrics per run and filter (from the IMU-rate real-time output, after the
 first ``skip_s`` seconds): RMSE over time of the north/east position
@@ -116,15 +142,137 @@ def _map_local(fn, tasks, workers):
             yield futs[f], f.result()
 
 
-_BACKENDS = {"local": _map_local, "serial": _map_serial}
+class BackendError(RuntimeError):
+    """A backend cannot run the campaign (scheduler unreachable, workers without insnav, ...)."""
+
+
+class MissingExtraError(ImportError):
+    """An optional dependency of the requested backend is not installed."""
+
+
+def _import_distributed():
+    try:
+        import distributed
+    except ImportError as exc:
+        raise MissingExtraError("backend 'dask' needs Dask distributed, which is not installed: "
+                                "pip install 'insnav[dask]'") from exc
+    return distributed
+
+
+def _insnav_version() -> str:
+    """Run on each Dask worker: the insnav version it imports."""
+    from . import __version__
+
+    return __version__
+
+
+def _check_reachable(address: str) -> None:
+    """Fail fast, with the address in the message, on a malformed address or
+    when nothing listens there (a ``Client`` would wait, then warn at exit)."""
+    import socket
+
+    import dask
+    from dask.utils import parse_timedelta
+    from distributed.comm import get_address_host_port, parse_address
+
+    try:
+        scheme, _ = parse_address(address)
+    except ValueError as exc:
+        raise BackendError(f"bad Dask scheduler address {address!r}: {exc}") from None
+    if scheme not in ("tcp", "tls"):
+        return  # other transports (ucx, inproc, ws) are left to distributed
+    try:
+        host, port = get_address_host_port(address)
+    except ValueError as exc:
+        raise BackendError(f"bad Dask scheduler address {address!r}: {exc}; expected tcp://HOST:PORT") from None
+    timeout = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), default="seconds")
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as exc:
+        raise BackendError(f"no Dask scheduler answers at {address} ({exc}); start one with "
+                           "'dask scheduler' or give the right --scheduler") from None
+
+
+def _map_dask(fn, tasks, workers, scheduler=None, *, info=None):
+    """Dask distributed: one future per run, results as they complete.
+
+    ``scheduler``: address, ``distributed.Client``, an object with a
+    ``scheduler_address`` (a cluster), or None (``DASK_SCHEDULER_ADDRESS``,
+    else a ``LocalCluster`` of ``workers`` processes, closed at the end).
+    ``info`` (a dict) receives the scheduler address and the worker count.
+    """
+    distributed = _import_distributed()
+    import uuid
+
+    import dask
+
+    from . import __version__
+
+    cluster = client = None
+    own_client = True
+    if scheduler is None:
+        scheduler = dask.config.get("scheduler-address", None)
+    try:
+        if isinstance(scheduler, distributed.Client):
+            client, own_client = scheduler, False
+        else:
+            if scheduler is None:
+                cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                   dashboard_address="127.0.0.1:0")
+                address = cluster.scheduler_address
+            else:
+                address = str(getattr(scheduler, "scheduler_address", scheduler))
+                _check_reachable(address)
+            try:
+                client = distributed.Client(address, set_as_default=False)
+            except (OSError, ValueError) as exc:
+                raise BackendError(f"cannot connect to the Dask scheduler at {address}: {exc}") from None
+        try:
+            versions = client.run(_insnav_version)
+        except Exception as exc:  # the workers cannot even import insnav
+            raise BackendError(f"the Dask workers at {client.scheduler.address} cannot run insnav "
+                               f"({type(exc).__name__}: {exc}); install insnav {__version__} on them") from None
+        wrong = {w: v for w, v in versions.items() if v != __version__}
+        if wrong:
+            raise BackendError(f"Dask workers run another insnav version than this one ({__version__}): "
+                               + ", ".join(f"{w}: {v}" for w, v in sorted(wrong.items())))
+        if info is not None:
+            info.update(scheduler=str(client.scheduler.address), workers=len(client.nthreads()))
+        token = uuid.uuid4().hex[:8]
+        keys = [f"insnav-run-{token}-{t.index}" for t in tasks]
+        futures = client.map(fn, tasks, key=keys, pure=False)
+        index = {k: t.index for k, t in zip(keys, tasks)}
+        try:
+            for fut, res in distributed.as_completed(futures, with_results=True, loop=client.loop):
+                yield index[fut.key], res
+        finally:
+            client.cancel(futures)  # no-op once all are done; stops the rest on an error or Ctrl-C
+    finally:
+        if client is not None and own_client:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+_BACKENDS = {"local": _map_local, "serial": _map_serial, "dask": _map_dask}
 
 
 def register_backend(name: str, mapper) -> None:
     """Add a backend: ``mapper(run_one, tasks, workers)`` yields ``(task.index, result)``
-    for every task (any order).  For example a Dask backend submits
-    ``run_one`` for each task to a ``distributed.Client`` and yields from
-    ``as_completed``."""
+    for every task (any order).  A mapper that also takes a ``scheduler``
+    keyword receives :func:`montecarlo`'s ``scheduler`` argument when one is
+    given (see the built-in ``"dask"`` backend, :func:`_map_dask`)."""
     _BACKENDS[name] = mapper
+
+
+def _takes_scheduler(mapper) -> bool:
+    import inspect
+
+    try:
+        params = inspect.signature(mapper).parameters
+    except (TypeError, ValueError):  # pragma: no cover (builtins)
+        return False
+    return "scheduler" in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
 
 
 def default_workers() -> int:
@@ -191,6 +339,7 @@ class MonteCarloResult:
     elapsed_s: float = 0.0
     workers: int = 1
     backend: str = "local"
+    scheduler: str = ""       # Dask scheduler address for backend "dask", else ""
 
     def values(self, filt: str, metric: str) -> np.ndarray:
         """The metric over runs for one filter."""
@@ -225,7 +374,7 @@ def _summarise(per_run, filters) -> dict:
 
 
 def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed: int = 0, workers: int | None = None,
-               backend: str = "local", *, skip_s: float = 5.0, progress: bool | None = None,
+               backend: str = "local", *, scheduler=None, skip_s: float = 5.0, progress: bool | None = None,
                **run_kwargs) -> MonteCarloResult:
     """Run ``runs`` Monte Carlo realisations of ``scenario`` through ``filters``.
 
@@ -239,9 +388,15 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
     seed : int
         Master seed; run i uses ``SeedSequence(seed).spawn(runs)[i]``.
     workers : int, optional
-        Local processes (default: the CPUs available); the results do not
-        depend on it.
-    backend : {'local', 'serial'} or a registered name
+        Local processes, or the size of the ``LocalCluster`` that
+        ``backend="dask"`` starts without a scheduler (default: the CPUs
+        available); ignored with a scheduler.  The results do not depend on it.
+    backend : {'local', 'serial', 'dask'} or a registered name
+        ``'dask'`` needs ``pip install insnav[dask]``; see the module docstring.
+    scheduler : str, distributed.Client or cluster, optional
+        Where ``backend="dask"`` runs: ``"tcp://host:8786"``, a client, or a
+        cluster with a ``scheduler_address``.  None: ``DASK_SCHEDULER_ADDRESS``
+        if set, else a ``LocalCluster`` of ``workers`` processes for this call.
     skip_s : float
         Seconds at the start excluded from the metrics (initial convergence).
     progress : bool, optional
@@ -262,38 +417,92 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
         raise ValueError(f"montecarlo: runs must be >= 1, got {runs}")
     if backend not in _BACKENDS:
         raise ValueError(f"montecarlo: unknown backend {backend!r}; available: {', '.join(sorted(_BACKENDS))}")
+    mapper = _BACKENDS[backend]
+    options = {}
+    if scheduler is not None:
+        if not _takes_scheduler(mapper):
+            raise ValueError(f"montecarlo: backend {backend!r} takes no scheduler (use backend='dask')")
+        options["scheduler"] = scheduler
+    if mapper is _map_dask:
+        options["info"] = {}  # filled with the scheduler address and worker count
     workers = default_workers() if workers is None else int(workers)
-    tasks = [Task(i, scenario, filters, s, q, float(skip_s), tuple(sorted(run_kwargs.items())))
+    if workers < 1:
+        raise ValueError(f"montecarlo: workers must be >= 1, got {workers}")
+    from .sim.scenario import load_scenario, resolve_raw
+
+    load_scenario(scenario)  # a bad scenario fails here, once, not in every worker
+    sent = scenario
+    if backend == "dask" and isinstance(scenario, (str, os.PathLike)) and (
+            str(scenario).endswith(".toml") or os.path.isfile(scenario)):
+        sent, _ = resolve_raw(scenario)  # the file need not exist on the workers
+    tasks = [Task(i, sent, filters, s, q, float(skip_s), tuple(sorted(run_kwargs.items())))
              for i, (s, q) in enumerate(run_seeds(seed, runs))]
     results = [None] * runs
     bar = _Progress(runs, progress, f"{scenario} x {','.join(filters)}")
     t0 = time.perf_counter()
+    stream = mapper(run_one, tasks, workers, **options)
     try:
-        for i, r in _BACKENDS[backend](run_one, tasks, workers):
+        for i, r in stream:
             results[i] = r
             bar.update()
     finally:
         bar.close()
+        if hasattr(stream, "close"):
+            stream.close()  # a generator backend releases its pool / cluster now, even on an error
+    if any(r is None for r in results):
+        missing = [i for i, r in enumerate(results) if r is None]
+        raise BackendError(f"montecarlo: backend {backend!r} returned no result for runs {missing[:10]}")
     name = scenario if isinstance(scenario, str) else str(getattr(scenario, "name", scenario))
+    info = options.get("info", {})
     return MonteCarloResult(scenario=str(name), filters=filters, runs=runs, seed=seed, per_run=results,
                             summary=_summarise(results, filters), elapsed_s=time.perf_counter() - t0,
-                            workers=workers, backend=backend)
+                            workers=int(info.get("workers", workers)), backend=backend,
+                            scheduler=str(info.get("scheduler", "")))
 
 
 # --- command line --------------------------------------------------------------
 def _compare_main(args) -> int:
+    from .cli import UserError
+
+    backend = args.backend or ("dask" if args.scheduler else "local")
+    if args.scheduler and backend != "dask":
+        raise UserError(f"--scheduler needs --backend dask (got --backend {backend})")
     kw = {}
     if args.delay_p:
-        kw["delay_p"] = [float(x) for x in args.delay_p.split(",")]
-    res = montecarlo(args.scenario, args.filters, runs=args.runs, seed=args.seed, workers=args.workers,
-                     backend=args.backend, skip_s=args.skip_s, **kw)
+        try:
+            kw["delay_p"] = [float(x) for x in args.delay_p.split(",")]
+        except ValueError:
+            raise UserError(f"--delay-p: expected comma-separated probabilities, got {args.delay_p!r}") from None
+    try:
+        res = montecarlo(args.scenario, args.filters, runs=args.runs, seed=args.seed, workers=args.workers,
+                         backend=backend, scheduler=args.scheduler, skip_s=args.skip_s, **kw)
+    except (BackendError, MissingExtraError) as exc:
+        raise UserError(str(exc)) from None
     if args.json:
         print(res.to_json(indent=None if args.compact else 2))
     else:
-        print(f"{res.scenario}: {res.runs} Monte Carlo runs, seed {res.seed}, {res.workers} worker(s), "
-              f"{res.elapsed_s:.1f} s; mean over runs (std) after the first {args.skip_s:g} s")
+        where = f"Dask scheduler {res.scheduler}" if res.scheduler else backend
+        print(f"{res.scenario}: {res.runs} Monte Carlo runs, seed {res.seed}, {res.workers} worker(s) ({where}), "
+              f"{res.elapsed_s:.1f} s; mean over runs (std) after the first {args.skip_s:g} s; "
+              "position RMSE [m], velocity RMSE [m/s]")
         print(res.table())
     return 0
+
+
+EXAMPLES = """examples:
+  insnav compare seed001-high --filters kf,rdkf,exact --runs 100
+  insnav compare my_scenario.toml --filters ekf,rbukf --runs 20 --json > mc.json
+  insnav compare seed001-high --runs 1000 --backend dask --scheduler tcp://head-node:8786
+
+Reported per filter: the mean over runs (and its standard deviation) of the RMSE over time
+of the north/east position error [m] and velocity error [m/s], after the first --skip-s
+seconds.  Run i always uses the seeds numpy.random.SeedSequence(SEED).spawn(RUNS)[i], so
+the numbers do not depend on --workers or --backend.
+
+--backend dask (pip install 'insnav[dask]') sends each run to a Dask distributed cluster:
+--scheduler ADDRESS connects to a running scheduler (its workers need the same insnav
+version); without it DASK_SCHEDULER_ADDRESS is used when set, otherwise a local cluster
+of --workers processes is started for the campaign."""
 
 
 def add_compare_parser(sub) -> None:
@@ -303,18 +512,23 @@ def add_compare_parser(sub) -> None:
     p = sub.add_parser(
         "compare",
         help="Monte Carlo comparison of filters on a scenario",
-        description="Simulate a scenario many times and compare filters (RMSE of N/E position and velocity).\n"
-        "Example: insnav compare seed001-high --filters kf,rdkf,exact --runs 100",
+        description="Simulate a scenario many times and compare filters (RMSE of the N/E position [m] "
+        "and velocity [m/s]).",
+        epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("scenario", help="preset name or scenario TOML file")
     p.add_argument("--filters", default="kf,rdkf,exact", help="comma-separated (default: %(default)s)")
     p.add_argument("--runs", type=int, default=100, help="Monte Carlo runs (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default: %(default)s)")
-    p.add_argument("--workers", type=int, default=None, help="local processes (default: all CPUs)")
-    p.add_argument("--backend", default="local", help="local (default) or a registered backend")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local processes, or the size of the local Dask cluster (default: all CPUs)")
+    p.add_argument("--backend", default=None,
+                   help=f"one of {', '.join(sorted(_BACKENDS))} (default: local; dask with --scheduler)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (implies --backend dask)")
     p.add_argument("--skip-s", dest="skip_s", type=float, default=5.0,
-                   help="seconds excluded at the start (default: %(default)s)")
+                   help="time excluded at the start [s] (default: %(default)s)")
     p.add_argument("--delay-p", dest="delay_p", default=None,
                    help="rdkf delay probabilities, e.g. 0.7,0.3 (default: the scenario's)")
     p.add_argument("--json", action="store_true", help="print JSON (per-run metrics and summary)")
