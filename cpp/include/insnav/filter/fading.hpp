@@ -83,7 +83,8 @@ struct FadingWorkspace {
   HMat Ht, HtQ;
   RowVec g;
   Dyn R;
-  Eigen::LLT<Dyn> llt;
+  // factorised once (0 x 0) so a copied workspace never reads Eigen's uninitialised info()
+  Eigen::LLT<Dyn> llt{Dyn(0, 0)};
   StateCov<L> G;
 };
 

@@ -261,7 +261,7 @@ class UkfKernel {
   typename T::Gain Pxz_, K_, KP_;
   typename T::Dyn Pzz_;
   Eigen::Matrix<double, Eigen::Dynamic, kN, 0, kMaxMeasRows, kN> Kt_;
-  Eigen::LLT<typename T::Dyn> llt_;
+  Eigen::LLT<typename T::Dyn> llt_{typename T::Dyn(0, 0)};  // initialised: particles are copied on resampling
   FadingWorkspace<L> fws_;
   double c_ = 0.0;
 };
