@@ -129,7 +129,9 @@ def test_constellation_nominal_and_broadcast(brdc):
     nom = Constellation.nominal()
     from insnav.gnss._nominal_elements import T_REF_GPS_S
     s = nom.sat_states(T_REF_GPS_S)
-    assert s.prn.size == 32 and s.r_e.shape == (32, 3)
+    assert s.prn.size == 31 and s.r_e.shape == (31, 3)   # PRN 11 left out (duplicate of PRN 10's elements)
+    d = np.linalg.norm(s.r_e[:, None, :] - s.r_e[None, :, :], axis=-1) + np.eye(31) * 1e9
+    assert d.min() > 1e5                                    # no two satellites at one point in the sky
     b = Constellation.from_rinex_nav(EPH / "brdc1180.21n").sat_states(T_REF_GPS_S, s.prn)
     idx_nom = np.argsort(s.prn)
     np.testing.assert_allclose(s.r_e, b.r_e[idx_nom], atol=1e-6)  # same elements at the reference time
