@@ -35,19 +35,32 @@ def ds6():
 
 
 def test_consistency_6plus_sats(ds6):
+    """rms(error / sigma) in [0.5, 1.5], pooled over five simulated runs.
+
+    One run is not enough: its slowly varying attitude error is nearly one
+    sample, and single-run ratios measured 0.1 .. 1.7 for pitch across seeds
+    7..11 while the pooled ratios were 0.7 .. 1.0.
+    """
     assert np.min(np.bincount(np.searchsorted(np.unique(ds6.gnss_raw.t), ds6.gnss_raw.t))) >= 6
-    sol = run_tight(ds6, RunConfig(filter="ekf", init_seed=3))
-    e = errors(sol, ds6.truth)
-    w = e["t"] > 60.0  # after the initial transient
-    ratios = []
-    for key, sk in (("pos_n_m", "sigma_pos_n_m"), ("vel_n_mps", "sigma_vel_n_mps"), ("att_deg", "sigma_att_deg")):
-        r = rms(e[key][w] / e[sk][w])
-        ratios.append(r)
-        assert np.all((r > 0.5) & (r < 1.5)), (key, r)
-    assert sol.summary["updates"] == len(sol.gnss_t)
-    nis = sol.nis / sol.rows
-    assert 0.7 < np.nanmean(nis) < 1.3
-    assert rms(np.linalg.norm(e["pos_n_m"][w], axis=1)) < 3.0
+    sc = _short(max_sats=8, sigma_pr_m=3.0, sigma_prr_mps=0.05)
+    pooled = {"pos": [], "vel": [], "att": []}
+    nis_all, pos_err = [], []
+    for seed in (7, 8, 9, 10, 11):
+        ds = ds6 if seed == 7 else sim.simulate(sc, seed=seed)
+        sol = run_tight(ds, RunConfig(filter="ekf", init_seed=seed))
+        e = errors(sol, ds.truth)
+        w = e["t"] > 60.0  # after the initial transient
+        for name, key, sk in (("pos", "pos_n_m", "sigma_pos_n_m"), ("vel", "vel_n_mps", "sigma_vel_n_mps"),
+                              ("att", "att_deg", "sigma_att_deg")):
+            pooled[name].append(e[key][w] / e[sk][w])
+        assert sol.summary["updates"] == len(sol.gnss_t)
+        nis_all.append(sol.nis / sol.rows)
+        pos_err.append(np.linalg.norm(e["pos_n_m"][w], axis=1))
+    for name, chunks in pooled.items():
+        r = rms(np.concatenate(chunks))
+        assert np.all((r > 0.5) & (r < 1.5)), (name, r)
+    assert 0.7 < np.nanmean(np.concatenate(nis_all)) < 1.3
+    assert rms(np.concatenate(pos_err)) < 3.0
 
 
 @pytest.mark.parametrize("n_sats", [0, 1, 2, 3])
