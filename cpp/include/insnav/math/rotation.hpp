@@ -81,8 +81,10 @@ inline Mat3 dcm_from_euler(const Vec3& rpy) {
 inline Vec3 euler_from_dcm(const Mat3& C) {
   const double cp = std::hypot(C(2, 1), C(2, 2));
   const double pitch = std::atan2(-C(2, 0), cp);
-  const double roll = cp > 1e-12 ? std::atan2(C(2, 1), C(2, 2)) : 0.0;
-  const double sr = std::sin(roll), cr = std::cos(roll);
+  const bool locked = !(cp > 1e-12);
+  const double roll = locked ? 0.0 : std::atan2(C(2, 1), C(2, 2));
+  // sin/cos of roll straight from the DCM (no trig): C_21 = sr cp, C_22 = cr cp
+  const double sr = locked ? 0.0 : C(2, 1) / cp, cr = locked ? 1.0 : C(2, 2) / cp;
   const double yaw = std::atan2(sr * C(0, 2) - cr * C(0, 1), cr * C(1, 1) - sr * C(1, 2));
   return Vec3(roll, pitch, yaw);
 }
