@@ -49,3 +49,68 @@ class rotation:
     def rotvec_from_quat(wxyz: npt.ArrayLike) -> np.ndarray: ...
     @staticmethod
     def dcm_from_rotvec(phi: npt.ArrayLike) -> np.ndarray: ...
+
+# --- closed-loop runs (the whole IMU loop in C++, GIL released) --------------
+# All inputs SI (rad, m, m/s, s); results are dicts of numpy arrays plus counts.
+# The public wrappers document every key: insnav.engine.run (loose),
+# insnav.tight.run_tight, insnav.delay.run_delayed, insnav.particle.
+
+def run_loose(
+    filter: str,  # "ekf" | "rbukf" | "ukf"
+    layout: int,  # 15 or 21 states
+    t: npt.ArrayLike,  # (N,) s
+    dtheta_b: npt.ArrayLike,  # (N, 3) rad
+    dv_b: npt.ArrayLike,  # (N, 3) m/s
+    gnss: npt.ArrayLike,  # (M, 13): t, lat, lon, h, vN, vE, vD, sigma N/E/D [m], sigma vN/vE/vD [m/s]
+    init: npt.ArrayLike,  # (10,): t0, lat, lon, h, vN, vE, vD, roll, pitch, yaw
+    P0: npt.ArrayLike,  # (layout, layout)
+    imu_correction: npt.ArrayLike,  # (12,): acc bias, gyro bias, acc scale, gyro scale
+    imu_model: dict[str, Any],
+    config: dict[str, Any],
+) -> dict[str, Any]: ...
+def run_tight(
+    filter: str,  # "ekf" | "rbukf" | "ukf" (Layout17)
+    t: npt.ArrayLike,
+    dtheta_b: npt.ArrayLike,
+    dv_b: npt.ArrayLike,
+    epoch_t: npt.ArrayLike,  # (E,) s
+    epoch_start: npt.ArrayLike,  # (E + 1,) first satellite row of each epoch
+    sats: npt.ArrayLike,  # (S, k) per-satellite rows, see insnav.tight.TightInputs
+    init: npt.ArrayLike,
+    P0: npt.ArrayLike,
+    imu_correction: npt.ArrayLike,
+    clock0: npt.ArrayLike,  # (2,) clock bias [m], drift [m/s]
+    imu_model: dict[str, Any],
+    config: dict[str, Any],
+) -> dict[str, Any]: ...
+def run_delay(
+    method: str,  # "rdkf" | "exact"
+    layout: int,
+    t: npt.ArrayLike,
+    dtheta_b: npt.ArrayLike,
+    dv_b: npt.ArrayLike,
+    gnss: npt.ArrayLike,
+    epochs: npt.ArrayLike,
+    init: npt.ArrayLike,
+    P0: npt.ArrayLike,
+    imu_correction: npt.ArrayLike,
+    imu_model: dict[str, Any],
+    config: dict[str, Any],
+    delay_p: npt.ArrayLike,  # (s + 1,) delay probabilities p_0..p_s
+) -> dict[str, Any]: ...
+def run_tight_particle(
+    filter: str,  # "upf" | "pf" | "fukf" (Layout20)
+    t: npt.ArrayLike,
+    dtheta_b: npt.ArrayLike,
+    dv_b: npt.ArrayLike,
+    epoch_t: npt.ArrayLike,
+    epoch_start: npt.ArrayLike,
+    sats: npt.ArrayLike,
+    init: npt.ArrayLike,
+    P0: npt.ArrayLike,
+    imu_correction: npt.ArrayLike,
+    clock0: npt.ArrayLike,
+    imu_model: dict[str, Any],
+    config: dict[str, Any],
+    particle: dict[str, Any],
+) -> dict[str, Any]: ...
