@@ -2,11 +2,13 @@
 
 Each area registers its subcommand through an ``add_*_parser(subparsers)``
 function; user errors (bad files, keys, values) exit with status 2 and a
-one-line message naming the problem, without a traceback.
+one-line message naming the problem, without a traceback.  Set
+``INSNAV_DEBUG=1`` to get the traceback instead.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from . import __version__
@@ -22,6 +24,11 @@ def _add_demo_parser(sub) -> None:
         help="run the built-in demonstration (the README's main job)",
         description="Simulate a built-in scenario, run the filters and print a comparison table.\n"
         "Example: insnav demo --out insnav-demo",
+        epilog="The table gives the run time [s], the RMS position error N/E/D [m] and attitude error\n"
+        "roll/pitch/yaw [deg], the largest error after the GPS outage and the reconvergence\n"
+        "time [s]; report.md and the error plots (with 3-sigma bounds) go to --out.\n"
+        "seed000-sim: 150 s, 200 Hz MEMS IMU, 1 Hz GPS lost 50-90 s.  Without --quick also\n"
+        "seed001-high (delayed GNSS) and seed003-1sat (loose vs tight), about a minute.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", default="insnav-demo", help="report folder (default: %(default)s)")
@@ -35,6 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
         prog="insnav",
         description="insnav: GNSS/INS integrated navigation (EKF, RB-UKF, UKF, random-delay and particle filters).\n"
         "Frames: NED navigation, FRD body, 3-2-1 Euler angles. Units are in every column name.",
+        epilog="examples:\n"
+        "  insnav demo --quick                                  # the main job in a few seconds\n"
+        "  insnav simulate seed000-sim --out run1               # 150 s at 200 Hz -> run1/*.csv\n"
+        "  insnav run run1 --filter rbukf --out run1/sol.csv\n"
+        "  insnav evaluate run1/sol.csv run1 --outages 50:90    # errors in m, m/s, deg; times in s\n"
+        "Each command has its own --help with examples.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"insnav {__version__}")
@@ -68,8 +81,11 @@ def main(argv=None) -> int:
         return 0
     try:
         rc = args.func(args)
-    except (UserError, FileNotFoundError, ValueError, KeyError) as exc:
+    except (UserError, OSError, ValueError, KeyError) as exc:  # OSError: existing/unwritable paths too
+        if os.environ.get("INSNAV_DEBUG"):
+            raise
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        msg = "; ".join(line.strip() for line in str(msg).splitlines() if line.strip())
         print(f"insnav {args.command}: error: {msg}", file=sys.stderr)
         return 2
     return int(rc or 0)
