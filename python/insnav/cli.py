@@ -28,7 +28,7 @@ def _add_demo_parser(sub) -> None:
         "roll/pitch/yaw [deg], the largest error after the GPS outage and the reconvergence\n"
         "time [s]; report.md and the error plots (with 3-sigma bounds) go to --out.\n"
         "seed000-sim: 150 s, 200 Hz MEMS IMU, 1 Hz GPS lost 50-90 s.  Without --quick also\n"
-        "seed001-high (delayed GNSS) and seed003-1sat (loose vs tight), about a minute.",
+        "seed001-high (delayed GNSS) and seed003-1sat (loose vs tight): about 10 s in all.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--out", default="insnav-demo", help="report folder (default: %(default)s)")
