@@ -152,14 +152,9 @@ def test_version():
 
 
 UNIT = re.compile(r"\[(?:s|m|m/s|deg|Hz|1/s)\]|\bm/s\b|\bdeg/h\b")
-NEEDS_SIM_CLI = pytest.mark.xfail(
-    reason="python/insnav/sim/cli.py (not in this change): its --help shows no unit"
-           " (simulate) / no example and no unit (scenarios); reported in issue 8", strict=False)
-
-
 @pytest.mark.parametrize("command", [
     "", "demo", "run", "evaluate", "compare", "bench",
-    pytest.param("simulate", marks=NEEDS_SIM_CLI), pytest.param("scenarios", marks=NEEDS_SIM_CLI)])
+    "simulate", "scenarios"])
 def test_help_shows_an_example_and_units(command):
     rc, out, _ = _call([command, "--help"] if command else ["--help"])
     assert rc == 0
@@ -353,8 +348,6 @@ def test_bad_config_is_one_line_naming_the_key(dataset, work, toml, needles):
     assert not (work / "never.csv").exists()
 
 
-@pytest.mark.xfail(reason="python/insnav/config.py (not in this change): init_seed is not range/type-checked, "
-                          "numpy's message does not name the key; reported in issue 8", strict=False)
 def test_bad_init_seed_names_the_key(dataset, work):
     cfg = work / "seed.toml"
     cfg.write_text("init_seed = -1\n", encoding="utf-8")

@@ -147,6 +147,9 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not math.isfinite(v):
                 bad(key, v, "a finite number")
+        if int(self.init_seed) != self.init_seed or self.init_seed < 0:
+            bad("init_seed", self.init_seed, "an integer >= 0")
+        self.init_seed = int(self.init_seed)
         for key in ("init_error", "use_position", "use_velocity"):
             if not isinstance(getattr(self, key), (bool, np.bool_)):
                 bad(key, getattr(self, key), "true or false")

@@ -14,6 +14,7 @@ def add_simulate_parser(subparsers) -> None:
         description="Simulate a preset (see 'insnav scenarios') or a scenario TOML file and write\n"
         "a dataset directory (imu.csv, gnss.csv, truth.csv, imu_errors.csv, gnss_raw.csv for\n"
         "tight presets, scenario.toml, dataset.json) that 'insnav run' reads.\n"
+        "Files carry the unit in every column name: t_s [s], dtheta_x_rad, dv_x_mps [m/s], lat_deg, h_m [m].\n"
         "Example: insnav simulate seed000-sim --seed 1 --out data/seed000-sim",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", help="preset name or path to a scenario .toml file")
@@ -26,7 +27,10 @@ def add_simulate_parser(subparsers) -> None:
 def add_scenarios_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "scenarios", help="list the preset scenarios",
-        description="List the preset scenarios shipped with insnav.  With NAME, print its TOML.")
+        description="List the preset scenarios shipped with insnav (name, duration [s], what it is).\n"
+        "With NAME, print its TOML (units in every key: lat_deg, duration_s, gyro_bias_deg_per_h, ...).\n"
+        "Example: insnav scenarios seed000-sim > my-scenario.toml",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("name", nargs="?", help="print this preset's TOML file")
     p.set_defaults(func=cmd_scenarios)
 
