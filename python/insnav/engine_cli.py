@@ -14,6 +14,15 @@ EXAMPLES = """examples:
   insnav run run3 --filter rbukf --out run3/solution.csv
   insnav run run3 --coupling tight --filter ekf --config my.toml --out sol.csv
   insnav run --format kfgins --config kf-gins.yaml [--imu IMU.txt --gnss GNSS.txt] --out sol.csv
+  insnav run --format rinex --obs F.obs --nav F.nav --imu IMU.csv [--imu-tag IMU.csv.tag] \
+             [--config run.toml] --coupling tight --filter ekf --out sol.csv
+
+--format rinex: real GPS L1 C/A data (RINEX 2/3 obs + nav, LNAV ephemerides) and an IMU CSV;
+the [rinex] table of --config says how to read the IMU file (columns, units g|mps2 and
+dps|rps, rates or increments, time gps_s|gps_sow|gpst_unix_s or an IMU tick counter with an
+RTKLIB str2str .tag file), the mounting rotation and lever arm and the initial heading
+(docs/formats.md).  Times in the solution are then GPS seconds of week, so
+`insnav evaluate sol.csv REFERENCE.pos` compares it with an RTKLIB solution.
 
 The solution CSV has the columns t, lat_deg, lon_deg, h_m, vn, ve, vd (m/s NED),
 roll_deg, pitch_deg, yaw_deg, their 1-sigma (sigma_n_m ... sigma_yaw_deg) and the
@@ -23,15 +32,20 @@ with --config.  Config keys (TOML, units in the names): see docs/formats.md."""
 
 
 def add_run_parser(sub) -> None:
-    p = sub.add_parser("run", help="run a filter over a dataset (insnav directory or KF-GINS files)",
+    p = sub.add_parser("run", help="run a filter over a dataset (insnav directory, KF-GINS files or RINEX + IMU CSV)",
                        description="Run a closed-loop GNSS/INS filter.", epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", nargs="?", help="dataset directory written by `insnav simulate` (insnav format)")
-    p.add_argument("--format", choices=("insnav", "kfgins"), default="insnav")
+    p.add_argument("--format", choices=("insnav", "kfgins", "rinex"), default="insnav")
     p.add_argument("--filter", default=None, help=f"one of {', '.join(FILTERS)} (default: config or ekf)")
     p.add_argument("--coupling", choices=("loose", "tight"), default=None)
-    p.add_argument("--config", help="insnav TOML run configuration, or the KF-GINS YAML with --format kfgins")
-    p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath)")
+    p.add_argument("--config", help="insnav TOML run configuration (with a [rinex] table for --format rinex), "
+                   "or the KF-GINS YAML with --format kfgins")
+    p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath); with --format rinex the IMU CSV")
+    p.add_argument("--obs", help="RINEX 2/3 observation file (--format rinex)")
+    p.add_argument("--nav", help="RINEX 2/3 GPS navigation file (--format rinex)")
+    p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex with a tick_ms "
+                   "column; default IMU.tag)")
     p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", required=True, help="solution CSV to write")
@@ -71,11 +85,38 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _rinex_table_toml(opt) -> str:
+    """The ``[rinex]`` table of the resolved configuration (loader options)."""
+    import dataclasses
+
+    lines = ["\n[rinex]"]
+    for f in dataclasses.fields(opt):
+        v = getattr(opt, f.name)
+        if v is None:
+            continue
+        if isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
+            lines.append(f"{f.name} = [" + ", ".join(_toml_value(x) for x in v) + "]")
+        else:
+            lines.append(f"{f.name} = {_toml_value(v)}")
+    return "\n".join(lines) + "\n"
+
+
 def cmd_run(args) -> int:
     import insnav
 
+    rinex_opts = None
     try:
-        if args.format == "kfgins":
+        if args.format == "rinex":
+            missing = [n for n in ("obs", "nav", "imu") if not getattr(args, n)]
+            if missing:
+                raise UserError("--format rinex needs " + ", ".join(f"--{n}" for n in missing))
+            if args.dataset:
+                raise UserError("--format rinex reads --obs/--nav/--imu; do not give a dataset directory")
+            from .io.rinex_dataset import load_rinex_run
+
+            ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=args.imu_tag)
+            rinex_opts = ds.options
+        elif args.format == "kfgins":
             if not args.config:
                 raise UserError("--format kfgins needs --config KF-GINS.yaml")
             from .io.kfgins_dataset import load_kfgins
@@ -96,7 +137,10 @@ def cmd_run(args) -> int:
     out = Path(args.out)
     sol.save_csv(out)
     cfg.filter = sol.summary.get("filter", cfg.filter)
-    atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), resolved_config_toml(cfg))
+    text = resolved_config_toml(cfg)
+    if rinex_opts is not None:
+        text += _rinex_table_toml(rinex_opts)
+    atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text)
     s = sol.summary
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling, "
           f"{s.get('updates')} updates, {s.get('rejected', 0)} rejected, "

@@ -16,8 +16,12 @@ from .analysis import errors, reconvergence_time, rms
 EXAMPLES = """examples:
   insnav evaluate run3/solution.csv run3/truth.csv --outages 50:90
   insnav evaluate sol.csv ../shared/data/kfgins/sim/truth-sim.nav.xz --json
+  insnav evaluate walk_sol.csv ../shared/data/rtklibexplorer_walk_0827/raw/gnss_1730_sf.pos --quality 1
 
-TRUTH may be a truth.csv (insnav dataset), a dataset directory, or a KF-GINS .nav(.xz).
+TRUTH may be a truth.csv (insnav dataset), a dataset directory, a KF-GINS .nav(.xz), or an
+RTKLIB .pos solution (GPST; compared at its own epochs, the solution t being GPS seconds of
+week as written by `insnav run --format rinex`; the .pos is the antenna, the solution the IMU
+centre: the lever arm is not applied; no attitude, so no attitude rows).
 Reported: RMS and max of the N/E/D position [m], velocity [m/s] and roll/pitch/yaw [deg] errors,
 horizontal and 3-D position; for each outage the max horizontal error inside it and in the
 60 s after it and the reconvergence time (first time after the outage from which the
@@ -42,8 +46,23 @@ def _read_solution(path):
     return s
 
 
-def _read_truth(path):
+def _read_truth(path, quality=None):
     p = Path(path)
+    if p.suffix == ".pos":
+        from .gnss.gpstime import SECONDS_PER_WEEK
+        from .gnss.measurements import read_rtklib_pos
+        from .io.rinex_dataset import rtklib_truth
+
+        ref = read_rtklib_pos(p)
+        if len(ref.t_gps_s) == 0:
+            raise ValueError(f"{p}: no solution records")
+        week0 = SECONDS_PER_WEEK * np.floor(ref.t_gps_s[0] / SECONDS_PER_WEEK)
+        t = rtklib_truth(ref, week0, quality)
+        if len(t.t) == 0:
+            raise ValueError(f"{p}: no records with Q <= {quality}")
+        return t
+    if quality is not None:
+        raise ValueError("--quality applies to an RTKLIB .pos truth only")
     if p.is_dir():
         from .dataset import load_dataset
 
@@ -80,6 +99,8 @@ def evaluate(solution, truth, outages=()) -> dict:
     hz = np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])
     out = {"samples": int(len(e["t"])), "rms": {}, "max": {}, "consistency": {}}
     for k in ("pos_n_m", "vel_n_mps", "att_deg"):
+        if not np.isfinite(e[k]).any():
+            continue  # the truth lacks it (e.g. no attitude in an RTKLIB reference)
         out["rms"][k] = rms(e[k]).tolist()
         out["max"][k] = np.abs(e[k]).max(axis=0).tolist()
         sk = "sigma_" + k
@@ -111,6 +132,8 @@ def add_evaluate_parser(sub) -> None:
     p.add_argument("truth")
     p.add_argument("--outages", default="", help="comma-separated start:end [s], e.g. 50:90,200:240")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--quality", type=int, default=None,
+                   help="RTKLIB .pos truth: use records with Q <= this (1 fix only, 2 fix and float)")
     p.set_defaults(func=cmd_evaluate)
 
 
@@ -127,11 +150,37 @@ def _parse_outages(text: str):
     return out
 
 
+def _solution_at(sol, t):
+    """The solution interpolated linearly to the times ``t`` inside its span (yaw unwrapped)."""
+    t = np.asarray(t, float)
+    t = t[(t >= sol.t[0]) & (t <= sol.t[-1])]
+    if t.size == 0:
+        raise ValueError(f"no truth epoch inside the solution's time span {sol.t[0]:.3f}..{sol.t[-1]:.3f} s "
+                         "(a .pos reference needs solution times in GPS seconds of week)")
+    out = _Sol()
+
+    def at(x):
+        x = np.asarray(x, float)
+        return np.interp(t, sol.t, x) if x.ndim == 1 else np.column_stack(
+            [np.interp(t, sol.t, x[:, i]) for i in range(x.shape[1])])
+
+    out.t = t
+    for k in ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "sigma_pos_n_m", "sigma_vel_n_mps",
+              "sigma_att_deg"):
+        setattr(out, k, at(getattr(sol, k)))
+    out.yaw_deg = (at(np.rad2deg(np.unwrap(np.deg2rad(sol.yaw_deg)))) + 180.0) % 360.0 - 180.0
+    return out
+
+
 def cmd_evaluate(args) -> int:
     for p in (args.solution, args.truth):
         if not Path(p).exists():
             raise FileNotFoundError(f"not found: {p}")
-    res = evaluate(_read_solution(args.solution), _read_truth(args.truth), _parse_outages(args.outages))
+    sol = _read_solution(args.solution)
+    truth = _read_truth(args.truth, args.quality)
+    if hasattr(truth, "quality"):  # a 4 Hz reference, possibly with gaps: compare at its epochs
+        sol = _solution_at(sol, truth.t)
+    res = evaluate(sol, truth, _parse_outages(args.outages))
     if args.json:
         print(json.dumps(res, indent=2))
         return 0
@@ -139,6 +188,8 @@ def cmd_evaluate(args) -> int:
              "att_deg": ("attitude", "deg", "roll/pitch/yaw")}
     print(f"{res['samples']} samples compared")
     for k, (n, u, ax) in names.items():
+        if k not in res["rms"]:
+            continue
         c = res["consistency"].get(k)
         cs = f"   rms(err/sigma) {'/'.join(f'{x:.2f}' for x in c)}" if c else ""
         print(f"{n:9s} [{u}] {ax}: RMS {'/'.join(f'{x:.4g}' for x in res['rms'][k])}"

@@ -336,8 +336,9 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     if inputs is None:
         if getattr(dataset, "gnss_raw", None) is None:
             raise ValueError(f"dataset {getattr(dataset, 'name', '')!r} has no raw GNSS data (gnss_raw); "
-                             "tight coupling needs pseudoranges (simulate a preset with [gnss_raw], "
-                             "or load RINEX with insnav.io.rinex_dataset)")
+                             "tight coupling needs pseudoranges (simulate a preset with [gnss_raw], or load "
+                             "RINEX + IMU files with insnav.io.rinex_dataset.load_rinex / "
+                             "`insnav run --format rinex`)")
         s0 = dataset.initial
         r0 = earth.geodetic_to_ecef(s0.lat_deg * DEG, s0.lon_deg * DEG, s0.h_m)
         inputs = tight_inputs_from_raw(dataset.gnss_raw, elevation_mask_deg=elevation_mask_deg,
