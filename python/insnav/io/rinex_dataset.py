@@ -106,7 +106,7 @@ __all__ = ["ImuFileError", "ImuCsvFormat", "Str2strTag", "read_str2str_tag", "re
 
 RAD2DEG = 180.0 / math.pi
 #: GPS seconds since 1980-01-06 of 1970-01-01 in GPS time: ``t_gps = t_gtime - 315964800`` [s]
-GPST_UNIX_OFFSET_S = -gps_seconds_from_calendar(1970, 1, 1)
+GPST_UNIX_OFFSET_S = int(round(-gps_seconds_from_calendar(1970, 1, 1)))
 _TAG_MAGIC = b"TIMETAG RTKLIB"
 _TAG_HEADER = 64          # bytes before u32 time, f64 sec
 _TAG_FIRST_RECORD = 76    # 64 + 4 + 8
@@ -199,7 +199,10 @@ class ImuSamples:
 
     Attributes
     ----------
-    t_gps_s : (N,) sample time, GPS seconds since 1980-01-06 [s]
+    t_ref_gps_s : float
+        GPS time [s since 1980-01-06] that ``t_s`` counts from (a whole second,
+        or the tag file's start), so that sample intervals keep full precision.
+    t_s : (N,) sample time after ``t_ref_gps_s`` [s]
     acc_b : (N, 3) specific force [m/s^2] (``samples == "rate"``) or velocity increment [m/s]
     gyro_b : (N, 3) angular rate [rad/s] or angle increment [rad]
     samples : {'rate', 'increment'}
@@ -210,7 +213,8 @@ class ImuSamples:
         tagged log, the tick -> GPS time fit (see :func:`tick_time_map`).
     """
 
-    t_gps_s: np.ndarray
+    t_ref_gps_s: float
+    t_s: np.ndarray
     acc_b: np.ndarray
     gyro_b: np.ndarray
     samples: str
@@ -219,12 +223,17 @@ class ImuSamples:
     info: dict = field(default_factory=dict)
 
     def __len__(self):
-        return len(self.t_gps_s)
+        return len(self.t_s)
+
+    @property
+    def t_gps_s(self) -> np.ndarray:
+        """(N,) sample time, GPS seconds since 1980-01-06 [s] (about 0.2 us resolution)."""
+        return self.t_ref_gps_s + self.t_s
 
     @property
     def rate_hz(self) -> float:
         """Mean sample rate [Hz]."""
-        return (len(self.t_gps_s) - 1) / float(self.t_gps_s[-1] - self.t_gps_s[0]) if len(self) > 1 else float("nan")
+        return (len(self.t_s) - 1) / float(self.t_s[-1] - self.t_s[0]) if len(self) > 1 else float("nan")
 
     def to_increments(self, t_offset_s: float = 0.0) -> ImuData:
         """:class:`insnav.dataset.ImuData` with time ``t_gps_s - t_offset_s``.
@@ -233,7 +242,7 @@ class ImuSamples:
         ``(t[k-1], t[k]]`` (exact for a rate that varies linearly between
         samples), so the first sample yields no increment.
         """
-        t = self.t_gps_s - t_offset_s
+        t = (self.t_ref_gps_s - t_offset_s) + self.t_s
         if self.samples == "increment":
             return ImuData(t.copy(), self.gyro_b.copy(), self.acc_b.copy(),
                            origin=RowOrigin(self.path, lines=self.lines.copy()))
@@ -306,7 +315,8 @@ def tick_time_map(tick_s, arrival_gps_s, window_s: float = 2.0, max_drift_ppm: f
     Parameters
     ----------
     tick_s : (N,) IMU counter [s], increasing
-    arrival_gps_s : (N,) PC arrival time of each sample, GPS [s]
+    arrival_gps_s : (N,) PC arrival time of each sample [s] (GPS time, or the
+        time after a reference such as the tag start; the result counts from it too)
     window_s : float
         Window for the minima the envelope line is fitted through [s].
     max_drift_ppm : float
@@ -348,6 +358,18 @@ def tick_time_map(tick_s, arrival_gps_s, window_s: float = 2.0, max_drift_ppm: f
     lat = (np.asarray(arrival_gps_s, float) - t) * 1e3
     return t, dict(drift_ppm=float(slope * 1e6), latency_median_ms=float(np.median(lat)),
                    latency_p95_ms=float(np.percentile(lat, 95)), latency_max_ms=float(lat.max()))
+
+
+def _time_after(tokens, ref_int: int) -> np.ndarray:
+    """Decimal time strings minus the integer ``ref_int`` without losing digits to a 1e9-sized float."""
+    out = np.empty(len(tokens))
+    for i, tok in enumerate(tokens):
+        whole, dot, frac = tok.strip().partition(".")
+        if whole.isdigit() and (not frac or frac.isdigit()):
+            out[i] = (int(whole) - ref_int) + (float("0." + frac) if frac else 0.0)
+        else:  # exponent or sign: plain float
+            out[i] = float(tok) - ref_int
+    return out
 
 
 def _is_number(tok: str) -> bool:
@@ -401,7 +423,7 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     gyr_cols = [idx[c] for c in ("gx", "gy", "gz")]
     want = [tcol] + acc_cols + gyr_cols
     names = ["tick_ms" if tagged else "t", "ax", "ay", "az", "gx", "gy", "gz"]
-    rows, lines, ends = [], [], []
+    rows, lines, ends, t_tok = [], [], [], []
     dropped = []
     pos = 0
     header_allowed = True
@@ -436,6 +458,7 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
                 raise ImuFileError(path, lineno, f"non-finite value {tok[j].strip()!r} in field {j + 1} ({name})")
             vals.append(v)
         rows.append(vals)
+        t_tok.append(tok[tcol])
         lines.append(lineno)
         ends.append(pos)
     if len(rows) < 2:
@@ -447,8 +470,8 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0)) + 1
         what = "tick" if tagged else "time"
-        raise ImuFileError(path, int(lines[k]), f"{what} {t[k]!r} does not increase (line {lines[k - 1]}: "
-                           f"{t[k - 1]!r})")
+        raise ImuFileError(path, int(lines[k]), f"{what} {float(t[k])!r} does not increase (line "
+                           f"{int(lines[k - 1])}: {float(t[k - 1])!r})")
     info = dict(lines_dropped=dropped)
     if tagged:
         if not isinstance(tag, Str2strTag):
@@ -465,23 +488,28 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
                                f"({n_lf} lines): not the time tag of this file")
         end_bytes = np.asarray(ends, dtype=np.int64) + crlf_added * lines  # byte after each line's newline
         k = np.minimum(np.searchsorted(tag.fpos, end_bytes), tag.fpos.size - 1)  # first write holding the line
-        arrival = tag.t_start_gps_s + tag.tick_ms[k] / 1000.0
+        arrival = tag.tick_ms[k] / 1000.0  # after the tag start
         try:
-            t, fit = tick_time_map(t / 1000.0, arrival)
+            t, fit = tick_time_map((t - t[0]) / 1000.0, arrival)
         except ValueError as exc:
             raise ImuFileError(tag.path, None, f"{exc} ({path})") from None
         info.update(fit, tag=tag.path, crlf_converted=bool(crlf_added), t_start_gps_s=tag.t_start_gps_s)
-    elif fmt.time == "gpst_unix_s":
-        t = t - GPST_UNIX_OFFSET_S
-    elif fmt.time == "gps_sow":
-        t = t + SECONDS_PER_WEEK * int(week)
+        t_ref = tag.t_start_gps_s
+    else:
+        ref_int = int(math.floor(t[0]))
+        t = _time_after(t_tok, ref_int)
+        t_ref = float(ref_int)
+        if fmt.time == "gpst_unix_s":
+            t_ref = float(ref_int - GPST_UNIX_OFFSET_S)
+        elif fmt.time == "gps_sow":
+            t_ref = float(ref_int + SECONDS_PER_WEEK * int(week))
     t = t + float(fmt.time_offset_s)
     k_acc = G0 if fmt.acc_unit == "g" else 1.0
     k_gyr = DEG if fmt.gyro_unit == "dps" else 1.0
     C = fmt.C_b_imu()
     acc_b = (a[:, 1:4] * k_acc) @ C.T
     gyro_b = (a[:, 4:7] * k_gyr) @ C.T
-    return ImuSamples(t, acc_b, gyro_b, fmt.samples, lines, path, info)
+    return ImuSamples(t_ref, t, acc_b, gyro_b, fmt.samples, lines, path, info)
 
 
 # --------------------------------------------------------------------------- single-point solution
@@ -886,7 +914,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
         good = np.isfinite(spp.r_e[:, 0])
 
     t_first = float(obs.epoch_t_gps_s[0] - t_week0)
-    imu_t = samples.t_gps_s - t_week0
+    imu_t = (samples.t_ref_gps_s - t_week0) + samples.t_s
     t_lo = max(t_first + opt.start_s, float(imu_t[1]) + opt.level_window_s
                if opt.init_yaw_deg == "course" else float(imu_t[1]))
     t_hi = float(imu_t[-1]) if opt.end_s is None else min(float(imu_t[-1]), t_first + opt.end_s)
