@@ -15,7 +15,6 @@ import struct
 import numpy as np
 import pytest
 
-from insnav import earth
 from insnav.analysis import errors
 from insnav.cli import main
 from insnav.config import ConfigError

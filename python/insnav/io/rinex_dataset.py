@@ -165,7 +165,8 @@ class ImuCsvFormat:
         cols = tuple(self.columns)
         for c in cols:
             if c not in _ALLOWED_COLUMNS:
-                raise ConfigError(f"{source}: imu_columns: unknown column {c!r}; allowed: {', '.join(_ALLOWED_COLUMNS)}")
+                raise ConfigError(f"{source}: imu_columns: unknown column {c!r}; "
+                                  f"allowed: {', '.join(_ALLOWED_COLUMNS)}")
         for c in ("ax", "ay", "az", "gx", "gy", "gz"):
             if cols.count(c) != 1:
                 raise ConfigError(f"{source}: imu_columns {list(cols)} must name {c!r} exactly once")
@@ -173,7 +174,8 @@ class ImuCsvFormat:
             raise ConfigError(f"{source}: imu_columns {list(cols)} must have exactly one of 't' or 'tick_ms'")
         for key, allowed in _CHOICES.items():
             if getattr(self, key) not in allowed:
-                raise ConfigError(f"{source}: imu_{key}: bad value {getattr(self, key)!r}; allowed: {', '.join(allowed)}")
+                raise ConfigError(f"{source}: imu_{key}: bad value {getattr(self, key)!r}; "
+                                  f"allowed: {', '.join(allowed)}")
         m = np.asarray(self.mount_rpy_deg, dtype=float)
         if m.shape != (3,) or not np.all(np.isfinite(m)):
             raise ConfigError(f"{source}: imu_mount_rpy_deg: bad value {self.mount_rpy_deg!r}; allowed: 3 angles [deg]")
@@ -819,7 +821,7 @@ def _epochs_in(inp, t_lo, t_hi):
                        inp.sats[a:b].copy(), inp.prn[a:b].copy(), inp.elevation_deg[a:b].copy(), dict(inp.info))
 
 
-def _approx_position(obs, nav, t_week0, opt):
+def _approx_position(obs, nav, t_week0):
     """Approximate receiver position: the header's, else a bootstrap from the centroid of the satellites."""
     from ..tight import tight_inputs_from_rinex
 
@@ -900,7 +902,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     fmt = opt.imu_format().validate()
     samples = read_imu_csv(imu, fmt, tag=opt.imu_tag, week=week)
 
-    r0 = _approx_position(obs, nav, t_week0, opt)
+    r0 = _approx_position(obs, nav, t_week0)
     kw = dict(elevation_mask_deg=opt.elevation_mask_deg, iono=opt.iono, tropo=opt.tropo,
               sigma_pr_zenith_m=opt.sigma_pr_zenith_m, sigma_prr_zenith_mps=opt.sigma_prr_zenith_mps,
               use_cn0=opt.use_cn0)
