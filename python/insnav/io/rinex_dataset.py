@@ -888,9 +888,9 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     else:
         opt = options.validate()
     if imu_tag is not None:
-        opt.imu_tag = os.fspath(imu_tag)
+        opt.imu_tag = os.path.abspath(imu_tag)
     if reference is not None:
-        opt.reference = os.fspath(reference)
+        opt.reference = os.path.abspath(reference)
     if not hasattr(obs, "C1"):
         obs = read_rinex_obs(obs)
     if not hasattr(nav, "eph"):
@@ -1025,7 +1025,8 @@ def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=N
     The TOML holds the usual run keys (``docs/formats.md``) plus a ``[rinex]``
     table (:class:`RinexOptions`).  Run keys it sets override the loader's
     suggestions (initial sigmas, ``init_error = false``); a top-level
-    ``lever_arm_b`` is also used as the dataset's lever arm.
+    ``lever_arm_b`` is also used as the dataset's lever arm.  Relative paths in
+    the table (``imu_tag``, ``reference``) are relative to the TOML file.
 
     Returns
     -------
@@ -1045,6 +1046,9 @@ def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=N
         raise ConfigError(f"{source}: key 'rinex': bad value {rin!r}; allowed: a table")
     if "lever_arm_b" in d and "lever_arm_b" not in rin:
         rin = dict(rin, lever_arm_b=d["lever_arm_b"])
+    for key in ("imu_tag", "reference"):
+        if isinstance(rin.get(key), str) and config_path is not None and not os.path.isabs(rin[key]):
+            rin = dict(rin, **{key: os.path.join(os.path.dirname(os.path.abspath(config_path)), rin[key])})
     opt = RinexOptions.from_dict(rin, source)
     ds, cfg = load_rinex(obs, nav, imu, opt, imu_tag=imu_tag, reference=reference)
     base = {k: v for k, v in dataclasses.asdict(cfg).items() if v is not None and k != "imu"}
