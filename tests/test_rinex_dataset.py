@@ -201,6 +201,12 @@ def test_cli_rinex_bad_imu_line_is_one_line_error_and_no_output(walk_files, tmp_
     assert not out.exists()
     rc, _, se = _call(["run", "--format", "rinex", "--obs", walk_files["obs"], "--imu", bad, "--out", out])
     assert rc == 2 and "--format rinex needs --nav" in se
+    # well-formed, but a day before the observations (e.g. UTC or seconds of week taken for GPS seconds)
+    far = _csv(tmp_path, "1440350000.0,0,0,-9.8,0,0,0\n1440350000.01,0,0,-9.8,0,0,0\n", "far.csv")
+    rc, _, se = _call(["run", "--format", "rinex", "--obs", walk_files["obs"], "--nav", walk_files["nav"],
+                       "--imu", far, "--out", out])
+    assert rc == 2 and f"{far}: the IMU data" in se and "do not overlap the observations" in se
+    assert not out.exists()
 
 
 # --------------------------------------------------------------------------- malformed files

@@ -920,6 +920,11 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     t_lo = max(t_first + opt.start_s, float(imu_t[1]) + opt.level_window_s
                if opt.init_yaw_deg == "course" else float(imu_t[1]))
     t_hi = float(imu_t[-1]) if opt.end_s is None else min(float(imu_t[-1]), t_first + opt.end_s)
+    t_last = float(obs.epoch_t_gps_s[-1] - t_week0)
+    if imu_t[-1] <= t_first or imu_t[0] >= t_last:
+        raise ValueError(f"{samples.path}: the IMU data (GPS seconds of week {week}: {imu_t[0]:.3f} to "
+                         f"{imu_t[-1]:.3f}) do not overlap the observations in {obs.path} ({t_first:.3f} to "
+                         f"{t_last:.3f}); check the IMU time column and imu_time")
     v_n_spp = spp.v_n()
     speed = np.hypot(v_n_spp[:, 0], v_n_spp[:, 1])
     cand = np.flatnonzero(good & (spp.t >= t_lo) & (spp.t < t_hi))
