@@ -54,8 +54,10 @@ class Ukf : public UnscentedPropagation<L> {
     const int r = meas.linear().rows();
     res.rows = r;
     if (r == 0) return res;
+#ifndef INSNAV_NO_FIXED_UPDATE_KERNELS
     if (r == 6) return update_impl<6>(meas, gate_chi2, res);
     if (r == 3) return update_impl<3>(meas, gate_chi2, res);
+#endif
     return update_impl<Eigen::Dynamic>(meas, gate_chi2, res);
   }
 
