@@ -1,15 +1,22 @@
 // Batch strapdown mechanization: the whole loop in C++ with the GIL released.
+#include <cmath>
+
 #include "common.hpp"
 
 namespace insnav::py_bind {
 
 namespace {
 
-/// Run the mechanization over n samples; inputs validated by the caller
-/// (python/insnav/ins.py) and re-checked here for shapes.
+/// Run the mechanization over n samples.  The loop also checks each sample
+/// before using it (finite values, strictly increasing time) and stops at the
+/// first bad one, returning its index as "bad_sample" (python/insnav/ins.py
+/// then raises the ValueError naming it), so the batch call pays no separate
+/// validation pass.  Outputs are written once, in the user units of
+/// insnav.Trajectory (degrees), into separate contiguous arrays.
 py::dict mechanize(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, double t0,
                    const DArray& pos_llh, const DArray& v_n0, const DArray& rpy0,
                    bool coning, bool sculling) {
+  constexpr double kRad2Deg = 180.0 / 3.14159265358979323846;
   const py::ssize_t n = t.size();
   require_shape(t, n, -1, "t");
   require_shape(dtheta_b, n, 3, "dtheta_b");
@@ -23,13 +30,18 @@ py::dict mechanize(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, 
   nav.v_n = vec3_from(v_n0, "v_n");
   nav.q_nb = quat_from_euler(vec3_from(rpy0, "rpy"));
 
-  DArray out_llh({n, py::ssize_t(3)}), out_v({n, py::ssize_t(3)}), out_rpy({n, py::ssize_t(3)});
+  DArray o_lat({n}), o_lon({n}), o_h({n}), o_v({n, py::ssize_t(3)}), o_roll({n}), o_pitch({n}), o_yaw({n});
   const double* pt = t.data();
   const double* pth = dtheta_b.data();
   const double* pdv = dv_b.data();
-  double* o_llh = out_llh.mutable_data();
-  double* o_v = out_v.mutable_data();
-  double* o_rpy = out_rpy.mutable_data();
+  double* lat = o_lat.mutable_data();
+  double* lon = o_lon.mutable_data();
+  double* h = o_h.mutable_data();
+  double* v = o_v.mutable_data();
+  double* roll = o_roll.mutable_data();
+  double* pitch = o_pitch.mutable_data();
+  double* yaw = o_yaw.mutable_data();
+  py::ssize_t bad = -1;
   {
     py::gil_scoped_release release;
     Strapdown ins(nav, MechanizationOptions{coning, sculling});
@@ -38,27 +50,37 @@ py::dict mechanize(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, 
     for (py::ssize_t i = 0; i < n; ++i) {
       imu.t = pt[i];
       imu.dt = pt[i] - t_prev;
-      t_prev = pt[i];
       imu.dtheta_b = Vec3(pth[3 * i], pth[3 * i + 1], pth[3 * i + 2]);
       imu.dv_b = Vec3(pdv[3 * i], pdv[3 * i + 1], pdv[3 * i + 2]);
+      // !(dt > 0) also catches a NaN time
+      if (!(imu.dt > 0.0) || !std::isfinite(imu.t) || !imu.dtheta_b.allFinite() || !imu.dv_b.allFinite()) {
+        bad = i;
+        break;
+      }
+      t_prev = pt[i];
       ins.update(imu);
       const NavState& s = ins.state();
-      o_llh[3 * i] = s.lat;
-      o_llh[3 * i + 1] = s.lon;
-      o_llh[3 * i + 2] = s.h;
-      o_v[3 * i] = s.v_n.x();
-      o_v[3 * i + 1] = s.v_n.y();
-      o_v[3 * i + 2] = s.v_n.z();
+      lat[i] = s.lat * kRad2Deg;
+      lon[i] = s.lon * kRad2Deg;
+      h[i] = s.h;
+      v[3 * i] = s.v_n.x();
+      v[3 * i + 1] = s.v_n.y();
+      v[3 * i + 2] = s.v_n.z();
       const Vec3 rpy = euler_from_quat(s.q_nb);
-      o_rpy[3 * i] = rpy.x();
-      o_rpy[3 * i + 1] = rpy.y();
-      o_rpy[3 * i + 2] = rpy.z();
+      roll[i] = rpy.x() * kRad2Deg;
+      pitch[i] = rpy.y() * kRad2Deg;
+      yaw[i] = rpy.z() * kRad2Deg;
     }
   }
   py::dict out;
-  out["llh"] = out_llh;
-  out["v_n"] = out_v;
-  out["rpy"] = out_rpy;
+  out["bad_sample"] = bad;
+  out["lat_deg"] = o_lat;
+  out["lon_deg"] = o_lon;
+  out["h_m"] = o_h;
+  out["v_n"] = o_v;
+  out["roll_deg"] = o_roll;
+  out["pitch_deg"] = o_pitch;
+  out["yaw_deg"] = o_yaw;
   return out;
 }
 
@@ -69,7 +91,9 @@ void bind_ins(py::module_& m) {
         py::arg("pos_llh"), py::arg("v_n"), py::arg("rpy"), py::arg("coning") = true,
         py::arg("sculling") = true,
         "Strapdown mechanization over IMU increments (rad, m/s) from the state at t0 "
-        "(lat/lon rad, h m, v_n m/s, roll/pitch/yaw rad). Returns llh, v_n, rpy arrays (SI).");
+        "(lat/lon rad, h m, v_n m/s, roll/pitch/yaw rad). Returns lat_deg, lon_deg, h_m, v_n [m/s], "
+        "roll_deg, pitch_deg, yaw_deg arrays and bad_sample (-1, or the first sample that is not finite "
+        "or not after the previous time; the outputs are then incomplete).");
 }
 
 }  // namespace insnav::py_bind

@@ -16,7 +16,7 @@ def mechanize(
     rpy: npt.ArrayLike,
     coning: bool = True,
     sculling: bool = True,
-) -> dict[str, np.ndarray]: ...
+) -> dict[str, Any]: ...  # lat_deg, lon_deg, h_m, v_n, roll_deg, pitch_deg, yaw_deg, bad_sample
 
 class earth:
     @staticmethod

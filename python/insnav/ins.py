@@ -7,8 +7,6 @@ from . import _core
 from ._validate import as_float_array, check_finite, check_increasing
 from .types import NavState, Trajectory
 
-RAD2DEG = 180.0 / np.pi
-
 
 def mechanize(t, dtheta_b, dv_b, initial: NavState, t0: float | None = None,
               *, coning: bool = True, sculling: bool = True) -> Trajectory:
@@ -57,11 +55,24 @@ def mechanize(t, dtheta_b, dv_b, initial: NavState, t0: float | None = None,
         if n < 2:
             raise ValueError("t0 is required with a single IMU sample")
         t0 = float(t[0] - (t[1] - t[0]))
-    for arr, name in ((t, "t"), (dtheta_b, "dtheta_b"), (dv_b, "dv_b")):
-        check_finite(arr, name)
-    check_increasing(t, "t", t0=float(t0))
+    if not np.isfinite(t0):
+        raise ValueError(f"t0: not finite ({t0!r})")
+    # the C++ loop checks every sample as it goes (finite, strictly increasing
+    # time) and stops at the first bad one; the checks below then name it
     out = _core.mechanize(t, dtheta_b, dv_b, float(t0), initial.pos_llh, initial.v_n, initial.rpy,
                           coning, sculling)
-    llh, rpy = out["llh"], out["rpy"] * RAD2DEG
-    return Trajectory(t=t.copy(), lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2],
-                      v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2])
+    if "bad_sample" not in out:  # a module built before the in-loop checks (transitional)
+        for arr, name in ((t, "t"), (dtheta_b, "dtheta_b"), (dv_b, "dv_b")):
+            check_finite(arr, name)
+        check_increasing(t, "t", t0=float(t0))
+        llh, rpy = out["llh"] * (180.0 / np.pi), out["rpy"] * (180.0 / np.pi)
+        return Trajectory(t=t.copy(), lat_deg=llh[:, 0], lon_deg=llh[:, 1], h_m=out["llh"][:, 2], v_n=out["v_n"],
+                          roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2])
+    if out["bad_sample"] >= 0:
+        for arr, name in ((t, "t"), (dtheta_b, "dtheta_b"), (dv_b, "dv_b")):
+            check_finite(arr, name)
+        check_increasing(t, "t", t0=float(t0))
+        raise AssertionError(f"mechanize: sample {out['bad_sample']} refused by the C++ loop")  # unreachable
+    return Trajectory(t=t.copy(), lat_deg=out["lat_deg"], lon_deg=out["lon_deg"], h_m=out["h_m"],
+                      v_n=out["v_n"], roll_deg=out["roll_deg"], pitch_deg=out["pitch_deg"],
+                      yaw_deg=out["yaw_deg"])
