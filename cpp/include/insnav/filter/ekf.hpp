@@ -3,11 +3,15 @@
 //
 // Time update with the linear error model of error_model_linear.hpp evaluated
 // at the middle of each propagation interval, Phi = I + F dt + (F dt)^2/2,
-// trapezoidal Q.  Measurement update: Joseph form (kalman_update.hpp).
+// trapezoidal Q; for the layouts with diagonal sensor-error dynamics
+// (Layout15, Layout21) in block form: one 9 x n congruence instead of five
+// n x n x n products (error_model_linear.hpp, kDiagonalAuxDynamics).
+// Measurement update: Joseph form (kalman_update.hpp).
 // Interface shared by all filters (see engine/loose_engine.hpp):
 // initialize / begin_cycle / propagate / end_cycle / update / reset_state.
 #pragma once
 
+#include "insnav/filter/covariance.hpp"
 #include "insnav/filter/error_model_linear.hpp"
 #include "insnav/filter/kalman_update.hpp"
 
@@ -30,12 +34,24 @@ class Ekf {
   void end_cycle() {}
 
   void propagate(const InsInterval& iv) {
-    const Cov F = linear_F<L>(iv.mid, model_);
-    const Cov Phi = transition<L>(F, iv.dt);
-    const Cov Qc = continuous_GQG<L>(iv.mid, model_);
-    P_ = Phi * P_ * Phi.transpose() + discrete_Q<L>(Phi, Qc, iv.dt);
-    P_ = 0.5 * (P_ + P_.transpose()).eval();
-    x_ = Phi * x_;
+    if constexpr (kDiagonalAuxDynamics<L>) {
+      // block form (error_model_linear.hpp): one 9 x n congruence, no n^3 product
+      F_ = linear_F<L>(iv.mid, model_);
+      Qc_ = continuous_GQG<L>(iv.mid, model_);
+      block_transition<L>(F_, iv.dt, phi_);
+      block_propagate_covariance<L>(phi_, Qc_, iv.dt, P_);
+      constexpr int N = NavAuxTransition<L>::kNav, K = NavAuxTransition<L>::kAux;
+      const Eigen::Matrix<double, N, 1> x_nav = phi_.U.lazyProduct(x_);
+      x_.template tail<K>().array() *= phi_.d.array();
+      x_.template head<N>() = x_nav;
+    } else {
+      const Cov F = linear_F<L>(iv.mid, model_);
+      const Cov Phi = transition<L>(F, iv.dt);
+      const Cov Qc = continuous_GQG<L>(iv.mid, model_);
+      P_ = Phi * P_ * Phi.transpose() + discrete_Q<L>(Phi, Qc, iv.dt);
+      P_ = 0.5 * (P_ + P_.transpose()).eval();
+      x_ = Phi * x_;
+    }
   }
 
   template <class Meas>
@@ -55,6 +71,8 @@ class Ekf {
   ImuErrorModel model_;
   Vec x_ = Vec::Zero();
   Cov P_ = Cov::Identity();
+  Cov F_ = Cov::Zero(), Qc_ = Cov::Zero();  // propagation workspace
+  NavAuxTransition<L> phi_;
   int repairs_ = 0;
 };
 
