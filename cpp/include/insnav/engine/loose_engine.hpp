@@ -57,7 +57,8 @@ struct LooseOutputs {
   double* llh = nullptr;      // (.,3) lat, lon [rad], h [m]
   double* v_n = nullptr;      // (.,3) [m/s]
   double* rpy = nullptr;      // (.,3) [rad]
-  double* sigma = nullptr;    // (.,n_state) sqrt(diag P)
+  double* sigma = nullptr;    // (.,sigma_cols) sqrt(diag P) of the first sigma_cols states
+  int sigma_cols = 0;         // <= 0 or >= n_state: all n_state
   double* imu_err = nullptr;  // (.,12) acc bias, gyro bias, acc scale, gyro scale (SI)
   std::int64_t n_out = 0;     // rows written
   // per GNSS record (n_gnss rows)
@@ -94,13 +95,15 @@ class LooseEngine {
     ins_.reset(initial);
     corr_ = corr0;
     filter_.initialize(P0);
+    out_cache_dirty_ = true;
     std::int64_t g = 0;
     while (g < m && !(fixes[g].t > initial.t)) mark(out, g++, 4);
     last_t_ = initial.t;
     cycle_start_ = initial.t;
     start_cycle();
-    ImuIncrement raw, part;
+    ImuIncrement raw;
     double t_prev = initial.t;
+    int until_output = cfg_.output_decimation;  // countdown: no division per sample
     for (std::int64_t k = 0; k < n; ++k) {
       raw.t = t[k];
       raw.dt = t[k] - t_prev;
@@ -123,7 +126,10 @@ class LooseEngine {
         close_cycle();
         start_cycle();
       }
-      if ((k + 1) % cfg_.output_decimation == 0 || k + 1 == n) write_output(out);
+      if (--until_output == 0 || k + 1 == n) {
+        write_output(out);
+        until_output = cfg_.output_decimation;
+      }
       t_prev = raw.t;
     }
     for (; g < m; ++g) mark(out, g, 4);
@@ -148,8 +154,8 @@ class LooseEngine {
     imu.dv_b = raw.dv_b * f;
     corr_.apply(imu);
     ins_.update(imu);
-    omega_ib_b_ = imu.dtheta_b / imu.dt;
-    f_ib_b_ = imu.dv_b / imu.dt;
+    last_imu_ = imu;  // the rates omega_ib_b_, f_ib_b_ follow when needed (rates())
+    rates_stale_ = true;
     const NavState& s = ins_.state();
     const double elapsed = s.t - interval_t0_;
     if (!have_mid_ && elapsed >= 0.5 * cfg_.propagation_interval) {
@@ -160,7 +166,17 @@ class LooseEngine {
     if (elapsed >= cfg_.propagation_interval - 1e-12) flush_interval();
   }
 
+  /// Corrected IMU rates of the last integrated increment (computed on demand:
+  /// the filter needs them a few times per propagation interval, not per sample).
+  void rates() {
+    if (!rates_stale_) return;
+    omega_ib_b_ = last_imu_.dtheta_b / last_imu_.dt;
+    f_ib_b_ = last_imu_.dv_b / last_imu_.dt;
+    rates_stale_ = false;
+  }
+
   void set_point(InsPoint& p) {
+    rates();
     const NavState& s = ins_.state();
     p.set(s.lat, s.h, s.v_n, s.q_nb.toRotationMatrix(), f_ib_b_, omega_ib_b_);
   }
@@ -179,7 +195,7 @@ class LooseEngine {
       iv_.mid.earth.evaluate(iv_.mid.lat, iv_.mid.h, iv_.mid.v_n);
     }
     filter_.propagate(iv_);
-    sigma_dirty_ = true;
+    out_cache_dirty_ = true;
     iv_.start = iv_.end;
     interval_t0_ = s.t;
     have_mid_ = false;
@@ -196,7 +212,7 @@ class LooseEngine {
   void close_cycle() {
     flush_interval();
     filter_.end_cycle();
-    sigma_dirty_ = true;
+    out_cache_dirty_ = true;
   }
 
   void apply_fix(const GnssFix& fix_in, std::int64_t g, LooseOutputs& out) {
@@ -207,6 +223,7 @@ class LooseEngine {
       mark(out, g, 0);
       return;
     }
+    rates();
     meas_.set(ins_.state(), omega_ib_b_, cfg_.lever_arm_b, fix);
     if (out.innovation) {
       const auto& r = meas_.linear().residual;
@@ -215,7 +232,7 @@ class LooseEngine {
       for (int i = 0; i < r.size(); ++i) out.innovation[6 * g + off + i] = r[i];
     }
     const UpdateResult res = filter_.update(meas_, cfg_.gate_chi2);
-    sigma_dirty_ = true;
+    out_cache_dirty_ = true;
     if (out.nis) out.nis[g] = res.nis;
     int st = res.applied ? 1 : (res.rejected_by_gate ? 2 : 3);
     if (out.status) out.status[g] = static_cast<std::int8_t>(st);
@@ -278,22 +295,22 @@ class LooseEngine {
       const Vec3 e = euler_from_quat(q);
       for (int j = 0; j < 3; ++j) out.rpy[3 * i + j] = e[j];
     }
-    if (out.sigma) {
-      if (sigma_dirty_) {  // P changes only at propagate/update: take the roots then
-        sigma_ = filter_.P().diagonal().cwiseMax(0.0).cwiseSqrt();
-        sigma_dirty_ = false;
-      }
-      for (int j = 0; j < L::kSize; ++j) out.sigma[L::kSize * i + j] = sigma_[j];
-    }
-    if (out.imu_err) {
-      double* e = out.imu_err + 12 * i;
+    if (out_cache_dirty_) {  // P, x and the corrections change only at propagate/update/feedback
+      sigma_ = filter_.P().diagonal().cwiseMax(0.0).cwiseSqrt();
       for (int j = 0; j < 3; ++j) {
-        e[j] = corr_.acc_bias[j] + x[L::kAccBias + j];
-        e[3 + j] = corr_.gyro_bias[j] + x[L::kGyroBias + j];
-        e[6 + j] = corr_.acc_scale[j] + (kHasScale<L> ? x[L::kAccScale >= 0 ? L::kAccScale + j : 0] : 0.0);
-        e[9 + j] = corr_.gyro_scale[j] + (kHasScale<L> ? x[L::kGyroScale >= 0 ? L::kGyroScale + j : 0] : 0.0);
+        imu_err_[j] = corr_.acc_bias[j] + x[L::kAccBias + j];
+        imu_err_[3 + j] = corr_.gyro_bias[j] + x[L::kGyroBias + j];
+        imu_err_[6 + j] = corr_.acc_scale[j] + (kHasScale<L> ? x[L::kAccScale >= 0 ? L::kAccScale + j : 0] : 0.0);
+        imu_err_[9 + j] = corr_.gyro_scale[j] + (kHasScale<L> ? x[L::kGyroScale >= 0 ? L::kGyroScale + j : 0] : 0.0);
       }
+      out_cache_dirty_ = false;
     }
+    if (out.sigma) {
+      const int nc = (out.sigma_cols > 0 && out.sigma_cols < L::kSize) ? out.sigma_cols : L::kSize;
+      for (int j = 0; j < nc; ++j) out.sigma[nc * i + j] = sigma_[j];
+    }
+    if (out.imu_err)
+      for (int j = 0; j < 12; ++j) out.imu_err[12 * i + j] = imu_err_[j];
   }
 
   Filter filter_;
@@ -303,10 +320,13 @@ class LooseEngine {
   LooseMeasurement<L> meas_;
   InsInterval iv_;
   Vec3 omega_ib_b_ = Vec3::Zero(), f_ib_b_ = Vec3::Zero();
+  ImuIncrement last_imu_;     // last corrected increment integrated
+  bool rates_stale_ = false;  // omega_ib_b_, f_ib_b_ not yet taken from last_imu_
   double last_t_ = 0.0, cycle_start_ = 0.0, interval_t0_ = 0.0, t_mid_ = 0.0;
   bool have_mid_ = false;
-  StateVec<L> sigma_ = StateVec<L>::Zero();
-  bool sigma_dirty_ = true;
+  StateVec<L> sigma_ = StateVec<L>::Zero();    // output cache: sqrt(diag P)
+  Eigen::Matrix<double, 12, 1> imu_err_ = Eigen::Matrix<double, 12, 1>::Zero();  // and the IMU errors
+  bool out_cache_dirty_ = true;   // P, x or the corrections changed since the cache was filled
 };
 
 }  // namespace insnav
