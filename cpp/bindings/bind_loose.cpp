@@ -69,7 +69,8 @@ LooseConfig loose_config_from_dict(const py::dict& d) {
   if (!(c.cycle_period > 0.0)) throw py::value_error("cycle_period must be > 0");
   if (c.output_decimation < 1) throw py::value_error("output_decimation must be >= 1");
   static const char* known[] = {"lever_arm_b", "propagation_interval", "cycle_period", "gate_chi2", "use_position",
-                                "use_velocity", "output_decimation", "ut_alpha", "ut_beta", "ut_kappa"};
+                                "use_velocity", "output_decimation", "ut_alpha", "ut_beta", "ut_kappa",
+                                "sigma_columns"};
   for (auto item : d) {
     const std::string k = py::cast<std::string>(item.first);
     bool ok = false;
@@ -93,7 +94,8 @@ void bind_loose(py::module_& m) {
         ut.alpha = number(config, "ut_alpha", ut.alpha);
         ut.beta = number(config, "ut_beta", ut.beta);
         ut.kappa = number(config, "ut_kappa", ut.kappa);
-        const LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut};
+        const int sigma_columns = static_cast<int>(number(config, "sigma_columns", 0));
+        const LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut, sigma_columns};
         if (layout == 15) return run_loose_l15(filter, args);
         if (layout == 21) return run_loose_l21(filter, args);
         unsupported_loose(filter, layout);

@@ -30,6 +30,7 @@ struct LooseRunArgs {
   ImuErrorModel model;
   LooseConfig cfg;
   UtParams ut;
+  int sigma_columns = 0;  // config key 'sigma_columns': sigmas of the first k states only (<= 0: all)
 };
 
 /// filter 'ekf', 'rbukf' or 'ukf' on one layout (any other filter: ValueError).
@@ -91,8 +92,9 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   }
 
   const py::ssize_t n_out = (n + cfg.output_decimation - 1) / cfg.output_decimation + 1;
+  const int n_sig = (a.sigma_columns > 0 && a.sigma_columns < ns) ? a.sigma_columns : ns;
   DArray o_t({n_out}), o_llh({n_out, py::ssize_t(3)}), o_v({n_out, py::ssize_t(3)}),
-      o_rpy({n_out, py::ssize_t(3)}), o_sig({n_out, py::ssize_t(ns)}), o_err({n_out, py::ssize_t(12)});
+      o_rpy({n_out, py::ssize_t(3)}), o_sig({n_out, py::ssize_t(n_sig)}), o_err({n_out, py::ssize_t(12)});
   DArray o_innov({m, py::ssize_t(6)}), o_nis({m});
   py::array_t<std::int8_t> o_status({m});
   LooseOutputs out;
@@ -101,6 +103,7 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   out.v_n = o_v.mutable_data();
   out.rpy = o_rpy.mutable_data();
   out.sigma = o_sig.mutable_data();
+  out.sigma_cols = n_sig;
   out.imu_err = o_err.mutable_data();
   out.innovation = m ? o_innov.mutable_data() : nullptr;
   out.nis = m ? o_nis.mutable_data() : nullptr;
