@@ -1,0 +1,294 @@
+// The EKF's block-structured hot path against the dense formulas it replaces:
+// the layout contract of kDiagonalAuxDynamics (F and Qc block structure),
+// block_transition / block_propagate_covariance vs I + F dt + (F dt)^2/2 and
+// Phi P Phi^T + Q_d, the structured Joseph update vs the dense one, no heap in
+// propagate/update, and the loose engine's output options (sigma_cols,
+// output_decimation).
+
+// Count Eigen assertions (also in Release) so that EIGEN_RUNTIME_NO_MALLOC is live.
+inline int g_eigen_asserts = 0;
+#define eigen_assert(x)                             \
+  do {                                              \
+    if (!(x)) {                                     \
+      ++g_eigen_asserts;                            \
+      std::printf("eigen_assert failed: %s\n", #x); \
+    }                                               \
+  } while (0)
+#define EIGEN_RUNTIME_NO_MALLOC
+#include <cstdio>
+#include <Eigen/Core>
+
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "insnav/engine/loose_engine.hpp"
+#include "insnav/filter/ekf.hpp"
+#include "test_util.hpp"
+
+using namespace insnav;
+
+namespace {
+
+double rel(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) { return (a - b).norm() / b.norm(); }
+
+/// A linear measurement h(dx) = H dx (the Meas interface of Ekf::update).
+template <class L>
+struct LinMeas {
+  LinearMeasurement<L> lin;
+  const LinearMeasurement<L>& linear() const { return lin; }
+};
+
+/// A varied INS point: latitude, height, velocity, attitude, f and omega drawn at random.
+InsPoint random_point(std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  InsPoint p;
+  const Vec3 rpy(0.3 * u(rng), 0.3 * u(rng), 3.0 * u(rng));
+  p.set(1.2 * u(rng), 500.0 * (1.0 + u(rng)), Vec3(30.0 * u(rng), 30.0 * u(rng), 2.0 * u(rng)),
+        quat_from_euler(rpy).toRotationMatrix(), Vec3(2.0 * u(rng), 2.0 * u(rng), -9.8 + u(rng)),
+        Vec3(0.1 * u(rng), 0.1 * u(rng), 0.3 * u(rng)));
+  return p;
+}
+
+ImuErrorModel random_model(std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(0.5, 2.0);
+  ImuErrorModel m;
+  m.acc_vrw = Vec3(1e-3 * u(rng), 2e-3 * u(rng), 1e-3 * u(rng));  // anisotropic: Q_nn is not diagonal
+  m.gyro_arw = Vec3(1e-4 * u(rng), 1e-4 * u(rng), 3e-4 * u(rng));
+  m.acc_bias_tau = Vec3(3600.0 * u(rng), kInf, 1800.0);
+  m.gyro_bias_rw = Vec3::Constant(1e-7);
+  return m;
+}
+
+template <class L>
+StateCov<L> random_spd(std::mt19937& rng) {
+  std::normal_distribution<double> nd;
+  StateCov<L> A;
+  for (int i = 0; i < L::kSize; ++i)
+    for (int j = 0; j < L::kSize; ++j) A(i, j) = nd(rng);
+  StateVec<L> s = StateVec<L>::Constant(1e-3);
+  s.template head<9>() << 2.0, 2.0, 4.0, 0.1, 0.1, 0.2, 1e-2, 1e-2, 3e-2;
+  const StateCov<L> D = s.asDiagonal();
+  return D * (A * A.transpose() / L::kSize + 0.1 * StateCov<L>::Identity()) * D;
+}
+
+// --- the layout contract behind the block path ------------------------------
+template <class L>
+void test_structure() {
+  static_assert(kDiagonalAuxDynamics<L>);
+  constexpr int N = 9, K = L::kSize - 9;
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 20; ++trial) {
+    const InsPoint p = random_point(rng);
+    const ImuErrorModel m = random_model(rng);
+    const StateCov<L> F = linear_F<L>(p, m), Qc = continuous_GQG<L>(p, m);
+    EXPECT_TRUE((F.template bottomLeftCorner<K, N>().array() == 0.0).all());
+    const Eigen::Matrix<double, K, K> Faa = F.template bottomRightCorner<K, K>();
+    EXPECT_TRUE(Faa.isDiagonal(0.0));
+    EXPECT_TRUE((Qc.template bottomLeftCorner<K, N>().array() == 0.0).all());
+    EXPECT_TRUE((Qc.template topRightCorner<N, K>().array() == 0.0).all());
+    const Eigen::Matrix<double, K, K> Qaa = Qc.template bottomRightCorner<K, K>();
+    EXPECT_TRUE(Qaa.isDiagonal(0.0));
+
+    // block_transition == transition
+    for (double dt : {0.005, 0.1, 1.0}) {
+      NavAuxTransition<L> phi;
+      block_transition<L>(F, dt, phi);
+      const StateCov<L> Phi = transition<L>(F, dt);
+      EXPECT_LT(rel(phi.U, Phi.template topRows<N>()), 1e-15);
+      EXPECT_LT(rel(phi.d, Phi.template bottomRightCorner<K, K>().diagonal()), 1e-15);
+      EXPECT_TRUE((Phi.template bottomLeftCorner<K, N>().array() == 0.0).all());
+    }
+  }
+}
+
+// --- Ekf::propagate (block path) vs the dense formula ------------------------
+template <class L>
+void test_propagate_vs_dense() {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> nd;
+  const ImuErrorModel m = random_model(rng);
+  const StateCov<L> P0 = random_spd<L>(rng);
+  Ekf<L> ekf(m);
+  ekf.initialize(P0);
+  StateCov<L> P = ekf.P();
+  StateVec<L> x = StateVec<L>::Zero();
+  double worst_P = 0.0, worst_x = 0.0;
+  for (int k = 0; k < 200; ++k) {
+    InsInterval iv;
+    iv.dt = (k % 7 == 3) ? 0.013 : 0.1;  // short split intervals as at GNSS epochs
+    iv.mid = random_point(rng);
+    if (k == 50) {  // an update without feedback: x != 0 from here on
+      LinMeas<L> meas;
+      meas.lin.residual.resize(6);
+      meas.lin.H.setZero(6, L::kSize);
+      meas.lin.R.setZero(6, 6);
+      for (int i = 0; i < 6; ++i) {
+        meas.lin.residual[i] = nd(rng);
+        meas.lin.H(i, i) = 1.0;
+        meas.lin.R(i, i) = 0.1;
+      }
+      meas.lin.n_cols = 6;
+      EXPECT_TRUE(ekf.update(meas, 0.0).applied);
+      EXPECT_TRUE(kalman_update<L>(x, P, meas.lin, 0.0).applied);
+    }
+    ekf.propagate(iv);
+    // dense reference, exactly the pre-block formula
+    const StateCov<L> F = linear_F<L>(iv.mid, m);
+    const StateCov<L> Phi = transition<L>(F, iv.dt);
+    const StateCov<L> Qc = continuous_GQG<L>(iv.mid, m);
+    P = Phi * P * Phi.transpose() + discrete_Q<L>(Phi, Qc, iv.dt);
+    P = 0.5 * (P + P.transpose()).eval();
+    x = Phi * x;
+    worst_P = std::max(worst_P, rel(ekf.P(), P));
+    if (x.norm() > 0) worst_x = std::max(worst_x, rel(ekf.x(), x));
+    EXPECT_TRUE(ekf.P() == ekf.P().transpose());  // exactly symmetric
+  }
+  std::printf("L%d: 200 propagations, block vs dense: |dP|/|P| <= %.3g, |dx|/|x| <= %.3g\n", L::kSize, worst_P,
+              worst_x);
+  EXPECT_LT(worst_P, 1e-12);
+  EXPECT_LT(worst_x, 1e-12);
+}
+
+// --- kalman_update (structured Joseph) vs the dense Joseph form ------------------
+template <class L>
+void test_update_vs_dense() {
+  constexpr int n = L::kSize;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> nd;
+  struct Shape {
+    int rows, cols;
+  };
+  for (const Shape sh : {Shape{6, 6}, Shape{3, 6}, Shape{3, 9}, Shape{6, 15}, Shape{6, n}, Shape{12, n}}) {
+    LinearMeasurement<L> lin;
+    lin.residual.resize(sh.rows);
+    lin.H.setZero(sh.rows, n);
+    lin.R.setZero(sh.rows, sh.rows);
+    for (int i = 0; i < sh.rows; ++i) {
+      lin.residual[i] = nd(rng);
+      for (int j = 0; j < sh.cols; ++j) lin.H(i, j) = (i == j) + 0.1 * nd(rng);
+      lin.R(i, i) = 0.01 + 0.1 * std::abs(nd(rng));
+    }
+    lin.n_cols = sh.cols;
+    const StateCov<L> P0 = random_spd<L>(rng);
+    StateVec<L> x0;
+    for (int i = 0; i < n; ++i) x0[i] = 1e-3 * nd(rng);
+    StateVec<L> x = x0;
+    StateCov<L> P = P0;
+    const UpdateResult r = kalman_update<L>(x, P, lin, 0.0);
+    EXPECT_TRUE(r.applied);
+    EXPECT_TRUE(P == P.transpose());
+    // dense reference
+    const Eigen::MatrixXd H = lin.H, R = lin.R;
+    const Eigen::MatrixXd S = H * P0 * H.transpose() + R;
+    const Eigen::MatrixXd K = P0 * H.transpose() * S.llt().solve(Eigen::MatrixXd::Identity(sh.rows, sh.rows));
+    const Eigen::VectorXd xr = x0 + K * (Eigen::VectorXd(lin.residual) - H * x0);
+    const Eigen::MatrixXd A = Eigen::MatrixXd::Identity(n, n) - K * H;
+    const Eigen::MatrixXd Pr = A * P0 * A.transpose() + K * R * K.transpose();
+    EXPECT_LT(rel(x, xr), 1e-12);
+    EXPECT_LT(rel(P, Pr), 1e-12);
+  }
+}
+
+// --- no heap in the EKF's propagate and update ---------------------------------
+template <class L>
+void test_no_malloc() {
+  std::mt19937 rng(5);
+  const ImuErrorModel m = random_model(rng);
+  Ekf<L> ekf(m);
+  ekf.initialize(random_spd<L>(rng));
+  InsInterval iv;
+  iv.dt = 0.1;
+  iv.mid = random_point(rng);
+  LooseMeasurement<L> lm;
+  NavState s;
+  s.lat = 0.6;
+  const int before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);
+  for (int k = 0; k < 3; ++k) {
+    ekf.propagate(iv);
+    lm.set(s, Vec3(0, 0, 0.2), Vec3(1.0, 0.3, -0.5), GnssFix{});
+    ekf.update(lm, 0.0);
+    ekf.reset_state();
+  }
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(g_eigen_asserts == before);
+}
+
+// --- engine output options ------------------------------------------------------
+void test_engine_outputs() {
+  using L = Layout21;
+  const int n = 1000;  // 10 s at 100 Hz, GNSS at 1 Hz
+  std::vector<double> t(n), dth(3 * n), dv(3 * n);
+  for (int k = 0; k < n; ++k) {
+    t[k] = 0.01 * (k + 1);
+    dth[3 * k] = 1e-5, dth[3 * k + 1] = -2e-5, dth[3 * k + 2] = 1e-3;
+    dv[3 * k] = 0.01, dv[3 * k + 1] = 0.0, dv[3 * k + 2] = -0.0980665;
+  }
+  NavState s0;
+  s0.lat = 0.5;
+  s0.v_n = Vec3(1.0, 0.0, 0.0);
+  std::vector<GnssFix> fixes;
+  for (int g = 1; g <= 9; ++g) {
+    GnssFix f;
+    f.t = g + 0.005;  // between IMU epochs: the increment is split
+    f.lat = 0.5 + 1e-8 * g;
+    f.lon = 1e-8 * g;
+    f.v_n = Vec3(1.0 + 0.01 * g, 0.0, 0.0);
+    fixes.push_back(f);
+  }
+  StateVec<L> sd = StateVec<L>::Constant(1e-3);
+  sd.head<9>().setConstant(0.1);
+  const StateCov<L> P0 = sd.cwiseAbs2().asDiagonal();
+  auto run = [&](int sigma_cols, int decimation, std::vector<double>& sig, std::vector<double>& rpy) {
+    LooseConfig cfg;
+    cfg.propagation_interval = 0.1;
+    cfg.output_decimation = decimation;
+    cfg.lever_arm_b = Vec3(0.1, 0.2, -0.3);
+    auto eng = std::make_unique<LooseEngine<Ekf<L>>>(ImuErrorModel{}, cfg);
+    const int n_out = n / decimation + 1;
+    const int cols = sigma_cols > 0 ? sigma_cols : L::kSize;
+    sig.assign(static_cast<size_t>(n_out) * cols, -1.0);
+    rpy.assign(3 * n_out, -1.0);
+    std::vector<double> err(12 * n_out);
+    LooseOutputs out;
+    out.sigma = sig.data();
+    out.sigma_cols = sigma_cols;
+    out.rpy = rpy.data();
+    out.imu_err = err.data();
+    eng->run(s0, P0, ImuCorrection{}, n, t.data(), dth.data(), dv.data(), static_cast<int>(fixes.size()),
+             fixes.data(), out);
+    EXPECT_TRUE(out.updates == 9);
+    return out.n_out;
+  };
+  std::vector<double> sig_all, rpy_all, sig9, rpy9, sig_d, rpy_d;
+  EXPECT_TRUE(run(0, 1, sig_all, rpy_all) == n);
+  EXPECT_TRUE(run(9, 1, sig9, rpy9) == n);
+  EXPECT_TRUE(rpy9 == rpy_all);
+  bool same = true;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < 9; ++j) same = same && sig9[9 * k + j] == sig_all[L::kSize * k + j];
+  EXPECT_TRUE(same);
+  // every 3rd sample and the last one: rows 3, 6, ..., 999, 1000
+  EXPECT_TRUE(run(0, 3, sig_d, rpy_d) == n / 3 + 1);
+  bool dec = true;
+  for (int r = 0; r < n / 3; ++r)
+    for (int j = 0; j < 3; ++j) dec = dec && rpy_d[3 * r + j] == rpy_all[3 * (3 * r + 2) + j];
+  for (int j = 0; j < 3; ++j) dec = dec && rpy_d[3 * (n / 3) + j] == rpy_all[3 * (n - 1) + j];
+  EXPECT_TRUE(dec);
+}
+
+}  // namespace
+
+int main() {
+  test_structure<Layout15>();
+  test_structure<Layout21>();
+  test_propagate_vs_dense<Layout15>();
+  test_propagate_vs_dense<Layout21>();
+  test_update_vs_dense<Layout15>();
+  test_update_vs_dense<Layout21>();
+  test_no_malloc<Layout15>();
+  test_no_malloc<Layout21>();
+  test_engine_outputs();
+  TEST_MAIN_END()
+}
