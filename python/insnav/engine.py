@@ -196,8 +196,9 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
     t = as_float_array(imu.t, "imu.t")
     dth = as_float_array(imu.dtheta_b, "imu.dtheta_b", (3,))
     dv = as_float_array(imu.dv_b, "imu.dv_b", (3,))
-    for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
-        check_finite(a, name)
+    if not sanitize:  # sanitize_imu has already refused non-finite samples
+        for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
+            check_finite(a, name)
     check_increasing(t, "imu.t", t0=float(dataset.t0))
 
     g = dataset.gnss
@@ -230,18 +231,23 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
     core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s,
                     cycle_period=cycle * 1.5 if cfg.filter == "ekf" else cycle, gate_chi2=cfg.gate_chi2,
                     use_position=cfg.use_position, use_velocity=cfg.use_velocity,
-                    output_decimation=int(cfg.output_decimation))
+                    output_decimation=int(cfg.output_decimation),
+                    sigma_columns=9)  # Solution keeps the position, velocity and attitude sigmas only
     if cfg.filter != "ekf":
         core_cfg.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
                         ut_kappa=(3.0 - n) if cfg.ut_kappa is None else cfg.ut_kappa)
     out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, np.zeros(12), noise.as_core_dict(),
                           core_cfg)
+    # unit conversions in place (the arrays are ours; no copies of (N, 3) arrays)
     sig = out["sigma"]
     err = out["imu_err"]
-    llh, rpy = out["llh"], out["rpy"] * RAD2DEG
-    sol = Solution(t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2],
+    llh, rpy = out["llh"], out["rpy"]
+    llh[:, :2] *= RAD2DEG
+    rpy *= RAD2DEG
+    sig[:, 6:9] *= RAD2DEG
+    sol = Solution(t=out["t"], lat_deg=llh[:, 0], lon_deg=llh[:, 1], h_m=llh[:, 2],
                    v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],
-                   sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG,
+                   sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9],
                    acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
                    gyro_scale=err[:, 9:12], gnss_t=gnss_t, innovation=out["innovation"], nis=out["nis"],
                    gnss_status=out["status"],
