@@ -61,13 +61,6 @@ def mechanize(t, dtheta_b, dv_b, initial: NavState, t0: float | None = None,
     # time) and stops at the first bad one; the checks below then name it
     out = _core.mechanize(t, dtheta_b, dv_b, float(t0), initial.pos_llh, initial.v_n, initial.rpy,
                           coning, sculling)
-    if "bad_sample" not in out:  # a module built before the in-loop checks (transitional)
-        for arr, name in ((t, "t"), (dtheta_b, "dtheta_b"), (dv_b, "dv_b")):
-            check_finite(arr, name)
-        check_increasing(t, "t", t0=float(t0))
-        llh, rpy = out["llh"] * (180.0 / np.pi), out["rpy"] * (180.0 / np.pi)
-        return Trajectory(t=t.copy(), lat_deg=llh[:, 0], lon_deg=llh[:, 1], h_m=out["llh"][:, 2], v_n=out["v_n"],
-                          roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2])
     if out["bad_sample"] >= 0:
         for arr, name in ((t, "t"), (dtheta_b, "dtheta_b"), (dv_b, "dv_b")):
             check_finite(arr, name)
