@@ -5,11 +5,18 @@ files KF-GINS used, with full GNSS and with the four 60 s outages of
 GNSS-RTK-sim-outage4.txt, and evaluates KF-GINS's own outputs with the same
 code against the same truth.  Writes docs/results/kfgins.md.
 
-    python bench/kfgins_track.py [--repeat 3]
+    python bench/kfgins_track.py [--repeat 5]
+
+Timing: wall and process-CPU time of each insnav.run call (validation,
+sanitize, the C++ run, output arrays at every IMU epoch; not file reading),
+median over --repeat runs, the filters interleaved so that they see the same
+machine load; the C++ part (_core.run_loose) is timed separately through a
+thin wrapper around the compiled call.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -17,9 +24,11 @@ from pathlib import Path
 import numpy as np
 
 import insnav
+import insnav.engine
 from insnav.analysis import errors, rms
 from insnav.io.kfgins import read_kfgins_nav
 from insnav.io.kfgins_dataset import load_kfgins
+from insnav.sanitize import sanitize_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 D = REPO.parent / "shared" / "data" / "kfgins" / "sim"
@@ -37,30 +46,48 @@ def metrics(sol, truth):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeat", type=int, default=3, help="timing repeats (median reported)")
+    ap.add_argument("--repeat", type=int, default=5, help="timing repeats (median reported, >= 3)")
+    ap.add_argument("--dump", metavar="DIR", help="write the inputs of the C++ call to DIR/{full,outage4} for "
+                    "bench/loose_track_bench.cpp and exit")
     args = ap.parse_args(argv)
     if not D.is_dir():
         sys.exit(f"KF-GINS data not found at {D}")
+    if args.repeat < 3:
+        sys.exit("--repeat must be >= 3 (medians)")
+    if args.dump:
+        return _dump(Path(args.dump))
     truth = read_kfgins_nav(D / "truth-sim.nav.xz")
+    core = _CoreTimer(insnav.engine._core)
+    insnav.engine._core = core
     rows, times = {}, {}
-    for gnss_file, tag in (("GNSS-RTK-sim.txt", "full"), ("GNSS-RTK-sim-outage4.txt", "outage4")):
-        ds, cfg = load_kfgins(D / "kf-gins-sim.yaml", D / "Leador-A15-sim.txt.xz", D / gnss_file, layout=21)
-        for f in ("ekf", "rbukf"):
-            ts = []
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                sol = insnav.run(ds, config=cfg, filter=f)
-                ts.append(time.perf_counter() - t0)
-            rows[(f, tag)] = metrics(sol, truth)
-            times[(f, tag)] = float(np.median(ts))
-        if tag == "full":
-            ts = []
-            for _ in range(args.repeat):
-                t0 = time.perf_counter()
-                insnav.mechanize(ds.imu.t, ds.imu.dtheta_b, ds.imu.dv_b, ds.initial, ds.t0)
-                ts.append(time.perf_counter() - t0)
-            times[("mechanize", tag)] = float(np.median(ts))
-            n_imu = len(ds.imu.t)
+    load = [os.getloadavg()[0]]
+    try:
+        for gnss_file, tag in (("GNSS-RTK-sim.txt", "full"), ("GNSS-RTK-sim-outage4.txt", "outage4")):
+            ds, cfg = load_kfgins(D / "kf-gins-sim.yaml", D / "Leador-A15-sim.txt.xz", D / gnss_file, layout=21)
+            jobs = {(f, tag): (lambda f=f: insnav.run(ds, config=cfg, filter=f)) for f in ("ekf", "rbukf")}
+            if tag == "full":
+                jobs[("mechanize", tag)] = lambda: insnav.mechanize(ds.imu.t, ds.imu.dtheta_b, ds.imu.dv_b,
+                                                                    ds.initial, ds.t0)
+                jobs[("sanitize", tag)] = lambda: sanitize_dataset(ds)  # the input check inside insnav.run
+                n_imu = len(ds.imu.t)
+            samples = {k: [] for k in jobs}
+            for _ in range(args.repeat):  # interleaved: every job sees the same load
+                for k, job in jobs.items():
+                    core.last = np.nan
+                    c0, t0 = time.process_time(), time.perf_counter()
+                    sol = job()
+                    samples[k].append((time.perf_counter() - t0, time.process_time() - c0, core.last))
+                    if k[0] in ("ekf", "rbukf"):
+                        rows[k] = sol
+                    del sol
+            for k, v in samples.items():
+                times[k] = np.median(np.array(v), axis=0)
+            load.append(os.getloadavg()[0])
+            for k in jobs:
+                if k[0] in ("ekf", "rbukf"):
+                    rows[k] = metrics(rows[k], truth)
+    finally:
+        insnav.engine._core = core.module
     kf = {tag: metrics(_nav_solution(read_kfgins_nav(D / "kfgins_results" / name)), truth)
           for tag, name in (("full", "KF_GINS_Navresult_fullGNSS_10Hz.nav.xz"),
                             ("outage4", "KF_GINS_Navresult_outage4_10Hz.nav.xz"))}
@@ -70,7 +97,7 @@ def main(argv=None):
              "KF-GINS formats, KF-GINS f39bc2e outputs). Our runs start from the YAML's initial state at 456300.004 s "
              f"({n_imu} IMU samples, {dur / 60:.1f} min). KF-GINS outputs are evaluated with the same code at 10 Hz "
              "(every 20th epoch, as shipped); ours at every IMU epoch.", "",
-             "Command: `python bench/kfgins_track.py`", "",
+             "Command: `PYTHONPATH=python python3 bench/kfgins_track.py` (from the repository root)", "",
              "| run | horizontal RMS [m] | 3-D RMS [m] | yaw RMS [deg] | outage max horizontal [m] (4 x 60 s) |",
              "|---|---|---|---|---|"]
     for tag in ("full", "outage4"):
@@ -80,16 +107,24 @@ def main(argv=None):
             lines.append(f"| {name}, {tag} | {m['hor_rms']:.4f} | {m['rms3d']:.4f} | {m['yaw_rms']:.4f} | {om} |")
     lines += ["", "KF-GINS's published figures on this data (from the issue): horizontal RMS 0.0099 m, 3-D RMS "
               "0.0145 m, yaw RMS 0.0076 deg; outage max horizontal 0.64 / 0.20 / 0.13 / 0.18 m.", "",
-              "## Speed (median of %d, this machine, 2 shared cores)" % args.repeat, "",
-              "| what | time [s] | x real time |", "|---|---|---|"]
-    for k, v in times.items():
-        lines.append(f"| {k[0]} ({k[1]}) | {v:.3f} | {dur / v:.0f} |")
-    lines += ["", "KF-GINS needs about 31 s for this run on a 2-core machine like ours (110x real time, from the "
-              "issue; measured there, not here). Ratios: " + ", ".join(
-                  f"{k[0]} {k[1]}: {31.0 / v:.0f}x KF-GINS" for k, v in times.items() if k[0] != "mechanize"),
-              "", "Times include the Python boundary (validation, output arrays at every IMU epoch), not file "
-              "reading. Propagation interval 0.1 s (default); GNSS fixes applied at their exact time by "
-              "splitting the IMU increment (KF-GINS does the same interpolation)."]
+              f"## Speed (median of {args.repeat}, this machine: 2 cores shared with other users)", "",
+              f"1-min load average {min(load):.1f} to {max(load):.1f} during the timing (2 cores: above 2, "
+              "the wall time includes waiting for a core; the CPU time does not).", "",
+              "| what | wall [s] | CPU [s] | of which C++ run_loose, wall [s] | x real time (wall) | KF-GINS 31 s / wall |",
+              "|---|---|---|---|---|---|"]
+    for k, (wall, cpu, c_wall) in times.items():
+        cw = "-" if not np.isfinite(c_wall) else f"{c_wall:.3f}"
+        ratio = f"{31.0 / wall:.0f}x" if k[0] in ("ekf", "rbukf") else "-"
+        lines.append(f"| {k[0]} ({k[1]}) | {wall:.3f} | {cpu:.3f} | {cw} | {dur / wall:.0f} | {ratio} |")
+    lines += ["", "KF-GINS's 31 s for this run (110x real time on a 2-core machine) is taken from the issue, not "
+              "measured here; the last column divides it by our wall time. Issue 4 asks for 50x KF-GINS, i.e. "
+              "under 0.6 s for the EKF run.",
+              "", "ekf / rbukf: one `insnav.run` call: input checks, `insnav.sanitize` (default on), the C++ "
+              "run with the GIL released, the output arrays at every IMU epoch and their unit conversion; not "
+              "file reading. mechanize: `insnav.mechanize` over the same IMU data (the bare strapdown with its "
+              "outputs). sanitize: `insnav.sanitize.sanitize_dataset` alone, the part of every `insnav.run` "
+              "spent checking the input. Propagation interval 0.1 s (default); GNSS fixes applied at their "
+              "exact time by splitting the IMU increment (KF-GINS does the same interpolation)."]
     text = "\n".join(lines) + "\n"
     out = REPO / "docs" / "results" / "kfgins.md"
     out.write_text(text)
@@ -98,6 +133,48 @@ def main(argv=None):
 
 def _nav_solution(nav):
     return nav
+
+
+def _dump(out_dir: Path) -> None:
+    """The arrays and settings insnav.run hands to _core.run_loose, per GNSS file."""
+    core = _CoreTimer(insnav.engine._core)
+    insnav.engine._core = core
+    try:
+        for gnss_file, tag in (("GNSS-RTK-sim.txt", "full"), ("GNSS-RTK-sim-outage4.txt", "outage4")):
+            ds, cfg = load_kfgins(D / "kf-gins-sim.yaml", D / "Leador-A15-sim.txt.xz", D / gnss_file, layout=21)
+            d = out_dir / tag
+            d.mkdir(parents=True, exist_ok=True)
+            for f in ("ekf", "rbukf", "ukf"):
+                insnav.run(ds, config=cfg, filter=f)
+                args = core.last_args
+                for name, a in zip(("t", "dtheta_b", "dv_b", "gnss", "init", "P0"), args[2:8]):
+                    np.ascontiguousarray(a, dtype=np.float64).tofile(d / f"{name}.bin")
+                lines = lambda dct: "".join(f"{k} {' '.join(repr(float(x)) for x in np.atleast_1d(v))}\n"
+                                            for k, v in dct.items())
+                (d / "model.txt").write_text(lines(args[9]))
+                (d / f"config_{f}.txt").write_text(lines(args[10]))
+            print(f"wrote {d}")
+    finally:
+        insnav.engine._core = core.module
+
+
+class _CoreTimer:
+    """insnav._core with run_loose timed (wall) into .last; everything else passed through."""
+
+    def __init__(self, module):
+        self.module = module
+        self.last = np.nan
+
+    def run_loose(self, *args, **kwargs):
+        self.last_args = args
+        t0 = time.perf_counter()
+        try:
+            return self.module.run_loose(*args, **kwargs)
+        finally:
+            self.last = time.perf_counter() - t0
+
+    def __getattr__(self, name):
+        return getattr(self.module, name)
 
 
 if __name__ == "__main__":
