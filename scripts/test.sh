@@ -1,11 +1,20 @@
 #!/usr/bin/env bash
-# The whole test suite (Python + the plain C++ tests + the ASan/UBSan build,
-# which tests/test_cpp.py drives): installs what is missing first.
+# The whole test suite (Python + every C++ test and the example built without
+# Python under ASan/UBSan, which tests/test_cpp.py runs): installs what is
+# missing first.  Arguments go to pytest; with none, the C++ sanitizer build
+# starts in the background first (tests/_cpp_build.py) so that it compiles
+# while the Python tests run, and pytest uses 2 workers (pytest-xdist).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install.sh
+if command -v clang++ >/dev/null && [ -z "${CXX:-}" ]; then export CXX=clang++; fi
+args=("$@")
+if [ ${#args[@]} -eq 0 ]; then
+  python3 tests/_cpp_build.py --background
+  args=(-n 2)
+fi
 set +e
-python3 -m pytest -q "$@"
+python3 -m pytest -q "${args[@]}"
 rc=$?
 set -e
 if [ "$rc" -eq 5 ]; then  # pytest: no tests collected

@@ -1,6 +1,7 @@
 """The C++ example and tests, built without Python under ASan + UBSan, run by
-ctest (issue 2).  Skips only if cmake or a compiler is missing.  `make
-cpp-test` builds the same without sanitizers at -O3."""
+ctest (issue 2); the build itself is tests/_cpp_build.py.  Skips only if cmake
+or the source tree is missing.  `make cpp-test` builds the same without
+sanitizers at -O3."""
 from __future__ import annotations
 
 import shutil
@@ -8,6 +9,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
+
+import _cpp_build  # tests/_cpp_build.py: flags, compiler choice, lock shared with scripts/test.sh
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -17,28 +20,12 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-#: One build serves both: every C++ test and the example, without Python, under
-#: ASan + UBSan.  The Eigen-heavy tests dominate the suite's time by their
-#: compile time (template instantiation: minutes per file on 2 cores), so they
-#: are compiled once, at -O1 without debug info, and without the fixed-size
-#: update kernels of RbUkf/Ukf (INSNAV_NO_FIXED_UPDATE_KERNELS: the same
-#: template code at bounded dynamic sizes; measured on test_rbukf.cpp: 466 s
-#: of compiler CPU time without them, > 586 s with them).  The kernels run in
-#: the extension, i.e. in every Python filter test; bench/ builds at -O3.
-SANITIZED_O1 = ("-DINSNAV_SANITIZE=ON", "-DCMAKE_BUILD_TYPE=Release",
-                "-DCMAKE_CXX_FLAGS_RELEASE=-O1 -DNDEBUG -DINSNAV_NO_FIXED_UPDATE_KERNELS")
-BUILD = REPO / "build" / "cpp-asan"
-
-
 @pytest.fixture(scope="module")
 def ctest_output() -> str:
-    """Configure, build and run ctest once for this module."""
-    subprocess.run(["cmake", "-S", str(REPO), "-B", str(BUILD), "-DINSNAV_BUILD_EXAMPLES=ON", *SANITIZED_O1],
-                   check=True, capture_output=True, text=True)
-    r = subprocess.run(["cmake", "--build", str(BUILD), "-j2"], capture_output=True, text=True)
-    assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-4000:]
-    res = subprocess.run(["ctest", "--test-dir", str(BUILD), "--output-on-failure"], capture_output=True, text=True)
-    return res.stdout + res.stderr
+    """Build (or wait for scripts/test.sh's background build), then run ctest once."""
+    r = _cpp_build.build()
+    assert r.returncode == 0, (r.stdout or "")[-4000:] + (r.stderr or "")[-4000:]
+    return _cpp_build.ctest()
 
 
 def test_cpp_tests_under_asan_ubsan(ctest_output):
@@ -49,7 +36,7 @@ def test_cpp_tests_under_asan_ubsan(ctest_output):
 
 
 def test_free_inertial_example_prints_drift(ctest_output):
-    exe = BUILD / "cpp" / "examples" / "free_inertial"
+    exe = _cpp_build.BUILD / "cpp" / "examples" / "free_inertial"
     out = subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout
     drift = float(out.split("position drift")[1].split("m")[0])
     assert drift < 1e-3

@@ -47,10 +47,45 @@ inline bool all_finite(const SquareMat<N>& P) {
   return P.allFinite();
 }
 
+/// Largest state dimension the repair handles (every layout fits: 15..21).
+inline constexpr int kMaxRepairSize = 32;
+
+namespace detail {
+
+/// Bounded dynamic-size square matrix: no heap, and one instantiation of the
+/// eigen-solver machinery for every layout (the repair is rare; compiling
+/// SelfAdjointEigenSolver once per fixed size N cost seconds per layout per
+/// translation unit).
+using RepairMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxRepairSize, kMaxRepairSize>;
+
+/// Steps 3-4 of the strategy on a symmetric, finite P (any size <= kMaxRepairSize).
+inline void clamp_eigenvalues(RepairMat& P, const RepairOptions& opt) {
+  const Eigen::Index n = P.rows();
+  Eigen::SelfAdjointEigenSolver<RepairMat> es(P);
+  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxRepairSize, 1> lam = es.eigenvalues();
+  const double lmax = std::max(lam.maxCoeff(), 0.0);
+  const double floor = std::max(opt.abs_floor, opt.rel_floor * lmax);
+  for (Eigen::Index i = 0; i < n; ++i) lam[i] = std::max(lam[i], floor);
+  const RepairMat& V = es.eigenvectors();
+  RepairMat VL = V * lam.asDiagonal();
+  P.noalias() = VL * V.transpose();
+  P = (0.5 * (P + P.transpose())).eval();
+  double jitter = floor;
+  for (int k = 0; k < 20; ++k) {
+    Eigen::LLT<RepairMat> llt(P);
+    if (llt.info() == Eigen::Success) break;
+    P.diagonal().array() += jitter;
+    jitter *= 10.0;
+  }
+}
+
+}  // namespace detail
+
 /// Make P symmetric positive definite (strategy in the header comment).
 /// Returns true if P had to be changed beyond symmetrisation (one repair).
 template <int N>
 bool repair_covariance(SquareMat<N>& P, const RepairOptions& opt = {}) {
+  static_assert(N <= kMaxRepairSize, "repair_covariance: raise kMaxRepairSize");
   bool changed = false;
   if (!P.allFinite()) {
     double dmax = 0.0;
@@ -67,21 +102,10 @@ bool repair_covariance(SquareMat<N>& P, const RepairOptions& opt = {}) {
     Eigen::LLT<SquareMat<N>> llt(P);
     if (llt.info() == Eigen::Success) return false;
   }
-  Eigen::SelfAdjointEigenSolver<SquareMat<N>> es(P);
-  Eigen::Matrix<double, N, 1> lam = es.eigenvalues();
-  const double lmax = std::max(lam.maxCoeff(), 0.0);
-  const double floor = std::max(opt.abs_floor, opt.rel_floor * lmax);
-  for (int i = 0; i < N; ++i) lam[i] = std::max(lam[i], floor);
-  const SquareMat<N>& V = es.eigenvectors();
-  P.noalias() = V * lam.asDiagonal() * V.transpose();
+  detail::RepairMat A = P;
+  detail::clamp_eigenvalues(A, opt);
+  P = A;
   symmetrize<N>(P);
-  double jitter = floor;
-  for (int k = 0; k < 20; ++k) {
-    Eigen::LLT<SquareMat<N>> llt(P);
-    if (llt.info() == Eigen::Success) break;
-    P.diagonal().array() += jitter;
-    jitter *= 10.0;
-  }
   return true;
 }
 

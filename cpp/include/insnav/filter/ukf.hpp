@@ -47,7 +47,7 @@ class Ukf : public UnscentedPropagation<L> {
   explicit Ukf(const ImuErrorModel& model, const UtParams& ut = {}) : Base(model, ut) {}
 
   /// Augmented-UT measurement update, eqs. (14)-(21).  gate_chi2 <= 0: no gating.
-  /// 3 and 6 rows run with compile-time sizes (as RbUkf::update does).
+  /// 6 rows (position + velocity) run with compile-time sizes (as RbUkf::update does).
   template <class Meas>
   UpdateResult update(const Meas& meas, double gate_chi2) {
     UpdateResult res;
@@ -56,7 +56,6 @@ class Ukf : public UnscentedPropagation<L> {
     if (r == 0) return res;
 #ifndef INSNAV_NO_FIXED_UPDATE_KERNELS
     if (r == 6) return update_impl<6>(meas, gate_chi2, res);
-    if (r == 3) return update_impl<3>(meas, gate_chi2, res);
 #endif
     return update_impl<Eigen::Dynamic>(meas, gate_chi2, res);
   }
