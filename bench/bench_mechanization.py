@@ -4,7 +4,8 @@
 
 Both integrate the same 1 h of 200 Hz IMU increments (720 000 samples, a turning,
 pitching motion).  Each round runs the C++ program once (bench/mechanization_bench.cpp,
-compiled here with g++ -O3 -DNDEBUG, the flags of the Release build of insnav._core)
+compiled here with the extension's compiler (``$CXX``, else clang++ when installed, else
+g++, as scripts/install.sh chooses) and its Release flags -O3 -DNDEBUG)
 and times one Python batch call ``insnav.mechanize`` and one call of the binding
 alone; the order alternates between rounds.  Reported: medians over the rounds and
 the median of the per-round ratios, by wall clock and by thread CPU time (CPU time
@@ -48,8 +49,15 @@ ROWS = (("plain", "C++ `Strapdown::update` only"),
         ("core", "binding alone, `insnav._core.mechanize`"))
 
 
+def compiler() -> str:
+    """The compiler scripts/install.sh builds insnav._core with."""
+    import shutil
+
+    return os.environ.get("CXX") or shutil.which("clang++") or "g++"
+
+
 def build(exe: Path) -> None:
-    subprocess.run(["g++", "-O3", "-DNDEBUG", "-std=c++17", f"-I{REPO / 'cpp' / 'include'}",
+    subprocess.run([compiler(), "-O3", "-DNDEBUG", "-std=c++17", f"-I{REPO / 'cpp' / 'include'}",
                     "-I/usr/include/eigen3", str(REPO / "bench" / "mechanization_bench.cpp"), "-o", str(exe)],
                    check=True)
 
@@ -132,7 +140,8 @@ def main(argv=None) -> int:
     R = {k: np.asarray(v) for k, v in rates.items()}  # (rounds, 2)
     med = lambda x: float(np.median(x))  # noqa: E731
     print(f"samples per run: {n} ({n * dt / 3600:.2f} h at 200 Hz); rounds: {a.repeats}; "
-          f"{os.cpu_count()} cores; load average (1 min) before/after: {load0[0]:.2f}/{load1[0]:.2f}")
+          f"{os.cpu_count()} cores; load average (1 min) before/after: {load0[0]:.2f}/{load1[0]:.2f}; "
+          f"C++ loop compiled with {compiler()} -O3")
     print()
     print("| loop | wall clock: median [M samples/s] | min, max | thread CPU time: median [M samples/s] "
           "| min, max |")

@@ -11,7 +11,7 @@ if command -v clang++ >/dev/null && [ -z "${CXX:-}" ]; then export CXX=clang++; 
 args=("$@")
 if [ ${#args[@]} -eq 0 ]; then
   python3 tests/_cpp_build.py --background
-  args=(-n 2)
+  args=(-n 2 -p no:benchmark)  # pytest-benchmark, if installed, refuses xdist with a warning (an error here)
 fi
 set +e
 python3 -m pytest -q "${args[@]}"
