@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Install what insnav needs on a fresh Debian machine, then the package itself
 # with its test extras.  Idempotent: skips what is already there.
+#   scripts/install.sh [--deps-only]   (--deps-only: the system packages and the
+#                                       build backend, not the package)
 #
 # Compiler: clang++ when present (installed here on Debian), else the default
 # c++.  The core is header-only Eigen templates; clang 14 compiles them about
@@ -31,5 +33,6 @@ cxx_define=()  # the same compiler also when build/ already holds a configured t
 [ -n "${CXX:-}" ] && cxx_define=(-Ccmake.define.CMAKE_CXX_COMPILER="$(command -v "$CXX")")
 # build backend for the no-isolation build (incremental rebuilds in build/)
 "$PY" -m pip install -q "scikit-build-core>=0.10" "pybind11>=3" ninja cmake
+[ "${1:-}" = "--deps-only" ] && exit 0  # scripts/test.sh: the C++ tests start building before the package
 echo "[insnav] building and installing insnav (CXX=${CXX:-default})"
 flock /tmp/insnav-build.lock "$PY" -m pip install -q --no-build-isolation "${cxx_define[@]}" ".[test]"

@@ -3,16 +3,19 @@
 # Python under ASan/UBSan, which tests/test_cpp.py runs): installs what is
 # missing first.  Arguments go to pytest; with none, the C++ sanitizer build
 # starts in the background first (tests/_cpp_build.py) so that it compiles
-# while the Python tests run, and pytest uses 2 workers (pytest-xdist).
+# while the extension builds and the Python tests run, and pytest uses 2
+# workers (pytest-xdist).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/install.sh
-if command -v clang++ >/dev/null && [ -z "${CXX:-}" ]; then export CXX=clang++; fi
 args=("$@")
 if [ ${#args[@]} -eq 0 ]; then
+  # Two builds share the 2 cores: the C++ tests (no Python needed) compile in
+  # the background from here on, beside the extension and then the Python tests.
+  scripts/install.sh --deps-only
   python3 tests/_cpp_build.py --background
   args=(-n 2 -p no:benchmark)  # pytest-benchmark, if installed, refuses xdist with a warning (an error here)
 fi
+scripts/install.sh
 set +e
 python3 -m pytest -q "${args[@]}"
 rc=$?

@@ -208,10 +208,10 @@ class RbUkf : public UnscentedPropagation<L> {
     const int r = lin.rows();
     res.rows = r;
     if (r == 0) return res;
-    const bool dense = form_ == UpdateForm::kDensePaper || form_ == UpdateForm::kDenseJoseph;
-    const int c = dense ? kN : lin.n_cols;
     y_ = lin.residual - meas.predicted_residual(this->x_);  // = residual - H x for linear h
 #ifndef INSNAV_NO_FIXED_UPDATE_KERNELS
+    const bool dense = form_ == UpdateForm::kDensePaper || form_ == UpdateForm::kDenseJoseph;
+    const int c = dense ? kN : lin.n_cols;
     if (r == 6 && c == 6) return update_impl<6, 6>(lin, gate_chi2, res);
     if (r == 6 && c == kN) return update_impl<6, kN>(lin, gate_chi2, res);
 #endif
