@@ -5,7 +5,7 @@ One build serves both: every C++ test and the example, without Python, under
 ASan + UBSan.  Its cost is compile time (Eigen template instantiation, minutes
 of CPU), so:
 
-* it is compiled once, at -O0 (-O1 costs 2-3x the compile time; the two
+* it is compiled once, at -O0 (-O1 costs 2-3x the compile time; the three
   tests with long simulated runs are built at -O1, cpp/tests/CMakeLists.txt), without
   the fixed-size update kernels of RbUkf/Ukf (INSNAV_NO_FIXED_UPDATE_KERNELS:
   the same template code at bounded dynamic sizes; the kernels run in the
