@@ -29,10 +29,23 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 [ -f /usr/include/eigen3/Eigen/Core ] || { echo "[insnav] Eigen 3.4 headers not found (apt-get install libeigen3-dev)" >&2; exit 1; }
 if [ -z "${CXX:-}" ] && command -v clang++ >/dev/null; then export CXX=clang++; fi
-cxx_define=()  # the same compiler also when build/ already holds a configured tree
-[ -n "${CXX:-}" ] && cxx_define=(-Ccmake.define.CMAKE_CXX_COMPILER="$(command -v "$CXX")")
+# A build tree configured with another compiler is removed: CMake ignores $CXX
+# for an existing cache, and re-configuring it with a new CMAKE_CXX_COMPILER
+# drops scikit-build-core's initial cache (an install without insnav._core).
+want=$(readlink -f "$(command -v "${CXX:-c++}")" 2>/dev/null || true)
+for cache in build/cp*/CMakeCache.txt; do
+  [ -f "$cache" ] || continue
+  have=$(sed -n 's/^CMAKE_CXX_COMPILER:[A-Z]*=//p' "$cache")
+  if [ -n "$want" ] && [ "$(readlink -f "$have" 2>/dev/null)" != "$want" ]; then
+    echo "[insnav] $(dirname "$cache") was configured with $have: removing it (now $want)"
+    rm -rf "$(dirname "$cache")"
+  fi
+done
 # build backend for the no-isolation build (incremental rebuilds in build/)
 "$PY" -m pip install -q "scikit-build-core>=0.10" "pybind11>=3" ninja cmake
 [ "${1:-}" = "--deps-only" ] && exit 0  # scripts/test.sh: the C++ tests start building before the package
 echo "[insnav] building and installing insnav (CXX=${CXX:-default})"
-flock /tmp/insnav-build.lock "$PY" -m pip install -q --no-build-isolation "${cxx_define[@]}" ".[test]"
+flock /tmp/insnav-build.lock "$PY" -m pip install -q --no-build-isolation ".[test]"
+# never leave an install that looks complete without its compiled core
+(cd / && "$PY" -c "import insnav._core") ||
+  { echo "[insnav] the installed package has no working insnav._core (see the build output above)" >&2; exit 1; }
