@@ -1,6 +1,6 @@
 """Mechanization throughput: plain C++ loop vs the Python batch call, side by side.
 
-    cd insnav && PYTHONPATH=python python3 bench/bench_mechanization.py [--repeats 15]
+    cd insnav && python3 bench/bench_mechanization.py [--repeats 15]
 
 Both integrate the same 1 h of 200 Hz IMU increments (720 000 samples, a turning,
 pitching motion).  Each round runs the C++ program once (bench/mechanization_bench.cpp,
@@ -164,7 +164,7 @@ def main(argv=None) -> int:
     print()
     breakdown(t, dth, dv, init, max(5, a.repeats // 2))
     print()
-    print(f"command: cd insnav && PYTHONPATH=python python3 bench/bench_mechanization.py --repeats {a.repeats}")
+    print(f"command: cd insnav && python3 bench/bench_mechanization.py --repeats {a.repeats}")
     return 0
 
 

@@ -1,6 +1,6 @@
 """Simulator benchmark: 1 h at 200 Hz with IMU errors and 1 Hz raw GNSS (target <= 2 s).
 
-Run: ``cd insnav && PYTHONPATH=python python3 bench/bench_sim.py [--repeats 5]`` (prints the
+Run: ``cd insnav && python3 bench/bench_sim.py [--repeats 5]`` (prints the
 median of the runs, by wall clock and by process CPU time, and the load average: the
 machine may be shared).
 """
@@ -56,7 +56,7 @@ def main(argv=None) -> int:
         times.append(time.perf_counter() - t)
         cpu.append(time.process_time() - c)
     load1 = os.getloadavg()
-    print(f"command: cd insnav && PYTHONPATH=python python3 bench/bench_sim.py --repeats {a.repeats}")
+    print(f"command: cd insnav && python3 bench/bench_sim.py --repeats {a.repeats}")
     print(f"simulate 1 h @ 200 Hz ({len(ds.imu)} IMU samples) + IMU errors + 1 Hz raw GNSS "
           f"({len(ds.gnss_raw)} observations) + truth @ 10 Hz")
     print(f"wall [s]: {', '.join(f'{x:.3f}' for x in times)}; median {np.median(times):.3f} s (target <= 2 s)")

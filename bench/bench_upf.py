@@ -10,7 +10,7 @@ median of ``--repeat`` runs.  Per filter epoch = loop time / 1800 epochs
 
 Reproduce (from the repository root)::
 
-    PYTHONPATH=python python bench/bench_upf.py --repeat 3 --out docs/results/seed004_bench.md
+    python3 bench/bench_upf.py --repeat 3 --out docs/results/seed004_bench.md
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ import insnav  # noqa: E402
 from insnav.config import RunConfig  # noqa: E402
 from insnav.particle import run_tight_particle  # noqa: E402
 
-COMMAND = "PYTHONPATH=python python bench/bench_upf.py --repeat 3 --out docs/results/seed004_bench.md"
+COMMAND = "python3 bench/bench_upf.py --repeat 3 --out docs/results/seed004_bench.md"
 
 
 def main():

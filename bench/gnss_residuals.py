@@ -2,7 +2,7 @@
 
 Reproduce (from the repository root, with ../shared/data beside the repo)::
 
-    PYTHONPATH=python python bench/gnss_residuals.py [--data ../shared/data] [--out docs/results/gnss_geometry.md]
+    python3 bench/gnss_residuals.py [--data ../shared/data] [--out docs/results/gnss_geometry.md]
 
 Prints a Markdown report and, with ``--out``, writes it to that file.
 """
@@ -24,7 +24,7 @@ from insnav.gnss.gpstime import gps_seconds_from_week_tow  # noqa: E402
 from insnav.gnss.measurements import observation_residuals, read_rtklib_pos  # noqa: E402
 from insnav.gnss.sp3 import read_rinex_clk, read_sp3  # noqa: E402
 
-COMMAND = "PYTHONPATH=python python bench/gnss_residuals.py --out docs/results/gnss_geometry.md"
+COMMAND = "python3 bench/gnss_residuals.py --out docs/results/gnss_geometry.md"
 
 
 def sp3_figures(d: Path):

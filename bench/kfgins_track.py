@@ -105,7 +105,7 @@ def main(argv=None):
              "(every 20th epoch, as shipped); ours at the same 10 Hz epochs (the like-for-like rows: a maximum "
              "over 200 Hz epochs also sees the last 0.1 s of each outage, where the error grows by about "
              "2 mm) and at every IMU epoch.", "",
-             "Command: `PYTHONPATH=python python3 bench/kfgins_track.py` (from the repository root)", "",
+             "Command: `python3 bench/kfgins_track.py` (from the repository root)", "",
              "| run | horizontal RMS [m] | 3-D RMS [m] | yaw RMS [deg] | outage max horizontal [m] (4 x 60 s) |",
              "|---|---|---|---|---|"]
     for tag in ("full", "outage4"):

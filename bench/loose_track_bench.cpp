@@ -2,7 +2,7 @@
 // inputs of insnav.run's C++ call, dumped by bench/kfgins_track.py --dump DIR
 // (arrays, model.txt, and config_<filter>.txt: the engine settings of that filter).
 //
-//   PYTHONPATH=python python3 bench/kfgins_track.py --dump /tmp/kfgins_bin
+//   python3 bench/kfgins_track.py --dump /tmp/kfgins_bin
 //   g++ -O3 -DNDEBUG -std=c++17 -Icpp/include -I/usr/include/eigen3 \
 //       bench/loose_track_bench.cpp -o /tmp/loose_track_bench
 //   /tmp/loose_track_bench /tmp/kfgins_bin/full ekf 5 [out.bin]

@@ -1,7 +1,7 @@
 """Seed 000 Table 1 (seed000-sim, Monte Carlo) and the Table 3 analogue
 (seed000-car, four outages), EKF vs RB-UKF (and UKF).  Writes docs/results/seed000.md.
 
-    PYTHONPATH=python python3 bench/seed000_tables.py [--runs 50] [--car-runs 20] [--workers 2]
+    python3 bench/seed000_tables.py [--runs 50] [--car-runs 20] [--workers 2]
 
 Run i (i = 1..runs) simulates the scenario with seed i (new IMU noise, GNSS noise
 and, for the car, new turn-on biases) and starts every filter from the same
@@ -191,7 +191,7 @@ def main(argv=None):
          "Reproduce (%.0f s wall with %d worker processes on the shared 2-core machine, which other jobs were "
          "using at the same time; %.0f s of it for Table 1):" % (wall, a.workers, t_sim), "",
          "```sh",
-         f"cd insnav && PYTHONPATH=python python3 bench/seed000_tables.py --runs {a.runs} "
+         f"cd insnav && python3 bench/seed000_tables.py --runs {a.runs} "
          f"--car-runs {a.car_runs} --workers {a.workers}",
          "```", "",
          "(`--render-only` rewrites this document from the per-run metrics the run pickled to `--raw`, "

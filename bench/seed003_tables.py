@@ -9,7 +9,7 @@ initial state, no aiding) for the 1-satellite ratio.
 
 Reproduce (from the repository root)::
 
-    PYTHONPATH=python python bench/seed003_tables.py --runs 20 --out docs/results/seed003.md
+    python3 bench/seed003_tables.py --runs 20 --out docs/results/seed003.md
 
 Writes the Markdown report and PNG figures beside it.
 """
@@ -33,7 +33,7 @@ from insnav.gnss.constellation import Constellation  # noqa: E402
 from insnav.ins import mechanize  # noqa: E402
 from insnav.tight import run_tight  # noqa: E402
 
-COMMAND = "PYTHONPATH=python python bench/seed003_tables.py --runs 20 --out docs/results/seed003.md"
+COMMAND = "python3 bench/seed003_tables.py --runs 20 --out docs/results/seed003.md"
 PRESETS = ("seed003-4sat", "seed003-3sat", "seed003-1sat")
 WIN = (600.0, 900.0)
 

@@ -19,7 +19,7 @@ Tables give the median over runs and the 90th percentile where it matters.
 
 Reproduce (from the repository root)::
 
-    PYTHONPATH=python python bench/seed004_tables.py --runs 20 --particles 100 --out docs/results/seed004.md
+    python3 bench/seed004_tables.py --runs 20 --particles 100 --out docs/results/seed004.md
 
 Writes the Markdown report and PNG error curves beside it.
 """
@@ -41,7 +41,7 @@ from insnav.analysis import errors, reconvergence_time, rms  # noqa: E402
 from insnav.config import RunConfig  # noqa: E402
 from insnav.particle import run_tight_particle  # noqa: E402
 
-COMMAND = "PYTHONPATH=python python bench/seed004_tables.py --runs 20 --particles 100 --out docs/results/seed004.md"
+COMMAND = "python3 bench/seed004_tables.py --runs 20 --particles 100 --out docs/results/seed004.md"
 T_OFF, T_ON = 600.0, 800.0
 DECIM = 10  # 10 Hz output
 GRID = np.arange(1.0, 1800.0, 1.0)  # error curves on a 1-s grid

@@ -16,7 +16,7 @@
 
 Reproduce (from the repository root, with ../shared/data beside the repo)::
 
-    PYTHONPATH=python python bench/tight_realdata.py --out docs/results/tight_realdata.md
+    python3 bench/tight_realdata.py --out docs/results/tight_realdata.md
 """
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ from insnav.gnss.measurements import read_rtklib_pos  # noqa: E402
 from insnav.io.rinex_dataset import GPST_UNIX_OFFSET_S, load_rinex, load_rinex_run  # noqa: E402
 from insnav.tight import run_tight, tight_inputs_from_rinex  # noqa: E402
 
-COMMAND = "PYTHONPATH=python python bench/tight_realdata.py --out docs/results/tight_realdata.md"
+COMMAND = "python3 bench/tight_realdata.py --out docs/results/tight_realdata.md"
 CONFIG = ROOT / "bench" / "walk_0827.toml"
 DEG = np.pi / 180.0
 
