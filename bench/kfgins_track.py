@@ -27,6 +27,7 @@ import numpy as np
 import insnav
 import insnav.engine
 from insnav.analysis import errors, rms
+from insnav.evaluate import _solution_at
 from insnav.io.kfgins import read_kfgins_nav
 from insnav.io.kfgins_dataset import load_kfgins
 from insnav.sanitize import sanitize_dataset
@@ -92,7 +93,7 @@ def main(argv=None):
                 if k[0] in FILTER_JOBS:
                     sol = rows[k]
                     rows[k] = metrics(sol, truth)
-                    rows[k + ("10hz",)] = metrics(at_epochs(sol, kf_nav.t), truth)
+                    rows[k + ("10hz",)] = metrics(_solution_at(sol, kf_nav.t), truth)  # KF-GINS epochs are ours too
                     del sol
     finally:
         insnav.engine._core = core.module
@@ -148,18 +149,6 @@ def main(argv=None):
 FILTER_JOBS = ("ekf", "rbukf", "rbukf-1s")
 KF_FILES = {"full": "KF_GINS_Navresult_fullGNSS_10Hz.nav.xz", "outage4": "KF_GINS_Navresult_outage4_10Hz.nav.xz"}
 
-
-def at_epochs(sol, t):
-    """The solution rows at the times t (each must be one of sol.t, to 1 us)."""
-    import dataclasses
-
-    idx = np.clip(np.searchsorted(sol.t, t - 1e-6), 0, len(sol.t) - 1)
-    if not np.all(np.abs(sol.t[idx] - t) < 1e-6):
-        raise ValueError("at_epochs: some requested times are not solution epochs")
-    n = len(sol.t)
-    return dataclasses.replace(sol, **{f.name: getattr(sol, f.name)[idx] for f in dataclasses.fields(sol)
-                                       if isinstance(getattr(sol, f.name), np.ndarray)
-                                       and len(getattr(sol, f.name)) == n})
 
 
 def _dump(out_dir: Path) -> None:

@@ -12,8 +12,8 @@ of CPU), so:
   extension, i.e. in every Python filter test, and in bench/);
 * with clang++ when present (as scripts/install.sh builds the extension);
 * scripts/test.sh starts it in the background (``python3 tests/_cpp_build.py
-  --background``) so that it compiles on one core while the Python tests run
-  on the other; tests/test_cpp.py then waits for it under the same lock
+  --background``) before it builds the extension, so that the two builds and
+  then the Python tests share the cores; tests/test_cpp.py waits for it under the same lock
   (build/cpp-asan.lock) and builds whatever is left itself, so running pytest
   alone works too.
 
