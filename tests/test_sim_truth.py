@@ -98,9 +98,10 @@ def test_commanded_changes_are_reached():
     speed = np.linalg.norm(k.v_n, axis=1)
     assert speed[0] == pytest.approx(10.0, abs=1e-12)
     assert speed[1] == pytest.approx(10.0, abs=1e-9)
-    assert np.degrees(k.euler[2, 2]) == pytest.approx(90.0, abs=1e-9)
+    # start east (90 deg), +90 deg turn -> south; -30, +30, -90 deg -> east again
+    assert abs(np.degrees(k.euler[2, 2])) == pytest.approx(180.0, abs=1e-9)
     assert speed[3] == pytest.approx(0.0, abs=1e-9) and speed[4] == pytest.approx(0.0, abs=1e-9)
-    assert np.degrees(k.euler[4, 2]) == pytest.approx(0.0, abs=1e-9)
+    assert np.degrees(k.euler[4, 2]) == pytest.approx(90.0, abs=1e-9)
 
 
 def _mechanize_or_skip():

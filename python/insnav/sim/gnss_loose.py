@@ -12,9 +12,20 @@ metres and converted to latitude/longitude with the radii of curvature.
 
 Epochs at ``first_epoch_s + k / rate_hz`` up to the end of the scenario;
 epochs strictly inside an outage window ``(start, end)`` are removed.
-Each remaining fix is delayed by ``i`` whole GNSS epochs with probability
-``delay_p[i]`` (seed 001): ``t_arrival = t_valid + i / rate_hz``.  Records
-are kept in ``t_valid`` order.
+Delays (seed 001 eq. (4)), in whole GNSS epochs, ``delay_model``:
+
+* ``"one_per_epoch"`` (the paper's model): at every epoch ``k`` the filter
+  receives exactly one measurement, ``y_k = z_{k - tau_k}`` with
+  ``P(tau_k = i) = delay_p[i]`` drawn independently per epoch.  A fix may
+  therefore arrive twice (same noise realisation) or never.  At the start only
+  delays reaching back to the first epoch are possible (``delay_p`` is
+  renormalised over them); nothing is received at an epoch inside an outage
+  or when the chosen fix fell in one.  Records are in ``t_arrival`` order
+  (one per arrival epoch).
+* ``"independent"``: each fix is delayed by its own draw ``i`` and arrives at
+  ``t_valid + i / rate_hz``; several fixes can arrive in the same epoch
+  (21-26 % of the epochs of the seed001 presets) and some epochs receive
+  none.  Records are in ``t_valid`` order.
 """
 from __future__ import annotations
 
@@ -70,8 +81,9 @@ def simulate_gnss_fixes(traj: Trajectory, cfg: dict, rng_noise: np.random.Genera
                         rng_delay: np.random.Generator) -> GnssFixes:
     """Simulate loosely coupled fixes for the ``[gnss]`` configuration ``cfg`` (SI dict)."""
     sc = traj.sc
-    t = gnss_epochs(sc.t0, sc.t_end, cfg["first_epoch"], cfg["rate"])
-    t = t[~in_windows(t, cfg["outages"])]
+    t_all = gnss_epochs(sc.t0, sc.t_end, cfg["first_epoch"], cfg["rate"])
+    received = ~in_windows(t_all, cfg["outages"])
+    t = t_all[received]
     n = t.size
     if n == 0 or not cfg["enabled"]:
         z = np.empty((0,))
@@ -86,7 +98,32 @@ def simulate_gnss_fixes(traj: Trajectory, cfg: dict, rng_noise: np.random.Genera
     lon_m = lon + e_pos[:, 1] / ((R_N + h) * np.cos(lat))
     h_m = h - e_pos[:, 2]
     p = cfg["delay_p"]
+    lat_d, lon_d, v_m = np.degrees(lat_m), np.degrees(lon_m), v_n + e_vel
+    if p.size > 1 and cfg.get("delay_model", "independent") == "one_per_epoch":
+        # fix j (index into the received epochs) of every epoch k of t_all
+        j_of_epoch = np.cumsum(received) - 1
+        pick = _one_per_epoch_delays(t_all.size, p, rng_delay)
+        k = np.arange(t_all.size)
+        src = k - pick
+        ok = received & received[src]  # nothing at an outage epoch, nor a fix that was never made
+        j = j_of_epoch[src[ok]]
+        t_arr = t_all[ok]
+        return GnssFixes(t[j], t_arr, lat_d[j], lon_d[j], h_m[j], v_m[j],
+                         np.tile(sig_pos, (j.size, 1)), np.tile(sig_vel, (j.size, 1)))
     delay = rng_delay.choice(p.size, size=n, p=p) if p.size > 1 else np.zeros(n, int)
     t_arr = np.round(t + delay / cfg["rate"], 9)
-    return GnssFixes(t, t_arr, np.degrees(lat_m), np.degrees(lon_m), h_m, v_n + e_vel,
+    return GnssFixes(t, t_arr, lat_d, lon_d, h_m, v_m,
                      np.tile(sig_pos, (n, 1)), np.tile(sig_vel, (n, 1)))
+
+
+def _one_per_epoch_delays(n_epochs: int, p: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Delay ``tau_k`` [epochs] of the one measurement received at each of
+    ``n_epochs`` epochs, ``P(tau_k = i) = p[i]`` (seed 001 eq. (4)); at epoch
+    ``k < len(p) - 1`` only ``tau <= k`` exist and ``p`` is renormalised over them."""
+    u = rng.random(n_epochs)
+    tau = np.searchsorted(np.cumsum(p), u * p.sum(), side="right")
+    tau = np.minimum(tau, p.size - 1)
+    for k in range(min(n_epochs, p.size - 1)):  # the first epochs: renormalise over tau <= k
+        q = p[:k + 1] / p[:k + 1].sum()
+        tau[k] = min(int(np.searchsorted(np.cumsum(q), u[k], side="right")), k)
+    return tau

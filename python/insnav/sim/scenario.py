@@ -27,7 +27,7 @@ Layout (all tables optional unless marked)::
     [imu.gyro] / [imu.accel]   error model, see _GYRO_KEYS / _ACCEL_KEYS
     [truth]   rate_hz
     [gnss]    enabled, rate_hz, lever_arm_b_m, sigma_h_m, sigma_v_m,
-              sigma_vel_mps, outages, delay_p, first_epoch_s
+              sigma_vel_mps, outages, delay_p, delay_model, first_epoch_s
     [gnss_raw] enabled, rate_hz, constellation, elevation_mask_deg, max_sats,
               sigma_pr_m, sigma_prr_mps, clock_bias0_m, clock_drift0_mps,
               clock_bias_rw_m_per_sqrts, clock_drift_rw_mps_per_sqrts
@@ -604,7 +604,7 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
 
     gn = _table(ctx, raw, "", "gnss")
     _check_keys(ctx, gn, "gnss", {"enabled", "rate_hz", "lever_arm_b_m", "sigma_h_m", "sigma_v_m",
-                                  "sigma_vel_mps", "outages", "delay_p", "first_epoch_s"})
+                                  "sigma_vel_mps", "outages", "delay_p", "delay_model", "first_epoch_s"})
     gnss = {
         "enabled": _bool(ctx, gn, "gnss", "enabled", True),
         "rate": _num(ctx, gn, "gnss", "rate_hz", 1.0, lo=0.0, lo_open=True, hi=imu_rate),
@@ -622,6 +622,10 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
     if abs(sum(dp) - 1.0) > 1e-9:
         ctx.fail("gnss.delay_p", f"probabilities {dp!r} must sum to 1 (sum is {sum(dp)!r})")
     gnss["delay_p"] = np.array(dp, dtype=float)
+    gnss["delay_model"] = _str(ctx, gn, "gnss", "delay_model", "independent")
+    if gnss["delay_model"] not in ("independent", "one_per_epoch"):
+        ctx.fail("gnss.delay_model", f"expected \"one_per_epoch\" (seed 001: one measurement received per "
+                 f"epoch) or \"independent\" (each fix delayed on its own), got {gnss['delay_model']!r}")
 
     gr = _table(ctx, raw, "", "gnss_raw")
     _check_keys(ctx, gr, "gnss_raw", {"enabled", "rate_hz", "constellation", "elevation_mask_deg",

@@ -273,12 +273,13 @@ class RandomDelayEngine {
         }
         core_.close_cycle();
         refs_[0] = Ref{core_.ins.state(), core_.omega_ib_b, true};
-        bool fed = false;
         for (; g < m && t_arrival[g] <= epochs[ep] + tol; ++g) {
-          const bool applied = apply(fixes[g], g, out);
-          fed = fed || applied;
+          // After a fed-back correction block 0 of the stack is zero and refers
+          // to the corrected INS: the next record of the same epoch must be
+          // differenced against that, not against the INS stored before the
+          // correction (which would apply the correction twice).
+          if (apply(fixes[g], g, out)) refs_[0].nav = core_.ins.state();
         }
-        if (fed) refs_[0].nav = core_.ins.state();  // block 0 now refers to the corrected INS
         core_.filter.shift();
         for (int i = S; i > 0; --i) refs_[i] = refs_[i - 1];
         core_.start_cycle();
