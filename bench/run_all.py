@@ -1,0 +1,90 @@
+"""Regenerate every results document in docs/results/ at the current commit.
+
+    python3 bench/run_all.py [--only NAME[,NAME...]] [--quick] [--list]
+
+Each generator writes its whole document (with the commit and the exact
+command inside it).  They run one after the other (each may use both cores);
+the wall time of each and of the whole run is printed and written to
+``docs/results/run_all.md``.  ``--quick`` passes each generator's reduced-run
+arguments (for checking the pipeline, not for publishing: the documents then
+say so through their own command line).  Needs the installed package
+(``scripts/install.sh``) and ``../shared/data`` for the real-data documents.
+"""
+from __future__ import annotations
+
+import argparse
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PY = sys.executable
+
+#: name -> (document(s), full command, quick command)
+GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
+    "seed000": (("seed000.md",), ["bench/seed000_tables.py"], ["bench/seed000_tables.py", "--runs", "4"]),
+    "seed001": (("seed001.md",), ["bench/seed001_tables.py"], ["bench/seed001_tables.py", "--runs", "4"]),
+    "seed003": (("seed003.md",), ["bench/seed003_tables.py"], ["bench/seed003_tables.py", "--runs", "3"]),
+    "seed004": (("seed004.md",), ["bench/seed004_tables.py"], ["bench/seed004_tables.py", "--runs", "2"]),
+    "seed004_bench": (("seed004_bench.md",), ["bench/bench_upf.py", "--out", "docs/results/seed004_bench.md"],
+                      ["bench/bench_upf.py", "--repeat", "1", "--out", "docs/results/seed004_bench.md"]),
+    "kfgins": (("kfgins.md",), ["bench/kfgins_track.py"], ["bench/kfgins_track.py", "--repeat", "1"]),
+    "gnss_geometry": (("gnss_geometry.md",), ["bench/gnss_residuals.py", "--out", "docs/results/gnss_geometry.md"],
+                      ["bench/gnss_residuals.py", "--out", "docs/results/gnss_geometry.md"]),
+    "tight_realdata": (("tight_realdata.md",),
+                       ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"],
+                       ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"]),
+}
+
+
+def git_commit() -> str:
+    out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
+    return out.stdout.strip() or "unknown"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--only", default="", help="comma-separated generator names")
+    ap.add_argument("--quick", action="store_true", help="reduced runs (pipeline check)")
+    ap.add_argument("--list", action="store_true")
+    args = ap.parse_args(argv)
+    if args.list:
+        for name, (docs, full, _) in GENERATORS.items():
+            print(f"{name:15s} {', '.join(docs):28s} python3 {shlex.join(full)}")
+        return 0
+    names = [n.strip() for n in args.only.split(",") if n.strip()] or list(GENERATORS)
+    unknown = [n for n in names if n not in GENERATORS]
+    if unknown:
+        ap.error(f"unknown generator(s) {', '.join(unknown)}; known: {', '.join(GENERATORS)}")
+    rows, failed = [], []
+    t_all = time.perf_counter()
+    for name in names:
+        docs, full, quick = GENERATORS[name]
+        cmd = [PY, *(quick if args.quick else full)]
+        print(f"[run_all] {name}: {shlex.join(cmd[1:])}", flush=True)
+        t0 = time.perf_counter()
+        rc = subprocess.run(cmd, cwd=ROOT).returncode
+        dt = time.perf_counter() - t0
+        rows.append((name, docs, shlex.join(["python3", *cmd[1:]]), dt, rc))
+        print(f"[run_all] {name}: rc {rc}, {dt:.0f} s", flush=True)
+        if rc:
+            failed.append(name)
+    total = time.perf_counter() - t_all
+    lines = ["# Results documents: regeneration times", "",
+             f"Written by `bench/run_all.py` at commit `{git_commit()}`; command: "
+             f"`python3 bench/run_all.py {' '.join(argv if argv is not None else sys.argv[1:])}`.", "",
+             "Each generator runs alone (one after the other) on the shared 2-core machine.", "",
+             "| generator | documents | command | wall [s] | exit |", "|---|---|---|---|---|"]
+    for name, docs, cmd, dt, rc in rows:
+        lines.append(f"| {name} | {', '.join(docs)} | `{cmd}` | {dt:.0f} | {rc} |")
+    lines += ["", f"Total: {total:.0f} s ({total / 60:.1f} min)."]
+    if not args.only:
+        (ROOT / "docs/results/run_all.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
