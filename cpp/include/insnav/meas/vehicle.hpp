@@ -1,0 +1,189 @@
+// insnav/meas/vehicle.hpp -- vehicle constraints as measurements:
+// non-holonomic constraint (NHC), wheel odometer, zero-velocity (ZUPT) and
+// zero-angular-rate (ZARU) updates.
+//
+// Frames: b the IMU body frame (FRD), v the vehicle frame (x forward along
+// the rear axle's direction of travel, y right, z down), C_bv the mounting
+// rotation (vehicle -> body; identity for an aligned IMU).  The constrained
+// point is the centre of the rear axle, at lever_arm_b from the IMU (body
+// axes): it does not slip sideways and does not leave the road, and the
+// odometer measures its forward speed.
+//
+// Velocity of the constrained point, vehicle axes (Shin 2001, "Accuracy
+// improvement of low cost INS/GPS for land applications", eq. (4.29); Groves
+// 2013, eq. (16.22)):
+//   v_v = C_vb (C_bn v_n + omega_nb_b x l_b),  omega_nb_b = omega_ib_b - C_bn omega_in_n
+// NHC: v_v[1] = v_v[2] = 0.  Odometer: v_v[0] = speed.
+// Linearisation (error = computed - true, C~_bn = C_bn (I + [psi x]),
+// omega~_ib_b = omega_ib_b + dw_b, so d omega_nb_b = dw_b + C_bn [omega_in_n x] psi;
+// the position error's effect on omega_in_n neglected, < 1e-9 m/s per metre):
+//   d v_v = C_vb C_bn dv - C_vb (C_bn [v_n x] + [l_b x] C_bn [omega_in_n x]) psi - C_vb [l_b x] dw_b
+// ZUPT (standstill): v_n = 0:  d = dv.
+// ZARU (standstill): omega_ib_b = C_bn omega_ie_n, residual
+//   omega~_ib_b - C~_bn omega_ie_n,  d = dw_b - C_bn [psi x] omega_ie_n
+//                                      = dw_b + C_bn [omega_ie_n x] psi.
+// Each class gives the residual (INS-predicted minus measured), H and R in
+// the LinearMeasurement form of the other measurements (gnss_loose.hpp), and
+// predicted_residual(dx), the exact residual the INS would show if its true
+// error were dx (for the unscented updates and the Jacobian tests).
+#pragma once
+
+#include "insnav/earth/wgs84.hpp"
+#include "insnav/filter/types.hpp"
+#include "insnav/math/rotation.hpp"
+
+namespace insnav {
+
+/// Mounting and noise of the vehicle constraints (SI).
+struct VehicleConstraintConfig {
+  Mat3 C_bv = Mat3::Identity();     // vehicle -> body rotation (IMU mounting)
+  Vec3 lever_arm_b = Vec3::Zero();  // IMU -> rear-axle centre, body axes [m]
+  double sigma_nhc_mps = 0.1;       // lateral / vertical velocity noise [m/s]
+  double sigma_odo_mps = 0.05;      // odometer speed noise [m/s]
+  double sigma_zupt_mps = 0.01;     // zero-velocity noise [m/s]
+  double sigma_zaru_radps = 1e-4;   // zero-angular-rate noise [rad/s]
+};
+
+namespace vehicle_detail {
+
+/// Velocity of the constrained point in vehicle axes for a given attitude,
+/// velocity and body rate (the nonlinear h of NHC and the odometer).
+inline Vec3 point_velocity_v(const Mat3& C_nb, const Vec3& v_n, const Vec3& omega_ib_b, const Vec3& omega_in_n,
+                             const VehicleConstraintConfig& cfg) {
+  const Mat3 C_bn = C_nb.transpose();
+  const Vec3 omega_nb_b = omega_ib_b - C_bn * omega_in_n;
+  return cfg.C_bv.transpose() * (C_bn * v_n + omega_nb_b.cross(cfg.lever_arm_b));
+}
+
+}  // namespace vehicle_detail
+
+/// NHC (rows: lateral, vertical) and/or odometer (row: forward speed) on the
+/// velocity of the rear-axle point.
+template <class L>
+class VehicleVelocityMeasurement {
+ public:
+  using RowVec = typename LinearMeasurement<L>::RowVec;
+
+  /// ins: INS state at the update time; omega_ib_b: corrected body rate [rad/s];
+  /// use_nhc: the two zero rows; odo_speed_mps: measured forward speed, or NaN for none.
+  void set(const NavState& ins, const Vec3& omega_ib_b, const VehicleConstraintConfig& cfg, bool use_nhc,
+           double odo_speed_mps) {
+    cfg_ = cfg;
+    C_nb_ = ins.q_nb.toRotationMatrix();
+    v_n_ = ins.v_n;
+    omega_ib_b_ = omega_ib_b;
+    const wgs84::Radii r = wgs84::radii(ins.lat);
+    omega_in_n_ = wgs84::omega_ie_n(ins.lat) + wgs84::omega_en_n(ins.lat, ins.h, ins.v_n, r);
+    use_odo_ = odo_speed_mps == odo_speed_mps;  // not NaN
+    use_nhc_ = use_nhc;
+    odo_ = use_odo_ ? odo_speed_mps : 0.0;
+    const int rows = (use_odo_ ? 1 : 0) + (use_nhc_ ? 2 : 0);
+    lin_.residual.resize(rows);
+    lin_.H.setZero(rows, L::kSize);
+    lin_.R.setZero(rows, rows);
+    const Vec3 v_v = vehicle_detail::point_velocity_v(C_nb_, v_n_, omega_ib_b_, omega_in_n_, cfg_);
+    const Mat3 C_vn = cfg_.C_bv.transpose() * C_nb_.transpose();
+    Eigen::Matrix<double, 3, 9> J;  // d v_v / d [dv psi dw_b]
+    J.leftCols<3>() = C_vn;
+    J.middleCols<3>(3) = -C_vn * skew(v_n_) - cfg_.C_bv.transpose() * skew(cfg_.lever_arm_b) *
+                                                  C_nb_.transpose() * skew(omega_in_n_);
+    J.rightCols<3>() = -cfg_.C_bv.transpose() * skew(cfg_.lever_arm_b);
+    int row = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+      const bool on = axis == 0 ? use_odo_ : use_nhc_;
+      if (!on) continue;
+      lin_.residual[row] = v_v[axis] - (axis == 0 ? odo_ : 0.0);
+      lin_.H.template block<1, 3>(row, L::kVel) = J.template block<1, 3>(axis, 0);
+      lin_.H.template block<1, 3>(row, L::kAtt) = J.template block<1, 3>(axis, 3);
+      lin_.H.template block<1, 3>(row, L::kGyroBias) = J.template block<1, 3>(axis, 6);
+      const double s = axis == 0 ? cfg_.sigma_odo_mps : cfg_.sigma_nhc_mps;
+      lin_.R(row, row) = s * s;
+      rows_axis_[row] = axis;
+      ++row;
+    }
+    lin_.n_cols = L::kGyroBias + 3;
+  }
+
+  const LinearMeasurement<L>& linear() const { return lin_; }
+
+  RowVec predicted_residual(const StateVec<L>& dx) const {
+    const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * C_nb_;
+    const Vec3 v_true = v_n_ - dx.template segment<3>(L::kVel);
+    const Vec3 w_true = omega_ib_b_ - dx.template segment<3>(L::kGyroBias);
+    const Vec3 d = vehicle_detail::point_velocity_v(C_nb_, v_n_, omega_ib_b_, omega_in_n_, cfg_) -
+                   vehicle_detail::point_velocity_v(C_true, v_true, w_true, omega_in_n_, cfg_);
+    RowVec out(lin_.rows());
+    for (int i = 0; i < lin_.rows(); ++i) out[i] = d[rows_axis_[i]];
+    return out;
+  }
+
+ private:
+  LinearMeasurement<L> lin_;
+  VehicleConstraintConfig cfg_;
+  Mat3 C_nb_ = Mat3::Identity();
+  Vec3 v_n_ = Vec3::Zero(), omega_ib_b_ = Vec3::Zero(), omega_in_n_ = Vec3::Zero();
+  bool use_odo_ = false, use_nhc_ = false;
+  double odo_ = 0.0;
+  int rows_axis_[3] = {0, 1, 2};
+};
+
+/// ZUPT (3 rows, v_n = 0) and/or ZARU (3 rows, omega_eb = 0) while stationary.
+template <class L>
+class StandstillMeasurement {
+ public:
+  using RowVec = typename LinearMeasurement<L>::RowVec;
+
+  void set(const NavState& ins, const Vec3& omega_ib_b, const VehicleConstraintConfig& cfg, bool zupt, bool zaru) {
+    C_nb_ = ins.q_nb.toRotationMatrix();
+    v_n_ = ins.v_n;
+    omega_ib_b_ = omega_ib_b;
+    omega_ie_n_ = wgs84::omega_ie_n(ins.lat);
+    zupt_ = zupt;
+    zaru_ = zaru;
+    const int rows = (zupt ? 3 : 0) + (zaru ? 3 : 0);
+    lin_.residual.resize(rows);
+    lin_.H.setZero(rows, L::kSize);
+    lin_.R.setZero(rows, rows);
+    int row = 0;
+    if (zupt) {
+      lin_.residual.template segment<3>(row) = v_n_;
+      lin_.H.template block<3, 3>(row, L::kVel) = Mat3::Identity();
+      lin_.R.template block<3, 3>(row, row) = Mat3::Identity() * (cfg.sigma_zupt_mps * cfg.sigma_zupt_mps);
+      row += 3;
+    }
+    if (zaru) {
+      lin_.residual.template segment<3>(row) = omega_ib_b_ - C_nb_.transpose() * omega_ie_n_;
+      lin_.H.template block<3, 3>(row, L::kAtt) = C_nb_.transpose() * skew(omega_ie_n_);
+      lin_.H.template block<3, 3>(row, L::kGyroBias) = Mat3::Identity();
+      lin_.R.template block<3, 3>(row, row) = Mat3::Identity() * (cfg.sigma_zaru_radps * cfg.sigma_zaru_radps);
+    }
+    lin_.n_cols = zaru ? L::kGyroBias + 3 : L::kVel + 3;
+  }
+
+  const LinearMeasurement<L>& linear() const { return lin_; }
+
+  RowVec predicted_residual(const StateVec<L>& dx) const {
+    RowVec out(lin_.rows());
+    int row = 0;
+    if (zupt_) {
+      out.template segment<3>(row) = dx.template segment<3>(L::kVel);
+      row += 3;
+    }
+    if (zaru_) {
+      const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * C_nb_;
+      // computed residual minus the residual of the true state (which is zero at standstill)
+      out.template segment<3>(row) = (omega_ib_b_ - C_nb_.transpose() * omega_ie_n_) -
+                                     ((omega_ib_b_ - dx.template segment<3>(L::kGyroBias)) -
+                                      C_true.transpose() * omega_ie_n_);
+    }
+    return out;
+  }
+
+ private:
+  LinearMeasurement<L> lin_;
+  Mat3 C_nb_ = Mat3::Identity();
+  Vec3 v_n_ = Vec3::Zero(), omega_ib_b_ = Vec3::Zero(), omega_ie_n_ = Vec3::Zero();
+  bool zupt_ = false, zaru_ = false;
+};
+
+}  // namespace insnav

@@ -1,0 +1,107 @@
+// Vehicle constraints (meas/vehicle.hpp): every analytic Jacobian H against a
+// central-difference derivative of the exact residual predicted_residual(dx)
+// (NHC, odometer, ZUPT, ZARU; a mounting rotation and a lever arm), the
+// residual sign (computed minus measured), and what each constraint sees:
+// a sideways velocity error shows in the NHC rows, an attitude error of a
+// moving vehicle too, a stationary vehicle's velocity in ZUPT.
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "insnav/core.hpp"
+#include "insnav/filter/layout.hpp"
+#include "insnav/meas/vehicle.hpp"
+#include "test_util.hpp"
+
+using namespace insnav;
+
+namespace {
+
+template <class M>
+double jacobian_error(const M& meas) {
+  using L = Layout21;
+  const auto& lin = meas.linear();
+  double worst = 0.0;
+  for (int j = 0; j < L::kSize; ++j) {
+    const double h = (j >= L::kAtt && j < L::kAtt + 3) ? 1e-6 : (j >= L::kGyroBias && j < L::kGyroBias + 3 ? 1e-7 : 1e-4);
+    StateVec<L> dx = StateVec<L>::Zero();
+    dx[j] = h;
+    const auto rp = meas.predicted_residual(dx);
+    dx[j] = -h;
+    const auto rm = meas.predicted_residual(dx);
+    for (int i = 0; i < lin.rows(); ++i) {
+      const double num = (rp[i] - rm[i]) / (2 * h);
+      const double scale = std::max(1.0, std::abs(lin.H(i, j)));
+      worst = std::max(worst, std::abs(num - lin.H(i, j)) / scale);
+    }
+  }
+  return worst;
+}
+
+NavState moving_state() {
+  NavState s;
+  s.lat = 30.5 * M_PI / 180;
+  s.lon = 114.4 * M_PI / 180;
+  s.h = 20.0;
+  s.q_nb = quat_from_euler(Vec3(0.03, -0.02, 0.8));
+  s.v_n = s.q_nb.toRotationMatrix() * Vec3(15.0, 0.0, 0.0) + Vec3(0.0, 0.0, 0.0);
+  return s;
+}
+
+void test_jacobians() {
+  VehicleConstraintConfig cfg;
+  cfg.C_bv = dcm_from_euler(Vec3(0.01, 0.02, -0.03));
+  cfg.lever_arm_b = Vec3(-1.2, 0.3, 0.8);
+  const NavState s = moving_state();
+  const Vec3 w(0.01, -0.02, 0.15);
+  VehicleVelocityMeasurement<Layout21> v;
+  v.set(s, w, cfg, true, 14.8);
+  EXPECT_TRUE(v.linear().rows() == 3);
+  const double ev = jacobian_error(v);
+  std::printf("NHC + odometer: max relative |H - numerical| %.2e\n", ev);
+  EXPECT_LT(ev, 1e-5);
+  v.set(s, w, cfg, true, std::numeric_limits<double>::quiet_NaN());
+  EXPECT_TRUE(v.linear().rows() == 2);
+  EXPECT_LT(jacobian_error(v), 1e-6);
+
+  NavState still = s;
+  still.v_n = Vec3(0.002, -0.001, 0.0005);
+  StandstillMeasurement<Layout21> z;
+  z.set(still, Vec3(1e-5, 2e-5, -3e-5), cfg, true, true);
+  EXPECT_TRUE(z.linear().rows() == 6);
+  const double ez = jacobian_error(z);
+  std::printf("ZUPT + ZARU: max relative |H - numerical| %.2e\n", ez);
+  EXPECT_LT(ez, 1e-6);
+}
+
+void test_residuals() {
+  VehicleConstraintConfig cfg;  // aligned IMU at the rear axle
+  NavState s = moving_state();
+  const Mat3 C_nb = s.q_nb.toRotationMatrix();
+  // a 0.5 m/s sideways velocity error of the INS shows as +0.5 in the lateral row
+  s.v_n += C_nb * Vec3(0.0, 0.5, 0.0);
+  VehicleVelocityMeasurement<Layout15> v;
+  v.set(s, Vec3::Zero(), cfg, true, 15.0);
+  EXPECT_LT(std::abs(v.linear().residual[0] - 0.0), 1e-9);  // forward speed matches the odometer
+  EXPECT_LT(std::abs(v.linear().residual[1] - 0.5), 1e-9);
+  EXPECT_LT(std::abs(v.linear().residual[2]), 1e-9);
+  // a heading error psi_z of a vehicle moving at 15 m/s: lateral residual ~ -15 psi_z
+  // (H_att row: -C_vn [v_n x])
+  const double h_yaw = v.linear().H(1, Layout15::kAtt + 2);
+  std::printf("NHC lateral d/dpsi_z at 15 m/s: %.3f\n", h_yaw);
+  EXPECT_LT(std::abs(std::abs(h_yaw) - 15.0), 0.5);
+  // ZUPT residual is the INS velocity
+  NavState still = s;
+  still.v_n = Vec3(0.1, -0.2, 0.05);
+  StandstillMeasurement<Layout15> z;
+  z.set(still, Vec3::Zero(), cfg, true, false);
+  EXPECT_LT((z.linear().residual.head<3>() - still.v_n).norm(), 1e-12);
+}
+
+}  // namespace
+
+int main() {
+  test_jacobians();
+  test_residuals();
+  TEST_MAIN_END();
+}
