@@ -31,6 +31,7 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "seed004_bench": (("seed004_bench.md",), ["bench/bench_upf.py", "--out", "docs/results/seed004_bench.md"],
                       ["bench/bench_upf.py", "--repeat", "1", "--out", "docs/results/seed004_bench.md"]),
     "kfgins": (("kfgins.md",), ["bench/kfgins_track.py"], ["bench/kfgins_track.py", "--repeat", "1"]),
+    "flops": (("flops.md",), ["bench/update_cost.sh", "200"], ["bench/update_cost.sh", "20"]),
     "gnss_geometry": (("gnss_geometry.md",), ["bench/gnss_residuals.py", "--out", "docs/results/gnss_geometry.md"],
                       ["bench/gnss_residuals.py", "--out", "docs/results/gnss_geometry.md"]),
     "tight_realdata": (("tight_realdata.md",),
@@ -52,7 +53,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.list:
         for name, (docs, full, _) in GENERATORS.items():
-            print(f"{name:15s} {', '.join(docs):28s} python3 {shlex.join(full)}")
+            print(f"{name:15s} {', '.join(docs):28s} {shlex.join(full)}")
         return 0
     names = [n.strip() for n in args.only.split(",") if n.strip()] or list(GENERATORS)
     unknown = [n for n in names if n not in GENERATORS]
@@ -62,12 +63,13 @@ def main(argv=None) -> int:
     t_all = time.perf_counter()
     for name in names:
         docs, full, quick = GENERATORS[name]
-        cmd = [PY, *(quick if args.quick else full)]
+        argv_ = quick if args.quick else full
+        cmd = ["bash" if argv_[0].endswith(".sh") else PY, *argv_]
         print(f"[run_all] {name}: {shlex.join(cmd[1:])}", flush=True)
         t0 = time.perf_counter()
         rc = subprocess.run(cmd, cwd=ROOT).returncode
         dt = time.perf_counter() - t0
-        rows.append((name, docs, shlex.join(["python3", *cmd[1:]]), dt, rc))
+        rows.append((name, docs, shlex.join([cmd[0] if cmd[0] == "bash" else "python3", *cmd[1:]]), dt, rc))
         print(f"[run_all] {name}: rc {rc}, {dt:.0f} s", flush=True)
         if rc:
             failed.append(name)

@@ -15,6 +15,9 @@ read by :func:`load_dataset`, ``insnav run``) holds:
                     ``h_m``, ``v{n,e,d}_mps``, ``roll_deg``, ``pitch_deg``,
                     ``yaw_deg``, ``f_{x,y,z}_mps2``, ``omega_{x,y,z}_radps``
 ``imu_errors.csv``  injected biases and scale factors (see :class:`ImuErrors`)
+``odometer.csv``    (car presets with an odometer) ``t_s``, ``speed_mps``:
+                    mean forward speed of the rear-axle centre over
+                    ``(t - dt, t]`` from the wheel ticks (see :class:`Odometer`)
 ``scenario.toml``   the resolved scenario (``extends`` merged, seed set)
 ``dataset.json``    metadata: t0, GPS time offset, lever arm, initial state,
                     the IMU model in SI (:func:`insnav.sim.imu.imu_model_dict`)
@@ -348,6 +351,37 @@ class ImuErrors:
 
 
 @dataclass
+class Odometer:
+    """Wheel odometer: forward speed of the rear-axle centre, vehicle axes.
+
+    Attributes
+    ----------
+    t : ndarray (K,)
+        End of each counting interval [s].
+    speed_mps : ndarray (K,)
+        Ticks counted over ``(t[k-1], t[k]]`` divided by ticks per metre and
+        the interval (includes the odometer's scale-factor error and its
+        quantisation) [m/s].
+    """
+
+    t: np.ndarray
+    speed_mps: np.ndarray
+
+    COLUMNS = ("t_s", "speed_mps")
+
+    def __len__(self):
+        return len(self.t)
+
+    def to_array(self):
+        return np.column_stack([self.t, self.speed_mps])
+
+    @classmethod
+    def from_array(cls, a):
+        a = np.asarray(a, float).reshape(-1, 2)
+        return cls(a[:, 0].copy(), a[:, 1].copy())
+
+
+@dataclass
 class Dataset:
     """Everything one simulation (or a converted real run) produced.
 
@@ -375,6 +409,8 @@ class Dataset:
         :func:`insnav.sim.imu.imu_model_dict`.
     name : str
     seed : int or None
+    odometer : Odometer or None
+        Wheel odometer (car presets with ``[odometer]``).
     """
 
     imu: ImuData
@@ -390,6 +426,7 @@ class Dataset:
     imu_model: dict
     name: str = ""
     seed: int | None = None
+    odometer: Odometer | None = None
 
     def save(self, directory, overwrite: bool = False) -> Path:
         """Write the dataset directory atomically (see module docstring).
@@ -421,6 +458,8 @@ class Dataset:
             if self.imu_errors is not None:
                 write_csv(tmp / "imu_errors.csv", ImuErrors.COLUMNS, self.imu_errors.to_array(),
                           "%.17g")
+            if self.odometer is not None:
+                write_csv(tmp / "odometer.csv", Odometer.COLUMNS, self.odometer.to_array(), "%.17g")
             (tmp / "scenario.toml").write_text(dumps_toml(self.scenario), encoding="utf-8")
             meta = {
                 "format": "insnav-dataset", "version": FORMAT_VERSION, "name": self.name,
@@ -497,6 +536,8 @@ def load_dataset(directory) -> Dataset:
                          np.array(c.get("accel_scale", a[0, 10:13] if len(a) else np.zeros(3))),
                          np.array(c.get("gyro_misalignment_rad", np.zeros((3, 3)))),
                          np.array(c.get("accel_misalignment_rad", np.zeros((3, 3)))))
+    odo = (Odometer.from_array(read_csv(d / "odometer.csv", Odometer.COLUMNS))
+           if (d / "odometer.csv").is_file() else None)
     scen = {}
     if (d / "scenario.toml").is_file():
         scen = tomllib.loads((d / "scenario.toml").read_text(encoding="utf-8"))
@@ -508,7 +549,7 @@ def load_dataset(directory) -> Dataset:
                    initial=initial, t0=float(meta["t0_s"]),
                    gps_time_offset_s=float(meta.get("gps_time_offset_s", 0.0)),
                    imu_model=meta.get("imu_model", {}), name=meta.get("name", ""),
-                   seed=meta.get("seed"))
+                   seed=meta.get("seed"), odometer=odo)
 
 
 # --- fast CSV --------------------------------------------------------------

@@ -19,7 +19,8 @@ from .scenario import Scenario, ScenarioError, list_presets, load_scenario
 __all__ = ["simulate", "load_scenario", "list_presets", "Scenario", "ScenarioError",
            "truth_from_state", "wrap_deg"]
 
-_STREAMS = ("gyro", "accel", "gnss", "delay", "gnss_raw", "clock")
+# appending keeps every earlier stream's seed (SeedSequence.spawn children are positional)
+_STREAMS = ("gyro", "accel", "gnss", "delay", "gnss_raw", "clock", "odometer")
 
 
 def wrap_deg(a):
@@ -110,10 +111,15 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
 
         gnss_raw = simulate_gnss_raw(traj, sc.gnss_raw, gcfg["lever_arm_b"], sc.gps_time_offset_s,
                                      rngs["gnss_raw"], rngs["clock"], constellation=constellation)
+    odometer = None
+    if sc.odometer is not None:
+        from .odometer import simulate_odometer
+
+        odometer = simulate_odometer(traj, sc.odometer, rngs["odometer"])
     raw = dict(sc.raw)
     raw["seed"] = int(sc.seed)
     return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=gnss_raw, imu_errors=imu_errors,
                    scenario=raw, lever_arm_b=np.array(gcfg["lever_arm_b"], float),
                    initial=initial, t0=sc.t0, gps_time_offset_s=sc.gps_time_offset_s,
                    imu_model=imu_model_dict(sc.gyro, sc.accel, sc.imu_rate), name=sc.name,
-                   seed=int(sc.seed))
+                   seed=int(sc.seed), odometer=odometer)

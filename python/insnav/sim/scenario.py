@@ -15,7 +15,8 @@ Layout (all tables optional unless marked)::
     [time]    t0_s, gps_week, gps_tow_s
     [initial] lat_deg*, lon_deg*, h_m*, speed_mps, heading_deg, path_angle_deg,
               roll_deg, pitch_deg, yaw_deg
-    [motion]  transition_s, coordinated_turns, g_ref_mps2
+    [motion]  transition_s, coordinated_turns, g_ref_mps2, lateral_slip_mps,
+              vertical_bounce_mps
     [[motion.segments]] duration_s*, label,
               accel_mps2 | target_speed_mps | speed_change_mps,
               turn_rate_dps | heading_change_deg,
@@ -161,6 +162,12 @@ class Scenario:
     truth_rate: float
     gnss: dict[str, Any]
     gnss_raw: dict[str, Any]
+    #: RMS body-frame lateral / vertical velocity of a road vehicle [m/s]
+    #: (wheel slip, suspension bounce; faded out at standstill)
+    lateral_slip: float = 0.0
+    vertical_bounce: float = 0.0
+    #: odometer sensor (see insnav.sim.odometer), SI; None = no odometer
+    odometer: dict[str, Any] | None = None
     raw: dict[str, Any] = field(repr=False, default_factory=dict)
     source: str = ""
 
@@ -461,7 +468,7 @@ def load_scenario(scenario, *, seed: int | None = None) -> Scenario:
 
 
 _TOP = {"name", "description", "seed", "time", "initial", "motion", "imu", "truth",
-        "gnss", "gnss_raw"}
+        "gnss", "gnss_raw", "odometer"}
 
 
 def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
@@ -492,7 +499,10 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
 
     mo = _table(ctx, raw, "", "motion")
     _check_keys(ctx, mo, "motion", {"transition_s", "coordinated_turns", "g_ref_mps2",
-                                    "segments", "oscillations"})
+                                    "segments", "oscillations", "lateral_slip_mps",
+                                    "vertical_bounce_mps"})
+    lateral_slip = _num(ctx, mo, "motion", "lateral_slip_mps", 0.0, lo=0.0, hi=5.0)
+    vertical_bounce = _num(ctx, mo, "motion", "vertical_bounce_mps", 0.0, lo=0.0, hi=5.0)
     transition = _num(ctx, mo, "motion", "transition_s", 1.0, lo=0.0, lo_open=True)
     coordinated = _bool(ctx, mo, "motion", "coordinated_turns", False)
     g_ref = _num(ctx, mo, "motion", "g_ref_mps2", G0, lo=0.0, lo_open=True)
@@ -670,7 +680,25 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
         segments=segments, oscillations=oscillations, transition=transition,
         coordinated_turns=coordinated, g_ref=g_ref, imu_rate=imu_rate, quadrature_nodes=nodes,
         errors_rate=errors_rate, gyro=gyro, accel=accel, truth_rate=truth_rate, gnss=gnss,
-        gnss_raw=gnss_raw, raw=raw)
+        gnss_raw=gnss_raw, lateral_slip=lateral_slip, vertical_bounce=vertical_bounce,
+        odometer=_odometer(ctx, raw, imu_rate), raw=raw)
+
+
+def _odometer(ctx, raw, imu_rate):
+    """``[odometer]``: wheel odometer of the rear-axle centre (insnav.sim.odometer)."""
+    od = _table(ctx, raw, "", "odometer")
+    _check_keys(ctx, od, "odometer", {"enabled", "rate_hz", "lever_arm_b_m", "ticks_per_m",
+                                      "scale_error_ppm", "scale_error_sigma_ppm", "sigma_mps"})
+    if not _bool(ctx, od, "odometer", "enabled", bool(od)):
+        return None
+    return {
+        "rate": _num(ctx, od, "odometer", "rate_hz", 10.0, lo=0.0, lo_open=True, hi=imu_rate),
+        "lever_arm_b": _vec3(ctx, od, "odometer", "lever_arm_b_m", 0.0),
+        "ticks_per_m": _num(ctx, od, "odometer", "ticks_per_m", 50.0, lo=0.0),
+        "scale_error": _num(ctx, od, "odometer", "scale_error_ppm", 0.0, lo=-1e5, hi=1e5) * 1e-6,
+        "scale_error_sigma": _num(ctx, od, "odometer", "scale_error_sigma_ppm", 0.0, lo=0.0, hi=1e5) * 1e-6,
+        "sigma": _num(ctx, od, "odometer", "sigma_mps", 0.0, lo=0.0),
+    }
 
 
 def _windows(ctx, table, prefix, key):

@@ -172,6 +172,48 @@ def _cross(a, b):
     return out
 
 
+class _VehicleMotion:
+    """Lateral slip and vertical bounce of a road vehicle, body axes.
+
+    ``v_b = q(V) [0, sum_i A_i sin(w_i t + phi_i), sum_i B_i sin(u_i t + chi_i)]``:
+    four sinusoids per axis with fixed periods (slip 1.5-6.3 s, bounce
+    0.35-1.3 s) and phases drawn from the scenario seed, amplitudes giving
+    the configured RMS at speed; ``q(V) = V^2 / (V^2 + 25 m^2/s^2)`` fades
+    both out at standstill (a parked car neither slips nor bounces).  Smooth
+    and analytic, so the IMU increments stay exact.
+    """
+
+    SLIP_PERIODS_S = np.array([1.5, 2.7, 4.1, 6.3])
+    BOUNCE_PERIODS_S = np.array([0.35, 0.55, 0.8, 1.3])
+    V0_MPS = 5.0
+
+    def __init__(self, sc):
+        rng = np.random.default_rng([int(sc.seed), 0x5A1B])
+        self.w = np.concatenate([2 * np.pi / self.SLIP_PERIODS_S, 2 * np.pi / self.BOUNCE_PERIODS_S])
+        self.phi = rng.uniform(0.0, 2 * np.pi, self.w.size)
+        k = self.SLIP_PERIODS_S.size
+        # RMS of a sum of k unit sinusoids is sqrt(k / 2)
+        self.amp = np.concatenate([np.full(k, sc.lateral_slip / np.sqrt(k / 2)),
+                                   np.full(self.BOUNCE_PERIODS_S.size, sc.vertical_bounce / np.sqrt(k / 2))])
+        self.k = k
+
+    def eval(self, t, V, a):
+        """``v_b`` (N, 3) [m/s] and ``dv_b/dt`` (N, 3) [m/s^2] at ``t`` for speed ``V`` and its rate ``a``."""
+        arg = t[:, None] * self.w[None, :] + self.phi[None, :]
+        s, c = np.sin(arg) * self.amp, np.cos(arg) * self.amp * self.w
+        k = self.k
+        v0 = self.V0_MPS ** 2
+        q = V * V / (V * V + v0)
+        dq = 2 * V * a * v0 / (V * V + v0) ** 2
+        v_b = np.zeros((t.size, 3))
+        dv_b = np.zeros((t.size, 3))
+        ys, zs = s[:, :k].sum(axis=1), s[:, k:].sum(axis=1)
+        v_b[:, 1], v_b[:, 2] = q * ys, q * zs
+        dv_b[:, 1] = dq * ys + q * c[:, :k].sum(axis=1)
+        dv_b[:, 2] = dq * zs + q * c[:, k:].sum(axis=1)
+        return v_b, dv_b
+
+
 class Trajectory:
     """Exact truth for a :class:`~insnav.sim.scenario.Scenario`.
 
@@ -207,6 +249,7 @@ class Trajectory:
         keep = np.concatenate([[True], np.diff(grid) > 1e-6])
         self._grid = grid[keep]
         self._grid[-1] = self.t_end
+        self._vehicle = _VehicleMotion(sc) if (sc.lateral_slip > 0 or sc.vertical_bounce > 0) else None
         self._integrate_position()
 
     # -- kinematics ---------------------------------------------------------
@@ -272,10 +315,20 @@ class Trajectory:
             ax = self._osc_axis[k]
             euler[sel, ax] += A * E * s_a
             rate[sel, ax] += A * (dE * s_a + E * om * c_a)
+        if self._vehicle is not None:
+            # body-frame lateral / vertical velocity v_b: v_n += C_nb v_b,
+            # a_n += C_nb (omega_nb_b x v_b + dv_b/dt)
+            v_b, dv_b = self._vehicle.eval(t, V, a)
+            trig = _trig(euler)
+            w_nb_b = euler_rate_to_omega_nb_b(euler, rate, trig)
+            v_n += rotate_b_to_n(euler, v_b)
+            a_n += rotate_b_to_n(euler, _cross(w_nb_b, v_b) + dv_b)
         return Kinematics(v_n, a_n, euler, rate)
 
     def _velocity(self, t):
         t = np.asarray(t, dtype=float)
+        if self._vehicle is not None:
+            return self.kinematics(t.ravel()).v_n.reshape(t.shape + (3,))
         sc = self.sc
         V = sc.speed0 + self._acc.eval(t)[0]
         psi = sc.heading0 + self._turn.eval(t)[0]
