@@ -40,7 +40,7 @@ from .config import DEG, ImuNoise, RunConfig
 from .engine import RAD2DEG, Solution, _initial_state
 
 __all__ = ["TightInputs", "TightSolution", "run_tight", "tight_inputs_from_raw", "tight_inputs_from_rinex",
-           "pseudorange_sigma", "clock_model", "TCXO_CLOCK_BIAS_PSD", "TCXO_CLOCK_DRIFT_PSD", "MAX_SATS"]
+           "pseudorange_sigma", "clock_model", "clock_psd_of_class", "TCXO_CLOCK_BIAS_PSD", "TCXO_CLOCK_DRIFT_PSD", "MAX_SATS"]
 
 #: TCXO receiver clock noise (Brown & Hwang Table 9.1, see the module docstring)
 TCXO_CLOCK_BIAS_PSD = 0.1     # m^2/s
@@ -146,11 +146,26 @@ def clock_model(dataset) -> tuple[float, float]:
     small floor), else the TCXO defaults.
     """
     gr = (getattr(dataset, "scenario", None) or {}).get("gnss_raw") or {}
-    if "clock_bias_rw_m_per_sqrts" in gr or "clock_drift_rw_mps_per_sqrts" in gr:
-        qb = float(gr.get("clock_bias_rw_m_per_sqrts", 0.0)) ** 2
-        qd = float(gr.get("clock_drift_rw_mps_per_sqrts", 0.0)) ** 2
-        return max(qb, 1e-6), max(qd, 1e-8)
+    if "clock_bias_rw_m_per_sqrts" in gr or "clock_drift_rw_mps_per_sqrts" in gr or "clock" in gr:
+        from .sim.gnss_raw import CLOCK_CLASSES
+
+        cb, cd = CLOCK_CLASSES.get(gr.get("clock", ""), (0.0, 0.0))
+        qb = float(gr.get("clock_bias_rw_m_per_sqrts", cb)) ** 2
+        qd = float(gr.get("clock_drift_rw_mps_per_sqrts", cd)) ** 2
+        return max(qb, 1e-6), max(qd, 1e-12)
     return TCXO_CLOCK_BIAS_PSD, TCXO_CLOCK_DRIFT_PSD
+
+
+def clock_psd_of_class(name: str) -> tuple[float, float]:
+    """(clock_bias_psd [m^2/s], clock_drift_psd [m^2/s^3]) of a named clock class
+    (``"tcxo"``, ``"ocxo"``, ``"rubidium"``; Brown & Hwang Table 9.1, see
+    :mod:`insnav.sim.gnss_raw`)."""
+    from .sim.gnss_raw import CLOCK_CLASSES
+
+    if name not in CLOCK_CLASSES:
+        raise ValueError(f"clock class {name!r} unknown; known: {', '.join(CLOCK_CLASSES)}")
+    qb, qd = CLOCK_CLASSES[name]
+    return qb * qb, qd * qd
 
 
 def _limit_sats(inp: TightInputs, max_sats: int) -> TightInputs:

@@ -28,10 +28,22 @@ Satellite selection per epoch: elevation at or above the mask; then, if
 ``max_sats`` > 0, the best-GDOP subset of that size
 (:func:`insnav.gnss.geometry.select_best_gdop`).  Inside a
 ``[[gnss_raw.windows]]`` window (epochs strictly inside ``(start, end)``, as for
-GNSS outages) exactly ``n_sats`` are
-kept: the best-GDOP subset when ``n_sats >= 4``, the ``n_sats`` highest
-satellites when fewer (GDOP is undefined), none when 0.  An epoch with fewer
-visible satellites than asked keeps all it has.
+GNSS outages) satellites *fail* (seed 003): at the window's first epoch the
+``n_sats`` highest of the satellites in use at the epoch before are kept
+(a subset of them, never a new satellite), and the same satellites are kept
+through the window while they stay above the mask; one that sets is replaced
+by the highest remaining satellite of the pre-window set, then by any visible
+one.  A window asking for at least as many satellites as are in use keeps the
+usual selection.  An epoch with fewer visible satellites than asked keeps all
+it has.
+
+Receiver clock classes (``clock = "tcxo" | "ocxo" | "rubidium"``) set the two
+densities from the Allan-variance coefficients of Brown & Hwang (2012),
+*Introduction to Random Signals and Applied Kalman Filtering*, 4th ed.,
+Table 9.1 (``h0``, ``h_-2``): ``clock_bias_rw = c sqrt(h0 / 2)``,
+``clock_drift_rw = c sqrt(2 pi^2 h_-2)`` (white frequency and random-walk
+frequency noise; the flicker term ``h_-1`` is left out of the two-state
+model).  See :data:`CLOCK_CLASSES`.
 """
 from __future__ import annotations
 
@@ -41,6 +53,13 @@ from .. import earth
 from ..dataset import GnssRaw
 from .gnss_loose import antenna_state, gnss_epochs
 from .trajectory import Trajectory
+
+C_LIGHT_MPS = 299_792_458.0
+#: Brown & Hwang (2012) Table 9.1: (h0, h_-2) of the fractional frequency PSD
+CLOCK_ALLAN = {"tcxo": (2e-19, 2e-20), "ocxo": (8e-20, 4e-23), "rubidium": (2e-20, 4e-29)}
+#: clock class -> (clock_bias_rw [m/sqrt(s)], clock_drift_rw [(m/s)/sqrt(s)])
+CLOCK_CLASSES = {k: (C_LIGHT_MPS * np.sqrt(h0 / 2.0), C_LIGHT_MPS * np.sqrt(2.0 * np.pi ** 2 * hm2))
+                 for k, (h0, hm2) in CLOCK_ALLAN.items()}
 
 
 def simulate_clock(t, t0, b0, d0, q_b, q_d, rng: np.random.Generator):
@@ -112,21 +131,42 @@ def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_
     if max_sats or windows:
         starts = np.searchsorted(ep, np.arange(ne))
         ends = np.searchsorted(ep, np.arange(ne), side="right")
+        in_use: list[int] = []       # PRNs kept at the previous epoch
+        before: list[int] = []       # PRNs in use just before the current window
+        failing: list[int] = []      # PRNs kept inside the current window
+        current_window = None
         for k in range(ne):
-            in_window = [n_w for (a, b, n_w) in windows if a < t[k] < b]
-            if not in_window and max_sats == 0:
-                continue
-            want = in_window[0] if in_window else max_sats
+            wins = [(a, b, n_w) for (a, b, n_w) in windows if a < t[k] < b]
             rows = np.arange(starts[k], ends[k])
             rows = rows[keep[rows]]
-            if want >= rows.size:
-                continue  # keep all that are visible
-            keep[starts[k]:ends[k]] = False
-            if want >= 4:
-                sel, _ = select_best_gdop(u_n[rows], want)
-                keep[rows[sel]] = True
-            elif want > 0:
-                keep[rows[np.argsort(-el[rows], kind="stable")[:want]]] = True
+            if wins and wins[0][2] < max(len(in_use) if current_window is None else len(before), 1):
+                # satellites fail: a subset of those in use before the window
+                if wins[0] != current_window:
+                    current_window, before, failing = wins[0], list(in_use), []
+                want = wins[0][2]
+                prn_here = {int(prn_rows[r]): r for r in rows}
+                chosen = [p for p in failing if p in prn_here]
+                for pool in (before, [int(prn_rows[r]) for r in rows]):
+                    for p in sorted((q for q in pool if q in prn_here and q not in chosen),
+                                    key=lambda q: -el[prn_here[q]]):
+                        if len(chosen) >= want:
+                            break
+                        chosen.append(p)
+                failing = chosen
+                keep[starts[k]:ends[k]] = False
+                keep[[prn_here[p] for p in chosen]] = True
+                in_use = chosen
+                continue
+            current_window = None
+            want = wins[0][2] if wins else max_sats
+            if want and want < rows.size:
+                keep[starts[k]:ends[k]] = False
+                if want >= 4:
+                    sel, _ = select_best_gdop(u_n[rows], want)
+                    keep[rows[sel]] = True
+                else:
+                    keep[rows[np.argsort(-el[rows], kind="stable")[:want]]] = True
+            in_use = [int(p) for p in prn_rows[starts[k]:ends[k]][keep[starts[k]:ends[k]]]]
 
     ep, prn_rows = ep[keep], prn_rows[keep]
     r_sat, v_sat = ts.r_e[keep], ts.v_e[keep]

@@ -31,7 +31,8 @@ Layout (all tables optional unless marked)::
               sigma_vel_mps, outages, delay_p, delay_model, first_epoch_s
     [gnss_raw] enabled, rate_hz, constellation, elevation_mask_deg, max_sats,
               sigma_pr_m, sigma_prr_mps, clock_bias0_m, clock_drift0_mps,
-              clock_bias_rw_m_per_sqrts, clock_drift_rw_mps_per_sqrts
+              clock_bias_rw_m_per_sqrts, clock_drift_rw_mps_per_sqrts,
+              clock ("tcxo" | "ocxo" | "rubidium": both densities, see sim/gnss_raw.py)
     [[gnss_raw.windows]] start_s*, end_s*, n_sats*
 """
 from __future__ import annotations
@@ -641,7 +642,7 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
     _check_keys(ctx, gr, "gnss_raw", {"enabled", "rate_hz", "constellation", "elevation_mask_deg",
                                       "max_sats", "sigma_pr_m", "sigma_prr_mps", "clock_bias0_m",
                                       "clock_drift0_mps", "clock_bias_rw_m_per_sqrts",
-                                      "clock_drift_rw_mps_per_sqrts", "windows"})
+                                      "clock_drift_rw_mps_per_sqrts", "clock", "windows"})
     cons = _str(ctx, gr, "gnss_raw", "constellation", "nominal")
     if cons != "nominal" and base_dir is not None and not Path(cons).is_absolute():
         cons = str(Path(base_dir) / cons)
@@ -659,6 +660,18 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
         "clock_drift_rw": _num(ctx, gr, "gnss_raw", "clock_drift_rw_mps_per_sqrts", 0.0, lo=0.0),
         "windows": [],
     }
+    clock = _str(ctx, gr, "gnss_raw", "clock", "")
+    if clock:
+        from .gnss_raw import CLOCK_CLASSES
+
+        if clock not in CLOCK_CLASSES:
+            ctx.fail("gnss_raw.clock", f"unknown clock class {clock!r}; known: {', '.join(CLOCK_CLASSES)} "
+                     "(or give clock_bias_rw_m_per_sqrts / clock_drift_rw_mps_per_sqrts)")
+        qb, qd = CLOCK_CLASSES[clock]
+        if "clock_bias_rw_m_per_sqrts" not in gr:
+            gnss_raw["clock_bias_rw"] = qb
+        if "clock_drift_rw_mps_per_sqrts" not in gr:
+            gnss_raw["clock_drift_rw"] = qd
     if gnss_raw["max_sats"] and gnss_raw["max_sats"] < 4:
         ctx.fail("gnss_raw.max_sats", f"value {gnss_raw['max_sats']} must be 0 (all) or >= 4; "
                  "use [[gnss_raw.windows]] to force fewer satellites")
