@@ -111,6 +111,95 @@ def one_run(args):
     return res
 
 
+HEADINGS = (10.0, 30.0, 60.0, 90.0)
+#: fixed bands for the heading sweep (the pre-outage error depends on H)
+HEAD_BAND = dict(roll=0.5, pitch=0.5, yaw=2.0, pos=10.0)
+
+
+def heading_run(args):
+    """seed000-heading (or seed000-sim) with the filters started from the true
+    state but the yaw off by +-H (random sign per run) and roll/pitch by
+    N(0, 0.5 deg); initial yaw sigma H.  Same data and same initial error for
+    the three filters."""
+    scenario, H, seed = args
+    import copy as _copy
+
+    import insnav
+    from insnav.analysis import errors
+    from insnav.types import NavState
+
+    ds = insnav.simulate(scenario, seed=seed)
+    rng = np.random.default_rng([seed, int(H)])
+    s0 = ds.initial
+    d = _copy.copy(ds)
+    yaw = (s0.yaw_deg + rng.choice([-1.0, 1.0]) * H + 180.0) % 360.0 - 180.0
+    d.initial = NavState(s0.lat_deg, s0.lon_deg, s0.h_m, s0.v_n, s0.roll_deg + 0.5 * rng.standard_normal(),
+                         s0.pitch_deg + 0.5 * rng.standard_normal(), yaw)
+    a, b = [tuple(o) for o in ds.scenario["gnss"]["outages"]][0]
+    gt = np.asarray(ds.gnss.t_valid)
+    t_r = float(gt[gt >= b - 1e-9][0])
+    res = {}
+    for f in FILTERS:
+        e = errors(insnav.run(d, filter=f, init_error=False, init_sigma_att_deg=[0.5, 0.5, H],
+                              output_decimation=4), ds.truth)
+        t, att = e["t"], np.abs(e["att_deg"])
+        hz = np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])
+        pre = t < a
+        bad = np.flatnonzero((att[:, 2] >= HEAD_BAND["yaw"]) & pre)
+        conv = float(t[bad[-1] + 1]) if bad.size else 0.0  # yaw within 2 deg from then on, before the outage
+        win = t >= t_r - 1e-9
+        tw = t[win]
+        res[f] = dict(
+            yaw_conv=conv if conv < a - 1e-9 else np.nan,
+            yaw_pre=float(np.sqrt(np.mean(e["att_deg"][(t > 20.0) & pre, 2] ** 2))),
+            att_end=att[np.flatnonzero(t < t_r - 1e-9)[-1]],
+            att_max=att[win].max(axis=0), pos_max=float(hz[win].max()),
+            att_reconv=np.array([reconv_time(tw, att[win, i], t_r, HEAD_BAND[ax]) for i, ax in enumerate(AXES)]),
+            pos_reconv=reconv_time(tw, hz[win], t_r, HEAD_BAND["pos"]),
+            z_yaw=float(np.sqrt(np.mean((e["att_deg"][t > 5.0, 2] / e["sigma_att_deg"][t > 5.0, 2]) ** 2))))
+    return res
+
+
+def heading_tables(rows_by_h, title):
+    """Median per filter and paired EKF - RB-UKF statistics per heading error."""
+    L = [f"### {title}", "",
+         "| H [deg] | filter | yaw within 2 deg after [s] (not before the outage) | yaw RMS 20-50 s [deg] | "
+         "at end of outage: roll / pitch / yaw [deg] | max after recovery: roll / pitch / yaw [deg] | "
+         "max hor. pos after recovery [m] | reconvergence roll / pitch / yaw / pos [s] | rms(yaw err / sigma) |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    med = lambda x: np.nanmedian(np.asarray(x, float), axis=0)  # noqa: E731
+    for H, rows in rows_by_h.items():
+        for f in FILTERS:
+            g = lambda k: [r[f][k] for r in rows]  # noqa: E731
+            conv = np.asarray(g("yaw_conv"), float)
+            rc = np.asarray(g("att_reconv"), float)
+            L.append(f"| {H:.0f} | {f} | {np.nanmedian(conv) if np.isfinite(conv).any() else float('nan'):.0f} "
+                     f"({int(np.isnan(conv).sum())} of {len(conv)}) | {med(g('yaw_pre')):.2f} | "
+                     f"{' / '.join(f'{x:.2f}' for x in med(g('att_end')))} | "
+                     f"{' / '.join(f'{x:.2f}' for x in med(g('att_max')))} | {med(g('pos_max')):.2f} | "
+                     f"{' / '.join(f'{x:.0f}' for x in np.nanmedian(rc, axis=0))} / {med(g('pos_reconv')):.0f} | "
+                     f"{med(g('z_yaw')):.2f} |")
+    L += ["", "Paired per run, EKF minus RB-UKF (positive: RB-UKF better); median difference and the share "
+          "of runs where the RB-UKF is lower:", "",
+          "| H [deg] | max roll after recovery | max pitch after recovery | max yaw after recovery | "
+          "max hor. pos after recovery | yaw RMS 20-50 s | pitch reconvergence |", "|---|---|---|---|---|---|---|"]
+    summary = {}
+    for H, rows in rows_by_h.items():
+        cells = []
+        for key, i in (("att_max", 0), ("att_max", 1), ("att_max", 2), ("pos_max", None), ("yaw_pre", None),
+                       ("att_reconv", 1)):
+            x = np.array([r["ekf"][key] if i is None else r["ekf"][key][i] for r in rows], float)
+            y = np.array([r["rbukf"][key] if i is None else r["rbukf"][key][i] for r in rows], float)
+            ok = np.isfinite(x) & np.isfinite(y)
+            dd = x[ok] - y[ok]
+            cells.append(f"{np.median(dd):+.3f} ({np.mean(dd > 0):.0%})" if dd.size else "n/a")
+            summary[(H, key, i)] = (float(np.median(dd)) if dd.size else np.nan,
+                                    float(np.mean(dd > 0)) if dd.size else np.nan,
+                                    float(np.median(x[ok])) if dd.size else np.nan)
+        L.append(f"| {H:.0f} | " + " | ".join(cells) + " |")
+    return L, summary
+
+
 def git_rev():
     try:
         return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
@@ -168,6 +257,7 @@ def main(argv=None):
         with open(a.raw, "rb") as fh:
             raw = pickle.load(fh)
         sim, car, wall, t_sim = raw["sim"], raw["car"], raw["wall"], raw["t_sim"]
+        head, head_straight = raw["head"], raw["head_straight"]
         rev = raw.get("rev", "?")
         a.runs, a.car_runs, a.workers = raw["runs"], raw["car_runs"], raw["workers"]
     else:
@@ -176,10 +266,14 @@ def main(argv=None):
             sim = list(ex.map(one_run, [("seed000-sim", s) for s in range(1, a.runs + 1)]))
             t_sim = time.time() - t0
             car = list(ex.map(one_run, [("seed000-car", s) for s in range(1, a.car_runs + 1)]))
+            head = {H: list(ex.map(heading_run, [("seed000-heading", H, s) for s in range(1, a.runs + 1)]))
+                    for H in HEADINGS}
+            head_straight = {60.0: list(ex.map(heading_run, [("seed000-sim", 60.0, s)
+                                                             for s in range(1, a.runs + 1)]))}
         wall = time.time() - t0
         with open(a.raw, "wb") as fh:
-            pickle.dump(dict(sim=sim, car=car, wall=wall, t_sim=t_sim, runs=a.runs, car_runs=a.car_runs,
-                             workers=a.workers, rev=git_rev()), fh)
+            pickle.dump(dict(sim=sim, car=car, head=head, head_straight=head_straight, wall=wall, t_sim=t_sim,
+                             runs=a.runs, car_runs=a.car_runs, workers=a.workers, rev=git_rev()), fh)
         rev = git_rev()
     N = a.runs
 
@@ -201,6 +295,7 @@ def main(argv=None):
          "gives and what was chosen here).  Filters: `ekf`, `rbukf`, `ukf` with the default `RunConfig` "
          "(15 states, IMU noise model from the simulator, UT alpha = 1, beta = 2, kappa = 3 - n).  "
          "Each run i uses simulator seed i and initial-error seed i; all filters see the same data.", "",
+         "VERDICTS_PLACEHOLDER",
          "## Definitions", "", defs, "",
          f"## Table 1: seed000-sim, {N} Monte Carlo runs, GPS lost 50-90 s", "",
          "The paper's values are from its single simulation run.  Ours: mean ± std over the runs.  "
@@ -289,6 +384,28 @@ def main(argv=None):
             car_verdicts.append(v)
             L.append(f"| {k + 1} | {name} | {m:+.{d}f} | {s:.{d}f} | {se:.{d}f} | {frac:.2f} | {v} |")
 
+    # ---- large heading error ------------------------------------------------------------------------
+    L += ["", f"## Large initial heading error: seed000-heading, {N} runs per H", "",
+          "The filters start from the true state with the yaw off by +-H (random sign per run), roll and pitch "
+          "off by N(0, 0.5 deg), and an initial yaw sigma of H; the three filters get the same data and the same "
+          "initial error.  `seed000-heading` has the paper's Table 1 sensors, GPS and outage (50-90 s) with the "
+          "rolling produced by coordinated weaving turns, so the heading is observable before the outage.  "
+          f"Medians over the runs.  Reconvergence: first time after the first fix from which the error stays "
+          f"5 s inside {HEAD_BAND['roll']}/{HEAD_BAND['pitch']}/{HEAD_BAND['yaw']} deg (roll/pitch/yaw) and "
+          f"{HEAD_BAND['pos']} m.", ""]
+    hl, hsum = heading_tables(head, "Weaving turns (heading observable)")
+    L += hl
+    sl, ssum = heading_tables(head_straight, "The same from seed000-sim's straight start (heading not observable "
+                                             "before its turn at 100 s)")
+    L += [""] + sl
+    big = [H for H in HEADINGS if H >= 60.0]
+    rp_gain = [hsum[(H, "att_max", i)] for H in big for i in (0, 1)]
+    rp_better = all(m > 0 and frac > 0.5 for m, frac, _ in rp_gain)
+    pitch_gain = [hsum[(H, "att_max", 1)] for H in HEADINGS]
+    grows = all(b[0] >= a[0] - 0.02 for a, b in zip(pitch_gain, pitch_gain[1:])) and pitch_gain[-1][0] > 0.1
+    pitch_txt = ", ".join(f"{H:.0f} deg: {m:+.2f} deg of {base:.2f} ({frac:.0%} of runs)"
+                          for H, (m, frac, base) in zip(HEADINGS, pitch_gain))
+
     # ---- reading ---------------------------------------------------------------------------------
     def vtxt(name, d=4):
         m, se, v = verdicts[name]
@@ -314,6 +431,31 @@ def main(argv=None):
                              ("position", car_pos[k], PAPER_T3["rbukf"]["pos"][k])) if o >= p]
     rb_cmp = ("below its RB-UKF (0.27/0.35/0.39/0.40 m/s, 5.4/4.0/5.9/7.3 m)" if not worse else
               "below its RB-UKF (0.27/0.35/0.39/0.40 m/s, 5.4/4.0/5.9/7.3 m) except " + ", ".join(worse))
+    # ---- verdicts ----------------------------------------------------------------------------------
+    v_t1 = "not reproduced" if not any(v.startswith("RB-UKF") for k, (m_, se_, v) in verdicts.items()
+                                       if "90-150" in k) else "partly reproduced"
+    verdict_rows = [
+        "## Verdicts", "",
+        "| paper's claim | verdict | evidence |", "|---|---|---|",
+        f"| Table 1: after the outage the RB-UKF's max roll/pitch errors are below the EKF's | **{v_t1}** on the "
+        f"paper's own scenario; **{'reproduced' if rp_better else 'partly reproduced'}** with a large initial "
+        f"heading error | seed000-sim: the two filters differ by at most {float(dmax.max()):.4f} deg (attitude "
+        "errors stay in the small-angle regime, see the reading); seed000-heading, H >= 30 deg: the RB-UKF's "
+        f"max roll/pitch after recovery is lower for H >= 60 deg (max pitch after recovery, EKF minus RB-UKF, "
+        f"median over runs, of the EKF's median, for H = {pitch_txt}) |",
+        "| Table 1: the RB-UKF reconverges faster | **not reproduced** on the paper's scenario; see the heading "
+        "tables for the large-error case | paired reconvergence differences within 2 SE on seed000-sim |",
+        f"| the nonlinear model matters when attitude errors are large | **{'reproduced' if grows else 'partly reproduced'}** "
+        "| the RB-UKF's advantage in max pitch after recovery grows with the initial heading error (row above); "
+        "at 10 deg the filters are equal |",
+        f"| Table 3 (car): the RB-UKF's position errors after the outages are several times smaller | **not "
+        f"reproduced** | {n_rb_better} of 12 paired car comparisons favour the RB-UKF by > 2 SE; the largest mean "
+        f"difference is {car_dpos * 1000:.2f} mm |",
+        "| the RB-UKF update costs 41.7 % fewer flops than the UKF's | **reproduced** | docs/results/flops.md "
+        "(paper-form saving measured with callgrind) |", ""]
+    i_v = L.index("VERDICTS_PLACEHOLDER")
+    L[i_v:i_v + 1] = verdict_rows
+
     L += ["", "## Reading: where we agree with the paper and where not", "",
           "The paper's expectation: after GPS returns, the RB-UKF's max attitude and position errors are below "
           "the EKF's and it reconverges faster.  **Our measurements disagree: on both simulated scenarios the "
@@ -372,8 +514,15 @@ def main(argv=None):
           "is not reproduced on our simulation of its scenarios.  It is not refuted either: by the second-order "
           "argument above a gap needs attitude errors of degrees at reacquisition, and with the paper's stated "
           "IMU parameters, as we read them, our outages leave the errors where the EKF's linearisation error is "
-          "negligible.  (A scenario with larger outage errors would test the claim; it would be a new "
-          "experiment, not the paper's Table 1, and was not run here.)", ""]
+          "negligible.", "",
+          "**Where the nonlinear model does matter: a large initial heading error** (section above).  With the "
+          "heading off by 30-90 deg and a trajectory that makes it observable, the RB-UKF propagates the "
+          "non-Gaussian yaw uncertainty through the Euler-platform-error-angle model and converges with smaller "
+          "roll/pitch disturbances, so its roll/pitch errors after the outage are smaller too, the paper's "
+          "Table 1 pattern.  From a straight start (the heading not observable) no filter can use the model's "
+          "advantage until the first turn, and both stay overconfident in yaw (rms(yaw err / sigma) > 1): with "
+          "a heading that uncertain, a Gaussian filter is the wrong tool at any order; the heading should come "
+          "from an alignment step (insnav.align) or a particle filter.", ""]
     out = Path(a.out)
     text = "\n".join(L) + "\n"
     out.write_text(text)
