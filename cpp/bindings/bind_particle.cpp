@@ -63,7 +63,8 @@ struct ParticleSetup {
 ParticleSetup particle_setup(const py::dict& d) {
   reject_unknown(d,
                  {"particles", "seed", "resample_threshold", "roughening", "rk4_step", "fading", "rho", "beta",
-                  "eta_max", "alpha", "sample"},
+                  "eta_max", "alpha", "sample", "kernel_h2", "init_yaw_halfwidth", "temper_stages",
+                  "divergence_chi2", "noise_floor"},
                  "particle config");
   ParticleSetup s;
   s.pp.particles = static_cast<int>(num(d, "particles", s.pp.particles));
@@ -83,6 +84,17 @@ ParticleSetup particle_setup(const py::dict& d) {
     else throw py::value_error("alpha: expected 1 or 20 values");
   }
   s.opt.sample = d.contains("sample") ? py::cast<bool>(d["sample"]) : true;
+  s.opt.kernel_h2 = num(d, "kernel_h2", s.opt.kernel_h2);
+  s.opt.init_yaw_halfwidth = num(d, "init_yaw_halfwidth", s.opt.init_yaw_halfwidth);
+  s.pp.temper_stages = static_cast<int>(num(d, "temper_stages", s.pp.temper_stages));
+  s.pp.divergence_chi2 = num(d, "divergence_chi2", s.pp.divergence_chi2);
+  s.pp.noise_floor = num(d, "noise_floor", s.pp.noise_floor);
+  if (!(s.pp.noise_floor >= 0.0)) throw py::value_error("noise_floor must be >= 0");
+  if (!(s.opt.kernel_h2 >= 0.0 && s.opt.kernel_h2 < 1.0)) throw py::value_error("kernel_h2 must be in [0, 1)");
+  if (!(s.opt.init_yaw_halfwidth >= 0.0 && s.opt.init_yaw_halfwidth <= M_PI))
+    throw py::value_error("init_yaw_halfwidth must be in [0, pi] rad");
+  if (s.pp.temper_stages < 1 || s.pp.temper_stages > 64) throw py::value_error("temper_stages must be in [1, 64]");
+  if (!(s.pp.divergence_chi2 > 0.0)) throw py::value_error("divergence_chi2 must be > 0");
   if (s.pp.particles < 1 || s.pp.particles > s.pp.max_particles)
     throw py::value_error("particles must be in [1, " + std::to_string(s.pp.max_particles) + "]");
   if (!(s.pp.resample_threshold >= 0.0 && s.pp.resample_threshold <= 1.0))
@@ -209,7 +221,7 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
   trace.resampled = E ? o_rs.mutable_data() : nullptr;
   trace.capacity = E;
   double seconds = 0.0;
-  int resamples = 0;
+  int resamples = 0, divergences = 0;
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<TightEngine<Filter>>(model, cfg, ut);  // one allocation per run
@@ -220,6 +232,7 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
                 epochs.data(), obs.data(), out);
     seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if constexpr (!std::is_same_v<Filter, FadingUkf<L20>>) resamples = engine->filter().resample_count();
+    if constexpr (std::is_same_v<Filter, ParticleFilter<L20>>) divergences = engine->filter().divergences();
   }
   const py::ssize_t k = out.n_out;
   const py::ssize_t nt = trace.n;
@@ -243,6 +256,7 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
   res["trace_eta_max"] = o_eta[py::slice(0, nt, 1)];
   res["trace_resampled"] = o_rs[py::slice(0, nt, 1)];
   res["resamples"] = resamples;
+  res["divergences"] = divergences;
   res["run_seconds"] = seconds;
   return res;
 }

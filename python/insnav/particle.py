@@ -95,7 +95,9 @@ def layout20_model(noise: ImuNoise, gyro_markov_sigma_dph: float = 1.0, gyro_mar
 def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | None = None, particles: int = 100,
                        seed: int = 1, fading: bool | None = None, rho: float = 0.95, beta: float = 2.0,
                        eta_max: float = 1e3, alpha=None, resample_threshold: float = 0.5,
-                       roughening: float | None = None, rk4_step_s: float = 1.0,
+                       roughening: float | None = None, rk4_step_s: float = 1.0, kernel_h2: float = 0.1,
+                       init_yaw_uniform_deg: float = 0.0, temper_stages: int = 8, divergence_chi2: float = 25.0,
+                       noise_floor: float = 3.0,
                        gyro_markov_sigma_dph: float = 1.0, gyro_markov_tau_s: float = 3600.0,
                        acc_markov_tau_s: float = 3600.0, inputs: TightInputs | None = None,
                        elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
@@ -123,7 +125,17 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         velocity and clock only (fading the weakly observable yaw and gyro states
         makes their variance grow without bound; see ``fading.hpp``).
     resample_threshold : resample when N_eff < threshold * N.
-    roughening : regularisation bandwidth after resampling (default 0.2 for the PF, 0 for the UPF).
+    roughening : regularisation bandwidth after resampling, kernel shaped by the unweighted
+        cloud covariance (default 0.2 for the PF, 0 for the UPF).
+    kernel_h2 : UPF: Liu-West kernel shrinkage h^2 in [0, 1): each particle is jittered by
+        h^2 of its UKF posterior covariance and keeps (1 - h^2) of it (0: a bank of UKFs).
+    init_yaw_uniform_deg : UPF: > 0 starts the particles' yaw errors stratified uniformly over
+        +-this [deg] (a non-Gaussian prior: heading unknown), instead of Gaussian draws.
+    temper_stages : PF: at most this many progressive-correction stages per update (1: none).
+    noise_floor : PF: every state random-walks by this x its initial sigma per sqrt(hour), which
+        keeps the cloud from collapsing in the states without process noise.
+    divergence_chi2 : PF: an epoch where no particle explains the measurement within this
+        chi-square per row is counted in ``summary["divergences"]`` and warned about.
     rk4_step_s : multi-interval RK4 step of the error state [s] (0: every engine interval).
     gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s : the Markov blocks (:func:`layout20_model`).
     inputs, elevation_mask_deg, max_sats, clock_psd, init_sigma_clock, clock0 : as :func:`insnav.tight.run_tight`.
@@ -192,7 +204,9 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     pcfg = dict(particles=int(particles), seed=int(seed), fading=bool(fading), rho=float(rho), beta=float(beta),
                 eta_max=float(eta_max), alpha=np.atleast_1d(np.asarray(alpha, float)),
                 resample_threshold=float(resample_threshold), roughening=float(roughening),
-                rk4_step=float(rk4_step_s))
+                rk4_step=float(rk4_step_s), kernel_h2=float(kernel_h2),
+                init_yaw_halfwidth=float(init_yaw_uniform_deg) * DEG, temper_stages=int(temper_stages),
+                divergence_chi2=float(divergence_chi2), noise_floor=float(noise_floor))
     out = _core.run_tight_particle(filt, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                                    np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0,
                                    np.zeros(12), np.asarray(clock0, float), model, core_cfg, pcfg)
@@ -216,13 +230,20 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         summary=dict(filter=filt, coupling="tight", layout=20, particles=int(particles) if filt != "fukf" else 1,
                      fading=bool(fading), seed=int(seed), updates=int(out["updates"]),
                      rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
-                     resamples=int(out["resamples"]), gnss_records=int(E), sat_rows=int(len(inputs.prn)),
+                     resamples=int(out["resamples"]), divergences=int(out["divergences"]),
+                     gnss_records=int(E), sat_rows=int(len(inputs.prn)),
                      clock0=tuple(clock0), clock_psd=(float(qb), float(qd)), run_seconds=float(out["run_seconds"])),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 18:20],
         rows=out["rows"], inputs=inputs,
         ess=per_epoch(out["trace_ess"]), fading_c=per_epoch(out["trace_fading_c"]),
         eta_max=per_epoch(out["trace_eta_max"]), resampled=per_epoch(out["trace_resampled"], 0, bool),
         run_seconds=float(out["run_seconds"]))
+    if out["divergences"]:
+        import warnings
+
+        warnings.warn(f"tight {filt}: at {out['divergences']} of {int(out['updates'])} updates no particle explained "
+                      f"the measurements within chi2 {divergence_chi2:g} per row: the particle cloud lost the "
+                      f"solution there (more particles, or the UPF)", RuntimeWarning, stacklevel=2)
     if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
         bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
         raise FloatingPointError(f"tight {filt}: the solution became non-finite at t={sol.t[bad]:.3f} s (row {bad})")

@@ -10,12 +10,37 @@
 //   update      log w_i += log p(z | x_i) = -1/2 |L_R^-1 (residual - h(x_i))|^2
 //               (h = meas.predicted_residual, nonlinear); normalise;
 //               N_eff = 1 / sum w_i^2; if N_eff < threshold * N: systematic
-//               resampling, then regularisation ("roughening"): every particle
-//               is moved by k * chol(P^) xi, xi ~ N(0, I), with P^ the weighted
-//               covariance before resampling (Musso, Oudjane, Le Gland 2001,
-//               with a bandwidth k below their h_opt, which over-disperses: for
-//               N = 100 and n = 20 h_opt = 0.77).  Without it the random-constant
-//               gyro states (no process noise) collapse onto a few values.
+//               resampling, then regularisation ("roughening"): every particle,
+//               in every state, is moved by k * chol(P_cloud) xi, xi ~ N(0, I),
+//               with P_cloud the *unweighted* covariance of the cloud before
+//               resampling (Musso, Oudjane, Le Gland 2001, with a bandwidth k
+//               below their h_opt, which over-disperses: for N = 100 and n = 20
+//               h_opt = 0.77).  The weighted covariance would collapse with the
+//               weights: when one particle takes all the weight (N_eff ~ 1, the
+//               rule with 0.1 m/s pseudorange rates) the kernel vanished and the
+//               cloud degenerated to one point, the cause of the earlier km-level
+//               divergence.  Without roughening the random-constant gyro states
+//               (no process noise) collapse onto a few values.
+//   progressive correction (Oudjane, Musso 2000): when the full likelihood
+//               would leave N_eff below threshold * N, it is applied in stages
+//               p(z | x)^beta_s, sum beta_s = 1, each beta chosen by bisection so
+//               that the stage keeps N_eff >= threshold * N, with resampling and
+//               roughening between stages (at most temper_stages; the last takes
+//               what is left).  The particles move towards the likelihood's peak
+//               instead of all weight landing on the one nearest it;
+//   noise floor every state also random-walks by noise_floor x its initial
+//               sigma per sqrt(hour): resampling shrinks the spread of the states
+//               without process noise (random-constant gyro biases) every epoch,
+//               and a roughening kernel shaped by the cloud shrinks with it; the
+//               floor keeps the cloud wide enough to follow the truth (seed004-uav,
+//               N = 1000: without it the cloud collapsed to one point within
+//               600 s and lost the solution; floors of 1 and 2 sigma per sqrt(h)
+//               still lost it in some runs, 3 in none of the runs tried;
+//               docs/results/seed004.md has the success rate over 20 runs).
+//   divergence  when the particle that explains z best is still more than
+//               divergence_chi2 per measurement row away (no particle within
+//               ~5 sigma), the epoch is counted in divergences() and reported by
+//               the bindings: the estimate there is not to be trusted.
 //   estimate    x^ = sum w_i x_i and P^ = sum w_i (x_i - x^)(x_i - x^)^T, formed
 //               before resampling (less Monte Carlo noise).
 // Closed loop (engines): after an applied update the engine feeds x^ back into
@@ -127,7 +152,9 @@ class Rng {
 };
 
 /// Stream purposes (any distinct constants).
-enum RngPurpose : std::uint64_t { kRngInit = 1, kRngProcess = 2, kRngProposal = 3, kRngResample = 4, kRngJitter = 5 };
+enum RngPurpose : std::uint64_t {
+  kRngInit = 1, kRngProcess = 2, kRngProposal = 3, kRngResample = 4, kRngJitter = 5, kRngTemper = 6
+};
 
 // --- weights -------------------------------------------------------------------
 
@@ -260,7 +287,26 @@ struct ParticleParams {
   double roughening = 0.2;          // regularisation bandwidth k (0: off)
   double rk4_step = 1.0;            // [s] multi-interval RK4 step; 0: every engine interval
   int max_particles = 4096;         // upper bound checked at construction
+  int temper_stages = 8;            // PF: progressive-correction stages at most (1: plain bootstrap update)
+  double noise_floor = 3.0;         // PF: every state random-walks by this x its initial sigma per sqrt(h)
+  double divergence_chi2 = 25.0;    // PF: divergence when no particle explains z within this chi^2 per row
 };
+
+/// Unweighted mean and covariance of a particle cloud (the shape of the
+/// roughening kernel: unlike the weighted covariance it does not collapse
+/// when one particle takes all the weight).
+template <class L>
+void cloud_covariance(const std::vector<StateVec<L>>& xs, int n, StateCov<L>& P) {
+  StateVec<L> m = StateVec<L>::Zero();
+  for (int i = 0; i < n; ++i) m += xs[i];
+  m /= n;
+  P.setZero();
+  for (int i = 0; i < n; ++i) {
+    const StateVec<L> d = xs[i] - m;
+    P.noalias() += d * d.transpose();
+  }
+  P /= std::max(n - 1, 1);
+}
 
 // --- weighted estimate ----------------------------------------------------------
 
@@ -317,6 +363,8 @@ class ParticleFilter {
     xs_tmp_.assign(n, Vec::Zero());
     logw_.assign(n, 0.0);
     w_.assign(n, 1.0 / n);
+    ll_.assign(n, 0.0);
+    tw_.assign(n, 0.0);
     idx_.assign(n, 0);
   }
 
@@ -324,9 +372,11 @@ class ParticleFilter {
 
   void initialize(const Cov& P0) {
     const int n = prm_.particles;
+    divergences_ = 0;
     Cov S;
     Cov P = P0;
     cholesky_with_repair<kN>(P, S);
+    sigma0_ = P0.diagonal().cwiseMax(0.0).cwiseSqrt();
     cycle_ = 0;
     INSNAV_PARALLEL_FOR
     for (int i = 0; i < n; ++i) {
@@ -350,6 +400,7 @@ class ParticleFilter {
     macro_.reset();
     steps_ = 0;
     ++cycle_;
+    stage_rng_ = 0;
   }
 
   void propagate(const InsInterval& iv) {
@@ -360,16 +411,20 @@ class ParticleFilter {
     if (macro_.pending()) run_step();
     if (steps_ == 0) return;
     steps_ = 0;
-    // process noise of the cycle
+    // process noise of the cycle, plus the floor on every state (header)
     psd_cholesky_lower<kN>(Q_cycle_, sqrtQ_);
+    const Vec floor = (prm_.noise_floor * std::sqrt(cycle_dt_ / 3600.0)) * sigma0_;
+    cycle_dt_ = 0.0;
     const int n = prm_.particles;
     INSNAV_PARALLEL_FOR
     for (int i = 0; i < n; ++i) {
       Rng rng;
       rng.seed(prm_.seed, cycle_, i, kRngProcess);
-      Vec xi;
+      Vec xi, eta;
       rng.fill_normal(xi);
+      rng.fill_normal(eta);
       xs_[i].noalias() += sqrtQ_ * xi;
+      xs_[i] += floor.cwiseProduct(eta);
       if (!xs_[i].allFinite()) xs_[i] = x_;  // left the model's domain: back to the estimate
     }
     estimate();
@@ -395,17 +450,31 @@ class ParticleFilter {
       return res;
     }
     const int n = prm_.particles;
-    INSNAV_PARALLEL_FOR
-    for (int i = 0; i < n; ++i) {
-      RowVec e = lin.residual - meas.predicted_residual(xs_[i]);
-      lltR.matrixL().solveInPlace(e);
-      const double ll = -0.5 * e.squaredNorm();
-      logw_[i] += std::isfinite(ll) ? ll : -std::numeric_limits<double>::infinity();
+    double left = 1.0;
+    for (int stage = 0; stage < std::max(prm_.temper_stages, 1) && left > 0.0; ++stage) {
+      INSNAV_PARALLEL_FOR
+      for (int i = 0; i < n; ++i) {
+        RowVec e = lin.residual - meas.predicted_residual(xs_[i]);
+        lltR.matrixL().solveInPlace(e);
+        const double ll = -0.5 * e.squaredNorm();
+        ll_[i] = std::isfinite(ll) ? ll : -std::numeric_limits<double>::infinity();
+      }
+      if (stage == 0) {
+        double best = -std::numeric_limits<double>::infinity();
+        for (int i = 0; i < n; ++i) best = std::max(best, ll_[i]);
+        if (!(-2.0 * best <= prm_.divergence_chi2 * m)) ++divergences_;
+      }
+      const bool last = stage + 1 >= std::max(prm_.temper_stages, 1);
+      const double beta = (n == 1 || last) ? left : temper_exponent(left);
+      for (int i = 0; i < n; ++i) logw_[i] += beta * ll_[i];
+      left -= beta;
+      if (left <= 1e-12) left = 0.0;
+      finish_update(left > 0.0);
     }
-    finish_update();
     res.applied = true;
     return res;
   }
+  int divergences() const { return divergences_; }
 
   const Vec& x() const { return x_; }
   const Cov& P() const { return P_; }
@@ -427,6 +496,7 @@ class ParticleFilter {
 
   void run_step() {
     macro_.prepare();
+    cycle_dt_ += macro_.dt;
     const int n = prm_.particles;
     INSNAV_PARALLEL_FOR
     for (int i = 0; i < n; ++i) rk4_error_step<L>(xs_[i], macro_.p0, macro_.ph, macro_.p1, macro_.dt);
@@ -438,26 +508,48 @@ class ParticleFilter {
 
   void estimate() { weighted_mean_cov<L>(xs_, w_.data(), prm_.particles, x_, P_); }
 
-  void finish_update() {
+  /// Largest beta in (0, left] whose tempered weights keep N_eff >= threshold N
+  /// (bisection on the exponent of the likelihood; seed of no randomness).
+  double temper_exponent(double left) {
+    const int n = prm_.particles;
+    const double target = std::max(prm_.resample_threshold, 0.1) * n;
+    auto ess_at = [&](double b) {
+      for (int i = 0; i < n; ++i) tw_[i] = logw_[i] + b * ll_[i];
+      normalize_log_weights(tw_.data(), w_.data(), n);
+      return effective_sample_size(w_.data(), n);
+    };
+    if (ess_at(left) >= target) return left;
+    double lo = 0.0, hi = left;
+    for (int it = 0; it < 30; ++it) {
+      const double mid = 0.5 * (lo + hi);
+      (ess_at(mid) >= target ? lo : hi) = mid;
+    }
+    return std::max(lo, 1e-6 * left);
+  }
+
+  /// Normalise, estimate, and resample + roughen when N_eff is low (always
+  /// between progressive-correction stages: force).
+  void finish_update(bool force = false) {
     const int n = prm_.particles;
     normalize_log_weights(logw_.data(), w_.data(), n);
     ess_ = effective_sample_size(w_.data(), n);
     estimate();
-    const bool rs = ess_ < prm_.resample_threshold * n;
+    const bool rs = n > 1 && (force || ess_ < prm_.resample_threshold * n);
     if (rs) {
+      if (prm_.roughening > 0.0) cloud_covariance<L>(xs_, n, Pcloud_);
       Rng rng;
-      rng.seed(prm_.seed, cycle_, 0, kRngResample);
+      rng.seed(prm_.seed, cycle_ * 16 + stage_rng_++, 0, kRngResample);
       systematic_resample(w_.data(), n, rng.uniform(), idx_.data());
       for (int j = 0; j < n; ++j) xs_tmp_[j] = xs_[idx_[j]];
       xs_.swap(xs_tmp_);
       if (prm_.roughening > 0.0) {
-        Cov Pk = P_;
-        repairs_ += cholesky_with_repair<kN>(Pk, sqrtP_);
+        repairs_ += cholesky_with_repair<kN>(Pcloud_, sqrtP_);
         sqrtP_ *= prm_.roughening;
+        const std::uint64_t stream = cycle_ * 16 + stage_rng_;
     INSNAV_PARALLEL_FOR
         for (int i = 0; i < n; ++i) {
           Rng r;
-          r.seed(prm_.seed, cycle_, i, kRngJitter);
+          r.seed(prm_.seed, stream, i, kRngJitter);
           Vec xi;
           r.fill_normal(xi);
           xs_[i].noalias() += sqrtP_ * xi;
@@ -471,14 +563,19 @@ class ParticleFilter {
     } else {
       for (int i = 0; i < n; ++i) logw_[i] = std::log(std::max(w_[i], 1e-300));
     }
-    if (trace_) trace_->record(ess_, 0.0, 1.0, rs);
+    if (trace_ && !force) trace_->record(ess_, 0.0, 1.0, rs);  // one record per epoch (the last stage)
   }
 
   ImuErrorModel model_;
   ParticleParams prm_;
   MacroStep<L> macro_;
   std::vector<Vec> xs_, xs_tmp_;
-  std::vector<double> logw_, w_;
+  std::vector<double> logw_, w_, ll_, tw_;
+  Cov Pcloud_ = Cov::Zero();
+  Vec sigma0_ = Vec::Zero();
+  double cycle_dt_ = 0.0;
+  int divergences_ = 0;
+  std::uint64_t stage_rng_ = 0;
   std::vector<int> idx_;
   Vec x_ = Vec::Zero();
   Cov P_ = Cov::Identity();

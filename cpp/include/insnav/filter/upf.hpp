@@ -18,35 +18,44 @@
 //                 x^ = x^- + K (residual - z^), P^ = Pbar - K P_zz K^T     (eqs. (11)-(17))
 // With the fading off this is exactly Ukf<L> (cpp/tests/test_upf.cpp checks it).
 //
-// UPF (van der Merwe, Doucet, de Freitas, Wan 2000; seed 004 steps (1)-(7)):
-//   particles i = 1..N each carry (x_i, P_i) and a log-weight;
-//   1. each particle's UKF step above gives the proposal q = N(x^_i, P^_i);
-//   2. sample x_i ~ q (per-particle deterministic stream, particle_filter.hpp);
-//   3. weight (eq. (18)): w_i *= p(z | x_i) p(x_i | prior_i) / q(x_i | z), with
-//        p(z | x_i)   = N(residual; h(x_i), R)  (nonlinear h),
-//        p(x | prior) = N(x_i; x^-_i, Pbar_i), the particle's UKF predictive density.
-//      The literal transition density N(x_i; f(x_{i,k-1}), Q) is NOT used: Q
-//      is zero for the random-constant gyro states and ~1e-12 for the slow
-//      Markov states, so with samples spread like P^ (>> Q) every weight but
-//      one underflows in 20 dimensions.  With the predictive density the weight
-//      is, for a linear h, exactly the particle's predictive likelihood
-//      N(z; z^_i, S_i), independent of the draw: the weights rank particles by
-//      how well their prediction explains z (a marginal / Rao-Blackwellised form).
+// UPF (seed 004 steps (1)-(7); van der Merwe, Doucet, de Freitas, Wan 2000),
+// in its regularised Gaussian-mixture form:
+//   particles i = 1..N each carry a Gaussian (x_i, P_i) and a log-weight;
+//   1. each particle's UKF step above gives its posterior N(x^_i, P^_i) and
+//      its predictive density of the measurement N(z; z^_i, P_zz,i);
+//   2. weight (seed 004 eq. (18) in its marginal, Rao-Blackwellised form):
+//      w_i *= N(residual; z^_i, P_zz,i), the particle's predictive likelihood.
+//      It does not depend on a draw, so it carries no sampling noise, and it is
+//      what the exact weight p(z | x) p(x | prior) / q(x | z) averages to over
+//      the proposal when h is linear;
+//   3. no draw: each particle keeps its UKF posterior (x^_i, P^_i), so the
+//      particles form a Gaussian mixture (a Gaussian-sum filter of UKFs,
+//      Alspach & Sorenson 1972, with particle-filter weights and resampling).
+//      The earlier form drew x_i from N(x^_i, P^_i) and kept P_i = P^_i:
+//      every particle then carried twice the spread its UKF believed, yaw and
+//      the gyro biases random-walked with the sampling noise, and 100 such
+//      particles lost to one UKF by 8-16x in position.  A jitter that keeps
+//      the moments instead (x_i += h chol(P^) xi, P_i = (1 - h^2) P^, Liu & West
+//      2001) fails differently: the states without process noise (the
+//      random-constant gyro biases) lose a factor (1 - h^2) of variance every
+//      epoch and the filter becomes overconfident (measured: h^2 = 0.1, 700 m);
 //   4. normalise (eq. (19)); N_eff = 1 / sum w^2 (eq. (20));
-//   5. if N_eff < threshold * N: systematic resampling (eqs. (21)-(22)).
-//      Diversity: the paper keeps it with "weight selection" (its ref. [7],
-//      Zhang, Hu, Qiao 2008), whose details are not in the extracted text.  Here
-//      a resampled copy keeps its (x_i, P_i) and the next cycle draws a new
-//      sample from its own UKF posterior, so duplicates separate by themselves
-//      at every epoch -- the UPF's proposal is its own regulariser; an optional
-//      kernel jitter (roughening, as in the bootstrap PF) is available and off
-//      by default;
-//   6. estimate (eq. (23)): x^ = sum w_i x_i; covariance of the mixture
-//      P^ = sum w_i (P_i + (x_i - x^)(x_i - x^)^T) (conservative: the sample
-//      spread and each particle's P both count).
+//   5. if N_eff < threshold * N: systematic resampling (eqs. (21)-(22)); the
+//      copies of one parent are separated by a draw from that parent's own
+//      posterior scaled by h (x_j += h chol(P_j) xi, h^2 = kernel_h2; P_j kept):
+//      regularisation shaped by the posterior (Musso, Oudjane, Le Gland 2001)
+//      and only where resampling has removed diversity;
+//   6. estimate (eq. (23)): x^ = sum w_i x_i; P^ = sum w_i (P_i + (x_i - x^)(x_i - x^)^T).
+//   With N = 1, or kernel_h2 = 0 (every particle the same Gaussian), the UPF is
+//   the UKF exactly (cpp/tests/test_upf.cpp); with N > 1 it is a weighted bank
+//   of UKFs, so on a near-Gaussian problem it cannot do worse than one UKF by
+//   more than the Monte Carlo spread of the kernel.
+//   Initial particles: x_i = h chol(P0) xi, P_i = (1 - h^2) P0; or, for a
+//   non-Gaussian start (init_yaw_halfwidth > 0: heading unknown within
+//   +-halfwidth), yaw errors stratified uniformly over the interval with a yaw
+//   sigma of one stratum -- the multi-modal prior a single Gaussian cannot hold.
 //   No measurement in a cycle (GPS outage): every particle keeps its UKF
-//   prediction (x_i = x^-_i, P_i = Pbar_i), weights unchanged, no sampling
-//   (sampling from the prediction would add a random walk of size P each cycle).
+//   prediction (x_i = x^-_i, P_i = Pbar_i), weights unchanged, no jitter.
 // Closed loop: the engine feeds x^ back and calls reset_state(), which shifts
 // every particle by the fed-back part of x^ (x_i -= x^; Layout20's gyro Markov
 // block is not fed back, layout20.hpp).
@@ -217,6 +226,7 @@ class UkfKernel {
     y_ = lin.residual - zmean_;
     v_ = llt_.matrixL().solve(y_);
     res.nis = v_.squaredNorm();
+    log_pred_ = -0.5 * res.nis - llt_.matrixLLT().diagonal().array().log().sum();
     if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
       res.rejected_by_gate = true;
       return res;
@@ -241,6 +251,8 @@ class UkfKernel {
 
   const Vec& prior_x() const { return xbar_; }
   const Cov& prior_P() const { return Pbar_; }
+  /// log N(residual; z^, P_zz) of the last update, without the 2 pi constant.
+  double log_predictive() const { return log_pred_; }
   double c() const { return c_; }
   const Vec& eta() const { return eta_; }
 
@@ -263,7 +275,7 @@ class UkfKernel {
   Eigen::Matrix<double, Eigen::Dynamic, kN, 0, kMaxMeasRows, kN> Kt_;
   Eigen::LLT<typename T::Dyn> llt_{typename T::Dyn(0, 0)};  // initialised: particles are copied on resampling
   FadingWorkspace<L> fws_;
-  double c_ = 0.0;
+  double c_ = 0.0, log_pred_ = 0.0;
 };
 
 /// The UKF with residual-constrained adaptive fading (seed 004 without the
@@ -348,7 +360,9 @@ class FadingUkf {
 
 /// Settings of the UPF beyond ParticleParams.
 struct UpfOptions {
-  bool sample = true;  // false: x_i = UKF posterior mean (no draw; tests)
+  bool sample = true;             // false: no kernel jitter (x_i = UKF posterior mean; tests)
+  double kernel_h2 = 0.1;         // h^2: copies after resampling jitter by h chol(P) and at the start (see header)
+  double init_yaw_halfwidth = 0;  // [rad] > 0: yaw errors stratified uniformly over +-halfwidth
 };
 
 /// The improved unscented particle filter of seed 004 (header comment).
@@ -377,6 +391,7 @@ class Upf {
     kernels_.assign(threads, UkfKernel<L>(ut));
     ps_.assign(n, UkfState<L>{});
     ps_tmp_.assign(n, UkfState<L>{});
+    means_.assign(n, Vec::Zero());
     logw_.assign(n, 0.0);
     w_.assign(n, 1.0 / n);
     idx_.assign(n, 0);
@@ -391,10 +406,31 @@ class Upf {
   /// Gaussians is the prior exactly); the first draw creates the diversity.
   void initialize(const Cov& P0) {
     const int n = pp_.particles;
+    const double h2 = (n > 1 && opt_.sample) ? opt_.kernel_h2 : 0.0;
+    Cov S = P0, L0;
+    symmetrize<kN>(S);
+    repairs_ += cholesky_with_repair<kN>(S, L0);
+    const double hw = opt_.init_yaw_halfwidth;
     for (int i = 0; i < n; ++i) {
       ps_[i] = UkfState<L>{};
       ps_[i].P = P0;
       symmetrize<kN>(ps_[i].P);
+      if (n > 1 && hw > 0.0) {
+        // stratified uniform yaw over [-hw, hw], one stratum wide each
+        const int a = L::kAtt + 2;
+        const double width = 2.0 * hw / n;
+        ps_[i].x[a] = -hw + width * (i + 0.5);
+        ps_[i].P.row(a).setZero();
+        ps_[i].P.col(a).setZero();
+        ps_[i].P(a, a) = width * width / 3.0;
+      } else if (h2 > 0.0) {
+        Rng rng;
+        rng.seed(pp_.seed, 0, i, kRngInit);
+        Vec xi;
+        rng.fill_normal(xi);
+        ps_[i].x.noalias() = std::sqrt(h2) * (L0 * xi);
+        ps_[i].P *= 1.0 - h2;
+      }
       logw_[i] = 0.0;
       w_[i] = 1.0 / n;
     }
@@ -462,33 +498,8 @@ class Upf {
         logw_[i] = ninf;
         continue;
       }
-      if (n == 1 && !opt_.sample) continue;
-      // proposal q = N(x^, P^): draw
-      double logq = 0.0;
-      if (opt_.sample) {
-        k.scratch_P = s.P;
-        rep_[i] += cholesky_with_repair<kN>(k.scratch_P, k.scratch_L);
-        Rng rng;
-        rng.seed(pp_.seed, cycle_, i, kRngProposal);
-        rng.fill_normal(k.scratch_v);
-        logq = -0.5 * k.scratch_v.squaredNorm() - k.scratch_L.diagonal().array().log().sum();
-        s.x.noalias() += k.scratch_L * k.scratch_v;
-      } else {
-        k.scratch_P = s.P;
-        rep_[i] += cholesky_with_repair<kN>(k.scratch_P, k.scratch_L);
-        logq = -k.scratch_L.diagonal().array().log().sum();
-      }
-      // predictive density N(x_i; x^-, Pbar)
-      k.scratch_P = k.prior_P();
-      rep_[i] += cholesky_with_repair<kN>(k.scratch_P, k.scratch_L);
-      k.scratch_v = s.x - k.prior_x();
-      k.scratch_L.template triangularView<Eigen::Lower>().solveInPlace(k.scratch_v);
-      const double logp = -0.5 * k.scratch_v.squaredNorm() - k.scratch_L.diagonal().array().log().sum();
-      // likelihood N(residual; h(x_i), R)
-      RowVec e = lin.residual - meas.predicted_residual(s.x);
-      lltR.matrixL().solveInPlace(e);
-      const double ll = -0.5 * e.squaredNorm();
-      const double inc = ll + logp - logq;
+      // marginal weight: the particle's predictive likelihood (header, step 2)
+      const double inc = k.log_predictive();
       logw_[i] += std::isfinite(inc) ? inc : ninf;
     }
     finish_update();
@@ -568,9 +579,27 @@ class Upf {
       systematic_resample(w_.data(), n, rng.uniform(), idx_.data());
       for (int j = 0; j < n; ++j) ps_tmp_[j] = ps_[idx_[j]];
       ps_.swap(ps_tmp_);
+      // copies of one parent separate by a draw from their own posterior,
+      // scaled by h (header, step 5); the first copy stays where it was
+      const double h2 = opt_.sample ? opt_.kernel_h2 : 0.0;
+      if (h2 > 0.0) {
+        INSNAV_PARALLEL_FOR
+        for (int j = 1; j < n; ++j) {
+          if (idx_[j] != idx_[j - 1]) continue;
+          UkfKernel<L>& k = kernel();
+          k.scratch_P = ps_[j].P;
+          rep_[j] += cholesky_with_repair<kN>(k.scratch_P, k.scratch_L);
+          Rng rng;
+          rng.seed(pp_.seed, cycle_, j, kRngProposal);
+          rng.fill_normal(k.scratch_v);
+          ps_[j].x.noalias() += std::sqrt(h2) * (k.scratch_L * k.scratch_v);
+          ps_[j].fresh = false;
+        }
+      }
       if (pp_.roughening > 0.0) {
-        Cov Pk = P_;
-        repairs_ += cholesky_with_repair<kN>(Pk, sqrtP_);
+        for (int i = 0; i < n; ++i) means_[i] = ps_[i].x;
+        cloud_covariance<L>(means_, n, Pcloud_);
+        repairs_ += cholesky_with_repair<kN>(Pcloud_, sqrtP_);
         sqrtP_ *= pp_.roughening;
         for (int i = 0; i < n; ++i) {
           Rng r;
@@ -597,6 +626,8 @@ class Upf {
   MacroStep<L> macro_;
   std::vector<UkfKernel<L>> kernels_;
   std::vector<UkfState<L>> ps_, ps_tmp_;
+  std::vector<Vec> means_;
+  Cov Pcloud_ = Cov::Zero();
   std::vector<double> logw_, w_, c_, etamax_;
   std::vector<int> idx_, rep_;
   Vec x_ = Vec::Zero(), d_ = Vec::Zero();
