@@ -52,7 +52,9 @@ def test_loose_gate_detects_jumps_and_spikes(car):
 
 
 def test_tight_gate_catches_pseudorange_ramp():
-    ds = insnav.simulate("seed004-uav", seed=1)
+    # every visible satellite (7-9): the redundancy that lets the gate single out
+    # one faulty pseudorange (the seed004-uav preset keeps the paper's 4)
+    ds = insnav.simulate({"extends": "seed004-uav", "gnss_raw": {"max_sats": 0}}, seed=1)
     bad, fl = F.inject_pseudorange_ramp(ds, rate_mps=2.0, duration_s=120.0)
     assert len({f["prn"] for f in fl}) == 1 and fl[-1]["magnitude"] == pytest.approx(240.0, abs=2.1)
     gate = F.CHI2_999[20]
