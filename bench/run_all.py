@@ -24,10 +24,12 @@ PY = sys.executable
 
 #: name -> (document(s), full command, quick command)
 GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
-    "seed000": (("seed000.md",), ["bench/seed000_tables.py"], ["bench/seed000_tables.py", "--runs", "4"]),
+    "seed000": (("seed000.md",), ["bench/seed000_tables.py"],
+                ["bench/seed000_tables.py", "--runs", "4", "--car-runs", "2"]),
     "seed001": (("seed001.md",), ["bench/seed001_tables.py"], ["bench/seed001_tables.py", "--runs", "4"]),
     "seed003": (("seed003.md",), ["bench/seed003_tables.py"], ["bench/seed003_tables.py", "--runs", "3"]),
-    "seed004": (("seed004.md",), ["bench/seed004_tables.py"], ["bench/seed004_tables.py", "--runs", "2"]),
+    "seed004": (("seed004.md",), ["bench/seed004_tables.py"],
+                ["bench/seed004_tables.py", "--runs", "2", "--heading-runs", "2", "--pf-particles", "200"]),
     "seed004_bench": (("seed004_bench.md",), ["bench/bench_upf.py", "--out", "docs/results/seed004_bench.md"],
                       ["bench/bench_upf.py", "--repeat", "1", "--out", "docs/results/seed004_bench.md"]),
     "kfgins": (("kfgins.md",), ["bench/kfgins_track.py"], ["bench/kfgins_track.py", "--repeat", "1"]),
