@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import insnav
+from _common import git_commit
 from insnav.analysis import errors
 
 FILTERS = ("kf", "rdkf", "exact")
@@ -124,17 +125,6 @@ def spike_plot(scen, seed, out_dir: Path):
         plt.close(fig)
         paths.append(p)
     return paths
-
-
-def git_commit() -> str:
-    try:
-        c = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                           check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True,
-                               text=True).stdout.strip()
-        return c + (" (with uncommitted changes)" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def main(argv=None) -> int:

@@ -45,6 +45,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 import insnav  # noqa: E402
+from _common import git_commit  # noqa: E402
 from insnav.analysis import errors, reconvergence_time, rms  # noqa: E402
 from insnav.config import RunConfig  # noqa: E402
 from insnav.particle import run_tight_particle  # noqa: E402
@@ -126,17 +127,6 @@ def one_run(args):
             divergences=int(sol.summary.get("divergences", 0)),
             max_after=float(np.linalg.norm(pos[after], axis=1).max()))
     return k, out
-
-
-def git_commit() -> str:
-    try:
-        c = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                           check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
-                               capture_output=True, text=True).stdout.strip()
-        return c + (" (with uncommitted changes)" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def fmt(v, nd=2):
