@@ -17,8 +17,9 @@ What is checked (the wrong-unit cases users actually hit):
   increment;
 * **GNSS positions**: latitude/longitude in range; the first fix within
   ``max_start_distance_m`` of the stated initial position (radians instead of
-  degrees, a flipped longitude sign: thousands of km); no jump between fixes
-  faster than ``max_speed_mps``; position sigmas > 0;
+  degrees, a flipped longitude sign: thousands of km); no jump of more than
+  ``min_jump_m`` between fixes faster than ``max_speed_mps``; position
+  sigmas > 0;
 * **gyro units and axes against the GNSS course**: the heading change the
   gyros integrate about the vertical (the mean specific-force direction) over
   each fast GNSS interval, regressed on the GNSS course change: slope 1 for
@@ -42,14 +43,17 @@ class DataCheckError(ValueError):
 def check_imu(t, dtheta_b, dv_b, *, source: str = "imu") -> None:
     """Specific force and angular rate magnitudes plausible for SI increments."""
     t = np.asarray(t, float)
-    if t.size < 3:
-        return
+    dtheta_b, dv_b = np.asarray(dtheta_b, float), np.asarray(dv_b, float)
+    if t.size < 3 or not (np.isfinite(t).all() and np.isfinite(dtheta_b).all() and np.isfinite(dv_b).all()):
+        return  # non-finite samples: the finite-value checks (sanitize, run) name them
     dt = np.diff(t)
+    ok = dt > 0  # repeated or decreasing times are the time check's business (sanitize, run)
+    if ok.sum() < 2:
+        return
+    dt = dt[ok]
     dtm = float(np.median(dt))
-    if not dtm > 0:
-        raise DataCheckError(f"{source}: t: median sample interval {dtm!r} s is not positive")
-    f = np.linalg.norm(np.asarray(dv_b, float)[1:], axis=1) / dt
-    w = np.linalg.norm(np.asarray(dtheta_b, float)[1:], axis=1) / dt
+    f = np.linalg.norm(np.asarray(dv_b, float)[1:][ok], axis=1) / dt
+    w = np.linalg.norm(np.asarray(dtheta_b, float)[1:][ok], axis=1) / dt
     fm, wm = float(np.median(f)), float(np.median(w))
     n = f.size
     if not 0.5 * G0 < fm < 2.0 * G0:
@@ -93,7 +97,8 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
     """
     t = np.asarray(t, float)
     gt = np.asarray(gnss.t_valid, float)
-    if t.size < 3 or gt.size < 3:
+    if t.size < 3 or gt.size < 3 or not (np.isfinite(t).all() and np.isfinite(dtheta_b).all()
+                                         and np.isfinite(dv_b).all() and np.isfinite(gt).all()):
         return None
     v = np.asarray(gnss.v_n, float)
     speed = np.hypot(v[:, 0], v[:, 1])
@@ -113,10 +118,16 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
     dc = (np.diff(course) + np.pi) % (2 * np.pi) - np.pi
     dg = np.diff(g_at)
     dc, dg = dc[fast], dg[fast]
-    if np.sum(np.abs(dc)) < np.radians(min_turn_deg) or not np.any(dg):
+    # evidence: the turning the gyros saw (low noise; the course of a noisy or slow
+    # receiver adds up to many degrees even on a straight line)
+    if np.sum(np.abs(dg)) < np.radians(min_turn_deg) or dg.size < 5:
         return None
     # the course is the noisy one: regress it on the gyro, slope = 1 / (d course / d gyro)
     inv = float(np.dot(dg, dc) / np.dot(dg, dg))
+    res = dc - inv * dg
+    se = float(np.sqrt(np.dot(res, res) / max(dg.size - 1, 1) / np.dot(dg, dg)))
+    if abs(inv - 1.0) < 5.0 * se:  # consistent with 1 (or too noisy to say otherwise)
+        return 1.0 / inv if inv != 0 else np.inf
     slope = 1.0 / inv if inv != 0 else np.inf
     if slope > 10.0 and 0.5 < slope / np.degrees(1.0) < 2.0:
         raise DataCheckError(f"{source}: dtheta_*: the gyros turn {slope:.1f}x the GNSS course over "
@@ -133,7 +144,7 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
 
 
 def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float = 600.0,
-               max_start_distance_m: float = 20_000.0) -> None:
+               min_jump_m: float = 10_000.0, max_start_distance_m: float = 20_000.0) -> None:
     """Ranges, the distance from the initial position, jumps and sigmas of loose fixes.
 
     ``gnss`` is a :class:`insnav.dataset.GnssFixes`; ``initial`` an optional
@@ -172,16 +183,22 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
             raise DataCheckError(f"{where(0)}: the first fix ({lat[0]:.6f}, {lon[0]:.6f}) is {d / 1000:.1f} km from "
                                  f"the initial position ({initial.lat_deg:.6f}, {initial.lon_deg:.6f}){hint}")
     if m > 1:
-        t = np.asarray(gnss.t_valid, float)
+        # in time-of-validity order (delayed records are stored in arrival order)
+        order = np.argsort(np.asarray(gnss.t_valid, float), kind="stable")
+        t = np.asarray(gnss.t_valid, float)[order]
+        la, lo = lat[order], lon[order]
         dt = np.diff(t)
-        dist = _distance_m(lat[:-1], lon[:-1], lat[1:], lon[1:])
+        dist = _distance_m(la[:-1], lo[:-1], la[1:], lo[1:])
         with np.errstate(divide="ignore", invalid="ignore"):
-            speed = np.where(dt > 0, dist / dt, np.where(dist > 1.0, np.inf, 0.0))
-        jump = np.nonzero(speed > max_speed_mps)[0]
+            speed = np.where(dt > 0, dist / dt, 0.0)  # fixes of the same instant: not a motion
+        # unit and sign mistakes move fixes by hundreds of km; a single bad fix of
+        # metres to kilometres is the innovation gate's business
+        jump = np.nonzero((speed > max_speed_mps) & (dist > min_jump_m))[0]
         if jump.size:
-            i = jump[0] + 1
-            raise DataCheckError(f"{where(i)}: a jump of {dist[i - 1] / 1000:.3f} km in {dt[i - 1]:.3g} s from the "
-                                 f"previous fix ({speed[i - 1]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
+            j = jump[0]
+            i = int(order[j + 1])
+            raise DataCheckError(f"{where(i)}: a jump of {dist[j] / 1000:.3f} km in {dt[j]:.3g} s from the "
+                                 f"previous fix ({speed[j]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
                                  f"mixed units or a bad fix")
 
 
@@ -210,3 +227,21 @@ def _distance_m(lat1, lon1, lat2, lon2):
     dl = np.radians(np.asarray(lon2, float) - np.asarray(lon1, float))
     a = np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2) * np.sin(dl / 2) ** 2
     return 2 * 6_371_000.0 * np.arcsin(np.sqrt(np.clip(a, 0.0, 1.0)))
+
+
+def check_dataset(dataset) -> None:
+    """Every check above on a dataset (loose fixes, IMU, time bases, gyro vs
+    course), naming the files the data came from where the readers recorded them."""
+    imu, gnss = dataset.imu, dataset.gnss
+    imu_src = _source(imu, "imu")
+    check_imu(imu.t, imu.dtheta_b, imu.dv_b, source=imu_src)
+    if len(gnss):
+        gnss_src = _source(gnss, "gnss")
+        check_time_overlap(imu.t, gnss.t_valid, imu_source=imu_src, gnss_source=gnss_src)
+        check_gnss(gnss, initial=getattr(dataset, "initial", None), source=gnss_src)
+        check_gyro_against_gnss(imu.t, imu.dtheta_b, imu.dv_b, gnss, source=imu_src)
+
+
+def _source(part, default: str) -> str:
+    o = getattr(part, "origin", None)
+    return str(getattr(o, "source", None) or default)

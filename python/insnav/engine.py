@@ -125,7 +125,7 @@ def _initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[N
 
 
 def run(dataset, filter: str | None = None, coupling: str | None = None, config: RunConfig | None = None,
-        *, sanitize: bool | dict = True, **overrides) -> Solution:
+        *, sanitize: bool | dict = True, checks: bool = True, **overrides) -> Solution:
     """Run a closed-loop GNSS/INS filter over a dataset.
 
     Parameters
@@ -144,6 +144,11 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
         dropped, short IMU gaps bridged, bad GNSS fixes dropped; a dict
         overrides ``insnav.sanitize.DEFAULTS``); the counts go to
         ``summary["sanitize"]``.  Clean data are not changed.
+    checks : bool
+        Unit and sanity checks before the filter (:mod:`insnav.checks`:
+        specific force ~ g, axes, gyro units against the GNSS course, GNSS
+        ranges / jumps / sigmas, overlapping time bases); a
+        :class:`insnav.checks.DataCheckError` names the file, column and cause.
     **overrides
         Any :class:`RunConfig` field, e.g. ``init_seed=3``.
 
@@ -156,6 +161,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
     if filter in ("kf", "rdkf", "exact"):  # delayed GNSS (seed 001), see insnav.delay
         from .delay import run_delayed
 
+        if checks:
+            from .checks import check_dataset
+
+            check_dataset(dataset)
         return run_delayed(dataset, filter, config=config, **overrides)
     cfg = dataclasses.replace(config or RunConfig())
     if filter is not None:
@@ -179,6 +188,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
         from .sanitize import sanitize_dataset  # issue 9
 
         dataset, input_report = sanitize_dataset(dataset, sanitize)
+    if checks:
+        from .checks import check_dataset
+
+        check_dataset(dataset)
     if cfg.coupling == "tight":
         from .tight import run_tight  # issue 5
 
