@@ -87,3 +87,40 @@ def test_imu_grades():
         assert all(a < b for a, b in zip(vals, vals[1:])), key
     with pytest.raises(ValueError, match="did you mean 'tactical'"):
         imu_grade("tactial")
+
+
+def test_dataset_noise_model_from_grade_or_error(tmp_path):
+    """dataset.json without an IMU model is an error naming the keys; with
+    imu_grade the grade's numbers are used; a misspelt imu_model key is named
+    with a suggestion; both keys at once are refused."""
+    import json
+
+    from insnav.dataset import load_dataset
+
+    out = insnav.simulate("seed000-sim", seed=1).save(tmp_path / "ds")
+    meta_path = out / "dataset.json"
+    meta = json.loads(meta_path.read_text())
+    model = meta.pop("imu_model")
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="no IMU noise model.*imu_grade"):
+        insnav.run(load_dataset(out))
+    meta["imu_grade"] = "tactical"
+    meta_path.write_text(json.dumps(meta))
+    ds = load_dataset(out)
+    assert ds.imu_model["gyro_gm_sigma"][0] == pytest.approx(IMU_GRADES["tactical"]["gyro_bias_sigma"])
+    assert insnav.run(ds).summary["updates"] > 50
+    meta["imu_grade"] = "tactial"
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=r"dataset.json.*did you mean 'tactical'"):
+        load_dataset(out)
+    meta["imu_grade"] = "tactical"
+    meta["imu_model"] = model
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="not both"):
+        load_dataset(out)
+    del meta["imu_grade"]
+    model["gyro_arw_typo"] = model.pop("gyro_arw")
+    meta["imu_model"] = model
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="did you mean 'gyro_arw'"):
+        insnav.run(load_dataset(out))

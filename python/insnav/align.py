@@ -80,6 +80,23 @@ def imu_grade(name: str) -> dict[str, float]:
         raise ValueError(f"imu_grade {name!r} unknown{hint}; known: {', '.join(IMU_GRADES)}") from None
 
 
+def imu_model_for_grade(name: str) -> dict:
+    """A dataset ``imu_model`` dict (keys of :func:`insnav.sim.imu.imu_model_dict`,
+    SI) for a named grade: first-order Gauss-Markov biases with the grade's
+    sigma and correlation time, white noise, scale-factor sigmas."""
+    g = imu_grade(name)
+    three = lambda v: [float(v)] * 3  # noqa: E731
+    m = {"imu_grade": name}
+    for p, q in (("gyro", "gyro"), ("accel", "accel")):
+        m[f"{p}_gm_sigma"] = three(g[f"{q}_bias_sigma"])
+        m[f"{p}_gm_tau"] = three(g["bias_tau_s"])
+        m[f"{p}_bias_total_sigma"] = three(g[f"{q}_bias_sigma"])
+        m[f"{p}_scale_sigma"] = three(g[f"{q}_scale_sigma"])
+    m["gyro_arw"] = three(g["gyro_arw"])
+    m["accel_vrw"] = three(g["accel_vrw"])
+    return m
+
+
 def level(f_ib_b: np.ndarray) -> tuple[float, float]:
     """Roll and pitch [rad] from a mean specific force at rest [m/s^2] (body FRD)."""
     f = np.asarray(f_ib_b, float)

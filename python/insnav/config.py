@@ -61,6 +61,21 @@ class ImuNoise:
         part when there is one, otherwise a slowly varying constant with the
         total bias sigma and ``default_tau_s``.
         """
+        if not m or not any(k in m for k in ("gyro_arw", "accel_vrw", "gyro_bias_total_sigma",
+                                               "accel_bias_total_sigma")):
+            raise ValueError("no IMU noise model: the dataset has neither 'imu_model' nor 'imu_grade' "
+                             "(dataset.json; imu_grade = consumer | industrial | tactical | navigation, "
+                             "docs/formats.md), and the run config gives no [imu] noise; a filter with zero "
+                             "IMU noise would trust the IMU blindly")
+        unknown = set(m) - _IMU_MODEL_KEYS
+        if unknown:
+            import difflib
+
+            k = sorted(unknown)[0]
+            close = difflib.get_close_matches(k, _IMU_MODEL_KEYS, n=1)
+            raise ValueError(f"imu_model: unknown key {k!r}" + (f" (did you mean {close[0]!r}?)" if close else "")
+                             + f"; known: {', '.join(sorted(_IMU_MODEL_KEYS))}")
+
         def vec(key, default=0.0):
             return np.broadcast_to(np.asarray(m.get(key, default), dtype=float), (3,)).copy()
 
@@ -79,6 +94,13 @@ class ImuNoise:
             sc = vec(f"{p}_scale_sigma")
             setattr(out, f"{q}_scale_sigma", np.maximum(sc, 1e-7).tolist())
         return out
+
+
+#: keys of a dataset's imu_model (insnav.sim.imu.imu_model_dict, insnav.align.imu_model_for_grade)
+_IMU_MODEL_KEYS = {"rate_hz", "imu_grade", "gyro_arw", "accel_vrw"} | {
+    f"{p}_{k}" for p in ("gyro", "accel")
+    for k in ("bias", "bias_sigma", "gm_sigma", "gm_tau", "bias_rw", "scale", "scale_sigma",
+              "misalignment_sigma", "bias_total_sigma")}
 
 
 @dataclass

@@ -541,6 +541,16 @@ def load_dataset(directory) -> Dataset:
     scen = {}
     if (d / "scenario.toml").is_file():
         scen = tomllib.loads((d / "scenario.toml").read_text(encoding="utf-8"))
+    imu_model = meta.get("imu_model", {})
+    if "imu_grade" in meta:
+        if imu_model:
+            raise ValueError(f"{d / 'dataset.json'}: give 'imu_model' or 'imu_grade', not both")
+        from .align import imu_model_for_grade
+
+        try:
+            imu_model = imu_model_for_grade(meta["imu_grade"])
+        except ValueError as exc:
+            raise ValueError(f"{d / 'dataset.json'}: {exc}") from None
     ini = meta["initial"]
     initial = NavState(ini["lat_deg"], ini["lon_deg"], ini["h_m"], ini["v_n_mps"],
                        ini["roll_deg"], ini["pitch_deg"], ini["yaw_deg"])
@@ -548,7 +558,7 @@ def load_dataset(directory) -> Dataset:
                    lever_arm_b=np.array(meta.get("lever_arm_b_m", [0.0, 0.0, 0.0])),
                    initial=initial, t0=float(meta["t0_s"]),
                    gps_time_offset_s=float(meta.get("gps_time_offset_s", 0.0)),
-                   imu_model=meta.get("imu_model", {}), name=meta.get("name", ""),
+                   imu_model=imu_model, name=meta.get("name", ""),
                    seed=meta.get("seed"), odometer=odo)
 
 
