@@ -173,7 +173,8 @@ def cmd_bench(args) -> int:
                python=platform.python_version(), machine=platform.machine(), cpus_available=cpus,
                load_avg_1min=load, repeats=repeats, mechanization=mech, scenario=scen, filters=filt)
     if args.json:
-        print(json.dumps(res, indent=2))
+        from ._atomic import json_safe
+        print(json.dumps(json_safe(res), indent=2, allow_nan=False))
         return 0
     print(f"insnav {__version__} bench: {cpus} CPU(s) available, 1-min load average {load:.2f}; "
           f"medians over {repeats} repeat(s)")

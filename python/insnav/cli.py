@@ -51,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"insnav {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_demo_parser(sub)
     # areas that live in their own modules register themselves here
@@ -81,12 +82,21 @@ def main(argv=None) -> int:
         return 0
     try:
         rc = args.func(args)
-    except (UserError, OSError, ValueError, KeyError) as exc:  # OSError: existing/unwritable paths too
-        if os.environ.get("INSNAV_DEBUG"):
+        sys.stdout.flush()
+    except BrokenPipeError:  # `insnav ... | head`: the reader left; nothing to report
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
+    except KeyboardInterrupt:
+        print(f"insnav {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - every error is one line; --debug for the traceback
+        if getattr(args, "debug", False) or os.environ.get("INSNAV_DEBUG"):
             raise
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        msg = "; ".join(line.strip() for line in str(msg).splitlines() if line.strip())
-        print(f"insnav {args.command}: error: {msg}", file=sys.stderr)
+        msg = "; ".join(line.strip() for line in str(msg).splitlines() if line.strip()) or type(exc).__name__
+        kind = "" if isinstance(exc, (UserError, OSError, ValueError, KeyError)) else f"{type(exc).__name__}: "
+        print(f"insnav {args.command}: error: {kind}{msg}", file=sys.stderr)
         return 2
     return int(rc or 0)
 

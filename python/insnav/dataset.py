@@ -443,11 +443,13 @@ class Dataset:
         """
         from .sim.scenario import dumps_toml
 
+        from ._atomic import chmod_like_new, json_safe
+
         out = Path(directory)
-        if out.exists() and not overwrite:
-            raise FileExistsError(f"{out} exists (use overwrite=True / --overwrite)")
+        check_replaceable(out, overwrite)
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+        chmod_like_new(tmp, directory=True)
         try:
             write_csv(tmp / "imu.csv", ImuData.COLUMNS, self.imu.to_array(), "%.17g")
             write_csv(tmp / "gnss.csv", GnssFixes.COLUMNS, self.gnss.to_array(), "%.17g")
@@ -478,7 +480,8 @@ class Dataset:
                     "accel_scale": self.imu_errors.accel_scale.tolist(),
                     "gyro_misalignment_rad": self.imu_errors.gyro_misalignment.tolist(),
                     "accel_misalignment_rad": self.imu_errors.accel_misalignment.tolist()}
-            (tmp / "dataset.json").write_text(json.dumps(meta, indent=1, allow_nan=True) + "\n",
+            # JSON has no Infinity: an infinite correlation time (no Gauss-Markov part) is null
+            (tmp / "dataset.json").write_text(json.dumps(json_safe(meta), indent=1, allow_nan=False) + "\n",
                                               encoding="utf-8")
             old = None
             if out.exists():
@@ -491,6 +494,35 @@ class Dataset:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
         return out
+
+
+#: the files Dataset.save writes (an --overwrite may replace a folder holding only these)
+DATASET_FILES = frozenset({"imu.csv", "gnss.csv", "truth.csv", "gnss_raw.csv", "imu_errors.csv", "odometer.csv",
+                           "scenario.toml", "dataset.json"})
+
+
+def check_replaceable(out: Path, overwrite: bool) -> None:
+    """Refuse to replace ``out`` unless it is an insnav dataset folder holding
+    nothing but the files :meth:`Dataset.save` writes (never a user's folder)."""
+    out = Path(out)
+    if not out.exists():
+        return
+    if not overwrite:
+        raise FileExistsError(f"{out} exists (use overwrite=True / --overwrite to replace an insnav dataset)")
+    if not out.is_dir():
+        raise FileExistsError(f"{out} exists and is not a folder: not replaced")
+    meta = out / "dataset.json"
+    try:
+        is_dataset = json.loads(meta.read_text(encoding="utf-8")).get("format") == "insnav-dataset"
+    except (OSError, ValueError, AttributeError):
+        is_dataset = False
+    if not is_dataset:
+        raise FileExistsError(f"{out} is not an insnav dataset (no dataset.json of format insnav-dataset): "
+                              "not replaced; choose another --out")
+    foreign = sorted(p.name for p in out.iterdir() if p.name not in DATASET_FILES or not p.is_file())
+    if foreign:
+        raise FileExistsError(f"{out} holds {len(foreign)} file(s) insnav did not write ({', '.join(foreign[:3])}"
+                              f"{', ...' if len(foreign) > 3 else ''}): not replaced; move them or choose another --out")
 
 
 def load_dataset(directory) -> Dataset:
@@ -541,7 +573,9 @@ def load_dataset(directory) -> Dataset:
     scen = {}
     if (d / "scenario.toml").is_file():
         scen = tomllib.loads((d / "scenario.toml").read_text(encoding="utf-8"))
-    imu_model = meta.get("imu_model", {})
+    imu_model = {k: ([np.inf if x is None else x for x in v] if k.endswith("_tau") and isinstance(v, list)
+                     else (np.inf if v is None and k.endswith("_tau") else v))
+                 for k, v in meta.get("imu_model", {}).items()}  # null = infinite correlation time
     if "imu_grade" in meta:
         if imu_model:
             raise ValueError(f"{d / 'dataset.json'}: give 'imu_model' or 'imu_grade', not both")

@@ -182,7 +182,8 @@ def cmd_evaluate(args) -> int:
         sol = _solution_at(sol, truth.t)
     res = evaluate(sol, truth, _parse_outages(args.outages))
     if args.json:
-        print(json.dumps(res, indent=2))
+        from ._atomic import json_safe
+        print(json.dumps(json_safe(res), indent=2, allow_nan=False))
         return 0
     names = {"pos_n_m": ("position", "m", "N/E/D"), "vel_n_mps": ("velocity", "m/s", "N/E/D"),
              "att_deg": ("attitude", "deg", "roll/pitch/yaw")}

@@ -358,7 +358,8 @@ class MonteCarloResult:
         return dataclasses.asdict(self)
 
     def to_json(self, **kw) -> str:
-        return json.dumps(self.to_dict(), **kw)
+        from ._atomic import json_safe
+        return json.dumps(json_safe(self.to_dict()), **{"allow_nan": False, **kw})
 
 
 def _summarise(per_run, filters) -> dict:

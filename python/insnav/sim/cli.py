@@ -20,7 +20,7 @@ def add_simulate_parser(subparsers) -> None:
     p.add_argument("scenario", help="preset name or path to a scenario .toml file")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
     p.add_argument("--out", required=True, help="dataset directory to write")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing directory")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing insnav dataset folder (never a folder holding other files)")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -38,9 +38,10 @@ def add_scenarios_parser(subparsers) -> None:
 def cmd_simulate(args) -> int:
     from . import simulate
 
+    from ..dataset import check_replaceable
+
     out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise FileExistsError(f"{out} exists; use --overwrite to replace it")
+    check_replaceable(out, args.overwrite)  # before the simulation: fail fast, never touch a user's folder
     t = time.perf_counter()
     ds = simulate(args.scenario, seed=args.seed)
     t_sim = time.perf_counter() - t
