@@ -203,7 +203,7 @@ def test_run_writes_the_documented_csv_and_a_config_that_repeats_it(solution, da
     assert ",".join(header) == SOLUTION_HEADER
     assert len(a) == int(DURATION_S * IMU_HZ)
     n_fixes = len(_csv(dataset[0] / "gnss.csv")[1])
-    assert f"{len(a)} rows, filter rbukf, loose coupling, {n_fixes} updates, 0 rejected" in out
+    assert f"{len(a)} rows, filter rbukf, loose coupling; GNSS: {n_fixes} records, {n_fixes} updates used, 0 rejected" in out
     # 1-sigma columns: positive; the north position sigma grows through the outage
     # (free inertial, MEMS IMU) and drops again at the first fix after it
     hs = header.index("sigma_n_m")

@@ -85,3 +85,27 @@ def test_errors_are_one_line_with_exit_code_2(tmp_path, small):
     assert not (tmp_path / "sol.csv").exists()
     r = _cli("--debug", "run", str(d), "--out", str(tmp_path / "sol.csv"))
     assert r.returncode != 0 and "Traceback" in r.stderr
+
+
+def test_rejected_run_is_an_error_unless_allowed(tmp_path, small):
+    """Every fix 200 m off (a datum or lever-arm blunder) with the innovation
+    gate on: all updates are rejected, so the run exits 2 with the reason and
+    writes no solution, unless --allow-free-inertial.  --out on a folder fails
+    before the run."""
+    d = small.save(tmp_path / "off")
+    lines = (d / "gnss.csv").read_text().splitlines()
+    dlat = 200.0 / 6.37e6 * 180.0 / np.pi
+    off = [lines[0]] + [",".join(r.split(",")[:2] + [repr(float(r.split(",")[2]) + dlat)] + r.split(",")[3:])
+                        for r in lines[1:]]
+    (d / "gnss.csv").write_text("\n".join(off) + "\n")
+    cfg = tmp_path / "gate.toml"
+    cfg.write_text("gate_chi2 = 22.5\n")  # chi-square, 6 rows, 0.999
+    r = _cli("run", str(d), "--config", str(cfg), "--out", str(tmp_path / "sol.csv"))
+    assert r.returncode == 2 and "rejected by the innovation gate" in r.stderr, (r.stdout, r.stderr)
+    assert not (tmp_path / "sol.csv").exists()
+    r = _cli("run", str(d), "--config", str(cfg), "--out", str(tmp_path / "sol.csv"), "--allow-free-inertial")
+    assert r.returncode == 0 and "rejected by the gate" in r.stdout and (tmp_path / "sol.csv").is_file()
+    out_dir = tmp_path / "a_folder"
+    out_dir.mkdir()
+    r = _cli("run", str(d), "--out", str(out_dir))
+    assert r.returncode == 2 and "is a folder" in r.stderr

@@ -49,6 +49,9 @@ def add_run_parser(sub) -> None:
     p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", required=True, help="solution CSV to write")
+    p.add_argument("--allow-free-inertial", action="store_true",
+                   help="accept a run that used no GNSS update, or had more than 20 %% of them rejected by the "
+                        "innovation gate (otherwise an error: wrong units, time bases or sigmas are the usual cause)")
     p.set_defaults(func=cmd_run)
 
 
@@ -101,9 +104,16 @@ def _rinex_table_toml(opt) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: share of GNSS updates the innovation gate may reject before a run counts as failed
+MAX_REJECTED_SHARE = 0.2
+
+
 def cmd_run(args) -> int:
     import insnav
 
+    out = Path(args.out)
+    if out.is_dir():  # fail before the run, not after it
+        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'solution.csv'}")
     rinex_opts = None
     try:
         if args.format == "rinex":
@@ -134,15 +144,27 @@ def cmd_run(args) -> int:
         sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
-    out = Path(args.out)
+    s = sol.summary
+    used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
+    records = int(s.get("gnss_records", len(getattr(ds, "gnss", ())) or 0))
+    san = s.get("sanitize") or {}
+    dropped = int(san.get("gnss_invalid_dropped", 0) or 0) + int(san.get("gnss_duplicates_dropped", 0) or 0)
+    if not args.allow_free_inertial:
+        if rejected > MAX_REJECTED_SHARE * (used + rejected):
+            raise UserError(f"{rejected} of {used + rejected} GNSS updates were rejected by the innovation gate "
+                            f"(> {MAX_REJECTED_SHARE:.0%}): the fixes and the IMU disagree; check units, lever arm "
+                            "and sigmas (--allow-free-inertial to accept the run)")
+        if used == 0:
+            raise UserError(f"no GNSS update was used ({records} records, {dropped} dropped): the run is free "
+                            "inertial; check the GNSS time base, sigmas and units (--allow-free-inertial to "
+                            "accept it)")
     sol.save_csv(out)
     cfg.filter = sol.summary.get("filter", cfg.filter)
     text = resolved_config_toml(cfg)
     if rinex_opts is not None:
         text += _rinex_table_toml(rinex_opts)
     atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text)
-    s = sol.summary
-    print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling, "
-          f"{s.get('updates')} updates, {s.get('rejected', 0)} rejected, "
+    print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
+          f"records, {used} updates used, {rejected} rejected by the gate, {dropped} dropped by the input checks; "
           f"{s.get('cholesky_repairs', 0)} covariance repairs")
     return 0
