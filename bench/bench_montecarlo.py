@@ -3,7 +3,7 @@
 
     python bench/bench_montecarlo.py [--runs 100] [--workers 2] [--repeats 3] [--scenario seed001-high]
 
-Target (issue 6): <= 20 s on 2 cores.  Prints the per-run serial cost too so a
+Target: <= 20 s on 2 cores.  Prints the per-run serial cost too so a
 loaded machine can be told apart from a slow runner.
 """
 from __future__ import annotations

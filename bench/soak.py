@@ -1,4 +1,4 @@
-"""Soak run (issue 9): 24 h at 200 Hz with periodic GNSS outages.
+"""Soak run: 24 h at 200 Hz with periodic GNSS outages.
 
 Two parts, same scenario (``cpp/tests/test_soak.cpp``): a vehicle parked at
 34.25 N, 108.95 E, 400 m turning through a full circle about its vertical

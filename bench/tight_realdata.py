@@ -379,7 +379,7 @@ horizontal 1-sigma at the end {sig_h_end:.2f} m against an error of {hz_ekf[-1]:
 * The author's low-pass-filtered IMU file gives the same numbers as the raw log: at this
   accuracy the filter does not see the difference.
 
-## Done (issue 5)
+## Done
 
 * `python/insnav/io/rinex_dataset.py`: `load_rinex` / `load_rinex_run` build a dataset
   that `run_tight` and `insnav.run(..., coupling="tight")` accept from RINEX 2/3 GPS obs + nav,

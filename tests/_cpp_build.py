@@ -1,4 +1,4 @@
-"""The sanitizer build of the plain C++ example and tests (issue 2), shared by
+"""The sanitizer build of the plain C++ example and tests, shared by
 tests/test_cpp.py and scripts/test.sh.
 
 One build serves both: every C++ test and the example, without Python, under

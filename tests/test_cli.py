@@ -1,4 +1,4 @@
-"""The ``insnav`` command line on a small simulated dataset (issue 8): every
+"""The ``insnav`` command line on a small simulated dataset: every
 subcommand exits 0 with sensible numbers, user errors exit 2 with one line
 naming the problem and no traceback, ``--help`` shows an example and units,
 and the demo writes its report.

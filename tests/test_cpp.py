@@ -1,5 +1,5 @@
 """The C++ example and tests, built without Python under ASan + UBSan, run by
-ctest (issue 2); the build itself is tests/_cpp_build.py.  Skips only if cmake
+ctest; the build itself is tests/_cpp_build.py.  Skips only if cmake
 or the source tree is missing.  `make cpp-test` builds the same without
 sanitizers at -O3."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Delayed GNSS (issue 6, seed 001): delay statistics, reduction of the
+"""Delayed GNSS (seed 001): delay statistics, reduction of the
 random-delay KF and of the exact engine to the ordinary KF, the three filters
 on a high-delay scenario, and the history bound of the exact engine."""
 from __future__ import annotations

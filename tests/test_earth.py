@@ -1,4 +1,4 @@
-"""WGS-84 model and rotations: published values, round trips, C++ == Python (issue 2)."""
+"""WGS-84 model and rotations: published values, round trips, C++ == Python."""
 from __future__ import annotations
 
 import numpy as np

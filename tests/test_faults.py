@@ -1,4 +1,4 @@
-"""GNSS faults (issue 9): NIS gating detects injected jumps, spikes and a
+"""GNSS faults: NIS gating detects injected jumps, spikes and a
 pseudorange ramp; false alarms near the chi-square rate; no divergence."""
 from __future__ import annotations
 

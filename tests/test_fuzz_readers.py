@@ -1,4 +1,4 @@
-"""Property-based fuzzing of the readers and the batch API boundary (issue 9).
+"""Property-based fuzzing of the readers and the batch API boundary.
 
 Each reader gets a valid file mutated by a hypothesis-drawn list of edits
 (delete / duplicate / swap lines, replace a field by NaN, inf, a huge or a

@@ -1,4 +1,4 @@
-"""Loose coupling (issue 4): consistency of the EKF, RB-UKF and UKF over
+"""Loose coupling (seed 000 filters): consistency of the EKF, RB-UKF and UKF over
 Monte Carlo runs, agreement between the filters, the RB-UKF with a large
 initial attitude error, a GNSS outage and the recovery after it, the
 measurement model (lever arm, position/velocity rows, per-epoch sigmas, NIS

@@ -1,4 +1,4 @@
-"""The output path of the loosely coupled run (issue 4 speed work): the unit
+"""The output path of the loosely coupled run (its in-place speed-ups): the unit
 conversions done in place in insnav.run and the ``sigma_columns`` key of
 ``_core.run_loose`` give exactly the numbers of the plain formulas."""
 from __future__ import annotations

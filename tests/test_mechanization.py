@@ -1,4 +1,4 @@
-"""Strapdown mechanization against analytic motions (issue 2)."""
+"""Strapdown mechanization against analytic motions."""
 from __future__ import annotations
 
 import numpy as np

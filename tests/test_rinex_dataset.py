@@ -1,4 +1,4 @@
-"""Real RINEX + IMU data for the tight filter (issue 5): ``insnav.io.rinex_dataset``
+"""Real RINEX + IMU data for the tight filter: ``insnav.io.rinex_dataset``
 on the rtklibexplorer walk_0827 log (raw u-blox GPS L1 + consumer IMU at ~152 Hz,
 time-tagged by str2str, RTK reference), ``insnav run --format rinex`` and
 ``insnav evaluate SOL REF.pos``, malformed IMU CSV / tag files, and synthetic

@@ -1,4 +1,4 @@
-"""Bad input (issue 9): every reader fault gives a clear error naming file,
+"""Bad input: every reader fault gives a clear error naming file,
 line and reason, or a documented repair counted in ``summary["sanitize"]``."""
 from __future__ import annotations
 

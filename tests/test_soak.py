@@ -1,4 +1,4 @@
-"""Shortened soak (issue 9; the 24 h run is bench/soak.py): 20 min at 200 Hz
+"""Shortened soak (the 24 h run is bench/soak.py): 20 min at 200 Hz
 with two GNSS outages through the Python API -- every output finite, sigmas
 positive, memory flat during the run.  The per-step P check (symmetric,
 positive definite after every propagate/update) is cpp/tests/test_soak.cpp,

@@ -1,4 +1,4 @@
-"""Tight coupling (issue 5): runs with 0-3 satellites, consistency with 6+
+"""Tight coupling (seed 003): runs with 0-3 satellites, consistency with 6+
 satellites, all three filters, input validation.  H rows against numerical
 derivatives are checked in C++ (cpp/tests/test_pseudorange.cpp, run by
 tests/test_cpp.py / make cpp-test)."""

@@ -1,6 +1,6 @@
-// Tightly coupled runs with the seed 004 filters on Layout20 (issue 7): the
+// Tightly coupled runs with the seed 004 filters on Layout20: the
 // improved UPF, the bootstrap PF and the (fading) UKF, on the tight engine and
-// pseudorange measurement of issue 5 (engine/tight_engine.hpp,
+// pseudorange measurement of seed 003 (engine/tight_engine.hpp,
 // meas/pseudorange.hpp).  The input format is that of _core.run_tight
 // (bind_tight.cpp, whose parsing is repeated here because it is file-local
 // there); the whole loop runs in C++ with the GIL released.

@@ -1,4 +1,4 @@
-// Tightly coupled run (issue 5): the whole IMU loop in C++ with the GIL
+// Tightly coupled run (seed 003): the whole IMU loop in C++ with the GIL
 // released; all epochs' satellite data handed over in one call as flat arrays.
 #include <memory>
 #include <string>

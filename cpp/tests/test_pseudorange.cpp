@@ -1,4 +1,4 @@
-// Tight coupling (issue 5): pseudorange / pseudorange-rate H rows against
+// Tight coupling (seed 003): pseudorange / pseudorange-rate H rows against
 // numerical derivatives of the nonlinear predicted residual, residual = H dx
 // for a known INS error, and TightEngine runs with 0..3 satellites, EKF /
 // RB-UKF / UKF, without heap allocation inside the epoch loop.

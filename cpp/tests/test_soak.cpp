@@ -1,4 +1,4 @@
-// Soak test (issue 9): a long closed-loop run at 200 Hz with periodic GNSS
+// Soak test: a long closed-loop run at 200 Hz with periodic GNSS
 // outages; after *every* filter step (propagate, end of cycle, update) the
 // covariance must be finite, symmetric and positive definite (LLT succeeds).
 //

@@ -1,4 +1,4 @@
-// Seed 004 filters (issue 7): the UPF's UKF step equals the plain UKF's
+// Seed 004 filters: the UPF's UKF step equals the plain UKF's
 // (one particle, no fading; and the fading UKF's with fading), FadingUkf with
 // the fading off equals Ukf<Layout20>, weights / effective sample size /
 // systematic resampling, determinism for a seed, no heap allocation in the

@@ -23,7 +23,7 @@ MPS_PER_SQRT_H = 1.0 / 60.0        # (m/s)/sqrt(h) -> (m/s)/sqrt(s)
 MG = 1e-3 * G0                     # mg -> m/s^2
 UG_PER_SQRT_HZ = 1e-6 * G0         # ug/sqrt(Hz) -> (m/s^2)/sqrt(Hz) = (m/s)/sqrt(s)
 
-FILTERS = ("ekf", "rbukf", "ukf", "upf", "pf", "fukf")  # upf, pf, fukf: tight only (issue 7)
+FILTERS = ("ekf", "rbukf", "ukf", "upf", "pf", "fukf")  # upf, pf, fukf: tight only (seed 004 filters)
 COUPLINGS = ("loose", "tight")
 LAYOUTS = (15, 21)
 

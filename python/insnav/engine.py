@@ -171,7 +171,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
         cfg.filter = filter
     if coupling is not None:
         cfg.coupling = coupling
-    from .particle import PARTICLE_FILTERS, PARTICLE_OPTIONS  # issue 7 (seed 004 filters)
+    from .particle import PARTICLE_FILTERS, PARTICLE_OPTIONS  # seed 004 filters
 
     particle_opts = {k: overrides.pop(k) for k in list(overrides) if k in PARTICLE_OPTIONS}
     if cfg.filter in PARTICLE_FILTERS and cfg.coupling != "tight":
@@ -185,7 +185,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
     cfg.validate()
     input_report = None
     if sanitize:
-        from .sanitize import sanitize_dataset  # issue 9
+        from .sanitize import sanitize_dataset  # input checks and repairs
 
         dataset, input_report = sanitize_dataset(dataset, sanitize)
     if checks:
@@ -193,10 +193,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config:
 
         check_dataset(dataset)
     if cfg.coupling == "tight":
-        from .tight import run_tight  # issue 5
+        from .tight import run_tight  # seed 003 tight coupling
 
         if cfg.filter in PARTICLE_FILTERS:
-            from .particle import run_tight_particle  # issue 7
+            from .particle import run_tight_particle  # seed 004 filters
 
             sol = run_tight_particle(dataset, cfg, **particle_opts)
         else:

@@ -3,7 +3,7 @@ residual-constrained adaptive fading, and its UKF and bootstrap-PF baselines,
 tightly coupled on pseudorange / pseudorange rate, 20 states.
 
 The C++ side is ``cpp/include/insnav/filter/{layout20,fading,upf,particle_filter}.hpp``
-on the tight engine and pseudorange measurement of issue 5
+on the tight engine and pseudorange measurement of seed 003's tight coupling
 (``engine/tight_engine.hpp``, ``meas/pseudorange.hpp``); the satellite
 selection and all GNSS inputs come from :mod:`insnav.tight`.
 

@@ -1,4 +1,4 @@
-"""Tightly coupled GNSS/INS (issue 5; seed 003, Xu et al. 2012): 17-state
+"""Tightly coupled GNSS/INS (seed 003, Xu et al. 2012): 17-state
 filters on pseudorange and pseudorange rate.
 
 Python owns the geometry: satellite positions, velocities and clocks (from the

@@ -1,4 +1,4 @@
-"""Real GNSS + IMU data for the tightly coupled filter (issue 5).
+"""Real GNSS + IMU data for the tightly coupled filter.
 
 A RINEX observation + navigation file pair, an IMU file (a generic CSV, or a
 raw log time-tagged by RTKLIB ``str2str``) and, optionally, an RTKLIB ``.pos``
