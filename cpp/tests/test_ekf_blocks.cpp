@@ -6,17 +6,7 @@
 // output_decimation).
 
 // Count Eigen assertions (also in Release) so that EIGEN_RUNTIME_NO_MALLOC is live.
-inline int g_eigen_asserts = 0;
-#define eigen_assert(x)                             \
-  do {                                              \
-    if (!(x)) {                                     \
-      ++g_eigen_asserts;                            \
-      std::printf("eigen_assert failed: %s\n", #x); \
-    }                                               \
-  } while (0)
-#define EIGEN_RUNTIME_NO_MALLOC
-#include <cstdio>
-#include <Eigen/Core>
+#include "eigen_malloc_check.hpp"  // first: before any Eigen header
 
 #include <memory>
 #include <random>

@@ -6,16 +6,7 @@
 #include <cstdio>
 #include <random>
 
-inline int g_eigen_asserts = 0;
-#define eigen_assert(x)                                            \
-  do {                                                             \
-    if (!(x)) {                                                    \
-      ++g_eigen_asserts;                                           \
-      std::printf("eigen_assert failed: %s\n", #x);                \
-    }                                                              \
-  } while (0)
-#define EIGEN_RUNTIME_NO_MALLOC
-#include <Eigen/Core>
+#include "eigen_malloc_check.hpp"  // first: before any Eigen header
 
 #include "insnav/filter/fading.hpp"
 #include "insnav/filter/layout20.hpp"
