@@ -440,7 +440,7 @@ def main(argv=None):
         f"| Table 1: after the outage the RB-UKF's max roll/pitch errors are below the EKF's | **{v_t1}** on the "
         f"paper's own scenario; **{'reproduced' if rp_better else 'partly reproduced'}** with a large initial "
         f"heading error | seed000-sim: the two filters differ by at most {float(dmax.max()):.4f} deg (attitude "
-        "errors stay in the small-angle regime, see the reading); seed000-heading, H >= 30 deg: the RB-UKF's "
+        "errors stay in the small-angle regime, see the reading); seed000-heading: the RB-UKF's "
         f"max roll/pitch after recovery is lower for H >= 60 deg (max pitch after recovery, EKF minus RB-UKF, "
         f"median over runs, of the EKF's median, for H = {pitch_txt}) |",
         "| Table 1: the RB-UKF reconverges faster | **not reproduced** on the paper's scenario; see the heading "
