@@ -179,3 +179,24 @@ def test_fading_reacts_to_outage(ds_full):
     e = errors(sol, d.truth)
     late = e["t"] > 840
     assert np.all(np.abs(e["pos_n_m"][late]) < 15.0)
+
+
+def test_fading_memory_after_outage(ds_full):
+    """The first epoch after the outage (800 s) has a large innovation that the
+    grown covariance predicts: neither memory fades there (c_k < 1).  Seed 004
+    eq. (6) keeps that innovation in C_0, so the next epoch, whose P the first
+    update shrank, fades although its NIS is normal; the NIS memory
+    (``fading_memory="nis"``, fading.hpp) does not fade those epochs."""
+    d = _truncate(ds_full, 820.0)
+    cfg = RunConfig(filter="fukf", init_seed=1, output_decimation=50)
+    eq6 = run_tight_particle(d, cfg)
+    nis = run_tight_particle(d, cfg, fading_memory="nis")
+    t = eq6.gnss_t
+    first = np.flatnonzero(t >= 800.0)[0]
+    assert eq6.fading_c[first] < 1.0 and nis.fading_c[first] < 1.0
+    nxt = slice(first + 1, first + 4)
+    assert np.all(eq6.nis[nxt] < 16.0)  # normal innovations (8 rows, chi-square 99 %: 20)
+    assert eq6.fading_c[first + 1] > 3.0, eq6.fading_c[nxt]
+    assert np.all(nis.fading_c[nxt] < 1.0), nis.fading_c[nxt]
+    with pytest.raises(ValueError, match="fading_memory"):
+        run_tight_particle(d, cfg, fading_memory="window")

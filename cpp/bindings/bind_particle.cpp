@@ -63,7 +63,7 @@ struct ParticleSetup {
 ParticleSetup particle_setup(const py::dict& d) {
   reject_unknown(d,
                  {"particles", "seed", "resample_threshold", "roughening", "rk4_step", "fading", "rho", "beta",
-                  "eta_max", "alpha", "sample", "kernel_h2", "init_yaw_halfwidth", "temper_stages",
+                  "eta_max", "alpha", "fading_memory", "sample", "kernel_h2", "init_yaw_halfwidth", "temper_stages",
                   "divergence_chi2", "noise_floor"},
                  "particle config");
   ParticleSetup s;
@@ -76,6 +76,12 @@ ParticleSetup particle_setup(const py::dict& d) {
   s.fp.rho = num(d, "rho", s.fp.rho);
   s.fp.beta = num(d, "beta", s.fp.beta);
   s.fp.eta_max = num(d, "eta_max", s.fp.eta_max);
+  if (d.contains("fading_memory")) {
+    const auto form = py::cast<std::string>(d["fading_memory"]);
+    if (form == "innovation") s.fp.memory = FadingMemoryForm::kInnovation;
+    else if (form == "nis") s.fp.memory = FadingMemoryForm::kNis;
+    else throw py::value_error("fading_memory: expected 'innovation' (seed 004 eq. (6)) or 'nis', got '" + form + "'");
+  }
   if (d.contains("alpha")) {
     DArray a = py::cast<DArray>(d["alpha"]);
     if (a.size() == 1) s.fp.alpha.setConstant(a.data()[0]);

@@ -167,9 +167,60 @@ void test_recursion() {
   EXPECT_TRUE(mem.epochs == 2);
 }
 
+void test_memory_after_outage() {
+  // The regime change at the end of a GNSS outage: one epoch with a large P
+  // (x100) whose innovation that P predicts exactly (NIS = 1 per row), then
+  // epochs with the small P of a converged filter, again with innovations of
+  // exactly their predicted size.  Eq. (6) as written remembers the large
+  // innovation and fades the converged filter; the NIS memory never fades a
+  // consistent sequence, and still fades innovations 5x larger in power than predicted.
+  std::mt19937 rng(4);
+  const int m = 8;
+  Setup s = make_setup(m, rng);
+  const StateCov<L> P_big = 100.0 * s.Pm;
+  const Eigen::MatrixXd H = s.lin.H;
+  const Eigen::MatrixXd S_big = H * (P_big + s.Q) * H.transpose() + Eigen::MatrixXd(s.lin.R);
+  const Eigen::MatrixXd L_big = Eigen::LLT<Eigen::MatrixXd>(S_big).matrixL();
+  const Eigen::MatrixXd L_small = Eigen::LLT<Eigen::MatrixXd>(s.S).matrixL();
+  const Eigen::VectorXd u = Eigen::VectorXd::Ones(m);  // |u|^2 = m: NIS per row exactly 1
+  const typename LinearMeasurement<L>::RowVec g_big = L_big * u, g_small = L_small * u;
+  FadingWorkspace<L> ws;
+  StateVec<L> eta;
+  double eta_innov = 1.0, eta_nis = 1.0;
+  for (const auto form : {FadingMemoryForm::kInnovation, FadingMemoryForm::kNis}) {
+    FadingParams<kN> fp;
+    fp.enabled = true;  // rho 0.95, beta 2
+    fp.memory = form;
+    FadingMemory mem;
+    Eigen::internal::set_is_malloc_allowed(false);
+    fading_factors<L>(g_big, s.lin, P_big, s.Q, fp, mem, ws, eta);
+    double worst = eta.maxCoeff();
+    for (int k = 0; k < 4; ++k) {
+      fading_factors<L>(g_small, s.lin, s.Pm, s.Q, fp, mem, ws, eta);
+      worst = std::max(worst, eta.maxCoeff());
+    }
+    Eigen::internal::set_is_malloc_allowed(true);
+    (form == FadingMemoryForm::kNis ? eta_nis : eta_innov) = worst;
+    if (form == FadingMemoryForm::kNis) {
+      EXPECT_LT(std::abs(mem.s - 1.0), 1e-9);  // the average NIS per row of an exactly consistent sequence
+      // persistent innovations 5x larger in power than predicted: c ~ 5
+      const typename LinearMeasurement<L>::RowVec g5 = std::sqrt(5.0) * g_small;
+      double c = 0.0;
+      for (int k = 0; k < 20; ++k) c = fading_factors<L>(g5, s.lin, s.Pm, s.Q, fp, mem, ws, eta);
+      std::printf("NIS memory, innovations 5x their predicted power: c = %.3g\n", c);
+      EXPECT_TRUE(c > 4.0 && eta.maxCoeff() > 4.0);
+    }
+  }
+  std::printf("after an outage (consistent innovations): max eta with eq. (6) memory %.3g, with NIS memory %.3g\n",
+              eta_innov, eta_nis);
+  EXPECT_TRUE(eta_innov > 3.0);  // the failure mode seen on seed004-uav right after 800 s
+  EXPECT_TRUE(eta_nis == 1.0);
+}
+
 }  // namespace
 
 int main() {
+  test_memory_after_outage();
   test_exact_match();
   test_consistent_then_jump();
   test_recursion();

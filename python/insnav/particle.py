@@ -46,7 +46,7 @@ __all__ = ["DEFAULT_ALPHA", "PARTICLE_FILTERS", "PARTICLE_OPTIONS", "ParticleSol
 PARTICLE_FILTERS = ("upf", "pf", "fukf")
 
 #: keyword options of :func:`run_tight_particle` that ``insnav.run`` passes through
-PARTICLE_OPTIONS = ("particles", "seed", "fading", "rho", "beta", "eta_max", "alpha", "resample_threshold",
+PARTICLE_OPTIONS = ("particles", "seed", "fading", "rho", "beta", "eta_max", "alpha", "fading_memory", "resample_threshold",
                     "roughening", "rk4_step_s", "gyro_markov_sigma_dph", "gyro_markov_tau_s", "acc_markov_tau_s",
                     "inputs", "elevation_mask_deg", "max_sats", "clock_psd", "init_sigma_clock", "clock0")
 
@@ -94,7 +94,8 @@ def layout20_model(noise: ImuNoise, gyro_markov_sigma_dph: float = 1.0, gyro_mar
 
 def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | None = None, particles: int = 100,
                        seed: int = 1, fading: bool | None = None, rho: float = 0.95, beta: float = 2.0,
-                       eta_max: float = 1e3, alpha=None, resample_threshold: float = 0.5,
+                       eta_max: float = 1e3, alpha=None, fading_memory: str = "innovation",
+                       resample_threshold: float = 0.5,
                        roughening: float | None = None, rk4_step_s: float = 1.0, kernel_h2: float = 0.1,
                        init_yaw_uniform_deg: float = 0.0, temper_stages: int = 8, divergence_chi2: float = 25.0,
                        noise_floor: float = 3.0,
@@ -124,6 +125,12 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         0 = that state is not faded).  Default :data:`DEFAULT_ALPHA`: fade position,
         velocity and clock only (fading the weakly observable yaw and gyro states
         makes their variance grow without bound; see ``fading.hpp``).
+    fading_memory : {'innovation', 'nis'}
+        What the forgetting recursion of C_0 (seed 004 eq. (6)) averages: the raw
+        innovation power, as the paper writes it, or the innovation power relative
+        to the covariance predicted at its own epoch (NIS per row), rescaled by the
+        current epoch's: the second does not fade on the epochs right after an
+        outage whose large innovations the filter had predicted (``fading.hpp``).
     resample_threshold : resample when N_eff < threshold * N.
     roughening : regularisation bandwidth after resampling, kernel shaped by the unweighted
         cloud covariance (default 0.2 for the PF, 0 for the UPF).
@@ -203,6 +210,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                     ut_kappa=(3.0 - 20) if cfg.ut_kappa is None else cfg.ut_kappa)
     pcfg = dict(particles=int(particles), seed=int(seed), fading=bool(fading), rho=float(rho), beta=float(beta),
                 eta_max=float(eta_max), alpha=np.atleast_1d(np.asarray(alpha, float)),
+                fading_memory=str(fading_memory),
                 resample_threshold=float(resample_threshold), roughening=float(roughening),
                 rk4_step=float(rk4_step_s), kernel_h2=float(kernel_h2),
                 init_yaw_halfwidth=float(init_yaw_uniform_deg) * DEG, temper_stages=int(temper_stages),
