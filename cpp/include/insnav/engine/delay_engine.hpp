@@ -30,10 +30,10 @@
 //    for the nonlinear closed loop (feedback and re-linearisation at the right
 //    times), works for any Filter, and its cost is bounded by the history.
 //
-// Both reuse LooseConfig, ImuCorrection, LooseMeasurement and the timing rules
-// of loose_engine.hpp (cycles, propagation intervals, outage cycles, feedback);
-// DelayCore below repeats LooseEngine's private mechanics (kept identical so
-// that with zero delay both engines reproduce LooseEngine).
+// Both run on the closed-loop core of every engine (closed_loop.hpp: cycles,
+// propagation intervals, outage cycles, feedback, outputs) and reuse
+// LooseConfig and LooseMeasurement, so that with zero delay both reproduce
+// LooseEngine.
 #pragma once
 
 #include <array>
@@ -53,187 +53,14 @@ struct DelayConfig {
   double time_tolerance = 1e-6;      // arrival at an epoch / same instant [s]
 };
 
-/// LooseOutputs plus the delay counters.  Status codes per record:
-/// 0 not used, 1 applied, 2 rejected by gate, 3 S not PD, 4 outside IMU span,
-/// 5 refused: older than the history (exact engine).
+/// LooseOutputs plus the delay counters.  Status per record: RecordStatus
+/// (kTooOld: refused by the exact engine, older than its history).
 struct DelayOutputs : LooseOutputs {
   int refused_too_old = 0;             // exact engine
   int replays = 0;                     // exact engine: restores from a checkpoint
   std::int64_t replayed_samples = 0;   // exact engine: IMU samples integrated again
   int filter_updates = 0;              // all filter updates incl. repeated ones in replays
 };
-
-/// The mechanics of LooseEngine (same order of operations), as a copyable
-/// value so that the exact engine can checkpoint it whole.
-template <class Filter>
-struct DelayCore {
-  using L = typename Filter::Layout;
-
-  Filter filter;
-  Strapdown ins;
-  ImuCorrection corr;
-  InsInterval iv;
-  Vec3 omega_ib_b = Vec3::Zero(), f_ib_b = Vec3::Zero();
-  double cycle_start = 0.0, interval_t0 = 0.0;
-  bool have_mid = false;
-
-  explicit DelayCore(const Filter& f) : filter(f) {}
-
-  void reset(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
-    ins.reset(initial);
-    corr = corr0;
-    filter.initialize(P0);
-    cycle_start = initial.t;
-    start_cycle();
-  }
-
-  /// Integrate the fraction (a0, a1] of one raw IMU increment (LooseEngine::step).
-  void step(const ImuIncrement& raw, double a0, double a1, double propagation_interval) {
-    ImuIncrement imu;
-    const double f = a1 - a0;
-    imu.dt = raw.dt * f;
-    imu.t = raw.t - raw.dt * (1.0 - a1);
-    imu.dtheta_b = raw.dtheta_b * f;
-    imu.dv_b = raw.dv_b * f;
-    corr.apply(imu);
-    ins.update(imu);
-    omega_ib_b = imu.dtheta_b / imu.dt;
-    f_ib_b = imu.dv_b / imu.dt;
-    const double elapsed = ins.state().t - interval_t0;
-    if (!have_mid && elapsed >= 0.5 * propagation_interval) {
-      set_point(iv.mid);
-      have_mid = true;
-    }
-    if (elapsed >= propagation_interval - 1e-12) flush_interval();
-  }
-
-  void set_point(InsPoint& p) {
-    const NavState& s = ins.state();
-    p.set(s.lat, s.h, s.v_n, s.q_nb.toRotationMatrix(), f_ib_b, omega_ib_b);
-  }
-
-  void flush_interval() {
-    const NavState& s = ins.state();
-    iv.dt = s.t - interval_t0;
-    if (iv.dt <= 0.0) return;
-    set_point(iv.end);
-    if (!have_mid) {
-      iv.mid = iv.end;
-      iv.mid.lat = 0.5 * (iv.start.lat + iv.end.lat);
-      iv.mid.h = 0.5 * (iv.start.h + iv.end.h);
-      iv.mid.v_n = 0.5 * (iv.start.v_n + iv.end.v_n);
-      iv.mid.earth.evaluate(iv.mid.lat, iv.mid.h, iv.mid.v_n);
-    }
-    filter.propagate(iv);
-    iv.start = iv.end;
-    interval_t0 = s.t;
-    have_mid = false;
-  }
-
-  void start_cycle() {
-    cycle_start = ins.state().t;
-    interval_t0 = cycle_start;
-    set_point(iv.start);
-    have_mid = false;
-    filter.begin_cycle();
-  }
-
-  void close_cycle() {
-    flush_interval();
-    filter.end_cycle();
-  }
-
-  /// Closed loop (LooseEngine::feedback): correct the INS and the IMU
-  /// corrections with the (newest) error estimate, then zero it.
-  void feedback() {
-    const StateVec<L> x = filter.x();
-    NavState s = ins.state();
-    const wgs84::Radii r = wgs84::radii(s.lat);
-    s.lat -= x[L::kPos] / (r.R_M + s.h);
-    s.lon -= x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
-    s.h += x[L::kPos + 2];
-    s.v_n -= x.template segment<3>(L::kVel);
-    s.q_nb = (quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb).normalized();
-    corr.acc_bias += x.template segment<3>(L::kAccBias);
-    corr.gyro_bias += x.template segment<3>(L::kGyroBias);
-    if constexpr (kHasScale<L>) {
-      corr.acc_scale += x.template segment<3>(L::kAccScale);
-      corr.gyro_scale += x.template segment<3>(L::kGyroScale);
-    }
-    ins.set_state(s);
-    filter.reset_state();
-  }
-
-  void write_output(LooseOutputs& out) const {
-    const std::int64_t i = out.n_out++;
-    const NavState& s = ins.state();
-    if (out.t) out.t[i] = s.t;
-    const StateVec<L> x = filter.x();
-    const wgs84::Radii r = wgs84::radii(s.lat);
-    if (out.llh) {
-      out.llh[3 * i] = s.lat - x[L::kPos] / (r.R_M + s.h);
-      out.llh[3 * i + 1] = s.lon - x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
-      out.llh[3 * i + 2] = s.h + x[L::kPos + 2];
-    }
-    if (out.v_n) {
-      const Vec3 v = s.v_n - x.template segment<3>(L::kVel);
-      for (int j = 0; j < 3; ++j) out.v_n[3 * i + j] = v[j];
-    }
-    if (out.rpy) {
-      const Vec3 e = euler_from_quat(quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb);
-      for (int j = 0; j < 3; ++j) out.rpy[3 * i + j] = e[j];
-    }
-    if (out.sigma) {
-      const StateCov<L> P = filter.P();
-      for (int j = 0; j < L::kSize; ++j) out.sigma[L::kSize * i + j] = std::sqrt(std::max(P(j, j), 0.0));
-    }
-    if (out.imu_err) {
-      double* e = out.imu_err + 12 * i;
-      for (int j = 0; j < 3; ++j) {
-        e[j] = corr.acc_bias[j] + x[L::kAccBias + j];
-        e[3 + j] = corr.gyro_bias[j] + x[L::kGyroBias + j];
-        e[6 + j] = corr.acc_scale[j] + (kHasScale<L> ? x[L::kAccScale >= 0 ? L::kAccScale + j : 0] : 0.0);
-        e[9 + j] = corr.gyro_scale[j] + (kHasScale<L> ? x[L::kGyroScale >= 0 ? L::kGyroScale + j : 0] : 0.0);
-      }
-    }
-  }
-};
-
-namespace delay_detail {
-
-inline ImuIncrement raw_sample(std::int64_t k, double t_prev, const double* t, const double* dtheta_b,
-                               const double* dv_b) {
-  ImuIncrement raw;
-  raw.t = t[k];
-  raw.dt = t[k] - t_prev;
-  raw.dtheta_b = Vec3(dtheta_b[3 * k], dtheta_b[3 * k + 1], dtheta_b[3 * k + 2]);
-  raw.dv_b = Vec3(dv_b[3 * k], dv_b[3 * k + 1], dv_b[3 * k + 2]);
-  return raw;
-}
-
-inline void mark(LooseOutputs& out, std::int64_t g, int st) {
-  if (out.status) out.status[g] = static_cast<std::int8_t>(st);
-  if (out.nis) out.nis[g] = NAN;
-  if (out.innovation)
-    for (int i = 0; i < 6; ++i) out.innovation[6 * g + i] = NAN;
-}
-
-template <class RowVec>
-void write_innovation(LooseOutputs& out, std::int64_t g, const GnssFix& fix, const RowVec& r) {
-  if (!out.innovation) return;
-  for (int i = 0; i < 6; ++i) out.innovation[6 * g + i] = NAN;
-  const int off = fix.has_pos ? 0 : 3;
-  for (int i = 0; i < r.size(); ++i) out.innovation[6 * g + off + i] = r[i];
-}
-
-inline GnssFix masked(const GnssFix& in, const LooseConfig& cfg) {
-  GnssFix f = in;
-  f.has_pos = f.has_pos && cfg.use_position;
-  f.has_vel = f.has_vel && cfg.use_velocity;
-  return f;
-}
-
-}  // namespace delay_detail
 
 // ---------------------------------------------------------------------------
 /// seed 001's random-delay KF in the closed-loop engine.
@@ -244,7 +71,7 @@ class RandomDelayEngine {
 
   RandomDelayEngine(const ImuErrorModel& model, const LooseConfig& cfg, const DelayConfig& dcfg,
                     const double* delay_p, int n_p)
-      : core_(make(model, delay_p, n_p)), cfg_(cfg), dcfg_(dcfg) {}
+      : core_(make(model, delay_p, n_p), cfg.propagation_interval), cfg_(cfg), dcfg_(dcfg) {}
 
   const Filter& filter() const { return core_.filter; }
 
@@ -254,25 +81,24 @@ class RandomDelayEngine {
   void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, std::int64_t n,
            const double* t, const double* dtheta_b, const double* dv_b, std::int64_t m, const GnssFix* fixes,
            const double* t_arrival, std::int64_t n_ep, const double* epochs, DelayOutputs& out) {
-    using namespace delay_detail;
-    const double tol = dcfg_.time_tolerance;
+        const double tol = dcfg_.time_tolerance;
     core_.reset(initial, P0, corr0);
     for (auto& r : refs_) r.valid = false;
     std::int64_t g = 0, ep = 0;
-    while (g < m && !(t_arrival[g] > initial.t + tol)) mark(out, g++, 4);
+    while (g < m && !(t_arrival[g] > initial.t + tol)) out.mark(g++, RecordStatus::kOutsideImuSpan);
     while (ep < n_ep && !(epochs[ep] > initial.t + tol)) ++ep;
     double t_prev = initial.t;
     for (std::int64_t k = 0; k < n; ++k) {
-      const ImuIncrement raw = raw_sample(k, t_prev, t, dtheta_b, dv_b);
+      const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
       double done = 0.0;
       while (ep < n_ep && epochs[ep] <= raw.t + tol) {
         const double a = std::min(1.0, (epochs[ep] - t_prev) / raw.dt);
         if (a > done) {
-          core_.step(raw, done, a, cfg_.propagation_interval);
+          core_.step(raw, done, a);
           done = a;
         }
         core_.close_cycle();
-        refs_[0] = Ref{core_.ins.state(), core_.omega_ib_b, true};
+        refs_[0] = Ref{core_.ins.state(), core_.omega_ib_b(), true};
         for (; g < m && t_arrival[g] <= epochs[ep] + tol; ++g) {
           // After a fed-back correction block 0 of the stack is zero and refers
           // to the corrected INS: the next record of the same epoch must be
@@ -281,11 +107,12 @@ class RandomDelayEngine {
           if (apply(fixes[g], g, out)) refs_[0].nav = core_.ins.state();
         }
         core_.filter.shift();
+        core_.touch();
         for (int i = S; i > 0; --i) refs_[i] = refs_[i - 1];
         core_.start_cycle();
         ++ep;
       }
-      if (done < 1.0) core_.step(raw, done, 1.0, cfg_.propagation_interval);
+      if (done < 1.0) core_.step(raw, done, 1.0);
       if (core_.ins.state().t - core_.cycle_start >= cfg_.cycle_period - 1e-9) {  // outage: no shift
         core_.close_cycle();
         core_.start_cycle();
@@ -293,7 +120,7 @@ class RandomDelayEngine {
       if ((k + 1) % cfg_.output_decimation == 0 || k + 1 == n) core_.write_output(out);
       t_prev = raw.t;
     }
-    for (; g < m; ++g) mark(out, g, 4);
+    for (; g < m; ++g) out.mark(g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
   }
 
@@ -312,10 +139,9 @@ class RandomDelayEngine {
 
   /// One received record: hypotheses against the stored epochs, update, feedback.
   bool apply(const GnssFix& fix_in, std::int64_t g, DelayOutputs& out) {
-    using namespace delay_detail;
-    const GnssFix fix = masked(fix_in, cfg_);
+    const GnssFix fix = masked_fix(fix_in, cfg_);
     if (!fix.has_pos && !fix.has_vel) {
-      mark(out, g, 0);
+      out.mark(g, RecordStatus::kNotUsed);
       return false;
     }
     typename Filter::Hypotheses hyp{};
@@ -326,10 +152,11 @@ class RandomDelayEngine {
       hyp[i] = &meas_[i].linear();
     }
     const UpdateResult res = core_.filter.update_delayed(hyp, cfg_.gate_chi2);
-    if (res.rows > 0) write_innovation(out, g, fix, core_.filter.last_mean_residual());
+    core_.touch();
+    if (res.rows > 0) out.write_innovation(g, fix, core_.filter.last_mean_residual());
     if (out.nis) out.nis[g] = res.rows > 0 ? res.nis : NAN;
-    const int st = res.applied ? 1 : (res.rejected_by_gate ? 2 : (res.cholesky_repairs ? 3 : 0));
-    if (out.status) out.status[g] = static_cast<std::int8_t>(st);
+    out.set_status(out.status, g,
+                   res.applied || res.rejected_by_gate || res.cholesky_repairs ? status_of(res) : RecordStatus::kNotUsed);
     if (res.applied) {
       ++out.updates;
       ++out.filter_updates;
@@ -340,7 +167,7 @@ class RandomDelayEngine {
     return res.applied;
   }
 
-  DelayCore<Filter> core_;
+  ClosedLoop<Filter> core_;
   LooseConfig cfg_;
   DelayConfig dcfg_;
   std::array<Ref, S + 1> refs_{};
@@ -357,7 +184,7 @@ class TimeTaggedEngine {
   static constexpr int kMaxKnown = 4 * kRing + 16;  // received records kept for replays
 
   TimeTaggedEngine(const ImuErrorModel& model, const LooseConfig& cfg, const DelayConfig& dcfg)
-      : core_(Filter(model)), cfg_(cfg), dcfg_(dcfg) {
+      : core_(Filter(model), cfg.propagation_interval), cfg_(cfg), dcfg_(dcfg) {
     INSNAV_CHECK(dcfg_.checkpoint_interval > 0.0, "checkpoint_interval must be > 0");
     INSNAV_CHECK(dcfg_.max_history_s >= 0.0, "max_history_s must be >= 0");
   }
@@ -369,8 +196,7 @@ class TimeTaggedEngine {
   void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, std::int64_t n,
            const double* t, const double* dtheta_b, const double* dv_b, std::int64_t m, const GnssFix* fixes,
            const double* t_arrival, DelayOutputs& out) {
-    using namespace delay_detail;
-    const double tol = dcfg_.time_tolerance;
+        const double tol = dcfg_.time_tolerance;
     t_ = t;
     dth_ = dtheta_b;
     dv_ = dv_b;
@@ -383,7 +209,7 @@ class TimeTaggedEngine {
     next_ = 0;
     last_ckpt_t_ = -kInf;
     std::int64_t ga = 0;
-    while (ga < m && !(fixes[ga].t > initial.t)) mark(out, ga++, 4);
+    while (ga < m && !(fixes[ga].t > initial.t)) out.mark(ga++, RecordStatus::kOutsideImuSpan);
     for (std::int64_t k = 0; k < n; ++k) {
       begin_sample(k);
       while (ga < m && t_arrival[ga] <= raw_.t + tol) {
@@ -394,10 +220,10 @@ class TimeTaggedEngine {
         while (ga < m && t_arrival[ga] <= now + tol) {
           const GnssFix& f = fixes[ga];
           if (!(f.t > t0_)) {
-            mark(out, ga, 4);
+            out.mark(ga, RecordStatus::kOutsideImuSpan);
           } else if (now - f.t > history_s() + tol || !has_checkpoint_before(f.t) ||
                      known_count_ == kMaxKnown) {
-            mark(out, ga, 5);
+            out.mark(ga, RecordStatus::kTooOld);
             ++out.refused_too_old;
           } else {
             insert_known(ga);
@@ -411,23 +237,23 @@ class TimeTaggedEngine {
       advance(1.0, out);
       end_sample(k, n, out, true);
     }
-    for (; ga < m; ++ga) mark(out, ga, 4);
+    for (; ga < m; ++ga) out.mark(ga, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.updates = 0;
     if (out.status)
-      for (std::int64_t g = 0; g < m; ++g) out.updates += out.status[g] == 1;
+      for (std::int64_t g = 0; g < m; ++g) out.updates += out.status[g] == static_cast<std::int8_t>(RecordStatus::kApplied);
   }
 
  private:
   struct Checkpoint {
-    std::optional<DelayCore<Filter>> core;  // engaged once the slot is first written
+    std::optional<ClosedLoop<Filter>> core;  // engaged once the slot is first written
     std::int64_t k;     // the sample about to be integrated
     double t;           // time of the state = t[k-1] (or t0)
   };
 
   void begin_sample(std::int64_t k) {
     t_prev_ = k > 0 ? t_[k - 1] : t0_;
-    raw_ = delay_detail::raw_sample(k, t_prev_, t_, dth_, dv_);
+    raw_ = raw_imu_sample(k, t_prev_, t_, dth_, dv_);
     k_ = k;
     done_ = 0.0;
     if (t_prev_ - last_ckpt_t_ >= dcfg_.checkpoint_interval - 1e-9) push_checkpoint();
@@ -449,7 +275,7 @@ class TimeTaggedEngine {
       const double af = (fixes_[g].t - t_prev_) / raw_.dt;
       if (!(fixes_[g].t <= raw_.t) || af > a + 1e-12) break;
       if (af > done_) {
-        core_.step(raw_, done_, af, cfg_.propagation_interval);
+        core_.step(raw_, done_, af);
         done_ = af;
       }
       core_.close_cycle();
@@ -458,23 +284,22 @@ class TimeTaggedEngine {
       ++next_;
     }
     if (a > done_) {
-      core_.step(raw_, done_, a, cfg_.propagation_interval);
+      core_.step(raw_, done_, a);
       done_ = a;
     }
   }
 
   void apply_fix(std::int64_t g, DelayOutputs& out) {
-    using namespace delay_detail;
-    const GnssFix fix = masked(fixes_[g], cfg_);
+        const GnssFix fix = masked_fix(fixes_[g], cfg_);
     if (!fix.has_pos && !fix.has_vel) {
-      mark(out, g, 0);
+      out.mark(g, RecordStatus::kNotUsed);
       return;
     }
-    meas_.set(core_.ins.state(), core_.omega_ib_b, cfg_.lever_arm_b, fix);
-    write_innovation(out, g, fix, meas_.linear().residual);
-    const UpdateResult res = core_.filter.update(meas_, cfg_.gate_chi2);
+    meas_.set(core_.ins.state(), core_.omega_ib_b(), cfg_.lever_arm_b, fix);
+    out.write_innovation(g, fix, meas_.linear().residual);
+    const UpdateResult res = core_.update(meas_, cfg_.gate_chi2);
     if (out.nis) out.nis[g] = res.nis;
-    if (out.status) out.status[g] = static_cast<std::int8_t>(res.applied ? 1 : (res.rejected_by_gate ? 2 : 3));
+    out.set_status(out.status, g, status_of(res));
     if (res.applied) {
       ++out.filter_updates;
       core_.feedback();
@@ -517,7 +342,7 @@ class TimeTaggedEngine {
     while (next_ < known_count_ && fixes_[known_[next_]].t <= c.t) ++next_;
     ++out.replays;
     t_prev_ = c.t;
-    raw_ = delay_detail::raw_sample(k0, t_prev_, t_, dth_, dv_);
+    raw_ = raw_imu_sample(k0, t_prev_, t_, dth_, dv_);
     k_ = k0;
     done_ = 0.0;  // the checkpoint itself is kept: no new push for sample k0
     for (std::int64_t kk = k0; kk < k; ++kk) {
@@ -554,7 +379,7 @@ class TimeTaggedEngine {
     next_ -= drop;
   }
 
-  DelayCore<Filter> core_;
+  ClosedLoop<Filter> core_;
   LooseConfig cfg_;
   DelayConfig dcfg_;
   LooseMeasurement<L> meas_;

@@ -1,0 +1,361 @@
+// insnav/engine/closed_loop.hpp -- the closed-loop core shared by every
+// engine: strapdown mechanization at the IMU rate, the error-state filter's
+// cycles and propagation intervals, feedback of the estimate into the INS, the
+// IMU corrections and (layouts with clock states) the receiver clock, and the
+// output rows.  An engine adds only its measurements (loose_engine.hpp,
+// tight_engine.hpp, delay_engine.hpp).
+//
+// Timing (seed 000 sec. 3): a filter *cycle* spans one GNSS period.  Inside a
+// cycle the error state is propagated over intervals of about
+// `propagation_interval` seconds, each given to the filter with the INS
+// solution at its start, middle and end.  A record valid at t_g inside an IMU
+// interval (t_{k-1}, t_k] is applied exactly at t_g: the IMU increment is
+// split in proportion (constant rate within the interval), the INS is advanced
+// to t_g, the cycle is closed, the filter updates, the estimate is fed back,
+// and the rest of the increment follows.  With no record for `cycle_period`
+// (a GNSS outage) the cycle is closed without update and without feedback
+// (seed 000 eqs. (26)-(29)).
+//
+// ClosedLoop is a copyable value (the exact time-tagged engine checkpoints it
+// whole).  Two things are computed only when needed: the IMU rates (a few
+// times per propagation interval, not per sample) and sqrt(diag P) / the IMU
+// error estimates of the output rows (only after propagate, update or
+// feedback changed them).
+//
+// The Filter type provides: initialize, begin_cycle, propagate, end_cycle,
+// x, P, reset_state, cholesky_repairs (ekf.hpp, rbukf.hpp, ukf.hpp, upf.hpp,
+// particle_filter.hpp, random_delay_kf.hpp).  No heap allocation.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <type_traits>
+
+#include "insnav/filter/sigma_points.hpp"
+#include "insnav/filter/types.hpp"
+#include "insnav/ins/mechanization.hpp"
+
+namespace insnav {
+
+/// What became of one GNSS record (loose fix or tight epoch); the same codes
+/// in Python (insnav.engine.GNSS_STATUS).
+enum class RecordStatus : std::int8_t {
+  kNotUsed = 0,              ///< nothing to use (masked out, or no satellite: prediction only)
+  kApplied = 1,              ///< the update was applied and fed back
+  kRejectedByGate = 2,       ///< NIS above the gate
+  kNotPositiveDefinite = 3,  ///< innovation covariance not positive definite
+  kOutsideImuSpan = 4,       ///< valid before the first or after the last IMU sample
+  kTooOld = 5,               ///< exact delay engine: older than the history it keeps
+};
+
+inline RecordStatus status_of(const UpdateResult& r) {
+  return r.applied ? RecordStatus::kApplied
+                   : (r.rejected_by_gate ? RecordStatus::kRejectedByGate : RecordStatus::kNotPositiveDefinite);
+}
+
+/// Accumulated IMU error estimates fed back into the IMU data.
+struct ImuCorrection {
+  Vec3 acc_bias = Vec3::Zero();    // [m/s^2]
+  Vec3 gyro_bias = Vec3::Zero();   // [rad/s]
+  Vec3 acc_scale = Vec3::Zero();   // [-]
+  Vec3 gyro_scale = Vec3::Zero();  // [-]
+
+  void apply(ImuIncrement& imu) const {
+    imu.dtheta_b = ((imu.dtheta_b - gyro_bias * imu.dt).array() / (1.0 + gyro_scale.array())).matrix();
+    imu.dv_b = ((imu.dv_b - acc_bias * imu.dt).array() / (1.0 + acc_scale.array())).matrix();
+  }
+};
+
+/// Caller-owned per-sample output buffers and run counters (row-major, any
+/// buffer may be null).  Engines extend it with their per-record outputs.
+struct NavOutputs {
+  double* t = nullptr;        // [s]
+  double* llh = nullptr;      // (.,3) lat, lon [rad], h [m]
+  double* v_n = nullptr;      // (.,3) [m/s]
+  double* rpy = nullptr;      // (.,3) [rad]
+  double* sigma = nullptr;    // (.,sigma_cols) sqrt(diag P) of the first sigma_cols states
+  int sigma_cols = 0;         // <= 0 or >= n_state: all n_state
+  double* imu_err = nullptr;  // (.,12) acc bias, gyro bias, acc scale, gyro scale (SI)
+  double* clock = nullptr;    // (.,2) receiver clock bias [m], drift [m/s] (layouts with clock states)
+  std::int64_t n_out = 0;     // rows written
+  int updates = 0, rejected = 0, cholesky_repairs = 0;
+
+  void set_status(std::int8_t* status, std::int64_t g, RecordStatus s) const {
+    if (status) status[g] = static_cast<std::int8_t>(s);
+  }
+};
+
+/// One raw IMU sample k of the caller's arrays: the increment over (t_prev, t[k]].
+inline ImuIncrement raw_imu_sample(std::int64_t k, double t_prev, const double* t, const double* dtheta_b,
+                                   const double* dv_b) {
+  ImuIncrement raw;
+  raw.t = t[k];
+  raw.dt = t[k] - t_prev;
+  raw.dtheta_b = Vec3(dtheta_b[3 * k], dtheta_b[3 * k + 1], dtheta_b[3 * k + 2]);
+  raw.dv_b = Vec3(dv_b[3 * k], dv_b[3 * k + 1], dv_b[3 * k + 2]);
+  return raw;
+}
+
+template <class Filter>
+Filter make_filter(const ImuErrorModel& model, const UtParams& ut) {
+  if constexpr (std::is_constructible_v<Filter, const ImuErrorModel&, const UtParams&>)
+    return Filter(model, ut);
+  else
+    return Filter(model);
+}
+
+template <class Filter>
+struct ClosedLoop {
+  using L = typename Filter::Layout;
+
+  Filter filter;
+  Strapdown ins;
+  ImuCorrection corr;
+  double clock_bias = 0.0, clock_drift = 0.0;  // receiver clock estimate [m], [m/s] (kHasClock<L>)
+  double propagation_interval = 0.02;          // [s]
+  double cycle_start = 0.0, interval_t0 = 0.0;
+
+  explicit ClosedLoop(const Filter& f, double propagation_interval_s = 0.02)
+      : filter(f), propagation_interval(propagation_interval_s) {}
+
+  void reset(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0 = 0.0,
+             double clock_drift0 = 0.0) {
+    ins.reset(initial);
+    corr = corr0;
+    clock_bias = clock_bias0;
+    clock_drift = clock_drift0;
+    filter.initialize(P0);
+    rates_stale_ = false;
+    omega_ib_b_.setZero();
+    f_ib_b_.setZero();
+    out_cache_dirty_ = true;
+    start_cycle();
+  }
+
+  const NavState& state() const { return ins.state(); }
+
+  /// Corrected angular rate and specific force of the last integrated increment.
+  const Vec3& omega_ib_b() {
+    rates();
+    return omega_ib_b_;
+  }
+  const Vec3& f_ib_b() {
+    rates();
+    return f_ib_b_;
+  }
+
+  /// Integrate the fraction (a0, a1] of one raw IMU increment.
+  void step(const ImuIncrement& raw, double a0, double a1) {
+    ImuIncrement imu;
+    const double f = a1 - a0;
+    imu.dt = raw.dt * f;
+    imu.t = raw.t - raw.dt * (1.0 - a1);
+    imu.dtheta_b = raw.dtheta_b * f;
+    imu.dv_b = raw.dv_b * f;
+    corr.apply(imu);
+    ins.update(imu);
+    if constexpr (kHasClock<L>) clock_bias += clock_drift * imu.dt;
+    last_imu_ = imu;
+    rates_stale_ = true;
+    const NavState& s = ins.state();
+    const double elapsed = s.t - interval_t0;
+    if (!have_mid_ && elapsed >= 0.5 * propagation_interval) {
+      set_point(iv_.mid);
+      have_mid_ = true;
+    }
+    if (elapsed >= propagation_interval - 1e-12) flush_interval();
+  }
+
+  void start_cycle() {
+    cycle_start = ins.state().t;
+    interval_t0 = cycle_start;
+    set_point(iv_.start);
+    have_mid_ = false;
+    filter.begin_cycle();
+  }
+
+  void close_cycle() {
+    flush_interval();
+    filter.end_cycle();
+    out_cache_dirty_ = true;
+  }
+
+  /// No record for a cycle period (an outage): true when the cycle is to be
+  /// closed without an update.
+  bool outage_due(double cycle_period) const { return ins.state().t - cycle_start >= cycle_period - 1e-9; }
+
+  /// The filter's measurement update (the output cache follows).
+  template <class Meas>
+  UpdateResult update(const Meas& meas, double gate_chi2) {
+    out_cache_dirty_ = true;
+    return filter.update(meas, gate_chi2);
+  }
+
+  /// Call after changing the filter directly (e.g. a delayed update).
+  void touch() { out_cache_dirty_ = true; }
+
+  /// Closed loop: correct the INS, the IMU corrections and the receiver clock
+  /// with x, then x = 0.
+  void feedback() {
+    const StateVec<L> x = filter.x();
+    NavState s = ins.state();
+    const wgs84::Radii r = wgs84::radii(s.lat);
+    s.lat -= x[L::kPos] / (r.R_M + s.h);
+    s.lon -= x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
+    s.h += x[L::kPos + 2];
+    s.v_n -= x.template segment<3>(L::kVel);
+    // C_nb(true) = C_{n n'} C_{n' b}, C_{n n'} = dcm_from_euler(psi) (layout.hpp)
+    s.q_nb = (quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb).normalized();
+    corr.acc_bias += x.template segment<3>(L::kAccBias);
+    corr.gyro_bias += x.template segment<3>(L::kGyroBias);
+    if constexpr (kHasScale<L>) {
+      corr.acc_scale += x.template segment<3>(L::kAccScale);
+      corr.gyro_scale += x.template segment<3>(L::kGyroScale);
+    }
+    if constexpr (kHasClock<L>) {
+      clock_bias -= x[L::kClockBias];
+      clock_drift -= x[L::kClockDrift];
+    }
+    ins.set_state(s);
+    filter.reset_state();
+    out_cache_dirty_ = true;
+  }
+
+  /// One output row: the INS corrected by the filter's current x (zero after
+  /// every feedback; non-zero during an outage for a sigma-point filter).
+  void write_output(NavOutputs& out) {
+    const std::int64_t i = out.n_out++;
+    const NavState& s = ins.state();
+    if (out.t) out.t[i] = s.t;
+    const StateVec<L>& x = filter.x();
+    const bool corrected = !x.template head<9>().isZero(0.0);
+    double lat = s.lat, lon = s.lon, h = s.h;
+    Vec3 v = s.v_n;
+    Quat q = s.q_nb;
+    if (corrected) {
+      const wgs84::Radii r = wgs84::radii(s.lat);
+      lat = s.lat - x[L::kPos] / (r.R_M + s.h);
+      lon = s.lon - x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
+      h = s.h + x[L::kPos + 2];
+      v = s.v_n - x.template segment<3>(L::kVel);
+      q = quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb;
+    }
+    if (out.llh) {
+      out.llh[3 * i] = lat;
+      out.llh[3 * i + 1] = lon;
+      out.llh[3 * i + 2] = h;
+    }
+    if (out.v_n)
+      for (int j = 0; j < 3; ++j) out.v_n[3 * i + j] = v[j];
+    if (out.rpy) {
+      const Vec3 e = euler_from_quat(q);
+      for (int j = 0; j < 3; ++j) out.rpy[3 * i + j] = e[j];
+    }
+    if (out_cache_dirty_) {  // P, x and the corrections change only at propagate/update/feedback
+      sigma_ = filter.P().diagonal().cwiseMax(0.0).cwiseSqrt();
+      for (int j = 0; j < 3; ++j) {
+        imu_err_[j] = corr.acc_bias[j] + x[L::kAccBias + j];
+        imu_err_[3 + j] = corr.gyro_bias[j] + x[L::kGyroBias + j];
+        imu_err_[6 + j] = corr.acc_scale[j] + (kHasScale<L> ? x[L::kAccScale >= 0 ? L::kAccScale + j : 0] : 0.0);
+        imu_err_[9 + j] = corr.gyro_scale[j] + (kHasScale<L> ? x[L::kGyroScale >= 0 ? L::kGyroScale + j : 0] : 0.0);
+      }
+      out_cache_dirty_ = false;
+    }
+    if (out.sigma) {
+      const int nc = (out.sigma_cols > 0 && out.sigma_cols < L::kSize) ? out.sigma_cols : L::kSize;
+      for (int j = 0; j < nc; ++j) out.sigma[nc * i + j] = sigma_[j];
+    }
+    if (out.imu_err)
+      for (int j = 0; j < 12; ++j) out.imu_err[12 * i + j] = imu_err_[j];
+    if constexpr (kHasClock<L>) {
+      if (out.clock) {
+        out.clock[2 * i] = clock_bias - x[L::kClockBias];
+        out.clock[2 * i + 1] = clock_drift - x[L::kClockDrift];
+      }
+    }
+  }
+
+  /// The IMU loop of the engines that apply each record at its own time of
+  /// validity (loose, tight): for every sample, the records valid in it are
+  /// applied at their times (`record_t(g)`, sorted, `apply(g)` between a
+  /// closed and a new cycle), an outage cycle is closed when due, and every
+  /// `decimation`-th row (and the last) is written.  `g` is the first record
+  /// not yet applied (updated).
+  template <class RecordTime, class Apply>
+  void run_samples(double t0, std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
+                   std::int64_t& g, std::int64_t m, double cycle_period, int decimation, NavOutputs& out,
+                   RecordTime&& record_t, Apply&& apply) {
+    double t_prev = t0;
+    int until_output = decimation;  // countdown: no division per sample
+    for (std::int64_t k = 0; k < n; ++k) {
+      const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
+      double done = 0.0;  // fraction of this increment already integrated
+      while (g < m && record_t(g) <= raw.t) {
+        const double a = (record_t(g) - t_prev) / raw.dt;  // in (0, 1]
+        if (a > done) {
+          step(raw, done, a);
+          done = a;
+        }
+        close_cycle();
+        apply(g);
+        ++g;
+        start_cycle();
+      }
+      if (done < 1.0) step(raw, done, 1.0);
+      if (outage_due(cycle_period)) {
+        close_cycle();
+        start_cycle();
+      }
+      if (--until_output == 0 || k + 1 == n) {
+        write_output(out);
+        until_output = decimation;
+      }
+      t_prev = raw.t;
+    }
+  }
+
+ private:
+  void rates() {
+    if (!rates_stale_) return;
+    omega_ib_b_ = last_imu_.dtheta_b / last_imu_.dt;
+    f_ib_b_ = last_imu_.dv_b / last_imu_.dt;
+    rates_stale_ = false;
+  }
+
+  void set_point(InsPoint& p) {
+    rates();
+    const NavState& s = ins.state();
+    p.set(s.lat, s.h, s.v_n, s.q_nb.toRotationMatrix(), f_ib_b_, omega_ib_b_);
+  }
+
+  /// Hand the filter the interval (interval_t0, now].
+  void flush_interval() {
+    const NavState& s = ins.state();
+    iv_.dt = s.t - interval_t0;
+    if (iv_.dt <= 0.0) return;
+    set_point(iv_.end);
+    if (!have_mid_) {  // a single short step: the middle is the mean of the ends
+      iv_.mid = iv_.end;
+      iv_.mid.lat = 0.5 * (iv_.start.lat + iv_.end.lat);
+      iv_.mid.h = 0.5 * (iv_.start.h + iv_.end.h);
+      iv_.mid.v_n = 0.5 * (iv_.start.v_n + iv_.end.v_n);
+      iv_.mid.earth.evaluate(iv_.mid.lat, iv_.mid.h, iv_.mid.v_n);
+    }
+    filter.propagate(iv_);
+    out_cache_dirty_ = true;
+    iv_.start = iv_.end;
+    interval_t0 = s.t;
+    have_mid_ = false;
+  }
+
+  InsInterval iv_;
+  bool have_mid_ = false;
+  ImuIncrement last_imu_;     // last corrected increment integrated
+  bool rates_stale_ = false;  // omega_ib_b_, f_ib_b_ not yet taken from last_imu_
+  Vec3 omega_ib_b_ = Vec3::Zero(), f_ib_b_ = Vec3::Zero();
+  StateVec<L> sigma_ = StateVec<L>::Zero();  // output cache: sqrt(diag P)
+  Eigen::Matrix<double, 12, 1> imu_err_ = Eigen::Matrix<double, 12, 1>::Zero();  // and the IMU errors
+  bool out_cache_dirty_ = true;  // P, x or the corrections changed since the cache was filled
+};
+
+}  // namespace insnav
