@@ -1,0 +1,216 @@
+// Python -> core conversions shared by every binder: config dicts (unknown
+// keys are errors), the IMU arrays, the initial state, P0, the IMU
+// correction, loose GNSS fixes and tight epochs.  A binder is then its
+// filter's own config and nothing else.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <initializer_list>
+#include <string>
+#include <vector>
+
+#include "common.hpp"
+#include "insnav/engine/loose_engine.hpp"
+#include "insnav/engine/tight_engine.hpp"
+
+namespace insnav::py_bind {
+
+inline double num(const py::dict& d, const char* key, double dflt) {
+  return d.contains(key) ? py::cast<double>(d[key]) : dflt;
+}
+
+inline bool flag(const py::dict& d, const char* key, bool dflt) {
+  return d.contains(key) ? py::cast<bool>(d[key]) : dflt;
+}
+
+/// 1 value (broadcast) or 3.
+inline Vec3 vec3_or_scalar(const py::dict& d, const char* key, const Vec3& dflt) {
+  if (!d.contains(key)) return dflt;
+  DArray a = py::cast<DArray>(d[key]);
+  if (a.size() == 1) return Vec3::Constant(a.data()[0]);
+  if (a.size() != 3) throw py::value_error(std::string("key '") + key + "': expected 1 or 3 values");
+  return Vec3(a.data()[0], a.data()[1], a.data()[2]);
+}
+
+/// Any key of d not in `known` (or in `known2`) is a ValueError naming it and `what`.
+inline void reject_unknown(const py::dict& d, std::initializer_list<const char*> known, const char* what,
+                           std::initializer_list<const char*> known2 = {}) {
+  for (auto item : d) {
+    const std::string k = py::cast<std::string>(item.first);
+    bool ok = false;
+    for (const char* kk : known) ok = ok || (k == kk);
+    for (const char* kk : known2) ok = ok || (k == kk);
+    if (!ok) throw py::value_error(std::string("unknown ") + what + " key '" + k + "'");
+  }
+}
+
+/// The engine timing keys every config shares.
+inline void timing_from(const py::dict& d, double& propagation_interval, double& cycle_period, double& gate_chi2,
+                        int& output_decimation) {
+  propagation_interval = num(d, "propagation_interval", propagation_interval);
+  cycle_period = num(d, "cycle_period", cycle_period);
+  gate_chi2 = num(d, "gate_chi2", gate_chi2);
+  output_decimation = static_cast<int>(num(d, "output_decimation", output_decimation));
+  if (!(propagation_interval > 0.0)) throw py::value_error("propagation_interval must be > 0");
+  if (!(cycle_period > 0.0)) throw py::value_error("cycle_period must be > 0");
+  if (output_decimation < 1) throw py::value_error("output_decimation must be >= 1");
+}
+
+inline UtParams ut_from(const py::dict& d) {
+  UtParams ut;
+  ut.alpha = num(d, "ut_alpha", ut.alpha);
+  ut.beta = num(d, "ut_beta", ut.beta);
+  ut.kappa = num(d, "ut_kappa", ut.kappa);
+  return ut;
+}
+
+#define INSNAV_TIMING_KEYS "lever_arm_b", "propagation_interval", "cycle_period", "gate_chi2", "output_decimation"
+#define INSNAV_UT_KEYS "ut_alpha", "ut_beta", "ut_kappa"
+
+/// LooseConfig from a dict; `extra` keys are allowed (and read by the caller).
+inline LooseConfig loose_config_from(const py::dict& d, const char* what, std::initializer_list<const char*> extra) {
+  reject_unknown(d, {INSNAV_TIMING_KEYS, "use_position", "use_velocity"}, what, extra);
+  LooseConfig c;
+  c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
+  timing_from(d, c.propagation_interval, c.cycle_period, c.gate_chi2, c.output_decimation);
+  c.use_position = flag(d, "use_position", true);
+  c.use_velocity = flag(d, "use_velocity", true);
+  return c;
+}
+
+inline TightConfig tight_config_from(const py::dict& d) {
+  reject_unknown(d, {INSNAV_TIMING_KEYS, "use_pseudorange", "use_rate", INSNAV_UT_KEYS}, "tight engine config");
+  TightConfig c;
+  c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
+  timing_from(d, c.propagation_interval, c.cycle_period, c.gate_chi2, c.output_decimation);
+  c.use_pseudorange = flag(d, "use_pseudorange", true);
+  c.use_rate = flag(d, "use_rate", true);
+  return c;
+}
+
+/// The IMU arrays t (n,), dtheta_b (n,3), dv_b (n,3), shapes checked.
+struct ImuArrays {
+  py::ssize_t n = 0;
+  const double *t = nullptr, *dtheta_b = nullptr, *dv_b = nullptr;
+};
+
+inline ImuArrays imu_arrays(const DArray& t, const DArray& dtheta_b, const DArray& dv_b) {
+  const py::ssize_t n = t.size();
+  require_shape(t, n, -1, "t");
+  require_shape(dtheta_b, n, 3, "dtheta_b");
+  require_shape(dv_b, n, 3, "dv_b");
+  return {n, t.data(), dtheta_b.data(), dv_b.data()};
+}
+
+/// init = (t0, lat, lon [rad], h [m], vN, vE, vD [m/s], roll, pitch, yaw [rad]).
+inline NavState nav_state_from(const DArray& init) {
+  if (init.size() != 10)
+    throw py::value_error("init: expected 10 values (t0, lat, lon, h, vN, vE, vD, roll, pitch, yaw)");
+  const double* pi = init.data();
+  NavState nav;
+  nav.t = pi[0];
+  nav.lat = pi[1];
+  nav.lon = pi[2];
+  nav.h = pi[3];
+  nav.v_n = Vec3(pi[4], pi[5], pi[6]);
+  nav.q_nb = quat_from_euler(Vec3(pi[7], pi[8], pi[9]));
+  return nav;
+}
+
+/// imu_correction = (acc bias, gyro bias, acc scale, gyro scale), 12 values SI.
+inline ImuCorrection imu_correction_from(const DArray& corr0) {
+  if (corr0.size() != 12) throw py::value_error("imu_correction: expected 12 values");
+  const double* pc = corr0.data();
+  ImuCorrection corr;
+  corr.acc_bias = Vec3(pc[0], pc[1], pc[2]);
+  corr.gyro_bias = Vec3(pc[3], pc[4], pc[5]);
+  corr.acc_scale = Vec3(pc[6], pc[7], pc[8]);
+  corr.gyro_scale = Vec3(pc[9], pc[10], pc[11]);
+  return corr;
+}
+
+template <class L>
+StateCov<L> state_cov_from(const DArray& P0) {
+  constexpr int ns = L::kSize;
+  require_shape(P0, ns, ns, "P0");
+  return Eigen::Map<const Eigen::Matrix<double, ns, ns, Eigen::RowMajor>>(P0.data());
+}
+
+/// A loose fix from its row: t, lat, lon [rad], h, vN, vE, vD, sN, sE, sD, svN, svE, svD
+/// (NaN position or velocity: that part absent).
+inline GnssFix gnss_fix_from(double t_valid, const double* r) {
+  GnssFix f;
+  f.t = t_valid;
+  f.lat = r[0];
+  f.lon = r[1];
+  f.h = r[2];
+  f.v_n = Vec3(r[3], r[4], r[5]);
+  f.sigma_pos_n = Vec3(r[6], r[7], r[8]);
+  f.sigma_vel_n = Vec3(r[9], r[10], r[11]);
+  f.has_pos = std::isfinite(r[0]) && std::isfinite(r[1]) && std::isfinite(r[2]);
+  f.has_vel = f.v_n.allFinite() && f.sigma_vel_n.allFinite();
+  return f;
+}
+
+/// Tight epochs and their satellites, validated: epoch_t (E,), epoch_start
+/// (E+1,) into sats (M, 12) = pr, prr, x, y, z, vx, vy, vz, clock_bias_m,
+/// clock_drift_mps, sigma_pr, sigma_prr.
+struct TightInputs {
+  std::vector<TightEpoch> epochs;
+  std::vector<SatObservation> sats;
+  py::ssize_t E = 0, M = 0;
+};
+
+using I64Array = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
+
+inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats) {
+  TightInputs in;
+  in.E = epoch_t.size();
+  require_shape(epoch_t, in.E, -1, "epoch_t");
+  if (epoch_start.ndim() != 1 || epoch_start.shape(0) != in.E + 1)
+    throw py::value_error("epoch_start: expected shape (" + std::to_string(in.E + 1) + ",)");
+  in.M = sats.ndim() == 2 ? sats.shape(0) : 0;
+  if (in.M > 0) require_shape(sats, in.M, 12, "sats");
+  const std::int64_t* es = epoch_start.data();
+  in.epochs.resize(static_cast<size_t>(in.E));
+  for (py::ssize_t i = 0; i < in.E; ++i) {
+    if (es[i] < 0 || es[i + 1] < es[i] || es[i + 1] > in.M)
+      throw py::value_error("epoch_start: bad range at epoch " + std::to_string(i));
+    in.epochs[i].t = epoch_t.data()[i];
+    in.epochs[i].begin = es[i];
+    in.epochs[i].end = es[i + 1];
+    if (i > 0 && !(in.epochs[i].t > in.epochs[i - 1].t))
+      throw py::value_error("epoch_t: not strictly increasing at epoch " + std::to_string(i));
+  }
+  in.sats.resize(static_cast<size_t>(in.M));
+  const double* ps = in.M ? sats.data() : nullptr;
+  for (py::ssize_t i = 0; i < in.M; ++i) {
+    const double* r = ps + 12 * i;
+    SatObservation& o = in.sats[i];
+    o.pseudorange_m = r[0];
+    o.pseudorange_rate_mps = r[1];
+    o.r_e = Vec3(r[2], r[3], r[4]);
+    o.v_e = Vec3(r[5], r[6], r[7]);
+    o.clock_bias_m = r[8];
+    o.clock_drift_mps = r[9];
+    o.sigma_pr_m = r[10];
+    o.sigma_prr_mps = r[11];
+    const bool any = std::isfinite(o.pseudorange_m) || std::isfinite(o.pseudorange_rate_mps);
+    if (any && !(o.r_e.allFinite() && o.v_e.allFinite() && std::isfinite(o.clock_bias_m) &&
+                 std::isfinite(o.clock_drift_mps)))
+      throw py::value_error("sats: non-finite satellite state at row " + std::to_string(i));
+    if (std::isfinite(o.pseudorange_m) && !(o.sigma_pr_m > 0.0))
+      throw py::value_error("sats: sigma_pr must be > 0 at row " + std::to_string(i));
+    if (std::isfinite(o.pseudorange_rate_mps) && !(o.sigma_prr_mps > 0.0))
+      throw py::value_error("sats: sigma_prr must be > 0 at row " + std::to_string(i));
+  }
+  return in;
+}
+
+inline double clock0_bias(const DArray& clock0) {
+  if (clock0.size() != 2) throw py::value_error("clock0: expected 2 values (bias m, drift m/s)");
+  return clock0.data()[0];
+}
+
+}  // namespace insnav::py_bind

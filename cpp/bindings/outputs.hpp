@@ -1,0 +1,99 @@
+// Core -> Python: the numpy arrays behind NavOutputs (the per-sample rows
+// every engine writes) and their result-dict entries, shared by every binder.
+#pragma once
+
+#include <cstdint>
+
+#include "common.hpp"
+#include "insnav/engine/closed_loop.hpp"
+
+namespace insnav::py_bind {
+
+/// Rows an engine writes at most: every decimation-th of n samples, the last, and slack of one.
+inline py::ssize_t output_rows(py::ssize_t n, int decimation) { return (n + decimation - 1) / decimation + 1; }
+
+/// Arrays for n_out per-sample rows: t, llh, v_n, rpy, sigma (sigma_cols), imu_err, and clock if asked.
+struct NavBuffers {
+  DArray t, llh, v_n, rpy, sigma, imu_err, clock;
+  bool with_clock;
+
+  NavBuffers(py::ssize_t n_out, int sigma_cols, bool with_clock_)
+      : t({n_out}), llh({n_out, py::ssize_t(3)}), v_n({n_out, py::ssize_t(3)}), rpy({n_out, py::ssize_t(3)}),
+        sigma({n_out, py::ssize_t(sigma_cols)}), imu_err({n_out, py::ssize_t(12)}),
+        clock({with_clock_ ? n_out : py::ssize_t(0), py::ssize_t(2)}), with_clock(with_clock_) {}
+
+  void attach(NavOutputs& out) {
+    out.t = t.mutable_data();
+    out.llh = llh.mutable_data();
+    out.v_n = v_n.mutable_data();
+    out.rpy = rpy.mutable_data();
+    out.sigma = sigma.mutable_data();
+    out.sigma_cols = static_cast<int>(sigma.shape(1));
+    out.imu_err = imu_err.mutable_data();
+    out.clock = with_clock ? clock.mutable_data() : nullptr;
+  }
+
+  /// The rows written and the run counters into res.
+  void put(py::dict& res, const NavOutputs& out) const {
+    const py::slice rows(0, out.n_out, 1);
+    res["t"] = t[rows];
+    res["llh"] = llh[rows];
+    res["v_n"] = v_n[rows];
+    res["rpy"] = rpy[rows];
+    res["sigma"] = sigma[rows];
+    res["imu_err"] = imu_err[rows];
+    if (with_clock) res["clock"] = clock[rows];
+    res["updates"] = out.updates;
+    res["rejected"] = out.rejected;
+    res["cholesky_repairs"] = out.cholesky_repairs;
+  }
+};
+
+/// Per loose record (m rows): innovation (m, 6), nis, status.
+struct LooseRecordBuffers {
+  DArray innovation, nis;
+  py::array_t<std::int8_t> status;
+
+  explicit LooseRecordBuffers(py::ssize_t m) : innovation({m, py::ssize_t(6)}), nis({m}), status({m}) {}
+
+  template <class Out>
+  void attach(Out& out, py::ssize_t m) {
+    out.innovation = m ? innovation.mutable_data() : nullptr;
+    out.nis = m ? nis.mutable_data() : nullptr;
+    out.status = m ? status.mutable_data() : nullptr;
+  }
+
+  void put(py::dict& res) const {
+    res["innovation"] = innovation;
+    res["nis"] = nis;
+    res["status"] = status;
+  }
+};
+
+/// Per tight epoch (E) and satellite row (M): sat_residual (M, 2), nis, status, rows.
+struct TightRecordBuffers {
+  DArray sat_residual, nis;
+  py::array_t<std::int8_t> status;
+  py::array_t<std::int32_t> rows;
+  py::ssize_t E, M;
+
+  TightRecordBuffers(py::ssize_t E_, py::ssize_t M_)
+      : sat_residual({M_, py::ssize_t(2)}), nis({E_}), status({E_}), rows({E_}), E(E_), M(M_) {}
+
+  template <class Out>
+  void attach(Out& out) {
+    out.sat_residual = M ? sat_residual.mutable_data() : nullptr;
+    out.nis = E ? nis.mutable_data() : nullptr;
+    out.status = E ? status.mutable_data() : nullptr;
+    out.rows = E ? rows.mutable_data() : nullptr;
+  }
+
+  void put(py::dict& res) const {
+    res["sat_residual"] = sat_residual;
+    res["nis"] = nis;
+    res["status"] = status;
+    res["rows"] = rows;
+  }
+};
+
+}  // namespace insnav::py_bind
