@@ -78,9 +78,9 @@ def timed(f, n):
 
 
 def breakdown(t, dth, dv, init, repeats):
-    """Thread CPU time of the phases of insnav.mechanize (the same steps as python/insnav/ins.py)."""
+    """Thread CPU time of the phases of insnav.mechanize (the same steps as python/insnav/ins/mechanize.py)."""
     from insnav._validate import as_float_array
-    from insnav.types import Trajectory
+    from insnav.data.nav import Trajectory
 
     ph = {k: [] for k in ("as_float_array", "_core.mechanize (checks + degrees inside)", "Trajectory", "total")}
     for _ in range(repeats):

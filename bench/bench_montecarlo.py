@@ -31,8 +31,8 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         insnav.montecarlo(args.scenario, filters, runs=args.runs, seed=0, workers=args.workers, progress=False)
         times.append(time.perf_counter() - t0)
-    run_one = sys.modules["insnav.montecarlo"].run_one
-    Task = sys.modules["insnav.montecarlo"].Task
+    run_one = sys.modules["insnav.analysis.montecarlo"].run_one
+    Task = sys.modules["insnav.analysis.montecarlo"].Task
     t0 = time.perf_counter()
     for i in range(5):
         run_one(Task(i, args.scenario, filters, 100 + i, i, 5.0))

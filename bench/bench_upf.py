@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 import insnav  # noqa: E402
 from _common import git_commit  # noqa: E402
 from insnav.config import RunConfig  # noqa: E402
-from insnav.particle import run_tight_particle  # noqa: E402
+from insnav.filters.particle import run_tight_particle  # noqa: E402
 
 COMMAND = "python3 bench/bench_upf.py --repeat 3 --out docs/results/seed004_bench.md"
 

@@ -6,7 +6,7 @@ vertical, 0.15 m/s; 10 Hz; four outages) and a pseudorange ramp on one
 satellite of ``seed004-uav`` (tight coupling), runs the filters with and
 without the gate, and prints a markdown table (docs/results/robustness.md).
 
-Gate thresholds (chi-square 0.999 quantiles, :data:`insnav.faults.CHI2_999`):
+Gate thresholds (chi-square 0.999 quantiles, :data:`insnav.analysis.faults.CHI2_999`):
 loose 22.46 (6 rows: position + velocity); tight 45.31 (20 rows: the largest
 epoch, 10 satellites x pseudorange + rate; the tight gate is one number for
 the whole epoch, see the note in the results).
@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 import insnav
-from insnav import faults as F
+from insnav.analysis import faults as F
 from insnav.analysis import errors
 
 LOOSE_GATE = F.CHI2_999[6]

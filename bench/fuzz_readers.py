@@ -35,12 +35,12 @@ def _write(name: str, data: bytes) -> Path:
 
 
 def _imu_csv(data):
-    from insnav.dataset import ImuData, check_finite_rows, read_csv
+    from insnav.data.dataset import ImuData, check_finite_rows, read_csv
 
     a, origin = read_csv(_write("imu.csv", b"t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps\n"
                                 + data), ImuData.COLUMNS, return_origin=True)
     check_finite_rows(a, origin, ImuData.COLUMNS)
-    from insnav.sanitize import sanitize_imu
+    from insnav.filters.sanitize import sanitize_imu
 
     sanitize_imu(ImuData.from_array(a))
 
@@ -53,7 +53,7 @@ def _kfgins(kind):
         r = {"imu": kfgins.read_kfgins_imu, "gnss": kfgins.read_kfgins_gnss, "yaml": kfgins.read_kfgins_config}[kind]
         out = r(p)
         if kind == "imu":
-            from insnav.sanitize import sanitize_imu
+            from insnav.filters.sanitize import sanitize_imu
 
             sanitize_imu(out)
     return f
@@ -100,10 +100,10 @@ def _run_atheris(target, argv):
 
     with atheris.instrument_imports():
         import insnav.config  # noqa: F401
-        import insnav.dataset  # noqa: F401
+        import insnav.data.dataset  # noqa: F401
         import insnav.gnss.rinex  # noqa: F401
         import insnav.io.kfgins  # noqa: F401
-        import insnav.sanitize  # noqa: F401
+        import insnav.filters.sanitize  # noqa: F401
         import insnav.sim.scenario  # noqa: F401
     atheris.Setup([sys.argv[0], *argv], one_input(target))
     atheris.Fuzz()

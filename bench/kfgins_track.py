@@ -26,12 +26,12 @@ import numpy as np
 
 import insnav
 from _common import git_commit
-import insnav.engine
+import insnav.filters.loose
 from insnav.analysis import errors, rms
-from insnav.evaluate import _solution_at
+from insnav.analysis.evaluate import _solution_at
 from insnav.io.kfgins import read_kfgins_nav
 from insnav.io.kfgins_dataset import load_kfgins
-from insnav.sanitize import sanitize_dataset
+from insnav.filters.sanitize import sanitize_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 D = REPO.parent / "shared" / "data" / "kfgins" / "sim"
@@ -60,8 +60,8 @@ def main(argv=None):
     if args.dump:
         return _dump(Path(args.dump))
     truth = read_kfgins_nav(D / "truth-sim.nav.xz")
-    core = _CoreTimer(insnav.engine._core)
-    insnav.engine._core = core
+    core = _CoreTimer(insnav.filters.loose._core)
+    insnav.filters.loose._core = core
     rows, times = {}, {}
     load = [os.getloadavg()[0]]
     try:
@@ -97,7 +97,7 @@ def main(argv=None):
                     rows[k + ("10hz",)] = metrics(_solution_at(sol, kf_nav.t), truth)  # KF-GINS epochs are ours too
                     del sol
     finally:
-        insnav.engine._core = core.module
+        insnav.filters.loose._core = core.module
     kf = {tag: metrics(read_kfgins_nav(D / "kfgins_results" / name), truth) for tag, name in KF_FILES.items()}
     dur = n_imu / 200.0
     lines = ["# insnav vs KF-GINS on the KF-GINS track", "",
@@ -134,10 +134,10 @@ def main(argv=None):
     lines += ["", "KF-GINS's 31 s for this run (110x real time on a 2-core machine) is the figure reported for KF-GINS on this track, not "
               "measured here; the last column divides it by our wall time. The target is 50x KF-GINS, i.e. "
               "under 0.6 s for the EKF run.",
-              "", "ekf / rbukf: one `insnav.run` call: input checks, `insnav.sanitize` (default on), the C++ "
+              "", "ekf / rbukf: one `insnav.run` call: input checks, `insnav.filters.sanitize` (default on), the C++ "
               "run with the GIL released, the output arrays at every IMU epoch and their unit conversion; not "
               "file reading. mechanize: `insnav.mechanize` over the same IMU data (the bare strapdown with its "
-              "outputs). sanitize: `insnav.sanitize.sanitize_dataset` alone, the part of every `insnav.run` "
+              "outputs). sanitize: `insnav.filters.sanitize.sanitize_dataset` alone, the part of every `insnav.run` "
               "spent checking the input. Propagation interval 0.1 s (default); rbukf-1s: 1 s, one RK4 step of "
               "every sigma point per GNSS period with the INS at its start, middle and end, as seed 000 "
               "propagates (same accuracy to 0.3 mm here, 4x less work). GNSS fixes applied at their "
@@ -155,8 +155,8 @@ KF_FILES = {"full": "KF_GINS_Navresult_fullGNSS_10Hz.nav.xz", "outage4": "KF_GIN
 
 def _dump(out_dir: Path) -> None:
     """The arrays and settings insnav.run hands to _core.run_loose, per GNSS file."""
-    core = _CoreTimer(insnav.engine._core)
-    insnav.engine._core = core
+    core = _CoreTimer(insnav.filters.loose._core)
+    insnav.filters.loose._core = core
     try:
         for gnss_file, tag in (("GNSS-RTK-sim.txt", "full"), ("GNSS-RTK-sim-outage4.txt", "outage4")):
             ds, cfg = load_kfgins(D / "kf-gins-sim.yaml", D / "Leador-A15-sim.txt.xz", D / gnss_file, layout=21)
@@ -173,7 +173,7 @@ def _dump(out_dir: Path) -> None:
                 (d / f"config_{f}.txt").write_text(lines(args[10]))
             print(f"wrote {d}")
     finally:
-        insnav.engine._core = core.module
+        insnav.filters.loose._core = core.module
 
 
 class _CoreTimer:

@@ -126,7 +126,7 @@ def heading_run(args):
 
     import insnav
     from insnav.analysis import errors
-    from insnav.types import NavState
+    from insnav.data.nav import NavState
 
     ds = insnav.simulate(scenario, seed=seed)
     rng = np.random.default_rng([seed, int(H)])
@@ -522,7 +522,7 @@ def main(argv=None):
           "Table 1 pattern.  From a straight start (the heading not observable) no filter can use the model's "
           "advantage until the first turn, and both stay overconfident in yaw (rms(yaw err / sigma) > 1): with "
           "a heading that uncertain, a Gaussian filter is the wrong tool at any order; the heading should come "
-          "from an alignment step (insnav.align) or a particle filter.", ""]
+          "from an alignment step (insnav.ins.align) or a particle filter.", ""]
     out = Path(a.out)
     text = "\n".join(L) + "\n"
     out.write_text(text)

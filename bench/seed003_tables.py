@@ -40,11 +40,12 @@ import insnav.sim as sim
 from insnav import earth
 from insnav.analysis import errors
 from insnav.config import RunConfig
-from insnav.dataset import GnssFixes
+from insnav.data.dataset import GnssFixes
 from insnav.ins import mechanize
 from insnav.io.rinex_dataset import single_point_solution
 from insnav.sim.scenario import resolve_raw
-from insnav.tight import run_tight, tight_inputs_from_raw
+from insnav.filters.tight import run_tight
+from insnav.gnss.tight_inputs import tight_inputs_from_raw
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESETS = ("seed003-4sat", "seed003-3sat", "seed003-1sat")
@@ -238,7 +239,7 @@ simulator seed 1000 + k, filter initial-error seed k (sigmas 2/2/3 m, 0.1 m/s,
 * **loose EKF, independent fixes**: the preset's simulated fixes (15 m / 25 m /
   0.1 m/s, drawn independently of the pseudoranges), for reference only: it
   does not compare like with like.
-* **tight EKF**: 17 states (`insnav.tight.run_tight`, Layout17) on every
+* **tight EKF**: 17 states (`insnav.filters.tight.run_tight`, Layout17) on every
   pseudorange and rate; the clock model (bias and drift random-walk densities)
   matches the simulated clock.
 * **INS only from 600 s**: unaided INS from the true state at 600 s with the

@@ -48,8 +48,8 @@ import insnav  # noqa: E402
 from _common import git_commit  # noqa: E402
 from insnav.analysis import errors, reconvergence_time, rms  # noqa: E402
 from insnav.config import RunConfig  # noqa: E402
-from insnav.particle import run_tight_particle  # noqa: E402
-from insnav.types import NavState  # noqa: E402
+from insnav.filters.particle import run_tight_particle  # noqa: E402
+from insnav.data.nav import NavState  # noqa: E402
 
 T_OFF, T_ON = 600.0, 800.0
 DECIM = 10  # 10 Hz output

@@ -58,9 +58,9 @@ def rss_kb() -> int:
 
 def make_dataset(hours: float, seed: int = 9, rate: float = 200.0, chunk: int = 2_000_000):
     """The soak scenario as an insnav Dataset (numpy, chunked; truth = the fixed position)."""
-    from insnav.dataset import Dataset, GnssFixes, ImuData
+    from insnav.data.dataset import Dataset, GnssFixes, ImuData
     from insnav.earth import radii
-    from insnav.types import NavState
+    from insnav.data.nav import NavState
 
     lat, lon, h = 34.25 * DEG, 108.95 * DEG, 400.0
     W = 7.292115e-5

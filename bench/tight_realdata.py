@@ -1,7 +1,7 @@
 """Tight coupling on real data (rtklibexplorer walk_0827): measurement model and solution vs RTK.
 
 1. The tight filter's per-epoch satellite inputs exactly as
-   ``insnav.tight.tight_inputs_from_rinex`` hands them to the C++ loop (GPS LNAV
+   ``insnav.gnss.tight_inputs.tight_inputs_from_rinex`` hands them to the C++ loop (GPS LNAV
    broadcast orbits/clocks, transmit time + Sagnac, T_GD, receiver-clock-corrected
    reception time, Klobuchar + Saastamoinen, 10 deg mask): pseudorange and Doppler
    (pseudorange-rate) residuals against the RTK reference trajectory (per-epoch
@@ -37,7 +37,8 @@ from insnav import _core, earth  # noqa: E402
 from insnav.gnss import read_rinex_nav, read_rinex_obs  # noqa: E402
 from insnav.gnss.measurements import read_rtklib_pos  # noqa: E402
 from insnav.io.rinex_dataset import GPST_UNIX_OFFSET_S, load_rinex, load_rinex_run  # noqa: E402
-from insnav.tight import run_tight, tight_inputs_from_rinex  # noqa: E402
+from insnav.filters.tight import run_tight
+from insnav.gnss.tight_inputs import tight_inputs_from_rinex  # noqa: E402
 
 COMMAND = "python3 bench/tight_realdata.py --out docs/results/tight_realdata.md"
 CONFIG = ROOT / "bench" / "walk_0827.toml"

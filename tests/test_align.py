@@ -1,4 +1,4 @@
-"""Initial alignment (insnav.align): levelling within the accelerometer-bias
+"""Initial alignment (insnav.ins.align): levelling within the accelerometer-bias
 limit, gyrocompassing within its own limit for a navigation-grade IMU, the
 heading from GNSS velocity for a MEMS IMU, static-start detection, and the
 named IMU grades."""
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import insnav
-from insnav.align import IMU_GRADES, align, gyrocompass, imu_grade, level, static_interval
+from insnav.ins.align import IMU_GRADES, align, gyrocompass, imu_grade, level, static_interval
 from insnav.sim.scenario import resolve_raw
 
 G = 9.80665
@@ -95,7 +95,7 @@ def test_dataset_noise_model_from_grade_or_error(tmp_path):
     with a suggestion; both keys at once are refused."""
     import json
 
-    from insnav.dataset import load_dataset
+    from insnav.data.dataset import load_dataset
 
     out = insnav.simulate("seed000-sim", seed=1).save(tmp_path / "ds")
     meta_path = out / "dataset.json"

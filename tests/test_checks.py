@@ -1,4 +1,4 @@
-"""Unit and sanity checks (insnav.checks): every wrong-unit case a user hits
+"""Unit and sanity checks (insnav.filters.checks): every wrong-unit case a user hits
 gives a one-line DataCheckError naming the column and the likely cause; the
 clean simulated data pass."""
 import copy
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import insnav
-from insnav.checks import DataCheckError, check_gnss, check_gyro_against_gnss, check_imu, check_time_overlap
+from insnav.filters.checks import DataCheckError, check_gnss, check_gyro_against_gnss, check_imu, check_time_overlap
 
 
 @pytest.fixture(scope="module")

@@ -412,3 +412,39 @@ def test_python_m_insnav_exit_status_and_stderr(dataset, tmp_path):
         assert needle in p.stderr and p.stdout == ""
     p = _python_m("run", "--filter", cwd=tmp_path)  # argparse usage error: status 2, usage on stderr
     assert p.returncode == 2 and "Traceback" not in p.stderr and "usage: insnav run" in p.stderr
+
+
+def test_every_registered_filter_is_in_the_help_and_the_config():
+    """One registry (insnav.registry) feeds the CLI help, the config check and
+    compare: every name appears in ``run --help``, a config accepts it with its
+    couplings and refuses it with the others."""
+    from insnav.config import ConfigError, config_from_dict
+    from insnav.registry import FILTERS
+
+    rc, out, _ = _call(["run", "--help"])
+    help_text = " ".join(out.split())
+    for name, spec in FILTERS.items():
+        assert f"{name} (" in help_text, name
+        for coupling in ("loose", "tight"):
+            if coupling in spec.couplings:
+                assert config_from_dict({"filter": name, "coupling": coupling}).filter == name
+            else:
+                with pytest.raises(ConfigError, match="coupling"):
+                    config_from_dict({"filter": name, "coupling": coupling})
+    with pytest.raises(ValueError, match="known: ekf, rbukf, ukf, kf, rdkf, exact"):
+        insnav.montecarlo("seed001-low", ("ekf", "kalman"), runs=1)
+
+
+def test_rdkf_run_writes_a_config_that_repeats_it(dataset, work):
+    """``--filter rdkf`` writes a *.config.toml that load_config accepts and
+    that reproduces the run; asking it to couple tightly is a one-line error."""
+    out = work / "sol-rdkf.csv"
+    rc, stdout, err = _call(["run", dataset[0], "--filter", "rdkf", "--out", out])
+    assert rc == 0, err
+    cfg_path = Path(str(out) + ".config.toml")
+    assert insnav.config.load_config(cfg_path).filter == "rdkf"
+    again = work / "sol-rdkf-again.csv"
+    assert _call(["run", dataset[0], "--config", cfg_path, "--out", again])[0] == 0
+    assert again.read_bytes() == out.read_bytes()
+    _user_error(["run", dataset[0], "--filter", "rdkf", "--coupling", "tight", "--out", work / "x.csv"],
+                "rdkf", "loosely coupled only")

@@ -15,7 +15,7 @@ import insnav  # noqa: E402
 from insnav.cli import main  # noqa: E402
 
 insnav.montecarlo  # noqa: B018  (loads the module behind the lazy attribute)
-mc = sys.modules["insnav.montecarlo"]
+mc = sys.modules["insnav.analysis.montecarlo"]
 
 FILTERS = ("kf", "rdkf", "ekf")
 

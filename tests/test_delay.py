@@ -10,7 +10,7 @@ import pytest
 
 import insnav
 from insnav.analysis import errors
-from insnav.delay import run_delayed, scenario_delay_p
+from insnav.filters.delay import run_delayed, scenario_delay_p
 
 R_EARTH = 6.378e6
 #: seed001-low with each fix delayed on its own: with the delays removed, one
@@ -91,8 +91,9 @@ def test_same_epoch_records_equal_the_kf(flt, opts):
     the first correction twice: ~2 m off with a 0.035 m sigma."""
     ds = _duplicate_every_second(insnav.simulate(INDEPENDENT_LOW, seed=5))
     assert len(ds.gnss) > 2000
-    ref = insnav.run(ds, "kf")
-    s = insnav.run(ds, flt, **opts)
+    # the repeats are the point here: sanitize (on by default for every filter) would drop them
+    ref = insnav.run(ds, "kf", sanitize=False)
+    s = insnav.run(ds, flt, sanitize=False, **opts)
     assert ref.summary["updates"] == s.summary["updates"] == len(ds.gnss)
     assert _max_pos_diff_m(s, ref) < 1e-9
     np.testing.assert_allclose(s.v_n, ref.v_n, atol=1e-9)
@@ -102,7 +103,7 @@ def test_same_epoch_records_equal_the_kf(flt, opts):
 def test_exact_matches_offline_at_the_end(high):
     """With every record known the exact engine ends where the on-time EKF
     (records at t_valid) ends, although it learnt them late."""
-    ex = insnav.run(high, "exact")
+    ex = insnav.run(high, "exact", sanitize=False)
     late = high.gnss.t_arrival > high.imu.t[-1] + 1e-9
     ds = copy.copy(high)
     g = copy.copy(high.gnss)
@@ -156,3 +157,16 @@ def test_high_delay_ordering():
     assert np.mean(ex <= rd) >= 0.8
     # velocity too
     assert res.values("kf", "vel_n_rmse_mps").mean() > 5 * res.values("rdkf", "vel_n_rmse_mps").mean()
+
+
+def test_delay_filters_honour_sanitize():
+    """insnav.run applies the same input repairs to every filter family: the
+    repeated fixes of the paper's arrival model are dropped before the delay
+    filters too (and counted), unless sanitize=False."""
+    ds = _duplicate_every_second(insnav.simulate(INDEPENDENT_LOW, seed=5))
+    for flt in ("kf", "rdkf", "exact"):
+        on = insnav.run(ds, flt)
+        off = insnav.run(ds, flt, sanitize=False)
+        assert on.summary["sanitize"]["gnss_duplicates_dropped"] > 0, on.summary["sanitize"]
+        assert "sanitize" not in off.summary
+        assert on.summary["updates"] < off.summary["updates"] == len(ds.gnss)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import insnav
-from insnav import faults as F
+from insnav.analysis import faults as F
 from insnav.analysis import errors
 
 

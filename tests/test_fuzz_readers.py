@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 import insnav
 from insnav.config import ConfigError, config_from_dict
-from insnav.dataset import load_dataset
+from insnav.data.dataset import load_dataset
 from insnav.gnss import RinexError, read_rinex_nav, read_rinex_obs
 from insnav.io import kfgins
 from insnav.sim.scenario import ScenarioError, load_scenario, resolve_raw

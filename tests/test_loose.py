@@ -21,7 +21,7 @@ import insnav.sim as sim
 from insnav.analysis import errors, rms
 from insnav.config import ConfigError, config_from_dict
 from insnav.earth import radii
-from insnav.engine import GNSS_STATUS
+from insnav.filters import GNSS_STATUS
 
 FILTERS = ("ekf", "rbukf", "ukf")
 PVA = (("pos_n_m", "sigma_pos_n_m"), ("vel_n_mps", "sigma_vel_n_mps"), ("att_deg", "sigma_att_deg"))
@@ -431,7 +431,7 @@ def test_rbukf_recovers_better_from_a_90_deg_heading_error():
     the EKF's in (nearly) every run (measured: 6 of 6, median 0.48 vs 0.92 deg;
     bench/seed000_tables.py has 50 runs), and its yaw is not overconfident
     (rms(yaw err / sigma) 0.58; EKF 0.82)."""
-    from insnav.types import NavState
+    from insnav.data.nav import NavState
 
     d_pitch, z = [], []
     for seed in range(1, 7):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import insnav
-import insnav.engine
+import insnav.filters.loose
 import insnav.sim as sim
 from insnav import _core
 
@@ -43,7 +43,7 @@ class _Capture:
 @pytest.mark.parametrize("filt,layout", [("ekf", 21), ("rbukf", 15)])
 def test_solution_equals_plain_conversions(ds, filt, layout, monkeypatch):
     cap = _Capture(_core)
-    monkeypatch.setattr(insnav.engine, "_core", cap)
+    monkeypatch.setattr(insnav.filters.loose, "_core", cap)
     sol = insnav.run(ds, filter=filt, layout=layout)
     raw = cap.raw
     np.testing.assert_array_equal(sol.lat_deg, raw["llh"][:, 0] * RAD2DEG)

@@ -11,7 +11,7 @@ import pytest
 import insnav
 
 insnav.montecarlo  # noqa: B018  (the lazy attribute is the function; it loads the module)
-mc = sys.modules["insnav.montecarlo"]
+mc = sys.modules["insnav.analysis.montecarlo"]
 
 
 def test_run_seeds_deterministic_and_distinct():

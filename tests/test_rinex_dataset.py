@@ -21,7 +21,7 @@ from insnav.config import ConfigError
 from insnav.gnss.gpstime import SECONDS_PER_WEEK
 from insnav.io.rinex_dataset import (GPST_UNIX_OFFSET_S, ImuCsvFormat, ImuFileError, RinexOptions, load_rinex,
                                      read_imu_csv, read_str2str_tag, rtklib_truth, tick_time_map)
-from insnav.tight import run_tight
+from insnav.filters.tight import run_tight
 
 G0 = 9.80665
 WALK = "rtklibexplorer_walk_0827"

@@ -10,9 +10,9 @@ import pytest
 
 import insnav
 from insnav.config import ConfigError, config_from_dict, load_config
-from insnav.dataset import ImuData, load_dataset
+from insnav.data.dataset import ImuData, load_dataset
 from insnav.io import kfgins
-from insnav.sanitize import sanitize_gnss, sanitize_imu
+from insnav.filters.sanitize import sanitize_gnss, sanitize_imu
 
 
 @pytest.fixture(scope="module")

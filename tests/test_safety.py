@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import insnav
-from insnav.dataset import check_replaceable, load_dataset
+from insnav.data.dataset import check_replaceable, load_dataset
 
 
 def _cli(*args, **kw):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import insnav.sim as sim
-from insnav.dataset import load_dataset, read_csv, ImuData
+from insnav.data.dataset import load_dataset, read_csv, ImuData
 
 
 def test_save_load_roundtrip(tmp_path):

@@ -7,7 +7,7 @@ import pytest
 
 import insnav.sim as sim
 from insnav import earth
-from insnav.dataset import load_dataset
+from insnav.data.dataset import load_dataset
 from insnav.sim.odometer import forward_speed, simulate_odometer
 from insnav.sim.scenario import ScenarioError, load_scenario, resolve_raw
 from insnav.sim.trajectory import Trajectory, rotate_n_to_b

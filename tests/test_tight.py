@@ -11,7 +11,8 @@ import insnav
 import insnav.sim as sim
 from insnav.analysis import errors, rms
 from insnav.config import RunConfig
-from insnav.tight import TightInputs, pseudorange_sigma, run_tight, tight_inputs_from_raw
+from insnav.filters.tight import run_tight
+from insnav.gnss.tight_inputs import TightInputs, pseudorange_sigma, tight_inputs_from_raw
 
 
 def _short(preset="seed003-4sat", duration=300.0, **raw_over):
@@ -176,8 +177,8 @@ def test_one_satellite_clock_model_sets_the_vertical():
 
 
 def test_clock_classes_reach_the_filter():
-    """The named clock class sets the filter's clock PSDs (insnav.tight.clock_model)."""
-    from insnav.tight import clock_model, clock_psd_of_class
+    """The named clock class sets the filter's clock PSDs (insnav.gnss.clock.clock_model)."""
+    from insnav.gnss.clock import clock_model, clock_psd_of_class
 
     for clock in ("tcxo", "ocxo", "rubidium"):
         ds = sim.simulate(_clock_scenario("seed003-4sat", clock), seed=1, with_truth=False)

@@ -14,8 +14,8 @@ import pytest
 import insnav
 from insnav.analysis import errors, rms
 from insnav.config import ConfigError, RunConfig
-from insnav.dataset import ImuData
-from insnav.particle import DEFAULT_ALPHA, PARTICLE_FILTERS, run_tight_particle
+from insnav.data.dataset import ImuData
+from insnav.filters.particle import DEFAULT_ALPHA, PARTICLE_FILTERS, run_tight_particle
 
 
 @pytest.fixture(scope="module")
@@ -150,7 +150,7 @@ def test_upf_wins_from_an_unknown_heading(ds):
     uniform +-180 deg) linearises badly; the UPF's particles, stratified over
     +-180 deg, keep the mixture and weigh the right heading up.  Measured yaw
     error 100-240 s: UPF(36) < 2 deg, UKF tens of degrees."""
-    from insnav.types import NavState
+    from insnav.data.nav import NavState
 
     s0 = ds.initial
     d = dataclasses.replace(ds, initial=NavState(s0.lat_deg, s0.lon_deg, s0.h_m, s0.v_n, s0.roll_deg,

@@ -164,7 +164,7 @@ void bind_delay(py::module_& m) {
       py::arg("method"), py::arg("layout"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("gnss"),
       py::arg("epochs"), py::arg("init"), py::arg("P0"), py::arg("imu_correction"), py::arg("imu_model"),
       py::arg("config"), py::arg("delay_p"),
-      "Closed-loop loose run with delayed GNSS records (SI; see python/insnav/delay.py).");
+      "Closed-loop loose run with delayed GNSS records (SI; see python/insnav/filters/delay.py).");
 }
 
 }  // namespace insnav::py_bind

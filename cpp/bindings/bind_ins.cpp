@@ -9,7 +9,7 @@ namespace {
 
 /// Run the mechanization over n samples.  The loop also checks each sample
 /// before using it (finite values, strictly increasing time) and stops at the
-/// first bad one, returning its index as "bad_sample" (python/insnav/ins.py
+/// first bad one, returning its index as "bad_sample" (python/insnav/ins/mechanize.py
 /// then raises the ValueError naming it), so the batch call pays no separate
 /// validation pass.  Outputs are written once, in the user units of
 /// insnav.Trajectory (degrees), into separate contiguous arrays.

@@ -50,7 +50,7 @@ void bind_loose(py::module_& m) {
       },
       py::arg("filter"), py::arg("layout"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("gnss"),
       py::arg("init"), py::arg("P0"), py::arg("imu_correction"), py::arg("imu_model"), py::arg("config"),
-      "Closed-loop loosely coupled run (SI units; see python/insnav/engine.py).");
+      "Closed-loop loosely coupled run (SI units; see python/insnav/filters/loose.py).");
 }
 
 }  // namespace insnav::py_bind

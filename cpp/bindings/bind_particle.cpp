@@ -179,7 +179,7 @@ void bind_particle(py::module_& m) {
       py::arg("filter"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("epoch_t"),
       py::arg("epoch_start"), py::arg("sats"), py::arg("init"), py::arg("P0"), py::arg("imu_correction"),
       py::arg("clock0"), py::arg("imu_model"), py::arg("config"), py::arg("particle"),
-      "Closed-loop tightly coupled run with the seed 004 filters, Layout20 (see python/insnav/particle.py).");
+      "Closed-loop tightly coupled run with the seed 004 filters, Layout20 (see python/insnav/filters/particle.py).");
 }
 
 }  // namespace insnav::py_bind

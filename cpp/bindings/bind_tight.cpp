@@ -71,7 +71,7 @@ void bind_tight(py::module_& m) {
       py::arg("filter"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("epoch_t"),
       py::arg("epoch_start"), py::arg("sats"), py::arg("init"), py::arg("P0"), py::arg("imu_correction"),
       py::arg("clock0"), py::arg("imu_model"), py::arg("config"),
-      "Closed-loop tightly coupled run, Layout17 (SI units; see python/insnav/tight.py).");
+      "Closed-loop tightly coupled run, Layout17 (SI units; see python/insnav/filters/tight.py).");
 }
 
 }  // namespace insnav::py_bind

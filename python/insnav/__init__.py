@@ -17,18 +17,21 @@ import importlib
 
 __version__ = "0.1.0"
 
-# public name -> module that defines it (PEP 562 lazy loading)
+# public name -> module that defines it (PEP 562 lazy loading).  No public
+# name is the name of a submodule (insnav.evaluate is the function of
+# insnav.analysis.evaluate), so importing any submodule never rebinds one.
 _LAZY = {
-    "NavState": "insnav.types",
-    "Trajectory": "insnav.types",
-    "mechanize": "insnav.ins",
+    "NavState": "insnav.data.nav",
+    "Trajectory": "insnav.data.nav",
+    "mechanize": "insnav.ins.mechanize",
     "simulate": "insnav.sim",
-    "load_dataset": "insnav.dataset",
-    "Dataset": "insnav.dataset",
-    "run": "insnav.engine",
-    "Solution": "insnav.engine",
-    "evaluate": "insnav.evaluate",
-    "montecarlo": "insnav.montecarlo",
+    "load_dataset": "insnav.data.dataset",
+    "Dataset": "insnav.data.dataset",
+    "run": "insnav.filters",
+    "Solution": "insnav.filters.solution",
+    "RunConfig": "insnav.config",
+    "evaluate": "insnav.analysis.evaluate",
+    "montecarlo": "insnav.analysis.montecarlo",
 }
 
 __all__ = sorted(_LAZY) + ["__version__"]

@@ -14,16 +14,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from .registry import FILTERS
+from .units import DEG_PER_H, DEG_PER_SQRT_H, MG, MPS_PER_SQRT_H, UG_PER_SQRT_HZ
 
-DEG = math.pi / 180.0
-G0 = 9.80665                       # standard gravity for mg / ug [m/s^2]
-DEG_PER_H = DEG / 3600.0           # deg/h -> rad/s
-DEG_PER_SQRT_H = DEG / 60.0        # deg/sqrt(h) -> rad/sqrt(s)
-MPS_PER_SQRT_H = 1.0 / 60.0        # (m/s)/sqrt(h) -> (m/s)/sqrt(s)
-MG = 1e-3 * G0                     # mg -> m/s^2
-UG_PER_SQRT_HZ = 1e-6 * G0         # ug/sqrt(Hz) -> (m/s^2)/sqrt(Hz) = (m/s)/sqrt(s)
 
-FILTERS = ("ekf", "rbukf", "ukf", "upf", "pf", "fukf")  # upf, pf, fukf: tight only (seed 004 filters)
 COUPLINGS = ("loose", "tight")
 LAYOUTS = (15, 21)
 
@@ -96,7 +90,7 @@ class ImuNoise:
         return out
 
 
-#: keys of a dataset's imu_model (insnav.sim.imu.imu_model_dict, insnav.align.imu_model_for_grade)
+#: keys of a dataset's imu_model (insnav.sim.imu.imu_model_dict, insnav.ins.align.imu_model_for_grade)
 _IMU_MODEL_KEYS = {"rate_hz", "imu_grade", "gyro_arw", "accel_vrw"} | {
     f"{p}_{k}" for p in ("gyro", "accel")
     for k in ("bias", "bias_sigma", "gm_sigma", "gm_tau", "bias_rw", "scale", "scale_sigma",
@@ -188,8 +182,13 @@ class RunConfig:
             bad("filter", self.filter, ", ".join(FILTERS))
         if self.coupling not in COUPLINGS:
             bad("coupling", self.coupling, ", ".join(COUPLINGS))
+        spec = FILTERS[self.filter]
+        if self.coupling not in spec.couplings:
+            bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
         if self.layout not in LAYOUTS:
             bad("layout", self.layout, "15, 21")
+        if self.coupling == "loose" and self.layout not in spec.layouts["loose"]:
+            bad("layout", self.layout, f"{', '.join(map(str, spec.layouts['loose']))} (filter {self.filter!r})")
         for key in ("init_sigma_pos_m", "init_sigma_vel_mps", "init_sigma_att_deg"):
             try:
                 v = np.asarray(getattr(self, key), dtype=float)

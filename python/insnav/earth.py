@@ -36,7 +36,6 @@ SOMIGLIANA_K = 0.00193185265241
 #: m = omega^2 a^2 b / GM.
 M_RATIO = OMEGA_IE**2 * A**2 * B / GM
 
-DEG = np.pi / 180.0
 
 
 def radii(lat):

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .gpstime import gps_seconds_from_calendar
-from .rinex import RinexError, _Lines
+from .rinex import _Lines
 
 __all__ = ["Sp3Data", "ClkData", "read_sp3", "read_rinex_clk", "lagrange_interpolate"]
 

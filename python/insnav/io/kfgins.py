@@ -17,7 +17,7 @@ Files ending in ``.xz``, ``.gz`` or ``.bz2`` are decompressed transparently.
 Malformed input raises ``ValueError("<file>:<line>: <reason>")`` (1-based):
 wrong column count (an incomplete last line is flagged as a truncated file),
 non-numeric fields, NaN/inf in the IMU file or in a GNSS time, decreasing IMU
-time.  Repeated IMU times pass and are handled by :mod:`insnav.sanitize` (an
+time.  Repeated IMU times pass and are handled by :mod:`insnav.filters.sanitize` (an
 exact duplicate is dropped and counted).  The returned data carry the file
 line of each row (``origin``) for later messages.
 The readers parse the whole text in one ``np.fromstring`` call (the 76 MB
@@ -33,12 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import GnssFixes, ImuData, Truth, check_finite_rows, parse_numeric_text, row_origin
+from ..data.dataset import GnssFixes, ImuData, Truth, check_finite_rows, parse_numeric_text, row_origin
+from ..units import DEG, PPM
 
-DEG = math.pi / 180.0  #: deg -> rad
 HOUR = 3600.0  #: h -> s
 MGAL = 1e-5  #: mGal -> m/s^2
-PPM = 1e-6  #: ppm -> [-]
 
 IMU_COLUMNS = ("sow", "dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "dvel_z")
 
@@ -95,7 +94,7 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
     origin = row_origin(text, str(path))
     check_finite_rows(a, origin, IMU_COLUMNS)
     # decreasing time is an error; equal times (duplicated records) are left to
-    # insnav.sanitize.sanitize_imu, which drops exact duplicates and counts them
+    # insnav.filters.sanitize.sanitize_imu, which drops exact duplicates and counts them
     if a.shape[0] > 1 and np.any(np.diff(a[:, 0]) < 0):
         i = int(np.argmax(np.diff(a[:, 0]) < 0)) + 1
         raise ValueError(f"{origin.where(i)}: time {float(a[i, 0])!r} does not increase "

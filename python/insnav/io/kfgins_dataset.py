@@ -1,5 +1,5 @@
 """Run insnav on KF-GINS data: a KF-GINS YAML configuration plus its IMU and
-GNSS files become an insnav :class:`~insnav.dataset.Dataset` and a
+GNSS files become an insnav :class:`~insnav.data.dataset.Dataset` and a
 :class:`~insnav.config.RunConfig` with the same initial state, initial
 sigmas, IMU noise model (Gauss-Markov biases and scale factors with KF-GINS's
 correlation time) and antenna lever arm.
@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from ..config import ImuNoise, RunConfig
-from ..dataset import Dataset, GnssFixes, ImuData
-from ..types import NavState
+from ..data.dataset import Dataset, GnssFixes, ImuData
+from ..data.nav import NavState
 from .kfgins import read_kfgins_config, read_kfgins_gnss, read_kfgins_imu
+from ..units import RAD2DEG
 
-RAD2DEG = 180.0 / np.pi
 
 
 def _or(v, default):

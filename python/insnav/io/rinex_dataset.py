@@ -2,7 +2,7 @@
 
 A RINEX observation + navigation file pair, an IMU file (a generic CSV, or a
 raw log time-tagged by RTKLIB ``str2str``) and, optionally, an RTKLIB ``.pos``
-reference become a :class:`RinexDataset` that :func:`insnav.tight.run_tight`
+reference become a :class:`RinexDataset` that :func:`insnav.filters.tight.run_tight`
 and ``insnav.run(ds, config=cfg)`` accept, plus a :class:`~insnav.config.RunConfig`
 suited to it (:func:`load_rinex`).  ``insnav run --format rinex`` calls
 :func:`load_rinex_run`.
@@ -95,16 +95,16 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core, earth
-from ..config import DEG, G0, ConfigError, RunConfig, config_from_dict
-from ..dataset import Dataset, GnssFixes, ImuData, RowOrigin, Truth
+from ..config import ConfigError, RunConfig, config_from_dict
+from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, Truth
 from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
-from ..types import NavState
+from ..data.nav import NavState
+from ..units import DEG, G0, RAD2DEG
 
 __all__ = ["ImuFileError", "ImuCsvFormat", "Str2strTag", "read_str2str_tag", "read_imu_csv", "ImuSamples",
            "tick_time_map", "SinglePoint", "single_point_solution", "rtklib_truth", "RinexOptions",
            "RinexDataset", "load_rinex", "load_rinex_run", "CONSUMER_MEMS_MODEL", "GPST_UNIX_OFFSET_S"]
 
-RAD2DEG = 180.0 / math.pi
 #: GPS seconds since 1980-01-06 of 1970-01-01 in GPS time: ``t_gps = t_gtime - 315964800`` [s]
 GPST_UNIX_OFFSET_S = int(round(-gps_seconds_from_calendar(1970, 1, 1)))
 _TAG_MAGIC = b"TIMETAG RTKLIB"
@@ -238,7 +238,7 @@ class ImuSamples:
         return (len(self.t_s) - 1) / float(self.t_s[-1] - self.t_s[0]) if len(self) > 1 else float("nan")
 
     def to_increments(self, t_offset_s: float = 0.0) -> ImuData:
-        """:class:`insnav.dataset.ImuData` with time ``t_gps_s - t_offset_s``.
+        """:class:`insnav.data.dataset.ImuData` with time ``t_gps_s - t_offset_s``.
 
         Rates are integrated with the trapezoidal rule over each interval
         ``(t[k-1], t[k]]`` (exact for a rate that varies linearly between
@@ -519,7 +519,7 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
 
 @dataclass
 class SinglePoint:
-    """Per-epoch single-point (GNSS-only) solution of a :class:`~insnav.tight.TightInputs`.
+    """Per-epoch single-point (GNSS-only) solution of a :class:`~insnav.gnss.tight_inputs.TightInputs`.
 
     Attributes
     ----------
@@ -564,7 +564,7 @@ def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 
 
     Parameters
     ----------
-    inputs : insnav.tight.TightInputs
+    inputs : insnav.gnss.tight_inputs.TightInputs
     r0_e : (3,) starting ECEF position [m]
     min_sats : int
         Epochs with fewer usable rows give NaN (4 unknowns each).
@@ -631,7 +631,7 @@ def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 
 
 
 def rtklib_truth(ref, t_offset_gps_s: float, quality_max: int | None = None) -> Truth:
-    """An RTKLIB ``.pos`` solution as a :class:`~insnav.dataset.Truth` (no attitude).
+    """An RTKLIB ``.pos`` solution as a :class:`~insnav.data.dataset.Truth` (no attitude).
 
     Parameters
     ----------
@@ -678,7 +678,7 @@ class RinexOptions:
     lever_arm_b : 3 floats
         IMU -> antenna, body FRD [m].
     elevation_mask_deg, iono, tropo, sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0 :
-        GNSS inputs (:func:`insnav.tight.tight_inputs_from_rinex`).
+        GNSS inputs (:func:`insnav.gnss.tight_inputs.tight_inputs_from_rinex`).
     start_s, end_s : float
         Span to use, seconds after the first observation epoch (end None: all).
     init_position : "spp" or [lat_deg, lon_deg, h_m] (antenna)
@@ -778,12 +778,12 @@ class RinexOptions:
 
 @dataclass
 class RinexDataset(Dataset):
-    """A :class:`~insnav.dataset.Dataset` built from real files (tight coupling).
+    """A :class:`~insnav.data.dataset.Dataset` built from real files (tight coupling).
 
     Extra attributes
     ----------------
-    tight_inputs : insnav.tight.TightInputs
-        Per-epoch satellite rows (read by :func:`insnav.tight.run_tight`).
+    tight_inputs : insnav.gnss.tight_inputs.TightInputs
+        Per-epoch satellite rows (read by :func:`insnav.filters.tight.run_tight`).
     spp : SinglePoint
         GNSS-only single-point solution of the same rows (all epochs).
     info : dict
@@ -809,7 +809,7 @@ def _level(f_b_mean) -> tuple[float, float]:
 
 def _epochs_in(inp, t_lo, t_hi):
     """Sub-:class:`TightInputs` with the epochs ``t_lo < t <= t_hi``."""
-    from ..tight import TightInputs
+    from ..gnss.tight_inputs import TightInputs
 
     m = (inp.epoch_t > t_lo) & (inp.epoch_t <= t_hi)
     e = np.flatnonzero(m)
@@ -823,7 +823,7 @@ def _epochs_in(inp, t_lo, t_hi):
 
 def _approx_position(obs, nav, t_week0):
     """Approximate receiver position: the header's, else a bootstrap from the centroid of the satellites."""
-    from ..tight import tight_inputs_from_rinex
+    from ..gnss.tight_inputs import tight_inputs_from_rinex
 
     r = getattr(obs, "approx_r_e", None)
     if r is not None and np.all(np.isfinite(r)) and np.linalg.norm(r) > 6.0e6:
@@ -879,7 +879,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
         No usable start epoch, no IMU data over the GNSS span.
     """
     from ..gnss import read_rinex_nav, read_rinex_obs
-    from ..tight import tight_inputs_from_rinex
+    from ..gnss.tight_inputs import tight_inputs_from_rinex
 
     if options is None:
         opt = RinexOptions().validate()

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dataset import Dataset, GnssFixes, ImuData, ImuErrors, Truth
+from ..data.dataset import Dataset, GnssFixes, ImuData, ImuErrors, Truth
 from .scenario import Scenario, ScenarioError, list_presets, load_scenario
 
 __all__ = ["simulate", "load_scenario", "list_presets", "Scenario", "ScenarioError",

@@ -38,7 +38,7 @@ def add_scenarios_parser(subparsers) -> None:
 def cmd_simulate(args) -> int:
     from . import simulate
 
-    from ..dataset import check_replaceable
+    from ..data.dataset import check_replaceable
 
     out = Path(args.out)
     check_replaceable(out, args.overwrite)  # before the simulation: fail fast, never touch a user's folder

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import earth
-from ..dataset import GnssFixes
+from ..data.dataset import GnssFixes
 from .trajectory import Trajectory, rotate_b_to_n, rotate_n_to_b
 
 

@@ -50,16 +50,11 @@ from __future__ import annotations
 import numpy as np
 
 from .. import earth
-from ..dataset import GnssRaw
+from ..data.dataset import GnssRaw
 from .gnss_loose import antenna_state, gnss_epochs
 from .trajectory import Trajectory
 
-C_LIGHT_MPS = 299_792_458.0
-#: Brown & Hwang (2012) Table 9.1: (h0, h_-2) of the fractional frequency PSD
-CLOCK_ALLAN = {"tcxo": (2e-19, 2e-20), "ocxo": (8e-20, 4e-23), "rubidium": (2e-20, 4e-29)}
-#: clock class -> (clock_bias_rw [m/sqrt(s)], clock_drift_rw [(m/s)/sqrt(s)])
-CLOCK_CLASSES = {k: (C_LIGHT_MPS * np.sqrt(h0 / 2.0), C_LIGHT_MPS * np.sqrt(2.0 * np.pi ** 2 * hm2))
-                 for k, (h0, hm2) in CLOCK_ALLAN.items()}
+from ..gnss.clock import C_LIGHT_MPS, CLOCK_ALLAN, CLOCK_CLASSES  # noqa: F401  (re-used names)
 
 
 def simulate_clock(t, t0, b0, d0, q_b, q_d, rng: np.random.Generator):

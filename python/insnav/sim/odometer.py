@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dataset import Odometer
+from ..data.dataset import Odometer
 from .trajectory import Trajectory, rotate_n_to_b
 
 #: truth samples per odometer interval for the distance integral (Simpson's rule)

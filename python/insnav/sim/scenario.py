@@ -47,20 +47,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from ..units import DEG, DEG_PER_SQRT_H, G0, MG, PPM
+from .._toml import dumps_toml  # noqa: F401  (part of this module's API)
 
 # --- unit conversion constants (user units -> SI) -------------------------
-DEG = math.pi / 180.0  #: [rad/deg]
 HOUR = 3600.0  #: [s/h]
 DPH = DEG / HOUR  #: deg/h -> rad/s
-DEG_PER_SQRT_H = DEG / math.sqrt(HOUR)  #: deg/sqrt(h) -> rad/sqrt(s)
 DPH_PER_SQRT_H = DPH / math.sqrt(HOUR)  #: deg/h/sqrt(h) -> rad/s/sqrt(s)
-G0 = 9.80665  #: standard gravity used to define mg and ug [m/s^2]
-MG = 1e-3 * G0  #: mg -> m/s^2
 UG = 1e-6 * G0  #: ug -> m/s^2
 UG_PER_SQRT_HZ = UG  #: ug/sqrt(Hz) -> (m/s^2)/sqrt(Hz) = (m/s)/sqrt(s)
 MPS_PER_SQRT_H = 1.0 / math.sqrt(HOUR)  #: (m/s)/sqrt(h) -> (m/s)/sqrt(s)
 MG_PER_SQRT_H = MG / math.sqrt(HOUR)  #: mg/sqrt(h) -> m/s^2/sqrt(s)
-PPM = 1e-6  #: ppm -> [-]
 MRAD = 1e-3  #: mrad -> rad
 
 PRESET_PACKAGE = "insnav.scenarios"
@@ -132,7 +129,7 @@ class Scenario:
     """A validated scenario in SI units.
 
     ``raw`` keeps the resolved TOML dictionary (after ``extends`` merging),
-    which is what :meth:`insnav.dataset.Dataset.save` writes back as
+    which is what :meth:`insnav.data.dataset.Dataset.save` writes back as
     ``scenario.toml``.
     """
 
@@ -662,7 +659,7 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
     }
     clock = _str(ctx, gr, "gnss_raw", "clock", "")
     if clock:
-        from .gnss_raw import CLOCK_CLASSES
+        from ..gnss.clock import CLOCK_CLASSES
 
         if clock not in CLOCK_CLASSES:
             ctx.fail("gnss_raw.clock", f"unknown clock class {clock!r}; known: {', '.join(CLOCK_CLASSES)} "
@@ -730,43 +727,3 @@ def _windows(ctx, table, prefix, key):
     return out
 
 
-# --- TOML writing (tomllib only reads) -------------------------------------
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        v = float(v)
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        if math.isnan(v):
-            return "nan"
-        return repr(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-    if isinstance(v, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
-
-
-def dumps_toml(d: dict, _prefix: str = "") -> str:
-    """Serialise a nested dict (scalars, lists, tables, arrays of tables) to TOML."""
-    lines = []
-    tables, arrays = [], []
-    for k, v in d.items():
-        if isinstance(v, dict):
-            tables.append((k, v))
-        elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
-            arrays.append((k, v))
-        else:
-            lines.append(f"{k} = {_toml_value(v)}")
-    out = "\n".join(lines) + ("\n" if lines else "")
-    for k, v in tables:
-        name = f"{_prefix}.{k}" if _prefix else k
-        out += f"\n[{name}]\n" + dumps_toml(v, name)
-    for k, v in arrays:
-        name = f"{_prefix}.{k}" if _prefix else k
-        for item in v:
-            out += f"\n[[{name}]]\n" + dumps_toml(item, name)
-    return out

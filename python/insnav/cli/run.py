@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import atomic_write_text
-from .cli import UserError
-from .config import FILTERS, ConfigError, RunConfig, load_config
+from .._atomic import atomic_write_text
+from ..errors import UserError
+from ..config import ConfigError, RunConfig, load_config
+from ..registry import FILTERS
 
 EXAMPLES = """examples:
   insnav run run3 --filter rbukf --out run3/solution.csv
@@ -37,7 +38,9 @@ def add_run_parser(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", nargs="?", help="dataset directory written by `insnav simulate` (insnav format)")
     p.add_argument("--format", choices=("insnav", "kfgins", "rinex"), default="insnav")
-    p.add_argument("--filter", default=None, help=f"one of {', '.join(FILTERS)} (default: config or ekf)")
+    p.add_argument("--filter", default=None, metavar="NAME",
+                   help="default: the config's, else ekf.  "
+                        + "; ".join(f"{n} ({'/'.join(s.couplings)}, {s.paper}): {s.summary}" for n, s in FILTERS.items()))
     p.add_argument("--coupling", choices=("loose", "tight"), default=None)
     p.add_argument("--config", help="insnav TOML run configuration (with a [rinex] table for --format rinex), "
                    "or the KF-GINS YAML with --format kfgins")
@@ -78,7 +81,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
             continue
         lines.append(f"{f.name} = {_toml_value(v)}")
     if cfg.imu is not None:
-        from .config import _USER_UNITS
+        from ..config import _USER_UNITS
 
         lines.append("\n[imu]")
         for key, (fld, factor) in _USER_UNITS.items():
@@ -122,14 +125,14 @@ def cmd_run(args) -> int:
                 raise UserError("--format rinex needs " + ", ".join(f"--{n}" for n in missing))
             if args.dataset:
                 raise UserError("--format rinex reads --obs/--nav/--imu; do not give a dataset directory")
-            from .io.rinex_dataset import load_rinex_run
+            from ..io.rinex_dataset import load_rinex_run
 
             ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=args.imu_tag)
             rinex_opts = ds.options
         elif args.format == "kfgins":
             if not args.config:
                 raise UserError("--format kfgins needs --config KF-GINS.yaml")
-            from .io.kfgins_dataset import load_kfgins
+            from ..io.kfgins_dataset import load_kfgins
 
             ds, cfg = load_kfgins(args.config, args.imu, args.gnss)
         else:

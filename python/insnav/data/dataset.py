@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .types import NavState
+from .nav import NavState
 
 FORMAT_VERSION = 1
 
@@ -441,9 +441,9 @@ class Dataset:
         -------
         Path
         """
-        from .sim.scenario import dumps_toml
+        from .._toml import dumps_toml
 
-        from ._atomic import chmod_like_new, json_safe
+        from .._atomic import chmod_like_new, json_safe
 
         out = Path(directory)
         check_replaceable(out, overwrite)
@@ -579,7 +579,7 @@ def load_dataset(directory) -> Dataset:
     if "imu_grade" in meta:
         if imu_model:
             raise ValueError(f"{d / 'dataset.json'}: give 'imu_model' or 'imu_grade', not both")
-        from .align import imu_model_for_grade
+        from .imu_grades import imu_model_for_grade
 
         try:
             imu_model = imu_model_for_grade(meta["imu_grade"])

@@ -5,7 +5,7 @@ tightly coupled on pseudorange / pseudorange rate, 20 states.
 The C++ side is ``cpp/include/insnav/filter/{layout20,fading,upf,particle_filter}.hpp``
 on the tight engine and pseudorange measurement of seed 003's tight coupling
 (``engine/tight_engine.hpp``, ``meas/pseudorange.hpp``); the satellite
-selection and all GNSS inputs come from :mod:`insnav.tight`.
+selection and all GNSS inputs come from :mod:`insnav.filters.tight`.
 
 Filters (``filter=``)
 ---------------------
@@ -33,22 +33,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core, earth
-from ._validate import as_float_array, check_finite, check_increasing
-from .config import DEG, DEG_PER_H, ImuNoise, RunConfig
-from .engine import RAD2DEG, _initial_state
-from .tight import (MAX_SATS, TightInputs, TightSolution, _initial_clock, _limit_sats, clock_model,
-                    tight_inputs_from_raw)
+from .. import _core, earth
+from ..config import ImuNoise, RunConfig
+from ..gnss.clock import clock_model
+from ..gnss.tight_inputs import MAX_SATS, TightInputs, limit_sats, tight_inputs_from_raw
+from ..registry import FILTERS, PARTICLE_OPTIONS
+from ..units import DEG, DEG_PER_H, RAD2DEG
+from ._setup import imu_arrays, initial_state, outage_cycle_period
+from .tight import TightSolution, _initial_clock
 
 __all__ = ["DEFAULT_ALPHA", "PARTICLE_FILTERS", "PARTICLE_OPTIONS", "ParticleSolution", "run_tight_particle", "layout20_model"]
 
 #: filter names handled here (``insnav.run(..., coupling="tight")`` routes them)
-PARTICLE_FILTERS = ("upf", "pf", "fukf")
+PARTICLE_FILTERS = tuple(n for n, s in FILTERS.items() if s.runners.get("tight", "").endswith(":run_tight_particle"))
 
 #: keyword options of :func:`run_tight_particle` that ``insnav.run`` passes through
-PARTICLE_OPTIONS = ("particles", "seed", "fading", "rho", "beta", "eta_max", "alpha", "fading_memory", "resample_threshold",
-                    "roughening", "rk4_step_s", "gyro_markov_sigma_dph", "gyro_markov_tau_s", "acc_markov_tau_s",
-                    "inputs", "elevation_mask_deg", "max_sats", "clock_psd", "init_sigma_clock", "clock0")
 
 
 #: default a priori fading ratios: 1 for position, velocity, clock; 0 (not faded) elsewhere
@@ -57,7 +56,7 @@ DEFAULT_ALPHA = np.r_[np.ones(6), np.zeros(12), np.ones(2)]
 
 @dataclass
 class ParticleSolution(TightSolution):
-    """:class:`insnav.tight.TightSolution` plus per-epoch filter diagnostics.
+    """:class:`insnav.filters.tight.TightSolution` plus per-epoch filter diagnostics.
 
     ``ess`` (E,) effective sample size after the update (before resampling;
     1 for the UKF; NaN where no update was applied), ``fading_c`` (E,) the
@@ -145,7 +144,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         chi-square per row is counted in ``summary["divergences"]`` and warned about.
     rk4_step_s : multi-interval RK4 step of the error state [s] (0: every engine interval).
     gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s : the Markov blocks (:func:`layout20_model`).
-    inputs, elevation_mask_deg, max_sats, clock_psd, init_sigma_clock, clock0 : as :func:`insnav.tight.run_tight`.
+    inputs, elevation_mask_deg, max_sats, clock_psd, init_sigma_clock, clock0 : as :func:`insnav.filters.tight.run_tight`.
 
     Returns
     -------
@@ -163,13 +162,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         alpha = DEFAULT_ALPHA
     if roughening is None:
         roughening = 0.2 if filt == "pf" else 0.0
-    imu = dataset.imu
-    t = as_float_array(imu.t, "imu.t")
-    dth = as_float_array(imu.dtheta_b, "imu.dtheta_b", (3,))
-    dv = as_float_array(imu.dv_b, "imu.dv_b", (3,))
-    for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
-        check_finite(a, name)
-    check_increasing(t, "imu.t", t0=float(dataset.t0))
+    t, dth, dv = imu_arrays(dataset)
     if inputs is None:
         inputs = getattr(dataset, "tight_inputs", None)
     if inputs is None:
@@ -180,10 +173,10 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         inputs = tight_inputs_from_raw(dataset.gnss_raw, elevation_mask_deg=elevation_mask_deg,
                                        max_sats=max_sats, approx_r_e=r0)
     if inputs.n_sats().max(initial=0) > MAX_SATS:
-        inputs = _limit_sats(inputs, MAX_SATS)
+        inputs = limit_sats(inputs, MAX_SATS)
 
     rng = np.random.default_rng(cfg.init_seed)
-    init, sig0 = _initial_state(dataset, cfg, rng)
+    init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     model, sig_sensor = layout20_model(noise, gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s)
     qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)
@@ -204,7 +197,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     if cycle is None:
         cycle = float(np.median(np.diff(ep_t))) if ep_t.size > 1 else 1.0
     init_vec = np.array([dataset.t0, lat0, lon0, init.h_m, *init.v_n, *rpy0])
-    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s, cycle_period=cycle,
+    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s, cycle_period=outage_cycle_period(filt, cycle),
                     gate_chi2=cfg.gate_chi2, output_decimation=int(cfg.output_decimation),
                     ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
                     ut_kappa=(3.0 - 20) if cfg.ut_kappa is None else cfg.ut_kappa)

@@ -11,11 +11,10 @@ import argparse
 import os
 import sys
 
-from . import __version__
+from .. import __version__
+from ..errors import UserError
 
 
-class UserError(Exception):
-    """An error in the user's input: printed as one line, exit status 2."""
 
 
 def _add_demo_parser(sub) -> None:
@@ -34,7 +33,7 @@ def _add_demo_parser(sub) -> None:
     p.add_argument("--out", default="insnav-demo", help="report folder (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="a shorter run (used by the tests)")
     p.add_argument("--seed", type=int, default=1, help="random seed (default: %(default)s)")
-    p.set_defaults(func=lambda args: __import__("insnav.demo", fromlist=["main"]).main(args))
+    p.set_defaults(func=lambda args: __import__("insnav.cli.demo", fromlist=["main"]).main(args))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,23 +53,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_demo_parser(sub)
-    # areas that live in their own modules register themselves here
+    # areas that live in their own modules register their sub-commands here
+    import importlib
+
     for module, funcs in (
         ("insnav.sim.cli", ("add_scenarios_parser", "add_simulate_parser")),
-        ("insnav.engine_cli", ("add_run_parser",)),
-        ("insnav.evaluate", ("add_evaluate_parser",)),
-        ("insnav.montecarlo", ("add_compare_parser",)),
-        ("insnav.bench_cli", ("add_bench_parser",)),
+        ("insnav.cli.run", ("add_run_parser",)),
+        ("insnav.analysis.evaluate", ("add_evaluate_parser",)),
+        ("insnav.analysis.montecarlo", ("add_compare_parser",)),
+        ("insnav.cli.bench", ("add_bench_parser",)),
     ):
-        try:
-            mod = __import__(module, fromlist=list(funcs))
-        except ModuleNotFoundError as exc:
-            if exc.name is None or not module.startswith(exc.name):
-                raise  # a real import error inside an existing module
-            continue
+        mod = importlib.import_module(module)
         for f in funcs:
-            if hasattr(mod, f):
-                getattr(mod, f)(sub)
+            getattr(mod, f)(sub)
     return parser
 
 

@@ -32,15 +32,17 @@ import warnings
 
 import numpy as np
 
-from . import _core
-from ._validate import as_float_array, check_finite, check_increasing
-from .config import DEG, ImuNoise, RunConfig
-from .engine import RAD2DEG, Solution, _initial_state
+from .. import _core
+from .._validate import check_finite
+from ..config import ImuNoise, RunConfig
+from ..registry import filter_names
+from ..units import DEG, RAD2DEG
+from ._setup import imu_arrays, initial_state, outage_cycle_period
+from .solution import GNSS_STATUS, Solution
 
-DELAY_FILTERS = ("kf", "rdkf", "exact")
-#: status codes of :attr:`Solution.gnss_status` for the delay filters
-DELAY_GNSS_STATUS = {0: "not used", 1: "applied", 2: "rejected by gate", 3: "S not positive definite",
-                     4: "outside the IMU time span", 5: "refused: older than the history"}
+DELAY_FILTERS = tuple(n for n in filter_names("loose") if n in ("kf", "rdkf", "exact"))
+#: status codes of :attr:`Solution.gnss_status` for the delay filters (all of them)
+DELAY_GNSS_STATUS = GNSS_STATUS
 MAX_DELAY_EPOCHS = 4  # RandomDelayKf<Layout15, S> is instantiated for S = 1..4
 
 
@@ -90,16 +92,10 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
         if not hasattr(cfg, k):
             raise TypeError(f"run_delayed() got an unknown option {k!r}")
         setattr(cfg, k, v)
-    cfg.filter, cfg.coupling = "ekf", "loose"
+    cfg.filter, cfg.coupling = filter, "loose"
     cfg.validate()
 
-    imu = dataset.imu
-    t = as_float_array(imu.t, "imu.t")
-    dth = as_float_array(imu.dtheta_b, "imu.dtheta_b", (3,))
-    dv = as_float_array(imu.dv_b, "imu.dv_b", (3,))
-    for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
-        check_finite(a, name)
-    check_increasing(t, "imu.t", t0=float(dataset.t0))
+    t, dth, dv = imu_arrays(dataset)
 
     g = dataset.gnss
     m = len(g)
@@ -119,7 +115,7 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     t_valid_sorted = rec[:, 0]
 
     rng = np.random.default_rng(cfg.init_seed)
-    init, sig0 = _initial_state(dataset, cfg, rng)
+    init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
     p0 = np.zeros(n)
@@ -137,7 +133,7 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     init_vec = np.array([dataset.t0, init.lat_deg * DEG, init.lon_deg * DEG, init.h_m, *init.v_n,
                          init.roll_deg * DEG, init.pitch_deg * DEG, init.yaw_deg * DEG])
     core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s,
-                    cycle_period=cycle * 1.5, gate_chi2=cfg.gate_chi2, use_position=cfg.use_position,
+                    cycle_period=outage_cycle_period(filter, cycle), gate_chi2=cfg.gate_chi2, use_position=cfg.use_position,
                     use_velocity=cfg.use_velocity, output_decimation=int(cfg.output_decimation))
     summary = dict(filter=filter, coupling="loose", layout=n, gnss_records=m)
     if filter == "kf":
@@ -182,3 +178,8 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
         bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
         raise FloatingPointError(f"{filter}: the solution became non-finite at t={sol.t[bad]:.3f} s (row {bad})")
     return sol
+
+
+def run_delay(dataset, cfg: RunConfig, **options) -> Solution:
+    """The registry's runner: :func:`run_delayed` with ``cfg.filter``."""
+    return run_delayed(dataset, cfg.filter, config=cfg, **options)

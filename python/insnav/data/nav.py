@@ -8,8 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from ..units import DEG
 
-DEG = np.pi / 180.0
 
 
 @dataclass

@@ -88,7 +88,7 @@ def run_seeds(seed: int, runs: int) -> list[tuple[int, int]]:
 
 
 def _metrics(sol, truth, skip_s: float) -> dict:
-    from .analysis import errors
+    from .metrics import errors
 
     e = errors(sol, truth)
     keep = e["t"] >= e["t"][0] + skip_s
@@ -104,8 +104,8 @@ def run_one(task: Task) -> dict:
     """Simulate one realisation and run every filter on it (top level: picklable)."""
     import warnings
 
-    from .engine import run
-    from .sim import simulate
+    from ..filters import run
+    from ..sim import simulate
 
     t0 = time.perf_counter()
     ds = simulate(task.scenario, seed=task.sim_seed)
@@ -161,7 +161,7 @@ def _import_distributed():
 
 def _insnav_version() -> str:
     """Run on each Dask worker: the insnav version it imports."""
-    from . import __version__
+    from .. import __version__
 
     return __version__
 
@@ -206,7 +206,7 @@ def _map_dask(fn, tasks, workers, scheduler=None, *, info=None):
 
     import dask
 
-    from . import __version__
+    from .. import __version__
 
     cluster = client = None
     own_client = True
@@ -358,7 +358,7 @@ class MonteCarloResult:
         return dataclasses.asdict(self)
 
     def to_json(self, **kw) -> str:
-        from ._atomic import json_safe
+        from .._atomic import json_safe
         return json.dumps(json_safe(self.to_dict()), **{"allow_nan": False, **kw})
 
 
@@ -414,6 +414,10 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
     filters = tuple(filters)
     if not filters:
         raise ValueError("montecarlo: no filters given")
+    from ..registry import filter_spec
+
+    for f in filters:
+        filter_spec(f)  # a ValueError naming the known filters
     if runs < 1:
         raise ValueError(f"montecarlo: runs must be >= 1, got {runs}")
     if backend not in _BACKENDS:
@@ -429,7 +433,7 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
     workers = default_workers() if workers is None else int(workers)
     if workers < 1:
         raise ValueError(f"montecarlo: workers must be >= 1, got {workers}")
-    from .sim.scenario import load_scenario, resolve_raw
+    from ..sim.scenario import load_scenario, resolve_raw
 
     load_scenario(scenario)  # a bad scenario fails here, once, not in every worker
     sent = scenario
@@ -463,7 +467,7 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
 
 # --- command line --------------------------------------------------------------
 def _compare_main(args) -> int:
-    from .cli import UserError
+    from ..errors import UserError
 
     backend = args.backend or ("dask" if args.scheduler else "local")
     if args.scheduler and backend != "dask":
@@ -519,7 +523,10 @@ def add_compare_parser(sub) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("scenario", help="preset name or scenario TOML file")
-    p.add_argument("--filters", default="kf,rdkf,exact", help="comma-separated (default: %(default)s)")
+    from ..registry import FILTERS
+
+    p.add_argument("--filters", default="kf,rdkf,exact",
+                   help=f"comma-separated, from {', '.join(FILTERS)} (default: %(default)s)")
     p.add_argument("--runs", type=int, default=100, help="Monte Carlo runs (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--workers", type=int, default=None,

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis import errors, reconvergence_time, rms
+from .metrics import errors, reconvergence_time, rms
 
 EXAMPLES = """examples:
   insnav evaluate run3/solution.csv run3/truth.csv --outages 50:90
@@ -34,8 +34,8 @@ class _Sol:
 
 
 def _read_solution(path):
-    from .dataset import read_csv
-    from .engine import Solution
+    from ..data.dataset import read_csv
+    from ..filters.solution import Solution
 
     a = read_csv(path, Solution.COLUMNS)
     s = _Sol()
@@ -49,9 +49,9 @@ def _read_solution(path):
 def _read_truth(path, quality=None):
     p = Path(path)
     if p.suffix == ".pos":
-        from .gnss.gpstime import SECONDS_PER_WEEK
-        from .gnss.measurements import read_rtklib_pos
-        from .io.rinex_dataset import rtklib_truth
+        from ..gnss.gpstime import SECONDS_PER_WEEK
+        from ..gnss.measurements import read_rtklib_pos
+        from ..io.rinex_dataset import rtklib_truth
 
         ref = read_rtklib_pos(p)
         if len(ref.t_gps_s) == 0:
@@ -64,17 +64,17 @@ def _read_truth(path, quality=None):
     if quality is not None:
         raise ValueError("--quality applies to an RTKLIB .pos truth only")
     if p.is_dir():
-        from .dataset import load_dataset
+        from ..data.dataset import load_dataset
 
         t = load_dataset(p).truth
         if t is None:
             raise ValueError(f"{p}: the dataset has no truth.csv")
         return t
     if ".nav" in p.name:
-        from .io.kfgins import read_kfgins_nav
+        from ..io.kfgins import read_kfgins_nav
 
         return read_kfgins_nav(p)
-    from .dataset import Truth, read_csv
+    from ..data.dataset import Truth, read_csv
 
     return Truth.from_array(read_csv(p, Truth.COLUMNS))
 
@@ -182,7 +182,7 @@ def cmd_evaluate(args) -> int:
         sol = _solution_at(sol, truth.t)
     res = evaluate(sol, truth, _parse_outages(args.outages))
     if args.json:
-        from ._atomic import json_safe
+        from .._atomic import json_safe
         print(json.dumps(json_safe(res), indent=2, allow_nan=False))
         return 0
     names = {"pos_n_m": ("position", "m", "N/E/D"), "vel_n_mps": ("velocity", "m/s", "N/E/D"),

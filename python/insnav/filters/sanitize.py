@@ -66,12 +66,11 @@ import dataclasses
 
 import numpy as np
 
-from .dataset import GnssFixes, ImuData, RowOrigin
+from ..data.dataset import GnssFixes, ImuData, RowOrigin
+from ..units import DEG, G0
 
 __all__ = ["sanitize_imu", "sanitize_gnss", "DEFAULTS"]
 
-G0 = 9.80665  #: standard gravity [m/s^2]
-DEG = np.pi / 180.0
 
 #: Default limits.  ``max_rate_rps`` = 2000 deg/s and ``max_accel_mps2`` = 100 g are
 #: beyond the full scale of automotive, aerial and tactical IMUs; ``max_gap_s``

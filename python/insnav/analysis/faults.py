@@ -32,8 +32,8 @@ import dataclasses
 
 import numpy as np
 
-from .config import DEG
-from .earth import radii
+from ..earth import radii
+from ..units import DEG
 
 __all__ = ["inject_position_jumps", "inject_velocity_spikes", "inject_pseudorange_ramp", "score",
            "CHI2_999"]

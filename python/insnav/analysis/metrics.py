@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .earth import radii
+from ..earth import radii
+from ..units import DEG
 
-DEG = np.pi / 180.0
 
 
 def _wrap_deg(a):

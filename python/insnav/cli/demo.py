@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis import errors, recovery_metrics, rms
+from ..analysis.metrics import errors, recovery_metrics, rms
 
 QUANTITIES = (("pos_n_m", "position", "m", ("N", "E", "D")),
               ("vel_n_mps", "velocity", "m/s", ("N", "E", "D")),
@@ -168,7 +168,7 @@ def _tight_section(args, out: Path, lines: list, n_seeds: int = 5) -> None:
 
 
 def main(args) -> int:
-    from ._atomic import atomic_write_text
+    from .._atomic import atomic_write_text
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

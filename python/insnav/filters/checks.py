@@ -31,9 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-G0 = 9.80665
-DEG = np.pi / 180.0
+from ..units import DEG, G0
 
 
 class DataCheckError(ValueError):
@@ -147,7 +145,7 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
                min_jump_m: float = 10_000.0, max_start_distance_m: float = 20_000.0) -> None:
     """Ranges, the distance from the initial position, jumps and sigmas of loose fixes.
 
-    ``gnss`` is a :class:`insnav.dataset.GnssFixes`; ``initial`` an optional
+    ``gnss`` is a :class:`insnav.data.dataset.GnssFixes`; ``initial`` an optional
     object with ``lat_deg``/``lon_deg`` (the stated initial state).
     """
     m = len(gnss)

@@ -98,8 +98,8 @@ def bench_mechanization(duration_s: float, repeats: int) -> dict:
     The increments are a smooth synthetic motion (slow coning about all axes,
     1 g specific force), the same data as ``bench/bench_mechanization.py``.
     """
-    from .ins import mechanize
-    from .types import NavState
+    from ..ins.mechanize import mechanize
+    from ..data.nav import NavState
 
     n = int(round(duration_s * IMU_RATE_HZ))
     dt = 1.0 / IMU_RATE_HZ
@@ -115,10 +115,10 @@ def bench_mechanization(duration_s: float, repeats: int) -> dict:
 
 def bench_filters(scenario, filters, repeats: int, seed: int) -> tuple[dict, dict]:
     """Simulate ``scenario`` once, then time :func:`insnav.run` per filter (medians)."""
-    from . import sanitize  # noqa: F401  (imported before timing: first-call costs)
-    from .analysis import errors
-    from .engine import run
-    from .sim import simulate
+    from ..filters import sanitize  # noqa: F401  (imported before timing: first-call costs)
+    from ..analysis.metrics import errors
+    from ..filters import run
+    from ..sim import simulate
 
     t0 = time.perf_counter()
     ds = simulate(scenario, seed=seed)
@@ -139,8 +139,8 @@ def bench_filters(scenario, filters, repeats: int, seed: int) -> tuple[dict, dic
 
 
 def cmd_bench(args) -> int:
-    from . import __version__
-    from .cli import UserError
+    from .. import __version__
+    from ..errors import UserError
 
     base = QUICK if args.quick else DEFAULTS
     repeats = base["repeats"] if args.repeats is None else args.repeats
@@ -155,7 +155,7 @@ def cmd_bench(args) -> int:
     if bad or not filters:
         raise UserError(f"--filters: unknown or tight-only filter(s) {', '.join(bad) or '(none given)'}; "
                         f"choose from {', '.join(LOOSE_FILTERS)}")
-    from .sim.scenario import load_scenario
+    from ..sim.scenario import load_scenario
 
     load_scenario(scenario)  # a bad scenario fails now, not after the mechanization figures
     command = _command(args, repeats)
@@ -173,7 +173,7 @@ def cmd_bench(args) -> int:
                python=platform.python_version(), machine=platform.machine(), cpus_available=cpus,
                load_avg_1min=load, repeats=repeats, mechanization=mech, scenario=scen, filters=filt)
     if args.json:
-        from ._atomic import json_safe
+        from .._atomic import json_safe
         print(json.dumps(json_safe(res), indent=2, allow_nan=False))
         return 0
     print(f"insnav {__version__} bench: {cpus} CPU(s) available, 1-min load average {load:.2f}; "

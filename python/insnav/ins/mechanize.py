@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _core
-from ._validate import as_float_array, check_finite, check_increasing
-from .types import NavState, Trajectory
+from .. import _core
+from .._validate import as_float_array, check_finite, check_increasing
+from ..data.nav import NavState, Trajectory
 
 
 def mechanize(t, dtheta_b, dv_b, initial: NavState, t0: float | None = None,

@@ -1,0 +1,110 @@
+"""Running a filter: :func:`run` looks the filter up in the registry
+(:mod:`insnav.registry`), checks and repairs the input once
+(:mod:`~insnav.filters.sanitize`, :mod:`~insnav.filters.checks`) and calls the
+runner of its family.  The runners are the only code that calls
+``_core.run_*``:
+
+=====================  ====================================  =========
+module                 filters                               paper
+=====================  ====================================  =========
+:mod:`.loose`          ekf, rbukf, ukf (loose)               seed 000
+:mod:`.tight`          ekf, rbukf, ukf (tight, 17 states)    seed 003
+:mod:`.delay`          kf, rdkf, exact                       seed 001
+:mod:`.particle`       fukf, upf, pf (tight, 20 states)      seed 004
+=====================  ====================================  =========
+"""
+from __future__ import annotations
+
+import dataclasses
+
+from ..config import RunConfig
+from ..registry import FILTERS, filter_spec
+from .solution import GNSS_STATUS, RecordStatus, Solution
+
+__all__ = ["run", "Solution", "RecordStatus", "GNSS_STATUS"]
+
+_ADVERB = {"loose": "loosely", "tight": "tightly"}
+
+
+def _as_config(config) -> RunConfig:
+    """A copy of ``config``: a RunConfig, a dict of TOML keys, or a TOML file path."""
+    if config is None:
+        return RunConfig()
+    if isinstance(config, RunConfig):
+        return dataclasses.replace(config)
+    from ..config import config_from_dict, load_config
+
+    if isinstance(config, dict):
+        return config_from_dict(config)
+    return load_config(config)
+
+
+def run(dataset, filter: str | None = None, coupling: str | None = None, config=None,
+        *, sanitize: bool | dict = True, checks: bool = True, **overrides) -> Solution:
+    """Run a closed-loop GNSS/INS filter over a dataset.
+
+    Parameters
+    ----------
+    dataset : insnav.Dataset
+        IMU increments, GNSS fixes (``t_valid``; the delay filters also use
+        ``t_arrival``) or raw observations (tight), initial state, lever arm and
+        IMU model.
+    filter : str, optional
+        A registered filter (:data:`insnav.registry.FILTERS`: ekf, rbukf, ukf,
+        kf, rdkf, exact, fukf, upf, pf); overrides ``config.filter``.
+    coupling : {'loose', 'tight'}, optional
+        Overrides ``config.coupling``; a filter that cannot run that way is an error.
+    config : RunConfig, dict or path, optional
+        A :class:`~insnav.config.RunConfig`, a dict of its TOML keys, or a TOML file.
+    sanitize : bool or dict
+        Check and repair the input first (:mod:`insnav.filters.sanitize`:
+        duplicates dropped, short IMU gaps bridged, bad GNSS fixes dropped; a
+        dict overrides ``DEFAULTS``); the counts go to ``summary["sanitize"]``.
+        Clean data are not changed.
+    checks : bool
+        Unit and sanity checks before the filter (:mod:`insnav.filters.checks`);
+        a :class:`~insnav.filters.checks.DataCheckError` names the file, column and cause.
+    **overrides
+        Any :class:`RunConfig` field (``init_seed=3``), or an option of the
+        filter's family (``delay_p=`` for the delay filters, ``particles=`` for
+        the seed 004 filters; :attr:`FilterSpec.options`).
+
+    Returns
+    -------
+    Solution
+        (its subclasses ``TightSolution`` / ``ParticleSolution`` for the tight families)
+    """
+    cfg = _as_config(config)
+    if filter is not None:
+        cfg.filter = filter
+    if coupling is not None:
+        cfg.coupling = coupling
+    if cfg.filter not in FILTERS or cfg.coupling not in _ADVERB:
+        cfg.validate()  # a ConfigError naming the key and the allowed values
+    spec = filter_spec(cfg.filter)
+    if cfg.coupling not in spec.couplings:
+        how = " or ".join(_ADVERB[c] for c in spec.couplings)
+        raise ValueError(f"filter {spec.name!r} runs {how} coupled only (coupling={spec.couplings[0]!r})")
+    options = {k: overrides.pop(k) for k in list(overrides) if k in spec.options}
+    for k, v in overrides.items():
+        if not hasattr(cfg, k):
+            owners = [s.name for s in FILTERS.values() if k in s.options]
+            if owners:
+                raise TypeError(f"run() option {k!r} needs filter {' or '.join(repr(o) for o in owners)}, "
+                                f"not {spec.name!r}")
+            raise TypeError(f"run() got an unknown option {k!r}")
+        setattr(cfg, k, v)
+    cfg.validate()
+    report = None
+    if sanitize:
+        from .sanitize import sanitize_dataset
+
+        dataset, report = sanitize_dataset(dataset, sanitize)
+    if checks:
+        from .checks import check_dataset
+
+        check_dataset(dataset)
+    sol = spec.runner(cfg.coupling)(dataset, cfg, **options)
+    if report is not None:
+        sol.summary["sanitize"] = report
+    return sol

@@ -1,0 +1,87 @@
+"""Loosely coupled runs (EKF, RB-UKF, UKF; seed 000): GNSS position and
+velocity fixes on the 15- or 21-state layout.
+
+The whole IMU loop runs in C++ with the GIL released
+(``cpp/include/insnav/engine/loose_engine.hpp``); this module converts units,
+builds the initial state and covariance, and validates inputs once.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _core
+from .._validate import check_finite
+from ..config import ImuNoise, RunConfig
+from ..units import DEG, RAD2DEG
+from ._setup import imu_arrays, initial_state, outage_cycle_period
+from .solution import Solution
+
+__all__ = ["run_loose"]
+
+
+def run_loose(dataset, cfg: RunConfig) -> Solution:
+    """Closed-loop loosely coupled run (``cfg.filter`` in ekf, rbukf, ukf;
+    ``cfg.layout`` 15 or 21); :func:`insnav.run` is the public entry."""
+    t, dth, dv = imu_arrays(dataset)
+
+    g = dataset.gnss
+    gnss = np.column_stack([g.t_valid, g.lat_deg * DEG, g.lon_deg * DEG, g.h_m, g.v_n,
+                            g.sigma_pos_n, g.sigma_vel_n]).astype(float) if len(g) else np.zeros((0, 13))
+    if len(gnss):
+        order = np.argsort(gnss[:, 0], kind="stable")
+        gnss = np.ascontiguousarray(gnss[order])
+        check_finite(gnss[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+    gnss_t = gnss[:, 0].copy()
+
+    rng = np.random.default_rng(cfg.init_seed)
+    init, sig0 = initial_state(dataset, cfg, rng)
+    noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
+    n = cfg.layout
+    p0 = np.zeros(n)
+    p0[:9] = sig0
+    p0[9:12] = noise.acc_bias_sigma
+    p0[12:15] = noise.gyro_bias_sigma
+    if n == 21:
+        p0[15:18] = noise.acc_scale_sigma
+        p0[18:21] = noise.gyro_scale_sigma
+    P0 = np.diag(p0 ** 2)
+    lever = np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
+    cycle = cfg.cycle_period_s
+    if cycle is None:
+        cycle = float(np.median(np.diff(gnss_t))) if len(gnss_t) > 1 else 1.0
+    init_vec = np.array([dataset.t0, init.lat_deg * DEG, init.lon_deg * DEG, init.h_m, *init.v_n,
+                         init.roll_deg * DEG, init.pitch_deg * DEG, init.yaw_deg * DEG])
+    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s,
+                    cycle_period=outage_cycle_period(cfg.filter, cycle), gate_chi2=cfg.gate_chi2,
+                    use_position=cfg.use_position, use_velocity=cfg.use_velocity,
+                    output_decimation=int(cfg.output_decimation),
+                    sigma_columns=9)  # Solution keeps the position, velocity and attitude sigmas only
+    if cfg.filter != "ekf":
+        core_cfg.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
+                        ut_kappa=(3.0 - n) if cfg.ut_kappa is None else cfg.ut_kappa)
+    out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, np.zeros(12), noise.as_core_dict(),
+                          core_cfg)
+    # unit conversions in place (the arrays are ours), one column at a time:
+    # numpy's strided 2-D loops over 2-3 columns are ~10x slower than 1-D ones
+    sig = out["sigma"]
+    err = out["imu_err"]
+    llh, rpy = out["llh"], out["rpy"]
+    rpy *= RAD2DEG
+    for j in (0, 1):
+        llh[:, j] *= RAD2DEG
+    for j in (6, 7, 8):
+        sig[:, j] *= RAD2DEG
+    sol = Solution(t=out["t"], lat_deg=llh[:, 0], lon_deg=llh[:, 1], h_m=llh[:, 2],
+                   v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],
+                   sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9],
+                   acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
+                   gyro_scale=err[:, 9:12], gnss_t=gnss_t, innovation=out["innovation"], nis=out["nis"],
+                   gnss_status=out["status"],
+                   summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n, updates=int(out["updates"]),
+                                rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
+                                gnss_records=len(gnss_t)))
+    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
+        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
+        raise FloatingPointError(f"{cfg.filter}: the solution became non-finite at t={sol.t[bad]:.3f} s "
+                                 f"(row {bad}); check the IMU data and the noise model")
+    return sol

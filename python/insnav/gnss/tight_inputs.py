@@ -1,0 +1,222 @@
+"""The tight filters' GNSS input: every epoch's satellites in the flat layout
+of ``_core.run_tight`` (pseudorange, rate, satellite position, velocity and
+clock, sigmas), built from the simulator's raw observations or from RINEX
+observation and navigation files (GPS LNAV broadcast ephemerides,
+IS-GPS-200, transmit time and Sagnac as in :mod:`insnav.gnss.ephemeris`;
+Klobuchar / Saastamoinen corrections), with an elevation mask, a best-GDOP
+satellite selection and per-satellite sigmas.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import earth
+
+__all__ = ["TightInputs", "MAX_SATS", "pseudorange_sigma", "limit_sats", "tight_inputs_from_raw",
+           "tight_inputs_from_rinex"]
+
+#: satellites per epoch the C++ measurement can hold (2 rows each, kMaxMeasRows = 32)
+MAX_SATS = 16
+
+_SAT_COLS = ("pseudorange_m", "pseudorange_rate_mps", "sat_x_m", "sat_y_m", "sat_z_m", "sat_vx_mps",
+             "sat_vy_mps", "sat_vz_mps", "sat_clock_bias_m", "sat_clock_drift_mps", "sigma_pr_m", "sigma_prr_mps")
+
+
+@dataclass
+class TightInputs:
+    """All epochs' satellite data in the flat layout of ``_core.run_tight``.
+
+    Attributes
+    ----------
+    epoch_t : (E,) time of validity of each epoch (dataset time) [s]
+    epoch_start : (E+1,) int64; epoch e owns rows ``epoch_start[e]:epoch_start[e+1]``
+    sats : (M, 12) float, columns :data:`_SAT_COLS`: measured pseudorange [m] and rate
+        [m/s] (NaN = not used), satellite ECEF position [m] / velocity [m/s] in the
+        frame at reception, ``c dt_sv`` minus modelled atmosphere delays [m], its rate,
+        1-sigma pseudorange [m] and rate [m/s]
+    prn : (M,) int
+    elevation_deg : (M,) seen from the (approximate) receiver
+    """
+
+    epoch_t: np.ndarray
+    epoch_start: np.ndarray
+    sats: np.ndarray
+    prn: np.ndarray
+    elevation_deg: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    @property
+    def row_epoch(self) -> np.ndarray:
+        """(M,) epoch index of each row."""
+        return np.repeat(np.arange(self.epoch_t.size), np.diff(self.epoch_start))
+
+    def n_sats(self) -> np.ndarray:
+        """(E,) satellites per epoch."""
+        return np.diff(self.epoch_start)
+
+    @classmethod
+    def from_rows(cls, t_row, prn, sats, el_deg, info=None) -> "TightInputs":
+        """Group rows by time (rows sorted by time on output)."""
+        t_row = np.asarray(t_row, float)
+        order = np.argsort(t_row, kind="stable")
+        t_row = t_row[order]
+        ep_t, start = np.unique(t_row, return_index=True)
+        epoch_start = np.append(start, t_row.size).astype(np.int64)
+        return cls(ep_t, epoch_start, np.ascontiguousarray(np.asarray(sats, float)[order]),
+                   np.asarray(prn)[order], np.asarray(el_deg, float)[order], dict(info or {}))
+
+    def select(self, keep) -> "TightInputs":
+        """Keep the rows ``keep`` (bool (M,)); empty epochs stay (prediction only)."""
+        keep = np.asarray(keep, bool)
+        ep = self.row_epoch[keep]
+        counts = np.bincount(ep, minlength=self.epoch_t.size)
+        start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return TightInputs(self.epoch_t.copy(), start, np.ascontiguousarray(self.sats[keep]), self.prn[keep],
+                           self.elevation_deg[keep], dict(self.info))
+
+
+def pseudorange_sigma(el_rad, sigma_zenith_m, cn0_dbhz=None, cn0_ref_dbhz=45.0, floor_el_deg=5.0):
+    """Elevation (and C/N0) dependent 1-sigma.
+
+    ``sigma = sigma_zenith / sin(el)`` (Groves 2013, eq. (9.168) form), and
+    when C/N0 is given, times ``sqrt(10^((cn0_ref - cn0)/10))`` (tracking
+    noise variance inversely proportional to C/N0, Groves eq. (9.165)); the
+    C/N0 factor is not allowed below 1.
+    """
+    s = np.asarray(sigma_zenith_m, float) / np.sin(np.maximum(np.asarray(el_rad, float), np.deg2rad(floor_el_deg)))
+    if cn0_dbhz is not None:
+        cn0 = np.asarray(cn0_dbhz, float)
+        f = np.sqrt(np.maximum(10.0 ** ((cn0_ref_dbhz - np.where(np.isfinite(cn0), cn0, cn0_ref_dbhz)) / 10.0), 1.0))
+        s = s * f
+    return s
+
+
+def limit_sats(inp: TightInputs, max_sats: int) -> TightInputs:
+    """Best-GDOP subset of ``max_sats`` per epoch where an epoch has more."""
+    from .geometry import select_best_gdop
+
+    counts = inp.n_sats()
+    if max_sats <= 0 or counts.max(initial=0) <= max_sats:
+        return inp
+    keep = np.ones(len(inp.prn), bool)
+    for e in np.flatnonzero(counts > max_sats):
+        a, b = inp.epoch_start[e], inp.epoch_start[e + 1]
+        # LOS from the Earth's centre direction is not needed: GDOP is rotation invariant,
+        # use the ECEF LOS from the mean of the rows' approximate receiver (info)
+        r_rx = inp.info.get("approx_r_e")
+        r_rx = np.asarray(r_rx if r_rx is not None else np.zeros(3), float)
+        d = inp.sats[a:b, 2:5] - r_rx
+        u = d / np.linalg.norm(d, axis=1)[:, None]
+        if max_sats >= 4:
+            sel, _ = select_best_gdop(u, max_sats)
+        else:
+            sel = np.argsort(-inp.elevation_deg[a:b], kind="stable")[:max_sats]
+        k = np.zeros(b - a, bool)
+        k[sel] = True
+        keep[a:b] = k
+    return inp.select(keep)
+
+
+def tight_inputs_from_raw(raw, *, elevation_mask_deg: float = 0.0, max_sats: int = MAX_SATS,
+                          sigma_pr_m=None, sigma_prr_mps=None, elevation_weighting: bool = False,
+                          approx_r_e=None) -> TightInputs:
+    """Simulator raw observations (:class:`insnav.dataset.GnssRaw`) -> :class:`TightInputs`.
+
+    Sigmas default to the dataset's own (the simulated noise); with
+    ``elevation_weighting`` they are scaled by ``1/sin(el)``.  The true
+    receiver clock columns are never read.
+    """
+    el = np.asarray(raw.elevation_deg, float)
+    spr = np.asarray(raw.sigma_pr_m if sigma_pr_m is None else np.broadcast_to(sigma_pr_m, el.shape), float)
+    sprr = np.asarray(raw.sigma_prr_mps if sigma_prr_mps is None else np.broadcast_to(sigma_prr_mps, el.shape), float)
+    if elevation_weighting:
+        spr = pseudorange_sigma(np.deg2rad(el), spr)
+        sprr = pseudorange_sigma(np.deg2rad(el), sprr)
+    sats = np.column_stack([raw.pseudorange_m, raw.pseudorange_rate_mps, raw.sat_r_e, raw.sat_v_e,
+                            raw.sat_clock_bias_m, raw.sat_clock_drift_mps, spr, sprr])
+    inp = TightInputs.from_rows(raw.t, raw.prn, sats, el, info=dict(source="simulator gnss_raw",
+                                                                    approx_r_e=approx_r_e))
+    if elevation_mask_deg > 0:
+        inp = inp.select(inp.elevation_deg >= elevation_mask_deg)
+    return limit_sats(inp, max_sats)
+
+
+def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_mask_deg: float = 10.0,
+                            max_sats: int = MAX_SATS, iono: bool = True, tropo: bool = True,
+                            sigma_pr_zenith_m: float = 3.0, sigma_prr_zenith_mps: float = 0.3,
+                            use_cn0: bool = True, t_range=None) -> TightInputs:
+    """RINEX observations + broadcast navigation -> :class:`TightInputs`.
+
+    Parameters
+    ----------
+    obs : insnav.gnss.ObsData
+    nav : insnav.gnss.NavData
+    t0_gps_s : float
+        GPS time of dataset time 0 [s]; ``epoch_t = t_gps - t0_gps_s``.
+    approx_r_e : (3,) approximate receiver ECEF position [m] (for light time,
+        elevation and the atmosphere; a few hundred metres do not matter).
+    iono, tropo : Klobuchar (needs ``nav.ion_alpha/ion_beta``) and Saastamoinen.
+    sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0 : see :func:`pseudorange_sigma`.
+    t_range : (t_min, t_max) in dataset time, optional.
+
+    Notes
+    -----
+    Time tags are receiver time.  The receiver clock offset of each epoch is
+    first estimated (median of pseudorange minus predicted range at
+    ``approx_r_e``); satellites are then evaluated at the true reception time
+    ``t_tag - dt_rx`` (a 1 ms receiver clock error otherwise moves a
+    satellite by ~4 m along the line of sight), and the epoch is placed at its
+    true time on the dataset time axis.  Doppler -> rate: ``-lambda_L1 D1``.
+    T_GD is applied (L1 C/A user).
+    """
+    from .ephemeris import C_LIGHT, select_ephemeris, transmit_states
+    from .corrections import klobuchar_delay, saastamoinen_delay
+    from .geometry import elevation_azimuth
+    from .measurements import L1_WAVELENGTH
+
+    eph = nav.eph
+    r0 = np.asarray(approx_r_e, float)
+    t_tag = np.asarray(obs.t_gps_s, float)
+    ok = np.isfinite(obs.C1)
+    if t_range is not None:
+        ok &= (t_tag - t0_gps_s >= t_range[0]) & (t_tag - t0_gps_s <= t_range[1])
+    idx = select_ephemeris(eph, obs.prn, t_tag)
+    ok &= idx >= 0
+    rows = np.flatnonzero(ok)
+    ep = obs.epoch[rows]
+    n_ep = obs.epoch_t_gps_s.size
+    clk = np.zeros(n_ep)
+    lat, lon, h = earth.ecef_to_geodetic(r0)
+    for _ in range(2):
+        t_rx = t_tag[rows] - clk[ep] / C_LIGHT
+        ts = transmit_states(eph, idx[rows], t_rx, r0, tgd=True)
+        raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
+        for e in np.unique(ep):
+            clk[e] = np.median(raw[ep == e])
+    el, az = elevation_azimuth(r0, ts.r_e)
+    iono_m = np.zeros(rows.size)
+    tropo_m = np.zeros(rows.size)
+    if iono and nav.ion_alpha is not None and nav.ion_beta is not None:
+        iono_m = klobuchar_delay(t_rx, np.full(rows.size, lat), np.full(rows.size, lon), el, az,
+                                 nav.ion_alpha, nav.ion_beta)
+    if tropo:
+        tropo_m = saastamoinen_delay(np.full(rows.size, lat), np.full(rows.size, h), el)
+    prr = -L1_WAVELENGTH * np.asarray(obs.D1, float)[rows]
+    cn0 = np.asarray(obs.S1, float)[rows] if use_cn0 else None
+    spr = pseudorange_sigma(el, sigma_pr_zenith_m, cn0)
+    sprr = pseudorange_sigma(el, sigma_prr_zenith_mps, cn0)
+    # modelled delays go into the satellite "clock" column: predicted = range + b - (c dt_sv - I - T)
+    sats = np.column_stack([obs.C1[rows], prr, ts.r_e, ts.v_e, C_LIGHT * ts.clock_bias_s - iono_m - tropo_m,
+                            C_LIGHT * ts.clock_drift_s_s, spr, sprr])
+    # epoch time: true reception time (receiver tag minus the estimated clock offset)
+    t_ep = t_tag[rows] - clk[ep] / C_LIGHT - t0_gps_s
+    inp = TightInputs.from_rows(t_ep, obs.prn[rows], sats, np.degrees(el),
+                                info=dict(source=str(getattr(obs, "path", "rinex")), approx_r_e=r0,
+                                          rx_clock_tag_m=clk, iono_m=iono_m, tropo_m=tropo_m))
+    # epochs of one tag share one true time only if the clock estimate is per epoch (it is)
+    inp = inp.select(np.degrees(el)[np.argsort(t_ep, kind="stable")] >= elevation_mask_deg)
+    return limit_sats(inp, max_sats)
+
+

@@ -1,0 +1,159 @@
+"""The package's layers, read from the source: every ``import`` in
+python/insnav (at module level or inside a function) goes to the same layer
+or a lower one, and no two modules import each other, directly or around a
+circle.  A new module must be given a layer here.
+
+    0  units errors _validate _atomic _toml earth registry _core scenarios (data files), the package root
+       (its public names are loaded lazily, by strings)
+    1  config data
+    2  gnss ins
+    3  sim
+    4  io
+    5  filters      (the only callers of _core.run_*)
+    6  analysis
+    7  cli, sim.cli, __main__
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "python" / "insnav"
+
+LAYERS = [
+    ("insnav.__main__", 7), ("insnav.sim.cli", 7), ("insnav.cli", 7),
+    ("insnav.analysis", 6), ("insnav.filters", 5), ("insnav.io", 4), ("insnav.sim", 3),
+    ("insnav.gnss", 2), ("insnav.ins", 2), ("insnav.config", 1), ("insnav.data", 1), ("insnav.scenarios", 0),
+    ("insnav.units", 0), ("insnav.errors", 0), ("insnav._validate", 0), ("insnav._atomic", 0),
+    ("insnav._toml", 0), ("insnav.earth", 0), ("insnav.registry", 0), ("insnav._core", 0),
+]
+
+
+def layer(mod: str) -> int:
+    if mod == "insnav":
+        return 0
+    for prefix, n in LAYERS:
+        if mod == prefix or mod.startswith(prefix + "."):
+            return n
+    raise AssertionError(f"module {mod} has no layer: add it to LAYERS in {__file__}")
+
+
+def modules() -> dict[str, Path]:
+    out = {}
+    for p in sorted(PKG.rglob("*.py")):
+        rel = p.relative_to(PKG.parent).with_suffix("")
+        name = ".".join(rel.parts)
+        out[name.removesuffix(".__init__")] = p
+    return out
+
+
+def imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """Modules of the package that `name` imports (a name imported from a
+    package counts as its submodule when there is one)."""
+    is_pkg = path.name == "__init__.py"
+    here = name if is_pkg else name.rsplit(".", 1)[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.split(".")[0] == "insnav"}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = here.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            if mod.split(".")[0] != "insnav":
+                continue
+            subs = {f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in known}
+            if subs:
+                out |= subs
+                if len(subs) < len(node.names):
+                    out.add(mod)
+            else:
+                out.add(mod)
+    out.discard(name)
+    return {m for m in out if m in known or m == "insnav._core"}
+
+
+@pytest.fixture(scope="module")
+def graph():
+    mods = modules()
+    known = set(mods)
+    return {n: imports(n, p, known) for n, p in mods.items()}
+
+
+def test_every_module_has_a_layer(graph):
+    for m in graph:
+        layer(m)
+
+
+def test_no_upward_imports(graph):
+    bad = [f"{a} (layer {layer(a)}) imports {b} (layer {layer(b)})"
+           for a, deps in graph.items() for b in deps if layer(b) > layer(a)]
+    assert not bad, "upward imports:\n" + "\n".join(sorted(bad))
+
+
+def test_no_import_circles(graph):
+    # edges between modules of one package and their own package __init__ are
+    # how a package re-exports; a circle through them is still a circle
+    state: dict[str, int] = {}
+    stack: list[str] = []
+    circles = []
+
+    def visit(m):
+        state[m] = 1
+        stack.append(m)
+        for d in sorted(graph.get(m, ())):
+            if state.get(d) == 1:
+                circles.append(" -> ".join(stack[stack.index(d):] + [d]))
+            elif d not in state:
+                visit(d)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
+    assert not circles, "import circles:\n" + "\n".join(circles)
+
+
+def test_the_checks_see_a_violation(tmp_path):
+    """The two checks would fail on an upward import and on a circle."""
+    g = {"insnav.data.nav": {"insnav.filters.loose"}, "insnav.filters.loose": {"insnav.data.nav"}}
+    assert any(layer(b) > layer(a) for a, deps in g.items() for b in deps)
+    with pytest.raises(AssertionError, match="circles"):
+        test_no_import_circles(g)
+
+
+@pytest.mark.parametrize("order", ["names first", "modules first", "modules reversed"])
+def test_public_names_keep_their_identity(order):
+    """insnav.evaluate, insnav.montecarlo, insnav.run, ... stay the public
+    functions / classes whatever is imported before or after them (a public
+    name equal to a submodule's would be rebound to the module by an import)."""
+    import subprocess
+    import sys
+
+    code = f"""
+import importlib, inspect, pkgutil, types
+import insnav
+names = [n for n in insnav.__all__ if n != "__version__"]
+mods = sorted(m.name for m in pkgutil.walk_packages(insnav.__path__, "insnav.") if m.name != "insnav.__main__")
+order = {order!r}
+first = {{n: getattr(insnav, n) for n in names}} if order == "names first" else None
+for m in (reversed(mods) if order == "modules reversed" else mods):
+    importlib.import_module(m)
+after = {{n: getattr(insnav, n) for n in names}}
+for n, v in after.items():
+    assert not isinstance(v, types.ModuleType), (n, v)
+    assert callable(v), n
+    assert first is None or first[n] is v, n
+from insnav.analysis.evaluate import evaluate
+from insnav.analysis import montecarlo as mc_mod
+assert insnav.evaluate is evaluate and callable(insnav.montecarlo) and insnav.montecarlo is not mc_mod
+print(len(names), len(mods))
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
