@@ -11,7 +11,8 @@ from ..earth import radii
 from ..registry import filter_spec
 from ..units import DEG
 
-__all__ = ["initial_state", "imu_arrays", "outage_cycle_period"]
+__all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_sigmas", "init_vector", "lever_arm",
+           "engine_config", "tight_inputs_for", "initial_clock", "raise_if_nonfinite"]
 
 
 def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[NavState, np.ndarray]:
@@ -50,3 +51,107 @@ def outage_cycle_period(filter_name: str, cycle_s: float) -> float:
     """The engine's ``cycle_period``: ``cycle_s`` (one GNSS period) times the
     filter's ``outage_cycle_factor`` (:mod:`insnav.registry`)."""
     return float(cycle_s) * filter_spec(filter_name).outage_cycle_factor
+
+
+def loose_initial_sigmas(sig0: np.ndarray, noise, layout: int) -> np.ndarray:
+    """1-sigma of the loose layouts' states: position, velocity, attitude
+    (``sig0``), accelerometer and gyro biases, and (21 states) scale factors."""
+    p0 = np.zeros(layout)
+    p0[:9] = sig0
+    p0[9:12] = noise.acc_bias_sigma
+    p0[12:15] = noise.gyro_bias_sigma
+    if layout == 21:
+        p0[15:18] = noise.acc_scale_sigma
+        p0[18:21] = noise.gyro_scale_sigma
+    return p0
+
+
+def init_vector(dataset, init: NavState) -> np.ndarray:
+    """The engines' ``init``: t0 [s], lat, lon [rad], h [m], v_n [m/s], roll, pitch, yaw [rad]."""
+    return np.array([dataset.t0, init.lat_deg * DEG, init.lon_deg * DEG, init.h_m, *init.v_n,
+                     init.roll_deg * DEG, init.pitch_deg * DEG, init.yaw_deg * DEG])
+
+
+def lever_arm(dataset, cfg: RunConfig) -> np.ndarray:
+    """IMU centre -> antenna, body FRD [m]: the config's if set, else the dataset's."""
+    return np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
+
+
+def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **extra) -> dict:
+    """The engine config every binder reads: lever arm, propagation interval,
+    outage cycle (the GNSS period, the median spacing of ``record_t``, unless
+    ``cfg.cycle_period_s``, times the filter's factor), gate, output
+    decimation, and the UT parameters of the sigma-point filters."""
+    cycle = cfg.cycle_period_s
+    if cycle is None:
+        rt = np.unique(np.asarray(record_t, float))
+        cycle = float(np.median(np.diff(rt))) if rt.size > 1 else 1.0
+    out = dict(lever_arm_b=lever_arm(dataset, cfg), propagation_interval=cfg.propagation_interval_s,
+               cycle_period=outage_cycle_period(cfg.filter, cycle), gate_chi2=cfg.gate_chi2,
+               output_decimation=int(cfg.output_decimation))
+    if cfg.filter not in ("ekf", "kf", "rdkf", "exact"):
+        out.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
+                   ut_kappa=(3.0 - layout) if cfg.ut_kappa is None else cfg.ut_kappa)
+    out.update(extra)
+    return out
+
+
+def tight_inputs_for(dataset, inputs=None, *, elevation_mask_deg: float, max_sats: int):
+    """The tight filters' GNSS input: ``inputs``, or the dataset's, or built
+    from its raw observations; at most MAX_SATS per epoch (best GDOP)."""
+    from ..earth import geodetic_to_ecef
+    from ..gnss.tight_inputs import MAX_SATS, limit_sats, tight_inputs_from_raw
+
+    if inputs is None:
+        inputs = getattr(dataset, "tight_inputs", None)
+    if inputs is None:
+        if getattr(dataset, "gnss_raw", None) is None:
+            raise ValueError(f"dataset {getattr(dataset, 'name', '')!r} has no raw GNSS data (gnss_raw); "
+                             "tight coupling needs pseudoranges (simulate a preset with [gnss_raw], or load "
+                             "RINEX + IMU files with insnav.io.rinex_dataset.load_rinex / "
+                             "`insnav run --format rinex`)")
+        s0 = dataset.initial
+        r0 = geodetic_to_ecef(s0.lat_deg * DEG, s0.lon_deg * DEG, s0.h_m)
+        inputs = tight_inputs_from_raw(dataset.gnss_raw, elevation_mask_deg=elevation_mask_deg,
+                                       max_sats=max_sats, approx_r_e=r0)
+    if inputs.n_sats().max(initial=0) > MAX_SATS:
+        inputs = limit_sats(inputs, MAX_SATS)
+    ep_t = np.asarray(inputs.epoch_t, float)
+    if ep_t.size > 1 and not np.all(np.diff(ep_t) > 0):
+        bad = int(np.argmax(~(np.diff(ep_t) > 0))) + 1
+        raise ValueError(f"GNSS epoch_t not strictly increasing at epoch {bad} (t = {ep_t[bad]:.3f} s)")
+    return inputs
+
+
+def initial_clock(inputs, dataset, cfg: RunConfig, init: NavState) -> tuple[float, float]:
+    """Receiver clock bias [m] and drift [m/s] from the first epoch with data,
+    at the initial antenna position and velocity."""
+    from .. import _core, earth
+
+    lat0, lon0 = init.lat_deg * DEG, init.lon_deg * DEG
+    rpy0 = np.array([init.roll_deg, init.pitch_deg, init.yaw_deg]) * DEG
+    C_en = earth.C_en(lat0, lon0)
+    C_nb = np.asarray(_core.rotation.dcm_from_euler(rpy0))
+    r_ant = earth.geodetic_to_ecef(lat0, lon0, init.h_m) + C_en @ (C_nb @ lever_arm(dataset, cfg))
+    v_ant = C_en @ init.v_n
+    for e in range(inputs.epoch_t.size):
+        a, b = inputs.epoch_start[e], inputs.epoch_start[e + 1]
+        if b <= a:
+            continue
+        s = inputs.sats[a:b]
+        d = s[:, 2:5] - r_ant
+        rng = np.linalg.norm(d, axis=1)
+        u = d / rng[:, None]
+        bias = np.nanmedian(s[:, 0] - (rng - s[:, 8]))
+        rate = s[:, 1] - (np.einsum("ij,ij->i", u, s[:, 5:8] - v_ant) - s[:, 9])
+        drift = np.nanmedian(rate) if np.any(np.isfinite(rate)) else 0.0
+        return float(bias), float(drift)
+    return 0.0, 0.0
+
+
+def raise_if_nonfinite(sol, name: str) -> None:
+    """A FloatingPointError naming the first output row where the solution left the finite numbers."""
+    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
+        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
+        raise FloatingPointError(f"{name}: the solution became non-finite at t={sol.t[bad]:.3f} s "
+                                 f"(row {bad}); check the IMU data and the noise model")

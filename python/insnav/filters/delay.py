@@ -37,7 +37,7 @@ from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
 from ..registry import filter_names
 from ..units import DEG, RAD2DEG
-from ._setup import imu_arrays, initial_state, outage_cycle_period
+from ._setup import engine_config, imu_arrays, init_vector, initial_state, loose_initial_sigmas, raise_if_nonfinite
 from .solution import GNSS_STATUS, Solution
 
 DELAY_FILTERS = tuple(n for n in filter_names("loose") if n in ("kf", "rdkf", "exact"))
@@ -118,23 +118,12 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
-    p0 = np.zeros(n)
-    p0[:9] = sig0
-    p0[9:12] = noise.acc_bias_sigma
-    p0[12:15] = noise.gyro_bias_sigma
-    if n == 21:
-        p0[15:18] = noise.acc_scale_sigma
-        p0[18:21] = noise.gyro_scale_sigma
-    P0 = np.diag(p0 ** 2)
-    lever = np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
+    P0 = np.diag(loose_initial_sigmas(sig0, noise, n) ** 2)
     tv_unique = np.unique(g.t_valid) if m else np.zeros(0)
     period = float(np.median(np.diff(tv_unique))) if len(tv_unique) > 1 else 1.0
-    cycle = cfg.cycle_period_s if cfg.cycle_period_s is not None else period
-    init_vec = np.array([dataset.t0, init.lat_deg * DEG, init.lon_deg * DEG, init.h_m, *init.v_n,
-                         init.roll_deg * DEG, init.pitch_deg * DEG, init.yaw_deg * DEG])
-    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s,
-                    cycle_period=outage_cycle_period(filter, cycle), gate_chi2=cfg.gate_chi2, use_position=cfg.use_position,
-                    use_velocity=cfg.use_velocity, output_decimation=int(cfg.output_decimation))
+    core_cfg = engine_config(dataset, cfg, tv_unique, n, use_position=cfg.use_position,
+                             use_velocity=cfg.use_velocity)
+    init_vec = init_vector(dataset, init)
     summary = dict(filter=filter, coupling="loose", layout=n, gnss_records=m)
     if filter == "kf":
         gnss13 = np.ascontiguousarray(np.delete(rec, 0, axis=1))  # t := t_arrival
@@ -174,9 +163,7 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
         warnings.warn(f"exact: {summary['refused_too_old']} GNSS record(s) arrived more than the history "
                       f"({summary['history_s']:.3g} s) after their time of validity and were not used",
                       RuntimeWarning, stacklevel=2)
-    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
-        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
-        raise FloatingPointError(f"{filter}: the solution became non-finite at t={sol.t[bad]:.3f} s (row {bad})")
+    raise_if_nonfinite(sol, filter)
     return sol
 
 

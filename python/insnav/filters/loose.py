@@ -13,7 +13,8 @@ from .. import _core
 from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
 from ..units import DEG, RAD2DEG
-from ._setup import imu_arrays, initial_state, outage_cycle_period
+from ._setup import (engine_config, imu_arrays, init_vector, initial_state, loose_initial_sigmas,
+                     raise_if_nonfinite)
 from .solution import Solution
 
 __all__ = ["run_loose"]
@@ -37,28 +38,10 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
-    p0 = np.zeros(n)
-    p0[:9] = sig0
-    p0[9:12] = noise.acc_bias_sigma
-    p0[12:15] = noise.gyro_bias_sigma
-    if n == 21:
-        p0[15:18] = noise.acc_scale_sigma
-        p0[18:21] = noise.gyro_scale_sigma
-    P0 = np.diag(p0 ** 2)
-    lever = np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
-    cycle = cfg.cycle_period_s
-    if cycle is None:
-        cycle = float(np.median(np.diff(gnss_t))) if len(gnss_t) > 1 else 1.0
-    init_vec = np.array([dataset.t0, init.lat_deg * DEG, init.lon_deg * DEG, init.h_m, *init.v_n,
-                         init.roll_deg * DEG, init.pitch_deg * DEG, init.yaw_deg * DEG])
-    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s,
-                    cycle_period=outage_cycle_period(cfg.filter, cycle), gate_chi2=cfg.gate_chi2,
-                    use_position=cfg.use_position, use_velocity=cfg.use_velocity,
-                    output_decimation=int(cfg.output_decimation),
-                    sigma_columns=9)  # Solution keeps the position, velocity and attitude sigmas only
-    if cfg.filter != "ekf":
-        core_cfg.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
-                        ut_kappa=(3.0 - n) if cfg.ut_kappa is None else cfg.ut_kappa)
+    P0 = np.diag(loose_initial_sigmas(sig0, noise, n) ** 2)
+    core_cfg = engine_config(dataset, cfg, gnss_t, n, use_position=cfg.use_position, use_velocity=cfg.use_velocity,
+                             sigma_columns=9)  # Solution keeps the position, velocity and attitude sigmas only
+    init_vec = init_vector(dataset, init)
     out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, np.zeros(12), noise.as_core_dict(),
                           core_cfg)
     # unit conversions in place (the arrays are ours), one column at a time:
@@ -80,8 +63,5 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                    summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n, updates=int(out["updates"]),
                                 rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
-    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
-        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
-        raise FloatingPointError(f"{cfg.filter}: the solution became non-finite at t={sol.t[bad]:.3f} s "
-                                 f"(row {bad}); check the IMU data and the noise model")
+    raise_if_nonfinite(sol, cfg.filter)
     return sol

@@ -33,14 +33,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import _core, earth
+from .. import _core
 from ..config import ImuNoise, RunConfig
 from ..gnss.clock import clock_model
-from ..gnss.tight_inputs import MAX_SATS, TightInputs, limit_sats, tight_inputs_from_raw
+from ..gnss.tight_inputs import MAX_SATS, TightInputs
 from ..registry import FILTERS, PARTICLE_OPTIONS
 from ..units import DEG, DEG_PER_H, RAD2DEG
-from ._setup import imu_arrays, initial_state, outage_cycle_period
-from .tight import TightSolution, _initial_clock
+from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
+                     tight_inputs_for)
+from .tight import TightSolution
 
 __all__ = ["DEFAULT_ALPHA", "PARTICLE_FILTERS", "PARTICLE_OPTIONS", "ParticleSolution", "run_tight_particle", "layout20_model"]
 
@@ -163,17 +164,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     if roughening is None:
         roughening = 0.2 if filt == "pf" else 0.0
     t, dth, dv = imu_arrays(dataset)
-    if inputs is None:
-        inputs = getattr(dataset, "tight_inputs", None)
-    if inputs is None:
-        if getattr(dataset, "gnss_raw", None) is None:
-            raise ValueError(f"dataset {getattr(dataset, 'name', '')!r} has no raw GNSS data (gnss_raw)")
-        s0 = dataset.initial
-        r0 = earth.geodetic_to_ecef(s0.lat_deg * DEG, s0.lon_deg * DEG, s0.h_m)
-        inputs = tight_inputs_from_raw(dataset.gnss_raw, elevation_mask_deg=elevation_mask_deg,
-                                       max_sats=max_sats, approx_r_e=r0)
-    if inputs.n_sats().max(initial=0) > MAX_SATS:
-        inputs = limit_sats(inputs, MAX_SATS)
+    inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
 
     rng = np.random.default_rng(cfg.init_seed)
     init, sig0 = initial_state(dataset, cfg, rng)
@@ -184,23 +175,11 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     model["clock_drift_psd"] = float(qd)
     p0 = np.concatenate([sig0, sig_sensor, np.asarray(init_sigma_clock, float)])
     P0 = np.diag(p0 ** 2)
-    lever = np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
-    lat0, lon0 = init.lat_deg * DEG, init.lon_deg * DEG
-    rpy0 = np.array([init.roll_deg, init.pitch_deg, init.yaw_deg]) * DEG
     if clock0 is None:
-        C_en = earth.C_en(lat0, lon0)
-        C_nb = np.asarray(_core.rotation.dcm_from_euler(rpy0))
-        r_ant = earth.geodetic_to_ecef(lat0, lon0, init.h_m) + C_en @ (C_nb @ lever)
-        clock0 = _initial_clock(inputs, r_ant, C_en @ init.v_n)
+        clock0 = initial_clock(inputs, dataset, cfg, init)
     ep_t = np.asarray(inputs.epoch_t, float)
-    cycle = cfg.cycle_period_s
-    if cycle is None:
-        cycle = float(np.median(np.diff(ep_t))) if ep_t.size > 1 else 1.0
-    init_vec = np.array([dataset.t0, lat0, lon0, init.h_m, *init.v_n, *rpy0])
-    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s, cycle_period=outage_cycle_period(filt, cycle),
-                    gate_chi2=cfg.gate_chi2, output_decimation=int(cfg.output_decimation),
-                    ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
-                    ut_kappa=(3.0 - 20) if cfg.ut_kappa is None else cfg.ut_kappa)
+    init_vec = init_vector(dataset, init)
+    core_cfg = engine_config(dataset, cfg, ep_t, 20)
     pcfg = dict(particles=int(particles), seed=int(seed), fading=bool(fading), rho=float(rho), beta=float(beta),
                 eta_max=float(eta_max), alpha=np.atleast_1d(np.asarray(alpha, float)),
                 fading_memory=str(fading_memory),
@@ -245,7 +224,5 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         warnings.warn(f"tight {filt}: at {out['divergences']} of {int(out['updates'])} updates no particle explained "
                       f"the measurements within chi2 {divergence_chi2:g} per row: the particle cloud lost the "
                       f"solution there (more particles, or the UPF)", RuntimeWarning, stacklevel=2)
-    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
-        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
-        raise FloatingPointError(f"tight {filt}: the solution became non-finite at t={sol.t[bad]:.3f} s (row {bad})")
+    raise_if_nonfinite(sol, f"tight {filt}")
     return sol

@@ -18,12 +18,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import _core, earth
+from .. import _core
 from ..config import ImuNoise, RunConfig
 from ..gnss.clock import clock_model
-from ..gnss.tight_inputs import MAX_SATS, TightInputs, limit_sats, tight_inputs_from_raw
-from ..units import DEG, RAD2DEG
-from ._setup import imu_arrays, initial_state, outage_cycle_period
+from ..gnss.tight_inputs import MAX_SATS, TightInputs
+from ..units import RAD2DEG
+from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
+                     tight_inputs_for)
 from .solution import Solution
 
 __all__ = ["TightSolution", "run_tight"]
@@ -45,23 +46,6 @@ class TightSolution(Solution):
     sigma_clock: np.ndarray = None
     rows: np.ndarray = None
     inputs: TightInputs | None = None
-
-
-def _initial_clock(inp: TightInputs, r_ant_e, v_ant_e) -> tuple[float, float]:
-    """Receiver clock bias/drift from the first epoch with data, at the initial antenna state."""
-    for e in range(inp.epoch_t.size):
-        a, b = inp.epoch_start[e], inp.epoch_start[e + 1]
-        if b <= a:
-            continue
-        s = inp.sats[a:b]
-        d = s[:, 2:5] - r_ant_e
-        rng = np.linalg.norm(d, axis=1)
-        u = d / rng[:, None]
-        bias = np.nanmedian(s[:, 0] - (rng - s[:, 8]))
-        rate = s[:, 1] - (np.einsum("ij,ij->i", u, s[:, 5:8] - v_ant_e) - s[:, 9])
-        drift = np.nanmedian(rate) if np.any(np.isfinite(rate)) else 0.0
-        return float(bias), float(drift)
-    return 0.0, 0.0
 
 
 def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | None = None,
@@ -92,20 +76,7 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     cfg.validate()
     t, dth, dv = imu_arrays(dataset)
 
-    if inputs is None:
-        inputs = getattr(dataset, "tight_inputs", None)
-    if inputs is None:
-        if getattr(dataset, "gnss_raw", None) is None:
-            raise ValueError(f"dataset {getattr(dataset, 'name', '')!r} has no raw GNSS data (gnss_raw); "
-                             "tight coupling needs pseudoranges (simulate a preset with [gnss_raw], or load "
-                             "RINEX + IMU files with insnav.io.rinex_dataset.load_rinex / "
-                             "`insnav run --format rinex`)")
-        s0 = dataset.initial
-        r0 = earth.geodetic_to_ecef(s0.lat_deg * DEG, s0.lon_deg * DEG, s0.h_m)
-        inputs = tight_inputs_from_raw(dataset.gnss_raw, elevation_mask_deg=elevation_mask_deg,
-                                       max_sats=max_sats, approx_r_e=r0)
-    if inputs.n_sats().max(initial=0) > MAX_SATS:
-        inputs = limit_sats(inputs, MAX_SATS)
+    inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
 
     rng = np.random.default_rng(cfg.init_seed)
     init, sig0 = initial_state(dataset, cfg, rng)
@@ -120,29 +91,11 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     p0[12:15] = noise.gyro_bias_sigma
     p0[15:17] = init_sigma_clock
     P0 = np.diag(p0 ** 2)
-    lever = np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
-    lat0, lon0 = init.lat_deg * DEG, init.lon_deg * DEG
-    rpy0 = np.array([init.roll_deg, init.pitch_deg, init.yaw_deg]) * DEG
     if clock0 is None:
-        C_en = earth.C_en(lat0, lon0)
-        C_nb = np.asarray(_core.rotation.dcm_from_euler(rpy0))
-        r_ant = earth.geodetic_to_ecef(lat0, lon0, init.h_m) + C_en @ (C_nb @ lever)
-        clock0 = _initial_clock(inputs, r_ant, C_en @ init.v_n)
+        clock0 = initial_clock(inputs, dataset, cfg, init)
     ep_t = np.asarray(inputs.epoch_t, float)
-    if ep_t.size > 1 and not np.all(np.diff(ep_t) > 0):
-        bad = int(np.argmax(~(np.diff(ep_t) > 0))) + 1
-        raise ValueError(f"GNSS epoch_t not strictly increasing at epoch {bad} (t = {ep_t[bad]:.3f} s)")
-    cycle = cfg.cycle_period_s
-    if cycle is None:
-        cycle = float(np.median(np.diff(ep_t))) if ep_t.size > 1 else 1.0
-    init_vec = np.array([dataset.t0, lat0, lon0, init.h_m, *init.v_n, *rpy0])
-    core_cfg = dict(lever_arm_b=lever, propagation_interval=cfg.propagation_interval_s,
-                    cycle_period=outage_cycle_period(cfg.filter, cycle), gate_chi2=cfg.gate_chi2,
-                    use_pseudorange=bool(use_pseudorange), use_rate=bool(use_rate),
-                    output_decimation=int(cfg.output_decimation))
-    if cfg.filter != "ekf":
-        core_cfg.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
-                        ut_kappa=(3.0 - 17) if cfg.ut_kappa is None else cfg.ut_kappa)
+    init_vec = init_vector(dataset, init)
+    core_cfg = engine_config(dataset, cfg, ep_t, 17, use_pseudorange=bool(use_pseudorange), use_rate=bool(use_rate))
     out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                           np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0, np.zeros(12),
                           np.asarray(clock0, float), model, core_cfg)
@@ -159,8 +112,5 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
                      clock_psd=(float(qb), float(qd))),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 15:17],
         rows=out["rows"], inputs=inputs)
-    if not (np.all(np.isfinite(sol.lat_deg)) and np.all(np.isfinite(sol.v_n))):
-        bad = int(np.argmax(~np.isfinite(sol.lat_deg) | ~np.isfinite(sol.v_n).any(axis=1)))
-        raise FloatingPointError(f"tight {cfg.filter}: the solution became non-finite at t={sol.t[bad]:.3f} s "
-                                 f"(row {bad})")
+    raise_if_nonfinite(sol, cfg.filter)
     return sol
