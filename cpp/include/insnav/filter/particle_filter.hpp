@@ -1,7 +1,8 @@
-// insnav/filter/particle_filter.hpp -- particle-filter building blocks
-// (deterministic random numbers, weight normalisation, effective sample size,
-// systematic resampling, the multi-interval RK4 step) and the bootstrap
-// particle filter that seed 004 (Shao et al. 2013) compares against.
+// insnav/filter/particle_filter.hpp -- the bootstrap particle filter that
+// seed 004 (Shao et al. 2013) compares against, and the settings and
+// diagnostics every particle filter shares (random.hpp: random numbers;
+// resampling.hpp: weights, resampling, roughening; macro_step.hpp: the
+// multi-interval RK4 step).
 //
 // Bootstrap PF (Gordon, Salmond, Smith 1993; seed 004 ref. [2]):
 //   propagate   every particle through the exact nonlinear error model
@@ -78,189 +79,14 @@
 #include "insnav/filter/error_model_linear.hpp"
 #include "insnav/filter/error_model_nonlinear.hpp"
 #include "insnav/filter/layout20.hpp"
+#include "insnav/filter/macro_step.hpp"
+#include "insnav/filter/random.hpp"
+#include "insnav/filter/resampling.hpp"
 #include "insnav/filter/sigma_points.hpp"
 #include "insnav/filter/types.hpp"
 
-#ifdef _OPENMP
-#include <omp.h>
-/// Loops over particles run in parallel when compiled with -fopenmp.
-#define INSNAV_PARALLEL_FOR _Pragma("omp parallel for schedule(static)")
-#else
-#define INSNAV_PARALLEL_FOR
-#endif
 
 namespace insnav {
-
-// --- deterministic random numbers --------------------------------------------
-
-inline std::uint64_t splitmix64(std::uint64_t& s) {
-  std::uint64_t z = (s += 0x9E3779B97F4A7C15ULL);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
-}
-
-/// xoshiro256** (Blackman & Vigna 2018) with Box-Muller normals.
-class Rng {
- public:
-  Rng() { seed(0, 0, 0, 0); }
-  /// A stream for (seed, cycle, particle, purpose): independent, reproducible.
-  void seed(std::uint64_t seed, std::uint64_t cycle, std::uint64_t particle, std::uint64_t purpose) {
-    std::uint64_t h = seed;
-    h ^= splitmix64(h) + cycle * 0xD1B54A32D192ED03ULL;
-    h ^= splitmix64(h) + particle * 0xABC98388FB8FAC03ULL;
-    h ^= splitmix64(h) + purpose * 0x8CB92BA72F3D8DD7ULL;
-    for (auto& w : s_) w = splitmix64(h);
-    have_spare_ = false;
-  }
-  std::uint64_t next() {
-    const std::uint64_t r = rotl(s_[1] * 5, 7) * 9;
-    const std::uint64_t t = s_[1] << 17;
-    s_[2] ^= s_[0];
-    s_[3] ^= s_[1];
-    s_[1] ^= s_[2];
-    s_[0] ^= s_[3];
-    s_[2] ^= t;
-    s_[3] = rotl(s_[3], 45);
-    return r;
-  }
-  /// Uniform on [0, 1) with 53 random bits.
-  double uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
-  double normal() {
-    if (have_spare_) {
-      have_spare_ = false;
-      return spare_;
-    }
-    double u1 = uniform();
-    while (u1 <= 0.0) u1 = uniform();
-    const double u2 = uniform();
-    const double r = std::sqrt(-2.0 * std::log(u1));
-    spare_ = r * std::sin(2.0 * M_PI * u2);
-    have_spare_ = true;
-    return r * std::cos(2.0 * M_PI * u2);
-  }
-  template <class V>
-  void fill_normal(V& v) {
-    for (int i = 0; i < v.size(); ++i) v[i] = normal();
-  }
-
- private:
-  static std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
-  std::uint64_t s_[4];
-  double spare_ = 0.0;
-  bool have_spare_ = false;
-};
-
-/// Stream purposes (any distinct constants).
-enum RngPurpose : std::uint64_t {
-  kRngInit = 1, kRngProcess = 2, kRngProposal = 3, kRngResample = 4, kRngJitter = 5, kRngTemper = 6
-};
-
-// --- weights -------------------------------------------------------------------
-
-/// Normalise log-weights into weights summing to 1 (log-sum-exp); returns
-/// false (and sets uniform weights) if every log-weight is -inf or NaN.
-inline bool normalize_log_weights(const double* logw, double* w, int n) {
-  double mx = -std::numeric_limits<double>::infinity();
-  for (int i = 0; i < n; ++i)
-    if (std::isfinite(logw[i])) mx = std::max(mx, logw[i]);
-  if (!std::isfinite(mx)) {
-    for (int i = 0; i < n; ++i) w[i] = 1.0 / n;
-    return false;
-  }
-  double s = 0.0;
-  for (int i = 0; i < n; ++i) {
-    w[i] = std::isfinite(logw[i]) ? std::exp(logw[i] - mx) : 0.0;
-    s += w[i];
-  }
-  for (int i = 0; i < n; ++i) w[i] /= s;
-  return true;
-}
-
-/// Effective sample size N_eff = 1 / sum w_i^2 of normalised weights.
-inline double effective_sample_size(const double* w, int n) {
-  double s = 0.0;
-  for (int i = 0; i < n; ++i) s += w[i] * w[i];
-  return s > 0.0 ? 1.0 / s : 0.0;
-}
-
-/// Systematic resampling (Kitagawa 1996): one uniform u0 in [0, 1/N), index
-/// of the points u0 + j/N in the cumulative weights.  O(N); idx has n entries.
-inline void systematic_resample(const double* w, int n, double u0_unit, int* idx) {
-  const double step = 1.0 / n;
-  double u = u0_unit * step, c = w[0];
-  int i = 0;
-  for (int j = 0; j < n; ++j) {
-    while (u > c && i < n - 1) c += w[++i];
-    idx[j] = i;
-    u += step;
-  }
-}
-
-// --- multi-interval RK4 step ------------------------------------------------------
-
-/// Collects engine intervals into one RK4 step of about `step` seconds (see the
-/// header comment).  Holds copies of the INS points (bounded array, no heap).
-template <class L>
-class MacroStep {
- public:
-  static constexpr int kMaxPoints = 256;
-  using Cov = StateCov<L>;
-
-  MacroStep(const ImuErrorModel& model, double step) : model_(model), step_(step) {}
-
-  void reset() { n_ = 0; t_ = 0.0; }
-  bool pending() const { return n_ > 0; }
-  double step() const { return step_; }
-
-  /// Add one interval; true when a step is ready (then call prepare()).
-  bool add(const InsInterval& iv) {
-    if (!(iv.dt > 0.0)) return false;
-    if (n_ == 0) start_ = iv.start;
-    pts_[n_] = iv.mid;
-    tp_[n_++] = t_ + 0.5 * iv.dt;
-    t_ += iv.dt;
-    pts_[n_] = iv.end;
-    tp_[n_++] = t_;
-    return step_ <= 0.0 || t_ >= step_ - 1e-9 || n_ + 2 > kMaxPoints;
-  }
-
-  /// Make the pending step ready: p0, ph, p1, dt, Phi, Q_d.  Clears the buffer.
-  void prepare() {
-    int mid = 0;
-    double best = std::numeric_limits<double>::infinity();
-    for (int i = 0; i < n_ - 1; ++i) {
-      const double d = std::abs(tp_[i] - 0.5 * t_);
-      if (d < best) {
-        best = d;
-        mid = i;
-      }
-    }
-    a_ = start_;
-    m_ = pts_[mid];
-    b_ = pts_[n_ - 1];
-    dt = t_;
-    p0.set(a_, model_);
-    ph.set(m_, model_);
-    p1.set(b_, model_);
-    phi = transition<L>(linear_F<L>(m_, model_), dt);
-    qd = discrete_Q<L>(phi, continuous_GQG<L>(m_, model_), dt);
-    reset();
-  }
-
-  NonlinearErrorPoint p0, ph, p1;
-  double dt = 0.0;
-  Cov phi = Cov::Identity(), qd = Cov::Zero();
-
- private:
-  ImuErrorModel model_;
-  double step_;
-  InsPoint start_, a_, m_, b_;
-  InsPoint pts_[kMaxPoints];
-  double tp_[kMaxPoints] = {};
-  int n_ = 0;
-  double t_ = 0.0;
-};
 
 /// Per-epoch diagnostics a particle filter can write (caller-owned, optional).
 struct ParticleTrace {
@@ -292,36 +118,6 @@ struct ParticleParams {
   double divergence_chi2 = 25.0;    // PF: divergence when no particle explains z within this chi^2 per row
 };
 
-/// Unweighted mean and covariance of a particle cloud (the shape of the
-/// roughening kernel: unlike the weighted covariance it does not collapse
-/// when one particle takes all the weight).
-template <class L>
-void cloud_covariance(const std::vector<StateVec<L>>& xs, int n, StateCov<L>& P) {
-  StateVec<L> m = StateVec<L>::Zero();
-  for (int i = 0; i < n; ++i) m += xs[i];
-  m /= n;
-  P.setZero();
-  for (int i = 0; i < n; ++i) {
-    const StateVec<L> d = xs[i] - m;
-    P.noalias() += d * d.transpose();
-  }
-  P /= std::max(n - 1, 1);
-}
-
-// --- weighted estimate ----------------------------------------------------------
-
-template <class L>
-void weighted_mean_cov(const std::vector<StateVec<L>>& xs, const double* w, int n, StateVec<L>& x,
-                       StateCov<L>& P) {
-  x.setZero();
-  for (int i = 0; i < n; ++i) x.noalias() += w[i] * xs[i];
-  P.setZero();
-  for (int i = 0; i < n; ++i) {
-    const StateVec<L> d = xs[i] - x;
-    P.noalias() += w[i] * d * d.transpose();
-  }
-}
-
 /// Innovation gate / NIS of the estimate: gamma = residual - h(x),
 /// S = H P H^T + R.  Returns NaN when S is not positive definite.
 template <class L, class Meas>
@@ -339,6 +135,29 @@ double estimate_nis(const Meas& meas, const StateVec<L>& x, const StateCov<L>& P
   if (llt.info() != Eigen::Success) return std::numeric_limits<double>::quiet_NaN();
   llt.matrixL().solveInPlace(g);
   return g.squaredNorm();
+}
+
+/// The start of every particle filter's update: the rows, the NIS of the
+/// estimate against the gate (gate_chi2 <= 0: no gate), and R positive
+/// definite (factorised into lltR).  False when the update stops here; `res`
+/// says why (no rows, rejected by the gate, or a Cholesky repair count of 1).
+template <class L, class Meas, class Llt>
+bool update_admitted(const Meas& meas, const StateVec<L>& x, const StateCov<L>& P, double gate_chi2, Llt& lltR,
+                     UpdateResult& res) {
+  const LinearMeasurement<L>& lin = meas.linear();
+  res.rows = lin.rows();
+  if (res.rows == 0) return false;
+  res.nis = estimate_nis<L>(meas, x, P);
+  if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
+    res.rejected_by_gate = true;
+    return false;
+  }
+  lltR.compute(lin.R);
+  if (lltR.info() != Eigen::Success) {
+    res.cholesky_repairs = 1;
+    return false;
+  }
+  return true;
 }
 
 // --- bootstrap particle filter -------------------------------------------------------
@@ -434,28 +253,18 @@ class ParticleFilter {
   UpdateResult update(const Meas& meas, double gate_chi2) {
     const LinearMeasurement<L>& lin = meas.linear();
     UpdateResult res;
-    const int m = lin.rows();
-    res.rows = m;
-    if (m == 0) return res;
-    res.nis = estimate_nis<L>(meas, x_, P_);
-    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
-      res.rejected_by_gate = true;
+    if (!update_admitted<L>(meas, x_, P_, gate_chi2, lltR_, res)) {
+      repairs_ += res.cholesky_repairs;
       return res;
     }
-    Dyn R = lin.R;
-    Eigen::LLT<Dyn> lltR(R);
-    if (lltR.info() != Eigen::Success) {
-      res.cholesky_repairs = 1;
-      ++repairs_;
-      return res;
-    }
+    const int m = res.rows;
     const int n = prm_.particles;
     double left = 1.0;
     for (int stage = 0; stage < std::max(prm_.temper_stages, 1) && left > 0.0; ++stage) {
       INSNAV_PARALLEL_FOR
       for (int i = 0; i < n; ++i) {
         RowVec e = lin.residual - meas.predicted_residual(xs_[i]);
-        lltR.matrixL().solveInPlace(e);
+        lltR_.matrixL().solveInPlace(e);
         const double ll = -0.5 * e.squaredNorm();
         ll_[i] = std::isfinite(ll) ? ll : -std::numeric_limits<double>::infinity();
       }
@@ -542,19 +351,9 @@ class ParticleFilter {
       systematic_resample(w_.data(), n, rng.uniform(), idx_.data());
       for (int j = 0; j < n; ++j) xs_tmp_[j] = xs_[idx_[j]];
       xs_.swap(xs_tmp_);
-      if (prm_.roughening > 0.0) {
-        repairs_ += cholesky_with_repair<kN>(Pcloud_, sqrtP_);
-        sqrtP_ *= prm_.roughening;
-        const std::uint64_t stream = cycle_ * 16 + stage_rng_;
-    INSNAV_PARALLEL_FOR
-        for (int i = 0; i < n; ++i) {
-          Rng r;
-          r.seed(prm_.seed, stream, i, kRngJitter);
-          Vec xi;
-          r.fill_normal(xi);
-          xs_[i].noalias() += sqrtP_ * xi;
-        }
-      }
+      if (prm_.roughening > 0.0)
+        repairs_ += roughen<L>(n, Pcloud_, prm_.roughening, prm_.seed, cycle_ * 16 + stage_rng_,
+                               [&](int i) -> Vec& { return xs_[i]; });
       for (int i = 0; i < n; ++i) {
         logw_[i] = 0.0;
         w_[i] = 1.0 / n;
@@ -579,7 +378,8 @@ class ParticleFilter {
   std::vector<int> idx_;
   Vec x_ = Vec::Zero();
   Cov P_ = Cov::Identity();
-  Cov Q_cycle_ = Cov::Zero(), sqrtQ_ = Cov::Zero(), sqrtP_ = Cov::Zero(), work_ = Cov::Zero();
+  Cov Q_cycle_ = Cov::Zero(), sqrtQ_ = Cov::Zero(), work_ = Cov::Zero();
+  Eigen::LLT<Dyn> lltR_{Dyn(0, 0)};
   ParticleTrace* trace_ = nullptr;
   std::uint64_t cycle_ = 0;
   int steps_ = 0;

@@ -467,21 +467,9 @@ class Upf {
 
   template <class Meas>
   UpdateResult update(const Meas& meas, double gate_chi2) {
-    const LinearMeasurement<L>& lin = meas.linear();
     UpdateResult res;
-    const int m = lin.rows();
-    res.rows = m;
-    if (m == 0) return res;
-    res.nis = estimate_nis<L>(meas, x_, P_);
-    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
-      res.rejected_by_gate = true;
-      return res;
-    }
-    Dyn R = lin.R;
-    Eigen::LLT<Dyn> lltR(R);
-    if (lltR.info() != Eigen::Success) {
-      res.cholesky_repairs = 1;
-      ++repairs_;
+    if (!update_admitted<L>(meas, x_, P_, gate_chi2, lltR_, res)) {
+      repairs_ += res.cholesky_repairs;
       return res;
     }
     const int n = pp_.particles;
@@ -599,15 +587,7 @@ class Upf {
       if (pp_.roughening > 0.0) {
         for (int i = 0; i < n; ++i) means_[i] = ps_[i].x;
         cloud_covariance<L>(means_, n, Pcloud_);
-        repairs_ += cholesky_with_repair<kN>(Pcloud_, sqrtP_);
-        sqrtP_ *= pp_.roughening;
-        for (int i = 0; i < n; ++i) {
-          Rng r;
-          r.seed(pp_.seed, cycle_, i, kRngJitter);
-          Vec xi;
-          r.fill_normal(xi);
-          ps_[i].x.noalias() += sqrtP_ * xi;
-        }
+        repairs_ += roughen<L>(n, Pcloud_, pp_.roughening, pp_.seed, cycle_, [&](int i) -> Vec& { return ps_[i].x; });
       }
       for (int i = 0; i < n; ++i) {
         logw_[i] = 0.0;
@@ -631,7 +611,8 @@ class Upf {
   std::vector<double> logw_, w_, c_, etamax_;
   std::vector<int> idx_, rep_;
   Vec x_ = Vec::Zero(), d_ = Vec::Zero();
-  Cov P_ = Cov::Identity(), Q_ = Cov::Zero(), work_ = Cov::Zero(), sqrtP_ = Cov::Zero();
+  Cov P_ = Cov::Identity(), Q_ = Cov::Zero(), work_ = Cov::Zero();
+  Eigen::LLT<Dyn> lltR_{Dyn(0, 0)};
   ParticleTrace* trace_ = nullptr;
   std::uint64_t cycle_ = 0;
   int repairs_ = 0, resamples_ = 0;
