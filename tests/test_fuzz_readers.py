@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 import insnav
 from insnav.config import ConfigError, config_from_dict
 from insnav.data.dataset import load_dataset
+from conftest import SHARED_DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 from insnav.gnss import RinexError, read_rinex_nav, read_rinex_obs
 from insnav.io import kfgins
 from insnav.sim.scenario import ScenarioError, load_scenario, resolve_raw
@@ -157,7 +158,7 @@ def test_fuzz_kfgins_yaml(tmp_path_factory, ops):
         expect_reader_error(exc, "kf-gins.yaml")
 
 
-RINEX_OBS = Path(__file__).parents[2] / "shared" / "data" / "rtklibexplorer_walk_0827" / "rinex_derived"
+RINEX_OBS = SHARED_DATA / "rtklibexplorer_walk_0827" / "rinex_derived"
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from insnav.gnss.ephemeris import (
 from insnav.gnss.gpstime import gps_seconds_from_calendar, week_tow
 from insnav.gnss.sp3 import read_rinex_clk, read_sp3
 
-DATA = Path(__file__).parents[2] / "shared" / "data"
+from conftest import SHARED_DATA as DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 EPH = DATA / "ephemeris_sp3_2021-118"
 
 
@@ -20,7 +20,7 @@ EPH = DATA / "ephemeris_sp3_2021-118"
 def brdc():
     p = EPH / "brdc1180.21n"
     if not p.exists():
-        pytest.skip(f"shared data not available: {p} (expected ../shared/data beside the repo)")
+        pytest.skip(f"shared data not available: {p} (set INSNAV_SHARED_DATA or put ../shared/data beside the repo)")
     return read_rinex_nav(p)
 
 

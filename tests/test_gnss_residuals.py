@@ -8,14 +8,14 @@ from insnav.gnss import read_rinex_nav, read_rinex_obs
 from insnav.gnss.gpstime import gps_seconds_from_week_tow
 from insnav.gnss.measurements import observation_residuals, read_rtklib_pos
 
-DATA = Path(__file__).parents[2] / "shared" / "data"
+from conftest import SHARED_DATA as DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 WALK = DATA / "rtklibexplorer_walk_0827"
 SPIRENT = DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
 
 
 def need(p):
     if not p.exists():
-        pytest.skip(f"shared data not available: {p} (expected ../shared/data beside the repo)")
+        pytest.skip(f"shared data not available: {p} (set INSNAV_SHARED_DATA or put ../shared/data beside the repo)")
     return p
 
 

@@ -8,13 +8,13 @@ from insnav.gnss import RinexError, read_rinex_nav, read_rinex_obs
 from insnav.gnss.gpstime import gps_seconds_from_calendar, week_tow
 from insnav.gnss.sp3 import read_rinex_clk, read_sp3
 
-DATA = Path(__file__).parents[2] / "shared" / "data"
+from conftest import SHARED_DATA as DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 
 
 def need(*parts):
     p = DATA.joinpath(*parts)
     if not p.exists():
-        pytest.skip(f"shared data not available: {p} (expected ../shared/data beside the repo)")
+        pytest.skip(f"shared data not available: {p} (set INSNAV_SHARED_DATA or put ../shared/data beside the repo)")
     return p
 
 
