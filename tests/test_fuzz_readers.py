@@ -14,7 +14,6 @@ Fixed budget (``max_examples``) so the suite stays fast; the long run is
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -1,5 +1,4 @@
 """Broadcast ephemeris vs precise products, analytic derivatives, Constellation."""
-from pathlib import Path
 
 import numpy as np
 import pytest

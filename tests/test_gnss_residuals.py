@@ -1,5 +1,4 @@
 """Pseudorange / Doppler residuals on real (rtklibexplorer) and simulator (Spirent) data."""
-from pathlib import Path
 
 import numpy as np
 import pytest

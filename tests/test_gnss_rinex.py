@@ -1,5 +1,4 @@
 """RINEX / SP3 / CLK readers: real files and malformed temp files."""
-from pathlib import Path
 
 import numpy as np
 import pytest
