@@ -60,7 +60,7 @@ DURATION_S, IMU_HZ, OUTAGE = 60.0, 200.0, (30.0, 40.0)
 
 # the solution CSV header as documented in docs/formats.md and `insnav run --help`
 SOLUTION_HEADER = (
-    "t,lat_deg,lon_deg,h_m,vn,ve,vd,roll_deg,pitch_deg,yaw_deg,"
+    "t_s,lat_deg,lon_deg,h_m,vn_mps,ve_mps,vd_mps,roll_deg,pitch_deg,yaw_deg,"
     "sigma_n_m,sigma_e_m,sigma_d_m,sigma_vn_mps,sigma_ve_mps,sigma_vd_mps,"
     "sigma_roll_deg,sigma_pitch_deg,sigma_yaw_deg,"
     "acc_bias_x_mps2,acc_bias_y_mps2,acc_bias_z_mps2,gyro_bias_x_dph,gyro_bias_y_dph,gyro_bias_z_dph,"
@@ -131,7 +131,7 @@ def _horizontal_error_m(sol_csv: Path, truth_csv: Path) -> np.ndarray:
     WGS-84 radii at the rows with the same time (independent of insnav.analysis)."""
     hs, s = _csv(sol_csv)
     ht, t = _csv(truth_csv)
-    ks = np.rint(s[:, hs.index("t")] * IMU_HZ).astype(int)
+    ks = np.rint(s[:, hs.index("t_s")] * IMU_HZ).astype(int)
     kt = np.rint(t[:, ht.index("t_s")] * IMU_HZ).astype(int)
     common, i_s, i_t = np.intersect1d(ks, kt, return_indices=True)
     assert len(common) == len(ks)  # truth at every solution time
@@ -373,8 +373,8 @@ def test_missing_files_and_directories(dataset, solution, work):
 def test_bad_values_on_the_command_line(solution, dataset):
     _user_error(["evaluate", solution[0], dataset[0], "--outages", "30-40"], "--outages", "30-40")
     _user_error(["evaluate", solution[0], dataset[0], "--outages", "40:30"], "--outages", "40:30")
-    # a solution where a truth is expected: the header check names the file and line 1
-    _user_error(["evaluate", dataset[0] / "truth.csv", dataset[0]], str(dataset[0] / "truth.csv") + ":1")
+    # a file that is not a solution: the header check names the file, line 1 and the missing columns
+    _user_error(["evaluate", dataset[0] / "imu.csv", dataset[0]], str(dataset[0] / "imu.csv") + ":1", "lat_deg")
     _user_error(["bench", "--filters", "upf"], "upf", "ekf, rbukf, ukf")
     _user_error(["bench", "--repeats", "0"], "--repeats")
     _user_error(["compare", "seed001-low", "--runs", "1", "--delay-p", "0.7;0.3"], "--delay-p")

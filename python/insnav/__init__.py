@@ -29,6 +29,7 @@ _LAZY = {
     "Dataset": "insnav.data.dataset",
     "run": "insnav.filters",
     "Solution": "insnav.filters.solution",
+    "load_solution": "insnav.filters.solution",
     "RunConfig": "insnav.config",
     "evaluate": "insnav.analysis.evaluate",
     "montecarlo": "insnav.analysis.montecarlo",

@@ -34,16 +34,9 @@ class _Sol:
 
 
 def _read_solution(path):
-    from ..data.dataset import read_csv
-    from ..filters.solution import Solution
+    from ..filters.solution import load_solution
 
-    a = read_csv(path, Solution.COLUMNS)
-    s = _Sol()
-    s.t, s.lat_deg, s.lon_deg, s.h_m = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
-    s.v_n = a[:, 4:7]
-    s.roll_deg, s.pitch_deg, s.yaw_deg = a[:, 7], a[:, 8], a[:, 9]
-    s.sigma_pos_n_m, s.sigma_vel_n_mps, s.sigma_att_deg = a[:, 10:13], a[:, 13:16], a[:, 16:19]
-    return s
+    return load_solution(path)
 
 
 def _read_truth(path, quality=None):

@@ -51,7 +51,10 @@ def add_run_parser(sub) -> None:
                    "column; default IMU.tag)")
     p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
-    p.add_argument("--out", required=True, help="solution CSV to write")
+    p.add_argument("--out", required=True,
+                   help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
+                        "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, "
+                        "innovation) and <out>.config.toml (the run's configuration)")
     p.add_argument("--allow-free-inertial", action="store_true",
                    help="accept a run that used no GNSS update, or had more than 20 %% of them rejected by the "
                         "innovation gate (otherwise an error: wrong units, time bases or sigmas are the usual cause)")
@@ -117,6 +120,10 @@ def cmd_run(args) -> int:
     out = Path(args.out)
     if out.is_dir():  # fail before the run, not after it
         raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'solution.csv'}")
+    from ..filters.solution import FORMATS
+
+    if out.suffix.lower() not in FORMATS:
+        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
     rinex_opts = None
     try:
         if args.format == "rinex":
@@ -161,7 +168,10 @@ def cmd_run(args) -> int:
             raise UserError(f"no GNSS update was used ({records} records, {dropped} dropped): the run is free "
                             "inertial; check the GNSS time base, sigmas and units (--allow-free-inertial to "
                             "accept it)")
-    sol.save_csv(out)
+    from ..filters.solution import write_innovations
+
+    sol.save(out)
+    write_innovations(sol, out)
     cfg.filter = sol.summary.get("filter", cfg.filter)
     text = resolved_config_toml(cfg)
     if rinex_opts is not None:

@@ -85,7 +85,7 @@ class Trajectory:
     yaw_deg: np.ndarray
 
     #: fixed column names of :meth:`to_dataframe` and CSV output
-    COLUMNS = ("t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg")
+    COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg")
 
     def __len__(self) -> int:
         return len(self.t)

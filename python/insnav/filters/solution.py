@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from ..units import RAD2DEG
 
-__all__ = ["RecordStatus", "GNSS_STATUS", "Solution"]
+__all__ = ["RecordStatus", "GNSS_STATUS", "Solution", "load_solution", "save_solution", "write_innovations",
+           "read_innovations", "innovations_path", "INNOVATION_COLUMNS"]
 
 
 class RecordStatus(enum.IntEnum):
@@ -76,7 +78,7 @@ class Solution:
     gnss_status: np.ndarray
     summary: dict = field(default_factory=dict)
 
-    COLUMNS = ("t", "lat_deg", "lon_deg", "h_m", "vn", "ve", "vd", "roll_deg", "pitch_deg", "yaw_deg",
+    COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg",
                "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps",
                "sigma_roll_deg", "sigma_pitch_deg", "sigma_yaw_deg",
                "acc_bias_x_mps2", "acc_bias_y_mps2", "acc_bias_z_mps2",
@@ -96,19 +98,213 @@ class Solution:
                                 self.acc_scale * 1e6, self.gyro_scale * 1e6])
 
     def to_dataframe(self):
-        """A pandas DataFrame with the fixed :attr:`COLUMNS` (pandas is optional)."""
-        import pandas as pd
-
+        """A pandas DataFrame with the :attr:`COLUMNS` (pandas is optional: ``pip install insnav[pandas]``)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("Solution.to_dataframe needs pandas: pip install 'insnav[pandas]'") from None
         return pd.DataFrame(self.to_array(), columns=list(self.COLUMNS))
 
-    def save_csv(self, path) -> None:
-        """Write the solution CSV atomically (a temp file renamed into place)."""
-        from .._atomic import atomic_write_text
+    def save(self, path) -> Path:
+        """Write the solution atomically (a temp file renamed into place); the
+        suffix chooses the format: ``.csv`` (text, :attr:`COLUMNS`), ``.npz``
+        (numpy, one array per column, exact) or ``.parquet`` (pyarrow, exact).
+        :func:`load_solution` reads all three."""
+        return save_solution(self, path)
 
-        header = ",".join(self.COLUMNS)
-        import io
+    def save_csv(self, path) -> Path:
+        """Write the solution CSV atomically (see :meth:`save`)."""
+        return _save_csv(self, Path(path))
 
+
+#: old (unit-less) column names still accepted on reading
+LEGACY_COLUMNS = {"t": "t_s", "vn": "vn_mps", "ve": "ve_mps", "vd": "vd_mps"}
+#: the CSV's number formats, per column (7 significant digits of position: 0.01 mm)
+_CSV_FMT = ["%.6f"] + ["%.10f"] * 2 + ["%.5f"] * 28
+FORMATS = (".csv", ".npz", ".parquet")
+
+
+def _save_csv(sol: Solution, path: Path) -> Path:
+    import io
+
+    from .._atomic import atomic_write_text
+
+    buf = io.StringIO()
+    np.savetxt(buf, sol.to_array(), delimiter=",", header=",".join(sol.COLUMNS), comments="", fmt=_CSV_FMT)
+    return atomic_write_text(path, buf.getvalue())
+
+
+def _atomic_binary(path: Path, write) -> Path:
+    """Write through ``write(tmp_path)`` to a temp file beside ``path``, then rename."""
+    import os
+    import tempfile
+
+    from .._atomic import chmod_like_new
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        chmod_like_new(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _parquet():
+    try:
+        import pyarrow
+        import pyarrow.parquet
+    except ImportError:
+        raise ImportError("Parquet needs pyarrow: pip install 'insnav[parquet]' (or write .csv / .npz)") from None
+    return pyarrow
+
+
+def save_solution(sol: Solution, path) -> Path:
+    """:meth:`Solution.save`."""
+    path = Path(path)
+    fmt = path.suffix.lower()
+    if fmt == ".csv":
+        return _save_csv(sol, path)
+    cols = dict(zip(sol.COLUMNS, sol.to_array().T))
+    if fmt == ".npz":
+        return _atomic_binary(path, lambda tmp: np.savez(tmp, **{k: np.ascontiguousarray(v) for k, v in cols.items()}))
+    if fmt == ".parquet":
+        pa = _parquet()
+        table = pa.table({k: pa.array(v) for k, v in cols.items()})
+        return _atomic_binary(path, lambda tmp: pa.parquet.write_table(table, tmp))
+    raise ValueError(f"{path}: unknown solution format {path.suffix!r}; use one of {', '.join(FORMATS)}")
+
+
+def _columns_from(path: Path) -> dict:
+    """column name -> array of a saved solution (legacy names mapped)."""
+    fmt = path.suffix.lower()
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such solution file")
+    if fmt == ".npz":
+        with np.load(path, allow_pickle=False) as z:
+            cols = {k: np.asarray(z[k], float) for k in z.files}
+    elif fmt == ".parquet":
+        pa = _parquet()
+        t = pa.parquet.read_table(path)
+        cols = {k: t.column(k).to_numpy().astype(float) for k in t.column_names}
+    else:
+        from ..data.dataset import parse_numeric_text
+
+        text = path.read_text(encoding="ascii", errors="replace")
+        nl = text.find("\n")
+        header = [h.strip() for h in (text if nl < 0 else text[:nl]).strip().split(",")]
+        a = parse_numeric_text("" if nl < 0 else text[nl + 1:], len(header), str(path), first_line=2)
+        cols = dict(zip(header, a.T))
+    cols = {LEGACY_COLUMNS.get(k, k): v for k, v in cols.items()}
+    need = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg")
+    missing = [c for c in need if c not in cols]
+    if missing:
+        raise ValueError(f"{path}:1: not an insnav solution: columns {', '.join(missing)} missing "
+                         f"(expected {','.join(Solution.COLUMNS)})")
+    return cols
+
+
+def load_solution(path) -> Solution:
+    """Read a solution written by ``insnav run`` or :meth:`Solution.save`
+    (``.csv``, ``.npz``, ``.parquet``; old unit-less CSV names accepted).
+
+    Columns absent from the file (sigmas, biases, scale factors) come back as
+    NaN.  The innovations sidecar ``<path>.innovations.csv``, when present,
+    fills ``gnss_t``, ``innovation``, ``nis`` and ``gnss_status``.
+    """
+    path = Path(path)
+    c = _columns_from(path)
+    n = len(c["t_s"])
+
+    def col(*names, scale=1.0):
+        return np.column_stack([c[k] * scale if k in c else np.full(n, np.nan) for k in names]) if len(names) > 1 \
+            else (c[names[0]] * scale if names[0] in c else np.full(n, np.nan))
+
+    from ..units import DEG_PER_H
+
+    sol = Solution(
+        t=col("t_s"), lat_deg=col("lat_deg"), lon_deg=col("lon_deg"), h_m=col("h_m"),
+        v_n=col("vn_mps", "ve_mps", "vd_mps"), roll_deg=col("roll_deg"), pitch_deg=col("pitch_deg"),
+        yaw_deg=col("yaw_deg"), sigma_pos_n_m=col("sigma_n_m", "sigma_e_m", "sigma_d_m"),
+        sigma_vel_n_mps=col("sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps"),
+        sigma_att_deg=col("sigma_roll_deg", "sigma_pitch_deg", "sigma_yaw_deg"),
+        acc_bias_mps2=col("acc_bias_x_mps2", "acc_bias_y_mps2", "acc_bias_z_mps2"),
+        gyro_bias_rps=col("gyro_bias_x_dph", "gyro_bias_y_dph", "gyro_bias_z_dph", scale=DEG_PER_H),
+        acc_scale=col("acc_scale_x_ppm", "acc_scale_y_ppm", "acc_scale_z_ppm", scale=1e-6),
+        gyro_scale=col("gyro_scale_x_ppm", "gyro_scale_y_ppm", "gyro_scale_z_ppm", scale=1e-6),
+        gnss_t=np.zeros(0), innovation=np.zeros((0, 6)), nis=np.zeros(0), gnss_status=np.zeros(0, np.int8),
+        summary={"source": str(path)})
+    side = innovations_path(path)
+    if side.is_file():
+        inn = read_innovations(side)
+        sol.gnss_t, sol.nis, sol.gnss_status = inn["t_s"], inn["nis"], inn["status"].astype(np.int8)
+        sol.innovation = inn["innovation"]
+    return sol
+
+
+# --- innovations sidecar --------------------------------------------------------
+
+#: the sidecar's columns: per GNSS record (loose: fix; tight: epoch)
+INNOVATION_COLUMNS = ("t_s", "status", "applied", "nis", "rows", "dn_m", "de_m", "dd_m", "dvn_mps", "dve_mps",
+                      "dvd_mps")
+
+
+def innovations_path(solution_path) -> Path:
+    p = Path(solution_path)
+    return p.with_name(p.name + ".innovations.csv")
+
+
+def write_innovations(sol: Solution, solution_path) -> Path:
+    """Write ``<solution>.innovations.csv``: per GNSS record its time of
+    validity [s], status code (:class:`RecordStatus`), applied (1/0), NIS
+    (innovation squared in the metric of its predicted covariance), measurement
+    rows, and the loose innovation INS minus GNSS (N, E, D position [m],
+    velocity [m/s]; empty for a tight solution, whose per-satellite residuals
+    go to ``<solution>.residuals.csv``)."""
+    import io
+
+    from .._atomic import atomic_write_text
+
+    m = len(sol.gnss_t)
+    st = np.asarray(sol.gnss_status, int)
+    inn = np.asarray(sol.innovation, float)
+    loose = inn.ndim == 2 and inn.shape == (m, 6)
+    rows = getattr(sol, "rows", None)
+    if rows is None:
+        rows = np.isfinite(inn).sum(axis=1) if loose else np.zeros(m, int)
+    body = np.column_stack([sol.gnss_t, st, st == RecordStatus.APPLIED, sol.nis, rows,
+                            inn if loose else np.full((m, 6), np.nan)])
+    buf = io.StringIO()
+    np.savetxt(buf, body, delimiter=",", header=",".join(INNOVATION_COLUMNS), comments="",
+               fmt=["%.6f", "%d", "%d", "%.6g", "%d"] + ["%.6g"] * 6)
+    out = atomic_write_text(innovations_path(solution_path), buf.getvalue().replace("nan", ""))
+    inputs = getattr(sol, "inputs", None)
+    if inputs is not None and not loose and inn.ndim == 2 and inn.shape[1] == 2:
+        ep = np.repeat(np.arange(len(inputs.epoch_t)), np.diff(inputs.epoch_start))
+        res = np.column_stack([inputs.epoch_t[ep], inputs.prn, inputs.elevation_deg, inn])
         buf = io.StringIO()
-        np.savetxt(buf, self.to_array(), delimiter=",", header=header, comments="",
-                   fmt=["%.6f"] + ["%.10f"] * 2 + ["%.5f"] * 28)
-        atomic_write_text(path, buf.getvalue())
+        np.savetxt(buf, res, delimiter=",", header="t_s,prn,elevation_deg,pseudorange_residual_m,rate_residual_mps",
+                   comments="", fmt=["%.6f", "%d", "%.3f", "%.6g", "%.6g"])
+        p = Path(solution_path)
+        atomic_write_text(p.with_name(p.name + ".residuals.csv"), buf.getvalue().replace("nan", ""))
+    return out
+
+
+def read_innovations(path) -> dict:
+    """The arrays of an innovations sidecar (empty cells: NaN)."""
+    path = Path(path)
+    text = path.read_text(encoding="ascii", errors="replace")
+    nl = text.find("\n")
+    header = tuple(h.strip() for h in text[:nl].split(","))
+    if header != INNOVATION_COLUMNS:
+        raise ValueError(f"{path}:1: unexpected header; expected {','.join(INNOVATION_COLUMNS)}")
+    body = "\n".join(",".join(x if x.strip() else "nan" for x in ln.split(",")) for ln in text[nl + 1:].splitlines())
+    from ..data.dataset import parse_numeric_text
+
+    a = parse_numeric_text(body, len(INNOVATION_COLUMNS), str(path), first_line=2)
+    return dict(t_s=a[:, 0], status=a[:, 1].astype(int), applied=a[:, 2] > 0, nis=a[:, 3], rows=a[:, 4].astype(int),
+                innovation=a[:, 5:11])

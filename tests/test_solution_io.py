@@ -1,0 +1,93 @@
+"""Saved solutions: CSV / npz / Parquet round trips through load_solution,
+the innovations sidecar, old column names, and clear errors."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+import insnav
+from insnav.filters.solution import (INNOVATION_COLUMNS, RecordStatus, innovations_path, load_solution,
+                                     write_innovations)
+
+
+@pytest.fixture(scope="module")
+def sol():
+    ds = insnav.simulate("seed001-low", seed=2)
+    return insnav.run(ds, "ekf", layout=21, gate_chi2=30.0)
+
+
+def _nav(s):
+    return s.to_array()
+
+
+def test_csv_round_trip_to_the_printed_digits(sol, tmp_path):
+    p = sol.save(tmp_path / "sol.csv")
+    back = load_solution(p)
+    a, b = _nav(sol), _nav(back)
+    # %.6f time, %.10f lat/lon [deg], %.5f the rest: half a unit of the last digit
+    tol = np.array([5e-7] + [5e-11] * 2 + [5e-6] * 28)
+    assert np.all(np.abs(a - b) <= tol * (1 + 1e-9) + 1e-12 * np.abs(a))
+    assert back.COLUMNS == sol.COLUMNS and tuple(p.read_text().splitlines()[0].split(",")) == sol.COLUMNS
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".parquet"])
+def test_binary_round_trip_is_exact(sol, tmp_path, suffix):
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow", reason="Parquet needs pyarrow (pip install 'insnav[parquet]')")
+    path = sol.save(tmp_path / f"sol{suffix}")
+    from insnav.filters.solution import _columns_from
+
+    cols = _columns_from(path)  # the stored columns: bit for bit what was written
+    assert tuple(cols) == sol.COLUMNS
+    np.testing.assert_array_equal(np.column_stack(list(cols.values())), _nav(sol))
+    back = load_solution(path)  # the unit conversions back to SI (deg/h, ppm) cost at most an ulp or two
+    np.testing.assert_array_equal(back.lat_deg, sol.lat_deg)
+    np.testing.assert_array_equal(back.v_n, sol.v_n)
+    np.testing.assert_allclose(back.gyro_bias_rps, sol.gyro_bias_rps, rtol=1e-15, atol=0)
+    assert not list(tmp_path.glob("*.part*"))  # no temp file left
+
+
+def test_innovations_sidecar_round_trip(sol, tmp_path):
+    p = sol.save(tmp_path / "sol.npz")
+    side = write_innovations(sol, p)
+    assert side == innovations_path(p) and side.name == "sol.npz.innovations.csv"
+    assert tuple(side.read_text().splitlines()[0].split(",")) == INNOVATION_COLUMNS
+    back = load_solution(p)
+    np.testing.assert_allclose(back.gnss_t, sol.gnss_t, atol=5e-7)
+    np.testing.assert_array_equal(back.gnss_status, sol.gnss_status)
+    ok = np.isfinite(sol.nis)
+    np.testing.assert_allclose(back.nis[ok], sol.nis[ok], rtol=1e-5)
+    fin = np.isfinite(sol.innovation)
+    np.testing.assert_array_equal(np.isfinite(back.innovation), fin)
+    np.testing.assert_allclose(back.innovation[fin], sol.innovation[fin], rtol=1e-5, atol=1e-9)
+    # applied records: the NIS of a consistent filter averages about the row count (6 here)
+    applied = back.gnss_status == RecordStatus.APPLIED
+    assert applied.sum() > 100 and 3.0 < np.mean(back.nis[applied]) < 12.0
+
+
+def test_old_column_names_are_accepted(sol, tmp_path):
+    p = sol.save(tmp_path / "new.csv")
+    lines = p.read_text().splitlines()
+    old = lines[0].replace("t_s,", "t,").replace("vn_mps,ve_mps,vd_mps", "vn,ve,vd")
+    q = tmp_path / "old.csv"
+    q.write_text("\n".join([old] + lines[1:]) + "\n")
+    np.testing.assert_array_equal(_nav(load_solution(q)), _nav(load_solution(p)))
+
+
+def test_bad_files_name_the_file(sol, tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.csv"):
+        load_solution(tmp_path / "nope.csv")
+    bad = tmp_path / "imu.csv"
+    bad.write_text("t_s,dtheta_x_rad\n0.1,0.0\n")
+    with pytest.raises(ValueError, match=r"imu.csv:1: not an insnav solution.*lat_deg"):
+        load_solution(bad)
+    with pytest.raises(ValueError, match=r"unknown solution format '\.txt'"):
+        sol.save(tmp_path / "x.txt")
+
+
+def test_to_dataframe_names_the_extra_without_pandas(sol, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pandas", None)
+    with pytest.raises(ImportError, match=r"insnav\[pandas\]"):
+        sol.to_dataframe()
