@@ -302,6 +302,18 @@ def test_demo_quick_writes_the_report(work):
         data = (out_dir / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, name
     assert "insnav demo --seed 1 --quick" in report
+    # every PNG the demo writes is linked from report.md, and the HTML report of the RB-UKF run is there
+    assert sorted(pngs) == sorted(p.name for p in out_dir.glob("*.png"))
+    page = out_dir / "seed000-rbukf-report" / "report.html"
+    assert page.is_file() and f"({page.parent.name}/report.html)" in report
+    assert page.read_text().count("data:image/png;base64,") == 6
+
+
+def test_demo_without_matplotlib_is_one_line(work, monkeypatch):
+    for m in [k for k in sys.modules if k == "matplotlib" or k.startswith("matplotlib.")]:
+        monkeypatch.delitem(sys.modules, m)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    _user_error(["demo", "--quick", "--out", work / "demo-nomatplotlib"], "matplotlib", "insnav[plot]")
 
 
 def test_bench_quick(scenario_file):

@@ -61,6 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
         ("insnav.cli.run", ("add_run_parser",)),
         ("insnav.analysis.evaluate", ("add_evaluate_parser",)),
         ("insnav.analysis.montecarlo", ("add_compare_parser",)),
+        ("insnav.cli.report", ("add_report_parser",)),
         ("insnav.cli.bench", ("add_bench_parser",)),
     ):
         mod = importlib.import_module(module)

@@ -1,0 +1,369 @@
+"""``insnav report``: one self-contained HTML page for any saved run.
+
+:func:`report` reads a solution (``.csv`` / ``.npz`` / ``.parquet``, with its
+``.innovations.csv`` sidecar when present), optionally a truth and the GNSS
+fixes, and writes ``report.html`` (every figure inlined as a PNG data URI:
+no network, no script) plus the PNGs beside it:
+
+* ground track: solution, truth, GNSS fixes, the solution inside GNSS
+  outages in red;
+* position, velocity and attitude errors with their +-3 sigma bounds, against
+  the truth, or (position only) against the GNSS fixes when there is no truth;
+* estimated IMU biases and scale factors;
+* innovations and NIS against the chi-square bounds of their row count,
+  applied and rejected updates marked;
+* a summary table: RMS and max errors, the maxima inside and after each
+  outage, reconvergence times, consistency rms(error / sigma), NIS statistics.
+
+Outages are the gaps in the GNSS record times (sidecar or fixes) longer than
+2.5 GNSS periods, unless given.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..earth import radii
+from ..units import DEG, DEG_PER_H, MG
+from .evaluate import evaluate
+from .metrics import errors, rms
+
+__all__ = ["report", "detect_outages", "chi2_interval"]
+
+_Z975 = 1.959963984540054  # standard normal 97.5 % quantile
+
+
+def chi2_interval(dof, z: float = _Z975) -> tuple[np.ndarray, np.ndarray]:
+    """Two-sided 95 % interval of a chi-square variable with ``dof`` degrees of
+    freedom (Wilson-Hilferty: within 3 % of the exact quantiles for dof >= 6)."""
+    k = np.maximum(np.asarray(dof, float), 1.0)
+    a = 2.0 / (9.0 * k)
+    lo = k * np.maximum(1.0 - a - z * np.sqrt(a), 0.0) ** 3
+    hi = k * (1.0 - a + z * np.sqrt(a)) ** 3
+    return lo, hi
+
+
+def detect_outages(t_records, factor: float = 2.5) -> list[tuple[float, float]]:
+    """Gaps longer than ``factor`` x the median spacing of the record times."""
+    t = np.unique(np.asarray(t_records, float))
+    if t.size < 3:
+        return []
+    d = np.diff(t)
+    period = float(np.median(d))
+    return [(float(t[i]), float(t[i + 1])) for i in np.flatnonzero(d > factor * period)]
+
+
+class _Fixes:
+    """GNSS fixes as errors need them: t, lat/lon/h, sigmas."""
+
+    def __init__(self, g):
+        self.t = np.asarray(getattr(g, "t_valid", getattr(g, "t", None)), float)
+        self.lat_deg, self.lon_deg, self.h_m = (np.asarray(getattr(g, k), float) for k in ("lat_deg", "lon_deg", "h_m"))
+        self.sigma_pos_n = np.asarray(getattr(g, "sigma_pos_n", np.full((len(self.t), 3), np.nan)), float)
+
+
+def _read_fixes(path) -> _Fixes:
+    from ..data.dataset import GnssFixes, load_dataset, read_csv
+
+    p = Path(path)
+    if p.is_dir():
+        return _Fixes(load_dataset(p).gnss)
+    return _Fixes(GnssFixes.from_array(read_csv(p, GnssFixes.COLUMNS)))
+
+
+def _local_en(lat_deg, lon_deg, lat0, lon0, h0=0.0):
+    R_M, R_N = radii(lat0 * DEG)
+    return ((np.asarray(lon_deg) - lon0) * DEG * (R_N + h0) * math.cos(lat0 * DEG),
+            (np.asarray(lat_deg) - lat0) * DEG * (R_M + h0))
+
+
+def _errors_vs_fixes(sol, fx: _Fixes) -> dict:
+    """Solution (IMU centre, interpolated) minus GNSS fix (antenna) at the fix times, NED [m]."""
+    t = fx.t[(fx.t >= sol.t[0]) & (fx.t <= sol.t[-1])]
+    if t.size == 0:
+        raise ValueError("no GNSS fix inside the solution's time span")
+    keep = np.isin(fx.t, t)
+    lat = np.interp(t, sol.t, sol.lat_deg) * DEG
+    lon = np.interp(t, sol.t, sol.lon_deg) * DEG
+    h = np.interp(t, sol.t, sol.h_m)
+    lat_f, lon_f, h_f = fx.lat_deg[keep] * DEG, fx.lon_deg[keep] * DEG, fx.h_m[keep]
+    R_M, R_N = radii(lat_f)
+    pos = np.column_stack([(lat - lat_f) * (R_M + h_f), (lon - lon_f) * (R_N + h_f) * np.cos(lat_f), -(h - h_f)])
+    sig_sol = np.column_stack([np.interp(t, sol.t, sol.sigma_pos_n_m[:, i]) for i in range(3)])
+    sig_fix = fx.sigma_pos_n[keep]
+    sig = np.sqrt(sig_sol ** 2 + np.where(np.isfinite(sig_fix), sig_fix, 0.0) ** 2)
+    return dict(t=t, pos_n_m=pos, sigma_pos_n_m=sig)
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    return buf.getvalue()
+
+
+def _shade(ax, outages):
+    for a, b in outages:
+        ax.axvspan(a, b, color="0.88", lw=0, zorder=0)
+
+
+def _figures(sol, err, err_kind, truth, fx, inn, outages, plt) -> list[tuple[str, str, bytes]]:
+    """(file name, caption, PNG bytes) of every figure."""
+    out = []
+    lat0, lon0 = float(sol.lat_deg[0]), float(sol.lon_deg[0])
+    # --- ground track
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    e, n = _local_en(sol.lat_deg, sol.lon_deg, lat0, lon0)
+    if truth is not None:
+        te, tn = _local_en(truth.lat_deg, truth.lon_deg, lat0, lon0)
+        ax.plot(te, tn, color="0.55", lw=2.5, label="truth")
+    if fx is not None:
+        fe, fn = _local_en(fx.lat_deg, fx.lon_deg, lat0, lon0)
+        ax.plot(fe, fn, ".", color="tab:green", ms=3, label="GNSS fixes")
+    ax.plot(e, n, color="tab:blue", lw=1.0, label="solution")
+    for i, (a, b) in enumerate(outages):
+        m = (sol.t >= a) & (sol.t <= b)
+        ax.plot(e[m], n[m], color="tab:red", lw=1.6, label="solution in GNSS outages" if i == 0 else None)
+    ax.set_xlabel("east [m]")
+    ax.set_ylabel("north [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("ground track (from the first solution point)")
+    out.append(("track.png", "Ground track", _png(fig)))
+    plt.close(fig)
+    # --- errors with +-3 sigma
+    panels = [("pos_n_m", "position error [m]", ("north", "east", "down")),
+              ("vel_n_mps", "velocity error [m/s]", ("north", "east", "down")),
+              ("att_deg", "attitude error [deg]", ("roll", "pitch", "yaw"))]
+    for key, label, axes in panels:
+        if err is None or key not in err or not np.isfinite(err[key]).any():
+            continue
+        fig, axs = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+        t = err["t"]
+        sk = "sigma_" + key
+        for i in range(3):
+            ax = axs[i]
+            _shade(ax, outages)
+            if sk in err and np.isfinite(err[sk][:, i]).any():
+                ax.fill_between(t, -3 * err[sk][:, i], 3 * err[sk][:, i], color="tab:orange", alpha=0.25, lw=0,
+                                label="+-3 sigma")
+            ax.plot(t, err[key][:, i], color="tab:blue", lw=0.8, label="error")
+            ax.set_ylabel(axes[i])
+        axs[0].legend(loc="upper right", fontsize=8)
+        axs[0].set_title(f"{label} against the {err_kind} (GNSS outages shaded)")
+        axs[-1].set_xlabel("time [s]")
+        out.append((f"{key.split('_')[0]}_error.png", label.capitalize() + f" against the {err_kind}", _png(fig)))
+        plt.close(fig)
+    # --- IMU errors
+    fig, axs = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    series = [(sol.acc_bias_mps2 / MG, "accelerometer bias [mg]"), (sol.gyro_bias_rps / DEG_PER_H, "gyro bias [deg/h]"),
+              (sol.acc_scale * 1e6, "accelerometer scale factor [ppm]"), (sol.gyro_scale * 1e6, "gyro scale factor [ppm]")]
+    for ax, (y, label) in zip(axs.ravel(), series):
+        _shade(ax, outages)
+        for i, c in enumerate("xyz"):
+            ax.plot(sol.t, y[:, i], lw=0.9, label=c)
+        ax.set_title(label, fontsize=10)
+        ax.legend(fontsize=7, loc="best")
+    for ax in axs[-1]:
+        ax.set_xlabel("time [s]")
+    fig.tight_layout()
+    out.append(("imu_errors.png", "Estimated IMU biases and scale factors", _png(fig)))
+    plt.close(fig)
+    # --- innovations and NIS
+    if inn is not None and len(inn["t_s"]):
+        t, st, nis, rows = inn["t_s"], inn["status"], inn["nis"], inn["rows"]
+        applied = st == 1
+        rejected = st == 2
+        has_inn = np.isfinite(inn["innovation"]).any()
+        fig, axs = plt.subplots(3 if has_inn else 1, 1, figsize=(9, 7.5 if has_inn else 3.5), sharex=True,
+                                squeeze=False)
+        axs = axs[:, 0]
+        k = 0
+        if has_inn:
+            for j, (cols, label) in enumerate((((0, 1, 2), "position innovation [m]"),
+                                                ((3, 4, 5), "velocity innovation [m/s]"))):
+                ax = axs[k]
+                for c, name in zip(cols, ("N", "E", "D")):
+                    ax.plot(t, inn["innovation"][:, c], ".", ms=2.5, label=name)
+                if rejected.any():
+                    ax.plot(t[rejected], np.zeros(rejected.sum()), "x", color="k", ms=6, label="rejected")
+                ax.set_ylabel(label, fontsize=8)
+                ax.legend(fontsize=7, loc="upper right", ncol=4)
+                k += 1
+        ax = axs[k]
+        lo, hi = chi2_interval(rows)
+        ok = np.isfinite(nis) & (rows > 0)
+        order = np.argsort(t)
+        ax.fill_between(t[order], lo[order], hi[order], color="tab:orange", alpha=0.25, lw=0,
+                        label="chi-square 95 % interval")
+        ax.semilogy(t[applied & ok], nis[applied & ok], ".", ms=3, color="tab:blue", label="applied")
+        if (rejected & ok).any():
+            ax.semilogy(t[rejected & ok], nis[rejected & ok], "x", ms=5, color="tab:red", label="rejected by the gate")
+        ax.set_ylabel("NIS")
+        ax.set_xlabel("time [s]")
+        ax.legend(fontsize=7, loc="upper right")
+        axs[0].set_title("innovations (INS minus GNSS, before the update) and NIS")
+        out.append(("innovations.png", "Innovations and NIS", _png(fig)))
+        plt.close(fig)
+    return out
+
+
+def _fmt(x, nd=3):
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "n/a"
+    return f"{x:.{nd}f}"
+
+
+def _summary_rows(sol, err_kind, ev, inn, outages, fix_err) -> list[tuple[str, str]]:
+    rows = [("solution rows", f"{len(sol.t)} ({sol.t[0]:.3f} to {sol.t[-1]:.3f} s)")]
+    if inn is not None and len(inn["t_s"]):
+        st = inn["status"]
+        rows.append(("GNSS records", f"{len(st)}: {int((st == 1).sum())} applied, {int((st == 2).sum())} rejected by "
+                                     f"the gate, {int(np.isin(st, (0, 3, 4, 5)).sum())} not used"))
+        ok = (st == 1) & np.isfinite(inn["nis"]) & (inn["rows"] > 0)
+        if ok.any():
+            lo, hi = chi2_interval(inn["rows"][ok])
+            inside = np.mean((inn["nis"][ok] >= lo) & (inn["nis"][ok] <= hi))
+            rows.append(("NIS of applied updates: mean / mean rows",
+                         f"{np.mean(inn['nis'][ok]):.2f} / {np.mean(inn['rows'][ok]):.2f} (about equal when "
+                         f"consistent); {100 * inside:.1f} % inside the 95 % chi-square interval"))
+    if outages:
+        rows.append(("GNSS outages [s]", ", ".join(f"{a:.1f}-{b:.1f}" for a, b in outages)))
+    if ev is not None:
+        names = {"pos_n_m": ("position", "m", "N/E/D"), "vel_n_mps": ("velocity", "m/s", "N/E/D"),
+                 "att_deg": ("attitude", "deg", "roll/pitch/yaw")}
+        for k, (n, u, ax) in names.items():
+            if k in ev["rms"]:
+                rows.append((f"{n} RMS [{u}] {ax}", " / ".join(_fmt(x) for x in ev["rms"][k])))
+                rows.append((f"{n} max [{u}] {ax}", " / ".join(_fmt(x) for x in ev["max"][k])))
+        rows.append(("horizontal RMS / max [m]", f"{_fmt(ev['horizontal_rms_m'])} / {_fmt(ev['horizontal_max_m'])}"))
+        rows.append(("3-D position RMS [m]", _fmt(ev["rms_3d_m"])))
+        for k, (n, _, ax) in names.items():
+            if k in ev["consistency"]:
+                rows.append((f"consistency rms(error / sigma), {n} {ax}",
+                             " / ".join(_fmt(x, 2) for x in ev["consistency"][k]) + " (about 1: consistent)"))
+        for o in ev["outages"]:
+            rows.append((f"outage {o['start_s']:.1f}-{o['end_s']:.1f} s: max horizontal inside / in the 60 s after [m]",
+                         f"{_fmt(o['max_horizontal_inside_m'])} / {_fmt(o['max_horizontal_after_60s_m'])}"))
+            rows.append((f"outage {o['start_s']:.1f}-{o['end_s']:.1f} s: reconvergence [s]",
+                         f"{_fmt(o['reconvergence_s'], 1)} (horizontal error back within 1.5x its pre-outage RMS "
+                         "for 5 s)"))
+    if fix_err is not None:
+        p = fix_err["pos_n_m"]
+        rows.append(("position minus GNSS fixes, RMS [m] N/E/D", " / ".join(_fmt(x) for x in rms(p))))
+        rows.append(("position minus GNSS fixes, rms(difference / sigma) N/E/D",
+                     " / ".join(_fmt(x, 2) for x in rms(p / fix_err["sigma_pos_n_m"]))))
+    rows.append(("errors against", err_kind))
+    return rows
+
+
+def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None) -> Path:
+    """Write ``report.html`` and its PNGs for a solution; returns the HTML path.
+
+    Parameters
+    ----------
+    solution : path or Solution
+        A saved solution (its ``.innovations.csv`` sidecar is read when present).
+    out_dir : path, optional
+        Default: ``<solution>-report`` beside a saved solution.
+    truth : path or Truth-like, optional
+        Anything ``insnav evaluate`` reads (truth.csv, dataset folder, KF-GINS .nav, RTKLIB .pos).
+    gnss : path or GnssFixes, optional
+        gnss.csv or a dataset folder: fixes on the track, and the position
+        reference when there is no truth.
+    outages : sequence of (start_s, end_s), optional
+        Default: the gaps in the GNSS record times.
+    """
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise ImportError("insnav report needs matplotlib: pip install 'insnav[plot]'") from None
+    from ..filters.solution import innovations_path, load_solution, read_innovations
+    from .evaluate import _read_truth, _solution_at
+
+    src = None
+    if isinstance(solution, (str, Path)):
+        src = Path(solution)
+        sol = load_solution(src)
+        side = innovations_path(src)
+        inn = read_innovations(side) if side.is_file() else None
+    else:
+        sol = solution
+        inn = None
+        if len(getattr(sol, "gnss_t", ())) and np.asarray(sol.innovation).ndim == 2:
+            m = len(sol.gnss_t)
+            i6 = np.asarray(sol.innovation, float)
+            inn = dict(t_s=np.asarray(sol.gnss_t, float), status=np.asarray(sol.gnss_status, int),
+                       nis=np.asarray(sol.nis, float),
+                       rows=np.asarray(getattr(sol, "rows", None) if getattr(sol, "rows", None) is not None
+                                       else np.isfinite(i6).sum(axis=1), int),
+                       innovation=i6 if i6.shape == (m, 6) else np.full((m, 6), np.nan))
+    if out_dir is None:
+        if src is None:
+            raise ValueError("report: out_dir is needed for a Solution object")
+        out_dir = src.with_name(src.name + "-report")
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"{out_dir}: exists and is not a folder")
+    tr = _read_truth(truth) if isinstance(truth, (str, Path)) else truth
+    fx = None
+    if gnss is not None:
+        fx = _read_fixes(gnss) if isinstance(gnss, (str, Path)) else _Fixes(gnss)
+    if outages is None:
+        rec_t = inn["t_s"] if inn is not None and len(inn["t_s"]) else (fx.t if fx is not None else [])
+        outages = [(a, b) for a, b in detect_outages(rec_t) if b > sol.t[0] and a < sol.t[-1]]
+    outages = [(float(a), float(b)) for a, b in outages]
+
+    err, ev, err_kind, fix_err = None, None, "nothing (no truth, no GNSS fixes given)", None
+    if tr is not None:
+        s_cmp = _solution_at(sol, tr.t) if hasattr(tr, "quality") else sol
+        err = errors(s_cmp, tr)
+        if len(err["t"]) == 0:
+            raise ValueError("the truth does not overlap the solution in time")
+        ev = evaluate(s_cmp, tr, outages)
+        err_kind = "truth"
+    elif fx is not None:
+        fix_err = _errors_vs_fixes(sol, fx)
+        err = dict(t=fix_err["t"], pos_n_m=fix_err["pos_n_m"], sigma_pos_n_m=fix_err["sigma_pos_n_m"])
+        err_kind = "GNSS fixes (antenna; the solution is the IMU centre, no lever arm applied)"
+
+    figs = _figures(sol, err, "truth" if tr is not None else "GNSS fixes", tr, fx, inn, outages, plt)
+    rows = _summary_rows(sol, err_kind, ev, inn, outages, fix_err)
+    from .._atomic import atomic_write_text
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    from ..filters.solution import _atomic_binary
+
+    for name, _, data in figs:
+        _atomic_binary(out_dir / name, lambda tmp, d=data: Path(tmp).write_bytes(d))
+    heading = title or f"insnav report: {src.name if src else 'solution'}"
+    parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
+             f"<title>{html.escape(heading)}</title>",
+             "<style>body{font-family:sans-serif;max-width:1000px;margin:1em auto;color:#222}"
+             "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:3px 8px;"
+             "text-align:left;font-size:14px}th{background:#eee}figure{margin:1.5em 0}"
+             "img{max-width:100%;border:1px solid #ddd}figcaption{font-size:13px;color:#555}</style>",
+             "</head><body>", f"<h1>{html.escape(heading)}</h1>"]
+    if src is not None:
+        parts.append(f"<p>Solution: <code>{html.escape(str(src))}</code>"
+                     + (f"; truth: <code>{html.escape(str(truth))}</code>" if isinstance(truth, (str, Path)) else "")
+                     + (f"; GNSS: <code>{html.escape(str(gnss))}</code>" if isinstance(gnss, (str, Path)) else "")
+                     + "</p>")
+    parts.append("<h2>Summary</h2><table id=\"summary\"><tr><th>quantity</th><th>value</th></tr>")
+    for k, v in rows:
+        parts.append(f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>")
+    parts.append("</table>")
+    for name, caption, data in figs:
+        b64 = base64.b64encode(data).decode("ascii")
+        parts.append(f"<figure id=\"{name[:-4]}\"><img alt=\"{html.escape(caption)}\" "
+                     f"src=\"data:image/png;base64,{b64}\"><figcaption>{html.escape(caption)} "
+                     f"({html.escape(name)})</figcaption></figure>")
+    parts.append("</body></html>")
+    return atomic_write_text(out_dir / "report.html", "\n".join(parts) + "\n")

@@ -1,0 +1,43 @@
+"""``insnav report``: an HTML page with plots and a summary for a saved solution."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+EXAMPLES = """examples:
+  insnav run run3 --filter rbukf --out run3-rbukf.csv
+  insnav report run3-rbukf.csv --truth run3 --gnss run3          # -> run3-rbukf.csv-report/report.html
+  insnav report walk.csv --truth ../shared/data/rtklibexplorer_walk_0827/raw/gnss_1730_sf.pos --out walk-report
+
+SOL: a solution written by `insnav run` (.csv, .npz or .parquet; its .innovations.csv
+sidecar is read when present).  TRUTH: anything `insnav evaluate` reads.  GNSS: gnss.csv or
+a dataset folder (fixes on the track; the position reference when there is no truth).
+Units: positions and errors in m, velocities in m/s, angles in deg, biases in mg and deg/h,
+scale factors in ppm, times in s."""
+
+
+def add_report_parser(sub) -> None:
+    p = sub.add_parser("report", help="HTML report (track, errors with 3-sigma, biases, innovations/NIS, summary)",
+                       description="Write one self-contained report.html (figures inlined, no network) plus "
+                                   "its PNGs for a saved solution.",
+                       epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("solution", metavar="SOL")
+    p.add_argument("--truth", default=None)
+    p.add_argument("--gnss", default=None)
+    p.add_argument("--outages", default="", help="start:end [s], comma-separated (default: gaps in the GNSS records)")
+    p.add_argument("--out", default=None, help="folder (default: SOL-report beside SOL)")
+    p.set_defaults(func=cmd_report)
+
+
+def cmd_report(args) -> int:
+    from ..analysis.evaluate import _parse_outages
+    from ..analysis.report import report
+
+    for name in ("solution", "truth", "gnss"):
+        v = getattr(args, name)
+        if v is not None and not Path(v).exists():
+            raise FileNotFoundError(f"{'SOL' if name == 'solution' else '--' + name}: not found: {v}")
+    outages = _parse_outages(args.outages) if args.outages else None
+    path = report(args.solution, args.out, truth=args.truth, gnss=args.gnss, outages=outages)
+    print(f"{path}: report written ({sum(1 for _ in path.parent.glob('*.png'))} figures beside it)")
+    return 0

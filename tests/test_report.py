@@ -1,0 +1,196 @@
+"""``insnav report``: the numbers in the summary table against values known
+in advance or computed independently, every figure a real non-blank PNG, and
+the page rendered in a real browser (headless Chromium, where installed)."""
+from __future__ import annotations
+
+import base64
+import copy
+import io
+import json
+import re
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import insnav
+from insnav.analysis.evaluate import evaluate
+from insnav.analysis.report import chi2_interval, detect_outages, report
+from insnav.filters.solution import write_innovations
+
+pytest.importorskip("matplotlib", reason="insnav report needs matplotlib")
+
+
+def _table(html: str) -> dict:
+    return {html_unescape(k): html_unescape(v) for k, v in
+            re.findall(r"<tr><td>(.*?)</td><td>(.*?)</td></tr>", html)}
+
+
+def html_unescape(s: str) -> str:
+    import html
+
+    return html.unescape(s)
+
+
+def _images(html: str) -> list[bytes]:
+    return [base64.b64decode(b) for b in re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html)]
+
+
+def _nonblank(png: bytes) -> float:
+    """Fraction of pixels that are not (near) white."""
+    import matplotlib.image as mpimg
+
+    a = mpimg.imread(io.BytesIO(png), format="png")
+    rgb = a[..., :3]
+    return float(np.mean(rgb.min(axis=-1) < 0.9))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("report")
+    ds = insnav.simulate("seed000-sim", seed=3)
+    ds.save(d / "ds")
+    sol = insnav.run(ds, "rbukf", init_seed=3)
+    path = sol.save(d / "sol.npz")
+    write_innovations(sol, path)
+    return d, ds, sol, path
+
+
+def test_known_offset_gives_known_numbers(tmp_path):
+    """A 'solution' equal to the truth moved 2 m north, with 1 m sigmas:
+    RMS N = max N = 2 m, E = D = 0, rms(error/sigma) N = 2."""
+    ds = insnav.simulate("seed000-sim", seed=1)
+    tr = ds.truth
+    from insnav.earth import radii
+    from insnav.filters.solution import Solution
+
+    n = len(tr.t)
+    R_M, _ = radii(np.deg2rad(tr.lat_deg))
+    one = np.ones((n, 3))
+    sol = Solution(t=tr.t, lat_deg=tr.lat_deg + np.rad2deg(2.0 / (R_M + tr.h_m)), lon_deg=tr.lon_deg, h_m=tr.h_m,
+                   v_n=tr.v_n, roll_deg=tr.roll_deg, pitch_deg=tr.pitch_deg, yaw_deg=tr.yaw_deg,
+                   sigma_pos_n_m=one, sigma_vel_n_mps=one, sigma_att_deg=one, acc_bias_mps2=0 * one,
+                   gyro_bias_rps=0 * one, acc_scale=0 * one, gyro_scale=0 * one, gnss_t=np.zeros(0),
+                   innovation=np.zeros((0, 6)), nis=np.zeros(0), gnss_status=np.zeros(0, np.int8))
+    path = sol.save(tmp_path / "offset.npz")
+    page = report(path, truth=tr, outages=[]).read_text()
+    t = _table(page)
+    assert t["position RMS [m] N/E/D"] == "2.000 / 0.000 / 0.000"
+    assert t["position max [m] N/E/D"] == "2.000 / 0.000 / 0.000"
+    assert t["horizontal RMS / max [m]"] == "2.000 / 2.000"
+    assert t["consistency rms(error / sigma), position N/E/D"].startswith("2.00 / 0.00 / 0.00")
+    assert t["velocity RMS [m/s] N/E/D"] == "0.000 / 0.000 / 0.000"
+
+
+def test_summary_matches_evaluate_and_figures_are_real(run):
+    d, ds, sol, path = run
+    html_path = report(path, truth=d / "ds", gnss=d / "ds")
+    assert html_path == path.with_name("sol.npz-report") / "report.html"
+    page = html_path.read_text()
+    assert "http://" not in page and "https://" not in page and "<script" not in page  # self-contained
+    t = _table(page)
+    ev = evaluate(sol, ds.truth, [(50.0, 90.0)])
+    assert t["horizontal RMS / max [m]"] == f"{ev['horizontal_rms_m']:.3f} / {ev['horizontal_max_m']:.3f}"
+    assert t["GNSS outages [s]"] == "50.0-90.0"  # seed000-sim: GPS lost 50-90 s, found from the record gaps
+    o = ev["outages"][0]
+    key = "outage 50.0-90.0 s: max horizontal inside / in the 60 s after [m]"
+    assert t[key] == f"{o['max_horizontal_inside_m']:.3f} / {o['max_horizontal_after_60s_m']:.3f}"
+    applied = sol.gnss_status == 1
+    assert t["GNSS records"].startswith(f"{len(sol.gnss_t)}: {applied.sum()} applied")
+    nis_mean = float(t["NIS of applied updates: mean / mean rows"].split(" / ")[0])
+    assert nis_mean == pytest.approx(np.nanmean(sol.nis[applied]), abs=0.006)
+    imgs = _images(page)
+    files = sorted(p.name for p in html_path.parent.glob("*.png"))
+    assert len(imgs) == len(files) == 6, files
+    for png in imgs:
+        assert png[:8] == b"\x89PNG\r\n\x1a\n"
+        assert _nonblank(png) > 0.01
+    for f in files:  # the PNGs beside the page are the ones inside it
+        assert (html_path.parent / f).read_bytes() in imgs
+
+
+def test_without_truth_the_gnss_fixes_are_the_reference(run, tmp_path):
+    d, ds, sol, path = run
+    page = report(path, tmp_path / "r", gnss=d / "ds" / "gnss.csv").read_text()
+    t = _table(page)
+    assert t["errors against"].startswith("GNSS fixes")
+    rms = [float(x) for x in t["position minus GNSS fixes, RMS [m] N/E/D"].split(" / ")]
+    # the fixes' own noise (seed000-sim: 5 m horizontal, 10 m vertical sigma) dominates
+    assert 1.0 < rms[0] < 10.0 and 1.0 < rms[1] < 10.0
+
+
+def test_chi2_interval_and_outage_detection():
+    lo, hi = chi2_interval([6, 30])
+    # exact 2.5 / 97.5 % quantiles: dof 6: 1.237, 14.449; dof 30: 16.791, 46.979
+    np.testing.assert_allclose(lo, [1.237, 16.791], rtol=0.03)
+    np.testing.assert_allclose(hi, [14.449, 46.979], rtol=0.01)
+    t = np.r_[np.arange(0, 50), np.arange(90, 150)]
+    assert detect_outages(t) == [(49.0, 90.0)]
+
+
+def test_cli_report_and_its_errors(run, tmp_path):
+    from insnav.cli import main
+
+    d, ds, sol, path = run
+    assert main(["report", str(path), "--truth", str(d / "ds"), "--out", str(tmp_path / "cli")]) == 0
+    assert (tmp_path / "cli" / "report.html").is_file()
+    r = subprocess.run([sys.executable, "-m", "insnav", "report", str(tmp_path / "nope.csv")],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "nope.csv" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_missing_matplotlib_is_one_clear_error(run, tmp_path, monkeypatch):
+    d, ds, sol, path = run
+    for m in [k for k in sys.modules if k == "matplotlib" or k.startswith("matplotlib.")]:
+        monkeypatch.delitem(sys.modules, m)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    with pytest.raises(ImportError, match=r"insnav\[plot\]"):
+        report(path, tmp_path / "x")
+
+
+def _chromium():
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        p = shutil.which(name)
+        if p:
+            return p
+    pytest.skip("Chromium not installed (apt-get install -y chromium): the browser check of the report is skipped")
+
+
+def test_page_renders_in_a_real_browser(run):
+    """Headless Chromium loads the page: no console error, every figure
+    decoded by the browser at its full size, and a screenshot with content."""
+    browser = _chromium()
+    d, ds, sol, path = run
+    html_path = report(path, truth=d / "ds", gnss=d / "ds")
+    out = html_path.parent
+    # a wrapper page (test only; the report itself has no script) reads the
+    # decoded size of every image of the report in an iframe
+    (out / "check.html").write_text(
+        "<html><body><iframe id='f' src='report.html' width='1000' height='800'></iframe><script>"
+        "window.addEventListener('load', () => { const d = document.getElementById('f').contentDocument;"
+        " document.body.setAttribute('data-images', JSON.stringify([...d.images].map("
+        "i => [i.complete, i.naturalWidth, i.naturalHeight]))); });</script></body></html>")
+    common = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files",
+              "--virtual-time-budget=10000", "--enable-logging=stderr", "--v=0"]
+    r = subprocess.run(common + ["--dump-dom", (out / "check.html").as_uri()], capture_output=True, text=True,
+                       timeout=120)
+    m = re.search(r"data-images=\"([^\"]*)\"", r.stdout)
+    assert m, r.stdout[-500:] + r.stderr[-1500:]
+    imgs = json.loads(m.group(1).replace("&quot;", '"'))
+    assert len(imgs) == 6 and all(c and w > 300 and h > 200 for c, w, h in imgs), imgs
+    shot = out / "screenshot.png"
+    r = subprocess.run(common + ["--hide-scrollbars", "--window-size=1100,4000", f"--screenshot={shot}",
+                                 html_path.as_uri()], capture_output=True, text=True, timeout=120)
+    console = [ln for ln in r.stderr.splitlines() if "CONSOLE" in ln or "Uncaught" in ln]
+    assert not console, console
+    assert shot.is_file(), r.stderr[-1500:]
+    import matplotlib.image as mpimg
+
+    a = mpimg.imread(shot)[..., :3]
+    h = a.shape[0]
+    for lo, hi in ((0.0, 0.15), (0.15, 0.45), (0.45, 0.75)):  # summary table, first figures, later figures
+        band = a[int(lo * h):int(hi * h)]
+        assert np.mean(band.min(axis=-1) < 0.9) > 0.01, (lo, hi)
