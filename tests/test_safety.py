@@ -109,3 +109,26 @@ def test_rejected_run_is_an_error_unless_allowed(tmp_path, small):
     out_dir.mkdir()
     r = _cli("run", str(d), "--out", str(out_dir))
     assert r.returncode == 2 and "is a folder" in r.stderr
+
+
+def test_run_takes_a_config_dict_or_toml_and_evaluate_needs_an_overlap(tmp_path):
+    """insnav.run(ds, config=dict | TOML path) is the same run as with a
+    RunConfig; a truth on another time base is one clear error."""
+    import copy
+
+    import numpy as np
+
+    import insnav
+    from insnav.config import RunConfig
+
+    ds = insnav.simulate("seed001-low", seed=1)
+    ref = insnav.run(ds, config=RunConfig(filter="rbukf", init_seed=2))
+    a = insnav.run(ds, config={"filter": "rbukf", "init_seed": 2})
+    (tmp_path / "run.toml").write_text('filter = "rbukf"\ninit_seed = 2\n')
+    b = insnav.run(ds, config=tmp_path / "run.toml")
+    np.testing.assert_array_equal(a.lat_deg, ref.lat_deg)
+    np.testing.assert_array_equal(b.lat_deg, ref.lat_deg)
+    tr = copy.copy(ds.truth)
+    tr.t = tr.t + 1e5
+    with pytest.raises(ValueError, match="do not overlap in time"):
+        insnav.evaluate(ref, tr)

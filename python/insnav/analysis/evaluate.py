@@ -14,7 +14,7 @@ import numpy as np
 from .metrics import errors, reconvergence_time, rms
 
 EXAMPLES = """examples:
-  insnav evaluate run3/solution.csv run3/truth.csv --outages 50:90
+  insnav evaluate run3-rbukf.csv run3/truth.csv --outages 50:90
   insnav evaluate sol.csv ../shared/data/kfgins/sim/truth-sim.nav.xz --json
   insnav evaluate walk_sol.csv ../shared/data/rtklibexplorer_walk_0827/raw/gnss_1730_sf.pos --quality 1
 

@@ -25,6 +25,9 @@ def errors(sol, truth) -> dict:
         keep = (t >= tt[0] - 1e-9) & (t <= tt[-1] + 1e-9)
     else:
         keep = np.ones(len(t), bool)
+    if not keep.any():
+        raise ValueError(f"the solution ({t[0]:.3f} to {t[-1]:.3f} s) and the truth ({tt[0]:.3f} to {tt[-1]:.3f} s) "
+                         "do not overlap in time (are both in the same time base, e.g. GPS seconds of week?)")
     t = t[keep]
 
     def at(x):

@@ -12,7 +12,7 @@ from ..config import ConfigError, RunConfig, load_config
 from ..registry import FILTERS
 
 EXAMPLES = """examples:
-  insnav run run3 --filter rbukf --out run3/solution.csv
+  insnav run run3 --filter rbukf --out run3-rbukf.csv      # beside the dataset folder, not inside it
   insnav run run3 --coupling tight --filter ekf --config my.toml --out sol.csv
   insnav run --format kfgins --config kf-gins.yaml [--imu IMU.txt --gnss GNSS.txt] --out sol.csv
   insnav run --format rinex --obs F.obs --nav F.nav --imu IMU.csv [--imu-tag IMU.csv.tag] \
