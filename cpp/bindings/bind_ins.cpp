@@ -1,7 +1,9 @@
 // Batch strapdown mechanization: the whole loop in C++ with the GIL released.
 #include <cmath>
+#include <limits>
 
 #include "common.hpp"
+#include "insnav/ins/standstill.hpp"
 
 namespace insnav::py_bind {
 
@@ -94,6 +96,46 @@ void bind_ins(py::module_& m) {
         "(lat/lon rad, h m, v_n m/s, roll/pitch/yaw rad). Returns lat_deg, lon_deg, h_m, v_n [m/s], "
         "roll_deg, pitch_deg, yaw_deg arrays and bad_sample (-1, or the first sample that is not finite "
         "or not after the previous time; the outputs are then incomplete).");
+  m.def(
+      "standstill_statistic",
+      [](const DArray& t, const DArray& dtheta_b, const DArray& dv_b, double t0, int window, double sigma_f_mps2,
+         double sigma_w_radps, double gravity_mps2) {
+        const py::ssize_t n = t.size();
+        require_shape(t, n, -1, "t");
+        require_shape(dtheta_b, n, 3, "dtheta_b");
+        require_shape(dv_b, n, 3, "dv_b");
+        StandstillConfig cfg;
+        cfg.window = window;
+        cfg.sigma_f_mps2 = sigma_f_mps2;
+        cfg.sigma_w_radps = sigma_w_radps;
+        cfg.gravity_mps2 = gravity_mps2;
+        if (!(window >= 2 && window <= 512)) throw py::value_error("standstill window must be 2..512 samples");
+        if (!(sigma_f_mps2 > 0 && sigma_w_radps > 0)) throw py::value_error("standstill sigmas must be > 0");
+        DArray out({n});
+        {
+          py::gil_scoped_release release;
+          StandstillDetector<512> det(cfg);
+          const double *pt = t.data(), *pa = dtheta_b.data(), *pv = dv_b.data();
+          double* po = out.mutable_data();
+          double prev = t0;
+          for (py::ssize_t k = 0; k < n; ++k) {
+            const double dt = pt[k] - prev;
+            prev = pt[k];
+            if (!(dt > 0)) {
+              po[k] = std::numeric_limits<double>::infinity();
+              det.reset();
+              continue;
+            }
+            po[k] = det.add(Vec3(pv[3 * k], pv[3 * k + 1], pv[3 * k + 2]) / dt,
+                            Vec3(pa[3 * k], pa[3 * k + 1], pa[3 * k + 2]) / dt);
+          }
+        }
+        return out;
+      },
+      py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("t0"), py::arg("window"), py::arg("sigma_f_mps2"),
+      py::arg("sigma_w_radps"), py::arg("gravity_mps2") = 9.80665,
+      "The standstill test statistic T of every IMU sample over the last `window` samples "
+      "(ins/standstill.hpp; +inf until the window is full); stationary where T < gamma.");
 }
 
 }  // namespace insnav::py_bind

@@ -3,6 +3,7 @@
 // in bind_loose_l15.cpp and bind_loose_l21.cpp (loose_run.hpp).
 #include <pybind11/stl.h>
 
+#include <optional>
 #include <string>
 
 #include "loose_run.hpp"
@@ -38,18 +39,37 @@ void bind_loose(py::module_& m) {
       "run_loose",
       [](const std::string& filter, int layout, const DArray& t, const DArray& dtheta_b, const DArray& dv_b,
          const DArray& gnss, const DArray& init, const DArray& P0, const DArray& corr0, const py::dict& model,
-         const py::dict& config) {
+         const py::dict& config, const std::optional<DArray>& constraints) {
         const ImuErrorModel mdl = imu_model_from_dict(model);
-        const LooseConfig cfg = loose_config_from(config, "engine config", {INSNAV_UT_KEYS, "sigma_columns"});
+        LooseConfig cfg = loose_config_from(config, "engine config",
+                                            {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
+                                             "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
+                                             "constraint_gate_chi2"});
+        VehicleConstraintConfig& v = cfg.vehicle;
+        v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
+        if (config.contains("vehicle_C_bv")) {
+          DArray c = py::cast<DArray>(config["vehicle_C_bv"]);
+          if (c.size() != 9) throw py::value_error("vehicle_C_bv: expected 9 values (row-major 3x3)");
+          v.C_bv = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(c.data());
+        }
+        v.sigma_nhc_mps = num(config, "sigma_nhc_mps", v.sigma_nhc_mps);
+        v.sigma_odo_mps = num(config, "sigma_odo_mps", v.sigma_odo_mps);
+        v.sigma_zupt_mps = num(config, "sigma_zupt_mps", v.sigma_zupt_mps);
+        v.sigma_zaru_radps = num(config, "sigma_zaru_radps", v.sigma_zaru_radps);
+        cfg.constraint_gate_chi2 = num(config, "constraint_gate_chi2", 0.0);
+        for (double sgm : {v.sigma_nhc_mps, v.sigma_odo_mps, v.sigma_zupt_mps, v.sigma_zaru_radps})
+          if (!(sgm > 0.0)) throw py::value_error("vehicle constraint sigmas must be > 0");
         const UtParams ut = ut_from(config);
         const int sigma_columns = static_cast<int>(num(config, "sigma_columns", 0));
-        const LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut, sigma_columns};
+        const LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut, sigma_columns,
+                                constraints ? &*constraints : nullptr};
         if (layout == 15) return run_loose_l15(filter, args);
         if (layout == 21) return run_loose_l21(filter, args);
         unsupported_loose(filter, layout);
       },
       py::arg("filter"), py::arg("layout"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("gnss"),
       py::arg("init"), py::arg("P0"), py::arg("imu_correction"), py::arg("imu_model"), py::arg("config"),
+      py::arg("constraints") = py::none(),
       "Closed-loop loosely coupled run (SI units; see python/insnav/filters/loose.py).");
 }
 

@@ -33,6 +33,7 @@ struct LooseRunArgs {
   LooseConfig cfg;
   UtParams ut;
   int sigma_columns = 0;  // config key 'sigma_columns': sigmas of the first k states only (<= 0: all)
+  const DArray* constraints = nullptr;  // (k, 3): t [s], kinds (ConstraintKind flags), speed [m/s]; sorted by t
 };
 
 /// filter 'ekf', 'rbukf' or 'ukf' on one layout (any other filter: ValueError).
@@ -59,20 +60,46 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   std::vector<GnssFix> fixes(static_cast<size_t>(m));
   for (py::ssize_t i = 0; i < m; ++i) fixes[i] = gnss_fix_from(a.gnss.data()[13 * i], a.gnss.data() + 13 * i + 1);
 
+  // vehicle-constraint events: t, kinds, odometer speed (NaN: none)
+  const py::ssize_t k = (a.constraints && a.constraints->ndim() == 2) ? a.constraints->shape(0) : 0;
+  std::vector<ConstraintEvent> events(static_cast<size_t>(k));
+  if (k > 0) {
+    require_shape(*a.constraints, k, 3, "constraints");
+    const double* pe = a.constraints->data();
+    for (py::ssize_t i = 0; i < k; ++i) {
+      const double* r = pe + 3 * i;
+      const double kinds = r[1];
+      if (!(kinds >= 0 && kinds <= 15 && kinds == std::floor(kinds)))
+        throw py::value_error("constraints row " + std::to_string(i) + ": kinds must be flags 0..15");
+      if (i > 0 && !(r[0] >= pe[3 * (i - 1)]))
+        throw py::value_error("constraints row " + std::to_string(i) + ": times must be non-decreasing");
+      events[i] = ConstraintEvent{r[0], static_cast<std::uint8_t>(kinds), r[2]};
+      if ((events[i].kinds & kOdometer) && !std::isfinite(r[2]))
+        throw py::value_error("constraints row " + std::to_string(i) + ": odometer event without a finite speed");
+    }
+  }
   const int n_sig = (a.sigma_columns > 0 && a.sigma_columns < ns) ? a.sigma_columns : ns;
   NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), n_sig, false);
   LooseRecordBuffers rec_buf(m);
+  DArray o_cnis({k});
+  py::array_t<std::int8_t> o_cst({k});
   LooseOutputs out;
   nav_buf.attach(out);
   rec_buf.attach(out, m);
+  out.constraint_nis = k ? o_cnis.mutable_data() : nullptr;
+  out.constraint_status = k ? o_cst.mutable_data() : nullptr;
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<LooseEngine<Filter>>(a.model, cfg, a.ut);  // one allocation per run, not per sample
-    engine->run(nav, P, corr, imu.n, imu.t, imu.dtheta_b, imu.dv_b, m, fixes.data(), out);
+    engine->run(nav, P, corr, imu.n, imu.t, imu.dtheta_b, imu.dv_b, m, fixes.data(), k, events.data(), out);
   }
   py::dict res;
   nav_buf.put(res, out);
   rec_buf.put(res);
+  res["constraint_nis"] = o_cnis;
+  res["constraint_status"] = o_cst;
+  res["constraint_updates"] = out.constraint_updates;
+  res["constraint_rejected"] = out.constraint_rejected;
   return res;
 }
 

@@ -97,6 +97,94 @@ _IMU_MODEL_KEYS = {"rate_hz", "imu_grade", "gyro_arw", "accel_vrw"} | {
               "misalignment_sigma", "bias_total_sigma")}
 
 
+#: vehicle constraints a run can use ([constraints] use = [...]); "zupt" brings ZARU with it
+CONSTRAINT_NAMES = ("nhc", "odo", "zupt")
+
+
+@dataclass
+class Constraints:
+    """Vehicle constraints as measurement updates (``[constraints]`` in the
+    TOML; ``cpp/include/insnav/meas/vehicle.hpp``).  Loose coupling with the
+    EKF, RB-UKF or UKF.
+
+    Attributes
+    ----------
+    use : list of {'nhc', 'odo', 'zupt'}
+        ``nhc``: the lateral and vertical velocity of the rear-axle point are
+        zero; ``odo``: its forward speed is the odometer's (the dataset's
+        ``odometer.csv``); ``zupt``: while the IMU stands still (test
+        statistic of ``ins/standstill.hpp`` below ``zupt_threshold``) zero
+        velocity and zero angular rate instead.
+    rate_hz : float
+        Update rate of NHC / ZUPT (the odometer's own samples when ``odo``).
+    sigma_nhc_mps, sigma_odo_mps, sigma_zupt_mps : float
+        Measurement noise [m/s] of one update: lateral slip and vertical
+        bounce; odometer speed; standstill.  Slip and the odometer's
+        scale-factor error (no state estimates it) are correlated over
+        seconds, so at 10 updates per second each update counts for less
+        than its own noise: the default odometer sigma of 0.5 m/s is 0.16 m/s
+        over one second, what a 2000 ppm scale error at 20 m/s and 0.05 m/s of
+        quantisation noise call for (docs/results/vehicle_constraints.md).
+    sigma_zaru_dph : float
+        Zero-angular-rate noise [deg/h].
+    lever_arm_b_m : 3 floats or None
+        IMU -> the point that does not slip (the rear-axle centre of a real
+        car; also where the odometer speed holds), body axes FRD [m]; None:
+        zero (the IMU itself: where the simulator's car presets hold it).
+    mounting_rpy_deg : 3 floats
+        Rotation vehicle -> IMU body (3-2-1 Euler angles) [deg]; zero for an aligned IMU.
+    zupt_window_s, zupt_threshold, zupt_sigma_f_mps2, zupt_sigma_w_dps : float
+        The standstill detector: window [s], threshold on the statistic (its
+        mean is about 6 at standstill), per-sample specific-force [m/s^2] and
+        rate [deg/s] noise including idle vibration.
+    gate_chi2 : float
+        NIS gate of the constraint updates (0 = off).
+    """
+
+    use: list = field(default_factory=list)
+    rate_hz: float = 10.0
+    sigma_nhc_mps: float = 0.1
+    sigma_odo_mps: float = 0.5
+    sigma_zupt_mps: float = 0.01
+    sigma_zaru_dph: float = 20.0
+    lever_arm_b_m: list | None = None
+    mounting_rpy_deg: list = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    zupt_window_s: float = 0.2
+    zupt_threshold: float = 18.0
+    zupt_sigma_f_mps2: float = 0.02
+    zupt_sigma_w_dps: float = 0.115
+    gate_chi2: float = 0.0
+
+    def validate(self, prefix: str = "constraints") -> "Constraints":
+        def bad(key, value, allowed):
+            raise ConfigError(f"config key '{prefix}.{key}': bad value {value!r}; allowed: {allowed}")
+
+        use = self.use
+        if isinstance(use, str):
+            use = [u.strip() for u in use.split(",") if u.strip()]
+        if not isinstance(use, (list, tuple)) or any(u not in CONSTRAINT_NAMES for u in use):
+            bad("use", self.use, f"a list of {', '.join(CONSTRAINT_NAMES)}")
+        self.use = list(dict.fromkeys(use))
+        for key in ("rate_hz", "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_dph", "zupt_window_s",
+                    "zupt_threshold", "zupt_sigma_f_mps2", "zupt_sigma_w_dps"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                bad(key, v, "a number > 0")
+        v = self.gate_chi2
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+            bad("gate_chi2", v, "a number >= 0 (0 = off)")
+        for key in ("lever_arm_b_m", "mounting_rpy_deg"):
+            if key == "lever_arm_b_m" and self.lever_arm_b_m is None:
+                continue
+            try:
+                a = np.asarray(getattr(self, key), dtype=float)
+            except (TypeError, ValueError):
+                a = np.full(1, np.nan)
+            if a.shape != (3,) or not np.all(np.isfinite(a)):
+                bad(key, getattr(self, key), "3 finite numbers")
+        return self
+
+
 @dataclass
 class RunConfig:
     """Everything a run needs besides the data.
@@ -128,6 +216,8 @@ class RunConfig:
         Keep every k-th IMU-rate output row.
     ut_alpha, ut_beta, ut_kappa : float
         Unscented-transform parameters (kappa None: 3 - n, seed 000).
+    constraints : Constraints
+        Vehicle constraints (NHC, odometer, ZUPT/ZARU; none by default).
     """
 
     filter: str = "ekf"
@@ -149,6 +239,7 @@ class RunConfig:
     ut_alpha: float = 1.0
     ut_beta: float = 2.0
     ut_kappa: float | None = None
+    constraints: Constraints = field(default_factory=Constraints)
 
     def validate(self) -> "RunConfig":
         def bad(key, value, allowed):
@@ -178,6 +269,12 @@ class RunConfig:
                 bad("lever_arm_b", self.lever_arm_b, "3 finite values [m]")
         if self.imu is not None and not isinstance(self.imu, ImuNoise):
             bad("imu", self.imu, "a table of IMU noise keys")
+        if not isinstance(self.constraints, Constraints):
+            bad("constraints", self.constraints, "a [constraints] table")
+        self.constraints.validate()
+        if self.constraints.use and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
+            bad("constraints.use", self.constraints.use,
+                f"vehicle constraints with loose ekf, rbukf or ukf only (not {self.coupling} {self.filter!r})")
         if self.filter not in FILTERS:
             bad("filter", self.filter, ", ".join(FILTERS))
         if self.coupling not in COUPLINGS:
@@ -229,11 +326,21 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     """Build a :class:`RunConfig` from a (TOML) dict, rejecting unknown keys."""
     d = dict(d)
     imu_d = d.pop("imu", None)
-    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu"}
+    con_d = d.pop("constraints", None)
+    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints"}
     for k in d:
         if k not in names:
-            raise ConfigError(f"{source}: unknown key '{k}'; known keys: {', '.join(sorted(names | {'imu'}))}")
+            raise ConfigError(f"{source}: unknown key '{k}'; known keys: "
+                              f"{', '.join(sorted(names | {'imu', 'constraints'}))}")
     cfg = RunConfig(**d)
+    if con_d is not None:
+        if not isinstance(con_d, dict):
+            raise ConfigError(f"{source}: key 'constraints': bad value {con_d!r}; allowed: a table")
+        known = {f.name for f in dataclasses.fields(Constraints)}
+        for k in con_d:
+            if k not in known:
+                raise ConfigError(f"{source}: unknown key 'constraints.{k}'; known keys: {', '.join(sorted(known))}")
+        cfg.constraints = Constraints(**con_d)
     if imu_d is not None:
         if not isinstance(imu_d, dict):
             raise ConfigError(f"{source}: key 'imu': bad value {imu_d!r}; allowed: a table of IMU noise keys")

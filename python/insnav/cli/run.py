@@ -50,6 +50,10 @@ def add_run_parser(sub) -> None:
     p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex with a tick_ms "
                    "column; default IMU.tag)")
     p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath)")
+    p.add_argument("--constraints", default=None, metavar="LIST",
+                   help="vehicle constraints, comma-separated from nhc (no lateral/vertical velocity), odo "
+                        "(odometer speed, the dataset's odometer.csv), zupt (zero velocity and angular rate while "
+                        "standing still); settings in the config's [constraints] table; loose ekf/rbukf/ukf")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", required=True,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
@@ -80,9 +84,19 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name == "imu" or v is None:
+        if f.name in ("imu", "constraints") or v is None:
             continue
         lines.append(f"{f.name} = {_toml_value(v)}")
+    if cfg.constraints.use:
+        lines.append("\n[constraints]")
+        for f in dataclasses.fields(cfg.constraints):
+            v = getattr(cfg.constraints, f.name)
+            if f.name == "use":
+                lines.append("use = [" + ", ".join(f'"{u}"' for u in v) + "]")
+            elif v is None:
+                continue
+            else:
+                lines.append(f"{f.name} = {_toml_value(v)}")
     if cfg.imu is not None:
         from ..config import _USER_UNITS
 
@@ -151,6 +165,8 @@ def cmd_run(args) -> int:
             cfg = load_config(args.config) if args.config else RunConfig()
         if args.seed is not None:
             cfg.init_seed = args.seed
+        if args.constraints is not None:
+            cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
         sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
     except ConfigError as exc:
         raise UserError(str(exc)) from None

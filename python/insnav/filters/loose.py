@@ -42,8 +42,14 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     core_cfg = engine_config(dataset, cfg, gnss_t, n, use_position=cfg.use_position, use_velocity=cfg.use_velocity,
                              sigma_columns=9)  # Solution keeps the position, velocity and attitude sigmas only
     init_vec = init_vector(dataset, init)
+    events, ev_counts = None, None
+    if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
+        from .constraints import constraint_events, engine_keys
+
+        events, ev_counts = constraint_events(dataset, cfg.constraints, t, dth, dv)
+        core_cfg.update(engine_keys(dataset, cfg.constraints))
     out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, np.zeros(12), noise.as_core_dict(),
-                          core_cfg)
+                          core_cfg, events)
     # unit conversions in place (the arrays are ours), one column at a time:
     # numpy's strided 2-D loops over 2-3 columns are ~10x slower than 1-D ones
     sig = out["sigma"]
@@ -63,5 +69,11 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                    summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n, updates=int(out["updates"]),
                                 rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
+    if events is not None:
+        sol.summary["constraints"] = dict(use=list(cfg.constraints.use), events=len(events), **ev_counts,
+                                          updates=int(out["constraint_updates"]),
+                                          rejected=int(out["constraint_rejected"]))
+        sol.constraint_t, sol.constraint_kinds = events[:, 0], events[:, 1].astype(np.int8)
+        sol.constraint_nis, sol.constraint_status = out["constraint_nis"], out["constraint_status"]
     raise_if_nonfinite(sol, cfg.filter)
     return sol

@@ -285,20 +285,28 @@ struct ClosedLoop {
   void run_samples(double t0, std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
                    std::int64_t& g, std::int64_t m, double cycle_period, int decimation, NavOutputs& out,
                    RecordTime&& record_t, Apply&& apply) {
+    run_events(t0, n, t, dtheta_b, dv_b, cycle_period, decimation, out,
+               [&]() { return g < m ? record_t(g) : kInf; }, [&]() { apply(g++); });
+  }
+
+  /// The same loop over any stream of timed events: `next_t()` is the time of
+  /// the next pending event (+inf: none), `apply_next()` applies it and moves on.
+  template <class NextTime, class ApplyNext>
+  void run_events(double t0, std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
+                  double cycle_period, int decimation, NavOutputs& out, NextTime&& next_t, ApplyNext&& apply_next) {
     double t_prev = t0;
     int until_output = decimation;  // countdown: no division per sample
     for (std::int64_t k = 0; k < n; ++k) {
       const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
       double done = 0.0;  // fraction of this increment already integrated
-      while (g < m && record_t(g) <= raw.t) {
-        const double a = (record_t(g) - t_prev) / raw.dt;  // in (0, 1]
+      for (double te = next_t(); te <= raw.t; te = next_t()) {
+        const double a = (te - t_prev) / raw.dt;  // in (0, 1]
         if (a > done) {
           step(raw, done, a);
           done = a;
         }
         close_cycle();
-        apply(g);
-        ++g;
+        apply_next();
         start_cycle();
       }
       if (done < 1.0) step(raw, done, 1.0);

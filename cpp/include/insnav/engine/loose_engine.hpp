@@ -4,14 +4,23 @@
 // closed_loop.hpp).  The engine's own part is the fix: lever arm, position
 // and/or velocity rows, gate, and the per-record outputs.
 //
+// Vehicle constraints (meas/vehicle.hpp) arrive as a second stream of timed
+// events, merged with the fixes in time order (a fix first at a tie): each
+// event is a non-holonomic constraint (lateral and vertical velocity of the
+// rear-axle point zero), an odometer speed, or, while the vehicle stands
+// still, a zero-velocity and zero-angular-rate update; the caller decides
+// which (e.g. from a StandstillDetector over the IMU samples).
+//
 // No heap allocation inside run(); outputs go to caller-owned buffers.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 
 #include "insnav/engine/closed_loop.hpp"
 #include "insnav/meas/gnss_loose.hpp"
+#include "insnav/meas/vehicle.hpp"
 
 namespace insnav {
 
@@ -23,6 +32,19 @@ struct LooseConfig {
   bool use_position = true;
   bool use_velocity = true;
   int output_decimation = 1;         // write every k-th IMU sample
+  VehicleConstraintConfig vehicle;   // mounting, rear-axle lever arm and noise of the constraint events
+  double constraint_gate_chi2 = 0.0; // NIS gate of the constraint events (<= 0: off)
+};
+
+/// What a vehicle-constraint event asks for (bit flags).
+enum ConstraintKind : std::uint8_t { kNhc = 1, kOdometer = 2, kZupt = 4, kZaru = 8 };
+
+/// One vehicle-constraint event at time t: kinds (ConstraintKind flags) and,
+/// with kOdometer, the measured forward speed of the rear-axle point [m/s].
+struct ConstraintEvent {
+  double t = 0.0;
+  std::uint8_t kinds = 0;
+  double speed_mps = 0.0;
 };
 
 /// Caller-owned output buffers (row-major, any may be null): the per-sample
@@ -31,6 +53,10 @@ struct LooseOutputs : NavOutputs {
   double* innovation = nullptr;  // (.,6) INS - GNSS residual before the update (NaN if absent)
   double* nis = nullptr;         // (.)
   std::int8_t* status = nullptr; // RecordStatus
+  // per constraint event (k rows)
+  double* constraint_nis = nullptr;
+  std::int8_t* constraint_status = nullptr;  // RecordStatus
+  int constraint_updates = 0, constraint_rejected = 0;
 
   /// A record that is not used for an update: status, NaN innovation and NIS.
   void mark(std::int64_t g, RecordStatus st) {
@@ -74,13 +100,31 @@ class LooseEngine {
   void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0,
            std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
            std::int64_t m, const GnssFix* fixes, LooseOutputs& out) {
+    run(initial, P0, corr0, n, t, dtheta_b, dv_b, m, fixes, 0, nullptr, out);
+  }
+
+  /// The same with k vehicle-constraint events sorted by time.
+  void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0,
+           std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
+           std::int64_t m, const GnssFix* fixes, std::int64_t k, const ConstraintEvent* events, LooseOutputs& out) {
     core_.reset(initial, P0, corr0);
-    std::int64_t g = 0;
+    std::int64_t g = 0, c = 0;
     while (g < m && !(fixes[g].t > initial.t)) out.mark(g++, RecordStatus::kOutsideImuSpan);
-    core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, m, cfg_.cycle_period, cfg_.output_decimation, out,
-                      [&](std::int64_t i) { return fixes[i].t; },
-                      [&](std::int64_t i) { apply_fix(fixes[i], i, out); });
+    while (c < k && !(events[c].t > initial.t)) mark_constraint(out, c++, RecordStatus::kOutsideImuSpan);
+    core_.run_events(
+        initial.t, n, t, dtheta_b, dv_b, cfg_.cycle_period, cfg_.output_decimation, out,
+        [&]() { return std::min(g < m ? fixes[g].t : kInf, c < k ? events[c].t : kInf); },
+        [&]() {
+          if (g < m && (c >= k || fixes[g].t <= events[c].t)) {
+            apply_fix(fixes[g], g, out);
+            ++g;
+          } else {
+            apply_constraint(events[c], c, out);
+            ++c;
+          }
+        });
     for (; g < m; ++g) out.mark(g, RecordStatus::kOutsideImuSpan);
+    for (; c < k; ++c) mark_constraint(out, c, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
   }
 
@@ -104,9 +148,40 @@ class LooseEngine {
     }
   }
 
+  void mark_constraint(LooseOutputs& out, std::int64_t c, RecordStatus st) {
+    out.set_status(out.constraint_status, c, st);
+    if (out.constraint_nis) out.constraint_nis[c] = NAN;
+  }
+
+  void apply_constraint(const ConstraintEvent& e, std::int64_t c, LooseOutputs& out) {
+    const bool zupt = e.kinds & kZupt, zaru = e.kinds & kZaru;
+    const bool nhc = e.kinds & kNhc, odo = e.kinds & kOdometer;
+    UpdateResult res;
+    if (zupt || zaru) {
+      standstill_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, zupt, zaru);
+      res = core_.update(standstill_, cfg_.constraint_gate_chi2);
+    } else if (nhc || odo) {
+      vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN);
+      res = core_.update(vehicle_, cfg_.constraint_gate_chi2);
+    } else {
+      mark_constraint(out, c, RecordStatus::kNotUsed);
+      return;
+    }
+    if (out.constraint_nis) out.constraint_nis[c] = res.nis;
+    out.set_status(out.constraint_status, c, status_of(res));
+    if (res.applied) {
+      ++out.constraint_updates;
+      core_.feedback();
+    } else if (res.rejected_by_gate) {
+      ++out.constraint_rejected;
+    }
+  }
+
   ClosedLoop<Filter> core_;
   LooseConfig cfg_;
   LooseMeasurement<L> meas_;
+  VehicleVelocityMeasurement<L> vehicle_;
+  StandstillMeasurement<L> standstill_;
 };
 
 }  // namespace insnav

@@ -1,0 +1,93 @@
+"""Vehicle constraints as timed events for the loose engine
+(``cpp/include/insnav/engine/loose_engine.hpp``, ``meas/vehicle.hpp``).
+
+Events, from :class:`insnav.config.Constraints`:
+
+* ``nhc``: every 1 / ``rate_hz`` s, the lateral and vertical velocity of the
+  rear-axle point are zero (non-holonomic constraint, Shin 2001 sec. 4.3);
+* ``odo``: at each odometer sample, its speed, applied at the middle of its
+  counting interval (the count is the mean over the interval), together with
+  NHC when both are on (decimated to ``rate_hz``);
+* ``zupt``: where the standstill detector (``ins/standstill.hpp``, the SHOE
+  statistic of Skog et al. 2010 over ``zupt_window_s``) is below
+  ``zupt_threshold`` at an event time, a zero-velocity and zero-angular-rate
+  update replaces NHC / odometer there; with ``zupt`` alone, events at
+  ``rate_hz`` where the IMU stands still.  With the odometer on, standstill
+  also needs its speed below ``ZUPT_ODO_SPEED_MPS``: the IMU statistic alone
+  cannot tell a car cruising straight at constant speed on a smooth road from
+  one standing still (both: specific force = gravity, no rotation).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _core
+from ..units import DEG, DEG_PER_H
+
+__all__ = ["NHC", "ODO", "ZUPT", "ZARU", "constraint_events", "engine_keys", "rear_axle_lever_arm"]
+
+NHC, ODO, ZUPT, ZARU = 1, 2, 4, 8  # ConstraintKind flags of loose_engine.hpp
+#: odometer speed below which the vehicle may be standing still [m/s]
+ZUPT_ODO_SPEED_MPS = 0.05
+
+
+def constraint_events(dataset, c, t: np.ndarray, dth: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, dict]:
+    """(k, 3) events ``[t_s, kinds, speed_mps]`` sorted by time, and counts per kind."""
+    use = set(c.use)
+    t0, t1 = float(dataset.t0), float(t[-1])
+    if "odo" in use:
+        odo = getattr(dataset, "odometer", None)
+        if odo is None or len(odo.t) == 0:
+            raise ValueError("constraints: 'odo' needs the dataset's odometer (odometer.csv: t_s, speed_mps)")
+        ot = np.asarray(odo.t, float)
+        sp = np.asarray(odo.speed_mps, float)
+        mid = ot - 0.5 * np.diff(np.concatenate([[ot[0] - (ot[1] - ot[0] if ot.size > 1 else 0.1)], ot]))
+        period = float(np.median(np.diff(ot))) if ot.size > 1 else 1.0 / c.rate_hz
+        step = max(1, int(round(1.0 / (c.rate_hz * period))))
+        keep = np.zeros(ot.size, bool)
+        keep[::step] = True
+        keep &= (mid > t0) & (mid <= t1) & np.isfinite(sp)
+        times, speed = mid[keep], sp[keep]
+        kinds = np.full(times.size, ODO | (NHC if "nhc" in use else 0), np.int64)
+    else:
+        times = np.arange(t0 + 1.0 / c.rate_hz, t1 + 1e-9, 1.0 / c.rate_hz)
+        speed = np.full(times.size, np.nan)
+        kinds = np.full(times.size, NHC if "nhc" in use else 0, np.int64)
+    counts = {}
+    if "zupt" in use:
+        rate = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 100.0
+        window = int(np.clip(round(c.zupt_window_s * rate), 2, 512))
+        T = np.asarray(_core.standstill_statistic(t, dth, dv, t0, window, float(c.zupt_sigma_f_mps2),
+                                                  float(c.zupt_sigma_w_dps) * DEG))
+        idx = np.searchsorted(t, times, side="right") - 1
+        still = (idx >= 0) & (T[np.maximum(idx, 0)] < c.zupt_threshold)
+        if "odo" in use:
+            still &= np.abs(speed) < ZUPT_ODO_SPEED_MPS
+        kinds[still] = ZUPT | ZARU
+        speed[still] = np.nan
+        counts["standstill_fraction_of_samples"] = float(np.mean(T < c.zupt_threshold))
+    sel = kinds != 0
+    ev = np.column_stack([times[sel], kinds[sel].astype(float), speed[sel]])
+    k = kinds[sel]
+    counts.update(nhc=int(np.sum((k & NHC) > 0)), odo=int(np.sum((k & ODO) > 0)), zupt=int(np.sum((k & ZUPT) > 0)))
+    return np.ascontiguousarray(ev), counts
+
+
+def rear_axle_lever_arm(dataset, c) -> np.ndarray:
+    """IMU -> the constrained point (the rear-axle centre of a real car), body FRD [m]: the config's, else zero.
+
+    Zero, not the simulator's odometer lever arm: the simulator's car
+    trajectories hold the non-holonomic constraint (and the slip and bounce)
+    at the IMU itself (``sim/trajectory.py``, ``_VehicleMotion``); the
+    odometer's rear axle then moves sideways by ``omega x l`` in turns.
+    """
+    return np.zeros(3) if c.lever_arm_b_m is None else np.asarray(c.lever_arm_b_m, float)
+
+
+def engine_keys(dataset, c) -> dict:
+    """The loose engine's config keys of the constraints (SI)."""
+    C_vb = np.asarray(_core.rotation.dcm_from_euler(np.asarray(c.mounting_rpy_deg, float) * DEG))
+    return dict(vehicle_lever_arm_b=rear_axle_lever_arm(dataset, c), vehicle_C_bv=C_vb.T.ravel().copy(),
+                sigma_nhc_mps=float(c.sigma_nhc_mps), sigma_odo_mps=float(c.sigma_odo_mps),
+                sigma_zupt_mps=float(c.sigma_zupt_mps), sigma_zaru_radps=float(c.sigma_zaru_dph) * DEG_PER_H,
+                constraint_gate_chi2=float(c.gate_chi2))
