@@ -1,0 +1,155 @@
+"""Vehicle constraints in the loose engine (NHC, odometer, ZUPT/ZARU):
+physics that could fail, the standstill detector's false alarms, and bad
+configuration as one-line errors."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import insnav
+from insnav.analysis import errors
+from insnav.config import ConfigError, Constraints, RunConfig, config_from_dict
+
+OUTAGE = (500.0, 620.0)  # car-mems-outage120
+
+
+@pytest.fixture(scope="module")
+def car():
+    return insnav.simulate("car-mems-outage120", seed=3)
+
+
+def _run(ds, use, **kw):
+    return insnav.run(ds, config=RunConfig(filter="ekf", init_seed=3, constraints=Constraints(use=use, **kw)))
+
+
+def _body_velocity_error(sol, ds):
+    """Solution minus truth velocity in body axes (forward, lateral, down) [m/s] at the solution times."""
+    from insnav import _core
+    from insnav.units import DEG
+
+    tr = ds.truth
+    v_t = np.column_stack([np.interp(sol.t, tr.t, tr.v_n[:, i]) for i in range(3)])
+    out = np.empty((len(sol.t), 3))
+    for k in range(len(sol.t)):
+        C_nb = np.asarray(_core.rotation.dcm_from_euler(np.array([sol.roll_deg[k], sol.pitch_deg[k],
+                                                                   sol.yaw_deg[k]]) * DEG))
+        out[k] = C_nb.T @ (sol.v_n[k] - v_t[k])
+    return out
+
+
+def test_no_constraints_is_the_plain_run(car):
+    """An empty [constraints] table changes nothing (same engine path, no event)."""
+    a = insnav.run(car, "ekf", init_seed=3)
+    b = _run(car, [])
+    np.testing.assert_array_equal(a.lat_deg, b.lat_deg)
+    assert "constraints" not in b.summary
+
+
+def test_nhc_holds_the_lateral_velocity_in_an_outage(car):
+    """120 s without GNSS: without aiding the body-lateral velocity error grows
+    (gyro bias -> heading error -> the speed leaks sideways); NHC keeps it at
+    the level of the simulated slip (0.05 m/s RMS)."""
+    free = insnav.run(car, "ekf", init_seed=3, output_decimation=200)
+    nhc = insnav.run(car, config=RunConfig(filter="ekf", init_seed=3, output_decimation=200,
+                                           constraints=Constraints(use=["nhc"])))
+    inside = (free.t > OUTAGE[0] + 60) & (free.t < OUTAGE[1])
+    lat_free = np.abs(_body_velocity_error(free, car)[inside, 1]).max()
+    lat_nhc = np.abs(_body_velocity_error(nhc, car)[inside, 1]).max()
+    assert lat_nhc < 0.1 and lat_nhc < 0.25 * lat_free, (lat_nhc, lat_free)
+    c = nhc.summary["constraints"]
+    assert c["events"] > 8000 and c["updates"] >= c["events"] - 1 and c["rejected"] == 0
+
+
+def test_odometer_bounds_the_along_track_drift(car):
+    """NHC + odometer in the 120 s outage: max horizontal error within 5 % of
+    the free-inertial EKF's and under 10 m."""
+    def max_in(sol):
+        e = errors(sol, car.truth)
+        t = e["t"]
+        return np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])[(t >= OUTAGE[0]) & (t <= OUTAGE[1])].max()
+
+    free, odo = max_in(_run(car, [])), max_in(_run(car, ["nhc", "odo"]))
+    assert odo < 10.0 and odo < 0.05 * free, (odo, free)
+
+
+def test_zupt_on_a_standing_car_bounds_velocity():
+    """A car parked for the last 20 s of car-mems with GNSS off there: ZUPT
+    keeps the velocity error at the noise level while the free INS drifts."""
+    ds = insnav.simulate("car-mems", seed=2)
+    t_end = float(ds.imu.t[-1])
+    ds.gnss = _cut(ds.gnss, t_end - 20.0)
+    cfg = dict(filter="ekf", init_seed=2, output_decimation=20)
+    free = insnav.run(ds, config=RunConfig(**cfg))
+    z = insnav.run(ds, config=RunConfig(**cfg, constraints=Constraints(use=["zupt"])))
+    last = z.t > t_end - 2.0
+    v_true = np.column_stack([np.interp(z.t, ds.truth.t, ds.truth.v_n[:, i]) for i in range(3)])
+    assert np.abs(v_true[last]).max() < 1e-6  # the car stands still there
+    assert np.abs(z.v_n[last]).max() < 0.02
+    assert np.abs(free.v_n[last]).max() > 5 * np.abs(z.v_n[last]).max()
+    assert z.summary["constraints"]["zupt"] > 100
+
+
+def _cut(g, t_max):
+    import copy
+
+    g2 = copy.copy(g)
+    keep = g.t_valid < t_max
+    for f in ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n"):
+        setattr(g2, f, getattr(g, f)[keep])
+    return g2
+
+
+def test_standstill_detector_false_alarms_on_moving_samples(car):
+    """The IMU statistic alone flags some constant-speed cruising as standing
+    (measured: under 2 %); with the odometer's speed as well, none."""
+    from insnav import _core
+
+    imu = car.imu
+    T = np.asarray(_core.standstill_statistic(imu.t, imu.dtheta_b, imu.dv_b, car.t0, 40, 0.02, 2e-3))
+    speed = np.linalg.norm(np.column_stack([np.interp(imu.t, car.truth.t, car.truth.v_n[:, i]) for i in range(3)]),
+                           axis=1)
+    moving, standing = speed > 0.5, speed < 1e-3
+    fa = np.mean(T[moving] < 18.0)
+    odo = np.interp(imu.t, car.odometer.t, car.odometer.speed_mps)
+    fa_odo = np.mean((T < 18.0)[moving] & (np.abs(odo[moving]) < 0.05))
+    assert fa < 0.02 and fa_odo == 0.0, (fa, fa_odo)
+    assert np.mean(T[standing] < 18.0) > 0.8
+
+
+@pytest.mark.parametrize("table, needle", [
+    ({"use": ["nhc", "wheel"]}, "constraints.use"),
+    ({"use": ["nhc"], "sigma_nhc_mps": -0.1}, "constraints.sigma_nhc_mps"),
+    ({"use": ["nhc"], "rate": 10}, "unknown key 'constraints.rate'"),
+    ({"use": ["nhc"], "lever_arm_b_m": [1, 2]}, "constraints.lever_arm_b_m"),
+])
+def test_bad_constraint_config_names_the_key(table, needle):
+    with pytest.raises(ConfigError, match=needle.replace(".", r"\.")):
+        config_from_dict({"constraints": table})
+
+
+def test_constraints_need_loose_ekf_rbukf_ukf_and_an_odometer(car):
+    with pytest.raises(ConfigError, match="loose ekf, rbukf or ukf"):
+        config_from_dict({"filter": "upf", "coupling": "tight", "constraints": {"use": ["nhc"]}})
+    ds = insnav.simulate("seed000-sim", seed=1)  # no odometer
+    with pytest.raises(ValueError, match="odometer"):
+        insnav.run(ds, config=RunConfig(constraints=Constraints(use=["odo"])))
+
+
+def test_cli_constraints_flag_and_config_round_trip(car, tmp_path):
+    from insnav.cli import main
+    from insnav.config import load_config
+
+    car.save(tmp_path / "car")
+    out = tmp_path / "sol.csv"
+    assert main(["run", str(tmp_path / "car"), "--constraints", "nhc,odo", "--out", str(out)]) == 0
+    cfg = load_config(str(out) + ".config.toml")
+    assert cfg.constraints.use == ["nhc", "odo"]
+    again = tmp_path / "again.csv"
+    assert main(["run", str(tmp_path / "car"), "--config", str(out) + ".config.toml", "--out", str(again)]) == 0
+    assert again.read_bytes() == out.read_bytes()
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "insnav", "run", str(tmp_path / "car"), "--constraints", "nhc,wheels",
+                        "--out", str(tmp_path / "x.csv")], capture_output=True, text=True)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "constraints.use" in r.stderr
