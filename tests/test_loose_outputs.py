@@ -57,11 +57,12 @@ def test_solution_equals_plain_conversions(ds, filt, layout, monkeypatch):
     np.testing.assert_array_equal(sol.gyro_scale, raw["imu_err"][:, 9:12])
 
     # sigma_columns: the leading columns of the full sigma array, everything else identical
-    args = list(cap.args)
-    full = _core.run_loose(*args[:-1], {**args[-1], "sigma_columns": 0})
+    args = list(cap.args)  # ..., imu_model, config, constraints
+    head, config, constraints = args[:-2], args[-2], args[-1]
+    full = _core.run_loose(*head, {**config, "sigma_columns": 0}, constraints)
     assert full["sigma"].shape[1] == args[1]
     for k in (9, 3):
-        part = _core.run_loose(*args[:-1], {**args[-1], "sigma_columns": k})
+        part = _core.run_loose(*head, {**config, "sigma_columns": k}, constraints)
         assert part["sigma"].shape == (len(full["t"]), k)
         np.testing.assert_array_equal(part["sigma"], full["sigma"][:, :k])
         for key in ("t", "llh", "v_n", "rpy", "imu_err", "innovation", "nis", "status"):

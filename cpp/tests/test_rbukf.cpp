@@ -16,6 +16,7 @@
 #include "insnav/filter/rbukf.hpp"
 #include "insnav/filter/ukf.hpp"
 #include "insnav/meas/gnss_loose.hpp"
+#include "fixtures.hpp"
 #include "test_util.hpp"
 
 using namespace insnav;
@@ -66,44 +67,6 @@ StateCov<L> random_spd(std::mt19937& rng, double scale) {
   return D * P * D;
 }
 
-/// IMU-rate INS of a turning, accelerating vehicle, cut into propagation
-/// intervals of `per` samples (start, middle, end).
-std::vector<InsInterval> make_intervals(int n_intervals, int per = 2, double imu_dt = 0.01) {
-  NavState s;
-  s.lat = 0.6;
-  s.lon = 1.9;
-  s.h = 200.0;
-  s.v_n = Vec3(15.0, -3.0, 0.0);
-  s.q_nb = quat_from_euler(Vec3(0.05, -0.03, 1.0));
-  Strapdown ins(s);
-  const Vec3 w_b(0.02, -0.01, 0.1), f_b(1.0, 0.5, -9.79);
-  std::vector<InsInterval> out(n_intervals);
-  auto point = [&](InsPoint& p) {
-    const NavState& n = ins.state();
-    p.set(n.lat, n.h, n.v_n, n.q_nb.toRotationMatrix(), f_b, w_b);
-  };
-  InsPoint start;
-  point(start);
-  double t = 0.0;
-  for (int k = 0; k < n_intervals; ++k) {
-    InsInterval& iv = out[k];
-    iv.start = start;
-    for (int j = 1; j <= per; ++j) {
-      ImuIncrement imu;
-      t += imu_dt;
-      imu.t = t;
-      imu.dt = imu_dt;
-      imu.dtheta_b = w_b * imu_dt;
-      imu.dv_b = f_b * imu_dt;
-      ins.update(imu);
-      if (j == per / 2) point(iv.mid);
-    }
-    point(iv.end);
-    iv.dt = per * imu_dt;
-    start = iv.end;
-  }
-  return out;
-}
 
 double rel(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) { return (a - b).norm() / std::max(b.norm(), 1e-300); }
 

@@ -27,6 +27,7 @@ inline int g_eigen_asserts = 0;
 #include "insnav/filter/ukf.hpp"
 #include "insnav/filter/upf.hpp"
 #include "insnav/meas/pseudorange.hpp"
+#include "fixtures.hpp"
 #include "test_util.hpp"
 
 using namespace insnav;
@@ -60,43 +61,6 @@ std::vector<SatObservation> make_sats(double lat, double lon, const Vec3& r_rx_e
   return out;
 }
 
-/// IMU-rate INS of a turning vehicle cut into intervals of `per` samples.
-std::vector<InsInterval> make_intervals(int n_intervals, NavState& s, int per = 2, double imu_dt = 0.01) {
-  s.lat = 0.6;
-  s.lon = 1.9;
-  s.h = 200.0;
-  s.v_n = Vec3(15.0, -3.0, 0.0);
-  s.q_nb = quat_from_euler(Vec3(0.05, -0.03, 1.0));
-  Strapdown ins(s);
-  const Vec3 w_b(0.02, -0.01, 0.1), f_b(1.0, 0.5, -9.79);
-  std::vector<InsInterval> out(n_intervals);
-  auto point = [&](InsPoint& p) {
-    const NavState& n = ins.state();
-    p.set(n.lat, n.h, n.v_n, n.q_nb.toRotationMatrix(), f_b, w_b);
-  };
-  InsPoint start;
-  point(start);
-  double t = 0.0;
-  for (int k = 0; k < n_intervals; ++k) {
-    InsInterval& iv = out[k];
-    iv.start = start;
-    for (int j = 1; j <= per; ++j) {
-      ImuIncrement imu;
-      t += imu_dt;
-      imu.t = t;
-      imu.dt = imu_dt;
-      imu.dtheta_b = w_b * imu_dt;
-      imu.dv_b = f_b * imu_dt;
-      ins.update(imu);
-      if (j == per / 2) point(iv.mid);
-    }
-    point(iv.end);
-    iv.dt = per * imu_dt;
-    start = iv.end;
-  }
-  s = ins.state();
-  return out;
-}
 
 StateCov<L> typical_P0() {
   StateVec<L> s;
@@ -154,7 +118,7 @@ StateVec<L> sample_error() {
 // --- FadingUkf (no fading, every interval) == Ukf<Layout20> ----------------------
 void test_fukf_equals_ukf() {
   NavState s;
-  const auto ivs = make_intervals(50, s);
+  const auto ivs = make_intervals(50, 2, 0.01, &s);
   const ImuErrorModel m = model20();
   Ukf<L> ukf(m);
   FadingUkf<L> fu(m, UtParams{}, FadingParams<kN>{}, 0.0);
@@ -185,7 +149,7 @@ void test_fukf_equals_ukf() {
 // --- one particle, no sampling: the UPF's UKF step == the (fading) UKF's --------------
 void test_upf_one_particle(bool fading) {
   NavState s;
-  const auto ivs = make_intervals(50, s);
+  const auto ivs = make_intervals(50, 2, 0.01, &s);
   const ImuErrorModel m = model20();
   FadingParams<kN> fp;
   fp.enabled = fading;

@@ -1,4 +1,4 @@
-"""Unit conversion factors: multiply a value in the named unit to get SI.
+"""Unit conversion factors (multiply a value in the named unit to get SI) and angle wrapping.
 
 The only definitions in the package (``insnav`` is SI inside; units appear
 at the edges: files, configs, printed tables).  ``RAD2DEG`` goes the other way.
@@ -18,5 +18,14 @@ MPS_PER_SQRT_H = 1.0 / 60.0          #: (m/s)/sqrt(h) -> (m/s)/sqrt(s)
 UG_PER_SQRT_HZ = 1e-6 * G0           #: ug/sqrt(Hz) -> (m/s^2)/sqrt(Hz) = (m/s)/sqrt(s)
 PPM = 1e-6                           #: ppm -> [-]
 
-__all__ = ["DEG", "RAD2DEG", "HOUR", "G0", "MG", "DEG_PER_H", "DEG_PER_SQRT_H", "MPS_PER_SQRT_H",
+
+
+def wrap_deg(a):
+    """Wrap angles [deg] to (-180, 180]."""
+    import numpy as np
+
+    return -np.mod(-np.asarray(a, float) + 180.0, 360.0) + 180.0
+
+
+__all__ = ["wrap_deg", "DEG", "RAD2DEG", "HOUR", "G0", "MG", "DEG_PER_H", "DEG_PER_SQRT_H", "MPS_PER_SQRT_H",
            "UG_PER_SQRT_HZ", "PPM"]

@@ -4,12 +4,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..earth import radii
-from ..units import DEG
+from ..units import DEG, wrap_deg
 
 
 
-def _wrap_deg(a):
-    return (np.asarray(a) + 180.0) % 360.0 - 180.0
 
 
 def errors(sol, truth) -> dict:
@@ -42,9 +40,9 @@ def errors(sol, truth) -> dict:
     pos = np.column_stack([(lat - lat_t) * (R_M + h_t), (lon - lon_t) * (R_N + h_t) * np.cos(lat_t), -(h - h_t)])
     vel = np.asarray(sol.v_n)[keep] - at(truth.v_n)
     yaw_t = np.unwrap(np.asarray(truth.yaw_deg) * DEG) / DEG
-    att = np.column_stack([_wrap_deg(np.asarray(sol.roll_deg)[keep] - at(truth.roll_deg)),
-                           _wrap_deg(np.asarray(sol.pitch_deg)[keep] - at(truth.pitch_deg)),
-                           _wrap_deg(np.asarray(sol.yaw_deg)[keep] - np.interp(t, tt, yaw_t))])
+    att = np.column_stack([wrap_deg(np.asarray(sol.roll_deg)[keep] - at(truth.roll_deg)),
+                           wrap_deg(np.asarray(sol.pitch_deg)[keep] - at(truth.pitch_deg)),
+                           wrap_deg(np.asarray(sol.yaw_deg)[keep] - np.interp(t, tt, yaw_t))])
     out = dict(t=t, pos_n_m=pos, vel_n_mps=vel, att_deg=att)
     for k in ("sigma_pos_n_m", "sigma_vel_n_mps", "sigma_att_deg"):
         if hasattr(sol, k):

@@ -8,6 +8,7 @@ import numpy as np
 
 from .._atomic import atomic_write_text
 from ..errors import UserError
+from .._toml import toml_value
 from ..config import ConfigError, RunConfig, load_config
 from ..registry import FILTERS
 
@@ -65,18 +66,6 @@ def add_run_parser(sub) -> None:
     p.set_defaults(func=cmd_run)
 
 
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return '"' + v.replace('"', '\\"') + '"'
-    if isinstance(v, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_toml_value(float(x)) for x in v) + "]"
-    if isinstance(v, float) and not np.isfinite(v):
-        return "inf" if v > 0 else "nan"
-    return repr(float(v)) if isinstance(v, float) else str(v)
-
-
 def resolved_config_toml(cfg: RunConfig) -> str:
     """The configuration as TOML (SI imu values under [imu_si], informational)."""
     import dataclasses
@@ -86,7 +75,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
         v = getattr(cfg, f.name)
         if f.name in ("imu", "constraints") or v is None:
             continue
-        lines.append(f"{f.name} = {_toml_value(v)}")
+        lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.constraints.use:
         lines.append("\n[constraints]")
         for f in dataclasses.fields(cfg.constraints):
@@ -96,7 +85,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
             elif v is None:
                 continue
             else:
-                lines.append(f"{f.name} = {_toml_value(v)}")
+                lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.imu is not None:
         from ..config import _USER_UNITS
 
@@ -104,7 +93,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
         for key, (fld, factor) in _USER_UNITS.items():
             if key in ("acc_vrw_ug_per_sqrt_hz",):
                 continue
-            lines.append(f"{key} = {_toml_value(np.asarray(getattr(cfg.imu, fld)) / factor)}")
+            lines.append(f"{key} = {toml_value(np.asarray(getattr(cfg.imu, fld)) / factor)}")
     return "\n".join(lines) + "\n"
 
 
@@ -118,9 +107,9 @@ def _rinex_table_toml(opt) -> str:
         if v is None:
             continue
         if isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
-            lines.append(f"{f.name} = [" + ", ".join(_toml_value(x) for x in v) + "]")
+            lines.append(f"{f.name} = [" + ", ".join(toml_value(x) for x in v) + "]")
         else:
-            lines.append(f"{f.name} = {_toml_value(v)}")
+            lines.append(f"{f.name} = {toml_value(v)}")
     return "\n".join(lines) + "\n"
 
 

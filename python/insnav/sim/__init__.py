@@ -15,17 +15,13 @@ import numpy as np
 
 from ..data.dataset import Dataset, GnssFixes, ImuData, ImuErrors, Truth
 from .scenario import Scenario, ScenarioError, list_presets, load_scenario
+from ..units import wrap_deg
 
 __all__ = ["simulate", "load_scenario", "list_presets", "Scenario", "ScenarioError",
            "truth_from_state", "wrap_deg"]
 
 # appending keeps every earlier stream's seed (SeedSequence.spawn children are positional)
 _STREAMS = ("gyro", "accel", "gnss", "delay", "gnss_raw", "clock", "odometer")
-
-
-def wrap_deg(a):
-    """Wrap angles [deg] to (-180, 180]."""
-    return -np.mod(-np.asarray(a, float) + 180.0, 360.0) + 180.0
 
 
 def sample_times(t0: float, t_end: float, rate: float) -> np.ndarray:
