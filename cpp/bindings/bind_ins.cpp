@@ -97,6 +97,59 @@ void bind_ins(py::module_& m) {
         "roll_deg, pitch_deg, yaw_deg arrays and bad_sample (-1, or the first sample that is not finite "
         "or not after the previous time; the outputs are then incomplete).");
   m.def(
+      "smooth_rows",
+      [](const DArray& t, DArray lat_deg, DArray lon_deg, DArray h_m, DArray v_n, DArray roll_deg, DArray pitch_deg,
+         DArray yaw_deg, const DArray& te, const DArray& s, const DArray& s_end, const DArray& sig_e, DArray sig_out) {
+        const py::ssize_t n = t.size(), E = te.size();
+        require_shape(t, n, -1, "t");
+        for (const DArray* a : {&lat_deg, &lon_deg, &h_m, &roll_deg, &pitch_deg, &yaw_deg}) require_shape(*a, n, -1, "rows");
+        require_shape(v_n, n, 3, "v_n");
+        require_shape(sig_out, n, 9, "sigma");
+        require_shape(te, E, -1, "te");
+        for (const DArray* a : {&s, &s_end, &sig_e}) require_shape(*a, E, 9, "epochs");
+        if (E < 2) throw py::value_error("smooth_rows: needs at least 2 epochs");
+        double *la = lat_deg.mutable_data(), *lo = lon_deg.mutable_data(), *h = h_m.mutable_data(),
+               *v = v_n.mutable_data(), *r = roll_deg.mutable_data(), *p = pitch_deg.mutable_data(),
+               *y = yaw_deg.mutable_data(), *so = sig_out.mutable_data();
+        const double *pt = t.data(), *pe = te.data(), *ps = s.data(), *pse = s_end.data(), *pg = sig_e.data();
+        constexpr double kDeg = 3.14159265358979323846 / 180.0;
+        {
+          py::gil_scoped_release release;
+          py::ssize_t k = 0;  // epoch interval [te[k], te[k+1]) holding the row
+          for (py::ssize_t i = 0; i < n; ++i) {
+            const double ti = pt[i];
+            while (k + 2 < E && pe[k + 1] < ti) ++k;  // ti in (te[k], te[k+1]]
+            const double t0 = pe[k], t1 = pe[k + 1];
+            const double w = t1 > t0 ? std::min(1.0, std::max(0.0, (ti - t0) / (t1 - t0))) : 1.0;
+            // a row at t_{k+1} is written after that epoch's feedback: s_{k+1}; before it, s_{k+1} + x_fed
+            const double* end = std::abs(ti - t1) < 1e-9 ? ps + 9 * (k + 1) : pse + 9 * (k + 1);
+            double x[9];
+            for (int j = 0; j < 9; ++j) {
+              x[j] = (1.0 - w) * ps[9 * k + j] + w * end[j];
+              so[9 * i + j] = (1.0 - w) * pg[9 * k + j] + w * pg[9 * (k + 1) + j];
+            }
+            const double lat = la[i] * kDeg;
+            const wgs84::Radii rad = wgs84::radii(lat);
+            la[i] = (lat - x[0] / (rad.R_M + h[i])) / kDeg;
+            lo[i] -= x[1] / ((rad.R_N + h[i]) * std::cos(lat)) / kDeg;
+            h[i] += x[2];
+            for (int j = 0; j < 3; ++j) v[3 * i + j] -= x[3 + j];
+            const Quat q = quat_from_euler(Vec3(x[6], x[7], x[8])) *
+                           quat_from_euler(Vec3(r[i] * kDeg, p[i] * kDeg, y[i] * kDeg));
+            const Vec3 rpy = euler_from_quat(q.normalized());
+            r[i] = rpy[0] / kDeg;
+            p[i] = rpy[1] / kDeg;
+            y[i] = rpy[2] / kDeg;
+          }
+        }
+      },
+      py::arg("t"), py::arg("lat_deg"), py::arg("lon_deg"), py::arg("h_m"), py::arg("v_n"), py::arg("roll_deg"),
+      py::arg("pitch_deg"), py::arg("yaw_deg"), py::arg("te"), py::arg("s"), py::arg("s_end"), py::arg("sigma_e"),
+      py::arg("sigma_out"),
+      "Smoothed output rows in place (python/insnav/filters/smoothing.py): the error at each row time, "
+      "interpolated between the epochs' smoothed errors s (after) and s_end (before feedback), corrects "
+      "position [m], velocity [m/s] and attitude [rad] as the engines' feedback does; sigmas interpolated.");
+  m.def(
       "standstill_statistic",
       [](const DArray& t, const DArray& dtheta_b, const DArray& dv_b, double t0, int window, double sigma_f_mps2,
          double sigma_w_radps, double gravity_mps2) {

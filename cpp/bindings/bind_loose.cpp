@@ -44,7 +44,7 @@ void bind_loose(py::module_& m) {
         LooseConfig cfg = loose_config_from(config, "engine config",
                                             {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
                                              "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
-                                             "constraint_gate_chi2"});
+                                             "constraint_gate_chi2", "smooth"});
         VehicleConstraintConfig& v = cfg.vehicle;
         v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
         if (config.contains("vehicle_C_bv")) {
@@ -62,7 +62,7 @@ void bind_loose(py::module_& m) {
         const UtParams ut = ut_from(config);
         const int sigma_columns = static_cast<int>(num(config, "sigma_columns", 0));
         const LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut, sigma_columns,
-                                constraints ? &*constraints : nullptr};
+                                constraints ? &*constraints : nullptr, flag(config, "smooth", false)};
         if (layout == 15) return run_loose_l15(filter, args);
         if (layout == 21) return run_loose_l21(filter, args);
         unsupported_loose(filter, layout);

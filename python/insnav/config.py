@@ -218,6 +218,9 @@ class RunConfig:
         Unscented-transform parameters (kappa None: 3 - n, seed 000).
     constraints : Constraints
         Vehicle constraints (NHC, odometer, ZUPT/ZARU; none by default).
+    smooth : bool
+        Post-process with the RTS smoother (loose EKF): every output row and
+        sigma from all the data, before and after it.
     """
 
     filter: str = "ekf"
@@ -240,6 +243,7 @@ class RunConfig:
     ut_beta: float = 2.0
     ut_kappa: float | None = None
     constraints: Constraints = field(default_factory=Constraints)
+    smooth: bool = False
 
     def validate(self) -> "RunConfig":
         def bad(key, value, allowed):
@@ -272,6 +276,10 @@ class RunConfig:
         if not isinstance(self.constraints, Constraints):
             bad("constraints", self.constraints, "a [constraints] table")
         self.constraints.validate()
+        if not isinstance(self.smooth, (bool, np.bool_)):
+            bad("smooth", self.smooth, "true or false")
+        if self.smooth and (self.coupling != "loose" or self.filter != "ekf"):
+            bad("smooth", self.smooth, f"the RTS smoother runs with the loose ekf (not {self.coupling} {self.filter!r})")
         if self.constraints.use and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
             bad("constraints.use", self.constraints.use,
                 f"vehicle constraints with loose ekf, rbukf or ukf only (not {self.coupling} {self.filter!r})")

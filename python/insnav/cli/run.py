@@ -55,6 +55,8 @@ def add_run_parser(sub) -> None:
                    help="vehicle constraints, comma-separated from nhc (no lateral/vertical velocity), odo "
                         "(odometer speed, the dataset's odometer.csv), zupt (zero velocity and angular rate while "
                         "standing still); settings in the config's [constraints] table; loose ekf/rbukf/ukf")
+    p.add_argument("--smooth", action="store_true",
+                   help="post-process with the RTS smoother (loose EKF): every row from all the data")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", required=True,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
@@ -154,6 +156,8 @@ def cmd_run(args) -> int:
             cfg = load_config(args.config) if args.config else RunConfig()
         if args.seed is not None:
             cfg.init_seed = args.seed
+        if args.smooth:
+            cfg.smooth = True
         if args.constraints is not None:
             cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
         sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)

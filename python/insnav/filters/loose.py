@@ -48,6 +48,8 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
 
         events, ev_counts = constraint_events(dataset, cfg.constraints, t, dth, dv)
         core_cfg.update(engine_keys(dataset, cfg.constraints))
+    if cfg.smooth:
+        core_cfg["smooth"] = True
     out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, np.zeros(12), noise.as_core_dict(),
                           core_cfg, events)
     # unit conversions in place (the arrays are ours), one column at a time:
@@ -75,5 +77,9 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                                           rejected=int(out["constraint_rejected"]))
         sol.constraint_t, sol.constraint_kinds = events[:, 0], events[:, 1].astype(np.int8)
         sol.constraint_nis, sol.constraint_status = out["constraint_nis"], out["constraint_status"]
+    if cfg.smooth:
+        from .smoothing import smoothed_rows
+
+        smoothed_rows(sol, out)
     raise_if_nonfinite(sol, cfg.filter)
     return sol

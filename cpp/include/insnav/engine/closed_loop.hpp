@@ -30,7 +30,9 @@
 #include <cmath>
 #include <cstdint>
 #include <type_traits>
+#include <utility>
 
+#include "insnav/filter/rts_smoother.hpp"
 #include "insnav/filter/sigma_points.hpp"
 #include "insnav/filter/types.hpp"
 #include "insnav/ins/mechanization.hpp"
@@ -118,8 +120,33 @@ struct ClosedLoop {
   explicit ClosedLoop(const Filter& f, double propagation_interval_s = 0.02)
       : filter(f), propagation_interval(propagation_interval_s) {}
 
+  /// Record one SmootherEpoch per filter epoch into buf[0..capacity) for the
+  /// RTS backward pass (rts_smoother.hpp).  Needs a filter that keeps its
+  /// cycle transition (Ekf::track_cycle_transition); call before reset().
+  void record_for_smoother(SmootherEpoch<L>* buf, std::int64_t capacity) {
+    rec_ = buf;
+    rec_cap_ = capacity;
+    if constexpr (kTracksTransition) filter.track_cycle_transition(buf != nullptr);
+  }
+  std::int64_t recorded_epochs() const { return rec_n_; }
+  bool recording_overflowed() const { return rec_overflow_; }
+
   void reset(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0 = 0.0,
              double clock_drift0 = 0.0) {
+    rec_n_ = 0;
+    rec_overflow_ = false;
+    rec_pending_ = false;
+    if (rec_) {  // epoch 0: the initial state, nothing fed back
+      if (rec_cap_ < 1) {
+        rec_overflow_ = true;
+      } else {
+        SmootherEpoch<L>& e = rec_[rec_n_++];
+        e = SmootherEpoch<L>{};
+        e.t = initial.t;
+        e.P = P0;
+        P_post_ = P0;
+      }
+    }
     ins.reset(initial);
     corr = corr0;
     clock_bias = clock_bias0;
@@ -167,6 +194,13 @@ struct ClosedLoop {
   }
 
   void start_cycle() {
+    if (rec_pending_) {  // close the epoch: its posterior (x was saved by feedback() if fed back)
+      SmootherEpoch<L>& e = rec_[rec_n_ - 1];
+      if (!e.fed_back) e.x = filter.x();
+      e.P = filter.P();
+      P_post_ = e.P;
+      rec_pending_ = false;
+    }
     cycle_start = ins.state().t;
     interval_t0 = cycle_start;
     set_point(iv_.start);
@@ -178,6 +212,21 @@ struct ClosedLoop {
     flush_interval();
     filter.end_cycle();
     out_cache_dirty_ = true;
+    if constexpr (kTracksTransition) {
+      if (rec_ && !rec_overflow_) {  // the prediction to this epoch
+        if (rec_n_ >= rec_cap_) {
+          rec_overflow_ = true;
+          return;
+        }
+        SmootherEpoch<L>& e = rec_[rec_n_++];
+        e.t = ins.state().t;
+        e.x_pred = filter.x();
+        e.P_pred = filter.P();
+        e.C.noalias() = P_post_ * filter.cycle_transition().transpose();
+        e.fed_back = false;
+        rec_pending_ = true;
+      }
+    }
   }
 
   /// No record for a cycle period (an outage): true when the cycle is to be
@@ -198,6 +247,10 @@ struct ClosedLoop {
   /// with x, then x = 0.
   void feedback() {
     const StateVec<L> x = filter.x();
+    if (rec_pending_) {
+      rec_[rec_n_ - 1].x = x;
+      rec_[rec_n_ - 1].fed_back = true;
+    }
     NavState s = ins.state();
     const wgs84::Radii r = wgs84::radii(s.lat);
     s.lat -= x[L::kPos] / (r.R_M + s.h);
@@ -356,6 +409,16 @@ struct ClosedLoop {
     have_mid_ = false;
   }
 
+  template <class F, class = void>
+  struct TracksTransition : std::false_type {};
+  template <class F>
+  struct TracksTransition<F, std::void_t<decltype(std::declval<F&>().cycle_transition())>> : std::true_type {};
+  static constexpr bool kTracksTransition = TracksTransition<Filter>::value;
+
+  SmootherEpoch<L>* rec_ = nullptr;
+  std::int64_t rec_cap_ = 0, rec_n_ = 0;
+  bool rec_pending_ = false, rec_overflow_ = false;
+  StateCov<L> P_post_ = StateCov<L>::Zero();
   InsInterval iv_;
   bool have_mid_ = false;
   ImuIncrement last_imu_;     // last corrected increment integrated

@@ -30,8 +30,18 @@ class Ekf {
     x_.setZero();
     P_ = 0.5 * (P0 + P0.transpose());
   }
-  void begin_cycle() {}
+  void begin_cycle() {
+    if (track_) Phi_cycle_.setIdentity();
+  }
   void end_cycle() {}
+
+  /// Keep the transition of the whole cycle (the product of the intervals'
+  /// Phi) for the RTS smoother (rts_smoother.hpp: C = P_k Phi'); off by default.
+  void track_cycle_transition(bool on) {
+    track_ = on;
+    Phi_cycle_.setIdentity();
+  }
+  const Cov& cycle_transition() const { return Phi_cycle_; }
 
   void propagate(const InsInterval& iv) {
     if constexpr (kDiagonalAuxDynamics<L>) {
@@ -44,6 +54,11 @@ class Ekf {
       const Eigen::Matrix<double, N, 1> x_nav = phi_.U.lazyProduct(x_);
       x_.template tail<K>().array() *= phi_.d.array();
       x_.template head<N>() = x_nav;
+      if (track_) {  // Phi_cycle <- [U; 0 diag(d)] Phi_cycle
+        work_.template topRows<N>().noalias() = phi_.U * Phi_cycle_;
+        work_.template bottomRows<K>() = phi_.d.asDiagonal() * Phi_cycle_.template bottomRows<K>();
+        Phi_cycle_ = work_;
+      }
     } else {
       const Cov F = linear_F<L>(iv.mid, model_);
       const Cov Phi = transition<L>(F, iv.dt);
@@ -51,6 +66,7 @@ class Ekf {
       P_ = Phi * P_ * Phi.transpose() + discrete_Q<L>(Phi, Qc, iv.dt);
       P_ = 0.5 * (P_ + P_.transpose()).eval();
       x_ = Phi * x_;
+      if (track_) Phi_cycle_ = (Phi * Phi_cycle_).eval();
     }
   }
 
@@ -73,6 +89,8 @@ class Ekf {
   Cov P_ = Cov::Identity();
   Cov F_ = Cov::Zero(), Qc_ = Cov::Zero();  // propagation workspace
   NavAuxTransition<L> phi_;
+  bool track_ = false;
+  Cov Phi_cycle_ = Cov::Identity(), work_ = Cov::Zero();
   int repairs_ = 0;
 };
 
