@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import insnav
+from conftest import short_tight_dataset
 from insnav.filters.solution import (INNOVATION_COLUMNS, RESIDUAL_COLUMNS, RecordStatus, innovations_path,
                                      load_solution, read_innovations, read_residuals, residuals_path,
                                      write_innovations)
@@ -94,27 +95,11 @@ def test_sidecar_of_an_earlier_version_and_bad_sidecars(sol, tmp_path):
         load_solution(p)
 
 
-def _short_tight_dataset(duration_s=120.0):
-    """seed003-4sat cut to its first segments (>= duration_s), 8 satellites, no failure windows."""
-    import insnav.sim as sim
-
-    sc = dict(sim.simulate("seed003-4sat", seed=0, with_truth=False).scenario)
-    segs, tot = [], 0.0
-    for seg in sc["motion"]["segments"]:
-        if tot >= duration_s:
-            break
-        segs.append(seg)
-        tot += float(seg["duration_s"])
-    sc["motion"] = dict(sc["motion"], segments=segs)
-    sc["gnss_raw"] = dict(sc["gnss_raw"], windows=[], max_sats=8)
-    return sim.simulate(sc, seed=7)
-
-
 def test_tight_sidecar_and_per_satellite_residuals(tmp_path):
     """Tight: one sidecar row per epoch with the core's row count, which is the
     number of finite residuals (pseudorange and rate per satellite) of that
     epoch in the per-satellite file; the residuals round-trip to the printed digits."""
-    ds = _short_tight_dataset()
+    ds = short_tight_dataset()
     sol = insnav.run(ds, filter="ekf", coupling="tight", init_seed=0, output_decimation=10)
     p = sol.save(tmp_path / "tight.npz")
     side = write_innovations(sol, p)
