@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -267,38 +268,100 @@ def _chromium():
     pytest.skip("Chromium not installed (apt-get install -y chromium): the browser check of the report is skipped")
 
 
+_WIDTH = 1100  # CSS px of the browser window (the page is at most 1000 px wide)
+
+
+def _browser_layout(browser: str, page) -> dict:
+    """Load ``page`` in headless Chromium inside an iframe as wide as the
+    screenshot window (no scrollbars, so the layout is the same) and read back
+    the document height and, per image, whether it decoded, its natural size
+    and its box in page pixels."""
+    page = Path(page)
+    probe = page.with_name("layout-probe.html")
+    probe.write_text(
+        "<html><body style='margin:0'><iframe id='f' src='" + page.name + "' width='" + str(_WIDTH) + "' "
+        "height='20000' scrolling='no' style='border:0;display:block'></iframe><script>"
+        "window.addEventListener('load', () => { const d = document.getElementById('f').contentDocument;"
+        " const boxes = [...d.images].map(i => { const r = i.getBoundingClientRect();"
+        " return [i.complete, i.naturalWidth, i.naturalHeight, r.left, r.top, r.width, r.height]; });"
+        " document.body.setAttribute('data-layout', JSON.stringify({height: Math.ceil(d.body.getBoundingClientRect()"
+        ".bottom) + 20,"
+        " images: boxes})); });</script></body></html>")
+    r = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files",
+                        "--virtual-time-budget=10000", "--dump-dom", probe.as_uri()],
+                       capture_output=True, text=True, timeout=120)
+    probe.unlink()
+    m = re.search(r'data-layout="([^"]*)"', r.stdout)
+    assert m, r.stdout[-500:] + r.stderr[-1500:]
+    return json.loads(html_unescape(m.group(1)))
+
+
+def _screenshot(browser: str, page, shot, height: int) -> list[str]:
+    """Screenshot of ``page`` (full height); returns the console messages
+    Chromium logged (console.log/error, uncaught exceptions)."""
+    r = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                        "--virtual-time-budget=10000", "--enable-logging=stderr", "--v=0",
+                        f"--window-size={_WIDTH},{height}", f"--screenshot={shot}", Path(page).as_uri()],
+                       capture_output=True, text=True, timeout=120)
+    assert Path(shot).is_file(), r.stderr[-1500:]
+    return [ln for ln in r.stderr.splitlines() if ":CONSOLE" in ln or "Uncaught" in ln]
+
+
+def _blank_figures(shot, boxes) -> list[int]:
+    """Indices of the image boxes whose screenshot pixels are (nearly) all white."""
+    import matplotlib.image as mpimg
+
+    a = mpimg.imread(shot)[..., :3]
+    bad = []
+    for k, (_, _, _, x, y, w, h) in enumerate(boxes):
+        region = a[int(y) + 2:int(y + h) - 2, int(x) + 2:int(x + w) - 2]  # inside the 1 px border
+        if region.size == 0 or np.mean(region.min(axis=-1) < 0.9) < 0.01:
+            bad.append(k)
+    return bad
+
+
 def test_page_renders_in_a_real_browser(run):
-    """Headless Chromium loads the page: no console error, every figure
-    decoded by the browser at its full size, and a screenshot with content."""
+    """Headless Chromium loads the page: no console message, every figure
+    decoded by the browser at its full size, and in a screenshot of the whole
+    page every figure's box has content.  The checks are shown to fail on a
+    copy of the page with a script error and one with a blank figure."""
     browser = _chromium()
     d, ds, sol, path = run
     html_path = report(path, truth=d / "ds", gnss=d / "ds")
     out = html_path.parent
-    # a wrapper page (test only; the report itself has no script) reads the
-    # decoded size of every image of the report in an iframe
-    (out / "check.html").write_text(
-        "<html><body><iframe id='f' src='report.html' width='1000' height='800'></iframe><script>"
-        "window.addEventListener('load', () => { const d = document.getElementById('f').contentDocument;"
-        " document.body.setAttribute('data-images', JSON.stringify([...d.images].map("
-        "i => [i.complete, i.naturalWidth, i.naturalHeight]))); });</script></body></html>")
-    common = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files",
-              "--virtual-time-budget=10000", "--enable-logging=stderr", "--v=0"]
-    r = subprocess.run(common + ["--dump-dom", (out / "check.html").as_uri()], capture_output=True, text=True,
-                       timeout=120)
-    m = re.search(r"data-images=\"([^\"]*)\"", r.stdout)
-    assert m, r.stdout[-500:] + r.stderr[-1500:]
-    imgs = json.loads(m.group(1).replace("&quot;", '"'))
-    assert len(imgs) == 6 and all(c and w > 300 and h > 200 for c, w, h in imgs), imgs
+    n_fig = len(_images(html_path.read_text()))
+    lay = _browser_layout(browser, html_path)
+    boxes = lay["images"]
+    assert len(boxes) == n_fig == 6
+    for complete, nw, nh, x, y, w, h in boxes:
+        assert complete and nw > 300 and nh > 200, boxes  # decoded
+        assert x >= 0 and x + w <= _WIDTH and w > 300 and h > 200, boxes  # laid out inside the window
+    tops = [b[4] for b in boxes]
+    assert tops == sorted(tops) and lay["height"] > tops[-1]
     shot = out / "screenshot.png"
-    r = subprocess.run(common + ["--hide-scrollbars", "--window-size=1100,4000", f"--screenshot={shot}",
-                                 html_path.as_uri()], capture_output=True, text=True, timeout=120)
-    console = [ln for ln in r.stderr.splitlines() if "CONSOLE" in ln or "Uncaught" in ln]
+    console = _screenshot(browser, html_path, shot, int(lay["height"]))
     assert not console, console
-    assert shot.is_file(), r.stderr[-1500:]
+    assert not _blank_figures(shot, boxes)
     import matplotlib.image as mpimg
 
     a = mpimg.imread(shot)[..., :3]
-    h = a.shape[0]
-    for lo, hi in ((0.0, 0.15), (0.15, 0.45), (0.45, 0.75)):  # summary table, first figures, later figures
-        band = a[int(lo * h):int(hi * h)]
-        assert np.mean(band.min(axis=-1) < 0.9) > 0.01, (lo, hi)
+    assert a.shape[1] == _WIDTH and a.shape[0] >= int(lay["height"]) - 1
+    table = a[: int(tops[0])]  # the title and summary table above the first figure
+    assert np.mean(table.min(axis=-1) < 0.5) > 0.005
+
+    # the checks can fail: a script error is seen, a blank figure is found
+    page = html_path.read_text()
+    broken = out / "broken.html"
+    broken.write_text(page.replace("</body>", "<script>console.error('x'); no_such_function();</script></body>"))
+    msgs = _screenshot(browser, broken, out / "broken.png", int(lay["height"]))
+    assert any("no_such_function" in m for m in msgs), msgs
+    import matplotlib.pyplot as plt
+
+    nw, nh = boxes[2][1], boxes[2][2]
+    white = io.BytesIO()
+    plt.imsave(white, np.ones((nh, nw, 3)), format="png")
+    b64 = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    blank = out / "blank.html"
+    blank.write_text(page.replace(b64[2], base64.b64encode(white.getvalue()).decode("ascii")))
+    _screenshot(browser, blank, out / "blank.png", int(lay["height"]))
+    assert _blank_figures(out / "blank.png", boxes) == [2]
