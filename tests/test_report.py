@@ -251,13 +251,18 @@ def test_cli_report_and_its_errors(run, tmp_path):
     assert "Traceback" not in r.stderr
 
 
-def test_missing_matplotlib_is_one_clear_error(run, tmp_path, monkeypatch):
+def test_missing_matplotlib_is_one_clear_error(run, tmp_path, monkeypatch, capsys):
     d, ds, sol, path = run
     for m in [k for k in sys.modules if k == "matplotlib" or k.startswith("matplotlib.")]:
         monkeypatch.delitem(sys.modules, m)
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(ImportError, match=r"insnav\[plot\]"):
         report(path, tmp_path / "x")
+    from insnav.cli import main
+
+    assert main(["report", str(path), "--out", str(tmp_path / "y")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("insnav report: error:") and "insnav[plot]" in err[0], err
 
 
 def _chromium():

@@ -149,3 +149,21 @@ def test_to_dataframe_names_the_extra_without_pandas(sol, monkeypatch):
     monkeypatch.setitem(sys.modules, "pandas", None)
     with pytest.raises(ImportError, match=r"insnav\[pandas\]"):
         sol.to_dataframe()
+
+
+def test_to_dataframe_hands_pandas_the_unit_named_columns(sol, monkeypatch):
+    """With pandas present (a stand-in here: pandas is optional), the frame gets
+    the file's columns and the file's units (gyro bias in deg/h)."""
+    import types
+
+    seen = {}
+
+    def frame(data, columns):
+        seen.update(data=data, columns=columns)
+        return "frame"
+
+    monkeypatch.setitem(sys.modules, "pandas", types.SimpleNamespace(DataFrame=frame))
+    assert sol.to_dataframe() == "frame"
+    assert tuple(seen["columns"]) == sol.COLUMNS and seen["data"].shape == (len(sol), len(sol.COLUMNS))
+    j = sol.COLUMNS.index("gyro_bias_x_dph")
+    np.testing.assert_allclose(seen["data"][:, j], np.rad2deg(sol.gyro_bias_rps[:, 0]) * 3600.0)
