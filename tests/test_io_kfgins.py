@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 import insnav.sim as sim
+from conftest import SHARED_DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 from insnav.io import kfgins
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kfgins"
+DATA = SHARED_DATA / "kfgins"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"KF-GINS shared data not found at {DATA}")
 
 
