@@ -1,5 +1,4 @@
 """KF-GINS text formats: readers on the shared data, writers round trip, error messages."""
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -4,7 +4,6 @@ the page rendered in a real browser (headless Chromium, where installed)."""
 from __future__ import annotations
 
 import base64
-import copy
 import io
 import json
 import re
