@@ -157,3 +157,83 @@ print(len(names), len(mods))
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
+
+
+def test_no_public_name_is_a_submodule_name():
+    """The cause of a rebinding, checked statically: importing ``insnav.X``
+    sets the attribute ``insnav.X`` to the module, so no public name may be
+    the name of a module or package directly under ``insnav``."""
+    import pkgutil
+
+    import insnav
+
+    top = {m.name for m in pkgutil.iter_modules(insnav.__path__)}
+    names = set(insnav.__all__) - {"__version__"}
+    assert not names & top, names & top
+    assert {"evaluate", "montecarlo", "run", "simulate", "load_solution"} <= names
+
+
+def _public_names():
+    import insnav
+
+    return [n for n in insnav.__all__ if n != "__version__"]
+
+
+@pytest.mark.parametrize("name", _public_names())
+def test_each_name_after_its_own_module_and_everything_else(name):
+    """Per public name, in a fresh interpreter: its defining module imported
+    first (``from insnav.analysis.evaluate import errors`` style), then the
+    name, then ``from insnav import *`` and every other module; the name is
+    the same object throughout and the same as in its module."""
+    import subprocess
+    import sys
+
+    import insnav
+
+    mod = insnav._LAZY[name]
+    code = f"""
+import importlib, pkgutil, types
+m = importlib.import_module({mod!r})
+import insnav
+f = insnav.{name}
+assert f is getattr(m, {name!r}) and not isinstance(f, types.ModuleType), f
+from insnav import {name} as g
+assert g is f
+ns = {{}}
+exec("from insnav import *", ns)
+assert ns[{name!r}] is f
+for mm in pkgutil.walk_packages(insnav.__path__, "insnav."):
+    if mm.name != "insnav.__main__":
+        importlib.import_module(mm.name)
+assert insnav.{name} is f, insnav.{name}
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
+def test_the_reported_sequence_now_works(tmp_path):
+    """``from insnav.analysis.evaluate import errors`` (the evaluate module),
+    then ``insnav.evaluate(...)`` and ``insnav.montecarlo`` are still the
+    functions; the old module path ``insnav.evaluate`` is not a module."""
+    import subprocess
+    import sys
+
+    code = """
+import insnav
+from insnav.analysis.evaluate import errors
+from insnav.analysis import montecarlo
+ds = insnav.simulate("seed000-sim", seed=1)
+sol = insnav.run(ds, filter="ekf", output_decimation=20)
+res = insnav.evaluate(sol, ds.truth, [(50.0, 90.0)])
+assert res["horizontal_rms_m"] > 0 and errors(sol, ds.truth)["pos_n_m"].shape[1] == 3
+assert callable(insnav.montecarlo) and insnav.montecarlo is montecarlo.montecarlo
+try:
+    import insnav.evaluate
+except ModuleNotFoundError:
+    pass
+else:
+    raise AssertionError("insnav.evaluate is a module again")
+assert callable(insnav.evaluate)
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr

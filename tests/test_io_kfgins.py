@@ -1,13 +1,13 @@
 """KF-GINS text formats: readers on the shared data, writers round trip, error messages."""
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import insnav.sim as sim
+from conftest import SHARED_DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 from insnav.io import kfgins
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kfgins"
+DATA = SHARED_DATA / "kfgins"
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"KF-GINS shared data not found at {DATA}")
 
 

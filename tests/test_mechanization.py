@@ -150,3 +150,11 @@ class TestBadInput:
             insnav.NavState(95.0, 0.0, 0.0)
         with pytest.raises(ValueError, match="h_m must be finite"):
             insnav.NavState(10.0, 0.0, float("nan"))
+
+
+def test_an_overflowing_interval_is_an_error_not_a_nan():
+    """Finite inputs whose first interval is absurd (t0 = -1e300 s) overflow
+    the state: an error naming the sample and the interval, never a NaN track."""
+    init = insnav.NavState(30.0, 114.0, 20.0, [0, 0, 0], 0, 0, 0)
+    with pytest.raises(FloatingPointError, match=r"sample 0 \(t = 0 s, interval 1e\+300 s"):
+        insnav.mechanize(np.array([0.0]), np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), init, t0=-1e300)

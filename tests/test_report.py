@@ -4,18 +4,19 @@ the page rendered in a real browser (headless Chromium, where installed)."""
 from __future__ import annotations
 
 import base64
-import copy
 import io
 import json
 import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import insnav
+from conftest import short_tight_dataset
 from insnav.analysis.evaluate import evaluate
 from insnav.analysis.report import chi2_interval, detect_outages, report
 from insnav.filters.solution import write_innovations
@@ -84,6 +85,113 @@ def test_known_offset_gives_known_numbers(tmp_path):
     assert t["velocity RMS [m/s] N/E/D"] == "0.000 / 0.000 / 0.000"
 
 
+def _shifted_truth(tr, north_m, dve_mps=0.0, dyaw_deg=0.0, sigmas=(1.0, 0.05, 0.25)):
+    """A 'solution' equal to the truth moved north by north_m(t) [m], with an
+    east velocity offset [m/s], a yaw offset [deg] and constant sigmas."""
+    from insnav.earth import radii
+    from insnav.filters.solution import Solution
+
+    n = len(tr.t)
+    R_M, _ = radii(np.deg2rad(tr.lat_deg))
+    one = np.ones((n, 3))
+    v_n = np.array(tr.v_n, float)
+    v_n[:, 1] += dve_mps
+    return Solution(t=tr.t, lat_deg=tr.lat_deg + np.rad2deg(north_m / (R_M + tr.h_m)), lon_deg=tr.lon_deg,
+                    h_m=tr.h_m, v_n=v_n, roll_deg=tr.roll_deg, pitch_deg=tr.pitch_deg,
+                    yaw_deg=(tr.yaw_deg + dyaw_deg + 180.0) % 360.0 - 180.0,
+                    sigma_pos_n_m=sigmas[0] * one, sigma_vel_n_mps=sigmas[1] * one, sigma_att_deg=sigmas[2] * one,
+                    acc_bias_mps2=0 * one, gyro_bias_rps=0 * one, acc_scale=0 * one, gyro_scale=0 * one,
+                    gnss_t=np.zeros(0), innovation=np.zeros((0, 6)), nis=np.zeros(0),
+                    gnss_status=np.zeros(0, np.int8))
+
+
+def _floats(cell: str) -> list[float]:
+    return [float(x) for x in cell.split(" (")[0].split(" / ")]
+
+
+def test_outage_maxima_reconvergence_and_consistency_of_a_known_error_profile(tmp_path):
+    """North error 1 m before a 50-90 s 'outage', growing linearly to 11 m at
+    90 s, then decaying as 11 exp(-(t - 90) / 4 s); east velocity +0.1 m/s
+    (sigma 0.05), yaw +0.5 deg (sigma 0.25).  Known in advance: max inside
+    11 m, reconvergence (back within 1.5 x the 1 m pre-outage RMS) at
+    4 ln(11 / 1.5) = 7.97 s, rms(error / sigma) 2 in velocity E and yaw."""
+    tr = insnav.simulate("seed000-sim", seed=1).truth
+    t = tr.t
+    e_n = np.where(t < 50, 1.0, np.where(t <= 90, 1.0 + 10.0 * (t - 50) / 40, 11.0 * np.exp(-(t - 90) / 4.0)))
+    sol = _shifted_truth(tr, e_n, dve_mps=0.1, dyaw_deg=0.5)
+    page = report(sol, tmp_path / "r", truth=tr, outages=[(50.0, 90.0)]).read_text()
+    tab = _table(page)
+    key = "outage 50.0-90.0 s: max horizontal inside / in the 60 s after [m]"
+    inside, after = _floats(tab[key])
+    assert inside == pytest.approx(11.0, abs=2e-3)
+    dt = float(np.median(np.diff(t)))
+    assert after == pytest.approx(11.0 * np.exp(-dt / 4.0), abs=2e-3)  # the first sample after 90 s
+    reconv = _floats(tab["outage 50.0-90.0 s: reconvergence [s]"])[0]
+    assert reconv == pytest.approx(4.0 * np.log(11.0 / 1.5), abs=0.051)
+    assert _floats(tab["position RMS [m] N/E/D"]) == pytest.approx([np.sqrt(np.mean(e_n ** 2)), 0, 0], abs=6e-4)
+    assert _floats(tab["position max [m] N/E/D"]) == pytest.approx([11.0, 0, 0], abs=6e-4)
+    assert _floats(tab["velocity RMS [m/s] N/E/D"]) == pytest.approx([0, 0.1, 0], abs=6e-4)
+    assert _floats(tab["attitude RMS [deg] roll/pitch/yaw"]) == pytest.approx([0, 0, 0.5], abs=6e-4)
+    assert _floats(tab["consistency rms(error / sigma), velocity N/E/D"]) == pytest.approx([0, 2, 0], abs=6e-3)
+    assert _floats(tab["consistency rms(error / sigma), attitude roll/pitch/yaw"]) == pytest.approx([0, 0, 2],
+                                                                                                 abs=6e-3)
+    assert _floats(tab["horizontal RMS / max [m]"])[1] == pytest.approx(11.0, abs=6e-4)
+
+
+def test_against_exact_fixes_the_offset_comes_back(tmp_path):
+    """Fixes equal to the truth at 1 Hz (no noise, sigma 0.5 m / 0.1 m/s), the
+    solution the truth moved 3 m north and 0.2 m/s east: position minus fixes
+    RMS 3 / 0 / 0 m, velocity 0 / 0.2 / 0, and rms(difference / sigma) from the
+    root-sum-square of both sigmas (1 m and 0.5 m: 3 / sqrt(1.25))."""
+    from insnav.data.dataset import GnssFixes
+
+    tr = insnav.simulate("seed000-sim", seed=1).truth
+    sol = _shifted_truth(tr, np.full(len(tr.t), 3.0), dve_mps=0.2, sigmas=(1.0, 0.2, 0.25))
+    i = np.flatnonzero(np.isclose(tr.t % 1.0, 0.0, atol=1e-6) | np.isclose(tr.t % 1.0, 1.0, atol=1e-6))
+    m = len(i)
+    fixes = GnssFixes(t_valid=tr.t[i], t_arrival=tr.t[i], lat_deg=tr.lat_deg[i], lon_deg=tr.lon_deg[i],
+                      h_m=tr.h_m[i], v_n=np.asarray(tr.v_n)[i], sigma_pos_n=np.full((m, 3), 0.5),
+                      sigma_vel_n=np.full((m, 3), 0.1))
+    html_path = report(sol, tmp_path / "f", gnss=fixes, outages=[])
+    tab = _table(html_path.read_text())
+    assert _floats(tab["position minus GNSS fixes, RMS [m] N/E/D"]) == pytest.approx([3.0, 0, 0], abs=6e-4)
+    assert _floats(tab["position minus GNSS fixes, rms(difference / sigma) N/E/D"])[0] == pytest.approx(
+        3.0 / np.sqrt(1.25), abs=6e-3)
+    assert _floats(tab["velocity minus GNSS fixes, RMS [m/s] N/E/D"]) == pytest.approx([0, 0.2, 0], abs=6e-4)
+    assert _floats(tab["velocity minus GNSS fixes, rms(difference / sigma) N/E/D"])[1] == pytest.approx(
+        0.2 / np.sqrt(0.05), abs=6e-3)
+    assert {p.name for p in html_path.parent.glob("*.png")} == {"track.png", "pos_error.png", "vel_error.png",
+                                                                "imu_errors.png"}
+
+
+def test_tight_report_shows_the_per_satellite_residuals(tmp_path):
+    ds = short_tight_dataset()
+    sol = insnav.run(ds, filter="ekf", coupling="tight", init_seed=0, output_decimation=10)
+    path = sol.save(tmp_path / "tight.npz")
+    write_innovations(sol, path)
+    html_path = report(path, truth=ds.truth)
+    page = html_path.read_text()
+    tab = _table(page)
+    applied = np.repeat(sol.gnss_status == 1, np.diff(sol.inputs.epoch_start))
+    pr = sol.innovation[applied, 0]
+    rr = sol.innovation[applied, 1]
+    want = [np.sqrt(np.nanmean(pr ** 2)), np.sqrt(np.nanmean(rr ** 2))]
+    got = _floats(tab["residual RMS of applied epochs: pseudorange [m] / rate [m/s]"])
+    assert got == pytest.approx(want, abs=6e-4)
+    names = {p.name for p in html_path.parent.glob("*.png")}
+    assert "residuals.png" in names and "innovations.png" in names
+    for png in _images(page):
+        assert _nonblank(png) > 0.01
+    # the same from the Solution object (no files): the same residual figure and numbers
+    tab2 = _table(report(sol, tmp_path / "obj", truth=ds.truth).read_text())
+    assert tab2["residual RMS of applied epochs: pseudorange [m] / rate [m/s]"] == \
+        tab["residual RMS of applied epochs: pseudorange [m] / rate [m/s]"]
+    # a loose report written into the same folder afterwards leaves no stale residual figure behind
+    loose = insnav.run(ds, filter="ekf", init_seed=0, output_decimation=10)
+    report(loose, html_path.parent, truth=ds.truth)
+    assert not (html_path.parent / "residuals.png").exists()
+
+
 def test_summary_matches_evaluate_and_figures_are_real(run):
     d, ds, sol, path = run
     html_path = report(path, truth=d / "ds", gnss=d / "ds")
@@ -142,13 +250,18 @@ def test_cli_report_and_its_errors(run, tmp_path):
     assert "Traceback" not in r.stderr
 
 
-def test_missing_matplotlib_is_one_clear_error(run, tmp_path, monkeypatch):
+def test_missing_matplotlib_is_one_clear_error(run, tmp_path, monkeypatch, capsys):
     d, ds, sol, path = run
     for m in [k for k in sys.modules if k == "matplotlib" or k.startswith("matplotlib.")]:
         monkeypatch.delitem(sys.modules, m)
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(ImportError, match=r"insnav\[plot\]"):
         report(path, tmp_path / "x")
+    from insnav.cli import main
+
+    assert main(["report", str(path), "--out", str(tmp_path / "y")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("insnav report: error:") and "insnav[plot]" in err[0], err
 
 
 def _chromium():
@@ -159,38 +272,100 @@ def _chromium():
     pytest.skip("Chromium not installed (apt-get install -y chromium): the browser check of the report is skipped")
 
 
+_WIDTH = 1100  # CSS px of the browser window (the page is at most 1000 px wide)
+
+
+def _browser_layout(browser: str, page) -> dict:
+    """Load ``page`` in headless Chromium inside an iframe as wide as the
+    screenshot window (no scrollbars, so the layout is the same) and read back
+    the document height and, per image, whether it decoded, its natural size
+    and its box in page pixels."""
+    page = Path(page)
+    probe = page.with_name("layout-probe.html")
+    probe.write_text(
+        "<html><body style='margin:0'><iframe id='f' src='" + page.name + "' width='" + str(_WIDTH) + "' "
+        "height='20000' scrolling='no' style='border:0;display:block'></iframe><script>"
+        "window.addEventListener('load', () => { const d = document.getElementById('f').contentDocument;"
+        " const boxes = [...d.images].map(i => { const r = i.getBoundingClientRect();"
+        " return [i.complete, i.naturalWidth, i.naturalHeight, r.left, r.top, r.width, r.height]; });"
+        " document.body.setAttribute('data-layout', JSON.stringify({height: Math.ceil(d.body.getBoundingClientRect()"
+        ".bottom) + 20,"
+        " images: boxes})); });</script></body></html>")
+    r = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files",
+                        "--virtual-time-budget=10000", "--dump-dom", probe.as_uri()],
+                       capture_output=True, text=True, timeout=120)
+    probe.unlink()
+    m = re.search(r'data-layout="([^"]*)"', r.stdout)
+    assert m, r.stdout[-500:] + r.stderr[-1500:]
+    return json.loads(html_unescape(m.group(1)))
+
+
+def _screenshot(browser: str, page, shot, height: int) -> list[str]:
+    """Screenshot of ``page`` (full height); returns the console messages
+    Chromium logged (console.log/error, uncaught exceptions)."""
+    r = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                        "--virtual-time-budget=10000", "--enable-logging=stderr", "--v=0",
+                        f"--window-size={_WIDTH},{height}", f"--screenshot={shot}", Path(page).as_uri()],
+                       capture_output=True, text=True, timeout=120)
+    assert Path(shot).is_file(), r.stderr[-1500:]
+    return [ln for ln in r.stderr.splitlines() if ":CONSOLE" in ln or "Uncaught" in ln]
+
+
+def _blank_figures(shot, boxes) -> list[int]:
+    """Indices of the image boxes whose screenshot pixels are (nearly) all white."""
+    import matplotlib.image as mpimg
+
+    a = mpimg.imread(shot)[..., :3]
+    bad = []
+    for k, (_, _, _, x, y, w, h) in enumerate(boxes):
+        region = a[int(y) + 2:int(y + h) - 2, int(x) + 2:int(x + w) - 2]  # inside the 1 px border
+        if region.size == 0 or np.mean(region.min(axis=-1) < 0.9) < 0.01:
+            bad.append(k)
+    return bad
+
+
 def test_page_renders_in_a_real_browser(run):
-    """Headless Chromium loads the page: no console error, every figure
-    decoded by the browser at its full size, and a screenshot with content."""
+    """Headless Chromium loads the page: no console message, every figure
+    decoded by the browser at its full size, and in a screenshot of the whole
+    page every figure's box has content.  The checks are shown to fail on a
+    copy of the page with a script error and one with a blank figure."""
     browser = _chromium()
     d, ds, sol, path = run
     html_path = report(path, truth=d / "ds", gnss=d / "ds")
     out = html_path.parent
-    # a wrapper page (test only; the report itself has no script) reads the
-    # decoded size of every image of the report in an iframe
-    (out / "check.html").write_text(
-        "<html><body><iframe id='f' src='report.html' width='1000' height='800'></iframe><script>"
-        "window.addEventListener('load', () => { const d = document.getElementById('f').contentDocument;"
-        " document.body.setAttribute('data-images', JSON.stringify([...d.images].map("
-        "i => [i.complete, i.naturalWidth, i.naturalHeight]))); });</script></body></html>")
-    common = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files",
-              "--virtual-time-budget=10000", "--enable-logging=stderr", "--v=0"]
-    r = subprocess.run(common + ["--dump-dom", (out / "check.html").as_uri()], capture_output=True, text=True,
-                       timeout=120)
-    m = re.search(r"data-images=\"([^\"]*)\"", r.stdout)
-    assert m, r.stdout[-500:] + r.stderr[-1500:]
-    imgs = json.loads(m.group(1).replace("&quot;", '"'))
-    assert len(imgs) == 6 and all(c and w > 300 and h > 200 for c, w, h in imgs), imgs
+    n_fig = len(_images(html_path.read_text()))
+    lay = _browser_layout(browser, html_path)
+    boxes = lay["images"]
+    assert len(boxes) == n_fig == 6
+    for complete, nw, nh, x, y, w, h in boxes:
+        assert complete and nw > 300 and nh > 200, boxes  # decoded
+        assert x >= 0 and x + w <= _WIDTH and w > 300 and h > 200, boxes  # laid out inside the window
+    tops = [b[4] for b in boxes]
+    assert tops == sorted(tops) and lay["height"] > tops[-1]
     shot = out / "screenshot.png"
-    r = subprocess.run(common + ["--hide-scrollbars", "--window-size=1100,4000", f"--screenshot={shot}",
-                                 html_path.as_uri()], capture_output=True, text=True, timeout=120)
-    console = [ln for ln in r.stderr.splitlines() if "CONSOLE" in ln or "Uncaught" in ln]
+    console = _screenshot(browser, html_path, shot, int(lay["height"]))
     assert not console, console
-    assert shot.is_file(), r.stderr[-1500:]
+    assert not _blank_figures(shot, boxes)
     import matplotlib.image as mpimg
 
     a = mpimg.imread(shot)[..., :3]
-    h = a.shape[0]
-    for lo, hi in ((0.0, 0.15), (0.15, 0.45), (0.45, 0.75)):  # summary table, first figures, later figures
-        band = a[int(lo * h):int(hi * h)]
-        assert np.mean(band.min(axis=-1) < 0.9) > 0.01, (lo, hi)
+    assert a.shape[1] == _WIDTH and a.shape[0] >= int(lay["height"]) - 1
+    table = a[: int(tops[0])]  # the title and summary table above the first figure
+    assert np.mean(table.min(axis=-1) < 0.5) > 0.005
+
+    # the checks can fail: a script error is seen, a blank figure is found
+    page = html_path.read_text()
+    broken = out / "broken.html"
+    broken.write_text(page.replace("</body>", "<script>console.error('x'); no_such_function();</script></body>"))
+    msgs = _screenshot(browser, broken, out / "broken.png", int(lay["height"]))
+    assert any("no_such_function" in m for m in msgs), msgs
+    import matplotlib.pyplot as plt
+
+    nw, nh = boxes[2][1], boxes[2][2]
+    white = io.BytesIO()
+    plt.imsave(white, np.ones((nh, nw, 3)), format="png")
+    b64 = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    blank = out / "blank.html"
+    blank.write_text(page.replace(b64[2], base64.b64encode(white.getvalue()).decode("ascii")))
+    _screenshot(browser, blank, out / "blank.png", int(lay["height"]))
+    assert _blank_figures(out / "blank.png", boxes) == [2]

@@ -50,6 +50,25 @@ def test_dataset_reader_errors_name_file_and_line(ds_dir, tmp_path, fault, patte
         load_dataset(d)
 
 
+@pytest.mark.parametrize("edit, pattern", [
+    (lambda m: m["initial"].pop("lat_deg"), r"dataset\.json: initial: lat_deg missing"),
+    (lambda m: m["initial"].__setitem__("v_n_mps", [0, 0]), r"dataset\.json: initial: v_n_mps must be 3 numbers"),
+    (lambda m: m["initial"].__setitem__("yaw_deg", "x"), r"dataset\.json: initial: could not convert.*'x'"),
+    (lambda m: m.pop("initial"), r"dataset\.json: 'initial' missing"),
+    (lambda m: m.pop("t0_s"), r"dataset\.json: t0_s .* missing"),
+    (lambda m: m.__setitem__("lever_arm_b_m", [1, 2]), r"dataset\.json: lever_arm_b_m must be 3 numbers"),
+])
+def test_dataset_json_initial_state_errors_name_file_and_key(ds_dir, tmp_path, edit, pattern):
+    import json
+
+    d = _copy(ds_dir, tmp_path)
+    meta = json.loads((d / "dataset.json").read_text())
+    edit(meta)
+    (d / "dataset.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=pattern):
+        load_dataset(d)
+
+
 def test_truncated_file_is_named(ds_dir, tmp_path):
     d = _copy(ds_dir, tmp_path)
     text = (d / "imu.csv").read_text()

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 import insnav
-from insnav.filters.solution import (INNOVATION_COLUMNS, RecordStatus, innovations_path, load_solution,
+from conftest import short_tight_dataset
+from insnav.filters.solution import (INNOVATION_COLUMNS, RESIDUAL_COLUMNS, RecordStatus, innovations_path,
+                                     load_solution, read_innovations, read_residuals, residuals_path,
                                      write_innovations)
 
 
@@ -65,6 +67,62 @@ def test_innovations_sidecar_round_trip(sol, tmp_path):
     # applied records: the NIS of a consistent filter averages about the row count (6 here)
     applied = back.gnss_status == RecordStatus.APPLIED
     assert applied.sum() > 100 and 3.0 < np.mean(back.nis[applied]) < 12.0
+    # the human-readable columns agree with the codes; rows = finite innovation components
+    inn = read_innovations(side)
+    assert list(inn["status_name"]) == [RecordStatus(c).name.lower() for c in sol.gnss_status]
+    np.testing.assert_array_equal(inn["applied"], sol.gnss_status == RecordStatus.APPLIED)
+    np.testing.assert_array_equal(inn["rows"], np.isfinite(sol.innovation).sum(axis=1))
+    lines = side.read_text().splitlines()
+    assert {ln.rsplit(",", 1)[1] for ln in lines[1:]} >= {"applied"} and "nan" not in side.read_text()
+
+
+def test_sidecar_of_an_earlier_version_and_bad_sidecars(sol, tmp_path):
+    p = sol.save(tmp_path / "sol.csv")
+    side = write_innovations(sol, p)
+    text = side.read_text().splitlines()
+    old = [text[0].rsplit(",", 1)[0]] + [ln.rsplit(",", 1)[0] for ln in text[1:]]  # no status_name column
+    side.write_text("\n".join(old) + "\n")
+    inn = read_innovations(side)
+    assert list(inn["status_name"]) == [RecordStatus(c).name.lower() for c in sol.gnss_status]
+    bad = list(text)
+    code, name = bad[3].split(",")[1], bad[3].rsplit(",", 1)[1]
+    bad[3] = bad[3][: -len(name)] + ("not_used" if name != "not_used" else "applied")
+    side.write_text("\n".join(bad) + "\n")
+    with pytest.raises(ValueError, match=rf"sol.csv.innovations.csv:4: status {code} is"):
+        read_innovations(side)
+    side.write_text("t,nis\n1,2\n")
+    with pytest.raises(ValueError, match=r"innovations.csv:1: unexpected header"):
+        load_solution(p)
+
+
+def test_tight_sidecar_and_per_satellite_residuals(tmp_path):
+    """Tight: one sidecar row per epoch with the core's row count, which is the
+    number of finite residuals (pseudorange and rate per satellite) of that
+    epoch in the per-satellite file; the residuals round-trip to the printed digits."""
+    ds = short_tight_dataset()
+    sol = insnav.run(ds, filter="ekf", coupling="tight", init_seed=0, output_decimation=10)
+    p = sol.save(tmp_path / "tight.npz")
+    side = write_innovations(sol, p)
+    inn = read_innovations(side)
+    np.testing.assert_array_equal(inn["rows"], sol.rows)
+    np.testing.assert_array_equal(inn["status"], sol.gnss_status)
+    assert np.isnan(inn["innovation"]).all()  # the loose columns are empty for tight
+    res = read_residuals(residuals_path(p))
+    assert tuple(residuals_path(p).read_text().splitlines()[0].split(",")) == RESIDUAL_COLUMNS
+    inputs = sol.inputs
+    assert len(res["prn"]) == len(inputs.prn) > 0
+    np.testing.assert_array_equal(res["prn"], inputs.prn)
+    per_epoch = np.add.reduceat(np.isfinite(res["pseudorange_residual_m"]).astype(int)
+                                + np.isfinite(res["rate_residual_mps"]), inputs.epoch_start[:-1])
+    applied = sol.gnss_status == RecordStatus.APPLIED
+    assert applied.sum() > 100
+    np.testing.assert_array_equal(per_epoch[applied], sol.rows[applied])
+    np.testing.assert_allclose(res["t_s"], np.repeat(inputs.epoch_t, np.diff(inputs.epoch_start)), atol=5e-7)
+    fin = np.isfinite(sol.innovation)
+    np.testing.assert_allclose(np.column_stack([res["pseudorange_residual_m"], res["rate_residual_mps"]])[fin],
+                               sol.innovation[fin], rtol=5e-6, atol=1e-9)
+    # NIS of a consistent tight EKF: about its row count (16 here) on average
+    assert 0.5 < np.mean(inn["nis"][applied]) / np.mean(inn["rows"][applied]) < 1.5
 
 
 def test_old_column_names_are_accepted(sol, tmp_path):
@@ -91,3 +149,21 @@ def test_to_dataframe_names_the_extra_without_pandas(sol, monkeypatch):
     monkeypatch.setitem(sys.modules, "pandas", None)
     with pytest.raises(ImportError, match=r"insnav\[pandas\]"):
         sol.to_dataframe()
+
+
+def test_to_dataframe_hands_pandas_the_unit_named_columns(sol, monkeypatch):
+    """With pandas present (a stand-in here: pandas is optional), the frame gets
+    the file's columns and the file's units (gyro bias in deg/h)."""
+    import types
+
+    seen = {}
+
+    def frame(data, columns):
+        seen.update(data=data, columns=columns)
+        return "frame"
+
+    monkeypatch.setitem(sys.modules, "pandas", types.SimpleNamespace(DataFrame=frame))
+    assert sol.to_dataframe() == "frame"
+    assert tuple(seen["columns"]) == sol.COLUMNS and seen["data"].shape == (len(sol), len(sol.COLUMNS))
+    j = sol.COLUMNS.index("gyro_bias_x_dph")
+    np.testing.assert_allclose(seen["data"][:, j], np.rad2deg(sol.gyro_bias_rps[:, 0]) * 3600.0)

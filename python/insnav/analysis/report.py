@@ -1,17 +1,20 @@
 """``insnav report``: one self-contained HTML page for any saved run.
 
 :func:`report` reads a solution (``.csv`` / ``.npz`` / ``.parquet``, with its
-``.innovations.csv`` sidecar when present), optionally a truth and the GNSS
+``.innovations.csv`` sidecar and, for a tight run, ``.residuals.csv`` when
+present), optionally a truth and the GNSS
 fixes, and writes ``report.html`` (every figure inlined as a PNG data URI:
 no network, no script) plus the PNGs beside it:
 
 * ground track: solution, truth, GNSS fixes, the solution inside GNSS
   outages in red;
 * position, velocity and attitude errors with their +-3 sigma bounds, against
-  the truth, or (position only) against the GNSS fixes when there is no truth;
+  the truth, or (position, and velocity where the fixes have it) against the
+  GNSS fixes when there is no truth;
 * estimated IMU biases and scale factors;
 * innovations and NIS against the chi-square bounds of their row count,
-  applied and rejected updates marked;
+  applied and rejected updates marked; for a tight run the per-satellite
+  pseudorange and rate residuals;
 * a summary table: RMS and max errors, the maxima inside and after each
   outage, reconvergence times, consistency rms(error / sigma), NIS statistics.
 
@@ -34,6 +37,10 @@ from .evaluate import evaluate
 from .metrics import errors, rms
 
 __all__ = ["report", "detect_outages", "chi2_interval"]
+
+#: every figure file a report may write
+FIGURES = ("track.png", "pos_error.png", "vel_error.png", "att_error.png", "imu_errors.png", "innovations.png",
+           "residuals.png")
 
 _Z975 = 1.959963984540054  # standard normal 97.5 % quantile
 
@@ -64,7 +71,10 @@ class _Fixes:
     def __init__(self, g):
         self.t = np.asarray(getattr(g, "t_valid", getattr(g, "t", None)), float)
         self.lat_deg, self.lon_deg, self.h_m = (np.asarray(getattr(g, k), float) for k in ("lat_deg", "lon_deg", "h_m"))
-        self.sigma_pos_n = np.asarray(getattr(g, "sigma_pos_n", np.full((len(self.t), 3), np.nan)), float)
+        nan3 = np.full((len(self.t), 3), np.nan)
+        self.sigma_pos_n = np.asarray(getattr(g, "sigma_pos_n", nan3), float)
+        self.v_n = np.asarray(getattr(g, "v_n", nan3), float)
+        self.sigma_vel_n = np.asarray(getattr(g, "sigma_vel_n", nan3), float)
 
 
 def _read_fixes(path) -> _Fixes:
@@ -83,7 +93,9 @@ def _local_en(lat_deg, lon_deg, lat0, lon0, h0=0.0):
 
 
 def _errors_vs_fixes(sol, fx: _Fixes) -> dict:
-    """Solution (IMU centre, interpolated) minus GNSS fix (antenna) at the fix times, NED [m]."""
+    """Solution (IMU centre, interpolated) minus GNSS fix (antenna) at the fix
+    times: NED position [m] and, where the fixes have one, velocity [m/s], each
+    with the root-sum-square of the solution's and the fix's 1-sigma."""
     t = fx.t[(fx.t >= sol.t[0]) & (fx.t <= sol.t[-1])]
     if t.size == 0:
         raise ValueError("no GNSS fix inside the solution's time span")
@@ -97,7 +109,15 @@ def _errors_vs_fixes(sol, fx: _Fixes) -> dict:
     sig_sol = np.column_stack([np.interp(t, sol.t, sol.sigma_pos_n_m[:, i]) for i in range(3)])
     sig_fix = fx.sigma_pos_n[keep]
     sig = np.sqrt(sig_sol ** 2 + np.where(np.isfinite(sig_fix), sig_fix, 0.0) ** 2)
-    return dict(t=t, pos_n_m=pos, sigma_pos_n_m=sig)
+    out = dict(t=t, pos_n_m=pos, sigma_pos_n_m=sig)
+    v_f = fx.v_n[keep]
+    if np.isfinite(v_f).any():
+        v = np.column_stack([np.interp(t, sol.t, np.asarray(sol.v_n)[:, i]) for i in range(3)])
+        sv_sol = np.column_stack([np.interp(t, sol.t, sol.sigma_vel_n_mps[:, i]) for i in range(3)])
+        sv_fix = fx.sigma_vel_n[keep]
+        out["vel_n_mps"] = v - v_f
+        out["sigma_vel_n_mps"] = np.sqrt(sv_sol ** 2 + np.where(np.isfinite(sv_fix), sv_fix, 0.0) ** 2)
+    return out
 
 
 def _png(fig) -> bytes:
@@ -111,7 +131,7 @@ def _shade(ax, outages):
         ax.axvspan(a, b, color="0.88", lw=0, zorder=0)
 
 
-def _figures(sol, err, err_kind, truth, fx, inn, outages, plt) -> list[tuple[str, str, bytes]]:
+def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tuple[str, str, bytes]]:
     """(file name, caption, PNG bytes) of every figure."""
     out = []
     lat0, lon0 = float(sol.lat_deg[0]), float(sol.lon_deg[0])
@@ -166,6 +186,8 @@ def _figures(sol, err, err_kind, truth, fx, inn, outages, plt) -> list[tuple[str
         _shade(ax, outages)
         for i, c in enumerate("xyz"):
             ax.plot(sol.t, y[:, i], lw=0.9, label=c)
+        if not np.any(np.nan_to_num(y)):  # a layout without this state (e.g. 15 states: no scale factors)
+            label += ": not estimated"
         ax.set_title(label, fontsize=10)
         ax.legend(fontsize=7, loc="best")
     for ax in axs[-1]:
@@ -209,6 +231,27 @@ def _figures(sol, err, err_kind, truth, fx, inn, outages, plt) -> list[tuple[str
         axs[0].set_title("innovations (INS minus GNSS, before the update) and NIS")
         out.append(("innovations.png", "Innovations and NIS", _png(fig)))
         plt.close(fig)
+    # --- tight: per-satellite residuals
+    if res is not None and len(res["t_s"]):
+        rejected_t = set(np.round(inn["t_s"][inn["status"] == 2], 6)) if inn is not None else set()
+        rej = np.isin(np.round(res["t_s"], 6), list(rejected_t))
+        fig, axs = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+        prns = np.unique(res["prn"])
+        cmap = plt.get_cmap("tab20")
+        for ax, key, label in ((axs[0], "pseudorange_residual_m", "pseudorange residual [m]"),
+                               (axs[1], "rate_residual_mps", "pseudorange-rate residual [m/s]")):
+            _shade(ax, outages)
+            for j, prn in enumerate(prns):
+                m = (res["prn"] == prn) & ~rej
+                ax.plot(res["t_s"][m], res[key][m], ".", ms=2.5, color=cmap(j % 20), label=f"G{prn:02d}")
+            if rej.any():
+                ax.plot(res["t_s"][rej], res[key][rej], "x", ms=5, color="k", label="epoch rejected")
+            ax.set_ylabel(label, fontsize=8)
+        axs[0].legend(fontsize=6, loc="upper right", ncol=min(8, len(prns) + 1))
+        axs[0].set_title("per-satellite residuals (INS-predicted minus measured, before the update)")
+        axs[-1].set_xlabel("time [s]")
+        out.append(("residuals.png", "Per-satellite pseudorange and rate residuals", _png(fig)))
+        plt.close(fig)
     return out
 
 
@@ -218,7 +261,7 @@ def _fmt(x, nd=3):
     return f"{x:.{nd}f}"
 
 
-def _summary_rows(sol, err_kind, ev, inn, outages, fix_err) -> list[tuple[str, str]]:
+def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[str, str]]:
     rows = [("solution rows", f"{len(sol.t)} ({sol.t[0]:.3f} to {sol.t[-1]:.3f} s)")]
     if inn is not None and len(inn["t_s"]):
         st = inn["status"]
@@ -231,6 +274,16 @@ def _summary_rows(sol, err_kind, ev, inn, outages, fix_err) -> list[tuple[str, s
             rows.append(("NIS of applied updates: mean / mean rows",
                          f"{np.mean(inn['nis'][ok]):.2f} / {np.mean(inn['rows'][ok]):.2f} (about equal when "
                          f"consistent); {100 * inside:.1f} % inside the 95 % chi-square interval"))
+    if res is not None and len(res["t_s"]):
+        ok = np.ones(len(res["t_s"]), bool)
+        if inn is not None:
+            applied_t = np.round(inn["t_s"][inn["status"] == 1], 6)
+            ok = np.isin(np.round(res["t_s"], 6), applied_t)
+        pr, rr = res["pseudorange_residual_m"][ok], res["rate_residual_mps"][ok]
+        pr, rr = pr[np.isfinite(pr)], rr[np.isfinite(rr)]
+        rows.append(("residual RMS of applied epochs: pseudorange [m] / rate [m/s]",
+                     f"{_fmt(float(rms(pr)) if pr.size else None)} / {_fmt(float(rms(rr)) if rr.size else None)} "
+                     f"({pr.size} / {rr.size} satellite rows)"))
     if outages:
         rows.append(("GNSS outages [s]", ", ".join(f"{a:.1f}-{b:.1f}" for a, b in outages)))
     if ev is not None:
@@ -257,8 +310,21 @@ def _summary_rows(sol, err_kind, ev, inn, outages, fix_err) -> list[tuple[str, s
         rows.append(("position minus GNSS fixes, RMS [m] N/E/D", " / ".join(_fmt(x) for x in rms(p))))
         rows.append(("position minus GNSS fixes, rms(difference / sigma) N/E/D",
                      " / ".join(_fmt(x, 2) for x in rms(p / fix_err["sigma_pos_n_m"]))))
+        if "vel_n_mps" in fix_err:
+            v, ok = fix_err["vel_n_mps"], np.isfinite(fix_err["vel_n_mps"]).all(axis=1)
+            rows.append(("velocity minus GNSS fixes, RMS [m/s] N/E/D", " / ".join(_fmt(x) for x in rms(v[ok]))))
+            rows.append(("velocity minus GNSS fixes, rms(difference / sigma) N/E/D",
+                         " / ".join(_fmt(x, 2) for x in rms(v[ok] / fix_err["sigma_vel_n_mps"][ok]))))
     rows.append(("errors against", err_kind))
     return rows
+
+
+def _read_solution(path):
+    """The one place the report reads a saved solution (any format
+    :func:`insnav.load_solution` reads, old column names included)."""
+    from ..filters.solution import load_solution
+
+    return load_solution(path)
 
 
 def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None) -> Path:
@@ -285,18 +351,26 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
         import matplotlib.pyplot as plt
     except ImportError:
         raise ImportError("insnav report needs matplotlib: pip install 'insnav[plot]'") from None
-    from ..filters.solution import innovations_path, load_solution, read_innovations
+    from ..filters.solution import innovations_path, read_innovations, read_residuals, residuals_path
     from .evaluate import _read_truth, _solution_at
 
-    src = None
+    src, res = None, None
     if isinstance(solution, (str, Path)):
         src = Path(solution)
-        sol = load_solution(src)
+        sol = _read_solution(src)
         side = innovations_path(src)
         inn = read_innovations(side) if side.is_file() else None
+        if residuals_path(src).is_file():
+            res = read_residuals(residuals_path(src))
     else:
         sol = solution
         inn = None
+        inputs = getattr(sol, "inputs", None)
+        i2 = np.asarray(getattr(sol, "innovation", np.zeros((0, 6))), float)
+        if inputs is not None and i2.ndim == 2 and i2.shape == (len(inputs.prn), 2):
+            ep = np.repeat(np.asarray(inputs.epoch_t, float), np.diff(inputs.epoch_start))
+            res = dict(t_s=ep, prn=np.asarray(inputs.prn, int), pseudorange_residual_m=i2[:, 0],
+                       rate_residual_mps=i2[:, 1])
         if len(getattr(sol, "gnss_t", ())) and np.asarray(sol.innovation).ndim == 2:
             m = len(sol.gnss_t)
             i6 = np.asarray(sol.innovation, float)
@@ -331,11 +405,11 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
         err_kind = "truth"
     elif fx is not None:
         fix_err = _errors_vs_fixes(sol, fx)
-        err = dict(t=fix_err["t"], pos_n_m=fix_err["pos_n_m"], sigma_pos_n_m=fix_err["sigma_pos_n_m"])
+        err = fix_err
         err_kind = "GNSS fixes (antenna; the solution is the IMU centre, no lever arm applied)"
 
-    figs = _figures(sol, err, "truth" if tr is not None else "GNSS fixes", tr, fx, inn, outages, plt)
-    rows = _summary_rows(sol, err_kind, ev, inn, outages, fix_err)
+    figs = _figures(sol, err, "truth" if tr is not None else "GNSS fixes", tr, fx, inn, res, outages, plt)
+    rows = _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err)
     from .._atomic import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -343,6 +417,8 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
 
     for name, _, data in figs:
         _atomic_binary(out_dir / name, lambda tmp, d=data: Path(tmp).write_bytes(d))
+    for name in set(FIGURES) - {f[0] for f in figs}:  # a figure of an earlier report in this folder
+        (out_dir / name).unlink(missing_ok=True)
     heading = title or f"insnav report: {src.name if src else 'solution'}"
     parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
              f"<title>{html.escape(heading)}</title>",

@@ -60,8 +60,9 @@ def add_run_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", required=True,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
-                        "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, "
-                        "innovation) and <out>.config.toml (the run's configuration)")
+                        "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, rows, "
+                        "loose innovation), for tight <out>.residuals.csv (per satellite) and <out>.config.toml "
+                        "(the run's configuration)")
     p.add_argument("--allow-free-inertial", action="store_true",
                    help="accept a run that used no GNSS update, or had more than 20 %% of them rejected by the "
                         "innovation gate (otherwise an error: wrong units, time bases or sigmas are the usual cause)")

@@ -525,6 +525,41 @@ def check_replaceable(out: Path, overwrite: bool) -> None:
                               f"{', ...' if len(foreign) > 3 else ''}): not replaced; move them or choose another --out")
 
 
+_INITIAL_KEYS = ("lat_deg", "lon_deg", "h_m", "v_n_mps", "roll_deg", "pitch_deg", "yaw_deg")
+
+
+def _initial_from_meta(meta: dict, meta_path: Path):
+    """The initial state, its time t0 [s] and the lever arm [m] of a
+    dataset.json, each checked: a missing key or a bad value is a ValueError
+    naming the file and the key."""
+    ini = meta.get("initial")
+    if not isinstance(ini, dict):
+        raise ValueError(f"{meta_path}: 'initial' missing or not an object with {', '.join(_INITIAL_KEYS)}")
+    missing = [k for k in _INITIAL_KEYS if k not in ini]
+    if missing:
+        raise ValueError(f"{meta_path}: initial: {', '.join(missing)} missing")
+    v = ini["v_n_mps"]
+    if not (isinstance(v, list) and len(v) == 3):
+        raise ValueError(f"{meta_path}: initial: v_n_mps must be 3 numbers (north, east, down [m/s]), got {v!r}")
+    try:
+        initial = NavState(*(ini[k] for k in _INITIAL_KEYS))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{meta_path}: initial: {exc}") from None
+    if "t0_s" not in meta:
+        raise ValueError(f"{meta_path}: t0_s (time of the initial state [s]) missing")
+    try:
+        t0 = float(meta["t0_s"])
+    except (TypeError, ValueError):
+        raise ValueError(f"{meta_path}: t0_s must be a number [s], got {meta['t0_s']!r}") from None
+    lever = meta.get("lever_arm_b_m", [0.0, 0.0, 0.0])
+    try:
+        lever_arm_b = np.asarray(lever, dtype=float).reshape(3)
+    except (TypeError, ValueError):
+        raise ValueError(f"{meta_path}: lever_arm_b_m must be 3 numbers (forward, right, down [m]), "
+                         f"got {lever!r}") from None
+    return initial, t0, lever_arm_b
+
+
 def load_dataset(directory) -> Dataset:
     """Read a dataset directory written by :meth:`Dataset.save`.
 
@@ -585,12 +620,9 @@ def load_dataset(directory) -> Dataset:
             imu_model = imu_model_for_grade(meta["imu_grade"])
         except ValueError as exc:
             raise ValueError(f"{d / 'dataset.json'}: {exc}") from None
-    ini = meta["initial"]
-    initial = NavState(ini["lat_deg"], ini["lon_deg"], ini["h_m"], ini["v_n_mps"],
-                       ini["roll_deg"], ini["pitch_deg"], ini["yaw_deg"])
+    initial, t0, lever_arm_b = _initial_from_meta(meta, meta_path)
     return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=raw, imu_errors=errs, scenario=scen,
-                   lever_arm_b=np.array(meta.get("lever_arm_b_m", [0.0, 0.0, 0.0])),
-                   initial=initial, t0=float(meta["t0_s"]),
+                   lever_arm_b=lever_arm_b, initial=initial, t0=t0,
                    gps_time_offset_s=float(meta.get("gps_time_offset_s", 0.0)),
                    imu_model=imu_model, name=meta.get("name", ""),
                    seed=meta.get("seed"), odometer=odo)

@@ -13,7 +13,8 @@ import numpy as np
 from ..units import RAD2DEG
 
 __all__ = ["RecordStatus", "GNSS_STATUS", "Solution", "load_solution", "save_solution", "write_innovations",
-           "read_innovations", "innovations_path", "INNOVATION_COLUMNS"]
+           "read_innovations", "innovations_path", "INNOVATION_COLUMNS", "RESIDUAL_COLUMNS", "read_residuals",
+           "residuals_path", "status_name"]
 
 
 class RecordStatus(enum.IntEnum):
@@ -250,7 +251,18 @@ def load_solution(path) -> Solution:
 
 #: the sidecar's columns: per GNSS record (loose: fix; tight: epoch)
 INNOVATION_COLUMNS = ("t_s", "status", "applied", "nis", "rows", "dn_m", "de_m", "dd_m", "dvn_mps", "dve_mps",
-                      "dvd_mps")
+                      "dvd_mps", "status_name")
+#: the columns of a tight run's per-satellite residuals ``<solution>.residuals.csv``
+RESIDUAL_COLUMNS = ("t_s", "prn", "elevation_deg", "pseudorange_residual_m", "rate_residual_mps")
+
+
+def status_name(code: int) -> str:
+    """The sidecar's name of a :class:`RecordStatus` code (``applied``,
+    ``rejected_by_gate``, ...; ``unknown_<code>`` for a code it does not know)."""
+    try:
+        return RecordStatus(int(code)).name.lower()
+    except ValueError:
+        return f"unknown_{int(code)}"
 
 
 def innovations_path(solution_path) -> Path:
@@ -258,15 +270,35 @@ def innovations_path(solution_path) -> Path:
     return p.with_name(p.name + ".innovations.csv")
 
 
-def write_innovations(sol: Solution, solution_path) -> Path:
-    """Write ``<solution>.innovations.csv``: per GNSS record its time of
-    validity [s], status code (:class:`RecordStatus`), applied (1/0), NIS
-    (innovation squared in the metric of its predicted covariance), measurement
-    rows, and the loose innovation INS minus GNSS (N, E, D position [m],
-    velocity [m/s]; empty for a tight solution, whose per-satellite residuals
-    go to ``<solution>.residuals.csv``)."""
+def residuals_path(solution_path) -> Path:
+    p = Path(solution_path)
+    return p.with_name(p.name + ".residuals.csv")
+
+
+def _csv_text(body: np.ndarray, columns, fmt, names=None) -> str:
+    """CSV text of a numeric table (NaN written as an empty cell), with an
+    optional last text column."""
     import io
 
+    buf = io.StringIO()
+    np.savetxt(buf, body, delimiter=",", fmt=fmt)
+    lines = [",".join(x if x != "nan" else "" for x in ln.split(",")) for ln in buf.getvalue().splitlines()]
+    if names is not None:
+        lines = [f"{ln},{n}" for ln, n in zip(lines, names)]
+    return "\n".join([",".join(columns)] + lines) + "\n"
+
+
+def write_innovations(sol: Solution, solution_path) -> Path:
+    """Write ``<solution>.innovations.csv`` (columns :data:`INNOVATION_COLUMNS`).
+
+    Per GNSS record: its time of validity [s], status code
+    (:class:`RecordStatus`), applied (1/0), NIS (innovation squared in the
+    metric of its predicted covariance), measurement rows, the loose
+    innovation INS minus GNSS (N, E, D position [m], velocity [m/s]; empty for
+    a tight solution) and the status name.  A tight solution's per-satellite
+    residuals (the rows the core returns, in the order of ``sol.inputs``) go
+    to ``<solution>.residuals.csv`` (:data:`RESIDUAL_COLUMNS`).
+    """
     from .._atomic import atomic_write_text
 
     m = len(sol.gnss_t)
@@ -278,33 +310,62 @@ def write_innovations(sol: Solution, solution_path) -> Path:
         rows = np.isfinite(inn).sum(axis=1) if loose else np.zeros(m, int)
     body = np.column_stack([sol.gnss_t, st, st == RecordStatus.APPLIED, sol.nis, rows,
                             inn if loose else np.full((m, 6), np.nan)])
-    buf = io.StringIO()
-    np.savetxt(buf, body, delimiter=",", header=",".join(INNOVATION_COLUMNS), comments="",
-               fmt=["%.6f", "%d", "%d", "%.6g", "%d"] + ["%.6g"] * 6)
-    out = atomic_write_text(innovations_path(solution_path), buf.getvalue().replace("nan", ""))
+    out = atomic_write_text(innovations_path(solution_path),
+                            _csv_text(body, INNOVATION_COLUMNS, ["%.6f", "%d", "%d", "%.6g", "%d"] + ["%.6g"] * 6,
+                                      [status_name(c) for c in st]))
     inputs = getattr(sol, "inputs", None)
     if inputs is not None and not loose and inn.ndim == 2 and inn.shape[1] == 2:
         ep = np.repeat(np.arange(len(inputs.epoch_t)), np.diff(inputs.epoch_start))
         res = np.column_stack([inputs.epoch_t[ep], inputs.prn, inputs.elevation_deg, inn])
-        buf = io.StringIO()
-        np.savetxt(buf, res, delimiter=",", header="t_s,prn,elevation_deg,pseudorange_residual_m,rate_residual_mps",
-                   comments="", fmt=["%.6f", "%d", "%.3f", "%.6g", "%.6g"])
-        p = Path(solution_path)
-        atomic_write_text(p.with_name(p.name + ".residuals.csv"), buf.getvalue().replace("nan", ""))
+        atomic_write_text(residuals_path(solution_path),
+                          _csv_text(res, RESIDUAL_COLUMNS, ["%.6f", "%d", "%.3f", "%.6g", "%.6g"]))
     return out
 
 
-def read_innovations(path) -> dict:
-    """The arrays of an innovations sidecar (empty cells: NaN)."""
-    path = Path(path)
+def _read_table(path: Path, columns, text_last: bool) -> tuple[np.ndarray, list[str] | None]:
     text = path.read_text(encoding="ascii", errors="replace")
     nl = text.find("\n")
-    header = tuple(h.strip() for h in text[:nl].split(","))
-    if header != INNOVATION_COLUMNS:
-        raise ValueError(f"{path}:1: unexpected header; expected {','.join(INNOVATION_COLUMNS)}")
-    body = "\n".join(",".join(x if x.strip() else "nan" for x in ln.split(",")) for ln in text[nl + 1:].splitlines())
+    header = tuple(h.strip() for h in (text[:nl] if nl >= 0 else text).split(","))
+    ncol = len(columns) - (1 if text_last else 0)
+    names = None
+    lines = [ln for ln in text[nl + 1:].splitlines() if ln.strip()] if nl >= 0 else []
+    if header == tuple(columns):
+        if text_last:
+            cut = [ln.rsplit(",", 1) for ln in lines]
+            for i, c in enumerate(cut):
+                if len(c) != 2:
+                    raise ValueError(f"{path}:{i + 2}: expected {len(columns)} columns")
+            lines, names = [c[0] for c in cut], [c[1].strip() for c in cut]
+    elif not (text_last and header == tuple(columns[:-1])):  # (a sidecar written before status_name existed)
+        raise ValueError(f"{path}:1: unexpected header; expected {','.join(columns)}")
+    body = "\n".join(",".join(x if x.strip() else "nan" for x in ln.split(",")) for ln in lines)
     from ..data.dataset import parse_numeric_text
 
-    a = parse_numeric_text(body, len(INNOVATION_COLUMNS), str(path), first_line=2)
-    return dict(t_s=a[:, 0], status=a[:, 1].astype(int), applied=a[:, 2] > 0, nis=a[:, 3], rows=a[:, 4].astype(int),
-                innovation=a[:, 5:11])
+    return parse_numeric_text(body, ncol, str(path), first_line=2), names
+
+
+def read_innovations(path) -> dict:
+    """The arrays of an innovations sidecar (empty cells: NaN): ``t_s``,
+    ``status`` (codes), ``applied`` (bool), ``nis``, ``rows``, ``innovation``
+    (M, 6) and ``status_name`` (the names; derived from the codes in a file
+    without that column)."""
+    path = Path(path)
+    a, names = _read_table(path, INNOVATION_COLUMNS, text_last=True)
+    status = a[:, 1].astype(int)
+    if names is None:
+        names = [status_name(c) for c in status]
+    else:
+        for i, (c, n) in enumerate(zip(status, names)):
+            if n != status_name(c):
+                raise ValueError(f"{path}:{i + 2}: status {c} is {status_name(c)!r}, but the row says {n!r}")
+    return dict(t_s=a[:, 0], status=status, applied=a[:, 2] > 0, nis=a[:, 3], rows=a[:, 4].astype(int),
+                innovation=a[:, 5:11], status_name=np.array(names, dtype=object))
+
+
+def read_residuals(path) -> dict:
+    """The arrays of a tight run's ``<solution>.residuals.csv``: ``t_s``,
+    ``prn``, ``elevation_deg``, ``pseudorange_residual_m``,
+    ``rate_residual_mps`` (INS-predicted minus measured, before the update)."""
+    a, _ = _read_table(Path(path), RESIDUAL_COLUMNS, text_last=False)
+    return dict(t_s=a[:, 0], prn=a[:, 1].astype(int), elevation_deg=a[:, 2], pseudorange_residual_m=a[:, 3],
+                rate_residual_mps=a[:, 4])

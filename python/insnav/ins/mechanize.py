@@ -42,6 +42,9 @@ def mechanize(t, dtheta_b, dv_b, initial: NavState, t0: float | None = None,
     ValueError
         On bad shapes, non-finite values or non-increasing time, naming the
         first offending sample.
+    FloatingPointError
+        When finite inputs still give a non-finite state (an absurdly long
+        interval, e.g. a time in the wrong unit), naming the first such sample.
     """
     t = as_float_array(t, "t")
     dtheta_b = as_float_array(dtheta_b, "dtheta_b", (3,))
@@ -66,6 +69,14 @@ def mechanize(t, dtheta_b, dv_b, initial: NavState, t0: float | None = None,
             check_finite(arr, name)
         check_increasing(t, "t", t0=float(t0))
         raise AssertionError(f"mechanize: sample {out['bad_sample']} refused by the C++ loop")  # unreachable
+    finite = (np.isfinite(out["lat_deg"]) & np.isfinite(out["lon_deg"]) & np.isfinite(out["h_m"])
+              & np.isfinite(out["v_n"]).all(axis=1))
+    if not finite.all():  # finite inputs, but an interval so long that the state overflows
+        i = int(np.argmin(finite))
+        dt = t[i] - (t[i - 1] if i > 0 else float(t0))
+        raise FloatingPointError(f"mechanize: the state is not finite from sample {i} (t = {float(t[i]):.9g} s, interval "
+                                 f"{float(dt):.6g} s from the previous time): is t in seconds, and t0 the time of "
+                                 "the initial state?")
     return Trajectory(t=t.copy(), lat_deg=out["lat_deg"], lon_deg=out["lon_deg"], h_m=out["h_m"],
                       v_n=out["v_n"], roll_deg=out["roll_deg"], pitch_deg=out["pitch_deg"],
                       yaw_deg=out["yaw_deg"])
