@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 import insnav
-from insnav.analysis import errors
 from insnav.filters.delay import run_delayed, scenario_delay_p
 
 R_EARTH = 6.378e6

@@ -15,7 +15,7 @@ import insnav
 from insnav.analysis import errors, rms
 from insnav.config import ConfigError, RunConfig
 from insnav.data.dataset import ImuData
-from insnav.filters.particle import DEFAULT_ALPHA, PARTICLE_FILTERS, run_tight_particle
+from insnav.filters.particle import DEFAULT_ALPHA, run_tight_particle
 
 
 @pytest.fixture(scope="module")
