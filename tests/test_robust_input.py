@@ -247,3 +247,29 @@ def test_run_config_errors(tmp_path, text, pattern):
 def test_run_config_valid_unchanged():
     cfg = config_from_dict({"gate_chi2": 22.46, "filter": "rbukf", "lever_arm_b": [0.1, 0.0, -0.2]})
     assert cfg.gate_chi2 == 22.46 and cfg.filter == "rbukf"
+
+
+def test_max_gap_is_reachable_from_the_toml(tmp_path):
+    """An IMU gap longer than the default 0.1 s is refused with a message that
+    names the TOML key; [sanitize] max_gap_s in the config lets the run through
+    (the gap is bridged), and a bad value is an error naming the key."""
+    import dataclasses
+
+    import insnav
+    from insnav.config import config_from_dict
+    from insnav.data.dataset import ImuData
+
+    ds = insnav.simulate("seed000-sim", seed=1)
+    imu = ds.imu
+    keep = np.ones(len(imu.t), bool)
+    keep[1000:1030] = False  # a 0.15 s gap at 200 Hz
+    imu2 = ImuData(imu.t[keep], imu.dtheta_b[keep], imu.dv_b[keep])
+    d2 = dataclasses.replace(ds, imu=imu2)
+    with pytest.raises(ValueError, match=r"max_gap_s=0\.1 s.*\[sanitize\] max_gap_s"):
+        insnav.run(d2, "ekf")
+    sol = insnav.run(d2, config=config_from_dict({"filter": "ekf", "sanitize": {"max_gap_s": 0.5}}))
+    assert sol.summary["sanitize"]["imu_gaps_bridged"] >= 1
+    with pytest.raises(ConfigError, match=r"sanitize\.max_gap_s"):
+        config_from_dict({"sanitize": {"max_gap_s": -1}})
+    with pytest.raises(ConfigError, match=r"unknown key 'sanitize\.max_gap'"):
+        config_from_dict({"sanitize": {"max_gap": 1}})

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 from .registry import FILTERS
-from .units import DEG_PER_H, DEG_PER_SQRT_H, MG, MPS_PER_SQRT_H, UG_PER_SQRT_HZ
+from .units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0, MG, MPS_PER_SQRT_H, UG_PER_SQRT_HZ
 
 
 COUPLINGS = ("loose", "tight")
@@ -96,6 +96,11 @@ _IMU_MODEL_KEYS = {"rate_hz", "imu_grade", "gyro_arw", "accel_vrw"} | {
     for k in ("bias", "bias_sigma", "gm_sigma", "gm_tau", "bias_rw", "scale", "scale_sigma",
               "misalignment_sigma", "bias_total_sigma")}
 
+
+#: limits of the input repairs (insnav.filters.sanitize; [sanitize] in the TOML overrides them):
+#: beyond the full scale of automotive, aerial and tactical IMUs; max_gap_s is the longest IMU gap bridged
+SANITIZE_DEFAULTS = dict(max_gap_s=0.1, gap_factor=1.5, max_rate_rps=2000.0 * DEG, max_accel_mps2=100.0 * G0,
+                         min_h_m=-2000.0, max_h_m=100_000.0)
 
 #: vehicle constraints a run can use ([constraints] use = [...]); "zupt" brings ZARU with it
 CONSTRAINT_NAMES = ("nhc", "odo", "zupt")
@@ -221,6 +226,10 @@ class RunConfig:
     smooth : bool
         Post-process with the RTS smoother (loose EKF): every output row and
         sigma from all the data, before and after it.
+    sanitize : dict
+        Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
+        ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
+        ``max_rate_rps``, ``max_accel_mps2``, ``min_h_m``, ``max_h_m``).
     """
 
     filter: str = "ekf"
@@ -244,6 +253,7 @@ class RunConfig:
     ut_kappa: float | None = None
     constraints: Constraints = field(default_factory=Constraints)
     smooth: bool = False
+    sanitize: dict = field(default_factory=dict)
 
     def validate(self) -> "RunConfig":
         def bad(key, value, allowed):
@@ -276,6 +286,16 @@ class RunConfig:
         if not isinstance(self.constraints, Constraints):
             bad("constraints", self.constraints, "a [constraints] table")
         self.constraints.validate()
+        if not isinstance(self.sanitize, dict):
+            bad("sanitize", self.sanitize, "a [sanitize] table")
+        _SAN = SANITIZE_DEFAULTS
+        for k, v in self.sanitize.items():
+            if k not in _SAN:
+                raise ConfigError(f"unknown key 'sanitize.{k}'; known keys: {', '.join(sorted(_SAN))}")
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            if not ok or (k not in ("min_h_m", "max_h_m") and v <= 0) or (k == "gap_factor" and v <= 1):
+                bad(f"sanitize.{k}", v, "a finite number" + ("" if k in ("min_h_m", "max_h_m") else
+                                                               " > 1" if k == "gap_factor" else " > 0"))
         if not isinstance(self.smooth, (bool, np.bool_)):
             bad("smooth", self.smooth, "true or false")
         if self.smooth and (self.coupling != "loose" or self.filter != "ekf"):

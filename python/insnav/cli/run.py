@@ -76,9 +76,12 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name in ("imu", "constraints") or v is None:
+        if f.name in ("imu", "constraints", "sanitize") or v is None:
             continue
         lines.append(f"{f.name} = {toml_value(v)}")
+    if cfg.sanitize:
+        lines.append("\n[sanitize]")
+        lines += [f"{k} = {toml_value(v)}" for k, v in cfg.sanitize.items()]
     if cfg.constraints.use:
         lines.append("\n[constraints]")
         for f in dataclasses.fields(cfg.constraints):

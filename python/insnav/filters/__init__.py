@@ -99,7 +99,8 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     if sanitize:
         from .sanitize import sanitize_dataset
 
-        dataset, report = sanitize_dataset(dataset, sanitize)
+        opts = {**cfg.sanitize, **(sanitize if isinstance(sanitize, dict) else {})}
+        dataset, report = sanitize_dataset(dataset, opts or True)
     if checks:
         from .checks import check_dataset
 

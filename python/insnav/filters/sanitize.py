@@ -67,7 +67,7 @@ import dataclasses
 import numpy as np
 
 from ..data.dataset import GnssFixes, ImuData, RowOrigin
-from ..units import DEG, G0
+from ..config import SANITIZE_DEFAULTS
 
 __all__ = ["sanitize_imu", "sanitize_gnss", "DEFAULTS"]
 
@@ -75,8 +75,7 @@ __all__ = ["sanitize_imu", "sanitize_gnss", "DEFAULTS"]
 #: Default limits.  ``max_rate_rps`` = 2000 deg/s and ``max_accel_mps2`` = 100 g are
 #: beyond the full scale of automotive, aerial and tactical IMUs; ``max_gap_s``
 #: is 0.1 s (20 samples at 200 Hz).
-DEFAULTS = dict(max_gap_s=0.1, gap_factor=1.5, max_rate_rps=2000.0 * DEG, max_accel_mps2=100.0 * G0,
-                min_h_m=-2000.0, max_h_m=100_000.0)
+DEFAULTS = SANITIZE_DEFAULTS  # the run config's [sanitize] table overrides them (insnav.config)
 
 
 def _where(origin: RowOrigin | None, source: str, i: int) -> str:
@@ -191,7 +190,8 @@ def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
             if too_long.any():
                 i = int(gaps[np.argmax(too_long)])
                 raise ValueError(f"{_where(origin, source, i)}: IMU gap of {dts[i]:.6g} s after t={float(t[i - 1])!r} "
-                                 f"is longer than max_gap_s={max_gap_s:g} s (nominal interval {dt0:.6g} s)")
+                                 f"is longer than max_gap_s={max_gap_s:g} s (nominal interval {dt0:.6g} s; a longer limit: "
+                                 "[sanitize] max_gap_s in the run config)")
             t, dth, dv, origin, rep = _bridge(t, dth, dv, dts, gaps, dt0, origin, rep)
     rep["imu_samples_out"] = len(t)
     changed = rep["imu_duplicates_dropped"] or rep["imu_samples_inserted"]
