@@ -9,16 +9,7 @@
 #include <random>
 #include <vector>
 
-inline int g_eigen_asserts = 0;
-#define eigen_assert(x)                                            \
-  do {                                                             \
-    if (!(x)) {                                                    \
-      ++g_eigen_asserts;                                           \
-      std::printf("eigen_assert failed: %s\n", #x);                \
-    }                                                              \
-  } while (0)
-#define EIGEN_RUNTIME_NO_MALLOC
-#include <Eigen/Core>
+#include "eigen_malloc_check.hpp"  // first: before any Eigen header
 
 #include "insnav/core.hpp"
 #include "insnav/engine/tight_engine.hpp"
