@@ -55,6 +55,8 @@ def add_run_parser(sub) -> None:
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
                         "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, "
                         "innovation) and <out>.config.toml (the run's configuration)")
+    p.add_argument("--timings", action="store_true",
+                   help="print the wall time of each stage (read, filter, write) to stderr")
     p.add_argument("--allow-free-inertial", action="store_true",
                    help="accept a run that used no GNSS update, or had more than 20 %% of them rejected by the "
                         "innovation gate (otherwise an error: wrong units, time bases or sigmas are the usual cause)")
@@ -114,8 +116,29 @@ def _rinex_table_toml(opt) -> str:
 MAX_REJECTED_SHARE = 0.2
 
 
+class _Stages:
+    """Wall time of the named stages of a run [s] (``--timings``)."""
+
+    def __init__(self):
+        import time
+
+        self._clock = time.perf_counter
+        self.t_last = self._clock()
+        self.times: dict[str, float] = {}
+
+    def done(self, name: str) -> None:
+        now = self._clock()
+        self.times[name] = self.times.get(name, 0.0) + now - self.t_last
+        self.t_last = now
+
+    def line(self) -> str:
+        return "timings [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in self.times.items())
+
+
 def cmd_run(args) -> int:
     import insnav
+
+    stages = _Stages()
 
     out = Path(args.out)
     if out.is_dir():  # fail before the run, not after it
@@ -151,6 +174,7 @@ def cmd_run(args) -> int:
             cfg = load_config(args.config) if args.config else RunConfig()
         if args.seed is not None:
             cfg.init_seed = args.seed
+        stages.done("read")
         sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
@@ -168,6 +192,7 @@ def cmd_run(args) -> int:
             raise UserError(f"no GNSS update was used ({records} records, {dropped} dropped): the run is free "
                             "inertial; check the GNSS time base, sigmas and units (--allow-free-inertial to "
                             "accept it)")
+    stages.done("filter")
     from ..filters.solution import write_innovations
 
     sol.save(out)
@@ -180,4 +205,9 @@ def cmd_run(args) -> int:
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
           f"records, {used} updates used, {rejected} rejected by the gate, {dropped} dropped by the input checks; "
           f"{s.get('cholesky_repairs', 0)} covariance repairs")
+    stages.done("write")
+    if args.timings:
+        import sys
+
+        print(stages.line(), file=sys.stderr)
     return 0
