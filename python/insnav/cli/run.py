@@ -25,11 +25,11 @@ RTKLIB str2str .tag file), the mounting rotation and lever arm and the initial h
 (docs/formats.md).  Times in the solution are then GPS seconds of week, so
 `insnav evaluate sol.csv REFERENCE.pos` compares it with an RTKLIB solution.
 
-The solution CSV has the columns t, lat_deg, lon_deg, h_m, vn, ve, vd (m/s NED),
-roll_deg, pitch_deg, yaw_deg, their 1-sigma (sigma_n_m ... sigma_yaw_deg) and the
-estimated IMU errors (acc_bias_*_mps2, gyro_bias_*_dph, *_scale_*_ppm).  The resolved
-configuration is written beside it as <out>.config.toml so the run can be repeated
-with --config.  Config keys (TOML, units in the names): see docs/formats.md."""
+The solution has the columns t_s, lat_deg, lon_deg, h_m, vn_mps, ve_mps, vd_mps (NED, m/s),
+roll_deg, pitch_deg, yaw_deg (group nav), their 1-sigma (sigma_n_m ... sigma_yaw_deg; group
+sigma) and the estimated IMU errors (acc_bias_*_mps2, gyro_bias_*_dph, *_scale_*_ppm; group
+bias).  The resolved configuration is written beside it as <out>.config.toml so the run
+can be repeated with --config.  Config keys (TOML, units in the names): see docs/formats.md."""
 
 
 def add_run_parser(sub) -> None:
@@ -55,6 +55,9 @@ def add_run_parser(sub) -> None:
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
                         "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, "
                         "innovation) and <out>.config.toml (the run's configuration)")
+    p.add_argument("--csv-precision", choices=("resolution", "exact"), default="resolution",
+                   help="CSV numbers: rounded to each column's resolution (1 ns, ~1 um, ...; docs/formats.md), "
+                        "or exact: the shortest text that reads back as the same double (about twice the size)")
     p.add_argument("--timings", action="store_true",
                    help="print the wall time of each stage (read, filter, write) to stderr")
     p.add_argument("--allow-free-inertial", action="store_true",
@@ -195,7 +198,7 @@ def cmd_run(args) -> int:
     stages.done("filter")
     from ..filters.solution import write_innovations
 
-    sol.save(out)
+    sol.save(out, precision=args.csv_precision)
     write_innovations(sol, out)
     cfg.filter = sol.summary.get("filter", cfg.filter)
     text = resolved_config_toml(cfg)
