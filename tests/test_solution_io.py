@@ -129,3 +129,23 @@ def test_to_dataframe_names_the_extra_without_pandas(sol, monkeypatch):
     monkeypatch.setitem(sys.modules, "pandas", None)
     with pytest.raises(ImportError, match=r"insnav\[pandas\]"):
         sol.to_dataframe()
+
+
+def test_parquet_without_pyarrow_names_the_extra(sol, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyarrow", None)
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
+    for call in (lambda: sol.save(tmp_path / "s.parquet"), lambda: load_solution(tmp_path / "s.parquet")):
+        (tmp_path / "s.parquet").write_bytes(b"PAR1")
+        with pytest.raises(ImportError, match=r"^Parquet needs pyarrow: pip install 'insnav\[parquet\]'") as e:
+            call()
+        assert "\n" not in str(e.value)
+    assert not list(tmp_path.glob("*.part*"))
+
+
+def test_load_solution_is_public_and_lazy():
+    import subprocess
+
+    code = ("import sys, insnav; assert 'insnav.filters.solution' not in sys.modules; "
+            "f = insnav.load_solution; assert f.__module__ == 'insnav.filters.solution'; print('ok')")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr
