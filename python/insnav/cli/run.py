@@ -55,6 +55,16 @@ def add_run_parser(sub) -> None:
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
                         "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, "
                         "innovation) and <out>.config.toml (the run's configuration)")
+    p.add_argument("--output-rate", type=float, default=None, metavar="HZ",
+                   help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
+                        "200 Hz); the filter still runs at every sample.  Default: every sample")
+    p.add_argument("--columns", default=None, metavar="GROUPS",
+                   help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
+                        "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
+    p.add_argument("--out-format", choices=("insnav", "kfgins"), default="insnav",
+                   help="kfgins: --out is a folder that gets KF_GINS_Navresult.nav and KF_GINS_IMU_ERR.txt "
+                        "exactly as KF-GINS writes them (week sow lat lon h vN vE vD roll pitch yaw; sow, "
+                        "gyro bias deg/h, acc bias mGal, scale factors ppm)")
     p.add_argument("--csv-precision", choices=("resolution", "exact"), default="resolution",
                    help="CSV numbers: rounded to each column's resolution (1 ns, ~1 um, ...; docs/formats.md), "
                         "or exact: the shortest text that reads back as the same double (about twice the size)")
@@ -115,6 +125,22 @@ def _rinex_table_toml(opt) -> str:
     return "\n".join(lines) + "\n"
 
 
+def output_decimation(t, rate_hz: float) -> int:
+    """k of ``--output-rate``: the IMU rate (median interval of ``t`` [s]) over
+    ``rate_hz`` [Hz], which must be a whole number (within 0.1 %)."""
+    t = np.asarray(t, float)
+    if t.size < 2:
+        return 1
+    imu_hz = 1.0 / float(np.median(np.diff(t)))
+    k = imu_hz / float(rate_hz)
+    if k < 1.0 - 1e-3 or abs(k - round(k)) > 1e-3 * k:
+        ok = [r for r in (100, 50, 20, 10, 5, 2, 1, 0.5, 0.1) if r <= imu_hz + 1e-9
+              and abs(imu_hz / r - round(imu_hz / r)) <= 1e-3 * imu_hz / r]
+        raise UserError(f"--output-rate {rate_hz:g}: the IMU rate {imu_hz:.6g} Hz is not a whole multiple of it; "
+                        f"use e.g. {', '.join(f'{r:g}' for r in ok[:4])} [Hz]")
+    return max(1, int(round(k)))
+
+
 #: share of GNSS updates the innovation gate may reject before a run counts as failed
 MAX_REJECTED_SHARE = 0.2
 
@@ -144,12 +170,28 @@ def cmd_run(args) -> int:
     stages = _Stages()
 
     out = Path(args.out)
-    if out.is_dir():  # fail before the run, not after it
-        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'solution.csv'}")
-    from ..filters.solution import FORMATS
+    from ..filters.solution import FORMATS, Solution
 
-    if out.suffix.lower() not in FORMATS:
-        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
+    groups = None
+    if args.columns is not None:
+        groups = [g.strip() for g in args.columns.split(",") if g.strip()]
+        bad = [g for g in groups if g not in Solution.COLUMN_GROUPS]
+        if bad or not groups:
+            raise UserError(f"--columns {args.columns}: unknown group {', '.join(map(repr, bad)) or '(none)'}; "
+                            f"use any of {','.join(Solution.COLUMN_GROUPS)}")
+    if args.out_format == "kfgins":
+        if out.exists() and not out.is_dir():
+            raise UserError(f"--out {out}: with --out-format kfgins, --out is a folder (it gets "
+                            "KF_GINS_Navresult.nav and KF_GINS_IMU_ERR.txt)")
+        if groups is not None:
+            raise UserError("--columns does not apply to --out-format kfgins (its files have fixed columns)")
+    else:
+        if out.is_dir():  # fail before the run, not after it
+            raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'solution.csv'}")
+        if out.suffix.lower() not in FORMATS:
+            raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
+    if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
+        raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     rinex_opts = None
     try:
         if args.format == "rinex":
@@ -177,6 +219,8 @@ def cmd_run(args) -> int:
             cfg = load_config(args.config) if args.config else RunConfig()
         if args.seed is not None:
             cfg.init_seed = args.seed
+        if args.output_rate is not None:
+            cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
         stages.done("read")
         sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
     except ConfigError as exc:
@@ -198,13 +242,28 @@ def cmd_run(args) -> int:
     stages.done("filter")
     from ..filters.solution import write_innovations
 
-    sol.save(out, precision=args.csv_precision)
-    write_innovations(sol, out)
-    cfg.filter = sol.summary.get("filter", cfg.filter)
-    text = resolved_config_toml(cfg)
-    if rinex_opts is not None:
-        text += _rinex_table_toml(rinex_opts)
-    atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text)
+    written: list[Path] = []  # Ctrl-C or an error while writing: none of this run's files stay
+    try:
+        if args.out_format == "kfgins":
+            from ..io.kfgins import write_kfgins_solution
+
+            out.mkdir(parents=True, exist_ok=True)
+            files = write_kfgins_solution(out, sol)
+            written += files
+            base = files[0]
+        else:
+            written.append(sol.save(out, columns=groups, precision=args.csv_precision))
+            base = out
+        written.append(write_innovations(sol, base))
+        cfg.filter = sol.summary.get("filter", cfg.filter)
+        text = resolved_config_toml(cfg)
+        if rinex_opts is not None:
+            text += _rinex_table_toml(rinex_opts)
+        written.append(atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text))
+    except BaseException:
+        for p in written:
+            Path(p).unlink(missing_ok=True)
+        raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
           f"records, {used} updates used, {rejected} rejected by the gate, {dropped} dropped by the input checks; "
           f"{s.get('cholesky_repairs', 0)} covariance repairs")

@@ -159,12 +159,6 @@ FORMATS = (".csv", ".npz", ".parquet")
 PRECISIONS = ("resolution", "exact")
 
 
-def _threads() -> int:
-    import os
-
-    return max(1, min(2, os.cpu_count() or 1))
-
-
 def _selected(sol: Solution, columns) -> list[tuple[str, np.ndarray, float]]:
     cols = sol.columns()
     if columns is None:
@@ -178,23 +172,13 @@ def _selected(sol: Solution, columns) -> list[tuple[str, np.ndarray, float]]:
     return [c for c in cols if c[0] in keep]
 
 
-def write_text_columns(path: Path, header: str, cols, decimals, **fmt) -> Path:
-    """Write ``cols`` (name, array, factor) as a text table through the C++
-    writer (``_core.write_table``: blocks formatted on two threads, the GIL
-    released, Ctrl-C checked after each block), atomically."""
-    from .. import _core
-    from .._atomic import atomic_write_with
-
-    arrays = [np.asarray(x, float) for _, x, _ in cols]
-    return atomic_write_with(path, lambda tmp: _core.write_table(
-        str(tmp), header, arrays, [float(f) for _, _, f in cols], list(decimals), threads=_threads(), **fmt))
-
-
 def _save_csv(sol: Solution, path: Path, columns=None, precision: str = "resolution") -> Path:
     if precision not in PRECISIONS:
         raise ValueError(f"precision {precision!r}: use one of {', '.join(PRECISIONS)}")
     cols = _selected(sol, columns)
     dec = [CSV_DECIMALS[n] if precision == "resolution" else -1 for n, _, _ in cols]
+    from ..data.textio import write_text_columns
+
     return write_text_columns(path, ",".join(n for n, _, _ in cols) + "\n", cols, dec)
 
 

@@ -42,7 +42,12 @@ MGAL = 1e-5  #: mGal -> m/s^2
 IMU_COLUMNS = ("sow", "dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "dvel_z")
 
 __all__ = ["read_kfgins_imu", "write_kfgins_imu", "read_kfgins_gnss", "write_kfgins_gnss",
-           "read_kfgins_nav", "write_kfgins_nav", "read_kfgins_config", "read_text"]
+           "read_kfgins_nav", "write_kfgins_nav", "read_kfgins_config", "read_text", "write_kfgins_solution",
+           "KFGINS_NAV_FILE", "KFGINS_IMU_ERR_FILE"]
+
+#: the file names KF-GINS gives its results in ``outputpath`` (src/kf_gins.cpp)
+KFGINS_NAV_FILE = "KF_GINS_Navresult.nav"
+KFGINS_IMU_ERR_FILE = "KF_GINS_IMU_ERR.txt"
 
 
 def read_text(path) -> str:
@@ -163,6 +168,48 @@ def write_kfgins_nav(path, truth, week: int = 0) -> None:
     a = np.column_stack([np.full(n, week), truth.t, truth.lat_deg, truth.lon_deg, truth.h_m,
                          truth.v_n, truth.roll_deg, truth.pitch_deg, truth.yaw_deg])
     _write(path, a, "%d %.9f %.11f %.11f %.5f %.6f %.6f %.6f %.8f %.8f %.8f")
+
+
+def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, Path]:
+    """Write a solution in the KF-GINS result layout, so that scripts written
+    for KF-GINS read it unchanged: ``KF_GINS_Navresult.nav`` (``week sow lat
+    lon h vN vE vD roll pitch yaw`` [-, s, deg, deg, m, m/s, deg]) and
+    ``KF_GINS_IMU_ERR.txt`` (``sow``, gyro bias [deg/h], accelerometer bias
+    [mGal], gyro and accelerometer scale factors [ppm]), every value as
+    KF-GINS's ``FileSaver`` prints it (``"%-15.9lf "``, src/fileio/filesaver.cc;
+    the week is 0 as KF-GINS writes it).  Both files atomic.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Created if missing.
+    sol : insnav.Solution
+    week : int
+        GPS week written in the first column.
+
+    Returns
+    -------
+    (Path, Path)
+        The ``.nav`` and the IMU-error file.
+    """
+    from ..data.textio import write_text_columns
+    from ..units import RAD2DEG
+
+    folder = Path(folder)
+    n = len(sol.t)
+    wk = np.full(n, float(week))
+    nav = [("week", wk, 1.0), ("sow", sol.t, 1.0), ("lat", sol.lat_deg, 1.0), ("lon", sol.lon_deg, 1.0),
+           ("h", sol.h_m, 1.0)] + [(f"v{j}", np.asarray(sol.v_n)[:, j], 1.0) for j in range(3)] + \
+        [("roll", sol.roll_deg, 1.0), ("pitch", sol.pitch_deg, 1.0), ("yaw", sol.yaw_deg, 1.0)]
+    gb, ab = np.asarray(sol.gyro_bias_rps), np.asarray(sol.acc_bias_mps2)
+    gs, as_ = np.asarray(sol.gyro_scale), np.asarray(sol.acc_scale)
+    err = [("sow", sol.t, 1.0)] + [("gb", gb[:, j], RAD2DEG * HOUR) for j in range(3)] + \
+        [("ab", ab[:, j], 1.0 / MGAL) for j in range(3)] + [("gs", gs[:, j], 1.0 / PPM) for j in range(3)] + \
+        [("as", as_[:, j], 1.0 / PPM) for j in range(3)]
+    fmt = dict(sep=" ", width=15, trim_zeros=False, trailing_sep=True)
+    p_nav = write_text_columns(folder / KFGINS_NAV_FILE, "", nav, [9] * len(nav), **fmt)
+    p_err = write_text_columns(folder / KFGINS_IMU_ERR_FILE, "", err, [9] * len(err), **fmt)
+    return p_nav, p_err
 
 
 def _write(path, a, fmt):
