@@ -241,12 +241,13 @@ def _columns_from(path: Path) -> dict:
         t = pa.parquet.read_table(path)
         cols = {k: t.column(k).to_numpy().astype(float) for k in t.column_names}
     else:
-        from ..data.dataset import parse_numeric_text
+        from ..data.textio import parse_numeric, read_bytes
 
-        text = path.read_text(encoding="ascii", errors="replace")
-        nl = text.find("\n")
-        header = [h.strip() for h in (text if nl < 0 else text[:nl]).strip().split(",")]
-        a = parse_numeric_text("" if nl < 0 else text[nl + 1:], len(header), str(path), first_line=2)
+        data = read_bytes(path)
+        nl = data.find(b"\n")
+        header = [h.strip() for h in (data if nl < 0 else data[:nl]).decode("ascii", "replace").strip().split(",")]
+        a, _ = parse_numeric(b"" if nl < 0 else memoryview(data)[nl + 1:], len(header), str(path), first_line=2,
+                             names=header)
         cols = dict(zip(header, a.T))
     cols = {LEGACY_COLUMNS.get(k, k): v for k, v in cols.items()}
     need = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg")

@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.dataset import GnssFixes, ImuData, Truth, check_finite_rows, parse_numeric_text, row_origin
+from ..data.dataset import GnssFixes, ImuData, RowOrigin, Truth, check_finite_rows
+from ..data.textio import count_columns, parse_numeric, read_bytes
 from ..units import DEG, PPM
 
 HOUR = 3600.0  #: h -> s
@@ -51,28 +52,24 @@ KFGINS_IMU_ERR_FILE = "KF_GINS_IMU_ERR.txt"
 
 
 def read_text(path) -> str:
-    """Whole file as text, decompressing ``.xz``/``.gz``/``.bz2``."""
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"{p} does not exist")
-    opener = {".xz": lzma.open, ".lzma": lzma.open, ".gz": gzip.open, ".bz2": bz2.open}.get(
-        p.suffix.lower())
-    if opener is None:
-        return p.read_text(encoding="utf-8", errors="replace")
-    with opener(p, "rt", encoding="utf-8", errors="replace") as f:
-        return f.read()
+    """Whole file as text, decompressing ``.xz``/``.gz``/``.bz2`` (a truncated
+    compressed file: one-line ``ValueError`` naming it)."""
+    return read_bytes(path).decode("utf-8", errors="replace")
+
+
+def _read_rows(path, ncols=None, keep=None, names=None, min_cols=None):
+    """(rows, RowOrigin, ncols) of a whitespace-separated KF-GINS text file:
+    the C++ reader, lines counted as it parses."""
+    data = read_bytes(path)
+    n = ncols or count_columns(data, path)
+    if min_cols is not None and n < min_cols:
+        return None, None, n
+    a, lines = parse_numeric(data, n, str(path), comma=False, keep=keep, names=names)
+    return a, RowOrigin(str(path), 1, lines), n
 
 
 def _read_table(path, ncols, min_cols=None):
-    text = read_text(path)
-    return parse_numeric_text(text, ncols, str(path), sep=" ", min_cols=min_cols)
-
-
-def _count_cols(text: str, path) -> int:
-    for i, ln in enumerate(text.splitlines()):
-        if ln.strip():
-            return len(ln.split())
-    raise ValueError(f"{path}:1: file is empty")
+    return _read_rows(path, ncols)[0]
 
 
 def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
@@ -90,18 +87,16 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
     ImuData
         ``t`` = GPS seconds of week [s], increments [rad], [m/s].
     """
-    text = read_text(path)
-    n = ncols or _count_cols(text, path)
+    a, origin, n = _read_rows(path, ncols, keep=7, names=IMU_COLUMNS, min_cols=7)
     if n < 7:
         raise ValueError(f"{path}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
                          f"found {n}")
-    a = parse_numeric_text(text, n, str(path), sep=" ")[:, :7]
-    origin = row_origin(text, str(path))
     check_finite_rows(a, origin, IMU_COLUMNS)
     # decreasing time is an error; equal times (duplicated records) are left to
     # insnav.filters.sanitize.sanitize_imu, which drops exact duplicates and counts them
-    if a.shape[0] > 1 and np.any(np.diff(a[:, 0]) < 0):
-        i = int(np.argmax(np.diff(a[:, 0]) < 0)) + 1
+    dt = np.diff(a[:, 0])
+    if a.shape[0] > 1 and (dt < 0).any():
+        i = int(np.argmax(dt < 0)) + 1
         raise ValueError(f"{origin.where(i)}: time {float(a[i, 0])!r} does not increase "
                          f"(previous record at {float(a[i - 1, 0])!r}, line {origin.line(i - 1)})")
     return ImuData(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy(), origin=origin)
@@ -122,13 +117,13 @@ def read_kfgins_gnss(path) -> GnssFixes:
         ``t_valid = t_arrival`` = sow; ``v_n``/``sigma_vel_n`` NaN for the
         7-column file.
     """
-    text = read_text(path)
-    n = _count_cols(text, path)
+    data = read_bytes(path)
+    n = count_columns(data, path)
     if n not in (7, 13):
         raise ValueError(f"{path}:1: expected 7 or 13 columns (sow lat lon h std_N std_E std_D"
                          f" [vN vE vD std_vN std_vE std_vD]), found {n}")
-    a = parse_numeric_text(text, n, str(path), sep=" ")
-    origin = row_origin(text, str(path))
+    a, lines = parse_numeric(data, n, str(path), comma=False)
+    origin = RowOrigin(str(path), 1, lines)
     check_finite_rows(a[:, :1], origin, ("sow",))
     k = a.shape[0]
     v = a[:, 7:10] if n == 13 else np.full((k, 3), np.nan)
