@@ -11,6 +11,7 @@
 
 #include "common.hpp"
 #include "insnav/io/text_table.hpp"
+#include "outputs.hpp"
 
 namespace insnav::py_bind {
 
@@ -127,6 +128,17 @@ py::tuple parse_text(const py::buffer& data, int ncols, int keep, bool allow_ext
 }  // namespace
 
 void bind_textio(py::module_& m) {
+  m.def(
+      "set_progress",
+      [](const py::object& f) {
+        PyObject*& hook = progress_hook();
+        Py_XDECREF(hook);
+        hook = nullptr;
+        if (!f.is_none()) hook = py::object(f).release().ptr();
+      },
+      py::arg("callback"),
+      "Call callback(k, n) from every run's C++ loop at most every 20 ms (with the GIL, beside the Ctrl-C "
+      "check); None: no callback.  An exception from it stops the run.");
   m.def("write_table", &write_table, py::arg("path"), py::arg("header"), py::arg("columns"), py::arg("scales"),
         py::arg("decimals"), py::arg("sep") = ",", py::arg("width") = 0, py::arg("trim_zeros") = true,
         py::arg("trailing_sep") = false, py::arg("threads") = 2,

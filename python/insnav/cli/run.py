@@ -68,6 +68,8 @@ def add_run_parser(sub) -> None:
     p.add_argument("--csv-precision", choices=("resolution", "exact"), default="resolution",
                    help="CSV numbers: rounded to each column's resolution (1 ns, ~1 um, ...; docs/formats.md), "
                         "or exact: the shortest text that reads back as the same double (about twice the size)")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no progress bar (shown on a terminal only, for runs longer than about 2 s)")
     p.add_argument("--timings", action="store_true",
                    help="print the wall time of each stage (read, filter, write) to stderr")
     p.add_argument("--allow-free-inertial", action="store_true",
@@ -222,7 +224,10 @@ def cmd_run(args) -> int:
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
         stages.done("read")
-        sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
+        from .._progress import reporting
+
+        with reporting(f"insnav run {args.filter or cfg.filter}", enabled=not args.quiet):
+            sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     s = sol.summary
