@@ -25,13 +25,51 @@ def _nav(s):
 
 
 def test_csv_round_trip_to_the_printed_digits(sol, tmp_path):
+    from insnav.filters.solution import CSV_DECIMALS
+
     p = sol.save(tmp_path / "sol.csv")
     back = load_solution(p)
     a, b = _nav(sol), _nav(back)
-    # %.6f time, %.10f lat/lon [deg], %.5f the rest: half a unit of the last digit
-    tol = np.array([5e-7] + [5e-11] * 2 + [5e-6] * 28)
-    assert np.all(np.abs(a - b) <= tol * (1 + 1e-9) + 1e-12 * np.abs(a))
+    # each column rounded to its resolution: at most half a unit of its last decimal apart
+    tol = 0.5 * 10.0 ** -np.array([CSV_DECIMALS[c] for c in sol.COLUMNS])
+    assert np.all(np.abs(a - b) <= tol * (1 + 1e-9) + 2e-16 * np.abs(a))
     assert back.COLUMNS == sol.COLUMNS and tuple(p.read_text().splitlines()[0].split(",")) == sol.COLUMNS
+
+
+def test_csv_text_is_the_correctly_rounded_value(sol, tmp_path):
+    """Every printed value is printf's correctly rounded "%.{d}f" of the value,
+    trailing zeros dropped (the C++ writer's integer fast path and its
+    fallback, checked against Python's formatting on real rows)."""
+    from insnav.filters.solution import CSV_DECIMALS
+
+    p = sol.save(tmp_path / "sol.csv")
+    rows = p.read_text().splitlines()[1:]
+    a = _nav(sol)
+    step = max(1, len(rows) // 400)
+    for i in range(0, len(rows), step):
+        for tok, v, name in zip(rows[i].split(","), a[i], sol.COLUMNS):
+            d = CSV_DECIMALS[name]
+            want = f"{v:.{d}f}".rstrip("0").rstrip(".") if d else f"{v:.0f}"
+            assert tok == ("0" if want == "-0" else want), (i, name, v, tok)
+
+
+def test_csv_exact_precision_round_trips_bit_for_bit(sol, tmp_path):
+    p = sol.save(tmp_path / "sol.csv", precision="exact")
+    np.testing.assert_array_equal(_nav(load_solution(p))[:, :10], _nav(sol)[:, :10])
+    from insnav.filters.solution import _columns_from
+
+    np.testing.assert_array_equal(np.column_stack(list(_columns_from(p).values())), _nav(sol))
+
+
+def test_column_groups(sol, tmp_path):
+    p = sol.save(tmp_path / "nav.npz", columns=["nav"])
+    back = load_solution(p)
+    np.testing.assert_array_equal(back.lat_deg, sol.lat_deg)
+    assert np.isnan(back.sigma_pos_n_m).all() and np.isnan(back.acc_bias_mps2).all()
+    q = sol.save(tmp_path / "nb.csv", columns=("nav", "bias"))
+    assert q.read_text().splitlines()[0].split(",") == list(sol.COLUMNS[:10] + sol.COLUMNS[19:])
+    with pytest.raises(ValueError, match="unknown column group 'sigmas'"):
+        sol.save(tmp_path / "x.csv", columns=["sigmas"])
 
 
 @pytest.mark.parametrize("suffix", [".npz", ".parquet"])
@@ -167,3 +205,23 @@ def test_to_dataframe_hands_pandas_the_unit_named_columns(sol, monkeypatch):
     assert tuple(seen["columns"]) == sol.COLUMNS and seen["data"].shape == (len(sol), len(sol.COLUMNS))
     j = sol.COLUMNS.index("gyro_bias_x_dph")
     np.testing.assert_allclose(seen["data"][:, j], np.rad2deg(sol.gyro_bias_rps[:, 0]) * 3600.0)
+
+
+def test_parquet_without_pyarrow_names_the_extra(sol, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyarrow", None)
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
+    for call in (lambda: sol.save(tmp_path / "s.parquet"), lambda: load_solution(tmp_path / "s.parquet")):
+        (tmp_path / "s.parquet").write_bytes(b"PAR1")
+        with pytest.raises(ImportError, match=r"^Parquet needs pyarrow: pip install 'insnav\[parquet\]'") as e:
+            call()
+        assert "\n" not in str(e.value)
+    assert not list(tmp_path.glob("*.part*"))
+
+
+def test_load_solution_is_public_and_lazy():
+    import subprocess
+
+    code = ("import sys, insnav; assert 'insnav.filters.solution' not in sys.modules; "
+            "f = insnav.load_solution; assert f.__module__ == 'insnav.filters.solution'; print('ok')")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr

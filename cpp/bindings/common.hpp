@@ -39,6 +39,7 @@ void bind_loose(py::module_& m);
 void bind_tight(py::module_& m);
 void bind_delay(py::module_& m);
 void bind_particle(py::module_& m);
+void bind_textio(py::module_& m);
 ImuErrorModel imu_model_from_dict(const py::dict& d);
 
 }  // namespace insnav::py_bind

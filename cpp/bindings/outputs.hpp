@@ -2,6 +2,7 @@
 // every engine writes) and their result-dict entries, shared by every binder.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 
 #include "common.hpp"
@@ -12,10 +13,50 @@ namespace insnav::py_bind {
 /// Rows an engine writes at most: every decimation-th of n samples, the last, and slack of one.
 inline py::ssize_t output_rows(py::ssize_t n, int decimation) { return (n + decimation - 1) / decimation + 1; }
 
+/// The progress callable of the runs (None: none), set by _core.set_progress.
+inline PyObject*& progress_hook() {
+  static PyObject* hook = nullptr;  // a strong reference, never released at exit
+  return hook;
+}
+
+/// The NavOutputs poll of a run from Python: called every kPollSamples
+/// samples, it takes the GIL at most every kPollPeriod (a clock read
+/// otherwise) for PyErr_CheckSignals (Ctrl-C) and the progress callable (k, n).
+struct PyPoll {
+  static constexpr std::int64_t kPollSamples = 256;
+  static constexpr std::chrono::milliseconds kPollPeriod{20};
+  py::object progress;
+  bool failed = false;
+  std::chrono::steady_clock::time_point last{};
+
+  static bool call(void* ctx, std::int64_t k, std::int64_t n) {
+    auto* self = static_cast<PyPoll*>(ctx);
+    const auto now = std::chrono::steady_clock::now();
+    if (now - self->last < kPollPeriod) return true;
+    self->last = now;
+    py::gil_scoped_acquire gil;
+    if (PyErr_CheckSignals() != 0) {
+      self->failed = true;
+      return false;
+    }
+    if (self->progress) {
+      PyObject* r = PyObject_CallFunction(self->progress.ptr(), "LL", static_cast<long long>(k),
+                                          static_cast<long long>(n));
+      if (!r) {
+        self->failed = true;
+        return false;
+      }
+      Py_DECREF(r);
+    }
+    return true;
+  }
+};
+
 /// Arrays for n_out per-sample rows: t, llh, v_n, rpy, sigma (sigma_cols), imu_err, and clock if asked.
 struct NavBuffers {
   DArray t, llh, v_n, rpy, sigma, imu_err, clock;
   bool with_clock;
+  PyPoll poll;
 
   NavBuffers(py::ssize_t n_out, int sigma_cols, bool with_clock_)
       : t({n_out}), llh({n_out, py::ssize_t(3)}), v_n({n_out, py::ssize_t(3)}), rpy({n_out, py::ssize_t(3)}),
@@ -23,6 +64,10 @@ struct NavBuffers {
         clock({with_clock_ ? n_out : py::ssize_t(0), py::ssize_t(2)}), with_clock(with_clock_) {}
 
   void attach(NavOutputs& out) {
+    if (progress_hook()) poll.progress = py::reinterpret_borrow<py::object>(progress_hook());
+    out.poll = &PyPoll::call;
+    out.poll_ctx = &poll;
+    out.poll_every = PyPoll::kPollSamples;
     out.t = t.mutable_data();
     out.llh = llh.mutable_data();
     out.v_n = v_n.mutable_data();
@@ -35,6 +80,7 @@ struct NavBuffers {
 
   /// The rows written and the run counters into res.
   void put(py::dict& res, const NavOutputs& out) const {
+    if (poll.failed) throw py::error_already_set();  // KeyboardInterrupt, or the progress callable's error
     const py::slice rows(0, out.n_out, 1);
     res["t"] = t[rows];
     res["llh"] = llh[rows];

@@ -41,6 +41,28 @@ def json_safe(obj):
     return obj
 
 
+def atomic_write_with(path, write) -> Path:
+    """Write ``path`` through ``write(tmp_path)``: a temporary file beside it
+    (``.NAME.XXXX.part.SUFFIX``, mode as a plain open() under the umask gives)
+    renamed into place once ``write`` returns; on any exception, Ctrl-C
+    included, the temporary file is removed and ``path`` left as it was."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        chmod_like_new(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
 def atomic_write_text(path, text: str) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -26,11 +26,11 @@ RTKLIB str2str .tag file), the mounting rotation and lever arm and the initial h
 (docs/formats.md).  Times in the solution are then GPS seconds of week, so
 `insnav evaluate sol.csv REFERENCE.pos` compares it with an RTKLIB solution.
 
-The solution CSV has the columns t, lat_deg, lon_deg, h_m, vn, ve, vd (m/s NED),
-roll_deg, pitch_deg, yaw_deg, their 1-sigma (sigma_n_m ... sigma_yaw_deg) and the
-estimated IMU errors (acc_bias_*_mps2, gyro_bias_*_dph, *_scale_*_ppm).  The resolved
-configuration is written beside it as <out>.config.toml so the run can be repeated
-with --config.  Config keys (TOML, units in the names): see docs/formats.md."""
+The solution has the columns t_s, lat_deg, lon_deg, h_m, vn_mps, ve_mps, vd_mps (NED, m/s),
+roll_deg, pitch_deg, yaw_deg (group nav), their 1-sigma (sigma_n_m ... sigma_yaw_deg; group
+sigma) and the estimated IMU errors (acc_bias_*_mps2, gyro_bias_*_dph, *_scale_*_ppm; group
+bias).  The resolved configuration is written beside it as <out>.config.toml so the run
+can be repeated with --config.  Config keys (TOML, units in the names): see docs/formats.md."""
 
 
 def add_run_parser(sub) -> None:
@@ -63,6 +63,23 @@ def add_run_parser(sub) -> None:
                         "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, rows, "
                         "loose innovation), for tight <out>.residuals.csv (per satellite) and <out>.config.toml "
                         "(the run's configuration)")
+    p.add_argument("--output-rate", type=float, default=None, metavar="HZ",
+                   help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
+                        "200 Hz); the filter still runs at every sample.  Default: every sample")
+    p.add_argument("--columns", default=None, metavar="GROUPS",
+                   help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
+                        "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
+    p.add_argument("--out-format", choices=("insnav", "kfgins"), default="insnav",
+                   help="kfgins: --out is a folder that gets KF_GINS_Navresult.nav and KF_GINS_IMU_ERR.txt "
+                        "exactly as KF-GINS writes them (week sow lat lon h vN vE vD roll pitch yaw; sow, "
+                        "gyro bias deg/h, acc bias mGal, scale factors ppm)")
+    p.add_argument("--csv-precision", choices=("resolution", "exact"), default="resolution",
+                   help="CSV numbers: rounded to each column's resolution (1 ns, ~1 um, ...; docs/formats.md), "
+                        "or exact: the shortest text that reads back as the same double (about twice the size)")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no progress bar (shown on a terminal only, for runs longer than about 2 s)")
+    p.add_argument("--timings", action="store_true",
+                   help="print the wall time of each stage (read, filter, write) to stderr")
     p.add_argument("--allow-free-inertial", action="store_true",
                    help="accept a run that used no GNSS update, or had more than 20 %% of them rejected by the "
                         "innovation gate (otherwise an error: wrong units, time bases or sigmas are the usual cause)")
@@ -119,20 +136,73 @@ def _rinex_table_toml(opt) -> str:
     return "\n".join(lines) + "\n"
 
 
+def output_decimation(t, rate_hz: float) -> int:
+    """k of ``--output-rate``: the IMU rate (median interval of ``t`` [s]) over
+    ``rate_hz`` [Hz], which must be a whole number (within 0.1 %)."""
+    t = np.asarray(t, float)
+    if t.size < 2:
+        return 1
+    imu_hz = 1.0 / float(np.median(np.diff(t)))
+    k = imu_hz / float(rate_hz)
+    if k < 1.0 - 1e-3 or abs(k - round(k)) > 1e-3 * k:
+        ok = [r for r in (100, 50, 20, 10, 5, 2, 1, 0.5, 0.1) if r <= imu_hz + 1e-9
+              and abs(imu_hz / r - round(imu_hz / r)) <= 1e-3 * imu_hz / r]
+        raise UserError(f"--output-rate {rate_hz:g}: the IMU rate {imu_hz:.6g} Hz is not a whole multiple of it; "
+                        f"use e.g. {', '.join(f'{r:g}' for r in ok[:4])} [Hz]")
+    return max(1, int(round(k)))
+
+
 #: share of GNSS updates the innovation gate may reject before a run counts as failed
 MAX_REJECTED_SHARE = 0.2
+
+
+class _Stages:
+    """Wall time of the named stages of a run [s] (``--timings``)."""
+
+    def __init__(self):
+        import time
+
+        self._clock = time.perf_counter
+        self.t_last = self._clock()
+        self.times: dict[str, float] = {}
+
+    def done(self, name: str) -> None:
+        now = self._clock()
+        self.times[name] = self.times.get(name, 0.0) + now - self.t_last
+        self.t_last = now
+
+    def line(self) -> str:
+        return "timings [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in self.times.items())
 
 
 def cmd_run(args) -> int:
     import insnav
 
-    out = Path(args.out)
-    if out.is_dir():  # fail before the run, not after it
-        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'solution.csv'}")
-    from ..filters.solution import FORMATS
+    stages = _Stages()
 
-    if out.suffix.lower() not in FORMATS:
-        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
+    out = Path(args.out)
+    from ..filters.solution import FORMATS, Solution
+
+    groups = None
+    if args.columns is not None:
+        groups = [g.strip() for g in args.columns.split(",") if g.strip()]
+        bad = [g for g in groups if g not in Solution.COLUMN_GROUPS]
+        if bad or not groups:
+            raise UserError(f"--columns {args.columns}: unknown group {', '.join(map(repr, bad)) or '(none)'}; "
+                            f"use any of {','.join(Solution.COLUMN_GROUPS)}")
+    if args.out_format == "kfgins":
+        if out.exists() and not out.is_dir():
+            raise UserError(f"--out {out}: with --out-format kfgins, --out is a folder (it gets "
+                            "KF_GINS_Navresult.nav and KF_GINS_IMU_ERR.txt)")
+        if groups is not None:
+            raise UserError("--columns does not apply to --out-format kfgins (its files have fixed columns)")
+    else:
+        if out.is_dir():  # fail before the run, not after it
+            raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'solution.csv'}")
+        if out.suffix.lower() not in FORMATS:
+            raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
+    if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
+        raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     rinex_opts = None
     try:
         if args.format == "rinex":
@@ -164,7 +234,13 @@ def cmd_run(args) -> int:
             cfg.smooth = True
         if args.constraints is not None:
             cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
-        sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
+        if args.output_rate is not None:
+            cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
+        stages.done("read")
+        from .._progress import reporting
+
+        with reporting(f"insnav run {args.filter or cfg.filter}", enabled=not args.quiet):
+            sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     s = sol.summary
@@ -181,16 +257,37 @@ def cmd_run(args) -> int:
             raise UserError(f"no GNSS update was used ({records} records, {dropped} dropped): the run is free "
                             "inertial; check the GNSS time base, sigmas and units (--allow-free-inertial to "
                             "accept it)")
+    stages.done("filter")
     from ..filters.solution import write_innovations
 
-    sol.save(out)
-    write_innovations(sol, out)
-    cfg.filter = sol.summary.get("filter", cfg.filter)
-    text = resolved_config_toml(cfg)
-    if rinex_opts is not None:
-        text += _rinex_table_toml(rinex_opts)
-    atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text)
+    written: list[Path] = []  # Ctrl-C or an error while writing: none of this run's files stay
+    try:
+        if args.out_format == "kfgins":
+            from ..io.kfgins import write_kfgins_solution
+
+            out.mkdir(parents=True, exist_ok=True)
+            files = write_kfgins_solution(out, sol)
+            written += files
+            base = files[0]
+        else:
+            written.append(sol.save(out, columns=groups, precision=args.csv_precision))
+            base = out
+        written.append(write_innovations(sol, base))
+        cfg.filter = sol.summary.get("filter", cfg.filter)
+        text = resolved_config_toml(cfg)
+        if rinex_opts is not None:
+            text += _rinex_table_toml(rinex_opts)
+        written.append(atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text))
+    except BaseException:
+        for p in written:
+            Path(p).unlink(missing_ok=True)
+        raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
           f"records, {used} updates used, {rejected} rejected by the gate, {dropped} dropped by the input checks; "
           f"{s.get('cholesky_repairs', 0)} covariance repairs")
+    stages.done("write")
+    if args.timings:
+        import sys
+
+        print(stages.line(), file=sys.stderr)
     return 0

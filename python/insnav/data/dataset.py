@@ -31,10 +31,8 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import shutil
 import tempfile
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -640,69 +638,28 @@ def write_csv(path, columns, data, fmt="%.17g", chunk=100_000) -> None:
             f.write((row * blk.shape[0]) % tuple(blk.ravel().tolist()))
 
 
-def parse_numeric_text(text: str, ncols: int, source: str, first_line: int = 1,
-                       sep: str | None = None, min_cols: int | None = None) -> np.ndarray:
+def parse_numeric_text(text, ncols: int, source: str, first_line: int = 1,
+                       sep: str | None = None, min_cols: int | None = None, names=None) -> np.ndarray:
     """Parse whitespace/comma-separated numeric text into an (N, ncols) array.
 
-    Fast path: one ``np.fromstring`` over the whole text.  If that fails or the
-    count does not match, the text is scanned line by line to report the first
-    bad line as ``ValueError("<source>:<line>: <reason>")`` (1-based).
-    Blank lines are ignored.  With ``min_cols`` rows may have more columns
-    than ``ncols`` (only the first ``ncols`` are kept; slow path).
+    The C++ reader (:func:`insnav.data.textio.parse_numeric`) reports the
+    first bad line as ``ValueError("<source>:<line>: <reason>")`` (1-based),
+    counting lines as it parses.  Blank lines are ignored.  ``sep=" "``:
+    whitespace only (KF-GINS files); otherwise commas separate too.  With
+    ``min_cols`` rows may have more columns than ``ncols`` (only the first
+    ``ncols`` are kept).
     """
-    body = text.replace(",", " ") if sep in (None, ",") else text
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error")
-            vals = np.fromstring(body, sep=" ") if body.strip() else np.empty(0)
-    except (ValueError, DeprecationWarning):
-        vals = None
-    if vals is not None:
-        n_rows = body.count("\n") + (0 if body.endswith("\n") or not body else 1)
-        if "\n\n" in body or body.startswith("\n") or "\r" in body:
-            n_rows = sum(1 for ln in body.splitlines() if ln.strip())
-        if vals.size == n_rows * ncols:
-            return vals.reshape(-1, ncols)
-    # slow path: find the bad line (or collect rows with extra columns)
-    rows = []
-    for i, ln in enumerate(body.splitlines()):
-        parts = ln.split()
-        if not parts:
-            continue
-        lineno = first_line + i
-        if len(parts) != ncols and not (min_cols is not None and len(parts) >= ncols):
-            hint = ""
-            if len(parts) < ncols and not body.rstrip(" \t").endswith("\n") and \
-                    not any(x.strip() for x in body.splitlines()[i + 1:]):
-                hint = " (incomplete last line: file truncated?)"
-            raise ValueError(f"{source}:{lineno}: expected {ncols} columns, found {len(parts)}{hint}")
-        try:
-            rows.append([float(p) for p in parts[:ncols]])
-        except ValueError:
-            bad = next(p for p in parts[:ncols] if not _is_float(p))
-            raise ValueError(f"{source}:{lineno}: not a number: {bad!r}") from None
-    return np.array(rows, dtype=float).reshape(-1, ncols)
+    return parse_numeric_origin(text, ncols, source, first_line, sep, min_cols, names)[0]
 
 
-def _is_float(s):
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False
+def parse_numeric_origin(text, ncols: int, source: str, first_line: int = 1, sep: str | None = None,
+                         min_cols: int | None = None, names=None, keep: int | None = None):
+    """:func:`parse_numeric_text` and the :class:`RowOrigin` of its rows."""
+    from .textio import parse_numeric
 
-
-def row_origin(text: str, source: str, first_line: int = 1) -> RowOrigin:
-    """The :class:`RowOrigin` of the non-blank lines of ``text`` (the rows
-    :func:`parse_numeric_text` returns); explicit line numbers only when the
-    text has blank lines."""
-    if "\r" in text or _BLANK_LINE.search(text):
-        lines = [first_line + i for i, ln in enumerate(text.splitlines()) if ln.strip()]
-        return RowOrigin(source, first_line, np.array(lines, dtype=np.int64))
-    return RowOrigin(source, first_line)
-
-
-_BLANK_LINE = re.compile(r"(?:^|\n)[ \t\f\v]*\n")
+    a, lines = parse_numeric(text, ncols, source, first_line=first_line, comma=sep in (None, ","), keep=keep,
+                             allow_extra=min_cols is not None, names=names)
+    return a, RowOrigin(source, first_line, lines)
 
 
 def check_finite_rows(a: np.ndarray, origin: RowOrigin, columns) -> None:
@@ -718,17 +675,17 @@ def read_csv(path, columns, return_origin: bool = False):
     """Read a dataset CSV, checking the header names ``columns``.
 
     With ``return_origin`` also return the :class:`RowOrigin` (file line of each row)."""
+    from .textio import read_bytes
+
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path} missing")
-    text = path.read_text(encoding="ascii", errors="replace")
-    nl = text.find("\n")
-    header = (text if nl < 0 else text[:nl]).strip()
+    data = read_bytes(path)
+    nl = data.find(b"\n")
+    header = (data if nl < 0 else data[:nl]).decode("ascii", "replace").strip()
     got = tuple(h.strip() for h in header.split(","))
     if got != tuple(columns):
         raise ValueError(f"{path}:1: unexpected header {header!r}; expected {','.join(columns)}")
-    body = "" if nl < 0 else text[nl + 1:]
-    a = parse_numeric_text(body, len(columns), str(path), first_line=2)
-    if return_origin:
-        return a, row_origin(body, str(path), first_line=2)
-    return a
+    body = b"" if nl < 0 else memoryview(data)[nl + 1:]
+    a, origin = parse_numeric_origin(body, len(columns), str(path), first_line=2, names=columns)
+    return (a, origin) if return_origin else a

@@ -10,8 +10,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..units import RAD2DEG
-
 __all__ = ["RecordStatus", "GNSS_STATUS", "Solution", "load_solution", "save_solution", "write_innovations",
            "read_innovations", "innovations_path", "INNOVATION_COLUMNS", "RESIDUAL_COLUMNS", "read_residuals",
            "residuals_path", "status_name"]
@@ -87,16 +85,38 @@ class Solution:
                "acc_scale_x_ppm", "acc_scale_y_ppm", "acc_scale_z_ppm",
                "gyro_scale_x_ppm", "gyro_scale_y_ppm", "gyro_scale_z_ppm")
 
+    #: --columns groups: the navigation state (t_s always), its 1-sigma, the IMU error estimates
+    COLUMN_GROUPS = {"nav": COLUMNS[:10], "sigma": COLUMNS[10:19], "bias": COLUMNS[19:31]}
+
     def __len__(self) -> int:
         return len(self.t)
 
+    def columns(self) -> list[tuple[str, np.ndarray, float]]:
+        """(name, SI or degree array, factor to the column's unit) of every
+        :attr:`COLUMNS` entry; the arrays are views, nothing is copied."""
+        from ..units import RAD2DEG
+
+        out = [("t_s", self.t, 1.0), ("lat_deg", self.lat_deg, 1.0), ("lon_deg", self.lon_deg, 1.0),
+               ("h_m", self.h_m, 1.0)]
+        tables = ((self.v_n, 1.0), (None, None), (self.sigma_pos_n_m, 1.0), (self.sigma_vel_n_mps, 1.0),
+                  (self.sigma_att_deg, 1.0), (self.acc_bias_mps2, 1.0), (self.gyro_bias_rps, RAD2DEG * 3600.0),
+                  (self.acc_scale, 1e6), (self.gyro_scale, 1e6))
+        names = iter(self.COLUMNS[4:])
+        for a, f in tables:
+            if a is None:
+                out += [(next(names), x, 1.0) for x in (self.roll_deg, self.pitch_deg, self.yaw_deg)]
+                continue
+            a = np.asarray(a, float)
+            out += [(next(names), a[:, j], f) for j in range(3)]
+        return out
+
     def to_array(self) -> np.ndarray:
         """(N, 31) array in :attr:`COLUMNS` order (user units as named)."""
-        return np.column_stack([self.t, self.lat_deg, self.lon_deg, self.h_m, self.v_n,
-                                self.roll_deg, self.pitch_deg, self.yaw_deg,
-                                self.sigma_pos_n_m, self.sigma_vel_n_mps, self.sigma_att_deg,
-                                self.acc_bias_mps2, self.gyro_bias_rps * RAD2DEG * 3600.0,
-                                self.acc_scale * 1e6, self.gyro_scale * 1e6])
+        cols = self.columns()
+        a = np.empty((len(self.t), len(cols)))
+        for j, (_, x, f) in enumerate(cols):
+            np.multiply(x, f, out=a[:, j])
+        return a
 
     def to_dataframe(self):
         """A pandas DataFrame with the :attr:`COLUMNS` (pandas is optional: ``pip install insnav[pandas]``)."""
@@ -106,53 +126,68 @@ class Solution:
             raise ImportError("Solution.to_dataframe needs pandas: pip install 'insnav[pandas]'") from None
         return pd.DataFrame(self.to_array(), columns=list(self.COLUMNS))
 
-    def save(self, path) -> Path:
+    def save(self, path, *, columns=None, precision: str = "resolution") -> Path:
         """Write the solution atomically (a temp file renamed into place); the
         suffix chooses the format: ``.csv`` (text, :attr:`COLUMNS`), ``.npz``
         (numpy, one array per column, exact) or ``.parquet`` (pyarrow, exact).
-        :func:`load_solution` reads all three."""
-        return save_solution(self, path)
+        :func:`load_solution` reads all three.
 
-    def save_csv(self, path) -> Path:
+        Parameters
+        ----------
+        columns : iterable of str, optional
+            Column groups of :attr:`COLUMN_GROUPS` (``nav``, ``sigma``, ``bias``); default all.
+        precision : {'resolution', 'exact'}
+            CSV only: each value rounded to its column's resolution
+            (:data:`CSV_DECIMALS`: 1 ns, 1e-11 deg, 1 um, ...; the shortest text
+            of the rounded value), or the shortest text that reads back as the
+            very same double (``std::to_chars`` round trip; about twice the size).
+        """
+        return save_solution(self, path, columns=columns, precision=precision)
+
+    def save_csv(self, path, **kw) -> Path:
         """Write the solution CSV atomically (see :meth:`save`)."""
-        return _save_csv(self, Path(path))
+        return _save_csv(self, Path(path), **kw)
 
 
 #: old (unit-less) column names still accepted on reading
 LEGACY_COLUMNS = {"t": "t_s", "vn": "vn_mps", "ve": "ve_mps", "vd": "vd_mps"}
-#: the CSV's number formats, per column (7 significant digits of position: 0.01 mm)
-_CSV_FMT = ["%.6f"] + ["%.10f"] * 2 + ["%.5f"] * 28
+#: decimals of each CSV column (precision='resolution'): time 1 ns, lat/lon 1e-11 deg (~1 um),
+#: h, velocities and their sigmas 1 um(/s), angles and their sigmas 1e-8 deg, acc bias 1e-9 m/s^2,
+#: gyro bias 1e-6 deg/h, scale factors 1e-4 ppm
+CSV_DECIMALS = dict(zip(Solution.COLUMNS, [9, 11, 11] + [6] * 4 + [8] * 3 + [6] * 6 + [8] * 3 + [9] * 3 + [6] * 3
+                        + [4] * 6))
 FORMATS = (".csv", ".npz", ".parquet")
+PRECISIONS = ("resolution", "exact")
 
 
-def _save_csv(sol: Solution, path: Path) -> Path:
-    import io
+def _selected(sol: Solution, columns) -> list[tuple[str, np.ndarray, float]]:
+    cols = sol.columns()
+    if columns is None:
+        return cols
+    groups = [columns] if isinstance(columns, str) else list(columns)
+    bad = [g for g in groups if g not in Solution.COLUMN_GROUPS]
+    if bad or not groups:
+        raise ValueError(f"unknown column group {', '.join(map(repr, bad)) or '(none)'}; "
+                         f"use any of {','.join(Solution.COLUMN_GROUPS)}")
+    keep = {"t_s"}.union(*(Solution.COLUMN_GROUPS[g] for g in groups))
+    return [c for c in cols if c[0] in keep]
 
-    from .._atomic import atomic_write_text
 
-    buf = io.StringIO()
-    np.savetxt(buf, sol.to_array(), delimiter=",", header=",".join(sol.COLUMNS), comments="", fmt=_CSV_FMT)
-    return atomic_write_text(path, buf.getvalue())
+def _save_csv(sol: Solution, path: Path, columns=None, precision: str = "resolution") -> Path:
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision {precision!r}: use one of {', '.join(PRECISIONS)}")
+    cols = _selected(sol, columns)
+    dec = [CSV_DECIMALS[n] if precision == "resolution" else -1 for n, _, _ in cols]
+    from ..data.textio import write_text_columns
+
+    return write_text_columns(path, ",".join(n for n, _, _ in cols) + "\n", cols, dec)
 
 
 def _atomic_binary(path: Path, write) -> Path:
     """Write through ``write(tmp_path)`` to a temp file beside ``path``, then rename."""
-    import os
-    import tempfile
+    from .._atomic import atomic_write_with
 
-    from .._atomic import chmod_like_new
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        chmod_like_new(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write_with(path, write)
 
 
 def _parquet():
@@ -164,20 +199,34 @@ def _parquet():
     return pyarrow
 
 
-def save_solution(sol: Solution, path) -> Path:
+def save_solution(sol: Solution, path, *, columns=None, precision: str = "resolution") -> Path:
     """:meth:`Solution.save`."""
     path = Path(path)
     fmt = path.suffix.lower()
     if fmt == ".csv":
-        return _save_csv(sol, path)
-    cols = dict(zip(sol.COLUMNS, sol.to_array().T))
+        return _save_csv(sol, path, columns, precision)
+    if fmt not in FORMATS:
+        raise ValueError(f"{path}: unknown solution format {path.suffix!r}; use one of {', '.join(FORMATS)}")
+
+    def arrays():  # one column at a time: never the whole table twice
+        for name, x, f in _selected(sol, columns):
+            yield name, (np.ascontiguousarray(x, float) if f == 1.0 else np.multiply(x, f))
+
     if fmt == ".npz":
-        return _atomic_binary(path, lambda tmp: np.savez(tmp, **{k: np.ascontiguousarray(v) for k, v in cols.items()}))
-    if fmt == ".parquet":
-        pa = _parquet()
-        table = pa.table({k: pa.array(v) for k, v in cols.items()})
-        return _atomic_binary(path, lambda tmp: pa.parquet.write_table(table, tmp))
-    raise ValueError(f"{path}: unknown solution format {path.suffix!r}; use one of {', '.join(FORMATS)}")
+        return _atomic_binary(path, lambda tmp: _write_npz(tmp, arrays()))
+    pa = _parquet()
+    return _atomic_binary(path, lambda tmp: pa.parquet.write_table(
+        pa.table({k: pa.array(v) for k, v in arrays()}), tmp))
+
+
+def _write_npz(tmp, arrays) -> None:
+    """An uncompressed .npz (what ``np.savez`` writes), filled one column at a time."""
+    import zipfile
+
+    with zipfile.ZipFile(tmp, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as z:
+        for name, a in arrays:
+            with z.open(name + ".npy", mode="w", force_zip64=True) as f:
+                np.lib.format.write_array(f, a, allow_pickle=False)
 
 
 def _columns_from(path: Path) -> dict:
@@ -193,12 +242,13 @@ def _columns_from(path: Path) -> dict:
         t = pa.parquet.read_table(path)
         cols = {k: t.column(k).to_numpy().astype(float) for k in t.column_names}
     else:
-        from ..data.dataset import parse_numeric_text
+        from ..data.textio import parse_numeric, read_bytes
 
-        text = path.read_text(encoding="ascii", errors="replace")
-        nl = text.find("\n")
-        header = [h.strip() for h in (text if nl < 0 else text[:nl]).strip().split(",")]
-        a = parse_numeric_text("" if nl < 0 else text[nl + 1:], len(header), str(path), first_line=2)
+        data = read_bytes(path)
+        nl = data.find(b"\n")
+        header = [h.strip() for h in (data if nl < 0 else data[:nl]).decode("ascii", "replace").strip().split(",")]
+        a, _ = parse_numeric(b"" if nl < 0 else memoryview(data)[nl + 1:], len(header), str(path), first_line=2,
+                             names=header)
         cols = dict(zip(header, a.T))
     cols = {LEGACY_COLUMNS.get(k, k): v for k, v in cols.items()}
     need = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg")

@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.dataset import GnssFixes, ImuData, Truth, check_finite_rows, parse_numeric_text, row_origin
+from ..data.dataset import GnssFixes, ImuData, RowOrigin, Truth, check_finite_rows
+from ..data.textio import count_columns, parse_numeric, read_bytes
 from ..units import DEG, PPM
 
 HOUR = 3600.0  #: h -> s
@@ -42,32 +43,33 @@ MGAL = 1e-5  #: mGal -> m/s^2
 IMU_COLUMNS = ("sow", "dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "dvel_z")
 
 __all__ = ["read_kfgins_imu", "write_kfgins_imu", "read_kfgins_gnss", "write_kfgins_gnss",
-           "read_kfgins_nav", "write_kfgins_nav", "read_kfgins_config", "read_text"]
+           "read_kfgins_nav", "write_kfgins_nav", "read_kfgins_config", "read_text", "write_kfgins_solution",
+           "KFGINS_NAV_FILE", "KFGINS_IMU_ERR_FILE"]
+
+#: the file names KF-GINS gives its results in ``outputpath`` (src/kf_gins.cpp)
+KFGINS_NAV_FILE = "KF_GINS_Navresult.nav"
+KFGINS_IMU_ERR_FILE = "KF_GINS_IMU_ERR.txt"
 
 
 def read_text(path) -> str:
-    """Whole file as text, decompressing ``.xz``/``.gz``/``.bz2``."""
-    p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"{p} does not exist")
-    opener = {".xz": lzma.open, ".lzma": lzma.open, ".gz": gzip.open, ".bz2": bz2.open}.get(
-        p.suffix.lower())
-    if opener is None:
-        return p.read_text(encoding="utf-8", errors="replace")
-    with opener(p, "rt", encoding="utf-8", errors="replace") as f:
-        return f.read()
+    """Whole file as text, decompressing ``.xz``/``.gz``/``.bz2`` (a truncated
+    compressed file: one-line ``ValueError`` naming it)."""
+    return read_bytes(path).decode("utf-8", errors="replace")
+
+
+def _read_rows(path, ncols=None, keep=None, names=None, min_cols=None):
+    """(rows, RowOrigin, ncols) of a whitespace-separated KF-GINS text file:
+    the C++ reader, lines counted as it parses."""
+    data = read_bytes(path)
+    n = ncols or count_columns(data, path)
+    if min_cols is not None and n < min_cols:
+        return None, None, n
+    a, lines = parse_numeric(data, n, str(path), comma=False, keep=keep, names=names)
+    return a, RowOrigin(str(path), 1, lines), n
 
 
 def _read_table(path, ncols, min_cols=None):
-    text = read_text(path)
-    return parse_numeric_text(text, ncols, str(path), sep=" ", min_cols=min_cols)
-
-
-def _count_cols(text: str, path) -> int:
-    for i, ln in enumerate(text.splitlines()):
-        if ln.strip():
-            return len(ln.split())
-    raise ValueError(f"{path}:1: file is empty")
+    return _read_rows(path, ncols)[0]
 
 
 def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
@@ -85,18 +87,16 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
     ImuData
         ``t`` = GPS seconds of week [s], increments [rad], [m/s].
     """
-    text = read_text(path)
-    n = ncols or _count_cols(text, path)
+    a, origin, n = _read_rows(path, ncols, keep=7, names=IMU_COLUMNS, min_cols=7)
     if n < 7:
         raise ValueError(f"{path}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
                          f"found {n}")
-    a = parse_numeric_text(text, n, str(path), sep=" ")[:, :7]
-    origin = row_origin(text, str(path))
     check_finite_rows(a, origin, IMU_COLUMNS)
     # decreasing time is an error; equal times (duplicated records) are left to
     # insnav.filters.sanitize.sanitize_imu, which drops exact duplicates and counts them
-    if a.shape[0] > 1 and np.any(np.diff(a[:, 0]) < 0):
-        i = int(np.argmax(np.diff(a[:, 0]) < 0)) + 1
+    dt = np.diff(a[:, 0])
+    if a.shape[0] > 1 and (dt < 0).any():
+        i = int(np.argmax(dt < 0)) + 1
         raise ValueError(f"{origin.where(i)}: time {float(a[i, 0])!r} does not increase "
                          f"(previous record at {float(a[i - 1, 0])!r}, line {origin.line(i - 1)})")
     return ImuData(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy(), origin=origin)
@@ -117,13 +117,13 @@ def read_kfgins_gnss(path) -> GnssFixes:
         ``t_valid = t_arrival`` = sow; ``v_n``/``sigma_vel_n`` NaN for the
         7-column file.
     """
-    text = read_text(path)
-    n = _count_cols(text, path)
+    data = read_bytes(path)
+    n = count_columns(data, path)
     if n not in (7, 13):
         raise ValueError(f"{path}:1: expected 7 or 13 columns (sow lat lon h std_N std_E std_D"
                          f" [vN vE vD std_vN std_vE std_vD]), found {n}")
-    a = parse_numeric_text(text, n, str(path), sep=" ")
-    origin = row_origin(text, str(path))
+    a, lines = parse_numeric(data, n, str(path), comma=False)
+    origin = RowOrigin(str(path), 1, lines)
     check_finite_rows(a[:, :1], origin, ("sow",))
     k = a.shape[0]
     v = a[:, 7:10] if n == 13 else np.full((k, 3), np.nan)
@@ -163,6 +163,48 @@ def write_kfgins_nav(path, truth, week: int = 0) -> None:
     a = np.column_stack([np.full(n, week), truth.t, truth.lat_deg, truth.lon_deg, truth.h_m,
                          truth.v_n, truth.roll_deg, truth.pitch_deg, truth.yaw_deg])
     _write(path, a, "%d %.9f %.11f %.11f %.5f %.6f %.6f %.6f %.8f %.8f %.8f")
+
+
+def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, Path]:
+    """Write a solution in the KF-GINS result layout, so that scripts written
+    for KF-GINS read it unchanged: ``KF_GINS_Navresult.nav`` (``week sow lat
+    lon h vN vE vD roll pitch yaw`` [-, s, deg, deg, m, m/s, deg]) and
+    ``KF_GINS_IMU_ERR.txt`` (``sow``, gyro bias [deg/h], accelerometer bias
+    [mGal], gyro and accelerometer scale factors [ppm]), every value as
+    KF-GINS's ``FileSaver`` prints it (``"%-15.9lf "``, src/fileio/filesaver.cc;
+    the week is 0 as KF-GINS writes it).  Both files atomic.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Created if missing.
+    sol : insnav.Solution
+    week : int
+        GPS week written in the first column.
+
+    Returns
+    -------
+    (Path, Path)
+        The ``.nav`` and the IMU-error file.
+    """
+    from ..data.textio import write_text_columns
+    from ..units import RAD2DEG
+
+    folder = Path(folder)
+    n = len(sol.t)
+    wk = np.full(n, float(week))
+    nav = [("week", wk, 1.0), ("sow", sol.t, 1.0), ("lat", sol.lat_deg, 1.0), ("lon", sol.lon_deg, 1.0),
+           ("h", sol.h_m, 1.0)] + [(f"v{j}", np.asarray(sol.v_n)[:, j], 1.0) for j in range(3)] + \
+        [("roll", sol.roll_deg, 1.0), ("pitch", sol.pitch_deg, 1.0), ("yaw", sol.yaw_deg, 1.0)]
+    gb, ab = np.asarray(sol.gyro_bias_rps), np.asarray(sol.acc_bias_mps2)
+    gs, as_ = np.asarray(sol.gyro_scale), np.asarray(sol.acc_scale)
+    err = [("sow", sol.t, 1.0)] + [("gb", gb[:, j], RAD2DEG * HOUR) for j in range(3)] + \
+        [("ab", ab[:, j], 1.0 / MGAL) for j in range(3)] + [("gs", gs[:, j], 1.0 / PPM) for j in range(3)] + \
+        [("as", as_[:, j], 1.0 / PPM) for j in range(3)]
+    fmt = dict(sep=" ", width=15, trim_zeros=False, trailing_sep=True)
+    p_nav = write_text_columns(folder / KFGINS_NAV_FILE, "", nav, [9] * len(nav), **fmt)
+    p_err = write_text_columns(folder / KFGINS_IMU_ERR_FILE, "", err, [9] * len(err), **fmt)
+    return p_nav, p_err
 
 
 def _write(path, a, fmt):

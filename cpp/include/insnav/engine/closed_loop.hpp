@@ -82,9 +82,28 @@ struct NavOutputs {
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
 
+  // Interrupt and progress hook (may be null): called every `poll_every`
+  // samples with the sample index and count; false stops the run with
+  // `interrupted` set (the rows written so far stay valid).  The bindings use
+  // it to check for Ctrl-C (taking the GIL only for that check).
+  bool (*poll)(void* ctx, std::int64_t k, std::int64_t n) = nullptr;
+  void* poll_ctx = nullptr;
+  std::int64_t poll_every = 2048;
+  bool interrupted = false;
+
+  /// Call at the top of sample k of n: true when the run is to stop.
+  bool stop_requested(std::int64_t k, std::int64_t n) {
+    if (!poll || --poll_countdown_ > 0) return false;
+    poll_countdown_ = poll_every;
+    if (!poll(poll_ctx, k, n)) interrupted = true;
+    return interrupted;
+  }
+
   void set_status(std::int8_t* status, std::int64_t g, RecordStatus s) const {
     if (status) status[g] = static_cast<std::int8_t>(s);
   }
+
+  std::int64_t poll_countdown_ = 1;  // samples to the next poll (the first sample polls at once)
 };
 
 /// One raw IMU sample k of the caller's arrays: the increment over (t_prev, t[k]].
@@ -350,6 +369,7 @@ struct ClosedLoop {
     double t_prev = t0;
     int until_output = decimation;  // countdown: no division per sample
     for (std::int64_t k = 0; k < n; ++k) {
+      if (out.stop_requested(k, n)) return;
       const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
       double done = 0.0;  // fraction of this increment already integrated
       for (double te = next_t(); te <= raw.t; te = next_t()) {

@@ -89,6 +89,7 @@ class RandomDelayEngine {
     while (ep < n_ep && !(epochs[ep] > initial.t + tol)) ++ep;
     double t_prev = initial.t;
     for (std::int64_t k = 0; k < n; ++k) {
+      if (out.stop_requested(k, n)) break;
       const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
       double done = 0.0;
       while (ep < n_ep && epochs[ep] <= raw.t + tol) {
@@ -211,6 +212,7 @@ class TimeTaggedEngine {
     std::int64_t ga = 0;
     while (ga < m && !(fixes[ga].t > initial.t)) out.mark(ga++, RecordStatus::kOutsideImuSpan);
     for (std::int64_t k = 0; k < n; ++k) {
+      if (out.stop_requested(k, n)) break;
       begin_sample(k);
       while (ga < m && t_arrival[ga] <= raw_.t + tol) {
         const double now = t_arrival[ga];

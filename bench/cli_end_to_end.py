@@ -1,0 +1,224 @@
+"""The whole command line on the KF-GINS track against the filter alone.
+
+Each variant is a fresh ``python -m insnav run --format kfgins ... --quiet
+--timings`` process (process start, imports, read, filter, write), timed
+around the process; its peak RSS comes from ``os.wait4`` (the child's own
+rusage).  The filter-only figures are in-process calls of ``insnav.run`` on
+the already-read dataset (sanitize, checks, C++ loop, output arrays) and of
+the compiled loop alone (``_core.run_loose``, timed through a thin wrapper).
+The variants and the filter-only calls are interleaved, round by round, so
+they see the same machine load; medians over --repeat rounds.  Writes
+docs/results/cli_end_to_end.md.
+
+    python bench/cli_end_to_end.py [--repeat 5]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from _common import ROOT, git_commit
+
+SIM = Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data")) / "kfgins" / "sim"
+IMU_XZ = SIM / "Leador-A15-sim.txt.xz"
+
+#: (label, extra arguments, output name); the filter is EKF unless the label says otherwise
+VARIANTS = [
+    ("EKF, CSV, 200 Hz, all columns", [], "sol.csv"),
+    ("EKF, npz, 200 Hz", [], "sol.npz"),
+    ("EKF, Parquet, 200 Hz", [], "sol.parquet"),
+    ("EKF, CSV, 10 Hz", ["--output-rate", "10"], "sol10.csv"),
+    ("EKF, npz, 10 Hz", ["--output-rate", "10"], "sol10.npz"),
+    ("EKF, CSV, 200 Hz, nav columns only", ["--columns", "nav"], "nav.csv"),
+    ("EKF, KF-GINS layout (.nav + IMU_ERR), 200 Hz", ["--out-format", "kfgins"], "kfgins_out"),
+    ("EKF, CSV, 200 Hz, IMU read from the .xz", ["--imu", str(IMU_XZ)], "solxz.csv"),
+    ("RB-UKF, CSV, 200 Hz", ["--filter", "rbukf"], "rbukf.csv"),
+]
+TIMINGS = re.compile(r"timings \[s\]: read ([\d.]+), filter ([\d.]+), write ([\d.]+)")
+
+
+def run_cli(work: Path, extra, out_name) -> dict:
+    out = work / "out" / out_name
+    if out.exists():
+        shutil.rmtree(out) if out.is_dir() else out.unlink()
+    args = [sys.executable, "-m", "insnav", "run", "--format", "kfgins", "--config", str(work / "kf-gins-sim.yaml"),
+            "--quiet", "--timings", "--out", str(out)]
+    if "--filter" not in extra:
+        args += ["--filter", "ekf"]
+    err_path = work / "stderr.txt"
+    with open(err_path, "wb") as err_f:
+        t0 = time.perf_counter()
+        p = subprocess.Popen(args + list(extra), stdout=subprocess.DEVNULL, stderr=err_f, cwd=work)
+        _, status, ru = os.wait4(p.pid, 0)  # the child's own rusage (peak RSS); Popen does not reap it first
+        wall = time.perf_counter() - t0
+    p.returncode = os.waitstatus_to_exitcode(status)
+    stderr = err_path.read_bytes()
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(args + list(extra))}: {stderr.decode()}")
+    m = TIMINGS.search(stderr.decode())
+    size = sum(f.stat().st_size for f in ([out] if out.is_file() else out.iterdir()) if f.is_file())
+    return dict(wall=wall, read=float(m[1]), filter=float(m[2]), write=float(m[3]), size=size, rss=ru)
+
+
+def api_child(work: Path) -> None:
+    """One round of the filter-only figures, printed as JSON (run in its own
+    process so that the benchmark's parent stays small: a child's peak RSS
+    counts its parent's at fork)."""
+    import json
+
+    import insnav
+    import insnav.filters.loose as loose
+    from insnav.io.kfgins_dataset import load_kfgins
+
+    t0 = time.perf_counter()
+    ds, cfg = load_kfgins(work / "kf-gins-sim.yaml")
+    out = {"read": time.perf_counter() - t0, "n_imu": len(ds.imu)}
+    core_t = []
+    real = loose._core.run_loose
+
+    def timed(*args, **kw):
+        t1 = time.perf_counter()
+        r = real(*args, **kw)
+        core_t.append(time.perf_counter() - t1)
+        return r
+
+    loose._core = _Shim(real_module=loose._core, run_loose=timed)
+    for f in ("ekf", "rbukf"):
+        t0 = time.perf_counter()
+        sol = insnav.run(ds, filter=f, config=cfg)
+        out[f] = time.perf_counter() - t0
+        out[f + "_core"] = core_t[-1]
+        out["n_rows"] = len(sol)
+        del sol
+    print(json.dumps(out))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "cli_end_to_end.md"))
+    ap.add_argument("--api-child", help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.api_child:
+        api_child(Path(a.api_child))
+        return 0
+    if not IMU_XZ.is_file():
+        print(f"KF-GINS data not found at {SIM}", file=sys.stderr)
+        return 1
+    import json
+
+    try:
+        import pyarrow  # noqa: F401
+        variants = VARIANTS
+    except ImportError:
+        variants = [v for v in VARIANTS if "Parquet" not in v[0]]
+    work = Path(tempfile.mkdtemp(prefix="insnav-e2e-"))
+    try:
+        for f in ("GNSS-RTK-sim.txt", "kf-gins-sim.yaml"):
+            shutil.copy(SIM / f, work / f)
+        # in a child: the decompressor's buffers would raise this process's RSS, which its children inherit
+        subprocess.run([sys.executable, "-c", "import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), "
+                        "open(sys.argv[2], 'wb'), 1 << 22)", str(IMU_XZ), str(work / "Leador-A15-sim.txt")], check=True)
+        (work / "out").mkdir()
+        imu_mb = (work / "Leador-A15-sim.txt").stat().st_size / 1e6
+
+        res = {v[0]: [] for v in variants}
+        api = {"ekf": [], "rbukf": []}
+        core = {"ekf": [], "rbukf": []}
+        read_t = []
+        load = [os.getloadavg()[0]]
+        n_rows = n_imu = 0
+        for r in range(a.repeat):
+            for label, extra, out_name in variants:
+                res[label].append(run_cli(work, extra, out_name))
+            child = subprocess.run([sys.executable, __file__, "--api-child", str(work)], capture_output=True,
+                                   text=True, check=True)
+            j = json.loads(child.stdout.strip().splitlines()[-1])
+            for f in ("ekf", "rbukf"):
+                api[f].append(j[f])
+                core[f].append(j[f + "_core"])
+            read_t.append(j["read"])
+            n_rows, n_imu = j["n_rows"], j["n_imu"]
+            load.append(os.getloadavg()[0])
+            print(f"round {r + 1}/{a.repeat}: " + ", ".join(f"{res[v[0]][-1]['wall']:.2f}" for v in variants),
+                  file=sys.stderr)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+    med = statistics.median
+    imu_array_mb = n_imu * 7 * 8 / 1e6
+    out_array_mb = n_rows * 31 * 8 / 1e6
+    lines = [
+        "# End to end: the insnav command line on the KF-GINS track",
+        "",
+        f"Generated by `bench/cli_end_to_end.py` at commit {git_commit()}.",
+        f"Command: `cd insnav && python3 bench/cli_end_to_end.py --repeat {a.repeat}`",
+        "",
+        f"KF-GINS simulated track (../shared/data/kfgins/sim): {n_imu:,} IMU samples at 200 Hz "
+        f"({imu_mb:.1f} MB of text, read uncompressed unless stated), 3,361 GNSS fixes, {n_rows:,} output rows at "
+        "200 Hz.  Each line is a fresh `python -m insnav run --format kfgins --config kf-gins-sim.yaml --quiet "
+        "--timings --out ...` process: wall time around the process (start, imports, read, filter, write), "
+        "the stages from its `--timings` line, peak RSS from `os.wait4` of that child.  "
+        f"Median of {a.repeat} interleaved rounds; machine: {os.cpu_count()} cores shared with other sessions, "
+        f"1-min load average {min(load):.1f} to {max(load):.1f} during the runs.",
+        "",
+        "| variant | wall [s] (min-max) | read [s] | filter [s] | write [s] | peak RSS [MB] | output [MB] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for label, _, _ in variants:
+        rs = res[label]
+        w = [x["wall"] for x in rs]
+        rss = max(x["rss"].ru_maxrss for x in rs) / 1024.0
+        lines.append(f"| {label} | {med(w):.2f} ({min(w):.2f}-{max(w):.2f}) | {med(x['read'] for x in rs):.3f} | "
+                     f"{med(x['filter'] for x in rs):.3f} | {med(x['write'] for x in rs):.3f} | {rss:.0f} | "
+                     f"{rs[-1]['size'] / 1e6:.1f} |")
+    lines += [
+        "",
+        "Filter only: in-process calls in a separate process per round, on the dataset already read:",
+        "",
+        "| what | EKF [s] | RB-UKF [s] |",
+        "|---|---|---|",
+        f"| `insnav.run` (sanitize, checks, C++ loop, output arrays) | {med(api['ekf']):.3f} | {med(api['rbukf']):.3f} |",
+        f"| of which the C++ loop `_core.run_loose` | {med(core['ekf']):.3f} | {med(core['rbukf']):.3f} |",
+        f"| reading the files in-process (`load_kfgins`) | {med(read_t):.3f} | |",
+        "",
+        f"Array sizes: IMU {imu_array_mb:.0f} MB (t + 6 increments, float64), all output columns "
+        f"{out_array_mb:.0f} MB; peak RSS budget of the issue = 2 x IMU + output = "
+        f"{2 * imu_array_mb + out_array_mb:.0f} MB (the Python interpreter with numpy and the extension "
+        f"alone is about {_baseline_rss_mb():.0f} MB).",
+        "",
+        "KF-GINS takes about 31 s on this track (the figure reported for KF-GINS, see kfgins.md); "
+        f"end to end the EKF with CSV output is {31.0 / med(x['wall'] for x in res[variants[0][0]]):.0f}x faster.",
+    ]
+    Path(a.out).write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+class _Shim:
+    """The compiled module with one function replaced (timing wrapper)."""
+
+    def __init__(self, real_module, **over):
+        self._real = real_module
+        self.__dict__.update(over)
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)
+
+
+def _baseline_rss_mb() -> float:
+    code = "import resource, numpy, insnav._core, insnav.cli; print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip()
+    return float(out) / 1024.0 if out else float("nan")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,156 @@
+// Numeric text tables: _core.write_table (the solution writer) and
+// _core.parse_text (the KF-GINS and insnav CSV readers), on
+// insnav/io/text_table.hpp with the GIL released.  The writer checks for
+// Ctrl-C after each of its blocks (taking the GIL only for that check).
+#include <pybind11/stl.h>
+
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "common.hpp"
+#include "insnav/io/text_table.hpp"
+#include "outputs.hpp"
+
+namespace insnav::py_bind {
+
+namespace {
+
+struct FileCloser {
+  void operator()(std::FILE* f) const {
+    if (f) std::fclose(f);
+  }
+};
+
+py::int_ write_table(const std::string& path, const std::string& header, const py::list& columns,
+                     const std::vector<double>& scales, const std::vector<int>& decimals, const std::string& sep,
+                     int width, bool trim_zeros, bool trailing_sep, int threads) {
+  const std::size_t nc = columns.size();
+  if (nc == 0 || scales.size() != nc || decimals.size() != nc)
+    throw py::value_error("write_table: columns, scales and decimals must have the same (non-zero) length");
+  if (sep.size() != 1) throw py::value_error("write_table: the separator must be one character");
+  std::vector<py::array> keep;  // the arrays stay referenced while the GIL is released
+  std::vector<textio::Column> cols(nc);
+  py::ssize_t n = -1;
+  for (std::size_t j = 0; j < nc; ++j) {
+    py::array a = py::reinterpret_borrow<py::array>(columns[j]);
+    if (!py::isinstance<py::array>(columns[j]) || a.ndim() != 1 || !a.dtype().is(py::dtype::of<double>()))
+      throw py::value_error("write_table: column " + std::to_string(j) + " is not a 1-D float64 array");
+    if (n < 0) n = a.shape(0);
+    if (a.shape(0) != n) throw py::value_error("write_table: columns of different lengths");
+    if (a.strides(0) % static_cast<py::ssize_t>(sizeof(double)) != 0)
+      throw py::value_error("write_table: unaligned column stride");
+    cols[j] = {static_cast<const double*>(a.data()), a.strides(0) / static_cast<py::ssize_t>(sizeof(double)),
+               scales[j], decimals[j]};
+    keep.push_back(a);
+  }
+  std::unique_ptr<std::FILE, FileCloser> f(std::fopen(path.c_str(), "wb"));
+  if (!f) {
+    PyErr_SetFromErrnoWithFilename(PyExc_OSError, path.c_str());
+    throw py::error_already_set();
+  }
+  textio::TextFormat fmt;
+  fmt.sep = sep[0];
+  fmt.width = width;
+  fmt.trim_zeros = trim_zeros;
+  fmt.trailing_sep = trailing_sep;
+  bool interrupted = false;
+  textio::WriteResult res;
+  {
+    py::gil_scoped_release release;
+    bool ok = header.empty() || std::fwrite(header.data(), 1, header.size(), f.get()) == header.size();
+    if (!ok) {
+      res.status = textio::WriteStatus::kIoError;
+      res.error = errno;
+    } else {
+      res = textio::write_rows(f.get(), cols.data(), static_cast<int>(nc), n, fmt, threads, 8192, [&] {
+        py::gil_scoped_acquire gil;
+        if (PyErr_CheckSignals() != 0) interrupted = true;
+        return !interrupted;
+      });
+      res.bytes += static_cast<std::int64_t>(header.size());
+      if (res.status == textio::WriteStatus::kOk && std::fflush(f.get()) != 0) {
+        res.status = textio::WriteStatus::kIoError;
+        res.error = errno;
+      }
+    }
+  }
+  if (interrupted) throw py::error_already_set();  // KeyboardInterrupt from the signal handler
+  const int close_rc = std::fclose(f.release());
+  if (res.status == textio::WriteStatus::kOk && close_rc != 0) {
+    res.status = textio::WriteStatus::kIoError;
+    res.error = errno;
+  }
+  if (res.status == textio::WriteStatus::kIoError) {
+    errno = res.error;
+    PyErr_SetFromErrnoWithFilename(PyExc_OSError, path.c_str());
+    throw py::error_already_set();
+  }
+  return py::int_(res.bytes);
+}
+
+py::tuple parse_text(const py::buffer& data, int ncols, int keep, bool allow_extra, bool comma,
+                     std::int64_t first_line, int threads) {
+  if (ncols <= 0 || keep <= 0 || keep > ncols) throw py::value_error("parse_text: need 0 < keep <= ncols");
+  const py::buffer_info info = data.request();
+  if (info.ndim != 1 || info.itemsize != 1) throw py::value_error("parse_text: expected a bytes-like buffer");
+  const char* p = static_cast<const char*>(info.ptr);
+  const std::size_t size = static_cast<std::size_t>(info.size);
+  std::int64_t lines = 0;
+  {
+    py::gil_scoped_release release;
+    lines = textio::count_lines(p, p + size);
+  }
+  DArray out({static_cast<py::ssize_t>(lines), static_cast<py::ssize_t>(keep)});
+  py::array_t<std::int64_t> line_of(static_cast<py::ssize_t>(lines));
+  textio::ParseOptions opt;
+  opt.ncols = ncols;
+  opt.keep = keep;
+  opt.allow_extra = allow_extra;
+  opt.comma = comma;
+  textio::ParseResult res;
+  {
+    py::gil_scoped_release release;
+    res = textio::parse_buffer(p, size, opt, first_line, out.mutable_data(), line_of.mutable_data(), threads);
+  }
+  py::object err = py::none();
+  if (res.error.kind != textio::ParseErrorKind::kNone) {
+    const auto& e = res.error;
+    err = py::make_tuple(static_cast<int>(e.kind), e.line, e.found, e.column, e.token_begin, e.token_end,
+                         e.line_end);
+  }
+  const py::slice rows(0, static_cast<py::ssize_t>(res.rows), 1);
+  py::object lines_out = res.blank ? py::object(line_of[rows]) : py::object(py::none());
+  return py::make_tuple(out[rows], lines_out, err);
+}
+
+}  // namespace
+
+void bind_textio(py::module_& m) {
+  m.def(
+      "set_progress",
+      [](const py::object& f) {
+        PyObject*& hook = progress_hook();
+        Py_XDECREF(hook);
+        hook = nullptr;
+        if (!f.is_none()) hook = py::object(f).release().ptr();
+      },
+      py::arg("callback"),
+      "Call callback(k, n) from every run's C++ loop at most every 20 ms (with the GIL, beside the Ctrl-C "
+      "check); None: no callback.  An exception from it stops the run.");
+  m.def("write_table", &write_table, py::arg("path"), py::arg("header"), py::arg("columns"), py::arg("scales"),
+        py::arg("decimals"), py::arg("sep") = ",", py::arg("width") = 0, py::arg("trim_zeros") = true,
+        py::arg("trailing_sep") = false, py::arg("threads") = 2,
+        "Write 1-D float64 columns (any stride) times their scales as a text table to path: decimals[j] >= 0 "
+        "fixed (trailing zeros trimmed when trim_zeros), < 0 shortest round-trip; blocks formatted on `threads` "
+        "threads, GIL released, Ctrl-C checked after each block.  Returns the bytes written.");
+  m.def("parse_text", &parse_text, py::arg("data"), py::arg("ncols"), py::arg("keep"), py::arg("allow_extra") = false,
+        py::arg("comma") = false, py::arg("first_line") = 1, py::arg("threads") = 2,
+        "Parse whitespace (and with comma=True comma) separated numbers, ncols a row (more if allow_extra), "
+        "keeping the first `keep`; blank lines skipped.  Returns (array (rows, keep), line of each row or None "
+        "when no line was blank, None or the first error (kind 1 columns | 2 number, line, found, column, "
+        "token_begin, token_end, line_end)).");
+}
+
+}  // namespace insnav::py_bind

@@ -1,0 +1,157 @@
+"""Numeric text tables through the compiled reader and writer
+(``cpp/include/insnav/io/text_table.hpp``): the solution CSV and KF-GINS
+layouts are written, and the KF-GINS and insnav CSV files read, in C++ with
+the GIL released."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["write_text_columns", "threads", "read_bytes", "count_columns", "parse_numeric"]
+
+
+def threads() -> int:
+    """Threads for formatting and parsing: at most two (the machine's cores)."""
+    return max(1, min(2, os.cpu_count() or 1))
+
+
+def write_text_columns(path, header: str, cols, decimals, **fmt) -> Path:
+    """Write ``cols`` (name, array, unit factor) as a text table, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    header : str
+        Written first, as is (with its newline; may be empty).
+    cols : list of (str, ndarray (N,), float)
+        The values written are ``factor * array`` (any stride, no copy).
+    decimals : list of int
+        Per column: >= 0 fixed decimals (trailing zeros dropped unless
+        ``trim_zeros=False``), < 0 the shortest round-trip text.
+    **fmt
+        ``sep`` (one character), ``width`` (left-justified field width),
+        ``trim_zeros``, ``trailing_sep`` of ``_core.write_table``.
+    """
+    from .. import _core
+    from .._atomic import atomic_write_with
+
+    arrays = [np.asarray(x, float) for _, x, _ in cols]
+    return atomic_write_with(Path(path), lambda tmp: _core.write_table(
+        str(tmp), header, arrays, [float(f) for _, _, f in cols], list(decimals), threads=threads(), **fmt))
+
+
+# --------------------------------------------------------------------------- reading
+
+_OPENERS = {".xz": "lzma", ".lzma": "lzma", ".gz": "gzip", ".bz2": "bz2"}
+
+
+def read_bytes(path) -> bytes:
+    """The whole file, decompressed when it ends in ``.xz``/``.lzma``/``.gz``/``.bz2``.
+
+    Raises
+    ------
+    FileNotFoundError
+        Naming the file.
+    ValueError
+        One line naming the file when the compressed stream is truncated or corrupt.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p} does not exist")
+    kind = _OPENERS.get(p.suffix.lower())
+    raw = p.read_bytes()
+    if kind is None:
+        return raw
+    import bz2
+    import gzip
+    import lzma
+    import zlib
+
+    try:
+        if kind == "lzma":
+            d = lzma.LZMADecompressor()
+            out = d.decompress(raw)
+            if not d.eof:
+                raise EOFError("the stream ends before its end marker")
+            return out
+        if kind == "gzip":
+            return gzip.decompress(raw)
+        d = bz2.BZ2Decompressor()
+        out = d.decompress(raw)
+        if not d.eof:
+            raise EOFError("the stream ends before its end marker")
+        return out
+    except (EOFError, lzma.LZMAError, OSError, zlib.error, ValueError) as exc:
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(f"{p}: truncated or corrupt {p.suffix.lstrip('.')} file ({why}); "
+                         "decompress it again or fetch a complete copy") from None
+
+
+def count_columns(data: bytes, source, comma: bool = False) -> int:
+    """Values on the first non-blank line."""
+    start = 0
+    while start < len(data):
+        end = data.find(b"\n", start)
+        end = len(data) if end < 0 else end
+        line = data[start:end]
+        if comma:
+            line = line.replace(b",", b" ")
+        n = len(line.split())
+        if n:
+            return n
+        start = end + 1
+    raise ValueError(f"{source}:1: file is empty")
+
+
+def parse_numeric(data, ncols: int, source, *, first_line: int = 1, comma: bool = True, keep: int | None = None,
+                  allow_extra: bool = False, names=None):
+    """Parse numeric text (C++ ``std::from_chars`` on two threads, the GIL released).
+
+    Parameters
+    ----------
+    data : bytes or str
+        One record per line; values separated by whitespace (and with
+        ``comma`` by commas); blank lines are skipped.
+    ncols : int
+        Values a row must have (``allow_extra``: at least).
+    source : str
+        File name for the messages.
+    first_line : int
+        File line of ``data``'s first line (2 after a header).
+    keep : int, optional
+        Only the first ``keep`` values of each row are returned (default ``ncols``).
+    names : sequence of str, optional
+        Column names for the messages.
+
+    Returns
+    -------
+    (ndarray (N, keep), ndarray (N,) of int or None)
+        The rows and, when a blank line was skipped, the file line of each.
+
+    Raises
+    ------
+    ValueError
+        ``"<source>:<line>: expected <n> columns, found <k>"`` (with a
+        truncation hint for an incomplete last line) or ``"<source>:<line>:
+        not a number: '<text>' in column <j>"``, for the first bad row.
+    """
+    from .. import _core
+
+    if isinstance(data, str):
+        data = data.encode("utf-8", "replace")
+    keep = ncols if keep is None else keep
+    a, lines, err = _core.parse_text(data, ncols, keep, allow_extra, comma, first_line, threads())
+    if err is not None:
+        data = bytes(data)
+        kind, line, found, col, tb, te, line_end = err
+        if kind == 1:
+            hint = ""
+            if found < ncols and not data.rstrip(b" \t").endswith(b"\n") and not data[line_end:].strip():
+                hint = " (incomplete last line: file truncated?)"
+            raise ValueError(f"{source}:{line}: expected {ncols} columns, found {found}{hint}")
+        tok = data[tb:te].decode("utf-8", "replace")
+        where = f"{names[col]!r}" if names is not None and col < len(names) else f"{col + 1}"
+        raise ValueError(f"{source}:{line}: not a number: {tok!r} in column {where}")
+    return a, lines

@@ -1,0 +1,90 @@
+"""Ctrl-C: SIGINT to a running ``insnav run`` ends it within a second with one
+line on stderr and no output file (the C++ loop checks for signals, taking
+the GIL only for that check); the progress bar only on a terminal."""
+from __future__ import annotations
+
+import io
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+import insnav
+from insnav._progress import Progress, reporting
+
+
+@pytest.fixture(scope="module")
+def uav_dir(tmp_path_factory):
+    """seed004-uav: the tight UPF takes ~6 s in its C++ loop, the read ~0.3 s."""
+    return insnav.simulate("seed004-uav", seed=1).save(tmp_path_factory.mktemp("int") / "uav")
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_sigint_stops_a_run_fast_with_one_line_and_no_output(uav_dir, tmp_path):
+    out = tmp_path / "sol.csv"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "insnav", "run", str(uav_dir), "--coupling", "tight",
+                             "--filter", "upf", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    time.sleep(2.5)  # start-up and read ~1 s: now inside the filter's C++ loop (~6 s)
+    assert proc.poll() is None, proc.communicate()
+    t0 = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    try:
+        stdout, stderr = proc.communicate(timeout=10)
+    finally:
+        proc.kill()
+    dt = time.perf_counter() - t0
+    assert proc.returncode == 130, (stdout, stderr)
+    assert dt < 1.0, f"took {dt:.2f} s to stop"
+    assert stderr.strip().splitlines() == ["insnav run: interrupted"], stderr
+    assert "Traceback" not in stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no solution, no sidecar, no temp file
+
+
+def test_interrupt_inside_the_loop_raises_keyboardinterrupt_and_leaves_no_state(uav_dir):
+    """A progress callback raising (as the signal handler does) stops the C++
+    loop at its next check; the next run is unaffected."""
+    ds = insnav.load_dataset(uav_dir)
+    calls = []
+
+    def stop(k, n):
+        calls.append(k)
+        if k > 0:
+            raise KeyboardInterrupt
+
+    from insnav import _core
+
+    _core.set_progress(stop)
+    try:
+        t0 = time.perf_counter()
+        with pytest.raises(KeyboardInterrupt):
+            insnav.run(ds, filter="ekf", coupling="tight")
+        assert time.perf_counter() - t0 < 5.0 and calls[-1] < 180_000
+    finally:
+        _core.set_progress(None)
+    sol = insnav.run(ds, filter="ekf", coupling="tight")
+    assert len(sol) == 180_000
+
+
+def test_progress_bar_only_on_a_terminal_and_for_long_tasks():
+    quiet = io.StringIO()  # not a TTY
+    p = Progress("run", stream=quiet, min_seconds=0.0)
+    p.t0 -= 1.0
+    p(10, 100)
+    p.close()
+    assert quiet.getvalue() == ""
+    shown = io.StringIO()
+    p = Progress("run", stream=shown, min_seconds=2.0, force=True)
+    p.t0 -= 0.5
+    p(90, 100)  # predicted 0.56 s: no bar
+    assert shown.getvalue() == ""
+    p.t0 -= 1.0
+    p(10, 100)  # predicted 15 s: bar
+    p.close()
+    assert "run" in shown.getvalue()
+    with reporting("x", enabled=False) as bar:
+        assert bar is None

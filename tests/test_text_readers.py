@@ -1,0 +1,100 @@
+"""The compiled text readers (KF-GINS IMU/GNSS text, insnav CSVs): values
+exactly as Python's float() reads them, the first bad value reported by file,
+line and column while blank lines keep the numbering (also across the two
+halves the reader splits a large file into), and compressed input: a
+truncated .xz/.gz is one line naming the file."""
+from __future__ import annotations
+
+import gzip
+import lzma
+
+import numpy as np
+import pytest
+
+from insnav.data.dataset import ImuData
+from insnav.data.textio import parse_numeric
+from insnav.io import kfgins
+
+from test_cli import _user_error
+
+
+def _imu_text(n, seed=0):
+    rng = np.random.default_rng(seed)
+    t = 456250.004412029 + 0.005 * np.arange(n)
+    a = np.column_stack([t, rng.standard_normal((n, 3)) * 1e-6, rng.standard_normal((n, 3)) * 1e-2])
+    text = "".join(f"{r[0]:.9f} " + " ".join(f"{x:.12e}" for x in r[1:]) + "\n" for r in a)
+    return np.array([[float(x) for x in ln.split()] for ln in text.splitlines()]), text  # what float() reads
+
+
+def test_values_are_what_float_reads():
+    toks = ["0", "-0", "+1.5", "1e-320", "4.9e-324", "1.7976931348623157e308", "0.1", "-2.5E+3", "123456789012345678901",
+            ".5", "5.", "nan", "inf", "-inf", "1e400"]
+    a, lines = parse_numeric(" ".join(toks).encode(), len(toks), "x", comma=False)
+    expect = np.array([float(t) for t in toks])
+    np.testing.assert_array_equal(a[0], expect)
+    assert lines is None
+    for bad in ["1e", "--1", "+", "0x1p3", "1.0.0", "1_0", "+-1", "\xff"]:
+        with pytest.raises(ValueError, match=r"^x:1: not a number: .* in column 2$"):
+            parse_numeric(f"1 {bad} 3".encode(), 3, "x", comma=False)
+
+
+def test_large_file_two_halves_keep_line_numbers(tmp_path):
+    a, text = _imu_text(40_000)  # ~4 MB: parsed as two halves on two threads
+    lines = text.splitlines()
+    for i in (5, 25_000):  # a blank line in each half
+        lines.insert(i, "   ")
+    p = tmp_path / "imu.txt"
+    p.write_text("\n".join(lines) + "\n")
+    imu = kfgins.read_kfgins_imu(p)
+    np.testing.assert_array_equal(imu.to_array(), a)
+    assert imu.origin.line(4) == 5 and imu.origin.line(5) == 7 and imu.origin.line(30_000) == 30_003
+    bad = list(lines)
+    bad[30_002] = bad[30_002].replace(bad[30_002].split()[5], "1.2.3")  # file line 30003, second half
+    p.write_text("\n".join(bad) + "\n")
+    with pytest.raises(ValueError, match=r"imu\.txt:30003: not a number: '1\.2\.3' in column 'dvel_y'$"):
+        kfgins.read_kfgins_imu(p)
+    bad = list(lines)
+    bad[3] = "1 2 3"  # first half: reported first, though the second half is parsed too
+    bad[30_002] = "x"
+    p.write_text("\n".join(bad) + "\n")
+    with pytest.raises(ValueError, match=r"imu\.txt:4: expected 7 columns, found 3$"):
+        kfgins.read_kfgins_imu(p)
+    p.write_text(text[: len(text) - 40])  # cut inside the last line
+    with pytest.raises(ValueError, match=r"imu\.txt:40000: expected 7 columns, found \d \(incomplete last line"):
+        kfgins.read_kfgins_imu(p)
+
+
+@pytest.mark.parametrize("suffix, opener", [(".xz", lzma.open), (".gz", gzip.open)])
+def test_compressed_input_and_truncated_compressed_file(tmp_path, suffix, opener):
+    a, text = _imu_text(3000)
+    p = tmp_path / f"imu.txt{suffix}"
+    with opener(p, "wt") as f:
+        f.write(text)
+    np.testing.assert_array_equal(kfgins.read_kfgins_imu(p).to_array(), a)
+    raw = p.read_bytes()
+    cut = tmp_path / f"cut.txt{suffix}"
+    cut.write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(ValueError, match=rf"^{cut}: truncated or corrupt {suffix[1:]} file") as e:
+        kfgins.read_kfgins_imu(cut)
+    assert "\n" not in str(e.value)
+    gnss = tmp_path / "gnss.txt"
+    gnss.write_text("456251.0 30.0 114.0 20.0 0.01 0.01 0.02\n")
+    y = tmp_path / "kf.yaml"
+    y.write_text(f"imupath: {cut.name}\ngnsspath: gnss.txt\ninitpos: [30, 114, 20]\ninitvel: [0, 0, 0]\n"
+                 "initatt: [0, 0, 0]\nimunoise:\n  arw: [0.1, 0.1, 0.1]\n  vrw: [0.1, 0.1, 0.1]\n")
+    _user_error(["run", "--format", "kfgins", "--config", y, "--out", tmp_path / "s.csv"], str(cut), "truncated")
+    assert not (tmp_path / "s.csv").exists()
+
+
+def test_kfgins_gnss_and_nav_readers_round_trip(tmp_path):
+    import insnav
+
+    ds = insnav.simulate("seed000-sim", seed=1)
+    kfgins.write_kfgins_gnss(tmp_path / "g.txt", ds.gnss, with_velocity=True)
+    g = kfgins.read_kfgins_gnss(tmp_path / "g.txt")
+    np.testing.assert_allclose(g.lat_deg, ds.gnss.lat_deg, atol=5e-11)
+    kfgins.write_kfgins_nav(tmp_path / "t.nav", ds.truth)
+    tr = kfgins.read_kfgins_nav(tmp_path / "t.nav")
+    np.testing.assert_allclose(tr.yaw_deg, ds.truth.yaw_deg, atol=5e-9)
+    kfgins.write_kfgins_imu(tmp_path / "i.txt", ImuData(ds.imu.t[:100], ds.imu.dtheta_b[:100], ds.imu.dv_b[:100]))
+    np.testing.assert_allclose(kfgins.read_kfgins_imu(tmp_path / "i.txt").dv_b, ds.imu.dv_b[:100], rtol=1e-15)
