@@ -38,6 +38,8 @@ class TightInputs:
         1-sigma pseudorange [m] and rate [m/s]
     prn : (M,) int
     elevation_deg : (M,) seen from the (approximate) receiver
+    system : (M,) one-letter RINEX system code of each row (:data:`insnav.gnss.systems.SYSTEMS`);
+        None on construction means GPS for every row
     """
 
     epoch_t: np.ndarray
@@ -46,6 +48,15 @@ class TightInputs:
     prn: np.ndarray
     elevation_deg: np.ndarray
     info: dict = field(default_factory=dict)
+    system: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.system is None:
+            self.system = np.full(len(self.prn), "G", dtype="<U1")
+        else:
+            self.system = np.asarray(self.system, dtype="<U1")
+            if self.system.shape != np.shape(self.prn):
+                raise ValueError(f"TightInputs: system has {self.system.size} rows, prn {np.size(self.prn)}")
 
     @property
     def row_epoch(self) -> np.ndarray:
@@ -57,15 +68,16 @@ class TightInputs:
         return np.diff(self.epoch_start)
 
     @classmethod
-    def from_rows(cls, t_row, prn, sats, el_deg, info=None) -> "TightInputs":
-        """Group rows by time (rows sorted by time on output)."""
+    def from_rows(cls, t_row, prn, sats, el_deg, info=None, system=None) -> "TightInputs":
+        """Group rows by time (rows sorted by time on output); ``system`` None: GPS."""
         t_row = np.asarray(t_row, float)
         order = np.argsort(t_row, kind="stable")
         t_row = t_row[order]
         ep_t, start = np.unique(t_row, return_index=True)
         epoch_start = np.append(start, t_row.size).astype(np.int64)
         return cls(ep_t, epoch_start, np.ascontiguousarray(np.asarray(sats, float)[order]),
-                   np.asarray(prn)[order], np.asarray(el_deg, float)[order], dict(info or {}))
+                   np.asarray(prn)[order], np.asarray(el_deg, float)[order], dict(info or {}),
+                   None if system is None else np.asarray(system, dtype="<U1")[order])
 
     def select(self, keep) -> "TightInputs":
         """Keep the rows ``keep`` (bool (M,)); empty epochs stay (prediction only)."""
@@ -74,7 +86,7 @@ class TightInputs:
         counts = np.bincount(ep, minlength=self.epoch_t.size)
         start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         return TightInputs(self.epoch_t.copy(), start, np.ascontiguousarray(self.sats[keep]), self.prn[keep],
-                           self.elevation_deg[keep], dict(self.info))
+                           self.elevation_deg[keep], dict(self.info), self.system[keep])
 
 
 def pseudorange_sigma(el_rad, sigma_zenith_m, cn0_dbhz=None, cn0_ref_dbhz=45.0, floor_el_deg=5.0):

@@ -818,7 +818,8 @@ def _epochs_in(inp, t_lo, t_hi):
                            np.zeros(0), dict(inp.info))
     a, b = inp.epoch_start[e[0]], inp.epoch_start[e[-1] + 1]
     return TightInputs(inp.epoch_t[e].copy(), (inp.epoch_start[e[0]:e[-1] + 2] - a).astype(np.int64),
-                       inp.sats[a:b].copy(), inp.prn[a:b].copy(), inp.elevation_deg[a:b].copy(), dict(inp.info))
+                       inp.sats[a:b].copy(), inp.prn[a:b].copy(), inp.elevation_deg[a:b].copy(), dict(inp.info),
+                       inp.system[a:b].copy())
 
 
 def _approx_position(obs, nav, t_week0):
