@@ -226,6 +226,10 @@ class RunConfig:
     smooth : bool
         Post-process with the RTS smoother (loose EKF): every output row and
         sigma from all the data, before and after it.
+    imu_error_sigmas : bool
+        Also keep the 1-sigma of the IMU-error states (biases, scale factors)
+        for every output row (``Solution.sigma_imu_err``; loose runs).
+        ``insnav run --out-format kfgins`` turns it on for ``KF_GINS_STD.txt``.
     sanitize : dict
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
@@ -254,6 +258,7 @@ class RunConfig:
     constraints: Constraints = field(default_factory=Constraints)
     smooth: bool = False
     sanitize: dict = field(default_factory=dict)
+    imu_error_sigmas: bool = False
 
     def validate(self) -> "RunConfig":
         def bad(key, value, allowed):
@@ -271,7 +276,7 @@ class RunConfig:
         if int(self.init_seed) != self.init_seed or self.init_seed < 0:
             bad("init_seed", self.init_seed, "an integer >= 0")
         self.init_seed = int(self.init_seed)
-        for key in ("init_error", "use_position", "use_velocity"):
+        for key in ("init_error", "use_position", "use_velocity", "imu_error_sigmas"):
             if not isinstance(getattr(self, key), (bool, np.bool_)):
                 bad(key, getattr(self, key), "true or false")
         if self.lever_arm_b is not None:

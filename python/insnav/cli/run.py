@@ -70,7 +70,7 @@ def add_run_parser(sub) -> None:
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
     p.add_argument("--out-format", choices=("insnav", "kfgins"), default="insnav",
-                   help="kfgins: --out is a folder that gets KF_GINS_Navresult.nav and KF_GINS_IMU_ERR.txt "
+                   help="kfgins: --out is a folder that gets KF_GINS_Navresult.nav, KF_GINS_IMU_ERR.txt, KF_GINS_STD.txt "
                         "exactly as KF-GINS writes them (week sow lat lon h vN vE vD roll pitch yaw; sow, "
                         "gyro bias deg/h, acc bias mGal, scale factors ppm)")
     p.add_argument("--csv-precision", choices=("resolution", "exact"), default="resolution",
@@ -234,6 +234,8 @@ def cmd_run(args) -> int:
             cfg.smooth = True
         if args.constraints is not None:
             cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
+        if args.out_format == "kfgins":
+            cfg.imu_error_sigmas = True  # KF_GINS_STD.txt
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
         stages.done("read")

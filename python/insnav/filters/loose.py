@@ -40,7 +40,8 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     n = cfg.layout
     P0 = np.diag(loose_initial_sigmas(sig0, noise, n) ** 2)
     core_cfg = engine_config(dataset, cfg, gnss_t, n, use_position=cfg.use_position, use_velocity=cfg.use_velocity,
-                             sigma_columns=9)  # Solution keeps the position, velocity and attitude sigmas only
+                             # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
+                             sigma_columns=n if cfg.imu_error_sigmas else 9)
     init_vec = init_vector(dataset, init)
     events, ev_counts = None, None
     if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
@@ -71,6 +72,9 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                    summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n, updates=int(out["updates"]),
                                 rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
+    if cfg.imu_error_sigmas:  # layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
+        sol.sigma_imu_err = np.zeros((len(sol.t), 12))
+        sol.sigma_imu_err[:, :n - 9] = sig[:, 9:n]
     if events is not None:
         sol.summary["constraints"] = dict(use=list(cfg.constraints.use), events=len(events), **ev_counts,
                                           updates=int(out["constraint_updates"]),

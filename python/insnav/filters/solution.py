@@ -48,6 +48,11 @@ class Solution:
     sigma_att_deg : (N, 3) 1-sigma of the attitude error angles [deg]
     acc_bias_mps2, gyro_bias_rps : (N, 3) estimated IMU biases (SI)
     acc_scale, gyro_scale : (N, 3) estimated scale-factor errors [-]
+    sigma_imu_err : (N, 12) or None
+        1-sigma of accelerometer bias [m/s^2], gyro bias [rad/s], accelerometer
+        and gyro scale factor [-] (the order of the IMU-error columns; 0 for the
+        scale factors of a 15-state layout, which does not estimate them); only
+        when the run asked for it (``imu_error_sigmas``), else None
     gnss_t : (M,) s, time of validity of each GNSS record
     innovation : (M, 6) INS minus GNSS (N, E, D position [m], velocity [m/s]) before the update
     nis : (M,) normalised innovation squared
@@ -76,6 +81,7 @@ class Solution:
     nis: np.ndarray
     gnss_status: np.ndarray
     summary: dict = field(default_factory=dict)
+    sigma_imu_err: np.ndarray | None = None
 
     COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg",
                "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps",
