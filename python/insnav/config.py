@@ -226,6 +226,14 @@ class RunConfig:
     smooth : bool
         Post-process with the RTS smoother (loose EKF): every output row and
         sigma from all the data, before and after it.
+    init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None
+        Initial estimate of the IMU errors (measured minus true; scale factors
+        [-]); None: zero.  KF-GINS's ``initaccbias``/``initgyrbias``/
+        ``initaccscale``/``initgyrscale``.  Loose runs.
+    init_sigma_acc_bias_mps2, init_sigma_gyro_bias_radps, init_sigma_acc_scale, init_sigma_gyro_scale : 3 floats or None
+        Initial 1-sigma of those states; None: the IMU noise model's bias and
+        scale-factor sigmas.  KF-GINS's ``initbastd``/``initbgstd``/
+        ``initsastd``/``initsgstd``.  Loose runs.
     imu_error_sigmas : bool
         Also keep the 1-sigma of the IMU-error states (biases, scale factors)
         for every output row (``Solution.sigma_imu_err``; loose runs).
@@ -259,6 +267,14 @@ class RunConfig:
     smooth: bool = False
     sanitize: dict = field(default_factory=dict)
     imu_error_sigmas: bool = False
+    init_acc_bias_mps2: list | None = None
+    init_gyro_bias_radps: list | None = None
+    init_acc_scale: list | None = None
+    init_gyro_scale: list | None = None
+    init_sigma_acc_bias_mps2: list | None = None
+    init_sigma_gyro_bias_radps: list | None = None
+    init_sigma_acc_scale: list | None = None
+    init_sigma_gyro_scale: list | None = None
 
     def validate(self) -> "RunConfig":
         def bad(key, value, allowed):
@@ -336,8 +352,28 @@ class RunConfig:
             bad("output_decimation", self.output_decimation, "integer >= 1")
         if not (0 < self.ut_alpha <= 1):
             bad("ut_alpha", self.ut_alpha, "0 < alpha <= 1")
+        for key in INIT_IMU_KEYS:
+            v = getattr(self, key)
+            if v is None:
+                continue
+            try:
+                a = np.asarray(v, dtype=float)
+            except (TypeError, ValueError):
+                a = np.full(1, np.nan)
+            sigma = key.startswith("init_sigma")
+            if a.shape != (3,) or not np.all(np.isfinite(a)) or (sigma and np.any(a < 0)):
+                bad(key, v, "3 finite values" + (" >= 0" if sigma else ""))
+            if self.coupling != "loose":
+                bad(key, v, "absent: the initial IMU-error estimate and sigmas apply to loose runs")
+            if "scale" in key and self.layout != 21:
+                bad(key, v, "absent: scale factors are states of layout = 21 only")
         return self
 
+
+#: RunConfig keys of the initial IMU-error estimate and its sigmas, in the imu_correction order
+INIT_IMU_KEYS = ("init_acc_bias_mps2", "init_gyro_bias_radps", "init_acc_scale", "init_gyro_scale",
+                 "init_sigma_acc_bias_mps2", "init_sigma_gyro_bias_radps", "init_sigma_acc_scale",
+                 "init_sigma_gyro_scale")
 
 _USER_UNITS = {
     # TOML key in [imu] -> (field, factor to SI)

@@ -13,7 +13,8 @@ from .. import _core
 from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
 from ..units import DEG, RAD2DEG
-from ._setup import (engine_config, imu_arrays, init_vector, initial_state, loose_initial_sigmas,
+from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
+                     loose_initial_sigmas,
                      raise_if_nonfinite)
 from .solution import Solution
 
@@ -38,7 +39,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
-    P0 = np.diag(loose_initial_sigmas(sig0, noise, n) ** 2)
+    P0 = np.diag(loose_initial_sigmas(sig0, noise, n, cfg) ** 2)
     core_cfg = engine_config(dataset, cfg, gnss_t, n, use_position=cfg.use_position, use_velocity=cfg.use_velocity,
                              # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
                              sigma_columns=n if cfg.imu_error_sigmas else 9)
@@ -51,7 +52,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         core_cfg.update(engine_keys(dataset, cfg.constraints))
     if cfg.smooth:
         core_cfg["smooth"] = True
-    out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, np.zeros(12), noise.as_core_dict(),
+    out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
                           core_cfg, events)
     # unit conversions in place (the arrays are ours), one column at a time:
     # numpy's strided 2-D loops over 2-3 columns are ~10x slower than 1-D ones

@@ -257,6 +257,26 @@ def _num(cfg, key, default, path):
     return float(v)
 
 
+#: every key of KF-GINS's configuration file (KF-GINS dataset/kf-gins.yaml and
+#: src/kf_gins.cpp loadConfig); ``imunoise`` is a table of :data:`KFGINS_NOISE_KEYS`
+KFGINS_KEYS = ("imupath", "gnsspath", "outputpath", "imudatalen", "imudatarate", "starttime", "endtime",
+               "initpos", "initvel", "initatt", "initgyrbias", "initaccbias", "initgyrscale", "initaccscale",
+               "initposstd", "initvelstd", "initattstd", "initbgstd", "initbastd", "initsgstd", "initsastd",
+               "imunoise", "antlever")
+KFGINS_NOISE_KEYS = ("arw", "vrw", "gbstd", "abstd", "gsstd", "asstd", "corrtime")
+
+
+def _unknown_keys(keys, known, where: str, p) -> None:
+    """A one-line error for the first key not in ``known``, with a suggestion."""
+    import difflib
+
+    for k in keys:
+        if k not in known:
+            close = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+            hint = f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
+            raise ValueError(f"{p}: unknown key '{where}{k}'{hint}")
+
+
 def read_kfgins_config(path) -> dict:
     """Read a KF-GINS YAML configuration into SI values.
 
@@ -288,6 +308,9 @@ def read_kfgins_config(path) -> dict:
         raise ValueError(f"{p}:{line}: invalid YAML: {getattr(exc, 'problem', exc)}") from None
     if not isinstance(cfg, dict):
         raise ValueError(f"{p}:1: expected a mapping of keys")
+    _unknown_keys(cfg, KFGINS_KEYS, "", p)
+    if isinstance(cfg.get("imunoise"), dict):
+        _unknown_keys(cfg["imunoise"], KFGINS_NOISE_KEYS, "imunoise.", p)
     base = p.parent
 
     def path_of(k):
