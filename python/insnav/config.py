@@ -312,7 +312,7 @@ class RunConfig:
         _SAN = SANITIZE_DEFAULTS
         for k, v in self.sanitize.items():
             if k not in _SAN:
-                raise ConfigError(f"unknown key 'sanitize.{k}'; known keys: {', '.join(sorted(_SAN))}")
+                raise ConfigError(f"unknown key 'sanitize.{k}'{_suggest(k, _SAN)}")
             ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
             if not ok or (k not in ("min_h_m", "max_h_m") and v <= 0) or (k == "gap_factor" and v <= 1):
                 bad(f"sanitize.{k}", v, "a finite number" + ("" if k in ("min_h_m", "max_h_m") else
@@ -391,6 +391,15 @@ _USER_UNITS = {
 }
 
 
+def _suggest(key: str, known) -> str:
+    """'; did you mean 'x'?' for the closest known key, else the list of known keys."""
+    import difflib
+
+    known = sorted(known)
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
+
+
 def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     """Build a :class:`RunConfig` from a (TOML) dict, rejecting unknown keys."""
     d = dict(d)
@@ -399,8 +408,7 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints"}
     for k in d:
         if k not in names:
-            raise ConfigError(f"{source}: unknown key '{k}'; known keys: "
-                              f"{', '.join(sorted(names | {'imu', 'constraints'}))}")
+            raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | {'imu', 'constraints'})}")
     cfg = RunConfig(**d)
     if con_d is not None:
         if not isinstance(con_d, dict):
@@ -408,7 +416,7 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
         known = {f.name for f in dataclasses.fields(Constraints)}
         for k in con_d:
             if k not in known:
-                raise ConfigError(f"{source}: unknown key 'constraints.{k}'; known keys: {', '.join(sorted(known))}")
+                raise ConfigError(f"{source}: unknown key 'constraints.{k}'{_suggest(k, known)}")
         cfg.constraints = Constraints(**con_d)
     if imu_d is not None:
         if not isinstance(imu_d, dict):
@@ -416,7 +424,7 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
         noise = ImuNoise()
         for k, v in imu_d.items():
             if k not in _USER_UNITS:
-                raise ConfigError(f"{source}: unknown key 'imu.{k}'; known keys: {', '.join(sorted(_USER_UNITS))}")
+                raise ConfigError(f"{source}: unknown key 'imu.{k}'{_suggest(k, _USER_UNITS)}")
             fld, factor = _USER_UNITS[k]
             try:
                 arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor
