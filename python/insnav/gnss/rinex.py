@@ -143,9 +143,17 @@ _NAV_ORDER = (
 )
 
 
+#: Broadcast orbit lines after the first line of a RINEX 3 record: (required, allowed).  GLONASS
+#: has a 4th orbit line from RINEX 3.05 on (status flags, L1/L2 group delay, URAI, health flags).
+_NAV3_LINES = {"G": (7, 7), "E": (7, 7), "C": (7, 7), "R": (3, 4)}
+
+#: systems whose navigation records insnav reads
+_SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou"}
+
+
 @dataclass
 class NavData:
-    """Contents of a GPS (or mixed) navigation file.
+    """Contents of a navigation file (GPS, or mixed / GLONASS / Galileo / BeiDou).
 
     Attributes
     ----------
@@ -157,7 +165,19 @@ class NavData:
         Klobuchar coefficients from the header [s, s/semicircle, ...] and
         [s, s/semicircle, ...] (IS-GPS-200 20.3.3.5.1.7); None if absent.
     n_skipped : int
-        Records of other systems that were skipped.
+        Records that were skipped: systems not asked for (``systems``) and
+        systems insnav does not process (QZSS, SBAS, IRNSS...).
+    eph_r : GlonassEphemerides
+        GLONASS records (``t_b`` converted from UTC to GPS time), empty unless asked for.
+    eph_e : KeplerEphemerides
+        Galileo records (I/NAV and F/NAV, see ``data_source``), empty unless asked for.
+    eph_c : KeplerEphemerides
+        BeiDou D1/D2 records (``toc``/``toe`` converted from BDT to GPS time), empty unless asked for.
+    leap_seconds : float or None
+        GPS - UTC from the header (``LEAP SECONDS``) [s]; None if absent
+        (GLONASS epochs then use :func:`insnav.gnss.glonass.gps_utc_leap_seconds`).
+    skipped_by_system : dict
+        System letter -> number of records skipped.
     """
 
     path: str
@@ -166,45 +186,124 @@ class NavData:
     ion_alpha: np.ndarray | None = None
     ion_beta: np.ndarray | None = None
     n_skipped: int = 0
+    eph_r: "GlonassEphemerides | None" = None
+    eph_e: "KeplerEphemerides | None" = None
+    eph_c: "KeplerEphemerides | None" = None
+    leap_seconds: float | None = None
+    skipped_by_system: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        from .galbds import KeplerEphemerides
+        from .glonass import GlonassEphemerides
+
+        if self.eph_r is None:
+            self.eph_r = GlonassEphemerides.empty()
+        if self.eph_e is None:
+            self.eph_e = KeplerEphemerides.empty()
+        if self.eph_c is None:
+            self.eph_c = KeplerEphemerides.empty()
+
+    @property
+    def systems(self) -> str:
+        """Letters of the systems with at least one record, in :data:`insnav.gnss.systems.SYSTEMS` order."""
+        n = {"G": len(self.eph), "R": len(self.eph_r), "E": len(self.eph_e), "C": len(self.eph_c)}
+        return "".join(s for s in "GREC" if n[s] > 0)
+
+    def merge(self, other: "NavData") -> "NavData":
+        """Records of both files (e.g. a RINEX 2 ``.n`` GPS and ``.g`` GLONASS file of the same day)."""
+        return NavData(
+            self.path + "+" + other.path, self.version,
+            Ephemerides.from_columns({k: np.concatenate([v, getattr(other.eph, k)])
+                                      for k, v in self.eph.to_columns().items()}),
+            self.ion_alpha if self.ion_alpha is not None else other.ion_alpha,
+            self.ion_beta if self.ion_beta is not None else other.ion_beta,
+            self.n_skipped + other.n_skipped, self.eph_r.concat(other.eph_r), self.eph_e.concat(other.eph_e),
+            self.eph_c.concat(other.eph_c), self.leap_seconds if self.leap_seconds is not None else other.leap_seconds,
+            {k: self.skipped_by_system.get(k, 0) + other.skipped_by_system.get(k, 0)
+             for k in set(self.skipped_by_system) | set(other.skipped_by_system)})
+
+    def transmit_states(self, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None, prn=None, codes=None, **kw):
+        """Multi-system satellite states at transmission; see :func:`insnav.gnss.broadcast.transmit_states_multi`."""
+        from .broadcast import transmit_states_multi
+
+        return transmit_states_multi(self, t_rx_gps_s, r_rx_e, sat_ids, system=system, prn=prn, codes=codes, **kw)
+
+    def sat_states(self, t_gps_s, sat_ids=None, *, system=None, prn=None, codes=None, **kw):
+        """Multi-system geometric states at ``t_gps_s``; see :func:`insnav.gnss.broadcast.sat_states_multi`."""
+        from .broadcast import sat_states_multi
+
+        return sat_states_multi(self, t_gps_s, sat_ids, system=system, prn=prn, codes=codes, **kw)
 
 
 def _four(src, text, start, width, what):
     return [_float(src, text[start + k * width:start + (k + 1) * width], what) for k in range(4)]
 
 
-def read_rinex_nav(path) -> NavData:
-    """Read GPS LNAV ephemerides and Klobuchar parameters from a RINEX nav file.
+def _parse_systems(systems) -> str:
+    s = "".join(dict.fromkeys(str(systems).upper().replace(",", "").replace(" ", "")))
+    bad = [c for c in s if c not in _SYSTEM_NAMES]
+    if bad or not s:
+        raise ValueError(f"systems={systems!r}: use letters of G (GPS), R (GLONASS), E (Galileo), C (BeiDou)")
+    return s
 
-    Supports RINEX 2.10/2.11 GPS nav (``.21n``) and RINEX 3.02-3.05 GPS or
-    mixed nav (``.rnx``/``.nav``); records of other systems in a mixed file
-    are skipped (a RINEX 3 record starts with a system letter in column 1,
-    continuation lines start with blanks, so the skip needs no knowledge of
-    each system's record length).  ``D``/``d``/``E`` exponents are accepted;
-    blank fields read as 0 (NaN for the fit interval, which then defaults
-    to 4 h).
+
+def read_rinex_nav(path, systems="G") -> NavData:
+    """Read broadcast ephemerides (and Klobuchar parameters) from a RINEX nav file.
+
+    Supports RINEX 2.10/2.11 GPS nav (``.21n``), RINEX 2.01-2.11 GLONASS nav
+    (``.16g``; always read as GLONASS, ``systems`` does not apply) and RINEX
+    3.02-3.05 GPS/GLONASS/Galileo/BeiDou or mixed nav (``.rnx``/``.nav``).
+    Records of systems not in ``systems`` and of systems insnav does not
+    process (J, S, I...) are skipped and counted (a RINEX 3 record starts
+    with a system letter in column 1, continuation lines start with blanks,
+    so the skip needs no knowledge of each system's record length; a record
+    start that is not a letter cannot be delimited and raises).  ``D``/``d``/``E``
+    exponents are accepted; blank fields read as 0 (NaN for the GPS fit
+    interval, which then defaults to 4 h).
 
     Parameters
     ----------
     path : str or PathLike
+    systems : str
+        Systems to read from a RINEX 3 file, letters of ``"GREC"``.  The
+        default ``"G"`` reads GPS only (the behaviour before multi-GNSS).
 
     Returns
     -------
     NavData
+        ``eph`` (GPS), ``eph_r`` (GLONASS), ``eph_e`` (Galileo), ``eph_c``
+        (BeiDou), all times in GPS seconds since 1980-01-06: GLONASS epochs
+        (UTC) plus the leap seconds, BeiDou epochs (BDT) plus 14 s, Galileo
+        (GST) as is.  Galileo: ``tgd`` = BGD(E1,E5a), ``tgd2`` = BGD(E1,E5b),
+        ``data_source`` the RINEX bit field; BeiDou: ``tgd`` = T_GD1,
+        ``tgd2`` = T_GD2; GLONASS: positions [m], velocities [m/s],
+        accelerations [m/s^2], ``freq_k`` the FDMA channel.
 
     Raises
     ------
     RinexError
-        Malformed header, bad record or unexpected end of file (message gives
-        path and 1-based line number).
+        Malformed header, bad or truncated record or unexpected end of file
+        (message gives path and 1-based line number).
+    ValueError
+        ``systems`` has a letter other than G, R, E, C.
     """
+    from .galbds import BDT_GPST_OFFSET_S, BDT_WEEK_OFFSET, KeplerEphemerides
+    from .glonass import GlonassEphemerides, gps_utc_leap_seconds
+
+    want = _parse_systems(systems)
     src = _Lines(path)
     header = _read_header(src)
     version, ftype, sysc = _version_type(src, header)
-    if ftype != "N":
+    glo2 = version < 3 and ftype == "G"  # RINEX 2 GLONASS navigation file
+    if ftype != "N" and not glo2:
         raise src.error(f"malformed header: not a navigation file (type {ftype!r})", header[0][0])
-    if version >= 3 and sysc not in ("G", "M"):
-        raise src.error(f"malformed header: navigation file of system {sysc!r} has no GPS records", header[0][0])
+    if version >= 3 and sysc != "M" and sysc not in want:
+        if want == "G":
+            raise src.error(f"malformed header: navigation file of system {sysc!r} has no GPS records", header[0][0])
+        raise src.error(f"malformed header: navigation file of system {sysc!r} has none of the systems {want!r}",
+                        header[0][0])
     ion_alpha = ion_beta = None
+    leap = None
     for lineno, text, label in header:
         if label == "ION ALPHA" or label == "ION BETA":
             vals = [_float(src, text[2 + 12 * k:14 + 12 * k], label, lineno=lineno) for k in range(4)]
@@ -224,9 +323,18 @@ def read_rinex_nav(path) -> NavData:
                     ion_alpha = np.array(vals)
                 else:
                     ion_beta = np.array(vals)
+        elif label == "LEAP SECONDS" and text[:6].strip():
+            leap = float(_int(src, text[:6], "LEAP SECONDS", lineno))
+            if not (0 <= leap < 100):
+                raise src.error(f"malformed header: LEAP SECONDS {leap:g} out of range", lineno)
 
     rec = {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}
+    krec = {"E": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER},
+            "C": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}}
+    grec = {k: [] for k in ("prn", "toc_utc", "clock_bias", "gamma_n", "tk", "x", "vx", "ax", "health",
+                            "y", "vy", "ay", "freq_k", "z", "vz", "az", "age")}
     n_skipped = 0
+    skipped = {}
     rinex3 = version >= 3.0
     width0 = 23 if rinex3 else 22  # end of the epoch field on the first line
     cont_start = 4 if rinex3 else 3
@@ -239,8 +347,12 @@ def read_rinex_nav(path) -> NavData:
             sysid = line[0]
             if sysid == " ":
                 raise src.error("bad record: expected a record start (system letter in column 1)")
-            if sysid != "G":
+            if not ("A" <= sysid <= "Z"):
+                raise src.error(f"bad record: cannot delimit the record: column 1 is {sysid!r}, "
+                                f"not a system letter")
+            if sysid not in want or sysid not in _SYSTEM_NAMES:
                 n_skipped += 1
+                skipped[sysid] = skipped.get(sysid, 0) + 1
                 while not src.eof() and src.lines[src.i][:1] == " ":
                     src.i += 1
                 continue
@@ -251,6 +363,7 @@ def read_rinex_nav(path) -> NavData:
             except ValueError:
                 raise src.error(f"bad record: cannot parse epoch {line[:23]!r}") from None
         else:
+            sysid = "R" if glo2 else "G"
             if line[:2] == "  " and line[2:3] == " ":
                 raise src.error("bad record: expected a record start (PRN in columns 1-2)")
             prn = _int(src, line[0:2], "satellite number")
@@ -262,7 +375,48 @@ def read_rinex_nav(path) -> NavData:
             y += 2000 if y < 80 else 1900
         if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and 0 <= sec < 61):
             raise src.error(f"bad record: impossible epoch {line[:width0]!r}")
+        if not (0 <= prn <= 99):
+            raise src.error(f"bad record: satellite number {prn} out of range")
         clk = [_float(src, line[width0 + 19 * k:width0 + 19 * (k + 1)], "clock parameter") for k in range(3)]
+        sat = f"{sysid}{prn:02d}"
+        if sysid != "G":
+            n_req, n_max = _NAV3_LINES[sysid] if rinex3 else (3, 3)
+            vals = []
+            for k in range(n_max):
+                if k >= n_req and (src.eof() or src.lines[src.i][:1] != " " or not src.lines[src.i].strip()):
+                    break
+                cl = src.next(f"broadcast orbit line {k + 1} of {sat} (record started on line {start_line})")
+                if cl[:1] != " " and rinex3:
+                    raise src.error(f"bad record: broadcast orbit line {k + 1} of {sat} "
+                                    f"(record started on line {start_line}) missing")
+                vals.extend(_four(src, cl.ljust(cont_start + 76), cont_start, 19, "broadcast orbit value"))
+            t_cal = gps_seconds_from_calendar(y, mo, d, h, mi, sec)
+            if sysid == "R":
+                vals = [0.0 if math.isnan(v) else v for v in vals[:12]]
+                grec["prn"].append(prn)
+                grec["toc_utc"].append(t_cal)
+                for name, v in zip(("clock_bias", "gamma_n", "tk"), clk):
+                    grec[name].append(0.0 if math.isnan(v) else v)
+                for name, v in zip(("x", "vx", "ax", "health", "y", "vy", "ay", "freq_k", "z", "vz", "az", "age"),
+                                   vals):
+                    grec[name].append(v)
+                if not (1.0e3 < math.sqrt(vals[0] ** 2 + vals[4] ** 2 + vals[8] ** 2) < 1.0e5):
+                    raise src.error(f"bad record: {sat} record starting on line {start_line} has an orbit radius "
+                                    "outside 1000-100000 km")
+                if not (-7 <= vals[7] <= 13):
+                    raise src.error(f"bad record: {sat} record starting on line {start_line} has frequency "
+                                    f"channel {vals[7]:g} (not -7..13)")
+            else:
+                r = krec[sysid]
+                r["prn"].append(prn)
+                r["toc"].append(t_cal + (BDT_GPST_OFFSET_S if sysid == "C" else 0.0))
+                for name, v in zip(("af0", "af1", "af2"), clk):
+                    r[name].append(0.0 if math.isnan(v) else v)
+                for name, v in zip(_NAV_ORDER, vals):
+                    r[name].append(0.0 if math.isnan(v) else v)
+                if not (0.0 < r["sqrt_a"][-1]):
+                    raise src.error(f"bad record: {sat} record starting on line {start_line} has sqrt(A) <= 0")
+            continue
         vals = []
         for k in range(7):
             cl = src.next(f"broadcast orbit line {k + 1} of G{prn:02d} (record started on line {start_line})")
@@ -299,7 +453,38 @@ def read_rinex_nav(path) -> NavData:
         cols["fit_s"] = np.zeros(0)
     cols["prn"] = cols["prn"].astype(np.int64)
     eph = Ephemerides.from_columns(cols)
-    return NavData(src.path, version, eph, ion_alpha, ion_beta, n_skipped)
+
+    kep = {}
+    for s, r in krec.items():
+        c = {k: np.asarray(v, dtype=float) for k, v in r.items()}
+        # GST week = GPS week (RINEX aligns it; a 1024 offset is absorbed by the rounding below);
+        # BDT week + 1356 = GPS week, BDT = GPST - 14 s
+        off = (BDT_WEEK_OFFSET * SECONDS_PER_WEEK + BDT_GPST_OFFSET_S) if s == "C" else 0.0
+        toe = c["week"] * SECONDS_PER_WEEK + c["toe_sow"] + off
+        toe += SECONDS_PER_WEEK * np.round((c["toc"] - toe) / SECONDS_PER_WEEK)
+        c["toe"] = toe
+        c["week"] = np.floor(toe / SECONDS_PER_WEEK)
+        # neither system broadcasts a fit interval; both are updated at least every 1-3 h
+        c["fit_s"] = np.full(toe.shape, DEFAULT_FIT_S)
+        c["tgd2"] = c["iodc"]  # the 4th value of broadcast orbit line 6: BGD(E1,E5b) / T_GD2
+        if s == "E":
+            c["data_source"] = c["l2_codes"]
+            c["iodc"] = np.zeros_like(toe)
+        else:
+            c["data_source"] = np.zeros_like(toe)
+            c["iodc"] = c["fit_h"]  # AODC
+        c["prn"] = c["prn"].astype(np.int64)
+        kep[s] = KeplerEphemerides.from_columns(c)
+
+    g = {k: np.asarray(v, dtype=float) for k, v in grec.items()}
+    leap_s = leap if leap is not None else (gps_utc_leap_seconds(g["toc_utc"] + 18.0) if g["prn"].size else 0.0)
+    g["tb"] = g.pop("toc_utc") + leap_s
+    for k in ("x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az"):
+        g[k] = g[k] * 1.0e3  # km -> m
+    g["prn"] = g["prn"].astype(np.int64)
+    g["freq_k"] = np.round(g["freq_k"]).astype(np.int64)
+    eph_r = GlonassEphemerides.from_columns(g)
+    return NavData(src.path, version, eph, ion_alpha, ion_beta, n_skipped, eph_r, kep["E"], kep["C"], leap, skipped)
 
 
 # --------------------------------------------------------------------------- obs
