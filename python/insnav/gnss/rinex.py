@@ -498,10 +498,26 @@ _OBS_PREF3 = {
 }
 _OBS_PREF2 = {"C1": ("C1", "P1"), "L1": ("L1",), "D1": ("D1",), "S1": ("S1",)}
 
+#: Pseudorange code preference per system for RINEX 3 (first present wins).  The carrier phase,
+#: Doppler and C/N0 are then taken on the same band (same attribute first).  GPS: L1 C/A (then
+#: L1C, P(Y)); GLONASS: G1 C/A, then G1 P; Galileo: E1 (C pilot, B+C, B data); BeiDou: B1I
+#: (C2I; C1I in RINEX 3.02), then B1I I+Q, then B3I (C6I; broadcast clocks refer to B3I, so no
+#: group delay), then B2I.  B1C/B2a (C1P/C1X/C5X) have no group delay in the D1/D2 message and
+#: are not chosen.  Override with ``read_rinex_obs(..., codes={"C": ("C6I",)})``.
+OBS_CODE_PREFERENCE = {
+    "G": ("C1C", "C1X", "C1W", "C1P"),
+    "R": ("C1C", "C1P"),
+    "E": ("C1C", "C1X", "C1B"),
+    "C": ("C2I", "C1I", "C2X", "C2Q", "C6I", "C6X", "C7I"),
+}
+#: RINEX 2 code -> the RINEX 3 code it corresponds to (for group delay and wavelength)
+_RINEX2_AS_3 = {("G", "C1"): "C1C", ("G", "P1"): "C1W", ("R", "C1"): "C1C", ("R", "P1"): "C1P",
+                ("E", "C1"): "C1X", ("E", "P1"): "C1X"}
+
 
 @dataclass
 class ObsData:
-    """GPS L1 observations in long format (one row per epoch and satellite).
+    """Observations of one signal per system in long format (one row per epoch and satellite).
 
     Attributes
     ----------
@@ -509,7 +525,7 @@ class ObsData:
     version : float
     codes : dict
         Which RINEX observation code was read for each of ``C1 L1 D1 S1``
-        (None if absent from the file).
+        for GPS (None if absent from the file).
     epoch_t_gps_s : (n,) float
         Epoch times, GPS seconds since 1980-01-06 [s] (receiver time tags).
     epoch_week, epoch_tow : (n,)
@@ -525,10 +541,17 @@ class ObsData:
         Row time in the three conventions.
     prn : (m,) int
     C1, L1, D1, S1 : (m,) float
-        Pseudorange [m], carrier phase [cycles], Doppler [Hz], C/N0 [dB-Hz];
-        NaN where missing.
+        Pseudorange [m], carrier phase [cycles], Doppler [Hz], C/N0 [dB-Hz]
+        of the system's chosen signal (``codes_by_system``); NaN where missing.
     approx_r_e : (3,) float or None
         ``APPROX POSITION XYZ`` from the header [m].
+    system : (m,) str
+        One-letter system of each row (all ``'G'`` unless other systems were asked for).
+    codes_by_system : dict
+        System letter -> ``{"C1": code, "L1": ..., "D1": ..., "S1": ...}`` as
+        read from the file (RINEX 2 codes for RINEX 2 files).
+    glonass_channels : dict
+        GLONASS slot -> FDMA channel from the ``GLONASS SLOT / FRQ #`` header (RINEX 3).
     """
 
     path: str
@@ -549,13 +572,62 @@ class ObsData:
     D1: np.ndarray
     S1: np.ndarray
     approx_r_e: np.ndarray | None = field(default=None)
+    system: np.ndarray | None = None
+    codes_by_system: dict = field(default_factory=dict)
+    glonass_channels: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.system is None:
+            self.system = np.full(np.shape(self.prn), "G", dtype="<U1")
+        if not self.codes_by_system:
+            self.codes_by_system = {"G": dict(self.codes)}
+
+    @property
+    def sat_id(self) -> np.ndarray:
+        """(m,) RINEX satellite identifiers ``'G05'``..."""
+        from .systems import sat_id
+
+        return sat_id(self.system, self.prn) if self.prn.size else np.zeros(0, "<U3")
+
+    def pseudorange_code(self) -> np.ndarray:
+        """(m,) RINEX 3 code of each row's pseudorange (RINEX 2 codes mapped: C1 -> C1C, P1 -> C1W/C1P)."""
+        out = np.full(self.prn.shape, "", dtype="<U3")
+        for s, cd in self.codes_by_system.items():
+            c = cd.get("C1")
+            if c is None:
+                continue
+            out[self.system == s] = _RINEX2_AS_3.get((s, c), c) if len(c) == 2 else c
+        return out
 
 
-def _obs_types_header(src, header, version):
-    """Return {system letter: [codes]} from the header."""
+def _choose_codes(s, stypes, rinex3, prefer=None):
+    """{key: code or None} of system ``s`` given its list of observation types."""
+    if not rinex3:
+        return {k: next((c for c in cands if c in stypes), None) for k, cands in _OBS_PREF2.items()}
+    if s == "G" and prefer is None:
+        return {k: next((c for c in cands if c in stypes), None) for k, cands in _OBS_PREF3.items()}
+    cands = prefer if prefer is not None else OBS_CODE_PREFERENCE.get(s, ())
+    c1 = next((c for c in cands if c in stypes), None)
+    out = {"C1": c1}
+    for key in ("L1", "D1", "S1"):
+        if c1 is None:
+            out[key] = None
+            continue
+        same = key[0] + c1[1:]
+        band = [c for c in stypes if c[0] == key[0] and c[1] == c1[1]]
+        out[key] = same if same in stypes else (band[0] if band else None)
+    return out
+
+
+def _obs_types_header(src, header, version, check=""):
+    """Return {system letter: [codes]} from the header.
+
+    For RINEX 3, the systems in ``check`` must list as many types as they announce.
+    """
     types = {}
     if version >= 3:
         cur_sys, cur_n = None, 0
+        announced = {}
         for lineno, text, label in header:
             if label != "SYS / # / OBS TYPES":
                 continue
@@ -565,12 +637,17 @@ def _obs_types_header(src, header, version):
                 if cur_n is None:
                     raise src.error("malformed header: SYS / # / OBS TYPES without a count", lineno)
                 types[cur_sys] = []
+                announced[cur_sys] = (cur_n, lineno)
             elif cur_sys is None:
                 raise src.error("malformed header: SYS / # / OBS TYPES continuation without a system", lineno)
             for k in range(13):
                 c = text[7 + 4 * k:10 + 4 * k].strip()
                 if c and len(types[cur_sys]) < cur_n:
                     types[cur_sys].append(c)
+        for sy in check:
+            if sy in announced and len(types[sy]) != announced[sy][0]:
+                raise src.error(f"malformed header: SYS / # / OBS TYPES of {sy} announces {announced[sy][0]} "
+                                f"types, lists {len(types[sy])}", announced[sy][1])
     else:
         n, codes = None, []
         for lineno, text, label in header:
@@ -593,33 +670,49 @@ def _obs_types_header(src, header, version):
     return types
 
 
-def read_rinex_obs(path) -> ObsData:
-    """Read GPS L1 observations (pseudorange, phase, Doppler, C/N0) from RINEX 2.x / 3.x.
+def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
+    """Read one signal's observations (pseudorange, phase, Doppler, C/N0) per system from RINEX 2.x / 3.x.
 
     Parameters
     ----------
     path : str or PathLike
         RINEX 2.10/2.11 or 3.02-3.05 observation file (GPS or mixed).
+    systems : str
+        Systems to read, letters of ``"GREC"``; the default ``"G"`` reads GPS
+        only (the behaviour before multi-GNSS).  RINEX 2.11 mixed files carry
+        G, R (and E) satellites with one list of types for all.
+    codes : dict, optional
+        System letter -> tuple of pseudorange codes in order of preference,
+        overriding :data:`OBS_CODE_PREFERENCE` (RINEX 3 only).
 
     Returns
     -------
     ObsData
-        Long-format arrays; see :class:`ObsData`.  For RINEX 3 the code read
-        is the first present of C1C, C1X, C1W, C1P (likewise L/D/S); for
-        RINEX 2 ``C1`` (else ``P1``), ``L1``, ``D1``, ``S1``.
+        Long-format arrays; see :class:`ObsData`.  For RINEX 3 GPS the code
+        read is the first present of C1C, C1X, C1W, C1P (likewise L/D/S); the
+        other systems follow :data:`OBS_CODE_PREFERENCE` (phase, Doppler and
+        C/N0 then on the same band); for RINEX 2 ``C1`` (else ``P1``), ``L1``,
+        ``D1``, ``S1``.  ``system`` names each row's system,
+        ``codes_by_system`` the codes read.  Doppler stays in Hz: GLONASS rows
+        need their FDMA wavelength (:func:`insnav.gnss.broadcast.signal_wavelength`).
 
     Raises
     ------
     RinexError
-        Malformed header, bad epoch or observation record, unexpected end of
+        Malformed header (e.g. fewer observation types than announced for a
+        requested system), bad epoch or observation record, unexpected end of
         file; the message names the file and the 1-based line number.
+    ValueError
+        ``systems`` has a letter other than G, R, E, C.
     """
+    want = _parse_systems(systems)
     src = _Lines(path)
     header = _read_header(src)
     version, ftype, sysc = _version_type(src, header)
     if ftype != "O":
         raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
     approx = None
+    glo_k = {}
     for lineno, text, label in header:
         if label == "APPROX POSITION XYZ":
             approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label, lineno=lineno) for k in range(3)])
@@ -627,33 +720,42 @@ def read_rinex_obs(path) -> ObsData:
             ts = text[48:51].strip()
             if ts and ts != "GPS":
                 raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
-    types = _obs_types_header(src, header, version)
+        if label == "GLONASS SLOT / FRQ #":
+            for k in range(8):
+                sl, fr = text[4 + 7 * k:7 + 7 * k], text[8 + 7 * k:10 + 7 * k]
+                if sl[:1] == "R" and sl[1:].strip():
+                    glo_k[_int(src, sl[1:], "GLONASS slot", lineno)] = _int(src, fr, "GLONASS frequency number",
+                                                                              lineno)
     rinex3 = version >= 3
-    gtypes = types.get("G", [])
-    pref = _OBS_PREF3 if rinex3 else _OBS_PREF2
-    codes, cols = {}, {}
-    for key, cands in pref.items():
-        codes[key] = next((c for c in cands if c in gtypes), None)
-        cols[key] = gtypes.index(codes[key]) if codes[key] else None
+    types = _obs_types_header(src, header, version, check=want if rinex3 else "")
+    # RINEX 2: one list of types for every system
+    sys_types = {s: types.get(s if rinex3 else "G", []) for s in want}
+    prefer = {} if codes is None else {k.upper(): tuple(v) if not isinstance(v, str) else (v,)
+                                       for k, v in codes.items()}
+    codes_by_sys, cols_by_sys = {}, {}
+    for s in want:
+        cs = _choose_codes(s, sys_types[s], rinex3, prefer.get(s) if rinex3 else None)
+        codes_by_sys[s] = cs
+        cols_by_sys[s] = {k: (sys_types[s].index(c) if c else None) for k, c in cs.items()}
+    gcodes = codes_by_sys.get("G") or _choose_codes("G", types.get("G", []), rinex3)
+    keys = tuple(_OBS_PREF3)
     ntypes = {s: len(v) for s, v in types.items()}
 
     ep_t, ep_flag, ep_clk = [], [], []
-    r_ep, r_prn = [], []
-    r_val = {k: [] for k in pref}
+    r_ep, r_prn, r_sys = [], [], []
+    r_val = {k: [] for k in keys}
 
-    def parse_sat(line, sat_prn, ep_index, lineno):
+    def parse_sat(line, s, sat_prn, ep_index):
         r_ep.append(ep_index)
         r_prn.append(sat_prn)
-        base = 3 if rinex3 else 0
-        for key, col in cols.items():
+        r_sys.append(s)
+        base = 3
+        for key, col in cols_by_sys[s].items():
             if col is None:
                 r_val[key].append(math.nan)
                 continue
-            if rinex3:
-                txt = line[base + 16 * col: base + 16 * col + 14]
-            else:
-                txt = line[16 * (col % 5): 16 * (col % 5) + 14]
-            r_val[key].append(_float(src, txt, f"observation {codes[key]}"))
+            txt = line[base + 16 * col: base + 16 * col + 14]
+            r_val[key].append(_float(src, txt, f"observation {codes_by_sys[s][key]}"))
 
     while not src.eof():
         line = src.next()
@@ -707,8 +809,8 @@ def read_rinex_obs(path) -> ObsData:
                 s = sid[0]
                 if s not in ntypes:
                     raise src.error(f"bad record: satellite {sid!r} of an undeclared system")
-                if s == "G" and keep:
-                    parse_sat(sl, _int(src, sid[1:3], "satellite number"), e_idx, src.lineno)
+                if s in want and keep:
+                    parse_sat(sl, s, _int(src, sid[1:3], "satellite number"), e_idx)
         else:
             sats = []
             text = line[32:68]
@@ -727,18 +829,19 @@ def read_rinex_obs(path) -> ObsData:
             for sid in sats:
                 s = sid[0] if sid[0] != " " else "G"
                 obs_lines = [src.next(f"the observations of the epoch on line {ep_line}") for _ in range(nlines)]
-                if s == "G" and keep:
+                if s in want and keep:
                     prn = _int(src, sid[1:3], "satellite number")
                     # assemble the obs of the requested columns line by line
                     r_ep.append(e_idx)
                     r_prn.append(prn)
-                    for key, col in cols.items():
+                    r_sys.append(s)
+                    for key, col in cols_by_sys[s].items():
                         if col is None:
                             r_val[key].append(math.nan)
                             continue
                         ol = obs_lines[col // 5]
                         txt = ol[16 * (col % 5):16 * (col % 5) + 14]
-                        r_val[key].append(_float(src, txt, f"observation {codes[key]}",
+                        r_val[key].append(_float(src, txt, f"observation {codes_by_sys[s][key]}",
                                                  lineno=src.lineno - nlines + 1 + col // 5))
         if keep:
             ep_t.append(t)
@@ -750,10 +853,11 @@ def read_rinex_obs(path) -> ObsData:
     wk, tw = week_tow(ep_t)
     wk, tw = np.atleast_1d(wk), np.atleast_1d(tw)
     return ObsData(
-        path=src.path, version=version, codes=codes,
+        path=src.path, version=version, codes=dict(gcodes),
         epoch_t_gps_s=ep_t, epoch_week=wk, epoch_tow=tw,
         epoch_flag=np.asarray(ep_flag, dtype=np.int64), clock_offset_s=np.asarray(ep_clk, dtype=float),
         epoch=e, t_gps_s=ep_t[e], week=wk[e], tow=tw[e], prn=np.asarray(r_prn, dtype=np.int64),
-        C1=np.asarray(r_val["C1"]), L1=np.asarray(r_val["L1"]), D1=np.asarray(r_val["D1"]),
-        S1=np.asarray(r_val["S1"]), approx_r_e=approx,
+        C1=np.asarray(r_val["C1"], dtype=float), L1=np.asarray(r_val["L1"], dtype=float),
+        D1=np.asarray(r_val["D1"], dtype=float), S1=np.asarray(r_val["S1"], dtype=float), approx_r_e=approx,
+        system=np.asarray(r_sys, dtype="<U1"), codes_by_system=codes_by_sys, glonass_channels=glo_k,
     )
