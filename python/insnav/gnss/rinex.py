@@ -405,7 +405,7 @@ def read_rinex_nav(path, systems="G") -> NavData:
                                     "outside 1000-100000 km")
                 if not (-7 <= vals[7] <= 13):
                     raise src.error(f"bad record: {sat} record starting on line {start_line} has frequency "
-                                    f"channel {vals[7]:g} (not -7..13)")
+                                    f"channel {vals[7]:g} (not -7..13)", start_line + 2)
             else:
                 r = krec[sysid]
                 r["prn"].append(prn)
