@@ -1,17 +1,23 @@
-"""RINEX 2.10/2.11 and 3.02-3.05 readers for GPS navigation and observation files.
+"""RINEX 2.10/2.11 and 3.02-3.05 readers for navigation and observation files.
 
-Why an own parser: the subset needed here (GPS LNAV records, the L1 C/A
-pseudorange/phase/Doppler/C/N0 columns) is small; a dependency such as
-georinex pulls in xarray/pandas and parses everything; and we want exact
-control over errors.  Every problem in a file raises :class:`RinexError`,
-whose message names the file, the 1-based line number and what was wrong;
-no IndexError or bare ValueError escapes for a malformed file.
+Navigation: GPS LNAV, GLONASS (RINEX 2 ``.g`` and RINEX 3 ``R`` records),
+Galileo I/NAV and F/NAV (``E``), BeiDou D1/D2 (``C``); observations: one
+signal per system (GPS, GLONASS, Galileo, BeiDou), pseudorange, phase,
+Doppler and C/N0.  Which systems are read is the caller's choice
+(``systems=``); the default is GPS only.
+
+Why an own parser: the subset needed here (broadcast records, one signal per
+system) is small; a dependency such as georinex pulls in xarray/pandas and
+parses everything; and we want exact control over errors.  Every problem in
+a file raises :class:`RinexError`, whose message names the file, the 1-based
+line number and what was wrong; no IndexError or bare ValueError escapes for
+a malformed file.
 
 Times are returned as GPS seconds since 1980-01-06 (``t_gps_s``, see
-:mod:`insnav.gnss.gpstime`) and as (GPS week, seconds of week).  Navigation
-record epochs (``toc``) of GPS records and observation epochs are taken to be
-GPS time, as the RINEX standard specifies for GPS and for files whose time
-system is GPS (the only case supported; other time systems raise).
+:mod:`insnav.gnss.gpstime`) and as (GPS week, seconds of week).  GPS and
+Galileo record epochs are GPS time (GST is steered to it), BeiDou epochs
+(BDT) get +14 s, GLONASS epochs (UTC) get the leap seconds.  Observation
+epochs must be GPS time (the only time system supported; others raise).
 
 References
 ----------

@@ -3,8 +3,9 @@ of ``_core.run_tight`` (pseudorange, rate, satellite position, velocity and
 clock, sigmas), built from the simulator's raw observations or from RINEX
 observation and navigation files (GPS LNAV broadcast ephemerides,
 IS-GPS-200, transmit time and Sagnac as in :mod:`insnav.gnss.ephemeris`;
-Klobuchar / Saastamoinen corrections), with an elevation mask, a best-GDOP
-satellite selection and per-satellite sigmas.
+with ``systems="GREC"`` also GLONASS, Galileo and BeiDou through
+:mod:`insnav.gnss.broadcast`; Klobuchar / Saastamoinen corrections), with an
+elevation mask, a best-GDOP satellite selection and per-satellite sigmas.
 """
 from __future__ import annotations
 
