@@ -120,6 +120,15 @@ def test_rinex3_nav_bad_input(tmp_path):
     hdr_r = NAV3_HEADER.replace("M: MIXED ", "R: GLONASS")
     with pytest.raises(RinexError, match=r"line 1: malformed header: navigation file of system 'R' has no GPS"):
         read_rinex_nav(write(tmp_path, "r.rnx", hdr_r + "".join(r01)))
+    # Galileo week given as a GST week (GPS week - 1024) or BeiDou week as GPS week: same toe (resolved by toc)
+    gst = "".join(e01).replace("2.253000000000e+03", "1.229000000000e+03")
+    n_gst = read_rinex_nav(write(tmp_path, "gst.rnx", NAV3_HEADER + gst), systems="E")
+    assert n_gst.eph_e.toe[0] == ok.eph_e.toe[0] and n_gst.eph_e.toe_sow[0] == 172200.0
+    # RINEX 2 GLONASS: a truncated record names the record's start line
+    g2 = need(SMARTLOC, "brdc1580.16g").read_text().splitlines(keepends=True)
+    with pytest.raises(RinexError, match=r"g2\.16g, line 11: unexpected end of file while reading broadcast orbit "
+                                         r"line 3 of R01 \(record started on line 8\)"):
+        read_rinex_nav(write(tmp_path, "g2.16g", "".join(g2[:10])))
     with pytest.raises(ValueError, match="systems='GX'"):
         read_rinex_nav(write(tmp_path, "ok2.rnx", NAV3_HEADER), systems="GX")
 
@@ -394,6 +403,11 @@ def test_group_delays_and_galileo_message_choice(nav23):
         st = nav23.sat_states(t, ["C06"], codes={"C": code})
         i = st.eph_idx[0]
         assert st.group_delay_s[0] == (0.0 if expect is None else getattr(c, expect)[i])
+    # GPS: L1 -> T_GD, L2 -> gamma T_GD
+    g1 = nav23.sat_states(t + 7200.0, ["G01"], codes={"G": "C1C"})
+    g2 = nav23.sat_states(t + 7200.0, ["G01"], codes={"G": "C2W"})
+    assert g2.group_delay_s[0] == pytest.approx((77.0 / 60.0) ** 2 * g1.group_delay_s[0], rel=1e-12)
+    assert g1.group_delay_s[0] == nav23.eph.tgd[g1.eph_idx[0]] != 0.0
     with pytest.raises(ValueError, match="C5X"):
         nav23.sat_states(t, ["C06"], codes={"C": "C5X"})
 
