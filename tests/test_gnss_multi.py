@@ -159,6 +159,9 @@ def test_rinex3_obs_four_systems_and_bad_input(tmp_path):
     np.testing.assert_array_equal(o.D1, [100.0, -200.0, 300.0, 500.0])
     assert o.glonass_channels == {1: 1, 2: -4}
     np.testing.assert_array_equal(o.pseudorange_code(), ["C1C", "C1P", "C1X", "C2I"])
+    # wavelengths: GLONASS from the header's channel (R02: k = -4), BeiDou B1I
+    np.testing.assert_allclose(o.wavelength_m(), C_LIGHT / np.array([1575.42e6, 1602e6 - 4 * 0.5625e6, 1575.42e6,
+                                                                      1561.098e6]))
     # preference override: B3I
     o6 = read_rinex_obs(p, systems="C", codes={"C": ("C6I",)})
     assert o6.C1[0] == 3.8e7 and o6.S1[0] == 30.0
@@ -197,6 +200,7 @@ def test_rinex2_mixed_obs_glonass_doppler_fdma():
     v = (gt[j + 1, 1:4] - gt[j - 1, 1:4]) / (gt[j + 1, 0] - gt[j - 1, 0])[:, None]
     ts = transmit_states_multi(nav, obs.t_gps_s, r, system=obs.system, prn=obs.prn, codes=obs.pseudorange_code())
     assert ts.valid.mean() > 0.95
+    np.testing.assert_array_equal(obs.wavelength_m(nav)[ts.valid], ts.wavelength_m[ts.valid])
     d = ts.r_e - r
     u = d / np.linalg.norm(d, axis=1)[:, None]
     model = np.sum(u * (ts.v_e - v), axis=1) - ts.clock_drift_mps

@@ -160,6 +160,14 @@ def _check_code(s, code):
                          f"(supported bands {', '.join(ok)})")
 
 
+def _check_codes(sys_a, code_a):
+    """ValueError for a code of G/R/E/C without a group delay model (other systems: no record, invalid)."""
+    for s in np.unique(sys_a):
+        if s in "GREC" and len(s) == 1:
+            for c in np.unique(code_a[sys_a == s]):
+                _check_code(s, c)
+
+
 def select_multi(nav, system, prn, t_gps_s, codes=None):
     """Row in ``nav``'s table of each (system, prn) at ``t_gps_s`` for the signal ``codes``; -1 if none.
 
@@ -268,6 +276,7 @@ def sat_states_multi(nav, t_gps_s, sat_ids=None, *, system=None, prn=None, codes
     k = sys_a.size
     t = np.broadcast_to(np.asarray(t_gps_s, float), (k,)).astype(float)
     code_a = _codes_per_row(sys_a, codes)
+    _check_codes(sys_a, code_a)
     out = _empty_states(k, sys_a, prn_a)
     idx = select_multi(nav, sys_a, prn_a, t, code_a)
     out["eph_idx"] = idx
@@ -277,8 +286,6 @@ def sat_states_multi(nav, t_gps_s, sat_ids=None, *, system=None, prn=None, codes
         rows = np.flatnonzero((sys_a == s) & (idx >= 0))
         if rows.size == 0:
             continue
-        for c in np.unique(code_a[rows]):
-            _check_code(s, c)
         r, v, b, d = _state_at(nav, s, idx[rows], t[rows], relativistic)
         gd = _group_delay(nav, s, idx[rows], code_a[rows]) if group_delay else np.zeros(rows.size)
         out["r_e"][rows], out["v_e"][rows] = r, v
@@ -325,6 +332,7 @@ def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None,
     t_rx = np.broadcast_to(np.asarray(t_rx_gps_s, float), (k,)).astype(float)
     r_rx = np.broadcast_to(np.asarray(r_rx_e, float), (k, 3))
     code_a = _codes_per_row(sys_a, codes)
+    _check_codes(sys_a, code_a)
     out = _empty_states(k, sys_a, prn_a)
     idx = select_multi(nav, sys_a, prn_a, t_rx, code_a)
     out["eph_idx"] = idx
@@ -332,8 +340,6 @@ def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None,
         rows = np.flatnonzero((sys_a == s) & (idx >= 0))
         if rows.size == 0:
             continue
-        for c in np.unique(code_a[rows]):
-            _check_code(s, c)
         ii = idx[rows]
         gd = _group_delay(nav, s, ii, code_a[rows]) if group_delay else np.zeros(rows.size)
         if s == "G":

@@ -606,6 +606,26 @@ class ObsData:
         return out
 
 
+    def wavelength_m(self, nav=None) -> np.ndarray:
+        """(m,) carrier wavelength [m] of each row's signal, for Doppler -> range rate (``-lambda D1``).
+
+        GLONASS rows use the FDMA channel of the satellite from ``nav`` (its
+        latest record) or else from the ``GLONASS SLOT / FRQ #`` header; NaN
+        where the channel is unknown.
+        """
+        from .broadcast import signal_wavelength
+
+        k = np.zeros(self.prn.shape)
+        glo = self.system == "R"
+        if glo.any():
+            ch = np.array([self.glonass_channels.get(int(p), -99) for p in self.prn[glo]], dtype=float)
+            if nav is not None and len(nav.eph_r):
+                from_nav = nav.eph_r.channel(self.prn[glo]).astype(float)
+                ch = np.where(from_nav > -99, from_nav, ch)
+            k[glo] = ch
+        return signal_wavelength(self.system, self.pseudorange_code(), k)
+
+
 def _choose_codes(s, stypes, rinex3, prefer=None):
     """{key: code or None} of system ``s`` given its list of observation types."""
     if not rinex3:
