@@ -278,8 +278,15 @@ def _design(r, sats, sys_col, n_clk):
     u = d / rng[:, None]
     H = np.zeros((len(sats), 3 + n_clk))
     H[:, :3] = -u
-    H[np.arange(len(sats)), 3 + sys_col] = 1.0
+    H[:, 3] = 1.0  # reference clock
+    o = np.flatnonzero(sys_col > 0)
+    H[o, 3 + sys_col[o]] = 1.0  # inter-system bias of the row's system
     return u, rng, H
+
+
+def _clock(x, col):
+    """Modelled receiver clock of each row: reference clock plus its system's ISB [m]."""
+    return x[3] + np.append(0.0, x[4:])[col]
 
 
 def _clock_columns(system):
@@ -302,7 +309,7 @@ def _position_fit(sats, system, w, x0, iterations):
     ok = False
     for _ in range(iterations):
         u, rng, H = _design(x[:3], sats, col, n_clk)
-        y = sats[:, 0] - (rng - sats[:, 8] + x[3:][col])
+        y = sats[:, 0] - (rng - sats[:, 8] + _clock(x, col))
         Hw = H * w[:, None]
         dx = np.linalg.lstsq(Hw, y * w, rcond=None)[0]
         x = x + dx
@@ -312,7 +319,7 @@ def _position_fit(sats, system, w, x0, iterations):
             ok = True
             break
     u, rng, H = _design(x[:3], sats, col, n_clk)
-    v = sats[:, 0] - (rng - sats[:, 8] + x[3:][col])
+    v = sats[:, 0] - (rng - sats[:, 8] + _clock(x, col))
     return x, u, H, v, ok, letters, col
 
 
