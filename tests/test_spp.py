@@ -356,3 +356,36 @@ def test_cli_spp_bad_key_and_missing_nav_are_one_line_errors(tmp_path):
                         "x.obs", "--out", str(tmp_path / "o.csv")], capture_output=True, text=True)
     err = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert r.returncode != 0 and len(err) == 1 and "--nav" in err[0]
+
+
+def test_gnss_table_reaches_the_tight_inputs(shared_data, tmp_path):
+    """[gnss] in a --format rinex run TOML changes the rows' sigmas (and only then)."""
+    d = shared_data / "rtklibexplorer_walk_0827"
+    if not (d / "rinex_derived" / "gnss_1730.obs").is_file():
+        pytest.skip(f"{d} not found")
+    from insnav.io.rinex_dataset import load_rinex_run
+
+    rinex = ('[rinex]\nimu_columns = ["ax", "ay", "az", "gx", "gy", "gz", "tick_ms"]\nimu_acc_unit = "g"\n'
+             'imu_gyro_unit = "dps"\nimu_mount_rpy_deg = [180.0, 0.0, -90.0]\nend_s = 40.0\n')
+    files = (d / "rinex_derived" / "gnss_1730.obs", d / "rinex_derived" / "gnss_1730.nav", d / "raw" / "imu_1730.csv")
+    base = tmp_path / "base.toml"
+    base.write_text(rinex)
+    ds0, _ = load_rinex_run(*files, base)
+    legacy = tmp_path / "legacy.toml"
+    legacy.write_text(rinex + '[gnss]\nmodel = "legacy"\n')
+    ds1, _ = load_rinex_run(*files, legacy)
+    assert np.array_equal(ds0.tight_inputs.sats, ds1.tight_inputs.sats, equal_nan=True)
+    rt = tmp_path / "rtklib.toml"
+    rt.write_text(rinex + '[gnss]\nmodel = "rtklib"\n')
+    ds2, _ = load_rinex_run(*files, rt)
+    i2 = ds2.tight_inputs
+    assert np.allclose(i2.sats[:, 10], sigma_rtklib(np.radians(i2.elevation_deg)), rtol=1e-12)
+    # the same rows and measurements; the satellite states move by millimetres only (the approximate
+    # position, from the differently weighted single-point fixes, enters the light time)
+    assert np.array_equal(i2.prn, ds0.tight_inputs.prn) and np.array_equal(i2.sats[:, :2], ds0.tight_inputs.sats[:, :2],
+                                                                             equal_nan=True)
+    assert np.allclose(i2.sats[:, 2:10], ds0.tight_inputs.sats[:, 2:10], rtol=0, atol=0.05)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(rinex + '[gnss]\nmodel = "rtklib"\nrtklib_c_m = 1.0\n')
+    with pytest.raises(ConfigError, match=r"bad\.toml: unknown key 'gnss\.rtklib_c_m'"):
+        load_rinex_run(*files, bad)
