@@ -56,7 +56,8 @@ def add_run_parser(sub) -> None:
                    "or the KF-GINS YAML with --format kfgins")
     p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath); with --format rinex the IMU CSV")
     p.add_argument("--obs", help="RINEX 2/3 observation file (--format rinex)")
-    p.add_argument("--nav", help="RINEX 2/3 GPS navigation file (--format rinex)")
+    p.add_argument("--nav", help="RINEX 2/3 GPS navigation file (--format rinex); with --filter spp several, "
+                   "comma-separated (e.g. brdc1580.16n,brdc1580.16g), or a mixed RINEX 3 file")
     p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex with a tick_ms "
                    "column; default IMU.tag)")
     p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath)")
@@ -229,7 +230,7 @@ def cmd_run_spp(args, stages) -> int:
         raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
-        sol = run_spp_rinex(args.obs, args.nav, args.config)
+        sol = run_spp_rinex(args.obs, [p for p in args.nav.split(",") if p], args.config)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     stages.done("filter")

@@ -26,7 +26,8 @@ import numpy as np
 
 from .. import earth
 from ..config import ConfigError
-from ..gnss.spp import SppOptions, SppSolution, solve_spp, spp_inputs_from_rinex, summary_counts
+from ..gnss.spp import (SppOptions, SppSolution, read_nav_multi, read_obs_multi, solve_spp, spp_inputs_from_rinex,
+                        summary_counts)
 from ..gnss.systems import SYSTEMS
 from ..gnss.weighting import Weighting
 from ..units import RAD2DEG
@@ -126,7 +127,9 @@ def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss
 
     Parameters
     ----------
-    obs, nav : path or insnav.gnss.ObsData / NavData
+    obs : path or insnav.gnss.ObsData
+        Read with the ``[gnss] systems`` when the reader supports several systems.
+    nav : path, list of paths (merged) or insnav.gnss.NavData
     config_path : path, optional
         Run TOML (``[rinex]``, ``[gnss]``, ``[spp]`` tables).
     rinex, gnss, spp : dict, optional
@@ -140,7 +143,6 @@ def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss
         Time: GPS seconds of week of the first epoch's week; ``solution.spp``
         the full :class:`SppSolution`, ``solution.summary`` the counts and options.
     """
-    from ..gnss import read_rinex_nav, read_rinex_obs
     from ..gnss.gpstime import SECONDS_PER_WEEK
     from ..io.rinex_dataset import RinexOptions, _approx_position
 
@@ -153,9 +155,9 @@ def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss
     if spp:
         sopt = SppOptions.from_dict({**_fields(sopt), **spp}, src)
     if not hasattr(obs, "C1"):
-        obs = read_rinex_obs(obs)
+        obs = read_obs_multi(obs, wgt.systems)
     if not hasattr(nav, "eph"):
-        nav = read_rinex_nav(nav)
+        nav = read_nav_multi(nav, wgt.systems)
     if obs.epoch_t_gps_s.size == 0:
         raise ValueError(f"{obs.path}: no observation epochs")
     t_week0 = SECONDS_PER_WEEK * int(obs.epoch_week[0])

@@ -52,7 +52,7 @@ from ..config import ConfigError
 from .systems import SYSTEMS
 
 __all__ = ["SppOptions", "SppSolution", "solve_spp", "chi2_quantile", "spp_inputs_from_rinex", "RAIM_STATUS",
-           "summary_counts"]
+           "summary_counts", "read_obs_multi", "read_nav_multi"]
 
 #: per-epoch RAIM status codes
 RAIM_STATUS = {0: "passed", 1: "excluded", 2: "failed", 3: "untested", 4: "no solution"}
@@ -577,17 +577,38 @@ def _obs_system(obs) -> np.ndarray:
 
 
 def _sat_states(nav, system, prn, t_rx_gps_s, r0, obs, rows) -> dict:
-    """Satellite states at transmission for rows of any system (GPS LNAV here).
+    """Satellite states at transmission for rows of any system.
+
+    Through the multi-system entry point ``insnav.gnss.broadcast.transmit_states_multi``
+    when the package has it (GPS rows there are exactly
+    :func:`insnav.gnss.ephemeris.transmit_states` with T_GD), with each
+    row's pseudorange code (``obs.pseudorange_code()``: group delay, and the
+    GLONASS FDMA wavelength); otherwise GPS LNAV only.
 
     Returns a dict of (k,) / (k, 3) arrays: ``valid`` (an ephemeris was
-    found), ``r_e``, ``v_e``, ``clock_bias_s`` (T_GD applied), ``clock_drift_s_s``,
-    ``range_m``, ``wavelength_m`` (of the Doppler), ``iono_scale`` (the L1
-    Klobuchar delay times (f_L1/f)^2).  Rows without ephemeris get NaN states.
+    found), ``r_e``, ``v_e``, ``clock_bias_s`` (group delay applied),
+    ``clock_drift_s_s``, ``range_m``, ``wavelength_m`` (of the Doppler),
+    ``iono_scale`` (the L1 Klobuchar delay times (f_L1/f)^2 = (lambda/lambda_L1)^2).
+    Rows without ephemeris get NaN states.
     """
     from .ephemeris import select_ephemeris, transmit_states
     from .measurements import L1_WAVELENGTH
 
     k = len(prn)
+    try:
+        from .broadcast import transmit_states_multi
+    except ImportError:  # a GPS-only package
+        transmit_states_multi = None
+    if transmit_states_multi is not None and hasattr(nav, "eph_r"):
+        codes = obs.pseudorange_code()[rows] if hasattr(obs, "pseudorange_code") else None
+        if codes is not None:
+            codes = np.where(codes == "", "C1C", codes)
+        ts = transmit_states_multi(nav, t_rx_gps_s, r0, system=system, prn=prn, codes=codes)
+        valid = ts.valid & np.isfinite(ts.range_m)
+        lam = np.where(valid, ts.wavelength_m, np.nan)
+        return dict(valid=valid, r_e=ts.r_e, v_e=ts.v_e, clock_bias_s=ts.clock_bias_s,
+                    clock_drift_s_s=ts.clock_drift_s_s, range_m=ts.range_m, wavelength_m=lam,
+                    iono_scale=np.where(valid, (lam / L1_WAVELENGTH) ** 2, 1.0))
     out = dict(valid=np.zeros(k, bool), r_e=np.full((k, 3), np.nan), v_e=np.full((k, 3), np.nan),
                clock_bias_s=np.full(k, np.nan), clock_drift_s_s=np.full(k, np.nan), range_m=np.full(k, np.nan),
                wavelength_m=np.full(k, np.nan), iono_scale=np.ones(k))
@@ -603,3 +624,36 @@ def _sat_states(nav, system, prn, t_rx_gps_s, r0, obs, rows) -> dict:
             out["range_m"][gg] = ts.range_m
             out["wavelength_m"][gg] = L1_WAVELENGTH
     return out
+
+
+def _reads_systems() -> bool:
+    import inspect
+
+    from .rinex import read_rinex_obs
+
+    return "systems" in inspect.signature(read_rinex_obs).parameters
+
+
+def read_obs_multi(path, systems="GREC"):
+    """ObsData of the ``systems`` (a GPS-only reader: GPS)."""
+    from .rinex import read_rinex_obs
+
+    return read_rinex_obs(path, systems="".join(systems)) if _reads_systems() else read_rinex_obs(path)
+
+
+def read_nav_multi(paths, systems="GREC"):
+    """NavData of one or more navigation files (merged; e.g. a RINEX 2 ``.n`` and ``.g`` pair)."""
+    from .rinex import read_rinex_nav
+
+    if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
+        paths = [paths]
+    nav = None
+    for p in paths:
+        n = read_rinex_nav(p, systems="".join(systems)) if _reads_systems() else read_rinex_nav(p)
+        if nav is None:
+            nav = n
+        elif hasattr(nav, "merge"):
+            nav = nav.merge(n)
+        else:
+            raise ValueError(f"{p}: this navigation reader cannot merge files; give one navigation file")
+    return nav
