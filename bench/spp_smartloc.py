@@ -40,45 +40,33 @@ def ground_truth(d: Path):
     return a[:, 0], a[:, 1:4]
 
 
+NAV_FILES = {"G": ("brdc1580.16n",), "GR": ("brdc1580.16n", "brdc1580.16g")}
+
+
 def nav_for(d: Path, systems: str):
-    """The navigation data for the systems (GPS: brdc1580.16n; with GLONASS: the .16n + .16g / mixed file)."""
-    from insnav.gnss import read_rinex_nav
+    """Navigation data of the systems (GPS: brdc1580.16n; GPS+GLONASS: with brdc1580.16g), or None when
+    the reader of this commit does not read GLONASS."""
+    from insnav.gnss.spp import read_nav_multi
 
-    if systems == "G":
-        return read_rinex_nav(d / "brdc1580.16n")
-    return _multi_nav(d)
-
-
-def _multi_nav(d: Path):
-    """GPS + GLONASS navigation data, when the reader supports it (None otherwise)."""
-    try:
-        from insnav.gnss import read_rinex_nav
-
-        nav = read_rinex_nav(d / "BRDC00WRD_U_20161580000_01D_MN.rnx")
-    except Exception:  # noqa: BLE001 - an older reader refuses the mixed file
-        return None
-    if not _has_glonass(nav):
+    nav = read_nav_multi([d / f for f in NAV_FILES[systems]], systems)
+    if "R" in systems and not len(getattr(nav, "eph_r", ())):
         return None
     return nav
 
 
-def _has_glonass(nav) -> bool:
-    for name in ("glo", "glonass", "geph"):
-        g = getattr(nav, name, None)
-        if g is not None and len(g):
-            return True
-    sy = getattr(getattr(nav, "eph", None), "system", None)
-    return sy is not None and bool(np.any(np.asarray(sy) == "R"))
+def read_obs(d: Path, systems: str):
+    from insnav.gnss.spp import read_obs_multi
+
+    return read_obs_multi(d / "Berlin_Potsdamer_Platz.obs", systems)
 
 
 def evaluate(d: Path, systems: str = "G", model: str = "legacy", raim: bool = True, obs=None, nav=None) -> dict:
     """Horizontal error percentiles of one SPP run (and its counts)."""
     from insnav.filters.spp import run_spp_rinex
-    from insnav.gnss import read_rinex_obs
     from insnav.gnss.ephemeris import C_LIGHT
 
     d = Path(d)
-    obs = obs if obs is not None else read_rinex_obs(d / "Berlin_Potsdamer_Platz.obs")
+    obs = obs if obs is not None else read_obs(d, systems)
     nav = nav if nav is not None else nav_for(d, systems)
     if nav is None:
         raise RuntimeError(f"no navigation data for systems {systems!r}")
@@ -115,16 +103,14 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     d = Path(args.data) / DATA
-    from insnav.gnss import read_rinex_obs
-
     t_start = time.time()
-    obs = read_rinex_obs(d / "Berlin_Potsdamer_Platz.obs")
     navs = {"G": nav_for(d, "G")}
-    gr = _multi_nav(d)
+    gr = nav_for(d, "GR")
     if gr is not None:
         navs["GR"] = gr
     rows = []
     for systems, nav in navs.items():
+        obs = read_obs(d, systems)
         for model in MODELS:
             for raim in (False, True):
                 rows.append(evaluate(d, systems, model, raim, obs=obs, nav=nav))
@@ -139,8 +125,7 @@ def main(argv=None) -> int:
         "",
         "Data: `../shared/data/smartloc_berlin_potsdamer_platz` (TU Chemnitz smartLoc, CC BY-SA 4.0): u-blox-class "
         "receiver in a car, RINEX 2.11 C1/L1/S1/D1 at ~5 Hz, 1375 epochs over 284 s; broadcast ephemerides "
-        "`brdc1580.16n` (GPS)" + (" and the mixed `BRDC00WRD_U_20161580000_01D_MN.rnx` (GPS+GLONASS)" if "GR" in navs
-                                  else "") + "; ground truth `Berlin_Potsdamer_Platz_GT.txt` (ECEF, matched to "
+        "`brdc1580.16n` (GPS)" + (" and `brdc1580.16g` (GLONASS)" if "GR" in navs else "") + "; ground truth `Berlin_Potsdamer_Platz_GT.txt` (ECEF, matched to "
         "each epoch by its receiver time tag, |dt| < 0.02 s).",
         "",
         "Solver: `insnav.gnss.spp.solve_spp` (weighted Gauss-Newton least squares, one inter-system bias per "

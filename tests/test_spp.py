@@ -389,3 +389,27 @@ def test_gnss_table_reaches_the_tight_inputs(shared_data, tmp_path):
     bad.write_text(rinex + '[gnss]\nmodel = "rtklib"\nrtklib_c_m = 1.0\n')
     with pytest.raises(ConfigError, match=r"bad\.toml: unknown key 'gnss\.rtklib_c_m'"):
         load_rinex_run(*files, bad)
+
+
+def test_smartloc_gps_glonass(smartloc):
+    """GPS+GLONASS (RINEX 2 .16n + .16g): more satellites, every epoch solved, a GLONASS-GPS
+    inter-system bias that stays constant within its own sigma, and errors below the documented bounds."""
+    b = _bench()
+    nav = b.nav_for(smartloc, "GR")
+    if nav is None:
+        pytest.skip("the navigation reader of this commit reads no GLONASS ephemerides")
+    from insnav.filters.spp import run_spp_rinex
+
+    obs = b.read_obs(smartloc, "GR")
+    sol = run_spp_rinex(obs, nav, spp=dict(raim=False))
+    sp = sol.spp
+    assert sol.summary["systems"] == "GR" and sp.solved.mean() > 0.99
+    sol_g = run_spp_rinex(b.read_obs(smartloc, "G"), b.nav_for(smartloc, "G"), spp=dict(raim=False))
+    assert np.mean(sp.n_used[sp.solved]) > 1.5 * np.mean(sol_g.spp.n_used[sol_g.spp.solved])
+    isb = sp.isb_m[sp.solved, 1]
+    assert abs(np.median(isb)) < 30.0
+    assert np.std(isb) < 2.0 * np.median(sp.sigma_isb_m[sp.solved, 1])
+    assert (sp.ref_system[sp.solved] == "G").all()
+    res = b.evaluate(smartloc, "GR", "legacy", False, obs=obs, nav=nav)
+    assert res["p50_m"] < b.BOUNDS["GR"]["p50_m"] and res["p95_m"] < b.BOUNDS["GR"]["p95_m"]
+    assert res["rms_m"] < b.evaluate(smartloc, "G", "legacy", False)["rms_m"]
