@@ -48,7 +48,14 @@ def nav_for(d: Path, systems: str):
     the reader of this commit does not read GLONASS."""
     from insnav.gnss.spp import read_nav_multi
 
-    nav = read_nav_multi([d / f for f in NAV_FILES[systems]], systems)
+    from insnav.gnss import RinexError
+
+    try:
+        nav = read_nav_multi([d / f for f in NAV_FILES[systems]], systems)
+    except RinexError:
+        if systems == "G":
+            raise
+        return None  # a GPS-only reader refuses the GLONASS file
     if "R" in systems and not len(getattr(nav, "eph_r", ())):
         return None
     return nav
