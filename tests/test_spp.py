@@ -335,9 +335,9 @@ def test_cli_spp_on_smartloc(smartloc, tmp_path):
     assert 'model = "cn0"' in text and "[spp]" in text
     # the resolved configuration runs again to the same result
     out2 = tmp_path / "spp2.csv"
-    r = subprocess.run([sys.executable, "-m", "insnav", "run", "--filter", "spp", "--format", "rinex", "--obs",
+    r = subprocess.run([sys.executable, "-m", "insnav", "run", "--format", "rinex", "--obs",
                         str(smartloc / "Berlin_Potsdamer_Platz.obs"), "--nav", str(smartloc / "brdc1580.16n"),
-                        "--config", str(tmp_path / "spp.csv.config.toml"), "--out", str(out2)],
+                        "--config", str(tmp_path / "spp.csv.config.toml"), "--out", str(out2)],  # filter from it
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert np.array_equal(load_solution(out2).lat_deg, sol.lat_deg)

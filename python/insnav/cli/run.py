@@ -267,6 +267,15 @@ def cmd_run(args) -> int:
     import insnav
 
     stages = _Stages()
+    if args.filter is None and args.format == "rinex" and args.config:  # filter = "spp" in the TOML
+        import tomllib
+
+        try:
+            with open(args.config, "rb") as f:
+                if tomllib.load(f).get("filter") == "spp":
+                    args.filter = "spp"
+        except (OSError, tomllib.TOMLDecodeError):
+            pass  # reported by the loader
     if args.filter == "spp":
         return cmd_run_spp(args, stages)
 
