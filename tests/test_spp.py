@@ -121,6 +121,11 @@ def test_inter_system_bias_recovered():
     assert np.abs(sp.isb_m[:, 1] + 87.25).max() < 1e-3 and np.all(sp.isb_m[:, 0] == 0)
     assert np.all(np.isnan(sp.isb_m[:, 2:]))  # Galileo, BeiDou absent
     assert (sp.ref_system == "G").all()
+    # no GPS at an epoch: the first system present is the reference clock
+    inp_r, _ = _epochs(np.random.default_rng(7), 3, 6, systems=lambda n, rng: np.array(["R"] * n), noise=False)
+    sp_r = solve_spp(inp_r, R0)
+    assert (sp_r.ref_system == "R").all() and np.abs(sp_r.r_e - R_RX).max() < 1e-3
+    assert np.all(np.isnan(sp_r.isb_m[:, 0])) and np.all(sp_r.isb_m[:, 1] == 0)
     # with noise: ISB error within its sigma on average (rms(error/sigma) ~ 1)
     inp, _ = _epochs(np.random.default_rng(4), 800, 10, systems=two, isb={"R": -87.25})
     sp = solve_spp(inp, R0, raim=False)
