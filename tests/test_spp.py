@@ -47,7 +47,7 @@ def _sky(rng, n, el_min_deg=10.0):
 
 
 def _epochs(rng, n_epochs, n_sats, *, systems=None, isb=None, sigma_zenith=1.0, noise=True, clock=1234.5,
-            fault=None):
+            fault=None, rate_fault=None):
     """TightInputs of simulated epochs (fault: (epoch-independent) bias [m] on one random row per epoch)."""
     rows, t_row, prn, el_all, sys_all, faulty = [], [], [], [], [], []
     for e in range(n_epochs):
@@ -67,6 +67,9 @@ def _epochs(rng, n_epochs, n_sats, *, systems=None, isb=None, sigma_zenith=1.0, 
         if fault is not None:
             k_f = int(rng.integers(n_sats))
             pr[k_f] += fault
+        if rate_fault is not None:
+            k_f = int(rng.integers(n_sats))
+            prr[k_f] += rate_fault
         rows.append(np.column_stack([pr, prr, r_s, v_s, clk_s, clkdot, sig, sigr]))
         t_row += [float(e)] * n_sats
         prn += list(range(1, n_sats + 1))
@@ -155,6 +158,17 @@ def test_raim_detects_and_excludes_a_50m_fault(n_sats):
     inp0, _ = _epochs(np.random.default_rng(20 + n_sats), 400, n_sats)
     sp0 = solve_spp(inp0, R0)
     assert np.mean(sp0.raim_status != 0) < 0.01
+
+
+def test_rate_fde_excludes_a_doppler_fault():
+    inp, faulty = _epochs(np.random.default_rng(30), 300, 10, rate_fault=5.0)  # 5 m/s; sigmas 0.1-0.4 m/s
+    sp = solve_spp(inp, R0)
+    start = inp.epoch_start[:-1]
+    hit = np.array([sp.rate_row_excluded[start[e] + faulty[e]] for e in range(len(faulty))])
+    assert np.mean(hit) >= 0.99 and (sp.n_excluded == 0).mean() > 0.98  # the pseudoranges are clean
+    ev = np.linalg.norm(sp.v_e - V_RX, axis=1)
+    ev_off = np.linalg.norm(solve_spp(inp, R0, raim=False).v_e - V_RX, axis=1)
+    assert np.median(ev) < 0.3 * np.median(ev_off)
 
 
 def test_raim_leaves_too_little_redundancy_untested():

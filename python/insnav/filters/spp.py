@@ -39,7 +39,7 @@ __all__ = ["run_spp", "run_spp_rinex", "spp_solution", "SPP_COLUMNS", "write_spp
 SPP_COLUMNS = ("t_s", "solved", "n_sats", "n_used", "n_excluded", "raim_status", "chi2", "chi2_threshold",
                "clock_bias_m", "sigma_clock_m", "clock_drift_mps", "sigma_drift_mps",
                *(f"isb_{s}_m" for s in SYSTEMS), *(f"sigma_isb_{s}_m" for s in SYSTEMS),
-               "gdop", "pdop", "hdop", "vdop", "tdop", "n_rate_used", "ref_system")
+               "gdop", "pdop", "hdop", "vdop", "tdop", "n_rate_used", "n_rate_excluded", "ref_system")
 
 
 def spp_solution(sp: SppSolution, filter_name: str = "spp") -> Solution:
@@ -191,9 +191,9 @@ def write_spp_table(sp: SppSolution, path) -> "os.PathLike":
 
     cols = [sp.t, sp.solved.astype(int), sp.n_sats, sp.n_used, sp.n_excluded, sp.raim_status, sp.chi2,
             sp.chi2_threshold, sp.clock_bias_m, sp.sigma_clock_m, sp.clock_drift_mps, sp.sigma_drift_mps,
-            *sp.isb_m.T, *sp.sigma_isb_m.T, sp.gdop, sp.pdop, sp.hdop, sp.vdop, sp.tdop, sp.n_rate_used]
-    fmt = ["%.6f"] + ["%d"] * 5 + ["%.6g"] * (len(cols) - 6)
-    fmt[-1] = "%d"
+            *sp.isb_m.T, *sp.sigma_isb_m.T, sp.gdop, sp.pdop, sp.hdop, sp.vdop, sp.tdop, sp.n_rate_used,
+            sp.n_rate_excluded]
+    fmt = ["%.6f"] + ["%d"] * 5 + ["%.6g"] * (len(cols) - 8) + ["%d", "%d"]
     lines = [",".join(SPP_COLUMNS)]
     for i in range(len(sp)):
         vals = [(f % c[i]) if np.isfinite(c[i]) else "nan" for f, c in zip(fmt, cols)]

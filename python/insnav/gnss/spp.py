@@ -34,6 +34,8 @@ eqs. (4.7)-(4.12)):
   row with the largest ``w_i`` is excluded, the epoch solved again and the
   global test repeated, as long as the redundancy allows (so at least one
   degree of freedom remains to test the result).
+* the velocity solution applies the same tests to the rates of the rows
+  kept (a linear problem; its exclusions are counted apart).
 
 Statuses per epoch (:data:`RAIM_STATUS`): 0 passed, 1 passed after
 excluding rows, 2 failed and no further exclusion possible, 3 not tested
@@ -209,6 +211,8 @@ class SppSolution:
     chi2 : (E,) final ``v^T W v``; chi2_threshold : (E,) its test bound (NaN: no redundancy)
     raim_status : (E,) int8 (:data:`RAIM_STATUS`)
     row_excluded : (M,) bool over the input rows
+    n_rate_excluded : (E,) rates excluded by the velocity solution's own FDE (same tests)
+    rate_row_excluded : (M,) bool
     """
 
     t: np.ndarray
@@ -238,6 +242,8 @@ class SppSolution:
     chi2_threshold: np.ndarray | None = None
     raim_status: np.ndarray | None = None
     row_excluded: np.ndarray | None = None
+    n_rate_excluded: np.ndarray | None = None
+    rate_row_excluded: np.ndarray | None = None
     info: dict = field(default_factory=dict)
 
     def __len__(self):
@@ -265,7 +271,8 @@ def summary_counts(sol: SppSolution) -> dict:
                 with_velocity=int(np.isfinite(sol.v_e[:, 0]).sum()),
                 raim_passed=int((st == 0).sum()), raim_excluded_epochs=int((st == 1).sum()),
                 raim_failed=int((st == 2).sum()), raim_untested=int((st == 3).sum()),
-                rows_excluded=int(sol.n_excluded.sum()), rows_used=int(sol.n_used.sum()))
+                rows_excluded=int(sol.n_excluded.sum()), rows_used=int(sol.n_used.sum()),
+                rates_excluded=int(sol.n_rate_excluded.sum()))
 
 
 # --------------------------------------------------------------------------- the solver
@@ -379,6 +386,8 @@ def solve_spp(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=Non
     status = np.full(E, 4, np.int8)
     ref_sys = np.full(E, "", dtype="<U1")
     row_excl = np.zeros(M, bool)
+    rate_excl = np.zeros(M, bool)
+    n_rate_x = np.zeros(E, np.int64)
     spr_all = inputs.sats[:, 10] if sigma_pr_m is None else np.asarray(sigma_pr_m, float)
     sprr_all = inputs.sats[:, 11] if sigma_prr_mps is None else np.asarray(sigma_prr_mps, float)
     system_all = np.asarray(inputs.system, dtype="<U1")
@@ -477,15 +486,30 @@ def solve_spp(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=Non
         x_prev = np.append(x[:3], x[3])
         if not opt.velocity:
             continue
-        m = np.isfinite(inputs.sats[rows, 1]) & np.isfinite(sprr_all[rows]) & (sprr_all[rows] > 0)
-        if m.sum() < max(opt.min_sats, 4):
+        idx = np.flatnonzero(np.isfinite(inputs.sats[rows, 1]) & np.isfinite(sprr_all[rows]) & (sprr_all[rows] > 0))
+        n_rx = 0
+        while True:  # the rates' own FDE: the same tests on the linear velocity problem
+            if idx.size < max(opt.min_sats, 4):
+                idx = None
+                break
+            sr = inputs.sats[rows[idx]]
+            wr = 1.0 / sprr_all[rows[idx]]
+            Hv = np.column_stack([-u[idx], np.ones(idx.size)])
+            yv = sr[:, 1] - np.einsum("ij,ij->i", u[idx], sr[:, 5:8]) + sr[:, 9]
+            Hvw = Hv * wr[:, None]
+            sol = np.linalg.lstsq(Hvw, yv * wr, rcond=None)[0]
+            dof = idx.size - 4
+            if not use_raim or dof < 2 or (0 <= opt.max_exclusions <= n_rx):
+                break
+            wt, chi2_v = _w_test(Hv, wr, yv - Hv @ sol)
+            if wt is None or chi2_v <= chi2_quantile(1.0 - opt.raim_alpha, dof):
+                break
+            k = int(np.argmax(wt))
+            rate_excl[rows[idx[k]]] = True
+            idx = np.delete(idx, k)
+            n_rx += 1
+        if idx is None:
             continue
-        sr = inputs.sats[rows[m]]
-        wr = 1.0 / sprr_all[rows[m]]
-        Hv = np.column_stack([-u[m], np.ones(int(m.sum()))])
-        yv = sr[:, 1] - np.einsum("ij,ij->i", u[m], sr[:, 5:8]) + sr[:, 9]
-        sol = np.linalg.lstsq(Hv * wr[:, None], yv * wr, rcond=None)[0]
-        Hvw = Hv * wr[:, None]
         try:
             Qv = np.linalg.inv(Hvw.T @ Hvw)
         except np.linalg.LinAlgError:
@@ -494,8 +518,10 @@ def solve_spp(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=Non
         out["cov_v_e"][e] = Qv[:3, :3]
         out["sigma_vel_n_mps"][e] = np.sqrt(np.diag(C_ne @ Qv[:3, :3] @ C_ne.T))
         out["sigma_drift_mps"][e] = math.sqrt(Qv[3, 3])
-        n_rate[e] = int(m.sum())
+        n_rate[e] = int(idx.size)
+        n_rate_x[e] = n_rx
     return SppSolution(t=inputs.epoch_t.copy(), n_sats=n_sats, n_used=n_used, n_excluded=n_excl, n_rate_used=n_rate,
+                       n_rate_excluded=n_rate_x, rate_row_excluded=rate_excl,
                        raim_status=status, ref_system=ref_sys, row_excluded=row_excl,
                        info=dict(raim=use_raim, raim_alpha=opt.raim_alpha), **out)
 
