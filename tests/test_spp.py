@@ -429,6 +429,18 @@ def test_smartloc_gps_glonass(smartloc):
     assert abs(np.median(isb)) < 30.0
     assert np.std(isb) < 2.0 * np.median(sp.sigma_isb_m[sp.solved, 1])
     assert (sp.ref_system[sp.solved] == "G").all()
+    # the rows are those of the multi-system tight_inputs_from_rinex; only GLONASS sigmas differ (x 1.5)
+    from insnav.gnss.spp import spp_inputs_from_rinex
+    from insnav.gnss.tight_inputs import tight_inputs_from_rinex
+
+    r0 = np.asarray(sp.info["approx_r_e"])
+    t0 = sp.info["t_week0_gps_s"]
+    a = tight_inputs_from_rinex(obs, nav, t0, r0, max_sats=0, systems="GR")
+    c, _ = spp_inputs_from_rinex(obs, nav, t0, r0)
+    assert np.array_equal(a.prn, c.prn) and np.array_equal(a.system, c.system)
+    assert np.array_equal(a.sats[:, :10], c.sats[:, :10], equal_nan=True)
+    np.testing.assert_allclose(c.sats[:, 10:] / a.sats[:, 10:], np.where(a.system == "R", 1.5, 1.0)[:, None] *
+                               np.ones((1, 2)), rtol=1e-12)
     res = b.evaluate(smartloc, "GR", "legacy", False, obs=obs, nav=nav)
     assert res["p50_m"] < b.BOUNDS["GR"]["p50_m"] and res["p95_m"] < b.BOUNDS["GR"]["p95_m"]
     assert res["rms_m"] < b.evaluate(smartloc, "G", "legacy", False)["rms_m"]
