@@ -444,3 +444,22 @@ def test_smartloc_gps_glonass(smartloc):
     res = b.evaluate(smartloc, "GR", "legacy", False, obs=obs, nav=nav)
     assert res["p50_m"] < b.BOUNDS["GR"]["p50_m"] and res["p95_m"] < b.BOUNDS["GR"]["p95_m"]
     assert res["rms_m"] < b.evaluate(smartloc, "G", "legacy", False)["rms_m"]
+
+
+def test_cli_tight_run_repeats_the_gnss_table(shared_data, tmp_path):
+    """A --format rinex tight run with [gnss] writes it into <out>.config.toml."""
+    d = shared_data / "rtklibexplorer_walk_0827"
+    if not (d / "rinex_derived" / "gnss_1730.obs").is_file():
+        pytest.skip(f"{d} not found")
+    cfg = tmp_path / "run.toml"
+    cfg.write_text('[rinex]\nimu_columns = ["ax", "ay", "az", "gx", "gy", "gz", "tick_ms"]\nimu_acc_unit = "g"\n'
+                   'imu_gyro_unit = "dps"\nimu_mount_rpy_deg = [180.0, 0.0, -90.0]\nend_s = 40.0\n'
+                   '[gnss]\nmodel = "cn0"\n')
+    out = tmp_path / "sol.csv"
+    r = subprocess.run([sys.executable, "-m", "insnav", "run", "--format", "rinex", "--obs",
+                        str(d / "rinex_derived" / "gnss_1730.obs"), "--nav", str(d / "rinex_derived" / "gnss_1730.nav"),
+                        "--imu", str(d / "raw" / "imu_1730.csv"), "--config", str(cfg), "--coupling", "tight",
+                        "--out", str(out), "--allow-free-inertial"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    text = (tmp_path / "sol.csv.config.toml").read_text()
+    assert "[gnss]" in text and 'model = "cn0"' in text

@@ -423,6 +423,9 @@ def cmd_run(args) -> int:
         text = resolved_config_toml(cfg)
         if rinex_opts is not None:
             text += _rinex_table_toml(rinex_opts)
+            wgt = getattr(ds, "weighting", None)
+            if wgt is not None and not wgt.is_default:
+                text += _table_toml("gnss", wgt)
         written.append(atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text))
     except BaseException:
         for p in written:
