@@ -18,7 +18,7 @@ from .registry import FILTERS
 from .units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0, MG, MPS_PER_SQRT_H, UG_PER_SQRT_HZ
 
 
-COUPLINGS = ("loose", "tight")
+COUPLINGS = ("loose", "tight", "gnss")
 LAYOUTS = (15, 21)
 
 

@@ -98,6 +98,8 @@ from .. import _core, earth
 from ..config import ConfigError, RunConfig, config_from_dict
 from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, Truth
 from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
+from ..gnss.spp import SppOptions, SppSolution, solve_spp, spp_inputs_from_rinex
+from ..gnss.weighting import Weighting
 from ..data.nav import NavState
 from ..units import DEG, G0, RAD2DEG
 
@@ -517,49 +519,18 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
 # --------------------------------------------------------------------------- single-point solution
 
 
-@dataclass
-class SinglePoint:
-    """Per-epoch single-point (GNSS-only) solution of a :class:`~insnav.gnss.tight_inputs.TightInputs`.
-
-    Attributes
-    ----------
-    t : (E,) epoch time (dataset time) [s]
-    r_e : (E, 3) antenna ECEF position [m] (NaN: fewer than 4 pseudoranges)
-    clock_bias_m : (E,)
-    v_e : (E, 3) antenna ECEF velocity [m/s] (NaN: fewer than 4 Dopplers)
-    clock_drift_mps : (E,)
-    n_sats : (E,) pseudoranges used
-    sigma_pos_n_m, sigma_vel_n_mps : (E, 3) 1-sigma N, E, D from the
-        least-squares covariance with the inputs' sigmas [m], [m/s]
-    pdop : (E,)
-    """
-
-    t: np.ndarray
-    r_e: np.ndarray
-    clock_bias_m: np.ndarray
-    v_e: np.ndarray
-    clock_drift_mps: np.ndarray
-    n_sats: np.ndarray
-    sigma_pos_n_m: np.ndarray
-    sigma_vel_n_mps: np.ndarray
-    pdop: np.ndarray
-
-    def llh(self):
-        """(lat [rad], lon [rad], h [m]) arrays."""
-        return earth.ecef_to_geodetic(self.r_e)
-
-    def v_n(self) -> np.ndarray:
-        lat, lon, _ = self.llh()
-        return earth.ecef_to_ned_vector(lat, lon, self.v_e)
+#: the single-point solution type (:class:`insnav.gnss.spp.SppSolution`; the name kept for the loader's users)
+SinglePoint = SppSolution
 
 
-def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 10) -> SinglePoint:
-    """Weighted least-squares position/clock and velocity/drift per epoch.
+def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 10, raim: bool = False,
+                          options: SppOptions | None = None) -> SppSolution:
+    """Weighted least-squares position/clock and velocity/drift per epoch (:func:`insnav.gnss.spp.solve_spp`).
 
     Uses exactly the rows the tight filter receives (same satellites,
     corrections and sigmas).  Model (``TightInputs.sats`` columns)::
 
-        rho  = |r_s - r| + b - clk_s                 (Gauss-Newton from r0_e)
+        rho  = |r_s - r| + b (+ ISB) - clk_s         (Gauss-Newton from r0_e, then from the previous epoch)
         rhod = u . (v_s - v) + d - clkdot_s          (linear once r is known)
 
     Parameters
@@ -567,64 +538,18 @@ def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 
     inputs : insnav.gnss.tight_inputs.TightInputs
     r0_e : (3,) starting ECEF position [m]
     min_sats : int
-        Epochs with fewer usable rows give NaN (4 unknowns each).
+        Epochs with fewer usable rows give NaN (4 unknowns each, one more per further system).
+    raim : bool
+        RAIM fault detection and exclusion (off for the start-up fix, as before).
+    options : SppOptions, optional
+        Overrides ``min_sats`` and ``iterations``.
 
     Returns
     -------
-    SinglePoint
+    SppSolution (alias :data:`SinglePoint`)
     """
-    E = inputs.epoch_t.size
-    r_out = np.full((E, 3), np.nan)
-    v_out = np.full((E, 3), np.nan)
-    b_out = np.full(E, np.nan)
-    d_out = np.full(E, np.nan)
-    sp = np.full((E, 3), np.nan)
-    sv = np.full((E, 3), np.nan)
-    pdop = np.full(E, np.nan)
-    n_used = np.zeros(E, np.int64)
-    x = np.append(np.asarray(r0_e, float), 0.0)
-    for e in range(E):
-        s = inputs.sats[inputs.epoch_start[e]:inputs.epoch_start[e + 1]]
-        s = s[np.isfinite(s[:, 0])]
-        n_used[e] = len(s)
-        if len(s) < min_sats:
-            continue
-        w = 1.0 / s[:, 10]
-        ok = False
-        for _ in range(iterations):
-            d = s[:, 2:5] - x[:3]
-            rng = np.linalg.norm(d, axis=1)
-            u = d / rng[:, None]
-            H = np.column_stack([-u, np.ones(len(s))])
-            y = s[:, 0] - (rng - s[:, 8] + x[3])
-            dx = np.linalg.lstsq(H * w[:, None], y * w, rcond=None)[0]
-            x = x + dx
-            if np.linalg.norm(dx[:3]) < 1e-4:
-                ok = True
-                break
-        if not ok or not np.all(np.isfinite(x)):
-            x = np.append(np.asarray(r0_e, float), 0.0)
-            continue
-        d = s[:, 2:5] - x[:3]
-        u = d / np.linalg.norm(d, axis=1)[:, None]
-        H = np.column_stack([-u, np.ones(len(s))])
-        lat, lon, _ = earth.ecef_to_geodetic(x[:3])
-        C_ne = earth.C_en(lat, lon).T
-        Q = np.linalg.inv((H * (w ** 2)[:, None]).T @ H)
-        Hn = np.column_stack([-(u @ C_ne.T), np.ones(len(s))])
-        Qn = np.linalg.inv(Hn.T @ Hn)
-        r_out[e], b_out[e] = x[:3], x[3]
-        sp[e] = np.sqrt(np.diag(C_ne @ Q[:3, :3] @ C_ne.T))
-        pdop[e] = math.sqrt(np.trace(Qn[:3, :3]))
-        m = np.isfinite(s[:, 1])
-        if m.sum() >= min_sats:
-            wr = 1.0 / s[m, 11]
-            y = s[m, 1] - np.einsum("ij,ij->i", u[m], s[m, 5:8]) + s[m, 9]
-            sol = np.linalg.lstsq(H[m] * wr[:, None], y * wr, rcond=None)[0]
-            v_out[e], d_out[e] = sol[:3], sol[3]
-            Qv = np.linalg.inv((H[m] * (wr ** 2)[:, None]).T @ H[m])
-            sv[e] = np.sqrt(np.diag(C_ne @ Qv[:3, :3] @ C_ne.T))
-    return SinglePoint(inputs.epoch_t.copy(), r_out, b_out, v_out, d_out, n_used, sp, sv, pdop)
+    opt = options or SppOptions(min_sats=min_sats, iterations=iterations)
+    return solve_spp(inputs, r0_e, options=opt, raim=raim)
 
 
 # --------------------------------------------------------------------------- reference
@@ -799,6 +724,8 @@ class RinexDataset(Dataset):
     spp: SinglePoint | None = None
     info: dict = field(default_factory=dict)
     options: RinexOptions | None = None
+    weighting: Weighting | None = None
+    spp_options: SppOptions | None = None
 
 
 def _level(f_b_mean) -> tuple[float, float]:
@@ -850,7 +777,7 @@ def _approx_position(obs, nav, t_week0):
 
 
 def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu_tag=None,
-               reference=None) -> tuple[RinexDataset, RunConfig]:
+               reference=None, weighting=None) -> tuple[RinexDataset, RunConfig]:
     """Build a dataset and a run configuration from RINEX + IMU (+ reference) files.
 
     Parameters
@@ -864,6 +791,11 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
         Overrides ``options.imu_tag``.
     reference : path, optional
         RTKLIB ``.pos``; overrides ``options.reference``.
+    weighting : insnav.gnss.weighting.Weighting or dict (the ``[gnss]`` TOML table), optional
+        Pseudorange variance model, masks and systems of the rows; None (or
+        the defaults): the rows of :func:`~insnav.gnss.tight_inputs.tight_inputs_from_rinex`
+        unchanged.  Otherwise the rows of :func:`insnav.gnss.spp.spp_inputs_from_rinex`
+        (then the best-GDOP limit of :data:`~insnav.gnss.tight_inputs.MAX_SATS`).
 
     Returns
     -------
@@ -908,12 +840,25 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     kw = dict(elevation_mask_deg=opt.elevation_mask_deg, iono=opt.iono, tropo=opt.tropo,
               sigma_pr_zenith_m=opt.sigma_pr_zenith_m, sigma_prr_zenith_mps=opt.sigma_prr_zenith_mps,
               use_cn0=opt.use_cn0)
-    inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+    wgt = None if weighting is None else (Weighting.from_dict(weighting, "[gnss]") if isinstance(weighting, dict)
+                                          else weighting.validate())
+    if wgt is not None and wgt.is_default:
+        wgt = None
+
+    def inputs_at(r):
+        if wgt is None:  # today's rows, unchanged
+            return tight_inputs_from_rinex(obs, nav, t_week0, r, **kw)
+        from ..gnss.tight_inputs import MAX_SATS, limit_sats
+
+        inp_all, _ = spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt, **kw)
+        return limit_sats(inp_all, MAX_SATS)
+
+    inp = inputs_at(r0)
     spp = single_point_solution(inp, r0)
     good = np.isfinite(spp.r_e[:, 0])
     if good.any():  # recompute light time / elevation / atmosphere at the data's own position
         r0 = np.median(spp.r_e[good], axis=0)
-        inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+        inp = inputs_at(r0)
         spp = single_point_solution(inp, r0)
         good = np.isfinite(spp.r_e[:, 0])
 
@@ -1026,11 +971,17 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     return ds, cfg
 
 
+def _bad_table(source, key, value):
+    raise ConfigError(f"{source}: key '{key}': bad value {value!r}; allowed: a table")
+
+
 def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=None):
     """:func:`load_rinex` with a run TOML (``insnav run --format rinex``).
 
     The TOML holds the usual run keys (``docs/formats.md``) plus a ``[rinex]``
-    table (:class:`RinexOptions`).  Run keys it sets override the loader's
+    table (:class:`RinexOptions`), a ``[gnss]`` table (pseudorange weighting,
+    masks, systems: :class:`insnav.gnss.weighting.Weighting`) and an ``[spp]``
+    table (:class:`insnav.gnss.spp.SppOptions`, for ``--filter spp``).  Run keys it sets override the loader's
     suggestions (initial sigmas, ``init_error = false``); a top-level
     ``lever_arm_b`` is also used as the dataset's lever arm.  Relative paths in
     the table (``imu_tag``, ``reference``) are relative to the TOML file.
@@ -1051,13 +1002,20 @@ def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=N
     rin = d.pop("rinex", {})
     if not isinstance(rin, dict):
         raise ConfigError(f"{source}: key 'rinex': bad value {rin!r}; allowed: a table")
+    gnss = d.pop("gnss", {})
+    if not isinstance(gnss, dict):
+        raise ConfigError(f"{source}: key 'gnss': bad value {gnss!r}; allowed: a table")
+    wgt = Weighting.from_dict(gnss, source)
+    spp_opt = SppOptions.from_dict(d.pop("spp", {}) if isinstance(d.get("spp", {}), dict) else
+                                   _bad_table(source, "spp", d["spp"]), source)
     if "lever_arm_b" in d and "lever_arm_b" not in rin:
         rin = dict(rin, lever_arm_b=d["lever_arm_b"])
     for key in ("imu_tag", "reference"):
         if isinstance(rin.get(key), str) and config_path is not None and not os.path.isabs(rin[key]):
             rin = dict(rin, **{key: os.path.join(os.path.dirname(os.path.abspath(config_path)), rin[key])})
     opt = RinexOptions.from_dict(rin, source)
-    ds, cfg = load_rinex(obs, nav, imu, opt, imu_tag=imu_tag, reference=reference)
+    ds, cfg = load_rinex(obs, nav, imu, opt, imu_tag=imu_tag, reference=reference, weighting=wgt)
+    ds.weighting, ds.spp_options = wgt, spp_opt
     base = {k: v for k, v in dataclasses.asdict(cfg).items() if v is not None and k != "imu"}
     base.update(d)
     return ds, config_from_dict(base, source=source)
