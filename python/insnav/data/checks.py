@@ -38,8 +38,21 @@ class DataCheckError(ValueError):
     """Input that cannot be right (units, signs, time bases)."""
 
 
-def check_imu(t, dtheta_b, dv_b, *, source: str = "imu") -> None:
-    """Specific force and angular rate magnitudes plausible for SI increments."""
+def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*", gyro_label: str = "dtheta_*",
+              fixes: dict | None = None) -> None:
+    """Specific force and angular rate magnitudes plausible for SI increments.
+
+    ``acc_label`` / ``gyro_label`` name the columns in the messages (a loader
+    passes the user's file columns); ``fixes`` maps a cause (``acc_g``,
+    ``t_ms``, ``dv_mm``, ``dv_cm``, ``dv_rate``, ``dv_increment``, ``axes``,
+    ``gyro_deg``, ``dtheta_rate``) to the setting that fixes it, appended to
+    the message (e.g. ``'set [imu] acc_unit = "g"'``).
+    """
+    fixes = fixes or {}
+
+    def fix(cause):
+        return f"; {fixes[cause]}" if cause in fixes else ""
+
     t = np.asarray(t, float)
     dtheta_b, dv_b = np.asarray(dtheta_b, float), np.asarray(dv_b, float)
     if t.size < 3 or not (np.isfinite(t).all() and np.isfinite(dtheta_b).all() and np.isfinite(dv_b).all()):
@@ -57,35 +70,38 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu") -> None:
     if not 0.5 * G0 < fm < 2.0 * G0:
         hint = ""
         if 0.5 < fm < 2.0:
-            hint = " (the increments look like g, not m/s)"
+            hint = " (the increments look like g, not m/s" + fix("acc_g") + ")"
         elif 0.5 * G0 < fm * 1000 < 2 * G0:
-            hint = " (t looks like milliseconds, or dv is in mm/s)"
+            hint = " (t looks like milliseconds, or dv is in mm/s" + fix("t_ms") + ")"
         elif 0.5 * G0 < fm / 1000 < 2 * G0:
-            hint = " (dv looks like mm/s, or t like kiloseconds)"
+            hint = " (dv looks like mm/s, or t like kiloseconds" + fix("dv_mm") + ")"
         elif 0.5 * G0 < fm / 100 < 2 * G0:
-            hint = " (dv looks like cm/s)"
+            hint = " (dv looks like cm/s" + fix("dv_cm") + ")"
         elif 0.5 * G0 < fm * dtm < 2 * G0:
-            hint = " (dv looks like a specific force in m/s^2, not an increment in m/s)"
-        raise DataCheckError(f"{source}: dv_*: median |f| = {fm:.4g} m/s^2 over {n} samples, expected ~{G0:.1f}"
-                             f"{hint}")
+            hint = " (dv looks like a specific force in m/s^2, not an increment in m/s" + fix("dv_rate") + ")"
+        elif 0.5 * G0 < fm / dtm < 2 * G0:
+            hint = " (the values look like increments over the sample interval, not rates" + fix("dv_increment") + ")"
+        raise DataCheckError(f"{source}: {acc_label}: median |f| = {fm:.4g} m/s^2 over {n} samples, expected "
+                             f"~{G0:.1f}{hint}")
     f_mean = np.asarray(dv_b, float).sum(axis=0)
     up = f_mean / max(np.linalg.norm(f_mean), 1e-12)  # at rest the specific force points up
     if up[2] > 0.7:
-        raise DataCheckError(f"{source}: dv_z: the mean specific force points along +z ({up.round(3).tolist()}), "
-                             f"i.e. down in FRD: the IMU is upside down, or FLU/RFU axes are read as FRD "
-                             f"(map the axes in the input settings)")
+        raise DataCheckError(f"{source}: {acc_label}: the mean specific force points along +z "
+                             f"({up.round(3).tolist()}), i.e. down in FRD: the IMU is upside down, or FLU/RFU axes "
+                             f"are read as FRD ({fixes.get('axes', 'map the axes in the input settings')})")
     if wm > 1.0:
         hint = ""
         if wm * DEG < 1.0:
-            hint = " (the increments look like degrees, not radians)"
+            hint = " (the increments look like degrees, not radians" + fix("gyro_deg") + ")"
         elif wm * dtm < 1.0:
-            hint = " (dtheta looks like an angular rate in rad/s, not an increment in rad)"
-        raise DataCheckError(f"{source}: dtheta_*: median |omega| = {wm:.4g} rad/s ({np.degrees(wm):.4g} deg/s) "
+            hint = " (dtheta looks like an angular rate in rad/s, not an increment in rad" + fix("dtheta_rate") + ")"
+        raise DataCheckError(f"{source}: {gyro_label}: median |omega| = {wm:.4g} rad/s ({np.degrees(wm):.4g} deg/s) "
                              f"over {n} samples, implausible for a vehicle{hint}")
 
 
 def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min_speed_mps: float = 3.0,
-                            min_turn_deg: float = 45.0) -> float | None:
+                            min_turn_deg: float = 45.0, gyro_label: str = "dtheta_*",
+                            fixes: dict | None = None) -> float | None:
     """Slope of the gyro heading change on the GNSS course change (1 when right).
 
     Returns the slope, or None when the run turns less than ``min_turn_deg``
@@ -127,15 +143,17 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
     if abs(inv - 1.0) < 5.0 * se:  # consistent with 1 (or too noisy to say otherwise)
         return 1.0 / inv if inv != 0 else np.inf
     slope = 1.0 / inv if inv != 0 else np.inf
+    fixes = fixes or {}
     if slope > 10.0 and 0.5 < slope / np.degrees(1.0) < 2.0:
-        raise DataCheckError(f"{source}: dtheta_*: the gyros turn {slope:.1f}x the GNSS course over "
+        raise DataCheckError(f"{source}: {gyro_label}: the gyros turn {slope:.1f}x the GNSS course over "
                              f"{np.degrees(np.sum(np.abs(dc))):.0f} deg of turns: the increments look like degrees, "
-                             f"not radians")
+                             f"not radians" + (f"; {fixes['gyro_deg']}" if "gyro_deg" in fixes else ""))
     if slope < -0.5:
-        raise DataCheckError(f"{source}: dtheta_*: the gyros turn opposite to the GNSS course (slope {slope:.2f}): "
-                             f"the gyro axes look inverted relative to the accelerometers'")
+        raise DataCheckError(f"{source}: {gyro_label}: the gyros turn opposite to the GNSS course (slope "
+                             f"{slope:.2f}): the gyro axes look inverted relative to the accelerometers'"
+                             + (f", {fixes['inverted']}" if "inverted" in fixes else ""))
     if not 0.5 < slope < 2.0:
-        raise DataCheckError(f"{source}: dtheta_*: the gyro heading change is {slope:.2f}x the GNSS course change "
+        raise DataCheckError(f"{source}: {gyro_label}: the gyro heading change is {slope:.2f}x the GNSS course change "
                              f"over {np.degrees(np.sum(np.abs(dc))):.0f} deg of turns (expected 1): wrong units, "
                              f"scale or axes")
     return slope
@@ -198,6 +216,73 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
             raise DataCheckError(f"{where(i)}: a jump of {dist[j] / 1000:.3f} km in {dt[j]:.3g} s from the "
                                  f"previous fix ({speed[j]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
                                  f"mixed units or a bad fix")
+
+
+def check_latlon_radians(lat, lon, *, source: str = "gnss", column: str = "lat/lon") -> None:
+    """Latitudes and longitudes given as degrees that all lie within
+    +-pi/2, +-pi: radians (in degrees every fix would be within 180 km of
+    (0, 0), in the Gulf of Guinea).  A loader calls this only when the user
+    did not state the angle unit."""
+    lat, lon = np.asarray(lat, float), np.asarray(lon, float)
+    ok = np.isfinite(lat) & np.isfinite(lon)
+    if ok.sum() == 0:
+        return
+    if np.all(np.abs(lat[ok]) <= np.pi / 2) and np.all(np.abs(lon[ok]) <= np.pi):
+        raise DataCheckError(f"{source}: {column}: every fix lies within +-{np.pi / 2:.4f}, +-{np.pi:.4f} (first "
+                             f"{lat[ok][0]:.6f}, {lon[ok][0]:.6f}): these look like radians, not degrees "
+                             f"(in degrees: off (0, 0) in the Gulf of Guinea); state the unit: [gnss] angle_unit = "
+                             f'"rad" (or "deg" if the data really are there)')
+
+
+def check_gnss_velocity(gnss, *, source: str = "gnss", min_speed_mps: float = 1.0, max_dt_s: float = 2.0,
+                        min_pairs: int = 10) -> tuple[float, float] | None:
+    """Position differences against the reported velocity of consecutive fixes.
+
+    The north and east slopes of ``d(position)/dt`` regressed on the mean
+    reported velocity are 1 for consistent data; -1 in one axis is a flipped
+    latitude / longitude sign (the velocity columns are right, the positions
+    mirrored), 1/57.3 in both is radians read as degrees.  Returns the slopes
+    ``(north, east)`` (NaN for an axis with too little motion), or None when
+    fewer than ``min_pairs`` pairs of fixes move faster than ``min_speed_mps``
+    with reported velocities.
+    """
+    m = len(gnss)
+    if m < min_pairs + 1:
+        return None
+    order = np.argsort(np.asarray(gnss.t_valid, float), kind="stable")
+    t = np.asarray(gnss.t_valid, float)[order]
+    lat = np.radians(np.asarray(gnss.lat_deg, float)[order])
+    lon = np.radians(np.asarray(gnss.lon_deg, float)[order])
+    h = np.asarray(gnss.h_m, float)[order]
+    v = np.asarray(gnss.v_n, float)[order]
+    dt = np.diff(t)
+    vm = 0.5 * (v[1:] + v[:-1])
+    R = 6_371_000.0 + np.nan_to_num(h[:-1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vp_n = np.diff(lat) * R / dt
+        vp_e = np.diff(lon) * R * np.cos(lat[:-1]) / dt
+    ok = ((dt > 0) & (dt <= max_dt_s) & np.all(np.isfinite(vm[:, :2]), axis=1) & np.isfinite(vp_n)
+          & np.isfinite(vp_e) & (np.hypot(vm[:, 0], vm[:, 1]) > min_speed_mps))
+    if ok.sum() < min_pairs:
+        return None
+    slopes = []
+    for vp, vr in ((vp_n[ok], vm[ok, 0]), (vp_e[ok], vm[ok, 1])):
+        if np.sqrt(np.mean(vr ** 2)) < min_speed_mps:  # too little motion along this axis
+            slopes.append(np.nan)
+        else:
+            slopes.append(float(np.dot(vp, vr) / np.dot(vr, vr)))
+    sn, se = slopes
+    where = f"{source}: lat/lon against the velocity columns over {int(ok.sum())} pairs of fixes"
+    deg = np.degrees(1.0)
+    if all(np.isfinite(x) and 0.5 < x * deg < 2.0 for x in slopes):
+        raise DataCheckError(f"{where}: the positions move {1 / np.nanmean(slopes):.1f}x slower than the velocities "
+                             f"say: the lat/lon look like radians read as degrees ([gnss] angle_unit = \"rad\")")
+    flipped = [name for name, x in (("latitude", sn), ("longitude", se)) if np.isfinite(x) and x < -0.5]
+    if flipped:
+        raise DataCheckError(f"{where}: the {' and '.join(flipped)} moves opposite to the velocity (slopes north "
+                             f"{sn:.2f}, east {se:.2f}): the {' and '.join(flipped)} sign looks flipped "
+                             f"(south and west are negative)")
+    return sn, se
 
 
 def check_time_overlap(imu_t, gnss_t, *, imu_source: str = "imu", gnss_source: str = "gnss") -> None:
