@@ -65,7 +65,7 @@ IMU_KEYS = IMU_FORMAT_KEYS + ("tag", "grade") + tuple(_USER_UNITS)
 #: keys of the [gnss] table
 GNSS_KEYS = tuple(f.name for f in dataclasses.fields(GnssFileFormat))
 INITIAL_KEYS = ("t_s", "lat_deg", "lon_deg", "h_m", "v_n_mps", "roll_deg", "pitch_deg", "yaw_deg")
-ALIGN_KEYS = ("min_speed_mps", "max_heading_sigma_deg", "slip_sigma_deg", "max_gyrocompass_sigma_deg")
+ALIGN_KEYS = ("min_speed_mps", "max_heading_sigma_deg", "slip_sigma_deg", "max_gyrocompass_sigma_deg", "course_window_s")
 _TABLES = ("imu", "gnss", "initial", "align")
 #: the noise figures a run needs when no grade is given (ARW, VRW, both bias sigmas)
 _REQUIRED_NOISE = (("gyro_arw_deg_per_sqrt_h",), ("acc_vrw_m_per_s_per_sqrt_h", "acc_vrw_ug_per_sqrt_hz"),
@@ -346,7 +346,7 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
         try:
             a = align(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, gyro_bias_sigma=gyro_bias,
                       gyro_arw=float(np.max(noise.gyro_arw)), accel_bias_sigma=float(np.max(noise.acc_bias_sigma)),
-                      lever_arm_b=lever, source=samples.path, **align_d)
+                      lever_arm_b=lever, source=samples.path, accel_vrw=float(np.max(noise.acc_vrw)), **align_d)
         except ValueError as exc:
             a = _fallback_attitude(imu_all, gnss_al, ini, exc)
         t0 = a.t_s

@@ -113,6 +113,9 @@ class GnssFileFormat:
         Read the file's velocities (False: position only).
     date : str or None
         NMEA without RMC: the UTC date of the first sentence, ``"YYYY-MM-DD"``.
+    decimate : int
+        Keep every k-th fix (after the quality filter): e.g. 4 turns 4 Hz into
+        1 Hz, leaving the others to evaluate the INS between fixes.
     """
 
     format: str = "auto"
@@ -131,6 +134,7 @@ class GnssFileFormat:
     quality_max: int | None = None
     velocity: bool = True
     date: str | None = None
+    decimate: int = 1
 
     def validate(self, source: str = "gnss format", prefix: str = "gnss.") -> "GnssFileFormat":
         """Check every option (ConfigError naming ``prefix`` + key); returns self."""
@@ -187,6 +191,9 @@ class GnssFileFormat:
             bad("min_sigma_pos_m", ">= 0 [m]")
         self.sigma_pos_m = _three(self.sigma_pos_m, "sigma_pos_m", source, prefix)
         self.sigma_vel_mps = _three(self.sigma_vel_mps, "sigma_vel_mps", source, prefix)
+        v = self.decimate
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            bad("decimate", "an integer >= 1")
         for key in ("quality_max", "gps_week"):
             v = getattr(self, key)
             if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
@@ -265,6 +272,8 @@ def _finish(rec: GnssRecords, fmt: GnssFileFormat) -> GnssRecords:
         rec.v_n = np.full((len(rec), 3), np.nan)
         rec.sigma_vel_n = np.full((len(rec), 3), np.nan)
     rec.t_s = rec.t_s + float(fmt.time_offset_s)
+    if fmt.decimate > 1:
+        rec = rec.take(np.arange(0, len(rec), fmt.decimate))
     if len(rec) == 0:
         raise GnssFileError(rec.path, None, "no usable GNSS fix" + (f" with Q <= {fmt.quality_max}"
                                                                      if fmt.quality_max is not None else ""))

@@ -325,7 +325,9 @@ class ImuSamples:
         if self.samples == "increment":
             return ImuData(t.copy(), self.gyro_b.copy(), self.acc_b.copy(),
                            origin=RowOrigin(self.path, lines=self.lines.copy()))
-        dt = np.diff(t)[:, None]
+        # intervals from the times after t_ref (~1e-16 s resolution), not from t (seconds of
+        # week have 6e-11 s steps: 1e-8 of a 5 ms interval)
+        dt = np.diff(self.t_s)[:, None]
         if self.samples == "mean_rate":  # the mean rate over (t[k-1], t[k]]: exact
             dth, dv = self.gyro_b[1:] * dt, self.acc_b[1:] * dt
         else:
@@ -498,7 +500,7 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
         The str2str time tag, required with a ``tick_ms`` column (default:
         ``path + ".tag"``).
     week : int, optional
-        GPS week for ``time = "gps_sow"`` (else ``fmt.gps_week``; one is required then).
+        GPS week for ``time = "gps_sow"`` when ``fmt.gps_week`` is None (one is required then).
 
     Returns
     -------
@@ -520,7 +522,7 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     except OSError as exc:
         raise ImuFileError(path, None, f"cannot read the IMU file ({exc.strerror})") from None
     tagged = fmt.uses_tick
-    week = fmt.gps_week if week is None else week
+    week = fmt.gps_week if fmt.gps_week is not None else week  # the mapping's own week wins
     if fmt.time == "gps_sow" and not tagged and week is None:
         raise ValueError(f"{path}: imu time 'gps_sow' needs the GPS week (gps_week, or the observation file's)")
     parts = raw.split(b"\n")
