@@ -59,11 +59,19 @@ def write_imu(path, ds, *, axes="FRD", gyro="rad", acc="mps2", samples="incremen
     kg = RAD2DEG if gyro == "deg" else 1.0
     ka = 1.0 / G0 if acc == "g" else 1.0
     tt = _time_text(ds, ds.imu.t)
-    if samples == "mean_rates":
+    if samples in ("mean_rates", "rates"):
         tt = _time_text(ds, [ds.t0]) + tt
         _, t = _split_time(tt, 1)
         dt = np.diff(t)[:, None]
-        dth, dv = np.vstack([dth[:1], dth / dt]), np.vstack([dv[:1], dv / dt])
+        if samples == "mean_rates":
+            dth, dv = np.vstack([dth[:1], dth / dt]), np.vstack([dv[:1], dv / dt])
+        else:  # instantaneous rates whose trapezoid gives the increments: w_k = 2 inc_k / dt_k - w_(k-1)
+            w, f = np.empty((len(tt), 3)), np.empty((len(tt), 3))
+            w[0], f[0] = dth[0] / dt[0], dv[0] / dt[0]
+            for k in range(1, len(tt)):
+                w[k] = 2.0 * dth[k - 1] / dt[k - 1] - w[k - 1]
+                f[k] = 2.0 * dv[k - 1] / dt[k - 1] - f[k - 1]
+            dth, dv = w, f
     lines = ["time,gx,gy,gz,ax,ay,az"] if header else []
     g, a = (dth * kg).tolist(), (dv * ka).tolist()
     lines += [f"{tt[k]},{g[k][0]!r},{g[k][1]!r},{g[k][2]!r},{a[k][0]!r},{a[k][1]!r},{a[k][2]!r}" for k in range(len(tt))]
@@ -135,6 +143,50 @@ def test_other_axes_units_and_rates_give_the_same_solution(car, frd_files, tmp_p
     sol1 = insnav.run(ds1, config=cfg1)
     assert _sol_diff(sol0, sol1) < 1e-9
     assert sol0.summary["updates"] > 0.9 * len(ds0.gnss)
+
+
+def test_instantaneous_rates_give_the_same_solution(tmp_path):
+    """Rates at the sample times (trapezoid to increments) written so that the
+    trapezoid returns the simulator's increments (an error-free IMU keeps them
+    smooth): FLU, deg/s, g, the same solution as the increments to 1e-9."""
+    raw, _ = resolve_raw("car-mems")
+    raw["motion"]["segments"] = raw["motion"]["segments"][:5]
+    raw["imu"]["gyro"], raw["imu"]["accel"] = {}, {}
+    raw.pop("odometer", None)
+    ds = insnav.simulate(raw, seed=4)
+    g = write_gnss(tmp_path / "g.csv", ds)
+    ds0, cfg0 = insnav.load_csv_dataset(write_imu(tmp_path / "i0.csv", ds), g, config())
+    i1 = write_imu(tmp_path / "i1.csv", ds, axes="FLU", gyro="deg", acc="g", samples="rates")
+    ds1, cfg1 = insnav.load_csv_dataset(i1, g, config(imu=dict(axes="FLU", gyro_unit="deg", acc_unit="g",
+                                                                samples="rates")))
+    assert np.abs(ds1.imu.dv_b - ds0.imu.dv_b).max() < 1e-12
+    assert _sol_diff(insnav.run(ds0, config=cfg0), insnav.run(ds1, config=cfg1)) < 1e-9
+
+
+def test_relative_time_bases(car, tmp_path):
+    """Both files on the user's own clock: the dataset keeps it; one relative and
+    one GPS-time file is a one-line error."""
+    sow0 = car.gps_time_offset_s % 604800.0
+    imu = write_imu(tmp_path / "i.csv", car)
+    g = write_gnss(tmp_path / "g.csv", car)
+    rel = dict(time="relative", time_offset_s=-sow0 + 1000.0)
+    ds, _ = insnav.load_csv_dataset(imu, g, config(imu=rel, gnss=rel))
+    assert ds.gps_time_offset_s == 0.0 and abs(ds.imu.t[-1] - (car.imu.t[-1] + 1000.0)) < 1e-6
+    with pytest.raises(ConfigError, match=r"\[imu\] time = 'relative'.*GPS time: both need the same clock"):
+        insnav.load_csv_dataset(imu, g, config(imu=rel))
+
+
+def test_nmea_without_gst_needs_sigmas(car, frd_files, tmp_path):
+    imu, _ = frd_files
+    g = car.gnss
+    nm = write_nmea(tmp_path / "f.nmea", g.t_valid + car.gps_time_offset_s, g.lat_deg, g.lon_deg, g.h_m, None, g.v_n)
+    c = config()
+    c["gnss"] = {}
+    with pytest.raises(GnssFileError, match=r"f\.nmea, line 1: no position sigma.*GST.*sigma_pos_m"):
+        insnav.load_csv_dataset(imu, nm, c)
+    c["gnss"] = dict(sigma_pos_m=[5.0, 5.0, 10.0])
+    ds, _ = insnav.load_csv_dataset(imu, nm, c)
+    assert np.all(ds.gnss.sigma_pos_n == [5.0, 5.0, 10.0])
 
 
 def test_gnss_in_radians_msl_and_header_names_same_solution(car, frd_files, tmp_path):
