@@ -26,6 +26,15 @@ What is checked (the wrong-unit cases users actually hit):
   rad, 57.3 for degrees, -1 for gyro axes of the other handedness than the
   accelerometers';
 * **time bases**: the GNSS fixes overlap the IMU's time span.
+
+Used by the file loaders before the alignment (:mod:`insnav.io.csv_dataset`),
+with two more that need to know what the user stated:
+
+* **lat/lon radians** read as degrees (:func:`check_latlon_radians`: every
+  fix within +-pi/2, +-pi when the unit was not stated);
+* **positions against the velocity columns** (:func:`check_gnss_velocity`):
+  a flipped latitude or longitude sign moves the fixes against the reported
+  velocity, radians read as degrees 57.3x slower.
 """
 from __future__ import annotations
 

@@ -237,7 +237,8 @@ class RinexOptions:
     Attributes (units in the names)
     ----------
     imu_columns, imu_time, imu_acc_unit, imu_gyro_unit, imu_samples,
-    imu_mount_rpy_deg, imu_time_offset_s, imu_delimiter :
+    imu_mount_rpy_deg, imu_time_offset_s, imu_delimiter, imu_axes, imu_time_unit,
+    imu_rate_hz, imu_gps_week :
         The IMU CSV format (:class:`ImuCsvFormat` without the ``imu_`` prefix).
     imu_tag : str or None
         str2str tag file (``tick_ms`` column); None: ``IMU + ".tag"``.
@@ -265,6 +266,10 @@ class RinexOptions:
     imu_mount_rpy_deg: tuple = (0.0, 0.0, 0.0)
     imu_time_offset_s: float = 0.0
     imu_delimiter: str = ","
+    imu_axes: str = "FRD"
+    imu_time_unit: str = "s"
+    imu_rate_hz: float | None = None
+    imu_gps_week: int | None = None
     imu_tag: str | None = None
     lever_arm_b: tuple = (0.0, 0.0, 0.0)
     elevation_mask_deg: float = 10.0
@@ -285,9 +290,10 @@ class RinexOptions:
     reference: str | None = None
 
     def imu_format(self) -> ImuCsvFormat:
-        return ImuCsvFormat(tuple(self.imu_columns), self.imu_time, self.imu_acc_unit, self.imu_gyro_unit,
-                            self.imu_samples, tuple(self.imu_mount_rpy_deg), float(self.imu_time_offset_s),
-                            self.imu_delimiter)
+        cols = self.imu_columns if isinstance(self.imu_columns, dict) else tuple(self.imu_columns)
+        return ImuCsvFormat(cols, self.imu_time, self.imu_acc_unit, self.imu_gyro_unit,
+                            self.imu_samples, tuple(self.imu_mount_rpy_deg), self.imu_time_offset_s,
+                            self.imu_delimiter, self.imu_axes, self.imu_time_unit, self.imu_gps_week, self.imu_rate_hz)
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "[rinex]") -> "RinexOptions":
