@@ -302,6 +302,23 @@ def test_consumer_car_alignment_heading_within_2_deg_after_10_s_of_motion(tmp_pa
     assert np.max(np.abs(e_yaw) / sol.sigma_att_deg[:, 2]) < 3.5
 
 
+def test_no_motion_needs_the_yaw(tmp_path):
+    """A consumer IMU that never moves cannot find north: a one-line error, unless
+    [initial] gives the yaw (then levelling over the first second)."""
+    ds = _car(segments=1)  # 20 s standstill only
+    imu, g = write_imu(tmp_path / "i.csv", ds), write_gnss(tmp_path / "g.csv", ds)
+    with pytest.raises(ValueError, match=r"i\.csv: cannot align the heading.*no GNSS fix reaches 3.0 m/s"):
+        insnav.load_csv_dataset(imu, g, config())
+    d, cfg = insnav.load_csv_dataset(imu, g, config(initial=dict(yaw_deg=90.0)))
+    assert d.initial.yaw_deg == 90.0 and d.alignment.heading_source == "given"
+    sig = cfg.init_sigma_att_deg  # the levelling limit of a 30 mg bias: 1.8 deg
+    assert 1.7 < sig[0] < 1.9
+    assert abs(d.initial.roll_deg - ds.truth.roll_deg[0]) < 3 * sig[0]
+    assert abs(d.initial.pitch_deg - ds.truth.pitch_deg[0]) < 3 * sig[1]
+    sol = insnav.run(d, config=cfg)
+    assert np.hypot(*(sol.v_n[-1, :2])) < 0.5
+
+
 def test_initial_table_wins(frd_files, car):
     imu, gnss = frd_files
     ds, cfg = insnav.load_csv_dataset(imu, gnss, config(initial=dict(yaw_deg=33.0), init_sigma_att_deg=[1, 1, 7]))

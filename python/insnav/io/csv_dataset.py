@@ -207,21 +207,24 @@ def initial_state_line(ds) -> str:
     return txt
 
 
-def _fallback_attitude(imu: ImuData, gnss: GnssFixes, ini: dict, exc: Exception):
-    """Levelling over the first second when the alignment finds no heading but [initial] gives the yaw."""
+def _fallback_attitude(imu: ImuData, gnss: GnssFixes, ini: dict, exc: Exception, accel_bias_sigma: float):
+    """Levelling over the first second when the alignment finds no heading but
+    [initial] gives the yaw; roll/pitch 1-sigma the levelling limit b_a / g
+    (and 0.5 deg for motion in that second), yaw 5 deg."""
     if "yaw_deg" not in ini:
         raise exc
     dt = np.diff(np.concatenate([[2 * imu.t[0] - imu.t[1]], imu.t]))
     n1 = max(2, int(round(1.0 / np.median(dt))))
     roll, pitch = level(imu.dv_b[:n1].sum(axis=0) / dt[:n1].sum())
     idx = n1 - 1
+    sig_level = float(np.hypot(np.degrees(accel_bias_sigma / 9.80665), 0.5))
     g = int(np.argmin(np.abs(gnss.t_valid - imu.t[idx])))
     v = np.nan_to_num(np.asarray(gnss.v_n[g], float))
     return Alignment(t_s=float(imu.t[idx]), index=idx, lat_deg=float(gnss.lat_deg[g]), lon_deg=float(gnss.lon_deg[g]),
                      h_m=float(gnss.h_m[g]), v_n_mps=v, roll_deg=float(np.degrees(roll)),
                      pitch_deg=float(np.degrees(pitch)), yaw_deg=float(ini["yaw_deg"]),
                      sigma_pos_n_m=np.asarray(gnss.sigma_pos_n[g], float), sigma_vel_n_mps=np.full(3, 0.5),
-                     sigma_att_deg=np.array([2.0, 2.0, 5.0]), heading_source="given", static_s=0.0,
+                     sigma_att_deg=np.array([sig_level, sig_level, 5.0]), heading_source="given", static_s=0.0,
                      notes=[f"alignment failed ({exc}); levelled over the first second, yaw from [initial]"])
 
 
@@ -348,7 +351,7 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
                       gyro_arw=float(np.max(noise.gyro_arw)), accel_bias_sigma=float(np.max(noise.acc_bias_sigma)),
                       lever_arm_b=lever, source=samples.path, accel_vrw=float(np.max(noise.acc_vrw)), **align_d)
         except ValueError as exc:
-            a = _fallback_attitude(imu_all, gnss_al, ini, exc)
+            a = _fallback_attitude(imu_all, gnss_al, ini, exc, float(np.max(noise.acc_bias_sigma)))
         t0 = a.t_s
         vals = dict(lat_deg=a.lat_deg, lon_deg=a.lon_deg, h_m=a.h_m, v_n_mps=np.asarray(a.v_n_mps, float),
                     roll_deg=a.roll_deg, pitch_deg=a.pitch_deg, yaw_deg=a.yaw_deg)

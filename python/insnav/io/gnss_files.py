@@ -532,7 +532,7 @@ def write_pos(path, t_gps_s, lat_deg, lon_deg, h_m, sigma_pos_n=None, v_n=None, 
     """Write fixes as an RTKLIB ``.pos`` file (GPST calendar time to 1 ms,
     lat/lon 9 decimals of a degree, height and sigmas 4 decimals of a metre,
     velocities 5 decimals, in the columns of ``rtkpost`` with velocity output)."""
-    from ..gnss.gpstime import week_tow
+    import datetime as _dt
 
     n = len(t_gps_s)
     sp = np.zeros((n, 3)) if sigma_pos_n is None else np.asarray(sigma_pos_n, float)
@@ -546,8 +546,6 @@ def write_pos(path, t_gps_s, lat_deg, lon_deg, h_m, sigma_pos_n=None, v_n=None, 
     for k in range(n):
         ms = int(round(float(t_gps_s[k]) * 1000.0))
         days, msd = divmod(ms, 86_400_000)
-        import datetime as _dt
-
         d = _dt.date(1980, 1, 6) + _dt.timedelta(days=int(days))
         hh, rem = divmod(msd, 3_600_000)
         mi, rem = divmod(rem, 60_000)
@@ -561,7 +559,6 @@ def write_pos(path, t_gps_s, lat_deg, lon_deg, h_m, sigma_pos_n=None, v_n=None, 
             line += (f" {v[0]:10.5f} {v[1]:10.5f} {-v[2]:10.5f} {s[0]:9.5f} {s[1]:9.5f} {s[2]:9.5f} "
                      f"{0.0:8.5f} {0.0:8.5f} {0.0:8.5f}")
         out.append(line)
-    del week_tow
     p = Path(path)
     p.write_text("\n".join(out) + "\n", encoding="ascii")
     return p
