@@ -52,7 +52,6 @@ from ..data.imu_grades import IMU_GRADES, imu_model_for_grade
 from ..data.nav import NavState
 from ..gnss.gpstime import SECONDS_PER_WEEK
 from ..ins.align import Alignment, align, level
-from ..units import DEG
 from .gnss_files import GnssFileFormat, GnssRecords, read_gnss
 from .imu_csv import ImuCsvFormat, ImuSamples, read_imu_csv
 
