@@ -45,6 +45,8 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "tight_realdata": (("tight_realdata.md",),
                        ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"],
                        ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"]),
+    "walk_loose": (("walk_loose.md",), ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"],
+                   ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"]),
 }
 
 

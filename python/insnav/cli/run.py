@@ -18,6 +18,15 @@ EXAMPLES = """examples:
   insnav run --format kfgins --config kf-gins.yaml [--imu IMU.txt --gnss GNSS.txt] --out sol.csv
   insnav run --format rinex --obs F.obs --nav F.nav --imu IMU.csv [--imu-tag IMU.csv.tag] \
              [--config run.toml] --coupling tight --filter ekf --out sol.csv
+  insnav run --format csv --imu imu.csv --gnss gnss.csv|fixes.pos|fixes.nmea --config run.toml --out sol.csv
+
+--format csv: your own IMU CSV and GNSS fixes (a CSV, an RTKLIB .pos or NMEA GGA+RMC+GST),
+loosely coupled.  The [imu] and [gnss] tables of --config map the columns and units (time
+base, rad|deg, rates|increments, m/s^2|g, FRD|FLU|RFU axes; lat/lon deg|rad, ellipsoidal|msl
+height, sigmas) and give the IMU noise model ([imu] grade = consumer|industrial|tactical|
+navigation, or the noise keys).  Units are checked first; the initial state comes from the
+alignment (levelling, gyrocompassing or the GNSS course once moving) unless [initial] gives it,
+and is printed with its sigmas (docs/formats.md).
 
   insnav run --filter spp --format rinex --obs F.obs --nav F.nav [--config run.toml] --out spp.csv
 
@@ -46,7 +55,7 @@ def add_run_parser(sub) -> None:
                        description="Run a closed-loop GNSS/INS filter.", epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", nargs="?", help="dataset directory written by `insnav simulate` (insnav format)")
-    p.add_argument("--format", choices=("insnav", "kfgins", "rinex"), default="insnav")
+    p.add_argument("--format", choices=("insnav", "kfgins", "rinex", "csv"), default="insnav")
     p.add_argument("--filter", default=None, metavar="NAME",
                    help="default: the config's, else ekf.  "
                         + "; ".join(f"{n} ({'/'.join(s.couplings)}, {s.paper}): {s.summary}" for n, s in FILTERS.items()))
@@ -54,13 +63,15 @@ def add_run_parser(sub) -> None:
                    help="gnss: GNSS only (filter spp; the only coupling it has, chosen by --filter spp)")
     p.add_argument("--config", help="insnav TOML run configuration (with a [rinex] table for --format rinex), "
                    "or the KF-GINS YAML with --format kfgins")
-    p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath); with --format rinex the IMU CSV")
+    p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath); with --format rinex or csv the "
+                   "IMU CSV")
     p.add_argument("--obs", help="RINEX 2/3 observation file (--format rinex)")
     p.add_argument("--nav", help="RINEX 2/3 GPS navigation file (--format rinex); with --filter spp several, "
                    "comma-separated (e.g. brdc1580.16n,brdc1580.16g), or a mixed RINEX 3 file")
-    p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex with a tick_ms "
+    p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex or csv with a tick_ms "
                    "column; default IMU.tag)")
-    p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath)")
+    p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath); with --format csv the GNSS fixes "
+                   "(.csv, RTKLIB .pos or NMEA .nmea; [gnss] format overrides the suffix)")
     p.add_argument("--constraints", default=None, metavar="LIST",
                    help="vehicle constraints, comma-separated from nhc (no lateral/vertical velocity), odo "
                         "(odometer speed, the dataset's odometer.csv), zupt (zero velocity and angular rate while "
@@ -148,6 +159,28 @@ def _rinex_table_toml(opt) -> str:
         else:
             lines.append(f"{f.name} = {toml_value(v)}")
     return "\n".join(lines) + "\n"
+
+
+def _csv_tables_toml(tables: dict, has_imu_table: bool) -> str:
+    """The file-mapping keys of ``--format csv`` (``[imu]`` mapping, ``[gnss]``,
+    ``[initial]``, ``[align]``) after the resolved run keys, whose last table is ``[imu]``."""
+    import numpy as _np
+
+    def val(v):
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + "}"
+        if isinstance(v, _np.ndarray):
+            v = v.tolist()
+        return toml_value(list(v) if isinstance(v, tuple) else v)
+
+    out = [] if has_imu_table else ["\n[imu]"]
+    out += [f"{k} = {val(v)}" for k, v in tables.get("imu", {}).items()]
+    for name in ("gnss", "initial", "align"):
+        t = tables.get(name) or {}
+        if t:
+            out.append(f"\n[{name}]")
+            out += [f"{k} = {val(v)}" for k, v in t.items()]
+    return "\n".join(out) + "\n"
 
 
 def output_decimation(t, rate_hz: float) -> int:
@@ -346,6 +379,7 @@ def cmd_run(args) -> int:
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     rinex_opts = None
+    csv_tables = None
     try:
         if args.format == "rinex":
             missing = [n for n in ("obs", "nav", "imu") if not getattr(args, n)]
@@ -357,6 +391,18 @@ def cmd_run(args) -> int:
 
             ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=args.imu_tag)
             rinex_opts = ds.options
+        elif args.format == "csv":
+            missing = [n for n in ("imu", "gnss", "config") if not getattr(args, n)]
+            if missing:
+                raise UserError("--format csv needs " + ", ".join(f"--{n}" for n in missing)
+                                + " (the [imu] and [gnss] tables of --config map the files)")
+            if args.dataset:
+                raise UserError("--format csv reads --imu/--gnss; do not give a dataset directory")
+            from ..io.csv_dataset import load_csv_run
+
+            ds, cfg = load_csv_run(args.imu, args.gnss, args.config, imu_tag=args.imu_tag)
+            print(ds.info["initial_state"])
+            csv_tables = ds.info["tables"]
         elif args.format == "kfgins":
             if not args.config:
                 raise UserError("--format kfgins needs --config KF-GINS.yaml")
@@ -426,6 +472,8 @@ def cmd_run(args) -> int:
             wgt = getattr(ds, "weighting", None)
             if wgt is not None and not wgt.is_default:
                 text += _table_toml("gnss", wgt)
+        if csv_tables is not None:
+            text += _csv_tables_toml(csv_tables, cfg.imu is not None)
         written.append(atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text))
     except BaseException:
         for p in written:
