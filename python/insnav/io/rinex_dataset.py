@@ -57,8 +57,8 @@ import numpy as np
 
 from .. import _core, earth
 from ..config import ConfigError, RunConfig, config_from_dict
-from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, Truth
-from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
+from ..data.dataset import Dataset, GnssFixes, ImuData, Truth
+from ..gnss.gpstime import SECONDS_PER_WEEK
 from ..gnss.spp import SppOptions, SppSolution, solve_spp, spp_inputs_from_rinex
 from ..gnss.weighting import Weighting
 from ..data.nav import NavState
