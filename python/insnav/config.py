@@ -202,9 +202,12 @@ class RunConfig:
         15 states (seed 000) or 21 with scale factors (KF-GINS-like).
     init_sigma_pos_m, init_sigma_vel_mps, init_sigma_att_deg : 3 floats
         Initial 1-sigma of position (N, E, D), velocity, roll/pitch/yaw.
-    init_error : bool
+    init_error : bool or "auto"
         Draw the initial state error from those sigmas (``init_seed``), as in
         a Monte Carlo run; otherwise start from the given initial state.
+        ``"auto"`` (default): draw only when the dataset's initial state is the
+        simulator's truth (``Dataset.initial_is_truth``); a state the user gives
+        (dataset.json, KF-GINS, RINEX, CSV) is taken as given.
     imu : ImuNoise or None
         None: derived from the dataset's IMU model.
     lever_arm_b : 3 floats or None
@@ -251,7 +254,7 @@ class RunConfig:
     init_sigma_pos_m: list = field(default_factory=lambda: [2.0, 2.0, 3.0])
     init_sigma_vel_mps: list = field(default_factory=lambda: [0.1, 0.1, 0.1])
     init_sigma_att_deg: list = field(default_factory=lambda: [0.5, 0.5, 1.0])
-    init_error: bool = True
+    init_error: bool | str = "auto"
     init_seed: int = 0
     imu: ImuNoise | None = None
     lever_arm_b: list | None = None
@@ -293,7 +296,9 @@ class RunConfig:
         if int(self.init_seed) != self.init_seed or self.init_seed < 0:
             bad("init_seed", self.init_seed, "an integer >= 0")
         self.init_seed = int(self.init_seed)
-        for key in ("init_error", "use_position", "use_velocity", "imu_error_sigmas"):
+        if not (isinstance(self.init_error, (bool, np.bool_)) or self.init_error == "auto"):
+            bad("init_error", self.init_error, 'true, false or "auto"')
+        for key in ("use_position", "use_velocity", "imu_error_sigmas"):
             if not isinstance(getattr(self, key), (bool, np.bool_)):
                 bad(key, getattr(self, key), "true or false")
         if self.lever_arm_b is not None:
