@@ -61,3 +61,17 @@ def test_dataset_json_keys_are_checked(saved, tmp_path, edit, needle):
     with pytest.raises(ValueError, match=needle) as exc:
         insnav.load_dataset(d)
     assert "dataset.json" in str(exc.value)
+
+
+def test_every_run_checks_positions_against_velocities(saved):
+    """insnav.run on any dataset: fixes whose longitude moves against the
+    reported east velocity (a flipped sign after the first fix) are refused
+    before the filter, in one line naming the cause."""
+    import copy
+
+    ds, _ = saved
+    bad = copy.deepcopy(ds)
+    lon0 = bad.gnss.lon_deg[0]
+    bad.gnss.lon_deg = 2 * lon0 - np.asarray(bad.gnss.lon_deg)  # mirrored about the first fix
+    with pytest.raises(ValueError, match="longitude sign looks flipped"):
+        insnav.run(bad, filter="ekf")

@@ -338,6 +338,7 @@ def check_dataset(dataset) -> None:
         gnss_src = _source(gnss, "gnss")
         check_time_overlap(imu.t, gnss.t_valid, imu_source=imu_src, gnss_source=gnss_src)
         check_gnss(gnss, initial=getattr(dataset, "initial", None), source=gnss_src)
+        check_gnss_velocity(gnss, source=gnss_src)  # flipped lat/lon signs, radians read as degrees
         check_gyro_against_gnss(imu.t, imu.dtheta_b, imu.dv_b, gnss, source=imu_src)
 
 
