@@ -7,6 +7,8 @@ raise :class:`ConfigError` naming the key, the value and what is allowed.
 """
 from __future__ import annotations
 
+from .errors import close_matches
+
 import dataclasses
 import math
 import tomllib
@@ -63,10 +65,8 @@ class ImuNoise:
                              "IMU noise would trust the IMU blindly")
         unknown = set(m) - _IMU_MODEL_KEYS
         if unknown:
-            import difflib
-
             k = sorted(unknown)[0]
-            close = difflib.get_close_matches(k, _IMU_MODEL_KEYS, n=1)
+            close = close_matches(k, _IMU_MODEL_KEYS)
             raise ValueError(f"imu_model: unknown key {k!r}" + (f" (did you mean {close[0]!r}?)" if close else "")
                              + f"; known: {', '.join(sorted(_IMU_MODEL_KEYS))}")
 
@@ -400,10 +400,8 @@ _USER_UNITS = {
 
 def _suggest(key: str, known) -> str:
     """'; did you mean 'x'?' for the closest known key, else the list of known keys."""
-    import difflib
-
     known = sorted(known)
-    close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+    close = close_matches(key, known)
     return f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
 
 

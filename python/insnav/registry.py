@@ -9,6 +9,8 @@ of it).
 """
 from __future__ import annotations
 
+from .errors import close_matches
+
 from dataclasses import dataclass
 
 __all__ = ["FilterSpec", "FILTERS", "filter_spec", "filter_names"]
@@ -115,8 +117,6 @@ def filter_spec(name: str) -> FilterSpec:
     try:
         return FILTERS[name]
     except KeyError:
-        import difflib
-
-        close = difflib.get_close_matches(str(name), FILTERS, n=1)
+        close = close_matches(str(name), FILTERS)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise ValueError(f"filter {name!r} unknown{hint}; known: {', '.join(FILTERS)}") from None

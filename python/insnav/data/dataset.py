@@ -29,6 +29,8 @@ so a directory that exists is always complete.
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 import json
 import os
 import shutil
@@ -521,14 +523,12 @@ _META_KEYS = ("format", "version", "name", "seed", "t0_s", "gps_time_offset_s", 
 
 def _check_meta_keys(meta: dict, meta_path: Path) -> None:
     """A key dataset.json does not define is a one-line error with the closest known key."""
-    import difflib
-
     for where, keys, known in (("", meta, _META_KEYS),
                                ("initial.", meta.get("initial") if isinstance(meta.get("initial"), dict) else {},
                                 _INITIAL_KEYS)):
         for k in keys:
             if k not in known:
-                close = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+                close = close_matches(str(k), known)
                 hint = f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
                 raise ValueError(f"{meta_path}: unknown key '{where}{k}'{hint}")
 

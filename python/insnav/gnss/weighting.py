@@ -45,6 +45,8 @@ the FDMA signals are worse), ``E`` 1, ``C`` 1 (RTKLIB ``EFACT_CMP``).  The
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -140,9 +142,7 @@ class Weighting:
         names = [f.name for f in dataclasses.fields(cls)]
         for k in d:
             if k not in names:
-                import difflib
-
-                close = difflib.get_close_matches(k, names, n=1)
+                close = close_matches(k, names)
                 hint = f" (did you mean '{cls.TABLE}.{close[0]}'?)" if close else ""
                 raise ConfigError(f"{source}: unknown key '{cls.TABLE}.{k}'{hint}; known keys: {', '.join(names)}")
         return cls(**d).validate(source)

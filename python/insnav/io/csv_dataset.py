@@ -34,8 +34,9 @@ the key and the closest known key.
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 import dataclasses
-import difflib
 import math
 import os
 import tomllib
@@ -88,7 +89,7 @@ class CsvDataset(Dataset):
 
 
 def _unknown(source: str, table: str, key: str, known) -> ConfigError:
-    close = difflib.get_close_matches(key, list(known), n=1)
+    close = close_matches(key, list(known))
     name = f"{table}.{key}" if table else key
     hint = f" (did you mean '{table + '.' if table else ''}{close[0]}'?)" if close else ""
     return ConfigError(f"{source}: unknown key '{name}'{hint}; known keys: {', '.join(sorted(known))}")

@@ -35,6 +35,8 @@ Formats
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 import math
 import os
 from dataclasses import dataclass, field
@@ -156,9 +158,7 @@ class GnssFileFormat:
             roles = tuple(cols)
             for c in roles:
                 if c not in _ROLES:
-                    import difflib
-
-                    close = difflib.get_close_matches(c, _ROLES, n=1)
+                    close = close_matches(c, _ROLES)
                     raise ConfigError(f"{source}: {prefix}columns: unknown column {c!r}"
                                       + (f" (did you mean {close[0]!r}?)" if close else "")
                                       + f"; allowed: {', '.join(_ROLES)}")
@@ -340,9 +340,7 @@ def read_gnss_csv(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
                 roles = ["_"] * len(names)
                 for role, name in fmt.columns.items():
                     if name not in names:
-                        import difflib
-
-                        close = difflib.get_close_matches(name, names, n=1)
+                        close = close_matches(name, names)
                         raise GnssFileError(path, i + 1, f"header has no column {name!r} (for {role})"
                                             + (f"; did you mean {close[0]!r}?" if close else "")
                                             + f"; header: {delim.join(names)}")

@@ -74,6 +74,8 @@ file) and what was wrong; a bad format option a
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 import math
 import os
 from dataclasses import dataclass, field
@@ -218,9 +220,7 @@ class ImuCsvFormat:
             cols = roles = tuple(cols)
             for c in cols:
                 if c not in _ROLES:
-                    import difflib
-
-                    close = difflib.get_close_matches(c, _ROLES, n=1)
+                    close = close_matches(c, _ROLES)
                     raise ConfigError(f"{source}: {prefix}columns: unknown column {c!r}"
                                       + (f" (did you mean {close[0]!r}?)" if close else "")
                                       + f"; allowed: {', '.join(_ROLES)}")
@@ -479,9 +479,7 @@ def _header_columns(path, lineno, tok, mapping: dict, delim: str) -> tuple:
     roles = ["_"] * len(names)
     for role, name in mapping.items():
         if name not in names:
-            import difflib
-
-            close = difflib.get_close_matches(name, names, n=1)
+            close = close_matches(name, names)
             raise ImuFileError(path, lineno, f"header has no column {name!r} (for {role})"
                                + (f"; did you mean {close[0]!r}?" if close else "")
                                + f"; header: {delim.join(names)}")
