@@ -93,7 +93,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name in ("imu", "constraints", "sanitize") or v is None:
+        if f.name in ("imu", "constraints", "robust", "sanitize") or v is None:
             continue
         lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.sanitize:
@@ -109,6 +109,9 @@ def resolved_config_toml(cfg: RunConfig) -> str:
                 continue
             else:
                 lines.append(f"{f.name} = {toml_value(v)}")
+    if cfg.coupling == "tight":
+        lines.append("\n[robust]")
+        lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)]
     if cfg.imu is not None:
         from ..config import _USER_UNITS
 
