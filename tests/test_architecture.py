@@ -237,3 +237,19 @@ assert callable(insnav.evaluate)
 """
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
+
+
+def test_one_navigation_trajectory_schema():
+    """Truth, Solution and the free-inertial trajectory declare the navigation
+    fields once (NavTrajectory) and spell their first columns the same way."""
+    import dataclasses
+
+    import insnav
+    from insnav.data.dataset import Truth
+    from insnav.data.nav import NAV_COLUMNS, NAV_FIELDS, NavTrajectory
+
+    for cls in (Truth, insnav.Solution, insnav.Trajectory):
+        assert issubclass(cls, NavTrajectory)
+        assert tuple(f.name for f in dataclasses.fields(cls))[:len(NAV_FIELDS)] == NAV_FIELDS
+        assert cls.COLUMNS[:len(NAV_COLUMNS)] == NAV_COLUMNS
+    assert insnav.Trajectory is insnav.NavTrajectory

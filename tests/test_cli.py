@@ -345,12 +345,14 @@ def test_bench_quick(scenario_file):
 
 # --- user errors: exit 2, one line naming the problem ---------------------------------
 @pytest.mark.parametrize("toml, needles", [
-    ('filtr = "ekf"\n', ["unknown key 'filtr'", "known keys"]),
+    ('filtr = "ekf"\n', ["unknown key 'filtr'", "did you mean 'filter'"]),
+    ('zzz = 1\n', ["unknown key 'zzz'", "known keys", "gate_chi2"]),
     ('filter = "kalman"\n', ["'filter'", "'kalman'", "rbukf"]),
     ("gate_chi2 = -1.0\n", ["'gate_chi2'", "-1.0"]),
     ("init_sigma_pos_m = [1.0, 2.0]\n", ["'init_sigma_pos_m'", "3 finite values"]),
     ("[imu]\nacc_bias_sigma_mg = -5\n", ["'imu.acc_bias_sigma_mg'", "-5"]),
-    ("[imu]\ngyro_bias_sigma_dph = 5\n", ["unknown key 'imu.gyro_bias_sigma_dph'"]),
+    ("[imu]\ngyro_bias_sigma_dph = 5\n", ["unknown key 'imu.gyro_bias_sigma_dph'",
+                                          "did you mean 'gyro_bias_sigma_deg_per_h'"]),
     ("filter = \n", ["not valid TOML", "line 1"]),
 ])
 def test_bad_config_is_one_line_naming_the_key(dataset, work, toml, needles):

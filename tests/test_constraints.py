@@ -177,3 +177,27 @@ def test_smoother_bridges_an_outage_consistently(car):
     assert sm.summary["smoother"]["gain_failures"] == 0
     with pytest.raises(ConfigError, match="smooth"):
         RunConfig(filter="rbukf", smooth=True).validate()
+
+
+def test_smoothed_rows_do_not_depend_on_how_the_rows_are_split():
+    """_core.smooth_rows works on blocks of rows on two threads, each finding its
+    epoch interval by bisection: the same rows one at a time give the same numbers."""
+    from insnav import _core
+
+    rng = np.random.default_rng(3)
+    n, E = 30_000, 301
+    t = np.linspace(0.0, 300.0, n)
+    te = np.linspace(0.0, 300.0, E)
+    s, s_end, sig = (rng.normal(scale=1e-3, size=(E, 9)) for _ in range(3))
+    base = [np.full(n, 30.0), np.full(n, 114.0), np.full(n, 20.0), rng.normal(size=(n, 3)),
+            rng.normal(size=n), rng.normal(size=n), rng.uniform(-180, 180, n)]
+    whole = [a.copy() for a in base]
+    sig_whole = np.empty((n, 9))
+    _core.smooth_rows(t, *whole, te, s, s_end, np.abs(sig), sig_whole)
+    for i in rng.choice(n, 300, replace=False):
+        one = [np.ascontiguousarray(a[i:i + 1]) for a in base]
+        sig_one = np.empty((1, 9))
+        _core.smooth_rows(t[i:i + 1], *one, te, s, s_end, np.abs(sig), sig_one)
+        for a, b in zip(whole, one):
+            assert np.array_equal(a[i:i + 1], b)
+        assert np.array_equal(sig_whole[i], sig_one[0])

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 import insnav
@@ -88,3 +89,18 @@ def test_progress_bar_only_on_a_terminal_and_for_long_tasks():
     assert "run" in shown.getvalue()
     with reporting("x", enabled=False) as bar:
         assert bar is None
+
+
+def test_simulate_reports_every_stage_in_order_and_the_same_dataset():
+    """insnav.simulate(progress=) is told each stage once, in order, and the
+    callable changes nothing in the dataset (insnav simulate draws its bar with it)."""
+    from insnav.sim import SIMULATE_STAGES
+
+    seen = []
+    ds = insnav.simulate("seed003-1sat", seed=4, progress=lambda k, n: seen.append((k, n)))
+    n = len(SIMULATE_STAGES)
+    assert seen == [(k, n) for k in range(1, n + 1)]
+    ref = insnav.simulate("seed003-1sat", seed=4)
+    assert np.array_equal(ds.imu.dtheta_b, ref.imu.dtheta_b) and np.array_equal(ds.gnss_raw.pseudorange_m,
+                                                                                ref.gnss_raw.pseudorange_m,
+                                                                                equal_nan=True)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import insnav
-from insnav.io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE
+from insnav.io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE
 
 from test_cli import _call, _user_error
 
@@ -91,6 +91,35 @@ def test_out_format_kfgins_writes_kfgins_files(ds_dir, full, tmp_path):
     assert np.abs(back[-1, 1:4]).max() > 0 and np.abs(back[-1, 4:7]).max() > 0
     _user_error(["run", ds_dir, "--out-format", "kfgins", "--columns", "nav", "--out", tmp_path / "kf2"],
                 "--columns")
+
+
+def test_kfgins_std_file_holds_the_filter_sigmas(ds_dir, tmp_path):
+    """KF_GINS_STD.txt: t, 1-sigma position [m], velocity [m/s], attitude [deg],
+    gyro bias [deg/h], accelerometer bias [mGal], gyro and accelerometer scale
+    [ppm] (22 columns, KF-GINS's writeSTD), the same numbers as the API's
+    sqrt(diag P) rows; the bias sigmas start at the IMU model's and shrink as
+    GNSS makes them observable; a 15-state run estimates no scale factor (0)."""
+    out = tmp_path / "kf"
+    rc, _, err = _call(["run", ds_dir, "--filter", "ekf", "--out-format", "kfgins", "--output-rate", 10,
+                        "--out", out])
+    assert rc == 0, err
+    lines = (out / KFGINS_STD_FILE).read_text().split("\n")
+    ds = insnav.load_dataset(ds_dir)
+    sol = insnav.run(ds, filter="ekf", imu_error_sigmas=True, output_decimation=20)
+    assert sol.sigma_imu_err.shape == (len(sol), 12) and len(lines) - 1 == len(sol)
+    deg_h, mgal = 180.0 / np.pi * 3600.0, 1e5
+    se = sol.sigma_imu_err
+    for i in (0, len(sol) // 2, len(sol) - 1):
+        assert lines[i] == _kfgins_line([sol.t[i], *sol.sigma_pos_n_m[i], *sol.sigma_vel_n_mps[i],
+                                         *sol.sigma_att_deg[i], *(se[i, 3:6] * deg_h), *(se[i, 0:3] * mgal),
+                                         *(se[i, 9:12] * 1e6), *(se[i, 6:9] * 1e6)])
+    back = np.loadtxt(out / KFGINS_STD_FILE)
+    assert back.shape == (len(sol), 22)
+    model = ds.imu_model  # the run's initial bias sigmas: the model's total bias sigmas
+    np.testing.assert_allclose(se[0, 0:3], model["accel_bias_total_sigma"], rtol=0.02)
+    np.testing.assert_allclose(se[0, 3:6], model["gyro_bias_total_sigma"], rtol=0.02)
+    assert (se[-1, 0:6] < se[0, 0:6]).all()  # GNSS updates made every bias observable, a little
+    assert (back[:, 16:22] == 0).all()        # 15 states: no scale factors estimated
 
 
 def test_kfgins_layout_matches_kfgins_own_output(shared_data):

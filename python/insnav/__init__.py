@@ -23,6 +23,7 @@ __version__ = "0.1.0"
 _LAZY = {
     "NavState": "insnav.data.nav",
     "Trajectory": "insnav.data.nav",
+    "NavTrajectory": "insnav.data.nav",
     "mechanize": "insnav.ins.mechanize",
     "simulate": "insnav.sim",
     "load_dataset": "insnav.data.dataset",

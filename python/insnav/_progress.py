@@ -24,9 +24,13 @@ class Progress:
         (predicted from the rate after at least ``0.3`` s).
     force : bool
         Draw even when ``stream`` is not a terminal (tests).
+    unit : str
+        What ``done`` counts (tqdm's unit).
     """
 
-    def __init__(self, label: str, stream=None, min_seconds: float = 2.0, force: bool = False):
+    def __init__(self, label: str, stream=None, min_seconds: float = 2.0, force: bool = False,
+                 unit: str = " samples"):
+        self.unit = unit
         self.label = label
         self.stream = sys.stderr if stream is None else stream
         self.min_seconds = min_seconds
@@ -50,7 +54,7 @@ class Progress:
             except ImportError:
                 self._plain = True
             else:
-                self._bar = tqdm(total=total, desc=self.label, unit=" samples", unit_scale=True, file=self.stream,
+                self._bar = tqdm(total=total, desc=self.label, unit=self.unit, unit_scale=True, file=self.stream,
                                  leave=False, dynamic_ncols=True, mininterval=0.2)
         if now - self._last < 0.2 and done < total:
             return

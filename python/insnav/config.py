@@ -290,6 +290,18 @@ class RunConfig:
     smooth : bool
         Post-process with the RTS smoother (loose EKF): every output row and
         sigma from all the data, before and after it.
+    init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None
+        Initial estimate of the IMU errors (measured minus true; scale factors
+        [-]); None: zero.  KF-GINS's ``initaccbias``/``initgyrbias``/
+        ``initaccscale``/``initgyrscale``.  Loose runs.
+    init_sigma_acc_bias_mps2, init_sigma_gyro_bias_radps, init_sigma_acc_scale, init_sigma_gyro_scale : 3 floats or None
+        Initial 1-sigma of those states; None: the IMU noise model's bias and
+        scale-factor sigmas.  KF-GINS's ``initbastd``/``initbgstd``/
+        ``initsastd``/``initsgstd``.  Loose runs.
+    imu_error_sigmas : bool
+        Also keep the 1-sigma of the IMU-error states (biases, scale factors)
+        for every output row (``Solution.sigma_imu_err``; loose runs).
+        ``insnav run --out-format kfgins`` turns it on for ``KF_GINS_STD.txt``.
     sanitize : dict
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
@@ -319,6 +331,15 @@ class RunConfig:
     robust: Robust = field(default_factory=Robust)
     smooth: bool = False
     sanitize: dict = field(default_factory=dict)
+    imu_error_sigmas: bool = False
+    init_acc_bias_mps2: list | None = None
+    init_gyro_bias_radps: list | None = None
+    init_acc_scale: list | None = None
+    init_gyro_scale: list | None = None
+    init_sigma_acc_bias_mps2: list | None = None
+    init_sigma_gyro_bias_radps: list | None = None
+    init_sigma_acc_scale: list | None = None
+    init_sigma_gyro_scale: list | None = None
 
     def validate(self) -> "RunConfig":
         def bad(key, value, allowed):
@@ -336,7 +357,7 @@ class RunConfig:
         if int(self.init_seed) != self.init_seed or self.init_seed < 0:
             bad("init_seed", self.init_seed, "an integer >= 0")
         self.init_seed = int(self.init_seed)
-        for key in ("init_error", "use_position", "use_velocity"):
+        for key in ("init_error", "use_position", "use_velocity", "imu_error_sigmas"):
             if not isinstance(getattr(self, key), (bool, np.bool_)):
                 bad(key, getattr(self, key), "true or false")
         if self.lever_arm_b is not None:
@@ -359,7 +380,7 @@ class RunConfig:
         _SAN = SANITIZE_DEFAULTS
         for k, v in self.sanitize.items():
             if k not in _SAN:
-                raise ConfigError(f"unknown key 'sanitize.{k}'; known keys: {', '.join(sorted(_SAN))}")
+                raise ConfigError(f"unknown key 'sanitize.{k}'{_suggest(k, _SAN)}")
             ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
             if not ok or (k not in ("min_h_m", "max_h_m") and v <= 0) or (k == "gap_factor" and v <= 1):
                 bad(f"sanitize.{k}", v, "a finite number" + ("" if k in ("min_h_m", "max_h_m") else
@@ -399,8 +420,28 @@ class RunConfig:
             bad("output_decimation", self.output_decimation, "integer >= 1")
         if not (0 < self.ut_alpha <= 1):
             bad("ut_alpha", self.ut_alpha, "0 < alpha <= 1")
+        for key in INIT_IMU_KEYS:
+            v = getattr(self, key)
+            if v is None:
+                continue
+            try:
+                a = np.asarray(v, dtype=float)
+            except (TypeError, ValueError):
+                a = np.full(1, np.nan)
+            sigma = key.startswith("init_sigma")
+            if a.shape != (3,) or not np.all(np.isfinite(a)) or (sigma and np.any(a < 0)):
+                bad(key, v, "3 finite values" + (" >= 0" if sigma else ""))
+            if self.coupling != "loose":
+                bad(key, v, "absent: the initial IMU-error estimate and sigmas apply to loose runs")
+            if "scale" in key and self.layout != 21:
+                bad(key, v, "absent: scale factors are states of layout = 21 only")
         return self
 
+
+#: RunConfig keys of the initial IMU-error estimate and its sigmas, in the imu_correction order
+INIT_IMU_KEYS = ("init_acc_bias_mps2", "init_gyro_bias_radps", "init_acc_scale", "init_gyro_scale",
+                 "init_sigma_acc_bias_mps2", "init_sigma_gyro_bias_radps", "init_sigma_acc_scale",
+                 "init_sigma_gyro_scale")
 
 _USER_UNITS = {
     # TOML key in [imu] -> (field, factor to SI)
@@ -418,6 +459,15 @@ _USER_UNITS = {
 }
 
 
+def _suggest(key: str, known) -> str:
+    """'; did you mean 'x'?' for the closest known key, else the list of known keys."""
+    import difflib
+
+    known = sorted(known)
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
+
+
 def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     """Build a :class:`RunConfig` from a (TOML) dict, rejecting unknown keys."""
     d = dict(d)
@@ -427,8 +477,7 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints", "robust"}
     for k in d:
         if k not in names:
-            raise ConfigError(f"{source}: unknown key '{k}'; known keys: "
-                              f"{', '.join(sorted(names | {'imu', 'constraints', 'robust'}))}")
+            raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | {'imu', 'constraints', 'robust'})}")
     cfg = RunConfig(**d)
     if rob_d is not None:
         if not isinstance(rob_d, dict):
@@ -444,7 +493,7 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
         known = {f.name for f in dataclasses.fields(Constraints)}
         for k in con_d:
             if k not in known:
-                raise ConfigError(f"{source}: unknown key 'constraints.{k}'; known keys: {', '.join(sorted(known))}")
+                raise ConfigError(f"{source}: unknown key 'constraints.{k}'{_suggest(k, known)}")
         cfg.constraints = Constraints(**con_d)
     if imu_d is not None:
         if not isinstance(imu_d, dict):
@@ -452,7 +501,7 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
         noise = ImuNoise()
         for k, v in imu_d.items():
             if k not in _USER_UNITS:
-                raise ConfigError(f"{source}: unknown key 'imu.{k}'; known keys: {', '.join(sorted(_USER_UNITS))}")
+                raise ConfigError(f"{source}: unknown key 'imu.{k}'{_suggest(k, _USER_UNITS)}")
             fld, factor = _USER_UNITS[k]
             try:
                 arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor

@@ -72,6 +72,27 @@ def _read_truth(path, quality=None):
     return Truth.from_array(read_csv(p, Truth.COLUMNS))
 
 
+#: rms(error/sigma) per axis outside these bounds flags the solution's sigmas as
+#: overconfident (above) or pessimistic (below); a consistent filter gives about 1
+CONSISTENCY_BOUNDS = (0.5, 2.0)
+
+
+def consistency_flags(consistency: dict, bounds=CONSISTENCY_BOUNDS) -> dict:
+    """Per quantity, the axes whose rms(error/sigma) is outside ``bounds``.
+
+    Returns ``{quantity: [(axis index, value, "overconfident" | "pessimistic"), ...]}``
+    holding only the quantities with at least one such axis.
+    """
+    lo, hi = bounds
+    out = {}
+    for k, vals in consistency.items():
+        bad = [(i, float(v), "overconfident" if v > hi else "pessimistic")
+               for i, v in enumerate(vals) if not lo <= v <= hi]
+        if bad:
+            out[k] = bad
+    return out
+
+
 def evaluate(solution, truth, outages=()) -> dict:
     """Accuracy figures of ``solution`` against ``truth``.
 
@@ -86,7 +107,9 @@ def evaluate(solution, truth, outages=()) -> dict:
     dict
         ``rms`` / ``max`` per quantity (lists N,E,D or roll,pitch,yaw),
         ``horizontal_rms_m``, ``horizontal_max_m``, ``rms_3d_m``,
-        ``consistency`` (rms(error/sigma) per quantity), ``outages`` (list of dicts).
+        ``consistency`` (rms(error/sigma) per quantity), ``consistency_flags``
+        (:func:`consistency_flags`: axes outside :data:`CONSISTENCY_BOUNDS`),
+        ``outages`` (list of dicts).
     """
     e = errors(solution, truth)
     hz = np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])
@@ -99,6 +122,7 @@ def evaluate(solution, truth, outages=()) -> dict:
         sk = "sigma_" + k
         if sk in e and np.all(e[sk] > 0):
             out["consistency"][k] = rms(e[k] / e[sk]).tolist()
+    out["consistency_flags"] = consistency_flags(out["consistency"])
     out["horizontal_rms_m"] = float(rms(hz))
     out["horizontal_max_m"] = float(hz.max())
     out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"] ** 2, axis=1))))
@@ -190,6 +214,13 @@ def cmd_evaluate(args) -> int:
               f"   max {'/'.join(f'{x:.4g}' for x in res['max'][k])}{cs}")
     print(f"horizontal RMS {res['horizontal_rms_m']:.4g} m, max {res['horizontal_max_m']:.4g} m; "
           f"3-D RMS {res['rms_3d_m']:.4g} m")
+    lo, hi = CONSISTENCY_BOUNDS
+    for k, bad in res["consistency_flags"].items():
+        n, _, ax = names[k]
+        axes = ax.split("/")
+        what = "; ".join(f"{axes[i]} {v:.2f} ({kind})" for i, v, kind in bad)
+        print(f"WARNING: {n} rms(err/sigma) outside {lo:g}-{hi:g}: {what}: the solution's {n} sigmas "
+              f"do not describe its errors")
     for o in res["outages"]:
         print(f"outage {o['start_s']:g}-{o['end_s']:g} s: max horizontal inside {o['max_horizontal_inside_m']:.4g} m, "
               f"in the 60 s after {o['max_horizontal_after_60s_m']:.4g} m, reconverged after "

@@ -480,7 +480,8 @@ def _compare_main(args) -> int:
             raise UserError(f"--delay-p: expected comma-separated probabilities, got {args.delay_p!r}") from None
     try:
         res = montecarlo(args.scenario, args.filters, runs=args.runs, seed=args.seed, workers=args.workers,
-                         backend=backend, scheduler=args.scheduler, skip_s=args.skip_s, **kw)
+                         backend=backend, scheduler=args.scheduler, skip_s=args.skip_s,
+                         progress=False if getattr(args, "quiet", False) else None, **kw)
     except (BackendError, MissingExtraError) as exc:
         raise UserError(str(exc)) from None
     if args.json:
@@ -541,4 +542,5 @@ def add_compare_parser(sub) -> None:
                    help="rdkf delay probabilities, e.g. 0.7,0.3 (default: the scenario's)")
     p.add_argument("--json", action="store_true", help="print JSON (per-run metrics and summary)")
     p.add_argument("--compact", action="store_true", help="with --json: one line")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar (shown on a terminal only)")
     p.set_defaults(func=_compare_main)

@@ -58,11 +58,15 @@ def add_run_parser(sub) -> None:
     p.add_argument("--smooth", action="store_true",
                    help="post-process with the RTS smoother (loose EKF): every row from all the data")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
-    p.add_argument("--out", required=True,
+    p.add_argument("--out", default=None,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
                         "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, rows, "
                         "loose innovation), for tight <out>.residuals.csv (per satellite) and <out>.config.toml "
-                        "(the run's configuration)")
+                        "(the run's configuration).  Required, except with --format kfgins: then the YAML's "
+                        "outputpath gets KF-GINS's own files (as --out-format kfgins), as KF-GINS does")
+    p.add_argument("--run-config", default=None, metavar="TOML",
+                   help="with --format kfgins (whose --config is the KF-GINS YAML): an insnav TOML run "
+                        "configuration whose keys override the YAML's (sanitize limits, gating, constraints...)")
     p.add_argument("--output-rate", type=float, default=None, metavar="HZ",
                    help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
                         "200 Hz); the filter still runs at every sample.  Default: every sample")
@@ -70,7 +74,7 @@ def add_run_parser(sub) -> None:
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
     p.add_argument("--out-format", choices=("insnav", "kfgins"), default="insnav",
-                   help="kfgins: --out is a folder that gets KF_GINS_Navresult.nav and KF_GINS_IMU_ERR.txt "
+                   help="kfgins: --out is a folder that gets KF_GINS_Navresult.nav, KF_GINS_IMU_ERR.txt, KF_GINS_STD.txt "
                         "exactly as KF-GINS writes them (week sow lat lon h vN vE vD roll pitch yaw; sow, "
                         "gyro bias deg/h, acc bias mGal, scale factors ppm)")
     p.add_argument("--csv-precision", choices=("resolution", "exact"), default="resolution",
@@ -178,11 +182,47 @@ class _Stages:
         return "timings [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in self.times.items())
 
 
+def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
+    """``cfg`` with the keys present in the insnav TOML ``path`` replaced (validated as a whole)."""
+    import dataclasses
+    import tomllib
+
+    from ..config import config_from_dict
+
+    try:
+        with open(path, "rb") as f:
+            d = tomllib.load(f)
+    except OSError as exc:
+        raise UserError(f"--run-config {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML: {exc}") from None
+    given = config_from_dict(d, source=str(path))  # unknown keys / bad values: one line naming the file
+    for key in d:
+        setattr(cfg, key, getattr(given, key))
+    return dataclasses.replace(cfg).validate()
+
+
 def cmd_run(args) -> int:
     import insnav
 
     stages = _Stages()
 
+    if args.run_config is not None and args.format != "kfgins":
+        raise UserError("--run-config goes with --format kfgins (otherwise the insnav TOML is --config)")
+    if args.out is None:
+        if args.format != "kfgins":
+            raise UserError("--out is required (a solution file such as sol.csv)")
+        if not args.config:
+            raise UserError("--format kfgins needs --config KF-GINS.yaml")
+        from ..io.kfgins import read_kfgins_config
+
+        try:
+            outputpath = read_kfgins_config(args.config)["outputpath"]
+        except (OSError, ValueError) as exc:
+            raise UserError(str(exc)) from None
+        if outputpath is None:
+            raise UserError(f"{args.config}: no --out and no 'outputpath' key: give one of them")
+        args.out, args.out_format = outputpath, "kfgins"
     out = Path(args.out)
     from ..filters.solution import FORMATS, Solution
 
@@ -224,6 +264,8 @@ def cmd_run(args) -> int:
             from ..io.kfgins_dataset import load_kfgins
 
             ds, cfg = load_kfgins(args.config, args.imu, args.gnss)
+            if args.run_config:
+                cfg = _overlay_run_config(cfg, args.run_config)
         else:
             if not args.dataset:
                 raise UserError("give a dataset directory (or --format kfgins --config FILE)")
@@ -237,6 +279,8 @@ def cmd_run(args) -> int:
             cfg.smooth = True
         if args.constraints is not None:
             cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
+        if args.out_format == "kfgins":
+            cfg.imu_error_sigmas = True  # KF_GINS_STD.txt
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
         stages.done("read")

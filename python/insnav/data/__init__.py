@@ -4,6 +4,6 @@ dataset's IMU, GNSS, odometer and truth tables and its folder format
 from __future__ import annotations
 
 from .dataset import Dataset, GnssFixes, GnssRaw, ImuData, Truth, load_dataset
-from .nav import NavState, Trajectory
+from .nav import NavState, NavTrajectory, Trajectory
 
-__all__ = ["Dataset", "GnssFixes", "GnssRaw", "ImuData", "Truth", "load_dataset", "NavState", "Trajectory"]
+__all__ = ["Dataset", "GnssFixes", "GnssRaw", "ImuData", "Truth", "load_dataset", "NavState", "NavTrajectory", "Trajectory"]

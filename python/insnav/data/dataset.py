@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .nav import NavState
+from .nav import NAV_COLUMNS, NavState, NavTrajectory
 
 FORMAT_VERSION = 1
 
@@ -177,8 +177,9 @@ class GnssFixes:
 
 
 @dataclass
-class Truth:
-    """Truth of the IMU centre.
+class Truth(NavTrajectory):
+    """Truth of the IMU centre (the :class:`~insnav.data.nav.NavTrajectory` fields
+    and the true specific force and angular rate).
 
     Attributes
     ----------
@@ -193,35 +194,17 @@ class Truth:
         True angular rate relative to inertial space, body FRD [rad/s].
     """
 
-    t: np.ndarray
-    lat_deg: np.ndarray
-    lon_deg: np.ndarray
-    h_m: np.ndarray
-    v_n: np.ndarray
-    roll_deg: np.ndarray
-    pitch_deg: np.ndarray
-    yaw_deg: np.ndarray
     f_ib_b: np.ndarray | None = None
     omega_ib_b: np.ndarray | None = None
 
-    COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg",
-               "pitch_deg", "yaw_deg", "f_x_mps2", "f_y_mps2", "f_z_mps2", "omega_x_radps",
-               "omega_y_radps", "omega_z_radps")
-
-    def __len__(self):
-        return len(self.t)
-
-    def state_at(self, i: int) -> NavState:
-        """Row ``i`` as a :class:`insnav.NavState`."""
-        return NavState(self.lat_deg[i], self.lon_deg[i], self.h_m[i], self.v_n[i],
-                        self.roll_deg[i], self.pitch_deg[i], self.yaw_deg[i])
+    COLUMNS = NAV_COLUMNS + ("f_x_mps2", "f_y_mps2", "f_z_mps2", "omega_x_radps", "omega_y_radps",
+                             "omega_z_radps")
 
     def to_array(self):
         n = len(self.t)
         f = self.f_ib_b if self.f_ib_b is not None else np.full((n, 3), np.nan)
         w = self.omega_ib_b if self.omega_ib_b is not None else np.full((n, 3), np.nan)
-        return np.column_stack([self.t, self.lat_deg, self.lon_deg, self.h_m, self.v_n,
-                                self.roll_deg, self.pitch_deg, self.yaw_deg, f, w])
+        return np.column_stack([self.nav_array(), f, w])
 
     @classmethod
     def from_array(cls, a):

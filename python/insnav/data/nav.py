@@ -10,6 +10,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from ..units import DEG
 
+__all__ = ["NavState", "NavTrajectory", "Trajectory", "NAV_FIELDS", "NAV_COLUMNS"]
+
+#: the navigation fields every trajectory container declares (time [s], position [deg, deg, m],
+#: NED velocity [m/s], 3-2-1 Euler angles [deg]), and their file columns
+NAV_FIELDS = ("t", "lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "yaw_deg")
+NAV_COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg")
 
 
 @dataclass
@@ -60,8 +66,14 @@ class NavState:
 
 
 @dataclass
-class Trajectory:
-    """A navigation solution sampled at times ``t`` (one row per sample).
+class NavTrajectory:
+    """Navigation states of the IMU centre sampled at times ``t`` (one row per sample).
+
+    The one navigation-trajectory schema: :class:`~insnav.data.dataset.Truth` (adds the true
+    specific force and rate), :class:`~insnav.Solution` (adds sigmas, IMU errors,
+    innovations) and the free-inertial output of :func:`insnav.mechanize` (this
+    class, also named ``insnav.Trajectory``) share these fields and the first
+    :data:`NAV_COLUMNS` of their files.
 
     Attributes
     ----------
@@ -85,7 +97,7 @@ class Trajectory:
     yaw_deg: np.ndarray
 
     #: fixed column names of :meth:`to_dataframe` and CSV output
-    COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg")
+    COLUMNS = NAV_COLUMNS
 
     def __len__(self) -> int:
         return len(self.t)
@@ -95,13 +107,21 @@ class Trajectory:
         return NavState(self.lat_deg[i], self.lon_deg[i], self.h_m[i], self.v_n[i],
                         self.roll_deg[i], self.pitch_deg[i], self.yaw_deg[i])
 
-    def to_array(self) -> np.ndarray:
-        """(N, 10) array in :attr:`COLUMNS` order."""
+    def nav_array(self) -> np.ndarray:
+        """(N, 10) array of the navigation fields in :data:`NAV_COLUMNS` order."""
         return np.column_stack([self.t, self.lat_deg, self.lon_deg, self.h_m, self.v_n,
                                 self.roll_deg, self.pitch_deg, self.yaw_deg])
+
+    def to_array(self) -> np.ndarray:
+        """(N, 10) array in :attr:`COLUMNS` order."""
+        return self.nav_array()
 
     def to_dataframe(self):
         """A pandas DataFrame with :attr:`COLUMNS` (pandas is optional)."""
         import pandas as pd
 
         return pd.DataFrame(self.to_array(), columns=list(self.COLUMNS))
+
+
+#: the free-inertial output of :func:`insnav.mechanize` (the same class)
+Trajectory = NavTrajectory

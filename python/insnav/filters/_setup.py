@@ -11,8 +11,9 @@ from ..earth import radii
 from ..registry import filter_spec
 from ..units import DEG
 
-__all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_sigmas", "init_vector", "lever_arm",
-           "engine_config", "tight_inputs_for", "initial_clock", "antenna_at_init", "raise_if_nonfinite"]
+__all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_sigmas", "initial_imu_correction",
+           "init_vector", "lever_arm", "engine_config", "tight_inputs_for", "initial_clock", "antenna_at_init",
+           "raise_if_nonfinite"]
 
 
 def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[NavState, np.ndarray]:
@@ -53,17 +54,35 @@ def outage_cycle_period(filter_name: str, cycle_s: float) -> float:
     return float(cycle_s) * filter_spec(filter_name).outage_cycle_factor
 
 
-def loose_initial_sigmas(sig0: np.ndarray, noise, layout: int) -> np.ndarray:
+def loose_initial_sigmas(sig0: np.ndarray, noise, layout: int, cfg=None) -> np.ndarray:
     """1-sigma of the loose layouts' states: position, velocity, attitude
-    (``sig0``), accelerometer and gyro biases, and (21 states) scale factors."""
+    (``sig0``), accelerometer and gyro biases, and (21 states) scale factors:
+    the run config's ``init_sigma_*`` IMU-error keys where given, else the
+    IMU noise model's sigmas."""
+    def pick(key, default):
+        v = getattr(cfg, key, None) if cfg is not None else None
+        return default if v is None else v
+
     p0 = np.zeros(layout)
     p0[:9] = sig0
-    p0[9:12] = noise.acc_bias_sigma
-    p0[12:15] = noise.gyro_bias_sigma
+    p0[9:12] = pick("init_sigma_acc_bias_mps2", noise.acc_bias_sigma)
+    p0[12:15] = pick("init_sigma_gyro_bias_radps", noise.gyro_bias_sigma)
     if layout == 21:
-        p0[15:18] = noise.acc_scale_sigma
-        p0[18:21] = noise.gyro_scale_sigma
+        p0[15:18] = pick("init_sigma_acc_scale", noise.acc_scale_sigma)
+        p0[18:21] = pick("init_sigma_gyro_scale", noise.gyro_scale_sigma)
     return p0
+
+
+def initial_imu_correction(cfg) -> np.ndarray:
+    """The engines' ``imu_correction``: the run config's initial IMU-error
+    estimate (accelerometer bias [m/s^2], gyro bias [rad/s], accelerometer and
+    gyro scale factor [-]; zero where not given)."""
+    out = np.zeros(12)
+    for j, key in enumerate(("init_acc_bias_mps2", "init_gyro_bias_radps", "init_acc_scale", "init_gyro_scale")):
+        v = getattr(cfg, key, None)
+        if v is not None:
+            out[3 * j:3 * j + 3] = v
+    return out
 
 
 def init_vector(dataset, init: NavState) -> np.ndarray:

@@ -37,7 +37,8 @@ from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
 from ..registry import filter_names
 from ..units import DEG, RAD2DEG
-from ._setup import engine_config, imu_arrays, init_vector, initial_state, loose_initial_sigmas, raise_if_nonfinite
+from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
+                     loose_initial_sigmas, raise_if_nonfinite)
 from .solution import GNSS_STATUS, Solution
 
 DELAY_FILTERS = tuple(n for n in filter_names("loose") if n in ("kf", "rdkf", "exact"))
@@ -118,7 +119,7 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
-    P0 = np.diag(loose_initial_sigmas(sig0, noise, n) ** 2)
+    P0 = np.diag(loose_initial_sigmas(sig0, noise, n, cfg) ** 2)
     tv_unique = np.unique(g.t_valid) if m else np.zeros(0)
     period = float(np.median(np.diff(tv_unique))) if len(tv_unique) > 1 else 1.0
     core_cfg = engine_config(dataset, cfg, tv_unique, n, use_position=cfg.use_position,
@@ -127,7 +128,7 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     summary = dict(filter=filter, coupling="loose", layout=n, gnss_records=m)
     if filter == "kf":
         gnss13 = np.ascontiguousarray(np.delete(rec, 0, axis=1))  # t := t_arrival
-        out = _core.run_loose("ekf", n, t, dth, dv, gnss13, init_vec, P0, np.zeros(12), noise.as_core_dict(),
+        out = _core.run_loose("ekf", n, t, dth, dv, gnss13, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
                               core_cfg)
     else:
         p = scenario_delay_p(dataset) if delay_p is None else np.asarray(delay_p, dtype=float)
@@ -141,7 +142,7 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
             core_cfg.update(max_history_s=float(max_history_s),
                             checkpoint_interval=float(checkpoint_interval_s or period))
         epochs = np.unique(np.round(np.concatenate([rec[:, 0], rec[:, 1]]), 9))
-        out = _core.run_delay(filter, n, t, dth, dv, rec, epochs, init_vec, P0, np.zeros(12), noise.as_core_dict(),
+        out = _core.run_delay(filter, n, t, dth, dv, rec, epochs, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
                               core_cfg, p if filter == "rdkf" else np.ones(1))
         for k in ("refused_too_old", "replays", "replayed_samples", "filter_updates", "history_s",
                   "max_delay_epochs"):

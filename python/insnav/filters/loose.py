@@ -13,7 +13,8 @@ from .. import _core
 from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
 from ..units import DEG, RAD2DEG
-from ._setup import (engine_config, imu_arrays, init_vector, initial_state, loose_initial_sigmas,
+from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
+                     loose_initial_sigmas,
                      raise_if_nonfinite)
 from .solution import Solution
 
@@ -38,9 +39,10 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
-    P0 = np.diag(loose_initial_sigmas(sig0, noise, n) ** 2)
+    P0 = np.diag(loose_initial_sigmas(sig0, noise, n, cfg) ** 2)
     core_cfg = engine_config(dataset, cfg, gnss_t, n, use_position=cfg.use_position, use_velocity=cfg.use_velocity,
-                             sigma_columns=9)  # Solution keeps the position, velocity and attitude sigmas only
+                             # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
+                             sigma_columns=n if cfg.imu_error_sigmas else 9)
     init_vec = init_vector(dataset, init)
     events, ev_counts = None, None
     if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
@@ -50,7 +52,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         core_cfg.update(engine_keys(dataset, cfg.constraints))
     if cfg.smooth:
         core_cfg["smooth"] = True
-    out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, np.zeros(12), noise.as_core_dict(),
+    out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
                           core_cfg, events)
     # unit conversions in place (the arrays are ours), one column at a time:
     # numpy's strided 2-D loops over 2-3 columns are ~10x slower than 1-D ones
@@ -71,6 +73,9 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                    summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n, updates=int(out["updates"]),
                                 rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
+    if cfg.imu_error_sigmas:  # layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
+        sol.sigma_imu_err = np.zeros((len(sol.t), 12))
+        sol.sigma_imu_err[:, :n - 9] = sig[:, 9:n]
     if events is not None:
         sol.summary["constraints"] = dict(use=list(cfg.constraints.use), events=len(events), **ev_counts,
                                           updates=int(out["constraint_updates"]),

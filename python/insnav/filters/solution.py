@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.nav import NAV_COLUMNS, NavTrajectory
+
 __all__ = ["RecordStatus", "GNSS_STATUS", "Solution", "load_solution", "save_solution", "write_innovations",
            "read_innovations", "innovations_path", "INNOVATION_COLUMNS", "RESIDUAL_COLUMNS", "read_residuals",
            "residuals_path", "status_name"]
@@ -34,8 +36,9 @@ GNSS_STATUS = {RecordStatus.NOT_USED: "not used", RecordStatus.APPLIED: "applied
 
 
 @dataclass
-class Solution:
-    """A navigation solution with its uncertainty and filter diagnostics.
+class Solution(NavTrajectory):
+    """A navigation solution with its uncertainty and filter diagnostics (the
+    :class:`~insnav.data.nav.NavTrajectory` fields, then the rest).
 
     Attributes
     ----------
@@ -48,6 +51,11 @@ class Solution:
     sigma_att_deg : (N, 3) 1-sigma of the attitude error angles [deg]
     acc_bias_mps2, gyro_bias_rps : (N, 3) estimated IMU biases (SI)
     acc_scale, gyro_scale : (N, 3) estimated scale-factor errors [-]
+    sigma_imu_err : (N, 12) or None
+        1-sigma of accelerometer bias [m/s^2], gyro bias [rad/s], accelerometer
+        and gyro scale factor [-] (the order of the IMU-error columns; 0 for the
+        scale factors of a 15-state layout, which does not estimate them); only
+        when the run asked for it (``imu_error_sigmas``), else None
     gnss_t : (M,) s, time of validity of each GNSS record
     innovation : (M, 6) INS minus GNSS (N, E, D position [m], velocity [m/s]) before the update
     nis : (M,) normalised innovation squared
@@ -56,14 +64,6 @@ class Solution:
         filter, coupling, counts of updates / rejections / covariance repairs.
     """
 
-    t: np.ndarray
-    lat_deg: np.ndarray
-    lon_deg: np.ndarray
-    h_m: np.ndarray
-    v_n: np.ndarray
-    roll_deg: np.ndarray
-    pitch_deg: np.ndarray
-    yaw_deg: np.ndarray
     sigma_pos_n_m: np.ndarray
     sigma_vel_n_mps: np.ndarray
     sigma_att_deg: np.ndarray
@@ -76,8 +76,9 @@ class Solution:
     nis: np.ndarray
     gnss_status: np.ndarray
     summary: dict = field(default_factory=dict)
+    sigma_imu_err: np.ndarray | None = None
 
-    COLUMNS = ("t_s", "lat_deg", "lon_deg", "h_m", "vn_mps", "ve_mps", "vd_mps", "roll_deg", "pitch_deg", "yaw_deg",
+    COLUMNS = NAV_COLUMNS + (
                "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps",
                "sigma_roll_deg", "sigma_pitch_deg", "sigma_yaw_deg",
                "acc_bias_x_mps2", "acc_bias_y_mps2", "acc_bias_z_mps2",
@@ -87,9 +88,6 @@ class Solution:
 
     #: --columns groups: the navigation state (t_s always), its 1-sigma, the IMU error estimates
     COLUMN_GROUPS = {"nav": COLUMNS[:10], "sigma": COLUMNS[10:19], "bias": COLUMNS[19:31]}
-
-    def __len__(self) -> int:
-        return len(self.t)
 
     def columns(self) -> list[tuple[str, np.ndarray, float]]:
         """(name, SI or degree array, factor to the column's unit) of every

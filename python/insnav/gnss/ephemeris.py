@@ -172,7 +172,8 @@ def _kepler(M, e, iters=10):
     return E
 
 
-def sat_position_velocity(eph: Ephemerides, idx, t_gps_s) -> SatPosVel:
+def sat_position_velocity(eph: Ephemerides, idx, t_gps_s, *, gm: float = GM_GPS,
+                          omega_e: float = OMEGA_E_DOT) -> SatPosVel:
     """Satellite ECEF position and velocity, IS-GPS-200 Table 20-IV.
 
     Parameters
@@ -183,6 +184,11 @@ def sat_position_velocity(eph: Ephemerides, idx, t_gps_s) -> SatPosVel:
     t_gps_s : array_like, shape (k,) or scalar
         GPS system time of evaluation, seconds since 1980-01-06 [s].  For a
         pseudorange this is the transmit time (see :func:`transmit_states`).
+    gm, omega_e : float
+        Gravitational constant [m^3/s^2] and Earth rotation rate [rad/s] of
+        the system's ICD (defaults: GPS).  Galileo (OS SIS ICD 2.1, Table 58)
+        and BeiDou MEO/IGSO (BDS-SIS-ICD-B1I 3.0, 5.2.4.12) use the same
+        algorithm with their own constants (:mod:`insnav.gnss.galbds`).
 
     Returns
     -------
@@ -203,7 +209,7 @@ def sat_position_velocity(eph: Ephemerides, idx, t_gps_s) -> SatPosVel:
     t = np.broadcast_to(np.asarray(t_gps_s, dtype=float), idx.shape)
     g = lambda name: getattr(eph, name)[idx]  # noqa: E731
     A = g("sqrt_a") ** 2
-    n0 = np.sqrt(GM_GPS / A**3)
+    n0 = np.sqrt(gm / A**3)
     tk = t - g("toe")
     n = n0 + g("delta_n")
     M = g("m0") + n * tk
@@ -222,7 +228,7 @@ def sat_position_velocity(eph: Ephemerides, idx, t_gps_s) -> SatPosVel:
     r = A * one_m_ecE + dr
     i = g("i0") + di + g("idot") * tk
     xp, yp = r * np.cos(u), r * np.sin(u)
-    Om = g("omega0") + (g("omega_dot") - OMEGA_E_DOT) * tk - OMEGA_E_DOT * g("toe_sow")
+    Om = g("omega0") + (g("omega_dot") - omega_e) * tk - omega_e * g("toe_sow")
     cO, sO, ci, si = np.cos(Om), np.sin(Om), np.cos(i), np.sin(i)
     x = xp * cO - yp * ci * sO
     y = xp * sO + yp * ci * cO
@@ -235,7 +241,7 @@ def sat_position_velocity(eph: Ephemerides, idx, t_gps_s) -> SatPosVel:
     u_dot = phi_dot * (1.0 + 2.0 * (g("cus") * c2 - g("cuc") * s2))
     r_dot = A * e * sE * E_dot + 2.0 * phi_dot * (g("crs") * c2 - g("crc") * s2)
     i_dot = g("idot") + 2.0 * phi_dot * (g("cis") * c2 - g("cic") * s2)
-    Om_dot = g("omega_dot") - OMEGA_E_DOT
+    Om_dot = g("omega_dot") - omega_e
     xp_dot = r_dot * np.cos(u) - yp * u_dot
     yp_dot = r_dot * np.sin(u) + xp * u_dot
     vx = xp_dot * cO - yp_dot * ci * sO + yp * si * i_dot * sO - y * Om_dot
@@ -252,7 +258,8 @@ class SatClock(NamedTuple):
     relativistic_s: np.ndarray  #: (k,) the relativistic term included in bias_s (0 if excluded) [s]
 
 
-def sat_clock(eph: Ephemerides, idx, t_gps_s, *, relativistic=True, tgd=False, E=None, E_dot=None) -> SatClock:
+def sat_clock(eph: Ephemerides, idx, t_gps_s, *, relativistic=True, tgd=False, E=None, E_dot=None,
+              f_rel: float = F_REL) -> SatClock:
     """Satellite clock offset ``dt_sv``, IS-GPS-200 20.3.3.3.3.1.
 
     ``dt_sv = af0 + af1 (t - toc) + af2 (t - toc)^2 + dt_r`` with the
@@ -269,7 +276,11 @@ def sat_clock(eph: Ephemerides, idx, t_gps_s, *, relativistic=True, tgd=False, E
     tgd : bool
         Subtract ``T_GD`` (L1 C/A single-frequency correction).
     E, E_dot : array_like, optional
-        Eccentric anomaly [rad] and rate [rad/s] if already computed.
+        Eccentric anomaly [rad] and rate [rad/s] if already computed (needed
+        when ``relativistic`` for a non-GPS table: the default recomputes
+        them with the GPS constants).
+    f_rel : float
+        Relativistic constant ``-2 sqrt(GM)/c^2`` of the system [s/sqrt(m)].
 
     Returns
     -------
@@ -288,7 +299,7 @@ def sat_clock(eph: Ephemerides, idx, t_gps_s, *, relativistic=True, tgd=False, E
         if E is None or E_dot is None:
             pv = sat_position_velocity(eph, idx, t)
             E, E_dot = pv.E, pv.E_dot
-        k = F_REL * eph.e[idx] * eph.sqrt_a[idx]
+        k = f_rel * eph.e[idx] * eph.sqrt_a[idx]
         rel = k * np.sin(E)
         bias = bias + rel
         drift = drift + k * np.cos(E) * E_dot

@@ -1,17 +1,23 @@
-"""RINEX 2.10/2.11 and 3.02-3.05 readers for GPS navigation and observation files.
+"""RINEX 2.10/2.11 and 3.02-3.05 readers for navigation and observation files.
 
-Why an own parser: the subset needed here (GPS LNAV records, the L1 C/A
-pseudorange/phase/Doppler/C/N0 columns) is small; a dependency such as
-georinex pulls in xarray/pandas and parses everything; and we want exact
-control over errors.  Every problem in a file raises :class:`RinexError`,
-whose message names the file, the 1-based line number and what was wrong;
-no IndexError or bare ValueError escapes for a malformed file.
+Navigation: GPS LNAV, GLONASS (RINEX 2 ``.g`` and RINEX 3 ``R`` records),
+Galileo I/NAV and F/NAV (``E``), BeiDou D1/D2 (``C``); observations: one
+signal per system (GPS, GLONASS, Galileo, BeiDou), pseudorange, phase,
+Doppler and C/N0.  Which systems are read is the caller's choice
+(``systems=``); the default is GPS only.
+
+Why an own parser: the subset needed here (broadcast records, one signal per
+system) is small; a dependency such as georinex pulls in xarray/pandas and
+parses everything; and we want exact control over errors.  Every problem in
+a file raises :class:`RinexError`, whose message names the file, the 1-based
+line number and what was wrong; no IndexError or bare ValueError escapes for
+a malformed file.
 
 Times are returned as GPS seconds since 1980-01-06 (``t_gps_s``, see
-:mod:`insnav.gnss.gpstime`) and as (GPS week, seconds of week).  Navigation
-record epochs (``toc``) of GPS records and observation epochs are taken to be
-GPS time, as the RINEX standard specifies for GPS and for files whose time
-system is GPS (the only case supported; other time systems raise).
+:mod:`insnav.gnss.gpstime`) and as (GPS week, seconds of week).  GPS and
+Galileo record epochs are GPS time (GST is steered to it), BeiDou epochs
+(BDT) get +14 s, GLONASS epochs (UTC) get the leap seconds.  Observation
+epochs must be GPS time (the only time system supported; others raise).
 
 References
 ----------
@@ -143,9 +149,17 @@ _NAV_ORDER = (
 )
 
 
+#: Broadcast orbit lines after the first line of a RINEX 3 record: (required, allowed).  GLONASS
+#: has a 4th orbit line from RINEX 3.05 on (status flags, L1/L2 group delay, URAI, health flags).
+_NAV3_LINES = {"G": (7, 7), "E": (7, 7), "C": (7, 7), "R": (3, 4)}
+
+#: systems whose navigation records insnav reads
+_SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou"}
+
+
 @dataclass
 class NavData:
-    """Contents of a GPS (or mixed) navigation file.
+    """Contents of a navigation file (GPS, or mixed / GLONASS / Galileo / BeiDou).
 
     Attributes
     ----------
@@ -157,7 +171,19 @@ class NavData:
         Klobuchar coefficients from the header [s, s/semicircle, ...] and
         [s, s/semicircle, ...] (IS-GPS-200 20.3.3.5.1.7); None if absent.
     n_skipped : int
-        Records of other systems that were skipped.
+        Records that were skipped: systems not asked for (``systems``) and
+        systems insnav does not process (QZSS, SBAS, IRNSS...).
+    eph_r : GlonassEphemerides
+        GLONASS records (``t_b`` converted from UTC to GPS time), empty unless asked for.
+    eph_e : KeplerEphemerides
+        Galileo records (I/NAV and F/NAV, see ``data_source``), empty unless asked for.
+    eph_c : KeplerEphemerides
+        BeiDou D1/D2 records (``toc``/``toe`` converted from BDT to GPS time), empty unless asked for.
+    leap_seconds : float or None
+        GPS - UTC from the header (``LEAP SECONDS``) [s]; None if absent
+        (GLONASS epochs then use :func:`insnav.gnss.glonass.gps_utc_leap_seconds`).
+    skipped_by_system : dict
+        System letter -> number of records skipped.
     """
 
     path: str
@@ -166,45 +192,124 @@ class NavData:
     ion_alpha: np.ndarray | None = None
     ion_beta: np.ndarray | None = None
     n_skipped: int = 0
+    eph_r: "GlonassEphemerides | None" = None
+    eph_e: "KeplerEphemerides | None" = None
+    eph_c: "KeplerEphemerides | None" = None
+    leap_seconds: float | None = None
+    skipped_by_system: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        from .galbds import KeplerEphemerides
+        from .glonass import GlonassEphemerides
+
+        if self.eph_r is None:
+            self.eph_r = GlonassEphemerides.empty()
+        if self.eph_e is None:
+            self.eph_e = KeplerEphemerides.empty()
+        if self.eph_c is None:
+            self.eph_c = KeplerEphemerides.empty()
+
+    @property
+    def systems(self) -> str:
+        """Letters of the systems with at least one record, in :data:`insnav.gnss.systems.SYSTEMS` order."""
+        n = {"G": len(self.eph), "R": len(self.eph_r), "E": len(self.eph_e), "C": len(self.eph_c)}
+        return "".join(s for s in "GREC" if n[s] > 0)
+
+    def merge(self, other: "NavData") -> "NavData":
+        """Records of both files (e.g. a RINEX 2 ``.n`` GPS and ``.g`` GLONASS file of the same day)."""
+        return NavData(
+            self.path + "+" + other.path, self.version,
+            Ephemerides.from_columns({k: np.concatenate([v, getattr(other.eph, k)])
+                                      for k, v in self.eph.to_columns().items()}),
+            self.ion_alpha if self.ion_alpha is not None else other.ion_alpha,
+            self.ion_beta if self.ion_beta is not None else other.ion_beta,
+            self.n_skipped + other.n_skipped, self.eph_r.concat(other.eph_r), self.eph_e.concat(other.eph_e),
+            self.eph_c.concat(other.eph_c), self.leap_seconds if self.leap_seconds is not None else other.leap_seconds,
+            {k: self.skipped_by_system.get(k, 0) + other.skipped_by_system.get(k, 0)
+             for k in set(self.skipped_by_system) | set(other.skipped_by_system)})
+
+    def transmit_states(self, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None, prn=None, codes=None, **kw):
+        """Multi-system satellite states at transmission; see :func:`insnav.gnss.broadcast.transmit_states_multi`."""
+        from .broadcast import transmit_states_multi
+
+        return transmit_states_multi(self, t_rx_gps_s, r_rx_e, sat_ids, system=system, prn=prn, codes=codes, **kw)
+
+    def sat_states(self, t_gps_s, sat_ids=None, *, system=None, prn=None, codes=None, **kw):
+        """Multi-system geometric states at ``t_gps_s``; see :func:`insnav.gnss.broadcast.sat_states_multi`."""
+        from .broadcast import sat_states_multi
+
+        return sat_states_multi(self, t_gps_s, sat_ids, system=system, prn=prn, codes=codes, **kw)
 
 
 def _four(src, text, start, width, what):
     return [_float(src, text[start + k * width:start + (k + 1) * width], what) for k in range(4)]
 
 
-def read_rinex_nav(path) -> NavData:
-    """Read GPS LNAV ephemerides and Klobuchar parameters from a RINEX nav file.
+def _parse_systems(systems) -> str:
+    s = "".join(dict.fromkeys(str(systems).upper().replace(",", "").replace(" ", "")))
+    bad = [c for c in s if c not in _SYSTEM_NAMES]
+    if bad or not s:
+        raise ValueError(f"systems={systems!r}: use letters of G (GPS), R (GLONASS), E (Galileo), C (BeiDou)")
+    return s
 
-    Supports RINEX 2.10/2.11 GPS nav (``.21n``) and RINEX 3.02-3.05 GPS or
-    mixed nav (``.rnx``/``.nav``); records of other systems in a mixed file
-    are skipped (a RINEX 3 record starts with a system letter in column 1,
-    continuation lines start with blanks, so the skip needs no knowledge of
-    each system's record length).  ``D``/``d``/``E`` exponents are accepted;
-    blank fields read as 0 (NaN for the fit interval, which then defaults
-    to 4 h).
+
+def read_rinex_nav(path, systems="G") -> NavData:
+    """Read broadcast ephemerides (and Klobuchar parameters) from a RINEX nav file.
+
+    Supports RINEX 2.10/2.11 GPS nav (``.21n``), RINEX 2.01-2.11 GLONASS nav
+    (``.16g``; always read as GLONASS, ``systems`` does not apply) and RINEX
+    3.02-3.05 GPS/GLONASS/Galileo/BeiDou or mixed nav (``.rnx``/``.nav``).
+    Records of systems not in ``systems`` and of systems insnav does not
+    process (J, S, I...) are skipped and counted (a RINEX 3 record starts
+    with a system letter in column 1, continuation lines start with blanks,
+    so the skip needs no knowledge of each system's record length; a record
+    start that is not a letter cannot be delimited and raises).  ``D``/``d``/``E``
+    exponents are accepted; blank fields read as 0 (NaN for the GPS fit
+    interval, which then defaults to 4 h).
 
     Parameters
     ----------
     path : str or PathLike
+    systems : str
+        Systems to read from a RINEX 3 file, letters of ``"GREC"``.  The
+        default ``"G"`` reads GPS only (the behaviour before multi-GNSS).
 
     Returns
     -------
     NavData
+        ``eph`` (GPS), ``eph_r`` (GLONASS), ``eph_e`` (Galileo), ``eph_c``
+        (BeiDou), all times in GPS seconds since 1980-01-06: GLONASS epochs
+        (UTC) plus the leap seconds, BeiDou epochs (BDT) plus 14 s, Galileo
+        (GST) as is.  Galileo: ``tgd`` = BGD(E1,E5a), ``tgd2`` = BGD(E1,E5b),
+        ``data_source`` the RINEX bit field; BeiDou: ``tgd`` = T_GD1,
+        ``tgd2`` = T_GD2; GLONASS: positions [m], velocities [m/s],
+        accelerations [m/s^2], ``freq_k`` the FDMA channel.
 
     Raises
     ------
     RinexError
-        Malformed header, bad record or unexpected end of file (message gives
-        path and 1-based line number).
+        Malformed header, bad or truncated record or unexpected end of file
+        (message gives path and 1-based line number).
+    ValueError
+        ``systems`` has a letter other than G, R, E, C.
     """
+    from .galbds import BDT_GPST_OFFSET_S, BDT_WEEK_OFFSET, KeplerEphemerides
+    from .glonass import GlonassEphemerides, gps_utc_leap_seconds
+
+    want = _parse_systems(systems)
     src = _Lines(path)
     header = _read_header(src)
     version, ftype, sysc = _version_type(src, header)
-    if ftype != "N":
+    glo2 = version < 3 and ftype == "G"  # RINEX 2 GLONASS navigation file
+    if ftype != "N" and not glo2:
         raise src.error(f"malformed header: not a navigation file (type {ftype!r})", header[0][0])
-    if version >= 3 and sysc not in ("G", "M"):
-        raise src.error(f"malformed header: navigation file of system {sysc!r} has no GPS records", header[0][0])
+    if version >= 3 and sysc != "M" and sysc not in want:
+        if want == "G":
+            raise src.error(f"malformed header: navigation file of system {sysc!r} has no GPS records", header[0][0])
+        raise src.error(f"malformed header: navigation file of system {sysc!r} has none of the systems {want!r}",
+                        header[0][0])
     ion_alpha = ion_beta = None
+    leap = None
     for lineno, text, label in header:
         if label == "ION ALPHA" or label == "ION BETA":
             vals = [_float(src, text[2 + 12 * k:14 + 12 * k], label, lineno=lineno) for k in range(4)]
@@ -224,9 +329,18 @@ def read_rinex_nav(path) -> NavData:
                     ion_alpha = np.array(vals)
                 else:
                     ion_beta = np.array(vals)
+        elif label == "LEAP SECONDS" and text[:6].strip():
+            leap = float(_int(src, text[:6], "LEAP SECONDS", lineno))
+            if not (0 <= leap < 100):
+                raise src.error(f"malformed header: LEAP SECONDS {leap:g} out of range", lineno)
 
     rec = {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}
+    krec = {"E": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER},
+            "C": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}}
+    grec = {k: [] for k in ("prn", "toc_utc", "clock_bias", "gamma_n", "tk", "x", "vx", "ax", "health",
+                            "y", "vy", "ay", "freq_k", "z", "vz", "az", "age")}
     n_skipped = 0
+    skipped = {}
     rinex3 = version >= 3.0
     width0 = 23 if rinex3 else 22  # end of the epoch field on the first line
     cont_start = 4 if rinex3 else 3
@@ -239,8 +353,12 @@ def read_rinex_nav(path) -> NavData:
             sysid = line[0]
             if sysid == " ":
                 raise src.error("bad record: expected a record start (system letter in column 1)")
-            if sysid != "G":
+            if not ("A" <= sysid <= "Z"):
+                raise src.error(f"bad record: cannot delimit the record: column 1 is {sysid!r}, "
+                                f"not a system letter")
+            if sysid not in want or sysid not in _SYSTEM_NAMES:
                 n_skipped += 1
+                skipped[sysid] = skipped.get(sysid, 0) + 1
                 while not src.eof() and src.lines[src.i][:1] == " ":
                     src.i += 1
                 continue
@@ -251,6 +369,7 @@ def read_rinex_nav(path) -> NavData:
             except ValueError:
                 raise src.error(f"bad record: cannot parse epoch {line[:23]!r}") from None
         else:
+            sysid = "R" if glo2 else "G"
             if line[:2] == "  " and line[2:3] == " ":
                 raise src.error("bad record: expected a record start (PRN in columns 1-2)")
             prn = _int(src, line[0:2], "satellite number")
@@ -262,7 +381,48 @@ def read_rinex_nav(path) -> NavData:
             y += 2000 if y < 80 else 1900
         if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and 0 <= sec < 61):
             raise src.error(f"bad record: impossible epoch {line[:width0]!r}")
+        if not (0 <= prn <= 99):
+            raise src.error(f"bad record: satellite number {prn} out of range")
         clk = [_float(src, line[width0 + 19 * k:width0 + 19 * (k + 1)], "clock parameter") for k in range(3)]
+        sat = f"{sysid}{prn:02d}"
+        if sysid != "G":
+            n_req, n_max = _NAV3_LINES[sysid] if rinex3 else (3, 3)
+            vals = []
+            for k in range(n_max):
+                if k >= n_req and (src.eof() or src.lines[src.i][:1] != " " or not src.lines[src.i].strip()):
+                    break
+                cl = src.next(f"broadcast orbit line {k + 1} of {sat} (record started on line {start_line})")
+                if cl[:1] != " " and rinex3:
+                    raise src.error(f"bad record: broadcast orbit line {k + 1} of {sat} "
+                                    f"(record started on line {start_line}) missing")
+                vals.extend(_four(src, cl.ljust(cont_start + 76), cont_start, 19, "broadcast orbit value"))
+            t_cal = gps_seconds_from_calendar(y, mo, d, h, mi, sec)
+            if sysid == "R":
+                vals = [0.0 if math.isnan(v) else v for v in vals[:12]]
+                grec["prn"].append(prn)
+                grec["toc_utc"].append(t_cal)
+                for name, v in zip(("clock_bias", "gamma_n", "tk"), clk):
+                    grec[name].append(0.0 if math.isnan(v) else v)
+                for name, v in zip(("x", "vx", "ax", "health", "y", "vy", "ay", "freq_k", "z", "vz", "az", "age"),
+                                   vals):
+                    grec[name].append(v)
+                if not (1.0e3 < math.sqrt(vals[0] ** 2 + vals[4] ** 2 + vals[8] ** 2) < 1.0e5):
+                    raise src.error(f"bad record: {sat} record starting on line {start_line} has an orbit radius "
+                                    "outside 1000-100000 km")
+                if not (-7 <= vals[7] <= 13):
+                    raise src.error(f"bad record: {sat} record starting on line {start_line} has frequency "
+                                    f"channel {vals[7]:g} (not -7..13)", start_line + 2)
+            else:
+                r = krec[sysid]
+                r["prn"].append(prn)
+                r["toc"].append(t_cal + (BDT_GPST_OFFSET_S if sysid == "C" else 0.0))
+                for name, v in zip(("af0", "af1", "af2"), clk):
+                    r[name].append(0.0 if math.isnan(v) else v)
+                for name, v in zip(_NAV_ORDER, vals):
+                    r[name].append(0.0 if math.isnan(v) else v)
+                if not (0.0 < r["sqrt_a"][-1]):
+                    raise src.error(f"bad record: {sat} record starting on line {start_line} has sqrt(A) <= 0")
+            continue
         vals = []
         for k in range(7):
             cl = src.next(f"broadcast orbit line {k + 1} of G{prn:02d} (record started on line {start_line})")
@@ -299,7 +459,38 @@ def read_rinex_nav(path) -> NavData:
         cols["fit_s"] = np.zeros(0)
     cols["prn"] = cols["prn"].astype(np.int64)
     eph = Ephemerides.from_columns(cols)
-    return NavData(src.path, version, eph, ion_alpha, ion_beta, n_skipped)
+
+    kep = {}
+    for s, r in krec.items():
+        c = {k: np.asarray(v, dtype=float) for k, v in r.items()}
+        # GST week = GPS week (RINEX aligns it; a 1024 offset is absorbed by the rounding below);
+        # BDT week + 1356 = GPS week, BDT = GPST - 14 s
+        off = (BDT_WEEK_OFFSET * SECONDS_PER_WEEK + BDT_GPST_OFFSET_S) if s == "C" else 0.0
+        toe = c["week"] * SECONDS_PER_WEEK + c["toe_sow"] + off
+        toe += SECONDS_PER_WEEK * np.round((c["toc"] - toe) / SECONDS_PER_WEEK)
+        c["toe"] = toe
+        c["week"] = np.floor(toe / SECONDS_PER_WEEK)
+        # neither system broadcasts a fit interval; both are updated at least every 1-3 h
+        c["fit_s"] = np.full(toe.shape, DEFAULT_FIT_S)
+        c["tgd2"] = c["iodc"]  # the 4th value of broadcast orbit line 6: BGD(E1,E5b) / T_GD2
+        if s == "E":
+            c["data_source"] = c["l2_codes"]
+            c["iodc"] = np.zeros_like(toe)
+        else:
+            c["data_source"] = np.zeros_like(toe)
+            c["iodc"] = c["fit_h"]  # AODC
+        c["prn"] = c["prn"].astype(np.int64)
+        kep[s] = KeplerEphemerides.from_columns(c)
+
+    g = {k: np.asarray(v, dtype=float) for k, v in grec.items()}
+    leap_s = leap if leap is not None else (gps_utc_leap_seconds(g["toc_utc"] + 18.0) if g["prn"].size else 0.0)
+    g["tb"] = g.pop("toc_utc") + leap_s
+    for k in ("x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az"):
+        g[k] = g[k] * 1.0e3  # km -> m
+    g["prn"] = g["prn"].astype(np.int64)
+    g["freq_k"] = np.round(g["freq_k"]).astype(np.int64)
+    eph_r = GlonassEphemerides.from_columns(g)
+    return NavData(src.path, version, eph, ion_alpha, ion_beta, n_skipped, eph_r, kep["E"], kep["C"], leap, skipped)
 
 
 # --------------------------------------------------------------------------- obs
@@ -313,10 +504,26 @@ _OBS_PREF3 = {
 }
 _OBS_PREF2 = {"C1": ("C1", "P1"), "L1": ("L1",), "D1": ("D1",), "S1": ("S1",)}
 
+#: Pseudorange code preference per system for RINEX 3 (first present wins).  The carrier phase,
+#: Doppler and C/N0 are then taken on the same band (same attribute first).  GPS: L1 C/A (then
+#: L1C, P(Y)); GLONASS: G1 C/A, then G1 P; Galileo: E1 (C pilot, B+C, B data); BeiDou: B1I
+#: (C2I; C1I in RINEX 3.02), then B1I I+Q, then B3I (C6I; broadcast clocks refer to B3I, so no
+#: group delay), then B2I.  B1C/B2a (C1P/C1X/C5X) have no group delay in the D1/D2 message and
+#: are not chosen.  Override with ``read_rinex_obs(..., codes={"C": ("C6I",)})``.
+OBS_CODE_PREFERENCE = {
+    "G": ("C1C", "C1X", "C1W", "C1P"),
+    "R": ("C1C", "C1P"),
+    "E": ("C1C", "C1X", "C1B"),
+    "C": ("C2I", "C1I", "C2X", "C2Q", "C6I", "C6X", "C7I"),
+}
+#: RINEX 2 code -> the RINEX 3 code it corresponds to (for group delay and wavelength)
+_RINEX2_AS_3 = {("G", "C1"): "C1C", ("G", "P1"): "C1W", ("R", "C1"): "C1C", ("R", "P1"): "C1P",
+                ("E", "C1"): "C1X", ("E", "P1"): "C1X"}
+
 
 @dataclass
 class ObsData:
-    """GPS L1 observations in long format (one row per epoch and satellite).
+    """Observations of one signal per system in long format (one row per epoch and satellite).
 
     Attributes
     ----------
@@ -324,7 +531,7 @@ class ObsData:
     version : float
     codes : dict
         Which RINEX observation code was read for each of ``C1 L1 D1 S1``
-        (None if absent from the file).
+        for GPS (None if absent from the file).
     epoch_t_gps_s : (n,) float
         Epoch times, GPS seconds since 1980-01-06 [s] (receiver time tags).
     epoch_week, epoch_tow : (n,)
@@ -340,10 +547,17 @@ class ObsData:
         Row time in the three conventions.
     prn : (m,) int
     C1, L1, D1, S1 : (m,) float
-        Pseudorange [m], carrier phase [cycles], Doppler [Hz], C/N0 [dB-Hz];
-        NaN where missing.
+        Pseudorange [m], carrier phase [cycles], Doppler [Hz], C/N0 [dB-Hz]
+        of the system's chosen signal (``codes_by_system``); NaN where missing.
     approx_r_e : (3,) float or None
         ``APPROX POSITION XYZ`` from the header [m].
+    system : (m,) str
+        One-letter system of each row (all ``'G'`` unless other systems were asked for).
+    codes_by_system : dict
+        System letter -> ``{"C1": code, "L1": ..., "D1": ..., "S1": ...}`` as
+        read from the file (RINEX 2 codes for RINEX 2 files).
+    glonass_channels : dict
+        GLONASS slot -> FDMA channel from the ``GLONASS SLOT / FRQ #`` header (RINEX 3).
     """
 
     path: str
@@ -364,13 +578,82 @@ class ObsData:
     D1: np.ndarray
     S1: np.ndarray
     approx_r_e: np.ndarray | None = field(default=None)
+    system: np.ndarray | None = None
+    codes_by_system: dict = field(default_factory=dict)
+    glonass_channels: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.system is None:
+            self.system = np.full(np.shape(self.prn), "G", dtype="<U1")
+        if not self.codes_by_system:
+            self.codes_by_system = {"G": dict(self.codes)}
+
+    @property
+    def sat_id(self) -> np.ndarray:
+        """(m,) RINEX satellite identifiers ``'G05'``..."""
+        from .systems import sat_id
+
+        return sat_id(self.system, self.prn) if self.prn.size else np.zeros(0, "<U3")
+
+    def pseudorange_code(self) -> np.ndarray:
+        """(m,) RINEX 3 code of each row's pseudorange (RINEX 2 codes mapped: C1 -> C1C, P1 -> C1W/C1P)."""
+        out = np.full(self.prn.shape, "", dtype="<U3")
+        for s, cd in self.codes_by_system.items():
+            c = cd.get("C1")
+            if c is None:
+                continue
+            out[self.system == s] = _RINEX2_AS_3.get((s, c), c) if len(c) == 2 else c
+        return out
 
 
-def _obs_types_header(src, header, version):
-    """Return {system letter: [codes]} from the header."""
+    def wavelength_m(self, nav=None) -> np.ndarray:
+        """(m,) carrier wavelength [m] of each row's signal, for Doppler -> range rate (``-lambda D1``).
+
+        GLONASS rows use the FDMA channel of the satellite from ``nav`` (its
+        latest record) or else from the ``GLONASS SLOT / FRQ #`` header; NaN
+        where the channel is unknown.
+        """
+        from .broadcast import signal_wavelength
+
+        k = np.zeros(self.prn.shape)
+        glo = self.system == "R"
+        if glo.any():
+            ch = np.array([self.glonass_channels.get(int(p), -99) for p in self.prn[glo]], dtype=float)
+            if nav is not None and len(nav.eph_r):
+                from_nav = nav.eph_r.channel(self.prn[glo]).astype(float)
+                ch = np.where(from_nav > -99, from_nav, ch)
+            k[glo] = ch
+        return signal_wavelength(self.system, self.pseudorange_code(), k)
+
+
+def _choose_codes(s, stypes, rinex3, prefer=None):
+    """{key: code or None} of system ``s`` given its list of observation types."""
+    if not rinex3:
+        return {k: next((c for c in cands if c in stypes), None) for k, cands in _OBS_PREF2.items()}
+    if s == "G" and prefer is None:
+        return {k: next((c for c in cands if c in stypes), None) for k, cands in _OBS_PREF3.items()}
+    cands = prefer if prefer is not None else OBS_CODE_PREFERENCE.get(s, ())
+    c1 = next((c for c in cands if c in stypes), None)
+    out = {"C1": c1}
+    for key in ("L1", "D1", "S1"):
+        if c1 is None:
+            out[key] = None
+            continue
+        same = key[0] + c1[1:]
+        band = [c for c in stypes if c[0] == key[0] and c[1] == c1[1]]
+        out[key] = same if same in stypes else (band[0] if band else None)
+    return out
+
+
+def _obs_types_header(src, header, version, check=""):
+    """Return {system letter: [codes]} from the header.
+
+    For RINEX 3, the systems in ``check`` must list as many types as they announce.
+    """
     types = {}
     if version >= 3:
         cur_sys, cur_n = None, 0
+        announced = {}
         for lineno, text, label in header:
             if label != "SYS / # / OBS TYPES":
                 continue
@@ -380,12 +663,17 @@ def _obs_types_header(src, header, version):
                 if cur_n is None:
                     raise src.error("malformed header: SYS / # / OBS TYPES without a count", lineno)
                 types[cur_sys] = []
+                announced[cur_sys] = (cur_n, lineno)
             elif cur_sys is None:
                 raise src.error("malformed header: SYS / # / OBS TYPES continuation without a system", lineno)
             for k in range(13):
                 c = text[7 + 4 * k:10 + 4 * k].strip()
                 if c and len(types[cur_sys]) < cur_n:
                     types[cur_sys].append(c)
+        for sy in check:
+            if sy in announced and len(types[sy]) != announced[sy][0]:
+                raise src.error(f"malformed header: SYS / # / OBS TYPES of {sy} announces {announced[sy][0]} "
+                                f"types, lists {len(types[sy])}", announced[sy][1])
     else:
         n, codes = None, []
         for lineno, text, label in header:
@@ -408,33 +696,49 @@ def _obs_types_header(src, header, version):
     return types
 
 
-def read_rinex_obs(path) -> ObsData:
-    """Read GPS L1 observations (pseudorange, phase, Doppler, C/N0) from RINEX 2.x / 3.x.
+def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
+    """Read one signal's observations (pseudorange, phase, Doppler, C/N0) per system from RINEX 2.x / 3.x.
 
     Parameters
     ----------
     path : str or PathLike
         RINEX 2.10/2.11 or 3.02-3.05 observation file (GPS or mixed).
+    systems : str
+        Systems to read, letters of ``"GREC"``; the default ``"G"`` reads GPS
+        only (the behaviour before multi-GNSS).  RINEX 2.11 mixed files carry
+        G, R (and E) satellites with one list of types for all.
+    codes : dict, optional
+        System letter -> tuple of pseudorange codes in order of preference,
+        overriding :data:`OBS_CODE_PREFERENCE` (RINEX 3 only).
 
     Returns
     -------
     ObsData
-        Long-format arrays; see :class:`ObsData`.  For RINEX 3 the code read
-        is the first present of C1C, C1X, C1W, C1P (likewise L/D/S); for
-        RINEX 2 ``C1`` (else ``P1``), ``L1``, ``D1``, ``S1``.
+        Long-format arrays; see :class:`ObsData`.  For RINEX 3 GPS the code
+        read is the first present of C1C, C1X, C1W, C1P (likewise L/D/S); the
+        other systems follow :data:`OBS_CODE_PREFERENCE` (phase, Doppler and
+        C/N0 then on the same band); for RINEX 2 ``C1`` (else ``P1``), ``L1``,
+        ``D1``, ``S1``.  ``system`` names each row's system,
+        ``codes_by_system`` the codes read.  Doppler stays in Hz: GLONASS rows
+        need their FDMA wavelength (:func:`insnav.gnss.broadcast.signal_wavelength`).
 
     Raises
     ------
     RinexError
-        Malformed header, bad epoch or observation record, unexpected end of
+        Malformed header (e.g. fewer observation types than announced for a
+        requested system), bad epoch or observation record, unexpected end of
         file; the message names the file and the 1-based line number.
+    ValueError
+        ``systems`` has a letter other than G, R, E, C.
     """
+    want = _parse_systems(systems)
     src = _Lines(path)
     header = _read_header(src)
     version, ftype, sysc = _version_type(src, header)
     if ftype != "O":
         raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
     approx = None
+    glo_k = {}
     for lineno, text, label in header:
         if label == "APPROX POSITION XYZ":
             approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label, lineno=lineno) for k in range(3)])
@@ -442,33 +746,42 @@ def read_rinex_obs(path) -> ObsData:
             ts = text[48:51].strip()
             if ts and ts != "GPS":
                 raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
-    types = _obs_types_header(src, header, version)
+        if label == "GLONASS SLOT / FRQ #":
+            for k in range(8):
+                sl, fr = text[4 + 7 * k:7 + 7 * k], text[8 + 7 * k:10 + 7 * k]
+                if sl[:1] == "R" and sl[1:].strip():
+                    glo_k[_int(src, sl[1:], "GLONASS slot", lineno)] = _int(src, fr, "GLONASS frequency number",
+                                                                              lineno)
     rinex3 = version >= 3
-    gtypes = types.get("G", [])
-    pref = _OBS_PREF3 if rinex3 else _OBS_PREF2
-    codes, cols = {}, {}
-    for key, cands in pref.items():
-        codes[key] = next((c for c in cands if c in gtypes), None)
-        cols[key] = gtypes.index(codes[key]) if codes[key] else None
+    types = _obs_types_header(src, header, version, check=want if rinex3 else "")
+    # RINEX 2: one list of types for every system
+    sys_types = {s: types.get(s if rinex3 else "G", []) for s in want}
+    prefer = {} if codes is None else {k.upper(): tuple(v) if not isinstance(v, str) else (v,)
+                                       for k, v in codes.items()}
+    codes_by_sys, cols_by_sys = {}, {}
+    for s in want:
+        cs = _choose_codes(s, sys_types[s], rinex3, prefer.get(s) if rinex3 else None)
+        codes_by_sys[s] = cs
+        cols_by_sys[s] = {k: (sys_types[s].index(c) if c else None) for k, c in cs.items()}
+    gcodes = codes_by_sys.get("G") or _choose_codes("G", types.get("G", []), rinex3)
+    keys = tuple(_OBS_PREF3)
     ntypes = {s: len(v) for s, v in types.items()}
 
     ep_t, ep_flag, ep_clk = [], [], []
-    r_ep, r_prn = [], []
-    r_val = {k: [] for k in pref}
+    r_ep, r_prn, r_sys = [], [], []
+    r_val = {k: [] for k in keys}
 
-    def parse_sat(line, sat_prn, ep_index, lineno):
+    def parse_sat(line, s, sat_prn, ep_index):
         r_ep.append(ep_index)
         r_prn.append(sat_prn)
-        base = 3 if rinex3 else 0
-        for key, col in cols.items():
+        r_sys.append(s)
+        base = 3
+        for key, col in cols_by_sys[s].items():
             if col is None:
                 r_val[key].append(math.nan)
                 continue
-            if rinex3:
-                txt = line[base + 16 * col: base + 16 * col + 14]
-            else:
-                txt = line[16 * (col % 5): 16 * (col % 5) + 14]
-            r_val[key].append(_float(src, txt, f"observation {codes[key]}"))
+            txt = line[base + 16 * col: base + 16 * col + 14]
+            r_val[key].append(_float(src, txt, f"observation {codes_by_sys[s][key]}"))
 
     while not src.eof():
         line = src.next()
@@ -522,8 +835,8 @@ def read_rinex_obs(path) -> ObsData:
                 s = sid[0]
                 if s not in ntypes:
                     raise src.error(f"bad record: satellite {sid!r} of an undeclared system")
-                if s == "G" and keep:
-                    parse_sat(sl, _int(src, sid[1:3], "satellite number"), e_idx, src.lineno)
+                if s in want and keep:
+                    parse_sat(sl, s, _int(src, sid[1:3], "satellite number"), e_idx)
         else:
             sats = []
             text = line[32:68]
@@ -542,18 +855,19 @@ def read_rinex_obs(path) -> ObsData:
             for sid in sats:
                 s = sid[0] if sid[0] != " " else "G"
                 obs_lines = [src.next(f"the observations of the epoch on line {ep_line}") for _ in range(nlines)]
-                if s == "G" and keep:
+                if s in want and keep:
                     prn = _int(src, sid[1:3], "satellite number")
                     # assemble the obs of the requested columns line by line
                     r_ep.append(e_idx)
                     r_prn.append(prn)
-                    for key, col in cols.items():
+                    r_sys.append(s)
+                    for key, col in cols_by_sys[s].items():
                         if col is None:
                             r_val[key].append(math.nan)
                             continue
                         ol = obs_lines[col // 5]
                         txt = ol[16 * (col % 5):16 * (col % 5) + 14]
-                        r_val[key].append(_float(src, txt, f"observation {codes[key]}",
+                        r_val[key].append(_float(src, txt, f"observation {codes_by_sys[s][key]}",
                                                  lineno=src.lineno - nlines + 1 + col // 5))
         if keep:
             ep_t.append(t)
@@ -565,10 +879,11 @@ def read_rinex_obs(path) -> ObsData:
     wk, tw = week_tow(ep_t)
     wk, tw = np.atleast_1d(wk), np.atleast_1d(tw)
     return ObsData(
-        path=src.path, version=version, codes=codes,
+        path=src.path, version=version, codes=dict(gcodes),
         epoch_t_gps_s=ep_t, epoch_week=wk, epoch_tow=tw,
         epoch_flag=np.asarray(ep_flag, dtype=np.int64), clock_offset_s=np.asarray(ep_clk, dtype=float),
         epoch=e, t_gps_s=ep_t[e], week=wk[e], tow=tw[e], prn=np.asarray(r_prn, dtype=np.int64),
-        C1=np.asarray(r_val["C1"]), L1=np.asarray(r_val["L1"]), D1=np.asarray(r_val["D1"]),
-        S1=np.asarray(r_val["S1"]), approx_r_e=approx,
+        C1=np.asarray(r_val["C1"], dtype=float), L1=np.asarray(r_val["L1"], dtype=float),
+        D1=np.asarray(r_val["D1"], dtype=float), S1=np.asarray(r_val["S1"], dtype=float), approx_r_e=approx,
+        system=np.asarray(r_sys, dtype="<U1"), codes_by_system=codes_by_sys, glonass_channels=glo_k,
     )

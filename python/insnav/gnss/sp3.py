@@ -181,6 +181,8 @@ class ClkData:
         j = self.sats.index(sat)
         t = np.atleast_1d(np.asarray(t_gps_s, dtype=float))
         c = self.clock_s[:, j]
+        if self.t_gps_s.size == 1:  # a single epoch: its value at that epoch only
+            return np.where(t == self.t_gps_s[0], c[0], np.nan)
         i = np.clip(np.searchsorted(self.t_gps_s, t) - 1, 0, self.t_gps_s.size - 2)
         t0, t1 = self.t_gps_s[i], self.t_gps_s[i + 1]
         w = (t - t0) / (t1 - t0)

@@ -3,8 +3,9 @@ of ``_core.run_tight`` (pseudorange, rate, satellite position, velocity and
 clock, sigmas), built from the simulator's raw observations or from RINEX
 observation and navigation files (GPS LNAV broadcast ephemerides,
 IS-GPS-200, transmit time and Sagnac as in :mod:`insnav.gnss.ephemeris`;
-Klobuchar / Saastamoinen corrections), with an elevation mask, a best-GDOP
-satellite selection and per-satellite sigmas.
+with ``systems="GREC"`` also GLONASS, Galileo and BeiDou through
+:mod:`insnav.gnss.broadcast`; Klobuchar / Saastamoinen corrections), with an
+elevation mask, a best-GDOP satellite selection and per-satellite sigmas.
 """
 from __future__ import annotations
 
@@ -159,13 +160,24 @@ def tight_inputs_from_raw(raw, *, elevation_mask_deg: float = 0.0, max_sats: int
 def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_mask_deg: float = 10.0,
                             max_sats: int = MAX_SATS, iono: bool = True, tropo: bool = True,
                             sigma_pr_zenith_m: float = 3.0, sigma_prr_zenith_mps: float = 0.3,
-                            use_cn0: bool = True, t_range=None) -> TightInputs:
+                            use_cn0: bool = True, t_range=None, systems: str = "G") -> TightInputs:
     """RINEX observations + broadcast navigation -> :class:`TightInputs`.
 
     Parameters
     ----------
     obs : insnav.gnss.ObsData
+        Read with the systems wanted (``read_rinex_obs(path, systems="GREC")``).
     nav : insnav.gnss.NavData
+        Read with the systems wanted (``read_rinex_nav(path, systems="GREC")``).
+    systems : str
+        Systems to use, letters of ``"GREC"``; default GPS only (results
+        identical to the GPS-only code).  Each row's system is in
+        ``TightInputs.system``.  Other systems: states from
+        :func:`insnav.gnss.broadcast.transmit_states_multi` with each row's
+        pseudorange code (group delay T_GD/BGD of that signal), Doppler ->
+        rate with the signal's wavelength (GLONASS: the satellite's FDMA
+        channel), Klobuchar scaled by ``(f_L1 / f)^2`` for the signal's
+        frequency (Galileo's NeQuick is not implemented).
     t0_gps_s : float
         GPS time of dataset time 0 [s]; ``epoch_t = t_gps - t0_gps_s``.
     approx_r_e : (3,) approximate receiver ECEF position [m] (for light time,
@@ -188,11 +200,21 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     from .corrections import klobuchar_delay, saastamoinen_delay
     from .geometry import elevation_azimuth
     from .measurements import L1_WAVELENGTH
+    from .rinex import _parse_systems
 
+    systems = _parse_systems(systems)
+    if systems != "G":
+        return _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, elevation_mask_deg=elevation_mask_deg,
+                                   max_sats=max_sats, iono=iono, tropo=tropo, sigma_pr_zenith_m=sigma_pr_zenith_m,
+                                   sigma_prr_zenith_mps=sigma_prr_zenith_mps, use_cn0=use_cn0, t_range=t_range,
+                                   systems=systems)
     eph = nav.eph
     r0 = np.asarray(approx_r_e, float)
     t_tag = np.asarray(obs.t_gps_s, float)
     ok = np.isfinite(obs.C1)
+    obs_sys = getattr(obs, "system", None)
+    if obs_sys is not None:
+        ok &= np.asarray(obs_sys) == "G"
     if t_range is not None:
         ok &= (t_tag - t0_gps_s >= t_range[0]) & (t_tag - t0_gps_s <= t_range[1])
     idx = select_ephemeris(eph, obs.prn, t_tag)
@@ -233,3 +255,63 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     return limit_sats(inp, max_sats)
 
 
+
+
+def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, max_sats, iono, tropo,
+                        sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0, t_range, systems) -> TightInputs:
+    """Multi-system :func:`tight_inputs_from_rinex` (same steps, per-row system and signal)."""
+    from .broadcast import select_multi, transmit_states_multi
+    from .corrections import klobuchar_delay, saastamoinen_delay
+    from .ephemeris import C_LIGHT
+    from .geometry import elevation_azimuth
+    from .measurements import L1_WAVELENGTH
+
+    r0 = np.asarray(approx_r_e, float)
+    t_tag = np.asarray(obs.t_gps_s, float)
+    sys_all = np.asarray(getattr(obs, "system", np.full(len(obs.prn), "G")), dtype="<U1")
+    code_all = obs.pseudorange_code() if hasattr(obs, "pseudorange_code") else np.full(len(obs.prn), "C1C")
+    ok = np.isfinite(obs.C1) & np.isin(sys_all, list(systems)) & (code_all != "")
+    if t_range is not None:
+        ok &= (t_tag - t0_gps_s >= t_range[0]) & (t_tag - t0_gps_s <= t_range[1])
+    idx = np.full(len(obs.prn), -1, np.int64)
+    idx[ok] = select_multi(nav, sys_all[ok], obs.prn[ok], t_tag[ok], code_all[ok])
+    ok &= idx >= 0
+    rows = np.flatnonzero(ok)
+    ep = obs.epoch[rows]
+    sys_r, prn_r, code_r = sys_all[rows], obs.prn[rows], code_all[rows]
+    n_ep = obs.epoch_t_gps_s.size
+    clk = np.zeros(n_ep)
+    lat, lon, h = earth.ecef_to_geodetic(r0)
+    for _ in range(2):
+        t_rx = t_tag[rows] - clk[ep] / C_LIGHT
+        ts = transmit_states_multi(nav, t_rx, r0, system=sys_r, prn=prn_r, codes=code_r)
+        raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
+        # receiver clock of the epoch (only sets the true reception time; inter-system
+        # offsets of tens of ns do not matter for it)
+        for e in np.unique(ep):
+            m = (ep == e) & np.isfinite(raw)
+            clk[e] = np.median(raw[m]) if m.any() else 0.0
+    good = ts.valid & np.isfinite(ts.range_m)
+    el, az = elevation_azimuth(r0, np.where(good[:, None], ts.r_e, r0 + 1.0))
+    iono_m = np.zeros(rows.size)
+    tropo_m = np.zeros(rows.size)
+    if iono and nav.ion_alpha is not None and nav.ion_beta is not None:
+        scale = (ts.wavelength_m / L1_WAVELENGTH) ** 2  # Klobuchar is the L1 delay; 1/f^2 to the signal
+        iono_m = scale * klobuchar_delay(t_rx, np.full(rows.size, lat), np.full(rows.size, lon), el, az,
+                                         nav.ion_alpha, nav.ion_beta)
+    if tropo:
+        tropo_m = saastamoinen_delay(np.full(rows.size, lat), np.full(rows.size, h), el)
+    prr = -ts.wavelength_m * np.asarray(obs.D1, float)[rows]
+    cn0 = np.asarray(obs.S1, float)[rows] if use_cn0 else None
+    spr = pseudorange_sigma(el, sigma_pr_zenith_m, cn0)
+    sprr = pseudorange_sigma(el, sigma_prr_zenith_mps, cn0)
+    sats = np.column_stack([obs.C1[rows], prr, ts.r_e, ts.v_e, C_LIGHT * ts.clock_bias_s - iono_m - tropo_m,
+                            C_LIGHT * ts.clock_drift_s_s, spr, sprr])
+    t_ep = t_tag[rows] - clk[ep] / C_LIGHT - t0_gps_s
+    inp = TightInputs.from_rows(t_ep, prn_r, sats, np.degrees(el),
+                                info=dict(source=str(getattr(obs, "path", "rinex")), approx_r_e=r0,
+                                          rx_clock_tag_m=clk, iono_m=iono_m, tropo_m=tropo_m, systems=systems),
+                                system=sys_r)
+    keep = (np.degrees(el) >= elevation_mask_deg) & good
+    inp = inp.select(keep[np.argsort(t_ep, kind="stable")])
+    return limit_sats(inp, max_sats)

@@ -44,11 +44,13 @@ IMU_COLUMNS = ("sow", "dtheta_x", "dtheta_y", "dtheta_z", "dvel_x", "dvel_y", "d
 
 __all__ = ["read_kfgins_imu", "write_kfgins_imu", "read_kfgins_gnss", "write_kfgins_gnss",
            "read_kfgins_nav", "write_kfgins_nav", "read_kfgins_config", "read_text", "write_kfgins_solution",
-           "KFGINS_NAV_FILE", "KFGINS_IMU_ERR_FILE"]
+           "KFGINS_NAV_FILE", "KFGINS_IMU_ERR_FILE",
+           "KFGINS_STD_FILE"]
 
 #: the file names KF-GINS gives its results in ``outputpath`` (src/kf_gins.cpp)
 KFGINS_NAV_FILE = "KF_GINS_Navresult.nav"
 KFGINS_IMU_ERR_FILE = "KF_GINS_IMU_ERR.txt"
+KFGINS_STD_FILE = "KF_GINS_STD.txt"
 
 
 def read_text(path) -> str:
@@ -165,14 +167,19 @@ def write_kfgins_nav(path, truth, week: int = 0) -> None:
     _write(path, a, "%d %.9f %.11f %.11f %.5f %.6f %.6f %.6f %.8f %.8f %.8f")
 
 
-def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, Path]:
+def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, ...]:
     """Write a solution in the KF-GINS result layout, so that scripts written
     for KF-GINS read it unchanged: ``KF_GINS_Navresult.nav`` (``week sow lat
     lon h vN vE vD roll pitch yaw`` [-, s, deg, deg, m, m/s, deg]) and
     ``KF_GINS_IMU_ERR.txt`` (``sow``, gyro bias [deg/h], accelerometer bias
-    [mGal], gyro and accelerometer scale factors [ppm]), every value as
-    KF-GINS's ``FileSaver`` prints it (``"%-15.9lf "``, src/fileio/filesaver.cc;
-    the week is 0 as KF-GINS writes it).  Both files atomic.
+    [mGal], gyro and accelerometer scale factors [ppm]) and, when the solution
+    carries the IMU-error sigmas (``sol.sigma_imu_err``, run config
+    ``imu_error_sigmas``), ``KF_GINS_STD.txt`` (``sow``, 1-sigma of position
+    N/E/D [m], velocity [m/s], attitude [deg], gyro bias [deg/h], accelerometer
+    bias [mGal], gyro and accelerometer scale factors [ppm]: 22 columns, KF-GINS's
+    ``writeSTD``), every value as KF-GINS's ``FileSaver`` prints it
+    (``"%-15.9lf "``, src/fileio/filesaver.cc; the week is 0 as KF-GINS writes
+    it).  Every file atomic.
 
     Parameters
     ----------
@@ -184,8 +191,8 @@ def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, Path]:
 
     Returns
     -------
-    (Path, Path)
-        The ``.nav`` and the IMU-error file.
+    tuple of Path
+        The ``.nav`` and the IMU-error file (and the STD file when written).
     """
     from ..data.textio import write_text_columns
     from ..units import RAD2DEG
@@ -204,7 +211,22 @@ def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, Path]:
     fmt = dict(sep=" ", width=15, trim_zeros=False, trailing_sep=True)
     p_nav = write_text_columns(folder / KFGINS_NAV_FILE, "", nav, [9] * len(nav), **fmt)
     p_err = write_text_columns(folder / KFGINS_IMU_ERR_FILE, "", err, [9] * len(err), **fmt)
-    return p_nav, p_err
+    if getattr(sol, "sigma_imu_err", None) is None:
+        return p_nav, p_err
+    se = np.asarray(sol.sigma_imu_err, float)
+    sp, sv, sa = (np.asarray(x, float) for x in (sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg))
+    std = [("sow", sol.t, 1.0)] + [(f"sp{j}", sp[:, j], 1.0) for j in range(3)] + \
+        [(f"sv{j}", sv[:, j], 1.0) for j in range(3)] + [(f"sa{j}", sa[:, j], 1.0) for j in range(3)] + \
+        [(f"sgb{j}", se[:, 3 + j], RAD2DEG * HOUR) for j in range(3)] + \
+        [(f"sab{j}", se[:, j], 1.0 / MGAL) for j in range(3)] + \
+        [(f"sgs{j}", se[:, 9 + j], 1.0 / PPM) for j in range(3)] + [(f"sas{j}", se[:, 6 + j], 1.0 / PPM) for j in range(3)]
+    try:
+        p_std = write_text_columns(folder / KFGINS_STD_FILE, "", std, [9] * len(std), **fmt)
+    except BaseException:
+        p_nav.unlink(missing_ok=True)
+        p_err.unlink(missing_ok=True)
+        raise
+    return p_nav, p_err, p_std
 
 
 def _write(path, a, fmt):
@@ -233,6 +255,26 @@ def _num(cfg, key, default, path):
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ValueError(f"{path}: key '{key}': expected a finite number, got {v!r}")
     return float(v)
+
+
+#: every key of KF-GINS's configuration file (KF-GINS dataset/kf-gins.yaml and
+#: src/kf_gins.cpp loadConfig); ``imunoise`` is a table of :data:`KFGINS_NOISE_KEYS`
+KFGINS_KEYS = ("imupath", "gnsspath", "outputpath", "imudatalen", "imudatarate", "starttime", "endtime",
+               "initpos", "initvel", "initatt", "initgyrbias", "initaccbias", "initgyrscale", "initaccscale",
+               "initposstd", "initvelstd", "initattstd", "initbgstd", "initbastd", "initsgstd", "initsastd",
+               "imunoise", "antlever")
+KFGINS_NOISE_KEYS = ("arw", "vrw", "gbstd", "abstd", "gsstd", "asstd", "corrtime")
+
+
+def _unknown_keys(keys, known, where: str, p) -> None:
+    """A one-line error for the first key not in ``known``, with a suggestion."""
+    import difflib
+
+    for k in keys:
+        if k not in known:
+            close = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+            hint = f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
+            raise ValueError(f"{p}: unknown key '{where}{k}'{hint}")
 
 
 def read_kfgins_config(path) -> dict:
@@ -266,6 +308,9 @@ def read_kfgins_config(path) -> dict:
         raise ValueError(f"{p}:{line}: invalid YAML: {getattr(exc, 'problem', exc)}") from None
     if not isinstance(cfg, dict):
         raise ValueError(f"{p}:1: expected a mapping of keys")
+    _unknown_keys(cfg, KFGINS_KEYS, "", p)
+    if isinstance(cfg.get("imunoise"), dict):
+        _unknown_keys(cfg["imunoise"], KFGINS_NOISE_KEYS, "imunoise.", p)
     base = p.parent
 
     def path_of(k):

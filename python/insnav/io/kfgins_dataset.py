@@ -88,12 +88,32 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
         gyro_scale_sigma=_or(n["gsstd"], np.full(3, 1e-4)).tolist(),
         acc_scale_sigma=_or(n["asstd"], np.full(3, 1e-4)).tolist(),
         gyro_scale_tau=[tau] * 3, acc_scale_tau=[tau] * 3)
+    def given(key, scale=True):  # a 3-vector of the YAML, or None
+        v = c[key]
+        if v is None or (not scale and layout != 21):
+            return None
+        return np.asarray(v, float).tolist()
+
+    if layout != 21:  # a non-zero initial scale factor cannot be carried by 15 states
+        for key in ("initgyrscale", "initaccscale"):
+            if c[key] is not None and np.any(np.asarray(c[key]) != 0):
+                raise ValueError(f"{config_path}: key '{key}': scale factors need the 21-state layout "
+                                 f"(layout={layout} has none)")
+    # the initial IMU-error estimate and its sigmas (KF-GINS: initial state and P0 of the
+    # bias and scale-factor states; the sigmas default to the imunoise values, as in KF-GINS)
     cfg = RunConfig(filter="ekf", coupling="loose", layout=layout,
                     init_sigma_pos_m=_or(c["initposstd_m"], np.full(3, 1.0)).tolist(),
                     init_sigma_vel_mps=_or(c["initvelstd_mps"], np.full(3, 0.1)).tolist(),
                     init_sigma_att_deg=(_or(c["initattstd_rad"], np.full(3, 0.01)) * RAD2DEG).tolist(),
                     init_error=False, imu=noise,
-                    lever_arm_b=_or(c["antlever_b_m"], np.zeros(3)).tolist())
+                    lever_arm_b=_or(c["antlever_b_m"], np.zeros(3)).tolist(),
+                    init_acc_bias_mps2=given("initaccbias_mps2"), init_gyro_bias_radps=given("initgyrbias_radps"),
+                    init_acc_scale=given("initaccscale", scale=False),
+                    init_gyro_scale=given("initgyrscale", scale=False),
+                    init_sigma_acc_bias_mps2=given("initbastd_mps2"),
+                    init_sigma_gyro_bias_radps=given("initbgstd_radps"),
+                    init_sigma_acc_scale=given("initsastd", scale=False),
+                    init_sigma_gyro_scale=given("initsgstd", scale=False))
     ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario={"kfgins_config": str(config_path)},
                  lever_arm_b=np.asarray(cfg.lever_arm_b), initial=initial, t0=t0, gps_time_offset_s=0.0,
                  imu_model={}, name=Path(config_path).stem)

@@ -831,11 +831,12 @@ def _approx_position(obs, nav, t_week0):
         return np.asarray(r, float)
     from ..gnss.ephemeris import sat_position_velocity, select_ephemeris
 
-    idx = select_ephemeris(nav.eph, obs.prn, obs.t_gps_s)
+    gps = np.asarray(getattr(obs, "system", np.full(np.shape(obs.prn), "G"))) == "G"  # multi-system obs
+    idx = select_ephemeris(nav.eph, obs.prn[gps], obs.t_gps_s[gps])
     ok = idx >= 0
     if not ok.any():
         raise ValueError(f"{obs.path}: no observation has a GPS ephemeris in {getattr(nav, 'path', 'the nav file')}")
-    rs = sat_position_velocity(nav.eph, idx[ok], obs.t_gps_s[ok]).r_e
+    rs = sat_position_velocity(nav.eph, idx[ok], obs.t_gps_s[gps][ok]).r_e
     c = rs.mean(axis=0)
     r0 = c / np.linalg.norm(c) * earth.A
     for _ in range(2):  # rough inputs -> single point -> again

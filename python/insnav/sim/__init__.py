@@ -38,8 +38,12 @@ def truth_from_state(st: dict) -> Truth:
                  yaw_deg=wrap_deg(eul[:, 2]), f_ib_b=st["f_ib_b"], omega_ib_b=st["omega_ib_b"])
 
 
+#: stages :func:`simulate` reports to its ``progress`` callable
+SIMULATE_STAGES = ("IMU increments", "IMU errors", "truth", "GNSS fixes", "raw GNSS", "odometer")
+
+
 def simulate(scenario, seed: int | None = None, *, constellation=None,
-             with_truth: bool = True) -> Dataset:
+             with_truth: bool = True, progress=None) -> Dataset:
     """Simulate a scenario.
 
     Parameters
@@ -55,6 +59,9 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
     with_truth : bool
         Compute the truth table at ``truth.rate_hz`` (the IMU increments are
         computed from the analytic truth either way).
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each of the
+        :data:`SIMULATE_STAGES` (``insnav simulate`` draws a bar with it).
 
     Returns
     -------
@@ -68,10 +75,16 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
     children = np.random.SeedSequence(sc.seed).spawn(len(_STREAMS))
     rngs = {k: np.random.default_rng(c) for k, c in zip(_STREAMS, children)}
     traj = Trajectory(sc)
+    n_stages = len(SIMULATE_STAGES)
+
+    def done(stage: str) -> None:
+        if progress is not None:
+            progress(SIMULATE_STAGES.index(stage) + 1, n_stages)
 
     dt = 1.0 / sc.imu_rate
     t_imu = sample_times(sc.t0, sc.t_end, sc.imu_rate)
     dtheta, dv = traj.imu_increments(t_imu, nodes=sc.quadrature_nodes)
+    done("IMU increments")
     n = dtheta.shape[0]
     g_real, g_noise = simulate_sensor_errors(sc.gyro, n + 1, dt, rngs["gyro"])
     a_real, a_noise = simulate_sensor_errors(sc.accel, n + 1, dt, rngs["accel"])
@@ -86,6 +99,7 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
     sel = np.arange(0, n + 1, step)
     imu_errors = ImuErrors(t_imu[sel], g_real.bias[sel], a_real.bias[sel], g_real.scale,
                            a_real.scale, g_real.misalignment, a_real.misalignment)
+    done("IMU errors")
 
     truth = None
     if with_truth:
@@ -94,6 +108,7 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
     st0 = traj.state(np.array([sc.t0]))
     tr0 = truth_from_state(st0)
     initial = tr0.state_at(0)
+    done("truth")
 
     gcfg = sc.gnss
     if gcfg["enabled"]:
@@ -101,17 +116,20 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
     else:
         z = np.empty(0)
         gnss = GnssFixes(z, z, z, z, z, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)))
+    done("GNSS fixes")
     gnss_raw = None
     if sc.gnss_raw["enabled"]:
         from .gnss_raw import simulate_gnss_raw
 
         gnss_raw = simulate_gnss_raw(traj, sc.gnss_raw, gcfg["lever_arm_b"], sc.gps_time_offset_s,
                                      rngs["gnss_raw"], rngs["clock"], constellation=constellation)
+    done("raw GNSS")
     odometer = None
     if sc.odometer is not None:
         from .odometer import simulate_odometer
 
         odometer = simulate_odometer(traj, sc.odometer, rngs["odometer"])
+    done("odometer")
     raw = dict(sc.raw)
     raw["seed"] = int(sc.seed)
     return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=gnss_raw, imu_errors=imu_errors,

@@ -21,6 +21,8 @@ def add_simulate_parser(subparsers) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
     p.add_argument("--out", required=True, help="dataset directory to write")
     p.add_argument("--overwrite", action="store_true", help="replace an existing insnav dataset folder (never a folder holding other files)")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no progress bar (shown on a terminal only, for simulations longer than about 2 s)")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -36,16 +38,25 @@ def add_scenarios_parser(subparsers) -> None:
 
 
 def cmd_simulate(args) -> int:
-    from . import simulate
+    from . import SIMULATE_STAGES, simulate
 
     from ..data.dataset import check_replaceable
 
     out = Path(args.out)
     check_replaceable(out, args.overwrite)  # before the simulation: fail fast, never touch a user's folder
-    t = time.perf_counter()
-    ds = simulate(args.scenario, seed=args.seed)
-    t_sim = time.perf_counter() - t
-    ds.save(out, overwrite=args.overwrite)
+    from .._progress import Progress
+
+    bar = Progress(f"insnav simulate {args.scenario}", unit=" stages")
+    bar.enabled = bar.enabled and not args.quiet
+    total = len(SIMULATE_STAGES) + 1  # + writing the files
+    try:
+        t = time.perf_counter()
+        ds = simulate(args.scenario, seed=args.seed, progress=lambda k, _n: bar(k, total))
+        t_sim = time.perf_counter() - t
+        ds.save(out, overwrite=args.overwrite)
+        bar(total, total)
+    finally:
+        bar.close()
     raw = "" if ds.gnss_raw is None else f", {len(ds.gnss_raw)} raw GNSS observations"
     print(f"{ds.name} (seed {ds.seed}): {len(ds.imu)} IMU samples, {len(ds.gnss)} GNSS fixes{raw}; "
           f"simulated in {t_sim:.2f} s -> {out}")
