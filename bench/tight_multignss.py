@@ -22,14 +22,22 @@ rms(error / sigma) per NED axis; the share of epochs with fewer than 4 GPS
 satellites that still give the filter an update (tight: status applied;
 loose: a fix).  The table gives medians over the runs.
 
+Real data (``--walk``, needs ../shared/data/rtklibexplorer_walk_0827): the
+u-blox walk of ``bench/tight_realdata.py`` (``bench/walk_0827.toml``), tight EKF
+on GPS only (the loader's inputs) against GPS + Galileo + BeiDou
+(``tight_inputs_from_rinex(..., systems="GREC")`` with the loader's options,
+same epochs), plain and robust, against the RTK reference: horizontal error,
+its mean offset and the RMS around it, rms(error / sigma) per axis, ISBs.
+
 Reproduce (from the repository root)::
 
-    python3 bench/tight_multignss.py --runs 20 --out docs/results/tight_multignss.md
+    python3 bench/tight_multignss.py --runs 20 --walk --out docs/results/tight_multignss.md
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -153,10 +161,81 @@ def one_run(seed):
     return out
 
 
+def walk_section(data_dir: Path) -> list[str]:
+    """The real u-blox walk: tight EKF GPS-only vs GPS + Galileo + BeiDou against the RTK reference."""
+    from tight_realdata import CONFIG, antenna_errors, hstats, tomllib_table
+
+    from insnav.gnss import read_rinex_nav, read_rinex_obs
+    from insnav.gnss.measurements import read_rtklib_pos
+    from insnav.gnss.tight_inputs import tight_inputs_from_rinex
+    from insnav.io.rinex_dataset import RinexOptions, _epochs_in, load_rinex_run
+
+    d = data_dir / "rtklibexplorer_walk_0827"
+    obs_p, nav_p = d / "rinex_derived/gnss_1730.obs", d / "rinex_derived/gnss_1730.nav"
+    pos_p = d / "raw/gnss_1730_sf.pos"
+    ref = read_rtklib_pos(pos_p)
+    ds, cfg = load_rinex_run(read_rinex_obs(obs_p), read_rinex_nav(nav_p), d / "raw/imu_1730.csv", CONFIG,
+                             reference=pos_p)
+    off = ds.gps_time_offset_s
+    opt = RinexOptions.from_dict(dict(tomllib_table(CONFIG)))
+    obs_m, nav_m = read_rinex_obs(obs_p, systems="GREC"), read_rinex_nav(nav_p, systems="GREC")
+    inp_m = tight_inputs_from_rinex(obs_m, nav_m, off, ds.tight_inputs.info["approx_r_e"], systems="GREC",
+                                    elevation_mask_deg=opt.elevation_mask_deg, iono=opt.iono, tropo=opt.tropo,
+                                    sigma_pr_zenith_m=opt.sigma_pr_zenith_m,
+                                    sigma_prr_zenith_mps=opt.sigma_prr_zenith_mps, use_cn0=opt.use_cn0)
+    inp_m = _epochs_in(inp_m, ds.t0, float(ds.imu.t[-1]))
+    rows = []
+    for name, inp, robust in (("GPS only (17 states)", ds.tight_inputs, False),
+                              ("GPS + Galileo + BeiDou (20 states)", inp_m, False),
+                              ("GPS + Galileo + BeiDou, robust screening", inp_m, True)):
+        c = dataclasses.replace(cfg, filter="ekf", robust=dataclasses.replace(cfg.robust, screening=robust))
+        sol = run_tight(ds, c, inputs=inp)
+        _, e, ev, q, sig = antenna_errors(sol, ds, ref, off)
+        h = hstats(e, q)
+        ratio = np.sqrt(np.mean((e / sig) ** 2, axis=0))
+        n = inp.n_sats()
+        isb = "-" if sol.isb_m is None else (f"E {sol.isb_m[-1, 1]:+.1f} +- {sol.sigma_isb[-1, 1]:.1f}, "
+                                             f"C {sol.isb_m[-1, 2]:+.1f} +- {sol.sigma_isb[-1, 2]:.1f}")
+        sm = sol.summary
+        rows.append(f"| {name} | {int(np.median(n))} ({n.min()}-{n.max()}) | {h[0]:.2f} | {h[2]:.2f} | {h[3]:.2f} | "
+                    f"{h[5]:+.1f}, {h[6]:+.1f} | {h[4]:.2f} | {ratio[0]:.1f} / {ratio[1]:.1f} / {ratio[2]:.1f} | "
+                    f"{isb} | {sm['rejected_sats']} / {sm['downweighted_sats']} ({sm['flagged_epochs']} epochs) |")
+    return [
+        "",
+        "## Real data: the u-blox walk (rtklibexplorer walk_0827) against the RTK reference",
+        "",
+        "Tight EKF with `bench/walk_0827.toml` (the run of `bench/tight_realdata.py`: start when walking, "
+        "consumer MEMS model, pseudorange sigma 3 m / sin(el), rate 0.3 m/s / sin(el), C/N0 scaled, at most 16 "
+        "satellites per epoch by best GDOP), on the loader's GPS-only inputs and on GPS + Galileo + BeiDou "
+        "from `tight_inputs_from_rinex(..., systems=\"GREC\")` (Galileo E1, BeiDou B2a with their group delays, "
+        "Klobuchar scaled to the frequency, Saastamoinen), same epochs.  Antenna position at the "
+        "reference epochs; 'RMS around the offset' removes the mean horizontal error of the run.",
+        "",
+        "| satellites | per epoch median (range) | hz RMS, RTK fix [m] | hz RMS, all [m] | hz max, all [m] | "
+        "mean offset N, E [m] | RMS around the offset [m] | rms(err/sigma) N / E / D | ISB at the end [m] | "
+        "rejected / down-weighted sats (flagged epochs) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        *rows,
+        "",
+        "With Galileo and BeiDou the walk has 4 times the satellites (and redundancy: the single-point "
+        "geometry of GPS alone had none), the ISBs converge to a few decimetres within seconds, and the "
+        "track around its mean offset stays at the GPS-only level, but the absolute horizontal error does not "
+        "drop: the GEC solution sits about 8 m from the RTK reference as the GPS-only one does, with a "
+        "different, four times larger satellite set.  The pseudorange residuals at the RTK position are "
+        "nearly constant per satellite over the 2 minutes (metres to -17 m for the low E08); a common "
+        "offset that two different satellite sets agree on points at the reference (e.g. its base "
+        "coordinates) rather than at the pseudoranges -- not verified here.  Against such biases the "
+        "white-noise measurement model makes the filter overconfident (rms(err/sigma) well above 1); the "
+        "robust screening flags nothing (no residual reaches 3.9 predicted sigmas).",
+    ]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--walk", action="store_true", help="add the real u-blox walk (needs the shared data)")
+    ap.add_argument("--data", type=Path, default=Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared/data")))
     a = ap.parse_args(argv)
     wall0 = time.perf_counter()
     res = [one_run(seed) for seed in range(1, a.runs + 1)]
@@ -167,7 +246,8 @@ def main(argv=None):
         f"Generated by `bench/tight_multignss.py` at commit `{git_commit()}`:",
         "",
         "```",
-        f"python3 bench/tight_multignss.py --runs {a.runs}" + (f" --out {a.out}" if a.out else ""),
+        f"python3 bench/tight_multignss.py --runs {a.runs}" + (" --walk" if a.walk else "")
+        + (f" --out {a.out}" if a.out else ""),
         "```",
         "",
         f"Scenario `{PRESET}` ({a.runs} runs, seeds 1..{a.runs}): car in a street grid, 592 s, MEMS IMU 100 Hz, "
@@ -215,8 +295,10 @@ def main(argv=None):
         "has a fix only where the GEC single-point solution has at least 3 + (systems) satellites.  "
         "`rms(err/sigma)` near 1 means the filter's sigma matches its error.",
         "",
-        f"Wall time {time.perf_counter() - wall0:.0f} s on this machine (2 shared cores).",
     ]
+    if a.walk:
+        lines += walk_section(a.data)
+    lines += ["", f"Wall time {time.perf_counter() - wall0:.0f} s on this machine (2 shared cores)."]
     text = "\n".join(lines) + "\n"
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
