@@ -218,7 +218,7 @@ def walk_section(data_dir: Path) -> list[str]:
         *rows,
         "",
         "With Galileo and BeiDou the walk has 4 times the satellites (and redundancy: the single-point "
-        "geometry of GPS alone had none), the ISBs converge to a few decimetres within seconds, and the "
+        "geometry of GPS alone had none), the ISB estimates end with sigmas of 0.2 m, and the "
         "track around its mean offset stays at the GPS-only level, but the absolute horizontal error does not "
         "drop: the GEC solution sits about 8 m from the RTK reference as the GPS-only one does, with a "
         "different, four times larger satellite set.  The pseudorange residuals at the RTK position are "
