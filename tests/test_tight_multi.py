@@ -246,6 +246,10 @@ def test_robust_config_from_toml():
 
 
 def test_gnss_raw_csv_round_trip_with_systems(tmp_path):
+    from insnav.data.dataset import SYSTEM_LETTERS
+    from insnav.gnss.systems import SYSTEMS
+
+    assert SYSTEM_LETTERS == SYSTEMS
     ds = sim.simulate(_scenario(duration=30.0), seed=2)
     ds.save(tmp_path / "d")
     from insnav.data.dataset import load_dataset

@@ -214,6 +214,11 @@ class Truth(NavTrajectory):
                    a[:, 10:13].copy(), a[:, 13:16].copy())
 
 
+#: system letters in the order of their index, the same as insnav.gnss.systems.SYSTEMS
+#: (the data layer does not import gnss; tests/test_tight_multi.py checks they agree)
+SYSTEM_LETTERS = ("G", "R", "E", "C")
+
+
 @dataclass
 class GnssRaw:
     """Raw GPS observations, one row per (epoch, satellite).
@@ -299,9 +304,8 @@ class GnssRaw:
                 self.travel_time_s, self.sigma_pr_m, self.sigma_prr_mps,
                 self.rx_clock_bias_m, self.rx_clock_drift_mps]
         if self.is_multi():
-            from ..gnss.systems import system_index
-
-            cols.append(system_index(self.system))
+            idx = {c: k for k, c in enumerate(SYSTEM_LETTERS)}
+            cols.append(np.array([idx[c] for c in self.system], np.int64))
         return np.column_stack(cols)
 
     @classmethod
@@ -311,12 +315,10 @@ class GnssRaw:
         c = [a[:, i].copy() for i in range(19)]
         system = None
         if w == 20:
-            from ..gnss.systems import SYSTEMS
-
             k = a[:, 19].astype(np.int64)
-            if np.any((k < 0) | (k >= len(SYSTEMS))):
-                raise ValueError(f"gnss_raw: system index outside 0..{len(SYSTEMS) - 1}")
-            system = np.asarray(SYSTEMS)[k]
+            if np.any((k < 0) | (k >= len(SYSTEM_LETTERS))):
+                raise ValueError(f"gnss_raw: system index outside 0..{len(SYSTEM_LETTERS) - 1}")
+            system = np.asarray(SYSTEM_LETTERS)[k]
         return cls(c[0], c[1].astype(np.int64), c[2], c[3], a[:, 4:7].copy(), a[:, 7:10].copy(),
                    c[10], c[11], c[12], c[13], c[14], c[15], c[16], c[17], c[18], system)
 
