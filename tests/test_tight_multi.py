@@ -257,3 +257,39 @@ def test_gnss_raw_csv_round_trip_with_systems(tmp_path):
     back = load_dataset(tmp_path / "d")
     np.testing.assert_array_equal(back.gnss_raw.system, ds.gnss_raw.system)
     np.testing.assert_array_equal(back.gnss_raw.pseudorange_m, ds.gnss_raw.pseudorange_m)
+
+
+def test_walk_gec_loader_option(shared_data):
+    """Real u-blox walk: [rinex] systems = "GEC" gives the 20-state filter every system's rows
+    (the start from the GPS single point as before); the ISBs settle with decimetre sigmas and the
+    solution stays within the GPS-only one's distance of the RTK reference (both are ~8 m off it)."""
+    import tomllib
+    from pathlib import Path
+
+    from insnav.io.rinex_dataset import load_rinex
+
+    d = shared_data / "rtklibexplorer_walk_0827"
+    if not d.is_dir():
+        pytest.skip(f"{d} not found")
+    with open(Path(__file__).resolve().parents[1] / "bench" / "walk_0827.toml", "rb") as f:
+        rin = tomllib.load(f)["rinex"]
+    args = (d / "rinex_derived/gnss_1730.obs", d / "rinex_derived/gnss_1730.nav", d / "raw/imu_1730.csv")
+    ds_g, cfg_g = load_rinex(*args, rin, reference=d / "raw/gnss_1730_sf.pos")
+    ds_m, cfg_m = load_rinex(*args, dict(rin, systems="GEC"), reference=d / "raw/gnss_1730_sf.pos")
+    assert ds_m.t0 == ds_g.t0 and ds_m.initial.lat_deg == ds_g.initial.lat_deg
+    np.testing.assert_array_equal(ds_m.initial.v_n, ds_g.initial.v_n)
+    assert set(ds_m.tight_inputs.system) == {"G", "E", "C"}
+    assert np.median(ds_m.tight_inputs.n_sats()) >= 3 * np.median(ds_g.tight_inputs.n_sats())
+    s_g, s_m = run_tight(ds_g, cfg_g), run_tight(ds_m, cfg_m)
+    assert s_g.summary["layout"] == 17 and s_m.summary["layout"] == 20
+    assert np.all(s_m.sigma_isb[-1, 1:] < 0.5)
+    hz = {}
+    for k, s in (("G", s_g), ("GEC", s_m)):
+        e = errors(s, ds_g.truth)["pos_n_m"]
+        hz[k] = np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))
+    assert hz["GEC"] < hz["G"] + 0.5, hz
+    from insnav.config import ConfigError
+    from insnav.io.rinex_dataset import RinexOptions
+
+    with pytest.raises(ConfigError, match="rinex.systems"):
+        RinexOptions.from_dict(dict(rin, systems="EC"))
