@@ -113,7 +113,9 @@ def resolved_config_toml(cfg: RunConfig) -> str:
                 continue
             else:
                 lines.append(f"{f.name} = {toml_value(v)}")
-    if cfg.coupling == "tight":
+    from ..config import Robust
+
+    if cfg.coupling == "tight" or cfg.robust != Robust():
         lines.append("\n[robust]")
         lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)]
     if cfg.imu is not None:
