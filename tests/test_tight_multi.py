@@ -293,3 +293,16 @@ def test_walk_gec_loader_option(shared_data):
 
     with pytest.raises(ConfigError, match="rinex.systems"):
         RinexOptions.from_dict(dict(rin, systems="EC"))
+
+
+@pytest.mark.parametrize("filt", ["rbukf", "ukf"])
+def test_multi_sigma_point_filters(ds_multi, filt):
+    """The RB-UKF and UKF on 20 states (same measurement): ISBs estimated, position near the EKF's."""
+    ekf = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=2))
+    sol = run_tight(ds_multi, RunConfig(filter=filt, init_seed=2))
+    assert sol.summary["layout"] == 20
+    for k, true in ((1, 12.5), (2, -31.7)):
+        assert abs(sol.isb_m[-1, k] - true) < max(4 * sol.sigma_isb[-1, k], 1.0)
+    hz, _, _ = _hz_err(sol, ds_multi)
+    hz_e, _, _ = _hz_err(ekf, ds_multi)
+    assert np.sqrt(np.mean(hz ** 2)) < 1.2 * np.sqrt(np.mean(hz_e ** 2)) + 0.1
