@@ -323,6 +323,7 @@ def cmd_run(args) -> int:
             base = out
         written.append(write_innovations(sol, base))
         cfg.filter = sol.summary.get("filter", cfg.filter)
+        cfg.coupling = sol.summary.get("coupling", cfg.coupling)
         text = resolved_config_toml(cfg)
         if rinex_opts is not None:
             text += _rinex_table_toml(rinex_opts)
@@ -333,7 +334,10 @@ def cmd_run(args) -> int:
         raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
           f"records, {used} updates used, {rejected} rejected by the gate, {dropped} dropped by the input checks; "
-          f"{s.get('cholesky_repairs', 0)} covariance repairs")
+          f"{s.get('cholesky_repairs', 0)} covariance repairs"
+          + (f"; robust: {s.get('rejected_sats', 0)} satellite-epochs rejected, {s.get('downweighted_sats', 0)} "
+             f"down-weighted ({s.get('flagged_epochs', 0)} epochs flagged), {s.get('clock_jumps', 0)} clock jumps"
+             if s.get("robust_screening") or s.get("clock_jumps") else ""))
     stages.done("write")
     if args.timings:
         import sys
