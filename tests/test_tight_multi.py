@@ -201,13 +201,18 @@ def test_robust_equals_plain_on_clean_data(ds_multi):
     """No fault: the robust filter's solution is the plain one except at the rare false alarms."""
     plain = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=5))
     rob = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=5, robust=Robust(screening=True)))
-    assert rob.summary["flagged_epochs"] <= 0.01 * len(rob.gnss_t)
+    assert rob.summary["flagged_epochs"] <= 0.05 * len(rob.gnss_t)  # false alarms: 1e-3 per row
     d = errors(rob, ds_multi.truth)["pos_n_m"] - errors(plain, ds_multi.truth)["pos_n_m"]
     hz_r, _, _ = _hz_err(rob, ds_multi)
     hz_p, _, _ = _hz_err(plain, ds_multi)
     assert abs(np.sqrt(np.mean(hz_r ** 2)) - np.sqrt(np.mean(hz_p ** 2))) < 0.02 * np.sqrt(np.mean(hz_p ** 2))
-    if rob.summary["flagged_epochs"] == 0:
-        assert np.max(np.abs(d)) < 1e-9
+    # identical up to the first flagged epoch (a flagged epoch has a rejected row)
+    inp = rob.inputs
+    rej = np.any(rob.sat_flag == 2, axis=1)
+    t_flag = inp.epoch_t[inp.row_epoch[rej]].min() if rej.any() else np.inf
+    t_sol = errors(rob, ds_multi.truth)["t"]
+    assert np.sum(t_sol < t_flag) > 1000
+    assert np.max(np.abs(d[t_sol < t_flag])) < 1e-9
 
 
 @pytest.mark.parametrize("screening", [False, True])

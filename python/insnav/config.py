@@ -204,7 +204,7 @@ class Robust:
         & Xu 2002, J. Geodesy 76) in the epochs it flags (off by default: the
         plain update; an unflagged epoch is always the plain update).
     chi2_row : float
-        Threshold on ``w_i^2`` (1-dof chi-square; 15.13 = the 1 - 1e-4
+        Threshold on ``w_i^2`` (1-dof chi-square; 10.83 = the 1 - 1e-3
         quantile): a row above it flags the epoch and is rejected.
     igg_k0, igg_k1 : float
         IGG-III limits on ``|w_i|`` in a flagged epoch: full weight up to
@@ -221,7 +221,7 @@ class Robust:
     """
 
     screening: bool = False
-    chi2_row: float = 15.13
+    chi2_row: float = 10.83
     igg_k0: float = 1.5
     igg_k1: float = 3.0
     clock_jump: bool = True

@@ -20,7 +20,7 @@
 // 2. Detection, identification, adaptation (Teunissen 1990, "An integrity
 //    and quality control procedure for use in multi sensor integration", the
 //    DIA scheme): an epoch is *flagged* when any row has w_i^2 > chi2_row (the
-//    1-dof chi-square quantile; default 15.13, false alarm 1e-4 per row).  In
+//    1-dof chi-square quantile; default 10.83, false alarm 1e-3 per row).  In
 //    a flagged epoch rows with w_i^2 > chi2_row are rejected and the others
 //    are weighted with the IGG-III equivalent weight (Yang, Song & Xu 2002,
 //    "Robust estimator for correlated observations based on bifactor
@@ -43,7 +43,7 @@ namespace insnav {
 /// Robust tight update settings (run config [robust], insnav.config.Robust).
 struct RobustConfig {
   bool screening = false;         // per-row screening + IGG-III in flagged epochs (off: plain update)
-  double chi2_row = 15.13;        // 1-dof chi-square threshold on w_i^2 (1 - 1e-4 quantile)
+  double chi2_row = 10.83;        // 1-dof chi-square threshold on w_i^2 (1 - 1e-3 quantile, 3.29 sigma)
   double igg_k0 = 1.5;            // IGG-III: full weight up to |w| = k0
   double igg_k1 = 3.0;            // IGG-III: zero weight beyond |w| = k1
   bool clock_jump = true;         // absorb a common pseudorange offset into the clock
