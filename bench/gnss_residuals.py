@@ -9,7 +9,6 @@ Prints a Markdown report and, with ``--out``, writes it to that file.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 

@@ -40,6 +40,8 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
                             ["bench/vehicle_constraints.py", "--runs", "2"]),
     "cli_end_to_end": (("cli_end_to_end.md",), ["bench/cli_end_to_end.py", "--repeat", "3"],
                        ["bench/cli_end_to_end.py", "--repeat", "1"]),
+    "spp_smartloc": (("spp_smartloc.md",), ["bench/spp_smartloc.py", "--out", "docs/results/spp_smartloc.md"],
+                     ["bench/spp_smartloc.py", "--out", "docs/results/spp_smartloc.md"]),
     "tight_realdata": (("tight_realdata.md",),
                        ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"],
                        ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"]),
@@ -48,6 +50,8 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
                          "docs/results/tight_multignss.md"],
                         ["bench/tight_multignss.py", "--runs", "2", "--fault-runs", "2", "--walk", "--out",
                          "docs/results/tight_multignss.md"]),
+    "walk_loose": (("walk_loose.md",), ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"],
+                   ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"]),
 }
 
 

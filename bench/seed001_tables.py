@@ -13,7 +13,6 @@ Writes the whole ``seed001.md`` (with the commit and the command) and
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
 import time
 from pathlib import Path

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import subprocess
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor

@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import multiprocessing as mp
-import subprocess
 import sys
 import warnings
 import time

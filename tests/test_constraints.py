@@ -155,13 +155,15 @@ def test_cli_constraints_flag_and_config_round_trip(car, tmp_path):
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "constraints.use" in r.stderr
 
 
-def test_smoother_bridges_an_outage_consistently(car):
-    """The RTS smoother (smooth=True) on the 120 s outage: the max horizontal
-    error inside it drops by more than 10x, the smoothed sigmas are consistent
-    with the errors (rms(error / sigma) in 0.6-1.4 per axis), and the last row,
-    with no measurement after it, is the filtered one."""
-    fwd = insnav.run(car, config=RunConfig(filter="ekf", init_seed=3))
-    sm = insnav.run(car, config=RunConfig(filter="ekf", init_seed=3, smooth=True))
+@pytest.mark.parametrize("filt", ["ekf", "rbukf", "ukf"])
+def test_smoother_bridges_an_outage_consistently(car, filt):
+    """The RTS smoother (smooth=True; the unscented RTS smoother for the RB-UKF
+    and UKF) on the 120 s outage: the max horizontal error inside it drops by
+    more than 10x, the smoothed sigmas are consistent with the errors
+    (rms(error / sigma) in 0.6-1.4 per axis), and the last row, with no
+    measurement after it, is the filtered one."""
+    fwd = insnav.run(car, config=RunConfig(filter=filt, init_seed=3))
+    sm = insnav.run(car, config=RunConfig(filter=filt, init_seed=3, smooth=True))
 
     def max_in(sol):
         e = errors(sol, car.truth)
@@ -176,7 +178,22 @@ def test_smoother_bridges_an_outage_consistently(car):
     assert sm.sigma_pos_n_m[-1] == pytest.approx(fwd.sigma_pos_n_m[-1], rel=1e-9)
     assert sm.summary["smoother"]["gain_failures"] == 0
     with pytest.raises(ConfigError, match="smooth"):
-        RunConfig(filter="rbukf", smooth=True).validate()
+        RunConfig(filter="ekf", coupling="tight", smooth=True).validate()
+
+
+def test_unscented_and_ekf_smoothers_agree_on_a_near_linear_problem(car):
+    """Same data, same start: the smoothed RB-UKF and EKF solutions differ by
+    far less than either's forward error in the outage (the error dynamics are
+    nearly linear for a MEMS car over 120 s)."""
+    sol = {(f, s): insnav.run(car, config=RunConfig(filter=f, init_seed=3, smooth=s))
+           for f in ("ekf", "rbukf") for s in (False, True)}
+    t = sol[("ekf", True)].t
+    inside = (t >= OUTAGE[0]) & (t <= OUTAGE[1])
+    e_fwd = errors(sol[("ekf", False)], car.truth)
+    fwd_max = np.hypot(e_fwd["pos_n_m"][:, 0], e_fwd["pos_n_m"][:, 1])[inside].max()
+    a, b = errors(sol[("ekf", True)], car.truth), errors(sol[("rbukf", True)], car.truth)
+    diff = np.hypot(*(a["pos_n_m"][:, :2] - b["pos_n_m"][:, :2]).T)[inside].max()
+    assert diff < 0.05 * fwd_max, (diff, fwd_max)
 
 
 def test_smoothed_rows_do_not_depend_on_how_the_rows_are_split():

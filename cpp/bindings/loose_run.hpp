@@ -20,6 +20,7 @@
 #include "convert.hpp"
 #include "insnav/engine/loose_engine.hpp"
 #include "insnav/filter/ekf.hpp"
+#include "insnav/filter/rbukf.hpp"
 #include "insnav/filter/rts_smoother.hpp"
 #include "outputs.hpp"
 
@@ -39,7 +40,7 @@ struct LooseRunArgs {
   UtParams ut;
   int sigma_columns = 0;  // config key 'sigma_columns': sigmas of the first k states only (<= 0: all)
   const DArray* constraints = nullptr;  // (k, 3): t [s], kinds (ConstraintKind flags), speed [m/s]; sorted by t
-  bool smooth = false;                   // config key 'smooth': RTS backward pass (EKF only)
+  bool smooth = false;                   // config key 'smooth': RTS backward pass (EKF, RB-UKF, UKF)
 };
 
 /// filter 'ekf', 'rbukf' or 'ukf' on one layout (any other filter: ValueError).
@@ -95,8 +96,9 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   out.constraint_nis = k ? o_cnis.mutable_data() : nullptr;
   out.constraint_status = k ? o_cst.mutable_data() : nullptr;
   // smoother: the forward pass recorded per filter epoch, then the backward pass
-  constexpr bool kCanSmooth = std::is_same_v<Filter, Ekf<L>>;
-  if (a.smooth && !kCanSmooth) throw py::value_error("smooth: the RTS smoother runs with the EKF only");
+  // the EKF (transition) and the RB-UKF / UKF (UT cross-covariance, the unscented RTS smoother)
+  constexpr bool kCanSmooth = std::is_same_v<Filter, Ekf<L>> || std::is_base_of_v<UnscentedPropagation<L>, Filter>;
+  if (a.smooth && !kCanSmooth) throw py::value_error("smooth: the RTS smoother runs with the EKF, RB-UKF and UKF");
   std::vector<SmootherEpoch<L>> fwd;
   std::vector<SmoothedEpoch<L>> bwd;
   std::int64_t n_ep = 0;

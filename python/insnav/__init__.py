@@ -27,6 +27,7 @@ _LAZY = {
     "mechanize": "insnav.ins.mechanize",
     "simulate": "insnav.sim",
     "load_dataset": "insnav.data.dataset",
+    "load_csv_dataset": "insnav.io.csv_dataset",
     "Dataset": "insnav.data.dataset",
     "run": "insnav.filters",
     "Solution": "insnav.filters.solution",

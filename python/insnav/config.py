@@ -7,6 +7,8 @@ raise :class:`ConfigError` naming the key, the value and what is allowed.
 """
 from __future__ import annotations
 
+from .errors import close_matches
+
 import dataclasses
 import math
 import tomllib
@@ -18,7 +20,7 @@ from .registry import FILTERS
 from .units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0, MG, MPS_PER_SQRT_H, UG_PER_SQRT_HZ
 
 
-COUPLINGS = ("loose", "tight")
+COUPLINGS = ("loose", "tight", "gnss")
 LAYOUTS = (15, 21)
 
 
@@ -63,10 +65,8 @@ class ImuNoise:
                              "IMU noise would trust the IMU blindly")
         unknown = set(m) - _IMU_MODEL_KEYS
         if unknown:
-            import difflib
-
             k = sorted(unknown)[0]
-            close = difflib.get_close_matches(k, _IMU_MODEL_KEYS, n=1)
+            close = close_matches(k, _IMU_MODEL_KEYS)
             raise ValueError(f"imu_model: unknown key {k!r}" + (f" (did you mean {close[0]!r}?)" if close else "")
                              + f"; known: {', '.join(sorted(_IMU_MODEL_KEYS))}")
 
@@ -263,9 +263,12 @@ class RunConfig:
         15 states (seed 000) or 21 with scale factors (KF-GINS-like).
     init_sigma_pos_m, init_sigma_vel_mps, init_sigma_att_deg : 3 floats
         Initial 1-sigma of position (N, E, D), velocity, roll/pitch/yaw.
-    init_error : bool
+    init_error : bool or "auto"
         Draw the initial state error from those sigmas (``init_seed``), as in
         a Monte Carlo run; otherwise start from the given initial state.
+        ``"auto"`` (default): draw only when the dataset's initial state is the
+        simulator's truth (``Dataset.initial_is_truth``); a state the user gives
+        (dataset.json, KF-GINS, RINEX, CSV) is taken as given.
     imu : ImuNoise or None
         None: derived from the dataset's IMU model.
     lever_arm_b : 3 floats or None
@@ -288,8 +291,9 @@ class RunConfig:
         Tight coupling: clock-jump check, per-satellite screening and IGG-III
         down-weighting (``[robust]``; screening off by default).
     smooth : bool
-        Post-process with the RTS smoother (loose EKF): every output row and
-        sigma from all the data, before and after it.
+        Post-process with the RTS smoother (loose EKF; loose RB-UKF and UKF:
+        the unscented RTS smoother, Sarkka 2008): every output row and sigma
+        from all the data, before and after it.
     init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None
         Initial estimate of the IMU errors (measured minus true; scale factors
         [-]); None: zero.  KF-GINS's ``initaccbias``/``initgyrbias``/
@@ -314,7 +318,7 @@ class RunConfig:
     init_sigma_pos_m: list = field(default_factory=lambda: [2.0, 2.0, 3.0])
     init_sigma_vel_mps: list = field(default_factory=lambda: [0.1, 0.1, 0.1])
     init_sigma_att_deg: list = field(default_factory=lambda: [0.5, 0.5, 1.0])
-    init_error: bool = True
+    init_error: bool | str = "auto"
     init_seed: int = 0
     imu: ImuNoise | None = None
     lever_arm_b: list | None = None
@@ -357,7 +361,9 @@ class RunConfig:
         if int(self.init_seed) != self.init_seed or self.init_seed < 0:
             bad("init_seed", self.init_seed, "an integer >= 0")
         self.init_seed = int(self.init_seed)
-        for key in ("init_error", "use_position", "use_velocity", "imu_error_sigmas"):
+        if not (isinstance(self.init_error, (bool, np.bool_)) or self.init_error == "auto"):
+            bad("init_error", self.init_error, 'true, false or "auto"')
+        for key in ("use_position", "use_velocity", "imu_error_sigmas"):
             if not isinstance(getattr(self, key), (bool, np.bool_)):
                 bad(key, getattr(self, key), "true or false")
         if self.lever_arm_b is not None:
@@ -387,8 +393,9 @@ class RunConfig:
                                                                " > 1" if k == "gap_factor" else " > 0"))
         if not isinstance(self.smooth, (bool, np.bool_)):
             bad("smooth", self.smooth, "true or false")
-        if self.smooth and (self.coupling != "loose" or self.filter != "ekf"):
-            bad("smooth", self.smooth, f"the RTS smoother runs with the loose ekf (not {self.coupling} {self.filter!r})")
+        if self.smooth and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
+            bad("smooth", self.smooth, f"the RTS smoother runs with the loose ekf, rbukf or ukf "
+                                       f"(not {self.coupling} {self.filter!r})")
         if self.constraints.use and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
             bad("constraints.use", self.constraints.use,
                 f"vehicle constraints with loose ekf, rbukf or ukf only (not {self.coupling} {self.filter!r})")
@@ -461,10 +468,8 @@ _USER_UNITS = {
 
 def _suggest(key: str, known) -> str:
     """'; did you mean 'x'?' for the closest known key, else the list of known keys."""
-    import difflib
-
     known = sorted(known)
-    close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+    close = close_matches(key, known)
     return f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
 
 

@@ -1,8 +1,16 @@
 """Exceptions that name what the user has to fix."""
 from __future__ import annotations
 
-__all__ = ["UserError"]
+__all__ = ["UserError", "close_matches"]
 
 
 class UserError(Exception):
     """An error in the user's input: the CLI prints it as one line and exits with status 2."""
+
+
+def close_matches(name, known) -> list[str]:
+    """The known name closest to a misspelt ``name`` (a list of at most one,
+    empty when none is close): every "did you mean" in insnav comes from here."""
+    import difflib
+
+    return difflib.get_close_matches(str(name), [str(k) for k in known], n=1, cutoff=0.6)

@@ -9,6 +9,8 @@ of it).
 """
 from __future__ import annotations
 
+from .errors import close_matches
+
 from dataclasses import dataclass
 
 __all__ = ["FilterSpec", "FILTERS", "filter_spec", "filter_names"]
@@ -23,7 +25,7 @@ class FilterSpec:
     name : str
         The ``filter=`` / ``--filter`` value.
     couplings : tuple of str
-        ``"loose"`` and/or ``"tight"``.
+        ``"loose"`` and/or ``"tight"``; ``"gnss"``: GNSS only, no IMU (``spp``).
     layouts : dict
         coupling -> error-state size(s) it runs on (15, 21: loose; 17, 20: tight).
     runners : dict
@@ -70,6 +72,9 @@ PARTICLE_OPTIONS = ("particles", "seed", "fading", "rho", "beta", "eta_max", "al
                     "temper_stages", "divergence_chi2", "noise_floor", "gyro_markov_sigma_dph",
                     "gyro_markov_tau_s", "acc_markov_tau_s", "inputs", "elevation_mask_deg", "max_sats",
                     "clock_psd", "init_sigma_clock", "clock0")
+_SPP = "insnav.filters.spp:run_spp"
+#: options of the single point solution (``insnav.filters.spp.run_spp``)
+SPP_OPTIONS = ("spp_options", "weighting")
 #: options of the delay filters (``insnav.filters.delay.run_delayed``)
 DELAY_OPTIONS = ("delay_p", "max_history_s", "checkpoint_interval_s")
 
@@ -95,6 +100,10 @@ FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
                summary="unscented particle filter (a weighted bank of UKFs)"),
     FilterSpec("pf", ("tight",), {"tight": (20,)}, {"tight": _PARTICLE}, PARTICLE_OPTIONS, paper="seed 004",
                summary="bootstrap particle filter"),
+    FilterSpec("spp", ("gnss",), {"gnss": ()}, {"gnss": _SPP}, SPP_OPTIONS,
+               paper="RTKLIB pntpos; Kuusniemi 2005 RAIM",
+               summary="GNSS-only weighted least-squares single point positioning, every system, RAIM FDE; "
+                       "no IMU (--format rinex --obs --nav)"),
 )}
 
 
@@ -108,8 +117,6 @@ def filter_spec(name: str) -> FilterSpec:
     try:
         return FILTERS[name]
     except KeyError:
-        import difflib
-
-        close = difflib.get_close_matches(str(name), FILTERS, n=1)
+        close = close_matches(str(name), FILTERS)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise ValueError(f"filter {name!r} unknown{hint}; known: {', '.join(FILTERS)}") from None

@@ -18,6 +18,23 @@ EXAMPLES = """examples:
   insnav run --format kfgins --config kf-gins.yaml [--imu IMU.txt --gnss GNSS.txt] --out sol.csv
   insnav run --format rinex --obs F.obs --nav F.nav --imu IMU.csv [--imu-tag IMU.csv.tag] \
              [--config run.toml] --coupling tight --filter ekf --out sol.csv
+  insnav run --format csv --imu imu.csv --gnss gnss.csv|fixes.pos|fixes.nmea --config run.toml --out sol.csv
+
+--format csv: your own IMU CSV and GNSS fixes (a CSV, an RTKLIB .pos or NMEA GGA+RMC+GST),
+loosely coupled.  The [imu] and [gnss] tables of --config map the columns and units (time
+base, rad|deg, rates|increments, m/s^2|g, FRD|FLU|RFU axes; lat/lon deg|rad, ellipsoidal|msl
+height, sigmas) and give the IMU noise model ([imu] grade = consumer|industrial|tactical|
+navigation, or the noise keys).  Units are checked first; the initial state comes from the
+alignment (levelling, gyrocompassing or the GNSS course once moving) unless [initial] gives it,
+and is printed with its sigmas (docs/formats.md).
+
+  insnav run --filter spp --format rinex --obs F.obs --nav F.nav [--config run.toml] --out spp.csv
+
+--filter spp: GNSS-only single point positioning (no IMU): weighted least squares over every
+system with ephemerides, one inter-system bias per further system, velocity from Doppler,
+RAIM fault detection and exclusion; [gnss] (weighting model legacy|rtklib|cn0, masks, system
+factors, systems) and [spp] (raim, raim_alpha, ...) tables of --config.  Beside --out:
+<out>.spp.csv (clock, inter-system biases, drift, DOPs, RAIM status per epoch).
 
 --format rinex: real GPS L1 C/A data (RINEX 2/3 obs + nav, LNAV ephemerides) and an IMU CSV;
 the [rinex] table of --config says how to read the IMU file (columns, units g|mps2 and
@@ -38,19 +55,23 @@ def add_run_parser(sub) -> None:
                        description="Run a closed-loop GNSS/INS filter.", epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", nargs="?", help="dataset directory written by `insnav simulate` (insnav format)")
-    p.add_argument("--format", choices=("insnav", "kfgins", "rinex"), default="insnav")
+    p.add_argument("--format", choices=("insnav", "kfgins", "rinex", "csv"), default="insnav")
     p.add_argument("--filter", default=None, metavar="NAME",
                    help="default: the config's, else ekf.  "
                         + "; ".join(f"{n} ({'/'.join(s.couplings)}, {s.paper}): {s.summary}" for n, s in FILTERS.items()))
-    p.add_argument("--coupling", choices=("loose", "tight"), default=None)
+    p.add_argument("--coupling", choices=("loose", "tight", "gnss"), default=None,
+                   help="gnss: GNSS only (filter spp; the only coupling it has, chosen by --filter spp)")
     p.add_argument("--config", help="insnav TOML run configuration (with a [rinex] table for --format rinex), "
                    "or the KF-GINS YAML with --format kfgins")
-    p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath); with --format rinex the IMU CSV")
+    p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath); with --format rinex or csv the "
+                   "IMU CSV")
     p.add_argument("--obs", help="RINEX 2/3 observation file (--format rinex)")
-    p.add_argument("--nav", help="RINEX 2/3 GPS navigation file (--format rinex)")
-    p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex with a tick_ms "
+    p.add_argument("--nav", help="RINEX 2/3 GPS navigation file (--format rinex); with --filter spp several, "
+                   "comma-separated (e.g. brdc1580.16n,brdc1580.16g), or a mixed RINEX 3 file")
+    p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex or csv with a tick_ms "
                    "column; default IMU.tag)")
-    p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath)")
+    p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath); with --format csv the GNSS fixes "
+                   "(.csv, RTKLIB .pos or NMEA .nmea; [gnss] format overrides the suffix)")
     p.add_argument("--constraints", default=None, metavar="LIST",
                    help="vehicle constraints, comma-separated from nhc (no lateral/vertical velocity), odo "
                         "(odometer speed, the dataset's odometer.csv), zupt (zero velocity and angular rate while "
@@ -145,6 +166,28 @@ def _rinex_table_toml(opt) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _csv_tables_toml(tables: dict, has_imu_table: bool) -> str:
+    """The file-mapping keys of ``--format csv`` (``[imu]`` mapping, ``[gnss]``,
+    ``[initial]``, ``[align]``) after the resolved run keys, whose last table is ``[imu]``."""
+    import numpy as _np
+
+    def val(v):
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + "}"
+        if isinstance(v, _np.ndarray):
+            v = v.tolist()
+        return toml_value(list(v) if isinstance(v, tuple) else v)
+
+    out = [] if has_imu_table else ["\n[imu]"]
+    out += [f"{k} = {val(v)}" for k, v in tables.get("imu", {}).items()]
+    for name in ("gnss", "initial", "align"):
+        t = tables.get(name) or {}
+        if t:
+            out.append(f"\n[{name}]")
+            out += [f"{k} = {val(v)}" for k, v in t.items()]
+    return "\n".join(out) + "\n"
+
+
 def output_decimation(t, rate_hz: float) -> int:
     """k of ``--output-rate``: the IMU rate (median interval of ``t`` [s]) over
     ``rate_hz`` [Hz], which must be a whole number (within 0.1 %)."""
@@ -184,6 +227,87 @@ class _Stages:
         return "timings [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in self.times.items())
 
 
+def _table_toml(name: str, obj) -> str:
+    """A ``[name]`` TOML table of a dataclass's fields (None left out)."""
+    import dataclasses
+
+    lines = [f"\n[{name}]"]
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if v is None:
+            continue
+        if isinstance(v, dict):
+            lines.append(f"{f.name} = {{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}")
+        elif isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
+            lines.append(f"{f.name} = [" + ", ".join(toml_value(x) for x in v) + "]")
+        else:
+            lines.append(f"{f.name} = {toml_value(v)}")
+    return "\n".join(lines) + "\n"
+
+
+def cmd_run_spp(args, stages) -> int:
+    """``insnav run --filter spp``: GNSS-only single point positioning over RINEX files (no IMU)."""
+    from ..filters.solution import FORMATS, write_innovations
+    from ..filters.spp import run_spp_rinex, write_spp_table
+
+    if args.format != "rinex":
+        raise UserError("--filter spp reads RINEX files: give --format rinex --obs OBS --nav NAV")
+    missing = [n for n in ("obs", "nav") if not getattr(args, n)]
+    if missing:
+        raise UserError("--filter spp needs " + ", ".join(f"--{n}" for n in missing))
+    unused = [f"--{n.replace('_', '-')}" for n in ("imu", "imu_tag", "gnss", "constraints", "output_rate",
+                                                   "run_config")
+              if getattr(args, n, None)] + (["--smooth"] if args.smooth else [])
+    if args.dataset:
+        unused.append("a dataset directory")
+    if args.coupling not in (None, "gnss"):
+        unused.append(f"--coupling {args.coupling}")
+    if unused:
+        raise UserError(f"--filter spp is GNSS only and does not use {', '.join(unused)}")
+    if args.out_format != "insnav":
+        raise UserError("--filter spp writes --out-format insnav only")
+    if args.out is None:
+        raise UserError("--out is required (a solution file such as spp.csv)")
+    out = Path(args.out)
+    if out.is_dir():
+        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'spp.csv'}")
+    if out.suffix.lower() not in FORMATS:
+        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
+    groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
+    try:
+        sol = run_spp_rinex(args.obs, [p for p in args.nav.split(",") if p], args.config)
+    except ConfigError as exc:
+        raise UserError(str(exc)) from None
+    stages.done("filter")
+    s = sol.summary
+    if s["solved"] == 0:
+        raise UserError(f"{args.obs}: no epoch could be solved ({s['epochs']} epochs; too few satellites with "
+                        "ephemerides above the masks?)")
+    written: list[Path] = []
+    try:
+        written.append(sol.save(out, columns=groups, precision=args.csv_precision))
+        written.append(write_innovations(sol, out))
+        written.append(write_spp_table(sol.spp, out.with_suffix(out.suffix + ".spp.csv")))
+        text = (f'# insnav resolved run configuration\nfilter = "spp"\ncoupling = "gnss"\n'
+                + _table_toml("rinex", sol.rinex_options) + _table_toml("gnss", sol.weighting)
+                + _table_toml("spp", sol.spp_options))
+        written.append(atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text))
+    except BaseException:
+        for p in written:
+            Path(p).unlink(missing_ok=True)
+        raise
+    print(f"{out}: {s['solved']} of {s['epochs']} epochs solved, filter spp ({s['systems']}, weighting "
+          f"{s['weighting']}, RAIM {'on' if sol.spp_options.raim else 'off'}); RAIM: {s['raim_passed']} passed, "
+          f"{s['raim_excluded_epochs']} after excluding {s['rows_excluded']} rows, {s['raim_failed']} failed, "
+          f"{s['raim_untested']} untested")
+    stages.done("write")
+    if args.timings:
+        import sys
+
+        print(stages.line(), file=sys.stderr)
+    return 0
+
+
 def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
     """``cfg`` with the keys present in the insnav TOML ``path`` replaced (validated as a whole)."""
     import dataclasses
@@ -208,6 +332,17 @@ def cmd_run(args) -> int:
     import insnav
 
     stages = _Stages()
+    if args.filter is None and args.format == "rinex" and args.config:  # filter = "spp" in the TOML
+        import tomllib
+
+        try:
+            with open(args.config, "rb") as f:
+                if tomllib.load(f).get("filter") == "spp":
+                    args.filter = "spp"
+        except (OSError, tomllib.TOMLDecodeError):
+            pass  # reported by the loader
+    if args.filter == "spp":
+        return cmd_run_spp(args, stages)
 
     if args.run_config is not None and args.format != "kfgins":
         raise UserError("--run-config goes with --format kfgins (otherwise the insnav TOML is --config)")
@@ -249,6 +384,7 @@ def cmd_run(args) -> int:
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     rinex_opts = None
+    csv_tables = None
     try:
         if args.format == "rinex":
             missing = [n for n in ("obs", "nav", "imu") if not getattr(args, n)]
@@ -260,6 +396,18 @@ def cmd_run(args) -> int:
 
             ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=args.imu_tag)
             rinex_opts = ds.options
+        elif args.format == "csv":
+            missing = [n for n in ("imu", "gnss", "config") if not getattr(args, n)]
+            if missing:
+                raise UserError("--format csv needs " + ", ".join(f"--{n}" for n in missing)
+                                + " (the [imu] and [gnss] tables of --config map the files)")
+            if args.dataset:
+                raise UserError("--format csv reads --imu/--gnss; do not give a dataset directory")
+            from ..io.csv_dataset import load_csv_run
+
+            ds, cfg = load_csv_run(args.imu, args.gnss, args.config, imu_tag=args.imu_tag)
+            print(ds.info["initial_state"])
+            csv_tables = ds.info["tables"]
         elif args.format == "kfgins":
             if not args.config:
                 raise UserError("--format kfgins needs --config KF-GINS.yaml")
@@ -327,6 +475,11 @@ def cmd_run(args) -> int:
         text = resolved_config_toml(cfg)
         if rinex_opts is not None:
             text += _rinex_table_toml(rinex_opts)
+            wgt = getattr(ds, "weighting", None)
+            if wgt is not None and not wgt.is_default:
+                text += _table_toml("gnss", wgt)
+        if csv_tables is not None:
+            text += _csv_tables_toml(csv_tables, cfg.imu is not None)
         written.append(atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text))
     except BaseException:
         for p in written:

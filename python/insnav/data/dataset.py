@@ -29,6 +29,8 @@ so a directory that exists is always complete.
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 import json
 import os
 import shutil
@@ -421,6 +423,11 @@ class Dataset:
     seed : int or None
     odometer : Odometer or None
         Wheel odometer (car presets with ``[odometer]``).
+    initial_is_truth : bool
+        ``initial`` is the simulator's exact truth (``insnav.simulate``): a run
+        with ``init_error = "auto"`` (the default) then starts from a random
+        draw around it, as a real alignment would; a state given by the user
+        (hand-written ``dataset.json``, KF-GINS, RINEX, CSV) is taken as given.
     """
 
     imu: ImuData
@@ -437,6 +444,7 @@ class Dataset:
     name: str = ""
     seed: int | None = None
     odometer: Odometer | None = None
+    initial_is_truth: bool = False
 
     def save(self, directory, overwrite: bool = False) -> Path:
         """Write the dataset directory atomically (see module docstring).
@@ -484,6 +492,7 @@ class Dataset:
                             "roll_deg": self.initial.roll_deg, "pitch_deg": self.initial.pitch_deg,
                             "yaw_deg": self.initial.yaw_deg},
                 "imu_model": self.imu_model,
+                "initial_is_truth": bool(self.initial_is_truth),
             }
             if self.imu_errors is not None:
                 meta["imu_errors_const"] = {
@@ -537,6 +546,21 @@ def check_replaceable(out: Path, overwrite: bool) -> None:
 
 
 _INITIAL_KEYS = ("lat_deg", "lon_deg", "h_m", "v_n_mps", "roll_deg", "pitch_deg", "yaw_deg")
+#: every key of dataset.json (docs/formats.md)
+_META_KEYS = ("format", "version", "name", "seed", "t0_s", "gps_time_offset_s", "lever_arm_b_m", "initial",
+              "imu_model", "imu_grade", "imu_errors_const", "initial_is_truth")
+
+
+def _check_meta_keys(meta: dict, meta_path: Path) -> None:
+    """A key dataset.json does not define is a one-line error with the closest known key."""
+    for where, keys, known in (("", meta, _META_KEYS),
+                               ("initial.", meta.get("initial") if isinstance(meta.get("initial"), dict) else {},
+                                _INITIAL_KEYS)):
+        for k in keys:
+            if k not in known:
+                close = close_matches(str(k), known)
+                hint = f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
+                raise ValueError(f"{meta_path}: unknown key '{where}{k}'{hint}")
 
 
 def _initial_from_meta(meta: dict, meta_path: Path):
@@ -631,12 +655,16 @@ def load_dataset(directory) -> Dataset:
             imu_model = imu_model_for_grade(meta["imu_grade"])
         except ValueError as exc:
             raise ValueError(f"{d / 'dataset.json'}: {exc}") from None
+    _check_meta_keys(meta, meta_path)
     initial, t0, lever_arm_b = _initial_from_meta(meta, meta_path)
+    iit = meta.get("initial_is_truth", False)
+    if not isinstance(iit, bool):
+        raise ValueError(f"{meta_path}: initial_is_truth must be true or false, got {iit!r}")
     return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=raw, imu_errors=errs, scenario=scen,
                    lever_arm_b=lever_arm_b, initial=initial, t0=t0,
                    gps_time_offset_s=float(meta.get("gps_time_offset_s", 0.0)),
                    imu_model=imu_model, name=meta.get("name", ""),
-                   seed=meta.get("seed"), odometer=odo)
+                   seed=meta.get("seed"), odometer=odo, initial_is_truth=iit)
 
 
 # --- fast CSV --------------------------------------------------------------

@@ -4,6 +4,8 @@ Table 4.1; representative data sheets); ``docs/formats.md`` lists them.
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 from ..units import DEG_PER_H, DEG_PER_SQRT_H, MG
 
 __all__ = ["IMU_GRADES", "imu_grade", "imu_model_for_grade"]
@@ -36,9 +38,7 @@ def imu_grade(name: str) -> dict[str, float]:
     try:
         return dict(IMU_GRADES[name])
     except KeyError:
-        import difflib
-
-        close = difflib.get_close_matches(str(name), IMU_GRADES, n=1)
+        close = close_matches(str(name), IMU_GRADES)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise ValueError(f"imu_grade {name!r} unknown{hint}; known: {', '.join(IMU_GRADES)}") from None
 

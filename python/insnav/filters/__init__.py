@@ -11,6 +11,7 @@ module                 filters                               paper
 :mod:`.tight`          ekf, rbukf, ukf (tight, 17 states)    seed 003
 :mod:`.delay`          kf, rdkf, exact                       seed 001
 :mod:`.particle`       fukf, upf, pf (tight, 20 states)      seed 004
+:mod:`.spp`            spp (GNSS only, no IMU)               RTKLIB pntpos, RAIM FDE
 =====================  ====================================  =========
 """
 from __future__ import annotations
@@ -23,7 +24,7 @@ from .solution import GNSS_STATUS, RecordStatus, Solution
 
 __all__ = ["run", "Solution", "RecordStatus", "GNSS_STATUS"]
 
-_ADVERB = {"loose": "loosely", "tight": "tightly"}
+_ADVERB = {"loose": "loosely", "tight": "tightly", "gnss": "GNSS-only (no IMU),"}
 
 
 def _as_config(config) -> RunConfig:
@@ -77,6 +78,8 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     cfg = _as_config(config)
     if filter is not None:
         cfg.filter = filter
+        if coupling is None and cfg.filter in FILTERS and FILTERS[cfg.filter].couplings == ("gnss",):
+            coupling = "gnss"  # spp has no other way to run
     if coupling is not None:
         cfg.coupling = coupling
     if cfg.filter not in FILTERS or cfg.coupling not in _ADVERB:

@@ -25,7 +25,8 @@ def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[Na
     lat, lon, h = s0.lat_deg * DEG, s0.lon_deg * DEG, s0.h_m
     v = s0.v_n.copy()
     rpy = np.array([s0.roll_deg, s0.pitch_deg, s0.yaw_deg])
-    if cfg.init_error:
+    draw = cfg.init_error if cfg.init_error != "auto" else bool(getattr(dataset, "initial_is_truth", False))
+    if draw:
         dp, dv, da = rng.standard_normal(3) * sp, rng.standard_normal(3) * sv, rng.standard_normal(3) * sa
         R_M, R_N = radii(lat)
         lat, lon, h = lat + dp[0] / (R_M + h), lon + dp[1] / ((R_N + h) * np.cos(lat)), h - dp[2]

@@ -85,6 +85,6 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     if cfg.smooth:
         from .smoothing import smoothed_rows
 
-        smoothed_rows(sol, out)
+        smoothed_rows(sol, out, cfg.filter)
     raise_if_nonfinite(sol, cfg.filter)
     return sol

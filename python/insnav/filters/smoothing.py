@@ -22,7 +22,7 @@ from ..units import RAD2DEG
 __all__ = ["smoothed_rows"]
 
 
-def smoothed_rows(sol, out: dict) -> None:
+def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
     """Replace the navigation rows and sigmas of ``sol`` by the smoothed ones (in place)."""
     te = np.ascontiguousarray(out["smooth_t"], float)
     s = np.ascontiguousarray(np.asarray(out["smooth_s"], float)[:, :9])  # position, velocity, attitude
@@ -37,5 +37,6 @@ def smoothed_rows(sol, out: dict) -> None:
     sol.sigma_pos_n_m = sg[:, 0:3]
     sol.sigma_vel_n_mps = sg[:, 3:6]
     sol.sigma_att_deg = sg[:, 6:9] * RAD2DEG
-    sol.summary["smoother"] = dict(method="RTS (EKF)", epochs=int(len(te)),
+    method = "RTS (EKF)" if filter_name == "ekf" else f"unscented RTS, Sarkka 2008 ({filter_name})"
+    sol.summary["smoother"] = dict(method=method, epochs=int(len(te)),
                                    gain_failures=int(out.get("smooth_gain_failures", 0)))

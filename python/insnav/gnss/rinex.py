@@ -32,7 +32,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from typing import TYPE_CHECKING
+
 from .ephemeris import DEFAULT_FIT_S, Ephemerides
+
+if TYPE_CHECKING:  # annotations only (the readers import these modules where they build the tables)
+    from .galbds import KeplerEphemerides
+    from .glonass import GlonassEphemerides
 from .gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar, week_tow
 
 __all__ = ["RinexError", "NavData", "ObsData", "read_rinex_nav", "read_rinex_obs"]

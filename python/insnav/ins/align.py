@@ -155,7 +155,8 @@ def _euler(C: np.ndarray) -> tuple[float, float, float]:
 
 def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, accel_bias_sigma: float,
           lever_arm_b=(0.0, 0.0, 0.0), min_speed_mps: float = 3.0, max_gyrocompass_sigma_deg: float = 5.0,
-          slip_sigma_deg: float = 0.5, max_heading_sigma_deg: float = 1.5, source: str = "imu") -> Alignment:
+          slip_sigma_deg: float = 0.5, max_heading_sigma_deg: float = 1.5, source: str = "imu",
+          accel_vrw: float | None = None, course_window_s: float = 1.0) -> Alignment:
     """Align from the data: level on the static start, gyrocompass if the gyro
     grade allows it, otherwise take the heading from GNSS velocity once moving.
 
@@ -180,6 +181,16 @@ def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, a
         Sideslip allowance added to the GNSS-course heading sigma.
     source : str
         Name used in error messages (the IMU file).
+    course_window_s : float
+        The heading is the weighted circular mean of the GNSS courses of the
+        fixes over this window [s] (ending at the first good fix), each
+        carried to that fix by the gyro heading change since: the course
+        noise averages down as 1/sqrt(n) (sideslip does not).
+    accel_vrw : float, optional
+        Accelerometer white noise [(m/s)/sqrt(s)]: the standstill detector's
+        per-sample specific-force noise becomes ``max(0.05, 1.5 VRW sqrt(rate))``
+        [m/s^2] and its rate noise ``max(5e-3, 1.5 hypot(ARW sqrt(rate), b_g))``
+        [rad/s] (a consumer IMU at 200 Hz is noisier than the defaults).
 
     Returns
     -------
@@ -200,7 +211,14 @@ def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, a
     sv = np.where(np.isfinite(gnss.sigma_vel_n[:, 0]), gnss.sigma_vel_n[:, 0], 0.1)
     fast = np.nonzero(np.isfinite(ant_speed) & (ant_speed > 5 * sv + 0.1))[0]  # 5 sigma: no false start in hours of fixes
     t_moving = float(gnss.t_valid[fast[0]]) if fast.size else np.inf
-    _, k_static = static_interval(t, dtheta_b, dv_b, t_moving=t_moving)
+    kw = {}
+    if accel_vrw is not None and len(t) > 1:
+        rate = 1.0 / float(np.median(np.diff(t)))
+        kw = dict(sigma_f_mps2=max(0.05, 1.5 * accel_vrw * np.sqrt(rate)),
+                  sigma_w_radps=max(5e-3, 1.5 * float(np.hypot(gyro_arw * np.sqrt(rate), gyro_bias_sigma))),
+                  # the mean of a 0.5 s window wanders by ~VRW sqrt(2 / 0.5 s) per axis
+                  max_f_change_mps2=max(0.03, 5.0 * accel_vrw * np.sqrt(2.0 / 0.5)))
+    _, k_static = static_interval(t, dtheta_b, dv_b, t_moving=t_moving, **kw)
     dt = np.diff(np.concatenate([[2 * t[0] - t[1]], t]))
     notes: list[str] = []
     static_s = float(t[k_static - 1] - t[0] + dt[0]) if k_static > 0 else 0.0
@@ -243,18 +261,36 @@ def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, a
                              f"and no GNSS fix reaches {min_speed_mps} m/s")
         g = int(moving[0])
         idx = int(np.clip(np.searchsorted(t, gnss.t_valid[g]), 0, len(t) - 1))
-        # carry the levelled attitude through the gyro increments to t[idx]
+        # carry the levelled attitude through the gyro increments to t[idx], keeping its yaw
         C = _c_level(roll, pitch)
-        for k in range(max(k_static, 0), idx + 1):
+        k_from = max(k_static, 0)
+        i_win = int(np.searchsorted(t, gnss.t_valid[g] - course_window_s))
+        yaw_rel = {}
+        for k in range(k_from, idx + 1):
             C = C @ _rot(dtheta_b[k])
+            if k >= i_win:
+                yaw_rel[k] = _euler(C)[2]
         r, p, y_rel = _euler(C)
-        course = float(np.arctan2(gnss.v_n[g, 1], gnss.v_n[g, 0]))
+        # the courses of the fixes over the last course_window_s, each carried to t[idx] by
+        # the gyro's heading change since, weighted by 1/sigma^2 (a circular mean)
+        sv_g = np.where(np.all(np.isfinite(gnss.sigma_vel_n[:, :2]), axis=1),
+                        np.nanmax(np.nan_to_num(gnss.sigma_vel_n[:, :2], nan=0.1), axis=1), 0.1)
+        win = np.flatnonzero((gnss.t_valid > gnss.t_valid[g] - course_window_s) & (gnss.t_valid <= gnss.t_valid[g])
+                             & ok)
+        sw = cw = wsum = 0.0
+        for j in win:
+            kj = int(np.clip(np.searchsorted(t, gnss.t_valid[j]), k_from, idx))
+            dpsi = y_rel - yaw_rel.get(kj, y_rel)
+            est = float(np.arctan2(gnss.v_n[j, 1], gnss.v_n[j, 0])) + dpsi
+            w = (ant_speed[j] / sv_g[j]) ** 2
+            sw, cw, wsum = sw + w * np.sin(est), cw + w * np.cos(est), wsum + w
+        course = float(np.arctan2(sw, cw))
         roll, pitch, yaw = r, p, course
         C_nb = _euler_to_dcm(roll, pitch, yaw)
         carried = gyro_bias_sigma * float(t[idx] - (t[k_static - 1] if k_static > 0 else t[0]))
-        sv = np.nanmax(gnss.sigma_vel_n[g, :2]) if np.all(np.isfinite(gnss.sigma_vel_n[g, :2])) else 0.1
-        yaw_sig = float(np.hypot(sv / ant_speed[g], slip_sigma_deg * DEG))
+        yaw_sig = float(np.hypot(1.0 / np.sqrt(wsum), slip_sigma_deg * DEG))
         att_sig = np.array([np.hypot(sig_level, carried), np.hypot(sig_level, carried), yaw_sig])
+        notes.append(f"heading: course of {win.size} fixes over {course_window_s:g} s")
         heading_source = "gnss_velocity"
     # position / velocity from the GNSS fix nearest the alignment time, antenna -> IMU
     t_a = float(t[idx])

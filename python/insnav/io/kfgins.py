@@ -25,6 +25,8 @@ KF-GINS IMU file reads in about 2.5 s including xz decompression).
 """
 from __future__ import annotations
 
+from ..errors import close_matches
+
 import bz2
 import gzip
 import lzma
@@ -268,11 +270,9 @@ KFGINS_NOISE_KEYS = ("arw", "vrw", "gbstd", "abstd", "gsstd", "asstd", "corrtime
 
 def _unknown_keys(keys, known, where: str, p) -> None:
     """A one-line error for the first key not in ``known``, with a suggestion."""
-    import difflib
-
     for k in keys:
         if k not in known:
-            close = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+            close = close_matches(str(k), known)
             hint = f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
             raise ValueError(f"{p}: unknown key '{where}{k}'{hint}")
 

@@ -15,51 +15,12 @@ epoch (as for the KF-GINS loader): ``t_gps = t + gps_time_offset_s`` with
 seconds of week in its ``t`` column and ``insnav evaluate SOL REF.pos`` can
 compare it with an RTKLIB reference directly.
 
-IMU file (generic CSV, :class:`ImuCsvFormat`)
----------------------------------------------
-One sample per line, fields separated by ``delimiter`` (``,``).  ``columns``
-names the fields in file order: ``t`` (time, see ``time``) or ``tick_ms``
-(an IMU counter in ms, needs a str2str tag file), ``ax ay az`` (accelerometer),
-``gx gy gz`` (gyro), ``_`` (ignored).  Blank lines and lines starting with
-``#`` are skipped; the first remaining line is a header (skipped) when its
-first field is not a number.  Options:
-
-==================  ==========================================================
-``time``            ``gps_s`` (s since 1980-01-06), ``gps_sow`` (GPS seconds
-                    of week; the week is the observation file's), or
-                    ``gpst_unix_s`` (RTKLIB ``gtime_t`` style: GPS time counted
-                    from 1970-01-01, e.g. the rtklibexplorer ``*_sf.csv``)
-``acc_unit``        ``mps2`` or ``g`` (standard gravity 9.80665 m/s^2)
-``gyro_unit``       ``rps`` or ``dps``
-``samples``         ``rate`` (specific force and angular rate at ``t``,
-                    integrated to increments with the trapezoidal rule over
-                    ``(t_prev, t]``; the first sample only starts the
-                    integration) or ``increment`` (velocity and angle
-                    increments over ``(t_prev, t]`` in the rate unit times
-                    seconds: m/s or g s, rad or deg)
-``mount_rpy_deg``   3-2-1 Euler angles of the IMU sensor axes relative to the
-                    body FRD axes [deg]: ``x_b = C(mount) x_imu`` with ``C``
-                    the same DCM as the attitude ``C_nb``
-``time_offset_s``   added to every IMU time [s] (a known logging delay)
-==================  ==========================================================
-
-Raw str2str logs (``tick_ms`` column + ``IMU.csv.tag``)
--------------------------------------------------------
-RTKLIB ``str2str`` writes, beside a logged stream, a binary time-tag file: a
-64-byte header (``"TIMETAG RTKLIB ..."``, the last 4 bytes the PC tick at
-opening), ``u32 time`` and ``f64 sec`` (GPST at opening, ``gtime_t`` style),
-then ``(u32 tick [ms since opening], u32 fpos [bytes written])`` per write.
-The IMU's own ``tick_ms`` counter is the sample clock; the tag gives the PC
-arrival time (GPST) of every byte.  :func:`tick_time_map` maps the counter to
-GPS time as the **lower envelope** of ``arrival - tick`` (a straight line
-through the minima over ``window_s`` windows, shifted below all of them): a
-sample's time is its arrival time at the smallest latency seen, and the line's
-slope is the rate difference of the IMU and PC clocks.  A log starts at an
-arbitrary byte, so the first line is always dropped; a last line without a
-newline is dropped too.  When the CSV's line endings were converted from
-``\\r\\n`` to ``\\n`` after logging (e.g. by git), the tag's byte count exceeds
-the file size by exactly the number of lines; this is detected and allowed,
-any other size mismatch is an error.
+IMU file
+--------
+Read by :func:`insnav.io.imu_csv.read_imu_csv` (columns, units, axes, time
+base, str2str-tagged raw logs; see that module).  The ``imu_*`` keys of
+:class:`RinexOptions` are the fields of :class:`~insnav.io.imu_csv.ImuCsvFormat`
+with an ``imu_`` prefix.
 
 Initial state
 -------------
@@ -96,20 +57,19 @@ import numpy as np
 
 from .. import _core, earth
 from ..config import ConfigError, RunConfig, config_from_dict
-from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, Truth
-from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
+from ..data.dataset import Dataset, GnssFixes, ImuData, Truth
+from ..gnss.gpstime import SECONDS_PER_WEEK
+from ..gnss.spp import SppOptions, SppSolution, solve_spp, spp_inputs_from_rinex
+from ..gnss.weighting import Weighting
 from ..data.nav import NavState
 from ..units import DEG, G0, RAD2DEG
+# the IMU CSV / str2str readers live in insnav.io.imu_csv (shared with --format csv); re-exported here
+from .imu_csv import (GPST_UNIX_OFFSET_S, ImuCsvFormat, ImuFileError, ImuSamples, Str2strTag,  # noqa: F401
+                      read_imu_csv, read_str2str_tag, tick_time_map)
 
 __all__ = ["ImuFileError", "ImuCsvFormat", "Str2strTag", "read_str2str_tag", "read_imu_csv", "ImuSamples",
            "tick_time_map", "SinglePoint", "single_point_solution", "rtklib_truth", "RinexOptions",
            "RinexDataset", "load_rinex", "load_rinex_run", "CONSUMER_MEMS_MODEL", "GPST_UNIX_OFFSET_S"]
-
-#: GPS seconds since 1980-01-06 of 1970-01-01 in GPS time: ``t_gps = t_gtime - 315964800`` [s]
-GPST_UNIX_OFFSET_S = int(round(-gps_seconds_from_calendar(1970, 1, 1)))
-_TAG_MAGIC = b"TIMETAG RTKLIB"
-_TAG_HEADER = 64          # bytes before u32 time, f64 sec
-_TAG_FIRST_RECORD = 76    # 64 + 4 + 8
 
 #: Default filter IMU model for a consumer MEMS IMU (SI, keys of
 #: :func:`insnav.sim.imu.imu_model_dict` read by ``ImuNoise.from_dataset_model``):
@@ -122,444 +82,21 @@ CONSUMER_MEMS_MODEL = dict(gyro_arw=4 * 0.0038 * DEG, accel_vrw=4 * 70e-6 * G0,
                            gyro_scale_sigma=1e-3, accel_scale_sigma=1e-3)
 
 
-class ImuFileError(ValueError):
-    """A malformed IMU CSV or str2str tag file.
-
-    Attributes
-    ----------
-    path : str
-    line : int or None
-        1-based line (CSV) or byte offset (tag file, ``unit="byte"``).
-    what : str
-    """
-
-    def __init__(self, path, line, what, unit="line"):
-        self.path = os.fspath(path)
-        self.line = line
-        self.what = what
-        where = f"{self.path}, {unit} {line}" if line is not None else self.path
-        super().__init__(f"{where}: {what}")
-
-
-# --------------------------------------------------------------------------- IMU CSV
-
-_ALLOWED_COLUMNS = ("t", "tick_ms", "ax", "ay", "az", "gx", "gy", "gz", "_")
-_CHOICES = dict(time=("gps_s", "gps_sow", "gpst_unix_s"), acc_unit=("mps2", "g"), gyro_unit=("rps", "dps"),
-                samples=("rate", "increment"))
-
-
-@dataclass
-class ImuCsvFormat:
-    """How to read an IMU CSV (see the module docstring for each option)."""
-
-    columns: tuple = ("t", "ax", "ay", "az", "gx", "gy", "gz")
-    time: str = "gps_s"
-    acc_unit: str = "mps2"
-    gyro_unit: str = "rps"
-    samples: str = "rate"
-    mount_rpy_deg: tuple = (0.0, 0.0, 0.0)
-    time_offset_s: float = 0.0
-    delimiter: str = ","
-
-    def validate(self, source: str = "imu format") -> "ImuCsvFormat":
-        cols = tuple(self.columns)
-        for c in cols:
-            if c not in _ALLOWED_COLUMNS:
-                raise ConfigError(f"{source}: imu_columns: unknown column {c!r}; "
-                                  f"allowed: {', '.join(_ALLOWED_COLUMNS)}")
-        for c in ("ax", "ay", "az", "gx", "gy", "gz"):
-            if cols.count(c) != 1:
-                raise ConfigError(f"{source}: imu_columns {list(cols)} must name {c!r} exactly once")
-        if cols.count("t") + cols.count("tick_ms") != 1:
-            raise ConfigError(f"{source}: imu_columns {list(cols)} must have exactly one of 't' or 'tick_ms'")
-        for key, allowed in _CHOICES.items():
-            if getattr(self, key) not in allowed:
-                raise ConfigError(f"{source}: imu_{key}: bad value {getattr(self, key)!r}; "
-                                  f"allowed: {', '.join(allowed)}")
-        m = np.asarray(self.mount_rpy_deg, dtype=float)
-        if m.shape != (3,) or not np.all(np.isfinite(m)):
-            raise ConfigError(f"{source}: imu_mount_rpy_deg: bad value {self.mount_rpy_deg!r}; allowed: 3 angles [deg]")
-        if not (isinstance(self.delimiter, str) and len(self.delimiter) == 1):
-            raise ConfigError(f"{source}: imu_delimiter: bad value {self.delimiter!r}; allowed: one character")
-        if not math.isfinite(float(self.time_offset_s)):
-            raise ConfigError(f"{source}: imu_time_offset_s: bad value {self.time_offset_s!r}")
-        self.columns = cols
-        return self
-
-    @property
-    def uses_tick(self) -> bool:
-        return "tick_ms" in self.columns
-
-    def C_b_imu(self) -> np.ndarray:
-        """(3, 3) rotation IMU sensor axes -> body FRD: ``x_b = C x_imu``."""
-        return np.asarray(_core.rotation.dcm_from_euler(np.asarray(self.mount_rpy_deg, float) * DEG))
-
-
-@dataclass
-class ImuSamples:
-    """IMU samples as read (rotated into the body frame, SI), before integration.
-
-    Attributes
-    ----------
-    t_ref_gps_s : float
-        GPS time [s since 1980-01-06] that ``t_s`` counts from (a whole second,
-        or the tag file's start), so that sample intervals keep full precision.
-    t_s : (N,) sample time after ``t_ref_gps_s`` [s]
-    acc_b : (N, 3) specific force [m/s^2] (``samples == "rate"``) or velocity increment [m/s]
-    gyro_b : (N, 3) angular rate [rad/s] or angle increment [rad]
-    samples : {'rate', 'increment'}
-    lines : (N,) 1-based file line of each sample
-    path : str
-    info : dict
-        ``lines_dropped`` (partial first/last lines of a str2str log) and, for a
-        tagged log, the tick -> GPS time fit (see :func:`tick_time_map`).
-    """
-
-    t_ref_gps_s: float
-    t_s: np.ndarray
-    acc_b: np.ndarray
-    gyro_b: np.ndarray
-    samples: str
-    lines: np.ndarray
-    path: str
-    info: dict = field(default_factory=dict)
-
-    def __len__(self):
-        return len(self.t_s)
-
-    @property
-    def t_gps_s(self) -> np.ndarray:
-        """(N,) sample time, GPS seconds since 1980-01-06 [s] (about 0.2 us resolution)."""
-        return self.t_ref_gps_s + self.t_s
-
-    @property
-    def rate_hz(self) -> float:
-        """Mean sample rate [Hz]."""
-        return (len(self.t_s) - 1) / float(self.t_s[-1] - self.t_s[0]) if len(self) > 1 else float("nan")
-
-    def to_increments(self, t_offset_s: float = 0.0) -> ImuData:
-        """:class:`insnav.data.dataset.ImuData` with time ``t_gps_s - t_offset_s``.
-
-        Rates are integrated with the trapezoidal rule over each interval
-        ``(t[k-1], t[k]]`` (exact for a rate that varies linearly between
-        samples), so the first sample yields no increment.
-        """
-        t = (self.t_ref_gps_s - t_offset_s) + self.t_s
-        if self.samples == "increment":
-            return ImuData(t.copy(), self.gyro_b.copy(), self.acc_b.copy(),
-                           origin=RowOrigin(self.path, lines=self.lines.copy()))
-        dt = np.diff(t)[:, None]
-        dth = 0.5 * (self.gyro_b[1:] + self.gyro_b[:-1]) * dt
-        dv = 0.5 * (self.acc_b[1:] + self.acc_b[:-1]) * dt
-        return ImuData(t[1:].copy(), dth, dv, origin=RowOrigin(self.path, lines=self.lines[1:].copy()))
-
-
-@dataclass
-class Str2strTag:
-    """An RTKLIB str2str time-tag file (see the module docstring).
-
-    Attributes
-    ----------
-    path : str
-    t_start_gps_s : float
-        GPS time at which the log was opened (tick 0) [s since 1980-01-06].
-    tick_ms : (K,) int64 PC milliseconds since opening of each write
-    fpos : (K,) int64 bytes of the stream written up to and including that write
-    """
-
-    path: str
-    t_start_gps_s: float
-    tick_ms: np.ndarray
-    fpos: np.ndarray
-
-
-def read_str2str_tag(path) -> Str2strTag:
-    """Read an RTKLIB str2str ``.tag`` file.
-
-    Raises
-    ------
-    ImuFileError
-        Naming the file and the byte offset: not a tag file, truncated, or
-        ticks / file positions that go backwards.
-    """
-    path = os.fspath(path)
-    try:
-        b = Path(path).read_bytes()
-    except OSError as exc:
-        raise ImuFileError(path, None, f"cannot read the tag file ({exc.strerror})") from None
-    if len(b) < _TAG_FIRST_RECORD or not b.startswith(_TAG_MAGIC):
-        raise ImuFileError(path, 0, f"not an RTKLIB str2str time-tag file (expected a {_TAG_FIRST_RECORD}-byte "
-                           f"header starting with {_TAG_MAGIC.decode()!r}; file has {len(b)} bytes)", unit="byte")
-    time_time = int(np.frombuffer(b, "<u4", 1, _TAG_HEADER)[0])
-    time_sec = float(np.frombuffer(b, "<f8", 1, _TAG_HEADER + 4)[0])
-    if not (math.isfinite(time_sec) and 0.0 <= time_sec < 1.0) or time_time < GPST_UNIX_OFFSET_S:
-        raise ImuFileError(path, _TAG_HEADER, f"bad start time {time_time} + {time_sec!r} s (expected GPST seconds "
-                           "since 1970 after 1980 and a fraction in [0, 1))", unit="byte")
-    n_rec, rest = divmod(len(b) - _TAG_FIRST_RECORD, 8)
-    if rest:
-        raise ImuFileError(path, _TAG_FIRST_RECORD + 8 * n_rec, f"truncated record ({rest} of 8 bytes)", unit="byte")
-    if n_rec == 0:
-        raise ImuFileError(path, _TAG_FIRST_RECORD, "no (tick, fpos) records", unit="byte")
-    rec = np.frombuffer(b, "<u4", 2 * n_rec, _TAG_FIRST_RECORD).reshape(-1, 2).astype(np.int64)
-    for col, name in ((0, "tick"), (1, "file position")):
-        bad = np.flatnonzero(np.diff(rec[:, col]) < 0)
-        if bad.size:
-            k = int(bad[0]) + 1
-            raise ImuFileError(path, _TAG_FIRST_RECORD + 8 * k + 4 * col,
-                               f"{name} {rec[k, col]} goes backwards (previous record: {rec[k - 1, col]})",
-                               unit="byte")
-    return Str2strTag(path, time_time + time_sec - GPST_UNIX_OFFSET_S, rec[:, 0], rec[:, 1])
-
-
-def tick_time_map(tick_s, arrival_gps_s, window_s: float = 2.0, max_drift_ppm: float = 1000.0):
-    """GPS time of IMU counter values from their PC arrival times (lower envelope).
-
-    Parameters
-    ----------
-    tick_s : (N,) IMU counter [s], increasing
-    arrival_gps_s : (N,) PC arrival time of each sample [s] (GPS time, or the
-        time after a reference such as the tag start; the result counts from it too)
-    window_s : float
-        Window for the minima the envelope line is fitted through [s].
-    max_drift_ppm : float
-        Largest plausible rate difference of the two clocks [ppm].
-
-    Returns
-    -------
-    t_gps_s : (N,) [s]
-    info : dict
-        ``drift_ppm`` (slope), ``latency_median_ms``, ``latency_p95_ms``,
-        ``latency_max_ms`` (arrival minus the mapped time).
-
-    Raises
-    ------
-    ValueError
-        When the slope exceeds ``max_drift_ppm`` (the tag does not belong to the log).
-    """
-    tick_s = np.asarray(tick_s, float)
-    x = tick_s - tick_s[0]
-    y = np.asarray(arrival_gps_s, float) - tick_s
-    y0 = float(np.min(y))
-    y = y - y0
-    win = np.floor(x / window_s).astype(np.int64)
-    starts = np.flatnonzero(np.r_[True, np.diff(win) != 0])
-    xm = np.empty(starts.size)
-    ym = np.empty(starts.size)
-    for j, (a, b) in enumerate(zip(starts, np.r_[starts[1:], x.size])):
-        k = a + int(np.argmin(y[a:b]))
-        xm[j], ym[j] = x[k], y[k]
-    if xm.size >= 2 and np.ptp(xm) > 0:
-        slope, icpt = np.polyfit(xm, ym, 1)
-    else:
-        slope, icpt = 0.0, 0.0
-    if abs(slope) * 1e6 > max_drift_ppm:
-        raise ValueError(f"IMU counter and tag arrival times drift apart by {slope * 1e6:.0f} ppm "
-                         f"(more than {max_drift_ppm:g} ppm): the tag file does not belong to this log")
-    icpt += float(np.min(y - (slope * x + icpt)))  # shift below every sample: a lower envelope
-    t = tick_s + y0 + icpt + slope * x
-    lat = (np.asarray(arrival_gps_s, float) - t) * 1e3
-    return t, dict(drift_ppm=float(slope * 1e6), latency_median_ms=float(np.median(lat)),
-                   latency_p95_ms=float(np.percentile(lat, 95)), latency_max_ms=float(lat.max()))
-
-
-def _time_after(tokens, ref_int: int) -> np.ndarray:
-    """Decimal time strings minus the integer ``ref_int`` without losing digits to a 1e9-sized float."""
-    out = np.empty(len(tokens))
-    for i, tok in enumerate(tokens):
-        whole, dot, frac = tok.strip().partition(".")
-        if whole.isdigit() and (not frac or frac.isdigit()):
-            out[i] = (int(whole) - ref_int) + (float("0." + frac) if frac else 0.0)
-        else:  # exponent or sign: plain float
-            out[i] = float(tok) - ref_int
-    return out
-
-
-def _is_number(tok: str) -> bool:
-    try:
-        float(tok)
-        return True
-    except ValueError:
-        return False
-
-
-def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int | None = None) -> ImuSamples:
-    """Read an IMU CSV (see the module docstring) into body-frame SI samples.
-
-    Parameters
-    ----------
-    path : path
-    fmt : ImuCsvFormat
-    tag : path or Str2strTag, optional
-        The str2str time tag, required with a ``tick_ms`` column (default:
-        ``path + ".tag"``).
-    week : int, optional
-        GPS week for ``time = "gps_sow"`` (required then).
-
-    Returns
-    -------
-    ImuSamples
-
-    Raises
-    ------
-    ImuFileError
-        Naming the file and the 1-based line: wrong number of fields, a bad
-        or non-finite number, time not increasing; tag problems (byte offset).
-    """
-    fmt = (fmt or ImuCsvFormat()).validate()
-    path = os.fspath(path)
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise ImuFileError(path, None, f"cannot read the IMU file ({exc.strerror})") from None
-    tagged = fmt.uses_tick
-    if fmt.time == "gps_sow" and not tagged and week is None:
-        raise ValueError(f"{path}: imu time 'gps_sow' needs the GPS week (from the observation file)")
-    parts = raw.split(b"\n")
-    complete_last = raw.endswith(b"\n")
-    if complete_last:
-        parts = parts[:-1]
-    ncol = len(fmt.columns)
-    idx = {c: fmt.columns.index(c) for c in fmt.columns if c != "_"}
-    tcol = idx["tick_ms"] if tagged else idx["t"]
-    acc_cols = [idx[c] for c in ("ax", "ay", "az")]
-    gyr_cols = [idx[c] for c in ("gx", "gy", "gz")]
-    want = [tcol] + acc_cols + gyr_cols
-    names = ["tick_ms" if tagged else "t", "ax", "ay", "az", "gx", "gy", "gz"]
-    rows, lines, ends, t_tok = [], [], [], []
-    dropped = []
-    pos = 0
-    header_allowed = True
-    delim = fmt.delimiter
-    for i, b in enumerate(parts):
-        lineno = i + 1
-        pos += len(b) + 1
-        if tagged and (i == 0 or (i == len(parts) - 1 and not complete_last)):
-            dropped.append(lineno)  # a str2str log starts and may end mid-line
-            continue
-        try:
-            s = b.decode("ascii").strip()
-        except UnicodeDecodeError:
-            raise ImuFileError(path, lineno, "not ASCII text (binary data in a CSV?)") from None
-        if not s or s.startswith("#"):
-            continue
-        tok = s.split(delim)
-        if header_allowed:
-            header_allowed = False
-            if not _is_number(tok[0].strip()):
-                continue
-        if len(tok) != ncol:
-            raise ImuFileError(path, lineno, f"expected {ncol} {delim!r}-separated fields "
-                               f"({', '.join(fmt.columns)}), found {len(tok)}")
-        vals = []
-        for j, name in zip(want, names):
-            try:
-                v = float(tok[j])
-            except ValueError:
-                raise ImuFileError(path, lineno, f"bad number {tok[j].strip()!r} in field {j + 1} ({name})") from None
-            if not math.isfinite(v):
-                raise ImuFileError(path, lineno, f"non-finite value {tok[j].strip()!r} in field {j + 1} ({name})")
-            vals.append(v)
-        rows.append(vals)
-        t_tok.append(tok[tcol])
-        lines.append(lineno)
-        ends.append(pos)
-    if len(rows) < 2:
-        raise ImuFileError(path, None, f"fewer than 2 IMU samples ({len(rows)})")
-    a = np.asarray(rows, dtype=float)
-    lines = np.asarray(lines, dtype=np.int64)
-    t = a[:, 0]
-    d = np.diff(t)
-    if np.any(d <= 0):
-        k = int(np.argmax(d <= 0)) + 1
-        what = "tick" if tagged else "time"
-        raise ImuFileError(path, int(lines[k]), f"{what} {float(t[k])!r} does not increase (line "
-                           f"{int(lines[k - 1])}: {float(t[k - 1])!r})")
-    info = dict(lines_dropped=dropped)
-    if tagged:
-        if not isinstance(tag, Str2strTag):
-            tag = read_str2str_tag(tag if tag is not None else path + ".tag")
-        n_lf = raw.count(b"\n")
-        size = len(raw)
-        last = int(tag.fpos[-1])
-        if last == size:
-            crlf_added = 0
-        elif last == size + n_lf and b"\r" not in raw:
-            crlf_added = 1  # the log had \r\n line ends, converted to \n afterwards
-        else:
-            raise ImuFileError(tag.path, None, f"the tag covers {last} bytes but {path} has {size} bytes "
-                               f"({n_lf} lines): not the time tag of this file")
-        end_bytes = np.asarray(ends, dtype=np.int64) + crlf_added * lines  # byte after each line's newline
-        k = np.minimum(np.searchsorted(tag.fpos, end_bytes), tag.fpos.size - 1)  # first write holding the line
-        arrival = tag.tick_ms[k] / 1000.0  # after the tag start
-        try:
-            t, fit = tick_time_map((t - t[0]) / 1000.0, arrival)
-        except ValueError as exc:
-            raise ImuFileError(tag.path, None, f"{exc} ({path})") from None
-        info.update(fit, tag=tag.path, crlf_converted=bool(crlf_added), t_start_gps_s=tag.t_start_gps_s)
-        t_ref = tag.t_start_gps_s
-    else:
-        ref_int = int(math.floor(t[0]))
-        t = _time_after(t_tok, ref_int)
-        t_ref = float(ref_int)
-        if fmt.time == "gpst_unix_s":
-            t_ref = float(ref_int - GPST_UNIX_OFFSET_S)
-        elif fmt.time == "gps_sow":
-            t_ref = float(ref_int + SECONDS_PER_WEEK * int(week))
-    t = t + float(fmt.time_offset_s)
-    k_acc = G0 if fmt.acc_unit == "g" else 1.0
-    k_gyr = DEG if fmt.gyro_unit == "dps" else 1.0
-    C = fmt.C_b_imu()
-    acc_b = (a[:, 1:4] * k_acc) @ C.T
-    gyro_b = (a[:, 4:7] * k_gyr) @ C.T
-    return ImuSamples(t_ref, t, acc_b, gyro_b, fmt.samples, lines, path, info)
-
-
 # --------------------------------------------------------------------------- single-point solution
 
 
-@dataclass
-class SinglePoint:
-    """Per-epoch single-point (GNSS-only) solution of a :class:`~insnav.gnss.tight_inputs.TightInputs`.
-
-    Attributes
-    ----------
-    t : (E,) epoch time (dataset time) [s]
-    r_e : (E, 3) antenna ECEF position [m] (NaN: fewer than 4 pseudoranges)
-    clock_bias_m : (E,)
-    v_e : (E, 3) antenna ECEF velocity [m/s] (NaN: fewer than 4 Dopplers)
-    clock_drift_mps : (E,)
-    n_sats : (E,) pseudoranges used
-    sigma_pos_n_m, sigma_vel_n_mps : (E, 3) 1-sigma N, E, D from the
-        least-squares covariance with the inputs' sigmas [m], [m/s]
-    pdop : (E,)
-    """
-
-    t: np.ndarray
-    r_e: np.ndarray
-    clock_bias_m: np.ndarray
-    v_e: np.ndarray
-    clock_drift_mps: np.ndarray
-    n_sats: np.ndarray
-    sigma_pos_n_m: np.ndarray
-    sigma_vel_n_mps: np.ndarray
-    pdop: np.ndarray
-
-    def llh(self):
-        """(lat [rad], lon [rad], h [m]) arrays."""
-        return earth.ecef_to_geodetic(self.r_e)
-
-    def v_n(self) -> np.ndarray:
-        lat, lon, _ = self.llh()
-        return earth.ecef_to_ned_vector(lat, lon, self.v_e)
+#: the single-point solution type (:class:`insnav.gnss.spp.SppSolution`; the name kept for the loader's users)
+SinglePoint = SppSolution
 
 
-def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 10) -> SinglePoint:
-    """Weighted least-squares position/clock and velocity/drift per epoch.
+def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 10, raim: bool = False,
+                          options: SppOptions | None = None) -> SppSolution:
+    """Weighted least-squares position/clock and velocity/drift per epoch (:func:`insnav.gnss.spp.solve_spp`).
 
     Uses exactly the rows the tight filter receives (same satellites,
     corrections and sigmas).  Model (``TightInputs.sats`` columns)::
 
-        rho  = |r_s - r| + b - clk_s                 (Gauss-Newton from r0_e)
+        rho  = |r_s - r| + b (+ ISB) - clk_s         (Gauss-Newton from r0_e, then from the previous epoch)
         rhod = u . (v_s - v) + d - clkdot_s          (linear once r is known)
 
     Parameters
@@ -567,64 +104,18 @@ def single_point_solution(inputs, r0_e, *, min_sats: int = 4, iterations: int = 
     inputs : insnav.gnss.tight_inputs.TightInputs
     r0_e : (3,) starting ECEF position [m]
     min_sats : int
-        Epochs with fewer usable rows give NaN (4 unknowns each).
+        Epochs with fewer usable rows give NaN (4 unknowns each, one more per further system).
+    raim : bool
+        RAIM fault detection and exclusion (off for the start-up fix, as before).
+    options : SppOptions, optional
+        Overrides ``min_sats`` and ``iterations``.
 
     Returns
     -------
-    SinglePoint
+    SppSolution (alias :data:`SinglePoint`)
     """
-    E = inputs.epoch_t.size
-    r_out = np.full((E, 3), np.nan)
-    v_out = np.full((E, 3), np.nan)
-    b_out = np.full(E, np.nan)
-    d_out = np.full(E, np.nan)
-    sp = np.full((E, 3), np.nan)
-    sv = np.full((E, 3), np.nan)
-    pdop = np.full(E, np.nan)
-    n_used = np.zeros(E, np.int64)
-    x = np.append(np.asarray(r0_e, float), 0.0)
-    for e in range(E):
-        s = inputs.sats[inputs.epoch_start[e]:inputs.epoch_start[e + 1]]
-        s = s[np.isfinite(s[:, 0])]
-        n_used[e] = len(s)
-        if len(s) < min_sats:
-            continue
-        w = 1.0 / s[:, 10]
-        ok = False
-        for _ in range(iterations):
-            d = s[:, 2:5] - x[:3]
-            rng = np.linalg.norm(d, axis=1)
-            u = d / rng[:, None]
-            H = np.column_stack([-u, np.ones(len(s))])
-            y = s[:, 0] - (rng - s[:, 8] + x[3])
-            dx = np.linalg.lstsq(H * w[:, None], y * w, rcond=None)[0]
-            x = x + dx
-            if np.linalg.norm(dx[:3]) < 1e-4:
-                ok = True
-                break
-        if not ok or not np.all(np.isfinite(x)):
-            x = np.append(np.asarray(r0_e, float), 0.0)
-            continue
-        d = s[:, 2:5] - x[:3]
-        u = d / np.linalg.norm(d, axis=1)[:, None]
-        H = np.column_stack([-u, np.ones(len(s))])
-        lat, lon, _ = earth.ecef_to_geodetic(x[:3])
-        C_ne = earth.C_en(lat, lon).T
-        Q = np.linalg.inv((H * (w ** 2)[:, None]).T @ H)
-        Hn = np.column_stack([-(u @ C_ne.T), np.ones(len(s))])
-        Qn = np.linalg.inv(Hn.T @ Hn)
-        r_out[e], b_out[e] = x[:3], x[3]
-        sp[e] = np.sqrt(np.diag(C_ne @ Q[:3, :3] @ C_ne.T))
-        pdop[e] = math.sqrt(np.trace(Qn[:3, :3]))
-        m = np.isfinite(s[:, 1])
-        if m.sum() >= min_sats:
-            wr = 1.0 / s[m, 11]
-            y = s[m, 1] - np.einsum("ij,ij->i", u[m], s[m, 5:8]) + s[m, 9]
-            sol = np.linalg.lstsq(H[m] * wr[:, None], y * wr, rcond=None)[0]
-            v_out[e], d_out[e] = sol[:3], sol[3]
-            Qv = np.linalg.inv((H[m] * (wr ** 2)[:, None]).T @ H[m])
-            sv[e] = np.sqrt(np.diag(C_ne @ Qv[:3, :3] @ C_ne.T))
-    return SinglePoint(inputs.epoch_t.copy(), r_out, b_out, v_out, d_out, n_used, sp, sv, pdop)
+    opt = options or SppOptions(min_sats=min_sats, iterations=iterations)
+    return solve_spp(inputs, r0_e, options=opt, raim=raim)
 
 
 # --------------------------------------------------------------------------- reference
@@ -671,7 +162,8 @@ class RinexOptions:
     Attributes (units in the names)
     ----------
     imu_columns, imu_time, imu_acc_unit, imu_gyro_unit, imu_samples,
-    imu_mount_rpy_deg, imu_time_offset_s, imu_delimiter :
+    imu_mount_rpy_deg, imu_time_offset_s, imu_delimiter, imu_axes, imu_time_unit,
+    imu_rate_hz, imu_gps_week :
         The IMU CSV format (:class:`ImuCsvFormat` without the ``imu_`` prefix).
     imu_tag : str or None
         str2str tag file (``tick_ms`` column); None: ``IMU + ".tag"``.
@@ -685,6 +177,7 @@ class RinexOptions:
         tight filter gets every system's rows and runs with inter-system bias
         states (``LayoutTightMulti``).  Files given as paths are read with
         these systems; already read ObsData/NavData are used as they are.
+        With a ``[gnss]`` weighting table its rows (and systems) are used instead.
     start_s, end_s : float
         Span to use, seconds after the first observation epoch (end None: all).
     init_position : "spp" or [lat_deg, lon_deg, h_m] (antenna)
@@ -705,6 +198,10 @@ class RinexOptions:
     imu_mount_rpy_deg: tuple = (0.0, 0.0, 0.0)
     imu_time_offset_s: float = 0.0
     imu_delimiter: str = ","
+    imu_axes: str = "FRD"
+    imu_time_unit: str = "s"
+    imu_rate_hz: float | None = None
+    imu_gps_week: int | None = None
     imu_tag: str | None = None
     lever_arm_b: tuple = (0.0, 0.0, 0.0)
     elevation_mask_deg: float = 10.0
@@ -726,9 +223,10 @@ class RinexOptions:
     reference: str | None = None
 
     def imu_format(self) -> ImuCsvFormat:
-        return ImuCsvFormat(tuple(self.imu_columns), self.imu_time, self.imu_acc_unit, self.imu_gyro_unit,
-                            self.imu_samples, tuple(self.imu_mount_rpy_deg), float(self.imu_time_offset_s),
-                            self.imu_delimiter)
+        cols = self.imu_columns if isinstance(self.imu_columns, dict) else tuple(self.imu_columns)
+        return ImuCsvFormat(cols, self.imu_time, self.imu_acc_unit, self.imu_gyro_unit,
+                            self.imu_samples, tuple(self.imu_mount_rpy_deg), self.imu_time_offset_s,
+                            self.imu_delimiter, self.imu_axes, self.imu_time_unit, self.imu_gps_week, self.imu_rate_hz)
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "[rinex]") -> "RinexOptions":
@@ -809,6 +307,8 @@ class RinexDataset(Dataset):
     spp: SinglePoint | None = None
     info: dict = field(default_factory=dict)
     options: RinexOptions | None = None
+    weighting: Weighting | None = None
+    spp_options: SppOptions | None = None
 
 
 def _level(f_b_mean) -> tuple[float, float]:
@@ -860,7 +360,7 @@ def _approx_position(obs, nav, t_week0):
 
 
 def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu_tag=None,
-               reference=None) -> tuple[RinexDataset, RunConfig]:
+               reference=None, weighting=None) -> tuple[RinexDataset, RunConfig]:
     """Build a dataset and a run configuration from RINEX + IMU (+ reference) files.
 
     Parameters
@@ -874,6 +374,11 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
         Overrides ``options.imu_tag``.
     reference : path, optional
         RTKLIB ``.pos``; overrides ``options.reference``.
+    weighting : insnav.gnss.weighting.Weighting or dict (the ``[gnss]`` TOML table), optional
+        Pseudorange variance model, masks and systems of the rows; None (or
+        the defaults): the rows of :func:`~insnav.gnss.tight_inputs.tight_inputs_from_rinex`
+        unchanged.  Otherwise the rows of :func:`insnav.gnss.spp.spp_inputs_from_rinex`
+        (then the best-GDOP limit of :data:`~insnav.gnss.tight_inputs.MAX_SATS`).
 
     Returns
     -------
@@ -918,12 +423,25 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     kw = dict(elevation_mask_deg=opt.elevation_mask_deg, iono=opt.iono, tropo=opt.tropo,
               sigma_pr_zenith_m=opt.sigma_pr_zenith_m, sigma_prr_zenith_mps=opt.sigma_prr_zenith_mps,
               use_cn0=opt.use_cn0)
-    inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+    wgt = None if weighting is None else (Weighting.from_dict(weighting, "[gnss]") if isinstance(weighting, dict)
+                                          else weighting.validate())
+    if wgt is not None and wgt.is_default:
+        wgt = None
+
+    def inputs_at(r):
+        if wgt is None:  # today's rows, unchanged
+            return tight_inputs_from_rinex(obs, nav, t_week0, r, **kw)
+        from ..gnss.tight_inputs import MAX_SATS, limit_sats
+
+        inp_all, _ = spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt, **kw)
+        return limit_sats(inp_all, MAX_SATS)
+
+    inp = inputs_at(r0)
     spp = single_point_solution(inp, r0)
     good = np.isfinite(spp.r_e[:, 0])
     if good.any():  # recompute light time / elevation / atmosphere at the data's own position
         r0 = np.median(spp.r_e[good], axis=0)
-        inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+        inp = inputs_at(r0)
         spp = single_point_solution(inp, r0)
         good = np.isfinite(spp.r_e[:, 0])
 
@@ -1007,7 +525,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     sel = (imu.t > t0) & (imu.t <= t_hi)
     origin = imu.origin.take(sel, len(imu.t))
     imu = ImuData(imu.t[sel], imu.dtheta_b[sel], imu.dv_b[sel], origin=origin)
-    if opt.systems != "G":  # every system's rows for the filter (ISB states); the start above is GPS
+    if opt.systems != "G" and wgt is None:  # every system's rows for the filter (ISB states); start: GPS
         inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, systems=opt.systems, **kw)
     inp_run = _epochs_in(inp, t0, float(imu.t[-1]))
     g = np.flatnonzero(good & (spp.t > t0) & (spp.t <= float(imu.t[-1])))
@@ -1040,11 +558,17 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     return ds, cfg
 
 
+def _bad_table(source, key, value):
+    raise ConfigError(f"{source}: key '{key}': bad value {value!r}; allowed: a table")
+
+
 def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=None):
     """:func:`load_rinex` with a run TOML (``insnav run --format rinex``).
 
     The TOML holds the usual run keys (``docs/formats.md``) plus a ``[rinex]``
-    table (:class:`RinexOptions`).  Run keys it sets override the loader's
+    table (:class:`RinexOptions`), a ``[gnss]`` table (pseudorange weighting,
+    masks, systems: :class:`insnav.gnss.weighting.Weighting`) and an ``[spp]``
+    table (:class:`insnav.gnss.spp.SppOptions`, for ``--filter spp``).  Run keys it sets override the loader's
     suggestions (initial sigmas, ``init_error = false``); a top-level
     ``lever_arm_b`` is also used as the dataset's lever arm.  Relative paths in
     the table (``imu_tag``, ``reference``) are relative to the TOML file.
@@ -1065,13 +589,20 @@ def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=N
     rin = d.pop("rinex", {})
     if not isinstance(rin, dict):
         raise ConfigError(f"{source}: key 'rinex': bad value {rin!r}; allowed: a table")
+    gnss = d.pop("gnss", {})
+    if not isinstance(gnss, dict):
+        raise ConfigError(f"{source}: key 'gnss': bad value {gnss!r}; allowed: a table")
+    wgt = Weighting.from_dict(gnss, source)
+    spp_opt = SppOptions.from_dict(d.pop("spp", {}) if isinstance(d.get("spp", {}), dict) else
+                                   _bad_table(source, "spp", d["spp"]), source)
     if "lever_arm_b" in d and "lever_arm_b" not in rin:
         rin = dict(rin, lever_arm_b=d["lever_arm_b"])
     for key in ("imu_tag", "reference"):
         if isinstance(rin.get(key), str) and config_path is not None and not os.path.isabs(rin[key]):
             rin = dict(rin, **{key: os.path.join(os.path.dirname(os.path.abspath(config_path)), rin[key])})
     opt = RinexOptions.from_dict(rin, source)
-    ds, cfg = load_rinex(obs, nav, imu, opt, imu_tag=imu_tag, reference=reference)
+    ds, cfg = load_rinex(obs, nav, imu, opt, imu_tag=imu_tag, reference=reference, weighting=wgt)
+    ds.weighting, ds.spp_options = wgt, spp_opt
     base = {k: v for k, v in dataclasses.asdict(cfg).items() if v is not None and k != "imu"}
     base.update(d)
     return ds, config_from_dict(base, source=source)

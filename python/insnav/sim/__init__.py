@@ -136,4 +136,4 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
                    scenario=raw, lever_arm_b=np.array(gcfg["lever_arm_b"], float),
                    initial=initial, t0=sc.t0, gps_time_offset_s=sc.gps_time_offset_s,
                    imu_model=imu_model_dict(sc.gyro, sc.accel, sc.imu_rate), name=sc.name,
-                   seed=int(sc.seed), odometer=odometer)
+                   seed=int(sc.seed), odometer=odometer, initial_is_truth=True)

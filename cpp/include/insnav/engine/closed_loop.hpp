@@ -150,7 +150,7 @@ struct ClosedLoop {
   void record_for_smoother(SmootherEpoch<L>* buf, std::int64_t capacity) {
     rec_ = buf;
     rec_cap_ = capacity;
-    if constexpr (kTracksTransition) filter.track_cycle_transition(buf != nullptr);
+    if constexpr (kCanRecordForSmoother) filter.track_cycle_transition(buf != nullptr);
   }
   std::int64_t recorded_epochs() const { return rec_n_; }
   bool recording_overflowed() const { return rec_overflow_; }
@@ -237,7 +237,7 @@ struct ClosedLoop {
     flush_interval();
     filter.end_cycle();
     out_cache_dirty_ = true;
-    if constexpr (kTracksTransition) {
+    if constexpr (kCanRecordForSmoother) {
       if (rec_ && !rec_overflow_) {  // the prediction to this epoch
         if (rec_n_ >= rec_cap_) {
           rec_overflow_ = true;
@@ -247,7 +247,10 @@ struct ClosedLoop {
         e.t = ins.state().t;
         e.x_pred = filter.x();
         e.P_pred = filter.P();
-        e.C.noalias() = P_post_ * filter.cycle_transition().transpose();
+        if constexpr (kTracksCross)  // the unscented filters' UT cross-covariance
+          e.C = filter.cycle_cross_covariance();
+        else  // EKF: P_k Phi'
+          e.C.noalias() = P_post_ * filter.cycle_transition().transpose();
         e.fed_back = false;
         rec_pending_ = true;
       }
@@ -447,6 +450,17 @@ struct ClosedLoop {
   template <class F>
   struct TracksTransition<F, std::void_t<decltype(std::declval<F&>().cycle_transition())>> : std::true_type {};
   static constexpr bool kTracksTransition = TracksTransition<Filter>::value;
+  template <class F, class = void>
+  struct TracksCross : std::false_type {};
+  template <class F>
+  struct TracksCross<F, std::void_t<decltype(std::declval<F&>().cycle_cross_covariance())>> : std::true_type {};
+  static constexpr bool kTracksCross = TracksCross<Filter>::value;
+
+ public:
+  /// The filter gives what the RTS smoother needs (EKF transition or UT cross-covariance).
+  static constexpr bool kCanRecordForSmoother = kTracksTransition || kTracksCross;
+
+ private:
 
   SmootherEpoch<L>* rec_ = nullptr;
   std::int64_t rec_cap_ = 0, rec_n_ = 0;

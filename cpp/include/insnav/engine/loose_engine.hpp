@@ -94,7 +94,7 @@ class LooseEngine {
       : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {}
 
   Filter& filter() { return core_.filter; }
-  /// Record the forward pass for the RTS smoother (closed_loop.hpp); EKF only.
+  /// Record the forward pass for the RTS smoother (closed_loop.hpp); EKF, RB-UKF, UKF.
   ClosedLoop<Filter>& core() { return core_; }
 
   /// Run over n IMU samples (t, dtheta_b (n,3), dv_b (n,3)) and m GNSS fixes

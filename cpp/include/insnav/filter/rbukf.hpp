@@ -68,6 +68,10 @@ class UnscentedPropagation {
   /// Draw the sigma points around the current (x, P) (eq. (9) / (25)).
   void begin_cycle() {
     repairs_ += draw_sigma_points<kN>(x_, P_, w_, chi_, factor_, repair_opt_);
+    if (track_cross_) {  // the drawn points' deviations, for the cycle's cross-covariance
+      chi0_ = chi_;
+      chi0_.colwise() -= x_;
+    }
     Q_cycle_.setZero();
     in_cycle_ = true;
     points_fresh_ = false;
@@ -100,10 +104,17 @@ class UnscentedPropagation {
   void end_cycle() {
     if (!in_cycle_) return;
     in_cycle_ = false;
-    if (n_intervals_ == 0) return;  // nothing propagated: (x, P) unchanged
+    if (n_intervals_ == 0) {  // nothing propagated: (x, P) unchanged
+      if (track_cross_) C_cycle_ = P_;
+      return;
+    }
     sanitize_points();
     ut_mean<kN, 2 * kN + 1>(chi_, w_, x_);
     ut_covariance<kN, 2 * kN + 1>(chi_, x_, w_, dev_, P_);
+    if (track_cross_) {  // Sarkka (2008) eq. (13): sum Wc (chi_k - x_k)(chi_k+1^- - x_k+1^-)^T
+      C_cycle_.noalias() = w_.wi * chi0_.template rightCols<2 * kN>() * dev_.template rightCols<2 * kN>().transpose();
+      C_cycle_.noalias() += w_.w0c * chi0_.col(0) * dev_.col(0).transpose();
+    }
     P_ += Q_cycle_;
     symmetrize<kN>(P_);
     if (!P_.allFinite()) {
@@ -116,6 +127,12 @@ class UnscentedPropagation {
   const Vec& x() const { return x_; }
   const Cov& P() const { return P_; }
   Cov& P_mutable() { return P_; }
+
+  /// Keep the UT cross-covariance of each cycle (the unscented RTS smoother's
+  /// C_k+1, rts_smoother.hpp): the drawn points are kept at begin_cycle.
+  void track_cycle_transition(bool on) { track_cross_ = on; }
+  /// cov(error at the cycle start, predicted error at its end) of the last cycle.
+  const Cov& cycle_cross_covariance() const { return C_cycle_; }
   /// Direct access to the mean (tests; an engine that feeds back partially).
   Vec& x_mutable() {
     points_fresh_ = false;
@@ -154,6 +171,9 @@ class UnscentedPropagation {
   Cov P_ = Cov::Identity();
   Cov Q_cycle_ = Cov::Zero();
   Points chi_ = Points::Zero();
+  Points chi0_ = Points::Zero();  // deviations of the drawn points (smoother only)
+  Cov C_cycle_ = Cov::Zero();
+  bool track_cross_ = false;
   Points dev_ = Points::Zero();
   Cov factor_ = Cov::Zero();
   Cov phi_ = Cov::Identity(), qd_ = Cov::Zero(), work_ = Cov::Zero();

@@ -19,13 +19,14 @@
 // mean x^ and the covariance P^- = sum_time-update + Q of the prediction (the
 // Q points, centred on xi_0, put back the 2n Wi (xi_0 - x^)(xi_0 - x^)^T the
 // smaller centre weight removes), so for a linear h the update equals the
-// Kalman update to rounding (cpp/tests/test_ukf.cpp).  The paper's eqs. (14)-(21)
+// Kalman update to rounding (cpp/tests/test_rbukf.cpp: Ukf = RbUkf).  The paper's eqs. (14)-(21)
 // leave these weights implicit.
 // When the propagated points are not those of the current (x, P) (a second
 // update in the same epoch, or no propagation since initialize), they are
 // redrawn from (x, P) and the Q columns are zero.
 #pragma once
 
+#include "insnav/filter/augmented_ut.hpp"
 #include "insnav/filter/rbukf.hpp"
 
 namespace insnav {
@@ -42,12 +43,12 @@ class Ukf : public UnscentedPropagation<L> {
   static constexpr int kN = L::kSize;
   static constexpr int kAug = 4 * kN + 1;
   using AugPoints = Eigen::Matrix<double, kN, kAug>;
-  using MeasPoints = Eigen::Matrix<double, Eigen::Dynamic, kAug, 0, kMaxMeasRows, kAug>;
 
   explicit Ukf(const ImuErrorModel& model, const UtParams& ut = {}) : Base(model, ut) {}
 
-  /// Augmented-UT measurement update, eqs. (14)-(21).  gate_chi2 <= 0: no gating.
-  /// 6 rows (position + velocity) run with compile-time sizes (as RbUkf::update does).
+  /// Augmented-UT measurement update, eqs. (14)-(21) (augmented_ut.hpp).
+  /// gate_chi2 <= 0: no gating.  6 rows (position + velocity) run with
+  /// compile-time sizes (as RbUkf::update does).
   template <class Meas>
   UpdateResult update(const Meas& meas, double gate_chi2) {
     UpdateResult res;
@@ -55,84 +56,44 @@ class Ukf : public UnscentedPropagation<L> {
     res.rows = r;
     if (r == 0) return res;
 #ifndef INSNAV_NO_FIXED_UPDATE_KERNELS
-    if (r == 6) return update_impl<6>(meas, gate_chi2, res);
+    if (r == 6) return update_impl(meas, gate_chi2, res, ws6_);
 #endif
-    return update_impl<Eigen::Dynamic>(meas, gate_chi2, res);
+    return update_impl(meas, gate_chi2, res, ws_);
   }
 
  private:
-  template <int R, class Meas>
-  UpdateResult update_impl(const Meas& meas, double gate_chi2, UpdateResult& res) {
-    constexpr int RM = (R == Eigen::Dynamic) ? kMaxMeasRows : R;
-    using MatRR = Eigen::Matrix<double, R, R, 0, RM, RM>;
-    using MatNR = Eigen::Matrix<double, kN, R, 0, kN, RM>;
-    using MatRN = Eigen::Matrix<double, R, kN, 0, RM, kN>;
-    using VecR = Eigen::Matrix<double, R, 1, 0, RM, 1>;
-    using MatRA = Eigen::Matrix<double, R, kAug, 0, RM, kAug>;
-    const LinearMeasurement<L>& lin = meas.linear();
-    const int r = lin.rows();
+  template <class Meas, int R>
+  UpdateResult update_impl(const Meas& meas, double gate_chi2, UpdateResult& res, AugmentedUtWorkspace<L, R>& ws) {
     Vec& x = this->x_;
     Cov& P = this->P_;
     const UtWeights<kN>& w = this->w_;
-    const double wi = w.wi;
-    const double w0m = 1.0 - 4.0 * kN * wi;  // weights of the 4n+1 points sum to 1
-    const double w0c = w0m + 1.0 - w.alpha * w.alpha + w.beta;
-
     // (14) augmented points
     if (this->points_fresh_) {
       Qs_ = this->Q_cycle_ * w.n_plus_lambda;
       psd_cholesky_lower<kN>(Qs_, sqrtQ_);
-      X_.template leftCols<2 * kN + 1>() = this->chi_;
     } else {
       res.cholesky_repairs += draw_sigma_points<kN>(x, P, w, this->chi_, this->factor_, this->repair_opt_);
       this->repairs_ += res.cholesky_repairs;
       sqrtQ_.setZero();
-      X_.template leftCols<2 * kN + 1>() = this->chi_;
     }
+    X_.template leftCols<2 * kN + 1>() = this->chi_;
     for (int i = 0; i < kN; ++i) {
       X_.col(2 * kN + 1 + i) = X_.col(0) + sqrtQ_.col(i);
       X_.col(3 * kN + 1 + i) = X_.col(0) - sqrtQ_.col(i);
     }
-    // (15)-(16)
-    MatRA Z(r, kAug);
-    for (int i = 0; i < kAug; ++i) Z.col(i) = meas.predicted_residual(X_.col(i));
-    VecR zmean = w0m * Z.col(0);
-    zmean += wi * Z.template rightCols<kAug - 1>().rowwise().sum();
-    // deviations (x^ = x: the augmented mean, see the header comment)
-    X_.colwise() -= x;
-    Z.colwise() -= zmean;
-    // (17)-(18)
-    MatNR Pxz;
-    Pxz.noalias() = wi * X_.template rightCols<kAug - 1>() * Z.template rightCols<kAug - 1>().transpose();
-    Pxz.noalias() += w0c * X_.col(0) * Z.col(0).transpose();
-    MatRR Pzz;
-    Pzz.noalias() = wi * Z.template rightCols<kAug - 1>() * Z.template rightCols<kAug - 1>().transpose();
-    Pzz.noalias() += w0c * Z.col(0) * Z.col(0).transpose();
-    Pzz += lin.R;
-    Eigen::LLT<MatRR> llt(Pzz);
     this->points_fresh_ = false;
-    if (llt.info() != Eigen::Success) {
-      res.cholesky_repairs += 1;
-      this->repairs_ += 1;
-      return res;
+    // (15)-(21); deviations from x (x^ = x: the augmented mean, see the header comment)
+    switch (augmented_ut_update<L, R>(X_, meas, w, x, P, gate_chi2, ws, res.nis)) {
+      case AugmentedUtStatus::kNotPositiveDefinite:
+        res.cholesky_repairs += 1;
+        this->repairs_ += 1;
+        return res;
+      case AugmentedUtStatus::kRejectedByGate:
+        res.rejected_by_gate = true;
+        return res;
+      case AugmentedUtStatus::kApplied:
+        break;
     }
-    const VecR y = lin.residual - zmean;
-    VecR v = y;
-    llt.matrixL().solveInPlace(v);
-    res.nis = v.squaredNorm();
-    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
-      res.rejected_by_gate = true;
-      return res;
-    }
-    // (19) K = P_xz P_zz^-1
-    MatRN Kt = Pxz.transpose();
-    llt.solveInPlace(Kt);
-    const MatNR K = Kt.transpose();
-    // (20)-(21), the lower triangle then mirrored
-    x.noalias() += K * y;
-    const MatNR KP = K * Pzz;
-    P.template triangularView<Eigen::Lower>() -= KP * K.transpose();
-    P.template triangularView<Eigen::StrictlyUpper>() = P.transpose();
     if (!P.allFinite() || !x.allFinite()) {
       if (!x.allFinite()) x.setZero();
       repair_covariance<kN>(P, this->repair_opt_);
@@ -145,6 +106,8 @@ class Ukf : public UnscentedPropagation<L> {
 
   Cov Qs_ = Cov::Zero(), sqrtQ_ = Cov::Zero();
   AugPoints X_ = AugPoints::Zero();
+  AugmentedUtWorkspace<L, 6> ws6_;
+  AugmentedUtWorkspace<L> ws_;
 };
 
 }  // namespace insnav

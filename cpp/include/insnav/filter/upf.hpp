@@ -72,6 +72,7 @@
 #include <limits>
 #include <vector>
 
+#include "insnav/filter/augmented_ut.hpp"
 #include "insnav/filter/fading.hpp"
 #include "insnav/filter/particle_filter.hpp"
 #include "insnav/filter/rbukf.hpp"
@@ -103,7 +104,6 @@ class UkfKernel {
   using Cov = StateCov<L>;
   using T = MeasTypes<L>;
   using AugPoints = Eigen::Matrix<double, kN, kAug>;
-  using MeasPoints = Eigen::Matrix<double, Eigen::Dynamic, kAug, 0, kMaxMeasRows, kAug>;
 
   explicit UkfKernel(const UtParams& ut = {}) : w_(ut) {}
 
@@ -169,9 +169,6 @@ class UkfKernel {
     c_ = 0.0;
     eta_.setOnes();
     if (r == 0) return res;
-    const double wi = w_.wi;
-    const double w0m = 1.0 - 4.0 * kN * wi;  // weights of the 4n+1 points sum to 1
-    const double w0c = w0m + 1.0 - w_.alpha * w_.alpha + w_.beta;
 
     // augmented points (ukf.hpp eq. (14))
     const bool fresh = s.fresh;
@@ -203,43 +200,22 @@ class UkfKernel {
       X_.col(2 * kN + 1 + i) = X_.col(0) + sqrtQ_.col(i);
       X_.col(3 * kN + 1 + i) = X_.col(0) - sqrtQ_.col(i);
     }
-    // z_i = h(X_i), z^ (eqs. (11)-(12))
-    Z_.resize(r, kAug);
-    for (int i = 0; i < kAug; ++i) Z_.col(i) = meas.predicted_residual(X_.col(i));
-    zmean_ = w0m * Z_.col(0);
-    zsum_ = Z_.rightCols(kAug - 1).rowwise().sum();
-    zmean_ += wi * zsum_;
-    X_.colwise() -= s.x;
-    Z_.colwise() -= zmean_;
-    // P_xz, P_zz (eqs. (13)-(14))
-    Pxz_.noalias() = wi * X_.template rightCols<kAug - 1>() * Z_.rightCols(kAug - 1).transpose();
-    Pxz_.noalias() += w0c * X_.col(0) * Z_.col(0).transpose();
-    Pzz_.noalias() = wi * Z_.rightCols(kAug - 1) * Z_.rightCols(kAug - 1).transpose();
-    Pzz_.noalias() += w0c * Z_.col(0) * Z_.col(0).transpose();
-    Pzz_ += lin.R;
-    llt_.compute(Pzz_);
     s.fresh = false;
-    if (llt_.info() != Eigen::Success) {
+    // (ukf.hpp eqs. (15)-(21), augmented_ut.hpp) from the faded prior Pbar; s.P
+    // changes only when the update is applied
+    Ppost_ = Pbar_;
+    const AugmentedUtStatus st = augmented_ut_update<L, Eigen::Dynamic>(X_, meas, w_, s.x, Ppost_, gate_chi2, ws_,
+                                                                         res.nis);
+    log_pred_ = ws_.log_predictive;
+    if (st == AugmentedUtStatus::kNotPositiveDefinite) {
       res.cholesky_repairs += 1;
       return res;
     }
-    y_ = lin.residual - zmean_;
-    v_ = llt_.matrixL().solve(y_);
-    res.nis = v_.squaredNorm();
-    log_pred_ = -0.5 * res.nis - llt_.matrixLLT().diagonal().array().log().sum();
-    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
+    if (st == AugmentedUtStatus::kRejectedByGate) {
       res.rejected_by_gate = true;
       return res;
     }
-    // K = P_xz P_zz^-1 (eq. (15)); x^, P^ (eqs. (16)-(17))
-    Kt_ = Pxz_.transpose();
-    llt_.solveInPlace(Kt_);
-    K_ = Kt_.transpose();
-    s.x.noalias() += K_ * y_;
-    KP_.noalias() = K_ * Pzz_;
-    s.P = Pbar_;
-    s.P.noalias() -= KP_ * K_.transpose();
-    symmetrize<kN>(s.P);
+    s.P = Ppost_;
     if (!s.P.allFinite() || !s.x.allFinite()) {
       if (!s.x.allFinite()) s.x = xbar_;
       repair_covariance<kN>(s.P, repair_opt_);
@@ -263,17 +239,13 @@ class UkfKernel {
  private:
   UtWeights<kN> w_;
   RepairOptions repair_opt_{};
-  Cov factor_ = Cov::Zero(), Qs_ = Cov::Zero(), sqrtQ_ = Cov::Zero(), Pbar_ = Cov::Zero();
+  Cov factor_ = Cov::Zero(), Qs_ = Cov::Zero(), sqrtQ_ = Cov::Zero(), Pbar_ = Cov::Zero(), Ppost_ = Cov::Zero();
   Cov zeroQ_ = Cov::Zero();
   SigmaPoints<kN> dev_ = SigmaPoints<kN>::Zero();
-  AugPoints X_ = AugPoints::Zero();
-  MeasPoints Z_;
+  typename AugmentedUtWorkspace<L>::Points X_ = AugPoints::Zero();
+  AugmentedUtWorkspace<L> ws_;  // its LLT is initialised: kernels are copied
   Vec tmp_ = Vec::Zero(), xbar_ = Vec::Zero(), eta_ = Vec::Ones();
-  typename T::RowVec zmean_, zsum_, y_, v_, gamma_;
-  typename T::Gain Pxz_, K_, KP_;
-  typename T::Dyn Pzz_;
-  Eigen::Matrix<double, Eigen::Dynamic, kN, 0, kMaxMeasRows, kN> Kt_;
-  Eigen::LLT<typename T::Dyn> llt_{typename T::Dyn(0, 0)};  // initialised: particles are copied on resampling
+  typename T::RowVec gamma_;
   FadingWorkspace<L> fws_;
   double c_ = 0.0, log_pred_ = 0.0;
 };

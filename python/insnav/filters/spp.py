@@ -1,0 +1,201 @@
+"""The ``spp`` filter: GNSS-only single point positioning as an insnav run.
+
+* :func:`run_spp`, the registry runner (``insnav.run(ds, filter="spp")``):
+  the dataset's own satellite rows (``RinexDataset.tight_inputs``, or the
+  simulator's raw observations, every satellite), no IMU used.
+* :func:`run_spp_rinex` (``insnav run --filter spp --format rinex --obs --nav``):
+  RINEX files and a run TOML with ``[rinex]`` (atmosphere, elevation mask,
+  zenith sigmas), ``[gnss]`` (:class:`insnav.gnss.weighting.Weighting`) and
+  ``[spp]`` (:class:`insnav.gnss.spp.SppOptions`) tables; no IMU needed.
+
+The result is a :class:`~insnav.filters.solution.Solution` with one row per
+solved epoch: antenna position, NED velocity and their 1-sigma in the usual
+columns, attitude and IMU errors NaN; ``gnss_t``/``nis``/``gnss_status`` per
+epoch hold the RAIM test statistic (``v^T W v``) and whether a position came
+out (:attr:`RecordStatus.APPLIED`).  The receiver clock, inter-system biases,
+drift, DOPs and RAIM counts, which have no solution column, are in
+``solution.spp`` (:class:`insnav.gnss.spp.SppSolution`) and, from the CLI, in
+``<out>.spp.csv`` (:data:`SPP_COLUMNS`).
+"""
+from __future__ import annotations
+
+import os
+import tomllib
+
+import numpy as np
+
+from .. import earth
+from ..config import ConfigError
+from ..gnss.spp import (SppOptions, SppSolution, read_nav_multi, read_obs_multi, solve_spp, spp_inputs_from_rinex,
+                        summary_counts)
+from ..gnss.systems import SYSTEMS
+from ..gnss.weighting import Weighting
+from ..units import RAD2DEG
+from .solution import RecordStatus, Solution
+
+__all__ = ["run_spp", "run_spp_rinex", "spp_solution", "SPP_COLUMNS", "write_spp_table"]
+
+#: columns of ``<out>.spp.csv``: per epoch (solved or not)
+SPP_COLUMNS = ("t_s", "solved", "n_sats", "n_used", "n_excluded", "raim_status", "chi2", "chi2_threshold",
+               "clock_bias_m", "sigma_clock_m", "clock_drift_mps", "sigma_drift_mps",
+               *(f"isb_{s}_m" for s in SYSTEMS), *(f"sigma_isb_{s}_m" for s in SYSTEMS),
+               "gdop", "pdop", "hdop", "vdop", "tdop", "n_rate_used", "n_rate_excluded", "ref_system")
+
+
+def spp_solution(sp: SppSolution, filter_name: str = "spp") -> Solution:
+    """The solved epochs of an :class:`SppSolution` as a :class:`Solution` (position of the antenna)."""
+    ok = sp.solved
+    lat, lon, h = earth.ecef_to_geodetic(sp.r_e[ok])
+    n = int(ok.sum())
+    nan = np.full(n, np.nan)
+    nan3 = np.full((n, 3), np.nan)
+    st = np.where(ok, int(RecordStatus.APPLIED), int(RecordStatus.NOT_USED)).astype(np.int8)
+    summary = dict(filter=filter_name, coupling="gnss", updates=n, rejected=0, gnss_records=len(sp),
+                   cholesky_repairs=0, **summary_counts(sp))
+    sol = Solution(t=sp.t[ok].copy(), lat_deg=lat * RAD2DEG, lon_deg=lon * RAD2DEG, h_m=h,
+                   v_n=np.asarray(sp.v_n()[ok]), roll_deg=nan, pitch_deg=nan.copy(), yaw_deg=nan.copy(),
+                   sigma_pos_n_m=sp.sigma_pos_n_m[ok].copy(), sigma_vel_n_mps=sp.sigma_vel_n_mps[ok].copy(),
+                   sigma_att_deg=nan3, acc_bias_mps2=nan3.copy(), gyro_bias_rps=nan3.copy(), acc_scale=nan3.copy(),
+                   gyro_scale=nan3.copy(), gnss_t=sp.t.copy(), innovation=np.full((len(sp), 6), np.nan),
+                   nis=sp.chi2.copy(), gnss_status=st, summary=summary)
+    sol.spp = sp
+    return sol
+
+
+def run_spp(dataset, cfg, *, spp_options: SppOptions | dict | None = None, weighting: Weighting | dict | None = None):
+    """Registry runner: single point positioning over the dataset's GNSS rows (the IMU is not used).
+
+    Rows: ``dataset.tight_inputs`` (RINEX datasets; sigmas as loaded, or
+    reweighted with ``weighting`` when the dataset kept the C/N0 -- it does
+    not, so only the elevation and system enter), else every satellite of
+    ``dataset.gnss_raw`` (simulator) with its own sigmas.
+    """
+    from ..gnss.tight_inputs import tight_inputs_from_raw
+
+    opt = spp_options if isinstance(spp_options, SppOptions) else SppOptions.from_dict(
+        spp_options if spp_options is not None else {}, "spp options")
+    if spp_options is None and getattr(dataset, "spp_options", None) is not None:
+        opt = dataset.spp_options
+    inp = getattr(dataset, "tight_inputs", None)
+    if inp is None:
+        if getattr(dataset, "gnss_raw", None) is None:
+            raise ValueError("filter 'spp' needs raw GNSS observations (a RINEX dataset or a simulated gnss_raw)")
+        inp = tight_inputs_from_raw(dataset.gnss_raw, max_sats=0)
+    r0 = inp.info.get("approx_r_e")
+    if r0 is None:
+        ini = dataset.initial
+        r0 = earth.geodetic_to_ecef(np.radians(ini.lat_deg), np.radians(ini.lon_deg), ini.h_m)
+    spr = sprr = None
+    if weighting is not None:
+        w = weighting if isinstance(weighting, Weighting) else Weighting.from_dict(weighting, "gnss weighting")
+        spr, sprr = w.sigmas(np.radians(inp.elevation_deg), None, inp.system)
+    sp = solve_spp(inp, np.asarray(r0, float), options=opt, sigma_pr_m=spr, sigma_prr_mps=sprr)
+    return spp_solution(sp)
+
+
+def load_spp_config(config_path=None):
+    """(RinexOptions, Weighting, SppOptions) from a run TOML (its other tables and keys are not used by spp).
+
+    Raises ConfigError (one line, naming the file and key) for a bad or unknown key.
+    """
+    from ..io.rinex_dataset import RinexOptions
+
+    d = {}
+    source = "run configuration"
+    if config_path is not None:
+        source = os.fspath(config_path)
+        try:
+            with open(config_path, "rb") as f:
+                d = tomllib.load(f)
+        except OSError as exc:
+            raise ConfigError(f"{source}: cannot read ({exc.strerror})") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    tables = {}
+    for key in ("rinex", "gnss", "spp"):
+        v = d.get(key, {})
+        if not isinstance(v, dict):
+            raise ConfigError(f"{source}: key '{key}': bad value {v!r}; allowed: a table")
+        tables[key] = v
+    return (RinexOptions.from_dict(tables["rinex"], source), Weighting.from_dict(tables["gnss"], source),
+            SppOptions.from_dict(tables["spp"], source))
+
+
+def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss: dict | None = None,
+                  spp: dict | None = None, approx_r_e=None):
+    """Single point positioning over RINEX files.
+
+    Parameters
+    ----------
+    obs : path or insnav.gnss.ObsData
+        Read with the ``[gnss] systems`` when the reader supports several systems.
+    nav : path, list of paths (merged) or insnav.gnss.NavData
+    config_path : path, optional
+        Run TOML (``[rinex]``, ``[gnss]``, ``[spp]`` tables).
+    rinex, gnss, spp : dict, optional
+        Table entries overriding the file's.
+    approx_r_e : (3,), optional
+        Starting position [m]; default the header's, else a GPS bootstrap.
+
+    Returns
+    -------
+    Solution
+        Time: GPS seconds of week of the first epoch's week; ``solution.spp``
+        the full :class:`SppSolution`, ``solution.summary`` the counts and options.
+    """
+    from ..gnss.gpstime import SECONDS_PER_WEEK
+    from ..io.rinex_dataset import RinexOptions, _approx_position
+
+    ropt, wgt, sopt = load_spp_config(config_path)
+    src = os.fspath(config_path) if config_path is not None else "spp options"
+    if rinex:
+        ropt = RinexOptions.from_dict({**_fields(ropt), **rinex}, src)
+    if gnss:
+        wgt = Weighting.from_dict({**_fields(wgt), **gnss}, src)
+    if spp:
+        sopt = SppOptions.from_dict({**_fields(sopt), **spp}, src)
+    if not hasattr(obs, "C1"):
+        obs = read_obs_multi(obs, wgt.systems)
+    if not hasattr(nav, "eph"):
+        nav = read_nav_multi(nav, wgt.systems)
+    if obs.epoch_t_gps_s.size == 0:
+        raise ValueError(f"{obs.path}: no observation epochs")
+    t_week0 = SECONDS_PER_WEEK * int(obs.epoch_week[0])
+    r0 = np.asarray(approx_r_e, float) if approx_r_e is not None else _approx_position(obs, nav, t_week0)
+    kw = dict(weighting=wgt, elevation_mask_deg=ropt.elevation_mask_deg, iono=ropt.iono, tropo=ropt.tropo,
+              sigma_pr_zenith_m=ropt.sigma_pr_zenith_m, sigma_prr_zenith_mps=ropt.sigma_prr_zenith_mps,
+              use_cn0=ropt.use_cn0)
+    inp, _ = spp_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+    sp = solve_spp(inp, r0, options=sopt)
+    good = sp.solved
+    if good.any():  # light time, elevation and atmosphere again from the data's own position
+        r0 = np.median(sp.r_e[good], axis=0)
+        inp, _ = spp_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+        sp = solve_spp(inp, r0, options=sopt)
+    sp.info.update(inputs=inp, t_week0_gps_s=float(t_week0), approx_r_e=r0.tolist())
+    sol = spp_solution(sp)
+    sol.summary.update(systems="".join(s for s in SYSTEMS if np.any(inp.system == s)), weighting=wgt.model)
+    sol.rinex_options, sol.weighting, sol.spp_options = ropt, wgt, sopt
+    return sol
+
+
+def _fields(obj) -> dict:
+    import dataclasses
+
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+
+
+def write_spp_table(sp: SppSolution, path) -> "os.PathLike":
+    """Write ``path`` (``<out>.spp.csv``): :data:`SPP_COLUMNS`, one line per epoch."""
+    from .._atomic import atomic_write_text
+
+    cols = [sp.t, sp.solved.astype(int), sp.n_sats, sp.n_used, sp.n_excluded, sp.raim_status, sp.chi2,
+            sp.chi2_threshold, sp.clock_bias_m, sp.sigma_clock_m, sp.clock_drift_mps, sp.sigma_drift_mps,
+            *sp.isb_m.T, *sp.sigma_isb_m.T, sp.gdop, sp.pdop, sp.hdop, sp.vdop, sp.tdop, sp.n_rate_used,
+            sp.n_rate_excluded]
+    fmt = ["%.6f"] + ["%d"] * 5 + ["%.6g"] * (len(cols) - 8) + ["%d", "%d"]
+    lines = [",".join(SPP_COLUMNS)]
+    for i in range(len(sp)):
+        vals = [(f % c[i]) if np.isfinite(c[i]) else "nan" for f, c in zip(fmt, cols)]
+        lines.append(",".join(vals + [str(sp.ref_system[i])]))
+    return atomic_write_text(path, "\n".join(lines) + "\n")

@@ -1,0 +1,648 @@
+"""IMU CSV files: one reader for every insnav loader (``--format csv`` and
+``--format rinex``) that maps columns, units, axes and the time base to SI
+increments in the body frame.
+
+IMU file (:class:`ImuCsvFormat`)
+--------------------------------
+One sample per line, fields separated by ``delimiter`` (``,``).  ``columns``
+names the fields in file order: ``t`` (time, see ``time``) or ``tick_ms``
+(an IMU counter in ms, needs a str2str tag file), ``ax ay az`` (accelerometer),
+``gx gy gz`` (gyro), ``_`` (ignored); or it is a table ``{role: header name}``
+(e.g. ``{t = "time", ax = "acc_x", ...}``) matched against the header line.
+With no time column at all, ``rate_hz`` gives the times:
+``t_k = time_offset_s + k / rate_hz``.  Blank lines and lines starting with
+``#`` are skipped; the first remaining line is a header (skipped) when its
+first field is not a number.  Options:
+
+==================  ==========================================================
+``time``            ``gps_s`` (s since 1980-01-06), ``gps_sow`` (GPS seconds
+                    of week; the week is ``gps_week`` or the observation
+                    file's), ``gpst_unix_s`` (RTKLIB ``gtime_t`` style: GPS
+                    time counted from 1970-01-01, e.g. the rtklibexplorer
+                    ``*_sf.csv``), ``unix_utc_s`` (POSIX time, UTC: leap
+                    seconds added, :func:`gps_minus_utc_s`) or ``relative``
+                    (the user's own clock, the same as the GNSS file's)
+``time_unit``       ``s``, ``ms``, ``us`` or ``ns`` (of the time column)
+``time_offset_s``   added to every IMU time [s] (a known logging delay)
+``acc_unit``        ``mps2`` (also ``m/s^2``) or ``g`` (standard gravity
+                    9.80665 m/s^2)
+``gyro_unit``       ``rps`` (also ``rad``, ``rad/s``) or ``dps`` (``deg``, ``deg/s``)
+``samples``         ``rate`` (``rates``: specific force and angular rate at
+                    ``t``, integrated to increments with the trapezoidal rule
+                    over ``(t_prev, t]``; the first sample only starts the
+                    integration), ``mean_rate`` (the mean rate over
+                    ``(t_prev, t]``: increment = rate x dt, exact) or
+                    ``increment`` (``increments``: velocity and angle
+                    increments over ``(t_prev, t]`` in the rate unit times
+                    seconds: m/s or g s, rad or deg)
+``axes``            the directions of the sensor's x, y, z axes in the body:
+                    three letters from F/B (forward/back), R/L (right/left),
+                    D/U (down/up), e.g. ``FRD`` (default), ``FLU``, ``RFU``;
+                    a left-handed triad is an error
+``mount_rpy_deg``   3-2-1 Euler angles of those axes relative to the body FRD
+                    axes [deg]: ``x_b = C(mount) A(axes) x_imu`` with ``C`` the
+                    same DCM as the attitude ``C_nb``
+``rate_hz``         nominal sample rate [Hz]: the times when there is no time
+                    column; otherwise checked against the median interval
+                    (within 10 %: a wrong ``time_unit`` shows there)
+==================  ==========================================================
+
+Raw str2str logs (``tick_ms`` column + ``IMU.csv.tag``)
+-------------------------------------------------------
+RTKLIB ``str2str`` writes, beside a logged stream, a binary time-tag file: a
+64-byte header (``"TIMETAG RTKLIB ..."``, the last 4 bytes the PC tick at
+opening), ``u32 time`` and ``f64 sec`` (GPST at opening, ``gtime_t`` style),
+then ``(u32 tick [ms since opening], u32 fpos [bytes written])`` per write.
+The IMU's own ``tick_ms`` counter is the sample clock; the tag gives the PC
+arrival time (GPST) of every byte.  :func:`tick_time_map` maps the counter to
+GPS time as the **lower envelope** of ``arrival - tick`` (a straight line
+through the minima over ``window_s`` windows, shifted below all of them): a
+sample's time is its arrival time at the smallest latency seen, and the line's
+slope is the rate difference of the IMU and PC clocks.  A log starts at an
+arbitrary byte, so the first line is always dropped; a last line without a
+newline is dropped too.  When the CSV's line endings were converted from
+``\\r\\n`` to ``\\n`` after logging (e.g. by git), the tag's byte count exceeds
+the file size by exactly the number of lines; this is detected and allowed,
+any other size mismatch is an error.
+
+Errors
+------
+A problem with a file raises :class:`ImuFileError`, a ``ValueError`` whose
+message names the file, the 1-based line (the byte offset for the binary tag
+file) and what was wrong; a bad format option a
+:class:`~insnav.config.ConfigError` naming the key.
+"""
+from __future__ import annotations
+
+from ..errors import close_matches
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import _core
+from ..config import ConfigError
+from ..data.dataset import ImuData, RowOrigin
+from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
+from ..units import DEG, G0
+
+__all__ = ["ImuFileError", "ImuCsvFormat", "ImuSamples", "Str2strTag", "read_str2str_tag", "tick_time_map",
+           "read_imu_csv", "axes_matrix", "gps_minus_utc_s", "GPST_UNIX_OFFSET_S", "canonical_choice"]
+
+#: GPS seconds since 1980-01-06 of 1970-01-01 in GPS time: ``t_gps = t_gtime - 315964800`` [s]
+GPST_UNIX_OFFSET_S = int(round(-gps_seconds_from_calendar(1970, 1, 1)))
+_TAG_MAGIC = b"TIMETAG RTKLIB"
+_TAG_HEADER = 64          # bytes before u32 time, f64 sec
+_TAG_FIRST_RECORD = 76    # 64 + 4 + 8
+
+
+class ImuFileError(ValueError):
+    """A malformed IMU CSV or str2str tag file.
+
+    Attributes
+    ----------
+    path : str
+    line : int or None
+        1-based line (CSV) or byte offset (tag file, ``unit="byte"``).
+    what : str
+    """
+
+    def __init__(self, path, line, what, unit="line"):
+        self.path = os.fspath(path)
+        self.line = line
+        self.what = what
+        where = f"{self.path}, {unit} {line}" if line is not None else self.path
+        super().__init__(f"{where}: {what}")
+
+
+# --------------------------------------------------------------------------- time systems
+
+#: UTC dates from which GPS - UTC grew by one second (IERS Bulletin C; GPS = UTC on 1980-01-06).
+_LEAP_DATES = ((1981, 7, 1), (1982, 7, 1), (1983, 7, 1), (1985, 7, 1), (1988, 1, 1), (1990, 1, 1), (1991, 1, 1),
+               (1992, 7, 1), (1993, 7, 1), (1994, 7, 1), (1996, 1, 1), (1997, 7, 1), (1999, 1, 1), (2006, 1, 1),
+               (2009, 1, 1), (2012, 7, 1), (2015, 7, 1), (2017, 1, 1))
+#: the same instants as UTC seconds since 1980-01-06 (calendar arithmetic, no leap seconds)
+_LEAP_UTC_S = np.array([gps_seconds_from_calendar(*d) for d in _LEAP_DATES])
+
+
+def gps_minus_utc_s(t_utc_s) -> np.ndarray:
+    """GPS - UTC [s] (leap seconds, 18 since 2017-01-01) at a UTC time
+    counted in calendar seconds since 1980-01-06 (IERS Bulletin C)."""
+    return np.searchsorted(_LEAP_UTC_S, np.asarray(t_utc_s, float), side="right").astype(float)
+
+
+# --------------------------------------------------------------------------- IMU CSV
+
+_ROLES = ("t", "tick_ms", "ax", "ay", "az", "gx", "gy", "gz", "_")
+_ALLOWED_COLUMNS = _ROLES
+#: canonical value -> accepted spellings
+_CHOICES = dict(time={"gps_s": (), "gps_sow": (), "gpst_unix_s": (), "unix_utc_s": (), "relative": ()},
+                time_unit={"s": (), "ms": (), "us": (), "ns": ()},
+                acc_unit={"mps2": ("m/s^2", "m/s2"), "g": ()},
+                gyro_unit={"rps": ("rad", "rad/s"), "dps": ("deg", "deg/s")},
+                samples={"rate": ("rates",), "mean_rate": ("mean_rates",), "increment": ("increments",)})
+_TIME_SCALE = {"s": 1, "ms": 1000, "us": 1_000_000, "ns": 1_000_000_000}
+_AXIS_DIR = {"F": (0, 1.0), "B": (0, -1.0), "R": (1, 1.0), "L": (1, -1.0), "D": (2, 1.0), "U": (2, -1.0)}
+
+
+def canonical_choice(value, choices: dict, key: str, source: str):
+    """The canonical spelling of ``value`` among ``choices`` (value -> aliases);
+    a ConfigError naming ``key`` and every allowed spelling otherwise."""
+    for canon, aliases in choices.items():
+        if value == canon or value in aliases:
+            return canon
+    allowed = ", ".join(choices)
+    aliases = [a for al in choices.values() for a in al]
+    raise ConfigError(f"{source}: {key}: bad value {value!r}; allowed: {allowed}"
+                      + (f" (also written {', '.join(aliases)})" if aliases else ""))
+
+
+def axes_matrix(axes: str) -> np.ndarray:
+    """(3, 3) ``A`` with ``x_FRD = A x_sensor`` for sensor axes named by three
+    letters (F/B, R/L, D/U): column ``i`` is the body direction of sensor axis ``i``.
+
+    Raises
+    ------
+    ValueError
+        Not three letters naming three different body axes, or a left-handed triad.
+    """
+    s = str(axes).upper()
+    if len(s) != 3 or any(c not in _AXIS_DIR for c in s) or len({_AXIS_DIR[c][0] for c in s}) != 3:
+        raise ValueError(f"bad axes {axes!r}: three letters from F/B, R/L, D/U naming three different axes "
+                         "(e.g. FRD, FLU, RFU)")
+    A = np.zeros((3, 3))
+    for i, c in enumerate(s):
+        k, sign = _AXIS_DIR[c]
+        A[k, i] = sign
+    if np.linalg.det(A) < 0:
+        raise ValueError(f"bad axes {axes!r}: a left-handed triad (x cross y must be z); check the sign of one axis")
+    return A
+
+
+@dataclass
+class ImuCsvFormat:
+    """How to read an IMU CSV (see the module docstring for each option).
+
+    The first eight fields keep their order (``RinexOptions.imu_format``)."""
+
+    columns: tuple = ("t", "ax", "ay", "az", "gx", "gy", "gz")
+    time: str = "gps_s"
+    acc_unit: str = "mps2"
+    gyro_unit: str = "rps"
+    samples: str = "rate"
+    mount_rpy_deg: tuple = (0.0, 0.0, 0.0)
+    time_offset_s: float = 0.0
+    delimiter: str = ","
+    axes: str = "FRD"
+    time_unit: str = "s"
+    gps_week: int | None = None
+    rate_hz: float | None = None
+
+    def validate(self, source: str = "imu format", prefix: str = "imu_") -> "ImuCsvFormat":
+        """Check every option (``prefix`` + field name in the messages) and
+        canonicalise the spellings; returns self."""
+        cols = self.columns
+        if isinstance(cols, dict):
+            for role, name in cols.items():
+                if role not in _ROLES or role == "_":
+                    raise ConfigError(f"{source}: {prefix}columns: unknown role {role!r}; allowed: "
+                                      f"{', '.join(r for r in _ROLES if r != '_')}")
+                if not isinstance(name, str) or not name:
+                    raise ConfigError(f"{source}: {prefix}columns.{role}: bad value {name!r}; allowed: a header name")
+            roles = tuple(cols)
+        else:
+            if isinstance(cols, str) or not all(isinstance(c, str) for c in cols):
+                raise ConfigError(f"{source}: {prefix}columns: bad value {cols!r}; allowed: a list of "
+                                  f"{', '.join(_ROLES)} in file order, or a table role = header name")
+            cols = roles = tuple(cols)
+            for c in cols:
+                if c not in _ROLES:
+                    close = close_matches(c, _ROLES)
+                    raise ConfigError(f"{source}: {prefix}columns: unknown column {c!r}"
+                                      + (f" (did you mean {close[0]!r}?)" if close else "")
+                                      + f"; allowed: {', '.join(_ROLES)}")
+        for c in ("ax", "ay", "az", "gx", "gy", "gz"):
+            if roles.count(c) != 1:
+                raise ConfigError(f"{source}: {prefix}columns {list(roles)} must name {c!r} exactly once")
+        n_time = roles.count("t") + roles.count("tick_ms")
+        if n_time > 1 or (n_time == 0 and self.rate_hz is None):
+            raise ConfigError(f"{source}: {prefix}columns {list(roles)} must have exactly one of 't' or 'tick_ms' "
+                              f"(or none and {prefix}rate_hz)")
+        for key, choices in _CHOICES.items():
+            setattr(self, key, canonical_choice(getattr(self, key), choices, prefix + key, source))
+        m = np.asarray(self.mount_rpy_deg, dtype=float) if not isinstance(self.mount_rpy_deg, str) else np.zeros(0)
+        if m.shape != (3,) or not np.all(np.isfinite(m)):
+            raise ConfigError(f"{source}: {prefix}mount_rpy_deg: bad value {self.mount_rpy_deg!r}; "
+                              "allowed: 3 angles [deg]")
+        try:
+            axes_matrix(self.axes)
+        except ValueError as exc:
+            raise ConfigError(f"{source}: {prefix}axes: {exc}") from None
+        self.axes = str(self.axes).upper()
+        if not (isinstance(self.delimiter, str) and len(self.delimiter) == 1):
+            raise ConfigError(f"{source}: {prefix}delimiter: bad value {self.delimiter!r}; allowed: one character")
+        v = self.time_offset_s
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ConfigError(f"{source}: {prefix}time_offset_s: bad value {v!r}; allowed: a finite number [s]")
+        v = self.rate_hz
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v)
+                                                                                            and v > 0)):
+            raise ConfigError(f"{source}: {prefix}rate_hz: bad value {v!r}; allowed: a number > 0 [Hz]")
+        v = self.gps_week
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
+            raise ConfigError(f"{source}: {prefix}gps_week: bad value {v!r}; allowed: a full GPS week number >= 0")
+        self.columns = cols
+        return self
+
+    @property
+    def roles(self) -> tuple:
+        return tuple(self.columns)
+
+    @property
+    def uses_tick(self) -> bool:
+        return "tick_ms" in self.roles
+
+    def C_b_imu(self) -> np.ndarray:
+        """(3, 3) rotation IMU sensor axes -> body FRD: ``x_b = C(mount) A(axes) x_imu``."""
+        C = np.asarray(_core.rotation.dcm_from_euler(np.asarray(self.mount_rpy_deg, float) * DEG))
+        return C @ axes_matrix(self.axes)
+
+
+@dataclass
+class ImuSamples:
+    """IMU samples as read (rotated into the body frame, SI), before integration.
+
+    Attributes
+    ----------
+    t_ref_gps_s : float
+        GPS time [s since 1980-01-06] that ``t_s`` counts from (a whole second,
+        or the tag file's start), so that sample intervals keep full precision.
+    t_s : (N,) sample time after ``t_ref_gps_s`` [s]
+    acc_b : (N, 3) specific force [m/s^2] (``samples == "rate"``) or velocity increment [m/s]
+    gyro_b : (N, 3) angular rate [rad/s] or angle increment [rad]
+    samples : {'rate', 'mean_rate', 'increment'}
+    lines : (N,) 1-based file line of each sample
+    path : str
+    info : dict
+        ``lines_dropped`` (partial first/last lines of a str2str log) and, for a
+        tagged log, the tick -> GPS time fit (see :func:`tick_time_map`).
+    """
+
+    t_ref_gps_s: float
+    t_s: np.ndarray
+    acc_b: np.ndarray
+    gyro_b: np.ndarray
+    samples: str
+    lines: np.ndarray
+    path: str
+    info: dict = field(default_factory=dict)
+
+    def __len__(self):
+        return len(self.t_s)
+
+    @property
+    def t_gps_s(self) -> np.ndarray:
+        """(N,) sample time, GPS seconds since 1980-01-06 [s] (about 0.2 us resolution)."""
+        return self.t_ref_gps_s + self.t_s
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean sample rate [Hz]."""
+        return (len(self.t_s) - 1) / float(self.t_s[-1] - self.t_s[0]) if len(self) > 1 else float("nan")
+
+    def to_increments(self, t_offset_s: float = 0.0) -> ImuData:
+        """:class:`insnav.data.dataset.ImuData` with time ``t_gps_s - t_offset_s``.
+
+        Rates are integrated with the trapezoidal rule over each interval
+        ``(t[k-1], t[k]]`` (exact for a rate that varies linearly between
+        samples), mean rates times the interval; either way the first sample
+        yields no increment.
+        """
+        t = (self.t_ref_gps_s - t_offset_s) + self.t_s
+        if self.samples == "increment":
+            return ImuData(t.copy(), self.gyro_b.copy(), self.acc_b.copy(),
+                           origin=RowOrigin(self.path, lines=self.lines.copy()))
+        # intervals from the times after t_ref (~1e-16 s resolution), not from t (seconds of
+        # week have 6e-11 s steps: 1e-8 of a 5 ms interval)
+        dt = np.diff(self.t_s)[:, None]
+        if self.samples == "mean_rate":  # the mean rate over (t[k-1], t[k]]: exact
+            dth, dv = self.gyro_b[1:] * dt, self.acc_b[1:] * dt
+        else:
+            dth = 0.5 * (self.gyro_b[1:] + self.gyro_b[:-1]) * dt
+            dv = 0.5 * (self.acc_b[1:] + self.acc_b[:-1]) * dt
+        return ImuData(t[1:].copy(), dth, dv, origin=RowOrigin(self.path, lines=self.lines[1:].copy()))
+
+
+@dataclass
+class Str2strTag:
+    """An RTKLIB str2str time-tag file (see the module docstring).
+
+    Attributes
+    ----------
+    path : str
+    t_start_gps_s : float
+        GPS time at which the log was opened (tick 0) [s since 1980-01-06].
+    tick_ms : (K,) int64 PC milliseconds since opening of each write
+    fpos : (K,) int64 bytes of the stream written up to and including that write
+    """
+
+    path: str
+    t_start_gps_s: float
+    tick_ms: np.ndarray
+    fpos: np.ndarray
+
+
+def read_str2str_tag(path) -> Str2strTag:
+    """Read an RTKLIB str2str ``.tag`` file.
+
+    Raises
+    ------
+    ImuFileError
+        Naming the file and the byte offset: not a tag file, truncated, or
+        ticks / file positions that go backwards.
+    """
+    path = os.fspath(path)
+    try:
+        b = Path(path).read_bytes()
+    except OSError as exc:
+        raise ImuFileError(path, None, f"cannot read the tag file ({exc.strerror})") from None
+    if len(b) < _TAG_FIRST_RECORD or not b.startswith(_TAG_MAGIC):
+        raise ImuFileError(path, 0, f"not an RTKLIB str2str time-tag file (expected a {_TAG_FIRST_RECORD}-byte "
+                           f"header starting with {_TAG_MAGIC.decode()!r}; file has {len(b)} bytes)", unit="byte")
+    time_time = int(np.frombuffer(b, "<u4", 1, _TAG_HEADER)[0])
+    time_sec = float(np.frombuffer(b, "<f8", 1, _TAG_HEADER + 4)[0])
+    if not (math.isfinite(time_sec) and 0.0 <= time_sec < 1.0) or time_time < GPST_UNIX_OFFSET_S:
+        raise ImuFileError(path, _TAG_HEADER, f"bad start time {time_time} + {time_sec!r} s (expected GPST seconds "
+                           "since 1970 after 1980 and a fraction in [0, 1))", unit="byte")
+    n_rec, rest = divmod(len(b) - _TAG_FIRST_RECORD, 8)
+    if rest:
+        raise ImuFileError(path, _TAG_FIRST_RECORD + 8 * n_rec, f"truncated record ({rest} of 8 bytes)", unit="byte")
+    if n_rec == 0:
+        raise ImuFileError(path, _TAG_FIRST_RECORD, "no (tick, fpos) records", unit="byte")
+    rec = np.frombuffer(b, "<u4", 2 * n_rec, _TAG_FIRST_RECORD).reshape(-1, 2).astype(np.int64)
+    for col, name in ((0, "tick"), (1, "file position")):
+        bad = np.flatnonzero(np.diff(rec[:, col]) < 0)
+        if bad.size:
+            k = int(bad[0]) + 1
+            raise ImuFileError(path, _TAG_FIRST_RECORD + 8 * k + 4 * col,
+                               f"{name} {rec[k, col]} goes backwards (previous record: {rec[k - 1, col]})",
+                               unit="byte")
+    return Str2strTag(path, time_time + time_sec - GPST_UNIX_OFFSET_S, rec[:, 0], rec[:, 1])
+
+
+def tick_time_map(tick_s, arrival_gps_s, window_s: float = 2.0, max_drift_ppm: float = 1000.0):
+    """GPS time of IMU counter values from their PC arrival times (lower envelope).
+
+    Parameters
+    ----------
+    tick_s : (N,) IMU counter [s], increasing
+    arrival_gps_s : (N,) PC arrival time of each sample [s] (GPS time, or the
+        time after a reference such as the tag start; the result counts from it too)
+    window_s : float
+        Window for the minima the envelope line is fitted through [s].
+    max_drift_ppm : float
+        Largest plausible rate difference of the two clocks [ppm].
+
+    Returns
+    -------
+    t_gps_s : (N,) [s]
+    info : dict
+        ``drift_ppm`` (slope), ``latency_median_ms``, ``latency_p95_ms``,
+        ``latency_max_ms`` (arrival minus the mapped time).
+
+    Raises
+    ------
+    ValueError
+        When the slope exceeds ``max_drift_ppm`` (the tag does not belong to the log).
+    """
+    tick_s = np.asarray(tick_s, float)
+    x = tick_s - tick_s[0]
+    y = np.asarray(arrival_gps_s, float) - tick_s
+    y0 = float(np.min(y))
+    y = y - y0
+    win = np.floor(x / window_s).astype(np.int64)
+    starts = np.flatnonzero(np.r_[True, np.diff(win) != 0])
+    xm = np.empty(starts.size)
+    ym = np.empty(starts.size)
+    for j, (a, b) in enumerate(zip(starts, np.r_[starts[1:], x.size])):
+        k = a + int(np.argmin(y[a:b]))
+        xm[j], ym[j] = x[k], y[k]
+    if xm.size >= 2 and np.ptp(xm) > 0:
+        slope, icpt = np.polyfit(xm, ym, 1)
+    else:
+        slope, icpt = 0.0, 0.0
+    if abs(slope) * 1e6 > max_drift_ppm:
+        raise ValueError(f"IMU counter and tag arrival times drift apart by {slope * 1e6:.0f} ppm "
+                         f"(more than {max_drift_ppm:g} ppm): the tag file does not belong to this log")
+    icpt += float(np.min(y - (slope * x + icpt)))  # shift below every sample: a lower envelope
+    t = tick_s + y0 + icpt + slope * x
+    lat = (np.asarray(arrival_gps_s, float) - t) * 1e3
+    return t, dict(drift_ppm=float(slope * 1e6), latency_median_ms=float(np.median(lat)),
+                   latency_p95_ms=float(np.percentile(lat, 95)), latency_max_ms=float(lat.max()))
+
+
+def _time_after(tokens, ref_int: int) -> np.ndarray:
+    """Decimal time strings minus the integer ``ref_int`` without losing digits to a 1e9-sized float."""
+    out = np.empty(len(tokens))
+    for i, tok in enumerate(tokens):
+        whole, dot, frac = tok.strip().partition(".")
+        if whole.isdigit() and (not frac or frac.isdigit()):
+            out[i] = (int(whole) - ref_int) + (float("0." + frac) if frac else 0.0)
+        else:  # exponent or sign: plain float
+            out[i] = float(tok) - ref_int
+    return out
+
+
+def _is_number(tok: str) -> bool:
+    try:
+        float(tok)
+        return True
+    except ValueError:
+        return False
+
+
+def _split_time(tokens, scale: int) -> tuple[int, np.ndarray]:
+    """(ref [whole s], times after ref [s]) of decimal time strings in units of 1/scale s,
+    keeping every digit (a 1e9-sized float would lose them)."""
+    ref_int = int(math.floor(float(tokens[0])))
+    t = _time_after(tokens, ref_int)  # units after ref_int
+    ref_s, rem = divmod(ref_int, scale)
+    return ref_s, (t + rem) / scale
+
+
+def _header_columns(path, lineno, tok, mapping: dict, delim: str) -> tuple:
+    """File-order roles from a header line and a ``{role: header name}`` table."""
+    names = [x.strip().strip('"') for x in tok]
+    roles = ["_"] * len(names)
+    for role, name in mapping.items():
+        if name not in names:
+            close = close_matches(name, names)
+            raise ImuFileError(path, lineno, f"header has no column {name!r} (for {role})"
+                               + (f"; did you mean {close[0]!r}?" if close else "")
+                               + f"; header: {delim.join(names)}")
+        roles[names.index(name)] = role
+    return tuple(roles)
+
+
+def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int | None = None) -> ImuSamples:
+    """Read an IMU CSV (see the module docstring) into body-frame SI samples.
+
+    Parameters
+    ----------
+    path : path
+    fmt : ImuCsvFormat
+    tag : path or Str2strTag, optional
+        The str2str time tag, required with a ``tick_ms`` column (default:
+        ``path + ".tag"``).
+    week : int, optional
+        GPS week for ``time = "gps_sow"`` when ``fmt.gps_week`` is None (one is required then).
+
+    Returns
+    -------
+    ImuSamples
+        ``t_ref_gps_s`` is GPS time except with ``time = "relative"``
+        (``info["time_base"]`` says which).
+
+    Raises
+    ------
+    ImuFileError
+        Naming the file and the 1-based line: wrong number of fields, a bad
+        or non-finite number, time not increasing, a header without a mapped
+        column, a sample rate that contradicts ``rate_hz``; tag problems (byte offset).
+    """
+    fmt = (fmt or ImuCsvFormat()).validate()
+    path = os.fspath(path)
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ImuFileError(path, None, f"cannot read the IMU file ({exc.strerror})") from None
+    tagged = fmt.uses_tick
+    week = fmt.gps_week if fmt.gps_week is not None else week  # the mapping's own week wins
+    if fmt.time == "gps_sow" and not tagged and week is None:
+        raise ValueError(f"{path}: imu time 'gps_sow' needs the GPS week (gps_week, or the observation file's)")
+    parts = raw.split(b"\n")
+    complete_last = raw.endswith(b"\n")
+    if complete_last:
+        parts = parts[:-1]
+    by_header = isinstance(fmt.columns, dict)
+    cols = None if by_header else tuple(fmt.columns)
+    rows, lines, ends, t_tok = [], [], [], []
+    dropped = []
+    pos = 0
+    header_allowed = True
+    delim = fmt.delimiter
+    for i, b in enumerate(parts):
+        lineno = i + 1
+        pos += len(b) + 1
+        if tagged and (i == 0 or (i == len(parts) - 1 and not complete_last)):
+            dropped.append(lineno)  # a str2str log starts and may end mid-line
+            continue
+        try:
+            s = b.decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise ImuFileError(path, lineno, "not ASCII text (binary data in a CSV?)") from None
+        if not s or s.startswith("#"):
+            continue
+        tok = s.split(delim)
+        if header_allowed:
+            header_allowed = False
+            if by_header:
+                if _is_number(tok[0].strip()):
+                    raise ImuFileError(path, lineno, "no header line, but the columns are mapped by header name")
+                cols = _header_columns(path, lineno, tok, fmt.columns, delim)
+                continue
+            if not _is_number(tok[0].strip()):
+                continue
+        if cols is None:
+            raise ImuFileError(path, lineno, "no header line before the data")
+        if len(rows) == 0:
+            ncol = len(cols)
+            idx = {c: cols.index(c) for c in cols if c != "_"}
+            tcol = idx["tick_ms"] if tagged else idx.get("t")
+            want = ([] if tcol is None else [tcol]) + [idx[c] for c in ("ax", "ay", "az", "gx", "gy", "gz")]
+            names = ([] if tcol is None else ["tick_ms" if tagged else "t"]) + ["ax", "ay", "az", "gx", "gy", "gz"]
+        if len(tok) != ncol:
+            raise ImuFileError(path, lineno, f"expected {ncol} {delim!r}-separated fields "
+                               f"({', '.join(cols)}), found {len(tok)}")
+        vals = []
+        for j, name in zip(want, names):
+            try:
+                v = float(tok[j])
+            except ValueError:
+                raise ImuFileError(path, lineno, f"bad number {tok[j].strip()!r} in field {j + 1} ({name})") from None
+            if not math.isfinite(v):
+                raise ImuFileError(path, lineno, f"non-finite value {tok[j].strip()!r} in field {j + 1} ({name})")
+            vals.append(v)
+        rows.append(vals)
+        if tcol is not None:
+            t_tok.append(tok[tcol])
+        lines.append(lineno)
+        ends.append(pos)
+    if len(rows) < 2:
+        raise ImuFileError(path, None, f"fewer than 2 IMU samples ({len(rows)})")
+    a = np.asarray(rows, dtype=float)
+    lines = np.asarray(lines, dtype=np.int64)
+    if tcol is None:  # no time column: t_k = k / rate_hz
+        a = np.column_stack([np.arange(len(a), dtype=float), a])
+        t_tok = None
+    t = a[:, 0]
+    d = np.diff(t)
+    if np.any(d <= 0):
+        k = int(np.argmax(d <= 0)) + 1
+        what = "tick" if tagged else "time"
+        raise ImuFileError(path, int(lines[k]), f"{what} {float(t[k])!r} does not increase (line "
+                           f"{int(lines[k - 1])}: {float(t[k - 1])!r})")
+    info = dict(lines_dropped=dropped, time_base="gps")
+    if tagged:
+        if not isinstance(tag, Str2strTag):
+            tag = read_str2str_tag(tag if tag is not None else path + ".tag")
+        n_lf = raw.count(b"\n")
+        size = len(raw)
+        last = int(tag.fpos[-1])
+        if last == size:
+            crlf_added = 0
+        elif last == size + n_lf and b"\r" not in raw:
+            crlf_added = 1  # the log had \r\n line ends, converted to \n afterwards
+        else:
+            raise ImuFileError(tag.path, None, f"the tag covers {last} bytes but {path} has {size} bytes "
+                               f"({n_lf} lines): not the time tag of this file")
+        end_bytes = np.asarray(ends, dtype=np.int64) + crlf_added * lines  # byte after each line's newline
+        k = np.minimum(np.searchsorted(tag.fpos, end_bytes), tag.fpos.size - 1)  # first write holding the line
+        arrival = tag.tick_ms[k] / 1000.0  # after the tag start
+        try:
+            t, fit = tick_time_map((t - t[0]) / 1000.0, arrival)
+        except ValueError as exc:
+            raise ImuFileError(tag.path, None, f"{exc} ({path})") from None
+        info.update(fit, tag=tag.path, crlf_converted=bool(crlf_added), t_start_gps_s=tag.t_start_gps_s)
+        t_ref = tag.t_start_gps_s
+    else:
+        if t_tok is None:
+            ref_s, t = 0, t / float(fmt.rate_hz)
+        else:
+            ref_s, t = _split_time(t_tok, _TIME_SCALE[fmt.time_unit])
+            if fmt.rate_hz is not None and len(t) > 2:
+                med = float(np.median(np.diff(t)))
+                if abs(med * fmt.rate_hz - 1.0) > 0.1:
+                    raise ImuFileError(path, None, f"median sample interval {med:.6g} s ({1 / med:.6g} Hz) with "
+                                       f"time_unit = {fmt.time_unit!r}, but rate_hz = {fmt.rate_hz:g}: wrong "
+                                       "time_unit or rate_hz")
+        t_ref = float(ref_s)
+        if fmt.time == "gpst_unix_s":
+            t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
+        elif fmt.time == "unix_utc_s":
+            t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
+            t_ref += float(gps_minus_utc_s(t_ref + t[0]))
+        elif fmt.time == "gps_sow":
+            t_ref = float(ref_s + SECONDS_PER_WEEK * int(week))
+        elif fmt.time == "relative":
+            info["time_base"] = "relative"
+    t = t + float(fmt.time_offset_s)
+    k_acc = G0 if fmt.acc_unit == "g" else 1.0
+    k_gyr = DEG if fmt.gyro_unit == "dps" else 1.0
+    C = fmt.C_b_imu()
+    acc_b = (a[:, 1:4] * k_acc) @ C.T
+    gyro_b = (a[:, 4:7] * k_gyr) @ C.T
+    return ImuSamples(t_ref, t, acc_b, gyro_b, fmt.samples, lines, path, info)
