@@ -45,6 +45,11 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "tight_realdata": (("tight_realdata.md",),
                        ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"],
                        ["bench/tight_realdata.py", "--out", "docs/results/tight_realdata.md"]),
+    "tight_multignss": (("tight_multignss.md",),
+                        ["bench/tight_multignss.py", "--runs", "20", "--fault-runs", "20", "--walk", "--out",
+                         "docs/results/tight_multignss.md"],
+                        ["bench/tight_multignss.py", "--runs", "2", "--fault-runs", "2", "--walk", "--out",
+                         "docs/results/tight_multignss.md"]),
     "walk_loose": (("walk_loose.md",), ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"],
                    ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"]),
 }

@@ -9,7 +9,7 @@ import pytest
 
 import insnav
 from conftest import short_tight_dataset
-from insnav.filters.solution import (INNOVATION_COLUMNS, RESIDUAL_COLUMNS, RecordStatus, innovations_path,
+from insnav.filters.solution import (INNOVATION_COLUMNS, RESIDUAL_COLUMNS, RESIDUAL_COLUMNS_FLAGS, RecordStatus, innovations_path,
                                      load_solution, read_innovations, read_residuals, residuals_path,
                                      write_innovations)
 
@@ -146,8 +146,17 @@ def test_tight_sidecar_and_per_satellite_residuals(tmp_path):
     np.testing.assert_array_equal(inn["status"], sol.gnss_status)
     assert np.isnan(inn["innovation"]).all()  # the loose columns are empty for tight
     res = read_residuals(residuals_path(p))
-    assert tuple(residuals_path(p).read_text().splitlines()[0].split(",")) == RESIDUAL_COLUMNS
+    assert tuple(residuals_path(p).read_text().splitlines()[0].split(",")) == RESIDUAL_COLUMNS_FLAGS
+    assert RESIDUAL_COLUMNS_FLAGS[:len(RESIDUAL_COLUMNS)] == RESIDUAL_COLUMNS
     inputs = sol.inputs
+    np.testing.assert_array_equal(res["system"], 0)  # GPS
+    np.testing.assert_array_equal(np.column_stack([res["pseudorange_flag"], res["rate_flag"]]), sol.sat_flag)
+    # a file without the flag columns (written before them) still reads
+    old = residuals_path(p).read_text().splitlines()
+    residuals_path(p).write_text("\n".join([",".join(RESIDUAL_COLUMNS)] + [ln.rsplit(",", 3)[0] for ln in old[1:]])
+                                 + "\n")
+    assert "system" not in read_residuals(residuals_path(p))
+    res = dict(read_residuals(residuals_path(p)), system=res["system"])
     assert len(res["prn"]) == len(inputs.prn) > 0
     np.testing.assert_array_equal(res["prn"], inputs.prn)
     per_epoch = np.add.reduceat(np.isfinite(res["pseudorange_residual_m"]).astype(int)

@@ -14,7 +14,7 @@ ImuErrorModel imu_model_from_dict(const py::dict& d) {
   reject_unknown(d,
                  {"gyro_arw", "acc_vrw", "gyro_bias_sigma", "acc_bias_sigma", "gyro_bias_tau", "acc_bias_tau",
                   "gyro_bias_rw", "acc_bias_rw", "gyro_scale_sigma", "acc_scale_sigma", "gyro_scale_tau",
-                  "acc_scale_tau", "clock_bias_psd", "clock_drift_psd"},
+                  "acc_scale_tau", "clock_bias_psd", "clock_drift_psd", "isb_psd"},
                  "IMU model");
   ImuErrorModel m;
   m.gyro_arw = vec3_or_scalar(d, "gyro_arw", m.gyro_arw);
@@ -31,6 +31,7 @@ ImuErrorModel imu_model_from_dict(const py::dict& d) {
   m.acc_scale_tau = vec3_or_scalar(d, "acc_scale_tau", m.acc_scale_tau);
   m.clock_bias_psd = num(d, "clock_bias_psd", m.clock_bias_psd);
   m.clock_drift_psd = num(d, "clock_drift_psd", m.clock_drift_psd);
+  m.isb_psd = num(d, "isb_psd", m.isb_psd);
   return m;
 }
 

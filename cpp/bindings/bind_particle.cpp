@@ -141,7 +141,7 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
   const py::slice traced(0, trace.n, 1);
   py::dict res;
   nav_buf.put(res, out);
-  rec_buf.put(res);
+  rec_buf.put(res, out);
   res["trace_ess"] = o_ess[traced];
   res["trace_fading_c"] = o_c[traced];
   res["trace_eta_max"] = o_eta[traced];

@@ -80,12 +80,26 @@ inline LooseConfig loose_config_from(const py::dict& d, const char* what, std::i
 }
 
 inline TightConfig tight_config_from(const py::dict& d) {
-  reject_unknown(d, {INSNAV_TIMING_KEYS, "use_pseudorange", "use_rate", INSNAV_UT_KEYS}, "tight engine config");
+  reject_unknown(d, {INSNAV_TIMING_KEYS, "use_pseudorange", "use_rate", INSNAV_UT_KEYS}, "tight engine config",
+                 {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
+                  "robust_clock_jump_sigma", "robust_clock_jump_min_rows"});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate_chi2, c.output_decimation);
   c.use_pseudorange = flag(d, "use_pseudorange", true);
   c.use_rate = flag(d, "use_rate", true);
+  RobustConfig& r = c.robust;
+  r.screening = flag(d, "robust_screening", r.screening);
+  r.chi2_row = num(d, "robust_chi2_row", r.chi2_row);
+  r.igg_k0 = num(d, "robust_igg_k0", r.igg_k0);
+  r.igg_k1 = num(d, "robust_igg_k1", r.igg_k1);
+  r.clock_jump = flag(d, "robust_clock_jump", r.clock_jump);
+  r.clock_jump_sigma = num(d, "robust_clock_jump_sigma", r.clock_jump_sigma);
+  r.clock_jump_min_rows = static_cast<int>(num(d, "robust_clock_jump_min_rows", r.clock_jump_min_rows));
+  if (!(r.chi2_row > 0.0)) throw py::value_error("robust_chi2_row must be > 0");
+  if (!(r.igg_k0 > 0.0 && r.igg_k1 > r.igg_k0)) throw py::value_error("robust IGG-III: need 0 < k0 < k1");
+  if (!(r.clock_jump_sigma > 0.0)) throw py::value_error("robust_clock_jump_sigma must be > 0");
+  if (r.clock_jump_min_rows < 1) throw py::value_error("robust_clock_jump_min_rows must be >= 1");
   return c;
 }
 
@@ -164,7 +178,9 @@ struct TightInputs {
 
 using I64Array = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
 
-inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats) {
+/// system: None (every row GPS) or (M,) int, each in [0, kNumSystems) (insnav.gnss.systems index).
+inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats,
+                                     const py::object& system = py::none()) {
   TightInputs in;
   in.E = epoch_t.size();
   require_shape(epoch_t, in.E, -1, "epoch_t");
@@ -185,6 +201,12 @@ inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoc
   }
   in.sats.resize(static_cast<size_t>(in.M));
   const double* ps = in.M ? sats.data() : nullptr;
+  I64Array sys;
+  if (!system.is_none()) {
+    sys = py::cast<I64Array>(system);
+    if (sys.ndim() != 1 || sys.shape(0) != in.M)
+      throw py::value_error("system: expected shape (" + std::to_string(in.M) + ",)");
+  }
   for (py::ssize_t i = 0; i < in.M; ++i) {
     const double* r = ps + 12 * i;
     SatObservation& o = in.sats[i];
@@ -196,6 +218,13 @@ inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoc
     o.clock_drift_mps = r[9];
     o.sigma_pr_m = r[10];
     o.sigma_prr_mps = r[11];
+    if (sys.size()) {
+      const std::int64_t k = sys.data()[i];
+      if (k < 0 || k >= kNumSystems)
+        throw py::value_error("system: index " + std::to_string(k) + " at row " + std::to_string(i) +
+                              " (expected 0 G, 1 R, 2 E, 3 C)");
+      o.system = static_cast<int>(k);
+    }
     const bool any = std::isfinite(o.pseudorange_m) || std::isfinite(o.pseudorange_rate_mps);
     if (any && !(o.r_e.allFinite() && o.v_e.allFinite() && std::isfinite(o.clock_bias_m) &&
                  std::isfinite(o.clock_drift_mps)))

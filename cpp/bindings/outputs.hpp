@@ -54,14 +54,15 @@ struct PyPoll {
 
 /// Arrays for n_out per-sample rows: t, llh, v_n, rpy, sigma (sigma_cols), imu_err, and clock if asked.
 struct NavBuffers {
-  DArray t, llh, v_n, rpy, sigma, imu_err, clock;
-  bool with_clock;
+  DArray t, llh, v_n, rpy, sigma, imu_err, clock, isb;
+  bool with_clock, with_isb;
   PyPoll poll;
 
-  NavBuffers(py::ssize_t n_out, int sigma_cols, bool with_clock_)
+  NavBuffers(py::ssize_t n_out, int sigma_cols, bool with_clock_, bool with_isb_ = false)
       : t({n_out}), llh({n_out, py::ssize_t(3)}), v_n({n_out, py::ssize_t(3)}), rpy({n_out, py::ssize_t(3)}),
         sigma({n_out, py::ssize_t(sigma_cols)}), imu_err({n_out, py::ssize_t(12)}),
-        clock({with_clock_ ? n_out : py::ssize_t(0), py::ssize_t(2)}), with_clock(with_clock_) {}
+        clock({with_clock_ ? n_out : py::ssize_t(0), py::ssize_t(2)}),
+        isb({with_isb_ ? n_out : py::ssize_t(0), py::ssize_t(3)}), with_clock(with_clock_), with_isb(with_isb_) {}
 
   void attach(NavOutputs& out) {
     if (progress_hook()) poll.progress = py::reinterpret_borrow<py::object>(progress_hook());
@@ -76,6 +77,7 @@ struct NavBuffers {
     out.sigma_cols = static_cast<int>(sigma.shape(1));
     out.imu_err = imu_err.mutable_data();
     out.clock = with_clock ? clock.mutable_data() : nullptr;
+    out.isb = with_isb ? isb.mutable_data() : nullptr;
   }
 
   /// The rows written and the run counters into res.
@@ -89,6 +91,7 @@ struct NavBuffers {
     res["sigma"] = sigma[rows];
     res["imu_err"] = imu_err[rows];
     if (with_clock) res["clock"] = clock[rows];
+    if (with_isb) res["isb"] = isb[rows];
     res["updates"] = out.updates;
     res["rejected"] = out.rejected;
     res["cholesky_repairs"] = out.cholesky_repairs;
@@ -116,29 +119,40 @@ struct LooseRecordBuffers {
   }
 };
 
-/// Per tight epoch (E) and satellite row (M): sat_residual (M, 2), nis, status, rows.
+/// Per tight epoch (E) and satellite row (M): sat_residual (M, 2), sat_flag (M, 2), nis, status, rows,
+/// clock_jump; and the robust step's counters.
 struct TightRecordBuffers {
-  DArray sat_residual, nis;
-  py::array_t<std::int8_t> status;
+  DArray sat_residual, nis, clock_jump;
+  py::array_t<std::int8_t> status, sat_flag;
   py::array_t<std::int32_t> rows;
   py::ssize_t E, M;
 
   TightRecordBuffers(py::ssize_t E_, py::ssize_t M_)
-      : sat_residual({M_, py::ssize_t(2)}), nis({E_}), status({E_}), rows({E_}), E(E_), M(M_) {}
+      : sat_residual({M_, py::ssize_t(2)}), nis({E_}), clock_jump({E_}), status({E_}), sat_flag({M_, py::ssize_t(2)}),
+        rows({E_}), E(E_), M(M_) {}
 
   template <class Out>
   void attach(Out& out) {
     out.sat_residual = M ? sat_residual.mutable_data() : nullptr;
+    out.sat_flag = M ? sat_flag.mutable_data() : nullptr;
     out.nis = E ? nis.mutable_data() : nullptr;
     out.status = E ? status.mutable_data() : nullptr;
     out.rows = E ? rows.mutable_data() : nullptr;
+    out.clock_jump = E ? clock_jump.mutable_data() : nullptr;
   }
 
-  void put(py::dict& res) const {
+  template <class Out>
+  void put(py::dict& res, const Out& out) const {
     res["sat_residual"] = sat_residual;
+    res["sat_flag"] = sat_flag;
     res["nis"] = nis;
     res["status"] = status;
     res["rows"] = rows;
+    res["clock_jump"] = clock_jump;
+    res["rejected_sats"] = out.rejected_sats;
+    res["downweighted_sats"] = out.downweighted_sats;
+    res["flagged_epochs"] = out.flagged_epochs;
+    res["clock_jumps"] = out.clock_jumps;
   }
 };
 

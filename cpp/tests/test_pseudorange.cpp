@@ -46,7 +46,12 @@ static std::vector<SatObservation> make_sats(double lat, double lon, const Vec3&
   return out;
 }
 
+// LL = LayoutTightMulti: the satellites cycle through G, R, E, C and each
+// non-GPS pseudorange row has +1 in its system's ISB column (checked
+// numerically with the rest of H).
+template <class LL>
 static void test_h_numerical() {
+  using L = LL;
   std::mt19937 rng(11);
   NavState ins;
   ins.lat = 0.7;
@@ -62,8 +67,21 @@ static void test_h_numerical() {
     s.pseudorange_rate_mps = 100.0;
   }
   sats[2].pseudorange_rate_mps = NAN;  // a missing Doppler drops one row
+  const double isb[3] = {-20.0, 35.0, 11.0};
+  if constexpr (kHasIsb<L>)
+    for (size_t i = 0; i < sats.size(); ++i) sats[i].system = static_cast<int>(i % 4);
   TightMeasurement<L> meas;
-  meas.set(ins, w_b, l_b, 123.0, 0.4, sats.data(), static_cast<int>(sats.size()));
+  meas.set(ins, w_b, l_b, 123.0, 0.4, sats.data(), static_cast<int>(sats.size()), isb);
+  if constexpr (kHasIsb<L>) {  // H: +1 in the ISB column of its system, pseudorange rows only
+    int row = 0;
+    for (size_t i = 0; i < sats.size(); ++i)
+      for (int kind = 0; kind < 2; ++kind) {
+        if (!std::isfinite(kind == 0 ? sats[i].pseudorange_m : sats[i].pseudorange_rate_mps)) continue;
+        for (int k = 0; k < 3; ++k)
+          EXPECT_TRUE(meas.linear().H(row, L::kIsb + k) == ((kind == 0 && sats[i].system == k + 1) ? 1.0 : 0.0));
+        ++row;
+      }
+  }
   const auto& lin = meas.linear();
   EXPECT_TRUE(lin.rows() == 15);
   const StateVec<L> zero = StateVec<L>::Zero();
@@ -89,12 +107,13 @@ static void test_h_numerical() {
   std::printf("H vs numerical derivative: worst abs difference %.3g\n", worst);
   // residual from exact measurements of a true state = predicted_residual(dx) ~ H dx
   StateVec<L> dx = zero;
-  dx.segment<3>(L::kPos) = Vec3(5.0, -3.0, 8.0);
-  dx.segment<3>(L::kVel) = Vec3(0.2, 0.1, -0.3);
-  dx.segment<3>(L::kAtt) = Vec3(1e-3, -2e-3, 5e-3);
-  dx.segment<3>(L::kGyroBias) = Vec3(1e-4, 2e-4, -1e-4);
+  dx.template segment<3>(L::kPos) = Vec3(5.0, -3.0, 8.0);
+  dx.template segment<3>(L::kVel) = Vec3(0.2, 0.1, -0.3);
+  dx.template segment<3>(L::kAtt) = Vec3(1e-3, -2e-3, 5e-3);
+  dx.template segment<3>(L::kGyroBias) = Vec3(1e-4, 2e-4, -1e-4);
   dx[L::kClockBias] = 7.0;
   dx[L::kClockDrift] = -0.05;
+  if constexpr (kHasIsb<L>) dx.template segment<3>(L::kIsb) = Vec3(2.0, -6.0, 1.5);
   const auto z_sim = meas.predicted_residual(dx);  // INS-predicted - true-state prediction
   const auto lin_pred = (lin.H * dx).eval();
   EXPECT_LT((z_sim - lin_pred).cwiseAbs().maxCoeff(), 1e-3);
@@ -104,15 +123,18 @@ static void test_h_numerical() {
   tru.lat -= dx[0] / (rr.R_M + ins.h);
   tru.lon -= dx[1] / ((rr.R_N + ins.h) * std::cos(ins.lat));
   tru.h += dx[2];
-  const Mat3 C_true = dcm_from_euler(dx.segment<3>(L::kAtt)) * ins.q_nb.toRotationMatrix();
+  const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * ins.q_nb.toRotationMatrix();
   const Vec3 r_ant = wgs84::geodetic_to_ecef(tru.lat, tru.lon, tru.h) + wgs84::C_en(tru.lat, tru.lon) * C_true * l_b;
   auto s1 = sats;
   for (auto& s : s1) {
-    s.pseudorange_m = (s.r_e - r_ant).norm() + (123.0 - 7.0) - s.clock_bias_m;
+    double isb_true = 0.0;
+    if constexpr (kHasIsb<L>)
+      if (s.system > 0) isb_true = isb[s.system - 1] - dx[L::kIsb + s.system - 1];
+    s.pseudorange_m = (s.r_e - r_ant).norm() + (123.0 - 7.0) + isb_true - s.clock_bias_m;
     s.pseudorange_rate_mps = NAN;
   }
   TightMeasurement<L> m2;
-  m2.set(ins, w_b, l_b, 123.0, 0.4, s1.data(), static_cast<int>(s1.size()));
+  m2.set(ins, w_b, l_b, 123.0, 0.4, s1.data(), static_cast<int>(s1.size()), isb);
   for (int i = 0; i < m2.linear().rows(); ++i)
     EXPECT_LT(std::abs(m2.linear().residual[i] - (m2.linear().H.row(i) * dx)(0)), 1e-4);
 }
@@ -204,8 +226,110 @@ static void run_stationary(int n_sats, const char* name) {
   if (n_sats >= 1) EXPECT_LT(std::hypot(dN, dE), 30.0);
 }
 
+// LayoutTightMulti, stationary, 9 satellites of G, E, C, R with true ISBs;
+// a 50 m pseudorange step on one Galileo satellite over epochs 40-79 and a
+// 1 ms receiver clock reset (all pseudoranges + 299792.458 m) from epoch 100:
+// with the robust step the fault is rejected, the jump absorbed into the
+// clock, the ISBs estimated, the position stays; no heap allocation.
+template <class Filter>
+static void run_multi_robust(const char* name) {
+  using LM = LayoutTightMulti;
+  std::mt19937 rng(7);
+  const double lat = 0.8, lon = 0.2, h = 300.0, dt = 0.01, T = 150.0;
+  const int n = static_cast<int>(T / dt);
+  const Vec3 w_ie_n = wgs84::omega_ie_n(lat);
+  const Vec3 f_n(0.0, 0.0, -wgs84::gravity(lat, h));
+  std::vector<double> t(n), dth(3 * n), dv(3 * n);
+  for (int k = 0; k < n; ++k) {
+    t[k] = (k + 1) * dt;
+    for (int j = 0; j < 3; ++j) {
+      dth[3 * k + j] = w_ie_n[j] * dt;
+      dv[3 * k + j] = f_n[j] * dt;
+    }
+  }
+  const Vec3 r_e = wgs84::geodetic_to_ecef(lat, lon, h);
+  auto geom = make_sats(lat, lon, r_e, 9, rng);
+  const int sys[9] = {0, 2, 3, 0, 2, 3, 0, 1, 2};
+  const double isb_true[3] = {-15.0, 42.0, -27.0};  // R, E, C [m]
+  for (int i = 0; i < 9; ++i) geom[i].system = sys[i];
+  std::normal_distribution<double> nd(0.0, 1.0);
+  std::vector<TightEpoch> ep;
+  std::vector<SatObservation> obs;
+  const double b0 = 50.0, d0 = 0.3, jump = 299792.458;
+  for (int e = 1; e <= static_cast<int>(T); ++e) {
+    TightEpoch x;
+    x.t = e;
+    x.begin = static_cast<std::int64_t>(obs.size());
+    for (int i = 0; i < 9; ++i) {
+      SatObservation s = geom[i];
+      const Vec3 d = s.r_e - r_e;
+      s.pseudorange_m = d.norm() + b0 + d0 * e + (s.system ? isb_true[s.system - 1] : 0.0) - s.clock_bias_m +
+                        1.0 * nd(rng) + ((i == 1 && e >= 40 && e < 80) ? 50.0 : 0.0) + (e >= 100 ? jump : 0.0);
+      s.sigma_pr_m = 1.0;
+      s.pseudorange_rate_mps = d.normalized().dot(s.v_e) + d0 - s.clock_drift_mps + 0.1 * nd(rng);
+      obs.push_back(s);
+    }
+    x.end = static_cast<std::int64_t>(obs.size());
+    ep.push_back(x);
+  }
+  NavState init;
+  init.lat = lat + 3.0 / 6.4e6;
+  init.lon = lon;
+  init.h = h - 2.0;
+  init.q_nb = quat_from_euler(Vec3(1e-3, -1e-3, 5e-3));
+  ImuErrorModel model;
+  model.gyro_arw = Vec3::Constant(1e-5);
+  model.acc_vrw = Vec3::Constant(1e-3);
+  model.gyro_bias_sigma = Vec3::Constant(1e-6);
+  model.acc_bias_sigma = Vec3::Constant(1e-3);
+  model.clock_bias_psd = 0.1;
+  model.clock_drift_psd = 0.01;
+  StateVec<LM> p0;
+  p0 << 5, 5, 5, 0.1, 0.1, 0.1, 2e-3, 2e-3, 1e-2, 1e-3, 1e-3, 1e-3, 1e-6, 1e-6, 1e-6, 20.0, 1.0, 100, 100, 100;
+  const StateCov<LM> P0 = p0.cwiseAbs2().asDiagonal();
+  TightConfig cfg;
+  cfg.robust.screening = true;
+  auto engine = std::make_unique<TightEngine<Filter>>(model, cfg);
+  std::vector<double> o_t(n + 1), o_llh(3 * (n + 1)), o_clk(2 * (n + 1)), o_isb(3 * (n + 1)), o_sig(20 * (n + 1)),
+      o_jump(ep.size());
+  std::vector<std::int8_t> o_flag(2 * obs.size());
+  TightOutputs out;
+  out.t = o_t.data();
+  out.llh = o_llh.data();
+  out.clock = o_clk.data();
+  out.isb = o_isb.data();
+  out.sigma = o_sig.data();
+  out.sat_flag = o_flag.data();
+  out.clock_jump = o_jump.data();
+  Eigen::internal::set_is_malloc_allowed(false);
+  engine->run(init, P0, ImuCorrection{}, 40.0, 0.0, n, t.data(), dth.data(), dv.data(),
+              static_cast<std::int64_t>(ep.size()), ep.data(), obs.data(), out);
+  Eigen::internal::set_is_malloc_allowed(true);
+  const std::int64_t last = out.n_out - 1;
+  const double dN = (o_llh[3 * last] - lat) * 6.37e6, dE = (o_llh[3 * last + 1] - lon) * 6.37e6 * std::cos(lat);
+  const double clk_err = o_clk[2 * last] - (b0 + d0 * T + jump);
+  int rejected_fault = 0;
+  for (int e = 40; e < 80; ++e) rejected_fault += o_flag[2 * (9 * (e - 1) + 1)] == 2 ? 1 : 0;
+  std::printf("%s multi-GNSS robust: pos err N %.2f E %.2f m, clock err %.2f m, ISB err %.2f %.2f %.2f m, "
+              "fault rejected %d/40 epochs, clock jumps %d (%.3f m at epoch 100), rejected sats %d, flagged %d\n",
+              name, dN, dE, clk_err, o_isb[3 * last] - isb_true[0], o_isb[3 * last + 1] - isb_true[1],
+              o_isb[3 * last + 2] - isb_true[2], rejected_fault, out.clock_jumps, o_jump[99], out.rejected_sats,
+              out.flagged_epochs);
+  EXPECT_TRUE(rejected_fault == 40);
+  EXPECT_TRUE(out.clock_jumps == 1);
+  EXPECT_LT(std::abs(o_jump[99] - jump), 5.0);
+  EXPECT_LT(std::abs(clk_err), 5.0);
+  for (int k = 0; k < 3; ++k) EXPECT_LT(std::abs(o_isb[3 * last + k] - isb_true[k]), 5.0);
+  EXPECT_LT(std::hypot(dN, dE), 5.0);
+  EXPECT_TRUE(out.updates == 150);
+}
+
 int main() {
-  test_h_numerical();
+  run_multi_robust<Ekf<LayoutTightMulti>>("EKF");
+  run_multi_robust<RbUkf<LayoutTightMulti>>("RB-UKF");
+  run_multi_robust<Ukf<LayoutTightMulti>>("UKF");
+  test_h_numerical<Layout17>();
+  test_h_numerical<LayoutTightMulti>();
   for (int ns : {0, 1, 2, 3, 4}) {
     run_stationary<Ekf<L>>(ns, "EKF");
     run_stationary<RbUkf<L>>(ns, "RB-UKF");

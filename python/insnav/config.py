@@ -191,6 +191,67 @@ class Constraints:
 
 
 @dataclass
+class Robust:
+    """Robust tight update (``[robust]`` in the TOML;
+    ``cpp/include/insnav/meas/robust.hpp``).  Every test is on the predicted
+    innovation ``y_i`` of one satellite's pseudorange or rate row against its
+    predicted variance ``S_ii = H_i P H_i' + R_ii`` (``w_i = y_i / sqrt(S_ii)``).
+
+    Attributes
+    ----------
+    screening : bool
+        Per-row chi-square screening with IGG-III down-weighting (Yang, Song
+        & Xu 2002, J. Geodesy 76) in the epochs it flags (off by default: the
+        plain update; an unflagged epoch is always the plain update).
+    chi2_row : float
+        Threshold on ``w_i^2`` (1-dof chi-square; 10.83 = the 1 - 1e-3
+        quantile): a row above it flags the epoch and is rejected.
+    igg_k0, igg_k1 : float
+        IGG-III limits on ``|w_i|`` in a flagged epoch: full weight up to
+        ``k0`` (1.5), ``R_ii`` inflated between, rejected beyond ``k1`` (3.0).
+    clock_jump : bool
+        Move a common offset of all pseudorange innovations (a receiver clock
+        reset, e.g. 1 ms = 299792.458 m) into the clock estimate instead of
+        rejecting every satellite (on by default).
+    clock_jump_sigma : float
+        The offset is a jump when its median exceeds this many median
+        ``sqrt(S_ii)`` (10) and at least half of the rows agree with it.
+    clock_jump_min_rows : int
+        Pseudorange rows an epoch needs for the check (3).
+    """
+
+    screening: bool = False
+    chi2_row: float = 10.83
+    igg_k0: float = 1.5
+    igg_k1: float = 3.0
+    clock_jump: bool = True
+    clock_jump_sigma: float = 10.0
+    clock_jump_min_rows: int = 3
+
+    def validate(self, prefix: str = "robust") -> "Robust":
+        def bad(key, value, allowed):
+            raise ConfigError(f"config key '{prefix}.{key}': bad value {value!r}; allowed: {allowed}")
+
+        for key in ("screening", "clock_jump"):
+            if not isinstance(getattr(self, key), (bool, np.bool_)):
+                bad(key, getattr(self, key), "true or false")
+        for key in ("chi2_row", "igg_k0", "igg_k1", "clock_jump_sigma"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                bad(key, v, "a number > 0")
+        if not self.igg_k1 > self.igg_k0:
+            bad("igg_k1", self.igg_k1, f"a number > igg_k0 = {self.igg_k0}")
+        v = self.clock_jump_min_rows
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            bad("clock_jump_min_rows", v, "an integer >= 1")
+        return self
+
+    def as_core_dict(self) -> dict:
+        """The ``robust_*`` keys of the tight engine config."""
+        return {f"robust_{f.name}": getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+@dataclass
 class RunConfig:
     """Everything a run needs besides the data.
 
@@ -226,6 +287,9 @@ class RunConfig:
         Unscented-transform parameters (kappa None: 3 - n, seed 000).
     constraints : Constraints
         Vehicle constraints (NHC, odometer, ZUPT/ZARU; none by default).
+    robust : Robust
+        Tight coupling: clock-jump check, per-satellite screening and IGG-III
+        down-weighting (``[robust]``; screening off by default).
     smooth : bool
         Post-process with the RTS smoother (loose EKF; loose RB-UKF and UKF:
         the unscented RTS smoother, Sarkka 2008): every output row and sigma
@@ -268,6 +332,7 @@ class RunConfig:
     ut_beta: float = 2.0
     ut_kappa: float | None = None
     constraints: Constraints = field(default_factory=Constraints)
+    robust: Robust = field(default_factory=Robust)
     smooth: bool = False
     sanitize: dict = field(default_factory=dict)
     imu_error_sigmas: bool = False
@@ -313,6 +378,9 @@ class RunConfig:
         if not isinstance(self.constraints, Constraints):
             bad("constraints", self.constraints, "a [constraints] table")
         self.constraints.validate()
+        if not isinstance(self.robust, Robust):
+            bad("robust", self.robust, "a [robust] table")
+        self.robust.validate()
         if not isinstance(self.sanitize, dict):
             bad("sanitize", self.sanitize, "a [sanitize] table")
         _SAN = SANITIZE_DEFAULTS
@@ -410,11 +478,20 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     d = dict(d)
     imu_d = d.pop("imu", None)
     con_d = d.pop("constraints", None)
-    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints"}
+    rob_d = d.pop("robust", None)
+    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints", "robust"}
     for k in d:
         if k not in names:
-            raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | {'imu', 'constraints'})}")
+            raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | {'imu', 'constraints', 'robust'})}")
     cfg = RunConfig(**d)
+    if rob_d is not None:
+        if not isinstance(rob_d, dict):
+            raise ConfigError(f"{source}: key 'robust': bad value {rob_d!r}; allowed: a table")
+        known = {f.name for f in dataclasses.fields(Robust)}
+        for k in rob_d:
+            if k not in known:
+                raise ConfigError(f"{source}: unknown key 'robust.{k}'; known keys: {', '.join(sorted(known))}")
+        cfg.robust = Robust(**rob_d)
     if con_d is not None:
         if not isinstance(con_d, dict):
             raise ConfigError(f"{source}: key 'constraints': bad value {con_d!r}; allowed: a table")

@@ -118,7 +118,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name in ("imu", "constraints", "sanitize") or v is None:
+        if f.name in ("imu", "constraints", "robust", "sanitize") or v is None:
             continue
         lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.sanitize:
@@ -134,6 +134,11 @@ def resolved_config_toml(cfg: RunConfig) -> str:
                 continue
             else:
                 lines.append(f"{f.name} = {toml_value(v)}")
+    from ..config import Robust
+
+    if cfg.coupling == "tight" or cfg.robust != Robust():
+        lines.append("\n[robust]")
+        lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)]
     if cfg.imu is not None:
         from ..config import _USER_UNITS
 
@@ -466,6 +471,7 @@ def cmd_run(args) -> int:
             base = out
         written.append(write_innovations(sol, base))
         cfg.filter = sol.summary.get("filter", cfg.filter)
+        cfg.coupling = sol.summary.get("coupling", cfg.coupling)
         text = resolved_config_toml(cfg)
         if rinex_opts is not None:
             text += _rinex_table_toml(rinex_opts)
@@ -481,7 +487,10 @@ def cmd_run(args) -> int:
         raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
           f"records, {used} updates used, {rejected} rejected by the gate, {dropped} dropped by the input checks; "
-          f"{s.get('cholesky_repairs', 0)} covariance repairs")
+          f"{s.get('cholesky_repairs', 0)} covariance repairs"
+          + (f"; robust: {s.get('rejected_sats', 0)} satellite-epochs rejected, {s.get('downweighted_sats', 0)} "
+             f"down-weighted ({s.get('flagged_epochs', 0)} epochs flagged), {s.get('clock_jumps', 0)} clock jumps"
+             if s.get("robust_screening") or s.get("clock_jumps") else ""))
     stages.done("write")
     if args.timings:
         import sys

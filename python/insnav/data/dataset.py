@@ -216,6 +216,11 @@ class Truth(NavTrajectory):
                    a[:, 10:13].copy(), a[:, 13:16].copy())
 
 
+#: system letters in the order of their index, the same as insnav.gnss.systems.SYSTEMS
+#: (the data layer does not import gnss; tests/test_tight_multi.py checks they agree)
+SYSTEM_LETTERS = ("G", "R", "E", "C")
+
+
 @dataclass
 class GnssRaw:
     """Raw GPS observations, one row per (epoch, satellite).
@@ -268,11 +273,23 @@ class GnssRaw:
     sigma_prr_mps: np.ndarray
     rx_clock_bias_m: np.ndarray
     rx_clock_drift_mps: np.ndarray
+    #: (M,) one-letter system of each row (insnav.gnss.systems.SYSTEMS); None: every row GPS
+    system: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.system is not None:
+            self.system = np.asarray(self.system, dtype="<U1")
+
+    def is_multi(self) -> bool:
+        """True when any row is not GPS."""
+        return self.system is not None and bool(np.any(self.system != "G"))
 
     COLUMNS = ("t_s", "prn", "pseudorange_m", "pseudorange_rate_mps", "sat_x_m", "sat_y_m",
                "sat_z_m", "sat_vx_mps", "sat_vy_mps", "sat_vz_mps", "sat_clock_bias_m",
                "sat_clock_drift_mps", "elevation_deg", "azimuth_deg", "travel_time_s",
                "sigma_pr_m", "sigma_prr_mps", "true_rx_clock_bias_m", "true_rx_clock_drift_mps")
+    #: gnss_raw.csv of a multi-system dataset: COLUMNS + the system index (0 G, 1 R, 2 E, 3 C)
+    COLUMNS_MULTI = COLUMNS + ("system",)
 
     def __len__(self):
         return len(self.t)
@@ -282,18 +299,30 @@ class GnssRaw:
         return np.unique(self.t)
 
     def to_array(self):
-        return np.column_stack([self.t, self.prn, self.pseudorange_m, self.pseudorange_rate_mps,
-                                self.sat_r_e, self.sat_v_e, self.sat_clock_bias_m,
-                                self.sat_clock_drift_mps, self.elevation_deg, self.azimuth_deg,
-                                self.travel_time_s, self.sigma_pr_m, self.sigma_prr_mps,
-                                self.rx_clock_bias_m, self.rx_clock_drift_mps])
+        """(M, 19) float, columns COLUMNS; (M, 20) with the system index when :meth:`is_multi`."""
+        cols = [self.t, self.prn, self.pseudorange_m, self.pseudorange_rate_mps,
+                self.sat_r_e, self.sat_v_e, self.sat_clock_bias_m,
+                self.sat_clock_drift_mps, self.elevation_deg, self.azimuth_deg,
+                self.travel_time_s, self.sigma_pr_m, self.sigma_prr_mps,
+                self.rx_clock_bias_m, self.rx_clock_drift_mps]
+        if self.is_multi():
+            idx = {c: k for k, c in enumerate(SYSTEM_LETTERS)}
+            cols.append(np.array([idx[c] for c in self.system], np.int64))
+        return np.column_stack(cols)
 
     @classmethod
     def from_array(cls, a):
-        a = a.reshape(-1, 19)
+        w = 20 if (a.ndim == 2 and a.shape[1] == 20) else 19
+        a = a.reshape(-1, w)
         c = [a[:, i].copy() for i in range(19)]
+        system = None
+        if w == 20:
+            k = a[:, 19].astype(np.int64)
+            if np.any((k < 0) | (k >= len(SYSTEM_LETTERS))):
+                raise ValueError(f"gnss_raw: system index outside 0..{len(SYSTEM_LETTERS) - 1}")
+            system = np.asarray(SYSTEM_LETTERS)[k]
         return cls(c[0], c[1].astype(np.int64), c[2], c[3], a[:, 4:7].copy(), a[:, 7:10].copy(),
-                   c[10], c[11], c[12], c[13], c[14], c[15], c[16], c[17], c[18])
+                   c[10], c[11], c[12], c[13], c[14], c[15], c[16], c[17], c[18], system)
 
 
 @dataclass
@@ -445,7 +474,8 @@ class Dataset:
             if self.truth is not None:
                 write_csv(tmp / "truth.csv", Truth.COLUMNS, self.truth.to_array(), "%.17g")
             if self.gnss_raw is not None:
-                write_csv(tmp / "gnss_raw.csv", GnssRaw.COLUMNS, self.gnss_raw.to_array(), "%.17g")
+                write_csv(tmp / "gnss_raw.csv", GnssRaw.COLUMNS_MULTI if self.gnss_raw.is_multi() else GnssRaw.COLUMNS,
+                          self.gnss_raw.to_array(), "%.17g")
             if self.imu_errors is not None:
                 write_csv(tmp / "imu_errors.csv", ImuErrors.COLUMNS, self.imu_errors.to_array(),
                           "%.17g")
@@ -597,8 +627,8 @@ def load_dataset(directory) -> Dataset:
     gnss.origin = gnss_origin
     truth = (Truth.from_array(read_csv(d / "truth.csv", Truth.COLUMNS))
              if (d / "truth.csv").is_file() else None)
-    raw = (GnssRaw.from_array(read_csv(d / "gnss_raw.csv", GnssRaw.COLUMNS))
-           if (d / "gnss_raw.csv").is_file() else None)
+    raw = (GnssRaw.from_array(read_csv(d / "gnss_raw.csv", GnssRaw.COLUMNS_MULTI if _csv_header(
+        d / "gnss_raw.csv").endswith(",system") else GnssRaw.COLUMNS)) if (d / "gnss_raw.csv").is_file() else None)
     errs = None
     if (d / "imu_errors.csv").is_file():
         a = read_csv(d / "imu_errors.csv", ImuErrors.COLUMNS).reshape(-1, 13)
@@ -680,6 +710,12 @@ def check_finite_rows(a: np.ndarray, origin: RowOrigin, columns) -> None:
         r, c = np.argwhere(bad)[0]
         raise ValueError(f"{origin.where(int(r))}: non-finite value {float(a[r, c])!r} in column "
                          f"{columns[int(c)]!r}")
+
+
+def _csv_header(path) -> str:
+    """The first line of a CSV file, stripped (empty for an empty file)."""
+    with open(path, "rb") as f:
+        return f.readline().decode("ascii", "replace").strip().replace(" ", "")
 
 
 def read_csv(path, columns, return_origin: bool = False):

@@ -11,8 +11,9 @@ from ..earth import radii
 from ..registry import filter_spec
 from ..units import DEG
 
-__all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_sigmas", "initial_imu_correction", "init_vector", "lever_arm",
-           "engine_config", "tight_inputs_for", "initial_clock", "raise_if_nonfinite"]
+__all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_sigmas", "initial_imu_correction",
+           "init_vector", "lever_arm", "engine_config", "tight_inputs_for", "initial_clock", "antenna_at_init",
+           "raise_if_nonfinite"]
 
 
 def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[NavState, np.ndarray]:
@@ -142,9 +143,8 @@ def tight_inputs_for(dataset, inputs=None, *, elevation_mask_deg: float, max_sat
     return inputs
 
 
-def initial_clock(inputs, dataset, cfg: RunConfig, init: NavState) -> tuple[float, float]:
-    """Receiver clock bias [m] and drift [m/s] from the first epoch with data,
-    at the initial antenna position and velocity."""
+def antenna_at_init(dataset, cfg: RunConfig, init: NavState) -> tuple[np.ndarray, np.ndarray]:
+    """ECEF antenna position [m] and velocity [m/s] (no lever-arm rate term) of the initial state."""
     from .. import _core, earth
 
     lat0, lon0 = init.lat_deg * DEG, init.lon_deg * DEG
@@ -152,12 +152,26 @@ def initial_clock(inputs, dataset, cfg: RunConfig, init: NavState) -> tuple[floa
     C_en = earth.C_en(lat0, lon0)
     C_nb = np.asarray(_core.rotation.dcm_from_euler(rpy0))
     r_ant = earth.geodetic_to_ecef(lat0, lon0, init.h_m) + C_en @ (C_nb @ lever_arm(dataset, cfg))
-    v_ant = C_en @ init.v_n
+    return r_ant, C_en @ init.v_n
+
+
+def initial_clock(inputs, dataset, cfg: RunConfig, init: NavState) -> tuple[float, float]:
+    """Receiver clock bias [m] and drift [m/s] from the first epoch with data,
+    at the initial antenna position and velocity (GPS rows when the epoch has
+    any: the clock is GPS time and the other systems' offsets are their ISBs)."""
+    from ..gnss.systems import system_index
+
+    r_ant, v_ant = antenna_at_init(dataset, cfg, init)
+    sys_idx = system_index(inputs.system) if getattr(inputs, "system", None) is not None and len(inputs.prn) \
+        else np.zeros(len(inputs.prn), np.int64)
     for e in range(inputs.epoch_t.size):
         a, b = inputs.epoch_start[e], inputs.epoch_start[e + 1]
         if b <= a:
             continue
         s = inputs.sats[a:b]
+        gps = sys_idx[a:b] == 0
+        if gps.any():
+            s = s[gps]
         d = s[:, 2:5] - r_ant
         rng = np.linalg.norm(d, axis=1)
         u = d / rng[:, None]

@@ -165,6 +165,11 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         roughening = 0.2 if filt == "pf" else 0.0
     t, dth, dv = imu_arrays(dataset)
     inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
+    if np.any(np.asarray(inputs.system) != "G"):
+        others = sorted(set(np.asarray(inputs.system).tolist()) - {"G"})
+        raise ValueError(f"{filt}: the seed 004 particle filters are GPS-only (Layout20 has no inter-system bias "
+                         f"states); the inputs have {', '.join(others)} rows -- select the GPS rows "
+                         "(inputs.select(inputs.system == 'G')) or use filter ekf/rbukf/ukf")
 
     rng = np.random.default_rng(cfg.init_seed)
     init, sig0 = initial_state(dataset, cfg, rng)
@@ -179,7 +184,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         clock0 = initial_clock(inputs, dataset, cfg, init)
     ep_t = np.asarray(inputs.epoch_t, float)
     init_vec = init_vector(dataset, init)
-    core_cfg = engine_config(dataset, cfg, ep_t, 20)
+    core_cfg = engine_config(dataset, cfg, ep_t, 20, **cfg.robust.as_core_dict())
     pcfg = dict(particles=int(particles), seed=int(seed), fading=bool(fading), rho=float(rho), beta=float(beta),
                 eta_max=float(eta_max), alpha=np.atleast_1d(np.asarray(alpha, float)),
                 fading_memory=str(fading_memory),

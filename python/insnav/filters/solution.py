@@ -302,6 +302,10 @@ INNOVATION_COLUMNS = ("t_s", "status", "applied", "nis", "rows", "dn_m", "de_m",
                       "dvd_mps", "status_name")
 #: the columns of a tight run's per-satellite residuals ``<solution>.residuals.csv``
 RESIDUAL_COLUMNS = ("t_s", "prn", "elevation_deg", "pseudorange_residual_m", "rate_residual_mps")
+#: ... and of a run that has the robust step's flags: + the system index (0 G, 1 R, 2 E, 3 C,
+#: insnav.gnss.systems) and the flags of the pseudorange and the rate (-1 absent, 0 used,
+#: 1 down-weighted, 2 rejected)
+RESIDUAL_COLUMNS_FLAGS = RESIDUAL_COLUMNS + ("system", "pseudorange_flag", "rate_flag")
 
 
 def status_name(code: int) -> str:
@@ -365,8 +369,14 @@ def write_innovations(sol: Solution, solution_path) -> Path:
     if inputs is not None and not loose and inn.ndim == 2 and inn.shape[1] == 2:
         ep = np.repeat(np.arange(len(inputs.epoch_t)), np.diff(inputs.epoch_start))
         res = np.column_stack([inputs.epoch_t[ep], inputs.prn, inputs.elevation_deg, inn])
-        atomic_write_text(residuals_path(solution_path),
-                          _csv_text(res, RESIDUAL_COLUMNS, ["%.6f", "%d", "%.3f", "%.6g", "%.6g"]))
+        cols, fmt = RESIDUAL_COLUMNS, ["%.6f", "%d", "%.3f", "%.6g", "%.6g"]
+        flags = getattr(sol, "sat_flag", None)
+        if flags is not None and np.shape(flags) == (len(inputs.prn), 2):
+            from ..gnss.systems import system_index
+
+            res = np.column_stack([res, system_index(inputs.system) if len(inputs.prn) else np.zeros(0), flags])
+            cols, fmt = RESIDUAL_COLUMNS_FLAGS, fmt + ["%d", "%d", "%d"]
+        atomic_write_text(residuals_path(solution_path), _csv_text(res, cols, fmt))
     return out
 
 
@@ -413,7 +423,16 @@ def read_innovations(path) -> dict:
 def read_residuals(path) -> dict:
     """The arrays of a tight run's ``<solution>.residuals.csv``: ``t_s``,
     ``prn``, ``elevation_deg``, ``pseudorange_residual_m``,
-    ``rate_residual_mps`` (INS-predicted minus measured, before the update)."""
-    a, _ = _read_table(Path(path), RESIDUAL_COLUMNS, text_last=False)
-    return dict(t_s=a[:, 0], prn=a[:, 1].astype(int), elevation_deg=a[:, 2], pseudorange_residual_m=a[:, 3],
-                rate_residual_mps=a[:, 4])
+    ``rate_residual_mps`` (INS-predicted minus measured, before the update);
+    and when the file has them (:data:`RESIDUAL_COLUMNS_FLAGS`) ``system``
+    (index), ``pseudorange_flag``, ``rate_flag``."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        header = tuple(h.strip() for h in f.readline().decode("ascii", "replace").strip().split(","))
+    cols = RESIDUAL_COLUMNS_FLAGS if header == RESIDUAL_COLUMNS_FLAGS else RESIDUAL_COLUMNS
+    a, _ = _read_table(path, cols, text_last=False)
+    out = dict(t_s=a[:, 0], prn=a[:, 1].astype(int), elevation_deg=a[:, 2], pseudorange_residual_m=a[:, 3],
+               rate_residual_mps=a[:, 4])
+    if cols is RESIDUAL_COLUMNS_FLAGS:
+        out.update(system=a[:, 5].astype(int), pseudorange_flag=a[:, 6].astype(int), rate_flag=a[:, 7].astype(int))
+    return out

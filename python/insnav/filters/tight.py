@@ -1,5 +1,16 @@
 """Tightly coupled GNSS/INS (seed 003, Xu et al. 2012): 17-state
-filters on pseudorange and pseudorange rate.
+filters on pseudorange and pseudorange rate; with several constellations
+(GPS + GLONASS / Galileo / BeiDou) 20 states: + one inter-system bias [m]
+per non-GPS system (``LayoutTightMulti``, ``cpp/include/insnav/filter/layout.hpp``).
+
+Layout choice (``layout="auto"``): 17 states when every satellite row is
+GPS (so every GPS-only result, seed 003's included, is unchanged), 20 when
+any row is of another system.  The ISB states start from the data (median
+pseudorange offset of each system against GPS at the initial position, 0
+when a system has no row in the first epochs) with a 1-sigma of
+``init_sigma_isb`` = 100 m, and are random walks of PSD ``isb_psd``
+(1e-4 m^2/s: 0.6 m in an hour).  Robust update: ``cfg.robust``
+(:class:`insnav.config.Robust`).
 
 Python owns the geometry (:mod:`insnav.gnss.tight_inputs`: satellite
 positions, velocities and clocks, elevation mask, best-GDOP selection,
@@ -21,13 +32,14 @@ import numpy as np
 from .. import _core
 from ..config import ImuNoise, RunConfig
 from ..gnss.clock import clock_model
+from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
 from ..units import RAD2DEG
 from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
                      tight_inputs_for)
 from .solution import Solution
 
-__all__ = ["TightSolution", "run_tight"]
+__all__ = ["TightSolution", "run_tight", "initial_isb"]
 
 
 @dataclass
@@ -35,10 +47,14 @@ class TightSolution(Solution):
     """:class:`insnav.filters.Solution` plus the tight-coupling outputs.
 
     Per epoch: ``gnss_t``, ``nis``, ``gnss_status`` (as the loose solution),
-    ``rows`` (measurement rows used).  Per satellite row (``inputs`` order):
-    ``innovation`` (M, 2) INS-predicted minus measured pseudorange [m] and
-    rate [m/s] before the update.  Per output sample: ``clock_bias_m``,
-    ``clock_drift_mps`` (estimated receiver clock), ``sigma_clock`` (N, 2).
+    ``rows`` (measurement rows used), ``clock_jump_m``.  Per satellite row
+    (``inputs`` order): ``innovation`` (M, 2) INS-predicted minus measured
+    pseudorange [m] and rate [m/s] before the update, ``sat_flag`` (M, 2).
+    Per output sample: ``clock_bias_m``, ``clock_drift_mps`` (estimated
+    receiver clock), ``sigma_clock`` (N, 2), and with 20 states ``isb_m``,
+    ``sigma_isb`` (N, 3).  ``summary``: ``layout``, ``systems``, and the
+    robust step's ``rejected_sats``, ``downweighted_sats``,
+    ``flagged_epochs``, ``clock_jumps``.
     """
 
     clock_bias_m: np.ndarray = None
@@ -46,13 +62,21 @@ class TightSolution(Solution):
     sigma_clock: np.ndarray = None
     rows: np.ndarray = None
     inputs: TightInputs | None = None
+    #: (N, 3) inter-system biases of GLONASS, Galileo, BeiDou [m] (20-state runs; None with 17)
+    isb_m: np.ndarray = None
+    sigma_isb: np.ndarray = None
+    #: (M, 2) per satellite row, pseudorange / rate: -1 absent, 0 used, 1 down-weighted (IGG-III), 2 rejected
+    sat_flag: np.ndarray = None
+    #: (E,) receiver clock jump moved into the clock estimate at each epoch [m] (0: none)
+    clock_jump_m: np.ndarray = None
 
 
 def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | None = None,
               elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
               init_sigma_clock=(30.0, 1.0), clock0=None, use_pseudorange: bool = True,
-              use_rate: bool = True) -> TightSolution:
-    """Closed-loop tightly coupled run over a dataset (EKF, RB-UKF or UKF, Layout17).
+              use_rate: bool = True, layout="auto", isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
+              isb0=None) -> TightSolution:
+    """Closed-loop tightly coupled run over a dataset (EKF, RB-UKF or UKF, 17 or 20 states).
 
     Parameters
     ----------
@@ -67,6 +91,16 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     clock_psd : (bias [m^2/s], drift [m^2/s^3]), optional; default :func:`clock_model`.
     init_sigma_clock : 1-sigma of the initial clock bias [m] and drift [m/s].
     clock0 : (bias, drift), optional; default from the first epoch at the initial state.
+    layout : {"auto", 17, 20}
+        20 (``LayoutTightMulti``): + inter-system biases of R, E, C; "auto": 20
+        when any row is not GPS, else 17.  (With 17, non-GPS rows would share
+        the GPS clock: only for data whose ISBs were removed.)
+    isb_psd : float
+        ISB random-walk PSD [m^2/s] (20 states).
+    init_sigma_isb : float
+        1-sigma of the initial ISBs [m].
+    isb0 : 3 floats, optional
+        Initial ISBs of R, E, C [m]; default :func:`initial_isb` from the data.
 
     Returns
     -------
@@ -85,32 +119,83 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)
     model["clock_bias_psd"] = float(qb)
     model["clock_drift_psd"] = float(qd)
-    p0 = np.zeros(17)
+    sys_idx = system_index(inputs.system) if len(inputs.prn) else np.zeros(0, np.int64)
+    if layout == "auto":
+        layout = 20 if np.any(sys_idx != 0) else 17
+    if layout not in (17, 20):
+        raise ValueError(f"run_tight: layout {layout!r}; allowed: 'auto', 17, 20")
+    n = int(layout)
+    p0 = np.zeros(n)
     p0[:9] = sig0
     p0[9:12] = noise.acc_bias_sigma
     p0[12:15] = noise.gyro_bias_sigma
     p0[15:17] = init_sigma_clock
+    if n == 20:
+        model["isb_psd"] = float(isb_psd)
+        p0[17:20] = init_sigma_isb
     P0 = np.diag(p0 ** 2)
     if clock0 is None:
         clock0 = initial_clock(inputs, dataset, cfg, init)
+    if n == 20 and isb0 is None:
+        isb0 = initial_isb(inputs, dataset, cfg, init, sys_idx)
     ep_t = np.asarray(inputs.epoch_t, float)
     init_vec = init_vector(dataset, init)
-    core_cfg = engine_config(dataset, cfg, ep_t, 17, use_pseudorange=bool(use_pseudorange), use_rate=bool(use_rate))
+    core_cfg = engine_config(dataset, cfg, ep_t, n, use_pseudorange=bool(use_pseudorange), use_rate=bool(use_rate),
+                             **cfg.robust.as_core_dict())
     out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                           np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0, np.zeros(12),
-                          np.asarray(clock0, float), model, core_cfg)
+                          np.asarray(clock0, float), model, core_cfg, layout=n, system=sys_idx,
+                          isb0=None if n == 17 else np.asarray(isb0, float))
     sig, err, llh, rpy = out["sigma"], out["imu_err"], out["llh"], out["rpy"] * RAD2DEG
+    systems = sorted(set(np.asarray(inputs.system).tolist()), key=SYSTEMS.index)
     sol = TightSolution(
         t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2], v_n=out["v_n"],
         roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2], sigma_pos_n_m=sig[:, 0:3],
         sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG, acc_bias_mps2=err[:, 0:3],
         gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9], gyro_scale=err[:, 9:12], gnss_t=ep_t,
         innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
-        summary=dict(filter=cfg.filter, coupling="tight", layout=17, updates=int(out["updates"]),
-                     rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
-                     gnss_records=int(ep_t.size), sat_rows=int(len(inputs.prn)), clock0=tuple(clock0),
-                     clock_psd=(float(qb), float(qd))),
+        summary=dict(filter=cfg.filter, coupling="tight", layout=n, systems="".join(systems),
+                     updates=int(out["updates"]), rejected=int(out["rejected"]),
+                     cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=int(ep_t.size),
+                     sat_rows=int(len(inputs.prn)), clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
+                     robust_screening=bool(cfg.robust.screening), rejected_sats=int(out["rejected_sats"]),
+                     downweighted_sats=int(out["downweighted_sats"]), flagged_epochs=int(out["flagged_epochs"]),
+                     clock_jumps=int(out["clock_jumps"])),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 15:17],
-        rows=out["rows"], inputs=inputs)
+        rows=out["rows"], inputs=inputs, sat_flag=out["sat_flag"], clock_jump_m=out["clock_jump"])
+    if n == 20:
+        sol.isb_m = out["isb"]
+        sol.sigma_isb = sig[:, 17:20]
+        sol.summary["isb0"] = tuple(float(v) for v in isb0)
     raise_if_nonfinite(sol, cfg.filter)
     return sol
+
+
+def initial_isb(inputs: TightInputs, dataset, cfg: RunConfig, init, sys_idx=None) -> np.ndarray:
+    """Initial inter-system biases of R, E, C [m]: in the first epoch where GPS
+    and the system are both seen (within the first 60 s of data), the median
+    pseudorange offset (measured minus range plus satellite clock at the
+    initial antenna position) of the system minus that of GPS; 0 for a system
+    not seen with GPS."""
+    from ._setup import antenna_at_init
+
+    sys_idx = system_index(inputs.system) if sys_idx is None else np.asarray(sys_idx)
+    r_ant, _ = antenna_at_init(dataset, cfg, init)
+    out = np.zeros(3)
+    done = np.zeros(3, bool)
+    t_first = inputs.epoch_t[0] if inputs.epoch_t.size else 0.0
+    for e in range(inputs.epoch_t.size):
+        if inputs.epoch_t[e] > t_first + 60.0 or done.all():
+            break
+        a, b = inputs.epoch_start[e], inputs.epoch_start[e + 1]
+        s, k = inputs.sats[a:b], sys_idx[a:b]
+        off = s[:, 0] - (np.linalg.norm(s[:, 2:5] - r_ant, axis=1) - s[:, 8])
+        g = (k == 0) & np.isfinite(off)
+        if not g.any():
+            continue
+        for j in range(1, 4):
+            m = (k == j) & np.isfinite(off)
+            if not done[j - 1] and m.any():
+                out[j - 1] = float(np.median(off[m]) - np.median(off[g]))
+                done[j - 1] = True
+    return out

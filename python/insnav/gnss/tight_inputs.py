@@ -150,7 +150,8 @@ def tight_inputs_from_raw(raw, *, elevation_mask_deg: float = 0.0, max_sats: int
     sats = np.column_stack([raw.pseudorange_m, raw.pseudorange_rate_mps, raw.sat_r_e, raw.sat_v_e,
                             raw.sat_clock_bias_m, raw.sat_clock_drift_mps, spr, sprr])
     inp = TightInputs.from_rows(raw.t, raw.prn, sats, el, info=dict(source="simulator gnss_raw",
-                                                                    approx_r_e=approx_r_e))
+                                                                    approx_r_e=approx_r_e),
+                                system=getattr(raw, "system", None))
     if elevation_mask_deg > 0:
         inp = inp.select(inp.elevation_deg >= elevation_mask_deg)
     return limit_sats(inp, max_sats)

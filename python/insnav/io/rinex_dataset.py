@@ -171,6 +171,13 @@ class RinexOptions:
         IMU -> antenna, body FRD [m].
     elevation_mask_deg, iono, tropo, sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0 :
         GNSS inputs (:func:`insnav.gnss.tight_inputs.tight_inputs_from_rinex`).
+    systems : str
+        Systems of the tight inputs, letters of "GREC" with G (default "G"):
+        the start (single-point fix, course) uses GPS; with more systems the
+        tight filter gets every system's rows and runs with inter-system bias
+        states (``LayoutTightMulti``).  Files given as paths are read with
+        these systems; already read ObsData/NavData are used as they are.
+        With a ``[gnss]`` weighting table its rows (and systems) are used instead.
     start_s, end_s : float
         Span to use, seconds after the first observation epoch (end None: all).
     init_position : "spp" or [lat_deg, lon_deg, h_m] (antenna)
@@ -203,6 +210,7 @@ class RinexOptions:
     sigma_pr_zenith_m: float = 3.0
     sigma_prr_zenith_mps: float = 0.3
     use_cn0: bool = True
+    systems: str = "G"
     start_s: float = 0.0
     end_s: float | None = None
     init_position: object = "spp"
@@ -235,6 +243,9 @@ class RinexOptions:
             raise ConfigError(f"{source}: key 'rinex.{key}': bad value {getattr(self, key)!r}; allowed: {allowed}")
 
         self.imu_format().validate(source)
+        if not (isinstance(self.systems, str) and "G" in self.systems and set(self.systems) <= set("GREC")
+                and len(set(self.systems)) == len(self.systems)):
+            bad("systems", 'letters of "GREC" including G (GPS is the clock reference), e.g. "GEC"')
         for key in ("iono", "tropo", "use_cn0"):
             if not isinstance(getattr(self, key), bool):
                 bad(key, "true or false")
@@ -398,9 +409,9 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     if reference is not None:
         opt.reference = os.path.abspath(reference)
     if not hasattr(obs, "C1"):
-        obs = read_rinex_obs(obs)
+        obs = read_rinex_obs(obs, systems=opt.systems)
     if not hasattr(nav, "eph"):
-        nav = read_rinex_nav(nav)
+        nav = read_rinex_nav(nav, systems=opt.systems)
     if obs.epoch_t_gps_s.size == 0:
         raise ValueError(f"{obs.path}: no observation epochs")
     week = int(obs.epoch_week[0])
@@ -514,6 +525,8 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     sel = (imu.t > t0) & (imu.t <= t_hi)
     origin = imu.origin.take(sel, len(imu.t))
     imu = ImuData(imu.t[sel], imu.dtheta_b[sel], imu.dv_b[sel], origin=origin)
+    if opt.systems != "G" and wgt is None:  # every system's rows for the filter (ISB states); start: GPS
+        inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, systems=opt.systems, **kw)
     inp_run = _epochs_in(inp, t0, float(imu.t[-1]))
     g = np.flatnonzero(good & (spp.t > t0) & (spp.t <= float(imu.t[-1])))
     lat_g, lon_g, h_g = earth.ecef_to_geodetic(spp.r_e[g])
@@ -525,9 +538,11 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     n = inp_run.n_sats()
     info = dict(obs=str(obs.path), nav=str(getattr(nav, "path", "")), imu=samples.path, week=week,
                 imu_samples=len(samples), imu_rate_hz=samples.rate_hz, imu_time=samples.info,
-                gps_prns_observed=sorted(int(p) for p in np.unique(obs.prn)),
+                gps_prns_observed=sorted(int(p) for p in np.unique(np.asarray(obs.prn)[
+                    np.asarray(getattr(obs, "system", np.full(len(obs.prn), "G"))) == "G"])),
                 gps_prns_with_ephemeris=sorted(int(p) for p in np.unique(nav.eph.prn)),
-                prns_used=sorted(int(p) for p in np.unique(inp_run.prn)),
+                prns_used=sorted(int(p) for p in np.unique(inp_run.prn[inp_run.system == "G"])),
+                sats_used=sorted(set(f"{s}{int(p):02d}" for s, p in zip(inp_run.system, inp_run.prn))),
                 sats_per_epoch=(int(n.min()), int(np.median(n)), int(n.max())) if n.size else (0, 0, 0),
                 start_rule=start_rule, start_s_after_first_epoch=t0 - t_first, approx_r_e=r0.tolist(),
                 f_level_mps2=f_mean.tolist())

@@ -1,4 +1,5 @@
-"""Raw GPS output for tight coupling: pseudoranges and pseudorange rates.
+"""Raw GNSS output for tight coupling: pseudoranges and pseudorange rates
+of GPS and (``systems``) the nominal Galileo and BeiDou MEO constellations.
 
 Model (documented here because the tight filter inverts exactly this)::
 
@@ -16,6 +17,14 @@ sigma_pr^2)``, ``e_rhod ~ N(0, sigma_prr^2)``.  No ionosphere or troposphere.
 Satellite states come from :class:`insnav.gnss.constellation.Constellation`
 (nominal 32-satellite set re-referenced to the scenario's start, or a RINEX
 navigation file) and :func:`insnav.gnss.ephemeris.transmit_states`.
+
+Several systems (``systems = ["G", "E", "C"]``): Galileo and BeiDou satellites
+from the nominal Walker constellations of :mod:`insnav.gnss.walker`; the
+pseudorange of a satellite of system s adds its inter-system bias ``isb_s``
+[m] (``[gnss_raw.isb_m]``, GPS 0: the receiver clock is GPS time), the rate
+does not.  Urban canyon (``[gnss_raw.urban_canyon]``): the elevation mask
+becomes azimuth dependent, :func:`urban_canyon_mask` about the street axis
+(the vehicle's heading unless a fixed ``street_azimuth_deg`` is given).
 
 Receiver clock: bias ``b`` [m] and drift ``d`` [m/s] as a two-state random
 walk, ``b' = d + w_b``, ``d' = w_d`` with white-noise densities
@@ -93,33 +102,57 @@ def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_
     from ..gnss.ephemeris import C_LIGHT, select_ephemeris, transmit_states
     from ..gnss.geometry import select_best_gdop
 
+    from ..gnss.systems import SYSTEMS
+
     sc = traj.sc
     t = gnss_epochs(sc.t0, sc.t_end, sc.t0 + 1.0 / cfg["rate"], cfg["rate"])
     if constellation is None:
         constellation = make_constellation(cfg["constellation"], sc.t0 + gps_time_offset_s)
-    eph = constellation.eph
     ne = t.size
     lat, lon, _, _, r_rx_e, v_rx_e = antenna_state(traj, t, lever_arm_b)
-    prns = np.asarray(constellation.prns, dtype=np.int64)
-    ns = prns.size
     t_gps = t + gps_time_offset_s
-    ep = np.repeat(np.arange(ne), ns)
-    prn_rows = np.tile(prns, ne)
-    if constellation.is_nominal:
-        lut = {int(p): i for i, p in enumerate(eph.prn)}
-        idx = np.tile(np.array([lut[int(p)] for p in prns], np.int64), ne)
-    else:
-        idx = select_ephemeris(eph, prn_rows, t_gps[ep])
-    ok = idx >= 0
-    ep, prn_rows, idx = ep[ok], prn_rows[ok], idx[ok]
-    ts = transmit_states(eph, idx, t_gps[ep], r_rx_e[ep])
-    d = ts.r_e - r_rx_e[ep]
+    parts = []
+    for system in cfg.get("systems", ("G",)):
+        if system == "G":
+            cons = constellation
+        else:
+            from ..gnss.walker import walker_constellation
+
+            cons = walker_constellation(system, sc.t0 + gps_time_offset_s)
+        eph = cons.eph
+        prns = np.asarray(cons.prns, dtype=np.int64)
+        ns = prns.size
+        ep_s = np.repeat(np.arange(ne), ns)
+        prn_s = np.tile(prns, ne)
+        if cons.is_nominal:
+            lut = {int(p): i for i, p in enumerate(eph.prn)}
+            idx = np.tile(np.array([lut[int(p)] for p in prns], np.int64), ne)
+        else:
+            idx = select_ephemeris(eph, prn_s, t_gps[ep_s])
+        ok = idx >= 0
+        ep_s, prn_s, idx = ep_s[ok], prn_s[ok], idx[ok]
+        ts_s = transmit_states(eph, idx, t_gps[ep_s], r_rx_e[ep_s])
+        parts.append((ep_s, prn_s, np.full(ep_s.size, SYSTEMS.index(system), np.int64), ts_s.r_e, ts_s.v_e,
+                      ts_s.clock_bias_s, ts_s.clock_drift_s_s, ts_s.tau_s))
+    order = np.argsort(np.concatenate([p[0] for p in parts]), kind="stable")  # by epoch, then system, PRN
+    ep, prn_rows, sys_rows, sat_r, sat_v, clk_s, clkd_s, tau_s = (np.concatenate([p[k] for p in parts])[order]
+                                                                  for k in range(8))
+    sid = sys_rows * 1000 + prn_rows  # one identifier per satellite across systems
+    d = sat_r - r_rx_e[ep]
     rng = np.linalg.norm(d, axis=1)
     u_e = d / rng[:, None]
     u_n = earth.ecef_to_ned_vector(lat[ep], lon[ep], u_e)
     el = np.arcsin(np.clip(-u_n[:, 2], -1.0, 1.0))
     az = np.mod(np.arctan2(u_n[:, 1], u_n[:, 0]), 2 * np.pi)
-    keep = el >= cfg["elevation_mask"]
+    mask = np.full(el.shape, cfg["elevation_mask"])
+    canyon = cfg.get("urban_canyon")
+    if canyon:
+        if canyon["street_azimuth"] is None:  # the street runs along the vehicle's heading
+            street = traj.state(t)["euler"][:, 2][ep]
+        else:
+            street = np.full(el.shape, canyon["street_azimuth"])
+        mask = np.maximum(mask, urban_canyon_mask(az - street, canyon["mask_across"], canyon["mask_along"]))
+    keep = el >= mask
 
     windows = cfg["windows"]
     max_sats = cfg["max_sats"]
@@ -139,9 +172,9 @@ def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_
                 if wins[0] != current_window:
                     current_window, before, failing = wins[0], list(in_use), []
                 want = wins[0][2]
-                prn_here = {int(prn_rows[r]): r for r in rows}
+                prn_here = {int(sid[r]): r for r in rows}
                 chosen = [p for p in failing if p in prn_here]
-                for pool in (before, [int(prn_rows[r]) for r in rows]):
+                for pool in (before, [int(sid[r]) for r in rows]):
                     for p in sorted((q for q in pool if q in prn_here and q not in chosen),
                                     key=lambda q: -el[prn_here[q]]):
                         if len(chosen) >= want:
@@ -161,23 +194,36 @@ def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_
                     keep[rows[sel]] = True
                 else:
                     keep[rows[np.argsort(-el[rows], kind="stable")[:want]]] = True
-            in_use = [int(p) for p in prn_rows[starts[k]:ends[k]][keep[starts[k]:ends[k]]]]
+            in_use = [int(p) for p in sid[starts[k]:ends[k]][keep[starts[k]:ends[k]]]]
 
-    ep, prn_rows = ep[keep], prn_rows[keep]
-    r_sat, v_sat = ts.r_e[keep], ts.v_e[keep]
-    clk_b = C_LIGHT * ts.clock_bias_s[keep]
-    clk_d = C_LIGHT * ts.clock_drift_s_s[keep]
+    ep, prn_rows, sys_rows = ep[keep], prn_rows[keep], sys_rows[keep]
+    r_sat, v_sat = sat_r[keep], sat_v[keep]
+    clk_b = C_LIGHT * clk_s[keep]
+    clk_d = C_LIGHT * clkd_s[keep]
     rng, u_e = rng[keep], u_e[keep]
     m = ep.size
     b_rx, d_rx = simulate_clock(t, sc.t0, cfg["clock_bias0"], cfg["clock_drift0"],
                                 cfg["clock_bias_rw"], cfg["clock_drift_rw"], rng_clock)
     e = rng_noise.standard_normal((m, 2))
-    pr = rng + b_rx[ep] - clk_b + cfg["sigma_pr"] * e[:, 0]
+    isb = np.array([cfg.get("isb", {}).get(sy, 0.0) for sy in SYSTEMS])  # true inter-system biases [m]
+    pr = rng + b_rx[ep] + isb[sys_rows] - clk_b + cfg["sigma_pr"] * e[:, 0]
     prr = (np.einsum("ij,ij->i", u_e, v_sat - v_rx_e[ep]) + d_rx[ep] - clk_d
            + cfg["sigma_prr"] * e[:, 1])
     return GnssRaw(t=t[ep], prn=prn_rows, pseudorange_m=pr, pseudorange_rate_mps=prr,
                    sat_r_e=r_sat, sat_v_e=v_sat, sat_clock_bias_m=clk_b, sat_clock_drift_mps=clk_d,
                    elevation_deg=np.degrees(el[keep]), azimuth_deg=np.degrees(az[keep]),
-                   travel_time_s=ts.tau_s[keep], sigma_pr_m=np.full(m, cfg["sigma_pr"]),
+                   travel_time_s=tau_s[keep], sigma_pr_m=np.full(m, cfg["sigma_pr"]),
                    sigma_prr_mps=np.full(m, cfg["sigma_prr"]), rx_clock_bias_m=b_rx[ep],
-                   rx_clock_drift_mps=d_rx[ep])
+                   rx_clock_drift_mps=d_rx[ep], system=np.asarray(SYSTEMS)[sys_rows])
+
+
+def urban_canyon_mask(d_az, mask_across, mask_along):
+    """Elevation mask [rad] of a straight street canyon at azimuth ``d_az`` [rad]
+    from the street axis: buildings of height H at distance W/2 on both sides
+    hide a satellite below ``atan(tan(mask_across) |sin d_az|)`` (the building
+    edge seen along the line of sight is W / (2 |sin d_az|) away), so
+    ``mask_across`` [rad] is the mask across the street (``atan(2 H / W)``),
+    and along it the mask falls to ``mask_along`` [rad] (the far end of the
+    street, other obstructions)."""
+    geo = np.arctan(np.tan(mask_across) * np.abs(np.sin(d_az)))
+    return np.maximum(geo, mask_along)

@@ -32,7 +32,11 @@ Layout (all tables optional unless marked)::
     [gnss_raw] enabled, rate_hz, constellation, elevation_mask_deg, max_sats,
               sigma_pr_m, sigma_prr_mps, clock_bias0_m, clock_drift0_mps,
               clock_bias_rw_m_per_sqrts, clock_drift_rw_mps_per_sqrts,
-              clock ("tcxo" | "ocxo" | "rubidium": both densities, see sim/gnss_raw.py)
+              clock ("tcxo" | "ocxo" | "rubidium": both densities, see sim/gnss_raw.py),
+              systems (list of "G", "E", "C"; default ["G"])
+    [gnss_raw.isb_m] E, C: true inter-system biases [m] (GPS the reference clock)
+    [gnss_raw.urban_canyon] mask_across_deg*, mask_along_deg, street_azimuth_deg
+              (absent: the street runs along the vehicle's heading; sim/gnss_raw.urban_canyon_mask)
     [[gnss_raw.windows]] start_s*, end_s*, n_sats*
 """
 from __future__ import annotations
@@ -639,7 +643,8 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
     _check_keys(ctx, gr, "gnss_raw", {"enabled", "rate_hz", "constellation", "elevation_mask_deg",
                                       "max_sats", "sigma_pr_m", "sigma_prr_mps", "clock_bias0_m",
                                       "clock_drift0_mps", "clock_bias_rw_m_per_sqrts",
-                                      "clock_drift_rw_mps_per_sqrts", "clock", "windows"})
+                                      "clock_drift_rw_mps_per_sqrts", "clock", "windows", "systems", "isb_m",
+                                      "urban_canyon"})
     cons = _str(ctx, gr, "gnss_raw", "constellation", "nominal")
     if cons != "nominal" and base_dir is not None and not Path(cons).is_absolute():
         cons = str(Path(base_dir) / cons)
@@ -657,6 +662,24 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
         "clock_drift_rw": _num(ctx, gr, "gnss_raw", "clock_drift_rw_mps_per_sqrts", 0.0, lo=0.0),
         "windows": [],
     }
+    systems = gr.get("systems", ["G"])
+    if (not isinstance(systems, list) or not systems or any(x not in ("G", "E", "C") for x in systems)
+            or len(set(systems)) != len(systems)):
+        ctx.fail("gnss_raw.systems", f'expected a list of distinct "G", "E", "C" (GPS, Galileo, BeiDou MEO), '
+                 f"got {systems!r}")
+    gnss_raw["systems"] = tuple(systems)
+    isb_t = _table(ctx, gr, "gnss_raw", "isb_m")
+    _check_keys(ctx, isb_t, "gnss_raw.isb_m", {"E", "C"})
+    gnss_raw["isb"] = {k: _num(ctx, isb_t, "gnss_raw.isb_m", k, 0.0) for k in isb_t}
+    if "urban_canyon" in gr:
+        uc = _table(ctx, gr, "gnss_raw", "urban_canyon")
+        _check_keys(ctx, uc, "gnss_raw.urban_canyon", {"mask_across_deg", "mask_along_deg", "street_azimuth_deg"})
+        st_az = _num(ctx, uc, "gnss_raw.urban_canyon", "street_azimuth_deg", None, lo=-360.0, hi=360.0)
+        gnss_raw["urban_canyon"] = dict(
+            mask_across=_num(ctx, uc, "gnss_raw.urban_canyon", "mask_across_deg", required=True, lo=0.0, hi=89.0)
+            * DEG,
+            mask_along=_num(ctx, uc, "gnss_raw.urban_canyon", "mask_along_deg", 0.0, lo=-5.0, hi=89.0) * DEG,
+            street_azimuth=None if st_az is None else st_az * DEG)
     clock = _str(ctx, gr, "gnss_raw", "clock", "")
     if clock:
         from ..gnss.clock import CLOCK_CLASSES

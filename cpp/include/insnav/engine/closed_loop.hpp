@@ -79,6 +79,7 @@ struct NavOutputs {
   int sigma_cols = 0;         // <= 0 or >= n_state: all n_state
   double* imu_err = nullptr;  // (.,12) acc bias, gyro bias, acc scale, gyro scale (SI)
   double* clock = nullptr;    // (.,2) receiver clock bias [m], drift [m/s] (layouts with clock states)
+  double* isb = nullptr;      // (.,3) inter-system biases of R, E, C [m] (layouts with ISB states)
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
 
@@ -125,6 +126,9 @@ Filter make_filter(const ImuErrorModel& model, const UtParams& ut) {
     return Filter(model);
 }
 
+/// Inter-system bias estimates of the non-GPS systems 1..kNumSystems-1 [m].
+using IsbVec = Eigen::Matrix<double, kNumSystems - 1, 1>;
+
 template <class Filter>
 struct ClosedLoop {
   using L = typename Filter::Layout;
@@ -133,6 +137,7 @@ struct ClosedLoop {
   Strapdown ins;
   ImuCorrection corr;
   double clock_bias = 0.0, clock_drift = 0.0;  // receiver clock estimate [m], [m/s] (kHasClock<L>)
+  IsbVec isb = IsbVec::Zero();                  // inter-system bias estimates of systems 1..3 [m] (kHasIsb<L>)
   double propagation_interval = 0.02;          // [s]
   double cycle_start = 0.0, interval_t0 = 0.0;
 
@@ -151,7 +156,7 @@ struct ClosedLoop {
   bool recording_overflowed() const { return rec_overflow_; }
 
   void reset(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0 = 0.0,
-             double clock_drift0 = 0.0) {
+             double clock_drift0 = 0.0, const IsbVec& isb0 = IsbVec::Zero()) {
     rec_n_ = 0;
     rec_overflow_ = false;
     rec_pending_ = false;
@@ -170,6 +175,7 @@ struct ClosedLoop {
     corr = corr0;
     clock_bias = clock_bias0;
     clock_drift = clock_drift0;
+    isb = isb0;
     filter.initialize(P0);
     rates_stale_ = false;
     omega_ib_b_.setZero();
@@ -291,6 +297,9 @@ struct ClosedLoop {
       clock_bias -= x[L::kClockBias];
       clock_drift -= x[L::kClockDrift];
     }
+    if constexpr (kHasIsb<L>) {
+      for (int i = 0; i < IsbStates<L>::count; ++i) isb[i] -= x[IsbStates<L>::offset + i];
+    }
     ins.set_state(s);
     filter.reset_state();
     out_cache_dirty_ = true;
@@ -347,6 +356,10 @@ struct ClosedLoop {
         out.clock[2 * i] = clock_bias - x[L::kClockBias];
         out.clock[2 * i + 1] = clock_drift - x[L::kClockDrift];
       }
+    }
+    if constexpr (kHasIsb<L>) {
+      if (out.isb)
+        for (int j = 0; j < IsbStates<L>::count; ++j) out.isb[3 * i + j] = isb[j] - x[IsbStates<L>::offset + j];
     }
   }
 

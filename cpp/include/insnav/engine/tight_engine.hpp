@@ -9,6 +9,16 @@
 // clock states are its errors (computed - true), fed back like the others.
 // An epoch with no satellite closes the cycle and predicts only (no update).
 //
+// Several constellations: a layout with inter-system bias states
+// (LayoutTightMulti) carries their estimates in the core like the clock and
+// feeds them back; the measurement (pseudorange.hpp) is the same for any mix.
+//
+// Robust update (meas/robust.hpp, TightConfig::robust): before the update of
+// an epoch, a common offset of all pseudorange innovations (a receiver clock
+// jump) is moved into the clock estimate, then (screening on) rows whose
+// predicted innovation fails the per-row chi-square test are rejected and,
+// in such a flagged epoch, the rest are IGG-III down-weighted.
+//
 // Input: E epochs (time, satellite range [begin, end) into one flat array of
 // SatObservation), sorted by time.  No heap allocation inside run().
 #pragma once
@@ -18,6 +28,7 @@
 
 #include "insnav/engine/closed_loop.hpp"
 #include "insnav/meas/pseudorange.hpp"
+#include "insnav/meas/robust.hpp"
 
 namespace insnav {
 
@@ -29,6 +40,15 @@ struct TightConfig {
   bool use_pseudorange = true;
   bool use_rate = true;
   int output_decimation = 1;
+  RobustConfig robust;                 // clock-jump check, screening and IGG-III (robust.hpp)
+};
+
+/// What the robust step did to one satellite row kind (TightOutputs::sat_flag).
+enum class SatFlag : std::int8_t {
+  kAbsent = -1,       ///< no such observation (NaN) or switched off
+  kUsed = 0,          ///< used with its own sigma
+  kDownWeighted = 1,  ///< IGG-III: sigma inflated
+  kRejected = 2,      ///< screened out
 };
 
 /// One GNSS epoch: time of validity and its satellites sats[begin, end).
@@ -42,17 +62,29 @@ struct TightEpoch {
 struct TightOutputs : NavOutputs {
   // per satellite row (M rows)
   double* sat_residual = nullptr;  // (.,2) INS-predicted minus measured pseudorange [m], rate [m/s], before the update
+                                   // (after a detected clock jump was moved into the clock)
+  std::int8_t* sat_flag = nullptr; // (.,2) SatFlag of the pseudorange and the rate
   // per epoch (E rows)
   double* nis = nullptr;
   std::int8_t* status = nullptr;   // RecordStatus
   std::int32_t* rows = nullptr;    // measurement rows used
+  double* clock_jump = nullptr;    // receiver clock jump moved into the clock estimate [m] (0: none)
+  // run counters of the robust step
+  int rejected_sats = 0;           // satellite-epochs with a rejected row
+  int downweighted_sats = 0;       // satellite-epochs down-weighted (and none of their rows rejected)
+  int flagged_epochs = 0;          // epochs the screening flagged
+  int clock_jumps = 0;             // clock jumps absorbed
 
   void mark(const TightEpoch& ep, std::int64_t g, RecordStatus st) {
     set_status(status, g, st);
     if (nis) nis[g] = NAN;
     if (rows) rows[g] = 0;
+    if (clock_jump) clock_jump[g] = 0.0;
     if (sat_residual)
       for (std::int64_t j = ep.begin; j < ep.end; ++j) sat_residual[2 * j] = sat_residual[2 * j + 1] = NAN;
+    if (sat_flag)
+      for (std::int64_t j = ep.begin; j < ep.end; ++j)
+        sat_flag[2 * j] = sat_flag[2 * j + 1] = static_cast<std::int8_t>(SatFlag::kAbsent);
   }
 };
 
@@ -67,11 +99,14 @@ class TightEngine {
 
   Filter& filter() { return core_.filter; }
 
+  /// Initial inter-system bias estimates [m] of systems 1..3 (layouts with ISB states; default 0).
+  void set_initial_isb(const IsbVec& isb0) { isb0_ = isb0; }
+
   /// n IMU samples; E epochs over M satellite rows.  clock0 = (bias [m], drift [m/s]).
   void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0,
            double clock_drift0, std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
            std::int64_t n_epochs, const TightEpoch* epochs, const SatObservation* sats, TightOutputs& out) {
-    core_.reset(initial, P0, corr0, clock_bias0, clock_drift0);
+    core_.reset(initial, P0, corr0, clock_bias0, clock_drift0, isb0_);
     sats_ = sats;
     std::int64_t g = 0;
     for (; g < n_epochs && !(epochs[g].t > initial.t); ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
@@ -93,22 +128,48 @@ class TightEngine {
       work_[ns] = s;
       src_[ns++] = j;
     }
-    meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, core_.clock_bias, core_.clock_drift, work_, ns);
-    const int m = meas_.linear().rows();
-    if (out.sat_residual) {
-      for (std::int64_t j = ep.begin; j < ep.end; ++j) out.sat_residual[2 * j] = out.sat_residual[2 * j + 1] = NAN;
-      int row = 0;
-      for (int i = 0; i < ns && row < m; ++i) {
-        for (int kind = 0; kind < 2 && row < m; ++kind) {
-          const double z = kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps;
-          if (!std::isfinite(z)) continue;
-          out.sat_residual[2 * src_[i] + kind] = meas_.linear().residual[row++];
-        }
+    set_measurement(ns);
+    const RobustConfig& rc = cfg_.robust;
+    double jump = 0.0;
+    if (rc.clock_jump && meas_.linear().rows() > 0) {
+      standardize();
+      jump = common_pseudorange_offset();
+      if (jump != 0.0) {
+        core_.clock_bias -= jump;  // residual = predicted - measured: a jump J of the receiver shows as -J
+        ++out.clock_jumps;
+        set_measurement(ns);
       }
     }
+    if (out.clock_jump) out.clock_jump[g] = -jump;
+    const int m0 = meas_.linear().rows();
+    for (int i = 0; i < ns; ++i) flag_[2 * i] = flag_[2 * i + 1] = SatFlag::kAbsent;
+    {
+      int row = 0;
+      for (int i = 0; i < ns && row < m0; ++i)
+        for (int kind = 0; kind < 2 && row < m0; ++kind)
+          if (std::isfinite(kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps)) {
+            row_sat_[row] = i;
+            row_kind_[row++] = kind;
+            flag_[2 * i + kind] = SatFlag::kUsed;
+          }
+    }
+    if (out.sat_residual) {
+      for (std::int64_t j = ep.begin; j < ep.end; ++j) out.sat_residual[2 * j] = out.sat_residual[2 * j + 1] = NAN;
+      for (int r = 0; r < m0; ++r) out.sat_residual[2 * src_[row_sat_[r]] + row_kind_[r]] = meas_.linear().residual[r];
+    }
+    if (rc.screening && m0 > 0) screen_and_weight(ns, out);
+    if (out.sat_flag) {
+      for (std::int64_t j = ep.begin; j < ep.end; ++j)
+        out.sat_flag[2 * j] = out.sat_flag[2 * j + 1] = static_cast<std::int8_t>(SatFlag::kAbsent);
+      for (int i = 0; i < ns; ++i)
+        for (int kind = 0; kind < 2; ++kind) out.sat_flag[2 * src_[i] + kind] = static_cast<std::int8_t>(flag_[2 * i + kind]);
+    }
+    const int m = meas_.linear().rows();
     if (out.rows) out.rows[g] = m;
-    if (m == 0) {  // no satellite: prediction only
-      out.set_status(out.status, g, RecordStatus::kNotUsed);
+    if (m == 0) {  // no satellite (or every row screened out): prediction only
+      const bool screened = m0 > 0;
+      out.set_status(out.status, g, screened ? RecordStatus::kRejectedByGate : RecordStatus::kNotUsed);
+      if (screened) ++out.rejected;
       if (out.nis) out.nis[g] = NAN;
       return;
     }
@@ -123,11 +184,94 @@ class TightEngine {
     }
   }
 
+  void set_measurement(int ns) {
+    meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, core_.clock_bias, core_.clock_drift, work_, ns,
+              core_.isb.data());
+  }
+
+  /// y_i = residual_i - H_i x and sqrt(S_ii) = sqrt(H_i P H_i^T + R_ii) of every row (robust.hpp).
+  void standardize() {
+    const auto& lin = meas_.linear();
+    const auto& x = core_.filter.x();
+    const auto& P = core_.filter.P();
+    for (int i = 0; i < lin.rows(); ++i) {
+      const auto h = lin.H.row(i);
+      hP_.noalias() = h * P;
+      y_[i] = lin.residual[i] - (h * x).value();
+      sqrt_S_[i] = std::sqrt(std::max(hP_.dot(h) + lin.R(i, i), 0.0));
+    }
+  }
+
+  /// The common offset of the pseudorange innovations when it is a clock jump, else 0 (robust.hpp, 1.).
+  double common_pseudorange_offset() {
+    const RobustConfig& rc = cfg_.robust;
+    const auto& lin = meas_.linear();
+    double yv[kMaxMeasRows], sv[kMaxMeasRows];
+    int n = 0;
+    int row = 0;
+    for (int i = 0; row < lin.rows(); ++i)
+      for (int kind = 0; kind < 2 && row < lin.rows(); ++kind) {
+        if (!std::isfinite(kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps)) continue;
+        if (kind == 0) {
+          yv[n] = y_[row];
+          sv[n++] = sqrt_S_[row];
+        }
+        ++row;
+      }
+    if (n < rc.clock_jump_min_rows || n < 1) return 0.0;
+    double tmp[kMaxMeasRows];
+    std::copy(yv, yv + n, tmp);
+    const double med = median_inplace(tmp, n);
+    std::copy(sv, sv + n, tmp);
+    const double med_s = median_inplace(tmp, n);
+    if (!(std::fabs(med) > rc.clock_jump_sigma * med_s)) return 0.0;
+    const double k = std::sqrt(rc.chi2_row);
+    int agree = 0;
+    for (int i = 0; i < n; ++i) agree += std::fabs(yv[i] - med) <= k * sv[i] ? 1 : 0;
+    return 2 * agree >= n ? med : 0.0;
+  }
+
+  /// Screening and IGG-III (robust.hpp, 2.): edits work_ and rebuilds the measurement.
+  void screen_and_weight(int ns, TightOutputs& out) {
+    const RobustConfig& rc = cfg_.robust;
+    standardize();
+    const int m0 = meas_.linear().rows();
+    bool flagged = false;
+    for (int r = 0; r < m0; ++r) flagged = flagged || !(y_[r] * y_[r] <= rc.chi2_row * sqrt_S_[r] * sqrt_S_[r]);
+    if (!flagged) return;
+    ++out.flagged_epochs;
+    for (int r = 0; r < m0; ++r) {
+      const double w = y_[r] / sqrt_S_[r];
+      SatObservation& s = work_[row_sat_[r]];
+      const int kind = row_kind_[r];
+      const double q = (w * w <= rc.chi2_row) ? igg3_weight(w, rc.igg_k0, rc.igg_k1) : 0.0;
+      if (q <= 0.0) {
+        (kind == 0 ? s.pseudorange_m : s.pseudorange_rate_mps) = NAN;
+        flag_[2 * row_sat_[r] + kind] = SatFlag::kRejected;
+      } else if (q < 1.0) {
+        (kind == 0 ? s.sigma_pr_m : s.sigma_prr_mps) /= std::sqrt(q);
+        flag_[2 * row_sat_[r] + kind] = SatFlag::kDownWeighted;
+      }
+    }
+    for (int i = 0; i < ns; ++i) {
+      const SatFlag a = flag_[2 * i], b = flag_[2 * i + 1];
+      if (a == SatFlag::kRejected || b == SatFlag::kRejected) ++out.rejected_sats;
+      else if (a == SatFlag::kDownWeighted || b == SatFlag::kDownWeighted) ++out.downweighted_sats;
+    }
+    set_measurement(ns);
+  }
+
   ClosedLoop<Filter> core_;
   TightConfig cfg_;
   TightMeasurement<L> meas_;
   SatObservation work_[kMaxMeasRows];
   std::int64_t src_[kMaxMeasRows] = {};
+  IsbVec isb0_ = IsbVec::Zero();
+  // robust step workspace (per row of the measurement / per satellite and kind)
+  double y_[kMaxMeasRows] = {}, sqrt_S_[kMaxMeasRows] = {};
+  Eigen::Matrix<double, 1, L::kSize> hP_;
+  int row_sat_[kMaxMeasRows] = {}, row_kind_[kMaxMeasRows] = {};
+  SatFlag flag_[2 * kMaxMeasRows] = {};
   const SatObservation* sats_ = nullptr;
 };
 

@@ -131,6 +131,9 @@ StateCov<L> continuous_GQG(const InsPoint& ins, const ImuErrorModel& m) {
     Qc(L::kClockBias, L::kClockBias) = m.clock_bias_psd;
     Qc(L::kClockDrift, L::kClockDrift) = m.clock_drift_psd;
   }
+  if constexpr (kHasIsb<L>) {  // inter-system biases: random walk (F rows zero)
+    for (int i = 0; i < IsbStates<L>::count; ++i) Qc(IsbStates<L>::offset + i, IsbStates<L>::offset + i) = m.isb_psd;
+  }
   return Qc;
 }
 

@@ -49,7 +49,8 @@
 // (the engine's ImuCorrection inverts exactly this), so exactly
 //   df_b = f~ - f = (b_a + s_a f~) / (1 + s_a),   dw_b = (b_g + s_g omega~) / (1 + s_g)
 // (elementwise); to first order df = b_a + diag(f~) s_a, as in linear_F.
-// Clock (Layout17): bias' = drift, drift' = 0 (integrated random walk).
+// Clock (Layout17): bias' = drift, drift' = 0 (integrated random walk); inter-system
+// biases (LayoutTightMulti): isb' = 0 (random walk).
 #pragma once
 
 #include <cmath>
@@ -175,6 +176,7 @@ StateVec<L> nonlinear_error_rate(const StateVec<L>& dx, const NonlinearErrorPoin
     rate[L::kClockBias] = dx[L::kClockDrift];
     rate[L::kClockDrift] = 0.0;
   }
+  if constexpr (kHasIsb<L>) rate.template segment<IsbStates<L>::count>(IsbStates<L>::offset).setZero();  // random walk
   return rate;
 }
 

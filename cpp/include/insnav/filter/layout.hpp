@@ -13,6 +13,8 @@
 // here; the filters are templates on the layout.
 #pragma once
 
+#include <type_traits>
+
 namespace insnav {
 
 /// seed 000 / 001 / 003 loose: [dr dv psi df_b dw_b]
@@ -56,6 +58,45 @@ struct Layout21 {
   static constexpr int kClockBias = -1;
   static constexpr int kClockDrift = -1;
 };
+
+/// Tight coupling with several constellations: Layout17 + one inter-system
+/// bias (ISB) [m] per non-GPS system.  The receiver clock (kClockBias,
+/// kClockDrift) is the GPS-time clock; the pseudorange of a satellite of
+/// system s (insnav.gnss.systems: G = 0 reference, R = 1, E = 2, C = 3) is
+///   rho = |r_sat - r_ant| + b + isb_s - c dt_sv,   isb_G = 0,
+/// its rate shares the drift d (an ISB is a hardware/time-scale offset that
+/// changes too slowly to show in a Doppler).  Each ISB is a random walk
+/// (ImuErrorModel::isb_psd).  Groves 2013, sec. 9.4.3 ("inter-constellation
+/// timing biases"); Cai & Gao 2013 (GPS/GLONASS PPP with an ISB state).
+struct LayoutTightMulti {
+  static constexpr int kSize = 20;
+  static constexpr int kPos = 0;
+  static constexpr int kVel = 3;
+  static constexpr int kAtt = 6;
+  static constexpr int kAccBias = 9;
+  static constexpr int kGyroBias = 12;
+  static constexpr int kAccScale = -1;
+  static constexpr int kGyroScale = -1;
+  static constexpr int kClockBias = 15;
+  static constexpr int kClockDrift = 16;
+  static constexpr int kIsb = 17;      // ISB of system 1 (R), 2 (E), 3 (C) at kIsb + s - 1
+  static constexpr int kNumIsb = 3;
+};
+
+/// Number of satellite systems a tight measurement tells apart (G, R, E, C).
+inline constexpr int kNumSystems = 4;
+
+template <class L, class = void>
+struct IsbStates {
+  static constexpr int offset = -1, count = 0;
+};
+template <class L>
+struct IsbStates<L, std::void_t<decltype(L::kIsb)>> {
+  static constexpr int offset = L::kIsb, count = L::kNumIsb;
+};
+/// True for a layout with inter-system bias states (L::kIsb, L::kNumIsb).
+template <class L>
+inline constexpr bool kHasIsb = IsbStates<L>::count > 0;
 
 template <class L>
 inline constexpr bool kHasScale = (L::kAccScale >= 0);

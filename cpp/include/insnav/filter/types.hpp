@@ -68,6 +68,10 @@ struct ImuErrorModel {
   Vec3 acc_scale_tau = Vec3::Constant(3600.0 * 4);
   double clock_bias_psd = 0.1;    // receiver clock phase noise PSD [m^2/s]
   double clock_drift_psd = 0.04;  // receiver clock frequency noise PSD [m^2/s^3]
+  // Inter-system bias random walk PSD [m^2/s] (layouts with ISB states):
+  // 1e-4 m^2/s = 0.01 m/sqrt(s), 0.6 m in an hour -- hardware delays and the
+  // GPS-Galileo/BeiDou time offsets drift by ns per day (Groves 2013, sec. 9.4.3)
+  double isb_psd = 1e-4;
 };
 
 /// Maximum rows of one measurement update (tight coupling: 2 per satellite).

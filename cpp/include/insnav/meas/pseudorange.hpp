@@ -10,7 +10,13 @@
 //   rhod = u_e . (v_sat_e - v_ant_e) + d - c ddt_sv,   u_e = (r_sat_e - r_ant_e) / |.|
 //   r_ant_e = r_e(lat, lon, h) + C_en C_nb l_b
 //   v_ant_e = C_en (v_n + C_nb (omega_ib_b x l_b) - omega_in_n x (C_nb l_b))
-// with b [m], d [m/s] the receiver clock bias and drift states.
+// with b [m], d [m/s] the receiver clock bias and drift states.  Several
+// constellations (LayoutTightMulti, layout.hpp): b is the GPS-time clock and a
+// satellite of system s != GPS adds its inter-system bias isb_s to rho (not to
+// rhod), so its pseudorange row has +1 in the ISB column of s; GPS-only data
+// leave the ISB columns zero (one code path for any mix).  A layout without
+// ISB states treats every system's pseudorange with the common clock b (the
+// caller has removed the ISB or uses GPS only).
 //
 // Linearisation (error = computed - true, layout.hpp; Groves 2013 eqs.
 // (14.127)-(14.129), mapped to our NED-metre position error):
@@ -42,6 +48,7 @@ struct SatObservation {
   double pseudorange_rate_mps = NAN;  // measured; NaN: no rate row
   double sigma_pr_m = 10.0;       // 1-sigma [m]
   double sigma_prr_mps = 0.1;     // 1-sigma [m/s]
+  int system = 0;                 // 0 GPS (reference clock), 1 GLONASS, 2 Galileo, 3 BeiDou (insnav.gnss.systems)
 };
 
 /// Antenna position/velocity in ECEF of a navigation state.
@@ -63,6 +70,7 @@ inline AntennaEcef antenna_ecef(double lat, double lon, double h, const Vec3& v_
 template <class L>
 class TightMeasurement {
   static_assert(kHasClock<L>, "tight coupling needs a layout with clock states (Layout17)");
+  static constexpr int kIsb = IsbStates<L>::offset, kNumIsb = IsbStates<L>::count;
 
  public:
   using RowVec = typename LinearMeasurement<L>::RowVec;
@@ -70,8 +78,11 @@ class TightMeasurement {
   /// Build residual, H and R for the satellites sats[0..n_sats) at the INS state.
   /// clock_bias_m / clock_drift_mps: the current receiver clock estimate.
   /// Satellites beyond kMaxMeasRows rows are ignored (the caller selects).
+  /// isb_m: the current inter-system bias estimates [m] of systems 1..kNumIsb
+  /// (layouts with ISB states; null: zero).
   void set(const NavState& ins, const Vec3& omega_ib_b, const Vec3& lever_arm_b, double clock_bias_m,
-           double clock_drift_mps, const SatObservation* sats, int n_sats) {
+           double clock_drift_mps, const SatObservation* sats, int n_sats, const double* isb_m = nullptr) {
+    (void)isb_m;  // layouts without ISB states
     ins_ = ins;
     C_nb_ = ins.q_nb.toRotationMatrix();
     l_b_ = lever_arm_b;
@@ -121,9 +132,20 @@ class TightMeasurement {
         rw.sat_v_e = s.v_e;
         rw.sat_clock = kind == 0 ? s.clock_bias_m : s.clock_drift_mps;
         rw.is_rate = kind == 1;
+        rw.isb_col = -1;
+        rw.isb = 0.0;
         auto H = lin_.H.row(row);
         if (kind == 0) {
-          rw.predicted = rho + b_ - s.clock_bias_m;
+          double isb = 0.0;
+          if constexpr (kHasIsb<L>) {
+            if (s.system >= 1 && s.system <= kNumIsb) {
+              rw.isb_col = kIsb + s.system - 1;
+              isb = isb_m ? isb_m[s.system - 1] : 0.0;
+              H[rw.isb_col] = 1.0;
+            }
+          }
+          rw.isb = isb;
+          rw.predicted = rho + b_ + isb - s.clock_bias_m;
           H.template segment<3>(L::kPos) = -u_n.transpose();
           if (lever) H.template segment<3>(L::kAtt) = -u_n.transpose() * dr_ant_dpsi;
           H[L::kClockBias] = 1.0;
@@ -171,8 +193,9 @@ class TightMeasurement {
       const Row& rw = rows_[i];
       const Vec3 dr_e = rw.sat_r_e - ant.r_e;
       const double rho = dr_e.norm();
+      // the ISB estimate is in `predicted`; its error dx[isb_col] enters as the clock's
       const double h_true = rw.is_rate ? dr_e.dot(rw.sat_v_e - ant.v_e) / rho + d - rw.sat_clock
-                                       : rho + b - rw.sat_clock;
+                                       : rho + b - rw.sat_clock + (rw.isb_col >= 0 ? rw.isb - dx[rw.isb_col] : 0.0);
       out[i] = rw.predicted - h_true;
     }
     return out;
@@ -185,6 +208,8 @@ class TightMeasurement {
   struct Row {
     Vec3 sat_r_e = Vec3::Zero(), sat_v_e = Vec3::Zero();
     double sat_clock = 0.0, predicted = 0.0;
+    double isb = 0.0;  // ISB estimate in `predicted` [m]
+    int isb_col = -1;  // its state column (pseudorange of a non-GPS satellite), else -1
     bool is_rate = false;
   };
   LinearMeasurement<L> lin_;

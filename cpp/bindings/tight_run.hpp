@@ -1,0 +1,56 @@
+// The tightly coupled run of bind_tight.cpp (Layout17) and
+// bind_tight_multi.cpp (LayoutTightMulti, several constellations): one
+// template, instantiated in two translation units so that they compile in
+// parallel.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "common.hpp"
+#include "convert.hpp"
+#include "insnav/engine/tight_engine.hpp"
+#include "outputs.hpp"
+
+namespace insnav::py_bind {
+
+/// Everything run_tight hands a layout's run (converted once).
+struct TightArgs {
+  ImuArrays imu;
+  TightInputs in;
+  NavState nav;
+  DArray P0;
+  ImuCorrection corr;
+  double clock_bias0 = 0.0, clock_drift0 = 0.0;
+  IsbVec isb0 = IsbVec::Zero();
+  ImuErrorModel model;
+  TightConfig cfg;
+  UtParams ut;
+};
+
+template <class Filter>
+py::dict run_tight_impl(const TightArgs& a) {
+  using L = typename Filter::Layout;
+  const StateCov<L> P = state_cov_from<L>(a.P0);
+  NavBuffers nav_buf(output_rows(a.imu.n, a.cfg.output_decimation), L::kSize, true, kHasIsb<L>);
+  TightRecordBuffers rec_buf(a.in.E, a.in.M);
+  TightOutputs out;
+  nav_buf.attach(out);
+  rec_buf.attach(out);
+  {
+    py::gil_scoped_release release;
+    auto engine = std::make_unique<TightEngine<Filter>>(a.model, a.cfg, a.ut);  // one allocation per run
+    engine->set_initial_isb(a.isb0);
+    engine->run(a.nav, P, a.corr, a.clock_bias0, a.clock_drift0, a.imu.n, a.imu.t, a.imu.dtheta_b, a.imu.dv_b, a.in.E,
+                a.in.epochs.data(), a.in.sats.data(), out);
+  }
+  py::dict res;
+  nav_buf.put(res, out);
+  rec_buf.put(res, out);
+  return res;
+}
+
+/// LayoutTightMulti runs (bind_tight_multi.cpp).
+py::dict run_tight_multi(const std::string& filter, const TightArgs& a);
+
+}  // namespace insnav::py_bind

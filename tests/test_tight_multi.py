@@ -1,0 +1,313 @@
+"""Tight coupling with several constellations (LayoutTightMulti: inter-system
+bias states) and the robust tight update (per-satellite chi-square
+screening, IGG-III, receiver clock jumps), on simulated GPS + Galileo +
+BeiDou data (sim/gnss_raw.py, gnss/walker.py).  The measurement rows and
+the no-malloc run are checked in C++ (cpp/tests/test_pseudorange.cpp)."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import insnav.sim as sim
+from insnav.analysis import errors
+from insnav.config import ConfigError, Robust, RunConfig, config_from_dict
+from insnav.filters.tight import run_tight
+from insnav.gnss.walker import walker_constellation
+
+C_MS_M = 299792.458  # c * 1 ms [m]
+
+
+def _scenario(preset="urban-multignss", duration=None, canyon=True, **raw_over):
+    sc = sim.load_scenario(preset).raw
+    sc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in sc.items()}
+    if duration is not None:
+        segs, tot = [], 0.0
+        for s in sc["motion"]["segments"]:
+            if tot >= duration:
+                break
+            segs.append(s)
+            tot += float(s["duration_s"])
+        sc["motion"] = dict(sc["motion"], segments=segs)
+    gr = dict(sc["gnss_raw"], **raw_over)
+    if not canyon:
+        gr.pop("urban_canyon", None)
+    sc["gnss_raw"] = gr
+    return sc
+
+
+def _hz_err(sol, ds, t_min=30.0):
+    e = errors(sol, ds.truth)
+    w = e["t"] > t_min
+    return np.hypot(e["pos_n_m"][w, 0], e["pos_n_m"][w, 1]), e, w
+
+
+@pytest.fixture(scope="module")
+def ds_gps():
+    """GPS only, open sky, 300 s."""
+    return sim.simulate(_scenario(duration=300.0, canyon=False, systems=["G"]), seed=3)
+
+
+@pytest.fixture(scope="module")
+def ds_multi():
+    """GPS + Galileo + BeiDou, open sky, 2 m pseudorange noise, 300 s."""
+    return sim.simulate(_scenario(duration=300.0, canyon=False, sigma_pr_m=2.0), seed=4)
+
+
+def test_walker_constellations():
+    """Radius, inclination and plane spacing of the nominal Galileo / BeiDou MEO sets."""
+    for sys_, a, inc in (("E", 29600e3, 56.0), ("C", 21528e3, 55.0)):
+        c = walker_constellation(sys_, 1.3e9)
+        st = c.sat_states(1.3e9)
+        assert st.prn.size == 24
+        np.testing.assert_allclose(np.linalg.norm(st.r_e, axis=1), a, rtol=1e-12)
+        # orbit normal (inertial velocity) -> inclination (0.01 deg: the J2 node
+        # regression turns the broadcast model's frame slowly)
+        v_i = st.v_e + np.cross([0, 0, 7.2921151467e-5], st.r_e)
+        h = np.cross(st.r_e, v_i)
+        i = np.degrees(np.arccos(h[:, 2] / np.linalg.norm(h, axis=1)))
+        np.testing.assert_allclose(i, inc, atol=0.01)
+        # 3 planes 120 deg apart, 8 satellites each
+        nodes = np.sort(np.degrees(np.arctan2(h[:, 0], -h[:, 1])) % 360)
+        gaps = np.diff(nodes)
+        cut = np.flatnonzero(gaps > 1.0)
+        assert cut.size == 2 and np.all(np.diff(np.concatenate([[-1], cut, [23]])) == 8)
+        centres = [nodes[a:b].mean() for a, b in ((0, 8), (8, 16), (16, 24))]
+        np.testing.assert_allclose(np.diff(centres), 120.0, atol=0.02)
+
+
+def test_simulated_isb_and_canyon():
+    """Simulated pseudoranges carry the ISBs; the canyon mask removes low satellites across the street."""
+    ds = sim.simulate(_scenario(duration=120.0), seed=1)
+    r = ds.gnss_raw
+    rng = np.linalg.norm(r.sat_r_e - _antenna_e(ds, r.t), axis=1)
+    off = r.pseudorange_m - (rng + r.rx_clock_bias_m - r.sat_clock_bias_m)
+    for s, isb in (("G", 0.0), ("E", 12.5), ("C", -31.7)):
+        m = r.system == s
+        assert m.sum() > 50
+        assert abs(np.mean(off[m]) - isb) < 4 * 3.0 / np.sqrt(m.sum())
+    # across the street (|az - heading| near 90 deg) nothing below 55 deg
+    yaw = np.interp(r.t, ds.truth.t, np.unwrap(np.radians(ds.truth.yaw_deg)))
+    d = np.abs(np.sin(np.radians(r.azimuth_deg) - yaw))
+    assert np.all(r.elevation_deg[d > 0.99] >= 59.0)
+    assert np.all(r.elevation_deg >= 15.0 - 1e-9)
+
+
+def _antenna_e(ds, t):
+    from insnav.sim.gnss_loose import antenna_state
+    from insnav.sim.trajectory import Trajectory
+
+    return antenna_state(Trajectory(sim.load_scenario(ds.scenario)), t, ds.lever_arm_b)[4]
+
+
+def test_layout20_equals_layout17_on_gps_only(ds_gps):
+    """GPS-only data: the 20-state layout (ISB states unobserved) gives Layout17's solution."""
+    cfg = RunConfig(filter="ekf", init_seed=1)
+    s17 = run_tight(ds_gps, cfg, layout=17)
+    s20 = run_tight(ds_gps, cfg, layout=20)
+    assert s17.summary["layout"] == 17 and s20.summary["layout"] == 20
+    e17, e20 = errors(s17, ds_gps.truth)["pos_n_m"], errors(s20, ds_gps.truth)["pos_n_m"]
+    assert np.max(np.abs(e17 - e20)) < 1e-6, np.max(np.abs(e17 - e20))
+    np.testing.assert_allclose(s20.clock_bias_m, s17.clock_bias_m, atol=1e-6)
+    np.testing.assert_allclose(s20.sigma_pos_n_m, s17.sigma_pos_n_m, rtol=1e-9)
+    # the ISB states stay at their prior
+    np.testing.assert_allclose(s20.sigma_isb[-1], 100.0, rtol=1e-3)
+    # auto: GPS only -> 17
+    assert run_tight(ds_gps, cfg).summary["layout"] == 17
+
+
+def test_multi_isb_estimated_and_consistent(ds_multi):
+    """GPS+Galileo+BeiDou: auto layout 20, the ISBs converge to the simulated ones, rms(error/sigma) sane."""
+    sol = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=2))
+    assert sol.summary["layout"] == 20 and sol.summary["systems"] == "GEC"
+    isb, sig = sol.isb_m[-1], sol.sigma_isb[-1]
+    for k, true in ((1, 12.5), (2, -31.7)):
+        assert abs(isb[k] - true) < max(4 * sig[k], 1.0), (k, isb[k], sig[k])
+        assert sig[k] < 3.0
+    assert sol.sigma_isb[-1, 0] > 99.0  # no GLONASS: unobserved
+    hz, e, w = _hz_err(sol, ds_multi)
+    assert np.sqrt(np.mean(hz ** 2)) < 3.0
+    ratio = np.sqrt(np.mean((e["pos_n_m"][w] / e["sigma_pos_n_m"][w]) ** 2, axis=0))
+    assert np.all(ratio < 2.0) and np.all(ratio > 0.3), ratio
+
+
+def _with_fault(ds, sat_sys, sat_prn, t0, t1, size, ramp_mps=None):
+    """A copy of ds whose satellite (sat_sys, sat_prn) pseudorange gets a step of `size` m
+    (or a ramp of ramp_mps from t0, capped at `size`) over [t0, t1)."""
+    r = dataclasses.replace(ds.gnss_raw, pseudorange_m=ds.gnss_raw.pseudorange_m.copy())
+    m = (r.system == sat_sys) & (r.prn == sat_prn) & (r.t >= t0) & (r.t < t1)
+    f = np.full(m.sum(), float(size)) if ramp_mps is None else np.minimum(ramp_mps * (r.t[m] - t0), size)
+    r.pseudorange_m[m] += f
+    return dataclasses.replace(ds, gnss_raw=r), m, f
+
+
+def _visible_longest(ds, t0, t1):
+    r = ds.gnss_raw
+    w = (r.t >= t0) & (r.t < t1)
+    ids, cnt = np.unique(np.char.add(r.system[w], r.prn[w].astype(str)), return_counts=True)
+    best = ids[np.argmax(cnt)]
+    return best[0], int(best[1:])
+
+
+@pytest.mark.parametrize("size", [20.0, 50.0, 100.0])
+def test_robust_rejects_faults(ds_multi, size):
+    """Step and ramp pseudorange faults of 20, 50, 100 m on one satellite are rejected in
+    >= 99 % of the faulty epochs (ramp: where it has reached 20 m), over several runs,
+    and the horizontal error stays at the fault-free level; the plain filter is pulled off."""
+    robust = RunConfig(filter="ekf", init_seed=5, robust=Robust(screening=True))
+    clean = run_tight(ds_multi, robust)
+    hz_clean, _, _ = _hz_err(clean, ds_multi)
+    n_faulty = n_rej = 0
+    for k, (t0, ramp) in enumerate(((60.0, None), (150.0, None), (100.0, 2.0))):
+        sys_, prn = _visible_longest(ds_multi, t0, t0 + 100.0)
+        ds_f, m, f = _with_fault(ds_multi, sys_, prn, t0, t0 + 100.0, size, ramp)
+        sol = run_tight(ds_f, robust)
+        counted = f >= 20.0 - 1e-9
+        rows = np.flatnonzero(m)[counted]
+        # the inputs keep the raw rows in time order (all rows used: no mask, <= 16 per epoch)
+        flag = _flags_of(sol, ds_f, rows)
+        flag = flag[flag != -9]
+        assert flag.size > 50
+        n_faulty += flag.size
+        n_rej += int(np.sum(flag == 2))
+        hz, _, _ = _hz_err(sol, ds_f)
+        assert np.sqrt(np.mean(hz ** 2)) < 1.1 * np.sqrt(np.mean(hz_clean ** 2)) + 0.2
+        assert hz.max() < hz_clean.max() + 1.5
+        assert sol.summary["rejected_sats"] >= flag.size
+        if k == 0:
+            plain = run_tight(ds_f, RunConfig(filter="ekf", init_seed=5))
+            hz_p, _, _ = _hz_err(plain, ds_f)
+            assert hz_p.max() > hz.max()
+    assert n_rej >= 0.99 * n_faulty, (n_rej, n_faulty)
+
+
+def _flags_of(sol, ds, raw_rows):
+    """sat_flag[:, 0] of the raw rows `raw_rows` in the solution's inputs (-9: not among
+    the inputs, e.g. left out by the best-GDOP selection of 16 satellites)."""
+    from insnav.gnss.systems import system_index
+
+    inp, r = sol.inputs, ds.gnss_raw
+
+    def key(t, system, prn):
+        return (np.round(np.asarray(t) * 1e3).astype(np.int64) * 10 + system_index(system)) * 1000 + prn
+
+    idx = {int(k): i for i, k in enumerate(key(inp.epoch_t[inp.row_epoch], inp.system, inp.prn))}
+    keys = key(r.t[raw_rows], r.system[raw_rows], r.prn[raw_rows])
+    return np.array([sol.sat_flag[idx[int(k)], 0] if int(k) in idx else -9 for k in keys])
+
+
+def test_robust_equals_plain_on_clean_data(ds_multi):
+    """No fault: the robust filter's solution is the plain one except at the rare false alarms."""
+    plain = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=5))
+    rob = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=5, robust=Robust(screening=True)))
+    assert rob.summary["flagged_epochs"] <= 0.05 * len(rob.gnss_t)  # false alarms: 1e-3 per row
+    d = errors(rob, ds_multi.truth)["pos_n_m"] - errors(plain, ds_multi.truth)["pos_n_m"]
+    hz_r, _, _ = _hz_err(rob, ds_multi)
+    hz_p, _, _ = _hz_err(plain, ds_multi)
+    assert abs(np.sqrt(np.mean(hz_r ** 2)) - np.sqrt(np.mean(hz_p ** 2))) < 0.02 * np.sqrt(np.mean(hz_p ** 2))
+    # identical up to the first flagged epoch (a flagged epoch has a rejected row)
+    inp = rob.inputs
+    rej = np.any(rob.sat_flag == 2, axis=1)
+    t_flag = inp.epoch_t[inp.row_epoch[rej]].min() if rej.any() else np.inf
+    t_sol = errors(rob, ds_multi.truth)["t"]
+    assert np.sum(t_sol < t_flag) > 1000
+    assert np.max(np.abs(d[t_sol < t_flag])) < 1e-9
+
+
+@pytest.mark.parametrize("screening", [False, True])
+def test_clock_jump_absorbed(ds_multi, screening):
+    """A 1 ms receiver clock reset (every pseudorange + 299792.458 m from t = 150 s) is
+    detected once and moved into the clock; the solution equals the jump-free one."""
+    r = ds_multi.gnss_raw
+    jumped = dataclasses.replace(r, pseudorange_m=r.pseudorange_m + np.where(r.t >= 150.0, C_MS_M, 0.0))
+    ds_j = dataclasses.replace(ds_multi, gnss_raw=jumped)
+    cfg = RunConfig(filter="ekf", init_seed=5, robust=Robust(screening=screening))
+    ref = run_tight(ds_multi, cfg)
+    sol = run_tight(ds_j, cfg)
+    assert sol.summary["clock_jumps"] == 1
+    k = int(np.argmax(sol.clock_jump_m != 0))
+    assert abs(sol.gnss_t[k] - 150.0) < 1e-6
+    assert abs(sol.clock_jump_m[k] - C_MS_M) < 5.0
+    assert sol.summary["updates"] == ref.summary["updates"]
+    hz, _, _ = _hz_err(sol, ds_j)
+    hz_ref, _, _ = _hz_err(ref, ds_multi)
+    assert np.sqrt(np.mean(hz ** 2)) < 1.05 * np.sqrt(np.mean(hz_ref ** 2)) + 0.05
+    # jump check off: with screening every pseudorange is rejected from then on
+    if screening:
+        off = run_tight(ds_j, dataclasses.replace(cfg, robust=Robust(screening=True, clock_jump=False)))
+        assert off.summary["clock_jumps"] == 0
+        n_after = int(np.sum(off.inputs.n_sats()[off.gnss_t >= 150.0]))
+        assert off.summary["rejected_sats"] >= n_after  # every pseudorange from then on (Doppler stays)
+
+
+def test_robust_config_from_toml():
+    cfg = config_from_dict({"coupling": "tight", "robust": {"screening": True, "igg_k1": 4.0, "chi2_row": 20.0}})
+    assert cfg.robust.screening and cfg.robust.igg_k1 == 4.0 and cfg.robust.igg_k0 == 1.5
+    with pytest.raises(ConfigError, match="robust.k2"):
+        config_from_dict({"robust": {"k2": 1.0}})
+    with pytest.raises(ConfigError, match="igg_k1"):
+        config_from_dict({"robust": {"igg_k0": 3.0, "igg_k1": 2.0}})
+
+
+def test_gnss_raw_csv_round_trip_with_systems(tmp_path):
+    from insnav.data.dataset import SYSTEM_LETTERS
+    from insnav.gnss.systems import SYSTEMS
+
+    assert SYSTEM_LETTERS == SYSTEMS
+    ds = sim.simulate(_scenario(duration=30.0), seed=2)
+    ds.save(tmp_path / "d")
+    from insnav.data.dataset import load_dataset
+
+    back = load_dataset(tmp_path / "d")
+    np.testing.assert_array_equal(back.gnss_raw.system, ds.gnss_raw.system)
+    np.testing.assert_array_equal(back.gnss_raw.pseudorange_m, ds.gnss_raw.pseudorange_m)
+
+
+def test_walk_gec_loader_option(shared_data):
+    """Real u-blox walk: [rinex] systems = "GEC" gives the 20-state filter every system's rows
+    (the start from the GPS single point as before); the ISBs settle with decimetre sigmas and the
+    solution stays within the GPS-only one's distance of the RTK reference (both are ~8 m off it)."""
+    import tomllib
+    from pathlib import Path
+
+    from insnav.io.rinex_dataset import load_rinex
+
+    d = shared_data / "rtklibexplorer_walk_0827"
+    if not d.is_dir():
+        pytest.skip(f"{d} not found")
+    with open(Path(__file__).resolve().parents[1] / "bench" / "walk_0827.toml", "rb") as f:
+        rin = tomllib.load(f)["rinex"]
+    args = (d / "rinex_derived/gnss_1730.obs", d / "rinex_derived/gnss_1730.nav", d / "raw/imu_1730.csv")
+    ds_g, cfg_g = load_rinex(*args, rin, reference=d / "raw/gnss_1730_sf.pos")
+    ds_m, cfg_m = load_rinex(*args, dict(rin, systems="GEC"), reference=d / "raw/gnss_1730_sf.pos")
+    assert ds_m.t0 == ds_g.t0 and ds_m.initial.lat_deg == ds_g.initial.lat_deg
+    np.testing.assert_array_equal(ds_m.initial.v_n, ds_g.initial.v_n)
+    assert set(ds_m.tight_inputs.system) == {"G", "E", "C"}
+    assert np.median(ds_m.tight_inputs.n_sats()) >= 3 * np.median(ds_g.tight_inputs.n_sats())
+    s_g, s_m = run_tight(ds_g, cfg_g), run_tight(ds_m, cfg_m)
+    assert s_g.summary["layout"] == 17 and s_m.summary["layout"] == 20
+    assert np.all(s_m.sigma_isb[-1, 1:] < 0.5)
+    hz = {}
+    for k, s in (("G", s_g), ("GEC", s_m)):
+        e = errors(s, ds_g.truth)["pos_n_m"]
+        hz[k] = np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))
+    assert hz["GEC"] < hz["G"] + 0.5, hz
+    from insnav.config import ConfigError
+    from insnav.io.rinex_dataset import RinexOptions
+
+    with pytest.raises(ConfigError, match="rinex.systems"):
+        RinexOptions.from_dict(dict(rin, systems="EC"))
+
+
+@pytest.mark.parametrize("filt", ["rbukf", "ukf"])
+def test_multi_sigma_point_filters(ds_multi, filt):
+    """The RB-UKF and UKF on 20 states (same measurement): ISBs estimated, position near the EKF's."""
+    ekf = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=2))
+    sol = run_tight(ds_multi, RunConfig(filter=filt, init_seed=2))
+    assert sol.summary["layout"] == 20
+    for k, true in ((1, 12.5), (2, -31.7)):
+        assert abs(sol.isb_m[-1, k] - true) < max(4 * sol.sigma_isb[-1, k], 1.0)
+    hz, _, _ = _hz_err(sol, ds_multi)
+    hz_e, _, _ = _hz_err(ekf, ds_multi)
+    assert np.sqrt(np.mean(hz ** 2)) < 1.2 * np.sqrt(np.mean(hz_e ** 2)) + 0.1
