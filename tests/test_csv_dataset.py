@@ -494,9 +494,9 @@ def _walk(shared_data, *parts):
 
 
 #: horizontal error against the RTK solution at the epochs the filter did not see [m]: rms and max
-#: (measured 0.115 and 0.42 m at bench/walk_0827_loose.toml's settings; linear interpolation of the
+#: (measured 0.083 and 0.28 m at bench/walk_0827_loose.toml's settings; linear interpolation of the
 #: same 1 Hz fixes gives 0.110 and 0.75 m)
-WALK_HOLDOUT_RMS_M, WALK_HOLDOUT_MAX_M = 0.2, 0.6
+WALK_HOLDOUT_RMS_M, WALK_HOLDOUT_MAX_M = 0.15, 0.5
 
 
 def test_walk_loose_from_pos_no_typed_initial_state(shared_data):
@@ -516,6 +516,8 @@ def test_walk_loose_from_pos_no_typed_initial_state(shared_data):
     a = ds.alignment
     assert a is not None and a.heading_source == "gnss_velocity" and a.static_s > 1.0
     sol = insnav.run(ds, config=cfg)
+    # the default innovation gate rejects none (with the file's 5 cm/s velocity sigmas it rejected
+    # 10 of 118: the reason for [gnss] sigma_vel_mps = 0.1 in the config)
     assert sol.summary["rejected"] == 0 and sol.summary["updates"] == len(ds.gnss) > 100
     ref = rtklib_truth(str(pos), ds.gps_time_offset_s)
     m = (ref.t > sol.t[0]) & (ref.t <= sol.t[-1])

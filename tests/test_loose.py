@@ -350,6 +350,74 @@ def test_nis_gate_rejects_jump(short, filt):
     assert pull[0] > 3.0 * np.max(np.abs(e_gated[:, 0] - e_clean[:, 0]))  # measured 2.16 vs 0.48 m
 
 
+def test_gate_is_on_by_default_at_its_quantile(short):
+    """With no gate setting (neither the run nor the dataset's preset: the
+    seed000 presets have ``[run] gate_prob = 0``, the paper's conditions) the
+    50 m jump (NIS 74) is rejected by the default gate (chi-square 0.9999
+    quantile of 6 rows, 27.86), the clean run loses no record (largest clean
+    NIS 16.9), and the default equals gate_chi2 = 27.856 to the last bit;
+    gate_prob = 0 turns it off, and the preset's default applies when the run
+    does not set it."""
+    preset = short
+    assert preset.scenario["run"]["gate_prob"] == 0.0
+    ds = copy.copy(short)
+    ds.scenario = {k: v for k, v in short.scenario.items() if k != "run"}
+    g = ds.gnss
+    k = int(np.flatnonzero(np.isclose(g.t_valid, 30.0))[0])
+    R_M, _ = radii(np.deg2rad(g.lat_deg[k]))
+    lat = g.lat_deg.copy()
+    lat[k] += np.rad2deg(50.0 / (R_M + g.h_m[k]))
+    bad = _with_gnss(ds, lat_deg=lat)
+    clean = insnav.run(ds, init_seed=6)
+    dflt = insnav.run(bad, init_seed=6)
+    fixed = insnav.run(bad, init_seed=6, gate_chi2=27.85634123601417)
+    off = insnav.run(bad, init_seed=6, gate_prob=0.0)
+    bad_preset = copy.copy(bad)
+    bad_preset.scenario = preset.scenario
+    np.testing.assert_array_equal(insnav.run(bad_preset, init_seed=6).lat_deg, off.lat_deg)
+    assert insnav.run(bad_preset, init_seed=6, gate_prob=0.9999).gnss_status[k] == 2
+    assert clean.summary["rejected"] == 0 and clean.summary["gate_reopened"] == 0
+    assert dflt.gnss_status[k] == 2 and dflt.summary["rejected"] == 1
+    assert 27.86 < dflt.nis[k] and np.nanmax(np.delete(dflt.nis, k)) < 27.86
+    np.testing.assert_array_equal(dflt.lat_deg, fixed.lat_deg)
+    assert off.gnss_status[k] == 1 and off.summary["rejected"] == 0
+    with pytest.raises(ConfigError, match=r"'gate_prob': bad value 1.0"):
+        insnav.run(ds, gate_prob=1.0)
+
+
+@pytest.mark.parametrize("filt", ["ekf", "rbukf"])
+def test_gate_reopens_after_a_run_of_rejections(short, filt):
+    """A lasting 100 m north step in every fix from 30 s (a datum change, a
+    wrong base): the default gate, never reopened, rejects all 31 remaining
+    fixes and the solution stays where it was (measured 1.3 m from the clean
+    run); reopened after 10 rejections in a row, the 11th fix (NIS 263) gets
+    P scaled by NIS / 6 and is applied, which moves the solution 86 m at once,
+    and every later fix passes the gate (NIS <= 15.4), the solution following
+    the shifted fixes (measured 98.9 m at the end, 5 m fix noise).  Without
+    the scaling the small P keeps the gain small: with the gate off entirely
+    the solution had followed 73 m of the step after all 31 fixes."""
+    ds = copy.copy(short)
+    ds.scenario = {k: v for k, v in short.scenario.items() if k != "run"}  # insnav's default gate
+    g = ds.gnss
+    step = g.t_valid >= 30.0 - 1e-9
+    R_M, _ = radii(np.deg2rad(g.lat_deg[0]))
+    lat = g.lat_deg.copy()
+    lat[step] += np.rad2deg(100.0 / (R_M + g.h_m[0]))
+    bad = _with_gnss(ds, lat_deg=lat)
+    never = insnav.run(bad, filter=filt, init_seed=6)  # default: never reopened
+    dflt = insnav.run(bad, filter=filt, init_seed=6, gate_reopen_after=10)
+    n_step = int(step.sum())
+    assert never.summary["rejected"] == n_step and never.summary["gate_reopened"] == 0
+    assert dflt.summary["gate_reopened"] == 1 and dflt.summary["rejected"] == 10  # and exit 2 of insnav run
+    st = dflt.gnss_status[step]
+    assert np.all(st[:10] == 2) and np.all(st[10:] == 1)
+    clean = insnav.run(ds, filter=filt, init_seed=6)
+    rows = np.minimum(np.searchsorted(clean.t, g.t_valid[step]), len(clean.t) - 1)
+    north = lambda s: (s.lat_deg[rows] - clean.lat_deg[rows]) * np.deg2rad(1.0) * (R_M + g.h_m[0])  # noqa: E731
+    assert np.max(np.abs(north(never))) < 3.0, north(never)
+    assert north(dflt)[10] > 80.0 and abs(north(dflt)[-1] - 100.0) < 2.5, north(dflt)
+
+
 def test_status_codes_and_summary(short):
     """Status codes and counts add up: a truncated IMU stream (45 s of 60 s)
     leaves the later records at 4 with NaN NIS/innovation, a record before t0

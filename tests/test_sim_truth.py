@@ -148,6 +148,29 @@ def test_bad_scenario_names_key():
     raw["motion"]["segments"][1]["accel_mps2"] = 1.0
     with pytest.raises(ScenarioError, match=r"motion\.segments\[1\]\.target_speed_mps.*conflicts"):
         load_scenario(raw)
+    raw, _ = resolve_raw("seed001-low")
+    raw["run"]["gate_chi2"] = 20.0  # only run defaults of the data belong in a preset
+    with pytest.raises(ScenarioError, match=r"run\.gate_chi2.*unknown key.*gate_prob"):
+        load_scenario(raw)
+    raw, _ = resolve_raw("seed001-low")
+    raw["run"]["gate_prob"] = 1.0
+    with pytest.raises(ScenarioError, match=r"run\.gate_prob"):
+        load_scenario(raw)
+
+
+def test_paper_presets_run_ungated_and_round_trip(tmp_path):
+    """The seed-paper presets carry ``[run] gate_prob = 0`` (the papers' filters
+    have no innovation gate), through a saved dataset folder too; a preset
+    without it gets insnav's default gate (car-mems sets it explicitly)."""
+    for name in ("seed000-sim", "seed000-heading", "seed000-car", "seed001-low", "seed001-high",
+                 "seed003-1sat", "seed004-uav"):
+        assert resolve_raw(name)[0]["run"] == {"gate_prob": 0.0}, name
+    assert resolve_raw("car-mems-outage30")[0]["run"] == {"gate_prob": 0.9999}
+    assert "run" not in resolve_raw("urban-multignss")[0]
+    import insnav
+    ds = insnav.simulate({"extends": "seed001-low", "motion": {"segments": [{"duration_s": 20.0}]}}, seed=1)
+    back = insnav.load_dataset(ds.save(tmp_path / "d"))
+    assert back.scenario["run"] == {"gate_prob": 0.0}
 
 
 def test_bad_toml_file(tmp_path):

@@ -46,11 +46,15 @@ inline void reject_unknown(const py::dict& d, std::initializer_list<const char*>
 }
 
 /// The engine timing keys every config shares.
-inline void timing_from(const py::dict& d, double& propagation_interval, double& cycle_period, double& gate_chi2,
+inline void timing_from(const py::dict& d, double& propagation_interval, double& cycle_period, GateConfig& gate,
                         int& output_decimation) {
   propagation_interval = num(d, "propagation_interval", propagation_interval);
   cycle_period = num(d, "cycle_period", cycle_period);
-  gate_chi2 = num(d, "gate_chi2", gate_chi2);
+  gate.chi2 = num(d, "gate_chi2", gate.chi2);
+  gate.prob = num(d, "gate_prob", gate.prob);
+  gate.reopen_after = static_cast<int>(num(d, "gate_reopen_after", gate.reopen_after));
+  if (!(gate.chi2 >= 0.0) || !(gate.prob >= 0.0 && gate.prob < 1.0) || gate.reopen_after < 0)
+    throw py::value_error("gate: need gate_chi2 >= 0, 0 <= gate_prob < 1, gate_reopen_after >= 0");
   output_decimation = static_cast<int>(num(d, "output_decimation", output_decimation));
   if (!(propagation_interval > 0.0)) throw py::value_error("propagation_interval must be > 0");
   if (!(cycle_period > 0.0)) throw py::value_error("cycle_period must be > 0");
@@ -65,7 +69,7 @@ inline UtParams ut_from(const py::dict& d) {
   return ut;
 }
 
-#define INSNAV_TIMING_KEYS "lever_arm_b", "propagation_interval", "cycle_period", "gate_chi2", "output_decimation"
+#define INSNAV_TIMING_KEYS "lever_arm_b", "propagation_interval", "cycle_period", "gate_chi2", "gate_prob", "gate_reopen_after", "output_decimation"
 #define INSNAV_UT_KEYS "ut_alpha", "ut_beta", "ut_kappa"
 
 /// LooseConfig from a dict; `extra` keys are allowed (and read by the caller).
@@ -73,7 +77,7 @@ inline LooseConfig loose_config_from(const py::dict& d, const char* what, std::i
   reject_unknown(d, {INSNAV_TIMING_KEYS, "use_position", "use_velocity"}, what, extra);
   LooseConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
-  timing_from(d, c.propagation_interval, c.cycle_period, c.gate_chi2, c.output_decimation);
+  timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
   c.use_position = flag(d, "use_position", true);
   c.use_velocity = flag(d, "use_velocity", true);
   return c;
@@ -85,7 +89,7 @@ inline TightConfig tight_config_from(const py::dict& d) {
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows"});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
-  timing_from(d, c.propagation_interval, c.cycle_period, c.gate_chi2, c.output_decimation);
+  timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
   c.use_pseudorange = flag(d, "use_pseudorange", true);
   c.use_rate = flag(d, "use_rate", true);
   RobustConfig& r = c.robust;

@@ -94,6 +94,7 @@ struct NavBuffers {
     if (with_isb) res["isb"] = isb[rows];
     res["updates"] = out.updates;
     res["rejected"] = out.rejected;
+    res["gate_reopened"] = out.gate_reopened;
     res["cholesky_repairs"] = out.cholesky_repairs;
   }
 };

@@ -162,7 +162,7 @@ int soak(const char* name, const Scenario& sc, const Data& d, double hours) {
   model.acc_bias_sigma = Vec3::Constant(5e-3 * 9.80665);
   LooseConfig cfg;
   cfg.cycle_period = 1.5;
-  cfg.gate_chi2 = 22.46;
+  cfg.gate.chi2 = 22.46;
   const int dec = static_cast<int>(sc.rate);  // 1 Hz output
   cfg.output_decimation = dec;
   UtParams ut;

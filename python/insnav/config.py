@@ -24,8 +24,33 @@ COUPLINGS = ("loose", "tight", "gnss")
 LAYOUTS = (15, 21)
 
 
+#: probability of the innovation gate when neither the run nor the dataset's
+#: preset sets ``gate_prob`` (chi-square 0.9999 quantile of the record's rows)
+GATE_PROB_DEFAULT = 0.9999
+
+
 class ConfigError(ValueError):
     """A bad configuration key or value; the message names both."""
+
+
+class TomlTable:
+    """Base of the option dataclasses read from one TOML table named ``TABLE``
+    (e.g. ``[gnss]``, ``[spp]``): ``from_dict`` rejects an unknown key with a
+    did-you-mean, then the subclass's ``validate(source)`` checks the values."""
+
+    TABLE = ""
+
+    @classmethod
+    def from_dict(cls, d: dict | None, source: str = "run configuration"):
+        """From the TOML table ``d``; a one-line ConfigError names a bad or unknown key."""
+        d = dict(d or {})
+        names = [f.name for f in dataclasses.fields(cls)]
+        for k in d:
+            if k not in names:
+                close = close_matches(k, names)
+                hint = f" (did you mean '{cls.TABLE}.{close[0]}'?)" if close else ""
+                raise ConfigError(f"{source}: unknown key '{cls.TABLE}.{k}'{hint}; known keys: {', '.join(names)}")
+        return cls(**d).validate(source)
 
 
 @dataclass
@@ -273,8 +298,24 @@ class RunConfig:
         None: derived from the dataset's IMU model.
     lever_arm_b : 3 floats or None
         IMU -> antenna in FRD [m]; None: the dataset's.
-    gate_chi2 : float
-        NIS gate (0 = off).  For 6 rows, 22.46 is the 0.999 quantile.
+    gate_prob : float or None
+        Innovation gate of the GNSS records, on by default: a record (loose
+        fix or tight epoch) whose NIS exceeds the chi-square quantile of its
+        row count at this probability is rejected (0.9999: 27.86 for a
+        position + velocity fix, 21.11 for position only; 0 = off).  None
+        (default): the dataset's preset default (``[run] gate_prob`` of a
+        simulator preset: 0 for the seed-paper presets, whose filters have no
+        gate), else ``GATE_PROB_DEFAULT`` = 0.9999.
+    gate_chi2 : float or None
+        A fixed NIS threshold for every row count instead of the quantile
+        (0 = no gate at all; None, the default: ``gate_prob``).
+    gate_reopen_after : int
+        Lock-out recovery, off by default (0): after this many rejected
+        records in a row the next one, if the gate rejects it too, is applied
+        with the covariance scaled by NIS / rows (nis_gate.hpp), so a filter
+        whose covariance became too small follows the GNSS again.  A lasting
+        fault is then taken in whole too, which is why it is off by default;
+        the run summary counts these records as ``gate_reopened``.
     use_position, use_velocity : bool
     propagation_interval_s : float
         Error-state propagation step inside a filter cycle (default 0.1 s:
@@ -322,7 +363,9 @@ class RunConfig:
     init_seed: int = 0
     imu: ImuNoise | None = None
     lever_arm_b: list | None = None
-    gate_chi2: float = 0.0
+    gate_prob: float | None = None
+    gate_chi2: float | None = None
+    gate_reopen_after: int = 0
     use_position: bool = True
     use_velocity: bool = True
     propagation_interval_s: float = 0.1
@@ -350,10 +393,10 @@ class RunConfig:
             raise ConfigError(f"config key '{key}': bad value {value!r}; allowed: {allowed}")
 
         # types first (TOML gives any type): numbers finite and not bool, flags bool
-        for key in ("init_seed", "gate_chi2", "propagation_interval_s", "output_decimation", "ut_alpha",
-                    "ut_beta", "ut_kappa", "cycle_period_s"):
+        for key in ("init_seed", "gate_prob", "gate_chi2", "gate_reopen_after", "propagation_interval_s",
+                    "output_decimation", "ut_alpha", "ut_beta", "ut_kappa", "cycle_period_s"):
             v = getattr(self, key)
-            if v is None and key in ("ut_kappa", "cycle_period_s"):
+            if v is None and key in ("ut_kappa", "cycle_period_s", "gate_chi2", "gate_prob"):
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not math.isfinite(v):
@@ -419,8 +462,13 @@ class RunConfig:
                 bad(key, getattr(self, key), "3 finite values > 0")
         if not (self.propagation_interval_s > 0):
             bad("propagation_interval_s", self.propagation_interval_s, "> 0")
-        if self.gate_chi2 < 0:
-            bad("gate_chi2", self.gate_chi2, ">= 0 (0 = off)")
+        if self.gate_chi2 is not None and self.gate_chi2 < 0:
+            bad("gate_chi2", self.gate_chi2, ">= 0 (0 = off) or absent (the gate_prob quantile)")
+        if self.gate_prob is not None and not 0 <= self.gate_prob < 1:
+            bad("gate_prob", self.gate_prob, "0 <= p < 1 (0 = off)")
+        if int(self.gate_reopen_after) != self.gate_reopen_after or self.gate_reopen_after < 0:
+            bad("gate_reopen_after", self.gate_reopen_after, "an integer >= 0 (0 = never)")
+        self.gate_reopen_after = int(self.gate_reopen_after)
         if self.cycle_period_s is not None and not self.cycle_period_s > 0:
             bad("cycle_period_s", self.cycle_period_s, "> 0 or absent")
         if int(self.output_decimation) != self.output_decimation or int(self.output_decimation) < 1:

@@ -486,7 +486,10 @@ def cmd_run(args) -> int:
             Path(p).unlink(missing_ok=True)
         raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
-          f"records, {used} updates used, {rejected} rejected by the gate, {dropped} dropped by the input checks; "
+          f"records, {used} updates used, {rejected} rejected by the gate"
+          + (f" ({s['gate_reopened']} applied ungated after a run of rejections: gate_reopen_after)"
+             if s.get("gate_reopened") else "")
+          + f", {dropped} dropped by the input checks; "
           f"{s.get('cholesky_repairs', 0)} covariance repairs"
           + (f"; robust: {s.get('rejected_sats', 0)} satellite-epochs rejected, {s.get('downweighted_sats', 0)} "
              f"down-weighted ({s.get('flagged_epochs', 0)} epochs flagged), {s.get('clock_jumps', 0)} clock jumps"

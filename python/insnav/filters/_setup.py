@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validate import as_float_array, check_finite, check_increasing
-from ..config import RunConfig
+from ..config import GATE_PROB_DEFAULT, RunConfig
 from ..data.nav import NavState
 from ..earth import radii
 from ..registry import filter_spec
@@ -97,6 +97,22 @@ def lever_arm(dataset, cfg: RunConfig) -> np.ndarray:
     return np.asarray(dataset.lever_arm_b if cfg.lever_arm_b is None else cfg.lever_arm_b, float)
 
 
+def gate_config(cfg: RunConfig, dataset=None) -> dict:
+    """The engines' gate keys (nis_gate.hpp): ``gate_chi2`` None -> the
+    ``gate_prob`` quantile of each record's row count, 0 -> no gate, > 0 -> that
+    fixed threshold.  ``gate_prob`` None: the dataset's preset default
+    (``[run] gate_prob`` of a simulator preset, e.g. 0 for the seed papers),
+    else :data:`insnav.config.GATE_PROB_DEFAULT`."""
+    if cfg.gate_chi2 is None:
+        prob = cfg.gate_prob
+        if prob is None:
+            prob = (getattr(dataset, "scenario", None) or {}).get("run", {}).get("gate_prob", GATE_PROB_DEFAULT)
+        chi2, prob = 0.0, float(prob)
+    else:
+        chi2, prob = float(cfg.gate_chi2), 0.0
+    return dict(gate_chi2=chi2, gate_prob=prob, gate_reopen_after=int(cfg.gate_reopen_after))
+
+
 def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **extra) -> dict:
     """The engine config every binder reads: lever arm, propagation interval,
     outage cycle (the GNSS period, the median spacing of ``record_t``, unless
@@ -107,7 +123,7 @@ def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **
         rt = np.unique(np.asarray(record_t, float))
         cycle = float(np.median(np.diff(rt))) if rt.size > 1 else 1.0
     out = dict(lever_arm_b=lever_arm(dataset, cfg), propagation_interval=cfg.propagation_interval_s,
-               cycle_period=outage_cycle_period(cfg.filter, cycle), gate_chi2=cfg.gate_chi2,
+               cycle_period=outage_cycle_period(cfg.filter, cycle), **gate_config(cfg, dataset),
                output_decimation=int(cfg.output_decimation))
     if cfg.filter not in ("ekf", "kf", "rdkf", "exact"):
         out.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,

@@ -214,7 +214,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
         summary=dict(filter=filt, coupling="tight", layout=20, particles=int(particles) if filt != "fukf" else 1,
                      fading=bool(fading), seed=int(seed), updates=int(out["updates"]),
-                     rejected=int(out["rejected"]), cholesky_repairs=int(out["cholesky_repairs"]),
+                     rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), cholesky_repairs=int(out["cholesky_repairs"]),
                      resamples=int(out["resamples"]), divergences=int(out["divergences"]),
                      gnss_records=int(E), sat_rows=int(len(inputs.prn)),
                      clock0=tuple(clock0), clock_psd=(float(qb), float(qd)), run_seconds=float(out["run_seconds"])),

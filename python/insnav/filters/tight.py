@@ -155,7 +155,7 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9], gyro_scale=err[:, 9:12], gnss_t=ep_t,
         innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
         summary=dict(filter=cfg.filter, coupling="tight", layout=n, systems="".join(systems),
-                     updates=int(out["updates"]), rejected=int(out["rejected"]),
+                     updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
                      cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=int(ep_t.size),
                      sat_rows=int(len(inputs.prn)), clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
                      robust_screening=bool(cfg.robust.screening), rejected_sats=int(out["rejected_sats"]),

@@ -470,11 +470,19 @@ def load_scenario(scenario, *, seed: int | None = None) -> Scenario:
 
 
 _TOP = {"name", "description", "seed", "time", "initial", "motion", "imu", "truth",
-        "gnss", "gnss_raw", "odometer"}
+        "gnss", "gnss_raw", "odometer", "run"}
+#: keys of a preset's [run] table: run-configuration defaults of the data it
+#: simulates (Dataset.scenario["run"]), e.g. gate_prob = 0 for the seed-paper
+#: presets, whose filters have no innovation gate
+RUN_DEFAULT_KEYS = {"gate_prob"}
 
 
 def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
     _check_keys(ctx, raw, "", _TOP)
+    rn = _table(ctx, raw, "", "run")
+    _check_keys(ctx, rn, "run", RUN_DEFAULT_KEYS)
+    gate_prob = _num(ctx, rn, "run", "gate_prob", 0.0, lo=0.0, hi=0.999999999)
+    del gate_prob  # read by insnav.run from Dataset.scenario["run"]; checked here
     name = _str(ctx, raw, "", "name", "unnamed")
     description = _str(ctx, raw, "", "description", "")
     seed = _num(ctx, raw, "", "seed", 0, integer=True, lo=0)

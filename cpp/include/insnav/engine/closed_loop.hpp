@@ -32,6 +32,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "insnav/filter/nis_gate.hpp"
 #include "insnav/filter/rts_smoother.hpp"
 #include "insnav/filter/sigma_points.hpp"
 #include "insnav/filter/types.hpp"
@@ -82,6 +83,7 @@ struct NavOutputs {
   double* isb = nullptr;      // (.,3) inter-system biases of R, E, C [m] (layouts with ISB states)
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
+  int gate_reopened = 0;       // records taken ungated after the gate's reopen_after rejections in a row
 
   // Interrupt and progress hook (may be null): called every `poll_every`
   // samples with the sample index and count; false stops the run with
@@ -136,6 +138,7 @@ struct ClosedLoop {
   Filter filter;
   Strapdown ins;
   ImuCorrection corr;
+  NisGate gate;  // the GNSS records' innovation gate (the engine sets its config)
   double clock_bias = 0.0, clock_drift = 0.0;  // receiver clock estimate [m], [m/s] (kHasClock<L>)
   IsbVec isb = IsbVec::Zero();                  // inter-system bias estimates of systems 1..3 [m] (kHasIsb<L>)
   double propagation_interval = 0.02;          // [s]
@@ -266,6 +269,28 @@ struct ClosedLoop {
   UpdateResult update(const Meas& meas, double gate_chi2) {
     out_cache_dirty_ = true;
     return filter.update(meas, gate_chi2);
+  }
+
+  /// The measurement update of a GNSS record through the record stream's
+  /// innovation gate (nis_gate.hpp: the chi-square quantile of its row count).
+  template <class Meas>
+  UpdateResult update_gated(const Meas& meas) {
+    const int m = static_cast<int>(meas.linear().rows());
+    UpdateResult r = update(meas, gate.nominal_threshold(m));
+    if (r.rejected_by_gate && gate.reopening()) {
+      // lock-out recovery (nis_gate.hpp): the covariance under which this
+      // innovation is ordinary, then the update without the gate
+      if constexpr (kCanInflate) {
+        const double lambda = r.nis / m;
+        if (lambda > 1.0 && std::isfinite(lambda)) {
+          filter.inflate_covariance(lambda);
+          if (rec_pending_) rec_[rec_n_ - 1].P_pred *= lambda;  // the smoother sees it as process noise
+        }
+      }
+      r = update(meas, 0.0);
+    }
+    gate.record(r);
+    return r;
   }
 
   /// Call after changing the filter directly (e.g. a delayed update).
@@ -455,6 +480,11 @@ struct ClosedLoop {
   template <class F>
   struct TracksCross<F, std::void_t<decltype(std::declval<F&>().cycle_cross_covariance())>> : std::true_type {};
   static constexpr bool kTracksCross = TracksCross<Filter>::value;
+  template <class F, class = void>
+  struct CanInflate : std::false_type {};
+  template <class F>
+  struct CanInflate<F, std::void_t<decltype(std::declval<F&>().inflate_covariance(1.0))>> : std::true_type {};
+  static constexpr bool kCanInflate = CanInflate<Filter>::value;  // EKF, RB-UKF, UKF (not the particle filters)
 
  public:
   /// The filter gives what the RTS smoother needs (EKF transition or UT cross-covariance).

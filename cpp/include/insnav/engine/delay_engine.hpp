@@ -71,7 +71,9 @@ class RandomDelayEngine {
 
   RandomDelayEngine(const ImuErrorModel& model, const LooseConfig& cfg, const DelayConfig& dcfg,
                     const double* delay_p, int n_p)
-      : core_(make(model, delay_p, n_p), cfg.propagation_interval), cfg_(cfg), dcfg_(dcfg) {}
+      : core_(make(model, delay_p, n_p), cfg.propagation_interval), cfg_(cfg), dcfg_(dcfg) {
+    core_.gate = NisGate(cfg.gate);
+  }
 
   const Filter& filter() const { return core_.filter; }
 
@@ -123,6 +125,7 @@ class RandomDelayEngine {
     }
     for (; g < m; ++g) out.mark(g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
+    out.gate_reopened = core_.gate.reopened();
   }
 
  private:
@@ -152,7 +155,11 @@ class RandomDelayEngine {
       meas_[i].set(refs_[i].nav, refs_[i].omega_ib_b, cfg_.lever_arm_b, fix);
       hyp[i] = &meas_[i].linear();
     }
-    const UpdateResult res = core_.filter.update_delayed(hyp, cfg_.gate_chi2);
+    int rows = 0;  // every hypothesis has the fix's rows
+    for (const auto* h : hyp)
+      if (h && rows == 0) rows = h->rows();
+    const UpdateResult res = core_.filter.update_delayed(hyp, core_.gate.threshold(rows));
+    core_.gate.record(res);
     core_.touch();
     if (res.rows > 0) out.write_innovation(g, fix, core_.filter.last_mean_residual());
     if (out.nis) out.nis[g] = res.rows > 0 ? res.nis : NAN;
@@ -186,6 +193,7 @@ class TimeTaggedEngine {
 
   TimeTaggedEngine(const ImuErrorModel& model, const LooseConfig& cfg, const DelayConfig& dcfg)
       : core_(Filter(model), cfg.propagation_interval), cfg_(cfg), dcfg_(dcfg) {
+    core_.gate = NisGate(cfg.gate);
     INSNAV_CHECK(dcfg_.checkpoint_interval > 0.0, "checkpoint_interval must be > 0");
     INSNAV_CHECK(dcfg_.max_history_s >= 0.0, "max_history_s must be >= 0");
   }
@@ -241,6 +249,7 @@ class TimeTaggedEngine {
     }
     for (; ga < m; ++ga) out.mark(ga, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
+    out.gate_reopened = core_.gate.reopened();
     out.updates = 0;
     if (out.status)
       for (std::int64_t g = 0; g < m; ++g) out.updates += out.status[g] == static_cast<std::int8_t>(RecordStatus::kApplied);
@@ -299,7 +308,7 @@ class TimeTaggedEngine {
     }
     meas_.set(core_.ins.state(), core_.omega_ib_b(), cfg_.lever_arm_b, fix);
     out.write_innovation(g, fix, meas_.linear().residual);
-    const UpdateResult res = core_.update(meas_, cfg_.gate_chi2);
+    const UpdateResult res = core_.update_gated(meas_);
     if (out.nis) out.nis[g] = res.nis;
     out.set_status(out.status, g, status_of(res));
     if (res.applied) {

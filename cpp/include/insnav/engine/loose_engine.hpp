@@ -28,7 +28,7 @@ struct LooseConfig {
   Vec3 lever_arm_b = Vec3::Zero();   // IMU centre -> GNSS antenna, FRD [m]
   double propagation_interval = 0.02;  // error-state propagation step [s]
   double cycle_period = 1.0;         // filter cycle without GNSS (outage) [s]
-  double gate_chi2 = 0.0;            // NIS gate (<= 0: off)
+  GateConfig gate;                   // innovation gate of the fixes (nis_gate.hpp; on by default)
   bool use_position = true;
   bool use_velocity = true;
   int output_decimation = 1;         // write every k-th IMU sample
@@ -91,7 +91,9 @@ class LooseEngine {
 
   /// ut is used by the sigma-point filters (RB-UKF, UKF) and ignored by the EKF.
   LooseEngine(const ImuErrorModel& model, const LooseConfig& cfg, const UtParams& ut = {})
-      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {}
+      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {
+    core_.gate = NisGate(cfg.gate);
+  }
 
   Filter& filter() { return core_.filter; }
   /// Record the forward pass for the RTS smoother (closed_loop.hpp); EKF, RB-UKF, UKF.
@@ -128,6 +130,7 @@ class LooseEngine {
     for (; g < m; ++g) out.mark(g, RecordStatus::kOutsideImuSpan);
     for (; c < k; ++c) mark_constraint(out, c, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
+    out.gate_reopened = core_.gate.reopened();
   }
 
  private:
@@ -139,7 +142,7 @@ class LooseEngine {
     }
     meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, fix);
     out.write_innovation(g, fix, meas_.linear().residual);
-    const UpdateResult res = core_.update(meas_, cfg_.gate_chi2);
+    const UpdateResult res = core_.update_gated(meas_);
     if (out.nis) out.nis[g] = res.nis;
     out.set_status(out.status, g, status_of(res));
     if (res.applied) {

@@ -36,7 +36,7 @@ struct TightConfig {
   Vec3 lever_arm_b = Vec3::Zero();     // IMU centre -> GNSS antenna, FRD [m]
   double propagation_interval = 0.02;  // error-state propagation step [s]
   double cycle_period = 1.0;           // filter cycle without GNSS [s]
-  double gate_chi2 = 0.0;              // NIS gate on the whole epoch (<= 0: off)
+  GateConfig gate;                     // innovation gate of the whole epoch (nis_gate.hpp; on by default)
   bool use_pseudorange = true;
   bool use_rate = true;
   int output_decimation = 1;
@@ -95,7 +95,9 @@ class TightEngine {
   static_assert(kHasClock<L>, "TightEngine needs a layout with clock states");
 
   TightEngine(const ImuErrorModel& model, const TightConfig& cfg, const UtParams& ut = {})
-      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {}
+      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {
+    core_.gate = NisGate(cfg.gate);
+  }
 
   Filter& filter() { return core_.filter; }
 
@@ -115,6 +117,7 @@ class TightEngine {
                       [&](std::int64_t i) { apply_epoch(epochs[i], i, out); });
     for (; g < n_epochs; ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
+    out.gate_reopened = core_.gate.reopened();
   }
 
  private:
@@ -173,7 +176,7 @@ class TightEngine {
       if (out.nis) out.nis[g] = NAN;
       return;
     }
-    const UpdateResult res = core_.update(meas_, cfg_.gate_chi2);
+    const UpdateResult res = core_.update_gated(meas_);
     if (out.nis) out.nis[g] = res.nis;
     out.set_status(out.status, g, status_of(res));
     if (res.applied) {

@@ -81,6 +81,8 @@ class Ekf {
   const Cov& P() const { return P_; }
   Cov& P_mutable() { return P_; }
   void reset_state() { x_.setZero(); }
+  /// P <- lambda P, lambda >= 1 (the gate's lock-out recovery, nis_gate.hpp).
+  void inflate_covariance(double lambda) { P_ *= lambda; }
   int cholesky_repairs() const { return repairs_; }
 
  private:

@@ -143,6 +143,13 @@ class UnscentedPropagation {
     x_.setZero();
     points_fresh_ = false;
   }
+  /// P <- lambda P, lambda >= 1 (the fading-memory scaling of seed 004 eq. (1),
+  /// used by the innovation gate to recover from a lock-out, nis_gate.hpp); the
+  /// next update draws its sigma points from the inflated P.
+  void inflate_covariance(double lambda) {
+    P_ *= lambda;
+    points_fresh_ = false;
+  }
   int cholesky_repairs() const { return repairs_; }
   const UtWeights<kN>& weights() const { return w_; }
   /// Sigma points: drawn (after begin_cycle) or propagated (after end_cycle).
