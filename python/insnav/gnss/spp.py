@@ -43,16 +43,13 @@ excluding rows, 2 failed and no further exclusion possible, 3 not tested
 """
 from __future__ import annotations
 
-from ..errors import close_matches
-
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import earth
-from ..config import ConfigError
+from ..config import ConfigError, TomlTable
 from .systems import SYSTEMS
 
 __all__ = ["SppOptions", "SppSolution", "solve_spp", "chi2_quantile", "spp_inputs_from_rinex", "RAIM_STATUS",
@@ -125,7 +122,7 @@ def chi2_quantile(p: float, dof: int) -> float:
 
 
 @dataclass
-class SppOptions:
+class SppOptions(TomlTable):
     """Solver options (the ``[spp]`` table of a run TOML).
 
     Attributes
@@ -152,18 +149,6 @@ class SppOptions:
     velocity: bool = True
 
     TABLE = "spp"
-
-    @classmethod
-    def from_dict(cls, d: dict | None, source: str = "run configuration") -> "SppOptions":
-        """From an ``[spp]`` TOML table; a one-line ConfigError names a bad or unknown key."""
-        d = dict(d or {})
-        names = [f.name for f in dataclasses.fields(cls)]
-        for k in d:
-            if k not in names:
-                close = close_matches(k, names)
-                hint = f" (did you mean '{cls.TABLE}.{close[0]}'?)" if close else ""
-                raise ConfigError(f"{source}: unknown key '{cls.TABLE}.{k}'{hint}; known keys: {', '.join(names)}")
-        return cls(**d).validate(source)
 
     def validate(self, source: str = "spp options") -> "SppOptions":
         def bad(key, allowed):

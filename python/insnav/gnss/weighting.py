@@ -45,15 +45,12 @@ the FDMA signals are worse), ``E`` 1, ``C`` 1 (RTKLIB ``EFACT_CMP``).  The
 """
 from __future__ import annotations
 
-from ..errors import close_matches
-
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import ConfigError, TomlTable
 from .systems import SYSTEMS, system_index
 
 __all__ = ["MODELS", "Weighting", "sigma_rtklib", "sigma_cn0", "sigma_legacy", "DEFAULT_SYSTEM_FACTORS",
@@ -92,7 +89,7 @@ def sigma_legacy(el_rad, sigma_zenith: float, cn0_dbhz=None, factor=1.0):
 
 
 @dataclass
-class Weighting:
+class Weighting(TomlTable):
     """How rows are weighted and masked (the ``[gnss]`` table; see the module docstring).
 
     Attributes (units in the names)
@@ -134,18 +131,6 @@ class Weighting:
     systems: list = field(default_factory=lambda: list(SYSTEMS))
 
     TABLE = "gnss"
-
-    @classmethod
-    def from_dict(cls, d: dict | None, source: str = "run configuration") -> "Weighting":
-        """From a ``[gnss]`` TOML table; a ConfigError of one line names a bad or unknown key."""
-        d = dict(d or {})
-        names = [f.name for f in dataclasses.fields(cls)]
-        for k in d:
-            if k not in names:
-                close = close_matches(k, names)
-                hint = f" (did you mean '{cls.TABLE}.{close[0]}'?)" if close else ""
-                raise ConfigError(f"{source}: unknown key '{cls.TABLE}.{k}'{hint}; known keys: {', '.join(names)}")
-        return cls(**d).validate(source)
 
     def validate(self, source: str = "gnss weighting") -> "Weighting":
         def bad(key, allowed):
