@@ -9,7 +9,8 @@ of CPU), so:
   tests with long simulated runs are built at -O1, cpp/tests/CMakeLists.txt), without
   the fixed-size update kernels of RbUkf/Ukf (INSNAV_NO_FIXED_UPDATE_KERNELS:
   the same template code at bounded dynamic sizes; the kernels run in the
-  extension, i.e. in every Python filter test, and in bench/);
+  extension, i.e. in every Python filter test, in bench/, and here in
+  cpp/tests/test_fixed_kernels.cpp, which switches them back on);
 * with clang++ when present (as scripts/install.sh builds the extension);
 * scripts/test.sh starts it in the background (``python3 tests/_cpp_build.py
   --background``) before it builds the extension, so that the two builds and
