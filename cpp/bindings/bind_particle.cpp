@@ -32,7 +32,7 @@ struct ParticleSetup {
 ParticleSetup particle_setup(const py::dict& d) {
   reject_unknown(d, {"particles", "seed", "resample_threshold", "roughening", "rk4_step", "fading", "rho", "beta",
                   "eta_max", "alpha", "fading_memory", "sample", "kernel_h2", "init_yaw_halfwidth", "temper_stages",
-                  "divergence_chi2", "noise_floor"},
+                  "divergence_chi2", "noise_floor", "reseed"},
                  "particle config");
   ParticleSetup s;
   s.pp.particles = static_cast<int>(num(d, "particles", s.pp.particles));
@@ -63,6 +63,7 @@ ParticleSetup particle_setup(const py::dict& d) {
   s.pp.temper_stages = static_cast<int>(num(d, "temper_stages", s.pp.temper_stages));
   s.pp.divergence_chi2 = num(d, "divergence_chi2", s.pp.divergence_chi2);
   s.pp.noise_floor = num(d, "noise_floor", s.pp.noise_floor);
+  s.pp.reseed = d.contains("reseed") ? py::cast<bool>(d["reseed"]) : s.pp.reseed;
   if (!(s.pp.noise_floor >= 0.0)) throw py::value_error("noise_floor must be >= 0");
   if (!(s.opt.kernel_h2 >= 0.0 && s.opt.kernel_h2 < 1.0)) throw py::value_error("kernel_h2 must be in [0, 1)");
   if (!(s.opt.init_yaw_halfwidth >= 0.0 && s.opt.init_yaw_halfwidth <= M_PI))
@@ -125,7 +126,7 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
   trace.resampled = E ? o_rs.mutable_data() : nullptr;
   trace.capacity = E;
   double seconds = 0.0;
-  int resamples = 0, divergences = 0;
+  int resamples = 0, divergences = 0, reseeds = 0;
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<TightEngine<Filter>>(model, cfg, ut);  // one allocation per run
@@ -136,7 +137,10 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
                 in.sats.data(), out);
     seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if constexpr (!std::is_same_v<Filter, FadingUkf<L20>>) resamples = engine->filter().resample_count();
-    if constexpr (std::is_same_v<Filter, ParticleFilter<L20>>) divergences = engine->filter().divergences();
+    if constexpr (std::is_same_v<Filter, ParticleFilter<L20>>) {
+      divergences = engine->filter().divergences();
+      reseeds = engine->filter().reseeds();
+    }
   }
   const py::slice traced(0, trace.n, 1);
   py::dict res;
@@ -148,6 +152,7 @@ py::dict run_impl(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, c
   res["trace_resampled"] = o_rs[traced];
   res["resamples"] = resamples;
   res["divergences"] = divergences;
+  res["reseeds"] = reseeds;
   res["run_seconds"] = seconds;
   return res;
 }

@@ -98,7 +98,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                        resample_threshold: float = 0.5,
                        roughening: float | None = None, rk4_step_s: float = 1.0, kernel_h2: float = 0.1,
                        init_yaw_uniform_deg: float = 0.0, temper_stages: int = 8, divergence_chi2: float = 25.0,
-                       noise_floor: float = 3.0,
+                       noise_floor: float = 3.0, reseed: bool = True,
                        gyro_markov_sigma_dph: float = 1.0, gyro_markov_tau_s: float = 3600.0,
                        acc_markov_tau_s: float = 3600.0, inputs: TightInputs | None = None,
                        elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
@@ -143,6 +143,10 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         keeps the cloud from collapsing in the states without process noise.
     divergence_chi2 : PF: an epoch where no particle explains the measurement within this
         chi-square per row is counted in ``summary["divergences"]`` and warned about.
+    reseed : PF: sensor resetting at such an epoch (default on; ``particle_filter.hpp``): the
+        position, velocity and clock of every particle are drawn again from the measurement
+        given the particle's other states (needs >= 8 rows: 4 satellites with pseudorange and
+        rate), counted in ``summary["reseeds"]``.  False: the plain bootstrap PF.
     rk4_step_s : multi-interval RK4 step of the error state [s] (0: every engine interval).
     gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s : the Markov blocks (:func:`layout20_model`).
     inputs, elevation_mask_deg, max_sats, clock_psd, init_sigma_clock, clock0 : as :func:`insnav.filters.tight.run_tight`.
@@ -191,7 +195,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                 resample_threshold=float(resample_threshold), roughening=float(roughening),
                 rk4_step=float(rk4_step_s), kernel_h2=float(kernel_h2),
                 init_yaw_halfwidth=float(init_yaw_uniform_deg) * DEG, temper_stages=int(temper_stages),
-                divergence_chi2=float(divergence_chi2), noise_floor=float(noise_floor))
+                divergence_chi2=float(divergence_chi2), noise_floor=float(noise_floor), reseed=bool(reseed))
     out = _core.run_tight_particle(filt, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                                    np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0,
                                    np.zeros(12), np.asarray(clock0, float), model, core_cfg, pcfg)
@@ -216,6 +220,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                      fading=bool(fading), seed=int(seed), updates=int(out["updates"]),
                      rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), cholesky_repairs=int(out["cholesky_repairs"]),
                      resamples=int(out["resamples"]), divergences=int(out["divergences"]),
+                     reseeds=int(out["reseeds"]),
                      gnss_records=int(E), sat_rows=int(len(inputs.prn)),
                      clock0=tuple(clock0), clock_psd=(float(qb), float(qd)), run_seconds=float(out["run_seconds"])),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 18:20],
@@ -226,8 +231,10 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     if out["divergences"]:
         import warnings
 
+        reset = (f"; the cloud was reset from the measurement at {out['reseeds']} of them" if out["reseeds"]
+                 else "")
         warnings.warn(f"tight {filt}: at {out['divergences']} of {int(out['updates'])} updates no particle explained "
                       f"the measurements within chi2 {divergence_chi2:g} per row: the particle cloud lost the "
-                      f"solution there (more particles, or the UPF)", RuntimeWarning, stacklevel=2)
+                      f"solution there{reset} (more particles, or the UPF)", RuntimeWarning, stacklevel=2)
     raise_if_nonfinite(sol, f"tight {filt}")
     return sol

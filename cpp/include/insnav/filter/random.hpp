@@ -72,7 +72,7 @@ class Rng {
 
 /// Stream purposes (any distinct constants).
 enum RngPurpose : std::uint64_t {
-  kRngInit = 1, kRngProcess = 2, kRngProposal = 3, kRngResample = 4, kRngJitter = 5, kRngTemper = 6
+  kRngInit = 1, kRngProcess = 2, kRngProposal = 3, kRngResample = 4, kRngJitter = 5, kRngTemper = 6, kRngReseed = 7
 };
 
 }  // namespace insnav
