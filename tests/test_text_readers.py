@@ -64,6 +64,28 @@ def test_large_file_two_halves_keep_line_numbers(tmp_path):
         kfgins.read_kfgins_imu(p)
 
 
+def test_blank_line_in_one_half_only_and_column_groups(tmp_path):
+    """Line numbers when only the second half has a blank line (the first half's
+    rows are numbered afterwards); the IMU columns parsed straight into t,
+    dtheta and dv equal the whole table; a NaN is reported by line and column."""
+    a, text = _imu_text(40_000, seed=1)
+    lines = text.splitlines()
+    lines.insert(30_000, "")
+    data = ("\n".join(lines) + "\n").encode()
+    table, where = parse_numeric(data, 7, "x", comma=False)
+    parts, where2 = parse_numeric(data, 7, "x", comma=False, groups=(1, 3, 3))
+    np.testing.assert_array_equal(table, a)
+    np.testing.assert_array_equal(np.column_stack(parts), a)
+    assert parts[0].shape == (40_000,) and parts[1].shape == parts[2].shape == (40_000, 3)
+    np.testing.assert_array_equal(where, where2)
+    assert where[10] == 11 and where[29_999] == 30_000 and where[30_000] == 30_002
+    lines[35_000] = lines[35_000].replace(lines[35_000].split()[4], "nan")
+    p = tmp_path / "imu.txt"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"imu\.txt:35001: non-finite value nan in column 'dvel_x'$"):
+        kfgins.read_kfgins_imu(p)
+
+
 @pytest.mark.parametrize("suffix, opener", [(".xz", lzma.open), (".gz", gzip.open)])
 def test_compressed_input_and_truncated_compressed_file(tmp_path, suffix, opener):
     a, text = _imu_text(3000)

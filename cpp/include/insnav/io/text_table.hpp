@@ -243,11 +243,34 @@ inline bool parse_value(const char* b, const char* e, double& v) {
   return false;
 }
 
-/// Parse [b, e) (whole lines) into out (row-major, keep values a row, room
-/// for as many rows as the block has lines); line_of (may be null) gets the
-/// line of each row, counted from first_line.  Stops at the first bad row.
+/// Where the kept value j of row r goes: data[r * stride] (a column of the
+/// caller's arrays, so that one row can be split over several of them).
+struct ColumnSink {
+  double* data = nullptr;
+  std::ptrdiff_t stride = 1;  // [elements]
+};
+
+/// One value starting at p, the line ending at le: the end of the value when
+/// it is a whole token (followed by a separator or le), else nullptr with the
+/// token's end in te.  The fast path parses in place (no scan for the token's
+/// end first); anything else (a '+', over/underflow, junk) goes through
+/// parse_value on the whole token, exactly as before.
+inline const char* parse_token(const char* p, const char* le, bool comma, double& v, const char*& te) {
+  const auto r = std::from_chars(p, le, v);
+  if (r.ec == std::errc() && (r.ptr == le || is_space(*r.ptr, comma))) return r.ptr;
+  te = p;
+  while (te < le && !is_space(*te, comma)) ++te;
+  return parse_value(p, te, v) ? te : nullptr;
+}
+
+/// Parse [b, e) (whole lines): row r (counted from row0) to sinks[j].data[r *
+/// stride] for j < opt.keep.  line_of (may be null) gets the line of each row,
+/// counted from first_line, but only once a blank line has been skipped (the
+/// rows before it are then filled in): a block without one leaves it alone.
+/// Stops at the first bad row.
 inline ParseBlock parse_block(const char* base, std::size_t b, std::size_t e, const ParseOptions& opt,
-                              std::int64_t first_line, double* out, std::int64_t* line_of) {
+                              std::int64_t first_line, const ColumnSink* sinks, std::int64_t row0,
+                              std::int64_t* line_of) {
   ParseBlock res;
   const char* s = base + b;
   const char* end = base + e;
@@ -258,32 +281,36 @@ inline ParseBlock parse_block(const char* base, std::size_t b, std::size_t e, co
     ++res.lines;
     const char* p = s;
     int col = 0;
-    double* row = out + res.rows * opt.keep;
+    const std::int64_t r = row0 + res.rows;
     while (true) {
       while (p < le && is_space(*p, opt.comma)) ++p;
       if (p == le) break;
-      const char* tb = p;
-      while (p < le && !is_space(*p, opt.comma)) ++p;
       if (col >= opt.ncols) {  // extra values: not parsed, counted for the message
+        while (p < le && !is_space(*p, opt.comma)) ++p;
         ++col;
         continue;
       }
       double v;
-      if (!parse_value(tb, p, v)) {
-        res.error = {ParseErrorKind::kNumber, line, 0, col, static_cast<std::size_t>(tb - base),
-                     static_cast<std::size_t>(p - base), static_cast<std::size_t>(le - base)};
+      const char* te = nullptr;
+      const char* q = parse_token(p, le, opt.comma, v, te);
+      if (!q) {
+        res.error = {ParseErrorKind::kNumber, line, 0, col, static_cast<std::size_t>(p - base),
+                     static_cast<std::size_t>(te - base), static_cast<std::size_t>(le - base)};
         return res;
       }
-      if (col < opt.keep) row[col] = v;
+      if (col < opt.keep) sinks[col].data[r * sinks[col].stride] = v;
       ++col;
+      p = q;
     }
     if (col == 0) {
+      if (line_of && !res.blank)
+        for (std::int64_t i = 0; i < res.rows; ++i) line_of[row0 + i] = first_line + i;
       res.blank = true;
     } else if (col < opt.ncols || (col > opt.ncols && !opt.allow_extra)) {
       res.error = {ParseErrorKind::kColumns, line, col, 0, 0, 0, static_cast<std::size_t>(le - base)};
       return res;
     } else {
-      if (line_of) line_of[res.rows] = line;
+      if (line_of && res.blank) line_of[r] = line;
       ++res.rows;
     }
     ++line;
@@ -294,65 +321,115 @@ inline ParseBlock parse_block(const char* base, std::size_t b, std::size_t e, co
 
 /// Lines in [b, e): newlines, plus one for a last line without one.
 inline std::int64_t count_lines(const char* b, const char* e) {
-  std::int64_t n = std::count(b, e, '\n');
-  if (e > b && e[-1] != '\n') ++n;
+  std::int64_t n = (e > b && e[-1] != '\n') ? 1 : 0;
+  while (b < e) {  // per-byte counters of at most 255 newlines (a vectorised compare-and-add), summed per chunk
+    const std::size_t chunk = std::min<std::size_t>(static_cast<std::size_t>(e - b), 255 * 64);
+    std::uint8_t acc[64] = {};
+    std::size_t i = 0;
+    for (; i + 64 <= chunk; i += 64)
+      for (int k = 0; k < 64; ++k) acc[k] = static_cast<std::uint8_t>(acc[k] + (b[i + k] == '\n'));
+    for (int k = 0; k < 64; ++k) n += acc[k];
+    for (; i < chunk; ++i) n += (b[i] == '\n');
+    b += chunk;
+  }
   return n;
 }
 
-struct ParseResult {
-  std::int64_t rows = 0;
-  bool blank = false;
-  ParseError error;  // line numbers absolute (from first_line)
+/// The blocks of a parallel parse: [cut[i], cut[i+1]) split at line
+/// boundaries, with their line counts (counted on the parse's threads).
+struct ParsePlan {
+  std::vector<std::size_t> cut{0};
+  std::vector<std::int64_t> lines;  // per block
+  std::int64_t total_lines = 0;
 };
 
-/// Parse the whole buffer on up to `threads` threads (split at line
-/// boundaries).  out must hold count_lines(data, data+size) rows of
-/// opt.keep values, line_of as many lines.  Rows are contiguous on return.
-inline ParseResult parse_buffer(const char* data, std::size_t size, const ParseOptions& opt, std::int64_t first_line,
-                                double* out, std::int64_t* line_of, int threads = 2) {
-  ParseResult res;
+/// Run job(i) for i < n on up to n threads (job 0 on the calling thread).
+template <class Job>
+void run_parallel(int n, Job&& job) {
+  std::vector<std::thread> pool;
+  for (int i = 1; i < n; ++i) pool.emplace_back(job, i);
+  if (n > 0) job(0);
+  for (auto& th : pool) th.join();
+}
+
+/// Split the buffer for `threads` threads (one block under 1 MB) and count
+/// each block's lines in parallel: the caller sizes its arrays from
+/// total_lines (one row a line at most).
+inline ParsePlan plan_parse(const char* data, std::size_t size, int threads = 2) {
+  ParsePlan plan;
   threads = (size < (std::size_t(1) << 20)) ? 1 : std::max(1, threads);
-  std::vector<std::size_t> cut{0};
   for (int t = 1; t < threads; ++t) {
     std::size_t c = size * static_cast<std::size_t>(t) / static_cast<std::size_t>(threads);
     const void* nl = std::memchr(data + c, '\n', size - c);
     c = nl ? static_cast<std::size_t>(static_cast<const char*>(nl) - data) + 1 : size;
-    if (c > cut.back()) cut.push_back(c);
+    if (c > plan.cut.back()) plan.cut.push_back(c);
   }
-  if (cut.back() < size) cut.push_back(size);
-  const int nb = static_cast<int>(cut.size()) - 1;
+  if (plan.cut.back() < size) plan.cut.push_back(size);
+  const int nb = static_cast<int>(plan.cut.size()) - 1;
+  plan.lines.assign(static_cast<std::size_t>(std::max(nb, 0)), 0);
+  run_parallel(nb, [&](int i) { plan.lines[i] = count_lines(data + plan.cut[i], data + plan.cut[i + 1]); });
+  for (std::int64_t l : plan.lines) plan.total_lines += l;
+  return plan;
+}
+
+struct ParseResult {
+  std::int64_t rows = 0;
+  bool blank = false;  // a blank line was skipped: line_of holds the line of every row
+  ParseError error;    // line numbers absolute (from first_line)
+};
+
+/// Parse the blocks of `plan` in parallel.  sinks[j] (j < opt.keep) must
+/// have room for plan.total_lines rows, line_of (may be null) as many
+/// entries.  Rows are contiguous on return; line_of is filled only when a
+/// line was blank (ParseResult::blank), else the row of line l is l - first_line.
+inline ParseResult parse_planned(const char* data, const ParsePlan& plan, const ParseOptions& opt,
+                                 std::int64_t first_line, const ColumnSink* sinks, std::int64_t* line_of) {
+  ParseResult res;
+  const int nb = static_cast<int>(plan.cut.size()) - 1;
   if (nb <= 0) return res;
   std::vector<std::int64_t> line0(nb, first_line), row0(nb, 0);
   for (int i = 1; i < nb; ++i) {
-    const std::int64_t prev = count_lines(data + cut[i - 1], data + cut[i]);
-    line0[i] = line0[i - 1] + prev;
-    row0[i] = row0[i - 1] + prev;  // room: one row per line
+    line0[i] = line0[i - 1] + plan.lines[i - 1];
+    row0[i] = row0[i - 1] + plan.lines[i - 1];  // room: one row per line
   }
   std::vector<ParseBlock> blocks(nb);
-  auto job = [&](int i) {
-    blocks[i] = parse_block(data, cut[i], cut[i + 1], opt, line0[i], out + row0[i] * opt.keep,
-                            line_of ? line_of + row0[i] : nullptr);
-  };
-  std::vector<std::thread> pool;
-  for (int i = 1; i < nb; ++i) pool.emplace_back(job, i);
-  job(0);
-  for (auto& th : pool) th.join();
+  run_parallel(nb, [&](int i) {
+    blocks[i] = parse_block(data, plan.cut[i], plan.cut[i + 1], opt, line0[i], sinks, row0[i], line_of);
+  });
+  bool any_blank = false;
   for (int i = 0; i < nb; ++i) {
-    const ParseBlock& bl = blocks[i];
-    if (bl.error.kind != ParseErrorKind::kNone) {
-      res.error = bl.error;
+    if (blocks[i].error.kind != ParseErrorKind::kNone) {
+      res.error = blocks[i].error;
       return res;
     }
-    if (row0[i] != res.rows) {  // close the gap left by blank lines before this block
-      std::memmove(out + res.rows * opt.keep, out + row0[i] * opt.keep,
-                   static_cast<std::size_t>(bl.rows * opt.keep) * sizeof(double));
-      if (line_of)
-        std::memmove(line_of + res.rows, line_of + row0[i], static_cast<std::size_t>(bl.rows) * sizeof(std::int64_t));
+    any_blank = any_blank || blocks[i].blank;
+  }
+  for (int i = 0; i < nb; ++i) {
+    const ParseBlock& bl = blocks[i];
+    if (any_blank && line_of && !bl.blank)  // this block's rows are on consecutive lines
+      for (std::int64_t r = 0; r < bl.rows; ++r) line_of[row0[i] + r] = line0[i] + r;
+    if (row0[i] != res.rows) {  // close the gap left by blank lines before this block (moving rows forward)
+      for (std::int64_t r = 0; r < bl.rows; ++r) {
+        for (int j = 0; j < opt.keep; ++j)
+          sinks[j].data[(res.rows + r) * sinks[j].stride] = sinks[j].data[(row0[i] + r) * sinks[j].stride];
+        if (line_of && any_blank) line_of[res.rows + r] = line_of[row0[i] + r];
+      }
     }
     res.rows += bl.rows;
-    res.blank = res.blank || bl.blank;
   }
+  res.blank = any_blank;
   return res;
+}
+
+/// Parse the whole buffer on up to `threads` threads into out (row-major,
+/// opt.keep values a row, room for count_lines(data, data + size) rows);
+/// line_of as parse_planned.
+inline ParseResult parse_buffer(const char* data, std::size_t size, const ParseOptions& opt, std::int64_t first_line,
+                                double* out, std::int64_t* line_of, int threads = 2) {
+  const ParsePlan plan = plan_parse(data, size, threads);
+  std::vector<ColumnSink> sinks(static_cast<std::size_t>(opt.keep));
+  for (int j = 0; j < opt.keep; ++j) sinks[j] = {out + j, opt.keep};
+  return parse_planned(data, plan, opt, first_line, sinks.data(), line_of);
 }
 
 }  // namespace insnav::textio
