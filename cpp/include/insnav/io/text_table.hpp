@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <system_error>
@@ -45,13 +46,62 @@ struct TextFormat {
 /// Longest text one value can take (shortest round-trip: 24; fixed: guarded below).
 constexpr int kMaxValueChars = 48;
 
+/// x < 10^8 as 8 ASCII digits in one word, the first digit in the lowest byte
+/// (SWAR: the four-digit halves, then pairs, then digits split in parallel
+/// lanes by multiply-shift division; n * 10486 >> 20 = n / 100 for n < 10^4,
+/// n * 103 >> 10 = n / 10 for n < 100).
+inline std::uint64_t ascii_8_digits(std::uint32_t x) {
+  std::uint64_t v = (x / 10000) | (static_cast<std::uint64_t>(x % 10000) << 32);
+  std::uint64_t hi = ((v * 10486) >> 20) & 0x0000007F0000007FULL;
+  v = hi | ((v - hi * 100) << 16);
+  hi = ((v * 103) >> 10) & 0x000F000F000F000FULL;
+  v = hi | ((v - hi * 10) << 8);
+  return v + 0x3030303030303030ULL;
+}
+
+/// Trailing / leading zero bits of a non-zero word.
+inline int ctz64(std::uint64_t x) {
+#if defined(__GNUC__) || defined(__clang__)
+  return __builtin_ctzll(x);
+#else
+  int n = 0;
+  while (!(x & 1)) x >>= 1, ++n;
+  return n;
+#endif
+}
+inline int clz64(std::uint64_t x) {
+#if defined(__GNUC__) || defined(__clang__)
+  return __builtin_clzll(x);
+#else
+  int n = 0;
+  while (!(x >> 63)) x <<= 1, ++n;
+  return n;
+#endif
+}
+
+/// Bytes [k, k + 16) of the 16 bytes (lo, hi) (little-endian; zeros shifted in) stored at p.
+inline void store_from_byte(char* p, std::uint64_t lo, std::uint64_t hi, int k) {
+  std::uint64_t a = lo, b = hi;
+  if (k >= 8) {
+    a = hi >> (8 * (k - 8));
+    b = 0;
+  } else if (k > 0) {
+    a = (lo >> (8 * k)) | (hi << (64 - 8 * k));
+    b = hi >> (8 * k);
+  }
+  std::memcpy(p, &a, 8);
+  std::memcpy(p + 8, &b, 8);
+}
+
 /// Fixed notation with `decimals` digits after the point (0..15), exactly as
 /// std::to_chars / printf("%.*f") round, without their cost: the value is
-/// scaled to an integer m = round(v 10^d) and m's digits are printed.  The
-/// residual v 10^d - m (one fma, exact to a few ulp) proves the rounding; when
-/// it is within 1e-7 of a half (a possible tie or double rounding), or the
-/// scaled value is too large for the integer path, the caller falls back to
-/// std::to_chars.  Returns nullptr in that case.
+/// scaled to an integer m = round(v 10^d) whose 16 digits are made in two
+/// words (ascii_8_digits) and stored from registers.  The residual
+/// v 10^d - m (one fma, exact to a few ulp) proves the rounding; when it is
+/// within 1e-7 of a half (a possible tie or double rounding), or the scaled
+/// value is too large for the integer path, the caller falls back to
+/// std::to_chars.  Returns nullptr in that case.  Writes up to 34 characters
+/// at p (the caller reserves kMaxValueChars) and returns the end of the value.
 inline char* format_fixed_fast(char* p, double v, int decimals, bool trim) {
   static constexpr double kPow10[16] = {1e0, 1e1, 1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
                                         1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15};
@@ -62,22 +112,26 @@ inline char* format_fixed_fast(char* p, double v, int decimals, bool trim) {
   const double m = std::nearbyint(s);
   const double r = std::fma(v, scale, -m);
   if (!(std::fabs(r) < 0.4999999)) return nullptr;
-  std::uint64_t u = static_cast<std::uint64_t>(std::fabs(m));
-  char digits[24];
-  int nd = 0;
-  do {
-    digits[nd++] = static_cast<char>('0' + u % 10);
-    u /= 10;
-  } while (u != 0);
-  while (nd < decimals + 1) digits[nd++] = '0';  // digits[] is little-endian: pad the integer part with 0
-  int lo = 0;                                    // lowest fractional digit printed
-  if (trim)
-    while (lo < decimals && digits[lo] == '0') ++lo;
+  const std::uint64_t u = static_cast<std::uint64_t>(std::fabs(m));  // < 10^15: 16 digits, the first one 0
+  const std::uint64_t lo = ascii_8_digits(static_cast<std::uint32_t>(u / 100000000));  // digits 0..7
+  const std::uint64_t hi = ascii_8_digits(static_cast<std::uint32_t>(u % 100000000));  // digits 8..15
+  const std::uint64_t zlo = lo - 0x3030303030303030ULL, zhi = hi - 0x3030303030303030ULL;  // digit values
+  const int point = 16 - decimals;  // digits [point, 16): the fraction
+  // the integer part from the first non-zero digit, at least one digit
+  const int lead = zlo ? ctz64(zlo) / 8 : (zhi ? 8 + ctz64(zhi) / 8 : 16);
+  const int first = std::min(lead, point - 1);
+  int last = 16;  // one past the last fractional digit printed
+  if (trim) {
+    last = zhi ? 16 - clz64(zhi) / 8 : (zlo ? 8 - clz64(zlo) / 8 : 0);
+    last = std::max(last, point);
+  }
   if (std::signbit(v) && !(trim && m == 0.0)) *p++ = '-';
-  for (int i = nd - 1; i >= decimals; --i) *p++ = digits[i];
-  if (lo < decimals) {
-    *p++ = '.';
-    for (int i = decimals - 1; i >= lo; --i) *p++ = digits[i];
+  store_from_byte(p, lo, hi, first);
+  p += point - first;
+  if (last > point) {
+    *p = '.';
+    store_from_byte(p + 1, lo, hi, point);
+    p += 1 + (last - point);
   }
   return p;
 }
@@ -109,14 +163,33 @@ inline char* format_value(char* p, double v, int decimals, bool trim) {
   return std::to_chars(p, p + kMaxValueChars, v).ptr;
 }
 
+/// A text buffer that grows without zero-filling: of the room reserved for
+/// the longest possible rows only what is formatted is ever touched (and
+/// counts in the resident memory).
+struct TextBuffer {
+  std::unique_ptr<char[]> data;
+  std::size_t size = 0, capacity = 0;
+
+  /// Room for n more characters at data + size.
+  char* room(std::size_t n) {
+    if (size + n > capacity) {
+      const std::size_t cap = std::max(size + n, 2 * capacity);
+      std::unique_ptr<char[]> grown(new char[cap]);
+      if (size) std::memcpy(grown.get(), data.get(), size);
+      data = std::move(grown);
+      capacity = cap;
+    }
+    return data.get() + size;
+  }
+};
+
 /// Rows [r0, r1) of the columns as text, appended to buf.
 inline void format_rows(const Column* cols, int ncols, std::int64_t r0, std::int64_t r1, const TextFormat& fmt,
-                        std::string& buf) {
+                        TextBuffer& buf) {
   const int per_value = std::max(kMaxValueChars, fmt.width) + 1;
   const std::size_t need = static_cast<std::size_t>(r1 - r0) * (static_cast<std::size_t>(ncols) * per_value + 1);
-  const std::size_t start = buf.size();
-  buf.resize(start + need);
-  char* p = buf.data() + start;
+  char* const start = buf.room(need);
+  char* p = start;
   for (std::int64_t r = r0; r < r1; ++r) {
     for (int j = 0; j < ncols; ++j) {
       const Column& c = cols[j];
@@ -128,7 +201,7 @@ inline void format_rows(const Column* cols, int ncols, std::int64_t r0, std::int
     }
     *p++ = '\n';
   }
-  buf.resize(static_cast<std::size_t>(p - buf.data()));
+  buf.size += static_cast<std::size_t>(p - start);
 }
 
 enum class WriteStatus { kOk = 0, kIoError = 1, kInterrupted = 2 };
@@ -157,9 +230,9 @@ inline WriteResult write_rows(std::FILE* f, const Column* cols, int ncols, std::
   std::atomic<bool> stop{false};
 
   auto worker = [&](int tid) {
-    std::string buf;
+    TextBuffer buf;
     for (std::int64_t b = tid; b < nblocks && !stop.load(); b += threads) {
-      buf.clear();
+      buf.size = 0;
       format_rows(cols, ncols, b * block_rows, std::min(n, (b + 1) * block_rows), fmt, buf);
       if (tid == 0 && keep_going && !keep_going()) {
         std::lock_guard<std::mutex> lk(m);
@@ -172,9 +245,9 @@ inline WriteResult write_rows(std::FILE* f, const Column* cols, int ncols, std::
       cv.wait(lk, [&] { return next_write == b || stop.load(); });
       if (stop.load()) return;
       lk.unlock();  // only this thread writes now: block b is next
-      const std::size_t w = std::fwrite(buf.data(), 1, buf.size(), f);
+      const std::size_t w = std::fwrite(buf.data.get(), 1, buf.size, f);
       lk.lock();
-      if (w != buf.size()) {
+      if (w != buf.size) {
         res.status = WriteStatus::kIoError;
         res.error = errno ? errno : EIO;
         stop = true;
