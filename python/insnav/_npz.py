@@ -1,7 +1,8 @@
 """An uncompressed ``.npz`` (what ``np.savez`` writes) from 1-D columns, at
 the speed of the disk: the member offsets follow from the names and sizes, so
-two threads each gather (and scale) their columns into a buffer, checksum
-them (``zlib.crc32``) and write them at their offsets with ``os.pwritev``;
+two threads each gather (and scale) their columns chunk by chunk into a small
+buffer, checksum them (``zlib.crc32``) and write them at their offsets with
+``os.pwrite``, each member's local header last (it holds the checksum);
 numpy's copy loops, zlib and the writes run with the GIL released.  The
 zip structure is PKWARE APPNOTE 6.3 sections 4.3.7 (local header), 4.3.12
 (central directory) and 4.3.16 (end record), without ZIP64: a file of
@@ -23,6 +24,8 @@ __all__ = ["write_npz"]
 #: the classic zip format's limits: 32-bit sizes and offsets, 16-bit member count
 _MAX_OFFSET = 0xFFFFFFFF - 1
 _MAX_MEMBERS = 0xFFFF - 1
+#: rows a thread gathers, checksums and writes at a time (512 KiB)
+_CHUNK = 1 << 16
 #: zipfile's defaults for a member written through ZipFile.open(name, "w")
 _VERSION = 20
 _MADE_BY = (3 << 8) | _VERSION  # Unix
@@ -72,21 +75,26 @@ def write_npz(path, columns) -> None:
 
     def member(i: int, buf: np.ndarray) -> None:
         _, x, f = cols[i]
-        if f == 1.0:
-            np.copyto(buf, x, casting="same_kind")
-        else:
-            np.multiply(x, f, out=buf)
-        crcs[i] = crc = zlib.crc32(buf, zlib.crc32(head))
+        crc = zlib.crc32(head)
+        start = offsets[i] + 30 + len(names[i]) + len(head)
+        for a in range(0, n, _CHUNK):  # in chunks: a small buffer, not one column's worth of resident memory
+            b = min(n, a + _CHUNK)
+            chunk = buf[:b - a]
+            if f == 1.0:
+                np.copyto(chunk, x[a:b], casting="same_kind")
+            else:
+                np.multiply(x[a:b], f, out=chunk)
+            crc = zlib.crc32(chunk, crc)
+            _pwrite_all(fd, chunk, start + 8 * a)
+        crcs[i] = crc
         local = struct.pack("<IHHHHHIIIHH", 0x04034B50, _VERSION, 0, 0, dos_t, dos_d, crc, size, size,
                             len(names[i]), 0) + names[i]
-        done = os.pwritev(fd, [local, head, buf], offsets[i])
-        if done != len(local) + size:  # a short write: the rest (or the error, e.g. disk full)
-            _pwrite_all(fd, (local + head + buf.tobytes())[done:], offsets[i] + done)
+        _pwrite_all(fd, local + head, offsets[i])
 
     errors: list[BaseException] = []
 
     def worker(first: int) -> None:
-        buf = np.empty(n)
+        buf = np.empty(min(n, _CHUNK))
         try:
             for i in range(first, len(cols), 2):
                 if stop.is_set():
