@@ -194,7 +194,7 @@ def output_decimation(t, rate_hz: float) -> int:
     t = np.asarray(t, float)
     if t.size < 2:
         return 1
-    imu_hz = 1.0 / float(np.median(np.diff(t)))
+    imu_hz = 1.0 / float(np.median(np.diff(t), overwrite_input=True))  # (partitions the temporary in place)
     k = imu_hz / float(rate_hz)
     if k < 1.0 - 1e-3 or abs(k - round(k)) > 1e-3 * k:
         ok = [r for r in (100, 50, 20, 10, 5, 2, 1, 0.5, 0.1) if r <= imu_hz + 1e-9

@@ -709,6 +709,9 @@ def check_finite_rows(a, origin: RowOrigin, columns) -> None:
     parts = a if isinstance(a, tuple) else (a,)
     first, c0 = None, 0
     for part in parts:
+        if np.isfinite(part).all():  # the usual case: no per-element mask to search
+            c0 += part.reshape(len(part), -1).shape[1]
+            continue
         part2 = part.reshape(len(part), -1)
         bad = ~np.isfinite(part2)
         if bad.any():
