@@ -64,6 +64,28 @@ def test_large_file_two_halves_keep_line_numbers(tmp_path):
         kfgins.read_kfgins_imu(p)
 
 
+def test_blank_line_in_one_half_only_and_column_groups(tmp_path):
+    """Line numbers when only the second half has a blank line (the first half's
+    rows are numbered afterwards); the IMU columns parsed straight into t,
+    dtheta and dv equal the whole table; a NaN is reported by line and column."""
+    a, text = _imu_text(40_000, seed=1)
+    lines = text.splitlines()
+    lines.insert(30_000, "")
+    data = ("\n".join(lines) + "\n").encode()
+    table, where = parse_numeric(data, 7, "x", comma=False)
+    parts, where2 = parse_numeric(data, 7, "x", comma=False, groups=(1, 3, 3))
+    np.testing.assert_array_equal(table, a)
+    np.testing.assert_array_equal(np.column_stack(parts), a)
+    assert parts[0].shape == (40_000,) and parts[1].shape == parts[2].shape == (40_000, 3)
+    np.testing.assert_array_equal(where, where2)
+    assert where[10] == 11 and where[29_999] == 30_000 and where[30_000] == 30_002
+    lines[35_000] = lines[35_000].replace(lines[35_000].split()[4], "nan")
+    p = tmp_path / "imu.txt"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match=r"imu\.txt:35001: non-finite value nan in column 'dvel_x'$"):
+        kfgins.read_kfgins_imu(p)
+
+
 @pytest.mark.parametrize("suffix, opener", [(".xz", lzma.open), (".gz", gzip.open)])
 def test_compressed_input_and_truncated_compressed_file(tmp_path, suffix, opener):
     a, text = _imu_text(3000)
@@ -98,3 +120,24 @@ def test_kfgins_gnss_and_nav_readers_round_trip(tmp_path):
     np.testing.assert_allclose(tr.yaw_deg, ds.truth.yaw_deg, atol=5e-9)
     kfgins.write_kfgins_imu(tmp_path / "i.txt", ImuData(ds.imu.t[:100], ds.imu.dtheta_b[:100], ds.imu.dv_b[:100]))
     np.testing.assert_allclose(kfgins.read_kfgins_imu(tmp_path / "i.txt").dv_b, ds.imu.dv_b[:100], rtol=1e-15)
+
+
+def test_fixed_decimals_are_printf_rounding(tmp_path):
+    """The writer's integer fast path (16 digits made in two words) against
+    Python's correctly rounded "%.{d}f" with trailing zeros dropped, on values
+    of every magnitude it takes (|v| 10^d < 10^15), exact decimals and ties."""
+    from insnav import _core
+
+    rng = np.random.default_rng(7)
+    n = 20_000
+    v = rng.uniform(-1, 1, n) * 10.0 ** rng.integers(-18, 16, n)
+    v[: n // 4] = np.round(v[: n // 4], 3)  # trailing zeros to drop
+    v[n // 4: n // 2] = (np.floor(v[n // 4: n // 2] * 8) + 0.5) / 8  # exact binary ties
+    v[:6] = [0.0, -0.0, 5e-7, -5e-7, 999999999999999.0, -123456.0]
+    for d in (0, 1, 4, 6, 9, 11, 15):
+        p = tmp_path / f"d{d}.txt"
+        _core.write_table(str(p), "", [v], [1.0], [d])
+        for tok, x in zip(p.read_text().splitlines(), v):
+            want = f"{x:.{d}f}"
+            want = (want.rstrip("0").rstrip(".") if d else want)
+            assert tok == ("0" if want == "-0" else want), (d, x, tok)

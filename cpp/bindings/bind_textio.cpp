@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -91,19 +92,35 @@ py::int_ write_table(const std::string& path, const std::string& header, const p
 }
 
 py::tuple parse_text(const py::buffer& data, int ncols, int keep, bool allow_extra, bool comma,
-                     std::int64_t first_line, int threads) {
+                     std::int64_t first_line, int threads, const std::optional<std::vector<int>>& groups) {
   if (ncols <= 0 || keep <= 0 || keep > ncols) throw py::value_error("parse_text: need 0 < keep <= ncols");
+  std::vector<int> widths = groups ? *groups : std::vector<int>{keep};
+  int total = 0;
+  for (int w : widths) {
+    if (w <= 0) throw py::value_error("parse_text: group widths must be > 0");
+    total += w;
+  }
+  if (total != keep) throw py::value_error("parse_text: the group widths must add up to keep");
   const py::buffer_info info = data.request();
   if (info.ndim != 1 || info.itemsize != 1) throw py::value_error("parse_text: expected a bytes-like buffer");
   const char* p = static_cast<const char*>(info.ptr);
   const std::size_t size = static_cast<std::size_t>(info.size);
-  std::int64_t lines = 0;
+  textio::ParsePlan plan;
   {
     py::gil_scoped_release release;
-    lines = textio::count_lines(p, p + size);
+    plan = textio::plan_parse(p, size, threads);  // lines counted on the parse's threads
   }
-  DArray out({static_cast<py::ssize_t>(lines), static_cast<py::ssize_t>(keep)});
-  py::array_t<std::int64_t> line_of(static_cast<py::ssize_t>(lines));
+  const auto lines = static_cast<py::ssize_t>(plan.total_lines);
+  // one array per group, (lines, width) (a width of 1 without groups still 2-D); pages untouched until parsed
+  std::vector<DArray> outs;
+  std::vector<textio::ColumnSink> sinks;
+  for (int w : widths) {
+    const bool flat = groups && w == 1;
+    outs.push_back(flat ? DArray({lines}) : DArray({lines, static_cast<py::ssize_t>(w)}));
+    double* base = outs.back().mutable_data();
+    for (int j = 0; j < w; ++j) sinks.push_back({base + j, w});
+  }
+  py::array_t<std::int64_t> line_of(lines);  // written only when a line was blank
   textio::ParseOptions opt;
   opt.ncols = ncols;
   opt.keep = keep;
@@ -112,7 +129,7 @@ py::tuple parse_text(const py::buffer& data, int ncols, int keep, bool allow_ext
   textio::ParseResult res;
   {
     py::gil_scoped_release release;
-    res = textio::parse_buffer(p, size, opt, first_line, out.mutable_data(), line_of.mutable_data(), threads);
+    res = textio::parse_planned(p, plan, opt, first_line, sinks.data(), line_of.mutable_data());
   }
   py::object err = py::none();
   if (res.error.kind != textio::ParseErrorKind::kNone) {
@@ -122,7 +139,15 @@ py::tuple parse_text(const py::buffer& data, int ncols, int keep, bool allow_ext
   }
   const py::slice rows(0, static_cast<py::ssize_t>(res.rows), 1);
   py::object lines_out = res.blank ? py::object(line_of[rows]) : py::object(py::none());
-  return py::make_tuple(out[rows], lines_out, err);
+  py::object arrays;
+  if (groups) {
+    py::tuple t(outs.size());
+    for (std::size_t g = 0; g < outs.size(); ++g) t[g] = outs[g][rows];
+    arrays = t;
+  } else {
+    arrays = outs[0][rows];
+  }
+  return py::make_tuple(arrays, lines_out, err);
 }
 
 }  // namespace
@@ -146,11 +171,12 @@ void bind_textio(py::module_& m) {
         "fixed (trailing zeros trimmed when trim_zeros), < 0 shortest round-trip; blocks formatted on `threads` "
         "threads, GIL released, Ctrl-C checked after each block.  Returns the bytes written.");
   m.def("parse_text", &parse_text, py::arg("data"), py::arg("ncols"), py::arg("keep"), py::arg("allow_extra") = false,
-        py::arg("comma") = false, py::arg("first_line") = 1, py::arg("threads") = 2,
+        py::arg("comma") = false, py::arg("first_line") = 1, py::arg("threads") = 2, py::arg("groups") = py::none(),
         "Parse whitespace (and with comma=True comma) separated numbers, ncols a row (more if allow_extra), "
         "keeping the first `keep`; blank lines skipped.  Returns (array (rows, keep), line of each row or None "
         "when no line was blank, None or the first error (kind 1 columns | 2 number, line, found, column, "
-        "token_begin, token_end, line_end)).");
+        "token_begin, token_end, line_end)).  groups (widths adding up to keep): the kept values split over "
+        "one array per group instead, returned as a tuple ((rows,) for a width of 1, else (rows, width)).");
 }
 
 }  // namespace insnav::py_bind

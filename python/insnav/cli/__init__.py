@@ -36,7 +36,29 @@ def _add_demo_parser(sub) -> None:
     p.set_defaults(func=lambda args: __import__("insnav.cli.demo", fromlist=["main"]).main(args))
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: module -> (its add_*_parser functions, the commands they add), in the order of the help
+_AREAS = (
+    ("insnav.sim.cli", ("add_scenarios_parser", "add_simulate_parser"), ("scenarios", "simulate")),
+    ("insnav.cli.run", ("add_run_parser",), ("run",)),
+    ("insnav.analysis.evaluate", ("add_evaluate_parser",), ("evaluate",)),
+    ("insnav.analysis.montecarlo", ("add_compare_parser",), ("compare",)),
+    ("insnav.cli.report", ("add_report_parser",), ("report",)),
+    ("insnav.cli.bench", ("add_bench_parser",), ("bench",)),
+)
+
+
+def _command_of(argv) -> str | None:
+    """The sub-command ``argv`` names (its first token not starting with '-'), if any."""
+    for tok in argv:
+        if not tok.startswith("-"):
+            return tok
+    return None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``insnav`` parser; with a known ``command``, only that area's
+    sub-command is registered (its module alone is imported: ``insnav run``
+    does not load the simulator or the analysis), else all of them."""
     parser = argparse.ArgumentParser(
         prog="insnav",
         description="insnav: GNSS/INS integrated navigation (EKF, RB-UKF, UKF, random-delay and particle filters).\n"
@@ -52,18 +74,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"insnav {__version__}")
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    _add_demo_parser(sub)
+    known = command == "demo" or any(command in cmds for _, _, cmds in _AREAS)
+    if not known or command == "demo":
+        _add_demo_parser(sub)
     # areas that live in their own modules register their sub-commands here
     import importlib
 
-    for module, funcs in (
-        ("insnav.sim.cli", ("add_scenarios_parser", "add_simulate_parser")),
-        ("insnav.cli.run", ("add_run_parser",)),
-        ("insnav.analysis.evaluate", ("add_evaluate_parser",)),
-        ("insnav.analysis.montecarlo", ("add_compare_parser",)),
-        ("insnav.cli.report", ("add_report_parser",)),
-        ("insnav.cli.bench", ("add_bench_parser",)),
-    ):
+    for module, funcs, cmds in _AREAS:
+        if known and command not in cmds:
+            continue
         mod = importlib.import_module(module)
         for f in funcs:
             getattr(mod, f)(sub)
@@ -71,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
+    parser = build_parser(_command_of(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

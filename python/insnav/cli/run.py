@@ -194,7 +194,7 @@ def output_decimation(t, rate_hz: float) -> int:
     t = np.asarray(t, float)
     if t.size < 2:
         return 1
-    imu_hz = 1.0 / float(np.median(np.diff(t)))
+    imu_hz = 1.0 / float(np.median(np.diff(t), overwrite_input=True))  # (partitions the temporary in place)
     k = imu_hz / float(rate_hz)
     if k < 1.0 - 1e-3 or abs(k - round(k)) > 1e-3 * k:
         ok = [r for r in (100, 50, 20, 10, 5, 2, 1, 0.5, 0.1) if r <= imu_hz + 1e-9
@@ -443,6 +443,8 @@ def cmd_run(args) -> int:
     s = sol.summary
     used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
     records = int(s.get("gnss_records", len(getattr(ds, "gnss", ())) or 0))
+    weighting = getattr(ds, "weighting", None)
+    del ds  # the IMU arrays are not needed any more: their memory goes before the output is written
     san = s.get("sanitize") or {}
     dropped = int(san.get("gnss_invalid_dropped", 0) or 0) + int(san.get("gnss_duplicates_dropped", 0) or 0)
     if not args.allow_free_inertial:
@@ -475,9 +477,8 @@ def cmd_run(args) -> int:
         text = resolved_config_toml(cfg)
         if rinex_opts is not None:
             text += _rinex_table_toml(rinex_opts)
-            wgt = getattr(ds, "weighting", None)
-            if wgt is not None and not wgt.is_default:
-                text += _table_toml("gnss", wgt)
+            if weighting is not None and not weighting.is_default:
+                text += _table_toml("gnss", weighting)
         if csv_tables is not None:
             text += _csv_tables_toml(csv_tables, cfg.imu is not None)
         written.append(atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text))

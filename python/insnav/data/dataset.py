@@ -703,13 +703,25 @@ def parse_numeric_origin(text, ncols: int, source: str, first_line: int = 1, sep
     return a, RowOrigin(source, first_line, lines)
 
 
-def check_finite_rows(a: np.ndarray, origin: RowOrigin, columns) -> None:
-    """Raise ``ValueError("<file>:<line>: non-finite value ...")`` for the first NaN/inf in ``a``."""
-    bad = ~np.isfinite(a)
-    if bad.any():
-        r, c = np.argwhere(bad)[0]
-        raise ValueError(f"{origin.where(int(r))}: non-finite value {float(a[r, c])!r} in column "
-                         f"{columns[int(c)]!r}")
+def check_finite_rows(a, origin: RowOrigin, columns) -> None:
+    """Raise ``ValueError("<file>:<line>: non-finite value ...")`` for the first NaN/inf in ``a``
+    (an (N, k) array, or a tuple of (N,) / (N, k) arrays holding its columns side by side)."""
+    parts = a if isinstance(a, tuple) else (a,)
+    first, c0 = None, 0
+    for part in parts:
+        if np.isfinite(part).all():  # the usual case: no per-element mask to search
+            c0 += part.reshape(len(part), -1).shape[1]
+            continue
+        part2 = part.reshape(len(part), -1)
+        bad = ~np.isfinite(part2)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            if first is None or r < first[0]:
+                first = (int(r), c0 + int(c), float(part2[r, c]))
+        c0 += part2.shape[1]
+    if first is not None:
+        r, c, v = first
+        raise ValueError(f"{origin.where(r)}: non-finite value {v!r} in column {columns[c]!r}")
 
 
 def _csv_header(path) -> str:

@@ -4,12 +4,13 @@ layouts are written, and the KF-GINS and insnav CSV files read, in C++ with
 the GIL released."""
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_text_columns", "threads", "read_bytes", "count_columns", "parse_numeric"]
+__all__ = ["write_text_columns", "threads", "read_bytes", "mapped_bytes", "count_columns", "parse_numeric"]
 
 
 def threads() -> int:
@@ -89,6 +90,31 @@ def read_bytes(path) -> bytes:
                          "decompress it again or fetch a complete copy") from None
 
 
+#: plain files from this size on are memory-mapped by :func:`mapped_bytes` rather than read [bytes]
+MAP_MIN_BYTES = 1 << 20
+
+
+@contextlib.contextmanager
+def mapped_bytes(path):
+    """The whole file as a read-only bytes-like object, for the length of the
+    ``with`` block: a memory map of a plain file of at least
+    :data:`MAP_MIN_BYTES` (the parser reads the page cache in place, no copy),
+    else :func:`read_bytes` (small and compressed files).  Same errors as
+    :func:`read_bytes`."""
+    p = Path(path)
+    if p.suffix.lower() not in _OPENERS and p.is_file() and p.stat().st_size >= MAP_MIN_BYTES:
+        import mmap
+
+        with open(p, "rb") as f:
+            m = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+        try:
+            yield m
+        finally:
+            m.close()
+    else:
+        yield read_bytes(p)
+
+
 def count_columns(data: bytes, source, comma: bool = False) -> int:
     """Values on the first non-blank line."""
     start = 0
@@ -106,8 +132,9 @@ def count_columns(data: bytes, source, comma: bool = False) -> int:
 
 
 def parse_numeric(data, ncols: int, source, *, first_line: int = 1, comma: bool = True, keep: int | None = None,
-                  allow_extra: bool = False, names=None):
-    """Parse numeric text (C++ ``std::from_chars`` on two threads, the GIL released).
+                  allow_extra: bool = False, names=None, groups=None):
+    """Parse numeric text (C++ ``std::from_chars`` on two threads, the GIL released; the
+    lines are counted on the same threads).
 
     Parameters
     ----------
@@ -124,11 +151,15 @@ def parse_numeric(data, ncols: int, source, *, first_line: int = 1, comma: bool 
         Only the first ``keep`` values of each row are returned (default ``ncols``).
     names : sequence of str, optional
         Column names for the messages.
+    groups : sequence of int, optional
+        Widths adding up to ``keep``: the kept values go to one array per
+        group, parsed in place (``(N,)`` for a width of 1, else ``(N, width)``).
 
     Returns
     -------
-    (ndarray (N, keep), ndarray (N,) of int or None)
-        The rows and, when a blank line was skipped, the file line of each.
+    (ndarray (N, keep) or tuple of ndarray, ndarray (N,) of int or None)
+        The rows (or the tuple of groups) and, when a blank line was skipped,
+        the file line of each.
 
     Raises
     ------
@@ -142,7 +173,8 @@ def parse_numeric(data, ncols: int, source, *, first_line: int = 1, comma: bool 
     if isinstance(data, str):
         data = data.encode("utf-8", "replace")
     keep = ncols if keep is None else keep
-    a, lines, err = _core.parse_text(data, ncols, keep, allow_extra, comma, first_line, threads())
+    a, lines, err = _core.parse_text(data, ncols, keep, allow_extra, comma, first_line, threads(),
+                                     None if groups is None else list(groups))
     if err is not None:
         data = bytes(data)
         kind, line, found, col, tb, te, line_end = err

@@ -16,8 +16,10 @@ __all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_
            "raise_if_nonfinite"]
 
 
-def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[NavState, np.ndarray]:
-    """Initial state (optionally perturbed, Monte Carlo style) and its 15/21 sigmas."""
+def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator | None = None) -> tuple[NavState, np.ndarray]:
+    """Initial state (optionally perturbed, Monte Carlo style) and its 15/21 sigmas;
+    the draw uses ``rng``, or ``np.random.default_rng(cfg.init_seed)`` when None
+    (made only when there is a draw: numpy.random is not imported otherwise)."""
     s0: NavState = dataset.initial
     sp = np.asarray(cfg.init_sigma_pos_m, float)
     sv = np.asarray(cfg.init_sigma_vel_mps, float)
@@ -27,6 +29,8 @@ def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator) -> tuple[Na
     rpy = np.array([s0.roll_deg, s0.pitch_deg, s0.yaw_deg])
     draw = cfg.init_error if cfg.init_error != "auto" else bool(getattr(dataset, "initial_is_truth", False))
     if draw:
+        if rng is None:
+            rng = np.random.default_rng(cfg.init_seed)
         dp, dv, da = rng.standard_normal(3) * sp, rng.standard_normal(3) * sv, rng.standard_normal(3) * sa
         R_M, R_N = radii(lat)
         lat, lon, h = lat + dp[0] / (R_M + h), lon + dp[1] / ((R_N + h) * np.cos(lat)), h - dp[2]

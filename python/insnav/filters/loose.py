@@ -35,8 +35,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         check_finite(gnss[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
     gnss_t = gnss[:, 0].copy()
 
-    rng = np.random.default_rng(cfg.init_seed)
-    init, sig0 = initial_state(dataset, cfg, rng)
+    init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
     P0 = np.diag(loose_initial_sigmas(sig0, noise, n, cfg) ** 2)

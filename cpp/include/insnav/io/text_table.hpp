@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <system_error>
@@ -45,13 +46,62 @@ struct TextFormat {
 /// Longest text one value can take (shortest round-trip: 24; fixed: guarded below).
 constexpr int kMaxValueChars = 48;
 
+/// x < 10^8 as 8 ASCII digits in one word, the first digit in the lowest byte
+/// (SWAR: the four-digit halves, then pairs, then digits split in parallel
+/// lanes by multiply-shift division; n * 10486 >> 20 = n / 100 for n < 10^4,
+/// n * 103 >> 10 = n / 10 for n < 100).
+inline std::uint64_t ascii_8_digits(std::uint32_t x) {
+  std::uint64_t v = (x / 10000) | (static_cast<std::uint64_t>(x % 10000) << 32);
+  std::uint64_t hi = ((v * 10486) >> 20) & 0x0000007F0000007FULL;
+  v = hi | ((v - hi * 100) << 16);
+  hi = ((v * 103) >> 10) & 0x000F000F000F000FULL;
+  v = hi | ((v - hi * 10) << 8);
+  return v + 0x3030303030303030ULL;
+}
+
+/// Trailing / leading zero bits of a non-zero word.
+inline int ctz64(std::uint64_t x) {
+#if defined(__GNUC__) || defined(__clang__)
+  return __builtin_ctzll(x);
+#else
+  int n = 0;
+  while (!(x & 1)) x >>= 1, ++n;
+  return n;
+#endif
+}
+inline int clz64(std::uint64_t x) {
+#if defined(__GNUC__) || defined(__clang__)
+  return __builtin_clzll(x);
+#else
+  int n = 0;
+  while (!(x >> 63)) x <<= 1, ++n;
+  return n;
+#endif
+}
+
+/// Bytes [k, k + 16) of the 16 bytes (lo, hi) (little-endian; zeros shifted in) stored at p.
+inline void store_from_byte(char* p, std::uint64_t lo, std::uint64_t hi, int k) {
+  std::uint64_t a = lo, b = hi;
+  if (k >= 8) {
+    a = hi >> (8 * (k - 8));
+    b = 0;
+  } else if (k > 0) {
+    a = (lo >> (8 * k)) | (hi << (64 - 8 * k));
+    b = hi >> (8 * k);
+  }
+  std::memcpy(p, &a, 8);
+  std::memcpy(p + 8, &b, 8);
+}
+
 /// Fixed notation with `decimals` digits after the point (0..15), exactly as
 /// std::to_chars / printf("%.*f") round, without their cost: the value is
-/// scaled to an integer m = round(v 10^d) and m's digits are printed.  The
-/// residual v 10^d - m (one fma, exact to a few ulp) proves the rounding; when
-/// it is within 1e-7 of a half (a possible tie or double rounding), or the
-/// scaled value is too large for the integer path, the caller falls back to
-/// std::to_chars.  Returns nullptr in that case.
+/// scaled to an integer m = round(v 10^d) whose 16 digits are made in two
+/// words (ascii_8_digits) and stored from registers.  The residual
+/// v 10^d - m (one fma, exact to a few ulp) proves the rounding; when it is
+/// within 1e-7 of a half (a possible tie or double rounding), or the scaled
+/// value is too large for the integer path, the caller falls back to
+/// std::to_chars.  Returns nullptr in that case.  Writes up to 34 characters
+/// at p (the caller reserves kMaxValueChars) and returns the end of the value.
 inline char* format_fixed_fast(char* p, double v, int decimals, bool trim) {
   static constexpr double kPow10[16] = {1e0, 1e1, 1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
                                         1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15};
@@ -62,22 +112,26 @@ inline char* format_fixed_fast(char* p, double v, int decimals, bool trim) {
   const double m = std::nearbyint(s);
   const double r = std::fma(v, scale, -m);
   if (!(std::fabs(r) < 0.4999999)) return nullptr;
-  std::uint64_t u = static_cast<std::uint64_t>(std::fabs(m));
-  char digits[24];
-  int nd = 0;
-  do {
-    digits[nd++] = static_cast<char>('0' + u % 10);
-    u /= 10;
-  } while (u != 0);
-  while (nd < decimals + 1) digits[nd++] = '0';  // digits[] is little-endian: pad the integer part with 0
-  int lo = 0;                                    // lowest fractional digit printed
-  if (trim)
-    while (lo < decimals && digits[lo] == '0') ++lo;
+  const std::uint64_t u = static_cast<std::uint64_t>(std::fabs(m));  // < 10^15: 16 digits, the first one 0
+  const std::uint64_t lo = ascii_8_digits(static_cast<std::uint32_t>(u / 100000000));  // digits 0..7
+  const std::uint64_t hi = ascii_8_digits(static_cast<std::uint32_t>(u % 100000000));  // digits 8..15
+  const std::uint64_t zlo = lo - 0x3030303030303030ULL, zhi = hi - 0x3030303030303030ULL;  // digit values
+  const int point = 16 - decimals;  // digits [point, 16): the fraction
+  // the integer part from the first non-zero digit, at least one digit
+  const int lead = zlo ? ctz64(zlo) / 8 : (zhi ? 8 + ctz64(zhi) / 8 : 16);
+  const int first = std::min(lead, point - 1);
+  int last = 16;  // one past the last fractional digit printed
+  if (trim) {
+    last = zhi ? 16 - clz64(zhi) / 8 : (zlo ? 8 - clz64(zlo) / 8 : 0);
+    last = std::max(last, point);
+  }
   if (std::signbit(v) && !(trim && m == 0.0)) *p++ = '-';
-  for (int i = nd - 1; i >= decimals; --i) *p++ = digits[i];
-  if (lo < decimals) {
-    *p++ = '.';
-    for (int i = decimals - 1; i >= lo; --i) *p++ = digits[i];
+  store_from_byte(p, lo, hi, first);
+  p += point - first;
+  if (last > point) {
+    *p = '.';
+    store_from_byte(p + 1, lo, hi, point);
+    p += 1 + (last - point);
   }
   return p;
 }
@@ -109,14 +163,33 @@ inline char* format_value(char* p, double v, int decimals, bool trim) {
   return std::to_chars(p, p + kMaxValueChars, v).ptr;
 }
 
+/// A text buffer that grows without zero-filling: of the room reserved for
+/// the longest possible rows only what is formatted is ever touched (and
+/// counts in the resident memory).
+struct TextBuffer {
+  std::unique_ptr<char[]> data;
+  std::size_t size = 0, capacity = 0;
+
+  /// Room for n more characters at data + size.
+  char* room(std::size_t n) {
+    if (size + n > capacity) {
+      const std::size_t cap = std::max(size + n, 2 * capacity);
+      std::unique_ptr<char[]> grown(new char[cap]);
+      if (size) std::memcpy(grown.get(), data.get(), size);
+      data = std::move(grown);
+      capacity = cap;
+    }
+    return data.get() + size;
+  }
+};
+
 /// Rows [r0, r1) of the columns as text, appended to buf.
 inline void format_rows(const Column* cols, int ncols, std::int64_t r0, std::int64_t r1, const TextFormat& fmt,
-                        std::string& buf) {
+                        TextBuffer& buf) {
   const int per_value = std::max(kMaxValueChars, fmt.width) + 1;
   const std::size_t need = static_cast<std::size_t>(r1 - r0) * (static_cast<std::size_t>(ncols) * per_value + 1);
-  const std::size_t start = buf.size();
-  buf.resize(start + need);
-  char* p = buf.data() + start;
+  char* const start = buf.room(need);
+  char* p = start;
   for (std::int64_t r = r0; r < r1; ++r) {
     for (int j = 0; j < ncols; ++j) {
       const Column& c = cols[j];
@@ -128,7 +201,7 @@ inline void format_rows(const Column* cols, int ncols, std::int64_t r0, std::int
     }
     *p++ = '\n';
   }
-  buf.resize(static_cast<std::size_t>(p - buf.data()));
+  buf.size += static_cast<std::size_t>(p - start);
 }
 
 enum class WriteStatus { kOk = 0, kIoError = 1, kInterrupted = 2 };
@@ -157,9 +230,9 @@ inline WriteResult write_rows(std::FILE* f, const Column* cols, int ncols, std::
   std::atomic<bool> stop{false};
 
   auto worker = [&](int tid) {
-    std::string buf;
+    TextBuffer buf;
     for (std::int64_t b = tid; b < nblocks && !stop.load(); b += threads) {
-      buf.clear();
+      buf.size = 0;
       format_rows(cols, ncols, b * block_rows, std::min(n, (b + 1) * block_rows), fmt, buf);
       if (tid == 0 && keep_going && !keep_going()) {
         std::lock_guard<std::mutex> lk(m);
@@ -172,9 +245,9 @@ inline WriteResult write_rows(std::FILE* f, const Column* cols, int ncols, std::
       cv.wait(lk, [&] { return next_write == b || stop.load(); });
       if (stop.load()) return;
       lk.unlock();  // only this thread writes now: block b is next
-      const std::size_t w = std::fwrite(buf.data(), 1, buf.size(), f);
+      const std::size_t w = std::fwrite(buf.data.get(), 1, buf.size, f);
       lk.lock();
-      if (w != buf.size()) {
+      if (w != buf.size) {
         res.status = WriteStatus::kIoError;
         res.error = errno ? errno : EIO;
         stop = true;
@@ -243,11 +316,34 @@ inline bool parse_value(const char* b, const char* e, double& v) {
   return false;
 }
 
-/// Parse [b, e) (whole lines) into out (row-major, keep values a row, room
-/// for as many rows as the block has lines); line_of (may be null) gets the
-/// line of each row, counted from first_line.  Stops at the first bad row.
+/// Where the kept value j of row r goes: data[r * stride] (a column of the
+/// caller's arrays, so that one row can be split over several of them).
+struct ColumnSink {
+  double* data = nullptr;
+  std::ptrdiff_t stride = 1;  // [elements]
+};
+
+/// One value starting at p, the line ending at le: the end of the value when
+/// it is a whole token (followed by a separator or le), else nullptr with the
+/// token's end in te.  The fast path parses in place (no scan for the token's
+/// end first); anything else (a '+', over/underflow, junk) goes through
+/// parse_value on the whole token, exactly as before.
+inline const char* parse_token(const char* p, const char* le, bool comma, double& v, const char*& te) {
+  const auto r = std::from_chars(p, le, v);
+  if (r.ec == std::errc() && (r.ptr == le || is_space(*r.ptr, comma))) return r.ptr;
+  te = p;
+  while (te < le && !is_space(*te, comma)) ++te;
+  return parse_value(p, te, v) ? te : nullptr;
+}
+
+/// Parse [b, e) (whole lines): row r (counted from row0) to sinks[j].data[r *
+/// stride] for j < opt.keep.  line_of (may be null) gets the line of each row,
+/// counted from first_line, but only once a blank line has been skipped (the
+/// rows before it are then filled in): a block without one leaves it alone.
+/// Stops at the first bad row.
 inline ParseBlock parse_block(const char* base, std::size_t b, std::size_t e, const ParseOptions& opt,
-                              std::int64_t first_line, double* out, std::int64_t* line_of) {
+                              std::int64_t first_line, const ColumnSink* sinks, std::int64_t row0,
+                              std::int64_t* line_of) {
   ParseBlock res;
   const char* s = base + b;
   const char* end = base + e;
@@ -258,32 +354,36 @@ inline ParseBlock parse_block(const char* base, std::size_t b, std::size_t e, co
     ++res.lines;
     const char* p = s;
     int col = 0;
-    double* row = out + res.rows * opt.keep;
+    const std::int64_t r = row0 + res.rows;
     while (true) {
       while (p < le && is_space(*p, opt.comma)) ++p;
       if (p == le) break;
-      const char* tb = p;
-      while (p < le && !is_space(*p, opt.comma)) ++p;
       if (col >= opt.ncols) {  // extra values: not parsed, counted for the message
+        while (p < le && !is_space(*p, opt.comma)) ++p;
         ++col;
         continue;
       }
       double v;
-      if (!parse_value(tb, p, v)) {
-        res.error = {ParseErrorKind::kNumber, line, 0, col, static_cast<std::size_t>(tb - base),
-                     static_cast<std::size_t>(p - base), static_cast<std::size_t>(le - base)};
+      const char* te = nullptr;
+      const char* q = parse_token(p, le, opt.comma, v, te);
+      if (!q) {
+        res.error = {ParseErrorKind::kNumber, line, 0, col, static_cast<std::size_t>(p - base),
+                     static_cast<std::size_t>(te - base), static_cast<std::size_t>(le - base)};
         return res;
       }
-      if (col < opt.keep) row[col] = v;
+      if (col < opt.keep) sinks[col].data[r * sinks[col].stride] = v;
       ++col;
+      p = q;
     }
     if (col == 0) {
+      if (line_of && !res.blank)
+        for (std::int64_t i = 0; i < res.rows; ++i) line_of[row0 + i] = first_line + i;
       res.blank = true;
     } else if (col < opt.ncols || (col > opt.ncols && !opt.allow_extra)) {
       res.error = {ParseErrorKind::kColumns, line, col, 0, 0, 0, static_cast<std::size_t>(le - base)};
       return res;
     } else {
-      if (line_of) line_of[res.rows] = line;
+      if (line_of && res.blank) line_of[r] = line;
       ++res.rows;
     }
     ++line;
@@ -294,65 +394,115 @@ inline ParseBlock parse_block(const char* base, std::size_t b, std::size_t e, co
 
 /// Lines in [b, e): newlines, plus one for a last line without one.
 inline std::int64_t count_lines(const char* b, const char* e) {
-  std::int64_t n = std::count(b, e, '\n');
-  if (e > b && e[-1] != '\n') ++n;
+  std::int64_t n = (e > b && e[-1] != '\n') ? 1 : 0;
+  while (b < e) {  // per-byte counters of at most 255 newlines (a vectorised compare-and-add), summed per chunk
+    const std::size_t chunk = std::min<std::size_t>(static_cast<std::size_t>(e - b), 255 * 64);
+    std::uint8_t acc[64] = {};
+    std::size_t i = 0;
+    for (; i + 64 <= chunk; i += 64)
+      for (int k = 0; k < 64; ++k) acc[k] = static_cast<std::uint8_t>(acc[k] + (b[i + k] == '\n'));
+    for (int k = 0; k < 64; ++k) n += acc[k];
+    for (; i < chunk; ++i) n += (b[i] == '\n');
+    b += chunk;
+  }
   return n;
 }
 
-struct ParseResult {
-  std::int64_t rows = 0;
-  bool blank = false;
-  ParseError error;  // line numbers absolute (from first_line)
+/// The blocks of a parallel parse: [cut[i], cut[i+1]) split at line
+/// boundaries, with their line counts (counted on the parse's threads).
+struct ParsePlan {
+  std::vector<std::size_t> cut{0};
+  std::vector<std::int64_t> lines;  // per block
+  std::int64_t total_lines = 0;
 };
 
-/// Parse the whole buffer on up to `threads` threads (split at line
-/// boundaries).  out must hold count_lines(data, data+size) rows of
-/// opt.keep values, line_of as many lines.  Rows are contiguous on return.
-inline ParseResult parse_buffer(const char* data, std::size_t size, const ParseOptions& opt, std::int64_t first_line,
-                                double* out, std::int64_t* line_of, int threads = 2) {
-  ParseResult res;
+/// Run job(i) for i < n on up to n threads (job 0 on the calling thread).
+template <class Job>
+void run_parallel(int n, Job&& job) {
+  std::vector<std::thread> pool;
+  for (int i = 1; i < n; ++i) pool.emplace_back(job, i);
+  if (n > 0) job(0);
+  for (auto& th : pool) th.join();
+}
+
+/// Split the buffer for `threads` threads (one block under 1 MB) and count
+/// each block's lines in parallel: the caller sizes its arrays from
+/// total_lines (one row a line at most).
+inline ParsePlan plan_parse(const char* data, std::size_t size, int threads = 2) {
+  ParsePlan plan;
   threads = (size < (std::size_t(1) << 20)) ? 1 : std::max(1, threads);
-  std::vector<std::size_t> cut{0};
   for (int t = 1; t < threads; ++t) {
     std::size_t c = size * static_cast<std::size_t>(t) / static_cast<std::size_t>(threads);
     const void* nl = std::memchr(data + c, '\n', size - c);
     c = nl ? static_cast<std::size_t>(static_cast<const char*>(nl) - data) + 1 : size;
-    if (c > cut.back()) cut.push_back(c);
+    if (c > plan.cut.back()) plan.cut.push_back(c);
   }
-  if (cut.back() < size) cut.push_back(size);
-  const int nb = static_cast<int>(cut.size()) - 1;
+  if (plan.cut.back() < size) plan.cut.push_back(size);
+  const int nb = static_cast<int>(plan.cut.size()) - 1;
+  plan.lines.assign(static_cast<std::size_t>(std::max(nb, 0)), 0);
+  run_parallel(nb, [&](int i) { plan.lines[i] = count_lines(data + plan.cut[i], data + plan.cut[i + 1]); });
+  for (std::int64_t l : plan.lines) plan.total_lines += l;
+  return plan;
+}
+
+struct ParseResult {
+  std::int64_t rows = 0;
+  bool blank = false;  // a blank line was skipped: line_of holds the line of every row
+  ParseError error;    // line numbers absolute (from first_line)
+};
+
+/// Parse the blocks of `plan` in parallel.  sinks[j] (j < opt.keep) must
+/// have room for plan.total_lines rows, line_of (may be null) as many
+/// entries.  Rows are contiguous on return; line_of is filled only when a
+/// line was blank (ParseResult::blank), else the row of line l is l - first_line.
+inline ParseResult parse_planned(const char* data, const ParsePlan& plan, const ParseOptions& opt,
+                                 std::int64_t first_line, const ColumnSink* sinks, std::int64_t* line_of) {
+  ParseResult res;
+  const int nb = static_cast<int>(plan.cut.size()) - 1;
   if (nb <= 0) return res;
   std::vector<std::int64_t> line0(nb, first_line), row0(nb, 0);
   for (int i = 1; i < nb; ++i) {
-    const std::int64_t prev = count_lines(data + cut[i - 1], data + cut[i]);
-    line0[i] = line0[i - 1] + prev;
-    row0[i] = row0[i - 1] + prev;  // room: one row per line
+    line0[i] = line0[i - 1] + plan.lines[i - 1];
+    row0[i] = row0[i - 1] + plan.lines[i - 1];  // room: one row per line
   }
   std::vector<ParseBlock> blocks(nb);
-  auto job = [&](int i) {
-    blocks[i] = parse_block(data, cut[i], cut[i + 1], opt, line0[i], out + row0[i] * opt.keep,
-                            line_of ? line_of + row0[i] : nullptr);
-  };
-  std::vector<std::thread> pool;
-  for (int i = 1; i < nb; ++i) pool.emplace_back(job, i);
-  job(0);
-  for (auto& th : pool) th.join();
+  run_parallel(nb, [&](int i) {
+    blocks[i] = parse_block(data, plan.cut[i], plan.cut[i + 1], opt, line0[i], sinks, row0[i], line_of);
+  });
+  bool any_blank = false;
   for (int i = 0; i < nb; ++i) {
-    const ParseBlock& bl = blocks[i];
-    if (bl.error.kind != ParseErrorKind::kNone) {
-      res.error = bl.error;
+    if (blocks[i].error.kind != ParseErrorKind::kNone) {
+      res.error = blocks[i].error;
       return res;
     }
-    if (row0[i] != res.rows) {  // close the gap left by blank lines before this block
-      std::memmove(out + res.rows * opt.keep, out + row0[i] * opt.keep,
-                   static_cast<std::size_t>(bl.rows * opt.keep) * sizeof(double));
-      if (line_of)
-        std::memmove(line_of + res.rows, line_of + row0[i], static_cast<std::size_t>(bl.rows) * sizeof(std::int64_t));
+    any_blank = any_blank || blocks[i].blank;
+  }
+  for (int i = 0; i < nb; ++i) {
+    const ParseBlock& bl = blocks[i];
+    if (any_blank && line_of && !bl.blank)  // this block's rows are on consecutive lines
+      for (std::int64_t r = 0; r < bl.rows; ++r) line_of[row0[i] + r] = line0[i] + r;
+    if (row0[i] != res.rows) {  // close the gap left by blank lines before this block (moving rows forward)
+      for (std::int64_t r = 0; r < bl.rows; ++r) {
+        for (int j = 0; j < opt.keep; ++j)
+          sinks[j].data[(res.rows + r) * sinks[j].stride] = sinks[j].data[(row0[i] + r) * sinks[j].stride];
+        if (line_of && any_blank) line_of[res.rows + r] = line_of[row0[i] + r];
+      }
     }
     res.rows += bl.rows;
-    res.blank = res.blank || bl.blank;
   }
+  res.blank = any_blank;
   return res;
+}
+
+/// Parse the whole buffer on up to `threads` threads into out (row-major,
+/// opt.keep values a row, room for count_lines(data, data + size) rows);
+/// line_of as parse_planned.
+inline ParseResult parse_buffer(const char* data, std::size_t size, const ParseOptions& opt, std::int64_t first_line,
+                                double* out, std::int64_t* line_of, int threads = 2) {
+  const ParsePlan plan = plan_parse(data, size, threads);
+  std::vector<ColumnSink> sinks(static_cast<std::size_t>(opt.keep));
+  for (int j = 0; j < opt.keep; ++j) sinks[j] = {out + j, opt.keep};
+  return parse_planned(data, plan, opt, first_line, sinks.data(), line_of);
 }
 
 }  // namespace insnav::textio
