@@ -192,6 +192,7 @@ static void run_stationary(int n_sats, const char* name) {
   p0 << 5, 5, 5, 0.1, 0.1, 0.1, 2e-3, 2e-3, 1e-2, 1e-3, 1e-3, 1e-3, 1e-6, 1e-6, 1e-6, 20.0, 1.0;
   const StateCov<L> P0 = p0.cwiseAbs2().asDiagonal();
   TightConfig cfg;
+  cfg.propagation_interval = 0.1;  // insnav.run's default (the C++ default 0.02 s: 5x the UT propagations)
   auto engine = std::make_unique<TightEngine<Filter>>(model, cfg);
   std::vector<double> o_t(n + 1), o_llh(3 * (n + 1)), o_clk(2 * (n + 1)), o_sig(17 * (n + 1)), o_res(2 * obs.size()),
       o_nis(ep.size());
@@ -288,6 +289,7 @@ static void run_multi_robust(const char* name) {
   p0 << 5, 5, 5, 0.1, 0.1, 0.1, 2e-3, 2e-3, 1e-2, 1e-3, 1e-3, 1e-3, 1e-6, 1e-6, 1e-6, 20.0, 1.0, 100, 100, 100;
   const StateCov<LM> P0 = p0.cwiseAbs2().asDiagonal();
   TightConfig cfg;
+  cfg.propagation_interval = 0.1;  // insnav.run's default
   cfg.robust.screening = true;
   auto engine = std::make_unique<TightEngine<Filter>>(model, cfg);
   std::vector<double> o_t(n + 1), o_llh(3 * (n + 1)), o_clk(2 * (n + 1)), o_isb(3 * (n + 1)), o_sig(20 * (n + 1)),
