@@ -2,8 +2,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <thread>
 #include <vector>
+
+#include <pybind11/stl.h>
 
 #include "common.hpp"
 #include "insnav/ins/standstill.hpp"
@@ -102,18 +105,25 @@ void bind_ins(py::module_& m) {
   m.def(
       "smooth_rows",
       [](const DArray& t, DArray lat_deg, DArray lon_deg, DArray h_m, DArray v_n, DArray roll_deg, DArray pitch_deg,
-         DArray yaw_deg, const DArray& te, const DArray& s, const DArray& s_end, const DArray& sig_e, DArray sig_out) {
+         DArray yaw_deg, const DArray& te, const DArray& s, const DArray& s_end, const DArray& sig_e, DArray sig_out,
+         const std::optional<DArray>& extra) {
         const py::ssize_t n = t.size(), E = te.size();
+        // columns: 9 navigation errors (position, velocity, attitude), then q additive ones (clock, ISBs)
+        const py::ssize_t c = s.ndim() == 2 ? s.shape(1) : 0, q = c - 9;
+        if (q < 0) throw py::value_error("smooth_rows: s needs at least 9 columns");
         require_shape(t, n, -1, "t");
         for (const DArray* a : {&lat_deg, &lon_deg, &h_m, &roll_deg, &pitch_deg, &yaw_deg}) require_shape(*a, n, -1, "rows");
         require_shape(v_n, n, 3, "v_n");
-        require_shape(sig_out, n, 9, "sigma");
+        require_shape(sig_out, n, c, "sigma");
         require_shape(te, E, -1, "te");
-        for (const DArray* a : {&s, &s_end, &sig_e}) require_shape(*a, E, 9, "epochs");
+        for (const DArray* a : {&s, &s_end, &sig_e}) require_shape(*a, E, c, "epochs");
+        if (q > 0 && !extra) throw py::value_error("smooth_rows: extra (n, " + std::to_string(q) + ") rows needed");
+        DArray ex = q > 0 ? *extra : DArray();
+        if (q > 0) require_shape(ex, n, q, "extra");
         if (E < 2) throw py::value_error("smooth_rows: needs at least 2 epochs");
         double *la = lat_deg.mutable_data(), *lo = lon_deg.mutable_data(), *h = h_m.mutable_data(),
                *v = v_n.mutable_data(), *r = roll_deg.mutable_data(), *p = pitch_deg.mutable_data(),
-               *y = yaw_deg.mutable_data(), *so = sig_out.mutable_data();
+               *y = yaw_deg.mutable_data(), *so = sig_out.mutable_data(), *px = q > 0 ? ex.mutable_data() : nullptr;
         const double *pt = t.data(), *pe = te.data(), *ps = s.data(), *pse = s_end.data(), *pg = sig_e.data();
         constexpr double kDeg = 3.14159265358979323846 / 180.0;
         // rows are independent: blocks on up to 2 threads (the rows' own
@@ -125,27 +135,28 @@ void bind_ins(py::module_& m) {
             const py::ssize_t idx = std::lower_bound(pe, pe + E, pt[i_begin]) - pe;  // pe[idx] >= t
             k = std::min<py::ssize_t>(std::max<py::ssize_t>(idx - 1, 0), E - 2);
           }
+          double x[9];
           for (py::ssize_t i = i_begin; i < i_end; ++i) {
             const double ti = pt[i];
             while (k + 2 < E && pe[k + 1] < ti) ++k;  // ti in (te[k], te[k+1]]
             const double t0 = pe[k], t1 = pe[k + 1];
             const double w = t1 > t0 ? std::min(1.0, std::max(0.0, (ti - t0) / (t1 - t0))) : 1.0;
-            // a row at t_{k+1} is written after that epoch's feedback: s_{k+1}; before it, s_{k+1} + x_fed
-            const double* end = std::abs(ti - t1) < 1e-9 ? ps + 9 * (k + 1) : pse + 9 * (k + 1);
-            double x[9];
-            for (int j = 0; j < 9; ++j) {
-              x[j] = (1.0 - w) * ps[9 * k + j] + w * end[j];
-              so[9 * i + j] = (1.0 - w) * pg[9 * k + j] + w * pg[9 * (k + 1) + j];
-            }
+            // a row at t_{k+1} (or after the last epoch) is written after that epoch's feedback:
+            // s_{k+1}; before it, s_{k+1} + x_fed
+            const double* end = ti > t1 - 1e-9 ? ps + c * (k + 1) : pse + c * (k + 1);
+            const double* beg = ps + c * k;
+            for (py::ssize_t j = 0; j < c; ++j) so[c * i + j] = (1.0 - w) * pg[c * k + j] + w * pg[c * (k + 1) + j];
+            for (int j = 0; j < 9; ++j) x[j] = (1.0 - w) * beg[j] + w * end[j];
+            for (py::ssize_t j = 0; j < q; ++j) px[q * i + j] -= (1.0 - w) * beg[9 + j] + w * end[9 + j];
             const double lat = la[i] * kDeg;
             const wgs84::Radii rad = wgs84::radii(lat);
             la[i] = (lat - x[0] / (rad.R_M + h[i])) / kDeg;
             lo[i] -= x[1] / ((rad.R_N + h[i]) * std::cos(lat)) / kDeg;
             h[i] += x[2];
             for (int j = 0; j < 3; ++j) v[3 * i + j] -= x[3 + j];
-            const Quat q = quat_from_euler(Vec3(x[6], x[7], x[8])) *
-                           quat_from_euler(Vec3(r[i] * kDeg, p[i] * kDeg, y[i] * kDeg));
-            const Vec3 rpy = euler_from_quat(q.normalized());
+            const Quat qr = quat_from_euler(Vec3(x[6], x[7], x[8])) *
+                            quat_from_euler(Vec3(r[i] * kDeg, p[i] * kDeg, y[i] * kDeg));
+            const Vec3 rpy = euler_from_quat(qr.normalized());
             r[i] = rpy[0] / kDeg;
             p[i] = rpy[1] / kDeg;
             y[i] = rpy[2] / kDeg;
@@ -164,10 +175,12 @@ void bind_ins(py::module_& m) {
       },
       py::arg("t"), py::arg("lat_deg"), py::arg("lon_deg"), py::arg("h_m"), py::arg("v_n"), py::arg("roll_deg"),
       py::arg("pitch_deg"), py::arg("yaw_deg"), py::arg("te"), py::arg("s"), py::arg("s_end"), py::arg("sigma_e"),
-      py::arg("sigma_out"),
+      py::arg("sigma_out"), py::arg("extra") = py::none(),
       "Smoothed output rows in place (python/insnav/filters/smoothing.py): the error at each row time, "
       "interpolated between the epochs' smoothed errors s (after) and s_end (before feedback), corrects "
-      "position [m], velocity [m/s] and attitude [rad] as the engines' feedback does; sigmas interpolated.");
+      "position [m], velocity [m/s] and attitude [rad] (s columns 0-8) as the engines' feedback does, and "
+      "subtracts from `extra` (n, c - 9) the errors of s columns 9.. (receiver clock, inter-system biases); "
+      "sigmas (c columns) interpolated.");
   m.def(
       "standstill_statistic",
       [](const DArray& t, const DArray& dtheta_b, const DArray& dv_b, double t0, int window, double sigma_f_mps2,
