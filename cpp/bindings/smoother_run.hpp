@@ -6,7 +6,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
+#include <cstdlib>
+#include <memory>
+#include <new>
 #include <stdexcept>
 #include <type_traits>
 #include <vector>
@@ -18,6 +22,29 @@
 #include "insnav/filter/rts_smoother.hpp"
 
 namespace insnav::py_bind {
+
+/// Storage for n objects of T, not initialized (aligned for T; T trivially destructible).
+template <class T>
+class RawBuffer {
+ public:
+  void allocate(std::int64_t n) {
+    const std::size_t a = alignof(T) < alignof(std::max_align_t) ? alignof(std::max_align_t) : alignof(T);
+    const std::size_t bytes = ((static_cast<std::size_t>(std::max<std::int64_t>(n, 1)) * sizeof(T) + a - 1) / a) * a;
+    p_.reset(static_cast<T*>(std::aligned_alloc(a, bytes)));
+    if (!p_) throw std::bad_alloc();
+    n_ = n;
+  }
+  T* data() const { return p_.get(); }
+  std::int64_t size() const { return n_; }
+  const T& operator[](std::int64_t i) const { return p_.get()[i]; }
+
+ private:
+  struct Free {
+    void operator()(T* p) const { std::free(p); }
+  };
+  std::unique_ptr<T, Free> p_;
+  std::int64_t n_ = 0;
+};
 
 template <class Filter>
 class SmootherRun {
@@ -35,7 +62,9 @@ class SmootherRun {
     if (!kSupported) throw py::value_error("smooth: the RTS smoother runs with the EKF, RB-UKF and UKF");
     const std::int64_t cap =
         records + static_cast<std::int64_t>(std::ceil(std::max(span_s, 0.0) / cycle_period_s)) + 16;
-    fwd_.resize(static_cast<size_t>(cap));  // once per run
+    // once per run, not initialized: the core constructs each epoch it records, and the pages of
+    // the capacity never used (the bound counts every outage cycle) are never touched
+    fwd_.allocate(cap);
   }
 
   bool on() const { return on_; }
@@ -50,7 +79,7 @@ class SmootherRun {
     if (!on_) return;
     if (core.recording_overflowed()) throw std::runtime_error("smoother: epoch buffer overflow");
     n_ = core.recorded_epochs();
-    bwd_.resize(static_cast<size_t>(n_));
+    bwd_.resize(static_cast<std::size_t>(n_));
     status_ = rts_backward<L>(fwd_.data(), n_, bwd_.data());
   }
 
@@ -93,7 +122,8 @@ class SmootherRun {
 
  private:
   bool on_ = false;
-  std::vector<SmootherEpoch<L>> fwd_;
+  static_assert(std::is_trivially_destructible_v<SmootherEpoch<L>>);
+  RawBuffer<SmootherEpoch<L>> fwd_;
   std::vector<SmoothedEpoch<L>> bwd_;
   std::int64_t n_ = 0;
   SmootherStatus status_;

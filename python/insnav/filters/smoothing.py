@@ -30,6 +30,7 @@ __all__ = ["smoothed_rows"]
 
 #: state columns of the clock (Layout17 / LayoutTightMulti: 15 bias [m], 16 drift [m/s]) and ISBs (17-19 [m])
 _CLOCK, _ISB = [15, 16], [17, 18, 19]
+_ROWS = ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "yaw_deg")
 
 
 def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
@@ -57,9 +58,8 @@ def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
     d = np.ascontiguousarray(np.asarray(out["smooth_d"], float)[:, cols])  # position, velocity, attitude (clock, ISB)
     d_end = np.ascontiguousarray(np.asarray(out["smooth_d_end"], float)[:, cols])  # before the epoch's feedback
     sig = np.ascontiguousarray(np.asarray(out["smooth_sigma"], float)[:, cols])
-    rows = [np.array(sol.lat_deg, float), np.array(sol.lon_deg, float), np.array(sol.h_m, float),
-            np.array(sol.v_n, float), np.array(sol.roll_deg, float), np.array(sol.pitch_deg, float),
-            np.array(sol.yaw_deg, float)]
+    # corrected in place (any strides, e.g. the columns of the engine's llh): no copy of float64 rows
+    rows = [np.require(getattr(sol, k), float, ["W"]) for k in _ROWS]
     ex = np.column_stack(extra).astype(float) if extra else None
     # rows after the last epoch: no data after them, the smoothed rows and sigmas are the filtered ones
     t = np.asarray(sol.t, float)
@@ -73,7 +73,8 @@ def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
         sg[n_in:, 9:11] = sol.sigma_clock[n_in:]
         if ex.shape[1] > 2:
             sg[n_in:, 11:14] = sol.sigma_isb[n_in:]
-    sol.lat_deg, sol.lon_deg, sol.h_m, sol.v_n, sol.roll_deg, sol.pitch_deg, sol.yaw_deg = rows
+    for k, r in zip(_ROWS, rows):
+        setattr(sol, k, r)
     sol.sigma_pos_n_m = sg[:, 0:3]
     sol.sigma_vel_n_mps = sg[:, 3:6]
     sol.sigma_att_deg = sg[:, 6:9] * RAD2DEG
