@@ -178,7 +178,7 @@ def test_smoother_bridges_an_outage_consistently(car, filt):
     assert sm.sigma_pos_n_m[-1] == pytest.approx(fwd.sigma_pos_n_m[-1], rel=1e-9)
     assert sm.summary["smoother"]["gain_failures"] == 0
     with pytest.raises(ConfigError, match="smooth"):
-        RunConfig(filter="ekf", coupling="tight", smooth=True).validate()
+        RunConfig(filter="upf", coupling="tight", smooth=True).validate()
 
 
 def test_unscented_and_ekf_smoothers_agree_on_a_near_linear_problem(car):

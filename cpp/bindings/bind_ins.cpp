@@ -2,8 +2,11 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <thread>
 #include <vector>
+
+#include <pybind11/stl.h>
 
 #include "common.hpp"
 #include "insnav/ins/standstill.hpp"
@@ -11,6 +14,67 @@
 namespace insnav::py_bind {
 
 namespace {
+
+/// `a`: a writeable float64 array of shape (n, cols) (cols < 0: (n,)), any
+/// strides, written in place (no converted copy whose writes would be lost).
+inline void require_inplace(const py::array& a, py::ssize_t n, py::ssize_t cols, const char* name) {
+  if (!a.dtype().is(py::dtype::of<double>()) || !a.writeable())
+    throw py::type_error(std::string(name) + ": expected a writeable float64 array");
+  const bool ok = cols < 0 ? (a.ndim() == 1 && a.shape(0) == n) : (a.ndim() == 2 && a.shape(0) == n && a.shape(1) == cols);
+  if (!ok) throw py::value_error(std::string(name) + ": expected " + std::to_string(n) + " rows" +
+                                 (cols < 0 ? std::string() : " of " + std::to_string(cols)));
+}
+
+/// sin and cos of one angle in one call where the C library has sincos (glibc).
+inline void sin_cos(double a, double& s, double& c) {
+#if defined(__GLIBC__)
+  ::sincos(a, &s, &c);
+#else
+  s = std::sin(a);
+  c = std::cos(a);
+#endif
+}
+
+/// quat_from_euler (math/rotation.hpp) of the output rows, one sincos per angle.
+inline Quat row_quat_from_euler(double roll, double pitch, double yaw) {
+  double sr, cr, sp, cp, sy, cy;
+  sin_cos(0.5 * roll, sr, cr);
+  sin_cos(0.5 * pitch, sp, cp);
+  sin_cos(0.5 * yaw, sy, cy);
+  return Quat(cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+              cr * cp * sy - sr * sp * cy);
+}
+
+/// euler_from_dcm (math/rotation.hpp) of a unit quaternion's DCM with sqrt for
+/// hypot (the elements are at most 1: no overflow to guard against).
+inline Vec3 row_euler_from_quat(const Quat& q) {
+  const Mat3 C = q.toRotationMatrix();
+  const double cp = std::sqrt(C(2, 1) * C(2, 1) + C(2, 2) * C(2, 2));
+  const double pitch = std::atan2(-C(2, 0), cp);
+  const bool locked = !(cp > 1e-12);
+  const double roll = locked ? 0.0 : std::atan2(C(2, 1), C(2, 2));
+  const double sr = locked ? 0.0 : C(2, 1) / cp, cr = locked ? 1.0 : C(2, 2) / cp;
+  const double yaw = std::atan2(sr * C(0, 2) - cr * C(0, 1), cr * C(1, 1) - sr * C(1, 2));
+  return Vec3(roll, pitch, yaw);
+}
+
+/// quat_from_euler for the attitude corrections of smooth_rows: half angles
+/// below 1e-2 rad by their Taylor series (remainder below 1e-19), else exact.
+inline Quat small_quat_from_euler(double roll, double pitch, double yaw) {
+  const double hr = 0.5 * roll, hp = 0.5 * pitch, hy = 0.5 * yaw;
+  if (!(std::max({std::abs(hr), std::abs(hp), std::abs(hy)}) < 1e-2)) return quat_from_euler(Vec3(roll, pitch, yaw));
+  const auto sin_s = [](double h) {
+    const double h2 = h * h;
+    return h * (1.0 - h2 / 6.0 * (1.0 - h2 / 20.0 * (1.0 - h2 / 42.0)));
+  };
+  const auto cos_s = [](double h) {
+    const double h2 = h * h;
+    return 1.0 - h2 / 2.0 * (1.0 - h2 / 12.0 * (1.0 - h2 / 30.0 * (1.0 - h2 / 56.0)));
+  };
+  const double sr = sin_s(hr), cr = cos_s(hr), sp = sin_s(hp), cp = cos_s(hp), sy = sin_s(hy), cy = cos_s(hy);
+  return Quat(cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+              cr * cp * sy - sr * sp * cy);
+}
 
 /// Run the mechanization over n samples.  The loop also checks each sample
 /// before using it (finite values, strictly increasing time) and stops at the
@@ -101,19 +165,31 @@ void bind_ins(py::module_& m) {
         "or not after the previous time; the outputs are then incomplete).");
   m.def(
       "smooth_rows",
-      [](const DArray& t, DArray lat_deg, DArray lon_deg, DArray h_m, DArray v_n, DArray roll_deg, DArray pitch_deg,
-         DArray yaw_deg, const DArray& te, const DArray& s, const DArray& s_end, const DArray& sig_e, DArray sig_out) {
+      [](const DArray& t, py::array lat_deg, py::array lon_deg, py::array h_m, py::array v_n, py::array roll_deg,
+         py::array pitch_deg, py::array yaw_deg, const DArray& te, const DArray& s, const DArray& s_end,
+         const DArray& sig_e, DArray sig_out, const std::optional<py::array>& extra) {
         const py::ssize_t n = t.size(), E = te.size();
+        // columns: 9 navigation errors (position, velocity, attitude), then q additive ones (clock, ISBs)
+        const py::ssize_t c = s.ndim() == 2 ? s.shape(1) : 0, q = c - 9;
+        if (q < 0) throw py::value_error("smooth_rows: s needs at least 9 columns");
         require_shape(t, n, -1, "t");
-        for (const DArray* a : {&lat_deg, &lon_deg, &h_m, &roll_deg, &pitch_deg, &yaw_deg}) require_shape(*a, n, -1, "rows");
-        require_shape(v_n, n, 3, "v_n");
-        require_shape(sig_out, n, 9, "sigma");
+        for (const py::array* a : {&lat_deg, &lon_deg, &h_m, &roll_deg, &pitch_deg, &yaw_deg})
+          require_inplace(*a, n, -1, "rows");
+        require_inplace(v_n, n, 3, "v_n");
+        require_shape(sig_out, n, c, "sigma");
         require_shape(te, E, -1, "te");
-        for (const DArray* a : {&s, &s_end, &sig_e}) require_shape(*a, E, 9, "epochs");
+        for (const DArray* a : {&s, &s_end, &sig_e}) require_shape(*a, E, c, "epochs");
+        if (q > 0 && !extra) throw py::value_error("smooth_rows: extra (n, " + std::to_string(q) + ") rows needed");
+        py::array ex = q > 0 ? *extra : py::array_t<double>(std::vector<py::ssize_t>{0, 1});
+        if (q > 0) require_inplace(ex, n, q, "extra");
         if (E < 2) throw py::value_error("smooth_rows: needs at least 2 epochs");
-        double *la = lat_deg.mutable_data(), *lo = lon_deg.mutable_data(), *h = h_m.mutable_data(),
-               *v = v_n.mutable_data(), *r = roll_deg.mutable_data(), *p = pitch_deg.mutable_data(),
-               *y = yaw_deg.mutable_data(), *so = sig_out.mutable_data();
+        // in place, any strides (e.g. the columns of the engine's (n, 3) llh array): no copies
+        auto la = lat_deg.mutable_unchecked<double, 1>(), lo = lon_deg.mutable_unchecked<double, 1>(),
+             h = h_m.mutable_unchecked<double, 1>(), r = roll_deg.mutable_unchecked<double, 1>(),
+             p = pitch_deg.mutable_unchecked<double, 1>(), y = yaw_deg.mutable_unchecked<double, 1>();
+        auto v = v_n.mutable_unchecked<double, 2>();
+        auto px = ex.mutable_unchecked<double, 2>();
+        double* so = sig_out.mutable_data();
         const double *pt = t.data(), *pe = te.data(), *ps = s.data(), *pse = s_end.data(), *pg = sig_e.data();
         constexpr double kDeg = 3.14159265358979323846 / 180.0;
         // rows are independent: blocks on up to 2 threads (the rows' own
@@ -125,30 +201,34 @@ void bind_ins(py::module_& m) {
             const py::ssize_t idx = std::lower_bound(pe, pe + E, pt[i_begin]) - pe;  // pe[idx] >= t
             k = std::min<py::ssize_t>(std::max<py::ssize_t>(idx - 1, 0), E - 2);
           }
+          double x[9];
           for (py::ssize_t i = i_begin; i < i_end; ++i) {
             const double ti = pt[i];
             while (k + 2 < E && pe[k + 1] < ti) ++k;  // ti in (te[k], te[k+1]]
             const double t0 = pe[k], t1 = pe[k + 1];
             const double w = t1 > t0 ? std::min(1.0, std::max(0.0, (ti - t0) / (t1 - t0))) : 1.0;
-            // a row at t_{k+1} is written after that epoch's feedback: s_{k+1}; before it, s_{k+1} + x_fed
-            const double* end = std::abs(ti - t1) < 1e-9 ? ps + 9 * (k + 1) : pse + 9 * (k + 1);
-            double x[9];
-            for (int j = 0; j < 9; ++j) {
-              x[j] = (1.0 - w) * ps[9 * k + j] + w * end[j];
-              so[9 * i + j] = (1.0 - w) * pg[9 * k + j] + w * pg[9 * (k + 1) + j];
-            }
-            const double lat = la[i] * kDeg;
-            const wgs84::Radii rad = wgs84::radii(lat);
-            la[i] = (lat - x[0] / (rad.R_M + h[i])) / kDeg;
-            lo[i] -= x[1] / ((rad.R_N + h[i]) * std::cos(lat)) / kDeg;
-            h[i] += x[2];
-            for (int j = 0; j < 3; ++j) v[3 * i + j] -= x[3 + j];
-            const Quat q = quat_from_euler(Vec3(x[6], x[7], x[8])) *
-                           quat_from_euler(Vec3(r[i] * kDeg, p[i] * kDeg, y[i] * kDeg));
-            const Vec3 rpy = euler_from_quat(q.normalized());
-            r[i] = rpy[0] / kDeg;
-            p[i] = rpy[1] / kDeg;
-            y[i] = rpy[2] / kDeg;
+            // a row at t_{k+1} (or after the last epoch) is written after that epoch's feedback:
+            // s_{k+1}; before it, s_{k+1} + x_fed
+            const double* end = ti > t1 - 1e-9 ? ps + c * (k + 1) : pse + c * (k + 1);
+            const double* beg = ps + c * k;
+            for (py::ssize_t j = 0; j < c; ++j) so[c * i + j] = (1.0 - w) * pg[c * k + j] + w * pg[c * (k + 1) + j];
+            for (int j = 0; j < 9; ++j) x[j] = (1.0 - w) * beg[j] + w * end[j];
+            for (py::ssize_t j = 0; j < q; ++j) px(i, j) -= (1.0 - w) * beg[9 + j] + w * end[9 + j];
+            const double lat = la(i) * kDeg;
+            double s_lat, c_lat;
+            sin_cos(lat, s_lat, c_lat);
+            const double w_lat = 1.0 - wgs84::kE2 * s_lat * s_lat;  // wgs84::radii with the sine at hand
+            const double R_N = wgs84::kA / std::sqrt(w_lat), R_M = R_N * (1.0 - wgs84::kE2) / w_lat;
+            la(i) = (lat - x[0] / (R_M + h(i))) / kDeg;
+            lo(i) -= x[1] / ((R_N + h(i)) * c_lat) / kDeg;
+            h(i) += x[2];
+            for (int j = 0; j < 3; ++j) v(i, j) -= x[3 + j];
+            const Quat qr = small_quat_from_euler(x[6], x[7], x[8]) *
+                            row_quat_from_euler(r(i) * kDeg, p(i) * kDeg, y(i) * kDeg);
+            const Vec3 rpy = row_euler_from_quat(qr.normalized());
+            r(i) = rpy[0] / kDeg;
+            p(i) = rpy[1] / kDeg;
+            y(i) = rpy[2] / kDeg;
           }
         };
         {
@@ -164,10 +244,12 @@ void bind_ins(py::module_& m) {
       },
       py::arg("t"), py::arg("lat_deg"), py::arg("lon_deg"), py::arg("h_m"), py::arg("v_n"), py::arg("roll_deg"),
       py::arg("pitch_deg"), py::arg("yaw_deg"), py::arg("te"), py::arg("s"), py::arg("s_end"), py::arg("sigma_e"),
-      py::arg("sigma_out"),
-      "Smoothed output rows in place (python/insnav/filters/smoothing.py): the error at each row time, "
+      py::arg("sigma_out"), py::arg("extra") = py::none(),
+      "Smoothed output rows in place (python/insnav/filters/smoothing.py; float64 rows, any strides): the error at each row time, "
       "interpolated between the epochs' smoothed errors s (after) and s_end (before feedback), corrects "
-      "position [m], velocity [m/s] and attitude [rad] as the engines' feedback does; sigmas interpolated.");
+      "position [m], velocity [m/s] and attitude [rad] (s columns 0-8) as the engines' feedback does, and "
+      "subtracts from `extra` (n, c - 9) the errors of s columns 9.. (receiver clock, inter-system biases); "
+      "sigmas (c columns) interpolated.");
   m.def(
       "standstill_statistic",
       [](const DArray& t, const DArray& dtheta_b, const DArray& dv_b, double t0, int window, double sigma_f_mps2,

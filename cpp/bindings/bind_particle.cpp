@@ -168,6 +168,8 @@ void bind_particle(py::module_& m) {
          const py::dict& particle) {
         const ImuErrorModel mdl = imu_model_from_dict(model);
         const TightConfig cfg = tight_config_from(config);
+        if (flag(config, "smooth", false))
+          throw py::value_error("smooth: the RTS smoother runs with the EKF, RB-UKF and UKF (not " + filter + ")");
         const ParticleSetup ps = particle_setup(particle);
         const UtParams ut = ut_from(config);
         if (filter == "upf")

@@ -23,6 +23,7 @@ void bind_tight(py::module_& m) {
         a.model = imu_model_from_dict(model);
         a.cfg = tight_config_from(config);
         a.ut = ut_from(config);
+        a.smooth = flag(config, "smooth", false);
         a.imu = imu_arrays(t, dtheta_b, dv_b);
         a.in = tight_inputs_from(epoch_t, epoch_start, sats, system);
         a.nav = nav_state_from(init);

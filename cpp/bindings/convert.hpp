@@ -84,7 +84,7 @@ inline LooseConfig loose_config_from(const py::dict& d, const char* what, std::i
 }
 
 inline TightConfig tight_config_from(const py::dict& d) {
-  reject_unknown(d, {INSNAV_TIMING_KEYS, "use_pseudorange", "use_rate", INSNAV_UT_KEYS}, "tight engine config",
+  reject_unknown(d, {INSNAV_TIMING_KEYS, "use_pseudorange", "use_rate", INSNAV_UT_KEYS, "smooth"}, "tight engine config",
                  {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows"});
   TightConfig c;

@@ -21,8 +21,8 @@
 #include "insnav/engine/loose_engine.hpp"
 #include "insnav/filter/ekf.hpp"
 #include "insnav/filter/rbukf.hpp"
-#include "insnav/filter/rts_smoother.hpp"
 #include "outputs.hpp"
+#include "smoother_run.hpp"
 
 namespace insnav::py_bind {
 
@@ -95,30 +95,14 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   rec_buf.attach(out, m);
   out.constraint_nis = k ? o_cnis.mutable_data() : nullptr;
   out.constraint_status = k ? o_cst.mutable_data() : nullptr;
-  // smoother: the forward pass recorded per filter epoch, then the backward pass
-  // the EKF (transition) and the RB-UKF / UKF (UT cross-covariance, the unscented RTS smoother)
-  constexpr bool kCanSmooth = std::is_same_v<Filter, Ekf<L>> || std::is_base_of_v<UnscentedPropagation<L>, Filter>;
-  if (a.smooth && !kCanSmooth) throw py::value_error("smooth: the RTS smoother runs with the EKF, RB-UKF and UKF");
-  std::vector<SmootherEpoch<L>> fwd;
-  std::vector<SmoothedEpoch<L>> bwd;
-  std::int64_t n_ep = 0;
-  SmootherStatus sst;
-  if (a.smooth) {
-    const double span = imu.n ? imu.t[imu.n - 1] - nav.t : 0.0;
-    const std::int64_t cap = m + k + static_cast<std::int64_t>(std::ceil(span / cfg.cycle_period)) + 16;
-    fwd.resize(static_cast<size_t>(cap));  // once per run
-    bwd.resize(static_cast<size_t>(cap));
-  }
+  const double span = imu.n ? imu.t[imu.n - 1] - nav.t : 0.0;
+  SmootherRun<Filter> smoother(a.smooth, m + k, span, cfg.cycle_period);
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<LooseEngine<Filter>>(a.model, cfg, a.ut);  // one allocation per run, not per sample
-    if (a.smooth) engine->core().record_for_smoother(fwd.data(), static_cast<std::int64_t>(fwd.size()));
+    smoother.attach(engine->core());
     engine->run(nav, P, corr, imu.n, imu.t, imu.dtheta_b, imu.dv_b, m, fixes.data(), k, events.data(), out);
-    if (a.smooth) {
-      if (engine->core().recording_overflowed()) throw std::runtime_error("smoother: epoch buffer overflow");
-      n_ep = engine->core().recorded_epochs();
-      sst = rts_backward<L>(fwd.data(), n_ep, bwd.data());
-    }
+    smoother.finish(engine->core());
   }
   py::dict res;
   nav_buf.put(res, out);
@@ -127,25 +111,7 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   res["constraint_status"] = o_cst;
   res["constraint_updates"] = out.constraint_updates;
   res["constraint_rejected"] = out.constraint_rejected;
-  if (a.smooth) {
-    DArray o_et({n_ep}), o_xf({n_ep, py::ssize_t(ns)}), o_s({n_ep, py::ssize_t(ns)}), o_ss({n_ep, py::ssize_t(ns)});
-    py::array_t<std::int8_t> o_fed({n_ep});
-    for (std::int64_t i = 0; i < n_ep; ++i) {
-      o_et.mutable_data()[i] = fwd[i].t;
-      o_fed.mutable_data()[i] = fwd[i].fed_back ? 1 : 0;
-      for (int j = 0; j < ns; ++j) {
-        o_xf.mutable_data()[i * ns + j] = fwd[i].fed_back ? fwd[i].x[j] : 0.0;
-        o_s.mutable_data()[i * ns + j] = bwd[i].s[j];
-        o_ss.mutable_data()[i * ns + j] = std::sqrt(std::max(bwd[i].P(j, j), 0.0));
-      }
-    }
-    res["smooth_t"] = o_et;
-    res["smooth_fed"] = o_fed;
-    res["smooth_x_fed"] = o_xf;
-    res["smooth_s"] = o_s;
-    res["smooth_sigma"] = o_ss;
-    res["smooth_gain_failures"] = sst.gain_failures;
-  }
+  smoother.put(res);
   return res;
 }
 

@@ -11,6 +11,7 @@
 #include "convert.hpp"
 #include "insnav/engine/tight_engine.hpp"
 #include "outputs.hpp"
+#include "smoother_run.hpp"
 
 namespace insnav::py_bind {
 
@@ -26,6 +27,7 @@ struct TightArgs {
   ImuErrorModel model;
   TightConfig cfg;
   UtParams ut;
+  bool smooth = false;  // config key 'smooth': RTS backward pass (EKF, RB-UKF, UKF; smoother_run.hpp)
 };
 
 template <class Filter>
@@ -37,16 +39,21 @@ py::dict run_tight_impl(const TightArgs& a) {
   TightOutputs out;
   nav_buf.attach(out);
   rec_buf.attach(out);
+  const double span = a.imu.n ? a.imu.t[a.imu.n - 1] - a.nav.t : 0.0;
+  SmootherRun<Filter> smoother(a.smooth, a.in.E, span, a.cfg.cycle_period);
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<TightEngine<Filter>>(a.model, a.cfg, a.ut);  // one allocation per run
     engine->set_initial_isb(a.isb0);
+    smoother.attach(engine->core());
     engine->run(a.nav, P, a.corr, a.clock_bias0, a.clock_drift0, a.imu.n, a.imu.t, a.imu.dtheta_b, a.imu.dv_b, a.in.E,
                 a.in.epochs.data(), a.in.sats.data(), out);
+    smoother.finish(engine->core());
   }
   py::dict res;
   nav_buf.put(res, out);
   rec_buf.put(res, out);
+  smoother.put(res);
   return res;
 }
 

@@ -68,6 +68,22 @@ def run_loose(
     imu_model: dict[str, Any],
     config: dict[str, Any],
 ) -> dict[str, Any]: ...
+def smooth_rows(
+    t: npt.NDArray[np.float64],  # (n,) row times [s]
+    lat_deg: npt.NDArray[np.float64],  # (n,) rows corrected in place (contiguous float64)
+    lon_deg: npt.NDArray[np.float64],
+    h_m: npt.NDArray[np.float64],
+    v_n: npt.NDArray[np.float64],  # (n, 3)
+    roll_deg: npt.NDArray[np.float64],
+    pitch_deg: npt.NDArray[np.float64],
+    yaw_deg: npt.NDArray[np.float64],
+    te: npt.NDArray[np.float64],  # (E,) smoother epochs [s]
+    s: npt.NDArray[np.float64],  # (E, c) smoothed errors after feedback, c >= 9
+    s_end: npt.NDArray[np.float64],  # (E, c) before feedback
+    sigma_e: npt.NDArray[np.float64],  # (E, c)
+    sigma_out: npt.NDArray[np.float64],  # (n, c) written
+    extra: npt.NDArray[np.float64] | None = None,  # (n, c - 9) additive rows (clock, ISBs), in place
+) -> None: ...
 def run_tight(
     filter: str,  # "ekf" | "rbukf" | "ukf" (Layout17)
     t: npt.ArrayLike,

@@ -332,9 +332,10 @@ class RunConfig:
         Tight coupling: clock-jump check, per-satellite screening and IGG-III
         down-weighting (``[robust]``; screening off by default).
     smooth : bool
-        Post-process with the RTS smoother (loose EKF; loose RB-UKF and UKF:
-        the unscented RTS smoother, Sarkka 2008): every output row and sigma
-        from all the data, before and after it.
+        Post-process with the RTS smoother (EKF; RB-UKF and UKF: the unscented
+        RTS smoother, Sarkka 2008; loose or tight): every output row and sigma,
+        and a tight run's receiver clock and inter-system biases, from all the
+        data, before and after it.
     init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None
         Initial estimate of the IMU errors (measured minus true; scale factors
         [-]); None: zero.  KF-GINS's ``initaccbias``/``initgyrbias``/
@@ -436,9 +437,8 @@ class RunConfig:
                                                                " > 1" if k == "gap_factor" else " > 0"))
         if not isinstance(self.smooth, (bool, np.bool_)):
             bad("smooth", self.smooth, "true or false")
-        if self.smooth and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
-            bad("smooth", self.smooth, f"the RTS smoother runs with the loose ekf, rbukf or ukf "
-                                       f"(not {self.coupling} {self.filter!r})")
+        if self.smooth and self.filter not in ("ekf", "rbukf", "ukf"):
+            bad("smooth", self.smooth, f"the RTS smoother runs with the ekf, rbukf or ukf (not {self.filter!r})")
         if self.constraints.use and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
             bad("constraints.use", self.constraints.use,
                 f"vehicle constraints with loose ekf, rbukf or ukf only (not {self.coupling} {self.filter!r})")

@@ -77,7 +77,8 @@ def add_run_parser(sub) -> None:
                         "(odometer speed, the dataset's odometer.csv), zupt (zero velocity and angular rate while "
                         "standing still); settings in the config's [constraints] table; loose ekf/rbukf/ukf")
     p.add_argument("--smooth", action="store_true",
-                   help="post-process with the RTS smoother (loose EKF): every row from all the data")
+                   help="post-process with the RTS smoother (ekf, rbukf, ukf; loose or tight): every row "
+                        "from all the data")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", default=None,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "

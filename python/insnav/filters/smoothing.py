@@ -3,14 +3,21 @@
 The C++ forward pass records every filter epoch and the backward pass
 (``cpp/include/insnav/filter/rts_smoother.hpp``) returns, per epoch k, the
 smoothed error ``s_k`` of the post-feedback nominal ``m_k`` and its sigma.
-Between two epochs the output rows are the nominal INS (the EKF's state is
-zero after every feedback); its error goes from ``s_k`` at ``t_k`` to the
-smoothed error of the pre-feedback nominal at ``t_{k+1}``,
-``s_{k+1} + x_{k+1}`` when ``x_{k+1}`` was fed back, and is interpolated
+Between two epochs the output rows are the nominal INS corrected by the
+filter's running estimate (zero after every feedback; after an epoch without
+feedback, e.g. in an outage, the propagated mean of a sigma-point filter).
+The smoothed row is that row corrected by the difference: ``s_k - r_k``
+just after epoch k (``r_k`` what remains of ``x_k`` after feedback), and
+``s_{k+1} + x_{k+1} - xp_{k+1}`` just before epoch k+1 (``x_{k+1}``
+counted when it was fed back; ``xp`` the predicted mean), interpolated
 linearly in time in between (the error dynamics are slow against the 0.1-1 s
-between epochs).  The smoothed row is the nominal corrected by that error,
-as a feedback would: position, velocity, and ``C_nb <- dcm(psi) C_nb``.
-IMU biases and scale factors stay the filtered ones.
+between epochs); for the EKF ``r`` and ``xp`` are zero.  The correction is
+applied as a feedback would: position, velocity, and
+``C_nb <- dcm(psi) C_nb``.
+Tight runs: the receiver clock bias and drift (and the inter-system biases
+of a 20-state run) likewise, ``b <- b - d_b``.  IMU biases and scale factors
+stay the filtered ones.  Rows after the last epoch (no data after them) and
+their sigmas are the filtered ones.
 """
 from __future__ import annotations
 
@@ -21,22 +28,60 @@ from ..units import RAD2DEG
 
 __all__ = ["smoothed_rows"]
 
+#: state columns of the clock (Layout17 / LayoutTightMulti: 15 bias [m], 16 drift [m/s]) and ISBs (17-19 [m])
+_CLOCK, _ISB = [15, 16], [17, 18, 19]
+_ROWS = ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "yaw_deg")
+
 
 def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
-    """Replace the navigation rows and sigmas of ``sol`` by the smoothed ones (in place)."""
-    te = np.ascontiguousarray(out["smooth_t"], float)
-    s = np.ascontiguousarray(np.asarray(out["smooth_s"], float)[:, :9])  # position, velocity, attitude
-    s_end = np.ascontiguousarray(s + np.asarray(out["smooth_x_fed"], float)[:, :9])  # before feedback
-    sig = np.ascontiguousarray(np.asarray(out["smooth_sigma"], float)[:, :9])
-    cols = [np.array(sol.lat_deg, float), np.array(sol.lon_deg, float), np.array(sol.h_m, float),
-            np.array(sol.v_n, float), np.array(sol.roll_deg, float), np.array(sol.pitch_deg, float),
-            np.array(sol.yaw_deg, float)]
-    sg = np.empty((len(sol.t), 9))
-    _core.smooth_rows(np.asarray(sol.t, float), *cols, te, s, s_end, sig, sg)
-    sol.lat_deg, sol.lon_deg, sol.h_m, sol.v_n, sol.roll_deg, sol.pitch_deg, sol.yaw_deg = cols
+    """Replace the navigation rows and sigmas of ``sol`` by the smoothed ones (in place).
+
+    Parameters
+    ----------
+    sol : Solution or TightSolution
+        The forward run's solution; with ``clock_bias_m`` (tight) the receiver
+        clock, and with ``isb_m`` the inter-system biases, are smoothed too.
+    out : dict
+        The engine's result with the ``smooth_*`` arrays (``smoother_run.hpp``).
+    filter_name : str
+        For the summary's method.
+    """
+    te = np.asarray(out["smooth_t"], float)
+    cols = list(range(9))
+    extra = []
+    if getattr(sol, "clock_bias_m", None) is not None:
+        cols += _CLOCK
+        extra += [sol.clock_bias_m, sol.clock_drift_mps]
+        if getattr(sol, "isb_m", None) is not None:
+            cols += _ISB
+            extra += [sol.isb_m[:, j] for j in range(3)]
+    d = np.ascontiguousarray(np.asarray(out["smooth_d"], float)[:, cols])  # position, velocity, attitude (clock, ISB)
+    d_end = np.ascontiguousarray(np.asarray(out["smooth_d_end"], float)[:, cols])  # before the epoch's feedback
+    sig = np.ascontiguousarray(np.asarray(out["smooth_sigma"], float)[:, cols])
+    # corrected in place (any strides, e.g. the columns of the engine's llh): no copy of float64 rows
+    rows = [np.require(getattr(sol, k), float, ["W"]) for k in _ROWS]
+    ex = np.column_stack(extra).astype(float) if extra else None
+    # rows after the last epoch: no data after them, the smoothed rows and sigmas are the filtered ones
+    t = np.asarray(sol.t, float)
+    n_in = int(np.searchsorted(t, te[-1] + 1e-9, side="right"))
+    sg = np.empty((len(t), len(cols)))
+    _core.smooth_rows(t[:n_in], *(r[:n_in] for r in rows), te, d, d_end, sig, sg[:n_in],
+                      None if ex is None else ex[:n_in])
+    sg[n_in:, :9] = np.column_stack([sol.sigma_pos_n_m[n_in:], sol.sigma_vel_n_mps[n_in:],
+                                     np.asarray(sol.sigma_att_deg[n_in:]) / RAD2DEG])
+    if ex is not None:
+        sg[n_in:, 9:11] = sol.sigma_clock[n_in:]
+        if ex.shape[1] > 2:
+            sg[n_in:, 11:14] = sol.sigma_isb[n_in:]
+    for k, r in zip(_ROWS, rows):
+        setattr(sol, k, r)
     sol.sigma_pos_n_m = sg[:, 0:3]
     sol.sigma_vel_n_mps = sg[:, 3:6]
     sol.sigma_att_deg = sg[:, 6:9] * RAD2DEG
+    if ex is not None:
+        sol.clock_bias_m, sol.clock_drift_mps, sol.sigma_clock = ex[:, 0], ex[:, 1], sg[:, 9:11]
+        if ex.shape[1] > 2:
+            sol.isb_m, sol.sigma_isb = ex[:, 2:5], sg[:, 11:14]
     method = "RTS (EKF)" if filter_name == "ekf" else f"unscented RTS, Sarkka 2008 ({filter_name})"
     sol.summary["smoother"] = dict(method=method, epochs=int(len(te)),
                                    gain_failures=int(out.get("smooth_gain_failures", 0)))

@@ -142,6 +142,8 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     init_vec = init_vector(dataset, init)
     core_cfg = engine_config(dataset, cfg, ep_t, n, use_pseudorange=bool(use_pseudorange), use_rate=bool(use_rate),
                              **cfg.robust.as_core_dict())
+    if cfg.smooth:
+        core_cfg["smooth"] = True
     out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                           np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0, np.zeros(12),
                           np.asarray(clock0, float), model, core_cfg, layout=n, system=sys_idx,
@@ -167,6 +169,10 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         sol.isb_m = out["isb"]
         sol.sigma_isb = sig[:, 17:20]
         sol.summary["isb0"] = tuple(float(v) for v in isb0)
+    if cfg.smooth:  # RTS backward pass: navigation rows, clock and ISBs (filters/smoothing.py)
+        from .smoothing import smoothed_rows
+
+        smoothed_rows(sol, out, cfg.filter)
     raise_if_nonfinite(sol, cfg.filter)
     return sol
 

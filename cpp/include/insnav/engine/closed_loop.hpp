@@ -29,6 +29,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <new>
 #include <type_traits>
 #include <utility>
 
@@ -150,6 +151,8 @@ struct ClosedLoop {
   /// Record one SmootherEpoch per filter epoch into buf[0..capacity) for the
   /// RTS backward pass (rts_smoother.hpp).  Needs a filter that keeps its
   /// cycle transition (Ekf::track_cycle_transition); call before reset().
+  /// The storage may be uninitialized: each epoch is constructed in place
+  /// when recorded, so capacity that is never used is never touched.
   void record_for_smoother(SmootherEpoch<L>* buf, std::int64_t capacity) {
     rec_ = buf;
     rec_cap_ = capacity;
@@ -167,8 +170,7 @@ struct ClosedLoop {
       if (rec_cap_ < 1) {
         rec_overflow_ = true;
       } else {
-        SmootherEpoch<L>& e = rec_[rec_n_++];
-        e = SmootherEpoch<L>{};
+        SmootherEpoch<L>& e = *new (&rec_[rec_n_++]) SmootherEpoch<L>;  // constructed in place (see record_for_smoother)
         e.t = initial.t;
         e.P = P0;
         P_post_ = P0;
@@ -246,7 +248,7 @@ struct ClosedLoop {
           rec_overflow_ = true;
           return;
         }
-        SmootherEpoch<L>& e = rec_[rec_n_++];
+        SmootherEpoch<L>& e = *new (&rec_[rec_n_++]) SmootherEpoch<L>;
         e.t = ins.state().t;
         e.x_pred = filter.x();
         e.P_pred = filter.P();

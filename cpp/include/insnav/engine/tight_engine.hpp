@@ -100,6 +100,7 @@ class TightEngine {
   }
 
   Filter& filter() { return core_.filter; }
+  ClosedLoop<Filter>& core() { return core_; }
 
   /// Initial inter-system bias estimates [m] of systems 1..3 (layouts with ISB states; default 0).
   void set_initial_isb(const IsbVec& isb0) { isb0_ = isb0; }
