@@ -140,6 +140,17 @@ def main(argv=None):
     obs = read_rinex_obs(obs_path)
     nav = read_rinex_nav(nav_path)
     ref = read_rtklib_pos(pos_path)
+    # the .pos height column is the height above mean sea level of the receiver's NAV-PVT (+21.39 m
+    # above the ellipsoidal height; bench/walk_reference_check.py): the reference is the same NAV-PVT
+    # with its ellipsoidal height (latitude, longitude, quality and velocity are the .pos ones)
+    from walk_reference_check import nav_pvt_as_reference, read_nav_pvt
+
+    pvt = read_nav_pvt(d / "raw/gnss_1730.ubx")
+    pvt_ref = nav_pvt_as_reference(pvt, int(ref.t_gps_s[0] // 604800.0))
+    msl_above_ellipsoid_m = float(np.mean(pvt["h_msl_m"] - pvt["h_m"]))
+    assert pvt_ref.t_gps_s.shape == ref.t_gps_s.shape and np.allclose(pvt_ref.t_gps_s, ref.t_gps_s, atol=0.02), \
+        "NAV-PVT and .pos epochs differ"
+    ref = ref._replace(r_e=pvt_ref.r_e)
 
     # ---------------------------------------------------------------- 1. residuals of the measurement model
     t0 = float(obs.epoch_t_gps_s[0])
@@ -257,7 +268,12 @@ Data: `../shared/data/rtklibexplorer_walk_0827` (u-blox RINEX 3.04 obs/nav made 
 convbin, raw IMU log `imu_1730.csv` with its str2str time tag, RTK reference
 `gnss_1730_sf.pos`, 536 epochs at 4 Hz, about 134 s: standing for about 12 s, walking
 in tight turns in a backyard (about 18 m x 20 m) at 1.2-1.4 m/s until about 113 s, then
-standing; RTK fix until 85 s, float after).
+standing; RTK fix until 85 s, float after).  The .pos `height` column is the receiver's
+NAV-PVT height above mean sea level ({msl_above_ellipsoid_m:+.2f} m above the ellipsoidal
+height), so every comparison below takes the NAV-PVT ellipsoidal height instead; the
+horizontal reference is the .pos as published, which sits about 8 m from every
+single-point solution (the RTK base, `bench/walk_reference_check.py`,
+[tight_multignss.md](tight_multignss.md)).
 
 ## What the GPS data allow
 
