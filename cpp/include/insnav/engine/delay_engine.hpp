@@ -155,6 +155,10 @@ class RandomDelayEngine {
       meas_[i].set(refs_[i].nav, refs_[i].omega_ib_b, cfg_.lever_arm_b, fix);
       hyp[i] = &meas_[i].linear();
     }
+    // the gate of the record stream; when it reopens (gate_reopen_after) the
+    // record is applied ungated, without the covariance scaling of
+    // ClosedLoop::update_gated (the stacked random-delay covariance has no
+    // single P to scale)
     int rows = 0;  // every hypothesis has the fix's rows
     for (const auto* h : hyp)
       if (h && rows == 0) rows = h->rows();
