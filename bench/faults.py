@@ -54,7 +54,7 @@ def loose_cases(seeds, filters):
                      "velocity spike": (*F.inject_velocity_spikes(ds, n=40, seed=100 + seed), [1, 2, 5, 10.1])}
             for name, (d2, fl, edges) in cases.items():
                 for gate in (0.0, LOOSE_GATE):
-                    sol = insnav.run(d2, filter=flt, gate_chi2=gate, output_decimation=10)
+                    sol = insnav.run(d2, filter=flt, gate_chi2=gate, gate_reopen_after=0, output_decimation=10)
                     s = F.score(sol, fl, settle_records=0)
                     a = acc.setdefault((name, gate), dict(injected=0, detected=0, missed=0, false_alarms=0,
                                                           clean=0, max_herr=0.0, bins={}))
@@ -84,7 +84,7 @@ def tight_cases(seeds, rates=(0.5, 1.0, 2.0)):
                 d2, fl = F.inject_pseudorange_ramp(ds, rate_mps=rate, duration_s=120.0, seed=seed)
                 name = f"pseudorange ramp {rate:g} m/s"
             for gate in (0.0, TIGHT_GATE):
-                sol = insnav.run(d2, coupling="tight", gate_chi2=gate, output_decimation=10)
+                sol = insnav.run(d2, coupling="tight", gate_chi2=gate, gate_reopen_after=0, output_decimation=10)
                 s = F.score(sol, fl)
                 b = bins(sol, fl, [0, 20, 50, 100, 1e9]) if fl else []
                 first = next((f["magnitude"] for f in fl

@@ -388,9 +388,9 @@ def test_gate_is_on_by_default_at_its_quantile(short):
 @pytest.mark.parametrize("filt", ["ekf", "rbukf"])
 def test_gate_reopens_after_a_run_of_rejections(short, filt):
     """A lasting 100 m north step in every fix from 30 s (a datum change, a
-    wrong base): the default gate, never reopened, rejects all 31 remaining
-    fixes and the solution stays where it was (measured 1.3 m from the clean
-    run); reopened after 10 rejections in a row, the 11th fix (NIS 263) gets
+    wrong base): a gate never reopened rejects all 31 remaining fixes and the
+    solution stays where it was (measured 1.3 m from the clean run);
+    reopened after 10 rejections in a row, the 11th fix (NIS 263) gets
     P scaled by NIS / 6 and is applied, which moves the solution 86 m at once,
     and every later fix passes the gate (NIS <= 15.4), the solution following
     the shifted fixes (measured 98.9 m at the end, 5 m fix noise).  Without
@@ -404,7 +404,7 @@ def test_gate_reopens_after_a_run_of_rejections(short, filt):
     lat = g.lat_deg.copy()
     lat[step] += np.rad2deg(100.0 / (R_M + g.h_m[0]))
     bad = _with_gnss(ds, lat_deg=lat)
-    never = insnav.run(bad, filter=filt, init_seed=6)  # default: never reopened
+    never = insnav.run(bad, filter=filt, init_seed=6, gate_reopen_after=0)
     dflt = insnav.run(bad, filter=filt, init_seed=6, gate_reopen_after=10)
     n_step = int(step.sum())
     assert never.summary["rejected"] == n_step and never.summary["gate_reopened"] == 0

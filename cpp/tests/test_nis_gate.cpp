@@ -51,9 +51,11 @@ UpdateResult applied() {
 }
 
 void test_threshold_and_reopen() {
-  NisGate dflt;  // defaults: p = 0.9999, never reopened
-  for (int i = 0; i < 100; ++i) dflt.record(rejected());
+  NisGate dflt;  // defaults: p = 0.9999, reopened after 5 rejections in a row
+  for (int i = 0; i < 4; ++i) dflt.record(rejected());
   EXPECT_TRUE(!dflt.reopening() && near(dflt.threshold(6), 27.85634123601417, 1e-9));
+  dflt.record(rejected());
+  EXPECT_TRUE(dflt.reopening());
 
   GateConfig cfg;
   cfg.reopen_after = 10;

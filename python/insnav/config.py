@@ -310,12 +310,13 @@ class RunConfig:
         A fixed NIS threshold for every row count instead of the quantile
         (0 = no gate at all; None, the default: ``gate_prob``).
     gate_reopen_after : int
-        Lock-out recovery, off by default (0): after this many rejected
+        Lock-out recovery (default 5; 0 = never): after this many rejected
         records in a row the next one, if the gate rejects it too, is applied
         with the covariance scaled by NIS / rows (nis_gate.hpp), so a filter
-        whose covariance became too small follows the GNSS again.  A lasting
-        fault is then taken in whole too, which is why it is off by default;
-        the run summary counts these records as ``gate_reopened``.
+        whose covariance became too small follows the GNSS again instead of
+        diverging.  A lasting fault is then taken in whole too (tight runs:
+        the ``[robust]`` per-satellite screening removes it first); the run
+        summary counts these records as ``gate_reopened``.
     use_position, use_velocity : bool
     propagation_interval_s : float
         Error-state propagation step inside a filter cycle (default 0.1 s:
@@ -366,7 +367,7 @@ class RunConfig:
     lever_arm_b: list | None = None
     gate_prob: float | None = None
     gate_chi2: float | None = None
-    gate_reopen_after: int = 0
+    gate_reopen_after: int = 5
     use_position: bool = True
     use_velocity: bool = True
     propagation_interval_s: float = 0.1
