@@ -71,7 +71,7 @@ void test_threshold_and_reopen() {
   EXPECT_TRUE(gate.reopening() && gate.threshold(6) == 0.0);  // 10 in a row: the next record is ungated
   EXPECT_TRUE(near(gate.nominal_threshold(6), 27.85634123601417, 1e-9));
   EXPECT_TRUE(gate.reopened() == 0);
-  gate.record(applied());
+  gate.record(applied(), /*forced=*/true);
   EXPECT_TRUE(gate.reopened() == 1 && gate.rejected_in_a_row() == 0);
   EXPECT_TRUE(gate.threshold(6) > 0.0);  // gated again
 
@@ -81,6 +81,9 @@ void test_threshold_and_reopen() {
   gate.record(applied());
   for (int i = 0; i < 9; ++i) gate.record(rejected());
   EXPECT_TRUE(gate.threshold(6) > 0.0 && gate.reopened() == 1);
+  gate.record(rejected());  // 10 in a row: reopening, but the next record passes the gate by itself
+  gate.record(applied());
+  EXPECT_TRUE(gate.reopened() == 1 && gate.rejected_in_a_row() == 0 && !gate.reopening());
 
   GateConfig fixed;
   fixed.chi2 = 30.0;

@@ -84,7 +84,7 @@ struct NavOutputs {
   double* isb = nullptr;      // (.,3) inter-system biases of R, E, C [m] (layouts with ISB states)
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
-  int gate_reopened = 0;       // records taken ungated after the gate's reopen_after rejections in a row
+  int gate_reopened = 0;       // records the gate rejected but applied, P scaled, after reopen_after rejections in a row
 
   // Interrupt and progress hook (may be null): called every `poll_every`
   // samples with the sample index and count; false stops the run with
@@ -279,6 +279,7 @@ struct ClosedLoop {
   UpdateResult update_gated(const Meas& meas) {
     const int m = static_cast<int>(meas.linear().rows());
     UpdateResult r = update(meas, gate.nominal_threshold(m));
+    bool forced = false;
     if (r.rejected_by_gate && gate.reopening()) {
       // lock-out recovery (nis_gate.hpp): the covariance under which this
       // innovation is ordinary, then the update without the gate
@@ -290,8 +291,9 @@ struct ClosedLoop {
         }
       }
       r = update(meas, 0.0);
+      forced = r.applied;
     }
-    gate.record(r);
+    gate.record(r, forced);
     return r;
   }
 

@@ -159,11 +159,12 @@ class RandomDelayEngine {
     // record is applied ungated, without the covariance scaling of
     // ClosedLoop::update_gated (the stacked random-delay covariance has no
     // single P to scale)
+    const bool forced = core_.gate.reopening();  // threshold() is 0 then: applied ungated
     int rows = 0;  // every hypothesis has the fix's rows
     for (const auto* h : hyp)
       if (h && rows == 0) rows = h->rows();
     const UpdateResult res = core_.filter.update_delayed(hyp, core_.gate.threshold(rows));
-    core_.gate.record(res);
+    core_.gate.record(res, forced);
     core_.touch();
     if (res.rows > 0) out.write_innovation(g, fix, core_.filter.last_mean_residual());
     if (out.nis) out.nis[g] = res.rows > 0 ? res.nis : NAN;

@@ -123,12 +123,14 @@ class NisGate {
     return rows <= kTabulatedRows ? quantile_[rows] : chi2_quantile(cfg_.prob, rows);
   }
 
-  /// Account for the result of the update made with threshold().
-  void record(const UpdateResult& r) {
+  /// Account for the result of a record's update; `forced`: it was applied
+  /// without the gate because the gate was reopening (counted in reopened()).
+  /// A record that passes the gate on its own while reopening is not counted.
+  void record(const UpdateResult& r, bool forced = false) {
     if (r.rejected_by_gate) {
       ++in_a_row_;
     } else if (r.applied) {
-      if (cfg_.reopen_after > 0 && in_a_row_ >= cfg_.reopen_after) ++reopened_;
+      if (forced) ++reopened_;
       in_a_row_ = 0;
     }
   }
