@@ -489,7 +489,7 @@ def cmd_run(args) -> int:
         raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
           f"records, {used} updates used, {rejected} rejected by the gate"
-          + (f" ({s['gate_reopened']} applied ungated after a run of rejections: gate_reopen_after)"
+          + (f" ({s['gate_reopened']} applied anyway with the covariance scaled after a run of rejections, gate_reopen_after)"
              if s.get("gate_reopened") else "")
           + f", {dropped} dropped by the input checks; "
           f"{s.get('cholesky_repairs', 0)} covariance repairs"
