@@ -104,7 +104,9 @@ int run(const std::string& dir, const std::string& name, int repeats, const char
   cfg.lever_arm_b = vec3(ck, "lever_arm_b", cfg.lever_arm_b);
   cfg.propagation_interval = vec3(ck, "propagation_interval", Vec3::Constant(cfg.propagation_interval))[0];
   cfg.cycle_period = vec3(ck, "cycle_period", Vec3::Constant(cfg.cycle_period))[0];
-  cfg.gate_chi2 = vec3(ck, "gate_chi2", Vec3::Constant(cfg.gate_chi2))[0];
+  cfg.gate.chi2 = vec3(ck, "gate_chi2", Vec3::Constant(cfg.gate.chi2))[0];
+  cfg.gate.prob = vec3(ck, "gate_prob", Vec3::Constant(cfg.gate.prob))[0];
+  cfg.gate.reopen_after = static_cast<int>(vec3(ck, "gate_reopen_after", Vec3::Constant(cfg.gate.reopen_after))[0]);
   cfg.use_position = vec3(ck, "use_position", Vec3::Constant(1.0))[0] != 0.0;
   cfg.use_velocity = vec3(ck, "use_velocity", Vec3::Constant(1.0))[0] != 0.0;
   UtParams ut;

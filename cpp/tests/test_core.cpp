@@ -33,6 +33,28 @@ static void test_rotations() {
   }
 }
 
+/// sincos_exact (rotation.hpp): the series branch equals libm to rounding
+/// (within 2 ulp of sin and cos) on both sides of its 2^-6 switch.
+static void test_sincos_exact() {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.02, 0.02);
+  double worst_ulp = 0.0;
+  for (int i = 0; i < 200000; ++i) {
+    double a = u(rng);
+    if (i % 1000 == 0) a = std::ldexp(1.0, -6) * (i % 2000 == 0 ? 1 : -1) * (1.0 - 1e-16);  // just below the switch
+    if (i % 1000 == 1) a = std::ldexp(1.0, -60);                                           // tiny
+    double s, c;
+    sincos_exact(a, s, c);
+    const double s_ref = std::sin(a), c_ref = std::cos(a);
+    worst_ulp = std::max(worst_ulp, std::abs(s - s_ref) / (std::nextafter(std::abs(s_ref), 1.0) - std::abs(s_ref)));
+    worst_ulp = std::max(worst_ulp, std::abs(c - c_ref) / (std::nextafter(c_ref, 2.0) - c_ref));
+  }
+  EXPECT_LT(worst_ulp, 2.01);
+  double s0, c0;
+  sincos_exact(0.0, s0, c0);
+  EXPECT_TRUE(s0 == 0.0 && c0 == 1.0);
+}
+
 static void test_earth() {
   EXPECT_LT(std::abs(wgs84::gravity(0.0, 0.0) - 9.7803253359), 1e-10);
   EXPECT_LT(std::abs(wgs84::gravity(M_PI / 2, 0.0) - 9.8321849378), 1e-9);
@@ -60,6 +82,7 @@ static void test_earth() {
 
 int main() {
   test_rotations();
+  test_sincos_exact();
   test_earth();
   TEST_MAIN_END();
 }

@@ -67,6 +67,7 @@ struct NonlinearErrorPoint {
   Vec3 omega_in_computed = Vec3::Zero();
   Vec3 coriolis_computed = Vec3::Zero();  // (2 omega~_ie + omega~_en) x v~
   double RMh = 0.0, RNh = 0.0;            // R_M~ + h~, R_N~ + h~
+  double inv_RMh = 0.0, inv_RNh_cos = 0.0; // 1 / (R_M~ + h~), 1 / ((R_N~ + h~) cos L~)
   double lat_rate = 0.0;                  // L~' [rad/s]
   double dRM_dlat = 0.0, dRN_dlat = 0.0;  // [m/rad] at L~
   double lon_rate = 0.0;                  // lambda~' [rad/s]
@@ -83,8 +84,10 @@ struct NonlinearErrorPoint {
     coriolis_computed = (2.0 * e.omega_ie_n + e.omega_en_n).cross(p.v_n);
     RMh = e.radii.R_M + p.h;
     RNh = e.radii.R_N + p.h;
-    lat_rate = p.v_n.x() / RMh;
-    lon_rate = p.v_n.y() / (RNh * e.cos_lat);
+    inv_RMh = 1.0 / RMh;
+    inv_RNh_cos = 1.0 / (RNh * e.cos_lat);
+    lat_rate = p.v_n.x() * inv_RMh;
+    lon_rate = p.v_n.y() * inv_RNh_cos;
     const double w = 1.0 - wgs84::kE2 * e.sin_lat * e.sin_lat;
     const double k = wgs84::kE2 * e.sin_lat * e.cos_lat / w;  // d ln(R_N)/dL = k, d ln(R_M)/dL = 3k
     dRN_dlat = e.radii.R_N * k;
@@ -127,13 +130,16 @@ StateVec<L> nonlinear_error_rate(const StateVec<L>& dx, const NonlinearErrorPoin
   imu_errors_from_state<L>(dx, ins.f_ib_b, ins.omega_ib_b, df_b, dw_b);
 
   // --- true point: L = L~ - dL, h = h~ - dh, v = v~ - dv ----------------------
-  const double dL = dr.x() / pt.RMh;
-  const double dlon = dr.y() / (pt.RNh * ec.cos_lat);
+  const double dL = dr.x() * pt.inv_RMh;
+  const double dlon = dr.y() * pt.inv_RNh_cos;
   const double dh = -dr.z();
-  const double lat = ins.lat - dL, h = ins.h - dh;
+  const double h = ins.h - dh;
   const Vec3 v_n = ins.v_n - dv;
+  // sin, cos of L = L~ - dL from L~'s and the small dL's (rotation.hpp: sincos_exact)
+  double s_dL, c_dL;
+  sincos_exact(dL, s_dL, c_dL);
   EarthTerms et;
-  et.evaluate(lat, h, v_n);
+  et.evaluate(ec.sin_lat * c_dL - ec.cos_lat * s_dL, ec.cos_lat * c_dL + ec.sin_lat * s_dL, h, v_n);
 
   // --- attitude, eqs. (1)-(3) -------------------------------------------------
   const Mat3 C_n_np = dcm_from_euler(psi);  // C_{n n'} = (C_n^{n'})^T
@@ -141,8 +147,9 @@ StateVec<L> nonlinear_error_rate(const StateVec<L>& dx, const NonlinearErrorPoin
   // (I - C_{n'n}) omega~_in + C_{n'n} (omega~_in - omega_in) = omega~_in - C_{n'n} omega_in
   const Vec3 w = pt.omega_in_computed - C_n_np.transpose() * omega_in_true - ins.C_nb * dw_b;
   // psi' = C_psi^{-1} w, eq. (2) solved in closed form
-  const double sx = std::sin(psi.x()), cx = std::cos(psi.x());
-  const double sy = std::sin(psi.y()), cy = std::cos(psi.y());
+  double sx, cx, sy, cy;
+  sincos_exact(psi.x(), sx, cx);
+  sincos_exact(psi.y(), sy, cy);
   const double psi_z_rate = (sx * w.y() + cx * w.z()) / cy;
   rate.template segment<3>(L::kAtt) =
       Vec3(w.x() + sy * psi_z_rate, cx * w.y() - sx * w.z(), psi_z_rate);

@@ -10,7 +10,8 @@
 //                   the INS at the start, middle and end of the interval (eq. (10));
 //                   the process noise of the interval is accumulated as
 //                   Q_c <- Phi Q_c Phi^T + Q_d(interval), Phi and Q_d from the
-//                   linear model at the middle point (error_model_linear.hpp);
+//                   linear model at the middle point (error_model_linear.hpp;
+//                   the EKF's block form for Layout15/21);
 //   end_cycle()     x = sum Wm chi, P = sum Wc (chi - x)(chi - x)^T + Q_c (eqs. (11)-(13));
 //   update(meas)    eqs. (22)-(24): y = residual - h(x) (h = meas.predicted_residual,
 //                   = H x for a linear measurement), S = H P H^T + R factorised
@@ -91,11 +92,18 @@ class UnscentedPropagation {
       rk4_error_step<L>(tmp_, p0_, ph_, p1_, iv.dt);
       chi_.col(j) = tmp_;
     }
-    phi_ = transition<L>(linear_F<L>(iv.mid, model_), iv.dt);
-    qd_ = discrete_Q<L>(phi_, continuous_GQG<L>(iv.mid, model_), iv.dt);
-    work_.noalias() = phi_ * Q_cycle_;
-    Q_cycle_.noalias() = work_ * phi_.transpose();
-    Q_cycle_ += qd_;
+    // Q_c <- Phi Q_c Phi^T + Q_d: the EKF's covariance step (ekf.hpp), in block
+    // form where the layout allows it (9 x n congruence instead of n^3 products)
+    if constexpr (kDiagonalAuxDynamics<L>) {
+      block_transition<L>(linear_F<L>(iv.mid, model_), iv.dt, phi_block_);
+      block_propagate_covariance<L>(phi_block_, continuous_GQG<L>(iv.mid, model_), iv.dt, Q_cycle_);
+    } else {
+      phi_ = transition<L>(linear_F<L>(iv.mid, model_), iv.dt);
+      qd_ = discrete_Q<L>(phi_, continuous_GQG<L>(iv.mid, model_), iv.dt);
+      work_.noalias() = phi_ * Q_cycle_;
+      Q_cycle_.noalias() = work_ * phi_.transpose();
+      Q_cycle_ += qd_;
+    }
     ut_mean<kN, 2 * kN + 1>(chi_, w_, x_);  // the running prediction (for mid-cycle output)
     ++n_intervals_;
   }
@@ -184,6 +192,7 @@ class UnscentedPropagation {
   Points dev_ = Points::Zero();
   Cov factor_ = Cov::Zero();
   Cov phi_ = Cov::Identity(), qd_ = Cov::Zero(), work_ = Cov::Zero();
+  NavAuxTransition<L> phi_block_;  // Phi in block form (kDiagonalAuxDynamics layouts)
   Vec tmp_ = Vec::Zero();
   NonlinearErrorPoint p0_, ph_, p1_;
   int repairs_ = 0;

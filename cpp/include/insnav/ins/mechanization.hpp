@@ -43,9 +43,11 @@ struct EarthTerms {
   Vec3 omega_ie_n = Vec3::Zero();
   Vec3 omega_en_n = Vec3::Zero();
 
-  void evaluate(double lat, double h, const Vec3& v_n) {
-    sin_lat = std::sin(lat);
-    cos_lat = std::cos(lat);
+  void evaluate(double lat, double h, const Vec3& v_n) { evaluate(std::sin(lat), std::cos(lat), h, v_n); }
+  /// The same from sin and cos of the latitude.
+  void evaluate(double sin_latitude, double cos_latitude, double h, const Vec3& v_n) {
+    sin_lat = sin_latitude;
+    cos_lat = cos_latitude;
     const double s2 = sin_lat * sin_lat;
     const double w = 1.0 - wgs84::kE2 * s2;
     const double sw = std::sqrt(w);
