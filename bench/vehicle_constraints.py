@@ -157,7 +157,8 @@ def main(argv=None) -> int:
              "lateral slip 0.05 m/s and vertical bounce 0.03 m/s RMS; one GNSS outage from 500 s.  Run k: "
              f"simulator seed k, initial-error seed k, {args.runs} runs.  Loose EKF (15 states; 16 with "
              "the odometer scale-factor state, `odo_scale = true`, initial sigma 0.01, random constant); "
-             "constraints at 10 Hz (`[constraints]` defaults: NHC sigma 0.1 m/s, odometer sigma 0.5 m/s per update, ZUPT "
+             "constraints at 10 Hz (`[constraints]` defaults: NHC sigma 0.1 m/s, odometer sigma 0.5 m/s per update "
+             "(0.1 m/s with the scale-factor state, which takes the scale error out of the readings), ZUPT "
              "0.01 m/s, ZARU 20 deg/h; the constrained point is the IMU, where the simulator holds the "
              "constraint).", "",
              "## Max horizontal error inside the outage", "",
