@@ -2,11 +2,13 @@
 (car-mems-outage30/60/120), and the smoother on the KF-GINS track.
 
 For each preset and run k (simulator seed k, initial-error seed k): the
-forward EKF, EKF + NHC, EKF + NHC + odometer, EKF + NHC + odometer + ZUPT,
-the RTS smoother, the smoother + NHC;
+forward EKF, EKF + NHC, EKF + NHC + odometer (raw readings, and with the
+odometer scale-factor state; + ZUPT), the RTS smoother, the smoother + NHC
+(+ odometer with the scale state);
 the maximum horizontal error inside the outage, and its ratio to the plain
 EKF's of the same run (median over runs: the issue's targets are on this
-ratio).  Also the standstill detector's false alarms on moving samples, with
+ratio).  Also the odometer scale-factor estimate against the simulated
+truth, the standstill detector's false alarms on moving samples, with
 and without the odometer's speed, and the constraint updates' consistency.
 Writes docs/results/vehicle_constraints.md.
 
@@ -32,12 +34,20 @@ from insnav.config import Constraints, RunConfig  # noqa: E402
 
 PRESETS = {"car-mems-outage30": (500.0, 530.0), "car-mems-outage60": (500.0, 560.0),
            "car-mems-outage120": (500.0, 620.0)}
-METHODS = {"EKF (forward)": ([], False), "EKF + NHC": (["nhc"], False), "EKF + NHC + odometer": (["nhc", "odo"], False),
-           "EKF + NHC + odometer + ZUPT": (["nhc", "odo", "zupt"], False), "RTS smoother": ([], True),
-           "RTS smoother + NHC": (["nhc"], True), "RB-UKF unscented RTS smoother": ([], True, "rbukf")}
+# name: (constraints.use, smooth, filter, constraints.odo_scale)
+METHODS = {"EKF (forward)": ([], False, "ekf", False), "EKF + NHC": (["nhc"], False, "ekf", False),
+           "EKF + NHC + odometer": (["nhc", "odo"], False, "ekf", False),
+           "EKF + NHC + odometer (scale state)": (["nhc", "odo"], False, "ekf", True),
+           "EKF + NHC + odometer (scale state) + ZUPT": (["nhc", "odo", "zupt"], False, "ekf", True),
+           "RTS smoother": ([], True, "ekf", False), "RTS smoother + NHC": (["nhc"], True, "ekf", False),
+           "RTS smoother + NHC + odometer (scale state)": (["nhc", "odo"], True, "ekf", True),
+           "RB-UKF unscented RTS smoother": ([], True, "rbukf", False)}
 TARGETS = {("EKF + NHC", "car-mems-outage30"): 0.3, ("EKF + NHC", "car-mems-outage60"): 0.2,
            ("EKF + NHC", "car-mems-outage120"): 0.15, ("EKF + NHC + odometer", "car-mems-outage30"): 0.1,
            ("EKF + NHC + odometer", "car-mems-outage60"): 0.05, ("EKF + NHC + odometer", "car-mems-outage120"): 0.05,
+           ("EKF + NHC + odometer (scale state)", "car-mems-outage30"): 0.1,
+           ("EKF + NHC + odometer (scale state)", "car-mems-outage60"): 0.05,
+           ("EKF + NHC + odometer (scale state)", "car-mems-outage120"): 0.05,
            ("RTS smoother", "car-mems-outage30"): 0.15, ("RTS smoother", "car-mems-outage60"): 0.15,
            ("RTS smoother", "car-mems-outage120"): 0.2, ("RTS smoother + NHC", "car-mems-outage30"): 0.05}
 
@@ -47,10 +57,10 @@ def one(args):
     a, b = PRESETS[preset]
     ds = insnav.simulate(preset, seed=k)
     out = {}
-    for name, (use, smooth, *filt) in METHODS.items():
+    for name, (use, smooth, filt, odo_scale) in METHODS.items():
         t0 = time.perf_counter()
-        sol = insnav.run(ds, config=RunConfig(filter=filt[0] if filt else "ekf", init_seed=k, smooth=smooth,
-                                              constraints=Constraints(use=use)))
+        sol = insnav.run(ds, config=RunConfig(filter=filt, init_seed=k, smooth=smooth,
+                                              constraints=Constraints(use=use, odo_scale=odo_scale)))
         wall = time.perf_counter() - t0
         e = errors(sol, ds.truth)
         t = e["t"]
@@ -58,6 +68,9 @@ def one(args):
         inside = (t >= a) & (t <= b)
         c = sol.summary.get("constraints") or {}
         nis = getattr(sol, "constraint_nis", None)
+        if sol.odo_scale is not None:  # the scale-factor estimate against the simulated truth
+            out.setdefault("odo_scale", {})[name] = dict(err=float(sol.odo_scale[-1] - ds.odometer.scale_error),
+                                                         sigma=float(sol.sigma_odo_scale[-1]))
         out[name] = dict(max_in=float(hz[inside].max()), rms=float(np.sqrt(np.mean(hz ** 2))), wall=wall,
                          nis=float(np.nanmean(nis)) if nis is not None and len(nis) else float("nan"),
                          consistency=float(np.sqrt(np.mean((e["pos_n_m"][:, :2] / e["sigma_pos_n_m"][:, :2]) ** 2))),
@@ -142,8 +155,10 @@ def main(argv=None) -> int:
              "Presets `car-mems-outage30/60/120`: 900 s car drive, MEMS IMU (gyro 30 deg/h, accelerometer 5 mg "
              "bias sigma), GNSS 10 Hz (5 m / 10 m), odometer 10 Hz (2000 ppm scale-factor sigma, 500 ticks/m), "
              "lateral slip 0.05 m/s and vertical bounce 0.03 m/s RMS; one GNSS outage from 500 s.  Run k: "
-             f"simulator seed k, initial-error seed k, {args.runs} runs.  Loose EKF (15 states); constraints at "
-             "10 Hz (`[constraints]` defaults: NHC sigma 0.1 m/s, odometer sigma 0.5 m/s per update, ZUPT "
+             f"simulator seed k, initial-error seed k, {args.runs} runs.  Loose EKF (15 states; 16 with "
+             "the odometer scale-factor state, `odo_scale = true`, initial sigma 0.01, random constant); "
+             "constraints at 10 Hz (`[constraints]` defaults: NHC sigma 0.1 m/s, odometer sigma 0.5 m/s per update "
+             "(0.1 m/s with the scale-factor state, which takes the scale error out of the readings), ZUPT "
              "0.01 m/s, ZARU 20 deg/h; the constrained point is the IMU, where the simulator holds the "
              "constraint).", "",
              "## Max horizontal error inside the outage", "",
@@ -182,6 +197,22 @@ def main(argv=None) -> int:
             cells += [f"{np.median([runs[k][name]['rms'] for k in runs]):.2f}",
                       f"{np.median([runs[k][name]['consistency'] for k in runs]):.2f}",
                       f"{np.nanmedian([runs[k][name]['nis'] for k in runs]):.2f}" if METHODS[name][0] else "-"]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    scale_methods = [m for m in METHODS if METHODS[m][3]]
+    lines += ["", "## Odometer scale-factor estimate (`[constraints] odo_scale`, 16 states)", "",
+              "At the end of each run (900 s; the simulated scale error is a random constant of 2000 ppm sigma, "
+              "a different one per run): the estimate's error against the simulated truth, median and maximum of "
+              "|error| over runs, the median of the filter's 1-sigma, and rms(error / sigma) over runs.", "",
+              "| method | " + " | ".join(f"{p.split('-')[-1]}: median / max abs error [ppm] | median sigma [ppm] | "
+                                          "rms(err/sigma)" for p in PRESETS) + " |",
+              "|---|" + "---|---|---|" * len(PRESETS)]
+    for name in scale_methods:
+        cells = []
+        for p in PRESETS:
+            er = np.array([R[p][k]["odo_scale"][name]["err"] for k in R[p]])
+            sg = np.array([R[p][k]["odo_scale"][name]["sigma"] for k in R[p]])
+            cells += [f"{np.median(np.abs(er)) * 1e6:.0f} / {np.abs(er).max() * 1e6:.0f}",
+                      f"{np.median(sg) * 1e6:.0f}", f"{np.sqrt(np.mean((er / sg) ** 2)):.2f}"]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     d = [R[p][k]["detector"] for p in PRESETS for k in R[p]]
     lines += ["", "## Standstill detector (`ins/standstill.hpp`, window 0.2 s, threshold 18)", "",

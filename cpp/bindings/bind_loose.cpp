@@ -1,6 +1,6 @@
 // Loosely coupled run: the whole IMU loop in C++ with the GIL released.
 // This file parses the arguments and dispatches; the engines are instantiated
-// in bind_loose_l15.cpp and bind_loose_l21.cpp (loose_run.hpp).
+// in bind_loose_l15.cpp, bind_loose_l16.cpp and bind_loose_l21.cpp (loose_run.hpp).
 #include <pybind11/stl.h>
 
 #include <optional>
@@ -14,7 +14,7 @@ ImuErrorModel imu_model_from_dict(const py::dict& d) {
   reject_unknown(d,
                  {"gyro_arw", "acc_vrw", "gyro_bias_sigma", "acc_bias_sigma", "gyro_bias_tau", "acc_bias_tau",
                   "gyro_bias_rw", "acc_bias_rw", "gyro_scale_sigma", "acc_scale_sigma", "gyro_scale_tau",
-                  "acc_scale_tau", "clock_bias_psd", "clock_drift_psd", "isb_psd"},
+                  "acc_scale_tau", "clock_bias_psd", "clock_drift_psd", "isb_psd", "odo_scale_sigma", "odo_scale_tau"},
                  "IMU model");
   ImuErrorModel m;
   m.gyro_arw = vec3_or_scalar(d, "gyro_arw", m.gyro_arw);
@@ -32,6 +32,10 @@ ImuErrorModel imu_model_from_dict(const py::dict& d) {
   m.clock_bias_psd = num(d, "clock_bias_psd", m.clock_bias_psd);
   m.clock_drift_psd = num(d, "clock_drift_psd", m.clock_drift_psd);
   m.isb_psd = num(d, "isb_psd", m.isb_psd);
+  m.odo_scale_sigma = num(d, "odo_scale_sigma", m.odo_scale_sigma);
+  m.odo_scale_tau = num(d, "odo_scale_tau", m.odo_scale_tau);
+  if (!(m.odo_scale_sigma >= 0.0)) throw py::value_error("IMU model: odo_scale_sigma must be >= 0");
+  if (!(m.odo_scale_tau > 0.0)) throw py::value_error("IMU model: odo_scale_tau must be > 0 (inf: random constant)");
   return m;
 }
 
@@ -66,6 +70,7 @@ void bind_loose(py::module_& m) {
                                 constraints ? &*constraints : nullptr, flag(config, "smooth", false)};
         if (layout == 15) return run_loose_l15(filter, args);
         if (layout == 21) return run_loose_l21(filter, args);
+        if (layout == 16) return run_loose_l16(filter, args);  // Layout15 + odometer scale factor
         unsupported_loose(filter, layout);
       },
       py::arg("filter"), py::arg("layout"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("gnss"),

@@ -1,6 +1,7 @@
 // The loosely coupled run behind _core.run_loose, shared by bind_loose*.cpp.
 // The engines are instantiated in one translation unit per layout
-// (bind_loose_l15.cpp, bind_loose_l21.cpp: ekf, rbukf and ukf each), so that a
+// (bind_loose_l15.cpp, bind_loose_l16.cpp, bind_loose_l21.cpp: ekf, rbukf and
+// ukf each), so that a
 // parallel build compiles them side by side; bind_loose.cpp parses the
 // arguments and dispatches.  (Per layout rather than per filter: RB-UKF and UKF
 // share UnscentedPropagation<L>, and all three share the layout's error models
@@ -46,6 +47,7 @@ struct LooseRunArgs {
 /// filter 'ekf', 'rbukf' or 'ukf' on one layout (any other filter: ValueError).
 py::dict run_loose_l15(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l15.cpp
 py::dict run_loose_l21(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l21.cpp
+py::dict run_loose_l16(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l16.cpp (Layout16Odo)
 
 [[noreturn]] inline void unsupported_loose(const std::string& filter, int layout) {
   throw py::value_error("unsupported filter/layout combination: " + filter + "/" + std::to_string(layout));
@@ -86,7 +88,7 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
     }
   }
   const int n_sig = (a.sigma_columns > 0 && a.sigma_columns < ns) ? a.sigma_columns : ns;
-  NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), n_sig, false);
+  NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), n_sig, false, false, kHasOdoScale<L>);
   LooseRecordBuffers rec_buf(m);
   DArray o_cnis({k});
   py::array_t<std::int8_t> o_cst({k});

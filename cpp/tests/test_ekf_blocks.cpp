@@ -47,6 +47,7 @@ ImuErrorModel random_model(std::mt19937& rng) {
   m.gyro_arw = Vec3(1e-4 * u(rng), 1e-4 * u(rng), 3e-4 * u(rng));
   m.acc_bias_tau = Vec3(3600.0 * u(rng), kInf, 1800.0);
   m.gyro_bias_rw = Vec3::Constant(1e-7);
+  m.odo_scale_tau = 900.0 * u(rng);  // Layout16Odo: a decaying odometer scale factor (q = 2 sigma^2 / tau)
   return m;
 }
 
@@ -269,17 +270,97 @@ void test_engine_outputs() {
   EXPECT_TRUE(dec);
 }
 
+// --- the odometer scale-factor state in the closed loop ----------------------------
+// A drive whose truth is the mechanization of the IMU data itself (so the INS
+// has no error of its own), GNSS position and velocity at 1 Hz, and an
+// odometer at 10 Hz that reads (1 + 3000 ppm) times the true forward speed:
+// the fed-back estimate converges to the truth within its 3 sigma, the odometer
+// rows then agree with the INS, and the whole run (constraint updates
+// included) does not touch the heap.
+void test_odo_scale_engine() {
+  using L = Layout16Odo;
+  constexpr double kScale = 3e-3, imu_dt = 0.01;
+  const int n = 12000;  // 120 s at 100 Hz
+  std::vector<double> t(n), dth(3 * n), dv(3 * n);
+  NavState s0;
+  s0.lat = 0.5;
+  s0.h = 50.0;
+  s0.v_n = Vec3(10.0, 0.0, 0.0);
+  Strapdown truth(s0);
+  std::vector<GnssFix> fixes;
+  std::vector<ConstraintEvent> events;
+  for (int k = 0; k < n; ++k) {
+    t[k] = imu_dt * (k + 1);
+    const double turn = 0.05 * std::sin(0.05 * t[k]);  // gentle S-curves [rad/s]
+    ImuIncrement imu;
+    imu.t = t[k];
+    imu.dt = imu_dt;
+    imu.dtheta_b = Vec3(0.0, 0.0, turn) * imu_dt;
+    imu.dv_b = Vec3(0.2 * std::cos(0.1 * t[k]), 10.0 * turn, -wgs84::gravity(s0.lat, s0.h)) * imu_dt;
+    for (int j = 0; j < 3; ++j) dth[3 * k + j] = imu.dtheta_b[j], dv[3 * k + j] = imu.dv_b[j];
+    truth.update(imu);
+    const NavState& s = truth.state();
+    if ((k + 1) % 10 == 0) {  // odometer: forward speed of the IMU (the constrained point), scaled
+      const double v_fwd = (s.q_nb.toRotationMatrix().transpose() * s.v_n)[0];
+      events.push_back(ConstraintEvent{t[k], std::uint8_t(kOdometer), (1.0 + kScale) * v_fwd});
+    }
+    if ((k + 1) % 100 == 0) {
+      GnssFix f;
+      f.t = t[k];
+      f.lat = s.lat, f.lon = s.lon, f.h = s.h;
+      f.v_n = s.v_n;
+      f.sigma_pos_n = Vec3::Constant(0.5);
+      f.sigma_vel_n = Vec3::Constant(0.05);
+      fixes.push_back(f);
+    }
+  }
+  StateVec<L> sd = StateVec<L>::Constant(1e-4);
+  sd.head<9>() << 0.5, 0.5, 0.5, 0.05, 0.05, 0.05, 1e-3, 1e-3, 3e-3;
+  sd[L::kOdoScale] = 0.01;
+  const StateCov<L> P0 = sd.cwiseAbs2().asDiagonal();
+  LooseConfig cfg;
+  cfg.gate.prob = 0.0;
+  cfg.vehicle.sigma_odo_mps = 0.05;
+  ImuErrorModel model;
+  model.odo_scale_sigma = 0.01;  // random constant (tau = inf)
+  auto eng = std::make_unique<LooseEngine<Ekf<L>>>(model, cfg);
+  std::vector<double> odo(2 * (n + 1)), cnis(events.size());
+  LooseOutputs out;
+  out.odo_scale = odo.data();
+  out.constraint_nis = cnis.data();
+  const int before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);
+  eng->run(s0, P0, ImuCorrection{}, n, t.data(), dth.data(), dv.data(), static_cast<std::int64_t>(fixes.size()),
+           fixes.data(), static_cast<std::int64_t>(events.size()), events.data(), out);
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(g_eigen_asserts == before);
+  const std::int64_t last = out.n_out - 1;
+  const double est = odo[2 * last], sig = odo[2 * last + 1];
+  std::printf("odometer scale: estimate %.1f ppm, sigma %.1f ppm (truth %.0f ppm); %d constraint updates\n",
+              est * 1e6, sig * 1e6, kScale * 1e6, out.constraint_updates);
+  EXPECT_TRUE(out.constraint_updates == static_cast<int>(events.size()));
+  EXPECT_LT(std::abs(est - kScale), 3.0 * sig);
+  EXPECT_LT(std::abs(est - kScale), 1e-4);
+  EXPECT_LT(sig, 1e-3);
+  EXPECT_LT(std::abs(eng->core().odo_scale - est), 1e-9);  // fed back: the filter's remainder is zero
+}
+
 }  // namespace
 
 int main() {
   test_structure<Layout15>();
   test_structure<Layout21>();
+  test_structure<Layout16Odo>();
   test_propagate_vs_dense<Layout15>();
   test_propagate_vs_dense<Layout21>();
+  test_propagate_vs_dense<Layout16Odo>();
   test_update_vs_dense<Layout15>();
   test_update_vs_dense<Layout21>();
+  test_update_vs_dense<Layout16Odo>();
   test_no_malloc<Layout15>();
   test_no_malloc<Layout21>();
+  test_no_malloc<Layout16Odo>();
   test_engine_outputs();
+  test_odo_scale_engine();
   TEST_MAIN_END()
 }

@@ -10,6 +10,8 @@
 
 #include "insnav/core.hpp"
 #include "insnav/filter/layout.hpp"
+#include "insnav/filter/error_model_linear.hpp"
+#include "insnav/filter/error_model_nonlinear.hpp"
 #include "insnav/meas/vehicle.hpp"
 #include "test_util.hpp"
 
@@ -17,13 +19,15 @@ using namespace insnav;
 
 namespace {
 
-template <class M>
+template <class M, class L = Layout21>
 double jacobian_error(const M& meas) {
-  using L = Layout21;
   const auto& lin = meas.linear();
   double worst = 0.0;
   for (int j = 0; j < L::kSize; ++j) {
-    const double h = (j >= L::kAtt && j < L::kAtt + 3) ? 1e-6 : (j >= L::kGyroBias && j < L::kGyroBias + 3 ? 1e-7 : 1e-4);
+    const double h = (j >= L::kAtt && j < L::kAtt + 3) ? 1e-6
+                     : (j >= L::kGyroBias && j < L::kGyroBias + 3) ? 1e-7
+                     : j == OdoScaleState<L>::offset ? 1e-6
+                                                     : 1e-4;
     StateVec<L> dx = StateVec<L>::Zero();
     dx[j] = h;
     const auto rp = meas.predicted_residual(dx);
@@ -98,10 +102,85 @@ void test_residuals() {
   EXPECT_LT((z.linear().residual.head<3>() - still.v_n).norm(), 1e-12);
 }
 
+/// The odometer row with the scale-factor state (Layout16Odo): H against the
+/// numerical derivative of the exact residual (the scale column included), the
+/// column's value -(1 + s^) v_fwd, the residual in reading units, and the
+/// scale-free layouts' rows unchanged.
+void test_odo_scale_row() {
+  using L = Layout16Odo;
+  VehicleConstraintConfig cfg;
+  cfg.C_bv = dcm_from_euler(Vec3(0.01, 0.02, -0.03));
+  cfg.lever_arm_b = Vec3(-1.2, 0.3, 0.8);
+  const NavState s = moving_state();
+  const Vec3 w(0.01, -0.02, 0.15);
+  const double s_hat = 2.5e-3;  // fed-back estimate
+  VehicleVelocityMeasurement<L> v;
+  v.set(s, w, cfg, true, 14.8, s_hat);
+  EXPECT_TRUE(v.linear().rows() == 3);
+  EXPECT_TRUE(v.linear().n_cols == L::kOdoScale + 1);
+  const double e = jacobian_error<VehicleVelocityMeasurement<L>, L>(v);
+  std::printf("NHC + odometer with the scale state: max relative |H - numerical| %.2e\n", e);
+  EXPECT_LT(e, 1e-5);
+  // the scale column alone, odometer only, larger s^
+  v.set(s, w, cfg, false, 15.2, -0.02);
+  EXPECT_TRUE(v.linear().rows() == 1);
+  EXPECT_LT((jacobian_error<VehicleVelocityMeasurement<L>, L>(v)), 1e-6);
+  StateVec<L> dx = StateVec<L>::Zero();
+  const double h = 1e-6;
+  dx[L::kOdoScale] = h;
+  const double num = (v.predicted_residual(dx)[0] - v.predicted_residual(-dx)[0]) / (2 * h);
+  std::printf("d r / d s_odo: analytic %.9f numerical %.9f\n", v.linear().H(0, L::kOdoScale), num);
+  EXPECT_LT(std::abs(num - v.linear().H(0, L::kOdoScale)), 1e-7);
+  // value: -(1 + s^) times the INS forward speed of the constrained point
+  const Vec3 v_v = vehicle_detail::point_velocity_v(s.q_nb.toRotationMatrix(), s.v_n, w,
+                                                    wgs84::omega_ie_n(s.lat) +
+                                                        wgs84::omega_en_n(s.lat, s.h, s.v_n, wgs84::radii(s.lat)),
+                                                    cfg);
+  EXPECT_LT(std::abs(v.linear().H(0, L::kOdoScale) + (1.0 - 0.02) * v_v[0]), 1e-12);
+  // a reading (1 + s^) v_fwd of an error-free INS gives a zero residual
+  v.set(s, w, cfg, false, (1.0 - 0.02) * v_v[0], -0.02);
+  EXPECT_LT(std::abs(v.linear().residual[0]), 1e-12);
+  // a layout without the state: the same NHC / odometer rows as before (s^ = 0, no column)
+  VehicleVelocityMeasurement<Layout15> v15;
+  v15.set(s, w, cfg, true, 14.8);
+  v.set(s, w, cfg, true, 14.8, 0.0);
+  EXPECT_TRUE(v15.linear().n_cols == Layout15::kGyroBias + 3);
+  EXPECT_LT((v15.linear().residual - v.linear().residual).norm(), 1e-15);
+  EXPECT_LT((v15.linear().H - v.linear().H.leftCols<15>()).norm(), 1e-15);
+}
+
+/// The nonlinear error model's rate of the scale state against linear_F
+/// (s' = -s / tau), and no coupling into the navigation errors.
+void test_odo_scale_model() {
+  using L = Layout16Odo;
+  ImuErrorModel m;
+  m.odo_scale_tau = 600.0;
+  InsPoint p;
+  p.set(0.5, 100.0, Vec3(10.0, 2.0, 0.1), dcm_from_euler(Vec3(0.02, 0.01, 0.3)), Vec3(0.3, 0.1, -9.8),
+        Vec3(0.001, 0.002, 0.05));
+  const StateCov<L> F = linear_F<L>(p, m);
+  EXPECT_LT(std::abs(F(L::kOdoScale, L::kOdoScale) + 1.0 / 600.0), 1e-15);
+  EXPECT_TRUE(F.col(L::kOdoScale).head<15>().isZero(0.0) && F.row(L::kOdoScale).head<15>().isZero(0.0));
+  const StateCov<L> Qc = continuous_GQG<L>(p, m);
+  EXPECT_LT(std::abs(Qc(L::kOdoScale, L::kOdoScale) - 2.0 * 0.01 * 0.01 / 600.0), 1e-18);
+  StateVec<L> dx = StateVec<L>::Zero();
+  dx[L::kOdoScale] = 4e-3;
+  const StateVec<L> r = nonlinear_error_rate<L>(dx, p, m);
+  EXPECT_LT(std::abs(r[L::kOdoScale] + 4e-3 / 600.0), 1e-18);
+  const StateVec<L> r0 = nonlinear_error_rate<L>(StateVec<L>::Zero(), p, m);
+  EXPECT_LT((r - r0).head<15>().norm(), 1e-15);
+  m.odo_scale_tau = kInf;  // random constant
+  EXPECT_TRUE(linear_F<L>(p, m)(L::kOdoScale, L::kOdoScale) == 0.0);
+  EXPECT_TRUE(continuous_GQG<L>(p, m)(L::kOdoScale, L::kOdoScale) == 0.0);
+  EXPECT_TRUE(nonlinear_error_rate<L>(dx, p, m)[L::kOdoScale] == 0.0);
+}
+
 }  // namespace
 
 int main() {
   test_jacobians();
+  test_odo_scale_row();
+  test_odo_scale_model();
   test_residuals();
   TEST_MAIN_END();
 }

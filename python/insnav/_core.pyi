@@ -57,7 +57,7 @@ class rotation:
 
 def run_loose(
     filter: str,  # "ekf" | "rbukf" | "ukf"
-    layout: int,  # 15 or 21 states
+    layout: int,  # 15, 21, or 16 (15 + the odometer scale factor: result "odo_scale" (N, 2))
     t: npt.ArrayLike,  # (N,) s
     dtheta_b: npt.ArrayLike,  # (N, 3) rad
     dv_b: npt.ArrayLike,  # (N, 3) m/s

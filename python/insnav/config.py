@@ -150,11 +150,15 @@ class Constraints:
     sigma_nhc_mps, sigma_odo_mps, sigma_zupt_mps : float
         Measurement noise [m/s] of one update: lateral slip and vertical
         bounce; odometer speed; standstill.  Slip and the odometer's
-        scale-factor error (no state estimates it) are correlated over
+        scale-factor error (when no state estimates it) are correlated over
         seconds, so at 10 updates per second each update counts for less
-        than its own noise: the default odometer sigma of 0.5 m/s is 0.16 m/s
-        over one second, what a 2000 ppm scale error at 20 m/s and 0.05 m/s of
-        quantisation noise call for (docs/results/vehicle_constraints.md).
+        than its own noise.  ``sigma_odo_mps`` None (default): 0.5 m/s
+        without the scale-factor state (``odo_scale``), 0.16 m/s over one
+        second, what a 2000 ppm scale error at 20 m/s and 0.05 m/s of
+        quantisation noise call for; 0.1 m/s with the state, which takes the
+        scale error out of the readings and leaves quantisation, the
+        odometer's lever-arm motion and slip
+        (docs/results/vehicle_constraints.md).
     sigma_zaru_dph : float
         Zero-angular-rate noise [deg/h].
     lever_arm_b_m : 3 floats or None
@@ -169,12 +173,28 @@ class Constraints:
         rate [deg/s] noise including idle vibration.
     gate_chi2 : float
         NIS gate of the constraint updates (0 = off).
+    odo_scale : bool or "auto"
+        Estimate the odometer's scale-factor error ``s`` (reading = (1 + s)
+        true forward speed) as a filter state: the 16-state layout (the 15
+        states + ``s``, ``cpp/include/insnav/filter/layout.hpp``
+        ``Layout16Odo``), fed back into the odometer readings like the IMU
+        biases into the IMU data.  ``"auto"`` (default): on whenever ``odo``
+        is used on the 15-state layout; ``true`` needs ``odo`` and
+        ``layout = 15``; ``false``: the raw readings, the scale error left to
+        ``sigma_odo_mps``.
+    odo_scale_sigma : float
+        Initial 1-sigma of ``s`` [-] (0.01 = 10000 ppm), also the steady-state
+        sigma of its Gauss-Markov model when ``odo_scale_tau_s`` is set.
+    odo_scale_tau_s : float or None
+        Correlation time of ``s`` [s] (first-order Gauss-Markov,
+        ``s' = -s / tau + w``, e.g. for tyre wear and temperature); None
+        (default): a random constant.
     """
 
     use: list = field(default_factory=list)
     rate_hz: float = 10.0
     sigma_nhc_mps: float = 0.1
-    sigma_odo_mps: float = 0.5
+    sigma_odo_mps: float | None = None
     sigma_zupt_mps: float = 0.01
     sigma_zaru_dph: float = 20.0
     lever_arm_b_m: list | None = None
@@ -184,6 +204,24 @@ class Constraints:
     zupt_sigma_f_mps2: float = 0.02
     zupt_sigma_w_dps: float = 0.115
     gate_chi2: float = 0.0
+    odo_scale: bool | str = "auto"
+    odo_scale_sigma: float = 0.01
+    odo_scale_tau_s: float | None = None
+
+    #: default odometer sigma per update [m/s]: without / with the scale-factor state
+    SIGMA_ODO_MPS_DEFAULT = (0.5, 0.1)
+
+    def odo_sigma_mps(self, layout: int = 15) -> float:
+        """The odometer's per-update sigma [m/s]: ``sigma_odo_mps``, or its default (see above)."""
+        if self.sigma_odo_mps is not None:
+            return float(self.sigma_odo_mps)
+        return self.SIGMA_ODO_MPS_DEFAULT[int(self.odo_scale_state(layout))]
+
+    def odo_scale_state(self, layout: int = 15) -> bool:
+        """True when the run estimates the odometer scale factor (``odo_scale``, see above)."""
+        if self.odo_scale == "auto":
+            return "odo" in self.use and layout == 15
+        return bool(self.odo_scale)
 
     def validate(self, prefix: str = "constraints") -> "Constraints":
         def bad(key, value, allowed):
@@ -198,6 +236,8 @@ class Constraints:
         for key in ("rate_hz", "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_dph", "zupt_window_s",
                     "zupt_threshold", "zupt_sigma_f_mps2", "zupt_sigma_w_dps"):
             v = getattr(self, key)
+            if v is None and key == "sigma_odo_mps":
+                continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
                 bad(key, v, "a number > 0")
         v = self.gate_chi2
@@ -212,6 +252,16 @@ class Constraints:
                 a = np.full(1, np.nan)
             if a.shape != (3,) or not np.all(np.isfinite(a)):
                 bad(key, getattr(self, key), "3 finite numbers")
+        if not (isinstance(self.odo_scale, (bool, np.bool_)) or self.odo_scale == "auto"):
+            bad("odo_scale", self.odo_scale, 'true, false or "auto"')
+        if self.odo_scale is True and "odo" not in self.use:
+            bad("odo_scale", self.odo_scale, "true only with 'odo' in constraints.use")
+        v = self.odo_scale_sigma
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v < 1):
+            bad("odo_scale_sigma", v, "a number in (0, 1) (1-sigma of the scale factor, 0.01 = 10000 ppm)")
+        v = self.odo_scale_tau_s
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not (v > 0)):
+            bad("odo_scale_tau_s", v, "a number > 0 [s] (inf or absent: random constant)")
         return self
 
 
@@ -443,6 +493,9 @@ class RunConfig:
         if self.constraints.use and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
             bad("constraints.use", self.constraints.use,
                 f"vehicle constraints with loose ekf, rbukf or ukf only (not {self.coupling} {self.filter!r})")
+        if self.constraints.odo_scale is True and self.layout != 15:
+            bad("constraints.odo_scale", True, "true only with layout = 15 (the 16-state odometer layout "
+                "is the 15 states + the scale factor)")
         if self.filter not in FILTERS:
             bad("filter", self.filter, ", ".join(FILTERS))
         if self.coupling not in COUPLINGS:

@@ -374,10 +374,14 @@ class Odometer:
         Ticks counted over ``(t[k-1], t[k]]`` divided by ticks per metre and
         the interval (includes the odometer's scale-factor error and its
         quantisation) [m/s].
+    scale_error : float or None
+        The simulator's true scale-factor error ``k`` [-] (reading = (1 + k)
+        true speed); None for recorded or loaded data (not saved).
     """
 
     t: np.ndarray
     speed_mps: np.ndarray
+    scale_error: float | None = None
 
     COLUMNS = ("t_s", "speed_mps")
 

@@ -84,10 +84,11 @@ def rear_axle_lever_arm(dataset, c) -> np.ndarray:
     return np.zeros(3) if c.lever_arm_b_m is None else np.asarray(c.lever_arm_b_m, float)
 
 
-def engine_keys(dataset, c) -> dict:
-    """The loose engine's config keys of the constraints (SI)."""
+def engine_keys(dataset, c, layout: int = 15) -> dict:
+    """The loose engine's config keys of the constraints (SI); ``layout`` the run's (15 or 21),
+    for the odometer sigma's default (with or without the scale-factor state)."""
     C_vb = np.asarray(_core.rotation.dcm_from_euler(np.asarray(c.mounting_rpy_deg, float) * DEG))
     return dict(vehicle_lever_arm_b=rear_axle_lever_arm(dataset, c), vehicle_C_bv=C_vb.T.ravel().copy(),
-                sigma_nhc_mps=float(c.sigma_nhc_mps), sigma_odo_mps=float(c.sigma_odo_mps),
+                sigma_nhc_mps=float(c.sigma_nhc_mps), sigma_odo_mps=c.odo_sigma_mps(layout),
                 sigma_zupt_mps=float(c.sigma_zupt_mps), sigma_zaru_radps=float(c.sigma_zaru_dph) * DEG_PER_H,
                 constraint_gate_chi2=float(c.gate_chi2))

@@ -1,5 +1,6 @@
 """Loosely coupled runs (EKF, RB-UKF, UKF; seed 000): GNSS position and
-velocity fixes on the 15- or 21-state layout.
+velocity fixes on the 15- or 21-state layout (16 states: the 15 and the
+odometer scale factor, with the vehicle constraints' ``odo_scale``).
 
 The whole IMU loop runs in C++ with the GIL released
 (``cpp/include/insnav/engine/loose_engine.hpp``); this module converts units,
@@ -38,21 +39,33 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     n = cfg.layout
-    P0 = np.diag(loose_initial_sigmas(sig0, noise, n, cfg) ** 2)
-    core_cfg = engine_config(dataset, cfg, gnss_t, n, use_position=cfg.use_position, use_velocity=cfg.use_velocity,
+    sig_states = loose_initial_sigmas(sig0, noise, n, cfg)
+    core_model = noise.as_core_dict()
+    # the odometer scale factor as a 16th state (Layout16Odo, [constraints] odo_scale)
+    odo_state = bool(cfg.constraints.use) and cfg.constraints.odo_scale_state(n)
+    n_core = n
+    if odo_state:
+        c = cfg.constraints
+        n_core = 16
+        sig_states = np.append(sig_states, float(c.odo_scale_sigma))
+        core_model.update(odo_scale_sigma=float(c.odo_scale_sigma),
+                          odo_scale_tau=np.inf if c.odo_scale_tau_s is None else float(c.odo_scale_tau_s))
+    P0 = np.diag(sig_states ** 2)
+    core_cfg = engine_config(dataset, cfg, gnss_t, n_core, use_position=cfg.use_position,
+                             use_velocity=cfg.use_velocity,
                              # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
-                             sigma_columns=n if cfg.imu_error_sigmas else 9)
+                             sigma_columns=n_core if cfg.imu_error_sigmas else 9)
     init_vec = init_vector(dataset, init)
     events, ev_counts = None, None
     if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
         from .constraints import constraint_events, engine_keys
 
         events, ev_counts = constraint_events(dataset, cfg.constraints, t, dth, dv)
-        core_cfg.update(engine_keys(dataset, cfg.constraints))
+        core_cfg.update(engine_keys(dataset, cfg.constraints, n))
     if cfg.smooth:
         core_cfg["smooth"] = True
-    out = _core.run_loose(cfg.filter, n, t, dth, dv, gnss, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
-                          core_cfg, events)
+    out = _core.run_loose(cfg.filter, n_core, t, dth, dv, gnss, init_vec, P0, initial_imu_correction(cfg),
+                          core_model, core_cfg, events)
     # unit conversions in place (the arrays are ours), one column at a time:
     # numpy's strided 2-D loops over 2-3 columns are ~10x slower than 1-D ones
     sig = out["sigma"]
@@ -69,7 +82,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                    acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
                    gyro_scale=err[:, 9:12], gnss_t=gnss_t, innovation=out["innovation"], nis=out["nis"],
                    gnss_status=out["status"],
-                   summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n, updates=int(out["updates"]),
+                   summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n_core, updates=int(out["updates"]),
                                 rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
     if cfg.imu_error_sigmas:  # layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
@@ -81,6 +94,11 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                                           rejected=int(out["constraint_rejected"]))
         sol.constraint_t, sol.constraint_kinds = events[:, 0], events[:, 1].astype(np.int8)
         sol.constraint_nis, sol.constraint_status = out["constraint_nis"], out["constraint_status"]
+    if odo_state:
+        sol.odo_scale, sol.sigma_odo_scale = out["odo_scale"][:, 0], out["odo_scale"][:, 1]
+        if len(sol.t):
+            sol.summary["constraints"]["odo_scale_ppm"] = float(sol.odo_scale[-1] * 1e6)
+            sol.summary["constraints"]["sigma_odo_scale_ppm"] = float(sol.sigma_odo_scale[-1] * 1e6)
     if cfg.smooth:
         from .smoothing import smoothed_rows
 

@@ -56,6 +56,10 @@ class Solution(NavTrajectory):
         and gyro scale factor [-] (the order of the IMU-error columns; 0 for the
         scale factors of a 15-state layout, which does not estimate them); only
         when the run asked for it (``imu_error_sigmas``), else None
+    odo_scale, sigma_odo_scale : (N,) or None
+        Estimated odometer scale-factor error [-] (reading = (1 + s) true
+        forward speed) and its 1-sigma [-]: runs with the scale-factor state
+        (``[constraints] odo_scale``), else None
     gnss_t : (M,) s, time of validity of each GNSS record
     innovation : (M, 6) INS minus GNSS (N, E, D position [m], velocity [m/s]) before the update
     nis : (M,) normalised innovation squared
@@ -77,6 +81,8 @@ class Solution(NavTrajectory):
     gnss_status: np.ndarray
     summary: dict = field(default_factory=dict)
     sigma_imu_err: np.ndarray | None = None
+    odo_scale: np.ndarray | None = None
+    sigma_odo_scale: np.ndarray | None = None
 
     COLUMNS = NAV_COLUMNS + (
                "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps",

@@ -62,4 +62,4 @@ def simulate_odometer(traj: Trajectory, cfg: dict, rng: np.random.Generator) -> 
     else:
         speed = (1.0 + k) * np.diff(s) / dt
     speed = speed + cfg["sigma"] * rng.standard_normal(n)
-    return Odometer(t[1:].copy(), speed)
+    return Odometer(t[1:].copy(), speed, scale_error=float(k))

@@ -82,6 +82,7 @@ struct NavOutputs {
   double* imu_err = nullptr;  // (.,12) acc bias, gyro bias, acc scale, gyro scale (SI)
   double* clock = nullptr;    // (.,2) receiver clock bias [m], drift [m/s] (layouts with clock states)
   double* isb = nullptr;      // (.,3) inter-system biases of R, E, C [m] (layouts with ISB states)
+  double* odo_scale = nullptr;  // (.,2) odometer scale factor s [-] and its 1-sigma (layouts with kOdoScale)
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
   int gate_reopened = 0;       // records the gate rejected but applied, P scaled, after reopen_after rejections in a row
@@ -142,6 +143,12 @@ struct ClosedLoop {
   NisGate gate;  // the GNSS records' innovation gate (the engine sets its config)
   double clock_bias = 0.0, clock_drift = 0.0;  // receiver clock estimate [m], [m/s] (kHasClock<L>)
   IsbVec isb = IsbVec::Zero();                  // inter-system bias estimates of systems 1..3 [m] (kHasIsb<L>)
+  // Odometer scale factor s^ [-] (kHasOdoScale<L>): fed back like the IMU
+  // biases, 1 + s^ <- (1 + s^)(1 + ds) (meas/vehicle.hpp); the engine applies
+  // it to the odometer reading.  With a finite correlation time it decays as
+  // the state model says (s' = -s / tau), exp(-dt / tau) per propagation interval.
+  double odo_scale = 0.0;
+  double odo_scale_tau = kInf;  // [s] (ImuErrorModel::odo_scale_tau)
   double propagation_interval = 0.02;          // [s]
   double cycle_start = 0.0, interval_t0 = 0.0;
 
@@ -181,6 +188,7 @@ struct ClosedLoop {
     clock_bias = clock_bias0;
     clock_drift = clock_drift0;
     isb = isb0;
+    odo_scale = 0.0;
     filter.initialize(P0);
     rates_stale_ = false;
     omega_ib_b_.setZero();
@@ -300,8 +308,8 @@ struct ClosedLoop {
   /// Call after changing the filter directly (e.g. a delayed update).
   void touch() { out_cache_dirty_ = true; }
 
-  /// Closed loop: correct the INS, the IMU corrections and the receiver clock
-  /// with x, then x = 0.
+  /// Closed loop: correct the INS, the IMU corrections, the receiver clock and
+  /// the odometer scale factor with x, then x = 0.
   void feedback() {
     const StateVec<L> x = filter.x();
     if (rec_pending_) {
@@ -329,6 +337,7 @@ struct ClosedLoop {
     if constexpr (kHasIsb<L>) {
       for (int i = 0; i < IsbStates<L>::count; ++i) isb[i] -= x[IsbStates<L>::offset + i];
     }
+    if constexpr (kHasOdoScale<L>) odo_scale += (1.0 + odo_scale) * x[OdoScaleState<L>::offset];
     ins.set_state(s);
     filter.reset_state();
     out_cache_dirty_ = true;
@@ -384,6 +393,13 @@ struct ClosedLoop {
       if (out.clock) {
         out.clock[2 * i] = clock_bias - x[L::kClockBias];
         out.clock[2 * i + 1] = clock_drift - x[L::kClockDrift];
+      }
+    }
+    if constexpr (kHasOdoScale<L>) {
+      if (out.odo_scale) {  // 1 + s = (1 + s^)(1 + ds)
+        const double g = 1.0 + odo_scale;
+        out.odo_scale[2 * i] = odo_scale + g * x[OdoScaleState<L>::offset];
+        out.odo_scale[2 * i + 1] = g * sigma_[OdoScaleState<L>::offset];
       }
     }
     if constexpr (kHasIsb<L>) {
@@ -468,6 +484,9 @@ struct ClosedLoop {
       iv_.mid.earth.evaluate(iv_.mid.lat, iv_.mid.h, iv_.mid.v_n);
     }
     filter.propagate(iv_);
+    if constexpr (kHasOdoScale<L>) {
+      if (std::isfinite(odo_scale_tau) && odo_scale_tau > 0.0) odo_scale *= std::exp(-iv_.dt / odo_scale_tau);
+    }
     out_cache_dirty_ = true;
     iv_.start = iv_.end;
     interval_t0 = s.t;

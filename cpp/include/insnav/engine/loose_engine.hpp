@@ -9,7 +9,9 @@
 // event is a non-holonomic constraint (lateral and vertical velocity of the
 // rear-axle point zero), an odometer speed, or, while the vehicle stands
 // still, a zero-velocity and zero-angular-rate update; the caller decides
-// which (e.g. from a StandstillDetector over the IMU samples).
+// which (e.g. from a StandstillDetector over the IMU samples).  With a layout
+// that estimates the odometer scale factor (Layout16Odo) the odometer row also
+// carries that state, and the closed-loop core keeps its fed-back estimate.
 //
 // No heap allocation inside run(); outputs go to caller-owned buffers.
 #pragma once
@@ -93,6 +95,7 @@ class LooseEngine {
   LooseEngine(const ImuErrorModel& model, const LooseConfig& cfg, const UtParams& ut = {})
       : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {
     core_.gate = NisGate(cfg.gate);
+    core_.odo_scale_tau = model.odo_scale_tau;
   }
 
   Filter& filter() { return core_.filter; }
@@ -166,7 +169,9 @@ class LooseEngine {
       standstill_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, zupt, zaru);
       res = core_.update(standstill_, cfg_.constraint_gate_chi2);
     } else if (nhc || odo) {
-      vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN);
+      // the odometer reading against (1 + s^) times the INS forward speed (meas/vehicle.hpp; s^ = 0
+      // for a layout without the scale-factor state)
+      vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
       res = core_.update(vehicle_, cfg_.constraint_gate_chi2);
     } else {
       mark_constraint(out, c, RecordStatus::kNotUsed);

@@ -9,6 +9,8 @@
 //              gravity terms, incl. + 2 g / R dr_D)
 //   psi'  = -[omega_in x] psi + d omega_in(dr, dv) - C_nb dw_b
 //   b'    = -b / tau + w                           (first-order Gauss-Markov)
+//   s_odo' = -s_odo / tau_odo + w                  (Layout16Odo: odometer scale factor,
+//                                                   no coupling into dr, dv, psi)
 // E.-H. Shin, "Estimation techniques for low-cost inertial navigation",
 // UCGE 20219, 2005, eqs. (2.55)-(2.68); Groves (2013) sec. 14.2.4.
 // seed 003 prints the same model (its eq. for dV and phi) in a local-level
@@ -98,6 +100,10 @@ StateCov<L> linear_F(const InsPoint& ins, const ImuErrorModel& m) {
       F(SG + i, SG + i) = std::isfinite(m.gyro_scale_tau[i]) ? -1.0 / m.gyro_scale_tau[i] : 0.0;
     }
   }
+  if constexpr (kHasOdoScale<L>) {  // s_odo' = -s_odo / tau (no coupling into the navigation errors)
+    constexpr int O = OdoScaleState<L>::offset;
+    F(O, O) = std::isfinite(m.odo_scale_tau) ? -1.0 / m.odo_scale_tau : 0.0;
+  }
   if constexpr (kHasClock<L>) {
     F(L::kClockBias, L::kClockDrift) = 1.0;  // bias' = drift
   }
@@ -127,6 +133,10 @@ StateCov<L> continuous_GQG(const InsPoint& ins, const ImuErrorModel& m) {
       Qc(L::kGyroScale + i, L::kGyroScale + i) = markov_psd(m.gyro_scale_sigma[i], m.gyro_scale_tau[i], 0.0);
     }
   }
+  if constexpr (kHasOdoScale<L>) {
+    constexpr int O = OdoScaleState<L>::offset;
+    Qc(O, O) = markov_psd(m.odo_scale_sigma, m.odo_scale_tau, 0.0);
+  }
   if constexpr (kHasClock<L>) {
     Qc(L::kClockBias, L::kClockBias) = m.clock_bias_psd;
     Qc(L::kClockDrift, L::kClockDrift) = m.clock_drift_psd;
@@ -155,7 +165,7 @@ StateCov<L> discrete_Q(const StateCov<L>& Phi, const StateCov<L>& Qc, double dt)
 //
 // In the layouts whose sensor-error states have their own diagonal dynamics
 // (first-order Gauss-Markov biases and scale factors, no clock: Layout15,
-// Layout21) F and Qc have the block form, nav = the first 9 states (dr, dv,
+// Layout21, Layout16Odo) F and Qc have the block form, nav = the first 9 states (dr, dv,
 // psi), aux = the sensor-error states:
 //   F  = [F_nn  F_na     ]      Qc = [Q_nn  0        ]
 //        [0     diag(f_a)],          [0     diag(q_a)]
@@ -172,6 +182,8 @@ template <>
 inline constexpr bool kDiagonalAuxDynamics<Layout15> = true;
 template <>
 inline constexpr bool kDiagonalAuxDynamics<Layout21> = true;
+template <>
+inline constexpr bool kDiagonalAuxDynamics<Layout16Odo> = true;
 
 /// Phi = [U; 0 diag(d)] of a layout with kDiagonalAuxDynamics.
 template <class L>

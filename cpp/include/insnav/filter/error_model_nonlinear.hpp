@@ -49,6 +49,8 @@
 // (the engine's ImuCorrection inverts exactly this), so exactly
 //   df_b = f~ - f = (b_a + s_a f~) / (1 + s_a),   dw_b = (b_g + s_g omega~) / (1 + s_g)
 // (elementwise); to first order df = b_a + diag(f~) s_a, as in linear_F.
+// Odometer scale factor (Layout16Odo): s_odo' = -s_odo / tau (tau = inf: 0); it
+// enters only the odometer measurement (meas/vehicle.hpp), not the INS errors.
 // Clock (Layout17): bias' = drift, drift' = 0 (integrated random walk); inter-system
 // biases (LayoutTightMulti): isb' = 0 (random walk).
 #pragma once
@@ -73,6 +75,7 @@ struct NonlinearErrorPoint {
   double lon_rate = 0.0;                  // lambda~' [rad/s]
   Vec3 decay_acc_bias = Vec3::Zero(), decay_gyro_bias = Vec3::Zero();  // 1/tau or 0
   Vec3 decay_acc_scale = Vec3::Zero(), decay_gyro_scale = Vec3::Zero();
+  double decay_odo_scale = 0.0;  // 1 / odo_scale_tau or 0 (layouts with kOdoScale)
 
   static double decay(double tau) { return (std::isfinite(tau) && tau > 0.0) ? 1.0 / tau : 0.0; }
 
@@ -98,6 +101,7 @@ struct NonlinearErrorPoint {
       decay_acc_scale[i] = decay(m.acc_scale_tau[i]);
       decay_gyro_scale[i] = decay(m.gyro_scale_tau[i]);
     }
+    decay_odo_scale = decay(m.odo_scale_tau);
   }
 };
 
@@ -182,6 +186,10 @@ StateVec<L> nonlinear_error_rate(const StateVec<L>& dx, const NonlinearErrorPoin
   if constexpr (kHasClock<L>) {
     rate[L::kClockBias] = dx[L::kClockDrift];
     rate[L::kClockDrift] = 0.0;
+  }
+  if constexpr (kHasOdoScale<L>) {  // odometer scale factor: s' = -s / tau (no effect on the INS errors)
+    constexpr int O = OdoScaleState<L>::offset;
+    rate[O] = -pt.decay_odo_scale * dx[O];
   }
   if constexpr (kHasIsb<L>) rate.template segment<IsbStates<L>::count>(IsbStates<L>::offset).setZero();  // random walk
   return rate;

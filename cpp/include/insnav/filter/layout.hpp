@@ -59,6 +59,30 @@ struct Layout21 {
   static constexpr int kClockDrift = -1;
 };
 
+/// Loose coupling with a wheel odometer: Layout15 + the odometer's
+/// scale-factor error s_odo [-] (meas/vehicle.hpp).  Error convention of a
+/// sensor error (measured - true, as df_b, dw_b): the odometer reads
+///   v_odo = (1 + s_odo) v_fwd,
+/// v_fwd the true forward speed of the constrained point.  State equation:
+/// first-order Gauss-Markov s' = -s / tau + w (tau = inf: random constant,
+/// no driving noise), ImuErrorModel::odo_scale_sigma / odo_scale_tau
+/// (Groves 2013, sec. 16.2.1 and 16.3.3: an odometer scale-factor state in
+/// the integration filter; Shin 2001, sec. 4.4).  Fed back like the IMU
+/// biases (engine/closed_loop.hpp).
+struct Layout16Odo {
+  static constexpr int kSize = 16;
+  static constexpr int kPos = 0;
+  static constexpr int kVel = 3;
+  static constexpr int kAtt = 6;
+  static constexpr int kAccBias = 9;
+  static constexpr int kGyroBias = 12;
+  static constexpr int kAccScale = -1;
+  static constexpr int kGyroScale = -1;
+  static constexpr int kClockBias = -1;
+  static constexpr int kClockDrift = -1;
+  static constexpr int kOdoScale = 15;
+};
+
 /// Tight coupling with several constellations: Layout17 + one inter-system
 /// bias (ISB) [m] per non-GPS system.  The receiver clock (kClockBias,
 /// kClockDrift) is the GPS-time clock; the pseudorange of a satellite of
@@ -97,6 +121,18 @@ struct IsbStates<L, std::void_t<decltype(L::kIsb)>> {
 /// True for a layout with inter-system bias states (L::kIsb, L::kNumIsb).
 template <class L>
 inline constexpr bool kHasIsb = IsbStates<L>::count > 0;
+
+template <class L, class = void>
+struct OdoScaleState {
+  static constexpr int offset = -1;
+};
+template <class L>
+struct OdoScaleState<L, std::void_t<decltype(L::kOdoScale)>> {
+  static constexpr int offset = L::kOdoScale;
+};
+/// True for a layout with the odometer scale-factor state (L::kOdoScale).
+template <class L>
+inline constexpr bool kHasOdoScale = OdoScaleState<L>::offset >= 0;
 
 template <class L>
 inline constexpr bool kHasScale = (L::kAccScale >= 0);

@@ -53,6 +53,7 @@ struct InsInterval {
 ///   gyro_bias_tau, acc_bias_tau [s]
 ///   gyro_bias_rw, acc_bias_rw: an extra random-walk drive of the bias state
 ///   gyro_scale_sigma, acc_scale_sigma [-], *_scale_tau [s]  (Layout21 only)
+///   odo_scale_sigma [-], odo_scale_tau [s]  (Layout16Odo only)
 struct ImuErrorModel {
   Vec3 gyro_arw = Vec3::Constant(1e-4);
   Vec3 acc_vrw = Vec3::Constant(1e-3);
@@ -72,6 +73,12 @@ struct ImuErrorModel {
   // 1e-4 m^2/s = 0.01 m/sqrt(s), 0.6 m in an hour -- hardware delays and the
   // GPS-Galileo/BeiDou time offsets drift by ns per day (Groves 2013, sec. 9.4.3)
   double isb_psd = 1e-4;
+  // Odometer scale-factor error s_odo [-] (layouts with kOdoScale, layout.hpp):
+  // first-order Gauss-Markov with steady-state sigma odo_scale_sigma [-] and
+  // correlation time odo_scale_tau [s]; tau = inf: a random constant (no
+  // driving noise; its sigma then enters only through P0).
+  double odo_scale_sigma = 0.01;
+  double odo_scale_tau = std::numeric_limits<double>::infinity();
 };
 
 /// Maximum rows of one measurement update (tight coupling: 2 per satellite).

@@ -18,6 +18,19 @@
 // omega~_ib_b = omega_ib_b + dw_b, so d omega_nb_b = dw_b + C_bn [omega_in_n x] psi;
 // the position error's effect on omega_in_n neglected, < 1e-9 m/s per metre):
 //   d v_v = C_vb C_bn dv - C_vb (C_bn [v_n x] + [l_b x] C_bn [omega_in_n x]) psi - C_vb [l_b x] dw_b
+// Odometer scale factor (layouts with kOdoScale, layout.hpp): the odometer
+// reads z = (1 + s) v_fwd, v_fwd = v_v[0] of the true state.  The engine
+// keeps the fed-back estimate s^ (engine/closed_loop.hpp) and the filter the
+// remaining error ds of the corrected reading z / (1 + s^) = (1 + ds) v_fwd,
+// i.e. 1 + s = (1 + s^)(1 + ds).  The odometer row is formed in reading units
+// (its noise is sigma_odo_mps as it stands):
+//   predicted reading  z^ = (1 + s^) v~_v[0]            (INS, ds = 0)
+//   residual           r  = z^ - z
+//   exact r(dx)           = (1 + s^) (v~_v[0] - (1 + ds) v_v[0](dx))
+//   first order (ds v_v[0](dx) ~ ds v~_v[0], the product ds d v_v dropped):
+//     r = (1 + s^) (d v_v[0] - v~_v[0] ds)
+//   so H_row = (1 + s^) [d v_v[0] / d(dv, psi, dw_b)],  H(row, kOdoScale) = -(1 + s^) v~_v[0].
+// Without the state (s^ = 0, no column) this is the plain odometer row.
 // ZUPT (standstill): v_n = 0:  d = dv.
 // ZARU (standstill): omega_ib_b = C_bn omega_ie_n, residual
 //   omega~_ib_b - C~_bn omega_ie_n,  d = dw_b - C_bn [psi x] omega_ie_n
@@ -27,6 +40,8 @@
 // predicted_residual(dx), the exact residual the INS would show if its true
 // error were dx (for the unscented updates and the Jacobian tests).
 #pragma once
+
+#include <algorithm>
 
 #include "insnav/earth/wgs84.hpp"
 #include "insnav/filter/types.hpp"
@@ -65,10 +80,13 @@ class VehicleVelocityMeasurement {
   using RowVec = typename LinearMeasurement<L>::RowVec;
 
   /// ins: INS state at the update time; omega_ib_b: corrected body rate [rad/s];
-  /// use_nhc: the two zero rows; odo_speed_mps: measured forward speed, or NaN for none.
+  /// use_nhc: the two zero rows; odo_speed_mps: the odometer's reading (forward
+  /// speed) [m/s], or NaN for none; odo_scale: the fed-back scale-factor
+  /// estimate s^ [-] of the reading (layouts with kOdoScale; see the header comment).
   void set(const NavState& ins, const Vec3& omega_ib_b, const VehicleConstraintConfig& cfg, bool use_nhc,
-           double odo_speed_mps) {
+           double odo_speed_mps, double odo_scale = 0.0) {
     cfg_ = cfg;
+    odo_gain_ = 1.0 + odo_scale;
     C_nb_ = ins.q_nb.toRotationMatrix();
     v_n_ = ins.v_n;
     omega_ib_b_ = omega_ib_b;
@@ -82,6 +100,7 @@ class VehicleVelocityMeasurement {
     lin_.H.setZero(rows, L::kSize);
     lin_.R.setZero(rows, rows);
     const Vec3 v_v = vehicle_detail::point_velocity_v(C_nb_, v_n_, omega_ib_b_, omega_in_n_, cfg_);
+    v_fwd_computed_ = v_v[0];
     const Mat3 C_vn = cfg_.C_bv.transpose() * C_nb_.transpose();
     Eigen::Matrix<double, 3, 9> J;  // d v_v / d [dv psi dw_b]
     J.leftCols<3>() = C_vn;
@@ -92,16 +111,23 @@ class VehicleVelocityMeasurement {
     for (int axis = 0; axis < 3; ++axis) {
       const bool on = axis == 0 ? use_odo_ : use_nhc_;
       if (!on) continue;
-      lin_.residual[row] = v_v[axis] - (axis == 0 ? odo_ : 0.0);
-      lin_.H.template block<1, 3>(row, L::kVel) = J.template block<1, 3>(axis, 0);
-      lin_.H.template block<1, 3>(row, L::kAtt) = J.template block<1, 3>(axis, 3);
-      lin_.H.template block<1, 3>(row, L::kGyroBias) = J.template block<1, 3>(axis, 6);
+      const double k = axis == 0 ? odo_gain_ : 1.0;  // the odometer row in reading units
+      lin_.residual[row] = axis == 0 ? k * v_v[0] - odo_ : v_v[axis];
+      lin_.H.template block<1, 3>(row, L::kVel) = k * J.template block<1, 3>(axis, 0);
+      lin_.H.template block<1, 3>(row, L::kAtt) = k * J.template block<1, 3>(axis, 3);
+      lin_.H.template block<1, 3>(row, L::kGyroBias) = k * J.template block<1, 3>(axis, 6);
+      if constexpr (kHasOdoScale<L>) {
+        if (axis == 0) lin_.H(row, OdoScaleState<L>::offset) = -k * v_v[0];
+      }
       const double s = axis == 0 ? cfg_.sigma_odo_mps : cfg_.sigma_nhc_mps;
       lin_.R(row, row) = s * s;
       rows_axis_[row] = axis;
       ++row;
     }
     lin_.n_cols = L::kGyroBias + 3;
+    if constexpr (kHasOdoScale<L>) {
+      if (use_odo_) lin_.n_cols = std::max(lin_.n_cols, OdoScaleState<L>::offset + 1);
+    }
   }
 
   const LinearMeasurement<L>& linear() const { return lin_; }
@@ -114,6 +140,12 @@ class VehicleVelocityMeasurement {
                    vehicle_detail::point_velocity_v(C_true, v_true, w_true, omega_in_n_, cfg_);
     RowVec out(lin_.rows());
     for (int i = 0; i < lin_.rows(); ++i) out[i] = d[rows_axis_[i]];
+    if (use_odo_) {  // row 0: (1 + s^) (v~_fwd - (1 + ds) v_fwd(dx)), header comment
+      const double v_fwd_true = v_fwd_computed_ - d[0];
+      double ds = 0.0;
+      if constexpr (kHasOdoScale<L>) ds = dx[OdoScaleState<L>::offset];
+      out[0] = odo_gain_ * (v_fwd_computed_ - (1.0 + ds) * v_fwd_true);
+    }
     return out;
   }
 
@@ -124,6 +156,8 @@ class VehicleVelocityMeasurement {
   Vec3 v_n_ = Vec3::Zero(), omega_ib_b_ = Vec3::Zero(), omega_in_n_ = Vec3::Zero();
   bool use_odo_ = false, use_nhc_ = false;
   double odo_ = 0.0;
+  double odo_gain_ = 1.0;        // 1 + s^ (fed-back odometer scale factor)
+  double v_fwd_computed_ = 0.0;  // v~_v[0]: forward speed of the constrained point from the INS [m/s]
   int rows_axis_[3] = {0, 1, 2};
 };
 
