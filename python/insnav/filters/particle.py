@@ -98,7 +98,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                        resample_threshold: float = 0.5,
                        roughening: float | None = None, rk4_step_s: float = 1.0, kernel_h2: float = 0.1,
                        init_yaw_uniform_deg: float = 0.0, temper_stages: int = 8, divergence_chi2: float = 25.0,
-                       noise_floor: float = 3.0, reseed: bool = True,
+                       noise_floor: float = 3.0, reseed: bool = True, marginalize: bool = True,
                        gyro_markov_sigma_dph: float = 1.0, gyro_markov_tau_s: float = 3600.0,
                        acc_markov_tau_s: float = 3600.0, inputs: TightInputs | None = None,
                        elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
@@ -195,7 +195,8 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                 resample_threshold=float(resample_threshold), roughening=float(roughening),
                 rk4_step=float(rk4_step_s), kernel_h2=float(kernel_h2),
                 init_yaw_halfwidth=float(init_yaw_uniform_deg) * DEG, temper_stages=int(temper_stages),
-                divergence_chi2=float(divergence_chi2), noise_floor=float(noise_floor), reseed=bool(reseed))
+                divergence_chi2=float(divergence_chi2), noise_floor=float(noise_floor), reseed=bool(reseed),
+                marginalize=bool(marginalize))
     out = _core.run_tight_particle(filt, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                                    np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0,
                                    np.zeros(12), np.asarray(clock0, float), model, core_cfg, pcfg)
