@@ -1,10 +1,67 @@
-// insnav/filter/particle_filter.hpp -- the bootstrap particle filter that
-// seed 004 (Shao et al. 2013) compares against, and the settings and
-// diagnostics every particle filter shares (random.hpp: random numbers;
-// resampling.hpp: weights, resampling, roughening; macro_step.hpp: the
-// multi-interval RK4 step).
+// insnav/filter/particle_filter.hpp -- insnav's particle filter (by default
+// marginalised), the bootstrap particle filter that seed 004 (Shao et al.
+// 2013) compares against, and the settings and diagnostics every particle
+// filter shares (random.hpp: random numbers; resampling.hpp: weights,
+// resampling, roughening; macro_step.hpp: the multi-interval RK4 step).
 //
-// Bootstrap PF (Gordon, Salmond, Smith 1993; seed 004 ref. [2]):
+// Marginalised PF (`marginalize`, the default; Rao-Blackwellised PF: Schön,
+// Gustafsson, Nordlund 2005, "Marginalized particle filters for mixed
+// linear/nonlinear state-space models", IEEE Trans. Signal Processing
+// 53(7):2279-2289, sec. III-IV and Algorithm 1; Doucet, Godsill, Andrieu 2000,
+// Statistics and Computing 10:197-208, sec. IV):
+//   split       x = (r, s): the particles sample only r -- attitude, gyro
+//               random constant and gyro Markov (9 states), the states through
+//               which the error model is nonlinear (large attitude errors) and
+//               which the GNSS rows see only through the dynamics -- while s --
+//               position, velocity, clock bias and drift, accelerometer bias
+//               (11 states), whose dynamics given r are linear and which the
+//               pseudoranges and rates observe -- is carried by a Kalman mean
+//               s_i per particle and ONE covariance P_s shared by all particles.
+//               The covariance is shared because its Riccati recursion uses
+//               Phi_ss and H_s of the linear model at the INS (linearised at the
+//               estimate, not at each particle): exact when they do not depend
+//               on r (Schön et al. 2005, sec. IV-B), an EKF-type approximation
+//               here.  One gain and one factorisation per epoch, no
+//               per-particle covariance: that is what separates this filter
+//               from the UPF (upf.hpp), whose particles each carry a UKF;
+//   propagate   every particle (r_i, s_i) through the exact nonlinear model
+//               (RK4; for s_i this is the conditional mean, the dynamics being
+//               affine in s given r), P_s = Phi_ss P_s Phi_ss^T; the cycle's
+//               process noise w ~ N(0, Q) is split in (r, s) order with one
+//               lower Cholesky factor [L_rr 0; L_sr L_ss]: w_r = L_rr xi is
+//               drawn per particle (the bootstrap proposal for r), s_i moves by
+//               E[w_s | w_r] = L_sr xi, and P_s += L_ss L_ss^T (Schön et al.
+//               2005, sec. III, correlated process noise);
+//   update      S = H_s P_s H_s^T + R, K = P_s H_s^T S^-1 (LLT solves; one of
+//               each per epoch), for every particle the innovation
+//               g_i = residual - h(r_i, s_i) (nonlinear h), the weight
+//               log w_i += -1/2 |L_S^-1 g_i|^2 (the predictive likelihood
+//               p(z | r_i, past z): Schön et al. 2005 eq. (25a)), the mean
+//               s_i += K g_i; P_s by the Joseph form.  No progressive correction
+//               (the predictive likelihood is as wide as P_s: N_eff stays high).
+//               What is left out: the information the sampled r transition
+//               carries about s (Schön et al. 2005 eq. (24), the "second
+//               measurement update"), since s enters the attitude dynamics only
+//               through the transport rate (v / R, ~1e-7 rad/s per m/s);
+//   resampling  systematic when N_eff < threshold * N, roughening of r only
+//               (the spread of s is in P_s), no noise floor by default: the
+//               kernel alone keeps the gyro random constants from collapsing,
+//               and a floor only adds yaw random walk (seed004-uav: whole-run
+//               yaw RMS 10-16 arcmin without it, 25-30 with a floor of 1,
+//               80-400 with 3);
+//   divergence  counted as below with S in place of R; with `reseed` the
+//               linear means of position, velocity and clock are set to the
+//               measurement's solution given r_i (no draw) and P_s's block to
+//               its covariance A^-1 (below).
+// Why (seed004-uav, N = 1000; docs/results/seed004.md): the bootstrap PF's
+// position and clock are near-static states for which resampling is a random
+// walk (genetic drift) that the 15-m pseudoranges cannot undo -- after the
+// outage its vertical stayed tens of metres off for 100 s and more -- and with
+// the 0.1-m/s rates the weights select velocity, not attitude: its yaw error
+// grew to 1-50 deg.  The marginalised PF averages the pseudoranges in P_s and
+// its weights, no longer dominated by the rates, select the attitude.
+//
+// Bootstrap PF (`marginalize = false`; Gordon, Salmond, Smith 1993; seed 004 ref. [2]):
 //   propagate   every particle through the exact nonlinear error model
 //               (error_model_nonlinear.hpp, RK4) and add process noise drawn
 //               from the accumulated Q of the cycle (Q_c = Phi Q_c Phi^T + Q_d);
@@ -30,8 +87,9 @@
 //               what is left).  The particles move towards the likelihood's peak
 //               instead of all weight landing on the one nearest it;
 //   noise floor every state also random-walks by noise_floor x its initial
-//               sigma per sqrt(hour): resampling shrinks the spread of the states
-//               without process noise (random-constant gyro biases) every epoch,
+//               sigma per sqrt(hour) (3 for this variant; the Python default):
+//               resampling shrinks the spread of the states without process
+//               noise (random-constant gyro biases) every epoch,
 //               and a roughening kernel shaped by the cloud shrinks with it; the
 //               floor keeps the cloud wide enough to follow the truth (seed004-uav,
 //               N = 1000: without it the cloud collapsed to one point within
@@ -130,7 +188,8 @@ struct ParticleParams {
   double rk4_step = 1.0;            // [s] multi-interval RK4 step; 0: every engine interval
   int max_particles = 4096;         // upper bound checked at construction
   int temper_stages = 8;            // PF: progressive-correction stages at most (1: plain bootstrap update)
-  double noise_floor = 3.0;         // PF: every state random-walks by this x its initial sigma per sqrt(h)
+  double noise_floor = 0.0;         // PF: every state random-walks by this x its initial sigma per sqrt(h)
+                                    //     (the bootstrap variants need ~3, the marginalised PF none: header)
   double divergence_chi2 = 25.0;    // PF: divergence when no particle explains z within this chi^2 per row
   bool reseed = true;               // PF: sensor resetting at a divergent epoch (header)
   bool marginalize = true;          // PF: Rao-Blackwellised linear substate (header); false: bootstrap
