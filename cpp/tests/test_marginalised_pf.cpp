@@ -7,7 +7,8 @@
 // likelihood N(z; h(r_i, s_i), H_s P_s H_s^T + R).  Awkward cases: a single
 // particle, a single satellite (2 rows: no sensor resetting possible), a huge
 // measurement noise (the update reduces to the prior), a measurement no
-// particle explains; no heap allocation in the update.
+// particle explains (with 4 satellites: sensor resetting of the Kalman means);
+// no heap allocation in the update.
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -201,6 +202,59 @@ void test_unexplained_measurement_one_satellite() {
   EXPECT_TRUE(std::abs(pf.x()[L::kClockDrift]) > 1.0);  // the rate pulled the drift towards the measurement
 }
 
+void test_reset_four_satellites() {
+  // 4 satellites (8 rows) and a measurement no particle explains: sensor resetting puts the linear means of
+  // position, velocity and clock on the measurement's solution given r (no draw) and P_s's block on its
+  // covariance A^-1, A = H_s' R^-1 H_s; the weights become uniform
+  constexpr auto idx = ParticleFilter<L>::linear_index();
+  LinearMeas m;
+  m.lin.residual.resize(8);
+  m.lin.H.setZero(8, kN);
+  m.lin.R.setZero(8, 8);
+  const Vec3 u[4] = {Vec3(0.3, -0.5, -0.8).normalized(), Vec3(-0.6, 0.2, -0.7).normalized(),
+                     Vec3(0.1, 0.9, -0.4).normalized(), Vec3(-0.2, -0.3, -0.95).normalized()};
+  for (int k = 0; k < 4; ++k) {
+    m.lin.H.block<1, 3>(k, L::kPos) = -u[k].transpose();
+    m.lin.H(k, L::kClockBias) = 1.0;
+    m.lin.H(k, L::kAtt + 2) = 3.0;
+    m.lin.H.block<1, 3>(4 + k, L::kVel) = -u[k].transpose();
+    m.lin.H(4 + k, L::kClockDrift) = 1.0;
+    m.lin.R(k, k) = 15.0 * 15.0;
+    m.lin.R(4 + k, 4 + k) = 0.1 * 0.1;
+    m.lin.residual[k] = 3000.0 + 100.0 * k;
+    m.lin.residual[4 + k] = 20.0 - 3.0 * k;
+  }
+  ParticleParams pp;
+  pp.particles = 8;
+  ParticleFilter<L> pf(model(), pp);
+  pf.initialize(prior());
+  const std::vector<Vec> before = pf.particle_states();
+  Eigen::internal::set_is_malloc_allowed(false);
+  const UpdateResult r = pf.update(m, 0.0);
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(r.applied && pf.divergences() == 1 && pf.reseeds() == 1);
+  Eigen::MatrixXd Hs(8, 8), Wi = Eigen::MatrixXd(m.lin.R).inverse();
+  for (int a = 0; a < 8; ++a) Hs.col(a) = m.lin.H.col(idx[a]);
+  const Eigen::MatrixXd Ainv = (Hs.transpose() * Wi * Hs).inverse();
+  double es = 0.0, eP = 0.0, ew = 0.0;
+  for (int i = 0; i < 8; ++i) {
+    Vec x_r = before[i];
+    for (int a = 0; a < 8; ++a) x_r[idx[a]] = 0.0;
+    const Eigen::VectorXd s_ls = Ainv * Hs.transpose() * Wi * (Eigen::VectorXd(m.lin.residual) - m.lin.H * x_r);
+    for (int a = 0; a < 8; ++a)
+      es = std::max(es, std::abs(pf.particle_states()[i][idx[a]] - s_ls[a]) / (std::abs(s_ls[a]) + 1e-9));
+    ew = std::max(ew, std::abs(pf.weights()[i] - 1.0 / 8));
+  }
+  const auto& Ps = pf.linear_covariance();
+  for (int a = 0; a < 8; ++a)
+    for (int b = 0; b < 11; ++b)
+      eP = std::max(eP, std::abs(Ps(a, b) - (b < 8 ? Ainv(a, b) : 0.0)) / std::sqrt(Ainv(a, a) * Ps(b, b)));
+  std::printf("reset, 4 satellites: means vs least squares %.2e, P_s vs A^-1 %.2e, weights %.2e\n", es, eP, ew);
+  EXPECT_LT(es, 1e-8);
+  EXPECT_LT(eP, 1e-9);
+  EXPECT_LT(ew, 1e-15);
+}
+
 }  // namespace
 
 int main() {
@@ -208,6 +262,7 @@ int main() {
   test_huge_noise_is_the_prior();
   test_weights_are_predictive_likelihoods();
   test_unexplained_measurement_one_satellite();
+  test_reset_four_satellites();
   EXPECT_TRUE(g_eigen_asserts == 0);
   TEST_MAIN_END()
 }

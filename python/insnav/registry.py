@@ -99,7 +99,7 @@ FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
     FilterSpec("upf", ("tight",), {"tight": (20,)}, {"tight": _PARTICLE}, PARTICLE_OPTIONS, paper="seed 004",
                summary="unscented particle filter (a weighted bank of UKFs)"),
     FilterSpec("pf", ("tight",), {"tight": (20,)}, {"tight": _PARTICLE}, PARTICLE_OPTIONS, paper="seed 004",
-               summary="bootstrap particle filter"),
+               summary="marginalised particle filter (marginalize=False: bootstrap PF)"),
     FilterSpec("spp", ("gnss",), {"gnss": ()}, {"gnss": _SPP}, SPP_OPTIONS,
                paper="RTKLIB pntpos; Kuusniemi 2005 RAIM",
                summary="GNSS-only weighted least-squares single point positioning, every system, RAIM FDE; "
