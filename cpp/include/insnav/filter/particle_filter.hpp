@@ -47,7 +47,7 @@
 //               (the spread of s is in P_s), no noise floor by default: the
 //               kernel alone keeps the gyro random constants from collapsing,
 //               and a floor only adds yaw random walk (seed004-uav: whole-run
-//               yaw RMS 10-16 arcmin without it, 25-30 with a floor of 1,
+//               yaw RMS 6-16 arcmin without it, 25-30 with a floor of 1,
 //               80-400 with 3);
 //   divergence  counted as below with S in place of R; with `reseed` the
 //               linear means of position, velocity and clock are set to the
