@@ -2,8 +2,10 @@
 short closed-loop runs of the UKF / fading UKF / UPF / PF on the seed004-uav
 preset (truncated to keep the test fast): the UPF (a weighted bank of UKFs)
 equals the UKF when its particles cannot differ and is not worse than it when
-they do; the PF with more particles beats fewer; the PF's divergence is
-reported; a non-Gaussian (uniform heading) start is where the UPF wins."""
+they do; the bootstrap PF with more particles beats fewer, and its divergence is
+reported; the marginalised PF (the default) stays within metres after the
+outage where the bootstrap PF does not; a non-Gaussian (uniform heading)
+start is where the UPF wins."""
 from __future__ import annotations
 
 import dataclasses
@@ -85,9 +87,15 @@ def test_deterministic_for_a_seed(ds):
     np.testing.assert_array_equal(a.ess, b.ess)
     assert not np.array_equal(a.lat_deg, c.lat_deg)
     with pytest.warns(RuntimeWarning, match="no particle"):  # 20 particles in 20 dimensions lose the cloud
-        p = run_tight_particle(ds, RunConfig(filter="pf", init_seed=2, output_decimation=20), particles=20, seed=4)
-        q = run_tight_particle(ds, RunConfig(filter="pf", init_seed=2, output_decimation=20), particles=20, seed=4)
+        p = run_tight_particle(ds, RunConfig(filter="pf", init_seed=2, output_decimation=20), particles=20, seed=4,
+                               marginalize=False)
+        q = run_tight_particle(ds, RunConfig(filter="pf", init_seed=2, output_decimation=20), particles=20, seed=4,
+                               marginalize=False)
     np.testing.assert_array_equal(p.lat_deg, q.lat_deg)
+    m = [run_tight_particle(ds, RunConfig(filter="pf", init_seed=2, output_decimation=20), particles=20, seed=s)
+         for s in (4, 4, 5)]
+    np.testing.assert_array_equal(m[0].lat_deg, m[1].lat_deg)
+    assert not np.array_equal(m[0].lat_deg, m[2].lat_deg)
 
 
 def test_short_runs_accuracy(ds):
@@ -95,7 +103,8 @@ def test_short_runs_accuracy(ds):
     UKF 1.2/1.5/2.5 m, UPF(20) 1.3/1.6/2.5 m, fading UKF 3.7/3.8/8.7 m, PF(20)
     46/32/32 m with 27 divergent epochs, PF(1000) 2.4/1.8/4.4 m).  The UPF may
     not lose to its own UKF by more than 20 %; the bootstrap PF with 1000
-    particles must beat 20 particles by 5x and stay within 3x the UKF."""
+    particles must beat 20 particles by 5x and stay within 3x the UKF.  (The
+    marginalised PF, insnav's default: test_marginalised_pf_after_outage.)"""
     cfg = RunConfig(init_seed=1, output_decimation=10)
     ukf = run_tight_particle(ds, dataclasses.replace(cfg, filter="fukf"), fading=False)
     fukf = run_tight_particle(ds, dataclasses.replace(cfg, filter="fukf"))
@@ -110,7 +119,8 @@ def test_short_runs_accuracy(ds):
     pf_err = {}
     for n in (20, 1000):
         with pytest.warns(RuntimeWarning) if n == 20 else _no_warning():
-            pf = run_tight_particle(ds, dataclasses.replace(cfg, filter="pf"), particles=n, seed=1, reseed=False)
+            pf = run_tight_particle(ds, dataclasses.replace(cfg, filter="pf"), particles=n, seed=1, reseed=False,
+                                    marginalize=False)
         pf_err[n] = np.linalg.norm(_err(pf, ds)[0])
         assert pf.summary["resamples"] > 0
     assert pf_err[1000] < 0.2 * pf_err[20], pf_err
@@ -136,21 +146,55 @@ class _no_warning:
 
 
 def test_pf_divergence_is_reported_and_reset(ds):
-    """A PF whose cloud cannot hold the solution (no noise floor, no
+    """A bootstrap PF whose cloud cannot hold the solution (no noise floor, no
     progressive correction, 10 particles) is reported, not silent: without
     sensor resetting 228 divergent epochs and 1047/1186 m N/E RMS (120-240 s);
     with it (the default, particle_filter.hpp) every divergent epoch resets the
     cloud from the measurement: 29 divergent epochs, 16/16 m N/E RMS."""
     cfg = RunConfig(filter="pf", init_seed=1, output_decimation=20)
     with pytest.warns(RuntimeWarning, match="no particle explained"):
-        plain = run_tight_particle(ds, cfg, particles=10, seed=1, noise_floor=0.0, temper_stages=1, reseed=False)
+        plain = run_tight_particle(ds, cfg, particles=10, seed=1, noise_floor=0.0, temper_stages=1, reseed=False,
+                                   marginalize=False)
     assert plain.summary["divergences"] > 100 and plain.summary["reseeds"] == 0
     with pytest.warns(RuntimeWarning, match="reset from the measurement"):
-        reset = run_tight_particle(ds, cfg, particles=10, seed=1, noise_floor=0.0, temper_stages=1)
+        reset = run_tight_particle(ds, cfg, particles=10, seed=1, noise_floor=0.0, temper_stages=1,
+                                   marginalize=False)
     s = reset.summary
     assert 0 < s["reseeds"] == s["divergences"] < plain.summary["divergences"] / 4
     p_plain, p_reset = _err(plain, ds)[0], _err(reset, ds)[0]
     assert np.all(p_reset[:2] < p_plain[:2] / 20) and np.all(p_reset < 60.0), (p_plain, p_reset)
+
+
+def test_marginalised_pf_after_outage(ds_full):
+    """GPS off 600-800 s, run to 880 s, 300 particles, the error after 805 s
+    (measured: 3-D position max 12.8 m, velocity 0.085 m/s, whole-run yaw RMS
+    10 arcmin, no divergent epoch).  The marginalised PF (the default,
+    particle_filter.hpp) stays within the bounds the bootstrap PF (557 m,
+    2.75 m/s, 179 arcmin, 81 divergent epochs) and its sensor-resetting
+    variant (19 m, 0.19 m/s, 179 arcmin) miss; its output sigma includes the
+    shared Kalman covariance of the linear substate."""
+    d = _truncate(ds_full, 880.0)
+    cfg = RunConfig(filter="pf", init_seed=1, output_decimation=20)
+
+    def after(sol):
+        e = errors(sol, d.truth)
+        a = e["t"] >= 805.0
+        return (np.linalg.norm(e["pos_n_m"][a], axis=1).max(), np.linalg.norm(e["vel_n_mps"][a], axis=1).max(),
+                np.sqrt(np.mean(e["att_deg"][:, 2] ** 2)) * 60.0)
+
+    mpf = run_tight_particle(d, cfg, particles=300, seed=1)
+    assert mpf.summary["marginalize"] and mpf.summary["divergences"] == 0
+    with pytest.warns(RuntimeWarning, match="no particle"):
+        boot = run_tight_particle(d, cfg, particles=300, seed=1, marginalize=False, reseed=False)
+    pos, vel, yaw = after(mpf)
+    b_pos, b_vel, b_yaw = after(boot)
+    assert pos < 25.0 and vel < 0.15 and yaw < 30.0, (pos, vel, yaw)
+    assert b_pos > 4 * 25.0 and b_vel > 0.15 and b_yaw > 30.0, (b_pos, b_vel, b_yaw)
+    # the reported sigma covers the error (the bootstrap cloud's alone would not hold P_s)
+    e = errors(mpf, d.truth)
+    late = (e["t"] > 820.0)
+    sig = np.array([np.interp(e["t"][late], mpf.t, mpf.sigma_pos_n_m[:, i]) for i in range(3)]).T
+    assert np.sqrt(np.mean((e["pos_n_m"][late] / sig) ** 2)) < 2.0
 
 
 def test_upf_wins_from_an_unknown_heading(ds):

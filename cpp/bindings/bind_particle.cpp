@@ -32,7 +32,7 @@ struct ParticleSetup {
 ParticleSetup particle_setup(const py::dict& d) {
   reject_unknown(d, {"particles", "seed", "resample_threshold", "roughening", "rk4_step", "fading", "rho", "beta",
                   "eta_max", "alpha", "fading_memory", "sample", "kernel_h2", "init_yaw_halfwidth", "temper_stages",
-                  "divergence_chi2", "noise_floor", "reseed"},
+                  "divergence_chi2", "noise_floor", "reseed", "marginalize"},
                  "particle config");
   ParticleSetup s;
   s.pp.particles = static_cast<int>(num(d, "particles", s.pp.particles));
@@ -64,6 +64,7 @@ ParticleSetup particle_setup(const py::dict& d) {
   s.pp.divergence_chi2 = num(d, "divergence_chi2", s.pp.divergence_chi2);
   s.pp.noise_floor = num(d, "noise_floor", s.pp.noise_floor);
   s.pp.reseed = d.contains("reseed") ? py::cast<bool>(d["reseed"]) : s.pp.reseed;
+  s.pp.marginalize = d.contains("marginalize") ? py::cast<bool>(d["marginalize"]) : s.pp.marginalize;
   if (!(s.pp.noise_floor >= 0.0)) throw py::value_error("noise_floor must be >= 0");
   if (!(s.opt.kernel_h2 >= 0.0 && s.opt.kernel_h2 < 1.0)) throw py::value_error("kernel_h2 must be in [0, 1)");
   if (!(s.opt.init_yaw_halfwidth >= 0.0 && s.opt.init_yaw_halfwidth <= M_PI))

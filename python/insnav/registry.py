@@ -69,7 +69,7 @@ _PARTICLE = "insnav.filters.particle:run_tight_particle"
 #: options of the seed 004 filters (``insnav.filters.particle.run_tight_particle``)
 PARTICLE_OPTIONS = ("particles", "seed", "fading", "rho", "beta", "eta_max", "alpha", "fading_memory",
                     "resample_threshold", "roughening", "rk4_step_s", "kernel_h2", "init_yaw_uniform_deg",
-                    "temper_stages", "divergence_chi2", "noise_floor", "reseed", "gyro_markov_sigma_dph",
+                    "temper_stages", "divergence_chi2", "noise_floor", "reseed", "marginalize", "gyro_markov_sigma_dph",
                     "gyro_markov_tau_s", "acc_markov_tau_s", "inputs", "elevation_mask_deg", "max_sats",
                     "clock_psd", "init_sigma_clock", "clock0")
 _SPP = "insnav.filters.spp:run_spp"
@@ -99,7 +99,7 @@ FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
     FilterSpec("upf", ("tight",), {"tight": (20,)}, {"tight": _PARTICLE}, PARTICLE_OPTIONS, paper="seed 004",
                summary="unscented particle filter (a weighted bank of UKFs)"),
     FilterSpec("pf", ("tight",), {"tight": (20,)}, {"tight": _PARTICLE}, PARTICLE_OPTIONS, paper="seed 004",
-               summary="bootstrap particle filter"),
+               summary="marginalised particle filter (marginalize=False: bootstrap PF)"),
     FilterSpec("spp", ("gnss",), {"gnss": ()}, {"gnss": _SPP}, SPP_OPTIONS,
                paper="RTKLIB pntpos; Kuusniemi 2005 RAIM",
                summary="GNSS-only weighted least-squares single point positioning, every system, RAIM FDE; "

@@ -11,7 +11,9 @@ Filters (``filter=``)
 ---------------------
 ``"upf"``   improved UPF: a UKF per particle builds the proposal, with adaptive fading
             (``fading=False`` gives the plain UPF)
-``"pf"``    bootstrap particle filter (systematic resampling + regularisation)
+``"pf"``    particle filter: by default marginalised (attitude and gyro biases sampled,
+            position/velocity/clock/accelerometer bias in one shared Kalman covariance);
+            ``marginalize=False`` gives the bootstrap PF (systematic resampling + regularisation)
 ``"fukf"``  fading UKF; ``fading=False`` is the plain UKF baseline of seed 004
 
 State layout (Layout20, NED, error = computed - true; the paper is ENU):
@@ -98,7 +100,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                        resample_threshold: float = 0.5,
                        roughening: float | None = None, rk4_step_s: float = 1.0, kernel_h2: float = 0.1,
                        init_yaw_uniform_deg: float = 0.0, temper_stages: int = 8, divergence_chi2: float = 25.0,
-                       noise_floor: float = 3.0, reseed: bool = True,
+                       noise_floor: float | None = None, reseed: bool = True, marginalize: bool = True,
                        gyro_markov_sigma_dph: float = 1.0, gyro_markov_tau_s: float = 3600.0,
                        acc_markov_tau_s: float = 3600.0, inputs: TightInputs | None = None,
                        elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
@@ -140,13 +142,19 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         +-this [deg] (a non-Gaussian prior: heading unknown), instead of Gaussian draws.
     temper_stages : PF: at most this many progressive-correction stages per update (1: none).
     noise_floor : PF: every state random-walks by this x its initial sigma per sqrt(hour), which
-        keeps the cloud from collapsing in the states without process noise.
+        keeps the bootstrap cloud from collapsing in the states without process noise (default 3 for
+        ``marginalize=False``, 0 for the marginalised PF, whose floor only degrades its yaw).
     divergence_chi2 : PF: an epoch where no particle explains the measurement within this
         chi-square per row is counted in ``summary["divergences"]`` and warned about.
     reseed : PF: sensor resetting at such an epoch (default on; ``particle_filter.hpp``): the
         position, velocity and clock of every particle are drawn again from the measurement
         given the particle's other states (needs >= 8 rows: 4 satellites with pseudorange and
         rate), counted in ``summary["reseeds"]``.  False: the plain bootstrap PF.
+    marginalize : PF: the marginalised (Rao-Blackwellised) particle filter, insnav's default
+        (Schön, Gustafsson, Nordlund 2005; ``particle_filter.hpp``): position, velocity, clock
+        and accelerometer bias are a linear substate with one Kalman covariance shared by all
+        particles, and only attitude and gyro biases are sampled.  False: the bootstrap PF
+        (with ``reseed``: the sensor-resetting variant; without: the plain bootstrap PF).
     rk4_step_s : multi-interval RK4 step of the error state [s] (0: every engine interval).
     gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s : the Markov blocks (:func:`layout20_model`).
     inputs, elevation_mask_deg, max_sats, clock_psd, init_sigma_clock, clock0 : as :func:`insnav.filters.tight.run_tight`.
@@ -167,6 +175,8 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         alpha = DEFAULT_ALPHA
     if roughening is None:
         roughening = 0.2 if filt == "pf" else 0.0
+    if noise_floor is None:
+        noise_floor = 0.0 if marginalize else 3.0
     t, dth, dv = imu_arrays(dataset)
     inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
     if np.any(np.asarray(inputs.system) != "G"):
@@ -195,7 +205,8 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                 resample_threshold=float(resample_threshold), roughening=float(roughening),
                 rk4_step=float(rk4_step_s), kernel_h2=float(kernel_h2),
                 init_yaw_halfwidth=float(init_yaw_uniform_deg) * DEG, temper_stages=int(temper_stages),
-                divergence_chi2=float(divergence_chi2), noise_floor=float(noise_floor), reseed=bool(reseed))
+                divergence_chi2=float(divergence_chi2), noise_floor=float(noise_floor), reseed=bool(reseed),
+                marginalize=bool(marginalize))
     out = _core.run_tight_particle(filt, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                                    np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0,
                                    np.zeros(12), np.asarray(clock0, float), model, core_cfg, pcfg)
@@ -220,7 +231,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                      fading=bool(fading), seed=int(seed), updates=int(out["updates"]),
                      rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), cholesky_repairs=int(out["cholesky_repairs"]),
                      resamples=int(out["resamples"]), divergences=int(out["divergences"]),
-                     reseeds=int(out["reseeds"]),
+                     reseeds=int(out["reseeds"]), marginalize=bool(marginalize) if filt == "pf" else False,
                      gnss_records=int(E), sat_rows=int(len(inputs.prn)),
                      clock0=tuple(clock0), clock_psd=(float(qb), float(qd)), run_seconds=float(out["run_seconds"])),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 18:20],

@@ -1,10 +1,67 @@
-// insnav/filter/particle_filter.hpp -- the bootstrap particle filter that
-// seed 004 (Shao et al. 2013) compares against, and the settings and
-// diagnostics every particle filter shares (random.hpp: random numbers;
-// resampling.hpp: weights, resampling, roughening; macro_step.hpp: the
-// multi-interval RK4 step).
+// insnav/filter/particle_filter.hpp -- insnav's particle filter (by default
+// marginalised), the bootstrap particle filter that seed 004 (Shao et al.
+// 2013) compares against, and the settings and diagnostics every particle
+// filter shares (random.hpp: random numbers; resampling.hpp: weights,
+// resampling, roughening; macro_step.hpp: the multi-interval RK4 step).
 //
-// Bootstrap PF (Gordon, Salmond, Smith 1993; seed 004 ref. [2]):
+// Marginalised PF (`marginalize`, the default; Rao-Blackwellised PF: Schön,
+// Gustafsson, Nordlund 2005, "Marginalized particle filters for mixed
+// linear/nonlinear state-space models", IEEE Trans. Signal Processing
+// 53(7):2279-2289, sec. III-IV and Algorithm 1; Doucet, Godsill, Andrieu 2000,
+// Statistics and Computing 10:197-208, sec. IV):
+//   split       x = (r, s): the particles sample only r -- attitude, gyro
+//               random constant and gyro Markov (9 states), the states through
+//               which the error model is nonlinear (large attitude errors) and
+//               which the GNSS rows see only through the dynamics -- while s --
+//               position, velocity, clock bias and drift, accelerometer bias
+//               (11 states), whose dynamics given r are linear and which the
+//               pseudoranges and rates observe -- is carried by a Kalman mean
+//               s_i per particle and ONE covariance P_s shared by all particles.
+//               The covariance is shared because its Riccati recursion uses
+//               Phi_ss and H_s of the linear model at the INS (linearised at the
+//               estimate, not at each particle): exact when they do not depend
+//               on r (Schön et al. 2005, sec. IV-B), an EKF-type approximation
+//               here.  One gain and one factorisation per epoch, no
+//               per-particle covariance: that is what separates this filter
+//               from the UPF (upf.hpp), whose particles each carry a UKF;
+//   propagate   every particle (r_i, s_i) through the exact nonlinear model
+//               (RK4; for s_i this is the conditional mean, the dynamics being
+//               affine in s given r), P_s = Phi_ss P_s Phi_ss^T; the cycle's
+//               process noise w ~ N(0, Q) is split in (r, s) order with one
+//               lower Cholesky factor [L_rr 0; L_sr L_ss]: w_r = L_rr xi is
+//               drawn per particle (the bootstrap proposal for r), s_i moves by
+//               E[w_s | w_r] = L_sr xi, and P_s += L_ss L_ss^T (Schön et al.
+//               2005, sec. III, correlated process noise);
+//   update      S = H_s P_s H_s^T + R, K = P_s H_s^T S^-1 (LLT solves; one of
+//               each per epoch), for every particle the innovation
+//               g_i = residual - h(r_i, s_i) (nonlinear h), the weight
+//               log w_i += -1/2 |L_S^-1 g_i|^2 (the predictive likelihood
+//               p(z | r_i, past z): Schön et al. 2005 eq. (25a)), the mean
+//               s_i += K g_i; P_s by the Joseph form.  No progressive correction
+//               (the predictive likelihood is as wide as P_s: N_eff stays high).
+//               What is left out: the information the sampled r transition
+//               carries about s (Schön et al. 2005 eq. (24), the "second
+//               measurement update"), since s enters the attitude dynamics only
+//               through the transport rate (v / R, ~1e-7 rad/s per m/s);
+//   resampling  systematic when N_eff < threshold * N, roughening of r only
+//               (the spread of s is in P_s), no noise floor by default: the
+//               kernel alone keeps the gyro random constants from collapsing,
+//               and a floor only adds yaw random walk (seed004-uav: whole-run
+//               yaw RMS 6-16 arcmin without it, 25-30 with a floor of 1,
+//               80-400 with 3);
+//   divergence  counted as below with S in place of R; with `reseed` the
+//               linear means of position, velocity and clock are set to the
+//               measurement's solution given r_i (no draw) and P_s's block to
+//               its covariance A^-1 (below).
+// Why (seed004-uav, N = 1000; docs/results/seed004.md): the bootstrap PF's
+// position and clock are near-static states for which resampling is a random
+// walk (genetic drift) that the 15-m pseudoranges cannot undo -- after the
+// outage its vertical stayed tens of metres off for 100 s and more -- and with
+// the 0.1-m/s rates the weights select velocity, not attitude: its yaw error
+// grew to 1-50 deg.  The marginalised PF averages the pseudoranges in P_s and
+// its weights, no longer dominated by the rates, select the attitude.
+//
+// Bootstrap PF (`marginalize = false`; Gordon, Salmond, Smith 1993; seed 004 ref. [2]):
 //   propagate   every particle through the exact nonlinear error model
 //               (error_model_nonlinear.hpp, RK4) and add process noise drawn
 //               from the accumulated Q of the cycle (Q_c = Phi Q_c Phi^T + Q_d);
@@ -30,8 +87,9 @@
 //               what is left).  The particles move towards the likelihood's peak
 //               instead of all weight landing on the one nearest it;
 //   noise floor every state also random-walks by noise_floor x its initial
-//               sigma per sqrt(hour): resampling shrinks the spread of the states
-//               without process noise (random-constant gyro biases) every epoch,
+//               sigma per sqrt(hour) (3 for this variant; the Python default):
+//               resampling shrinks the spread of the states without process
+//               noise (random-constant gyro biases) every epoch,
 //               and a roughening kernel shaped by the cloud shrinks with it; the
 //               floor keeps the cloud wide enough to follow the truth (seed004-uav,
 //               N = 1000: without it the cloud collapsed to one point within
@@ -85,6 +143,7 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -129,9 +188,11 @@ struct ParticleParams {
   double rk4_step = 1.0;            // [s] multi-interval RK4 step; 0: every engine interval
   int max_particles = 4096;         // upper bound checked at construction
   int temper_stages = 8;            // PF: progressive-correction stages at most (1: plain bootstrap update)
-  double noise_floor = 3.0;         // PF: every state random-walks by this x its initial sigma per sqrt(h)
+  double noise_floor = 0.0;         // PF: every state random-walks by this x its initial sigma per sqrt(h)
+                                    //     (the bootstrap variants need ~3, the marginalised PF none: header)
   double divergence_chi2 = 25.0;    // PF: divergence when no particle explains z within this chi^2 per row
   bool reseed = true;               // PF: sensor resetting at a divergent epoch (header)
+  bool marginalize = true;          // PF: Rao-Blackwellised linear substate (header); false: bootstrap
 };
 
 /// Innovation gate / NIS of the estimate: gamma = residual - h(x),
@@ -201,6 +262,7 @@ class ParticleFilter {
     ll_.assign(n, 0.0);
     tw_.assign(n, 0.0);
     idx_.assign(n, 0);
+    innov_.assign(n, RowVec::Zero(kMaxMeasRows));
   }
 
   void set_trace(ParticleTrace* t) { trace_ = t; }
@@ -221,6 +283,7 @@ class ParticleFilter {
       rng.fill_normal(xi);
       xs_[i] = n == 1 ? Vec::Zero() : Vec(S * xi);
     }
+    if (prm_.marginalize) condition_initial(P0);
     for (int i = 0; i < n; ++i) {
       logw_[i] = 0.0;
       w_[i] = 1.0 / n;
@@ -247,9 +310,14 @@ class ParticleFilter {
     if (steps_ == 0) return;
     steps_ = 0;
     // process noise of the cycle, plus the floor on every state (header)
-    psd_cholesky_lower<kN>(Q_cycle_, sqrtQ_);
     const Vec floor = (prm_.noise_floor * std::sqrt(cycle_dt_ / 3600.0)) * sigma0_;
     cycle_dt_ = 0.0;
+    if (prm_.marginalize) {
+      sample_process_noise_marginalised(floor);
+      estimate();
+      return;
+    }
+    psd_cholesky_lower<kN>(Q_cycle_, sqrtQ_);
     const int n = prm_.particles;
     INSNAV_PARALLEL_FOR
     for (int i = 0; i < n; ++i) {
@@ -273,6 +341,7 @@ class ParticleFilter {
       repairs_ += res.cholesky_repairs;
       return res;
     }
+    if (prm_.marginalize) return update_marginalised(meas, res);
     const int m = res.rows;
     const int n = prm_.particles;
     double left = 1.0;
@@ -307,6 +376,10 @@ class ParticleFilter {
   }
   int divergences() const { return divergences_; }
   int reseeds() const { return reseeds_; }
+  /// Marginalised PF: the covariance shared by every particle's linear
+  /// substate (order: linear_index()); zero for the bootstrap PF.
+  const Eigen::Matrix<double, 11, 11>& linear_covariance() const { return Ps_; }
+  static constexpr std::array<int, 11> linear_index() { return kLin; }
 
   const Vec& x() const { return x_; }
   const Cov& P() const { return P_; }
@@ -325,6 +398,42 @@ class ParticleFilter {
  private:
   using Dyn = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxMeasRows, kMaxMeasRows>;
   using RowVec = typename LinearMeasurement<L>::RowVec;
+  using Self = ParticleFilter;
+
+  // Marginalised PF: the linear substate s (position, velocity, clock bias and
+  // drift -- the states the GNSS rows observe, in the order of reseed_from --
+  // then the accelerometer bias) and the nonlinear substate r (attitude, gyro
+  // biases): every other state.  kPerm = (r, s).
+  static constexpr int kS = 11;
+  static constexpr int kR = kN - kS;
+  using SVec = Eigen::Matrix<double, kS, 1>;
+  using SMat = Eigen::Matrix<double, kS, kS>;
+  using RMat = Eigen::Matrix<double, kR, kR>;
+  using HsMat = Eigen::Matrix<double, Eigen::Dynamic, kS, 0, kMaxMeasRows, kS>;
+  using KMat = Eigen::Matrix<double, kS, Eigen::Dynamic, 0, kS, kMaxMeasRows>;
+  static constexpr std::array<int, kS> kLin = {L::kPos,         L::kPos + 1,      L::kPos + 2,     L::kVel,
+                                               L::kVel + 1,     L::kVel + 2,      L::kClockBias,   L::kClockDrift,
+                                               L::kAccBias,     L::kAccBias + 1,  L::kAccBias + 2};
+  static constexpr bool is_linear(int k) {
+    for (int a = 0; a < kS; ++a)
+      if (kLin[a] == k) return true;
+    return false;
+  }
+  static constexpr std::array<int, kR> nonlinear_index() {
+    std::array<int, kR> r{};
+    int j = 0;
+    for (int k = 0; k < kN; ++k)
+      if (!is_linear(k)) r[j++] = k;
+    return r;
+  }
+  static constexpr std::array<int, kR> kNonlin = nonlinear_index();
+  static constexpr std::array<int, kN> permutation() {
+    std::array<int, kN> p{};
+    for (int b = 0; b < kR; ++b) p[b] = kNonlin[b];
+    for (int a = 0; a < kS; ++a) p[kR + a] = kLin[a];
+    return p;
+  }
+  static constexpr std::array<int, kN> kPerm = permutation();
 
   void run_step() {
     macro_.prepare();
@@ -335,10 +444,160 @@ class ParticleFilter {
     work_.noalias() = macro_.phi * Q_cycle_;
     Q_cycle_.noalias() = work_ * macro_.phi.transpose();
     Q_cycle_ += macro_.qd;
+    if (prm_.marginalize) {  // P_s = Phi_ss P_s Phi_ss^T (the particle carries r exactly)
+      SMat phi_ss;
+      for (int a = 0; a < kS; ++a)
+        for (int b = 0; b < kS; ++b) phi_ss(a, b) = macro_.phi(kLin[a], kLin[b]);
+      Ps_work_.noalias() = phi_ss * Ps_;
+      Ps_.noalias() = Ps_work_ * phi_ss.transpose();
+    }
     ++steps_;
   }
 
-  void estimate() { weighted_mean_cov<L>(xs_, w_.data(), prm_.particles, x_, P_); }
+  /// x^ and P^ of the cloud; the marginalised PF adds the shared covariance
+  /// of the linear substate (law of total covariance).
+  void estimate() {
+    weighted_mean_cov<L>(xs_, w_.data(), prm_.particles, x_, P_);
+    if (prm_.marginalize)
+      for (int a = 0; a < kS; ++a)
+        for (int b = 0; b < kS; ++b) P_(kLin[a], kLin[b]) += Ps_(a, b);
+  }
+
+  // --- marginalised (Rao-Blackwellised) PF: header ---------------------------------
+
+  /// Initial linear substate given each particle's nonlinear draw:
+  /// s_i = P_sr P_rr^-1 r_i, P_s = P_ss - P_sr P_rr^-1 P_rs (a Gaussian P0
+  /// conditioned on r; P_rr singular: s_i = 0, P_s = P_ss).
+  void condition_initial(const Cov& P0) {
+    RMat Prr;
+    Eigen::Matrix<double, kS, kR> Psr;
+    for (int a = 0; a < kR; ++a)
+      for (int b = 0; b < kR; ++b) Prr(a, b) = P0(kNonlin[a], kNonlin[b]);
+    for (int a = 0; a < kS; ++a) {
+      for (int b = 0; b < kR; ++b) Psr(a, b) = P0(kLin[a], kNonlin[b]);
+      for (int b = 0; b < kS; ++b) Ps_(a, b) = P0(kLin[a], kLin[b]);
+    }
+    Eigen::Matrix<double, kS, kR> G = Eigen::Matrix<double, kS, kR>::Zero();
+    const Eigen::LLT<RMat> llt(Prr);
+    if (llt.info() == Eigen::Success && Psr.cwiseAbs().maxCoeff() > 0.0) {
+      G = llt.solve(Psr.transpose()).transpose();
+      Ps_ -= G * Psr.transpose();
+    }
+    symmetrize<kS>(Ps_);
+    const int n = prm_.particles;
+    for (int i = 0; i < n; ++i) {
+      Eigen::Matrix<double, kR, 1> r;
+      for (int b = 0; b < kR; ++b) r[b] = xs_[i][kNonlin[b]];
+      const SVec s = G * r;
+      for (int a = 0; a < kS; ++a) xs_[i][kLin[a]] = s[a];
+    }
+  }
+
+  /// The cycle's process noise w ~ N(0, Q) split into the nonlinear part w_r,
+  /// drawn per particle, and the linear part: its conditional mean
+  /// E[w_s | w_r] = Q_sr Q_rr^-1 w_r moves the particle's linear mean, its
+  /// conditional covariance Q_ss - Q_sr Q_rr^-1 Q_rs (and the noise floor of
+  /// the linear states) goes into the shared P_s.  With the lower Cholesky
+  /// factor of Q in (r, s) order, [L_rr 0; L_sr L_ss], both come from one
+  /// factorisation: w_r = L_rr xi, E[w_s | w_r] = L_sr xi, cov = L_ss L_ss^T
+  /// (Schön, Gustafsson, Nordlund 2005, sec. III, correlated noise).
+  void sample_process_noise_marginalised(const Vec& floor) {
+    for (int a = 0; a < kN; ++a)
+      for (int b = 0; b < kN; ++b) work_(a, b) = Q_cycle_(kPerm[a], kPerm[b]);
+    psd_cholesky_lower<kN>(work_, sqrtQ_);
+    const SMat Lss = sqrtQ_.template bottomRightCorner<kS, kS>();
+    Ps_.noalias() += Lss * Lss.transpose();
+    for (int a = 0; a < kS; ++a) Ps_(a, a) += floor[kLin[a]] * floor[kLin[a]];
+    const int n = prm_.particles;
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) {
+      Rng rng;
+      rng.seed(prm_.seed, cycle_, i, kRngProcess);
+      Eigen::Matrix<double, kR, 1> xi, eta;
+      rng.fill_normal(xi);
+      rng.fill_normal(eta);
+      const Vec w = sqrtQ_.template leftCols<kR>() * xi;  // (r, s) order
+      Vec& x = xs_[i];
+      for (int a = 0; a < kN; ++a) x[kPerm[a]] += w[a];
+      for (int b = 0; b < kR; ++b) x[kNonlin[b]] += floor[kNonlin[b]] * eta[b];
+      if (!x.allFinite()) x = x_;
+    }
+  }
+
+  /// Measurement update of the marginalised PF (header): one Kalman gain for
+  /// every particle's linear mean, weights by the predictive likelihood
+  /// N(z; h(x_i), H_s P_s H_s^T + R).
+  template <class Meas>
+  UpdateResult update_marginalised(const Meas& meas, UpdateResult res) {
+    const LinearMeasurement<L>& lin = meas.linear();
+    const int m = res.rows;
+    const int n = prm_.particles;
+    HsMat Hs(m, kS);
+    for (int a = 0; a < kS; ++a) Hs.col(a) = lin.H.col(kLin[a]);
+    const KMat PHt = Ps_ * Hs.transpose();
+    Dyn S = Hs * PHt;
+    S += lin.R;
+    lltS_.compute(S);
+    if (lltS_.info() != Eigen::Success) {
+      ++repairs_;
+      res.cholesky_repairs = 1;
+      return res;
+    }
+    const KMat K = lltS_.solve(PHt.transpose()).transpose();  // P_s H_s^T S^-1
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) {
+      innov_[i] = lin.residual - meas.predicted_residual(xs_[i]);
+      RowVec e = innov_[i];
+      lltS_.matrixL().solveInPlace(e);
+      const double ll = -0.5 * e.squaredNorm();
+      ll_[i] = std::isfinite(ll) ? ll : -std::numeric_limits<double>::infinity();
+    }
+    double best = -std::numeric_limits<double>::infinity();
+    for (int i = 0; i < n; ++i) best = std::max(best, ll_[i]);
+    if (!(-2.0 * best <= prm_.divergence_chi2 * m)) {
+      ++divergences_;
+      if (prm_.reseed && reseed_from(lin)) {
+        res.applied = true;
+        return res;
+      }
+    }
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) {
+      const SVec ds = K * innov_[i];
+      for (int a = 0; a < kS; ++a) xs_[i][kLin[a]] += ds[a];
+      logw_[i] += ll_[i];
+    }
+    // Joseph form: P_s = (I - K H_s) P_s (I - K H_s)^T + K R K^T
+    const SMat IKH = SMat::Identity() - K * Hs;
+    Ps_work_.noalias() = IKH * Ps_;
+    Ps_.noalias() = Ps_work_ * IKH.transpose();
+    Ps_.noalias() += K * lin.R * K.transpose();
+    symmetrize<kS>(Ps_);
+    finish_update(false);
+    res.applied = true;
+    return res;
+  }
+
+  /// Roughening of the marginalised PF: only the nonlinear substate (the
+  /// spread of the linear one is in P_s); the kernel is k chol of the
+  /// unweighted cloud covariance of r (as roughen() does for the whole state).
+  void roughen_nonlinear(const Cov& P_cloud, std::uint64_t stream) {
+    RMat Prr, Lrr;
+    for (int a = 0; a < kR; ++a)
+      for (int b = 0; b < kR; ++b) Prr(a, b) = P_cloud(kNonlin[a], kNonlin[b]);
+    psd_cholesky_lower<kR>(Prr, Lrr);
+    Lrr *= prm_.roughening;
+    const int n = prm_.particles;
+    INSNAV_PARALLEL_FOR
+    for (int i = 0; i < n; ++i) {
+      Rng r;
+      r.seed(prm_.seed, stream, i, kRngJitter);
+      Eigen::Matrix<double, kR, 1> xi;
+      r.fill_normal(xi);
+      const Eigen::Matrix<double, kR, 1> d = Lrr * xi;
+      for (int b = 0; b < kR; ++b) xs_[i][kNonlin[b]] += d[b];
+    }
+  }
 
   /// Sensor resetting (header): position, velocity and clock of every
   /// particle drawn from the linearised measurement given its other states.
@@ -367,9 +626,15 @@ class ParticleFilter {
       Rng rng;
       rng.seed(prm_.seed, cycle_, i, kRngReseed);
       rng.fill_normal(xi);
-      s += lltA.matrixU().solve(xi);  // cov (L L')^-1 = A^-1
+      if (!prm_.marginalize) s += lltA.matrixU().solve(xi);  // cov (L L')^-1 = A^-1
       for (int j = 0; j < kS; ++j) x[kIdx[j]] = s[j];
       if (!x.allFinite()) x = x_;
+    }
+    if (prm_.marginalize) {  // the linear means keep the solution, P_s its covariance A^-1
+      const Eigen::Matrix<double, kS, kS> Ainv = lltA.solve(Eigen::Matrix<double, kS, kS>::Identity());
+      Ps_.template topLeftCorner<kS, kS>() = Ainv;
+      Ps_.template topRightCorner<kS, Self::kS - kS>().setZero();
+      Ps_.template bottomLeftCorner<Self::kS - kS, kS>().setZero();
     }
     for (int i = 0; i < n; ++i) {
       logw_[i] = 0.0;
@@ -416,7 +681,9 @@ class ParticleFilter {
       systematic_resample(w_.data(), n, rng.uniform(), idx_.data());
       for (int j = 0; j < n; ++j) xs_tmp_[j] = xs_[idx_[j]];
       xs_.swap(xs_tmp_);
-      if (prm_.roughening > 0.0)
+      if (prm_.roughening > 0.0 && prm_.marginalize)
+        roughen_nonlinear(Pcloud_, cycle_ * 16 + stage_rng_);
+      else if (prm_.roughening > 0.0)
         repairs_ += roughen<L>(n, Pcloud_, prm_.roughening, prm_.seed, cycle_ * 16 + stage_rng_,
                                [&](int i) -> Vec& { return xs_[i]; });
       for (int i = 0; i < n; ++i) {
@@ -445,6 +712,9 @@ class ParticleFilter {
   Cov P_ = Cov::Identity();
   Cov Q_cycle_ = Cov::Zero(), sqrtQ_ = Cov::Zero(), work_ = Cov::Zero();
   Eigen::LLT<Dyn> lltR_{Dyn(0, 0)};
+  Eigen::LLT<Dyn> lltS_{Dyn(0, 0)};
+  SMat Ps_ = SMat::Zero(), Ps_work_ = SMat::Zero();
+  std::vector<RowVec> innov_;
   ParticleTrace* trace_ = nullptr;
   std::uint64_t cycle_ = 0;
   int steps_ = 0;
