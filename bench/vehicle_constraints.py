@@ -76,7 +76,8 @@ def track_errors(e: dict, truth, a: float, b: float) -> dict:
         ``along_end`` / ``cross_end``: |along| / |cross| at the last row at or before b [m];
         ``hz_start`` / ``hz_end``: horizontal error at the first row at or after a and the last at or
         before b [m]; ``hz_gnss_window``: max horizontal error over a window of the outage's length
-        with GNSS, ending 50 s before the outage [m].
+        with GNSS, ending 50 s before the outage [m]; ``t_max``: time of the max horizontal error
+        inside [a, b] from a [s].
     """
     t = e["t"]
     psi = np.interp(t, truth.t, np.unwrap(np.deg2rad(np.asarray(truth.yaw_deg))))
@@ -89,7 +90,8 @@ def track_errors(e: dict, truth, a: float, b: float) -> dict:
     window = (t >= a - 50.0 - (b - a)) & (t <= a - 50.0)
     return dict(along_max=float(np.abs(along[inside]).max()), cross_max=float(np.abs(cross[inside]).max()),
                 along_end=float(abs(along[i1])), cross_end=float(abs(cross[i1])),
-                hz_start=float(hz[i0]), hz_end=float(hz[i1]), hz_gnss_window=float(hz[window].max()))
+                hz_start=float(hz[i0]), hz_end=float(hz[i1]), hz_gnss_window=float(hz[window].max()),
+                t_max=float(t[inside][np.argmax(hz[inside])] - a))
 
 
 def one(args):
@@ -155,8 +157,8 @@ def analysis_section(R: dict) -> list[str]:
              "max horizontal error (the ratio of the targets); |along| / |cross| at the outage's last row [m]; "
              "median over runs.", "",
              "| preset | method | max along [m] | / EKF's along | max cross [m] | / EKF's cross | along / EKF's max "
-             "| cross / EKF's max | end: along / cross [m] | ratio (table above) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "| cross / EKF's max | end: along / cross [m] | ratio (table above) | max at [s from start] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for p in PRESETS:
         for m in DECOMPOSE:
             lines.append(
@@ -167,7 +169,8 @@ def analysis_section(R: dict) -> list[str]:
                 f"{med(p, lambda r: tr(r, m, 'along_max') / r[base]['max_in']):.3f} | "
                 f"{med(p, lambda r: tr(r, m, 'cross_max') / r[base]['max_in']):.3f} | "
                 f"{med(p, lambda r: tr(r, m, 'along_end')):.2f} / {med(p, lambda r: tr(r, m, 'cross_end')):.2f} | "
-                f"{med(p, lambda r: r[m]['max_in'] / r[base]['max_in']):.3f} |")
+                f"{med(p, lambda r: r[m]['max_in'] / r[base]['max_in']):.3f} | "
+                f"{med(p, lambda r: tr(r, m, 't_max')):.1f} |")
     lines += [""]
     for p in PRESETS:
         tgt = TARGETS.get(("EKF + NHC", p))
