@@ -35,45 +35,43 @@ inline void sin_cos(double a, double& s, double& c) {
 #endif
 }
 
-/// quat_from_euler (math/rotation.hpp) of the output rows, one sincos per angle.
-inline Quat row_quat_from_euler(double roll, double pitch, double yaw) {
-  double sr, cr, sp, cp, sy, cy;
-  sin_cos(0.5 * roll, sr, cr);
-  sin_cos(0.5 * pitch, sp, cp);
-  sin_cos(0.5 * yaw, sy, cy);
-  return Quat(cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-              cr * cp * sy - sr * sp * cy);
-}
-
-/// euler_from_dcm (math/rotation.hpp) of a unit quaternion's DCM with sqrt for
-/// hypot (the elements are at most 1: no overflow to guard against).
-inline Vec3 row_euler_from_quat(const Quat& q) {
-  const Mat3 C = q.toRotationMatrix();
-  const double cp = std::sqrt(C(2, 1) * C(2, 1) + C(2, 2) * C(2, 2));
-  const double pitch = std::atan2(-C(2, 0), cp);
-  const bool locked = !(cp > 1e-12);
-  const double roll = locked ? 0.0 : std::atan2(C(2, 1), C(2, 2));
-  const double sr = locked ? 0.0 : C(2, 1) / cp, cr = locked ? 1.0 : C(2, 2) / cp;
-  const double yaw = std::atan2(sr * C(0, 2) - cr * C(0, 1), cr * C(1, 1) - sr * C(1, 2));
-  return Vec3(roll, pitch, yaw);
-}
-
 /// quat_from_euler for the attitude corrections of smooth_rows: half angles
 /// below 1e-2 rad by their Taylor series (remainder below 1e-19), else exact.
 inline Quat small_quat_from_euler(double roll, double pitch, double yaw) {
   const double hr = 0.5 * roll, hp = 0.5 * pitch, hy = 0.5 * yaw;
   if (!(std::max({std::abs(hr), std::abs(hp), std::abs(hy)}) < 1e-2)) return quat_from_euler(Vec3(roll, pitch, yaw));
+  // reciprocal constants: multiplications, not divisions, in the row loop (the same to rounding)
   const auto sin_s = [](double h) {
     const double h2 = h * h;
-    return h * (1.0 - h2 / 6.0 * (1.0 - h2 / 20.0 * (1.0 - h2 / 42.0)));
+    return h * (1.0 - h2 * (1.0 / 6.0) * (1.0 - h2 * (1.0 / 20.0) * (1.0 - h2 * (1.0 / 42.0))));
   };
   const auto cos_s = [](double h) {
     const double h2 = h * h;
-    return 1.0 - h2 / 2.0 * (1.0 - h2 / 12.0 * (1.0 - h2 / 30.0 * (1.0 - h2 / 56.0)));
+    return 1.0 - h2 * 0.5 * (1.0 - h2 * (1.0 / 12.0) * (1.0 - h2 * (1.0 / 30.0) * (1.0 - h2 * (1.0 / 56.0))));
   };
   const double sr = sin_s(hr), cr = cos_s(hr), sp = sin_s(hp), cp = cos_s(hp), sy = sin_s(hy), cy = cos_s(hy);
   return Quat(cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
               cr * cp * sy - sr * sp * cy);
+}
+
+/// atan(x) for |x| <= 0.02 by its series to x^11 (remainder below x^13 / 13 < 1e-23).
+inline double small_atan(double x) {
+  const double x2 = x * x;
+  return x * (1.0 - x2 * (1.0 / 3.0 - x2 * (1.0 / 5.0 - x2 * (1.0 / 7.0 - x2 * (1.0 / 9.0 - x2 * (1.0 / 11.0))))));
+}
+
+/// atan2(a, b) as the angle `ref` (sin_ref, cos_ref at hand) plus the small
+/// difference atan2(a cos_ref - b sin_ref, b cos_ref + a sin_ref) by its
+/// series, wrapped to (-pi, pi]: the same angle without a full atan2 when the
+/// corrected angle is within 0.02 rad of the row's own; else atan2(a, b).
+inline double atan2_near(double a, double b, double ref, double sin_ref, double cos_ref) {
+  constexpr double kPi = 3.14159265358979323846;
+  const double num = a * cos_ref - b * sin_ref, den = b * cos_ref + a * sin_ref;
+  if (!(den > 0.0) || !(std::abs(num) <= 0.02 * den)) return std::atan2(a, b);
+  double r = ref + small_atan(num / den);
+  if (r > kPi) r -= 2.0 * kPi;
+  if (r <= -kPi) r += 2.0 * kPi;
+  return r;
 }
 
 /// Run the mechanization over n samples.  The loop also checks each sample
@@ -167,7 +165,7 @@ void bind_ins(py::module_& m) {
       "smooth_rows",
       [](const DArray& t, py::array lat_deg, py::array lon_deg, py::array h_m, py::array v_n, py::array roll_deg,
          py::array pitch_deg, py::array yaw_deg, const DArray& te, const DArray& s, const DArray& s_end,
-         const DArray& sig_e, DArray sig_out, const std::optional<py::array>& extra) {
+         const DArray& sig_e, py::array sig_out, const std::optional<py::array>& extra) {
         const py::ssize_t n = t.size(), E = te.size();
         // columns: 9 navigation errors (position, velocity, attitude), then q additive ones (clock, ISBs)
         const py::ssize_t c = s.ndim() == 2 ? s.shape(1) : 0, q = c - 9;
@@ -176,7 +174,7 @@ void bind_ins(py::module_& m) {
         for (const py::array* a : {&lat_deg, &lon_deg, &h_m, &roll_deg, &pitch_deg, &yaw_deg})
           require_inplace(*a, n, -1, "rows");
         require_inplace(v_n, n, 3, "v_n");
-        require_shape(sig_out, n, c, "sigma");
+        require_inplace(sig_out, n, c, "sigma_out");
         require_shape(te, E, -1, "te");
         for (const DArray* a : {&s, &s_end, &sig_e}) require_shape(*a, E, c, "epochs");
         if (q > 0 && !extra) throw py::value_error("smooth_rows: extra (n, " + std::to_string(q) + ") rows needed");
@@ -189,9 +187,9 @@ void bind_ins(py::module_& m) {
              p = pitch_deg.mutable_unchecked<double, 1>(), y = yaw_deg.mutable_unchecked<double, 1>();
         auto v = v_n.mutable_unchecked<double, 2>();
         auto px = ex.mutable_unchecked<double, 2>();
-        double* so = sig_out.mutable_data();
+        auto so = sig_out.mutable_unchecked<double, 2>();
         const double *pt = t.data(), *pe = te.data(), *ps = s.data(), *pse = s_end.data(), *pg = sig_e.data();
-        constexpr double kDeg = 3.14159265358979323846 / 180.0;
+        constexpr double kDeg = 3.14159265358979323846 / 180.0, kRad2Deg = 180.0 / 3.14159265358979323846;
         // rows are independent: blocks on up to 2 threads (the rows' own
         // trigonometry dominates: ~0.25 us a row), each finding its first epoch
         // interval by bisection (rows are sorted in time)
@@ -201,34 +199,73 @@ void bind_ins(py::module_& m) {
             const py::ssize_t idx = std::lower_bound(pe, pe + E, pt[i_begin]) - pe;  // pe[idx] >= t
             k = std::min<py::ssize_t>(std::max<py::ssize_t>(idx - 1, 0), E - 2);
           }
-          double x[9];
-          for (py::ssize_t i = i_begin; i < i_end; ++i) {
-            const double ti = pt[i];
-            while (k + 2 < E && pe[k + 1] < ti) ++k;  // ti in (te[k], te[k+1]]
-            const double t0 = pe[k], t1 = pe[k + 1];
-            const double w = t1 > t0 ? std::min(1.0, std::max(0.0, (ti - t0) / (t1 - t0))) : 1.0;
-            // a row at t_{k+1} (or after the last epoch) is written after that epoch's feedback:
-            // s_{k+1}; before it, s_{k+1} + x_fed
-            const double* end = ti > t1 - 1e-9 ? ps + c * (k + 1) : pse + c * (k + 1);
-            const double* beg = ps + c * k;
-            for (py::ssize_t j = 0; j < c; ++j) so[c * i + j] = (1.0 - w) * pg[c * k + j] + w * pg[c * (k + 1) + j];
-            for (int j = 0; j < 9; ++j) x[j] = (1.0 - w) * beg[j] + w * end[j];
-            for (py::ssize_t j = 0; j < q; ++j) px(i, j) -= (1.0 - w) * beg[9 + j] + w * end[9 + j];
-            const double lat = la(i) * kDeg;
-            double s_lat, c_lat;
-            sin_cos(lat, s_lat, c_lat);
-            const double w_lat = 1.0 - wgs84::kE2 * s_lat * s_lat;  // wgs84::radii with the sine at hand
-            const double R_N = wgs84::kA / std::sqrt(w_lat), R_M = R_N * (1.0 - wgs84::kE2) / w_lat;
-            la(i) = (lat - x[0] / (R_M + h(i))) / kDeg;
-            lo(i) -= x[1] / ((R_N + h(i)) * c_lat) / kDeg;
-            h(i) += x[2];
-            for (int j = 0; j < 3; ++j) v(i, j) -= x[3 + j];
-            const Quat qr = small_quat_from_euler(x[6], x[7], x[8]) *
-                            row_quat_from_euler(r(i) * kDeg, p(i) * kDeg, y(i) * kDeg);
-            const Vec3 rpy = row_euler_from_quat(qr.normalized());
-            r(i) = rpy[0] / kDeg;
-            p(i) = rpy[1] / kDeg;
-            y(i) = rpy[2] / kDeg;
+          // blocks of kBlock rows in three passes (interpolation; position and velocity; attitude):
+          // the short passes let the rows' sqrt / division chains overlap (the same arithmetic per row)
+          constexpr py::ssize_t kBlock = 32;
+          double X[kBlock][9];
+          for (py::ssize_t i0 = i_begin; i0 < i_end; i0 += kBlock) {
+            const py::ssize_t m = std::min(kBlock, i_end - i0);
+            for (py::ssize_t b = 0; b < m; ++b) {
+              const py::ssize_t i = i0 + b;
+              double* x = X[b];
+              const double ti = pt[i];
+              while (k + 2 < E && pe[k + 1] < ti) ++k;  // ti in (te[k], te[k+1]]
+              const double t0 = pe[k], t1 = pe[k + 1];
+              const double w = t1 > t0 ? std::min(1.0, std::max(0.0, (ti - t0) / (t1 - t0))) : 1.0;
+              // a row at t_{k+1} (or after the last epoch) is written after that epoch's feedback:
+              // s_{k+1}; before it, s_{k+1} + x_fed
+              const double* end = ti > t1 - 1e-9 ? ps + c * (k + 1) : pse + c * (k + 1);
+              const double* beg = ps + c * k;
+              for (py::ssize_t j = 0; j < c; ++j) so(i, j) = (1.0 - w) * pg[c * k + j] + w * pg[c * (k + 1) + j];
+              for (int j = 0; j < 9; ++j) x[j] = (1.0 - w) * beg[j] + w * end[j];
+              for (py::ssize_t j = 0; j < q; ++j) px(i, j) -= (1.0 - w) * beg[9 + j] + w * end[9 + j];
+            }
+            for (py::ssize_t b = 0; b < m; ++b) {
+              const py::ssize_t i = i0 + b;
+              const double* x = X[b];
+              const double lat = la(i) * kDeg;
+              double s_lat, c_lat;
+              sin_cos(lat, s_lat, c_lat);
+              const double w_lat = 1.0 - wgs84::kE2 * s_lat * s_lat;  // wgs84::radii with the sine at hand
+              const double R_N = wgs84::kA / std::sqrt(w_lat), R_M = R_N * (1.0 - wgs84::kE2) / w_lat;
+              la(i) = (lat - x[0] / (R_M + h(i))) * kRad2Deg;
+              lo(i) -= x[1] / ((R_N + h(i)) * c_lat) * kRad2Deg;
+              h(i) += x[2];
+              for (int j = 0; j < 3; ++j) v(i, j) -= x[3 + j];
+            }
+            for (py::ssize_t b = 0; b < m; ++b) {
+              const py::ssize_t i = i0 + b;
+              const double* x = X[b];
+              // C_nb <- dcm(psi) C_nb through quaternions (quat_from_euler, euler_from_dcm of
+              // math/rotation.hpp); the new angles as the row's plus a small difference
+              // (atan2_near: no full atan2 when the correction is below 0.02 rad)
+              const double roll = r(i) * kDeg, pitch = p(i) * kDeg, yaw = y(i) * kDeg;
+              double shr, chr, shp, chp, shy, chy;  // half angles
+              sin_cos(0.5 * roll, shr, chr);
+              sin_cos(0.5 * pitch, shp, chp);
+              sin_cos(0.5 * yaw, shy, chy);
+              const Quat q_row(chr * chp * chy + shr * shp * shy, shr * chp * chy - chr * shp * shy,
+                               chr * shp * chy + shr * chp * shy, chr * chp * shy - shr * shp * chy);
+              Quat qc = small_quat_from_euler(x[6], x[7], x[8]) * q_row;
+              qc.coeffs() *= 1.0 / qc.coeffs().norm();  // normalized with one division
+              const Mat3 C = qc.toRotationMatrix();
+              const double cp = std::sqrt(C(2, 1) * C(2, 1) + C(2, 2) * C(2, 2));
+              const bool locked = !(cp > 1e-12);
+              const double inv_cp = locked ? 0.0 : 1.0 / cp;
+              const double sr = locked ? 0.0 : C(2, 1) * inv_cp, cr = locked ? 1.0 : C(2, 2) * inv_cp;
+              // sin and cos of the row's angles from the half angles' (double-angle formulas)
+              const auto full = [](double sh, double ch, double& sf, double& cf) {
+                sf = 2.0 * sh * ch;
+                cf = (ch - sh) * (ch + sh);
+              };
+              double sin_r, cos_r, sin_p, cos_p, sin_y, cos_y;
+              full(shr, chr, sin_r, cos_r);
+              full(shp, chp, sin_p, cos_p);
+              full(shy, chy, sin_y, cos_y);
+              p(i) = atan2_near(-C(2, 0), cp, pitch, sin_p, cos_p) * kRad2Deg;
+              r(i) = locked ? 0.0 : atan2_near(C(2, 1), C(2, 2), roll, sin_r, cos_r) * kRad2Deg;
+              y(i) = atan2_near(sr * C(0, 2) - cr * C(0, 1), cr * C(1, 1) - sr * C(1, 2), yaw, sin_y, cos_y) * kRad2Deg;
+            }
           }
         };
         {
@@ -249,7 +286,7 @@ void bind_ins(py::module_& m) {
       "interpolated between the epochs' smoothed errors s (after) and s_end (before feedback), corrects "
       "position [m], velocity [m/s] and attitude [rad] (s columns 0-8) as the engines' feedback does, and "
       "subtracts from `extra` (n, c - 9) the errors of s columns 9.. (receiver clock, inter-system biases); "
-      "sigmas (c columns) interpolated.");
+      "sigmas (c columns, in the units of sigma_e) interpolated into sigma_out (n, c; written in place, any strides).");
   m.def(
       "standstill_statistic",
       [](const DArray& t, const DArray& dtheta_b, const DArray& dv_b, double t0, int window, double sigma_f_mps2,

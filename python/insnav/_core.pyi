@@ -81,7 +81,7 @@ def smooth_rows(
     s: npt.NDArray[np.float64],  # (E, c) smoothed errors after feedback, c >= 9
     s_end: npt.NDArray[np.float64],  # (E, c) before feedback
     sigma_e: npt.NDArray[np.float64],  # (E, c)
-    sigma_out: npt.NDArray[np.float64],  # (n, c) written
+    sigma_out: npt.NDArray[np.float64],  # (n, c) written in place (writeable float64, any strides), units of sigma_e
     extra: npt.NDArray[np.float64] | None = None,  # (n, c - 9) additive rows (clock, ISBs), in place
 ) -> None: ...
 def run_tight(

@@ -102,6 +102,6 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     if cfg.smooth:
         from .smoothing import smoothed_rows
 
-        smoothed_rows(sol, out, cfg.filter)
+        smoothed_rows(sol, out, cfg.filter, sigma=sig)
     raise_if_nonfinite(sol, cfg.filter)
     return sol

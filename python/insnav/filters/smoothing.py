@@ -33,7 +33,7 @@ _CLOCK, _ISB = [15, 16], [17, 18, 19]
 _ROWS = ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "yaw_deg")
 
 
-def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
+def smoothed_rows(sol, out: dict, filter_name: str = "ekf", sigma=None) -> None:
     """Replace the navigation rows and sigmas of ``sol`` by the smoothed ones (in place).
 
     Parameters
@@ -45,6 +45,10 @@ def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
         The engine's result with the ``smooth_*`` arrays (``smoother_run.hpp``).
     filter_name : str
         For the summary's method.
+    sigma : ndarray (n, >= 9), optional
+        The array whose columns 0-8 ``sol``'s position [m], velocity [m/s] and
+        attitude [deg] sigmas are views of (the loose engine's): the smoothed
+        sigmas are then written into it in place (no new (n, 9) array).
     """
     te = np.asarray(out["smooth_t"], float)
     cols = list(range(9))
@@ -58,26 +62,32 @@ def smoothed_rows(sol, out: dict, filter_name: str = "ekf") -> None:
     d = np.ascontiguousarray(np.asarray(out["smooth_d"], float)[:, cols])  # position, velocity, attitude (clock, ISB)
     d_end = np.ascontiguousarray(np.asarray(out["smooth_d_end"], float)[:, cols])  # before the epoch's feedback
     sig = np.ascontiguousarray(np.asarray(out["smooth_sigma"], float)[:, cols])
+    sig[:, 6:9] *= RAD2DEG  # the rows' attitude sigma unit
     # corrected in place (any strides, e.g. the columns of the engine's llh): no copy of float64 rows
     rows = [np.require(getattr(sol, k), float, ["W"]) for k in _ROWS]
     ex = np.column_stack(extra).astype(float) if extra else None
     # rows after the last epoch: no data after them, the smoothed rows and sigmas are the filtered ones
     t = np.asarray(sol.t, float)
     n_in = int(np.searchsorted(t, te[-1] + 1e-9, side="right"))
-    sg = np.empty((len(t), len(cols)))
+    in_place = sigma is not None and ex is None
+    if in_place:  # the views sol.sigma_* see the smoothed sigmas; rows from n_in on keep the filtered ones
+        sg = sigma[:, :9]
+    else:
+        sg = np.empty((len(t), len(cols)))
     _core.smooth_rows(t[:n_in], *(r[:n_in] for r in rows), te, d, d_end, sig, sg[:n_in],
                       None if ex is None else ex[:n_in])
-    sg[n_in:, :9] = np.column_stack([sol.sigma_pos_n_m[n_in:], sol.sigma_vel_n_mps[n_in:],
-                                     np.asarray(sol.sigma_att_deg[n_in:]) / RAD2DEG])
-    if ex is not None:
-        sg[n_in:, 9:11] = sol.sigma_clock[n_in:]
-        if ex.shape[1] > 2:
-            sg[n_in:, 11:14] = sol.sigma_isb[n_in:]
     for k, r in zip(_ROWS, rows):
         setattr(sol, k, r)
-    sol.sigma_pos_n_m = sg[:, 0:3]
-    sol.sigma_vel_n_mps = sg[:, 3:6]
-    sol.sigma_att_deg = sg[:, 6:9] * RAD2DEG
+    if not in_place:
+        sg[n_in:, :9] = np.column_stack([sol.sigma_pos_n_m[n_in:], sol.sigma_vel_n_mps[n_in:],
+                                         sol.sigma_att_deg[n_in:]])
+        if ex is not None:
+            sg[n_in:, 9:11] = sol.sigma_clock[n_in:]
+            if ex.shape[1] > 2:
+                sg[n_in:, 11:14] = sol.sigma_isb[n_in:]
+        sol.sigma_pos_n_m = sg[:, 0:3]
+        sol.sigma_vel_n_mps = sg[:, 3:6]
+        sol.sigma_att_deg = sg[:, 6:9]
     if ex is not None:
         sol.clock_bias_m, sol.clock_drift_mps, sol.sigma_clock = ex[:, 0], ex[:, 1], sg[:, 9:11]
         if ex.shape[1] > 2:

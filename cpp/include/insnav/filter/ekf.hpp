@@ -31,7 +31,7 @@ class Ekf {
     P_ = 0.5 * (P0 + P0.transpose());
   }
   void begin_cycle() {
-    if (track_) Phi_cycle_.setIdentity();
+    if (track_) reset_cycle_transition();
   }
   void end_cycle() {}
 
@@ -39,9 +39,18 @@ class Ekf {
   /// Phi) for the RTS smoother (rts_smoother.hpp: C = P_k Phi'); off by default.
   void track_cycle_transition(bool on) {
     track_ = on;
-    Phi_cycle_.setIdentity();
+    reset_cycle_transition();
   }
-  const Cov& cycle_transition() const { return Phi_cycle_; }
+  /// The cycle's transition (assembled from its block form on layouts with
+  /// diagonal sensor-error dynamics: once per epoch, not per interval).
+  const Cov& cycle_transition() const {
+    if constexpr (kDiagonalAuxDynamics<L>) {
+      Phi_cycle_.template topRows<kNav>() = T_cycle_;
+      Phi_cycle_.template bottomRows<kAux>().setZero();
+      Phi_cycle_.template bottomRightCorner<kAux, kAux>().diagonal() = d_cycle_;
+    }
+    return Phi_cycle_;
+  }
 
   void propagate(const InsInterval& iv) {
     if constexpr (kDiagonalAuxDynamics<L>) {
@@ -54,10 +63,14 @@ class Ekf {
       const Eigen::Matrix<double, N, 1> x_nav = phi_.U.lazyProduct(x_);
       x_.template tail<K>().array() *= phi_.d.array();
       x_.template head<N>() = x_nav;
-      if (track_) {  // Phi_cycle <- [U; 0 diag(d)] Phi_cycle
-        work_.template topRows<N>().noalias() = phi_.U * Phi_cycle_;
-        work_.template bottomRows<K>() = phi_.d.asDiagonal() * Phi_cycle_.template bottomRows<K>();
-        Phi_cycle_ = work_;
+      if (track_) {
+        // Phi_cycle <- [U_nn U_na; 0 diag(d)] Phi_cycle keeps the form [T; 0 diag(D)]
+        // (a product of such matrices): T <- U_nn T + [0, U_na diag(D)], D <- d D,
+        // 9 x 9 x n + 9 x K products instead of 9 x n x n (the zero block is not multiplied)
+        T_work_.noalias() = phi_.U.template leftCols<N>() * T_cycle_;
+        T_work_.template rightCols<K>().noalias() += phi_.U.template rightCols<K>() * d_cycle_.asDiagonal();
+        T_cycle_ = T_work_;
+        d_cycle_.array() *= phi_.d.array();
       }
     } else {
       const Cov F = linear_F<L>(iv.mid, model_);
@@ -91,8 +104,18 @@ class Ekf {
   Cov P_ = Cov::Identity();
   Cov F_ = Cov::Zero(), Qc_ = Cov::Zero();  // propagation workspace
   NavAuxTransition<L> phi_;
+  static constexpr int kNav = NavAuxTransition<L>::kNav, kAux = NavAuxTransition<L>::kAux;
+  void reset_cycle_transition() {
+    Phi_cycle_.setIdentity();
+    T_cycle_.setZero();
+    T_cycle_.template leftCols<kNav>().setIdentity();
+    d_cycle_.setOnes();
+  }
   bool track_ = false;
-  Cov Phi_cycle_ = Cov::Identity(), work_ = Cov::Zero();
+  mutable Cov Phi_cycle_ = Cov::Identity();  // the whole product (assembled in cycle_transition on the block path)
+  // block path: Phi_cycle = [T_cycle; 0 diag(d_cycle)] (nav rows, sensor-error diagonal)
+  Eigen::Matrix<double, kNav, L::kSize> T_cycle_ = Eigen::Matrix<double, kNav, L::kSize>::Zero(), T_work_;
+  Eigen::Matrix<double, kAux, 1> d_cycle_ = Eigen::Matrix<double, kAux, 1>::Ones();
   int repairs_ = 0;
 };
 
