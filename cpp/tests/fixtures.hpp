@@ -4,6 +4,7 @@
 
 #include <vector>
 
+#include "insnav/filter/layout20.hpp"
 #include "insnav/filter/types.hpp"
 #include "insnav/ins/mechanization.hpp"
 #include "insnav/math/rotation.hpp"
@@ -50,6 +51,17 @@ inline std::vector<InsInterval> make_intervals(int n_intervals, int per = 2, dou
   }
   if (end_state) *end_state = ins.state();
   return out;
+}
+
+/// Initial covariance of the seed 004 20-state filters (Layout20): position 5/5/8 m,
+/// velocity 0.2 m/s, attitude 0.5/0.5/1 deg, accelerometer 10 mg, gyro constant
+/// 10 deg/h and Markov 1 deg/h, clock 30 m and 1 m/s (1 sigma).
+inline StateCov<Layout20> seed004_typical_P0() {
+  constexpr double deg = M_PI / 180.0;
+  StateVec<Layout20> s;
+  s << 5, 5, 8, 0.2, 0.2, 0.2, 0.5 * deg, 0.5 * deg, 1.0 * deg, 1e-2, 1e-2, 1e-2, 10 * deg / 3600,
+      10 * deg / 3600, 10 * deg / 3600, 1 * deg / 3600, 1 * deg / 3600, 1 * deg / 3600, 30.0, 1.0;
+  return s.cwiseAbs2().asDiagonal();
 }
 
 }  // namespace insnav

@@ -17,6 +17,7 @@
 
 #include "insnav/filter/layout20.hpp"
 #include "insnav/filter/particle_filter.hpp"
+#include "fixtures.hpp"
 #include "test_util.hpp"
 
 using namespace insnav;
@@ -56,13 +57,6 @@ LinearMeas one_satellite(double sigma_pr_m, double sigma_prr_mps, double pr_res_
   return m;
 }
 
-Cov prior() {
-  Vec s;
-  s << 5, 5, 8, 0.2, 0.2, 0.2, 0.5 * kDeg, 0.5 * kDeg, 1.0 * kDeg, 1e-2, 1e-2, 1e-2, 10 * kDeg / 3600,
-      10 * kDeg / 3600, 10 * kDeg / 3600, 1 * kDeg / 3600, 1 * kDeg / 3600, 1 * kDeg / 3600, 30.0, 1.0;
-  return s.cwiseAbs2().asDiagonal();
-}
-
 ImuErrorModel model() {
   ImuErrorModel m;
   m.gyro_arw = Vec3::Constant(4.85e-6);
@@ -98,7 +92,7 @@ void test_single_particle_is_kalman() {
   constexpr auto idx = ParticleFilter<L>::linear_index();
   ParticleParams pp;
   pp.particles = 1;
-  const Cov P0 = prior();
+  const Cov P0 = seed004_typical_P0();
   const LinearMeas m = one_satellite(15.0, 0.1, 12.0, 0.3);
   ParticleFilter<L> pf(model(), pp);
   pf.initialize(P0);
@@ -127,7 +121,7 @@ void test_huge_noise_is_the_prior() {
   ParticleParams pp;
   pp.particles = 50;
   pp.resample_threshold = 0.0;
-  const Cov P0 = prior();
+  const Cov P0 = seed004_typical_P0();
   ParticleFilter<L> pf(model(), pp);
   pf.initialize(P0);
   const std::vector<Vec> before = pf.particle_states();
@@ -153,7 +147,7 @@ void test_weights_are_predictive_likelihoods() {
   pp.particles = n;
   pp.seed = 3;
   pp.resample_threshold = 0.0;  // no resampling: the weights stay visible
-  Cov P0 = prior();
+  Cov P0 = seed004_typical_P0();
   P0.block<3, 3>(L::kAtt, L::kAtt) *= 400.0;  // 10-20 deg of attitude: the particles' h(x_i) differ by metres
   const LinearMeas m = one_satellite(15.0, 0.1, 12.0, 0.3);
   ParticleFilter<L> pf(model(), pp);
@@ -191,7 +185,7 @@ void test_unexplained_measurement_one_satellite() {
   // Kalman update is applied all the same
   ParticleParams pp;
   pp.particles = 5;
-  const Cov P0 = prior();
+  const Cov P0 = seed004_typical_P0();
   const LinearMeas m = one_satellite(15.0, 0.1, 5000.0, 30.0);
   ParticleFilter<L> pf(model(), pp);
   pf.initialize(P0);
@@ -227,7 +221,7 @@ void test_reset_four_satellites() {
   ParticleParams pp;
   pp.particles = 8;
   ParticleFilter<L> pf(model(), pp);
-  pf.initialize(prior());
+  pf.initialize(seed004_typical_P0());
   const std::vector<Vec> before = pf.particle_states();
   Eigen::internal::set_is_malloc_allowed(false);
   const UpdateResult r = pf.update(m, 0.0);

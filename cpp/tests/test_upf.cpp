@@ -54,13 +54,6 @@ std::vector<SatObservation> make_sats(double lat, double lon, const Vec3& r_rx_e
 }
 
 
-StateCov<L> typical_P0() {
-  StateVec<L> s;
-  s << 5, 5, 8, 0.2, 0.2, 0.2, 0.5 * kDeg, 0.5 * kDeg, 1.0 * kDeg, 1e-2, 1e-2, 1e-2, 10 * kDeg / 3600,
-      10 * kDeg / 3600, 10 * kDeg / 3600, 1 * kDeg / 3600, 1 * kDeg / 3600, 1 * kDeg / 3600, 30.0, 1.0;
-  return s.cwiseAbs2().asDiagonal();
-}
-
 ImuErrorModel model20() {
   ImuErrorModel m;
   m.gyro_arw = Vec3::Constant(4.85e-6);
@@ -114,7 +107,7 @@ void test_fukf_equals_ukf() {
   const ImuErrorModel m = model20();
   Ukf<L> ukf(m);
   FadingUkf<L> fu(m, UtParams{}, FadingParams<kN>{}, 0.0);
-  const StateCov<L> P0 = typical_P0();
+  const StateCov<L> P0 = seed004_typical_P0();
   ukf.initialize(P0);
   fu.initialize(P0);
   std::mt19937 rng(3);
@@ -153,7 +146,7 @@ void test_upf_one_particle(bool fading) {
   opt.sample = false;
   FadingUkf<L> fu(m, UtParams{}, fp, pp.rk4_step);
   Upf<L> upf(m, UtParams{}, pp, fp, opt);
-  const StateCov<L> P0 = typical_P0();
+  const StateCov<L> P0 = seed004_typical_P0();
   fu.initialize(P0);
   upf.initialize(P0);
   std::mt19937 rng(4);
@@ -319,7 +312,7 @@ StateVec<L> run_stationary(const char* name, Make make, bool check_malloc, doubl
   out.sigma = o_sig.data();
   out.status = o_st.data();
   if (check_malloc) Eigen::internal::set_is_malloc_allowed(false);
-  engine->run(init, typical_P0(), ImuCorrection{}, 0.0, 0.0, n, t.data(), dth.data(), dv.data(),
+  engine->run(init, seed004_typical_P0(), ImuCorrection{}, 0.0, 0.0, n, t.data(), dth.data(), dv.data(),
               static_cast<std::int64_t>(ep.size()), ep.data(), obs.data(), out);
   if (check_malloc) Eigen::internal::set_is_malloc_allowed(true);
   const std::int64_t last = out.n_out - 1;
