@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <vector>
 
 #include "insnav/core.hpp"
 #include "insnav/filter/layout.hpp"
@@ -177,8 +178,73 @@ void test_odo_scale_model() {
 
 }  // namespace
 
+// The second-order term of the NHC / odometer rows (add_second_order_noise):
+// the covariance of z' M_i z / 2 it adds to R, with M_i from the mixed second
+// difference d^2 r_i / (d psi d dv) of the exact residual predicted_residual,
+// under a correlated covariance of [dv; psi] (so the signs of the cross-row
+// and dv-psi terms matter).  Catches a wrong axis, sign or odometer gain.
+void test_second_order_noise() {
+  using L = Layout21;
+  VehicleConstraintConfig cfg;
+  cfg.C_bv = dcm_from_euler(Vec3(0.01, 0.02, -0.03));
+  const NavState s = moving_state();
+  const Vec3 w(0.01, -0.02, 0.15);
+  StateCov<L> P = StateCov<L>::Zero();
+  Eigen::Matrix<double, 6, 6> A;  // a fixed, well-conditioned correlated covariance of [dv; psi]
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) A(i, j) = std::sin(1.0 + 3.0 * i + 7.0 * j);
+  Eigen::Matrix<double, 6, 6> Pz = A * A.transpose() + 6.0 * Eigen::Matrix<double, 6, 6>::Identity();
+  Pz.topRows<3>() *= 0.5;  // dv [m/s]
+  Pz.leftCols<3>() *= 0.5;
+  Pz.bottomRows<3>() *= 0.01;  // psi [rad]
+  Pz.rightCols<3>() *= 0.01;
+  P.block<3, 3>(L::kVel, L::kVel) = Pz.topLeftCorner<3, 3>();
+  P.block<3, 3>(L::kVel, L::kAtt) = Pz.topRightCorner<3, 3>();
+  P.block<3, 3>(L::kAtt, L::kVel) = Pz.bottomLeftCorner<3, 3>();
+  P.block<3, 3>(L::kAtt, L::kAtt) = Pz.bottomRightCorner<3, 3>();
+  P.diagonal().tail<L::kSize - 9>().setConstant(1e-6);  // the other states do not enter
+  for (const bool odo : {false, true}) {
+    VehicleVelocityMeasurement<L> v;
+    v.set(s, w, cfg, true, odo ? 14.8 : std::numeric_limits<double>::quiet_NaN(), odo ? 0.02 : 0.0);
+    const auto R0 = v.linear().R;
+    const int m = v.linear().rows();
+    // numerical M_i (6 x 6 over [dv; psi]) from the mixed differences of the exact residual
+    std::vector<Eigen::Matrix<double, 6, 6>> M(m, Eigen::Matrix<double, 6, 6>::Zero());
+    const double hv = 1e-3, ha = 1e-5;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        auto r = [&](double sa, double sb) {
+          StateVec<L> dx = StateVec<L>::Zero();
+          dx[L::kAtt + a] = sa * ha;
+          dx[L::kVel + b] = sb * hv;
+          return v.predicted_residual(dx);
+        };
+        const auto d = (r(1, 1) - r(1, -1) - r(-1, 1) + r(-1, -1)) / (4.0 * ha * hv);
+        for (int i = 0; i < m; ++i) {
+          M[i](3 + a, b) = d[i];
+          M[i](b, 3 + a) = d[i];
+        }
+      }
+    v.add_second_order_noise(P);
+    const auto dR = v.linear().R - R0;
+    double worst = 0.0, scale = 0.0;
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j < m; ++j) {
+        const double want = 0.5 * (M[i] * Pz * M[j] * Pz).trace();
+        worst = std::max(worst, std::abs(dR(i, j) - want));
+        scale = std::max(scale, std::abs(want));
+      }
+    std::printf("second-order noise (%s): max |dR - tr(M_i P M_j P)/2| %.2e of %.2e\n",
+                odo ? "NHC + odometer" : "NHC", worst, scale);
+    EXPECT_TRUE(scale > 1e-6);
+    EXPECT_LT(worst, 1e-4 * scale);
+    EXPECT_LT((dR - dR.transpose()).cwiseAbs().maxCoeff(), 1e-15);
+  }
+}
+
 int main() {
   test_jacobians();
+  test_second_order_noise();
   test_odo_scale_row();
   test_odo_scale_model();
   test_residuals();

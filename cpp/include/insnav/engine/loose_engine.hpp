@@ -172,6 +172,9 @@ class LooseEngine {
       // the odometer reading against (1 + s^) times the INS forward speed (meas/vehicle.hpp; s^ = 0
       // for a layout without the scale-factor state)
       vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
+      // an update linear in H: R + the covariance of the attitude x velocity error product it leaves out
+      // (second-order filter, meas/vehicle.hpp)
+      if constexpr (kJacobianUpdate<Filter>) vehicle_.add_second_order_noise(core_.filter.P());
       res = core_.update(vehicle_, cfg_.constraint_gate_chi2);
     } else {
       mark_constraint(out, c, RecordStatus::kNotUsed);

@@ -23,6 +23,8 @@ class Ekf {
   using Layout = L;
   using Vec = StateVec<L>;
   using Cov = StateCov<L>;
+  /// The update is linear in the measurement's H (kJacobianUpdate, types.hpp).
+  static constexpr bool kJacobianUpdate = true;
 
   explicit Ekf(const ImuErrorModel& model) : model_(model) {}
 

@@ -220,6 +220,8 @@ class RbUkf : public UnscentedPropagation<L> {
   using typename Base::Vec;
   using Layout = L;
   static constexpr int kN = L::kSize;
+  /// The update is linear in the measurement's H (kJacobianUpdate, types.hpp).
+  static constexpr bool kJacobianUpdate = true;
 
   explicit RbUkf(const ImuErrorModel& model, const UtParams& ut = {}) : Base(model, ut) {}
 

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <limits>
+#include <type_traits>
 
 #include "insnav/ins/mechanization.hpp"
 #include "insnav/filter/layout.hpp"
@@ -111,5 +112,17 @@ struct UpdateResult {
 };
 
 inline constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// True for a filter whose measurement update is linear in the measurement's
+/// Jacobian H (Ekf, RbUkf: they declare kJacobianUpdate = true), false for the
+/// filters that evaluate predicted_residual at sigma points or particles.
+/// A measurement may then add the covariance of the terms H leaves out
+/// (meas/vehicle.hpp, add_second_order_noise).
+template <class F, class = void>
+struct JacobianUpdate : std::false_type {};
+template <class F>
+struct JacobianUpdate<F, std::void_t<decltype(F::kJacobianUpdate)>> : std::bool_constant<F::kJacobianUpdate> {};
+template <class F>
+inline constexpr bool kJacobianUpdate = JacobianUpdate<F>::value;
 
 }  // namespace insnav
