@@ -219,14 +219,14 @@ void test_second_order_noise() {
           dx[L::kVel + b] = sb * hv;
           return v.predicted_residual(dx);
         };
-        const auto d = (r(1, 1) - r(1, -1) - r(-1, 1) + r(-1, -1)) / (4.0 * ha * hv);
+        const typename LinearMeasurement<L>::RowVec d = (r(1, 1) - r(1, -1) - r(-1, 1) + r(-1, -1)) / (4.0 * ha * hv);
         for (int i = 0; i < m; ++i) {
           M[i](3 + a, b) = d[i];
           M[i](b, 3 + a) = d[i];
         }
       }
     v.add_second_order_noise(P);
-    const auto dR = v.linear().R - R0;
+    const typename LinearMeasurement<L>::RMat dR = v.linear().R - R0;
     double worst = 0.0, scale = 0.0;
     for (int i = 0; i < m; ++i)
       for (int j = 0; j < m; ++j) {
