@@ -34,7 +34,13 @@
 // r2_i = z' M_i z / 2, z = [dv; psi] ~ N(0, P_z), M_i = [0 B_i'; B_i 0],
 // B_i = [a_i x],  Cov(r2_i, r2_j) = tr(M_i P_z M_j P_z) / 2.
 // (Its mean tr(M_i P_z) / 2 is not added: it made no difference in the runs
-// measured, and x is zero after each feedback.)  For the filters whose update
+// measured, and x is zero after each feedback.)  The product is not white: it
+// moves with the attitude and along-track velocity errors, over seconds or
+// more, and events 0.1 s apart see nearly the same value.  As for any
+// time-correlated measurement error treated as white, its covariance is
+// scaled by the number of events within its correlation time,
+// max(1, second_order_corr_s / dt_event) (the engine passes the factor),
+// so that n events a correlation time apart do not average it down by n.  For the filters whose update
 // is linear in H (EKF, RB-UKF); the UKF's sigma points see the product in
 // predicted_residual.
 // Odometer scale factor (layouts with kOdoScale, layout.hpp): the odometer
@@ -76,6 +82,10 @@ struct VehicleConstraintConfig {
   double sigma_odo_mps = 0.05;      // odometer speed noise [m/s]
   double sigma_zupt_mps = 0.01;     // zero-velocity noise [m/s]
   double sigma_zaru_radps = 1e-4;   // zero-angular-rate noise [rad/s]
+  // correlation time of the attitude x velocity error product of the NHC /
+  // odometer rows (add_second_order_noise) [s]; its covariance is scaled by
+  // max(1, second_order_corr_s / event interval)
+  double second_order_corr_s = 1.0;
 };
 
 namespace vehicle_detail {
@@ -151,10 +161,11 @@ class VehicleVelocityMeasurement {
 
   const LinearMeasurement<L>& linear() const { return lin_; }
 
-  /// R += the covariance of the rows' attitude x velocity error product under
-  /// the prior covariance P (second-order filter, header comment).  Call after
-  /// set(), for a filter whose update is linear in H.
-  void add_second_order_noise(const StateCov<L>& P) {
+  /// R += scale times the covariance of the rows' attitude x velocity error
+  /// product under the prior covariance P (second-order filter; scale >= 1 for
+  /// its time correlation, header comment).  Call after set(), for a filter
+  /// whose update is linear in H.
+  void add_second_order_noise(const StateCov<L>& P, double scale = 1.0) {
     using Mat6 = Eigen::Matrix<double, 6, 6>;
     Mat6 Pz;  // covariance of z = [dv; psi]
     Pz.template topLeftCorner<3, 3>() = P.template block<3, 3>(L::kVel, L::kVel);
@@ -175,7 +186,7 @@ class VehicleVelocityMeasurement {
     }
     for (int i = 0; i < rows; ++i)
       for (int j = 0; j <= i; ++j) {
-        const double c = 0.5 * (MP[i] * MP[j]).trace();
+        const double c = 0.5 * scale * (MP[i] * MP[j]).trace();
         lin_.R(i, j) += c;
         if (j != i) lin_.R(j, i) += c;
       }
