@@ -142,11 +142,11 @@ def test_nhc_at_one_hertz_drifts_less_than_white_noise_at_ten_hertz():
     with a tight sigma (0.02 m/s) treated as white noise at 10 Hz count each
     second's slip ten times: in the 30 s outage the horizontal error is
     larger than with the same sigma at 1 Hz in every run (measured 1.4-4.3 m
-    against 2.6-9.6 m over six runs) and leaves its sigmas more (pooled
-    rms(error / sigma) about 0.7 at 1 Hz, 1.2 at 10 Hz)."""
+    against 2.6-9.6 m over six runs; here two of them) and leaves its sigmas
+    more (pooled rms(error / sigma) about 0.7 at 1 Hz, 1.2 at 10 Hz)."""
     a, b = 500.0, 530.0
     z, mx = {1.0: [], 10.0: []}, {1.0: [], 10.0: []}
-    for seed in (0, 2, 5):
+    for seed in (0, 5):
         ds = insnav.simulate("car-mems-outage30", seed=seed)
         for rate in (1.0, 10.0):
             sol = insnav.run(ds, config=RunConfig(filter="ekf", init_seed=seed, output_decimation=20, constraints=
