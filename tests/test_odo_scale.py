@@ -137,3 +137,26 @@ def test_odo_scale_needs_the_15_state_layout():
         config_from_dict({"layout": 21, "constraints": {"use": ["odo"], "odo_scale": True}})
     # auto on 21 states: no state, no error
     assert config_from_dict({"layout": 21, "constraints": {"use": ["odo"]}}).constraints.odo_scale == "auto"
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_scale_columns_round_trip_through_the_solution_file(car3000, tmp_path, suffix):
+    """A run with the state writes ``odo_scale_ppm`` / ``sigma_odo_scale_ppm``
+    last (in the ``bias`` group): back to 1e-4 ppm from the CSV, exactly from
+    the npz; a run without it writes neither, and ``--columns nav`` drops them."""
+    from insnav.filters.solution import load_solution
+
+    sol = _run(car3000, True)
+    path = sol.save(tmp_path / f"sol{suffix}")
+    back = load_solution(path)
+    # the CSV's 4 decimals of ppm; the npz stores the ppm values bit for bit, and ppm -> [-] costs an ulp or two
+    for a, b in ((back.odo_scale, sol.odo_scale), (back.sigma_odo_scale, sol.sigma_odo_scale)):
+        tol = 0.5e-4 * PPM * (1 + 1e-9) if suffix == ".csv" else 0.0
+        assert np.all(np.abs(a - b) <= tol + 4e-16 * np.abs(b))
+    assert abs(back.odo_scale[-1] - 3000 * PPM) < 300 * PPM  # the estimate itself, read back
+    names = [n for n, _, _ in sol.columns()]
+    assert names[-2:] == ["odo_scale_ppm", "sigma_odo_scale_ppm"] and len(names) == 33
+    nav = load_solution(sol.save(tmp_path / f"nav{suffix}", columns="nav"))
+    assert nav.odo_scale is None
+    plain = _run(car3000, False)
+    assert load_solution(plain.save(tmp_path / f"plain{suffix}")).odo_scale is None

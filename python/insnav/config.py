@@ -146,7 +146,18 @@ class Constraints:
         statistic of ``ins/standstill.hpp`` below ``zupt_threshold``) zero
         velocity and zero angular rate instead.
     rate_hz : float
-        Update rate of NHC / ZUPT (the odometer's own samples when ``odo``).
+        Update rate of ZUPT and of the odometer (its own samples decimated to
+        this rate when ``odo``).
+    nhc_rate_hz : float or None
+        Update rate of NHC, at most ``rate_hz`` (NHC on every k-th event of
+        the ``rate_hz`` grid or of the odometer updates).  None (default):
+        1 Hz on its own, every odometer update with ``odo``.  Slip and bounce
+        are correlated over seconds, so NHC updates closer than that are not
+        independent: treated as white noise at 10 Hz on their own they make
+        the outage drift larger, the more so the smaller ``sigma_nhc_mps``;
+        with the odometer pinning the forward speed, 10 Hz and 1 Hz are within
+        a few percent of each other (docs/results/vehicle_constraints.md,
+        "NHC rate and noise").
     sigma_nhc_mps, sigma_odo_mps, sigma_zupt_mps : float
         Measurement noise [m/s] of one update: lateral slip and vertical
         bounce; odometer speed; standstill.  Slip and the odometer's
@@ -193,6 +204,7 @@ class Constraints:
 
     use: list = field(default_factory=list)
     rate_hz: float = 10.0
+    nhc_rate_hz: float | None = None
     sigma_nhc_mps: float = 0.1
     sigma_odo_mps: float | None = None
     sigma_zupt_mps: float = 0.01
@@ -208,8 +220,16 @@ class Constraints:
     odo_scale_sigma: float = 0.01
     odo_scale_tau_s: float | None = None
 
+    #: default NHC rate without the odometer [Hz]
+    NHC_RATE_HZ_DEFAULT = 1.0
     #: default odometer sigma per update [m/s]: without / with the scale-factor state
     SIGMA_ODO_MPS_DEFAULT = (0.5, 0.1)
+
+    def nhc_rate(self, grid_hz: float) -> float:
+        """NHC's update rate [Hz] on an event grid of ``grid_hz``: ``nhc_rate_hz``, or its default (see above)."""
+        if self.nhc_rate_hz is not None:
+            return float(self.nhc_rate_hz)
+        return grid_hz if "odo" in self.use else min(grid_hz, self.NHC_RATE_HZ_DEFAULT)
 
     def odo_sigma_mps(self, layout: int = 15) -> float:
         """The odometer's per-update sigma [m/s]: ``sigma_odo_mps``, or its default (see above)."""
@@ -233,13 +253,15 @@ class Constraints:
         if not isinstance(use, (list, tuple)) or any(u not in CONSTRAINT_NAMES for u in use):
             bad("use", self.use, f"a list of {', '.join(CONSTRAINT_NAMES)}")
         self.use = list(dict.fromkeys(use))
-        for key in ("rate_hz", "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_dph", "zupt_window_s",
+        for key in ("rate_hz", "nhc_rate_hz", "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_dph", "zupt_window_s",
                     "zupt_threshold", "zupt_sigma_f_mps2", "zupt_sigma_w_dps"):
             v = getattr(self, key)
-            if v is None and key == "sigma_odo_mps":
+            if v is None and key in ("sigma_odo_mps", "nhc_rate_hz"):
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
                 bad(key, v, "a number > 0")
+        if self.nhc_rate_hz is not None and self.nhc_rate_hz > self.rate_hz:
+            bad("nhc_rate_hz", self.nhc_rate_hz, f"a number > 0 and at most rate_hz ({self.rate_hz:g})")
         v = self.gate_chi2
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
             bad("gate_chi2", v, "a number >= 0 (0 = off)")

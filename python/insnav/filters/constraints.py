@@ -3,11 +3,13 @@
 
 Events, from :class:`insnav.config.Constraints`:
 
-* ``nhc``: every 1 / ``rate_hz`` s, the lateral and vertical velocity of the
-  rear-axle point are zero (non-holonomic constraint, Shin 2001 sec. 4.3);
-* ``odo``: at each odometer sample, its speed, applied at the middle of its
-  counting interval (the count is the mean over the interval), together with
-  NHC when both are on (decimated to ``rate_hz``);
+* ``nhc``: the lateral and vertical velocity of the rear-axle point are zero
+  (non-holonomic constraint, Shin 2001 sec. 4.3), at ``nhc_rate_hz`` (default
+  1 Hz alone, each odometer update with ``odo``): every k-th event of the
+  ``rate_hz`` grid or of the odometer updates, ``k = round(grid / nhc rate)``;
+* ``odo``: at each odometer sample (decimated to ``rate_hz``), its speed,
+  applied at the middle of its counting interval (the count is the mean over
+  the interval), with the NHC rows in the same update on NHC's ticks;
 * ``zupt``: where the standstill detector (``ins/standstill.hpp``, the SHOE
   statistic of Skog et al. 2010 over ``zupt_window_s``) is below
   ``zupt_threshold`` at an event time, a zero-velocity and zero-angular-rate
@@ -48,11 +50,15 @@ def constraint_events(dataset, c, t: np.ndarray, dth: np.ndarray, dv: np.ndarray
         keep[::step] = True
         keep &= (mid > t0) & (mid <= t1) & np.isfinite(sp)
         times, speed = mid[keep], sp[keep]
-        kinds = np.full(times.size, ODO | (NHC if "nhc" in use else 0), np.int64)
+        kinds = np.full(times.size, ODO, np.int64)
+        grid_hz = 1.0 / (period * step)
     else:
         times = np.arange(t0 + 1.0 / c.rate_hz, t1 + 1e-9, 1.0 / c.rate_hz)
         speed = np.full(times.size, np.nan)
-        kinds = np.full(times.size, NHC if "nhc" in use else 0, np.int64)
+        kinds = np.zeros(times.size, np.int64)
+        grid_hz = c.rate_hz
+    if "nhc" in use:  # every k-th event of the grid: NHC at nhc_rate_hz
+        kinds[::max(1, int(round(grid_hz / c.nhc_rate(grid_hz))))] |= NHC
     counts = {}
     if "zupt" in use:
         rate = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 100.0

@@ -92,12 +92,18 @@ class Solution(NavTrajectory):
                "acc_scale_x_ppm", "acc_scale_y_ppm", "acc_scale_z_ppm",
                "gyro_scale_x_ppm", "gyro_scale_y_ppm", "gyro_scale_z_ppm")
 
-    #: --columns groups: the navigation state (t_s always), its 1-sigma, the IMU error estimates
-    COLUMN_GROUPS = {"nav": COLUMNS[:10], "sigma": COLUMNS[10:19], "bias": COLUMNS[19:31]}
+    #: the odometer scale factor and its 1-sigma [ppm] (runs that estimate it: ``[constraints] odo_scale``),
+    #: after :attr:`COLUMNS` in the ``bias`` group
+    ODO_SCALE_COLUMNS = ("odo_scale_ppm", "sigma_odo_scale_ppm")
+
+    #: --columns groups: the navigation state (t_s always), its 1-sigma, the IMU (and odometer) error estimates
+    COLUMN_GROUPS = {"nav": COLUMNS[:10], "sigma": COLUMNS[10:19], "bias": COLUMNS[19:31] + ODO_SCALE_COLUMNS}
 
     def columns(self) -> list[tuple[str, np.ndarray, float]]:
         """(name, SI or degree array, factor to the column's unit) of every
-        :attr:`COLUMNS` entry; the arrays are views, nothing is copied."""
+        :attr:`COLUMNS` entry, then :attr:`ODO_SCALE_COLUMNS` when the run
+        estimated the odometer scale factor; the arrays are views, nothing is
+        copied."""
         from ..units import RAD2DEG
 
         out = [("t_s", self.t, 1.0), ("lat_deg", self.lat_deg, 1.0), ("lon_deg", self.lon_deg, 1.0),
@@ -112,10 +118,13 @@ class Solution(NavTrajectory):
                 continue
             a = np.asarray(a, float)
             out += [(next(names), a[:, j], f) for j in range(3)]
+        if self.odo_scale is not None:
+            out += [(n, np.asarray(x, float), 1e6) for n, x in zip(self.ODO_SCALE_COLUMNS,
+                                                                    (self.odo_scale, self.sigma_odo_scale))]
         return out
 
     def to_array(self) -> np.ndarray:
-        """(N, 31) array in :attr:`COLUMNS` order (user units as named)."""
+        """(N, 31) array in :attr:`COLUMNS` order (user units as named; (N, 33) with the odometer scale)."""
         cols = self.columns()
         a = np.empty((len(self.t), len(cols)))
         for j, (_, x, f) in enumerate(cols):
@@ -128,7 +137,7 @@ class Solution(NavTrajectory):
             import pandas as pd
         except ImportError:
             raise ImportError("Solution.to_dataframe needs pandas: pip install 'insnav[pandas]'") from None
-        return pd.DataFrame(self.to_array(), columns=list(self.COLUMNS))
+        return pd.DataFrame(self.to_array(), columns=[n for n, _, _ in self.columns()])
 
     def save(self, path, *, columns=None, precision: str = "resolution") -> Path:
         """Write the solution atomically (a temp file renamed into place); the
@@ -160,6 +169,7 @@ LEGACY_COLUMNS = {"t": "t_s", "vn": "vn_mps", "ve": "ve_mps", "vd": "vd_mps"}
 #: gyro bias 1e-6 deg/h, scale factors 1e-4 ppm
 CSV_DECIMALS = dict(zip(Solution.COLUMNS, [9, 11, 11] + [6] * 4 + [8] * 3 + [6] * 6 + [8] * 3 + [9] * 3 + [6] * 3
                         + [4] * 6))
+CSV_DECIMALS.update(odo_scale_ppm=4, sigma_odo_scale_ppm=4)
 FORMATS = (".csv", ".npz", ".parquet")
 PRECISIONS = ("resolution", "exact")
 
@@ -287,6 +297,9 @@ def load_solution(path) -> Solution:
         gyro_scale=col("gyro_scale_x_ppm", "gyro_scale_y_ppm", "gyro_scale_z_ppm", scale=1e-6),
         gnss_t=np.zeros(0), innovation=np.zeros((0, 6)), nis=np.zeros(0), gnss_status=np.zeros(0, np.int8),
         summary={"source": str(path)})
+    if "odo_scale_ppm" in c:
+        sol.odo_scale = c["odo_scale_ppm"] * 1e-6
+        sol.sigma_odo_scale = col("sigma_odo_scale_ppm", scale=1e-6)
     side = innovations_path(path)
     if side.is_file():
         inn = read_innovations(side)
