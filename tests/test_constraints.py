@@ -82,7 +82,7 @@ def test_exact_nhc_keeps_the_linearised_filters_consistent_in_an_outage(filt):
         sc = dataclasses.replace(load_scenario("car-mems-outage120", seed=k), lateral_slip=0.0, vertical_bounce=0.0)
         ds = insnav.simulate(sc, seed=k)
         hmax = []
-        for cons in (Constraints(use=["nhc"], sigma_nhc_mps=0.001, rate_hz=10.0), None):
+        for cons in (Constraints(use=["nhc"], sigma_nhc_mps=0.001, rate_hz=10.0, nhc_rate_hz=10.0), None):
             kw = dict(constraints=cons) if cons else {}
             e = errors(insnav.run(ds, config=RunConfig(filter=filt, init_seed=k, **kw)), ds.truth)
             m = (e["t"] > OUTAGE[0]) & (e["t"] < OUTAGE[1])

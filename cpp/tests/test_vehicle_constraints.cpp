@@ -239,6 +239,16 @@ void test_second_order_noise() {
     EXPECT_TRUE(scale > 1e-6);
     EXPECT_LT(worst, 1e-4 * scale);
     EXPECT_LT((dR - dR.transpose()).cwiseAbs().maxCoeff(), 1e-15);
+    // time-correlation scales: NHC rows 4, odometer row 9, cross terms sqrt(4 * 9)
+    VehicleVelocityMeasurement<L> vs;
+    vs.set(s, w, cfg, true, odo ? 14.8 : std::numeric_limits<double>::quiet_NaN(), odo ? 0.02 : 0.0);
+    vs.add_second_order_noise(P, 4.0, 9.0);
+    const typename LinearMeasurement<L>::RMat dRs = vs.linear().R - R0;
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j < m; ++j) {
+        const double si = (odo && i == 0) ? 3.0 : 2.0, sj = (odo && j == 0) ? 3.0 : 2.0;
+        EXPECT_LT(std::abs(dRs(i, j) - si * sj * dR(i, j)), 1e-12 * scale);
+      }
   }
 }
 

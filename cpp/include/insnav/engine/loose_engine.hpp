@@ -115,7 +115,7 @@ class LooseEngine {
            std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
            std::int64_t m, const GnssFix* fixes, std::int64_t k, const ConstraintEvent* events, LooseOutputs& out) {
     core_.reset(initial, P0, corr0);
-    last_velocity_event_t_ = -kInf;
+    last_nhc_t_ = last_odo_t_ = -kInf;
     std::int64_t g = 0, c = 0;
     while (g < m && !(fixes[g].t > initial.t)) out.mark(g++, RecordStatus::kOutsideImuSpan);
     while (c < k && !(events[c].t > initial.t)) mark_constraint(out, c++, RecordStatus::kOutsideImuSpan);
@@ -175,12 +175,14 @@ class LooseEngine {
       vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
       // an update linear in H: R + the covariance of the attitude x velocity error product it leaves out
       // (second-order filter, meas/vehicle.hpp), scaled by the events within its correlation time
+      // (NHC rows: the interval between NHC events; odometer row: between odometer events)
       if constexpr (kJacobianUpdate<Filter>) {
-        const double dt = e.t - last_velocity_event_t_;
-        const double scale = dt > 0.0 ? std::max(1.0, cfg_.vehicle.second_order_corr_s / dt) : 1.0;
-        vehicle_.add_second_order_noise(core_.filter.P(), scale);
+        const double tau = cfg_.vehicle.second_order_corr_s;
+        auto scale = [&](double t_prev) { return e.t > t_prev ? std::max(1.0, tau / (e.t - t_prev)) : 1.0; };
+        vehicle_.add_second_order_noise(core_.filter.P(), scale(last_nhc_t_), scale(last_odo_t_));
       }
-      last_velocity_event_t_ = e.t;
+      if (nhc) last_nhc_t_ = e.t;
+      if (odo) last_odo_t_ = e.t;
       res = core_.update(vehicle_, cfg_.constraint_gate_chi2);
     } else {
       mark_constraint(out, c, RecordStatus::kNotUsed);
@@ -201,7 +203,7 @@ class LooseEngine {
   LooseMeasurement<L> meas_;
   VehicleVelocityMeasurement<L> vehicle_;
   StandstillMeasurement<L> standstill_;
-  double last_velocity_event_t_ = -kInf;  // the previous NHC / odometer event [s]
+  double last_nhc_t_ = -kInf, last_odo_t_ = -kInf;  // the previous NHC / odometer event [s]
 };
 
 }  // namespace insnav

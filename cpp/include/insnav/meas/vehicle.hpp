@@ -39,8 +39,11 @@
 // more, and events 0.1 s apart see nearly the same value.  As for any
 // time-correlated measurement error treated as white, its covariance is
 // scaled by the number of events within its correlation time,
-// max(1, second_order_corr_s / dt_event) (the engine passes the factor),
-// so that n events a correlation time apart do not average it down by n.  For the filters whose update
+// max(1, second_order_corr_s / dt_event), dt_event the interval between the
+// NHC events for the NHC rows and between the odometer events for the
+// odometer row (the engine passes the factors; a cross term takes the
+// geometric mean, which keeps R positive semi-definite), so that n events a
+// correlation time apart do not average it down by n.  For the filters whose update
 // is linear in H (EKF, RB-UKF); the UKF's sigma points see the product in
 // predicted_residual.
 // Odometer scale factor (layouts with kOdoScale, layout.hpp): the odometer
@@ -67,6 +70,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 
 #include "insnav/earth/wgs84.hpp"
 #include "insnav/filter/types.hpp"
@@ -161,11 +165,12 @@ class VehicleVelocityMeasurement {
 
   const LinearMeasurement<L>& linear() const { return lin_; }
 
-  /// R += scale times the covariance of the rows' attitude x velocity error
-  /// product under the prior covariance P (second-order filter; scale >= 1 for
-  /// its time correlation, header comment).  Call after set(), for a filter
-  /// whose update is linear in H.
-  void add_second_order_noise(const StateCov<L>& P, double scale = 1.0) {
+  /// R += the covariance of the rows' attitude x velocity error product under
+  /// the prior covariance P (second-order filter), scaled by scale_nhc >= 1 in
+  /// the NHC rows and scale_odo >= 1 in the odometer row for its time
+  /// correlation (header comment).  Call after set(), for a filter whose
+  /// update is linear in H.
+  void add_second_order_noise(const StateCov<L>& P, double scale_nhc = 1.0, double scale_odo = 1.0) {
     using Mat6 = Eigen::Matrix<double, 6, 6>;
     Mat6 Pz;  // covariance of z = [dv; psi]
     Pz.template topLeftCorner<3, 3>() = P.template block<3, 3>(L::kVel, L::kVel);
@@ -173,10 +178,12 @@ class VehicleVelocityMeasurement {
     Pz.template bottomLeftCorner<3, 3>() = P.template block<3, 3>(L::kAtt, L::kVel);
     Pz.template bottomRightCorner<3, 3>() = P.template block<3, 3>(L::kAtt, L::kAtt);
     const Mat3 C_nv = C_nb_ * cfg_.C_bv;
-    Mat6 MP[3];  // M_i P_z per row
+    Mat6 MP[3];     // M_i P_z per row
+    double sq[3];   // sqrt of the row's scale
     const int rows = lin_.rows();
     for (int i = 0; i < rows; ++i) {
       const int axis = rows_axis_[i];
+      sq[i] = std::sqrt(axis == 0 ? scale_odo : scale_nhc);
       const double k = axis == 0 ? odo_gain_ : 1.0;  // the odometer row in reading units
       const Mat3 B = k * skew(Vec3(C_nv.col(axis)));
       Mat6 M = Mat6::Zero();
@@ -186,7 +193,7 @@ class VehicleVelocityMeasurement {
     }
     for (int i = 0; i < rows; ++i)
       for (int j = 0; j <= i; ++j) {
-        const double c = 0.5 * scale * (MP[i] * MP[j]).trace();
+        const double c = 0.5 * sq[i] * sq[j] * (MP[i] * MP[j]).trace();
         lin_.R(i, j) += c;
         if (j != i) lin_.R(j, i) += c;
       }
