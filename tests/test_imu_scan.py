@@ -202,3 +202,21 @@ def test_scan_memo_reads_each_stream_once():
         t2[5] = np.nan
         assert scan_imu(t2, dth, dv)["nonfinite_t"] == 5  # other memory, another scan
     assert scan_imu(t, dth, dv) is not a
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 10, 11, 50_001])
+def test_median_is_numpys_without_numpy_ma(n):
+    from insnav._median import median
+
+    rng = np.random.default_rng(n)
+    x = rng.normal(size=n)
+    assert median(x) == float(np.median(x))
+    x[n // 3] = np.nan
+    assert np.isnan(median(x)) and np.isnan(median([]))
+    import subprocess
+    import sys
+
+    if n == 1:  # the run path's medians leave numpy.ma unimported
+        code = "import sys, numpy as np; from insnav._median import median; median(np.arange(5.)); " \
+               "print('numpy.ma' in sys.modules)"
+        assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip() == "False"

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._median import median
 from ..units import DEG, G0
 
 
@@ -76,11 +77,11 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*"
     if ok.sum() < 2:
         return
     idx, dt = idx[ok], dt[ok]
-    dtm = float(np.median(dt))
+    dtm = median(dt)
     dvs, dths = dv_b[idx], dtheta_b[idx]
     f = np.sqrt(np.einsum("ij,ij->i", dvs, dvs)) / dt
     w = np.sqrt(np.einsum("ij,ij->i", dths, dths)) / dt
-    fm, wm = float(np.median(f)), float(np.median(w))
+    fm, wm = median(f), median(w)
     n = f.size
     if not 0.5 * G0 < fm < 2.0 * G0:
         hint = ""
@@ -134,7 +135,7 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
     f = np.array(scan["dv_sum"])  # sum of dv_b over the samples
     down_b = -f / max(np.linalg.norm(f), 1e-12)  # the mean specific force points up
     # ~1 s intervals (the course of a 10 Hz receiver is noisy fix to fix)
-    step = max(1, int(round(1.0 / max(np.median(np.diff(gt)), 1e-3))))
+    step = max(1, int(round(1.0 / max(median(np.diff(gt)), 1e-3))))
     sel = np.arange(0, gt.size, step)
     gt, v, speed, course = gt[sel], v[sel], speed[sel], course[sel]
     # the heading the gyros integrate about the vertical, at the fixes: np.interp(gt, [t[0] - (t[1] - t[0]), t],
