@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._imu_scan import scan_imu
 from ..data.dataset import GnssFixes, ImuData, RowOrigin, Truth, check_finite_rows
 from ..data.textio import count_columns, mapped_bytes, parse_numeric, read_bytes
 from ..units import DEG, PPM
@@ -99,12 +100,13 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
         raise ValueError(f"{path}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
                          f"found {n}")
     t, dth, dv = parts
-    check_finite_rows(parts, origin, IMU_COLUMNS)
+    scan = scan_imu(t, dth, dv)  # one compiled pass for both checks below
+    if scan["nonfinite_t"] >= 0 or scan["nonfinite_dtheta"] >= 0 or scan["nonfinite_dv"] >= 0:
+        check_finite_rows(parts, origin, IMU_COLUMNS)  # the message: file, line, value and column
     # decreasing time is an error; equal times (duplicated records) are left to
     # insnav.filters.sanitize.sanitize_imu, which drops exact duplicates and counts them
-    dt = np.diff(t)
-    if t.shape[0] > 1 and (dt < 0).any():
-        i = int(np.argmax(dt < 0)) + 1
+    i = scan["decrease"]
+    if i >= 0:
         raise ValueError(f"{origin.where(i)}: time {float(t[i])!r} does not increase "
                          f"(previous record at {float(t[i - 1])!r}, line {origin.line(i - 1)})")
     return ImuData(t, dth, dv, origin=origin)
