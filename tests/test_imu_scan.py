@@ -220,3 +220,40 @@ def test_median_is_numpys_without_numpy_ma(n):
         code = "import sys, numpy as np; from insnav._median import median; median(np.arange(5.)); " \
                "print('numpy.ma' in sys.modules)"
         assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip() == "False"
+
+
+def test_nav_rows_to_degrees_is_the_numpy_conversion_bit_for_bit():
+    from insnav.units import RAD2DEG
+
+    rng = np.random.default_rng(7)
+    n = 1001
+    llh, rpy, sig, v = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.random((n, 15)), rng.normal(size=(n, 3))
+    want_llh, want_rpy, want_sig = llh.copy(), rpy * RAD2DEG, sig.copy()
+    want_llh[:, :2] *= RAD2DEG
+    want_sig[:, 6:9] *= RAD2DEG
+    assert _core.nav_rows_to_degrees(llh, rpy, sig, 6, v) == (-1, False)
+    for got, want in ((llh, want_llh), (rpy, want_rpy), (sig, want_sig)):
+        np.testing.assert_array_equal(got, want)
+    # the first row raise_if_nonfinite names: non-finite latitude, or no finite velocity component
+    v[300, 1] = np.nan  # one component: not that row, but still non-finite
+    assert _core.nav_rows_to_degrees(llh, rpy, sig, 6, v) == (-1, True)
+    v[500] = np.nan
+    llh[700, 0] = np.inf
+    assert _core.nav_rows_to_degrees(llh, rpy, sig, 6, v) == (500, True)
+    with pytest.raises(ValueError, match="writeable"):
+        _core.nav_rows_to_degrees(llh[:10], rpy, sig, 6, v)
+
+
+def test_a_diverging_run_names_its_row():
+    """raise_if_nonfinite's message after the compiled conversion pass."""
+    import dataclasses
+
+    import insnav
+
+    ds = insnav.simulate("seed000-sim", seed=1)
+    imu = ds.imu
+    dv = imu.dv_b.copy()
+    dv[6000:, 2] *= 1e12  # absurd forces after 30 s: the run leaves the finite numbers
+    bad = dataclasses.replace(ds, imu=ImuData(imu.t, imu.dtheta_b, dv))
+    with pytest.raises(FloatingPointError, match=r"ekf: the solution became non-finite at t=\d+\.\d{3} s \(row \d+\)"):
+        insnav.run(bad, sanitize=False, checks=False)

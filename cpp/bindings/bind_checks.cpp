@@ -5,6 +5,7 @@
 // builds the messages (which sample, which file line) from the indices.
 #include <cmath>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "common.hpp"
@@ -65,6 +66,66 @@ DArray rotation_about_at(const DArray& t, const DArray& dtheta_b, const DArray& 
   return out;
 }
 
+/// A C-contiguous float64 array changed in place (no converting copy).
+using InPlace = py::array_t<double, py::array::c_style>;
+
+InPlace require_in_place(const py::object& o, py::ssize_t n, py::ssize_t cols, const char* name) {
+  if (!py::isinstance<InPlace>(o)) throw py::value_error(std::string(name) + ": expected a C-contiguous float64 array");
+  auto a = py::reinterpret_borrow<InPlace>(o);
+  if (a.ndim() != 2 || a.shape(0) != n || a.shape(1) < cols || !a.writeable())
+    throw py::value_error(std::string(name) + ": expected a writeable (" + std::to_string(n) + ", >= " +
+                          std::to_string(cols) + ") array");
+  return a;
+}
+
+// The engines' rows in the Solution's units, in place and in one pass: latitude,
+// longitude, roll, pitch, yaw and the attitude sigmas (columns att_col..att_col+2 of
+// sigma) from rad to deg.  Returns (first row whose latitude, or every velocity
+// component, is not finite; whether any latitude or velocity value is not finite),
+// -1 for no such row.
+py::tuple nav_rows_to_degrees(const py::object& llh_o, const py::object& rpy_o, const py::object& sigma_o,
+                              int att_col, const py::object& v_n_o) {
+  const py::ssize_t n = py::isinstance<py::array>(llh_o) ? py::reinterpret_borrow<py::array>(llh_o).shape(0) : -1;
+  InPlace llh = require_in_place(llh_o, n, 3, "nav_rows_to_degrees: llh");
+  InPlace rpy = require_in_place(rpy_o, n, 3, "nav_rows_to_degrees: rpy");
+  InPlace sigma = require_in_place(sigma_o, n, att_col + 3, "nav_rows_to_degrees: sigma");
+  const DArray v_n = py::cast<DArray>(v_n_o);
+  require_shape(v_n, n, 3, "nav_rows_to_degrees: v_n");
+  if (att_col < 0) throw py::value_error("nav_rows_to_degrees: att_col < 0");
+  constexpr double kRad2Deg = 180.0 / 3.14159265358979323846;
+  std::int64_t first_bad = -1;
+  bool any_bad = false;
+  {
+    py::gil_scoped_release release;
+    double* pl = llh.mutable_data();
+    double* pr = rpy.mutable_data();
+    double* ps = sigma.mutable_data() + att_col;
+    const py::ssize_t sc = sigma.shape(1);
+    const double* pv = v_n.data();
+    for (py::ssize_t i = 0; i < n; ++i) {
+      double* l = pl + 3 * i;
+      double* r = pr + 3 * i;
+      double* s = ps + sc * i;
+      const double* v = pv + 3 * i;
+      const bool lat_ok = std::isfinite(l[0]);
+      const int v_ok = int(std::isfinite(v[0])) + int(std::isfinite(v[1])) + int(std::isfinite(v[2]));
+      if (!lat_ok || v_ok < 3) {
+        any_bad = true;
+        if (first_bad < 0 && (!lat_ok || v_ok == 0)) first_bad = i;
+      }
+      l[0] *= kRad2Deg;
+      l[1] *= kRad2Deg;
+      r[0] *= kRad2Deg;
+      r[1] *= kRad2Deg;
+      r[2] *= kRad2Deg;
+      s[0] *= kRad2Deg;
+      s[1] *= kRad2Deg;
+      s[2] *= kRad2Deg;
+    }
+  }
+  return py::make_tuple(first_bad, any_bad);
+}
+
 }  // namespace
 
 void bind_checks(py::module_& m) {
@@ -80,6 +141,11 @@ void bind_checks(py::module_& m) {
         py::arg("query"),
         "The rotation about the body axis axis_b [rad] integrated from the start of the first sample to each "
         "query time [s], linear between samples; NaN outside [t[0] - (t[1] - t[0]), t[-1]].");
+  m.def("nav_rows_to_degrees", &nav_rows_to_degrees, py::arg("llh"), py::arg("rpy"), py::arg("sigma"),
+        py::arg("att_col"), py::arg("v_n"),
+        "In place, one pass: llh[:, :2], rpy and sigma[:, att_col:att_col + 3] from rad to deg.  Returns "
+        "(first row whose latitude or whole velocity is not finite, or -1; any latitude or velocity value not "
+        "finite).");
 }
 
 }  // namespace insnav::py_bind
