@@ -462,3 +462,23 @@ def test_rdkf_run_writes_a_config_that_repeats_it(dataset, work):
     assert again.read_bytes() == out.read_bytes()
     _user_error(["run", dataset[0], "--filter", "rdkf", "--coupling", "tight", "--out", work / "x.csv"],
                 "rdkf", "loosely coupled only")
+
+
+def test_command_line_process_uses_one_openblas_thread(tmp_path):
+    """The CLI sets OPENBLAS_NUM_THREADS=1 before numpy starts its busy-waiting
+    pool, unless the user set it; in a process that imported numpy already it
+    changes nothing."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import os, sys; from insnav.cli import _single_threaded_blas; _single_threaded_blas(); "
+            "print(os.environ.get('OPENBLAS_NUM_THREADS'))")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    run = lambda e: subprocess.run([sys.executable, "-c", code], env=e, capture_output=True,  # noqa: E731
+                                   text=True, check=True).stdout.strip()
+    assert run(env) == "1"
+    assert run({**env, "OPENBLAS_NUM_THREADS": "4"}) == "4"
+    code_after_numpy = "import numpy; " + code
+    assert subprocess.run([sys.executable, "-c", code_after_numpy], env=env, capture_output=True, text=True,
+                          check=True).stdout.strip() == "None"

@@ -73,3 +73,32 @@ def test_reader_errors_name_file_and_line(tmp_path):
     q.write_text("1 2 3 4 5\n")
     with pytest.raises(ValueError, match=r"g\.txt:1: expected 7 or 13 columns"):
         kfgins.read_kfgins_gnss(q)
+
+
+_YAML_CASES = [
+    'imupath: "./a b.txt"\nimudatalen: 7\nstarttime: 456300\nendtime: -1\n',
+    "initpos: [ 30.4447858349, 114.4718661070, 21.0972 ]   # deg deg m\ninitgyrbias: [ 0, 0, 0 ]\nx: []\n",
+    "imunoise:\n  arw: [0.003, 0.003, 0.003]          # [deg/sqrt(hr)]\n  corrtime: 4.0\n\nantlever: [ 0.136, -0.301, -0.184 ]\n",
+    "a: +5\nb: -0\nc: 1.5e+3\nd: 3.\ne: 'single'\nempty:\nnext: 1\n",
+]
+#: outside the subset: PyYAML decides (a YAML 1.1 string "1e3", octal, a plain string, a '#' without a
+#: space, tabs, a flow mapping, a second nesting level, a document marker, an escape)
+_YAML_OTHER = ["a: 1e3\n", "a: 010\n", "a: plain text\n", "a: 5#x\n", "a:\n\tb: 1\n", "a: {b: 1}\n",
+               "a:\n  b:\n    c: 1\n", "---\na: 1\n", 'a: "x\\ty"\n', "a: [1, x]\n", "a: 1\n  b: 2\n",
+               "a:\n  b: 1\n   c: 2\n", "a: true\n", "a: ~\n", "a: .5\n",
+               "# only a comment\n\n"]
+
+
+@pytest.mark.parametrize("text", _YAML_CASES + ([p.read_text() for p in sorted(DATA.glob("*/*.yaml"))]
+                                                 if DATA.is_dir() else []))
+def test_plain_yaml_reads_what_pyyaml_reads(text):
+    """The KF-GINS subset read without importing PyYAML gives yaml.safe_load's values and types."""
+    yaml = pytest.importorskip("yaml")
+    got, want = kfgins._plain_yaml(text), yaml.safe_load(text)
+    assert got is not None
+    assert got == want and repr(got) == repr(want)
+
+
+@pytest.mark.parametrize("text", _YAML_OTHER)
+def test_plain_yaml_leaves_the_rest_to_pyyaml(text):
+    assert kfgins._plain_yaml(text) is None

@@ -109,6 +109,29 @@ def test_npz_is_a_valid_zip_with_what_np_savez_stores(sol, tmp_path, monkeypatch
             assert a.read(name) == b.read(name) == r.read(name), name
 
 
+def test_writers_overwrite_a_longer_file_to_the_exact_new_length(sol, tmp_path):
+    """The npz and text writers open without truncating (no flush on close on
+    ext4); a longer file already at the path is cut to what was written."""
+    import zipfile
+
+    from insnav import _core
+    from insnav._npz import write_npz
+
+    x = np.arange(1000.0)
+    (tmp_path / "a.npz").write_bytes(b"\xff" * 100_000)
+    for name in ("a.npz", "fresh.npz"):
+        write_npz(tmp_path / name, [("x", x, 1.0), ("y", x[::-1], 2.0)])
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "fresh.npz").read_bytes()
+    assert (tmp_path / "a.npz").stat().st_size < 20_000
+    with zipfile.ZipFile(tmp_path / "a.npz") as z, np.load(tmp_path / "a.npz") as a:
+        assert z.testzip() is None
+        np.testing.assert_array_equal(a["y"], 2.0 * x[::-1])
+    txt = tmp_path / "t.csv"
+    txt.write_text("9" * 50_000)
+    assert _core.write_table(str(txt), "x\n", [x[:3]], [1.0], [1], ",", 0, True, False, 1) == 8
+    assert txt.read_text() == "x\n0\n1\n2\n"
+
+
 def test_innovations_sidecar_round_trip(sol, tmp_path):
     p = sol.save(tmp_path / "sol.npz")
     side = write_innovations(sol, p)

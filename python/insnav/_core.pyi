@@ -130,3 +130,19 @@ def run_tight_particle(
     config: dict[str, Any],
     particle: dict[str, Any],
 ) -> dict[str, Any]: ...
+
+def scan_imu(
+    t: npt.ArrayLike,
+    dtheta_b: npt.ArrayLike,
+    dv_b: npt.ArrayLike,
+    t0: float = ...,
+    max_rate_rps: float = ...,
+    max_accel_mps2: float = ...,
+    gap_factor: float = ...,
+) -> dict[str, Any]: ...
+def rotation_about_at(
+    t: npt.ArrayLike,
+    dtheta_b: npt.ArrayLike,
+    axis_b: npt.ArrayLike,
+    query: npt.ArrayLike,
+) -> np.ndarray: ...

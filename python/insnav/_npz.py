@@ -1,8 +1,9 @@
 """An uncompressed ``.npz`` (what ``np.savez`` writes) from 1-D columns, at
 the speed of the disk: the member offsets follow from the names and sizes, so
-two threads each gather (and scale) their columns chunk by chunk into a small
-buffer, checksum them (``zlib.crc32``) and write them at their offsets with
-``os.pwrite``, each member's local header last (it holds the checksum);
+two threads each gather (and scale) their half of the columns, a chunk of rows
+across all of them at a time, into a small buffer, checksum them
+(``zlib.crc32``) and write them at their offsets with ``os.pwrite``, each
+member's local header last (it holds the checksum);
 numpy's copy loops, zlib and the writes run with the GIL released.  The
 zip structure is PKWARE APPNOTE 6.3 sections 4.3.7 (local header), 4.3.12
 (central directory) and 4.3.16 (end record), without ZIP64: a file of
@@ -24,8 +25,9 @@ __all__ = ["write_npz"]
 #: the classic zip format's limits: 32-bit sizes and offsets, 16-bit member count
 _MAX_OFFSET = 0xFFFFFFFF - 1
 _MAX_MEMBERS = 0xFFFF - 1
-#: rows a thread gathers, checksums and writes at a time (512 KiB)
-_CHUNK = 1 << 16
+#: rows a thread gathers, checksums and writes at a time, per column (128 KiB; the
+#: chunk of a (N, 12) source array, 1.5 MiB, stays in the cache across its columns)
+_CHUNK = 1 << 14
 #: zipfile's defaults for a member written through ZipFile.open(name, "w")
 _VERSION = 20
 _MADE_BY = (3 << 8) | _VERSION  # Unix
@@ -53,7 +55,7 @@ def write_npz(path, columns) -> None:
     Parameters
     ----------
     path : str or Path
-        Created or truncated.
+        Created, or overwritten (cut to the new length).
     columns : list of (str, ndarray (N,), float)
         Any stride; the arrays are not modified.
     """
@@ -71,46 +73,56 @@ def write_npz(path, columns) -> None:
     dos_t, dos_d = _dos_time()
     crcs = [0] * len(cols)
     stop = threading.Event()
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+    # no O_TRUNC: on ext4 (auto_da_alloc) a file truncated to zero length is
+    # flushed to disk by its close(), ~0.06-0.1 s for 167 MB here; a longer old
+    # file is cut to the new size at the end instead (not to zero: no flush)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT, 0o666)
 
-    def member(i: int, buf: np.ndarray) -> None:
-        _, x, f = cols[i]
-        crc = zlib.crc32(head)
-        start = offsets[i] + 30 + len(names[i]) + len(head)
+    def members(first: int, last: int) -> None:
+        """Columns first..last-1, chunk by chunk across them: the columns of one
+        (N, k) array are views of it, so a chunk of the array is read from memory
+        once and stays in the cache for its next columns (column by column, each
+        column's gather would read the whole array again: 1.35 GB instead of
+        0.17 GB for the 31 solution columns)."""
+        buf = np.empty((last - first, min(n, _CHUNK)))
+        crc = [zlib.crc32(head)] * (last - first)
+        start = [offsets[i] + 30 + len(names[i]) + len(head) for i in range(first, last)]
         for a in range(0, n, _CHUNK):  # in chunks: a small buffer, not one column's worth of resident memory
+            if stop.is_set():
+                return
             b = min(n, a + _CHUNK)
-            chunk = buf[:b - a]
-            if f == 1.0:
-                np.copyto(chunk, x[a:b], casting="same_kind")
-            else:
-                np.multiply(x[a:b], f, out=chunk)
-            crc = zlib.crc32(chunk, crc)
-            _pwrite_all(fd, chunk, start + 8 * a)
-        crcs[i] = crc
-        local = struct.pack("<IHHHHHIIIHH", 0x04034B50, _VERSION, 0, 0, dos_t, dos_d, crc, size, size,
-                            len(names[i]), 0) + names[i]
-        _pwrite_all(fd, local + head, offsets[i])
+            for j, i in enumerate(range(first, last)):
+                _, x, f = cols[i]
+                chunk = buf[j, :b - a]
+                if f == 1.0:
+                    np.copyto(chunk, x[a:b], casting="same_kind")
+                else:
+                    np.multiply(x[a:b], f, out=chunk)
+                crc[j] = zlib.crc32(chunk, crc[j])
+                _pwrite_all(fd, chunk, start[j] + 8 * a)
+        for j, i in enumerate(range(first, last)):
+            crcs[i] = crc[j]
+            local = struct.pack("<IHHHHHIIIHH", 0x04034B50, _VERSION, 0, 0, dos_t, dos_d, crc[j], size, size,
+                                len(names[i]), 0) + names[i]
+            _pwrite_all(fd, local + head, offsets[i])
 
     errors: list[BaseException] = []
 
-    def worker(first: int) -> None:
-        buf = np.empty(min(n, _CHUNK))
+    def worker(first: int, last: int) -> None:
         try:
-            for i in range(first, len(cols), 2):
-                if stop.is_set():
-                    return
-                member(i, buf)
+            members(first, last)
         except BaseException as exc:  # noqa: BLE001 - re-raised on the calling thread
             errors.append(exc)
             stop.set()
 
+    half = (len(cols) + 1) // 2  # the first half on this thread, the second on a helper
     try:
-        helper = threading.Thread(target=worker, args=(1,), daemon=True)
+        helper = threading.Thread(target=worker, args=(half, len(cols)), daemon=True)
         helper.start()
         try:
-            worker(0)  # on this thread: Ctrl-C lands between two columns
+            worker(0, half)  # on this thread: Ctrl-C lands between two chunks
             helper.join()
-        except BaseException:  # Ctrl-C while waiting: the helper stops after its column
+        except BaseException:  # Ctrl-C while waiting: the helper stops after its chunk
             stop.set()
             helper.join()
             raise
@@ -120,8 +132,10 @@ def write_npz(path, columns) -> None:
             struct.pack("<IHHHHHHIIIHHHHHII", 0x02014B50, _MADE_BY, _VERSION, 0, 0, dos_t, dos_d, crcs[i], size,
                         size, len(nm), 0, 0, 0, 0, _EXTERNAL_ATTR, offsets[i]) + nm
             for i, nm in enumerate(names))
-        _pwrite_all(fd, central + struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, len(cols), len(cols), len(central),
-                                              off, 0), off)
+        end = central + struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, len(cols), len(cols), len(central), off, 0)
+        _pwrite_all(fd, end, off)
+        if os.fstat(fd).st_size > off + len(end):  # an older, longer file was there
+            os.ftruncate(fd, off + len(end))
     finally:
         os.close(fd)
 

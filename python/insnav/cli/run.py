@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_write_text
+from .._median import median
 from ..errors import UserError
 from .._toml import toml_value
 from ..config import ConfigError, RunConfig, load_config
@@ -195,7 +196,7 @@ def output_decimation(t, rate_hz: float) -> int:
     t = np.asarray(t, float)
     if t.size < 2:
         return 1
-    imu_hz = 1.0 / float(np.median(np.diff(t), overwrite_input=True))  # (partitions the temporary in place)
+    imu_hz = 1.0 / median(np.diff(t))
     k = imu_hz / float(rate_hz)
     if k < 1.0 - 1e-3 or abs(k - round(k)) > 1e-3 * k:
         ok = [r for r in (100, 50, 20, 10, 5, 2, 1, 0.5, 0.1) if r <= imu_hz + 1e-9

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._median import median
 from ..units import DEG, G0
 
 
@@ -67,9 +68,8 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*"
     def fix(cause):
         return f"; {fixes[cause]}" if cause in fixes else ""
 
-    t = np.asarray(t, float)
-    dtheta_b, dv_b = np.asarray(dtheta_b, float), np.asarray(dv_b, float)
-    if t.size < 3 or not (np.isfinite(t).all() and np.isfinite(dtheta_b).all() and np.isfinite(dv_b).all()):
+    t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
+    if t.size < 3 or scan is None:
         return  # non-finite samples: the finite-value checks (sanitize, run) name them
     idx = np.arange(1, t.size, max(1, (t.size - 1) // CHECK_IMU_MAX_SAMPLES))
     dt = t[idx] - t[idx - 1]
@@ -77,11 +77,11 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*"
     if ok.sum() < 2:
         return
     idx, dt = idx[ok], dt[ok]
-    dtm = float(np.median(dt))
+    dtm = median(dt)
     dvs, dths = dv_b[idx], dtheta_b[idx]
     f = np.sqrt(np.einsum("ij,ij->i", dvs, dvs)) / dt
     w = np.sqrt(np.einsum("ij,ij->i", dths, dths)) / dt
-    fm, wm = float(np.median(f)), float(np.median(w))
+    fm, wm = median(f), median(w)
     n = f.size
     if not 0.5 * G0 < fm < 2.0 * G0:
         hint = ""
@@ -99,7 +99,7 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*"
             hint = " (the values look like increments over the sample interval, not rates" + fix("dv_increment") + ")"
         raise DataCheckError(f"{source}: {acc_label}: median |f| = {fm:.4g} m/s^2 over {n} samples, expected "
                              f"~{G0:.1f}{hint}")
-    f_mean = np.einsum("ij->j", np.asarray(dv_b, float))  # = sum(axis=0), the same sums, ~4x faster
+    f_mean = np.array(scan["dv_sum"])  # sum of dv_b over the samples
     up = f_mean / max(np.linalg.norm(f_mean), 1e-12)  # at rest the specific force points up
     if up[2] > 0.7:
         raise DataCheckError(f"{source}: {acc_label}: the mean specific force points along +z "
@@ -125,24 +125,24 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
     slope says degrees (> 10) or an inverted vertical axis (< -0.5), or is
     otherwise far from 1 (outside 0.5..2).
     """
-    t = np.asarray(t, float)
+    t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
     gt = np.asarray(gnss.t_valid, float)
-    if t.size < 3 or gt.size < 3 or not (np.isfinite(t).all() and np.isfinite(dtheta_b).all()
-                                         and np.isfinite(dv_b).all() and np.isfinite(gt).all()):
+    if t.size < 3 or gt.size < 3 or scan is None or not np.isfinite(gt).all():
         return None
     v = np.asarray(gnss.v_n, float)
     speed = np.hypot(v[:, 0], v[:, 1])
     course = np.arctan2(v[:, 1], v[:, 0])
-    f = np.einsum("ij->j", np.asarray(dv_b, float))  # = sum(axis=0), the same sums, ~4x faster
+    f = np.array(scan["dv_sum"])  # sum of dv_b over the samples
     down_b = -f / max(np.linalg.norm(f), 1e-12)  # the mean specific force points up
-    yaw_inc = np.einsum("ij,j->i", np.asarray(dtheta_b, float), down_b)
-    cum = np.concatenate([[0.0], np.cumsum(yaw_inc)])
-    tt = np.concatenate([[t[0] - (t[1] - t[0])], t])
     # ~1 s intervals (the course of a 10 Hz receiver is noisy fix to fix)
-    step = max(1, int(round(1.0 / max(np.median(np.diff(gt)), 1e-3))))
+    step = max(1, int(round(1.0 / max(median(np.diff(gt)), 1e-3))))
     sel = np.arange(0, gt.size, step)
     gt, v, speed, course = gt[sel], v[sel], speed[sel], course[sel]
-    g_at = np.interp(gt, tt, cum, left=np.nan, right=np.nan)
+    # the heading the gyros integrate about the vertical, at the fixes: np.interp(gt, [t[0] - (t[1] - t[0]), t],
+    # [0, cumsum(dtheta_b @ down_b)], left=nan, right=nan) in one compiled pass, no (N,) temporaries
+    from .. import _core
+
+    g_at = _core.rotation_about_at(t, dtheta_b, down_b, gt)
     fast = (speed[:-1] > min_speed_mps) & (speed[1:] > min_speed_mps) & np.all(np.isfinite(v[:, :2]), axis=1)[1:] \
         & np.isfinite(g_at[:-1]) & np.isfinite(g_at[1:]) & (np.diff(gt) < 5.0 * step * 0.1 + 2.0)
     dc = (np.diff(course) + np.pi) % (2 * np.pi) - np.pi
@@ -173,6 +173,23 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
                              f"over {np.degrees(np.sum(np.abs(dc))):.0f} deg of turns (expected 1): wrong units, "
                              f"scale or axes")
     return slope
+
+
+def _scanned(t, dtheta_b, dv_b):
+    """(t, dtheta_b, dv_b) as float64 arrays and their one-pass scan
+    (:func:`insnav._imu_scan.scan_imu`), None when a value is not finite or
+    the shapes are not (N,), (N, 3), (N, 3)."""
+    from .._imu_scan import scan_imu
+
+    t = np.ascontiguousarray(t, float)
+    dtheta_b, dv_b = np.ascontiguousarray(dtheta_b, float), np.ascontiguousarray(dv_b, float)
+    n = t.shape[0] if t.ndim == 1 else -1
+    if dtheta_b.shape != (n, 3) or dv_b.shape != (n, 3):
+        return t, dtheta_b, dv_b, None
+    scan = scan_imu(t, dtheta_b, dv_b)
+    if scan["nonfinite_t"] >= 0 or scan["nonfinite_dtheta"] >= 0 or scan["nonfinite_dv"] >= 0:
+        return t, dtheta_b, dv_b, None
+    return t, dtheta_b, dv_b, scan
 
 
 def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float = 600.0,

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 from ..errors import close_matches
 
-import json
 import os
 import shutil
 import tempfile
@@ -465,6 +464,8 @@ class Dataset:
         """
         from .._toml import dumps_toml
 
+        import json
+
         from .._atomic import chmod_like_new, json_safe
 
         out = Path(directory)
@@ -528,6 +529,8 @@ DATASET_FILES = frozenset({"imu.csv", "gnss.csv", "truth.csv", "gnss_raw.csv", "
 def check_replaceable(out: Path, overwrite: bool) -> None:
     """Refuse to replace ``out`` unless it is an insnav dataset folder holding
     nothing but the files :meth:`Dataset.save` writes (never a user's folder)."""
+    import json
+
     out = Path(out)
     if not out.exists():
         return
@@ -609,6 +612,7 @@ def load_dataset(directory) -> Dataset:
     ValueError
         Naming the file, the 1-based line and the reason for a malformed file.
     """
+    import json  # here: a run from other files never reads JSON
     import tomllib
 
     d = Path(directory)

@@ -99,16 +99,19 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         setattr(cfg, k, v)
     cfg.validate()
     report = None
-    if sanitize:
-        from .sanitize import sanitize_dataset
+    from .._imu_scan import scan_memo
 
-        opts = {**cfg.sanitize, **(sanitize if isinstance(sanitize, dict) else {})}
-        dataset, report = sanitize_dataset(dataset, opts or True)
-    if checks:
-        from .checks import check_dataset
+    with scan_memo():  # the sanitizer, the checks and the runner share one pass over the IMU arrays
+        if sanitize:
+            from .sanitize import sanitize_dataset
 
-        check_dataset(dataset)
-    sol = spec.runner(cfg.coupling)(dataset, cfg, **options)
+            opts = {**cfg.sanitize, **(sanitize if isinstance(sanitize, dict) else {})}
+            dataset, report = sanitize_dataset(dataset, opts or True)
+        if checks:
+            from .checks import check_dataset
+
+            check_dataset(dataset)
+        sol = spec.runner(cfg.coupling)(dataset, cfg, **options)
     if report is not None:
         sol.summary["sanitize"] = report
     return sol

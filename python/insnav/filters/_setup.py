@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._imu_scan import scan_imu
+from .._median import median
 from .._validate import as_float_array, check_finite, check_increasing
 from ..config import GATE_PROB_DEFAULT, RunConfig
 from ..data.nav import NavState
@@ -46,10 +48,22 @@ def imu_arrays(dataset, *, check_nonfinite: bool = True) -> tuple[np.ndarray, np
     t = as_float_array(imu.t, "imu.t")
     dth = as_float_array(imu.dtheta_b, "imu.dtheta_b", (3,))
     dv = as_float_array(imu.dv_b, "imu.dv_b", (3,))
+    if len(t) != len(dth) or len(t) != len(dv):  # the messages of the checks one array at a time
+        if check_nonfinite:
+            for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
+                check_finite(a, name)
+        check_increasing(t, "imu.t", t0=float(dataset.t0))
+        return t, dth, dv
+    # one compiled pass (memoised within insnav.run, where the sanitizer made it already)
+    scan = scan_imu(t, dth, dv)
     if check_nonfinite:
-        for a, name in ((t, "imu.t"), (dth, "imu.dtheta_b"), (dv, "imu.dv_b")):
-            check_finite(a, name)
-    check_increasing(t, "imu.t", t0=float(dataset.t0))
+        for a, name, key in ((t, "imu.t", "nonfinite_t"), (dth, "imu.dtheta_b", "nonfinite_dtheta"),
+                             (dv, "imu.dv_b", "nonfinite_dv")):
+            if scan[key] >= 0:
+                check_finite(a, name)  # its message, at the sample the scan found
+    t0 = float(dataset.t0)
+    if len(t) and not t[0] > t0 or scan["not_increasing"] >= 0:
+        check_increasing(t, "imu.t", t0=t0)
     return t, dth, dv
 
 
@@ -124,8 +138,9 @@ def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **
     decimation, and the UT parameters of the sigma-point filters."""
     cycle = cfg.cycle_period_s
     if cycle is None:
-        rt = np.unique(np.asarray(record_t, float))
-        cycle = float(np.median(np.diff(rt))) if rt.size > 1 else 1.0
+        d = np.diff(np.sort(np.asarray(record_t, float)))
+        d = d[d != 0]  # the spacing of the distinct times (np.unique would import numpy.ma, ~10 ms)
+        cycle = median(d) if d.size else 1.0
     out = dict(lever_arm_b=lever_arm(dataset, cfg), propagation_interval=cfg.propagation_interval_s,
                cycle_period=outage_cycle_period(cfg.filter, cycle), **gate_config(cfg, dataset),
                output_decimation=int(cfg.output_decimation))

@@ -13,7 +13,7 @@ import numpy as np
 from .. import _core
 from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
-from ..units import DEG, RAD2DEG
+from ..units import DEG
 from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
                      loose_initial_sigmas,
                      raise_if_nonfinite)
@@ -66,16 +66,12 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         core_cfg["smooth"] = True
     out = _core.run_loose(cfg.filter, n_core, t, dth, dv, gnss, init_vec, P0, initial_imu_correction(cfg),
                           core_model, core_cfg, events)
-    # unit conversions in place (the arrays are ours), one column at a time:
-    # numpy's strided 2-D loops over 2-3 columns are ~10x slower than 1-D ones
+    # unit conversions in place (the arrays are ours) in one compiled pass over the rows,
+    # which also finds the first non-finite row (raise_if_nonfinite below)
     sig = out["sigma"]
     err = out["imu_err"]
     llh, rpy = out["llh"], out["rpy"]
-    rpy *= RAD2DEG
-    for j in (0, 1):
-        llh[:, j] *= RAD2DEG
-    for j in (6, 7, 8):
-        sig[:, j] *= RAD2DEG
+    _, nonfinite = _core.nav_rows_to_degrees(llh, rpy, sig, 6, out["v_n"])
     sol = Solution(t=out["t"], lat_deg=llh[:, 0], lon_deg=llh[:, 1], h_m=llh[:, 2],
                    v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],
                    sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9],
@@ -103,5 +99,6 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         from .smoothing import smoothed_rows
 
         smoothed_rows(sol, out, cfg.filter, sigma=sig)
-    raise_if_nonfinite(sol, cfg.filter)
+    if nonfinite or cfg.smooth:  # the message (row and time), or the smoothed rows' check
+        raise_if_nonfinite(sol, cfg.filter)
     return sol

@@ -68,6 +68,7 @@ import numpy as np
 
 from ..data.dataset import GnssFixes, ImuData, RowOrigin
 from ..config import SANITIZE_DEFAULTS
+from .._imu_scan import scan_imu
 
 __all__ = ["sanitize_imu", "sanitize_gnss", "DEFAULTS"]
 
@@ -136,21 +137,20 @@ def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
     rep["imu_samples_in"] = rep["imu_samples_out"] = n
     if n == 0:
         return imu, rep
-    for arr, name in ((t, "time"), (dth, "dtheta_b"), (dv, "dv_b")):
-        if np.isfinite(arr).all():  # the usual case, ~30x cheaper than the per-row test
-            continue
-        bad = ~np.isfinite(arr.reshape(n, -1)).all(axis=1)
-        if bad.any():
-            i = int(np.argmax(bad))
+    limits = dict(t0=t0, max_rate_rps=max_rate_rps, max_accel_mps2=max_accel_mps2, gap_factor=gap_factor)
+    # one compiled pass: the first bad sample of each kind (insnav/_imu_scan.py)
+    scan = scan_imu(t, dth, dv, **limits)
+    for arr, name, key in ((t, "time", "nonfinite_t"), (dth, "dtheta_b", "nonfinite_dtheta"),
+                           (dv, "dv_b", "nonfinite_dv")):
+        i = scan[key]
+        if i >= 0:
             raise ValueError(f"{_where(origin, source, i)}: non-finite {name}: {arr[i]!r}")
-
-    d = np.diff(t)
-    if (d < 0).any():
-        i = int(np.argmax(d < 0)) + 1
+    i = scan["decrease"]
+    if i >= 0:
         raise ValueError(f"{_where(origin, source, i)}: time {float(t[i])!r} decreases (previous sample "
                          f"{_where(origin, source, i - 1)} at {float(t[i - 1])!r})")
-    keep = None
-    if (d == 0).any():
+    if scan["repeats"]:
+        d = np.diff(t)
         dup = np.flatnonzero(d == 0) + 1
         same = (dth[dup] == dth[dup - 1]).all(axis=1) & (dv[dup] == dv[dup - 1]).all(axis=1)
         if not same.all():
@@ -164,29 +164,28 @@ def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
         if origin is not None:
             origin = origin.take(keep, n)
         n = len(t)
-        d = np.diff(t)
+        scan = scan_imu(t, dth, dv, **limits)  # rates and gaps over the intervals without the repeats
 
-    # interval of every sample; the first one from t0 when given, else the nominal one
-    dt0 = float(np.median(d[:: max(1, len(d) // 200_000)])) if len(d) else np.nan
-    if not np.isfinite(dt0) or dt0 <= 0:
-        dt0 = float(t[0] - t0) if t0 is not None and t[0] > t0 else 0.0
+    # the nominal interval dt0: the median interval, else the first one from t0 (scan_imu)
+    dt0 = scan["dt0"]
     if dt0 > 0:
-        dts = np.empty(n)
-        dts[1:] = d
-        dts[0] = (t[0] - t0) if (t0 is not None and t[0] > t0) else dt0
+        def dt_of(i):  # the sample's own interval; the first one from t0 when given, else the nominal one
+            return float(t[i] - t[i - 1]) if i > 0 else (float(t[0] - t0) if (t0 is not None and t[0] > t0) else dt0)
+
         # absurd values: rates over the sample's own interval, but never over more
         # than the nominal one (an accumulated gap sample is judged by its mean rate)
-        # |x| / dt > lim tested as |x|^2 > (lim dt)^2 (no square root or division per sample)
-        for x, lim, what, unit in ((dth, max_rate_rps, "angular rate |dtheta|/dt", "rad/s"),
-                                   (dv, max_accel_mps2, "specific force |dv|/dt", "m/s^2")):
-            bad = np.einsum("ij,ij->i", x, x) > np.square(lim * dts)
-            if bad.any():
-                i = int(np.argmax(bad))
-                val = float(np.linalg.norm(x[i]) / dts[i])
+        for x, lim, what, unit, key in ((dth, max_rate_rps, "angular rate |dtheta|/dt", "rad/s", "rate"),
+                                        (dv, max_accel_mps2, "specific force |dv|/dt", "m/s^2", "accel")):
+            i = scan[key]
+            if i >= 0:
+                val = float(np.linalg.norm(x[i]) / dt_of(i))
                 raise ValueError(f"{_where(origin, source, i)}: {what} = {val:.6g} {unit} exceeds the "
                                  f"physical limit {lim:.6g} {unit} (corrupted record?)")
-        gaps = np.flatnonzero(dts[1:] > gap_factor * dt0) + 1
-        if gaps.size:
+        if scan["gaps"]:
+            dts = np.empty(n)
+            dts[1:] = np.diff(t)
+            dts[0] = dt_of(0)
+            gaps = np.flatnonzero(dts[1:] > gap_factor * dt0) + 1
             rep["imu_max_gap_s"] = float(dts[gaps].max())
             too_long = dts[gaps] > max_gap_s
             if too_long.any():

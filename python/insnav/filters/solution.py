@@ -330,6 +330,13 @@ def status_name(code: int) -> str:
         return f"unknown_{int(code)}"
 
 
+def _status_names(codes: np.ndarray) -> list[str]:
+    """:func:`status_name` of every code (looked up once per distinct code)."""
+    codes = np.asarray(codes).tolist()
+    names = {c: status_name(c) for c in set(codes)}
+    return [names[c] for c in codes]
+
+
 def innovations_path(solution_path) -> Path:
     p = Path(solution_path)
     return p.with_name(p.name + ".innovations.csv")
@@ -343,14 +350,14 @@ def residuals_path(solution_path) -> Path:
 def _csv_text(body: np.ndarray, columns, fmt, names=None) -> str:
     """CSV text of a numeric table (NaN written as an empty cell), with an
     optional last text column."""
-    import io
-
-    buf = io.StringIO()
-    np.savetxt(buf, body, delimiter=",", fmt=fmt)
-    lines = [",".join(x if x != "nan" else "" for x in ln.split(",")) for ln in buf.getvalue().splitlines()]
+    row = ",".join(fmt)  # what np.savetxt formats each row with, ~3x faster without its per-row overhead
+    lines = [row % tuple(r) for r in np.asarray(body, float).tolist()]
     if names is not None:
         lines = [f"{ln},{n}" for ln, n in zip(lines, names)]
-    return "\n".join([",".join(columns)] + lines) + "\n"
+    text = "\n".join([",".join(columns)] + lines) + "\n"
+    # NaN -> an empty cell ("nan" is only ever a whole cell); two passes for ",nan,nan,"
+    # (a replace goes on after the comma its match consumed)
+    return text.replace("\nnan,", "\n,").replace(",nan,", ",,").replace(",nan,", ",,").replace(",nan\n", ",\n")
 
 
 def write_innovations(sol: Solution, solution_path) -> Path:
@@ -377,7 +384,7 @@ def write_innovations(sol: Solution, solution_path) -> Path:
                             inn if loose else np.full((m, 6), np.nan)])
     out = atomic_write_text(innovations_path(solution_path),
                             _csv_text(body, INNOVATION_COLUMNS, ["%.6f", "%d", "%d", "%.6g", "%d"] + ["%.6g"] * 6,
-                                      [status_name(c) for c in st]))
+                                      _status_names(st)))
     inputs = getattr(sol, "inputs", None)
     if inputs is not None and not loose and inn.ndim == 2 and inn.shape[1] == 2:
         ep = np.repeat(np.arange(len(inputs.epoch_t)), np.diff(inputs.epoch_start))

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._imu_scan import scan_imu
 from ..data.dataset import GnssFixes, ImuData, RowOrigin, Truth, check_finite_rows
 from ..data.textio import count_columns, mapped_bytes, parse_numeric, read_bytes
 from ..units import DEG, PPM
@@ -99,12 +100,13 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
         raise ValueError(f"{path}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
                          f"found {n}")
     t, dth, dv = parts
-    check_finite_rows(parts, origin, IMU_COLUMNS)
+    scan = scan_imu(t, dth, dv)  # one compiled pass for both checks below
+    if scan["nonfinite_t"] >= 0 or scan["nonfinite_dtheta"] >= 0 or scan["nonfinite_dv"] >= 0:
+        check_finite_rows(parts, origin, IMU_COLUMNS)  # the message: file, line, value and column
     # decreasing time is an error; equal times (duplicated records) are left to
     # insnav.filters.sanitize.sanitize_imu, which drops exact duplicates and counts them
-    dt = np.diff(t)
-    if t.shape[0] > 1 and (dt < 0).any():
-        i = int(np.argmax(dt < 0)) + 1
+    i = scan["decrease"]
+    if i >= 0:
         raise ValueError(f"{origin.where(i)}: time {float(t[i])!r} does not increase "
                          f"(previous record at {float(t[i - 1])!r}, line {origin.line(i - 1)})")
     return ImuData(t, dth, dv, origin=origin)
@@ -300,10 +302,12 @@ def read_kfgins_config(path) -> dict:
     """
     p = Path(path)
     text = read_text(p)
+    cfg = _plain_yaml(text)  # KF-GINS's own files; anything else goes to PyYAML (~13 ms to import and parse)
     try:
-        import yaml
+        if cfg is None:
+            import yaml
 
-        cfg = yaml.safe_load(text)
+            cfg = yaml.safe_load(text)
     except ImportError:  # pragma: no cover - PyYAML is normally there
         cfg = _mini_yaml(text, p)
     except Exception as exc:  # yaml.YAMLError
@@ -368,6 +372,68 @@ def read_kfgins_config(path) -> dict:
         "raw": cfg,
     }
     return out
+
+
+_YAML_INT = r"[-+]?(?:0|[1-9][0-9]*)"
+_YAML_FLOAT = r"[-+]?[0-9]+\.[0-9]*(?:[eE][-+][0-9]+)?"
+_YAML_NUM = f"(?:{_YAML_FLOAT}|{_YAML_INT})"
+_YAML_LINE = None
+
+
+def _plain_yaml(text: str) -> dict | None:
+    """The YAML of KF-GINS's configuration files read without PyYAML, or None
+    when ``text`` is anything more than that subset (PyYAML then reads it).
+
+    The subset, line by line: blank lines and ``#`` comments; ``key:`` opening
+    a mapping of the indented lines below it (one level); ``key: value`` with a
+    decimal integer, a float with a decimal point (PyYAML's YAML 1.1 resolver:
+    ``1e3`` would be a string there, so it is left to PyYAML), a quoted string
+    without quotes, backslashes or ``#`` inside, or a ``[...]`` list of such
+    numbers; a comment after a value starts with whitespace.  Within it the
+    result is what ``yaml.safe_load`` returns (tests/test_io_kfgins.py)."""
+    import re
+
+    global _YAML_LINE
+    if _YAML_LINE is None:
+        value = (rf"(?P<int>{_YAML_INT})|(?P<float>{_YAML_FLOAT})|\"(?P<dq>[^\"\\#]*)\"|'(?P<sq>[^'\\#]*)'"
+                 rf"|\[\s*(?P<list>{_YAML_NUM}(?:\s*,\s*{_YAML_NUM})*)?\s*\]")
+        _YAML_LINE = re.compile(rf"(?P<indent> *)(?P<key>[A-Za-z_][A-Za-z0-9_]*):(?:[ ]+(?:{value}))?(?:[ ]+#.*)?[ ]*")
+    num = re.compile(_YAML_NUM)
+    out: dict = {}
+    table: dict | None = None  # the mapping the indented lines go to
+    indent = None
+    for line in text.splitlines():
+        stripped = line.lstrip(" ")
+        if not stripped or stripped.startswith("#"):
+            continue
+        m = _YAML_LINE.fullmatch(line)
+        if m is None:
+            return None
+        k = m["key"]
+        if m["indent"]:
+            if table is None or (indent is not None and m["indent"] != indent):
+                return None
+            indent, tgt = m["indent"], table
+        else:
+            table, indent, tgt = None, None, out
+        if m["int"] is not None:
+            tgt[k] = int(m["int"])
+        elif m["float"] is not None:
+            tgt[k] = float(m["float"])
+        elif m["dq"] is not None or m["sq"] is not None:
+            tgt[k] = m["dq"] if m["dq"] is not None else m["sq"]
+        elif "[" in line.split("#", 1)[0]:
+            items = num.findall(m["list"] or "")
+            tgt[k] = [float(x) if "." in x else int(x) for x in items]
+        elif tgt is out:  # "key:" alone: a mapping follows (None when nothing is indented under it)
+            out[k] = None
+            table = out[k] = {}
+        else:
+            return None
+    for k, v in list(out.items()):  # "key:" with nothing indented under it is null in YAML
+        if v == {}:
+            out[k] = None
+    return out or None  # no key at all: PyYAML's None and the caller's message
 
 
 def _mini_yaml(text, p):  # pragma: no cover - fallback without PyYAML
