@@ -49,7 +49,7 @@ void bind_loose(py::module_& m) {
         LooseConfig cfg = loose_config_from(config, "engine config",
                                             {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
                                              "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
-                                             "constraint_gate_chi2", "smooth"});
+                                             "constraint_gate_chi2", "second_order_corr_s", "smooth"});
         VehicleConstraintConfig& v = cfg.vehicle;
         v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
         if (config.contains("vehicle_C_bv")) {
@@ -61,6 +61,8 @@ void bind_loose(py::module_& m) {
         v.sigma_odo_mps = num(config, "sigma_odo_mps", v.sigma_odo_mps);
         v.sigma_zupt_mps = num(config, "sigma_zupt_mps", v.sigma_zupt_mps);
         v.sigma_zaru_radps = num(config, "sigma_zaru_radps", v.sigma_zaru_radps);
+        v.second_order_corr_s = num(config, "second_order_corr_s", v.second_order_corr_s);
+        if (!(v.second_order_corr_s >= 0.0)) throw py::value_error("second_order_corr_s must be >= 0");
         cfg.constraint_gate_chi2 = num(config, "constraint_gate_chi2", 0.0);
         for (double sgm : {v.sigma_nhc_mps, v.sigma_odo_mps, v.sigma_zupt_mps, v.sigma_zaru_radps})
           if (!(sgm > 0.0)) throw py::value_error("vehicle constraint sigmas must be > 0");

@@ -183,6 +183,12 @@ class Constraints:
         rate [deg/s] noise including idle vibration.
     gate_chi2 : float
         NIS gate of the constraint updates (0 = off).
+    second_order_corr_s : float
+        Correlation time [s] of the attitude x velocity error product that
+        the NHC and odometer rows of the EKF and RB-UKF leave out of H (its
+        covariance is added to R, scaled by ``max(1, second_order_corr_s /
+        event interval)``; ``meas/vehicle.hpp``, docs/algorithms.md); 0: as
+        white noise.  Default 1 s.
     odo_scale : bool or "auto"
         Estimate the odometer's scale-factor error ``s`` (reading = (1 + s)
         true forward speed) as a filter state: the 16-state layout (the 15
@@ -215,6 +221,7 @@ class Constraints:
     zupt_sigma_f_mps2: float = 0.02
     zupt_sigma_w_dps: float = 0.115
     gate_chi2: float = 0.0
+    second_order_corr_s: float = 1.0
     odo_scale: bool | str = "auto"
     odo_scale_sigma: float = 0.01
     odo_scale_tau_s: float | None = None
@@ -264,6 +271,9 @@ class Constraints:
         v = self.gate_chi2
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
             bad("gate_chi2", v, "a number >= 0 (0 = off)")
+        v = self.second_order_corr_s
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+            bad("second_order_corr_s", v, "a number >= 0 [s] (0 = white)")
         for key in ("lever_arm_b_m", "mounting_rpy_deg"):
             if key == "lever_arm_b_m" and self.lever_arm_b_m is None:
                 continue

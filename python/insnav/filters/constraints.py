@@ -97,4 +97,4 @@ def engine_keys(dataset, c, layout: int = 15) -> dict:
     return dict(vehicle_lever_arm_b=rear_axle_lever_arm(dataset, c), vehicle_C_bv=C_vb.T.ravel().copy(),
                 sigma_nhc_mps=float(c.sigma_nhc_mps), sigma_odo_mps=c.odo_sigma_mps(layout),
                 sigma_zupt_mps=float(c.sigma_zupt_mps), sigma_zaru_radps=float(c.sigma_zaru_dph) * DEG_PER_H,
-                constraint_gate_chi2=float(c.gate_chi2))
+                constraint_gate_chi2=float(c.gate_chi2), second_order_corr_s=float(c.second_order_corr_s))
