@@ -1,5 +1,7 @@
 """KF-GINS text formats: readers on the shared data, writers round trip, error messages."""
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -102,3 +104,18 @@ def test_plain_yaml_reads_what_pyyaml_reads(text):
 @pytest.mark.parametrize("text", _YAML_OTHER)
 def test_plain_yaml_leaves_the_rest_to_pyyaml(text):
     assert kfgins._plain_yaml(text) is None
+
+
+def test_without_pyyaml_kfgins_yaml_reads_and_the_rest_names_the_file(tmp_path, monkeypatch):
+    """No PyYAML (not a dependency): KF-GINS's own flat YAML still reads; a file
+    beyond it is a one-line error naming the file and what to install."""
+    monkeypatch.setitem(sys.modules, "yaml", None)  # import yaml raises ImportError
+    good = tmp_path / "kf.yaml"
+    good.write_text("imudatarate: 200\ninitpos: [30.0, 114.0, 20.0]\nimunoise:\n  arw: [0.003, 0.003, 0.003]\n")
+    cfg = kfgins.read_kfgins_config(good)
+    assert cfg["imudatarate_hz"] == 200 and cfg["initpos"][2] == 20.0
+    bad = tmp_path / "flow.yaml"
+    bad.write_text("imunoise: {arw: 0.003}\n")
+    with pytest.raises(ValueError, match=r"flow\.yaml: .*needs PyYAML") as exc:
+        kfgins.read_kfgins_config(bad)
+    assert len(str(exc.value).splitlines()) == 1

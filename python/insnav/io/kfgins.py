@@ -308,8 +308,9 @@ def read_kfgins_config(path) -> dict:
             import yaml
 
             cfg = yaml.safe_load(text)
-    except ImportError:  # pragma: no cover - PyYAML is normally there
-        cfg = _mini_yaml(text, p)
+    except ImportError:
+        raise ValueError(f"{p}: more than KF-GINS's flat YAML (key: value, [a, b] lists of numbers, one nesting "
+                         f"level): reading it needs PyYAML (pip install pyyaml)") from None
     except Exception as exc:  # yaml.YAMLError
         mark = getattr(exc, "problem_mark", None)
         line = mark.line + 1 if mark is not None else 1
@@ -434,34 +435,3 @@ def _plain_yaml(text: str) -> dict | None:
         if v == {}:
             out[k] = None
     return out or None  # no key at all: PyYAML's None and the caller's message
-
-
-def _mini_yaml(text, p):  # pragma: no cover - fallback without PyYAML
-    """Parse the flat KF-GINS YAML subset: ``key: value``, ``[a, b]`` lists, one nesting level."""
-    out: dict = {}
-    cur = out
-    for i, ln in enumerate(text.splitlines(), 1):
-        s = ln.split("#", 1)[0].rstrip()
-        if not s.strip():
-            continue
-        if ":" not in s:
-            raise ValueError(f"{p}:{i}: expected 'key: value'")
-        k, v = s.split(":", 1)
-        indented = s.startswith((" ", "\t"))
-        k, v = k.strip(), v.strip()
-        tgt = cur if indented else out
-        if not indented:
-            cur = out
-        if v == "":
-            tgt[k] = {}
-            cur = tgt[k]
-            continue
-        if v.startswith("["):
-            tgt[k] = [float(x) for x in v.strip("[]").split(",") if x.strip()]
-        else:
-            v = v.strip('"').strip("'")
-            try:
-                tgt[k] = float(v) if any(c in v for c in ".eE") else int(v)
-            except ValueError:
-                tgt[k] = v
-    return out
