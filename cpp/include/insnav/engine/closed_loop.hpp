@@ -42,7 +42,7 @@
 namespace insnav {
 
 /// What became of one GNSS record (loose fix or tight epoch); the same codes
-/// in Python (insnav.engine.GNSS_STATUS).
+/// in Python (insnav.filters.solution.RecordStatus, GNSS_STATUS).
 enum class RecordStatus : std::int8_t {
   kNotUsed = 0,              ///< nothing to use (masked out, or no satellite: prediction only)
   kApplied = 1,              ///< the update was applied and fed back
