@@ -33,6 +33,8 @@ from .loose import loose_engine_args
 
 __all__ = ["Navigator"]
 
+_RAD2DEG = 180.0 / np.pi  # the batch run's conversion (_core.nav_rows_to_degrees), to the bit
+
 #: engine record status codes (closed_loop.hpp RecordStatus) as returned by the push calls
 RECORD_STATUS = {0: "queued", 1: "applied", 2: "rejected_by_gate", 3: "not_positive_definite",
                  4: "outside_imu_span", 5: "too_old"}
@@ -165,9 +167,9 @@ class Navigator:
         ``pitch_deg``, ``yaw_deg``, ``sigma`` (sqrt(diag P), layout order, SI),
         ``acc_bias_mps2``, ``gyro_bias_rps`` (and scale factors)."""
         s = self._nav.solution()
-        rpy = s["rpy"] / DEG
+        rpy = s["rpy"] * _RAD2DEG
         err = s["imu_err"]
-        out = dict(t=s["t"], lat_deg=s["lat"] / DEG, lon_deg=s["lon"] / DEG, h_m=s["h"], v_n_mps=s["v_n"],
+        out = dict(t=s["t"], lat_deg=s["lat"] * _RAD2DEG, lon_deg=s["lon"] * _RAD2DEG, h_m=s["h"], v_n_mps=s["v_n"],
                    roll_deg=rpy[0], pitch_deg=rpy[1], yaw_deg=rpy[2], sigma=s["sigma"],
                    acc_bias_mps2=err[0:3], gyro_bias_rps=err[3:6], acc_scale=err[6:9], gyro_scale=err[9:12])
         if "odo_scale" in s:
