@@ -26,10 +26,7 @@ import insnav
 from insnav.io.kfgins_dataset import load_kfgins
 D = Path(os.environ.get("INSNAV_SHARED_DATA", "../shared/data")) / "kfgins" / "sim"
 ds, cfg = load_kfgins(D / "kf-gins-sim.yaml", D / "Leador-A15-sim.txt.xz", D / "GNSS-RTK-sim.txt", layout=21)
-try:
-    import insnav.filters.loose as loose_mod
-except ImportError:
-    import insnav.engine as loose_mod
+import insnav.filters.loose as loose_mod
 core = loose_mod._core
 calls = {}
 def timed(*a, **k):

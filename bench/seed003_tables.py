@@ -246,7 +246,7 @@ simulator seed 1000 + k, filter initial-error seed k (sigmas 2/2/3 m, 0.1 m/s,
 
 Receiver clock (the preset's, unless swept): bias random walk 0.1 m/sqrt(s), drift
 random walk 0.01 (m/s)/sqrt(s).  The sweep uses the clock classes of Brown & Hwang
-(2012) Table 9.1 (`insnav.sim.gnss_raw.CLOCK_CLASSES`: TCXO 0.095 m/sqrt(s) and
+(2012) Table 9.1 (`insnav.gnss.clock.CLOCK_CLASSES`: TCXO 0.095 m/sqrt(s) and
 0.19 (m/s)/sqrt(s); OCXO 0.060 and 0.0084; rubidium 0.030 and 8.4e-6), in the
 simulator and in the filter alike.
 

@@ -4,11 +4,16 @@
 # missing first.  Arguments go to pytest; with none, the C++ sanitizer build
 # starts in the background first (tests/_cpp_build.py) so that it compiles
 # while the extension builds and the Python tests run, and pytest uses 2
-# workers (pytest-xdist).
+# workers (pytest-xdist).  scripts/test.sh --quick: the tests not marked slow (about 2 min).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 args=("$@")
-if [ ${#args[@]} -eq 0 ]; then
+if [ "${1:-}" = "--quick" ]; then
+  # the quick subset: everything not marked slow (tests/conftest.py SLOW_TESTS), on 2 workers,
+  # without the C++ sanitizer build (tests/test_cpp.py is slow)
+  shift
+  args=(-n 2 -p no:benchmark -m "not slow" "$@")
+elif [ ${#args[@]} -eq 0 ]; then
   # Two builds share the 2 cores: the C++ tests (no Python needed) compile in
   # the background from here on, beside the extension and then the Python tests.
   scripts/install.sh --deps-only

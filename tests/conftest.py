@@ -33,3 +33,41 @@ def short_tight_dataset(duration_s: float = 120.0, seed: int = 7):
     sc["motion"] = dict(sc["motion"], segments=segs)
     sc["gnss_raw"] = dict(sc["gnss_raw"], windows=[], max_sats=8)
     return sim.simulate(sc, seed=seed)
+
+
+#: The long tests (real-data campaigns, Monte Carlo, the C++ sanitizer build, a browser):
+#: marked ``slow`` here, in one place, so that ``scripts/test.sh --quick`` (``-m "not slow"``)
+#: runs the rest in about two minutes.  CI runs everything.  A node id or a prefix of one.
+SLOW_TESTS = (
+    "tests/test_cpp.py",
+    "tests/test_tight_multi.py::test_robust_rejects_faults",
+    "tests/test_tight_multi.py::test_multi_sigma_point_filters",
+    "tests/test_tight_multi.py::test_robust_equals_plain_on_clean_data",
+    "tests/test_tight_multi.py::test_clock_jump_absorbed",
+    "tests/test_tight_multi.py::test_walk_gec_loader_option",
+    "tests/test_spp.py::test_smartloc",
+    "tests/test_spp.py::test_cli_spp_on_smartloc",
+    "tests/test_report.py::test_page_renders_in_a_real_browser",
+    "tests/test_report.py::test_tight_report_shows_the_per_satellite_residuals",
+    "tests/test_constraints.py::test_exact_nhc_keeps_the_linearised_filters_consistent_in_an_outage",
+    "tests/test_constraints.py::test_nhc_at_one_hertz_drifts_less_than_white_noise_at_ten_hertz",
+    "tests/test_sim_dataset.py::test_save_load_roundtrip",
+    "tests/test_tight.py::test_one_satellite_clock_model_sets_the_vertical",
+    "tests/test_smoother_rows.py::test_smoothed_run_matches_the_plain_formula",
+    "tests/test_io_kfgins.py::test_read_sim_imu_xz_and_truth",
+    "tests/test_io_kfgins.py::test_writers_roundtrip",
+    "tests/test_odo_scale.py",
+    "tests/test_upf.py",
+    "tests/test_loose.py::test_consistency_monte_carlo",
+    "tests/test_delay.py::test_high_delay_ordering",
+    "tests/test_mechanization.py::test_stationary_one_hour",
+    "tests/test_cli.py::test_demo_quick_writes_the_report",
+    "tests/test_interrupt.py::test_sigint_stops_a_run_fast_with_one_line_and_no_output",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        nodeid = item.nodeid.replace("\\", "/")
+        if any(nodeid.startswith(p) for p in SLOW_TESTS):
+            item.add_marker(pytest.mark.slow)

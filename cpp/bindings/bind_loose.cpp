@@ -39,6 +39,32 @@ ImuErrorModel imu_model_from_dict(const py::dict& d) {
   return m;
 }
 
+/// The loose engine config of _core.run_loose / _core.LooseNavigator, with the
+/// vehicle-constraint keys (unknown keys are errors).
+LooseConfig loose_run_config_from(const py::dict& config) {
+  LooseConfig cfg = loose_config_from(config, "engine config",
+                                      {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
+                                       "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
+                                       "constraint_gate_chi2", "second_order_corr_s", "smooth"});
+  VehicleConstraintConfig& v = cfg.vehicle;
+  v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
+  if (config.contains("vehicle_C_bv")) {
+    DArray c = py::cast<DArray>(config["vehicle_C_bv"]);
+    if (c.size() != 9) throw py::value_error("vehicle_C_bv: expected 9 values (row-major 3x3)");
+    v.C_bv = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(c.data());
+  }
+  v.sigma_nhc_mps = num(config, "sigma_nhc_mps", v.sigma_nhc_mps);
+  v.sigma_odo_mps = num(config, "sigma_odo_mps", v.sigma_odo_mps);
+  v.sigma_zupt_mps = num(config, "sigma_zupt_mps", v.sigma_zupt_mps);
+  v.sigma_zaru_radps = num(config, "sigma_zaru_radps", v.sigma_zaru_radps);
+  v.second_order_corr_s = num(config, "second_order_corr_s", v.second_order_corr_s);
+  if (!(v.second_order_corr_s >= 0.0)) throw py::value_error("second_order_corr_s must be >= 0");
+  cfg.constraint_gate_chi2 = num(config, "constraint_gate_chi2", 0.0);
+  for (double sgm : {v.sigma_nhc_mps, v.sigma_odo_mps, v.sigma_zupt_mps, v.sigma_zaru_radps})
+    if (!(sgm > 0.0)) throw py::value_error("vehicle constraint sigmas must be > 0");
+  return cfg;
+}
+
 void bind_loose(py::module_& m) {
   m.def(
       "run_loose",
@@ -46,26 +72,7 @@ void bind_loose(py::module_& m) {
          const DArray& gnss, const DArray& init, const DArray& P0, const DArray& corr0, const py::dict& model,
          const py::dict& config, const std::optional<DArray>& constraints) {
         const ImuErrorModel mdl = imu_model_from_dict(model);
-        LooseConfig cfg = loose_config_from(config, "engine config",
-                                            {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
-                                             "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
-                                             "constraint_gate_chi2", "second_order_corr_s", "smooth"});
-        VehicleConstraintConfig& v = cfg.vehicle;
-        v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
-        if (config.contains("vehicle_C_bv")) {
-          DArray c = py::cast<DArray>(config["vehicle_C_bv"]);
-          if (c.size() != 9) throw py::value_error("vehicle_C_bv: expected 9 values (row-major 3x3)");
-          v.C_bv = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(c.data());
-        }
-        v.sigma_nhc_mps = num(config, "sigma_nhc_mps", v.sigma_nhc_mps);
-        v.sigma_odo_mps = num(config, "sigma_odo_mps", v.sigma_odo_mps);
-        v.sigma_zupt_mps = num(config, "sigma_zupt_mps", v.sigma_zupt_mps);
-        v.sigma_zaru_radps = num(config, "sigma_zaru_radps", v.sigma_zaru_radps);
-        v.second_order_corr_s = num(config, "second_order_corr_s", v.second_order_corr_s);
-        if (!(v.second_order_corr_s >= 0.0)) throw py::value_error("second_order_corr_s must be >= 0");
-        cfg.constraint_gate_chi2 = num(config, "constraint_gate_chi2", 0.0);
-        for (double sgm : {v.sigma_nhc_mps, v.sigma_odo_mps, v.sigma_zupt_mps, v.sigma_zaru_radps})
-          if (!(sgm > 0.0)) throw py::value_error("vehicle constraint sigmas must be > 0");
+        const LooseConfig cfg = loose_run_config_from(config);
         const UtParams ut = ut_from(config);
         const int sigma_columns = static_cast<int>(num(config, "sigma_columns", 0));
         const LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut, sigma_columns,

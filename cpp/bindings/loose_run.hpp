@@ -44,6 +44,8 @@ struct LooseRunArgs {
   bool smooth = false;                   // config key 'smooth': RTS backward pass (EKF, RB-UKF, UKF)
 };
 
+LooseConfig loose_run_config_from(const py::dict& config);  // bind_loose.cpp
+
 /// filter 'ekf', 'rbukf' or 'ukf' on one layout (any other filter: ValueError).
 py::dict run_loose_l15(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l15.cpp
 py::dict run_loose_l21(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l21.cpp

@@ -30,6 +30,7 @@ _LAZY = {
     "load_csv_dataset": "insnav.io.csv_dataset",
     "Dataset": "insnav.data.dataset",
     "run": "insnav.filters",
+    "Navigator": "insnav.filters.navigator",
     "Solution": "insnav.filters.solution",
     "load_solution": "insnav.filters.solution",
     "RunConfig": "insnav.config",

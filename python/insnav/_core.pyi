@@ -67,6 +67,7 @@ def run_loose(
     imu_correction: npt.ArrayLike,  # (12,): acc bias, gyro bias, acc scale, gyro scale
     imu_model: dict[str, Any],
     config: dict[str, Any],
+    constraints: npt.ArrayLike | None = None,  # (K, 3): t [s], kinds (flags nhc 1, odo 2, zupt 4, zaru 8), speed [m/s]
 ) -> dict[str, Any]: ...
 def smooth_rows(
     t: npt.NDArray[np.float64],  # (n,) row times [s]
@@ -146,3 +147,66 @@ def rotation_about_at(
     axis_b: npt.ArrayLike,
     query: npt.ArrayLike,
 ) -> np.ndarray: ...
+def nav_rows_to_degrees(
+    llh: npt.NDArray[np.float64],  # (N, 3) lat, lon [rad] -> [deg] in place
+    rpy: npt.NDArray[np.float64],  # (N, 3) [rad] -> [deg] in place
+    sigma: npt.NDArray[np.float64],  # (N, k): columns att_col..att_col+2 [rad] -> [deg] in place
+    att_col: int,
+    v_n: npt.NDArray[np.float64],
+) -> tuple[int, bool]: ...  # (first row with a non-finite latitude or velocity or -1, any non-finite)
+def parse_text(
+    data: bytes | memoryview,
+    ncols: int,
+    keep: int,
+    allow_extra: bool = False,
+    comma: bool = False,
+    first_line: int = 1,
+    threads: int = 2,
+    groups: list[int] | None = None,
+) -> tuple[Any, Any, Any]: ...  # (array or tuple of arrays, line of each row or None, None or the first error)
+def set_progress(callback: Any) -> None: ...  # callback(k, n) from every run's C++ loop, at most every 20 ms
+def standstill_statistic(
+    t: npt.ArrayLike,
+    dtheta_b: npt.ArrayLike,
+    dv_b: npt.ArrayLike,
+    t0: float,
+    window: int,
+    sigma_f_mps2: float,
+    sigma_w_radps: float,
+    gravity_mps2: float = 9.80665,
+) -> np.ndarray: ...  # (N,) test statistic T (ins/standstill.hpp), +inf until the window is full
+def write_table(
+    path: str,
+    header: str,
+    columns: list[npt.NDArray[np.float64]],
+    scales: list[float],
+    decimals: list[int],  # >= 0 fixed, < 0 shortest round trip
+    sep: str = ",",
+    width: int = 0,
+    trim_zeros: bool = True,
+    trailing_sep: bool = False,
+    threads: int = 2,
+) -> int: ...  # bytes written
+
+class LooseNavigator:
+    """Real-time loose navigator (engine/navigator.hpp); use insnav.Navigator."""
+    def __init__(
+        self,
+        filter: str,  # "ekf" (layout 15, 16, 21) | "rbukf" | "ukf" (15)
+        layout: int,
+        init: npt.ArrayLike,  # (10,): t0, lat, lon, h, vN, vE, vD, roll, pitch, yaw (SI)
+        P0: npt.ArrayLike,  # (layout, layout)
+        imu_correction: npt.ArrayLike,  # (12,)
+        imu_model: dict[str, Any],
+        config: dict[str, Any],  # run_loose's engine config
+        imu_hold: int = 0,  # IMU samples held back for late records, 0..256
+    ) -> None: ...
+    def push_imu(self, t: float, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> bool: ...
+    def push_imu_array(self, t: npt.ArrayLike, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> int: ...
+    def push_gnss_fix(self, row: npt.ArrayLike) -> int: ...  # run_loose's 13-value gnss row; RecordStatus code
+    def push_constraint(self, t: float, kinds: int, speed_mps: float = ...) -> int: ...
+    def flush(self) -> None: ...
+    def solution(self) -> dict[str, Any]: ...  # t, lat, lon [rad], h, v_n, rpy [rad], sigma, imu_err (, odo_scale)
+    def covariance(self) -> np.ndarray: ...
+    def counters(self) -> dict[str, Any]: ...
+    def last_fix(self) -> dict[str, Any]: ...  # status, nis, innovation (6)

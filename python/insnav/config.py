@@ -114,7 +114,7 @@ class ImuNoise:
         return out
 
 
-#: keys of a dataset's imu_model (insnav.sim.imu.imu_model_dict, insnav.ins.align.imu_model_for_grade)
+#: keys of a dataset's imu_model (insnav.sim.imu.imu_model_dict, insnav.data.imu_grades.imu_model_for_grade)
 _IMU_MODEL_KEYS = {"rate_hz", "imu_grade", "gyro_arw", "accel_vrw"} | {
     f"{p}_{k}" for p in ("gyro", "accel")
     for k in ("bias", "bias_sigma", "gm_sigma", "gm_tau", "bias_rw", "scale", "scale_sigma",

@@ -8,6 +8,8 @@ builds the initial state and covariance, and validates inputs once.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .. import _core
@@ -19,7 +21,7 @@ from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correct
                      raise_if_nonfinite)
 from .solution import Solution
 
-__all__ = ["run_loose"]
+__all__ = ["run_loose", "loose_engine_args", "LooseEngineArgs"]
 
 
 def run_loose(dataset, cfg: RunConfig) -> Solution:
@@ -36,36 +38,13 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         check_finite(gnss[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
     gnss_t = gnss[:, 0].copy()
 
-    init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
-    noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
-    n = cfg.layout
-    sig_states = loose_initial_sigmas(sig0, noise, n, cfg)
-    core_model = noise.as_core_dict()
-    # the odometer scale factor as a 16th state (Layout16Odo, [constraints] odo_scale)
-    odo_state = bool(cfg.constraints.use) and cfg.constraints.odo_scale_state(n)
-    n_core = n
-    if odo_state:
-        c = cfg.constraints
-        n_core = 16
-        sig_states = np.append(sig_states, float(c.odo_scale_sigma))
-        core_model.update(odo_scale_sigma=float(c.odo_scale_sigma),
-                          odo_scale_tau=np.inf if c.odo_scale_tau_s is None else float(c.odo_scale_tau_s))
-    P0 = np.diag(sig_states ** 2)
-    core_cfg = engine_config(dataset, cfg, gnss_t, n_core, use_position=cfg.use_position,
-                             use_velocity=cfg.use_velocity,
-                             # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
-                             sigma_columns=n_core if cfg.imu_error_sigmas else 9)
-    init_vec = init_vector(dataset, init)
-    events, ev_counts = None, None
-    if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
-        from .constraints import constraint_events, engine_keys
-
-        events, ev_counts = constraint_events(dataset, cfg.constraints, t, dth, dv)
-        core_cfg.update(engine_keys(dataset, cfg.constraints, n))
+    a = loose_engine_args(dataset, cfg, gnss_t, (t, dth, dv))
+    n, n_core, odo_state = cfg.layout, a.layout, a.odo_state
+    events, ev_counts, core_cfg = a.events, a.ev_counts, a.config
     if cfg.smooth:
         core_cfg["smooth"] = True
-    out = _core.run_loose(cfg.filter, n_core, t, dth, dv, gnss, init_vec, P0, initial_imu_correction(cfg),
-                          core_model, core_cfg, events)
+    out = _core.run_loose(cfg.filter, n_core, t, dth, dv, gnss, a.init, a.P0, a.imu_correction, a.imu_model,
+                          core_cfg, events)
     # unit conversions in place (the arrays are ours) in one compiled pass over the rows,
     # which also finds the first non-finite row (raise_if_nonfinite below)
     sig = out["sigma"]
@@ -102,3 +81,56 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     if nonfinite or cfg.smooth:  # the message (row and time), or the smoothed rows' check
         raise_if_nonfinite(sol, cfg.filter)
     return sol
+
+
+@dataclass
+class LooseEngineArgs:
+    """What the loose engine is built from (``_core.run_loose`` and
+    ``_core.LooseNavigator`` take the same): the core layout, initial state
+    vector (:func:`init_vector`), P0, initial IMU correction, IMU model and
+    engine config dicts, and the vehicle-constraint events (None without)."""
+
+    layout: int
+    init: np.ndarray
+    P0: np.ndarray
+    imu_correction: np.ndarray
+    imu_model: dict
+    config: dict
+    odo_state: bool
+    events: np.ndarray | None = None
+    ev_counts: dict | None = None
+
+
+def loose_engine_args(dataset, cfg: RunConfig, record_t: np.ndarray, imu=None) -> LooseEngineArgs:
+    """The loose engine's set-up from a dataset and a run config: initial state
+    and covariance, IMU model, engine config (outage cycle from the spacing of
+    ``record_t`` [s]) and, with ``imu`` = (t, dtheta_b, dv_b) and
+    ``[constraints]``, the constraint events (the push API leaves them to the caller)."""
+    init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
+    noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
+    n = cfg.layout
+    sig_states = loose_initial_sigmas(sig0, noise, n, cfg)
+    core_model = noise.as_core_dict()
+    # the odometer scale factor as a 16th state (Layout16Odo, [constraints] odo_scale)
+    odo_state = bool(cfg.constraints.use) and cfg.constraints.odo_scale_state(n)
+    n_core = n
+    if odo_state:
+        c = cfg.constraints
+        n_core = 16
+        sig_states = np.append(sig_states, float(c.odo_scale_sigma))
+        core_model.update(odo_scale_sigma=float(c.odo_scale_sigma),
+                          odo_scale_tau=np.inf if c.odo_scale_tau_s is None else float(c.odo_scale_tau_s))
+    core_cfg = engine_config(dataset, cfg, record_t, n_core, use_position=cfg.use_position,
+                             use_velocity=cfg.use_velocity,
+                             # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
+                             sigma_columns=n_core if cfg.imu_error_sigmas else 9)
+    events, ev_counts = None, None
+    if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
+        from .constraints import constraint_events, engine_keys
+
+        if imu is not None:
+            events, ev_counts = constraint_events(dataset, cfg.constraints, *imu)
+        core_cfg.update(engine_keys(dataset, cfg.constraints, n))
+    return LooseEngineArgs(layout=n_core, init=init_vector(dataset, init), P0=np.diag(sig_states ** 2),
+                           imu_correction=initial_imu_correction(cfg), imu_model=core_model, config=core_cfg,
+                           odo_state=odo_state, events=events, ev_counts=ev_counts)

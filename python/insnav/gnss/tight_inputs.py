@@ -135,7 +135,7 @@ def limit_sats(inp: TightInputs, max_sats: int) -> TightInputs:
 def tight_inputs_from_raw(raw, *, elevation_mask_deg: float = 0.0, max_sats: int = MAX_SATS,
                           sigma_pr_m=None, sigma_prr_mps=None, elevation_weighting: bool = False,
                           approx_r_e=None) -> TightInputs:
-    """Simulator raw observations (:class:`insnav.dataset.GnssRaw`) -> :class:`TightInputs`.
+    """Simulator raw observations (:class:`insnav.data.dataset.GnssRaw`) -> :class:`TightInputs`.
 
     Sigmas default to the dataset's own (the simulated noise); with
     ``elevation_weighting`` they are scaled by ``1/sin(el)``.  The true

@@ -42,7 +42,7 @@
 namespace insnav {
 
 /// What became of one GNSS record (loose fix or tight epoch); the same codes
-/// in Python (insnav.engine.GNSS_STATUS).
+/// in Python (insnav.filters.solution.RecordStatus, GNSS_STATUS).
 enum class RecordStatus : std::int8_t {
   kNotUsed = 0,              ///< nothing to use (masked out, or no satellite: prediction only)
   kApplied = 1,              ///< the update was applied and fed back
@@ -432,27 +432,38 @@ struct ClosedLoop {
     for (std::int64_t k = 0; k < n; ++k) {
       if (out.stop_requested(k, n)) return;
       const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
-      double done = 0.0;  // fraction of this increment already integrated
-      for (double te = next_t(); te <= raw.t; te = next_t()) {
-        const double a = (te - t_prev) / raw.dt;  // in (0, 1]
-        if (a > done) {
-          step(raw, done, a);
-          done = a;
-        }
-        close_cycle();
-        apply_next();
-        start_cycle();
-      }
-      if (done < 1.0) step(raw, done, 1.0);
-      if (outage_due(cycle_period)) {
-        close_cycle();
-        start_cycle();
-      }
+      process_sample(raw, t_prev, cycle_period, next_t, apply_next);
       if (--until_output == 0 || k + 1 == n) {
         write_output(out);
         until_output = decimation;
       }
       t_prev = raw.t;
+    }
+  }
+
+  /// One raw IMU increment over (t_prev, raw.t]: the events valid in it are
+  /// applied at their own times (the increment split in proportion, the cycle
+  /// closed, `apply_next()`, a new cycle), then the rest is integrated and an
+  /// outage cycle closed when due.  The batch loop above and the push API
+  /// (engine/navigator.hpp) both call it, so their results are identical.
+  template <class NextTime, class ApplyNext>
+  void process_sample(const ImuIncrement& raw, double t_prev, double cycle_period, NextTime&& next_t,
+                      ApplyNext&& apply_next) {
+    double done = 0.0;  // fraction of this increment already integrated
+    for (double te = next_t(); te <= raw.t; te = next_t()) {
+      const double a = (te - t_prev) / raw.dt;  // in (0, 1]
+      if (a > done) {
+        step(raw, done, a);
+        done = a;
+      }
+      close_cycle();
+      apply_next();
+      start_cycle();
+    }
+    if (done < 1.0) step(raw, done, 1.0);
+    if (outage_due(cycle_period)) {
+      close_cycle();
+      start_cycle();
     }
   }
 

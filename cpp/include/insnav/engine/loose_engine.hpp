@@ -114,8 +114,7 @@ class LooseEngine {
   void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0,
            std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
            std::int64_t m, const GnssFix* fixes, std::int64_t k, const ConstraintEvent* events, LooseOutputs& out) {
-    core_.reset(initial, P0, corr0);
-    last_nhc_t_ = last_odo_t_ = -kInf;
+    start(initial, P0, corr0);
     std::int64_t g = 0, c = 0;
     while (g < m && !(fixes[g].t > initial.t)) out.mark(g++, RecordStatus::kOutsideImuSpan);
     while (c < k && !(events[c].t > initial.t)) mark_constraint(out, c++, RecordStatus::kOutsideImuSpan);
@@ -137,7 +136,14 @@ class LooseEngine {
     out.gate_reopened = core_.gate.reopened();
   }
 
- private:
+  /// Reset to the initial state (the start of run(); the push API's constructor).
+  void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
+    core_.reset(initial, P0, corr0);
+    last_nhc_t_ = last_odo_t_ = -kInf;
+  }
+
+  /// The measurement step of fix g, applied now (the INS is at its time of
+  /// validity): lever arm, gate, update, feedback; record g's outputs in out.
   void apply_fix(const GnssFix& fix_in, std::int64_t g, LooseOutputs& out) {
     const GnssFix fix = masked_fix(fix_in, cfg_);
     if (!fix.has_pos && !fix.has_vel) {
@@ -157,11 +163,12 @@ class LooseEngine {
     }
   }
 
-  void mark_constraint(LooseOutputs& out, std::int64_t c, RecordStatus st) {
+  static void mark_constraint(LooseOutputs& out, std::int64_t c, RecordStatus st) {
     out.set_status(out.constraint_status, c, st);
     if (out.constraint_nis) out.constraint_nis[c] = NAN;
   }
 
+  /// The measurement step of constraint event c, applied now (as apply_fix).
   void apply_constraint(const ConstraintEvent& e, std::int64_t c, LooseOutputs& out) {
     const bool zupt = e.kinds & kZupt, zaru = e.kinds & kZaru;
     const bool nhc = e.kinds & kNhc, odo = e.kinds & kOdometer;
@@ -198,6 +205,7 @@ class LooseEngine {
     }
   }
 
+ private:
   ClosedLoop<Filter> core_;
   LooseConfig cfg_;
   LooseMeasurement<L> meas_;

@@ -38,7 +38,7 @@
 //    weakly observable state (yaw, gyro biases) multiplies its variance on
 //    every fading epoch while the measurements shrink it only slowly, so it
 //    grows without bound: on seed004-uav alpha = 1 for all 20 states makes the
-//    fading UKF diverge within 600 s; insnav.particle fades only the
+//    fading UKF diverge within 600 s; insnav.filters.particle fades only the
 //    position, velocity and clock states (alpha = 1 there, 0 elsewhere).
 //  * Lambda is applied symmetrically, Pbar = Lambda^1/2 P^- Lambda^1/2 + Q: the
 //    diagonal gets eta_i as in Lambda P^-, and Pbar stays symmetric.

@@ -1,0 +1,185 @@
+// The push API (engine/navigator.hpp) against the batch engine
+// (loose_engine.hpp): the same drive pushed sample by sample, with GNSS fixes
+// and vehicle-constraint events pushed on time or late (held IMU samples),
+// gives the batch rows bit for bit; late records beyond the hold are refused,
+// never applied at a wrong time; no heap allocation after construction.
+#include "eigen_malloc_check.hpp"  // first: before any Eigen header
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "insnav/engine/navigator.hpp"
+#include "insnav/filter/ekf.hpp"
+#include "insnav/filter/rbukf.hpp"
+#include "test_util.hpp"
+
+using namespace insnav;
+
+namespace {
+
+struct Drive {
+  std::vector<double> t, dth, dv;
+  std::vector<GnssFix> fixes;
+  std::vector<ConstraintEvent> events;
+  NavState s0;
+};
+
+/// 60 s at 100 Hz of gentle S-curves; GNSS at 1 Hz between IMU epochs (the
+/// increment is split), perturbed fixes; NHC + odometer at 10 Hz.
+Drive make_drive() {
+  Drive d;
+  const double imu_dt = 0.01;
+  const int n = 6000;
+  d.s0.lat = 0.5;
+  d.s0.lon = 0.2;
+  d.s0.h = 50.0;
+  d.s0.v_n = Vec3(10.0, 0.0, 0.0);
+  Strapdown truth(d.s0);
+  d.t.resize(n);
+  d.dth.resize(3 * n);
+  d.dv.resize(3 * n);
+  for (int k = 0; k < n; ++k) {
+    d.t[k] = imu_dt * (k + 1);
+    const double turn = 0.05 * std::sin(0.1 * d.t[k]);
+    ImuIncrement imu;
+    imu.t = d.t[k];
+    imu.dt = imu_dt;
+    imu.dtheta_b = Vec3(1e-5, -2e-5, turn * imu_dt);
+    imu.dv_b = Vec3(0.2 * std::cos(0.1 * d.t[k]), 10.0 * turn, -wgs84::gravity(d.s0.lat, d.s0.h)) * imu_dt;
+    for (int j = 0; j < 3; ++j) d.dth[3 * k + j] = imu.dtheta_b[j], d.dv[3 * k + j] = imu.dv_b[j];
+    truth.update(imu);
+    const double tk = d.t[k];
+    if (k % 100 == 49) {  // a fix valid 5 ms after this sample: inside the next increment
+      const NavState& s = truth.state();
+      GnssFix f;
+      f.t = tk + 0.005;
+      f.lat = s.lat + 1e-7 * std::sin(3.0 * k);
+      f.lon = s.lon - 1e-7 * std::cos(5.0 * k);
+      f.h = s.h + 0.5 * std::sin(7.0 * k);
+      f.v_n = s.v_n + Vec3(0.05, -0.03, 0.02) * std::sin(11.0 * k);
+      f.sigma_pos_n = Vec3(0.5, 0.5, 1.0);
+      f.sigma_vel_n = Vec3::Constant(0.1);
+      f.has_vel = (k / 100) % 3 != 0;  // some fixes position only
+      d.fixes.push_back(f);
+    }
+    if (k % 10 == 9) d.events.push_back(ConstraintEvent{tk, static_cast<std::uint8_t>(kNhc | kOdometer),
+                                                        truth.state().v_n.norm()});
+  }
+  // two records at the same time as a sample (a fix and an event at a tie: fix first)
+  d.events.push_back(ConstraintEvent{d.fixes[10].t, kNhc, 0.0});
+  std::sort(d.events.begin(), d.events.end(), [](const auto& a, const auto& b) { return a.t < b.t; });
+  d.s0.q_nb = quat_from_euler(Vec3(0.01, -0.02, 0.05));  // a wrong initial attitude: the filter works
+  d.s0.v_n += Vec3(0.3, -0.2, 0.1);
+  return d;
+}
+
+template <class Filter>
+double run_compare(const Drive& d, int hold, int late_samples, bool constraints) {
+  using L = typename Filter::Layout;
+  NavigatorConfig cfg;
+  cfg.loose.propagation_interval = 0.05;
+  cfg.loose.lever_arm_b = Vec3(0.5, -0.2, -1.0);
+  cfg.imu_hold = hold;
+  StateVec<L> sd = StateVec<L>::Constant(1e-3);
+  sd.template head<9>() << 2, 2, 3, 0.5, 0.5, 0.5, 0.02, 0.02, 0.1;
+  const StateCov<L> P0 = sd.cwiseAbs2().asDiagonal();
+  const int n = static_cast<int>(d.t.size());
+  const int k_ev = constraints ? static_cast<int>(d.events.size()) : 0;
+
+  // batch
+  std::vector<double> bt(n), bllh(3 * n), bv(3 * n), brpy(3 * n), bsig(L::kSize * n);
+  LooseOutputs out;
+  out.t = bt.data();
+  out.llh = bllh.data();
+  out.v_n = bv.data();
+  out.rpy = brpy.data();
+  out.sigma = bsig.data();
+  auto batch = std::make_unique<LooseEngine<Filter>>(cfg.imu_model, cfg.loose, cfg.ut);
+  batch->run(d.s0, P0, ImuCorrection{}, n, d.t.data(), d.dth.data(), d.dv.data(),
+             static_cast<std::int64_t>(d.fixes.size()), d.fixes.data(), k_ev, d.events.data(), out);
+
+  // push: a record is pushed `late_samples` samples after the sample that covers it
+  auto nav = std::make_unique<LooseNavigator<Filter>>(cfg, d.s0, P0);
+  size_t g = 0, c = 0;
+  double max_diff = 0.0;
+  int rows = 0;
+  const long before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);
+  auto compare_row = [&](int k) {
+    const auto r = nav->solution();
+    double dmax = std::abs(r.t - bt[k]);
+    for (int j = 0; j < 3; ++j) {
+      dmax = std::max(dmax, std::abs(r.llh[j] - bllh[3 * k + j]) * (j < 2 ? 6.4e6 : 1.0));
+      dmax = std::max(dmax, std::abs(r.v_n[j] - bv[3 * k + j]));
+      dmax = std::max(dmax, std::abs(r.rpy[j] - brpy[3 * k + j]));
+    }
+    for (int j = 0; j < L::kSize; ++j) dmax = std::max(dmax, std::abs(r.sigma[j] - bsig[L::kSize * k + j]));
+    max_diff = std::max(max_diff, dmax);
+    ++rows;
+  };
+  for (int k = 0; k < n; ++k) {
+    const double t_cover = d.t[std::max(0, k - late_samples)];  // records covered up to here are "arrived"
+    while (g < d.fixes.size() && d.fixes[g].t <= (late_samples ? t_cover : d.t[k])) nav->push_gnss_fix(d.fixes[g++]);
+    while (constraints && c < d.events.size() && d.events[c].t <= (late_samples ? t_cover : d.t[k]))
+      nav->push_constraint(d.events[c++]);
+    nav->push_imu(d.t[k], Vec3(d.dth[3 * k], d.dth[3 * k + 1], d.dth[3 * k + 2]),
+                  Vec3(d.dv[3 * k], d.dv[3 * k + 1], d.dv[3 * k + 2]));
+    const std::int64_t done = nav->samples();  // rows integrated so far: compare the newest
+    if (done > 0 && done == k + 1 - hold) compare_row(static_cast<int>(done - 1));
+  }
+  while (g < d.fixes.size()) nav->push_gnss_fix(d.fixes[g++]);
+  while (constraints && c < d.events.size()) nav->push_constraint(d.events[c++]);
+  nav->flush();
+  compare_row(n - 1);
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(g_eigen_asserts == before);  // no heap allocation while pushing
+  EXPECT_TRUE(nav->updates() == out.updates);
+  EXPECT_TRUE(nav->refused_records() == 0);
+  EXPECT_TRUE(rows >= n - hold);
+  if (constraints) EXPECT_TRUE(nav->constraint_updates() == out.constraint_updates && out.constraint_updates > 0);
+  return max_diff;
+}
+
+void test_push_equals_batch() {
+  const Drive d = make_drive();
+  // on time, no hold
+  EXPECT_TRUE(run_compare<Ekf<Layout15>>(d, 0, 0, false) == 0.0);
+  EXPECT_TRUE(run_compare<Ekf<Layout15>>(d, 0, 0, true) == 0.0);
+  // records arriving 20 samples (0.2 s) late, 25 samples held back
+  EXPECT_TRUE(run_compare<Ekf<Layout15>>(d, 25, 20, true) == 0.0);
+  EXPECT_TRUE(run_compare<Ekf<Layout21>>(d, 25, 20, false) == 0.0);
+  EXPECT_TRUE(run_compare<RbUkf<Layout15>>(d, 25, 20, false) == 0.0);
+}
+
+void test_late_record_refused() {
+  const Drive d = make_drive();
+  NavigatorConfig cfg;
+  cfg.imu_hold = 2;
+  const StateCov<Layout15> P0 = StateCov<Layout15>::Identity();
+  auto nav = std::make_unique<LooseNavigator<Ekf<Layout15>>>(cfg, d.s0, P0);
+  for (int k = 0; k < 100; ++k)
+    nav->push_imu(d.t[k], Vec3(d.dth[3 * k], d.dth[3 * k + 1], d.dth[3 * k + 2]),
+                  Vec3(d.dv[3 * k], d.dv[3 * k + 1], d.dv[3 * k + 2]));
+  EXPECT_TRUE(nav->held_samples() == 2);
+  EXPECT_TRUE(nav->t_integrated() == d.t[97]);
+  GnssFix f = d.fixes[0];  // valid at 0.505 s: integrated long ago
+  EXPECT_TRUE(nav->push_gnss_fix(f) == RecordStatus::kTooOld);
+  f.t = d.t[98];  // inside a held sample: still on time
+  EXPECT_TRUE(nav->push_gnss_fix(f) == RecordStatus::kNotUsed);
+  f.t = d.s0.t;  // the initial time itself
+  EXPECT_TRUE(nav->push_gnss_fix(f) == RecordStatus::kOutsideImuSpan);
+  EXPECT_TRUE(nav->refused_records() == 2);
+  EXPECT_TRUE(!nav->push_imu(d.t[99], Vec3::Zero(), Vec3::Zero()));  // time not increasing
+  nav->flush();
+  EXPECT_TRUE(nav->held_samples() == 0 && nav->pending_records() == 0);
+}
+
+}  // namespace
+
+int main() {
+  test_push_equals_batch();
+  test_late_record_refused();
+  TEST_MAIN_END();
+}

@@ -1,0 +1,193 @@
+"""Real-time loosely coupled navigation, one sample at a time.
+
+:class:`Navigator` is the push API for a ROS-style node or any program that
+receives IMU samples and GNSS fixes as they happen, instead of whole files:
+``push_imu``, ``push_gnss_fix``, ``push_constraint``, then ``state()`` /
+``covariance()`` whenever an estimate is wanted.  It drives the same compiled
+engine as :func:`insnav.run` (``cpp/include/insnav/engine/navigator.hpp``):
+pushed in time order, its rows equal the batch run's bit for bit.
+
+Timing: a GNSS fix is applied exactly at its time of validity, inside the IMU
+increment that covers it, so it must be pushed before that increment is
+integrated.  Receivers deliver fixes late; ``imu_hold`` IMU samples are held
+back so that a fix up to ``imu_hold`` samples late is still applied at its own
+time (the state then lags the newest sample by that many samples).  A fix
+older than the last integrated sample is refused (``"too_old"``) and counted,
+never applied at a wrong time.
+
+Frames and units are the library's: NED navigation frame, FRD body frame,
+IMU increments over ``(t_prev, t]`` (``dtheta_b`` [rad], ``dv_b`` [m/s]),
+latitude/longitude in degrees at the API, SI elsewhere.
+"""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from .. import _core
+from ..config import RunConfig
+from ..data.nav import NavState
+from ..units import DEG
+from .loose import loose_engine_args
+
+__all__ = ["Navigator"]
+
+_RAD2DEG = 180.0 / np.pi  # the batch run's conversion (_core.nav_rows_to_degrees), to the bit
+
+#: engine record status codes (closed_loop.hpp RecordStatus) as returned by the push calls
+RECORD_STATUS = {0: "queued", 1: "applied", 2: "rejected_by_gate", 3: "not_positive_definite",
+                 4: "outside_imu_span", 5: "too_old"}
+
+#: constraint kinds (loose_engine.hpp ConstraintKind)
+CONSTRAINT_KINDS = {"nhc": 1, "odo": 2, "zupt": 4, "zaru": 8}
+
+
+def _imu_model(imu_model) -> dict:
+    """A dataset ``imu_model`` dict from a dict or an IMU grade name."""
+    if isinstance(imu_model, str):
+        from ..data.imu_grades import imu_model_for_grade
+
+        return imu_model_for_grade(imu_model)
+    if not isinstance(imu_model, dict):
+        raise TypeError(f"Navigator: imu_model must be a dict (SI keys) or a grade name, got {type(imu_model).__name__}")
+    return dict(imu_model)
+
+
+class Navigator:
+    """Loosely coupled EKF / RB-UKF / UKF fed one sample at a time.
+
+    Parameters
+    ----------
+    initial : NavState
+        Initial position, velocity and attitude (degrees, m, m/s), valid at ``t0``.
+    t0 : float
+        Time of the initial state [s]; the first IMU increment starts there.
+    imu_model : dict or str
+        The IMU noise model: a dataset ``imu_model`` dict (SI keys,
+        docs/formats.md) or a grade name (``"consumer"``, ``"industrial"``,
+        ``"tactical"``, ``"navigation"``).
+    config : RunConfig, dict or path, optional
+        Run configuration (filter, layout, initial sigmas, gate, lever arm, ...);
+        ``filter`` must be ``ekf`` (layouts 15/16/21), ``rbukf`` or ``ukf`` (15).
+    lever_arm_b : array_like of 3, optional
+        IMU centre to GNSS antenna, body FRD [m] (the config's ``lever_arm_b`` wins).
+    gnss_period_s : float
+        Nominal GNSS period [s]: the filter cycle during an outage (the batch
+        run takes the median fix spacing).
+    imu_hold : int
+        IMU samples held back for late fixes (0 .. 256).
+    """
+
+    def __init__(self, initial: NavState, t0: float, imu_model, config=None, *, lever_arm_b=(0.0, 0.0, 0.0),
+                 gnss_period_s: float = 1.0, imu_hold: int = 0):
+        from . import _as_config
+
+        cfg = _as_config(config)
+        cfg.validate()
+        if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf"):
+            raise ValueError(f"Navigator: filter {cfg.filter!r} / coupling {cfg.coupling!r}: the push API runs "
+                             "the loose ekf, rbukf and ukf")
+        if not (np.isfinite(gnss_period_s) and gnss_period_s > 0):
+            raise ValueError(f"Navigator: gnss_period_s must be > 0 s, got {gnss_period_s!r}")
+        ds = SimpleNamespace(initial=initial, t0=float(t0), lever_arm_b=np.asarray(lever_arm_b, float),
+                             imu_model=_imu_model(imu_model), scenario=None, initial_is_truth=False)
+        self._setup(ds, cfg, np.array([0.0, float(gnss_period_s)]), imu_hold)
+
+    @classmethod
+    def from_dataset(cls, dataset, config=None, *, imu_hold: int = 0, **overrides) -> "Navigator":
+        """A navigator set up exactly as :func:`insnav.run` sets up its loose
+        run of ``dataset`` (initial state and its sigmas, IMU model, lever arm,
+        gate, outage cycle from the fix spacing); push the data yourself."""
+        from . import _as_config
+
+        cfg = _as_config(config)
+        for k, v in overrides.items():
+            if not hasattr(cfg, k):
+                raise TypeError(f"Navigator.from_dataset() got an unknown option {k!r}")
+            setattr(cfg, k, v)
+        cfg.validate()
+        self = cls.__new__(cls)
+        self._setup(dataset, cfg, np.asarray(dataset.gnss.t_valid, float), imu_hold)
+        return self
+
+    def _setup(self, dataset, cfg: RunConfig, record_t: np.ndarray, imu_hold: int) -> None:
+        if cfg.smooth:
+            raise ValueError("Navigator: the RTS smoother needs the whole run (insnav.run(..., smooth=True))")
+        a = loose_engine_args(dataset, cfg, record_t)
+        self.config = cfg
+        self.layout = a.layout
+        self._nav = _core.LooseNavigator(cfg.filter, a.layout, a.init, a.P0, a.imu_correction, a.imu_model,
+                                         a.config, int(imu_hold))
+        self._row = np.empty(13)
+
+    # --- input -----------------------------------------------------------------------------
+    def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
+        """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
+        False (ignored) when ``t`` does not increase."""
+        return bool(self._nav.push_imu(float(t), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
+
+    def push_imu_array(self, t, dtheta_b, dv_b) -> int:
+        """Many IMU increments at once (N,), (N,3), (N,3); returns how many were taken."""
+        return int(self._nav.push_imu_array(np.asarray(t, float), np.asarray(dtheta_b, float),
+                                            np.asarray(dv_b, float)))
+
+    def push_gnss_fix(self, t: float, lat_deg: float, lon_deg: float, h_m: float, sigma_pos_n_m,
+                      v_n_mps=None, sigma_vel_n_mps=None) -> str:
+        """A GNSS antenna fix valid at ``t`` [s]: position (deg, deg, ellipsoidal m)
+        with N/E/D 1-sigma [m], optionally NED velocity [m/s] with its 1-sigma.
+        Returns ``"queued"``, or why it was refused (``"too_old"``, ``"outside_imu_span"``)."""
+        r = self._row
+        r[0], r[1], r[2], r[3] = t, lat_deg * DEG, lon_deg * DEG, h_m
+        r[4:7] = np.nan if v_n_mps is None else np.asarray(v_n_mps, float)
+        r[7:10] = sigma_pos_n_m
+        r[10:13] = np.nan if sigma_vel_n_mps is None else np.asarray(sigma_vel_n_mps, float)
+        if not np.all(np.asarray(r[7:10]) > 0):
+            raise ValueError(f"push_gnss_fix at t={t}: sigma_pos_n_m must be > 0, got {r[7:10]}")
+        return RECORD_STATUS[self._nav.push_gnss_fix(r)]
+
+    def push_constraint(self, t: float, kinds, speed_mps: float = float("nan")) -> str:
+        """A vehicle-constraint event at ``t`` [s]: ``kinds`` a name or names of
+        ``nhc``, ``odo`` (with ``speed_mps``, the rear-axle forward speed), ``zupt``, ``zaru``."""
+        names = [kinds] if isinstance(kinds, str) else list(kinds)
+        bad = [k for k in names if k not in CONSTRAINT_KINDS]
+        if bad:
+            raise ValueError(f"push_constraint: unknown kind {bad[0]!r} (one of {', '.join(CONSTRAINT_KINDS)})")
+        flags = sum(CONSTRAINT_KINDS[k] for k in set(names))
+        return RECORD_STATUS[self._nav.push_constraint(float(t), flags, float(speed_mps))]
+
+    def flush(self) -> None:
+        """Integrate the held IMU samples (at the end of a run)."""
+        self._nav.flush()
+
+    # --- output ----------------------------------------------------------------------------
+    def state(self) -> dict:
+        """The current solution after the last integrated sample: ``t`` [s],
+        ``lat_deg``, ``lon_deg``, ``h_m``, ``v_n_mps`` (3), ``roll_deg``,
+        ``pitch_deg``, ``yaw_deg``, ``sigma`` (sqrt(diag P), layout order, SI),
+        ``acc_bias_mps2``, ``gyro_bias_rps`` (and scale factors)."""
+        s = self._nav.solution()
+        rpy = s["rpy"] * _RAD2DEG
+        err = s["imu_err"]
+        out = dict(t=s["t"], lat_deg=s["lat"] * _RAD2DEG, lon_deg=s["lon"] * _RAD2DEG, h_m=s["h"], v_n_mps=s["v_n"],
+                   roll_deg=rpy[0], pitch_deg=rpy[1], yaw_deg=rpy[2], sigma=s["sigma"],
+                   acc_bias_mps2=err[0:3], gyro_bias_rps=err[3:6], acc_scale=err[6:9], gyro_scale=err[9:12])
+        if "odo_scale" in s:
+            out["odo_scale"], out["sigma_odo_scale"] = s["odo_scale"]
+        return out
+
+    def covariance(self) -> np.ndarray:
+        """The error-state covariance (layout order, SI: m, m/s, rad, m/s^2, rad/s)."""
+        return self._nav.covariance()
+
+    def last_fix(self) -> dict:
+        """The last fix applied or refused by the gate: ``status``, ``nis``,
+        ``innovation`` (INS - GNSS: N, E, D [m], vN, vE, vD [m/s])."""
+        d = self._nav.last_fix()
+        d["status"] = RECORD_STATUS[d["status"]]
+        return d
+
+    @property
+    def counters(self) -> dict:
+        """samples integrated, held samples, pending records, updates, rejected, refused records."""
+        return self._nav.counters()

@@ -1,0 +1,125 @@
+"""The real-time push API (insnav.Navigator, engine/navigator.hpp): pushed in
+time order, with fixes on time or late within the IMU hold, it reproduces the
+batch run of insnav.run row for row; a fix beyond the hold is refused; bad
+calls give one-line errors."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import insnav
+from insnav import sim
+from insnav.config import RunConfig
+from insnav.filters.navigator import Navigator
+
+
+def _dataset(seed=2, duration_s=40.0, outages=((20.0, 26.0),)):
+    """seed000-sim (MEMS IMU 200 Hz, GNSS 1 Hz) shortened, with an outage and a lever arm."""
+    sc = copy.deepcopy(sim.simulate("seed000-sim", seed=0, with_truth=False).scenario)
+    sc["motion"]["segments"] = [dict(duration_s=duration_s / 2), dict(duration_s=duration_s / 2, heading_change_deg=60.0)]
+    sc["motion"]["oscillations"] = [dict(o, end_s=duration_s) for o in sc["motion"]["oscillations"]]
+    sc["gnss"].update(lever_arm_b_m=[0.4, -0.2, -0.8], outages=[list(o) for o in outages])
+    return insnav.simulate(sc, seed=seed)
+
+
+def _push_all(nav, ds, cfg_rows, late_samples=0):
+    """Push the dataset's IMU samples and fixes in arrival order (a fix
+    `late_samples` IMU samples after the sample covering it); the navigator's
+    row after each integrated sample."""
+    t = ds.imu.t
+    g = ds.gnss
+    order = np.argsort(g.t_valid, kind="stable")
+    gi = 0
+    rows = {}
+
+    def push_fixes_upto(tc):
+        nonlocal gi
+        while gi < len(order) and g.t_valid[order[gi]] <= tc:
+            j = order[gi]
+            st = nav.push_gnss_fix(g.t_valid[j], g.lat_deg[j], g.lon_deg[j], g.h_m[j], g.sigma_pos_n[j],
+                                   g.v_n[j], g.sigma_vel_n[j])
+            assert st == "queued", (j, st)
+            gi += 1
+
+    for k in range(len(t)):
+        push_fixes_upto(t[max(0, k - late_samples)] if late_samples else t[k])
+        nav.push_imu(t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+        done = nav.counters["samples"]
+        if done and done - 1 in cfg_rows and done - 1 not in rows:
+            rows[done - 1] = nav.state()
+    push_fixes_upto(np.inf)
+    nav.flush()
+    rows[len(t) - 1] = nav.state()
+    return rows
+
+
+@pytest.mark.parametrize("filt,late,hold", [("ekf", 0, 0), ("ekf", 30, 40), ("rbukf", 30, 40)])
+def test_push_equals_batch(filt, late, hold):
+    ds = _dataset()
+    cfg = RunConfig(filter=filt)
+    batch = insnav.run(ds, config=cfg, sanitize=False, checks=False)
+    nav = Navigator.from_dataset(ds, RunConfig(filter=filt), imu_hold=hold)
+    check = set(range(0, len(ds.imu.t), 97)) | {len(ds.imu.t) - 1}
+    rows = _push_all(nav, ds, check, late_samples=late)
+    assert len(rows) >= len(check) - 1
+    worst = dict(pos=0.0, vel=0.0, att=0.0, sig=0.0)
+    for k, r in rows.items():
+        assert r["t"] == batch.t[k]
+        worst["pos"] = max(worst["pos"], abs(r["lat_deg"] - batch.lat_deg[k]) * 1.1e5,
+                           abs(r["lon_deg"] - batch.lon_deg[k]) * 1.1e5, abs(r["h_m"] - batch.h_m[k]))
+        worst["vel"] = max(worst["vel"], np.max(np.abs(r["v_n_mps"] - batch.v_n[k])))
+        worst["att"] = max(worst["att"], abs(r["roll_deg"] - batch.roll_deg[k]), abs(r["pitch_deg"] - batch.pitch_deg[k]),
+                           abs(r["yaw_deg"] - batch.yaw_deg[k]))
+        worst["sig"] = max(worst["sig"], np.max(np.abs(r["sigma"][0:3] - batch.sigma_pos_n_m[k])))
+    assert max(worst.values()) < 1e-9, worst
+    c = nav.counters
+    assert c["updates"] == batch.summary["updates"] and c["updates"] > 20
+    assert c["refused_records"] == 0 and c["pending_records"] == 0 and c["held_samples"] == 0
+
+
+def test_push_matches_truth_and_sigma():
+    """A navigator built by hand (no dataset) from the truth's initial state
+    tracks the truth within its own 4 sigma after 40 s."""
+    ds = _dataset(seed=5)
+    s0 = ds.initial
+    nav = Navigator(s0, ds.t0, ds.imu_model, RunConfig(filter="ekf"), lever_arm_b=ds.lever_arm_b,
+                    gnss_period_s=1.0, imu_hold=50)
+    rows = _push_all(nav, ds, set(), late_samples=20)
+    last = rows[len(ds.imu.t) - 1]
+    tr = ds.truth
+    k = int(np.argmin(np.abs(tr.t - last["t"])))
+    from insnav.earth import radii
+
+    R_M, R_N = radii(np.radians(tr.lat_deg[k]))
+    dn = np.radians(last["lat_deg"] - tr.lat_deg[k]) * (R_M + tr.h_m[k])
+    de = np.radians(last["lon_deg"] - tr.lon_deg[k]) * (R_N + tr.h_m[k]) * np.cos(np.radians(tr.lat_deg[k]))
+    assert abs(dn) < 4 * last["sigma"][0] and abs(de) < 4 * last["sigma"][1], (dn, de, last["sigma"][:2])
+    assert np.all(np.abs(last["v_n_mps"] - tr.v_n[k]) < 4 * last["sigma"][3:6] + 1e-3)
+    P = nav.covariance()
+    assert P.shape == (15, 15) and np.allclose(P, P.T) and np.all(np.linalg.eigvalsh(P) > 0)
+    assert np.allclose(np.sqrt(np.diag(P)), last["sigma"])
+
+
+def test_late_fix_refused_and_bad_calls():
+    ds = _dataset(duration_s=10.0, outages=())
+    nav = Navigator(ds.initial, ds.t0, "consumer", imu_hold=5)
+    for k in range(400):
+        nav.push_imu(ds.imu.t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+    c = nav.counters
+    assert c["held_samples"] == 5 and c["samples"] == 395
+    g = ds.gnss
+    # valid long before the last integrated sample: refused, never applied at a wrong time
+    assert nav.push_gnss_fix(g.t_valid[0], g.lat_deg[0], g.lon_deg[0], g.h_m[0], g.sigma_pos_n[0]) == "too_old"
+    assert nav.push_gnss_fix(ds.imu.t[398], g.lat_deg[1], g.lon_deg[1], g.h_m[1], g.sigma_pos_n[1]) == "queued"
+    assert nav.counters["refused_records"] == 1
+    assert nav.push_imu(ds.imu.t[399], ds.imu.dtheta_b[0], ds.imu.dv_b[0]) is False  # time not increasing
+    with pytest.raises(ValueError, match="sigma_pos_n_m must be > 0"):
+        nav.push_gnss_fix(ds.imu.t[399], 0.0, 0.0, 0.0, [0.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="unknown kind 'nhcc'"):
+        nav.push_constraint(ds.imu.t[399], "nhcc")
+    with pytest.raises(ValueError, match="push API runs the loose"):
+        Navigator(ds.initial, ds.t0, "consumer", RunConfig(filter="upf", coupling="tight"))
+    with pytest.raises(ValueError, match="imu_hold"):
+        Navigator(ds.initial, ds.t0, "consumer", imu_hold=1000)
