@@ -25,8 +25,11 @@ Montenbruck (eds.), *Springer Handbook of GNSS*, 2017, eqs. (19.1)-(19.2))::
   random walk of :func:`insnav.sim.gnss_raw.simulate_clock`, one per receiver.
   Time tags are whole epochs of the receiver clock, so the two receivers
   sample at true times that differ by ``(b_rover - b_base) / c``.
-* ``I`` [m, on L1]: the Klobuchar delay at each receiver (the broadcast
-  coefficients of the navigation file), plus at the rover a residual
+* ``I`` [m, on L1]: the Klobuchar delay (the broadcast coefficients of the
+  navigation file) along the base's line of sight to the satellite, the same
+  for both receivers (the model's own horizontal and elevation gradients,
+  several ppm at low latitudes, would otherwise add a between-receiver
+  ionosphere nobody configured), plus at the rover a residual
   ``iono_ppm 1e-6 d M_I(el) x_I`` with ``d`` the rover-base distance,
   ``M_I`` the single-layer mapping function (350 km shell) and ``x_I`` a
   unit first-order Gauss-Markov process per satellite (``iono_tau_s``): the
@@ -331,7 +334,8 @@ def _ambiguities(vis: np.ndarray, p_slip: float, slip_max: int, lli_prob: float,
 
 
 # --------------------------------------------------------------------------- simulation
-def _receiver(name, t_tag, clock, pos_fn, nav, systems, signals, cfg, rng, *, mask_fn, rover_extra=None):
+def _receiver(name, t_tag, clock, pos_fn, nav, systems, signals, cfg, rng, *, mask_fn, iono_origin_e,
+              rover_extra=None):
     """Observations of one receiver (see the module docstring)."""
     from ..gnss.corrections import klobuchar_delay, saastamoinen_delay
     from ..gnss.geometry import elevation_azimuth
@@ -389,7 +393,13 @@ def _receiver(name, t_tag, clock, pos_fn, nav, systems, signals, cfg, rng, *, ma
     lat, lon, h = earth.ecef_to_geodetic(r_e)
     iono = np.zeros(rows.size)
     if cfg["klobuchar"]:
-        iono = klobuchar_delay(t_rx[e_row], lat[e_row], lon[e_row], el_r, az_r, nav.ion_alpha, nav.ion_beta)
+        # the ionosphere over the area: Klobuchar along the base's line of sight for both receivers, so
+        # the between-receiver ionosphere is the residual term alone (Klobuchar's own horizontal and
+        # elevation gradients reach several ppm at low latitudes and would not be the configured ones)
+        origin = np.asarray(iono_origin_e, float)
+        lat_i, lon_i, _ = earth.ecef_to_geodetic(origin[None, :])
+        el_i, az_i = elevation_azimuth(origin, ts.r_e[rows])
+        iono = klobuchar_delay(t_rx[e_row], lat_i[0], lon_i[0], el_i, az_i, nav.ion_alpha, nav.ion_beta)
     tropo = saastamoinen_delay(lat[e_row], h[e_row], el_r) if cfg["saastamoinen"] else np.zeros(rows.size)
     if rover_extra is not None:
         dist = np.linalg.norm(r_e - rover_extra["base_r_e"], axis=1)[e_row]
@@ -502,6 +512,7 @@ def simulate_rtk_obs(traj, cfg: dict, lever_arm_b, gps_time_offset_s: float, rng
         return np.full(el.shape, cfg["base_elevation_mask"])
 
     rover = _receiver("rover", t_tag, (b_r, d_r), rover_pos, nav, systems, signals, cfg, rng_rover,
-                      mask_fn=rover_mask, rover_extra={"base_r_e": base_r_e})
-    base = _receiver("base", t_tag, (b_b, d_b), base_pos, nav, systems, signals, cfg, rng_base, mask_fn=base_mask)
+                      mask_fn=rover_mask, iono_origin_e=base_r_e, rover_extra={"base_r_e": base_r_e})
+    base = _receiver("base", t_tag, (b_b, d_b), base_pos, nav, systems, signals, cfg, rng_base, mask_fn=base_mask,
+                     iono_origin_e=base_r_e)
     return RtkSimulation(rover, base, nav, signals, base_r_e, rate, dict(cfg))
