@@ -154,6 +154,28 @@ def test_rinex_nav_round_trip_reproduces_satellites():
             assert np.max(np.abs(mem.clock_bias_m - st.clock_bias_m)) < 1e-6
 
 
+@pytest.mark.parametrize("frac_s", [0.37, -0.5])
+def test_rinex_representable_keeps_the_orbit_for_a_fractional_start(frac_s):
+    # toe/toc moved to whole seconds, t_oe made the seconds of week of toe: the same orbit and clock
+    from insnav.gnss.constellation import Constellation
+    from insnav.gnss.ephemeris import Ephemerides, sat_clock, sat_position_velocity
+    from insnav.gnss.rinex_write import rinex_representable
+
+    t0 = 2155 * 604800.0 + 345600.0 + frac_s
+    eph = Constellation.nominal(t0_gps_s=t0).eph
+    rep = Ephemerides.from_columns(rinex_representable(eph.to_columns()))
+    assert np.all(rep.toe == np.round(rep.toe)) and np.all(rep.toc == np.round(rep.toc))
+    assert np.any(np.abs(rep.toe_sow - eph.toe_sow) > 1.0)  # the nominal set's t_oe did not match its toe
+    idx = np.arange(len(eph))
+    for tk in t0 + np.array([0.0, 900.0, 5400.0]):
+        a = sat_position_velocity(eph, idx, np.full(idx.size, tk))
+        b = sat_position_velocity(rep, idx, np.full(idx.size, tk))
+        assert np.max(np.linalg.norm(a.r_e - b.r_e, axis=1)) < 1e-3
+        ca = sat_clock(eph, idx, np.full(idx.size, tk), relativistic=True, E=a.E, E_dot=a.E_dot)
+        cb = sat_clock(rep, idx, np.full(idx.size, tk), relativistic=True, E=b.E, E_dot=b.E_dot)
+        assert np.max(np.abs(ca.bias_s - cb.bias_s)) * C_LIGHT < 1e-3
+
+
 def test_slip_count_matches_configured_rate():
     rate_h = 720.0  # per satellite and signal: p = 1 - exp(-0.2) = 0.181 per 1 s epoch
     sim = simulate_rtk(_scenario("rtk-open-sky-car", 100.0, slip_rate_per_h=rate_h, slip_lli_prob=0.5,

@@ -77,8 +77,7 @@ from ..gnss.ephemeris import C_LIGHT
 __all__ = ["RtkReceiverObs", "RtkSimulation", "rtk_navdata", "simulate_rtk_obs", "SIGNALS", "signal_frequency_hz",
            "elevation_weight"]
 
-#: RINEX 3 signal codes (band + attribute) the simulator can write, per system
-SIGNALS = {"G": ("1C", "1W", "2W", "2L", "5Q"), "E": ("1C", "5Q", "7Q")}
+from .scenario import RTK_SIGNALS as SIGNALS  # RINEX 3 signals the simulator can write, per system
 F_L1_HZ = 1575.42e6
 #: ionospheric single-layer height [m] of the mapping function M_I
 IONO_SHELL_M = 350e3
@@ -473,7 +472,7 @@ def simulate_rtk_obs(traj, cfg: dict, lever_arm_b, gps_time_offset_s: float, rng
     systems = tuple(cfg["systems"])
     signals = {s: tuple(cfg["signals"].get(s, ("1C",))) for s in systems}
     t0_gps = sc.t0 + gps_time_offset_s
-    nav = rtk_navdata(round(t0_gps), systems)
+    nav = rtk_navdata(t0_gps, systems)
     rate = cfg["rate"]
     t_sim = gnss_epochs(sc.t0, sc.t_end, sc.t0 + 1.0 / rate, rate)
     # the true reception time t_tag - b / c must stay inside the trajectory

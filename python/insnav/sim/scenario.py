@@ -38,6 +38,9 @@ Layout (all tables optional unless marked)::
     [gnss_raw.urban_canyon] mask_across_deg*, mask_along_deg, street_azimuth_deg
               (absent: the street runs along the vehicle's heading; sim/gnss_raw.urban_canyon_mask)
     [[gnss_raw.windows]] start_s*, end_s*, n_sats*
+    [gnss_rtk] rover and base carrier phase (insnav.sim.gnss_rtk; keys in _RTK_KEYS,
+              docs/formats.md), [gnss_rtk.signals] G, E, [gnss_rtk.base] lat_deg/lon_deg/h_m
+              or offset_ned_m, [gnss_rtk.urban_canyon] as [gnss_raw.urban_canyon]
 """
 from __future__ import annotations
 
@@ -744,6 +747,9 @@ def _odometer(ctx, raw, imu_rate):
     }
 
 
+#: RINEX 3 signals (band + attribute) the carrier-phase simulation writes, per system (insnav.sim.gnss_rtk)
+RTK_SIGNALS = {"G": ("1C", "1W", "2W", "2L", "5Q"), "E": ("1C", "5Q", "7Q")}
+
 _RTK_KEYS = {"enabled", "rate_hz", "systems", "signals", "elevation_mask_deg", "base_elevation_mask_deg",
              "sigma_code_m", "sigma_phase_m", "sigma_doppler_hz", "multipath_code_m", "multipath_phase_m",
              "multipath_tau_s", "base_multipath_scale", "iono_ppm", "iono_tau_s", "tropo_ppm", "tropo_tau_s",
@@ -755,27 +761,25 @@ _RTK_KEYS = {"enabled", "rate_hz", "systems", "signals", "elevation_mask_deg", "
 
 def _gnss_rtk(ctx, raw, imu_rate):
     """``[gnss_rtk]``: rover and base carrier phase and code (insnav.sim.gnss_rtk), SI; None when absent."""
-    from .gnss_rtk import SIGNALS
-
     p = "gnss_rtk"
     gr = _table(ctx, raw, "", p)
     _check_keys(ctx, gr, p, _RTK_KEYS)
     if not _bool(ctx, gr, p, "enabled", bool(gr)):
         return None
     systems = gr.get("systems", ["G"])
-    if (not isinstance(systems, list) or not systems or any(x not in SIGNALS for x in systems)
+    if (not isinstance(systems, list) or not systems or any(x not in RTK_SIGNALS for x in systems)
             or len(set(systems)) != len(systems)):
-        ctx.fail(f"{p}.systems", f'expected a list of distinct {", ".join(repr(s) for s in SIGNALS)} '
+        ctx.fail(f"{p}.systems", f'expected a list of distinct {", ".join(repr(s) for s in RTK_SIGNALS)} '
                  f"(GPS, Galileo), got {systems!r}")
     sig_t = _table(ctx, gr, p, "signals")
-    _check_keys(ctx, sig_t, f"{p}.signals", set(SIGNALS))
+    _check_keys(ctx, sig_t, f"{p}.signals", set(RTK_SIGNALS))
     signals = {}
     for s in systems:
         v = sig_t.get(s, ["1C"])
-        if (not isinstance(v, list) or not v or any(x not in SIGNALS[s] for x in v) or len(set(v)) != len(v)
+        if (not isinstance(v, list) or not v or any(x not in RTK_SIGNALS[s] for x in v) or len(set(v)) != len(v)
                 or len({x[0] for x in v}) != len(v)):
             ctx.fail(f"{p}.signals.{s}", f"expected a list of signals on distinct bands out of "
-                     f"{', '.join(SIGNALS[s])}, got {v!r}")
+                     f"{', '.join(RTK_SIGNALS[s])}, got {v!r}")
         signals[s] = tuple(v)
     mask = _num(ctx, gr, p, "elevation_mask_deg", 10.0, lo=-5.0, hi=89.0) * DEG
     cfg = {
