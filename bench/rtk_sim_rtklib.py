@@ -175,8 +175,16 @@ def run(presets, n_runs, workroot: Path, engines=None, progress=print, keep=Fals
         setting = dict(systems=cfg["systems"], elevation_mask_deg=math.degrees(cfg["base_elevation_mask"]))
         settings[preset] = dict(setting, description=sc.description)
         results[preset] = {e: [] for e in engines}
+        stats = dict(n_common=[], baseline_m=[], slips=0, slips_flagged=0, epochs=0)
         for k in range(1, n_runs + 1):
             sim = simulate_rtk(preset, seed=k)
+            _n_r, n_c = sim.common_counts()
+            stats["n_common"].append(n_c)
+            stats["baseline_m"].append(np.linalg.norm(sim.rover.r_e - sim.base_r_e, axis=1))
+            stats["slips"] += int(sim.rover.slip.sum() + sim.base.slip.sum())
+            stats["slips_flagged"] += int((sim.rover.slip & (sim.rover.lli & 1 > 0)).sum()
+                                          + (sim.base.slip & (sim.base.lli & 1 > 0)).sum())
+            stats["epochs"] += int(n_c.size)
             wd = workroot / f"{preset}-{k}"
             wd.mkdir(parents=True, exist_ok=True)
             files = sim.write(wd)
@@ -185,6 +193,7 @@ def run(presets, n_runs, workroot: Path, engines=None, progress=print, keep=Fals
                 results[preset][name].append(score(sol, sim.rover.t_tag_gps_s, sim.rover.r_e))
             if not keep:
                 shutil.rmtree(wd, ignore_errors=True)
+            settings[preset]["stats"] = stats
             if progress:
                 progress(f"{preset} run {k}/{n_runs}: " + ", ".join(
                     f"{e} {r[-1]['n_fixed']}/{r[-1]['n']} fixed, {r[-1]['n_wrong']} wrong"
@@ -229,8 +238,15 @@ def report(results, settings, n_runs, wall_s) -> str:
              f"simulated rover antenna. A wrong fix is a fixed epoch more than {WRONG_FIX_M * 100:.0f} cm off.", ""]
     for preset, by_engine in results.items():
         s = settings[preset]
+        st = s["stats"]
+        nc = np.concatenate(st["n_common"])
+        bl = np.concatenate(st["baseline_m"])
         lines += [f"## {preset}", "", f"{s['description']}; systems {'+'.join(s['systems'])}, "
                   f"mask {s['elevation_mask_deg']:g} deg.", "",
+                  f"Simulated: {st['epochs']} rover epochs; satellites in both files {int(nc.min())}-{int(nc.max())} "
+                  f"(median {np.median(nc):g}); baseline {bl.min() / 1e3:.1f}-{bl.max() / 1e3:.1f} km; "
+                  f"{st['slips']} cycle slips on all signals, {st['slips_flagged']} of them flagged by LLI "
+                  "(plus a new ambiguity at every re-acquisition, flagged).", "",
                   "| engine | fix rate | wrong fixes / fixed | runs with a wrong fix | TTFF median [s] | TTFF max [s] "
                   "| runs never fixed | CPU per run [s] |",
                   "|---|---|---|---|---|---|---|---|"]
