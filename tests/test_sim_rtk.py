@@ -176,6 +176,25 @@ def test_rinex_representable_keeps_the_orbit_for_a_fractional_start(frac_s):
         assert np.max(np.abs(ca.bias_s - cb.bias_s)) * C_LIGHT < 1e-3
 
 
+def test_navigation_records_every_2h_describe_one_orbit():
+    # a 5 h scenario: three records per satellite, each valid +-2 h, one continuous orbit and clock
+    from insnav.gnss.constellation import Constellation
+    from insnav.gnss.ephemeris import sat_position_velocity
+    from insnav.sim.gnss_rtk import rtk_navdata
+
+    t0 = 2155 * 604800.0 + 345600.0
+    nav = rtk_navdata(t0, ("G", "E"), duration_s=5 * 3600.0)
+    assert len(nav.eph) == 3 * np.unique(nav.eph.prn).size
+    assert np.unique(nav.eph_e.toe).size == 3
+    c = Constellation.nominal(t0_gps_s=t0)
+    prn = np.asarray(c.prns)
+    for tk in t0 + np.array([3599.0, 3601.0, 4.9 * 3600.0]):
+        pv = sat_position_velocity(c.eph, np.arange(prn.size), np.full(prn.size, tk))
+        st = nav.sat_states(tk, system="G", prn=prn)
+        assert st.valid.all()
+        assert np.max(np.linalg.norm(st.r_e - pv.r_e, axis=1)) < 1e-3
+
+
 def test_slip_count_matches_configured_rate():
     rate_h = 720.0  # per satellite and signal: p = 1 - exp(-0.2) = 0.181 per 1 s epoch
     sim = simulate_rtk(_scenario("rtk-open-sky-car", 100.0, slip_rate_per_h=rate_h, slip_lli_prob=0.5,

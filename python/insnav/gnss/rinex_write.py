@@ -34,7 +34,7 @@ import numpy as np
 from .ephemeris import GM_GPS, OMEGA_E_DOT
 from .gpstime import SECONDS_PER_WEEK
 
-__all__ = ["gps_calendar", "rinex_representable", "elements_for_system", "write_rinex_nav", "write_rinex_obs",
+__all__ = ["gps_calendar", "rereference", "rinex_representable", "elements_for_system", "write_rinex_nav", "write_rinex_obs",
            "RINEX_VERSION"]
 
 RINEX_VERSION = 3.04
@@ -85,22 +85,60 @@ def elements_for_system(cols: dict, gm: float, omega_e: float) -> dict:
     return out
 
 
-def rinex_representable(cols: dict, omega_e: float = OMEGA_E_DOT, gm: float = GM_GPS) -> dict:
-    """Broadcast elements a RINEX navigation file holds exactly, describing the same orbit and clock.
+def rereference(cols: dict, toe_new, toc_new=None, omega_e: float = OMEGA_E_DOT, gm: float = GM_GPS) -> dict:
+    """The same orbit and clock written about new reference times (exact, no rounding).
 
-    * ``toe`` -> ``toe' = round(toe)``, ``d = toe' - toe``: ``M_0' = M_0 + n d``,
-      ``i_0' = i_0 + IDOT d`` and ``Omega_0' = Omega_0 + (Omega_dot - Omega_e) d
-      + Omega_e (t_oe' - t_oe)`` with ``t_oe'`` the seconds of week of ``toe'``
-      (the node term ``- Omega_e t_oe`` of IS-GPS-200 Table 20-IV uses the
-      broadcast seconds of week, which a re-referenced nominal set no longer matches);
-    * ``toc`` -> ``round(toc)``, the clock polynomial re-expanded about it;
-    * every value rounded to 12 significant digits (``D19.12``).
+    ``d = toe' - toe``: ``M_0' = M_0 + n d``, ``i_0' = i_0 + IDOT d``,
+    ``Omega_0' = Omega_0 + (Omega_dot - Omega_e) d + Omega_e (t_oe' - t_oe)``
+    with ``t_oe'`` the seconds of week of ``toe'`` (IS-GPS-200 Table 20-IV: the
+    harmonic corrections depend on the argument of latitude only, so they
+    stay); the clock polynomial is re-expanded about ``toc'`` (default: ``toe'``
+    moved by the same amount as ``toe``).  Every time of the model is then the
+    same function of ``t``, so several records of one satellite at different
+    ``toe'`` describe one continuous orbit (a navigation file longer than the
+    4 h fit interval).
 
     Parameters
     ----------
     cols : dict
         Columns of :class:`insnav.gnss.ephemeris.Ephemerides` (or its Galileo
         subclass); ``toe``/``toc`` continuous GPS seconds.
+    toe_new, toc_new : float or (n,) array [GPS s]
+    omega_e, gm : float
+        The constants the orbit is evaluated with (GPS by default).
+    """
+    c = {k: np.array(v, dtype=float if k != "prn" else np.int64, copy=True) for k, v in cols.items()}
+    toe_new = np.broadcast_to(np.asarray(toe_new, float), c["toe"].shape).copy()
+    d = toe_new - c["toe"]
+    toc_new = c["toc"] + d if toc_new is None else np.broadcast_to(np.asarray(toc_new, float), c["toc"].shape).copy()
+    n = np.sqrt(gm / c["sqrt_a"] ** 6) + c["delta_n"]
+    toe_sow_new = np.mod(toe_new, SECONDS_PER_WEEK)
+    c["m0"] = np.mod(c["m0"] + n * d + np.pi, 2 * np.pi) - np.pi
+    c["i0"] = c["i0"] + c["idot"] * d
+    c["omega0"] = c["omega0"] + (c["omega_dot"] - omega_e) * d + omega_e * (toe_sow_new - c["toe_sow"])
+    c["omega0"] = np.mod(c["omega0"] + np.pi, 2 * np.pi) - np.pi
+    c["toe"], c["toe_sow"] = toe_new, toe_sow_new
+    c["week"] = np.floor(toe_new / SECONDS_PER_WEEK)
+    dc = toc_new - c["toc"]
+    c["af0"] = c["af0"] + c["af1"] * dc + c["af2"] * dc ** 2
+    c["af1"] = c["af1"] + 2.0 * c["af2"] * dc
+    c["toc"] = toc_new
+    return c
+
+
+def rinex_representable(cols: dict, omega_e: float = OMEGA_E_DOT, gm: float = GM_GPS) -> dict:
+    """Broadcast elements a RINEX navigation file holds exactly, describing the same orbit and clock.
+
+    :func:`rereference` to ``toe' = round(toe)``, ``toc' = round(toc)`` (the
+    node term ``- Omega_e t_oe`` of IS-GPS-200 Table 20-IV uses the broadcast
+    seconds of week, which a re-referenced nominal set no longer matches: it
+    is made the seconds of week of ``toe'``), then every value rounded to 12
+    significant digits (``D19.12``).
+
+    Parameters
+    ----------
+    cols : dict
+        Columns of :class:`insnav.gnss.ephemeris.Ephemerides` (or its Galileo subclass).
     omega_e, gm : float
         The constants the orbit is evaluated with (GPS by default).
 
@@ -109,22 +147,8 @@ def rinex_representable(cols: dict, omega_e: float = OMEGA_E_DOT, gm: float = GM
     dict
         New columns; ``week`` is the GPS week of ``toe'``.
     """
-    c = {k: np.array(v, dtype=float if k != "prn" else np.int64, copy=True) for k, v in cols.items()}
-    toe_new = np.round(c["toe"])
-    d = toe_new - c["toe"]
-    n = np.sqrt(gm / c["sqrt_a"] ** 6) + c["delta_n"]
-    toe_sow_new = np.mod(toe_new, SECONDS_PER_WEEK)
-    c["m0"] = c["m0"] + n * d
-    c["i0"] = c["i0"] + c["idot"] * d
-    c["omega0"] = c["omega0"] + (c["omega_dot"] - omega_e) * d + omega_e * (toe_sow_new - c["toe_sow"])
-    c["omega0"] = np.mod(c["omega0"] + np.pi, 2 * np.pi) - np.pi
-    c["toe"], c["toe_sow"] = toe_new, toe_sow_new
-    c["week"] = np.floor(toe_new / SECONDS_PER_WEEK)
-    toc_new = np.round(c["toc"])
-    dc = toc_new - c["toc"]
-    c["af0"] = c["af0"] + c["af1"] * dc + c["af2"] * dc ** 2
-    c["af1"] = c["af1"] + 2.0 * c["af2"] * dc
-    c["toc"] = toc_new
+    c = rereference(cols, np.round(np.asarray(cols["toe"], float)), np.round(np.asarray(cols["toc"], float)),
+                    omega_e, gm)
     for k in ("af0", "af1", "af2", "crs", "delta_n", "m0", "cuc", "e", "cus", "sqrt_a", "cic", "omega0", "cis", "i0",
               "crc", "omega", "omega_dot", "idot", "sv_accuracy", "tgd", "tgd2", "iode", "iodc", "health"):
         if k in c:

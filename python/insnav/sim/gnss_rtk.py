@@ -238,46 +238,66 @@ class RtkSimulation:
 
 
 # --------------------------------------------------------------------------- navigation data
-def rtk_navdata(t0_gps_s: float, systems=("G",)):
+#: spacing of the navigation records of one satellite [s] (every record is valid +-2 h)
+NAV_RECORD_SPACING_S = 7200.0
+
+
+def rtk_navdata(t0_gps_s: float, systems=("G",), duration_s: float = 0.0):
     """In-memory broadcast navigation data of the simulated constellations, exactly as ``nav.rnx`` holds it.
 
     GPS: :meth:`insnav.gnss.constellation.Constellation.nominal` re-referenced
     to ``t0_gps_s`` with ``T_GD = 0`` (the simulation has no satellite group
     delay); Galileo: the Walker set of :func:`insnav.gnss.walker.walker_constellation`,
     re-expressed for the Galileo constants (:func:`insnav.gnss.rinex_write.elements_for_system`),
-    data source 513 (I/NAV E1-B, clock E1/E5b), BGDs 0.  Both pass through
+    data source 513 (I/NAV E1-B, clock E1/E5b), BGDs 0.  One record per
+    satellite every :data:`NAV_RECORD_SPACING_S` from ``t0_gps_s`` to
+    ``t0_gps_s + duration_s`` (:func:`insnav.gnss.rinex_write.rereference`:
+    one continuous orbit, so any scenario length stays inside the 4 h fit
+    interval of some record), each passed through
     :func:`insnav.gnss.rinex_write.rinex_representable`.  The satellite
     positions equal those of the ``gnss_raw`` simulation's constellations to
     the 12-digit rounding (< 1 mm).
     """
     from ..gnss.constellation import Constellation
-    from ..gnss.ephemeris import Ephemerides
+    from ..gnss.ephemeris import GM_GPS, OMEGA_E_DOT, Ephemerides
     from ..gnss.galbds import GM_GAL, OMEGA_E_GAL, KeplerEphemerides
     from ..gnss.rinex import NavData
-    from ..gnss.rinex_write import elements_for_system, rinex_representable
+    from ..gnss.rinex_write import elements_for_system, rereference, rinex_representable
 
     bad = [s for s in systems if s not in SIGNALS]
     if bad:
         raise ValueError(f"carrier-phase simulation: system(s) {', '.join(bad)} not supported "
                          f"(supported: {', '.join(SIGNALS)})")
+    n_rec = int(np.floor(max(duration_s, 0.0) / NAV_RECORD_SPACING_S)) + 1
     nominal = Constellation.nominal(t0_gps_s=t0_gps_s)
+
+    def records(cols, omega_e, gm):
+        parts = []
+        for k in range(n_rec):
+            c = rereference(cols, cols["toe"] + k * NAV_RECORD_SPACING_S, None, omega_e, gm) if k else cols
+            c = rinex_representable(c, omega_e, gm)
+            c["iode"] = np.mod(np.asarray(c["iode"], float) + k, 256.0)
+            parts.append(c)
+        return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+
     eph_g = None
     if "G" in systems:
         cols = nominal.eph.to_columns()
         cols["tgd"] = np.zeros_like(cols["tgd"])
         cols["fit_s"] = np.full(cols["prn"].shape, 4 * 3600.0)
-        eph_g = Ephemerides.from_columns(rinex_representable(cols))
+        cols = records(cols, OMEGA_E_DOT, GM_GPS)
+        cols["iodc"] = cols["iode"].copy()
+        eph_g = Ephemerides.from_columns(cols)
     eph_e = None
     if "E" in systems:
         from ..gnss.walker import walker_elements
 
         cols = walker_elements("E", nominal.eph.to_columns(), float(t0_gps_s))
         cols = elements_for_system(cols, GM_GAL, OMEGA_E_GAL)
-        cols = rinex_representable(cols, OMEGA_E_GAL, GM_GAL)
         n = cols["prn"].size
         cols.update(tgd=np.zeros(n), tgd2=np.zeros(n), data_source=np.full(n, 513.0), iodc=np.zeros(n),
                     iode=np.arange(n, dtype=float) % 128, fit_s=np.full(n, 4 * 3600.0))
-        eph_e = KeplerEphemerides.from_columns(cols)
+        eph_e = KeplerEphemerides.from_columns(records(cols, OMEGA_E_GAL, GM_GAL))
     if eph_g is None:
         eph_g = Ephemerides.from_columns({k: np.zeros(0) for k in nominal.eph.to_columns()})
     return NavData("<simulated>", 3.04, eph_g, nominal.ion_alpha, nominal.ion_beta, 0, None, eph_e, None, 18.0)
@@ -353,8 +373,7 @@ def _receiver(name, t_tag, clock, pos_fn, nav, systems, signals, cfg, rng, *, ma
     pr = np.tile(prn_s, ne)
     ts = nav.transmit_states(t_rx[ep], r_e[ep], system=sy, prn=pr, codes={"G": "C1C", "E": "C1C"})
     if not np.all(ts.valid):
-        raise ValueError(f"carrier-phase simulation ({name}): no broadcast ephemeris for some satellites "
-                         "(scenario longer than the 4 h fit interval?)")
+        raise ValueError(f"carrier-phase simulation ({name}): no broadcast ephemeris for some satellites")
     el, az = elevation_azimuth(r_e[ep], ts.r_e)
     vis_flat = el >= mask_fn(el, az, ep)
     vis = vis_flat.reshape(ne, ns)
@@ -472,7 +491,7 @@ def simulate_rtk_obs(traj, cfg: dict, lever_arm_b, gps_time_offset_s: float, rng
     systems = tuple(cfg["systems"])
     signals = {s: tuple(cfg["signals"].get(s, ("1C",))) for s in systems}
     t0_gps = sc.t0 + gps_time_offset_s
-    nav = rtk_navdata(t0_gps, systems)
+    nav = rtk_navdata(t0_gps, systems, sc.duration)
     rate = cfg["rate"]
     t_sim = gnss_epochs(sc.t0, sc.t_end, sc.t0 + 1.0 / rate, rate)
     # the true reception time t_tag - b / c must stay inside the trajectory
