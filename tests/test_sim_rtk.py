@@ -95,6 +95,22 @@ def test_double_difference_phase_equals_geometry_plus_modelled_terms(tmp_path):
     assert np.std(r.mp_phase_m[ir, 0]) > 1e-3
 
 
+def test_residual_ionosphere_and_troposphere_scale_with_the_baseline():
+    # between-receiver delays divided by (baseline x mapping) are unit Gauss-Markov processes x ppm
+    from insnav.sim.gnss_rtk import iono_mapping
+
+    sim = simulate_rtk(_scenario("rtk-open-sky-car", 200.0, iono_ppm=2.0, tropo_ppm=0.5, iono_tau_s=20.0,
+                                 tropo_tau_s=20.0, saastamoinen=False), seed=8)
+    r, b = sim.rover, sim.base
+    ir, ib = _pairs(r, b)
+    d = np.linalg.norm(r.r_e[r.epoch[ir]] - sim.base_r_e, axis=1)
+    x_i = (r.iono_l1_m[ir] - b.iono_l1_m[ib]) / (1e-6 * d * iono_mapping(r.el[ir]))
+    x_t = (r.tropo_m[ir] - b.tropo_m[ib]) / (1e-6 * d / np.sin(r.el[ir]))
+    assert abs(np.std(x_i) / 2.0 - 1.0) < 0.15 and abs(np.mean(x_i)) < 0.4
+    assert abs(np.std(x_t) / 0.5 - 1.0) < 0.15
+    assert d.max() > 2000.0
+
+
 def test_rinex_obs_round_trip(tmp_path):
     from insnav.gnss.rinex import read_rinex_obs
 
