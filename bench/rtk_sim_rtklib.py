@@ -105,15 +105,19 @@ def solution_from_rtklib_pos(path) -> EngineSolution:
     return EngineSolution(np.asarray(t), a, np.array([names.get(x, "other") for x in q]))
 
 
-def _rtklib(files, setting, workdir, armode):
-    """RTKLIB ``rnx2rtkp`` (Debian rtklib 2.4.3): kinematic, L1, the preset's systems, ratio 3."""
+def rtklib_options(setting, armode) -> list:
+    """``rnx2rtkp -k`` options: kinematic, L1, the preset's systems, ratio 3, base position from its header."""
     navsys = sum({"G": 1, "R": 4, "E": 8, "C": 32}[s] for s in setting["systems"])
+    return ["pos1-posmode=kinematic", "pos1-frequency=l1", "pos1-soltype=forward",
+            f"pos1-elmask={setting['elevation_mask_deg']:g}", "pos1-ionoopt=brdc", "pos1-tropopt=saas",
+            f"pos1-navsys={navsys}", f"pos2-armode={armode}", f"pos2-arthres={RATIO:g}",
+            "out-solformat=xyz", "ant2-postype=rinexhead"]
+
+
+def _rtklib(files, setting, workdir, armode):
+    """RTKLIB ``rnx2rtkp`` (Debian rtklib 2.4.3) with :func:`rtklib_options`."""
     conf = workdir / f"rtklib_{armode}.conf"
-    conf.write_text("\n".join([
-        "pos1-posmode=kinematic", "pos1-frequency=l1", "pos1-soltype=forward",
-        f"pos1-elmask={setting['elevation_mask_deg']:g}", "pos1-ionoopt=brdc", "pos1-tropopt=saas",
-        f"pos1-navsys={navsys}", f"pos2-armode={armode}", f"pos2-arthres={RATIO:g}",
-        "out-solformat=xyz", "ant2-postype=rinexhead", ""]))
+    conf.write_text("\n".join(rtklib_options(setting, armode)) + "\n")
     pos = workdir / f"rtklib_{armode}.pos"
     t0 = os.times()
     subprocess.run(["rnx2rtkp", "-k", str(conf), "-o", str(pos), str(files["rover"]), str(files["base"]),
@@ -243,6 +247,7 @@ def report(results, settings, n_runs, wall_s) -> str:
         bl = np.concatenate(st["baseline_m"])
         lines += [f"## {preset}", "", f"{s['description']}; systems {'+'.join(s['systems'])}, "
                   f"mask {s['elevation_mask_deg']:g} deg.", "",
+                  "RTKLIB (`rnx2rtkp -k`): `" + " ".join(rtklib_options(s, "continuous|instantaneous")) + "`.", "",
                   f"Simulated: {st['epochs']} rover epochs; satellites in both files {int(nc.min())}-{int(nc.max())} "
                   f"(median {np.median(nc):g}); baseline {bl.min() / 1e3:.1f}-{bl.max() / 1e3:.1f} km; "
                   f"{st['slips']} cycle slips on all signals, {st['slips_flagged']} of them flagged by LLI "
