@@ -111,6 +111,33 @@ def test_residual_ionosphere_and_troposphere_scale_with_the_baseline():
     assert d.max() > 2000.0
 
 
+def test_doppler_is_minus_the_phase_rate():
+    # D = -d(rho + b - c dt_s)/dt / lambda: the central difference of the phase (cycles) over +-1 s
+    raw = _scenario("rtk-open-sky-car", 40.0, multipath_phase_m=0.0, multipath_code_m=0.0, **_QUIET)
+    # constant velocity: the 2 s difference cannot follow the jerk of a manoeuvre, wheel slip or bounce
+    raw["motion"].update(lateral_slip_mps=0.0, vertical_bounce_mps=0.0, segments=[{"duration_s": 40.0}])
+    raw["initial"]["speed_mps"] = 15.0
+    sim = simulate_rtk(raw, seed=6)
+    r = sim.rover
+    key = np.char.add(r.system, r.prn.astype(str))
+    worst = 0.0
+    for sat in np.unique(key):
+        rows = np.flatnonzero(key == sat)
+        ok = (np.diff(r.epoch[rows])[1:] == 1) & (np.diff(r.epoch[rows])[:-1] == 1)
+        for k in range(2):
+            lam = r.wavelength_m[rows[1:-1], k]
+            # the receiver clock's white frequency noise moves the phase but not the drift d the Doppler
+            # carries (it cancels between satellites): compare without the clock terms
+            e0, e1, e2 = r.epoch[rows[:-2]], r.epoch[rows[1:-1]], r.epoch[rows[2:]]
+            rate = (r.phase_cyc[rows[2:], k] - r.phase_cyc[rows[:-2], k]) / 2.0 \
+                - (r.clock_bias_m[e2] - r.clock_bias_m[e0]) / 2.0 / lam
+            dop = r.doppler_hz[rows[1:-1], k] + r.clock_drift_mps[e1] / lam
+            same = r.ambiguity_cyc[rows[2:], k] == r.ambiguity_cyc[rows[:-2], k]
+            m = ok & same & np.isfinite(lam)
+            worst = max(worst, float(np.max(np.abs(rate[m] + dop[m]), initial=0.0)))
+    assert worst < 0.02, worst  # the rest: curvature over 2 s, ionosphere rate
+
+
 def test_rinex_obs_round_trip(tmp_path):
     from insnav.gnss.rinex import read_rinex_obs
 

@@ -18,7 +18,7 @@ Montenbruck (eds.), *Springer Handbook of GNSS*, 2017, eqs. (19.1)-(19.2))::
     rho    = |R_z(w tau) r_sat(t - tau) - r_r(t)|   light time and Sagnac (insnav.gnss.ephemeris)
     P_k    = rho + b_r - c dt_s + q_k I + T + m_P + e_P
     L_k    = (rho + b_r - c dt_s - q_k I + T + m_L + e_L) / lambda_k + N_k       [cycles]
-    D_k    = -(u . (v_sat - v_r) + d_r - c ddt_s) / lambda_k + e_D              [Hz]
+    D_k    = -(u . (v_sat - v_r) + d_r - c ddt_s + dT/dt - q_k dI/dt) / lambda_k + e_D    [Hz]
     q_k    = (f_1 / f_k)^2,  f_1 = 1575.42 MHz
 
 * ``b_r``, ``d_r``: receiver clock bias [m] and drift [m/s], the two-state
@@ -42,6 +42,8 @@ Montenbruck (eds.), *Springer Handbook of GNSS*, 2017, eqs. (19.1)-(19.2))::
 * ``m_P``, ``m_L``: code and phase multipath, unit first-order Gauss-Markov
   processes per receiver, satellite and signal with correlation time
   ``multipath_tau_s``, scaled by ``sigma w(el)``; the base's by ``base_multipath_scale``.
+* ``dT/dt``, ``dI/dt``: central differences over the epoch grid (the
+  Doppler follows the phase rate; multipath rates are left out of it).
 * ``e_P``, ``e_L``, ``e_D``: white noise ``sigma w(el)``,
   ``w(el) = sqrt((1 + 1 / sin^2 el) / 2)`` (1 at the zenith, 4.1 at 10 deg;
   the ``a + b / sin el`` form of RTKLIB's weighting with ``a = b``).
@@ -408,21 +410,31 @@ def _receiver(name, t_tag, clock, pos_fn, nav, systems, signals, cfg, rng, *, ma
     e_row = ep[rows]
     j_row = rows % ns
     el_r, az_r = el[rows], az[rows]
+    # atmosphere on the whole (epoch, satellite) grid, so that its rate enters the Doppler
     lat, lon, h = earth.ecef_to_geodetic(r_e)
-    iono = np.zeros(rows.size)
+    iono_g = np.zeros(ep.size)
     if cfg["klobuchar"]:
         # the ionosphere over the area: Klobuchar along the base's line of sight for both receivers, so
         # the between-receiver ionosphere is the residual term alone (Klobuchar's own horizontal and
         # elevation gradients reach several ppm at low latitudes and would not be the configured ones)
         origin = np.asarray(iono_origin_e, float)
         lat_i, lon_i, _ = earth.ecef_to_geodetic(origin[None, :])
-        el_i, az_i = elevation_azimuth(origin, ts.r_e[rows])
-        iono = klobuchar_delay(t_rx[e_row], lat_i[0], lon_i[0], el_i, az_i, nav.ion_alpha, nav.ion_beta)
-    tropo = saastamoinen_delay(lat[e_row], h[e_row], el_r) if cfg["saastamoinen"] else np.zeros(rows.size)
+        el_i, az_i = elevation_azimuth(origin, ts.r_e)
+        iono_g = klobuchar_delay(t_rx[ep], lat_i[0], lon_i[0], np.maximum(el_i, 0.0), az_i, nav.ion_alpha,
+                                 nav.ion_beta)
+    el_c = np.maximum(el, np.radians(1.0))  # below the horizon: any finite value (never observed)
+    tropo_g = saastamoinen_delay(lat[ep], h[ep], el_c) if cfg["saastamoinen"] else np.zeros(ep.size)
     if rover_extra is not None:
-        dist = np.linalg.norm(r_e - rover_extra["base_r_e"], axis=1)[e_row]
-        iono = iono + cfg["iono_ppm"] * 1e-6 * dist * iono_mapping(el_r) * x_i[e_row, j_row]
-        tropo = tropo + cfg["tropo_ppm"] * 1e-6 * dist / np.maximum(np.sin(el_r), 0.05) * x_t[e_row, j_row]
+        dist = np.linalg.norm(r_e - rover_extra["base_r_e"], axis=1)[ep]
+        iono_g = iono_g + cfg["iono_ppm"] * 1e-6 * dist * iono_mapping(el_c) * x_i.ravel()
+        tropo_g = tropo_g + cfg["tropo_ppm"] * 1e-6 * dist / np.maximum(np.sin(el_c), 0.05) * x_t.ravel()
+    iono, tropo = iono_g[rows], tropo_g[rows]
+    # d/dt of tropo and iono (central differences on the epoch grid) for the Doppler
+    dt_grid = np.gradient(t_rx) if ne > 1 else np.ones(1)
+    tropo_rate = (np.gradient(tropo_g.reshape(ne, ns), axis=0) / dt_grid[:, None]).ravel()[rows] if ne > 1 \
+        else np.zeros(rows.size)
+    iono_rate = (np.gradient(iono_g.reshape(ne, ns), axis=0) / dt_grid[:, None]).ravel()[rows] if ne > 1 \
+        else np.zeros(rows.size)
     w = elevation_weight(el_r)[:, None]
     mp_c = mp_scale * cfg["multipath_code"] * w * x_mp_c[e_row, j_row]
     mp_l = mp_scale * cfg["multipath_phase"] * w * x_mp_l[e_row, j_row]
@@ -437,7 +449,9 @@ def _receiver(name, t_tag, clock, pos_fn, nav, systems, signals, cfg, rng, *, ma
     phase = (common - q_r * iono[:, None] + mp_l + n_l) / lam_r + amb_r
     u = (ts.r_e[rows] - r_e[e_row]) / rho[:, None]
     rr = np.einsum("ij,ij->i", u, ts.v_e[rows] - v_e[e_row]) + d[e_row] - C_LIGHT * ts.clock_drift_s_s[rows]
-    dop = -rr[:, None] / lam_r + cfg["sigma_doppler"] * e_d[e_row, j_row]
+    # the carrier's rate: geometry, clocks and the atmosphere (dispersive part with the phase's sign)
+    dop = -(rr[:, None] + tropo_rate[:, None] - q_r * iono_rate[:, None]) / lam_r \
+        + cfg["sigma_doppler"] * e_d[e_row, j_row]
     cn0 = (cfg["cn0_zenith"] - cfg["cn0_span"] * (1.0 - np.sin(el_r)))[:, None] + np.zeros((1, kk))
     nan = ~have_r
     for a in (code, phase, dop, cn0, mp_c, mp_l, n_c, n_l):
