@@ -1,4 +1,4 @@
-"""The insnav simulator: exact truth, IMU increments with errors, GNSS fixes and raw GPS.
+"""The insnav simulator: exact truth, IMU increments with errors, GNSS fixes, raw GNSS and carrier phase.
 
 Main entry point :func:`simulate`; scenarios are TOML files
 (:mod:`insnav.sim.scenario`), presets ship in ``insnav/scenarios``
@@ -6,8 +6,10 @@ Main entry point :func:`simulate`; scenarios are TOML files
 
 Random streams: one ``numpy.random.SeedSequence(seed)`` is split into
 independent children for the gyro, the accelerometer, GNSS fix noise, GNSS
-delays, raw-GNSS noise and the receiver clock, so switching one part on or off
-does not change the random numbers of the others.
+delays, raw-GNSS noise, the receiver clock, the odometer and the carrier-phase
+simulation (:mod:`insnav.sim.gnss_rtk`, rover and base RINEX 3 files;
+:func:`simulate_rtk` runs it alone), so switching one part on or off does not
+change the random numbers of the others.
 """
 from __future__ import annotations
 
