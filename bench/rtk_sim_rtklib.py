@@ -42,6 +42,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -310,7 +311,7 @@ def main(argv=None) -> int:
                                 progress=lambda s: print(s, file=sys.stderr), keep=bool(args.keep))
     argv = sys.argv[1:] if argv is None else list(argv)
     text = report(results, settings, args.runs, time.perf_counter() - t,
-                  command=" ".join(["python3", "bench/rtk_sim_rtklib.py"] + argv))
+                  command=shlex.join(["python3", "bench/rtk_sim_rtklib.py"] + argv))
     if args.out:
         Path(args.out).write_text(text, encoding="utf-8")
         print(f"wrote {args.out}")
