@@ -52,6 +52,8 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
                          "docs/results/tight_multignss.md"]),
     "walk_loose": (("walk_loose.md",), ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"],
                    ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"]),
+    "rtk_sim": (("rtk_sim.md",), ["bench/rtk_sim_rtklib.py", "--runs", "20", "--out", "docs/results/rtk_sim.md"],
+                ["bench/rtk_sim_rtklib.py", "--runs", "2", "--out", "docs/results/rtk_sim.md"]),
 }
 
 

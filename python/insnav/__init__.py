@@ -26,6 +26,7 @@ _LAZY = {
     "NavTrajectory": "insnav.data.nav",
     "mechanize": "insnav.ins.mechanize",
     "simulate": "insnav.sim",
+    "simulate_rtk": "insnav.sim",
     "load_dataset": "insnav.data.dataset",
     "load_csv_dataset": "insnav.io.csv_dataset",
     "Dataset": "insnav.data.dataset",

@@ -431,6 +431,10 @@ class Dataset:
         with ``init_error = "auto"`` (the default) then starts from a random
         draw around it, as a real alignment would; a state given by the user
         (hand-written ``dataset.json``, KF-GINS, RINEX, CSV) is taken as given.
+    rtk : insnav.sim.gnss_rtk.RtkSimulation or None
+        Simulated rover/base carrier phase (scenarios with ``[gnss_rtk]``);
+        :meth:`save` writes it as RINEX 3 (``rover.obs``, ``base.obs``,
+        ``nav.rnx``) with ``rtk_truth.csv``; :meth:`load` does not read it back.
     """
 
     imu: ImuData
@@ -448,6 +452,7 @@ class Dataset:
     seed: int | None = None
     odometer: Odometer | None = None
     initial_is_truth: bool = False
+    rtk: object | None = None
 
     def save(self, directory, overwrite: bool = False) -> Path:
         """Write the dataset directory atomically (see module docstring).
@@ -486,6 +491,8 @@ class Dataset:
                           "%.17g")
             if self.odometer is not None:
                 write_csv(tmp / "odometer.csv", Odometer.COLUMNS, self.odometer.to_array(), "%.17g")
+            if self.rtk is not None:
+                self.rtk.write(tmp)
             (tmp / "scenario.toml").write_text(dumps_toml(self.scenario), encoding="utf-8")
             meta = {
                 "format": "insnav-dataset", "version": FORMAT_VERSION, "name": self.name,
@@ -523,7 +530,7 @@ class Dataset:
 
 #: the files Dataset.save writes (an --overwrite may replace a folder holding only these)
 DATASET_FILES = frozenset({"imu.csv", "gnss.csv", "truth.csv", "gnss_raw.csv", "imu_errors.csv", "odometer.csv",
-                           "scenario.toml", "dataset.json"})
+                           "scenario.toml", "dataset.json", "rover.obs", "base.obs", "nav.rnx", "rtk_truth.csv"})
 
 
 def check_replaceable(out: Path, overwrite: bool) -> None:

@@ -1,4 +1,4 @@
-"""The insnav simulator: exact truth, IMU increments with errors, GNSS fixes and raw GPS.
+"""The insnav simulator: exact truth, IMU increments with errors, GNSS fixes, raw GNSS and carrier phase.
 
 Main entry point :func:`simulate`; scenarios are TOML files
 (:mod:`insnav.sim.scenario`), presets ship in ``insnav/scenarios``
@@ -6,8 +6,10 @@ Main entry point :func:`simulate`; scenarios are TOML files
 
 Random streams: one ``numpy.random.SeedSequence(seed)`` is split into
 independent children for the gyro, the accelerometer, GNSS fix noise, GNSS
-delays, raw-GNSS noise and the receiver clock, so switching one part on or off
-does not change the random numbers of the others.
+delays, raw-GNSS noise, the receiver clock, the odometer and the carrier-phase
+simulation (:mod:`insnav.sim.gnss_rtk`, rover and base RINEX 3 files;
+:func:`simulate_rtk` runs it alone), so switching one part on or off does not
+change the random numbers of the others.
 """
 from __future__ import annotations
 
@@ -17,11 +19,11 @@ from ..data.dataset import Dataset, GnssFixes, ImuData, ImuErrors, Truth
 from .scenario import Scenario, ScenarioError, list_presets, load_scenario
 from ..units import wrap_deg
 
-__all__ = ["simulate", "load_scenario", "list_presets", "Scenario", "ScenarioError",
+__all__ = ["simulate", "simulate_rtk", "load_scenario", "list_presets", "Scenario", "ScenarioError",
            "truth_from_state", "wrap_deg"]
 
 # appending keeps every earlier stream's seed (SeedSequence.spawn children are positional)
-_STREAMS = ("gyro", "accel", "gnss", "delay", "gnss_raw", "clock", "odometer")
+_STREAMS = ("gyro", "accel", "gnss", "delay", "gnss_raw", "clock", "odometer", "rtk")
 
 
 def sample_times(t0: float, t_end: float, rate: float) -> np.ndarray:
@@ -39,7 +41,7 @@ def truth_from_state(st: dict) -> Truth:
 
 
 #: stages :func:`simulate` reports to its ``progress`` callable
-SIMULATE_STAGES = ("IMU increments", "IMU errors", "truth", "GNSS fixes", "raw GNSS", "odometer")
+SIMULATE_STAGES = ("IMU increments", "IMU errors", "truth", "GNSS fixes", "raw GNSS", "odometer", "carrier phase")
 
 
 def simulate(scenario, seed: int | None = None, *, constellation=None,
@@ -130,10 +132,44 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
 
         odometer = simulate_odometer(traj, sc.odometer, rngs["odometer"])
     done("odometer")
+    rtk = None
+    if sc.gnss_rtk is not None:
+        from .gnss_rtk import simulate_rtk_obs
+
+        rtk = simulate_rtk_obs(traj, sc.gnss_rtk, gcfg["lever_arm_b"], sc.gps_time_offset_s, rngs["rtk"])
+    done("carrier phase")
     raw = dict(sc.raw)
     raw["seed"] = int(sc.seed)
     return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=gnss_raw, imu_errors=imu_errors,
                    scenario=raw, lever_arm_b=np.array(gcfg["lever_arm_b"], float),
                    initial=initial, t0=sc.t0, gps_time_offset_s=sc.gps_time_offset_s,
                    imu_model=imu_model_dict(sc.gyro, sc.accel, sc.imu_rate), name=sc.name,
-                   seed=int(sc.seed), odometer=odometer, initial_is_truth=True)
+                   seed=int(sc.seed), odometer=odometer, initial_is_truth=True, rtk=rtk)
+
+
+def simulate_rtk(scenario, seed: int | None = None):
+    """Only the carrier-phase part of :func:`simulate` (no IMU): the same rover and base observations.
+
+    The ``rtk`` random stream is the same child of the seed as in
+    :func:`simulate`, so ``simulate_rtk(s, k)`` equals ``simulate(s, k).rtk``
+    (a faster path for Monte Carlo runs of RTK engines).
+
+    Returns
+    -------
+    insnav.sim.gnss_rtk.RtkSimulation
+
+    Raises
+    ------
+    ScenarioError
+        The scenario has no ``[gnss_rtk]`` table.
+    """
+    from .gnss_rtk import simulate_rtk_obs
+    from .trajectory import Trajectory
+
+    sc = load_scenario(scenario, seed=seed)
+    if sc.gnss_rtk is None:
+        raise ScenarioError(f"scenario {sc.source or sc.name}: no [gnss_rtk] table (carrier-phase simulation); "
+                            "presets with one: " + ", ".join(p for p in list_presets() if p.startswith("rtk-")))
+    children = np.random.SeedSequence(sc.seed).spawn(len(_STREAMS))
+    rng = np.random.default_rng(children[_STREAMS.index("rtk")])
+    return simulate_rtk_obs(Trajectory(sc), sc.gnss_rtk, sc.gnss["lever_arm_b"], sc.gps_time_offset_s, rng)

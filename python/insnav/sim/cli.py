@@ -13,7 +13,9 @@ def add_simulate_parser(subparsers) -> None:
         help="simulate a scenario into a dataset directory",
         description="Simulate a preset (see 'insnav scenarios') or a scenario TOML file and write\n"
         "a dataset directory (imu.csv, gnss.csv, truth.csv, imu_errors.csv, gnss_raw.csv for\n"
-        "tight presets, scenario.toml, dataset.json) that 'insnav run' reads.\n"
+        "tight presets, scenario.toml, dataset.json) that 'insnav run' reads; presets with carrier\n"
+        "phase (rtk-open-sky-car, rtk-urban-car) also write RINEX 3 rover.obs, base.obs, nav.rnx\n"
+        "and rtk_truth.csv (the rover antenna per epoch) for RTK engines such as RTKLIB.\n"
         "Files carry the unit in every column name: t_s [s], dtheta_x_rad, dv_x_mps [m/s], lat_deg, h_m [m].\n"
         "Example: insnav simulate seed000-sim --seed 1 --out data/seed000-sim",
         formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -58,6 +60,10 @@ def cmd_simulate(args) -> int:
     finally:
         bar.close()
     raw = "" if ds.gnss_raw is None else f", {len(ds.gnss_raw)} raw GNSS observations"
+    if ds.rtk is not None:
+        n_r, n_c = ds.rtk.common_counts()
+        raw += (f", carrier phase of rover and base (RINEX 3 rover.obs, base.obs, nav.rnx; "
+                f"{n_c.min()}-{n_c.max()} common satellites)")
     print(f"{ds.name} (seed {ds.seed}): {len(ds.imu)} IMU samples, {len(ds.gnss)} GNSS fixes{raw}; "
           f"simulated in {t_sim:.2f} s -> {out}")
     return 0

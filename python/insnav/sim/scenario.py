@@ -38,6 +38,9 @@ Layout (all tables optional unless marked)::
     [gnss_raw.urban_canyon] mask_across_deg*, mask_along_deg, street_azimuth_deg
               (absent: the street runs along the vehicle's heading; sim/gnss_raw.urban_canyon_mask)
     [[gnss_raw.windows]] start_s*, end_s*, n_sats*
+    [gnss_rtk] rover and base carrier phase (insnav.sim.gnss_rtk; keys in _RTK_KEYS,
+              docs/formats.md), [gnss_rtk.signals] G, E, [gnss_rtk.base] lat_deg/lon_deg/h_m
+              or offset_ned_m, [gnss_rtk.urban_canyon] as [gnss_raw.urban_canyon]
 """
 from __future__ import annotations
 
@@ -170,6 +173,8 @@ class Scenario:
     vertical_bounce: float = 0.0
     #: odometer sensor (see insnav.sim.odometer), SI; None = no odometer
     odometer: dict[str, Any] | None = None
+    #: carrier-phase rover/base simulation (see insnav.sim.gnss_rtk), SI; None = none
+    gnss_rtk: dict[str, Any] | None = None
     raw: dict[str, Any] = field(repr=False, default_factory=dict)
     source: str = ""
 
@@ -470,7 +475,7 @@ def load_scenario(scenario, *, seed: int | None = None) -> Scenario:
 
 
 _TOP = {"name", "description", "seed", "time", "initial", "motion", "imu", "truth",
-        "gnss", "gnss_raw", "odometer", "run"}
+        "gnss", "gnss_raw", "gnss_rtk", "odometer", "run"}
 #: keys of a preset's [run] table: run-configuration defaults of the data it
 #: simulates (Dataset.scenario["run"]), e.g. gate_prob = 0 for the seed-paper
 #: presets, whose filters have no innovation gate
@@ -722,7 +727,7 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
         coordinated_turns=coordinated, g_ref=g_ref, imu_rate=imu_rate, quadrature_nodes=nodes,
         errors_rate=errors_rate, gyro=gyro, accel=accel, truth_rate=truth_rate, gnss=gnss,
         gnss_raw=gnss_raw, lateral_slip=lateral_slip, vertical_bounce=vertical_bounce,
-        odometer=_odometer(ctx, raw, imu_rate), raw=raw)
+        odometer=_odometer(ctx, raw, imu_rate), gnss_rtk=_gnss_rtk(ctx, raw, imu_rate), raw=raw)
 
 
 def _odometer(ctx, raw, imu_rate):
@@ -740,6 +745,111 @@ def _odometer(ctx, raw, imu_rate):
         "scale_error_sigma": _num(ctx, od, "odometer", "scale_error_sigma_ppm", 0.0, lo=0.0, hi=1e5) * 1e-6,
         "sigma": _num(ctx, od, "odometer", "sigma_mps", 0.0, lo=0.0),
     }
+
+
+#: RINEX 3 signals (band + attribute) the carrier-phase simulation writes, per system (insnav.sim.gnss_rtk)
+RTK_SIGNALS = {"G": ("1C", "1W", "2W", "2L", "5Q"), "E": ("1C", "5Q", "7Q")}
+
+_RTK_KEYS = {"enabled", "rate_hz", "systems", "signals", "elevation_mask_deg", "base_elevation_mask_deg",
+             "sigma_code_m", "sigma_phase_m", "sigma_doppler_hz", "multipath_code_m", "multipath_phase_m",
+             "multipath_tau_s", "base_multipath_scale", "iono_ppm", "iono_tau_s", "tropo_ppm", "tropo_tau_s",
+             "klobuchar", "saastamoinen", "slip_rate_per_h", "slip_max_cycles", "slip_lli_prob", "base_slips",
+             "ambiguity_max_cycles", "clock", "clock_bias_rw_m_per_sqrts", "clock_drift_rw_mps_per_sqrts",
+             "rover_clock_bias0_m", "rover_clock_drift0_mps", "base_clock_bias0_m", "base_clock_drift0_mps",
+             "cn0_zenith_dbhz", "cn0_span_dbhz", "base", "urban_canyon"}
+
+
+def _gnss_rtk(ctx, raw, imu_rate):
+    """``[gnss_rtk]``: rover and base carrier phase and code (insnav.sim.gnss_rtk), SI; None when absent."""
+    p = "gnss_rtk"
+    gr = _table(ctx, raw, "", p)
+    _check_keys(ctx, gr, p, _RTK_KEYS)
+    if not _bool(ctx, gr, p, "enabled", bool(gr)):
+        return None
+    systems = gr.get("systems", ["G"])
+    if (not isinstance(systems, list) or not systems or any(x not in RTK_SIGNALS for x in systems)
+            or len(set(systems)) != len(systems)):
+        ctx.fail(f"{p}.systems", f'expected a list of distinct {", ".join(repr(s) for s in RTK_SIGNALS)} '
+                 f"(GPS, Galileo), got {systems!r}")
+    sig_t = _table(ctx, gr, p, "signals")
+    _check_keys(ctx, sig_t, f"{p}.signals", set(RTK_SIGNALS))
+    signals = {}
+    for s in systems:
+        v = sig_t.get(s, ["1C"])
+        if (not isinstance(v, list) or not v or any(x not in RTK_SIGNALS[s] for x in v) or len(set(v)) != len(v)
+                or len({x[0] for x in v}) != len(v)):
+            ctx.fail(f"{p}.signals.{s}", f"expected a list of signals on distinct bands out of "
+                     f"{', '.join(RTK_SIGNALS[s])}, got {v!r}")
+        signals[s] = tuple(v)
+    mask = _num(ctx, gr, p, "elevation_mask_deg", 10.0, lo=-5.0, hi=89.0) * DEG
+    cfg = {
+        "rate": _num(ctx, gr, p, "rate_hz", 1.0, lo=0.0, lo_open=True, hi=min(imu_rate, 100.0)),
+        "systems": tuple(systems), "signals": signals, "elevation_mask": mask,
+        "base_elevation_mask": _num(ctx, gr, p, "base_elevation_mask_deg", mask / DEG, lo=-5.0, hi=89.0) * DEG,
+        "sigma_code": _num(ctx, gr, p, "sigma_code_m", 0.3, lo=0.0),
+        "sigma_phase": _num(ctx, gr, p, "sigma_phase_m", 0.002, lo=0.0),
+        "sigma_doppler": _num(ctx, gr, p, "sigma_doppler_hz", 0.05, lo=0.0),
+        "multipath_code": _num(ctx, gr, p, "multipath_code_m", 0.3, lo=0.0),
+        "multipath_phase": _num(ctx, gr, p, "multipath_phase_m", 0.003, lo=0.0, hi=0.05),
+        "multipath_tau": _num(ctx, gr, p, "multipath_tau_s", 30.0, lo=0.0),
+        "base_multipath_scale": _num(ctx, gr, p, "base_multipath_scale", 0.3, lo=0.0),
+        "iono_ppm": _num(ctx, gr, p, "iono_ppm", 1.0, lo=0.0),
+        "iono_tau": _num(ctx, gr, p, "iono_tau_s", 600.0, lo=0.0),
+        "tropo_ppm": _num(ctx, gr, p, "tropo_ppm", 0.3, lo=0.0),
+        "tropo_tau": _num(ctx, gr, p, "tropo_tau_s", 1800.0, lo=0.0),
+        "klobuchar": _bool(ctx, gr, p, "klobuchar", True),
+        "saastamoinen": _bool(ctx, gr, p, "saastamoinen", True),
+        "slip_rate_per_h": _num(ctx, gr, p, "slip_rate_per_h", 0.0, lo=0.0),
+        "slip_max_cycles": _num(ctx, gr, p, "slip_max_cycles", 10, integer=True, lo=1, hi=1000000),
+        "slip_lli_prob": _num(ctx, gr, p, "slip_lli_prob", 1.0, lo=0.0, hi=1.0),
+        "base_slips": _bool(ctx, gr, p, "base_slips", False),
+        "ambiguity_max": _num(ctx, gr, p, "ambiguity_max_cycles", 1000000, integer=True, lo=0, hi=100000000),
+        "clock_bias_rw": _num(ctx, gr, p, "clock_bias_rw_m_per_sqrts", 0.0, lo=0.0),
+        "clock_drift_rw": _num(ctx, gr, p, "clock_drift_rw_mps_per_sqrts", 0.0, lo=0.0),
+        "rover_clock_bias0": _num(ctx, gr, p, "rover_clock_bias0_m", 300.0, lo=-3e5, hi=3e5),
+        "rover_clock_drift0": _num(ctx, gr, p, "rover_clock_drift0_mps", 0.3, lo=-300.0, hi=300.0),
+        "base_clock_bias0": _num(ctx, gr, p, "base_clock_bias0_m", -150.0, lo=-3e5, hi=3e5),
+        "base_clock_drift0": _num(ctx, gr, p, "base_clock_drift0_mps", 0.1, lo=-300.0, hi=300.0),
+        "cn0_zenith": _num(ctx, gr, p, "cn0_zenith_dbhz", 48.0, lo=0.0, hi=99.0),
+        "cn0_span": _num(ctx, gr, p, "cn0_span_dbhz", 15.0, lo=0.0, hi=99.0),
+    }
+    clock = _str(ctx, gr, p, "clock", "")
+    if clock:
+        from ..gnss.clock import CLOCK_CLASSES
+
+        if clock not in CLOCK_CLASSES:
+            ctx.fail(f"{p}.clock", f"unknown clock class {clock!r}; known: {', '.join(CLOCK_CLASSES)}")
+        qb, qd = CLOCK_CLASSES[clock]
+        if "clock_bias_rw_m_per_sqrts" not in gr:
+            cfg["clock_bias_rw"] = qb
+        if "clock_drift_rw_mps_per_sqrts" not in gr:
+            cfg["clock_drift_rw"] = qd
+    bt = _table(ctx, gr, p, "base")
+    pb = f"{p}.base"
+    _check_keys(ctx, bt, pb, {"lat_deg", "lon_deg", "h_m", "offset_ned_m"})
+    geo = [k for k in ("lat_deg", "lon_deg", "h_m") if k in bt]
+    if geo and "offset_ned_m" in bt:
+        ctx.fail(f"{pb}.offset_ned_m", f"conflicts with '{pb}.{geo[0]}': give the base as lat_deg/lon_deg/h_m "
+                 "or as offset_ned_m from the rover's start, not both")
+    if geo:
+        cfg["base"] = {"lat": _num(ctx, bt, pb, "lat_deg", required=True, lo=-89.0, hi=89.0) * DEG,
+                       "lon": _num(ctx, bt, pb, "lon_deg", required=True, lo=-360.0, hi=360.0) * DEG,
+                       "h": _num(ctx, bt, pb, "h_m", required=True, lo=-500.0, hi=9000.0)}
+    else:
+        off = _vec3(ctx, bt, pb, "offset_ned_m", 0.0)
+        if np.linalg.norm(off) > 100e3:
+            ctx.fail(f"{pb}.offset_ned_m", f"baseline {np.linalg.norm(off) / 1e3:.1f} km: at most 100 km")
+        cfg["base"] = {"offset_ned": off}
+    if "urban_canyon" in gr:
+        uc = _table(ctx, gr, p, "urban_canyon")
+        pu = f"{p}.urban_canyon"
+        _check_keys(ctx, uc, pu, {"mask_across_deg", "mask_along_deg", "street_azimuth_deg"})
+        st_az = _num(ctx, uc, pu, "street_azimuth_deg", None, lo=-360.0, hi=360.0)
+        cfg["urban_canyon"] = dict(
+            mask_across=_num(ctx, uc, pu, "mask_across_deg", required=True, lo=0.0, hi=89.0) * DEG,
+            mask_along=_num(ctx, uc, pu, "mask_along_deg", 0.0, lo=-5.0, hi=89.0) * DEG,
+            street_azimuth=None if st_az is None else st_az * DEG)
+    return cfg
 
 
 def _windows(ctx, table, prefix, key):
