@@ -39,7 +39,9 @@ def build() -> Path:
     if shutil.which("clang++"):
         cfg.append("-DCMAKE_CXX_COMPILER=" + shutil.which("clang++"))
     subprocess.run(cfg, check=True, capture_output=True)
-    subprocess.run(["cmake", "--build", str(b), "--target", "loose_realtime", "-j2"], check=True, capture_output=True)
+    r = subprocess.run(["cmake", "--build", str(b), "--target", "loose_realtime", "-j2"], capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit("build of loose_realtime failed:\n" + r.stdout[-3000:] + r.stderr[-3000:])
     return b / "cpp" / "examples" / "loose_realtime"
 
 

@@ -258,7 +258,7 @@ int main(int argc, char** argv) {
     for (int j = 0; j < 3; ++j) worst = std::max(worst, std::abs(p[3 + j] - bv[3 * k + j]));
     for (int j = 0; j < 3; ++j) worst = std::max(worst, std::abs(p[6 + j] - brpy[3 * k + j]));
   }
-  auto pct = [](std::vector<double>& v, double q) {
+  auto pct = [](std::vector<double>& v, double q) -> double {
     if (v.empty()) return NAN;
     const size_t i = std::min(v.size() - 1, static_cast<size_t>(q * (v.size() - 1) + 0.5));
     std::nth_element(v.begin(), v.begin() + static_cast<long>(i), v.end());

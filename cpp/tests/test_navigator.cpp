@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <random>
 #include <vector>
 
 #include "insnav/engine/navigator.hpp"
@@ -176,10 +177,109 @@ void test_late_record_refused() {
   EXPECT_TRUE(nav->held_samples() == 0 && nav->pending_records() == 0);
 }
 
+
+/// Tight: a stationary receiver, 6 satellites, epochs 5 ms after an IMU
+/// sample, a clock bias and drift; the batch TightEngine against the pushed
+/// TightNavigator (epochs 20 samples late, 25 held back).
+template <class Filter>
+void test_tight_push_equals_batch() {
+  using L = typename Filter::Layout;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  const double lat = 0.8, lon = 0.2, h = 300.0, dt = 0.01;
+  const int n = 6000;
+  const Vec3 w_ie_n = wgs84::omega_ie_n(lat), f_n(0.0, 0.0, -wgs84::gravity(lat, h));
+  std::vector<double> t(n), dth(3 * n), dv(3 * n);
+  for (int k = 0; k < n; ++k) {
+    t[k] = (k + 1) * dt;
+    for (int j = 0; j < 3; ++j) dth[3 * k + j] = w_ie_n[j] * dt, dv[3 * k + j] = f_n[j] * dt;
+  }
+  const Vec3 r_e = wgs84::geodetic_to_ecef(lat, lon, h);
+  const Mat3 C_en = wgs84::C_en(lat, lon);
+  std::vector<SatObservation> geom;
+  for (int i = 0; i < 6; ++i) {
+    const double az = 2 * M_PI * i / 6 + 0.3, el = 0.25 + 1.1 * u(rng);
+    const Vec3 u_e = C_en * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), -std::sin(el));
+    const double b = r_e.dot(u_e), c = r_e.squaredNorm() - 26560e3 * 26560e3;
+    SatObservation s;
+    s.r_e = r_e + (-b + std::sqrt(b * b - c)) * u_e;
+    s.v_e = 3874.0 * s.r_e.cross(Vec3(u(rng) - 0.5, u(rng) - 0.5, 1.0)).normalized();
+    s.sigma_pr_m = 3.0;
+    s.sigma_prr_mps = 0.1;
+    geom.push_back(s);
+  }
+  std::vector<TightEpoch> ep;
+  std::vector<SatObservation> obs;
+  for (int e = 1; e < 60; ++e) {
+    TightEpoch x;
+    x.t = e + 0.005;
+    x.begin = static_cast<std::int64_t>(obs.size());
+    for (int i = 0; i < (e % 7 == 0 ? 3 : 6); ++i) {
+      SatObservation s = geom[i];
+      const Vec3 d = s.r_e - r_e;
+      s.pseudorange_m = d.norm() + 50.0 + 0.3 * x.t + 3.0 * nd(rng);
+      s.pseudorange_rate_mps = d.normalized().dot(s.v_e) + 0.3 + 0.1 * nd(rng);
+      obs.push_back(s);
+    }
+    x.end = static_cast<std::int64_t>(obs.size());
+    ep.push_back(x);
+  }
+  NavState init;
+  init.lat = lat + 3.0 / 6.4e6;
+  init.lon = lon;
+  init.h = h - 2.0;
+  init.q_nb = quat_from_euler(Vec3(1e-3, -1e-3, 5e-3));
+  StateVec<L> p0 = StateVec<L>::Constant(1e-3);
+  p0.template head<9>() << 5, 5, 5, 0.1, 0.1, 0.1, 2e-3, 2e-3, 1e-2;
+  p0[L::kClockBias] = 20.0;
+  p0[L::kClockDrift] = 1.0;
+  const StateCov<L> P0 = p0.cwiseAbs2().asDiagonal();
+  TightNavigatorConfig cfg;
+  cfg.tight.propagation_interval = 0.1;
+  cfg.imu_hold = 25;
+  cfg.clock_bias0_m = 40.0;
+  std::vector<double> bt(n), bllh(3 * n), bclk(2 * n);
+  TightOutputs out;
+  out.t = bt.data();
+  out.llh = bllh.data();
+  out.clock = bclk.data();
+  auto batch = std::make_unique<TightEngine<Filter>>(cfg.imu_model, cfg.tight, cfg.ut);
+  batch->run(init, P0, ImuCorrection{}, cfg.clock_bias0_m, 0.0, n, t.data(), dth.data(), dv.data(),
+             static_cast<std::int64_t>(ep.size()), ep.data(), obs.data(), out);
+  auto nav = std::make_unique<TightNavigator<Filter>>(cfg, init, P0);
+  const long before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);
+  size_t g = 0;
+  double worst = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const double t_arrived = t[std::max(0, k - 20)];
+    while (g < ep.size() && ep[g].t <= t_arrived) {
+      nav->push_pseudoranges(ep[g].t, obs.data() + ep[g].begin, static_cast<int>(ep[g].end - ep[g].begin));
+      ++g;
+    }
+    nav->push_imu(t[k], Vec3(dth[3 * k], dth[3 * k + 1], dth[3 * k + 2]), Vec3(dv[3 * k], dv[3 * k + 1], dv[3 * k + 2]));
+    const std::int64_t i = nav->samples() - 1;
+    if (i >= 0 && k >= cfg.imu_hold) {
+      const auto r = nav->solution();
+      worst = std::max({worst, std::abs(r.llh[0] - bllh[3 * i]) * 6.4e6, std::abs(r.llh[2] - bllh[3 * i + 2]),
+                        std::abs(nav->clock_bias_m() - bclk[2 * i]), std::abs(r.t - bt[i])});
+    }
+  }
+  nav->flush();
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(g_eigen_asserts == before);
+  std::printf("tight push vs batch (%s): max difference %.3g, updates %d / %d\n", L::kSize == 17 ? "17" : "20", worst,
+              nav->updates(), out.updates);
+  EXPECT_TRUE(worst == 0.0);
+  EXPECT_TRUE(nav->updates() == out.updates && out.updates > 50);
+  EXPECT_TRUE(nav->refused_records() == 0);
+}
 }  // namespace
 
 int main() {
   test_push_equals_batch();
   test_late_record_refused();
+  test_tight_push_equals_batch<Ekf<Layout17>>();
   TEST_MAIN_END();
 }

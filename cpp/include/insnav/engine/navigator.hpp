@@ -24,11 +24,13 @@
 // fixed-size matrices): allocate it once, e.g. with std::make_unique.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <stdexcept>
 
 #include "insnav/engine/loose_engine.hpp"
+#include "insnav/engine/tight_engine.hpp"
 
 namespace insnav {
 
@@ -52,6 +54,30 @@ struct NavigatorRow {
   Eigen::Matrix<double, 2, 1> odo_scale;        // odometer scale factor and its sigma (Layout16Odo)
 };
 
+/// The output row of a closed loop (the batch engines' write_output, one row).
+template <class L, class Core>
+NavigatorRow<L> navigator_row(Core& core) {
+  NavOutputs o;
+  double t = 0, llh[3], v[3], rpy[3], sig[L::kSize], err[12], odo[2] = {0.0, 0.0};
+  o.t = &t;
+  o.llh = llh;
+  o.v_n = v;
+  o.rpy = rpy;
+  o.sigma = sig;
+  o.imu_err = err;
+  o.odo_scale = odo;
+  core.write_output(o);
+  NavigatorRow<L> r;
+  r.t = t;
+  r.llh = Vec3(llh[0], llh[1], llh[2]);
+  r.v_n = Vec3(v[0], v[1], v[2]);
+  r.rpy = Vec3(rpy[0], rpy[1], rpy[2]);
+  for (int j = 0; j < L::kSize; ++j) r.sigma[j] = sig[j];
+  for (int j = 0; j < 12; ++j) r.imu_err[j] = err[j];
+  r.odo_scale << odo[0], odo[1];
+  return r;
+}
+
 /// What became of the last GNSS fix applied (or refused).
 struct NavigatorRecord {
   RecordStatus status = RecordStatus::kNotUsed;
@@ -59,60 +85,29 @@ struct NavigatorRecord {
   std::array<double, 6> innovation{};  // INS - GNSS before the update: N, E, D [m], vN, vE, vD [m/s] (NaN: absent)
 };
 
-template <class Filter, int kMaxHold = 256, int kMaxPending = 64>
-class LooseNavigator {
+/// The part every navigator shares: the IMU hold ring, the queue of pending
+/// records sorted by time of validity, and the per-sample step through
+/// ClosedLoop::process_sample.  Derived (CRTP) provides `core()` (its
+/// ClosedLoop), `apply(const Record&)` (the engine's measurement step) and
+/// `Record::t`; `Record::order` breaks ties (lower first, then push order).
+template <class Derived, class Record, int kMaxHold, int kMaxPending>
+class PushLoop {
  public:
-  using L = typename Filter::Layout;
   static_assert(kMaxHold >= 1 && kMaxPending >= 1, "capacities must be positive");
-
-  /// initial: the state at initial.t (the first IMU sample's interval starts there).
-  LooseNavigator(const NavigatorConfig& cfg, const NavState& initial, const StateCov<L>& P0,
-                 const ImuCorrection& corr0 = ImuCorrection())
-      : engine_(cfg.imu_model, cfg.loose, cfg.ut), cfg_(cfg) {
-    if (cfg.imu_hold < 0 || cfg.imu_hold > kMaxHold) throw std::invalid_argument("imu_hold must be in 0 .. kMaxHold");
-    engine_.start(initial, P0, corr0);
-    t_pushed_ = t_done_ = initial_t_ = initial.t;
-    fix_out_.innovation = last_fix_.innovation.data();
-    fix_out_.nis = &last_fix_.nis;
-    fix_out_.status = &fix_status_;
-    fix_out_.constraint_nis = &constraint_nis_;
-    fix_out_.constraint_status = &constraint_status_;
-  }
 
   /// One IMU increment over (t_prev, t]: dtheta_b [rad], dv_b [m/s] (FRD).
   /// Returns false (nothing done) when t does not increase.
   bool push_imu(double t, const Vec3& dtheta_b, const Vec3& dv_b) {
     if (!(t > t_pushed_)) return false;
-    ImuIncrement& raw = hold_[(hold_head_ + hold_n_) % kMaxHold];
+    ImuIncrement& raw = ring_[(hold_head_ + hold_n_) % kMaxHold];
     raw.t = t;
     raw.dt = t - t_pushed_;
     raw.dtheta_b = dtheta_b;
     raw.dv_b = dv_b;
     ++hold_n_;
     t_pushed_ = t;
-    while (hold_n_ > cfg_.imu_hold) integrate_oldest();
+    while (hold_n_ > hold_) integrate_oldest();
     return true;
-  }
-
-  /// A GNSS position (and/or velocity) fix valid at fix.t, queued until the
-  /// IMU sample that covers it is integrated.  kNotUsed: queued;
-  /// kOutsideImuSpan: at or before the initial time; kTooOld: older than the
-  /// last integrated sample (or the queue is full).
-  RecordStatus push_gnss_fix(const GnssFix& fix) {
-    Pending p;
-    p.t = fix.t;
-    p.is_fix = true;
-    p.fix = fix;
-    return enqueue(p);
-  }
-
-  /// A vehicle-constraint event (NHC, odometer speed, ZUPT, ZARU), queued as a fix.
-  RecordStatus push_constraint(const ConstraintEvent& e) {
-    Pending p;
-    p.t = e.t;
-    p.is_fix = false;
-    p.event = e;
-    return enqueue(p);
   }
 
   /// Integrate every held sample (the end of a run, or no more late records expected).
@@ -120,28 +115,133 @@ class LooseNavigator {
     while (hold_n_ > 0) integrate_oldest();
   }
 
-  /// The current output row (the batch engine's row after the last integrated sample).
-  NavigatorRow<L> solution() {
-    NavOutputs o;
-    double t = 0, llh[3], v[3], rpy[3], sig[L::kSize], err[12], odo[2] = {0.0, 0.0};
-    o.t = &t;
-    o.llh = llh;
-    o.v_n = v;
-    o.rpy = rpy;
-    o.sigma = sig;
-    o.imu_err = err;
-    o.odo_scale = odo;
-    engine_.core().write_output(o);
-    NavigatorRow<L> r;
-    r.t = t;
-    r.llh = Vec3(llh[0], llh[1], llh[2]);
-    r.v_n = Vec3(v[0], v[1], v[2]);
-    r.rpy = Vec3(rpy[0], rpy[1], rpy[2]);
-    for (int j = 0; j < L::kSize; ++j) r.sigma[j] = sig[j];
-    for (int j = 0; j < 12; ++j) r.imu_err[j] = err[j];
-    r.odo_scale << odo[0], odo[1];
-    return r;
+  double t_integrated() const { return t_done_; }  // last integrated sample [s]
+  int held_samples() const { return hold_n_; }
+  int pending_records() const { return pend_n_; }
+  std::int64_t samples() const { return samples_; }
+  int refused_records() const { return refused_; }  // too old, outside the span, or the queue full
+
+ protected:
+  void start(double t0, int hold, double cycle_period) {
+    if (hold < 0 || hold > kMaxHold) throw std::invalid_argument("imu_hold must be in 0 .. kMaxHold");
+    hold_ = hold;
+    cycle_period_ = cycle_period;
+    t_pushed_ = t_done_ = t0_ = t0;
   }
+
+  /// Queue a record (sorted by t, then by order, then in push order).
+  RecordStatus enqueue(const Record& r) {
+    if (!(r.t > t0_)) {
+      ++refused_;
+      return RecordStatus::kOutsideImuSpan;
+    }
+    if (!(r.t > t_done_) || pend_n_ == kMaxPending) {
+      ++refused_;
+      return RecordStatus::kTooOld;
+    }
+    int i = pend_n_;
+    while (i > 0 && (pend_[i - 1].t > r.t || (pend_[i - 1].t == r.t && pend_[i - 1].order > r.order))) {
+      pend_[i] = pend_[i - 1];
+      --i;
+    }
+    pend_[i] = r;
+    ++pend_n_;
+    return RecordStatus::kNotUsed;
+  }
+
+  RecordStatus refuse(RecordStatus why) {
+    ++refused_;
+    return why;
+  }
+
+  /// True when a pending record would still be applied (its slot of a pool is in use).
+  template <class Pred>
+  bool any_pending(Pred&& pred) const {
+    for (int i = 0; i < pend_n_; ++i)
+      if (pred(pend_[i])) return true;
+    return false;
+  }
+
+ private:
+  void integrate_oldest() {
+    Derived& self = static_cast<Derived&>(*this);
+    const ImuIncrement raw = ring_[hold_head_];
+    hold_head_ = (hold_head_ + 1) % kMaxHold;
+    --hold_n_;
+    int done = 0;  // records applied in this sample (the queue front)
+    self.core().process_sample(
+        raw, t_done_, cycle_period_, [&]() { return pend_n_ > done ? pend_[done].t : kInf; },
+        [&]() { self.apply(pend_[done++]); });
+    if (done > 0) {
+      for (int j = done; j < pend_n_; ++j) pend_[j - done] = pend_[j];
+      pend_n_ -= done;
+    }
+    t_done_ = raw.t;
+    ++samples_;
+  }
+
+  std::array<ImuIncrement, kMaxHold> ring_;
+  int hold_head_ = 0, hold_n_ = 0, hold_ = 0;  // ring_ start, samples in it, samples to hold
+  std::array<Record, kMaxPending> pend_;
+  int pend_n_ = 0;
+  double t_pushed_ = 0.0, t_done_ = 0.0, t0_ = 0.0, cycle_period_ = 1.0;
+  std::int64_t samples_ = 0;
+  int refused_ = 0;
+};
+
+/// A queued loose record: a GNSS fix (order 0: first at a tie, as the batch
+/// engine merges its two sorted streams) or a vehicle-constraint event (order 1).
+struct LoosePending {
+  double t = 0.0;
+  int order = 0;
+  GnssFix fix;
+  ConstraintEvent event;
+};
+
+template <class Filter, int kMaxHold = 256, int kMaxPending = 64>
+class LooseNavigator : public PushLoop<LooseNavigator<Filter, kMaxHold, kMaxPending>, LoosePending, kMaxHold, kMaxPending> {
+  using Base = PushLoop<LooseNavigator, LoosePending, kMaxHold, kMaxPending>;
+  friend Base;
+
+ public:
+  using L = typename Filter::Layout;
+
+  /// initial: the state at initial.t (the first IMU sample's interval starts there).
+  LooseNavigator(const NavigatorConfig& cfg, const NavState& initial, const StateCov<L>& P0,
+                 const ImuCorrection& corr0 = ImuCorrection())
+      : engine_(cfg.imu_model, cfg.loose, cfg.ut) {
+    Base::start(initial.t, cfg.imu_hold, cfg.loose.cycle_period);
+    engine_.start(initial, P0, corr0);
+    fix_out_.innovation = last_fix_.innovation.data();
+    fix_out_.nis = &last_fix_.nis;
+    fix_out_.status = &fix_status_;
+    fix_out_.constraint_nis = &constraint_nis_;
+    fix_out_.constraint_status = &constraint_status_;
+  }
+
+  /// A GNSS position (and/or velocity) fix valid at fix.t, queued until the
+  /// IMU sample that covers it is integrated.  kNotUsed: queued;
+  /// kOutsideImuSpan: at or before the initial time; kTooOld: older than the
+  /// last integrated sample (or the queue is full).
+  RecordStatus push_gnss_fix(const GnssFix& fix) {
+    LoosePending p;
+    p.t = fix.t;
+    p.order = 0;
+    p.fix = fix;
+    return Base::enqueue(p);
+  }
+
+  /// A vehicle-constraint event (NHC, odometer speed, ZUPT, ZARU), queued as a fix.
+  RecordStatus push_constraint(const ConstraintEvent& e) {
+    LoosePending p;
+    p.t = e.t;
+    p.order = 1;
+    p.event = e;
+    return Base::enqueue(p);
+  }
+
+  /// The current output row (the batch engine's row after the last integrated sample).
+  NavigatorRow<L> solution() { return navigator_row<L>(engine_.core()); }
 
   /// The INS state after the last feedback (not corrected by a pending x).
   const NavState& ins_state() { return engine_.core().state(); }
@@ -150,85 +250,111 @@ class LooseNavigator {
   /// The last fix applied or refused by the gate (its innovation, NIS and status).
   const NavigatorRecord& last_fix() const { return last_fix_; }
 
-  double t_integrated() const { return t_done_; }  // last integrated sample [s]
-  int held_samples() const { return hold_n_; }
-  int pending_records() const { return pend_n_; }
-  std::int64_t samples() const { return samples_; }
   int updates() const { return fix_out_.updates; }
   int rejected() const { return fix_out_.rejected; }
   int constraint_updates() const { return fix_out_.constraint_updates; }
   int gate_reopened() { return engine_.core().gate.reopened(); }
-  int refused_records() const { return refused_; }  // too old, outside the span, or the queue full
 
  private:
-  struct Pending {
-    double t = 0.0;
-    bool is_fix = true;
-    GnssFix fix;
-    ConstraintEvent event;
-  };
-
-  RecordStatus enqueue(const Pending& p) {
-    if (!(p.t > initial_t_)) {
-      ++refused_;
-      return RecordStatus::kOutsideImuSpan;
+  ClosedLoop<Filter>& core() { return engine_.core(); }
+  void apply(const LoosePending& p) {
+    if (p.order == 0) {
+      engine_.apply_fix(p.fix, 0, fix_out_);
+      last_fix_.status = static_cast<RecordStatus>(fix_status_);
+    } else {
+      engine_.apply_constraint(p.event, 0, fix_out_);
     }
-    if (!(p.t > t_done_) || pend_n_ == kMaxPending) {
-      ++refused_;
-      return RecordStatus::kTooOld;
-    }
-    // sorted by time, a fix before a constraint event at the same time, else in push order
-    // (the batch engine's merge of its two sorted streams)
-    int i = pend_n_;
-    while (i > 0 && (pend_[i - 1].t > p.t || (pend_[i - 1].t == p.t && p.is_fix && !pend_[i - 1].is_fix))) {
-      pend_[i] = pend_[i - 1];
-      --i;
-    }
-    pend_[i] = p;
-    ++pend_n_;
-    return RecordStatus::kNotUsed;
-  }
-
-  void integrate_oldest() {
-    const ImuIncrement raw = hold_[hold_head_];
-    hold_head_ = (hold_head_ + 1) % kMaxHold;
-    --hold_n_;
-    engine_.core().process_sample(
-        raw, t_done_, cfg_.loose.cycle_period, [&]() { return pend_n_ > pend_head_ ? pend_[pend_head_].t : kInf; },
-        [&]() {
-          const Pending& p = pend_[pend_head_++];
-          if (p.is_fix) {
-            engine_.apply_fix(p.fix, 0, fix_out_);
-            last_fix_.status = static_cast<RecordStatus>(fix_status_);
-          } else {
-            engine_.apply_constraint(p.event, 0, fix_out_);
-          }
-        });
-    // drop the applied records from the queue front
-    if (pend_head_ > 0) {
-      for (int j = pend_head_; j < pend_n_; ++j) pend_[j - pend_head_] = pend_[j];
-      pend_n_ -= pend_head_;
-      pend_head_ = 0;
-    }
-    t_done_ = raw.t;
-    ++samples_;
   }
 
   LooseEngine<Filter> engine_;
-  NavigatorConfig cfg_;
-  std::array<ImuIncrement, kMaxHold> hold_;
-  int hold_head_ = 0, hold_n_ = 0;
-  std::array<Pending, kMaxPending> pend_;
-  int pend_head_ = 0, pend_n_ = 0;
-  double t_pushed_ = 0.0, t_done_ = 0.0;
-  double initial_t_ = 0.0;
-  std::int64_t samples_ = 0;
-  int refused_ = 0;
   LooseOutputs fix_out_;
   NavigatorRecord last_fix_;
   std::int8_t fix_status_ = 0;
   double constraint_nis_ = NAN;
   std::int8_t constraint_status_ = 0;
+};
+
+/// The plain configuration of a TightNavigator (SI units, as the batch engine).
+struct TightNavigatorConfig {
+  ImuErrorModel imu_model;
+  TightConfig tight;   // lever arm, propagation interval, outage cycle, gate, robust screening
+  UtParams ut;
+  int imu_hold = 0;    // IMU samples held back for late epochs [samples], 0 .. kMaxHold
+  double clock_bias0_m = 0.0, clock_drift0_mps = 0.0;  // initial receiver clock estimate
+  IsbVec isb0 = IsbVec::Zero();                         // initial inter-system biases of R, E, C [m]
+};
+
+/// A queued tight epoch: its satellites sit in the navigator's pool at slot * kMaxMeasRows.
+struct TightPending {
+  double t = 0.0;
+  int order = 0;
+  int slot = 0, n_sats = 0;
+};
+
+/// The tightly coupled engine (tight_engine.hpp) pushed one GNSS epoch of
+/// pseudoranges / pseudorange rates at a time; as LooseNavigator otherwise.
+template <class Filter, int kMaxHold = 256, int kMaxPendingEpochs = 8>
+class TightNavigator
+    : public PushLoop<TightNavigator<Filter, kMaxHold, kMaxPendingEpochs>, TightPending, kMaxHold, kMaxPendingEpochs> {
+  using Base = PushLoop<TightNavigator, TightPending, kMaxHold, kMaxPendingEpochs>;
+  friend Base;
+
+ public:
+  using L = typename Filter::Layout;
+
+  TightNavigator(const TightNavigatorConfig& cfg, const NavState& initial, const StateCov<L>& P0,
+                 const ImuCorrection& corr0 = ImuCorrection())
+      : engine_(cfg.imu_model, cfg.tight, cfg.ut) {
+    Base::start(initial.t, cfg.imu_hold, cfg.tight.cycle_period);
+    engine_.set_initial_isb(cfg.isb0);
+    engine_.start(initial, P0, corr0, cfg.clock_bias0_m, cfg.clock_drift0_mps);
+    out_.nis = &last_nis_;
+    out_.status = &last_status_;
+    out_.rows = &last_rows_;
+    out_.clock_jump = &last_clock_jump_;
+  }
+
+  /// One GNSS epoch valid at t: n satellites (at most kMaxMeasRows; the rest
+  /// are dropped as the batch engine drops them).  kNotUsed: queued; else why refused.
+  RecordStatus push_pseudoranges(double t, const SatObservation* sats, int n) {
+    int slot = 0;
+    while (slot < kMaxPendingEpochs && Base::any_pending([&](const TightPending& p) { return p.slot == slot; })) ++slot;
+    if (slot == kMaxPendingEpochs) return Base::refuse(RecordStatus::kTooOld);  // every slot pending
+    TightPending p;
+    p.t = t;
+    p.slot = slot;
+    p.n_sats = std::min(std::max(n, 0), kMaxMeasRows);
+    const RecordStatus st = Base::enqueue(p);
+    if (st == RecordStatus::kNotUsed)
+      for (int i = 0; i < p.n_sats; ++i) pool_[slot * kMaxMeasRows + i] = sats[i];
+    return st;
+  }
+
+  NavigatorRow<L> solution() { return navigator_row<L>(engine_.core()); }
+  const NavState& ins_state() { return engine_.core().state(); }
+  const StateCov<L>& covariance() { return engine_.filter().P(); }
+  double clock_bias_m() { return engine_.core().clock_bias - engine_.filter().x()[L::kClockBias]; }
+  double clock_drift_mps() { return engine_.core().clock_drift - engine_.filter().x()[L::kClockDrift]; }
+  RecordStatus last_status() const { return static_cast<RecordStatus>(last_status_); }
+  double last_nis() const { return last_nis_; }
+
+  int updates() const { return out_.updates; }
+  int rejected() const { return out_.rejected; }
+  int rejected_sats() const { return out_.rejected_sats; }
+  int gate_reopened() { return engine_.core().gate.reopened(); }
+
+ private:
+  ClosedLoop<Filter>& core() { return engine_.core(); }
+  void apply(const TightPending& p) {
+    engine_.apply_epoch(pool_.data() + p.slot * kMaxMeasRows, TightEpoch{p.t, 0, p.n_sats}, 0, out_);
+  }
+
+  TightEngine<Filter> engine_;
+  std::array<SatObservation, kMaxPendingEpochs * kMaxMeasRows> pool_;
+  TightOutputs out_;
+  double last_nis_ = NAN, last_clock_jump_ = 0.0;
+  std::int8_t last_status_ = 0;
+  std::int32_t last_rows_ = 0;
 };
 
 }  // namespace insnav

@@ -109,7 +109,7 @@ class TightEngine {
   void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0,
            double clock_drift0, std::int64_t n, const double* t, const double* dtheta_b, const double* dv_b,
            std::int64_t n_epochs, const TightEpoch* epochs, const SatObservation* sats, TightOutputs& out) {
-    core_.reset(initial, P0, corr0, clock_bias0, clock_drift0, isb0_);
+    start(initial, P0, corr0, clock_bias0, clock_drift0);
     sats_ = sats;
     std::int64_t g = 0;
     for (; g < n_epochs && !(epochs[g].t > initial.t); ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
@@ -119,6 +119,19 @@ class TightEngine {
     for (; g < n_epochs; ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.gate_reopened = core_.gate.reopened();
+  }
+
+  /// Reset to the initial state (the start of run(); the push API's constructor).
+  void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0,
+             double clock_drift0) {
+    core_.reset(initial, P0, corr0, clock_bias0, clock_drift0, isb0_);
+  }
+
+  /// The measurement step of epoch g over sats[ep.begin, ep.end), applied now
+  /// (the INS is at its time of validity; the push API, navigator.hpp).
+  void apply_epoch(const SatObservation* sats, const TightEpoch& ep, std::int64_t g, TightOutputs& out) {
+    sats_ = sats;
+    apply_epoch(ep, g, out);
   }
 
  private:
