@@ -9,9 +9,9 @@ of it).
 """
 from __future__ import annotations
 
-from .errors import close_matches
+from dataclasses import dataclass, field
 
-from dataclasses import dataclass
+from .errors import close_matches
 
 __all__ = ["FilterSpec", "FILTERS", "filter_spec", "filter_names"]
 
@@ -31,7 +31,12 @@ class FilterSpec:
     runners : dict
         coupling -> ``"module:function"`` of the run function.
     options : tuple of str
-        Keyword options of ``insnav.run`` beyond :class:`~insnav.config.RunConfig` fields.
+        Keyword options of ``insnav.run`` beyond :class:`~insnav.config.RunConfig` fields,
+        for every coupling.
+    coupling_options : dict
+        coupling -> further keyword options of that coupling's runner only
+        (:meth:`options_for`; ``tests/test_architecture.py`` checks them against
+        the runners' signatures).
     outage_cycle_factor : float
         The filter cycle without GNSS (an outage) closes after this many GNSS
         periods.  1 for the sigma-point filters: seed 000's UT prediction runs
@@ -53,6 +58,17 @@ class FilterSpec:
     outage_cycle_factor: float = 1.0
     paper: str = ""
     summary: str = ""
+    coupling_options: dict = field(default_factory=dict)
+
+    def options_for(self, coupling: str) -> tuple:
+        """The ``insnav.run`` keyword options of this filter run with ``coupling``."""
+        return self.options + tuple(self.coupling_options.get(coupling, ()))
+
+    @property
+    def all_options(self) -> tuple:
+        """Every keyword option of this filter, over its couplings."""
+        return tuple(dict.fromkeys(self.options + tuple(o for c in self.couplings
+                                                        for o in self.coupling_options.get(c, ()))))
 
     def runner(self, coupling: str):
         """The run function for a coupling (imported now)."""
@@ -64,6 +80,9 @@ class FilterSpec:
 
 _LOOSE = "insnav.filters.loose:run_loose"
 _TIGHT = "insnav.filters.tight:run_tight"
+#: options of the tightly coupled EKF / RB-UKF / UKF (``insnav.filters.tight.run_tight``)
+TIGHT_OPTIONS = ("inputs", "elevation_mask_deg", "max_sats", "clock_psd", "init_sigma_clock", "clock0",
+                 "use_pseudorange", "use_rate", "layout", "isb_psd", "init_sigma_isb", "isb0")
 _DELAY = "insnav.filters.delay:run_delay"
 _PARTICLE = "insnav.filters.particle:run_tight_particle"
 #: options of the seed 004 filters (``insnav.filters.particle.run_tight_particle``)
@@ -81,13 +100,15 @@ DELAY_OPTIONS = ("delay_p", "max_history_s", "checkpoint_interval_s")
 FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
     FilterSpec("ekf", ("loose", "tight"), {"loose": (15, 21), "tight": (17,)},
                {"loose": _LOOSE, "tight": _TIGHT}, outage_cycle_factor=1.5, paper="seed 000 baseline, seed 003",
-               summary="closed-loop error-state EKF, Joseph update"),
+               summary="closed-loop error-state EKF, Joseph update", coupling_options={"tight": TIGHT_OPTIONS}),
     FilterSpec("rbukf", ("loose", "tight"), {"loose": (15, 21), "tight": (17,)},
                {"loose": _LOOSE, "tight": _TIGHT}, paper="seed 000",
-               summary="UT time update through the nonlinear error model, linear KF update"),
+               summary="UT time update through the nonlinear error model, linear KF update",
+               coupling_options={"tight": TIGHT_OPTIONS}),
     FilterSpec("ukf", ("loose", "tight"), {"loose": (15, 21), "tight": (17,)},
                {"loose": _LOOSE, "tight": _TIGHT}, paper="seed 000 baseline",
-               summary="UT time update + augmented unscented measurement update"),
+               summary="UT time update + augmented unscented measurement update",
+               coupling_options={"tight": TIGHT_OPTIONS}),
     FilterSpec("kf", ("loose",), {"loose": (15,)}, {"loose": _DELAY}, DELAY_OPTIONS, 1.5, "seed 001",
                summary="late GNSS used as if current"),
     FilterSpec("rdkf", ("loose",), {"loose": (15,)}, {"loose": _DELAY}, DELAY_OPTIONS, 1.5, "seed 001",

@@ -88,13 +88,14 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     if cfg.coupling not in spec.couplings:
         how = " or ".join(_ADVERB[c] for c in spec.couplings)
         raise ValueError(f"filter {spec.name!r} runs {how} coupled only (coupling={spec.couplings[0]!r})")
-    options = {k: overrides.pop(k) for k in list(overrides) if k in spec.options}
+    mine = spec.options_for(cfg.coupling)
+    options = {k: overrides.pop(k) for k in list(overrides) if k in mine}
     for k, v in overrides.items():
         if not hasattr(cfg, k):
-            owners = [s.name for s in FILTERS.values() if k in s.options]
+            owners = [f"{s.name!r} {c}" for s in FILTERS.values() for c in s.couplings if k in s.options_for(c)]
             if owners:
-                raise TypeError(f"run() option {k!r} needs filter {' or '.join(repr(o) for o in owners)}, "
-                                f"not {spec.name!r}")
+                raise TypeError(f"run() option {k!r} needs filter {' or '.join(owners)} coupling, "
+                                f"not {spec.name!r} {cfg.coupling}")
             raise TypeError(f"run() got an unknown option {k!r}")
         setattr(cfg, k, v)
     cfg.validate()
