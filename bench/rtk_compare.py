@@ -149,7 +149,14 @@ def read_pos(path):
         f = ln.split()
         if len(f) < 6:
             continue
-        t.append(float(f[0]) * 604800.0 + float(f[1]))
+        if "/" in f[0]:
+            from insnav.gnss.gpstime import gps_seconds_from_calendar
+
+            y, mo, d = (int(x) for x in f[0].split("/"))
+            hh, mi, ss = f[1].split(":")
+            t.append(gps_seconds_from_calendar(y, mo, d, int(hh), int(mi), float(ss)))
+        else:
+            t.append(float(f[0]) * 604800.0 + float(f[1]))
         a, b, c = float(f[2]), float(f[3]), float(f[4])
         if llh:
             r.append(np.asarray(earth.geodetic_to_ecef(np.radians(a), np.radians(b), c), float).ravel())

@@ -237,6 +237,30 @@ py::array_t<std::uint8_t> slip_detect(const DArray& t, const IArray& off, const 
   return flags;
 }
 
+py::dict rtk_double_differences(const DArray& rover_rows, const DArray& base_rows, const DArray& r_rover_e,
+                                const DArray& r_base_e, const py::dict& opts) {
+  check_rows(rover_rows, "rtk_double_differences: rover_rows");
+  check_rows(base_rows, "rtk_double_differences: base_rows");
+  const RtkOptions o = options_from_dict(opts);
+  const int nr = static_cast<int>(std::min<py::ssize_t>(rover_rows.shape(0), gnss::kMaxSatKeys));
+  const int nb = static_cast<int>(std::min<py::ssize_t>(base_rows.shape(0), gnss::kMaxSatKeys));
+  constexpr int kMax = 2 * gnss::kMaxRows;
+  std::vector<int> sat(kMax), ref(kMax), freq(kMax), code(kMax);
+  std::vector<double> val(kMax);
+  auto eng = std::make_unique<gnss::RtkEngine>(o);
+  const int n = eng->double_differences(rover_rows.data(), nr, base_rows.data(), nb, vec3_from(r_rover_e, "r_rover_e"),
+                                        vec3_from(r_base_e, "r_base_e"), sat.data(), ref.data(), freq.data(),
+                                        code.data(), val.data(), kMax);
+  sat.resize(n); ref.resize(n); freq.resize(n); code.resize(n); val.resize(n);
+  py::dict d;
+  d["sat_row"] = to_array(sat);
+  d["ref_row"] = to_array(ref);
+  d["freq"] = to_array(freq);
+  d["is_code"] = to_array(code);
+  d["value_m"] = to_array(val);
+  return d;
+}
+
 }  // namespace
 
 void bind_rtk(py::module_& m) {
@@ -251,6 +275,9 @@ void bind_rtk(py::module_& m) {
         "RTK engine over every rover epoch (GIL released).");
   m.def("slip_detect", &slip_detect, py::arg("t"), py::arg("off"), py::arg("rows"), py::arg("options"),
         "Cycle-slip flags (m, 3) of one receiver's rows (bits: LLI, GF, MW, Doppler, gap).");
+  m.def("rtk_double_differences", &rtk_double_differences, py::arg("rover_rows"), py::arg("base_rows"),
+        py::arg("r_rover_e"), py::arg("r_base_e"), py::arg("options"),
+        "Double differences observed minus computed (no ambiguity term) at a given rover position.");
   m.attr("RTK_ROW_COLS") = gnss::RtkRow::kCols;
   m.attr("RTK_MAX_AMBIGUITIES") = gnss::kMaxAmbiguities;
 }

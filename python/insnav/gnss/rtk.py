@@ -297,8 +297,8 @@ def _read_phase_obs_v2(path, systems) -> PhaseObs:
     code, phase, dop, cn0 = nan.copy(), nan.copy(), nan.copy(), nan.copy()
     code[:, 0], phase[:, 0], dop[:, 0], cn0[:, 0] = o.C1, o.L1, o.D1, o.S1
     lli = np.zeros((m, 3), np.int64)
-    if getattr(o, "lli", None) is not None:
-        lli[:, 0] = o.lli
+    if getattr(o, "lli1", None) is not None:
+        lli[:, 0] = o.lli1
     sig = {s: [(_v2_code(s, cd.get("C1")) or "")[1:], "", ""] for s, cd in o.codes_by_system.items()}
     return PhaseObs(path=path, epoch_t_gps_s=o.epoch_t_gps_s, epoch=o.epoch, system=o.system, prn=o.prn, code_m=code,
                     phase_cycles=phase, doppler_hz=dop, cn0_dbhz=cn0, lli=lli, signals=sig, approx_r_e=o.approx_r_e,
@@ -313,23 +313,39 @@ def _v2_code(s, c):
 
 def wavelengths(obs: PhaseObs, nav=None) -> np.ndarray:
     """(m, 3) carrier wavelength [m] per row and slot (GLONASS: FDMA channel from nav, else the header)."""
-    from .broadcast import signal_wavelength
+    from .broadcast import _band
+    from .galbds import FREQ_HZ
 
     m = len(obs)
     out = np.full((m, 3), np.nan)
-    k = np.zeros(m)
     glo = obs.system == "R"
+    k = np.full(m, np.nan)
     if glo.any():
-        ch = np.array([obs.glonass_channels.get(int(p), -99) for p in obs.prn[glo]], dtype=float)
+        ch = np.array([obs.glonass_channels.get(int(p), -99) for p in np.unique(obs.prn[glo])], dtype=float)
+        table = dict(zip(np.unique(obs.prn[glo]).tolist(), ch.tolist()))
         if nav is not None and getattr(nav, "eph_r", None) is not None and len(nav.eph_r):
-            from_nav = nav.eph_r.channel(obs.prn[glo]).astype(float)
-            ch = np.where(from_nav > -99, from_nav, ch)
-        k[glo] = ch
+            prns = np.array(sorted(table), dtype=np.int64)
+            from_nav = nav.eph_r.channel(prns).astype(float)
+            for p, c in zip(prns.tolist(), from_nav.tolist()):
+                if c > -99:
+                    table[p] = c
+        k[glo] = [table[int(p)] for p in obs.prn[glo]]
+        k[k <= -99] = np.nan
     for s, sig in obs.signals.items():
         rows = obs.system == s
         for f in range(3):
-            if f < len(sig) and sig[f]:
-                out[rows, f] = signal_wavelength(np.full(rows.sum(), s), "C" + sig[f], k[rows])
+            if f >= len(sig) or not sig[f]:
+                continue
+            b = _band(s, "C" + sig[f])
+            if s == "R":
+                if b == "1":
+                    out[rows, f] = C_LIGHT / (1602.0e6 + k[rows] * 0.5625e6)
+                elif b == "2":
+                    out[rows, f] = C_LIGHT / (1246.0e6 + k[rows] * 0.4375e6)
+                elif b == "3":
+                    out[rows, f] = C_LIGHT / 1202.025e6
+            elif (s, b) in FREQ_HZ:
+                out[rows, f] = C_LIGHT / FREQ_HZ[(s, b)]
     return out
 
 
@@ -531,8 +547,17 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
                                  base_signals=base.signals))
 
 
+def _gpst_text(t_gps_s: float) -> str:
+    """``YYYY/MM/DD HH:MM:SS.SSS`` of GPS seconds since 1980-01-06 (RTKLIB's default time form)."""
+    import datetime
+
+    ms = int(round(t_gps_s * 1000.0))
+    d = datetime.datetime(1980, 1, 6) + datetime.timedelta(milliseconds=ms)
+    return d.strftime("%Y/%m/%d %H:%M:%S") + f".{ms % 1000:03d}"
+
+
 def write_rtklib_pos(sol: RtkSolution, path, *, program: str = "insnav") -> "os.PathLike":
-    """Write ``path`` in RTKLIB's ``.pos`` layout (GPST week/seconds, latitude/longitude/height
+    """Write ``path`` in RTKLIB's ``.pos`` layout (GPST date and time, latitude/longitude/height
     [deg, deg, m], Q, ns, sdn/sde/sdu/sdne/sdeu/sdun [m], age [s], ratio), so RTKLIB users'
     scripts read it unchanged."""
     from .. import earth
@@ -544,7 +569,7 @@ def write_rtklib_pos(sol: RtkSolution, path, *, program: str = "insnav") -> "os.
              f"% inp file  : {sol.info.get('base', '')}",
              f"% ref pos   :{sol.r_base_e[0]:15.4f}{sol.r_base_e[1]:15.4f}{sol.r_base_e[2]:15.4f}",
              "% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)",
-             "%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  "
+             "%  GPST                   latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  "
              "sdne(m)  sdeu(m)  sdun(m) age(s)  ratio"]
     if ok.any():
         lat, lon, h = earth.ecef_to_geodetic(sol.r_e[ok])
@@ -557,10 +582,8 @@ def write_rtklib_pos(sol: RtkSolution, path, *, program: str = "insnav") -> "os.
             def ss(v):
                 return math.copysign(math.sqrt(abs(v)), v)
 
-            wk = int(sol.t_gps_s[k] // 604800.0)
-            tow = sol.t_gps_s[k] - 604800.0 * wk
             age = sol.base_age_s[k] if np.isfinite(sol.base_age_s[k]) else 0.0
-            lines.append(f"{wk:4d} {tow:10.3f} {np.degrees(lat[i]):14.9f} {np.degrees(lon[i]):14.9f} {h[i]:10.4f} "
+            lines.append(f"{_gpst_text(sol.t_gps_s[k])} {np.degrees(lat[i]):14.9f} {np.degrees(lon[i]):14.9f} {h[i]:10.4f} "
                          f"{int(sol.status[k]):3d} {int(sol.n_sat[k]):3d} {sd[1]:8.4f} {sd[0]:8.4f} {sd[2]:8.4f} "
                          f"{ss(Q[1, 0]):8.4f} {ss(Q[0, 2]):8.4f} {ss(Q[2, 1]):8.4f} {age:6.2f} {sol.ratio[k]:6.1f}")
     return atomic_write_text(path, "\n".join(lines) + "\n")

@@ -312,6 +312,54 @@ class RtkEngine {
 
   const RtkOptions& options() const { return opt_; }
 
+  /// Double differences "observed minus computed" at a given rover position, without the
+  /// ambiguity term (for tests against analytic values): per row the rover row index of the
+  /// satellite, of its reference, the frequency slot, whether it is code, and the value [m].
+  /// Returns the number of rows written (at most max_rows).  Resets the engine.
+  int double_differences(const double* rover, int n_r, const double* base, int n_b, const Vec3& r_rover_e,
+                         const Vec3& r_base_e, int* sat_row, int* ref_row, int* freq, int* is_code, double* value,
+                         int max_rows) {
+    reset();
+    const int nf = std::clamp(opt_.n_freq, 1, kMaxFreq);
+    std::array<int, kNumSlipKinds> slips{};
+    rover_slip_.detect(0.0, rover, n_r, nf, opt_, flags_r_.data(), slips);
+    std::fill(flags_b_.begin(), flags_b_.end(), 0);
+    std::fill(base_of_.begin(), base_of_.end(), -1);
+    for (int j = 0; j < n_b; ++j) base_of_[key(base + j * RtkRow::kCols)] = j;
+    n_common_ = 0;
+    for (int i = 0; i < n_r; ++i) {
+      const int j = base_of_[key(rover + i * RtkRow::kCols)];
+      if (j < 0) continue;
+      common_r_[n_common_] = i;
+      common_b_[n_common_] = j;
+      ++n_common_;
+    }
+    rover_ = rover;
+    base_ = base;
+    r_base_ = r_base_e;
+    const Vec3 llh_b = wgs84::ecef_to_geodetic(r_base_e);
+    lat_b_ = llh_b(0);
+    h_b_ = llh_b(2);
+    x_.segment<3>(RtkLayout::kPos) = r_rover_e;
+    update_geometry();
+    RtkEpoch dummy;
+    manage_ambiguities(nf, dummy);
+    int w = 0;
+    for (int code = 0; code < 2; ++code) {
+      const int m = build_rows(nf, code);
+      for (int i = 0; i < m && w < max_rows; ++i, ++w) {
+        const int c = row_c_[i], r = row_ref_[i], f = row_f_[i];
+        sat_row[w] = common_r_[c];
+        ref_row[w] = common_r_[r];
+        freq[w] = f;
+        is_code[w] = code;
+        value[w] = code ? sd_code_[c * kMaxFreq + f] - sd_code_[r * kMaxFreq + f]
+                        : sd_phase_[c * kMaxFreq + f] - sd_phase_[r * kMaxFreq + f];
+      }
+    }
+    return w;
+  }
+
   /// Process one rover epoch at GPS time t [s] against a base epoch.
   /// rover/base: n_r / n_b rows of RtkRow::kCols; base_new: the base rows are a new base epoch
   /// (false when the caller holds an older one); r_base_e: base antenna position [m].
@@ -631,6 +679,9 @@ class RtkEngine {
               row_amb_[m] = -1;
             }
             row_code_[m] = code;
+            row_c_[m] = c;
+            row_ref_[m] = ref;
+            row_f_[m] = f;
             const double var_j = var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio : 1.0);
             R_(m, m) = var_j + var_bl;
             for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
@@ -877,7 +928,7 @@ class RtkEngine {
   int na_ = 0;
   std::array<int, kMaxStates> act_{};
   std::array<int, kMaxAmbStates> col_of_{};
-  std::array<int, kMaxRows> row_amb_{}, row_code_{};
+  std::array<int, kMaxRows> row_amb_{}, row_code_{}, row_c_{}, row_ref_{}, row_f_{};
   HMat H_;
   RowMat R_, S_;
   RowVec y_;
