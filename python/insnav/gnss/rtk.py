@@ -349,56 +349,108 @@ def wavelengths(obs: PhaseObs, nav=None) -> np.ndarray:
     return out
 
 
-def receiver_rows(obs: PhaseObs, nav, n_freq: int = 3):
-    """Engine rows of one receiver: (epoch offsets (n+1,), rows (m, RTK_ROW_COLS), kept row index).
+def _orbit_states(nav, system, prn, t_gps_s):
+    """(valid, r_e, v_e, clock bias [s], drift [s/s]) at GPS time ``t`` (ECEF of that instant), broadcast
+    ephemerides, no group delay (it cancels between the receivers)."""
+    from .broadcast import _state_at, select_multi
 
-    Satellite positions and clocks at the transmission time of each row
-    (``t_tx = t_rx - P/c - dt^s``, two iterations; broadcast ephemerides,
-    no group delay: it cancels between the receivers).  Rows without code
-    or ephemeris keep NaN satellite states (the engine skips them).
+    k = prn.size
+    valid = np.zeros(k, bool)
+    r = np.full((k, 3), np.nan)
+    v = np.full((k, 3), np.nan)
+    b = np.full(k, np.nan)
+    d = np.full(k, np.nan)
+    for s in np.unique(system):
+        rows = np.flatnonzero(system == s)
+        idx = select_multi(nav, np.full(rows.size, s), prn[rows], t_gps_s[rows],
+                           np.full(rows.size, "C2I" if s == "C" else "C1C"))
+        ok = idx >= 0
+        if not ok.any():
+            continue
+        rr = rows[ok]
+        r[rr], v[rr], b[rr], d[rr] = _state_at(nav, s, idx[ok], t_gps_s[rr])
+        valid[rr] = True
+    return valid & np.all(np.isfinite(r), axis=1), r, v, b, d
+
+
+def transmit_states(nav, t_tag_gps_s, system, prn, code_m):
+    """Satellite position (ECEF of the transmission instant) and clock ``c dt^s`` [m] of each row.
+
+    ``t_tx = t_tag - P / c - dt^s`` from the row's own pseudorange.  The broadcast orbit is evaluated
+    once per (epoch tag, satellite) at ``t_tag - 75 ms`` and carried to each row's ``t_tx`` by a
+    second-order Taylor step with the ECEF acceleration (gravity, Coriolis, centrifugal;
+    |t_tx - t_ref| < 20 ms: the J2 and third-body terms left out give < 1e-7 m), so rover and base
+    rows of one epoch share one orbit evaluation.
+    """
+    m = prn.size
+    rs = np.full((m, 3), np.nan)
+    clk = np.full(m, np.nan)
+    ok = np.isfinite(code_m) & (code_m > 1.0e6) & (code_m < 1.0e8)
+    if not ok.any():
+        return rs, clk
+    key = np.zeros(m, np.int64)
+    for sname, i in SYSTEM_INDEX.items():
+        key[system == sname] = i * 64
+    key += np.clip(prn, 0, 63)
+    t_ms = np.round(np.asarray(t_tag_gps_s, float) * 1000.0).astype(np.int64)
+    pair = t_ms * 1000 + key
+    uniq, first, inv = np.unique(pair[ok], return_index=True, return_inverse=True)
+    rows_ok = np.flatnonzero(ok)
+    u_rows = rows_ok[first]
+    t_ref = t_tag_gps_s[u_rows] - 0.075
+    valid, r0, v0, b0, d0 = _orbit_states(nav, system[u_rows], prn[u_rows], t_ref)
+    gm = 3.986004418e14
+    w = np.array([0.0, 0.0, 7.2921151467e-5])
+    rn = np.linalg.norm(r0, axis=1, keepdims=True)
+    a0 = -gm * r0 / rn ** 3 - 2.0 * np.cross(w, v0) - np.cross(w, np.cross(w, r0))
+    # per row: t_tx = t_tag - P/c - dt^s (the clock at t_ref; its drift over 20 ms is < 1e-12 s)
+    j = inv.ravel()
+    dt = (t_tag_gps_s[rows_ok] - code_m[rows_ok] / C_LIGHT - b0[j]) - t_ref[j]
+    good = valid[j] & (np.abs(dt) < 0.05)
+    rr = rows_ok[good]
+    jj = j[good]
+    dtg = dt[good][:, None]
+    rs[rr] = r0[jj] + v0[jj] * dtg + 0.5 * a0[jj] * dtg ** 2
+    clk[rr] = C_LIGHT * (b0[jj] + d0[jj] * dt[good])
+    return rs, clk
+
+
+def receiver_rows(obs: PhaseObs, nav, n_freq: int = 3, states=None):
+    """Engine rows of one receiver: (epoch offsets (n+1,), rows (m, RTK_ROW_COLS)).
+
+    ``states``: (satellite positions, clocks) of the rows from :func:`transmit_states` (computed
+    here when not given).  Rows without code or ephemeris keep NaN satellite states (the engine
+    skips them).
     """
     from .. import _core
-    from .broadcast import sat_states_multi
 
     m = len(obs)
     cols = int(_core.RTK_ROW_COLS)
     rows = np.full((m, cols), np.nan)
-    sys_idx = np.array([SYSTEM_INDEX.get(s, 0) for s in "GRECJ"])
-    letters = np.array(list("GRECJ"))
     si = np.zeros(m, np.int64)
     for s, i in SYSTEM_INDEX.items():
         si[obs.system == s] = i
-    del sys_idx, letters
     rows[:, 0] = si * 64 + np.clip(obs.prn, 0, 63)
     rows[:, 1] = si
     lam = wavelengths(obs, nav)
     for f in range(min(n_freq, 3)):
         rows[:, 2 + 5 * f] = obs.code_m[:, f]
-        rows[:, 3 + 5 * f] = obs.phase_cycles[:, f]
+        rows[:, 3 + 5 * f] = np.where(np.isfinite(lam[:, f]), obs.phase_cycles[:, f], np.nan)
         rows[:, 4 + 5 * f] = obs.doppler_hz[:, f]
         rows[:, 5 + 5 * f] = obs.lli[:, f]
         rows[:, 6 + 5 * f] = lam[:, f]
-        bad = ~np.isfinite(lam[:, f])
-        rows[bad, 3 + 5 * f] = np.nan
-    # a pseudorange for the transmission time: the first slot that has one
-    P = np.full(m, np.nan)
-    for f in range(3):
-        P = np.where(np.isfinite(P), P, obs.code_m[:, f])
-    ok = np.flatnonzero(np.isfinite(P) & (P > 1.0e6) & (P < 1.0e8))
-    if ok.size:
-        t_rx = obs.epoch_t_gps_s[obs.epoch[ok]]
-        t_tx = t_rx - P[ok] / C_LIGHT
-        st = None
-        for _ in range(2):
-            st = sat_states_multi(nav, t_tx, system=obs.system[ok], prn=obs.prn[ok], group_delay=False)
-            dts = np.where(np.isfinite(st.clock_bias_s), st.clock_bias_s, 0.0)
-            t_tx = t_rx - P[ok] / C_LIGHT - dts
-        good = st.valid & np.all(np.isfinite(st.r_e), axis=1)
-        g = ok[good]
-        rows[g, 17:20] = st.r_e[good]
-        rows[g, 20] = C_LIGHT * st.clock_bias_s[good]
+    if states is None:
+        states = transmit_states(nav, obs.epoch_t_gps_s[obs.epoch], obs.system, obs.prn, _first_code(obs))
+    rows[:, 17:20], rows[:, 20] = states
     off = np.searchsorted(obs.epoch, np.arange(obs.epoch_t_gps_s.size + 1)).astype(np.int64)
     return off, rows
+
+
+def _first_code(obs: PhaseObs) -> np.ndarray:
+    P = obs.code_m[:, 0].copy()
+    for f in (1, 2):
+        P = np.where(np.isfinite(P), P, obs.code_m[:, f])
+    return P
 
 
 def match_base(t_rover, t_base, max_age_s: float) -> np.ndarray:
@@ -534,8 +586,12 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
     r_base_e = np.asarray(r_base_e, float)
     bidx = match_base(rover.epoch_t_gps_s, base.epoch_t_gps_s, opt.max_age_s)
     _check_inputs(rover, base, opt, bidx)
-    roff, rrows = receiver_rows(rover, nav, opt.frequencies)
-    boff, brows = receiver_rows(base, nav, opt.frequencies)
+    nr = len(rover)
+    rs, clk = transmit_states(nav, np.concatenate([rover.epoch_t_gps_s[rover.epoch], base.epoch_t_gps_s[base.epoch]]),
+                              np.concatenate([rover.system, base.system]), np.concatenate([rover.prn, base.prn]),
+                              np.concatenate([_first_code(rover), _first_code(base)]))
+    roff, rrows = receiver_rows(rover, nav, opt.frequencies, (rs[:nr], clk[:nr]))
+    boff, brows = receiver_rows(base, nav, opt.frequencies, (rs[nr:], clk[nr:]))
     out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
     age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
     return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),

@@ -644,7 +644,6 @@ class RtkEngine {
     }
     int m = 0;
     n_phase_rows_ = 0;
-    H_.setZero(kMaxRows, na_);
     R_.setZero(kMaxRows, kMaxRows);
     y_.setZero(kMaxRows);
     {
@@ -664,14 +663,15 @@ class RtkEngine {
             if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * RtkRow::kCols) != sys) continue;
             if (!valid(c, f, code) || m >= kMaxRows) continue;
             const Vec3 dH = -(e_[c] - e_[ref]);
-            for (int i = 0; i < 3; ++i) H_(m, i) = dH(i);
+            nz_[m] = 0;
+            for (int i = 0; i < 3; ++i) set_h(m, i, dH(i));
             if (!code) {
               const int kj = amb_row_[c * kMaxFreq + f], ki = amb_row_[ref * kMaxFreq + f];
               const double lj = lam(common_r_[c], f), li = lam(common_r_[ref], f);
               y_(m) = (sd_phase_[c * kMaxFreq + f] - sd_phase_[ref * kMaxFreq + f]) -
                       (lj * x_(RtkLayout::kAmb + kj) - li * x_(RtkLayout::kAmb + ki));
-              H_(m, col_of_[kj]) = lj;
-              H_(m, col_of_[ki]) = -li;
+              set_h(m, col_of_[kj], lj);
+              set_h(m, col_of_[ki], -li);
               row_amb_[m] = kj;
               ++n_phase_rows_;
             } else {
@@ -711,10 +711,14 @@ class RtkEngine {
       xa_(i) = x_(act_[i]);
       for (int j = 0; j < na_; ++j) Pa_(i, j) = P_(act_[i], act_[j]);
     }
-    auto H = H_.topLeftCorner(m, na_);
-    PHt_.noalias() = Pa_ * H.transpose();
-    S_.noalias() = H * PHt_;
-    S_ += R_.topLeftCorner(m, m);
+    // H is sparse (3 position columns and two ambiguities per row): P H^T and H P H^T by its
+    // non-zeros, O(n m) and O(m^2) instead of O(n^2 m) and O(n m^2)
+    PHt_.setZero(na_, m);
+    for (int r = 0; r < m; ++r)
+      for (int k = 0; k < nz_[r]; ++k) PHt_.col(r) += Pa_.col(hc_[r][k]) * hv_[r][k];
+    S_ = R_.topLeftCorner(m, m);
+    for (int a = 0; a < m; ++a)
+      for (int k = 0; k < nz_[a]; ++k) S_.row(a) += hv_[a][k] * PHt_.row(hc_[a][k]);
     if (opt_.outlier_sigma > 0.0 && allow_reset) {
       bool reset_any = false;
       for (int i = 0; i < m; ++i) {
@@ -737,10 +741,9 @@ class RtkEngine {
     llt_.solveInPlace(KT_);
     K_ = KT_.transpose();
     xa_.noalias() += K_ * y_.head(m);
-    IKH_.setIdentity(na_, na_);
-    IKH_.noalias() -= K_ * H;
-    Pn_.noalias() = IKH_ * Pa_;
-    Pa_ = 0.5 * (Pn_ + Pn_.transpose());
+    Pa_.noalias() -= K_ * PHt_.transpose();  // P - K H P
+    Pn_ = 0.5 * (Pa_ + Pa_.transpose());
+    Pa_ = Pn_;
     for (int i = 0; i < na_; ++i) {
       x_(act_[i]) = xa_(i);
       for (int j = 0; j < na_; ++j) P_(act_[i], act_[j]) = Pa_(i, j);
@@ -890,12 +893,12 @@ class RtkEngine {
         act_[na_++] = RtkLayout::kAmb + k;
       }
     const int m = std::min(nuse, kMaxRows);
-    H_.setZero(kMaxRows, na_);
     R_.setZero(kMaxRows, kMaxRows);
     for (int p = 0; p < m; ++p) {
       const int kj = dd_j_[order_[p]], ki = dd_i_[order_[p]];
-      H_(p, col_of_[kj]) = 1.0;
-      H_(p, col_of_[ki]) = -1.0;
+      nz_[p] = 0;
+      set_h(p, col_of_[kj], 1.0);
+      set_h(p, col_of_[ki], -1.0);
       y_(p) = a_fix_(p, 0) - (x_(RtkLayout::kAmb + kj) - x_(RtkLayout::kAmb + ki));
       R_(p, p) = opt_.hold_sigma_cycles * opt_.hold_sigma_cycles;
       row_code_[p] = 1;  // no outlier test on these
@@ -928,11 +931,20 @@ class RtkEngine {
   int na_ = 0;
   std::array<int, kMaxStates> act_{};
   std::array<int, kMaxAmbStates> col_of_{};
-  std::array<int, kMaxRows> row_amb_{}, row_code_{}, row_c_{}, row_ref_{}, row_f_{};
-  HMat H_;
+  std::array<int, kMaxRows> row_amb_{}, row_code_{}, row_c_{}, row_ref_{}, row_f_{}, nz_{};
+  std::array<std::array<int, 5>, kMaxRows> hc_{};     // non-zero columns of each row of H
+  std::array<std::array<double, 5>, kMaxRows> hv_{};  // and their values
+  void set_h(int r, int col, double v) {
+    for (int k = 0; k < nz_[r]; ++k)
+      if (hc_[r][k] == col) { hv_[r][k] += v; return; }
+    hc_[r][nz_[r]] = col;
+    hv_[r][nz_[r]] = v;
+    ++nz_[r];
+  }
+
   RowMat R_, S_;
   RowVec y_;
-  StateMat Pa_, IKH_, Pn_;
+  StateMat Pa_, Pn_;
   StateVec xa_;
   KMat PHt_, K_;
   HMat KT_;
