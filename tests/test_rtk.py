@@ -281,7 +281,7 @@ def _write_obs(path, sats, types="C1C L1C", approx=True, n_epochs=3):
     lines = ["     3.04           OBSERVATION DATA    M                   RINEX VERSION / TYPE"]
     if approx:
         lines.append("  4075580.8863   931853.5784  4801567.9707                  APPROX POSITION XYZ")
-    lines.append(f"G{len(ty):5d} " + "".join(f"{t:>4s}" for t in ty).ljust(53) + "SYS / # / OBS TYPES")
+    lines.append(f"G{len(ty):5d}" + "".join(f" {t}" for t in ty).ljust(54) + "SYS / # / OBS TYPES")
     lines.append("  2020     6    25     0     0    0.0000000     GPS         TIME OF FIRST OBS")
     lines.append(" " * 60 + "END OF HEADER")
     for e in range(n_epochs):

@@ -115,6 +115,7 @@ RtkOptions options_from_dict(const py::dict& d) {
     else if (k == "ratio_threshold") o.ratio_threshold = v.cast<double>();
     else if (k == "min_fix_ambiguities") o.min_fix_ambiguities = v.cast<int>();
     else if (k == "max_partial_drops") o.max_partial_drops = v.cast<int>();
+    else if (k == "partial_by_variance") o.partial_by_variance = v.cast<bool>();
     else if (k == "min_lock_epochs") o.min_lock_epochs = v.cast<int>();
     else if (k == "glonass_ar") o.glonass_ar = v.cast<bool>();
     else if (k == "sigma_phase_a_m") o.sigma_phase_a_m = v.cast<double>();

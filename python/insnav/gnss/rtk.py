@@ -86,7 +86,11 @@ class RtkOptions(TomlTable):
     ratio_threshold : float
         Ratio test s2/s1 of MLAMBDA's two best candidates (3).
     min_fix_ambiguities : int
-        Partial AR drops the lowest-elevation ambiguity until the test passes, down to this many.
+        Partial AR drops one ambiguity at a time until the ratio test passes, down to this many
+        (at most ``max_partial_drops`` times).
+    partial_ar_order : str
+        Which one partial AR drops first: ``"elevation"`` (the lowest satellite) or ``"variance"``
+        (the largest float variance).
     glonass_ar : bool
         Fix GLONASS ambiguities (off: FDMA inter-frequency biases make them float only).
     sigma_phase_a_m, sigma_phase_b_m : float
@@ -111,6 +115,7 @@ class RtkOptions(TomlTable):
     ratio_threshold: float = 3.0
     min_fix_ambiguities: int = 3
     max_partial_drops: int = 12
+    partial_ar_order: str = "elevation"
     min_lock_epochs: int = 0
     glonass_ar: bool = False
     sigma_phase_a_m: float = 0.003
@@ -144,6 +149,8 @@ class RtkOptions(TomlTable):
             bad("systems", "letters of GREC")
         if isinstance(self.frequencies, bool) or self.frequencies not in (1, 2, 3):
             bad("frequencies", "1, 2 or 3")
+        if self.partial_ar_order not in ("elevation", "variance"):
+            bad("partial_ar_order", "elevation or variance")
         if not isinstance(self.glonass_ar, bool):
             bad("glonass_ar", "true or false")
         if not isinstance(self.tropo_model, bool):
@@ -174,7 +181,8 @@ class RtkOptions(TomlTable):
                     elevation_mask_rad=math.radians(self.elevation_mask_deg),
                     ar_elevation_mask_rad=math.radians(self.ar_elevation_mask_deg),
                     ratio_threshold=float(self.ratio_threshold), min_fix_ambiguities=int(self.min_fix_ambiguities),
-                    max_partial_drops=int(self.max_partial_drops), min_lock_epochs=int(self.min_lock_epochs),
+                    max_partial_drops=int(self.max_partial_drops),
+                    partial_by_variance=self.partial_ar_order == "variance", min_lock_epochs=int(self.min_lock_epochs),
                     glonass_ar=bool(self.glonass_ar), sigma_phase_a_m=float(self.sigma_phase_a_m),
                     sigma_phase_b_m=float(self.sigma_phase_b_m), code_phase_ratio=float(self.code_phase_ratio),
                     iono_sigma_per_10km_m=float(self.iono_sigma_per_10km_m), tropo_model=bool(self.tropo_model),

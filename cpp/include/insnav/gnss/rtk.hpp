@@ -107,6 +107,7 @@ struct RtkOptions {
   double ratio_threshold = 3.0;
   int min_fix_ambiguities = 3;     // partial AR stops above this count
   int max_partial_drops = 12;
+  bool partial_by_variance = false;  // partial AR drops the largest-variance ambiguity first (else the lowest)
   int min_lock_epochs = 0;         // epochs an ambiguity is tracked before it is fixed
   bool glonass_ar = false;
   double sigma_phase_a_m = 0.003;  // sigma(el) = sqrt(a^2 + b^2 / sin^2 el), zero difference
@@ -827,13 +828,20 @@ class RtkEngine {
           dd_j_[n] = k;
           dd_i_[n] = ref;
           dd_el_[n] = amb_[k].el;
+          {
+            const int sj = RtkLayout::kAmb + k, si = RtkLayout::kAmb + ref;
+            dd_var_[n] = P_(sj, sj) - 2.0 * P_(sj, si) + P_(si, si);
+          }
           ++n;
         }
       }
     }
-    // order by elevation, highest first: partial AR drops from the end
+    // order by elevation, highest first (or by variance, smallest first): partial AR drops from the end
     for (int i = 0; i < n; ++i) order_[i] = i;
-    std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
+    if (opt_.partial_by_variance)
+      std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_var_[a] < dd_var_[b]; });
+    else
+      std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
     const bool kv = kin;
     int drops = 0;
     for (int nuse = n; nuse >= std::max(opt_.min_fix_ambiguities, 1); --nuse) {
@@ -952,7 +960,7 @@ class RtkEngine {
   // AR workspace
   Lambda lambda_;
   std::array<int, kMaxAmbiguities> dd_j_{}, dd_i_{}, order_{};
-  std::array<double, kMaxAmbiguities> dd_el_{};
+  std::array<double, kMaxAmbiguities> dd_el_{}, dd_var_{};
   AmbVec a_hat_, da_;
   AmbMat Qa_;
   AmbCand a_fix_;
