@@ -344,3 +344,27 @@ def test_lower_rate_base_is_held(shared_data):
     # beyond max_age_s no solution
     idx = rtk.match_base([10.0, 20.0, 45.0], [0.0, 15.0], 10.0)
     np.testing.assert_array_equal(idx, [0, 1, -1])
+
+
+def test_transmit_states_equal_the_iterated_light_time(shared_data):
+    """One orbit evaluation per epoch and satellite, carried by a Taylor step to each row: the same
+    satellite position (1e-6 m) and clock as evaluating each row at its own t_tx = t - P/c - dt^s,
+    for every system (BeiDou GEO/IGSO included: 120 ms of signal time)."""
+    from insnav.gnss.broadcast import sat_states_multi
+    from insnav.gnss.spp import read_nav_multi
+
+    d = _matrtklib(shared_data)
+    o = rtk.read_phase_obs(d / "rover.obs", "GREC")
+    nav = read_nav_multi(d / "base.nav", "GREC")
+    P = rtk._first_code(o)
+    t = o.epoch_t_gps_s[o.epoch]
+    rs, clk = rtk.transmit_states(nav, t, o.system, o.prn, P)
+    tt = t - P / C
+    for _ in range(3):
+        st = sat_states_multi(nav, tt, system=o.system, prn=o.prn, group_delay=False)
+        tt = t - P / C - np.nan_to_num(st.clock_bias_s)
+    ok = np.isfinite(st.r_e[:, 0])
+    assert np.array_equal(ok, np.isfinite(rs[:, 0]))
+    assert set(o.system[ok]) == set("GREC")
+    assert np.max(np.linalg.norm(rs[ok] - st.r_e[ok], axis=1)) < 1e-6
+    assert np.max(np.abs(clk[ok] - C * st.clock_bias_s[ok])) < 1e-6

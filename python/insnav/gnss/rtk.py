@@ -385,10 +385,11 @@ def transmit_states(nav, t_tag_gps_s, system, prn, code_m):
     """Satellite position (ECEF of the transmission instant) and clock ``c dt^s`` [m] of each row.
 
     ``t_tx = t_tag - P / c - dt^s`` from the row's own pseudorange.  The broadcast orbit is evaluated
-    once per (epoch tag, satellite) at ``t_tag - 75 ms`` and carried to each row's ``t_tx`` by a
-    second-order Taylor step with the ECEF acceleration (gravity, Coriolis, centrifugal;
-    |t_tx - t_ref| < 20 ms: the J2 and third-body terms left out give < 1e-7 m), so rover and base
-    rows of one epoch share one orbit evaluation.
+    once per (epoch tag, satellite), at ``t_tag - P / c`` of the first such row, and carried to each
+    row's ``t_tx`` by a second-order Taylor step with the ECEF acceleration (gravity, Coriolis,
+    centrifugal; the step is the satellite clock plus the receivers' clock and range differences,
+    a few ms: the J2 and third-body terms left out give < 1e-7 m), so rover and base rows of one
+    epoch share one orbit evaluation.
     """
     m = prn.size
     rs = np.full((m, 3), np.nan)
@@ -405,7 +406,7 @@ def transmit_states(nav, t_tag_gps_s, system, prn, code_m):
     uniq, first, inv = np.unique(pair[ok], return_index=True, return_inverse=True)
     rows_ok = np.flatnonzero(ok)
     u_rows = rows_ok[first]
-    t_ref = t_tag_gps_s[u_rows] - 0.075
+    t_ref = t_tag_gps_s[u_rows] - code_m[u_rows] / C_LIGHT  # the first row's own signal time
     valid, r0, v0, b0, d0 = _orbit_states(nav, system[u_rows], prn[u_rows], t_ref)
     gm = 3.986004418e14
     w = np.array([0.0, 0.0, 7.2921151467e-5])
