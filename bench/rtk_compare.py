@@ -212,8 +212,7 @@ def run_setting(ds, st, repeat, work: Path):
     out_i = work / f"{st['name']}_insnav.pos"
     rnx = shutil.which("rnx2rtkp")
     cmd_r = [rnx, "-k", str(conf), "-o", str(out_r), str(ds["rover"]), str(ds["base"]), *map(str, ds["nav"])]
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT / "python") + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env = dict(os.environ)  # the insnav this interpreter imports (an install of this tree)
     cmd_i = [sys.executable, "-m", "insnav", "run", "--filter", "rtk", "--format", "rinex", "--obs", str(ds["rover"]),
              "--base", str(ds["base"]), "--nav", ",".join(map(str, ds["nav"])), "--config", str(toml), "--out",
              str(out_i), "--quiet"]
@@ -227,8 +226,13 @@ def run_setting(ds, st, repeat, work: Path):
     res_r["time_s"], res_i["time_s"] = min(x[0] for x in tr), min(x[0] for x in ti)
     res_r["cpu_s"], res_i["cpu_s"] = min(x[1] for x in tr), min(x[1] for x in ti)
     return dict(setting=st, rtklib=res_r, insnav=res_i,
-                cmd_insnav=" ".join(["insnav"] + cmd_i[3:]).replace(str(ROOT) + "/", "").replace(str(DATA), "$DATA"),
-                cmd_rtklib=" ".join(["rnx2rtkp"] + cmd_r[1:]).replace(str(ROOT) + "/", "").replace(str(DATA), "$DATA"))
+                cmd_insnav=_shown(["insnav"] + cmd_i[3:], work), cmd_rtklib=_shown(["rnx2rtkp"] + cmd_r[1:], work))
+
+
+def _shown(cmd, work: Path) -> str:
+    """A command as the reader types it: data under $DATA, outputs in the current folder."""
+    return (" ".join(map(str, cmd)).replace(str(work) + "/", "").replace(str(ROOT) + "/", "")
+            .replace(str(DATA), "$DATA"))
 
 
 def verdicts(r, speed_target: bool):
