@@ -267,7 +267,7 @@ def write_doc(name, ds, results, path: Path):
         for prog in ("insnav", "rtklib"):
             x = r[prog]
             L.append(f"| {lab} | {prog} | {x['epochs']} | {x['fixed']} | {100 * x['fix_rate']:.1f} % | "
-                     f"{x['rms_fixed_mm']:.1f} | {x['max_fixed_mm']:.1f} | {x['wrong']} | {x['float_median_mm']:.0f} | "
+                     f"{x['rms_fixed_mm']:.2f} | {x['max_fixed_mm']:.2f} | {x['wrong']} | {x['float_median_mm']:.0f} | "
                      f"{x['cpu_s']:.2f} | {x['time_s']:.2f} |")
     L += ["", "## Targets", "", "| setting | fix rate >= RTKLIB | RMS <= 1.2x RTKLIB | no wrong fix |"
           + (" CPU time <= 0.5x RTKLIB |" if speed else ""), "|---|---|---|---|" + ("---|" if speed else "")]

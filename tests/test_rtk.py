@@ -368,3 +368,27 @@ def test_transmit_states_equal_the_iterated_light_time(shared_data):
     assert set(o.system[ok]) == set("GREC")
     assert np.max(np.linalg.norm(rs[ok] - st.r_e[ok], axis=1)) < 1e-6
     assert np.max(np.abs(clk[ok] - C * st.clock_bias_s[ok])) < 1e-6
+
+
+def test_cli_run_writes_rtklib_pos_and_evaluate_reports_the_fix_rate(tmp_path, shared_data):
+    d = _matrtklib(shared_data)
+    cfg = tmp_path / "rtk.toml"
+    cfg.write_text('filter = "rtk"\n[rtk]\nsystems = "GE"\nfrequencies = 1\nar_mode = "instantaneous"\n')
+    out = tmp_path / "rtk.pos"
+    p = subprocess.run([sys.executable, "-m", "insnav", "run", "--filter", "rtk", "--format", "rinex", "--obs",
+                        str(d / "rover.obs"), "--base", str(d / "base.obs"), "--nav", str(d / "base.nav"),
+                        "--base-pos", "35.134707705,136.977577939,104.853", "--config", str(cfg), "--out", str(out),
+                        "--quiet"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    assert "301 epochs, 301 fixed" in p.stdout
+    assert (tmp_path / "rtk.pos.rtk.csv").exists() and (tmp_path / "rtk.pos.config.toml").exists()
+    from insnav.gnss.measurements import read_rtklib_pos
+
+    ref = read_rtklib_pos(out)  # RTKLIB's layout, read by the RTKLIB .pos reader
+    assert len(ref.q) == 301 and np.all(ref.q == 1)
+    rt = _llh(d / "rover_position.txt")
+    assert np.max(np.linalg.norm(ref.r_e - rt, axis=1)) < 0.02
+    e = subprocess.run([sys.executable, "-m", "insnav", "evaluate", str(out), "35.13469901,136.97757549,104.8626"],
+                       capture_output=True, text=True)
+    assert e.returncode == 0, e.stderr
+    assert "fix rate 100.0 %; fixed 301" in e.stdout
