@@ -4,7 +4,8 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
 
     python3 bench/rtk_compare.py            # writes docs/results/rtk_<dataset>.md for the three pairs
 
-For each setting of the table (systems, frequencies, ambiguity mode, elevation mask) the script
+For each setting (the issue's table: instantaneous AR on the real pairs, continuous on the Spirent
+drive; plus continuous AR, insnav's default, on the real pairs) the script
 
 * writes the RTKLIB configuration ``bench/rtk/<setting>.conf`` and the insnav run TOML
   ``bench/rtk/<setting>.toml`` (the same options: kinematic, forward, broadcast ephemerides,
@@ -72,7 +73,8 @@ def datasets():
             nav=[w / "ESBC00DNK_R_20201770000_01D_MN.rnx", w / "ESBC00DNK_R_20201770000_01D_RN.rnx"],
             base_e=rb, truth=lambda t, rt=rt: np.broadcast_to(rt, (len(t), 3)),
             settings=[dict(name="wtzr_wtzz_l1_gec_inst", systems="GEC", freq=1, armode="instantaneous", mask=15.0),
-                      dict(name="wtzr_wtzz_l1l2_gec_inst", systems="GEC", freq=2, armode="instantaneous", mask=15.0)])
+                      dict(name="wtzr_wtzz_l1l2_gec_inst", systems="GEC", freq=2, armode="instantaneous", mask=15.0),
+                      dict(name="wtzr_wtzz_l1l2_gec_cont", systems="GEC", freq=2, armode="continuous", mask=15.0)])
     m = DATA / "matrtklib_static_septentrio"
     if m.is_dir():
         rb, rt = _llh_file(m / "base_position.txt"), _llh_file(m / "rover_position.txt")
@@ -80,7 +82,8 @@ def datasets():
             title="MatRTKLIB static (real Septentrio pair, 1 m, 1 Hz, 5 min)", rover=m / "rover.obs", base=m / "base.obs",
             nav=[m / "base.nav"], base_e=rb, truth=lambda t, rt=rt: np.broadcast_to(rt, (len(t), 3)),
             settings=[dict(name="matrtklib_l1_grec_inst", systems="GREC", freq=1, armode="instantaneous", mask=15.0),
-                      dict(name="matrtklib_l1l2_grec_inst", systems="GREC", freq=2, armode="instantaneous", mask=15.0)])
+                      dict(name="matrtklib_l1l2_grec_inst", systems="GREC", freq=2, armode="instantaneous", mask=15.0),
+                      dict(name="matrtklib_l1l2_grec_cont", systems="GREC", freq=2, armode="continuous", mask=15.0)])
     s = DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
     if s.is_dir():
         v = s / "iono-Klob_tropo-Saast"
