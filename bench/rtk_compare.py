@@ -97,7 +97,8 @@ def datasets():
             r[np.abs(t_truth[i] - t) > 1e-3] = np.nan
             return r
 
-        hdr = [ln for ln in open(v / "Base-static_MO_Spirent.obs") if "APPROX POSITION XYZ" in ln][0]
+        with open(v / "Base-static_MO_Spirent.obs") as f:
+            hdr = next(ln for ln in f if "APPROX POSITION XYZ" in ln)
         rb = np.array([float(hdr[14 * k:14 * k + 14]) for k in range(3)])
         out["instinct_spirent_rtk_dynamic_SIMULATED"] = dict(
             title="Spirent dynamic rover (hardware-simulated, Klobuchar + Saastamoinen, 1 Hz, 10 min)",
@@ -144,7 +145,9 @@ def read_pos(path):
     """(t_gps_s, (n, 3) ECEF, Q) from an RTKLIB .pos file (xyz or llh layout, GPST week + seconds)."""
     t, r, q = [], [], []
     llh = False
-    for ln in open(path):
+    with open(path) as fh:
+        lines = fh.readlines()
+    for ln in lines:
         if ln.startswith("%"):
             if "latitude" in ln:
                 llh = True

@@ -392,3 +392,48 @@ def test_cli_run_writes_rtklib_pos_and_evaluate_reports_the_fix_rate(tmp_path, s
                        capture_output=True, text=True)
     assert e.returncode == 0, e.stderr
     assert "fix rate 100.0 %; fixed 301" in e.stdout
+
+
+def test_fast_reader_errors_name_file_and_line(tmp_path):
+    from insnav.gnss.rinex import RinexError
+
+    good = tmp_path / "good.rnx"
+    _write_obs(good, [1, 3, 8])
+    lines = good.read_text().splitlines()
+    bad_num = tmp_path / "bad_number.rnx"
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("G03"))
+    bad_num.write_text("\n".join(lines[:k] + [lines[k][:5] + "x" + lines[k][6:]] + lines[k + 1:]) + "\n")
+    with pytest.raises(RinexError, match=rf"{bad_num}, line {k + 1}: bad number"):
+        rtk.read_phase_obs(bad_num, "G")
+    short = tmp_path / "truncated.rnx"
+    short.write_text("\n".join(lines[:-1]) + "\n")
+    with pytest.raises(RinexError, match=rf"{short}, line \d+: unexpected end of file"):
+        rtk.read_phase_obs(short, "G")
+    with pytest.raises(RinexError, match="cannot read file"):
+        rtk.read_phase_obs(tmp_path / "missing.rnx", "G")
+
+
+@pytest.mark.slow
+def test_matches_or_beats_rnx2rtkp_on_matrtklib(tmp_path, shared_data):
+    """Paired with docs/results/rtk_matrtklib_static_septentrio.md: the same files and options through
+    RTKLIB's rnx2rtkp and insnav; insnav's fix rate at least RTKLIB's, its RMS of fixed epochs at
+    most 1.2x, no wrong fix."""
+    import shutil
+
+    if shutil.which("rnx2rtkp") is None:
+        pytest.skip("rnx2rtkp (Debian rtklib) not installed")
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("rtk_compare", Path(__file__).resolve().parents[1] / "bench"
+                                                  / "rtk_compare.py")
+    rc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rc)
+    rc.DATA = shared_data
+    ds = rc.datasets()["matrtklib_static_septentrio"]
+    rc.CONF_DIR = tmp_path
+    r = rc.run_setting(ds, ds["settings"][0], 1, tmp_path)
+    a, b = r["insnav"], r["rtklib"]
+    assert a["fix_rate"] >= b["fix_rate"]
+    assert a["rms_fixed_mm"] <= 1.2 * b["rms_fixed_mm"]
+    assert a["wrong"] == 0
