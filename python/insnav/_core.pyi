@@ -210,3 +210,29 @@ class LooseNavigator:
     def covariance(self) -> np.ndarray: ...
     def counters(self) -> dict[str, Any]: ...
     def last_fix(self) -> dict[str, Any]: ...  # status, nis, innovation (6)
+
+# carrier-phase RTK (bind_rtk.cpp)
+RTK_ROW_COLS: int
+RTK_MAX_AMBIGUITIES: int
+
+def read_rinex3_obs(path: str, prefs: dict[str, list[list[str]]]) -> dict[str, Any]: ...
+def lambda_search(a_hat: npt.ArrayLike, Q: npt.ArrayLike) -> tuple[np.ndarray, tuple[float, float]]: ...
+def lambda_decorrelate(Q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+def rtk_run(
+    t_rover: npt.ArrayLike,
+    rover_off: npt.ArrayLike,
+    rover_rows: npt.ArrayLike,
+    base_off: npt.ArrayLike,
+    base_rows: npt.ArrayLike,
+    base_index: npt.ArrayLike,
+    r_base_e: npt.ArrayLike,
+    options: dict[str, Any],
+) -> dict[str, np.ndarray]: ...
+def slip_detect(t: npt.ArrayLike, off: npt.ArrayLike, rows: npt.ArrayLike, options: dict[str, Any]) -> np.ndarray: ...
+def rtk_double_differences(
+    rover_rows: npt.ArrayLike,
+    base_rows: npt.ArrayLike,
+    r_rover_e: npt.ArrayLike,
+    r_base_e: npt.ArrayLike,
+    options: dict[str, Any],
+) -> dict[str, np.ndarray]: ...

@@ -94,6 +94,9 @@ PARTICLE_OPTIONS = ("particles", "seed", "fading", "rho", "beta", "eta_max", "al
 _SPP = "insnav.filters.spp:run_spp"
 #: options of the single point solution (``insnav.filters.spp.run_spp``)
 SPP_OPTIONS = ("spp_options", "weighting")
+_RTK = "insnav.filters.rtk:run_rtk"
+#: options of the carrier-phase RTK (``insnav.filters.rtk.run_rtk``)
+RTK_OPTIONS = ("rtk_options",)
 #: options of the delay filters (``insnav.filters.delay.run_delayed``)
 DELAY_OPTIONS = ("delay_p", "max_history_s", "checkpoint_interval_s")
 
@@ -125,6 +128,10 @@ FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
                paper="RTKLIB pntpos; Kuusniemi 2005 RAIM",
                summary="GNSS-only weighted least-squares single point positioning, every system, RAIM FDE; "
                        "no IMU (--format rinex --obs --nav)"),
+    FilterSpec("rtk", ("gnss",), {"gnss": ()}, {"gnss": _RTK}, RTK_OPTIONS,
+               paper="Chang, Yang & Zhou 2005 (MLAMBDA); RTKLIB relpos",
+               summary="GNSS-only carrier-phase RTK against a base: double differences, float EKF, MLAMBDA "
+                       "integer fix, cycle slips; no IMU (--format rinex --obs --base --nav)"),
 )}
 
 

@@ -18,15 +18,18 @@ EXAMPLES = """examples:
   insnav evaluate sol.csv ../shared/data/kfgins/sim/truth-sim.nav.xz --json
   insnav evaluate walk_sol.csv ../shared/data/rtklibexplorer_walk_0827/raw/gnss_1730_sf.pos --quality 1
 
-TRUTH may be a truth.csv (insnav dataset), a dataset directory, a KF-GINS .nav(.xz), or an
-RTKLIB .pos solution (GPST; compared at its own epochs, the solution t being GPS seconds of
+TRUTH may be a truth.csv (insnav dataset), a dataset directory, a KF-GINS .nav(.xz), a static
+antenna position "x,y,z" (ECEF m) or "lat_deg,lon_deg,h_m", or an RTKLIB .pos solution (GPST; compared at its own epochs, the solution t being GPS seconds of
 week as written by `insnav run --format rinex`; the .pos is the antenna, the solution the IMU
 centre: the lever arm is not applied; no attitude, so no attitude rows).
 Reported: RMS and max of the N/E/D position [m], velocity [m/s] and roll/pitch/yaw [deg] errors,
 horizontal and 3-D position; for each outage the max horizontal error inside it and in the
 60 s after it and the reconvergence time (first time after the outage from which the
 horizontal error stays within 1.5x its pre-outage RMS for 5 s); consistency rms(error/sigma)
-per axis (about 1 for a consistent filter)."""
+per axis (about 1 for a consistent filter).  A carrier-phase solution (an RTKLIB .pos as SOLUTION,
+or an insnav rtk solution with its <out>.rtk.csv beside it) also gets the fix rate and the 3-D
+error per fix status (fixed, float, dgps).
+  insnav evaluate rtk.pos 4075579.19,931853.37,4801569.19"""
 
 
 class _Sol:
@@ -34,9 +37,72 @@ class _Sol:
 
 
 def _read_solution(path):
+    """A solution file; an RTKLIB ``.pos`` (insnav rtk or RTKLIB) keeps its Q as ``fix_status``, and an
+    insnav rtk solution gets it from ``<path>.rtk.csv``."""
     from ..filters.solution import load_solution
 
-    return load_solution(path)
+    p = Path(path)
+    if p.suffix == ".pos":
+        return _pos_solution(p)
+    return attach_fix_status(load_solution(path), p)
+
+
+def attach_fix_status(sol, path):
+    """Give ``sol`` a ``fix_status`` per row from the ``<path>.rtk.csv`` sidecar of an rtk run (if any)."""
+    p = Path(path)
+    side = p.with_suffix(p.suffix + ".rtk.csv")
+    if side.exists():
+        from ..gnss.gpstime import SECONDS_PER_WEEK
+
+        a = np.genfromtxt(side, delimiter=",", names=True)
+        t = np.atleast_1d(a["t_gps_s"])
+        t = t - SECONDS_PER_WEEK * np.floor(t[0] / SECONDS_PER_WEEK)
+        i = np.clip(np.searchsorted(t, np.asarray(sol.t) - 1e-6), 0, len(t) - 1)
+        sol.fix_status = np.where(np.abs(t[i] - sol.t) < 1e-3, np.atleast_1d(a["status"])[i], 0).astype(int)
+    return sol
+
+
+def _pos_solution(path):
+    """An RTKLIB .pos file as a solution (antenna position, GPS seconds of the first epoch's week)."""
+    from .. import earth
+    from ..gnss.gpstime import SECONDS_PER_WEEK
+    from ..gnss.measurements import read_rtklib_pos
+
+    ref = read_rtklib_pos(path)
+    if len(ref.t_gps_s) == 0:
+        raise ValueError(f"{path}: no solution records")
+    out = _Sol()
+    out.t = ref.t_gps_s - SECONDS_PER_WEEK * np.floor(ref.t_gps_s[0] / SECONDS_PER_WEEK)
+    lat, lon, h = earth.ecef_to_geodetic(ref.r_e)
+    out.lat_deg, out.lon_deg, out.h_m = np.degrees(lat), np.degrees(lon), h
+    n = len(out.t)
+    out.v_n = np.full((n, 3), np.nan)
+    out.roll_deg = out.pitch_deg = out.yaw_deg = np.full(n, np.nan)
+    out.fix_status = np.asarray(ref.q, int)
+    return out
+
+
+def static_truth(text: str, t):
+    """A constant truth (a static antenna) from ``"x,y,z"`` ECEF [m] or ``"lat_deg,lon_deg,h_m"``, at times ``t``."""
+    from .. import earth
+    from ..data.dataset import Truth
+
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 3:
+        raise ValueError(f"truth {text!r}: not a file, nor x,y,z [m] / lat_deg,lon_deg,h_m")
+    if abs(v[0]) <= 90.0 and abs(v[1]) <= 360.0 and abs(v[2]) < 1e5:
+        lat, lon, h = v
+    else:
+        la, lo, h = earth.ecef_to_geodetic(np.asarray(v, float))
+        lat, lon = float(np.degrees(la)), float(np.degrees(lo))
+    t = np.asarray(t, float)
+    n = t.size
+    z = np.zeros(n)
+    return Truth(t=t.copy(), lat_deg=np.full(n, lat), lon_deg=np.full(n, lon), h_m=np.full(n, float(h)),
+                 v_n=np.full((n, 3), np.nan), roll_deg=z + np.nan, pitch_deg=z + np.nan, yaw_deg=z + np.nan)
 
 
 def _read_truth(path, quality=None):
@@ -126,6 +192,21 @@ def evaluate(solution, truth, outages=()) -> dict:
     out["horizontal_rms_m"] = float(rms(hz))
     out["horizontal_max_m"] = float(hz.max())
     out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"] ** 2, axis=1))))
+    fs = getattr(solution, "fix_status", None)
+    if fs is not None:  # carrier-phase solutions: fix rate and the error per status
+        from ..gnss.rtk import STATUS_NAMES
+
+        st = np.asarray(fs)
+        i = np.clip(np.searchsorted(np.asarray(solution.t), e["t"] - 1e-9), 0, len(st) - 1)
+        st_e = st[i]
+        err3 = np.linalg.norm(e["pos_n_m"], axis=1)
+        out["fix_rate"] = float(np.mean(st == 1)) if st.size else 0.0
+        out["by_status"] = {}
+        for q, name in STATUS_NAMES.items():
+            m = st_e == q
+            if m.any():
+                out["by_status"][name] = dict(epochs=int(m.sum()), rms_3d_m=float(np.sqrt(np.mean(err3[m] ** 2))),
+                                              max_3d_m=float(err3[m].max()))
     out["outages"] = []
     t = e["t"]
     for (a, b) in outages:
@@ -190,11 +271,11 @@ def _solution_at(sol, t):
 
 
 def cmd_evaluate(args) -> int:
-    for p in (args.solution, args.truth):
+    for p in (args.solution,) + (() if "," in args.truth else (args.truth,)):
         if not Path(p).exists():
             raise FileNotFoundError(f"not found: {p}")
     sol = _read_solution(args.solution)
-    truth = _read_truth(args.truth, args.quality)
+    truth = _read_truth(args.truth, args.quality) if Path(args.truth).exists() else static_truth(args.truth, sol.t)
     if hasattr(truth, "quality"):  # a 4 Hz reference, possibly with gaps: compare at its epochs
         sol = _solution_at(sol, truth.t)
     res = evaluate(sol, truth, _parse_outages(args.outages))
@@ -214,6 +295,10 @@ def cmd_evaluate(args) -> int:
               f"   max {'/'.join(f'{x:.4g}' for x in res['max'][k])}{cs}")
     print(f"horizontal RMS {res['horizontal_rms_m']:.4g} m, max {res['horizontal_max_m']:.4g} m; "
           f"3-D RMS {res['rms_3d_m']:.4g} m")
+    if "fix_rate" in res:
+        parts = [f"{name} {d['epochs']} (3-D RMS {d['rms_3d_m']:.4g} m, max {d['max_3d_m']:.4g} m)"
+                 for name, d in res["by_status"].items()]
+        print(f"fix rate {100.0 * res['fix_rate']:.1f} %; " + "; ".join(parts))
     lo, hi = CONSISTENCY_BOUNDS
     for k, bad in res["consistency_flags"].items():
         n, _, ax = names[k]

@@ -284,6 +284,16 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
         rows.append(("residual RMS of applied epochs: pseudorange [m] / rate [m/s]",
                      f"{_fmt(float(rms(pr)) if pr.size else None)} / {_fmt(float(rms(rr)) if rr.size else None)} "
                      f"({pr.size} / {rr.size} satellite rows)"))
+    fs = getattr(sol, "fix_status", None)
+    if fs is not None and len(fs):
+        from ..gnss.rtk import STATUS_NAMES
+
+        counts = ", ".join(f"{int(np.sum(fs == q))} {n}" for q, n in STATUS_NAMES.items() if np.any(fs == q))
+        rows.append(("carrier-phase fix rate", f"{100.0 * np.mean(fs == 1):.1f} % ({counts})"))
+        if ev is not None and "by_status" in ev:
+            for name, d in ev["by_status"].items():
+                rows.append((f"3-D error of {name} epochs, RMS / max [m]",
+                             f"{_fmt(d['rms_3d_m'])} / {_fmt(d['max_3d_m'])} ({d['epochs']} epochs)"))
     if outages:
         rows.append(("GNSS outages [s]", ", ".join(f"{a:.1f}-{b:.1f}" for a, b in outages)))
     if ev is not None:
@@ -323,8 +333,9 @@ def _read_solution(path):
     """The one place the report reads a saved solution (any format
     :func:`insnav.load_solution` reads, old column names included)."""
     from ..filters.solution import load_solution
+    from .evaluate import attach_fix_status
 
-    return load_solution(path)
+    return attach_fix_status(load_solution(path), path)
 
 
 def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None) -> Path:

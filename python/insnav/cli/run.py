@@ -30,6 +30,8 @@ alignment (levelling, gyrocompassing or the GNSS course once moving) unless [ini
 and is printed with its sigmas (docs/formats.md).
 
   insnav run --filter spp --format rinex --obs F.obs --nav F.nav [--config run.toml] --out spp.csv
+  insnav run --filter rtk --format rinex --obs ROVER.obs --base BASE.obs --nav F.nav [--base-pos X,Y,Z] \
+             [--config run.toml] --out rtk.pos
 
 --filter spp: GNSS-only single point positioning (no IMU): weighted least squares over every
 system with ephemerides, one inter-system bias per further system, velocity from Doppler,
@@ -69,6 +71,10 @@ def add_run_parser(sub) -> None:
     p.add_argument("--obs", help="RINEX 2/3 observation file (--format rinex)")
     p.add_argument("--nav", help="RINEX 2/3 GPS navigation file (--format rinex); with --filter spp several, "
                    "comma-separated (e.g. brdc1580.16n,brdc1580.16g), or a mixed RINEX 3 file")
+    p.add_argument("--base", help="--filter rtk: the base station's RINEX observation file")
+    p.add_argument("--base-pos", metavar="X,Y,Z|LAT,LON,H",
+                   help="--filter rtk: base antenna reference point, ECEF [m] or lat_deg,lon_deg,h_m (default: "
+                        "the TOML's [rtk] base_position_*, else the base header's APPROX POSITION + antenna delta)")
     p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log (--format rinex or csv with a tick_ms "
                    "column; default IMU.tag)")
     p.add_argument("--gnss", help="KF-GINS GNSS file (overrides the YAML's gnsspath); with --format csv the GNSS fixes "
@@ -310,6 +316,79 @@ def cmd_run_spp(args, stages) -> int:
     return 0
 
 
+def cmd_run_rtk(args, stages) -> int:
+    """``insnav run --filter rtk``: carrier-phase RTK of --obs against --base (no IMU).
+
+    ``--out X.pos`` writes RTKLIB's .pos layout; any other suffix the insnav
+    solution formats.  Beside it: ``<out>.rtk.csv`` (per epoch: status, ratio,
+    fixed ambiguities, slips) and ``<out>.config.toml``.
+    """
+    from ..filters.rtk import run_rtk_rinex
+    from ..filters.solution import FORMATS
+    from ..gnss.rtk import write_rtk_table, write_rtklib_pos
+
+    if args.format != "rinex":
+        raise UserError("--filter rtk reads RINEX files: give --format rinex --obs ROVER --base BASE --nav NAV")
+    missing = [n for n in ("obs", "base", "nav") if not getattr(args, n)]
+    if missing:
+        raise UserError("--filter rtk needs " + ", ".join(f"--{n}" for n in missing))
+    unused = [f"--{n.replace('_', '-')}" for n in ("imu", "imu_tag", "gnss", "constraints", "output_rate",
+                                                   "run_config")
+              if getattr(args, n, None)] + (["--smooth"] if args.smooth else [])
+    if args.dataset:
+        unused.append("a dataset directory")
+    if args.coupling not in (None, "gnss"):
+        unused.append(f"--coupling {args.coupling}")
+    if unused:
+        raise UserError(f"--filter rtk is GNSS only and does not use {', '.join(unused)}")
+    if args.out_format != "insnav":
+        raise UserError("--filter rtk writes --out-format insnav (or RTKLIB's layout with an --out ending in .pos)")
+    if args.out is None:
+        raise UserError("--out is required (a solution file such as rtk.pos or rtk.csv)")
+    out = Path(args.out)
+    if out.is_dir():
+        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'rtk.pos'}")
+    pos = out.suffix.lower() == ".pos"
+    if not pos and out.suffix.lower() not in FORMATS:
+        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use .pos or one of {', '.join(FORMATS)}")
+    try:
+        sol = run_rtk_rinex(args.obs, args.base, [p for p in args.nav.split(",") if p], args.config,
+                            base_pos=args.base_pos)
+    except ConfigError as exc:
+        raise UserError(str(exc)) from None
+    stages.done("filter")
+    rs = sol.rtk
+    c = rs.counts()
+    if c["epochs"] == c["n_none"]:
+        raise UserError(f"{args.obs}: no epoch could be solved ({c['epochs']} epochs; no common satellites above "
+                        "the mask with ephemerides?)")
+    written: list[Path] = []
+    try:
+        if pos:
+            written.append(write_rtklib_pos(rs, out))
+        else:
+            groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
+            written.append(sol.save(out, columns=groups, precision=args.csv_precision))
+        written.append(write_rtk_table(rs, out.with_suffix(out.suffix + ".rtk.csv")))
+        text = (f'# insnav resolved run configuration\nfilter = "rtk"\ncoupling = "gnss"\n'
+                + _table_toml("rtk", sol.rtk_options))
+        written.append(atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text))
+    except BaseException:
+        for p in written:
+            Path(p).unlink(missing_ok=True)
+        raise
+    slips = sum(v for k, v in c.items() if k.startswith("slips_"))
+    print(f"{out}: {c['epochs']} epochs, {c['n_fixed']} fixed ({100.0 * c['fix_rate']:.1f} %), {c['n_float']} float, "
+          f"{c['n_dgps']} dgps, {c['n_none']} none; filter rtk ({sol.rtk_options.mode}, {sol.rtk_options.ar_mode}, "
+          f"{sol.rtk_options.systems}, {sol.rtk_options.frequencies} frequencies); {slips} cycle slips detected")
+    stages.done("write")
+    if args.timings:
+        import sys
+
+        print(stages.line(), file=sys.stderr)
+    return 0
+
+
 def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
     """``cfg`` with the keys present in the insnav TOML ``path`` replaced (validated as a whole)."""
     import dataclasses
@@ -339,12 +418,15 @@ def cmd_run(args) -> int:
 
         try:
             with open(args.config, "rb") as f:
-                if tomllib.load(f).get("filter") == "spp":
-                    args.filter = "spp"
+                f_toml = tomllib.load(f).get("filter")
+                if f_toml in ("spp", "rtk"):
+                    args.filter = f_toml
         except (OSError, tomllib.TOMLDecodeError):
             pass  # reported by the loader
     if args.filter == "spp":
         return cmd_run_spp(args, stages)
+    if args.filter == "rtk":
+        return cmd_run_rtk(args, stages)
 
     if args.run_config is not None and args.format != "kfgins":
         raise UserError("--run-config goes with --format kfgins (otherwise the insnav TOML is --config)")

@@ -12,6 +12,7 @@ module                 filters                               paper
 :mod:`.delay`          kf, rdkf, exact                       seed 001
 :mod:`.particle`       fukf, upf, pf (tight, 20 states)      seed 004
 :mod:`.spp`            spp (GNSS only, no IMU)               RTKLIB pntpos, RAIM FDE
+:mod:`.rtk`            rtk (GNSS only, base + rover)         MLAMBDA (Chang et al. 2005)
 =====================  ====================================  =========
 """
 from __future__ import annotations
@@ -79,7 +80,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     if filter is not None:
         cfg.filter = filter
         if coupling is None and cfg.filter in FILTERS and FILTERS[cfg.filter].couplings == ("gnss",):
-            coupling = "gnss"  # spp has no other way to run
+            coupling = "gnss"  # spp and rtk have no other way to run
     if coupling is not None:
         cfg.coupling = coupling
     if cfg.filter not in FILTERS or cfg.coupling not in _ADVERB:
@@ -102,6 +103,8 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     report = None
     from .._imu_scan import scan_memo
 
+    if getattr(dataset, "gnss_only", False):  # GNSS-only inputs (rtk): no IMU to sanitize or check
+        sanitize = checks = False
     with scan_memo():  # the sanitizer, the checks and the runner share one pass over the IMU arrays
         if sanitize:
             from .sanitize import sanitize_dataset

@@ -564,6 +564,9 @@ class ObsData:
         read from the file (RINEX 2 codes for RINEX 2 files).
     glonass_channels : dict
         GLONASS slot -> FDMA channel from the ``GLONASS SLOT / FRQ #`` header (RINEX 3).
+    lli1 : (m,) int or None
+        Loss-of-lock indicator of ``L1`` (bit 0: lost lock / possible cycle slip, bit 1:
+        half-cycle ambiguity); 0 where blank or no phase.
     """
 
     path: str
@@ -587,6 +590,7 @@ class ObsData:
     system: np.ndarray | None = None
     codes_by_system: dict = field(default_factory=dict)
     glonass_channels: dict = field(default_factory=dict)
+    lli1: np.ndarray | None = None
 
     def __post_init__(self):
         if self.system is None:
@@ -776,6 +780,11 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
     ep_t, ep_flag, ep_clk = [], [], []
     r_ep, r_prn, r_sys = [], [], []
     r_val = {k: [] for k in keys}
+    r_lli = []
+
+    def lli_of(txt_line, start):
+        c = txt_line[start + 14:start + 15]
+        return int(c) if c.isdigit() else 0
 
     def parse_sat(line, s, sat_prn, ep_index):
         r_ep.append(ep_index)
@@ -785,9 +794,13 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
         for key, col in cols_by_sys[s].items():
             if col is None:
                 r_val[key].append(math.nan)
+                if key == "L1":
+                    r_lli.append(0)
                 continue
             txt = line[base + 16 * col: base + 16 * col + 14]
             r_val[key].append(_float(src, txt, f"observation {codes_by_sys[s][key]}"))
+            if key == "L1":
+                r_lli.append(lli_of(line, base + 16 * col))
 
     while not src.eof():
         line = src.next()
@@ -870,9 +883,13 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
                     for key, col in cols_by_sys[s].items():
                         if col is None:
                             r_val[key].append(math.nan)
+                            if key == "L1":
+                                r_lli.append(0)
                             continue
                         ol = obs_lines[col // 5]
                         txt = ol[16 * (col % 5):16 * (col % 5) + 14]
+                        if key == "L1":
+                            r_lli.append(lli_of(ol, 16 * (col % 5)))
                         r_val[key].append(_float(src, txt, f"observation {codes_by_sys[s][key]}",
                                                  lineno=src.lineno - nlines + 1 + col // 5))
         if keep:
@@ -892,4 +909,5 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
         C1=np.asarray(r_val["C1"], dtype=float), L1=np.asarray(r_val["L1"], dtype=float),
         D1=np.asarray(r_val["D1"], dtype=float), S1=np.asarray(r_val["S1"], dtype=float), approx_r_e=approx,
         system=np.asarray(r_sys, dtype="<U1"), codes_by_system=codes_by_sys, glonass_channels=glo_k,
+        lli1=np.asarray(r_lli, dtype=np.int64),
     )

@@ -1,0 +1,286 @@
+// Carrier-phase RTK: the fast RINEX 3 observation reader, MLAMBDA and the RTK engine batch
+// loop (insnav/gnss/rtk.hpp) with the GIL released.
+#include <pybind11/stl.h>
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "common.hpp"
+#include "insnav/gnss/lambda.hpp"
+#include "insnav/gnss/rtk.hpp"
+#include "insnav/io/rinex3_obs.hpp"
+
+namespace insnav::py_bind {
+
+namespace {
+
+using gnss::RtkOptions;
+using IArray = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
+
+template <class T>
+py::array_t<T> to_array(const std::vector<T>& v) {
+  py::array_t<T> a(static_cast<py::ssize_t>(v.size()));
+  if (!v.empty()) std::memcpy(a.mutable_data(), v.data(), v.size() * sizeof(T));
+  return a;
+}
+
+py::dict read_obs(const std::string& path, const std::map<std::string, std::vector<std::vector<std::string>>>& prefs) {
+  std::map<char, std::vector<std::vector<std::string>>> p;
+  for (const auto& [k, v] : prefs)
+    if (!k.empty()) p[k[0]] = v;
+  io::RinexObsTable t;
+  {
+    py::gil_scoped_release release;
+    t = io::read_rinex3_obs(path, p);
+  }
+  py::dict d;
+  d["version"] = t.version;
+  d["approx_r_e"] = t.has_approx ? py::object(py::make_tuple(t.approx_r_e[0], t.approx_r_e[1], t.approx_r_e[2]))
+                                 : py::object(py::none());
+  d["antenna_hen_m"] = py::make_tuple(t.antenna_hen_m[0], t.antenna_hen_m[1], t.antenna_hen_m[2]);
+  d["marker_name"] = t.marker_name;
+  d["glonass_channels"] = t.glonass_channels;
+  std::map<std::string, std::vector<std::string>> chosen;
+  for (const auto& [s, a] : t.chosen) chosen[std::string(1, s)] = std::vector<std::string>(a.begin(), a.end());
+  d["chosen"] = chosen;
+  d["epoch_t_gps_s"] = to_array(t.epoch_t_gps_s);
+  d["epoch_flag"] = to_array(t.epoch_flag);
+  d["row_epoch"] = to_array(t.row_epoch);
+  d["row_sys"] = to_array(t.row_sys);
+  d["row_prn"] = to_array(t.row_prn);
+  const py::ssize_t n = static_cast<py::ssize_t>(t.row_epoch.size());
+  py::array_t<double> obs({n, static_cast<py::ssize_t>(io::kObsSlots * io::kObsPerSlot)});
+  if (n) std::memcpy(obs.mutable_data(), t.obs.data(), t.obs.size() * sizeof(double));
+  d["obs"] = obs;
+  return d;
+}
+
+py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
+  const py::ssize_t n = a_hat.ndim() == 1 ? a_hat.shape(0) : -1;
+  if (n < 0) throw py::value_error("lambda_search: a_hat must be 1-D");
+  if (n > gnss::kMaxAmbiguities)
+    throw py::value_error("lambda_search: at most " + std::to_string(gnss::kMaxAmbiguities) + " ambiguities");
+  require_shape(Q, n, n, "lambda_search: Q");
+  gnss::AmbVec a(n);
+  gnss::AmbMat q(n, n);
+  for (py::ssize_t i = 0; i < n; ++i) {
+    a(i) = a_hat.data()[i];
+    for (py::ssize_t j = 0; j < n; ++j) q(i, j) = Q.data()[i * n + j];
+  }
+  gnss::AmbCand fix;
+  double s[2];
+  gnss::Lambda lam;
+  const auto st = lam.solve(a, q, fix, s);
+  if (st == gnss::LambdaStatus::kNotPositiveDefinite) throw py::value_error("lambda_search: Q is not positive definite");
+  if (st != gnss::LambdaStatus::kOk) throw py::value_error("lambda_search: search failed");
+  py::array_t<double> out({n, static_cast<py::ssize_t>(2)});
+  for (py::ssize_t i = 0; i < n; ++i)
+    for (int c = 0; c < 2; ++c) out.mutable_data()[i * 2 + c] = fix(i, c);
+  return py::make_tuple(out, py::make_tuple(s[0], s[1]));
+}
+
+py::tuple lambda_decorrelate(const DArray& Q) {
+  const py::ssize_t n = Q.ndim() == 2 ? Q.shape(0) : -1;
+  if (n < 0 || n > gnss::kMaxAmbiguities) throw py::value_error("lambda_decorrelate: bad Q");
+  require_shape(Q, n, n, "lambda_decorrelate: Q");
+  gnss::AmbMat q(n, n), Z, L;
+  gnss::AmbVec D;
+  for (py::ssize_t i = 0; i < n; ++i)
+    for (py::ssize_t j = 0; j < n; ++j) q(i, j) = Q.data()[i * n + j];
+  gnss::Lambda lam;
+  if (!lam.decorrelate(q, Z, L, D)) throw py::value_error("lambda_decorrelate: Q is not positive definite");
+  py::array_t<double> z({n, n}), l({n, n}), d(n);
+  for (py::ssize_t i = 0; i < n; ++i) {
+    d.mutable_data()[i] = D(i);
+    for (py::ssize_t j = 0; j < n; ++j) {
+      z.mutable_data()[i * n + j] = Z(i, j);
+      l.mutable_data()[i * n + j] = L(i, j);
+    }
+  }
+  return py::make_tuple(z, l, d);
+}
+
+RtkOptions options_from_dict(const py::dict& d) {
+  RtkOptions o;
+  for (auto item : d) {
+    const std::string k = py::str(item.first);
+    const py::handle v = item.second;
+    if (k == "mode") o.mode = static_cast<gnss::RtkMode>(v.cast<int>());
+    else if (k == "ar_mode") o.ar_mode = static_cast<gnss::ArMode>(v.cast<int>());
+    else if (k == "n_freq") o.n_freq = v.cast<int>();
+    else if (k == "elevation_mask_rad") o.elevation_mask_rad = v.cast<double>();
+    else if (k == "ar_elevation_mask_rad") o.ar_elevation_mask_rad = v.cast<double>();
+    else if (k == "ratio_threshold") o.ratio_threshold = v.cast<double>();
+    else if (k == "min_fix_ambiguities") o.min_fix_ambiguities = v.cast<int>();
+    else if (k == "max_partial_drops") o.max_partial_drops = v.cast<int>();
+    else if (k == "partial_by_variance") o.partial_by_variance = v.cast<bool>();
+    else if (k == "min_lock_epochs") o.min_lock_epochs = v.cast<int>();
+    else if (k == "glonass_ar") o.glonass_ar = v.cast<bool>();
+    else if (k == "sigma_phase_a_m") o.sigma_phase_a_m = v.cast<double>();
+    else if (k == "sigma_phase_b_m") o.sigma_phase_b_m = v.cast<double>();
+    else if (k == "code_phase_ratio") o.code_phase_ratio = v.cast<double>();
+    else if (k == "glonass_factor") o.glonass_factor = v.cast<double>();
+    else if (k == "iono_sigma_per_10km_m") o.iono_sigma_per_10km_m = v.cast<double>();
+    else if (k == "tropo_model") o.tropo_model = v.cast<bool>();
+    else if (k == "accel_psd_h") o.accel_psd_h = v.cast<double>();
+    else if (k == "accel_psd_v") o.accel_psd_v = v.cast<double>();
+    else if (k == "static_pos_psd") o.static_pos_psd = v.cast<double>();
+    else if (k == "pos_init_sigma_m") o.pos_init_sigma_m = v.cast<double>();
+    else if (k == "vel_init_sigma_mps") o.vel_init_sigma_mps = v.cast<double>();
+    else if (k == "amb_init_sigma_cycles") o.amb_init_sigma_cycles = v.cast<double>();
+    else if (k == "amb_psd") o.amb_psd = v.cast<double>();
+    else if (k == "gf_threshold_m") o.gf_threshold_m = v.cast<double>();
+    else if (k == "mw_threshold_cycles") o.mw_threshold_cycles = v.cast<double>();
+    else if (k == "doppler_threshold_cycles") o.doppler_threshold_cycles = v.cast<double>();
+    else if (k == "doppler_max_dt_s") o.doppler_max_dt_s = v.cast<double>();
+    else if (k == "max_gap_s") o.max_gap_s = v.cast<double>();
+    else if (k == "max_outage_epochs") o.max_outage_epochs = v.cast<int>();
+    else if (k == "outlier_sigma") o.outlier_sigma = v.cast<double>();
+    else if (k == "hold_sigma_cycles") o.hold_sigma_cycles = v.cast<double>();
+    else if (k == "max_age_s") o.max_age_s = v.cast<double>();
+    else throw py::value_error("rtk options: unknown key '" + k + "'");
+  }
+  return o;
+}
+
+void check_rows(const DArray& rows, const char* name) {
+  if (rows.ndim() != 2 || rows.shape(1) != gnss::RtkRow::kCols)
+    throw py::value_error(std::string(name) + ": expected shape (m, " + std::to_string(gnss::RtkRow::kCols) + ")");
+}
+
+py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& rover_rows, const IArray& base_off,
+                 const DArray& base_rows, const IArray& base_index, const DArray& r_base_e, const py::dict& opts) {
+  const py::ssize_t n = t_rover.ndim() == 1 ? t_rover.shape(0) : -1;
+  if (n < 0) throw py::value_error("rtk_run: t_rover must be 1-D");
+  check_rows(rover_rows, "rtk_run: rover_rows");
+  check_rows(base_rows, "rtk_run: base_rows");
+  if (rover_off.size() != n + 1 || base_index.size() != n) throw py::value_error("rtk_run: offsets / base index sizes");
+  const py::ssize_t nb = base_off.size() - 1;
+  const Vec3 rb = vec3_from(r_base_e, "rtk_run: r_base_e");
+  const RtkOptions o = options_from_dict(opts);
+  py::array_t<int> status(n), n_fix(n), n_dd(n), n_sat(n);
+  py::array_t<double> ratio(n), r_e({n, static_cast<py::ssize_t>(3)}), v_e({n, static_cast<py::ssize_t>(3)}),
+      r_float({n, static_cast<py::ssize_t>(3)}), P_r({n, static_cast<py::ssize_t>(9)});
+  py::array_t<int> slips({n, static_cast<py::ssize_t>(gnss::kNumSlipKinds)});
+  const std::int64_t* ro = rover_off.data();
+  const std::int64_t* bo = base_off.data();
+  const std::int64_t* bi = base_index.data();
+  const py::ssize_t mr = rover_rows.shape(0), mb = base_rows.shape(0);
+  for (py::ssize_t e = 0; e < n; ++e) {
+    if (ro[e] < 0 || ro[e + 1] < ro[e] || ro[e + 1] > mr) throw py::value_error("rtk_run: bad rover offsets");
+    if (bi[e] >= nb) throw py::value_error("rtk_run: base index out of range");
+  }
+  for (py::ssize_t e = 0; e < nb; ++e)
+    if (bo[e] < 0 || bo[e + 1] < bo[e] || bo[e + 1] > mb) throw py::value_error("rtk_run: bad base offsets");
+  {
+    py::gil_scoped_release release;
+    auto eng = std::make_unique<gnss::RtkEngine>(o);
+    std::int64_t last_b = -1;
+    for (py::ssize_t e = 0; e < n; ++e) {
+      gnss::RtkEpoch out;
+      const std::int64_t b = bi[e];
+      if (b >= 0) {
+        out = eng->process(t_rover.data()[e], rover_rows.data() + ro[e] * gnss::RtkRow::kCols,
+                           static_cast<int>(ro[e + 1] - ro[e]), base_rows.data() + bo[b] * gnss::RtkRow::kCols,
+                           static_cast<int>(bo[b + 1] - bo[b]), b != last_b, rb);
+        last_b = b;
+      }
+      status.mutable_data()[e] = static_cast<int>(out.status);
+      n_fix.mutable_data()[e] = out.n_fix;
+      n_dd.mutable_data()[e] = out.n_dd;
+      n_sat.mutable_data()[e] = out.n_sat;
+      ratio.mutable_data()[e] = out.ratio;
+      for (int i = 0; i < 3; ++i) {
+        r_e.mutable_data()[e * 3 + i] = out.r_e(i);
+        v_e.mutable_data()[e * 3 + i] = out.v_e(i);
+        r_float.mutable_data()[e * 3 + i] = out.r_float_e(i);
+        for (int j = 0; j < 3; ++j) P_r.mutable_data()[e * 9 + i * 3 + j] = out.P_r(i, j);
+      }
+      for (int k = 0; k < gnss::kNumSlipKinds; ++k) slips.mutable_data()[e * gnss::kNumSlipKinds + k] = out.slips[k];
+    }
+  }
+  py::dict d;
+  d["status"] = status;
+  d["n_fix"] = n_fix;
+  d["n_dd"] = n_dd;
+  d["n_sat"] = n_sat;
+  d["ratio"] = ratio;
+  d["r_e"] = r_e;
+  d["v_e"] = v_e;
+  d["r_float_e"] = r_float;
+  d["P_r"] = P_r;
+  d["slips"] = slips;
+  return d;
+}
+
+py::array_t<std::uint8_t> slip_detect(const DArray& t, const IArray& off, const DArray& rows, const py::dict& opts) {
+  const py::ssize_t n = t.ndim() == 1 ? t.shape(0) : -1;
+  check_rows(rows, "slip_detect: rows");
+  if (n < 0 || off.size() != n + 1) throw py::value_error("slip_detect: offsets");
+  const RtkOptions o = options_from_dict(opts);
+  const py::ssize_t m = rows.shape(0);
+  py::array_t<std::uint8_t> flags({m, static_cast<py::ssize_t>(gnss::kMaxFreq)});
+  std::fill(flags.mutable_data(), flags.mutable_data() + m * gnss::kMaxFreq, 0);
+  {
+    py::gil_scoped_release release;
+    auto det = std::make_unique<gnss::SlipDetector>();
+    std::array<int, gnss::kNumSlipKinds> counts{};
+    std::vector<std::uint8_t> buf(gnss::kMaxSatKeys * gnss::kMaxFreq);
+    for (py::ssize_t e = 0; e < n; ++e) {
+      const auto a = off.data()[e], b = off.data()[e + 1];
+      const int k = static_cast<int>(std::min<std::int64_t>(b - a, gnss::kMaxSatKeys));
+      det->detect(t.data()[e], rows.data() + a * gnss::RtkRow::kCols, k, o.n_freq, o, buf.data(), counts);
+      std::memcpy(flags.mutable_data() + a * gnss::kMaxFreq, buf.data(), static_cast<size_t>(k) * gnss::kMaxFreq);
+    }
+  }
+  return flags;
+}
+
+py::dict rtk_double_differences(const DArray& rover_rows, const DArray& base_rows, const DArray& r_rover_e,
+                                const DArray& r_base_e, const py::dict& opts) {
+  check_rows(rover_rows, "rtk_double_differences: rover_rows");
+  check_rows(base_rows, "rtk_double_differences: base_rows");
+  const RtkOptions o = options_from_dict(opts);
+  const int nr = static_cast<int>(std::min<py::ssize_t>(rover_rows.shape(0), gnss::kMaxSatKeys));
+  const int nb = static_cast<int>(std::min<py::ssize_t>(base_rows.shape(0), gnss::kMaxSatKeys));
+  constexpr int kMax = 2 * gnss::kMaxRows;
+  std::vector<int> sat(kMax), ref(kMax), freq(kMax), code(kMax);
+  std::vector<double> val(kMax);
+  auto eng = std::make_unique<gnss::RtkEngine>(o);
+  const int n = eng->double_differences(rover_rows.data(), nr, base_rows.data(), nb, vec3_from(r_rover_e, "r_rover_e"),
+                                        vec3_from(r_base_e, "r_base_e"), sat.data(), ref.data(), freq.data(),
+                                        code.data(), val.data(), kMax);
+  sat.resize(n); ref.resize(n); freq.resize(n); code.resize(n); val.resize(n);
+  py::dict d;
+  d["sat_row"] = to_array(sat);
+  d["ref_row"] = to_array(ref);
+  d["freq"] = to_array(freq);
+  d["is_code"] = to_array(code);
+  d["value_m"] = to_array(val);
+  return d;
+}
+
+}  // namespace
+
+void bind_rtk(py::module_& m) {
+  m.def("read_rinex3_obs", &read_obs, py::arg("path"), py::arg("prefs"),
+        "Fast RINEX 3 observation reader: up to 3 frequency slots per system (C, L, D, S, LLI).");
+  m.def("lambda_search", &lambda_search, py::arg("a_hat"), py::arg("Q"),
+        "MLAMBDA (Chang, Yang, Zhou 2005): best and second-best integer vectors (n, 2) and squared norms.");
+  m.def("lambda_decorrelate", &lambda_decorrelate, py::arg("Q"),
+        "MLAMBDA reduction: (Z, L, D) with Z^T Q Z = L^T diag(D) L.");
+  m.def("rtk_run", &rtk_run, py::arg("t_rover"), py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"),
+        py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
+        "RTK engine over every rover epoch (GIL released).");
+  m.def("slip_detect", &slip_detect, py::arg("t"), py::arg("off"), py::arg("rows"), py::arg("options"),
+        "Cycle-slip flags (m, 3) of one receiver's rows (bits: LLI, GF, MW, Doppler, gap).");
+  m.def("rtk_double_differences", &rtk_double_differences, py::arg("rover_rows"), py::arg("base_rows"),
+        py::arg("r_rover_e"), py::arg("r_base_e"), py::arg("options"),
+        "Double differences observed minus computed (no ambiguity term) at a given rover position.");
+  m.attr("RTK_ROW_COLS") = gnss::RtkRow::kCols;
+  m.attr("RTK_MAX_AMBIGUITIES") = gnss::kMaxAmbiguities;
+}
+
+}  // namespace insnav::py_bind

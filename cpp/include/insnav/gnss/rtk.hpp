@@ -1,0 +1,970 @@
+// insnav/gnss/rtk.hpp -- carrier-phase relative positioning (RTK): double differences,
+// a float EKF with single-differenced ambiguities, cycle-slip detection and integer
+// ambiguity resolution (MLAMBDA, ratio test, partial AR, fix-and-hold).
+//
+// Frames and units: e = ECEF (WGS-84), SI throughout; carrier phase in cycles,
+// pseudorange in metres, Doppler in Hz, ambiguities in cycles.
+//
+// Models (P. J. G. Teunissen, O. Montenbruck (eds.), Springer Handbook of GNSS,
+// 2017, ch. 26 "Differential positioning" eqs. (26.9)-(26.17); T. Takasu,
+// RTKLIB 2.4.2 manual, Appendix E.7 "Relative positioning"):
+//
+//   zero difference   phi_r^s lambda = rho_r^s - c dt^s + T_r^s + lambda N_r^s + c dt_r + e
+//                     P_r^s          = rho_r^s - c dt^s + T_r^s               + c dt_r + e
+//   range with Sagnac rho = |r^s - r_r| + omega_e (x^s y_r - y^s x_r) / c  (r^s at transmission,
+//                     ECEF of that instant; RTKLIB manual eq. (E.3.8b))
+//   single difference (rover r - base b) removes the satellite clock; the state holds
+//                     single-differenced ambiguities N_rb^s [cycles] (one per satellite and
+//                     frequency), so satellites rise, set and slip independently.
+//   double difference (satellite s - reference satellite i of the same system and frequency)
+//                     removes the receiver clocks:
+//                     DD phi = DD rho + lambda_s N_rb^s - lambda_i N_rb^i   [m]
+//                     (written per satellite wavelength, which also serves GLONASS FDMA).
+//   covariance        Cov(DD) = D diag(sigma_sd^2) D^T: sigma_sd^2(s) = sigma^2(el_r) + sigma^2(el_b),
+//                     sigma^2(el) = a^2 + b^2 / sin^2 el (the SPP elevation weighting), code
+//                     sigma = code_phase_ratio x phase sigma; rows that share a reference are
+//                     correlated by sigma_sd^2(i).
+//   troposphere       Saastamoinen zenith delay of a standard atmosphere with a 1/sin(el) mapping at
+//                     each receiver (cancels to the height difference on short baselines); the
+//                     residual ionosphere of a medium baseline enters as a variance
+//                     (iono_sigma_per_10km_m x baseline / 10 km)^2 per double difference.
+//
+// Ambiguity resolution: MLAMBDA (insnav/gnss/lambda.hpp; Chang, Yang and Zhou 2005) on the
+// double-differenced ambiguities D x_N, Q_a = D P_NN D^T; ratio test s2/s1 >= threshold
+// (Teunissen & Verhagen 2009, "The GNSS ambiguity ratio-test revisited"); on failure partial
+// AR drops the lowest-elevation ambiguity and retries down to min_fix_ambiguities; the fixed
+// baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)).
+//
+// Cycle slips (per receiver, before differencing): loss-of-lock indicator; the geometry-free
+// combination lambda_1 phi_1 - lambda_2 phi_2 jumping by more than gf_threshold_m between
+// epochs; the Melbourne-Wuebbena wide-lane (Melbourne 1985, Wuebbena 1985) leaving its running
+// mean by more than mw_threshold_cycles; and, on every frequency, the Doppler-predicted phase
+// phi_k - phi_{k-1} + (D_k + D_{k-1}) dt / 2 (receiver clock removed as the median over
+// satellites) beyond doppler_threshold_cycles when dt <= doppler_max_dt_s.
+//
+// No heap allocation per epoch: every matrix is bounded (kMaxStates, kMaxRows) and lives in the
+// engine, which is allocated once.
+#pragma once
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "insnav/earth/wgs84.hpp"
+#include "insnav/gnss/lambda.hpp"
+
+namespace insnav::gnss {
+
+inline constexpr double kCLight = 299792458.0;     // [m/s]
+inline constexpr double kOmegaE = 7.2921151467e-5;  // IS-GPS Earth rate [rad/s] (Sagnac term)
+
+/// Systems of the RTK engine (index order of the per-row ``system`` column).
+enum RtkSystem : int { kGps = 0, kGlonass = 1, kGalileo = 2, kBeidou = 3, kQzss = 4, kNumSystems = 5 };
+
+inline constexpr int kMaxFreq = 3;        // frequency slots per system
+inline constexpr int kMaxPrn = 64;        // satellite numbers per system
+inline constexpr int kMaxSatKeys = kNumSystems * kMaxPrn;
+inline constexpr int kMaxAmbStates = 120; // tracked single-differenced ambiguities
+inline constexpr int kMaxStates = 6 + kMaxAmbStates;
+inline constexpr int kMaxRows = kMaxAmbStates;  // DD rows of one kind (phase and code are updated in turn)
+
+/// Column layout of one observation row (one satellite of one receiver epoch).
+struct RtkRow {
+  static constexpr int kSat = 0;     // key = system * 64 + prn
+  static constexpr int kSys = 1;     // RtkSystem
+  static constexpr int kFreq0 = 2;   // per frequency slot f: kFreq0 + 5 f + {0 P [m], 1 L [cyc], 2 D [Hz], 3 LLI, 4 lambda [m]}
+  static constexpr int kPerFreq = 5;
+  static constexpr int kSatPos = kFreq0 + kPerFreq * kMaxFreq;  // r^s at transmission, ECEF of that instant [m]
+  static constexpr int kSatClock = kSatPos + 3;                 // c dt^s [m]
+  static constexpr int kCols = kSatClock + 1;
+};
+
+/// State layout: position, velocity (kinematic), then single-differenced ambiguities.
+struct RtkLayout {
+  static constexpr int kPos = 0;
+  static constexpr int kVel = 3;
+  static constexpr int kAmb = 6;
+};
+
+enum class RtkMode : int { kStatic = 0, kKinematic = 1 };
+enum class ArMode : int { kOff = 0, kContinuous = 1, kInstantaneous = 2, kFixAndHold = 3 };
+/// Solution status, RTKLIB's Q values: 1 fixed, 2 float, 4 DGPS (code only); 0 none.
+enum class RtkStatus : int { kNone = 0, kFixed = 1, kFloat = 2, kDgps = 4 };
+/// Slip detectors (bits of the per-epoch counts).
+enum SlipKind : int { kSlipLli = 0, kSlipGf = 1, kSlipMw = 2, kSlipDoppler = 3, kSlipGap = 4, kSlipOutlier = 5,
+                      kNumSlipKinds = 6 };
+
+struct RtkOptions {
+  RtkMode mode = RtkMode::kKinematic;
+  ArMode ar_mode = ArMode::kContinuous;
+  int n_freq = 2;
+  double elevation_mask_rad = 15.0 * M_PI / 180.0;
+  double ar_elevation_mask_rad = 0.0;
+  double ratio_threshold = 3.0;
+  int min_fix_ambiguities = 3;     // partial AR stops above this count
+  int max_partial_drops = 12;
+  bool partial_by_variance = false;  // partial AR drops the largest-variance ambiguity first (else the lowest)
+  int min_lock_epochs = 0;         // epochs an ambiguity is tracked before it is fixed
+  bool glonass_ar = false;
+  double sigma_phase_a_m = 0.003;  // sigma(el) = sqrt(a^2 + b^2 / sin^2 el), zero difference
+  double sigma_phase_b_m = 0.003;
+  double code_phase_ratio = 100.0;
+  double glonass_factor = 1.5;
+  double iono_sigma_per_10km_m = 0.0;
+  bool tropo_model = true;
+  double accel_psd_h = 9.0;        // white acceleration [m^2/s^3], horizontal
+  double accel_psd_v = 1.0;        // vertical
+  double static_pos_psd = 0.0;     // random walk of a static position [m^2/s]
+  double pos_init_sigma_m = 30.0;
+  double vel_init_sigma_mps = 10.0;
+  double amb_init_sigma_cycles = 30.0;
+  double amb_psd = 1e-8;           // [cycles^2/s]
+  double gf_threshold_m = 0.05;
+  double mw_threshold_cycles = 2.0;
+  double doppler_threshold_cycles = 1.0;  // <= 0: off
+  double doppler_max_dt_s = 1.5;
+  double max_gap_s = 120.0;        // a satellite unseen longer: its phase is treated as slipped
+  int max_outage_epochs = 5;       // an ambiguity unobserved this many epochs is removed
+  double outlier_sigma = 5.0;      // phase innovation beyond this many sigmas: ambiguity reset (0 off)
+  double hold_sigma_cycles = 0.0316;
+  double max_age_s = 30.0;         // (applied by the caller that matches the base epochs)
+};
+
+/// One epoch of the solution.
+struct RtkEpoch {
+  RtkStatus status = RtkStatus::kNone;
+  double ratio = 0.0;
+  int n_fix = 0;       // ambiguities fixed (double differences)
+  int n_dd = 0;        // double-differenced phase rows used
+  int n_sat = 0;       // common satellites above the mask
+  Vec3 r_e = Vec3::Zero();       // fixed if fixed, else float [m]
+  Vec3 v_e = Vec3::Zero();
+  Vec3 r_float_e = Vec3::Zero();
+  Mat3 P_r = Mat3::Zero();        // covariance of r_e [m^2]
+  std::array<int, kNumSlipKinds> slips{};
+};
+
+namespace detail {
+
+inline double tropo_saastamoinen_m(double lat, double h, double el) {
+  // Saastamoinen (1972) zenith delay of a standard atmosphere (RTKLIB manual eq. (E.5.4)),
+  // humidity 0.7, mapped by 1/cos(z).
+  if (el <= 0.0 || h < -100.0 || h > 1e4) return 0.0;
+  const double hgt = h < 0.0 ? 0.0 : h;
+  const double pres = 1013.25 * std::pow(1.0 - 2.2557e-5 * hgt, 5.2568);
+  const double temp = 15.0 - 6.5e-3 * hgt + 273.16;
+  const double e = 6.108 * 0.7 * std::exp((17.15 * temp - 4684.0) / (temp - 38.45));
+  const double z = M_PI / 2.0 - el;
+  const double trph = 0.0022768 * pres / (1.0 - 0.00266 * std::cos(2.0 * lat) - 0.00028 * hgt / 1e3) / std::cos(z);
+  const double trpw = 0.002277 * (1255.0 / temp + 0.05) * e / std::cos(z);
+  return trph + trpw;
+}
+
+}  // namespace detail
+
+/// Per-receiver cycle-slip detector (LLI, geometry-free, Melbourne-Wuebbena, Doppler).
+class SlipDetector {
+ public:
+  void reset() {
+    for (auto& s : sat_) s = SatTrack{};
+  }
+
+  /// Flags of one receiver epoch: flags[i * kMaxFreq + f] = bitmask of SlipKind for row i.
+  /// Rows: RtkRow layout, n rows.  Counts are added per detected (row, frequency).
+  void detect(double t, const double* rows, int n, int n_freq, const RtkOptions& o, std::uint8_t* flags,
+              std::array<int, kNumSlipKinds>& counts) {
+    // Doppler test: the receiver clock drift is common to all satellites: remove its median.
+    int nd = 0;
+    for (int i = 0; i < n; ++i) {
+      const double* r = rows + i * RtkRow::kCols;
+      const SatTrack& s = sat_[key(r)];
+      for (int f = 0; f < n_freq; ++f) {
+        dop_res_[i * kMaxFreq + f] = std::numeric_limits<double>::quiet_NaN();
+        const double L = r[RtkRow::kFreq0 + RtkRow::kPerFreq * f + 1];
+        const double D = r[RtkRow::kFreq0 + RtkRow::kPerFreq * f + 2];
+        const double dt = t - s.t[f];
+        if (o.doppler_threshold_cycles > 0.0 && std::isfinite(L) && std::isfinite(D) && std::isfinite(s.L[f]) &&
+            std::isfinite(s.D[f]) && dt > 0.0 && dt <= o.doppler_max_dt_s) {
+          const double d = (L - s.L[f]) + 0.5 * (D + s.D[f]) * dt;
+          dop_res_[i * kMaxFreq + f] = d;
+          if (nd < static_cast<int>(med_.size())) med_[nd++] = d;
+        }
+      }
+    }
+    double med = 0.0;
+    if (nd > 0) {
+      std::nth_element(med_.begin(), med_.begin() + nd / 2, med_.begin() + nd);
+      med = med_[nd / 2];
+    }
+    for (int i = 0; i < n; ++i) {
+      const double* r = rows + i * RtkRow::kCols;
+      SatTrack& s = sat_[key(r)];
+      std::uint8_t any = 0;
+      for (int f = 0; f < n_freq; ++f) {
+        std::uint8_t fl = 0;
+        const double* fr = r + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        const double L = fr[1];
+        if (!std::isfinite(L)) {
+          flags[i * kMaxFreq + f] = 0;
+          continue;
+        }
+        const int lli = std::isfinite(fr[3]) ? static_cast<int>(fr[3]) : 0;
+        if (lli & 1) fl |= 1u << kSlipLli;
+        if (std::isfinite(s.t[f]) && t - s.t[f] > o.max_gap_s) fl |= 1u << kSlipGap;
+        const double d = dop_res_[i * kMaxFreq + f];
+        if (std::isfinite(d) && nd >= 2 && std::abs(d - med) > o.doppler_threshold_cycles) fl |= 1u << kSlipDoppler;
+        flags[i * kMaxFreq + f] = fl;
+        any |= fl;
+      }
+      // geometry-free and Melbourne-Wuebbena on the first two frequencies
+      if (n_freq >= 2) {
+        const double* f0 = r + RtkRow::kFreq0;
+        const double* f1 = r + RtkRow::kFreq0 + RtkRow::kPerFreq;
+        const double L0 = f0[1], L1 = f1[1], lam0 = f0[4], lam1 = f1[4];
+        if (std::isfinite(L0) && std::isfinite(L1) && lam0 > 0.0 && lam1 > 0.0 && lam0 != lam1) {
+          const double gf = lam0 * L0 - lam1 * L1;
+          std::uint8_t fl = 0;
+          if (std::isfinite(s.gf) && t - s.gf_t <= o.max_gap_s && std::abs(gf - s.gf) > o.gf_threshold_m)
+            fl |= 1u << kSlipGf;
+          s.gf = gf;
+          s.gf_t = t;
+          const double P0 = f0[0], P1 = f1[0];
+          if (std::isfinite(P0) && std::isfinite(P1)) {
+            const double fr0 = kCLight / lam0, fr1 = kCLight / lam1;
+            const double lam_wl = kCLight / (fr0 - fr1);
+            const double mw = (L0 - L1) - (fr0 * P0 + fr1 * P1) / (fr0 + fr1) / lam_wl;
+            const bool restart = (any != 0) || (fl != 0) || !(t - s.mw_t <= o.max_gap_s);
+            if (!restart && s.mw_n >= 2) {
+              const double sd = std::sqrt(s.mw_m2 / (s.mw_n - 1));
+              if (std::abs(mw - s.mw_mean) > std::max(o.mw_threshold_cycles, 5.0 * sd)) fl |= 1u << kSlipMw;
+            }
+            if (restart || fl) {
+              s.mw_n = 0;
+              s.mw_mean = s.mw_m2 = 0.0;
+            }
+            ++s.mw_n;  // Welford running mean and variance
+            const double dm = mw - s.mw_mean;
+            s.mw_mean += dm / s.mw_n;
+            s.mw_m2 += dm * (mw - s.mw_mean);
+            s.mw_t = t;
+          }
+          if (fl)
+            for (int f = 0; f < 2; ++f) flags[i * kMaxFreq + f] |= fl;
+        }
+      }
+      for (int f = 0; f < n_freq; ++f) {
+        const std::uint8_t fl = flags[i * kMaxFreq + f];
+        for (int k = 0; k < kNumSlipKinds; ++k)
+          if (fl & (1u << k)) ++counts[k];
+        const double* fr = r + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        if (std::isfinite(fr[1])) {
+          s.t[f] = t;
+          s.L[f] = fr[1];
+          s.D[f] = fr[2];
+        }
+      }
+    }
+  }
+
+ private:
+  struct SatTrack {
+    double t[kMaxFreq] = {NAN, NAN, NAN};
+    double L[kMaxFreq] = {NAN, NAN, NAN};
+    double D[kMaxFreq] = {NAN, NAN, NAN};
+    double gf = NAN, gf_t = NAN;
+    double mw_mean = 0.0, mw_m2 = 0.0, mw_t = NAN;
+    int mw_n = 0;
+  };
+  static int key(const double* r) {
+    const int k = static_cast<int>(r[RtkRow::kSat]);
+    return (k >= 0 && k < kMaxSatKeys) ? k : 0;
+  }
+  std::array<SatTrack, kMaxSatKeys> sat_{};
+  std::array<double, kMaxSatKeys * kMaxFreq> dop_res_{};
+  std::array<double, kMaxSatKeys * kMaxFreq> med_{};
+};
+
+/// The RTK engine: feed it epochs in time order (process), read RtkEpoch back.
+class RtkEngine {
+ public:
+  using StateVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxStates, 1>;
+  using StateMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxStates, kMaxStates>;
+  using RowVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxRows, 1>;
+  using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxRows, kMaxRows>;
+  using HMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxRows, kMaxStates>;
+  using KMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxStates, kMaxRows>;
+
+  explicit RtkEngine(const RtkOptions& o) : opt_(o) { reset(); }
+
+  void reset() {
+    x_.setZero(kMaxStates);
+    P_.setZero(kMaxStates, kMaxStates);
+    amb_of_.fill(-1);
+    for (auto& a : amb_) a = AmbSlot{};
+    initialized_ = false;
+    t_prev_ = NAN;
+    rover_slip_.reset();
+    base_slip_.reset();
+  }
+
+  const RtkOptions& options() const { return opt_; }
+
+  /// Double differences "observed minus computed" at a given rover position, without the
+  /// ambiguity term (for tests against analytic values): per row the rover row index of the
+  /// satellite, of its reference, the frequency slot, whether it is code, and the value [m].
+  /// Returns the number of rows written (at most max_rows).  Resets the engine.
+  int double_differences(const double* rover, int n_r, const double* base, int n_b, const Vec3& r_rover_e,
+                         const Vec3& r_base_e, int* sat_row, int* ref_row, int* freq, int* is_code, double* value,
+                         int max_rows) {
+    reset();
+    const int nf = std::clamp(opt_.n_freq, 1, kMaxFreq);
+    std::array<int, kNumSlipKinds> slips{};
+    rover_slip_.detect(0.0, rover, n_r, nf, opt_, flags_r_.data(), slips);
+    std::fill(flags_b_.begin(), flags_b_.end(), 0);
+    std::fill(base_of_.begin(), base_of_.end(), -1);
+    for (int j = 0; j < n_b; ++j) base_of_[key(base + j * RtkRow::kCols)] = j;
+    n_common_ = 0;
+    for (int i = 0; i < n_r; ++i) {
+      const int j = base_of_[key(rover + i * RtkRow::kCols)];
+      if (j < 0) continue;
+      common_r_[n_common_] = i;
+      common_b_[n_common_] = j;
+      ++n_common_;
+    }
+    rover_ = rover;
+    base_ = base;
+    r_base_ = r_base_e;
+    const Vec3 llh_b = wgs84::ecef_to_geodetic(r_base_e);
+    lat_b_ = llh_b(0);
+    h_b_ = llh_b(2);
+    x_.segment<3>(RtkLayout::kPos) = r_rover_e;
+    update_geometry();
+    RtkEpoch dummy;
+    manage_ambiguities(nf, dummy);
+    int w = 0;
+    for (int code = 0; code < 2; ++code) {
+      const int m = build_rows(nf, code);
+      for (int i = 0; i < m && w < max_rows; ++i, ++w) {
+        const int c = row_c_[i], r = row_ref_[i], f = row_f_[i];
+        sat_row[w] = common_r_[c];
+        ref_row[w] = common_r_[r];
+        freq[w] = f;
+        is_code[w] = code;
+        value[w] = code ? sd_code_[c * kMaxFreq + f] - sd_code_[r * kMaxFreq + f]
+                        : sd_phase_[c * kMaxFreq + f] - sd_phase_[r * kMaxFreq + f];
+      }
+    }
+    return w;
+  }
+
+  /// Process one rover epoch at GPS time t [s] against a base epoch.
+  /// rover/base: n_r / n_b rows of RtkRow::kCols; base_new: the base rows are a new base epoch
+  /// (false when the caller holds an older one); r_base_e: base antenna position [m].
+  RtkEpoch process(double t, const double* rover, int n_r, const double* base, int n_b, bool base_new,
+                   const Vec3& r_base_e) {
+    RtkEpoch out;
+    const int nf = std::clamp(opt_.n_freq, 1, kMaxFreq);
+    n_r = std::min(n_r, kMaxSatKeys);
+    n_b = std::min(n_b, kMaxSatKeys);
+    rover_slip_.detect(t, rover, n_r, nf, opt_, flags_r_.data(), out.slips);
+    if (base_new) base_slip_.detect(t, base, n_b, nf, opt_, flags_b_.data(), out.slips);
+    else std::fill(flags_b_.begin(), flags_b_.end(), 0);
+    // common satellites
+    std::fill(base_of_.begin(), base_of_.end(), -1);
+    for (int j = 0; j < n_b; ++j) base_of_[key(base + j * RtkRow::kCols)] = j;
+    n_common_ = 0;
+    for (int i = 0; i < n_r; ++i) {
+      const double* rr = rover + i * RtkRow::kCols;
+      const int j = base_of_[key(rr)];
+      if (j < 0) continue;
+      if (!std::isfinite(rr[RtkRow::kSatPos]) || !std::isfinite(base[j * RtkRow::kCols + RtkRow::kSatPos])) continue;
+      common_r_[n_common_] = i;
+      common_b_[n_common_] = j;
+      ++n_common_;
+    }
+    rover_ = rover;
+    base_ = base;
+    r_base_ = r_base_e;
+    const Vec3 llh_b = wgs84::ecef_to_geodetic(r_base_e);
+    lat_b_ = llh_b(0);
+    h_b_ = llh_b(2);
+
+    const bool inst = opt_.ar_mode == ArMode::kInstantaneous;
+    const bool kin = opt_.mode == RtkMode::kKinematic;
+    // (re)initialise the position from the code double differences
+    if (!initialized_ || inst) {
+      Vec3 r0 = initialized_ ? Vec3(x_.segment<3>(RtkLayout::kPos)) : r_base_e;
+      Mat3 Pr;
+      if (!dgps(r0, nf, Pr)) {
+        out.n_sat = n_common_;
+        return out;  // no solution this epoch
+      }
+      x_.setZero(kMaxStates);
+      P_.setZero(kMaxStates, kMaxStates);
+      amb_of_.fill(-1);
+      for (auto& a : amb_) a = AmbSlot{};
+      x_.segment<3>(RtkLayout::kPos) = r0;
+      P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos) = Mat3::Identity() * opt_.pos_init_sigma_m * opt_.pos_init_sigma_m;
+      if (kin)
+        P_.block<3, 3>(RtkLayout::kVel, RtkLayout::kVel) =
+            Mat3::Identity() * opt_.vel_init_sigma_mps * opt_.vel_init_sigma_mps;
+      initialized_ = true;
+      t_prev_ = t;
+    }
+    // time update
+    const double dt = std::isfinite(t_prev_) ? t - t_prev_ : 0.0;
+    if (dt > 0.0) predict(dt, kin);
+    t_prev_ = t;
+    // elevations at the current rover estimate and the ambiguity bookkeeping
+    update_geometry();
+    manage_ambiguities(nf, out);
+    out.n_sat = n_used_sats_;
+    // float update: code rows, then phase rows (uncorrelated, so two updates in turn are exact up
+    // to the relinearisation); phase rows are rebuilt after outlier resets, at most twice
+    const int n_code = build_rows(nf, 1);
+    if (n_code > 0) kalman_update(n_code, false, out);
+    int n_rows = 0;
+    for (int pass = 0; pass < 3; ++pass) {
+      n_rows = build_rows(nf, 0);
+      if (n_rows == 0) break;
+      if (!kalman_update(n_rows, pass < 2, out)) continue;  // an outlier reset: rebuild
+      break;
+    }
+    out.n_dd = n_phase_rows_;
+    if (n_rows == 0 || n_phase_rows_ == 0) {
+      Mat3 Pr;
+      Vec3 r0 = x_.segment<3>(RtkLayout::kPos);
+      if (dgps(r0, nf, Pr)) {
+        out.status = RtkStatus::kDgps;
+        out.r_e = r0;
+        out.r_float_e = r0;
+        out.P_r = Pr;
+      }
+      return out;
+    }
+    for (int k = 0; k < kMaxAmbStates; ++k)
+      if (amb_[k].used) ++amb_[k].lock;
+    out.r_float_e = x_.segment<3>(RtkLayout::kPos);
+    out.r_e = out.r_float_e;
+    out.v_e = kin ? Vec3(x_.segment<3>(RtkLayout::kVel)) : Vec3::Zero();
+    out.P_r = P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos);
+    out.status = RtkStatus::kFloat;
+    if (opt_.ar_mode != ArMode::kOff) resolve(out, kin);
+    return out;
+  }
+
+ private:
+  struct AmbSlot {
+    int sat = -1, freq = -1;
+    int lock = 0, outage = 0;
+    bool used = false;      // a phase row this epoch
+    bool half = false;      // half-cycle ambiguity flagged
+    double el = 0.0;
+  };
+
+  static int key(const double* r) {
+    const int k = static_cast<int>(r[RtkRow::kSat]);
+    return (k >= 0 && k < kMaxSatKeys) ? k : 0;
+  }
+  static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
+
+  // Geometry of a receiver at r to the satellite of row: range with Sagnac term, unit vector, elevation.
+  static double range(const double* row, const Vec3& r, Vec3& e_unit) {
+    const Vec3 rs(row[RtkRow::kSatPos], row[RtkRow::kSatPos + 1], row[RtkRow::kSatPos + 2]);
+    const Vec3 d = rs - r;
+    const double g = d.norm();
+    e_unit = d / g;
+    return g + kOmegaE * (rs.x() * r.y() - rs.y() * r.x()) / kCLight;
+  }
+
+  double var_zd(double el, int sys) const {
+    const double s = std::max(std::sin(el), 0.05);
+    const double f = sys == kGlonass ? opt_.glonass_factor : 1.0;
+    return f * f * (opt_.sigma_phase_a_m * opt_.sigma_phase_a_m + opt_.sigma_phase_b_m * opt_.sigma_phase_b_m / (s * s));
+  }
+
+  void update_geometry() {
+    const Vec3 rr = x_.segment<3>(RtkLayout::kPos);
+    const Vec3 llh = wgs84::ecef_to_geodetic(rr);
+    lat_r_ = llh(0);
+    h_r_ = llh(2);
+    const Mat3 C = wgs84::C_en(llh(0), llh(1));
+    const Mat3 Cb = wgs84::C_en(lat_b_, wgs84::ecef_to_geodetic(r_base_)(1));
+    n_used_sats_ = 0;
+    for (int c = 0; c < n_common_; ++c) {
+      Vec3 e;
+      range(rover_ + common_r_[c] * RtkRow::kCols, rr, e);
+      const Vec3 e_n = C.transpose() * e;
+      el_r_[c] = std::asin(std::clamp(-e_n(2), -1.0, 1.0));
+      range(base_ + common_b_[c] * RtkRow::kCols, r_base_, e);
+      const Vec3 eb_n = Cb.transpose() * e;
+      el_b_[c] = std::asin(std::clamp(-eb_n(2), -1.0, 1.0));
+      use_[c] = el_r_[c] >= opt_.elevation_mask_rad && el_b_[c] >= 0.0;
+      if (use_[c]) ++n_used_sats_;
+    }
+  }
+
+  void predict(double dt, bool kin) {
+    if (kin) {
+      // x_pos += v dt; white acceleration in ENU (q_h, q_h, q_v)
+      x_.segment<3>(RtkLayout::kPos) += x_.segment<3>(RtkLayout::kVel) * dt;
+      const int n = kMaxStates;
+      // P <- F P F^T with F = [I I dt; 0 I] on the first six states
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < 3; ++i) P_(i, j) += dt * P_(3 + i, j);
+      for (int i = 0; i < n; ++i)
+        for (int j = 0; j < 3; ++j) P_(i, j) += dt * P_(i, 3 + j);
+      const Vec3 llh = wgs84::ecef_to_geodetic(Vec3(x_.segment<3>(RtkLayout::kPos)));
+      const Mat3 C = wgs84::C_en(llh(0), llh(1));
+      const Mat3 Qn = Vec3(opt_.accel_psd_h, opt_.accel_psd_h, opt_.accel_psd_v).asDiagonal();
+      const Mat3 Qe = C * Qn * C.transpose();
+      P_.block<3, 3>(0, 0) += Qe * (dt * dt * dt / 3.0);
+      P_.block<3, 3>(0, 3) += Qe * (dt * dt / 2.0);
+      P_.block<3, 3>(3, 0) += Qe * (dt * dt / 2.0);
+      P_.block<3, 3>(3, 3) += Qe * dt;
+    } else if (opt_.static_pos_psd > 0.0) {
+      P_.block<3, 3>(0, 0) += Mat3::Identity() * opt_.static_pos_psd * dt;
+    }
+    for (int k = 0; k < kMaxAmbStates; ++k)
+      if (amb_[k].sat >= 0) P_(RtkLayout::kAmb + k, RtkLayout::kAmb + k) += opt_.amb_psd * dt;
+  }
+
+  void remove_amb(int k) {
+    const int s = RtkLayout::kAmb + k;
+    if (amb_[k].sat >= 0) amb_of_[amb_[k].sat * kMaxFreq + amb_[k].freq] = -1;
+    amb_[k] = AmbSlot{};
+    x_(s) = 0.0;
+    P_.row(s).setZero();
+    P_.col(s).setZero();
+  }
+
+  // Initialise (or re-initialise) the ambiguity of common satellite c, frequency f from SD(phase - code).
+  void init_amb(int k, int c, int f) {
+    const int s = RtkLayout::kAmb + k;
+    const double* fr = rover_ + common_r_[c] * RtkRow::kCols + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+    const double* fb = base_ + common_b_[c] * RtkRow::kCols + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+    const double lam = fr[4];
+    double n0 = fr[1] - fb[1];
+    if (std::isfinite(fr[0]) && std::isfinite(fb[0])) n0 -= (fr[0] - fb[0]) / lam;
+    else {  // no code: from the geometry of the current estimate
+      Vec3 e;
+      const double rho_r = range(rover_ + common_r_[c] * RtkRow::kCols, x_.segment<3>(RtkLayout::kPos), e);
+      const double rho_b = range(base_ + common_b_[c] * RtkRow::kCols, r_base_, e);
+      n0 -= (rho_r - rho_b) / lam;
+    }
+    x_(s) = n0;
+    P_.row(s).setZero();
+    P_.col(s).setZero();
+    P_(s, s) = opt_.amb_init_sigma_cycles * opt_.amb_init_sigma_cycles;
+    amb_[k].lock = 0;
+    amb_[k].outage = 0;
+  }
+
+  void manage_ambiguities(int nf, RtkEpoch& out) {
+    for (int k = 0; k < kMaxAmbStates; ++k) amb_[k].used = false;
+    for (int c = 0; c < n_common_; ++c) {
+      if (!use_[c]) continue;
+      const double* r = rover_ + common_r_[c] * RtkRow::kCols;
+      const double* b = base_ + common_b_[c] * RtkRow::kCols;
+      const int sat = key(r);
+      for (int f = 0; f < nf; ++f) {
+        const double* fr = r + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        const double* fb = b + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        if (!std::isfinite(fr[1]) || !std::isfinite(fb[1]) || !(fr[4] > 0.0)) continue;
+        const bool slip = flags_r_[common_r_[c] * kMaxFreq + f] != 0 || flags_b_[common_b_[c] * kMaxFreq + f] != 0;
+        int k = amb_of_[sat * kMaxFreq + f];
+        if (k < 0) {
+          for (int q = 0; q < kMaxAmbStates; ++q)
+            if (amb_[q].sat < 0) { k = q; break; }
+          if (k < 0) continue;  // table full: the satellite is not used on this frequency
+          amb_[k].sat = sat;
+          amb_[k].freq = f;
+          amb_of_[sat * kMaxFreq + f] = k;
+          init_amb(k, c, f);
+        } else if (slip) {
+          init_amb(k, c, f);
+        }
+        const int lli_r = std::isfinite(fr[3]) ? static_cast<int>(fr[3]) : 0;
+        const int lli_b = std::isfinite(fb[3]) ? static_cast<int>(fb[3]) : 0;
+        amb_[k].half = ((lli_r | lli_b) & 2) != 0;
+        amb_[k].used = true;
+        amb_[k].outage = 0;
+        amb_[k].el = el_r_[c];
+        amb_row_[c * kMaxFreq + f] = k;
+      }
+    }
+    for (int k = 0; k < kMaxAmbStates; ++k)
+      if (amb_[k].sat >= 0 && !amb_[k].used && ++amb_[k].outage > opt_.max_outage_epochs) remove_amb(k);
+    (void)out;
+  }
+
+  // Build the double-difference rows at the current state (y, H over the compact state, R).
+  int build_rows(int nf, int code) {
+    // active states: position, velocity (kinematic), tracked ambiguities
+    na_ = 0;
+    const bool kin = opt_.mode == RtkMode::kKinematic && opt_.ar_mode != ArMode::kInstantaneous;
+    for (int i = 0; i < (kin ? 6 : 3); ++i) act_[na_++] = i;
+    std::fill(col_of_.begin(), col_of_.end(), -1);
+    for (int k = 0; k < kMaxAmbStates; ++k)
+      if (amb_[k].sat >= 0) {
+        col_of_[k] = na_;
+        act_[na_++] = RtkLayout::kAmb + k;
+      }
+    const Vec3 rr = x_.segment<3>(RtkLayout::kPos);
+    const double bl = (rr - r_base_).norm();
+    const double var_bl = std::pow(opt_.iono_sigma_per_10km_m * bl / 1e4, 2);
+    // zero-difference residuals
+    for (int c = 0; c < n_common_; ++c) {
+      if (!use_[c]) continue;
+      const double* r = rover_ + common_r_[c] * RtkRow::kCols;
+      const double* b = base_ + common_b_[c] * RtkRow::kCols;
+      Vec3 eb;
+      const double rho_r = range(r, rr, e_[c]);
+      const double rho_b = range(b, r_base_, eb);
+      double tr = 0.0, tb = 0.0;
+      if (opt_.tropo_model) {
+        tr = detail::tropo_saastamoinen_m(lat_r_, h_r_, el_r_[c]);
+        tb = detail::tropo_saastamoinen_m(lat_b_, h_b_, el_b_[c]);
+      }
+      const double mr = rho_r - r[RtkRow::kSatClock] + tr;
+      const double mb = rho_b - b[RtkRow::kSatClock] + tb;
+      for (int f = 0; f < nf; ++f) {
+        const double* fr = r + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        const double* fb = b + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        sd_phase_[c * kMaxFreq + f] = (fr[4] > 0.0 && std::isfinite(fr[1]) && std::isfinite(fb[1]))
+                                          ? (fr[4] * fr[1] - mr) - (fb[4] * fb[1] - mb)
+                                          : NAN;
+        sd_code_[c * kMaxFreq + f] =
+            (std::isfinite(fr[0]) && std::isfinite(fb[0])) ? (fr[0] - mr) - (fb[0] - mb) : NAN;
+      }
+      var_sd_[c] = var_zd(el_r_[c], sys_of(r)) + var_zd(el_b_[c], sys_of(r));
+    }
+    int m = 0;
+    n_phase_rows_ = 0;
+    R_.setZero(kMaxRows, kMaxRows);
+    y_.setZero(kMaxRows);
+    {
+      for (int sys = 0; sys < kNumSystems; ++sys) {
+        for (int f = 0; f < nf; ++f) {
+          // reference: highest rover elevation with a valid observation (and ambiguity for phase)
+          int ref = -1;
+          for (int c = 0; c < n_common_; ++c) {
+            if (!use_[c] || sys_of(rover_ + common_r_[c] * RtkRow::kCols) != sys) continue;
+            if (!valid(c, f, code)) continue;
+            if (ref < 0 || el_r_[c] > el_r_[ref]) ref = c;
+          }
+          if (ref < 0) continue;
+          const int m0 = m;
+          const double var_ref = var_sd_[ref] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio : 1.0);
+          for (int c = 0; c < n_common_; ++c) {
+            if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * RtkRow::kCols) != sys) continue;
+            if (!valid(c, f, code) || m >= kMaxRows) continue;
+            const Vec3 dH = -(e_[c] - e_[ref]);
+            nz_[m] = 0;
+            for (int i = 0; i < 3; ++i) set_h(m, i, dH(i));
+            if (!code) {
+              const int kj = amb_row_[c * kMaxFreq + f], ki = amb_row_[ref * kMaxFreq + f];
+              const double lj = lam(common_r_[c], f), li = lam(common_r_[ref], f);
+              y_(m) = (sd_phase_[c * kMaxFreq + f] - sd_phase_[ref * kMaxFreq + f]) -
+                      (lj * x_(RtkLayout::kAmb + kj) - li * x_(RtkLayout::kAmb + ki));
+              set_h(m, col_of_[kj], lj);
+              set_h(m, col_of_[ki], -li);
+              row_amb_[m] = kj;
+              ++n_phase_rows_;
+            } else {
+              y_(m) = sd_code_[c * kMaxFreq + f] - sd_code_[ref * kMaxFreq + f];
+              row_amb_[m] = -1;
+            }
+            row_code_[m] = code;
+            row_c_[m] = c;
+            row_ref_[m] = ref;
+            row_f_[m] = f;
+            const double var_j = var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio : 1.0);
+            R_(m, m) = var_j + var_bl;
+            for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
+            R_(m, m) += var_ref + var_bl;
+            ++m;
+          }
+        }
+      }
+    }
+    return m;
+  }
+
+  double lam(int rover_row, int f) const {
+    return rover_[rover_row * RtkRow::kCols + RtkRow::kFreq0 + RtkRow::kPerFreq * f + 4];
+  }
+
+  bool valid(int c, int f, int code) const {
+    if (code) return std::isfinite(sd_code_[c * kMaxFreq + f]);
+    return std::isfinite(sd_phase_[c * kMaxFreq + f]) && amb_of_[key(rover_ + common_r_[c] * RtkRow::kCols) * kMaxFreq + f] >= 0;
+  }
+
+  // Kalman update over the compact state.  Returns false after resetting outlier ambiguities.
+  bool kalman_update(int m, bool allow_reset, RtkEpoch& out) {
+    Pa_.resize(na_, na_);
+    xa_.resize(na_);
+    for (int i = 0; i < na_; ++i) {
+      xa_(i) = x_(act_[i]);
+      for (int j = 0; j < na_; ++j) Pa_(i, j) = P_(act_[i], act_[j]);
+    }
+    // H is sparse (3 position columns and two ambiguities per row): P H^T and H P H^T by its
+    // non-zeros, O(n m) and O(m^2) instead of O(n^2 m) and O(n m^2)
+    PHt_.setZero(na_, m);
+    for (int r = 0; r < m; ++r)
+      for (int k = 0; k < nz_[r]; ++k) PHt_.col(r) += Pa_.col(hc_[r][k]) * hv_[r][k];
+    S_ = R_.topLeftCorner(m, m);
+    for (int a = 0; a < m; ++a)
+      for (int k = 0; k < nz_[a]; ++k) S_.row(a) += hv_[a][k] * PHt_.row(hc_[a][k]);
+    if (opt_.outlier_sigma > 0.0 && allow_reset) {
+      bool reset_any = false;
+      for (int i = 0; i < m; ++i) {
+        if (row_code_[i]) continue;
+        const double lim = opt_.outlier_sigma * std::sqrt(S_(i, i));
+        if (std::abs(y_(i)) > lim && amb_[row_amb_[i]].lock > 0) {
+          // re-initialise the ambiguity (an undetected slip or a multipath outlier)
+          const int k = row_amb_[i];
+          for (int c = 0; c < n_common_; ++c)
+            if (key(rover_ + common_r_[c] * RtkRow::kCols) == amb_[k].sat) { init_amb(k, c, amb_[k].freq); break; }
+          ++out.slips[kSlipOutlier];
+          reset_any = true;
+        }
+      }
+      if (reset_any) return false;
+    }
+    llt_.compute(S_);
+    if (llt_.info() != Eigen::Success) return true;
+    KT_ = PHt_.transpose();  // K^T = S^{-1} (P H^T)^T
+    llt_.solveInPlace(KT_);
+    K_ = KT_.transpose();
+    xa_.noalias() += K_ * y_.head(m);
+    Pa_.noalias() -= K_ * PHt_.transpose();  // P - K H P
+    Pn_ = 0.5 * (Pa_ + Pa_.transpose());
+    Pa_ = Pn_;
+    for (int i = 0; i < na_; ++i) {
+      x_(act_[i]) = xa_(i);
+      for (int j = 0; j < na_; ++j) P_(act_[i], act_[j]) = Pa_(i, j);
+    }
+    return true;
+  }
+
+  // Code-only double-difference least squares (the DGPS solution; initialisation).
+  bool dgps(Vec3& r, int nf, Mat3& P_r) {
+    (void)nf;
+    for (int it = 0; it < 10; ++it) {
+      Mat3 N = Mat3::Zero();
+      Vec3 b = Vec3::Zero();
+      int nrows = 0;
+      for (int sys = 0; sys < kNumSystems; ++sys) {
+        int ref = -1;
+        double best = -2.0;
+        for (int c = 0; c < n_common_; ++c) {
+          const double* rw = rover_ + common_r_[c] * RtkRow::kCols;
+          const double* bw = base_ + common_b_[c] * RtkRow::kCols;
+          if (sys_of(rw) != sys || !std::isfinite(rw[RtkRow::kFreq0]) || !std::isfinite(bw[RtkRow::kFreq0])) continue;
+          Vec3 e;
+          range(rw, r, e);
+          const double up = e.dot(r.normalized());  // sin of the geocentric elevation
+          if (up < std::sin(opt_.elevation_mask_rad)) continue;
+          if (up > best) { best = up; ref = c; }
+        }
+        if (ref < 0) continue;
+        Vec3 ei, eb;
+        const double* ri = rover_ + common_r_[ref] * RtkRow::kCols;
+        const double* bi = base_ + common_b_[ref] * RtkRow::kCols;
+        const double sdi = (ri[RtkRow::kFreq0] - range(ri, r, ei)) - (bi[RtkRow::kFreq0] - range(bi, r_base_, eb));
+        for (int c = 0; c < n_common_; ++c) {
+          if (c == ref) continue;
+          const double* rw = rover_ + common_r_[c] * RtkRow::kCols;
+          const double* bw = base_ + common_b_[c] * RtkRow::kCols;
+          if (sys_of(rw) != sys || !std::isfinite(rw[RtkRow::kFreq0]) || !std::isfinite(bw[RtkRow::kFreq0])) continue;
+          Vec3 e;
+          const double rho = range(rw, r, e);
+          const double up = e.dot(r.normalized());
+          if (up < std::sin(opt_.elevation_mask_rad)) continue;
+          const double sd = (rw[RtkRow::kFreq0] - rho) - (bw[RtkRow::kFreq0] - range(bw, r_base_, eb));
+          const Vec3 h = -(e - ei);
+          const double w = up * up;  // ~ 1 / sigma^2 with sigma ~ 1 / sin(el)
+          N += w * h * h.transpose();
+          b += w * h * (sd - sdi);
+          ++nrows;
+        }
+      }
+      if (nrows < 3) return false;
+      Eigen::LDLT<Mat3> ldlt(N);
+      if (ldlt.info() != Eigen::Success) return false;
+      const Vec3 dx = ldlt.solve(b);
+      if (!dx.allFinite()) return false;
+      r += dx;
+      if (dx.norm() < 1e-4) {
+        P_r = N.inverse() * std::pow(opt_.sigma_phase_a_m * opt_.code_phase_ratio, 2) * 4.0;
+        return true;
+      }
+    }
+    P_r = Mat3::Identity() * opt_.pos_init_sigma_m * opt_.pos_init_sigma_m;
+    return true;
+  }
+
+  // Integer ambiguity resolution with partial AR; fills out (fixed position, ratio, counts).
+  void resolve(RtkEpoch& out, bool kin) {
+    // candidate double differences: per system and frequency, reference = highest elevation
+    int n = 0;
+    for (int sys = 0; sys < kNumSystems; ++sys) {
+      if (sys == kGlonass && !opt_.glonass_ar) continue;
+      for (int f = 0; f < kMaxFreq; ++f) {
+        int ref = -1;
+        for (int k = 0; k < kMaxAmbStates; ++k) {
+          const AmbSlot& a = amb_[k];
+          if (!eligible(a, sys, f)) continue;
+          if (ref < 0 || a.el > amb_[ref].el) ref = k;
+        }
+        if (ref < 0) continue;
+        for (int k = 0; k < kMaxAmbStates; ++k) {
+          if (k == ref || !eligible(amb_[k], sys, f) || n >= kMaxAmbiguities) continue;
+          dd_j_[n] = k;
+          dd_i_[n] = ref;
+          dd_el_[n] = amb_[k].el;
+          {
+            const int sj = RtkLayout::kAmb + k, si = RtkLayout::kAmb + ref;
+            dd_var_[n] = P_(sj, sj) - 2.0 * P_(sj, si) + P_(si, si);
+          }
+          ++n;
+        }
+      }
+    }
+    // order by elevation, highest first (or by variance, smallest first): partial AR drops from the end
+    for (int i = 0; i < n; ++i) order_[i] = i;
+    if (opt_.partial_by_variance)
+      std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_var_[a] < dd_var_[b]; });
+    else
+      std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
+    const bool kv = kin;
+    int drops = 0;
+    for (int nuse = n; nuse >= std::max(opt_.min_fix_ambiguities, 1); --nuse) {
+      if (drops++ > opt_.max_partial_drops) break;
+      a_hat_.resize(nuse);
+      Qa_.resize(nuse, nuse);
+      for (int p = 0; p < nuse; ++p) {
+        const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
+        a_hat_(p) = x_(sj) - x_(si);
+        for (int q = 0; q <= p; ++q) {
+          const int tj = RtkLayout::kAmb + dd_j_[order_[q]], ti = RtkLayout::kAmb + dd_i_[order_[q]];
+          Qa_(p, q) = Qa_(q, p) = P_(sj, tj) - P_(sj, ti) - P_(si, tj) + P_(si, ti);
+        }
+      }
+      double s[2];
+      if (lambda_.solve(a_hat_, Qa_, a_fix_, s) != LambdaStatus::kOk) continue;
+      const double ratio = s[0] > 0.0 ? std::min(s[1] / s[0], 999.9) : 999.9;
+      if (nuse == n) out.ratio = ratio;
+      if (ratio < opt_.ratio_threshold) continue;
+      // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
+      Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxAmbiguities> Qba(6, nuse);
+      for (int p = 0; p < nuse; ++p) {
+        const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
+        for (int i = 0; i < 6; ++i) Qba(i, p) = P_(i, sj) - P_(i, si);
+      }
+      qa_llt_.compute(Qa_);
+      if (qa_llt_.info() != Eigen::Success) continue;
+      da_ = a_hat_ - a_fix_.col(0);
+      const Eigen::Matrix<double, 6, 1> xb = x_.head<6>() - Qba * qa_llt_.solve(da_);
+      const Eigen::Matrix<double, 6, 6> Pb =
+          P_.topLeftCorner<6, 6>() - Qba * qa_llt_.solve(AmbMat(Qba.transpose()));
+      out.status = RtkStatus::kFixed;
+      out.ratio = ratio;
+      out.n_fix = nuse;
+      out.r_e = xb.head<3>();
+      if (kv) out.v_e = xb.tail<3>();
+      out.P_r = Pb.topLeftCorner<3, 3>();
+      if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
+      return;
+    }
+  }
+
+  bool eligible(const AmbSlot& a, int sys, int f) const {
+    return a.sat >= 0 && a.used && !a.half && a.freq == f && a.sat / kMaxPrn == sys && a.lock >= opt_.min_lock_epochs &&
+           a.el >= opt_.ar_elevation_mask_rad;
+  }
+
+  // Fix-and-hold: the fixed double differences as tight pseudo-measurements of the float filter.
+  void hold(int nuse) {
+    na_ = 0;
+    std::fill(col_of_.begin(), col_of_.end(), -1);
+    const bool kin = opt_.mode == RtkMode::kKinematic;
+    for (int i = 0; i < (kin ? 6 : 3); ++i) act_[na_++] = i;
+    for (int k = 0; k < kMaxAmbStates; ++k)
+      if (amb_[k].sat >= 0) {
+        col_of_[k] = na_;
+        act_[na_++] = RtkLayout::kAmb + k;
+      }
+    const int m = std::min(nuse, kMaxRows);
+    R_.setZero(kMaxRows, kMaxRows);
+    for (int p = 0; p < m; ++p) {
+      const int kj = dd_j_[order_[p]], ki = dd_i_[order_[p]];
+      nz_[p] = 0;
+      set_h(p, col_of_[kj], 1.0);
+      set_h(p, col_of_[ki], -1.0);
+      y_(p) = a_fix_(p, 0) - (x_(RtkLayout::kAmb + kj) - x_(RtkLayout::kAmb + ki));
+      R_(p, p) = opt_.hold_sigma_cycles * opt_.hold_sigma_cycles;
+      row_code_[p] = 1;  // no outlier test on these
+    }
+    RtkEpoch dummy;
+    kalman_update(m, false, dummy);
+  }
+
+  RtkOptions opt_;
+  StateVec x_;
+  StateMat P_;
+  std::array<int, kMaxSatKeys * kMaxFreq> amb_of_{};
+  std::array<AmbSlot, kMaxAmbStates> amb_{};
+  bool initialized_ = false;
+  double t_prev_ = NAN;
+  SlipDetector rover_slip_, base_slip_;
+  std::array<std::uint8_t, kMaxSatKeys * kMaxFreq> flags_r_{}, flags_b_{};
+  std::array<int, kMaxSatKeys> base_of_{}, common_r_{}, common_b_{};
+  std::array<double, kMaxSatKeys> el_r_{}, el_b_{}, var_sd_{};
+  std::array<bool, kMaxSatKeys> use_{};
+  std::array<Vec3, kMaxSatKeys> e_{};
+  std::array<int, kMaxSatKeys * kMaxFreq> amb_row_{};
+  std::array<double, kMaxSatKeys * kMaxFreq> sd_phase_{}, sd_code_{};
+  int n_common_ = 0, n_used_sats_ = 0, n_phase_rows_ = 0;
+  const double* rover_ = nullptr;
+  const double* base_ = nullptr;
+  Vec3 r_base_ = Vec3::Zero();
+  double lat_b_ = 0.0, h_b_ = 0.0, lat_r_ = 0.0, h_r_ = 0.0;
+  // update workspace (compact state)
+  int na_ = 0;
+  std::array<int, kMaxStates> act_{};
+  std::array<int, kMaxAmbStates> col_of_{};
+  std::array<int, kMaxRows> row_amb_{}, row_code_{}, row_c_{}, row_ref_{}, row_f_{}, nz_{};
+  std::array<std::array<int, 5>, kMaxRows> hc_{};     // non-zero columns of each row of H
+  std::array<std::array<double, 5>, kMaxRows> hv_{};  // and their values
+  void set_h(int r, int col, double v) {
+    for (int k = 0; k < nz_[r]; ++k)
+      if (hc_[r][k] == col) { hv_[r][k] += v; return; }
+    hc_[r][nz_[r]] = col;
+    hv_[r][nz_[r]] = v;
+    ++nz_[r];
+  }
+
+  RowMat R_, S_;
+  RowVec y_;
+  StateMat Pa_, Pn_;
+  StateVec xa_;
+  KMat PHt_, K_;
+  HMat KT_;
+  Eigen::LLT<RowMat> llt_{kMaxRows};
+  // AR workspace
+  Lambda lambda_;
+  std::array<int, kMaxAmbiguities> dd_j_{}, dd_i_{}, order_{};
+  std::array<double, kMaxAmbiguities> dd_el_{}, dd_var_{};
+  AmbVec a_hat_, da_;
+  AmbMat Qa_;
+  AmbCand a_fix_;
+  Eigen::LLT<AmbMat> qa_llt_{kMaxAmbiguities};
+};
+
+}  // namespace insnav::gnss

@@ -1,0 +1,297 @@
+// insnav/io/rinex3_obs.hpp -- fast RINEX 3.02-3.05 observation reader for carrier-phase work:
+// pseudorange, carrier phase, Doppler, C/N0 and the loss-of-lock indicator on up to three
+// frequency slots per system.
+//
+// Format: Gurtner & Estey / IGS RINEX WG, "RINEX The Receiver Independent Exchange Format",
+// version 3.05 (2020), Sec. 5.1 and Table A2-A3: an epoch line starts with '>', each satellite
+// line holds 16-character fields, F14.3 value + LLI digit + signal-strength digit.
+//
+// The reader keeps one signal per (system, frequency slot): the first attribute of the slot's
+// preference list whose carrier phase type ('L') is in the header (else whose pseudorange is),
+// and the pseudorange / Doppler / C/N0 of the same attribute.  Every problem throws
+// std::runtime_error "<file>, line <n>: <what>" (the Python layer turns it into RinexError).
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace insnav::io {
+
+/// Per-slot columns of RinexObsTable::obs: pseudorange [m], phase [cycles], Doppler [Hz], C/N0 [dB-Hz], LLI.
+inline constexpr int kObsPerSlot = 5;
+inline constexpr int kObsSlots = 3;
+
+struct RinexObsTable {
+  std::string path;
+  double version = 0.0;
+  bool has_approx = false;
+  double approx_r_e[3] = {NAN, NAN, NAN};
+  double antenna_hen_m[3] = {0.0, 0.0, 0.0};  // ANTENNA: DELTA H/E/N
+  std::string marker_name;
+  std::map<int, int> glonass_channels;        // slot -> FDMA channel (GLONASS SLOT / FRQ #)
+  std::map<char, std::array<std::string, kObsSlots>> chosen;  // system -> 3-char code ("1C") per slot
+  std::vector<double> epoch_t_gps_s;          // GPS seconds since 1980-01-06
+  std::vector<int> epoch_flag;
+  std::vector<int> row_epoch, row_sys, row_prn;
+  std::vector<double> obs;                    // n_rows x (kObsSlots * kObsPerSlot), NaN where missing
+};
+
+namespace detail {
+
+inline long days_from_civil(long y, unsigned m, unsigned d) {  // H. Hinnant's algorithm
+  y -= m <= 2;
+  const long era = (y >= 0 ? y : y - 399) / 400;
+  const unsigned yoe = static_cast<unsigned>(y - era * 400);
+  const unsigned doy = (153 * (m + (m > 2 ? -3 : 9)) + 2) / 5 + d - 1;
+  const unsigned doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+  return era * 146097 + static_cast<long>(doe) - 719468;
+}
+
+struct LineReader {
+  const std::string& text;
+  const std::string& path;
+  size_t pos = 0;
+  long lineno = 0;
+  const char* b = nullptr;
+  size_t len = 0;
+  bool next() {
+    if (pos >= text.size()) return false;
+    const size_t e = text.find('\n', pos);
+    const size_t end = e == std::string::npos ? text.size() : e;
+    b = text.data() + pos;
+    len = end - pos;
+    if (len > 0 && b[len - 1] == '\r') --len;
+    pos = end + 1;
+    ++lineno;
+    return true;
+  }
+  [[noreturn]] void fail(const std::string& what) const {
+    throw std::runtime_error(path + ", line " + std::to_string(lineno) + ": " + what);
+  }
+  std::string field(size_t a, size_t n) const {
+    if (a >= len) return std::string();
+    return std::string(b + a, std::min(n, len - a));
+  }
+};
+
+inline bool blank(const char* p, size_t n) {
+  for (size_t i = 0; i < n; ++i)
+    if (p[i] != ' ') return false;
+  return true;
+}
+
+// Parse [p, p+n) as a number; NaN if blank; false if not a number.
+inline bool parse_num(const char* p, size_t n, double& v) {
+  char buf[40];
+  n = std::min<size_t>(n, sizeof(buf) - 1);
+  std::memcpy(buf, p, n);
+  buf[n] = 0;
+  char* s = buf;
+  while (*s == ' ') ++s;
+  if (!*s) { v = NAN; return true; }
+  for (char* q = s; *q; ++q)
+    if (*q == 'D' || *q == 'd') *q = 'E';
+  char* end = nullptr;
+  v = std::strtod(s, &end);
+  while (end && *end == ' ') ++end;
+  return end && *end == 0;
+}
+
+inline int parse_int(const LineReader& L, size_t a, size_t n, const char* what) {
+  double v;
+  if (a + n > L.len || !parse_num(L.b + a, n, v) || !std::isfinite(v) || v != std::floor(v))
+    L.fail(std::string("bad integer for ") + what + " '" + L.field(a, n) + "'");
+  return static_cast<int>(v);
+}
+
+}  // namespace detail
+
+/// Read a RINEX 3 observation file.  prefs: system letter -> up to kObsSlots lists of
+/// 2-character signal codes ("1C", "2W", ...) in order of preference; systems not in prefs are
+/// skipped.  Throws std::runtime_error naming the file and line on malformed input.
+inline RinexObsTable read_rinex3_obs(const std::string& path,
+                                     const std::map<char, std::vector<std::vector<std::string>>>& prefs) {
+  std::string text;
+  {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw std::runtime_error(path + ": cannot read file");
+    std::ostringstream ss;
+    ss << f.rdbuf();
+    text = ss.str();
+  }
+  RinexObsTable out;
+  out.path = path;
+  detail::LineReader L{text, path};
+  if (!L.next() || L.len < 61 || L.field(60, 20).find("RINEX VERSION / TYPE") == std::string::npos)
+    L.fail("malformed header: first line is not 'RINEX VERSION / TYPE'");
+  {
+    double v;
+    if (!detail::parse_num(L.b, 9, v) || !std::isfinite(v)) L.fail("malformed header: bad RINEX version");
+    out.version = v;
+    if (v < 3.0 || v >= 4.0) L.fail("unsupported RINEX version " + L.field(0, 9) + " (this reader: 3.02-3.05)");
+    if (L.field(20, 1) != "O") L.fail("malformed header: not an observation file (type '" + L.field(20, 1) + "')");
+  }
+  std::map<char, std::vector<std::string>> types;  // system -> list of 3-char obs types
+  std::map<char, int> announced;
+  char cur = 0;
+  bool end_header = false;
+  while (L.next()) {
+    const std::string label = L.len > 60 ? L.field(60, 20) : std::string();
+    auto has = [&](const char* s) { return label.compare(0, std::strlen(s), s) == 0; };
+    if (has("END OF HEADER")) { end_header = true; break; }
+    if (has("SYS / # / OBS TYPES")) {
+      if (L.b[0] != ' ') {
+        cur = L.b[0];
+        announced[cur] = detail::parse_int(L, 3, 3, "number of observation types");
+        types[cur].clear();
+      } else if (!cur) {
+        L.fail("malformed header: SYS / # / OBS TYPES continuation without a system");
+      }
+      for (int k = 0; k < 13; ++k) {
+        std::string c = L.field(7 + 4 * k, 3);
+        while (!c.empty() && c.back() == ' ') c.pop_back();
+        if (!c.empty() && static_cast<int>(types[cur].size()) < announced[cur]) types[cur].push_back(c);
+      }
+    } else if (has("APPROX POSITION XYZ")) {
+      for (int k = 0; k < 3; ++k)
+        if (!detail::parse_num(L.b + 14 * k, 14, out.approx_r_e[k])) L.fail("bad number in APPROX POSITION XYZ");
+      out.has_approx = std::isfinite(out.approx_r_e[0]) && std::isfinite(out.approx_r_e[1]) &&
+                       std::isfinite(out.approx_r_e[2]) &&
+                       (out.approx_r_e[0] != 0.0 || out.approx_r_e[1] != 0.0 || out.approx_r_e[2] != 0.0);
+    } else if (has("ANTENNA: DELTA H/E/N")) {
+      for (int k = 0; k < 3; ++k) {
+        double v;
+        if (!detail::parse_num(L.b + 14 * k, 14, v)) L.fail("bad number in ANTENNA: DELTA H/E/N");
+        out.antenna_hen_m[k] = std::isfinite(v) ? v : 0.0;
+      }
+    } else if (has("MARKER NAME")) {
+      out.marker_name = L.field(0, 60);
+      while (!out.marker_name.empty() && out.marker_name.back() == ' ') out.marker_name.pop_back();
+    } else if (has("TIME OF FIRST OBS")) {
+      std::string ts = L.field(48, 3);
+      if (ts != "GPS" && ts != "   " && !ts.empty() && ts != "GAL")
+        L.fail("unsupported time system '" + ts + "' (GPS only)");
+    } else if (has("GLONASS SLOT / FRQ #")) {
+      for (int k = 0; k < 8; ++k) {
+        const size_t a = 4 + 7 * k;
+        if (a + 6 > L.len || L.b[a] != 'R') continue;
+        const int slot = detail::parse_int(L, a + 1, 2, "GLONASS slot");
+        const int fcn = detail::parse_int(L, a + 4, 2, "GLONASS frequency number");
+        out.glonass_channels[slot] = fcn;
+      }
+    }
+  }
+  if (!end_header) L.fail("malformed header: no END OF HEADER");
+  for (const auto& [s, n] : announced)
+    if (static_cast<int>(types[s].size()) != n)
+      L.fail(std::string("malformed header: SYS / # / OBS TYPES of ") + s + " announces " + std::to_string(n) +
+             " types, lists " + std::to_string(types[s].size()));
+  // column index of (system, slot, kind C/L/D/S); -1 absent
+  std::array<std::array<std::array<int, 4>, kObsSlots>, 128> col{};
+  for (auto& a : col)
+    for (auto& b : a) b.fill(-1);
+  std::array<bool, 128> want{};
+  for (const auto& [s, slots] : prefs) {
+    if (static_cast<unsigned char>(s) >= 128) continue;
+    want[s] = types.count(s) > 0;
+    auto& ch = out.chosen[s];
+    const auto& ty = types[s];
+    auto index = [&](const std::string& t) {
+      for (size_t i = 0; i < ty.size(); ++i)
+        if (ty[i] == t) return static_cast<int>(i);
+      return -1;
+    };
+    for (int k = 0; k < kObsSlots && k < static_cast<int>(slots.size()); ++k) {
+      std::string pick;
+      for (const auto& c : slots[k])
+        if (index("L" + c) >= 0) { pick = c; break; }
+      if (pick.empty())
+        for (const auto& c : slots[k])
+          if (index("C" + c) >= 0) { pick = c; break; }
+      ch[k] = pick;
+      if (pick.empty()) continue;
+      const char kinds[4] = {'C', 'L', 'D', 'S'};
+      for (int q = 0; q < 4; ++q) col[s][k][q] = index(std::string(1, kinds[q]) + pick);
+    }
+  }
+  std::map<char, int> ntypes;
+  for (const auto& [s, ty] : types) ntypes[s] = static_cast<int>(ty.size());
+  constexpr int W = kObsSlots * kObsPerSlot;
+  while (L.next()) {
+    if (L.len == 0 || detail::blank(L.b, L.len)) continue;
+    if (L.b[0] != '>') L.fail("bad record: expected an epoch line starting with '>'");
+    if (L.len < 35) L.fail("bad record: epoch line too short");
+    const int y = detail::parse_int(L, 2, 4, "epoch year"), mo = detail::parse_int(L, 7, 2, "epoch month");
+    const int d = detail::parse_int(L, 10, 2, "epoch day"), h = detail::parse_int(L, 13, 2, "epoch hour");
+    const int mi = detail::parse_int(L, 16, 2, "epoch minute");
+    double sec;
+    if (!detail::parse_num(L.b + 18, 11, sec) || !std::isfinite(sec)) L.fail("bad record: epoch seconds");
+    const int flag = detail::parse_int(L, 31, 1, "epoch flag");
+    const int nsat = detail::parse_int(L, 32, 3, "number of satellites");
+    if (flag > 6 || nsat < 0) L.fail("bad record: epoch flag / satellite count out of range");
+    const long ep_line = L.lineno;
+    if (flag >= 2 && flag <= 5) {  // event: nsat header lines follow
+      for (int i = 0; i < nsat; ++i)
+        if (!L.next()) L.fail("unexpected end of file in the special records of the event on line " + std::to_string(ep_line));
+      continue;
+    }
+    if (!(mo >= 1 && mo <= 12 && d >= 1 && d <= 31 && h >= 0 && h <= 23 && mi >= 0 && mi <= 59 && sec >= 0 && sec < 61))
+      L.fail("bad record: impossible epoch date/time");
+    const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
+                     h * 3600.0 + mi * 60.0 + sec;
+    const bool keep = flag == 0 || flag == 1;
+    const int e = static_cast<int>(out.epoch_t_gps_s.size());
+    for (int i = 0; i < nsat; ++i) {
+      if (!L.next()) L.fail("unexpected end of file in the satellites of the epoch on line " + std::to_string(ep_line));
+      if (L.len > 0 && L.b[0] == '>')
+        L.fail("bad record: epoch on line " + std::to_string(ep_line) + " announces " + std::to_string(nsat) +
+               " satellites, found fewer");
+      if (L.len < 3) L.fail("bad record: satellite line too short");
+      const char s = L.b[0];
+      if (!ntypes.count(s)) L.fail(std::string("bad record: satellite '") + L.field(0, 3) + "' of an undeclared system");
+      if (!keep || static_cast<unsigned char>(s) >= 128 || !want[s]) continue;
+      const int prn = detail::parse_int(L, 1, 2, "satellite number");
+      out.row_epoch.push_back(e);
+      out.row_sys.push_back(s);
+      out.row_prn.push_back(prn);
+      const size_t base = out.obs.size();
+      out.obs.resize(base + W, NAN);
+      for (int k = 0; k < kObsSlots; ++k) {
+        for (int q = 0; q < 4; ++q) {
+          const int c = col[s][k][q];
+          if (c < 0) continue;
+          const size_t a = 3 + 16 * static_cast<size_t>(c);
+          if (a >= L.len) continue;
+          double v;
+          if (!detail::parse_num(L.b + a, std::min<size_t>(14, L.len - a), v))
+            L.fail("bad number '" + L.field(a, 14) + "' for observation " + std::string(1, "CLDS"[q]) +
+                   out.chosen[s][k] + " of " + L.field(0, 3));
+          if (q <= 1 && v == 0.0) v = NAN;  // 0.000: not observed
+          out.obs[base + k * kObsPerSlot + q] = v;
+          if (q == 1 && a + 14 < L.len) {
+            const char lli = L.b[a + 14];
+            out.obs[base + k * kObsPerSlot + 4] = (lli >= '0' && lli <= '9') ? lli - '0' : 0.0;
+          } else if (q == 1) {
+            out.obs[base + k * kObsPerSlot + 4] = 0.0;
+          }
+        }
+      }
+    }
+    if (keep) {
+      out.epoch_t_gps_s.push_back(t);
+      out.epoch_flag.push_back(flag);
+    }
+  }
+  return out;
+}
+
+}  // namespace insnav::io

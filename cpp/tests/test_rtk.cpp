@@ -1,0 +1,109 @@
+// The RTK engine (insnav/gnss/rtk.hpp) on a synthetic short baseline: noise-free dual-frequency
+// code and phase with integer ambiguities; the engine fixes from the first epoch to the true
+// position within 1 mm, and after construction it allocates nothing on the heap per epoch
+// (Eigen's malloc check on).  MLAMBDA: the fixed vector of a well-conditioned problem is the
+// rounded one.
+#include <cstdio>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "eigen_malloc_check.hpp"  // first: before any Eigen header
+
+#include "insnav/gnss/lambda.hpp"
+#include "insnav/gnss/rtk.hpp"
+#include "test_util.hpp"
+
+using namespace insnav;
+using namespace insnav::gnss;
+
+namespace {
+
+constexpr double kL1 = kCLight / 1575.42e6, kL2 = kCLight / 1227.60e6;
+
+double range_sagnac(const Vec3& rs, const Vec3& r) {
+  return (rs - r).norm() + kOmegaE * (rs.x() * r.y() - rs.y() * r.x()) / kCLight;
+}
+
+std::vector<double> rows_for(const Vec3& r, const std::vector<Vec3>& sats, const std::vector<double>& N1,
+                             const std::vector<double>& N2, double clk_m) {
+  std::vector<double> rows(sats.size() * RtkRow::kCols, NAN);
+  for (size_t k = 0; k < sats.size(); ++k) {
+    double* w = rows.data() + k * RtkRow::kCols;
+    const double rho = range_sagnac(sats[k], r) + clk_m;
+    w[RtkRow::kSat] = static_cast<double>(k + 1);
+    w[RtkRow::kSys] = kGps;
+    const double lam[2] = {kL1, kL2};
+    const double N[2] = {N1[k], N2[k]};
+    for (int f = 0; f < 2; ++f) {
+      double* q = w + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+      q[0] = rho;
+      q[1] = rho / lam[f] + N[f];
+      q[2] = 0.0;
+      q[3] = 0.0;
+      q[4] = lam[f];
+    }
+    for (int i = 0; i < 3; ++i) w[RtkRow::kSatPos + i] = sats[k](i);
+    w[RtkRow::kSatClock] = 0.0;
+  }
+  return rows;
+}
+
+}  // namespace
+
+int main() {
+  const double lat = 0.84, lon = 0.20;
+  const Vec3 r_b = wgs84::geodetic_to_ecef(lat, lon, 300.0);
+  const Mat3 C = wgs84::C_en(lat, lon);
+  const Vec3 r_r = r_b + C * Vec3(40.0, -25.0, 3.0);
+  std::vector<Vec3> sats;
+  const double els[8] = {80, 60, 45, 35, 28, 50, 40, 65}, azs[8] = {0, 50, 100, 150, 200, 250, 300, 330};
+  for (int k = 0; k < 8; ++k) {
+    const double el = els[k] * M_PI / 180.0, az = azs[k] * M_PI / 180.0;
+    const Vec3 u = C * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), -std::sin(el));
+    const double b = 2.0 * r_b.dot(u), c = r_b.squaredNorm() - 26560e3 * 26560e3;
+    sats.push_back(r_b + u * ((-b + std::sqrt(b * b - 4.0 * c)) / 2.0));
+  }
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> ui(-100000, 100000);
+  std::vector<double> N1r(8), N2r(8), N1b(8), N2b(8);
+  for (int k = 0; k < 8; ++k) { N1r[k] = ui(rng); N2r[k] = ui(rng); N1b[k] = ui(rng); N2b[k] = ui(rng); }
+  RtkOptions o;
+  o.tropo_model = false;
+  o.mode = RtkMode::kKinematic;
+  auto eng = std::make_unique<RtkEngine>(o);
+  double worst = 0.0;
+  int fixed = 0;
+  for (int e = 0; e < 10; ++e) {
+    const auto rr = rows_for(r_r, sats, N1r, N2r, 1234.0 + e);
+    const auto rb = rows_for(r_b, sats, N1b, N2b, -567.0 + 2 * e);
+    if (e == 2) Eigen::internal::set_is_malloc_allowed(false);
+    const RtkEpoch out = eng->process(1000.0 + e, rr.data(), 8, rb.data(), 8, true, r_b);
+    if (out.status == RtkStatus::kFixed) {
+      ++fixed;
+      worst = std::max(worst, (out.r_e - r_r).norm());
+    }
+  }
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(fixed == 10);
+  EXPECT_LT(worst, 1e-3);
+  EXPECT_TRUE(g_eigen_asserts == 0);
+
+  // MLAMBDA on a well-conditioned problem: the rounded vector, no allocation
+  Lambda lam;
+  AmbVec a(4);
+  a << 1.1, -2.05, 3.02, 0.97;
+  AmbMat Q = AmbMat::Identity(4, 4) * 0.01;
+  Q(0, 1) = Q(1, 0) = 0.004;
+  AmbCand fix;
+  double s[2];
+  Eigen::internal::set_is_malloc_allowed(false);
+  const LambdaStatus st = lam.solve(a, Q, fix, s);
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(st == LambdaStatus::kOk);
+  EXPECT_TRUE(fix(0, 0) == 1 && fix(1, 0) == -2 && fix(2, 0) == 3 && fix(3, 0) == 1);
+  EXPECT_TRUE(s[1] > s[0]);
+  EXPECT_TRUE(g_eigen_asserts == 0);
+  std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
+  TEST_MAIN_END()
+}

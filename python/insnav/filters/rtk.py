@@ -1,0 +1,155 @@
+"""The ``rtk`` filter: carrier-phase relative positioning of a rover against a base (no IMU).
+
+* :func:`run_rtk_rinex` (``insnav run --filter rtk --format rinex --obs ROVER --base BASE --nav NAV``):
+  RINEX files, a run TOML with an ``[rtk]`` table (:class:`insnav.gnss.rtk.RtkOptions`, plus
+  ``base_position_ecef_m`` / ``base_position_llh`` for the base antenna reference point).
+* :func:`run_rtk`, the registry runner (``insnav.run(RtkDataset(...), filter="rtk")``).
+
+The result is a :class:`~insnav.filters.solution.Solution` with one row per
+rover epoch that has a solution (antenna position, ECEF velocity rotated to
+NED, 1-sigma from the fixed or float covariance); ``gnss_status`` holds the
+fix status per epoch (RTKLIB's Q: 1 fixed, 2 float, 4 DGPS, 0 none) and
+``solution.rtk`` the full :class:`insnav.gnss.rtk.RtkSolution` (ratio,
+number of fixed ambiguities, slips per epoch).
+"""
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import earth
+from ..config import ConfigError
+from ..gnss.rtk import RtkOptions, RtkSolution, solve_rtk
+from ..units import RAD2DEG
+from .solution import Solution
+
+__all__ = ["RtkDataset", "run_rtk", "run_rtk_rinex", "rtk_solution", "load_rtk_config", "parse_base_position"]
+
+_BASE_KEYS = ("base_position_ecef_m", "base_position_llh")
+
+
+@dataclass
+class RtkDataset:
+    """Inputs of an RTK run: rover and base observation files (or PhaseObs), navigation file(s),
+    and optionally the base antenna reference point, ECEF [m]."""
+
+    rover: object
+    base: object
+    nav: object
+    base_position_e_m: object = None
+    gnss_only = True  # no IMU: insnav.run skips the IMU sanitizer and checks
+
+
+def parse_base_position(value, source: str = "--base-pos") -> np.ndarray:
+    """ECEF [m] from ``"x,y,z"`` (ECEF metres) or ``"lat_deg,lon_deg,h_m"`` (a list or a string)."""
+    try:
+        v = [float(x) for x in (value.split(",") if isinstance(value, str) else value)]
+    except (TypeError, ValueError):
+        raise ConfigError(f"{source}: bad base position {value!r}; give x,y,z [m] (ECEF) or lat_deg,lon_deg,h_m") \
+            from None
+    if len(v) != 3 or not np.all(np.isfinite(v)):
+        raise ConfigError(f"{source}: bad base position {value!r}; give three numbers")
+    if abs(v[0]) <= 90.0 and abs(v[1]) <= 360.0 and abs(v[2]) < 1.0e5:  # geodetic
+        return np.asarray(earth.geodetic_to_ecef(np.radians(v[0]), np.radians(v[1]), v[2]), float).ravel()
+    if not (6.0e6 < np.linalg.norm(v) < 7.0e6):
+        raise ConfigError(f"{source}: base position {value!r} is neither ECEF (|r| near 6371 km) nor lat,lon,h")
+    return np.asarray(v, float)
+
+
+def load_rtk_config(config_path=None, overrides: dict | None = None):
+    """(RtkOptions, base position ECEF or None) from a run TOML's ``[rtk]`` table."""
+    d = {}
+    source = "rtk options"
+    if config_path is not None:
+        source = os.fspath(config_path)
+        try:
+            with open(config_path, "rb") as f:
+                d = tomllib.load(f)
+        except OSError as exc:
+            raise ConfigError(f"{source}: cannot read ({exc.strerror})") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    t = d.get("rtk", {})
+    if not isinstance(t, dict):
+        raise ConfigError(f"{source}: key 'rtk': bad value {t!r}; allowed: a table")
+    t = {**t, **(overrides or {})}
+    base = None
+    for k in _BASE_KEYS:
+        if k in t:
+            v = t.pop(k)
+            base = parse_base_position(v, f"{source}: key 'rtk.{k}'")
+    return RtkOptions.from_dict(t, source), base
+
+
+def rtk_solution(rs: RtkSolution, filter_name: str = "rtk") -> Solution:
+    """The epochs of an :class:`RtkSolution` that have a position, as a :class:`Solution`."""
+    from ..gnss.gpstime import SECONDS_PER_WEEK
+
+    ok = rs.status > 0
+    n = int(ok.sum())
+    t0 = SECONDS_PER_WEEK * np.floor(rs.t_gps_s[0] / SECONDS_PER_WEEK) if len(rs) else 0.0
+    lat, lon, h = earth.ecef_to_geodetic(rs.r_e[ok]) if n else (np.zeros(0),) * 3
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    C_ne = np.stack([np.stack([-sl * co, -sl * so, cl], -1), np.stack([-so, co, np.zeros_like(sl)], -1),
+                     np.stack([-cl * co, -cl * so, -sl], -1)], 1)  # (n, 3, 3): NED <- ECEF
+    v_n = np.einsum("nij,nj->ni", C_ne, rs.v_e[ok])
+    P_n = np.einsum("nij,njk,nlk->nil", C_ne, rs.P_r[ok], C_ne)
+    sig = np.sqrt(np.maximum(np.diagonal(P_n, axis1=1, axis2=2), 0.0))
+    nan = np.full(n, np.nan)
+    nan3 = np.full((n, 3), np.nan)
+    counts = rs.counts()
+    summary = dict(filter=filter_name, coupling="gnss", updates=n, rejected=0, gnss_records=len(rs),
+                   cholesky_repairs=0, **counts)
+    sol = Solution(t=rs.t_gps_s[ok] - t0, lat_deg=lat * RAD2DEG, lon_deg=lon * RAD2DEG, h_m=h, v_n=v_n,
+                   roll_deg=nan, pitch_deg=nan.copy(), yaw_deg=nan.copy(), sigma_pos_n_m=sig,
+                   sigma_vel_n_mps=nan3, sigma_att_deg=nan3.copy(), acc_bias_mps2=nan3.copy(),
+                   gyro_bias_rps=nan3.copy(), acc_scale=nan3.copy(), gyro_scale=nan3.copy(),
+                   gnss_t=rs.t_gps_s - t0, innovation=np.full((len(rs), 6), np.nan), nis=rs.ratio.copy(),
+                   gnss_status=rs.status.astype(np.int8), summary=summary)
+    sol.rtk = rs
+    sol.fix_status = rs.status[ok].copy()
+    sol.ratio = rs.ratio[ok].copy()
+    sol.n_fix = rs.n_fix[ok].copy()
+    return sol
+
+
+def run_rtk_rinex(obs, base, nav, config_path=None, *, base_pos=None, rtk: dict | None = None) -> Solution:
+    """RTK over RINEX files (see the module docstring).
+
+    Parameters
+    ----------
+    obs, base : path
+        Rover and base RINEX observation files.
+    nav : path or list of paths
+    config_path : path, optional
+        Run TOML with an ``[rtk]`` table.
+    base_pos : str or (3,), optional
+        Base antenna reference point (ECEF [m] or lat_deg, lon_deg, h_m); overrides the TOML's
+        and the header's.
+    rtk : dict, optional
+        ``[rtk]`` entries overriding the file's.
+    """
+    opt, base_e = load_rtk_config(config_path, rtk)
+    if base_pos is not None:
+        base_e = base_pos if isinstance(base_pos, np.ndarray) else parse_base_position(base_pos)
+    rs = solve_rtk(obs, base, nav, r_base_e=base_e, options=opt)
+    sol = rtk_solution(rs)
+    sol.rtk_options = opt
+    return sol
+
+
+def run_rtk(dataset, cfg, *, rtk_options: RtkOptions | dict | None = None):
+    """Registry runner: ``insnav.run(RtkDataset(rover, base, nav), filter="rtk")`` (no IMU)."""
+    for k in ("rover", "base", "nav"):
+        if getattr(dataset, k, None) is None:
+            raise ValueError(f"filter 'rtk' needs a dataset with rover, base and nav (insnav.filters.rtk.RtkDataset); "
+                             f"missing {k!r}")
+    opt = rtk_options if isinstance(rtk_options, RtkOptions) else RtkOptions.from_dict(rtk_options or {}, "rtk options")
+    rs = solve_rtk(dataset.rover, dataset.base, dataset.nav, r_base_e=getattr(dataset, "base_position_e_m", None),
+                   options=opt)
+    sol = rtk_solution(rs)
+    sol.rtk_options = opt
+    return sol

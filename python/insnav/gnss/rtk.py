@@ -1,0 +1,672 @@
+"""Carrier-phase relative positioning (RTK) of a rover against a base station.
+
+The engine is C++ (``cpp/include/insnav/gnss/rtk.hpp``, MLAMBDA in
+``cpp/include/insnav/gnss/lambda.hpp``, called through ``insnav._core.rtk_run``
+with the GIL released); this module reads the observations, computes the
+satellite states each receiver saw, matches base and rover epochs and wraps
+the result.  Equations: docs/algorithms.md, "Carrier-phase RTK".
+
+* Observations: :func:`read_phase_obs` reads RINEX 3 files with the fast C++
+  reader (``insnav._core.read_rinex3_obs``): pseudorange [m], carrier phase
+  [cycles], Doppler [Hz], C/N0 [dB-Hz] and the loss-of-lock indicator (bit 0
+  slip, bit 1 half-cycle ambiguity) on up to three frequency slots per system
+  (:data:`SIGNALS`: slot 0 L1/E1/G1/B1I, slot 1 L2/E5b/G2/B2I, slot 2
+  L5/E5a/G3/B3I -- RTKLIB 2.4.3's numbering, so ``frequencies = 2`` means
+  the same signals as its "L1+L2").  RINEX 2 files are read with
+  :func:`insnav.gnss.rinex.read_rinex_obs` on slot 0 only (L1, with its LLI).
+  Wavelengths per system and, for GLONASS, per FDMA channel (navigation data
+  first, then the ``GLONASS SLOT / FRQ #`` header).
+* Satellite states: per receiver and row at the transmission time
+  ``t_tx = t_rx - P / c - dt^s`` from the row's own pseudorange (so no
+  approximate position is needed), in the ECEF frame of that instant; the
+  engine adds the Sagnac term to the range.
+* Base epochs: a rover epoch uses the base epoch with the same time tag
+  (within 1 ms); without one (a base at a lower rate, or a gap) the latest
+  earlier base epoch not older than ``max_age_s`` is held: its zero-difference
+  residuals (observation minus computed range and satellite clock at the
+  base's own epoch) enter the double differences, so only the change of the
+  atmosphere and of the base receiver clock over the age (the latter cancels
+  between satellites) is not modelled -- RTKLIB's "age of differential".
+  Epochs with no base epoch within ``max_age_s`` get no solution.
+* Base position (the antenna reference point): ``r_base_e`` given, else the
+  RINEX header's ``APPROX POSITION XYZ`` plus ``ANTENNA: DELTA H/E/N``.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config import ConfigError, TomlTable
+
+__all__ = ["RtkOptions", "PhaseObs", "RtkSolution", "SIGNALS", "STATUS_NAMES", "read_phase_obs", "receiver_rows",
+           "match_base", "solve_rtk", "base_position_from_header", "write_rtklib_pos", "write_rtk_table",
+           "RTK_COLUMNS", "RtkInputError"]
+
+#: engine index of each system (``RtkSystem`` in rtk.hpp)
+SYSTEM_INDEX = {"G": 0, "R": 1, "E": 2, "C": 3, "J": 4}
+#: signals per system and frequency slot, in order of preference (RINEX 3 band + attribute)
+SIGNALS = {
+    "G": (("1C", "1W", "1X", "1P", "1S", "1L"), ("2W", "2L", "2S", "2X", "2P", "2C", "2D"), ("5Q", "5X", "5I")),
+    "R": (("1C", "1P"), ("2C", "2P"), ("3Q", "3X", "3I")),
+    "E": (("1C", "1X", "1B"), ("7Q", "7X", "7I"), ("5Q", "5X", "5I")),
+    "C": (("2I", "2X", "2Q", "1I"), ("7I", "7X", "7Q"), ("6I", "6X", "6Q")),
+}
+#: RTKLIB's Q values
+STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 4: "dgps"}
+_MODES = {"static": 0, "kinematic": 1}
+_AR_MODES = {"off": 0, "continuous": 1, "instantaneous": 2, "fix-and-hold": 3}
+C_LIGHT = 299792458.0
+
+
+class RtkInputError(ValueError):
+    """Unusable RTK input (no common epochs / satellites / frequency, base without phase, no base position)."""
+
+
+@dataclass
+class RtkOptions(TomlTable):
+    """The ``[rtk]`` table of a run TOML.
+
+    Attributes
+    ----------
+    mode : str
+        ``"kinematic"`` (position and velocity, white-acceleration dynamics) or ``"static"``.
+    ar_mode : str
+        ``"continuous"`` (ambiguities kept while tracked), ``"instantaneous"`` (single-epoch:
+        ambiguities and position re-initialised every epoch), ``"fix-and-hold"`` (the fixed
+        double differences fed back as tight pseudo-measurements), ``"off"`` (float only).
+    systems : str
+        Letters of ``GREC`` (GPS, GLONASS, Galileo, BeiDou).
+    frequencies : int
+        1 (L1/E1/G1/B1I), 2 (+ L2/E5b/G2/B2I), 3 (+ L5/E5a/G3/B3I).
+    elevation_mask_deg, ar_elevation_mask_deg : float
+        Satellites below are not used / not fixed [deg].
+    ratio_threshold : float
+        Ratio test s2/s1 of MLAMBDA's two best candidates (3).
+    min_fix_ambiguities : int
+        Partial AR drops one ambiguity at a time until the ratio test passes, down to this many
+        (at most ``max_partial_drops`` times).
+    partial_ar_order : str
+        Which one partial AR drops first: ``"elevation"`` (the lowest satellite) or ``"variance"``
+        (the largest float variance).
+    glonass_ar : bool
+        Fix GLONASS ambiguities (off: FDMA inter-frequency biases make them float only).
+    sigma_phase_a_m, sigma_phase_b_m : float
+        Zero-difference phase sigma sqrt(a^2 + b^2 / sin^2 el) [m]; code = ``code_phase_ratio`` x.
+    iono_sigma_per_10km_m : float
+        Double-difference ionosphere sigma per 10 km of baseline [m] (medium baselines).
+    accel_psd_h_m2ps3, accel_psd_v_m2ps3 : float
+        White acceleration PSD, kinematic mode [m^2/s^3].
+    max_age_s : float
+        Oldest base epoch held for a rover epoch [s].
+    gf_threshold_m, mw_threshold_cycles, doppler_threshold_cycles : float
+        Cycle-slip thresholds (geometry-free jump, Melbourne-Wuebbena wide-lane departure from
+        its mean, Doppler-predicted phase; <= 0 switches the Doppler test off).
+    """
+
+    mode: str = "kinematic"
+    ar_mode: str = "continuous"
+    systems: str = "GREC"
+    frequencies: int = 2
+    elevation_mask_deg: float = 15.0
+    ar_elevation_mask_deg: float = 0.0
+    ratio_threshold: float = 3.0
+    min_fix_ambiguities: int = 3
+    max_partial_drops: int = 12
+    partial_ar_order: str = "elevation"
+    min_lock_epochs: int = 0
+    glonass_ar: bool = False
+    sigma_phase_a_m: float = 0.003
+    sigma_phase_b_m: float = 0.003
+    code_phase_ratio: float = 100.0
+    iono_sigma_per_10km_m: float = 0.0
+    tropo_model: bool = True
+    accel_psd_h_m2ps3: float = 9.0
+    accel_psd_v_m2ps3: float = 1.0
+    amb_init_sigma_cycles: float = 30.0
+    gf_threshold_m: float = 0.05
+    mw_threshold_cycles: float = 2.0
+    doppler_threshold_cycles: float = 1.0
+    max_outage_epochs: int = 5
+    outlier_sigma: float = 5.0
+    hold_sigma_cycles: float = 0.0316
+    max_age_s: float = 30.0
+
+    TABLE = "rtk"
+
+    def validate(self, source: str = "rtk options") -> "RtkOptions":
+        def bad(key, allowed):
+            raise ConfigError(f"{source}: key '{self.TABLE}.{key}': bad value {getattr(self, key)!r}; "
+                              f"allowed: {allowed}")
+
+        if self.mode not in _MODES:
+            bad("mode", " or ".join(_MODES))
+        if self.ar_mode not in _AR_MODES:
+            bad("ar_mode", ", ".join(_AR_MODES))
+        if not isinstance(self.systems, str) or not self.systems or any(s not in SIGNALS for s in self.systems):
+            bad("systems", "letters of GREC")
+        if isinstance(self.frequencies, bool) or self.frequencies not in (1, 2, 3):
+            bad("frequencies", "1, 2 or 3")
+        if self.partial_ar_order not in ("elevation", "variance"):
+            bad("partial_ar_order", "elevation or variance")
+        if not isinstance(self.glonass_ar, bool):
+            bad("glonass_ar", "true or false")
+        if not isinstance(self.tropo_model, bool):
+            bad("tropo_model", "true or false")
+        for key, lo, hi in (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.0),
+                            ("ratio_threshold", 1.0, 1e3), ("sigma_phase_a_m", 0.0, 1.0),
+                            ("sigma_phase_b_m", 0.0, 1.0), ("code_phase_ratio", 1.0, 1e4),
+                            ("iono_sigma_per_10km_m", 0.0, 10.0), ("accel_psd_h_m2ps3", 0.0, 1e4),
+                            ("accel_psd_v_m2ps3", 0.0, 1e4), ("amb_init_sigma_cycles", 1e-3, 1e6),
+                            ("gf_threshold_m", 1e-4, 10.0), ("mw_threshold_cycles", 0.1, 100.0),
+                            ("doppler_threshold_cycles", -1.0, 1e3), ("outlier_sigma", 0.0, 1e3),
+                            ("hold_sigma_cycles", 1e-6, 10.0), ("max_age_s", 0.0, 86400.0)):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi):
+                bad(key, f"a number in [{lo}, {hi}]")
+        if self.sigma_phase_a_m == 0.0 and self.sigma_phase_b_m == 0.0:
+            bad("sigma_phase_a_m", "a and b not both 0")
+        for key, lo in (("min_fix_ambiguities", 1), ("max_partial_drops", 0), ("min_lock_epochs", 0),
+                        ("max_outage_epochs", 0)):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                bad(key, f"an integer >= {lo}")
+        return self
+
+    def core_dict(self) -> dict:
+        """Options of the C++ engine (``RtkOptions`` in rtk.hpp; SI units)."""
+        return dict(mode=_MODES[self.mode], ar_mode=_AR_MODES[self.ar_mode], n_freq=int(self.frequencies),
+                    elevation_mask_rad=math.radians(self.elevation_mask_deg),
+                    ar_elevation_mask_rad=math.radians(self.ar_elevation_mask_deg),
+                    ratio_threshold=float(self.ratio_threshold), min_fix_ambiguities=int(self.min_fix_ambiguities),
+                    max_partial_drops=int(self.max_partial_drops),
+                    partial_by_variance=self.partial_ar_order == "variance", min_lock_epochs=int(self.min_lock_epochs),
+                    glonass_ar=bool(self.glonass_ar), sigma_phase_a_m=float(self.sigma_phase_a_m),
+                    sigma_phase_b_m=float(self.sigma_phase_b_m), code_phase_ratio=float(self.code_phase_ratio),
+                    iono_sigma_per_10km_m=float(self.iono_sigma_per_10km_m), tropo_model=bool(self.tropo_model),
+                    accel_psd_h=float(self.accel_psd_h_m2ps3), accel_psd_v=float(self.accel_psd_v_m2ps3),
+                    amb_init_sigma_cycles=float(self.amb_init_sigma_cycles),
+                    gf_threshold_m=float(self.gf_threshold_m), mw_threshold_cycles=float(self.mw_threshold_cycles),
+                    doppler_threshold_cycles=float(self.doppler_threshold_cycles),
+                    max_outage_epochs=int(self.max_outage_epochs), outlier_sigma=float(self.outlier_sigma),
+                    hold_sigma_cycles=float(self.hold_sigma_cycles), max_age_s=float(self.max_age_s))
+
+
+@dataclass
+class PhaseObs:
+    """Multi-frequency observations of one receiver (long format, one row per epoch and satellite).
+
+    Attributes
+    ----------
+    path : str
+    epoch_t_gps_s : (n,) float
+        Epoch time tags, GPS seconds since 1980-01-06 [s].
+    epoch : (m,) int
+        Row -> epoch index.
+    system : (m,) str
+        One-letter system.
+    prn : (m,) int
+    code_m, phase_cycles, doppler_hz, cn0_dbhz : (m, 3) float
+        Per frequency slot (:data:`SIGNALS`); NaN where not observed.
+    lli : (m, 3) int
+        Loss-of-lock indicator of the phase (bit 0: slip, bit 1: half-cycle ambiguity).
+    signals : dict
+        System -> the three signal codes read (``""`` where the file has none).
+    approx_r_e : (3,) float or None
+        ``APPROX POSITION XYZ`` [m].
+    antenna_hen_m : (3,) float
+        ``ANTENNA: DELTA H/E/N`` [m].
+    glonass_channels : dict
+        GLONASS slot -> FDMA channel from the header.
+    """
+
+    path: str
+    epoch_t_gps_s: np.ndarray
+    epoch: np.ndarray
+    system: np.ndarray
+    prn: np.ndarray
+    code_m: np.ndarray
+    phase_cycles: np.ndarray
+    doppler_hz: np.ndarray
+    cn0_dbhz: np.ndarray
+    lli: np.ndarray
+    signals: dict = field(default_factory=dict)
+    approx_r_e: np.ndarray | None = None
+    antenna_hen_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    glonass_channels: dict = field(default_factory=dict)
+
+    def __len__(self):
+        return int(self.prn.size)
+
+
+def _rinex_version(path) -> float:
+    from .rinex import RinexError
+
+    try:
+        with open(path, "r", encoding="ascii", errors="replace") as f:
+            first = f.readline()
+    except OSError as exc:
+        raise RinexError(os.fspath(path), None, f"cannot read file ({exc.strerror})") from None
+    try:
+        return float(first[:9])
+    except ValueError:
+        raise RinexError(os.fspath(path), 1, "malformed header: bad RINEX version") from None
+
+
+def read_phase_obs(path, systems: str = "GREC") -> PhaseObs:
+    """Read code, phase, Doppler, C/N0 and LLI on the frequency slots of :data:`SIGNALS`.
+
+    RINEX 3 through the fast C++ reader; RINEX 2 through
+    :func:`insnav.gnss.rinex.read_rinex_obs` (slot 0 only).  Raises
+    :class:`insnav.gnss.rinex.RinexError` naming the file and line.
+    """
+    from .. import _core
+    from .rinex import RinexError
+
+    path = os.fspath(path)
+    systems = "".join(s for s in systems if s in SIGNALS)
+    if _rinex_version(path) < 3.0:
+        return _read_phase_obs_v2(path, systems)
+    prefs = {s: [list(x) for x in SIGNALS[s]] for s in systems}
+    try:
+        d = _core.read_rinex3_obs(path, prefs)
+    except RuntimeError as exc:
+        msg = str(exc)
+        line = None
+        if ", line " in msg:
+            try:
+                line = int(msg.split(", line ", 1)[1].split(":", 1)[0])
+            except ValueError:
+                line = None
+        what = msg.split(": ", 1)[1] if ": " in msg else msg
+        raise RinexError(path, line, what) from None
+    obs = np.asarray(d["obs"]).reshape(-1, 3, 5)
+    sys_a = np.asarray(d["row_sys"], dtype=np.uint8).view("S1").astype("<U1") if len(d["row_sys"]) else \
+        np.zeros(0, "<U1")
+    lli = obs[:, :, 4]
+    return PhaseObs(path=path, epoch_t_gps_s=np.asarray(d["epoch_t_gps_s"]), epoch=np.asarray(d["row_epoch"], np.int64),
+                    system=sys_a, prn=np.asarray(d["row_prn"], np.int64), code_m=obs[:, :, 0].copy(),
+                    phase_cycles=obs[:, :, 1].copy(), doppler_hz=obs[:, :, 2].copy(), cn0_dbhz=obs[:, :, 3].copy(),
+                    lli=np.where(np.isfinite(lli), lli, 0).astype(np.int64),
+                    signals={s: list(v) for s, v in d["chosen"].items()},
+                    approx_r_e=None if d["approx_r_e"] is None else np.asarray(d["approx_r_e"], float),
+                    antenna_hen_m=np.asarray(d["antenna_hen_m"], float),
+                    glonass_channels={int(k): int(v) for k, v in d["glonass_channels"].items()})
+
+
+def _read_phase_obs_v2(path, systems) -> PhaseObs:
+    from .rinex import read_rinex_obs
+
+    o = read_rinex_obs(path, systems="".join(s for s in systems if s in "GRE"))
+    m = o.prn.size
+    nan = np.full((m, 3), np.nan)
+    code, phase, dop, cn0 = nan.copy(), nan.copy(), nan.copy(), nan.copy()
+    code[:, 0], phase[:, 0], dop[:, 0], cn0[:, 0] = o.C1, o.L1, o.D1, o.S1
+    lli = np.zeros((m, 3), np.int64)
+    if getattr(o, "lli1", None) is not None:
+        lli[:, 0] = o.lli1
+    sig = {s: [(_v2_code(s, cd.get("C1")) or "")[1:], "", ""] for s, cd in o.codes_by_system.items()}
+    return PhaseObs(path=path, epoch_t_gps_s=o.epoch_t_gps_s, epoch=o.epoch, system=o.system, prn=o.prn, code_m=code,
+                    phase_cycles=phase, doppler_hz=dop, cn0_dbhz=cn0, lli=lli, signals=sig, approx_r_e=o.approx_r_e,
+                    glonass_channels=dict(o.glonass_channels))
+
+
+def _v2_code(s, c):
+    if c is None:
+        return None
+    return {("G", "C1"): "C1C", ("G", "P1"): "C1W", ("R", "C1"): "C1C", ("R", "P1"): "C1P"}.get((s, c), "C1X")
+
+
+def wavelengths(obs: PhaseObs, nav=None) -> np.ndarray:
+    """(m, 3) carrier wavelength [m] per row and slot (GLONASS: FDMA channel from nav, else the header)."""
+    from .broadcast import _band
+    from .galbds import FREQ_HZ
+
+    m = len(obs)
+    out = np.full((m, 3), np.nan)
+    glo = obs.system == "R"
+    k = np.full(m, np.nan)
+    if glo.any():
+        ch = np.array([obs.glonass_channels.get(int(p), -99) for p in np.unique(obs.prn[glo])], dtype=float)
+        table = dict(zip(np.unique(obs.prn[glo]).tolist(), ch.tolist()))
+        if nav is not None and getattr(nav, "eph_r", None) is not None and len(nav.eph_r):
+            prns = np.array(sorted(table), dtype=np.int64)
+            from_nav = nav.eph_r.channel(prns).astype(float)
+            for p, c in zip(prns.tolist(), from_nav.tolist()):
+                if c > -99:
+                    table[p] = c
+        k[glo] = [table[int(p)] for p in obs.prn[glo]]
+        k[k <= -99] = np.nan
+    for s, sig in obs.signals.items():
+        rows = obs.system == s
+        for f in range(3):
+            if f >= len(sig) or not sig[f]:
+                continue
+            b = _band(s, "C" + sig[f])
+            if s == "R":
+                if b == "1":
+                    out[rows, f] = C_LIGHT / (1602.0e6 + k[rows] * 0.5625e6)
+                elif b == "2":
+                    out[rows, f] = C_LIGHT / (1246.0e6 + k[rows] * 0.4375e6)
+                elif b == "3":
+                    out[rows, f] = C_LIGHT / 1202.025e6
+            elif (s, b) in FREQ_HZ:
+                out[rows, f] = C_LIGHT / FREQ_HZ[(s, b)]
+    return out
+
+
+def _orbit_states(nav, system, prn, t_gps_s):
+    """(valid, r_e, v_e, clock bias [s], drift [s/s]) at GPS time ``t`` (ECEF of that instant), broadcast
+    ephemerides, no group delay (it cancels between the receivers)."""
+    from .broadcast import _state_at, select_multi
+
+    k = prn.size
+    valid = np.zeros(k, bool)
+    r = np.full((k, 3), np.nan)
+    v = np.full((k, 3), np.nan)
+    b = np.full(k, np.nan)
+    d = np.full(k, np.nan)
+    for s in np.unique(system):
+        rows = np.flatnonzero(system == s)
+        idx = select_multi(nav, np.full(rows.size, s), prn[rows], t_gps_s[rows],
+                           np.full(rows.size, "C2I" if s == "C" else "C1C"))
+        ok = idx >= 0
+        if not ok.any():
+            continue
+        rr = rows[ok]
+        r[rr], v[rr], b[rr], d[rr] = _state_at(nav, s, idx[ok], t_gps_s[rr])
+        valid[rr] = True
+    return valid & np.all(np.isfinite(r), axis=1), r, v, b, d
+
+
+def transmit_states(nav, t_tag_gps_s, system, prn, code_m):
+    """Satellite position (ECEF of the transmission instant) and clock ``c dt^s`` [m] of each row.
+
+    ``t_tx = t_tag - P / c - dt^s`` from the row's own pseudorange.  The broadcast orbit is evaluated
+    once per (epoch tag, satellite), at ``t_tag - P / c`` of the first such row, and carried to each
+    row's ``t_tx`` by a second-order Taylor step with the ECEF acceleration (gravity, Coriolis,
+    centrifugal; the step is the satellite clock plus the receivers' clock and range differences,
+    a few ms: the J2 and third-body terms left out give < 1e-7 m), so rover and base rows of one
+    epoch share one orbit evaluation.
+    """
+    m = prn.size
+    rs = np.full((m, 3), np.nan)
+    clk = np.full(m, np.nan)
+    ok = np.isfinite(code_m) & (code_m > 1.0e6) & (code_m < 1.0e8)
+    if not ok.any():
+        return rs, clk
+    key = np.zeros(m, np.int64)
+    for sname, i in SYSTEM_INDEX.items():
+        key[system == sname] = i * 64
+    key += np.clip(prn, 0, 63)
+    t_ms = np.round(np.asarray(t_tag_gps_s, float) * 1000.0).astype(np.int64)
+    pair = t_ms * 1000 + key
+    uniq, first, inv = np.unique(pair[ok], return_index=True, return_inverse=True)
+    rows_ok = np.flatnonzero(ok)
+    u_rows = rows_ok[first]
+    t_ref = t_tag_gps_s[u_rows] - code_m[u_rows] / C_LIGHT  # the first row's own signal time
+    valid, r0, v0, b0, d0 = _orbit_states(nav, system[u_rows], prn[u_rows], t_ref)
+    gm = 3.986004418e14
+    w = np.array([0.0, 0.0, 7.2921151467e-5])
+    rn = np.linalg.norm(r0, axis=1, keepdims=True)
+    a0 = -gm * r0 / rn ** 3 - 2.0 * np.cross(w, v0) - np.cross(w, np.cross(w, r0))
+    # per row: t_tx = t_tag - P/c - dt^s (the clock at t_ref; its drift over 20 ms is < 1e-12 s)
+    j = inv.ravel()
+    dt = (t_tag_gps_s[rows_ok] - code_m[rows_ok] / C_LIGHT - b0[j]) - t_ref[j]
+    good = valid[j] & (np.abs(dt) < 0.05)
+    rr = rows_ok[good]
+    jj = j[good]
+    dtg = dt[good][:, None]
+    rs[rr] = r0[jj] + v0[jj] * dtg + 0.5 * a0[jj] * dtg ** 2
+    clk[rr] = C_LIGHT * (b0[jj] + d0[jj] * dt[good])
+    return rs, clk
+
+
+def receiver_rows(obs: PhaseObs, nav, n_freq: int = 3, states=None):
+    """Engine rows of one receiver: (epoch offsets (n+1,), rows (m, RTK_ROW_COLS)).
+
+    ``states``: (satellite positions, clocks) of the rows from :func:`transmit_states` (computed
+    here when not given).  Rows without code or ephemeris keep NaN satellite states (the engine
+    skips them).
+    """
+    from .. import _core
+
+    m = len(obs)
+    cols = int(_core.RTK_ROW_COLS)
+    rows = np.full((m, cols), np.nan)
+    si = np.zeros(m, np.int64)
+    for s, i in SYSTEM_INDEX.items():
+        si[obs.system == s] = i
+    rows[:, 0] = si * 64 + np.clip(obs.prn, 0, 63)
+    rows[:, 1] = si
+    lam = wavelengths(obs, nav)
+    for f in range(min(n_freq, 3)):
+        rows[:, 2 + 5 * f] = obs.code_m[:, f]
+        rows[:, 3 + 5 * f] = np.where(np.isfinite(lam[:, f]), obs.phase_cycles[:, f], np.nan)
+        rows[:, 4 + 5 * f] = obs.doppler_hz[:, f]
+        rows[:, 5 + 5 * f] = obs.lli[:, f]
+        rows[:, 6 + 5 * f] = lam[:, f]
+    if states is None:
+        states = transmit_states(nav, obs.epoch_t_gps_s[obs.epoch], obs.system, obs.prn, _first_code(obs))
+    rows[:, 17:20], rows[:, 20] = states
+    off = np.searchsorted(obs.epoch, np.arange(obs.epoch_t_gps_s.size + 1)).astype(np.int64)
+    return off, rows
+
+
+def _first_code(obs: PhaseObs) -> np.ndarray:
+    P = obs.code_m[:, 0].copy()
+    for f in (1, 2):
+        P = np.where(np.isfinite(P), P, obs.code_m[:, f])
+    return P
+
+
+def match_base(t_rover, t_base, max_age_s: float) -> np.ndarray:
+    """(n,) index of the base epoch for each rover epoch: same tag within 1 ms, else the latest
+    earlier one not older than ``max_age_s`` (held); -1 where none."""
+    t_rover = np.asarray(t_rover, float)
+    t_base = np.asarray(t_base, float)
+    if t_base.size == 0:
+        return np.full(t_rover.size, -1, np.int64)
+    j = np.searchsorted(t_base, t_rover + 1e-3, side="right") - 1
+    out = np.where(j >= 0, j, -1).astype(np.int64)
+    age = np.where(out >= 0, t_rover - t_base[np.maximum(out, 0)], np.inf)
+    out[age > max_age_s + 1e-3] = -1
+    return out
+
+
+def base_position_from_header(obs: PhaseObs) -> np.ndarray | None:
+    """Antenna reference point [m]: ``APPROX POSITION XYZ`` + ``ANTENNA: DELTA H/E/N`` (None if absent)."""
+    from .. import earth
+
+    if obs.approx_r_e is None or not np.all(np.isfinite(obs.approx_r_e)) or not np.any(obs.approx_r_e):
+        return None
+    lat, lon, _ = earth.ecef_to_geodetic(np.asarray(obs.approx_r_e, float))
+    h, e, n = obs.antenna_hen_m
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    up = np.array([cl * co, cl * so, sl])
+    east = np.array([-so, co, 0.0])
+    north = np.array([-sl * co, -sl * so, cl])
+    return np.asarray(obs.approx_r_e, float) + h * up + e * east + n * north
+
+
+@dataclass
+class RtkSolution:
+    """Per rover epoch: ``t_gps_s``, ``status`` (:data:`STATUS_NAMES`), ``ratio``, ``n_fix``
+    (double-differenced ambiguities fixed), ``n_dd`` (phase double differences used),
+    ``n_sat``, ``r_e`` (fixed where fixed, else float) [m], ``v_e`` [m/s], ``r_float_e``,
+    ``P_r`` (3, 3) covariance of ``r_e`` [m^2], ``slips`` (n, 6) detections per epoch
+    (LLI, geometry-free, Melbourne-Wuebbena, Doppler, data gap, innovation outlier),
+    ``base_age_s``; ``info`` the options and files."""
+
+    t_gps_s: np.ndarray
+    status: np.ndarray
+    ratio: np.ndarray
+    n_fix: np.ndarray
+    n_dd: np.ndarray
+    n_sat: np.ndarray
+    r_e: np.ndarray
+    v_e: np.ndarray
+    r_float_e: np.ndarray
+    P_r: np.ndarray
+    slips: np.ndarray
+    base_age_s: np.ndarray
+    r_base_e: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    SLIP_KINDS = ("lli", "geometry_free", "melbourne_wuebbena", "doppler", "gap", "outlier")
+
+    def __len__(self):
+        return int(self.t_gps_s.size)
+
+    def counts(self) -> dict:
+        """Epochs per status and slip detections per kind."""
+        d = {f"n_{name}": int(np.sum(self.status == q)) for q, name in STATUS_NAMES.items()}
+        d["epochs"] = len(self)
+        d["fix_rate"] = float(np.mean(self.status == 1)) if len(self) else 0.0
+        for k, name in enumerate(self.SLIP_KINDS):
+            d[f"slips_{name}"] = int(self.slips[:, k].sum())
+        return d
+
+
+def _check_inputs(rover: PhaseObs, base: PhaseObs, opt: RtkOptions, bidx: np.ndarray):
+    if base.epoch_t_gps_s.size == 0:
+        raise RtkInputError(f"{base.path}: no base observation epochs")
+    if rover.epoch_t_gps_s.size == 0:
+        raise RtkInputError(f"{rover.path}: no rover observation epochs")
+    if np.all(bidx < 0):
+        raise RtkInputError(f"{rover.path}: no epoch in common with the base {base.path} (rover "
+                            f"{rover.epoch_t_gps_s[0]:.1f}-{rover.epoch_t_gps_s[-1]:.1f} s, base "
+                            f"{base.epoch_t_gps_s[0]:.1f}-{base.epoch_t_gps_s[-1]:.1f} s GPS, max_age_s {opt.max_age_s})")
+    nf = opt.frequencies
+    if not np.any(np.isfinite(base.phase_cycles[:, :nf])):
+        raise RtkInputError(f"{base.path}: the base has no carrier phase on the frequencies used "
+                            f"({_sig_text(base, nf)})")
+    if not np.any(np.isfinite(rover.phase_cycles[:, :nf])):
+        raise RtkInputError(f"{rover.path}: the rover has no carrier phase on the frequencies used "
+                            f"({_sig_text(rover, nf)})")
+    rs = {(s, f) for s, sig in rover.signals.items() for f in range(nf) if f < len(sig) and sig[f]}
+    bs = {(s, f) for s, sig in base.signals.items() for f in range(nf) if f < len(sig) and sig[f]}
+    if not rs & bs:
+        raise RtkInputError(f"{base.path}: no frequency in common with the rover {rover.path} "
+                            f"(rover {_sig_text(rover, nf)}; base {_sig_text(base, nf)})")
+    key_r = set(zip(rover.system.tolist(), rover.prn.tolist()))
+    key_b = set(zip(base.system.tolist(), base.prn.tolist()))
+    if not key_r & key_b:
+        raise RtkInputError(f"{base.path}: no satellite in common with the rover {rover.path}")
+
+
+def _sig_text(obs, nf):
+    return ", ".join(f"{s}:{'/'.join(x or '-' for x in sig[:nf])}" for s, sig in obs.signals.items()) or "none"
+
+
+def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None = None) -> RtkSolution:
+    """RTK of ``rover`` against ``base``.
+
+    Parameters
+    ----------
+    rover, base : path or PhaseObs
+    nav : path, list of paths or NavData (broadcast ephemerides of the systems used)
+    r_base_e : (3,), optional
+        Base antenna reference point, ECEF [m]; default the base header's (see
+        :func:`base_position_from_header`).  Raises :class:`RtkInputError` when neither exists.
+    options : RtkOptions or dict
+
+    Returns
+    -------
+    RtkSolution
+    """
+    from .. import _core
+    from .spp import read_nav_multi
+
+    opt = options if isinstance(options, RtkOptions) else RtkOptions.from_dict(options or {}, "rtk options")
+    if not isinstance(rover, PhaseObs):
+        rover = read_phase_obs(rover, opt.systems)
+    if not isinstance(base, PhaseObs):
+        base = read_phase_obs(base, opt.systems)
+    if not hasattr(nav, "eph"):
+        nav = read_nav_multi(nav, "".join(s for s in opt.systems if s in "GREC"))
+    if r_base_e is None:
+        r_base_e = base_position_from_header(base)
+        if r_base_e is None:
+            raise RtkInputError(f"{base.path}: base position missing: the header has no APPROX POSITION XYZ; "
+                                f"give --base-pos or [rtk_base] position in the TOML")
+    r_base_e = np.asarray(r_base_e, float)
+    bidx = match_base(rover.epoch_t_gps_s, base.epoch_t_gps_s, opt.max_age_s)
+    _check_inputs(rover, base, opt, bidx)
+    nr = len(rover)
+    rs, clk = transmit_states(nav, np.concatenate([rover.epoch_t_gps_s[rover.epoch], base.epoch_t_gps_s[base.epoch]]),
+                              np.concatenate([rover.system, base.system]), np.concatenate([rover.prn, base.prn]),
+                              np.concatenate([_first_code(rover), _first_code(base)]))
+    roff, rrows = receiver_rows(rover, nav, opt.frequencies, (rs[:nr], clk[:nr]))
+    boff, brows = receiver_rows(base, nav, opt.frequencies, (rs[nr:], clk[nr:]))
+    out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
+    age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
+    return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
+                       ratio=np.asarray(out["ratio"]), n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]),
+                       n_sat=np.asarray(out["n_sat"]), r_e=np.asarray(out["r_e"]), v_e=np.asarray(out["v_e"]),
+                       r_float_e=np.asarray(out["r_float_e"]), P_r=np.asarray(out["P_r"]).reshape(-1, 3, 3),
+                       slips=np.asarray(out["slips"]), base_age_s=age, r_base_e=r_base_e,
+                       info=dict(rover=rover.path, base=base.path, options=opt, rover_signals=rover.signals,
+                                 base_signals=base.signals))
+
+
+def _gpst_text(t_gps_s: float) -> str:
+    """``YYYY/MM/DD HH:MM:SS.SSS`` of GPS seconds since 1980-01-06 (RTKLIB's default time form)."""
+    import datetime
+
+    ms = int(round(t_gps_s * 1000.0))
+    d = datetime.datetime(1980, 1, 6) + datetime.timedelta(milliseconds=ms)
+    return d.strftime("%Y/%m/%d %H:%M:%S") + f".{ms % 1000:03d}"
+
+
+def write_rtklib_pos(sol: RtkSolution, path, *, program: str = "insnav") -> "os.PathLike":
+    """Write ``path`` in RTKLIB's ``.pos`` layout (GPST date and time, latitude/longitude/height
+    [deg, deg, m], Q, ns, sdn/sde/sdu/sdne/sdeu/sdun [m], age [s], ratio), so RTKLIB users'
+    scripts read it unchanged."""
+    from .. import earth
+    from .._atomic import atomic_write_text
+
+    ok = sol.status > 0
+    lines = [f"% program   : {program} rtk",
+             f"% inp file  : {sol.info.get('rover', '')}",
+             f"% inp file  : {sol.info.get('base', '')}",
+             f"% ref pos   :{sol.r_base_e[0]:15.4f}{sol.r_base_e[1]:15.4f}{sol.r_base_e[2]:15.4f}",
+             "% (lat/lon/height=WGS84/ellipsoidal,Q=1:fix,2:float,3:sbas,4:dgps,5:single,6:ppp,ns=# of satellites)",
+             "%  GPST                   latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  "
+             "sdne(m)  sdeu(m)  sdun(m) age(s)  ratio"]
+    if ok.any():
+        lat, lon, h = earth.ecef_to_geodetic(sol.r_e[ok])
+        for i, k in enumerate(np.flatnonzero(ok)):
+            sl, cl, so, co = np.sin(lat[i]), np.cos(lat[i]), np.sin(lon[i]), np.cos(lon[i])
+            C = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])  # ENU <- ECEF
+            Q = C @ sol.P_r[k] @ C.T
+            sd = np.sqrt(np.maximum(np.diag(Q), 0.0))
+
+            def ss(v):
+                return math.copysign(math.sqrt(abs(v)), v)
+
+            age = sol.base_age_s[k] if np.isfinite(sol.base_age_s[k]) else 0.0
+            lines.append(f"{_gpst_text(sol.t_gps_s[k])} {np.degrees(lat[i]):14.9f} {np.degrees(lon[i]):14.9f} {h[i]:10.4f} "
+                         f"{int(sol.status[k]):3d} {int(sol.n_sat[k]):3d} {sd[1]:8.4f} {sd[0]:8.4f} {sd[2]:8.4f} "
+                         f"{ss(Q[1, 0]):8.4f} {ss(Q[0, 2]):8.4f} {ss(Q[2, 1]):8.4f} {age:6.2f} {sol.ratio[k]:6.1f}")
+    return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+#: columns of ``<out>.rtk.csv``: one line per rover epoch
+RTK_COLUMNS = ("t_gps_s", "status", "ratio", "n_fix", "n_dd", "n_sat", "base_age_s", "x_m", "y_m", "z_m",
+               *(f"slips_{k}" for k in RtkSolution.SLIP_KINDS))
+
+
+def write_rtk_table(sol: RtkSolution, path) -> "os.PathLike":
+    """Write ``path`` (``<out>.rtk.csv``): :data:`RTK_COLUMNS` per rover epoch (ECEF position [m])."""
+    from .._atomic import atomic_write_text
+
+    lines = [",".join(RTK_COLUMNS)]
+    for i in range(len(sol)):
+        age = f"{sol.base_age_s[i]:.3f}" if np.isfinite(sol.base_age_s[i]) else "nan"
+        xyz = ",".join(f"{v:.4f}" for v in sol.r_e[i]) if sol.status[i] > 0 else "nan,nan,nan"
+        lines.append(f"{sol.t_gps_s[i]:.3f},{int(sol.status[i])},{sol.ratio[i]:.2f},{int(sol.n_fix[i])},"
+                     f"{int(sol.n_dd[i])},{int(sol.n_sat[i])},{age},{xyz}," + ",".join(str(int(v)) for v in sol.slips[i]))
+    return atomic_write_text(path, "\n".join(lines) + "\n")
