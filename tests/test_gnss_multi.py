@@ -457,3 +457,50 @@ def test_tight_inputs_multi_system_on_real_walk():
         assert abs(np.median(pr[k])) < 10.0, s  # inter-system bias: metres
         kr = k & np.isfinite(rr)
         assert np.std(rr[kr]) < 0.5 and abs(np.median(rr[kr])) < 0.05, s
+
+
+# --------------------------------------------------------------------- compiled orbits
+def _both_paths(monkeypatch, fn):
+    """fn() with the compiled orbit code, then with the numpy reference (the compiled functions hidden)."""
+    import types
+
+    from insnav.gnss import broadcast, ephemeris
+
+    got = fn()
+    with monkeypatch.context() as m:
+        m.setattr(broadcast, "_core", types.SimpleNamespace())
+        m.setattr(ephemeris, "_core", types.SimpleNamespace())
+        ref = fn()
+    return got, ref
+
+
+def _assert_states_close(got, ref):
+    """Positions to 1 um, velocities to 1 nm/s, clocks to 1e-17 s (1e-8 m), light time to 1e-15 s."""
+    np.testing.assert_array_equal(got.valid, ref.valid)
+    np.testing.assert_allclose(got.r_e, ref.r_e, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.v_e, ref.v_e, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.clock_bias_s, ref.clock_bias_s, rtol=0, atol=1e-17)
+    np.testing.assert_allclose(got.clock_drift_s_s, ref.clock_drift_s_s, rtol=0, atol=1e-20)
+    np.testing.assert_allclose(got.tau_s, ref.tau_s, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got.range_m, ref.range_m, rtol=0, atol=1e-6)
+
+
+def test_compiled_transmit_states_equal_the_numpy_reference(nav23, monkeypatch):
+    """insnav/gnss/broadcast_orbit.hpp against the numpy code of ephemeris / galbds / glonass: every
+    satellite of the 2023 mixed file (GPS, GLONASS, Galileo, BeiDou MEO/IGSO) over 4 h, and the five
+    BeiDou GEOs of the 2016 file (Table 5-11 transform)."""
+    t0 = gps_seconds_from_calendar(2023, 3, 14, 0, 5, 0.0)
+    ids = [f"{s}{p:02d}" for s, n in (("G", 32), ("R", 24), ("E", 36), ("C", 46)) for p in range(1, n + 1)]
+    t = np.repeat(t0 + np.arange(0.0, 4 * 3600.0, 900.0), len(ids))
+    ids_all = np.tile(ids, t.size // len(ids))
+    r_rx = np.array([4027893.9, 307045.6, 4919474.9])
+    got, ref = _both_paths(monkeypatch, lambda: nav23.transmit_states(t, r_rx, ids_all))
+    assert got.valid.sum() > 2000 and set(np.unique(got.system[got.valid])) == {"G", "R", "E", "C"}
+    _assert_states_close(got, ref)
+    nav16 = read_rinex_nav(need(SMARTLOC, "BRDC00WRD_U_20161580000_01D_MN.rnx"), systems="C")
+    geo = [f"C{p:02d}" for p in _GEO_SLOTS] + ["C06", "C11"]
+    t16 = nav16.eph_c.toe[0] + np.arange(0.0, 3600.0, 600.0)
+    tt = np.repeat(t16, len(geo))
+    got, ref = _both_paths(monkeypatch, lambda: nav16.transmit_states(tt, r_rx, np.tile(geo, t16.size)))
+    assert got.valid.sum() >= 5 * t16.size
+    _assert_states_close(got, ref)

@@ -41,6 +41,7 @@ void bind_delay(py::module_& m);
 void bind_particle(py::module_& m);
 void bind_textio(py::module_& m);
 void bind_checks(py::module_& m);
+void bind_spp(py::module_& m);
 ImuErrorModel imu_model_from_dict(const py::dict& d);
 
 }  // namespace insnav::py_bind

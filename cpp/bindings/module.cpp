@@ -26,5 +26,6 @@ PYBIND11_MODULE(_core, m) {
   insnav::py_bind::bind_particle(m);
   insnav::py_bind::bind_textio(m);
   insnav::py_bind::bind_checks(m);
+  insnav::py_bind::bind_spp(m);
   // one call per cpp/bindings/bind_*.cpp (declared in common.hpp)
 }

@@ -95,6 +95,10 @@ class _Lines:
 
 
 def _float(src: _Lines, text: str, what: str, blank=math.nan, lineno=None):
+    try:  # the common case first: float() skips the blanks around a number itself
+        return float(text)
+    except ValueError:
+        pass
     s = text.strip()
     if not s:
         return blank

@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core, earth
+from .._median import median
 from ..config import ConfigError, RunConfig, config_from_dict
 from ..data.dataset import Dataset, GnssFixes, ImuData, Truth
 from ..gnss.gpstime import SECONDS_PER_WEEK
@@ -355,7 +356,7 @@ def _approx_position(obs, nav, t_week0):
         good = np.isfinite(spp.r_e[:, 0])
         if not good.any():
             raise ValueError(f"{obs.path}: no epoch with 4 GPS satellites for a first position fix")
-        r0 = np.median(spp.r_e[good], axis=0)
+        r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
     return r0
 
 
@@ -440,7 +441,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     spp = single_point_solution(inp, r0)
     good = np.isfinite(spp.r_e[:, 0])
     if good.any():  # recompute light time / elevation / atmosphere at the data's own position
-        r0 = np.median(spp.r_e[good], axis=0)
+        r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
         inp = inputs_at(r0)
         spp = single_point_solution(inp, r0)
         good = np.isfinite(spp.r_e[:, 0])
@@ -543,7 +544,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
                 gps_prns_with_ephemeris=sorted(int(p) for p in np.unique(nav.eph.prn)),
                 prns_used=sorted(int(p) for p in np.unique(inp_run.prn[inp_run.system == "G"])),
                 sats_used=sorted(set(f"{s}{int(p):02d}" for s, p in zip(inp_run.system, inp_run.prn))),
-                sats_per_epoch=(int(n.min()), int(np.median(n)), int(n.max())) if n.size else (0, 0, 0),
+                sats_per_epoch=(int(n.min()), int(median(n)), int(n.max())) if n.size else (0, 0, 0),
                 start_rule=start_rule, start_s_after_first_epoch=t0 - t_first, approx_r_e=r0.tolist(),
                 f_level_mps2=f_mean.tolist())
     ds = RinexDataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=None, imu_errors=None,
