@@ -349,15 +349,45 @@ def _approx_position(obs, nav, t_week0):
         raise ValueError(f"{obs.path}: no observation has a GPS ephemeris in {getattr(nav, 'path', 'the nav file')}")
     rs = sat_position_velocity(nav.eph, idx[ok], obs.t_gps_s[gps][ok]).r_e
     c = rs.mean(axis=0)
-    r0 = c / np.linalg.norm(c) * earth.A
-    for _ in range(2):  # rough inputs -> single point -> again
-        inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, elevation_mask_deg=-90.0, iono=False, tropo=False)
-        spp = single_point_solution(inp, r0)
-        good = np.isfinite(spp.r_e[:, 0])
-        if not good.any():
-            raise ValueError(f"{obs.path}: no epoch with 4 GPS satellites for a first position fix")
-        r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
-    return r0
+    r_start = c / np.linalg.norm(c) * earth.A
+    # Every caller solves again from this position and then from the median of that solution, and a
+    # start position off by d moves those final fixes by about 1e-10 d (light time, elevation and
+    # atmosphere at the start position; tests/test_spp.py): about 100 epochs spread over the file
+    # give the median to metres at a fraction of the cost of all of them.
+    n_ep = obs.epoch_t_gps_s.size
+    for sub in ((_every_kth_epoch(obs, max(1, n_ep // _BOOTSTRAP_EPOCHS)), obs) if n_ep > 2 * _BOOTSTRAP_EPOCHS
+                else (obs,)):
+        r0 = r_start
+        for _ in range(2):  # rough inputs -> single point -> again
+            inp = tight_inputs_from_rinex(sub, nav, t_week0, r0, elevation_mask_deg=-90.0, iono=False, tropo=False)
+            spp = single_point_solution(inp, r0)
+            good = np.isfinite(spp.r_e[:, 0])
+            if not good.any():
+                break
+            r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
+        if good.any():
+            return r0
+    raise ValueError(f"{obs.path}: no epoch with 4 GPS satellites for a first position fix")
+
+
+#: epochs (about) of the start-position bootstrap of :func:`_approx_position`
+_BOOTSTRAP_EPOCHS = 100
+#: per-epoch fields of an ObsData (the other arrays of one row per observation are subset by row)
+_OBS_EPOCH_FIELDS = ("epoch_t_gps_s", "epoch_week", "epoch_tow", "epoch_flag", "clock_offset_s")
+
+
+def _every_kth_epoch(obs, k: int):
+    """``obs`` with the observations of every ``k``-th epoch only (the epoch arrays and indices unchanged)."""
+    if k <= 1:
+        return obs
+    keep = obs.epoch % k == 0
+    m = keep.size
+    sub = {}
+    for f in dataclasses.fields(obs):
+        v = getattr(obs, f.name)
+        if f.name not in _OBS_EPOCH_FIELDS and isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == m:
+            sub[f.name] = v[keep]
+    return dataclasses.replace(obs, **sub)
 
 
 def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu_tag=None,
