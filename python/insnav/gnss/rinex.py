@@ -252,6 +252,7 @@ class NavData:
 
 
 def _four(src, text, start, width, what):
+    text = text.replace("D", "E").replace("d", "e")  # Fortran exponents once per line (same field widths)
     return [_float(src, text[start + k * width:start + (k + 1) * width], what) for k in range(4)]
 
 
@@ -393,7 +394,8 @@ def read_rinex_nav(path, systems="G") -> NavData:
             raise src.error(f"bad record: impossible epoch {line[:width0]!r}")
         if not (0 <= prn <= 99):
             raise src.error(f"bad record: satellite number {prn} out of range")
-        clk = [_float(src, line[width0 + 19 * k:width0 + 19 * (k + 1)], "clock parameter") for k in range(3)]
+        line_e = line.replace("D", "E").replace("d", "e")  # Fortran exponents once per line
+        clk = [_float(src, line_e[width0 + 19 * k:width0 + 19 * (k + 1)], "clock parameter") for k in range(3)]
         sat = f"{sysid}{prn:02d}"
         if sysid != "G":
             n_req, n_max = _NAV3_LINES[sysid] if rinex3 else (3, 3)
