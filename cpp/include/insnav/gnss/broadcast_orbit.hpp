@@ -14,9 +14,11 @@
 // Light time: tau from 0.075 s, t_tx = t_rx - tau, the state rotated by
 // R3(OMEGA_E_DOT tau) into the frame at reception, tau = |r - r_rx| / c, until
 // tau changes by less than tol_s; the state during the iteration from a
-// second-order Taylor expansion about t_rx - 0.075 s (light_time_row), the
-// returned state evaluated exactly at t_tx.  The numpy reference evaluates the
-// orbit at every iteration: the two agree to 1e-12 s in tau, 1e-8 m in position.
+// second-order Taylor expansion about t_rx - 0.075 s (light_time_row), then one
+// exact step (the orbit at t_rx - tau, tau from its range) and the returned
+// state evaluated exactly at t_tx, so that range = c tau as in the numpy
+// reference, which evaluates the orbit at every iteration (3 evaluations per
+// row instead of 4-5; the two agree to 1e-12 s in tau, 1e-8 m in position).
 // Clock without group delay (the caller subtracts the signal's T_GD / BGD).
 //
 // Frames: e = ECEF (WGS-84 / PZ-90 taken equal).  SI throughout.  Element
@@ -235,7 +237,7 @@ struct TransmitOutput {
 /// Light time of one row from its state (r0, v0, a0) at t_rx - 0.075 s: tau = |R3(OMEGA_E_DOT tau) r(t_rx -
 /// tau) - r_rx| / c with r(t0 + d) = r0 + v0 d + a0 d^2 / 2 (|d| < 0.06 s: the third-order term is below 1e-9 m
 /// for any GNSS orbit), iterated from 0.075 s until tau changes by less than tol_s.  The satellite is then
-/// evaluated once more, exactly, at t_rx - tau (two orbit evaluations per row instead of one per iteration).
+/// refined by one exact step and evaluated at t_tx by the callers.
 inline double light_time_row(const OrbitState& s0, const double* a0, const double* r_rx, double tol_s, int max_iter) {
   double tau = 0.075, r[3], rt[3];
   for (int it = 0; it < max_iter; ++it) {
@@ -272,7 +274,13 @@ inline void transmit_states_kepler(const double* elem, const std::int64_t* idx, 
     const double* el = elem + C::kCols * idx[i];
     state(i, t_rx[i] - 0.075, st);
     two_body_accel_e(st, c.gm, el[C::kGeo] != 0.0 ? c.omega_geo : c.omega_e, a0);
-    const double tau = light_time_row(st, a0, r_rx + r_rx_stride * i, tol_s, max_iter);
+    double tau = light_time_row(st, a0, r_rx + r_rx_stride * i, tol_s, max_iter);
+    {  // one exact step of the iteration: tau consistent with the range of the state returned
+      double rt[3];
+      state(i, t_rx[i] - tau, st);
+      detail::rotate_z(st.r, kOmegaEDotGps * tau, rt);
+      tau = detail::range_to(rt, r_rx + r_rx_stride * i) / kCLight;
+    }
     out.tau_s[i] = tau;
     const double t_tx = t_rx[i] - tau;
     state(i, t_tx, st);
@@ -317,6 +325,16 @@ inline void transmit_states_glonass(const double* glo, const std::int64_t* idx, 
     const double s6[6] = {st.r[0], st.r[1], st.r[2], st.v[0], st.v[1], st.v[2]};
     detail::glonass_rhs(s6, g + C::kAx, c, deriv);
     out.tau_s[i] = light_time_row(st, deriv + 3, r_rx + r_rx_stride * i, tol_s, max_iter);
+  }
+  // one exact step of the iteration: tau consistent with the range of the state returned
+  for (std::int64_t i = 0; i < k; ++i) dt_scratch[i] = t_rx[i] - out.tau_s[i];
+  n_steps = steps_for(dt_scratch);
+  for (std::int64_t i = 0; i < k; ++i) {
+    const double* g = glo + C::kCols * idx[i];
+    double rt[3];
+    detail::glonass_integrate(g, dt_scratch[i] - g[C::kTb], n_steps, c, st);
+    detail::rotate_z(st.r, kOmegaEDotGps * out.tau_s[i], rt);
+    out.tau_s[i] = detail::range_to(rt, r_rx + r_rx_stride * i) / kCLight;
   }
   for (std::int64_t i = 0; i < k; ++i) dt_scratch[i] = t_rx[i] - out.tau_s[i];
   n_steps = steps_for(dt_scratch);
