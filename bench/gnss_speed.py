@@ -161,6 +161,12 @@ def main(argv=None) -> int:
         print("rnx2rtkp not found (Debian package rtklib)", file=sys.stderr)
         return 2
     t_start = time.time()
+    # the package's bytecode compiled first, as pip does on install (a process that finds no .pyc compiles
+    # every module it imports: this machine sets PYTHONDONTWRITEBYTECODE)
+    import importlib.util
+
+    pkg = importlib.util.find_spec("insnav").submodule_search_locations[0]
+    subprocess.run([sys.executable, "-m", "compileall", "-q", pkg], check=True, stdout=subprocess.DEVNULL)
     s, w = data / SMARTLOC, data / WALK
     obs_s, nav_n, nav_g = s / "Berlin_Potsdamer_Platz.obs", s / "brdc1580.16n", s / "brdc1580.16g"
     obs_w, nav_w = w / "rinex_derived/gnss_1730.obs", w / "rinex_derived/gnss_1730.nav"
