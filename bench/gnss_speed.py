@@ -271,7 +271,8 @@ def main(argv=None) -> int:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for c in check:
-        lines.append(f"| {c['name']} | {c['rows']} | {c['solved']} of {c['epochs']} | {'yes' if c['same_rows'] else 'no'} "
+        lines.append(f"| {c['name']} | {c['rows']} | {c['solved']} of {c['epochs']} | "
+                     f"{'yes' if c['same_rows'] else 'no'} "
                      f"| {c['sat_pos']:.1e} | {c['sat_clk']:.1e} | {c['pos']:.1e} | {c['vel']:.1e} | "
                      f"{'yes' if c['same_status'] else 'no'} |")
     tol_ok = bool(check) and all(c["pos"] <= 1e-6 and c["same_status"] and c["same_rows"] for c in check)

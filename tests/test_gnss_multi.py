@@ -475,8 +475,9 @@ def _both_paths(monkeypatch, fn):
 
 
 def _assert_states_close(got, ref):
-    """Positions to 1 um, velocities to 1 nm/s, clocks to 1e-17 s (1e-8 m), light time to 1e-12 s (its convergence
-    tolerance: the numpy iteration evaluates the orbit at t_rx - tau in GPS seconds since 1980, resolved to 2.4e-7 s)."""
+    """Positions to 1 um, velocities to 1 nm/s, clocks to 1e-17 s (1e-8 m), light time to 1e-12 s (its
+    convergence tolerance: the numpy iteration evaluates the orbit at t_rx - tau in GPS seconds since 1980,
+    resolved to 2.4e-7 s)."""
     np.testing.assert_array_equal(got.valid, ref.valid)
     np.testing.assert_allclose(got.r_e, ref.r_e, rtol=0, atol=1e-6)
     np.testing.assert_allclose(got.v_e, ref.v_e, rtol=0, atol=1e-9)

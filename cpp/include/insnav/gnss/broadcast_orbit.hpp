@@ -267,7 +267,9 @@ inline void transmit_states_kepler(const double* elem, const std::int64_t* idx, 
                                    const double* r_rx, int r_rx_stride, const KeplerConstants& c, double tol_s,
                                    int max_iter, TransmitOutput& out) {
   using C = KeplerCols;
-  auto state = [&](std::int64_t i, double t, OrbitState& st) { detail::kepler_any(elem + C::kCols * idx[i], t, c, st); };
+  auto state = [&](std::int64_t i, double t, OrbitState& st) {
+    detail::kepler_any(elem + C::kCols * idx[i], t, c, st);
+  };
   OrbitState st;
   double a0[3];
   for (std::int64_t i = 0; i < k; ++i) {
