@@ -50,6 +50,8 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
                          "docs/results/tight_multignss.md"],
                         ["bench/tight_multignss.py", "--runs", "2", "--fault-runs", "2", "--walk", "--out",
                          "docs/results/tight_multignss.md"]),
+    "gnss_speed": (("gnss_speed.md",), ["bench/gnss_speed.py", "--out", "docs/results/gnss_speed.md"],
+                   ["bench/gnss_speed.py", "--repeats", "3", "--out", "docs/results/gnss_speed.md"]),
     "walk_loose": (("walk_loose.md",), ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"],
                    ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"]),
     "rtk_sim": (("rtk_sim.md",), ["bench/rtk_sim_rtklib.py", "--runs", "20", "--out", "docs/results/rtk_sim.md"],

@@ -457,3 +457,54 @@ def test_tight_inputs_multi_system_on_real_walk():
         assert abs(np.median(pr[k])) < 10.0, s  # inter-system bias: metres
         kr = k & np.isfinite(rr)
         assert np.std(rr[kr]) < 0.5 and abs(np.median(rr[kr])) < 0.05, s
+
+
+# --------------------------------------------------------------------- compiled orbits
+def _both_paths(monkeypatch, fn):
+    """fn() with the compiled orbit code, then with the numpy reference (the compiled functions hidden)."""
+    import types
+
+    from insnav.gnss import broadcast, ephemeris
+
+    got = fn()
+    with monkeypatch.context() as m:
+        m.setattr(broadcast, "_core", types.SimpleNamespace())
+        m.setattr(ephemeris, "_core", types.SimpleNamespace())
+        ref = fn()
+    return got, ref
+
+
+def _assert_states_close(got, ref):
+    """Positions to 1 um, velocities to 1 nm/s, clocks to 1e-17 s (1e-8 m), light time to 1e-12 s (its
+    convergence tolerance: the numpy iteration evaluates the orbit at t_rx - tau in GPS seconds since 1980,
+    resolved to 2.4e-7 s)."""
+    np.testing.assert_array_equal(got.valid, ref.valid)
+    np.testing.assert_allclose(got.r_e, ref.r_e, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got.v_e, ref.v_e, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got.clock_bias_s, ref.clock_bias_s, rtol=0, atol=1e-17)
+    np.testing.assert_allclose(got.clock_drift_s_s, ref.clock_drift_s_s, rtol=0, atol=1e-20)
+    np.testing.assert_allclose(got.tau_s, ref.tau_s, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got.range_m, ref.range_m, rtol=0, atol=1e-6)
+
+
+def test_compiled_transmit_states_equal_the_numpy_reference(nav23, monkeypatch):
+    """insnav/gnss/broadcast_orbit.hpp against the numpy code of ephemeris / galbds / glonass: the
+    satellites of the 2023 mixed file (2 per system: GPS, GLONASS, Galileo, BeiDou) over 4 h, and the five
+    BeiDou GEOs of the 2016 file (Table 5-11 transform)."""
+    t0 = gps_seconds_from_calendar(2023, 3, 14, 0, 5, 0.0)
+    ids = [f"{s}{p:02d}" for s, n in (("G", 32), ("R", 24), ("E", 36), ("C", 46)) for p in range(1, n + 1)]
+    t = np.repeat(t0 + np.arange(0.0, 4 * 3600.0, 900.0), len(ids))
+    ids_all = np.tile(ids, t.size // len(ids))
+    r_rx = np.array([4027893.9, 307045.6, 4919474.9])
+    got, ref = _both_paths(monkeypatch, lambda: nav23.transmit_states(t, r_rx, ids_all))
+    assert got.valid.sum() > 50 and set(np.unique(got.system[got.valid])) == {"G", "R", "E", "C"}
+    _assert_states_close(got, ref)
+    nav16 = read_rinex_nav(need(SMARTLOC, "BRDC00WRD_U_20161580000_01D_MN.rnx"), systems="C")
+    ids16, t16 = [], []
+    for prn in list(_GEO_SLOTS) + [6, 11]:  # the GEOs, an IGSO and a MEO
+        toe = nav16.eph_c.toe[np.flatnonzero(nav16.eph_c.prn == prn)[0]]
+        ids16 += [f"C{prn:02d}"] * 3
+        t16 += list(toe + np.array([-1800.0, 0.0, 1800.0]))
+    got, ref = _both_paths(monkeypatch, lambda: nav16.transmit_states(np.array(t16), r_rx, ids16))
+    assert got.valid.all()
+    _assert_states_close(got, ref)

@@ -236,3 +236,40 @@ def rtk_double_differences(
     r_base_e: npt.ArrayLike,
     options: dict[str, Any],
 ) -> dict[str, np.ndarray]: ...
+
+SPP_MAX_ROWS: int
+
+def solve_spp_batch(
+    epoch_start: npt.ArrayLike,
+    sats: npt.ArrayLike,
+    sigma_pr_m: npt.ArrayLike,
+    sigma_prr_mps: npt.ArrayLike,
+    system: npt.ArrayLike,
+    r0_e: npt.ArrayLike,
+    options: dict[str, Any],
+    out: dict[str, np.ndarray],
+) -> None: ...
+def transmit_states_kepler(
+    elem: npt.ArrayLike,
+    idx: npt.ArrayLike,
+    t_rx: npt.ArrayLike,
+    r_rx: npt.ArrayLike,
+    gm: float,
+    omega_e: float,
+    f_rel: float,
+    omega_geo: float,
+    tol_s: float,
+    max_iter: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...
+def transmit_states_glonass(
+    glo: npt.ArrayLike,
+    idx: npt.ArrayLike,
+    t_rx: npt.ArrayLike,
+    r_rx: npt.ArrayLike,
+    gm: float,
+    j2_term: float,
+    omega_e: float,
+    step_s: float,
+    tol_s: float,
+    max_iter: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]: ...

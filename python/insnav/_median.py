@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["median"]
+__all__ = ["median", "group_median"]
 
 
 def median(x) -> float:
@@ -23,3 +23,35 @@ def median(x) -> float:
     if np.isnan(p[-1]):  # NaNs sort last
         return float("nan")
     return float(p[k]) if n % 2 else float((p[k - 1] + p[k]) / 2.0)
+
+
+def group_median(x, group, n_groups: int):
+    """Per-group medians of ``x`` (1-D), as ``np.median(x[group == g])`` for each group ``g``.
+
+    Parameters
+    ----------
+    x : (k,) values
+    group : (k,) int group of each value, 0 <= group < n_groups
+    n_groups : int
+
+    Returns
+    -------
+    med : (n_groups,) the median of each group (the mean of the two middle
+        values for an even count; NaN for a group holding a NaN or no value)
+    present : (n_groups,) bool, the groups with at least one value
+    """
+    a = np.asarray(x, dtype=float).reshape(-1)
+    g = np.asarray(group, dtype=np.int64).reshape(-1)
+    out = np.full(n_groups, np.nan)
+    counts = np.bincount(g, minlength=n_groups) if g.size else np.zeros(n_groups, np.int64)
+    present = counts > 0
+    if not g.size:
+        return out, present
+    xs = a[np.lexsort((a, g))]  # by group, then value (NaN last in its group)
+    start = np.cumsum(counts) - counts
+    c, s0 = counts[present], start[present]
+    lo, hi = s0 + (c - 1) // 2, s0 + c // 2
+    med = np.where(c % 2 == 1, xs[lo], (xs[lo] + xs[hi]) / 2.0)
+    med[np.isnan(xs[s0 + c - 1])] = np.nan
+    out[present] = med
+    return out, present

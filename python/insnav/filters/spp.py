@@ -25,6 +25,7 @@ import tomllib
 import numpy as np
 
 from .. import earth
+from .._median import median
 from ..config import ConfigError
 from ..gnss.spp import (SppOptions, SppSolution, read_nav_multi, read_obs_multi, solve_spp, spp_inputs_from_rinex,
                         summary_counts)
@@ -169,7 +170,7 @@ def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss
     sp = solve_spp(inp, r0, options=sopt)
     good = sp.solved
     if good.any():  # light time, elevation and atmosphere again from the data's own position
-        r0 = np.median(sp.r_e[good], axis=0)
+        r0 = np.array([median(sp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
         inp, _ = spp_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
         sp = solve_spp(inp, r0, options=sopt)
     sp.info.update(inputs=inp, t_week0_gps_s=float(t_week0), approx_r_e=r0.tolist())
@@ -194,8 +195,11 @@ def write_spp_table(sp: SppSolution, path) -> "os.PathLike":
             *sp.isb_m.T, *sp.sigma_isb_m.T, sp.gdop, sp.pdop, sp.hdop, sp.vdop, sp.tdop, sp.n_rate_used,
             sp.n_rate_excluded]
     fmt = ["%.6f"] + ["%d"] * 5 + ["%.6g"] * (len(cols) - 8) + ["%d", "%d"]
-    lines = [",".join(SPP_COLUMNS)]
-    for i in range(len(sp)):
-        vals = [(f % c[i]) if np.isfinite(c[i]) else "nan" for f, c in zip(fmt, cols)]
-        lines.append(",".join(vals + [str(sp.ref_system[i])]))
+    text_cols = []
+    for f, c in zip(fmt, cols):  # column by column: one isfinite per column, not per value
+        c = np.asarray(c)
+        fin = np.isfinite(c).tolist()
+        text_cols.append([(f % v) if ok else "nan" for v, ok in zip(c.tolist(), fin)])
+    text_cols.append([str(r) for r in sp.ref_system.tolist()])
+    lines = [",".join(SPP_COLUMNS)] + [",".join(row) for row in zip(*text_cols)]
     return atomic_write_text(path, "\n".join(lines) + "\n")

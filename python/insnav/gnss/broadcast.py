@@ -43,15 +43,23 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .ephemeris import C_LIGHT, OMEGA_E_DOT, rotate_earth, sat_clock, select_ephemeris, transmit_states
+from .. import _core
+from .ephemeris import (C_LIGHT, OMEGA_E_DOT, kepler_table, rotate_earth, sat_clock, select_ephemeris,
+                        transmit_states)
 from .galbds import (
     F_REL_BDS,
     F_REL_GAL,
     FREQ_HZ,
+    GM_BDS,
+    GM_GAL,
+    OMEGA_E_BDS,
+    OMEGA_E_GAL,
     galileo_clock_band,
+    is_bds_geo,
     kepler_position_velocity,
 )
-from .glonass import glonass_clock, glonass_position_velocity, select_glonass
+from .glonass import (A_E_GLO, GM_GLO, J2_GLO, OMEGA_E_GLO, glonass_clock, glonass_position_velocity,
+                      glonass_table, select_glonass)
 
 __all__ = ["DEFAULT_CODES", "MultiStates", "parse_sat_ids", "signal_wavelength", "select_multi",
            "sat_states_multi", "transmit_states_multi"]
@@ -133,22 +141,31 @@ def _band(system: str, code: str) -> str:
     return b
 
 
+def _bands(system, code) -> np.ndarray:
+    """:func:`_band` of every row at once: (k,) ``<U1`` band digits ('' for a code shorter than 2)."""
+    sys_a = np.atleast_1d(np.asarray(system, dtype="<U1"))
+    chars = np.ascontiguousarray(np.broadcast_to(np.asarray(code, dtype="<U3"), sys_a.shape)).view("<U1")
+    chars = chars.reshape(sys_a.shape + (3,))
+    b = chars[..., 1].copy()
+    b[(sys_a == "C") & (b == "1") & ((chars[..., 2] == "I") | (chars[..., 2] == "Q"))] = "2"
+    return b
+
+
 def signal_wavelength(system, code, freq_k=None) -> np.ndarray:
     """Carrier wavelength [m] of each row's signal (GLONASS: FDMA channel ``freq_k``; NaN if unknown)."""
     sys_a = np.atleast_1d(np.asarray(system, dtype="<U1"))
-    code_a = np.broadcast_to(np.asarray(code, dtype="<U3"), sys_a.shape)
     k = np.zeros(sys_a.shape) if freq_k is None else np.broadcast_to(np.asarray(freq_k, float), sys_a.shape)
+    bands = _bands(sys_a, code)
     out = np.full(sys_a.shape, np.nan)
-    for i, (s, c) in enumerate(zip(sys_a, code_a)):
-        b = _band(s, c)
-        if s == "R":
-            if abs(k[i]) <= 20:
-                out[i] = C_LIGHT / ((1602.0e6 + k[i] * 0.5625e6) if b == "1" else (1246.0e6 + k[i] * 0.4375e6)) \
-                    if b in ("1", "2") else np.nan
-        else:
-            f = FREQ_HZ.get((s, b))
-            if f is not None:
-                out[i] = C_LIGHT / f
+    glo = sys_a == "R"
+    ok1 = glo & (bands == "1") & (np.abs(k) <= 20)
+    ok2 = glo & (bands == "2") & (np.abs(k) <= 20)
+    out[ok1] = C_LIGHT / (1602.0e6 + k[ok1] * 0.5625e6)
+    out[ok2] = C_LIGHT / (1246.0e6 + k[ok2] * 0.4375e6)
+    for (s, b), f in FREQ_HZ.items():
+        m = (sys_a == s) & (bands == b)
+        if m.any():
+            out[m] = C_LIGHT / f
     return out
 
 
@@ -196,7 +213,7 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
                 continue
             band_rec = galileo_clock_band(nav.eph_e.data_source)
             rows = np.flatnonzero(m)
-            bands = np.array([_band("E", c) for c in code_a[rows]])
+            bands = _bands(np.full(rows.size, "E"), code_a[rows])
             for b_sig, prefs in (("1", (7, 5)), ("5", (5,)), ("7", (7,))):
                 r = rows[bands == b_sig]
                 for b_rec in prefs:
@@ -214,7 +231,7 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
 def _group_delay(nav, s, idx, code_a):
     """Group delay [s] of each row (system ``s``, valid ``idx``) for its code."""
     out = np.zeros(idx.shape)
-    bands = np.array([_band(s, c) for c in code_a])
+    bands = _bands(np.full(len(code_a), s), code_a)
     if s == "G":
         tgd = nav.eph.tgd[idx]
         out = np.where(bands == "2", _GAMMA_GPS * tgd, tgd)
@@ -343,7 +360,7 @@ def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None,
         ii = idx[rows]
         gd = _group_delay(nav, s, ii, code_a[rows]) if group_delay else np.zeros(rows.size)
         if s == "G":
-            l1 = np.array([_band("G", c) == "1" for c in code_a[rows]])
+            l1 = _bands(np.full(rows.size, "G"), code_a[rows]) == "1"
             if group_delay and l1.all():  # exactly the GPS-only arithmetic (bias - T_GD)
                 ts = transmit_states(nav.eph, ii, t_rx[rows], r_rx[rows], tgd=True)
                 bias = ts.clock_bias_s
@@ -351,6 +368,20 @@ def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None,
                 ts = transmit_states(nav.eph, ii, t_rx[rows], r_rx[rows], tgd=False)
                 bias = ts.clock_bias_s - gd
             r, v, drift, t_tx, tau, rng = ts.r_e, ts.v_e, ts.clock_drift_s_s, ts.t_tx_gps_s, ts.tau_s, ts.range_m
+        elif s in "EC" and hasattr(_core, "transmit_states_kepler"):
+            e = nav.eph_e if s == "E" else nav.eph_c
+            gm, om, f_rel = (GM_GAL, OMEGA_E_GAL, F_REL_GAL) if s == "E" else (GM_BDS, OMEGA_E_BDS, F_REL_BDS)
+            table = kepler_table(e, is_bds_geo(e.prn) if s == "C" else None)
+            r, v, b, drift, t_tx, tau, rng = _core.transmit_states_kepler(table, ii, t_rx[rows], r_rx[rows], gm, om,
+                                                                          f_rel, OMEGA_E_BDS, tol_s, max_iter)
+            bias = b - gd
+        elif s == "R" and hasattr(_core, "transmit_states_glonass"):
+            # 1.5 J2 GM a_e^2 with the operations of glonass.glonass_derivatives
+            j2_term = 1.5 * J2_GLO * GM_GLO * A_E_GLO**2
+            r, v, b, drift, t_tx, tau, rng = _core.transmit_states_glonass(
+                glonass_table(nav.eph_r), ii, t_rx[rows], r_rx[rows], GM_GLO, j2_term, OMEGA_E_GLO, 60.0, tol_s,
+                max_iter)
+            bias = b - gd
         else:
             tau = np.full(rows.size, 0.075)
             rr = r_rx[rows]

@@ -44,6 +44,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .. import _core
 from .gpstime import wrap_week_seconds
 
 #: WGS-84 value of GM used by GPS, IS-GPS-200 Table 20-IV [m^3/s^2].
@@ -409,6 +410,33 @@ def transmit_states(eph: Ephemerides, idx, t_rx_gps_s, r_rx_e, *, tgd=False, tol
     idx = np.atleast_1d(np.asarray(idx, dtype=np.int64))
     t_rx = np.broadcast_to(np.asarray(t_rx_gps_s, dtype=float), idx.shape)
     r_rx = np.broadcast_to(np.asarray(r_rx_e, dtype=float), idx.shape + (3,))
+    if idx.ndim == 1 and idx.size and hasattr(_core, "transmit_states_kepler"):
+        r, v, bias, drift, t_tx, tau, rng = _core.transmit_states_kepler(
+            kepler_table(eph), idx, t_rx, r_rx, GM_GPS, OMEGA_E_DOT, F_REL, 0.0, tol_s, max_iter)
+        if tgd:
+            bias = bias - eph.tgd[idx]
+        return TransmitStates(r, v, bias, drift, t_tx, tau, rng)
+    return _transmit_states_numpy(eph, idx, t_rx, r_rx, tgd=tgd, tol_s=tol_s, max_iter=max_iter)
+
+
+#: columns of :func:`kepler_table` (the order of ``KeplerCols`` in insnav/gnss/broadcast_orbit.hpp)
+KEPLER_TABLE_COLUMNS = ("sqrt_a", "toe", "delta_n", "m0", "e", "omega", "cus", "cuc", "crs", "crc", "cis", "cic",
+                        "i0", "idot", "omega0", "omega_dot", "toe_sow", "toc", "af0", "af1", "af2")
+
+
+def kepler_table(eph: Ephemerides, geo=None) -> np.ndarray:
+    """(records, 22) element table of the compiled orbit code: :data:`KEPLER_TABLE_COLUMNS`, then the
+    BeiDou GEO flag (``geo``, default 0)."""
+    t = np.empty((len(eph), len(KEPLER_TABLE_COLUMNS) + 1))
+    for j, name in enumerate(KEPLER_TABLE_COLUMNS):
+        t[:, j] = getattr(eph, name)
+    t[:, -1] = 0.0 if geo is None else np.asarray(geo, float)
+    return t
+
+
+def _transmit_states_numpy(eph: Ephemerides, idx, t_rx, r_rx, *, tgd=False, tol_s=1e-12,
+                           max_iter=10) -> TransmitStates:
+    """:func:`transmit_states` in numpy (the reference of the compiled code)."""
     tau = np.full(idx.shape, 0.075)
     for _ in range(max_iter):
         t_tx = t_rx - tau

@@ -189,11 +189,12 @@ def select_best_gdop(u_n, n_select: int, max_combinations: int = 5000):
         if combos is None:
             return np.setdiff1d(np.arange(k), left_out[j]), float(g[j])
         return combos[j], float(g[j])
-    keep = list(range(k))
-    while len(keep) > n_select:
-        cand = np.array([[q for q in keep if q != drop] for drop in keep], dtype=np.int64)
+    keep = np.arange(k, dtype=np.int64)
+    while keep.size > n_select:
+        m = keep.size  # row j of cand: keep without its j-th entry, in order
+        cand = np.broadcast_to(keep, (m, m))[~np.eye(m, dtype=bool)].reshape(m, m - 1)
         g = dop_from_los_n(u[cand]).gdop
         j = int(np.argmin(g))
-        keep = list(cand[j])
-    idx = np.array(sorted(keep), dtype=np.int64)
+        keep = cand[j]
+    idx = np.sort(keep)
     return idx, float(dop_from_los_n(u[idx]).gdop)

@@ -258,6 +258,18 @@ def glonass_position_velocity(eph: GlonassEphemerides, idx, t_gps_s, step_s: flo
     return s[:, 0:3], s[:, 3:6]
 
 
+#: columns of :func:`glonass_table` (the order of ``GlonassCols`` in insnav/gnss/broadcast_orbit.hpp)
+GLONASS_TABLE_COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "ax", "ay", "az", "tb", "clock_bias", "gamma_n")
+
+
+def glonass_table(eph: GlonassEphemerides) -> np.ndarray:
+    """(records, 12) table of the compiled GLONASS orbit code (:data:`GLONASS_TABLE_COLUMNS`)."""
+    t = np.empty((len(eph), len(GLONASS_TABLE_COLUMNS)))
+    for j, name in enumerate(GLONASS_TABLE_COLUMNS):
+        t[:, j] = getattr(eph, name)
+    return t
+
+
 def glonass_clock(eph: GlonassEphemerides, idx, t_gps_s):
     """Satellite clock offset ``dt_sv = -tau_n + gamma_n (t - t_b)`` [s] and drift ``gamma_n`` [s/s]."""
     idx = np.atleast_1d(np.asarray(idx, np.int64))

@@ -57,6 +57,14 @@ def gps_seconds_from_calendar(year, month, day, hour=0, minute=0, second=0.0):
         ``t_gps_s`` [s].  No leap seconds are applied: the input must already
         be GPS time (as RINEX GPS records and SP3 files with time system GPS are).
     """
+    if all(type(v) is int for v in (year, month, day, hour, minute)) and type(second) in (int, float):
+        # one epoch of a reader: the same arithmetic in Python scalars (no numpy scalar per operation)
+        y = year - (month <= 2)
+        era = y // 400
+        yoe = y - era * 400
+        doe = yoe * 365 + yoe // 4 - yoe // 100 + (153 * ((month + 9) % 12) + 2) // 5 + day - 1
+        days = era * 146097 + doe - 719468 - _GPS_EPOCH_DAYS
+        return days * 86400.0 + hour * 3600.0 + minute * 60.0 + float(second)
     days = _days_from_civil(year, month, day) - _GPS_EPOCH_DAYS
     out = days * 86400.0 + np.asarray(hour) * 3600.0 + np.asarray(minute) * 60.0 + np.asarray(second, dtype=float)
     return float(out) if np.ndim(out) == 0 else out

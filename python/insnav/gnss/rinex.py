@@ -95,6 +95,10 @@ class _Lines:
 
 
 def _float(src: _Lines, text: str, what: str, blank=math.nan, lineno=None):
+    try:  # the common case first: float() skips the blanks around a number itself
+        return float(text)
+    except ValueError:
+        pass
     s = text.strip()
     if not s:
         return blank
@@ -247,8 +251,17 @@ class NavData:
         return sat_states_multi(self, t_gps_s, sat_ids, system=system, prn=prn, codes=codes, **kw)
 
 
-def _four(src, text, start, width, what):
-    return [_float(src, text[start + k * width:start + (k + 1) * width], what) for k in range(4)]
+def _four(src, text, start, width, what, n=4):
+    """``n`` numbers of ``width`` characters from column ``start`` (as :func:`_float` reads each)."""
+    t = text.replace("D", "E").replace("d", "e")  # Fortran exponents once per line (same field widths)
+    out = []
+    for k in range(n):
+        a, b = start + k * width, start + (k + 1) * width
+        try:
+            out.append(float(t[a:b]))
+        except ValueError:  # a blank field, or the error naming the file's own text
+            out.append(_float(src, text[a:b], what))
+    return out
 
 
 def _parse_systems(systems) -> str:
@@ -389,7 +402,7 @@ def read_rinex_nav(path, systems="G") -> NavData:
             raise src.error(f"bad record: impossible epoch {line[:width0]!r}")
         if not (0 <= prn <= 99):
             raise src.error(f"bad record: satellite number {prn} out of range")
-        clk = [_float(src, line[width0 + 19 * k:width0 + 19 * (k + 1)], "clock parameter") for k in range(3)]
+        clk = _four(src, line, width0, 19, "clock parameter", n=3)
         sat = f"{sysid}{prn:02d}"
         if sysid != "G":
             n_req, n_max = _NAV3_LINES[sysid] if rinex3 else (3, 3)

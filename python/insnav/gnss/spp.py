@@ -48,9 +48,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import earth
+from .. import _core, earth
 from ..config import ConfigError, TomlTable
-from .systems import SYSTEMS
+from .systems import SYSTEMS, system_index
 
 __all__ = ["SppOptions", "SppSolution", "solve_spp", "chi2_quantile", "spp_inputs_from_rinex", "RAIM_STATUS",
            "summary_counts", "read_obs_multi", "read_nav_multi"]
@@ -334,6 +334,11 @@ def solve_spp(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=Non
               raim: bool | None = None, warm_start: bool = True) -> SppSolution:
     """Weighted least-squares position/clocks and velocity/drift per epoch, with RAIM FDE.
 
+    The epochs are solved by the compiled solver (``insnav/gnss/spp_solver.hpp``,
+    GIL released, no allocation per epoch) when every epoch has at most
+    ``_core.SPP_MAX_ROWS`` rows, else by :func:`_solve_spp_python` (the same
+    algorithm in numpy; the reference the compiled solver is tested against).
+
     Parameters
     ----------
     inputs : insnav.gnss.tight_inputs.TightInputs
@@ -351,6 +356,50 @@ def solve_spp(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=Non
     -------
     SppSolution
     """
+    opt = (options or SppOptions()).validate()
+    use_raim = opt.raim if raim is None else bool(raim)
+    counts = np.diff(np.asarray(inputs.epoch_start, np.int64))
+    batch = getattr(_core, "solve_spp_batch", None)
+    if batch is None or counts.max(initial=0) > _core.SPP_MAX_ROWS:
+        return _solve_spp_python(inputs, r0_e, options=opt, sigma_pr_m=sigma_pr_m, sigma_prr_mps=sigma_prr_mps,
+                                 raim=use_raim, warm_start=warm_start)
+    E = inputs.epoch_t.size
+    M = len(inputs.prn)
+    out = _empty_outputs(E, M)
+    spr_all = inputs.sats[:, 10] if sigma_pr_m is None else sigma_pr_m
+    sprr_all = inputs.sats[:, 11] if sigma_prr_mps is None else sigma_prr_mps
+    ref = np.full(E, -1, np.int8)
+    row_excl = np.zeros(M, np.uint8)
+    rate_excl = np.zeros(M, np.uint8)
+    out.update(ref_system=ref, row_excluded=row_excl, rate_row_excluded=rate_excl)
+    batch(np.asarray(inputs.epoch_start, np.int64), inputs.sats, np.asarray(spr_all, float),
+          np.asarray(sprr_all, float), system_index(inputs.system).astype(np.int8), np.asarray(r0_e, float),
+          dict(raim=use_raim, raim_alpha=float(opt.raim_alpha), max_exclusions=int(opt.max_exclusions),
+               min_sats=int(opt.min_sats), iterations=int(opt.iterations), velocity=bool(opt.velocity),
+               warm_start=bool(warm_start)), out)
+    letters = np.array(list(SYSTEMS) + [""], dtype="<U1")
+    out.update(ref_system=letters[ref], row_excluded=row_excl.astype(bool), rate_row_excluded=rate_excl.astype(bool))
+    return SppSolution(t=inputs.epoch_t.copy(), info=dict(raim=use_raim, raim_alpha=opt.raim_alpha), **out)
+
+
+def _empty_outputs(E: int, M: int) -> dict:
+    """The per-epoch arrays of an :class:`SppSolution` before any epoch is solved (NaN, 0, no solution)."""
+    nS = len(SYSTEMS)
+    nan3 = np.full((E, 3), np.nan)
+    return dict(r_e=nan3.copy(), v_e=nan3.copy(), clock_bias_m=np.full(E, np.nan), clock_drift_mps=np.full(E, np.nan),
+                sigma_pos_n_m=nan3.copy(), sigma_vel_n_mps=nan3.copy(), pdop=np.full(E, np.nan),
+                isb_m=np.full((E, nS), np.nan), sigma_isb_m=np.full((E, nS), np.nan),
+                cov_r_e=np.full((E, 3, 3), np.nan), cov_v_e=np.full((E, 3, 3), np.nan),
+                sigma_clock_m=np.full(E, np.nan), sigma_drift_mps=np.full(E, np.nan), gdop=np.full(E, np.nan),
+                hdop=np.full(E, np.nan), vdop=np.full(E, np.nan), tdop=np.full(E, np.nan),
+                chi2=np.full(E, np.nan), chi2_threshold=np.full(E, np.nan), n_sats=np.zeros(E, np.int64),
+                n_used=np.zeros(E, np.int64), n_excluded=np.zeros(E, np.int64), n_rate_used=np.zeros(E, np.int64),
+                n_rate_excluded=np.zeros(E, np.int64), raim_status=np.full(E, 4, np.int8))
+
+
+def _solve_spp_python(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=None, sigma_prr_mps=None,
+                      raim: bool | None = None, warm_start: bool = True) -> SppSolution:
+    """:func:`solve_spp` epoch by epoch in numpy (the reference of the compiled solver)."""
     opt = (options or SppOptions()).validate()
     use_raim = opt.raim if raim is None else bool(raim)
     E = inputs.epoch_t.size
@@ -529,6 +578,7 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
     :mod:`insnav.gnss.ephemeris`; further systems when the navigation data
     carry them).
     """
+    from .._median import group_median
     from .corrections import klobuchar_delay, saastamoinen_delay
     from .ephemeris import C_LIGHT
     from .geometry import elevation_azimuth
@@ -553,8 +603,8 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
         ts = _sat_states(nav, sys_r, np.asarray(obs.prn)[rows], t_rx, r0, obs, rows)
         raw = obs.C1[rows] - (ts["range_m"] - C_LIGHT * ts["clock_bias_s"])
-        for e in np.unique(ep):
-            clk[e] = np.median(raw[ep == e])
+        med, present = group_median(raw, ep, n_ep)
+        clk[present] = med[present]
     el, az = elevation_azimuth(r0, ts["r_e"])
     iono_m = np.zeros(rows.size)
     tropo_m = np.zeros(rows.size)

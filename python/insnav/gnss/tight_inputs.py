@@ -196,6 +196,7 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     true time on the dataset time axis.  Doppler -> rate: ``-lambda_L1 D1``.
     T_GD is applied (L1 C/A user).
     """
+    from .._median import group_median
     from .ephemeris import C_LIGHT, select_ephemeris, transmit_states
     from .corrections import klobuchar_delay, saastamoinen_delay
     from .geometry import elevation_azimuth
@@ -228,8 +229,8 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
         ts = transmit_states(eph, idx[rows], t_rx, r0, tgd=True)
         raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
-        for e in np.unique(ep):
-            clk[e] = np.median(raw[ep == e])
+        med, present = group_median(raw, ep, n_ep)
+        clk[present] = med[present]
     el, az = elevation_azimuth(r0, ts.r_e)
     iono_m = np.zeros(rows.size)
     tropo_m = np.zeros(rows.size)
@@ -260,6 +261,7 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
 def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, max_sats, iono, tropo,
                         sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0, t_range, systems) -> TightInputs:
     """Multi-system :func:`tight_inputs_from_rinex` (same steps, per-row system and signal)."""
+    from .._median import group_median
     from .broadcast import select_multi, transmit_states_multi
     from .corrections import klobuchar_delay, saastamoinen_delay
     from .ephemeris import C_LIGHT
@@ -288,9 +290,10 @@ def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, m
         raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
         # receiver clock of the epoch (only sets the true reception time; inter-system
         # offsets of tens of ns do not matter for it)
-        for e in np.unique(ep):
-            m = (ep == e) & np.isfinite(raw)
-            clk[e] = np.median(raw[m]) if m.any() else 0.0
+        fin = np.isfinite(raw)
+        med, present = group_median(raw[fin], ep[fin], n_ep)
+        clk[ep] = 0.0
+        clk[present] = med[present]
     good = ts.valid & np.isfinite(ts.range_m)
     el, az = elevation_azimuth(r0, np.where(good[:, None], ts.r_e, r0 + 1.0))
     iono_m = np.zeros(rows.size)

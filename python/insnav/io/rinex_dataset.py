@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core, earth
+from .._median import median
 from ..config import ConfigError, RunConfig, config_from_dict
 from ..data.dataset import Dataset, GnssFixes, ImuData, Truth
 from ..gnss.gpstime import SECONDS_PER_WEEK
@@ -348,15 +349,45 @@ def _approx_position(obs, nav, t_week0):
         raise ValueError(f"{obs.path}: no observation has a GPS ephemeris in {getattr(nav, 'path', 'the nav file')}")
     rs = sat_position_velocity(nav.eph, idx[ok], obs.t_gps_s[gps][ok]).r_e
     c = rs.mean(axis=0)
-    r0 = c / np.linalg.norm(c) * earth.A
-    for _ in range(2):  # rough inputs -> single point -> again
-        inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, elevation_mask_deg=-90.0, iono=False, tropo=False)
-        spp = single_point_solution(inp, r0)
-        good = np.isfinite(spp.r_e[:, 0])
-        if not good.any():
-            raise ValueError(f"{obs.path}: no epoch with 4 GPS satellites for a first position fix")
-        r0 = np.median(spp.r_e[good], axis=0)
-    return r0
+    r_start = c / np.linalg.norm(c) * earth.A
+    # Every caller solves again from this position and then from the median of that solution, and a
+    # start position off by d moves those final fixes by about 1e-10 d (light time, elevation and
+    # atmosphere at the start position; tests/test_spp.py): about 100 epochs spread over the file
+    # give the median to metres at a fraction of the cost of all of them.
+    n_ep = obs.epoch_t_gps_s.size
+    for sub in ((_every_kth_epoch(obs, max(1, n_ep // _BOOTSTRAP_EPOCHS)), obs) if n_ep > 2 * _BOOTSTRAP_EPOCHS
+                else (obs,)):
+        r0 = r_start
+        for _ in range(2):  # rough inputs -> single point -> again
+            inp = tight_inputs_from_rinex(sub, nav, t_week0, r0, elevation_mask_deg=-90.0, iono=False, tropo=False)
+            spp = single_point_solution(inp, r0)
+            good = np.isfinite(spp.r_e[:, 0])
+            if not good.any():
+                break
+            r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
+        if good.any():
+            return r0
+    raise ValueError(f"{obs.path}: no epoch with 4 GPS satellites for a first position fix")
+
+
+#: epochs (about) of the start-position bootstrap of :func:`_approx_position`
+_BOOTSTRAP_EPOCHS = 100
+#: per-epoch fields of an ObsData (the other arrays of one row per observation are subset by row)
+_OBS_EPOCH_FIELDS = ("epoch_t_gps_s", "epoch_week", "epoch_tow", "epoch_flag", "clock_offset_s")
+
+
+def _every_kth_epoch(obs, k: int):
+    """``obs`` with the observations of every ``k``-th epoch only (the epoch arrays and indices unchanged)."""
+    if k <= 1:
+        return obs
+    keep = obs.epoch % k == 0
+    m = keep.size
+    sub = {}
+    for f in dataclasses.fields(obs):
+        v = getattr(obs, f.name)
+        if f.name not in _OBS_EPOCH_FIELDS and isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == m:
+            sub[f.name] = v[keep]
+    return dataclasses.replace(obs, **sub)
 
 
 def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu_tag=None,
@@ -440,7 +471,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     spp = single_point_solution(inp, r0)
     good = np.isfinite(spp.r_e[:, 0])
     if good.any():  # recompute light time / elevation / atmosphere at the data's own position
-        r0 = np.median(spp.r_e[good], axis=0)
+        r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
         inp = inputs_at(r0)
         spp = single_point_solution(inp, r0)
         good = np.isfinite(spp.r_e[:, 0])
@@ -543,7 +574,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
                 gps_prns_with_ephemeris=sorted(int(p) for p in np.unique(nav.eph.prn)),
                 prns_used=sorted(int(p) for p in np.unique(inp_run.prn[inp_run.system == "G"])),
                 sats_used=sorted(set(f"{s}{int(p):02d}" for s, p in zip(inp_run.system, inp_run.prn))),
-                sats_per_epoch=(int(n.min()), int(np.median(n)), int(n.max())) if n.size else (0, 0, 0),
+                sats_per_epoch=(int(n.min()), int(median(n)), int(n.max())) if n.size else (0, 0, 0),
                 start_rule=start_rule, start_s_after_first_epoch=t0 - t_first, approx_r_e=r0.tolist(),
                 f_level_mps2=f_mean.tolist())
     ds = RinexDataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=None, imu_errors=None,
