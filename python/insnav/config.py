@@ -430,6 +430,10 @@ class RunConfig:
         Also keep the 1-sigma of the IMU-error states (biases, scale factors)
         for every output row (``Solution.sigma_imu_err``; loose runs).
         ``insnav run --out-format kfgins`` turns it on for ``KF_GINS_STD.txt``.
+    max_time_offset_s : float
+        Largest IMU/GNSS time offset accepted before the run [s] (default
+        0.8; ``inf``: no check): the lag between the gyro heading and the
+        GNSS course in the turns (:func:`insnav.data.checks.check_time_offset`).
     sanitize : dict
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
@@ -460,6 +464,7 @@ class RunConfig:
     constraints: Constraints = field(default_factory=Constraints)
     robust: Robust = field(default_factory=Robust)
     smooth: bool = False
+    max_time_offset_s: float = 0.8
     sanitize: dict = field(default_factory=dict)
     imu_error_sigmas: bool = False
     init_acc_bias_mps2: list | None = None
@@ -484,6 +489,9 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not math.isfinite(v):
                 bad(key, v, "a finite number")
+        v = self.max_time_offset_s
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not v > 0:
+            bad("max_time_offset_s", v, "a number > 0 [s] (inf: no check)")
         if int(self.init_seed) != self.init_seed or self.init_seed < 0:
             bad("init_seed", self.init_seed, "an integer >= 0")
         self.init_seed = int(self.init_seed)

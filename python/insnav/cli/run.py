@@ -446,14 +446,19 @@ def cmd_run(args) -> int:
     used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
     records = int(s.get("gnss_records", len(getattr(ds, "gnss", ())) or 0))
     weighting = getattr(ds, "weighting", None)
+    gate_failed = not args.allow_free_inertial and rejected > MAX_REJECTED_SHARE * (used + rejected)
+    if gate_failed:  # what the data point to: a time offset, a mirrored track, the initial yaw
+        from ..data.checks import disagreement_hint
+
+        hint = disagreement_hint(ds)
     del ds  # the IMU arrays are not needed any more: their memory goes before the output is written
     san = s.get("sanitize") or {}
     dropped = int(san.get("gnss_invalid_dropped", 0) or 0) + int(san.get("gnss_duplicates_dropped", 0) or 0)
     if not args.allow_free_inertial:
-        if rejected > MAX_REJECTED_SHARE * (used + rejected):
+        if gate_failed:
             raise UserError(f"{rejected} of {used + rejected} GNSS updates were rejected by the innovation gate "
-                            f"(> {MAX_REJECTED_SHARE:.0%}): the fixes and the IMU disagree; check units, lever arm "
-                            "and sigmas (--allow-free-inertial to accept the run)")
+                            f"(> {MAX_REJECTED_SHARE:.0%}): the fixes and the IMU disagree; {hint} "
+                            "(--allow-free-inertial to accept the run)")
         if used == 0:
             raise UserError(f"no GNSS update was used ({records} records, {dropped} dropped): the run is free "
                             "inertial; check the GNSS time base, sigmas and units (--allow-free-inertial to "

@@ -46,8 +46,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config import _USER_UNITS, ConfigError, ImuNoise, RunConfig, config_from_dict
-from ..data.checks import (check_gnss, check_gnss_velocity, check_gyro_against_gnss, check_imu, check_latlon_radians,
-                           check_time_overlap)
+from ..data.checks import (MAX_TIME_OFFSET_S, check_gnss, check_gnss_velocity, check_gyro_against_gnss, check_imu,
+                           check_latlon_radians, check_time_offset, check_time_overlap)
 from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin
 from ..data.imu_grades import IMU_GRADES, imu_model_for_grade
 from ..data.nav import NavState
@@ -327,6 +327,10 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
     check_gnss(gnss_all, source=rec.path)
     check_gnss_velocity(gnss_all, source=rec.path)
     gnss_al = _with_velocity(gnss_all)
+    mto = d.get("max_time_offset_s", MAX_TIME_OFFSET_S)  # a bad value: the run configuration's error below
+    if isinstance(mto, (int, float)) and not isinstance(mto, bool) and mto > 0:
+        check_time_offset(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, max_offset_s=float(mto),
+                          source=samples.path, gnss_source=rec.path, fix="[imu] time_offset_s")
     check_gyro_against_gnss(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=samples.path,
                             gyro_label=gyro_label, fixes=dict(fixes, inverted="or the lat/lon signs are flipped; "
                                                               "check [imu] axes and the GNSS signs"))
