@@ -295,6 +295,47 @@ def time_offset_cause(lag_s: float) -> str:
     return ": a logging latency?"
 
 
+def _course_samples(gnss, interval_s: float):
+    """GNSS course samples for :func:`estimate_time_offset`: ``(lo, hi, course
+    [rad], speed [m/s])``, time ordered, or None with fewer than 3.
+
+    With velocities (at least half the fixes): the course of each fix with
+    one, ``lo = hi = t``.  Without (positions only): the chord between fixes
+    ``j`` apart (``j`` fixes ~ ``interval_s``), ``lo = t[k]``, ``hi = t[k+j]``:
+    its direction is the mean heading over the chord, compared with the mean
+    of the gyro heading over the same span.  (The central difference over
+    ``t[k-j]..t[k+j]`` is the tangent at the chord's arc-length midpoint, not
+    at ``t[k]``; decelerating into turns it biased the lag by 0.3 s.)"""
+    t = np.asarray(gnss.t_valid, float)
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    v = np.asarray(gnss.v_n, float)[order, :2]
+    has_v = np.all(np.isfinite(v), axis=1) & np.isfinite(t)
+    if has_v.sum() >= 0.5 * t.size:
+        t, v = t[has_v], v[has_v]
+        if t.size < 3:
+            return None
+        return t, t, np.arctan2(v[:, 1], v[:, 0]), np.hypot(v[:, 0], v[:, 1])
+    lat = np.radians(np.asarray(gnss.lat_deg, float)[order])
+    lon = np.radians(np.asarray(gnss.lon_deg, float)[order])
+    ok = np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon)
+    t, lat, lon = t[ok], lat[ok], lon[ok]
+    if t.size < 4:
+        return None
+    dt = median(np.diff(t))
+    j = min(max(1, int(round(interval_s / max(dt, 1e-3)))), t.size - 1)
+    n_m = lat * _R_EARTH_M
+    e_m = np.unwrap(lon) * _R_EARTH_M * np.cos(lat)
+    lo, hi = t[:-j], t[j:]
+    dn, de = n_m[j:] - n_m[:-j], e_m[j:] - e_m[:-j]
+    span = hi - lo
+    keep = (span > 0) & (span <= 3.0 * j * dt)
+    if keep.sum() < 3:
+        return None
+    lo, hi, dn, de, span = lo[keep], hi[keep], dn[keep], de[keep], span[keep]
+    return lo, hi, np.arctan2(de, dn), np.hypot(dn, de) / span
+
+
 def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, interval_s: float = 1.0,
                          min_speed_mps: float = 0.5, min_turn_deg: float = 90.0,
                          max_pairs: int = 4000) -> TimeOffset | None:
@@ -305,15 +346,16 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
     rate) is integrated once onto a 20 Hz grid
     (``_core.rotation_about_at``); for each candidate lag ``L`` the heading
     change ``g(t_b - L) - g(t_a - L)`` over pairs of fixes ``interval_s``
-    apart is correlated with the GNSS course change ``c(t_b) - c(t_a)``
+    apart (the mean over the chord of a positions-only file,
+    :func:`_course_samples`) is correlated with the GNSS course change
+    ``c(t_b) - c(t_a)``
     (weights ``speed^2``: the course error is ``sigma_v / speed``).  The
     correlation is searched over ``-max_lag_s..max_lag_s`` on a 0.5 s grid,
     then on 0.1 s steps around its maximum, and refined by a parabola through
     the best three (cross-correlation time-delay estimation with sub-sample
     interpolation; Knapp & Carter 1976, IEEE Trans. ASSP 24(4)).  The course
-    is the reported GNSS velocity's, or the positions' central difference
-    (:func:`_gnss_course`; a tight run: the single-point fixes' Doppler
-    velocity).
+    is the reported GNSS velocity's (a tight run: the single-point fixes'
+    Doppler velocity), or the chords' between the positions.
 
     Returns None with fewer than 20 pairs at speed or less than
     ``min_turn_deg`` of turning.
@@ -321,19 +363,17 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
     t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
     if t.size < 3 or len(gnss) < 3 or scan is None:
         return None
-    gt, v, _ = _gnss_course(gnss)
-    ok = np.isfinite(gt) & np.all(np.isfinite(v), axis=1)
-    gt, v = gt[ok], v[ok]
-    if gt.size < 3:
+    samples = _course_samples(gnss, interval_s)
+    if samples is None:
         return None
-    speed = np.hypot(v[:, 0], v[:, 1])
-    course = np.arctan2(v[:, 1], v[:, 0])
-    # pairs (a, b): b the first fix at least interval_s after a; no gaps
-    a = np.arange(gt.size)
-    b = np.searchsorted(gt, gt + interval_s - 1e-6)
-    keep = b < gt.size
+    lo, hi, course, speed = samples
+    tm = 0.5 * (lo + hi)
+    # pairs (a, b): b the first sample at least interval_s after a; no gaps
+    a = np.arange(tm.size)
+    b = np.searchsorted(tm, tm + interval_s - 1e-6)
+    keep = b < tm.size
     a, b = a[keep], b[keep]
-    keep = (gt[b] - gt[a] <= 2.0 * interval_s) & (speed[a] > min_speed_mps) & (speed[b] > min_speed_mps)
+    keep = (tm[b] - tm[a] <= 2.0 * interval_s) & (speed[a] > min_speed_mps) & (speed[b] > min_speed_mps)
     a, b = a[keep], b[keep]
     if a.size > max_pairs:
         pick = np.linspace(0, a.size - 1, max_pairs).round().astype(np.int64)
@@ -342,7 +382,6 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
         return None
     dc = (course[b] - course[a] + np.pi) % (2 * np.pi) - np.pi
     w = np.minimum(np.minimum(speed[a], speed[b]), 30.0) ** 2
-    ta, tb = gt[a], gt[b]
     from .. import _core
 
     h = 0.05  # s: the heading on a uniform grid, interpolated by index arithmetic (no search per query)
@@ -352,20 +391,29 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
     if grid.size < 2 or not np.isfinite(g_grid).all():
         return None
     wdc = w * dc
-
     dg_grid = np.diff(g_grid)
+    chords = bool(np.any(hi > lo))
+    if chords:  # the integral of the heading (trapezoid): a chord's course is the heading's mean over it
+        gi_grid = np.concatenate([[0.0], np.cumsum(0.5 * h * (g_grid[1:] + g_grid[:-1]))])
+        dgi_grid = np.diff(gi_grid)
 
-    def heading_at(q):
+    def at(q, f, df):
         u = (q - x0) * (1.0 / h)
         i = u.astype(np.int64)  # truncation = floor inside the grid; outside: NaN below
         np.clip(i, 0, grid.size - 2, out=i)
-        out = g_grid[i] + (u - i) * dg_grid[i]
+        out = f[i] + (u - i) * df[i]
         out[(u < 0.0) | (u > grid.size - 1)] = np.nan
         return out
 
+    def heading(k, lags):
+        """The gyro heading of samples k at the lags: at the fix, or averaged over the chord."""
+        if not chords:
+            return at(lo[k] - lags, g_grid, dg_grid)
+        return (at(hi[k] - lags, gi_grid, dgi_grid) - at(lo[k] - lags, gi_grid, dgi_grid)) / (hi[k] - lo[k])
+
     def corr(lags, sub=slice(None)):
         lags = np.asarray(lags, float)[:, None]
-        dg = heading_at(tb[sub] - lags) - heading_at(ta[sub] - lags)
+        dg = heading(b[sub], lags) - heading(a[sub], lags)
         m = np.isfinite(dg)
         dg = np.where(m, dg, 0.0)
         ww = w[sub]
@@ -392,20 +440,19 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
         if den < 0:
             lag += 0.5 * (rf[k - 1] - rf[k + 1]) / den * fine_step
     # the turning seen (the pairs overlap when the fixes come faster than interval_s)
-    tas = ta[::max(1, -(-a.size // 1500))]
+    tas = tm[a][::max(1, -(-a.size // 1500))]
     turn_deg = float(np.degrees(np.sum(np.abs(dgf[k][mf[k]]))) * median(np.diff(tas)) / interval_s)
     if turn_deg < min_turn_deg:
         return None
     # the highest other local maximum of the coarse correlation, outside the main lobe
     rr = np.where(np.isfinite(rc), rc, -np.inf)
     peaks = np.flatnonzero((rr[1:-1] >= rr[:-2]) & (rr[1:-1] >= rr[2:])) + 1
-    lobe = j
-    lo, hi = lobe, lobe
-    while lo > 0 and rr[lo - 1] <= rr[lo]:
-        lo -= 1
-    while hi < rr.size - 1 and rr[hi + 1] <= rr[hi]:
-        hi += 1
-    others = [rr[p] for p in peaks if p < lo or p > hi]
+    left, right = j, j  # the main lobe: downhill from the maximum on both sides
+    while left > 0 and rr[left - 1] <= rr[left]:
+        left -= 1
+    while right < rr.size - 1 and rr[right + 1] <= rr[right]:
+        right += 1
+    others = [rr[p] for p in peaks if p < left or p > right]
     r_second = float(max(others)) if others else float("nan")
     r_zero = float(corr([0.0])[0][0])
     return TimeOffset(lag, float(rf[k]), r_zero, r_second, int(a.size), turn_deg)
