@@ -167,3 +167,18 @@ def test_gate_hints_name_the_cause():
     mirrored = dataclasses.replace(g, lon_deg=-g.lon_deg, v_n=np.full_like(g.v_n, np.nan))
     h = disagreement_hint(dataclasses.replace(ds, gnss=mirrored))
     assert "flipped longitude" in h and "behind" not in h
+
+
+def test_cli_gate_failure_names_the_time_offset(walk, tmp_path, capsys):
+    """The real walk with its IMU 1 s early: the lag (0.54 s seen, the walk's own -0.46 s added) stays
+    under the refusal limit, the gate rejects most fixes, and the message names the offset instead of
+    the generic 'check units, lever arm and sigmas'."""
+    from insnav.cli import main
+
+    cfg = _walk_loose_config(tmp_path, "time_offset_s = -1.0\n")
+    rc = main(["run", "--format", "csv", "--imu", str(walk / "raw/imu_1730.csv"), "--gnss",
+               str(walk / "raw/gnss_1730_sf.pos"), "--config", str(cfg), "--out", str(tmp_path / "s.csv"), "-q"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "rejected by the innovation gate" in err
+    m = re.search(r"the turns put the GNSS ([0-9.]+) s behind the IMU", err)
+    assert m and 0.5 < float(m.group(1)) < 0.6 and "check units" not in err

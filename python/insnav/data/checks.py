@@ -505,7 +505,7 @@ def disagreement_hint(dataset) -> str:
             est = estimate_time_offset(imu.t, imu.dtheta_b, imu.dv_b, gnss)
             if est is not None and not est.ambiguous and abs(est.lag_s) > HINT_TIME_OFFSET_S:
                 hints.append(f"the turns put the GNSS {abs(est.lag_s):.2f} s {'behind' if est.lag_s > 0 else 'ahead of'}"
-                             f" the IMU{time_offset_cause(est.lag_s)} (max_time_offset_s)")
+                             f" the IMU{time_offset_cause(est.lag_s)} (shift the IMU times by {est.lag_s:+.2f} s)")
             fit = gyro_course_slope(imu.t, imu.dtheta_b, imu.dv_b, gnss)
             if fit is not None and fit[0] < -0.5:
                 hints.append(f"the GNSS track turns opposite to the gyros (slope {fit[0]:.2f}): a flipped longitude "
