@@ -480,7 +480,10 @@ class RunConfig:
         def bad(key, value, allowed):
             raise ConfigError(f"config key '{key}': bad value {value!r}; allowed: {allowed}")
 
-        # types first (TOML gives any type): numbers finite and not bool, flags bool
+        # types first (TOML gives any type): names str, numbers finite and not bool, flags bool
+        for key, allowed in (("filter", FILTERS), ("coupling", COUPLINGS)):
+            if not isinstance(getattr(self, key), str):
+                bad(key, getattr(self, key), ", ".join(allowed))
         for key in ("init_seed", "gate_prob", "gate_chi2", "gate_reopen_after", "propagation_interval_s",
                     "output_decimation", "ut_alpha", "ut_beta", "ut_kappa", "cycle_period_s"):
             v = getattr(self, key)
@@ -507,6 +510,11 @@ class RunConfig:
                 la = np.full(1, np.nan)
             if la.shape != (3,) or not np.all(np.isfinite(la)):
                 bad("lever_arm_b", self.lever_arm_b, "3 finite values [m]")
+            from .data.checks import lever_arm_problem
+
+            problem = lever_arm_problem(la)
+            if problem:
+                raise ConfigError(f"config key 'lever_arm_b': {self.lever_arm_b!r}: {problem}")
         if self.imu is not None and not isinstance(self.imu, ImuNoise):
             bad("imu", self.imu, "a table of IMU noise keys")
         if not isinstance(self.constraints, Constraints):

@@ -50,6 +50,9 @@ class DataCheckError(ValueError):
     """Input that cannot be right (units, signs, time bases)."""
 
 
+#: a GNSS position sigma above this [m] is refused (insnav.filters.sanitize drops such fixes first)
+MAX_GNSS_SIGMA_M = 1e5
+
 #: check_imu judges the medians on at most this many evenly spread samples (the
 #: verdicts have factor-2 margins; a 56-min 200 Hz log then takes ~10 ms, not ~90)
 CHECK_IMU_MAX_SAMPLES = 50_000
@@ -600,6 +603,11 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
     if nonpos.size:
         raise DataCheckError(f"{where(nonpos[0])}: sigma_{{n,e,d}}_m = {sig[nonpos[0]].tolist()} must be > 0 "
                              f"({nonpos.size} of {m} fixes; a zero sigma would make the filter ignore the IMU)")
+    huge = np.nonzero(~np.all(sig <= MAX_GNSS_SIGMA_M, axis=1))[0]
+    if huge.size:
+        raise DataCheckError(f"{where(huge[0])}: sigma_{{n,e,d}}_m = {sig[huge[0]].tolist()}: over "
+                             f"{MAX_GNSS_SIGMA_M:g} m ({huge.size} of {m} fixes; no information, and the filter's "
+                             "covariance would overflow)")
     if initial is not None:
         d = _distance_m(initial.lat_deg, initial.lon_deg, lat[0], lon[0])
         if d > max_start_distance_m:
@@ -630,6 +638,28 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
             raise DataCheckError(f"{where(i)}: a jump of {dist[j] / 1000:.3f} km in {dt[j]:.3g} s from the "
                                  f"previous fix ({speed[j]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
                                  f"mixed units or a bad fix")
+
+
+#: the longest IMU -> antenna lever arm accepted [m] (a large ship or aircraft stays below it; a lever
+#: arm typed in millimetres or centimetres does not)
+MAX_LEVER_ARM_M = 100.0
+
+
+def lever_arm_problem(lever_arm_b) -> str | None:
+    """Why an IMU -> antenna lever arm [m] cannot be right (not 3 finite values, or
+    longer than :data:`MAX_LEVER_ARM_M`, with the unit it looks like), or None."""
+    try:
+        la = np.asarray(lever_arm_b, dtype=float)
+    except (TypeError, ValueError):
+        return "expected 3 numbers [m]"
+    if la.shape != (3,) or not np.all(np.isfinite(la)):
+        return "expected 3 finite numbers [m]"
+    n = float(np.linalg.norm(la))
+    if n <= MAX_LEVER_ARM_M:
+        return None
+    unit = " (it looks like millimetres: the lever arm is in metres)" if n / 1000.0 <= 20.0 else \
+        " (it looks like centimetres: the lever arm is in metres)" if n / 100.0 <= 20.0 else ""
+    return f"{n:.4g} m long, implausible for an IMU -> antenna lever arm (> {MAX_LEVER_ARM_M:g} m){unit}"
 
 
 def check_latlon_radians(lat, lon, *, source: str = "gnss", column: str = "lat/lon") -> None:
@@ -734,6 +764,10 @@ def check_dataset(dataset, *, max_time_offset_s: float = MAX_TIME_OFFSET_S) -> N
     simulator's fixes, so both couplings get the same checks."""
     imu, gnss = dataset.imu, dataset.gnss
     imu_src = _source(imu, "imu")
+    problem = lever_arm_problem(getattr(dataset, "lever_arm_b", np.zeros(3)))
+    if problem:
+        raise DataCheckError(f"{getattr(dataset, 'name', None) or 'dataset'}: lever_arm_b = "
+                             f"{np.asarray(dataset.lever_arm_b).tolist()}: {problem}")
     check_imu(imu.t, imu.dtheta_b, imu.dv_b, source=imu_src)
     if len(gnss):
         gnss_src = _source(gnss, "gnss")

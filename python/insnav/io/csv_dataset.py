@@ -114,6 +114,8 @@ def _noise_model(imu_d: dict, source: str) -> tuple[ImuNoise, dict]:
                           f"keys ({', '.join(k[0] for k in _REQUIRED_NOISE)}); a filter with zero IMU noise would "
                           "trust the IMU blindly")
     model = {}
+    if grade is not None and not isinstance(grade, str):
+        raise ConfigError(f"{source}: key 'imu.grade': bad value {grade!r}; allowed: {' | '.join(IMU_GRADES)}")
     if grade is not None:
         try:
             model = imu_model_for_grade(grade)
@@ -287,7 +289,10 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
     ini = _table(d, "initial", INITIAL_KEYS, source)
     align_d = _table(d, "align", ALIGN_KEYS, source)
     for k, v in list(ini.items()) + list(align_d.items()):
-        vals = np.atleast_1d(np.asarray(v, dtype=float)) if not isinstance(v, (str, bool)) else np.array([np.nan])
+        try:
+            vals = np.atleast_1d(np.asarray(v, dtype=float)) if not isinstance(v, (str, bool)) else np.array([np.nan])
+        except (TypeError, ValueError):  # a table or a nested list where numbers belong
+            vals = np.array([np.nan])
         if not np.all(np.isfinite(vals)) or (k == "v_n_mps" and vals.shape != (3,)) or \
                 (k != "v_n_mps" and vals.shape != (1,)):
             raise ConfigError(f"{source}: key '{'initial' if k in INITIAL_KEYS else 'align'}.{k}': bad value {v!r}; "
