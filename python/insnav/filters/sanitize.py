@@ -46,17 +46,17 @@ a bad one is dropped (it then acts like a short outage) rather than refused:
 
 =====================================  ========================================
 non-finite time, position or position  dropped (``gnss_invalid_dropped``)
-sigma, sigma <= 0 or > ``MAX_SIGMA_M``
-(1e5 m: no information, and its square
-overflows the filter), latitude
-outside [-90, 90], longitude outside
-[-180, 360], height outside
+sigma, sigma <= 0 or > MAX_SIGMA_M
+(1e5 m: no information, and its
+square overflows the filter),
+latitude outside [-90, 90], longitude
+outside [-180, 360], height outside
 [``min_h_m``, ``max_h_m``]
 non-finite or non-positive velocity    velocity removed, position kept
-or velocity sigma (some, not all NaN),  (``gnss_velocity_removed``)
-a speed over ``MAX_SPEED_MPS`` (1e4
-m/s) or a sigma over ``MAX_SIGMA_MPS``
-(1e5 m/s)
+or velocity sigma (some, not all       (``gnss_velocity_removed``)
+NaN), a speed over MAX_SPEED_MPS
+(1e4 m/s) or a sigma over
+MAX_SIGMA_MPS (1e5 m/s)
 out of time order                      sorted (``gnss_reordered``)
 repeated time of validity              first kept, rest dropped
                                        (``gnss_duplicates_dropped``)
