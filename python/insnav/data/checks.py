@@ -657,8 +657,8 @@ def lever_arm_problem(lever_arm_b) -> str | None:
     n = float(np.linalg.norm(la))
     if n <= MAX_LEVER_ARM_M:
         return None
-    unit = " (it looks like millimetres: the lever arm is in metres)" if n / 1000.0 <= 20.0 else \
-        " (it looks like centimetres: the lever arm is in metres)" if n / 100.0 <= 20.0 else ""
+    units = [u for u, f in (("millimetres", 1000.0), ("centimetres", 100.0)) if n / f <= 20.0]
+    unit = f" (it looks like {' or '.join(units)}: the lever arm is in metres)" if units else ""
     return f"{n:.4g} m long, implausible for an IMU -> antenna lever arm (> {MAX_LEVER_ARM_M:g} m){unit}"
 
 

@@ -121,7 +121,9 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
                     init_sigma_gyro_bias_radps=given("initbgstd_radps"),
                     init_sigma_acc_scale=given("initsastd", scale=False),
                     init_sigma_gyro_scale=given("initsgstd", scale=False))
-    ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario={"kfgins_config": str(config_path)},
+    # the records outside the run's IMU span are not carried; the run summary counts them
+    scenario = {"kfgins_config": str(config_path), "gnss_outside_imu_span": int(g.size - np.count_nonzero(g))}
+    ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario=scenario,
                  lever_arm_b=np.asarray(cfg.lever_arm_b), initial=initial, t0=t0, gps_time_offset_s=0.0,
                  imu_model={}, name=Path(config_path).stem)
     return ds, cfg
