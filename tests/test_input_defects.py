@@ -68,3 +68,33 @@ def test_lever_arm_in_millimetres_is_named(sim, tmp_path, where):
         ds = dataclasses.replace(sim, lever_arm_b=np.array([13.6, -30.1, 118.4]))
         with pytest.raises(DataCheckError, match=r"lever_arm_b = .*centimetres"):
             insnav.run(ds)
+
+
+@pytest.fixture(scope="module")
+def car_csv(tmp_path_factory):
+    from test_csv_dataset import _car, write_gnss
+
+    car = _car(segments=7)  # the standstill, a straight, two turns
+    d = tmp_path_factory.mktemp("car")
+    return car, write_gnss(d / "gnss.csv", car), d
+
+
+def test_rfu_read_as_flu_is_named_not_a_90_deg_heading(car_csv):
+    """z-up data: the hint names FLU and RFU; RFU data mapped as FLU (x right taken as forward) would
+    start 90 deg off from the GNSS course, so the loader refuses it, naming the axes."""
+    from test_csv_dataset import config, write_imu
+
+    from insnav.data.checks import DataCheckError
+
+    car, gnss, d = car_csv
+    rfu = write_imu(d / "rfu.csv", car, axes="RFU")
+    with pytest.raises(DataCheckError, match=r'z up with x forward is FLU, with x right RFU|"FLU" if .*"RFU" if'):
+        insnav.load_csv_dataset(rfu, gnss, config())  # read as FRD: the axes hint names both
+    with pytest.raises(DataCheckError, match=r"along body -x, not \+y .*x axis points left|along body \+x, not \+y "
+                                             r".*x axis points right") as err:
+        insnav.load_csv_dataset(rfu, gnss, config(imu=dict(axes="FLU")))
+    assert "[imu] axes" in str(err.value) and "\n" not in str(err.value)
+    ds, cfg = insnav.load_csv_dataset(rfu, gnss, config(imu=dict(axes="RFU")))  # right: runs
+    t_car = ds.t0 + ds.gps_time_offset_s - car.gps_time_offset_s
+    yaw_err = (ds.initial.yaw_deg - np.interp(t_car, car.truth.t, car.truth.yaw_deg) + 180.0) % 360.0 - 180.0
+    assert abs(yaw_err) < 5.0

@@ -53,6 +53,9 @@ class DataCheckError(ValueError):
 #: a GNSS position sigma above this [m] is refused (insnav.filters.sanitize drops such fixes first)
 MAX_GNSS_SIGMA_M = 1e5
 
+#: how to map z-up axes (check_imu): naming one candidate made RFU data read as FLU, 90 deg off in yaw
+_AXES_HINT = "map the axes in the input settings: z up with x forward is FLU, with x right RFU"
+
 #: check_imu judges the medians on at most this many evenly spread samples (the
 #: verdicts have factor-2 margins; a 56-min 200 Hz log then takes ~10 ms, not ~90)
 CHECK_IMU_MAX_SAMPLES = 50_000
@@ -109,7 +112,7 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*"
     if up[2] > 0.7:
         raise DataCheckError(f"{source}: {acc_label}: the mean specific force points along +z "
                              f"({up.round(3).tolist()}), i.e. down in FRD: the IMU is upside down, or FLU/RFU axes "
-                             f"are read as FRD ({fixes.get('axes', 'map the axes in the input settings')})")
+                             f"are read as FRD ({fixes.get('axes', _AXES_HINT)})")
     if wm > 1.0:
         hint = ""
         if wm * DEG < 1.0:
@@ -483,6 +486,81 @@ def check_time_offset(t, dtheta_b, dv_b, gnss, *, max_offset_s: float = MAX_TIME
         f"GNSS course than in the gyros: correlation {est.r_peak:.2f}, {est.r_zero:.2f} unshifted, {est.pairs} course "
         f"changes, {est.turn_deg:.0f} deg of turns); shift the IMU times by {lag:+.2f} s" + (f" ({fix})" if fix else "")
         + f", or raise max_time_offset_s (now {max_offset_s:g} s; inf: no check)")
+
+
+def lateral_axis_correlation(t, dtheta_b, dv_b, gnss, *, min_speed_mps: float = 1.0,
+                             interval_s: float = 1.0) -> tuple[float, float, int] | None:
+    """Correlation of the body x and y specific force with the centripetal
+    acceleration of the GNSS track, ``speed * d(course)/dt`` (to the right in
+    a right turn), over ~``interval_s`` windows: ``(r_x, r_y, windows)``.
+
+    In FRD, +y is right: ``r_y`` near 1 and ``r_x`` near 0 (0.72-0.94 and
+    |r_x| < 0.25 on the walk, the KF-GINS track and the car presets).  An IMU
+    whose x axis points right (RFU read as FLU) puts it on ``r_x``.  None with
+    fewer than 20 windows at speed or less than 0.2 m/s^2 of centripetal
+    acceleration rms."""
+    t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
+    if t.size < 3 or len(gnss) < 3 or scan is None:
+        return None
+    samples = _course_samples(gnss, interval_s)
+    if samples is None:
+        return None
+    lo, hi, course, speed = samples
+    tm = 0.5 * (lo + hi)
+    b = np.searchsorted(tm, tm + interval_s - 1e-6)
+    a = np.flatnonzero(b < tm.size)
+    b = b[a]
+    span = tm[b] - tm[a]
+    ok = (span > 0) & (span <= 2.0 * interval_s) & (speed[a] > min_speed_mps) & (speed[b] > min_speed_mps)
+    a, b, span = a[ok], b[ok], span[ok]
+    if a.size < 20:
+        return None
+    dc = (course[b] - course[a] + np.pi) % (2 * np.pi) - np.pi
+    a_lat = 0.5 * (speed[a] + speed[b]) * dc / span
+    if np.sqrt(np.mean(a_lat ** 2)) < 0.2:
+        return None
+    from .. import _core
+
+    # the mean specific force over each window: the velocity increments summed about x and y
+    # (rotation_about_at integrates any (N, 3) increments along an axis)
+    f = []
+    for axis in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
+        c = _core.rotation_about_at(t, dv_b, axis, np.concatenate([tm[a], tm[b]]))
+        f.append((c[a.size:] - c[:a.size]) / span)
+    good = np.isfinite(f[0]) & np.isfinite(f[1])
+    if good.sum() < 20:
+        return None
+    y = a_lat[good] - a_lat[good].mean()
+    r = []
+    for fx in f:
+        x = fx[good] - fx[good].mean()
+        den = np.sqrt(np.dot(x, x) * np.dot(y, y))
+        r.append(float(np.dot(x, y) / den) if den > 0 else 0.0)
+    return r[0], r[1], int(good.sum())
+
+
+def check_heading_axes(t, dtheta_b, dv_b, gnss, *, source: str = "imu", fix: str | None = None):
+    """Refuse body axes whose x is not forward when the heading is to come from
+    the GNSS course: the centripetal acceleration of the turns must be along
+    +y (right, FRD), not along x (an IMU whose x points right or left: RFU or
+    LBU read as FLU, a 90 deg error in every heading) nor along -y.  Returns
+    :func:`lateral_axis_correlation` (None: too little turning to tell)."""
+    res = lateral_axis_correlation(t, dtheta_b, dv_b, gnss)
+    if res is None:
+        return None
+    r_x, r_y, n = res
+    how = f"(correlation of the specific force with the track's centripetal acceleration over {n} windows: " \
+          f"x {r_x:+.2f}, y {r_y:+.2f})"
+    tail = f"; {fix}" if fix else ""
+    if abs(r_x) > 0.5 and abs(r_x) > 2.0 * abs(r_y):
+        side = "right" if r_x > 0 else "left"
+        raise DataCheckError(f"{source}: the turns push the IMU along body {'+' if r_x > 0 else '-'}x, not +y "
+                             f"{how}: its x axis points {side}, not forward (e.g. RFU data read as FLU), which "
+                             f"turns the heading from the GNSS course by 90 deg{tail}")
+    if r_y < -0.5 and abs(r_x) < 0.5 * abs(r_y):
+        raise DataCheckError(f"{source}: the turns push the IMU along body -y, not +y {how}: its x axis points "
+                             f"backwards (a 180 deg heading error){tail}")
+    return res
 
 
 #: a lag the failure hints name (below MAX_TIME_OFFSET_S: a run that failed for another reason does not

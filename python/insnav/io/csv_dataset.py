@@ -46,8 +46,9 @@ from pathlib import Path
 import numpy as np
 
 from ..config import _USER_UNITS, ConfigError, ImuNoise, RunConfig, config_from_dict
-from ..data.checks import (MAX_TIME_OFFSET_S, check_gnss, check_gnss_velocity, check_gyro_against_gnss, check_imu,
-                           check_latlon_radians, check_time_offset, check_time_overlap)
+from ..data.checks import (MAX_TIME_OFFSET_S, check_gnss, check_gnss_velocity, check_gyro_against_gnss,
+                           check_heading_axes, check_imu, check_latlon_radians, check_time_offset,
+                           check_time_overlap)
 from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin
 from ..data.imu_grades import IMU_GRADES, imu_model_for_grade
 from ..data.nav import NavState
@@ -153,7 +154,8 @@ def _labels(fmt: ImuCsvFormat, path: str) -> tuple[str, str]:
 
 def _fixes(fmt: ImuCsvFormat) -> dict:
     """The setting that fixes each cause a check can name."""
-    out = {"axes": '[imu] axes = "FLU" (or the axes the IMU has: three of F/B, R/L, D/U)',
+    out = {"axes": '[imu] axes = "FLU" if the IMU\'s x axis points forward, "RFU" if it points right (the axes '
+                   'the IMU has: three of F/B, R/L, D/U; a wrong x turns every heading by 90 deg)',
            "inverted": "check [imu] axes / mount_rpy_deg",
            "t_ms": '[imu] time_unit = "ms"?'}
     if fmt.acc_unit != "g":
@@ -339,6 +341,10 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
     check_gyro_against_gnss(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=samples.path,
                             gyro_label=gyro_label, fixes=dict(fixes, inverted="or the lat/lon signs are flipped; "
                                                               "check [imu] axes and the GNSS signs"))
+
+    if "yaw_deg" not in ini:  # the heading will come from the GNSS course: body x must be forward
+        check_heading_axes(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=samples.path,
+                           fix="map the axes so that x is forward: [imu] axes (e.g. \"RFU\") or mount_rpy_deg")
 
     # -- initial state
     lever = np.asarray(d.get("lever_arm_b", (0.0, 0.0, 0.0)), float)
