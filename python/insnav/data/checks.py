@@ -163,6 +163,45 @@ def _down_b(scan) -> np.ndarray:
     return -f / max(np.linalg.norm(f), 1e-12)
 
 
+#: grid step of the gyro heading shared by the course checks [s]
+_HEADING_GRID_S = 0.1
+
+
+def _heading_grid(t, dtheta_b, scan):
+    """The rotation about the body's mean-down axis [rad] on a uniform
+    ``_HEADING_GRID_S`` grid from ``t[0]``: ``(x0, h, g)``, or None when not
+    finite.  One compiled pass over the samples (``_core.rotation_about_at``),
+    memoised with the IMU scan inside :func:`insnav.run`
+    (:func:`insnav._imu_scan.scan_memo`): the slope check, the time-offset
+    estimate and the failure hints share it."""
+    from .. import _core
+    from .._imu_scan import _MEMO, _key
+
+    memo = _MEMO.get()
+    key = ("heading_grid", _key(t), _key(dtheta_b)) if memo is not None else None
+    if key is not None and key in memo:
+        return memo[key][1]
+    h = _HEADING_GRID_S
+    x0 = float(t[0])
+    grid = x0 + h * np.arange(int((t[-1] - x0) / h) + 1)
+    g = _core.rotation_about_at(t, dtheta_b, _down_b(scan), grid)
+    res = (x0, h, g) if grid.size >= 2 and np.isfinite(g).all() else None
+    if key is not None:
+        memo[key] = ((t, dtheta_b), res)  # the arrays kept alive: their addresses stay theirs
+    return res
+
+
+def _heading_at(grid, q):
+    """Linear interpolation of :func:`_heading_grid` at times ``q`` (NaN outside)."""
+    x0, h, g = grid
+    u = (np.asarray(q, float) - x0) * (1.0 / h)
+    i = u.astype(np.int64)  # truncation = floor inside the grid; outside: NaN below
+    np.clip(i, 0, g.size - 2, out=i)
+    out = g[i] + (u - i) * (g[i + 1] - g[i])
+    out[(u < 0.0) | (u > g.size - 1)] = np.nan
+    return out
+
+
 def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min_speed_mps: float = 3.0,
                             min_turn_deg: float = 45.0, gyro_label: str = "dtheta_*",
                             fixes: dict | None = None) -> float | None:
@@ -209,16 +248,15 @@ def gyro_course_slope(t, dtheta_b, dv_b, gnss, *, min_speed_mps: float = 3.0, mi
     gt, v, from_positions = _gnss_course(gnss)
     speed = np.hypot(v[:, 0], v[:, 1])
     course = np.arctan2(v[:, 1], v[:, 0])
-    down_b = _down_b(scan)
     # ~1 s intervals (the course of a 10 Hz receiver is noisy fix to fix)
     step = max(1, int(round(1.0 / max(median(np.diff(gt)), 1e-3))))
     sel = np.arange(0, gt.size, step)
     gt, v, speed, course = gt[sel], v[sel], speed[sel], course[sel]
-    # the heading the gyros integrate about the vertical, at the fixes: np.interp(gt, [t[0] - (t[1] - t[0]), t],
-    # [0, cumsum(dtheta_b @ down_b)], left=nan, right=nan) in one compiled pass, no (N,) temporaries
-    from .. import _core
-
-    g_at = _core.rotation_about_at(t, dtheta_b, down_b, gt)
+    # the heading the gyros integrate about the vertical, at the fixes (the shared 10 Hz grid)
+    grid = _heading_grid(t, dtheta_b, scan)
+    if grid is None:
+        return None
+    g_at = _heading_at(grid, gt)
     with np.errstate(invalid="ignore"):
         fast = (speed[:-1] > min_speed_mps) & (speed[1:] > min_speed_mps) & np.all(np.isfinite(v[:, :2]), axis=1)[1:] \
             & np.all(np.isfinite(v[:, :2]), axis=1)[:-1] & np.isfinite(g_at[:-1]) & np.isfinite(g_at[1:]) \
@@ -349,14 +387,14 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
 
     The gyros' rotation about the vertical (the mean specific-force direction,
     as in :func:`check_gyro_against_gnss`; a near-level vehicle's heading
-    rate) is integrated once onto a 20 Hz grid
+    rate) is integrated once onto a 10 Hz grid
     (``_core.rotation_about_at``); for each candidate lag ``L`` the heading
     change ``g(t_b - L) - g(t_a - L)`` over pairs of fixes ``interval_s``
     apart (the mean over the chord of a positions-only file,
     :func:`_course_samples`) is correlated with the GNSS course change
     ``c(t_b) - c(t_a)``
     (weights ``speed^2``: the course error is ``sigma_v / speed``).  The
-    correlation is searched over ``-max_lag_s..max_lag_s`` on a 0.5 s grid,
+    correlation is searched over ``-max_lag_s..max_lag_s`` on a 1 s grid,
     then on 0.1 s steps around its maximum, and refined by a parabola through
     the best three (cross-correlation time-delay estimation with sub-sample
     interpolation; Knapp & Carter 1976, IEEE Trans. ASSP 24(4)).  The course
@@ -388,14 +426,11 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
         return None
     dc = (course[b] - course[a] + np.pi) % (2 * np.pi) - np.pi
     w = np.minimum(np.minimum(speed[a], speed[b]), 30.0) ** 2
-    from .. import _core
-
-    h = 0.05  # s: the heading on a uniform grid, interpolated by index arithmetic (no search per query)
-    x0 = float(t[0])
-    grid = x0 + h * np.arange(int((t[-1] - x0) / h) + 1)
-    g_grid = _core.rotation_about_at(t, dtheta_b, _down_b(scan), grid)
-    if grid.size < 2 or not np.isfinite(g_grid).all():
+    hg = _heading_grid(t, dtheta_b, scan)  # interpolated by index arithmetic (no search per query)
+    if hg is None:
         return None
+    x0, h, g_grid = hg
+    grid = g_grid  # its size is the grid's
     wdc = w * dc
     dg_grid = np.diff(g_grid)
     chords = bool(np.any(hi > lo))
@@ -419,7 +454,10 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
 
     def corr(lags, sub=slice(None)):
         lags = np.asarray(lags, float)[:, None]
-        dg = heading(b[sub], lags) - heading(a[sub], lags)
+        ab = np.concatenate([a[sub], b[sub]])
+        used, pos = np.unique(ab, return_inverse=True)  # a sample ends one pair and starts the next: once
+        hk = heading(used, lags)
+        dg = hk[:, pos[ab.size // 2:]] - hk[:, pos[:ab.size // 2]]
         m = np.isfinite(dg)
         dg = np.where(m, dg, 0.0)
         ww = w[sub]
@@ -431,13 +469,13 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
         r[m.sum(axis=1) < max(20, ww.size // 2)] = np.nan  # most pairs outside the IMU span: no verdict
         return r, dg, m
 
-    coarse = np.arange(-max_lag_s, max_lag_s + 1e-9, 0.5)
+    coarse = np.arange(-max_lag_s, max_lag_s + 1e-9, 1.0)  # the correlation's main lobe is several s wide
     rc, _, _ = corr(coarse, slice(None, None, max(1, -(-a.size // 300))))  # the coarse search on <= 300 pairs
     if not np.isfinite(rc).any():
         return None
     j = int(np.nanargmax(rc))
     fine_step = 0.1
-    fine = coarse[j] + np.arange(-0.6, 0.6 + 1e-9, fine_step)
+    fine = coarse[j] + np.arange(-1.1, 1.1 + 1e-9, fine_step)
     rf, dgf, mf = corr(fine, slice(None, None, max(1, -(-a.size // 1500))))  # on <= 1500 pairs
     k = int(np.nanargmax(rf))
     lag = float(fine[k])
@@ -625,10 +663,10 @@ def initial_yaw_offset_deg(dataset, *, min_speed_mps: float = 1.0, window_s: flo
     fast = fast[gt[fast] <= gt[fast[0]] + window_s]
     if fast.size < 5:
         return None
-    from .. import _core
-
-    q = np.concatenate([[max(t0, float(t[0]))], gt[fast]])
-    g = _core.rotation_about_at(t, dtheta_b, _down_b(scan), q)
+    hg = _heading_grid(t, dtheta_b, scan)
+    if hg is None:
+        return None
+    g = _heading_at(hg, np.concatenate([[max(t0, float(t[0]))], gt[fast]]))
     yaw = np.radians(yaw0) + g[1:] - g[0]
     d = np.arctan2(v[fast, 1], v[fast, 0]) - yaw
     ok = np.isfinite(d)
