@@ -43,7 +43,8 @@ edit = st.one_of(
 )
 edits = st.lists(edit, min_size=1, max_size=4)
 #: the edits of the whole-pipeline fuzz: also an emptied file and a field replaced in every line
-edit_run = st.one_of(edit, st.just(("empty",)), st.tuples(st.just("column"), st.integers(0, 30), st.sampled_from(TOKENS)))
+edit_run = st.one_of(edit, st.just(("empty",)),
+                     st.tuples(st.just("column"), st.integers(0, 30), st.sampled_from(TOKENS)))
 edits_run = st.lists(edit_run, min_size=1, max_size=3)
 
 

@@ -146,9 +146,10 @@ def _gnss_course(gnss):
         e_m = np.unwrap(lon) * _R_EARTH_M * np.cos(lat)
         with np.errstate(invalid="ignore", divide="ignore"):
             span = gt[2 * j:] - gt[:-2 * j]
+            no_gap = span <= 3.0 * 2 * j * median(np.diff(gt))
             vp = np.full_like(v, np.nan)
-            vp[j:-j, 0] = np.where(span <= 3.0 * 2 * j * median(np.diff(gt)), (n_m[2 * j:] - n_m[:-2 * j]) / span, np.nan)
-            vp[j:-j, 1] = np.where(span <= 3.0 * 2 * j * median(np.diff(gt)), (e_m[2 * j:] - e_m[:-2 * j]) / span, np.nan)
+            vp[j:-j, 0] = np.where(no_gap, (n_m[2 * j:] - n_m[:-2 * j]) / span, np.nan)
+            vp[j:-j, 1] = np.where(no_gap, (e_m[2 * j:] - e_m[:-2 * j]) / span, np.nan)
         v[missing] = vp[missing]
     return gt, v, from_positions
 
@@ -430,7 +431,7 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
     if hg is None:
         return None
     x0, h, g_grid = hg
-    grid = g_grid  # its size is the grid's
+    n_grid = g_grid.size
     wdc = w * dc
     dg_grid = np.diff(g_grid)
     chords = bool(np.any(hi > lo))
@@ -441,9 +442,9 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
     def at(q, f, df):
         u = (q - x0) * (1.0 / h)
         i = u.astype(np.int64)  # truncation = floor inside the grid; outside: NaN below
-        np.clip(i, 0, grid.size - 2, out=i)
+        np.clip(i, 0, n_grid - 2, out=i)
         out = f[i] + (u - i) * df[i]
-        out[(u < 0.0) | (u > grid.size - 1)] = np.nan
+        out[(u < 0.0) | (u > n_grid - 1)] = np.nan
         return out
 
     def heading(k, lags):
@@ -623,8 +624,9 @@ def disagreement_hint(dataset) -> str:
         if len(gnss) >= 3:
             est = estimate_time_offset(imu.t, imu.dtheta_b, imu.dv_b, gnss)
             if est is not None and not est.ambiguous and abs(est.lag_s) > HINT_TIME_OFFSET_S:
-                hints.append(f"the turns put the GNSS {abs(est.lag_s):.2f} s {'behind' if est.lag_s > 0 else 'ahead of'}"
-                             f" the IMU{time_offset_cause(est.lag_s)} (shift the IMU times by {est.lag_s:+.2f} s)")
+                how = "behind" if est.lag_s > 0 else "ahead of"
+                hints.append(f"the turns put the GNSS {abs(est.lag_s):.2f} s {how} the IMU"
+                             f"{time_offset_cause(est.lag_s)} (shift the IMU times by {est.lag_s:+.2f} s)")
             fit = gyro_course_slope(imu.t, imu.dtheta_b, imu.dv_b, gnss)
             if fit is not None and fit[0] < -0.5:
                 hints.append(f"the GNSS track turns opposite to the gyros (slope {fit[0]:.2f}): a flipped longitude "

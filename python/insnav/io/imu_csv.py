@@ -214,7 +214,8 @@ class ImuCsvFormat:
                     raise ConfigError(f"{source}: {prefix}columns.{role}: bad value {name!r}; allowed: a header name")
             roles = tuple(cols)
         else:
-            if isinstance(cols, str) or not isinstance(cols, (list, tuple)) or not all(isinstance(c, str) for c in cols):
+            if isinstance(cols, str) or not isinstance(cols, (list, tuple)) \
+                    or not all(isinstance(c, str) for c in cols):
                 raise ConfigError(f"{source}: {prefix}columns: bad value {cols!r}; allowed: a list of "
                                   f"{', '.join(_ROLES)} in file order, or a table role = header name")
             cols = roles = tuple(cols)
