@@ -139,8 +139,39 @@ def rtklib_instantaneous(files, setting, workdir):
     return _rtklib(files, setting, workdir, "instantaneous")
 
 
+def _insnav(files, setting, workdir, ar_mode):
+    """insnav ``--filter rtk`` as a process (reading included) with the options RTKLIB gets:
+    kinematic, L1 (E1), the preset's systems and mask, ratio 3, base position from its header."""
+    toml = workdir / f"insnav_{ar_mode}.toml"
+    toml.write_text("\n".join([
+        'filter = "rtk"', "", "[rtk]", 'mode = "kinematic"', f'ar_mode = "{ar_mode}"',
+        f'systems = "{"".join(setting["systems"])}"', "frequencies = 1",
+        f"elevation_mask_deg = {setting['elevation_mask_deg']:g}", f"ratio_threshold = {RATIO:g}"]) + "\n")
+    pos = workdir / f"insnav_{ar_mode}.pos"
+    t0 = os.times()
+    subprocess.run([sys.executable, "-m", "insnav", "run", "--filter", "rtk", "--format", "rinex",
+                    "--obs", str(files["rover"]), "--base", str(files["base"]), "--nav", str(files["nav"]),
+                    "--config", str(toml), "--out", str(pos)],
+                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=600)
+    t1 = os.times()
+    sol = solution_from_rtklib_pos(pos)
+    sol.cpu_s = (t1.children_user - t0.children_user) + (t1.children_system - t0.children_system)
+    return sol
+
+
+def insnav_continuous(files, setting, workdir):
+    """insnav ``--filter rtk``, continuous ambiguity resolution (its default)."""
+    return _insnav(files, setting, workdir, "continuous")
+
+
+def insnav_instantaneous(files, setting, workdir):
+    """insnav ``--filter rtk``, instantaneous (single-epoch) ambiguity resolution."""
+    return _insnav(files, setting, workdir, "instantaneous")
+
+
 #: engine name -> function(files {"rover", "base", "nav"}, setting, workdir) -> EngineSolution
-ENGINES = {"RTKLIB continuous": rtklib_continuous, "RTKLIB instantaneous": rtklib_instantaneous}
+ENGINES = {"insnav continuous": insnav_continuous, "insnav instantaneous": insnav_instantaneous,
+           "RTKLIB continuous": rtklib_continuous, "RTKLIB instantaneous": rtklib_instantaneous}
 
 
 def score(sol: EngineSolution, t_truth, r_truth) -> dict:

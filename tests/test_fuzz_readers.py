@@ -31,7 +31,7 @@ from insnav.sim.scenario import ScenarioError, load_scenario, resolve_raw
 FUZZ = settings(max_examples=40, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 TOKENS = ["nan", "NaN", "inf", "-inf", "1e308", "-1e308", "1e-320", "", "x", "0x1p3", "1,5", "--1", "1e",
-          "\x00", "\xff", "9" * 40, "-0", "+", "1.0.0", "\t"]
+          "\x00", "\xff", "9" * 40, "-0", "+", "1.0.0", "\t", "1e155", "-1e155", "300", "-1"]
 
 edit = st.one_of(
     st.tuples(st.just("del"), st.integers(0, 10_000)),
@@ -42,6 +42,10 @@ edit = st.one_of(
     st.tuples(st.just("junk"), st.integers(0, 10_000), st.text(max_size=8)),
 )
 edits = st.lists(edit, min_size=1, max_size=4)
+#: the edits of the whole-pipeline fuzz: also an emptied file and a field replaced in every line
+edit_run = st.one_of(edit, st.just(("empty",)),
+                     st.tuples(st.just("column"), st.integers(0, 30), st.sampled_from(TOKENS)))
+edits_run = st.lists(edit_run, min_size=1, max_size=3)
 
 
 def mutate(text: str, ops, sep=None) -> str:
@@ -50,7 +54,16 @@ def mutate(text: str, ops, sep=None) -> str:
         n = len(lines)
         if n == 0:
             break
-        i = op[1] % n if op[0] != "trunc" else 0
+        i = op[1] % n if op[0] not in ("trunc", "empty", "column") else 0
+        if op[0] == "empty":
+            return ""
+        if op[0] == "column":  # one field of every line (a unit typed wrong for the whole file)
+            for k, line in enumerate(lines):
+                parts = line.split(sep) if sep else line.split()
+                if parts:
+                    parts[op[1] % len(parts)] = op[2]
+                    lines[k] = (sep or " ").join(parts)
+            continue
         if op[0] == "del":
             del lines[i]
         elif op[0] == "dup":
@@ -155,6 +168,124 @@ def test_fuzz_kfgins_yaml(tmp_path_factory, ops):
         kfgins.read_kfgins_config(p)
     except Exception as exc:  # noqa: BLE001
         expect_reader_error(exc, "kf-gins.yaml")
+
+
+def _kfgins_set(small_ds, d):
+    """A valid KF-GINS YAML + IMU + GNSS set of the small dataset in folder d."""
+    i = small_ds.initial
+    kfgins.write_kfgins_imu(d / "imu.txt", small_ds.imu)
+    kfgins.write_kfgins_gnss(d / "gnss.txt", small_ds.gnss)
+    (d / "kf-gins.yaml").write_text(
+        f"imupath: imu.txt\ngnsspath: gnss.txt\noutputpath: out\nimudatalen: 7\nimudatarate: 200\n"
+        f"starttime: {small_ds.t0}\nendtime: -1\ninitpos: [{i.lat_deg}, {i.lon_deg}, {i.h_m}]\n"
+        f"initvel: [0, 0, 0]\ninitatt: [{i.roll_deg}, {i.pitch_deg}, {i.yaw_deg}]\n"
+        "imunoise:\n  arw: [0.2, 0.2, 0.2]\n  vrw: [0.4, 0.4, 0.4]\n  corrtime: 1.0\n"
+        "antlever: [0.1, 0.2, 0.3]\n")
+
+
+@FUZZ
+@given(ops=edits_run, which=st.sampled_from(["imu.txt", "gnss.txt", "kf-gins.yaml"]))
+def test_fuzz_kfgins_load_and_run(small_ds, tmp_path_factory, ops, which):
+    """The whole `insnav run --format kfgins` path on a mutated file: a ValueError naming a file, or a
+    finite solution; never IndexError (an empty IMU file, endtime before starttime) or FloatingPointError
+    (a lever arm in mm, a GNSS sigma of 1e155)."""
+    from insnav.io.kfgins_dataset import load_kfgins
+
+    d = tmp_path_factory.mktemp("kfrun")
+    _kfgins_set(small_ds, d)
+    p = d / which
+    p.write_text(mutate(p.read_text(), ops, sep=None), encoding="utf-8", errors="surrogatepass")
+    try:
+        ds, cfg = load_kfgins(d / "kf-gins.yaml")
+        sol = insnav.run(ds, config=cfg)
+    except Exception as exc:  # noqa: BLE001 - the property is about the type and the message
+        assert isinstance(exc, (ValueError, FileNotFoundError)), f"{type(exc).__name__}: {exc}"
+        assert any(n in str(exc) for n in ("imu.txt", "gnss.txt", "kf-gins.yaml", "dataset")), str(exc)
+        return
+    assert np.isfinite(sol.lat_deg).all() and np.isfinite(sol.sigma_pos_n_m).all()
+
+
+@pytest.mark.parametrize("kind", ["empty", "endtime", "antlever_mm", "sigma_1e155"])
+def test_kfgins_cases_found_by_fuzzing(small_ds, tmp_path, kind):
+    """The cases the fuzzing found, each a one-line ValueError naming the file and the key or line."""
+    from insnav.io.kfgins_dataset import load_kfgins
+
+    _kfgins_set(small_ds, tmp_path)
+    y = tmp_path / "kf-gins.yaml"
+    if kind == "empty":
+        (tmp_path / "imu.txt").write_text("")
+        said = "imu.txt:1: no IMU records"
+    elif kind == "endtime":
+        y.write_text(y.read_text().replace(f"starttime: {small_ds.t0}", f"starttime: {small_ds.t0 + 1.0}")
+                     .replace("endtime: -1", f"endtime: {small_ds.t0 + 0.5}"))
+        said = "kf-gins.yaml: key 'endtime'"
+    elif kind == "antlever_mm":
+        y.write_text(y.read_text().replace("antlever: [0.1, 0.2, 0.3]", "antlever: [100, 200, 300]"))
+        said = "kf-gins.yaml: key 'antlever'"
+    else:
+        g = tmp_path / "gnss.txt"
+        rows = g.read_text().splitlines()
+        f = rows[1].split()
+        f[5] = "1e155"  # std_E
+        rows[1] = " ".join(f)
+        g.write_text("\n".join(rows) + "\n")
+        ds, cfg = load_kfgins(y)
+        sol = insnav.run(ds, config=cfg)  # the fix is dropped and counted (insnav.filters.sanitize)
+        assert sol.summary["sanitize"]["gnss_invalid_dropped"] == 1
+        assert sol.summary["sanitize"]["gnss_dropped_lines"] == [2]
+        assert np.isfinite(sol.sigma_pos_n_m).all()
+        with pytest.raises(ValueError, match=r"gnss.txt:2: sigma_\{n,e,d\}_m = .*1e\+155"):
+            insnav.run(ds, config=cfg, sanitize=False)
+        return
+    with pytest.raises(ValueError) as err:
+        ds, cfg = load_kfgins(y)
+        insnav.run(ds, config=cfg)
+    assert said in str(err.value) and "\n" not in str(err.value)
+
+
+#: values of the wrong type for a TOML key (a table, a nested list, a list of strings, a number...)
+WRONG_TYPES = [5, 1.5, float("nan"), True, "x", "", [1, 2], [1, 2, 3], ["a", "b", "c"], {"a": 1}, [], [[1]]]
+
+
+def test_toml_tables_wrong_types():
+    """Every key of the run TOML and of its --format csv / rinex tables, with values of every wrong
+    type: a ConfigError (a ValueError naming the key), never TypeError."""
+    import dataclasses
+
+    from insnav.config import Constraints, Robust, RunConfig, _USER_UNITS
+    from insnav.io.csv_dataset import ALIGN_KEYS, GNSS_KEYS, IMU_KEYS, INITIAL_KEYS, load_csv_run
+    from insnav.io.rinex_dataset import RinexOptions
+
+    cases = [{k.name: v} for k in dataclasses.fields(RunConfig) for v in WRONG_TYPES]
+    cases += [{t: {f.name: v}} for t, c in (("constraints", Constraints), ("robust", Robust))
+              for f in dataclasses.fields(c) for v in WRONG_TYPES]
+    cases += [{"imu": {k: v}} for k in _USER_UNITS for v in WRONG_TYPES]
+    found = []
+    for d in cases:
+        try:
+            config_from_dict(d, source="run.toml")
+        except ConfigError:
+            pass
+        except Exception as exc:  # noqa: BLE001
+            found.append(f"{d}: {type(exc).__name__}: {exc}")
+    for t, keys in (("imu", IMU_KEYS), ("gnss", GNSS_KEYS), ("initial", INITIAL_KEYS), ("align", ALIGN_KEYS)):
+        for k in keys:
+            for v in WRONG_TYPES:
+                try:
+                    load_csv_run("/nonexistent/imu.csv", "/nonexistent/gnss.csv", {t: {k: v}})
+                except (ValueError, FileNotFoundError):
+                    pass
+                except Exception as exc:  # noqa: BLE001
+                    found.append(f"[{t}] {k} = {v!r}: {type(exc).__name__}: {exc}")
+    for f in dataclasses.fields(RinexOptions):
+        for v in WRONG_TYPES:
+            try:
+                RinexOptions.from_dict({f.name: v})
+            except ConfigError:
+                pass
+            except Exception as exc:  # noqa: BLE001
+                found.append(f"[rinex] {f.name} = {v!r}: {type(exc).__name__}: {exc}")
+    assert not found, f"{len(found)} wrong types not named: " + "; ".join(found[:5])
 
 
 RINEX_OBS = SHARED_DATA / "rtklibexplorer_walk_0827" / "rinex_derived"

@@ -104,3 +104,72 @@ def test_simulate_reports_every_stage_in_order_and_the_same_dataset():
     assert np.array_equal(ds.imu.dtheta_b, ref.imu.dtheta_b) and np.array_equal(ds.gnss_raw.pseudorange_m,
                                                                                 ref.gnss_raw.pseudorange_m,
                                                                                 equal_nan=True)
+
+
+def test_ctrl_c_while_the_command_modules_load_is_one_line(monkeypatch, capsys):
+    """Ctrl-C during the imports of a command (insnav.cli.build_parser): one line, 130, no traceback."""
+    import importlib
+
+    import insnav.cli as cli
+
+    real = importlib.import_module
+
+    def interrupted(name, *a, **k):
+        if name == "insnav.cli.run":
+            raise KeyboardInterrupt
+        return real(name, *a, **k)
+
+    monkeypatch.setattr(importlib, "import_module", interrupted)
+    assert cli.main(["run", "x", "--out", "y.csv"]) == 130
+    assert capsys.readouterr().err.strip().splitlines() == ["insnav run: interrupted"]
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_ctrl_c_swallowed_inside_a_command_still_exits_130(monkeypatch, tmp_path, capsys):
+    """A SIGINT whose KeyboardInterrupt is swallowed (a finalizer, a library's broad except) late in
+    `insnav report`: the command still ends with one line and status 130, not 0."""
+    import insnav.analysis.report as rep
+    import insnav.cli as cli
+
+    sol = tmp_path / "sol.csv"
+    sol.write_text("x\n")
+
+    def report(*a, **k):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.5)
+        except BaseException:  # noqa: BLE001 - what swallowed it
+            pass
+        out = tmp_path / "r" / "report.html"
+        out.parent.mkdir()
+        out.write_text("")
+        return out
+
+    monkeypatch.setattr(rep, "report", report)
+    assert cli.main(["report", str(sol)]) == 130
+    assert capsys.readouterr().err.strip().splitlines() == ["insnav report: interrupted"]
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("when", ["import", "exit"])
+def test_ctrl_c_at_startup_or_exit_of_python_m_insnav(when):
+    """`python -m insnav`: Ctrl-C while insnav.cli is imported, or in an exit callback after the
+    command returned 0 (atexit would swallow it): one line on stderr and status 130."""
+    if when == "import":
+        code = ("import builtins, runpy, sys\n"
+                "real = builtins.__import__\n"
+                "def imp(name, *a, **k):\n"
+                "    if name == 'cli' or name == 'insnav.cli':\n"
+                "        raise KeyboardInterrupt\n"
+                "    return real(name, *a, **k)\n"
+                "builtins.__import__ = imp\n"
+                "sys.argv = ['insnav', 'scenarios']\n"
+                "runpy.run_module('insnav', run_name='__main__')\n")
+    else:
+        code = ("import atexit, os, runpy, signal, sys, time\n"
+                "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(1.0)))\n"
+                "sys.argv = ['insnav', 'scenarios']\n"
+                "runpy.run_module('insnav', run_name='__main__')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 130, (r.stdout, r.stderr)
+    assert r.stderr.strip().splitlines()[-1] == "insnav: interrupted" and "Traceback" not in r.stderr

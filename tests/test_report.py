@@ -160,8 +160,11 @@ def test_against_exact_fixes_the_offset_comes_back(tmp_path):
     assert _floats(tab["velocity minus GNSS fixes, RMS [m/s] N/E/D"]) == pytest.approx([0, 0.2, 0], abs=6e-4)
     assert _floats(tab["velocity minus GNSS fixes, rms(difference / sigma) N/E/D"])[1] == pytest.approx(
         0.2 / np.sqrt(0.05), abs=6e-3)
-    assert {p.name for p in html_path.parent.glob("*.png")} == {"track.png", "pos_error.png", "vel_error.png",
-                                                                "imu_errors.png"}
+    # no IMU-error state estimated (all zero): no empty imu_errors.png
+    assert {p.name for p in html_path.parent.glob("*.png")} == {"track.png", "pos_error.png", "vel_error.png"}
+    # 3 / sqrt(1.25) = 2.68 north: the verdict word uses evaluate's bounds, not "about 1: consistent"
+    assert "overconfident (sigmas too small): north 2.68 > 2" in tab["position minus GNSS fixes, rms(difference / "
+                                                                  "sigma) N/E/D"]
 
 
 def test_tight_report_shows_the_per_satellite_residuals(tmp_path):
@@ -369,3 +372,75 @@ def test_page_renders_in_a_real_browser(run):
     blank.write_text(page.replace(b64[2], base64.b64encode(white.getvalue()).decode("ascii")))
     _screenshot(browser, blank, out / "blank.png", int(lay["height"]))
     assert _blank_figures(out / "blank.png", boxes) == [2]
+
+
+def test_consistency_verdict_uses_the_bounds_evaluate_warns_outside():
+    from insnav.analysis.evaluate import CONSISTENCY_BOUNDS, consistency_flags
+    from insnav.analysis.report import consistency_verdict
+
+    assert CONSISTENCY_BOUNDS == (0.5, 2.0)
+    assert consistency_verdict([0.51, 1.46, 1.0]).startswith("consistent")
+    v = consistency_verdict([2.31, 1.0, 0.3])
+    assert v == "overconfident (sigmas too small): north 2.31 > 2; pessimistic (sigmas too large): down 0.30 < 0.5"
+    assert [i for i, *_ in consistency_flags({"q": [2.31, 1.0, 0.3]})["q"]] == [0, 2]
+    assert consistency_verdict([0.4, 1.0, 1.0], ("roll", "pitch", "yaw")).endswith("roll 0.40 < 0.5")
+
+
+def test_steady_limit_and_nis_limits():
+    from insnav.analysis.report import nis_limits, steady_limit
+
+    t = np.arange(0.0, 200.0, 0.1)
+    sig = np.where(t < 5.0, 100.0, 1.0)  # the start-up sigma
+    err = np.where(t < 5.0, 50.0, 0.5 * np.sin(t))
+    assert steady_limit(t, err, sig) == pytest.approx(1.1 * 3.0)
+    assert steady_limit(t, 0.5 * np.sin(t), np.ones_like(t)) is None  # no transient: the automatic limits
+    nis = np.r_[1e-12, np.full(200, 3.0), 30.0]
+    lo, hi = nis_limits(nis, np.full(nis.size, 3))
+    assert 0.05 < lo < 0.9 and hi >= 90.0
+
+
+def test_report_axes_time_since_start_no_empty_panels_robust_nis(tmp_path, monkeypatch):
+    """A 15-state solution in GPS seconds of week (t from 456300 s), an alignment-epoch NIS of 1e-12 and
+    100x larger sigmas for the first 5 s: every time axis starts at 0, no panel for the scale factors that
+    were not estimated, the NIS axis ignores the 1e-12, the error axes the start-up sigmas."""
+    import insnav.analysis.report as rep
+
+    tr = insnav.simulate("seed000-sim", seed=1).truth
+    sol = _shifted_truth(tr, np.full(len(tr.t), 0.5))
+    sol.sigma_pos_n_m[tr.t < tr.t[0] + 5.0] *= 100.0
+    sol.acc_bias_mps2[:] = 1e-3  # biases estimated, scale factors not (15 states)
+    sol.gyro_bias_rps[:] = 1e-5
+    off = 456300.0
+    sol.t = sol.t + off
+    tr.t = tr.t + off
+    k = np.arange(0, len(tr.t), 200)
+    sol.gnss_t = sol.t[k]
+    sol.gnss_status = np.ones(k.size, np.int8)
+    sol.nis = np.full(k.size, 4.0)
+    sol.nis[0] = 1e-12
+    sol.innovation = np.zeros((k.size, 6))
+    figs = []
+
+    def keep(fig):
+        figs.append(fig)
+        return b"png"
+
+    monkeypatch.setattr(rep, "_png", keep)
+    import matplotlib.pyplot as plt
+
+    monkeypatch.setattr(plt, "close", lambda fig: None)  # the figures stay readable
+    rep.report(sol, tmp_path / "r", truth=tr, outages=[])
+    axes = [ax for f in figs for ax in f.axes if ax.get_visible()]
+    timed = [ax for ax in axes if ax.get_xlabel().startswith("time since start")]
+    assert timed and all(f"start at t = {sol.t[0]:.3f}" in ax.get_xlabel() for ax in timed)
+    for ax in timed:
+        for line in ax.get_lines():
+            x = np.asarray(line.get_xdata(), float)
+            if x.size:
+                assert x.min() >= -1e-6 and x.max() < tr.t[-1] - tr.t[0] + 1e-6
+    titles = [ax.get_title() for ax in axes]
+    assert not any("scale factor" in t for t in titles) and any("gyro bias" in t for t in titles)
+    nis_ax = [ax for ax in axes if ax.get_ylabel() == "NIS"][0]
+    assert nis_ax.get_ylim()[0] > 0.1
+    north = [ax for ax in axes if ax.get_ylabel() == "north" and "position error" in (ax.figure.axes[0].get_title())][0]
+    assert north.get_ylim()[1] == pytest.approx(1.1 * 3.0)  # 3 sigma after the start-up, not 300 m

@@ -7,15 +7,33 @@ callbacks (``atexit``), flushes its standard streams and leaves with
 ``os._exit``, unless another thread is still running or a profiler or tracer
 (cProfile, coverage) is attached or ``-i`` given: those exit normally.
 """
+import os
 import sys
 
-from .cli import main
+try:
+    from .cli import main
+except KeyboardInterrupt:  # Ctrl-C while the command line's modules load: one line, not a traceback
+    sys.stderr.write("insnav: interrupted\n")
+    os._exit(130)
+
+
+def _interrupted_late(signum, frame) -> None:
+    """Ctrl-C after the command returned (exit callbacks, flushing): still one line and 130."""
+    try:
+        sys.stderr.write("insnav: interrupted\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(130)
 
 
 def _leave(rc: int) -> None:
     import atexit
-    import os
+    import signal
     import threading
+
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _interrupted_late)  # an exit callback would swallow KeyboardInterrupt
 
     monitoring = getattr(sys, "monitoring", None)  # Python >= 3.12: coverage's tool
     watched = monitoring is not None and any(monitoring.get_tool(i) is not None for i in range(6))

@@ -430,6 +430,10 @@ class RunConfig:
         Also keep the 1-sigma of the IMU-error states (biases, scale factors)
         for every output row (``Solution.sigma_imu_err``; loose runs).
         ``insnav run --out-format kfgins`` turns it on for ``KF_GINS_STD.txt``.
+    max_time_offset_s : float
+        Largest IMU/GNSS time offset accepted before the run [s] (default
+        0.8; ``inf``: no check): the lag between the gyro heading and the
+        GNSS course in the turns (:func:`insnav.data.checks.check_time_offset`).
     sanitize : dict
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
@@ -460,6 +464,7 @@ class RunConfig:
     constraints: Constraints = field(default_factory=Constraints)
     robust: Robust = field(default_factory=Robust)
     smooth: bool = False
+    max_time_offset_s: float = 0.8
     sanitize: dict = field(default_factory=dict)
     imu_error_sigmas: bool = False
     init_acc_bias_mps2: list | None = None
@@ -475,7 +480,10 @@ class RunConfig:
         def bad(key, value, allowed):
             raise ConfigError(f"config key '{key}': bad value {value!r}; allowed: {allowed}")
 
-        # types first (TOML gives any type): numbers finite and not bool, flags bool
+        # types first (TOML gives any type): names str, numbers finite and not bool, flags bool
+        for key, allowed in (("filter", FILTERS), ("coupling", COUPLINGS)):
+            if not isinstance(getattr(self, key), str):
+                bad(key, getattr(self, key), ", ".join(allowed))
         for key in ("init_seed", "gate_prob", "gate_chi2", "gate_reopen_after", "propagation_interval_s",
                     "output_decimation", "ut_alpha", "ut_beta", "ut_kappa", "cycle_period_s"):
             v = getattr(self, key)
@@ -484,6 +492,9 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not math.isfinite(v):
                 bad(key, v, "a finite number")
+        v = self.max_time_offset_s
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not v > 0:
+            bad("max_time_offset_s", v, "a number > 0 [s] (inf: no check)")
         if int(self.init_seed) != self.init_seed or self.init_seed < 0:
             bad("init_seed", self.init_seed, "an integer >= 0")
         self.init_seed = int(self.init_seed)
@@ -499,6 +510,11 @@ class RunConfig:
                 la = np.full(1, np.nan)
             if la.shape != (3,) or not np.all(np.isfinite(la)):
                 bad("lever_arm_b", self.lever_arm_b, "3 finite values [m]")
+            from .data.checks import lever_arm_problem
+
+            problem = lever_arm_problem(la)
+            if problem:
+                raise ConfigError(f"config key 'lever_arm_b': {self.lever_arm_b!r}: {problem}")
         if self.imu is not None and not isinstance(self.imu, ImuNoise):
             bad("imu", self.imu, "a table of IMU noise keys")
         if not isinstance(self.constraints, Constraints):

@@ -36,7 +36,7 @@ from ..units import DEG, DEG_PER_H, MG
 from .evaluate import evaluate
 from .metrics import errors, rms
 
-__all__ = ["report", "detect_outages", "chi2_interval"]
+__all__ = ["report", "detect_outages", "chi2_interval", "consistency_verdict", "steady_limit", "nis_limits"]
 
 #: every figure file a report may write
 FIGURES = ("track.png", "pos_error.png", "vel_error.png", "att_error.png", "imu_errors.png", "innovations.png",
@@ -120,6 +120,67 @@ def _errors_vs_fixes(sol, fx: _Fixes) -> dict:
     return out
 
 
+def consistency_verdict(values, axes=("north", "east", "down")) -> str:
+    """The verdict on rms(error / sigma) per axis with the bounds ``insnav
+    evaluate`` warns outside (:data:`insnav.analysis.evaluate.CONSISTENCY_BOUNDS`):
+    ``"consistent: ..."``, or the overconfident / pessimistic axes named."""
+    from .evaluate import CONSISTENCY_BOUNDS, consistency_flags
+
+    lo, hi = CONSISTENCY_BOUNDS
+    vals = [float(v) for v in values]
+    finite = {i: v for i, v in enumerate(vals) if math.isfinite(v)}
+    if not finite:
+        return "no verdict (no finite value)"
+    flags = consistency_flags({"q": list(finite.values())}).get("q", [])
+    keys = list(finite)
+    over = [f"{axes[keys[i]]} {v:.2f} > {hi:g}" for i, v, kind in flags if kind == "overconfident"]
+    pess = [f"{axes[keys[i]]} {v:.2f} < {lo:g}" for i, v, kind in flags if kind == "pessimistic"]
+    if not over and not pess:
+        return f"consistent: every axis within {lo:g}-{hi:g}"
+    parts = ([f"overconfident (sigmas too small): {', '.join(over)}"] if over else []) + \
+        ([f"pessimistic (sigmas too large): {', '.join(pess)}"] if pess else [])
+    return "; ".join(parts)
+
+
+def steady_limit(t, err, sigma=None, *, transient_share: float = 0.05, min_transient_s: float = 10.0):
+    """The y half-range of an error plot that the first epochs' large sigmas do
+    not flatten: the largest ``|error|`` and ``3 sigma`` after the first
+    ``max(transient_share x run, min_transient_s)`` (outages later in the run
+    stay in), times 1.1; None when that is not below half the whole run's (no
+    transient to cut) or nothing is finite."""
+    t = np.asarray(t, float)
+    if t.size < 3:
+        return None
+    a = np.abs(np.asarray(err, float))
+    if sigma is not None:
+        a = np.fmax(a, 3.0 * np.abs(np.asarray(sigma, float)))
+    cut = t[0] + max(transient_share * (t[-1] - t[0]), min_transient_s)
+    steady = a[(t >= cut) & np.isfinite(a)]
+    whole = a[np.isfinite(a)]
+    if steady.size == 0 or whole.size == 0:
+        return None
+    lim = 1.1 * float(steady.max())
+    return lim if 0.0 < lim < 0.5 * float(whole.max()) else None
+
+
+def nis_limits(nis, rows=None):
+    """Log-axis limits of a NIS plot that one near-zero value (the alignment
+    epoch's 1e-12) does not squash: from 0.3 x the 1st percentile (and the
+    chi-square interval's lower end) to 3 x the largest; None without values."""
+    x = np.asarray(nis, float)
+    x = x[np.isfinite(x) & (x > 0)]
+    if x.size == 0:
+        return None
+    lo = 0.3 * float(np.percentile(x, 1.0))
+    if rows is not None and np.size(rows):
+        lo = min(lo, 0.3 * float(np.min(chi2_interval(np.asarray(rows, float))[0][np.asarray(rows) > 0]))
+                 if np.any(np.asarray(rows) > 0) else lo)
+    hi = 3.0 * float(x.max())
+    if rows is not None and np.any(np.asarray(rows) > 0):
+        hi = max(hi, 1.5 * float(np.max(chi2_interval(np.asarray(rows, float))[1])))
+    return max(lo, 1e-6 * hi), hi
+
+
 def _png(fig) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
@@ -132,9 +193,12 @@ def _shade(ax, outages):
 
 
 def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tuple[str, str, bytes]]:
-    """(file name, caption, PNG bytes) of every figure."""
+    """(file name, caption, PNG bytes) of every figure; times since the first solution row."""
     out = []
     lat0, lon0 = float(sol.lat_deg[0]), float(sol.lon_deg[0])
+    t_ref = float(sol.t[0])
+    t_label = f"time since start [s] (start at t = {t_ref:.3f} s)"
+    outages_rel = [(a - t_ref, b - t_ref) for a, b in outages]
     # --- ground track
     fig, ax = plt.subplots(figsize=(7.5, 6.5))
     e, n = _local_en(sol.lat_deg, sol.lon_deg, lat0, lon0)
@@ -163,41 +227,55 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
         if err is None or key not in err or not np.isfinite(err[key]).any():
             continue
         fig, axs = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-        t = err["t"]
+        t = err["t"] - t_ref
         sk = "sigma_" + key
+        cut = False
         for i in range(3):
             ax = axs[i]
-            _shade(ax, outages)
-            if sk in err and np.isfinite(err[sk][:, i]).any():
-                ax.fill_between(t, -3 * err[sk][:, i], 3 * err[sk][:, i], color="tab:orange", alpha=0.25, lw=0,
-                                label="+-3 sigma")
+            _shade(ax, outages_rel)
+            sig = err[sk][:, i] if sk in err and np.isfinite(err[sk][:, i]).any() else None
+            if sig is not None:
+                ax.fill_between(t, -3 * sig, 3 * sig, color="tab:orange", alpha=0.25, lw=0, label="+-3 sigma")
             ax.plot(t, err[key][:, i], color="tab:blue", lw=0.8, label="error")
+            lim = steady_limit(t, err[key][:, i], sig)
+            if lim is not None:  # the first epochs' large sigmas would flatten the rest
+                ax.set_ylim(-lim, lim)
+                cut = True
             ax.set_ylabel(axes[i])
         axs[0].legend(loc="upper right", fontsize=8)
-        axs[0].set_title(f"{label} against the {err_kind} (GNSS outages shaded)")
-        axs[-1].set_xlabel("time [s]")
+        axs[0].set_title(f"{label} against the {err_kind} (GNSS outages shaded"
+                         + ("; y axis: after the start-up transient" if cut else "") + ")", fontsize=10)
+        axs[-1].set_xlabel(t_label)
         out.append((f"{key.split('_')[0]}_error.png", label.capitalize() + f" against the {err_kind}", _png(fig)))
         plt.close(fig)
-    # --- IMU errors
-    fig, axs = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    # --- IMU errors: a panel per estimated state (a layout without scale factors gets none for them)
     series = [(sol.acc_bias_mps2 / MG, "accelerometer bias [mg]"), (sol.gyro_bias_rps / DEG_PER_H, "gyro bias [deg/h]"),
               (sol.acc_scale * 1e6, "accelerometer scale factor [ppm]"), (sol.gyro_scale * 1e6, "gyro scale factor [ppm]")]
-    for ax, (y, label) in zip(axs.ravel(), series):
-        _shade(ax, outages)
-        for i, c in enumerate("xyz"):
-            ax.plot(sol.t, y[:, i], lw=0.9, label=c)
-        if not np.any(np.nan_to_num(y)):  # a layout without this state (e.g. 15 states: no scale factors)
-            label += ": not estimated"
-        ax.set_title(label, fontsize=10)
-        ax.legend(fontsize=7, loc="best")
-    for ax in axs[-1]:
-        ax.set_xlabel("time [s]")
-    fig.tight_layout()
-    out.append(("imu_errors.png", "Estimated IMU biases and scale factors", _png(fig)))
-    plt.close(fig)
+    shown = [(y, label) for y, label in series if np.any(np.nan_to_num(np.asarray(y, float)))]
+    if shown:
+        ncol = 2 if len(shown) > 1 else 1
+        nrow = -(-len(shown) // ncol)
+        fig, axs = plt.subplots(nrow, ncol, figsize=(10, 3 * nrow + 0.5), sharex=True, squeeze=False)
+        for ax in axs.ravel()[len(shown):]:
+            ax.set_visible(False)
+        for ax, (y, label) in zip(axs.ravel(), shown):
+            _shade(ax, outages_rel)
+            for i, c in enumerate("xyz"):
+                ax.plot(sol.t - t_ref, y[:, i], lw=0.9, label=c)
+            ax.set_title(label, fontsize=10)
+            ax.legend(fontsize=7, loc="best")
+        for ax in axs.ravel()[max(0, len(shown) - ncol):len(shown)]:
+            ax.set_xlabel(t_label, fontsize=8)
+        fig.tight_layout()
+        names = {label for _, label in shown}
+        missing = [label.split(" [")[0] for _, label in series if label not in names]
+        cap = "Estimated IMU " + ("biases and scale factors" if not missing else
+                                  "errors (not estimated: " + ", ".join(missing) + ")")
+        out.append(("imu_errors.png", cap, _png(fig)))
+        plt.close(fig)
     # --- innovations and NIS
     if inn is not None and len(inn["t_s"]):
-        t, st, nis, rows = inn["t_s"], inn["status"], inn["nis"], inn["rows"]
+        t, st, nis, rows = inn["t_s"] - t_ref, inn["status"], inn["nis"], inn["rows"]
         applied = st == 1
         rejected = st == 2
         has_inn = np.isfinite(inn["innovation"]).any()
@@ -225,8 +303,14 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
         ax.semilogy(t[applied & ok], nis[applied & ok], ".", ms=3, color="tab:blue", label="applied")
         if (rejected & ok).any():
             ax.semilogy(t[rejected & ok], nis[rejected & ok], "x", ms=5, color="tab:red", label="rejected by the gate")
+        lims = nis_limits(nis[ok], rows[ok])
+        if lims is not None:  # a near-zero NIS (the alignment epoch) would squash the axis
+            ax.set_ylim(*lims)
+            below = int(np.count_nonzero(nis[ok] < lims[0]))
+            if below:
+                ax.text(0.01, 0.03, f"{below} NIS below the axis", transform=ax.transAxes, fontsize=7)
         ax.set_ylabel("NIS")
-        ax.set_xlabel("time [s]")
+        ax.set_xlabel(t_label)
         ax.legend(fontsize=7, loc="upper right")
         axs[0].set_title("innovations (INS minus GNSS, before the update) and NIS")
         out.append(("innovations.png", "Innovations and NIS", _png(fig)))
@@ -235,21 +319,22 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
     if res is not None and len(res["t_s"]):
         rejected_t = set(np.round(inn["t_s"][inn["status"] == 2], 6)) if inn is not None else set()
         rej = np.isin(np.round(res["t_s"], 6), list(rejected_t))
+        tr_s = res["t_s"] - t_ref
         fig, axs = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
         prns = np.unique(res["prn"])
         cmap = plt.get_cmap("tab20")
         for ax, key, label in ((axs[0], "pseudorange_residual_m", "pseudorange residual [m]"),
                                (axs[1], "rate_residual_mps", "pseudorange-rate residual [m/s]")):
-            _shade(ax, outages)
+            _shade(ax, outages_rel)
             for j, prn in enumerate(prns):
                 m = (res["prn"] == prn) & ~rej
-                ax.plot(res["t_s"][m], res[key][m], ".", ms=2.5, color=cmap(j % 20), label=f"G{prn:02d}")
+                ax.plot(tr_s[m], res[key][m], ".", ms=2.5, color=cmap(j % 20), label=f"G{prn:02d}")
             if rej.any():
-                ax.plot(res["t_s"][rej], res[key][rej], "x", ms=5, color="k", label="epoch rejected")
+                ax.plot(tr_s[rej], res[key][rej], "x", ms=5, color="k", label="epoch rejected")
             ax.set_ylabel(label, fontsize=8)
         axs[0].legend(fontsize=6, loc="upper right", ncol=min(8, len(prns) + 1))
         axs[0].set_title("per-satellite residuals (INS-predicted minus measured, before the update)")
-        axs[-1].set_xlabel("time [s]")
+        axs[-1].set_xlabel(t_label)
         out.append(("residuals.png", "Per-satellite pseudorange and rate residuals", _png(fig)))
         plt.close(fig)
     return out
@@ -259,6 +344,10 @@ def _fmt(x, nd=3):
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "n/a"
     return f"{x:.{nd}f}"
+
+
+_AXES = {"pos_n_m": ("north", "east", "down"), "vel_n_mps": ("north", "east", "down"),
+         "att_deg": ("roll", "pitch", "yaw")}
 
 
 def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[str, str]]:
@@ -308,7 +397,8 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
         for k, (n, _, ax) in names.items():
             if k in ev["consistency"]:
                 rows.append((f"consistency rms(error / sigma), {n} {ax}",
-                             " / ".join(_fmt(x, 2) for x in ev["consistency"][k]) + " (about 1: consistent)"))
+                             " / ".join(_fmt(x, 2) for x in ev["consistency"][k])
+                             + f" ({consistency_verdict(ev['consistency'][k], _AXES[k])})"))
         for o in ev["outages"]:
             rows.append((f"outage {o['start_s']:.1f}-{o['end_s']:.1f} s: max horizontal inside / in the 60 s after [m]",
                          f"{_fmt(o['max_horizontal_inside_m'])} / {_fmt(o['max_horizontal_after_60s_m'])}"))
@@ -318,13 +408,15 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
     if fix_err is not None:
         p = fix_err["pos_n_m"]
         rows.append(("position minus GNSS fixes, RMS [m] N/E/D", " / ".join(_fmt(x) for x in rms(p))))
+        c = rms(p / fix_err["sigma_pos_n_m"])
         rows.append(("position minus GNSS fixes, rms(difference / sigma) N/E/D",
-                     " / ".join(_fmt(x, 2) for x in rms(p / fix_err["sigma_pos_n_m"]))))
+                     " / ".join(_fmt(x, 2) for x in c) + f" ({consistency_verdict(c)})"))
         if "vel_n_mps" in fix_err:
             v, ok = fix_err["vel_n_mps"], np.isfinite(fix_err["vel_n_mps"]).all(axis=1)
             rows.append(("velocity minus GNSS fixes, RMS [m/s] N/E/D", " / ".join(_fmt(x) for x in rms(v[ok]))))
+            c = rms(v[ok] / fix_err["sigma_vel_n_mps"][ok])
             rows.append(("velocity minus GNSS fixes, rms(difference / sigma) N/E/D",
-                         " / ".join(_fmt(x, 2) for x in rms(v[ok] / fix_err["sigma_vel_n_mps"][ok]))))
+                         " / ".join(_fmt(x, 2) for x in c) + f" ({consistency_verdict(c)})"))
     rows.append(("errors against", err_kind))
     return rows
 

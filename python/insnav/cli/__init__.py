@@ -103,31 +103,69 @@ def _single_threaded_blas() -> None:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
+class _SigintWatch:
+    """SIGINT raises KeyboardInterrupt as Python's default handler does, and
+    also remembers it: an interrupt that lands where an exception is ignored
+    (a finalizer, a library's broad ``except``) still ends the command with
+    status 130 instead of being swallowed (:func:`main`)."""
+
+    def __init__(self):
+        self.seen = False
+        self.previous = None
+
+    def _handler(self, signum, frame):
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when the parent ignores it
+            self.previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            import signal
+
+            signal.signal(signal.SIGINT, self.previous)
+        return False
+
+
 def main(argv=None) -> int:
-    _single_threaded_blas()
-    parser = build_parser(_command_of(sys.argv[1:] if argv is None else argv))
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 0
-    try:
-        rc = args.func(args)
-        sys.stdout.flush()
-    except BrokenPipeError:  # `insnav ... | head`: the reader left; nothing to report
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        return 0
-    except KeyboardInterrupt:
-        print(f"insnav {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # noqa: BLE001 - every error is one line; --debug for the traceback
-        if getattr(args, "debug", False) or os.environ.get("INSNAV_DEBUG"):
-            raise
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
-        msg = "; ".join(line.strip() for line in str(msg).splitlines() if line.strip()) or type(exc).__name__
-        kind = "" if isinstance(exc, (UserError, OSError, ValueError, KeyError)) else f"{type(exc).__name__}: "
-        print(f"insnav {args.command}: error: {kind}{msg}", file=sys.stderr)
-        return 2
+    """Run one command; its status: 0, 2 (an error, one line on stderr) or 130 (Ctrl-C, one line)."""
+    command = _command_of(sys.argv[1:] if argv is None else argv)
+    args = None
+    with _SigintWatch() as sigint:
+        try:
+            _single_threaded_blas()
+            parser = build_parser(command)  # imports the command's modules: Ctrl-C here is one line too
+            args = parser.parse_args(argv)
+            if not getattr(args, "func", None):
+                parser.print_help()
+                return 0
+            rc = args.func(args)
+            sys.stdout.flush()
+            if sigint.seen:  # interrupted where the exception was swallowed
+                raise KeyboardInterrupt
+        except BrokenPipeError:  # `insnav ... | head`: the reader left; nothing to report
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            return 0
+        except KeyboardInterrupt:
+            name = getattr(args, "command", None) or command
+            print(f"insnav{' ' + name if name else ''}: interrupted", file=sys.stderr)
+            return 130
+        except Exception as exc:  # noqa: BLE001 - every error is one line; --debug for the traceback
+            if getattr(args, "debug", False) or os.environ.get("INSNAV_DEBUG"):
+                raise
+            msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+            msg = "; ".join(line.strip() for line in str(msg).splitlines() if line.strip()) or type(exc).__name__
+            kind = "" if isinstance(exc, (UserError, OSError, ValueError, KeyError)) else f"{type(exc).__name__}: "
+            print(f"insnav {getattr(args, 'command', None) or command}: error: {kind}{msg}", file=sys.stderr)
+            return 2
     return int(rc or 0)
 
 

@@ -409,6 +409,19 @@ def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
     return dataclasses.replace(cfg).validate()
 
 
+def _outside_imu_span(sol, ds) -> tuple[int, int]:
+    """GNSS records outside the IMU's time span, and how many of them the
+    loader left out (KF-GINS: before ``starttime`` or after the IMU file); the
+    others are those the filter marked ``RecordStatus.OUTSIDE_IMU_SPAN``."""
+    from ..filters.solution import RecordStatus
+
+    status = getattr(sol, "gnss_status", None)
+    n = int(np.count_nonzero(np.asarray(status) == RecordStatus.OUTSIDE_IMU_SPAN)) if status is not None else 0
+    scenario = getattr(ds, "scenario", None)
+    cut = int(scenario.get("gnss_outside_imu_span", 0)) if isinstance(scenario, dict) else 0
+    return n + cut, cut
+
+
 def cmd_run(args) -> int:
     import insnav
 
@@ -527,15 +540,22 @@ def cmd_run(args) -> int:
     s = sol.summary
     used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
     records = int(s.get("gnss_records", len(getattr(ds, "gnss", ())) or 0))
+    outside, cut = _outside_imu_span(sol, ds)
+    records += cut  # the records the loader left out count too
     weighting = getattr(ds, "weighting", None)
+    gate_failed = not args.allow_free_inertial and rejected > MAX_REJECTED_SHARE * (used + rejected)
+    if gate_failed:  # what the data point to: a time offset, a mirrored track, the initial yaw
+        from ..data.checks import disagreement_hint
+
+        hint = disagreement_hint(ds)
     del ds  # the IMU arrays are not needed any more: their memory goes before the output is written
     san = s.get("sanitize") or {}
     dropped = int(san.get("gnss_invalid_dropped", 0) or 0) + int(san.get("gnss_duplicates_dropped", 0) or 0)
     if not args.allow_free_inertial:
-        if rejected > MAX_REJECTED_SHARE * (used + rejected):
+        if gate_failed:
             raise UserError(f"{rejected} of {used + rejected} GNSS updates were rejected by the innovation gate "
-                            f"(> {MAX_REJECTED_SHARE:.0%}): the fixes and the IMU disagree; check units, lever arm "
-                            "and sigmas (--allow-free-inertial to accept the run)")
+                            f"(> {MAX_REJECTED_SHARE:.0%}): the fixes and the IMU disagree; {hint} "
+                            "(--allow-free-inertial to accept the run)")
         if used == 0:
             raise UserError(f"no GNSS update was used ({records} records, {dropped} dropped): the run is free "
                             "inertial; check the GNSS time base, sigmas and units (--allow-free-inertial to "
@@ -571,7 +591,8 @@ def cmd_run(args) -> int:
             Path(p).unlink(missing_ok=True)
         raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
-          f"records, {used} updates used, {rejected} rejected by the gate"
+          f"records" + (f" ({outside} outside the run's IMU time span, not used)" if outside else "")
+          + f", {used} updates used, {rejected} rejected by the gate"
           + (f" ({s['gate_reopened']} applied anyway with the covariance scaled after a run of rejections, gate_reopen_after)"
              if s.get("gate_reopened") else "")
           + f", {dropped} dropped by the input checks; "

@@ -38,6 +38,8 @@ with two more that need to know what the user stated:
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .._median import median
@@ -47,6 +49,12 @@ from ..units import DEG, G0
 class DataCheckError(ValueError):
     """Input that cannot be right (units, signs, time bases)."""
 
+
+#: a GNSS position sigma above this [m] is refused (insnav.filters.sanitize drops such fixes first)
+MAX_GNSS_SIGMA_M = 1e5
+
+#: how to map z-up axes (check_imu): naming one candidate made RFU data read as FLU, 90 deg off in yaw
+_AXES_HINT = "map the axes in the input settings: z up with x forward is FLU, with x right RFU"
 
 #: check_imu judges the medians on at most this many evenly spread samples (the
 #: verdicts have factor-2 margins; a 56-min 200 Hz log then takes ~10 ms, not ~90)
@@ -104,7 +112,7 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*"
     if up[2] > 0.7:
         raise DataCheckError(f"{source}: {acc_label}: the mean specific force points along +z "
                              f"({up.round(3).tolist()}), i.e. down in FRD: the IMU is upside down, or FLU/RFU axes "
-                             f"are read as FRD ({fixes.get('axes', 'map the axes in the input settings')})")
+                             f"are read as FRD ({fixes.get('axes', _AXES_HINT)})")
     if wm > 1.0:
         hint = ""
         if wm * DEG < 1.0:
@@ -115,64 +123,558 @@ def check_imu(t, dtheta_b, dv_b, *, source: str = "imu", acc_label: str = "dv_*"
                              f"over {n} samples, implausible for a vehicle{hint}")
 
 
+def _gnss_course(gnss):
+    """Time-ordered GNSS times [s], horizontal velocity (N, E) [m/s] and
+    whether some of it came from the positions.
+
+    The reported velocity where it is finite; where it is not (KF-GINS and
+    many RTK files carry positions only), the central difference of the
+    positions over about 2 s, ``(p[k+j] - p[k-j]) / (t[k+j] - t[k-j])`` with
+    ``j`` fixes ~1 s, which is centred on ``t[k]`` (no time shift)."""
+    gt = np.asarray(gnss.t_valid, float)
+    v = np.array(np.asarray(gnss.v_n, float)[:, :2])
+    order = np.argsort(gt, kind="stable")
+    gt, v = gt[order], v[order]
+    missing = ~np.all(np.isfinite(v), axis=1)
+    from_positions = bool(missing.any())
+    if from_positions and gt.size >= 3:
+        j = max(1, int(round(1.0 / max(median(np.diff(gt)), 1e-3))))
+        j = min(j, (gt.size - 1) // 2)
+        lat = np.radians(np.asarray(gnss.lat_deg, float)[order])
+        lon = np.radians(np.asarray(gnss.lon_deg, float)[order])
+        n_m = lat * _R_EARTH_M
+        e_m = np.unwrap(lon) * _R_EARTH_M * np.cos(lat)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            span = gt[2 * j:] - gt[:-2 * j]
+            no_gap = span <= 3.0 * 2 * j * median(np.diff(gt))
+            vp = np.full_like(v, np.nan)
+            vp[j:-j, 0] = np.where(no_gap, (n_m[2 * j:] - n_m[:-2 * j]) / span, np.nan)
+            vp[j:-j, 1] = np.where(no_gap, (e_m[2 * j:] - e_m[:-2 * j]) / span, np.nan)
+        v[missing] = vp[missing]
+    return gt, v, from_positions
+
+
+_R_EARTH_M = 6_371_000.0
+
+
+def _down_b(scan) -> np.ndarray:
+    """The body-frame down axis: minus the mean specific-force direction (a
+    vehicle spends most of its time near level)."""
+    f = np.array(scan["dv_sum"])  # sum of dv_b over the samples
+    return -f / max(np.linalg.norm(f), 1e-12)
+
+
+#: grid step of the gyro heading shared by the course checks [s]
+_HEADING_GRID_S = 0.1
+
+
+def _heading_grid(t, dtheta_b, scan):
+    """The rotation about the body's mean-down axis [rad] on a uniform
+    ``_HEADING_GRID_S`` grid from ``t[0]``: ``(x0, h, g)``, or None when not
+    finite.  One compiled pass over the samples (``_core.rotation_about_at``),
+    memoised with the IMU scan inside :func:`insnav.run`
+    (:func:`insnav._imu_scan.scan_memo`): the slope check, the time-offset
+    estimate and the failure hints share it."""
+    from .. import _core
+    from .._imu_scan import _MEMO, _key
+
+    memo = _MEMO.get()
+    key = ("heading_grid", _key(t), _key(dtheta_b)) if memo is not None else None
+    if key is not None and key in memo:
+        return memo[key][1]
+    h = _HEADING_GRID_S
+    x0 = float(t[0])
+    grid = x0 + h * np.arange(int((t[-1] - x0) / h) + 1)
+    g = _core.rotation_about_at(t, dtheta_b, _down_b(scan), grid)
+    res = (x0, h, g) if grid.size >= 2 and np.isfinite(g).all() else None
+    if key is not None:
+        memo[key] = ((t, dtheta_b), res)  # the arrays kept alive: their addresses stay theirs
+    return res
+
+
+def _heading_at(grid, q):
+    """Linear interpolation of :func:`_heading_grid` at times ``q`` (NaN outside)."""
+    x0, h, g = grid
+    u = (np.asarray(q, float) - x0) * (1.0 / h)
+    i = u.astype(np.int64)  # truncation = floor inside the grid; outside: NaN below
+    np.clip(i, 0, g.size - 2, out=i)
+    out = g[i] + (u - i) * (g[i + 1] - g[i])
+    out[(u < 0.0) | (u > g.size - 1)] = np.nan
+    return out
+
+
 def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min_speed_mps: float = 3.0,
                             min_turn_deg: float = 45.0, gyro_label: str = "dtheta_*",
                             fixes: dict | None = None) -> float | None:
     """Slope of the gyro heading change on the GNSS course change (1 when right).
 
-    Returns the slope, or None when the run turns less than ``min_turn_deg``
-    at speed (nothing to compare).  Raises :class:`DataCheckError` when the
-    slope says degrees (> 10) or an inverted vertical axis (< -0.5), or is
-    otherwise far from 1 (outside 0.5..2).
+    The course is the reported GNSS velocity's, or (no velocity columns) the
+    positions' central difference.  Returns the slope, or None when the run
+    turns less than ``min_turn_deg`` at speed (nothing to compare).  Raises
+    :class:`DataCheckError` when the slope says degrees (> 10) or a mirrored
+    turn (< -0.5: inverted gyro axes, or a flipped latitude / longitude sign
+    of course-from-positions), or is otherwise far from 1 (outside 0.5..2).
     """
-    t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
-    gt = np.asarray(gnss.t_valid, float)
-    if t.size < 3 or gt.size < 3 or scan is None or not np.isfinite(gt).all():
+    fit = gyro_course_slope(t, dtheta_b, dv_b, gnss, min_speed_mps=min_speed_mps, min_turn_deg=min_turn_deg)
+    if fit is None:
         return None
-    v = np.asarray(gnss.v_n, float)
+    slope, consistent, turn_deg, from_positions = fit
+    if consistent:
+        return slope
+    fixes = fixes or {}
+    if slope > 10.0 and 0.5 < slope / np.degrees(1.0) < 2.0:
+        raise DataCheckError(f"{source}: {gyro_label}: the gyros turn {slope:.1f}x the GNSS course over "
+                             f"{turn_deg:.0f} deg of turns: the increments look like degrees, "
+                             f"not radians" + (f"; {fixes['gyro_deg']}" if "gyro_deg" in fixes else ""))
+    if slope < -0.5:
+        flip = (" or the GNSS longitude (or latitude) sign is flipped (the track is mirrored; west and south are "
+                "negative)") if from_positions else ""
+        raise DataCheckError(f"{source}: {gyro_label}: the gyros turn opposite to the GNSS course (slope "
+                             f"{slope:.2f}): the gyro axes look inverted relative to the accelerometers'"
+                             + (f", {fixes['inverted']}" if "inverted" in fixes else "") + flip)
+    if not 0.5 < slope < 2.0:
+        raise DataCheckError(f"{source}: {gyro_label}: the gyro heading change is {slope:.2f}x the GNSS course change "
+                             f"over {turn_deg:.0f} deg of turns (expected 1): wrong units, "
+                             f"scale or axes")
+    return slope
+
+
+def gyro_course_slope(t, dtheta_b, dv_b, gnss, *, min_speed_mps: float = 3.0, min_turn_deg: float = 45.0):
+    """The regression of :func:`check_gyro_against_gnss`: ``(slope, consistent
+    with 1, degrees of turns, course from positions)``, or None without
+    enough turns at speed."""
+    t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
+    if t.size < 3 or len(gnss) < 3 or scan is None or not np.isfinite(np.asarray(gnss.t_valid, float)).all():
+        return None
+    gt, v, from_positions = _gnss_course(gnss)
     speed = np.hypot(v[:, 0], v[:, 1])
     course = np.arctan2(v[:, 1], v[:, 0])
-    f = np.array(scan["dv_sum"])  # sum of dv_b over the samples
-    down_b = -f / max(np.linalg.norm(f), 1e-12)  # the mean specific force points up
     # ~1 s intervals (the course of a 10 Hz receiver is noisy fix to fix)
     step = max(1, int(round(1.0 / max(median(np.diff(gt)), 1e-3))))
     sel = np.arange(0, gt.size, step)
     gt, v, speed, course = gt[sel], v[sel], speed[sel], course[sel]
-    # the heading the gyros integrate about the vertical, at the fixes: np.interp(gt, [t[0] - (t[1] - t[0]), t],
-    # [0, cumsum(dtheta_b @ down_b)], left=nan, right=nan) in one compiled pass, no (N,) temporaries
-    from .. import _core
-
-    g_at = _core.rotation_about_at(t, dtheta_b, down_b, gt)
-    fast = (speed[:-1] > min_speed_mps) & (speed[1:] > min_speed_mps) & np.all(np.isfinite(v[:, :2]), axis=1)[1:] \
-        & np.isfinite(g_at[:-1]) & np.isfinite(g_at[1:]) & (np.diff(gt) < 5.0 * step * 0.1 + 2.0)
+    # the heading the gyros integrate about the vertical, at the fixes (the shared 10 Hz grid)
+    grid = _heading_grid(t, dtheta_b, scan)
+    if grid is None:
+        return None
+    g_at = _heading_at(grid, gt)
+    with np.errstate(invalid="ignore"):
+        fast = (speed[:-1] > min_speed_mps) & (speed[1:] > min_speed_mps) & np.all(np.isfinite(v[:, :2]), axis=1)[1:] \
+            & np.all(np.isfinite(v[:, :2]), axis=1)[:-1] & np.isfinite(g_at[:-1]) & np.isfinite(g_at[1:]) \
+            & (np.diff(gt) < 5.0 * step * 0.1 + 2.0)
     dc = (np.diff(course) + np.pi) % (2 * np.pi) - np.pi
     dg = np.diff(g_at)
     dc, dg = dc[fast], dg[fast]
     # evidence: the turning the gyros saw (low noise; the course of a noisy or slow
     # receiver adds up to many degrees even on a straight line)
-    if np.sum(np.abs(dg)) < np.radians(min_turn_deg) or dg.size < 5:
+    if dg.size < 5 or np.sum(np.abs(dg)) < np.radians(min_turn_deg):
         return None
     # the course is the noisy one: regress it on the gyro, slope = 1 / (d course / d gyro)
     inv = float(np.dot(dg, dc) / np.dot(dg, dg))
     res = dc - inv * dg
     se = float(np.sqrt(np.dot(res, res) / max(dg.size - 1, 1) / np.dot(dg, dg)))
-    if abs(inv - 1.0) < 5.0 * se:  # consistent with 1 (or too noisy to say otherwise)
-        return 1.0 / inv if inv != 0 else np.inf
     slope = 1.0 / inv if inv != 0 else np.inf
-    fixes = fixes or {}
-    if slope > 10.0 and 0.5 < slope / np.degrees(1.0) < 2.0:
-        raise DataCheckError(f"{source}: {gyro_label}: the gyros turn {slope:.1f}x the GNSS course over "
-                             f"{np.degrees(np.sum(np.abs(dc))):.0f} deg of turns: the increments look like degrees, "
-                             f"not radians" + (f"; {fixes['gyro_deg']}" if "gyro_deg" in fixes else ""))
-    if slope < -0.5:
-        raise DataCheckError(f"{source}: {gyro_label}: the gyros turn opposite to the GNSS course (slope "
-                             f"{slope:.2f}): the gyro axes look inverted relative to the accelerometers'"
-                             + (f", {fixes['inverted']}" if "inverted" in fixes else ""))
-    if not 0.5 < slope < 2.0:
-        raise DataCheckError(f"{source}: {gyro_label}: the gyro heading change is {slope:.2f}x the GNSS course change "
-                             f"over {np.degrees(np.sum(np.abs(dc))):.0f} deg of turns (expected 1): wrong units, "
-                             f"scale or axes")
-    return slope
+    return slope, abs(inv - 1.0) < 5.0 * se, float(np.degrees(np.sum(np.abs(dc)))), from_positions
+
+
+@dataclasses.dataclass(frozen=True)
+class TimeOffset:
+    """The IMU/GNSS time offset seen in the turns (:func:`estimate_time_offset`).
+
+    Attributes
+    ----------
+    lag_s : float
+        How much later [s] the same turn appears in the GNSS course than in the
+        gyros (> 0: the GNSS time stamps are late, or the IMU's early).
+    r_peak, r_zero : float
+        Correlation of the GNSS course changes with the gyro heading changes
+        at ``lag_s`` and at no lag.
+    r_second : float
+        The highest other local maximum of the correlation (periodic motion
+        makes one lag as good as another); NaN when there is none.
+    pairs : int
+        Course changes compared.
+    turn_deg : float
+        Their turning [deg].
+    """
+
+    lag_s: float
+    r_peak: float
+    r_zero: float
+    r_second: float
+    pairs: int
+    turn_deg: float
+
+    @property
+    def ambiguous(self) -> bool:
+        """Another lag fits almost as well (periodic motion) or none fits well."""
+        return self.r_peak < TIME_OFFSET_MIN_R or (np.isfinite(self.r_second)
+                                                    and self.r_second > TIME_OFFSET_MAX_SECOND * self.r_peak)
+
+
+#: the correlation a lag must reach to be believed, and the share of it a second peak may not reach
+TIME_OFFSET_MIN_R = 0.5
+TIME_OFFSET_MAX_SECOND = 0.9
+#: default largest IMU/GNSS time offset accepted before a run [s] (RunConfig.max_time_offset_s): the
+#: handheld walk (rtklibexplorer walk_0827) shows its GNSS course 0.46-0.62 s ahead of the phone's heading
+#: (a walker's path turns before the phone does: the filter's NIS puts the IMU time within 0.1 s), and a
+#: 1 s offset must be caught
+MAX_TIME_OFFSET_S = 0.8
+
+
+def time_offset_cause(lag_s: float) -> str:
+    """The usual cause of an IMU/GNSS time offset of ``lag_s`` [s], as ``": ...?"``.
+
+    GPS - UTC was 10-18 s over the last decades (18 s since 2017), TAI - GPS is
+    19 s and TAI - UTC 37 s; the tolerance of 0.7 s covers the bias of the
+    course-against-heading estimate on a handheld walk (:data:`MAX_TIME_OFFSET_S`)."""
+    a = abs(lag_s)
+    if 36.3 < a < 37.7:
+        return ": TAI vs UTC time stamps?"
+    if 18.3 < a < 19.7:
+        return ": TAI vs GPS time stamps, or GPS-UTC leap seconds?"
+    if 9.3 < a <= 18.3:
+        return ": GPS-UTC leap seconds?"
+    if abs(a - round(a)) < 0.2:
+        return ": a whole-second time stamp error?"
+    return ": a logging latency?"
+
+
+def _course_samples(gnss, interval_s: float):
+    """GNSS course samples for :func:`estimate_time_offset`: ``(lo, hi, course
+    [rad], speed [m/s])``, time ordered, or None with fewer than 3.
+
+    With velocities (at least half the fixes): the course of each fix with
+    one, ``lo = hi = t``.  Without (positions only): the chord between fixes
+    ``j`` apart (``j`` fixes ~ ``interval_s``), ``lo = t[k]``, ``hi = t[k+j]``:
+    its direction is the mean heading over the chord, compared with the mean
+    of the gyro heading over the same span.  (The central difference over
+    ``t[k-j]..t[k+j]`` is the tangent at the chord's arc-length midpoint, not
+    at ``t[k]``; decelerating into turns it biased the lag by 0.3 s.)"""
+    t = np.asarray(gnss.t_valid, float)
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    v = np.asarray(gnss.v_n, float)[order, :2]
+    has_v = np.all(np.isfinite(v), axis=1) & np.isfinite(t)
+    if has_v.sum() >= 0.5 * t.size:
+        t, v = t[has_v], v[has_v]
+        if t.size < 3:
+            return None
+        return t, t, np.arctan2(v[:, 1], v[:, 0]), np.hypot(v[:, 0], v[:, 1])
+    lat = np.radians(np.asarray(gnss.lat_deg, float)[order])
+    lon = np.radians(np.asarray(gnss.lon_deg, float)[order])
+    ok = np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon)
+    t, lat, lon = t[ok], lat[ok], lon[ok]
+    if t.size < 4:
+        return None
+    dt = median(np.diff(t))
+    j = min(max(1, int(round(interval_s / max(dt, 1e-3)))), t.size - 1)
+    n_m = lat * _R_EARTH_M
+    e_m = np.unwrap(lon) * _R_EARTH_M * np.cos(lat)
+    lo, hi = t[:-j], t[j:]
+    dn, de = n_m[j:] - n_m[:-j], e_m[j:] - e_m[:-j]
+    span = hi - lo
+    keep = (span > 0) & (span <= 3.0 * j * dt)
+    if keep.sum() < 3:
+        return None
+    lo, hi, dn, de, span = lo[keep], hi[keep], dn[keep], de[keep], span[keep]
+    return lo, hi, np.arctan2(de, dn), np.hypot(dn, de) / span
+
+
+def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, interval_s: float = 1.0,
+                         min_speed_mps: float = 0.5, min_turn_deg: float = 90.0,
+                         max_pairs: int = 4000) -> TimeOffset | None:
+    """The lag between the gyro heading and the GNSS course, from the turns.
+
+    The gyros' rotation about the vertical (the mean specific-force direction,
+    as in :func:`check_gyro_against_gnss`; a near-level vehicle's heading
+    rate) is integrated once onto a 10 Hz grid
+    (``_core.rotation_about_at``); for each candidate lag ``L`` the heading
+    change ``g(t_b - L) - g(t_a - L)`` over pairs of fixes ``interval_s``
+    apart (the mean over the chord of a positions-only file,
+    :func:`_course_samples`) is correlated with the GNSS course change
+    ``c(t_b) - c(t_a)``
+    (weights ``speed^2``: the course error is ``sigma_v / speed``).  The
+    correlation is searched over ``-max_lag_s..max_lag_s`` on a 1 s grid,
+    then on 0.1 s steps around its maximum, and refined by a parabola through
+    the best three (cross-correlation time-delay estimation with sub-sample
+    interpolation; Knapp & Carter 1976, IEEE Trans. ASSP 24(4)).  The course
+    is the reported GNSS velocity's (a tight run: the single-point fixes'
+    Doppler velocity), or the chords' between the positions.
+
+    Returns None with fewer than 20 pairs at speed or less than
+    ``min_turn_deg`` of turning.
+    """
+    t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
+    if t.size < 3 or len(gnss) < 3 or scan is None:
+        return None
+    samples = _course_samples(gnss, interval_s)
+    if samples is None:
+        return None
+    lo, hi, course, speed = samples
+    tm = 0.5 * (lo + hi)
+    # pairs (a, b): b the first sample at least interval_s after a; no gaps
+    a = np.arange(tm.size)
+    b = np.searchsorted(tm, tm + interval_s - 1e-6)
+    keep = b < tm.size
+    a, b = a[keep], b[keep]
+    keep = (tm[b] - tm[a] <= 2.0 * interval_s) & (speed[a] > min_speed_mps) & (speed[b] > min_speed_mps)
+    a, b = a[keep], b[keep]
+    if a.size > max_pairs:
+        pick = np.linspace(0, a.size - 1, max_pairs).round().astype(np.int64)
+        a, b = a[pick], b[pick]
+    if a.size < 20:
+        return None
+    dc = (course[b] - course[a] + np.pi) % (2 * np.pi) - np.pi
+    w = np.minimum(np.minimum(speed[a], speed[b]), 30.0) ** 2
+    hg = _heading_grid(t, dtheta_b, scan)  # interpolated by index arithmetic (no search per query)
+    if hg is None:
+        return None
+    x0, h, g_grid = hg
+    n_grid = g_grid.size
+    wdc = w * dc
+    dg_grid = np.diff(g_grid)
+    chords = bool(np.any(hi > lo))
+    if chords:  # the integral of the heading (trapezoid): a chord's course is the heading's mean over it
+        gi_grid = np.concatenate([[0.0], np.cumsum(0.5 * h * (g_grid[1:] + g_grid[:-1]))])
+        dgi_grid = np.diff(gi_grid)
+
+    def at(q, f, df):
+        u = (q - x0) * (1.0 / h)
+        i = u.astype(np.int64)  # truncation = floor inside the grid; outside: NaN below
+        np.clip(i, 0, n_grid - 2, out=i)
+        out = f[i] + (u - i) * df[i]
+        out[(u < 0.0) | (u > n_grid - 1)] = np.nan
+        return out
+
+    def heading(k, lags):
+        """The gyro heading of samples k at the lags: at the fix, or averaged over the chord."""
+        if not chords:
+            return at(lo[k] - lags, g_grid, dg_grid)
+        return (at(hi[k] - lags, gi_grid, dgi_grid) - at(lo[k] - lags, gi_grid, dgi_grid)) / (hi[k] - lo[k])
+
+    def corr(lags, sub=slice(None)):
+        lags = np.asarray(lags, float)[:, None]
+        ab = np.concatenate([a[sub], b[sub]])
+        used, pos = np.unique(ab, return_inverse=True)  # a sample ends one pair and starts the next: once
+        hk = heading(used, lags)
+        dg = hk[:, pos[ab.size // 2:]] - hk[:, pos[:ab.size // 2]]
+        m = np.isfinite(dg)
+        dg = np.where(m, dg, 0.0)
+        ww = w[sub]
+        sxy = dg @ wdc[sub]
+        sxx = np.einsum("ij,ij,j->i", dg, dg, ww)
+        syy = m @ (ww * dc[sub] ** 2)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = sxy / np.sqrt(sxx * syy)
+        r[m.sum(axis=1) < max(20, ww.size // 2)] = np.nan  # most pairs outside the IMU span: no verdict
+        return r, dg, m
+
+    coarse = np.arange(-max_lag_s, max_lag_s + 1e-9, 1.0)  # the correlation's main lobe is several s wide
+    rc, _, _ = corr(coarse, slice(None, None, max(1, -(-a.size // 300))))  # the coarse search on <= 300 pairs
+    if not np.isfinite(rc).any():
+        return None
+    j = int(np.nanargmax(rc))
+    fine_step = 0.1
+    fine = coarse[j] + np.arange(-1.1, 1.1 + 1e-9, fine_step)
+    rf, dgf, mf = corr(fine, slice(None, None, max(1, -(-a.size // 1500))))  # on <= 1500 pairs
+    k = int(np.nanargmax(rf))
+    lag = float(fine[k])
+    if 0 < k < fine.size - 1 and np.isfinite(rf[k - 1]) and np.isfinite(rf[k + 1]):
+        den = rf[k - 1] - 2.0 * rf[k] + rf[k + 1]
+        if den < 0:
+            lag += 0.5 * (rf[k - 1] - rf[k + 1]) / den * fine_step
+    # the turning seen (the pairs overlap when the fixes come faster than interval_s)
+    tas = tm[a][::max(1, -(-a.size // 1500))]
+    turn_deg = float(np.degrees(np.sum(np.abs(dgf[k][mf[k]]))) * median(np.diff(tas)) / interval_s)
+    if turn_deg < min_turn_deg:
+        return None
+    # the highest other local maximum of the coarse correlation, outside the main lobe
+    rr = np.where(np.isfinite(rc), rc, -np.inf)
+    peaks = np.flatnonzero((rr[1:-1] >= rr[:-2]) & (rr[1:-1] >= rr[2:])) + 1
+    left, right = j, j  # the main lobe: downhill from the maximum on both sides
+    while left > 0 and rr[left - 1] <= rr[left]:
+        left -= 1
+    while right < rr.size - 1 and rr[right + 1] <= rr[right]:
+        right += 1
+    others = [rr[p] for p in peaks if p < left or p > right]
+    r_second = float(max(others)) if others else float("nan")
+    r_zero = float(corr([0.0])[0][0])
+    return TimeOffset(lag, float(rf[k]), r_zero, r_second, int(a.size), turn_deg)
+
+
+def check_time_offset(t, dtheta_b, dv_b, gnss, *, max_offset_s: float = MAX_TIME_OFFSET_S,
+                      source: str = "imu", gnss_source: str = "gnss", fix: str | None = None) -> TimeOffset | None:
+    """Refuse IMU and GNSS time bases that disagree by more than ``max_offset_s`` [s].
+
+    :func:`estimate_time_offset` over the run; an unambiguous lag beyond the
+    limit raises :class:`DataCheckError` naming it, the likely cause (GPS-UTC
+    leap seconds for 10-19 s, TAI for 19 / 37 s, whole seconds) and ``fix``
+    (the loader's key that shifts a time base), and the ``max_time_offset_s``
+    key that accepts it.  Returns the estimate (None: too few turns).
+    """
+    if not max_offset_s < np.inf:
+        return None
+    est = estimate_time_offset(t, dtheta_b, dv_b, gnss)
+    if est is None or est.ambiguous or abs(est.lag_s) <= max_offset_s:
+        return est
+    lag = est.lag_s
+    raise DataCheckError(
+        f"{gnss_source}: GNSS is {abs(lag):.1f} s {'behind' if lag > 0 else 'ahead of'} the IMU ({source})"
+        f"{time_offset_cause(lag)} (the same turns come {abs(lag):.2f} s {'later' if lag > 0 else 'earlier'} in the "
+        f"GNSS course than in the gyros: correlation {est.r_peak:.2f}, {est.r_zero:.2f} unshifted, {est.pairs} course "
+        f"changes, {est.turn_deg:.0f} deg of turns); shift the IMU times by {lag:+.2f} s" + (f" ({fix})" if fix else "")
+        + f", or raise max_time_offset_s (now {max_offset_s:g} s; inf: no check)")
+
+
+def lateral_axis_correlation(t, dtheta_b, dv_b, gnss, *, min_speed_mps: float = 1.0,
+                             interval_s: float = 1.0) -> tuple[float, float, int] | None:
+    """Correlation of the body x and y specific force with the centripetal
+    acceleration of the GNSS track, ``speed * d(course)/dt`` (to the right in
+    a right turn), over ~``interval_s`` windows: ``(r_x, r_y, windows)``.
+
+    In FRD, +y is right: ``r_y`` near 1 and ``r_x`` near 0 (0.72-0.94 and
+    |r_x| < 0.25 on the walk, the KF-GINS track and the car presets).  An IMU
+    whose x axis points right (RFU read as FLU) puts it on ``r_x``.  None with
+    fewer than 20 windows at speed or less than 0.2 m/s^2 of centripetal
+    acceleration rms."""
+    t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
+    if t.size < 3 or len(gnss) < 3 or scan is None:
+        return None
+    samples = _course_samples(gnss, interval_s)
+    if samples is None:
+        return None
+    lo, hi, course, speed = samples
+    tm = 0.5 * (lo + hi)
+    b = np.searchsorted(tm, tm + interval_s - 1e-6)
+    a = np.flatnonzero(b < tm.size)
+    b = b[a]
+    span = tm[b] - tm[a]
+    ok = (span > 0) & (span <= 2.0 * interval_s) & (speed[a] > min_speed_mps) & (speed[b] > min_speed_mps)
+    a, b, span = a[ok], b[ok], span[ok]
+    if a.size < 20:
+        return None
+    dc = (course[b] - course[a] + np.pi) % (2 * np.pi) - np.pi
+    a_lat = 0.5 * (speed[a] + speed[b]) * dc / span
+    if np.sqrt(np.mean(a_lat ** 2)) < 0.2:
+        return None
+    from .. import _core
+
+    # the mean specific force over each window: the velocity increments summed about x and y
+    # (rotation_about_at integrates any (N, 3) increments along an axis)
+    f = []
+    for axis in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
+        c = _core.rotation_about_at(t, dv_b, axis, np.concatenate([tm[a], tm[b]]))
+        f.append((c[a.size:] - c[:a.size]) / span)
+    good = np.isfinite(f[0]) & np.isfinite(f[1])
+    if good.sum() < 20:
+        return None
+    y = a_lat[good] - a_lat[good].mean()
+    r = []
+    for fx in f:
+        x = fx[good] - fx[good].mean()
+        den = np.sqrt(np.dot(x, x) * np.dot(y, y))
+        r.append(float(np.dot(x, y) / den) if den > 0 else 0.0)
+    return r[0], r[1], int(good.sum())
+
+
+def check_heading_axes(t, dtheta_b, dv_b, gnss, *, source: str = "imu", fix: str | None = None):
+    """Refuse body axes whose x is not forward when the heading is to come from
+    the GNSS course: the centripetal acceleration of the turns must be along
+    +y (right, FRD), not along x (an IMU whose x points right or left: RFU or
+    LBU read as FLU, a 90 deg error in every heading) nor along -y.  Returns
+    :func:`lateral_axis_correlation` (None: too little turning to tell)."""
+    res = lateral_axis_correlation(t, dtheta_b, dv_b, gnss)
+    if res is None:
+        return None
+    r_x, r_y, n = res
+    how = f"(correlation of the specific force with the track's centripetal acceleration over {n} windows: " \
+          f"x {r_x:+.2f}, y {r_y:+.2f})"
+    tail = f"; {fix}" if fix else ""
+    if abs(r_x) > 0.5 and abs(r_x) > 2.0 * abs(r_y):
+        side = "right" if r_x > 0 else "left"
+        raise DataCheckError(f"{source}: the turns push the IMU along body {'+' if r_x > 0 else '-'}x, not +y "
+                             f"{how}: its x axis points {side}, not forward (e.g. RFU data read as FLU), which "
+                             f"turns the heading from the GNSS course by 90 deg{tail}")
+    if r_y < -0.5 and abs(r_x) < 0.5 * abs(r_y):
+        raise DataCheckError(f"{source}: the turns push the IMU along body -y, not +y {how}: its x axis points "
+                             f"backwards (a 180 deg heading error){tail}")
+    return res
+
+
+#: a lag the failure hints name (below MAX_TIME_OFFSET_S: a run that failed for another reason does not
+#: blame the walk's 0.46-0.62 s course-against-heading lag)
+HINT_TIME_OFFSET_S = 0.5
+
+
+def disagreement_hint(dataset) -> str:
+    """What the data say about GNSS fixes and an IMU that disagree (a run
+    whose innovation gate rejected too many records), as a clause of a message.
+
+    In order: an IMU/GNSS time offset over :data:`HINT_TIME_OFFSET_S`
+    (:func:`estimate_time_offset`); a GNSS track that turns opposite to the
+    gyros (a flipped longitude or latitude sign, or inverted gyro axes;
+    :func:`gyro_course_slope`); an initial yaw more than 30 deg from the GNSS
+    course (the course at the first fast fixes against the initial yaw carried
+    to them by the gyros, :func:`initial_yaw_offset_deg`).  Falls back to the
+    generic "check units, lever arm and sigmas"."""
+    imu, gnss = dataset.imu, dataset.gnss
+    hints = []
+    try:
+        if len(gnss) >= 3:
+            est = estimate_time_offset(imu.t, imu.dtheta_b, imu.dv_b, gnss)
+            if est is not None and not est.ambiguous and abs(est.lag_s) > HINT_TIME_OFFSET_S:
+                how = "behind" if est.lag_s > 0 else "ahead of"
+                hints.append(f"the turns put the GNSS {abs(est.lag_s):.2f} s {how} the IMU"
+                             f"{time_offset_cause(est.lag_s)} (shift the IMU times by {est.lag_s:+.2f} s)")
+            fit = gyro_course_slope(imu.t, imu.dtheta_b, imu.dv_b, gnss)
+            if fit is not None and fit[0] < -0.5:
+                hints.append(f"the GNSS track turns opposite to the gyros (slope {fit[0]:.2f}): a flipped longitude "
+                             "(or latitude) sign, or inverted gyro axes?")
+            off = initial_yaw_offset_deg(dataset)
+            if off is not None and abs(off) > 30.0:
+                hints.append(f"the initial yaw ({dataset.initial.yaw_deg:.1f} deg) is {off:+.0f} deg off the GNSS "
+                             "course" + (" (180 deg: heading reversed?)" if abs(off) > 150.0 else ""))
+    except Exception:  # noqa: BLE001 - a hint must never replace the message it belongs to
+        hints = []
+    return "; ".join(hints) if hints else "check units, lever arm and sigmas"
+
+
+def initial_yaw_offset_deg(dataset, *, min_speed_mps: float = 1.0, window_s: float = 120.0) -> float | None:
+    """The GNSS course minus the initial yaw carried forward by the gyros [deg].
+
+    ``yaw(t) = yaw0 + g(t) - g(t0)`` with ``g`` the rotation about the vertical
+    (:func:`check_gyro_against_gnss`), compared with the course at the fixes
+    faster than ``min_speed_mps`` within ``window_s`` of the first of them; the
+    circular mean of the differences.  About 0 for a vehicle whose heading is
+    its course (no sideslip; a walker whose mounting is right); None without
+    an initial yaw or 5 such fixes."""
+    initial = getattr(dataset, "initial", None)
+    yaw0 = getattr(initial, "yaw_deg", None)
+    if yaw0 is None or not np.isfinite(yaw0):
+        return None
+    t, dtheta_b, dv_b, scan = _scanned(dataset.imu.t, dataset.imu.dtheta_b, dataset.imu.dv_b)
+    if scan is None or t.size < 3 or len(dataset.gnss) < 5:
+        return None
+    gt, v, _ = _gnss_course(dataset.gnss)
+    t0 = float(getattr(dataset, "t0", t[0]))
+    with np.errstate(invalid="ignore"):
+        fast = np.flatnonzero((np.hypot(v[:, 0], v[:, 1]) > min_speed_mps) & (gt >= t0) & (gt <= t[-1]))
+    if fast.size < 5:
+        return None
+    fast = fast[gt[fast] <= gt[fast[0]] + window_s]
+    if fast.size < 5:
+        return None
+    hg = _heading_grid(t, dtheta_b, scan)
+    if hg is None:
+        return None
+    g = _heading_at(hg, np.concatenate([[max(t0, float(t[0]))], gt[fast]]))
+    yaw = np.radians(yaw0) + g[1:] - g[0]
+    d = np.arctan2(v[fast, 1], v[fast, 0]) - yaw
+    ok = np.isfinite(d)
+    if ok.sum() < 5:
+        return None
+    return float(np.degrees(np.arctan2(np.mean(np.sin(d[ok])), np.mean(np.cos(d[ok])))))
 
 
 def _scanned(t, dtheta_b, dv_b):
@@ -219,6 +721,11 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
     if nonpos.size:
         raise DataCheckError(f"{where(nonpos[0])}: sigma_{{n,e,d}}_m = {sig[nonpos[0]].tolist()} must be > 0 "
                              f"({nonpos.size} of {m} fixes; a zero sigma would make the filter ignore the IMU)")
+    huge = np.nonzero(~np.all(sig <= MAX_GNSS_SIGMA_M, axis=1))[0]
+    if huge.size:
+        raise DataCheckError(f"{where(huge[0])}: sigma_{{n,e,d}}_m = {sig[huge[0]].tolist()}: over "
+                             f"{MAX_GNSS_SIGMA_M:g} m ({huge.size} of {m} fixes; no information, and the filter's "
+                             "covariance would overflow)")
     if initial is not None:
         d = _distance_m(initial.lat_deg, initial.lon_deg, lat[0], lon[0])
         if d > max_start_distance_m:
@@ -249,6 +756,28 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
             raise DataCheckError(f"{where(i)}: a jump of {dist[j] / 1000:.3f} km in {dt[j]:.3g} s from the "
                                  f"previous fix ({speed[j]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
                                  f"mixed units or a bad fix")
+
+
+#: the longest IMU -> antenna lever arm accepted [m] (a large ship or aircraft stays below it; a lever
+#: arm typed in millimetres or centimetres does not)
+MAX_LEVER_ARM_M = 100.0
+
+
+def lever_arm_problem(lever_arm_b) -> str | None:
+    """Why an IMU -> antenna lever arm [m] cannot be right (not 3 finite values, or
+    longer than :data:`MAX_LEVER_ARM_M`, with the unit it looks like), or None."""
+    try:
+        la = np.asarray(lever_arm_b, dtype=float)
+    except (TypeError, ValueError):
+        return "expected 3 numbers [m]"
+    if la.shape != (3,) or not np.all(np.isfinite(la)):
+        return "expected 3 finite numbers [m]"
+    n = float(np.linalg.norm(la))
+    if n <= MAX_LEVER_ARM_M:
+        return None
+    units = [u for u, f in (("millimetres", 1000.0), ("centimetres", 100.0)) if n / f <= 20.0]
+    unit = f" (it looks like {' or '.join(units)}: the lever arm is in metres)" if units else ""
+    return f"{n:.4g} m long, implausible for an IMU -> antenna lever arm (> {MAX_LEVER_ARM_M:g} m){unit}"
 
 
 def check_latlon_radians(lat, lon, *, source: str = "gnss", column: str = "lat/lon") -> None:
@@ -345,18 +874,37 @@ def _distance_m(lat1, lon1, lat2, lon2):
     return 2 * 6_371_000.0 * np.arcsin(np.sqrt(np.clip(a, 0.0, 1.0)))
 
 
-def check_dataset(dataset) -> None:
+def check_dataset(dataset, *, max_time_offset_s: float = MAX_TIME_OFFSET_S) -> None:
     """Every check above on a dataset (loose fixes, IMU, time bases, gyro vs
-    course), naming the files the data came from where the readers recorded them."""
+    course, the IMU/GNSS time offset), naming the files the data came from
+    where the readers recorded them.  A tight dataset's ``gnss`` are its
+    single-point fixes (:func:`insnav.io.rinex_dataset.load_rinex`) or the
+    simulator's fixes, so both couplings get the same checks."""
     imu, gnss = dataset.imu, dataset.gnss
     imu_src = _source(imu, "imu")
+    problem = lever_arm_problem(getattr(dataset, "lever_arm_b", np.zeros(3)))
+    if problem:
+        raise DataCheckError(f"{getattr(dataset, 'name', None) or 'dataset'}: lever_arm_b = "
+                             f"{np.asarray(dataset.lever_arm_b).tolist()}: {problem}")
     check_imu(imu.t, imu.dtheta_b, imu.dv_b, source=imu_src)
     if len(gnss):
         gnss_src = _source(gnss, "gnss")
         check_time_overlap(imu.t, gnss.t_valid, imu_source=imu_src, gnss_source=gnss_src)
         check_gnss(gnss, initial=getattr(dataset, "initial", None), source=gnss_src)
         check_gnss_velocity(gnss, source=gnss_src)  # flipped lat/lon signs, radians read as degrees
+        # the time offset first: a shifted time base also spoils the gyro-against-course slope
+        check_time_offset(imu.t, imu.dtheta_b, imu.dv_b, gnss, max_offset_s=max_time_offset_s, source=imu_src,
+                          gnss_source=gnss_src, fix=_time_offset_key(dataset))
         check_gyro_against_gnss(imu.t, imu.dtheta_b, imu.dv_b, gnss, source=imu_src)
+
+
+def _time_offset_key(dataset) -> str | None:
+    """The loader's key that shifts the IMU times, for a message."""
+    if getattr(dataset, "options", None) is not None and hasattr(dataset.options, "imu_time_offset_s"):
+        return "[rinex] imu_time_offset_s"
+    if "tables" in (getattr(dataset, "info", None) or {}):
+        return "[imu] time_offset_s"
+    return None
 
 
 def _source(part, default: str) -> str:

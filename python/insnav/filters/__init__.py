@@ -114,7 +114,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         if checks:
             from .checks import check_dataset
 
-            check_dataset(dataset)
+            check_dataset(dataset, max_time_offset_s=cfg.max_time_offset_s)
         sol = spec.runner(cfg.coupling)(dataset, cfg, **options)
     if report is not None:
         sol.summary["sanitize"] = report

@@ -46,12 +46,17 @@ a bad one is dropped (it then acts like a short outage) rather than refused:
 
 =====================================  ========================================
 non-finite time, position or position  dropped (``gnss_invalid_dropped``)
-sigma, sigma <= 0, latitude outside
-[-90, 90], longitude outside
-[-180, 360], height outside
+sigma, sigma <= 0 or > MAX_SIGMA_M
+(1e5 m: no information, and its
+square overflows the filter),
+latitude outside [-90, 90], longitude
+outside [-180, 360], height outside
 [``min_h_m``, ``max_h_m``]
 non-finite or non-positive velocity    velocity removed, position kept
-or velocity sigma (some, not all NaN)  (``gnss_velocity_removed``)
+or velocity sigma (some, not all       (``gnss_velocity_removed``)
+NaN), a speed over MAX_SPEED_MPS
+(1e4 m/s) or a sigma over
+MAX_SIGMA_MPS (1e5 m/s)
 out of time order                      sorted (``gnss_reordered``)
 repeated time of validity              first kept, rest dropped
                                        (``gnss_duplicates_dropped``)
@@ -178,7 +183,8 @@ def sanitize_imu(imu: ImuData, *, max_gap_s: float = DEFAULTS["max_gap_s"],
                                         (dv, max_accel_mps2, "specific force |dv|/dt", "m/s^2", "accel")):
             i = scan[key]
             if i >= 0:
-                val = float(np.linalg.norm(x[i]) / dt_of(i))
+                with np.errstate(over="ignore"):  # 1e308 components: the norm is inf, the message says so
+                    val = float(np.linalg.norm(x[i]) / dt_of(i))
                 raise ValueError(f"{_where(origin, source, i)}: {what} = {val:.6g} {unit} exceeds the "
                                  f"physical limit {lim:.6g} {unit} (corrupted record?)")
         if scan["gaps"]:
@@ -246,6 +252,14 @@ def _bridge(t, dth, dv, dts, gaps, dt0, origin, rep):
     return np.concatenate(pieces_t), np.concatenate(pieces_th), np.concatenate(pieces_v), origin, rep
 
 
+#: a GNSS position sigma [m] / velocity sigma [m/s] above this carries no information (and its square,
+#: near 1e155, overflows the covariance): the fix (the velocity) is dropped like a non-finite one
+MAX_SIGMA_M = 1e5
+MAX_SIGMA_MPS = 1e5
+#: a reported speed above this [m/s] (beyond low Earth orbit) is not a measurement
+MAX_SPEED_MPS = 1e4
+
+
 def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m: float = DEFAULTS["max_h_m"],
                   source: str = "gnss") -> tuple[GnssFixes, dict]:
     """Check and repair loosely coupled GNSS fixes (policy in the module docstring).
@@ -273,10 +287,11 @@ def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m
     sv = np.array(g.sigma_vel_n, float).reshape(n, 3)
     with np.errstate(invalid="ignore"):
         ok = (np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
-              & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1)
+              & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1) & (sp <= MAX_SIGMA_M).all(axis=1)
               & (np.abs(lat) <= 90.0) & (lon >= -180.0) & (lon <= 360.0) & (h >= min_h_m) & (h <= max_h_m))
         vel_any = np.isfinite(v).any(axis=1) | np.isfinite(sv).any(axis=1)
-        vel_ok = np.isfinite(v).all(axis=1) & np.isfinite(sv).all(axis=1) & (sv > 0).all(axis=1)
+        vel_ok = (np.isfinite(v).all(axis=1) & np.isfinite(sv).all(axis=1) & (sv > 0).all(axis=1)
+                  & (sv <= MAX_SIGMA_MPS).all(axis=1) & (np.abs(v) <= MAX_SPEED_MPS).all(axis=1))
     bad_vel = ok & vel_any & ~vel_ok
     changed = False
     if bad_vel.any():

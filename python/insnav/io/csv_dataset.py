@@ -46,7 +46,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config import _USER_UNITS, ConfigError, ImuNoise, RunConfig, config_from_dict
-from ..data.checks import (check_gnss, check_gnss_velocity, check_gyro_against_gnss, check_imu, check_latlon_radians,
+from ..data.checks import (MAX_TIME_OFFSET_S, check_gnss, check_gnss_velocity, check_gyro_against_gnss,
+                           check_heading_axes, check_imu, check_latlon_radians, check_time_offset,
                            check_time_overlap)
 from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin
 from ..data.imu_grades import IMU_GRADES, imu_model_for_grade
@@ -114,6 +115,8 @@ def _noise_model(imu_d: dict, source: str) -> tuple[ImuNoise, dict]:
                           f"keys ({', '.join(k[0] for k in _REQUIRED_NOISE)}); a filter with zero IMU noise would "
                           "trust the IMU blindly")
     model = {}
+    if grade is not None and not isinstance(grade, str):
+        raise ConfigError(f"{source}: key 'imu.grade': bad value {grade!r}; allowed: {' | '.join(IMU_GRADES)}")
     if grade is not None:
         try:
             model = imu_model_for_grade(grade)
@@ -151,7 +154,8 @@ def _labels(fmt: ImuCsvFormat, path: str) -> tuple[str, str]:
 
 def _fixes(fmt: ImuCsvFormat) -> dict:
     """The setting that fixes each cause a check can name."""
-    out = {"axes": '[imu] axes = "FLU" (or the axes the IMU has: three of F/B, R/L, D/U)',
+    out = {"axes": '[imu] axes = "FLU" if the IMU\'s x axis points forward, "RFU" if it points right (the axes '
+                   'the IMU has: three of F/B, R/L, D/U; a wrong x turns every heading by 90 deg)',
            "inverted": "check [imu] axes / mount_rpy_deg",
            "t_ms": '[imu] time_unit = "ms"?'}
     if fmt.acc_unit != "g":
@@ -287,7 +291,10 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
     ini = _table(d, "initial", INITIAL_KEYS, source)
     align_d = _table(d, "align", ALIGN_KEYS, source)
     for k, v in list(ini.items()) + list(align_d.items()):
-        vals = np.atleast_1d(np.asarray(v, dtype=float)) if not isinstance(v, (str, bool)) else np.array([np.nan])
+        try:
+            vals = np.atleast_1d(np.asarray(v, dtype=float)) if not isinstance(v, (str, bool)) else np.array([np.nan])
+        except (TypeError, ValueError):  # a table or a nested list where numbers belong
+            vals = np.array([np.nan])
         if not np.all(np.isfinite(vals)) or (k == "v_n_mps" and vals.shape != (3,)) or \
                 (k != "v_n_mps" and vals.shape != (1,)):
             raise ConfigError(f"{source}: key '{'initial' if k in INITIAL_KEYS else 'align'}.{k}': bad value {v!r}; "
@@ -327,9 +334,17 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
     check_gnss(gnss_all, source=rec.path)
     check_gnss_velocity(gnss_all, source=rec.path)
     gnss_al = _with_velocity(gnss_all)
+    mto = d.get("max_time_offset_s", MAX_TIME_OFFSET_S)  # a bad value: the run configuration's error below
+    if isinstance(mto, (int, float)) and not isinstance(mto, bool) and mto > 0:
+        check_time_offset(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, max_offset_s=float(mto),
+                          source=samples.path, gnss_source=rec.path, fix="[imu] time_offset_s")
     check_gyro_against_gnss(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=samples.path,
                             gyro_label=gyro_label, fixes=dict(fixes, inverted="or the lat/lon signs are flipped; "
                                                               "check [imu] axes and the GNSS signs"))
+
+    if "yaw_deg" not in ini:  # the heading will come from the GNSS course: body x must be forward
+        check_heading_axes(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=samples.path,
+                           fix="map the axes so that x is forward: [imu] axes (e.g. \"RFU\") or mount_rpy_deg")
 
     # -- initial state
     lever = np.asarray(d.get("lever_arm_b", (0.0, 0.0, 0.0)), float)

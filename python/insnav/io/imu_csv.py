@@ -214,7 +214,8 @@ class ImuCsvFormat:
                     raise ConfigError(f"{source}: {prefix}columns.{role}: bad value {name!r}; allowed: a header name")
             roles = tuple(cols)
         else:
-            if isinstance(cols, str) or not all(isinstance(c, str) for c in cols):
+            if isinstance(cols, str) or not isinstance(cols, (list, tuple)) \
+                    or not all(isinstance(c, str) for c in cols):
                 raise ConfigError(f"{source}: {prefix}columns: bad value {cols!r}; allowed: a list of "
                                   f"{', '.join(_ROLES)} in file order, or a table role = header name")
             cols = roles = tuple(cols)
@@ -233,7 +234,10 @@ class ImuCsvFormat:
                               f"(or none and {prefix}rate_hz)")
         for key, choices in _CHOICES.items():
             setattr(self, key, canonical_choice(getattr(self, key), choices, prefix + key, source))
-        m = np.asarray(self.mount_rpy_deg, dtype=float) if not isinstance(self.mount_rpy_deg, str) else np.zeros(0)
+        try:
+            m = np.asarray(self.mount_rpy_deg, dtype=float) if not isinstance(self.mount_rpy_deg, str) else np.zeros(0)
+        except (TypeError, ValueError):  # a table or a nested list where 3 angles belong
+            m = np.zeros(0)
         if m.shape != (3,) or not np.all(np.isfinite(m)):
             raise ConfigError(f"{source}: {prefix}mount_rpy_deg: bad value {self.mount_rpy_deg!r}; "
                               "allowed: 3 angles [deg]")

@@ -100,6 +100,8 @@ def read_kfgins_imu(path, ncols: int | None = None) -> ImuData:
         raise ValueError(f"{path}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
                          f"found {n}")
     t, dth, dv = parts
+    if t.size == 0:
+        raise ValueError(f"{path}:1: no IMU records (an empty file, or only blank and comment lines)")
     scan = scan_imu(t, dth, dv)  # one compiled pass for both checks below
     if scan["nonfinite_t"] >= 0 or scan["nonfinite_dtheta"] >= 0 or scan["nonfinite_dv"] >= 0:
         check_finite_rows(parts, origin, IMU_COLUMNS)  # the message: file, line, value and column
@@ -372,6 +374,14 @@ def read_kfgins_config(path) -> dict:
         "antlever_b_m": _vec(cfg, "antlever", p),
         "raw": cfg,
     }
+    if out["endtime_s"] is not None and out["endtime_s"] <= out["starttime_s"]:
+        raise ValueError(f"{p}: key 'endtime': {out['endtime_s']:g} is not after 'starttime' "
+                         f"{out['starttime_s']:g} (-1: to the end of the IMU file)")
+    from ..data.checks import lever_arm_problem
+
+    problem = None if out["antlever_b_m"] is None else lever_arm_problem(out["antlever_b_m"])
+    if problem:
+        raise ValueError(f"{p}: key 'antlever': {out['antlever_b_m'].tolist()}: {problem}")
     return out
 
 

@@ -63,15 +63,22 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
     # the initial state is valid at the first IMU epoch at or after starttime
     i0 = int(np.searchsorted(imu.t, start))
     if i0 >= len(imu.t) - 1:
-        raise ValueError(f"{config_path}: key 'starttime': {start} is after the IMU data ({imu.t[-1]})")
+        raise ValueError(f"{config_path}: key 'starttime': {start} is after the IMU data "
+                         f"({imu_path}: {len(imu.t)} records, the last at {imu.t[-1] if len(imu.t) else 'none'})")
     t0 = float(imu.t[i0])
     # t never decreases (read_kfgins_imu), so t0 < t <= end is one run of rows: views, no copy
     lo = int(np.searchsorted(imu.t, t0, side="right"))
     hi = len(imu.t) if end is None else int(np.searchsorted(imu.t, end, side="right"))
-    imu = ImuData(imu.t[lo:hi], imu.dtheta_b[lo:hi], imu.dv_b[lo:hi])
+    if hi - lo < 2:
+        raise ValueError(f"{config_path}: keys 'starttime' {start:.10g} and 'endtime' "
+                         f"{-1 if end is None else end:.10g} leave {max(hi - lo, 0)} IMU records of {imu_path}")
+    # the rows keep their file lines (messages name "file:line")
+    imu_origin = None if imu.origin is None else imu.origin.take(np.arange(lo, hi), len(imu.t))
+    imu = ImuData(imu.t[lo:hi], imu.dtheta_b[lo:hi], imu.dv_b[lo:hi], origin=imu_origin)
     g = (gnss.t_valid > t0) & (gnss.t_valid <= imu.t[-1])
     gnss = GnssFixes(*(np.asarray(getattr(gnss, f))[g] for f in
-                       ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")))
+                       ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")),
+                     origin=None if gnss.origin is None else gnss.origin.take(g, len(g)))
     if c["initpos"] is None or c["initatt_rad"] is None:
         raise ValueError(f"{config_path}: keys 'initpos' and 'initatt' are required")
     pos, att = c["initpos"], c["initatt_rad"]
@@ -114,7 +121,9 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
                     init_sigma_gyro_bias_radps=given("initbgstd_radps"),
                     init_sigma_acc_scale=given("initsastd", scale=False),
                     init_sigma_gyro_scale=given("initsgstd", scale=False))
-    ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario={"kfgins_config": str(config_path)},
+    # the records outside the run's IMU span are not carried; the run summary counts them
+    scenario = {"kfgins_config": str(config_path), "gnss_outside_imu_span": int(g.size - np.count_nonzero(g))}
+    ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario=scenario,
                  lever_arm_b=np.asarray(cfg.lever_arm_b), initial=initial, t0=t0, gps_time_offset_s=0.0,
                  imu_model={}, name=Path(config_path).stem)
     return ds, cfg

@@ -224,9 +224,15 @@ class RinexOptions:
     reference: str | None = None
 
     def imu_format(self) -> ImuCsvFormat:
-        cols = self.imu_columns if isinstance(self.imu_columns, dict) else tuple(self.imu_columns)
+        cols = self.imu_columns
+        if isinstance(cols, (list, tuple)):
+            cols = tuple(cols)
+        mount = self.imu_mount_rpy_deg
+        if isinstance(mount, (list, tuple)):
+            mount = tuple(mount)
+        # anything else (a number where a list belongs) is named by ImuCsvFormat.validate
         return ImuCsvFormat(cols, self.imu_time, self.imu_acc_unit, self.imu_gyro_unit,
-                            self.imu_samples, tuple(self.imu_mount_rpy_deg), self.imu_time_offset_s,
+                            self.imu_samples, mount, self.imu_time_offset_s,
                             self.imu_delimiter, self.imu_axes, self.imu_time_unit, self.imu_gps_week, self.imu_rate_hz)
 
     @classmethod
@@ -262,9 +268,17 @@ class RinexOptions:
                 bad(key, "> 0")
         if self.end_s is not None and not self.end_s > self.start_s:
             bad("end_s", f"> start_s ({self.start_s})")
-        la = np.asarray(self.lever_arm_b, dtype=float) if not isinstance(self.lever_arm_b, str) else np.zeros(0)
+        try:
+            la = np.asarray(self.lever_arm_b, dtype=float) if not isinstance(self.lever_arm_b, str) else np.zeros(0)
+        except (TypeError, ValueError):  # a table or a nested list where 3 numbers belong
+            la = np.zeros(0)
         if la.shape != (3,) or not np.all(np.isfinite(la)):
             bad("lever_arm_b", "3 finite values [m]")
+        from ..data.checks import lever_arm_problem
+
+        problem = lever_arm_problem(la)
+        if problem:
+            raise ConfigError(f"{source}: key 'rinex.lever_arm_b': {self.lever_arm_b!r}: {problem}")
         for key, word, n in (("init_position", "spp", 3), ("init_velocity", ("doppler", "zero"), 3)):
             v = getattr(self, key)
             words = (word,) if isinstance(word, str) else word
