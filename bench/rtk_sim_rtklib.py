@@ -25,17 +25,10 @@ Metrics, per engine and preset, pooled over the runs:
 * a paired comparison of the engines' per-run fix rates (sign test, exact
   binomial p-value).
 
-Adding an engine (insnav's own ``--filter rtk``, for example) is one function
-and one line in :data:`ENGINES`::
-
-    def insnav_rtk(files, setting, workdir):
-        pos = workdir / "insnav.pos"
-        subprocess.run([sys.executable, "-m", "insnav", "run", "--filter", "rtk", "--format", "rinex",
-                        "--obs", str(files["rover"]), "--base", str(files["base"]), "--nav", str(files["nav"]),
-                        ..., "--out", str(pos)], check=True)
-        return solution_from_rtklib_pos(pos)      # or EngineSolution(t, r_e, status) from a Solution
-
-    ENGINES["insnav rtk"] = insnav_rtk
+The engines: insnav's ``--filter rtk`` and RTKLIB's ``rnx2rtkp``, each with
+continuous and instantaneous ambiguity resolution, each run as a process on
+the same files (reading included).  Another engine is one function returning
+an :class:`EngineSolution` and one line in :data:`ENGINES`.
 """
 from __future__ import annotations
 
