@@ -180,38 +180,27 @@ class RtklibPos(NamedTuple):
     q: np.ndarray  #: (n,) quality flag (1 fix, 2 float, 5 single)
 
 
-def read_rtklib_pos(path) -> RtklibPos:
-    """Read an RTKLIB solution file with ``GPST latitude(deg) longitude(deg) height(m) Q ...``.
+def read_rtklib_pos(path, geoid_undulation_m: float | None = None) -> RtklibPos:
+    """Read an RTKLIB solution file (``GPST|UTC latitude(deg) longitude(deg)
+    height(m) Q ...`` or ``x-ecef(m) ...``) as a reference.
 
-    Velocity columns ``vn ve vu`` (m/s), when present, are converted to ECEF.
+    The reader is :func:`insnav.io.gnss_files.read_pos_records`: the header's
+    columns, time system (UTC converted to GPST) and height kind are honoured;
+    ``height=WGS84/geodetic`` (mean sea level) needs ``geoid_undulation_m``
+    (the geoid height N [m]: ``h = H + N``).  Velocity columns ``vn ve vu``
+    (m/s), when present, are converted to ECEF.
 
     Raises
     ------
-    insnav.gnss.RinexError
-        On a line that cannot be parsed (file path and line number).
+    insnav.io.gnss_files.GnssFileError
+        (a ValueError) On a line that cannot be parsed (file path and line number).
+    insnav.config.ConfigError
+        MSL heights without ``geoid_undulation_m``.
     """
-    from .gpstime import gps_seconds_from_calendar
-    from .rinex import RinexError
+    from ..io.gnss_files import GnssFileFormat, read_pos_records
 
-    t, llh, q, vneu = [], [], [], []
-    with open(path, "r", encoding="ascii", errors="replace") as fh:
-        for lineno, line in enumerate(fh, 1):
-            if line.startswith("%") or not line.strip():
-                continue
-            p = line.split()
-            try:
-                y, mo, d = (int(x) for x in p[0].split("/"))
-                hh, mi, ss = p[1].split(":")
-                t.append(gps_seconds_from_calendar(y, mo, d, int(hh), int(mi), float(ss)))
-                llh.append([float(x) for x in p[2:5]])
-                q.append(int(float(p[5])))
-                vneu.append([float(x) for x in p[15:18]] if len(p) >= 18 else [np.nan] * 3)
-            except (ValueError, IndexError):
-                raise RinexError(path, lineno, "bad RTKLIB solution line") from None
-    llh = np.asarray(llh, dtype=float).reshape(-1, 3)
-    lat, lon = np.deg2rad(llh[:, 0]), np.deg2rad(llh[:, 1])
-    r_e = earth.geodetic_to_ecef(lat, lon, llh[:, 2])
-    vneu = np.asarray(vneu, dtype=float).reshape(-1, 3)
-    v_n = np.stack([vneu[:, 0], vneu[:, 1], -vneu[:, 2]], axis=-1)
-    v_e = earth.ned_to_ecef_vector(lat, lon, v_n)
-    return RtklibPos(np.asarray(t), r_e, v_e, np.asarray(q))
+    rec = read_pos_records(path, GnssFileFormat(format="pos", geoid_undulation_m=geoid_undulation_m))
+    lat, lon = np.deg2rad(rec.lat_deg), np.deg2rad(rec.lon_deg)
+    r_e = earth.geodetic_to_ecef(lat, lon, rec.h_m)
+    v_e = earth.ned_to_ecef_vector(lat, lon, rec.v_n)
+    return RtklibPos(rec.t_ref_s + rec.t_s, r_e, v_e, np.asarray(rec.quality))

@@ -39,7 +39,7 @@ import numpy as np
 
 from .._imu_scan import scan_imu
 from ..data.dataset import GnssFixes, ImuData, RowOrigin, Truth, check_finite_rows
-from ..data.textio import count_columns, mapped_bytes, parse_numeric, read_bytes
+from ..data.textio import count_columns, file_bytes, parse_numeric, read_bytes
 from ..units import DEG, PPM
 
 HOUR = 3600.0  #: h -> s
@@ -67,7 +67,7 @@ def read_text(path) -> str:
 def _read_rows(path, ncols=None, keep=None, names=None, min_cols=None, groups=None):
     """(rows, RowOrigin, ncols) of a whitespace-separated KF-GINS text file:
     the C++ reader, lines counted as it parses (rows: a tuple of arrays with ``groups``)."""
-    with mapped_bytes(path) as data:
+    with file_bytes(path) as data:
         n = ncols or count_columns(data, path)
         if min_cols is not None and n < min_cols:
             return None, None, n
