@@ -253,7 +253,8 @@ def _vec(cfg, key, path, n=3):
     v = cfg.get(key)
     if v is None:
         return None
-    if not (isinstance(v, list) and len(v) == n and all(isinstance(x, (int, float)) for x in v)):
+    if not (isinstance(v, list) and len(v) == n
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):  # YAML true is not 1
         raise ValueError(f"{path}: key '{key}': expected a list of {n} numbers, got {v!r}")
     return np.array(v, dtype=float)
 
