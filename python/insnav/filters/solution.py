@@ -371,6 +371,13 @@ def write_innovations(sol: Solution, solution_path) -> Path:
     residuals (the rows the core returns, in the order of ``sol.inputs``) go
     to ``<solution>.residuals.csv`` (:data:`RESIDUAL_COLUMNS`).
     """
+    from .._atomic import output_set
+
+    with output_set():  # both sidecars or neither
+        return _write_innovations(sol, solution_path)
+
+
+def _write_innovations(sol: Solution, solution_path) -> Path:
     from .._atomic import atomic_write_text
 
     m = len(sol.gnss_t)
