@@ -72,28 +72,38 @@ class OutputSet:
 
     def commit(self) -> None:
         """Rename every temporary file into place, with SIGINT and SIGTERM held
-        back meanwhile (a Ctrl-C then arrives after the last rename: never half
-        a set of new files beside half of the old ones)."""
-        import signal
-        import threading
-
-        held = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
-        if held:
-            mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        back meanwhile (:func:`signals_held`: a Ctrl-C then arrives after the
+        last rename, never half a set of new files beside half of the old ones)."""
         try:
-            while self._pending:
-                path, tmp = next(iter(self._pending.items()))
-                os.replace(tmp, path)
-                del self._pending[path]
+            with signals_held():
+                while self._pending:
+                    path, tmp = next(iter(self._pending.items()))
+                    os.replace(tmp, path)
+                    del self._pending[path]
         finally:
-            if held:
-                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             self.abort()  # a rename that failed: the rest stay as they were
 
     def abort(self) -> None:
         """Remove the temporary files; the destinations are not touched."""
         while self._pending:
             _unlink(self._pending.popitem()[1])
+
+
+@contextlib.contextmanager
+def signals_held():
+    """SIGINT and SIGTERM held back for the ``with`` block (delivered at its
+    end) in the main thread; elsewhere, or without ``pthread_sigmask``, nothing."""
+    import signal
+    import threading
+
+    held = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
+    if held:
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        if held:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 _ACTIVE: contextvars.ContextVar = contextvars.ContextVar("insnav_output_set", default=None)
