@@ -171,3 +171,22 @@ def test_kfgins_own_result_is_a_solution(shared_data):
     np.testing.assert_array_equal(s.lat_deg, t.lat_deg)
     np.testing.assert_array_equal(s.v_n, t.v_n)
     np.testing.assert_array_equal(s.yaw_deg, t.yaw_deg)
+
+
+def test_evaluate_out_never_replaces_an_input_or_a_users_file(work, tmp_path, capsys):
+    d, ds_dir = work
+    sol = d / "sol.csv"
+    before = sol.read_bytes()
+    for target in (sol, d / "sol.csv.innovations.csv", ds_dir / "truth.csv"):
+        rc, _, err = _run(capsys, "evaluate", sol, ds_dir, "--out", target, "--overwrite")
+        assert rc == 2 and "is an input of this evaluation" in err, err
+    assert sol.read_bytes() == before
+    notes = tmp_path / "notes.json"
+    notes.write_text('{"mine": 1}\n')
+    rc, _, err = _run(capsys, "evaluate", sol, ds_dir, "--out", notes)
+    assert rc == 2 and "not a file insnav wrote" in err and notes.read_text() == '{"mine": 1}\n', err
+    ev = tmp_path / "ev.json"
+    rc, printed, err = _run(capsys, "evaluate", sol, ds_dir, "--out", ev, "--json")
+    assert rc == 0 and json.loads(ev.read_text()) == json.loads(printed), err
+    rc, _, err = _run(capsys, "evaluate", sol, ds_dir, "--out", ev, "--outages", "12:18")  # its own file: replaced
+    assert rc == 0 and json.loads(ev.read_text())["outages"][0]["start_s"] == 12.0, err

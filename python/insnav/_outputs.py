@@ -170,7 +170,8 @@ def check_writable(folder) -> None:
     os.unlink(tmp)
 
 
-def check_outputs(outputs, inputs: dict, *, overwrite: bool = False, option: str = "--out") -> None:
+def check_outputs(outputs, inputs: dict, *, overwrite: bool = False, option: str = "--out",
+                  command: str = "run") -> None:
     """Refuse, with one line naming the file, an output that is one of the
     ``inputs`` (:func:`input_files`), an existing folder, or an existing file
     that is not an insnav output (unless ``overwrite``); and check that every
@@ -186,6 +187,8 @@ def check_outputs(outputs, inputs: dict, *, overwrite: bool = False, option: str
         Replace an existing file that insnav did not write.
     option : str
         Named in the messages (``--out``).
+    command : str
+        What the inputs are inputs of, for the messages (``run``, ``evaluation``).
     """
     folders = []
     for out in outputs:
@@ -195,7 +198,7 @@ def check_outputs(outputs, inputs: dict, *, overwrite: bool = False, option: str
             if fid in inputs:
                 src = inputs[fid]
                 same = "" if Path(os.path.abspath(src)) == Path(os.path.abspath(out)) else f" ({src})"
-                raise UserError(f"{option} {out} is an input of this run{same}: choose another output name")
+                raise UserError(f"{option} {out} is an input of this {command}{same}: choose another output name")
             if stat.S_ISDIR(os.stat(out).st_mode):
                 raise UserError(f"{option} {out} is a folder: give a file name")
             if not overwrite and insnav_output_kind(out) is None:
