@@ -211,3 +211,20 @@ def test_no_file_is_lost_at_any_free_space_level(tmp_path, ds_dir, capsys):
     assert res[0]["rc"] == 2 and res[-1]["rc"] == 0
     between = [x for x in res if out.stat().st_size < x["limit"] < sizes[-1]]
     assert between and all(x["rc"] == 2 for x in between)  # the solution fitted, the innovations did not
+
+
+def test_parquet_without_pyarrow_fails_before_the_run(tmp_path, ds_dir, capsys, monkeypatch):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_pyarrow(name, *a, **kw):
+        if name == "pyarrow" or name.startswith("pyarrow."):
+            raise ImportError("No module named 'pyarrow'")
+        return real_import(name, *a, **kw)
+
+    monkeypatch.setattr(builtins, "__import__", no_pyarrow)
+    ran = []
+    monkeypatch.setattr(insnav, "run", lambda *a, **kw: ran.append(1))
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", tmp_path / "sol.parquet")
+    assert rc == 2 and "pyarrow" in err and not ran and not list(tmp_path.iterdir()), err
