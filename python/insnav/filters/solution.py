@@ -453,7 +453,9 @@ def _write_innovations(sol: Solution, solution_path) -> Path:
 
 
 def _read_table(path: Path, columns, text_last: bool) -> tuple[np.ndarray, list[str] | None]:
-    text = path.read_text(encoding="ascii", errors="replace")
+    from ..data.textio import read_text
+
+    text = read_text(path, "ascii")
     nl = text.find("\n")
     header = tuple(h.strip() for h in (text[:nl] if nl >= 0 else text).split(","))
     ncol = len(columns) - (1 if text_last else 0)
