@@ -228,3 +228,26 @@ def test_parquet_without_pyarrow_fails_before_the_run(tmp_path, ds_dir, capsys, 
     monkeypatch.setattr(insnav, "run", lambda *a, **kw: ran.append(1))
     rc, _, err = _run(capsys, "run", ds_dir, "--out", tmp_path / "sol.parquet")
     assert rc == 2 and "pyarrow" in err and not ran and not list(tmp_path.iterdir()), err
+
+
+def test_what_counts_as_insnavs_own_file(tmp_path, ds_dir, capsys):
+    """A solution of any --columns groups is insnav's; KF-GINS result files are
+    insnav's only beside the configuration insnav writes with them (without it
+    they are KF-GINS's own results, not replaced without --overwrite)."""
+    sol = tmp_path / "bias.csv"
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", sol, "--columns", "bias")
+    assert rc == 0, err
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", sol, "--columns", "sigma")
+    assert rc == 0, err
+    kf = tmp_path / "kf"
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", kf, "--out-format", "kfgins")
+    assert rc == 0, err
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", kf, "--out-format", "kfgins", "--seed", "2")
+    assert rc == 0, err
+    (kf / "KF_GINS_Navresult.nav.config.toml").unlink()  # now it looks like KF-GINS's own output folder
+    before = _snapshot(kf)
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", kf, "--out-format", "kfgins")
+    assert rc == 2 and "KF_GINS_Navresult.nav exists and is not a file insnav wrote" in err, err
+    assert _snapshot(kf) == before
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", kf, "--out-format", "kfgins", "--overwrite")
+    assert rc == 0 and (kf / "KF_GINS_Navresult.nav.config.toml").is_file(), err

@@ -93,29 +93,31 @@ def insnav_output_kind(path) -> str | None:
     from .io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE
 
     if name in (KFGINS_NAV_FILE, KFGINS_IMU_ERR_FILE, KFGINS_STD_FILE):
+        # insnav's --out-format kfgins files, known by the resolved configuration insnav writes beside
+        # them; the same files without it are KF-GINS's own results: not insnav's to replace
         want = {KFGINS_NAV_FILE: 11, KFGINS_IMU_ERR_FILE: 13, KFGINS_STD_FILE: 22}[name]
-        return "KF-GINS result" if _numeric_fields(p) == want else None
+        ours = insnav_output_kind(p.with_name(KFGINS_NAV_FILE + ".config.toml")) == "config"
+        return "KF-GINS result" if ours and _numeric_fields(p) == want else None
     suffix = p.suffix.lower()
     if suffix == ".csv":
-        cols = _first_line(p).split(",")
-        return "solution" if cols[0] in ("t_s", "t") and "lat_deg" in cols and "lon_deg" in cols else None
+        return "solution" if _solution_columns(_first_line(p).split(",")) else None
     if suffix == ".npz":
         import zipfile
 
         try:
             with zipfile.ZipFile(p) as z:
-                names = set(z.namelist())
+                names = [n[:-4] for n in z.namelist() if n.endswith(".npy")]
         except (OSError, zipfile.BadZipFile):
             return None
-        return "solution" if {"t_s.npy", "lat_deg.npy", "lon_deg.npy"} <= names else None
+        return "solution" if _solution_columns(names) else None
     if suffix == ".parquet":
         try:
             import pyarrow.parquet as pq
 
-            names = set(pq.read_schema(p).names)
+            names = list(pq.read_schema(p).names)
         except Exception:  # noqa: BLE001 - not pyarrow's file, or no pyarrow: not recognised
             return None
-        return "solution" if {"t_s", "lat_deg", "lon_deg"} <= names else None
+        return "solution" if _solution_columns(names) else None
     if suffix == ".json":
         import json
 
@@ -125,6 +127,16 @@ def insnav_output_kind(path) -> str | None:
             return None
         return "evaluation" if isinstance(d, dict) and {"samples", "rms", "max"} <= set(d) else None
     return None
+
+
+def _solution_columns(names) -> bool:
+    """True when ``names`` are a solution's: ``t_s`` (or the older ``t``) and
+    nothing but :attr:`insnav.Solution.COLUMNS` (any ``--columns`` groups)."""
+    from .filters.solution import LEGACY_COLUMNS, Solution
+
+    names = [LEGACY_COLUMNS.get(n.strip(), n.strip()) for n in names]
+    known = set(Solution.COLUMNS) | {"odo_scale_ppm", "sigma_odo_scale_ppm"}
+    return bool(names) and "t_s" in names and len(names) > 1 and set(names) <= known
 
 
 #: the files a report folder holds (insnav.analysis.report.FIGURES and report.html)
