@@ -150,6 +150,8 @@ def test_a_failed_first_run_leaves_nothing(tmp_path, ds_dir, capsys, monkeypatch
     assert list(tmp_path.iterdir()) == []  # not even the folders it made
     rc, _, err = _run(capsys, "run", ds_dir, "--out", tmp_path / "sol.csv")
     assert rc == 2 and list(tmp_path.iterdir()) == [], err
+    rc, _, err = _run(capsys, "run", ds_dir, "--out", tmp_path / "a" / "b" / "sol.npz")
+    assert rc == 2 and list(tmp_path.iterdir()) == [], err
 
 
 _LEVELS = textwrap.dedent("""

@@ -516,7 +516,8 @@ def cmd_run(args) -> int:
 
     from .._atomic import output_set
 
-    made = [d for d in (out, *out.parents) if not d.exists()] if args.out_format == "kfgins" else []
+    first = out if args.out_format == "kfgins" else out.parent
+    made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the writes fail
     try:
         # every file of the run or, on an error (a full disk, Ctrl-C), none: each is written to a
         # temporary file beside its destination and all are renamed into place at the end
