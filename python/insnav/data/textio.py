@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["write_text_columns", "threads", "read_bytes", "read_text", "file_bytes", "mapped_bytes", "count_columns",
-           "parse_numeric", "FileChangedError", "file_stamp", "check_unchanged"]
+           "parse_numeric", "FileChangedError"]
 
 
 def threads() -> int:
@@ -79,8 +79,14 @@ def _read_whole(p: Path):
         st0 = _stamp(os.fstat(f.fileno()))
         size = st0[0]
         if size < MAP_MIN_BYTES or not hasattr(mmap, "MAP_ANONYMOUS"):
-            buf = f.read(size + 1)  # one byte more: a file that grew meanwhile shows it
-            got = len(buf)
+            parts, got = [], 0
+            while got <= size:  # one byte more than the size: a file that grew meanwhile shows it
+                b = f.read(size + 1 - got)
+                if not b:
+                    break
+                parts.append(b)
+                got += len(b)
+            buf = parts[0] if len(parts) == 1 else b"".join(parts)
         else:
             buf = mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
             if hasattr(mmap, "MADV_HUGEPAGE"):
@@ -100,23 +106,6 @@ def _read_whole(p: Path):
     if st1 != st0 or got != size:
         raise _changed(p, st0, st1, got)
     return buf
-
-
-def check_unchanged(path, stamp) -> None:
-    """Raise :class:`FileChangedError` when ``path`` no longer has the
-    ``(size, mtime_ns)`` of :func:`file_stamp` taken before it was read."""
-    p = Path(path)
-    try:
-        now = _stamp(os.stat(p))
-    except OSError:
-        now = (-1, -1)
-    if now != tuple(stamp):
-        raise _changed(p, tuple(stamp), now)
-
-
-def file_stamp(path) -> tuple[int, int]:
-    """``(size [bytes], mtime [ns])`` of ``path``, for :func:`check_unchanged`."""
-    return _stamp(os.stat(path))
 
 
 def read_text(path, encoding: str = "utf-8", errors: str = "replace") -> str:
