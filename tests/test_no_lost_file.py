@@ -253,3 +253,26 @@ def test_what_counts_as_insnavs_own_file(tmp_path, ds_dir, capsys):
     assert _snapshot(kf) == before
     rc, _, err = _run(capsys, "run", ds_dir, "--out", kf, "--out-format", "kfgins", "--overwrite")
     assert rc == 0 and (kf / "KF_GINS_Navresult.nav.config.toml").is_file(), err
+
+
+@pytest.mark.parametrize("fmt", ["csv", "kfgins"])
+def test_format_csv_and_kfgins_refuse_their_own_inputs(tmp_path, capsys, fmt):
+    """`--out my_imu.csv` with `--imu my_imu.csv` (and the GNSS file): refused
+    before anything is read, even with --overwrite."""
+    imu, gnss, cfg = tmp_path / "my_imu.csv", tmp_path / "fixes.csv", tmp_path / "run.toml"
+    for p in (imu, gnss, cfg):
+        p.write_text("anything\n")
+    if fmt == "kfgins":  # the YAML's data files are inputs too, and the solution's sidecars count
+        cfg = tmp_path / "kf.yaml"
+        cfg.write_text('imupath: "./my_imu.csv"\ngnsspath: "./fixes.csv"\n')
+        argv = ["--format", "kfgins", "--config", cfg]
+        targets = [imu, gnss]
+        os.link(imu, tmp_path / "sol.csv.innovations.csv")
+        targets.append(tmp_path / "sol.csv")
+    else:
+        argv = ["--format", "csv", "--imu", imu, "--gnss", gnss, "--config", cfg]
+        targets = [imu, gnss]
+    for out in targets:
+        rc, _, err = _run(capsys, "run", *argv, "--out", out, "--overwrite")
+        assert rc == 2 and "is an input of this run" in err, err
+    assert imu.read_text() == gnss.read_text() == "anything\n"
