@@ -146,7 +146,7 @@ _RACE = textwrap.dedent("""
         with open(work, "wb") as f:
             f.write(pristine)
         keep = rng.randrange(len(pristine))
-        delay = rng.uniform(0.0, span)
+        delay = max(0.0, rng.uniform(-0.5, 1.0) * span)  # a third at once: the cut comes first, however busy
         r, w = os.pipe()
         pid = os.fork()
         if pid == 0:  # the child reads while a thread cuts the file

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from insnav.config import ConfigError
-from insnav.gnss.measurements import read_rtklib_pos
-from insnav.io.gnss_files import GnssFileError, GnssFileFormat, read_pos, write_pos
+from insnav.io.gnss_files import GnssFileError, GnssFileFormat, read_pos, read_rtklib_pos, write_pos
 
 T0 = 2_000 * 604_800.0 + 345_600.0  # GPS seconds
 

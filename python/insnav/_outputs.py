@@ -14,10 +14,15 @@ from pathlib import Path
 
 from .errors import UserError
 
-__all__ = ["input_files", "check_outputs", "check_writable", "insnav_output_kind", "is_report_folder"]
+__all__ = ["input_files", "check_outputs", "check_writable", "insnav_output_kind"]
 
 #: the first line of a resolved run configuration (``<out>.config.toml``)
 CONFIG_FIRST_LINE = "# insnav resolved run configuration"
+
+
+def file_id(path) -> tuple[int, int] | None:
+    """(device, inode) of ``path`` (links followed), None when it does not exist."""
+    return _file_id(path)
 
 
 def _file_id(path) -> tuple[int, int] | None:
@@ -51,6 +56,11 @@ def input_files(*paths) -> dict[tuple[int, int], Path]:
                 if cid is not None and c.is_file():
                     out.setdefault(cid, c)
     return out
+
+
+def head(path, n: int = 4096) -> bytes:
+    """The first ``n`` bytes of ``path`` (empty when it cannot be read)."""
+    return _head(path, n)
 
 
 def _head(path, n: int = 4096) -> bytes:
@@ -137,26 +147,6 @@ def _solution_columns(names) -> bool:
     names = [LEGACY_COLUMNS.get(n.strip(), n.strip()) for n in names]
     known = set(Solution.COLUMNS) | {"odo_scale_ppm", "sigma_odo_scale_ppm"}
     return bool(names) and "t_s" in names and len(names) > 1 and set(names) <= known
-
-
-#: the files a report folder holds (insnav.analysis.report.FIGURES and report.html)
-def _report_files() -> set[str]:
-    from .analysis.report import FIGURES
-
-    return set(FIGURES) | {"report.html"}
-
-
-def is_report_folder(path) -> bool:
-    """True for a folder written by ``insnav report``: report.html and its
-    figures, nothing else."""
-    p = Path(path)
-    if not p.is_dir() or not (p / "report.html").is_file():
-        return False
-    head = _head(p / "report.html", 65536)
-    if not (head.startswith(b"<!DOCTYPE html>") and (b"insnav report" in head or b'id="summary"' in head)):
-        return False
-    allowed = _report_files()
-    return all(c.name in allowed and c.is_file() for c in p.iterdir())
 
 
 def check_writable(folder) -> None:

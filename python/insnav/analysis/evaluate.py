@@ -43,7 +43,7 @@ def _read_truth(path, quality=None):
     p = Path(path)
     if p.suffix == ".pos":
         from ..gnss.gpstime import SECONDS_PER_WEEK
-        from ..gnss.measurements import read_rtklib_pos
+        from ..io.gnss_files import read_rtklib_pos
         from ..io.rinex_dataset import rtklib_truth
 
         ref = read_rtklib_pos(p)

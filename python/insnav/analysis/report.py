@@ -474,17 +474,32 @@ def _report_inputs(paths) -> dict:
     return input_files(*files)
 
 
+def is_report_folder(path) -> bool:
+    """True for a folder written by :func:`report`: report.html (an insnav
+    page) and its figures, nothing else."""
+    from .._outputs import head
+
+    p = Path(path)
+    if not p.is_dir() or not (p / "report.html").is_file():
+        return False
+    h = head(p / "report.html", 65536)
+    if not (h.startswith(b"<!DOCTYPE html>") and (b"insnav report" in h or b'id="summary"' in h)):
+        return False
+    allowed = set(FIGURES) | {"report.html"}
+    return all(c.name in allowed and c.is_file() for c in p.iterdir())
+
+
 def _check_report_out(out_dir: Path, inputs, overwrite: bool) -> None:
     """Before any work: ``out_dir`` is new, empty or an earlier report (then
     replaced), or with ``overwrite`` any folder (its report files replaced);
     never an input, never holding an input under a report file's name; writable."""
-    from .._outputs import _file_id, check_writable, is_report_folder
+    from .._outputs import check_writable, file_id
     from ..errors import UserError
 
     ins = _report_inputs(inputs)
     if out_dir.exists() and not out_dir.is_dir():
         raise UserError(f"--out {out_dir} exists and is not a folder: not replaced")
-    if _file_id(out_dir) in ins:
+    if file_id(out_dir) in ins:
         raise UserError(f"--out {out_dir} is an input of this report: choose another folder")
     if out_dir.is_dir() and any(out_dir.iterdir()) and not is_report_folder(out_dir):
         if not overwrite:
@@ -492,7 +507,7 @@ def _check_report_out(out_dir: Path, inputs, overwrite: bool) -> None:
                             "figures only): not replaced (choose another --out, or --overwrite to write the "
                             "report files into it)")
         for name in ("report.html", *FIGURES):
-            if _file_id(out_dir / name) in ins:
+            if file_id(out_dir / name) in ins:
                 raise UserError(f"{out_dir / name} is an input of this report: choose another --out")
     check_writable(out_dir)
 
@@ -507,7 +522,6 @@ def _write_report(out_dir: Path, files) -> Path:
     import tempfile
 
     from .._atomic import atomic_write_with, chmod_like_new, output_set, signals_held
-    from .._outputs import is_report_folder
 
     if out_dir.is_dir() and any(out_dir.iterdir()) and not is_report_folder(out_dir):
         with output_set():

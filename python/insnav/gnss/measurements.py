@@ -16,7 +16,7 @@ from .ephemeris import C_LIGHT, Ephemerides, select_ephemeris, transmit_states
 from .geometry import elevation_azimuth
 
 __all__ = ["L1_WAVELENGTH", "Predicted", "predict_observables", "common_clock_residuals",
-           "Residuals", "observation_residuals", "read_rtklib_pos"]
+           "Residuals", "observation_residuals"]
 
 #: GPS L1 carrier frequency [Hz] and wavelength [m] (IS-GPS-200 3.3.1.1).
 L1_FREQ_HZ = 1575.42e6
@@ -172,35 +172,10 @@ def observation_residuals(obs, eph: Ephemerides, r_rx_e, v_rx_e=None, **kwargs) 
 
 
 class RtklibPos(NamedTuple):
-    """An RTKLIB ``.pos`` solution (lat/lon/height format, GPST time)."""
+    """An RTKLIB ``.pos`` solution as a reference (GPST time, ECEF), as
+    :func:`insnav.io.gnss_files.read_rtklib_pos` reads it."""
 
     t_gps_s: np.ndarray  #: (n,) [s]
     r_e: np.ndarray  #: (n, 3) ECEF [m]
     v_e: np.ndarray  #: (n, 3) ECEF [m/s] (NaN if the file has no velocity columns)
     q: np.ndarray  #: (n,) quality flag (1 fix, 2 float, 5 single)
-
-
-def read_rtklib_pos(path, geoid_undulation_m: float | None = None) -> RtklibPos:
-    """Read an RTKLIB solution file (``GPST|UTC latitude(deg) longitude(deg)
-    height(m) Q ...`` or ``x-ecef(m) ...``) as a reference.
-
-    The reader is :func:`insnav.io.gnss_files.read_pos_records`: the header's
-    columns, time system (UTC converted to GPST) and height kind are honoured;
-    ``height=WGS84/geodetic`` (mean sea level) needs ``geoid_undulation_m``
-    (the geoid height N [m]: ``h = H + N``).  Velocity columns ``vn ve vu``
-    (m/s), when present, are converted to ECEF.
-
-    Raises
-    ------
-    insnav.io.gnss_files.GnssFileError
-        (a ValueError) On a line that cannot be parsed (file path and line number).
-    insnav.config.ConfigError
-        MSL heights without ``geoid_undulation_m``.
-    """
-    from ..io.gnss_files import GnssFileFormat, read_pos_records
-
-    rec = read_pos_records(path, GnssFileFormat(format="pos", geoid_undulation_m=geoid_undulation_m))
-    lat, lon = np.deg2rad(rec.lat_deg), np.deg2rad(rec.lon_deg)
-    r_e = earth.geodetic_to_ecef(lat, lon, rec.h_m)
-    v_e = earth.ned_to_ecef_vector(lat, lon, rec.v_n)
-    return RtklibPos(rec.t_ref_s + rec.t_s, r_e, v_e, np.asarray(rec.quality))

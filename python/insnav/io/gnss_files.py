@@ -52,7 +52,8 @@ from ..units import DEG, RAD2DEG
 from .imu_csv import GPST_UNIX_OFFSET_S, _CHOICES as _IMU_CHOICES, _TIME_SCALE, _split_time, canonical_choice
 from .imu_csv import gps_minus_utc_s
 
-__all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos",
+__all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos", "read_pos_records",
+           "read_rtklib_pos",
            "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
 
 #: knot -> m/s (1852 m per hour)
@@ -457,7 +458,7 @@ _POS_HEIGHT = None
 def read_pos_records(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
     """The records of an RTKLIB ``.pos`` file as read (ellipsoidal heights,
     GPST), before :func:`read_pos`'s sigma, quality and time-offset steps; also
-    the reader of :func:`insnav.gnss.measurements.read_rtklib_pos`.
+    the reader of :func:`read_rtklib_pos`.
 
     The header is honoured: the column names (every record must have as many
     fields as the header names, the time taking two), GPST or UTC time, and
@@ -591,6 +592,37 @@ def read_pos_records(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
                        info=dict(time_system="UTC" if utc else "GPST",
                                  height="geodetic" if height_kind == "geodetic" else "ellipsoidal",
                                  q_counts={int(k): int((q == k).sum()) for k in np.unique(q)}))
+
+
+def read_rtklib_pos(path, geoid_undulation_m: float | None = None):
+    """Read an RTKLIB solution file (``GPST|UTC latitude(deg) longitude(deg)
+    height(m) Q ...`` or ``x-ecef(m) ...``) as a reference.
+
+    The reader is :func:`read_pos_records` (the fixes reader's): the header's
+    columns, time system (UTC converted to GPST) and height kind are honoured;
+    ``height=WGS84/geodetic`` (mean sea level) needs ``geoid_undulation_m``
+    (the geoid height N [m]: ``h = H + N``).  Velocity columns ``vn ve vu``
+    (m/s), when present, are converted to ECEF.
+
+    Returns
+    -------
+    insnav.gnss.measurements.RtklibPos
+        ``t_gps_s``, ``r_e``, ``v_e``, ``q``.
+
+    Raises
+    ------
+    GnssFileError
+        (a ValueError) On a line that cannot be parsed (file path and line number).
+    insnav.config.ConfigError
+        MSL heights without ``geoid_undulation_m``.
+    """
+    from ..gnss.measurements import RtklibPos
+
+    rec = read_pos_records(path, GnssFileFormat(format="pos", geoid_undulation_m=geoid_undulation_m))
+    lat, lon = np.deg2rad(rec.lat_deg), np.deg2rad(rec.lon_deg)
+    r_e = earth.geodetic_to_ecef(lat, lon, rec.h_m)
+    v_e = earth.ned_to_ecef_vector(lat, lon, rec.v_n)
+    return RtklibPos(rec.t_ref_s + rec.t_s, r_e, v_e, np.asarray(rec.quality))
 
 
 def write_pos(path, t_gps_s, lat_deg, lon_deg, h_m, sigma_pos_n=None, v_n=None, sigma_vel_n=None, q=None,
