@@ -52,9 +52,8 @@ from ..units import DEG, RAD2DEG
 from .imu_csv import GPST_UNIX_OFFSET_S, _CHOICES as _IMU_CHOICES, _TIME_SCALE, _split_time, canonical_choice
 from .imu_csv import gps_minus_utc_s
 
-__all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos", "read_pos_records",
-           "read_rtklib_pos",
-           "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
+__all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos",
+           "read_pos_records", "read_rtklib_pos", "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
 
 #: knot -> m/s (1852 m per hour)
 KNOT_MPS = 1852.0 / 3600.0
