@@ -26,7 +26,8 @@ def test_geodetic_header_is_msl_refused_without_undulation_and_used_with_it(tmp_
     ell = read_pos(_pos(tmp_path / "ell.pos"))
     msl = _pos(tmp_path / "msl.pos", "geodetic")
     for read in (lambda: read_pos(msl), lambda: read_rtklib_pos(msl)):
-        with pytest.raises(ConfigError, match=r"msl\.pos:2: the header says height=WGS84/geodetic .*geoid_undulation_m"):
+        with pytest.raises(ConfigError, match=r"msl\.pos:2: the header says height=WGS84/geodetic .*"
+                                              r"geoid_undulation_m"):
             read()
     n_m = -16.5  # geoid height: h = H + N
     got = read_pos(msl, GnssFileFormat(format="pos", geoid_undulation_m=n_m))

@@ -517,8 +517,9 @@ def read_pos_records(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
         if nfields is None:  # no header: every record like the first
             nfields = len(p)
         if len(p) != nfields:
-            raise GnssFileError(path, i + 1, f"{len(p)} fields where the {'header has' if header else 'first record has'}"
-                                f" {nfields} (expected {' '.join(h[:5])} ...): a missing or extra field")
+            where = "header has" if header else "first record has"
+            raise GnssFileError(path, i + 1, f"{len(p)} fields where the {where} {nfields} (expected "
+                                f"{' '.join(h[:5])} ...): a missing or extra field")
         try:
             if "/" in p[0]:
                 y, mo, d = (int(x) for x in p[0].split("/"))
