@@ -20,7 +20,8 @@ from _common import git_commit  # noqa: E402
 from insnav.gnss import read_rinex_nav, read_rinex_obs, sat_clock, sat_position_velocity, select_ephemeris  # noqa: E402
 from insnav.gnss.ephemeris import C_LIGHT  # noqa: E402
 from insnav.gnss.gpstime import gps_seconds_from_week_tow  # noqa: E402
-from insnav.gnss.measurements import observation_residuals, read_rtklib_pos  # noqa: E402
+from insnav.gnss.measurements import observation_residuals  # noqa: E402
+from insnav.io.gnss_files import read_rtklib_pos  # noqa: E402
 from insnav.gnss.sp3 import read_rinex_clk, read_sp3  # noqa: E402
 
 COMMAND = "python3 bench/gnss_residuals.py --out docs/results/gnss_geometry.md"

@@ -34,7 +34,7 @@ import insnav  # noqa: E402
 from _common import git_commit  # noqa: E402
 from insnav import _core, earth  # noqa: E402
 from insnav.gnss import read_rinex_nav, read_rinex_obs  # noqa: E402
-from insnav.gnss.measurements import read_rtklib_pos  # noqa: E402
+from insnav.io.gnss_files import read_rtklib_pos  # noqa: E402
 from insnav.io.rinex_dataset import GPST_UNIX_OFFSET_S, load_rinex, load_rinex_run  # noqa: E402
 from insnav.filters.tight import run_tight
 from insnav.gnss.tight_inputs import tight_inputs_from_rinex  # noqa: E402

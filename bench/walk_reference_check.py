@@ -39,7 +39,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 from insnav import earth  # noqa: E402
-from insnav.gnss.measurements import RtklibPos, read_rtklib_pos  # noqa: E402
+from insnav.gnss.measurements import RtklibPos  # noqa: E402
+from insnav.io.gnss_files import read_rtklib_pos  # noqa: E402
 
 SECONDS_PER_WEEK = 604800.0
 DEG = np.pi / 180.0

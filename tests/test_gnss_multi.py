@@ -424,7 +424,7 @@ def test_tight_inputs_multi_system_on_real_walk():
     std of 0.2-0.3 m/s with a median near 0 -- the signs, wavelengths and the BeiDou/Galileo
     satellite velocities are right.
     """
-    from insnav.gnss.measurements import read_rtklib_pos
+    from insnav.io.gnss_files import read_rtklib_pos
     from insnav.gnss.tight_inputs import tight_inputs_from_rinex
 
     obs = read_rinex_obs(need(WALK, "rinex_derived", "gnss_1730.obs"), systems="GREC")

@@ -5,7 +5,8 @@ import pytest
 
 from insnav.gnss import read_rinex_nav, read_rinex_obs
 from insnav.gnss.gpstime import gps_seconds_from_week_tow
-from insnav.gnss.measurements import observation_residuals, read_rtklib_pos
+from insnav.gnss.measurements import observation_residuals
+from insnav.io.gnss_files import read_rtklib_pos
 
 from conftest import SHARED_DATA as DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 WALK = DATA / "rtklibexplorer_walk_0827"

@@ -1,7 +1,15 @@
 """Atomic file output: write to a temporary file beside the target, then rename,
-so an interrupted run never leaves a partial file that looks complete."""
+so an interrupted run never leaves a partial file that looks complete.
+
+Inside :func:`output_set` the renames wait: every file written through
+:func:`atomic_write_with` / :func:`atomic_write_text` stays a temporary file
+beside its destination until the whole set has been written, and is renamed
+into place only then; an error (a full disk, Ctrl-C) removes the temporary
+files and leaves every file that existed before exactly as it was."""
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import os
 import tempfile
@@ -41,41 +49,140 @@ def json_safe(obj):
     return obj
 
 
+class OutputSet:
+    """The files of one command, written as temporary files beside their
+    destinations and renamed into place together by :meth:`commit`
+    (see :func:`output_set`)."""
+
+    def __init__(self):
+        self._pending: dict[Path, Path] = {}  # destination -> its temporary file
+
+    def add(self, tmp, path) -> None:
+        """Rename ``tmp`` to ``path`` at :meth:`commit` (a later file for the same ``path`` wins)."""
+        path = Path(path)
+        old = self._pending.pop(path, None)
+        if old is not None:
+            _unlink(old)
+        self._pending[path] = Path(tmp)
+
+    @property
+    def paths(self) -> list[Path]:
+        """The destinations, in the order they were written."""
+        return list(self._pending)
+
+    def commit(self) -> None:
+        """Rename every temporary file into place, with SIGINT and SIGTERM held
+        back meanwhile (:func:`signals_held`: a Ctrl-C then arrives after the
+        last rename, never half a set of new files beside half of the old ones)."""
+        try:
+            with signals_held():
+                while self._pending:
+                    path, tmp = next(iter(self._pending.items()))
+                    os.replace(tmp, path)
+                    del self._pending[path]
+        finally:
+            self.abort()  # a rename that failed: the rest stay as they were
+
+    def abort(self) -> None:
+        """Remove the temporary files; the destinations are not touched."""
+        while self._pending:
+            _unlink(self._pending.popitem()[1])
+
+
+@contextlib.contextmanager
+def signals_held():
+    """SIGINT and SIGTERM held back for the ``with`` block (delivered at its
+    end) in the main thread; elsewhere, or without ``pthread_sigmask``, nothing."""
+    import signal
+    import threading
+
+    held = threading.current_thread() is threading.main_thread() and hasattr(signal, "pthread_sigmask")
+    if held:
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        if held:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
+_ACTIVE: contextvars.ContextVar = contextvars.ContextVar("insnav_output_set", default=None)
+
+
+@contextlib.contextmanager
+def output_set():
+    """Write several files as one: inside the ``with`` block every
+    :func:`atomic_write_with` / :func:`atomic_write_text` leaves its file as a
+    temporary file beside the destination; when the block ends normally they
+    are all renamed into place, on any exception (Ctrl-C included) they are
+    removed and no destination is touched.  Nested blocks join the outer one.
+
+    Yields
+    ------
+    OutputSet
+    """
+    outer = _ACTIVE.get()
+    if outer is not None:
+        yield outer
+        return
+    s = OutputSet()
+    token = _ACTIVE.set(s)
+    try:
+        yield s
+    except BaseException:
+        s.abort()
+        raise
+    finally:
+        _ACTIVE.reset(token)
+    s.commit()
+
+
+def _unlink(p) -> None:
+    try:
+        os.unlink(p)
+    except FileNotFoundError:
+        pass
+
+
+def _finish(tmp, path: Path) -> None:
+    """``tmp`` is complete: rename it to ``path`` now, or at the end of the active :func:`output_set`."""
+    chmod_like_new(tmp)
+    s = _ACTIVE.get()
+    if s is None:
+        os.replace(tmp, path)
+    else:
+        s.add(tmp, path)
+
+
 def atomic_write_with(path, write) -> Path:
     """Write ``path`` through ``write(tmp_path)``: a temporary file beside it
     (``.NAME.XXXX.part.SUFFIX``, mode as a plain open() under the umask gives)
-    renamed into place once ``write`` returns; on any exception, Ctrl-C
-    included, the temporary file is removed and ``path`` left as it was."""
+    renamed into place once ``write`` returns (inside :func:`output_set`: when
+    the set is complete); on any exception, Ctrl-C included, the temporary
+    file is removed and ``path`` left as it was."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=path.parent)
     os.close(fd)
     try:
         write(tmp)
-        chmod_like_new(tmp)
-        os.replace(tmp, path)
+        _finish(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+        _unlink(tmp)
         raise
     return path
 
 
 def atomic_write_text(path, text: str) -> Path:
+    """:func:`atomic_write_with` of a text file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
     try:
         with os.fdopen(fd, "w") as f:
             f.write(text)
-        chmod_like_new(tmp)
-        os.replace(tmp, path)
+        _finish(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+        _unlink(tmp)
         raise
     return path

@@ -109,7 +109,7 @@ def _read_truth(path, quality=None):
     p = Path(path)
     if p.suffix == ".pos":
         from ..gnss.gpstime import SECONDS_PER_WEEK
-        from ..gnss.measurements import read_rtklib_pos
+        from ..io.gnss_files import read_rtklib_pos
         from ..io.rinex_dataset import rtklib_truth
 
         ref = read_rtklib_pos(p)
@@ -230,6 +230,11 @@ def add_evaluate_parser(sub) -> None:
     p.add_argument("truth")
     p.add_argument("--outages", default="", help="comma-separated start:end [s], e.g. 50:90,200:240")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--out", default=None, metavar="FILE",
+                   help="also write the results as JSON to FILE (atomically; never over an input, nor over an "
+                        "existing file that is not an insnav evaluation unless --overwrite)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="let --out replace an existing file that is not an insnav evaluation")
     p.add_argument("--quality", type=int, default=None,
                    help="RTKLIB .pos truth: use records with Q <= this (1 fix only, 2 fix and float)")
     p.set_defaults(func=cmd_evaluate)
@@ -274,11 +279,23 @@ def cmd_evaluate(args) -> int:
     for p in (args.solution,) + (() if "," in args.truth else (args.truth,)):
         if not Path(p).exists():
             raise FileNotFoundError(f"not found: {p}")
+    out = getattr(args, "out", None)
+    if out is not None:  # before the work: never over an input or a user's file
+        from .._outputs import check_outputs, input_files
+        from ..filters.solution import innovations_path, residuals_path
+
+        check_outputs([Path(out)], input_files(args.solution, innovations_path(args.solution),
+                                               residuals_path(args.solution), args.truth),
+                      overwrite=getattr(args, "overwrite", False), command="evaluation")
     sol = _read_solution(args.solution)
     truth = _read_truth(args.truth, args.quality) if Path(args.truth).exists() else static_truth(args.truth, sol.t)
     if hasattr(truth, "quality"):  # a 4 Hz reference, possibly with gaps: compare at its epochs
         sol = _solution_at(sol, truth.t)
     res = evaluate(sol, truth, _parse_outages(args.outages))
+    if out is not None:
+        from .._atomic import atomic_write_text, json_safe
+
+        atomic_write_text(out, json.dumps(json_safe(res), indent=2, allow_nan=False) + "\n")
     if args.json:
         from .._atomic import json_safe
         print(json.dumps(json_safe(res), indent=2, allow_nan=False))

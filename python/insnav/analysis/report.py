@@ -78,11 +78,25 @@ class _Fixes:
 
 
 def _read_fixes(path) -> _Fixes:
+    """GNSS fixes of ``--gnss``: a dataset folder or its gnss.csv, or the fixes
+    ``insnav run --format csv`` reads (an RTKLIB ``.pos``, NMEA
+    ``.nmea``/``.nma``/``.gga``/``.log``), with times in GPS seconds of week
+    (of the first fix) as that run's solution has them."""
     from ..data.dataset import GnssFixes, load_dataset, read_csv
 
     p = Path(path)
     if p.is_dir():
         return _Fixes(load_dataset(p).gnss)
+    from ..io.gnss_files import GnssFileFormat, read_gnss
+
+    fmt = GnssFileFormat()
+    if fmt.resolved_format(p) in ("pos", "nmea"):
+        from ..gnss.gpstime import SECONDS_PER_WEEK
+
+        rec = read_gnss(p, fmt)
+        week0 = math.floor((rec.t_ref_s + float(rec.t_s[0])) / SECONDS_PER_WEEK) if rec.time_base == "gps" else 0
+        t = (rec.t_ref_s - week0 * SECONDS_PER_WEEK) + rec.t_s
+        return _Fixes(GnssFixes(t, t, rec.lat_deg, rec.lon_deg, rec.h_m, rec.v_n, rec.sigma_pos_n, rec.sigma_vel_n))
     return _Fixes(GnssFixes.from_array(read_csv(p, GnssFixes.COLUMNS)))
 
 
@@ -430,8 +444,13 @@ def _read_solution(path):
     return attach_fix_status(load_solution(path), path)
 
 
-def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None) -> Path:
+def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None,
+           overwrite: bool = False) -> Path:
     """Write ``report.html`` and its PNGs for a solution; returns the HTML path.
+
+    The files are written into a temporary folder beside ``out_dir`` that
+    replaces it at the end (an earlier report there goes then; a failed or
+    interrupted report leaves no file and the earlier report as it was).
 
     Parameters
     ----------
@@ -446,6 +465,10 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
         reference when there is no truth.
     outages : sequence of (start_s, end_s), optional
         Default: the gaps in the GNSS record times.
+    overwrite : bool
+        Write into an existing folder that is not an insnav report (its
+        report.html and figures replaced, its other files left alone);
+        without it such a folder is refused before any work.
     """
     try:
         import matplotlib
@@ -487,8 +510,7 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
             raise ValueError("report: out_dir is needed for a Solution object")
         out_dir = src.with_name(src.name + "-report")
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise ValueError(f"{out_dir}: exists and is not a folder")
+    _check_report_out(out_dir, [src, truth, gnss], overwrite)
     tr = _read_truth(truth) if isinstance(truth, (str, Path)) else truth
     fx = None
     if gnss is not None:
@@ -513,15 +535,6 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
 
     figs = _figures(sol, err, "truth" if tr is not None else "GNSS fixes", tr, fx, inn, res, outages, plt)
     rows = _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err)
-    from .._atomic import atomic_write_text
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    from ..filters.solution import _atomic_binary
-
-    for name, _, data in figs:
-        _atomic_binary(out_dir / name, lambda tmp, d=data: Path(tmp).write_bytes(d))
-    for name in set(FIGURES) - {f[0] for f in figs}:  # a figure of an earlier report in this folder
-        (out_dir / name).unlink(missing_ok=True)
     heading = title or f"insnav report: {src.name if src else 'solution'}"
     parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
              f"<title>{html.escape(heading)}</title>",
@@ -545,4 +558,103 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
                      f"src=\"data:image/png;base64,{b64}\"><figcaption>{html.escape(caption)} "
                      f"({html.escape(name)})</figcaption></figure>")
     parts.append("</body></html>")
-    return atomic_write_text(out_dir / "report.html", "\n".join(parts) + "\n")
+    files = [(name, data) for name, _, data in figs] + [("report.html", ("\n".join(parts) + "\n").encode())]
+    return _write_report(out_dir, files)
+
+
+def _report_inputs(paths) -> dict:
+    """:func:`insnav._outputs.input_files` of a report's inputs: the solution,
+    its sidecars, and the truth and GNSS files or folders."""
+    from .._outputs import input_files
+    from ..filters.solution import innovations_path, residuals_path
+
+    files = []
+    for p in paths:
+        if isinstance(p, (str, Path)):
+            files.append(Path(p))
+    if paths and isinstance(paths[0], Path):
+        files += [innovations_path(paths[0]), residuals_path(paths[0])]
+    return input_files(*files)
+
+
+def is_report_folder(path) -> bool:
+    """True for a folder written by :func:`report`: report.html (an insnav
+    page) and its figures, nothing else."""
+    from .._outputs import head
+
+    p = Path(path)
+    if not p.is_dir() or not (p / "report.html").is_file():
+        return False
+    h = head(p / "report.html", 65536)
+    if not (h.startswith(b"<!DOCTYPE html>") and (b"insnav report" in h or b'id="summary"' in h)):
+        return False
+    allowed = set(FIGURES) | {"report.html"}
+    return all(c.name in allowed and c.is_file() for c in p.iterdir())
+
+
+def _check_report_out(out_dir: Path, inputs, overwrite: bool) -> None:
+    """Before any work: ``out_dir`` is new, empty or an earlier report (then
+    replaced), or with ``overwrite`` any folder (its report files replaced);
+    never an input, never holding an input under a report file's name; writable."""
+    from .._outputs import check_writable, file_id
+    from ..errors import UserError
+
+    ins = _report_inputs(inputs)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"--out {out_dir} exists and is not a folder: not replaced")
+    if file_id(out_dir) in ins:
+        raise UserError(f"--out {out_dir} is an input of this report: choose another folder")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not is_report_folder(out_dir):
+        if not overwrite:
+            raise UserError(f"--out {out_dir} exists and is not an insnav report folder (report.html and its "
+                            "figures only): not replaced (choose another --out, or --overwrite to write the "
+                            "report files into it)")
+        for name in ("report.html", *FIGURES):
+            if file_id(out_dir / name) in ins:
+                raise UserError(f"{out_dir / name} is an input of this report: choose another --out")
+    check_writable(out_dir)
+
+
+def _write_report(out_dir: Path, files) -> Path:
+    """Write ``files`` ((name, bytes), report.html last) as the report folder
+    ``out_dir``: into a temporary folder beside it, renamed into place at the
+    end (an earlier report there removed then; a folder that is not a report,
+    accepted by ``overwrite``, gets the files each renamed in at the end)."""
+    import os
+    import shutil
+    import tempfile
+
+    from .._atomic import atomic_write_with, chmod_like_new, output_set, signals_held
+
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not is_report_folder(out_dir):
+        with output_set():
+            for name, data in files:
+                atomic_write_with(out_dir / name, lambda tmp, d=data: Path(tmp).write_bytes(d))
+        return out_dir / "report.html"
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".part", dir=out_dir.parent))
+    old = None
+    try:
+        for name, data in files:
+            (tmp / name).write_bytes(data)
+        chmod_like_new(tmp, directory=True)
+        with signals_held():
+            if out_dir.exists():  # an earlier report, or an empty folder: swapped out, then removed
+                old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
+                os.replace(out_dir, old)
+                try:
+                    os.replace(tmp, out_dir)
+                except BaseException:
+                    os.replace(old, out_dir)
+                    old = None
+                    raise
+            else:
+                os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None and old.exists() and not out_dir.exists():
+            os.replace(old, out_dir)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return out_dir / "report.html"

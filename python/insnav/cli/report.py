@@ -9,9 +9,10 @@ EXAMPLES = """examples:
   insnav report run3-rbukf.csv --truth run3 --gnss run3          # -> run3-rbukf.csv-report/report.html
   insnav report walk.csv --truth ../shared/data/rtklibexplorer_walk_0827/raw/gnss_1730_sf.pos --out walk-report
 
-SOL: a solution written by `insnav run` (.csv, .npz or .parquet; its .innovations.csv
-sidecar is read when present).  TRUTH: anything `insnav evaluate` reads.  GNSS: gnss.csv or
-a dataset folder (fixes on the track; the position reference when there is no truth).
+SOL: a solution written by `insnav run` (.csv, .npz or .parquet, or a KF-GINS .nav; its
+.innovations.csv sidecar is read when present).  TRUTH: anything `insnav evaluate` reads.
+GNSS: gnss.csv or a dataset folder, or the RTKLIB .pos / NMEA file given to `insnav run
+--format csv` (fixes on the track; the position reference when there is no truth).
 Units: positions and errors in m, velocities in m/s, angles in deg, biases in mg and deg/h,
 scale factors in ppm, times in s."""
 
@@ -25,7 +26,11 @@ def add_report_parser(sub) -> None:
     p.add_argument("--truth", default=None)
     p.add_argument("--gnss", default=None)
     p.add_argument("--outages", default="", help="start:end [s], comma-separated (default: gaps in the GNSS records)")
-    p.add_argument("--out", default=None, help="folder (default: SOL-report beside SOL)")
+    p.add_argument("--out", default=None, help="folder (default: SOL-report beside SOL); an earlier report there is "
+                   "replaced at the end, any other existing folder only with --overwrite")
+    p.add_argument("--overwrite", action="store_true",
+                   help="write report.html and its figures into an existing folder that is not an insnav report "
+                        "(its other files are left alone)")
     p.set_defaults(func=cmd_report)
 
 
@@ -38,6 +43,7 @@ def cmd_report(args) -> int:
         if v is not None and not Path(v).exists():
             raise FileNotFoundError(f"{'SOL' if name == 'solution' else '--' + name}: not found: {v}")
     outages = _parse_outages(args.outages) if args.outages else None
-    path = report(args.solution, args.out, truth=args.truth, gnss=args.gnss, outages=outages)
+    path = report(args.solution, args.out, truth=args.truth, gnss=args.gnss, outages=outages,
+                  overwrite=args.overwrite)
     print(f"{path}: report written ({sum(1 for _ in path.parent.glob('*.png'))} figures beside it)")
     return 0

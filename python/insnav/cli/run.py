@@ -93,6 +93,9 @@ def add_run_parser(sub) -> None:
                         "loose innovation), for tight <out>.residuals.csv (per satellite) and <out>.config.toml "
                         "(the run's configuration).  Required, except with --format kfgins: then the YAML's "
                         "outputpath gets KF-GINS's own files (as --out-format kfgins), as KF-GINS does")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --out file that insnav did not write (a solution and its sidecars "
+                        "from an earlier run are replaced without it); an input of the run is never replaced")
     p.add_argument("--run-config", default=None, metavar="TOML",
                    help="with --format kfgins (whose --config is the KF-GINS YAML): an insnav TOML run "
                         "configuration whose keys override the YAML's (sanitize limits, gating, constraints...)")
@@ -253,6 +256,57 @@ def _table_toml(name: str, obj) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _input_paths(args) -> list:
+    """Every file the run reads (those given, and a KF-GINS YAML's data files)."""
+    paths = [args.dataset, args.imu, args.gnss, args.obs, args.imu_tag, args.config, args.run_config]
+    paths += [n for n in (args.nav or "").split(",") if n]
+    if args.imu:
+        paths += [args.imu + ".tag", str(Path(args.imu).with_suffix(".tag"))]
+    if args.format == "kfgins" and args.config:
+        from ..io.kfgins import read_kfgins_config
+
+        try:
+            y = read_kfgins_config(args.config)
+        except (OSError, ValueError):
+            y = {}  # reported by the loader
+        paths += [y.get("imupath"), y.get("gnsspath")]
+    return paths
+
+
+def _run_outputs(out: Path, kfgins_folder: bool, spp: bool = False) -> list[Path]:
+    """Every file ``insnav run`` may write for ``--out``."""
+    from ..filters.solution import innovations_path, residuals_path
+
+    if kfgins_folder:
+        from ..io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE
+
+        base = out / KFGINS_NAV_FILE
+        files = [base, out / KFGINS_IMU_ERR_FILE, out / KFGINS_STD_FILE]
+    else:
+        base, files = out, [out]
+    files += [innovations_path(base), residuals_path(base), base.with_suffix(base.suffix + ".config.toml")]
+    if spp:
+        files.append(out.with_suffix(out.suffix + ".spp.csv"))
+    return files
+
+
+def check_run_outputs(args, out: Path, kfgins_folder: bool, spp: bool = False) -> None:
+    """Before the run: no output is an input, none replaces a file insnav did
+    not write (unless --overwrite), the folder is writable, and a .parquet
+    output has pyarrow (one-line errors, not after minutes of filtering)."""
+    from .._outputs import check_outputs, input_files
+
+    check_outputs(_run_outputs(out, kfgins_folder, spp), input_files(*_input_paths(args)),
+                  overwrite=getattr(args, "overwrite", False))
+    if out.suffix.lower() == ".parquet" and not kfgins_folder:
+        from ..filters.solution import _parquet
+
+        try:
+            _parquet()
+        except ImportError as exc:
+            raise UserError(f"--out {out}: {exc}") from None
+
+
 def cmd_run_spp(args, stages) -> int:
     """``insnav run --filter spp``: GNSS-only single point positioning over RINEX files (no IMU)."""
     from ..filters.solution import FORMATS, write_innovations
@@ -281,6 +335,7 @@ def cmd_run_spp(args, stages) -> int:
         raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'spp.csv'}")
     if out.suffix.lower() not in FORMATS:
         raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
+    check_run_outputs(args, out, kfgins_folder=False, spp=True)
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
         sol = run_spp_rinex(args.obs, [p for p in args.nav.split(",") if p], args.config)
@@ -291,19 +346,16 @@ def cmd_run_spp(args, stages) -> int:
     if s["solved"] == 0:
         raise UserError(f"{args.obs}: no epoch could be solved ({s['epochs']} epochs; too few satellites with "
                         "ephemerides above the masks?)")
-    written: list[Path] = []
-    try:
-        written.append(sol.save(out, columns=groups, precision=args.csv_precision))
-        written.append(write_innovations(sol, out))
-        written.append(write_spp_table(sol.spp, out.with_suffix(out.suffix + ".spp.csv")))
+    from .._atomic import output_set
+
+    with output_set():  # every file or, on an error (a full disk, Ctrl-C), none; older files untouched
+        sol.save(out, columns=groups, precision=args.csv_precision)
+        write_innovations(sol, out)
+        write_spp_table(sol.spp, out.with_suffix(out.suffix + ".spp.csv"))
         text = (f'# insnav resolved run configuration\nfilter = "spp"\ncoupling = "gnss"\n'
                 + _table_toml("rinex", sol.rinex_options) + _table_toml("gnss", sol.weighting)
                 + _table_toml("spp", sol.spp_options))
-        written.append(atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text))
-    except BaseException:
-        for p in written:
-            Path(p).unlink(missing_ok=True)
-        raise
+        atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text)
     print(f"{out}: {s['solved']} of {s['epochs']} epochs solved, filter spp ({s['systems']}, weighting "
           f"{s['weighting']}, RAIM {'on' if sol.spp_options.raim else 'off'}); RAIM: {s['raim_passed']} passed, "
           f"{s['raim_excluded_epochs']} after excluding {s['rows_excluded']} rows, {s['raim_failed']} failed, "
@@ -480,6 +532,7 @@ def cmd_run(args) -> int:
             raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
+    check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
     rinex_opts = None
     csv_tables = None
     try:
@@ -563,32 +616,39 @@ def cmd_run(args) -> int:
     stages.done("filter")
     from ..filters.solution import write_innovations
 
-    written: list[Path] = []  # Ctrl-C or an error while writing: none of this run's files stay
-    try:
-        if args.out_format == "kfgins":
-            from ..io.kfgins import write_kfgins_solution
+    from .._atomic import output_set
 
-            out.mkdir(parents=True, exist_ok=True)
-            files = write_kfgins_solution(out, sol)
-            written += files
-            base = files[0]
-        else:
-            written.append(sol.save(out, columns=groups, precision=args.csv_precision))
-            base = out
-        written.append(write_innovations(sol, base))
-        cfg.filter = sol.summary.get("filter", cfg.filter)
-        cfg.coupling = sol.summary.get("coupling", cfg.coupling)
-        text = resolved_config_toml(cfg)
-        if rinex_opts is not None:
-            text += _rinex_table_toml(rinex_opts)
-            if weighting is not None and not weighting.is_default:
-                text += _table_toml("gnss", weighting)
-        if csv_tables is not None:
-            text += _csv_tables_toml(csv_tables, cfg.imu is not None)
-        written.append(atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text))
+    first = out if args.out_format == "kfgins" else out.parent
+    made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the writes fail
+    try:
+        # every file of the run or, on an error (a full disk, Ctrl-C), none: each is written to a
+        # temporary file beside its destination and all are renamed into place at the end
+        with output_set():
+            if args.out_format == "kfgins":
+                from ..io.kfgins import write_kfgins_solution
+
+                out.mkdir(parents=True, exist_ok=True)
+                base = write_kfgins_solution(out, sol)[0]
+            else:
+                sol.save(out, columns=groups, precision=args.csv_precision)
+                base = out
+            write_innovations(sol, base)
+            cfg.filter = sol.summary.get("filter", cfg.filter)
+            cfg.coupling = sol.summary.get("coupling", cfg.coupling)
+            text = resolved_config_toml(cfg)
+            if rinex_opts is not None:
+                text += _rinex_table_toml(rinex_opts)
+                if weighting is not None and not weighting.is_default:
+                    text += _table_toml("gnss", weighting)
+            if csv_tables is not None:
+                text += _csv_tables_toml(csv_tables, cfg.imu is not None)
+            atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text)
     except BaseException:
-        for p in written:
-            Path(p).unlink(missing_ok=True)
+        for d in made:  # the folders this run created, when the failed write left them empty
+            try:
+                d.rmdir()
+            except OSError:
+                break
         raise
     print(f"{out}: {len(sol)} rows, filter {s.get('filter')}, {s.get('coupling')} coupling; GNSS: {records} "
           f"records" + (f" ({outside} outside the run's IMU time span, not used)" if outside else "")

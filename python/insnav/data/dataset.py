@@ -628,8 +628,10 @@ def load_dataset(directory) -> Dataset:
     meta_path = d / "dataset.json"
     if not meta_path.is_file():
         raise FileNotFoundError(f"{meta_path} missing: not an insnav dataset directory")
+    from .textio import read_text
+
     try:
-        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        meta = json.loads(read_text(meta_path, errors="strict"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"{meta_path}:{exc.lineno}: invalid JSON: {exc.msg}") from None
     a, imu_origin = read_csv(d / "imu.csv", ImuData.COLUMNS, return_origin=True)
@@ -657,7 +659,7 @@ def load_dataset(directory) -> Dataset:
            if (d / "odometer.csv").is_file() else None)
     scen = {}
     if (d / "scenario.toml").is_file():
-        scen = tomllib.loads((d / "scenario.toml").read_text(encoding="utf-8"))
+        scen = tomllib.loads(read_text(d / "scenario.toml", errors="strict"))
     imu_model = {k: ([np.inf if x is None else x for x in v] if k.endswith("_tau") and isinstance(v, list)
                      else (np.inf if v is None and k.endswith("_tau") else v))
                  for k, v in meta.get("imu_model", {}).items()}  # null = infinite correlation time

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_text_columns", "threads", "read_bytes", "mapped_bytes", "count_columns", "parse_numeric"]
+__all__ = ["write_text_columns", "threads", "read_bytes", "read_text", "file_bytes", "mapped_bytes", "count_columns",
+           "parse_numeric", "FileChangedError"]
 
 
 def threads() -> int:
@@ -48,23 +49,90 @@ def write_text_columns(path, header: str, cols, decimals, **fmt) -> Path:
 _OPENERS = {".xz": "lzma", ".lzma": "lzma", ".gz": "gzip", ".bz2": "bz2"}
 
 
+class FileChangedError(ValueError):
+    """An input file changed (size or modification time) while it was read."""
+
+
+def _stamp(st) -> tuple[int, int]:
+    return st.st_size, st.st_mtime_ns
+
+
+def _changed(p: Path, before, after, got: int | None = None) -> FileChangedError:
+    what = f"size {before[0]} -> {after[0]} bytes" if before[0] != after[0] else (
+        f"{got} of {before[0]} bytes read" if got is not None and got != before[0] else "modified")
+    return FileChangedError(f"{p}: the file changed while it was read ({what}); read it again once it is "
+                            "complete (is another program still writing it?)")
+
+
+def _read_whole(p: Path):
+    """The bytes of the plain file ``p`` (a bytes-like object), refused when
+    its size or modification time changes during the read.
+
+    The file is read, never memory-mapped: a map of a file that another
+    program truncates meanwhile faults (SIGBUS) on the first page past the new
+    end.  Large files are read into an anonymous map whose pages are made at
+    once (``MAP_POPULATE``: one call instead of a page fault per 4 KiB; 76 MB
+    in 50 ms of CPU in a fresh process here, 58 ms into a ``bytes``, 57-108 ms
+    with huge pages, whose compaction stalls on a busy machine)."""
+    import mmap
+
+    with open(p, "rb", buffering=0) as f:
+        st0 = _stamp(os.fstat(f.fileno()))
+        size = st0[0]
+        if size < MAP_MIN_BYTES or not hasattr(mmap, "MAP_ANONYMOUS"):
+            parts, got = [], 0
+            while got <= size:  # one byte more than the size: a file that grew meanwhile shows it
+                b = f.read(size + 1 - got)
+                if not b:
+                    break
+                parts.append(b)
+                got += len(b)
+            buf = parts[0] if len(parts) == 1 else b"".join(parts)
+        else:
+            buf = mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | getattr(mmap, "MAP_POPULATE", 0))
+            view, got = memoryview(buf), 0
+            while got < size:
+                k = f.readinto(view[got:])
+                if not k:
+                    break
+                got += k
+            view.release()
+            got += len(f.read(1))  # a file that grew meanwhile
+        st1 = _stamp(os.fstat(f.fileno()))
+    if st1 != st0 or got != size:
+        raise _changed(p, st0, st1, got)
+    return buf
+
+
+def read_text(path, encoding: str = "utf-8", errors: str = "replace") -> str:
+    """:func:`read_bytes` decoded (a small input such as a configuration file)."""
+    return bytes(read_bytes(path)).decode(encoding, errors)
+
+
 def read_bytes(path) -> bytes:
     """The whole file, decompressed when it ends in ``.xz``/``.lzma``/``.gz``/``.bz2``.
+
+    The file is read once (never memory-mapped) and refused when its size or
+    modification time changes during the read.
 
     Raises
     ------
     FileNotFoundError
         Naming the file.
+    FileChangedError
+        (a ValueError) One line naming the file when it changed while it was read.
     ValueError
         One line naming the file when the compressed stream is truncated or corrupt.
     """
     p = Path(path)
     if not p.is_file():
-        raise FileNotFoundError(f"{p} does not exist")
+        exc = FileNotFoundError(f"{p} does not exist")
+        exc.strerror, exc.filename = "No such file or directory", str(p)
+        raise exc
     kind = _OPENERS.get(p.suffix.lower())
-    raw = p.read_bytes()
+    raw = _read_whole(p)
     if kind is None:
-        return raw
+        return bytes(raw) if not isinstance(raw, bytes) else raw
     import bz2
     import gzip
     import lzma
@@ -90,29 +158,26 @@ def read_bytes(path) -> bytes:
                          "decompress it again or fetch a complete copy") from None
 
 
-#: plain files from this size on are memory-mapped by :func:`mapped_bytes` rather than read [bytes]
+#: plain files from this size on are read by :func:`file_bytes` into an anonymous populated map [bytes]
 MAP_MIN_BYTES = 1 << 20
 
 
 @contextlib.contextmanager
-def mapped_bytes(path):
+def file_bytes(path):
     """The whole file as a read-only bytes-like object, for the length of the
-    ``with`` block: a memory map of a plain file of at least
-    :data:`MAP_MIN_BYTES` (the parser reads the page cache in place, no copy),
-    else :func:`read_bytes` (small and compressed files).  Same errors as
-    :func:`read_bytes`."""
+    ``with`` block, without the copy into a ``bytes`` that :func:`read_bytes`
+    makes of a large file (the parser reads the buffer in place).  Same errors
+    as :func:`read_bytes`; the file is read, not mapped, so a file truncated
+    meanwhile is an error, never a SIGBUS."""
     p = Path(path)
-    if p.suffix.lower() not in _OPENERS and p.is_file() and p.stat().st_size >= MAP_MIN_BYTES:
-        import mmap
-
-        with open(p, "rb") as f:
-            m = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
-        try:
-            yield m
-        finally:
-            m.close()
+    if p.suffix.lower() not in _OPENERS and p.is_file():
+        yield _read_whole(p)
     else:
         yield read_bytes(p)
+
+
+#: the former name of :func:`file_bytes` (the file used to be memory-mapped)
+mapped_bytes = file_bytes
 
 
 def count_columns(data: bytes, source, comma: bool = False) -> int:

@@ -237,12 +237,53 @@ def save_solution(sol: Solution, path, *, columns=None, precision: str = "resolu
         pa.table({k: pa.array(v) for k, v in arrays()}), tmp))
 
 
+def is_kfgins_nav(path) -> bool:
+    """True for a KF-GINS ``.nav`` result name (``.nav``, ``.nav.xz``/``.gz``/``.bz2``)."""
+    name = Path(path).name.lower()
+    return name.endswith(".nav") or any(name.endswith(".nav" + z) for z in (".xz", ".gz", ".bz2"))
+
+
+def _kfgins_columns(path: Path) -> dict:
+    """The columns of a KF-GINS ``.nav`` result (KF-GINS's own or ``insnav run
+    --out-format kfgins``), with the sigmas of ``KF_GINS_STD.txt`` and the IMU
+    errors of ``KF_GINS_IMU_ERR.txt`` when they lie beside it, row for row."""
+    from ..io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_STD_FILE, MGAL, _read_table, read_kfgins_nav
+
+    nav = read_kfgins_nav(path)
+    cols = dict(t_s=nav.t, lat_deg=nav.lat_deg, lon_deg=nav.lon_deg, h_m=nav.h_m, vn_mps=nav.v_n[:, 0],
+                ve_mps=nav.v_n[:, 1], vd_mps=nav.v_n[:, 2], roll_deg=nav.roll_deg, pitch_deg=nav.pitch_deg,
+                yaw_deg=nav.yaw_deg)
+
+    def beside(name, ncols):
+        f = path.with_name(name)
+        if not f.is_file():
+            return None
+        a = _read_table(f, ncols)
+        return a if a.shape[0] == len(nav.t) and np.array_equal(a[:, 0], nav.t) else None
+
+    std = beside(KFGINS_STD_FILE, 22)
+    if std is not None:
+        names = ["sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps",
+                 "sigma_roll_deg", "sigma_pitch_deg", "sigma_yaw_deg"]
+        cols.update({n: std[:, 1 + j] for j, n in enumerate(names)})
+    err = beside(KFGINS_IMU_ERR_FILE, 13)
+    if err is not None:
+        for j, ax in enumerate("xyz"):
+            cols[f"gyro_bias_{ax}_dph"] = err[:, 1 + j]
+            cols[f"acc_bias_{ax}_mps2"] = err[:, 4 + j] * MGAL
+            cols[f"gyro_scale_{ax}_ppm"] = err[:, 7 + j]
+            cols[f"acc_scale_{ax}_ppm"] = err[:, 10 + j]
+    return cols
+
+
 def _columns_from(path: Path) -> dict:
     """column name -> array of a saved solution (legacy names mapped)."""
     fmt = path.suffix.lower()
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such solution file")
-    if fmt == ".npz":
+    if is_kfgins_nav(path):
+        cols = _kfgins_columns(path)
+    elif fmt == ".npz":
         with np.load(path, allow_pickle=False) as z:
             cols = {k: np.asarray(z[k], float) for k in z.files}
     elif fmt == ".parquet":
@@ -269,7 +310,11 @@ def _columns_from(path: Path) -> dict:
 
 def load_solution(path) -> Solution:
     """Read a solution written by ``insnav run`` or :meth:`Solution.save`
-    (``.csv``, ``.npz``, ``.parquet``; old unit-less CSV names accepted).
+    (``.csv``, ``.npz``, ``.parquet``; old unit-less CSV names accepted), or a
+    KF-GINS result ``.nav`` (``week sow lat lon h vN vE vD roll pitch yaw``;
+    KF-GINS's own or ``insnav run --out-format kfgins``: ``t`` = seconds of
+    week; the sigmas of ``KF_GINS_STD.txt`` and the IMU errors of
+    ``KF_GINS_IMU_ERR.txt`` beside it are read when they have the same epochs).
 
     Columns absent from the file (sigmas, biases, scale factors) come back as
     NaN.  The innovations sidecar ``<path>.innovations.csv``, when present,
@@ -371,6 +416,13 @@ def write_innovations(sol: Solution, solution_path) -> Path:
     residuals (the rows the core returns, in the order of ``sol.inputs``) go
     to ``<solution>.residuals.csv`` (:data:`RESIDUAL_COLUMNS`).
     """
+    from .._atomic import output_set
+
+    with output_set():  # both sidecars or neither
+        return _write_innovations(sol, solution_path)
+
+
+def _write_innovations(sol: Solution, solution_path) -> Path:
     from .._atomic import atomic_write_text
 
     m = len(sol.gnss_t)
@@ -401,7 +453,9 @@ def write_innovations(sol: Solution, solution_path) -> Path:
 
 
 def _read_table(path: Path, columns, text_last: bool) -> tuple[np.ndarray, list[str] | None]:
-    text = path.read_text(encoding="ascii", errors="replace")
+    from ..data.textio import read_text
+
+    text = read_text(path, "ascii")
     nl = text.find("\n")
     header = tuple(h.strip() for h in (text[:nl] if nl >= 0 else text).split(","))
     ncol = len(columns) - (1 if text_last else 0)

@@ -16,7 +16,7 @@ from .ephemeris import C_LIGHT, Ephemerides, select_ephemeris, transmit_states
 from .geometry import elevation_azimuth
 
 __all__ = ["L1_WAVELENGTH", "Predicted", "predict_observables", "common_clock_residuals",
-           "Residuals", "observation_residuals", "read_rtklib_pos"]
+           "Residuals", "observation_residuals"]
 
 #: GPS L1 carrier frequency [Hz] and wavelength [m] (IS-GPS-200 3.3.1.1).
 L1_FREQ_HZ = 1575.42e6
@@ -172,46 +172,10 @@ def observation_residuals(obs, eph: Ephemerides, r_rx_e, v_rx_e=None, **kwargs) 
 
 
 class RtklibPos(NamedTuple):
-    """An RTKLIB ``.pos`` solution (lat/lon/height format, GPST time)."""
+    """An RTKLIB ``.pos`` solution as a reference (GPST time, ECEF), as
+    :func:`insnav.io.gnss_files.read_rtklib_pos` reads it."""
 
     t_gps_s: np.ndarray  #: (n,) [s]
     r_e: np.ndarray  #: (n, 3) ECEF [m]
     v_e: np.ndarray  #: (n, 3) ECEF [m/s] (NaN if the file has no velocity columns)
     q: np.ndarray  #: (n,) quality flag (1 fix, 2 float, 5 single)
-
-
-def read_rtklib_pos(path) -> RtklibPos:
-    """Read an RTKLIB solution file with ``GPST latitude(deg) longitude(deg) height(m) Q ...``.
-
-    Velocity columns ``vn ve vu`` (m/s), when present, are converted to ECEF.
-
-    Raises
-    ------
-    insnav.gnss.RinexError
-        On a line that cannot be parsed (file path and line number).
-    """
-    from .gpstime import gps_seconds_from_calendar
-    from .rinex import RinexError
-
-    t, llh, q, vneu = [], [], [], []
-    with open(path, "r", encoding="ascii", errors="replace") as fh:
-        for lineno, line in enumerate(fh, 1):
-            if line.startswith("%") or not line.strip():
-                continue
-            p = line.split()
-            try:
-                y, mo, d = (int(x) for x in p[0].split("/"))
-                hh, mi, ss = p[1].split(":")
-                t.append(gps_seconds_from_calendar(y, mo, d, int(hh), int(mi), float(ss)))
-                llh.append([float(x) for x in p[2:5]])
-                q.append(int(float(p[5])))
-                vneu.append([float(x) for x in p[15:18]] if len(p) >= 18 else [np.nan] * 3)
-            except (ValueError, IndexError):
-                raise RinexError(path, lineno, "bad RTKLIB solution line") from None
-    llh = np.asarray(llh, dtype=float).reshape(-1, 3)
-    lat, lon = np.deg2rad(llh[:, 0]), np.deg2rad(llh[:, 1])
-    r_e = earth.geodetic_to_ecef(lat, lon, llh[:, 2])
-    vneu = np.asarray(vneu, dtype=float).reshape(-1, 3)
-    v_n = np.stack([vneu[:, 0], vneu[:, 1], -vneu[:, 2]], axis=-1)
-    v_e = earth.ned_to_ecef_vector(lat, lon, v_n)
-    return RtklibPos(np.asarray(t), r_e, v_e, np.asarray(q))

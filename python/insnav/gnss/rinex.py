@@ -68,8 +68,9 @@ class _Lines:
     def __init__(self, path):
         self.path = os.fspath(path)
         try:
-            with open(self.path, "r", encoding="ascii", errors="replace") as fh:
-                self.lines = fh.read().splitlines()
+            from ..data.textio import read_text
+
+            self.lines = read_text(self.path, "ascii").splitlines()
         except OSError as exc:
             raise RinexError(self.path, None, f"cannot read file ({exc.strerror})") from exc
         self.i = 0  # index of the next line

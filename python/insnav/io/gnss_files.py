@@ -46,13 +46,14 @@ import numpy as np
 
 from .. import earth
 from ..config import ConfigError
+from ..data.textio import read_bytes
 from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
 from ..units import DEG, RAD2DEG
 from .imu_csv import GPST_UNIX_OFFSET_S, _CHOICES as _IMU_CHOICES, _TIME_SCALE, _split_time, canonical_choice
 from .imu_csv import gps_minus_utc_s
 
 __all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos",
-           "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
+           "read_pos_records", "read_rtklib_pos", "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
 
 #: knot -> m/s (1852 m per hour)
 KNOT_MPS = 1852.0 / 3600.0
@@ -299,7 +300,7 @@ def read_gnss(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
 def _text_lines(path):
     path = os.fspath(path)
     try:
-        raw = Path(path).read_bytes()
+        raw = read_bytes(path)
     except OSError as exc:
         raise GnssFileError(path, None, f"cannot read the GNSS file ({exc.strerror})") from None
     try:
@@ -443,18 +444,67 @@ _POS_DEFAULT_HEADER = ["GPST", "latitude(deg)", "longitude(deg)", "height(m)", "
 def read_pos(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
     """An RTKLIB solution file (module docstring); sigmas ``sdn sde sdu``."""
     fmt = (fmt or GnssFileFormat(format="pos")).validate()
+    rec = read_pos_records(path, fmt)
+    if fmt.quality_max is not None:
+        rec = rec.take(rec.quality <= fmt.quality_max)
+    return _finish(rec, fmt)
+
+
+#: ``% (lat/lon/height=WGS84/ellipsoidal,...)``: the datum and height kind RTKLIB's outsolhead writes
+_POS_HEIGHT = None
+
+
+def read_pos_records(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
+    """The records of an RTKLIB ``.pos`` file as read (ellipsoidal heights,
+    GPST), before :func:`read_pos`'s sigma, quality and time-offset steps; also
+    the reader of :func:`read_rtklib_pos`.
+
+    The header is honoured: the column names (every record must have as many
+    fields as the header names, the time taking two), GPST or UTC time, and
+    the ``lat/lon/height=DATUM/HEIGHT`` comment that RTKLIB writes (``outsolhead``):
+    ``ellipsoidal`` heights are used as they are; ``geodetic`` heights (above
+    mean sea level, RTKLIB option ``out-height=geodetic``) get
+    ``fmt.geoid_undulation_m`` added (``h = H + N``) and are refused without
+    it; a datum other than WGS84 is refused.
+
+    Raises
+    ------
+    GnssFileError
+        Naming the file and line.
+    ConfigError
+        MSL heights (header or ``fmt.height``) without ``geoid_undulation_m``.
+    """
+    import re
+
+    global _POS_HEIGHT
+    if _POS_HEIGHT is None:
+        _POS_HEIGHT = re.compile(r"height=([A-Za-z0-9]+)/([A-Za-z]+)")
+    fmt = (fmt or GnssFileFormat(format="pos")).validate()
     path = os.fspath(path)
     header = None
+    datum = height_kind = None
+    height_line = 0
     t_l, rows, lines = [], [], []
     utc = False
+    nfields = None  # fields of a record: the header's names + 1 (date and time are two fields, GPST one name)
     for i, line in enumerate(_text_lines(path)):
         s = line.strip()
         if not s:
             continue
         if s.startswith("%"):
             tok = s[1:].split()
+            m = _POS_HEIGHT.search(s)
+            if m and height_kind is None:
+                datum, height_kind, height_line = m[1], m[2].lower(), i + 1
+                if datum.upper() != "WGS84":
+                    raise GnssFileError(path, i + 1, f"the header says height={m[1]}/{m[2]}: datum {m[1]} is not "
+                                        "supported (RTKLIB option out-datum=wgs84)")
+                if height_kind not in ("ellipsoidal", "geodetic"):
+                    raise GnssFileError(path, i + 1, f"the header says height={m[1]}/{m[2]}: expected ellipsoidal "
+                                        "or geodetic")
             if tok and tok[0] in ("GPST", "UTC", "JST") and len(tok) > 3:
                 header = tok
+                nfields = len(tok) + 1
                 utc = tok[0] == "UTC"
                 if tok[0] == "JST":
                     raise GnssFileError(path, i + 1, "JST time is not supported (use GPST or UTC output)")
@@ -464,6 +514,12 @@ def read_pos(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
             continue
         h = header or _POS_DEFAULT_HEADER
         p = s.split()
+        if nfields is None:  # no header: every record like the first
+            nfields = len(p)
+        if len(p) != nfields:
+            where = "header has" if header else "first record has"
+            raise GnssFileError(path, i + 1, f"{len(p)} fields where the {where} {nfields} (expected "
+                                f"{' '.join(h[:5])} ...): a missing or extra field")
         try:
             if "/" in p[0]:
                 y, mo, d = (int(x) for x in p[0].split("/"))
@@ -496,11 +552,17 @@ def read_pos(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
         for k in range(n):  # diagonal ECEF variances -> NED
             C = earth.C_en(la[k], lo[k]).T
             sp[k] = np.sqrt(np.diag(C @ np.diag(sx[k] ** 2) @ C.T))
+        height_kind = "ellipsoidal"  # ECEF: no height kind
     else:
         raise GnssFileError(path, None, f"no latitude(deg) or x-ecef(m) column in the header ({' '.join(h)})")
     bad = np.flatnonzero(~(np.isfinite(lat) & np.isfinite(lon) & np.isfinite(hgt)))
     if bad.size:
         raise GnssFileError(path, lines[bad[0]], "missing position fields")
+    bad = np.flatnonzero((np.abs(lat) > 90.0) | (np.abs(lon) > 360.0))
+    if bad.size:
+        k = int(bad[0])
+        raise GnssFileError(path, lines[k], f"latitude {lat[k]:g} / longitude {lon[k]:g} deg out of range "
+                            "(a missing field?)")
     q = col("Q", 0).astype(np.int64)
     v = np.full((n, 3), np.nan)
     sv = np.full((n, 3), np.nan)
@@ -513,16 +575,54 @@ def read_pos(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
     t = (t_int - ref) + t_frac
     if utc:
         ref += float(gps_minus_utc_s(ref + t[0]))
-    if fmt.height == "msl":
+    if height_kind == "geodetic":
+        if fmt.geoid_undulation_m is None:
+            raise ConfigError(f"{path}:{height_line}: the header says height=WGS84/geodetic (above mean sea level, "
+                              "RTKLIB out-height=geodetic): give [gnss] geoid_undulation_m (the geoid height N "
+                              "[m] there: h = H + N), or output ellipsoidal heights")
+        hgt = hgt + fmt.geoid_undulation_m
+    elif fmt.height == "msl":
+        if height_kind == "ellipsoidal":
+            raise ConfigError(f"{path}:{height_line}: gnss.height = 'msl', but the header says "
+                              "height=WGS84/ellipsoidal: remove gnss.height (the file's heights are ellipsoidal)")
         if fmt.geoid_undulation_m is None:
             raise ConfigError(f"{path}: gnss.height = 'msl' needs gnss.geoid_undulation_m")
         hgt = hgt + fmt.geoid_undulation_m
-    rec = GnssRecords(ref, t, lat, lon, hgt, v, sp, sv, q, np.asarray(lines, np.int64), path, "pos",
-                      info=dict(time_system="UTC" if utc else "GPST", q_counts={int(k): int((q == k).sum())
-                                                                              for k in np.unique(q)}))
-    if fmt.quality_max is not None:
-        rec = rec.take(q <= fmt.quality_max)
-    return _finish(rec, fmt)
+    return GnssRecords(ref, t, lat, lon, hgt, v, sp, sv, q, np.asarray(lines, np.int64), path, "pos",
+                       info=dict(time_system="UTC" if utc else "GPST",
+                                 height="geodetic" if height_kind == "geodetic" else "ellipsoidal",
+                                 q_counts={int(k): int((q == k).sum()) for k in np.unique(q)}))
+
+
+def read_rtklib_pos(path, geoid_undulation_m: float | None = None):
+    """Read an RTKLIB solution file (``GPST|UTC latitude(deg) longitude(deg)
+    height(m) Q ...`` or ``x-ecef(m) ...``) as a reference.
+
+    The reader is :func:`read_pos_records` (the fixes reader's): the header's
+    columns, time system (UTC converted to GPST) and height kind are honoured;
+    ``height=WGS84/geodetic`` (mean sea level) needs ``geoid_undulation_m``
+    (the geoid height N [m]: ``h = H + N``).  Velocity columns ``vn ve vu``
+    (m/s), when present, are converted to ECEF.
+
+    Returns
+    -------
+    insnav.gnss.measurements.RtklibPos
+        ``t_gps_s``, ``r_e``, ``v_e``, ``q``.
+
+    Raises
+    ------
+    GnssFileError
+        (a ValueError) On a line that cannot be parsed (file path and line number).
+    insnav.config.ConfigError
+        MSL heights without ``geoid_undulation_m``.
+    """
+    from ..gnss.measurements import RtklibPos
+
+    rec = read_pos_records(path, GnssFileFormat(format="pos", geoid_undulation_m=geoid_undulation_m))
+    lat, lon = np.deg2rad(rec.lat_deg), np.deg2rad(rec.lon_deg)
+    r_e = earth.geodetic_to_ecef(lat, lon, rec.h_m)
+    v_e = earth.ned_to_ecef_vector(lat, lon, rec.v_n)
+    return RtklibPos(rec.t_ref_s + rec.t_s, r_e, v_e, np.asarray(rec.quality))
 
 
 def write_pos(path, t_gps_s, lat_deg, lon_deg, h_m, sigma_pos_n=None, v_n=None, sigma_vel_n=None, q=None,

@@ -86,6 +86,7 @@ import numpy as np
 from .. import _core
 from ..config import ConfigError
 from ..data.dataset import ImuData, RowOrigin
+from ..data.textio import read_bytes
 from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
 from ..units import DEG, G0
 
@@ -370,7 +371,7 @@ def read_str2str_tag(path) -> Str2strTag:
     """
     path = os.fspath(path)
     try:
-        b = Path(path).read_bytes()
+        b = read_bytes(path)
     except OSError as exc:
         raise ImuFileError(path, None, f"cannot read the tag file ({exc.strerror})") from None
     if len(b) < _TAG_FIRST_RECORD or not b.startswith(_TAG_MAGIC):
@@ -520,7 +521,7 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     fmt = (fmt or ImuCsvFormat()).validate()
     path = os.fspath(path)
     try:
-        raw = Path(path).read_bytes()
+        raw = read_bytes(path)
     except OSError as exc:
         raise ImuFileError(path, None, f"cannot read the IMU file ({exc.strerror})") from None
     tagged = fmt.uses_tick

@@ -39,7 +39,7 @@ import numpy as np
 
 from .._imu_scan import scan_imu
 from ..data.dataset import GnssFixes, ImuData, RowOrigin, Truth, check_finite_rows
-from ..data.textio import count_columns, mapped_bytes, parse_numeric, read_bytes
+from ..data.textio import count_columns, file_bytes, parse_numeric, read_bytes
 from ..units import DEG, PPM
 
 HOUR = 3600.0  #: h -> s
@@ -67,7 +67,7 @@ def read_text(path) -> str:
 def _read_rows(path, ncols=None, keep=None, names=None, min_cols=None, groups=None):
     """(rows, RowOrigin, ncols) of a whitespace-separated KF-GINS text file:
     the C++ reader, lines counted as it parses (rows: a tuple of arrays with ``groups``)."""
-    with mapped_bytes(path) as data:
+    with file_bytes(path) as data:
         n = ncols or count_columns(data, path)
         if min_cols is not None and n < min_cols:
             return None, None, n
@@ -189,7 +189,8 @@ def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, ...]:
     bias [mGal], gyro and accelerometer scale factors [ppm]: 22 columns, KF-GINS's
     ``writeSTD``), every value as KF-GINS's ``FileSaver`` prints it
     (``"%-15.9lf "``, src/fileio/filesaver.cc; the week is 0 as KF-GINS writes
-    it).  Every file atomic.
+    it).  The files are written as one (:func:`insnav._atomic.output_set`): all
+    or, on an error, none of them, older files untouched.
 
     Parameters
     ----------
@@ -219,10 +220,22 @@ def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, ...]:
         [("ab", ab[:, j], 1.0 / MGAL) for j in range(3)] + [("gs", gs[:, j], 1.0 / PPM) for j in range(3)] + \
         [("as", as_[:, j], 1.0 / PPM) for j in range(3)]
     fmt = dict(sep=" ", width=15, trim_zeros=False, trailing_sep=True)
-    p_nav = write_text_columns(folder / KFGINS_NAV_FILE, "", nav, [9] * len(nav), **fmt)
-    p_err = write_text_columns(folder / KFGINS_IMU_ERR_FILE, "", err, [9] * len(err), **fmt)
-    if getattr(sol, "sigma_imu_err", None) is None:
-        return p_nav, p_err
+    from .._atomic import output_set
+
+    with output_set():  # all or none of the files (older ones untouched on an error)
+        p_nav = write_text_columns(folder / KFGINS_NAV_FILE, "", nav, [9] * len(nav), **fmt)
+        p_err = write_text_columns(folder / KFGINS_IMU_ERR_FILE, "", err, [9] * len(err), **fmt)
+        if getattr(sol, "sigma_imu_err", None) is None:
+            return p_nav, p_err
+        p_std = _write_std(folder, sol, fmt)
+    return p_nav, p_err, p_std
+
+
+def _write_std(folder: Path, sol, fmt: dict) -> Path:
+    """``KF_GINS_STD.txt`` of :func:`write_kfgins_solution`."""
+    from ..data.textio import write_text_columns
+    from ..units import RAD2DEG
+
     se = np.asarray(sol.sigma_imu_err, float)
     sp, sv, sa = (np.asarray(x, float) for x in (sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg))
     std = [("sow", sol.t, 1.0)] + [(f"sp{j}", sp[:, j], 1.0) for j in range(3)] + \
@@ -230,13 +243,7 @@ def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, ...]:
         [(f"sgb{j}", se[:, 3 + j], RAD2DEG * HOUR) for j in range(3)] + \
         [(f"sab{j}", se[:, j], 1.0 / MGAL) for j in range(3)] + \
         [(f"sgs{j}", se[:, 9 + j], 1.0 / PPM) for j in range(3)] + [(f"sas{j}", se[:, 6 + j], 1.0 / PPM) for j in range(3)]
-    try:
-        p_std = write_text_columns(folder / KFGINS_STD_FILE, "", std, [9] * len(std), **fmt)
-    except BaseException:
-        p_nav.unlink(missing_ok=True)
-        p_err.unlink(missing_ok=True)
-        raise
-    return p_nav, p_err, p_std
+    return write_text_columns(folder / KFGINS_STD_FILE, "", std, [9] * len(std), **fmt)
 
 
 def _write(path, a, fmt):
@@ -255,7 +262,8 @@ def _vec(cfg, key, path, n=3):
     v = cfg.get(key)
     if v is None:
         return None
-    if not (isinstance(v, list) and len(v) == n and all(isinstance(x, (int, float)) for x in v)):
+    if not (isinstance(v, list) and len(v) == n
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):  # YAML true is not 1
         raise ValueError(f"{path}: key '{key}': expected a list of {n} numbers, got {v!r}")
     return np.array(v, dtype=float)
 

@@ -140,7 +140,7 @@ def rtklib_truth(ref, t_offset_gps_s: float, quality_max: int | None = None) -> 
         Antenna position and velocity (NaN velocity when the file has none),
         attitude NaN; ``truth.quality`` holds Q.
     """
-    from ..gnss.measurements import read_rtklib_pos
+    from .gnss_files import read_rtklib_pos
 
     if not hasattr(ref, "r_e"):
         ref = read_rtklib_pos(ref)
