@@ -382,7 +382,7 @@ def test_cli_run_writes_rtklib_pos_and_evaluate_reports_the_fix_rate(tmp_path, s
     assert p.returncode == 0, p.stderr
     assert "301 epochs, 301 fixed" in p.stdout
     assert (tmp_path / "rtk.pos.rtk.csv").exists() and (tmp_path / "rtk.pos.config.toml").exists()
-    from insnav.gnss.measurements import read_rtklib_pos
+    from insnav.io.gnss_files import read_rtklib_pos
 
     ref = read_rtklib_pos(out)  # RTKLIB's layout, read by the RTKLIB .pos reader
     assert len(ref.q) == 301 and np.all(ref.q == 1)

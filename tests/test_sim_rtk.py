@@ -333,7 +333,7 @@ def test_simulate_and_simulate_rtk_agree_and_cli_writes_rinex(tmp_path):
 
 @pytest.mark.skipif(shutil.which("rnx2rtkp") is None, reason="RTKLIB rnx2rtkp not installed (apt-get install rtklib)")
 def test_rtklib_reads_the_files_and_fixes(tmp_path):
-    from insnav.gnss.measurements import read_rtklib_pos
+    from insnav.io.gnss_files import read_rtklib_pos
 
     sim = simulate_rtk(_scenario("rtk-open-sky-car", 60.0), seed=1)
     files = sim.write(tmp_path)

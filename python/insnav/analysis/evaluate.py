@@ -66,7 +66,7 @@ def _pos_solution(path):
     """An RTKLIB .pos file as a solution (antenna position, GPS seconds of the first epoch's week)."""
     from .. import earth
     from ..gnss.gpstime import SECONDS_PER_WEEK
-    from ..gnss.measurements import read_rtklib_pos
+    from ..io.gnss_files import read_rtklib_pos
 
     ref = read_rtklib_pos(path)
     if len(ref.t_gps_s) == 0:
