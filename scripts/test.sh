@@ -5,9 +5,26 @@
 # starts in the background first (tests/_cpp_build.py) so that it compiles
 # while the extension builds and the Python tests run, and pytest uses 2
 # workers (pytest-xdist).
+#
+# Everything the package promises is tested, so everything is installed first:
+# Debian's chromium (the HTML report's headless-browser check) and the optional
+# extras plot, pandas, parquet, dask and docs (the documentation build is a
+# test).  A test whose capability is missing FAILS (tests/conftest.py); the
+# only skips are explicit opt-outs, e.g. INSNAV_SKIP_BROWSER=1 (no Chromium
+# install either), and .ci/run allows none (INSNAV_NO_SKIP=1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 args=("$@")
+if [ "${INSNAV_SKIP_BROWSER:-}" != 1 ] || [ "${INSNAV_NO_SKIP:-}" = 1 ]; then
+  if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null &&
+     ! command -v google-chrome >/dev/null && command -v apt-get >/dev/null; then
+    echo "[insnav] installing chromium (the report's browser test; INSNAV_SKIP_BROWSER=1 opts out)"
+    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+    $SUDO apt-get update -qq || true
+    $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+  fi
+fi
+export INSNAV_EXTRAS=${INSNAV_EXTRAS:-test,plot,pandas,parquet,dask,docs}
 if [ ${#args[@]} -eq 0 ]; then
   # Two builds share the 2 cores: the C++ tests (no Python needed) compile in
   # the background from here on, beside the extension and then the Python tests.

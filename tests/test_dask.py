@@ -9,7 +9,9 @@ import sys
 
 import pytest
 
-distributed = pytest.importorskip("distributed", reason="the dask extra: pip install 'insnav[dask]'")
+from conftest import require_module  # noqa: E402
+
+distributed = require_module("distributed", "dask")
 
 import insnav  # noqa: E402
 from insnav.cli import main  # noqa: E402
