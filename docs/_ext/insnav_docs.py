@@ -252,7 +252,8 @@ def write_api_pages(app) -> None:
     out = Path(app.srcdir) / "reference" / "api"
     out.mkdir(parents=True, exist_ok=True)
     wanted = set()
-    for modname in public_modules():
+    modules = public_modules()
+    for modname in modules:
         names = public_names(modname)
         if modname != "insnav" and not names:
             continue
@@ -266,10 +267,21 @@ def write_api_pages(app) -> None:
                     continue
                 obj = getattr(insnav, n)
                 kind = "autoclass" if isinstance(obj, type) else "autofunction"
-                body += [f"```{{{kind}}} insnav.{n}", ":no-index:", "```", ""]
+                body += ["```{eval-rst}", f".. {kind}:: insnav.{n}", "   :no-index:", "```", ""]
         else:
-            body = [f"# {modname}", "", f"```{{automodule}} {modname}", ":members: " + ", ".join(names),
-                    ":undoc-members:", "```", ""]
+            # (eval-rst: autodoc writes reStructuredText, which a MyST block would read as Markdown)
+            mod = importlib.import_module(modname)
+            # a package's name that is also one of its submodules (insnav.ins.mechanize, the
+            # function and the module) is documented where it is defined, and only shown here
+            shadow = [n for n in names if hasattr(mod, "__path__") and f"{modname}.{n}" in modules]
+            members = [n for n in names if n not in shadow]
+            body = [f"# {modname}", "", "```{eval-rst}", f".. automodule:: {modname}"]
+            if members:  # (an empty :members: would mean all of them)
+                body += ["   :members: " + ", ".join(members), "   :undoc-members:"]
+            body += [""]
+            for n in shadow:
+                body += [f".. autofunction:: {modname}.{n}", "   :no-index:", ""]
+            body += ["```", ""]
         text = "\n".join(body)
         p = out / f"{modname}.md"
         wanted.add(p.name)
@@ -280,8 +292,29 @@ def write_api_pages(app) -> None:
             p.unlink()
 
 
+_TITLE_UNDERLINE = re.compile(r"^\s*([-=~^])\1{2,}\s*$")
+
+
+def module_section_titles_to_bold(app, what, name, obj, options, lines) -> None:
+    """A module docstring's section titles (``References`` over ``----------``)
+    become bold paragraphs: inside an autodoc entry a title cannot start a
+    section, and as a rubric every page's "References" would be one more
+    label of the same name."""
+    if what != "module":
+        return
+    i = 1
+    while i < len(lines):
+        prev = lines[i - 1].strip()
+        if prev and _TITLE_UNDERLINE.match(lines[i]) and len(lines[i].strip()) == len(prev) \
+                and not _TITLE_UNDERLINE.match(lines[i - 1]):
+            lines[i - 1] = f"**{prev}**"
+            lines[i] = ""
+        i += 1
+
+
 def setup(app):
     app.connect("builder-inited", write_api_pages)
+    app.connect("autodoc-process-docstring", module_section_titles_to_bold, priority=100)
     app.add_directive("insnav-cli", InsnavCli)
     app.add_directive("insnav-config", InsnavConfig)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
