@@ -128,7 +128,7 @@ for c in cc c++ gcc g++ clang clang++; do
   if command -v "$c" >/dev/null; then echo "compiler $c on PATH" >&2; exit 1; fi
 done
 [ "${INSNAV_ISOLATED:-}" != 1 ] || [ ! -e /usr/include/eigen3/Eigen/Core ] || { echo "Eigen visible" >&2; exit 1; }
-cd "$(dirname "$venv")"
+cd "$venv"
 "$venv/bin/python" -m pip install -q --only-binary=:all: "$@"
 EOS
 chmod +x "$CHECK"
@@ -145,7 +145,7 @@ in_venv() {  # in_venv NAME "pip requirement" 'python code' [shell command run i
     set -euo pipefail
     $(printf '%q ' "$CHECK" "$v" "$req")
     export PATH=$v/bin:$(printf '%q' "$WORK/venvs/safebin") MPLBACKEND=Agg
-    cd $(printf '%q' "$WORK/venvs")
+    mkdir -p $(printf '%q' "$v/work") && cd $(printf '%q' "$v/work")  # (not beside the venv named pandas)
     $(printf '%q' "$v/bin/python") -c $(printf '%q' "$code")
     $cmd
   " || { echo "[build_dist] FAILED: $name" >&2; exit 1; }

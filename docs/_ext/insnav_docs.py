@@ -276,8 +276,10 @@ def write_api_pages(app) -> None:
             shadow = [n for n in names if hasattr(mod, "__path__") and f"{modname}.{n}" in modules]
             members = [n for n in names if n not in shadow]
             body = [f"# {modname}", "", "```{eval-rst}", f".. automodule:: {modname}"]
-            if members:  # (an empty :members: would mean all of them)
+            if members:
                 body += ["   :members: " + ", ".join(members), "   :undoc-members:"]
+            else:  # (an empty :members: would mean all of them, as would the default)
+                body += ["   :no-members:"]
             body += [""]
             for n in shadow:
                 body += [f".. autofunction:: {modname}.{n}", "   :no-index:", ""]
