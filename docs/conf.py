@@ -20,7 +20,8 @@ sys.path.insert(0, str(HERE / "_ext"))
 # the tutorials read the third-party data from ../shared/data beside the repo
 # (or $INSNAV_SHARED_DATA); the executing kernel inherits the environment
 os.environ.setdefault("INSNAV_SHARED_DATA", str(REPO.parent / "shared" / "data"))
-os.environ.setdefault("MPLBACKEND", "Agg")
+# the kernels draw figures inline (a MPLBACKEND=Agg from the caller would draw none)
+os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
 os.environ.setdefault("INSNAV_PROGRESS", "0")
 
 import insnav  # noqa: E402

@@ -52,6 +52,10 @@ def test_every_tutorial_executed_with_outputs(site):
         n_out = len(re.findall(r'class="cell_output docutils container"', html))
         assert n_cells >= 3 and n_out >= 2, (name, n_cells, n_out)
         assert "Traceback" not in html, name  # (an error in a cell also fails the build itself)
+    for name in ("own_csv", "smoother_constraints"):  # the figures are drawn, inline
+        html = (site / "tutorials" / f"{name}.html").read_text(encoding="utf-8")
+        imgs = re.findall(r'<img[^>]+src="(\.\./_images/[^"]+\.png)"', html)
+        assert imgs and all((site / "tutorials" / i).resolve().stat().st_size > 5000 for i in imgs), (name, imgs)
     # the outputs are the numbers the code computed, e.g. KF-GINS vs insnav on the same track
     k = _text((site / "tutorials" / "kfgins.html").read_text(encoding="utf-8"))
     m = re.search(r"insnav EKF horizontal RMS ([0-9.]+) m.*?KF-GINS horizontal RMS ([0-9.]+) m", k)
