@@ -56,7 +56,8 @@ nb_merge_streams = True
 
 autodoc_typehints = "none"       # the numpydoc Parameters sections carry types and units
 autodoc_member_order = "bysource"
-autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": False}
+# (only "members": a default given here replaces the option a directive gives)
+autodoc_default_options = {"members": True}
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 numpydoc_xref_param_type = False

@@ -41,7 +41,10 @@ def site(tmp_path_factory):
 
 
 def _text(html: str) -> str:
-    return re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", html))
+    import html as _html
+
+    # (Sphinx typesets "--" as an en dash)
+    return re.sub(r"\s+", " ", _html.unescape(re.sub(r"<[^>]+>", " ", html))).replace("\u2013", "--")
 
 
 def test_every_tutorial_executed_with_outputs(site):

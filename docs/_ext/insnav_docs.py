@@ -274,13 +274,29 @@ def write_api_pages(app) -> None:
             # a package's name that is also one of its submodules (insnav.ins.mechanize, the
             # function and the module) is documented where it is defined, and only shown here
             shadow = [n for n in names if hasattr(mod, "__path__") and f"{modname}.{n}" in modules]
-            members = [n for n in names if n not in shadow]
+            # autodoc's automodule documents module-level data only with a "#:" comment:
+            # the rest of the public constants get an explicit autodata entry
+            import inspect
+
+            from sphinx.pycode import ModuleAnalyzer
+
+            try:
+                attr_docs = {k[1] for k in ModuleAnalyzer.for_module(modname).find_attr_docs() if k[0] == ""}
+            except Exception:  # (a module without source)
+                attr_docs = set()
+            bare = [n for n in names if n not in shadow and n not in attr_docs and hasattr(mod, n)
+                    and getattr(getattr(mod, n), "__module__", None) in (None, "builtins", "numpy")
+                    and not (inspect.isroutine(getattr(mod, n)) or inspect.isclass(getattr(mod, n))
+                             or inspect.ismodule(getattr(mod, n)))]
+            members = [n for n in names if n not in shadow and n not in bare]
             body = [f"# {modname}", "", "```{eval-rst}", f".. automodule:: {modname}"]
             if members:
                 body += ["   :members: " + ", ".join(members), "   :undoc-members:"]
             else:  # (an empty :members: would mean all of them, as would the default)
                 body += ["   :no-members:"]
             body += [""]
+            for n in bare:
+                body += [f".. autodata:: {modname}.{n}", ""]
             for n in shadow:
                 body += [f".. autofunction:: {modname}.{n}", "   :no-index:", ""]
             body += ["```", ""]
