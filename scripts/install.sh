@@ -3,6 +3,8 @@
 # with its test extras.  Idempotent: skips what is already there.
 #   scripts/install.sh [--deps-only]   (--deps-only: the system packages and the
 #                                       build backend, not the package)
+# INSNAV_EXTRAS: the extras installed with it (default: test; scripts/test.sh
+# adds plot,pandas,parquet,dask,docs).
 #
 # Compiler: clang++ when present (installed here on Debian), else the default
 # c++.  The core is header-only Eigen templates; clang 14 compiles them about
@@ -45,7 +47,7 @@ done
 "$PY" -m pip install -q "scikit-build-core>=0.10" "pybind11>=3" ninja cmake
 [ "${1:-}" = "--deps-only" ] && exit 0  # scripts/test.sh: the C++ tests start building before the package
 echo "[insnav] building and installing insnav (CXX=${CXX:-default})"
-flock /tmp/insnav-build.lock "$PY" -m pip install -q --no-build-isolation ".[test]"
+flock /tmp/insnav-build.lock "$PY" -m pip install -q --no-build-isolation ".[${INSNAV_EXTRAS:-test}]"
 # never leave an install that looks complete without its compiled core
 (cd / && "$PY" -c "import insnav._core") ||
   { echo "[insnav] the installed package has no working insnav._core (see the build output above)" >&2; exit 1; }

@@ -4,13 +4,29 @@
 # missing first.  Arguments go to pytest; with none, the C++ sanitizer build
 # starts in the background first (tests/_cpp_build.py) so that it compiles
 # while the extension builds and the Python tests run, and pytest uses 2
-# workers (pytest-xdist).  scripts/test.sh --quick: the tests not marked slow (about 2 min).
+# workers (pytest-xdist).  scripts/test.sh --quick: the tests not marked slow
+# (tests/conftest.py SLOW_TESTS; about 2 min), without the C++ sanitizer build.
+#
+# Everything the package promises is tested, so everything is installed first:
+# Debian's chromium (the HTML report's headless-browser check) and the optional
+# extras plot, pandas, parquet, dask and docs (the documentation build is a
+# test).  A test whose capability is missing FAILS (tests/conftest.py); the
+# only skips are explicit opt-outs, e.g. INSNAV_SKIP_BROWSER=1 (no Chromium
+# install either), and .ci/run allows none (INSNAV_NO_SKIP=1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 args=("$@")
+if [ "${INSNAV_SKIP_BROWSER:-}" != 1 ] || [ "${INSNAV_NO_SKIP:-}" = 1 ]; then
+  if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null &&
+     ! command -v google-chrome >/dev/null && command -v apt-get >/dev/null; then
+    echo "[insnav] installing chromium (the report's browser test; INSNAV_SKIP_BROWSER=1 opts out)"
+    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+    $SUDO apt-get update -qq || true
+    $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+  fi
+fi
+export INSNAV_EXTRAS=${INSNAV_EXTRAS:-test,plot,pandas,parquet,dask,docs}
 if [ "${1:-}" = "--quick" ]; then
-  # the quick subset: everything not marked slow (tests/conftest.py SLOW_TESTS), on 2 workers,
-  # without the C++ sanitizer build (tests/test_cpp.py is slow)
   shift
   args=(-n 2 -p no:benchmark -m "not slow" "$@")
 elif [ ${#args[@]} -eq 0 ]; then

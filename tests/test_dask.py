@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 import pytest
 
-distributed = pytest.importorskip("distributed", reason="the dask extra: pip install 'insnav[dask]'")
+from conftest import require_module  # noqa: E402
+
+distributed = require_module("distributed", "dask")
 
 import insnav  # noqa: E402
 from insnav.cli import main  # noqa: E402
@@ -150,3 +153,74 @@ def test_dask_without_scheduler_starts_a_local_cluster(scenario, reference, monk
                                 progress=False)
     assert res.scheduler.startswith("tcp://127.0.0.1:") and res.workers == 1
     assert [r["metrics"] for r in res.per_run] == [r["metrics"] for r in reference.per_run[:2]]
+
+
+@pytest.fixture(scope="module")
+def separate_cluster(tmp_path_factory):
+    """The recipe of a real cluster, on loopback: ``dask scheduler`` and two
+    ``dask worker`` processes started as separate programs (no nanny, one
+    thread each), the workers in a directory of their own.  Yields the
+    scheduler address; the processes are stopped at teardown."""
+    import os
+    import subprocess
+    import time
+
+    work = tmp_path_factory.mktemp("dask-cluster")
+    sched_file = work / "scheduler.json"
+    logs = [open(work / f"{name}.log", "wb") for name in ("scheduler", "worker0", "worker1")]
+    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--no-dashboard", "--scheduler-file", str(sched_file)], cwd=work,
+                              stdout=subprocess.DEVNULL, stderr=logs[0])]
+    try:
+        t_end = time.monotonic() + 60
+        while not (sched_file.exists() and sched_file.stat().st_size) and time.monotonic() < t_end:
+            assert procs[0].poll() is None, (work / "scheduler.log").read_text()[-2000:]
+            time.sleep(0.1)
+        address = json.loads(sched_file.read_text())["address"]
+        for i in range(2):
+            wdir = work / f"worker{i}"
+            wdir.mkdir()
+            procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--no-nanny",
+                                           "--nthreads", "1", "--no-dashboard", "--name", f"w{i}",
+                                           "--local-directory", str(wdir)], cwd=wdir,
+                                          stdout=subprocess.DEVNULL, stderr=logs[1 + i]))
+        with distributed.Client(address, set_as_default=False) as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address, procs
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        for f in logs:
+            f.close()
+
+
+def test_separate_processes_cluster_matches_local(separate_cluster, scenario, reference, monkeypatch, capsys):
+    """insnav compare --backend dask --scheduler tcp://... against a scheduler and two
+    workers that are separate programs: the scenario is a path RELATIVE to the
+    client's directory, which the workers (in directories of their own) cannot
+    resolve, so the numbers can only come from the scenario the client shipped;
+    they equal the local backend's run for run."""
+    import os
+
+    address, procs = separate_cluster
+    monkeypatch.chdir(scenario.parent)
+    rel = scenario.name
+    with distributed.Client(address, set_as_default=False) as client:
+        pids = client.run(os.getpid)
+        cwds = client.run(os.getcwd)
+    assert len(set(pids.values())) == 2 and os.getpid() not in pids.values()
+    assert {p.pid for p in procs[1:]} == set(pids.values())  # the workers are the processes started here
+    assert all(not (Path(c) / rel).exists() for c in cwds.values())  # the file is not where they run
+    rc = main(["compare", rel, "--filters", ",".join(FILTERS), "--runs", "4", "--seed", "11",
+               "--backend", "dask", "--scheduler", address, "--json", "--compact"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["backend"] == "dask" and out["scheduler"] == address and out["workers"] == 2
+    assert [r["metrics"] for r in out["per_run"]] == [r["metrics"] for r in reference.per_run]
+    assert out["summary"] == json.loads(json.dumps(reference.summary))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import insnav.sim as sim
-from conftest import SHARED_DATA  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
+from conftest import SHARED_DATA, require_module  # ../shared/data beside the repo, or $INSNAV_SHARED_DATA
 from insnav.io import kfgins
 
 DATA = SHARED_DATA / "kfgins"
@@ -95,7 +95,7 @@ _YAML_OTHER = ["a: 1e3\n", "a: 010\n", "a: plain text\n", "a: 5#x\n", "a:\n\tb: 
                                                  if DATA.is_dir() else []))
 def test_plain_yaml_reads_what_pyyaml_reads(text):
     """The KF-GINS subset read without importing PyYAML gives yaml.safe_load's values and types."""
-    yaml = pytest.importorskip("yaml")
+    yaml = require_module("yaml", "yaml")
     got, want = kfgins._plain_yaml(text), yaml.safe_load(text)
     assert got is not None
     assert got == want and repr(got) == repr(want)

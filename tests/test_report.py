@@ -1,6 +1,6 @@
 """``insnav report``: the numbers in the summary table against values known
 in advance or computed independently, every figure a real non-blank PNG, and
-the page rendered in a real browser (headless Chromium, where installed)."""
+the page rendered in a real browser (headless Chromium)."""
 from __future__ import annotations
 
 import base64
@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 import insnav
-from conftest import short_tight_dataset
+from conftest import missing_capability, require_module, short_tight_dataset
 from insnav.analysis.evaluate import evaluate
 from insnav.analysis.report import chi2_interval, detect_outages, report
 from insnav.filters.solution import write_innovations
 
-pytest.importorskip("matplotlib", reason="insnav report needs matplotlib")
+require_module("matplotlib", "plot")
 
 
 def _table(html: str) -> dict:
@@ -272,7 +272,7 @@ def _chromium():
         p = shutil.which(name)
         if p:
             return p
-    pytest.skip("Chromium not installed (apt-get install -y chromium): the browser check of the report is skipped")
+    missing_capability("browser", "Chromium is not installed (the report's browser check)")
 
 
 _WIDTH = 1100  # CSS px of the browser window (the page is at most 1000 px wide)

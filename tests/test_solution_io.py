@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import insnav
-from conftest import short_tight_dataset
+from conftest import require_module, short_tight_dataset
 from insnav.filters.solution import (INNOVATION_COLUMNS, RESIDUAL_COLUMNS, RESIDUAL_COLUMNS_FLAGS, RecordStatus, innovations_path,
                                      load_solution, read_innovations, read_residuals, residuals_path,
                                      write_innovations)
@@ -75,7 +75,7 @@ def test_column_groups(sol, tmp_path):
 @pytest.mark.parametrize("suffix", [".npz", ".parquet"])
 def test_binary_round_trip_is_exact(sol, tmp_path, suffix):
     if suffix == ".parquet":
-        pytest.importorskip("pyarrow", reason="Parquet needs pyarrow (pip install 'insnav[parquet]')")
+        require_module("pyarrow", "parquet")
     path = sol.save(tmp_path / f"sol{suffix}")
     from insnav.filters.solution import _columns_from
 

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import importlib
 
+# The one place the version is written: pyproject.toml (scikit-build-core regex
+# provider) and CMakeLists.txt read this line.
 __version__ = "0.1.0"
 
 # public name -> module that defines it (PEP 562 lazy loading).  No public

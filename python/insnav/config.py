@@ -359,9 +359,9 @@ class Robust:
 
 @dataclass
 class RunConfig:
-    """Everything a run needs besides the data.
+    """Everything a run needs besides the data (SI unless the name says otherwise).
 
-    Attributes (SI unless the name says otherwise)
+    Attributes
     ----------
     filter : {'ekf', 'rbukf', 'ukf'}
     coupling : {'loose', 'tight'}

@@ -55,10 +55,10 @@ def rms(x, axis=0):
 
 
 def reconvergence_time(t, err, t_recover, threshold, hold_s=5.0):
-    """Time after ``t_recover`` until |err| stays below ``threshold`` for ``hold_s``.
+    """Time after ``t_recover`` until ``|err|`` stays below ``threshold`` for ``hold_s``.
 
     Definition used in the results: the first time t >= t_recover from which
-    |err| <= threshold holds for at least ``hold_s`` seconds, minus t_recover.
+    ``|err| <= threshold`` holds for at least ``hold_s`` seconds, minus t_recover.
     Returns NaN if it never reconverges.
     """
     t = np.asarray(t)

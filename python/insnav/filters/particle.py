@@ -11,9 +11,11 @@ Filters (``filter=``)
 ---------------------
 ``"upf"``   improved UPF: a UKF per particle builds the proposal, with adaptive fading
             (``fading=False`` gives the plain UPF)
+
 ``"pf"``    particle filter: by default marginalised (attitude and gyro biases sampled,
             position/velocity/clock/accelerometer bias in one shared Kalman covariance);
             ``marginalize=False`` gives the bootstrap PF (systematic resampling + regularisation)
+
 ``"fukf"``  fading UKF; ``fading=False`` is the plain UKF baseline of seed 004
 
 State layout (Layout20, NED, error = computed - true; the paper is ENU):

@@ -86,7 +86,7 @@ class MultiStates(NamedTuple):
     clock_drift_s_s: np.ndarray  #: (k,) d(dt_sv)/dt [s/s]
     t_tx_gps_s: np.ndarray  #: (k,) transmit time (= t for sat_states) [s]
     tau_s: np.ndarray  #: (k,) signal travel time (0 for sat_states) [s]
-    range_m: np.ndarray  #: (k,) |r_e - r_rx_e| (NaN for sat_states) [m]
+    range_m: np.ndarray  #: (k,) ``|r_e - r_rx_e|`` (NaN for sat_states) [m]
     valid: np.ndarray  #: (k,) bool, a usable ephemeris record was found
     eph_idx: np.ndarray  #: (k,) row in the system's table of ``NavData`` (-1: none)
     system: np.ndarray  #: (k,) one-letter system code

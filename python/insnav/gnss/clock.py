@@ -3,9 +3,9 @@
 Two-state clock (bias b [m], drift d [m/s]): ``b' = d + w_b``, ``d' = w_d``
 with PSDs ``clock_bias_psd`` [m^2/s] and ``clock_drift_psd`` [m^2/s^3]
 (Brown & Hwang, *Introduction to Random Signals and Applied Kalman
-Filtering*, 4th ed., sec. 9.3, eqs. (9.3.8)-(9.3.9): S_b = c^2 h0 / 2,
-S_d = 2 pi^2 c^2 h_-2).  Clock classes from their Table 9.1 Allan-variance
-coefficients (h0, h_-2); the flicker term h_-1 is left out of the two-state
+Filtering*, 4th ed., sec. 9.3, eqs. (9.3.8)-(9.3.9): ``S_b = c^2 h0 / 2``,
+``S_d = 2 pi^2 c^2 h_-2``).  Clock classes from their Table 9.1 Allan-variance
+coefficients (``h0``, ``h_-2``); the flicker term ``h_-1`` is left out of the two-state
 model.  TCXO defaults with margin for flicker noise:
 ``clock_bias_psd = 0.1`` m^2/s, ``clock_drift_psd = 0.04`` m^2/s^3.
 """
@@ -17,7 +17,7 @@ __all__ = ["C_LIGHT_MPS", "CLOCK_ALLAN", "CLOCK_CLASSES", "TCXO_CLOCK_BIAS_PSD",
            "clock_model", "clock_psd_of_class"]
 
 C_LIGHT_MPS = 299_792_458.0
-#: Brown & Hwang (2012) Table 9.1: (h0, h_-2) of the fractional frequency PSD
+#: Brown & Hwang (2012) Table 9.1: ``(h0, h_-2)`` of the fractional frequency PSD
 CLOCK_ALLAN = {"tcxo": (2e-19, 2e-20), "ocxo": (8e-20, 4e-23), "rubidium": (2e-20, 4e-29)}
 #: clock class -> (clock_bias_rw [m/sqrt(s)], clock_drift_rw [(m/s)/sqrt(s)])
 CLOCK_CLASSES = {k: (C_LIGHT_MPS * np.sqrt(h0 / 2.0), C_LIGHT_MPS * np.sqrt(2.0 * np.pi ** 2 * hm2))

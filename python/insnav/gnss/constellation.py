@@ -119,7 +119,7 @@ class Constellation:
         ``IDOT`` is set to zero (it is a fit parameter of a 4-hour arc; its
         secular use over months would tilt the planes by milliradians per
         month); ``delta_n`` and ``OMEGA_DOT`` (J2 effects) are kept.  Clock
-        bias then grows as ``af0 + af1 (t - toc)`` with |af1| < 1e-11
+        bias then grows as ``af0 + af1 (t - toc)`` with ``|af1| < 1e-11``
         (< 1 m per day).  The Klobuchar parameters of the same file come
         with it (``ion_alpha``, ``ion_beta``).
         """

@@ -367,7 +367,7 @@ class TransmitStates(NamedTuple):
     clock_drift_s_s: np.ndarray  #: (k,) [s/s]
     t_tx_gps_s: np.ndarray  #: (k,) transmit time [s]
     tau_s: np.ndarray  #: (k,) geometric signal travel time [s]
-    range_m: np.ndarray  #: (k,) geometric range |r_e - r_rx_e| [m]
+    range_m: np.ndarray  #: (k,) geometric range ``|r_e - r_rx_e|`` [m]
 
 
 def rotate_earth(r_e, theta):

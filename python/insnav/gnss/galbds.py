@@ -82,8 +82,10 @@ FREQ_HZ = {
 class KeplerEphemerides(Ephemerides):
     """Galileo or BeiDou records: the GPS fields plus the second group delay and the data source.
 
-    Attributes (in addition to :class:`insnav.gnss.ephemeris.Ephemerides`)
-    ----------------------------------------------------------------------
+    The attributes below are in addition to those of :class:`insnav.gnss.ephemeris.Ephemerides`.
+
+    Attributes
+    ----------
     tgd : Galileo BGD(E1,E5a) [s]; BeiDou T_GD1 (B1I) [s]
     tgd2 : Galileo BGD(E1,E5b) [s]; BeiDou T_GD2 (B2I) [s]
     data_source : Galileo RINEX "data sources" bit field (0 for BeiDou)

@@ -56,7 +56,7 @@ A_E_GLO = 6378136.0
 J2_GLO = 1082625.75e-9
 #: Earth rotation rate, ICD Ed. 5.1 Table 3.2 [rad/s]
 OMEGA_E_GLO = 7.292115e-5
-#: RINEX records are every 30 min; the ICD validity interval is |t - t_b| <= 15 min.  Selection
+#: RINEX records are every 30 min; the ICD validity interval is ``|t - t_b| <= 15 min``.  Selection
 #: accepts the nearest record up to this age (RTKLIB's MAXDTOE_GLO) [s]
 MAX_AGE_GLO_S = 1800.0
 #: G1 centre frequency and channel spacing, ICD Ed. 5.1 3.3.1.1 [Hz]

@@ -91,8 +91,9 @@ def sigma_legacy(el_rad, sigma_zenith: float, cn0_dbhz=None, factor=1.0):
 @dataclass
 class Weighting(TomlTable):
     """How rows are weighted and masked (the ``[gnss]`` table; see the module docstring).
+    Units are in the attribute names.
 
-    Attributes (units in the names)
+    Attributes
     ----------
     model : {'legacy', 'rtklib', 'cn0'}
     rtklib_a_m, rtklib_b_m : float

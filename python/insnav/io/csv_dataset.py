@@ -77,8 +77,10 @@ _REQUIRED_NOISE = (("gyro_arw_deg_per_sqrt_h",), ("acc_vrw_m_per_s_per_sqrt_h", 
 class CsvDataset(Dataset):
     """A :class:`~insnav.data.dataset.Dataset` from a user's IMU and GNSS files.
 
-    Extra attributes
-    ----------------
+    The attributes below are in addition to those of the Dataset.
+
+    Attributes
+    ----------
     alignment : insnav.ins.align.Alignment or None
         The alignment that gave the initial state (None: all of it given).
     info : dict

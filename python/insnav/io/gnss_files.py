@@ -91,8 +91,9 @@ def _three(v, key, source, prefix):
 @dataclass
 class GnssFileFormat:
     """How to read a GNSS file (the ``[gnss]`` table; see the module docstring).
+    Units are in the attribute names.
 
-    Attributes (units in the names)
+    Attributes
     ----------
     format : {'auto', 'csv', 'pos', 'nmea'}
         ``auto``: by suffix (``.pos``; ``.nmea``/``.nma``/``.gga``/``.log``; else CSV).

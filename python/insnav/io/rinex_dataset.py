@@ -159,8 +159,9 @@ def rtklib_truth(ref, t_offset_gps_s: float, quality_max: int | None = None) -> 
 @dataclass
 class RinexOptions:
     """Options of :func:`load_rinex` (the ``[rinex]`` table of a run TOML).
+    Units are in the attribute names.
 
-    Attributes (units in the names)
+    Attributes
     ----------
     imu_columns, imu_time, imu_acc_unit, imu_gyro_unit, imu_samples,
     imu_mount_rpy_deg, imu_time_offset_s, imu_delimiter, imu_axes, imu_time_unit,
@@ -303,8 +304,10 @@ class RinexOptions:
 class RinexDataset(Dataset):
     """A :class:`~insnav.data.dataset.Dataset` built from real files (tight coupling).
 
-    Extra attributes
-    ----------------
+    The attributes below are in addition to those of the Dataset.
+
+    Attributes
+    ----------
     tight_inputs : insnav.gnss.tight_inputs.TightInputs
         Per-epoch satellite rows (read by :func:`insnav.filters.tight.run_tight`).
     spp : SinglePoint

@@ -221,7 +221,7 @@ def urban_canyon_mask(d_az, mask_across, mask_along):
     """Elevation mask [rad] of a straight street canyon at azimuth ``d_az`` [rad]
     from the street axis: buildings of height H at distance W/2 on both sides
     hide a satellite below ``atan(tan(mask_across) |sin d_az|)`` (the building
-    edge seen along the line of sight is W / (2 |sin d_az|) away), so
+    edge seen along the line of sight is ``W / (2 |sin d_az|)`` away), so
     ``mask_across`` [rad] is the mask across the street (``atan(2 H / W)``),
     and along it the mask falls to ``mask_along`` [rad] (the far end of the
     street, other obstructions)."""
