@@ -176,7 +176,7 @@ def test_robust_rejects_faults(ds_multi, size):
         assert hz.max() < hz_clean.max() + 1.5
         assert sol.summary["rejected_sats"] >= flag.size
         if k == 0:
-            plain = run_tight(ds_f, RunConfig(filter="ekf", init_seed=5))
+            plain = run_tight(ds_f, RunConfig(filter="ekf", init_seed=5, robust=Robust(screening=False)))
             hz_p, _, _ = _hz_err(plain, ds_f)
             assert hz_p.max() > hz.max()
     assert n_rej >= 0.99 * n_faulty, (n_rej, n_faulty)
@@ -199,7 +199,7 @@ def _flags_of(sol, ds, raw_rows):
 
 def test_robust_equals_plain_on_clean_data(ds_multi):
     """No fault: the robust filter's solution is the plain one except at the rare false alarms."""
-    plain = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=5))
+    plain = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=5, robust=Robust(screening=False)))
     rob = run_tight(ds_multi, RunConfig(filter="ekf", init_seed=5, robust=Robust(screening=True)))
     assert rob.summary["flagged_epochs"] <= 0.05 * len(rob.gnss_t)  # false alarms: 1e-3 per row
     d = errors(rob, ds_multi.truth)["pos_n_m"] - errors(plain, ds_multi.truth)["pos_n_m"]

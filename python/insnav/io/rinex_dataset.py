@@ -436,13 +436,16 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
         inp_all, _ = spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt, **kw)
         return limit_sats(inp_all, MAX_SATS)
 
+    # the fixes of the start (course, initial position) and of the input checks: with RAIM FDE on
+    # positions and Doppler velocities, so one faulty satellite (a Doppler bias, a wrong PRN) neither
+    # moves the start nor fails the gyro-vs-course check (insnav.gnss.spp.solve_spp)
     inp = inputs_at(r0)
-    spp = single_point_solution(inp, r0)
+    spp = single_point_solution(inp, r0, raim=True)
     good = np.isfinite(spp.r_e[:, 0])
     if good.any():  # recompute light time / elevation / atmosphere at the data's own position
         r0 = np.median(spp.r_e[good], axis=0)
         inp = inputs_at(r0)
-        spp = single_point_solution(inp, r0)
+        spp = single_point_solution(inp, r0, raim=True)
         good = np.isfinite(spp.r_e[:, 0])
 
     t_first = float(obs.epoch_t_gps_s[0] - t_week0)
