@@ -277,7 +277,9 @@ class TightEngine {
     standardize(alpha);
     const int m0 = meas_.linear().rows();
     bool alarm = false;
-    if (cusum && rc.cusum_h > 0.0) {
+    int n_pr = 0;  // the CUSUM needs redundancy: with 4 pseudoranges or fewer a slow drift of the filter
+    for (int r = 0; r < m0; ++r) n_pr += row_kind_[r] == 0 ? 1 : 0;  // cannot be told from one satellite's
+    if (cusum && rc.cusum_h > 0.0 && n_pr >= kCusumMinPseudoranges) {
       const double clip = std::sqrt(rc.chi2_row);
       for (int r = 0; r < m0; ++r) {
         SatObservation& s = work_[row_sat_[r]];
@@ -383,6 +385,7 @@ class TightEngine {
   SatFlag flag_[2 * kMaxMeasRows] = {};
   // CUSUM per (system, prn, row kind) (robust.hpp, 4.)
   static constexpr int kSatKeys = 4 * 64 * 2;
+  static constexpr int kCusumMinPseudoranges = 5;  // position + clock + one redundant row
   double cusum_pos_[kSatKeys] = {}, cusum_neg_[kSatKeys] = {}, excluded_until_[kSatKeys] = {};
   const SatObservation* sats_ = nullptr;
 };
