@@ -224,3 +224,32 @@ def test_health_warns_when_the_configured_noise_is_far_too_small():
     h = sol.summary["health"]
     assert h["nis_ratio"] > 10.0 and h["consistency"] == "far too optimistic"
     assert any("far too small" in w for w in h["warnings"])
+
+
+def test_cli_exits_2_with_one_line_when_the_solution_is_unhealthy(tmp_path, monkeypatch, capsys):
+    """A solution whose covariance broke (a NaN sigma, as after the 14,000 km wrong-PRN run of the
+    old gate) is refused with status 2 and a one-line reason, nothing written; --allow-unhealthy
+    writes it; a healthy run prints its verdict and exits 0."""
+    from insnav.cli import main
+
+    ds = insnav.simulate("seed000-sim", seed=1)
+    ds.save(tmp_path / "d")
+    out = tmp_path / "sol.csv"
+    assert main(["run", str(tmp_path / "d"), "--out", str(out), "-q"]) == 0
+    assert "health: ok; consistency" in capsys.readouterr().out
+    real_run = insnav.run
+
+    def broken_run(*a, **k):
+        sol = real_run(*a, **k)
+        sol.sigma_pos_n_m[len(sol.t) // 2:, 1] = np.nan
+        sol.summary["health"] = assess(sol)
+        return sol
+
+    monkeypatch.setattr(insnav, "run", broken_run)
+    out2 = tmp_path / "bad.csv"
+    assert main(["run", str(tmp_path / "d"), "--out", str(out2), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unhealthy solution: broken covariance" in err[0]
+    assert not out2.exists()
+    assert main(["run", str(tmp_path / "d"), "--out", str(out2), "-q", "--allow-unhealthy"]) == 0
+    assert out2.exists()
