@@ -21,7 +21,7 @@ car simulation whose true IMU noise is larger than the configured one.
 2. Faults (the walk, tight EKF, default settings, ``insnav run --format rinex`` path: loader, input
    checks, filter): GPS only and GPS + Galileo + BeiDou; faults injected into the RINEX observations
    over 60 s from 1/3 of the run (ramp: 120 s, wrong PRN: 30 s): a wrong PRN (one GPS satellite's
-   signal reported under the PRN of a satellite with an ephemeris that is not tracked), pseudorange steps of 20 / 50 / 100 m on one GPS satellite, a 1 m/s
+   signal reported under another's PRN, whose own signal is lost), pseudorange steps of 20 / 50 / 100 m on one GPS satellite, a 1 m/s
    pseudorange ramp, a 5 m/s Doppler bias, 50 m steps on two GPS satellites.  Deviation: the max
    horizontal distance between the faulty and the clean run (same settings); detection: the first
    epoch that rejects or excludes the faulty row; the run's health verdict.
@@ -211,16 +211,20 @@ def _gps_sats(obs, t_a, t_b):
     return [int(p) for p in prns[np.argsort(-n)]]
 
 
-def inject(obs, kind, t_a, dur, prns, untracked=None):
+def inject(obs, kind, t_a, dur, prns):
     """A copy of ``obs`` with the fault ``kind`` on GPS satellite(s) ``prns`` over [t_a, t_a + dur)
-    (wrong PRN: the first one's signal reported under the GPS PRN ``untracked``, which has an
-    ephemeris but is not tracked then)."""
+    (wrong PRN: the first one's signal reported under the second one's PRN, whose own signal is
+    lost: the walk's navigation file has ephemerides of the tracked satellites only)."""
     o = _obs_copy(obs)
     win = (o.t_gps_s >= t_a) & (o.t_gps_s < t_a + dur) & (o.system == "G")
     p0 = prns[0]
     row = win & (o.prn == p0)
-    if kind == "wrong PRN":
-        o.prn[row] = untracked
+    if kind == "wrong PRN":  # p0's signal reported as p1's (p1's own rows dropped)
+        p1 = prns[1]
+        drop = win & (o.prn == p1)
+        o.C1[drop] = np.nan
+        o.D1[drop] = np.nan
+        o.prn[row] = p1
     elif kind.startswith("step"):
         mag = float(kind.split()[1])
         o.C1[row] += mag
@@ -265,10 +269,8 @@ def fault_section():
             for kind in FAULTS:
                 dur = 120.0 if kind.startswith("ramp") else 30.0 if kind == "wrong PRN" else 60.0
                 prns = _gps_sats(obs, t_a, t_a + dur)
-                tracked = set(obs.prn[(obs.system == "G") & (np.abs(obs.t_gps_s - t_a) < dur + 60)].tolist())
-                untracked = min(set(int(p) for p in nav.eph.prn) - tracked)
                 try:
-                    _, sol = run(inject(obs, kind, t_a, dur, prns, untracked))
+                    _, sol = run(inject(obs, kind, t_a, dur, prns))
                 except (UserError, DataCheckError, ValueError) as exc:
                     rows.append(dict(systems=systems, fault=kind, refused=str(exc).splitlines()[0][:120]))
                     continue
@@ -277,7 +279,7 @@ def fault_section():
                 dn = (sol.lat_deg - lat_c) * DEG * 6.37e6
                 de = (sol.lon_deg - lon_c) * DEG * 6.37e6 * np.cos(lat_c * DEG)
                 dev = float(np.nanmax(np.hypot(dn, de)))
-                detect = detection_delay(sol, untracked if kind == "wrong PRN" else prns[0], t_a - off, kind)
+                detect = detection_delay(sol, prns[1] if kind == "wrong PRN" else prns[0], t_a - off, kind)
                 s, h = sol.summary, sol.summary["health"]
                 rows.append(dict(systems=systems, fault=kind, dev=dev, detect=detect, healthy=h["healthy"],
                                  consistency=h["consistency"], rejected_sats=s.get("rejected_sats", 0),
