@@ -162,9 +162,10 @@ def test_paper_presets_run_ungated_and_round_trip(tmp_path):
     """The seed-paper presets carry ``[run] gate_prob = 0`` (the papers' filters
     have no innovation gate), through a saved dataset folder too; a preset
     without it gets insnav's default gate (car-mems sets it explicitly)."""
-    for name in ("seed000-sim", "seed000-heading", "seed000-car", "seed001-low", "seed001-high",
-                 "seed003-1sat", "seed004-uav"):
+    for name in ("seed000-sim", "seed000-heading", "seed000-car", "seed001-low", "seed001-high"):
         assert resolve_raw(name)[0]["run"] == {"gate_prob": 0.0}, name
+    for name in ("seed003-1sat", "seed004-uav"):  # tight: no per-satellite screening either
+        assert resolve_raw(name)[0]["run"] == {"gate_prob": 0.0, "robust_screening": False}, name
     assert resolve_raw("car-mems-outage30")[0]["run"] == {"gate_prob": 0.9999}
     assert "run" not in resolve_raw("urban-multignss")[0]
     import insnav

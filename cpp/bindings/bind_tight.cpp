@@ -18,14 +18,14 @@ void bind_tight(py::module_& m) {
       [](const std::string& filter, const DArray& t, const DArray& dtheta_b, const DArray& dv_b,
          const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats, const DArray& init, const DArray& P0,
          const DArray& corr0, const DArray& clock0, const py::dict& model, const py::dict& config, int layout,
-         const py::object& system, const py::object& isb0) {
+         const py::object& system, const py::object& isb0, const py::object& prn) {
         TightArgs a;
         a.model = imu_model_from_dict(model);
         a.cfg = tight_config_from(config);
         a.ut = ut_from(config);
         a.smooth = flag(config, "smooth", false);
         a.imu = imu_arrays(t, dtheta_b, dv_b);
-        a.in = tight_inputs_from(epoch_t, epoch_start, sats, system);
+        a.in = tight_inputs_from(epoch_t, epoch_start, sats, system, prn);
         a.nav = nav_state_from(init);
         a.P0 = P0;
         a.corr = imu_correction_from(corr0);
@@ -46,7 +46,7 @@ void bind_tight(py::module_& m) {
       py::arg("filter"), py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("epoch_t"),
       py::arg("epoch_start"), py::arg("sats"), py::arg("init"), py::arg("P0"), py::arg("imu_correction"),
       py::arg("clock0"), py::arg("imu_model"), py::arg("config"), py::arg("layout") = 17,
-      py::arg("system") = py::none(), py::arg("isb0") = py::none(),
+      py::arg("system") = py::none(), py::arg("isb0") = py::none(), py::arg("prn") = py::none(),
       "Closed-loop tightly coupled run, Layout17 or (layout=20) LayoutTightMulti with inter-system biases "
       "(SI units; see python/insnav/filters/tight.py).");
 }

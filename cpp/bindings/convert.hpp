@@ -53,8 +53,12 @@ inline void timing_from(const py::dict& d, double& propagation_interval, double&
   gate.chi2 = num(d, "gate_chi2", gate.chi2);
   gate.prob = num(d, "gate_prob", gate.prob);
   gate.reopen_after = static_cast<int>(num(d, "gate_reopen_after", gate.reopen_after));
+  gate.mismatch = num(d, "gate_mismatch", gate.mismatch);
+  gate.outage_s = num(d, "gate_outage_s", gate.outage_s);
   if (!(gate.chi2 >= 0.0) || !(gate.prob >= 0.0 && gate.prob < 1.0) || gate.reopen_after < 0)
     throw py::value_error("gate: need gate_chi2 >= 0, 0 <= gate_prob < 1, gate_reopen_after >= 0");
+  if (!(gate.mismatch >= 0.0) || !(gate.outage_s >= 0.0))
+    throw py::value_error("gate: need gate_mismatch >= 0 and gate_outage_s >= 0");
   output_decimation = static_cast<int>(num(d, "output_decimation", output_decimation));
   if (!(propagation_interval > 0.0)) throw py::value_error("propagation_interval must be > 0");
   if (!(cycle_period > 0.0)) throw py::value_error("cycle_period must be > 0");
@@ -69,7 +73,7 @@ inline UtParams ut_from(const py::dict& d) {
   return ut;
 }
 
-#define INSNAV_TIMING_KEYS "lever_arm_b", "propagation_interval", "cycle_period", "gate_chi2", "gate_prob", "gate_reopen_after", "output_decimation"
+#define INSNAV_TIMING_KEYS "lever_arm_b", "propagation_interval", "cycle_period", "gate_chi2", "gate_prob", "gate_reopen_after", "gate_mismatch", "gate_outage_s", "output_decimation"
 #define INSNAV_UT_KEYS "ut_alpha", "ut_beta", "ut_kappa"
 
 /// LooseConfig from a dict; `extra` keys are allowed (and read by the caller).
@@ -86,7 +90,9 @@ inline LooseConfig loose_config_from(const py::dict& d, const char* what, std::i
 inline TightConfig tight_config_from(const py::dict& d) {
   reject_unknown(d, {INSNAV_TIMING_KEYS, "use_pseudorange", "use_rate", INSNAV_UT_KEYS, "smooth"}, "tight engine config",
                  {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
-                  "robust_clock_jump_sigma", "robust_clock_jump_min_rows"});
+                  "robust_clock_jump_sigma", "robust_clock_jump_min_rows", "robust_huber", "robust_huber_k",
+                  "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
+                  "robust_cusum_hold_s"});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
@@ -104,6 +110,17 @@ inline TightConfig tight_config_from(const py::dict& d) {
   if (!(r.igg_k0 > 0.0 && r.igg_k1 > r.igg_k0)) throw py::value_error("robust IGG-III: need 0 < k0 < k1");
   if (!(r.clock_jump_sigma > 0.0)) throw py::value_error("robust_clock_jump_sigma must be > 0");
   if (r.clock_jump_min_rows < 1) throw py::value_error("robust_clock_jump_min_rows must be >= 1");
+  r.huber = flag(d, "robust_huber", r.huber);
+  r.huber_k = num(d, "robust_huber_k", r.huber_k);
+  r.fde_max_sats = static_cast<int>(num(d, "robust_fde_max_sats", r.fde_max_sats));
+  r.fde_min_rows = static_cast<int>(num(d, "robust_fde_min_rows", r.fde_min_rows));
+  r.cusum_k = num(d, "robust_cusum_k", r.cusum_k);
+  r.cusum_h = num(d, "robust_cusum_h", r.cusum_h);
+  r.cusum_hold_s = num(d, "robust_cusum_hold_s", r.cusum_hold_s);
+  if (!(r.huber_k > 0.0)) throw py::value_error("robust_huber_k must be > 0");
+  if (r.fde_max_sats < 0 || r.fde_min_rows < 0) throw py::value_error("robust_fde_max_sats, robust_fde_min_rows must be >= 0");
+  if (!(r.cusum_k >= 0.0) || !(r.cusum_h >= 0.0) || !(r.cusum_hold_s >= 0.0))
+    throw py::value_error("robust_cusum_k, robust_cusum_h, robust_cusum_hold_s must be >= 0");
   return c;
 }
 
@@ -184,7 +201,7 @@ using I64Array = py::array_t<std::int64_t, py::array::c_style | py::array::force
 
 /// system: None (every row GPS) or (M,) int, each in [0, kNumSystems) (insnav.gnss.systems index).
 inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats,
-                                     const py::object& system = py::none()) {
+                                     const py::object& system = py::none(), const py::object& prn = py::none()) {
   TightInputs in;
   in.E = epoch_t.size();
   require_shape(epoch_t, in.E, -1, "epoch_t");
@@ -211,6 +228,12 @@ inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoc
     if (sys.ndim() != 1 || sys.shape(0) != in.M)
       throw py::value_error("system: expected shape (" + std::to_string(in.M) + ",)");
   }
+  I64Array prns;
+  if (!prn.is_none()) {
+    prns = py::cast<I64Array>(prn);
+    if (prns.ndim() != 1 || prns.shape(0) != in.M)
+      throw py::value_error("prn: expected shape (" + std::to_string(in.M) + ",)");
+  }
   for (py::ssize_t i = 0; i < in.M; ++i) {
     const double* r = ps + 12 * i;
     SatObservation& o = in.sats[i];
@@ -229,6 +252,7 @@ inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoc
                               " (expected 0 G, 1 R, 2 E, 3 C)");
       o.system = static_cast<int>(k);
     }
+    if (prns.size()) o.prn = static_cast<int>(std::max<std::int64_t>(0, prns.data()[i]));
     const bool any = std::isfinite(o.pseudorange_m) || std::isfinite(o.pseudorange_rate_mps);
     if (any && !(o.r_e.allFinite() && o.v_e.allFinite() && std::isfinite(o.clock_bias_m) &&
                  std::isfinite(o.clock_drift_mps)))

@@ -100,6 +100,7 @@ struct NavBuffers {
     res["updates"] = out.updates;
     res["rejected"] = out.rejected;
     res["gate_reopened"] = out.gate_reopened;
+    res["gate_outage_accepted"] = out.gate_outage_accepted;
     res["cholesky_repairs"] = out.cholesky_repairs;
   }
 };
@@ -156,6 +157,9 @@ struct TightRecordBuffers {
     res["rows"] = rows;
     res["clock_jump"] = clock_jump;
     res["rejected_sats"] = out.rejected_sats;
+    res["fde_excluded"] = out.fde_excluded;
+    res["cusum_alarms"] = out.cusum_alarms;
+    res["cusum_excluded"] = out.cusum_excluded;
     res["downweighted_sats"] = out.downweighted_sats;
     res["flagged_epochs"] = out.flagged_epochs;
     res["clock_jumps"] = out.clock_jumps;

@@ -99,6 +99,10 @@ def run_tight(
     clock0: npt.ArrayLike,  # (2,) clock bias [m], drift [m/s]
     imu_model: dict[str, Any],
     config: dict[str, Any],
+    layout: int = 17,  # 17, or 20 with inter-system biases
+    system: npt.ArrayLike | None = None,  # (S,) system index per row (0 G, 1 R, 2 E, 3 C)
+    isb0: npt.ArrayLike | None = None,  # (3,) initial ISBs of R, E, C [m]
+    prn: npt.ArrayLike | None = None,  # (S,) satellite number per row (the robust CUSUM keys on it)
 ) -> dict[str, Any]: ...
 def run_delay(
     method: str,  # "rdkf" | "exact"

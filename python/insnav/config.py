@@ -305,10 +305,13 @@ class Robust:
 
     Attributes
     ----------
-    screening : bool
-        Per-row chi-square screening with IGG-III down-weighting (Yang, Song
-        & Xu 2002, J. Geodesy 76) in the epochs it flags (off by default: the
-        plain update; an unflagged epoch is always the plain update).
+    screening : bool or None
+        Per-row chi-square screening with IGG-III (or Huber) down-weighting
+        (Yang, Song & Xu 2002, J. Geodesy 76) in the epochs it flags, the
+        whole-epoch fault exclusion and the CUSUM below (an unflagged epoch
+        is always the plain update).  None (default): on, unless the
+        dataset's simulator preset says ``[run] robust_screening = false``
+        (the seed-paper presets, whose filters are the plain ones).
     chi2_row : float
         Threshold on ``w_i^2`` (1-dof chi-square; 10.83 = the 1 - 1e-3
         quantile): a row above it flags the epoch and is rejected.
@@ -324,21 +327,47 @@ class Robust:
         ``sqrt(S_ii)`` (10) and at least half of the rows agree with it.
     clock_jump_min_rows : int
         Pseudorange rows an epoch needs for the check (3).
+    huber : bool
+        Huber weights ``q = min(1, huber_k / |w|)`` instead of IGG-III (off).
+    huber_k : float
+        Huber: full weight up to ``|w| = huber_k`` (1.5).
+    fde_max_sats : int
+        Whole-epoch fault detection and exclusion (meas/robust.hpp, 3.): when
+        the epoch still fails the gate, the satellite with the largest w-test
+        statistic (Teunissen 1990) is excluded and the epoch re-tested, up to
+        this many satellites per epoch (2; 0 = off).
+    fde_min_rows : int
+        ... while more than this many rows remain (8).
+    cusum_k, cusum_h : float
+        Two-sided CUSUM per satellite and row kind on the standardized
+        innovation (Page 1954), for slow faults such as a pseudorange ramp:
+        drift ``k`` (0.5) and alarm threshold ``h`` (8; 0 = off).
+    cusum_hold_s : float
+        An alarm excludes that satellite's row this long [s] (60).
     """
 
-    screening: bool = False
+    screening: bool | None = None
     chi2_row: float = 10.83
     igg_k0: float = 1.5
     igg_k1: float = 3.0
     clock_jump: bool = True
     clock_jump_sigma: float = 10.0
     clock_jump_min_rows: int = 3
+    huber: bool = False
+    huber_k: float = 1.5
+    fde_max_sats: int = 2
+    fde_min_rows: int = 8
+    cusum_k: float = 0.5
+    cusum_h: float = 8.0
+    cusum_hold_s: float = 60.0
 
     def validate(self, prefix: str = "robust") -> "Robust":
         def bad(key, value, allowed):
             raise ConfigError(f"config key '{prefix}.{key}': bad value {value!r}; allowed: {allowed}")
 
-        for key in ("screening", "clock_jump"):
+        for key in ("screening", "clock_jump", "huber"):
+            if key == "screening" and self.screening is None:
+                continue
             if not isinstance(getattr(self, key), (bool, np.bool_)):
                 bad(key, getattr(self, key), "true or false")
         for key in ("chi2_row", "igg_k0", "igg_k1", "clock_jump_sigma"):
@@ -350,11 +379,25 @@ class Robust:
         v = self.clock_jump_min_rows
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             bad("clock_jump_min_rows", v, "an integer >= 1")
+        for key in ("fde_max_sats", "fde_min_rows"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+                bad(key, v, "an integer >= 0")
+        for key in ("cusum_k", "cusum_h", "cusum_hold_s"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                bad(key, v, "a number >= 0")
         return self
 
-    def as_core_dict(self) -> dict:
-        """The ``robust_*`` keys of the tight engine config."""
-        return {f"robust_{f.name}": getattr(self, f.name) for f in dataclasses.fields(self)}
+    def as_core_dict(self, dataset=None) -> dict:
+        """The ``robust_*`` keys of the tight engine config (``screening``
+        None: on unless ``dataset``'s simulator preset sets ``[run]
+        robust_screening = false``)."""
+        d = {f"robust_{f.name}": getattr(self, f.name) for f in dataclasses.fields(self)}
+        if self.screening is None:
+            run = (getattr(dataset, "scenario", None) or {}).get("run", {})
+            d["robust_screening"] = bool(run.get("robust_screening", True))
+        return d
 
 
 @dataclass
@@ -398,6 +441,17 @@ class RunConfig:
         diverging.  A lasting fault is then taken in whole too (tight runs:
         the ``[robust]`` per-satellite screening removes it first); the run
         summary counts these records as ``gate_reopened``.
+    gate_mismatch : float
+        Outage-aware test (nis_gate.hpp; default 25, <= 1 = off): when no
+        record was applied for ``gate_outage_s``, a record is tested against
+        ``S = gate_mismatch * H P H' + R`` (an IMU whose real noise is up to
+        5x the configured one) and, if it passes, applied as the plain
+        update.  The first fixes after an outage then end the drift instead
+        of being rejected, and the smoother carries them into the outage
+        (docs/results/gate_outages.md); in steady state the gate is unchanged.
+    gate_outage_s : float
+        Time without an applied record after which the outage-aware test is
+        used [s] (default 2).
     use_position, use_velocity : bool
     propagation_interval_s : float
         Error-state propagation step inside a filter cycle (default 0.1 s:
@@ -411,8 +465,10 @@ class RunConfig:
     constraints : Constraints
         Vehicle constraints (NHC, odometer, ZUPT/ZARU; none by default).
     robust : Robust
-        Tight coupling: clock-jump check, per-satellite screening and IGG-III
-        down-weighting (``[robust]``; screening off by default).
+        Tight coupling: clock-jump check, per-satellite screening with IGG-III
+        or Huber down-weighting, whole-epoch fault exclusion and the CUSUM of
+        slow faults (``[robust]``; on by default except for the seed-paper
+        presets).
     smooth : bool
         Post-process with the RTS smoother (EKF; RB-UKF and UKF: the unscented
         RTS smoother, Sarkka 2008; loose or tight): every output row and sigma,
@@ -453,6 +509,8 @@ class RunConfig:
     gate_prob: float | None = None
     gate_chi2: float | None = None
     gate_reopen_after: int = 5
+    gate_mismatch: float = 25.0
+    gate_outage_s: float = 2.0
     use_position: bool = True
     use_velocity: bool = True
     propagation_interval_s: float = 0.1
@@ -484,7 +542,8 @@ class RunConfig:
         for key, allowed in (("filter", FILTERS), ("coupling", COUPLINGS)):
             if not isinstance(getattr(self, key), str):
                 bad(key, getattr(self, key), ", ".join(allowed))
-        for key in ("init_seed", "gate_prob", "gate_chi2", "gate_reopen_after", "propagation_interval_s",
+        for key in ("init_seed", "gate_prob", "gate_chi2", "gate_reopen_after", "gate_mismatch", "gate_outage_s",
+                    "propagation_interval_s",
                     "output_decimation", "ut_alpha", "ut_beta", "ut_kappa", "cycle_period_s"):
             v = getattr(self, key)
             if v is None and key in ("ut_kappa", "cycle_period_s", "gate_chi2", "gate_prob"):
@@ -570,6 +629,9 @@ class RunConfig:
         if int(self.gate_reopen_after) != self.gate_reopen_after or self.gate_reopen_after < 0:
             bad("gate_reopen_after", self.gate_reopen_after, "an integer >= 0 (0 = never)")
         self.gate_reopen_after = int(self.gate_reopen_after)
+        for key in ("gate_mismatch", "gate_outage_s"):
+            if getattr(self, key) < 0:
+                bad(key, getattr(self, key), "a number >= 0" + (" (<= 1: off)" if key == "gate_mismatch" else " [s]"))
         if self.cycle_period_s is not None and not self.cycle_period_s > 0:
             bad("cycle_period_s", self.cycle_period_s, "> 0 or absent")
         if int(self.output_decimation) != self.output_decimation or int(self.output_decimation) < 1:

@@ -119,6 +119,9 @@ def add_run_parser(sub) -> None:
     p.add_argument("--allow-free-inertial", action="store_true",
                    help="accept a run that used no GNSS update, or had more than 20 %% of them rejected by the "
                         "innovation gate (otherwise an error: wrong units, time bases or sigmas are the usual cause)")
+    p.add_argument("--allow-unhealthy", action="store_true",
+                   help="write a solution whose health check failed (a broken covariance, a km-scale jump; "
+                        "otherwise exit status 2 and nothing written)")
     p.set_defaults(func=cmd_run)
 
 
@@ -149,7 +152,8 @@ def resolved_config_toml(cfg: RunConfig) -> str:
 
     if cfg.coupling == "tight" or cfg.robust != Robust():
         lines.append("\n[robust]")
-        lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)]
+        lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)
+                  if getattr(cfg.robust, f.name) is not None]  # screening unset: the default (on, or the preset's)
     if cfg.imu is not None:
         from ..config import _USER_UNITS
 
@@ -613,6 +617,9 @@ def cmd_run(args) -> int:
             raise UserError(f"no GNSS update was used ({records} records, {dropped} dropped): the run is free "
                             "inertial; check the GNSS time base, sigmas and units (--allow-free-inertial to "
                             "accept it)")
+    health = s.get("health") or {}
+    if health and not health.get("healthy", True) and not args.allow_unhealthy:
+        raise UserError(f"unhealthy solution: {health['reason']} (--allow-unhealthy to write it)")
     stages.done("filter")
     from ..filters.solution import write_innovations
 
@@ -659,7 +666,19 @@ def cmd_run(args) -> int:
           f"{s.get('cholesky_repairs', 0)} covariance repairs"
           + (f"; robust: {s.get('rejected_sats', 0)} satellite-epochs rejected, {s.get('downweighted_sats', 0)} "
              f"down-weighted ({s.get('flagged_epochs', 0)} epochs flagged), {s.get('clock_jumps', 0)} clock jumps"
-             if s.get("robust_screening") or s.get("clock_jumps") else ""))
+             if s.get("robust_screening") or s.get("clock_jumps") else "")
+          + (f"; {s['fde_excluded']} satellite-epochs excluded by FDE, {s.get('cusum_alarms', 0)} CUSUM alarms"
+             if s.get("robust_screening") else "")
+          + (f"; {s['gate_outage_accepted']} records after outages accepted by the outage-aware gate"
+             if s.get("gate_outage_accepted") else ""))
+    if health:
+        import sys
+
+        print(f"health: {'ok' if health['healthy'] else 'UNHEALTHY (' + health['reason'] + ')'}; consistency "
+              f"{health['consistency']} (mean NIS / rows {health['nis_ratio']:.3g}; consistent within "
+              f"1/3 .. 3)")
+        for w in health.get("warnings", ()):
+            print(f"warning: {w}", file=sys.stderr)
     stages.done("write")
     if args.timings:
         import sys

@@ -118,4 +118,9 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         sol = spec.runner(cfg.coupling)(dataset, cfg, **options)
     if report is not None:
         sol.summary["sanitize"] = report
+    if cfg.coupling != "gnss":
+        from .health import assess
+
+        imu_t = getattr(getattr(dataset, "imu", None), "t", None)
+        sol.summary["health"] = assess(sol, imu_t_end=float(imu_t[-1]) if imu_t is not None and len(imu_t) else None)
     return sol

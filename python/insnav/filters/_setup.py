@@ -128,7 +128,8 @@ def gate_config(cfg: RunConfig, dataset=None) -> dict:
         chi2, prob = 0.0, float(prob)
     else:
         chi2, prob = float(cfg.gate_chi2), 0.0
-    return dict(gate_chi2=chi2, gate_prob=prob, gate_reopen_after=int(cfg.gate_reopen_after))
+    return dict(gate_chi2=chi2, gate_prob=prob, gate_reopen_after=int(cfg.gate_reopen_after),
+                gate_mismatch=float(cfg.gate_mismatch), gate_outage_s=float(cfg.gate_outage_s))
 
 
 def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **extra) -> dict:

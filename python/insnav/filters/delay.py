@@ -152,7 +152,7 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     inv[order] = np.arange(len(order))
     sig, err = out["sigma"], out["imu_err"]
     llh, rpy = out["llh"], out["rpy"] * RAD2DEG
-    summary.update(updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
+    summary.update(updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), gate_outage_accepted=int(out["gate_outage_accepted"]),
                    cholesky_repairs=int(out["cholesky_repairs"]))
     sol = Solution(t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2],
                    v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],

@@ -58,7 +58,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                    gyro_scale=err[:, 9:12], gnss_t=gnss_t, innovation=out["innovation"], nis=out["nis"],
                    gnss_status=out["status"],
                    summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n_core, updates=int(out["updates"]),
-                                rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), cholesky_repairs=int(out["cholesky_repairs"]),
+                                rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), gate_outage_accepted=int(out["gate_outage_accepted"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
     if cfg.imu_error_sigmas:  # layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
         sol.sigma_imu_err = np.zeros((len(sol.t), 12))

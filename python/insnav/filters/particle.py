@@ -200,7 +200,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         clock0 = initial_clock(inputs, dataset, cfg, init)
     ep_t = np.asarray(inputs.epoch_t, float)
     init_vec = init_vector(dataset, init)
-    core_cfg = engine_config(dataset, cfg, ep_t, 20, **cfg.robust.as_core_dict())
+    core_cfg = engine_config(dataset, cfg, ep_t, 20, **cfg.robust.as_core_dict(dataset))
     pcfg = dict(particles=int(particles), seed=int(seed), fading=bool(fading), rho=float(rho), beta=float(beta),
                 eta_max=float(eta_max), alpha=np.atleast_1d(np.asarray(alpha, float)),
                 fading_memory=str(fading_memory),
@@ -231,7 +231,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
         summary=dict(filter=filt, coupling="tight", layout=20, particles=int(particles) if filt != "fukf" else 1,
                      fading=bool(fading), seed=int(seed), updates=int(out["updates"]),
-                     rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), cholesky_repairs=int(out["cholesky_repairs"]),
+                     rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), gate_outage_accepted=int(out["gate_outage_accepted"]), cholesky_repairs=int(out["cholesky_repairs"]),
                      resamples=int(out["resamples"]), divergences=int(out["divergences"]),
                      reseeds=int(out["reseeds"]), marginalize=bool(marginalize) if filt == "pf" else False,
                      gnss_records=int(E), sat_rows=int(len(inputs.prn)),

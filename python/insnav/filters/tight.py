@@ -140,14 +140,16 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         isb0 = initial_isb(inputs, dataset, cfg, init, sys_idx)
     ep_t = np.asarray(inputs.epoch_t, float)
     init_vec = init_vector(dataset, init)
+    robust = cfg.robust.as_core_dict(dataset)
     core_cfg = engine_config(dataset, cfg, ep_t, n, use_pseudorange=bool(use_pseudorange), use_rate=bool(use_rate),
-                             **cfg.robust.as_core_dict())
+                             **robust)
     if cfg.smooth:
         core_cfg["smooth"] = True
     out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                           np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0, np.zeros(12),
                           np.asarray(clock0, float), model, core_cfg, layout=n, system=sys_idx,
-                          isb0=None if n == 17 else np.asarray(isb0, float))
+                          isb0=None if n == 17 else np.asarray(isb0, float),
+                          prn=np.asarray(inputs.prn, np.int64) if len(inputs.prn) else None)
     sig, err, llh, rpy = out["sigma"], out["imu_err"], out["llh"], out["rpy"] * RAD2DEG
     systems = sorted(set(np.asarray(inputs.system).tolist()), key=SYSTEMS.index)
     sol = TightSolution(
@@ -158,9 +160,12 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
         summary=dict(filter=cfg.filter, coupling="tight", layout=n, systems="".join(systems),
                      updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
+                     gate_outage_accepted=int(out["gate_outage_accepted"]),
                      cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=int(ep_t.size),
                      sat_rows=int(len(inputs.prn)), clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
-                     robust_screening=bool(cfg.robust.screening), rejected_sats=int(out["rejected_sats"]),
+                     robust_screening=bool(robust["robust_screening"]), rejected_sats=int(out["rejected_sats"]),
+                     fde_excluded=int(out["fde_excluded"]), cusum_alarms=int(out["cusum_alarms"]),
+                     cusum_excluded=int(out["cusum_excluded"]),
                      downweighted_sats=int(out["downweighted_sats"]), flagged_epochs=int(out["flagged_epochs"]),
                      clock_jumps=int(out["clock_jumps"])),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 15:17],

@@ -407,6 +407,51 @@ def _every_kth_epoch(obs, k: int):
     return dataclasses.replace(obs, **sub)
 
 
+#: Doppler velocity vs the slope of the single-point positions: window [s] and largest difference [m/s]
+DOPPLER_CHECK_WINDOW_S = 10.0
+DOPPLER_CHECK_MAX_MPS = 3.0
+
+
+def doppler_consistent(t, r_e, v_e, *, window_s: float = DOPPLER_CHECK_WINDOW_S,
+                       max_diff_mps: float = DOPPLER_CHECK_MAX_MPS) -> np.ndarray:
+    """True where the Doppler velocity of a single-point fix agrees with the change of the fixes' positions.
+
+    The velocity from the pseudorange rates and the least-squares slope of the positions over
+    ``window_s`` centred on the epoch are independent; with 4 or 5 satellites snapshot RAIM cannot
+    find a biased Doppler on one of them (no redundancy), but the two velocities then differ by
+    metres per second (a 5 m/s bias on one of 5 satellites: about 5-10 m/s).  Over 10 s of 1 Hz
+    fixes with 5 m position noise the slope is good to about 0.5 m/s, so ``max_diff_mps`` = 3 m/s
+    is about 6 sigma.  Epochs without a position or velocity, or with fewer than 4 positions in the
+    window, are kept (True) when their velocity is finite.
+
+    Parameters
+    ----------
+    t : (E,) s;  r_e : (E, 3) ECEF position [m];  v_e : (E, 3) ECEF velocity [m/s]
+
+    Returns
+    -------
+    (E,) bool
+    """
+    t = np.asarray(t, float)
+    r_e, v_e = np.asarray(r_e, float), np.asarray(v_e, float)
+    ok = np.isfinite(r_e[:, 0])
+    keep = np.isfinite(v_e[:, 0])
+    tt, rr = t[ok], r_e[ok]
+    lo = np.searchsorted(tt, t - window_s / 2.0)
+    hi = np.searchsorted(tt, t + window_s / 2.0, side="right")
+    for k in np.flatnonzero(keep):
+        a, b = lo[k], hi[k]
+        if b - a < 4:
+            continue
+        dt = tt[a:b] - t[k]
+        A = np.column_stack([np.ones_like(dt), dt, dt * dt])  # constant acceleration: turns, speed changes
+        coef, _, rank, _ = np.linalg.lstsq(A, rr[a:b], rcond=None)
+        if rank < 3:
+            continue
+        keep[k] = np.linalg.norm(coef[1] - v_e[k]) <= max_diff_mps
+    return keep
+
+
 def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu_tag=None,
                reference=None, weighting=None) -> tuple[RinexDataset, RunConfig]:
     """Build a dataset and a run configuration from RINEX + IMU (+ reference) files.
@@ -484,13 +529,16 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
         inp_all, _ = spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt, **kw)
         return limit_sats(inp_all, MAX_SATS)
 
+    # the fixes of the start (course, initial position) and of the input checks: with RAIM FDE on
+    # positions and Doppler velocities, so one faulty satellite (a Doppler bias, a wrong PRN) neither
+    # moves the start nor fails the gyro-vs-course check (insnav.gnss.spp.solve_spp)
     inp = inputs_at(r0)
-    spp = single_point_solution(inp, r0)
+    spp = single_point_solution(inp, r0, raim=True)
     good = np.isfinite(spp.r_e[:, 0])
     if good.any():  # recompute light time / elevation / atmosphere at the data's own position
         r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
         inp = inputs_at(r0)
-        spp = single_point_solution(inp, r0)
+        spp = single_point_solution(inp, r0, raim=True)
         good = np.isfinite(spp.r_e[:, 0])
 
     t_first = float(obs.epoch_t_gps_s[0] - t_week0)
@@ -504,6 +552,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
                          f"{imu_t[-1]:.3f}) do not overlap the observations in {obs.path} ({t_first:.3f} to "
                          f"{t_last:.3f}); check the IMU time column and imu_time")
     v_n_spp = spp.v_n()
+    v_n_spp[~doppler_consistent(spp.t, spp.r_e, spp.v_e)] = np.nan  # not used for the start or the checks
     speed = np.hypot(v_n_spp[:, 0], v_n_spp[:, 1])
     cand = np.flatnonzero(good & (spp.t >= t_lo) & (spp.t < t_hi))
     if cand.size == 0:

@@ -478,8 +478,9 @@ _TOP = {"name", "description", "seed", "time", "initial", "motion", "imu", "trut
         "gnss", "gnss_raw", "gnss_rtk", "odometer", "run"}
 #: keys of a preset's [run] table: run-configuration defaults of the data it
 #: simulates (Dataset.scenario["run"]), e.g. gate_prob = 0 for the seed-paper
-#: presets, whose filters have no innovation gate
-RUN_DEFAULT_KEYS = {"gate_prob"}
+#: presets, whose filters have no innovation gate, and robust_screening = false
+#: for their tight filters (no per-satellite screening, FDE or CUSUM)
+RUN_DEFAULT_KEYS = {"gate_prob", "robust_screening"}
 
 
 def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
@@ -487,7 +488,8 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
     rn = _table(ctx, raw, "", "run")
     _check_keys(ctx, rn, "run", RUN_DEFAULT_KEYS)
     gate_prob = _num(ctx, rn, "run", "gate_prob", 0.0, lo=0.0, hi=0.999999999)
-    del gate_prob  # read by insnav.run from Dataset.scenario["run"]; checked here
+    screening = _bool(ctx, rn, "run", "robust_screening", True)
+    del gate_prob, screening  # read by insnav.run from Dataset.scenario["run"]; checked here
     name = _str(ctx, raw, "", "name", "unnamed")
     description = _str(ctx, raw, "", "description", "")
     seed = _num(ctx, raw, "", "seed", 0, integer=True, lo=0)

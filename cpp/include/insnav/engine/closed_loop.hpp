@@ -86,6 +86,7 @@ struct NavOutputs {
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
   int gate_reopened = 0;       // records the gate rejected but applied, P scaled, after reopen_after rejections in a row
+  int gate_outage_accepted = 0;  // records above the plain gate applied by its outage-aware test (nis_gate.hpp)
 
   // Interrupt and progress hook (may be null): called every `poll_every`
   // samples with the sample index and count; false stops the run with
@@ -286,7 +287,19 @@ struct ClosedLoop {
   template <class Meas>
   UpdateResult update_gated(const Meas& meas) {
     const int m = static_cast<int>(meas.linear().rows());
-    UpdateResult r = update(meas, gate.nominal_threshold(m));
+    const double t = ins.state().t;
+    double threshold = gate.nominal_threshold(m);
+    bool bridged = false;
+    if constexpr (kCanInflate) {
+      // outage-aware test (nis_gate.hpp): passed -> the plain update, ungated
+      if (threshold > 0.0 && gate.outage_aware(t) &&
+          mismatch_nis(meas.linear(), gate.config().mismatch) <= threshold) {
+        bridged = true;
+        threshold = 0.0;
+      }
+    }
+    UpdateResult r = update(meas, threshold);
+    if (bridged && r.applied && !(r.nis > gate.nominal_threshold(m))) bridged = false;  // passed the plain test too
     bool forced = false;
     if (r.rejected_by_gate && gate.reopening()) {
       // lock-out recovery (nis_gate.hpp): the covariance under which this
@@ -301,8 +314,28 @@ struct ClosedLoop {
       r = update(meas, 0.0);
       forced = r.applied;
     }
-    gate.record(r, forced);
+    gate.record(r, forced, t, bridged);
     return r;
+  }
+
+  /// The NIS of `lin` under S_a = alpha H P H' + R (the outage-aware test of
+  /// nis_gate.hpp); +inf when S_a is not positive definite.  No heap.
+  double mismatch_nis(const LinearMeasurement<L>& lin, double alpha) {
+    using Dyn = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxMeasRows, kMaxMeasRows>;
+    using Vm = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxMeasRows, 1>;
+    using HP = Eigen::Matrix<double, Eigen::Dynamic, L::kSize, Eigen::RowMajor, kMaxMeasRows, L::kSize>;
+    const int m = lin.rows();
+    if (m == 0) return 0.0;
+    const Vm y = lin.residual - lin.H * filter.x();
+    HP hp(m, L::kSize);
+    hp.noalias() = lin.H * filter.P();
+    Dyn S(m, m);
+    S.noalias() = alpha * (hp * lin.H.transpose());
+    S += lin.R;
+    Eigen::LLT<Dyn> llt(S);
+    if (llt.info() != Eigen::Success) return kInf;
+    const double nis = y.dot(llt.solve(y));
+    return std::isfinite(nis) ? nis : kInf;
   }
 
   /// Call after changing the filter directly (e.g. a delayed update).

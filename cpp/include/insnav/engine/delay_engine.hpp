@@ -126,6 +126,7 @@ class RandomDelayEngine {
     for (; g < m; ++g) out.mark(g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.gate_reopened = core_.gate.reopened();
+    out.gate_outage_accepted = core_.gate.outage_accepted();
   }
 
  private:
@@ -255,6 +256,7 @@ class TimeTaggedEngine {
     for (; ga < m; ++ga) out.mark(ga, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.gate_reopened = core_.gate.reopened();
+    out.gate_outage_accepted = core_.gate.outage_accepted();
     out.updates = 0;
     if (out.status)
       for (std::int64_t g = 0; g < m; ++g) out.updates += out.status[g] == static_cast<std::int8_t>(RecordStatus::kApplied);

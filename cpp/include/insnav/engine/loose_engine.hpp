@@ -134,6 +134,7 @@ class LooseEngine {
     for (; c < k; ++c) mark_constraint(out, c, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.gate_reopened = core_.gate.reopened();
+    out.gate_outage_accepted = core_.gate.outage_accepted();
   }
 
   /// Reset to the initial state (the start of run(); the push API's constructor).

@@ -17,7 +17,13 @@
 // an epoch, a common offset of all pseudorange innovations (a receiver clock
 // jump) is moved into the clock estimate, then (screening on) rows whose
 // predicted innovation fails the per-row chi-square test are rejected and,
-// in such a flagged epoch, the rest are IGG-III down-weighted.
+// in such a flagged epoch, the rest are IGG-III (or Huber) down-weighted; a
+// satellite whose rows keep failing slowly is caught by a CUSUM and excluded
+// for a while; and when the epoch still fails the gate, the satellite with
+// the largest w-test statistic is excluded and the epoch re-tested (FDE).
+// After an outage (the gate's outage-aware test, nis_gate.hpp) every test
+// uses alpha H P H' + R, so the first epochs after it are not screened out
+// whole.
 //
 // Input: E epochs (time, satellite range [begin, end) into one flat array of
 // SatObservation), sorted by time.  No heap allocation inside run().
@@ -74,6 +80,9 @@ struct TightOutputs : NavOutputs {
   int downweighted_sats = 0;       // satellite-epochs down-weighted (and none of their rows rejected)
   int flagged_epochs = 0;          // epochs the screening flagged
   int clock_jumps = 0;             // clock jumps absorbed
+  int fde_excluded = 0;            // satellite-epochs excluded by the whole-epoch FDE
+  int cusum_alarms = 0;            // CUSUM alarms (a row kind of a satellite excluded for cusum_hold_s)
+  int cusum_excluded = 0;          // satellite rows left out while a CUSUM exclusion held
 
   void mark(const TightEpoch& ep, std::int64_t g, RecordStatus st) {
     set_status(status, g, st);
@@ -111,6 +120,10 @@ class TightEngine {
            std::int64_t n_epochs, const TightEpoch* epochs, const SatObservation* sats, TightOutputs& out) {
     start(initial, P0, corr0, clock_bias0, clock_drift0);
     sats_ = sats;
+    for (int i = 0; i < kSatKeys; ++i) {
+      cusum_pos_[i] = cusum_neg_[i] = 0.0;
+      excluded_until_[i] = -kInf;
+    }
     std::int64_t g = 0;
     for (; g < n_epochs && !(epochs[g].t > initial.t); ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, n_epochs, cfg_.cycle_period, cfg_.output_decimation, out,
@@ -119,6 +132,7 @@ class TightEngine {
     for (; g < n_epochs; ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.gate_reopened = core_.gate.reopened();
+    out.gate_outage_accepted = core_.gate.outage_accepted();
   }
 
   /// Reset to the initial state (the start of run(); the push API's constructor).
@@ -145,11 +159,23 @@ class TightEngine {
       work_[ns] = s;
       src_[ns++] = j;
     }
-    set_measurement(ns);
     const RobustConfig& rc = cfg_.robust;
+    const double t_ep = core_.state().t;
+    const bool outage = core_.gate.outage_aware(t_ep);
+    const double alpha = outage ? core_.gate.config().mismatch : 1.0;
+    if (rc.screening && rc.cusum_h > 0.0)  // rows a CUSUM alarm excluded (robust.hpp, 4.)
+      for (int i = 0; i < ns; ++i)
+        for (int kind = 0; kind < 2; ++kind) {
+          double& z = kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps;
+          if (std::isfinite(z) && excluded_until_[sat_key(work_[i], kind)] > t_ep) {
+            z = NAN;
+            ++out.cusum_excluded;
+          }
+        }
+    set_measurement(ns);
     double jump = 0.0;
     if (rc.clock_jump && meas_.linear().rows() > 0) {
-      standardize();
+      standardize(1.0);
       jump = common_pseudorange_offset();
       if (jump != 0.0) {
         core_.clock_bias -= jump;  // residual = predicted - measured: a jump J of the receiver shows as -J
@@ -174,7 +200,10 @@ class TightEngine {
       for (std::int64_t j = ep.begin; j < ep.end; ++j) out.sat_residual[2 * j] = out.sat_residual[2 * j + 1] = NAN;
       for (int r = 0; r < m0; ++r) out.sat_residual[2 * src_[row_sat_[r]] + row_kind_[r]] = meas_.linear().residual[r];
     }
-    if (rc.screening && m0 > 0) screen_and_weight(ns, out);
+    if (rc.screening && m0 > 0) {
+      screen_and_weight(ns, alpha, !outage, t_ep, out);
+      if (rc.fde_max_sats > 0) exclude_faults(ns, alpha, out);
+    }
     if (out.sat_flag) {
       for (std::int64_t j = ep.begin; j < ep.end; ++j)
         out.sat_flag[2 * j] = out.sat_flag[2 * j + 1] = static_cast<std::int8_t>(SatFlag::kAbsent);
@@ -206,8 +235,9 @@ class TightEngine {
               core_.isb.data());
   }
 
-  /// y_i = residual_i - H_i x and sqrt(S_ii) = sqrt(H_i P H_i^T + R_ii) of every row (robust.hpp).
-  void standardize() {
+  /// y_i = residual_i - H_i x and sqrt(S_ii) = sqrt(alpha H_i P H_i^T + R_ii) of every row (robust.hpp;
+  /// alpha > 1: the gate's outage-aware test, nis_gate.hpp).
+  void standardize(double alpha) {
     const auto& lin = meas_.linear();
     const auto& x = core_.filter.x();
     const auto& P = core_.filter.P();
@@ -215,7 +245,7 @@ class TightEngine {
       const auto h = lin.H.row(i);
       hP_.noalias() = h * P;
       y_[i] = lin.residual[i] - (h * x).value();
-      sqrt_S_[i] = std::sqrt(std::max(hP_.dot(h) + lin.R(i, i), 0.0));
+      sqrt_S_[i] = std::sqrt(std::max(alpha * hP_.dot(h) + lin.R(i, i), 0.0));
     }
   }
 
@@ -248,12 +278,38 @@ class TightEngine {
     return 2 * agree >= n ? med : 0.0;
   }
 
-  /// Screening and IGG-III (robust.hpp, 2.): edits work_ and rebuilds the measurement.
-  void screen_and_weight(int ns, TightOutputs& out) {
+  /// The CUSUM slot of a satellite's row kind (robust.hpp, 4.).
+  static int sat_key(const SatObservation& s, int kind) {
+    return ((s.system & 3) * 64 + (s.prn & 63)) * 2 + kind;
+  }
+
+  /// Screening and IGG-III / Huber (robust.hpp, 2.) and the CUSUM (4.; when
+  /// `cusum`): edits work_ and rebuilds the measurement.
+  void screen_and_weight(int ns, double alpha, bool cusum, double t_ep, TightOutputs& out) {
     const RobustConfig& rc = cfg_.robust;
-    standardize();
+    standardize(alpha);
     const int m0 = meas_.linear().rows();
-    bool flagged = false;
+    bool alarm = false;
+    if (cusum && rc.cusum_h > 0.0) {
+      const double clip = std::sqrt(rc.chi2_row);
+      for (int r = 0; r < m0; ++r) {
+        SatObservation& s = work_[row_sat_[r]];
+        if (s.prn <= 0) continue;  // no satellite identity: no CUSUM
+        const int key = sat_key(s, row_kind_[r]);
+        const double w = std::clamp(y_[r] / sqrt_S_[r], -clip, clip);
+        cusum_pos_[key] = std::max(0.0, cusum_pos_[key] + w - rc.cusum_k);
+        cusum_neg_[key] = std::max(0.0, cusum_neg_[key] - w - rc.cusum_k);
+        if (cusum_pos_[key] > rc.cusum_h || cusum_neg_[key] > rc.cusum_h) {
+          cusum_pos_[key] = cusum_neg_[key] = 0.0;
+          excluded_until_[key] = t_ep + rc.cusum_hold_s;
+          ++out.cusum_alarms;
+          (row_kind_[r] == 0 ? s.pseudorange_m : s.pseudorange_rate_mps) = NAN;
+          flag_[2 * row_sat_[r] + row_kind_[r]] = SatFlag::kRejected;
+          alarm = true;
+        }
+      }
+    }
+    bool flagged = alarm;
     for (int r = 0; r < m0; ++r) flagged = flagged || !(y_[r] * y_[r] <= rc.chi2_row * sqrt_S_[r] * sqrt_S_[r]);
     if (!flagged) return;
     ++out.flagged_epochs;
@@ -261,7 +317,10 @@ class TightEngine {
       const double w = y_[r] / sqrt_S_[r];
       SatObservation& s = work_[row_sat_[r]];
       const int kind = row_kind_[r];
-      const double q = (w * w <= rc.chi2_row) ? igg3_weight(w, rc.igg_k0, rc.igg_k1) : 0.0;
+      if (flag_[2 * row_sat_[r] + kind] == SatFlag::kRejected) continue;  // the CUSUM's
+      const double q = !(w * w <= rc.chi2_row) ? 0.0
+                       : rc.huber             ? huber_weight(w, rc.huber_k)
+                                              : igg3_weight(w, rc.igg_k0, rc.igg_k1);
       if (q <= 0.0) {
         (kind == 0 ? s.pseudorange_m : s.pseudorange_rate_mps) = NAN;
         flag_[2 * row_sat_[r] + kind] = SatFlag::kRejected;
@@ -278,6 +337,52 @@ class TightEngine {
     set_measurement(ns);
   }
 
+  /// Whole-epoch FDE (robust.hpp, 3.): while the epoch's NIS under
+  /// alpha H P H' + R fails the gate, exclude the satellite of the largest
+  /// w-test statistic.  Edits work_ and rebuilds the measurement.
+  void exclude_faults(int ns, double alpha, TightOutputs& out) {
+    using Dyn = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxMeasRows, kMaxMeasRows>;
+    using Vm = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxMeasRows, 1>;
+    using HP = Eigen::Matrix<double, Eigen::Dynamic, L::kSize, Eigen::RowMajor, kMaxMeasRows, L::kSize>;
+    const RobustConfig& rc = cfg_.robust;
+    for (int k = 0; k < rc.fde_max_sats; ++k) {
+      const auto& lin = meas_.linear();
+      const int m = lin.rows();
+      const double threshold = core_.gate.nominal_threshold(m);
+      if (threshold <= 0.0 || m <= rc.fde_min_rows) return;
+      const Vm y = lin.residual - lin.H * core_.filter.x();
+      HP hp(m, L::kSize);
+      hp.noalias() = lin.H * core_.filter.P();
+      Dyn S(m, m);
+      S.noalias() = alpha * (hp * lin.H.transpose());
+      S += lin.R;
+      Eigen::LLT<Dyn> llt(S);
+      if (llt.info() != Eigen::Success) return;
+      const Vm Sy = llt.solve(y);
+      if (!(y.dot(Sy) > threshold)) return;
+      Dyn Sinv = Dyn::Identity(m, m);
+      llt.solveInPlace(Sinv);
+      // rows of meas_ -> satellites (the finite observations, in order)
+      int worst = -1, row = 0;
+      double w_max = 0.0;
+      for (int i = 0; i < ns && row < m; ++i)
+        for (int kind = 0; kind < 2 && row < m; ++kind) {
+          if (!std::isfinite(kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps)) continue;
+          const double w = std::fabs(Sy[row]) / std::sqrt(std::max(Sinv(row, row), 1e-300));
+          if (w > w_max) {
+            w_max = w;
+            worst = i;
+          }
+          ++row;
+        }
+      if (worst < 0) return;
+      work_[worst].pseudorange_m = work_[worst].pseudorange_rate_mps = NAN;
+      flag_[2 * worst] = flag_[2 * worst + 1] = SatFlag::kRejected;
+      ++out.fde_excluded;
+      set_measurement(ns);
+    }
+  }
+
   ClosedLoop<Filter> core_;
   TightConfig cfg_;
   TightMeasurement<L> meas_;
@@ -289,6 +394,9 @@ class TightEngine {
   Eigen::Matrix<double, 1, L::kSize> hP_;
   int row_sat_[kMaxMeasRows] = {}, row_kind_[kMaxMeasRows] = {};
   SatFlag flag_[2 * kMaxMeasRows] = {};
+  // CUSUM per (system, prn, row kind) (robust.hpp, 4.)
+  static constexpr int kSatKeys = 4 * 64 * 2;
+  double cusum_pos_[kSatKeys] = {}, cusum_neg_[kSatKeys] = {}, excluded_until_[kSatKeys] = {};
   const SatObservation* sats_ = nullptr;
 };
 

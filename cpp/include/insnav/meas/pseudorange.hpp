@@ -49,6 +49,7 @@ struct SatObservation {
   double sigma_pr_m = 10.0;       // 1-sigma [m]
   double sigma_prr_mps = 0.1;     // 1-sigma [m/s]
   int system = 0;                 // 0 GPS (reference clock), 1 GLONASS, 2 Galileo, 3 BeiDou (insnav.gnss.systems)
+  int prn = 0;                    // satellite number within its system (0: unknown; the robust CUSUM keys on it)
 };
 
 /// Antenna position/velocity in ECEF of a navigation state.

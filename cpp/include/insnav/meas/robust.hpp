@@ -33,6 +33,31 @@
 //    applied as R_ii / q (q = 0: rejected), k0 = 1.5, k1 = 3.0 by default.
 //    An epoch that is not flagged is the plain update, so on clean data the
 //    robust filter equals the plain one except at the rare false alarms.
+//    `huber = true` replaces IGG-III by the Huber weight (Huber 1964; the
+//    M-estimator form of Yang et al. 2002): q(w) = 1 for |w| <= k, k/|w|
+//    beyond (k = huber_k, default 1.5), never zero below the chi2_row test.
+// 3. Fault detection and exclusion over the whole epoch (RAIM in the
+//    innovation domain, the DIA scheme's identification step): when the
+//    epoch's NIS over the rows left after 2. fails the gate (nis_gate.hpp),
+//    the satellite of the row with the largest w-test statistic
+//        w_i = (S^-1 y)_i / sqrt((S^-1)_ii)            (Teunissen 1990, eq. 13)
+//    is excluded (both its rows) and the epoch re-tested, up to
+//    `fde_max_sats` satellites and while more than `fde_min_rows` rows remain
+//    (below that the epoch has no redundancy to identify a fault and goes to
+//    the gate whole).  One faulty satellite of many no longer costs the
+//    epoch, and the gate's reopening never applies a row the screening or the
+//    exclusion removed (it sees only the rows left).
+// 4. Slow faults (a ramp of a few m/s on one pseudorange grows under the
+//    per-row threshold while the filter absorbs part of it): a two-sided
+//    CUSUM (Page 1954; Basseville & Nikiforov 1993, sec. 2.2) per satellite
+//    and row kind on the standardized innovation, clipped to
+//    +-sqrt(chi2_row) so one outlier cannot trigger it alone:
+//        g+ = max(0, g+ + w - k),   g- = max(0, g- - w - k),   alarm: g > h
+//    (k = cusum_k = 0.5 detects a mean shift of about 1 sigma, h = cusum_h).
+//    An alarm excludes that row of that satellite for `cusum_hold_s` and
+//    resets its sums; a fault still there afterwards fails the per-row test
+//    at once.  Not updated while the gate's outage-aware test is active
+//    (after an outage the innovations of every satellite are large together).
 #pragma once
 
 #include <algorithm>
@@ -42,14 +67,27 @@ namespace insnav {
 
 /// Robust tight update settings (run config [robust], insnav.config.Robust).
 struct RobustConfig {
-  bool screening = false;         // per-row screening + IGG-III in flagged epochs (off: plain update)
+  bool screening = true;          // per-row screening + IGG-III, FDE and CUSUM (off: plain update)
   double chi2_row = 10.83;        // 1-dof chi-square threshold on w_i^2 (1 - 1e-3 quantile, 3.29 sigma)
   double igg_k0 = 1.5;            // IGG-III: full weight up to |w| = k0
   double igg_k1 = 3.0;            // IGG-III: zero weight beyond |w| = k1
   bool clock_jump = true;         // absorb a common pseudorange offset into the clock
   double clock_jump_sigma = 10.0; // |median y| / median sqrt(S) above which the offset is a jump
   int clock_jump_min_rows = 3;    // pseudorange rows needed to call an offset common
+  bool huber = false;             // Huber instead of IGG-III weights
+  double huber_k = 1.5;           // Huber: full weight up to |w| = k
+  int fde_max_sats = 2;           // whole-epoch FDE: satellites excluded per epoch at most (0: off)
+  int fde_min_rows = 8;           // ... while more rows than this remain
+  double cusum_k = 0.5;           // CUSUM drift (in sigma of w)
+  double cusum_h = 8.0;           // CUSUM alarm threshold (0: off)
+  double cusum_hold_s = 60.0;     // an alarm excludes the row this long [s]
 };
+
+/// Huber weight factor q(w) = min(1, k/|w|) (header comment, 2.).
+inline double huber_weight(double w, double k) {
+  const double a = std::fabs(w);
+  return a <= k ? 1.0 : k / a;
+}
 
 /// IGG-III equivalent weight factor q(w) of a standardized residual w (header comment).
 inline double igg3_weight(double w, double k0, double k1) {
