@@ -120,10 +120,6 @@ class TightEngine {
            std::int64_t n_epochs, const TightEpoch* epochs, const SatObservation* sats, TightOutputs& out) {
     start(initial, P0, corr0, clock_bias0, clock_drift0);
     sats_ = sats;
-    for (int i = 0; i < kSatKeys; ++i) {
-      cusum_pos_[i] = cusum_neg_[i] = 0.0;
-      excluded_until_[i] = -kInf;
-    }
     std::int64_t g = 0;
     for (; g < n_epochs && !(epochs[g].t > initial.t); ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, n_epochs, cfg_.cycle_period, cfg_.output_decimation, out,
@@ -139,6 +135,10 @@ class TightEngine {
   void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0,
              double clock_drift0) {
     core_.reset(initial, P0, corr0, clock_bias0, clock_drift0, isb0_);
+    for (int i = 0; i < kSatKeys; ++i) {  // the per-satellite CUSUM of the robust step (robust.hpp, 4.)
+      cusum_pos_[i] = cusum_neg_[i] = 0.0;
+      excluded_until_[i] = -kInf;
+    }
   }
 
   /// The measurement step of epoch g over sats[ep.begin, ep.end), applied now
