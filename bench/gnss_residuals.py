@@ -22,6 +22,7 @@ from insnav.gnss.ephemeris import C_LIGHT  # noqa: E402
 from insnav.gnss.gpstime import gps_seconds_from_week_tow  # noqa: E402
 from insnav.gnss.measurements import observation_residuals, read_rtklib_pos  # noqa: E402
 from insnav.gnss.sp3 import read_rinex_clk, read_sp3  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/gnss_residuals.py --out docs/results/gnss_geometry.md"
 
@@ -266,7 +267,7 @@ def main(argv=None):
     text = "\n".join(L)
     print(text)
     if a.out:
-        a.out.write_text(text)
+        a.out.write_text(with_stamp(text, a.out))
 
 
 if __name__ == "__main__":

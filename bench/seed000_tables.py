@@ -40,6 +40,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from _stamps import with_stamp  # noqa: E402
 
 FILTERS = ("ekf", "rbukf", "ukf")
 AXES = ("roll", "pitch", "yaw")
@@ -525,7 +526,7 @@ def main(argv=None):
           "from an alignment step (insnav.ins.align) or a particle filter.", ""]
     out = Path(a.out)
     text = "\n".join(L) + "\n"
-    out.write_text(text)
+    out.write_text(with_stamp(text, out))
     print(text)
     return 0
 

@@ -22,6 +22,7 @@ import numpy as np
 import insnav
 from _common import git_commit
 from insnav.analysis import errors
+from _stamps import with_stamp  # noqa: E402
 
 FILTERS = ("kf", "rdkf", "exact")
 LABEL = {"kf": "(a) KF, delayed fixes used as current", "rdkf": "(b) random-delay KF (seed 001)",
@@ -172,7 +173,7 @@ def main(argv=None) -> int:
         order_verdict=("reproduced" if min(lo["kf_rdkf_n"], hi["kf_rdkf_n"]) > 2
                        and hi["kf_rdkf_n"] > lo["kf_rdkf_n"] else "partly reproduced"),
     )
-    (out / "seed001.md").write_text(text)
+    (out / "seed001.md").write_text(with_stamp(text, "seed001.md"))
     print(f"wrote {out / 'seed001.md'} and {', '.join(str(p) for v in plots.values() for p in v)}")
     print(f"total {time.perf_counter() - t_start:.0f} s")
     return 0

@@ -45,6 +45,7 @@ from insnav.io.rinex_dataset import single_point_solution
 from insnav.sim.scenario import resolve_raw
 from insnav.filters.tight import run_tight
 from insnav.gnss.tight_inputs import tight_inputs_from_raw
+from _stamps import with_stamp  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESETS = ("seed003-4sat", "seed003-3sat", "seed003-1sat")
@@ -291,7 +292,7 @@ Paired per run:
   vertical rms(error / sigma) 0.83-0.86 over the window).  Horizontal error is
   held well below the INS drift whatever the clock.
 """
-    a.out.write_text(md)
+    a.out.write_text(with_stamp(md, a.out))
     print(md)
     print(f"total {elapsed:.0f} s")
 

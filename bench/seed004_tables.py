@@ -50,6 +50,7 @@ from insnav.analysis import errors, reconvergence_time, rms  # noqa: E402
 from insnav.config import RunConfig  # noqa: E402
 from insnav.filters.particle import run_tight_particle  # noqa: E402
 from insnav.data.nav import NavState  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 T_OFF, T_ON = 600.0, 800.0
 DECIM = 10  # 10 Hz output
@@ -457,7 +458,7 @@ def main(argv=None):
         w(f"\n## Error curves\n\n![ensemble RMS]({png.name})\n\n![run 1]({png1.name})\n")
     except ImportError:
         w("\n(matplotlib not installed: no figures)\n")
-    out.write_text("\n".join(lines) + "\n")
+    out.write_text(with_stamp("\n".join(lines) + "\n", out))
     print("\n".join(lines))
 
 

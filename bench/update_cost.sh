@@ -96,4 +96,4 @@ commit 07da5dd and holds while the table keeps its shape):
   instantiation of the update in every translation unit: fewer kernels, shorter builds).
 EOF
 }
-if [ "$OUT" = "-" ]; then report; else tmp=$(mktemp "$OUT.XXXXXX"); report > "$tmp"; chmod 644 "$tmp"; mv "$tmp" "$OUT"; cat "$OUT"; fi
+if [ "$OUT" = "-" ]; then report; else tmp=$(mktemp "$OUT.XXXXXX"); { report; python3 bench/_stamps.py stamp "$(basename "$OUT")"; } > "$tmp"; chmod 644 "$tmp"; mv "$tmp" "$OUT"; cat "$OUT"; fi
