@@ -76,7 +76,7 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                  f"{_CPP}filter/kalman_update.hpp", f"{_CPP}filter/sigma_points.hpp"),
     "seed001.md": ("bench/seed001_tables.py", f"{_PY}scenarios/seed001-low.toml", f"{_PY}scenarios/seed001-high.toml",
                    f"{_CPP}engine/delay_engine.hpp", f"{_CPP}filter/random_delay_kf.hpp", f"{_PY}filters/delay.py",
-                   f"{_PY}filters/liu2020.py", "cpp/bindings/bind_delay.cpp") + LOOSE_EKF + SIM + MC,
+                   "cpp/bindings/bind_delay.cpp") + LOOSE_EKF + SIM + MC,
     "seed003.md": ("bench/seed003_tables.py", f"{_PY}scenarios/seed003-4sat.toml", f"{_PY}scenarios/seed003-3sat.toml",
                    f"{_PY}scenarios/seed003-1sat.toml", f"{_PY}io/rinex_dataset.py", f"{_PY}gnss/spp.py")
                   + TIGHT + LOOSE_EKF + SIM_RAW + MC,
