@@ -35,7 +35,7 @@ from insnav.filters.sanitize import sanitize_dataset
 from _stamps import with_stamp  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-D = REPO.parent / "shared" / "data" / "kfgins" / "sim"
+D = Path(os.environ.get("INSNAV_SHARED_DATA", REPO.parent / "shared" / "data")) / "kfgins" / "sim"
 OUTAGES = [456700, 457400, 458200, 459100]
 
 
