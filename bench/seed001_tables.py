@@ -237,7 +237,8 @@ def main(argv=None) -> int:
                 "own Table 1 (0.1504 m against the KF's 0.3319 m) |")
     arr_exp = {sc: expected_fix_arrivals(np.asarray(PAPER_P[sc])) for sc in PAPER_P}
     cs = lambda sc, f, m: fmt(cal_full[sc].summary[f][m]["mean"])  # noqa: E731
-    cal_text = ("\n".join(cal_lines) + f"\n\nThe closest setting (fixes {best[0]:g} m horizontal, {best[1]:g} m/s) "
+    cal_text = ("\n".join(cal_lines) + f"\n\nThe closest setting (fixes {best[0]:g} m horizontal, start heading "
+                f"{best[1]:g} deg) "
                 f"over {args.runs} runs: KF north / east position RMSE {cs('seed001-low', 'kf', 'pos_n_rmse_m')} / "
                 f"{cs('seed001-low', 'kf', 'pos_e_rmse_m')} m (low), {cs('seed001-high', 'kf', 'pos_n_rmse_m')} / "
                 f"{cs('seed001-high', 'kf', 'pos_e_rmse_m')} m (high); random-delay KF "
