@@ -22,6 +22,7 @@ dependency here also flags documents generated before.
 """
 from __future__ import annotations
 
+import functools
 import re
 import subprocess
 import sys
@@ -167,6 +168,13 @@ def read_stamp(text: str) -> tuple[str, bool, tuple[str, ...]] | None:
     return m.group("commit"), bool(m.group("dirty").strip()), files
 
 
+@functools.lru_cache(maxsize=None)
+def _changed_since(commit: str) -> frozenset:
+    """Files that differ between ``commit`` and the working tree (one git call per commit)."""
+    return frozenset(_git("diff", "--name-only", commit).stdout.split())
+
+
+@functools.lru_cache(maxsize=1)
 def history_problem() -> str | None:
     """Why the stamps cannot be checked here (no git, not a repository, a shallow clone), or None."""
     r = _git("rev-parse", "--is-shallow-repository")
@@ -193,7 +201,7 @@ def check(doc: str) -> str | None:
                and _git("cat-file", "-e", f"{commit}:{f}").returncode != 0]
     if missing:
         return f"{doc}: dependency file(s) {', '.join(missing)} exist neither now nor at {commit[:10]}"
-    changed = _git("diff", "--name-only", commit, "--", *want).stdout.split()
+    changed = [f for f in want if f in _changed_since(commit)]
     if changed:
         return (f"{doc}: stale, generated at {commit[:10]} but {', '.join(changed)} changed since; "
                 f"regenerate it with its script in bench/")

@@ -42,6 +42,7 @@ def test_document_is_fresh(doc):
 
 @pytest.mark.skipif(shutil.which("git") is None, reason="git not installed")
 def test_stamp_detects_a_changed_dependency(tmp_path, monkeypatch):
+    monkeypatch.setenv("GIT_CONFIG_NOSYSTEM", "1")
     """In a scratch repository: fresh after generation, stale once a listed
     file changes, fresh again when regenerated; an unlisted file does not matter."""
     def git(*a):
@@ -56,6 +57,8 @@ def test_stamp_detects_a_changed_dependency(tmp_path, monkeypatch):
     monkeypatch.setattr(stamps, "ROOT", tmp_path)
     monkeypatch.setattr(stamps, "RESULTS", tmp_path / "docs" / "results")
     monkeypatch.setattr(stamps, "DEPENDS", {"x.md": ("gen.py",)})
+    stamps._changed_since.cache_clear()
+    stamps.history_problem.cache_clear()
     git("add", "-A")
     git("commit", "-qm", "code")
     doc = tmp_path / "docs" / "results" / "x.md"
@@ -66,15 +69,20 @@ def test_stamp_detects_a_changed_dependency(tmp_path, monkeypatch):
     assert stamps.check("x.md") is None
     (tmp_path / "other.py").write_text("b = 2\n")
     git("commit", "-qam", "unrelated")
+    stamps._changed_since.cache_clear()
     assert stamps.check("x.md") is None
     (tmp_path / "gen.py").write_text("a = 2\n")
     git("commit", "-qam", "dependency")
+    stamps._changed_since.cache_clear()
     assert "stale" in stamps.check("x.md") and "gen.py" in stamps.check("x.md")
     (tmp_path / "gen.py").write_text("a = 3\n")  # uncommitted change at generation time
     doc.write_text("# x\n" + stamps.stamp("x.md"))
     assert "uncommitted" in stamps.check("x.md")
     git("commit", "-qam", "dependency again")
     doc.write_text("# x\n" + stamps.stamp("x.md"))
+    stamps._changed_since.cache_clear()
     assert stamps.check("x.md") is None
     doc.write_text("# x\n")
     assert "no stamp" in stamps.check("x.md")
+    stamps._changed_since.cache_clear()
+    stamps.history_problem.cache_clear()
