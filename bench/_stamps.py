@@ -193,7 +193,8 @@ def check(doc: str) -> str | None:
         return f"{doc}: no stamp (regenerate it with its script in bench/)"
     commit, dirty, files = st
     if dirty:
-        return f"{doc}: generated at {commit[:10]} with uncommitted changes to its dependencies; commit, then regenerate"
+        return (f"{doc}: generated at {commit[:10]} with uncommitted changes to its dependencies; "
+                "commit, then regenerate")
     if _git("cat-file", "-e", f"{commit}^{{commit}}").returncode != 0:
         return f"{doc}: stamped commit {commit[:10]} is not in this repository's history; regenerate"
     want = tuple(dict.fromkeys(files + DEPENDS.get(doc, ())))
