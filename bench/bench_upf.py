@@ -28,6 +28,7 @@ import insnav  # noqa: E402
 from _common import git_commit  # noqa: E402
 from insnav.config import RunConfig  # noqa: E402
 from insnav.filters.particle import run_tight_particle  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/bench_upf.py --repeat 3 --out docs/results/seed004_bench.md"
 
@@ -72,7 +73,7 @@ def main():
         lp = upf100[0][2]
         lines.append(f"\nBenchmark target (1800-s scenario, UPF N = 100, one core, <= 60 s): **{lp:.1f} s** "
                      f"({'met' if lp <= 60 else 'NOT met'}).\n")
-    Path(args.out).write_text("\n".join(lines) + "\n")
+    Path(args.out).write_text(with_stamp("\n".join(lines) + "\n", args.out))
     print("\n".join(lines))
 
 

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 from _common import ROOT, git_commit
+from _stamps import with_stamp  # noqa: E402
 
 SIM = Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data")) / "kfgins" / "sim"
 IMU_XZ = SIM / "Leador-A15-sim.txt.xz"
@@ -216,7 +217,7 @@ def main(argv=None) -> int:
         "KF-GINS takes about 31 s on this track (the figure reported for KF-GINS, see kfgins.md); "
         f"end to end the EKF with CSV output is {31.0 / med(x['wall'] for x in res[variants[0][0]]):.0f}x faster.",
     ]
-    Path(a.out).write_text("\n".join(lines) + "\n")
+    Path(a.out).write_text(with_stamp("\n".join(lines) + "\n", a.out))
     print("\n".join(lines))
     return 0
 

@@ -23,6 +23,7 @@ from insnav.gnss.gpstime import gps_seconds_from_week_tow  # noqa: E402
 from insnav.gnss.measurements import observation_residuals  # noqa: E402
 from insnav.io.gnss_files import read_rtklib_pos  # noqa: E402
 from insnav.gnss.sp3 import read_rinex_clk, read_sp3  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/gnss_residuals.py --out docs/results/gnss_geometry.md"
 
@@ -267,7 +268,7 @@ def main(argv=None):
     text = "\n".join(L)
     print(text)
     if a.out:
-        a.out.write_text(text)
+        a.out.write_text(with_stamp(text, a.out))
 
 
 if __name__ == "__main__":

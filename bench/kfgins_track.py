@@ -32,9 +32,10 @@ from insnav.analysis.evaluate import _solution_at
 from insnav.io.kfgins import read_kfgins_nav
 from insnav.io.kfgins_dataset import load_kfgins
 from insnav.filters.sanitize import sanitize_dataset
+from _stamps import with_stamp  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-D = REPO.parent / "shared" / "data" / "kfgins" / "sim"
+D = Path(os.environ.get("INSNAV_SHARED_DATA", REPO.parent / "shared" / "data")) / "kfgins" / "sim"
 OUTAGES = [456700, 457400, 458200, 459100]
 
 
@@ -144,7 +145,7 @@ def main(argv=None):
               "exact time by splitting the IMU increment (KF-GINS does the same interpolation)."]
     text = "\n".join(lines) + "\n"
     out = REPO / "docs" / "results" / "kfgins.md"
-    out.write_text(text)
+    out.write_text(with_stamp(text, out))
     print(text)
 
 

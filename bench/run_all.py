@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from _stamps import with_stamp  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
@@ -102,7 +103,7 @@ def main(argv=None) -> int:
         lines.append(f"| {name} | {', '.join(docs)} | `{cmd}` | {dt:.0f} | {rc} |")
     lines += ["", f"Total: {total:.0f} s ({total / 60:.1f} min)."]
     if not args.only:
-        (ROOT / "docs/results/run_all.md").write_text("\n".join(lines) + "\n")
+        (ROOT / "docs/results/run_all.md").write_text(with_stamp("\n".join(lines) + "\n", "run_all.md"))
     print("\n".join(lines))
     return 1 if failed else 0
 

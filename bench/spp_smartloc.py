@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import git_commit  # noqa: E402
 from insnav import earth  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/spp_smartloc.py --out docs/results/spp_smartloc.md"
 DATA = "smartloc_berlin_potsdamer_platz"
@@ -192,7 +193,7 @@ def main(argv=None) -> int:
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:
-        Path(args.out).write_text(text)
+        Path(args.out).write_text(with_stamp(text, args.out))
     return 0
 
 

@@ -63,6 +63,7 @@ from insnav.config import Robust, RunConfig  # noqa: E402
 from insnav.data.dataset import GnssFixes  # noqa: E402
 from insnav.filters.tight import run_tight  # noqa: E402
 from insnav.gnss.tight_inputs import tight_inputs_from_raw  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 PRESET = "urban-multignss"
 T_SKIP = 10.0
@@ -469,7 +470,7 @@ def main(argv=None):
     if a.walk_only:
         text = "\n".join(walk_section(a.data)) + f"\n\nWall time {time.perf_counter() - wall0:.0f} s.\n"
         if a.out:
-            a.out.write_text(text)
+            a.out.write_text(with_stamp(text, a.out))
         print(text)
         return
     res = [one_run(seed) for seed in range(1, a.runs + 1)]
@@ -539,7 +540,7 @@ def main(argv=None):
     text = "\n".join(lines) + "\n"
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(text)
+        a.out.write_text(with_stamp(text, a.out))
     print(text)
 
 

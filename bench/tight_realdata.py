@@ -38,6 +38,7 @@ from insnav.io.gnss_files import read_rtklib_pos  # noqa: E402
 from insnav.io.rinex_dataset import GPST_UNIX_OFFSET_S, load_rinex, load_rinex_run  # noqa: E402
 from insnav.filters.tight import run_tight
 from insnav.gnss.tight_inputs import tight_inputs_from_rinex  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/tight_realdata.py --out docs/results/tight_realdata.md"
 CONFIG = ROOT / "bench" / "walk_0827.toml"
@@ -422,7 +423,7 @@ horizontal 1-sigma at the end {sig_h_end:.2f} m against an error of {hz_ekf[-1]:
 """
     print(md)
     if a.out:
-        a.out.write_text(md)
+        a.out.write_text(with_stamp(md, a.out))
 
 
 def updown(d_m):

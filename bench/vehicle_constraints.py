@@ -33,6 +33,7 @@ from _common import git_commit  # noqa: E402
 from insnav.analysis import errors  # noqa: E402
 from insnav.config import Constraints, RunConfig  # noqa: E402
 from insnav.sim.scenario import load_scenario  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 PRESETS = {"car-mems-outage30": (500.0, 530.0), "car-mems-outage60": (500.0, 560.0),
            "car-mems-outage120": (500.0, 620.0)}
@@ -427,7 +428,7 @@ def main(argv=None) -> int:
     lines += analysis_section(R)
     lines += nhc_section(R)
     lines += kfgins_section()
-    Path(args.out).write_text("\n".join(lines) + "\n")
+    Path(args.out).write_text(with_stamp("\n".join(lines) + "\n", args.out))
     print("\n".join(lines))
     return 0
 

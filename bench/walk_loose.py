@@ -29,6 +29,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 import insnav  # noqa: E402
 from _common import git_commit  # noqa: E402
 from insnav.io.rinex_dataset import rtklib_truth  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/walk_loose.py --out docs/results/walk_loose.md"
 CONFIG = ROOT / "bench" / "walk_0827_loose.toml"
@@ -118,7 +119,7 @@ def main(argv=None) -> int:
               "out for good in the k = 1 rows and the position-only rows (docs/algorithms.md)."]
     text = "\n".join(lines) + "\n"
     if args.out:
-        Path(args.out).write_text(text)
+        Path(args.out).write_text(with_stamp(text, args.out))
     print(text)
     return 0
 

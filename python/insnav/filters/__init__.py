@@ -110,7 +110,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
             from .sanitize import sanitize_dataset
 
             opts = {**cfg.sanitize, **(sanitize if isinstance(sanitize, dict) else {})}
-            dataset, report = sanitize_dataset(dataset, opts or True)
+            # the delay filters receive the arrival stream: a fix that arrives
+            # twice (seed 001 eq. (4)) is two records, not a duplicate
+            arrivals = spec.runners.get(cfg.coupling) == "insnav.filters.delay:run_delay"
+            dataset, report = sanitize_dataset(dataset, opts or True, arrivals=arrivals)
         if checks:
             from .checks import check_dataset
 

@@ -24,6 +24,14 @@ with the scenario's ``gnss.delay_p``).  :func:`run_delayed` runs one of
 
 All three return a real-time :class:`insnav.Solution`: the output at time t
 uses only the records that arrived by t.
+
+The records are the *arrival stream* (seed 001 eq. (4)): a fix that arrives at
+two epochs is two records with the same ``t_valid`` and different
+``t_arrival`` (``insnav.run`` keeps both; see
+:func:`insnav.filters.sanitize.sanitize_gnss`).  The stack of the random-delay
+KF shifts at every epoch of the receiver's epoch grid
+(:func:`receiver_epochs`), also at an epoch where nothing arrives, so that
+block ``i`` always means "``i`` epochs ago".
 """
 from __future__ import annotations
 
@@ -52,6 +60,81 @@ def scenario_delay_p(dataset) -> np.ndarray:
     sc = getattr(dataset, "scenario", None) or {}
     p = (sc.get("gnss") or {}).get("delay_p", [1.0])
     return np.asarray(p, dtype=float)
+
+
+def receiver_epochs(t_valid, t_arrival, period_s: float | None = None) -> np.ndarray:
+    """The receiver's GNSS epoch grid [s], sorted.
+
+    Every time of validity and arrival time of the records, plus the epochs of
+    the grid at which no record is valid nor arrives: inside a gap longer than
+    1.5 periods between consecutive record times, the missing epochs are
+    inserted at the period's spacing.  The random-delay KF shifts its stack at
+    each of them (seed 001 eqs. (5)-(7): one step of the stacked state per
+    epoch, whether or not a measurement arrives).
+
+    Parameters
+    ----------
+    t_valid, t_arrival : array_like
+        Record times [s].
+    period_s : float, optional
+        GNSS epoch period [s]; default: the median spacing of the distinct
+        record times (validity and arrival together).
+
+    Returns
+    -------
+    ndarray
+        Epoch times [s], rounded to 1e-9 s.
+    """
+    tv = np.asarray(t_valid, float)
+    times = np.unique(np.round(np.concatenate([tv, np.asarray(t_arrival, float)]), 9))
+    if times.size < 2:
+        return times
+    if period_s is None:
+        period_s = float(np.median(np.diff(times)))
+    if not period_s > 0:
+        return times
+    gaps = np.diff(times)
+    fill = np.flatnonzero(gaps > 1.5 * period_s)
+    extra = [times[i] + period_s * np.arange(1, int(round(gaps[i] / period_s)))
+             for i in fill]
+    if not extra:
+        return times
+    return np.unique(np.round(np.concatenate([times, *extra]), 9))
+
+
+def _arrival_counts(rec: np.ndarray, epochs: np.ndarray, t_start: float, t_end: float) -> dict:
+    """What the filter receives: per receiver epoch the number of records that
+    arrive there, and per epoch the number of records valid there (how often
+    that epoch's fix arrives), over the epochs inside the IMU span."""
+    tol = 1e-6
+    inside = (epochs > t_start + tol) & (epochs <= t_end + tol)
+    got = (rec[:, 1] > t_start + tol) & (rec[:, 1] <= t_end + tol)
+    e = np.round(epochs, 9)
+
+    def per_epoch(times):
+        i = np.clip(np.searchsorted(e, np.round(times, 9) - tol), 0, max(e.size - 1, 0))
+        on = np.abs(e[i] - times) < tol if e.size else np.zeros(0, bool)
+        return np.bincount(i[on], minlength=e.size)
+
+    n_arr = per_epoch(rec[got, 1])[inside]
+    # a fix valid at an epoch whose arrival could still fall inside the span
+    last_valid = rec[got, 0].max() if got.any() else -np.inf
+    valid_span = inside & (epochs <= last_valid + tol)
+    n_fix = per_epoch(rec[got, 0])[valid_span]
+    return dict(receiver_epochs=int(inside.sum()),
+                epoch_arrivals=np.bincount(n_arr).tolist() if n_arr.size else [],
+                fix_arrivals=np.bincount(n_fix).tolist() if n_fix.size else [])
+
+
+def scenario_gnss_period_s(dataset) -> float | None:
+    """The GNSS epoch period [s] of the dataset's scenario (``1 / gnss.rate_hz``), or
+    None (then :func:`receiver_epochs` takes it from the record times)."""
+    sc = getattr(dataset, "scenario", None) or {}
+    rate = (sc.get("gnss") or {}).get("rate_hz")
+    try:
+        return 1.0 / float(rate) if rate and float(rate) > 0 else None
+    except (TypeError, ValueError):
+        return None
 
 
 def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfig | None = None,
@@ -84,7 +167,11 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     Solution
         ``gnss_status`` etc. are in the dataset's record order;
         ``summary`` adds ``delay_p``, ``refused_too_old``, ``replays``,
-        ``replayed_samples``, ``filter_updates``, ``history_s``.
+        ``replayed_samples``, ``filter_updates``, ``history_s`` and (rdkf,
+        exact) what the filter received: ``receiver_epochs`` (epochs of the
+        grid inside the IMU span), ``epoch_arrivals[j]`` (epochs at which
+        ``j`` records arrived) and ``fix_arrivals[j]`` (epochs whose fix
+        arrived ``j`` times).
     """
     if filter not in DELAY_FILTERS:
         raise ValueError(f"run_delayed: filter {filter!r}; allowed: {', '.join(DELAY_FILTERS)}")
@@ -126,6 +213,8 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
                              use_velocity=cfg.use_velocity)
     init_vec = init_vector(dataset, init)
     summary = dict(filter=filter, coupling="loose", layout=n, gnss_records=m)
+    epochs = receiver_epochs(rec[:, 0], rec[:, 1], scenario_gnss_period_s(dataset))
+    summary.update(_arrival_counts(rec, epochs, float(dataset.t0), float(t[-1]) if t.size else float(dataset.t0)))
     if filter == "kf":
         gnss13 = np.ascontiguousarray(np.delete(rec, 0, axis=1))  # t := t_arrival
         out = _core.run_loose("ekf", n, t, dth, dv, gnss13, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
@@ -141,7 +230,6 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
         else:
             core_cfg.update(max_history_s=float(max_history_s),
                             checkpoint_interval=float(checkpoint_interval_s or period))
-        epochs = np.unique(np.round(np.concatenate([rec[:, 0], rec[:, 1]]), 9))
         out = _core.run_delay(filter, n, t, dth, dv, rec, epochs, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
                               core_cfg, p if filter == "rdkf" else np.ones(1))
         for k in ("refused_too_old", "replays", "replayed_samples", "filter_updates", "history_s",

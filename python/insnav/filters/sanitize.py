@@ -60,7 +60,19 @@ MAX_SIGMA_MPS (1e5 m/s)
 out of time order                      sorted (``gnss_reordered``)
 repeated time of validity              first kept, rest dropped
                                        (``gnss_duplicates_dropped``)
+repeated time of validity, different   kept for the delay filters
+arrival time (``arrivals=True``)       (``gnss_repeat_arrivals_kept``)
 =====================================  ========================================
+
+The delay filters (seed 001: ``kf``, ``rdkf``, ``exact``) receive the
+*arrival stream*: in the paper's model (seed 001 eq. (4)) the receiver gets
+one measurement per epoch, ``y_k = z_(k - tau_k)``, so one fix can arrive at
+two epochs (probability ``p_0 p_1`` for ``p = [p_0, p_1]``) and another at
+none.  A second record with the same time of validity and a *different*
+arrival time is then a legitimate second arrival, not a duplicate; only a
+record that repeats both times is dropped (``arrivals=True``).  The on-time
+filters use the time of validity only, for which such a record would count
+the same fix twice.
 
 A fix that is well formed but wrong (a jump, a spike) is the NIS gate's job
 (``RunConfig.gate_chi2``), not this module's.
@@ -261,22 +273,35 @@ MAX_SPEED_MPS = 1e4
 
 
 def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m: float = DEFAULTS["max_h_m"],
-                  source: str = "gnss") -> tuple[GnssFixes, dict]:
+                  source: str = "gnss", arrivals: bool = False) -> tuple[GnssFixes, dict]:
     """Check and repair loosely coupled GNSS fixes (policy in the module docstring).
+
+    Parameters
+    ----------
+    g : GnssFixes
+    min_h_m, max_h_m : float
+        Plausible height range [m].
+    source : str
+        Name used in messages when ``g.origin`` is not set.
+    arrivals : bool
+        The records are an arrival stream (the delay filters): a repeated time
+        of validity with a different arrival time is kept as a second arrival
+        (seed 001 eq. (4)); only repeats of both times are dropped.
 
     Returns
     -------
     GnssFixes
-        Sorted by ``t_valid``; the input object itself when nothing was changed.
+        Sorted by ``t_valid`` (then ``t_arrival``); the input object itself
+        when nothing was changed.
     dict
         ``gnss_records_in``, ``gnss_records_out``, ``gnss_invalid_dropped``,
-        ``gnss_velocity_removed``, ``gnss_reordered``, ``gnss_duplicates_dropped``
-        and ``gnss_dropped_lines`` (file lines, or sample indices, of the first
+        ``gnss_velocity_removed``, ``gnss_reordered``, ``gnss_duplicates_dropped``,
+        ``gnss_repeat_arrivals_kept`` and ``gnss_dropped_lines`` (file lines, or sample indices, of the first
         20 records dropped).
     """
     n = len(g)
     rep = dict(gnss_records_in=n, gnss_records_out=n, gnss_invalid_dropped=0, gnss_velocity_removed=0,
-               gnss_reordered=0, gnss_duplicates_dropped=0, gnss_dropped_lines=[])
+               gnss_reordered=0, gnss_duplicates_dropped=0, gnss_repeat_arrivals_kept=0, gnss_dropped_lines=[])
     if n == 0:
         return g, rep
     t = np.asarray(g.t_valid, float)
@@ -303,10 +328,17 @@ def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m
     dropped = ~ok
     rep["gnss_invalid_dropped"] = int(dropped.sum())
     idx = np.flatnonzero(ok)
-    order = idx[np.argsort(t[idx], kind="stable")]
+    if arrivals:  # by time of validity, then arrival (stable for ties of both)
+        order = idx[np.lexsort((ta[idx], t[idx]))]
+    else:
+        order = idx[np.argsort(t[idx], kind="stable")]
     rep["gnss_reordered"] = int((order != idx).sum())
     ts = t[order]
     dup = np.concatenate([[False], np.diff(ts) == 0]) if len(ts) else np.zeros(0, bool)
+    if arrivals and len(ts):
+        repeat = dup & np.concatenate([[False], np.diff(ta[order]) != 0])
+        rep["gnss_repeat_arrivals_kept"] = int(repeat.sum())
+        dup &= ~repeat
     rep["gnss_duplicates_dropped"] = int(dup.sum())
     all_dropped = np.concatenate([np.flatnonzero(dropped), order[dup]])
     rep["gnss_dropped_lines"] = sorted(int(lines[i]) for i in all_dropped)[:20]
@@ -320,11 +352,13 @@ def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m
     return out, rep
 
 
-def sanitize_dataset(dataset, options: dict | bool | None = True):
+def sanitize_dataset(dataset, options: dict | bool | None = True, *, arrivals: bool = False):
     """Both sanitizers on a :class:`insnav.Dataset`: ``(dataset', report)``.
 
     ``options`` (a dict) overrides :data:`DEFAULTS`; the dataset is returned
-    unchanged (the same object) when nothing had to be repaired.
+    unchanged (the same object) when nothing had to be repaired.  ``arrivals``:
+    the GNSS records are an arrival stream (the delay filters; see
+    :func:`sanitize_gnss`).
     """
     opts = dict(DEFAULTS)
     if isinstance(options, dict):
@@ -335,7 +369,8 @@ def sanitize_dataset(dataset, options: dict | bool | None = True):
     imu, r1 = sanitize_imu(dataset.imu, max_gap_s=opts["max_gap_s"], gap_factor=opts["gap_factor"],
                            max_rate_rps=opts["max_rate_rps"], max_accel_mps2=opts["max_accel_mps2"],
                            source="imu", t0=float(dataset.t0))
-    gnss, r2 = sanitize_gnss(dataset.gnss, min_h_m=opts["min_h_m"], max_h_m=opts["max_h_m"], source="gnss")
+    gnss, r2 = sanitize_gnss(dataset.gnss, min_h_m=opts["min_h_m"], max_h_m=opts["max_h_m"], source="gnss",
+                             arrivals=arrivals)
     rep = {**r1, **r2}
     if imu is dataset.imu and gnss is dataset.gnss:
         return dataset, rep
