@@ -65,6 +65,10 @@ PARTICLE = (f"{_CPP}filter/particle_filter.hpp", f"{_CPP}filter/upf.hpp", f"{_CP
 #: RINEX reading, broadcast orbits and the real-data tight inputs
 RINEX = (f"{_PY}gnss/rinex.py", f"{_PY}gnss/broadcast.py", f"{_PY}gnss/ephemeris.py", f"{_PY}gnss/corrections.py",
          f"{_PY}gnss/tight_inputs.py", f"{_PY}io/rinex_dataset.py")
+#: carrier-phase RTK: the C++ engine (double differences, float EKF, MLAMBDA) and its Python run
+RTK = (f"{_CPP}gnss/rtk.hpp", f"{_CPP}gnss/lambda.hpp", "cpp/bindings/bind_rtk.cpp", f"{_PY}gnss/rtk.py",
+       f"{_PY}filters/rtk.py",
+       f"{_PY}gnss/rinex.py", f"{_PY}gnss/broadcast.py", f"{_PY}gnss/ephemeris.py")
 #: KF-GINS data reading
 KFGINS = (f"{_PY}io/kfgins.py", f"{_PY}io/kfgins_dataset.py")
 
@@ -102,6 +106,22 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                            f"{_PY}gnss/measurements.py", f"{_PY}gnss/systems.py") + RINEX + TIGHT + SIM_RAW,
     "walk_loose.md": ("bench/walk_loose.py", "bench/walk_0827_loose.toml", f"{_PY}io/csv_dataset.py",
                       f"{_PY}io/imu_csv.py") + RINEX + LOOSE_EKF,
+    "gate_outages.md": ("bench/gate_outages.py", f"{_PY}filters/health.py", f"{_PY}filters/smoothing.py",
+                        f"{_PY}filters/constraints.py", f"{_CPP}filter/rts_smoother.hpp", f"{_CPP}meas/vehicle.hpp",
+                        "bench/walk_0827.toml", "bench/walk_0827_loose.toml", f"{_PY}io/csv_dataset.py",
+                        f"{_PY}io/imu_csv.py", f"{_PY}scenarios/car-mems.toml")
+                       + KFGINS + LOOSE_EKF + TIGHT + RINEX + SIM + SIM_RAW,
+    "gnss_speed.md": ("bench/gnss_speed.py", f"{_PY}filters/spp.py", f"{_PY}gnss/spp.py", f"{_PY}gnss/weighting.py",
+                      f"{_CPP}gnss/spp_solver.hpp", f"{_CPP}gnss/broadcast_orbit.hpp", "cpp/bindings/bind_spp.cpp",
+                      "bench/walk_0827.toml", "bench/walk_0827_loose.toml", f"{_PY}io/csv_dataset.py",
+                      f"{_PY}io/imu_csv.py") + RINEX + TIGHT + LOOSE_EKF,
+    "navigator.md": ("bench/navigator_latency.py", "cpp/examples/loose_realtime.cpp", f"{_CPP}engine/navigator.hpp",
+                     f"{_PY}filters/navigator.py", "cpp/bindings/bind_navigator.cpp") + LOOSE_EKF,
+    "rtk_sim.md": ("bench/rtk_sim_rtklib.py", f"{_PY}sim/gnss_rtk.py", f"{_PY}gnss/rinex_write.py",
+                   f"{_PY}scenarios/rtk-open-sky-car.toml", f"{_PY}scenarios/rtk-urban-car.toml") + RTK + SIM_RAW,
+    "rtk_euref_wettzell_wtzr_wtzz.md": ("bench/rtk_compare.py",) + RTK,
+    "rtk_matrtklib_static_septentrio.md": ("bench/rtk_compare.py",) + RTK,
+    "rtk_instinct_spirent_rtk_dynamic_SIMULATED.md": ("bench/rtk_compare.py",) + RTK,
     "run_all.md": ("bench/run_all.py",),
     # hand-written documents: the commands they quote
     "benchmarks.md": ("bench/bench_mechanization.py", "bench/bench_sim.py", "bench/mechanization_bench.cpp") + INS

@@ -47,6 +47,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 import insnav  # noqa: E402
 from _common import git_commit  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 from insnav.analysis import errors  # noqa: E402
 
 COMMAND = "python3 bench/gate_outages.py --out docs/results/gate_outages.md"
@@ -403,7 +404,7 @@ def main(argv=None) -> int:
     out += [f"Run time {time.time() - t_start:.0f} s."]
     text = "\n".join(out) + "\n"
     if a.out:
-        Path(a.out).write_text(text)
+        Path(a.out).write_text(with_stamp(text, a.out))
     print(text)
     return 0 if all(verdicts) else 1
 

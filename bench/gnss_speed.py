@@ -41,6 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import git_commit  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/gnss_speed.py --out docs/results/gnss_speed.md"
 SMARTLOC = "smartloc_berlin_potsdamer_platz"
@@ -285,7 +286,7 @@ def main(argv=None) -> int:
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:
-        Path(args.out).write_text(text)
+        Path(args.out).write_text(with_stamp(text, args.out))
     return 0
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 from _common import git_commit  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 DATA = Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data"))
 
@@ -115,7 +116,7 @@ compares every row.  Medians over {args.runs} runs of each figure.
 - Pushed vs batch, largest difference over every row (m, m/s, rad): {max(r['max_diff'] for r in runs):.3g}
   (the example fails above 1e-9); fixes applied {med['applied']:.0f} of {med['fixes']:.0f}.
 """
-    Path(args.out).write_text(text, encoding="utf-8")
+    Path(args.out).write_text(with_stamp(text, args.out), encoding="utf-8")
     print(text)
     return 0
 

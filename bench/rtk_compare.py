@@ -38,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import git_commit  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 from insnav import earth  # noqa: E402
 
 DATA = Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data"))
@@ -286,7 +287,7 @@ def write_doc(name, ds, results, path: Path):
     for r in results:
         L += [f"- `{r['cmd_insnav']}`", f"- `{r['cmd_rtklib']}`"]
     L.append("")
-    path.write_text("\n".join(L))
+    path.write_text(with_stamp("\n".join(L), path))
 
 
 def main(argv=None):

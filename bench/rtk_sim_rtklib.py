@@ -50,6 +50,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import git_commit  # noqa: E402
+from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/rtk_sim_rtklib.py --runs 20 --out docs/results/rtk_sim.md"
 PRESETS = ("rtk-open-sky-car", "rtk-urban-car")
@@ -337,7 +338,7 @@ def main(argv=None) -> int:
     text = report(results, settings, args.runs, time.perf_counter() - t,
                   command=shlex.join(["python3", "bench/rtk_sim_rtklib.py"] + argv))
     if args.out:
-        Path(args.out).write_text(text, encoding="utf-8")
+        Path(args.out).write_text(with_stamp(text, args.out), encoding="utf-8")
         print(f"wrote {args.out}")
     else:
         print(text)

@@ -57,6 +57,12 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
                    ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"]),
     "rtk_sim": (("rtk_sim.md",), ["bench/rtk_sim_rtklib.py", "--runs", "20", "--out", "docs/results/rtk_sim.md"],
                 ["bench/rtk_sim_rtklib.py", "--runs", "2", "--out", "docs/results/rtk_sim.md"]),
+    "rtk_compare": (("rtk_euref_wettzell_wtzr_wtzz.md", "rtk_matrtklib_static_septentrio.md",
+                     "rtk_instinct_spirent_rtk_dynamic_SIMULATED.md"), ["bench/rtk_compare.py"],
+                    ["bench/rtk_compare.py", "--repeat", "1"]),
+    "gate_outages": (("gate_outages.md",), ["bench/gate_outages.py", "--out", "docs/results/gate_outages.md"],
+                     ["bench/gate_outages.py", "--seeds", "2", "--out", "docs/results/gate_outages.md"]),
+    "navigator": (("navigator.md",), ["bench/navigator_latency.py"], ["bench/navigator_latency.py", "--runs", "1"]),
 }
 
 
