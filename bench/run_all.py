@@ -1,6 +1,6 @@
 """Regenerate every results document in docs/results/ at the current commit.
 
-    python3 bench/run_all.py [--only NAME[,NAME...]] [--quick] [--list]
+    python3 bench/run_all.py [--only NAME[,NAME...]] [--quick] [--list] [--jobs N]
 
 Each generator writes its whole document (with the commit and the exact
 command inside it).  They run one after the other (each may use both cores);
@@ -66,6 +66,11 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
 }
 
 
+#: generators whose documents report wall or CPU times: they run alone, after the others
+#: (the rest only count, so ``--jobs 2`` may run two of them side by side)
+TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator")
+
+
 def git_commit() -> str:
     out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
     return out.stdout.strip() or "unknown"
@@ -76,6 +81,8 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default="", help="comma-separated generator names")
     ap.add_argument("--quick", action="store_true", help="reduced runs (pipeline check)")
     ap.add_argument("--list", action="store_true")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="generators run side by side (not the timed ones, which run alone at the end)")
     args = ap.parse_args(argv)
     if args.list:
         for name, (docs, full, _) in GENERATORS.items():
@@ -85,9 +92,10 @@ def main(argv=None) -> int:
     unknown = [n for n in names if n not in GENERATORS]
     if unknown:
         ap.error(f"unknown generator(s) {', '.join(unknown)}; known: {', '.join(GENERATORS)}")
-    rows, failed = [], []
+    rows, failed = {}, []
     t_all = time.perf_counter()
-    for name in names:
+
+    def one(name):
         docs, full, quick = GENERATORS[name]
         argv_ = quick if args.quick else full
         cmd = ["bash" if argv_[0].endswith(".sh") else PY, *argv_]
@@ -95,15 +103,31 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         rc = subprocess.run(cmd, cwd=ROOT).returncode
         dt = time.perf_counter() - t0
-        rows.append((name, docs, shlex.join([cmd[0] if cmd[0] == "bash" else "python3", *cmd[1:]]), dt, rc))
+        rows[name] = (name, docs, shlex.join([cmd[0] if cmd[0] == "bash" else "python3", *cmd[1:]]), dt, rc)
         print(f"[run_all] {name}: rc {rc}, {dt:.0f} s", flush=True)
         if rc:
             failed.append(name)
+
+    counted = [n for n in names if n not in TIMED]
+    if args.jobs > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(args.jobs) as pool:
+            list(pool.map(one, counted))
+    else:
+        for name in counted:
+            one(name)
+    for name in names:
+        if name in TIMED:
+            one(name)
+    rows = [rows[n] for n in names]
     total = time.perf_counter() - t_all
     lines = ["# Results documents: regeneration times", "",
              f"Written by `bench/run_all.py` at commit `{git_commit()}`; command: "
              f"`python3 bench/run_all.py {' '.join(argv if argv is not None else sys.argv[1:])}`.", "",
-             "Each generator runs alone (one after the other) on the shared 2-core machine.", "",
+             ("Each generator runs alone (one after the other) on the shared 2-core machine." if args.jobs <= 1 else
+              f"The generators that only count ran {args.jobs} side by side; those that report times "
+              f"({', '.join(TIMED)}) ran alone after them, on the shared 2-core machine."), "",
              "| generator | documents | command | wall [s] | exit |", "|---|---|---|---|---|"]
     for name, docs, cmd, dt, rc in rows:
         lines.append(f"| {name} | {', '.join(docs)} | `{cmd}` | {dt:.0f} | {rc} |")
