@@ -42,10 +42,11 @@ def test_estimate_recovers_the_shift(lag_s):
     est0 = estimate_time_offset(ds.imu.t, ds.imu.dtheta_b, ds.imu.dv_b, ds.gnss)
     est = estimate_time_offset(ds.imu.t, ds.imu.dtheta_b, ds.imu.dv_b, _gnss_shifted(ds.gnss, lag_s))
     assert abs(est0.lag_s) < 0.05  # simulated: the same clock
-    assert not est.ambiguous and est.r_peak > 0.8
+    assert est.r_peak > 0.8
     assert abs(est.lag_s - lag_s) < 0.05, est
-    if abs(lag_s) >= 1.0:
-        assert est.r_zero < est.r_peak - 0.05  # the unshifted fit is clearly worse
+    if abs(lag_s) >= 1.0:  # a lag that would be refused: unambiguous, the unshifted fit clearly worse
+        assert not est.ambiguous
+        assert est.r_zero < est.r_peak - 0.05
 
 
 @pytest.mark.parametrize("coupling", ["loose", "tight"])
@@ -182,3 +183,13 @@ def test_cli_gate_failure_names_the_time_offset(walk, tmp_path, capsys):
     assert rc == 2 and "rejected by the innovation gate" in err
     m = re.search(r"the turns put the GNSS ([0-9.]+) s behind the IMU", err)
     assert m and 0.5 < float(m.group(1)) < 0.6 and "check units" not in err
+
+
+def test_oscillating_platform_with_noisy_fixes_gives_no_verdict():
+    """seed000-sim (pitch/roll oscillations, 5 m fixes): the best lag fits barely better than
+    none (0.56 vs 0.54), so no offset is claimed and the paper's runs are not refused."""
+    import insnav
+
+    ds = insnav.simulate("seed000-sim", seed=1)
+    est = estimate_time_offset(ds.imu.t, ds.imu.dtheta_b, ds.imu.dv_b, ds.gnss)
+    assert est is None or est.ambiguous or abs(est.lag_s) < 0.8, est
