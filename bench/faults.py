@@ -4,7 +4,7 @@ Injects position jumps (10-100 m) and velocity spikes (1-10 m/s) into the
 loose GNSS fixes of ``seed000-car`` (GNSS sigma 5 m horizontal, 10 m
 vertical, 0.15 m/s; 10 Hz; four outages) and a pseudorange ramp on one
 satellite of ``seed004-uav`` (tight coupling), runs the filters with and
-without the gate, and prints a markdown table (docs/results/robustness.md).
+without the gate, and prints a markdown table (docs/logs/robustness.md).
 
 Gate thresholds (chi-square 0.999 quantiles, :data:`insnav.analysis.faults.CHI2_999`):
 loose 22.46 (6 rows: position + velocity); tight 45.31 (20 rows: the largest

@@ -9,7 +9,7 @@
 # Compiler: clang++ when present (installed here on Debian), else the default
 # c++.  The core is header-only Eigen templates; clang 14 compiles them about
 # 2.5x faster than g++ 12 (the extension: 6 vs 14 min of CPU, measured) with the
-# same run-time speed (docs/results/benchmarks.md).  CXX=g++ scripts/install.sh
+# same run-time speed (docs/logs/benchmarks.md).  CXX=g++ scripts/install.sh
 # builds with g++ instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."

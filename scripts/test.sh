@@ -25,6 +25,13 @@ if [ "${INSNAV_SKIP_BROWSER:-}" != 1 ] || [ "${INSNAV_NO_SKIP:-}" = 1 ]; then
     $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
   fi
 fi
+# RTKLIB's rnx2rtkp: the RTK tests run it beside insnav on the same files (the GNSS anchor)
+if ! command -v rnx2rtkp >/dev/null && command -v apt-get >/dev/null; then
+  echo "[insnav] installing rtklib (rnx2rtkp: the RTK tests compare with it)"
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq || true
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq rtklib >/dev/null
+fi
 export INSNAV_EXTRAS=${INSNAV_EXTRAS:-test,plot,pandas,parquet,dask,docs}
 if [ "${1:-}" = "--quick" ]; then
   shift
