@@ -35,7 +35,7 @@ NOT_ATTEMPTED = "not attempted"
 
 
 def sign_test_p(wins: int, losses: int) -> float:
-    """Exact two-sided sign test: P(|W - n/2| >= |wins - n/2|), W ~ Binomial(n, 1/2), n = wins + losses."""
+    """Exact two-sided sign test: ``P(|W - n/2| >= |wins - n/2|)``, W ~ Binomial(n, 1/2), n = wins + losses."""
     n = wins + losses
     if n == 0:
         return 1.0

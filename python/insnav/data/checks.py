@@ -544,7 +544,7 @@ def lateral_axis_correlation(t, dtheta_b, dv_b, gnss, *, min_speed_mps: float = 
     a right turn), over ~``interval_s`` windows: ``(r_x, r_y, windows)``.
 
     In FRD, +y is right: ``r_y`` near 1 and ``r_x`` near 0 (0.72-0.94 and
-    |r_x| < 0.25 on the walk, the KF-GINS track and the car presets).  An IMU
+    ``|r_x| < 0.25`` on the walk, the KF-GINS track and the car presets).  An IMU
     whose x axis points right (RFU read as FLU) puts it on ``r_x``.  None with
     fewer than 20 windows at speed or less than 0.2 m/s^2 of centripetal
     acceleration rms."""
