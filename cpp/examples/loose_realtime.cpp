@@ -116,6 +116,18 @@ struct LineReader {
   }
 };
 
+/// A KF-GINS GNSS line (sow, lat, lon [deg], h [m], std N/E/D [m]) as a position-only fix.
+GnssFix fix_of(const double* g) {
+  GnssFix f;
+  f.t = g[0];
+  f.lat = g[1] * kDeg;
+  f.lon = g[2] * kDeg;
+  f.h = g[3];
+  f.sigma_pos_n = Vec3(g[4], g[5], g[6]);
+  f.has_vel = false;
+  return f;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -192,15 +204,9 @@ int main(int argc, char** argv) {
     const double t_arrived = t.size() > static_cast<size_t>(latency) ? t[t.size() - 1 - latency] : -kInf;
     while (have_g && g[0] <= t_arrived) {
       if (g[0] > s0.t) {
-        GnssFix f;
-        f.t = g[0];
-        f.lat = g[1] * kDeg;
-        f.lon = g[2] * kDeg;
-        f.h = g[3];
-        f.sigma_pos_n = Vec3(g[4], g[5], g[6]);
-        f.has_vel = false;
-        fixes.push_back(f);
-        if (nav->push_gnss_fix(f) != RecordStatus::kNotUsed) fail("fix at " + std::to_string(f.t) + " refused");
+        fixes.push_back(fix_of(g));
+        if (nav->push_gnss_fix(fixes.back()) != RecordStatus::kNotUsed)
+          fail("fix at " + std::to_string(g[0]) + " refused");
       }
       have_g = gnss_in.next(g, 7);
     }
@@ -215,15 +221,8 @@ int main(int argc, char** argv) {
   }
   while (have_g && g[0] <= (t.empty() ? -kInf : t.back())) {  // the fixes still in flight at the end
     if (g[0] > s0.t) {
-      GnssFix f;
-      f.t = g[0];
-      f.lat = g[1] * kDeg;
-      f.lon = g[2] * kDeg;
-      f.h = g[3];
-      f.sigma_pos_n = Vec3(g[4], g[5], g[6]);
-      f.has_vel = false;
-      fixes.push_back(f);
-      nav->push_gnss_fix(f);
+      fixes.push_back(fix_of(g));
+      nav->push_gnss_fix(fixes.back());
     }
     have_g = gnss_in.next(g, 7);
   }

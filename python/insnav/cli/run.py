@@ -311,16 +311,14 @@ def check_run_outputs(args, out: Path, kfgins_folder: bool, spp: bool = False) -
             raise UserError(f"--out {out}: {exc}") from None
 
 
-def cmd_run_spp(args, stages) -> int:
-    """``insnav run --filter spp``: GNSS-only single point positioning over RINEX files (no IMU)."""
-    from ..filters.solution import FORMATS, write_innovations
-    from ..filters.spp import run_spp_rinex, write_spp_table
-
+def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
+    """The arguments of a GNSS-only filter (spp, rtk): RINEX input with ``needs``,
+    and none of the IMU / dataset options (a one-line UserError naming them)."""
     if args.format != "rinex":
-        raise UserError("--filter spp reads RINEX files: give --format rinex --obs OBS --nav NAV")
-    missing = [n for n in ("obs", "nav") if not getattr(args, n)]
+        raise UserError(f"--filter {name} reads RINEX files: give --format rinex {usage}")
+    missing = [n for n in needs if not getattr(args, n)]
     if missing:
-        raise UserError("--filter spp needs " + ", ".join(f"--{n}" for n in missing))
+        raise UserError(f"--filter {name} needs " + ", ".join(f"--{n}" for n in missing))
     unused = [f"--{n.replace('_', '-')}" for n in ("imu", "imu_tag", "gnss", "constraints", "output_rate",
                                                    "run_config")
               if getattr(args, n, None)] + (["--smooth"] if args.smooth else [])
@@ -329,7 +327,15 @@ def cmd_run_spp(args, stages) -> int:
     if args.coupling not in (None, "gnss"):
         unused.append(f"--coupling {args.coupling}")
     if unused:
-        raise UserError(f"--filter spp is GNSS only and does not use {', '.join(unused)}")
+        raise UserError(f"--filter {name} is GNSS only and does not use {', '.join(unused)}")
+
+
+def cmd_run_spp(args, stages) -> int:
+    """``insnav run --filter spp``: GNSS-only single point positioning over RINEX files (no IMU)."""
+    from ..filters.solution import FORMATS, write_innovations
+    from ..filters.spp import run_spp_rinex, write_spp_table
+
+    _check_gnss_only_args(args, "spp", ("obs", "nav"), "--obs OBS --nav NAV")
     if args.out_format != "insnav":
         raise UserError("--filter spp writes --out-format insnav only")
     if args.out is None:
@@ -383,20 +389,7 @@ def cmd_run_rtk(args, stages) -> int:
     from ..filters.solution import FORMATS
     from ..gnss.rtk import write_rtk_table, write_rtklib_pos
 
-    if args.format != "rinex":
-        raise UserError("--filter rtk reads RINEX files: give --format rinex --obs ROVER --base BASE --nav NAV")
-    missing = [n for n in ("obs", "base", "nav") if not getattr(args, n)]
-    if missing:
-        raise UserError("--filter rtk needs " + ", ".join(f"--{n}" for n in missing))
-    unused = [f"--{n.replace('_', '-')}" for n in ("imu", "imu_tag", "gnss", "constraints", "output_rate",
-                                                   "run_config")
-              if getattr(args, n, None)] + (["--smooth"] if args.smooth else [])
-    if args.dataset:
-        unused.append("a dataset directory")
-    if args.coupling not in (None, "gnss"):
-        unused.append(f"--coupling {args.coupling}")
-    if unused:
-        raise UserError(f"--filter rtk is GNSS only and does not use {', '.join(unused)}")
+    _check_gnss_only_args(args, "rtk", ("obs", "base", "nav"), "--obs ROVER --base BASE --nav NAV")
     if args.out_format != "insnav":
         raise UserError("--filter rtk writes --out-format insnav (or RTKLIB's layout with an --out ending in .pos)")
     if args.out is None:
