@@ -55,6 +55,8 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
                    ["bench/gnss_speed.py", "--repeats", "3", "--out", "docs/results/gnss_speed.md"]),
     "walk_loose": (("walk_loose.md",), ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"],
                    ["bench/walk_loose.py", "--out", "docs/results/walk_loose.md"]),
+    "tdcp_walk": (("tdcp_walk.md",), ["bench/tdcp_walk.py", "--out", "docs/results/tdcp_walk.md"],
+                  ["bench/tdcp_walk.py", "--out", "docs/results/tdcp_walk.md"]),
     "rtk_sim": (("rtk_sim.md",), ["bench/rtk_sim_rtklib.py", "--runs", "20", "--out", "docs/results/rtk_sim.md"],
                 ["bench/rtk_sim_rtklib.py", "--runs", "2", "--out", "docs/results/rtk_sim.md"]),
     "rtk_compare": (("rtk_euref_wettzell_wtzr_wtzz.md", "rtk_matrtklib_static_septentrio.md",

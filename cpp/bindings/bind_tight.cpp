@@ -18,7 +18,7 @@ void bind_tight(py::module_& m) {
       [](const std::string& filter, const DArray& t, const DArray& dtheta_b, const DArray& dv_b,
          const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats, const DArray& init, const DArray& P0,
          const DArray& corr0, const DArray& clock0, const py::dict& model, const py::dict& config, int layout,
-         const py::object& system, const py::object& isb0, const py::object& prn) {
+         const py::object& system, const py::object& isb0, const py::object& prn, const py::object& phase) {
         TightArgs a;
         a.model = imu_model_from_dict(model);
         a.cfg = tight_config_from(config);
@@ -26,6 +26,9 @@ void bind_tight(py::module_& m) {
         a.smooth = flag(config, "smooth", false);
         a.imu = imu_arrays(t, dtheta_b, dv_b);
         a.in = tight_inputs_from(epoch_t, epoch_start, sats, system, prn);
+        a.phase = phase_rows_from(phase, a.in);
+        if (a.cfg.tdcp.enabled && a.phase.empty())
+          throw py::value_error("tdcp: the config asks for TDCP rows but no carrier phase was given (phase=None)");
         a.nav = nav_state_from(init);
         a.P0 = P0;
         a.corr = imu_correction_from(corr0);
@@ -47,8 +50,41 @@ void bind_tight(py::module_& m) {
       py::arg("epoch_start"), py::arg("sats"), py::arg("init"), py::arg("P0"), py::arg("imu_correction"),
       py::arg("clock0"), py::arg("imu_model"), py::arg("config"), py::arg("layout") = 17,
       py::arg("system") = py::none(), py::arg("isb0") = py::none(), py::arg("prn") = py::none(),
+      py::arg("phase") = py::none(),
       "Closed-loop tightly coupled run, Layout17 or (layout=20) LayoutTightMulti with inter-system biases "
-      "(SI units; see python/insnav/filters/tight.py).");
+      "(SI units; see python/insnav/filters/tight.py).  phase: (M, 4) carrier phase [m], wavelength [m], "
+      "zero-difference sigma [m], LLI per satellite row, for the TDCP rows (config key 'tdcp').");
+
+  m.def(
+      "tdcp_row",
+      [](const DArray& prev, const DArray& cur, const DArray& lever_arm_b, const DArray& sat_prev, const DArray& sat_cur,
+         double clock_bias_prev_m, double clock_bias_cur_m) {
+        auto sat = [](const DArray& s, const char* name) {
+          if (s.size() != 4) throw py::value_error(std::string(name) + ": expected 4 values (x, y, z [m], c dt_sv [m])");
+          return TdcpSatEpoch{Vec3(s.data()[0], s.data()[1], s.data()[2]), s.data()[3]};
+        };
+        if (lever_arm_b.size() != 3) throw py::value_error("lever_arm_b: expected 3 values [m]");
+        const Vec3 l(lever_arm_b.data()[0], lever_arm_b.data()[1], lever_arm_b.data()[2]);
+        const TdcpRow<Layout17> r =
+            tdcp_row<Layout17>(tdcp_antenna(nav_state_from(prev), l, clock_bias_prev_m),
+                               tdcp_antenna(nav_state_from(cur), l, clock_bias_cur_m), sat(sat_prev, "sat_prev"),
+                               sat(sat_cur, "sat_cur"));
+        py::dict d;
+        d["predicted"] = r.predicted;
+        DArray hc({py::ssize_t(Layout17::kSize)}), hp({py::ssize_t(Layout17::kSize)});
+        for (int i = 0; i < Layout17::kSize; ++i) {
+          hc.mutable_data()[i] = r.H_cur[i];
+          hp.mutable_data()[i] = r.H_prev[i];
+        }
+        d["H_cur"] = hc;
+        d["H_prev"] = hp;
+        return d;
+      },
+      py::arg("prev"), py::arg("cur"), py::arg("lever_arm_b"), py::arg("sat_prev"), py::arg("sat_cur"),
+      py::arg("clock_bias_prev_m"), py::arg("clock_bias_cur_m"),
+      "The TDCP row of meas/tdcp.hpp (Layout17): INS-predicted phase change [m] between the navigation states "
+      "prev and cur (10 values: t, lat, lon [rad], h [m], v_n [m/s], roll, pitch, yaw [rad]) and its "
+      "Jacobians H_cur, H_prev (17,) with respect to the error states of the two epochs.");
 }
 
 }  // namespace insnav::py_bind

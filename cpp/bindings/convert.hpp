@@ -92,7 +92,7 @@ inline TightConfig tight_config_from(const py::dict& d) {
                  {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows", "robust_huber", "robust_huber_k",
                   "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
-                  "robust_cusum_hold_s"});
+                  "robust_cusum_hold_s", "tdcp", "tdcp_slip_threshold_cycles", "tdcp_chi2_row"});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
@@ -121,8 +121,15 @@ inline TightConfig tight_config_from(const py::dict& d) {
   if (r.fde_max_sats < 0 || r.fde_min_rows < 0) throw py::value_error("robust_fde_max_sats, robust_fde_min_rows must be >= 0");
   if (!(r.cusum_k >= 0.0) || !(r.cusum_h >= 0.0) || !(r.cusum_hold_s >= 0.0))
     throw py::value_error("robust_cusum_k, robust_cusum_h, robust_cusum_hold_s must be >= 0");
+  TdcpConfig& td = c.tdcp;  // time-differenced carrier phase (meas/tdcp.hpp)
+  td.enabled = flag(d, "tdcp", td.enabled);
+  td.slip_threshold_cycles = num(d, "tdcp_slip_threshold_cycles", td.slip_threshold_cycles);
+  td.chi2_row = num(d, "tdcp_chi2_row", td.chi2_row);
+  if (!(td.slip_threshold_cycles > 0.0) || !(td.chi2_row > 0.0))
+    throw py::value_error("tdcp_slip_threshold_cycles and tdcp_chi2_row must be > 0");
   return c;
 }
+
 
 /// The IMU arrays t (n,), dtheta_b (n,3), dv_b (n,3), shapes checked.
 struct ImuArrays {
@@ -263,6 +270,34 @@ inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoc
       throw py::value_error("sats: sigma_prr must be > 0 at row " + std::to_string(i));
   }
   return in;
+}
+
+/// The carrier phase of the tight rows: None, or (M, 4) phase [m], wavelength [m],
+/// zero-difference sigma [m], LLI (meas/tdcp.hpp, PhaseObservation).
+inline std::vector<PhaseObservation> phase_rows_from(const py::object& phase, const TightInputs& in) {
+  std::vector<PhaseObservation> out;
+  if (phase.is_none()) return out;
+  const DArray a = py::cast<DArray>(phase);
+  if (a.ndim() != 2 || a.shape(0) != in.M || a.shape(1) != 4)
+    throw py::value_error("phase: expected shape (" + std::to_string(in.M) +
+                          ", 4) (phase [m], wavelength [m], sigma [m], LLI)");
+  out.resize(static_cast<size_t>(in.M));
+  for (py::ssize_t i = 0; i < in.M; ++i) {
+    const double* r = a.data() + 4 * i;
+    PhaseObservation& p = out[static_cast<size_t>(i)];
+    p.phase_m = r[0];
+    p.wavelength_m = r[1];
+    p.sigma_m = r[2];
+    p.lli = std::isfinite(r[3]) ? static_cast<int>(r[3]) : 0;
+    if (!std::isfinite(p.phase_m)) continue;
+    const SatObservation& o = in.sats[static_cast<size_t>(i)];
+    if (!(p.wavelength_m > 0.0) || !(p.sigma_m > 0.0))
+      throw py::value_error("phase: wavelength and sigma must be > 0 at row " + std::to_string(i));
+    if (!(o.r_e.allFinite() && std::isfinite(o.clock_bias_m)))
+      throw py::value_error("phase: non-finite satellite state at row " + std::to_string(i));
+    if (o.prn <= 0) throw py::value_error("phase: row " + std::to_string(i) + " needs its satellite number (prn)");
+  }
+  return out;
 }
 
 inline double clock0_bias(const DArray& clock0) {

@@ -7,6 +7,7 @@
 
 #include "common.hpp"
 #include "insnav/engine/closed_loop.hpp"
+#include "insnav/engine/tight_engine.hpp"
 
 namespace insnav::py_bind {
 
@@ -129,14 +130,14 @@ struct LooseRecordBuffers {
 /// Per tight epoch (E) and satellite row (M): sat_residual (M, 2), sat_flag (M, 2), nis, status, rows,
 /// clock_jump; and the robust step's counters.
 struct TightRecordBuffers {
-  DArray sat_residual, nis, clock_jump;
-  py::array_t<std::int8_t> status, sat_flag;
-  py::array_t<std::int32_t> rows;
+  DArray sat_residual, nis, clock_jump, tdcp_residual;
+  py::array_t<std::int8_t> status, sat_flag, tdcp_flag;
+  py::array_t<std::int32_t> rows, tdcp_rows;
   py::ssize_t E, M;
 
   TightRecordBuffers(py::ssize_t E_, py::ssize_t M_)
-      : sat_residual({M_, py::ssize_t(2)}), nis({E_}), clock_jump({E_}), status({E_}), sat_flag({M_, py::ssize_t(2)}),
-        rows({E_}), E(E_), M(M_) {}
+      : sat_residual({M_, py::ssize_t(2)}), nis({E_}), clock_jump({E_}), tdcp_residual({M_}), status({E_}),
+        sat_flag({M_, py::ssize_t(2)}), tdcp_flag({M_}), rows({E_}), tdcp_rows({E_}), E(E_), M(M_) {}
 
   template <class Out>
   void attach(Out& out) {
@@ -146,6 +147,9 @@ struct TightRecordBuffers {
     out.status = E ? status.mutable_data() : nullptr;
     out.rows = E ? rows.mutable_data() : nullptr;
     out.clock_jump = E ? clock_jump.mutable_data() : nullptr;
+    out.tdcp_residual = M ? tdcp_residual.mutable_data() : nullptr;  // TDCP rows (meas/tdcp.hpp)
+    out.tdcp_flag = M ? tdcp_flag.mutable_data() : nullptr;
+    out.tdcp_rows = E ? tdcp_rows.mutable_data() : nullptr;
   }
 
   template <class Out>
@@ -163,6 +167,14 @@ struct TightRecordBuffers {
     res["downweighted_sats"] = out.downweighted_sats;
     res["flagged_epochs"] = out.flagged_epochs;
     res["clock_jumps"] = out.clock_jumps;
+    res["tdcp_residual"] = tdcp_residual;
+    res["tdcp_flag"] = tdcp_flag;
+    res["tdcp_rows"] = tdcp_rows;
+    res["tdcp_used"] = out.tdcp_used;
+    res["tdcp_rejected"] = out.tdcp_rejected;
+    res["tdcp_slips_lli"] = out.tdcp_slips_lli;
+    res["tdcp_slips_ins"] = out.tdcp_slips_ins;
+    res["tdcp_updates"] = out.tdcp_updates;
   }
 };
 

@@ -28,11 +28,16 @@ struct TightArgs {
   TightConfig cfg;
   UtParams ut;
   bool smooth = false;  // config key 'smooth': RTS backward pass (EKF, RB-UKF, UKF; smoother_run.hpp)
+  std::vector<PhaseObservation> phase;  // carrier phase per satellite row (TDCP; empty: none)
 };
 
 template <class Filter>
 py::dict run_tight_impl(const TightArgs& a) {
   using L = typename Filter::Layout;
+  if (a.cfg.tdcp.enabled && !TightEngine<Filter>::kCanTdcp)
+    throw py::value_error("tdcp: time-differenced carrier phase runs with the tight ekf only");
+  if (a.cfg.tdcp.enabled && a.smooth)
+    throw py::value_error("tdcp: the RTS smoother over TDCP rows is not implemented (smooth = false)");
   const StateCov<L> P = state_cov_from<L>(a.P0);
   NavBuffers nav_buf(output_rows(a.imu.n, a.cfg.output_decimation), L::kSize, true, kHasIsb<L>);
   TightRecordBuffers rec_buf(a.in.E, a.in.M);
@@ -45,6 +50,7 @@ py::dict run_tight_impl(const TightArgs& a) {
     py::gil_scoped_release release;
     auto engine = std::make_unique<TightEngine<Filter>>(a.model, a.cfg, a.ut);  // one allocation per run
     engine->set_initial_isb(a.isb0);
+    if (a.cfg.tdcp.enabled && !a.phase.empty()) engine->set_phase(a.phase.data());
     smoother.attach(engine->core());
     engine->run(a.nav, P, a.corr, a.clock_bias0, a.clock_drift0, a.imu.n, a.imu.t, a.imu.dtheta_b, a.imu.dv_b, a.in.E,
                 a.in.epochs.data(), a.in.sats.data(), out);

@@ -103,6 +103,16 @@ def run_tight(
     system: npt.ArrayLike | None = None,  # (S,) system index per row (0 G, 1 R, 2 E, 3 C)
     isb0: npt.ArrayLike | None = None,  # (3,) initial ISBs of R, E, C [m]
     prn: npt.ArrayLike | None = None,  # (S,) satellite number per row (the robust CUSUM keys on it)
+    phase: npt.ArrayLike | None = None,  # (S, 4) carrier phase [m], wavelength [m], sigma [m], LLI (TDCP)
+) -> dict[str, Any]: ...
+def tdcp_row(
+    prev: npt.ArrayLike,  # (10,) t, lat, lon [rad], h [m], v_n [m/s], roll, pitch, yaw [rad]
+    cur: npt.ArrayLike,
+    lever_arm_b: npt.ArrayLike,  # (3,) IMU -> antenna, FRD [m]
+    sat_prev: npt.ArrayLike,  # (4,) satellite ECEF position [m], c dt_sv [m]
+    sat_cur: npt.ArrayLike,
+    clock_bias_prev_m: float,
+    clock_bias_cur_m: float,
 ) -> dict[str, Any]: ...
 def run_delay(
     method: str,  # "rdkf" | "exact"

@@ -401,6 +401,53 @@ class Robust:
 
 
 @dataclass
+class Tdcp:
+    """Time-differenced carrier phase in the tight EKF (``[tdcp]`` in the TOML,
+    ``--tdcp``; ``cpp/include/insnav/meas/tdcp.hpp``, docs/algorithms.md
+    "TDCP/INS").  Off by default.
+
+    Attributes
+    ----------
+    enabled : bool
+        Add a TDCP row per satellite tracked at two consecutive epochs
+        (stochastic cloning of the previous epoch's error state, Roumeliotis
+        & Burdick 2002); needs carrier phase in the tight inputs (RINEX data:
+        ``insnav run --format rinex``), the tight ``ekf``, and no ``smooth``.
+    sigma_phase_m : float
+        Zero-difference carrier-phase 1-sigma at zenith [m], divided by
+        sin(elevation) (floor 5 deg); a TDCP row's variance is the sum of its
+        two epochs' (0.01 m: consumer receiver and antenna, multipath and the
+        unmodelled correlation of consecutive rows included).
+    slip_threshold_cycles : float
+        INS-aided slip test: a row whose INS-predicted minus measured phase
+        change, less the epoch's common (receiver clock) part, exceeds this
+        many cycles is a slip (0.5).
+    chi2_row : float
+        Per-row chi-square on ``w^2 = y^2 / S_ii`` under the clone-augmented
+        covariance (10.83: 1 - 1e-3, 1 dof).
+    """
+
+    enabled: bool = False
+    sigma_phase_m: float = 0.01
+    slip_threshold_cycles: float = 0.5
+    chi2_row: float = 10.83
+
+    def validate(self, prefix: str = "tdcp") -> "Tdcp":
+        if not isinstance(self.enabled, (bool, np.bool_)):
+            raise ConfigError(f"config key '{prefix}.enabled': bad value {self.enabled!r}; allowed: true or false")
+        for key in ("sigma_phase_m", "slip_threshold_cycles", "chi2_row"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                raise ConfigError(f"config key '{prefix}.{key}': bad value {v!r}; allowed: a number > 0")
+        return self
+
+    def as_core_dict(self) -> dict:
+        """The ``tdcp*`` keys of the tight engine config."""
+        return dict(tdcp=bool(self.enabled), tdcp_slip_threshold_cycles=float(self.slip_threshold_cycles),
+                    tdcp_chi2_row=float(self.chi2_row))
+
+
+@dataclass
 class RunConfig:
     """Everything a run needs besides the data (SI unless the name says otherwise).
 
@@ -521,6 +568,7 @@ class RunConfig:
     ut_kappa: float | None = None
     constraints: Constraints = field(default_factory=Constraints)
     robust: Robust = field(default_factory=Robust)
+    tdcp: Tdcp = field(default_factory=Tdcp)
     smooth: bool = False
     max_time_offset_s: float = 0.8
     sanitize: dict = field(default_factory=dict)
@@ -582,6 +630,12 @@ class RunConfig:
         if not isinstance(self.robust, Robust):
             bad("robust", self.robust, "a [robust] table")
         self.robust.validate()
+        if not isinstance(self.tdcp, Tdcp):
+            bad("tdcp", self.tdcp, "a [tdcp] table")
+        self.tdcp.validate()
+        if self.tdcp.enabled and (self.coupling != "tight" or self.filter != "ekf" or self.smooth):
+            bad("tdcp.enabled", True, f"true only with coupling = \"tight\", filter = \"ekf\" and smooth = false "
+                f"(not {self.coupling} {self.filter!r}{', smooth' if self.smooth else ''})")
         if not isinstance(self.sanitize, dict):
             bad("sanitize", self.sanitize, "a [sanitize] table")
         _SAN = SANITIZE_DEFAULTS
@@ -690,11 +744,21 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     imu_d = d.pop("imu", None)
     con_d = d.pop("constraints", None)
     rob_d = d.pop("robust", None)
-    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints", "robust"}
+    tdcp_d = d.pop("tdcp", None)
+    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints", "robust", "tdcp"}
     for k in d:
         if k not in names:
-            raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | {'imu', 'constraints', 'robust'})}")
+            raise ConfigError(f"{source}: unknown key '{k}'"
+                              f"{_suggest(k, names | {'imu', 'constraints', 'robust', 'tdcp'})}")
     cfg = RunConfig(**d)
+    if tdcp_d is not None:
+        if not isinstance(tdcp_d, dict):
+            raise ConfigError(f"{source}: key 'tdcp': bad value {tdcp_d!r}; allowed: a table")
+        known = {f.name for f in dataclasses.fields(Tdcp)}
+        for k in tdcp_d:
+            if k not in known:
+                raise ConfigError(f"{source}: unknown key 'tdcp.{k}'{_suggest(k, known)}")
+        cfg.tdcp = Tdcp(**tdcp_d)
     if rob_d is not None:
         if not isinstance(rob_d, dict):
             raise ConfigError(f"{source}: key 'robust': bad value {rob_d!r}; allowed: a table")

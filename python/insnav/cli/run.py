@@ -86,6 +86,9 @@ def add_run_parser(sub) -> None:
     p.add_argument("--smooth", action="store_true",
                    help="post-process with the RTS smoother (ekf, rbukf, ukf; loose or tight): every row "
                         "from all the data")
+    p.add_argument("--tdcp", action="store_true",
+                   help="tight ekf on RINEX data: add time-differenced carrier-phase rows (rover only, no base; "
+                        "settings in the config's [tdcp] table)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", default=None,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
@@ -132,7 +135,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name in ("imu", "constraints", "robust", "sanitize") or v is None:
+        if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize") or v is None:
             continue
         lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.sanitize:
@@ -154,6 +157,9 @@ def resolved_config_toml(cfg: RunConfig) -> str:
         lines.append("\n[robust]")
         lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)
                   if getattr(cfg.robust, f.name) is not None]  # screening unset: the default (on, or the preset's)
+    if cfg.tdcp.enabled:
+        lines.append("\n[tdcp]")
+        lines += [f"{f.name} = {toml_value(getattr(cfg.tdcp, f.name))}" for f in dataclasses.fields(cfg.tdcp)]
     if cfg.imu is not None:
         from ..config import _USER_UNITS
 
@@ -321,7 +327,7 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
         raise UserError(f"--filter {name} needs " + ", ".join(f"--{n}" for n in missing))
     unused = [f"--{n.replace('_', '-')}" for n in ("imu", "imu_tag", "gnss", "constraints", "output_rate",
                                                    "run_config")
-              if getattr(args, n, None)] + (["--smooth"] if args.smooth else [])
+              if getattr(args, n, None)] + (["--smooth"] if args.smooth else []) + (["--tdcp"] if args.tdcp else [])
     if args.dataset:
         unused.append("a dataset directory")
     if args.coupling not in (None, "gnss"):
@@ -574,6 +580,8 @@ def cmd_run(args) -> int:
             cfg.init_seed = args.seed
         if args.smooth:
             cfg.smooth = True
+        if args.tdcp:
+            cfg.tdcp.enabled = True
         if args.constraints is not None:
             cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
         if args.out_format == "kfgins":
@@ -663,7 +671,10 @@ def cmd_run(args) -> int:
           + (f"; {s['fde_excluded']} satellite-epochs excluded by FDE, {s.get('cusum_alarms', 0)} CUSUM alarms"
              if s.get("robust_screening") else "")
           + (f"; {s['gate_outage_accepted']} records after outages accepted by the outage-aware gate"
-             if s.get("gate_outage_accepted") else ""))
+             if s.get("gate_outage_accepted") else "")
+          + (f"; TDCP: {s['tdcp_used']} rows used in {s['tdcp_updates']} epochs, {s['tdcp_rejected']} rejected by "
+             f"the chi-square, slips {s['tdcp_slips_lli']} by LLI and {s['tdcp_slips_ins']} by the INS-predicted test"
+             if s.get("tdcp") else ""))
     if health:
         import sys
 

@@ -39,7 +39,7 @@ from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, init
                      tight_inputs_for)
 from .solution import Solution
 
-__all__ = ["TightSolution", "run_tight", "initial_isb"]
+__all__ = ["TightSolution", "run_tight", "initial_isb", "tdcp_phase"]
 
 
 @dataclass
@@ -69,6 +69,12 @@ class TightSolution(Solution):
     sat_flag: np.ndarray = None
     #: (E,) receiver clock jump moved into the clock estimate at each epoch [m] (0: none)
     clock_jump_m: np.ndarray = None
+    #: TDCP runs (``[tdcp]``): (M,) INS-predicted minus measured phase change [m] before the update (NaN: no row)
+    tdcp_residual_m: np.ndarray = None
+    #: (M,) -1 absent, 0 used, 1 slip by LLI, 2 slip by the INS-predicted test, 3 rejected by the chi-square
+    tdcp_flag: np.ndarray = None
+    #: (E,) TDCP rows used per epoch
+    tdcp_rows: np.ndarray = None
 
 
 def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | None = None,
@@ -145,11 +151,16 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
                              **robust)
     if cfg.smooth:
         core_cfg["smooth"] = True
+    phase = None
+    if cfg.tdcp.enabled:  # time-differenced carrier phase (meas/tdcp.hpp)
+        phase = tdcp_phase(inputs, cfg)
+        core_cfg.update(cfg.tdcp.as_core_dict())
     out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                           np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0, np.zeros(12),
                           np.asarray(clock0, float), model, core_cfg, layout=n, system=sys_idx,
                           isb0=None if n == 17 else np.asarray(isb0, float),
-                          prn=np.asarray(inputs.prn, np.int64) if len(inputs.prn) else None)
+                          prn=np.asarray(inputs.prn, np.int64) if len(inputs.prn) else None,
+                          **({} if phase is None else dict(phase=phase)))
     sig, err, llh, rpy = out["sigma"], out["imu_err"], out["llh"], out["rpy"] * RAD2DEG
     systems = sorted(set(np.asarray(inputs.system).tolist()), key=SYSTEMS.index)
     sol = TightSolution(
@@ -170,6 +181,11 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
                      clock_jumps=int(out["clock_jumps"])),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 15:17],
         rows=out["rows"], inputs=inputs, sat_flag=out["sat_flag"], clock_jump_m=out["clock_jump"])
+    if cfg.tdcp.enabled:
+        sol.tdcp_residual_m, sol.tdcp_flag, sol.tdcp_rows = out["tdcp_residual"], out["tdcp_flag"], out["tdcp_rows"]
+        sol.summary.update(tdcp=True, tdcp_used=int(out["tdcp_used"]), tdcp_rejected=int(out["tdcp_rejected"]),
+                           tdcp_slips_lli=int(out["tdcp_slips_lli"]), tdcp_slips_ins=int(out["tdcp_slips_ins"]),
+                           tdcp_updates=int(out["tdcp_updates"]))
     if n == 20:
         sol.isb_m = out["isb"]
         sol.sigma_isb = sig[:, 17:20]
@@ -180,6 +196,23 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         smoothed_rows(sol, out, cfg.filter)
     raise_if_nonfinite(sol, cfg.filter)
     return sol
+
+
+def tdcp_phase(inputs: TightInputs, cfg: RunConfig) -> np.ndarray:
+    """The ``(M, 4)`` carrier-phase rows of ``_core.run_tight`` for a TDCP run: the
+    inputs' phase, wavelength and LLI with the sigma of ``cfg.tdcp.sigma_phase_m``
+    / sin(elevation) (floor 5 deg)."""
+    phase = getattr(inputs, "phase", None)
+    if phase is None:
+        raise ValueError("tdcp: the tight inputs carry no carrier phase (TightInputs.phase); load RINEX data "
+                         "(insnav.io.rinex_dataset.load_rinex, `insnav run --format rinex`) or set it with "
+                         "insnav.gnss.tdcp.phase_rows")
+    phase = np.array(phase, float, copy=True)
+    if phase.shape != (len(inputs.prn), 4):
+        raise ValueError(f"tdcp: TightInputs.phase has shape {phase.shape}; expected ({len(inputs.prn)}, 4)")
+    el = np.radians(np.maximum(np.asarray(inputs.elevation_deg, float), 5.0))
+    phase[:, 2] = cfg.tdcp.sigma_phase_m / np.sin(el)
+    return np.ascontiguousarray(phase)
 
 
 def initial_isb(inputs: TightInputs, dataset, cfg: RunConfig, init, sys_idx=None) -> np.ndarray:

@@ -41,6 +41,9 @@ class TightInputs:
     elevation_deg : (M,) seen from the (approximate) receiver
     system : (M,) one-letter RINEX system code of each row (:data:`insnav.gnss.systems.SYSTEMS`);
         None on construction means GPS for every row
+    phase : (M, 4) float or None
+        Carrier phase of each row for the TDCP rows (:func:`insnav.gnss.tdcp.phase_rows`:
+        phase [m], wavelength [m], sigma [m], LLI); None: no carrier phase
     """
 
     epoch_t: np.ndarray
@@ -50,6 +53,7 @@ class TightInputs:
     elevation_deg: np.ndarray
     info: dict = field(default_factory=dict)
     system: np.ndarray | None = None
+    phase: np.ndarray | None = None
 
     def __post_init__(self):
         if self.system is None:
@@ -87,7 +91,8 @@ class TightInputs:
         counts = np.bincount(ep, minlength=self.epoch_t.size)
         start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         return TightInputs(self.epoch_t.copy(), start, np.ascontiguousarray(self.sats[keep]), self.prn[keep],
-                           self.elevation_deg[keep], dict(self.info), self.system[keep])
+                           self.elevation_deg[keep], dict(self.info), self.system[keep],
+                           None if self.phase is None else self.phase[keep].copy())
 
 
 def pseudorange_sigma(el_rad, sigma_zenith_m, cn0_dbhz=None, cn0_ref_dbhz=45.0, floor_el_deg=5.0):

@@ -625,6 +625,9 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     if opt.systems != "G" and wgt is None:  # every system's rows for the filter (ISB states); start: GPS
         inp = tight_inputs_from_rinex(obs, nav, t_week0, r0, systems=opt.systems, **kw)
     inp_run = _epochs_in(inp, t0, float(imu.t[-1]))
+    from ..gnss.tdcp import phase_rows  # carrier phase of the rows, for the TDCP rows ([tdcp], --tdcp)
+
+    inp_run.phase = phase_rows(inp_run, obs, nav, t_week0)
     g = np.flatnonzero(good & (spp.t > t0) & (spp.t <= float(imu.t[-1])))
     lat_g, lon_g, h_g = earth.ecef_to_geodetic(spp.r_e[g])
     gnss = GnssFixes(spp.t[g], spp.t[g], lat_g * RAD2DEG, lon_g * RAD2DEG, h_g, v_n_spp[g],

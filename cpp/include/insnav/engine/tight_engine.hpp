@@ -25,16 +25,30 @@
 // uses alpha H P H' + R, so the first epochs after it are not screened out
 // whole.
 //
+// TDCP (TightConfig::tdcp, meas/tdcp.hpp; off by default, and then nothing
+// below changes): with a PhaseObservation per satellite row (set_phase), the
+// time-differenced carrier phase of each satellite tracked at the previous
+// epoch is applied first, by stochastic cloning of the previous epoch's error
+// state (EKF only: the cycle transition Phi gives the clone's cross-
+// covariance), after the clock-jump check and before the pseudorange / rate
+// update (which then starts from the TDCP-corrected x); one feedback closes
+// the epoch.  Screening: the loss-of-lock indicator, the INS-predicted phase
+// change (single frequency: the residual less the epoch's common clock part,
+// in cycles) and a per-row chi-square on the clone-augmented S_ii.
+//
 // Input: E epochs (time, satellite range [begin, end) into one flat array of
 // SatObservation), sorted by time.  No heap allocation inside run().
 #pragma once
 
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 
 #include "insnav/engine/closed_loop.hpp"
 #include "insnav/meas/pseudorange.hpp"
 #include "insnav/meas/robust.hpp"
+#include "insnav/meas/tdcp.hpp"
 
 namespace insnav {
 
@@ -47,6 +61,7 @@ struct TightConfig {
   bool use_rate = true;
   int output_decimation = 1;
   RobustConfig robust;                 // clock-jump check, screening and IGG-III (robust.hpp)
+  TdcpConfig tdcp;                     // time-differenced carrier phase (tdcp.hpp; off by default, EKF only)
 };
 
 /// What the robust step did to one satellite row kind (TightOutputs::sat_flag).
@@ -83,6 +98,15 @@ struct TightOutputs : NavOutputs {
   int fde_excluded = 0;            // satellite-epochs excluded by the whole-epoch FDE
   int cusum_alarms = 0;            // CUSUM alarms (a row kind of a satellite excluded for cusum_hold_s)
   int cusum_excluded = 0;          // satellite rows left out while a CUSUM exclusion held
+  // TDCP (TightConfig::tdcp): per satellite row (M) and per epoch (E), and run counters
+  double* tdcp_residual = nullptr; // (M,) INS-predicted minus measured phase change [m], before the update
+  std::int8_t* tdcp_flag = nullptr;  // (M,) TdcpFlag
+  std::int32_t* tdcp_rows = nullptr; // (E,) TDCP rows used
+  int tdcp_used = 0;               // rows used
+  int tdcp_rejected = 0;           // rows rejected by the per-row chi-square
+  int tdcp_slips_lli = 0;          // rows dropped for the loss-of-lock indicator
+  int tdcp_slips_ins = 0;          // rows flagged by the INS-predicted phase-change test
+  int tdcp_updates = 0;            // epochs with a TDCP update
 
   void mark(const TightEpoch& ep, std::int64_t g, RecordStatus st) {
     set_status(status, g, st);
@@ -94,8 +118,21 @@ struct TightOutputs : NavOutputs {
     if (sat_flag)
       for (std::int64_t j = ep.begin; j < ep.end; ++j)
         sat_flag[2 * j] = sat_flag[2 * j + 1] = static_cast<std::int8_t>(SatFlag::kAbsent);
+    if (tdcp_rows) tdcp_rows[g] = 0;
+    for (std::int64_t j = ep.begin; j < ep.end; ++j) {
+      if (tdcp_residual) tdcp_residual[j] = NAN;
+      if (tdcp_flag) tdcp_flag[j] = static_cast<std::int8_t>(TdcpFlag::kAbsent);
+    }
   }
 };
+
+/// Filters whose x and P an update outside update() may write and whose
+/// cycle transition is tracked (the EKF: the TDCP clone update, tdcp.hpp).
+template <class F, class = void>
+struct TdcpCapable : std::false_type {};
+template <class F>
+struct TdcpCapable<F, std::void_t<decltype(std::declval<F&>().x_mutable()), decltype(std::declval<F&>().P_mutable()),
+                                  decltype(std::declval<const F&>().cycle_transition())>> : std::true_type {};
 
 template <class Filter>
 class TightEngine {
@@ -110,6 +147,12 @@ class TightEngine {
 
   Filter& filter() { return core_.filter; }
   ClosedLoop<Filter>& core() { return core_; }
+
+  /// The filters that take TDCP rows (an EKF: x and P writable, the cycle transition tracked).
+  static constexpr bool kCanTdcp = TdcpCapable<Filter>::value;
+
+  /// Carrier phase of the satellite rows (parallel to `sats` of run(); null: no TDCP rows).
+  void set_phase(const PhaseObservation* phase) { phase_ = phase; }
 
   /// Initial inter-system bias estimates [m] of systems 1..3 (layouts with ISB states; default 0).
   void set_initial_isb(const IsbVec& isb0) { isb0_ = isb0; }
@@ -138,6 +181,12 @@ class TightEngine {
     for (int i = 0; i < kSatKeys; ++i) {  // the per-satellite CUSUM of the robust step (robust.hpp, 4.)
       cusum_pos_[i] = cusum_neg_[i] = 0.0;
       excluded_until_[i] = -kInf;
+    }
+    if constexpr (kCanTdcp) {
+      have_prev_ = false;
+      epoch_count_ = 0;
+      for (int i = 0; i < kTdcpKeys; ++i) prev_epoch_[i] = -1;
+      if (cfg_.tdcp.enabled) core_.filter.track_cycle_transition(true);
     }
   }
 
@@ -184,6 +233,7 @@ class TightEngine {
       }
     }
     if (out.clock_jump) out.clock_jump[g] = -jump;
+    if constexpr (kCanTdcp) tdcp_step(ep, g, out);
     const int m0 = meas_.linear().rows();
     for (int i = 0; i < ns; ++i) flag_[2 * i] = flag_[2 * i + 1] = SatFlag::kAbsent;
     {
@@ -217,6 +267,7 @@ class TightEngine {
       out.set_status(out.status, g, screened ? RecordStatus::kRejectedByGate : RecordStatus::kNotUsed);
       if (screened) ++out.rejected;
       if (out.nis) out.nis[g] = NAN;
+      if constexpr (kCanTdcp) tdcp_close(ep);
       return;
     }
     const UpdateResult res = core_.update_gated(meas_);
@@ -228,6 +279,122 @@ class TightEngine {
     } else if (res.rejected_by_gate) {
       ++out.rejected;
     }
+    if constexpr (kCanTdcp) tdcp_close(ep);
+  }
+
+  // ---------------------------------------------------------------- TDCP (meas/tdcp.hpp)
+  static int tdcp_key(const SatObservation& s) { return (s.system & 3) * 64 + (s.prn & 63); }
+
+  /// The TDCP update of this epoch against the previous one (stochastic cloning, tdcp.hpp).
+  void tdcp_step(const TightEpoch& ep, std::int64_t g, TightOutputs& out) {
+    if (out.tdcp_rows) out.tdcp_rows[g] = 0;
+    for (std::int64_t j = ep.begin; j < ep.end; ++j) {
+      if (out.tdcp_residual) out.tdcp_residual[j] = NAN;
+      if (out.tdcp_flag) out.tdcp_flag[j] = static_cast<std::int8_t>(TdcpFlag::kAbsent);
+    }
+    if (!cfg_.tdcp.enabled || !phase_) return;
+    // chained: the filter cycle began at the previous epoch (no outage cycle closed between)
+    if (!have_prev_ || core_.cycle_start != t_prev_) return;
+    const TdcpAntenna cur = tdcp_antenna(core_.state(), cfg_.lever_arm_b, core_.clock_bias);
+    tdcp_.clear();
+    int n = 0;
+    for (std::int64_t j = ep.begin; j < ep.end && !tdcp_.full(); ++j) {
+      const SatObservation& s = sats_[j];
+      const PhaseObservation& p = phase_[j];
+      if (s.prn <= 0 || !std::isfinite(p.phase_m) || !(p.wavelength_m > 0.0)) continue;
+      const int key = tdcp_key(s);
+      if (prev_epoch_[key] != epoch_count_ - 1) continue;  // not tracked at the previous epoch
+      if (p.lli & 1) {
+        ++out.tdcp_slips_lli;
+        if (out.tdcp_flag) out.tdcp_flag[j] = static_cast<std::int8_t>(TdcpFlag::kSlipLli);
+        continue;
+      }
+      const TdcpRow<L> row = tdcp_row<L>(ant_prev_, cur, TdcpSatEpoch{prev_r_e_[key], prev_clock_[key]},
+                                         TdcpSatEpoch{s.r_e, s.clock_bias_m});
+      const double y = row.predicted - (p.phase_m - prev_phase_[key]);
+      if (out.tdcp_residual) out.tdcp_residual[j] = y;
+      tdcp_.add(row, y, p.sigma_m * p.sigma_m + prev_sigma_[key] * prev_sigma_[key]);
+      tdcp_src_[n] = j;
+      tdcp_lambda_[n++] = p.wavelength_m;
+    }
+    if (n == 0) return;
+    // INS-predicted phase change test (single frequency): residual less the common (clock) part
+    bool keep[kMaxMeasRows];
+    double common = 0.0;
+    if (n >= 3) {
+      double tmp[kMaxMeasRows];
+      for (int i = 0; i < n; ++i) tmp[i] = tdcp_.residual(i);
+      common = median_inplace(tmp, n);
+    }
+    for (int i = 0; i < n; ++i) {
+      keep[i] = std::fabs(tdcp_.residual(i) - common) <= cfg_.tdcp.slip_threshold_cycles * tdcp_lambda_[i];
+      if (!keep[i]) {
+        ++out.tdcp_slips_ins;
+        if (out.tdcp_flag) out.tdcp_flag[tdcp_src_[i]] = static_cast<std::int8_t>(TdcpFlag::kSlipIns);
+      }
+    }
+    compact(keep, n);
+    if (n == 0) return;
+    // per-row chi-square on the clone-augmented S_ii
+    Phi_P_prev_.noalias() = core_.filter.cycle_transition() * P_prev_;
+    if (!tdcp_.covariance(core_.filter.P(), Phi_P_prev_, P_prev_)) return;
+    bool any_rejected = false;
+    for (int i = 0; i < n; ++i) {
+      const double w2 = tdcp_.residual(i) * tdcp_.residual(i) / tdcp_.S(i);  // x = 0 here (fed back)
+      keep[i] = w2 <= cfg_.tdcp.chi2_row;
+      if (!keep[i]) {
+        any_rejected = true;
+        ++out.tdcp_rejected;
+        if (out.tdcp_flag) out.tdcp_flag[tdcp_src_[i]] = static_cast<std::int8_t>(TdcpFlag::kRejected);
+      }
+    }
+    if (any_rejected) {
+      compact(keep, n);
+      if (n == 0 || !tdcp_.covariance(core_.filter.P(), Phi_P_prev_, P_prev_)) return;
+    }
+    tdcp_.apply(core_.filter.x_mutable(), core_.filter.P_mutable());
+    core_.touch();
+    for (int i = 0; i < n; ++i)
+      if (out.tdcp_flag) out.tdcp_flag[tdcp_src_[i]] = static_cast<std::int8_t>(TdcpFlag::kUsed);
+    out.tdcp_used += n;
+    ++out.tdcp_updates;
+    if (out.tdcp_rows) out.tdcp_rows[g] = n;
+  }
+
+  /// Keep the TDCP rows with keep[i] (and their source indices / wavelengths).
+  void compact(const bool* keep, int& n) {
+    tdcp_.select(keep);
+    int k = 0;
+    for (int i = 0; i < n; ++i)
+      if (keep[i]) {
+        tdcp_src_[k] = tdcp_src_[i];
+        tdcp_lambda_[k++] = tdcp_lambda_[i];
+      }
+    n = k;
+  }
+
+  /// End of an epoch: feed back what is left in x (the TDCP correction when the
+  /// code update was not applied), then clone: the fed-back state, P and this
+  /// epoch's phases become the previous epoch of the next TDCP update.
+  void tdcp_close(const TightEpoch& ep) {
+    if (!cfg_.tdcp.enabled || !phase_) return;
+    if (!core_.filter.x().isZero(0.0)) core_.feedback();
+    P_prev_ = core_.filter.P();
+    ant_prev_ = tdcp_antenna(core_.state(), cfg_.lever_arm_b, core_.clock_bias);
+    t_prev_ = core_.state().t;
+    have_prev_ = true;
+    for (std::int64_t j = ep.begin; j < ep.end; ++j) {
+      const SatObservation& s = sats_[j];
+      const PhaseObservation& p = phase_[j];
+      if (s.prn <= 0 || !std::isfinite(p.phase_m) || !(p.wavelength_m > 0.0)) continue;
+      const int key = tdcp_key(s);
+      prev_epoch_[key] = epoch_count_;
+      prev_phase_[key] = p.phase_m;
+      prev_sigma_[key] = p.sigma_m;
+      prev_r_e_[key] = s.r_e;
+      prev_clock_[key] = s.clock_bias_m;
+    }
+    ++epoch_count_;
   }
 
   void set_measurement(int ns) {
@@ -398,6 +565,20 @@ class TightEngine {
   static constexpr int kSatKeys = 4 * 64 * 2;
   double cusum_pos_[kSatKeys] = {}, cusum_neg_[kSatKeys] = {}, excluded_until_[kSatKeys] = {};
   const SatObservation* sats_ = nullptr;
+  // TDCP: the clone of the previous epoch and its satellites' phases per (system, prn)
+  static constexpr int kTdcpKeys = 4 * 64;
+  const PhaseObservation* phase_ = nullptr;
+  TdcpUpdate<L> tdcp_;
+  StateCov<L> P_prev_ = StateCov<L>::Zero(), Phi_P_prev_ = StateCov<L>::Zero();
+  TdcpAntenna ant_prev_;
+  double t_prev_ = 0.0;
+  bool have_prev_ = false;
+  std::int64_t epoch_count_ = 0;
+  std::int64_t prev_epoch_[kTdcpKeys] = {};
+  double prev_phase_[kTdcpKeys] = {}, prev_sigma_[kTdcpKeys] = {}, prev_clock_[kTdcpKeys] = {};
+  Vec3 prev_r_e_[kTdcpKeys];
+  std::int64_t tdcp_src_[kMaxMeasRows] = {};
+  double tdcp_lambda_[kMaxMeasRows] = {};
 };
 
 }  // namespace insnav

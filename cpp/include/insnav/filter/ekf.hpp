@@ -95,6 +95,8 @@ class Ekf {
   const Vec& x() const { return x_; }
   const Cov& P() const { return P_; }
   Cov& P_mutable() { return P_; }
+  /// The error state for an update done outside update() (the TDCP clone update, meas/tdcp.hpp).
+  Vec& x_mutable() { return x_; }
   void reset_state() { x_.setZero(); }
   /// P <- lambda P, lambda >= 1 (the gate's lock-out recovery, nis_gate.hpp).
   void inflate_covariance(double lambda) { P_ *= lambda; }
