@@ -161,6 +161,33 @@ def main(argv=None) -> int:
     rows, verdicts, per = campaign(with_outage)
     rows_b, verdicts_b, per_b = campaign(without_code)
 
+    # ---------------------------------------------------------------- sensitivity (the 10 s complete outages)
+    import tomllib
+
+    from insnav.io.rinex_dataset import load_rinex
+
+    rin = tomllib.loads(CONFIG.read_text())["rinex"]
+    sens = []
+    for off in (-0.05, 0.0, 0.05):
+        ds_o, cfg_o = load_rinex(obs, nav, d / "raw/imu_1730.csv", dict(rin, imu_time_offset_s=off))
+        inp_o = ds_o.tight_inputs
+        for sig in (0.003, 0.01, 0.03):
+            c_code = dataclasses.replace(cfg_o, coupling="tight", filter="ekf")
+            c_tdcp = dataclasses.replace(c_code, tdcp=dataclasses.replace(cfg_o.tdcp, enabled=True, sigma_phase_m=sig))
+            dr = {"code": [], "tdcp": []}
+            for st in WINDOWS[10.0]:
+                lo = float(ds_o.t0) + st
+                ds_o.tight_inputs = with_outage(inp_o, lo, lo + 10.0)
+                for name, c in (("code", c_code), ("tdcp", c_tdcp)):
+                    s = insnav.run(ds_o, config=c)
+                    t, e = horizontal_error(s, ds_o, ref.t_gps_s - ds_o.gps_time_offset_s, ref.r_e)
+                    dr[name].append(drift_in(t, e, lo, lo + 10.0))
+            ds_o.tight_inputs = inp_o
+            s_full = insnav.run(ds_o, config=c_tdcp)
+            r = s_full.tdcp_residual_m[s_full.tdcp_flag == 0]
+            sens.append(f"| {off:+.2f} | {sig} | {np.sqrt(np.mean(r ** 2)) * 100:.1f} | {np.mean(dr['code']):.2f} | "
+                        f"{np.mean(dr['tdcp']):.2f} | {np.mean(dr['tdcp']) / np.mean(dr['code']):.2f} |")
+
     # ---------------------------------------------------------------- overall error (no outage)
     def overall(name):
         s, t, e = full[name]
@@ -249,6 +276,14 @@ windows).  Paired test "TDCP/INS drifts less" (Wilcoxon signed-rank, two-sided, 
 
 Target met in every outage length: **{'yes' if all_met else 'no'}**.
 
+Is the missing gain a fault of the TDCP rows?  The same 10 s complete outages with the IMU time
+shifted against GNSS (`imu_time_offset_s`: the tag-derived time is right to about 0.1 s,
+tight_realdata.md) and with other phase sigmas (mean max drift over the {len(WINDOWS[10.0])} windows):
+
+| IMU time offset [s] | sigma_phase_m [m] | TDCP residual RMS [cm] | code + Doppler [m] | TDCP/INS [m] | TDCP / code |
+|---|---|---|---|---|---|
+{chr(10).join(sens)}
+
 ## Drift without absolute position: pseudorange outages (Doppler and phase kept)
 
 Not the target above, an added view of what TDCP is for: the same windows with only the
@@ -287,8 +322,12 @@ def discussion(per, per_b, ov, vr) -> str:
         f"{ov['tdcp'][2]:.3f} m against {ov['code'][2]:.3f} m.",
         "* In a complete outage neither filter has any GNSS row: both coast on the consumer IMU from the state",
         "  and the IMU-error estimates they had at the outage start.  TDCP can only act through those (a better",
-        "  velocity, attitude and bias estimate at the start); the drift of the free consumer IMU (tens of metres",
-        "  in 10 s, hundreds in 30 s: tight_realdata.md) grows with the outage length and soon dominates both.",
+        "  velocity, attitude and bias estimate at the start); the drift of the free consumer IMU grows with the",
+        "  outage length and dominates both (the window-to-window spread above is larger than the difference",
+        "  between the filters).  The TDCP rows themselves are sound by the other measures here: their residuals,",
+        "  the pseudorange-outage drift and the track error; and by `tests/test_tdcp.py` (exact data to 1e-6 m,",
+        "  the numerical Jacobian, the injected slip).  The issue's target assumes that TDCP's better calibration",
+        "  shows in a complete outage; with this handheld consumer IMU it does not.",
     ]
     return "\n".join(lines)
 
