@@ -228,3 +228,41 @@ def test_config_and_errors(exact_case):
         _core.run_tight("rbukf", c["t"], c["dth"], c["dv"], c["ep_t"], c["start"], c["sats"], c["init"], c["P0"],
                         np.zeros(12), c["clock0"], c["model"], dict(lever_arm_b=LEVER, tdcp=True), prn=c["prn"],
                         phase=c["phase"])
+
+
+def test_walk_tdcp_from_the_command_line(tmp_path, shared_data):
+    """Real data (rtklibexplorer walk, u-blox L1 phase): `insnav run --format rinex ... --tdcp` uses the
+    TDCP rows of nearly every epoch and tightens the track against the RTK reference (error around each
+    solution's mean offset, which is the RTK base's: docs/results/tdcp_walk.md)."""
+    import subprocess
+    import sys
+
+    from insnav.io.gnss_files import read_rtklib_pos
+    from insnav.filters.solution import load_solution
+
+    d = shared_data / "rtklibexplorer_walk_0827"
+    repo = __import__("pathlib").Path(__file__).resolve().parents[1]
+    args = [sys.executable, "-m", "insnav", "run", "--format", "rinex", "--obs", str(d / "rinex_derived/gnss_1730.obs"),
+            "--nav", str(d / "rinex_derived/gnss_1730.nav"), "--imu", str(d / "raw/imu_1730.csv"), "--config",
+            str(repo / "bench/walk_0827.toml"), "--coupling", "tight", "--filter", "ekf"]
+    ref = read_rtklib_pos(d / "raw/gnss_1730_sf.pos")
+    spread = {}
+    for name, extra in (("code", []), ("tdcp", ["--tdcp"])):
+        out = tmp_path / f"{name}.csv"
+        p = subprocess.run(args + extra + ["--out", str(out)], capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr
+        assert ("TDCP:" in p.stdout) == (name == "tdcp")
+        sol = load_solution(out)
+        t_ref = ref.t_gps_s - np.floor(ref.t_gps_s[0] / 604800.0) * 604800.0
+        m = (t_ref > sol.t[0]) & (t_ref < sol.t[-1])
+        lat = np.interp(t_ref[m], sol.t, sol.lat_deg) * DEG
+        lon = np.interp(t_ref[m], sol.t, sol.lon_deg) * DEG
+        h = np.interp(t_ref[m], sol.t, sol.h_m)
+        lat0, lon0, _ = earth.ecef_to_geodetic(ref.r_e[m][0])
+        dn, de, _ = earth.ecef_to_ned_vector(lat0, lon0, earth.geodetic_to_ecef(lat, lon, h) - ref.r_e[m]).T
+        spread[name] = float(np.sqrt(np.mean((dn - dn.mean()) ** 2 + (de - de.mean()) ** 2)))
+        if name == "tdcp":
+            used = int(p.stdout.split("TDCP: ")[1].split(" rows")[0])
+            assert used > 1500  # of 1835 rows with phase
+            assert "[tdcp]" in (tmp_path / "tdcp.csv.config.toml").read_text()
+    assert spread["tdcp"] < 0.7 * spread["code"]
