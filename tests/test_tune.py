@@ -152,12 +152,20 @@ def test_toy_tuning_recovers_q_and_r_like_em():
     assert evals < 200
 
 
-def test_trimmed_likelihood_caps_outliers():
+def test_robust_likelihood_is_huber_beyond_the_cap():
+    """Beyond the cap c the NIS counts as 2 sqrt(c nis) - c (continuous at c, linear in the distance), and
+    a shrinking S still loses: the robust ln L of an outlier falls as S -> 0 (a plain clip would rise)."""
     nis = np.array([1.0, 400.0, np.nan])
     ld = np.array([0.5, 0.5, 0.5])
     rows = np.array([1, 1, 1])
-    assert innovation_log_likelihood(nis, ld, rows, nis_cap=15.1) == pytest.approx(
-        -0.5 * (1.0 + 15.1 + 1.0 + 2 * math.log(2 * math.pi)))
+    c = 15.1
+    assert innovation_log_likelihood(nis, ld, rows, nis_cap=c) == pytest.approx(
+        -0.5 * (1.0 + 2 * math.sqrt(c * 400.0) - c + 1.0 + 2 * math.log(2 * math.pi)))
+    assert innovation_log_likelihood([c], [0.0], [1], nis_cap=c) == pytest.approx(
+        innovation_log_likelihood([c], [0.0], [1]))
+    y = 1.0
+    ll = [innovation_log_likelihood([y * y / s], [math.log(s)], [1], nis_cap=c) for s in (1e-2, 1e-4, 1e-6)]
+    assert ll[0] > ll[1] > ll[2]
 
 
 def _first_fix_dataset(seconds=20.0):

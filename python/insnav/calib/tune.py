@@ -21,15 +21,17 @@ engines return ``nis`` = nu' S^-1 nu and ``log_det_s`` = ln det S per record
 Search: Nelder-Mead (Nelder & Mead 1965, Comput. J. 7; coefficients 1, 2,
 1/2, 1/2 as in Lagarias et al. 1998, SIAM J. Optim. 9) over theta = ln s,
 each theta_j kept within ln 1e-3 .. ln 1e3: no gradients (a run is not
-differentiable in s, e.g. through the gate), scale-free in log space, a few
-dozen runs for four to six factors.  Each evaluation is one C++ run over the
-tuning segment with the GIL released and output rows at 1 Hz only.
+differentiable in s, e.g. through the gate), scale-free in log space.  Coarse
+to fine (:func:`_search`): first one common factor per group (IMU noise, GNSS
+sigmas, constraint sigmas), then every factor, then restarts from the best
+point.  Each evaluation is one C++ run over the tuning segment with the GIL
+released and output rows at 1 Hz only.
 
-Robustness: a record the innovation gate would reject (NIS above the
-chi-square 1 - 1e-4 quantile of its rows) enters with its NIS clipped at that
-quantile (a trimmed likelihood, as Huber's loss trims the Gaussian's), so a
-few outliers do not set the noise and a setting cannot gain by having the
-gate reject records.
+Robustness: beyond the chi-square 1 - 1e-4 quantile c of its rows (where the
+innovation gate rejects), a record's NIS is replaced by Huber's loss
+2 sqrt(c NIS) - c of its Mahalanobis distance (Huber 1964, Ann. Math.
+Statist. 35(1)): a few outliers do not set the noise, and a setting cannot
+gain by having the gate reject records (the loss still grows as S shrinks).
 
 Hold-out: the factors are tuned on the first ``1 - holdout`` of the IMU time
 span (the IMU arrays cut there; later records are outside the run) and the
@@ -87,7 +89,11 @@ def innovation_log_likelihood(nis, log_det_s, rows, nis_cap=None) -> float:
     log_det_s : (K,) ln det S [ln of the product of the rows' units squared]
     rows : (K,) int, rows m_k of each record
     nis_cap : float or (K,) array, optional
-        Clip each NIS at this value (the trimmed likelihood of the tuner).
+        Huber's loss beyond this NIS (the robust likelihood of the tuner):
+        ``nis`` replaced by ``2 sqrt(c nis) - c`` where ``nis > c`` (Huber
+        1964, on the Mahalanobis distance ``sqrt(nis)``): an outlier counts
+        linearly in its distance, not quadratically, and a small ``S`` still
+        costs (a plain clip would let ln det S -> -inf win).
     """
     nis = np.asarray(nis, float)
     ld = np.asarray(log_det_s, float)
@@ -96,7 +102,8 @@ def innovation_log_likelihood(nis, log_det_s, rows, nis_cap=None) -> float:
     q = nis[ok]
     if nis_cap is not None:
         cap = np.broadcast_to(np.asarray(nis_cap, float), nis.shape)[ok]
-        q = np.minimum(q, cap)
+        big = q > cap
+        q = np.where(big, 2.0 * np.sqrt(np.where(big, cap * q, 0.0)) - cap, q)
     return float(-0.5 * np.sum(q + ld[ok] + m[ok] * LOG_2PI))
 
 
@@ -131,7 +138,8 @@ def solution_log_likelihood(sol, t_from=-np.inf, t_to=np.inf, trim: bool = True)
     innovation covariance (applied or rejected by the gate) with time of
     validity in [t_from, t_to), and the vehicle-constraint events likewise.
 
-    ``trim``: NIS clipped at the chi-square 1 - 1e-4 quantile of the record's rows.
+    ``trim``: Huber's loss beyond the chi-square 1 - 1e-4 quantile of the record's rows
+    (:func:`innovation_log_likelihood`).
     """
     from ..filters.solution import RecordStatus
 
@@ -224,6 +232,55 @@ def nelder_mead_log(fun, x0, step=math.log(3.0), *, max_evals: int = 120, xtol: 
                 pts = new
     best = min(hist, key=lambda p: p[1])
     return best[0], best[1], len(hist), hist
+
+
+#: the groups of the coarse first stage of the search (one common factor each)
+GROUPS = (("gyro_arw", "acc_vrw", "gyro_bias", "acc_bias"), ("gnss_pos", "gnss_vel"), ("nhc", "odo", "zupt"))
+
+
+def _search(objective, names, x0, step, budget, xtol, used):
+    """Coarse to fine: Nelder-Mead over one common ln-factor per group of
+    :data:`GROUPS` (the overall level of the IMU noise, of the GNSS sigmas, of
+    the constraint sigmas: the usual error of a hand setting, 2-3 dimensions),
+    then over every factor from there, then restarts from the best point with
+    a fresh simplex (step halved each time) while they gain more than 0.01 in
+    ln L and the budget of evaluations (``used()`` counts them) lasts.
+    Restarts are the standard remedy for a simplex that collapsed along a
+    ridge (e.g. gyro white noise against gyro bias instability)."""
+    n0 = used()
+    best = [np.asarray(x0, float), math.inf]
+
+    def left():
+        return budget - (used() - n0)
+
+    def run(fun, x, st, evals, tol):
+        th, f, _, _ = nelder_mead_log(fun, x, step=st, max_evals=evals, xtol=tol, ftol=0.01)
+        return th, f
+
+    groups = [[names.index(p) for p in g if p in names] for g in GROUPS]
+    groups = [g for g in groups if g]
+    x = np.asarray(x0, float).copy()
+    if len(groups) < len(names) and left() > 4 * (len(groups) + 1) + 2 * len(names):
+        def coarse(z):
+            y = x.copy()
+            for gi, g in enumerate(groups):
+                y[g] = x[g] + z[gi]
+            return objective(y)
+
+        z, f = run(coarse, np.zeros(len(groups)), math.log(4.0), min(left() // 3, 15 * len(groups)), 0.05)
+        for gi, g in enumerate(groups):
+            x[g] += z[gi]
+        best = [x.copy(), f]
+    st = step
+    while left() > len(names) + 2:
+        th, f = run(objective, best[0], st, left(), xtol)
+        gain = best[1] - f
+        if f < best[1]:
+            best = [th, f]
+        if not gain > 0.01:
+            break
+        st = max(0.5 * st, 4 * xtol)
+    return best
 
 
 # --------------------------------------------------------------------------- the settings
@@ -329,11 +386,12 @@ class TuneResult:
     records : int
         Records in the tuning segment's likelihood.
     runs : int
-        Filter runs the search used.
+        Evaluations of ln L the search used (each one filter run per dataset).
     seconds : float
         Wall time of the search [s] (the first, sanitizing step included).
-    t_split : float
-        End of the tuning segment [s] (dataset time); hold-out after it.
+    t_split : float or tuple of float
+        End of the tuning segment [s] (dataset time); hold-out after it (one per
+        dataset when several were given).
     holdout : float
     history : list of (dict of scales, ln L, records)
     """
@@ -361,7 +419,10 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
 
     Parameters
     ----------
-    dataset : insnav.Dataset (or a CSV / RINEX / KF-GINS dataset)
+    dataset : insnav.Dataset (or a CSV / RINEX / KF-GINS dataset), or a list of them
+        Several datasets (e.g. drives with the same sensors) are tuned
+        together: ln L is the sum of their ln L (independent data), each
+        split by ``holdout`` of its own.
     config : RunConfig, dict or TOML path, optional
         The base (hand) settings; the factors multiply them.
     filter : {'ekf', 'rbukf'}, optional
@@ -371,7 +432,8 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     holdout : float
         Share of the data (the end of the IMU span) left out of the tuning, in [0, 0.9).
     max_runs : int
-        Filter runs the search may use (>= 2 * factors + 2).
+        Evaluations of ln L the search may use (>= 2 * factors + 2; one filter
+        run per dataset each).
     start : dict, optional
         Starting factors (name -> factor; default 1 for each).
     xtol : float
@@ -401,8 +463,11 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
                           f"innovation covariance, which the loose and tight {' and '.join(FILTERS)} return")
     if cfg.smooth:
         cfg.smooth = False  # the smoother does not change the forward innovations
-    t_split = split_time(dataset, holdout)
-    names = list(params) if params is not None else default_parameters(dataset, cfg)
+    datasets = list(dataset) if isinstance(dataset, (list, tuple)) else [dataset]
+    if not datasets:
+        raise ConfigError("no dataset to tune on")
+    splits = [split_time(d, holdout) for d in datasets]
+    names = list(params) if params is not None else default_parameters(datasets[0], cfg)
     bad = [p for p in names if p not in PARAMETERS]
     if bad:
         raise ConfigError(f"unknown tuning parameter {bad[0]!r}; known: {', '.join(PARAMETERS)}")
@@ -419,10 +484,11 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         if k not in names or not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
             raise ConfigError(f"start factor {k!r} = {v!r}: a factor > 0 of a tuned parameter ({', '.join(names)})")
 
-    dataset, _ = sanitize_dataset(dataset, {**cfg.sanitize} or True)
-    noise = base_noise(dataset, cfg)
-    seg = _cut(dataset, t_split)
+    datasets = [sanitize_dataset(d, {**cfg.sanitize} or True)[0] for d in datasets]
+    noise = base_noise(datasets[0], cfg)
+    segs = [_cut(d, t) for d, t in zip(datasets, splits)]
     runner = filter_spec(cfg.filter).runner(cfg.coupling)
+    seg = segs[0]
     dt = float(np.median(np.diff(np.asarray(seg.imu.t[:1000], float)))) if len(seg.imu.t) > 2 else 1.0
     decim = max(1, int(round(1.0 / dt))) if dt > 0 else 1
     history = []
@@ -430,12 +496,20 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     def loglik(scales: dict) -> float:
         c = scaled_config(cfg, noise, scales)
         c.output_decimation = decim
-        try:
-            sol = runner(seg, c)
-        except (ValueError, FloatingPointError, RuntimeError):
-            ll, n = -math.inf, 0  # a setting the filter cannot run with (e.g. a covariance gone non-finite)
-        else:
-            ll, n = solution_log_likelihood(sol, t_to=t_split + 1e-9)
+        if c.coupling == "tight":
+            # the robust step removes or down-weights satellite rows depending on the setting, and
+            # ln L over different rows is not comparable (a tiny pseudorange sigma would win by
+            # screening out all but the easy rows): tuned on every row, Huber's loss per epoch instead
+            c.robust = dataclasses.replace(c.robust, screening=False, fde_max_sats=0, cusum_h=0.0)
+        ll, n = 0.0, 0
+        for sg, ts in zip(segs, splits):
+            try:
+                sol = runner(sg, c)
+            except (ValueError, FloatingPointError, RuntimeError):
+                ll, n = -math.inf, 0  # a setting the filter cannot run with (e.g. a covariance gone non-finite)
+                break
+            lk, nk = solution_log_likelihood(sol, t_to=ts + 1e-9)
+            ll, n = ll + lk, n + nk
         history.append((dict(scales), ll, n))
         if progress is not None:
             progress(len(history), dict(scales), ll)
@@ -447,20 +521,18 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     base_scales = {k: 1.0 for k in names}
     ll_base = loglik(base_scales)
     x0 = np.array([math.log(start.get(k, 1.0)) for k in names])
-    if np.any(x0 != 0.0):
-        objective(x0)
-    theta, f_best, _, _ = nelder_mead_log(objective, x0, step=step, max_evals=max_runs - len(history),
-                                          xtol=xtol, ftol=0.01)
+    _search(objective, names, x0, step, max_runs - 1, xtol, lambda: len(history))
     # the search's evaluations are in history (the base run too); pick the best of all
     best_scales, ll_best, n_best = max(history, key=lambda h: h[1])
     if not math.isfinite(ll_best) or n_best == 0:
         raise ConfigError("insnav tune: no GNSS record with an innovation covariance in the tuning segment "
-                          f"(before t = {t_split:.3f} s)")
+                          f"(before t = {splits[0]:.3f} s)")
     tuned = scaled_config(cfg, noise, best_scales)
     base = dataclasses.replace(cfg, imu=noise)
     return TuneResult(names=names, scales=best_scales, base=base, tuned=tuned, log_likelihood_base=ll_base,
                       log_likelihood_tuned=ll_best, records=n_best, runs=len(history),
-                      seconds=time.perf_counter() - t_start, t_split=t_split, holdout=float(holdout), history=history)
+                      seconds=time.perf_counter() - t_start,
+                      t_split=splits[0] if len(splits) == 1 else tuple(splits), holdout=float(holdout), history=history)
 
 
 # --------------------------------------------------------------------------- the report
