@@ -346,6 +346,16 @@ def scaled_config(cfg: RunConfig, noise: ImuNoise, scales: dict) -> RunConfig:
     return c
 
 
+def _plain_robust(robust):
+    """The ``[robust]`` settings of a tight run while tuning, and of the tuned run: no per-satellite
+    screening, fault exclusion or CUSUM.  They remove or down-weight rows depending on the noise
+    setting, and ln L over different rows is not comparable (with them on, a tiny pseudorange sigma
+    won on the real walk by screening out all but the easy rows); their thresholds are multiples of
+    the sigmas, so the tuned sigmas are only right without them.  Huber's loss per epoch
+    (:func:`innovation_log_likelihood`) keeps a few outliers from setting the noise."""
+    return dataclasses.replace(robust, screening=False, fde_max_sats=0, cusum_h=0.0)
+
+
 def split_time(dataset, holdout: float) -> float:
     """The time [s] that ends the tuning segment: the first ``1 - holdout`` of the IMU span."""
     if isinstance(holdout, bool) or not isinstance(holdout, (int, float)) or not (0.0 <= holdout < 0.9):
@@ -497,10 +507,7 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         c = scaled_config(cfg, noise, scales)
         c.output_decimation = decim
         if c.coupling == "tight":
-            # the robust step removes or down-weights satellite rows depending on the setting, and
-            # ln L over different rows is not comparable (a tiny pseudorange sigma would win by
-            # screening out all but the easy rows): tuned on every row, Huber's loss per epoch instead
-            c.robust = dataclasses.replace(c.robust, screening=False, fde_max_sats=0, cusum_h=0.0)
+            c.robust = _plain_robust(c.robust)
         ll, n = 0.0, 0
         for sg, ts in zip(segs, splits):
             try:
@@ -528,6 +535,8 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         raise ConfigError("insnav tune: no GNSS record with an innovation covariance in the tuning segment "
                           f"(before t = {splits[0]:.3f} s)")
     tuned = scaled_config(cfg, noise, best_scales)
+    if tuned.coupling == "tight":  # run as tuned (_plain_robust)
+        tuned.robust = _plain_robust(tuned.robust)
     base = dataclasses.replace(cfg, imu=noise)
     return TuneResult(names=names, scales=best_scales, base=base, tuned=tuned, log_likelihood_base=ll_base,
                       log_likelihood_tuned=ll_best, records=n_best, runs=len(history),
@@ -605,8 +614,11 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     """The base TOML (as a dict; its other keys and tables kept) with the
     tuned settings written in: every ``[imu]`` noise key, the GNSS sigma
     scales, ``filter`` and ``coupling``, and the constraint sigmas that were
-    tuned.  ``insnav run --config`` (``--run-config`` with ``--format kfgins``)
-    then runs with the tuned noise."""
+    tuned, and for tight coupling the ``[robust]`` keys it was tuned with
+    (screening, fault exclusion and CUSUM off).  ``insnav run --config``
+    (``--run-config`` with ``--format kfgins``) then runs with it.  (The bias
+    random-walk fields of ``ImuNoise`` have no TOML key: a base model with them
+    non-zero loses them in the file.)"""
     from ..config import _USER_UNITS
 
     d = {k: (dict(v) if isinstance(v, dict) else v) for k, v in (base or {}).items()}
@@ -617,6 +629,10 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     imu = {k: v for k, v in d.get("imu", {}).items() if k not in _USER_UNITS}
     imu.update(_user_noise(cfg.imu))
     d["imu"] = imu
+    if cfg.coupling == "tight":  # as tuned (_plain_robust)
+        rob = dict(d.get("robust", {}))
+        rob.update(screening=False, fde_max_sats=0, cusum_h=0.0)
+        d["robust"] = rob
     tuned_constraints = [p for p in ("nhc", "odo", "zupt") if p in result.names]
     if tuned_constraints or cfg.constraints.use:
         con = dict(d.get("constraints", {}))
