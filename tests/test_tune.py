@@ -284,3 +284,46 @@ def test_bad_config_keys_one_line(sim_dir, tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "unknown key 'imu.gyro_arw_deg_per_sqrt_hr'" in err
     with pytest.raises(ConfigError, match="tuner needs the innovation covariance"):
         tune(insnav.load_dataset(sim_dir), RunConfig(filter="ukf"), max_runs=20)
+
+
+def test_tight_engine_log_det_s_and_tuning():
+    """Tight EKF: ln det S of the first epoch (moved to the first IMU sample) is that of
+    blockdiag(U P_pos U' + P_cb 1 1' + R_pr, U P_vel U' + P_cd 1 1' + R_prr), U the receiver-to-satellite
+    unit vectors in NED; and the tuner runs tight, with the robust row screening off in the tuned settings."""
+    from conftest import short_tight_dataset
+    from insnav import earth
+    from insnav.filters._setup import tight_inputs_for
+    from insnav.filters.tight import run_tight
+    from insnav.units import DEG
+
+    ds = short_tight_dataset(60.0)
+    inp = tight_inputs_for(ds, None, elevation_mask_deg=10.0, max_sats=8)
+    ep_t = inp.epoch_t.copy()
+    ep_t[0] = ds.imu.t[0]
+    inp = dataclasses.replace(inp, epoch_t=ep_t)
+    cfg = RunConfig(filter="ekf", coupling="tight", init_error=False, gate_prob=0.0,
+                    init_sigma_pos_m=[3.0, 4.0, 5.0], init_sigma_vel_mps=[0.2, 0.3, 0.4],
+                    gnss_pos_sigma_scale=1.5, gnss_vel_sigma_scale=0.7)
+    sol = run_tight(ds, cfg, inputs=inp, init_sigma_clock=(30.0, 1.0))
+    assert sol.gnss_status[0] == 1
+    a, b = inp.epoch_start[0], inp.epoch_start[1]
+    s = inp.sats[a:b]
+    s0 = ds.initial
+    r = earth.geodetic_to_ecef(s0.lat_deg * DEG, s0.lon_deg * DEG, s0.h_m)
+    u_e = (s[:, 2:5] - r) / np.linalg.norm(s[:, 2:5] - r, axis=1)[:, None]
+    U = earth.ecef_to_ned_vector(s0.lat_deg * DEG, s0.lon_deg * DEG, u_e)
+    blocks = []
+    for col, p_nav, p_clk, f in ((0, np.square(cfg.init_sigma_pos_m), 30.0 ** 2, 1.5),
+                                 (1, np.square(cfg.init_sigma_vel_mps), 1.0 ** 2, 0.7)):
+        k = np.isfinite(s[:, col])
+        Uk = U[k]
+        blocks.append(Uk @ np.diag(p_nav) @ Uk.T + p_clk + np.diag(np.square(f * s[k, 10 + col])))
+    expect = sum(np.linalg.slogdet(B)[1] for B in blocks)
+    assert sol.rows[0] == sum(B.shape[0] for B in blocks)
+    # to the propagation over the first IMU interval (1e-4 of ln det S per row here); a factor left out
+    # of R (1.5 or 0.7) would move it by ~0.7 per row
+    assert sol.log_det_s[0] == pytest.approx(expect, abs=5e-3)
+
+    res = tune(ds, RunConfig(filter="ekf", coupling="tight"), params=["gnss_pos", "gnss_vel"], max_runs=10)
+    assert res.log_likelihood_tuned >= res.log_likelihood_base
+    assert res.tuned.robust.screening is False and res.tuned.robust.fde_max_sats == 0
