@@ -127,6 +127,10 @@ DEPENDS: dict[str, tuple[str, ...]] = {
     "rtk_matrtklib_static_septentrio.md": ("bench/rtk_compare.py",) + RTK,
     "rtk_instinct_spirent_rtk_dynamic_SIMULATED.md": ("bench/rtk_compare.py",) + RTK,
     "run_all.md": ("bench/run_all.py",),
+    "tune.md": ("bench/tune_check.py", f"{_PY}calib/tune.py", f"{_PY}filters/tight.py", f"{_PY}filters/solution.py",
+                f"{_PY}scenarios/seed000-car.toml", "bench/walk_0827.toml", "bench/walk_0827_loose.toml",
+                f"{_PY}io/csv_dataset.py", f"{_PY}io/imu_csv.py", f"{_PY}analysis/evaluate.py")
+               + KFGINS + LOOSE_EKF + TIGHT + RINEX + SIM,
 }
 
 #: hand-written measurement logs live in docs/logs/ (not checked here): docs/results/ holds

@@ -65,12 +65,15 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "gate_outages": (("gate_outages.md",), ["bench/gate_outages.py", "--out", "docs/results/gate_outages.md"],
                      ["bench/gate_outages.py", "--seeds", "2", "--out", "docs/results/gate_outages.md"]),
     "navigator": (("navigator.md",), ["bench/navigator_latency.py"], ["bench/navigator_latency.py", "--runs", "1"]),
+    "tune": (("tune.md",), ["bench/tune_check.py", "--out", "docs/results/tune.md"],
+             ["bench/tune_check.py", "--seeds", "1", "--max-runs", "40", "--real-max-runs", "24", "--out",
+              "docs/results/tune.md"]),
 }
 
 
 #: generators whose documents report wall or CPU times: they run alone, after the others
 #: (the rest only count, so ``--jobs 2`` may run two of them side by side)
-TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator")
+TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator", "tune")
 
 
 def git_commit() -> str:

@@ -10,7 +10,7 @@ circle.  A new module must be given a layer here.
     3  sim
     4  io
     5  filters      (the only callers of _core.run_*)
-    6  analysis
+    6  analysis calib
     7  cli, sim.cli, __main__
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ PKG = Path(__file__).resolve().parents[1] / "python" / "insnav"
 
 LAYERS = [
     ("insnav.__main__", 7), ("insnav.sim.cli", 7), ("insnav.cli", 7),
-    ("insnav.analysis", 6), ("insnav._outputs", 5), ("insnav.filters", 5), ("insnav.io", 4), ("insnav.sim", 3),
+    ("insnav.analysis", 6), ("insnav.calib", 6), ("insnav._outputs", 5), ("insnav.filters", 5), ("insnav.io", 4), ("insnav.sim", 3),
     ("insnav.gnss", 2), ("insnav.ins", 2), ("insnav.config", 1), ("insnav.data", 1), ("insnav.scenarios", 0),
     ("insnav.units", 0), ("insnav.errors", 0), ("insnav._validate", 0), ("insnav._atomic", 0), ("insnav._npz", 0), ("insnav._imu_scan", 0), ("insnav._median", 0), ("insnav._progress", 0),
     ("insnav._toml", 0), ("insnav.earth", 0), ("insnav.registry", 0), ("insnav._core", 0),

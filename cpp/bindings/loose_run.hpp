@@ -92,12 +92,13 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   const int n_sig = (a.sigma_columns > 0 && a.sigma_columns < ns) ? a.sigma_columns : ns;
   NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), n_sig, false, false, kHasOdoScale<L>);
   LooseRecordBuffers rec_buf(m);
-  DArray o_cnis({k});
+  DArray o_cnis({k}), o_cldet({k});
   py::array_t<std::int8_t> o_cst({k});
   LooseOutputs out;
   nav_buf.attach(out);
   rec_buf.attach(out, m);
   out.constraint_nis = k ? o_cnis.mutable_data() : nullptr;
+  out.constraint_log_det_s = k ? o_cldet.mutable_data() : nullptr;
   out.constraint_status = k ? o_cst.mutable_data() : nullptr;
   const double span = imu.n ? imu.t[imu.n - 1] - nav.t : 0.0;
   SmootherRun<Filter> smoother(a.smooth, m + k, span, cfg.cycle_period);
@@ -112,6 +113,7 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   nav_buf.put(res, out);
   rec_buf.put(res);
   res["constraint_nis"] = o_cnis;
+  res["constraint_log_det_s"] = o_cldet;
   res["constraint_status"] = o_cst;
   res["constraint_updates"] = out.constraint_updates;
   res["constraint_rejected"] = out.constraint_rejected;

@@ -2,7 +2,9 @@
 // every engine writes) and their result-dict entries, shared by every binder.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 
 #include "common.hpp"
@@ -108,21 +110,25 @@ struct NavBuffers {
 
 /// Per loose record (m rows): innovation (m, 6), nis, status.
 struct LooseRecordBuffers {
-  DArray innovation, nis;
+  DArray innovation, nis, log_det_s;
   py::array_t<std::int8_t> status;
 
-  explicit LooseRecordBuffers(py::ssize_t m) : innovation({m, py::ssize_t(6)}), nis({m}), status({m}) {}
+  explicit LooseRecordBuffers(py::ssize_t m) : innovation({m, py::ssize_t(6)}), nis({m}), log_det_s({m}), status({m}) {
+    std::fill_n(log_det_s.mutable_data(), m, NAN);  // engines that do not write it (delay filters)
+  }
 
   template <class Out>
   void attach(Out& out, py::ssize_t m) {
     out.innovation = m ? innovation.mutable_data() : nullptr;
     out.nis = m ? nis.mutable_data() : nullptr;
+    out.log_det_s = m ? log_det_s.mutable_data() : nullptr;
     out.status = m ? status.mutable_data() : nullptr;
   }
 
   void put(py::dict& res) const {
     res["innovation"] = innovation;
     res["nis"] = nis;
+    res["log_det_s"] = log_det_s;
     res["status"] = status;
   }
 };
@@ -130,20 +136,23 @@ struct LooseRecordBuffers {
 /// Per tight epoch (E) and satellite row (M): sat_residual (M, 2), sat_flag (M, 2), nis, status, rows,
 /// clock_jump; and the robust step's counters.
 struct TightRecordBuffers {
-  DArray sat_residual, nis, clock_jump, tdcp_residual;
+  DArray sat_residual, nis, clock_jump, tdcp_residual, log_det_s;
   py::array_t<std::int8_t> status, sat_flag, tdcp_flag;
   py::array_t<std::int32_t> rows, tdcp_rows;
   py::ssize_t E, M;
 
   TightRecordBuffers(py::ssize_t E_, py::ssize_t M_)
-      : sat_residual({M_, py::ssize_t(2)}), nis({E_}), clock_jump({E_}), tdcp_residual({M_}), status({E_}),
-        sat_flag({M_, py::ssize_t(2)}), tdcp_flag({M_}), rows({E_}), tdcp_rows({E_}), E(E_), M(M_) {}
+      : sat_residual({M_, py::ssize_t(2)}), nis({E_}), clock_jump({E_}), tdcp_residual({M_}), log_det_s({E_}),
+        status({E_}), sat_flag({M_, py::ssize_t(2)}), tdcp_flag({M_}), rows({E_}), tdcp_rows({E_}), E(E_), M(M_) {
+    std::fill_n(log_det_s.mutable_data(), E_, NAN);  // engines that do not write it (particle filters)
+  }
 
   template <class Out>
   void attach(Out& out) {
     out.sat_residual = M ? sat_residual.mutable_data() : nullptr;
     out.sat_flag = M ? sat_flag.mutable_data() : nullptr;
     out.nis = E ? nis.mutable_data() : nullptr;
+    out.log_det_s = E ? log_det_s.mutable_data() : nullptr;
     out.status = E ? status.mutable_data() : nullptr;
     out.rows = E ? rows.mutable_data() : nullptr;
     out.clock_jump = E ? clock_jump.mutable_data() : nullptr;
@@ -157,6 +166,7 @@ struct TightRecordBuffers {
     res["sat_residual"] = sat_residual;
     res["sat_flag"] = sat_flag;
     res["nis"] = nis;
+    res["log_det_s"] = log_det_s;
     res["status"] = status;
     res["rows"] = rows;
     res["clock_jump"] = clock_jump;

@@ -85,9 +85,13 @@ def _numeric_fields(path) -> int:
     return len(f)
 
 
+#: the first bytes of the TOML ``insnav tune`` writes
+TUNED_FIRST_LINE = "# insnav tune:"
+
+
 def insnav_output_kind(path) -> str | None:
     """What insnav file ``path`` is (``solution``, ``innovations``,
-    ``residuals``, ``config``, ``spp table``, ``KF-GINS result``,
+    ``residuals``, ``config``, ``tuned config``, ``spp table``, ``KF-GINS result``,
     ``evaluation``), from its name and its first bytes; None for anything else
     (an empty file included)."""
     p = Path(path)
@@ -98,6 +102,8 @@ def insnav_output_kind(path) -> str | None:
         return "residuals" if _first_line(p).startswith("t_s,prn,elevation_deg,") else None
     if name.endswith(".config.toml"):
         return "config" if _head(p).startswith(CONFIG_FIRST_LINE.encode()) else None
+    if name.endswith(".toml") and _head(p).startswith(TUNED_FIRST_LINE.encode()):
+        return "tuned config"  # insnav tune --out
     if name.endswith(".spp.csv"):
         return "spp table" if _first_line(p).startswith("t_s,solved,n_sats,") else None
     from .io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE

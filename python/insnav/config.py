@@ -500,6 +500,12 @@ class RunConfig:
         Time without an applied record after which the outage-aware test is
         used [s] (default 2).
     use_position, use_velocity : bool
+    gnss_pos_sigma_scale, gnss_vel_sigma_scale : float
+        Factors on the GNSS measurement sigmas the data give (default 1):
+        loose runs, the position and the velocity sigmas of each fix; tight
+        runs, the pseudorange and the pseudorange-rate sigmas of each
+        satellite row.  ``insnav tune`` estimates them
+        (:mod:`insnav.calib.tune`).
     propagation_interval_s : float
         Error-state propagation step inside a filter cycle (default 0.1 s:
         on the KF-GINS track 0.02 s to 0.5 s give the same accuracy to 0.1 mm).
@@ -560,6 +566,8 @@ class RunConfig:
     gate_outage_s: float = 2.0
     use_position: bool = True
     use_velocity: bool = True
+    gnss_pos_sigma_scale: float = 1.0
+    gnss_vel_sigma_scale: float = 1.0
     propagation_interval_s: float = 0.1
     cycle_period_s: float | None = None
     output_decimation: int = 1
@@ -599,6 +607,11 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not math.isfinite(v):
                 bad(key, v, "a finite number")
+        for key in ("gnss_pos_sigma_scale", "gnss_vel_sigma_scale"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not (math.isfinite(v) and v > 0):
+                bad(key, v, "a finite number > 0 (factor on the data's GNSS sigmas)")
         v = self.max_time_offset_s
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not v > 0:
             bad("max_time_offset_s", v, "a number > 0 [s] (inf: no check)")

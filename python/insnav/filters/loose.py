@@ -35,6 +35,9 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     if len(gnss):
         order = np.argsort(gnss[:, 0], kind="stable")
         gnss = np.ascontiguousarray(gnss[order])
+        if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:  # insnav tune's R scale factors
+            gnss[:, 7:10] *= cfg.gnss_pos_sigma_scale
+            gnss[:, 10:13] *= cfg.gnss_vel_sigma_scale
         check_finite(gnss[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
     gnss_t = gnss[:, 0].copy()
 
@@ -56,7 +59,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                    sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9],
                    acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
                    gyro_scale=err[:, 9:12], gnss_t=gnss_t, innovation=out["innovation"], nis=out["nis"],
-                   gnss_status=out["status"],
+                   gnss_status=out["status"], log_det_s=out["log_det_s"],
                    summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n_core, updates=int(out["updates"]),
                                 rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), gate_outage_accepted=int(out["gate_outage_accepted"]), cholesky_repairs=int(out["cholesky_repairs"]),
                                 gnss_records=len(gnss_t)))
@@ -69,6 +72,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                                           rejected=int(out["constraint_rejected"]))
         sol.constraint_t, sol.constraint_kinds = events[:, 0], events[:, 1].astype(np.int8)
         sol.constraint_nis, sol.constraint_status = out["constraint_nis"], out["constraint_status"]
+        sol.constraint_log_det_s = out["constraint_log_det_s"]
     if odo_state:
         sol.odo_scale, sol.sigma_odo_scale = out["odo_scale"][:, 0], out["odo_scale"][:, 1]
         if len(sol.t):

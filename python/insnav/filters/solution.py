@@ -64,6 +64,13 @@ class Solution(NavTrajectory):
     innovation : (M, 6) INS minus GNSS (N, E, D position [m], velocity [m/s]) before the update
     nis : (M,) normalised innovation squared
     gnss_status : (M,) int8, see :data:`GNSS_STATUS`
+    log_det_s : (M,) or None
+        log det S of each record's innovation covariance (NaN where no S was
+        formed): with ``nis`` the innovation log-likelihood
+        ``-(nis + log_det_s + rows log 2 pi) / 2`` (:mod:`insnav.calib.tune`);
+        EKF and RB-UKF runs (NaN from the other filters)
+    constraint_log_det_s : (K,) or None
+        The same per vehicle-constraint event (runs with ``[constraints]``)
     summary : dict
         filter, coupling, counts of updates / rejections / covariance repairs.
     """
@@ -83,6 +90,8 @@ class Solution(NavTrajectory):
     sigma_imu_err: np.ndarray | None = None
     odo_scale: np.ndarray | None = None
     sigma_odo_scale: np.ndarray | None = None
+    log_det_s: np.ndarray | None = None
+    constraint_log_det_s: np.ndarray | None = None
 
     COLUMNS = NAV_COLUMNS + (
                "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps",

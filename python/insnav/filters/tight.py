@@ -117,6 +117,11 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     t, dth, dv = imu_arrays(dataset)
 
     inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
+    if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:  # insnav tune's R scale factors
+        sats = np.array(inputs.sats, float)
+        sats[:, 10] *= cfg.gnss_pos_sigma_scale
+        sats[:, 11] *= cfg.gnss_vel_sigma_scale
+        inputs = dataclasses.replace(inputs, sats=sats)
 
     rng = np.random.default_rng(cfg.init_seed)
     init, sig0 = initial_state(dataset, cfg, rng)
@@ -168,7 +173,7 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2], sigma_pos_n_m=sig[:, 0:3],
         sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG, acc_bias_mps2=err[:, 0:3],
         gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9], gyro_scale=err[:, 9:12], gnss_t=ep_t,
-        innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
+        innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"], log_det_s=out["log_det_s"],
         summary=dict(filter=cfg.filter, coupling="tight", layout=n, systems="".join(systems),
                      updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
                      gate_outage_accepted=int(out["gate_outage_accepted"]),

@@ -54,9 +54,11 @@ struct ConstraintEvent {
 struct LooseOutputs : NavOutputs {
   double* innovation = nullptr;  // (.,6) INS - GNSS residual before the update (NaN if absent)
   double* nis = nullptr;         // (.)
+  double* log_det_s = nullptr;   // (.) log det S of the update (NaN if none; insnav.calib.tune's likelihood)
   std::int8_t* status = nullptr; // RecordStatus
   // per constraint event (k rows)
   double* constraint_nis = nullptr;
+  double* constraint_log_det_s = nullptr;
   std::int8_t* constraint_status = nullptr;  // RecordStatus
   int constraint_updates = 0, constraint_rejected = 0;
 
@@ -64,6 +66,7 @@ struct LooseOutputs : NavOutputs {
   void mark(std::int64_t g, RecordStatus st) {
     set_status(status, g, st);
     if (nis) nis[g] = NAN;
+    if (log_det_s) log_det_s[g] = NAN;
     if (innovation)
       for (int i = 0; i < 6; ++i) innovation[6 * g + i] = NAN;
   }
@@ -155,6 +158,7 @@ class LooseEngine {
     out.write_innovation(g, fix, meas_.linear().residual);
     const UpdateResult res = core_.update_gated(meas_);
     if (out.nis) out.nis[g] = res.nis;
+    if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
     if (res.applied) {
       ++out.updates;
@@ -167,6 +171,7 @@ class LooseEngine {
   static void mark_constraint(LooseOutputs& out, std::int64_t c, RecordStatus st) {
     out.set_status(out.constraint_status, c, st);
     if (out.constraint_nis) out.constraint_nis[c] = NAN;
+    if (out.constraint_log_det_s) out.constraint_log_det_s[c] = NAN;
   }
 
   /// The measurement step of constraint event c, applied now (as apply_fix).
@@ -197,6 +202,7 @@ class LooseEngine {
       return;
     }
     if (out.constraint_nis) out.constraint_nis[c] = res.nis;
+    if (out.constraint_log_det_s) out.constraint_log_det_s[c] = res.log_det_s;
     out.set_status(out.constraint_status, c, status_of(res));
     if (res.applied) {
       ++out.constraint_updates;

@@ -87,6 +87,7 @@ struct TightOutputs : NavOutputs {
   std::int8_t* sat_flag = nullptr; // (.,2) SatFlag of the pseudorange and the rate
   // per epoch (E rows)
   double* nis = nullptr;
+  double* log_det_s = nullptr;     // log det S of the epoch's update (NaN if none; insnav.calib.tune)
   std::int8_t* status = nullptr;   // RecordStatus
   std::int32_t* rows = nullptr;    // measurement rows used
   double* clock_jump = nullptr;    // receiver clock jump moved into the clock estimate [m] (0: none)
@@ -111,6 +112,7 @@ struct TightOutputs : NavOutputs {
   void mark(const TightEpoch& ep, std::int64_t g, RecordStatus st) {
     set_status(status, g, st);
     if (nis) nis[g] = NAN;
+    if (log_det_s) log_det_s[g] = NAN;
     if (rows) rows[g] = 0;
     if (clock_jump) clock_jump[g] = 0.0;
     if (sat_residual)
@@ -267,11 +269,13 @@ class TightEngine {
       out.set_status(out.status, g, screened ? RecordStatus::kRejectedByGate : RecordStatus::kNotUsed);
       if (screened) ++out.rejected;
       if (out.nis) out.nis[g] = NAN;
+      if (out.log_det_s) out.log_det_s[g] = NAN;
       if constexpr (kCanTdcp) tdcp_close(ep);
       return;
     }
     const UpdateResult res = core_.update_gated(meas_);
     if (out.nis) out.nis[g] = res.nis;
+    if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
     if (res.applied) {
       ++out.updates;

@@ -42,6 +42,7 @@ UpdateResult kalman_update(StateVec<L>& x, StateCov<L>& P, const LinearMeasureme
     return res;  // S not PD: refuse the update rather than corrupt P
   }
   res.nis = y.dot(llt.solve(y));
+  res.log_det_s = 2.0 * llt.matrixLLT().diagonal().array().log().sum();
   if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
     res.rejected_by_gate = true;
     return res;

@@ -288,6 +288,7 @@ class RbUkf : public UnscentedPropagation<L> {
     VecR v = y;
     llt.matrixL().solveInPlace(v);
     res.nis = v.squaredNorm();
+    res.log_det_s = 2.0 * llt.matrixLLT().diagonal().array().log().sum();
     if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
       res.rejected_by_gate = true;
       return res;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cmath>
 #include <limits>
 #include <type_traits>
 
@@ -107,6 +108,7 @@ struct UpdateResult {
   bool applied = false;
   bool rejected_by_gate = false;
   double nis = 0.0;             // y' S^-1 y
+  double log_det_s = NAN;       // log det S (NaN: no S): the innovation log-likelihood's other term (Mehra 1970)
   int rows = 0;
   int cholesky_repairs = 0;     // covariance repairs during this update
 };

@@ -1,0 +1,1 @@
+"""Self-calibration: IMU noise identification and filter noise tuning."""

@@ -1,0 +1,648 @@
+"""Automatic noise tuning by the innovation likelihood (``insnav tune``).
+
+The filter's noise settings are multiplied by scale factors ``s_j``
+(:data:`PARAMETERS`: IMU noise densities, bias instabilities, the GNSS
+sigmas, the vehicle-constraint sigmas), and the factors that maximise the
+innovation log-likelihood of the data are searched for:
+
+    ln L(s) = sum_k -1/2 (nu_k' S_k^-1 nu_k + ln det S_k + m_k ln 2 pi)
+
+over the GNSS records (and constraint events) k of a run with those settings:
+nu_k is the innovation (m_k rows) and S_k its covariance as the filter
+predicts them.  For a linear-Gaussian model this is the exact log-likelihood
+of the measurements (prediction-error decomposition, Schweppe 1965), the
+basis of adaptive noise identification by maximum likelihood (Mehra 1970,
+IEEE TAC 15(2), Sec. IV; Maybeck 1982, *Stochastic Models, Estimation and
+Control* Vol. 2, ch. 10, eqs. (10-17)-(10-20)); for the EKF and the RB-UKF
+it is the usual approximation through their linearised update.  The
+engines return ``nis`` = nu' S^-1 nu and ``log_det_s`` = ln det S per record
+(``Solution.nis``, ``Solution.log_det_s``), so one run gives ln L(s).
+
+Search: Nelder-Mead (Nelder & Mead 1965, Comput. J. 7; coefficients 1, 2,
+1/2, 1/2 as in Lagarias et al. 1998, SIAM J. Optim. 9) over theta = ln s,
+each theta_j kept within ln 1e-3 .. ln 1e3: no gradients (a run is not
+differentiable in s, e.g. through the gate), scale-free in log space.  Coarse
+to fine (:func:`_search`): first one common factor per group (IMU noise, GNSS
+sigmas, constraint sigmas), then every factor, then restarts from the best
+point.  Each evaluation is one C++ run over the tuning segment with the GIL
+released and output rows at 1 Hz only.
+
+Robustness: beyond the chi-square 1 - 1e-4 quantile c of its rows (where the
+innovation gate rejects), a record's NIS is replaced by Huber's loss
+2 sqrt(c NIS) - c of its Mahalanobis distance (Huber 1964, Ann. Math.
+Statist. 35(1)): a few outliers do not set the noise, and a setting cannot
+gain by having the gate reject records (the loss still grows as S shrinks).
+
+Hold-out: the factors are tuned on the first ``1 - holdout`` of the IMU time
+span (the IMU arrays cut there; later records are outside the run) and the
+comparison of the hand and the tuned settings (:func:`holdout_report`) uses
+the records and the reference epochs after it, from runs over all the data.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config import ConfigError, ImuNoise, RunConfig
+
+__all__ = ["PARAMETERS", "TuneResult", "innovation_log_likelihood", "solution_log_likelihood", "nelder_mead_log",
+           "scaled_config", "default_parameters", "tune", "holdout_report", "tuned_toml_dict", "split_time",
+           "LOG_SCALE_BOUND"]
+
+LOG_2PI = math.log(2.0 * math.pi)
+#: each ln s_j is kept within +-this (scale factors 1e-3 .. 1e3)
+LOG_SCALE_BOUND = math.log(1e3)
+#: records above this chi-square quantile of their rows enter the likelihood clipped at it
+TRIM_PROB = 1.0 - 1e-4
+
+#: tunable scale factors: name -> what they multiply
+PARAMETERS = {
+    "gyro_arw": "gyro angle random walk, all axes ([imu] gyro_arw_deg_per_sqrt_h)",
+    "acc_vrw": "accelerometer velocity random walk, all axes ([imu] acc_vrw_m_per_s_per_sqrt_h)",
+    "gyro_bias": "gyro bias instability: sigma of the Gauss-Markov bias (its driving noise with it), all axes "
+                 "([imu] gyro_bias_sigma_deg_per_h)",
+    "acc_bias": "accelerometer bias instability, all axes ([imu] acc_bias_sigma_mg)",
+    "gnss_pos": "GNSS sigmas of the data: loose position, tight pseudorange (gnss_pos_sigma_scale)",
+    "gnss_vel": "GNSS sigmas of the data: loose velocity, tight pseudorange rate (gnss_vel_sigma_scale)",
+    "nhc": "non-holonomic constraint sigma ([constraints] sigma_nhc_mps)",
+    "odo": "odometer speed sigma ([constraints] sigma_odo_mps)",
+    "zupt": "zero-velocity and zero-angular-rate sigmas ([constraints] sigma_zupt_mps, sigma_zaru_dph)",
+}
+
+#: filters whose engines return ln det S (the linear-update filters)
+FILTERS = ("ekf", "rbukf")
+
+
+# --------------------------------------------------------------------------- the likelihood
+
+def innovation_log_likelihood(nis, log_det_s, rows, nis_cap=None) -> float:
+    """``sum_k -(nis_k + log_det_s_k + rows_k ln 2 pi) / 2`` over the records
+    with finite values and at least one row (Mehra 1970, Sec. IV).
+
+    Parameters
+    ----------
+    nis : (K,) nu' S^-1 nu of each record [-]
+    log_det_s : (K,) ln det S [ln of the product of the rows' units squared]
+    rows : (K,) int, rows m_k of each record
+    nis_cap : float or (K,) array, optional
+        Huber's loss beyond this NIS (the robust likelihood of the tuner):
+        ``nis`` replaced by ``2 sqrt(c nis) - c`` where ``nis > c`` (Huber
+        1964, on the Mahalanobis distance ``sqrt(nis)``): an outlier counts
+        linearly in its distance, not quadratically, and a small ``S`` still
+        costs (a plain clip would let ln det S -> -inf win).
+    """
+    nis = np.asarray(nis, float)
+    ld = np.asarray(log_det_s, float)
+    m = np.asarray(rows, float)
+    ok = np.isfinite(nis) & np.isfinite(ld) & (m > 0)
+    q = nis[ok]
+    if nis_cap is not None:
+        cap = np.broadcast_to(np.asarray(nis_cap, float), nis.shape)[ok]
+        big = q > cap
+        q = np.where(big, 2.0 * np.sqrt(np.where(big, cap * q, 0.0)) - cap, q)
+    return float(-0.5 * np.sum(q + ld[ok] + m[ok] * LOG_2PI))
+
+
+def _gnss_rows(sol) -> np.ndarray:
+    rows = getattr(sol, "rows", None)
+    if rows is not None:  # tight: measurement rows of each epoch
+        return np.asarray(rows, float)
+    inn = np.asarray(sol.innovation, float)
+    return np.isfinite(inn).sum(axis=1).astype(float) if inn.size else np.zeros(0)
+
+
+def _constraint_rows(kinds) -> np.ndarray:
+    """Rows of each vehicle-constraint event (loose_engine.hpp ConstraintKind): NHC 2, odometer 1,
+    standstill: ZUPT 3 + ZARU 3 (instead of NHC / odometer)."""
+    k = np.asarray(kinds, np.int64)
+    still = 3 * ((k & 4) > 0) + 3 * ((k & 8) > 0)
+    return np.where(still > 0, still, 2 * ((k & 1) > 0) + ((k & 2) > 0)).astype(float)
+
+
+def _caps(rows) -> np.ndarray:
+    from ..gnss.spp import chi2_quantile
+
+    rows = np.asarray(rows, float)
+    out = np.full(rows.shape, np.inf)
+    for m in np.unique(rows[np.isfinite(rows) & (rows > 0)]):
+        out[rows == m] = chi2_quantile(TRIM_PROB, int(m))
+    return out
+
+
+def solution_log_likelihood(sol, t_from=-np.inf, t_to=np.inf, trim: bool = True) -> tuple[float, int]:
+    """(ln L, records) of a run's innovations: the GNSS records with an
+    innovation covariance (applied or rejected by the gate) with time of
+    validity in [t_from, t_to), and the vehicle-constraint events likewise.
+
+    ``trim``: Huber's loss beyond the chi-square 1 - 1e-4 quantile of the record's rows
+    (:func:`innovation_log_likelihood`).
+    """
+    from ..filters.solution import RecordStatus
+
+    if getattr(sol, "log_det_s", None) is None:
+        raise ValueError("the solution has no ln det S (only the loose and tight ekf / rbukf runs give it)")
+    total, n = 0.0, 0
+    streams = [(sol.gnss_t, sol.gnss_status, sol.nis, sol.log_det_s, _gnss_rows(sol))]
+    if getattr(sol, "constraint_log_det_s", None) is not None:
+        streams.append((sol.constraint_t, sol.constraint_status, sol.constraint_nis, sol.constraint_log_det_s,
+                        _constraint_rows(sol.constraint_kinds)))
+    for t, st, nis, ld, rows in streams:
+        t, st = np.asarray(t, float), np.asarray(st)
+        keep = (t >= t_from) & (t < t_to) & ((st == RecordStatus.APPLIED) | (st == RecordStatus.REJECTED_BY_GATE))
+        if not keep.any():
+            continue
+        r = rows[keep]
+        total += innovation_log_likelihood(np.asarray(nis)[keep], np.asarray(ld)[keep], r,
+                                           _caps(r) if trim else None)
+        n += int(keep.sum())
+    return total, n
+
+
+# --------------------------------------------------------------------------- the search
+
+def nelder_mead_log(fun, x0, step=math.log(3.0), *, max_evals: int = 120, xtol: float = 0.01, ftol: float = 0.01,
+                    bound: float = LOG_SCALE_BOUND):
+    """Minimise ``fun(theta)`` over log-scale factors by Nelder-Mead.
+
+    Nelder & Mead (1965) with the standard coefficients (reflection 1,
+    expansion 2, contraction 1/2, shrink 1/2; Lagarias et al. 1998), the
+    initial simplex ``x0 + step e_j``, every point clipped to ``+-bound``.
+    Stops when the simplex spans less than ``xtol`` in every coordinate and
+    less than ``ftol`` in ``fun``, or after ``max_evals`` evaluations.
+
+    Returns
+    -------
+    (theta_best, f_best, evaluations, history) ; history: list of (theta, f)
+    """
+    x0 = np.asarray(x0, float)
+    n = x0.size
+    hist = []
+
+    def f(x):
+        x = np.clip(x, -bound, bound)
+        v = float(fun(x))
+        if not math.isfinite(v):
+            v = math.inf
+        hist.append((x.copy(), v))
+        return x, v
+
+    pts = [f(x0)]
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = step if x0[j] + step <= bound else -step
+        pts.append(f(x0 + e))
+    while len(hist) < max_evals:
+        pts.sort(key=lambda p: p[1])
+        xs = np.array([p[0] for p in pts])
+        fs = np.array([p[1] for p in pts])
+        if np.max(np.abs(xs[1:] - xs[0])) <= xtol and fs[-1] - fs[0] <= ftol:
+            break
+        c = xs[:-1].mean(axis=0)
+        xr, fr = f(c + (c - xs[-1]))
+        if fr < fs[0]:
+            if len(hist) >= max_evals:
+                pts[-1] = (xr, fr)
+                break
+            xe, fe = f(c + 2.0 * (c - xs[-1]))
+            pts[-1] = (xe, fe) if fe < fr else (xr, fr)
+        elif fr < fs[-2]:
+            pts[-1] = (xr, fr)
+        else:
+            if len(hist) >= max_evals:
+                break
+            if fr < fs[-1]:  # outside contraction
+                xc, fc = f(c + 0.5 * (xr - c))
+                ok = fc <= fr
+            else:  # inside contraction
+                xc, fc = f(c + 0.5 * (xs[-1] - c))
+                ok = fc < fs[-1]
+            if ok:
+                pts[-1] = (xc, fc)
+            else:  # shrink towards the best point
+                new = [pts[0]]
+                for p in pts[1:]:
+                    if len(hist) >= max_evals:
+                        new.append(p)
+                        continue
+                    new.append(f(xs[0] + 0.5 * (p[0] - xs[0])))
+                pts = new
+    best = min(hist, key=lambda p: p[1])
+    return best[0], best[1], len(hist), hist
+
+
+#: the groups of the coarse first stage of the search (one common factor each)
+GROUPS = (("gyro_arw", "acc_vrw", "gyro_bias", "acc_bias"), ("gnss_pos", "gnss_vel"), ("nhc", "odo", "zupt"))
+
+
+def _search(objective, names, x0, step, budget, xtol, used):
+    """Coarse to fine: Nelder-Mead over one common ln-factor per group of
+    :data:`GROUPS` (the overall level of the IMU noise, of the GNSS sigmas, of
+    the constraint sigmas: the usual error of a hand setting, 2-3 dimensions),
+    then over every factor from there, then restarts from the best point with
+    a fresh simplex (step halved each time) while they gain more than 0.01 in
+    ln L and the budget of evaluations (``used()`` counts them) lasts.
+    Restarts are the standard remedy for a simplex that collapsed along a
+    ridge (e.g. gyro white noise against gyro bias instability)."""
+    n0 = used()
+    best = [np.asarray(x0, float), math.inf]
+
+    def left():
+        return budget - (used() - n0)
+
+    def run(fun, x, st, evals, tol):
+        th, f, _, _ = nelder_mead_log(fun, x, step=st, max_evals=evals, xtol=tol, ftol=0.01)
+        return th, f
+
+    groups = [[names.index(p) for p in g if p in names] for g in GROUPS]
+    groups = [g for g in groups if g]
+    x = np.asarray(x0, float).copy()
+    if len(groups) < len(names) and left() > 4 * (len(groups) + 1) + 2 * len(names):
+        def coarse(z):
+            y = x.copy()
+            for gi, g in enumerate(groups):
+                y[g] = x[g] + z[gi]
+            return objective(y)
+
+        z, f = run(coarse, np.zeros(len(groups)), math.log(4.0), min(left() // 3, 15 * len(groups)), 0.05)
+        for gi, g in enumerate(groups):
+            x[g] += z[gi]
+        best = [x.copy(), f]
+    st = step
+    while left() > len(names) + 2:
+        th, f = run(objective, best[0], st, left(), xtol)
+        gain = best[1] - f
+        if f < best[1]:
+            best = [th, f]
+        if not gain > 0.01:
+            break
+        st = max(0.5 * st, 4 * xtol)
+    return best
+
+
+# --------------------------------------------------------------------------- the settings
+
+def base_noise(dataset, cfg: RunConfig) -> ImuNoise:
+    """The IMU noise model a run with ``cfg`` uses (the config's, else the dataset's)."""
+    return dataclasses.replace(cfg.imu) if cfg.imu is not None else ImuNoise.from_dataset_model(dataset.imu_model)
+
+
+def default_parameters(dataset, cfg: RunConfig) -> list[str]:
+    """The factors tuned by default: the four IMU terms, the GNSS position (pseudorange)
+    sigma, the velocity (rate) sigma when the data have it, and the sigmas of
+    the constraints in use."""
+    names = ["gyro_arw", "acc_vrw", "gyro_bias", "acc_bias", "gnss_pos"]
+    if cfg.use_velocity and _has_velocity(dataset, cfg):
+        names.append("gnss_vel")
+    names += [c for c in ("nhc", "odo", "zupt") if c in cfg.constraints.use]
+    return names
+
+
+def _has_velocity(dataset, cfg) -> bool:
+    if cfg.coupling == "tight":
+        inp = getattr(dataset, "tight_inputs", None)
+        return inp is None or bool(np.isfinite(np.asarray(inp.sats)[:, 1]).any())
+    g = dataset.gnss
+    return len(g) > 0 and bool(np.isfinite(np.asarray(g.v_n)).any() and np.isfinite(np.asarray(g.sigma_vel_n)).any())
+
+
+def scaled_config(cfg: RunConfig, noise: ImuNoise, scales: dict) -> RunConfig:
+    """A copy of ``cfg`` with the noise of :data:`PARAMETERS` multiplied by ``scales`` (name -> factor)."""
+    unknown = [k for k in scales if k not in PARAMETERS]
+    if unknown:
+        raise ConfigError(f"unknown tuning parameter {unknown[0]!r}; known: {', '.join(PARAMETERS)}")
+    c = dataclasses.replace(cfg, imu=dataclasses.replace(noise), constraints=dataclasses.replace(cfg.constraints))
+    n = c.imu
+
+    def mul(v, s):
+        return (np.asarray(v, float) * s).tolist()
+
+    s = scales.get
+    if "gyro_arw" in scales:
+        n.gyro_arw = mul(noise.gyro_arw, s("gyro_arw"))
+    if "acc_vrw" in scales:
+        n.acc_vrw = mul(noise.acc_vrw, s("acc_vrw"))
+    if "gyro_bias" in scales:
+        n.gyro_bias_sigma = mul(noise.gyro_bias_sigma, s("gyro_bias"))
+        n.gyro_bias_rw = mul(noise.gyro_bias_rw, s("gyro_bias"))
+    if "acc_bias" in scales:
+        n.acc_bias_sigma = mul(noise.acc_bias_sigma, s("acc_bias"))
+        n.acc_bias_rw = mul(noise.acc_bias_rw, s("acc_bias"))
+    if "gnss_pos" in scales:
+        c.gnss_pos_sigma_scale = float(cfg.gnss_pos_sigma_scale * s("gnss_pos"))
+    if "gnss_vel" in scales:
+        c.gnss_vel_sigma_scale = float(cfg.gnss_vel_sigma_scale * s("gnss_vel"))
+    k = c.constraints
+    if "nhc" in scales:
+        k.sigma_nhc_mps = float(cfg.constraints.sigma_nhc_mps * s("nhc"))
+    if "odo" in scales:
+        k.sigma_odo_mps = float(cfg.constraints.odo_sigma_mps(cfg.layout) * s("odo"))
+    if "zupt" in scales:
+        k.sigma_zupt_mps = float(cfg.constraints.sigma_zupt_mps * s("zupt"))
+        k.sigma_zaru_dph = float(cfg.constraints.sigma_zaru_dph * s("zupt"))
+    return c
+
+
+def _plain_robust(robust):
+    """The ``[robust]`` settings of a tight run while tuning, and of the tuned run: no per-satellite
+    screening, fault exclusion or CUSUM.  They remove or down-weight rows depending on the noise
+    setting, and ln L over different rows is not comparable (with them on, a tiny pseudorange sigma
+    won on the real walk by screening out all but the easy rows); their thresholds are multiples of
+    the sigmas, so the tuned sigmas are only right without them.  Huber's loss per epoch
+    (:func:`innovation_log_likelihood`) keeps a few outliers from setting the noise."""
+    return dataclasses.replace(robust, screening=False, fde_max_sats=0, cusum_h=0.0)
+
+
+def split_time(dataset, holdout: float) -> float:
+    """The time [s] that ends the tuning segment: the first ``1 - holdout`` of the IMU span."""
+    if isinstance(holdout, bool) or not isinstance(holdout, (int, float)) or not (0.0 <= holdout < 0.9):
+        raise ConfigError(f"holdout {holdout!r}: expected a fraction of the data in [0, 0.9) (0: no hold-out)")
+    t = np.asarray(dataset.imu.t, float)
+    if t.size < 2:
+        raise ConfigError("the dataset has fewer than 2 IMU samples")
+    return float(t[-1]) if holdout == 0 else float(t[0] + (1.0 - holdout) * (t[-1] - t[0]))
+
+
+def _cut(dataset, t_end: float):
+    """The dataset with its IMU samples after ``t_end`` left out."""
+    from ..data.dataset import ImuData
+
+    imu = dataset.imu
+    k = int(np.searchsorted(np.asarray(imu.t), t_end, side="right"))
+    if k >= len(imu.t):
+        return dataset
+    return dataclasses.replace(dataset, imu=ImuData(imu.t[:k], imu.dtheta_b[:k], imu.dv_b[:k]))
+
+
+# --------------------------------------------------------------------------- tuning
+
+@dataclass
+class TuneResult:
+    """What :func:`tune` found.
+
+    Attributes
+    ----------
+    names : list of str
+        The tuned factors (:data:`PARAMETERS`).
+    scales : dict
+        name -> factor on the base settings (1 = unchanged).
+    base, tuned : RunConfig
+        The settings before and after (``tuned.imu`` complete).
+    log_likelihood_base, log_likelihood_tuned : float
+        ln L over the tuning segment's records.
+    records : int
+        Records in the tuning segment's likelihood.
+    runs : int
+        Evaluations of ln L the search used (each one filter run per dataset).
+    seconds : float
+        Wall time of the search [s] (the first, sanitizing step included).
+    t_split : float or tuple of float
+        End of the tuning segment [s] (dataset time); hold-out after it (one per
+        dataset when several were given).
+    holdout : float
+    history : list of (dict of scales, ln L, records)
+    """
+
+    names: list
+    scales: dict
+    base: RunConfig
+    tuned: RunConfig
+    log_likelihood_base: float
+    log_likelihood_tuned: float
+    records: int
+    runs: int
+    seconds: float
+    t_split: float
+    holdout: float
+    history: list = field(default_factory=list, repr=False)
+
+
+def tune(dataset, config=None, *, filter: str | None = None, coupling: str | None = None, params=None,
+         holdout: float = 0.3, max_runs: int = 80, start=None, xtol: float = 0.01, step: float = math.log(3.0),
+         progress=None) -> TuneResult:
+    """Tune the noise scale factors of a loose or tight EKF / RB-UKF run by
+    maximising the innovation log-likelihood over the first ``1 - holdout``
+    of the data (module docstring).
+
+    Parameters
+    ----------
+    dataset : insnav.Dataset (or a CSV / RINEX / KF-GINS dataset), or a list of them
+        Several datasets (e.g. drives with the same sensors) are tuned
+        together: ln L is the sum of their ln L (independent data), each
+        split by ``holdout`` of its own.
+    config : RunConfig, dict or TOML path, optional
+        The base (hand) settings; the factors multiply them.
+    filter : {'ekf', 'rbukf'}, optional
+    coupling : {'loose', 'tight'}, optional
+    params : list of str, optional
+        Factors to tune (:data:`PARAMETERS`); default :func:`default_parameters`.
+    holdout : float
+        Share of the data (the end of the IMU span) left out of the tuning, in [0, 0.9).
+    max_runs : int
+        Evaluations of ln L the search may use (>= 2 * factors + 2; one filter
+        run per dataset each).
+    start : dict, optional
+        Starting factors (name -> factor; default 1 for each).
+    xtol : float
+        Convergence: the simplex spans less than this in every ln s_j (0.01: 1 %).
+    step : float
+        Initial simplex step in ln s (ln 3).
+    progress : callable, optional
+        Called with (run, scales, ln L) after every run.
+
+    Returns
+    -------
+    TuneResult
+    """
+    from ..filters import _as_config
+    from ..filters.sanitize import sanitize_dataset
+    from ..registry import filter_spec
+
+    t_start = time.perf_counter()
+    cfg = _as_config(config)
+    if filter is not None:
+        cfg.filter = filter
+    if coupling is not None:
+        cfg.coupling = coupling
+    cfg.validate()
+    if cfg.filter not in FILTERS or cfg.coupling not in ("loose", "tight"):
+        raise ConfigError(f"insnav tune: filter {cfg.filter!r} with {cfg.coupling} coupling; the tuner needs the "
+                          f"innovation covariance, which the loose and tight {' and '.join(FILTERS)} return")
+    if cfg.smooth:
+        cfg.smooth = False  # the smoother does not change the forward innovations
+    datasets = list(dataset) if isinstance(dataset, (list, tuple)) else [dataset]
+    if not datasets:
+        raise ConfigError("no dataset to tune on")
+    splits = [split_time(d, holdout) for d in datasets]
+    names = list(params) if params is not None else default_parameters(datasets[0], cfg)
+    bad = [p for p in names if p not in PARAMETERS]
+    if bad:
+        raise ConfigError(f"unknown tuning parameter {bad[0]!r}; known: {', '.join(PARAMETERS)}")
+    if not names:
+        raise ConfigError("no parameter to tune")
+    for c in ("nhc", "odo", "zupt"):
+        if c in names and c not in cfg.constraints.use:
+            raise ConfigError(f"tuning parameter {c!r} needs the {c} constraint in use (--constraints / "
+                              "[constraints] use)")
+    if isinstance(max_runs, bool) or not isinstance(max_runs, (int, np.integer)) or max_runs < 2 * len(names) + 2:
+        raise ConfigError(f"max_runs {max_runs!r}: at least {2 * len(names) + 2} for {len(names)} factors")
+    start = dict(start or {})
+    for k, v in start.items():
+        if k not in names or not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
+            raise ConfigError(f"start factor {k!r} = {v!r}: a factor > 0 of a tuned parameter ({', '.join(names)})")
+
+    datasets = [sanitize_dataset(d, {**cfg.sanitize} or True)[0] for d in datasets]
+    noise = base_noise(datasets[0], cfg)
+    segs = [_cut(d, t) for d, t in zip(datasets, splits)]
+    runner = filter_spec(cfg.filter).runner(cfg.coupling)
+    seg = segs[0]
+    dt = float(np.median(np.diff(np.asarray(seg.imu.t[:1000], float)))) if len(seg.imu.t) > 2 else 1.0
+    decim = max(1, int(round(1.0 / dt))) if dt > 0 else 1
+    history = []
+
+    def loglik(scales: dict) -> float:
+        c = scaled_config(cfg, noise, scales)
+        c.output_decimation = decim
+        if c.coupling == "tight":
+            c.robust = _plain_robust(c.robust)
+        ll, n = 0.0, 0
+        for sg, ts in zip(segs, splits):
+            try:
+                sol = runner(sg, c)
+            except (ValueError, FloatingPointError, RuntimeError):
+                ll, n = -math.inf, 0  # a setting the filter cannot run with (e.g. a covariance gone non-finite)
+                break
+            lk, nk = solution_log_likelihood(sol, t_to=ts + 1e-9)
+            ll, n = ll + lk, n + nk
+        history.append((dict(scales), ll, n))
+        if progress is not None:
+            progress(len(history), dict(scales), ll)
+        return ll
+
+    def objective(theta):
+        return -loglik({k: float(math.exp(v)) for k, v in zip(names, theta)})
+
+    base_scales = {k: 1.0 for k in names}
+    ll_base = loglik(base_scales)
+    x0 = np.array([math.log(start.get(k, 1.0)) for k in names])
+    _search(objective, names, x0, step, max_runs - 1, xtol, lambda: len(history))
+    # the search's evaluations are in history (the base run too); pick the best of all
+    best_scales, ll_best, n_best = max(history, key=lambda h: h[1])
+    if not math.isfinite(ll_best) or n_best == 0:
+        raise ConfigError("insnav tune: no GNSS record with an innovation covariance in the tuning segment "
+                          f"(before t = {splits[0]:.3f} s)")
+    tuned = scaled_config(cfg, noise, best_scales)
+    if tuned.coupling == "tight":  # run as tuned (_plain_robust)
+        tuned.robust = _plain_robust(tuned.robust)
+    base = dataclasses.replace(cfg, imu=noise)
+    return TuneResult(names=names, scales=best_scales, base=base, tuned=tuned, log_likelihood_base=ll_base,
+                      log_likelihood_tuned=ll_best, records=n_best, runs=len(history),
+                      seconds=time.perf_counter() - t_start,
+                      t_split=splits[0] if len(splits) == 1 else tuple(splits), holdout=float(holdout), history=history)
+
+
+# --------------------------------------------------------------------------- the report
+
+def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = np.inf, keep_t=None) -> dict:
+    """Consistency and error figures of ``sol`` over [t_from, t_to).
+
+    Returns a dict: ``records`` and ``nis_per_row`` (mean NIS over the mean
+    rows of the applied GNSS records: 1 for a consistent filter),
+    ``log_likelihood_per_record``; with a ``reference`` (a Truth-like
+    trajectory of the IMU centre in the solution's time base), ``epochs``,
+    ``hor_rms_m``, ``rms_3d_m`` and ``nees`` = rms(error/sigma) per axis of
+    ``pos_n_m`` (N, E, D), ``vel_n_mps``, ``att_deg`` (roll, pitch, yaw),
+    where the reference has them.  ``keep_t``: only the reference epochs in
+    this set of times (e.g. the epochs whose fixes the filter did not see).
+    """
+    from ..analysis.metrics import errors
+    from ..filters.solution import RecordStatus
+
+    out = {}
+    t = np.asarray(sol.gnss_t, float)
+    ap = (np.asarray(sol.gnss_status) == RecordStatus.APPLIED) & (t >= t_from) & (t < t_to)
+    rows = _gnss_rows(sol)[ap]
+    nis = np.asarray(sol.nis, float)[ap]
+    out["records"] = int(ap.sum())
+    out["nis_per_row"] = float(np.sum(nis) / np.sum(rows)) if rows.size and np.sum(rows) > 0 else math.nan
+    ll, n = solution_log_likelihood(sol, t_from, t_to)
+    out["log_likelihood_per_record"] = ll / n if n else math.nan
+    if reference is None:
+        return out
+    tr = np.asarray(reference.t, float)
+    m = (tr >= max(t_from, sol.t[0])) & (tr < min(t_to, sol.t[-1]))
+    if keep_t is not None:
+        m &= np.isin(np.round(tr, 3), np.round(np.asarray(keep_t, float), 3))
+    from ..analysis.evaluate import _solution_at
+
+    at = _solution_at(sol, tr[m])
+    e = errors(at, reference)
+    out["epochs"] = int(len(e["t"]))
+    if not len(e["t"]):
+        return out
+    hz = np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])
+    out["hor_rms_m"] = float(np.sqrt(np.mean(hz ** 2)))
+    out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"] ** 2, axis=1))))
+    out["nees"] = {}
+    for k in ("pos_n_m", "vel_n_mps", "att_deg"):
+        x, s = e[k], e.get("sigma_" + k)
+        if s is None:
+            continue
+        ok = np.all(np.isfinite(x), axis=1) & np.all(s > 0, axis=1)
+        if ok.sum() < 2:
+            continue
+        out["nees"][k] = np.sqrt(np.mean((x[ok] / s[ok]) ** 2, axis=0)).tolist()
+    return out
+
+
+def _user_noise(noise: ImuNoise) -> dict:
+    """The ``[imu]`` noise keys in user units (every one, so a loader need not fill in any)."""
+    from ..config import _USER_UNITS
+
+    d = {}
+    for key, (fld, factor) in _USER_UNITS.items():
+        if key == "acc_vrw_ug_per_sqrt_hz":
+            continue
+        d[key] = [float(v) / factor for v in getattr(noise, fld)]
+    return d
+
+
+def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
+    """The base TOML (as a dict; its other keys and tables kept) with the
+    tuned settings written in: every ``[imu]`` noise key, the GNSS sigma
+    scales, ``filter`` and ``coupling``, and the constraint sigmas that were
+    tuned, and for tight coupling the ``[robust]`` keys it was tuned with
+    (screening, fault exclusion and CUSUM off).  ``insnav run --config``
+    (``--run-config`` with ``--format kfgins``) then runs with it.  (The bias
+    random-walk fields of ``ImuNoise`` have no TOML key: a base model with them
+    non-zero loses them in the file.)"""
+    from ..config import _USER_UNITS
+
+    d = {k: (dict(v) if isinstance(v, dict) else v) for k, v in (base or {}).items()}
+    cfg = result.tuned
+    d["filter"], d["coupling"] = cfg.filter, cfg.coupling
+    d["gnss_pos_sigma_scale"] = float(cfg.gnss_pos_sigma_scale)
+    d["gnss_vel_sigma_scale"] = float(cfg.gnss_vel_sigma_scale)
+    imu = {k: v for k, v in d.get("imu", {}).items() if k not in _USER_UNITS}
+    imu.update(_user_noise(cfg.imu))
+    d["imu"] = imu
+    if cfg.coupling == "tight":  # as tuned (_plain_robust)
+        rob = dict(d.get("robust", {}))
+        rob.update(screening=False, fde_max_sats=0, cusum_h=0.0)
+        d["robust"] = rob
+    tuned_constraints = [p for p in ("nhc", "odo", "zupt") if p in result.names]
+    if tuned_constraints or cfg.constraints.use:
+        con = dict(d.get("constraints", {}))
+        con["use"] = list(cfg.constraints.use)
+        if "nhc" in result.names:
+            con["sigma_nhc_mps"] = float(cfg.constraints.sigma_nhc_mps)
+        if "odo" in result.names:
+            con["sigma_odo_mps"] = float(cfg.constraints.sigma_odo_mps)
+        if "zupt" in result.names:
+            con["sigma_zupt_mps"] = float(cfg.constraints.sigma_zupt_mps)
+            con["sigma_zaru_dph"] = float(cfg.constraints.sigma_zaru_dph)
+        d["constraints"] = con
+    return d

@@ -1,0 +1,212 @@
+"""``insnav tune``: noise scale factors by the innovation likelihood, written as a run TOML."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from ..errors import UserError
+
+EXAMPLES = """examples:
+  insnav tune run3 --filter ekf --out tuned.toml                        # an `insnav simulate` folder
+  insnav run run3 --config tuned.toml --out sol.csv                      # ... then run with it
+  insnav tune --format kfgins --config kf-gins.yaml --out tuned.toml     # then: insnav run --format kfgins
+                                                                         #   --config kf-gins.yaml --run-config tuned.toml
+  insnav tune --format csv --imu imu.csv --gnss fixes.pos --config base.toml --out tuned.toml
+  insnav tune --format rinex --obs F.obs --nav F.nav --imu IMU.csv --config base.toml --coupling tight \\
+              --reference ref.pos --out tuned.toml
+
+The noise settings of the base configuration (--config; the dataset's IMU model without one) are
+multiplied by scale factors: gyro_arw, acc_vrw, gyro_bias, acc_bias (all axes of each), gnss_pos and
+gnss_vel (the data's GNSS sigmas: loose position / velocity, tight pseudorange / rate) and, with
+constraints, nhc, odo, zupt.  The factors that maximise the innovation log-likelihood
+sum_k -(nu_k' S_k^-1 nu_k + ln det S_k)/2 over the first 1 - HOLDOUT of the data are found by
+Nelder-Mead in log space (docs/algorithms.md, "Noise tuning"), one C++ run per evaluation.
+
+The table compares the base and the tuned settings on the held-out end of the data: mean NIS per
+measurement row of the applied GNSS records (1 when consistent) and, with a reference
+(--reference, or the simulator's truth), the horizontal RMS error and rms(error/sigma) per axis.
+--out gets the base TOML with the tuned [imu] noise keys, gnss_pos_sigma_scale,
+gnss_vel_sigma_scale, filter, coupling (and the tuned [constraints] sigmas): `insnav run --config`
+(`--run-config` with --format kfgins) runs with it."""
+
+
+def add_tune_parser(sub) -> None:
+    from ..calib.tune import PARAMETERS
+
+    p = sub.add_parser("tune", help="tune the filter's noise scale factors by the innovation likelihood",
+                       description="Estimate noise scale factors by maximising the innovation log-likelihood "
+                       "(loose / tight EKF and RB-UKF) and write the tuned run TOML.", epilog=EXAMPLES,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("dataset", nargs="?", help="dataset directory written by `insnav simulate` (insnav format)")
+    p.add_argument("--format", choices=("insnav", "kfgins", "rinex", "csv"), default="insnav")
+    p.add_argument("--filter", choices=("ekf", "rbukf"), default=None, help="default: the config's, else ekf")
+    p.add_argument("--coupling", choices=("loose", "tight"), default=None, help="default: the config's, else loose")
+    p.add_argument("--config", help="base insnav TOML (with --format kfgins: the KF-GINS YAML)")
+    p.add_argument("--run-config", metavar="TOML", help="--format kfgins: base insnav TOML overriding the YAML's keys")
+    p.add_argument("--imu", help="IMU file (--format kfgins, rinex, csv)")
+    p.add_argument("--gnss", help="GNSS file (--format kfgins; --format csv: .csv, .pos or NMEA)")
+    p.add_argument("--obs", help="RINEX observation file (--format rinex)")
+    p.add_argument("--nav", help="RINEX navigation file (--format rinex)")
+    p.add_argument("--imu-tag", help="RTKLIB str2str time tag of the IMU log")
+    p.add_argument("--constraints", default=None, metavar="LIST", help="vehicle constraints nhc,odo,zupt (loose)")
+    p.add_argument("--params", default=None, metavar="LIST",
+                   help="factors to tune, comma-separated from " + ", ".join(PARAMETERS)
+                   + " (default: the IMU four, gnss_pos, gnss_vel when the data have velocity, the constraints in use)")
+    p.add_argument("--holdout", type=float, default=0.3,
+                   help="share of the data at its end left out of the tuning and used for the report, in [0, 0.9) "
+                        "(default %(default)s; 0: tune and report on all of it)")
+    p.add_argument("--max-runs", type=int, default=80, help="filter runs the search may use (default %(default)s)")
+    p.add_argument("--reference", metavar="FILE",
+                   help="reference trajectory for the report: insnav truth.csv or folder, KF-GINS .nav, RTKLIB .pos "
+                        "(default: the dataset's truth, if any)")
+    p.add_argument("--out", required=True, help="the tuned run TOML to write")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out that insnav did not write")
+    p.add_argument("--quiet", "-q", action="store_true", help="no line per filter run")
+    p.set_defaults(func=cmd_tune)
+
+
+def _load(args):
+    """(dataset, RunConfig, base TOML dict) from the input options, as ``insnav run`` reads them."""
+    import tomllib
+
+    import insnav
+    from ..config import RunConfig, load_config
+
+    def toml(path):
+        if not path:
+            return {}
+        try:
+            with open(path, "rb") as f:
+                return tomllib.load(f)
+        except OSError as exc:
+            raise UserError(f"{path}: {exc.strerror}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise UserError(f"{path}: not valid TOML: {exc}") from None
+
+    if args.format != "insnav" and args.dataset:
+        raise UserError(f"--format {args.format} reads the files given by options; do not give a dataset directory")
+    if args.run_config and args.format != "kfgins":
+        raise UserError("--run-config goes with --format kfgins (otherwise the insnav TOML is --config)")
+    if args.format == "rinex":
+        missing = [n for n in ("obs", "nav", "imu") if not getattr(args, n)]
+        if missing:
+            raise UserError("--format rinex needs " + ", ".join(f"--{n}" for n in missing))
+        from ..io.rinex_dataset import load_rinex_run
+
+        ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=args.imu_tag)
+        return ds, cfg, toml(args.config)
+    if args.format == "csv":
+        missing = [n for n in ("imu", "gnss", "config") if not getattr(args, n)]
+        if missing:
+            raise UserError("--format csv needs " + ", ".join(f"--{n}" for n in missing))
+        from ..io.csv_dataset import load_csv_run
+
+        ds, cfg = load_csv_run(args.imu, args.gnss, args.config, imu_tag=args.imu_tag)
+        return ds, cfg, toml(args.config)
+    if args.format == "kfgins":
+        if not args.config:
+            raise UserError("--format kfgins needs --config KF-GINS.yaml")
+        from ..io.kfgins_dataset import load_kfgins
+
+        ds, cfg = load_kfgins(args.config, args.imu, args.gnss)
+        if args.run_config:
+            from .run import _overlay_run_config
+
+            cfg = _overlay_run_config(cfg, args.run_config)
+        return ds, cfg, toml(args.run_config)
+    if not args.dataset:
+        raise UserError("give a dataset directory (or --format kfgins|rinex|csv with its files)")
+    if not Path(args.dataset).is_dir():
+        raise UserError(f"dataset directory not found: {args.dataset}")
+    ds = insnav.load_dataset(args.dataset)
+    cfg = load_config(args.config) if args.config else RunConfig()
+    return ds, cfg, toml(args.config)
+
+
+def _fmt(x, nd=3):
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
+
+
+def report_table(rep_base: dict, rep_tuned: dict) -> list[str]:
+    """The before/after table (plain text) of two :func:`insnav.calib.tune.holdout_report` dicts."""
+    rows = [("held-out GNSS records applied", "records", 0), ("mean NIS per row (expect 1)", "nis_per_row", 3),
+            ("ln L per record", "log_likelihood_per_record", 3), ("reference epochs", "epochs", 0),
+            ("horizontal RMS error [m]", "hor_rms_m", 4), ("3-D RMS error [m]", "rms_3d_m", 4)]
+    out = [f"{'':38s} {'base':>22s} {'tuned':>22s}"]
+    for label, key, nd in rows:
+        if key not in rep_base and key not in rep_tuned:
+            continue
+        out.append(f"{label:38s} {_fmt(rep_base.get(key), nd):>22s} {_fmt(rep_tuned.get(key), nd):>22s}")
+    names = {"pos_n_m": "position N,E,D", "vel_n_mps": "velocity N,E,D", "att_deg": "attitude r,p,y"}
+    for k, label in names.items():
+        a, b = rep_base.get("nees", {}).get(k), rep_tuned.get("nees", {}).get(k)
+        if a is None and b is None:
+            continue
+        f = (lambda v: "-" if v is None else ", ".join(f"{x:.2f}" for x in v))
+        out.append(f"{'rms(err/sigma) ' + label:38s} {f(a):>22s} {f(b):>22s}")
+    return out
+
+
+def cmd_tune(args) -> int:
+    import dataclasses
+
+    from .._atomic import atomic_write_text
+    from .._outputs import check_outputs, input_files
+    from .._toml import dumps_toml
+    from ..calib.tune import holdout_report, split_time, tune, tuned_toml_dict
+    from ..config import ConfigError
+    from ..filters import run
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".toml":
+        raise UserError(f"--out {out}: the tuned configuration is a TOML file (e.g. tuned.toml)")
+    if not (0.0 <= args.holdout < 0.9):
+        raise UserError(f"--holdout {args.holdout:g}: expected a fraction of the data in [0, 0.9) (0: no hold-out)")
+    params = None if args.params is None else [p.strip() for p in args.params.split(",") if p.strip()]
+    ins = [args.dataset, args.config, args.run_config, args.imu, args.gnss, args.obs, args.nav, args.imu_tag,
+           args.reference]
+    check_outputs([out], input_files(*ins), overwrite=args.overwrite, command="tune")
+    try:
+        ds, cfg, base_d = _load(args)
+        if args.constraints is not None:
+            cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
+        split_time(ds, args.holdout)  # a bad --holdout before any work
+        progress = None
+        if not args.quiet:
+            def progress(k, scales, ll):
+                print(f"run {k:3d}: ln L {ll:14.3f}  " + " ".join(f"{n} {v:.3g}" for n, v in scales.items()),
+                      file=sys.stderr)
+        res = tune(ds, cfg, filter=args.filter, coupling=args.coupling, params=params, holdout=args.holdout,
+                   max_runs=args.max_runs, progress=progress)
+        reference = None
+        if args.reference:
+            from ..analysis.evaluate import _read_truth
+
+            reference = _read_truth(args.reference)
+        elif getattr(ds, "truth", None) is not None:
+            reference = ds.truth
+        t_from = res.t_split if args.holdout > 0 else -math.inf
+        reps = []
+        for c in (res.base, res.tuned):
+            sol = run(ds, config=dataclasses.replace(c))
+            reps.append(holdout_report(sol, reference, t_from=t_from))
+    except ConfigError as exc:
+        raise UserError(str(exc)) from None
+    d = tuned_toml_dict(base_d, res)
+    head = (f"# insnav tune: {res.tuned.filter} {res.tuned.coupling}, {len(res.names)} factors by the innovation "
+            f"likelihood over t < {res.t_split:.3f} s ({res.records} records, {res.runs} runs)\n"
+            + "".join(f"#   {n} x {v:.4g}\n" for n, v in res.scales.items()))
+    atomic_write_text(out, head + dumps_toml(d))
+    print(f"tuned {len(res.names)} factors in {res.runs} runs, {res.seconds:.1f} s; ln L over the tuning segment "
+          f"{res.log_likelihood_base:.2f} -> {res.log_likelihood_tuned:.2f} ({res.records} records)")
+    for n, v in res.scales.items():
+        print(f"  {n:10s} x {v:.4g}")
+    print(f"held out: t >= {res.t_split:.3f} s ({args.holdout:.0%} of the IMU span)" if args.holdout > 0
+          else "no hold-out: the report uses all the data")
+    for line in report_table(*reps):
+        print(line)
+    print(f"{out}: written (insnav run --config {out})" if args.format != "kfgins"
+          else f"{out}: written (insnav run --format kfgins --config {args.config} --run-config {out})")
+    return 0
