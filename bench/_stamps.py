@@ -104,6 +104,11 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                           f"{_PY}io/imu_csv.py") + RINEX + TIGHT,
     "tight_multignss.md": ("bench/tight_multignss.py", f"{_PY}scenarios/urban-multignss.toml",
                            f"{_PY}gnss/measurements.py", f"{_PY}gnss/systems.py") + RINEX + TIGHT + SIM_RAW,
+    "selfcal_states.md": ("bench/selfcal_states.py", "bench/walk_loose.py", "bench/walk_0827_loose.toml",
+                          f"{_PY}io/csv_dataset.py", f"{_PY}io/imu_csv.py", f"{_PY}scenarios/car-mems.toml",
+                          f"{_PY}scenarios/seed000-car.toml", f"{_PY}filters/solution.py",
+                          "cpp/bindings/bind_loose_selfcal.cpp", "cpp/bindings/bind_tight_selfcal.cpp")
+                         + RINEX + LOOSE_EKF + TIGHT + SIM_RAW,
     "walk_loose.md": ("bench/walk_loose.py", "bench/walk_0827_loose.toml", f"{_PY}io/csv_dataset.py",
                       f"{_PY}io/imu_csv.py") + RINEX + LOOSE_EKF,
     "gate_outages.md": ("bench/gate_outages.py", f"{_PY}filters/health.py", f"{_PY}filters/smoothing.py",

@@ -63,6 +63,9 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "gate_outages": (("gate_outages.md",), ["bench/gate_outages.py", "--out", "docs/results/gate_outages.md"],
                      ["bench/gate_outages.py", "--seeds", "2", "--out", "docs/results/gate_outages.md"]),
     "navigator": (("navigator.md",), ["bench/navigator_latency.py"], ["bench/navigator_latency.py", "--runs", "1"]),
+    "selfcal_states": (("selfcal_states.md",), ["bench/selfcal_states.py", "--out", "docs/results/selfcal_states.md"],
+                       ["bench/selfcal_states.py", "--runs", "4", "--zero-runs", "2", "--lever-runs", "1",
+                        "--out", "docs/results/selfcal_states.md"]),
 }
 
 

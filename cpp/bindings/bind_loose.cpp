@@ -91,7 +91,7 @@ void bind_loose(py::module_& m) {
           if (layout != 15)
             throw py::value_error("estimate_time_offset / estimate_lever_arm: layout " + std::to_string(layout) +
                                   " unsupported (the self-calibration states extend the 15-state layout)");
-          return run_loose_selfcal(filter, args, sc.time_offset, sc.lever_arm);
+          return run_loose_selfcal(filter, args, sc);
         }
         if (layout == 15) return run_loose_l15(filter, args);
         if (layout == 21) return run_loose_l21(filter, args);

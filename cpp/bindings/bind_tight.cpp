@@ -43,6 +43,7 @@ void bind_tight(py::module_& m) {
             throw py::value_error("estimate_time_offset / estimate_lever_arm: layout " + std::to_string(layout) +
                                   " unsupported (the self-calibration states extend the 17-state layout: "
                                   "one constellation)");
+          if (sc.odo_lever_arm) throw py::value_error("estimate_odo_lever_arm: loose coupling only");
           return run_tight_selfcal(filter, a, sc.time_offset, sc.lever_arm);
         }
         if (layout == 20) return run_tight_multi(filter, a);

@@ -80,19 +80,20 @@ inline UtParams ut_from(const py::dict& d) {
 /// Engine-config keys of the self-calibration states (layout.hpp): the
 /// IMU-GNSS time offset and the GNSS lever arm as filter states, and the
 /// initial time-offset estimate [s].
-#define INSNAV_SELFCAL_KEYS "estimate_time_offset", "estimate_lever_arm", "time_offset0_s"
+#define INSNAV_SELFCAL_KEYS "estimate_time_offset", "estimate_lever_arm", "estimate_odo_lever_arm", "time_offset0_s"
 
 /// Which self-calibration states a run asks for.
 struct SelfCal {
-  bool time_offset = false, lever_arm = false;
+  bool time_offset = false, lever_arm = false, odo_lever_arm = false;
   double time_offset0_s = 0.0;
-  bool any() const { return time_offset || lever_arm; }
+  bool any() const { return time_offset || lever_arm || odo_lever_arm; }
 };
 
 inline SelfCal selfcal_from(const py::dict& d) {
   SelfCal s;
   s.time_offset = flag(d, "estimate_time_offset", false);
   s.lever_arm = flag(d, "estimate_lever_arm", false);
+  s.odo_lever_arm = flag(d, "estimate_odo_lever_arm", false);
   s.time_offset0_s = num(d, "time_offset0_s", 0.0);
   if (!std::isfinite(s.time_offset0_s)) throw py::value_error("time_offset0_s must be finite");
   return s;

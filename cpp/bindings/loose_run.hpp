@@ -51,8 +51,9 @@ LooseConfig loose_run_config_from(const py::dict& config);  // bind_loose.cpp
 py::dict run_loose_l15(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l15.cpp
 py::dict run_loose_l21(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l21.cpp
 py::dict run_loose_l16(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l16.cpp (Layout16Odo)
-/// The self-calibration layouts (Layout16Td, Layout18Lever, Layout19TdLever; EKF): bind_loose_selfcal.cpp.
-py::dict run_loose_selfcal(const std::string& filter, const LooseRunArgs& a, bool time_offset, bool lever_arm);
+/// The self-calibration layouts (Layout16Td, Layout18Lever, Layout19TdLever, Layout18OdoLever; EKF):
+/// bind_loose_selfcal.cpp.
+py::dict run_loose_selfcal(const std::string& filter, const LooseRunArgs& a, const SelfCal& sc);
 
 [[noreturn]] inline void unsupported_loose(const std::string& filter, int layout) {
   throw py::value_error("unsupported filter/layout combination: " + filter + "/" + std::to_string(layout));
@@ -94,7 +95,7 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   }
   const int n_sig = (a.sigma_columns > 0 && a.sigma_columns < ns) ? a.sigma_columns : ns;
   NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), n_sig, false, false, kHasOdoScale<L>,
-                     kHasTimeOffset<L>, kHasLeverArm<L>);
+                     kHasTimeOffset<L>, kHasLeverArm<L>, kHasOdoLever<L>);
   LooseRecordBuffers rec_buf(m);
   DArray o_cnis({k});
   py::array_t<std::int8_t> o_cst({k});

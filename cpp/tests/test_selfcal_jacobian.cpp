@@ -12,6 +12,8 @@
 // of the true trajectory at t -/+ h.
 // Lever arm: the residual of the INS with l_b^ against the antenna of the
 // true lever arm l_b^ - dl_b, differentiated in dl_b.
+// Odometer lever arm (meas/vehicle.hpp): the NHC and odometer rows' columns
+// against central differences of predicted_residual, the exact residual.
 // Also: the shifted prediction (a record applied after its time) and
 // predicted_residual of the new columns.
 #include <cmath>
@@ -21,6 +23,7 @@
 #include "insnav/earth/wgs84.hpp"
 #include "insnav/meas/gnss_loose.hpp"
 #include "insnav/meas/pseudorange.hpp"
+#include "insnav/meas/vehicle.hpp"
 #include "test_util.hpp"
 
 using namespace insnav;
@@ -263,6 +266,29 @@ int main() {
     std::printf("tight lever-arm columns: max relative |H - numerical| %.2e\n", worst);
     EXPECT_LT(worst, 1e-5);  // central differences of 2.2e7 m ranges over 1 mm steps: ~1e-6 of round-off
     EXPECT_LT(0.5, m.linear().H.block(0, LA, m.linear().rows(), 3).norm());
+  }
+  // --- vehicle constraints, odometer lever-arm columns (NHC + odometer rows, turning) ---
+  {
+    using L = Layout18OdoLever;
+    constexpr int LO = L::kOdoLever;
+    VehicleConstraintConfig vc;
+    vc.lever_arm_b = Vec3(-1.3, 0.2, 0.4);
+    vc.C_bv = dcm_from_euler(Vec3(0.01, -0.02, 0.03)).transpose();
+    VehicleVelocityMeasurement<L> m;
+    const Vec3 w = ins.omega_ib_b + Vec3(0.03, -0.05, 0.0);  // some roll and pitch rate besides the yaw rate
+    m.set(ins.s, w, vc, true, 14.0, 0.002);
+    double worst = 0.0;
+    for (int j = 0; j < 3; ++j) {
+      StateVec<L> dp = StateVec<L>::Zero(), dm = StateVec<L>::Zero();
+      dp[LO + j] = 1e-3;
+      dm[LO + j] = -1e-3;
+      const auto col = ((m.predicted_residual(dp) - m.predicted_residual(dm)) / 2e-3).eval();
+      for (int i = 0; i < m.linear().rows(); ++i) worst = std::max(worst, rel_err(m.linear().H(i, LO + j), col[i]));
+    }
+    std::printf("vehicle odometer lever-arm columns: max relative |H - numerical| %.2e (|H| %.3f)\n", worst,
+                m.linear().H.block(0, LO, m.linear().rows(), 3).norm());
+    EXPECT_LT(worst, 1e-9);  // linear in l: central differences are exact up to round-off
+    EXPECT_LT(0.1, (m.linear().H.block(0, LO, m.linear().rows(), 3).norm()));
   }
   TEST_MAIN_END();
 }

@@ -85,6 +85,7 @@ struct NavOutputs {
   double* odo_scale = nullptr;  // (.,2) odometer scale factor s [-] and its 1-sigma (layouts with kOdoScale)
   double* time_offset = nullptr;  // (.,2) IMU-GNSS time offset t_d [s] and its 1-sigma (layouts with kTimeOffset)
   double* lever_arm = nullptr;    // (.,6) GNSS lever arm l_b [m] (FRD) and its 1-sigma (layouts with kLeverArm)
+  double* odo_lever = nullptr;    // (.,6) odometer lever arm [m] (FRD) and its 1-sigma (layouts with kOdoLever)
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
   int gate_reopened = 0;       // records the gate rejected but applied, P scaled, after reopen_after rejections in a row
@@ -159,6 +160,9 @@ struct ClosedLoop {
   // them from time_offset0 / lever_arm_b0.
   double time_offset = 0.0, time_offset0 = 0.0;
   Vec3 lever_arm_b = Vec3::Zero(), lever_arm_b0 = Vec3::Zero();
+  // the odometer / vehicle-constraint lever arm l_o^ [m] (kHasOdoLever<L>; the loose engine uses it
+  // instead of VehicleConstraintConfig::lever_arm_b), from odo_lever_b0
+  Vec3 odo_lever_b = Vec3::Zero(), odo_lever_b0 = Vec3::Zero();
   double propagation_interval = 0.02;          // [s]
   double cycle_start = 0.0, interval_t0 = 0.0;
 
@@ -201,6 +205,7 @@ struct ClosedLoop {
     odo_scale = 0.0;
     time_offset = time_offset0;
     lever_arm_b = lever_arm_b0;
+    odo_lever_b = odo_lever_b0;
     filter.initialize(P0);
     rates_stale_ = false;
     omega_ib_b_.setZero();
@@ -404,6 +409,7 @@ struct ClosedLoop {
     if constexpr (kHasOdoScale<L>) odo_scale += (1.0 + odo_scale) * x[OdoScaleState<L>::offset];
     if constexpr (kHasTimeOffset<L>) time_offset -= x[TimeOffsetState<L>::offset];
     if constexpr (kHasLeverArm<L>) lever_arm_b -= x.template segment<3>(LeverArmState<L>::offset);
+    if constexpr (kHasOdoLever<L>) odo_lever_b -= x.template segment<3>(OdoLeverState<L>::offset);
     ins.set_state(s);
     filter.reset_state();
     out_cache_dirty_ = true;
@@ -479,6 +485,13 @@ struct ClosedLoop {
         for (int j = 0; j < 3; ++j) {
           out.lever_arm[6 * i + j] = lever_arm_b[j] - x[LeverArmState<L>::offset + j];
           out.lever_arm[6 * i + 3 + j] = sigma_[LeverArmState<L>::offset + j];
+        }
+    }
+    if constexpr (kHasOdoLever<L>) {
+      if (out.odo_lever)
+        for (int j = 0; j < 3; ++j) {
+          out.odo_lever[6 * i + j] = odo_lever_b[j] - x[OdoLeverState<L>::offset + j];
+          out.odo_lever[6 * i + 3 + j] = sigma_[OdoLeverState<L>::offset + j];
         }
     }
     if constexpr (kHasIsb<L>) {

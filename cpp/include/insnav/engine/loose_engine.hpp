@@ -145,6 +145,7 @@ class LooseEngine {
 
   void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
     core_.lever_arm_b0 = cfg_.lever_arm_b;
+    core_.odo_lever_b0 = cfg_.vehicle.lever_arm_b;
     core_.reset(initial, P0, corr0);
     last_nhc_t_ = last_odo_t_ = -kInf;
   }
@@ -194,7 +195,13 @@ class LooseEngine {
     } else if (nhc || odo) {
       // the odometer reading against (1 + s^) times the INS forward speed (meas/vehicle.hpp; s^ = 0
       // for a layout without the scale-factor state)
-      vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
+      if constexpr (kHasOdoLever<L>) {  // the lever-arm estimate of the constrained point (layout.hpp)
+        VehicleConstraintConfig v = cfg_.vehicle;
+        v.lever_arm_b = core_.odo_lever_b;
+        vehicle_.set(core_.state(), core_.omega_ib_b(), v, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
+      } else {
+        vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
+      }
       // an update linear in H: R + the covariance of the attitude x velocity error product it leaves out
       // (second-order filter, meas/vehicle.hpp), scaled by the events within its correlation time
       // (NHC rows: the interval between NHC events; odometer row: between odometer events)

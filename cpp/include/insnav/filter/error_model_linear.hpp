@@ -149,6 +149,9 @@ StateCov<L> continuous_GQG(const InsPoint& ins, const ImuErrorModel& m) {
   if constexpr (kHasLeverArm<L>) {  // lever arm: random walk (F rows zero)
     for (int i = 0; i < 3; ++i) Qc(LeverArmState<L>::offset + i, LeverArmState<L>::offset + i) = m.lever_arm_psd;
   }
+  if constexpr (kHasOdoLever<L>) {  // odometer lever arm: random walk (F rows zero)
+    for (int i = 0; i < 3; ++i) Qc(OdoLeverState<L>::offset + i, OdoLeverState<L>::offset + i) = m.lever_arm_psd;
+  }
   if constexpr (kHasIsb<L>) {  // inter-system biases: random walk (F rows zero)
     for (int i = 0; i < IsbStates<L>::count; ++i) Qc(IsbStates<L>::offset + i, IsbStates<L>::offset + i) = m.isb_psd;
   }
@@ -198,6 +201,8 @@ template <>
 inline constexpr bool kDiagonalAuxDynamics<Layout18Lever> = true;
 template <>
 inline constexpr bool kDiagonalAuxDynamics<Layout19TdLever> = true;
+template <>
+inline constexpr bool kDiagonalAuxDynamics<Layout18OdoLever> = true;
 
 /// Phi = [U; 0 diag(d)] of a layout with kDiagonalAuxDynamics.
 template <class L>

@@ -166,6 +166,26 @@ struct LayoutTightTdLever : Layout17 {
   static constexpr int kTimeOffset = 20;
 };
 
+/// Layout15 + the odometer lever arm (IMU -> the constrained rear-axle point,
+/// body axes [m]; meas/vehicle.hpp): the state is dl_o = l_o^ - l_o, fed
+/// back l_o^ <- l_o^ - dl_o, random walk of ImuErrorModel::lever_arm_psd.
+struct Layout18OdoLever : Layout15 {
+  static constexpr int kSize = 18;
+  static constexpr int kOdoLever = 15;
+};
+
+template <class L, class = void>
+struct OdoLeverState {
+  static constexpr int offset = -1;
+};
+template <class L>
+struct OdoLeverState<L, std::void_t<decltype(L::kOdoLever)>> {
+  static constexpr int offset = L::kOdoLever;
+};
+/// True for a layout with the odometer / vehicle-constraint lever-arm states (L::kOdoLever, 3 states).
+template <class L>
+inline constexpr bool kHasOdoLever = OdoLeverState<L>::offset >= 0;
+
 template <class L, class = void>
 struct TimeOffsetState {
   static constexpr int offset = -1;

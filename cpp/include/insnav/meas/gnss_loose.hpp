@@ -22,8 +22,9 @@
 // with a_n = C_nb f_ib_b + g_n - (2 omega_ie_n + omega_en_n) x v_n the INS
 // acceleration (the lever arm's own acceleration, omega-dot x l and
 // omega x (omega x l), left out: < 0.05 m/s^2 for l = 1.5 m at 0.2 rad/s).
-// Groves 2013, sec. 14.2.7 (the GNSS/INS time-synchronisation error as a
-// state, "the measurement matrix ... the velocity"); Shin 2005, sec. 4.3.
+// (The time-synchronisation error as an integration-filter state: Groves
+// 2013, ch. 14; lever-arm observability: Hong et al. 2005, docs/algorithms.md
+// section 19.)
 #pragma once
 
 #include "insnav/earth/wgs84.hpp"
