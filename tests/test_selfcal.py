@@ -108,6 +108,21 @@ def test_lever_arm_recovered_on_a_short_drive():
     assert np.all(np.abs(est - l_true) < 3 * sig + 1e-3)
 
 
+def test_odometer_lever_arm_moves_to_the_non_slipping_point(car):
+    """NHC only: the simulator's car does not slip sideways at the IMU (lever arm 0).  Started from the
+    rear-axle guess [-1.3, 0, 0.4] m (sigma 1 m), the forward component, seen in the turn (w_z l_x),
+    ends within 0.3 m of 0 and inside 3 sigma, and the sigma has shrunk below half its prior."""
+    from insnav.config import Constraints
+
+    con = Constraints(use=["nhc"], lever_arm_b_m=[-1.3, 0.0, 0.4])
+    sol = insnav.run(car, constraints=con, lever_arm={"estimate_odometer": True, "odometer_sigma_m": 1.0})
+    est, sig = sol.odo_lever_arm_b_m[-1], sol.sigma_odo_lever_arm_b_m[-1]
+    print(f"odometer lever arm {est} m, sigma {sig} m")
+    assert sol.summary["layout"] == 18
+    np.testing.assert_allclose(sol.odo_lever_arm_b_m[0], [-1.3, 0.0, 0.4], atol=0.05)
+    assert abs(est[0]) < 0.3 and abs(est[0]) < 3 * sig[0] and sig[0] < 0.5
+
+
 def test_solution_file_keeps_the_estimates(car, tmp_path):
     sol = insnav.run(_retag(car, 0.05), time={"estimate_offset": True}, lever_arm={"estimate": True},
                      output_decimation=50)
@@ -146,6 +161,11 @@ def test_tight_time_offset_short():
     ({"lever_arm": {"psd_m2_per_s": float("nan")}}, "'lever_arm.psd_m2_per_s'"),
     ({"lever_arm": 3}, "'lever_arm'"),
     ({"lever_arm": {"estimate": True}, "constraints": {"use": ["odo"]}}, "'lever_arm.estimate'"),
+    ({"lever_arm": {"estimate_odometer": True}}, "'lever_arm.estimate_odometer'"),
+    ({"lever_arm": {"estimate_odometer": True, "estimate": True}, "constraints": {"use": ["nhc"]}},
+     "'lever_arm.estimate_odometer'"),
+    ({"lever_arm": {"estimate_odometer": True}, "constraints": {"use": ["nhc"]}, "coupling": "tight"},
+     "'constraints.use'"),
 ])
 def test_bad_configuration_is_one_line_naming_the_key(d, key):
     with pytest.raises(ConfigError) as e:
