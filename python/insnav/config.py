@@ -152,11 +152,13 @@ class TimeOffset(TomlTable):
     initial_offset_ms: float = 0.0
     offset_psd_ms2_per_s: float = 0.0
 
-    def validate(self, source: str = "run configuration") -> "TimeOffset":
-        _check_flag(self, "estimate_offset", "time")
-        _check_number(self, "offset_sigma_ms", "time", lo=0.0, strict=True)
-        _check_number(self, "initial_offset_ms", "time")
-        _check_number(self, "offset_psd_ms2_per_s", "time", lo=0.0)
+    def validate(self, source: str | None = None) -> "TimeOffset":
+        """Check the values; a one-line ConfigError naming ``time.<key>`` (prefixed by ``source`` if given)."""
+        with _prefixed(source):
+            _check_flag(self, "estimate_offset", "time")
+            _check_number(self, "offset_sigma_ms", "time", lo=0.0, strict=True)
+            _check_number(self, "initial_offset_ms", "time")
+            _check_number(self, "offset_psd_ms2_per_s", "time", lo=0.0)
         return self
 
 
@@ -196,13 +198,30 @@ class LeverArmEstimation(TomlTable):
     estimate_odometer: bool = False
     odometer_sigma_m: float = 0.5
 
-    def validate(self, source: str = "run configuration") -> "LeverArmEstimation":
-        _check_flag(self, "estimate", "lever_arm")
-        _check_number(self, "sigma_m", "lever_arm", lo=0.0, strict=True)
-        _check_number(self, "psd_m2_per_s", "lever_arm", lo=0.0)
-        _check_flag(self, "estimate_odometer", "lever_arm")
-        _check_number(self, "odometer_sigma_m", "lever_arm", lo=0.0, strict=True)
+    def validate(self, source: str | None = None) -> "LeverArmEstimation":
+        """Check the values; a one-line ConfigError naming ``lever_arm.<key>`` (prefixed by ``source`` if given)."""
+        with _prefixed(source):
+            _check_flag(self, "estimate", "lever_arm")
+            _check_number(self, "sigma_m", "lever_arm", lo=0.0, strict=True)
+            _check_number(self, "psd_m2_per_s", "lever_arm", lo=0.0)
+            _check_flag(self, "estimate_odometer", "lever_arm")
+            _check_number(self, "odometer_sigma_m", "lever_arm", lo=0.0, strict=True)
         return self
+
+
+class _prefixed:
+    """Prefix a ConfigError raised inside the block with ``source: `` (no-op for None)."""
+
+    def __init__(self, source: str | None):
+        self.source = source
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, typ, exc, tb):
+        if exc is not None and isinstance(exc, ConfigError) and self.source:
+            raise ConfigError(f"{self.source}: {exc}") from None
+        return False
 
 
 def _check_flag(obj, key: str, table: str) -> None:
@@ -590,6 +609,13 @@ class RunConfig:
         Largest IMU/GNSS time offset accepted before the run [s] (default
         0.8; ``inf``: no check): the lag between the gyro heading and the
         GNSS course in the turns (:func:`insnav.data.checks.check_time_offset`).
+    time : TimeOffset
+        ``[time]``: the IMU-GNSS time offset as an EKF state
+        (``estimate_offset``, ``offset_sigma_ms``, ...; :class:`TimeOffset`).
+        A dict of its keys is accepted.
+    lever_arm : LeverArmEstimation
+        ``[lever_arm]``: the GNSS antenna (or the vehicle constraints') lever
+        arm as EKF states (:class:`LeverArmEstimation`).  A dict is accepted.
     sanitize : dict
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,

@@ -138,11 +138,12 @@ class LooseEngine {
     out.gate_outage_accepted = core_.gate.outage_accepted();
   }
 
-  /// Reset to the initial state (the start of run(); the push API's constructor).
   /// Initial self-calibration estimates (layouts with the states, layout.hpp):
-  /// time offset t_d [s]; the lever arm starts from LooseConfig::lever_arm_b.
+  /// time offset t_d [s]; the lever arms start from LooseConfig::lever_arm_b
+  /// and VehicleConstraintConfig::lever_arm_b.
   void set_initial_time_offset(double t_d0_s) { core_.time_offset0 = t_d0_s; }
 
+  /// Reset to the initial state (the start of run(); the push API's constructor).
   void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
     core_.lever_arm_b0 = cfg_.lever_arm_b;
     core_.odo_lever_b0 = cfg_.vehicle.lever_arm_b;
