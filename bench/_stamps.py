@@ -108,6 +108,12 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                      f"{_PY}gnss/measurements.py", f"{_PY}io/imu_csv.py", f"{_PY}analysis/paired.py",
                      f"{_PY}io/gnss_files.py", f"{_PY}sim/gnss_rtk.py", f"{_PY}gnss/rinex_write.py",
                      f"{_PY}scenarios/rtk-open-sky-car.toml") + RINEX + TIGHT + SIM_RAW,
+    "selfcal_states.md": ("bench/selfcal_states.py", "bench/walk_loose.py", "bench/walk_0827_loose.toml",
+                          f"{_PY}io/csv_dataset.py", f"{_PY}io/imu_csv.py", f"{_PY}scenarios/car-mems.toml",
+                          f"{_PY}scenarios/seed000-car.toml", f"{_PY}filters/solution.py",
+                          "cpp/bindings/bind_loose_selfcal.cpp", "cpp/bindings/bind_tight_selfcal.cpp",
+                          f"{_CPP}meas/vehicle.hpp", f"{_PY}filters/constraints.py")
+                         + RINEX + LOOSE_EKF + TIGHT + SIM_RAW,
     "walk_loose.md": ("bench/walk_loose.py", "bench/walk_0827_loose.toml", f"{_PY}io/csv_dataset.py",
                       f"{_PY}io/imu_csv.py") + RINEX + LOOSE_EKF,
     "gate_outages.md": ("bench/gate_outages.py", f"{_PY}filters/health.py", f"{_PY}filters/smoothing.py",

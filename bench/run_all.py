@@ -68,6 +68,9 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "tune": (("tune.md",), ["bench/tune_check.py", "--out", "docs/results/tune.md"],
              ["bench/tune_check.py", "--seeds", "1", "--max-runs", "40", "--real-max-runs", "24", "--out",
               "docs/results/tune.md"]),
+    "selfcal_states": (("selfcal_states.md",), ["bench/selfcal_states.py", "--out", "docs/results/selfcal_states.md"],
+                       ["bench/selfcal_states.py", "--runs", "4", "--zero-runs", "2", "--lever-runs", "1",
+                        "--out", "docs/results/selfcal_states.md"]),
 }
 
 

@@ -3,6 +3,7 @@
 // in bind_loose_l15.cpp, bind_loose_l16.cpp and bind_loose_l21.cpp (loose_run.hpp).
 #include <pybind11/stl.h>
 
+#include <cmath>
 #include <optional>
 #include <string>
 
@@ -14,7 +15,8 @@ ImuErrorModel imu_model_from_dict(const py::dict& d) {
   reject_unknown(d,
                  {"gyro_arw", "acc_vrw", "gyro_bias_sigma", "acc_bias_sigma", "gyro_bias_tau", "acc_bias_tau",
                   "gyro_bias_rw", "acc_bias_rw", "gyro_scale_sigma", "acc_scale_sigma", "gyro_scale_tau",
-                  "acc_scale_tau", "clock_bias_psd", "clock_drift_psd", "isb_psd", "odo_scale_sigma", "odo_scale_tau"},
+                  "acc_scale_tau", "clock_bias_psd", "clock_drift_psd", "isb_psd", "odo_scale_sigma", "odo_scale_tau",
+                  "time_offset_psd", "lever_arm_psd"},
                  "IMU model");
   ImuErrorModel m;
   m.gyro_arw = vec3_or_scalar(d, "gyro_arw", m.gyro_arw);
@@ -34,6 +36,12 @@ ImuErrorModel imu_model_from_dict(const py::dict& d) {
   m.isb_psd = num(d, "isb_psd", m.isb_psd);
   m.odo_scale_sigma = num(d, "odo_scale_sigma", m.odo_scale_sigma);
   m.odo_scale_tau = num(d, "odo_scale_tau", m.odo_scale_tau);
+  m.time_offset_psd = num(d, "time_offset_psd", m.time_offset_psd);
+  m.lever_arm_psd = num(d, "lever_arm_psd", m.lever_arm_psd);
+  if (!(m.time_offset_psd >= 0.0 && std::isfinite(m.time_offset_psd)))
+    throw py::value_error("IMU model: time_offset_psd must be finite and >= 0 [s^2/s]");
+  if (!(m.lever_arm_psd >= 0.0 && std::isfinite(m.lever_arm_psd)))
+    throw py::value_error("IMU model: lever_arm_psd must be finite and >= 0 [m^2/s]");
   if (!(m.odo_scale_sigma >= 0.0)) throw py::value_error("IMU model: odo_scale_sigma must be >= 0");
   if (!(m.odo_scale_tau > 0.0)) throw py::value_error("IMU model: odo_scale_tau must be > 0 (inf: random constant)");
   return m;
@@ -45,7 +53,7 @@ LooseConfig loose_run_config_from(const py::dict& config) {
   LooseConfig cfg = loose_config_from(config, "engine config",
                                       {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
                                        "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
-                                       "constraint_gate_chi2", "second_order_corr_s", "smooth"});
+                                       "constraint_gate_chi2", "second_order_corr_s", "smooth", INSNAV_SELFCAL_KEYS});
   VehicleConstraintConfig& v = cfg.vehicle;
   v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
   if (config.contains("vehicle_C_bv")) {
@@ -75,8 +83,16 @@ void bind_loose(py::module_& m) {
         const LooseConfig cfg = loose_run_config_from(config);
         const UtParams ut = ut_from(config);
         const int sigma_columns = static_cast<int>(num(config, "sigma_columns", 0));
-        const LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut, sigma_columns,
-                                constraints ? &*constraints : nullptr, flag(config, "smooth", false)};
+        LooseRunArgs args{t, dtheta_b, dv_b, gnss, init, P0, corr0, mdl, cfg, ut, sigma_columns,
+                          constraints ? &*constraints : nullptr, flag(config, "smooth", false)};
+        const SelfCal sc = selfcal_from(config);
+        args.time_offset0_s = sc.time_offset0_s;
+        if (sc.any()) {  // self-calibration layouts (layout.hpp): on the 15 states, EKF (bind_loose_selfcal.cpp)
+          if (layout != 15)
+            throw py::value_error("estimate_time_offset / estimate_lever_arm: layout " + std::to_string(layout) +
+                                  " unsupported (the self-calibration states extend the 15-state layout)");
+          return run_loose_selfcal(filter, args, sc);
+        }
         if (layout == 15) return run_loose_l15(filter, args);
         if (layout == 21) return run_loose_l21(filter, args);
         if (layout == 16) return run_loose_l16(filter, args);  // Layout15 + odometer scale factor

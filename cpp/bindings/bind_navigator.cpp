@@ -136,6 +136,9 @@ void bind_navigator(py::module_& m) {
              NavigatorConfig cfg;
              cfg.imu_model = imu_model_from_dict(model);
              cfg.loose = loose_run_config_from(config);
+             if (selfcal_from(config).any())
+               throw py::value_error("LooseNavigator: estimate_time_offset / estimate_lever_arm unsupported "
+                                     "(the self-calibration states run in the batch engines, insnav.run)");
              cfg.ut = ut_from(config);
              if (imu_hold < 0 || imu_hold > 256) throw py::value_error("imu_hold must be in 0 .. 256 samples");
              cfg.imu_hold = imu_hold;

@@ -39,6 +39,16 @@ void bind_tight(py::module_& m) {
           if (b.size() != 3) throw py::value_error("isb0: expected 3 values (R, E, C) [m]");
           a.isb0 = IsbVec(b.data()[0], b.data()[1], b.data()[2]);
         }
+        const SelfCal sc = selfcal_from(config);
+        a.time_offset0_s = sc.time_offset0_s;
+        if (sc.any()) {  // self-calibration layouts (layout.hpp): on the 17 states, EKF (bind_tight_selfcal.cpp)
+          if (layout != 17)
+            throw py::value_error("estimate_time_offset / estimate_lever_arm: layout " + std::to_string(layout) +
+                                  " unsupported (the self-calibration states extend the 17-state layout: "
+                                  "one constellation)");
+          if (sc.odo_lever_arm) throw py::value_error("estimate_odo_lever_arm: loose coupling only");
+          return run_tight_selfcal(filter, a, sc.time_offset, sc.lever_arm);
+        }
         if (layout == 20) return run_tight_multi(filter, a);
         if (layout != 17) throw py::value_error("run_tight: layout must be 17 or 20 (with inter-system biases)");
         if (filter == "ekf") return run_tight_impl<Ekf<Layout17>>(a);

@@ -77,6 +77,28 @@ inline UtParams ut_from(const py::dict& d) {
 #define INSNAV_UT_KEYS "ut_alpha", "ut_beta", "ut_kappa"
 
 /// LooseConfig from a dict; `extra` keys are allowed (and read by the caller).
+/// Engine-config keys of the self-calibration states (layout.hpp): the
+/// IMU-GNSS time offset and the GNSS lever arm as filter states, and the
+/// initial time-offset estimate [s].
+#define INSNAV_SELFCAL_KEYS "estimate_time_offset", "estimate_lever_arm", "estimate_odo_lever_arm", "time_offset0_s"
+
+/// Which self-calibration states a run asks for.
+struct SelfCal {
+  bool time_offset = false, lever_arm = false, odo_lever_arm = false;
+  double time_offset0_s = 0.0;
+  bool any() const { return time_offset || lever_arm || odo_lever_arm; }
+};
+
+inline SelfCal selfcal_from(const py::dict& d) {
+  SelfCal s;
+  s.time_offset = flag(d, "estimate_time_offset", false);
+  s.lever_arm = flag(d, "estimate_lever_arm", false);
+  s.odo_lever_arm = flag(d, "estimate_odo_lever_arm", false);
+  s.time_offset0_s = num(d, "time_offset0_s", 0.0);
+  if (!std::isfinite(s.time_offset0_s)) throw py::value_error("time_offset0_s must be finite");
+  return s;
+}
+
 inline LooseConfig loose_config_from(const py::dict& d, const char* what, std::initializer_list<const char*> extra) {
   reject_unknown(d, {INSNAV_TIMING_KEYS, "use_position", "use_velocity"}, what, extra);
   LooseConfig c;
@@ -92,7 +114,7 @@ inline TightConfig tight_config_from(const py::dict& d) {
                  {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows", "robust_huber", "robust_huber_k",
                   "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
-                  "robust_cusum_hold_s", "tdcp", "tdcp_slip_threshold_cycles", "tdcp_chi2_row"});
+                   "robust_cusum_hold_s", "tdcp", "tdcp_slip_threshold_cycles", "tdcp_chi2_row", INSNAV_SELFCAL_KEYS});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);

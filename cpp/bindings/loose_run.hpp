@@ -42,6 +42,7 @@ struct LooseRunArgs {
   int sigma_columns = 0;  // config key 'sigma_columns': sigmas of the first k states only (<= 0: all)
   const DArray* constraints = nullptr;  // (k, 3): t [s], kinds (ConstraintKind flags), speed [m/s]; sorted by t
   bool smooth = false;                   // config key 'smooth': RTS backward pass (EKF, RB-UKF, UKF)
+  double time_offset0_s = 0.0;           // config key 'time_offset0_s': initial t_d (time-offset layouts) [s]
 };
 
 LooseConfig loose_run_config_from(const py::dict& config);  // bind_loose.cpp
@@ -50,6 +51,9 @@ LooseConfig loose_run_config_from(const py::dict& config);  // bind_loose.cpp
 py::dict run_loose_l15(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l15.cpp
 py::dict run_loose_l21(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l21.cpp
 py::dict run_loose_l16(const std::string& filter, const LooseRunArgs& a);  // bind_loose_l16.cpp (Layout16Odo)
+/// The self-calibration layouts (Layout16Td, Layout18Lever, Layout19TdLever, Layout18OdoLever; EKF):
+/// bind_loose_selfcal.cpp.
+py::dict run_loose_selfcal(const std::string& filter, const LooseRunArgs& a, const SelfCal& sc);
 
 [[noreturn]] inline void unsupported_loose(const std::string& filter, int layout) {
   throw py::value_error("unsupported filter/layout combination: " + filter + "/" + std::to_string(layout));
@@ -90,7 +94,8 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
     }
   }
   const int n_sig = (a.sigma_columns > 0 && a.sigma_columns < ns) ? a.sigma_columns : ns;
-  NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), n_sig, false, false, kHasOdoScale<L>);
+  NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), n_sig, false, false, kHasOdoScale<L>,
+                     kHasTimeOffset<L>, kHasLeverArm<L>, kHasOdoLever<L>);
   LooseRecordBuffers rec_buf(m);
   DArray o_cnis({k}), o_cldet({k});
   py::array_t<std::int8_t> o_cst({k});
@@ -105,6 +110,7 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<LooseEngine<Filter>>(a.model, cfg, a.ut);  // one allocation per run, not per sample
+    engine->set_initial_time_offset(a.time_offset0_s);
     smoother.attach(engine->core());
     engine->run(nav, P, corr, imu.n, imu.t, imu.dtheta_b, imu.dv_b, m, fixes.data(), k, events.data(), out);
     smoother.finish(engine->core());

@@ -58,17 +58,22 @@ struct PyPoll {
 /// Arrays for n_out per-sample rows: t, llh, v_n, rpy, sigma (sigma_cols), imu_err, and clock, ISBs and the
 /// odometer scale factor (estimate, sigma) if asked.
 struct NavBuffers {
-  DArray t, llh, v_n, rpy, sigma, imu_err, clock, isb, odo_scale;
-  bool with_clock, with_isb, with_odo_scale;
+  DArray t, llh, v_n, rpy, sigma, imu_err, clock, isb, odo_scale, time_offset, lever_arm, odo_lever;
+  bool with_clock, with_isb, with_odo_scale, with_time_offset, with_lever_arm, with_odo_lever;
   PyPoll poll;
 
-  NavBuffers(py::ssize_t n_out, int sigma_cols, bool with_clock_, bool with_isb_ = false, bool with_odo_scale_ = false)
+  NavBuffers(py::ssize_t n_out, int sigma_cols, bool with_clock_, bool with_isb_ = false, bool with_odo_scale_ = false,
+             bool with_time_offset_ = false, bool with_lever_arm_ = false, bool with_odo_lever_ = false)
       : t({n_out}), llh({n_out, py::ssize_t(3)}), v_n({n_out, py::ssize_t(3)}), rpy({n_out, py::ssize_t(3)}),
         sigma({n_out, py::ssize_t(sigma_cols)}), imu_err({n_out, py::ssize_t(12)}),
         clock({with_clock_ ? n_out : py::ssize_t(0), py::ssize_t(2)}),
         isb({with_isb_ ? n_out : py::ssize_t(0), py::ssize_t(3)}),
-        odo_scale({with_odo_scale_ ? n_out : py::ssize_t(0), py::ssize_t(2)}), with_clock(with_clock_),
-        with_isb(with_isb_), with_odo_scale(with_odo_scale_) {}
+        odo_scale({with_odo_scale_ ? n_out : py::ssize_t(0), py::ssize_t(2)}),
+        time_offset({with_time_offset_ ? n_out : py::ssize_t(0), py::ssize_t(2)}),
+        lever_arm({with_lever_arm_ ? n_out : py::ssize_t(0), py::ssize_t(6)}),
+        odo_lever({with_odo_lever_ ? n_out : py::ssize_t(0), py::ssize_t(6)}), with_clock(with_clock_),
+        with_isb(with_isb_), with_odo_scale(with_odo_scale_), with_time_offset(with_time_offset_),
+        with_lever_arm(with_lever_arm_), with_odo_lever(with_odo_lever_) {}
 
   void attach(NavOutputs& out) {
     if (progress_hook()) poll.progress = py::reinterpret_borrow<py::object>(progress_hook());
@@ -85,6 +90,9 @@ struct NavBuffers {
     out.clock = with_clock ? clock.mutable_data() : nullptr;
     out.isb = with_isb ? isb.mutable_data() : nullptr;
     out.odo_scale = with_odo_scale ? odo_scale.mutable_data() : nullptr;
+    out.time_offset = with_time_offset ? time_offset.mutable_data() : nullptr;
+    out.lever_arm = with_lever_arm ? lever_arm.mutable_data() : nullptr;
+    out.odo_lever = with_odo_lever ? odo_lever.mutable_data() : nullptr;
   }
 
   /// The rows written and the run counters into res.
@@ -100,6 +108,9 @@ struct NavBuffers {
     if (with_clock) res["clock"] = clock[rows];
     if (with_isb) res["isb"] = isb[rows];
     if (with_odo_scale) res["odo_scale"] = odo_scale[rows];  // (., 2): s [-], its 1-sigma [-]
+    if (with_time_offset) res["time_offset"] = time_offset[rows];  // (., 2): t_d [s], its 1-sigma [s]
+    if (with_lever_arm) res["lever_arm"] = lever_arm[rows];        // (., 6): l_b [m], its 1-sigma [m]
+    if (with_odo_lever) res["odo_lever"] = odo_lever[rows];        // (., 6): odometer lever arm [m], 1-sigma [m]
     res["updates"] = out.updates;
     res["rejected"] = out.rejected;
     res["gate_reopened"] = out.gate_reopened;

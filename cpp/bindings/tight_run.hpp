@@ -29,6 +29,7 @@ struct TightArgs {
   UtParams ut;
   bool smooth = false;  // config key 'smooth': RTS backward pass (EKF, RB-UKF, UKF; smoother_run.hpp)
   std::vector<PhaseObservation> phase;  // carrier phase per satellite row (TDCP; empty: none)
+  double time_offset0_s = 0.0;  // config key 'time_offset0_s': initial t_d (time-offset layouts) [s]
 };
 
 template <class Filter>
@@ -39,7 +40,8 @@ py::dict run_tight_impl(const TightArgs& a) {
   if (a.cfg.tdcp.enabled && a.smooth)
     throw py::value_error("tdcp: the RTS smoother over TDCP rows is not implemented (smooth = false)");
   const StateCov<L> P = state_cov_from<L>(a.P0);
-  NavBuffers nav_buf(output_rows(a.imu.n, a.cfg.output_decimation), L::kSize, true, kHasIsb<L>);
+  NavBuffers nav_buf(output_rows(a.imu.n, a.cfg.output_decimation), L::kSize, true, kHasIsb<L>, false,
+                     kHasTimeOffset<L>, kHasLeverArm<L>);
   TightRecordBuffers rec_buf(a.in.E, a.in.M);
   TightOutputs out;
   nav_buf.attach(out);
@@ -51,6 +53,7 @@ py::dict run_tight_impl(const TightArgs& a) {
     auto engine = std::make_unique<TightEngine<Filter>>(a.model, a.cfg, a.ut);  // one allocation per run
     engine->set_initial_isb(a.isb0);
     if (a.cfg.tdcp.enabled && !a.phase.empty()) engine->set_phase(a.phase.data());
+    engine->set_initial_time_offset(a.time_offset0_s);
     smoother.attach(engine->core());
     engine->run(a.nav, P, a.corr, a.clock_bias0, a.clock_drift0, a.imu.n, a.imu.t, a.imu.dtheta_b, a.imu.dv_b, a.in.E,
                 a.in.epochs.data(), a.in.sats.data(), out);
@@ -65,5 +68,9 @@ py::dict run_tight_impl(const TightArgs& a) {
 
 /// LayoutTightMulti runs (bind_tight_multi.cpp).
 py::dict run_tight_multi(const std::string& filter, const TightArgs& a);
+
+/// The self-calibration layouts (LayoutTightTd, LayoutTightLever, LayoutTightTdLever; EKF):
+/// bind_tight_selfcal.cpp.
+py::dict run_tight_selfcal(const std::string& filter, const TightArgs& a, bool time_offset, bool lever_arm);
 
 }  // namespace insnav::py_bind

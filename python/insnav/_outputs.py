@@ -151,7 +151,8 @@ def _solution_columns(names) -> bool:
     from .filters.solution import LEGACY_COLUMNS, Solution
 
     names = [LEGACY_COLUMNS.get(n.strip(), n.strip()) for n in names]
-    known = set(Solution.COLUMNS) | {"odo_scale_ppm", "sigma_odo_scale_ppm"}
+    known = (set(Solution.COLUMNS) | set(Solution.ODO_SCALE_COLUMNS) | set(Solution.TIME_OFFSET_COLUMNS)
+             | set(Solution.LEVER_ARM_COLUMNS))
     return bool(names) and "t_s" in names and len(names) > 1 and set(names) <= known
 
 

@@ -121,6 +121,125 @@ _IMU_MODEL_KEYS = {"rate_hz", "imu_grade", "gyro_arw", "accel_vrw"} | {
               "misalignment_sigma", "bias_total_sigma")}
 
 
+@dataclass
+class TimeOffset(TomlTable):
+    """The IMU-GNSS time offset as a filter state (``[time]`` in the run TOML;
+    ``cpp/include/insnav/filter/layout.hpp``, docs/algorithms.md
+    "Self-calibration states").
+
+    A GNSS record tagged ``t`` holds the antenna at IMU time ``t - t_d``
+    (``t_d > 0``: the GNSS data are tagged late against the IMU clock).  With
+    ``estimate_offset`` the EKF carries ``t_d`` as a state (loose: 16 states,
+    19 with the lever arm; tight: 18 / 21), applies every record at
+    ``t - t_d^`` and reports ``Solution.time_offset_s`` and its 1-sigma.
+
+    Attributes
+    ----------
+    estimate_offset : bool
+        Estimate ``t_d`` (default false: the layouts and results without it).
+    offset_sigma_ms : float
+        Initial 1-sigma of ``t_d`` [ms] (default 100).
+    initial_offset_ms : float
+        Initial estimate of ``t_d`` [ms] (default 0).
+    offset_psd_ms2_per_s : float
+        Random-walk PSD of ``t_d`` [ms^2/s] (default 0: a random constant;
+        e.g. 0.01 lets it wander 6 ms in an hour).
+    """
+
+    TABLE = "time"
+    estimate_offset: bool = False
+    offset_sigma_ms: float = 100.0
+    initial_offset_ms: float = 0.0
+    offset_psd_ms2_per_s: float = 0.0
+
+    def validate(self, source: str | None = None) -> "TimeOffset":
+        """Check the values; a one-line ConfigError naming ``time.<key>`` (prefixed by ``source`` if given)."""
+        with _prefixed(source):
+            _check_flag(self, "estimate_offset", "time")
+            _check_number(self, "offset_sigma_ms", "time", lo=0.0, strict=True)
+            _check_number(self, "initial_offset_ms", "time")
+            _check_number(self, "offset_psd_ms2_per_s", "time", lo=0.0)
+        return self
+
+
+@dataclass
+class LeverArmEstimation(TomlTable):
+    """The GNSS antenna lever arm as filter states (``[lever_arm]`` in the run
+    TOML; docs/algorithms.md "Self-calibration states").
+
+    The states start from the run's lever arm (``lever_arm_b``, else the
+    dataset's) and are observable only with attitude changes (turns); the
+    estimate and its 1-sigma are ``Solution.lever_arm_b_m`` /
+    ``sigma_lever_arm_b_m``.
+
+    Attributes
+    ----------
+    estimate : bool
+        Estimate the lever arm (default false).
+    sigma_m : float
+        Initial 1-sigma of each component [m] (default 0.5).
+    psd_m2_per_s : float
+        Random-walk PSD of each component [m^2/s] (default 0: random
+        constants); also that of the odometer lever arm.
+    estimate_odometer : bool
+        Estimate the lever arm of the vehicle constraints' point (IMU -> the
+        rear-axle centre, ``[constraints] lever_arm_b_m``) instead (loose EKF
+        with ``[constraints] use`` nhc and/or odo; 18 states; not together
+        with ``estimate`` or ``[time] estimate_offset``).  Observable in turns.
+        ``Solution.odo_lever_arm_b_m`` / ``sigma_odo_lever_arm_b_m``.
+    odometer_sigma_m : float
+        Initial 1-sigma of each component of the odometer lever arm [m] (default 0.5).
+    """
+
+    TABLE = "lever_arm"
+    estimate: bool = False
+    sigma_m: float = 0.5
+    psd_m2_per_s: float = 0.0
+    estimate_odometer: bool = False
+    odometer_sigma_m: float = 0.5
+
+    def validate(self, source: str | None = None) -> "LeverArmEstimation":
+        """Check the values; a one-line ConfigError naming ``lever_arm.<key>`` (prefixed by ``source`` if given)."""
+        with _prefixed(source):
+            _check_flag(self, "estimate", "lever_arm")
+            _check_number(self, "sigma_m", "lever_arm", lo=0.0, strict=True)
+            _check_number(self, "psd_m2_per_s", "lever_arm", lo=0.0)
+            _check_flag(self, "estimate_odometer", "lever_arm")
+            _check_number(self, "odometer_sigma_m", "lever_arm", lo=0.0, strict=True)
+        return self
+
+
+class _prefixed:
+    """Prefix a ConfigError raised inside the block with ``source: `` (no-op for None)."""
+
+    def __init__(self, source: str | None):
+        self.source = source
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, typ, exc, tb):
+        if exc is not None and isinstance(exc, ConfigError) and self.source:
+            raise ConfigError(f"{self.source}: {exc}") from None
+        return False
+
+
+def _check_flag(obj, key: str, table: str) -> None:
+    v = getattr(obj, key)
+    if not isinstance(v, (bool, np.bool_)):
+        raise ConfigError(f"config key '{table}.{key}': bad value {v!r}; allowed: true or false")
+
+
+def _check_number(obj, key: str, table: str, lo: float | None = None, strict: bool = False) -> None:
+    v = getattr(obj, key)
+    ok = not isinstance(v, bool) and isinstance(v, (int, float, np.integer, np.floating)) and math.isfinite(v)
+    if ok and lo is not None:
+        ok = v > lo if strict else v >= lo
+    if not ok:
+        bound = "" if lo is None else f" {'>' if strict else '>='} {lo:g}"
+        raise ConfigError(f"config key '{table}.{key}': bad value {v!r}; allowed: a finite number{bound}")
+
+
 #: limits of the input repairs (insnav.filters.sanitize; [sanitize] in the TOML overrides them):
 #: beyond the full scale of automotive, aerial and tactical IMUs; max_gap_s is the longest IMU gap bridged
 SANITIZE_DEFAULTS = dict(max_gap_s=0.1, gap_factor=1.5, max_rate_rps=2000.0 * DEG, max_accel_mps2=100.0 * G0,
@@ -543,6 +662,13 @@ class RunConfig:
         Largest IMU/GNSS time offset accepted before the run [s] (default
         0.8; ``inf``: no check): the lag between the gyro heading and the
         GNSS course in the turns (:func:`insnav.data.checks.check_time_offset`).
+    time : TimeOffset
+        ``[time]``: the IMU-GNSS time offset as an EKF state
+        (``estimate_offset``, ``offset_sigma_ms``, ...; :class:`TimeOffset`).
+        A dict of its keys is accepted.
+    lever_arm : LeverArmEstimation
+        ``[lever_arm]``: the GNSS antenna (or the vehicle constraints') lever
+        arm as EKF states (:class:`LeverArmEstimation`).  A dict is accepted.
     sanitize : dict
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
@@ -589,6 +715,13 @@ class RunConfig:
     init_sigma_gyro_bias_radps: list | None = None
     init_sigma_acc_scale: list | None = None
     init_sigma_gyro_scale: list | None = None
+    time: TimeOffset = field(default_factory=TimeOffset)
+    lever_arm: LeverArmEstimation = field(default_factory=LeverArmEstimation)
+
+    @property
+    def selfcal(self) -> bool:
+        """True when the run estimates the time offset and/or the lever arm."""
+        return bool(self.time.estimate_offset or self.lever_arm.estimate or self.lever_arm.estimate_odometer)
 
     def validate(self) -> "RunConfig":
         def bad(key, value, allowed):
@@ -669,6 +802,14 @@ class RunConfig:
         if self.constraints.odo_scale is True and self.layout != 15:
             bad("constraints.odo_scale", True, "true only with layout = 15 (the 16-state odometer layout "
                 "is the 15 states + the scale factor)")
+        for key, cls in (("time", TimeOffset), ("lever_arm", LeverArmEstimation)):
+            v = getattr(self, key)
+            if isinstance(v, dict):
+                v = cls.from_dict(v)
+                setattr(self, key, v)
+            if not isinstance(v, cls):
+                bad(key, v, f"a [{key}] table")
+            v.validate()
         if self.filter not in FILTERS:
             bad("filter", self.filter, ", ".join(FILTERS))
         if self.coupling not in COUPLINGS:
@@ -678,6 +819,28 @@ class RunConfig:
             bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
         if self.layout not in LAYOUTS:
             bad("layout", self.layout, "15, 21")
+        if self.lever_arm.estimate_odometer:
+            if not (set(self.constraints.use) & {"nhc", "odo"}):
+                bad("lever_arm.estimate_odometer", True, "false without nhc or odo in constraints.use "
+                    "(the odometer lever arm is seen through the vehicle constraints)")
+            if self.time.estimate_offset or self.lever_arm.estimate:
+                bad("lever_arm.estimate_odometer", True, "false together with time.estimate_offset or "
+                    "lever_arm.estimate (no such layout)")
+        for key, on in (("time.estimate_offset", self.time.estimate_offset),
+                        ("lever_arm.estimate", self.lever_arm.estimate),
+                        ("lever_arm.estimate_odometer", self.lever_arm.estimate_odometer)):
+            if not on:
+                continue
+            if self.coupling not in spec.selfcal:
+                where = ", ".join(f"{n} {c}" for n, s_ in FILTERS.items() for c in s_.selfcal)
+                bad(key, True, f"false with filter {self.filter!r} {self.coupling} (the self-calibration states "
+                               f"run with: {where})")
+            if self.coupling == "loose" and self.layout != 15:
+                bad(key, True, "false with layout = 21 (the self-calibration states extend the 15-state layout)")
+            if self.constraints.use and self.constraints.odo_scale_state(self.layout):
+                bad(key, True, "false with the odometer scale-factor state (set constraints.odo_scale = false)")
+            if self.smooth:
+                bad(key, True, "false with smooth = true (the RTS smoother does not run on these states)")
         if self.coupling == "loose" and self.layout not in spec.layouts["loose"]:
             bad("layout", self.layout, f"{', '.join(map(str, spec.layouts['loose']))} (filter {self.filter!r})")
         for key in ("init_sigma_pos_m", "init_sigma_vel_mps", "init_sigma_att_deg"):
@@ -758,12 +921,19 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     con_d = d.pop("constraints", None)
     rob_d = d.pop("robust", None)
     tdcp_d = d.pop("tdcp", None)
-    names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints", "robust", "tdcp"}
+    tables = {}
+    for key, cls in (("time", TimeOffset), ("lever_arm", LeverArmEstimation)):
+        t = d.pop(key, None)
+        if t is not None:
+            if not isinstance(t, dict):
+                raise ConfigError(f"{source}: key '{key}': bad value {t!r}; allowed: a [{key}] table")
+            tables[key] = cls.from_dict(t, source)
+    tabled = {"imu", "constraints", "robust", "tdcp", "time", "lever_arm"}
+    names = {f.name for f in dataclasses.fields(RunConfig)} - tabled
     for k in d:
         if k not in names:
-            raise ConfigError(f"{source}: unknown key '{k}'"
-                              f"{_suggest(k, names | {'imu', 'constraints', 'robust', 'tdcp'})}")
-    cfg = RunConfig(**d)
+            raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | tabled)}")
+    cfg = RunConfig(**d, **tables)
     if tdcp_d is not None:
         if not isinstance(tdcp_d, dict):
             raise ConfigError(f"{source}: key 'tdcp': bad value {tdcp_d!r}; allowed: a table")

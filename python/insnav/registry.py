@@ -33,6 +33,10 @@ class FilterSpec:
     options : tuple of str
         Keyword options of ``insnav.run`` beyond :class:`~insnav.config.RunConfig` fields,
         for every coupling.
+    selfcal : tuple of str
+        The couplings on which the filter can estimate the IMU-GNSS time
+        offset and the GNSS lever arm as states (``[time] estimate_offset``,
+        ``[lever_arm] estimate``; ``cpp/include/insnav/filter/layout.hpp``).
     coupling_options : dict
         coupling -> further keyword options of that coupling's runner only
         (:meth:`options_for`; ``tests/test_architecture.py`` checks them against
@@ -59,6 +63,7 @@ class FilterSpec:
     paper: str = ""
     summary: str = ""
     coupling_options: dict = field(default_factory=dict)
+    selfcal: tuple = ()
 
     def options_for(self, coupling: str) -> tuple:
         """The ``insnav.run`` keyword options of this filter run with ``coupling``."""
@@ -103,7 +108,8 @@ DELAY_OPTIONS = ("delay_p", "max_history_s", "checkpoint_interval_s")
 FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
     FilterSpec("ekf", ("loose", "tight"), {"loose": (15, 21), "tight": (17,)},
                {"loose": _LOOSE, "tight": _TIGHT}, outage_cycle_factor=1.5, paper="seed 000 baseline, seed 003",
-               summary="closed-loop error-state EKF, Joseph update", coupling_options={"tight": TIGHT_OPTIONS}),
+               summary="closed-loop error-state EKF, Joseph update", coupling_options={"tight": TIGHT_OPTIONS},
+               selfcal=("loose", "tight")),
     FilterSpec("rbukf", ("loose", "tight"), {"loose": (15, 21), "tight": (17,)},
                {"loose": _LOOSE, "tight": _TIGHT}, paper="seed 000",
                summary="UT time update through the nonlinear error model, linear KF update",

@@ -135,7 +135,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize") or v is None:
+        if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize", "time", "lever_arm") or v is None:
             continue
         lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.sanitize:
@@ -151,8 +151,11 @@ def resolved_config_toml(cfg: RunConfig) -> str:
                 continue
             else:
                 lines.append(f"{f.name} = {toml_value(v)}")
-    from ..config import Robust
+    from ..config import LeverArmEstimation, Robust, TimeOffset
 
+    for name, default in (("time", TimeOffset()), ("lever_arm", LeverArmEstimation())):
+        if getattr(cfg, name) != default:  # the self-calibration tables, when not the defaults
+            lines.append(_table_toml(name, getattr(cfg, name)).rstrip("\n"))
     if cfg.coupling == "tight" or cfg.robust != Robust():
         lines.append("\n[robust]")
         lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)

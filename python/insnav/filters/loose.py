@@ -21,7 +21,49 @@ from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correct
                      raise_if_nonfinite)
 from .solution import Solution
 
-__all__ = ["run_loose", "loose_engine_args", "LooseEngineArgs"]
+__all__ = ["run_loose", "loose_engine_args", "LooseEngineArgs", "selfcal_setup", "put_selfcal"]
+
+
+def selfcal_setup(cfg: RunConfig) -> tuple[np.ndarray, dict, dict]:
+    """The self-calibration states of a run (``[lever_arm] estimate``, ``[time]
+    estimate_offset``; ``cpp/include/insnav/filter/layout.hpp``): their initial
+    1-sigma in layout order (lever arm [m] x 3, then time offset [s]), the IMU
+    model keys (random-walk PSDs, SI) and the engine-config keys.  Empty when off."""
+    sig, model, core = [], {}, {}
+    if cfg.lever_arm.estimate:
+        sig += [float(cfg.lever_arm.sigma_m)] * 3
+        model["lever_arm_psd"] = float(cfg.lever_arm.psd_m2_per_s)
+        core["estimate_lever_arm"] = True
+    if cfg.lever_arm.estimate_odometer:  # Layout18OdoLever (never with the two others: RunConfig.validate)
+        sig += [float(cfg.lever_arm.odometer_sigma_m)] * 3
+        model["lever_arm_psd"] = float(cfg.lever_arm.psd_m2_per_s)
+        core["estimate_odo_lever_arm"] = True
+    if cfg.time.estimate_offset:
+        sig.append(float(cfg.time.offset_sigma_ms) * 1e-3)
+        model["time_offset_psd"] = float(cfg.time.offset_psd_ms2_per_s) * 1e-6
+        core["estimate_time_offset"] = True
+        core["time_offset0_s"] = float(cfg.time.initial_offset_ms) * 1e-3
+    return np.asarray(sig, float), model, core
+
+
+def put_selfcal(sol, out: dict, cfg: RunConfig) -> None:
+    """The time-offset and lever-arm estimates of a run's core output into the
+    solution (per row, SI) and their last values into ``summary``."""
+    if "time_offset" in out:
+        sol.time_offset_s, sol.sigma_time_offset_s = out["time_offset"][:, 0], out["time_offset"][:, 1]
+        if len(sol.t):
+            sol.summary["time_offset_ms"] = float(sol.time_offset_s[-1] * 1e3)
+            sol.summary["sigma_time_offset_ms"] = float(sol.sigma_time_offset_s[-1] * 1e3)
+    if "odo_lever" in out:
+        sol.odo_lever_arm_b_m, sol.sigma_odo_lever_arm_b_m = out["odo_lever"][:, :3], out["odo_lever"][:, 3:]
+        if len(sol.t):
+            sol.summary["odo_lever_arm_b_m"] = [float(v) for v in sol.odo_lever_arm_b_m[-1]]
+            sol.summary["sigma_odo_lever_arm_b_m"] = [float(v) for v in sol.sigma_odo_lever_arm_b_m[-1]]
+    if "lever_arm" in out:
+        sol.lever_arm_b_m, sol.sigma_lever_arm_b_m = out["lever_arm"][:, :3], out["lever_arm"][:, 3:]
+        if len(sol.t):
+            sol.summary["lever_arm_b_m"] = [float(v) for v in sol.lever_arm_b_m[-1]]
+            sol.summary["sigma_lever_arm_b_m"] = [float(v) for v in sol.sigma_lever_arm_b_m[-1]]
 
 
 def run_loose(dataset, cfg: RunConfig) -> Solution:
@@ -73,6 +115,9 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         sol.constraint_t, sol.constraint_kinds = events[:, 0], events[:, 1].astype(np.int8)
         sol.constraint_nis, sol.constraint_status = out["constraint_nis"], out["constraint_status"]
         sol.constraint_log_det_s = out["constraint_log_det_s"]
+    put_selfcal(sol, out, cfg)
+    if a.P0.shape[0] != n_core:  # the self-calibration states extend the core layout
+        sol.summary["layout"] = int(a.P0.shape[0])
     if odo_state:
         sol.odo_scale, sol.sigma_odo_scale = out["odo_scale"][:, 0], out["odo_scale"][:, 1]
         if len(sol.t):
@@ -124,10 +169,13 @@ def loose_engine_args(dataset, cfg: RunConfig, record_t: np.ndarray, imu=None) -
         sig_states = np.append(sig_states, float(c.odo_scale_sigma))
         core_model.update(odo_scale_sigma=float(c.odo_scale_sigma),
                           odo_scale_tau=np.inf if c.odo_scale_tau_s is None else float(c.odo_scale_tau_s))
-    core_cfg = engine_config(dataset, cfg, record_t, n_core, use_position=cfg.use_position,
+    sc_sigmas, sc_model, sc_cfg = selfcal_setup(cfg)  # time offset / lever arm states (after the 15)
+    sig_states = np.append(sig_states, sc_sigmas)
+    core_model.update(sc_model)
+    core_cfg = engine_config(dataset, cfg, record_t, n_core + len(sc_sigmas), use_position=cfg.use_position,
                              use_velocity=cfg.use_velocity,
                              # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
-                             sigma_columns=n_core if cfg.imu_error_sigmas else 9)
+                             sigma_columns=n_core if cfg.imu_error_sigmas else 9, **sc_cfg)
     events, ev_counts = None, None
     if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
         from .constraints import constraint_events, engine_keys

@@ -60,6 +60,17 @@ class Solution(NavTrajectory):
         Estimated odometer scale-factor error [-] (reading = (1 + s) true
         forward speed) and its 1-sigma [-]: runs with the scale-factor state
         (``[constraints] odo_scale``), else None
+    time_offset_s, sigma_time_offset_s : (N,) or None
+        Estimated IMU-GNSS time offset t_d [s] (a GNSS record tagged t holds
+        the antenna at IMU time t - t_d) and its 1-sigma: runs with ``[time]
+        estimate_offset``, else None
+    lever_arm_b_m, sigma_lever_arm_b_m : (N, 3) or None
+        Estimated GNSS lever arm (IMU -> antenna, FRD) [m] and its 1-sigma:
+        runs with ``[lever_arm] estimate``, else None
+    odo_lever_arm_b_m, sigma_odo_lever_arm_b_m : (N, 3) or None
+        Estimated lever arm of the vehicle constraints' point (IMU -> rear-axle
+        centre, FRD) [m] and its 1-sigma: runs with ``[lever_arm]
+        estimate_odometer`` (not written to the solution file), else None
     gnss_t : (M,) s, time of validity of each GNSS record
     innovation : (M, 6) INS minus GNSS (N, E, D position [m], velocity [m/s]) before the update
     nis : (M,) normalised innovation squared
@@ -92,6 +103,12 @@ class Solution(NavTrajectory):
     sigma_odo_scale: np.ndarray | None = None
     log_det_s: np.ndarray | None = None
     constraint_log_det_s: np.ndarray | None = None
+    time_offset_s: np.ndarray | None = None
+    sigma_time_offset_s: np.ndarray | None = None
+    lever_arm_b_m: np.ndarray | None = None
+    sigma_lever_arm_b_m: np.ndarray | None = None
+    odo_lever_arm_b_m: np.ndarray | None = None
+    sigma_odo_lever_arm_b_m: np.ndarray | None = None
 
     COLUMNS = NAV_COLUMNS + (
                "sigma_n_m", "sigma_e_m", "sigma_d_m", "sigma_vn_mps", "sigma_ve_mps", "sigma_vd_mps",
@@ -104,9 +121,15 @@ class Solution(NavTrajectory):
     #: the odometer scale factor and its 1-sigma [ppm] (runs that estimate it: ``[constraints] odo_scale``),
     #: after :attr:`COLUMNS` in the ``bias`` group
     ODO_SCALE_COLUMNS = ("odo_scale_ppm", "sigma_odo_scale_ppm")
+    #: the IMU-GNSS time offset and its 1-sigma [ms] (runs with ``[time] estimate_offset``), then
+    TIME_OFFSET_COLUMNS = ("time_offset_ms", "sigma_time_offset_ms")
+    #: the GNSS lever arm and its 1-sigma [m] (runs with ``[lever_arm] estimate``), in the ``bias`` group
+    LEVER_ARM_COLUMNS = ("lever_x_m", "lever_y_m", "lever_z_m", "sigma_lever_x_m", "sigma_lever_y_m",
+                         "sigma_lever_z_m")
 
     #: --columns groups: the navigation state (t_s always), its 1-sigma, the IMU (and odometer) error estimates
-    COLUMN_GROUPS = {"nav": COLUMNS[:10], "sigma": COLUMNS[10:19], "bias": COLUMNS[19:31] + ODO_SCALE_COLUMNS}
+    COLUMN_GROUPS = {"nav": COLUMNS[:10], "sigma": COLUMNS[10:19],
+                     "bias": COLUMNS[19:31] + ODO_SCALE_COLUMNS + TIME_OFFSET_COLUMNS + LEVER_ARM_COLUMNS}
 
     def columns(self) -> list[tuple[str, np.ndarray, float]]:
         """(name, SI or degree array, factor to the column's unit) of every
@@ -130,6 +153,13 @@ class Solution(NavTrajectory):
         if self.odo_scale is not None:
             out += [(n, np.asarray(x, float), 1e6) for n, x in zip(self.ODO_SCALE_COLUMNS,
                                                                     (self.odo_scale, self.sigma_odo_scale))]
+        if self.time_offset_s is not None:
+            out += [(n, np.asarray(x, float), 1e3) for n, x in zip(self.TIME_OFFSET_COLUMNS,
+                                                                    (self.time_offset_s, self.sigma_time_offset_s))]
+        if self.lever_arm_b_m is not None:
+            la, sl = np.asarray(self.lever_arm_b_m, float), np.asarray(self.sigma_lever_arm_b_m, float)
+            out += [(n, x[:, j], 1.0) for n, (x, j) in zip(self.LEVER_ARM_COLUMNS,
+                                                          [(la, 0), (la, 1), (la, 2), (sl, 0), (sl, 1), (sl, 2)])]
         return out
 
     def to_array(self) -> np.ndarray:
@@ -178,7 +208,8 @@ LEGACY_COLUMNS = {"t": "t_s", "vn": "vn_mps", "ve": "ve_mps", "vd": "vd_mps"}
 #: gyro bias 1e-6 deg/h, scale factors 1e-4 ppm
 CSV_DECIMALS = dict(zip(Solution.COLUMNS, [9, 11, 11] + [6] * 4 + [8] * 3 + [6] * 6 + [8] * 3 + [9] * 3 + [6] * 3
                         + [4] * 6))
-CSV_DECIMALS.update(odo_scale_ppm=4, sigma_odo_scale_ppm=4)
+CSV_DECIMALS.update(odo_scale_ppm=4, sigma_odo_scale_ppm=4, time_offset_ms=6, sigma_time_offset_ms=6)
+CSV_DECIMALS.update({n: 6 for n in Solution.LEVER_ARM_COLUMNS})
 FORMATS = (".csv", ".npz", ".parquet")
 PRECISIONS = ("resolution", "exact")
 
@@ -354,6 +385,12 @@ def load_solution(path) -> Solution:
     if "odo_scale_ppm" in c:
         sol.odo_scale = c["odo_scale_ppm"] * 1e-6
         sol.sigma_odo_scale = col("sigma_odo_scale_ppm", scale=1e-6)
+    if "time_offset_ms" in c:
+        sol.time_offset_s = c["time_offset_ms"] * 1e-3
+        sol.sigma_time_offset_s = col("sigma_time_offset_ms", scale=1e-3)
+    if "lever_x_m" in c:
+        sol.lever_arm_b_m = col("lever_x_m", "lever_y_m", "lever_z_m")
+        sol.sigma_lever_arm_b_m = col("sigma_lever_x_m", "sigma_lever_y_m", "sigma_lever_z_m")
     side = innovations_path(path)
     if side.is_file():
         inn = read_innovations(side)

@@ -30,13 +30,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
-from ..config import ImuNoise, RunConfig
+from ..config import ConfigError, ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
 from ..units import RAD2DEG
 from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
                      tight_inputs_for)
+from .loose import put_selfcal, selfcal_setup
 from .solution import Solution
 
 __all__ = ["TightSolution", "run_tight", "initial_isb", "tdcp_phase"]
@@ -144,6 +145,14 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     if n == 20:
         model["isb_psd"] = float(isb_psd)
         p0[17:20] = init_sigma_isb
+    if cfg.selfcal and n != 17:
+        key = "time.estimate_offset" if cfg.time.estimate_offset else "lever_arm.estimate"
+        raise ConfigError(f"config key '{key}': bad value True; allowed: false with several constellations "
+                          f"(the self-calibration states extend the 17-state GPS-only layout; systems in the data: "
+                          f"{''.join(sorted(set(np.asarray(inputs.system).tolist())))})")
+    sc_sigmas, sc_model, sc_cfg = selfcal_setup(cfg)  # time offset / lever arm states (after the 17)
+    p0 = np.append(p0, sc_sigmas)
+    model.update(sc_model)
     P0 = np.diag(p0 ** 2)
     if clock0 is None:
         clock0 = initial_clock(inputs, dataset, cfg, init)
@@ -152,8 +161,8 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     ep_t = np.asarray(inputs.epoch_t, float)
     init_vec = init_vector(dataset, init)
     robust = cfg.robust.as_core_dict(dataset)
-    core_cfg = engine_config(dataset, cfg, ep_t, n, use_pseudorange=bool(use_pseudorange), use_rate=bool(use_rate),
-                             **robust)
+    core_cfg = engine_config(dataset, cfg, ep_t, n + len(sc_sigmas), use_pseudorange=bool(use_pseudorange),
+                             use_rate=bool(use_rate), **robust, **sc_cfg)
     if cfg.smooth:
         core_cfg["smooth"] = True
     phase = None
@@ -191,6 +200,9 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         sol.summary.update(tdcp=True, tdcp_used=int(out["tdcp_used"]), tdcp_rejected=int(out["tdcp_rejected"]),
                            tdcp_slips_lli=int(out["tdcp_slips_lli"]), tdcp_slips_ins=int(out["tdcp_slips_ins"]),
                            tdcp_updates=int(out["tdcp_updates"]))
+    put_selfcal(sol, out, cfg)
+    if sc_cfg:
+        sol.summary["layout"] = n + len(sc_sigmas)
     if n == 20:
         sol.isb_m = out["isb"]
         sol.sigma_isb = sig[:, 17:20]

@@ -83,6 +83,9 @@ struct NavOutputs {
   double* clock = nullptr;    // (.,2) receiver clock bias [m], drift [m/s] (layouts with clock states)
   double* isb = nullptr;      // (.,3) inter-system biases of R, E, C [m] (layouts with ISB states)
   double* odo_scale = nullptr;  // (.,2) odometer scale factor s [-] and its 1-sigma (layouts with kOdoScale)
+  double* time_offset = nullptr;  // (.,2) IMU-GNSS time offset t_d [s] and its 1-sigma (layouts with kTimeOffset)
+  double* lever_arm = nullptr;    // (.,6) GNSS lever arm l_b [m] (FRD) and its 1-sigma (layouts with kLeverArm)
+  double* odo_lever = nullptr;    // (.,6) odometer lever arm [m] (FRD) and its 1-sigma (layouts with kOdoLever)
   std::int64_t n_out = 0;     // rows written
   int updates = 0, rejected = 0, cholesky_repairs = 0;
   int gate_reopened = 0;       // records the gate rejected but applied, P scaled, after reopen_after rejections in a row
@@ -150,6 +153,16 @@ struct ClosedLoop {
   // the state model says (s' = -s / tau), exp(-dt / tau) per propagation interval.
   double odo_scale = 0.0;
   double odo_scale_tau = kInf;  // [s] (ImuErrorModel::odo_scale_tau)
+  // Self-calibration estimates (layout.hpp), fed back like the clock: the
+  // IMU-GNSS time offset t_d^ [s] (kHasTimeOffset<L>; the engines apply a
+  // record tagged t_g at t_g - t_d^) and the GNSS lever arm l_b^ [m]
+  // (kHasLeverArm<L>; used instead of the configured one).  reset() starts
+  // them from time_offset0 / lever_arm_b0.
+  double time_offset = 0.0, time_offset0 = 0.0;
+  Vec3 lever_arm_b = Vec3::Zero(), lever_arm_b0 = Vec3::Zero();
+  // the odometer / vehicle-constraint lever arm l_o^ [m] (kHasOdoLever<L>; the loose engine uses it
+  // instead of VehicleConstraintConfig::lever_arm_b), from odo_lever_b0
+  Vec3 odo_lever_b = Vec3::Zero(), odo_lever_b0 = Vec3::Zero();
   double propagation_interval = 0.02;          // [s]
   double cycle_start = 0.0, interval_t0 = 0.0;
 
@@ -190,6 +203,9 @@ struct ClosedLoop {
     clock_drift = clock_drift0;
     isb = isb0;
     odo_scale = 0.0;
+    time_offset = time_offset0;
+    lever_arm_b = lever_arm_b0;
+    odo_lever_b = odo_lever_b0;
     filter.initialize(P0);
     rates_stale_ = false;
     omega_ib_b_.setZero();
@@ -208,6 +224,26 @@ struct ClosedLoop {
   const Vec3& f_ib_b() {
     rates();
     return f_ib_b_;
+  }
+
+  /// The INS acceleration over the Earth in n [m/s^2] at the current state:
+  /// a_n = C_nb f_ib_b + g_n - (2 omega_ie_n + omega_en_n) x v_n (the
+  /// velocity equation of the mechanization; the time-offset columns,
+  /// meas/gnss_loose.hpp, meas/pseudorange.hpp).
+  Vec3 acceleration_n() {
+    rates();
+    const NavState& s = ins.state();
+    EarthTerms e;
+    e.evaluate(s.lat, s.h, s.v_n);
+    return s.q_nb.toRotationMatrix() * f_ib_b_ + Vec3(0.0, 0.0, e.g) -
+           (2.0 * e.omega_ie_n + e.omega_en_n).cross(s.v_n);
+  }
+
+  /// The time at which a record tagged t_g (GNSS time) is applied: t_g - t_d^
+  /// with the time-offset state, else t_g.
+  double record_time(double t_g) const {
+    if constexpr (kHasTimeOffset<L>) return t_g - time_offset;
+    else return t_g;
   }
 
   /// Integrate the fraction (a0, a1] of one raw IMU increment.
@@ -371,6 +407,9 @@ struct ClosedLoop {
       for (int i = 0; i < IsbStates<L>::count; ++i) isb[i] -= x[IsbStates<L>::offset + i];
     }
     if constexpr (kHasOdoScale<L>) odo_scale += (1.0 + odo_scale) * x[OdoScaleState<L>::offset];
+    if constexpr (kHasTimeOffset<L>) time_offset -= x[TimeOffsetState<L>::offset];
+    if constexpr (kHasLeverArm<L>) lever_arm_b -= x.template segment<3>(LeverArmState<L>::offset);
+    if constexpr (kHasOdoLever<L>) odo_lever_b -= x.template segment<3>(OdoLeverState<L>::offset);
     ins.set_state(s);
     filter.reset_state();
     out_cache_dirty_ = true;
@@ -434,6 +473,26 @@ struct ClosedLoop {
         out.odo_scale[2 * i] = odo_scale + g * x[OdoScaleState<L>::offset];
         out.odo_scale[2 * i + 1] = g * sigma_[OdoScaleState<L>::offset];
       }
+    }
+    if constexpr (kHasTimeOffset<L>) {
+      if (out.time_offset) {
+        out.time_offset[2 * i] = time_offset - x[TimeOffsetState<L>::offset];
+        out.time_offset[2 * i + 1] = sigma_[TimeOffsetState<L>::offset];
+      }
+    }
+    if constexpr (kHasLeverArm<L>) {
+      if (out.lever_arm)
+        for (int j = 0; j < 3; ++j) {
+          out.lever_arm[6 * i + j] = lever_arm_b[j] - x[LeverArmState<L>::offset + j];
+          out.lever_arm[6 * i + 3 + j] = sigma_[LeverArmState<L>::offset + j];
+        }
+    }
+    if constexpr (kHasOdoLever<L>) {
+      if (out.odo_lever)
+        for (int j = 0; j < 3; ++j) {
+          out.odo_lever[6 * i + j] = odo_lever_b[j] - x[OdoLeverState<L>::offset + j];
+          out.odo_lever[6 * i + 3 + j] = sigma_[OdoLeverState<L>::offset + j];
+        }
     }
     if constexpr (kHasIsb<L>) {
       if (out.isb)

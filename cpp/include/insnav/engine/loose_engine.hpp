@@ -119,13 +119,14 @@ class LooseEngine {
            std::int64_t m, const GnssFix* fixes, std::int64_t k, const ConstraintEvent* events, LooseOutputs& out) {
     start(initial, P0, corr0);
     std::int64_t g = 0, c = 0;
-    while (g < m && !(fixes[g].t > initial.t)) out.mark(g++, RecordStatus::kOutsideImuSpan);
+    // a fix applies at core_.record_time(t_g): t_g - t_d^ with the time-offset state, else t_g
+    while (g < m && !(core_.record_time(fixes[g].t) > initial.t)) out.mark(g++, RecordStatus::kOutsideImuSpan);
     while (c < k && !(events[c].t > initial.t)) mark_constraint(out, c++, RecordStatus::kOutsideImuSpan);
     core_.run_events(
         initial.t, n, t, dtheta_b, dv_b, cfg_.cycle_period, cfg_.output_decimation, out,
-        [&]() { return std::min(g < m ? fixes[g].t : kInf, c < k ? events[c].t : kInf); },
+        [&]() { return std::min(g < m ? core_.record_time(fixes[g].t) : kInf, c < k ? events[c].t : kInf); },
         [&]() {
-          if (g < m && (c >= k || fixes[g].t <= events[c].t)) {
+          if (g < m && (c >= k || core_.record_time(fixes[g].t) <= events[c].t)) {
             apply_fix(fixes[g], g, out);
             ++g;
           } else {
@@ -140,8 +141,15 @@ class LooseEngine {
     out.gate_outage_accepted = core_.gate.outage_accepted();
   }
 
+  /// Initial self-calibration estimates (layouts with the states, layout.hpp):
+  /// time offset t_d [s]; the lever arms start from LooseConfig::lever_arm_b
+  /// and VehicleConstraintConfig::lever_arm_b.
+  void set_initial_time_offset(double t_d0_s) { core_.time_offset0 = t_d0_s; }
+
   /// Reset to the initial state (the start of run(); the push API's constructor).
   void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
+    core_.lever_arm_b0 = cfg_.lever_arm_b;
+    core_.odo_lever_b0 = cfg_.vehicle.lever_arm_b;
     core_.reset(initial, P0, corr0);
     last_nhc_t_ = last_odo_t_ = -kInf;
   }
@@ -154,7 +162,15 @@ class LooseEngine {
       out.mark(g, RecordStatus::kNotUsed);
       return;
     }
-    meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, fix);
+    if constexpr (kHasTimeOffset<L> || kHasLeverArm<L>) {
+      // self-calibration (layout.hpp): the lever-arm estimate, and how far the INS is past the fix's
+      // shifted time (0 unless the estimate moved it into the past; meas/gnss_loose.hpp)
+      const Vec3& l_b = kHasLeverArm<L> ? core_.lever_arm_b : cfg_.lever_arm_b;
+      const double shift = std::max(0.0, core_.state().t - core_.record_time(fix.t));
+      meas_.set(core_.state(), core_.omega_ib_b(), l_b, fix, core_.acceleration_n(), shift);
+    } else {
+      meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, fix);
+    }
     out.write_innovation(g, fix, meas_.linear().residual);
     const UpdateResult res = core_.update_gated(meas_);
     if (out.nis) out.nis[g] = res.nis;
@@ -185,7 +201,13 @@ class LooseEngine {
     } else if (nhc || odo) {
       // the odometer reading against (1 + s^) times the INS forward speed (meas/vehicle.hpp; s^ = 0
       // for a layout without the scale-factor state)
-      vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
+      if constexpr (kHasOdoLever<L>) {  // the lever-arm estimate of the constrained point (layout.hpp)
+        VehicleConstraintConfig v = cfg_.vehicle;
+        v.lever_arm_b = core_.odo_lever_b;
+        vehicle_.set(core_.state(), core_.omega_ib_b(), v, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
+      } else {
+        vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
+      }
       // an update linear in H: R + the covariance of the attitude x velocity error product it leaves out
       // (second-order filter, meas/vehicle.hpp), scaled by the events within its correlation time
       // (NHC rows: the interval between NHC events; odometer row: between odometer events)

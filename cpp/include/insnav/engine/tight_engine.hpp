@@ -166,9 +166,11 @@ class TightEngine {
     start(initial, P0, corr0, clock_bias0, clock_drift0);
     sats_ = sats;
     std::int64_t g = 0;
-    for (; g < n_epochs && !(epochs[g].t > initial.t); ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
+    // an epoch applies at core_.record_time(t_g): t_g - t_d^ with the time-offset state, else t_g
+    for (; g < n_epochs && !(core_.record_time(epochs[g].t) > initial.t); ++g)
+      out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, n_epochs, cfg_.cycle_period, cfg_.output_decimation, out,
-                      [&](std::int64_t i) { return epochs[i].t; },
+                      [&](std::int64_t i) { return core_.record_time(epochs[i].t); },
                       [&](std::int64_t i) { apply_epoch(epochs[i], i, out); });
     for (; g < n_epochs; ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
@@ -177,8 +179,13 @@ class TightEngine {
   }
 
   /// Reset to the initial state (the start of run(); the push API's constructor).
+  /// Initial time offset t_d [s] (layouts with the state, layout.hpp); the
+  /// lever arm starts from TightConfig::lever_arm_b.
+  void set_initial_time_offset(double t_d0_s) { core_.time_offset0 = t_d0_s; }
+
   void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0,
              double clock_drift0) {
+    core_.lever_arm_b0 = cfg_.lever_arm_b;
     core_.reset(initial, P0, corr0, clock_bias0, clock_drift0, isb0_);
     for (int i = 0; i < kSatKeys; ++i) {  // the per-satellite CUSUM of the robust step (robust.hpp, 4.)
       cusum_pos_[i] = cusum_neg_[i] = 0.0;
@@ -201,6 +208,7 @@ class TightEngine {
 
  private:
   void apply_epoch(const TightEpoch& ep, std::int64_t g, TightOutputs& out) {
+    ep_t_ = ep.t;
     // copy the epoch's satellites, dropping the observation kinds switched off
     int ns = 0;
     for (std::int64_t j = ep.begin; j < ep.end && ns < kMaxMeasRows; ++j) {
@@ -402,8 +410,17 @@ class TightEngine {
   }
 
   void set_measurement(int ns) {
-    meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, core_.clock_bias, core_.clock_drift, work_, ns,
-              core_.isb.data());
+    if constexpr (kHasTimeOffset<L> || kHasLeverArm<L>) {
+      // self-calibration (layout.hpp; meas/pseudorange.hpp): the lever-arm estimate, and how far the
+      // INS is past the epoch's shifted time (0 unless the estimate moved it into the past)
+      const Vec3& l_b = kHasLeverArm<L> ? core_.lever_arm_b : cfg_.lever_arm_b;
+      const double shift = std::max(0.0, core_.state().t - core_.record_time(ep_t_));
+      meas_.set(core_.state(), core_.omega_ib_b(), l_b, core_.clock_bias, core_.clock_drift, work_, ns,
+                core_.isb.data(), core_.acceleration_n(), shift);
+    } else {
+      meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, core_.clock_bias, core_.clock_drift, work_, ns,
+                core_.isb.data());
+    }
   }
 
   /// y_i = residual_i - H_i x and sqrt(S_ii) = sqrt(alpha H_i P H_i^T + R_ii) of every row (robust.hpp;
@@ -583,6 +600,7 @@ class TightEngine {
   Vec3 prev_r_e_[kTdcpKeys];
   std::int64_t tdcp_src_[kMaxMeasRows] = {};
   double tdcp_lambda_[kMaxMeasRows] = {};
+  double ep_t_ = 0.0;  // the time tag of the epoch being applied [s]
 };
 
 }  // namespace insnav

@@ -11,6 +11,8 @@
 //   b'    = -b / tau + w                           (first-order Gauss-Markov)
 //   s_odo' = -s_odo / tau_odo + w                  (Layout16Odo: odometer scale factor,
 //                                                   no coupling into dr, dv, psi)
+//   dt_d' = w, dl_b' = w                           (time offset, lever arm: random walks,
+//                                                   no coupling; layout.hpp)
 // E.-H. Shin, "Estimation techniques for low-cost inertial navigation",
 // UCGE 20219, 2005, eqs. (2.55)-(2.68); Groves (2013) sec. 14.2.4.
 // seed 003 prints the same model (its eq. for dV and phi) in a local-level
@@ -141,6 +143,15 @@ StateCov<L> continuous_GQG(const InsPoint& ins, const ImuErrorModel& m) {
     Qc(L::kClockBias, L::kClockBias) = m.clock_bias_psd;
     Qc(L::kClockDrift, L::kClockDrift) = m.clock_drift_psd;
   }
+  if constexpr (kHasTimeOffset<L>) {  // time offset: random walk (F row zero; layout.hpp)
+    Qc(TimeOffsetState<L>::offset, TimeOffsetState<L>::offset) = m.time_offset_psd;
+  }
+  if constexpr (kHasLeverArm<L>) {  // lever arm: random walk (F rows zero)
+    for (int i = 0; i < 3; ++i) Qc(LeverArmState<L>::offset + i, LeverArmState<L>::offset + i) = m.lever_arm_psd;
+  }
+  if constexpr (kHasOdoLever<L>) {  // odometer lever arm: random walk (F rows zero)
+    for (int i = 0; i < 3; ++i) Qc(OdoLeverState<L>::offset + i, OdoLeverState<L>::offset + i) = m.lever_arm_psd;
+  }
   if constexpr (kHasIsb<L>) {  // inter-system biases: random walk (F rows zero)
     for (int i = 0; i < IsbStates<L>::count; ++i) Qc(IsbStates<L>::offset + i, IsbStates<L>::offset + i) = m.isb_psd;
   }
@@ -184,6 +195,14 @@ template <>
 inline constexpr bool kDiagonalAuxDynamics<Layout21> = true;
 template <>
 inline constexpr bool kDiagonalAuxDynamics<Layout16Odo> = true;
+template <>
+inline constexpr bool kDiagonalAuxDynamics<Layout16Td> = true;
+template <>
+inline constexpr bool kDiagonalAuxDynamics<Layout18Lever> = true;
+template <>
+inline constexpr bool kDiagonalAuxDynamics<Layout19TdLever> = true;
+template <>
+inline constexpr bool kDiagonalAuxDynamics<Layout18OdoLever> = true;
 
 /// Phi = [U; 0 diag(d)] of a layout with kDiagonalAuxDynamics.
 template <class L>

@@ -110,6 +110,106 @@ struct LayoutTightMulti {
 /// Number of satellite systems a tight measurement tells apart (G, R, E, C).
 inline constexpr int kNumSystems = 4;
 
+// --- self-calibration states: IMU-GNSS time offset and GNSS antenna lever arm ---
+//
+// Time offset t_d [s]: a GNSS record time-tagged t_g (GNSS time) holds the
+// antenna at IMU time t_g - t_d (t_d > 0: the IMU clock runs behind, or the
+// GNSS data are tagged late).  The engines keep the estimate t_d^ and apply
+// the record when the INS reaches t_g - t_d^ ("shifting the time tag"); the
+// filter state is its error dt_d = t_d^ - t_d (computed - true, like every
+// state here), fed back as t_d^ <- t_d^ - dt_d.  Model: random walk of PSD
+// ImuErrorModel::time_offset_psd [s^2/s] (0: a random constant).
+// Lever arm l_b [m] (IMU centre -> GNSS antenna, body FRD): the estimate l_b^
+// replaces the configured lever arm in the GNSS measurements; the state is
+// dl_b = l_b^ - l_b, fed back as l_b^ <- l_b^ - dl_b; random walk of PSD
+// ImuErrorModel::lever_arm_psd [m^2/s] (0: a random constant).
+// Measurement columns: meas/gnss_loose.hpp, meas/pseudorange.hpp; equations
+// and observability: docs/algorithms.md ("Self-calibration states").
+// The extra states follow the layout they extend, so its offsets (and every
+// result with the options off) are unchanged.
+
+/// Layout15 + time offset.
+struct Layout16Td : Layout15 {
+  static constexpr int kSize = 16;
+  static constexpr int kTimeOffset = 15;
+};
+
+/// Layout15 + GNSS antenna lever arm.
+struct Layout18Lever : Layout15 {
+  static constexpr int kSize = 18;
+  static constexpr int kLeverArm = 15;
+};
+
+/// Layout15 + lever arm + time offset.
+struct Layout19TdLever : Layout15 {
+  static constexpr int kSize = 19;
+  static constexpr int kLeverArm = 15;
+  static constexpr int kTimeOffset = 18;
+};
+
+/// Layout17 (tight) + time offset.
+struct LayoutTightTd : Layout17 {
+  static constexpr int kSize = 18;
+  static constexpr int kTimeOffset = 17;
+};
+
+/// Layout17 (tight) + GNSS antenna lever arm.
+struct LayoutTightLever : Layout17 {
+  static constexpr int kSize = 20;
+  static constexpr int kLeverArm = 17;
+};
+
+/// Layout17 (tight) + lever arm + time offset.
+struct LayoutTightTdLever : Layout17 {
+  static constexpr int kSize = 21;
+  static constexpr int kLeverArm = 17;
+  static constexpr int kTimeOffset = 20;
+};
+
+/// Layout15 + the odometer lever arm (IMU -> the constrained rear-axle point,
+/// body axes [m]; meas/vehicle.hpp): the state is dl_o = l_o^ - l_o, fed
+/// back l_o^ <- l_o^ - dl_o, random walk of ImuErrorModel::lever_arm_psd.
+struct Layout18OdoLever : Layout15 {
+  static constexpr int kSize = 18;
+  static constexpr int kOdoLever = 15;
+};
+
+template <class L, class = void>
+struct OdoLeverState {
+  static constexpr int offset = -1;
+};
+template <class L>
+struct OdoLeverState<L, std::void_t<decltype(L::kOdoLever)>> {
+  static constexpr int offset = L::kOdoLever;
+};
+/// True for a layout with the odometer / vehicle-constraint lever-arm states (L::kOdoLever, 3 states).
+template <class L>
+inline constexpr bool kHasOdoLever = OdoLeverState<L>::offset >= 0;
+
+template <class L, class = void>
+struct TimeOffsetState {
+  static constexpr int offset = -1;
+};
+template <class L>
+struct TimeOffsetState<L, std::void_t<decltype(L::kTimeOffset)>> {
+  static constexpr int offset = L::kTimeOffset;
+};
+/// True for a layout with the IMU-GNSS time-offset state (L::kTimeOffset).
+template <class L>
+inline constexpr bool kHasTimeOffset = TimeOffsetState<L>::offset >= 0;
+
+template <class L, class = void>
+struct LeverArmState {
+  static constexpr int offset = -1;
+};
+template <class L>
+struct LeverArmState<L, std::void_t<decltype(L::kLeverArm)>> {
+  static constexpr int offset = L::kLeverArm;
+};
+/// True for a layout with the GNSS antenna lever-arm states (L::kLeverArm, 3 states).
+template <class L>
+inline constexpr bool kHasLeverArm = LeverArmState<L>::offset >= 0;
+
 template <class L, class = void>
 struct IsbStates {
   static constexpr int offset = -1, count = 0;

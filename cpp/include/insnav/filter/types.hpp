@@ -56,6 +56,7 @@ struct InsInterval {
 ///   gyro_bias_rw, acc_bias_rw: an extra random-walk drive of the bias state
 ///   gyro_scale_sigma, acc_scale_sigma [-], *_scale_tau [s]  (Layout21 only)
 ///   odo_scale_sigma [-], odo_scale_tau [s]  (Layout16Odo only)
+///   time_offset_psd [s^2/s], lever_arm_psd [m^2/s]  (self-calibration layouts only)
 struct ImuErrorModel {
   Vec3 gyro_arw = Vec3::Constant(1e-4);
   Vec3 acc_vrw = Vec3::Constant(1e-3);
@@ -81,6 +82,11 @@ struct ImuErrorModel {
   // driving noise; its sigma then enters only through P0).
   double odo_scale_sigma = 0.01;
   double odo_scale_tau = std::numeric_limits<double>::infinity();
+  // Self-calibration states (layout.hpp): random-walk PSD of the IMU-GNSS
+  // time offset [s^2/s] and of each lever-arm component [m^2/s]; 0: random
+  // constants (their sigma then enters only through P0).
+  double time_offset_psd = 0.0;
+  double lever_arm_psd = 0.0;
 };
 
 /// Maximum rows of one measurement update (tight coupling: 2 per satellite).

@@ -7,6 +7,24 @@
 //   d r_ant = dr + [(C_nb l_b) x] psi
 //   d v_ant = dv + [(C_nb (omega x l)) x] psi - [omega_in x][(C_nb l) x] psi - C_nb [l x] dw_b
 // Groves (2013) eqs. (14.113)-(14.118); KF-GINS uses the same position form.
+//
+// Self-calibration states (layout.hpp).  Lever arm, dl_b = l_b^ - l_b: the
+// same residual differentiated with respect to l_b,
+//   d r_ant = ... + C_nb dl_b
+//   d v_ant = ... + (C_nb [omega_ib_b x] - [omega_in_n x] C_nb) dl_b
+// Time offset, dt_d = t_d^ - t_d: the fix tagged t_g holds the antenna at IMU
+// time t_g - t_d; the engine applies it at t_a = t_g - t_d^ + shift (shift =
+// 0 unless the INS had already passed that time) and the prediction is taken
+// back by `shift` to first order, r_ant - v_ant shift, v_ant - a_n shift.  The
+// true antenna is then at t_a - shift + dt_d, so to first order
+//   residual = ... - v_ant dt_d            (position rows)
+//   residual = ... - a_n dt_d              (velocity rows)
+// with a_n = C_nb f_ib_b + g_n - (2 omega_ie_n + omega_en_n) x v_n the INS
+// acceleration (the lever arm's own acceleration, omega-dot x l and
+// omega x (omega x l), left out: < 0.05 m/s^2 for l = 1.5 m at 0.2 rad/s).
+// (The time-synchronisation error as an integration-filter state: Groves
+// 2013, ch. 14; lever-arm observability: Hong et al. 2005, docs/algorithms.md
+// section 19.)
 #pragma once
 
 #include "insnav/earth/wgs84.hpp"
@@ -34,6 +52,14 @@ class LooseMeasurement {
   /// Build residual, H and R from the INS state at the fix time.
   /// omega_ib_b: corrected angular rate [rad/s]; lever_arm_b: IMU -> antenna [m].
   void set(const NavState& ins, const Vec3& omega_ib_b, const Vec3& lever_arm_b, const GnssFix& fix) {
+    set(ins, omega_ib_b, lever_arm_b, fix, Vec3::Zero(), 0.0);
+  }
+
+  /// The same for the self-calibration layouts: a_n the INS acceleration
+  /// [m/s^2] (time-offset column of the velocity rows) and shift_s [s] how
+  /// far past the fix's (shifted) time of validity the INS is (header comment).
+  void set(const NavState& ins, const Vec3& omega_ib_b, const Vec3& lever_arm_b, const GnssFix& fix,
+           const Vec3& a_n, double shift_s) {
     const int rows = (fix.has_pos ? 3 : 0) + (fix.has_vel ? 3 : 0);
     lin_.residual.resize(rows);
     lin_.H.setZero(rows, L::kSize);
@@ -55,6 +81,16 @@ class LooseMeasurement {
       lin_.H.template block<3, 3>(row, L::kPos) = Mat3::Identity();
       if (lever) lin_.H.template block<3, 3>(row, L::kAtt) = skew(l_n);
       lin_.R.template block<3, 3>(row, row) = fix.sigma_pos_n.cwiseAbs2().asDiagonal();
+      if constexpr (kHasLeverArm<L> || kHasTimeOffset<L>) {
+        const Vec3 omega_in_n = wgs84::omega_ie_n(ins.lat) + wgs84::omega_en_n(ins.lat, ins.h, ins.v_n, r);
+        const Vec3 v_ant_n = ins.v_n + C_nb_ * omega_ib_b_.cross(l_b_) - omega_in_n.cross(l_n);
+        omega_in_n_ = omega_in_n;
+        if constexpr (kHasLeverArm<L>) lin_.H.template block<3, 3>(row, kLever) = C_nb_;
+        if constexpr (kHasTimeOffset<L>) {
+          lin_.H.template block<3, 1>(row, kTd) = -v_ant_n;
+          if (shift_s != 0.0) lin_.residual.template segment<3>(row) -= v_ant_n * shift_s;
+        }
+      }
       row += 3;
     }
     if (fix.has_vel) {
@@ -66,37 +102,62 @@ class LooseMeasurement {
         lin_.H.template block<3, 3>(row, L::kAtt) = skew(wxl_n) - skew(omega_in_n) * skew(l_n);
         lin_.H.template block<3, 3>(row, L::kGyroBias) = -C_nb_ * skew(l_b_);
       }
+      if constexpr (kHasLeverArm<L>) {
+        lin_.H.template block<3, 3>(row, kLever) = C_nb_ * skew(omega_ib_b_) - skew(omega_in_n) * C_nb_;
+        omega_in_n_ = omega_in_n;
+      }
+      if constexpr (kHasTimeOffset<L>) {
+        lin_.H.template block<3, 1>(row, kTd) = -a_n;
+        if (shift_s != 0.0) lin_.residual.template segment<3>(row) -= a_n * shift_s;
+      }
       lin_.R.template block<3, 3>(row, row) = fix.sigma_vel_n.cwiseAbs2().asDiagonal();
     }
     // block sparsity: pos/vel only -> 6 columns; lever arm adds psi (and dw_b for velocity)
     lin_.n_cols = !lever ? 6 : (fix.has_vel ? L::kGyroBias + 3 : L::kAtt + 3);
+    if constexpr (kHasLeverArm<L> || kHasTimeOffset<L>) lin_.n_cols = L::kSize;  // the extra states come last
+    (void)a_n;
+    (void)shift_s;
   }
 
   const LinearMeasurement<L>& linear() const { return lin_; }
 
   /// Nonlinear h(dx): the residual the INS would show if its true error were dx
   /// (exact attitude dependence of the lever-arm terms; seed 000 UKF eqs. (14)-(21)).
+  /// Lever-arm states: the true lever arm l_b^ - dl_b (exact); time offset:
+  /// its linear column (header comment).
   RowVec predicted_residual(const StateVec<L>& dx) const {
     RowVec out(lin_.rows());
     const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * C_nb_;
+    Vec3 l_true = l_b_;
+    if constexpr (kHasLeverArm<L>) l_true -= dx.template segment<3>(kLever);
     int row = 0;
     if (has_pos_) {
-      out.template segment<3>(row) = dx.template segment<3>(L::kPos) + (C_nb_ - C_true) * l_b_;
+      if constexpr (kHasLeverArm<L>)
+        out.template segment<3>(row) = dx.template segment<3>(L::kPos) + C_nb_ * l_b_ - C_true * l_true;
+      else
+        out.template segment<3>(row) = dx.template segment<3>(L::kPos) + (C_nb_ - C_true) * l_b_;
       row += 3;
     }
     if (has_vel_) {
       const Vec3 dw = dx.template segment<3>(L::kGyroBias);
       out.template segment<3>(row) = dx.template segment<3>(L::kVel) + C_nb_ * omega_ib_b_.cross(l_b_) -
-                                     C_true * (omega_ib_b_ - dw).cross(l_b_);
+                                     C_true * (omega_ib_b_ - dw).cross(l_true);
+      if constexpr (kHasLeverArm<L>) {  // the transport term of the lever arm, exact in l
+        const Vec3 d_l = C_nb_ * l_b_ - C_true * l_true;
+        out.template segment<3>(row) -= omega_in_n_.cross(d_l);
+      }
     }
+    if constexpr (kHasTimeOffset<L>) out += lin_.H.col(kTd) * dx[kTd];
     return out;
   }
 
  private:
+  static constexpr int kLever = LeverArmState<L>::offset, kTd = TimeOffsetState<L>::offset;
   LinearMeasurement<L> lin_;
   Mat3 C_nb_ = Mat3::Identity();
   Vec3 l_b_ = Vec3::Zero();
   Vec3 omega_ib_b_ = Vec3::Zero();
+  Vec3 omega_in_n_ = Vec3::Zero();  // lever-arm layouts only (predicted_residual)
   bool has_pos_ = true, has_vel_ = true;
 };
 

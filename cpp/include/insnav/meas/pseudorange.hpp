@@ -27,6 +27,20 @@
 // and the frame-rotation term dC_en(dr) v (rotation of the NED axes with the
 // position error), both of order 1e-4 (m/s)/m.
 //
+// Self-calibration states (layout.hpp; the same conventions as
+// gnss_loose.hpp).  Lever arm, dl_b = l_b^ - l_b:
+//   d rho  = ... - u_n^T C_nb dl_b
+//   d rhod = ... - u_n^T (C_nb [omega_ib_b x] - [omega_in_n x] C_nb) dl_b - g_n^T C_nb dl_b
+// Time offset, dt_d = t_d^ - t_d (the satellite states stay at the epoch's
+// GNSS time; only the INS is offset): the true antenna is at the INS time
+// t_a - shift + dt_d, d r_ant = -v_ant dt_d, d v_ant = -a_n dt_d, so
+//   d rho  = ... + u_n^T v_ant_n dt_d                       (minus the receiver's range rate)
+//   d rhod = ... + (u_n^T a_n + g_n^T v_ant_n) dt_d         (minus its range acceleration)
+// the second derivative of the range with respect to the receiver's motion
+// (the lever arm's own acceleration left out, as in gnss_loose.hpp).  A
+// prediction taken at shift > 0 after its time is moved back by shift with
+// the same terms.
+//
 // Rows: one per finite observation (NaN pseudorange or rate drops that row),
 // at most kMaxMeasRows (16 satellites with both); fixed storage, no heap.
 #pragma once
@@ -82,14 +96,18 @@ class TightMeasurement {
   /// isb_m: the current inter-system bias estimates [m] of systems 1..kNumIsb
   /// (layouts with ISB states; null: zero).
   void set(const NavState& ins, const Vec3& omega_ib_b, const Vec3& lever_arm_b, double clock_bias_m,
-           double clock_drift_mps, const SatObservation* sats, int n_sats, const double* isb_m = nullptr) {
+           double clock_drift_mps, const SatObservation* sats, int n_sats, const double* isb_m = nullptr,
+           const Vec3& a_n = Vec3::Zero(), double shift_s = 0.0) {
     (void)isb_m;  // layouts without ISB states
+    (void)a_n;    // layouts without the time offset
+    (void)shift_s;
     ins_ = ins;
     C_nb_ = ins.q_nb.toRotationMatrix();
     l_b_ = lever_arm_b;
     omega_ib_b_ = omega_ib_b;
     b_ = clock_bias_m;
     d_ = clock_drift_mps;
+    shift_ = shift_s;
     const wgs84::Radii r = wgs84::radii(ins.lat);
     RMh_ = r.R_M + ins.h;
     RNh_ = r.R_N + ins.h;
@@ -150,6 +168,11 @@ class TightMeasurement {
           H.template segment<3>(L::kPos) = -u_n.transpose();
           if (lever) H.template segment<3>(L::kAtt) = -u_n.transpose() * dr_ant_dpsi;
           H[L::kClockBias] = 1.0;
+          if constexpr (kHasLeverArm<L>) H.template segment<3>(kLever) = -u_n.transpose() * C_nb_;
+          if constexpr (kHasTimeOffset<L>) {
+            H[kTd] = u_n.dot(v_ant_n);
+            rw.predicted += H[kTd] * shift_s;
+          }
           lin_.R(row, row) = s.sigma_pr_m * s.sigma_pr_m;
         } else {
           rw.predicted = u_e.dot(vrel_e) + d_ - s.clock_drift_mps;
@@ -164,6 +187,13 @@ class TightMeasurement {
             H.template segment<3>(L::kGyroBias) = -u_n.transpose() * dv_ant_ddw;
           }
           H[L::kClockDrift] = 1.0;
+          if constexpr (kHasLeverArm<L>)
+            H.template segment<3>(kLever) =
+                -u_n.transpose() * (C_nb_ * skew(omega_ib_b_) - skew(omega_in_n_) * C_nb_) - g_n.transpose() * C_nb_;
+          if constexpr (kHasTimeOffset<L>) {
+            H[kTd] = u_n.dot(a_n) + g_n.dot(v_ant_n);
+            rw.predicted += H[kTd] * shift_s;
+          }
           lin_.R(row, row) = s.sigma_prr_mps * s.sigma_prr_mps;
         }
         lin_.residual[row] = rw.predicted - z;
@@ -188,7 +218,9 @@ class TightMeasurement {
     const Vec3 v_n = ins_.v_n - dx.template segment<3>(L::kVel);
     const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * C_nb_;
     const Vec3 w_true = omega_ib_b_ - dx.template segment<3>(L::kGyroBias);
-    const AntennaEcef ant = antenna_ecef(lat, lon, h, v_n, C_true, w_true, omega_in_n_, l_b_);
+    Vec3 l_true = l_b_;
+    if constexpr (kHasLeverArm<L>) l_true -= dx.template segment<3>(kLever);
+    const AntennaEcef ant = antenna_ecef(lat, lon, h, v_n, C_true, w_true, omega_in_n_, l_true);
     const double b = b_ - dx[L::kClockBias], d = d_ - dx[L::kClockDrift];
     for (int i = 0; i < m; ++i) {
       const Row& rw = rows_[i];
@@ -198,6 +230,7 @@ class TightMeasurement {
       const double h_true = rw.is_rate ? dr_e.dot(rw.sat_v_e - ant.v_e) / rho + d - rw.sat_clock
                                        : rho + b - rw.sat_clock + (rw.isb_col >= 0 ? rw.isb - dx[rw.isb_col] : 0.0);
       out[i] = rw.predicted - h_true;
+      if constexpr (kHasTimeOffset<L>) out[i] += lin_.H(i, kTd) * (dx[kTd] - shift_);
     }
     return out;
   }
@@ -213,6 +246,8 @@ class TightMeasurement {
     int isb_col = -1;  // its state column (pseudorange of a non-GPS satellite), else -1
     bool is_rate = false;
   };
+  static constexpr int kLever = LeverArmState<L>::offset, kTd = TimeOffsetState<L>::offset;
+  double shift_ = 0.0;  // shift_s of set() (time-offset layouts)
   LinearMeasurement<L> lin_;
   Row rows_[kMaxMeasRows];
   NavState ins_{};

@@ -59,6 +59,13 @@
 //     r = (1 + s^) (d v_v[0] - v~_v[0] ds)
 //   so H_row = (1 + s^) [d v_v[0] / d(dv, psi, dw_b)],  H(row, kOdoScale) = -(1 + s^) v~_v[0].
 // Without the state (s^ = 0, no column) this is the plain odometer row.
+// Lever arm of the constrained point as a state (layouts with kOdoLever,
+// layout.hpp; dl_o = l_o^ - l_o, the engine passes l_o^ in the config):
+//   d v_v = ... + C_vb [omega_nb_b x] dl_o
+// (the odometer row times 1 + s^); observable only while the body turns
+// (omega_nb_b != 0): the lateral row sees the forward component in yaw turns,
+// the odometer row the lateral one; the vertical component needs roll/pitch
+// rates (Groves 2013, eq. (16.22) differentiated in l; docs/algorithms.md section 19).
 // ZUPT (standstill): v_n = 0:  d = dv.
 // ZARU (standstill): omega_ib_b = C_bn omega_ie_n, residual
 //   omega~_ib_b - C~_bn omega_ie_n,  d = dw_b - C_bn [psi x] omega_ie_n
@@ -152,6 +159,11 @@ class VehicleVelocityMeasurement {
       if constexpr (kHasOdoScale<L>) {
         if (axis == 0) lin_.H(row, OdoScaleState<L>::offset) = -k * v_v[0];
       }
+      if constexpr (kHasOdoLever<L>) {
+        const Vec3 omega_nb_b = omega_ib_b_ - C_nb_.transpose() * omega_in_n_;
+        const Mat3 J_l = cfg_.C_bv.transpose() * skew(omega_nb_b);
+        lin_.H.template block<1, 3>(row, OdoLeverState<L>::offset) = k * J_l.row(axis);
+      }
       const double s = axis == 0 ? cfg_.sigma_odo_mps : cfg_.sigma_nhc_mps;
       lin_.R(row, row) = s * s;
       rows_axis_[row] = axis;
@@ -161,6 +173,7 @@ class VehicleVelocityMeasurement {
     if constexpr (kHasOdoScale<L>) {
       if (use_odo_) lin_.n_cols = std::max(lin_.n_cols, OdoScaleState<L>::offset + 1);
     }
+    if constexpr (kHasOdoLever<L>) lin_.n_cols = OdoLeverState<L>::offset + 3;
   }
 
   const LinearMeasurement<L>& linear() const { return lin_; }
@@ -203,8 +216,10 @@ class VehicleVelocityMeasurement {
     const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * C_nb_;
     const Vec3 v_true = v_n_ - dx.template segment<3>(L::kVel);
     const Vec3 w_true = omega_ib_b_ - dx.template segment<3>(L::kGyroBias);
+    VehicleConstraintConfig cfg_true = cfg_;  // the true lever arm l_o^ - dl_o (layouts with kOdoLever)
+    if constexpr (kHasOdoLever<L>) cfg_true.lever_arm_b -= dx.template segment<3>(OdoLeverState<L>::offset);
     const Vec3 d = vehicle_detail::point_velocity_v(C_nb_, v_n_, omega_ib_b_, omega_in_n_, cfg_) -
-                   vehicle_detail::point_velocity_v(C_true, v_true, w_true, omega_in_n_, cfg_);
+                   vehicle_detail::point_velocity_v(C_true, v_true, w_true, omega_in_n_, cfg_true);
     RowVec out(lin_.rows());
     for (int i = 0; i < lin_.rows(); ++i) out[i] = d[rows_axis_[i]];
     if (use_odo_) {  // row 0: (1 + s^) (v~_fwd - (1 + ds) v_fwd(dx)), header comment

@@ -1,0 +1,182 @@
+"""The self-calibration states (``[time] estimate_offset``, ``[lever_arm]
+estimate``; ``cpp/include/insnav/filter/layout.hpp``, docs/algorithms.md
+section 19): exact reduction to the runs without them, recovery of an
+injected time offset and lever arm on a short simulated drive, the outputs,
+and bad configuration as one-line errors.  The H columns are checked against
+numerical derivatives in ``cpp/tests/test_selfcal_jacobian.cpp``."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import insnav
+import insnav.sim as sim
+from insnav.config import ConfigError, LeverArmEstimation, RunConfig, TimeOffset, config_from_dict
+
+
+def _short_car(seed: int, lever_arm_b=(0.0, 0.0, 0.0), t_end_s: float = 130.0):
+    """car-mems cut after its first left turn (~110 s: a stop, accelerations, a 90 deg turn), RTK-grade fixes."""
+    segs, tot = [], 0.0
+    for seg in sim.load_scenario("car-mems").raw["motion"]["segments"]:
+        if tot >= t_end_s:
+            break
+        segs.append(seg)
+        tot += float(seg["duration_s"])
+    sc = {"extends": "car-mems", "name": "selfcal-short", "motion": {"segments": segs},
+          "gnss": {"rate_hz": 5.0, "sigma_h_m": 0.02, "sigma_v_m": 0.04, "sigma_vel_mps": 0.02,
+                   "lever_arm_b_m": list(lever_arm_b)}}
+    return sim.simulate(sc, seed=seed)
+
+
+def _retag(ds, t_d):
+    """Fixes tagged t_d late: the fix tagged t holds the antenna at t - t_d."""
+    g = ds.gnss
+    return dataclasses.replace(ds, gnss=dataclasses.replace(g, t_valid=g.t_valid + t_d, t_arrival=g.t_arrival + t_d))
+
+
+@pytest.fixture(scope="module")
+def car():
+    return _short_car(seed=3)
+
+
+def _same(a, b):
+    for f in ("t", "lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "yaw_deg", "sigma_pos_n_m"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+
+
+def test_options_off_give_the_plain_solution_bit_for_bit(car):
+    """Both tables present but off: the 15-state run, every row identical (not close)."""
+    a = insnav.run(car)
+    b = insnav.run(car, time=TimeOffset(estimate_offset=False, offset_sigma_ms=5.0),
+                   lever_arm={"estimate": False, "sigma_m": 0.1})
+    _same(a, b)
+    assert b.time_offset_s is None and b.lever_arm_b_m is None and b.summary["layout"] == 15
+
+
+def test_states_with_a_tiny_prior_reduce_to_the_plain_run(car):
+    """Exact reduction: a time offset of prior sigma 1e-6 ms and a lever arm of 1e-9 m add columns whose
+    states cannot move: the solution equals the 15-state run to 1e-9 (not bit for bit: more states,
+    other round-off), and the estimates stay at their initial values."""
+    a = insnav.run(car)
+    b = insnav.run(car, time={"estimate_offset": True, "offset_sigma_ms": 1e-6},
+                   lever_arm={"estimate": True, "sigma_m": 1e-9})
+    assert b.summary["layout"] == 19
+    np.testing.assert_allclose(b.lat_deg, a.lat_deg, rtol=0, atol=1e-12)  # 1e-12 deg = 0.1 um
+    np.testing.assert_allclose(b.v_n, a.v_n, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.yaw_deg, a.yaw_deg, rtol=0, atol=1e-9)
+    assert np.abs(b.time_offset_s).max() < 1e-10
+    np.testing.assert_allclose(b.lever_arm_b_m, np.broadcast_to(car.lever_arm_b, b.lever_arm_b_m.shape), atol=1e-12)
+
+
+@pytest.mark.parametrize("t_d_ms", [-150.0, 80.0])
+def test_time_offset_recovered_on_a_short_drive(t_d_ms):
+    """An injected offset on 110 s of driving (one turn): the estimate within 2 ms and 3 sigma, and the
+    horizontal position error far below the run that ignores the offset."""
+    ds = _retag(_short_car(seed=5), t_d_ms * 1e-3)
+    sol = insnav.run(ds, time={"estimate_offset": True, "offset_sigma_ms": 250.0})
+    est, sig = sol.time_offset_s[-1], sol.sigma_time_offset_s[-1]
+    err = est - t_d_ms * 1e-3
+    print(f"t_d {t_d_ms:+.0f} ms: estimate {1e3 * est:+.3f} ms, sigma {1e3 * sig:.3f} ms, "
+          f"summary {sol.summary['time_offset_ms']:+.3f} ms, layout {sol.summary['layout']}")
+    assert sol.summary["layout"] == 16
+    assert abs(err) < 2e-3 and abs(err) < 3 * sig
+    assert sig < 0.01 * 0.25  # from 250 ms to below 2.5 ms
+    tr = ds.truth
+
+    def hor(s):
+        m = (tr.t > s.t[0] + 30) & (tr.t <= s.t[-1])
+        dn = (np.interp(tr.t[m], s.t, s.lat_deg) - tr.lat_deg[m]) * np.pi / 180 * 6.37e6
+        de = (np.interp(tr.t[m], s.t, s.lon_deg) - tr.lon_deg[m]) * np.pi / 180 * 6.37e6 * np.cos(tr.lat_deg[0] * np.pi / 180)
+        return float(np.sqrt(np.mean(dn ** 2 + de ** 2)))
+
+    plain = insnav.run(ds)
+    assert hor(sol) < 0.5 * hor(plain)
+
+
+def test_lever_arm_recovered_on_a_short_drive():
+    """A 1.5 m lever arm, the filter starting from zero (sigma 1 m): after one turn the horizontal
+    components within 10 cm and 3 sigma (the full drive: docs/results/selfcal_states.md)."""
+    l_true = np.array([1.0, 0.5, -1.0])
+    ds = _short_car(seed=6, lever_arm_b=l_true)
+    sol = insnav.run(ds, lever_arm_b=[0.0, 0.0, 0.0], lever_arm=LeverArmEstimation(estimate=True, sigma_m=1.0))
+    est, sig = sol.lever_arm_b_m[-1], sol.sigma_lever_arm_b_m[-1]
+    print(f"lever arm {est} m, sigma {sig} m")
+    assert sol.summary["layout"] == 18
+    assert np.all(np.abs(est[:2] - l_true[:2]) < 0.1)
+    assert np.all(np.abs(est - l_true) < 3 * sig + 1e-3)
+
+
+def test_odometer_lever_arm_moves_to_the_non_slipping_point(car):
+    """NHC only: the simulator's car does not slip sideways at the IMU (lever arm 0).  Started from the
+    rear-axle guess [-1.3, 0, 0.4] m (sigma 1 m), the forward component, seen in the turn (w_z l_x),
+    ends within 0.3 m of 0 and inside 3 sigma, and the sigma has shrunk below half its prior."""
+    from insnav.config import Constraints
+
+    con = Constraints(use=["nhc"], lever_arm_b_m=[-1.3, 0.0, 0.4])
+    sol = insnav.run(car, constraints=con, lever_arm={"estimate_odometer": True, "odometer_sigma_m": 1.0})
+    est, sig = sol.odo_lever_arm_b_m[-1], sol.sigma_odo_lever_arm_b_m[-1]
+    print(f"odometer lever arm {est} m, sigma {sig} m")
+    assert sol.summary["layout"] == 18
+    np.testing.assert_allclose(sol.odo_lever_arm_b_m[0], [-1.3, 0.0, 0.4], atol=0.05)
+    assert abs(est[0]) < 0.3 and abs(est[0]) < 3 * sig[0] and sig[0] < 0.5
+
+
+def test_solution_file_keeps_the_estimates(car, tmp_path):
+    sol = insnav.run(_retag(car, 0.05), time={"estimate_offset": True}, lever_arm={"estimate": True},
+                     output_decimation=50)
+    p = sol.save(tmp_path / "s.csv")
+    back = insnav.load_solution(p)
+    np.testing.assert_allclose(back.time_offset_s, sol.time_offset_s, atol=1e-9)
+    np.testing.assert_allclose(back.sigma_time_offset_s, sol.sigma_time_offset_s, atol=1e-9)
+    np.testing.assert_allclose(back.lever_arm_b_m, sol.lever_arm_b_m, atol=1e-6)
+    np.testing.assert_allclose(back.sigma_lever_arm_b_m, sol.sigma_lever_arm_b_m, atol=1e-6)
+
+
+def test_tight_time_offset_short():
+    """Tight EKF (seed003-4sat's 10 m pseudoranges and Doppler, 120 s): an offset of +100 ms re-tagged
+    onto the epochs is recovered within 3 sigma, the sigma down from 250 ms to below 30 ms."""
+    from conftest import short_tight_dataset
+
+    ds = short_tight_dataset()
+    raw = ds.gnss_raw
+    ds = dataclasses.replace(ds, gnss_raw=dataclasses.replace(raw, t=np.asarray(raw.t) + 0.1))
+    sol = insnav.run(ds, coupling="tight", time={"estimate_offset": True, "offset_sigma_ms": 250.0})
+    est, sig = sol.time_offset_s[-1], sol.sigma_time_offset_s[-1]
+    print(f"tight: estimate {1e3 * est:+.2f} ms, sigma {1e3 * sig:.2f} ms, layout {sol.summary['layout']}")
+    assert sol.summary["layout"] == 18
+    assert abs(est - 0.1) < 3 * sig and sig < 0.03
+
+
+@pytest.mark.parametrize("d, key", [
+    ({"time": {"estimate_ofset": True}}, "'time.estimate_ofset'"),
+    ({"time": {"offset_sigma_ms": -1.0}}, "'time.offset_sigma_ms'"),
+    ({"time": {"estimate_offset": "yes"}}, "'time.estimate_offset'"),
+    ({"time": {"estimate_offset": True}, "filter": "rbukf"}, "'time.estimate_offset'"),
+    ({"time": {"estimate_offset": True}, "layout": 21}, "'time.estimate_offset'"),
+    ({"time": {"estimate_offset": True}, "smooth": True}, "'time.estimate_offset'"),
+    ({"lever_arm": {"estimate": True}, "filter": "ukf"}, "'lever_arm.estimate'"),
+    ({"lever_arm": {"sigma_m": 0.0}}, "'lever_arm.sigma_m'"),
+    ({"lever_arm": {"psd_m2_per_s": float("nan")}}, "'lever_arm.psd_m2_per_s'"),
+    ({"lever_arm": 3}, "'lever_arm'"),
+    ({"lever_arm": {"estimate": True}, "constraints": {"use": ["odo"]}}, "'lever_arm.estimate'"),
+    ({"lever_arm": {"estimate_odometer": True}}, "'lever_arm.estimate_odometer'"),
+    ({"lever_arm": {"estimate_odometer": True, "estimate": True}, "constraints": {"use": ["nhc"]}},
+     "'lever_arm.estimate_odometer'"),
+    ({"lever_arm": {"estimate_odometer": True}, "constraints": {"use": ["nhc"]}, "coupling": "tight"},
+     "'constraints.use'"),
+])
+def test_bad_configuration_is_one_line_naming_the_key(d, key):
+    with pytest.raises(ConfigError) as e:
+        config_from_dict(d, source="run.toml")
+    msg = str(e.value)
+    print(msg)
+    assert key in msg and "\n" not in msg and msg.startswith("run.toml")
+
+
+def test_python_api_checks_the_same(car):
+    with pytest.raises(ConfigError, match="'time.estimate_offset'.*ekf loose, ekf tight"):
+        insnav.run(car, filter="ukf", time={"estimate_offset": True})
+    with pytest.raises(ConfigError, match="'time.estimate_offset'"):
+        RunConfig(filter="exact", time=TimeOffset(estimate_offset=True)).validate()
