@@ -129,7 +129,7 @@ def walk_section():
     from insnav.io.rinex_dataset import rtklib_truth
 
     d = DATA / "rtklibexplorer_walk_0827"
-    cfg_d = tomllib.loads((ROOT / "bench" / "walk_0827_loose.toml").read_text())
+    cfg_d = tomllib.loads((ROOT / "tests" / "data" / "walk_0827_loose.toml").read_text())
     pos = d / "raw" / "gnss_1730_sf.pos"
     ds, cfg = insnav.load_csv_dataset(d / "raw" / "imu_1730.csv", pos, cfg_d)
     ref = rtklib_truth(str(pos), ds.gps_time_offset_s)
@@ -251,7 +251,7 @@ def fault_section():
 
     d = DATA / "rtklibexplorer_walk_0827"
     obs_p, nav_p, imu_p = d / "rinex_derived/gnss_1730.obs", d / "rinex_derived/gnss_1730.nav", d / "raw/imu_1730.csv"
-    text = (ROOT / "bench" / "walk_0827.toml").read_text()
+    text = (ROOT / "tests" / "data" / "walk_0827.toml").read_text()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for systems in ("G", "GEC"):
@@ -369,7 +369,7 @@ def main(argv=None) -> int:
     if a.only in (None, "walk"):
         res, counts, lengths = walk_section()
         out += ["## Real walk (u-blox, consumer IMU), loose, fixes removed", "",
-                "rtklibexplorer walk_0827 (about 2 minutes of walking), `bench/walk_0827_loose.toml` (1 Hz of "
+                "rtklibexplorer walk_0827 (about 2 minutes of walking), `tests/data/walk_0827_loose.toml` (1 Hz of "
                 "the RTK fixes), fixes removed over 10 / 20 / 30 s from 15 / 35 / 60 % of the span; error "
                 "against every RTK epoch inside the gaps.  A handheld receiver: no NHC.", ""]
         out += outage_table(res, counts, lengths, ["EKF", "smooth"])
@@ -392,7 +392,7 @@ def main(argv=None) -> int:
     if a.only in (None, "faults"):
         rows = fault_section()
         out += ["## Faults on the real walk, tight EKF, default settings", "",
-                "`bench/walk_0827.toml` with `systems = \"G\"` or `\"GEC\"`, loaded and checked as "
+                "`tests/data/walk_0827.toml` with `systems = \"G\"` or `\"GEC\"`, loaded and checked as "
                 "`insnav run --format rinex` does; faults over 60 s (ramp 120 s) from a third of the run.", ""]
         out += fault_table(rows)
         bad = [f"{r['systems']} {r['fault']}" for r in rows if "refused" in r or r["dev"] > MAX_DEV_M[r["systems"]]

@@ -12,8 +12,8 @@ load of a shared machine falls on both alike):
   ``insnav run --filter spp`` against RTKLIB ``rnx2rtkp -p 0`` (single, 10 deg
   mask, GPS + GLONASS) on the same observation and navigation files;
 * the u-blox walk: the tight EKF on GPS + Galileo + BeiDou
-  (``bench/walk_0827.toml`` with ``systems = "GEC"``) and on GPS alone, against
-  the loose EKF on the RTK fixes of the same walk (``bench/walk_0827_loose.toml``),
+  (``tests/data/walk_0827.toml`` with ``systems = "GEC"``) and on GPS alone, against
+  the loose EKF on the RTK fixes of the same walk (``tests/data/walk_0827_loose.toml``),
   and RTKLIB single point on the walk's files (GPS + Galileo + BeiDou).
 
 Time: CPU time (user + system) of the child from ``os.wait4`` -- what a
@@ -178,7 +178,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         gec = tmp / "walk_0827_gec.toml"
-        text = (ROOT / "bench/walk_0827.toml").read_text()
+        text = (ROOT / "tests/data/walk_0827.toml").read_text()
         assert 'systems = "G"\n' in text
         gec.write_text(text.replace('systems = "G"\n', 'systems = "GEC"\n'))
         walk_rinex = ["run", "--format", "rinex", "--obs", obs_w, "--nav", nav_w, "--imu", imu_w, "--coupling",
@@ -190,9 +190,9 @@ def main(argv=None) -> int:
         }, tmp, args.repeats)
         walk = time_commands({
             "tight GEC": py + walk_rinex + ["--config", gec, "--out", tmp / "walk_gec.csv"],
-            "tight G": py + walk_rinex + ["--config", ROOT / "bench/walk_0827.toml", "--out", tmp / "walk_g.csv"],
+            "tight G": py + walk_rinex + ["--config", ROOT / "tests/data/walk_0827.toml", "--out", tmp / "walk_g.csv"],
             "loose": py + ["run", "--format", "csv", "--imu", imu_w, "--gnss", pos_w, "--config",
-                           ROOT / "bench/walk_0827_loose.toml", "--out", tmp / "walk_loose.csv"],
+                           ROOT / "tests/data/walk_0827_loose.toml", "--out", tmp / "walk_loose.csv"],
             "rtklib single GEC": [rnx2rtkp, "-p", "0", "-m", "10", "-sys", "G,E,C", "-o", tmp / "walk.pos", obs_w,
                                   nav_w],
         }, tmp, args.repeats)
@@ -247,9 +247,9 @@ def main(argv=None) -> int:
         "| command | CPU median [s] | CPU min-max [s] | wall median [s] |",
         "|---|---|---|---|",
     ]
-    desc = {"tight GEC": "tight EKF, GPS + Galileo + BeiDou (`bench/walk_0827.toml`, `systems = \"GEC\"`)",
-            "tight G": "tight EKF, GPS (`bench/walk_0827.toml`)",
-            "loose": "loose EKF on the RTK fixes (`bench/walk_0827_loose.toml`)",
+    desc = {"tight GEC": "tight EKF, GPS + Galileo + BeiDou (`tests/data/walk_0827.toml`, `systems = \"GEC\"`)",
+            "tight G": "tight EKF, GPS (`tests/data/walk_0827.toml`)",
+            "loose": "loose EKF on the RTK fixes (`tests/data/walk_0827_loose.toml`)",
             "rtklib single GEC": "RTKLIB `rnx2rtkp -p 0 -m 10 -sys G,E,C` on the walk's RINEX"}
     for k, v in walk.items():
         lines.append(f"| {desc[k]} | {v['cpu']:.2f} | {v['cpu_min']:.2f}-{v['cpu_max']:.2f} | {v['wall']:.2f} |")

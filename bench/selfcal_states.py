@@ -17,7 +17,7 @@ docs/algorithms.md section 19), on simulation and on the real walk.
    target: every component within 3 cm.
 4. Tight EKF (simulated pseudorange and Doppler, the same car): the time
    offset at -100 / +100 ms (reported, no target in the task).
-5. Real walk (rtklibexplorer walk_0827, ``bench/walk_0827_loose.toml``, 1 fix
+5. Real walk (rtklibexplorer walk_0827, ``tests/data/walk_0827_loose.toml``, 1 fix
    in 4 to the filter, the rest held out against the RTK ``.pos``): the t_d
    estimate, its sigma and the held-out error with and without the state.
 """
@@ -169,7 +169,7 @@ def walk(data: Path, decimate: int = 4):
 
     out = {}
     for label, extra in (("without the state", {}), ("with the state", {"time": {"estimate_offset": True}})):
-        d = tomllib.loads((ROOT / "bench" / "walk_0827_loose.toml").read_text())
+        d = tomllib.loads((ROOT / "tests" / "data" / "walk_0827_loose.toml").read_text())
         d["gnss"]["decimate"] = decimate
         d.update(extra)
         pos = data / "raw" / "gnss_1730_sf.pos"
@@ -313,7 +313,7 @@ def main(argv=None) -> int:
         s = b["track"]
         k = np.searchsorted(s.t, s.t[0] + np.array([60.0, 120.0, 180.0]))
         k = k[k < len(s.t)]
-        lines += ["`bench/walk_0827_loose.toml` (consumer IMU, RTK `.pos`), 1 fix in 4 to the filter, the horizontal",
+        lines += ["`tests/data/walk_0827_loose.toml` (consumer IMU, RTK `.pos`), 1 fix in 4 to the filter, the horizontal",
                   "error at the other RTK epochs (held out), as in docs/results/walk_loose.md.  Default time-offset",
                   "settings (sigma 100 ms, random constant).", "",
                   "| run | held-out epochs | held-out rms [m] | max [m] | t_d estimate [ms] | sigma [ms] |",

@@ -3,7 +3,7 @@ in the tight EKF, rover only (no base), against the code + Doppler tight EKF, wi
 GNSS outages inserted.
 
 Both filters read the same files as ``insnav run --format rinex --config
-bench/walk_0827.toml --coupling tight --filter ekf`` (``--tdcp`` for TDCP/INS:
+tests/data/walk_0827.toml --coupling tight --filter ekf`` (``--tdcp`` for TDCP/INS:
 pseudorange + Doppler + TDCP rows).  The RTK ``.pos`` is the reference only.
 Complete GNSS outages (every satellite row of the epochs in the window removed,
 the same windows for both methods) of 10, 30 and 60 s are inserted one per run,
@@ -40,7 +40,7 @@ from insnav.io.gnss_files import read_rtklib_pos  # noqa: E402
 from insnav.io.rinex_dataset import load_rinex_run  # noqa: E402
 
 COMMAND = "python3 bench/tdcp_walk.py --out docs/results/tdcp_walk.md"
-CONFIG = ROOT / "bench" / "walk_0827.toml"
+CONFIG = ROOT / "tests" / "data" / "walk_0827.toml"
 DEG = np.pi / 180.0
 #: outage lengths [s] and the start times of their windows [s after the run start]
 WINDOWS = {10.0: (10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0),
@@ -227,7 +227,7 @@ phase and Doppler; the raw consumer IMU log with its str2str tag; {t_run1 - t_ru
 after the course-over-ground start; see [tight_realdata.md](tight_realdata.md)).  The RTK `.pos`
 is the reference only.  GPS satellites with ephemeris per epoch: {int(inp0.n_sats().min())}-{int(inp0.n_sats().max())}.
 
-Both filters: `insnav run --format rinex --config bench/walk_0827.toml --coupling tight --filter
+Both filters: `insnav run --format rinex --config tests/data/walk_0827.toml --coupling tight --filter
 ekf` (the code + Doppler tight EKF), and the same with `--tdcp` (TDCP/INS: + one
 time-differenced carrier-phase row per satellite tracked at two consecutive epochs, stochastic
 cloning of the previous epoch's error state; `[tdcp]` defaults: zero-difference phase sigma

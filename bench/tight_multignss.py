@@ -26,7 +26,7 @@ Faults (``--fault-runs N``): a step or ramp pseudorange fault of 20, 50, 100 m
 on one satellite, robust screening against the plain update.
 
 Real data (``--walk``, needs ../shared/data/rtklibexplorer_walk_0827): the
-u-blox walk of ``bench/tight_realdata.py`` (``bench/walk_0827.toml``), tight EKF
+u-blox walk of ``bench/tight_realdata.py`` (``tests/data/walk_0827.toml``), tight EKF
 on GPS only (the loader's inputs) against GPS + Galileo + BeiDou
 (``tight_inputs_from_rinex(..., systems="GREC")`` with the loader's options,
 same epochs), plain and robust, against the RTK reference: horizontal error,
@@ -363,7 +363,7 @@ def walk_section(data_dir: Path) -> list[str]:
         "",
         "## Real data: the u-blox walk (rtklibexplorer walk_0827) against the RTK reference",
         "",
-        "Tight EKF with `bench/walk_0827.toml` (the run of `bench/tight_realdata.py`: start when walking, "
+        "Tight EKF with `tests/data/walk_0827.toml` (the run of `bench/tight_realdata.py`: start when walking, "
         "consumer MEMS model, pseudorange sigma 3 m / sin(el), rate 0.3 m/s / sin(el), C/N0 scaled, at most 16 "
         "satellites per epoch by best GDOP), on the loader's GPS-only inputs and on GPS + Galileo + BeiDou "
         "from `tight_inputs_from_rinex(..., systems=\"GREC\")` (Galileo E1, BeiDou B2a with their group delays, "
@@ -452,7 +452,7 @@ def walk_section(data_dir: Path) -> list[str]:
         f"4 Hz), which no white-noise sigma fits on every axis (6 m: {fmt(gg6[0])}).  Lowering the GEC sigma to "
         "fit the variations would make the constant part more overconfident still; consistency on both needs "
         "time-correlated (Gauss-Markov) pseudorange error states, which insnav does not have.  "
-        "`bench/walk_0827.toml` keeps 3 m.",
+        "`tests/data/walk_0827.toml` keeps 3 m.",
     ]
 
 

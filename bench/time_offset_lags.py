@@ -25,9 +25,9 @@ def datasets(data: Path):
 
     w = data / "rtklibexplorer_walk_0827"
     yield "walk loose (RTK .pos)", load_csv_run(w / "raw/imu_1730.csv", w / "raw/gnss_1730_sf.pos",
-                                                REPO / "bench/walk_0827_loose.toml")[0]
+                                                REPO / "tests/data/walk_0827_loose.toml")[0]
     yield "walk tight (SPP, Doppler)", load_rinex_run(w / "rinex_derived/gnss_1730.obs", w / "rinex_derived/gnss_1730.nav",
-                                                      w / "raw/imu_1730.csv", REPO / "bench/walk_0827.toml")[0]
+                                                      w / "raw/imu_1730.csv", REPO / "tests/data/walk_0827.toml")[0]
     k = data / "kfgins/sim"
     yield "KF-GINS sim track (positions only)", load_kfgins(k / "kf-gins-sim.yaml", k / "Leador-A15-sim.txt.xz",
                                                             k / "GNSS-RTK-sim.txt")[0]

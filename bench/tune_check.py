@@ -8,7 +8,7 @@ the true noise, and does it help on real data?
 2. Real data, hand settings against tuned (tuned on the first 70 %, reported on the last 30 %):
    the KF-GINS track (loose EKF, 21 states, KF-GINS's YAML noise as the hand settings; also the
    time of the tuning), the rtklibexplorer walk loosely coupled on the RTK .pos and tightly
-   coupled on the RINEX (bench/walk_0827_loose.toml, bench/walk_0827.toml).  Targets: held-out
+   coupled on the RINEX (tests/data/walk_0827_loose.toml, tests/data/walk_0827.toml).  Targets: held-out
    error no worse than the hand settings', and consistency (mean NIS per row, rms(error/sigma))
    within 0.7-1.3 where the hand settings are outside it.
 
@@ -249,7 +249,7 @@ def walk_loose(lines, verdicts, max_runs):
     if not w.is_dir():
         lines += ["### Walk, loose", "", f"not run: {w} not found", ""]
         return
-    d = tomllib.loads((ROOT / "bench" / "walk_0827_loose.toml").read_text())
+    d = tomllib.loads((ROOT / "tests" / "data" / "walk_0827_loose.toml").read_text())
     pos = w / "raw" / "gnss_1730_sf.pos"
     ds, cfg = insnav.load_csv_dataset(w / "raw" / "imu_1730.csv", pos, d)
     ref = rtklib_truth(str(pos), ds.gps_time_offset_s)
@@ -257,7 +257,7 @@ def walk_loose(lines, verdicts, max_runs):
     unseen = np.setdiff1d(np.round(np.asarray(ref.t), 3), np.round(seen, 3))
     compare("rtklibexplorer walk, loose on the RTK .pos (EKF)", ds, cfg, ref, lines, verdicts, max_runs=max_runs,
             keep_t=unseen,
-            note="`bench/walk_0827_loose.toml` (consumer grade, `[gnss] decimate = 4`: 1 fix in 4 to the filter, "
+            note="`tests/data/walk_0827_loose.toml` (consumer grade, `[gnss] decimate = 4`: 1 fix in 4 to the filter, "
                  "position sigma floor 5 cm, velocity sigma 0.1 m/s) as the hand settings; reference = the RTK "
                  "`.pos` at the epochs the filter did not see (antenna position; the 5 cm lever arm is left in).")
 
@@ -270,11 +270,11 @@ def walk_tight(lines, verdicts, max_runs):
         lines += ["### Walk, tight", "", f"not run: {w} not found", ""]
         return
     ds, cfg = load_rinex_run(w / "rinex_derived" / "gnss_1730.obs", w / "rinex_derived" / "gnss_1730.nav",
-                             w / "raw" / "imu_1730.csv", ROOT / "bench" / "walk_0827.toml")
+                             w / "raw" / "imu_1730.csv", ROOT / "tests" / "data" / "walk_0827.toml")
     cfg = dataclasses.replace(cfg, coupling="tight", filter="ekf")
     ref = rtklib_truth(str(w / "raw" / "gnss_1730_sf.pos"), ds.gps_time_offset_s)
     compare("rtklibexplorer walk, tight on the RINEX (EKF)", ds, cfg, ref, lines, verdicts, max_runs=max_runs,
-            note="`bench/walk_0827.toml` (GPS L1 pseudorange and Doppler, the loader's consumer MEMS model and "
+            note="`tests/data/walk_0827.toml` (GPS L1 pseudorange and Doppler, the loader's consumer MEMS model and "
                  "pseudorange weighting) as the hand settings; reference = the RTK `.pos` (an independent "
                  "carrier-phase solution).  The tight solution of this walk carries a constant offset of several "
                  "metres from pseudorange biases (docs/results/tight_realdata.md): the innovations do not see it, "

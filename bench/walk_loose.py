@@ -1,6 +1,6 @@
 """Your own files, loosely coupled, on real data (rtklibexplorer walk_0827): the raw
 consumer IMU log (str2str-tagged) + the RTK ``.pos`` through ``insnav.load_csv_dataset``
-(what ``insnav run --format csv --config bench/walk_0827_loose.toml`` does), with no
+(what ``insnav run --format csv --config tests/data/walk_0827_loose.toml`` does), with no
 initial state typed.
 
 The ``.pos`` is the only reference, so only every k-th fix goes to the filter
@@ -32,7 +32,7 @@ from insnav.io.rinex_dataset import rtklib_truth  # noqa: E402
 from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/walk_loose.py --out docs/results/walk_loose.md"
-CONFIG = ROOT / "bench" / "walk_0827_loose.toml"
+CONFIG = ROOT / "tests" / "data" / "walk_0827_loose.toml"
 DEG = np.pi / 180.0
 
 
@@ -92,7 +92,7 @@ def main(argv=None) -> int:
         "",
         "Raw consumer IMU log (`raw/imu_1730.csv` + str2str tag, ~152 Hz, g and deg/s, mounting",
         "[180, 0, -90] deg) and the RTK solution `raw/gnss_1730_sf.pos` (4 Hz, Q = 1 fix / 2 float)",
-        "through `insnav.load_csv_dataset` with `bench/walk_0827_loose.toml` (`[imu] grade = \"consumer\"`,",
+        "through `insnav.load_csv_dataset` with `tests/data/walk_0827_loose.toml` (`[imu] grade = \"consumer\"`,",
         "`[gnss] min_sigma_pos_m = 0.05`), loose EKF, **no initial state typed**.  The `.pos` is also the",
         "only reference: 1 fix in k goes to the filter, the error is taken at the other RTK epochs",
         "(\"held out\"; k = 1: at every epoch, all of them used).  \"Linear\" is linear interpolation",

@@ -494,7 +494,7 @@ def _walk(shared_data, *parts):
 
 
 #: horizontal error against the RTK solution at the epochs the filter did not see [m]: rms and max
-#: (measured 0.083 and 0.28 m at bench/walk_0827_loose.toml's settings; linear interpolation of the
+#: (measured 0.083 and 0.28 m at tests/data/walk_0827_loose.toml's settings; linear interpolation of the
 #: same 1 Hz fixes gives 0.110 and 0.75 m)
 WALK_HOLDOUT_RMS_M, WALK_HOLDOUT_MAX_M = 0.15, 0.5
 
@@ -511,7 +511,7 @@ def test_walk_loose_from_pos_no_typed_initial_state(shared_data):
 
     imu = _walk(shared_data, "raw", "imu_1730.csv")
     pos = _walk(shared_data, "raw", "gnss_1730_sf.pos")
-    d = tomllib.loads((Path(__file__).resolve().parents[1] / "bench" / "walk_0827_loose.toml").read_text())
+    d = tomllib.loads((Path(__file__).resolve().parent / "data" / "walk_0827_loose.toml").read_text())
     ds, cfg = insnav.load_csv_dataset(imu, pos, d)
     a = ds.alignment
     assert a is not None and a.heading_source == "gnss_velocity" and a.static_s > 1.0

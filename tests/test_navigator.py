@@ -123,3 +123,91 @@ def test_late_fix_refused_and_bad_calls():
         Navigator(ds.initial, ds.t0, "consumer", RunConfig(filter="upf", coupling="tight"))
     with pytest.raises(ValueError, match="imu_hold"):
         Navigator(ds.initial, ds.t0, "consumer", imu_hold=1000)
+
+
+# --- tightly coupled push API (insnav.TightNavigator) --------------------------------------------
+
+def _multi_dataset(duration_s=60.0, seed=4):
+    """urban-multignss (GPS + Galileo + BeiDou) cut to its first motion segments, open sky."""
+    sc = copy.deepcopy(sim.load_scenario("urban-multignss").raw)
+    segs, tot = [], 0.0
+    for s in sc["motion"]["segments"]:
+        if tot >= duration_s:
+            break
+        segs.append(s)
+        tot += float(s["duration_s"])
+    sc["motion"]["segments"] = segs
+    sc["gnss_raw"].pop("urban_canyon", None)
+    return sim.simulate(sc, seed=seed)
+
+
+def _push_tight(nav, ds, check, late_samples):
+    """IMU samples and the navigator's own epochs (TightNavigator.inputs) in arrival order, an
+    epoch `late_samples` IMU samples after the sample covering it; rows after the checked samples."""
+    t = ds.imu.t
+    ep_t = nav.inputs.epoch_t
+    e, rows = 0, {}
+    for k in range(len(t)):
+        tc = t[max(0, k - late_samples)]
+        while e < len(ep_t) and ep_t[e] <= tc:
+            assert nav.push_epoch(e) == "queued", e
+            e += 1
+        nav.push_imu(t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+        done = nav.counters["samples"]
+        if done and done - 1 in check and done - 1 not in rows:
+            rows[done - 1] = nav.state()
+    while e < len(ep_t):
+        nav.push_epoch(e)
+        e += 1
+    nav.flush()
+    rows[len(t) - 1] = nav.state()
+    return rows
+
+
+@pytest.mark.parametrize("filt,multi", [("ekf", False), ("rbukf", False), ("ekf", True)])
+def test_tight_push_equals_batch(filt, multi):
+    """The tight push API from the same inputs (epochs 30 IMU samples late, 40 held) gives the batch
+    run's rows to 1e-12 (m, m/s, deg), its receiver clock and (20 states) ISBs, and its counts."""
+    from conftest import short_tight_dataset
+
+    from insnav.filters.navigator import TightNavigator
+
+    ds = _multi_dataset() if multi else short_tight_dataset(60.0)
+    batch = insnav.run(ds, filt, "tight", sanitize=False, checks=False)
+    nav = TightNavigator.from_dataset(ds, RunConfig(filter=filt), imu_hold=40)
+    assert nav.layout == (20 if multi else 17) == batch.summary["layout"]
+    check = set(range(0, len(ds.imu.t), 89)) | {len(ds.imu.t) - 1}
+    rows = _push_tight(nav, ds, check, late_samples=30)
+    assert len(rows) >= len(check) - 1
+    worst = 0.0
+    for k, r in rows.items():
+        assert r["t"] == batch.t[k]
+        worst = max(worst, abs(r["lat_deg"] - batch.lat_deg[k]) * 1.1e5, abs(r["lon_deg"] - batch.lon_deg[k]) * 1.1e5,
+                    abs(r["h_m"] - batch.h_m[k]), np.max(np.abs(r["v_n_mps"] - batch.v_n[k])),
+                    abs(r["roll_deg"] - batch.roll_deg[k]), abs(r["yaw_deg"] - batch.yaw_deg[k]),
+                    abs(r["clock_bias_m"] - batch.clock_bias_m[k]), abs(r["clock_drift_mps"] - batch.clock_drift_mps[k]),
+                    np.max(np.abs(r["sigma"][0:3] - batch.sigma_pos_n_m[k])))
+        if multi:
+            worst = max(worst, np.max(np.abs(r["isb_m"] - batch.isb_m[k])))
+    assert worst <= 1e-12, worst
+    c = nav.counters
+    assert c["updates"] == batch.summary["updates"] and c["updates"] > 40
+    assert c["rejected_sats"] == batch.summary["rejected_sats"]
+    assert c["refused_records"] == 0 and c["pending_records"] == 0 and c["held_samples"] == 0
+
+
+def test_tight_push_refuses_a_late_epoch_and_bad_rows():
+    from conftest import short_tight_dataset
+
+    from insnav.filters.navigator import TightNavigator
+
+    ds = short_tight_dataset(20.0)
+    nav = TightNavigator.from_dataset(ds, RunConfig(filter="ekf"))
+    nav.push_imu_array(ds.imu.t[:1000], ds.imu.dtheta_b[:1000], ds.imu.dv_b[:1000])
+    assert nav.push_epoch(0) == "too_old" and nav.counters["refused_records"] == 1
+    bad = np.array(nav.inputs.sats[:4], float)
+    bad[0, 10] = 0.0  # sigma_pr
+    with pytest.raises(ValueError, match="sigma_pr must be > 0 at row 0"):
+        nav.push_pseudoranges(ds.imu.t[1000] + 0.1, bad)
+    with pytest.raises(ValueError, match="smoother"):
+        TightNavigator.from_dataset(ds, RunConfig(filter="ekf", smooth=True))

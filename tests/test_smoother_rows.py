@@ -137,3 +137,44 @@ def test_smoothed_run_matches_the_plain_formula(monkeypatch):
     fsig = np.column_stack([fwd.sigma_pos_n_m, fwd.sigma_vel_n_mps, fwd.sigma_att_deg])
     assert np.array_equal(np.column_stack([sm.sigma_pos_n_m, sm.sigma_vel_n_mps, sm.sigma_att_deg])[n_in:],
                           fsig[n_in:])
+
+
+#: sha256 of the rows, sigmas and extra columns of the case below as the row correction computed them before it
+#: moved from the binder (cpp/bindings/bind_ins.cpp) into engine/smoothed_rows.hpp (x86-64, this compiler family)
+_GOLDEN_SHA256 = "0adda025b5bfcb1265d6ae7cab3f995badb60f626827daa90a0879de1b37008d"
+#: rows 0, 17, 39 of lat_deg, lon_deg, h_m, roll_deg, pitch_deg, yaw_deg then
+_GOLDEN_ROWS = [[51.49491247516262, -15.20650023588993, 2.259013784788604],
+                [144.00997876989766, -121.37228032731778, -65.79471059801757],
+                [1102.8146265372175, 514.9139916162742, 559.1715088024745],
+                [81.30422742115512, -60.48892611793492, 76.43665636612465],
+                [18.84600813016549, -25.528172216552793, 0.032254982614302624],
+                [-166.81878447847086, -177.39032462589617, -48.76137045461069]]
+
+
+def test_rows_identical_to_the_binder_implementation_they_replace():
+    """The smoothed rows (clock columns too) equal those of the row correction before it moved into the C++
+    core: bit for bit on x86-64 (the same arithmetic in the same order), to 1e-13 elsewhere."""
+    import hashlib
+    import platform
+
+    rng = np.random.default_rng(11)
+    n, E = 40, 5
+    t = np.sort(rng.uniform(0.0, 4.0, n))
+    te = np.linspace(0.0, 4.0, E)
+    s, s_end = rng.normal(scale=2.0, size=(E, 11)), rng.normal(scale=2.0, size=(E, 11))
+    for a in (s, s_end):
+        a[:, 6:9] = rng.normal(scale=5e-3, size=(E, 3)) * np.where(rng.uniform(size=(E, 1)) < 0.3, 6.0, 1.0)
+    sig = np.abs(rng.normal(size=(E, 11)))
+    rows = [rng.uniform(-60, 60, n), rng.uniform(-180, 180, n), rng.uniform(-100, 3000, n),
+            rng.normal(scale=20.0, size=(n, 3)), rng.uniform(-180, 180, n), rng.uniform(-85, 85, n),
+            rng.uniform(-180, 180, n)]
+    extra = rng.normal(scale=50.0, size=(n, 2))
+    so = np.empty((n, 11))
+    _core.smooth_rows(t, *rows, te, s, s_end, sig, so, extra)
+    got = [a[[0, 17, 39]] for a in rows[:3] + rows[4:]]
+    np.testing.assert_allclose(got, _GOLDEN_ROWS, rtol=1e-13)
+    if platform.machine() in ("x86_64", "AMD64"):
+        h = hashlib.sha256()
+        for a in rows + [so, extra]:
+            h.update(np.ascontiguousarray(a).tobytes())
+        assert h.hexdigest() == _GOLDEN_SHA256

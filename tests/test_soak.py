@@ -1,30 +1,15 @@
-"""Shortened soak (the 24 h run is bench/soak.py): 20 min at 200 Hz
+"""Shortened soak (the 24 h run is bench/soak.py; the scenario is tests/_soak.py): 20 min at 200 Hz
 with two GNSS outages through the Python API -- every output finite, sigmas
 positive, memory flat during the run.  The per-step P check (symmetric,
 positive definite after every propagate/update) is cpp/tests/test_soak.cpp,
 run by tests/test_cpp.py in Release and under ASan + UBSan."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
-import pytest
-
-BENCH = Path(__file__).resolve().parents[1] / "bench" / "soak.py"
+from _soak import python_soak
 
 
-@pytest.fixture(scope="module")
-def soak():
-    if not BENCH.is_file():
-        pytest.skip("bench/soak.py not available (installed wheel)")
-    spec = importlib.util.spec_from_file_location("insnav_bench_soak", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_short_soak_python_api(soak):
-    for r in soak.python_soak(0.34, filters=("ekf", "rbukf")):
+def test_short_soak_python_api():
+    for r in python_soak(0.34, filters=("ekf", "rbukf")):
         assert r["finite"] and r["sigma_positive"], r
         assert r["summary"]["updates"] > 1000 and r["summary"]["cholesky_repairs"] == 0
         assert r["max_err_m"] < 25.0 and r["rms_err_m"] < 3.0

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -291,10 +290,9 @@ def smartloc(shared_data):
 
 
 def _bench():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-    import spp_smartloc
+    import _smartloc  # tests/_smartloc.py (bench/spp_smartloc.py tabulates the same evaluation)
 
-    return spp_smartloc
+    return _smartloc
 
 
 def test_smartloc_gps_spp_percentiles_below_documented_bounds(smartloc):

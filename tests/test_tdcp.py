@@ -244,7 +244,7 @@ def test_walk_tdcp_from_the_command_line(tmp_path, shared_data):
     repo = __import__("pathlib").Path(__file__).resolve().parents[1]
     args = [sys.executable, "-m", "insnav", "run", "--format", "rinex", "--obs", str(d / "rinex_derived/gnss_1730.obs"),
             "--nav", str(d / "rinex_derived/gnss_1730.nav"), "--imu", str(d / "raw/imu_1730.csv"), "--config",
-            str(repo / "bench/walk_0827.toml"), "--coupling", "tight", "--filter", "ekf"]
+            str(repo / "tests/data/walk_0827.toml"), "--coupling", "tight", "--filter", "ekf"]
     ref = read_rtklib_pos(d / "raw/gnss_1730_sf.pos")
     spread = {}
     for name, extra in (("code", []), ("tdcp", ["--tdcp"])):

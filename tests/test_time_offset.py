@@ -112,7 +112,7 @@ def walk(shared_data):
 def _walk_loose_config(tmp_path, extra_imu: str = ""):
     from pathlib import Path
 
-    src = (Path(__file__).resolve().parents[1] / "bench" / "walk_0827_loose.toml").read_text()
+    src = (Path(__file__).resolve().parent / "data" / "walk_0827_loose.toml").read_text()
     p = tmp_path / "walk.toml"
     p.write_text(src.replace('grade = "consumer"\n', 'grade = "consumer"\n' + extra_imu))
     return p
@@ -139,7 +139,7 @@ def test_walk_tight_real_data_passes_and_18_s_is_refused(walk, tmp_path):
     from insnav.io.rinex_dataset import load_rinex_run
 
     obs, nav = walk / "rinex_derived/gnss_1730.obs", walk / "rinex_derived/gnss_1730.nav"
-    toml = Path(__file__).resolve().parents[1] / "bench" / "walk_0827.toml"
+    toml = Path(__file__).resolve().parent / "data" / "walk_0827.toml"
     ds, cfg = load_rinex_run(obs, nav, walk / "raw/imu_1730.csv", toml)
     est = estimate_time_offset(ds.imu.t, ds.imu.dtheta_b, ds.imu.dv_b, ds.gnss)  # SPP fixes, Doppler velocity
     assert -0.75 < est.lag_s < -0.4 and not est.ambiguous

@@ -1,14 +1,15 @@
-// Batch strapdown mechanization: the whole loop in C++ with the GIL released.
+// Batch strapdown mechanization (the whole loop in C++ with the GIL released), the
+// standstill statistic, and the wrapper of the smoothed output rows (engine/smoothed_rows.hpp).
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <optional>
-#include <thread>
 #include <vector>
 
 #include <pybind11/stl.h>
 
 #include "common.hpp"
+#include "insnav/engine/smoothed_rows.hpp"
 #include "insnav/ins/standstill.hpp"
 
 namespace insnav::py_bind {
@@ -25,53 +26,20 @@ inline void require_inplace(const py::array& a, py::ssize_t n, py::ssize_t cols,
                                  (cols < 0 ? std::string() : " of " + std::to_string(cols)));
 }
 
-/// sin and cos of one angle in one call where the C library has sincos (glibc).
-inline void sin_cos(double a, double& s, double& c) {
-#if defined(__GLIBC__)
-  ::sincos(a, &s, &c);
-#else
-  s = std::sin(a);
-  c = std::cos(a);
-#endif
+/// A float64 array's element strides (its byte strides are multiples of 8 for any view numpy makes of
+/// float64 data; anything else is refused).
+inline std::ptrdiff_t element_stride(const py::array& a, int axis) {
+  const py::ssize_t b = a.strides(axis);
+  if (b % static_cast<py::ssize_t>(sizeof(double)) != 0) throw py::value_error("rows: unaligned float64 strides");
+  return static_cast<std::ptrdiff_t>(b / static_cast<py::ssize_t>(sizeof(double)));
 }
 
-/// quat_from_euler for the attitude corrections of smooth_rows: half angles
-/// below 1e-2 rad by their Taylor series (remainder below 1e-19), else exact.
-inline Quat small_quat_from_euler(double roll, double pitch, double yaw) {
-  const double hr = 0.5 * roll, hp = 0.5 * pitch, hy = 0.5 * yaw;
-  if (!(std::max({std::abs(hr), std::abs(hp), std::abs(hy)}) < 1e-2)) return quat_from_euler(Vec3(roll, pitch, yaw));
-  // reciprocal constants: multiplications, not divisions, in the row loop (the same to rounding)
-  const auto sin_s = [](double h) {
-    const double h2 = h * h;
-    return h * (1.0 - h2 * (1.0 / 6.0) * (1.0 - h2 * (1.0 / 20.0) * (1.0 - h2 * (1.0 / 42.0))));
-  };
-  const auto cos_s = [](double h) {
-    const double h2 = h * h;
-    return 1.0 - h2 * 0.5 * (1.0 - h2 * (1.0 / 12.0) * (1.0 - h2 * (1.0 / 30.0) * (1.0 - h2 * (1.0 / 56.0))));
-  };
-  const double sr = sin_s(hr), cr = cos_s(hr), sp = sin_s(hp), cp = cos_s(hp), sy = sin_s(hy), cy = cos_s(hy);
-  return Quat(cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-              cr * cp * sy - sr * sp * cy);
+inline StridedColumn column(py::array& a) {
+  return StridedColumn{static_cast<double*>(a.mutable_data()), element_stride(a, 0)};
 }
 
-/// atan(x) for |x| <= 0.02 by its series to x^11 (remainder below x^13 / 13 < 1e-23).
-inline double small_atan(double x) {
-  const double x2 = x * x;
-  return x * (1.0 - x2 * (1.0 / 3.0 - x2 * (1.0 / 5.0 - x2 * (1.0 / 7.0 - x2 * (1.0 / 9.0 - x2 * (1.0 / 11.0))))));
-}
-
-/// atan2(a, b) as the angle `ref` (sin_ref, cos_ref at hand) plus the small
-/// difference atan2(a cos_ref - b sin_ref, b cos_ref + a sin_ref) by its
-/// series, wrapped to (-pi, pi]: the same angle without a full atan2 when the
-/// corrected angle is within 0.02 rad of the row's own; else atan2(a, b).
-inline double atan2_near(double a, double b, double ref, double sin_ref, double cos_ref) {
-  constexpr double kPi = 3.14159265358979323846;
-  const double num = a * cos_ref - b * sin_ref, den = b * cos_ref + a * sin_ref;
-  if (!(den > 0.0) || !(std::abs(num) <= 0.02 * den)) return std::atan2(a, b);
-  double r = ref + small_atan(num / den);
-  if (r > kPi) r -= 2.0 * kPi;
-  if (r <= -kPi) r += 2.0 * kPi;
-  return r;
+inline StridedMatrix matrix(py::array& a) {
+  return StridedMatrix{static_cast<double*>(a.mutable_data()), element_stride(a, 0), element_stride(a, 1)};
 }
 
 /// Run the mechanization over n samples.  The loop also checks each sample
@@ -181,103 +149,30 @@ void bind_ins(py::module_& m) {
         py::array ex = q > 0 ? *extra : py::array_t<double>(std::vector<py::ssize_t>{0, 1});
         if (q > 0) require_inplace(ex, n, q, "extra");
         if (E < 2) throw py::value_error("smooth_rows: needs at least 2 epochs");
+        SmoothedErrors e;
+        e.n_epochs = E;
+        e.cols = static_cast<int>(c);
+        e.t = te.data();
+        e.d = s.data();
+        e.d_end = s_end.data();
+        e.sigma = sig_e.data();
         // in place, any strides (e.g. the columns of the engine's (n, 3) llh array): no copies
-        auto la = lat_deg.mutable_unchecked<double, 1>(), lo = lon_deg.mutable_unchecked<double, 1>(),
-             h = h_m.mutable_unchecked<double, 1>(), r = roll_deg.mutable_unchecked<double, 1>(),
-             p = pitch_deg.mutable_unchecked<double, 1>(), y = yaw_deg.mutable_unchecked<double, 1>();
-        auto v = v_n.mutable_unchecked<double, 2>();
-        auto px = ex.mutable_unchecked<double, 2>();
-        auto so = sig_out.mutable_unchecked<double, 2>();
-        const double *pt = t.data(), *pe = te.data(), *ps = s.data(), *pse = s_end.data(), *pg = sig_e.data();
-        constexpr double kDeg = 3.14159265358979323846 / 180.0, kRad2Deg = 180.0 / 3.14159265358979323846;
-        // rows are independent: blocks on up to 2 threads (the rows' own
-        // trigonometry dominates: ~0.25 us a row), each finding its first epoch
-        // interval by bisection (rows are sorted in time)
-        auto rows = [&](py::ssize_t i_begin, py::ssize_t i_end) {
-          py::ssize_t k = 0;  // epoch interval [te[k], te[k+1]) holding the row
-          if (i_begin < i_end) {
-            const py::ssize_t idx = std::lower_bound(pe, pe + E, pt[i_begin]) - pe;  // pe[idx] >= t
-            k = std::min<py::ssize_t>(std::max<py::ssize_t>(idx - 1, 0), E - 2);
-          }
-          // blocks of kBlock rows in three passes (interpolation; position and velocity; attitude):
-          // the short passes let the rows' sqrt / division chains overlap (the same arithmetic per row)
-          constexpr py::ssize_t kBlock = 32;
-          double X[kBlock][9];
-          for (py::ssize_t i0 = i_begin; i0 < i_end; i0 += kBlock) {
-            const py::ssize_t m = std::min(kBlock, i_end - i0);
-            for (py::ssize_t b = 0; b < m; ++b) {
-              const py::ssize_t i = i0 + b;
-              double* x = X[b];
-              const double ti = pt[i];
-              while (k + 2 < E && pe[k + 1] < ti) ++k;  // ti in (te[k], te[k+1]]
-              const double t0 = pe[k], t1 = pe[k + 1];
-              const double w = t1 > t0 ? std::min(1.0, std::max(0.0, (ti - t0) / (t1 - t0))) : 1.0;
-              // a row at t_{k+1} (or after the last epoch) is written after that epoch's feedback:
-              // s_{k+1}; before it, s_{k+1} + x_fed
-              const double* end = ti > t1 - 1e-9 ? ps + c * (k + 1) : pse + c * (k + 1);
-              const double* beg = ps + c * k;
-              for (py::ssize_t j = 0; j < c; ++j) so(i, j) = (1.0 - w) * pg[c * k + j] + w * pg[c * (k + 1) + j];
-              for (int j = 0; j < 9; ++j) x[j] = (1.0 - w) * beg[j] + w * end[j];
-              for (py::ssize_t j = 0; j < q; ++j) px(i, j) -= (1.0 - w) * beg[9 + j] + w * end[9 + j];
-            }
-            for (py::ssize_t b = 0; b < m; ++b) {
-              const py::ssize_t i = i0 + b;
-              const double* x = X[b];
-              const double lat = la(i) * kDeg;
-              double s_lat, c_lat;
-              sin_cos(lat, s_lat, c_lat);
-              const double w_lat = 1.0 - wgs84::kE2 * s_lat * s_lat;  // wgs84::radii with the sine at hand
-              const double R_N = wgs84::kA / std::sqrt(w_lat), R_M = R_N * (1.0 - wgs84::kE2) / w_lat;
-              la(i) = (lat - x[0] / (R_M + h(i))) * kRad2Deg;
-              lo(i) -= x[1] / ((R_N + h(i)) * c_lat) * kRad2Deg;
-              h(i) += x[2];
-              for (int j = 0; j < 3; ++j) v(i, j) -= x[3 + j];
-            }
-            for (py::ssize_t b = 0; b < m; ++b) {
-              const py::ssize_t i = i0 + b;
-              const double* x = X[b];
-              // C_nb <- dcm(psi) C_nb through quaternions (quat_from_euler, euler_from_dcm of
-              // math/rotation.hpp); the new angles as the row's plus a small difference
-              // (atan2_near: no full atan2 when the correction is below 0.02 rad)
-              const double roll = r(i) * kDeg, pitch = p(i) * kDeg, yaw = y(i) * kDeg;
-              double shr, chr, shp, chp, shy, chy;  // half angles
-              sin_cos(0.5 * roll, shr, chr);
-              sin_cos(0.5 * pitch, shp, chp);
-              sin_cos(0.5 * yaw, shy, chy);
-              const Quat q_row(chr * chp * chy + shr * shp * shy, shr * chp * chy - chr * shp * shy,
-                               chr * shp * chy + shr * chp * shy, chr * chp * shy - shr * shp * chy);
-              Quat qc = small_quat_from_euler(x[6], x[7], x[8]) * q_row;
-              qc.coeffs() *= 1.0 / qc.coeffs().norm();  // normalized with one division
-              const Mat3 C = qc.toRotationMatrix();
-              const double cp = std::sqrt(C(2, 1) * C(2, 1) + C(2, 2) * C(2, 2));
-              const bool locked = !(cp > 1e-12);
-              const double inv_cp = locked ? 0.0 : 1.0 / cp;
-              const double sr = locked ? 0.0 : C(2, 1) * inv_cp, cr = locked ? 1.0 : C(2, 2) * inv_cp;
-              // sin and cos of the row's angles from the half angles' (double-angle formulas)
-              const auto full = [](double sh, double ch, double& sf, double& cf) {
-                sf = 2.0 * sh * ch;
-                cf = (ch - sh) * (ch + sh);
-              };
-              double sin_r, cos_r, sin_p, cos_p, sin_y, cos_y;
-              full(shr, chr, sin_r, cos_r);
-              full(shp, chp, sin_p, cos_p);
-              full(shy, chy, sin_y, cos_y);
-              p(i) = atan2_near(-C(2, 0), cp, pitch, sin_p, cos_p) * kRad2Deg;
-              r(i) = locked ? 0.0 : atan2_near(C(2, 1), C(2, 2), roll, sin_r, cos_r) * kRad2Deg;
-              y(i) = atan2_near(sr * C(0, 2) - cr * C(0, 1), cr * C(1, 1) - sr * C(1, 2), yaw, sin_y, cos_y) * kRad2Deg;
-            }
-          }
-        };
-        {
-          py::gil_scoped_release release;
-          const int threads = n < 20000 ? 1 : 2;
-          std::vector<std::thread> pool;
-          const py::ssize_t block = (n + threads - 1) / threads;
-          for (int th = 1; th < threads; ++th)
-            pool.emplace_back(rows, std::min<py::ssize_t>(n, th * block), std::min<py::ssize_t>(n, (th + 1) * block));
-          rows(0, std::min<py::ssize_t>(n, block));
-          for (auto& th : pool) th.join();
-        }
+        NavRowsRef r;
+        r.n = n;
+        r.t = t.data();
+        r.lat = column(lat_deg);
+        r.lon = column(lon_deg);
+        r.h = column(h_m);
+        r.roll = column(roll_deg);
+        r.pitch = column(pitch_deg);
+        r.yaw = column(yaw_deg);
+        r.v_n = matrix(v_n);
+        r.sigma = matrix(sig_out);
+        r.extra = matrix(ex);
+        r.to_rad = kDegToRad;
+        r.from_rad = kRadToDeg;
+        py::gil_scoped_release release;
+        smooth_nav_rows(e, r, n < 20000 ? 1 : 2);  // engine/smoothed_rows.hpp
       },
       py::arg("t"), py::arg("lat_deg"), py::arg("lon_deg"), py::arg("h_m"), py::arg("v_n"), py::arg("roll_deg"),
       py::arg("pitch_deg"), py::arg("yaw_deg"), py::arg("te"), py::arg("s"), py::arg("s_end"), py::arg("sigma_e"),

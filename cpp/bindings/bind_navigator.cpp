@@ -16,6 +16,8 @@
 
 namespace insnav::py_bind {
 
+void bind_tight_navigator(py::module_& m);  // bind_tight_navigator.cpp (registered with this one)
+
 namespace {
 
 /// The calls the binding needs, independent of the filter and layout.
@@ -180,6 +182,7 @@ void bind_navigator(py::module_& m) {
       .def("covariance", &NavigatorBase::covariance)
       .def("counters", &NavigatorBase::counters)
       .def("last_fix", &NavigatorBase::last_fix);
+  bind_tight_navigator(m);
 }
 
 }  // namespace insnav::py_bind

@@ -228,6 +228,34 @@ struct TightInputs {
 
 using I64Array = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
 
+/// One satellite row of `sats` (12 values, the order above), its system index
+/// (insnav.gnss.systems: 0 G, 1 R, 2 E, 3 C) and PRN, validated (`row` for the messages).
+inline SatObservation sat_observation_from(const double* r, std::int64_t system, std::int64_t prn, py::ssize_t row) {
+  SatObservation o;
+  o.pseudorange_m = r[0];
+  o.pseudorange_rate_mps = r[1];
+  o.r_e = Vec3(r[2], r[3], r[4]);
+  o.v_e = Vec3(r[5], r[6], r[7]);
+  o.clock_bias_m = r[8];
+  o.clock_drift_mps = r[9];
+  o.sigma_pr_m = r[10];
+  o.sigma_prr_mps = r[11];
+  if (system < 0 || system >= kNumSystems)
+    throw py::value_error("system: index " + std::to_string(system) + " at row " + std::to_string(row) +
+                          " (expected 0 G, 1 R, 2 E, 3 C)");
+  o.system = static_cast<int>(system);
+  o.prn = static_cast<int>(std::max<std::int64_t>(0, prn));
+  const bool any = std::isfinite(o.pseudorange_m) || std::isfinite(o.pseudorange_rate_mps);
+  if (any && !(o.r_e.allFinite() && o.v_e.allFinite() && std::isfinite(o.clock_bias_m) &&
+               std::isfinite(o.clock_drift_mps)))
+    throw py::value_error("sats: non-finite satellite state at row " + std::to_string(row));
+  if (std::isfinite(o.pseudorange_m) && !(o.sigma_pr_m > 0.0))
+    throw py::value_error("sats: sigma_pr must be > 0 at row " + std::to_string(row));
+  if (std::isfinite(o.pseudorange_rate_mps) && !(o.sigma_prr_mps > 0.0))
+    throw py::value_error("sats: sigma_prr must be > 0 at row " + std::to_string(row));
+  return o;
+}
+
 /// system: None (every row GPS) or (M,) int, each in [0, kNumSystems) (insnav.gnss.systems index).
 inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats,
                                      const py::object& system = py::none(), const py::object& prn = py::none()) {
@@ -263,34 +291,8 @@ inline TightInputs tight_inputs_from(const DArray& epoch_t, const I64Array& epoc
     if (prns.ndim() != 1 || prns.shape(0) != in.M)
       throw py::value_error("prn: expected shape (" + std::to_string(in.M) + ",)");
   }
-  for (py::ssize_t i = 0; i < in.M; ++i) {
-    const double* r = ps + 12 * i;
-    SatObservation& o = in.sats[i];
-    o.pseudorange_m = r[0];
-    o.pseudorange_rate_mps = r[1];
-    o.r_e = Vec3(r[2], r[3], r[4]);
-    o.v_e = Vec3(r[5], r[6], r[7]);
-    o.clock_bias_m = r[8];
-    o.clock_drift_mps = r[9];
-    o.sigma_pr_m = r[10];
-    o.sigma_prr_mps = r[11];
-    if (sys.size()) {
-      const std::int64_t k = sys.data()[i];
-      if (k < 0 || k >= kNumSystems)
-        throw py::value_error("system: index " + std::to_string(k) + " at row " + std::to_string(i) +
-                              " (expected 0 G, 1 R, 2 E, 3 C)");
-      o.system = static_cast<int>(k);
-    }
-    if (prns.size()) o.prn = static_cast<int>(std::max<std::int64_t>(0, prns.data()[i]));
-    const bool any = std::isfinite(o.pseudorange_m) || std::isfinite(o.pseudorange_rate_mps);
-    if (any && !(o.r_e.allFinite() && o.v_e.allFinite() && std::isfinite(o.clock_bias_m) &&
-                 std::isfinite(o.clock_drift_mps)))
-      throw py::value_error("sats: non-finite satellite state at row " + std::to_string(i));
-    if (std::isfinite(o.pseudorange_m) && !(o.sigma_pr_m > 0.0))
-      throw py::value_error("sats: sigma_pr must be > 0 at row " + std::to_string(i));
-    if (std::isfinite(o.pseudorange_rate_mps) && !(o.sigma_prr_mps > 0.0))
-      throw py::value_error("sats: sigma_prr must be > 0 at row " + std::to_string(i));
-  }
+  for (py::ssize_t i = 0; i < in.M; ++i)
+    in.sats[i] = sat_observation_from(ps + 12 * i, sys.size() ? sys.data()[i] : 0, prns.size() ? prns.data()[i] : 0, i);
   return in;
 }
 

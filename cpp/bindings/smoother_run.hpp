@@ -17,6 +17,7 @@
 
 #include "common.hpp"
 #include "insnav/engine/closed_loop.hpp"
+#include "insnav/engine/smoothed_rows.hpp"
 #include "insnav/filter/ekf.hpp"
 #include "insnav/filter/rbukf.hpp"
 #include "insnav/filter/rts_smoother.hpp"
@@ -85,11 +86,8 @@ class SmootherRun {
 
   /// The result arrays (GIL held), per epoch k (E rows; n columns: the layout's states):
   ///   smooth_t (E,), smooth_fed (E,) x_k fed back, smooth_s (E, n) s_k, smooth_sigma (E, n) sqrt(diag Ps_k);
-  ///   the corrections of the output rows (python/insnav/filters/smoothing.py), which are the nominal
-  ///   corrected by the filter's running estimate (zero after a feedback, the propagated mean after an
-  ///   epoch without one): smooth_d (E, n) = s_k - r_k for the rows from epoch k on, smooth_d_end
-  ///   (E, n) = s_k + fed_k x_k - xp_k for the rows just before it (rts_smoother.hpp's symbols);
-  ///   smooth_gain_failures.
+  ///   the corrections of the output rows (engine/smoothed_rows.hpp smoothed_row_errors): smooth_d (E, n)
+  ///   for the rows from epoch k on, smooth_d_end (E, n) for the rows just before it; smooth_gain_failures.
   void put(py::dict& res) const {
     if (!on_) return;
     const py::ssize_t E = n_, n = kN;
@@ -103,11 +101,10 @@ class SmootherRun {
       const SmoothedEpoch<L>& b = bwd_[i];
       et[i] = f.t;
       fed[i] = f.fed_back ? 1 : 0;
+      smoothed_row_errors<L>(f, b, i > 0, d + i * kN, de + i * kN);
       for (int j = 0; j < kN; ++j) {
         const std::int64_t ij = i * kN + j;
         s[ij] = b.s[j];
-        d[ij] = f.fed_back ? b.s[j] : b.s[j] - f.x[j];
-        de[ij] = (f.fed_back ? b.s[j] + f.x[j] : b.s[j]) - (i > 0 ? f.x_pred[j] : 0.0);
         ss[ij] = std::sqrt(std::max(b.P(j, j), 0.0));
       }
     }

@@ -34,6 +34,7 @@ _LAZY = {
     "Dataset": "insnav.data.dataset",
     "run": "insnav.filters",
     "Navigator": "insnav.filters.navigator",
+    "TightNavigator": "insnav.filters.navigator",
     "Solution": "insnav.filters.solution",
     "load_solution": "insnav.filters.solution",
     "RunConfig": "insnav.config",

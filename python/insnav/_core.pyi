@@ -225,6 +225,30 @@ class LooseNavigator:
     def counters(self) -> dict[str, Any]: ...
     def last_fix(self) -> dict[str, Any]: ...  # status, nis, innovation (6)
 
+class TightNavigator:
+    """Real-time tight navigator (engine/navigator.hpp); use insnav.TightNavigator."""
+    def __init__(
+        self,
+        filter: str,  # "ekf" | "rbukf" | "ukf"
+        layout: int,  # 17 | 20 (inter-system biases of R, E, C)
+        init: npt.ArrayLike,  # (10,): t0, lat, lon, h, vN, vE, vD, roll, pitch, yaw (SI)
+        P0: npt.ArrayLike,  # (layout, layout)
+        imu_correction: npt.ArrayLike,  # (12,)
+        clock0: npt.ArrayLike,  # (2,): receiver clock bias [m], drift [m/s]
+        isb0: npt.ArrayLike | None,  # (3,) [m] (layout 20)
+        imu_model: dict[str, Any],
+        config: dict[str, Any],  # run_tight's engine config
+        imu_hold: int = 0,  # IMU samples held back for late epochs, 0..256
+    ) -> None: ...
+    def push_imu(self, t: float, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> bool: ...
+    def push_imu_array(self, t: npt.ArrayLike, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> int: ...
+    def push_pseudoranges(self, t: float, sats: npt.ArrayLike, system: npt.ArrayLike, prn: npt.ArrayLike) -> int: ...
+    def flush(self) -> None: ...
+    def solution(self) -> dict[str, Any]: ...  # as LooseNavigator's, plus clock (2) (, isb (3))
+    def covariance(self) -> np.ndarray: ...
+    def counters(self) -> dict[str, Any]: ...
+    def last_epoch(self) -> dict[str, Any]: ...  # status, nis
+
 # carrier-phase RTK (bind_rtk.cpp)
 RTK_ROW_COLS: int
 RTK_MAX_AMBIGUITIES: int

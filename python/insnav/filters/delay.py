@@ -44,9 +44,10 @@ from .. import _core
 from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
 from ..registry import filter_names
-from ..units import DEG, RAD2DEG
+from ..units import DEG
 from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
                      loose_initial_sigmas, raise_if_nonfinite)
+from ._assemble import nav_solution
 from .solution import GNSS_STATUS, Solution
 
 DELAY_FILTERS = tuple(n for n in filter_names("loose") if n in ("kf", "rdkf", "exact"))
@@ -139,7 +140,7 @@ def scenario_gnss_period_s(dataset) -> float | None:
 
 def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfig | None = None,
                 max_history_s: float = 1.0, checkpoint_interval_s: float | None = None,
-                **overrides) -> Solution:
+                sanitize: bool | dict = True, checks: bool = True, **overrides) -> Solution:
     """Closed-loop loose GNSS/INS run with delayed GNSS records.
 
     Parameters
@@ -159,6 +160,8 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     checkpoint_interval_s : float, optional
         exact: checkpoint spacing [s] (default: the median GNSS interval).
         History = min(max_history_s, 63 checkpoint_interval_s).
+    sanitize, checks : bool
+        As :func:`insnav.run`, which this calls (input repair and checks first).
     **overrides
         Any :class:`RunConfig` field.
 
@@ -175,12 +178,20 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     """
     if filter not in DELAY_FILTERS:
         raise ValueError(f"run_delayed: filter {filter!r}; allowed: {', '.join(DELAY_FILTERS)}")
-    cfg = dataclasses.replace(config or RunConfig())
-    for k, v in overrides.items():
-        if not hasattr(cfg, k):
-            raise TypeError(f"run_delayed() got an unknown option {k!r}")
-        setattr(cfg, k, v)
-    cfg.filter, cfg.coupling = filter, "loose"
+    from . import run
+
+    return run(dataset, filter, "loose", config, sanitize=sanitize, checks=checks, delay_p=delay_p,
+               max_history_s=max_history_s, checkpoint_interval_s=checkpoint_interval_s, **overrides)
+
+
+def run_delay(dataset, cfg: RunConfig, *, delay_p=None, max_history_s: float = 1.0,
+              checkpoint_interval_s: float | None = None) -> Solution:
+    """The registry's runner (``insnav.run(ds, "kf" | "rdkf" | "exact")``): ``cfg.filter``
+    over the arrival stream; the options as :func:`run_delayed`'s."""
+    filter = cfg.filter
+    if filter not in DELAY_FILTERS:
+        raise ValueError(f"run_delay: filter {filter!r}; allowed: {', '.join(DELAY_FILTERS)}")
+    cfg = dataclasses.replace(cfg, coupling="loose")
     cfg.validate()
 
     t, dth, dv = imu_arrays(dataset)
@@ -238,16 +249,10 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
                 summary[k] = out[k]
     inv = np.empty_like(order)
     inv[order] = np.arange(len(order))
-    sig, err = out["sigma"], out["imu_err"]
-    llh, rpy = out["llh"], out["rpy"] * RAD2DEG
     summary.update(updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), gate_outage_accepted=int(out["gate_outage_accepted"]),
                    cholesky_repairs=int(out["cholesky_repairs"]))
-    sol = Solution(t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2],
-                   v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],
-                   sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG,
-                   acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
-                   gyro_scale=err[:, 9:12], gnss_t=t_valid_sorted[inv], innovation=out["innovation"][inv],
-                   nis=out["nis"][inv], gnss_status=out["status"][inv], summary=summary)
+    sol, _ = nav_solution(out, gnss_t=t_valid_sorted[inv], innovation=out["innovation"][inv], nis=out["nis"][inv],
+                          gnss_status=out["status"][inv], summary=summary)
     if summary.get("refused_too_old", 0):
         warnings.warn(f"exact: {summary['refused_too_old']} GNSS record(s) arrived more than the history "
                       f"({summary['history_s']:.3g} s) after their time of validity and were not used",
@@ -255,7 +260,3 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
     raise_if_nonfinite(sol, filter)
     return sol
 
-
-def run_delay(dataset, cfg: RunConfig, **options) -> Solution:
-    """The registry's runner: :func:`run_delayed` with ``cfg.filter``."""
-    return run_delayed(dataset, cfg.filter, config=cfg, **options)

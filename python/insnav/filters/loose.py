@@ -19,6 +19,7 @@ from ..units import DEG
 from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
                      loose_initial_sigmas,
                      raise_if_nonfinite)
+from ._assemble import nav_solution
 from .solution import Solution
 
 __all__ = ["run_loose", "loose_engine_args", "LooseEngineArgs", "selfcal_setup", "put_selfcal"]
@@ -93,18 +94,13 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
     # unit conversions in place (the arrays are ours) in one compiled pass over the rows,
     # which also finds the first non-finite row (raise_if_nonfinite below)
     sig = out["sigma"]
-    err = out["imu_err"]
-    llh, rpy = out["llh"], out["rpy"]
-    _, nonfinite = _core.nav_rows_to_degrees(llh, rpy, sig, 6, out["v_n"])
-    sol = Solution(t=out["t"], lat_deg=llh[:, 0], lon_deg=llh[:, 1], h_m=llh[:, 2],
-                   v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],
-                   sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9],
-                   acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
-                   gyro_scale=err[:, 9:12], gnss_t=gnss_t, innovation=out["innovation"], nis=out["nis"],
-                   gnss_status=out["status"], log_det_s=out["log_det_s"],
-                   summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n_core, updates=int(out["updates"]),
-                                rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), gate_outage_accepted=int(out["gate_outage_accepted"]), cholesky_repairs=int(out["cholesky_repairs"]),
-                                gnss_records=len(gnss_t)))
+    sol, nonfinite = nav_solution(
+        out, gnss_t=gnss_t, innovation=out["innovation"], nis=out["nis"], gnss_status=out["status"],
+        log_det_s=out["log_det_s"],
+        summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=n_core, updates=int(out["updates"]),
+                     rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
+                     gate_outage_accepted=int(out["gate_outage_accepted"]),
+                     cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=len(gnss_t)))
     if cfg.imu_error_sigmas:  # layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
         sol.sigma_imu_err = np.zeros((len(sol.t), 12))
         sol.sigma_imu_err[:, :n - 9] = sig[:, 9:n]

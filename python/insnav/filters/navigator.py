@@ -31,7 +31,7 @@ from ..data.nav import NavState
 from ..units import DEG
 from .loose import loose_engine_args
 
-__all__ = ["Navigator"]
+__all__ = ["Navigator", "TightNavigator"]
 
 _RAD2DEG = 180.0 / np.pi  # the batch run's conversion (_core.nav_rows_to_degrees), to the bit
 
@@ -52,6 +52,15 @@ def _imu_model(imu_model) -> dict:
     if not isinstance(imu_model, dict):
         raise TypeError(f"Navigator: imu_model must be a dict (SI keys) or a grade name, got {type(imu_model).__name__}")
     return dict(imu_model)
+
+
+def _state_dict(s: dict) -> dict:
+    """The engine's row (radians, SI) as the API's dict (degrees at the API, as the batch Solution)."""
+    rpy = s["rpy"] * _RAD2DEG
+    err = s["imu_err"]
+    return dict(t=s["t"], lat_deg=s["lat"] * _RAD2DEG, lon_deg=s["lon"] * _RAD2DEG, h_m=s["h"], v_n_mps=s["v_n"],
+                roll_deg=rpy[0], pitch_deg=rpy[1], yaw_deg=rpy[2], sigma=s["sigma"],
+                acc_bias_mps2=err[0:3], gyro_bias_rps=err[3:6], acc_scale=err[6:9], gyro_scale=err[9:12])
 
 
 class Navigator:
@@ -167,11 +176,7 @@ class Navigator:
         ``pitch_deg``, ``yaw_deg``, ``sigma`` (sqrt(diag P), layout order, SI),
         ``acc_bias_mps2``, ``gyro_bias_rps`` (and scale factors)."""
         s = self._nav.solution()
-        rpy = s["rpy"] * _RAD2DEG
-        err = s["imu_err"]
-        out = dict(t=s["t"], lat_deg=s["lat"] * _RAD2DEG, lon_deg=s["lon"] * _RAD2DEG, h_m=s["h"], v_n_mps=s["v_n"],
-                   roll_deg=rpy[0], pitch_deg=rpy[1], yaw_deg=rpy[2], sigma=s["sigma"],
-                   acc_bias_mps2=err[0:3], gyro_bias_rps=err[3:6], acc_scale=err[6:9], gyro_scale=err[9:12])
+        out = _state_dict(s)
         if "odo_scale" in s:
             out["odo_scale"], out["sigma_odo_scale"] = s["odo_scale"]
         return out
@@ -190,4 +195,111 @@ class Navigator:
     @property
     def counters(self) -> dict:
         """samples integrated, held samples, pending records, updates, rejected, refused records."""
+        return self._nav.counters()
+
+
+class TightNavigator:
+    """Tightly coupled EKF / RB-UKF / UKF (17 states, or 20 with the
+    inter-system biases of several constellations) fed one IMU sample and one
+    GNSS epoch of pseudoranges / pseudorange rates at a time.
+
+    The same compiled engine as ``insnav.run(..., coupling="tight")``
+    (``engine/navigator.hpp`` ``TightNavigator``): pushed in time order, its rows
+    equal the batch run's.  Timing as :class:`Navigator` (``imu_hold`` IMU
+    samples held back for late epochs; an epoch older than the last integrated
+    sample is refused).  Build it with :meth:`from_dataset`, which sets it up
+    exactly as the batch run (initial state and sigmas, receiver clock, ISBs,
+    gate, robust screening); :attr:`inputs` then holds the satellite rows the
+    batch run would use (``insnav.gnss.tight_inputs.TightInputs``).
+    """
+
+    @classmethod
+    def from_dataset(cls, dataset, config=None, *, imu_hold: int = 0, **options) -> "TightNavigator":
+        """A navigator set up as :func:`insnav.filters.tight.run_tight` sets up its run of
+        ``dataset``; ``options`` are run_tight's keywords (``elevation_mask_deg``,
+        ``layout``, ``clock0``, ...), ``config`` a RunConfig, dict or path."""
+        import dataclasses
+
+        from . import _as_config
+        from .tight import tight_engine_args
+
+        cfg = dataclasses.replace(_as_config(config), coupling="tight")
+        cfg.validate()
+        if cfg.filter not in ("ekf", "rbukf", "ukf"):
+            raise ValueError(f"TightNavigator: filter {cfg.filter!r}: the push API runs the tight ekf, rbukf and ukf")
+        if cfg.smooth:
+            raise ValueError("TightNavigator: the RTS smoother needs the whole run (insnav.run(..., smooth=True))")
+        if not (0 <= int(imu_hold) <= 256):
+            raise ValueError(f"TightNavigator: imu_hold must be in 0 .. 256 samples, got {imu_hold!r}")
+        a = tight_engine_args(dataset, cfg, **options)
+        self = cls.__new__(cls)
+        self.config = cfg
+        self.layout = a.layout
+        self.inputs = a.inputs
+        self._nav = _core.TightNavigator(cfg.filter, a.layout, a.init, a.P0, a.imu_correction,
+                                         np.asarray(a.clock0, float), a.isb0 if a.layout == 20 else None,
+                                         a.imu_model, a.config, int(imu_hold))
+        return self
+
+    def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
+        """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
+        False (ignored) when ``t`` does not increase."""
+        return bool(self._nav.push_imu(float(t), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
+
+    def push_imu_array(self, t, dtheta_b, dv_b) -> int:
+        """Many IMU increments at once (N,), (N,3), (N,3); returns how many were taken."""
+        return int(self._nav.push_imu_array(np.asarray(t, float), np.asarray(dtheta_b, float),
+                                            np.asarray(dv_b, float)))
+
+    def push_pseudoranges(self, t: float, sats, system=None, prn=None) -> str:
+        """One GNSS epoch valid at ``t`` [s]: ``sats`` (k, 12) rows of pseudorange [m],
+        pseudorange rate [m/s] (NaN: absent), satellite ECEF position [m] and velocity
+        [m/s], satellite clock bias [m] and drift [m/s], and the 1-sigma of the
+        pseudorange [m] and rate [m/s] (``TightInputs.sats``'s columns);
+        ``system`` (k,) indices 0 G, 1 R, 2 E, 3 C (default GPS), ``prn`` (k,).
+        Returns ``"queued"``, or why the epoch was refused."""
+        rows = np.ascontiguousarray(np.asarray(sats, float).reshape(-1, 12))
+        k = rows.shape[0]
+        sys_ = np.zeros(k, np.int64) if system is None else np.asarray(system, np.int64)
+        prn_ = np.zeros(k, np.int64) if prn is None else np.asarray(prn, np.int64)
+        return RECORD_STATUS[self._nav.push_pseudoranges(float(t), rows, sys_, prn_)]
+
+    def push_epoch(self, e: int) -> str:
+        """Push epoch ``e`` of :attr:`inputs` (the batch run's satellite rows)."""
+        inp = self.inputs
+        b, f = int(inp.epoch_start[e]), int(inp.epoch_start[e + 1])
+        from ..gnss.systems import system_index
+
+        sys_ = system_index(inp.system[b:f]) if f > b else np.zeros(0, np.int64)
+        return self.push_pseudoranges(inp.epoch_t[e], inp.sats[b:f], sys_, np.asarray(inp.prn[b:f], np.int64))
+
+    def flush(self) -> None:
+        """Integrate the held IMU samples (at the end of a run)."""
+        self._nav.flush()
+
+    def state(self) -> dict:
+        """The current solution after the last integrated sample: as
+        :meth:`Navigator.state`, plus ``clock_bias_m``, ``clock_drift_mps`` and,
+        with 20 states, ``isb_m`` (R, E, C) [m]."""
+        s = self._nav.solution()
+        out = _state_dict(s)
+        out["clock_bias_m"], out["clock_drift_mps"] = s["clock"]
+        if "isb" in s:
+            out["isb_m"] = s["isb"]
+        return out
+
+    def covariance(self) -> np.ndarray:
+        """The error-state covariance (layout order, SI; clock states in m and m/s)."""
+        return self._nav.covariance()
+
+    def last_epoch(self) -> dict:
+        """The last epoch applied: ``status`` and ``nis``."""
+        d = self._nav.last_epoch()
+        d["status"] = RECORD_STATUS[d["status"]]
+        return d
+
+    @property
+    def counters(self) -> dict:
+        """samples integrated, held samples, pending epochs, updates, rejected epochs and satellites,
+        refused epochs."""
         return self._nav.counters()

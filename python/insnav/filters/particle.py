@@ -42,9 +42,10 @@ from ..config import ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
 from ..registry import FILTERS, PARTICLE_OPTIONS
-from ..units import DEG, DEG_PER_H, RAD2DEG
+from ..units import DEG, DEG_PER_H
 from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
                      tight_inputs_for)
+from ._assemble import nav_solution
 from .tight import TightSolution
 
 __all__ = ["DEFAULT_ALPHA", "PARTICLE_FILTERS", "PARTICLE_OPTIONS", "ParticleSolution", "run_tight_particle", "layout20_model"]
@@ -212,7 +213,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     out = _core.run_tight_particle(filt, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                                    np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0,
                                    np.zeros(12), np.asarray(clock0, float), model, core_cfg, pcfg)
-    sig, err, llh, rpy = out["sigma"], out["imu_err"], out["llh"], out["rpy"] * RAD2DEG
+    sig = out["sigma"]
     # per-update traces -> per-epoch arrays (entries belong to the applied epochs in order)
     applied = np.flatnonzero(out["status"] == 1)
     E = ep_t.size
@@ -223,12 +224,8 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
         r[applied[:k]] = np.asarray(a)[:k]
         return r
 
-    sol = ParticleSolution(
-        t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2], v_n=out["v_n"],
-        roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2], sigma_pos_n_m=sig[:, 0:3],
-        sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG, acc_bias_mps2=err[:, 0:3],
-        gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9], gyro_scale=err[:, 9:12], gnss_t=ep_t,
-        innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
+    sol, _ = nav_solution(
+        out, ParticleSolution, gnss_t=ep_t, innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
         summary=dict(filter=filt, coupling="tight", layout=20, particles=int(particles) if filt != "fukf" else 1,
                      fading=bool(fading), seed=int(seed), updates=int(out["updates"]),
                      rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]), gate_outage_accepted=int(out["gate_outage_accepted"]), cholesky_repairs=int(out["cholesky_repairs"]),

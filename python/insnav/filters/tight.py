@@ -34,13 +34,13 @@ from ..config import ConfigError, ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
-from ..units import RAD2DEG
 from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
                      tight_inputs_for)
+from ._assemble import nav_solution
 from .loose import put_selfcal, selfcal_setup
 from .solution import Solution
 
-__all__ = ["TightSolution", "run_tight", "initial_isb", "tdcp_phase"]
+__all__ = ["TightSolution", "run_tight", "initial_isb", "tight_engine_args", "tdcp_phase"]
 
 
 @dataclass
@@ -116,7 +116,90 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     cfg = dataclasses.replace(cfg or RunConfig(), coupling="tight")
     cfg.validate()
     t, dth, dv = imu_arrays(dataset)
+    a = tight_engine_args(dataset, cfg, inputs=inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats,
+                          clock_psd=clock_psd, init_sigma_clock=init_sigma_clock, clock0=clock0,
+                          use_pseudorange=use_pseudorange, use_rate=use_rate, layout=layout, isb_psd=isb_psd,
+                          init_sigma_isb=init_sigma_isb, isb0=isb0)
+    inputs, n, ep_t, sys_idx, clock0, isb0, robust = a.inputs, a.layout, a.epoch_t, a.system, a.clock0, a.isb0, a.robust
+    qb, qd = a.clock_psd
+    core_cfg = dict(a.config)
+    if cfg.smooth:
+        core_cfg["smooth"] = True
+    phase = None
+    if cfg.tdcp.enabled:  # time-differenced carrier phase (meas/tdcp.hpp)
+        phase = tdcp_phase(inputs, cfg)
+        core_cfg.update(cfg.tdcp.as_core_dict())
+    out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
+                          a.sats, a.init, a.P0, a.imu_correction, np.asarray(clock0, float), a.imu_model, core_cfg,
+                          layout=n, system=sys_idx, isb0=None if n == 17 else np.asarray(isb0, float), prn=a.prn,
+                          **({} if phase is None else dict(phase=phase)))
+    sig = out["sigma"]
+    systems = sorted(set(np.asarray(inputs.system).tolist()), key=SYSTEMS.index)
+    sol, _ = nav_solution(
+        out, TightSolution, gnss_t=ep_t, innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
+        log_det_s=out["log_det_s"],
+        summary=dict(filter=cfg.filter, coupling="tight", layout=n, systems="".join(systems),
+                     updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
+                     gate_outage_accepted=int(out["gate_outage_accepted"]),
+                     cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=int(ep_t.size),
+                     sat_rows=int(len(inputs.prn)), clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
+                     robust_screening=bool(robust["robust_screening"]), rejected_sats=int(out["rejected_sats"]),
+                     fde_excluded=int(out["fde_excluded"]), cusum_alarms=int(out["cusum_alarms"]),
+                     cusum_excluded=int(out["cusum_excluded"]),
+                     downweighted_sats=int(out["downweighted_sats"]), flagged_epochs=int(out["flagged_epochs"]),
+                     clock_jumps=int(out["clock_jumps"])),
+        clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 15:17],
+        rows=out["rows"], inputs=inputs, sat_flag=out["sat_flag"], clock_jump_m=out["clock_jump"])
+    if cfg.tdcp.enabled:
+        sol.tdcp_residual_m, sol.tdcp_flag, sol.tdcp_rows = out["tdcp_residual"], out["tdcp_flag"], out["tdcp_rows"]
+        sol.summary.update(tdcp=True, tdcp_used=int(out["tdcp_used"]), tdcp_rejected=int(out["tdcp_rejected"]),
+                           tdcp_slips_lli=int(out["tdcp_slips_lli"]), tdcp_slips_ins=int(out["tdcp_slips_ins"]),
+                           tdcp_updates=int(out["tdcp_updates"]))
+    put_selfcal(sol, out, cfg)
+    if a.P0.shape[0] != n:  # the self-calibration states extend the core layout
+        sol.summary["layout"] = int(a.P0.shape[0])
+    if n == 20:
+        sol.isb_m = out["isb"]
+        sol.sigma_isb = sig[:, 17:20]
+        sol.summary["isb0"] = tuple(float(v) for v in isb0)
+    if cfg.smooth:  # RTS backward pass: navigation rows, clock and ISBs (filters/smoothing.py)
+        from .smoothing import smoothed_rows
 
+        smoothed_rows(sol, out, cfg.filter)
+    raise_if_nonfinite(sol, cfg.filter)
+    return sol
+
+
+@dataclass
+class TightEngineArgs:
+    """The tight engine's set-up (:func:`tight_engine_args`): what ``_core.run_tight``
+    and ``_core.TightNavigator`` take, plus the inputs it was built from."""
+
+    layout: int
+    init: np.ndarray
+    P0: np.ndarray
+    imu_correction: np.ndarray
+    imu_model: dict
+    config: dict
+    clock0: tuple
+    clock_psd: tuple
+    isb0: np.ndarray | None
+    inputs: TightInputs
+    epoch_t: np.ndarray
+    system: np.ndarray
+    sats: np.ndarray
+    prn: np.ndarray | None
+    robust: dict
+
+
+def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = None,
+                      elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
+                      init_sigma_clock=(30.0, 1.0), clock0=None, use_pseudorange: bool = True,
+                      use_rate: bool = True, layout="auto", isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
+                      isb0=None) -> TightEngineArgs:
+    """The tight engine's set-up from a dataset, a run config and :func:`run_tight`'s
+    options (the same meaning): the batch run and the push API
+    (:class:`insnav.filters.navigator.TightNavigator`) start from it alike."""
     inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
     if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:  # insnav tune's R scale factors
         sats = np.array(inputs.sats, float)
@@ -159,60 +242,14 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     if n == 20 and isb0 is None:
         isb0 = initial_isb(inputs, dataset, cfg, init, sys_idx)
     ep_t = np.asarray(inputs.epoch_t, float)
-    init_vec = init_vector(dataset, init)
     robust = cfg.robust.as_core_dict(dataset)
     core_cfg = engine_config(dataset, cfg, ep_t, n + len(sc_sigmas), use_pseudorange=bool(use_pseudorange),
                              use_rate=bool(use_rate), **robust, **sc_cfg)
-    if cfg.smooth:
-        core_cfg["smooth"] = True
-    phase = None
-    if cfg.tdcp.enabled:  # time-differenced carrier phase (meas/tdcp.hpp)
-        phase = tdcp_phase(inputs, cfg)
-        core_cfg.update(cfg.tdcp.as_core_dict())
-    out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
-                          np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0, np.zeros(12),
-                          np.asarray(clock0, float), model, core_cfg, layout=n, system=sys_idx,
-                          isb0=None if n == 17 else np.asarray(isb0, float),
-                          prn=np.asarray(inputs.prn, np.int64) if len(inputs.prn) else None,
-                          **({} if phase is None else dict(phase=phase)))
-    sig, err, llh, rpy = out["sigma"], out["imu_err"], out["llh"], out["rpy"] * RAD2DEG
-    systems = sorted(set(np.asarray(inputs.system).tolist()), key=SYSTEMS.index)
-    sol = TightSolution(
-        t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2], v_n=out["v_n"],
-        roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2], sigma_pos_n_m=sig[:, 0:3],
-        sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG, acc_bias_mps2=err[:, 0:3],
-        gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9], gyro_scale=err[:, 9:12], gnss_t=ep_t,
-        innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"], log_det_s=out["log_det_s"],
-        summary=dict(filter=cfg.filter, coupling="tight", layout=n, systems="".join(systems),
-                     updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
-                     gate_outage_accepted=int(out["gate_outage_accepted"]),
-                     cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=int(ep_t.size),
-                     sat_rows=int(len(inputs.prn)), clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
-                     robust_screening=bool(robust["robust_screening"]), rejected_sats=int(out["rejected_sats"]),
-                     fde_excluded=int(out["fde_excluded"]), cusum_alarms=int(out["cusum_alarms"]),
-                     cusum_excluded=int(out["cusum_excluded"]),
-                     downweighted_sats=int(out["downweighted_sats"]), flagged_epochs=int(out["flagged_epochs"]),
-                     clock_jumps=int(out["clock_jumps"])),
-        clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 15:17],
-        rows=out["rows"], inputs=inputs, sat_flag=out["sat_flag"], clock_jump_m=out["clock_jump"])
-    if cfg.tdcp.enabled:
-        sol.tdcp_residual_m, sol.tdcp_flag, sol.tdcp_rows = out["tdcp_residual"], out["tdcp_flag"], out["tdcp_rows"]
-        sol.summary.update(tdcp=True, tdcp_used=int(out["tdcp_used"]), tdcp_rejected=int(out["tdcp_rejected"]),
-                           tdcp_slips_lli=int(out["tdcp_slips_lli"]), tdcp_slips_ins=int(out["tdcp_slips_ins"]),
-                           tdcp_updates=int(out["tdcp_updates"]))
-    put_selfcal(sol, out, cfg)
-    if sc_cfg:
-        sol.summary["layout"] = n + len(sc_sigmas)
-    if n == 20:
-        sol.isb_m = out["isb"]
-        sol.sigma_isb = sig[:, 17:20]
-        sol.summary["isb0"] = tuple(float(v) for v in isb0)
-    if cfg.smooth:  # RTS backward pass: navigation rows, clock and ISBs (filters/smoothing.py)
-        from .smoothing import smoothed_rows
-
-        smoothed_rows(sol, out, cfg.filter)
-    raise_if_nonfinite(sol, cfg.filter)
-    return sol
+    return TightEngineArgs(layout=n, init=init_vector(dataset, init), P0=P0, imu_correction=np.zeros(12),
+                           imu_model=model, config=core_cfg, clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
+                           isb0=None if isb0 is None else np.asarray(isb0, float), inputs=inputs, epoch_t=ep_t,
+                           system=sys_idx, sats=np.ascontiguousarray(inputs.sats, float).reshape(-1, 12),
+                           prn=np.asarray(inputs.prn, np.int64) if len(inputs.prn) else None, robust=robust)
 
 
 def tdcp_phase(inputs: TightInputs, cfg: RunConfig) -> np.ndarray:

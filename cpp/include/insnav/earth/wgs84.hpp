@@ -29,12 +29,14 @@ struct Radii {
   double R_N;
 };
 
-inline Radii radii(double lat) {
-  const double s = std::sin(lat);
-  const double w = 1.0 - kE2 * s * s;
+/// radii(lat) from sin(lat) (a caller that has the sine at hand).
+inline Radii radii_from_sin(double sin_lat) {
+  const double w = 1.0 - kE2 * sin_lat * sin_lat;
   const double R_N = kA / std::sqrt(w);
   return {R_N * (1.0 - kE2) / w, R_N};
 }
+
+inline Radii radii(double lat) { return radii_from_sin(std::sin(lat)); }
 
 /// Normal gravity [m/s^2]: Somigliana's closed form on the ellipsoid with the
 /// second-order free-air height correction (TR8350.2 eq. 4-1 and 4-3).

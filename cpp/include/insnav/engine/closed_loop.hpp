@@ -38,6 +38,7 @@
 #include "insnav/filter/sigma_points.hpp"
 #include "insnav/filter/types.hpp"
 #include "insnav/ins/mechanization.hpp"
+#include "insnav/ins/nav_error.hpp"
 
 namespace insnav {
 
@@ -386,13 +387,8 @@ struct ClosedLoop {
       rec_[rec_n_ - 1].fed_back = true;
     }
     NavState s = ins.state();
-    const wgs84::Radii r = wgs84::radii(s.lat);
-    s.lat -= x[L::kPos] / (r.R_M + s.h);
-    s.lon -= x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
-    s.h += x[L::kPos + 2];
-    s.v_n -= x.template segment<3>(L::kVel);
-    // C_nb(true) = C_{n n'} C_{n' b}, C_{n n'} = dcm_from_euler(psi) (layout.hpp)
-    s.q_nb = (quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb).normalized();
+    apply_nav_error(s, x.template segment<3>(L::kPos), x.template segment<3>(L::kVel),
+                    x.template segment<3>(L::kAtt));  // ins/nav_error.hpp
     corr.acc_bias += x.template segment<3>(L::kAccBias);
     corr.gyro_bias += x.template segment<3>(L::kGyroBias);
     if constexpr (kHasScale<L>) {
@@ -423,17 +419,13 @@ struct ClosedLoop {
     if (out.t) out.t[i] = s.t;
     const StateVec<L>& x = filter.x();
     const bool corrected = !x.template head<9>().isZero(0.0);
-    double lat = s.lat, lon = s.lon, h = s.h;
-    Vec3 v = s.v_n;
-    Quat q = s.q_nb;
-    if (corrected) {
-      const wgs84::Radii r = wgs84::radii(s.lat);
-      lat = s.lat - x[L::kPos] / (r.R_M + s.h);
-      lon = s.lon - x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
-      h = s.h + x[L::kPos + 2];
-      v = s.v_n - x.template segment<3>(L::kVel);
-      q = quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb;
-    }
+    NavState c = s;  // the INS corrected by the estimate not yet fed back (feedback's formula)
+    if (corrected)
+      apply_nav_error(c, x.template segment<3>(L::kPos), x.template segment<3>(L::kVel),
+                      x.template segment<3>(L::kAtt));
+    const double lat = c.lat, lon = c.lon, h = c.h;
+    const Vec3& v = c.v_n;
+    const Quat& q = c.q_nb;
     if (out.llh) {
       out.llh[3 * i] = lat;
       out.llh[3 * i + 1] = lon;

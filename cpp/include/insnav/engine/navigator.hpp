@@ -52,14 +52,19 @@ struct NavigatorRow {
   StateVec<L> sigma = StateVec<L>::Zero();      // sqrt(diag P), layout order
   Eigen::Matrix<double, 12, 1> imu_err;         // acc bias, gyro bias, acc scale, gyro scale (SI)
   Eigen::Matrix<double, 2, 1> odo_scale;        // odometer scale factor and its sigma (Layout16Odo)
+  Eigen::Matrix<double, 2, 1> clock = Eigen::Matrix<double, 2, 1>::Constant(NAN);  // receiver clock bias [m], drift [m/s] (tight)
+  IsbVec isb = IsbVec::Constant(NAN);           // inter-system biases of R, E, C [m] (LayoutTightMulti)
 };
 
 /// The output row of a closed loop (the batch engines' write_output, one row).
 template <class L, class Core>
 NavigatorRow<L> navigator_row(Core& core) {
   NavOutputs o;
-  double t = 0, llh[3], v[3], rpy[3], sig[L::kSize], err[12], odo[2] = {0.0, 0.0};
+  double t = 0, llh[3], v[3], rpy[3], sig[L::kSize], err[12], odo[2] = {0.0, 0.0}, clk[2] = {NAN, NAN},
+         isb[3] = {NAN, NAN, NAN};
   o.t = &t;
+  o.clock = clk;
+  o.isb = isb;
   o.llh = llh;
   o.v_n = v;
   o.rpy = rpy;
@@ -75,6 +80,8 @@ NavigatorRow<L> navigator_row(Core& core) {
   for (int j = 0; j < L::kSize; ++j) r.sigma[j] = sig[j];
   for (int j = 0; j < 12; ++j) r.imu_err[j] = err[j];
   r.odo_scale << odo[0], odo[1];
+  r.clock << clk[0], clk[1];
+  r.isb = IsbVec(isb[0], isb[1], isb[2]);
   return r;
 }
 

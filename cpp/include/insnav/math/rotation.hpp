@@ -13,6 +13,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 namespace insnav {
@@ -110,13 +111,73 @@ inline Vec3 euler_from_dcm(const Mat3& C) {
   return Vec3(roll, pitch, yaw);
 }
 
-inline Quat quat_from_euler(const Vec3& rpy) {
-  const double hr = 0.5 * rpy.x(), hp = 0.5 * rpy.y(), hy = 0.5 * rpy.z();
-  const double sr = std::sin(hr), cr = std::cos(hr);
-  const double sp = std::sin(hp), cp = std::cos(hp);
-  const double sy = std::sin(hy), cy = std::cos(hy);
+/// q_nb of 3-2-1 Euler angles from the sines and cosines of the half angles
+/// (roll/2, pitch/2, yaw/2): q = q_z(yaw) q_y(pitch) q_x(roll).
+inline Quat quat_from_half_sincos(double sr, double cr, double sp, double cp, double sy, double cy) {
   return Quat(cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
               cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy);
+}
+
+/// q_nb of 3-2-1 Euler angles (roll, pitch, yaw) [rad].
+inline Quat quat_from_euler(const Vec3& rpy) {
+  const double hr = 0.5 * rpy.x(), hp = 0.5 * rpy.y(), hy = 0.5 * rpy.z();
+  return quat_from_half_sincos(std::sin(hr), std::cos(hr), std::sin(hp), std::cos(hp), std::sin(hy), std::cos(hy));
+}
+
+/// quat_from_euler for error angles (an attitude correction psi [rad]): half
+/// angles below 1e-2 rad by their Taylor series (remainder below 1e-19), else
+/// exact; the same quaternion to rounding, without six libm calls.
+inline Quat quat_from_small_euler(const Vec3& rpy) {
+  const double hr = 0.5 * rpy.x(), hp = 0.5 * rpy.y(), hy = 0.5 * rpy.z();
+  if (!(std::max({std::abs(hr), std::abs(hp), std::abs(hy)}) < 1e-2)) return quat_from_euler(rpy);
+  // reciprocal constants: multiplications, not divisions (the same to rounding)
+  const auto sin_s = [](double h) {
+    const double h2 = h * h;
+    return h * (1.0 - h2 * (1.0 / 6.0) * (1.0 - h2 * (1.0 / 20.0) * (1.0 - h2 * (1.0 / 42.0))));
+  };
+  const auto cos_s = [](double h) {
+    const double h2 = h * h;
+    return 1.0 - h2 * 0.5 * (1.0 - h2 * (1.0 / 12.0) * (1.0 - h2 * (1.0 / 30.0) * (1.0 - h2 * (1.0 / 56.0))));
+  };
+  return quat_from_half_sincos(sin_s(hr), cos_s(hr), sin_s(hp), cos_s(hp), sin_s(hy), cos_s(hy));
+}
+
+/// q / |q| with one division (the correction of a unit quaternion by a unit quaternion).
+inline Quat unit_quat(const Quat& q) {
+  Quat u = q;
+  u.coeffs() *= 1.0 / u.coeffs().norm();
+  return u;
+}
+
+/// atan2(a, b) near a known angle `ref` [rad] (sin_ref, cos_ref at hand): ref
+/// plus the small difference atan2(a cos_ref - b sin_ref, b cos_ref + a sin_ref)
+/// by its series to x^11 (remainder below 1e-23), wrapped to (-pi, pi]; the
+/// same angle without a full atan2 when the result is within 0.02 rad of ref,
+/// else atan2(a, b).
+inline double atan2_near(double a, double b, double ref, double sin_ref, double cos_ref) {
+  constexpr double kPi = 3.14159265358979323846;
+  const double num = a * cos_ref - b * sin_ref, den = b * cos_ref + a * sin_ref;
+  if (!(den > 0.0) || !(std::abs(num) <= 0.02 * den)) return std::atan2(a, b);
+  const double x = num / den, x2 = x * x;
+  double r = ref + x * (1.0 - x2 * (1.0 / 3.0 - x2 * (1.0 / 5.0 - x2 * (1.0 / 7.0 - x2 * (1.0 / 9.0 - x2 * (1.0 / 11.0))))));
+  if (r > kPi) r -= 2.0 * kPi;
+  if (r <= -kPi) r += 2.0 * kPi;
+  return r;
+}
+
+/// euler_from_dcm of a C_nb known to be close to the attitude `rpy_ref` [rad]
+/// (sines and cosines of its angles at hand: s_ref, c_ref): the same angles to
+/// rounding, each by atan2_near (an attitude corrected by a small psi).
+inline Vec3 euler_from_dcm_near(const Mat3& C, const Vec3& rpy_ref, const Vec3& s_ref, const Vec3& c_ref) {
+  const double cp = std::sqrt(C(2, 1) * C(2, 1) + C(2, 2) * C(2, 2));
+  const bool locked = !(cp > 1e-12);
+  const double inv_cp = locked ? 0.0 : 1.0 / cp;
+  const double sr = locked ? 0.0 : C(2, 1) * inv_cp, cr = locked ? 1.0 : C(2, 2) * inv_cp;
+  const double pitch = atan2_near(-C(2, 0), cp, rpy_ref.y(), s_ref.y(), c_ref.y());
+  const double roll = locked ? 0.0 : atan2_near(C(2, 1), C(2, 2), rpy_ref.x(), s_ref.x(), c_ref.x());
+  const double yaw = atan2_near(sr * C(0, 2) - cr * C(0, 1), cr * C(1, 1) - sr * C(1, 2), rpy_ref.z(), s_ref.z(),
+                                c_ref.z());
+  return Vec3(roll, pitch, yaw);
 }
 
 inline Vec3 euler_from_quat(const Quat& q) { return euler_from_dcm(q.toRotationMatrix()); }

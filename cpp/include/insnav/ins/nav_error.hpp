@@ -1,0 +1,66 @@
+// insnav/ins/nav_error.hpp -- correcting a navigation solution by the
+// navigation error states of the closed-loop filters.
+//
+// The error is computed minus true (filter/layout.hpp): dr_n [m] the N, E, D
+// position error [dL (R_M + h), dlambda (R_N + h) cos L, -dh], dv_n [m/s] the
+// velocity error, psi [rad] the attitude error with C_nb(true) =
+// dcm_from_euler(psi) C_nb (seed 000 eq. (1)).  The latitude / longitude
+// corrections divide by the radii and cos(lat) of the computed latitude, as
+// KF-GINS's feedback does (the error's first-order definition above).
+//
+// One place for the formula: ClosedLoop::feedback (the INS reset), its
+// output rows (ClosedLoop::write_output, the INS corrected by a filter estimate
+// not yet fed back) and the RTS smoother's rows (engine/smoothed_rows.hpp).
+#pragma once
+
+#include <cmath>
+
+#include "insnav/earth/wgs84.hpp"
+#include "insnav/ins/nav_state.hpp"
+#include "insnav/math/rotation.hpp"
+
+namespace insnav {
+
+/// sin and cos of one angle [rad] in one call where the C library has sincos
+/// (glibc: the same values as std::sin and std::cos).
+inline void sin_cos(double a, double& s, double& c) {
+#if defined(__GLIBC__)
+  ::sincos(a, &s, &c);
+#else
+  s = std::sin(a);
+  c = std::cos(a);
+#endif
+}
+
+/// Latitude and longitude corrections [rad] of the horizontal position error
+/// (dr_north, dr_east) [m] at height h [m], sin and cos of the computed
+/// latitude at hand: lat(true) = lat - dlat, lon(true) = lon - dlon.
+struct LatLonCorrection {
+  double dlat = 0.0;
+  double dlon = 0.0;
+};
+
+inline LatLonCorrection latlon_correction(double sin_lat, double cos_lat, double h, double dr_north, double dr_east) {
+  const wgs84::Radii r = wgs84::radii_from_sin(sin_lat);
+  return {dr_north / (r.R_M + h), dr_east / ((r.R_N + h) * cos_lat)};
+}
+
+/// q_nb corrected by the attitude error psi [rad]: dcm(psi) C_nb as quaternions, renormalised.
+inline Quat corrected_attitude(const Vec3& psi, const Quat& q_nb) {
+  return unit_quat(quat_from_small_euler(psi) * q_nb);
+}
+
+/// Correct a navigation state by its error (dr_n [m], dv_n [m/s], psi [rad];
+/// the file comment): position, velocity and attitude of the true state.
+inline void apply_nav_error(NavState& s, const Vec3& dr_n, const Vec3& dv_n, const Vec3& psi) {
+  double sin_lat, cos_lat;
+  sin_cos(s.lat, sin_lat, cos_lat);
+  const LatLonCorrection c = latlon_correction(sin_lat, cos_lat, s.h, dr_n.x(), dr_n.y());
+  s.lat -= c.dlat;
+  s.lon -= c.dlon;
+  s.h += dr_n.z();
+  s.v_n -= dv_n;
+  s.q_nb = corrected_attitude(psi, s.q_nb);
+}
+
+}  // namespace insnav
