@@ -166,6 +166,23 @@ inline double tropo_saastamoinen_m(double lat, double h, double el) {
 
 }  // namespace detail
 
+/// Geometry of a receiver at r_e to the satellite of an RtkRow: range with the Sagnac term
+/// (RTKLIB manual eq. (E.3.8b)) [m] and the unit vector receiver -> satellite (e_unit, ECEF).
+inline double sat_range(const double* row, const Vec3& r_e, Vec3& e_unit) {
+  const Vec3 rs(row[RtkRow::kSatPos], row[RtkRow::kSatPos + 1], row[RtkRow::kSatPos + 2]);
+  const Vec3 d = rs - r_e;
+  const double g = d.norm();
+  e_unit = d / g;
+  return g + kOmegaE * (rs.x() * r_e.y() - rs.y() * r_e.x()) / kCLight;
+}
+
+/// Zero-difference phase variance sigma^2(el) = F^2 (a^2 + b^2 / sin^2 el) [m^2] (F: GLONASS factor).
+inline double phase_variance_zd(double el, int sys, const RtkOptions& o) {
+  const double s = std::max(std::sin(el), 0.05);
+  const double f = sys == kGlonass ? o.glonass_factor : 1.0;
+  return f * f * (o.sigma_phase_a_m * o.sigma_phase_a_m + o.sigma_phase_b_m * o.sigma_phase_b_m / (s * s));
+}
+
 /// Per-receiver cycle-slip detector (LLI, geometry-free, Melbourne-Wuebbena, Doppler).
 class SlipDetector {
  public:
@@ -473,19 +490,9 @@ class RtkEngine {
   static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
 
   // Geometry of a receiver at r to the satellite of row: range with Sagnac term, unit vector, elevation.
-  static double range(const double* row, const Vec3& r, Vec3& e_unit) {
-    const Vec3 rs(row[RtkRow::kSatPos], row[RtkRow::kSatPos + 1], row[RtkRow::kSatPos + 2]);
-    const Vec3 d = rs - r;
-    const double g = d.norm();
-    e_unit = d / g;
-    return g + kOmegaE * (rs.x() * r.y() - rs.y() * r.x()) / kCLight;
-  }
+  static double range(const double* row, const Vec3& r, Vec3& e_unit) { return sat_range(row, r, e_unit); }
 
-  double var_zd(double el, int sys) const {
-    const double s = std::max(std::sin(el), 0.05);
-    const double f = sys == kGlonass ? opt_.glonass_factor : 1.0;
-    return f * f * (opt_.sigma_phase_a_m * opt_.sigma_phase_a_m + opt_.sigma_phase_b_m * opt_.sigma_phase_b_m / (s * s));
-  }
+  double var_zd(double el, int sys) const { return phase_variance_zd(el, sys, opt_); }
 
   void update_geometry() {
     const Vec3 rr = x_.segment<3>(RtkLayout::kPos);
