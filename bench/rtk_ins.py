@@ -140,7 +140,8 @@ def _truth(ds, t_gps):
     tr = ds.truth
     t = np.asarray(t_gps) - ds.gps_time_offset_s
     i = np.clip(np.searchsorted(tr.t, t - 1e-6), 0, tr.t.size - 1)
-    r = np.column_stack(earth.geodetic_to_ecef(np.radians(tr.lat_deg[i]), np.radians(tr.lon_deg[i]), tr.h_m[i]))
+    r = np.asarray(earth.geodetic_to_ecef(np.radians(tr.lat_deg[i]), np.radians(tr.lon_deg[i]), tr.h_m[i]),
+                   float).reshape(-1, 3)
     r[np.abs(tr.t[i] - t) > 1e-3] = np.nan
     return r
 
@@ -197,7 +198,8 @@ def spirent_part(work: Path, progress):
     # INS errors in the outages (fix-and-hold run): IMU-centre solution rows (zero lever arm here)
     sol = res["insnav RTK/INS (fix-and-hold)"]["sol"]
     tt = sol.t + ds.gps_time_offset_s
-    r_ins = np.column_stack(earth.geodetic_to_ecef(np.radians(sol.lat_deg), np.radians(sol.lon_deg), sol.h_m))
+    r_ins = np.asarray(earth.geodetic_to_ecef(np.radians(sol.lat_deg), np.radians(sol.lon_deg), sol.h_m),
+                       float).reshape(-1, 3)
     # truth at the IMU rows: the 10 Hz truth rows coincide with every 10th IMU row
     outage_err = []
     for (a, L), ta in zip(OUTAGES, after):

@@ -50,7 +50,8 @@ def _truth_e(ds, t_gps):
     tr = ds.truth
     t = np.asarray(t_gps) - ds.gps_time_offset_s
     i = np.clip(np.searchsorted(tr.t, t - 1e-6), 0, tr.t.size - 1)
-    r = np.column_stack(earth.geodetic_to_ecef(np.radians(tr.lat_deg[i]), np.radians(tr.lon_deg[i]), tr.h_m[i]))
+    r = np.asarray(earth.geodetic_to_ecef(np.radians(tr.lat_deg[i]), np.radians(tr.lon_deg[i]), tr.h_m[i]),
+                   float).reshape(-1, 3)
     r[np.abs(tr.t[i] - t) > 1e-3] = np.nan
     return r
 

@@ -603,8 +603,24 @@ class RtkInsEngine {
       for (int b = 0; b < na_; ++b) Paa_(k, act_[b]) = Pj_(kN + a, kN + b);
       xa_(k) -= dx_(kN + a);
     }
-    core_.filter.x_mutable() = dx_.template head<kN>();
-    core_.feedback();
+    feedback_ins(dx_.template head<kN>());
+  }
+
+  // Closed-loop feedback of a Layout15 error estimate (computed - true) into the core's INS and IMU
+  // corrections, as ClosedLoop::feedback does with the filter's x (which stays zero here: the joint
+  // update is this engine's own).
+  void feedback_ins(const Eigen::Matrix<double, kN, 1>& x) {
+    NavState s = core_.ins.state();
+    const wgs84::Radii r = wgs84::radii(s.lat);
+    s.lat -= x[L::kPos] / (r.R_M + s.h);
+    s.lon -= x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
+    s.h += x[L::kPos + 2];
+    s.v_n -= x.template segment<3>(L::kVel);
+    s.q_nb = (quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb).normalized();
+    core_.corr.acc_bias += x.template segment<3>(L::kAccBias);
+    core_.corr.gyro_bias += x.template segment<3>(L::kGyroBias);
+    core_.ins.set_state(s);
+    core_.touch();
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {

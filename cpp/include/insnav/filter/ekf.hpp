@@ -95,9 +95,6 @@ class Ekf {
   const Vec& x() const { return x_; }
   const Cov& P() const { return P_; }
   Cov& P_mutable() { return P_; }
-  /// The error state, for engines that update an augmented state themselves (rtk_ins_engine.hpp)
-  /// and then feed it back through ClosedLoop::feedback.
-  Vec& x_mutable() { return x_; }
   void reset_state() { x_.setZero(); }
   /// P <- lambda P, lambda >= 1 (the gate's lock-out recovery, nis_gate.hpp).
   void inflate_covariance(double lambda) { P_ *= lambda; }

@@ -63,7 +63,7 @@ class PartialAr {
       const double ratio = sq[0] > 0.0 ? std::min(sq[1] / sq[0], 999.9) : 999.9;
       if (nuse == n) ratio_ = ratio;
       if (ratio < s.ratio_threshold) continue;
-      if (s.validation_prob > 0.0 && sq[0] > chi2_quantile(s.validation_prob, nuse)) continue;
+      if (s.validation_prob > 0.0 && sq[0] > ::insnav::chi2_quantile(s.validation_prob, nuse)) continue;
       llt_.compute(Qa_);
       if (llt_.info() != Eigen::Success) continue;
       ratio_ = ratio;
@@ -88,7 +88,7 @@ class PartialAr {
     s_out = d.dot(llt_.solve(d));
     const bool best = (a_cand - a_fix_.col(0)).cwiseAbs().maxCoeff() < 0.5;
     ratio_out = best ? ratio_ : s1_ / std::max(s_out, 1e-300);
-    if (s.validation_prob > 0.0 && s_out > chi2_quantile(s.validation_prob, n_used_)) return false;
+    if (s.validation_prob > 0.0 && s_out > ::insnav::chi2_quantile(s.validation_prob, n_used_)) return false;
     return ratio_out >= s.ratio_threshold;
   }
 
