@@ -672,7 +672,7 @@ def cmd_run(args) -> int:
                 from ..gnss.rtk import write_rtk_table, write_rtklib_pos
 
                 write_rtklib_pos(sol.rtk, base.with_suffix(base.suffix + ".rtk.pos"), program="insnav rtk/ins")
-                write_rtk_table(sol.rtk, base.with_suffix(base.suffix + ".rtk.csv"))
+                write_rtk_table(sol.rtk, base.with_suffix(base.suffix + ".rtk.csv"), t_solution_s=sol.gnss_t)
             cfg.filter = sol.summary.get("filter", cfg.filter)
             cfg.coupling = sol.summary.get("coupling", cfg.coupling)
             text = resolved_config_toml(cfg)

@@ -669,15 +669,20 @@ RTK_COLUMNS = ("t_gps_s", "status", "ratio", "n_fix", "n_dd", "n_sat", "base_age
                *(f"slips_{k}" for k in RtkSolution.SLIP_KINDS))
 
 
-def write_rtk_table(sol: RtkSolution, path) -> "os.PathLike":
-    """Write ``path`` (``<out>.rtk.csv``): :data:`RTK_COLUMNS` per rover epoch (ECEF position [m])."""
+def write_rtk_table(sol: RtkSolution, path, *, t_solution_s=None) -> "os.PathLike":
+    """Write ``path`` (``<out>.rtk.csv``): :data:`RTK_COLUMNS` per rover epoch (ECEF position [m]); the
+    slip columns of ``type(sol).SLIP_KINDS``; with ``t_solution_s`` (the epochs on the time axis of a
+    solution whose rows are not GPS seconds, e.g. RTK/INS) a last column ``t_s``."""
     from .._atomic import atomic_write_text
 
     cols = RTK_COLUMNS[:-len(RtkSolution.SLIP_KINDS)] + tuple(f"slips_{k}" for k in type(sol).SLIP_KINDS)
+    if t_solution_s is not None:
+        cols += ("t_s",)
     lines = [",".join(cols)]
     for i in range(len(sol)):
         age = f"{sol.base_age_s[i]:.3f}" if np.isfinite(sol.base_age_s[i]) else "nan"
         xyz = ",".join(f"{v:.4f}" for v in sol.r_e[i]) if sol.status[i] > 0 else "nan,nan,nan"
         lines.append(f"{sol.t_gps_s[i]:.3f},{int(sol.status[i])},{sol.ratio[i]:.2f},{int(sol.n_fix[i])},"
-                     f"{int(sol.n_dd[i])},{int(sol.n_sat[i])},{age},{xyz}," + ",".join(str(int(v)) for v in sol.slips[i]))
+                     f"{int(sol.n_dd[i])},{int(sol.n_sat[i])},{age},{xyz}," + ",".join(str(int(v)) for v in sol.slips[i])
+                     + (f",{t_solution_s[i]:.6f}" if t_solution_s is not None else ""))
     return atomic_write_text(path, "\n".join(lines) + "\n")
