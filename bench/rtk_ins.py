@@ -5,7 +5,8 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
     python3 bench/rtk_ins.py                    # writes docs/results/rtk_ins.md
     python3 bench/rtk_ins.py --runs 4 --out /tmp/x.md   # a quicker look
 
-1. **Spirent dynamic rover + synthesised MEMS IMU.**  The hardware-simulated GPS+Galileo L1/L2 drive
+1. **Spirent dynamic rover + synthesised MEMS IMU.**  The hardware-simulated GPS+Galileo drive, L1+L2 and
+   L1 only
    (``instinct_spirent_rtk_dynamic_SIMULATED``, Klobuchar + Saastamoinen variant) with an IMU of
    the ``industrial`` MEMS grade synthesised from the 10 Hz Spirent truth
    (``insnav simulate --from-truth``: quintic Hermite position, cubic-spline attitude, 100 Hz).
@@ -123,11 +124,14 @@ def write_with_outages(src: Path, dst: Path, t_first_gps: float, outages) -> lis
 # --------------------------------------------------------------------------- engines on the Spirent drive
 
 
-def _rtklib(rover, base, nav, work: Path):
+def _rtklib(rover, base, nav, work: Path, freq: int = 2):
+    """RTKLIB with bench/rtk/spirent_dynamic_l1l2_ge_cont.conf (rtk_compare's), its frequency set to ``freq``."""
     from rtk_compare import read_pos
 
-    conf = ROOT / "bench" / "rtk" / "spirent_dynamic_l1l2_ge_cont.conf"
-    pos = work / "rtklib.pos"
+    conf = work / f"spirent_f{freq}.conf"
+    text = (ROOT / "bench" / "rtk" / "spirent_dynamic_l1l2_ge_cont.conf").read_text()
+    conf.write_text(text.replace("pos1-frequency     =l1+l2", f"pos1-frequency     ={'l1+l2' if freq == 2 else 'l1'}"))
+    pos = work / f"rtklib_f{freq}.pos"
     t0 = time.perf_counter()
     subprocess.run(["rnx2rtkp", "-k", str(conf), "-o", str(pos), str(rover), str(base)] + [str(n) for n in nav],
                    check=True, capture_output=True)
@@ -154,7 +158,7 @@ def _epochs_to_fix(t, q, t_after, t_next):
     return int(fx[0] + 1) if fx.size else None
 
 
-def spirent_part(work: Path, progress):
+def spirent_part(work: Path, progress, freq: int = 2):
     from insnav.config import RunConfig
     from insnav.filters.rtk_ins import run_rtk_ins
     from insnav.gnss.rtk import base_position_from_header, read_phase_obs, solve_rtk
@@ -165,23 +169,26 @@ def spirent_part(work: Path, progress):
     ds = simulate_from_truth(SP / "Rover-dynamic_motion_Spirent.csv", IMU_GRADE, imu_rate_hz=100.0, seed=1)
     rover0 = read_phase_obs(v / "Rover-dynamic_MO_Spirent.obs", "GE")
     t_first = float(rover0.epoch_t_gps_s[0])
-    rov = work / "rover_outages.obs"
+    rov = work / f"rover_outages_f{freq}.obs"
     after = write_with_outages(v / "Rover-dynamic_MO_Spirent.obs", rov, t_first, OUTAGES)
     base = v / "Base-static_MO_Spirent.obs"
     base_e = base_position_from_header(read_phase_obs(base, "GE"))
-    opts = dict(systems="GE", frequencies=2, elevation_mask_deg=15.0, ratio_threshold=3.0)
+    opts = dict(systems="GE", frequencies=freq, elevation_mask_deg=15.0, ratio_threshold=3.0)
     res = {}
-    for name, ar in (("insnav RTK/INS (fix-and-hold)", "fix-and-hold"), ("insnav RTK/INS (continuous)", "continuous")):
+    for name, ar, eng in (("insnav RTK/INS (fix-and-hold)", "fix-and-hold", {}),
+                          ("insnav RTK/INS (continuous)", "continuous", {}),
+                          ("insnav RTK/INS (fix-and-hold, bootstrapped success rate >= 0.999)", "fix-and-hold",
+                           {"ar_min_success_rate": 0.999})):
         t0 = time.perf_counter()
         sol = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False), rover=rov, base=base, nav=nav,
-                          base_pos=base_e, rtk_options=dict(opts, ar_mode=ar))
+                          base_pos=base_e, rtk_options=dict(opts, ar_mode=ar), engine=eng)
         res[name] = dict(t=sol.rtk.t_gps_s, r=sol.rtk.r_e, q=sol.rtk.status, wall_s=time.perf_counter() - t0, sol=sol)
-        progress(f"spirent {name}: {np.mean(sol.rtk.status == 1) * 100:.1f} % fixed")
+        progress(f"spirent L{freq} {name}: {np.mean(sol.rtk.status == 1) * 100:.1f} % fixed")
     t0 = time.perf_counter()
     g = solve_rtk(rov, base, nav, r_base_e=base_e, options=dict(opts, ar_mode="continuous"))
     res["insnav GNSS-only RTK (continuous)"] = dict(t=g.t_gps_s, r=g.r_e, q=g.status, wall_s=time.perf_counter() - t0)
     if shutil.which("rnx2rtkp"):
-        res["RTKLIB rnx2rtkp (continuous)"] = _rtklib(rov, base, nav, work)
+        res["RTKLIB rnx2rtkp (continuous)"] = _rtklib(rov, base, nav, work, freq)
     n_epochs = int(read_phase_obs(rov, "GE").epoch_t_gps_s.size)
     rows = {}
     for name, r in res.items():
@@ -211,7 +218,7 @@ def spirent_part(work: Path, progress):
         outage_err.append((float(np.max(e[ok])) if ok.any() else math.nan,
                            float(e[last[-1]]) if last.size else math.nan))
     return dict(rows=rows, outage_err=outage_err, n_epochs=n_epochs, after=after, t_first=t_first,
-                lever=ds.lever_arm_b)
+                lever=ds.lever_arm_b, freq=freq)
 
 
 # --------------------------------------------------------------------------- simulator urban car
@@ -247,10 +254,13 @@ def urban_part(n_runs, work: Path, progress):
         sol = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
                           rtk_options=opts)
         t_ri = time.perf_counter() - t0
+        solc = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
+                           rtk_options=dict(opts, ar_mode="continuous"))
         g = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous"))
         truth_t, truth_r = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
         one = {}
         for name, t, r, q in (("RTK/INS", sol.rtk.t_gps_s, sol.rtk.r_e, sol.rtk.status),
+                              ("RTK/INS continuous", solc.rtk.t_gps_s, solc.rtk.r_e, solc.rtk.status),
                               ("GNSS-only", g.t_gps_s, g.r_e, g.status)):
             i = np.searchsorted(truth_t, t - 0.5e-3)
             ok = (i < truth_t.size) & (np.abs(truth_t[np.minimum(i, truth_t.size - 1)] - t) < 1e-3)
@@ -344,15 +354,16 @@ def sign_test_p(wins, losses):
     return min(1.0, 2.0 * sum(math.comb(n, j) for j in range(k + 1)) / 2.0 ** n)
 
 
-def report(sp, urban, cost, n_runs, wall_s, command) -> str:
+def report(sps, urban, cost, n_runs, wall_s, command) -> str:
     load = os.getloadavg()[0]
     L = ["# Tight RTK/INS: re-fixing after outages, fix rate, slips, cost (GNSS-only RTK and RTKLIB side by side)", "",
          f"Written by `{command}` at commit {git_commit()} in {wall_s:.0f} s (load average {load:.1f} on "
          f"{os.cpu_count()} cores); do not edit by hand.  Method: the docstring of `bench/rtk_ins.py`.", ""]
-    if sp is not None:
+    for sp in sps or ():
         names = list(sp["rows"])
-        L += ["## Spirent dynamic rover + synthesised MEMS IMU, outages of 10 and 30 s", "",
-              f"GPS+Galileo L1+L2, 1 Hz, mask 15 deg, ratio 3; IMU `{IMU_GRADE}` grade at 100 Hz synthesised from "
+        fq = "L1+L2" if sp["freq"] == 2 else "L1 only"
+        L += [f"## Spirent dynamic rover + synthesised MEMS IMU, outages of 10 and 30 s, {fq}", "",
+              f"GPS+Galileo {fq}, 1 Hz, mask 15 deg, ratio 3; IMU `{IMU_GRADE}` grade at 100 Hz synthesised from "
               "the 10 Hz Spirent truth (seed 1).  Outages (start after the first epoch, length): "
               + ", ".join(f"{a} s / {b} s" for a, b in OUTAGES) + f"; {sp['n_epochs']} rover epochs remain.", "",
               "Epochs to the first fix after each outage (1 = the first epoch after it; - = none before the next "
@@ -373,7 +384,7 @@ def report(sp, urban, cost, n_runs, wall_s, command) -> str:
               "| at the end | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err"]) + " |"]
         ri = sp["rows"][names[0]]
         ok1 = all(x is not None and x <= 1 for x in ri["per"])
-        L += ["", "Targets (RTK/INS, fix-and-hold):", "",
+        L += ["", f"Targets (RTK/INS, fix-and-hold, {fq}):", "",
               f"- at most 1 epoch to the first fix after every outage: {_met(ok1)} "
               f"({', '.join(_f(x, 'd') for x in ri['per'])});",
               f"- fix rate at least 99 %: {_met(ri['fix_rate'] >= 0.99)} ({ri['fix_rate'] * 100:.1f} %);",
@@ -388,7 +399,7 @@ def report(sp, urban, cost, n_runs, wall_s, command) -> str:
             return dict(n=n, fixed=fx, wrong=wr, fix_rate=fx / n, wrong_rate=wr / fx if fx else math.nan,
                         p95=float(np.percentile(he, 95)) if he.size else math.nan,
                         per=[r[name]["fixed"] / r[name]["n"] for r in runs])
-        a, b = pooled("RTK/INS"), pooled("GNSS-only")
+        a, b, c = pooled("RTK/INS"), pooled("GNSS-only"), pooled("RTK/INS continuous")
         sl = sum(r["slips"] for r in runs)
         det = sum(r["detected"] for r in runs)
         det_ins = sum(r["detected_ins"] for r in runs)
@@ -400,8 +411,10 @@ def report(sp, urban, cost, n_runs, wall_s, command) -> str:
               "", "Seeds 1.." + str(n_runs) + "; the preset's IMU and canyon; both engines on the same RINEX files "
               "(kinematic, the base's mask, ratio 3; GNSS-only continuous AR, RTK/INS fix-and-hold).", "",
               "| engine | fix rate | wrong fixes / fixed | horizontal p95 [m] |", "|---|---|---|---|",
-              f"| insnav RTK/INS | {a['fix_rate'] * 100:.1f} % ({a['fixed']}/{a['n']}) | "
+              f"| insnav RTK/INS (fix-and-hold, default) | {a['fix_rate'] * 100:.1f} % ({a['fixed']}/{a['n']}) | "
               f"{_f(a['wrong_rate'] * 100, '.2f')} % ({a['wrong']}) | {_f(a['p95'], '.3f')} |",
+              f"| insnav RTK/INS (continuous AR) | {c['fix_rate'] * 100:.1f} % ({c['fixed']}/{c['n']}) | "
+              f"{_f(c['wrong_rate'] * 100, '.2f')} % ({c['wrong']}) | {_f(c['p95'], '.3f')} |",
               f"| insnav GNSS-only RTK | {b['fix_rate'] * 100:.1f} % ({b['fixed']}/{b['n']}) | "
               f"{_f(b['wrong_rate'] * 100, '.2f')} % ({b['wrong']}) | {_f(b['p95'], '.3f')} |", "",
               f"Paired per-run fix rates: RTK/INS higher in {wins} runs, lower in {losses} (sign test p = {p:.2g}).", "",
@@ -439,7 +452,7 @@ def main(argv=None) -> int:
     progress = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
     with tempfile.TemporaryDirectory(prefix="rtk_ins_") as tmp:
         work = Path(tmp)
-        sp = None if args.skip_spirent or not SP.is_dir() else spirent_part(work, progress)
+        sp = None if args.skip_spirent or not SP.is_dir() else [spirent_part(work, progress, f) for f in (2, 1)]
         urban = urban_part(args.runs, work, progress) if args.runs > 0 else None
     cost = urban[1] if urban else None
     argv = sys.argv[1:] if argv is None else list(argv)

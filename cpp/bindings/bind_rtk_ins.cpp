@@ -22,7 +22,8 @@ using Engine = RtkInsEngine<64>;
 
 RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   reject_unknown(engine, {"lever_arm_b", "propagation_interval", "output_decimation", "ins_slip_k_sigma",
-                          "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob"},
+                          "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob",
+                          "ar_min_success_rate"},
                  "rtk/ins engine config");
   RtkInsConfig c;
   c.rtk = rtk_options_from_dict(rtk);
@@ -34,6 +35,9 @@ RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   c.ins_slip_max_dt_s = num(engine, "ins_slip_max_dt_s", c.ins_slip_max_dt_s);
   c.code_chi2_row = num(engine, "code_chi2_row", c.code_chi2_row);
   c.validation_prob = num(engine, "validation_prob", c.validation_prob);
+  c.ar_min_success_rate = num(engine, "ar_min_success_rate", c.ar_min_success_rate);
+  if (!(c.ar_min_success_rate >= 0.0 && c.ar_min_success_rate < 1.0))
+    throw py::value_error("ar_min_success_rate must be in [0, 1)");
   if (!(c.propagation_interval > 0.0)) throw py::value_error("propagation_interval must be > 0");
   if (c.output_decimation < 1) throw py::value_error("output_decimation must be >= 1");
   if (!(c.ins_slip_k_sigma > 0.0) || !(c.ins_slip_min_cycles >= 0.0) || !(c.ins_slip_max_dt_s >= 0.0))

@@ -37,6 +37,8 @@ __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins",
 #: [rtk] defaults of the RTK/INS filter that differ from the GNSS-only engine's: fix-and-hold (the
 #: INS bridges what would make holding risky for GNSS alone; a validation test guards it).
 RTK_INS_DEFAULTS = {"ar_mode": "fix-and-hold"}
+#: engine ([rtk_engine]) defaults applied under the caller's (empty: the C++ RtkInsConfig defaults)
+ENGINE_DEFAULTS: dict = {}
 
 
 @dataclass
@@ -126,6 +128,7 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     p0[12:15] = noise.gyro_bias_sigma
     eng = dict(lever_arm_b=lever_arm(imu_ds, cfg), propagation_interval=cfg.propagation_interval_s,
                output_decimation=int(cfg.output_decimation))
+    eng.update(ENGINE_DEFAULTS)
     eng.update(engine or {})
     out = _core.rtk_ins_run(t, dth, dv, init_vector(imu_ds, init), np.diag(p0 ** 2), np.zeros(12),
                             noise.as_core_dict(), eng, opt.core_dict(), t_rec, roff, rrows, boff, brows, bidx,

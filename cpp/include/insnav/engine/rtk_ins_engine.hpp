@@ -28,7 +28,8 @@
 //   3. AR (gnss/ambiguity_resolution.hpp): MLAMBDA on the DD float ambiguities with the joint
 //      covariance (so the INS-propagated position uncertainty conditions them: after a GNSS gap
 //      the INS-predicted position constrains the search), ratio test, validation of the best
-//      vector's squared norm against chi2(validation_prob, n), partial AR; the fixed INS error is
+//      vector's squared norm against chi2(validation_prob, n), a bootstrapped success rate of at
+//      least ar_min_success_rate (Teunissen 1998), partial AR; the fixed INS error is
 //      dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)); fix-and-hold feeds the
 //      fixed DD back as pseudo-measurements (sigma hold_sigma_cycles) into the joint filter.
 //
@@ -61,6 +62,7 @@ struct RtkInsConfig {
   double ins_slip_max_dt_s = 2.0;     // the test needs the previous epoch of the satellite within this
   double code_chi2_row = 25.0;        // code row screening (0: off)
   double validation_prob = 0.999;     // AR: best vector's squared norm <= chi2 quantile (0: off)
+  double ar_min_success_rate = 0.0;   // AR: bootstrapped success rate of the fixed subset (0: off)
 };
 
 /// Slip count index of the INS-aided test (after gnss::SlipKind's).
@@ -659,6 +661,7 @@ class RtkInsEngine {
     s.min_fix = o.min_fix_ambiguities;
     s.max_drops = o.max_partial_drops;
     s.validation_prob = cfg_.validation_prob;
+    s.min_success_rate = cfg_.ar_min_success_rate;
     const bool ok = ar_.resolve(
         n, [&](int p) { return xa_(dd_j_[order_[p]]) - xa_(dd_i_[order_[p]]); },
         [&](int p, int q) {

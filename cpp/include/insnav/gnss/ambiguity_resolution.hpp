@@ -9,7 +9,10 @@
 //   2. ratio test s_2 / s_1 >= threshold (Teunissen & Verhagen 2009);
 //   3. optional validation of a_1 against the float solution: s_1 <= chi2_{1-alpha}(n) (a fixed
 //      vector the float ambiguities and their covariance cannot explain is rejected: an
-//      INS-predicted position that constrains the float ambiguities makes this test sharp);
+//      INS-predicted position that constrains the float ambiguities makes this test sharp), and
+//      a minimum bootstrapped success rate of the subset (Teunissen 1998): the float precision
+//      must make a correct fix likely, which the ratio test alone does not ensure with few
+//      ambiguities;
 //   4. on failure, partial AR drops the last ambiguity of the order and retries, down to
 //      min_fix ambiguities and at most max_drops times.
 // The fixed baseline follows from the conditional mean (Teunissen 1995, eq. (6)):
@@ -35,7 +38,18 @@ struct ArSettings {
   int min_fix = 3;            // partial AR stops above this count
   int max_drops = 12;         // at most this many partial-AR retries
   double validation_prob = 0.0;  // > 0: also require s_1 <= chi2_quantile(validation_prob, n)
+  double min_success_rate = 0.0; // > 0: also require the bootstrapped success rate >= this
 };
+
+/// Bootstrapped success rate of integer ambiguity resolution (Teunissen 1998, "Success probability
+/// of integer GPS ambiguity rounding and bootstrapping", J. Geodesy 72):
+/// P_s = prod_i (2 Phi(1 / (2 sigma_i|I)) - 1) = prod_i erf(1 / (2 sqrt(2 D_i))), D_i the conditional
+/// variances of the decorrelated ambiguities (Z^T Q Z = L^T diag(D) L).
+inline double bootstrap_success_rate(const AmbVec& D) {
+  double p = 1.0;
+  for (int i = 0; i < D.size(); ++i) p *= std::erf(1.0 / (2.0 * std::sqrt(2.0 * std::max(D(i), 1e-300))));
+  return p;
+}
 
 /// Partial ambiguity resolution over candidates given in priority order.
 class PartialAr {
@@ -64,6 +78,11 @@ class PartialAr {
       if (nuse == n) ratio_ = ratio;
       if (ratio < s.ratio_threshold) continue;
       if (s.validation_prob > 0.0 && sq[0] > ::insnav::chi2_quantile(s.validation_prob, nuse)) continue;
+      if (s.min_success_rate > 0.0) {
+        if (!lambda_.decorrelate(Qa_, Zw_, Lw_, Dw_)) continue;
+        success_ = bootstrap_success_rate(Dw_);
+        if (success_ < s.min_success_rate) continue;
+      }
       llt_.compute(Qa_);
       if (llt_.info() != Eigen::Success) continue;
       ratio_ = ratio;
@@ -111,6 +130,9 @@ class PartialAr {
   AmbVec a_hat_, da_;
   AmbMat Qa_;
   AmbCand a_fix_;
+  AmbMat Zw_, Lw_;
+  AmbVec Dw_;
+  double success_ = 1.0;
   Eigen::LLT<AmbMat> llt_{kMaxAmbiguities};
   int n_used_ = 0;
   double ratio_ = 0.0, s1_ = 0.0;
