@@ -279,3 +279,34 @@ def test_single_frequency_one_cycle_slip_flagged_by_ins(drive):
     assert near.sum() >= 50
     err = np.linalg.norm(sol.rtk.r_e - r_t, axis=1)
     assert np.nanmax(err[near]) < 0.02
+
+
+def test_cli_coupling_rtk_writes_fix_status_and_evaluate_reads_it(tmp_path):
+    import subprocess
+    import sys
+
+    v = SP / "iono-Klob_tropo-Saast"
+    motion = need(SP / "Rover-dynamic_motion_Spirent.csv")
+    ds_dir = tmp_path / "spirent"
+    r = subprocess.run([sys.executable, "-m", "insnav", "simulate", "--from-truth", str(motion), "--imu-grade",
+                        "tactical", "--imu-rate-hz", "50", "--out", str(ds_dir), "-q"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "ri.csv"
+    cmd = [sys.executable, "-m", "insnav", "run", str(ds_dir), "--filter", "ekf", "--coupling", "rtk",
+           "--obs", str(v / "Rover-dynamic_MO_Spirent.obs"), "--base", str(v / "Base-static_MO_Spirent.obs"),
+           "--nav", ",".join(str(p) for p in NAV), "--out", str(out), "--quiet"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "rtk coupling" in r.stdout
+    for side in (".rtk.pos", ".rtk.csv", ".config.toml"):
+        assert (tmp_path / ("ri.csv" + side)).exists(), side
+    tab = np.genfromtxt(tmp_path / "ri.csv.rtk.csv", delimiter=",", names=True)
+    assert "slips_ins" in tab.dtype.names and "t_s" in tab.dtype.names
+    assert np.mean(tab["status"] == 1) > 0.99
+    r = subprocess.run([sys.executable, "-m", "insnav", "evaluate", str(out), str(ds_dir / "truth.csv")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "fix" in r.stdout.lower()
+    # without --base: one line naming what is missing
+    r = subprocess.run(cmd[:cmd.index("--base")] + cmd[cmd.index("--nav"):], capture_output=True, text=True)
+    assert r.returncode != 0 and "--base" in r.stderr
