@@ -34,9 +34,10 @@ from .solution import Solution
 
 __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins", "rtk_ins_options"]
 
-#: [rtk] defaults of the RTK/INS filter that differ from the GNSS-only engine's: fix-and-hold (the
-#: INS bridges what would make holding risky for GNSS alone; a validation test guards it).
-RTK_INS_DEFAULTS = {"ar_mode": "fix-and-hold"}
+#: [rtk] defaults of the RTK/INS filter that differ from the GNSS-only engine's (none: continuous AR,
+#: as the GNSS-only engine; fix-and-hold holds a wrong fix in the joint filter, which on the urban
+#: simulator preset costs more than it gains, docs/results/rtk_ins.md)
+RTK_INS_DEFAULTS: dict = {}
 #: engine ([rtk_engine]) defaults applied under the caller's (empty: the C++ RtkInsConfig defaults)
 ENGINE_DEFAULTS: dict = {}
 
