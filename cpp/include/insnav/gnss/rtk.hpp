@@ -55,6 +55,7 @@
 #include <limits>
 
 #include "insnav/earth/wgs84.hpp"
+#include "insnav/gnss/ambiguity_resolution.hpp"
 #include "insnav/gnss/lambda.hpp"
 
 namespace insnav::gnss {
@@ -165,6 +166,23 @@ inline double tropo_saastamoinen_m(double lat, double h, double el) {
 }
 
 }  // namespace detail
+
+/// Geometry of a receiver at r_e to the satellite of an RtkRow: range with the Sagnac term
+/// (RTKLIB manual eq. (E.3.8b)) [m] and the unit vector receiver -> satellite (e_unit, ECEF).
+inline double sat_range(const double* row, const Vec3& r_e, Vec3& e_unit) {
+  const Vec3 rs(row[RtkRow::kSatPos], row[RtkRow::kSatPos + 1], row[RtkRow::kSatPos + 2]);
+  const Vec3 d = rs - r_e;
+  const double g = d.norm();
+  e_unit = d / g;
+  return g + kOmegaE * (rs.x() * r_e.y() - rs.y() * r_e.x()) / kCLight;
+}
+
+/// Zero-difference phase variance sigma^2(el) = F^2 (a^2 + b^2 / sin^2 el) [m^2] (F: GLONASS factor).
+inline double phase_variance_zd(double el, int sys, const RtkOptions& o) {
+  const double s = std::max(std::sin(el), 0.05);
+  const double f = sys == kGlonass ? o.glonass_factor : 1.0;
+  return f * f * (o.sigma_phase_a_m * o.sigma_phase_a_m + o.sigma_phase_b_m * o.sigma_phase_b_m / (s * s));
+}
 
 /// Per-receiver cycle-slip detector (LLI, geometry-free, Melbourne-Wuebbena, Doppler).
 class SlipDetector {
@@ -473,19 +491,9 @@ class RtkEngine {
   static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
 
   // Geometry of a receiver at r to the satellite of row: range with Sagnac term, unit vector, elevation.
-  static double range(const double* row, const Vec3& r, Vec3& e_unit) {
-    const Vec3 rs(row[RtkRow::kSatPos], row[RtkRow::kSatPos + 1], row[RtkRow::kSatPos + 2]);
-    const Vec3 d = rs - r;
-    const double g = d.norm();
-    e_unit = d / g;
-    return g + kOmegaE * (rs.x() * r.y() - rs.y() * r.x()) / kCLight;
-  }
+  static double range(const double* row, const Vec3& r, Vec3& e_unit) { return sat_range(row, r, e_unit); }
 
-  double var_zd(double el, int sys) const {
-    const double s = std::max(std::sin(el), 0.05);
-    const double f = sys == kGlonass ? opt_.glonass_factor : 1.0;
-    return f * f * (opt_.sigma_phase_a_m * opt_.sigma_phase_a_m + opt_.sigma_phase_b_m * opt_.sigma_phase_b_m / (s * s));
-  }
+  double var_zd(double el, int sys) const { return phase_variance_zd(el, sys, opt_); }
 
   void update_geometry() {
     const Vec3 rr = x_.segment<3>(RtkLayout::kPos);
@@ -843,45 +851,42 @@ class RtkEngine {
     else
       std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
     const bool kv = kin;
-    int drops = 0;
-    for (int nuse = n; nuse >= std::max(opt_.min_fix_ambiguities, 1); --nuse) {
-      if (drops++ > opt_.max_partial_drops) break;
-      a_hat_.resize(nuse);
-      Qa_.resize(nuse, nuse);
-      for (int p = 0; p < nuse; ++p) {
-        const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
-        a_hat_(p) = x_(sj) - x_(si);
-        for (int q = 0; q <= p; ++q) {
+    ArSettings st;
+    st.ratio_threshold = opt_.ratio_threshold;
+    st.min_fix = opt_.min_fix_ambiguities;
+    st.max_drops = opt_.max_partial_drops;
+    const bool ok = ar_.resolve(
+        n,
+        [&](int p) {
+          return x_(RtkLayout::kAmb + dd_j_[order_[p]]) - x_(RtkLayout::kAmb + dd_i_[order_[p]]);
+        },
+        [&](int p, int q) {
+          const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
           const int tj = RtkLayout::kAmb + dd_j_[order_[q]], ti = RtkLayout::kAmb + dd_i_[order_[q]];
-          Qa_(p, q) = Qa_(q, p) = P_(sj, tj) - P_(sj, ti) - P_(si, tj) + P_(si, ti);
-        }
-      }
-      double s[2];
-      if (lambda_.solve(a_hat_, Qa_, a_fix_, s) != LambdaStatus::kOk) continue;
-      const double ratio = s[0] > 0.0 ? std::min(s[1] / s[0], 999.9) : 999.9;
-      if (nuse == n) out.ratio = ratio;
-      if (ratio < opt_.ratio_threshold) continue;
-      // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
-      Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxAmbiguities> Qba(6, nuse);
-      for (int p = 0; p < nuse; ++p) {
-        const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
-        for (int i = 0; i < 6; ++i) Qba(i, p) = P_(i, sj) - P_(i, si);
-      }
-      qa_llt_.compute(Qa_);
-      if (qa_llt_.info() != Eigen::Success) continue;
-      da_ = a_hat_ - a_fix_.col(0);
-      const Eigen::Matrix<double, 6, 1> xb = x_.head<6>() - Qba * qa_llt_.solve(da_);
-      const Eigen::Matrix<double, 6, 6> Pb =
-          P_.topLeftCorner<6, 6>() - Qba * qa_llt_.solve(AmbMat(Qba.transpose()));
-      out.status = RtkStatus::kFixed;
-      out.ratio = ratio;
-      out.n_fix = nuse;
-      out.r_e = xb.head<3>();
-      if (kv) out.v_e = xb.tail<3>();
-      out.P_r = Pb.topLeftCorner<3, 3>();
-      if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
-      return;
+          return P_(sj, tj) - P_(sj, ti) - P_(si, tj) + P_(si, ti);
+        },
+        st);
+    out.ratio = ar_.ratio();
+    if (!ok) return;
+    const int nuse = ar_.n_used();
+    // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
+    Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxAmbiguities> Qba(6, nuse);
+    for (int p = 0; p < nuse; ++p) {
+      const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
+      for (int i = 0; i < 6; ++i) Qba(i, p) = P_(i, sj) - P_(i, si);
     }
+    da_ = ar_.residual();
+    ar_.solve_in_place(da_);
+    const Eigen::Matrix<double, 6, 1> xb = x_.head<6>() - Qba * da_;
+    AmbMat QabT(Qba.transpose());
+    ar_.solve_in_place(QabT);
+    const Eigen::Matrix<double, 6, 6> Pb = P_.topLeftCorner<6, 6>() - Qba * QabT;
+    out.status = RtkStatus::kFixed;
+    out.n_fix = nuse;
+    out.r_e = xb.head<3>();
+    if (kv) out.v_e = xb.tail<3>();
+    out.P_r = Pb.topLeftCorner<3, 3>();
+    if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -907,7 +912,7 @@ class RtkEngine {
       nz_[p] = 0;
       set_h(p, col_of_[kj], 1.0);
       set_h(p, col_of_[ki], -1.0);
-      y_(p) = a_fix_(p, 0) - (x_(RtkLayout::kAmb + kj) - x_(RtkLayout::kAmb + ki));
+      y_(p) = ar_.a_fix()(p) - (x_(RtkLayout::kAmb + kj) - x_(RtkLayout::kAmb + ki));
       R_(p, p) = opt_.hold_sigma_cycles * opt_.hold_sigma_cycles;
       row_code_[p] = 1;  // no outlier test on these
     }
@@ -957,14 +962,11 @@ class RtkEngine {
   KMat PHt_, K_;
   HMat KT_;
   Eigen::LLT<RowMat> llt_{kMaxRows};
-  // AR workspace
-  Lambda lambda_;
+  // AR workspace (gnss/ambiguity_resolution.hpp)
+  PartialAr ar_;
   std::array<int, kMaxAmbiguities> dd_j_{}, dd_i_{}, order_{};
   std::array<double, kMaxAmbiguities> dd_el_{}, dd_var_{};
-  AmbVec a_hat_, da_;
-  AmbMat Qa_;
-  AmbCand a_fix_;
-  Eigen::LLT<AmbMat> qa_llt_{kMaxAmbiguities};
+  AmbVec da_;
 };
 
 }  // namespace insnav::gnss
