@@ -266,3 +266,13 @@ def test_walk_tdcp_from_the_command_line(tmp_path, shared_data):
             assert used > 1500  # of 1835 rows with phase
             assert "[tdcp]" in (tmp_path / "tdcp.csv.config.toml").read_text()
     assert spread["tdcp"] < 0.7 * spread["code"]
+
+
+def test_tdcp_refuses_self_calibration_states():
+    """TDCP rows have no time-offset or lever-arm columns: the combination is refused by key."""
+    from insnav.config import ConfigError, RunConfig, Tdcp
+
+    for extra in (dict(time={"estimate_offset": True}), dict(lever_arm={"estimate": True})):
+        cfg = RunConfig(filter="ekf", coupling="tight", tdcp=Tdcp(enabled=True), **extra)
+        with pytest.raises(ConfigError, match="tdcp.enabled"):
+            cfg.validate()

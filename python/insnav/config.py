@@ -820,6 +820,9 @@ class RunConfig:
             bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
         if self.layout not in LAYOUTS:
             bad("layout", self.layout, "15, 21")
+        if self.tdcp.enabled and (self.time.estimate_offset or self.lever_arm.estimate):
+            bad("tdcp.enabled", True, "false together with time.estimate_offset or lever_arm.estimate (the TDCP "
+                "rows carry no self-calibration columns)")
         if self.lever_arm.estimate_odometer:
             if not (set(self.constraints.use) & {"nhc", "odo"}):
                 bad("lever_arm.estimate_odometer", True, "false without nhc or odo in constraints.use "
