@@ -236,14 +236,42 @@ def test_obs3_compiled_records_equal_python_reference(tmp_path, newline):
             rinex._read_obs(q, "GE", compiled=compiled)
 
 
+def test_obs2_compiled_records_equal_python_reference(tmp_path):
+    """RINEX 2.11: two satellite-list lines, two observation lines per satellite, blanks, a 0.000, an LLI
+    digit, a blank system letter (GPS), an event; compiled and Python records parsers give the same bits."""
+    from insnav.gnss import rinex
+
+    types = ["C1", "L1", "D1", "S1", "P2", "L2", "C2", "S2", "D2", "C5"]
+    sats = {}
+    for k in range(13):
+        sid = f"G{k + 1:2d}" if k not in (5, 7) else ("R07" if k == 5 else f" {k + 1:2d}")
+        sats[sid] = [2.0e7 + k, 1.0e8 + k, None if k == 0 else -100.0 - k, 40.0 + k, None, 0.0, 2.0e7, None, 1.0, 3.0]
+    text = _obs2(types, sats)
+    lines = text.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith(f"{2.0e7 + 2:14.3f}"))
+    lines[k] = lines[k][:30] + "1" + lines[k][31:]  # LLI of L1 of G03
+    p = write(tmp_path, "o.21o", "\n".join(lines) + "\n")
+    for systems in ("G", "GR", "GREC"):
+        assert_same_obs(rinex._read_obs(p, systems, compiled=True), rinex._read_obs(p, systems, compiled=False))
+    a = read_rinex_obs(p, systems="GR")
+    assert a.lli1.tolist().count(1) == 1 and a.lli1[2] == 1 and 8 in a.prn.tolist() and a.L1[0] == 1.0e8
+    bad = text.replace(f"{1.0e8 + 3:14.3f}", "   1e8x00.000", 1)
+    q = write(tmp_path, "bad.21o", bad)
+    for compiled in (True, False):
+        with pytest.raises(RinexError, match=r"line \d+: bad number '1e8x00\.000' for observation L1") as ei:
+            rinex._read_obs(q, "G", compiled=compiled)
+        assert bad.splitlines()[ei.value.line - 1].find("1e8x00") >= 0
+
+
 @pytest.mark.parametrize("parts", [
     ("rtklibexplorer_walk_0827", "rinex_derived", "gnss_1730.obs"),
     ("euref_wettzell_wtzr_wtzz", "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"),
     ("matrtklib_static_septentrio", "rover.obs"),
     ("instinct_spirent_rtk_dynamic_SIMULATED", "iono-Klob_tropo-Saast", "Rover-dynamic_MO_Spirent.obs"),
+    ("smartloc_berlin_potsdamer_platz", "Berlin_Potsdamer_Platz.obs"),  # RINEX 2.11
 ])
-def test_obs3_real_files_compiled_equal_python_reference(parts):
-    """The RINEX 3 files of the shared data: every observation the same to the last bit."""
+def test_obs_real_files_compiled_equal_python_reference(parts):
+    """The RINEX 3 files and the RINEX 2.11 file of the shared data: every observation the same to the last bit."""
     from insnav.gnss import rinex
 
     p = need(*parts)

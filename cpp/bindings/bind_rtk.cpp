@@ -63,7 +63,8 @@ py::dict read_obs(const std::string& path, const std::map<std::string, std::vect
 // receiver clock offsets); the observations on slot 0.
 py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size_t offset, long lineno,
                        const std::map<std::string, std::vector<std::string>>& types,
-                       const std::map<std::string, std::vector<std::string>>& select, bool zero_is_missing) {
+                       const std::map<std::string, std::vector<std::string>>& select, bool zero_is_missing,
+                       bool rinex2) {
   io::ObsColumns c;
   c.zero_is_missing = zero_is_missing;
   for (const auto& [k, ty] : types)
@@ -72,7 +73,7 @@ py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size
     if (k.size() != 1 || static_cast<unsigned char>(k[0]) >= 128) throw py::value_error("read_rinex3_obs_body: bad system key '" + k + "'");
     const unsigned char s = static_cast<unsigned char>(k[0]);
     if (codes.size() != 4) throw py::value_error("read_rinex3_obs_body: select needs 4 codes (C, L, D, S) per system");
-    const auto it = types.find(k);
+    const auto it = types.find(rinex2 ? std::string("G") : k);  // RINEX 2: one list of types for all systems
     c.want[s] = it != types.end();
     if (!c.want[s]) continue;
     for (int q = 0; q < 4; ++q) {
@@ -84,6 +85,8 @@ py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size
       c.names[s][0][q] = codes[q];
     }
   }
+  const auto g = types.find("G");
+  const int n_types_v2 = g == types.end() ? 0 : static_cast<int>(g->second.size());
   char* data = nullptr;
   Py_ssize_t size = 0;
   if (PyBytes_AsStringAndSize(text.ptr(), &data, &size) != 0) throw py::error_already_set();
@@ -91,7 +94,10 @@ py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size
   io::RinexObsTable t;
   {
     py::gil_scoped_release release;  // `text` stays referenced by the caller
-    io::read_rinex3_obs_body(data, static_cast<std::size_t>(size), path, offset, lineno, c, t);
+    if (rinex2)
+      io::read_rinex2_obs_body(data, static_cast<std::size_t>(size), path, offset, lineno, n_types_v2, c, t);
+    else
+      io::read_rinex3_obs_body(data, static_cast<std::size_t>(size), path, offset, lineno, c, t);
   }
   py::dict d;
   d["epoch_t_gps_s"] = to_array(t.epoch_t_gps_s);
@@ -318,8 +324,8 @@ void bind_rtk(py::module_& m) {
   m.def("read_rinex3_obs", &read_obs, py::arg("path"), py::arg("prefs"),
         "Fast RINEX 3 observation reader: up to 3 frequency slots per system (C, L, D, S, LLI).");
   m.def("read_rinex3_obs_body", &read_obs_body, py::arg("text"), py::arg("path"), py::arg("offset"), py::arg("lineno"),
-        py::arg("types"), py::arg("select"), py::arg("zero_is_missing"),
-        "Records of a RINEX 3 observation file after a header parsed by the caller (slot 0: C, L, D, S, LLI).");
+        py::arg("types"), py::arg("select"), py::arg("zero_is_missing"), py::arg("rinex2") = false,
+        "Records of a RINEX 3 (or, rinex2=True, 2.1x) observation file after a header parsed by the caller (slot 0: C, L, D, S, LLI).");
   m.def("lambda_search", &lambda_search, py::arg("a_hat"), py::arg("Q"),
         "MLAMBDA (Chang, Yang, Zhou 2005): best and second-best integer vectors (n, 2) and squared norms.");
   m.def("lambda_decorrelate", &lambda_decorrelate, py::arg("Q"),

@@ -759,11 +759,11 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
 
     Notes
     -----
-    The header is parsed here; the records of a RINEX 3 file by the compiled
-    reader (``insnav/io/rinex3_obs.hpp``), which gives the same numbers as
-    the Python record parser kept for RINEX 2 (and as the reference of the
-    tests) to the last bit: the same fields, the same decimal-to-binary
-    conversion (correctly rounded in both) and the same time arithmetic.
+    The header is parsed here, the records by the compiled reader
+    (``insnav/io/rinex3_obs.hpp``), which gives the same numbers as the
+    Python records parser kept as the reference of the tests, to the last
+    bit: the same fields, the same decimal-to-binary conversion (correctly
+    rounded in both) and the same time arithmetic.
     """
     return _read_obs(path, systems, codes, compiled=True)
 
@@ -796,7 +796,7 @@ def _core_rinex_error(path, exc) -> RinexError:
 
 
 def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
-    """:func:`read_rinex_obs`; ``compiled=False`` parses RINEX 3 records in Python (the reference)."""
+    """:func:`read_rinex_obs`; ``compiled=False`` parses the records in Python (the tests' reference)."""
     want = _parse_systems(systems)
     raw = head = None
     if compiled:
@@ -844,13 +844,9 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
     gcodes = codes_by_sys.get("G") or _choose_codes("G", types.get("G", []), rinex3)
     keys = tuple(_OBS_PREF3)
     ntypes = {s: len(v) for s, v in types.items()}
-    if head is not None and rinex3:
+    if head is not None:
         return _obs_from_core(src.path, version, raw, (head[0], src.i), types, want, codes_by_sys, gcodes,
                               approx, glo_k)
-    if head is not None:  # RINEX 2: the records in Python, after the header lines already read
-        n_head = src.i
-        src = _Lines(path, raw.decode("ascii", "replace").splitlines())
-        src.i = n_head
 
     ep_t, ep_flag, ep_clk = [], [], []
     r_ep, r_prn, r_sys = [], [], []
@@ -989,12 +985,12 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
 
 
 def _obs_from_core(path, version, raw, head, types, want, codes_by_sys, gcodes, approx, glo_k) -> ObsData:
-    """The records of a RINEX 3 file (header parsed) through ``insnav._core.read_rinex3_obs_body``."""
+    """The records of a RINEX 2 or 3 file (header parsed) through ``insnav._core.read_rinex3_obs_body``."""
     from .. import _core
 
     select = {s: [codes_by_sys[s][k] or "" for k in _OBS_PREF3] for s in want}
     try:  # a 0.0 stays 0.0, as in the Python records parser
-        d = _core.read_rinex3_obs_body(raw, path, head[0], head[1], types, select, False)
+        d = _core.read_rinex3_obs_body(raw, path, head[0], head[1], types, select, False, version < 3)
     except RuntimeError as exc:
         raise _core_rinex_error(path, exc) from None
     ep_t = np.asarray(d["epoch_t_gps_s"], dtype=float)

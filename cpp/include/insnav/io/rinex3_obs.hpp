@@ -12,6 +12,7 @@
 // std::runtime_error "<file>, line <n>: <what>" (the Python layer turns it into RinexError).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -221,6 +222,128 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
             out.obs[base + k * kObsPerSlot + 4] = (lli >= '0' && lli <= '9') ? lli - '0' : 0.0;
           }
         }
+      }
+    }
+    if (keep) {
+      out.epoch_t_gps_s.push_back(t);
+      out.epoch_flag.push_back(flag);
+      out.epoch_clock_s.push_back(clk);
+    }
+  }
+}
+
+/// The records of a RINEX 2.10/2.11 file after END OF HEADER (Gurtner & Estey 2007, RINEX 2.11
+/// Sec. 5 and Table A1): an epoch line (2-digit year, flag in column 29, satellite count and up to
+/// 12 satellites, continued on further lines), then per satellite ceil(n/5) lines of 16-character
+/// fields.  One list of types for every system: ``c.col`` of each wanted system holds columns of
+/// that list; a blank system letter means GPS.  Slot 0 only.
+inline void read_rinex2_obs_body(const char* text, size_t size, const std::string& path, size_t offset,
+                                 long lineno0, int n_types, const ObsColumns& c, RinexObsTable& out) {
+  detail::LineReader L{text, size, path};
+  L.pos = offset;
+  L.lineno = lineno0;
+  constexpr int W = kObsSlots * kObsPerSlot;
+  const int nlines = std::max(1, (n_types + 4) / 5);
+  struct Line { const char* b; size_t len; long lineno; };
+  std::vector<Line> obs_lines(static_cast<size_t>(nlines));
+  std::vector<std::array<char, 3>> sats;
+  sats.reserve(64);
+  auto trimmed = [](std::string f) {
+    while (!f.empty() && f.front() == ' ') f.erase(f.begin());
+    while (!f.empty() && f.back() == ' ') f.pop_back();
+    return f;
+  };
+  auto int_field = [&](size_t a, size_t n, int& v) {  // a field cut by the end of the line: what is there
+    double x;
+    if (a >= L.len || !detail::parse_num(L.b + a, std::min(n, L.len - a), x) || !std::isfinite(x) || x != std::floor(x))
+      return false;
+    v = static_cast<int>(x);
+    return true;
+  };
+  while (L.next()) {
+    if (L.len == 0 || detail::blank(L.b, L.len)) continue;
+    const long ep_line = L.lineno;
+    int flag = 0, nsat = 0;
+    if (!int_field(28, 1, flag) || !int_field(29, 3, nsat))
+      L.fail("bad record: cannot parse epoch flag / satellite count '" + L.field(26, 6) + "'");
+    int y = 1, mo = 1, d = 1, h = 0, mi = 0;
+    double sec = 0.0;
+    if (!(flag >= 2 && flag <= 5)) {
+      if (!int_field(1, 2, y) || !int_field(4, 2, mo) || !int_field(7, 2, d) || !int_field(10, 2, h) ||
+          !int_field(13, 2, mi) || L.len <= 15 || !detail::parse_num(L.b + 15, std::min<size_t>(11, L.len - 15), sec) ||
+          !std::isfinite(sec))
+        L.fail("bad record: cannot parse epoch line '" + L.field(0, 32) + "'");
+      y += y < 80 ? 2000 : 1900;
+    }
+    double clk = NAN;
+    if (L.len > 68 && !detail::parse_num(L.b + 68, std::min<size_t>(12, L.len - 68), clk))
+      L.fail("bad number '" + trimmed(L.field(68, 12)) + "' for receiver clock offset");
+    if (flag > 6 || nsat < 0)
+      L.fail("bad record: epoch flag " + std::to_string(flag) + " / count " + std::to_string(nsat) + " out of range");
+    if (flag >= 2 && flag <= 5) {
+      for (int i = 0; i < nsat; ++i)
+        if (!L.next())
+          L.fail_at(L.lineno + 1, "unexpected end of file while reading the special records of the event on line " +
+                                      std::to_string(ep_line));
+      continue;
+    }
+    if (!(mo >= 1 && mo <= 12 && d >= 1 && d <= 31 && h >= 0 && h <= 23 && mi >= 0 && mi <= 59 && sec >= 0 && sec < 61))
+      L.fail("bad record: impossible epoch date/time");
+    const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
+                     h * 3600.0 + mi * 60.0 + sec;
+    const bool keep = flag == 0 || flag == 1;
+    const int e = static_cast<int>(out.epoch_t_gps_s.size());
+    sats.clear();
+    while (true) {  // the satellite list: columns 33-68 of the epoch line and of its continuation lines
+      for (int k = 0; k < 12; ++k) {
+        const size_t a = 32 + 3 * static_cast<size_t>(k);
+        if (a >= L.len || a >= 68) break;
+        const size_t n = std::min<size_t>({3, L.len - a, 68 - a});
+        if (detail::blank(L.b + a, n)) continue;
+        std::array<char, 3> sid{' ', ' ', ' '};
+        for (size_t q = 0; q < n; ++q) sid[q] = L.b[a + q];
+        sats.push_back(sid);
+      }
+      if (static_cast<int>(sats.size()) >= nsat) break;
+      if (!L.next())
+        L.fail_at(L.lineno + 1, "unexpected end of file while reading the satellite list of the epoch on line " +
+                                    std::to_string(ep_line));
+    }
+    if (static_cast<int>(sats.size()) != nsat)
+      L.fail("bad record: epoch on line " + std::to_string(ep_line) + " announces " + std::to_string(nsat) +
+             " satellites, lists " + std::to_string(sats.size()));
+    for (const auto& sid : sats) {
+      for (int q = 0; q < nlines; ++q) {
+        if (!L.next())
+          L.fail_at(L.lineno + 1, "unexpected end of file while reading the observations of the epoch on line " +
+                                      std::to_string(ep_line));
+        obs_lines[q] = Line{L.b, L.len, L.lineno};
+      }
+      const unsigned char s = sid[0] == ' ' ? 'G' : static_cast<unsigned char>(sid[0]);
+      if (!keep || s >= 128 || !c.want[s]) continue;
+      double prn_v;
+      const std::string prn_txt(sid.data() + 1, 2);
+      if (!detail::parse_num(prn_txt.data(), 2, prn_v) || !std::isfinite(prn_v) || prn_v != std::floor(prn_v))
+        L.fail("bad integer '" + prn_txt + "' for satellite number");
+      out.row_epoch.push_back(e);
+      out.row_sys.push_back(s);
+      out.row_prn.push_back(static_cast<int>(prn_v));
+      const size_t base = out.obs.size();
+      out.obs.resize(base + W, NAN);
+      for (int q = 0; q < 4; ++q) {
+        const int cq = c.col[s][0][q];
+        if (cq < 0) continue;
+        const Line& ol = obs_lines[static_cast<size_t>(cq / 5)];
+        const size_t a = 16 * static_cast<size_t>(cq % 5);
+        if (q == 1) out.obs[base + 4] = (a + 14 < ol.len && ol.b[a + 14] >= '0' && ol.b[a + 14] <= '9') ? ol.b[a + 14] - '0' : 0.0;
+        if (a >= ol.len) continue;
+        double v;
+        if (!detail::parse_num(ol.b + a, std::min<size_t>(14, ol.len - a), v)) {
+          std::string f(ol.b + a, std::min<size_t>(14, ol.len - a));
+          L.fail_at(ol.lineno, "bad number '" + trimmed(f) + "' for observation " + c.names[s][0][q]);
+        }
+        if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;
+        out.obs[base + q] = v;
       }
     }
     if (keep) {
