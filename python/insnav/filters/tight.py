@@ -112,8 +112,7 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
 
     inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
 
-    rng = np.random.default_rng(cfg.init_seed)
-    init, sig0 = initial_state(dataset, cfg, rng)
+    init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     model = noise.as_core_dict()
     qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)
