@@ -156,6 +156,131 @@ G05  20576400.000                                          50.000
 """
 
 
+#: every array and table of an ObsData (compared to the last bit between the two record parsers)
+_OBS_ARRAYS = ("epoch_t_gps_s", "epoch_week", "epoch_tow", "epoch_flag", "clock_offset_s", "epoch", "t_gps_s",
+               "week", "tow", "prn", "C1", "L1", "D1", "S1", "system", "lli1", "approx_r_e")
+
+
+def assert_same_obs(a, b):
+    """Same dtype, shape and bytes of every array (NaN payloads included), same tables."""
+    for f in _OBS_ARRAYS:
+        x, y = getattr(a, f), getattr(b, f)
+        if x is None or y is None:
+            assert x is None and y is None, f
+            continue
+        x, y = np.asarray(x), np.asarray(y)
+        assert (x.dtype, x.shape) == (y.dtype, y.shape), f
+        assert x.tobytes() == y.tobytes(), f
+    assert (a.version, a.codes, a.codes_by_system, a.glonass_channels) == \
+        (b.version, b.codes, b.codes_by_system, b.glonass_channels)
+
+
+# RINEX 3 records: the edge cases of the format (0.000, blanks, a line ending inside a field, LLI and
+# signal-strength digits, an event with its special records, a flag-6 epoch, a blank line, a BeiDou
+# satellite of a system not asked for) for the compiled parser against the Python reference
+def _f(v="", lli=" ", ssi=" "):
+    """One 16-character observation field: F14.3 (or the text given), LLI, signal strength."""
+    return (f"{v:14.3f}" if isinstance(v, float) else f"{v:>14}") + lli + ssi
+
+
+OBS3_EDGES = "".join([
+    "     3.04           OBSERVATION DATA    M: Mixed            RINEX VERSION / TYPE\n",
+    "G    4 C1C L1C D1C S1C                                      SYS / # / OBS TYPES\n",
+    "E    4 C1X L1X D1X S1X                                      SYS / # / OBS TYPES\n",
+    "C    4 C2I L2I D2I S2I                                      SYS / # / OBS TYPES\n",
+    "      100.0000     -200.0000      300.0000                  APPROX POSITION XYZ\n",
+    "                                                            END OF HEADER\n",
+    "> 2021 04 28 18 00  0.0000000  0  4      -0.000012345678\n",
+    "G05" + _f(20576396.770, " ", "7") + _f(108129693.934, "1", "5") + _f(1064.326, " ", "6") + _f(51.0) + "\n",
+    "G07" + _f(0.0) + _f(0.0) + _f(0.0) + _f(0.0) + "\n",
+    "E11" + _f(21534103.024) + _f(84504436.889, "2") + "\n",
+    "C06" + _f(38000000.0) + _f("1.9e8") + _f("-100.5") + _f("33.0")[:10] + "\n",
+    "\n",
+    "> 2021 04 28 18 00  1.0000000  4  2\n",
+    "EVENT COMMENT                                               COMMENT\n",
+    "SECOND COMMENT                                              COMMENT\n",
+    "> 2021 04 28 18 00  1.5000000  6  1\n",
+    "G05" + _f(20576398.0) + _f(108129695.0) + "\n",
+    "> 2021 04 28 18 00  2.0000000  1  2\n",
+    "G05" + _f(20576400.0) + _f() + _f() + _f(50.0) + "\n",
+    "G12" + _f("2.22354090D+07") + "\n",
+])
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n"])
+def test_obs3_compiled_records_equal_python_reference(tmp_path, newline):
+    from insnav.gnss import rinex
+
+    p = tmp_path / "e.rnx"
+    p.write_bytes(OBS3_EDGES.replace("\n", newline).encode())
+    for systems in ("G", "GE", "GREC"):
+        a, b = rinex._read_obs(p, systems, compiled=True), rinex._read_obs(p, systems, compiled=False)
+        assert_same_obs(a, b)
+    a = read_rinex_obs(p, systems="GEC")
+    np.testing.assert_array_equal(a.prn, [5, 7, 11, 6, 5, 12])  # the flag-6 epoch dropped, the event skipped
+    assert a.C1[1] == 0.0 and a.L1[1] == 0.0  # a 0.000 stays as written (both parsers)
+    assert a.L1[0] == 108129693.934 and list(a.lli1) == [1, 0, 2, 0, 0, 0]
+    assert np.isnan(a.D1[2]) and a.L1[3] == 1.9e8 and a.C1[5] == 2.2235409e7
+    assert a.epoch_flag.tolist() == [0, 1] and np.isnan(a.clock_offset_s[1])
+    # compressed: the same numbers
+    import gzip
+
+    g = tmp_path / "e.rnx.gz"
+    g.write_bytes(gzip.compress(p.read_bytes()))
+    assert_same_obs(read_rinex_obs(g, systems="GEC"), rinex._read_obs(p, "GEC", compiled=False))
+    # a malformed observation: the same file, line and value from both
+    bad = OBS3_EDGES.replace("84504436.889", "84504x36.889")
+    q = write(tmp_path, "bad.rnx", bad)
+    for compiled in (True, False):
+        with pytest.raises(RinexError, match=r"bad\.rnx, line 10: bad number '84504x36\.889' for observation L1X"):
+            rinex._read_obs(q, "GE", compiled=compiled)
+
+
+def test_obs2_compiled_records_equal_python_reference(tmp_path):
+    """RINEX 2.11: two satellite-list lines, two observation lines per satellite, blanks, a 0.000, an LLI
+    digit, a blank system letter (GPS), an event; compiled and Python records parsers give the same bits."""
+    from insnav.gnss import rinex
+
+    types = ["C1", "L1", "D1", "S1", "P2", "L2", "C2", "S2", "D2", "C5"]
+    sats = {}
+    for k in range(13):
+        sid = f"G{k + 1:2d}" if k not in (5, 7) else ("R07" if k == 5 else f" {k + 1:2d}")
+        sats[sid] = [2.0e7 + k, 1.0e8 + k, None if k == 0 else -100.0 - k, 40.0 + k, None, 0.0, 2.0e7, None, 1.0, 3.0]
+    text = _obs2(types, sats)
+    lines = text.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith(f"{2.0e7 + 2:14.3f}"))
+    lines[k] = lines[k][:30] + "1" + lines[k][31:]  # LLI of L1 of G03
+    p = write(tmp_path, "o.21o", "\n".join(lines) + "\n")
+    for systems in ("G", "GR", "GREC"):
+        assert_same_obs(rinex._read_obs(p, systems, compiled=True), rinex._read_obs(p, systems, compiled=False))
+    a = read_rinex_obs(p, systems="GR")
+    assert a.lli1.tolist().count(1) == 1 and a.lli1[2] == 1 and 8 in a.prn.tolist() and a.L1[0] == 1.0e8
+    bad = text.replace(f"{1.0e8 + 3:14.3f}", "   1e8x00.000", 1)
+    q = write(tmp_path, "bad.21o", bad)
+    for compiled in (True, False):
+        with pytest.raises(RinexError, match=r"line \d+: bad number '1e8x00\.000' for observation L1") as ei:
+            rinex._read_obs(q, "G", compiled=compiled)
+        assert bad.splitlines()[ei.value.line - 1].find("1e8x00") >= 0
+
+
+@pytest.mark.parametrize("parts", [
+    ("rtklibexplorer_walk_0827", "rinex_derived", "gnss_1730.obs"),
+    ("euref_wettzell_wtzr_wtzz", "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"),
+    ("matrtklib_static_septentrio", "rover.obs"),
+    ("instinct_spirent_rtk_dynamic_SIMULATED", "iono-Klob_tropo-Saast", "Rover-dynamic_MO_Spirent.obs"),
+    ("smartloc_berlin_potsdamer_platz", "Berlin_Potsdamer_Platz.obs"),  # RINEX 2.11
+])
+def test_obs_real_files_compiled_equal_python_reference(parts):
+    """The RINEX 3 files and the RINEX 2.11 file of the shared data: every observation the same to the last bit."""
+    from insnav.gnss import rinex
+
+    p = need(*parts)
+    for systems in ("G", "GREC"):
+        a, b = rinex._read_obs(p, systems, compiled=True), rinex._read_obs(p, systems, compiled=False)
+        assert a.prn.size > 1000 and np.isfinite(a.C1).mean() > 0.5
+        assert_same_obs(a, b)
+
+
 def test_obs3_types_continuation_flags_clock(tmp_path):
     obs = read_rinex_obs(write(tmp_path, "o.rnx", OBS3))
     assert obs.codes["C1"] == "C1C" and obs.codes["D1"] == "D1C"

@@ -289,6 +289,42 @@ def smartloc(shared_data):
     return d
 
 
+
+@pytest.mark.parametrize("case", ["smartloc", "walk"])
+def test_sat_states_row_by_row(shared_data, case):
+    """The satellite states of a row do not depend on the other rows of the call, to the last bit.
+
+    ``spp_inputs_from_rinex`` evaluates the states once at the receiver time tags to find the rows with an
+    ephemeris and takes its first clock iteration from those rows (no second evaluation); that gives the
+    inputs of a separate call on the kept rows only if every row is computed on its own.
+    """
+    from insnav.gnss.gpstime import SECONDS_PER_WEEK
+    from insnav.gnss.spp import _obs_system, _sat_states, read_nav_multi, read_obs_multi
+    from insnav.io.rinex_dataset import _approx_position
+
+    if case == "smartloc":
+        d, systems = shared_data / SMARTLOC, "GR"
+        obs_p, nav_p = d / "Berlin_Potsdamer_Platz.obs", [d / "brdc1580.16n", d / "brdc1580.16g"]
+    else:
+        d, systems = shared_data / "rtklibexplorer_walk_0827" / "rinex_derived", "GEC"
+        obs_p, nav_p = d / "gnss_1730.obs", [d / "gnss_1730.nav"]
+    if not obs_p.is_file():
+        pytest.skip(f"{obs_p} not found")
+    obs, nav = read_obs_multi(obs_p, systems), read_nav_multi(nav_p, systems)
+    r0 = _approx_position(obs, nav, SECONDS_PER_WEEK * int(obs.epoch_week[0]))
+    system = _obs_system(obs)
+    rows = np.flatnonzero(np.isfinite(obs.C1))
+    t = np.asarray(obs.t_gps_s, float)
+    full = _sat_states(nav, system[rows], obs.prn[rows], t[rows], r0, obs, rows)
+    keep = full["valid"]
+    assert 0 < keep.sum() < keep.size or keep.all()
+    kept = rows[keep]
+    part = _sat_states(nav, system[kept], obs.prn[kept], t[kept], r0, obs, kept)
+    assert set(part) == set(full)
+    for k, v in part.items():
+        assert v.tobytes() == full[k][keep].tobytes(), k
+    assert set(system[kept]) == set(systems)
+
 def _bench():
     import _smartloc  # tests/_smartloc.py (bench/spp_smartloc.py tabulates the same evaluation)
 

@@ -57,6 +57,62 @@ py::dict read_obs(const std::string& path, const std::map<std::string, std::vect
   return d;
 }
 
+// The records of a RINEX 3 observation file whose header the caller parsed: ``types`` every
+// system's header types (3-character codes), ``select`` system -> the codes read on slot 0 in
+// the order C, L, D, S ("" where not read).  Returns the columns of read_obs (and the epochs'
+// receiver clock offsets); the observations on slot 0.
+py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size_t offset, long lineno,
+                       const std::map<std::string, std::vector<std::string>>& types,
+                       const std::map<std::string, std::vector<std::string>>& select, bool zero_is_missing,
+                       bool rinex2) {
+  io::ObsColumns c;
+  c.zero_is_missing = zero_is_missing;
+  for (const auto& [k, ty] : types)
+    if (k.size() == 1 && static_cast<unsigned char>(k[0]) < 128) c.n_types[static_cast<unsigned char>(k[0])] = static_cast<int>(ty.size());
+  for (const auto& [k, codes] : select) {
+    if (k.size() != 1 || static_cast<unsigned char>(k[0]) >= 128) throw py::value_error("read_rinex3_obs_body: bad system key '" + k + "'");
+    const unsigned char s = static_cast<unsigned char>(k[0]);
+    if (codes.size() != 4) throw py::value_error("read_rinex3_obs_body: select needs 4 codes (C, L, D, S) per system");
+    const auto it = types.find(rinex2 ? std::string("G") : k);  // RINEX 2: one list of types for all systems
+    c.want[s] = it != types.end();
+    if (!c.want[s]) continue;
+    for (int q = 0; q < 4; ++q) {
+      if (codes[q].empty()) continue;
+      const auto& ty = it->second;
+      for (std::size_t i = 0; i < ty.size(); ++i)
+        if (ty[i] == codes[q]) { c.col[s][0][q] = static_cast<int>(i); break; }
+      if (c.col[s][0][q] < 0) throw py::value_error("read_rinex3_obs_body: code " + codes[q] + " not in the header types of " + k);
+      c.names[s][0][q] = codes[q];
+    }
+  }
+  const auto g = types.find("G");
+  const int n_types_v2 = g == types.end() ? 0 : static_cast<int>(g->second.size());
+  char* data = nullptr;
+  Py_ssize_t size = 0;
+  if (PyBytes_AsStringAndSize(text.ptr(), &data, &size) != 0) throw py::error_already_set();
+  if (offset > static_cast<std::size_t>(size)) throw py::value_error("read_rinex3_obs_body: offset beyond the text");
+  io::RinexObsTable t;
+  {
+    py::gil_scoped_release release;  // `text` stays referenced by the caller
+    if (rinex2)
+      io::read_rinex2_obs_body(data, static_cast<std::size_t>(size), path, offset, lineno, n_types_v2, c, t);
+    else
+      io::read_rinex3_obs_body(data, static_cast<std::size_t>(size), path, offset, lineno, c, t);
+  }
+  py::dict d;
+  d["epoch_t_gps_s"] = to_array(t.epoch_t_gps_s);
+  d["epoch_flag"] = to_array(t.epoch_flag);
+  d["epoch_clock_s"] = to_array(t.epoch_clock_s);
+  d["row_epoch"] = to_array(t.row_epoch);
+  d["row_sys"] = to_array(t.row_sys);
+  d["row_prn"] = to_array(t.row_prn);
+  const py::ssize_t n = static_cast<py::ssize_t>(t.row_epoch.size());
+  py::array_t<double> obs({n, static_cast<py::ssize_t>(io::kObsSlots * io::kObsPerSlot)});
+  if (n) std::memcpy(obs.mutable_data(), t.obs.data(), t.obs.size() * sizeof(double));
+  d["obs"] = obs;
+  return d;
+}
+
 py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
   const py::ssize_t n = a_hat.ndim() == 1 ? a_hat.shape(0) : -1;
   if (n < 0) throw py::value_error("lambda_search: a_hat must be 1-D");
@@ -273,6 +329,9 @@ py::dict rtk_double_differences(const DArray& rover_rows, const DArray& base_row
 void bind_rtk(py::module_& m) {
   m.def("read_rinex3_obs", &read_obs, py::arg("path"), py::arg("prefs"),
         "Fast RINEX 3 observation reader: up to 3 frequency slots per system (C, L, D, S, LLI).");
+  m.def("read_rinex3_obs_body", &read_obs_body, py::arg("text"), py::arg("path"), py::arg("offset"), py::arg("lineno"),
+        py::arg("types"), py::arg("select"), py::arg("zero_is_missing"), py::arg("rinex2") = false,
+        "Records of a RINEX 3 (or, rinex2=True, 2.1x) observation file after a header parsed by the caller (slot 0: C, L, D, S, LLI).");
   m.def("lambda_search", &lambda_search, py::arg("a_hat"), py::arg("Q"),
         "MLAMBDA (Chang, Yang, Zhou 2005): best and second-best integer vectors (n, 2) and squared norms.");
   m.def("lambda_decorrelate", &lambda_decorrelate, py::arg("Q"),

@@ -207,8 +207,7 @@ def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = N
         sats[:, 11] *= cfg.gnss_vel_sigma_scale
         inputs = dataclasses.replace(inputs, sats=sats)
 
-    rng = np.random.default_rng(cfg.init_seed)
-    init, sig0 = initial_state(dataset, cfg, rng)
+    init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     model = noise.as_core_dict()
     qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)

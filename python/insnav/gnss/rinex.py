@@ -65,14 +65,16 @@ class RinexError(ValueError):
 class _Lines:
     """Line source that remembers the 1-based line number (for error messages)."""
 
-    def __init__(self, path):
+    def __init__(self, path, lines=None):
         self.path = os.fspath(path)
-        try:
-            from ..data.textio import read_text
+        if lines is None:
+            try:
+                from ..data.textio import read_text
 
-            self.lines = read_text(self.path, "ascii").splitlines()
-        except OSError as exc:
-            raise RinexError(self.path, None, f"cannot read file ({exc.strerror})") from exc
+                lines = read_text(self.path, "ascii").splitlines()
+            except OSError as exc:
+                raise RinexError(self.path, None, f"cannot read file ({exc.strerror})") from exc
+        self.lines = lines
         self.i = 0  # index of the next line
 
     def next(self, what="a record line"):
@@ -754,9 +756,61 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
         file; the message names the file and the 1-based line number.
     ValueError
         ``systems`` has a letter other than G, R, E, C.
+
+    Notes
+    -----
+    The header is parsed here, the records by the compiled reader
+    (``insnav/io/rinex3_obs.hpp``), which gives the same numbers as the
+    Python records parser kept as the reference of the tests, to the last
+    bit: the same fields, the same decimal-to-binary conversion (correctly
+    rounded in both) and the same time arithmetic.
     """
+    return _read_obs(path, systems, codes, compiled=True)
+
+
+def _header_end(raw: bytes):
+    """(byte offset after the ``END OF HEADER`` line, number of header lines), or None if absent."""
+    pos, n = 0, 0
+    while True:
+        nl = raw.find(b"\n", pos)
+        end = len(raw) if nl < 0 else nl + 1
+        n += 1
+        if raw[pos:end][60:].strip() == b"END OF HEADER":
+            return end, n
+        if nl < 0 or n > 10000:
+            return None
+        pos = end
+
+
+def _core_rinex_error(path, exc) -> RinexError:
+    """The compiled readers' ``"<file>, line <n>: <what>"`` as a :class:`RinexError`."""
+    msg = str(exc)
+    line = None
+    if ", line " in msg:
+        try:
+            line = int(msg.split(", line ", 1)[1].split(":", 1)[0])
+        except ValueError:
+            line = None
+    what = msg.split(": ", 1)[1] if ": " in msg else msg
+    return RinexError(path, line, what)
+
+
+def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
+    """:func:`read_rinex_obs`; ``compiled=False`` parses the records in Python (the tests' reference)."""
     want = _parse_systems(systems)
-    src = _Lines(path)
+    raw = head = None
+    if compiled:
+        from ..data.textio import read_bytes
+
+        try:
+            raw = read_bytes(path)
+        except OSError as exc:
+            raise RinexError(os.fspath(path), None, f"cannot read file ({exc.strerror})") from exc
+        head = _header_end(raw)
+    if head is not None:
+        src = _Lines(path, raw[:head[0]].decode("ascii", "replace").splitlines())
+    else:
+        src = _Lines(path, None if raw is None else raw.decode("ascii", "replace").splitlines())
     header = _read_header(src)
     version, ftype, sysc = _version_type(src, header)
     if ftype != "O":
@@ -790,6 +844,9 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
     gcodes = codes_by_sys.get("G") or _choose_codes("G", types.get("G", []), rinex3)
     keys = tuple(_OBS_PREF3)
     ntypes = {s: len(v) for s, v in types.items()}
+    if head is not None:
+        return _obs_from_core(src.path, version, raw, (head[0], src.i), types, want, codes_by_sys, gcodes,
+                              approx, glo_k)
 
     ep_t, ep_flag, ep_clk = [], [], []
     r_ep, r_prn, r_sys = [], [], []
@@ -924,4 +981,33 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
         D1=np.asarray(r_val["D1"], dtype=float), S1=np.asarray(r_val["S1"], dtype=float), approx_r_e=approx,
         system=np.asarray(r_sys, dtype="<U1"), codes_by_system=codes_by_sys, glonass_channels=glo_k,
         lli1=np.asarray(r_lli, dtype=np.int64),
+    )
+
+
+def _obs_from_core(path, version, raw, head, types, want, codes_by_sys, gcodes, approx, glo_k) -> ObsData:
+    """The records of a RINEX 2 or 3 file (header parsed) through ``insnav._core.read_rinex3_obs_body``."""
+    from .. import _core
+
+    select = {s: [codes_by_sys[s][k] or "" for k in _OBS_PREF3] for s in want}
+    try:  # a 0.0 stays 0.0, as in the Python records parser
+        d = _core.read_rinex3_obs_body(raw, path, head[0], head[1], types, select, False, version < 3)
+    except RuntimeError as exc:
+        raise _core_rinex_error(path, exc) from None
+    ep_t = np.asarray(d["epoch_t_gps_s"], dtype=float)
+    e = np.asarray(d["row_epoch"], dtype=np.int64)
+    obs = np.asarray(d["obs"])
+    wk, tw = week_tow(ep_t)
+    wk, tw = np.atleast_1d(wk), np.atleast_1d(tw)
+    row_sys = np.asarray(d["row_sys"])
+    system = row_sys.astype(np.uint8).view("S1").astype("<U1") if row_sys.size else np.zeros(0, "<U1")
+    lli = obs[:, 4]
+    return ObsData(
+        path=path, version=version, codes=dict(gcodes),
+        epoch_t_gps_s=ep_t, epoch_week=wk, epoch_tow=tw,
+        epoch_flag=np.asarray(d["epoch_flag"], dtype=np.int64),
+        clock_offset_s=np.asarray(d["epoch_clock_s"], dtype=float),
+        epoch=e, t_gps_s=ep_t[e], week=wk[e], tow=tw[e], prn=np.asarray(d["row_prn"], dtype=np.int64),
+        C1=obs[:, 0].copy(), L1=obs[:, 1].copy(), D1=obs[:, 2].copy(), S1=obs[:, 3].copy(), approx_r_e=approx,
+        system=system, codes_by_system=codes_by_sys, glonass_channels=glo_k,
+        lli1=np.where(np.isfinite(lli), lli, 0).astype(np.int64),
     )

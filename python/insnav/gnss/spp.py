@@ -591,6 +591,8 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
     system = _obs_system(obs)
     ok = np.isfinite(obs.C1) & np.isin(system, np.asarray(wgt.systems, dtype="<U1"))
     rows = np.flatnonzero(ok)
+    # the states at the receiver's time tags (clock estimate 0) decide which rows have an ephemeris and are
+    # the first of the two clock iterations (row by row: the same numbers as a call on the kept rows alone)
     states = _sat_states(nav, system[rows], np.asarray(obs.prn)[rows], t_tag[rows], r0, obs, rows)
     keep = states["valid"]
     rows = rows[keep]
@@ -599,9 +601,12 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
     clk = np.zeros(n_ep)
     lat, lon, h = earth.ecef_to_geodetic(r0)
     sys_r = system[rows]
-    for _ in range(2):
+    for it in range(2):
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
-        ts = _sat_states(nav, sys_r, np.asarray(obs.prn)[rows], t_rx, r0, obs, rows)
+        if it == 0:
+            ts = {k: v[keep] for k, v in states.items()}
+        else:
+            ts = _sat_states(nav, sys_r, np.asarray(obs.prn)[rows], t_rx, r0, obs, rows)
         raw = obs.C1[rows] - (ts["range_m"] - C_LIGHT * ts["clock_bias_s"])
         med, present = group_median(raw, ep, n_ep)
         clk[present] = med[present]

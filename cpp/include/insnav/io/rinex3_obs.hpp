@@ -12,6 +12,7 @@
 // std::runtime_error "<file>, line <n>: <what>" (the Python layer turns it into RinexError).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -41,6 +42,7 @@ struct RinexObsTable {
   std::map<char, std::array<std::string, kObsSlots>> chosen;  // system -> 3-char code ("1C") per slot
   std::vector<double> epoch_t_gps_s;          // GPS seconds since 1980-01-06
   std::vector<int> epoch_flag;
+  std::vector<double> epoch_clock_s;          // receiver clock offset of the epoch line [s], NaN if blank
   std::vector<int> row_epoch, row_sys, row_prn;
   std::vector<double> obs;                    // n_rows x (kObsSlots * kObsPerSlot), NaN where missing
 };
@@ -57,25 +59,27 @@ inline long days_from_civil(long y, unsigned m, unsigned d) {  // H. Hinnant's a
 }
 
 struct LineReader {
-  const std::string& text;
+  const char* data;   // the whole text (not owned)
+  size_t size;
   const std::string& path;
   size_t pos = 0;
   long lineno = 0;
   const char* b = nullptr;
   size_t len = 0;
   bool next() {
-    if (pos >= text.size()) return false;
-    const size_t e = text.find('\n', pos);
-    const size_t end = e == std::string::npos ? text.size() : e;
-    b = text.data() + pos;
+    if (pos >= size) return false;
+    const void* nl = std::memchr(data + pos, '\n', size - pos);
+    const size_t end = nl ? static_cast<size_t>(static_cast<const char*>(nl) - data) : size;
+    b = data + pos;
     len = end - pos;
     if (len > 0 && b[len - 1] == '\r') --len;
     pos = end + 1;
     ++lineno;
     return true;
   }
-  [[noreturn]] void fail(const std::string& what) const {
-    throw std::runtime_error(path + ", line " + std::to_string(lineno) + ": " + what);
+  [[noreturn]] void fail(const std::string& what) const { fail_at(lineno, what); }
+  [[noreturn]] void fail_at(long line, const std::string& what) const {
+    throw std::runtime_error(path + ", line " + std::to_string(line) + ": " + what);
   }
   std::string field(size_t a, size_t n) const {
     if (a >= len) return std::string();
@@ -115,6 +119,241 @@ inline int parse_int(const LineReader& L, size_t a, size_t n, const char* what) 
 
 }  // namespace detail
 
+/// Which header column holds each observation read: for every system letter, its number of
+/// declared types (-1: not declared in the header), whether its rows are kept, and per frequency
+/// slot the 0-based column of C, L, D, S (-1: not read).  ``names`` (e.g. "C1C") only label errors.
+struct ObsColumns {
+  std::array<int, 128> n_types;
+  std::array<bool, 128> want{};
+  std::array<std::array<std::array<int, 4>, kObsSlots>, 128> col;
+  std::array<std::array<std::array<std::string, 4>, kObsSlots>, 128> names;
+  /// RINEX 3.05 Sec. 5.1: a missing observation may be written as 0.0; true turns a 0.0 code or
+  /// phase into NaN, false keeps the number as written.
+  bool zero_is_missing = true;
+  ObsColumns() {
+    n_types.fill(-1);
+    for (auto& a : col)
+      for (auto& b : a) b.fill(-1);
+  }
+};
+
+/// Parse the records after END OF HEADER: text[offset, size) whose first line is line
+/// ``lineno0 + 1`` of the file.  Epochs with flag 0 or 1 are kept, events (2-5) skipped with
+/// their special records, flag 6 epochs read and dropped (as the header-driven reader does).
+inline void read_rinex3_obs_body(const char* text, size_t size, const std::string& path, size_t offset,
+                                 long lineno0, const ObsColumns& c, RinexObsTable& out) {
+  detail::LineReader L{text, size, path};
+  L.pos = offset;
+  L.lineno = lineno0;
+  constexpr int W = kObsSlots * kObsPerSlot;
+  while (L.next()) {
+    if (L.len == 0 || detail::blank(L.b, L.len)) continue;
+    if (L.b[0] != '>') L.fail("bad record: expected an epoch line starting with '>'");
+    auto epoch_int = [&](size_t a, size_t n) {
+      double v;
+      if (a + n > L.len || !detail::parse_num(L.b + a, n, v) || !std::isfinite(v) || v != std::floor(v))
+        L.fail("bad record: cannot parse epoch line '" + L.field(0, 35) + "'");
+      return static_cast<int>(v);
+    };
+    const int y = epoch_int(2, 4), mo = epoch_int(7, 2), d = epoch_int(10, 2), h = epoch_int(13, 2);
+    const int mi = epoch_int(16, 2);
+    double sec;
+    if (L.len < 29 || !detail::parse_num(L.b + 18, 11, sec) || !std::isfinite(sec))
+      L.fail("bad record: cannot parse epoch line '" + L.field(0, 35) + "'");
+    const int flag = epoch_int(31, 1), nsat = epoch_int(32, 3);
+    double clk = NAN;
+    if (L.len > 41 && !detail::parse_num(L.b + 41, std::min<size_t>(15, L.len - 41), clk)) {
+      std::string f = L.field(41, 15);
+      while (!f.empty() && f.front() == ' ') f.erase(f.begin());
+      while (!f.empty() && f.back() == ' ') f.pop_back();
+      L.fail("bad number '" + f + "' for receiver clock offset");
+    }
+    if (flag > 6 || nsat < 0)
+      L.fail("bad record: epoch flag " + std::to_string(flag) + " / count " + std::to_string(nsat) + " out of range");
+    const long ep_line = L.lineno;
+    if (flag >= 2 && flag <= 5) {  // event: nsat header lines follow
+      for (int i = 0; i < nsat; ++i)
+        if (!L.next())
+          L.fail_at(L.lineno + 1, "unexpected end of file while reading the special records of the event on line " +
+                                      std::to_string(ep_line));
+      continue;
+    }
+    if (!(mo >= 1 && mo <= 12 && d >= 1 && d <= 31 && h >= 0 && h <= 23 && mi >= 0 && mi <= 59 && sec >= 0 && sec < 61))
+      L.fail("bad record: impossible epoch date/time");
+    const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
+                     h * 3600.0 + mi * 60.0 + sec;
+    const bool keep = flag == 0 || flag == 1;
+    const int e = static_cast<int>(out.epoch_t_gps_s.size());
+    for (int i = 0; i < nsat; ++i) {
+      if (!L.next())
+        L.fail_at(L.lineno + 1, "unexpected end of file while reading the satellites of the epoch on line " +
+                                    std::to_string(ep_line));
+      if (L.len > 0 && L.b[0] == '>')
+        L.fail("bad record: epoch on line " + std::to_string(ep_line) + " announces " + std::to_string(nsat) +
+               " satellites, found fewer");
+      const unsigned char s = L.len > 0 ? static_cast<unsigned char>(L.b[0]) : ' ';
+      if (s >= 128 || c.n_types[s] < 0)
+        L.fail("bad record: satellite '" + L.field(0, 3) + "' of an undeclared system");
+      if (!keep || !c.want[s]) continue;
+      const int prn = detail::parse_int(L, 1, 2, "satellite number");
+      out.row_epoch.push_back(e);
+      out.row_sys.push_back(s);
+      out.row_prn.push_back(prn);
+      const size_t base = out.obs.size();
+      out.obs.resize(base + W, NAN);
+      for (int k = 0; k < kObsSlots; ++k) {
+        for (int q = 0; q < 4; ++q) {
+          const int cq = c.col[s][k][q];
+          if (cq < 0) continue;
+          const size_t a = 3 + 16 * static_cast<size_t>(cq);
+          if (q == 1) out.obs[base + k * kObsPerSlot + 4] = 0.0;  // LLI: 0 where blank or beyond the line
+          if (a >= L.len) continue;
+          double v;
+          if (!detail::parse_num(L.b + a, std::min<size_t>(14, L.len - a), v)) {
+            std::string f = L.field(a, 14);
+            while (!f.empty() && f.front() == ' ') f.erase(f.begin());
+            while (!f.empty() && f.back() == ' ') f.pop_back();
+            L.fail("bad number '" + f + "' for observation " + c.names[s][k][q] + " of " + L.field(0, 3));
+          }
+          if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;  // 0.000: not observed
+          out.obs[base + k * kObsPerSlot + q] = v;
+          if (q == 1 && a + 14 < L.len) {
+            const char lli = L.b[a + 14];
+            out.obs[base + k * kObsPerSlot + 4] = (lli >= '0' && lli <= '9') ? lli - '0' : 0.0;
+          }
+        }
+      }
+    }
+    if (keep) {
+      out.epoch_t_gps_s.push_back(t);
+      out.epoch_flag.push_back(flag);
+      out.epoch_clock_s.push_back(clk);
+    }
+  }
+}
+
+/// The records of a RINEX 2.10/2.11 file after END OF HEADER (Gurtner & Estey 2007, RINEX 2.11
+/// Sec. 5 and Table A1): an epoch line (2-digit year, flag in column 29, satellite count and up to
+/// 12 satellites, continued on further lines), then per satellite ceil(n/5) lines of 16-character
+/// fields.  One list of types for every system: ``c.col`` of each wanted system holds columns of
+/// that list; a blank system letter means GPS.  Slot 0 only.
+inline void read_rinex2_obs_body(const char* text, size_t size, const std::string& path, size_t offset,
+                                 long lineno0, int n_types, const ObsColumns& c, RinexObsTable& out) {
+  detail::LineReader L{text, size, path};
+  L.pos = offset;
+  L.lineno = lineno0;
+  constexpr int W = kObsSlots * kObsPerSlot;
+  const int nlines = std::max(1, (n_types + 4) / 5);
+  struct Line { const char* b; size_t len; long lineno; };
+  std::vector<Line> obs_lines(static_cast<size_t>(nlines));
+  std::vector<std::array<char, 3>> sats;
+  sats.reserve(64);
+  auto trimmed = [](std::string f) {
+    while (!f.empty() && f.front() == ' ') f.erase(f.begin());
+    while (!f.empty() && f.back() == ' ') f.pop_back();
+    return f;
+  };
+  auto int_field = [&](size_t a, size_t n, int& v) {  // a field cut by the end of the line: what is there
+    double x;
+    if (a >= L.len || !detail::parse_num(L.b + a, std::min(n, L.len - a), x) || !std::isfinite(x) || x != std::floor(x))
+      return false;
+    v = static_cast<int>(x);
+    return true;
+  };
+  while (L.next()) {
+    if (L.len == 0 || detail::blank(L.b, L.len)) continue;
+    const long ep_line = L.lineno;
+    int flag = 0, nsat = 0;
+    if (!int_field(28, 1, flag) || !int_field(29, 3, nsat))
+      L.fail("bad record: cannot parse epoch flag / satellite count '" + L.field(26, 6) + "'");
+    int y = 1, mo = 1, d = 1, h = 0, mi = 0;
+    double sec = 0.0;
+    if (!(flag >= 2 && flag <= 5)) {
+      if (!int_field(1, 2, y) || !int_field(4, 2, mo) || !int_field(7, 2, d) || !int_field(10, 2, h) ||
+          !int_field(13, 2, mi) || L.len <= 15 || !detail::parse_num(L.b + 15, std::min<size_t>(11, L.len - 15), sec) ||
+          !std::isfinite(sec))
+        L.fail("bad record: cannot parse epoch line '" + L.field(0, 32) + "'");
+      y += y < 80 ? 2000 : 1900;
+    }
+    double clk = NAN;
+    if (L.len > 68 && !detail::parse_num(L.b + 68, std::min<size_t>(12, L.len - 68), clk))
+      L.fail("bad number '" + trimmed(L.field(68, 12)) + "' for receiver clock offset");
+    if (flag > 6 || nsat < 0)
+      L.fail("bad record: epoch flag " + std::to_string(flag) + " / count " + std::to_string(nsat) + " out of range");
+    if (flag >= 2 && flag <= 5) {
+      for (int i = 0; i < nsat; ++i)
+        if (!L.next())
+          L.fail_at(L.lineno + 1, "unexpected end of file while reading the special records of the event on line " +
+                                      std::to_string(ep_line));
+      continue;
+    }
+    if (!(mo >= 1 && mo <= 12 && d >= 1 && d <= 31 && h >= 0 && h <= 23 && mi >= 0 && mi <= 59 && sec >= 0 && sec < 61))
+      L.fail("bad record: impossible epoch date/time");
+    const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
+                     h * 3600.0 + mi * 60.0 + sec;
+    const bool keep = flag == 0 || flag == 1;
+    const int e = static_cast<int>(out.epoch_t_gps_s.size());
+    sats.clear();
+    while (true) {  // the satellite list: columns 33-68 of the epoch line and of its continuation lines
+      for (int k = 0; k < 12; ++k) {
+        const size_t a = 32 + 3 * static_cast<size_t>(k);
+        if (a >= L.len || a >= 68) break;
+        const size_t n = std::min<size_t>({3, L.len - a, 68 - a});
+        if (detail::blank(L.b + a, n)) continue;
+        std::array<char, 3> sid{' ', ' ', ' '};
+        for (size_t q = 0; q < n; ++q) sid[q] = L.b[a + q];
+        sats.push_back(sid);
+      }
+      if (static_cast<int>(sats.size()) >= nsat) break;
+      if (!L.next())
+        L.fail_at(L.lineno + 1, "unexpected end of file while reading the satellite list of the epoch on line " +
+                                    std::to_string(ep_line));
+    }
+    if (static_cast<int>(sats.size()) != nsat)
+      L.fail("bad record: epoch on line " + std::to_string(ep_line) + " announces " + std::to_string(nsat) +
+             " satellites, lists " + std::to_string(sats.size()));
+    for (const auto& sid : sats) {
+      for (int q = 0; q < nlines; ++q) {
+        if (!L.next())
+          L.fail_at(L.lineno + 1, "unexpected end of file while reading the observations of the epoch on line " +
+                                      std::to_string(ep_line));
+        obs_lines[q] = Line{L.b, L.len, L.lineno};
+      }
+      const unsigned char s = sid[0] == ' ' ? 'G' : static_cast<unsigned char>(sid[0]);
+      if (!keep || s >= 128 || !c.want[s]) continue;
+      double prn_v;
+      const std::string prn_txt(sid.data() + 1, 2);
+      if (!detail::parse_num(prn_txt.data(), 2, prn_v) || !std::isfinite(prn_v) || prn_v != std::floor(prn_v))
+        L.fail("bad integer '" + prn_txt + "' for satellite number");
+      out.row_epoch.push_back(e);
+      out.row_sys.push_back(s);
+      out.row_prn.push_back(static_cast<int>(prn_v));
+      const size_t base = out.obs.size();
+      out.obs.resize(base + W, NAN);
+      for (int q = 0; q < 4; ++q) {
+        const int cq = c.col[s][0][q];
+        if (cq < 0) continue;
+        const Line& ol = obs_lines[static_cast<size_t>(cq / 5)];
+        const size_t a = 16 * static_cast<size_t>(cq % 5);
+        if (q == 1) out.obs[base + 4] = (a + 14 < ol.len && ol.b[a + 14] >= '0' && ol.b[a + 14] <= '9') ? ol.b[a + 14] - '0' : 0.0;
+        if (a >= ol.len) continue;
+        double v;
+        if (!detail::parse_num(ol.b + a, std::min<size_t>(14, ol.len - a), v)) {
+          std::string f(ol.b + a, std::min<size_t>(14, ol.len - a));
+          L.fail_at(ol.lineno, "bad number '" + trimmed(f) + "' for observation " + c.names[s][0][q]);
+        }
+        if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;
+        out.obs[base + q] = v;
+      }
+    }
+    if (keep) {
+      out.epoch_t_gps_s.push_back(t);
+      out.epoch_flag.push_back(flag);
+      out.epoch_clock_s.push_back(clk);
+    }
+  }
+}
+
 /// Read a RINEX 3 observation file.  prefs: system letter -> up to kObsSlots lists of
 /// 2-character signal codes ("1C", "2W", ...) in order of preference; systems not in prefs are
 /// skipped.  Throws std::runtime_error naming the file and line on malformed input.
@@ -130,7 +369,7 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
   }
   RinexObsTable out;
   out.path = path;
-  detail::LineReader L{text, path};
+  detail::LineReader L{text.data(), text.size(), path};
   if (!L.next() || L.len < 61 || L.field(60, 20).find("RINEX VERSION / TYPE") == std::string::npos)
     L.fail("malformed header: first line is not 'RINEX VERSION / TYPE'");
   {
@@ -195,14 +434,12 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
     if (static_cast<int>(types[s].size()) != n)
       L.fail(std::string("malformed header: SYS / # / OBS TYPES of ") + s + " announces " + std::to_string(n) +
              " types, lists " + std::to_string(types[s].size()));
-  // column index of (system, slot, kind C/L/D/S); -1 absent
-  std::array<std::array<std::array<int, 4>, kObsSlots>, 128> col{};
-  for (auto& a : col)
-    for (auto& b : a) b.fill(-1);
-  std::array<bool, 128> want{};
+  ObsColumns c;
+  for (const auto& [s, ty] : types)
+    if (static_cast<unsigned char>(s) < 128) c.n_types[s] = static_cast<int>(ty.size());
   for (const auto& [s, slots] : prefs) {
     if (static_cast<unsigned char>(s) >= 128) continue;
-    want[s] = types.count(s) > 0;
+    c.want[s] = types.count(s) > 0;
     auto& ch = out.chosen[s];
     const auto& ty = types[s];
     auto index = [&](const std::string& t) {
@@ -212,85 +449,21 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
     };
     for (int k = 0; k < kObsSlots && k < static_cast<int>(slots.size()); ++k) {
       std::string pick;
-      for (const auto& c : slots[k])
-        if (index("L" + c) >= 0) { pick = c; break; }
+      for (const auto& code : slots[k])
+        if (index("L" + code) >= 0) { pick = code; break; }
       if (pick.empty())
-        for (const auto& c : slots[k])
-          if (index("C" + c) >= 0) { pick = c; break; }
+        for (const auto& code : slots[k])
+          if (index("C" + code) >= 0) { pick = code; break; }
       ch[k] = pick;
       if (pick.empty()) continue;
       const char kinds[4] = {'C', 'L', 'D', 'S'};
-      for (int q = 0; q < 4; ++q) col[s][k][q] = index(std::string(1, kinds[q]) + pick);
-    }
-  }
-  std::map<char, int> ntypes;
-  for (const auto& [s, ty] : types) ntypes[s] = static_cast<int>(ty.size());
-  constexpr int W = kObsSlots * kObsPerSlot;
-  while (L.next()) {
-    if (L.len == 0 || detail::blank(L.b, L.len)) continue;
-    if (L.b[0] != '>') L.fail("bad record: expected an epoch line starting with '>'");
-    if (L.len < 35) L.fail("bad record: epoch line too short");
-    const int y = detail::parse_int(L, 2, 4, "epoch year"), mo = detail::parse_int(L, 7, 2, "epoch month");
-    const int d = detail::parse_int(L, 10, 2, "epoch day"), h = detail::parse_int(L, 13, 2, "epoch hour");
-    const int mi = detail::parse_int(L, 16, 2, "epoch minute");
-    double sec;
-    if (!detail::parse_num(L.b + 18, 11, sec) || !std::isfinite(sec)) L.fail("bad record: epoch seconds");
-    const int flag = detail::parse_int(L, 31, 1, "epoch flag");
-    const int nsat = detail::parse_int(L, 32, 3, "number of satellites");
-    if (flag > 6 || nsat < 0) L.fail("bad record: epoch flag / satellite count out of range");
-    const long ep_line = L.lineno;
-    if (flag >= 2 && flag <= 5) {  // event: nsat header lines follow
-      for (int i = 0; i < nsat; ++i)
-        if (!L.next()) L.fail("unexpected end of file in the special records of the event on line " + std::to_string(ep_line));
-      continue;
-    }
-    if (!(mo >= 1 && mo <= 12 && d >= 1 && d <= 31 && h >= 0 && h <= 23 && mi >= 0 && mi <= 59 && sec >= 0 && sec < 61))
-      L.fail("bad record: impossible epoch date/time");
-    const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
-                     h * 3600.0 + mi * 60.0 + sec;
-    const bool keep = flag == 0 || flag == 1;
-    const int e = static_cast<int>(out.epoch_t_gps_s.size());
-    for (int i = 0; i < nsat; ++i) {
-      if (!L.next()) L.fail("unexpected end of file in the satellites of the epoch on line " + std::to_string(ep_line));
-      if (L.len > 0 && L.b[0] == '>')
-        L.fail("bad record: epoch on line " + std::to_string(ep_line) + " announces " + std::to_string(nsat) +
-               " satellites, found fewer");
-      if (L.len < 3) L.fail("bad record: satellite line too short");
-      const char s = L.b[0];
-      if (!ntypes.count(s)) L.fail(std::string("bad record: satellite '") + L.field(0, 3) + "' of an undeclared system");
-      if (!keep || static_cast<unsigned char>(s) >= 128 || !want[s]) continue;
-      const int prn = detail::parse_int(L, 1, 2, "satellite number");
-      out.row_epoch.push_back(e);
-      out.row_sys.push_back(s);
-      out.row_prn.push_back(prn);
-      const size_t base = out.obs.size();
-      out.obs.resize(base + W, NAN);
-      for (int k = 0; k < kObsSlots; ++k) {
-        for (int q = 0; q < 4; ++q) {
-          const int c = col[s][k][q];
-          if (c < 0) continue;
-          const size_t a = 3 + 16 * static_cast<size_t>(c);
-          if (a >= L.len) continue;
-          double v;
-          if (!detail::parse_num(L.b + a, std::min<size_t>(14, L.len - a), v))
-            L.fail("bad number '" + L.field(a, 14) + "' for observation " + std::string(1, "CLDS"[q]) +
-                   out.chosen[s][k] + " of " + L.field(0, 3));
-          if (q <= 1 && v == 0.0) v = NAN;  // 0.000: not observed
-          out.obs[base + k * kObsPerSlot + q] = v;
-          if (q == 1 && a + 14 < L.len) {
-            const char lli = L.b[a + 14];
-            out.obs[base + k * kObsPerSlot + 4] = (lli >= '0' && lli <= '9') ? lli - '0' : 0.0;
-          } else if (q == 1) {
-            out.obs[base + k * kObsPerSlot + 4] = 0.0;
-          }
-        }
+      for (int q = 0; q < 4; ++q) {
+        c.col[s][k][q] = index(std::string(1, kinds[q]) + pick);
+        c.names[s][k][q] = std::string(1, kinds[q]) + pick;
       }
     }
-    if (keep) {
-      out.epoch_t_gps_s.push_back(t);
-      out.epoch_flag.push_back(flag);
-    }
   }
+  read_rinex3_obs_body(text.data(), text.size(), path, L.pos, L.lineno, c, out);
   return out;
 }
 
