@@ -1,6 +1,6 @@
 """Self-calibration states: the IMU-GNSS time offset and the GNSS lever arm
 estimated by the EKF (``[time] estimate_offset``, ``[lever_arm] estimate``;
-docs/algorithms.md section 19), on simulation and on the real walk.
+docs/algorithms.md section 21), on simulation and on the real walk.
 
     python3 bench/selfcal_states.py [--runs 20] [--out docs/results/selfcal_states.md]
 
@@ -204,7 +204,7 @@ def main(argv=None) -> int:
              + ".", "",
              "The EKF estimates the IMU-GNSS time offset t_d (a GNSS record tagged t holds the antenna at",
              "IMU time t - t_d; `[time] estimate_offset`) and the GNSS lever arm (`[lever_arm] estimate`)",
-             "as extra states (docs/algorithms.md section 19).  Simulation: the `car-mems` drive (MEMS IMU",
+             "as extra states (docs/algorithms.md section 21).  Simulation: the `car-mems` drive (MEMS IMU",
              "200 Hz, a stop, two 90 deg turns, a gentle curve) cut to its first 450 s, with RTK-grade loose fixes (5 Hz,",
              "2 cm horizontal, 4 cm vertical, 2 cm/s), one simulator seed per run; the offset is injected by",
              "re-tagging the fixes.  Errors are of the last estimate, horizontal position errors rms over",
@@ -276,7 +276,7 @@ def main(argv=None) -> int:
                   f"horizontal (x, y) components only: {100 * worst_h:.2f} cm ({verdict(worst_h <= 0.03)}), "
                   f"rms(error / sigma) {np.sqrt(np.mean(zh ** 2)):.2f}; all components rms(error / sigma) "
                   f"{np.sqrt(np.mean(zl ** 2)):.2f}.  The vertical component is seen only through the small "
-                  "pitch and roll changes of a road drive (docs/algorithms.md section 19, observability).", ""]
+                  "pitch and roll changes of a road drive (docs/algorithms.md section 21, observability).", ""]
 
     # 3b. odometer (vehicle-constraint) lever arm
     l0, orows = odo_lever_runs(max(1, args.lever_runs // 2))

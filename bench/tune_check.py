@@ -279,7 +279,7 @@ def walk_tight(lines, verdicts, max_runs):
                  "carrier-phase solution).  The tight solution of this walk carries a constant offset of several "
                  "metres from pseudorange biases (docs/results/tight_realdata.md): the innovations do not see it, "
                  "so no white-noise setting makes the position error consistent with its sigma.  Tuned and run "
-                 "with the `[robust]` row screening off (docs/algorithms.md section 19), the hand settings with it "
+                 "with the `[robust]` row screening off (docs/algorithms.md section 20), the hand settings with it "
                  "on.")
 
 
@@ -295,7 +295,7 @@ def main(argv=None) -> int:
     lines = ["# Noise tuning by the innovation likelihood (`insnav tune`)", "",
              f"Commit `{git_commit()}`; command `{COMMAND}`"
              + ("" if argv is None and len(sys.argv) <= 3 else f" (this run: `{' '.join(sys.argv[1:])}`)") + ".", "",
-             "The tuner (docs/algorithms.md section 19) multiplies the noise settings by factors (gyro_arw, acc_vrw, "
+             "The tuner (docs/algorithms.md section 20) multiplies the noise settings by factors (gyro_arw, acc_vrw, "
              "gyro_bias, acc_bias: all axes of each; gnss_pos, gnss_vel: the data's GNSS sigmas) and maximises "
              "the innovation log-likelihood sum_k -(nu' S^-1 nu + ln det S)/2 of the first 70 % of the data by "
              "Nelder-Mead in log space, one C++ run per evaluation.  The last 30 % are held out: hand (or wrong) "

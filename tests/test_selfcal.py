@@ -1,6 +1,6 @@
 """The self-calibration states (``[time] estimate_offset``, ``[lever_arm]
 estimate``; ``cpp/include/insnav/filter/layout.hpp``, docs/algorithms.md
-section 19): exact reduction to the runs without them, recovery of an
+section 21): exact reduction to the runs without them, recovery of an
 injected time offset and lever arm on a short simulated drive, the outputs,
 and bad configuration as one-line errors.  The H columns are checked against
 numerical derivatives in ``cpp/tests/test_selfcal_jacobian.cpp``."""

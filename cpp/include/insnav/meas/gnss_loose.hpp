@@ -24,7 +24,7 @@
 // omega x (omega x l), left out: < 0.05 m/s^2 for l = 1.5 m at 0.2 rad/s).
 // (The time-synchronisation error as an integration-filter state: Groves
 // 2013, ch. 14; lever-arm observability: Hong et al. 2005, docs/algorithms.md
-// section 19.)
+// section 21.)
 #pragma once
 
 #include "insnav/earth/wgs84.hpp"

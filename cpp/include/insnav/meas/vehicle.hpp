@@ -65,7 +65,7 @@
 // (the odometer row times 1 + s^); observable only while the body turns
 // (omega_nb_b != 0): the lateral row sees the forward component in yaw turns,
 // the odometer row the lateral one; the vertical component needs roll/pitch
-// rates (Groves 2013, eq. (16.22) differentiated in l; docs/algorithms.md section 19).
+// rates (Groves 2013, eq. (16.22) differentiated in l; docs/algorithms.md section 21).
 // ZUPT (standstill): v_n = 0:  d = dv.
 // ZARU (standstill): omega_ib_b = C_bn omega_ie_n, residual
 //   omega~_ib_b - C~_bn omega_ie_n,  d = dw_b - C_bn [psi x] omega_ie_n
