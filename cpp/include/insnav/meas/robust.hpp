@@ -57,7 +57,9 @@
 //    An alarm excludes that row of that satellite for `cusum_hold_s` and
 //    resets its sums; a fault still there afterwards fails the per-row test
 //    at once.  Not updated while the gate's outage-aware test is active
-//    (after an outage the innovations of every satellite are large together).
+//    (after an outage the innovations of every satellite are large together)
+//    nor in an epoch with fewer than 5 pseudoranges (without a redundant row
+//    a slow drift of the filter itself looks the same on every satellite).
 #pragma once
 
 #include <algorithm>
