@@ -14,8 +14,9 @@ power-on changes its frequency steadily; the rtklibexplorer walk's u-blox
 drift runs from -64 to -81 m/s in two minutes).  A filter whose drift model is
 too tight cannot follow the change; with few satellites the common part of
 the Doppler residuals that the clock should take then goes into the velocity
-(on that walk, losing two of four GPS satellites for 30 s moves the tight
-solution 35 m with the table's PSD and 5 m with the data's own).  So for
+(on that walk, with two of its four GPS satellites lost for 30 s, the
+tight solution moves several times further with the table's PSD than with
+the data's own: docs/results/gate_outages.md).  So for
 real data :func:`clock_model` takes the larger of the table's drift PSD and
 the one the data show (:func:`clock_drift_psd_from_drift`, from the
 single-point drift of every epoch).
@@ -40,14 +41,15 @@ TCXO_CLOCK_DRIFT_PSD = 0.04   # m^2/s^3
 #: lag over which the data's drift PSD is measured [s] (the time the filter may have to predict the
 #: clock with too few satellites to separate it from the velocity)
 DRIFT_PSD_TAU_S = 10.0
-#: median of a chi-square variable with 1 degree of freedom (robust mean square: median(x^2) / this)
-_CHI2_1_MEDIAN = 0.454936423119573
+#: differences further than this many robust standard deviations from their median are outliers
+_OUTLIER_SIGMAS = 5.0
 
 
 def _robust_mean_square(t: np.ndarray, d: np.ndarray, lag_s: float, tol_s: float) -> tuple[float, int]:
-    """median((d(t + lag) - d(t))^2) / 0.4549 over the pairs whose time difference is lag +- tol, and
-    their count (a zero-mean normal difference of variance V gives V; outliers of under half the
-    pairs do not)."""
+    """The mean of (d(t + lag) - d(t))^2 over the pairs whose time difference is lag +- tol, leaving out
+    differences more than 5 robust standard deviations (1.4826 MAD) from their median, and the count of
+    pairs.  A random walk's and a steady ramp's differences are all kept (a ramp's are all equal), a
+    faulty satellite's epochs (under half of the pairs) are not."""
     j = np.searchsorted(t, t + lag_s - tol_s)
     ok = j < len(t)
     i, j = np.flatnonzero(ok), j[ok]
@@ -55,7 +57,10 @@ def _robust_mean_square(t: np.ndarray, d: np.ndarray, lag_s: float, tol_s: float
     diff = d[j[ok]] - d[i[ok]]
     if diff.size == 0:
         return np.nan, 0
-    return float(np.median(diff * diff)) / _CHI2_1_MEDIAN, int(diff.size)
+    med = float(np.median(diff))
+    mad = float(np.median(np.abs(diff - med)))
+    keep = np.abs(diff - med) <= _OUTLIER_SIGMAS * 1.4826 * mad
+    return float(np.mean(diff[keep] ** 2)), int(diff.size)
 
 
 def clock_drift_psd_from_drift(t_s, drift_mps, tau_s: float = DRIFT_PSD_TAU_S, min_pairs: int = 20) -> float:
@@ -65,10 +70,12 @@ def clock_drift_psd_from_drift(t_s, drift_mps, tau_s: float = DRIFT_PSD_TAU_S, m
     For ``d' = w_d`` with PSD ``q`` observed with white noise of variance ``s^2`` per epoch, the
     lag-``tau`` difference has ``V(tau) = q tau + 2 s^2`` (Brown & Hwang, sec. 9.3; the structure
     function of a random walk), so ``q = (V(tau) - V(tau0)) / (tau - tau0)`` with ``tau0`` the epoch
-    interval removes the noise.  ``V`` is the robust mean square of the differences
-    (``median / 0.4549``), so a faulty satellite's epochs (under half of the pairs) do not raise it.
-    A steady frequency change ``r`` [m/s^2] (warm-up) adds ``r^2 tau^2`` to ``V(tau)``: the
-    returned PSD then covers that change over ``tau``, which is what the filter has to follow.
+    interval removes the noise.  ``V`` is the mean square of the differences without the outliers
+    (further than 5 x 1.4826 MAD from their median), so a faulty satellite's epochs (under half of
+    the pairs) do not raise it.
+    A steady frequency change ``r`` [m/s^2] (warm-up) adds ``r^2 tau^2`` to ``V(tau)`` (so
+    ``r^2 (tau + tau0)`` to ``q``): the returned PSD then covers that change over ``tau``, which is
+    what the filter has to follow.
 
     Parameters
     ----------
