@@ -113,14 +113,14 @@ def test_walk_clock_drift_psd_is_the_datas(walk):
 def test_walk_gps_wrong_prn_stays_within_20_m(walk):
     """One GPS satellite's signal labelled as another's for 30 s (2 of the walk's 4 satellites
     lost): the default tight EKF rejects the mislabelled rows at once and stays within 20 m of the
-    clean run (194 m with the TCXO table's clock and the CUSUM acting on 4 pseudoranges); with the
+    clean run (194 m with the TCXO table's clock and a CUSUM acting on 2-3 pseudoranges); with the
     table's drift PSD the two satellites left pull the solution further than free inertial
     coasting would (the common Doppler change of the warming clock goes into the velocity)."""
     g, obs, t_a = walk["g"], walk["obs"], walk["t_a"]
     prns = g._gps_sats(obs, t_a, t_a + 30.0)
     _, sol = walk["run"](g.inject(obs, "wrong PRN", t_a, 30.0, prns))
     assert _deviation_m(sol, walk["clean"]) < 20.0
-    assert sol.summary["cusum_alarms"] == 0  # never more than 4 pseudoranges: no CUSUM
+    assert sol.summary["cusum_alarms"] == 0  # 2-3 pseudoranges during the fault: no CUSUM
     assert sol.summary["rejected_sats"] >= 3 and sol.summary["health"]["healthy"]
     # every mislabelled row is flagged rejected, in every epoch of the fault: neither the gate nor its
     # reopening ever applies a row the screening rejected
@@ -180,16 +180,21 @@ def test_cusum_held_rows_are_flagged_rejected_and_counted(uav_all):
     assert np.any(sol.sat_flag[inp.prn == faults[0]["prn"], 0] == 2)
 
 
-def test_cusum_does_not_act_with_four_pseudoranges():
-    """seed004-uav keeps the paper's 4 satellites: without a redundant pseudorange a slow drift of
-    the filter itself shows on every satellite alike, and a CUSUM would exclude good satellites
-    (2 false alarms and 118 rows held out on this clean run before the redundancy condition).  The
-    per-row screening still runs."""
+def test_cusum_acts_only_with_enough_pseudoranges():
+    """seed004-uav keeps the paper's 4 satellites: with the default cusum_min_pseudoranges = 4 the
+    CUSUM runs there (measured 2 alarms on this clean run); asking for 5 switches it off in every
+    epoch while the per-row screening still runs; the key is validated."""
+    from insnav.config import ConfigError
+
     ds = insnav.simulate("seed004-uav", seed=1)
     ds.scenario = {k: v for k, v in ds.scenario.items() if k != "run"}  # insnav's defaults, screening on
-    sol = insnav.run(ds, coupling="tight", output_decimation=20)
-    assert sol.summary["robust_screening"] is True
-    assert sol.summary["cusum_alarms"] == 0 and sol.summary["cusum_excluded"] == 0
+    four = insnav.run(ds, coupling="tight", output_decimation=20)
+    five = insnav.run(ds, coupling="tight", output_decimation=20, robust=Robust(cusum_min_pseudoranges=5))
+    assert four.summary["robust_screening"] is True and four.summary["cusum_alarms"] >= 1
+    assert five.summary["cusum_alarms"] == 0 and five.summary["cusum_excluded"] == 0
+    assert five.summary["flagged_epochs"] > 0  # the screening itself still acts
+    with pytest.raises(ConfigError, match="cusum_min_pseudoranges"):
+        Robust(cusum_min_pseudoranges=-1).validate()
 
 
 # ------------------------------------------------------------------ the health verdict's row pass

@@ -299,9 +299,9 @@ class TightEngine {
     standardize(alpha);
     const int m0 = meas_.linear().rows();
     bool alarm = false;
-    int n_pr = 0;  // the CUSUM needs redundancy: with 4 pseudoranges or fewer a slow drift of the filter
-    for (int r = 0; r < m0; ++r) n_pr += row_kind_[r] == 0 ? 1 : 0;  // cannot be told from one satellite's
-    if (cusum && rc.cusum_h > 0.0 && n_pr >= kCusumMinPseudoranges) {
+    int n_pr = 0;  // with too few pseudoranges to pin position and clock, the filter's own coasting drift
+    for (int r = 0; r < m0; ++r) n_pr += row_kind_[r] == 0 ? 1 : 0;  // shows on every satellite (robust.hpp, 4.)
+    if (cusum && rc.cusum_h > 0.0 && n_pr >= rc.cusum_min_pseudoranges) {
       const double clip = std::sqrt(rc.chi2_row);
       for (int r = 0; r < m0; ++r) {
         SatObservation& s = work_[row_sat_[r]];
@@ -403,7 +403,6 @@ class TightEngine {
   bool cut_[2 * kMaxMeasRows] = {};  // rows left out by a CUSUM exclusion this epoch
   // CUSUM per (system, prn, row kind) (robust.hpp, 4.)
   static constexpr int kSatKeys = 4 * 64 * 2;
-  static constexpr int kCusumMinPseudoranges = 5;  // position + clock + one redundant row
   double cusum_pos_[kSatKeys] = {}, cusum_neg_[kSatKeys] = {}, excluded_until_[kSatKeys] = {};
   const SatObservation* sats_ = nullptr;
 };
