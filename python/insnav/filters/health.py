@@ -24,6 +24,12 @@ GNSS span
 
 ``insnav run`` prints the verdict and exits with status 2 and a one-line
 reason when the run is unhealthy (``--allow-unhealthy`` writes it anyway).
+
+The per-row tests (sigmas, positions, steps, speeds, heights) are one
+compiled pass over the solution's columns as they are, strided views included
+(``_core.scan_solution``, ``cpp/include/insnav/engine/solution_scan.hpp``);
+``tests/test_tight_walk_faults.py`` checks it against the numpy expressions
+of the definitions above.
 """
 from __future__ import annotations
 
