@@ -50,7 +50,7 @@ SIGMA = (f"{_CPP}filter/rbukf.hpp", f"{_CPP}filter/ukf.hpp", f"{_CPP}filter/augm
 TIGHT = INS + (f"{_CPP}engine/closed_loop.hpp", f"{_CPP}engine/tight_engine.hpp", f"{_CPP}filter/ekf.hpp",
                f"{_CPP}filter/error_model_linear.hpp", f"{_CPP}filter/kalman_update.hpp",
                f"{_CPP}filter/nis_gate.hpp", f"{_CPP}meas/pseudorange.hpp", f"{_CPP}meas/robust.hpp",
-               f"{_PY}filters/tight.py", f"{_PY}filters/_setup.py", f"{_PY}config.py")
+               f"{_PY}filters/tight.py", f"{_PY}filters/_setup.py", f"{_PY}config.py", f"{_PY}gnss/clock.py")
 #: the simulator (trajectory, IMU errors, loose fixes)
 SIM = (f"{_PY}sim/scenario.py", f"{_PY}sim/trajectory.py", f"{_PY}sim/imu.py", f"{_PY}sim/gnss_loose.py")
 #: simulated raw GNSS (pseudorange, range rate, constellation)
@@ -96,7 +96,9 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                                f"{_PY}scenarios/car-mems-outage60.toml", f"{_PY}scenarios/car-mems-outage120.toml",
                                f"{_PY}analysis/report.py") + KFGINS + LOOSE_EKF + SIM,
     "cli_end_to_end.md": ("bench/cli_end_to_end.py", f"{_PY}cli/run.py", f"{_PY}data/textio.py",
-                          f"{_PY}io/imu_csv.py", f"{_PY}io/gnss_files.py") + KFGINS + LOOSE_EKF + SIGMA,
+                          f"{_PY}io/imu_csv.py", f"{_PY}io/gnss_files.py", f"{_PY}filters/health.py",
+                          f"{_CPP}engine/solution_scan.hpp", "cpp/bindings/bind_checks.cpp")
+                         + KFGINS + LOOSE_EKF + SIGMA,
     "gnss_geometry.md": ("bench/gnss_residuals.py", f"{_PY}gnss/measurements.py", f"{_PY}gnss/glonass.py",
                          f"{_PY}gnss/gpstime.py", f"{_PY}gnss/sp3.py", f"{_PY}gnss/galbds.py") + RINEX,
     "spp_smartloc.md": ("bench/spp_smartloc.py", f"{_PY}filters/spp.py", f"{_PY}gnss/spp.py",

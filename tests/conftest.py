@@ -64,6 +64,8 @@ SLOW_TESTS = (
     "tests/test_mechanization.py::test_stationary_one_hour",
     "tests/test_cli.py::test_demo_quick_writes_the_report",
     "tests/test_interrupt.py::test_sigint_stops_a_run_fast_with_one_line_and_no_output",
+    "tests/test_tight_walk_faults.py::test_walk_fault_campaign_meets_its_targets",
+    "tests/test_gate_outages.py::test_kfgins_track_default_gate_never_worse_than_gate_off",
 )
 
 

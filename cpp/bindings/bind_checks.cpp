@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "common.hpp"
+#include "insnav/engine/solution_scan.hpp"
 #include "insnav/ins/imu_scan.hpp"
 
 namespace insnav::py_bind {
@@ -126,6 +127,63 @@ py::tuple nav_rows_to_degrees(const py::object& llh_o, const py::object& rpy_o, 
   return py::make_tuple(first_bad, any_bad);
 }
 
+/// Any float64 array (strides kept: the Solution's columns are views of the engine's row blocks).
+using Strided = py::array_t<double, 0>;
+
+Strided require_float64(const py::object& o, py::ssize_t n, int ndim, const char* name) {
+  if (!py::isinstance<py::array>(o) || py::reinterpret_borrow<py::array>(o).dtype().kind() != 'f' ||
+      py::reinterpret_borrow<py::array>(o).itemsize() != 8)
+    throw py::value_error(std::string(name) + ": expected a float64 array");
+  auto a = py::reinterpret_borrow<Strided>(o);
+  if (a.ndim() != ndim || a.shape(0) != n || (ndim == 2 && a.shape(1) != 3))
+    throw py::value_error(std::string(name) + ": expected shape (" + std::to_string(n) + (ndim == 2 ? ", 3)" : ",)"));
+  return a;
+}
+
+// The per-row part of the health verdict in one pass (insnav/engine/solution_scan.hpp).
+py::dict scan_solution(const py::object& lat_deg_o, const py::object& lon_deg_o, const py::object& h_m_o,
+                       const py::object& v_n_o, const py::list& sigmas, double h_lo_m, double h_hi_m, double r_m) {
+  const py::ssize_t n = py::isinstance<py::array>(lat_deg_o) ? py::reinterpret_borrow<py::array>(lat_deg_o).shape(0) : -1;
+  if (n < 0) throw py::value_error("scan_solution: lat_deg must be an array");
+  Strided lat = require_float64(lat_deg_o, n, 1, "scan_solution: lat_deg");
+  Strided lon = require_float64(lon_deg_o, n, 1, "scan_solution: lon_deg");
+  Strided h = require_float64(h_m_o, n, 1, "scan_solution: h_m");
+  Strided v = require_float64(v_n_o, n, 2, "scan_solution: v_n");
+  if (sigmas.size() > 3) throw py::value_error("scan_solution: at most 3 sigma blocks");
+  std::vector<Strided> sig;
+  RowBlock3 blocks[3];
+  for (std::size_t b = 0; b < sigmas.size(); ++b) {
+    sig.push_back(require_float64(sigmas[b], n, 2, "scan_solution: sigma"));
+    blocks[b] = RowBlock3{sig.back().data(), sig.back().strides(0) / 8, sig.back().strides(1) / 8};
+  }
+  const auto col = [](const Strided& a) { return Column{a.data(), a.strides(0) / 8}; };
+  SolutionScan s;
+  {
+    py::gil_scoped_release release;
+    s = insnav::scan_solution(n, col(lat), col(lon), col(h), RowBlock3{v.data(), v.strides(0) / 8, v.strides(1) / 8},
+                              blocks, static_cast<int>(sig.size()), h_lo_m, h_hi_m, r_m);
+  }
+  py::dict d;
+  py::list first, first_col, rows;
+  for (std::size_t b = 0; b < sig.size(); ++b) {
+    first.append(s.first_bad_sigma[b]);
+    first_col.append(s.first_bad_sigma_col[b]);
+    rows.append(s.bad_sigma_rows[b]);
+  }
+  d["first_bad_sigma"] = first;
+  d["first_bad_sigma_col"] = first_col;
+  d["bad_sigma_rows"] = rows;
+  d["first_nonfinite_pos"] = s.first_nonfinite_pos;
+  d["max_step_m"] = s.max_step_m;
+  d["max_step_row"] = s.max_step_row;
+  d["any_finite_step"] = s.any_finite_step;
+  d["max_speed_mps"] = s.max_speed_mps;
+  d["max_speed_row"] = s.max_speed_row;
+  d["any_finite_speed"] = s.any_finite_speed;
+  d["first_height_out"] = s.first_height_out;
+  return d;
+}
+
 }  // namespace
 
 void bind_checks(py::module_& m) {
@@ -137,6 +195,13 @@ void bind_checks(py::module_& m) {
         "array, the first decreasing / not increasing time, the count of repeated times, the nominal interval "
         "dt0 [s] (median), the first sample over max_rate_rps [rad/s] / max_accel_mps2 [m/s^2], the gaps "
         "(interval > gap_factor * dt0) and the longest, and the sum of dv_b [m/s].  Indices are -1 when none.");
+  m.def("scan_solution", &scan_solution, py::arg("lat_deg"), py::arg("lon_deg"), py::arg("h_m"), py::arg("v_n"),
+        py::arg("sigmas"), py::arg("h_lo_m"), py::arg("h_hi_m"), py::arg("r_m"),
+        "One pass over a solution's rows for its health verdict (float64 arrays, any strides): per sigma "
+        "block (n, 3) the first row with a value not finite or <= 0, its column and the count of such rows; "
+        "the first non-finite position; the longest step between rows [m] on a sphere of radius r_m and the "
+        "highest speed [m/s] (NaN skipped, first index of the maximum); the first finite row with a height "
+        "outside [h_lo_m, h_hi_m].  Indices are -1 when none.");
   m.def("rotation_about_at", &rotation_about_at, py::arg("t"), py::arg("dtheta_b"), py::arg("axis_b"),
         py::arg("query"),
         "The rotation about the body axis axis_b [rad] integrated from the start of the first sample to each "

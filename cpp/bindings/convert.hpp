@@ -114,7 +114,8 @@ inline TightConfig tight_config_from(const py::dict& d) {
                  {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows", "robust_huber", "robust_huber_k",
                   "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
-                   "robust_cusum_hold_s", "tdcp", "tdcp_slip_threshold_cycles", "tdcp_chi2_row", INSNAV_SELFCAL_KEYS});
+                   "robust_cusum_hold_s", "robust_cusum_min_pseudoranges", "tdcp", "tdcp_slip_threshold_cycles",
+                   "tdcp_chi2_row", INSNAV_SELFCAL_KEYS});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
@@ -139,6 +140,8 @@ inline TightConfig tight_config_from(const py::dict& d) {
   r.cusum_k = num(d, "robust_cusum_k", r.cusum_k);
   r.cusum_h = num(d, "robust_cusum_h", r.cusum_h);
   r.cusum_hold_s = num(d, "robust_cusum_hold_s", r.cusum_hold_s);
+  r.cusum_min_pseudoranges = static_cast<int>(num(d, "robust_cusum_min_pseudoranges", r.cusum_min_pseudoranges));
+  if (r.cusum_min_pseudoranges < 0) throw py::value_error("robust_cusum_min_pseudoranges must be >= 0");
   if (!(r.huber_k > 0.0)) throw py::value_error("robust_huber_k must be > 0");
   if (r.fde_max_sats < 0 || r.fde_min_rows < 0) throw py::value_error("robust_fde_max_sats, robust_fde_min_rows must be >= 0");
   if (!(r.cusum_k >= 0.0) || !(r.cusum_h >= 0.0) || !(r.cusum_hold_s >= 0.0))

@@ -155,6 +155,16 @@ def scan_imu(
     max_accel_mps2: float = ...,
     gap_factor: float = ...,
 ) -> dict[str, Any]: ...
+def scan_solution(
+    lat_deg: npt.NDArray[np.float64],  # (N,) any strides
+    lon_deg: npt.NDArray[np.float64],
+    h_m: npt.NDArray[np.float64],
+    v_n: npt.NDArray[np.float64],  # (N, 3)
+    sigmas: list[npt.NDArray[np.float64]],  # up to 3 blocks (N, 3)
+    h_lo_m: float,
+    h_hi_m: float,
+    r_m: float,
+) -> dict[str, Any]: ...
 def rotation_about_at(
     t: npt.ArrayLike,
     dtheta_b: npt.ArrayLike,

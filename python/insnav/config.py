@@ -463,6 +463,10 @@ class Robust:
         drift ``k`` (0.5) and alarm threshold ``h`` (8; 0 = off).
     cusum_hold_s : float
         An alarm excludes that satellite's row this long [s] (60).
+    cusum_min_pseudoranges : int
+        The CUSUM acts only in epochs with at least this many pseudoranges
+        (4: with fewer, position and clock are not pinned by the epoch and
+        the filter's coasting drift shows on every satellite alike).
     """
 
     screening: bool | None = None
@@ -479,6 +483,7 @@ class Robust:
     cusum_k: float = 0.5
     cusum_h: float = 8.0
     cusum_hold_s: float = 60.0
+    cusum_min_pseudoranges: int = 4
 
     def validate(self, prefix: str = "robust") -> "Robust":
         def bad(key, value, allowed):
@@ -498,7 +503,7 @@ class Robust:
         v = self.clock_jump_min_rows
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             bad("clock_jump_min_rows", v, "an integer >= 1")
-        for key in ("fde_max_sats", "fde_min_rows"):
+        for key in ("fde_max_sats", "fde_min_rows", "cusum_min_pseudoranges"):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 bad(key, v, "an integer >= 0")

@@ -24,6 +24,12 @@ GNSS span
 
 ``insnav run`` prints the verdict and exits with status 2 and a one-line
 reason when the run is unhealthy (``--allow-unhealthy`` writes it anyway).
+
+The per-row tests (sigmas, positions, steps, speeds, heights) are one
+compiled pass over the solution's columns as they are, strided views included
+(``_core.scan_solution``, ``cpp/include/insnav/engine/solution_scan.hpp``);
+``tests/test_tight_walk_faults.py`` checks it against the numpy expressions
+of the definitions above.
 """
 from __future__ import annotations
 
@@ -56,6 +62,32 @@ def _record_rows(sol) -> np.ndarray:
     if inn.ndim == 2 and inn.shape[0] == np.size(sol.gnss_t):
         return np.isfinite(inn).sum(axis=1).astype(float)
     return np.full(np.size(sol.gnss_t), np.nan)
+
+
+#: the 1-sigma blocks tested for a broken covariance, in this order
+_SIGMA_BLOCKS = ("sigma_pos_n_m", "sigma_vel_n_mps", "sigma_att_deg")
+
+
+def _f64(a, shape) -> np.ndarray:
+    """``a`` as float64 of ``shape`` without a copy when it already is (strided views pass as they are)."""
+    a = np.asarray(a)
+    if a.dtype != np.float64:
+        a = a.astype(np.float64)
+    return a.reshape(shape) if a.shape != shape else a
+
+
+def _scan_rows(sol, t) -> dict:
+    """:func:`insnav._core.scan_solution` over the solution's rows (one pass, the GIL released)."""
+    from .. import _core
+
+    n = len(t)
+    sigmas = []
+    for name in _SIGMA_BLOCKS:
+        s = getattr(sol, name, None)
+        sigmas.append(_f64(s, (n, 3)) if s is not None and np.size(s) else np.ones((n, 3)))
+    return _core.scan_solution(_f64(sol.lat_deg, (n,)), _f64(sol.lon_deg, (n,)), _f64(sol.h_m, (n,)),
+                               _f64(sol.v_n, (n, 3)), sigmas, float(HEIGHT_RANGE_M[0]), float(HEIGHT_RANGE_M[1]),
+                               _R_EARTH_M)
 
 
 def assess(sol, imu_t_end: float | None = None) -> dict:
@@ -100,44 +132,31 @@ def assess(sol, imu_t_end: float | None = None) -> dict:
     if word == "far too optimistic":
         out["warnings"].append(f"the GNSS innovations are {ratio:.3g} times their expected size (mean NIS / rows; "
                                "about 1 when consistent): the configured IMU noise or GNSS sigmas are far too small")
-    # broken covariance
-    for name in ("sigma_pos_n_m", "sigma_vel_n_mps", "sigma_att_deg"):
-        s = np.asarray(getattr(sol, name, np.zeros((0, 3))), float)
-        bad = ~(np.isfinite(s) & (s > 0))
-        if s.size and bad.any():
-            i = int(np.flatnonzero(bad.any(axis=1))[0])
-            reasons.append(f"broken covariance: {name} is {s[i][bad[i]][0]:.3g} at t = {t[i]:.3f} s "
-                           f"({int(bad.any(axis=1).sum())} of {len(s)} rows)")
+    # broken covariance, km-scale jumps: one compiled pass over the rows (engine/solution_scan.hpp)
+    sc = _scan_rows(sol, t)
+    for b, name in enumerate(_SIGMA_BLOCKS):
+        i = sc["first_bad_sigma"][b]
+        if i >= 0:
+            value = np.asarray(getattr(sol, name), float)[i, sc["first_bad_sigma_col"][b]]
+            reasons.append(f"broken covariance: {name} is {value:.3g} at t = {t[i]:.3f} s "
+                           f"({sc['bad_sigma_rows'][b]} of {len(t)} rows)")
             break
-    # km-scale jumps
-    lat = np.radians(np.asarray(sol.lat_deg, float))
-    lon = np.radians(np.asarray(sol.lon_deg, float))
-    h = np.asarray(sol.h_m, float)
-    finite = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
-    if not finite.all():
-        i = int(np.flatnonzero(~finite)[0])
-        reasons.append(f"position not finite from t = {t[i]:.3f} s")
-    step = np.zeros(0)
-    if len(t) > 1:
-        dn = np.diff(lat) * _R_EARTH_M
-        de = np.diff(lon) * _R_EARTH_M * np.cos(lat[:-1])
-        step = np.sqrt(dn ** 2 + de ** 2 + np.diff(h) ** 2)
-    out["max_step_m"] = float(np.nanmax(step)) if step.size and np.isfinite(step).any() else 0.0
-    speed = np.linalg.norm(np.asarray(sol.v_n, float), axis=1) if len(t) else np.zeros(0)
-    out["max_speed_mps"] = float(np.nanmax(speed)) if speed.size and np.isfinite(speed).any() else 0.0
+    if sc["first_nonfinite_pos"] >= 0:
+        reasons.append(f"position not finite from t = {t[sc['first_nonfinite_pos']]:.3f} s")
+    out["max_step_m"] = float(sc["max_step_m"]) if sc["any_finite_step"] else 0.0
+    out["max_speed_mps"] = float(sc["max_speed_mps"]) if sc["any_finite_speed"] else 0.0
     if out["max_step_m"] > MAX_STEP_M:
-        i = int(np.nanargmax(step))
-        reasons.append(f"km-scale jump: the position moves {step[i] / 1000:.3g} km between t = {t[i]:.3f} and "
-                       f"{t[i + 1]:.3f} s")
+        i = sc["max_step_row"]
+        reasons.append(f"km-scale jump: the position moves {sc['max_step_m'] / 1000:.3g} km between t = "
+                       f"{t[i]:.3f} and {t[i + 1]:.3f} s")
     elif out["max_speed_mps"] > MAX_SPEED_MPS:
-        i = int(np.nanargmax(speed))
-        reasons.append(f"km-scale jump: speed {speed[i]:.4g} m/s at t = {t[i]:.3f} s")
-    elif finite.any():
+        i = sc["max_speed_row"]
+        reasons.append(f"km-scale jump: speed {sc['max_speed_mps']:.4g} m/s at t = {t[i]:.3f} s")
+    elif sc["first_height_out"] >= 0:
+        i = sc["first_height_out"]
         lo, hi = HEIGHT_RANGE_M
-        out_h = finite & ((h < lo) | (h > hi))
-        if out_h.any():
-            i = int(np.flatnonzero(out_h)[0])
-            reasons.append(f"km-scale jump: height {h[i]:.4g} m at t = {t[i]:.3f} s (outside {lo:g} .. {hi:g} m)")
+        reasons.append(f"km-scale jump: height {float(sol.h_m[i]):.4g} m at t = {t[i]:.3f} s "
+                       f"(outside {lo:g} .. {hi:g} m)")
     # GNSS span
     gt = np.asarray(sol.gnss_t, float)
     used = gt[status == _APPLIED] if status.shape == gt.shape else gt

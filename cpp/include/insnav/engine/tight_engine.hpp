@@ -222,12 +222,14 @@ class TightEngine {
     const double t_ep = core_.state().t;
     const bool outage = core_.gate.outage_aware(t_ep);
     const double alpha = outage ? core_.gate.config().mismatch : 1.0;
+    for (int i = 0; i < ns; ++i) cut_[2 * i] = cut_[2 * i + 1] = false;
     if (rc.screening && rc.cusum_h > 0.0)  // rows a CUSUM alarm excluded (robust.hpp, 4.)
       for (int i = 0; i < ns; ++i)
         for (int kind = 0; kind < 2; ++kind) {
           double& z = kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps;
           if (std::isfinite(z) && excluded_until_[sat_key(work_[i], kind)] > t_ep) {
             z = NAN;
+            cut_[2 * i + kind] = true;
             ++out.cusum_excluded;
           }
         }
@@ -245,7 +247,8 @@ class TightEngine {
     if (out.clock_jump) out.clock_jump[g] = -jump;
     if constexpr (kCanTdcp) tdcp_step(ep, g, out);
     const int m0 = meas_.linear().rows();
-    for (int i = 0; i < ns; ++i) flag_[2 * i] = flag_[2 * i + 1] = SatFlag::kAbsent;
+    for (int i = 0; i < ns; ++i)
+      for (int kind = 0; kind < 2; ++kind) flag_[2 * i + kind] = cut_[2 * i + kind] ? SatFlag::kRejected : SatFlag::kAbsent;
     {
       int row = 0;
       for (int i = 0; i < ns && row < m0; ++i)
@@ -264,6 +267,12 @@ class TightEngine {
       screen_and_weight(ns, alpha, !outage, t_ep, out);
       if (rc.fde_max_sats > 0) exclude_faults(ns, alpha, out);
     }
+    if (rc.screening)  // satellites with a rejected (screened, CUSUM-held or FDE-excluded) or down-weighted row
+      for (int i = 0; i < ns; ++i) {
+        const SatFlag a = flag_[2 * i], b = flag_[2 * i + 1];
+        if (a == SatFlag::kRejected || b == SatFlag::kRejected) ++out.rejected_sats;
+        else if (a == SatFlag::kDownWeighted || b == SatFlag::kDownWeighted) ++out.downweighted_sats;
+      }
     if (out.sat_flag) {
       for (std::int64_t j = ep.begin; j < ep.end; ++j)
         out.sat_flag[2 * j] = out.sat_flag[2 * j + 1] = static_cast<std::int8_t>(SatFlag::kAbsent);
@@ -478,7 +487,9 @@ class TightEngine {
     standardize(alpha);
     const int m0 = meas_.linear().rows();
     bool alarm = false;
-    if (cusum && rc.cusum_h > 0.0) {
+    int n_pr = 0;  // with too few pseudoranges to pin position and clock, the filter's own coasting drift
+    for (int r = 0; r < m0; ++r) n_pr += row_kind_[r] == 0 ? 1 : 0;  // shows on every satellite (robust.hpp, 4.)
+    if (cusum && rc.cusum_h > 0.0 && n_pr >= rc.cusum_min_pseudoranges) {
       const double clip = std::sqrt(rc.chi2_row);
       for (int r = 0; r < m0; ++r) {
         SatObservation& s = work_[row_sat_[r]];
@@ -516,11 +527,6 @@ class TightEngine {
         (kind == 0 ? s.sigma_pr_m : s.sigma_prr_mps) /= std::sqrt(q);
         flag_[2 * row_sat_[r] + kind] = SatFlag::kDownWeighted;
       }
-    }
-    for (int i = 0; i < ns; ++i) {
-      const SatFlag a = flag_[2 * i], b = flag_[2 * i + 1];
-      if (a == SatFlag::kRejected || b == SatFlag::kRejected) ++out.rejected_sats;
-      else if (a == SatFlag::kDownWeighted || b == SatFlag::kDownWeighted) ++out.downweighted_sats;
     }
     set_measurement(ns);
   }
@@ -582,6 +588,7 @@ class TightEngine {
   Eigen::Matrix<double, 1, L::kSize> hP_;
   int row_sat_[kMaxMeasRows] = {}, row_kind_[kMaxMeasRows] = {};
   SatFlag flag_[2 * kMaxMeasRows] = {};
+  bool cut_[2 * kMaxMeasRows] = {};  // rows left out by a CUSUM exclusion this epoch
   // CUSUM per (system, prn, row kind) (robust.hpp, 4.)
   static constexpr int kSatKeys = 4 * 64 * 2;
   double cusum_pos_[kSatKeys] = {}, cusum_neg_[kSatKeys] = {}, excluded_until_[kSatKeys] = {};

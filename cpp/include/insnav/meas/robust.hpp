@@ -57,7 +57,14 @@
 //    An alarm excludes that row of that satellite for `cusum_hold_s` and
 //    resets its sums; a fault still there afterwards fails the per-row test
 //    at once.  Not updated while the gate's outage-aware test is active
-//    (after an outage the innovations of every satellite are large together).
+//    (after an outage the innovations of every satellite are large together)
+//    nor in an epoch with fewer than `cusum_min_pseudoranges` (4)
+//    pseudoranges: with fewer than position + clock the epoch cannot pin the
+//    filter, whose coasting drift then shows on every satellite alike (on the
+//    rtklibexplorer walk with 2-3 GPS satellites left it excluded a good
+//    satellite's Doppler); with 4 the prediction from the INS is the
+//    redundancy (a 1 m/s ramp on that walk's four GPS satellites is caught
+//    only by the CUSUM: docs/results/gate_outages.md).
 #pragma once
 
 #include <algorithm>
@@ -81,6 +88,7 @@ struct RobustConfig {
   double cusum_k = 0.5;           // CUSUM drift (in sigma of w)
   double cusum_h = 8.0;           // CUSUM alarm threshold (0: off)
   double cusum_hold_s = 60.0;     // an alarm excludes the row this long [s]
+  int cusum_min_pseudoranges = 4; // the CUSUM acts only in epochs with at least this many pseudoranges
 };
 
 /// Huber weight factor q(w) = min(1, k/|w|) (header comment, 2.).
