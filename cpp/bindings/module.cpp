@@ -29,5 +29,6 @@ PYBIND11_MODULE(_core, m) {
   insnav::py_bind::bind_navigator(m);
   insnav::py_bind::bind_rtk(m);
   insnav::py_bind::bind_spp(m);
+  insnav::py_bind::bind_calib(m);
   // one call per cpp/bindings/bind_*.cpp (declared in common.hpp)
 }
