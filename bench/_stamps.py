@@ -122,6 +122,8 @@ DEPENDS: dict[str, tuple[str, ...]] = {
     "rtk_euref_wettzell_wtzr_wtzz.md": ("bench/rtk_compare.py",) + RTK,
     "rtk_matrtklib_static_septentrio.md": ("bench/rtk_compare.py",) + RTK,
     "rtk_instinct_spirent_rtk_dynamic_SIMULATED.md": ("bench/rtk_compare.py",) + RTK,
+    "allan.md": ("bench/allan_check.py", f"{_CPP}calib/allan.hpp", "cpp/bindings/bind_calib.cpp",
+                 f"{_PY}calib/allan.py", f"{_PY}data/imu_grades.py"),
     "run_all.md": ("bench/run_all.py",),
 }
 

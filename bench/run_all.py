@@ -63,12 +63,14 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "gate_outages": (("gate_outages.md",), ["bench/gate_outages.py", "--out", "docs/results/gate_outages.md"],
                      ["bench/gate_outages.py", "--seeds", "2", "--out", "docs/results/gate_outages.md"]),
     "navigator": (("navigator.md",), ["bench/navigator_latency.py"], ["bench/navigator_latency.py", "--runs", "1"]),
+    "allan": (("allan.md",), ["bench/allan_check.py", "--out", "docs/results/allan.md"],
+              ["bench/allan_check.py", "--hours", "3", "--repeat", "1", "--skip-24h", "--out", "docs/results/allan.md"]),
 }
 
 
 #: generators whose documents report wall or CPU times: they run alone, after the others
 #: (the rest only count, so ``--jobs 2`` may run two of them side by side)
-TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator")
+TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator", "allan")
 
 
 def git_commit() -> str:

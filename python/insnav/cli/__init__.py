@@ -44,6 +44,7 @@ _AREAS = (
     ("insnav.analysis.montecarlo", ("add_compare_parser",), ("compare",)),
     ("insnav.cli.report", ("add_report_parser",), ("report",)),
     ("insnav.cli.bench", ("add_bench_parser",), ("bench",)),
+    ("insnav.cli.allan", ("add_allan_parser",), ("allan",)),
 )
 
 

@@ -1,0 +1,2 @@
+"""IMU calibration from data: Allan-variance noise identification
+(:mod:`insnav.calib.allan`, the ``insnav allan`` command)."""
