@@ -44,7 +44,6 @@ void bind_checks(py::module_& m);
 void bind_navigator(py::module_& m);
 void bind_rtk(py::module_& m);
 void bind_spp(py::module_& m);
-void bind_calib(py::module_& m);
 ImuErrorModel imu_model_from_dict(const py::dict& d);
 
 }  // namespace insnav::py_bind

@@ -6,6 +6,10 @@
 
 namespace py = pybind11;
 
+namespace insnav::py_bind {
+void bind_calib(py::module_& m);  // bind_calib.cpp (declared here: common.hpp unchanged keeps the other units' builds cached)
+}  // namespace insnav::py_bind
+
 namespace {
 // Core precondition failures become Python exceptions instead of abort().
 void throwing_check_handler(const char* expr, const char* msg, const char* file, int line) {
