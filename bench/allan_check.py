@@ -135,8 +135,8 @@ def main(argv=None) -> int:
     verdict = "PASS" if worst_all <= RECOVERY_TOL else "FAIL"
     lines += ["", f"**Largest error of any fitted term: {100 * worst_all:.1f} %** (target {100 * RECOVERY_TOL:g} %): "
               f"**{verdict}**.  95 % intervals containing the truth: {hits_all} of {count_all} "
-              f"({100 * hits_all / count_all:.0f} %; the intervals ignore the correlation of neighbouring averaging "
-              "times, module docstring).", ""]
+              f"({100 * hits_all / count_all:.0f} % for a nominal 95 %: the estimates at neighbouring averaging "
+              "times are correlated, docs/algorithms.md section 19).", ""]
 
     # ---------------------------------------------------------------- 2. agreement
     av = "PASS" if agree_worst <= AGREE_TOL else "FAIL"
@@ -177,7 +177,7 @@ def main(argv=None) -> int:
         lines += [f"24 h at 200 Hz: {n24} samples x 6 axes (gyro and accelerometer arrays as the readers give "
                   f"them), {c.tau_s.size} octave averaging times up to {c.tau_s[-1]:.0f} s, median of 3: "
                   f"**{t_all:.2f} s** with {os.cpu_count()} threads (target {TIME_TARGET_S:g} s: **{tv}**), "
-                  f"{t_one:.2f} s on one thread ({cpu_one:.2f} s of CPU time: the wall time of one thread on an idle core).", ""]
+                  f"{t_one:.2f} s on one thread ({cpu_one:.2f} s of CPU time, about its wall time on an idle core).", ""]
         del gyro, acc
     load1 = os.getloadavg()
     lines += [f"Load average (1 min) before / after the timings: {load0[0]:.1f} / {load1[0]:.1f} on "
