@@ -140,6 +140,8 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                    f"{_CPP}gnss/ambiguity_resolution.hpp", f"{_CPP}engine/closed_loop.hpp", f"{_CPP}filter/ekf.hpp",
                    "cpp/bindings/bind_rtk_ins.cpp", f"{_PY}filters/rtk_ins.py", f"{_PY}sim/from_truth.py",
                    f"{_PY}sim/gnss_rtk.py", f"{_PY}scenarios/rtk-urban-car.toml") + RTK + TIGHT + SIM + SIM_RAW,
+    "allan.md": ("bench/allan_check.py", f"{_CPP}calib/allan.hpp", "cpp/bindings/bind_calib.cpp",
+                 f"{_PY}calib/allan.py", f"{_PY}data/imu_grades.py"),
     "run_all.md": ("bench/run_all.py",),
     "tune.md": ("bench/tune_check.py", f"{_PY}calib/tune.py", f"{_PY}filters/tight.py", f"{_PY}filters/solution.py",
                 f"{_PY}scenarios/seed000-car.toml", "tests/data/walk_0827.toml", "tests/data/walk_0827_loose.toml",

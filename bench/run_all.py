@@ -73,12 +73,14 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "selfcal_states": (("selfcal_states.md",), ["bench/selfcal_states.py", "--out", "docs/results/selfcal_states.md"],
                        ["bench/selfcal_states.py", "--runs", "4", "--zero-runs", "2", "--lever-runs", "1",
                         "--out", "docs/results/selfcal_states.md"]),
+    "allan": (("allan.md",), ["bench/allan_check.py", "--out", "docs/results/allan.md"],
+              ["bench/allan_check.py", "--hours", "3", "--repeat", "1", "--skip-24h", "--out", "docs/results/allan.md"]),
 }
 
 
 #: generators whose documents report wall or CPU times: they run alone, after the others
 #: (the rest only count, so ``--jobs 2`` may run two of them side by side)
-TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator", "tune")
+TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator", "tune", "allan")
 
 
 def git_commit() -> str:

@@ -90,6 +90,7 @@ CAPABILITIES = {
     "plot": ("INSNAV_SKIP_PLOT", "pip install 'insnav[plot]'"),
     "dask": ("INSNAV_SKIP_DASK", "pip install 'insnav[dask]'"),
     "yaml": ("INSNAV_SKIP_YAML", "pip install pyyaml (in the test extra)"),
+    "allantools": ("INSNAV_SKIP_ALLANTOOLS", "pip install allantools (in the test extra)"),
     "docs": ("INSNAV_SKIP_DOCS", "pip install 'insnav[docs]'"),
 }
 

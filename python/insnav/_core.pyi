@@ -1,5 +1,5 @@
 """Type stubs for the private compiled module ``insnav._core``."""
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -199,6 +199,12 @@ def standstill_statistic(
     sigma_w_radps: float,
     gravity_mps2: float = 9.80665,
 ) -> np.ndarray: ...  # (N,) test statistic T (ins/standstill.hpp), +inf until the window is full
+def overlapping_avar(
+    rates: Sequence[npt.ArrayLike],  # (n,) or (n, k) float64 arrays, same n, any strides (not copied)
+    m: npt.ArrayLike,  # (n_m,) cluster sizes, 1 <= m <= n / 2
+    threads: int = 0,  # <= 0: the hardware's
+) -> tuple[np.ndarray, np.ndarray, int, int]: ...  # (avar (n_m, axes), terms (n_m,), first non-finite row or -1, its axis group or -1)
+def allan_cluster_sizes(n: int, per_octave: int = 1, max_m: int = -1) -> np.ndarray: ...  # round(2^(k/per_octave)) <= n/2
 def write_table(
     path: str,
     header: str,

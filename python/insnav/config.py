@@ -909,6 +909,9 @@ _USER_UNITS = {
     "acc_bias_sigma_mg": ("acc_bias_sigma", MG),
     "gyro_bias_tau_s": ("gyro_bias_tau", 1.0),
     "acc_bias_tau_s": ("acc_bias_tau", 1.0),
+    # rate random walk of the bias (IEEE Std 952 K; insnav allan): deg/h/sqrt(h) -> rad/s/sqrt(s), mg/sqrt(h)
+    "gyro_bias_rw_deg_per_h_per_sqrt_h": ("gyro_bias_rw", DEG_PER_H / 60.0),
+    "acc_bias_rw_mg_per_sqrt_h": ("acc_bias_rw", MG / 60.0),
     "gyro_scale_sigma_ppm": ("gyro_scale_sigma", 1e-6),
     "acc_scale_sigma_ppm": ("acc_scale_sigma", 1e-6),
     "gyro_scale_tau_s": ("gyro_scale_tau", 1.0),

@@ -1,1 +1,3 @@
-"""Self-calibration: IMU noise identification and filter noise tuning."""
+"""Self-calibration from data: Allan-variance noise identification
+(:mod:`insnav.calib.allan`, ``insnav allan``) and filter noise tuning by the
+innovation likelihood (:mod:`insnav.calib.tune`, ``insnav tune``)."""

@@ -45,6 +45,7 @@ _AREAS = (
     ("insnav.cli.report", ("add_report_parser",), ("report",)),
     ("insnav.cli.bench", ("add_bench_parser",), ("bench",)),
     ("insnav.cli.tune", ("add_tune_parser",), ("tune",)),
+    ("insnav.cli.allan", ("add_allan_parser",), ("allan",)),
 )
 
 
