@@ -5,7 +5,7 @@
 Each generator writes its whole document (with the commit and the exact
 command inside it).  They run one after the other (each may use both cores);
 the wall time of each and of the whole run is printed and written to
-``docs/results/run_all.md``.  ``--quick`` passes each generator's reduced-run
+``docs/results/run_all.md`` (``--only`` replaces the rows of the generators it ran).  ``--quick`` passes each generator's reduced-run
 arguments (for checking the pipeline, not for publishing: the documents then
 say so through their own command line).  Needs the installed package
 (``scripts/install.sh``) and ``../shared/data`` for the real-data documents.
@@ -88,6 +88,23 @@ def git_commit() -> str:
     return out.stdout.strip() or "unknown"
 
 
+def _previous_rows() -> dict[str, tuple[str, ...]]:
+    """The rows of the current docs/results/run_all.md (generator -> its six cells; a
+    row of the older five-column table gets the document's commit)."""
+    path = ROOT / "docs/results/run_all.md"
+    if not path.exists():
+        return {}
+    text = path.read_text()
+    old_commit = text.split("at commit `", 1)[1].split("`", 1)[0] if "at commit `" in text else "unknown"
+    out = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) in (5, 6) and cells[0] in GENERATORS:
+            cells = [c.strip("`") if i in (2, 5) else c for i, c in enumerate(cells)]
+            out[cells[0]] = tuple(cells) if len(cells) == 6 else (*cells, old_commit)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--only", default="", help="comma-separated generator names")
@@ -112,10 +129,10 @@ def main(argv=None) -> int:
         argv_ = quick if args.quick else full
         cmd = ["bash" if argv_[0].endswith(".sh") else PY, *argv_]
         print(f"[run_all] {name}: {shlex.join(cmd[1:])}", flush=True)
-        t0 = time.perf_counter()
+        t0, at = time.perf_counter(), git_commit()
         rc = subprocess.run(cmd, cwd=ROOT).returncode
         dt = time.perf_counter() - t0
-        rows[name] = (name, docs, shlex.join([cmd[0] if cmd[0] == "bash" else "python3", *cmd[1:]]), dt, rc)
+        rows[name] = (name, docs, shlex.join([cmd[0] if cmd[0] == "bash" else "python3", *cmd[1:]]), dt, rc, at)
         print(f"[run_all] {name}: rc {rc}, {dt:.0f} s", flush=True)
         if rc:
             failed.append(name)
@@ -132,20 +149,26 @@ def main(argv=None) -> int:
     for name in names:
         if name in TIMED:
             one(name)
-    rows = [rows[n] for n in names]
     total = time.perf_counter() - t_all
+    commit = git_commit()
+    table = _previous_rows() if args.only else {}  # a partial run updates its own rows only
+    for n in names:
+        name, docs, cmd, dt, rc, at = rows[n]
+        table[name] = (name, ", ".join(docs), cmd, f"{dt:.0f}", str(rc), at)
+    how = ("each generator alone, one after the other" if args.jobs <= 1 else
+           f"the generators that only count {args.jobs} side by side; those that report times "
+           f"({', '.join(TIMED)}) alone after them")
     lines = ["# Results documents: regeneration times", "",
-             f"Written by `bench/run_all.py` at commit `{git_commit()}`; command: "
-             f"`python3 bench/run_all.py {' '.join(argv if argv is not None else sys.argv[1:])}`.", "",
-             ("Each generator runs alone (one after the other) on the shared 2-core machine." if args.jobs <= 1 else
-              f"The generators that only count ran {args.jobs} side by side; those that report times "
-              f"({', '.join(TIMED)}) ran alone after them, on the shared 2-core machine."), "",
-             "| generator | documents | command | wall [s] | exit |", "|---|---|---|---|---|"]
-    for name, docs, cmd, dt, rc in rows:
-        lines.append(f"| {name} | {', '.join(docs)} | `{cmd}` | {dt:.0f} | {rc} |")
-    lines += ["", f"Total: {total:.0f} s ({total / 60:.1f} min)."]
-    if not args.only:
-        (ROOT / "docs/results/run_all.md").write_text(with_stamp("\n".join(lines) + "\n", "run_all.md"))
+             f"Written by `bench/run_all.py`; this invocation at commit `{commit}`: "
+             f"`python3 bench/run_all.py {' '.join(argv if argv is not None else sys.argv[1:])}` ({how}, "
+             f"on the shared 2-core machine; {total:.0f} s, {total / 60:.1f} min).  A run with `--only` "
+             "replaces its generators' rows and keeps the others; each row names the commit its generator started at.", "",
+             "| generator | documents | command | wall [s] | exit | commit |", "|---|---|---|---|---|---|"]
+    for name in GENERATORS:
+        if name in table:
+            g, docs, cmd, dt, rc, c = table[name]
+            lines.append(f"| {g} | {docs} | `{cmd}` | {dt} | {rc} | `{c}` |")
+    (ROOT / "docs/results/run_all.md").write_text(with_stamp("\n".join(lines) + "\n", "run_all.md"))
     print("\n".join(lines))
     return 1 if failed else 0
 
