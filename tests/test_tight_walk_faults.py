@@ -82,7 +82,7 @@ def walk(shared_data):
     obs_p, nav_p, imu_p = d / "rinex_derived/gnss_1730.obs", d / "rinex_derived/gnss_1730.nav", d / "raw/imu_1730.csv"
     tmp = Path(tempfile.mkdtemp(prefix="insnav-walk-"))
     cfg_p = tmp / "walk_G.toml"
-    cfg_p.write_text((REPO / "bench" / "walk_0827.toml").read_text())
+    cfg_p.write_text((REPO / "tests" / "data" / "walk_0827.toml").read_text())
     obs, nav = read_rinex_obs(obs_p, systems="G"), read_rinex_nav(nav_p, systems="G")
 
     def run(o, **kw):
