@@ -121,6 +121,9 @@ RtkOptions options_from_dict(const py::dict& d) {
     else if (k == "sigma_phase_a_m") o.sigma_phase_a_m = v.cast<double>();
     else if (k == "sigma_phase_b_m") o.sigma_phase_b_m = v.cast<double>();
     else if (k == "code_phase_ratio") o.code_phase_ratio = v.cast<double>();
+    else if (k == "code_corr_time_s") o.code_corr_time_s = v.cast<double>();
+    else if (k == "code_scale_gain") o.code_scale_gain = v.cast<double>();
+    else if (k == "min_success_rate") o.min_success_rate = v.cast<double>();
     else if (k == "glonass_factor") o.glonass_factor = v.cast<double>();
     else if (k == "iono_sigma_per_10km_m") o.iono_sigma_per_10km_m = v.cast<double>();
     else if (k == "tropo_model") o.tropo_model = v.cast<bool>();
@@ -161,7 +164,7 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   const Vec3 rb = vec3_from(r_base_e, "rtk_run: r_base_e");
   const RtkOptions o = options_from_dict(opts);
   py::array_t<int> status(n), n_fix(n), n_dd(n), n_sat(n);
-  py::array_t<double> ratio(n), r_e({n, static_cast<py::ssize_t>(3)}), v_e({n, static_cast<py::ssize_t>(3)}),
+  py::array_t<double> ratio(n), success_rate(n), r_e({n, static_cast<py::ssize_t>(3)}), v_e({n, static_cast<py::ssize_t>(3)}),
       r_float({n, static_cast<py::ssize_t>(3)}), P_r({n, static_cast<py::ssize_t>(9)});
   py::array_t<int> slips({n, static_cast<py::ssize_t>(gnss::kNumSlipKinds)});
   const std::int64_t* ro = rover_off.data();
@@ -192,6 +195,7 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
       n_dd.mutable_data()[e] = out.n_dd;
       n_sat.mutable_data()[e] = out.n_sat;
       ratio.mutable_data()[e] = out.ratio;
+      success_rate.mutable_data()[e] = out.success_rate;
       for (int i = 0; i < 3; ++i) {
         r_e.mutable_data()[e * 3 + i] = out.r_e(i);
         v_e.mutable_data()[e * 3 + i] = out.v_e(i);
@@ -207,6 +211,7 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   d["n_dd"] = n_dd;
   d["n_sat"] = n_sat;
   d["ratio"] = ratio;
+  d["success_rate"] = success_rate;
   d["r_e"] = r_e;
   d["v_e"] = v_e;
   d["r_float_e"] = r_float;

@@ -113,19 +113,23 @@ class RtkOptions(TomlTable):
     elevation_mask_deg: float = 15.0
     ar_elevation_mask_deg: float = 0.0
     ratio_threshold: float = 3.0
-    min_fix_ambiguities: int = 3
+    min_fix_ambiguities: int = 5
     max_partial_drops: int = 12
-    partial_ar_order: str = "elevation"
+    partial_ar_order: str = "variance"
     min_lock_epochs: int = 0
     glonass_ar: bool = False
     sigma_phase_a_m: float = 0.003
     sigma_phase_b_m: float = 0.003
     code_phase_ratio: float = 100.0
+    code_correlation_time_s: float = 0.0
+    adaptive_code_gain: float = 0.0
+    min_success_rate: float = 0.95
     iono_sigma_per_10km_m: float = 0.0
     tropo_model: bool = True
     accel_psd_h_m2ps3: float = 9.0
     accel_psd_v_m2ps3: float = 1.0
     amb_init_sigma_cycles: float = 30.0
+    amb_psd_cycles2ps: float = 1e-8
     gf_threshold_m: float = 0.05
     mw_threshold_cycles: float = 2.0
     doppler_threshold_cycles: float = 1.0
@@ -158,8 +162,11 @@ class RtkOptions(TomlTable):
         for key, lo, hi in (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.0),
                             ("ratio_threshold", 1.0, 1e3), ("sigma_phase_a_m", 0.0, 1.0),
                             ("sigma_phase_b_m", 0.0, 1.0), ("code_phase_ratio", 1.0, 1e4),
+                            ("code_correlation_time_s", 0.0, 1e4), ("min_success_rate", 0.0, 1.0),
+                            ("adaptive_code_gain", 0.0, 1.0),
                             ("iono_sigma_per_10km_m", 0.0, 10.0), ("accel_psd_h_m2ps3", 0.0, 1e4),
                             ("accel_psd_v_m2ps3", 0.0, 1e4), ("amb_init_sigma_cycles", 1e-3, 1e6),
+                            ("amb_psd_cycles2ps", 0.0, 1.0),
                             ("gf_threshold_m", 1e-4, 10.0), ("mw_threshold_cycles", 0.1, 100.0),
                             ("doppler_threshold_cycles", -1.0, 1e3), ("outlier_sigma", 0.0, 1e3),
                             ("hold_sigma_cycles", 1e-6, 10.0), ("max_age_s", 0.0, 86400.0)):
@@ -185,9 +192,13 @@ class RtkOptions(TomlTable):
                     partial_by_variance=self.partial_ar_order == "variance", min_lock_epochs=int(self.min_lock_epochs),
                     glonass_ar=bool(self.glonass_ar), sigma_phase_a_m=float(self.sigma_phase_a_m),
                     sigma_phase_b_m=float(self.sigma_phase_b_m), code_phase_ratio=float(self.code_phase_ratio),
+                    code_corr_time_s=float(self.code_correlation_time_s),
+                    code_scale_gain=float(self.adaptive_code_gain),
+                    min_success_rate=float(self.min_success_rate),
                     iono_sigma_per_10km_m=float(self.iono_sigma_per_10km_m), tropo_model=bool(self.tropo_model),
                     accel_psd_h=float(self.accel_psd_h_m2ps3), accel_psd_v=float(self.accel_psd_v_m2ps3),
                     amb_init_sigma_cycles=float(self.amb_init_sigma_cycles),
+                    amb_psd=float(self.amb_psd_cycles2ps),
                     gf_threshold_m=float(self.gf_threshold_m), mw_threshold_cycles=float(self.mw_threshold_cycles),
                     doppler_threshold_cycles=float(self.doppler_threshold_cycles),
                     max_outage_epochs=int(self.max_outage_epochs), outlier_sigma=float(self.outlier_sigma),
@@ -503,6 +514,7 @@ class RtkSolution:
     t_gps_s: np.ndarray
     status: np.ndarray
     ratio: np.ndarray
+    success_rate: np.ndarray
     n_fix: np.ndarray
     n_dd: np.ndarray
     n_sat: np.ndarray
@@ -604,7 +616,7 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
     out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
     age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
     return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
-                       ratio=np.asarray(out["ratio"]), n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]),
+                       ratio=np.asarray(out["ratio"]), success_rate=np.asarray(out["success_rate"]), n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]),
                        n_sat=np.asarray(out["n_sat"]), r_e=np.asarray(out["r_e"]), v_e=np.asarray(out["v_e"]),
                        r_float_e=np.asarray(out["r_float_e"]), P_r=np.asarray(out["P_r"]).reshape(-1, 3, 3),
                        slips=np.asarray(out["slips"]), base_age_s=age, r_base_e=r_base_e,

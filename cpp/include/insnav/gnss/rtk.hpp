@@ -32,8 +32,12 @@
 // Ambiguity resolution: MLAMBDA (insnav/gnss/lambda.hpp; Chang, Yang and Zhou 2005) on the
 // double-differenced ambiguities D x_N, Q_a = D P_NN D^T; ratio test s2/s1 >= threshold
 // (Teunissen & Verhagen 2009, "The GNSS ambiguity ratio-test revisited"); on failure partial
-// AR drops the lowest-elevation ambiguity and retries down to min_fix_ambiguities; the fixed
-// baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)).
+// AR drops the largest-variance (or the lowest-elevation) ambiguity and retries down to
+// min_fix_ambiguities; a set that passes is validated further (RtkEngine::validate_fix: number
+// fixed, bootstrapped success rate); the fixed baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
+// (Teunissen 1995, eq. (6)).  Optional float-model terms for receivers noisier than configured:
+// time-correlated code (code_corr_time_s), an adaptive code variance factor (code_scale_gain) and
+// the ambiguity random walk (amb_psd).
 //
 // Cycle slips (per receiver, before differencing): loss-of-lock indicator; the geometry-free
 // combination lambda_1 phi_1 - lambda_2 phi_2 jumping by more than gf_threshold_m between
@@ -105,14 +109,16 @@ struct RtkOptions {
   double elevation_mask_rad = 15.0 * M_PI / 180.0;
   double ar_elevation_mask_rad = 0.0;
   double ratio_threshold = 3.0;
-  int min_fix_ambiguities = 3;     // partial AR stops above this count
+  int min_fix_ambiguities = 5;     // fewest ambiguities fixed (partial AR stops there; validate_fix)
   int max_partial_drops = 12;
-  bool partial_by_variance = false;  // partial AR drops the largest-variance ambiguity first (else the lowest)
+  bool partial_by_variance = true;   // partial AR drops the largest-variance ambiguity first (else the lowest)
   int min_lock_epochs = 0;         // epochs an ambiguity is tracked before it is fixed
   bool glonass_ar = false;
   double sigma_phase_a_m = 0.003;  // sigma(el) = sqrt(a^2 + b^2 / sin^2 el), zero difference
   double sigma_phase_b_m = 0.003;
   double code_phase_ratio = 100.0;
+  double code_corr_time_s = 0.0;   // correlation time of the code errors (multipath) [s]; 0: white
+  double code_scale_gain = 0.0;    // adaptive code variance factor: gain of its update per epoch (0: off)
   double glonass_factor = 1.5;
   double iono_sigma_per_10km_m = 0.0;
   bool tropo_model = true;
@@ -131,6 +137,8 @@ struct RtkOptions {
   int max_outage_epochs = 5;       // an ambiguity unobserved this many epochs is removed
   double outlier_sigma = 5.0;      // phase innovation beyond this many sigmas: ambiguity reset (0 off)
   double hold_sigma_cycles = 0.0316;
+  // fix validation beyond the ratio test (see validate_fix and RtkEngine::resolve)
+  double min_success_rate = 0.95;  // bootstrapped success rate of the subset fixed (0: off)
   double max_age_s = 30.0;         // (applied by the caller that matches the base epochs)
 };
 
@@ -138,6 +146,7 @@ struct RtkOptions {
 struct RtkEpoch {
   RtkStatus status = RtkStatus::kNone;
   double ratio = 0.0;
+  double success_rate = 0.0;  // bootstrapped success rate of the ambiguities fixed (of all, when float)
   int n_fix = 0;       // ambiguities fixed (double differences)
   int n_dd = 0;        // double-differenced phase rows used
   int n_sat = 0;       // common satellites above the mask
@@ -307,6 +316,7 @@ class RtkEngine {
     for (auto& a : amb_) a = AmbSlot{};
     initialized_ = false;
     t_prev_ = NAN;
+    code_scale_ = 1.0;
     rover_slip_.reset();
     base_slip_.reset();
   }
@@ -417,6 +427,7 @@ class RtkEngine {
     }
     // time update
     const double dt = std::isfinite(t_prev_) ? t - t_prev_ : 0.0;
+    dt_epoch_ = dt;
     if (dt > 0.0) predict(dt, kin);
     t_prev_ = t;
     // elevations at the current rover estimate and the ambiguity bookkeeping
@@ -446,6 +457,7 @@ class RtkEngine {
       }
       return out;
     }
+    update_code_scale(nf);
     for (int k = 0; k < kMaxAmbStates; ++k)
       if (amb_[k].used) ++amb_[k].lock;
     out.r_float_e = x_.segment<3>(RtkLayout::kPos);
@@ -659,7 +671,8 @@ class RtkEngine {
           }
           if (ref < 0) continue;
           const int m0 = m;
-          const double var_ref = var_sd_[ref] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio : 1.0);
+          const double var_ref =
+              var_sd_[ref] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(ref, f) : 1.0);
           for (int c = 0; c < n_common_; ++c) {
             if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * RtkRow::kCols) != sys) continue;
             if (!valid(c, f, code) || m >= kMaxRows) continue;
@@ -683,7 +696,8 @@ class RtkEngine {
             row_c_[m] = c;
             row_ref_[m] = ref;
             row_f_[m] = f;
-            const double var_j = var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio : 1.0);
+            const double var_j =
+                var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(c, f) : 1.0);
             R_(m, m) = var_j + var_bl;
             for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
             R_(m, m) += var_ref + var_bl;
@@ -693,6 +707,49 @@ class RtkEngine {
       }
     }
     return m;
+  }
+
+  // Time-correlated code errors.  A first-order Gauss-Markov error of variance sigma^2 and correlation
+  // rho = exp(-dt / tau) between epochs: the generalised least-squares information of N such samples on
+  // a constant is [2 + (N - 2)(1 - rho)] / ((1 + rho) sigma^2) (inverse of the AR(1) covariance,
+  // A. Gelb (ed.), Applied Optimal Estimation, 1974, sec. 3.8), i.e. 1 / sigma^2 for the first sample
+  // and (1 - rho) / (1 + rho) / sigma^2 for each further one.  The filter treats code as white, so the
+  // code of a satellite whose ambiguity was already tracked (lock > 0) enters with its variance scaled
+  // by (1 + rho) / (1 - rho): the float ambiguities (and the success rate and ratio test built on their
+  // covariance) then accumulate what correlated multipath really gives, not sqrt(N) of it.  The first
+  // epoch of an ambiguity (and every epoch of instantaneous AR) keeps the white variance.
+  //
+  // The factor also holds code_scale_, the adaptive variance factor of the code (update_code_scale).
+  double code_var_factor(int c, int f) const {
+    if (!(opt_.code_corr_time_s > 0.0) || !(dt_epoch_ > 0.0)) return code_scale_;
+    const int k = amb_of_[key(rover_ + common_r_[c] * RtkRow::kCols) * kMaxFreq + f];
+    if (k < 0 || amb_[k].lock == 0) return code_scale_;
+    const double rho = std::exp(-dt_epoch_ / opt_.code_corr_time_s);
+    return code_scale_ * (1.0 + rho) / std::max(1.0 - rho, 1e-6);
+  }
+
+  // Adaptive variance factor of the code rows from their post-fit residuals (residual-based adaptive
+  // estimation, A. H. Mohamed, K. P. Schwarz, "Adaptive Kalman filtering for INS/GPS", J. Geodesy 73
+  // (1999) 193-203, eq. (28) in its scalar form).  After the phase update the position is known far
+  // better than the code, so the code double differences rebuilt at the updated state, y_i, have
+  // E[y_i^2] ~ k R_i with R_i the configured (white, single-epoch) variance of the row: the factor k
+  // moves towards what the epoch's mean of nu_i = y_i^2 / (k R_i) says, log k <- log k + g log(mean nu)
+  // (each nu_i capped at 25: one outlier moves it little), kept in [1, 100].  A receiver noisier than
+  // configured gets a larger code variance (so the float ambiguities, the success rate and the ratio
+  // test are not over-confident); never a smaller one.
+  void update_code_scale(int nf) {
+    if (!(opt_.code_scale_gain > 0.0)) return;
+    const int m = build_rows(nf, 1);
+    if (m <= 0) return;
+    const double r2 = opt_.code_phase_ratio * opt_.code_phase_ratio;
+    double sum = 0.0;
+    for (int i = 0; i < m; ++i) {
+      const double var = code_scale_ * r2 * (var_sd_[row_c_[i]] + var_sd_[row_ref_[i]]);
+      sum += std::min(y_(i) * y_(i) / var, 25.0);
+    }
+    const double mean = sum / m;
+    if (!(mean > 0.0) || !std::isfinite(mean)) return;
+    code_scale_ = std::clamp(code_scale_ * std::pow(mean, opt_.code_scale_gain), 1.0, 100.0);
   }
 
   double lam(int rover_row, int f) const {
@@ -859,7 +916,11 @@ class RtkEngine {
       double s[2];
       if (lambda_.solve(a_hat_, Qa_, a_fix_, s) != LambdaStatus::kOk) continue;
       const double ratio = s[0] > 0.0 ? std::min(s[1] / s[0], 999.9) : 999.9;
-      if (nuse == n) out.ratio = ratio;
+      const double ps = lambda_.bootstrap_success_rate();
+      if (nuse == n) {
+        out.ratio = ratio;
+        out.success_rate = ps;
+      }
       if (ratio < opt_.ratio_threshold) continue;
       // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
       Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxAmbiguities> Qba(6, nuse);
@@ -873,8 +934,10 @@ class RtkEngine {
       const Eigen::Matrix<double, 6, 1> xb = x_.head<6>() - Qba * qa_llt_.solve(da_);
       const Eigen::Matrix<double, 6, 6> Pb =
           P_.topLeftCorner<6, 6>() - Qba * qa_llt_.solve(AmbMat(Qba.transpose()));
+      if (validate_fix(ps, nuse) != FixCheck::kAccepted) continue;
       out.status = RtkStatus::kFixed;
       out.ratio = ratio;
+      out.success_rate = ps;
       out.n_fix = nuse;
       out.r_e = xb.head<3>();
       if (kv) out.v_e = xb.tail<3>();
@@ -882,6 +945,26 @@ class RtkEngine {
       if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
       return;
     }
+  }
+
+  // ---------------------------------------------------------------- fix validation
+  // Checks of a candidate integer set beyond the ratio test (which resolve applies first).
+  enum class FixCheck : int { kAccepted = 0, kTooFew = 1, kSuccessRate = 2 };
+
+  /// ps: bootstrapped success rate of the candidate subset (Lambda::bootstrap_success_rate);
+  /// n_fix: its number of double-differenced ambiguities.
+  ///  1. Number fixed: n_fix >= min_fix_ambiguities.  With the three position coordinates free, a
+  ///     subset of n ambiguities leaves n - 3 checks on the integers: a wrong set that only moves the
+  ///     position fits as well as the right one when n - 3 < 2 (measured on the urban preset, GPS L1,
+  ///     5-6 satellites, ratio 3: 3 fixed 100 % wrong, 4 fixed 57 %, 5 fixed 6 %).
+  ///  2. Success rate: ps >= min_success_rate.  The float covariance must make the integer set
+  ///     probable before the data's ratio is believed (Teunissen 1998; Verhagen & Teunissen,
+  ///     "The ratio test for future GNSS ambiguity resolution", GPS Solutions 17 (2013) 535-548:
+  ///     the ratio test alone does not control the failure rate of a weak model).
+  FixCheck validate_fix(double ps, int n_fix) const {
+    if (n_fix < opt_.min_fix_ambiguities) return FixCheck::kTooFew;
+    if (ps < opt_.min_success_rate) return FixCheck::kSuccessRate;
+    return FixCheck::kAccepted;
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -931,6 +1014,9 @@ class RtkEngine {
   std::array<int, kMaxSatKeys * kMaxFreq> amb_row_{};
   std::array<double, kMaxSatKeys * kMaxFreq> sd_phase_{}, sd_code_{};
   int n_common_ = 0, n_used_sats_ = 0, n_phase_rows_ = 0;
+  double dt_epoch_ = 0.0;  // time since the previous epoch [s] (0 on the first)
+  double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
+
   const double* rover_ = nullptr;
   const double* base_ = nullptr;
   Vec3 r_base_ = Vec3::Zero();
