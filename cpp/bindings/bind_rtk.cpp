@@ -81,6 +81,19 @@ py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
   return py::make_tuple(out, py::make_tuple(s[0], s[1]));
 }
 
+double lambda_success_rate(const DArray& Q) {
+  const py::ssize_t n = Q.ndim() == 2 ? Q.shape(0) : -1;
+  if (n < 1 || n > gnss::kMaxAmbiguities) throw py::value_error("lambda_success_rate: bad Q");
+  require_shape(Q, n, n, "lambda_success_rate: Q");
+  gnss::AmbMat q(n, n), Z, L;
+  gnss::AmbVec D;
+  for (py::ssize_t i = 0; i < n; ++i)
+    for (py::ssize_t j = 0; j < n; ++j) q(i, j) = Q.data()[i * n + j];
+  gnss::Lambda lam;
+  if (!lam.decorrelate(q, Z, L, D)) throw py::value_error("lambda_success_rate: Q is not positive definite");
+  return lam.bootstrap_success_rate();
+}
+
 py::tuple lambda_decorrelate(const DArray& Q) {
   const py::ssize_t n = Q.ndim() == 2 ? Q.shape(0) : -1;
   if (n < 0 || n > gnss::kMaxAmbiguities) throw py::value_error("lambda_decorrelate: bad Q");
@@ -276,6 +289,8 @@ void bind_rtk(py::module_& m) {
         "MLAMBDA (Chang, Yang, Zhou 2005): best and second-best integer vectors (n, 2) and squared norms.");
   m.def("lambda_decorrelate", &lambda_decorrelate, py::arg("Q"),
         "MLAMBDA reduction: (Z, L, D) with Z^T Q Z = L^T diag(D) L.");
+  m.def("lambda_success_rate", &lambda_success_rate, py::arg("Q"),
+        "Bootstrapped success rate of the decorrelated ambiguities (Teunissen 1998), a lower bound of ILS's.");
   m.def("rtk_run", &rtk_run, py::arg("t_rover"), py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"),
         py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
         "RTK engine over every rover epoch (GIL released).");
