@@ -107,7 +107,7 @@ def test_success_rate_rule_rejects_weak_single_epoch_partial_fixes(tmp_path_fact
 def test_partial_ar_by_variance_avoids_wrong_subsets(tmp_path_factory):
     # open sky, continuous AR: dropping the lowest satellites first keeps a badly determined (recently
     # re-initialised) ambiguity in the subset; dropping the largest variance first does not
-    old = dict(min_fix_ambiguities=3, min_success_rate=0.0)
+    old = dict(min_fix_ambiguities=3, min_success_rate=0.0, confirm_epochs=1)  # the other rules off
     _, fixed, wrong, _ = _run("rtk-open-sky-car", 8, tmp_path_factory, partial_ar_order="elevation", **old)
     assert wrong.sum() >= 3
     _, fixed, wrong, _ = _run("rtk-open-sky-car", 8, tmp_path_factory, partial_ar_order="variance", **old)
@@ -138,3 +138,24 @@ def test_float_model_terms_make_the_float_covariance_consistent(tmp_path_factory
 
     assert nees() > 15.0
     assert 1.0 < nees(code_correlation_time_s=20.0, adaptive_code_gain=0.1, amb_psd_cycles2ps=1e-4) < 6.0
+
+
+def test_confirmation_over_consecutive_epochs_rejects_transient_wrong_sets(tmp_path_factory):
+    # urban canyon: a float biased by correlated multipath yields a 5-ambiguity set that passes the
+    # ratio and success-rate tests for a few epochs with the wrong integers; the right set repeats
+    for seed, n_wrong_unconfirmed in ((2, 4), (7, 3)):
+        _, fixed, wrong, _ = _run("rtk-urban-car", seed, tmp_path_factory, confirm_epochs=1)
+        assert wrong.sum() >= n_wrong_unconfirmed
+        _, fixed, wrong, _ = _run("rtk-urban-car", seed, tmp_path_factory)
+        assert wrong.sum() == 0
+    assert fixed.sum() >= 100  # seed 7: its right set is still reported
+
+
+def test_a_validated_set_stays_fixed_when_a_satellite_sets(tmp_path_factory):
+    # urban canyon, seed 1: six satellites give a confirmed 5-ambiguity set; when one sets, the four left
+    # (fewer than min_fix_ambiguities) repeat the validated integers and stay fixed, to the centimetre
+    rs, fixed, wrong, r_true = _run("rtk-urban-car", 1, tmp_path_factory)
+    four = fixed & (rs.n_fix == 4)
+    assert four.sum() >= 90
+    assert np.max(np.linalg.norm(rs.r_e[four] - r_true[four], axis=1)) < 0.06
+    assert wrong.sum() <= 1

@@ -136,6 +136,8 @@ RtkOptions options_from_dict(const py::dict& d) {
     else if (k == "code_phase_ratio") o.code_phase_ratio = v.cast<double>();
     else if (k == "code_corr_time_s") o.code_corr_time_s = v.cast<double>();
     else if (k == "code_scale_gain") o.code_scale_gain = v.cast<double>();
+    else if (k == "confirm_epochs") o.confirm_epochs = v.cast<int>();
+    else if (k == "confirm_max_ambiguities") o.confirm_max_ambiguities = v.cast<int>();
     else if (k == "min_success_rate") o.min_success_rate = v.cast<double>();
     else if (k == "glonass_factor") o.glonass_factor = v.cast<double>();
     else if (k == "iono_sigma_per_10km_m") o.iono_sigma_per_10km_m = v.cast<double>();

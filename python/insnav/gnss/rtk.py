@@ -86,15 +86,29 @@ class RtkOptions(TomlTable):
     ratio_threshold : float
         Ratio test s2/s1 of MLAMBDA's two best candidates (3).
     min_fix_ambiguities : int
-        Partial AR drops one ambiguity at a time until the ratio test passes, down to this many
-        (at most ``max_partial_drops`` times).
+        Fewest double-differenced ambiguities a new integer set may have (5): partial AR drops one
+        ambiguity at a time until the ratio test passes (at most ``max_partial_drops`` times), and a
+        set with fewer is fixed only when it is all the epoch's fixable ambiguities and repeats a
+        validated set (docs/algorithms.md, "Integer ambiguity resolution").
+    min_success_rate : float
+        Bootstrapped success rate (Teunissen 1998) a set must have (0.95; 0 off).
+    confirm_epochs, confirm_max_ambiguities : int
+        A new set of at most ``confirm_max_ambiguities`` (6) ambiguities is reported fixed once
+        its integers have passed in ``confirm_epochs`` (5) consecutive epochs.
     partial_ar_order : str
-        Which one partial AR drops first: ``"elevation"`` (the lowest satellite) or ``"variance"``
-        (the largest float variance).
+        Which one partial AR drops first: ``"variance"`` (the largest float variance) or
+        ``"elevation"`` (the lowest satellite).
     glonass_ar : bool
         Fix GLONASS ambiguities (off: FDMA inter-frequency biases make them float only).
     sigma_phase_a_m, sigma_phase_b_m : float
         Zero-difference phase sigma sqrt(a^2 + b^2 / sin^2 el) [m]; code = ``code_phase_ratio`` x.
+    code_correlation_time_s : float
+        Correlation time of the code errors (multipath) [s]: the code of a tracked satellite enters
+        with its variance x (1 + rho) / (1 - rho), rho = exp(-dt / tau) (0: white).
+    adaptive_code_gain : float
+        Gain of the adaptive code variance factor estimated from post-fit code residuals (0: off).
+    amb_psd_cycles2ps : float
+        Random walk of the single-differenced ambiguities [cycles^2/s].
     iono_sigma_per_10km_m : float
         Double-difference ionosphere sigma per 10 km of baseline [m] (medium baselines).
     accel_psd_h_m2ps3, accel_psd_v_m2ps3 : float
@@ -124,6 +138,8 @@ class RtkOptions(TomlTable):
     code_correlation_time_s: float = 0.0
     adaptive_code_gain: float = 0.0
     min_success_rate: float = 0.95
+    confirm_epochs: int = 5
+    confirm_max_ambiguities: int = 6
     iono_sigma_per_10km_m: float = 0.0
     tropo_model: bool = True
     accel_psd_h_m2ps3: float = 9.0
@@ -176,6 +192,7 @@ class RtkOptions(TomlTable):
         if self.sigma_phase_a_m == 0.0 and self.sigma_phase_b_m == 0.0:
             bad("sigma_phase_a_m", "a and b not both 0")
         for key, lo in (("min_fix_ambiguities", 1), ("max_partial_drops", 0), ("min_lock_epochs", 0),
+                        ("confirm_epochs", 1), ("confirm_max_ambiguities", 0),
                         ("max_outage_epochs", 0)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
@@ -195,6 +212,8 @@ class RtkOptions(TomlTable):
                     code_corr_time_s=float(self.code_correlation_time_s),
                     code_scale_gain=float(self.adaptive_code_gain),
                     min_success_rate=float(self.min_success_rate),
+                    confirm_epochs=int(self.confirm_epochs),
+                    confirm_max_ambiguities=int(self.confirm_max_ambiguities),
                     iono_sigma_per_10km_m=float(self.iono_sigma_per_10km_m), tropo_model=bool(self.tropo_model),
                     accel_psd_h=float(self.accel_psd_h_m2ps3), accel_psd_v=float(self.accel_psd_v_m2ps3),
                     amb_init_sigma_cycles=float(self.amb_init_sigma_cycles),

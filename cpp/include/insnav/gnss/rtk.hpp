@@ -139,6 +139,8 @@ struct RtkOptions {
   double hold_sigma_cycles = 0.0316;
   // fix validation beyond the ratio test (see validate_fix and RtkEngine::resolve)
   double min_success_rate = 0.95;  // bootstrapped success rate of the subset fixed (0: off)
+  int confirm_epochs = 5;          // a new set of few ambiguities is reported after this many repeats
+  int confirm_max_ambiguities = 6; // ... "few": at most this many (more: reported at once)
   double max_age_s = 30.0;         // (applied by the caller that matches the base epochs)
 };
 
@@ -465,7 +467,11 @@ class RtkEngine {
     out.v_e = kin ? Vec3(x_.segment<3>(RtkLayout::kVel)) : Vec3::Zero();
     out.P_r = P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos);
     out.status = RtkStatus::kFloat;
-    if (opt_.ar_mode != ArMode::kOff) resolve(out, kin);
+    if (opt_.ar_mode != ArMode::kOff) {
+      confirm_seen_ = false;
+      resolve(out, kin);
+      if (!confirm_seen_) confirm_count_ = 0;  // the repeats must be consecutive epochs
+    }
     return out;
   }
 
@@ -476,6 +482,10 @@ class RtkEngine {
     bool used = false;      // a phase row this epoch
     bool half = false;      // half-cycle ambiguity flagged
     double el = 0.0;
+    // the integer of the last validated fix (validate_fix): N^k - N^fix_ref = fix_int [cycles]
+    bool fix_valid = false;
+    int fix_ref = -1;
+    double fix_int = 0.0;
   };
 
   static int key(const double* r) {
@@ -574,6 +584,7 @@ class RtkEngine {
     P_(s, s) = opt_.amb_init_sigma_cycles * opt_.amb_init_sigma_cycles;
     amb_[k].lock = 0;
     amb_[k].outage = 0;
+    amb_[k].fix_valid = false;
   }
 
   void manage_ambiguities(int nf, RtkEpoch& out) {
@@ -901,7 +912,7 @@ class RtkEngine {
       std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
     const bool kv = kin;
     int drops = 0;
-    for (int nuse = n; nuse >= std::max(opt_.min_fix_ambiguities, 1); --nuse) {
+    for (int nuse = n; nuse >= 1; --nuse) {
       if (drops++ > opt_.max_partial_drops) break;
       a_hat_.resize(nuse);
       Qa_.resize(nuse, nuse);
@@ -934,7 +945,9 @@ class RtkEngine {
       const Eigen::Matrix<double, 6, 1> xb = x_.head<6>() - Qba * qa_llt_.solve(da_);
       const Eigen::Matrix<double, 6, 6> Pb =
           P_.topLeftCorner<6, 6>() - Qba * qa_llt_.solve(AmbMat(Qba.transpose()));
-      if (validate_fix(ps, nuse) != FixCheck::kAccepted) continue;
+      const FixCheck check = validate_fix(ps, nuse, n);
+      if (check == FixCheck::kTooFew || check == FixCheck::kSuccessRate) continue;
+      if (!confirm_fix(nuse, check)) return;  // waiting for its repeats: float this epoch
       out.status = RtkStatus::kFixed;
       out.ratio = ratio;
       out.success_rate = ps;
@@ -949,22 +962,75 @@ class RtkEngine {
 
   // ---------------------------------------------------------------- fix validation
   // Checks of a candidate integer set beyond the ratio test (which resolve applies first).
-  enum class FixCheck : int { kAccepted = 0, kTooFew = 1, kSuccessRate = 2 };
+  enum class FixCheck : int { kAccepted = 0, kTooFew = 1, kSuccessRate = 2, kConsistent = 3 };
 
   /// ps: bootstrapped success rate of the candidate subset (Lambda::bootstrap_success_rate);
-  /// n_fix: its number of double-differenced ambiguities.
+  /// n_fix: its number of double-differenced ambiguities; n_candidates: the epoch's fixable ones.
   ///  1. Number fixed: n_fix >= min_fix_ambiguities.  With the three position coordinates free, a
   ///     subset of n ambiguities leaves n - 3 checks on the integers: a wrong set that only moves the
   ///     position fits as well as the right one when n - 3 < 2 (measured on the urban preset, GPS L1,
-  ///     5-6 satellites, ratio 3: 3 fixed 100 % wrong, 4 fixed 57 %, 5 fixed 6 %).
+  ///     5-6 satellites, ratio 3: 3 fixed 100 % wrong, 4 fixed 57 %, 5 fixed 6 %).  A smaller set is
+  ///     accepted (kConsistent) when it is every fixable ambiguity of the epoch (at least 3, so the
+  ///     position is pinned) and repeats a validated fix: each of its double differences was fixed to
+  ///     the same integer by an earlier accepted set and its ambiguities have been tracked without a
+  ///     slip since (consistency over consecutive epochs: a satellite setting does not undo what the
+  ///     larger set established).
   ///  2. Success rate: ps >= min_success_rate.  The float covariance must make the integer set
   ///     probable before the data's ratio is believed (Teunissen 1998; Verhagen & Teunissen,
   ///     "The ratio test for future GNSS ambiguity resolution", GPS Solutions 17 (2013) 535-548:
   ///     the ratio test alone does not control the failure rate of a weak model).
-  FixCheck validate_fix(double ps, int n_fix) const {
-    if (n_fix < opt_.min_fix_ambiguities) return FixCheck::kTooFew;
+  FixCheck validate_fix(double ps, int n_fix, int n_candidates) const {
     if (ps < opt_.min_success_rate) return FixCheck::kSuccessRate;
-    return FixCheck::kAccepted;
+    if (n_fix >= opt_.min_fix_ambiguities) return FixCheck::kAccepted;
+    if (n_fix == n_candidates && n_fix >= 3 && repeats_validated_fix(n_fix)) return FixCheck::kConsistent;
+    return FixCheck::kTooFew;
+  }
+
+  // The candidate's first n_fix double differences (dd_j_, dd_i_ in order_, integers a_fix_) equal the
+  // last validated fix: both single-differenced ambiguities carry a validated integer against the
+  // same reference and their difference is the candidate's.
+  bool repeats_validated_fix(int n_fix) const {
+    for (int p = 0; p < n_fix; ++p) {
+      const AmbSlot& j = amb_[dd_j_[order_[p]]];
+      const AmbSlot& i = amb_[dd_i_[order_[p]]];
+      if (!j.fix_valid || !i.fix_valid || j.fix_ref != i.fix_ref) return false;
+      if (j.fix_int - i.fix_int != a_fix_(p, 0)) return false;
+    }
+    return n_fix > 0;
+  }
+
+  // Store a set's integers as the validated ones (replacing the old set).
+  void remember_fix(int n_fix) {
+    for (auto& a : amb_) a.fix_valid = false;
+    for (int p = 0; p < n_fix; ++p) {
+      AmbSlot& j = amb_[dd_j_[order_[p]]];
+      AmbSlot& i = amb_[dd_i_[order_[p]]];
+      const int ref = dd_i_[order_[p]];
+      i.fix_valid = true;
+      i.fix_ref = ref;
+      i.fix_int = 0.0;
+      j.fix_valid = true;
+      j.fix_ref = ref;
+      j.fix_int = a_fix_(p, 0);
+    }
+  }
+
+  ///  3. Confirmation over consecutive epochs: a new set of at most confirm_max_ambiguities
+  ///     ambiguities (redundancy n - 3 <= 3) is reported fixed once the same integers have passed
+  ///     the checks in confirm_epochs consecutive epochs; until then the epoch stays float.  A float
+  ///     filter biased by an undetected slip or by correlated multipath yields a wrong set that passes
+  ///     the ratio test for a few epochs and then changes; the right set repeats.  Larger sets are
+  ///     reported at once (real pairs and open sky: 13 or more).  Returns whether the set is reported.
+  bool confirm_fix(int n_fix, FixCheck check) {
+    confirm_seen_ = true;
+    if (check == FixCheck::kConsistent) return ++confirm_count_ >= opt_.confirm_epochs;
+    if (repeats_validated_fix(n_fix)) {
+      ++confirm_count_;
+    } else {
+      remember_fix(n_fix);
+      confirm_count_ = 1;
+    }
+    return n_fix > opt_.confirm_max_ambiguities || confirm_count_ >= opt_.confirm_epochs;
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -1016,6 +1082,8 @@ class RtkEngine {
   int n_common_ = 0, n_used_sats_ = 0, n_phase_rows_ = 0;
   double dt_epoch_ = 0.0;  // time since the previous epoch [s] (0 on the first)
   double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
+  int confirm_count_ = 0;    // consecutive epochs the validated set was found (confirm_fix)
+  bool confirm_seen_ = false;
 
   const double* rover_ = nullptr;
   const double* base_ = nullptr;
