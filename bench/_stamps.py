@@ -66,7 +66,8 @@ PARTICLE = (f"{_CPP}filter/particle_filter.hpp", f"{_CPP}filter/upf.hpp", f"{_CP
 RINEX = (f"{_PY}gnss/rinex.py", f"{_PY}gnss/broadcast.py", f"{_PY}gnss/ephemeris.py", f"{_PY}gnss/corrections.py",
          f"{_PY}gnss/tight_inputs.py", f"{_PY}io/rinex_dataset.py")
 #: carrier-phase RTK: the C++ engine (double differences, float EKF, MLAMBDA) and its Python run
-RTK = (f"{_CPP}gnss/rtk.hpp", f"{_CPP}gnss/lambda.hpp", "cpp/bindings/bind_rtk.cpp", f"{_PY}gnss/rtk.py",
+RTK = (f"{_CPP}gnss/rtk.hpp", f"{_CPP}gnss/lambda.hpp", f"{_CPP}gnss/ambiguity_resolution.hpp",
+       "cpp/bindings/bind_rtk.cpp", f"{_PY}gnss/rtk.py",
        f"{_PY}filters/rtk.py",
        f"{_PY}gnss/rinex.py", f"{_PY}gnss/broadcast.py", f"{_PY}gnss/ephemeris.py")
 #: KF-GINS data reading
@@ -122,6 +123,11 @@ DEPENDS: dict[str, tuple[str, ...]] = {
     "rtk_euref_wettzell_wtzr_wtzz.md": ("bench/rtk_compare.py",) + RTK,
     "rtk_matrtklib_static_septentrio.md": ("bench/rtk_compare.py",) + RTK,
     "rtk_instinct_spirent_rtk_dynamic_SIMULATED.md": ("bench/rtk_compare.py",) + RTK,
+    "rtk_ins.md": ("bench/rtk_ins.py", "bench/rtk_compare.py", "bench/rtk/spirent_dynamic_l1l2_ge_cont.conf",
+                   f"{_CPP}engine/rtk_ins_engine.hpp", f"{_CPP}meas/dd_phase.hpp",
+                   f"{_CPP}gnss/ambiguity_resolution.hpp", f"{_CPP}engine/closed_loop.hpp", f"{_CPP}filter/ekf.hpp",
+                   "cpp/bindings/bind_rtk_ins.cpp", f"{_PY}filters/rtk_ins.py", f"{_PY}sim/from_truth.py",
+                   f"{_PY}sim/gnss_rtk.py", f"{_PY}scenarios/rtk-urban-car.toml") + RTK + TIGHT + SIM + SIM_RAW,
     "run_all.md": ("bench/run_all.py",),
 }
 

@@ -60,6 +60,8 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
     "rtk_compare": (("rtk_euref_wettzell_wtzr_wtzz.md", "rtk_matrtklib_static_septentrio.md",
                      "rtk_instinct_spirent_rtk_dynamic_SIMULATED.md"), ["bench/rtk_compare.py"],
                     ["bench/rtk_compare.py", "--repeat", "1"]),
+    "rtk_ins": (("rtk_ins.md",), ["bench/rtk_ins.py", "--runs", "20", "--out", "docs/results/rtk_ins.md"],
+                ["bench/rtk_ins.py", "--runs", "2", "--out", "docs/results/rtk_ins.md"]),
     "gate_outages": (("gate_outages.md",), ["bench/gate_outages.py", "--out", "docs/results/gate_outages.md"],
                      ["bench/gate_outages.py", "--seeds", "2", "--out", "docs/results/gate_outages.md"]),
     "navigator": (("navigator.md",), ["bench/navigator_latency.py"], ["bench/navigator_latency.py", "--runs", "1"]),

@@ -115,7 +115,9 @@ py::tuple lambda_decorrelate(const DArray& Q) {
   return py::make_tuple(z, l, d);
 }
 
-RtkOptions options_from_dict(const py::dict& d) {
+}  // namespace
+
+RtkOptions rtk_options_from_dict(const py::dict& d) {
   RtkOptions o;
   for (auto item : d) {
     const std::string k = py::str(item.first);
@@ -162,6 +164,10 @@ RtkOptions options_from_dict(const py::dict& d) {
   }
   return o;
 }
+
+namespace {
+
+RtkOptions options_from_dict(const py::dict& d) { return rtk_options_from_dict(d); }
 
 void check_rows(const DArray& rows, const char* name) {
   if (rows.ndim() != 2 || rows.shape(1) != gnss::RtkRow::kCols)

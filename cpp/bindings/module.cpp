@@ -6,6 +6,10 @@
 
 namespace py = pybind11;
 
+namespace insnav::py_bind {
+void bind_rtk_ins(py::module_& m);  // bind_rtk_ins.cpp (declared here: common.hpp is in every binder's TU)
+}  // namespace insnav::py_bind
+
 namespace {
 // Core precondition failures become Python exceptions instead of abort().
 void throwing_check_handler(const char* expr, const char* msg, const char* file, int line) {
@@ -29,5 +33,6 @@ PYBIND11_MODULE(_core, m) {
   insnav::py_bind::bind_navigator(m);
   insnav::py_bind::bind_rtk(m);
   insnav::py_bind::bind_spp(m);
+  insnav::py_bind::bind_rtk_ins(m);
   // one call per cpp/bindings/bind_*.cpp (declared in common.hpp)
 }

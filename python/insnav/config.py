@@ -19,7 +19,7 @@ from .registry import FILTERS
 from .units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0, MG, MPS_PER_SQRT_H, UG_PER_SQRT_HZ
 
 
-COUPLINGS = ("loose", "tight", "gnss")
+COUPLINGS = ("loose", "tight", "gnss", "rtk")
 LAYOUTS = (15, 21)
 
 
@@ -407,7 +407,8 @@ class RunConfig:
     Attributes
     ----------
     filter : {'ekf', 'rbukf', 'ukf'}
-    coupling : {'loose', 'tight'}
+    coupling : {'loose', 'tight', 'rtk'}
+        (``rtk``: tight RTK/INS, ``insnav.filters.rtk_ins``; ``gnss``: the GNSS-only filters)
     layout : {15, 21}
         15 states (seed 000) or 21 with scale factors (KF-GINS-like).
     init_sigma_pos_m, init_sigma_vel_mps, init_sigma_att_deg : 3 floats
@@ -690,6 +691,8 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     imu_d = d.pop("imu", None)
     con_d = d.pop("constraints", None)
     rob_d = d.pop("robust", None)
+    for table in ("rtk", "rtk_engine"):  # coupling = "rtk": read by insnav.filters.rtk_ins (the CLI passes them)
+        d.pop(table, None)
     names = {f.name for f in dataclasses.fields(RunConfig)} - {"imu", "constraints", "robust"}
     for k in d:
         if k not in names:

@@ -97,13 +97,19 @@ SPP_OPTIONS = ("spp_options", "weighting")
 _RTK = "insnav.filters.rtk:run_rtk"
 #: options of the carrier-phase RTK (``insnav.filters.rtk.run_rtk``)
 RTK_OPTIONS = ("rtk_options",)
+_RTK_INS = "insnav.filters.rtk_ins:run_rtk_ins"
+#: options of the tight RTK/INS EKF (``insnav.filters.rtk_ins.run_rtk_ins``)
+RTK_INS_OPTIONS = ("rover", "base", "nav", "base_pos", "rtk_options", "engine", "probe_epoch")
 #: options of the delay filters (``insnav.filters.delay.run_delayed``)
 DELAY_OPTIONS = ("delay_p", "max_history_s", "checkpoint_interval_s")
 
 FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
-    FilterSpec("ekf", ("loose", "tight"), {"loose": (15, 21), "tight": (17,)},
-               {"loose": _LOOSE, "tight": _TIGHT}, outage_cycle_factor=1.5, paper="seed 000 baseline, seed 003",
-               summary="closed-loop error-state EKF, Joseph update", coupling_options={"tight": TIGHT_OPTIONS}),
+    FilterSpec("ekf", ("loose", "tight", "rtk"), {"loose": (15, 21), "tight": (17,), "rtk": (15,)},
+               {"loose": _LOOSE, "tight": _TIGHT, "rtk": _RTK_INS}, outage_cycle_factor=1.5,
+               paper="seed 000 baseline, seed 003; rtk: Teunissen 1995, Chang, Yang & Zhou 2005 (MLAMBDA)",
+               summary="closed-loop error-state EKF, Joseph update; rtk: double-differenced carrier phase and code "
+                       "against a base, ambiguity states, INS-aided AR and slip detection",
+               coupling_options={"tight": TIGHT_OPTIONS, "rtk": RTK_INS_OPTIONS}),
     FilterSpec("rbukf", ("loose", "tight"), {"loose": (15, 21), "tight": (17,)},
                {"loose": _LOOSE, "tight": _TIGHT}, paper="seed 000",
                summary="UT time update through the nonlinear error model, linear KF update",

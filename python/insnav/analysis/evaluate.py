@@ -55,10 +55,21 @@ def attach_fix_status(sol, path):
         from ..gnss.gpstime import SECONDS_PER_WEEK
 
         a = np.genfromtxt(side, delimiter=",", names=True)
+        status = np.atleast_1d(a["status"]).astype(int)
+        sol.slip_counts = {k[len("slips_"):]: int(np.nansum(np.atleast_1d(a[k]))) for k in a.dtype.names
+                           if k.startswith("slips_")}
+        if "t_s" in a.dtype.names:  # RTK/INS: rows at the IMU rate carry the status of the last epoch
+            t = np.atleast_1d(a["t_s"])
+            i = np.searchsorted(t, np.asarray(sol.t) + 1e-6, side="right") - 1
+            dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+            ok = (i >= 0) & (np.asarray(sol.t) - t[np.maximum(i, 0)] <= 1.5 * dt)
+            sol.fix_status = np.where(ok, status[np.maximum(i, 0)], 0).astype(int)
+            sol.epoch_fix_status = status  # fix rate over the rover epochs, not the rows
+            return sol
         t = np.atleast_1d(a["t_gps_s"])
         t = t - SECONDS_PER_WEEK * np.floor(t[0] / SECONDS_PER_WEEK)
         i = np.clip(np.searchsorted(t, np.asarray(sol.t) - 1e-6), 0, len(t) - 1)
-        sol.fix_status = np.where(np.abs(t[i] - sol.t) < 1e-3, np.atleast_1d(a["status"])[i], 0).astype(int)
+        sol.fix_status = np.where(np.abs(t[i] - sol.t) < 1e-3, status[i], 0).astype(int)
     return sol
 
 
@@ -200,7 +211,9 @@ def evaluate(solution, truth, outages=()) -> dict:
         i = np.clip(np.searchsorted(np.asarray(solution.t), e["t"] - 1e-9), 0, len(st) - 1)
         st_e = st[i]
         err3 = np.linalg.norm(e["pos_n_m"], axis=1)
-        out["fix_rate"] = float(np.mean(st == 1)) if st.size else 0.0
+        ep = getattr(solution, "epoch_fix_status", None)  # RTK/INS: over the rover epochs
+        ep = st if ep is None else np.asarray(ep)
+        out["fix_rate"] = float(np.mean(ep == 1)) if ep.size else 0.0
         out["by_status"] = {}
         for q, name in STATUS_NAMES.items():
             m = st_e == q

@@ -388,11 +388,16 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
                      f"{_fmt(float(rms(pr)) if pr.size else None)} / {_fmt(float(rms(rr)) if rr.size else None)} "
                      f"({pr.size} / {rr.size} satellite rows)"))
     fs = getattr(sol, "fix_status", None)
+    if getattr(sol, "epoch_fix_status", None) is not None:  # RTK/INS: per rover epoch, not per IMU row
+        fs = np.asarray(sol.epoch_fix_status)
     if fs is not None and len(fs):
         from ..gnss.rtk import STATUS_NAMES
 
         counts = ", ".join(f"{int(np.sum(fs == q))} {n}" for q, n in STATUS_NAMES.items() if np.any(fs == q))
         rows.append(("carrier-phase fix rate", f"{100.0 * np.mean(fs == 1):.1f} % ({counts})"))
+        sc = getattr(sol, "slip_counts", None)
+        if sc:
+            rows.append(("cycle slips detected", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sc.items())))
         if ev is not None and "by_status" in ev:
             for name, d in ev["by_status"].items():
                 rows.append((f"3-D error of {name} epochs, RMS / max [m]",

@@ -62,8 +62,11 @@ def add_run_parser(sub) -> None:
     p.add_argument("--filter", default=None, metavar="NAME",
                    help="default: the config's, else ekf.  "
                         + "; ".join(f"{n} ({'/'.join(s.couplings)}, {s.paper}): {s.summary}" for n, s in FILTERS.items()))
-    p.add_argument("--coupling", choices=("loose", "tight", "gnss"), default=None,
-                   help="gnss: GNSS only (filter spp; the only coupling it has, chosen by --filter spp)")
+    p.add_argument("--coupling", choices=("loose", "tight", "gnss", "rtk"), default=None,
+                   help="gnss: GNSS only (filter spp; the only coupling it has, chosen by --filter spp); "
+                        "rtk: tight RTK/INS of the dataset's IMU with --obs ROVER --base BASE --nav NAV (carrier "
+                        "phase; the TOML's [rtk] and [rtk_engine] tables; writes <out>.rtk.pos and <out>.rtk.csv "
+                        "per rover epoch with the fix status, ratio and slips)")
     p.add_argument("--config", help="insnav TOML run configuration (with a [rinex] table for --format rinex), "
                    "or the KF-GINS YAML with --format kfgins")
     p.add_argument("--imu", help="KF-GINS IMU file (overrides the YAML's imupath); with --format rinex or csv the "
@@ -471,6 +474,35 @@ def _outside_imu_span(sol, ds) -> tuple[int, int]:
     return n + cut, cut
 
 
+def _rtk_ins_inputs(args, ds):
+    """``--coupling rtk``: the IMU dataset with --obs/--base/--nav (an RtkInsDataset) and the run options
+    (the TOML's ``[rtk]`` table over the RTK/INS defaults, ``[rtk_engine]``, the base position)."""
+    import tomllib
+
+    from ..filters.rtk import parse_base_position
+    from ..filters.rtk_ins import RtkInsDataset
+
+    missing = [n for n in ("obs", "base", "nav") if not getattr(args, n)]
+    if missing:
+        raise UserError("--coupling rtk needs " + ", ".join(f"--{n}" for n in missing)
+                        + " (rover and base RINEX observations, navigation file(s))")
+    rtk, eng, base_e = {}, {}, None
+    if args.config:
+        try:
+            with open(args.config, "rb") as f:
+                d = tomllib.load(f)
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise UserError(f"{args.config}: {exc}") from None
+        rtk, eng = dict(d.get("rtk", {})), dict(d.get("rtk_engine", {}))
+        for k in ("base_position_ecef_m", "base_position_llh"):
+            if k in rtk:
+                base_e = parse_base_position(rtk.pop(k), f"{args.config}: key 'rtk.{k}'")
+    if args.base_pos is not None:
+        base_e = parse_base_position(args.base_pos)
+    ds = RtkInsDataset(ds, args.obs, args.base, [p for p in args.nav.split(",") if p], base_e)
+    return ds, dict(rtk_options=rtk, engine=eng)
+
+
 def cmd_run(args) -> int:
     import insnav
 
@@ -580,11 +612,14 @@ def cmd_run(args) -> int:
             cfg.imu_error_sigmas = True  # KF_GINS_STD.txt
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
+        run_opts = {}
+        if (args.coupling or cfg.coupling) == "rtk":
+            ds, run_opts = _rtk_ins_inputs(args, ds)
         stages.done("read")
         from .._progress import reporting
 
         with reporting(f"insnav run {args.filter or cfg.filter}", enabled=not args.quiet):
-            sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg)
+            sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg, **run_opts)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     s = sol.summary
@@ -633,6 +668,11 @@ def cmd_run(args) -> int:
                 sol.save(out, columns=groups, precision=args.csv_precision)
                 base = out
             write_innovations(sol, base)
+            if getattr(sol, "rtk", None) is not None and s.get("coupling") == "rtk":  # RTK/INS: per rover epoch
+                from ..gnss.rtk import write_rtk_table, write_rtklib_pos
+
+                write_rtklib_pos(sol.rtk, base.with_suffix(base.suffix + ".rtk.pos"), program="insnav rtk/ins")
+                write_rtk_table(sol.rtk, base.with_suffix(base.suffix + ".rtk.csv"), t_solution_s=sol.gnss_t)
             cfg.filter = sol.summary.get("filter", cfg.filter)
             cfg.coupling = sol.summary.get("coupling", cfg.coupling)
             text = resolved_config_toml(cfg)

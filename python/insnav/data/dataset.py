@@ -727,7 +727,7 @@ def check_finite_rows(a, origin: RowOrigin, columns) -> None:
     first, c0 = None, 0
     for part in parts:
         if np.isfinite(part).all():  # the usual case: no per-element mask to search
-            c0 += part.reshape(len(part), -1).shape[1]
+            c0 += part.shape[1] if part.ndim > 1 else 1  # (an empty file: no rows to reshape)
             continue
         part2 = part.reshape(len(part), -1)
         bad = ~np.isfinite(part2)

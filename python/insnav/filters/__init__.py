@@ -25,7 +25,8 @@ from .solution import GNSS_STATUS, RecordStatus, Solution
 
 __all__ = ["run", "Solution", "RecordStatus", "GNSS_STATUS"]
 
-_ADVERB = {"loose": "loosely", "tight": "tightly", "gnss": "GNSS-only (no IMU),"}
+_ADVERB = {"loose": "loosely", "tight": "tightly", "gnss": "GNSS-only (no IMU),",
+           "rtk": "RTK/INS (carrier phase against a base),"}
 
 
 def _as_config(config) -> RunConfig:
@@ -106,6 +107,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     if getattr(dataset, "gnss_only", False):  # GNSS-only inputs (rtk): no IMU to sanitize or check
         sanitize = checks = False
     with scan_memo():  # the sanitizer, the checks and the runner share one pass over the IMU arrays
+        inner = getattr(dataset, "imu_dataset", None)  # RTK/INS: the IMU side of an RtkInsDataset
         if sanitize:
             from .sanitize import sanitize_dataset
 
@@ -113,11 +115,15 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
             # the delay filters receive the arrival stream: a fix that arrives
             # twice (seed 001 eq. (4)) is two records, not a duplicate
             arrivals = spec.runners.get(cfg.coupling) == "insnav.filters.delay:run_delay"
-            dataset, report = sanitize_dataset(dataset, opts or True, arrivals=arrivals)
+            if inner is not None:
+                inner, report = sanitize_dataset(inner, opts or True, arrivals=arrivals)
+                dataset = dataclasses.replace(dataset, imu_dataset=inner)
+            else:
+                dataset, report = sanitize_dataset(dataset, opts or True, arrivals=arrivals)
         if checks:
             from .checks import check_dataset
 
-            check_dataset(dataset, max_time_offset_s=cfg.max_time_offset_s)
+            check_dataset(inner if inner is not None else dataset, max_time_offset_s=cfg.max_time_offset_s)
         sol = spec.runner(cfg.coupling)(dataset, cfg, **options)
     if report is not None:
         sol.summary["sanitize"] = report

@@ -42,7 +42,7 @@ import numpy as np
 from ..config import ConfigError, TomlTable
 
 __all__ = ["RtkOptions", "PhaseObs", "RtkSolution", "SIGNALS", "STATUS_NAMES", "read_phase_obs", "receiver_rows",
-           "match_base", "solve_rtk", "base_position_from_header", "write_rtklib_pos", "write_rtk_table",
+           "match_base", "solve_rtk", "prepare_rtk_rows", "base_position_from_header", "write_rtklib_pos", "write_rtk_table",
            "RTK_COLUMNS", "RtkInputError"]
 
 #: engine index of each system (``RtkSystem`` in rtk.hpp)
@@ -609,9 +609,28 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
     RtkSolution
     """
     from .. import _core
-    from .spp import read_nav_multi
 
     opt = options if isinstance(options, RtkOptions) else RtkOptions.from_dict(options or {}, "rtk options")
+    rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, r_base_e, opt)
+    out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
+    age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
+    return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
+                       ratio=np.asarray(out["ratio"]), success_rate=np.asarray(out["success_rate"]),
+                       n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]),
+                       n_sat=np.asarray(out["n_sat"]), r_e=np.asarray(out["r_e"]), v_e=np.asarray(out["v_e"]),
+                       r_float_e=np.asarray(out["r_float_e"]), P_r=np.asarray(out["P_r"]).reshape(-1, 3, 3),
+                       slips=np.asarray(out["slips"]), base_age_s=age, r_base_e=r_base_e,
+                       info=dict(rover=rover.path, base=base.path, options=opt, rover_signals=rover.signals,
+                                 base_signals=base.signals))
+
+
+def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
+    """The engine inputs of an RTK run (shared by :func:`solve_rtk` and the tight RTK/INS filter):
+    ``(rover, base, r_base_e, base_index, rover_off, rover_rows, base_off, base_rows)`` with the
+    observations read (paths -> :class:`PhaseObs`), the base position (header default), the base
+    epoch of each rover epoch (:func:`match_base`) and the satellite states of each receiver."""
+    from .spp import read_nav_multi
+
     if not isinstance(rover, PhaseObs):
         rover = read_phase_obs(rover, opt.systems)
     if not isinstance(base, PhaseObs):
@@ -632,15 +651,7 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
                               np.concatenate([_first_code(rover), _first_code(base)]))
     roff, rrows = receiver_rows(rover, nav, opt.frequencies, (rs[:nr], clk[:nr]))
     boff, brows = receiver_rows(base, nav, opt.frequencies, (rs[nr:], clk[nr:]))
-    out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
-    age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
-    return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
-                       ratio=np.asarray(out["ratio"]), success_rate=np.asarray(out["success_rate"]), n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]),
-                       n_sat=np.asarray(out["n_sat"]), r_e=np.asarray(out["r_e"]), v_e=np.asarray(out["v_e"]),
-                       r_float_e=np.asarray(out["r_float_e"]), P_r=np.asarray(out["P_r"]).reshape(-1, 3, 3),
-                       slips=np.asarray(out["slips"]), base_age_s=age, r_base_e=r_base_e,
-                       info=dict(rover=rover.path, base=base.path, options=opt, rover_signals=rover.signals,
-                                 base_signals=base.signals))
+    return rover, base, r_base_e, bidx, roff, rrows, boff, brows
 
 
 def _gpst_text(t_gps_s: float) -> str:
@@ -690,14 +701,20 @@ RTK_COLUMNS = ("t_gps_s", "status", "ratio", "n_fix", "n_dd", "n_sat", "base_age
                *(f"slips_{k}" for k in RtkSolution.SLIP_KINDS))
 
 
-def write_rtk_table(sol: RtkSolution, path) -> "os.PathLike":
-    """Write ``path`` (``<out>.rtk.csv``): :data:`RTK_COLUMNS` per rover epoch (ECEF position [m])."""
+def write_rtk_table(sol: RtkSolution, path, *, t_solution_s=None) -> "os.PathLike":
+    """Write ``path`` (``<out>.rtk.csv``): :data:`RTK_COLUMNS` per rover epoch (ECEF position [m]); the
+    slip columns of ``type(sol).SLIP_KINDS``; with ``t_solution_s`` (the epochs on the time axis of a
+    solution whose rows are not GPS seconds, e.g. RTK/INS) a last column ``t_s``."""
     from .._atomic import atomic_write_text
 
-    lines = [",".join(RTK_COLUMNS)]
+    cols = RTK_COLUMNS[:-len(RtkSolution.SLIP_KINDS)] + tuple(f"slips_{k}" for k in type(sol).SLIP_KINDS)
+    if t_solution_s is not None:
+        cols += ("t_s",)
+    lines = [",".join(cols)]
     for i in range(len(sol)):
         age = f"{sol.base_age_s[i]:.3f}" if np.isfinite(sol.base_age_s[i]) else "nan"
         xyz = ",".join(f"{v:.4f}" for v in sol.r_e[i]) if sol.status[i] > 0 else "nan,nan,nan"
         lines.append(f"{sol.t_gps_s[i]:.3f},{int(sol.status[i])},{sol.ratio[i]:.2f},{int(sol.n_fix[i])},"
-                     f"{int(sol.n_dd[i])},{int(sol.n_sat[i])},{age},{xyz}," + ",".join(str(int(v)) for v in sol.slips[i]))
+                     f"{int(sol.n_dd[i])},{int(sol.n_sat[i])},{age},{xyz}," + ",".join(str(int(v)) for v in sol.slips[i])
+                     + (f",{t_solution_s[i]:.6f}" if t_solution_s is not None else ""))
     return atomic_write_text(path, "\n".join(lines) + "\n")

@@ -19,7 +19,15 @@ def add_simulate_parser(subparsers) -> None:
         "Files carry the unit in every column name: t_s [s], dtheta_x_rad, dv_x_mps [m/s], lat_deg, h_m [m].\n"
         "Example: insnav simulate seed000-sim --seed 1 --out data/seed000-sim",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scenario", help="preset name or path to a scenario .toml file")
+    p.add_argument("scenario", nargs="?", help="preset name or path to a scenario .toml file")
+    p.add_argument("--from-truth", metavar="FILE", default=None,
+                   help="instead of a scenario: synthesise IMU increments from a sampled truth trajectory file\n"
+                   "(Spirent SimGEN motion CSV: quintic Hermite position, cubic-spline attitude; see\n"
+                   "docs/algorithms.md) and write imu.csv, truth.csv, imu_errors.csv, dataset.json")
+    p.add_argument("--imu-grade", default="industrial",
+                   help="with --from-truth: IMU grade of the injected errors (navigation, tactical, industrial,\n"
+                   "consumer) or 'exact' (no error); default industrial")
+    p.add_argument("--imu-rate-hz", type=float, default=100.0, help="with --from-truth: IMU rate [Hz] (default 100)")
     p.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
     p.add_argument("--out", required=True, help="dataset directory to write")
     p.add_argument("--overwrite", action="store_true", help="replace an existing insnav dataset folder (never a folder holding other files)")
@@ -45,7 +53,18 @@ def cmd_simulate(args) -> int:
     from ..data.dataset import check_replaceable
 
     out = Path(args.out)
+    if (args.scenario is None) == (args.from_truth is None):
+        raise SystemExit("insnav simulate: give either a scenario or --from-truth FILE (not both)")
     check_replaceable(out, args.overwrite)  # before the simulation: fail fast, never touch a user's folder
+    if args.from_truth is not None:
+        from .from_truth import simulate_from_truth
+
+        ds = simulate_from_truth(args.from_truth, args.imu_grade, imu_rate_hz=args.imu_rate_hz,
+                                 seed=0 if args.seed is None else args.seed)
+        ds.save(out, overwrite=args.overwrite)
+        print(f"{ds.name} (IMU grade {args.imu_grade}, seed {ds.seed}): {len(ds.imu)} IMU samples at "
+              f"{args.imu_rate_hz:g} Hz, {len(ds.truth)} truth epochs -> {out}")
+        return 0
     from .._progress import Progress
 
     bar = Progress(f"insnav simulate {args.scenario}", unit=" stages")

@@ -33,8 +33,9 @@
 // double-differenced ambiguities D x_N, Q_a = D P_NN D^T; ratio test s2/s1 >= threshold
 // (Teunissen & Verhagen 2009, "The GNSS ambiguity ratio-test revisited"); on failure partial
 // AR drops the largest-variance (or the lowest-elevation) ambiguity and retries down to
-// min_fix_ambiguities; a set that passes is validated further (RtkEngine::validate_fix: number
-// fixed, bootstrapped success rate); the fixed baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
+// min_fix_ambiguities; a set that passes is validated further (gnss/ambiguity_resolution.hpp:
+// bootstrapped success rate in PartialAr; number fixed and confirmation over epochs in
+// FixValidator); the fixed baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
 // (Teunissen 1995, eq. (6)).  Optional float-model terms for receivers noisier than configured:
 // time-correlated code (code_corr_time_s), an adaptive code variance factor (code_scale_gain) and
 // the ambiguity random walk (amb_psd).
@@ -59,6 +60,7 @@
 #include <limits>
 
 #include "insnav/earth/wgs84.hpp"
+#include "insnav/gnss/ambiguity_resolution.hpp"
 #include "insnav/gnss/lambda.hpp"
 
 namespace insnav::gnss {
@@ -109,7 +111,7 @@ struct RtkOptions {
   double elevation_mask_rad = 15.0 * M_PI / 180.0;
   double ar_elevation_mask_rad = 0.0;
   double ratio_threshold = 3.0;
-  int min_fix_ambiguities = 5;     // fewest ambiguities fixed (partial AR stops there; validate_fix)
+  int min_fix_ambiguities = 5;     // fewest ambiguities fixed (partial AR stops there; FixValidator rule 1)
   int max_partial_drops = 12;
   bool partial_by_variance = true;   // partial AR drops the largest-variance ambiguity first (else the lowest)
   int min_lock_epochs = 0;         // epochs an ambiguity is tracked before it is fixed
@@ -137,7 +139,7 @@ struct RtkOptions {
   int max_outage_epochs = 5;       // an ambiguity unobserved this many epochs is removed
   double outlier_sigma = 5.0;      // phase innovation beyond this many sigmas: ambiguity reset (0 off)
   double hold_sigma_cycles = 0.0316;
-  // fix validation beyond the ratio test (see validate_fix and RtkEngine::resolve)
+  // fix validation beyond the ratio test (ambiguity_resolution.hpp: PartialAr, FixValidator)
   double min_success_rate = 0.95;  // bootstrapped success rate of the subset fixed (0: off)
   int confirm_epochs = 5;          // a new set of few ambiguities is reported after this many repeats
   int confirm_max_ambiguities = 6; // ... "few": at most this many (more: reported at once)
@@ -176,6 +178,23 @@ inline double tropo_saastamoinen_m(double lat, double h, double el) {
 }
 
 }  // namespace detail
+
+/// Geometry of a receiver at r_e to the satellite of an RtkRow: range with the Sagnac term
+/// (RTKLIB manual eq. (E.3.8b)) [m] and the unit vector receiver -> satellite (e_unit, ECEF).
+inline double sat_range(const double* row, const Vec3& r_e, Vec3& e_unit) {
+  const Vec3 rs(row[RtkRow::kSatPos], row[RtkRow::kSatPos + 1], row[RtkRow::kSatPos + 2]);
+  const Vec3 d = rs - r_e;
+  const double g = d.norm();
+  e_unit = d / g;
+  return g + kOmegaE * (rs.x() * r_e.y() - rs.y() * r_e.x()) / kCLight;
+}
+
+/// Zero-difference phase variance sigma^2(el) = F^2 (a^2 + b^2 / sin^2 el) [m^2] (F: GLONASS factor).
+inline double phase_variance_zd(double el, int sys, const RtkOptions& o) {
+  const double s = std::max(std::sin(el), 0.05);
+  const double f = sys == kGlonass ? o.glonass_factor : 1.0;
+  return f * f * (o.sigma_phase_a_m * o.sigma_phase_a_m + o.sigma_phase_b_m * o.sigma_phase_b_m / (s * s));
+}
 
 /// Per-receiver cycle-slip detector (LLI, geometry-free, Melbourne-Wuebbena, Doppler).
 class SlipDetector {
@@ -316,6 +335,7 @@ class RtkEngine {
     P_.setZero(kMaxStates, kMaxStates);
     amb_of_.fill(-1);
     for (auto& a : amb_) a = AmbSlot{};
+    validator_.reset();
     initialized_ = false;
     t_prev_ = NAN;
     code_scale_ = 1.0;
@@ -419,6 +439,7 @@ class RtkEngine {
       P_.setZero(kMaxStates, kMaxStates);
       amb_of_.fill(-1);
       for (auto& a : amb_) a = AmbSlot{};
+      validator_.reset();
       x_.segment<3>(RtkLayout::kPos) = r0;
       P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos) = Mat3::Identity() * opt_.pos_init_sigma_m * opt_.pos_init_sigma_m;
       if (kin)
@@ -468,9 +489,9 @@ class RtkEngine {
     out.P_r = P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos);
     out.status = RtkStatus::kFloat;
     if (opt_.ar_mode != ArMode::kOff) {
-      confirm_seen_ = false;
+      validator_.begin_epoch();
       resolve(out, kin);
-      if (!confirm_seen_) confirm_count_ = 0;  // the repeats must be consecutive epochs
+      validator_.end_epoch();
     }
     return out;
   }
@@ -482,10 +503,6 @@ class RtkEngine {
     bool used = false;      // a phase row this epoch
     bool half = false;      // half-cycle ambiguity flagged
     double el = 0.0;
-    // the integer of the last validated fix (validate_fix): N^k - N^fix_ref = fix_int [cycles]
-    bool fix_valid = false;
-    int fix_ref = -1;
-    double fix_int = 0.0;
   };
 
   static int key(const double* r) {
@@ -495,19 +512,9 @@ class RtkEngine {
   static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
 
   // Geometry of a receiver at r to the satellite of row: range with Sagnac term, unit vector, elevation.
-  static double range(const double* row, const Vec3& r, Vec3& e_unit) {
-    const Vec3 rs(row[RtkRow::kSatPos], row[RtkRow::kSatPos + 1], row[RtkRow::kSatPos + 2]);
-    const Vec3 d = rs - r;
-    const double g = d.norm();
-    e_unit = d / g;
-    return g + kOmegaE * (rs.x() * r.y() - rs.y() * r.x()) / kCLight;
-  }
+  static double range(const double* row, const Vec3& r, Vec3& e_unit) { return sat_range(row, r, e_unit); }
 
-  double var_zd(double el, int sys) const {
-    const double s = std::max(std::sin(el), 0.05);
-    const double f = sys == kGlonass ? opt_.glonass_factor : 1.0;
-    return f * f * (opt_.sigma_phase_a_m * opt_.sigma_phase_a_m + opt_.sigma_phase_b_m * opt_.sigma_phase_b_m / (s * s));
-  }
+  double var_zd(double el, int sys) const { return phase_variance_zd(el, sys, opt_); }
 
   void update_geometry() {
     const Vec3 rr = x_.segment<3>(RtkLayout::kPos);
@@ -559,6 +566,7 @@ class RtkEngine {
     const int s = RtkLayout::kAmb + k;
     if (amb_[k].sat >= 0) amb_of_[amb_[k].sat * kMaxFreq + amb_[k].freq] = -1;
     amb_[k] = AmbSlot{};
+    validator_.invalidate(k);
     x_(s) = 0.0;
     P_.row(s).setZero();
     P_.col(s).setZero();
@@ -584,7 +592,7 @@ class RtkEngine {
     P_(s, s) = opt_.amb_init_sigma_cycles * opt_.amb_init_sigma_cycles;
     amb_[k].lock = 0;
     amb_[k].outage = 0;
-    amb_[k].fix_valid = false;
+    validator_.invalidate(k);
   }
 
   void manage_ambiguities(int nf, RtkEpoch& out) {
@@ -911,126 +919,48 @@ class RtkEngine {
     else
       std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
     const bool kv = kin;
-    int drops = 0;
-    for (int nuse = n; nuse >= 1; --nuse) {
-      if (drops++ > opt_.max_partial_drops) break;
-      a_hat_.resize(nuse);
-      Qa_.resize(nuse, nuse);
-      for (int p = 0; p < nuse; ++p) {
-        const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
-        a_hat_(p) = x_(sj) - x_(si);
-        for (int q = 0; q <= p; ++q) {
+    ArSettings st;
+    st.ratio_threshold = opt_.ratio_threshold;
+    // subsets below min_fix_ambiguities only pass as every candidate of the epoch (FixValidator rule 1)
+    st.min_fix = std::max(std::min(opt_.min_fix_ambiguities, n), 1);
+    st.max_drops = opt_.max_partial_drops;
+    st.min_success_rate = opt_.min_success_rate;
+    const FixRules rules{opt_.min_fix_ambiguities, opt_.confirm_epochs, opt_.confirm_max_ambiguities};
+    const auto slot_j = [&](int p) { return dd_j_[order_[p]]; };
+    const auto slot_i = [&](int p) { return dd_i_[order_[p]]; };
+    const bool ok = ar_.resolve(
+        n,
+        [&](int p) {
+          return x_(RtkLayout::kAmb + dd_j_[order_[p]]) - x_(RtkLayout::kAmb + dd_i_[order_[p]]);
+        },
+        [&](int p, int q) {
+          const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
           const int tj = RtkLayout::kAmb + dd_j_[order_[q]], ti = RtkLayout::kAmb + dd_i_[order_[q]];
-          Qa_(p, q) = Qa_(q, p) = P_(sj, tj) - P_(sj, ti) - P_(si, tj) + P_(si, ti);
-        }
-      }
-      double s[2];
-      if (lambda_.solve(a_hat_, Qa_, a_fix_, s) != LambdaStatus::kOk) continue;
-      const double ratio = s[0] > 0.0 ? std::min(s[1] / s[0], 999.9) : 999.9;
-      const double ps = lambda_.bootstrap_success_rate();
-      if (nuse == n) {
-        out.ratio = ratio;
-        out.success_rate = ps;
-      }
-      if (ratio < opt_.ratio_threshold) continue;
-      // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
-      Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxAmbiguities> Qba(6, nuse);
-      for (int p = 0; p < nuse; ++p) {
-        const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
-        for (int i = 0; i < 6; ++i) Qba(i, p) = P_(i, sj) - P_(i, si);
-      }
-      qa_llt_.compute(Qa_);
-      if (qa_llt_.info() != Eigen::Success) continue;
-      da_ = a_hat_ - a_fix_.col(0);
-      const Eigen::Matrix<double, 6, 1> xb = x_.head<6>() - Qba * qa_llt_.solve(da_);
-      const Eigen::Matrix<double, 6, 6> Pb =
-          P_.topLeftCorner<6, 6>() - Qba * qa_llt_.solve(AmbMat(Qba.transpose()));
-      const FixCheck check = validate_fix(ps, nuse, n);
-      if (check == FixCheck::kTooFew || check == FixCheck::kSuccessRate) continue;
-      if (!confirm_fix(nuse, check)) return;  // waiting for its repeats: float this epoch
-      out.status = RtkStatus::kFixed;
-      out.ratio = ratio;
-      out.success_rate = ps;
-      out.n_fix = nuse;
-      out.r_e = xb.head<3>();
-      if (kv) out.v_e = xb.tail<3>();
-      out.P_r = Pb.topLeftCorner<3, 3>();
-      if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
-      return;
+          return P_(sj, tj) - P_(sj, ti) - P_(si, tj) + P_(si, ti);
+        },
+        st, [&](int n_fix) { return validator_(n_fix, n, slot_j, slot_i, ar_.a_fix(), rules); });
+    out.ratio = ar_.ratio();
+    out.success_rate = ar_.success_rate();
+    if (!ok) return;  // no set passed, or a new small set waits for its repeats (FixValidator rule 2)
+    const int nuse = ar_.n_used();
+    // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
+    Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxAmbiguities> Qba(6, nuse);
+    for (int p = 0; p < nuse; ++p) {
+      const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
+      for (int i = 0; i < 6; ++i) Qba(i, p) = P_(i, sj) - P_(i, si);
     }
-  }
-
-  // ---------------------------------------------------------------- fix validation
-  // Checks of a candidate integer set beyond the ratio test (which resolve applies first).
-  enum class FixCheck : int { kAccepted = 0, kTooFew = 1, kSuccessRate = 2, kConsistent = 3 };
-
-  /// ps: bootstrapped success rate of the candidate subset (Lambda::bootstrap_success_rate);
-  /// n_fix: its number of double-differenced ambiguities; n_candidates: the epoch's fixable ones.
-  ///  1. Number fixed: n_fix >= min_fix_ambiguities.  With the three position coordinates free, a
-  ///     subset of n ambiguities leaves n - 3 checks on the integers: a wrong set that only moves the
-  ///     position fits as well as the right one when n - 3 < 2 (measured on the urban preset, GPS L1,
-  ///     5-6 satellites, ratio 3: 3 fixed 100 % wrong, 4 fixed 57 %, 5 fixed 6 %).  A smaller set is
-  ///     accepted (kConsistent) when it is every fixable ambiguity of the epoch (at least 3, so the
-  ///     position is pinned) and repeats a validated fix: each of its double differences was fixed to
-  ///     the same integer by an earlier accepted set and its ambiguities have been tracked without a
-  ///     slip since (consistency over consecutive epochs: a satellite setting does not undo what the
-  ///     larger set established).
-  ///  2. Success rate: ps >= min_success_rate.  The float covariance must make the integer set
-  ///     probable before the data's ratio is believed (Teunissen 1998; Verhagen & Teunissen,
-  ///     "The ratio test for future GNSS ambiguity resolution", GPS Solutions 17 (2013) 535-548:
-  ///     the ratio test alone does not control the failure rate of a weak model).
-  FixCheck validate_fix(double ps, int n_fix, int n_candidates) const {
-    if (ps < opt_.min_success_rate) return FixCheck::kSuccessRate;
-    if (n_fix >= opt_.min_fix_ambiguities) return FixCheck::kAccepted;
-    if (n_fix == n_candidates && n_fix >= 3 && repeats_validated_fix(n_fix)) return FixCheck::kConsistent;
-    return FixCheck::kTooFew;
-  }
-
-  // The candidate's first n_fix double differences (dd_j_, dd_i_ in order_, integers a_fix_) equal the
-  // last validated fix: both single-differenced ambiguities carry a validated integer against the
-  // same reference and their difference is the candidate's.
-  bool repeats_validated_fix(int n_fix) const {
-    for (int p = 0; p < n_fix; ++p) {
-      const AmbSlot& j = amb_[dd_j_[order_[p]]];
-      const AmbSlot& i = amb_[dd_i_[order_[p]]];
-      if (!j.fix_valid || !i.fix_valid || j.fix_ref != i.fix_ref) return false;
-      if (j.fix_int - i.fix_int != a_fix_(p, 0)) return false;
-    }
-    return n_fix > 0;
-  }
-
-  // Store a set's integers as the validated ones (replacing the old set).
-  void remember_fix(int n_fix) {
-    for (auto& a : amb_) a.fix_valid = false;
-    for (int p = 0; p < n_fix; ++p) {
-      AmbSlot& j = amb_[dd_j_[order_[p]]];
-      AmbSlot& i = amb_[dd_i_[order_[p]]];
-      const int ref = dd_i_[order_[p]];
-      i.fix_valid = true;
-      i.fix_ref = ref;
-      i.fix_int = 0.0;
-      j.fix_valid = true;
-      j.fix_ref = ref;
-      j.fix_int = a_fix_(p, 0);
-    }
-  }
-
-  ///  3. Confirmation over consecutive epochs: a new set of at most confirm_max_ambiguities
-  ///     ambiguities (redundancy n - 3 <= 3) is reported fixed once the same integers have passed
-  ///     the checks in confirm_epochs consecutive epochs; until then the epoch stays float.  A float
-  ///     filter biased by an undetected slip or by correlated multipath yields a wrong set that passes
-  ///     the ratio test for a few epochs and then changes; the right set repeats.  Larger sets are
-  ///     reported at once (real pairs and open sky: 13 or more).  Returns whether the set is reported.
-  bool confirm_fix(int n_fix, FixCheck check) {
-    confirm_seen_ = true;
-    if (check == FixCheck::kConsistent) return ++confirm_count_ >= opt_.confirm_epochs;
-    if (repeats_validated_fix(n_fix)) {
-      ++confirm_count_;
-    } else {
-      remember_fix(n_fix);
-      confirm_count_ = 1;
-    }
-    return n_fix > opt_.confirm_max_ambiguities || confirm_count_ >= opt_.confirm_epochs;
+    da_ = ar_.residual();
+    ar_.solve_in_place(da_);
+    const Eigen::Matrix<double, 6, 1> xb = x_.head<6>() - Qba * da_;
+    AmbMat QabT(Qba.transpose());
+    ar_.solve_in_place(QabT);
+    const Eigen::Matrix<double, 6, 6> Pb = P_.topLeftCorner<6, 6>() - Qba * QabT;
+    out.status = RtkStatus::kFixed;
+    out.n_fix = nuse;
+    out.r_e = xb.head<3>();
+    if (kv) out.v_e = xb.tail<3>();
+    out.P_r = Pb.topLeftCorner<3, 3>();
+    if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -1056,7 +986,7 @@ class RtkEngine {
       nz_[p] = 0;
       set_h(p, col_of_[kj], 1.0);
       set_h(p, col_of_[ki], -1.0);
-      y_(p) = a_fix_(p, 0) - (x_(RtkLayout::kAmb + kj) - x_(RtkLayout::kAmb + ki));
+      y_(p) = ar_.a_fix()(p) - (x_(RtkLayout::kAmb + kj) - x_(RtkLayout::kAmb + ki));
       R_(p, p) = opt_.hold_sigma_cycles * opt_.hold_sigma_cycles;
       row_code_[p] = 1;  // no outlier test on these
     }
@@ -1082,8 +1012,7 @@ class RtkEngine {
   int n_common_ = 0, n_used_sats_ = 0, n_phase_rows_ = 0;
   double dt_epoch_ = 0.0;  // time since the previous epoch [s] (0 on the first)
   double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
-  int confirm_count_ = 0;    // consecutive epochs the validated set was found (confirm_fix)
-  bool confirm_seen_ = false;
+  FixValidator<kMaxAmbStates> validator_;  // fix validation over epochs (ambiguity_resolution.hpp)
 
   const double* rover_ = nullptr;
   const double* base_ = nullptr;
@@ -1111,14 +1040,11 @@ class RtkEngine {
   KMat PHt_, K_;
   HMat KT_;
   Eigen::LLT<RowMat> llt_{kMaxRows};
-  // AR workspace
-  Lambda lambda_;
+  // AR workspace (gnss/ambiguity_resolution.hpp)
+  PartialAr ar_;
   std::array<int, kMaxAmbiguities> dd_j_{}, dd_i_{}, order_{};
   std::array<double, kMaxAmbiguities> dd_el_{}, dd_var_{};
-  AmbVec a_hat_, da_;
-  AmbMat Qa_;
-  AmbCand a_fix_;
-  Eigen::LLT<AmbMat> qa_llt_{kMaxAmbiguities};
+  AmbVec da_;
 };
 
 }  // namespace insnav::gnss

@@ -1,0 +1,779 @@
+// insnav/engine/rtk_ins_engine.hpp -- tightly coupled RTK/INS: double-differenced carrier-phase
+// and code rows (meas/dd_phase.hpp) in the closed-loop EKF (Layout15) with single-differenced
+// ambiguity states, INS-aided integer ambiguity resolution and INS-aided cycle-slip detection.
+//
+// State: the 15 INS error states of the closed-loop core (engine/closed_loop.hpp, filter/ekf.hpp:
+// propagation, feedback, timing are the core's) and a fixed-capacity block of kMaxAmb
+// single-differenced ambiguities N_rb^s_f [cycles] with an active mask (gnss/rtk.hpp's
+// bookkeeping: a state is added when a satellite/frequency appears, re-initialised on a slip and
+// removed after max_outage_epochs unobserved epochs).  No receiver clock or inter-system bias
+// states: double differences remove them.  The ambiguities are constants (plus amb_psd), so
+// between two epochs their cross-covariance with the INS errors evolves by the INS transition
+// alone, P_xN <- Phi_cycle P_xN (Phi_cycle: the EKF's product of the interval transitions), and
+// the core propagates P_xx as in every other engine.
+//
+// Epoch (an RTK record applied at its time of validity):
+//   1. slips: the receiver detectors of gnss/rtk.hpp (LLI, geometry-free, Melbourne-Wuebbena,
+//      Doppler) and the INS-aided test, which works on one frequency: per satellite and frequency
+//      d = [SD_now(r_ant prior) - SD_prev(r_ant posterior)] (observed minus computed single
+//      differences, metres): the change of the receiver clock difference (common, removed as
+//      the median over satellites) plus lambda x (slip) plus the error of the INS-predicted
+//      position change; |d - median| > max(k sigma, min_cycles lambda) flags a slip of that
+//      satellite only, and only its ambiguity is re-initialised (sigma^2 = 2 sigma_sd^2 +
+//      u^T P_vv u dt^2, the INS's velocity uncertainty over the epoch interval).
+//   2. DD code rows, robust screening (a row whose innovation exceeds sqrt(code_chi2_row) of
+//      sqrt(H P H^T + R) is dropped, robust.hpp's per-row test), Kalman update of the joint state,
+//      feedback; then DD phase rows at the new linearisation point (an innovation beyond
+//      outlier_sigma re-initialises that ambiguity, as in rtk.hpp), update, feedback.
+//   3. AR (gnss/ambiguity_resolution.hpp): MLAMBDA on the DD float ambiguities with the joint
+//      covariance (so the INS-propagated position uncertainty conditions them: after a GNSS gap
+//      the INS-predicted position constrains the search), ratio test, validation of the best
+//      vector's squared norm against chi2(validation_prob, n), a bootstrapped success rate of at
+//      least ar_min_success_rate (Teunissen 1998), partial AR; the fixed INS error is
+//      dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)); fix-and-hold feeds the
+//      fixed DD back as pseudo-measurements (sigma hold_sigma_cycles) into the joint filter.
+//
+// No heap allocation per epoch: every matrix is bounded by kMaxAmb and lives in the engine.
+#pragma once
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+#include "insnav/engine/closed_loop.hpp"
+#include "insnav/filter/ekf.hpp"
+#include "insnav/filter/layout.hpp"
+#include "insnav/gnss/ambiguity_resolution.hpp"
+#include "insnav/gnss/rtk.hpp"
+#include "insnav/meas/dd_phase.hpp"
+
+namespace insnav {
+
+struct RtkInsConfig {
+  gnss::RtkOptions rtk;               // weighting, masks, AR, receiver slip detectors (gnss/rtk.hpp)
+  Vec3 lever_arm_b = Vec3::Zero();    // IMU centre -> GNSS antenna, FRD [m]
+  double propagation_interval = 0.02; // error-state propagation step [s]
+  int output_decimation = 1;
+  double ins_slip_k_sigma = 5.0;      // INS-aided slip test threshold max(k sigma, min_cycles lambda)
+  double ins_slip_min_cycles = 0.35;
+  double ins_slip_max_dt_s = 2.0;     // the test needs the previous epoch of the satellite within this
+  double code_chi2_row = 25.0;        // code row screening (0: off)
+  double validation_prob = 0.999;     // AR: best vector's squared norm <= chi2 quantile (0: off)
+  double ar_min_success_rate = 0.0;   // AR: bootstrapped success rate of the fixed subset (0: off)
+};
+
+/// Slip count index of the INS-aided test (after gnss::SlipKind's).
+inline constexpr int kSlipIns = gnss::kNumSlipKinds;
+inline constexpr int kRtkInsSlipKinds = gnss::kNumSlipKinds + 1;
+
+/// One GNSS epoch of the RTK/INS solution.
+struct RtkInsEpoch {
+  gnss::RtkStatus status = gnss::RtkStatus::kNone;
+  double ratio = 0.0;
+  double success_rate = 0.0;  // bootstrapped success rate of the ambiguities fixed (of all, when float)
+  int n_fix = 0, n_dd = 0, n_sat = 0, code_rejected = 0;
+  Vec3 r_e = Vec3::Zero();        // antenna, fixed if fixed, else float [m]
+  Vec3 r_float_e = Vec3::Zero();  // antenna, float [m]
+  Mat3 P_r = Mat3::Zero();        // covariance of r_e, NED [m^2]
+  std::array<int, kRtkInsSlipKinds> slips{};
+};
+
+/// Caller-owned per-epoch outputs (any may be null); rows for E epochs.
+struct RtkInsOutputs : NavOutputs {
+  std::int32_t* status = nullptr;
+  double* ratio = nullptr;
+  double* success_rate = nullptr;
+  std::int32_t* n_fix = nullptr;
+  std::int32_t* n_dd = nullptr;
+  std::int32_t* n_sat = nullptr;
+  std::int32_t* code_rejected = nullptr;
+  double* r_e = nullptr;        // (E, 3)
+  double* r_float_e = nullptr;  // (E, 3)
+  double* P_r = nullptr;        // (E, 9) NED
+  std::int32_t* slips = nullptr;  // (E, kRtkInsSlipKinds)
+  // per rover row (M rows over all epochs): slip flags of the row, bits gnss::SlipKind and kSlipIns,
+  // OR over the frequencies
+  std::uint8_t* row_slip = nullptr;
+};
+
+/// One rover epoch: time of validity, rover rows [begin, end) and base rows [base_begin, base_end)
+/// (RtkRow layout), base_new: a new base epoch (false when an older one is held).
+struct RtkInsRecord {
+  double t = 0.0;
+  std::int64_t begin = 0, end = 0, base_begin = 0, base_end = 0;
+  bool base_new = true;
+};
+
+template <int kMaxAmb = 64>
+class RtkInsEngine {
+ public:
+  using L = Layout15;
+  using Filter = Ekf<L>;
+  static constexpr int kN = L::kSize;
+  static constexpr int kMaxJ = kN + kMaxAmb;
+  static constexpr int kMaxRowsE = kMaxAmb;  // DD rows of one kind
+  using JVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxJ, 1>;
+  using JMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxJ, kMaxJ>;
+  using RVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxRowsE, 1>;
+  using RMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxRowsE, kMaxRowsE>;
+  using HMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxRowsE, kMaxJ>;
+  using KMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxJ, kMaxRowsE>;
+
+  RtkInsEngine(const ImuErrorModel& model, const RtkInsConfig& cfg)
+      : core_(Filter(model), cfg.propagation_interval), cfg_(cfg) {
+    core_.gate = NisGate(GateConfig{});
+    core_.filter.track_cycle_transition(true);
+  }
+
+  ClosedLoop<Filter>& core() { return core_; }
+  const gnss::PartialAr& ar() const { return ar_; }
+  const RtkInsConfig& config() const { return cfg_; }
+
+  void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
+    core_.reset(initial, P0, corr0);
+    core_.filter.track_cycle_transition(true);
+    xa_.setZero();
+    Pia_.setZero();
+    Paa_.setZero();
+    amb_of_.fill(-1);
+    for (auto& a : amb_) a = AmbSlot{};
+    validator_.reset();
+    rover_slip_.reset();
+    base_slip_.reset();
+    for (auto& p : prev_) p = PrevSd{};
+    t_last_ = NAN;
+  }
+
+  /// n IMU samples; E records over the rover rows and base rows (RtkRow layout).
+  void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, std::int64_t n,
+           const double* t, const double* dtheta_b, const double* dv_b, std::int64_t n_epochs,
+           const RtkInsRecord* recs, const double* rover_rows, const double* base_rows, const Vec3& r_base_e,
+           RtkInsOutputs& out) {
+    start(initial, P0, corr0);
+    std::int64_t g = 0;
+    for (; g < n_epochs && !(recs[g].t > initial.t); ++g) mark(g, out);
+    core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, n_epochs, kInf, cfg_.output_decimation, out,
+                      [&](std::int64_t i) { return recs[i].t; },
+                      [&](std::int64_t i) {
+                        const RtkInsRecord& r = recs[i];
+                        const RtkInsEpoch e = apply_epoch(
+                            rover_rows + r.begin * gnss::RtkRow::kCols, static_cast<int>(r.end - r.begin),
+                            base_rows + r.base_begin * gnss::RtkRow::kCols,
+                            static_cast<int>(r.base_end - r.base_begin), r.base_new, r_base_e);
+                        write_epoch(i, e, out);
+                        if (out.row_slip) {
+                          const int nr = static_cast<int>(std::min<std::int64_t>(r.end - r.begin, gnss::kMaxSatKeys));
+                          for (int j = 0; j < nr; ++j) {
+                            std::uint8_t fl = 0;
+                            for (int f = 0; f < std::clamp(cfg_.rtk.n_freq, 1, gnss::kMaxFreq); ++f) fl |= flags_r_[j * gnss::kMaxFreq + f];
+                            out.row_slip[r.begin + j] = fl;
+                          }
+                        }
+                      });
+    for (; g < n_epochs; ++g) mark(g, out);
+    out.cholesky_repairs = core_.filter.cholesky_repairs();
+  }
+
+  /// The measurement step of one rover epoch at the INS's current time.
+  RtkInsEpoch apply_epoch(const double* rover, int n_r, const double* base, int n_b, bool base_new,
+                          const Vec3& r_base_e) {
+    using gnss::RtkRow;
+    RtkInsEpoch out;
+    const gnss::RtkOptions& o = cfg_.rtk;
+    const int nf = std::clamp(o.n_freq, 1, gnss::kMaxFreq);
+    const double t = core_.state().t;
+    n_r = std::min(n_r, gnss::kMaxSatKeys);
+    n_b = std::min(n_b, gnss::kMaxSatKeys);
+    std::array<int, gnss::kNumSlipKinds> sl{};
+    rover_slip_.detect(t, rover, n_r, nf, o, flags_r_.data(), sl);
+    if (base_new) base_slip_.detect(t, base, n_b, nf, o, flags_b_.data(), sl);
+    else std::fill(flags_b_.begin(), flags_b_.end(), 0);
+    for (int k = 0; k < gnss::kNumSlipKinds; ++k) out.slips[k] = sl[k];
+    // ambiguity covariance to this epoch: P_xN <- Phi P_xN, P_NN += q dt
+    const double dt = std::isfinite(t_last_) ? t - t_last_ : 0.0;
+    Pia_ = core_.filter.cycle_transition() * Pia_;
+    if (dt > 0.0)
+      for (int k = 0; k < kMaxAmb; ++k)
+        if (amb_[k].sat >= 0) Paa_(k, k) += o.amb_psd * dt;
+    t_last_ = t;
+    // common satellites
+    std::fill(base_of_.begin(), base_of_.end(), -1);
+    for (int j = 0; j < n_b; ++j) base_of_[key(base + j * RtkRow::kCols)] = j;
+    n_common_ = 0;
+    for (int i = 0; i < n_r; ++i) {
+      const double* rr = rover + i * RtkRow::kCols;
+      const int j = base_of_[key(rr)];
+      if (j < 0) continue;
+      if (!std::isfinite(rr[RtkRow::kSatPos]) || !std::isfinite(base[j * RtkRow::kCols + RtkRow::kSatPos])) continue;
+      common_r_[n_common_] = i;
+      common_b_[n_common_] = j;
+      ++n_common_;
+    }
+    rover_ = rover;
+    base_ = base;
+    r_base_ = r_base_e;
+    const Vec3 llh_b = wgs84::ecef_to_geodetic(r_base_e);
+    lat_b_ = llh_b(0);
+    h_b_ = llh_b(2);
+    C_en_b_ = wgs84::C_en(llh_b(0), llh_b(1));
+    // geometry and single differences at the INS-predicted antenna
+    single_differences(nf);
+    out.n_sat = n_used_sats_;
+    ins_slip_test(nf, dt, out);
+    manage_ambiguities(nf);
+    // code rows, screened
+    std::fill(code_out_.begin(), code_out_.end(), false);
+    int m = build_rows(nf, true);
+    if (m > 0 && cfg_.code_chi2_row > 0.0) {
+      gather();
+      fill_H(m);
+      bool any = false;
+      for (int r = 0; r < m; ++r) {
+        const double S = (H_.row(r) * Pj_ * H_.row(r).transpose()).value() + R_(r, r);
+        if (y_(r) * y_(r) > cfg_.code_chi2_row * S) {
+          code_out_[row_c_[r] * gnss::kMaxFreq + row_f_[r]] = true;
+          any = true;
+          ++out.code_rejected;
+        }
+      }
+      if (any) m = build_rows(nf, true);
+    }
+    if (m > 0) {
+      gather();
+      fill_H(m);
+      kalman_update(m);
+      scatter_and_feedback();
+      single_differences(nf);
+    }
+    // phase rows; an outlier re-initialises its ambiguity (at most two rebuilds)
+    int mp = 0;
+    for (int pass = 0; pass < 3; ++pass) {
+      mp = build_rows(nf, false);
+      if (mp == 0) break;
+      gather();
+      fill_H(mp);
+      if (pass < 2 && o.outlier_sigma > 0.0) {
+        bool reset_any = false;
+        for (int r = 0; r < mp; ++r) {
+          const double S = (H_.row(r) * Pj_ * H_.row(r).transpose()).value() + R_(r, r);
+          const int k = row_amb_[r];
+          if (std::abs(y_(r)) > o.outlier_sigma * std::sqrt(S) && amb_[k].lock > 0) {
+            init_amb(k, row_c_[r], amb_[k].freq);
+            ++out.slips[gnss::kSlipOutlier];
+            reset_any = true;
+          }
+        }
+        if (reset_any) continue;
+      }
+      kalman_update(mp);
+      scatter_and_feedback();
+      break;
+    }
+    out.n_dd = mp;
+    RtkAntenna ant;
+    ant.set(core_.state(), cfg_.lever_arm_b);
+    out.r_float_e = ant.r_e;
+    out.r_e = ant.r_e;
+    out.P_r = core_.filter.P().template block<3, 3>(L::kPos, L::kPos);
+    out.status = mp > 0 ? gnss::RtkStatus::kFloat : (m > 0 ? gnss::RtkStatus::kDgps : gnss::RtkStatus::kNone);
+    if (mp > 0) {
+      for (int k = 0; k < kMaxAmb; ++k)
+        if (amb_[k].used) ++amb_[k].lock;
+      if (o.ar_mode != gnss::ArMode::kOff) {
+        validator_.begin_epoch();
+        resolve(out);
+        validator_.end_epoch();
+      }
+    }
+    // single differences at the final antenna position: the reference of the next INS-aided slip test
+    single_differences(nf);
+    store_prev(nf, t);
+    return out;
+  }
+
+  /// The ambiguity candidates of the last AR (satellite keys and frequency of each DD, in the
+  /// order of ar().a_hat()): sat_j, sat_i (system * 64 + prn), freq.
+  int last_candidates(int* sat_j, int* sat_i, int* freq, int max_n) const {
+    const int n = std::min(ar_.n_used(), max_n);
+    for (int p = 0; p < n; ++p) {
+      sat_j[p] = amb_[dd_j_[order_[p]]].sat;
+      sat_i[p] = amb_[dd_i_[order_[p]]].sat;
+      freq[p] = amb_[dd_j_[order_[p]]].freq;
+    }
+    return n;
+  }
+
+ private:
+  struct AmbSlot {
+    int sat = -1, freq = -1;
+    int lock = 0, outage = 0;
+    bool used = false, half = false;
+    double el = 0.0;
+  };
+  struct PrevSd {
+    double t = NAN;
+    double sd = NAN;  // observed minus computed single difference at the posterior antenna [m]
+  };
+
+  static int key(const double* r) {
+    const int k = static_cast<int>(r[gnss::RtkRow::kSat]);
+    return (k >= 0 && k < gnss::kMaxSatKeys) ? k : 0;
+  }
+  static int sys_of(const double* r) { return static_cast<int>(r[gnss::RtkRow::kSys]); }
+  double lam(int c, int f) const {
+    return rover_[common_r_[c] * gnss::RtkRow::kCols + gnss::RtkRow::kFreq0 + gnss::RtkRow::kPerFreq * f + 4];
+  }
+
+  void mark(std::int64_t g, RtkInsOutputs& out) {
+    RtkInsEpoch e;
+    write_epoch(g, e, out);
+  }
+
+  void write_epoch(std::int64_t g, const RtkInsEpoch& e, RtkInsOutputs& out) const {
+    if (out.status) out.status[g] = static_cast<std::int32_t>(e.status);
+    if (out.ratio) out.ratio[g] = e.ratio;
+    if (out.success_rate) out.success_rate[g] = e.success_rate;
+    if (out.n_fix) out.n_fix[g] = e.n_fix;
+    if (out.n_dd) out.n_dd[g] = e.n_dd;
+    if (out.n_sat) out.n_sat[g] = e.n_sat;
+    if (out.code_rejected) out.code_rejected[g] = e.code_rejected;
+    const bool none = e.status == gnss::RtkStatus::kNone;
+    for (int i = 0; i < 3; ++i) {
+      if (out.r_e) out.r_e[3 * g + i] = none ? NAN : e.r_e(i);
+      if (out.r_float_e) out.r_float_e[3 * g + i] = none ? NAN : e.r_float_e(i);
+      for (int j = 0; j < 3; ++j)
+        if (out.P_r) out.P_r[9 * g + 3 * i + j] = none ? NAN : e.P_r(i, j);
+    }
+    if (out.slips)
+      for (int k = 0; k < kRtkInsSlipKinds; ++k) out.slips[kRtkInsSlipKinds * g + k] = e.slips[k];
+  }
+
+  // Elevations, unit vectors and observed-minus-computed single differences of the common
+  // satellites at the current INS antenna.
+  void single_differences(int nf) {
+    using gnss::RtkRow;
+    const gnss::RtkOptions& o = cfg_.rtk;
+    ant_.set(core_.state(), cfg_.lever_arm_b);
+    const Vec3 llh = wgs84::ecef_to_geodetic(ant_.r_e);
+    const Mat3 C = wgs84::C_en(llh(0), llh(1));
+    n_used_sats_ = 0;
+    for (int c = 0; c < n_common_; ++c) {
+      const double* r = rover_ + common_r_[c] * RtkRow::kCols;
+      const double* b = base_ + common_b_[c] * RtkRow::kCols;
+      Vec3 ur, ub;
+      gnss::sat_range(r, ant_.r_e, ur);
+      gnss::sat_range(b, r_base_, ub);
+      el_r_[c] = std::asin(std::clamp(-(C.transpose() * ur)(2), -1.0, 1.0));
+      el_b_[c] = std::asin(std::clamp(-(C_en_b_.transpose() * ub)(2), -1.0, 1.0));
+      use_[c] = el_r_[c] >= o.elevation_mask_rad && el_b_[c] >= 0.0;
+      if (use_[c]) ++n_used_sats_;
+      const double mr = rtk_computed_zd(r, ant_.r_e, llh(0), llh(2), el_r_[c], o.tropo_model, ur);
+      const double mb = rtk_computed_zd(b, r_base_, lat_b_, h_b_, el_b_[c], o.tropo_model, ub);
+      u_[c] = ur;
+      for (int f = 0; f < nf; ++f) {
+        const double* fr = r + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        const double* fb = b + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        sd_phase_[c * gnss::kMaxFreq + f] = (fr[4] > 0.0 && std::isfinite(fr[1]) && std::isfinite(fb[1]))
+                                                ? (fr[4] * fr[1] - mr) - (fb[4] * fb[1] - mb)
+                                                : NAN;
+        sd_code_[c * gnss::kMaxFreq + f] =
+            (std::isfinite(fr[0]) && std::isfinite(fb[0])) ? (fr[0] - mr) - (fb[0] - mb) : NAN;
+      }
+      var_sd_[c] = gnss::phase_variance_zd(el_r_[c], sys_of(r), o) + gnss::phase_variance_zd(el_b_[c], sys_of(r), o);
+    }
+  }
+
+  void store_prev(int nf, double t) {
+    for (int c = 0; c < n_common_; ++c) {
+      const int sat = key(rover_ + common_r_[c] * gnss::RtkRow::kCols);
+      for (int f = 0; f < nf; ++f) {
+        PrevSd& p = prev_[sat * gnss::kMaxFreq + f];
+        p.sd = sd_phase_[c * gnss::kMaxFreq + f];
+        p.t = std::isfinite(p.sd) ? t : NAN;
+      }
+    }
+  }
+
+  // INS-aided slip test (see the file comment, 1.)
+  void ins_slip_test(int nf, double dt, RtkInsEpoch& out) {
+    int nd = 0;
+    const Mat3 Pvv = core_.filter.P().template block<3, 3>(L::kVel, L::kVel);
+    const double t = core_.state().t;
+    for (int c = 0; c < n_common_; ++c) {
+      const int sat = key(rover_ + common_r_[c] * gnss::RtkRow::kCols);
+      for (int f = 0; f < nf; ++f) {
+        const int i = c * gnss::kMaxFreq + f;
+        d_[i] = NAN;
+        const PrevSd& p = prev_[sat * gnss::kMaxFreq + f];
+        if (!use_[c] || !std::isfinite(sd_phase_[i]) || !std::isfinite(p.sd) || !(t - p.t <= cfg_.ins_slip_max_dt_s))
+          continue;
+        d_[i] = sd_phase_[i] - p.sd;
+        med_[nd++] = d_[i];
+      }
+    }
+    if (nd < 3) return;
+    std::nth_element(med_.begin(), med_.begin() + nd / 2, med_.begin() + nd);
+    const double med = med_[nd / 2];
+    for (int c = 0; c < n_common_; ++c) {
+      const int r = common_r_[c], b = common_b_[c];
+      const Vec3 u_n = ant_.C_en.transpose() * u_[c];
+      const double var_ins = u_n.dot(Pvv * u_n) * dt * dt;
+      for (int f = 0; f < nf; ++f) {
+        const double d = d_[c * gnss::kMaxFreq + f];
+        if (!std::isfinite(d)) continue;
+        const double thr =
+            std::max(cfg_.ins_slip_k_sigma * std::sqrt(2.0 * var_sd_[c] + var_ins), cfg_.ins_slip_min_cycles * lam(c, f));
+        if (std::abs(d - med) > thr) {
+          flags_r_[r * gnss::kMaxFreq + f] |= 1u << kSlipIns;
+          (void)b;
+          ++out.slips[kSlipIns];
+        }
+      }
+    }
+  }
+
+  void remove_amb(int k) {
+    if (amb_[k].sat >= 0) amb_of_[amb_[k].sat * gnss::kMaxFreq + amb_[k].freq] = -1;
+    amb_[k] = AmbSlot{};
+    validator_.invalidate(k);
+    xa_(k) = 0.0;
+    Pia_.col(k).setZero();
+    Paa_.row(k).setZero();
+    Paa_.col(k).setZero();
+  }
+
+  // (Re-)initialise ambiguity k of common satellite c, frequency f from SD(phase - code / lambda)
+  // (as gnss/rtk.hpp), uncorrelated, sigma amb_init_sigma_cycles.
+  void init_amb(int k, int c, int f) {
+    const double* fr = rover_ + common_r_[c] * gnss::RtkRow::kCols + gnss::RtkRow::kFreq0 + gnss::RtkRow::kPerFreq * f;
+    const double* fb = base_ + common_b_[c] * gnss::RtkRow::kCols + gnss::RtkRow::kFreq0 + gnss::RtkRow::kPerFreq * f;
+    const double lam = fr[4];
+    double n0 = fr[1] - fb[1];
+    if (std::isfinite(fr[0]) && std::isfinite(fb[0])) n0 -= (fr[0] - fb[0]) / lam;
+    else n0 = sd_phase_[c * gnss::kMaxFreq + f] / lam;  // no code: from the INS-predicted geometry
+    xa_(k) = n0;
+    Pia_.col(k).setZero();
+    Paa_.row(k).setZero();
+    Paa_.col(k).setZero();
+    Paa_(k, k) = cfg_.rtk.amb_init_sigma_cycles * cfg_.rtk.amb_init_sigma_cycles;
+    amb_[k].lock = 0;
+    amb_[k].outage = 0;
+    validator_.invalidate(k);
+  }
+
+  void manage_ambiguities(int nf) {
+    using gnss::RtkRow;
+    for (int k = 0; k < kMaxAmb; ++k) amb_[k].used = false;
+    for (int c = 0; c < n_common_; ++c) {
+      if (!use_[c]) continue;
+      const double* r = rover_ + common_r_[c] * RtkRow::kCols;
+      const double* b = base_ + common_b_[c] * RtkRow::kCols;
+      const int sat = key(r);
+      for (int f = 0; f < nf; ++f) {
+        const double* fr = r + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        const double* fb = b + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+        if (!std::isfinite(fr[1]) || !std::isfinite(fb[1]) || !(fr[4] > 0.0)) continue;
+        const bool slip = flags_r_[common_r_[c] * gnss::kMaxFreq + f] != 0 || flags_b_[common_b_[c] * gnss::kMaxFreq + f] != 0;
+        int k = amb_of_[sat * gnss::kMaxFreq + f];
+        if (k < 0) {
+          for (int q = 0; q < kMaxAmb; ++q)
+            if (amb_[q].sat < 0) { k = q; break; }
+          if (k < 0) continue;  // table full
+          amb_[k].sat = sat;
+          amb_[k].freq = f;
+          amb_of_[sat * gnss::kMaxFreq + f] = k;
+          init_amb(k, c, f);
+        } else if (slip) {
+          init_amb(k, c, f);
+        }
+        const int lli_r = std::isfinite(fr[3]) ? static_cast<int>(fr[3]) : 0;
+        const int lli_b = std::isfinite(fb[3]) ? static_cast<int>(fb[3]) : 0;
+        amb_[k].half = ((lli_r | lli_b) & 2) != 0;
+        amb_[k].used = true;
+        amb_[k].outage = 0;
+        amb_[k].el = el_r_[c];
+        amb_row_[c * gnss::kMaxFreq + f] = k;
+      }
+    }
+    for (int k = 0; k < kMaxAmb; ++k)
+      if (amb_[k].sat >= 0 && !amb_[k].used && ++amb_[k].outage > cfg_.rtk.max_outage_epochs) remove_amb(k);
+  }
+
+  bool valid(int c, int f, bool code) const {
+    if (code) return std::isfinite(sd_code_[c * gnss::kMaxFreq + f]) && !code_out_[c * gnss::kMaxFreq + f];
+    return std::isfinite(sd_phase_[c * gnss::kMaxFreq + f]) &&
+           amb_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f] >= 0;
+  }
+
+  // DD rows (y = computed - measured, R) per system and frequency against the highest satellite,
+  // the ordering and covariance of gnss/rtk.hpp.  H is filled by fill_H after gather().
+  int build_rows(int nf, bool code) {
+    const gnss::RtkOptions& o = cfg_.rtk;
+    const double bl = (ant_.r_e - r_base_).norm();
+    const double var_bl = std::pow(o.iono_sigma_per_10km_m * bl / 1e4, 2);
+    const double cf = code ? o.code_phase_ratio * o.code_phase_ratio : 1.0;
+    int m = 0;
+    R_.setZero(kMaxRowsE, kMaxRowsE);
+    y_.setZero(kMaxRowsE);
+    for (int sys = 0; sys < gnss::kNumSystems; ++sys) {
+      for (int f = 0; f < nf; ++f) {
+        int ref = -1;
+        for (int c = 0; c < n_common_; ++c) {
+          if (!use_[c] || sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols) != sys || !valid(c, f, code)) continue;
+          if (ref < 0 || el_r_[c] > el_r_[ref]) ref = c;
+        }
+        if (ref < 0) continue;
+        const int m0 = m;
+        const double var_ref = var_sd_[ref] * cf;
+        for (int c = 0; c < n_common_; ++c) {
+          if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols) != sys) continue;
+          if (!valid(c, f, code) || m >= kMaxRowsE) continue;
+          const int i = c * gnss::kMaxFreq + f, ir = ref * gnss::kMaxFreq + f;
+          if (code) {
+            y_(m) = -(sd_code_[i] - sd_code_[ir]);
+            row_amb_[m] = row_amb_ref_[m] = -1;
+          } else {
+            const int kj = amb_row_[i], ki = amb_row_[ir];
+            y_(m) = -(sd_phase_[i] - sd_phase_[ir]) + lam(c, f) * xa_(kj) - lam(ref, f) * xa_(ki);
+            row_amb_[m] = kj;
+            row_amb_ref_[m] = ki;
+          }
+          row_c_[m] = c;
+          row_ref_[m] = ref;
+          row_f_[m] = f;
+          R_(m, m) = var_sd_[c] * cf + var_bl + var_ref + var_bl;
+          for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
+          ++m;
+        }
+      }
+    }
+    return m;
+  }
+
+  // Compact joint state: the 15 INS errors and the tracked ambiguities.
+  void gather() {
+    na_ = 0;
+    std::fill(col_of_.begin(), col_of_.end(), -1);
+    for (int k = 0; k < kMaxAmb; ++k)
+      if (amb_[k].sat >= 0) {
+        col_of_[k] = kN + na_;
+        act_[na_++] = k;
+      }
+    const int n = kN + na_;
+    Pj_.resize(n, n);
+    Pj_.template topLeftCorner<kN, kN>() = core_.filter.P();
+    for (int a = 0; a < na_; ++a) {
+      Pj_.col(kN + a).template head<kN>() = Pia_.col(act_[a]);
+      Pj_.row(kN + a).template head<kN>() = Pia_.col(act_[a]).transpose();
+      for (int b = 0; b < na_; ++b) Pj_(kN + a, kN + b) = Paa_(act_[a], act_[b]);
+    }
+  }
+
+  void fill_H(int m) {
+    const int n = kN + na_;
+    H_.setZero(m, n);
+    for (int r = 0; r < m; ++r) {
+      double hp[3], ha[3];
+      ant_.dd_jacobian(u_[row_c_[r]] - u_[row_ref_[r]], hp, ha);
+      for (int k = 0; k < 3; ++k) {
+        H_(r, L::kPos + k) = hp[k];
+        H_(r, L::kAtt + k) = ha[k];
+      }
+      if (row_amb_[r] >= 0) {
+        H_(r, col_of_[row_amb_[r]]) += lam(row_c_[r], row_f_[r]);
+        H_(r, col_of_[row_amb_ref_[r]]) -= lam(row_ref_[r], row_f_[r]);
+      }
+    }
+  }
+
+  // x = K y, P = P - K H P over the compact joint state (y = computed - measured = H dx + v).
+  void kalman_update(int m) {
+    const int n = kN + na_;
+    PHt_.noalias() = Pj_ * H_.transpose();
+    S_ = R_.topLeftCorner(m, m);
+    S_.noalias() += H_ * PHt_;
+    llt_.compute(S_);
+    dx_.setZero(n);
+    if (llt_.info() != Eigen::Success) return;
+    KT_ = PHt_.transpose();
+    llt_.solveInPlace(KT_);
+    dx_.noalias() = KT_.transpose() * y_.head(m);
+    Pj_.noalias() -= KT_.transpose() * PHt_.transpose();
+    Pn_ = 0.5 * (Pj_ + Pj_.transpose());
+    Pj_ = Pn_;
+  }
+
+  // Write the compact joint state back, feed the INS errors back and correct the ambiguities.
+  void scatter_and_feedback() {
+    core_.filter.P_mutable() = Pj_.template topLeftCorner<kN, kN>();
+    for (int a = 0; a < na_; ++a) {
+      const int k = act_[a];
+      Pia_.col(k) = Pj_.col(kN + a).template head<kN>();
+      for (int b = 0; b < na_; ++b) Paa_(k, act_[b]) = Pj_(kN + a, kN + b);
+      xa_(k) -= dx_(kN + a);
+    }
+    feedback_ins(dx_.template head<kN>());
+  }
+
+  // Closed-loop feedback of a Layout15 error estimate (computed - true) into the core's INS and IMU
+  // corrections, as ClosedLoop::feedback does with the filter's x (which stays zero here: the joint
+  // update is this engine's own).
+  void feedback_ins(const Eigen::Matrix<double, kN, 1>& x) {
+    NavState s = core_.ins.state();
+    const wgs84::Radii r = wgs84::radii(s.lat);
+    s.lat -= x[L::kPos] / (r.R_M + s.h);
+    s.lon -= x[L::kPos + 1] / ((r.R_N + s.h) * std::cos(s.lat));
+    s.h += x[L::kPos + 2];
+    s.v_n -= x.template segment<3>(L::kVel);
+    s.q_nb = (quat_from_euler(x.template segment<3>(L::kAtt)) * s.q_nb).normalized();
+    core_.corr.acc_bias += x.template segment<3>(L::kAccBias);
+    core_.corr.gyro_bias += x.template segment<3>(L::kGyroBias);
+    core_.ins.set_state(s);
+    core_.touch();
+  }
+
+  bool eligible(const AmbSlot& a, int sys, int f) const {
+    const gnss::RtkOptions& o = cfg_.rtk;
+    return a.sat >= 0 && a.used && !a.half && a.freq == f && a.sat / gnss::kMaxPrn == sys &&
+           a.lock >= o.min_lock_epochs && a.el >= o.ar_elevation_mask_rad;
+  }
+
+  void resolve(RtkInsEpoch& out) {
+    const gnss::RtkOptions& o = cfg_.rtk;
+    int n = 0;
+    for (int sys = 0; sys < gnss::kNumSystems; ++sys) {
+      if (sys == gnss::kGlonass && !o.glonass_ar) continue;
+      for (int f = 0; f < gnss::kMaxFreq; ++f) {
+        int ref = -1;
+        for (int k = 0; k < kMaxAmb; ++k)
+          if (eligible(amb_[k], sys, f) && (ref < 0 || amb_[k].el > amb_[ref].el)) ref = k;
+        if (ref < 0) continue;
+        for (int k = 0; k < kMaxAmb; ++k) {
+          if (k == ref || !eligible(amb_[k], sys, f) || n >= gnss::kMaxAmbiguities) continue;
+          dd_j_[n] = k;
+          dd_i_[n] = ref;
+          dd_el_[n] = amb_[k].el;
+          dd_var_[n] = Paa_(k, k) - 2.0 * Paa_(k, ref) + Paa_(ref, ref);
+          ++n;
+        }
+      }
+    }
+    for (int i = 0; i < n; ++i) order_[i] = i;
+    if (o.partial_by_variance)
+      std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_var_[a] < dd_var_[b]; });
+    else
+      std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
+    gnss::ArSettings s;
+    s.ratio_threshold = o.ratio_threshold;
+    // subsets below min_fix_ambiguities only pass as every candidate of the epoch (FixValidator rule 1)
+    s.min_fix = std::max(std::min(o.min_fix_ambiguities, n), 1);
+    s.max_drops = o.max_partial_drops;
+    s.validation_prob = cfg_.validation_prob;
+    s.min_success_rate = std::max(cfg_.ar_min_success_rate, o.min_success_rate);
+    const gnss::FixRules rules{o.min_fix_ambiguities, o.confirm_epochs, o.confirm_max_ambiguities};
+    const auto slot_j = [&](int p) { return dd_j_[order_[p]]; };
+    const auto slot_i = [&](int p) { return dd_i_[order_[p]]; };
+    const bool ok = ar_.resolve(
+        n, [&](int p) { return xa_(dd_j_[order_[p]]) - xa_(dd_i_[order_[p]]); },
+        [&](int p, int q) {
+          const int sj = dd_j_[order_[p]], si = dd_i_[order_[p]], tj = dd_j_[order_[q]], ti = dd_i_[order_[q]];
+          return Paa_(sj, tj) - Paa_(sj, ti) - Paa_(si, tj) + Paa_(si, ti);
+        },
+        s, [&](int n_fix) { return validator_(n_fix, n, slot_j, slot_i, ar_.a_fix(), rules); });
+    out.ratio = ar_.ratio();
+    out.success_rate = ar_.success_rate();
+    if (!ok) return;
+    const int nu = ar_.n_used();
+    // dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix); the antenna follows the INS error
+    Qxa_.resize(kN, nu);
+    for (int p = 0; p < nu; ++p) Qxa_.col(p) = Pia_.col(dd_j_[order_[p]]) - Pia_.col(dd_i_[order_[p]]);
+    w_ = ar_.residual();
+    ar_.solve_in_place(w_);
+    const Eigen::Matrix<double, kN, 1> dx_fix = Qxa_ * w_;
+    NavState s_fix = core_.state();
+    const wgs84::Radii rr = wgs84::radii(s_fix.lat);
+    s_fix.lat -= dx_fix[L::kPos] / (rr.R_M + s_fix.h);
+    s_fix.lon -= dx_fix[L::kPos + 1] / ((rr.R_N + s_fix.h) * std::cos(s_fix.lat));
+    s_fix.h += dx_fix[L::kPos + 2];
+    s_fix.q_nb = (quat_from_euler(dx_fix.template segment<3>(L::kAtt)) * s_fix.q_nb).normalized();
+    RtkAntenna a;
+    a.set(s_fix, cfg_.lever_arm_b);
+    out.status = gnss::RtkStatus::kFixed;
+    out.n_fix = nu;
+    out.r_e = a.r_e;
+    QxaT_ = Qxa_.transpose();
+    ar_.solve_in_place(QxaT_);
+    out.P_r = (core_.filter.P() - Qxa_ * QxaT_).template block<3, 3>(L::kPos, L::kPos);
+    if (o.ar_mode == gnss::ArMode::kFixAndHold) hold(nu);
+  }
+
+  // Fix-and-hold: the fixed DD as pseudo-measurements N_j - N_i = a_fix (sigma hold_sigma_cycles).
+  void hold(int nu) {
+    gather();
+    const int n = kN + na_;
+    const int m = std::min(nu, kMaxRowsE);
+    H_.setZero(m, n);
+    R_.setZero(kMaxRowsE, kMaxRowsE);
+    for (int p = 0; p < m; ++p) {
+      const int kj = dd_j_[order_[p]], ki = dd_i_[order_[p]];
+      H_(p, col_of_[kj]) = 1.0;
+      H_(p, col_of_[ki]) = -1.0;
+      y_(p) = (xa_(kj) - xa_(ki)) - ar_.a_fix()(p);  // computed - "measured"
+      R_(p, p) = cfg_.rtk.hold_sigma_cycles * cfg_.rtk.hold_sigma_cycles;
+    }
+    kalman_update(m);
+    scatter_and_feedback();
+  }
+
+  ClosedLoop<Filter> core_;
+  RtkInsConfig cfg_;
+  // ambiguity block (fixed capacity, active mask = amb_[k].sat >= 0)
+  Eigen::Matrix<double, kMaxAmb, 1> xa_ = Eigen::Matrix<double, kMaxAmb, 1>::Zero();
+  Eigen::Matrix<double, kN, kMaxAmb> Pia_ = Eigen::Matrix<double, kN, kMaxAmb>::Zero();
+  Eigen::Matrix<double, kMaxAmb, kMaxAmb> Paa_ = Eigen::Matrix<double, kMaxAmb, kMaxAmb>::Zero();
+  std::array<AmbSlot, kMaxAmb> amb_{};
+  std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> amb_of_{};
+  double t_last_ = NAN;
+  gnss::SlipDetector rover_slip_, base_slip_;
+  std::array<std::uint8_t, gnss::kMaxSatKeys * gnss::kMaxFreq> flags_r_{}, flags_b_{};
+  std::array<PrevSd, gnss::kMaxSatKeys * gnss::kMaxFreq> prev_{};
+  // epoch geometry
+  const double* rover_ = nullptr;
+  const double* base_ = nullptr;
+  Vec3 r_base_ = Vec3::Zero();
+  Mat3 C_en_b_ = Mat3::Identity();
+  double lat_b_ = 0.0, h_b_ = 0.0;
+  RtkAntenna ant_;
+  int n_common_ = 0, n_used_sats_ = 0;
+  std::array<int, gnss::kMaxSatKeys> base_of_{}, common_r_{}, common_b_{};
+  std::array<double, gnss::kMaxSatKeys> el_r_{}, el_b_{}, var_sd_{};
+  std::array<bool, gnss::kMaxSatKeys> use_{};
+  std::array<Vec3, gnss::kMaxSatKeys> u_{};
+  std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> amb_row_{};
+  std::array<bool, gnss::kMaxSatKeys * gnss::kMaxFreq> code_out_{};
+  std::array<double, gnss::kMaxSatKeys * gnss::kMaxFreq> sd_phase_{}, sd_code_{}, d_{}, med_{};
+  // rows and the compact update
+  std::array<int, kMaxRowsE> row_c_{}, row_ref_{}, row_f_{}, row_amb_{}, row_amb_ref_{};
+  int na_ = 0;
+  std::array<int, kMaxAmb> act_{}, col_of_{};
+  JMat Pj_, Pn_;
+  JVec dx_;
+  HMat H_, KT_;
+  KMat PHt_;
+  RMat R_, S_;
+  RVec y_;
+  Eigen::LLT<RMat> llt_{kMaxRowsE};
+  // AR
+  gnss::PartialAr ar_;
+  gnss::FixValidator<kMaxAmb> validator_;  // fix validation over epochs (gnss/ambiguity_resolution.hpp)
+  std::array<int, gnss::kMaxAmbiguities> dd_j_{}, dd_i_{}, order_{};
+  std::array<double, gnss::kMaxAmbiguities> dd_el_{}, dd_var_{};
+  Eigen::Matrix<double, kN, Eigen::Dynamic, 0, kN, gnss::kMaxAmbiguities> Qxa_;
+  Eigen::Matrix<double, Eigen::Dynamic, kN, 0, gnss::kMaxAmbiguities, kN> QxaT_;
+  gnss::AmbVec w_;
+};
+
+}  // namespace insnav

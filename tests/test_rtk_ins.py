@@ -1,0 +1,312 @@
+"""Tight RTK/INS (engine/rtk_ins_engine.hpp, insnav.filters.rtk_ins).
+
+Data: the Spirent SimGEN drive (hardware-simulated GNSS, base and rovers, ../shared/data) with an IMU
+synthesised from its 10 Hz truth (insnav.sim.from_truth).  Checks:
+
+* a DD phase row with a lever arm against a numerical Jacobian (meas/dd_phase.hpp);
+* an exact reduction: exact IMU, zero IMU noise, a static receiver -> the RTK/INS float solution is
+  the GNSS-only static RTK float solution (the same estimator when the INS adds no information);
+* INS-aided slip detection of a 1-cycle slip on one single-frequency satellite during motion;
+* the first epoch after a 30 s outage fixes to the true integers; a wrong set is rejected.
+"""
+import numpy as np
+import pytest
+
+from insnav import _core, earth
+from insnav.config import ImuNoise, RunConfig
+from insnav.data.nav import NavState
+from insnav.filters.rtk_ins import run_rtk_ins
+from insnav.gnss import rtk
+from insnav.sim.from_truth import simulate_from_truth
+
+from conftest import SHARED_DATA
+
+SIG0 = 1e4  # prior position sigma of both engines [m]
+SP = SHARED_DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
+
+
+def need(p):
+    if not p.exists():
+        pytest.skip(f"shared data not available: {p} (set INSNAV_SHARED_DATA or put ../shared/data beside the repo)")
+    return p
+
+
+NAV = [SP / "RINEX_GN_Spirent.23N", SP / "RINEX_EN_Spirent.23L"]
+
+
+def _base_e(v="iono-Klob_tropo-Saast"):
+    with open(need(SP / v / "Base-static_MO_Spirent.obs")) as f:
+        hdr = next(ln for ln in f if "APPROX POSITION XYZ" in ln)
+    return np.array([float(hdr[14 * k:14 * k + 14]) for k in range(3)])
+
+
+@pytest.fixture(scope="module")
+def drive():
+    need(SP / "Rover-dynamic_motion_Spirent.csv")
+    ds = simulate_from_truth(SP / "Rover-dynamic_motion_Spirent.csv", "tactical", imu_rate_hz=100.0, seed=1)
+    return ds
+
+
+def _truth_e(ds, t_gps):
+    tr = ds.truth
+    t = np.asarray(t_gps) - ds.gps_time_offset_s
+    i = np.clip(np.searchsorted(tr.t, t - 1e-6), 0, tr.t.size - 1)
+    r = np.asarray(earth.geodetic_to_ecef(np.radians(tr.lat_deg[i]), np.radians(tr.lon_deg[i]), tr.h_m[i]),
+                   float).reshape(-1, 3)
+    r[np.abs(tr.t[i] - t) > 1e-3] = np.nan
+    return r
+
+
+def _euler_dcm(rpy):
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array([[cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
+                     [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
+                     [-sp, sr * cp, cr * cp]])
+
+
+def _apply_error(init, dx):
+    """The true state of an INS state `init` (engine init vector) whose error is dx (computed - true)."""
+    t0, lat, lon, h = init[:4]
+    R_M, R_N = earth.radii(lat)
+    out = np.array(init, float)
+    out[1] = lat - dx[0] / (R_M + h)
+    out[2] = lon - dx[1] / ((R_N + h) * np.cos(lat))
+    out[3] = h + dx[2]
+    out[4:7] = init[4:7] - dx[3:6]
+    C = _euler_dcm(dx[6:9]) @ _euler_dcm(init[7:10])
+    out[7] = np.arctan2(C[2, 1], C[2, 2])
+    out[8] = -np.arcsin(C[2, 0])
+    out[9] = np.arctan2(C[1, 0], C[0, 0])
+    return out
+
+
+def test_dd_phase_row_matches_numerical_jacobian():
+    v = "iono-Klob_tropo-Saast"
+    opt = rtk.RtkOptions(systems="GE", frequencies=2)
+    rover, base, rb, bidx, roff, rrows, boff, brows = rtk.prepare_rtk_rows(
+        need(SP / v / "Rover-dynamic_MO_Spirent.obs"), SP / v / "Base-static_MO_Spirent.obs", NAV, None, opt)
+    e = 100
+    R = rrows[roff[e]:roff[e + 1]]
+    B = brows[boff[bidx[e]]:boff[bidx[e] + 1]]
+    kb = {int(k): j for j, k in enumerate(B[:, 0])}
+    pairs = [(i, kb[int(R[i, 0])]) for i in range(len(R)) if int(R[i, 0]) in kb and int(R[i, 1]) == 0]
+    (si, sb), (ii, ib) = pairs[0], pairs[1]
+    lat, lon, h = earth.ecef_to_geodetic(rb + np.array([30.0, -20.0, 10.0]))
+    init = np.array([0.0, lat, lon, h, 3.0, -2.0, 0.1, 0.05, -0.03, 1.2])
+    lever = np.array([0.8, -0.4, -1.2])
+    for f, code in ((0, False), (1, False), (0, True)):
+        y0, H = _core.dd_phase_row(init, lever, rb, R[si], R[ii], B[sb], B[ib], f, code, False)
+        assert np.isfinite(y0)
+        Hn = np.zeros(15)
+        for k in (0, 1, 2, 6, 7, 8, 3):
+            # steps against the round-off of |y| ~ 1e7 m (2e-9 m): 10 cm, 1e-3 rad (truncation < 1e-6)
+            eps = 0.1 if k < 6 else 1e-3
+            d = np.zeros(15)
+            d[k] = eps
+            # g(dx) = y(init (-) dx), the residual the true state would show: y(init) - g(dx) ~ H dx,
+            # so H = -dg/d dx (central difference)
+            g_p, _ = _core.dd_phase_row(_apply_error(init, d), lever, rb, R[si], R[ii], B[sb], B[ib], f, code, False)
+            g_m, _ = _core.dd_phase_row(_apply_error(init, -d), lever, rb, R[si], R[ii], B[sb], B[ib], f, code, False)
+            Hn[k] = -(g_p - g_m) / (2 * eps)
+        # (the Sagnac term's derivative, omega_e |r_s - r_i| / c < 1e-5 per metre, is left out of H)
+        assert np.allclose(H[[0, 1, 2, 6, 7, 8]], Hn[[0, 1, 2, 6, 7, 8]], rtol=0.0, atol=2e-5), (f, code, H, Hn)
+        assert H[3] == 0.0 and abs(Hn[3]) < 1e-9
+        assert np.abs(H[6:9]).max() > 0.1  # the lever arm term is there
+
+
+def _static_imu(lat, lon, h, T, rate=100.0):
+    """Exact increments of a level, north-facing IMU at rest on the rotating Earth."""
+    n = int(T * rate)
+    t = (np.arange(n) + 1) / rate
+    g = earth.gravity(lat, h)
+    w = earth.OMEGA_IE * np.array([np.cos(lat), 0.0, -np.sin(lat)])
+    return t, np.tile(w / rate, (n, 1)), np.tile(np.array([0.0, 0.0, -g]) / rate, (n, 1))
+
+
+class _Static:
+    """The exact IMU of a receiver at rest at r_true_e (level, north), the INS starting at r0_e."""
+
+    def __init__(self, r_true_e, r0_e, T, off):
+        lat, lon, h = earth.ecef_to_geodetic(r0_e)
+        self.t0 = 0.0
+        self.gps_time_offset_s = off
+        self.lever_arm_b = np.zeros(3)
+        self.initial = NavState(np.degrees(lat), np.degrees(lon), h, np.zeros(3), 0.0, 0.0, 0.0)
+        self.initial_is_truth = False
+        self.imu_model = {}
+        t, dth, dv = _static_imu(*earth.ecef_to_geodetic(r_true_e), T)
+        from insnav.data.dataset import ImuData
+
+        self.imu = ImuData(t, dth, dv)
+
+
+def test_static_exact_imu_float_equals_gnss_only_static_rtk():
+    v = "iono-Klob_tropo-Saast"
+    rover = rtk.read_phase_obs(need(SP / v / "Rover-static-2km-east_MO_Spirent.obs"), "GE")
+    base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
+    keep = rover.epoch < 120
+    rover = rtk.PhaseObs(**{**rover.__dict__, "epoch_t_gps_s": rover.epoch_t_gps_s[:120],
+                            **{k: getattr(rover, k)[keep] for k in ("epoch", "system", "prn", "code_m", "phase_cycles",
+                                                                    "doppler_hz", "cn0_dbhz", "lli")}})
+    # both with a 10 km prior sigma: their different prior means (the GNSS-only engine starts at its code
+    # solution, the INS 3.7 m from the truth) weigh 1e-9 m in the result
+    common = dict(systems="GE", frequencies=2, ar_mode="off", tropo_model=False)
+    opt = rtk.RtkOptions(mode="static", **common)
+    rover, base, rb, bidx, roff, rrows, boff, brows = rtk.prepare_rtk_rows(rover, base, NAV, None, opt)
+    g = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, rb,
+                      dict(opt.core_dict(), pos_init_sigma_m=SIG0))
+    r0 = rtk.base_position_from_header(rover)
+    off = rover.epoch_t_gps_s[0] - 0.01
+    ds = _Static(r0, r0, rover.epoch_t_gps_s[-1] - off + 0.5, off)
+    zero = ImuNoise(gyro_arw=[0.0] * 3, acc_vrw=[0.0] * 3, gyro_bias_sigma=[0.0] * 3, acc_bias_sigma=[0.0] * 3,
+                    gyro_bias_tau=[3600.0] * 3, acc_bias_tau=[3600.0] * 3, gyro_scale_sigma=[0.0] * 3,
+                    acc_scale_sigma=[0.0] * 3)
+    cfg = RunConfig(filter="ekf", imu=zero, init_error=False, init_sigma_pos_m=[SIG0] * 3,
+                    init_sigma_vel_mps=[1e-9] * 3, init_sigma_att_deg=[1e-9] * 3)
+    sol = run_rtk_ins(ds, cfg, rover=rover, base=base, nav=NAV, base_pos=rb, rtk_options=common,
+                      engine=dict(code_chi2_row=0.0))
+    ri = sol.rtk.r_float_e
+    rg = np.asarray(g["r_float_e"])
+    ok = (np.asarray(g["status"]) == 2) & (sol.rtk.status == 2)
+    assert ok.sum() >= 110
+    d = np.linalg.norm(ri[ok] - rg[ok], axis=1)
+    # the first two epochs: the same estimator (only 0.01 s of INS propagation before them);
+    # afterwards the INS error model's vertical channel (dv_D/dt = 2 g / R dh, Groves 2013 eq. (14.70))
+    # gives the vertical velocity a sigma of a few um/s that the static model does not have: the two
+    # float solutions then part by up to 1.2e-5 m in 10 s (measured) and 1.1 mm in 120 s, both 4-5 mm
+    # from the truth
+    assert d[:2].max() < 1e-6, d[:2]
+    assert d[:10].max() < 3e-5 and d.max() < 2e-3, d
+    assert np.linalg.norm(ri[ok][-1] - r0) < 0.05  # and it is the right place
+
+
+def _remove(obs, t0, t1):
+    """Rover epochs in [t0, t1) removed (a complete outage); the first epoch after it has the loss-of-lock
+    bit on every phase (the receiver re-acquires)."""
+    ke = (obs.epoch_t_gps_s < t0) | (obs.epoch_t_gps_s >= t1)
+    new_index = np.cumsum(ke) - 1
+    kr = ke[obs.epoch]
+    first = int(np.flatnonzero(obs.epoch_t_gps_s >= t1)[0])
+    lli = obs.lli.copy()
+    lli[obs.epoch == first] |= 1
+    d = {**obs.__dict__}
+    for k in ("system", "prn", "code_m", "phase_cycles", "doppler_hz", "cn0_dbhz"):
+        d[k] = getattr(obs, k)[kr]
+    d["lli"] = lli[kr]
+    d["epoch"] = new_index[obs.epoch[kr]]
+    d["epoch_t_gps_s"] = obs.epoch_t_gps_s[ke]
+    return rtk.PhaseObs(**d), int(new_index[first])
+
+
+def _true_dd_integers(ds, rover, base, rb, probe, v):
+    """The DD integers of the probed epoch from the truth position: round(DD phase - DD range / lambda)."""
+    opt = rtk.RtkOptions(systems="GE", frequencies=2)
+    _, _, _, bidx, roff, rrows, boff, brows = rtk.prepare_rtk_rows(rover, base, NAV, rb, opt)
+    e = probe["epoch"]
+    R = rrows[roff[e]:roff[e + 1]]
+    B = brows[boff[bidx[e]]:boff[bidx[e] + 1]]
+    rt = _truth_e(ds, rover.epoch_t_gps_s[e:e + 1])[0]
+
+    def sd(key, f):
+        i = int(np.flatnonzero(R[:, 0] == key)[0])
+        j = int(np.flatnonzero(B[:, 0] == key)[0])
+        lam = R[i, 6 + 5 * f]
+        rho_r = np.linalg.norm(R[i, 17:20] - rt) + 7.2921151467e-5 * (R[i, 17] * rt[1] - R[i, 18] * rt[0]) / 299792458.0
+        rho_b = np.linalg.norm(B[j, 17:20] - rb) + 7.2921151467e-5 * (B[j, 17] * rb[1] - B[j, 18] * rb[0]) / 299792458.0
+        return (R[i, 3 + 5 * f] - B[j, 3 + 5 * f]) - (rho_r - rho_b) / lam
+
+    out = np.array([sd(j, f) - sd(i, f) for j, i, f in zip(probe["sat_j"], probe["sat_i"], probe["freq"])])
+    return out
+
+
+def test_first_epoch_after_30s_outage_fixes_true_integers(drive):
+    v = "iono-Klob_tropo-Saast"
+    rover = rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE")
+    base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
+    t_a = rover.epoch_t_gps_s[0] + 400.0
+    rov2, first = _remove(rover, t_a, t_a + 30.0)
+    rb = _base_e(v)
+    sol = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rov2, base=base, nav=NAV,
+                      rtk_options=dict(systems="GE", frequencies=2), probe_epoch=first)
+    assert sol.rtk.status[first] == 1, (sol.rtk.status[first - 3:first + 1], sol.rtk.ratio[first])
+    err = np.linalg.norm(sol.rtk.r_e[first] - _truth_e(drive, rov2.epoch_t_gps_s[first:first + 1])[0])
+    assert err < 0.02
+    pr = dict(sol.probe, epoch=first)
+    true_dd = _true_dd_integers(drive, rov2, base, rb, pr, v)
+    assert np.abs(true_dd - np.round(true_dd)).max() < 0.05  # the truth makes them integers
+    assert np.array_equal(pr["a_fix"], np.round(true_dd))
+    wrong = pr["a_fix"].copy()
+    wrong[0] += 1.0
+    acc, s, ratio = _core.ambiguity_accepts(pr["a_hat"], pr["Q_a"], wrong, 3.0, 0.999)
+    assert not acc and ratio < 1.0
+    acc, s, ratio = _core.ambiguity_accepts(pr["a_hat"], pr["Q_a"], pr["a_fix"], 3.0, 0.999)
+    assert acc and ratio >= 3.0
+
+
+def test_single_frequency_one_cycle_slip_flagged_by_ins(drive):
+    v = "iono-Klob_tropo-Saast"
+    rover = rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE")
+    base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
+    e0 = 300
+    # a GPS satellite between 30 and 60 deg elevation at the base at epoch e0 (used, not the reference)
+    _, _, rb, _, roff, rrows, _, _ = rtk.prepare_rtk_rows(rover, base, NAV, None, rtk.RtkOptions(systems="GE"))
+    lat, lon, _ = earth.ecef_to_geodetic(rb)
+    up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    R = rrows[roff[e0]:roff[e0 + 1]]
+    los = R[:, 17:20] - rb
+    el = np.degrees(np.arcsin(los @ up / np.linalg.norm(los, axis=1)))
+    pick = np.flatnonzero((R[:, 1] == 0) & (el > 30) & (el < 60))
+    prn = int(R[pick[0], 0])  # system 0: key = prn
+    rows = np.flatnonzero((rover.system == "G") & (rover.epoch >= e0) & np.isfinite(rover.phase_cycles[:, 0]))
+    hit = rows[rover.prn[rows] == prn]
+    assert hit.size > 100 and rover.epoch[hit[0]] == e0
+    ph = rover.phase_cycles.copy()
+    ph[hit, 0] += 1.0
+    rov2 = rtk.PhaseObs(**{**rover.__dict__, "phase_cycles": ph})
+    opts = dict(systems="GE", frequencies=1, doppler_threshold_cycles=0.0)  # the INS test alone
+    sol = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rov2, base=base, nav=NAV, rtk_options=opts)
+    flags = sol.rtk_row_slip if hasattr(sol, "rtk_row_slip") else None
+    assert flags is not None
+    ins_bit = 1 << 6
+    assert flags[hit[0]] & ins_bit  # flagged at the slip
+    others = np.ones(len(rover), bool)
+    others[hit[0]] = False
+    assert not np.any(flags[others] & ins_bit)  # and nowhere else
+    r_t = _truth_e(drive, rov2.epoch_t_gps_s)
+    fixed = sol.rtk.status == 1
+    near = fixed & (np.abs(np.arange(len(fixed)) - e0) <= 30)
+    assert near.sum() >= 50
+    err = np.linalg.norm(sol.rtk.r_e - r_t, axis=1)
+    assert np.nanmax(err[near]) < 0.02
+
+
+def test_cli_coupling_rtk_writes_fix_status_and_evaluate_reads_it(tmp_path):
+    import subprocess
+    import sys
+
+    v = SP / "iono-Klob_tropo-Saast"
+    motion = need(SP / "Rover-dynamic_motion_Spirent.csv")
+    ds_dir = tmp_path / "spirent"
+    r = subprocess.run([sys.executable, "-m", "insnav", "simulate", "--from-truth", str(motion), "--imu-grade",
+                        "tactical", "--imu-rate-hz", "50", "--out", str(ds_dir), "-q"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "ri.csv"
+    cmd = [sys.executable, "-m", "insnav", "run", str(ds_dir), "--filter", "ekf", "--coupling", "rtk",
+           "--obs", str(v / "Rover-dynamic_MO_Spirent.obs"), "--base", str(v / "Base-static_MO_Spirent.obs"),
+           "--nav", ",".join(str(p) for p in NAV), "--out", str(out), "--quiet"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "rtk coupling" in r.stdout
+    for side in (".rtk.pos", ".rtk.csv", ".config.toml"):
+        assert (tmp_path / ("ri.csv" + side)).exists(), side
+    tab = np.genfromtxt(tmp_path / "ri.csv.rtk.csv", delimiter=",", names=True)
+    assert "slips_ins" in tab.dtype.names and "t_s" in tab.dtype.names
+    assert np.mean(tab["status"] == 1) > 0.99
+    r = subprocess.run([sys.executable, "-m", "insnav", "evaluate", str(out), str(ds_dir / "truth.csv")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "fix" in r.stdout.lower()
+    # without --base: one line naming what is missing
+    r = subprocess.run(cmd[:cmd.index("--base")] + cmd[cmd.index("--nav"):], capture_output=True, text=True)
+    assert r.returncode != 0 and "--base" in r.stderr
