@@ -242,6 +242,44 @@ def rtk_double_differences(
     options: dict[str, Any],
 ) -> dict[str, np.ndarray]: ...
 
+# tight RTK/INS (bind_rtk_ins.cpp)
+RTK_INS_SLIP_KINDS: int
+
+def rtk_ins_run(
+    t: npt.ArrayLike,
+    dtheta_b: npt.ArrayLike,
+    dv_b: npt.ArrayLike,
+    init: npt.ArrayLike,
+    P0: npt.ArrayLike,
+    imu_correction: npt.ArrayLike,
+    imu_model: dict[str, Any],
+    config: dict[str, Any],
+    rtk_options: dict[str, Any],
+    t_rec: npt.ArrayLike,
+    rover_off: npt.ArrayLike,
+    rover_rows: npt.ArrayLike,
+    base_off: npt.ArrayLike,
+    base_rows: npt.ArrayLike,
+    base_index: npt.ArrayLike,
+    r_base_e: npt.ArrayLike,
+    probe_epoch: int = -1,
+) -> dict[str, Any]: ...
+def dd_phase_row(
+    init: npt.ArrayLike,
+    lever_arm_b: npt.ArrayLike,
+    r_base_e: npt.ArrayLike,
+    rover_s: npt.ArrayLike,
+    rover_i: npt.ArrayLike,
+    base_s: npt.ArrayLike,
+    base_i: npt.ArrayLike,
+    freq: int,
+    code: bool,
+    tropo: bool = True,
+) -> tuple[float, np.ndarray]: ...
+def ambiguity_accepts(
+    a_hat: npt.ArrayLike, Q: npt.ArrayLike, a_cand: npt.ArrayLike, ratio_threshold: float, validation_prob: float
+) -> tuple[bool, float, float]: ...
+
 SPP_MAX_ROWS: int
 
 def solve_spp_batch(
