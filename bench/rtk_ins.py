@@ -444,9 +444,9 @@ def report(sps, urban, cost, n_runs, wall_s, command) -> str:
               f"{_f(a['wrong_rate'] * 100, '.2f')} % ({a['wrong']}) | {_f(a['p95'], '.3f')} |",
               f"| insnav RTK/INS (fix-and-hold) | {c['fix_rate'] * 100:.1f} % ({c['fixed']}/{c['n']}) | "
               f"{_f(c['wrong_rate'] * 100, '.2f')} % ({c['wrong']}) | {_f(c['p95'], '.3f')} |",
-              f"| {SR_ROW[7:]} | {d['fix_rate'] * 100:.1f} % ({d['fixed']}/{d['n']}) | "
+              f"| {SR_ROW} | {d['fix_rate'] * 100:.1f} % ({d['fixed']}/{d['n']}) | "
               f"{_f(d['wrong_rate'] * 100, '.2f')} % ({d['wrong']}) | {_f(d['p95'], '.3f')} |",
-              f"| {NO_VALIDATION_ROW[7:]} | {e['fix_rate'] * 100:.1f} % ({e['fixed']}/{e['n']}) | "
+              f"| {NO_VALIDATION_ROW} | {e['fix_rate'] * 100:.1f} % ({e['fixed']}/{e['n']}) | "
               f"{_f(e['wrong_rate'] * 100, '.2f')} % ({e['wrong']}) | {_f(e['p95'], '.3f')} |",
               f"| insnav GNSS-only RTK | {b['fix_rate'] * 100:.1f} % ({b['fixed']}/{b['n']}) | "
               f"{_f(b['wrong_rate'] * 100, '.2f')} % ({b['wrong']}) | {_f(b['p95'], '.3f')} |", "",
