@@ -145,7 +145,8 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     C_en = np.asarray(earth.C_en(lat_b, lon_b))  # NED -> ECEF at the base (short baselines)
     P_e = np.einsum("ij,njk,lk->nil", C_en, P_ned, C_en)
     rs = RtkInsSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=status, ratio=np.asarray(out["ratio"]),
-                        success_rate=np.asarray(out["success_rate"]), n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]), n_sat=np.asarray(out["n_sat"]),
+                        success_rate=np.asarray(out["success_rate"]), n_fix=np.asarray(out["n_fix"]),
+                        n_dd=np.asarray(out["n_dd"]), n_sat=np.asarray(out["n_sat"]),
                         r_e=np.asarray(out["r_e"]), v_e=np.full((status.size, 3), np.nan),
                         r_float_e=np.asarray(out["r_float_e"]), P_r=P_e, slips=np.asarray(out["slips"]),
                         base_age_s=age, r_base_e=r_base_e, code_rejected=np.asarray(out["code_rejected"]),

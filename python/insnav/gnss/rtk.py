@@ -91,7 +91,8 @@ class RtkOptions(TomlTable):
         set with fewer is fixed only when it is all the epoch's fixable ambiguities and repeats a
         validated set (docs/algorithms.md, "Integer ambiguity resolution").
     min_success_rate : float
-        Bootstrapped success rate (Teunissen 1998) a set must have (0.95; 0 off).
+        Bootstrapped success rate (Teunissen 1998) a set must have (0.95; 0 off; the tight RTK/INS
+        filter's default is 0, :data:`insnav.filters.rtk_ins.RTK_INS_DEFAULTS`).
     confirm_epochs, confirm_max_ambiguities : int
         A new set of at most ``confirm_max_ambiguities`` (6) ambiguities is reported fixed once
         its integers have passed in ``confirm_epochs`` (5) consecutive epochs.
@@ -523,7 +524,8 @@ def base_position_from_header(obs: PhaseObs) -> np.ndarray | None:
 
 @dataclass
 class RtkSolution:
-    """Per rover epoch: ``t_gps_s``, ``status`` (:data:`STATUS_NAMES`), ``ratio``, ``n_fix``
+    """Per rover epoch: ``t_gps_s``, ``status`` (:data:`STATUS_NAMES`), ``ratio``, ``success_rate``
+    (bootstrapped, Teunissen 1998, of the ambiguities fixed; of all the candidates when float), ``n_fix``
     (double-differenced ambiguities fixed), ``n_dd`` (phase double differences used),
     ``n_sat``, ``r_e`` (fixed where fixed, else float) [m], ``v_e`` [m/s], ``r_float_e``,
     ``P_r`` (3, 3) covariance of ``r_e`` [m^2], ``slips`` (n, 6) detections per epoch
