@@ -13,8 +13,10 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    Complete GNSS outages of 10 s and 30 s are made by removing the rover epochs from the RINEX
    file; the first epoch after each has the loss-of-lock bit set on every phase (a receiver
    re-acquires after a blockage, so every engine starts new ambiguities).  The same file goes to
-   insnav RTK/INS (continuous AR, its default; also fix-and-hold and a minimum bootstrapped success
-   rate), insnav GNSS-only RTK (continuous AR, as in docs/results/rtk_*) and RTKLIB
+   insnav RTK/INS (continuous AR, its default; also fix-and-hold, a minimum bootstrapped success
+   rate of 0.999 ([rtk_engine]) or of 0.95 (``[rtk] min_success_rate``, the GNSS-only engine's default)
+   and the AR without the GNSS-only engine's fix validation: partial AR down to 3 ambiguities in
+   elevation order, no confirmation over epochs), insnav GNSS-only RTK (continuous AR, as in docs/results/rtk_*) and RTKLIB
    ``rnx2rtkp`` (``bench/rtk/spirent_dynamic_l1l2_ge_cont.conf``: continuous AR).
    Per outage: epochs to the first fix after it (1 = the first epoch), the 3-D error of the
    RTK/INS during the outage (max) and at its end (the INS just before the first epoch after it);
@@ -22,7 +24,8 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
 2. **Simulator, ``rtk-urban-car`` (GPS L1 only), N runs** (seeds 1..N) with cycle slips at 1 per
    satellite per 5 minutes (``slip_rate_per_h = 12``), none flagged by the receiver
    (``slip_lli_prob = 0``): fix rate, wrong-fix rate, horizontal 95th percentile of RTK/INS and of
-   GNSS-only RTK on the same files; slips detected (any detector, and the INS-aided test alone)
+   GNSS-only RTK on the same files (RTK/INS also with the success-rate test and without the fix
+   validation, as in 1.); slips detected (any detector, and the INS-aided test alone)
    over the injected ones; a paired sign test of the per-run fix rates.
 3. **Cost**: the RTK/INS run against the multi-GNSS tight EKF (``coupling = "tight"``, the
    preset's pseudoranges and Doppler) on the same simulated drive, each the whole Python call,
@@ -57,6 +60,14 @@ WRONG_FIX_M = 0.05
 #: (start after the first rover epoch [s], length [s])
 OUTAGES = ((90, 10), (150, 30), (240, 10), (300, 30), (390, 10), (450, 30), (530, 10))
 IMU_GRADE = "industrial"
+#: RTK/INS with the GNSS-only engine's success-rate test ([rtk] min_success_rate, off in RTK_INS_DEFAULTS)
+SR_OPTS = {"min_success_rate": 0.95}
+SR_ROW = "insnav RTK/INS (continuous, bootstrapped success rate >= 0.95 as GNSS-only RTK)"
+#: RTK/INS without the fix validation of the GNSS-only engine (partial AR to 3 ambiguities in elevation
+#: order, no confirmation over epochs, no success rate)
+NO_VALIDATION_OPTS = {"min_fix_ambiguities": 3, "partial_ar_order": "elevation", "confirm_epochs": 1,
+                      "min_success_rate": 0.0}
+NO_VALIDATION_ROW = "insnav RTK/INS (continuous, no fix validation: >= 3 fixed, elevation order, no confirmation)"
 COMMAND = "python3 bench/rtk_ins.py"
 
 
@@ -176,13 +187,15 @@ def spirent_part(work: Path, progress, freq: int = 2):
     base_e = base_position_from_header(read_phase_obs(base, "GE"))
     opts = dict(systems="GE", frequencies=freq, elevation_mask_deg=15.0, ratio_threshold=3.0)
     res = {}
-    for name, ar, eng in (("insnav RTK/INS (continuous, default)", "continuous", {}),
-                          ("insnav RTK/INS (fix-and-hold)", "fix-and-hold", {}),
-                          ("insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)", "continuous",
-                           {"ar_min_success_rate": 0.999})):
+    for name, ar, eng, extra in (("insnav RTK/INS (continuous, default)", "continuous", {}, {}),
+                                 ("insnav RTK/INS (fix-and-hold)", "fix-and-hold", {}, {}),
+                                 ("insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)", "continuous",
+                                  {"ar_min_success_rate": 0.999}, {}),
+                                 (SR_ROW, "continuous", {}, SR_OPTS),
+                                 (NO_VALIDATION_ROW, "continuous", {}, NO_VALIDATION_OPTS)):
         t0 = time.perf_counter()
         sol = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False), rover=rov, base=base, nav=nav,
-                          base_pos=base_e, rtk_options=dict(opts, ar_mode=ar), engine=eng)
+                          base_pos=base_e, rtk_options=dict(opts, ar_mode=ar, **extra), engine=eng)
         res[name] = dict(t=sol.rtk.t_gps_s, r=sol.rtk.r_e, q=sol.rtk.status, wall_s=time.perf_counter() - t0, sol=sol)
         progress(f"spirent L{freq} {name}: {np.mean(sol.rtk.status == 1) * 100:.1f} % fixed")
     t0 = time.perf_counter()
@@ -218,8 +231,10 @@ def spirent_part(work: Path, progress, freq: int = 2):
         last = np.flatnonzero(ok)
         outage_err.append((float(np.max(e[ok])) if ok.any() else math.nan,
                            float(e[last[-1]]) if last.size else math.nan))
+    fx = sol.rtk.status == 1
+    min_ps = float(np.min(sol.rtk.success_rate[fx])) if fx.any() else math.nan
     return dict(rows=rows, outage_err=outage_err, n_epochs=n_epochs, after=after, t_first=t_first,
-                lever=ds.lever_arm_b, freq=freq)
+                lever=ds.lever_arm_b, freq=freq, min_ps=min_ps)
 
 
 # --------------------------------------------------------------------------- simulator urban car
@@ -257,11 +272,17 @@ def urban_part(n_runs, work: Path, progress):
         t_ri = time.perf_counter() - t0
         solc = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
                            rtk_options=dict(opts, ar_mode="fix-and-hold"))
+        sols = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
+                           rtk_options=dict(opts, **SR_OPTS))
+        soln = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
+                           rtk_options=dict(opts, **NO_VALIDATION_OPTS))
         g = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous"))
         truth_t, truth_r = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
         one = {}
         for name, t, r, q in (("RTK/INS", sol.rtk.t_gps_s, sol.rtk.r_e, sol.rtk.status),
                               ("RTK/INS fix-and-hold", solc.rtk.t_gps_s, solc.rtk.r_e, solc.rtk.status),
+                              ("RTK/INS success rate", sols.rtk.t_gps_s, sols.rtk.r_e, sols.rtk.status),
+                              ("RTK/INS no validation", soln.rtk.t_gps_s, soln.rtk.r_e, soln.rtk.status),
                               ("GNSS-only", g.t_gps_s, g.r_e, g.status)):
             i = np.searchsorted(truth_t, t - 0.5e-3)
             ok = (i < truth_t.size) & (np.abs(truth_t[np.minimum(i, truth_t.size - 1)] - t) < 1e-3)
@@ -390,6 +411,12 @@ def report(sps, urban, cost, n_runs, wall_s, command) -> str:
               f"({', '.join(_f(x, 'd') for x in ri['per'])});",
               f"- fix rate at least 99 %: {_met(ri['fix_rate'] >= 0.99)} ({ri['fix_rate'] * 100:.1f} %);",
               f"- no wrong fix: {_met(ri['wrong'] == 0)} ({ri['wrong']}).", ""]
+        rs = sp["rows"][SR_ROW]
+        ok_s = all(x is not None and x <= 1 for x in rs["per"])
+        L += [f"With the success-rate test of GNSS-only RTK (>= 0.95): at most 1 epoch to the first fix after every "
+              f"outage {_met(ok_s)} ({', '.join(_f(x, 'd') for x in rs['per'])}); fix rate {rs['fix_rate'] * 100:.1f} %, "
+              f"wrong fixes {rs['wrong']}; lowest success rate of a default-row fix "
+              f"{_f(sp['min_ps'], '.3f')}.", ""]
     if urban:
         runs, _ = urban
         def pooled(name):
@@ -401,6 +428,7 @@ def report(sps, urban, cost, n_runs, wall_s, command) -> str:
                         p95=float(np.percentile(he, 95)) if he.size else math.nan,
                         per=[r[name]["fixed"] / r[name]["n"] for r in runs])
         a, b, c = pooled("RTK/INS"), pooled("GNSS-only"), pooled("RTK/INS fix-and-hold")
+        d, e = pooled("RTK/INS success rate"), pooled("RTK/INS no validation")
         sl = sum(r["slips"] for r in runs)
         det = sum(r["detected"] for r in runs)
         det_ins = sum(r["detected_ins"] for r in runs)
@@ -416,8 +444,17 @@ def report(sps, urban, cost, n_runs, wall_s, command) -> str:
               f"{_f(a['wrong_rate'] * 100, '.2f')} % ({a['wrong']}) | {_f(a['p95'], '.3f')} |",
               f"| insnav RTK/INS (fix-and-hold) | {c['fix_rate'] * 100:.1f} % ({c['fixed']}/{c['n']}) | "
               f"{_f(c['wrong_rate'] * 100, '.2f')} % ({c['wrong']}) | {_f(c['p95'], '.3f')} |",
+              f"| {SR_ROW} | {d['fix_rate'] * 100:.1f} % ({d['fixed']}/{d['n']}) | "
+              f"{_f(d['wrong_rate'] * 100, '.2f')} % ({d['wrong']}) | {_f(d['p95'], '.3f')} |",
+              f"| {NO_VALIDATION_ROW} | {e['fix_rate'] * 100:.1f} % ({e['fixed']}/{e['n']}) | "
+              f"{_f(e['wrong_rate'] * 100, '.2f')} % ({e['wrong']}) | {_f(e['p95'], '.3f')} |",
               f"| insnav GNSS-only RTK | {b['fix_rate'] * 100:.1f} % ({b['fixed']}/{b['n']}) | "
               f"{_f(b['wrong_rate'] * 100, '.2f')} % ({b['wrong']}) | {_f(b['p95'], '.3f')} |", "",
+              f"The fix validation shared with GNSS-only RTK (default rows): wrong fixes {a['wrong']} against "
+              f"{e['wrong']} without it ({'fewer' if a['wrong'] < e['wrong'] else 'not fewer'}), correct fixes "
+              f"{a['fixed'] - a['wrong']} against {e['fixed'] - e['wrong']}; its success-rate test on top: wrong "
+              f"fixes {d['wrong']} ({'fewer' if d['wrong'] < a['wrong'] else 'not fewer'} than {a['wrong']}), "
+              f"correct fixes {d['fixed'] - d['wrong']}.", "",
               f"Paired per-run fix rates: RTK/INS higher in {wins} runs, lower in {losses} (sign test p = {p:.2g}).", "",
               f"Cycle slips injected on the rover L1 phase: {sl}; flagged by any detector at the slip epoch: {det} "
               f"({_f(100.0 * det / sl if sl else math.nan, '.1f')} %); by the INS-aided test: {det_ins} "

@@ -244,6 +244,33 @@ def test_first_epoch_after_30s_outage_fixes_true_integers(drive):
     assert acc and ratio >= 3.0
 
 
+def test_single_frequency_first_fix_after_outage_and_the_success_rate_test(drive):
+    """L1 only, the first epoch after a 30 s outage: the default RTK/INS AR (the GNSS-only engine's
+    validation without its success-rate test, RTK_INS_DEFAULTS) fixes the true integers; the reported
+    success rate is the bootstrapped one of the fixed subset's Q_a (Teunissen 1998), below 0.95 there,
+    so [rtk] min_success_rate = 0.95 keeps that epoch float."""
+    v = "iono-Klob_tropo-Saast"
+    rover = rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE")
+    base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
+    t_a = rover.epoch_t_gps_s[0] + 300.0
+    rov2, first = _remove(rover, t_a, t_a + 30.0)
+    rb = _base_e(v)
+    opts = dict(systems="GE", frequencies=1)
+    sol = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rov2, base=base, nav=NAV, rtk_options=opts,
+                      probe_epoch=first)
+    assert sol.rtk.status[first] == 1
+    pr = dict(sol.probe, epoch=first)
+    assert pr["a_fix"].size == sol.rtk.n_fix[first] >= 5
+    true_dd = _true_dd_integers(drive, rov2, base, rb, pr, v)
+    assert np.array_equal(pr["a_fix"], np.round(true_dd))
+    ps = _core.lambda_success_rate(pr["Q_a"])
+    assert sol.rtk.success_rate[first] == pytest.approx(ps, rel=1e-12)
+    assert ps < 0.95
+    sr = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rov2, base=base, nav=NAV,
+                     rtk_options=dict(opts, min_success_rate=0.95), probe_epoch=first)
+    assert sr.rtk.status[first] == 2
+
+
 def test_single_frequency_one_cycle_slip_flagged_by_ins(drive):
     v = "iono-Klob_tropo-Saast"
     rover = rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE")

@@ -93,11 +93,12 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), Layout15::kSize, false);
   py::array_t<std::int32_t> status(R), n_fix(R), n_dd(R), n_sat(R), code_rej(R),
       slips({R, static_cast<py::ssize_t>(kRtkInsSlipKinds)});
-  DArray ratio(R), r_e({R, py::ssize_t(3)}), r_float({R, py::ssize_t(3)}), P_r({R, py::ssize_t(9)});
+  DArray ratio(R), success_rate(R), r_e({R, py::ssize_t(3)}), r_float({R, py::ssize_t(3)}), P_r({R, py::ssize_t(9)});
   RtkInsOutputs out;
   nav_buf.attach(out);
   out.status = status.mutable_data();
   out.ratio = ratio.mutable_data();
+  out.success_rate = success_rate.mutable_data();
   out.n_fix = n_fix.mutable_data();
   out.n_dd = n_dd.mutable_data();
   out.n_sat = n_sat.mutable_data();
@@ -142,11 +143,11 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   // per rover epoch (E): records scattered back, epochs without a base: status 0
   py::array_t<std::int32_t> st_all(E), nfix_all(E), ndd_all(E), nsat_all(E), crej_all(E),
       sl_all({E, static_cast<py::ssize_t>(kRtkInsSlipKinds)});
-  DArray ratio_all(E), re_all({E, py::ssize_t(3)}), rf_all({E, py::ssize_t(3)}), pr_all({E, py::ssize_t(9)});
+  DArray ratio_all(E), ps_all(E), re_all({E, py::ssize_t(3)}), rf_all({E, py::ssize_t(3)}), pr_all({E, py::ssize_t(9)});
   for (py::ssize_t e = 0; e < E; ++e) {
     st_all.mutable_data()[e] = nfix_all.mutable_data()[e] = ndd_all.mutable_data()[e] = nsat_all.mutable_data()[e] =
         crej_all.mutable_data()[e] = 0;
-    ratio_all.mutable_data()[e] = 0.0;
+    ratio_all.mutable_data()[e] = ps_all.mutable_data()[e] = 0.0;
     for (int k = 0; k < 3; ++k) re_all.mutable_data()[3 * e + k] = rf_all.mutable_data()[3 * e + k] = NAN;
     for (int k = 0; k < 9; ++k) pr_all.mutable_data()[9 * e + k] = NAN;
     for (int k = 0; k < kRtkInsSlipKinds; ++k) sl_all.mutable_data()[kRtkInsSlipKinds * e + k] = 0;
@@ -160,6 +161,7 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
     nsat_all.mutable_data()[e] = n_sat.data()[i];
     crej_all.mutable_data()[e] = code_rej.data()[i];
     ratio_all.mutable_data()[e] = ratio.data()[i];
+    ps_all.mutable_data()[e] = success_rate.data()[i];
     for (int k = 0; k < 3; ++k) {
       re_all.mutable_data()[3 * e + k] = r_e.data()[3 * i + k];
       rf_all.mutable_data()[3 * e + k] = r_float.data()[3 * i + k];
@@ -170,6 +172,7 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   }
   res["status_epoch"] = st_all;
   res["ratio"] = ratio_all;
+  res["success_rate"] = ps_all;
   res["n_fix"] = nfix_all;
   res["n_dd"] = ndd_all;
   res["n_sat"] = nsat_all;

@@ -2,7 +2,9 @@
 // code and phase with integer ambiguities; the engine fixes from the first epoch to the true
 // position within 1 mm, and after construction it allocates nothing on the heap per epoch
 // (Eigen's malloc check on).  MLAMBDA: the fixed vector of a well-conditioned problem is the
-// rounded one.
+// rounded one.  PartialAr (gnss/ambiguity_resolution.hpp): the per-subset check callback (reject ->
+// a smaller subset, stop -> no fix) and the bootstrapped success rate of a diagonal Q_a, the
+// product formula (Teunissen 1998); FixValidator's rules over epochs.
 #include <cstdio>
 #include <memory>
 #include <random>
@@ -10,6 +12,7 @@
 
 #include "eigen_malloc_check.hpp"  // first: before any Eigen header
 
+#include "insnav/gnss/ambiguity_resolution.hpp"
 #include "insnav/gnss/lambda.hpp"
 #include "insnav/gnss/rtk.hpp"
 #include "test_util.hpp"
@@ -104,6 +107,58 @@ int main() {
   EXPECT_TRUE(fix(0, 0) == 1 && fix(1, 0) == -2 && fix(2, 0) == 3 && fix(3, 0) == 1);
   EXPECT_TRUE(s[1] > s[0]);
   EXPECT_TRUE(g_eigen_asserts == 0);
+  // PartialAr: 6 candidates, Q_a = 0.04 I (D = diag(Q_a) after the reduction)
+  {
+    auto ar = std::make_unique<PartialAr>();
+    ArSettings st;
+    st.min_fix = 2;
+    const double av[6] = {3.02, -1.03, 7.0, 0.96, -4.01, 2.05};
+    auto value = [&](int p) { return av[p]; };
+    auto cov = [&](int p, int q) { return p == q ? 0.04 : 0.0; };
+    int calls = 0, first = 0;
+    Eigen::internal::set_is_malloc_allowed(false);
+    const bool ok = ar->resolve(6, value, cov, st, [&](int n_fix) {
+      if (calls++ == 0) first = n_fix;
+      return n_fix > 4 ? ArVerdict::kReject : ArVerdict::kAccept;
+    });
+    Eigen::internal::set_is_malloc_allowed(true);
+    EXPECT_TRUE(ok && first == 6 && calls == 3 && ar->n_used() == 4);
+    const double p1 = std::erf(1.0 / (2.0 * std::sqrt(2.0 * 0.04)));
+    EXPECT_LT(std::abs(ar->success_rate() - std::pow(p1, 4)), 1e-14);
+    EXPECT_TRUE(ar->a_fix()(0) == 3 && ar->a_fix()(3) == 1);
+    const bool stop = ar->resolve(6, value, cov, st, [](int) { return ArVerdict::kStop; });
+    EXPECT_TRUE(!stop && ar->n_used() == 0 && ar->ratio() > 3.0);
+    EXPECT_LT(std::abs(ar->success_rate() - std::pow(p1, 6)), 1e-14);  // the full set's when none is fixed
+    st.min_success_rate = 0.5 * (std::pow(p1, 5) + std::pow(p1, 4));  // 6 and 5 fail the success rate, 4 passes
+    calls = 0;
+    EXPECT_TRUE(ar->resolve(6, value, cov, st, [&](int n_fix) { first = n_fix; ++calls; return ArVerdict::kAccept; }));
+    EXPECT_TRUE(calls == 1 && first == 4 && ar->n_used() == 4);
+  }
+  // FixValidator: DD p = slot p+1 - slot 0, integers a(p) = 10 + p
+  {
+    auto v = std::make_unique<FixValidator<16>>();
+    const FixRules r{5, 3, 6};
+    auto sj = [](int p) { return p + 1; };
+    auto si = [](int) { return 0; };
+    auto a = [](int p) { return 10.0 + p; };
+    auto epoch = [&](int n_fix, int n_cand) {
+      v->begin_epoch();
+      const ArVerdict x = (*v)(n_fix, n_cand, sj, si, a, r);
+      v->end_epoch();
+      return x;
+    };
+    EXPECT_TRUE(epoch(4, 8) == ArVerdict::kReject);  // fewer than min_fix, not every candidate
+    EXPECT_TRUE(epoch(5, 8) == ArVerdict::kStop);    // a new small set: 1st of 3 repeats
+    EXPECT_TRUE(epoch(5, 8) == ArVerdict::kStop);
+    EXPECT_TRUE(epoch(5, 8) == ArVerdict::kAccept);  // 3rd consecutive epoch
+    EXPECT_TRUE(epoch(3, 3) == ArVerdict::kAccept);  // every candidate, repeats the validated integers
+    v->begin_epoch();
+    v->end_epoch();  // an epoch without the set: the repeats start again
+    EXPECT_TRUE(epoch(3, 3) == ArVerdict::kStop && v->confirm_count() == 1);
+    v->invalidate(2);  // slot 2 re-initialised (slip): DD 1 no longer repeats
+    EXPECT_TRUE(epoch(3, 3) == ArVerdict::kReject);
+    EXPECT_TRUE(epoch(7, 8) == ArVerdict::kAccept);  // more than confirm_max: at once
+  }
   std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
   TEST_MAIN_END()
 }

@@ -86,15 +86,30 @@ class RtkOptions(TomlTable):
     ratio_threshold : float
         Ratio test s2/s1 of MLAMBDA's two best candidates (3).
     min_fix_ambiguities : int
-        Partial AR drops one ambiguity at a time until the ratio test passes, down to this many
-        (at most ``max_partial_drops`` times).
+        Fewest double-differenced ambiguities a new integer set may have (5): partial AR drops one
+        ambiguity at a time until the ratio test passes (at most ``max_partial_drops`` times), and a
+        set with fewer is fixed only when it is all the epoch's fixable ambiguities and repeats a
+        validated set (docs/algorithms.md, "Integer ambiguity resolution").
+    min_success_rate : float
+        Bootstrapped success rate (Teunissen 1998) a set must have (0.95; 0 off; the tight RTK/INS
+        filter's default is 0, :data:`insnav.filters.rtk_ins.RTK_INS_DEFAULTS`).
+    confirm_epochs, confirm_max_ambiguities : int
+        A new set of at most ``confirm_max_ambiguities`` (6) ambiguities is reported fixed once
+        its integers have passed in ``confirm_epochs`` (5) consecutive epochs.
     partial_ar_order : str
-        Which one partial AR drops first: ``"elevation"`` (the lowest satellite) or ``"variance"``
-        (the largest float variance).
+        Which one partial AR drops first: ``"variance"`` (the largest float variance) or
+        ``"elevation"`` (the lowest satellite).
     glonass_ar : bool
         Fix GLONASS ambiguities (off: FDMA inter-frequency biases make them float only).
     sigma_phase_a_m, sigma_phase_b_m : float
         Zero-difference phase sigma sqrt(a^2 + b^2 / sin^2 el) [m]; code = ``code_phase_ratio`` x.
+    code_correlation_time_s : float
+        Correlation time of the code errors (multipath) [s]: the code of a tracked satellite enters
+        with its variance x (1 + rho) / (1 - rho), rho = exp(-dt / tau) (0: white).
+    adaptive_code_gain : float
+        Gain of the adaptive code variance factor estimated from post-fit code residuals (0: off).
+    amb_psd_cycles2ps : float
+        Random walk of the single-differenced ambiguities [cycles^2/s].
     iono_sigma_per_10km_m : float
         Double-difference ionosphere sigma per 10 km of baseline [m] (medium baselines).
     accel_psd_h_m2ps3, accel_psd_v_m2ps3 : float
@@ -113,19 +128,25 @@ class RtkOptions(TomlTable):
     elevation_mask_deg: float = 15.0
     ar_elevation_mask_deg: float = 0.0
     ratio_threshold: float = 3.0
-    min_fix_ambiguities: int = 3
+    min_fix_ambiguities: int = 5
     max_partial_drops: int = 12
-    partial_ar_order: str = "elevation"
+    partial_ar_order: str = "variance"
     min_lock_epochs: int = 0
     glonass_ar: bool = False
     sigma_phase_a_m: float = 0.003
     sigma_phase_b_m: float = 0.003
     code_phase_ratio: float = 100.0
+    code_correlation_time_s: float = 0.0
+    adaptive_code_gain: float = 0.0
+    min_success_rate: float = 0.95
+    confirm_epochs: int = 5
+    confirm_max_ambiguities: int = 6
     iono_sigma_per_10km_m: float = 0.0
     tropo_model: bool = True
     accel_psd_h_m2ps3: float = 9.0
     accel_psd_v_m2ps3: float = 1.0
     amb_init_sigma_cycles: float = 30.0
+    amb_psd_cycles2ps: float = 1e-8
     gf_threshold_m: float = 0.05
     mw_threshold_cycles: float = 2.0
     doppler_threshold_cycles: float = 1.0
@@ -158,8 +179,11 @@ class RtkOptions(TomlTable):
         for key, lo, hi in (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.0),
                             ("ratio_threshold", 1.0, 1e3), ("sigma_phase_a_m", 0.0, 1.0),
                             ("sigma_phase_b_m", 0.0, 1.0), ("code_phase_ratio", 1.0, 1e4),
+                            ("code_correlation_time_s", 0.0, 1e4), ("min_success_rate", 0.0, 1.0),
+                            ("adaptive_code_gain", 0.0, 1.0),
                             ("iono_sigma_per_10km_m", 0.0, 10.0), ("accel_psd_h_m2ps3", 0.0, 1e4),
                             ("accel_psd_v_m2ps3", 0.0, 1e4), ("amb_init_sigma_cycles", 1e-3, 1e6),
+                            ("amb_psd_cycles2ps", 0.0, 1.0),
                             ("gf_threshold_m", 1e-4, 10.0), ("mw_threshold_cycles", 0.1, 100.0),
                             ("doppler_threshold_cycles", -1.0, 1e3), ("outlier_sigma", 0.0, 1e3),
                             ("hold_sigma_cycles", 1e-6, 10.0), ("max_age_s", 0.0, 86400.0)):
@@ -169,6 +193,7 @@ class RtkOptions(TomlTable):
         if self.sigma_phase_a_m == 0.0 and self.sigma_phase_b_m == 0.0:
             bad("sigma_phase_a_m", "a and b not both 0")
         for key, lo in (("min_fix_ambiguities", 1), ("max_partial_drops", 0), ("min_lock_epochs", 0),
+                        ("confirm_epochs", 1), ("confirm_max_ambiguities", 0),
                         ("max_outage_epochs", 0)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
@@ -185,9 +210,15 @@ class RtkOptions(TomlTable):
                     partial_by_variance=self.partial_ar_order == "variance", min_lock_epochs=int(self.min_lock_epochs),
                     glonass_ar=bool(self.glonass_ar), sigma_phase_a_m=float(self.sigma_phase_a_m),
                     sigma_phase_b_m=float(self.sigma_phase_b_m), code_phase_ratio=float(self.code_phase_ratio),
+                    code_corr_time_s=float(self.code_correlation_time_s),
+                    code_scale_gain=float(self.adaptive_code_gain),
+                    min_success_rate=float(self.min_success_rate),
+                    confirm_epochs=int(self.confirm_epochs),
+                    confirm_max_ambiguities=int(self.confirm_max_ambiguities),
                     iono_sigma_per_10km_m=float(self.iono_sigma_per_10km_m), tropo_model=bool(self.tropo_model),
                     accel_psd_h=float(self.accel_psd_h_m2ps3), accel_psd_v=float(self.accel_psd_v_m2ps3),
                     amb_init_sigma_cycles=float(self.amb_init_sigma_cycles),
+                    amb_psd=float(self.amb_psd_cycles2ps),
                     gf_threshold_m=float(self.gf_threshold_m), mw_threshold_cycles=float(self.mw_threshold_cycles),
                     doppler_threshold_cycles=float(self.doppler_threshold_cycles),
                     max_outage_epochs=int(self.max_outage_epochs), outlier_sigma=float(self.outlier_sigma),
@@ -493,7 +524,8 @@ def base_position_from_header(obs: PhaseObs) -> np.ndarray | None:
 
 @dataclass
 class RtkSolution:
-    """Per rover epoch: ``t_gps_s``, ``status`` (:data:`STATUS_NAMES`), ``ratio``, ``n_fix``
+    """Per rover epoch: ``t_gps_s``, ``status`` (:data:`STATUS_NAMES`), ``ratio``, ``success_rate``
+    (bootstrapped, Teunissen 1998, of the ambiguities fixed; of all the candidates when float), ``n_fix``
     (double-differenced ambiguities fixed), ``n_dd`` (phase double differences used),
     ``n_sat``, ``r_e`` (fixed where fixed, else float) [m], ``v_e`` [m/s], ``r_float_e``,
     ``P_r`` (3, 3) covariance of ``r_e`` [m^2], ``slips`` (n, 6) detections per epoch
@@ -503,6 +535,7 @@ class RtkSolution:
     t_gps_s: np.ndarray
     status: np.ndarray
     ratio: np.ndarray
+    success_rate: np.ndarray
     n_fix: np.ndarray
     n_dd: np.ndarray
     n_sat: np.ndarray
@@ -584,7 +617,8 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
     out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
     age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
     return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
-                       ratio=np.asarray(out["ratio"]), n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]),
+                       ratio=np.asarray(out["ratio"]), success_rate=np.asarray(out["success_rate"]),
+                       n_fix=np.asarray(out["n_fix"]), n_dd=np.asarray(out["n_dd"]),
                        n_sat=np.asarray(out["n_sat"]), r_e=np.asarray(out["r_e"]), v_e=np.asarray(out["v_e"]),
                        r_float_e=np.asarray(out["r_float_e"]), P_r=np.asarray(out["P_r"]).reshape(-1, 3, 3),
                        slips=np.asarray(out["slips"]), base_age_s=age, r_base_e=r_base_e,

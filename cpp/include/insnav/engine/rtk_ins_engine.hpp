@@ -73,6 +73,7 @@ inline constexpr int kRtkInsSlipKinds = gnss::kNumSlipKinds + 1;
 struct RtkInsEpoch {
   gnss::RtkStatus status = gnss::RtkStatus::kNone;
   double ratio = 0.0;
+  double success_rate = 0.0;  // bootstrapped success rate of the ambiguities fixed (of all, when float)
   int n_fix = 0, n_dd = 0, n_sat = 0, code_rejected = 0;
   Vec3 r_e = Vec3::Zero();        // antenna, fixed if fixed, else float [m]
   Vec3 r_float_e = Vec3::Zero();  // antenna, float [m]
@@ -84,6 +85,7 @@ struct RtkInsEpoch {
 struct RtkInsOutputs : NavOutputs {
   std::int32_t* status = nullptr;
   double* ratio = nullptr;
+  double* success_rate = nullptr;
   std::int32_t* n_fix = nullptr;
   std::int32_t* n_dd = nullptr;
   std::int32_t* n_sat = nullptr;
@@ -138,6 +140,7 @@ class RtkInsEngine {
     Paa_.setZero();
     amb_of_.fill(-1);
     for (auto& a : amb_) a = AmbSlot{};
+    validator_.reset();
     rover_slip_.reset();
     base_slip_.reset();
     for (auto& p : prev_) p = PrevSd{};
@@ -279,7 +282,11 @@ class RtkInsEngine {
     if (mp > 0) {
       for (int k = 0; k < kMaxAmb; ++k)
         if (amb_[k].used) ++amb_[k].lock;
-      if (o.ar_mode != gnss::ArMode::kOff) resolve(out);
+      if (o.ar_mode != gnss::ArMode::kOff) {
+        validator_.begin_epoch();
+        resolve(out);
+        validator_.end_epoch();
+      }
     }
     // single differences at the final antenna position: the reference of the next INS-aided slip test
     single_differences(nf);
@@ -328,6 +335,7 @@ class RtkInsEngine {
   void write_epoch(std::int64_t g, const RtkInsEpoch& e, RtkInsOutputs& out) const {
     if (out.status) out.status[g] = static_cast<std::int32_t>(e.status);
     if (out.ratio) out.ratio[g] = e.ratio;
+    if (out.success_rate) out.success_rate[g] = e.success_rate;
     if (out.n_fix) out.n_fix[g] = e.n_fix;
     if (out.n_dd) out.n_dd[g] = e.n_dd;
     if (out.n_sat) out.n_sat[g] = e.n_sat;
@@ -430,6 +438,7 @@ class RtkInsEngine {
   void remove_amb(int k) {
     if (amb_[k].sat >= 0) amb_of_[amb_[k].sat * gnss::kMaxFreq + amb_[k].freq] = -1;
     amb_[k] = AmbSlot{};
+    validator_.invalidate(k);
     xa_(k) = 0.0;
     Pia_.col(k).setZero();
     Paa_.row(k).setZero();
@@ -452,6 +461,7 @@ class RtkInsEngine {
     Paa_(k, k) = cfg_.rtk.amb_init_sigma_cycles * cfg_.rtk.amb_init_sigma_cycles;
     amb_[k].lock = 0;
     amb_[k].outage = 0;
+    validator_.invalidate(k);
   }
 
   void manage_ambiguities(int nf) {
@@ -658,18 +668,23 @@ class RtkInsEngine {
       std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
     gnss::ArSettings s;
     s.ratio_threshold = o.ratio_threshold;
-    s.min_fix = o.min_fix_ambiguities;
+    // subsets below min_fix_ambiguities only pass as every candidate of the epoch (FixValidator rule 1)
+    s.min_fix = std::max(std::min(o.min_fix_ambiguities, n), 1);
     s.max_drops = o.max_partial_drops;
     s.validation_prob = cfg_.validation_prob;
-    s.min_success_rate = cfg_.ar_min_success_rate;
+    s.min_success_rate = std::max(cfg_.ar_min_success_rate, o.min_success_rate);
+    const gnss::FixRules rules{o.min_fix_ambiguities, o.confirm_epochs, o.confirm_max_ambiguities};
+    const auto slot_j = [&](int p) { return dd_j_[order_[p]]; };
+    const auto slot_i = [&](int p) { return dd_i_[order_[p]]; };
     const bool ok = ar_.resolve(
         n, [&](int p) { return xa_(dd_j_[order_[p]]) - xa_(dd_i_[order_[p]]); },
         [&](int p, int q) {
           const int sj = dd_j_[order_[p]], si = dd_i_[order_[p]], tj = dd_j_[order_[q]], ti = dd_i_[order_[q]];
           return Paa_(sj, tj) - Paa_(sj, ti) - Paa_(si, tj) + Paa_(si, ti);
         },
-        s);
+        s, [&](int n_fix) { return validator_(n_fix, n, slot_j, slot_i, ar_.a_fix(), rules); });
     out.ratio = ar_.ratio();
+    out.success_rate = ar_.success_rate();
     if (!ok) return;
     const int nu = ar_.n_used();
     // dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix); the antenna follows the INS error
@@ -753,6 +768,7 @@ class RtkInsEngine {
   Eigen::LLT<RMat> llt_{kMaxRowsE};
   // AR
   gnss::PartialAr ar_;
+  gnss::FixValidator<kMaxAmb> validator_;  // fix validation over epochs (gnss/ambiguity_resolution.hpp)
   std::array<int, gnss::kMaxAmbiguities> dd_j_{}, dd_i_{}, order_{};
   std::array<double, gnss::kMaxAmbiguities> dd_el_{}, dd_var_{};
   Eigen::Matrix<double, kN, Eigen::Dynamic, 0, kN, gnss::kMaxAmbiguities> Qxa_;

@@ -13,11 +13,17 @@
 //      a minimum bootstrapped success rate of the subset (Teunissen 1998): the float precision
 //      must make a correct fix likely, which the ratio test alone does not ensure with few
 //      ambiguities;
-//   4. on failure, partial AR drops the last ambiguity of the order and retries, down to
+//   4. the caller's check of the candidate (PartialAr::resolve's check callback), e.g. the rules
+//      over epochs of FixValidator below: accept it, try a smaller subset, or stop (float epoch);
+//   5. on failure, partial AR drops the last ambiguity of the order and retries, down to
 //      min_fix ambiguities and at most max_drops times.
 // The fixed baseline follows from the conditional mean (Teunissen 1995, eq. (6)):
 //   x_b_fix = x_b - Q_ba Q_a^{-1} (a_hat - a_fix),  P_b_fix = P_b - Q_ba Q_a^{-1} Q_ab;
 // solve() gives Q_a^{-1} v for the caller, which knows its own Q_ba.
+//
+// FixValidator: the rules of an accepted set over epochs (minimum number fixed, consistency with
+// the last validated set, confirmation of small sets over consecutive epochs), for engines whose
+// single-differenced ambiguities live in numbered slots.
 //
 // Bounded sizes (kMaxAmbiguities), no heap allocation.
 #pragma once
@@ -35,7 +41,7 @@ namespace insnav::gnss {
 
 struct ArSettings {
   double ratio_threshold = 3.0;
-  int min_fix = 3;            // partial AR stops above this count
+  int min_fix = 3;            // partial AR tries subsets down to this count
   int max_drops = 12;         // at most this many partial-AR retries
   double validation_prob = 0.0;  // > 0: also require s_1 <= chi2_quantile(validation_prob, n)
   double min_success_rate = 0.0; // > 0: also require the bootstrapped success rate >= this
@@ -51,17 +57,29 @@ inline double bootstrap_success_rate(const AmbVec& D) {
   return p;
 }
 
+/// What a caller's check makes of a candidate subset (PartialAr::resolve).
+enum class ArVerdict : int { kAccept = 0, kReject = 1, kStop = 2 };
+
 /// Partial ambiguity resolution over candidates given in priority order.
 class PartialAr {
  public:
   /// n candidates, priority order p = 0..n-1: float value a(p) and covariance q(p, q) (callables).
-  /// Returns true when a subset of the first n_used() candidates passes; ratio() is the full set's
-  /// ratio (or the accepted subset's when one passes).
+  /// Returns true when a subset of the first n_used() candidates passes; ratio() and
+  /// success_rate() are the full set's (or the accepted subset's when one passes).
   template <class ValueFn, class CovFn>
   bool resolve(int n, ValueFn&& a, CovFn&& q, const ArSettings& s) {
+    return resolve(n, a, q, s, [](int) { return ArVerdict::kAccept; });
+  }
+
+  /// As above, with check(n_fix) called for a subset of the first n_fix candidates that passed
+  /// the ratio, chi2 and success-rate tests (a_fix() is its integer vector during the call):
+  /// kAccept fixes it, kReject tries the next smaller subset, kStop ends the search (no fix).
+  template <class ValueFn, class CovFn, class CheckFn>
+  bool resolve(int n, ValueFn&& a, CovFn&& q, const ArSettings& s, CheckFn&& check) {
     n = std::min(n, kMaxAmbiguities);
     n_used_ = 0;
     ratio_ = 0.0;
+    success_ = 0.0;
     s1_ = 0.0;
     int drops = 0;
     for (int nuse = n; nuse >= std::max(s.min_fix, 1); --nuse) {
@@ -75,17 +93,21 @@ class PartialAr {
       double sq[2];
       if (lambda_.solve(a_hat_, Qa_, a_fix_, sq) != LambdaStatus::kOk) continue;
       const double ratio = sq[0] > 0.0 ? std::min(sq[1] / sq[0], 999.9) : 999.9;
-      if (nuse == n) ratio_ = ratio;
+      const double ps = lambda_.bootstrap_success_rate();  // of this subset's decorrelated Q_a
+      if (nuse == n) {
+        ratio_ = ratio;
+        success_ = ps;
+      }
       if (ratio < s.ratio_threshold) continue;
       if (s.validation_prob > 0.0 && sq[0] > ::insnav::chi2_quantile(s.validation_prob, nuse)) continue;
-      if (s.min_success_rate > 0.0) {
-        if (!lambda_.decorrelate(Qa_, Zw_, Lw_, Dw_)) continue;
-        success_ = bootstrap_success_rate(Dw_);
-        if (success_ < s.min_success_rate) continue;
-      }
+      if (s.min_success_rate > 0.0 && ps < s.min_success_rate) continue;
       llt_.compute(Qa_);
       if (llt_.info() != Eigen::Success) continue;
+      const ArVerdict v = check(nuse);
+      if (v == ArVerdict::kReject) continue;
+      if (v == ArVerdict::kStop) return false;
       ratio_ = ratio;
+      success_ = ps;
       s1_ = sq[0];
       n_used_ = nuse;
       da_ = a_hat_ - a_fix_.col(0);
@@ -113,6 +135,8 @@ class PartialAr {
 
   int n_used() const { return n_used_; }
   double ratio() const { return ratio_; }
+  /// Bootstrapped success rate of the full set (or of the accepted subset when one passes).
+  double success_rate() const { return success_; }
   double s1() const { return s1_; }
   const AmbVec& a_hat() const { return a_hat_; }
   auto a_fix() const { return a_fix_.col(0); }
@@ -130,12 +154,131 @@ class PartialAr {
   AmbVec a_hat_, da_;
   AmbMat Qa_;
   AmbCand a_fix_;
-  AmbMat Zw_, Lw_;
-  AmbVec Dw_;
-  double success_ = 1.0;
+  double success_ = 0.0;
   Eigen::LLT<AmbMat> llt_{kMaxAmbiguities};
   int n_used_ = 0;
   double ratio_ = 0.0, s1_ = 0.0;
+};
+
+/// Rules of FixValidator (the [rtk] keys min_fix_ambiguities, confirm_epochs, confirm_max_ambiguities).
+struct FixRules {
+  int min_fix = 5;       // fewest ambiguities of a new set
+  int confirm_epochs = 5;  // a new set of few ambiguities is reported after this many repeats (1: at once)
+  int confirm_max = 6;   // ... "few": at most this many (more: reported at once)
+};
+
+/// Validation of an accepted integer set beyond the tests of one epoch, for an engine whose
+/// single-differenced ambiguities live in kSlots numbered slots and whose double differences are
+/// a_p = N_j(p) - N_i(p) (slots j(p), i(p)).  The engine calls invalidate(k) whenever slot k is
+/// (re-)initialised (new satellite, slip, outlier, removal), reset() when all are, and
+/// begin_epoch() / end_epoch() around each epoch's AR.
+///  1. Number fixed (check): n_fix >= min_fix.  With the three position coordinates free, a
+///     subset of n ambiguities leaves n - 3 checks on the integers: a wrong set that only moves the
+///     position fits as well as the right one when n - 3 < 2 (measured on the urban preset, GPS L1,
+///     5-6 satellites, ratio 3: 3 fixed 100 % wrong, 4 fixed 57 %, 5 fixed 6 %).  A smaller set is
+///     accepted (kConsistent) when it is every fixable ambiguity of the epoch (at least 3, so the
+///     position is pinned) and repeats a validated fix: each of its double differences was fixed to
+///     the same integer by an earlier accepted set and its ambiguities have been tracked without a
+///     slip since (consistency over consecutive epochs: a satellite setting does not undo what the
+///     larger set established).
+///  2. Confirmation over consecutive epochs (confirm): a new set of at most confirm_max ambiguities
+///     (redundancy n - 3 <= 3) is reported fixed once the same integers have passed the checks in
+///     confirm_epochs consecutive epochs; until then the epoch stays float.  A float filter biased by
+///     an undetected slip or by correlated multipath yields a wrong set that passes the ratio test
+///     for a few epochs and then changes; the right set repeats.  Larger sets are reported at once.
+/// (The success rate, Teunissen 1998, is ArSettings::min_success_rate, tested by PartialAr first.)
+template <int kSlots>
+class FixValidator {
+ public:
+  enum class Check : int { kAccepted = 0, kTooFew = 1, kConsistent = 3 };
+
+  void reset() {
+    for (auto& v : slot_) v = Slot{};
+    count_ = 0;
+    seen_ = false;
+  }
+  void invalidate(int k) { slot_[k].valid = false; }
+  void begin_epoch() { seen_ = false; }
+  void end_epoch() {
+    if (!seen_) count_ = 0;  // the repeats must be consecutive epochs
+  }
+
+  /// Verdict on the candidate of PartialAr::resolve's check (n_fix of n_candidates fixable; slot_j,
+  /// slot_i: slots of double difference p; a_fix: its integers): rule 1, then rule 2.
+  template <class SlotJ, class SlotI, class AFix>
+  ArVerdict operator()(int n_fix, int n_candidates, SlotJ&& slot_j, SlotI&& slot_i, const AFix& a_fix,
+                       const FixRules& r) {
+    const Check c = check(n_fix, n_candidates, slot_j, slot_i, a_fix, r);
+    if (c == Check::kTooFew) return ArVerdict::kReject;
+    return confirm(n_fix, c, slot_j, slot_i, a_fix, r) ? ArVerdict::kAccept : ArVerdict::kStop;
+  }
+
+  template <class SlotJ, class SlotI, class AFix>
+  Check check(int n_fix, int n_candidates, SlotJ&& slot_j, SlotI&& slot_i, const AFix& a_fix,
+              const FixRules& r) const {
+    if (n_fix >= r.min_fix) return Check::kAccepted;
+    if (n_fix == n_candidates && n_fix >= 3 && repeats(n_fix, slot_j, slot_i, a_fix)) return Check::kConsistent;
+    return Check::kTooFew;
+  }
+
+  /// Rule 2; returns whether the set is reported fixed this epoch.
+  template <class SlotJ, class SlotI, class AFix>
+  bool confirm(int n_fix, Check c, SlotJ&& slot_j, SlotI&& slot_i, const AFix& a_fix, const FixRules& r) {
+    seen_ = true;
+    if (c == Check::kConsistent) return ++count_ >= r.confirm_epochs;
+    if (repeats(n_fix, slot_j, slot_i, a_fix)) {
+      ++count_;
+    } else {
+      remember(n_fix, slot_j, slot_i, a_fix);
+      count_ = 1;
+    }
+    return n_fix > r.confirm_max || count_ >= r.confirm_epochs;
+  }
+
+  /// The candidate's n_fix double differences equal the last validated fix: both single-differenced
+  /// ambiguities carry a validated integer against the same reference and their difference is the
+  /// candidate's.
+  template <class SlotJ, class SlotI, class AFix>
+  bool repeats(int n_fix, SlotJ&& slot_j, SlotI&& slot_i, const AFix& a_fix) const {
+    for (int p = 0; p < n_fix; ++p) {
+      const Slot& j = slot_[slot_j(p)];
+      const Slot& i = slot_[slot_i(p)];
+      if (!j.valid || !i.valid || j.ref != i.ref) return false;
+      if (j.integer - i.integer != a_fix(p)) return false;
+    }
+    return n_fix > 0;
+  }
+
+  int confirm_count() const { return count_; }
+
+ private:
+  // N^k - N^ref = integer [cycles] of the last validated set
+  struct Slot {
+    bool valid = false;
+    int ref = -1;
+    double integer = 0.0;
+  };
+
+  // Store a set's integers as the validated ones (replacing the old set).
+  template <class SlotJ, class SlotI, class AFix>
+  void remember(int n_fix, SlotJ&& slot_j, SlotI&& slot_i, const AFix& a_fix) {
+    for (auto& v : slot_) v.valid = false;
+    for (int p = 0; p < n_fix; ++p) {
+      Slot& j = slot_[slot_j(p)];
+      Slot& i = slot_[slot_i(p)];
+      const int ref = slot_i(p);
+      i.valid = true;
+      i.ref = ref;
+      i.integer = 0.0;
+      j.valid = true;
+      j.ref = ref;
+      j.integer = a_fix(p);
+    }
+  }
+
+  std::array<Slot, kSlots> slot_{};
+  int count_ = 0;   // consecutive epochs the validated set was found
+  bool seen_ = false;
 };
 
 }  // namespace insnav::gnss

@@ -70,6 +70,20 @@ class Lambda {
     return true;
   }
 
+  /// Bootstrapped success rate of the (decorrelated) problem of the last solve() or decorrelate():
+  ///   P_s = prod_i (2 Phi(1 / (2 sqrt(D_i))) - 1),  Phi the standard normal distribution,
+  /// D_i the conditional variances of the decorrelated ambiguities (P. J. G. Teunissen, "Success
+  /// probability of integer GPS ambiguity rounding and bootstrapping", J. Geodesy 72 (1998)
+  /// 606-612).  It is a lower bound of the integer least-squares success rate (P. J. G. Teunissen,
+  /// "An optimality property of the integer least-squares estimator", J. Geodesy 73 (1999) 587-593),
+  /// computed from the float covariance alone: it says whether the float solution is precise
+  /// enough for any integer to be trusted, which the ratio test of the data does not.
+  double bootstrap_success_rate() const {
+    double p = 1.0;
+    for (int i = 0; i < D_.size(); ++i) p *= std::erf(1.0 / (2.0 * std::sqrt(2.0 * D_(i))));  // 2 Phi(x) - 1 = erf(x / sqrt 2)
+    return p;
+  }
+
   /// Search-node budget (guards pathological, badly conditioned problems).
   long max_nodes = 10000000;
 

@@ -32,8 +32,13 @@
 // Ambiguity resolution: MLAMBDA (insnav/gnss/lambda.hpp; Chang, Yang and Zhou 2005) on the
 // double-differenced ambiguities D x_N, Q_a = D P_NN D^T; ratio test s2/s1 >= threshold
 // (Teunissen & Verhagen 2009, "The GNSS ambiguity ratio-test revisited"); on failure partial
-// AR drops the lowest-elevation ambiguity and retries down to min_fix_ambiguities; the fixed
-// baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)).
+// AR drops the largest-variance (or the lowest-elevation) ambiguity and retries down to
+// min_fix_ambiguities; a set that passes is validated further (gnss/ambiguity_resolution.hpp:
+// bootstrapped success rate in PartialAr; number fixed and confirmation over epochs in
+// FixValidator); the fixed baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
+// (Teunissen 1995, eq. (6)).  Optional float-model terms for receivers noisier than configured:
+// time-correlated code (code_corr_time_s), an adaptive code variance factor (code_scale_gain) and
+// the ambiguity random walk (amb_psd).
 //
 // Cycle slips (per receiver, before differencing): loss-of-lock indicator; the geometry-free
 // combination lambda_1 phi_1 - lambda_2 phi_2 jumping by more than gf_threshold_m between
@@ -106,14 +111,16 @@ struct RtkOptions {
   double elevation_mask_rad = 15.0 * M_PI / 180.0;
   double ar_elevation_mask_rad = 0.0;
   double ratio_threshold = 3.0;
-  int min_fix_ambiguities = 3;     // partial AR stops above this count
+  int min_fix_ambiguities = 5;     // fewest ambiguities fixed (partial AR stops there; FixValidator rule 1)
   int max_partial_drops = 12;
-  bool partial_by_variance = false;  // partial AR drops the largest-variance ambiguity first (else the lowest)
+  bool partial_by_variance = true;   // partial AR drops the largest-variance ambiguity first (else the lowest)
   int min_lock_epochs = 0;         // epochs an ambiguity is tracked before it is fixed
   bool glonass_ar = false;
   double sigma_phase_a_m = 0.003;  // sigma(el) = sqrt(a^2 + b^2 / sin^2 el), zero difference
   double sigma_phase_b_m = 0.003;
   double code_phase_ratio = 100.0;
+  double code_corr_time_s = 0.0;   // correlation time of the code errors (multipath) [s]; 0: white
+  double code_scale_gain = 0.0;    // adaptive code variance factor: gain of its update per epoch (0: off)
   double glonass_factor = 1.5;
   double iono_sigma_per_10km_m = 0.0;
   bool tropo_model = true;
@@ -132,6 +139,10 @@ struct RtkOptions {
   int max_outage_epochs = 5;       // an ambiguity unobserved this many epochs is removed
   double outlier_sigma = 5.0;      // phase innovation beyond this many sigmas: ambiguity reset (0 off)
   double hold_sigma_cycles = 0.0316;
+  // fix validation beyond the ratio test (ambiguity_resolution.hpp: PartialAr, FixValidator)
+  double min_success_rate = 0.95;  // bootstrapped success rate of the subset fixed (0: off)
+  int confirm_epochs = 5;          // a new set of few ambiguities is reported after this many repeats
+  int confirm_max_ambiguities = 6; // ... "few": at most this many (more: reported at once)
   double max_age_s = 30.0;         // (applied by the caller that matches the base epochs)
 };
 
@@ -139,6 +150,7 @@ struct RtkOptions {
 struct RtkEpoch {
   RtkStatus status = RtkStatus::kNone;
   double ratio = 0.0;
+  double success_rate = 0.0;  // bootstrapped success rate of the ambiguities fixed (of all, when float)
   int n_fix = 0;       // ambiguities fixed (double differences)
   int n_dd = 0;        // double-differenced phase rows used
   int n_sat = 0;       // common satellites above the mask
@@ -323,8 +335,10 @@ class RtkEngine {
     P_.setZero(kMaxStates, kMaxStates);
     amb_of_.fill(-1);
     for (auto& a : amb_) a = AmbSlot{};
+    validator_.reset();
     initialized_ = false;
     t_prev_ = NAN;
+    code_scale_ = 1.0;
     rover_slip_.reset();
     base_slip_.reset();
   }
@@ -425,6 +439,7 @@ class RtkEngine {
       P_.setZero(kMaxStates, kMaxStates);
       amb_of_.fill(-1);
       for (auto& a : amb_) a = AmbSlot{};
+      validator_.reset();
       x_.segment<3>(RtkLayout::kPos) = r0;
       P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos) = Mat3::Identity() * opt_.pos_init_sigma_m * opt_.pos_init_sigma_m;
       if (kin)
@@ -435,6 +450,7 @@ class RtkEngine {
     }
     // time update
     const double dt = std::isfinite(t_prev_) ? t - t_prev_ : 0.0;
+    dt_epoch_ = dt;
     if (dt > 0.0) predict(dt, kin);
     t_prev_ = t;
     // elevations at the current rover estimate and the ambiguity bookkeeping
@@ -464,6 +480,7 @@ class RtkEngine {
       }
       return out;
     }
+    update_code_scale(nf);
     for (int k = 0; k < kMaxAmbStates; ++k)
       if (amb_[k].used) ++amb_[k].lock;
     out.r_float_e = x_.segment<3>(RtkLayout::kPos);
@@ -471,7 +488,11 @@ class RtkEngine {
     out.v_e = kin ? Vec3(x_.segment<3>(RtkLayout::kVel)) : Vec3::Zero();
     out.P_r = P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos);
     out.status = RtkStatus::kFloat;
-    if (opt_.ar_mode != ArMode::kOff) resolve(out, kin);
+    if (opt_.ar_mode != ArMode::kOff) {
+      validator_.begin_epoch();
+      resolve(out, kin);
+      validator_.end_epoch();
+    }
     return out;
   }
 
@@ -545,6 +566,7 @@ class RtkEngine {
     const int s = RtkLayout::kAmb + k;
     if (amb_[k].sat >= 0) amb_of_[amb_[k].sat * kMaxFreq + amb_[k].freq] = -1;
     amb_[k] = AmbSlot{};
+    validator_.invalidate(k);
     x_(s) = 0.0;
     P_.row(s).setZero();
     P_.col(s).setZero();
@@ -570,6 +592,7 @@ class RtkEngine {
     P_(s, s) = opt_.amb_init_sigma_cycles * opt_.amb_init_sigma_cycles;
     amb_[k].lock = 0;
     amb_[k].outage = 0;
+    validator_.invalidate(k);
   }
 
   void manage_ambiguities(int nf, RtkEpoch& out) {
@@ -667,7 +690,8 @@ class RtkEngine {
           }
           if (ref < 0) continue;
           const int m0 = m;
-          const double var_ref = var_sd_[ref] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio : 1.0);
+          const double var_ref =
+              var_sd_[ref] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(ref, f) : 1.0);
           for (int c = 0; c < n_common_; ++c) {
             if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * RtkRow::kCols) != sys) continue;
             if (!valid(c, f, code) || m >= kMaxRows) continue;
@@ -691,7 +715,8 @@ class RtkEngine {
             row_c_[m] = c;
             row_ref_[m] = ref;
             row_f_[m] = f;
-            const double var_j = var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio : 1.0);
+            const double var_j =
+                var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(c, f) : 1.0);
             R_(m, m) = var_j + var_bl;
             for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
             R_(m, m) += var_ref + var_bl;
@@ -701,6 +726,49 @@ class RtkEngine {
       }
     }
     return m;
+  }
+
+  // Time-correlated code errors.  A first-order Gauss-Markov error of variance sigma^2 and correlation
+  // rho = exp(-dt / tau) between epochs: the generalised least-squares information of N such samples on
+  // a constant is [2 + (N - 2)(1 - rho)] / ((1 + rho) sigma^2) (inverse of the AR(1) covariance,
+  // A. Gelb (ed.), Applied Optimal Estimation, 1974, sec. 3.8), i.e. 1 / sigma^2 for the first sample
+  // and (1 - rho) / (1 + rho) / sigma^2 for each further one.  The filter treats code as white, so the
+  // code of a satellite whose ambiguity was already tracked (lock > 0) enters with its variance scaled
+  // by (1 + rho) / (1 - rho): the float ambiguities (and the success rate and ratio test built on their
+  // covariance) then accumulate what correlated multipath really gives, not sqrt(N) of it.  The first
+  // epoch of an ambiguity (and every epoch of instantaneous AR) keeps the white variance.
+  //
+  // The factor also holds code_scale_, the adaptive variance factor of the code (update_code_scale).
+  double code_var_factor(int c, int f) const {
+    if (!(opt_.code_corr_time_s > 0.0) || !(dt_epoch_ > 0.0)) return code_scale_;
+    const int k = amb_of_[key(rover_ + common_r_[c] * RtkRow::kCols) * kMaxFreq + f];
+    if (k < 0 || amb_[k].lock == 0) return code_scale_;
+    const double rho = std::exp(-dt_epoch_ / opt_.code_corr_time_s);
+    return code_scale_ * (1.0 + rho) / std::max(1.0 - rho, 1e-6);
+  }
+
+  // Adaptive variance factor of the code rows from their post-fit residuals (residual-based adaptive
+  // estimation, A. H. Mohamed, K. P. Schwarz, "Adaptive Kalman filtering for INS/GPS", J. Geodesy 73
+  // (1999) 193-203, eq. (28) in its scalar form).  After the phase update the position is known far
+  // better than the code, so the code double differences rebuilt at the updated state, y_i, have
+  // E[y_i^2] ~ k R_i with R_i the configured (white, single-epoch) variance of the row: the factor k
+  // moves towards what the epoch's mean of nu_i = y_i^2 / (k R_i) says, log k <- log k + g log(mean nu)
+  // (each nu_i capped at 25: one outlier moves it little), kept in [1, 100].  A receiver noisier than
+  // configured gets a larger code variance (so the float ambiguities, the success rate and the ratio
+  // test are not over-confident); never a smaller one.
+  void update_code_scale(int nf) {
+    if (!(opt_.code_scale_gain > 0.0)) return;
+    const int m = build_rows(nf, 1);
+    if (m <= 0) return;
+    const double r2 = opt_.code_phase_ratio * opt_.code_phase_ratio;
+    double sum = 0.0;
+    for (int i = 0; i < m; ++i) {
+      const double var = code_scale_ * r2 * (var_sd_[row_c_[i]] + var_sd_[row_ref_[i]]);
+      sum += std::min(y_(i) * y_(i) / var, 25.0);
+    }
+    const double mean = sum / m;
+    if (!(mean > 0.0) || !std::isfinite(mean)) return;
+    code_scale_ = std::clamp(code_scale_ * std::pow(mean, opt_.code_scale_gain), 1.0, 100.0);
   }
 
   double lam(int rover_row, int f) const {
@@ -853,8 +921,13 @@ class RtkEngine {
     const bool kv = kin;
     ArSettings st;
     st.ratio_threshold = opt_.ratio_threshold;
-    st.min_fix = opt_.min_fix_ambiguities;
+    // subsets below min_fix_ambiguities only pass as every candidate of the epoch (FixValidator rule 1)
+    st.min_fix = std::max(std::min(opt_.min_fix_ambiguities, n), 1);
     st.max_drops = opt_.max_partial_drops;
+    st.min_success_rate = opt_.min_success_rate;
+    const FixRules rules{opt_.min_fix_ambiguities, opt_.confirm_epochs, opt_.confirm_max_ambiguities};
+    const auto slot_j = [&](int p) { return dd_j_[order_[p]]; };
+    const auto slot_i = [&](int p) { return dd_i_[order_[p]]; };
     const bool ok = ar_.resolve(
         n,
         [&](int p) {
@@ -865,9 +938,10 @@ class RtkEngine {
           const int tj = RtkLayout::kAmb + dd_j_[order_[q]], ti = RtkLayout::kAmb + dd_i_[order_[q]];
           return P_(sj, tj) - P_(sj, ti) - P_(si, tj) + P_(si, ti);
         },
-        st);
+        st, [&](int n_fix) { return validator_(n_fix, n, slot_j, slot_i, ar_.a_fix(), rules); });
     out.ratio = ar_.ratio();
-    if (!ok) return;
+    out.success_rate = ar_.success_rate();
+    if (!ok) return;  // no set passed, or a new small set waits for its repeats (FixValidator rule 2)
     const int nuse = ar_.n_used();
     // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
     Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, kMaxAmbiguities> Qba(6, nuse);
@@ -936,6 +1010,10 @@ class RtkEngine {
   std::array<int, kMaxSatKeys * kMaxFreq> amb_row_{};
   std::array<double, kMaxSatKeys * kMaxFreq> sd_phase_{}, sd_code_{};
   int n_common_ = 0, n_used_sats_ = 0, n_phase_rows_ = 0;
+  double dt_epoch_ = 0.0;  // time since the previous epoch [s] (0 on the first)
+  double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
+  FixValidator<kMaxAmbStates> validator_;  // fix validation over epochs (ambiguity_resolution.hpp)
+
   const double* rover_ = nullptr;
   const double* base_ = nullptr;
   Vec3 r_base_ = Vec3::Zero();
