@@ -10,18 +10,18 @@ Hou & Niu 2008, "Analysis and modeling of inertial sensors using Allan
 variance", IEEE Trans. Instrum. Meas. 57(1), eqs. (11)-(18)): the Allan
 variance of a rate is the sum of
 
-=====  =========================  ===============================  =======  ======================
-term   noise                      sigma^2(tau)                     slope    SI unit (gyro / accel)
-=====  =========================  ===============================  =======  ======================
-Q      quantisation (angle /      3 Q^2 / tau^2                    -1       rad / (m/s)
+=====  =========================  =================================  =======  ======================
+term   noise                      sigma^2(tau)                       slope    SI unit (gyro / accel)
+=====  =========================  =================================  =======  ======================
+Q      quantisation (angle /      3 Q^2 / tau^2                      -1       rad / (m/s)
        velocity white noise)
-N      angle / velocity random    N^2 / tau                        -1/2     rad/sqrt(s) / (m/s)/sqrt(s)
+N      angle / velocity random    N^2 / tau                          -1/2     rad/sqrt(s) / (m/s)/sqrt(s)
        walk (rate white noise)
-B      bias instability (flicker  (2 ln 2 / pi) B^2 (= (0.664 B)^2)  0      rad/s / m/s^2
+B      bias instability (flicker  (2 ln 2 / pi) B^2 (= (0.664 B)^2)  0        rad/s / m/s^2
        rate noise)
-K      rate random walk           K^2 tau / 3                      +1/2     rad/s/sqrt(s) / m/s^2/sqrt(s)
-R      rate ramp (drift)          R^2 tau^2 / 2                    +1       rad/s^2 / m/s^3
-=====  =========================  ===============================  =======  ======================
+K      rate random walk           K^2 tau / 3                        +1/2     rad/s/sqrt(s) / m/s^2/sqrt(s)
+R      rate ramp (drift)          R^2 tau^2 / 2                      +1       rad/s^2 / m/s^3
+=====  =========================  =================================  =======  ======================
 
 (slopes of the Allan *deviation* on log-log axes).  The fit is the standard
 least-squares fit of sigma^2(tau) = sum_k C_k tau^k, k = -2..2 (IEEE Std 952
