@@ -19,6 +19,12 @@ Metrics, per engine and preset, pooled over the runs:
 
 * fix rate: fixed epochs / rover epochs (an epoch without a solution counts as not fixed);
 * wrong-fix rate: fixed epochs with a 3-D error above 5 cm / fixed epochs;
+* fixed epochs more than 20 cm off (a fixed position that far off holds a wrong integer set; one
+  between 5 and 20 cm may also be the right integers in a poor geometry);
+* float consistency: rms(e / sigma) over the float epochs and the three axes of the engine's own
+  ``.pos`` frame (its standard deviations sdn/sde/sdu or sdx/sdy/sdz; 1 for a consistent filter,
+  larger for an overconfident one: its success rate and ratio test then trust a float solution
+  that is not there);
 * correct-fix rate: fixed epochs within 5 cm / rover epochs;
 * time to first fix: from the first rover epoch to the first fixed one [s],
   median and maximum over the runs that fix (and how many never do);
@@ -71,6 +77,8 @@ class EngineSolution:
     r_e: np.ndarray  #: (n, 3) antenna ECEF [m]
     status: np.ndarray  #: (n,) "fixed" | "float" | "single" (anything else: no solution)
     cpu_s: float = float("nan")  #: CPU time of the engine's process [s]
+    sd: np.ndarray | None = None  #: (n, 3) standard deviations of the .pos file's axes [m]
+    C_sd_e: np.ndarray | None = None  #: (n, 3, 3) rotation ECEF -> the axes of sd (ENU or identity)
 
 
 def solution_from_rtklib_pos(path) -> EngineSolution:
@@ -79,7 +87,7 @@ def solution_from_rtklib_pos(path) -> EngineSolution:
 
     from insnav import earth
 
-    t, xyz, q = [], [], []
+    t, xyz, q, sd = [], [], [], []
     is_llh = None
     for line in Path(path).read_text(encoding="ascii", errors="replace").splitlines():
         if line.startswith("%"):
@@ -96,11 +104,20 @@ def solution_from_rtklib_pos(path) -> EngineSolution:
         t.append(gps_seconds_from_calendar(y, mo, d, int(hh), int(mi), float(ss)))
         xyz.append([float(x) for x in p[2:5]])
         q.append(int(p[5]))
+        sd.append([float(x) for x in p[7:10]] if len(p) >= 10 else [math.nan] * 3)
     a = np.asarray(xyz, float).reshape(-1, 3)
+    sd = np.asarray(sd, float).reshape(-1, 3)
+    C = np.broadcast_to(np.eye(3), (a.shape[0], 3, 3)).copy()
     if is_llh:
-        a = earth.geodetic_to_ecef(np.radians(a[:, 0]), np.radians(a[:, 1]), a[:, 2])
+        lat, lon = np.radians(a[:, 0]), np.radians(a[:, 1])
+        a = earth.geodetic_to_ecef(lat, lon, a[:, 2])
+        sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+        z = np.zeros_like(sl)
+        # rows: north, east, up (the order of sdn, sde, sdu)
+        C = np.stack([np.stack([-sl * co, -sl * so, cl], -1), np.stack([-so, co, z], -1),
+                      np.stack([cl * co, cl * so, sl], -1)], 1)
     names = {1: "fixed", 2: "float", 5: "single", 4: "dgps"}
-    return EngineSolution(np.asarray(t), a, np.array([names.get(x, "other") for x in q]))
+    return EngineSolution(np.asarray(t), a, np.array([names.get(x, "other") for x in q]), sd=sd, C_sd_e=C)
 
 
 def rtklib_options(setting, armode) -> list:
@@ -136,15 +153,16 @@ def rtklib_instantaneous(files, setting, workdir):
     return _rtklib(files, setting, workdir, "instantaneous")
 
 
-def _insnav(files, setting, workdir, ar_mode):
+def _insnav(files, setting, workdir, ar_mode, extra=(), tag=""):
     """insnav ``--filter rtk`` as a process (reading included) with the options RTKLIB gets:
-    kinematic, L1 (E1), the preset's systems and mask, ratio 3, base position from its header."""
-    toml = workdir / f"insnav_{ar_mode}.toml"
+    kinematic, L1 (E1), the preset's systems and mask, ratio 3, base position from its header
+    (``extra``: further ``[rtk]`` lines)."""
+    toml = workdir / f"insnav_{ar_mode}{tag}.toml"
     toml.write_text("\n".join([
         'filter = "rtk"', "", "[rtk]", 'mode = "kinematic"', f'ar_mode = "{ar_mode}"',
         f'systems = "{"".join(setting["systems"])}"', "frequencies = 1",
-        f"elevation_mask_deg = {setting['elevation_mask_deg']:g}", f"ratio_threshold = {RATIO:g}"]) + "\n")
-    pos = workdir / f"insnav_{ar_mode}.pos"
+        f"elevation_mask_deg = {setting['elevation_mask_deg']:g}", f"ratio_threshold = {RATIO:g}", *extra]) + "\n")
+    pos = workdir / f"insnav_{ar_mode}{tag}.pos"
     t0 = os.times()
     subprocess.run([sys.executable, "-m", "insnav", "run", "--filter", "rtk", "--format", "rinex",
                     "--obs", str(files["rover"]), "--base", str(files["base"]), "--nav", str(files["nav"]),
@@ -166,9 +184,25 @@ def insnav_instantaneous(files, setting, workdir):
     return _insnav(files, setting, workdir, "instantaneous")
 
 
+#: the float-model terms of the consistent-float engine: the simulator's multipath correlation time
+#: (multipath_tau_s of both presets), the adaptive code variance factor and an ambiguity random
+#: walk that bounds what correlated phase multipath lets the filter learn (RtkOptions)
+CONSISTENT_FLOAT = ("code_correlation_time_s = 20.0", "adaptive_code_gain = 0.1", "amb_psd_cycles2ps = 1e-4")
+
+
+def insnav_consistent_float(files, setting, workdir):
+    """insnav ``--filter rtk``, continuous, with the float-model terms of :data:`CONSISTENT_FLOAT`:
+    a float filter whose covariance matches its errors (float rms(e / sigma) near 1), so the success
+    rate and the ratio test judge the information the observations really hold."""
+    return _insnav(files, setting, workdir, "continuous", CONSISTENT_FLOAT, "_consistent")
+
+
 #: engine name -> function(files {"rover", "base", "nav"}, setting, workdir) -> EngineSolution
 ENGINES = {"insnav continuous": insnav_continuous, "insnav instantaneous": insnav_instantaneous,
+           "insnav continuous (consistent float)": insnav_consistent_float,
            "RTKLIB continuous": rtklib_continuous, "RTKLIB instantaneous": rtklib_instantaneous}
+#: a fixed epoch this far off holds a wrong integer set [m]
+WRONG_SET_M = 0.20
 
 
 def score(sol: EngineSolution, t_truth, r_truth) -> dict:
@@ -179,10 +213,17 @@ def score(sol: EngineSolution, t_truth, r_truth) -> dict:
     err = np.full(t_truth.size, np.nan)
     status[i[ok]] = sol.status[ok]
     err[i[ok]] = np.linalg.norm(sol.r_e[ok] - r_truth[i[ok]], axis=1)
+    # float epochs: e / sigma on the axes of the engine's .pos file
+    z2 = np.zeros(0)
+    if sol.sd is not None:
+        fl = ok & (sol.status == "float")
+        e_ax = np.einsum("nij,nj->ni", sol.C_sd_e[fl], sol.r_e[fl] - r_truth[i[fl]])
+        z = e_ax / sol.sd[fl]
+        z2 = (z[np.isfinite(z)]) ** 2
     fixed = status == "fixed"
     first = np.flatnonzero(fixed)
-    return dict(n=t_truth.size, status=status, err=err, n_fixed=int(fixed.sum()),
-                n_wrong=int((fixed & (err > WRONG_FIX_M)).sum()),
+    return dict(n=t_truth.size, status=status, err=err, n_fixed=int(fixed.sum()), z2_float=z2,
+                n_wrong=int((fixed & (err > WRONG_FIX_M)).sum()), n_wrong_set=int((fixed & (err > WRONG_SET_M)).sum()),
                 ttff_s=float(t_truth[first[0]] - t_truth[0]) if first.size else math.nan, cpu_s=sol.cpu_s)
 
 
@@ -247,7 +288,10 @@ def summarise(runs: list) -> dict:
         e = err[(st == s) & np.isfinite(err)]
         by[s] = (e.size, float(np.sqrt(np.mean(e ** 2))) if e.size else math.nan,
                  float(np.percentile(e, 95)) if e.size else math.nan)
+    z2 = np.concatenate([r["z2_float"] for r in runs])
     return dict(n=n, fix_rate=n_fixed / n if n else math.nan, n_fixed=n_fixed, n_wrong=n_wrong,
+                n_wrong_set=sum(r["n_wrong_set"] for r in runs),
+                float_z_rms=float(np.sqrt(np.mean(z2))) if z2.size else math.nan,
                 wrong_rate=n_wrong / n_fixed if n_fixed else math.nan,
                 runs_wrong=sum(r["n_wrong"] > 0 for r in runs),
                 ttff_median=float(np.nanmedian(ttff)) if np.isfinite(ttff).any() else math.nan,
@@ -282,13 +326,16 @@ def report(results, settings, n_runs, wall_s, command=COMMAND) -> str:
                   f"{st['slips']} cycle slips on all signals, {st['slips_flagged']} of them flagged by LLI "
                   "(plus a new ambiguity at every re-acquisition, flagged).", "",
                   "| engine | fix rate | wrong fixes / fixed | correct fixes / epochs | runs with a wrong fix "
+                  f"| fixed > {WRONG_SET_M * 100:.0f} cm | float rms(e / sigma) "
                   "| TTFF median [s] | TTFF max [s] | runs never fixed | CPU per run [s] |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         sums = {e: summarise(r) for e, r in by_engine.items()}
         for e, m in sums.items():
             lines.append(f"| {e} | {m['fix_rate'] * 100:.1f} % ({m['n_fixed']} / {m['n']}) | "
                          f"{_f(m['wrong_rate'] * 100 if m['n_fixed'] else math.nan, '.2f')} % ({m['n_wrong']}) | "
-                         f"{(m['n_fixed'] - m['n_wrong']) / m['n'] * 100:.1f} % | {m['runs_wrong']} / {n_runs} | {_f(m['ttff_median'], '.0f')} | {_f(m['ttff_max'], '.0f')} | "
+                         f"{(m['n_fixed'] - m['n_wrong']) / m['n'] * 100:.1f} % | {m['runs_wrong']} / {n_runs} | "
+                         f"{m['n_wrong_set']} | {_f(m['float_z_rms'], '.1f')} | "
+                         f"{_f(m['ttff_median'], '.0f')} | {_f(m['ttff_max'], '.0f')} | "
                          f"{m['never']} | {_f(m['cpu_s'], '.2f')} |")
         a, b = sums.get("insnav continuous"), sums.get("RTKLIB continuous")
         if a and b:
@@ -300,6 +347,13 @@ def report(results, settings, n_runs, wall_s, command=COMMAND) -> str:
                       f"({b['fix_rate'] * 100:.1f} %): {a['fix_rate'] * 100:.1f} %, {'met' if ok_f else 'not met'}; "
                       f"correct fixes {(a['n_fixed'] - a['n_wrong']) / a['n'] * 100:.1f} % of the epochs against "
                       f"RTKLIB's {(b['n_fixed'] - b['n_wrong']) / b['n'] * 100:.1f} %."]
+            c = sums.get("insnav continuous (consistent float)")
+            if c:
+                lines += ["", f"Float consistency: insnav continuous's float rms(e / sigma) is {_f(a['float_z_rms'], '.1f')}, "
+                          f"RTKLIB continuous's {_f(b['float_z_rms'], '.1f')}; with the float-model terms "
+                          f"`{'`, `'.join(CONSISTENT_FLOAT)}` it is {_f(c['float_z_rms'], '.1f')}, and that engine "
+                          f"fixes {c['fix_rate'] * 100:.1f} % of the epochs "
+                          f"({_f(c['wrong_rate'] * 100 if c['n_fixed'] else math.nan, '.2f')} % of them wrong)."]
         lines += ["", "3-D error by status (epochs, RMS, 95th percentile):", "",
                   "| engine | " + " | ".join(STATUS_NAMES) + " |", "|---|" + "---|" * len(STATUS_NAMES)]
         for e, m in sums.items():
