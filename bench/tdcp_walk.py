@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -101,7 +102,8 @@ def drift_in(t, e, t_lo, t_hi):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=ROOT.parent / "shared/data")
+    ap.add_argument("--data", type=Path,
+                    default=Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data")))
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args(argv)
     wall0 = time.perf_counter()
