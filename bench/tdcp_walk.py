@@ -494,8 +494,8 @@ def discussion(per, per_b, ov, vr, ac1) -> str:
         "time tagging).",
         f"  The TDCP residuals point the same way: their lag-1 autocorrelation per satellite (less the epoch median) is "
         + ", ".join(f"{x:+.2f}" for x in ac1) + " where white phase noise, which the rows' R assumes, gives -0.50: "
-        "what the residuals hold is mostly slower than the phase noise, i.e. the INS prediction over the epoch, and "
-        "the filter takes it as independent information every epoch.",
+        "what the residuals hold is mostly an error slower than the phase noise (likely the INS prediction over the "
+        "epoch), which the filter takes as independent information every epoch.",
     ]
     return "\n".join(lines)
 
