@@ -40,8 +40,13 @@ __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins",
 #: ambiguities, partial AR by float variance, confirmation of small sets over 5 epochs) except its
 #: bootstrapped success-rate test: after a 30 s outage the INS-constrained L1-only float of the Spirent
 #: drive has a success rate of 0.85 at the first epoch and fixes the true integers, and the test delays
-#: that fix to the second epoch without removing a wrong fix (docs/results/rtk_ins.md).
-RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.0)
+#: that fix to the second epoch (docs/results/rtk_ins.md).  Code errors time-correlated over 10 s
+#: (``code_correlation_time_s``: multipath of a moving antenna; the first epoch of an ambiguity keeps the
+#: white variance): the INS holds the position between epochs, so a white-code model averages correlated
+#: multipath as if it were white noise and its float ambiguities are over-confident (on the urban
+#: simulator preset the float position's NEES was 10-40x its dimension and most fixes wrong; with the
+#: correlated model the wrong fixes fall, docs/results/rtk_ins.md).
+RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.0, code_correlation_time_s=10.0)
 #: engine ([rtk_engine]) defaults applied under the caller's (empty: the C++ RtkInsConfig defaults)
 ENGINE_DEFAULTS: dict = {}
 

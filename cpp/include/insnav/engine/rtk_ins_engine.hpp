@@ -145,6 +145,8 @@ class RtkInsEngine {
     base_slip_.reset();
     for (auto& p : prev_) p = PrevSd{};
     t_last_ = NAN;
+    dt_epoch_ = 0.0;
+    code_scale_ = 1.0;
   }
 
   /// n IMU samples; E records over the rover rows and base rows (RtkRow layout).
@@ -194,6 +196,7 @@ class RtkInsEngine {
     for (int k = 0; k < gnss::kNumSlipKinds; ++k) out.slips[k] = sl[k];
     // ambiguity covariance to this epoch: P_xN <- Phi P_xN, P_NN += q dt
     const double dt = std::isfinite(t_last_) ? t - t_last_ : 0.0;
+    dt_epoch_ = dt;
     Pia_ = core_.filter.cycle_transition() * Pia_;
     if (dt > 0.0)
       for (int k = 0; k < kMaxAmb; ++k)
@@ -273,6 +276,10 @@ class RtkInsEngine {
       break;
     }
     out.n_dd = mp;
+    if (mp > 0) {  // adaptive code variance from the code residuals at the updated state (gnss/rtk.hpp)
+      single_differences(nf);
+      update_code_scale(nf);
+    }
     RtkAntenna ant;
     ant.set(core_.state(), cfg_.lever_arm_b);
     out.r_float_e = ant.r_e;
@@ -514,7 +521,7 @@ class RtkInsEngine {
     const gnss::RtkOptions& o = cfg_.rtk;
     const double bl = (ant_.r_e - r_base_).norm();
     const double var_bl = std::pow(o.iono_sigma_per_10km_m * bl / 1e4, 2);
-    const double cf = code ? o.code_phase_ratio * o.code_phase_ratio : 1.0;
+    const double cf = code ? o.code_phase_ratio * o.code_phase_ratio : 1.0;  // x code_var_factor per satellite
     int m = 0;
     R_.setZero(kMaxRowsE, kMaxRowsE);
     y_.setZero(kMaxRowsE);
@@ -527,7 +534,7 @@ class RtkInsEngine {
         }
         if (ref < 0) continue;
         const int m0 = m;
-        const double var_ref = var_sd_[ref] * cf;
+        const double var_ref = var_sd_[ref] * cf * (code ? code_var_factor(ref, f) : 1.0);
         for (int c = 0; c < n_common_; ++c) {
           if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols) != sys) continue;
           if (!valid(c, f, code) || m >= kMaxRowsE) continue;
@@ -544,13 +551,52 @@ class RtkInsEngine {
           row_c_[m] = c;
           row_ref_[m] = ref;
           row_f_[m] = f;
-          R_(m, m) = var_sd_[c] * cf + var_bl + var_ref + var_bl;
+          R_(m, m) = var_sd_[c] * cf * (code ? code_var_factor(c, f) : 1.0) + var_bl + var_ref + var_bl;
           for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
           ++m;
         }
       }
     }
     return m;
+  }
+
+  // Time-correlated code errors and the adaptive code variance factor, as gnss/rtk.hpp's
+  // code_var_factor / update_code_scale (the [rtk] keys code_correlation_time_s, adaptive_code_gain):
+  // a first-order Gauss-Markov code error of correlation rho = exp(-dt / tau) between epochs gives
+  // the information (1 - rho) / (1 + rho) / sigma^2 per further epoch on a constant (A. Gelb (ed.),
+  // Applied Optimal Estimation, 1974, sec. 3.8), so the code of a satellite whose ambiguity is
+  // already tracked (lock > 0) enters with its variance x (1 + rho) / (1 - rho); the first epoch of
+  // an ambiguity keeps the white variance (an INS-aided re-fix after an outage is not slowed).
+  // With an INS holding the position between epochs the white-code float solution would average
+  // correlated multipath as if it were white, and its ambiguities, success rate and ratio test
+  // would be over-confident.
+  double code_var_factor(int c, int f) const {
+    const gnss::RtkOptions& o = cfg_.rtk;
+    if (!(o.code_corr_time_s > 0.0) || !(dt_epoch_ > 0.0)) return code_scale_;
+    const int k = amb_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f];
+    if (k < 0 || amb_[k].lock == 0) return code_scale_;
+    const double rho = std::exp(-dt_epoch_ / o.code_corr_time_s);
+    return code_scale_ * (1.0 + rho) / std::max(1.0 - rho, 1e-6);
+  }
+
+  // Adaptive variance factor of the code rows (Mohamed & Schwarz 1999, J. Geodesy 73, eq. (28),
+  // scalar form; gnss/rtk.hpp's update_code_scale): the code DD residuals at the state after the
+  // phase update, nu_i = y_i^2 / (k R_i) (capped at 25), move log k by gain x log(mean nu), k in
+  // [1, 100]: never smaller than configured.
+  void update_code_scale(int nf) {
+    const gnss::RtkOptions& o = cfg_.rtk;
+    if (!(o.code_scale_gain > 0.0)) return;
+    const int m = build_rows(nf, true);
+    if (m <= 0) return;
+    const double r2 = o.code_phase_ratio * o.code_phase_ratio;
+    double sum = 0.0;
+    for (int i = 0; i < m; ++i) {
+      const double var = code_scale_ * r2 * (var_sd_[row_c_[i]] + var_sd_[row_ref_[i]]);
+      sum += std::min(y_(i) * y_(i) / var, 25.0);
+    }
+    const double mean = sum / m;
+    if (!(mean > 0.0) || !std::isfinite(mean)) return;
+    code_scale_ = std::clamp(code_scale_ * std::pow(mean, o.code_scale_gain), 1.0, 100.0);
   }
 
   // Compact joint state: the 15 INS errors and the tracked ambiguities.
@@ -737,6 +783,8 @@ class RtkInsEngine {
   std::array<AmbSlot, kMaxAmb> amb_{};
   std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> amb_of_{};
   double t_last_ = NAN;
+  double dt_epoch_ = 0.0;    // time since the previous rover epoch [s] (0 on the first)
+  double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
   gnss::SlipDetector rover_slip_, base_slip_;
   std::array<std::uint8_t, gnss::kMaxSatKeys * gnss::kMaxFreq> flags_r_{}, flags_b_{};
   std::array<PrevSd, gnss::kMaxSatKeys * gnss::kMaxFreq> prev_{};
