@@ -1,11 +1,15 @@
 // _core.solve_spp_batch: single point positioning with RAIM FDE over all epochs
 // (insnav/gnss/spp_solver.hpp) with the GIL released; python/insnav/gnss/spp.py
 // allocates the output arrays (NaN / 0 / no-solution) and wraps them.
+// _core.select_best_gdop / best_gdop_keep: the best-GDOP satellite subset of one
+// epoch / of every epoch (insnav/gnss/gdop_selection.hpp).
+#include <algorithm>
 #include <cstdint>
 #include <string>
 
 #include "common.hpp"
 #include "insnav/gnss/broadcast_orbit.hpp"
+#include "insnav/gnss/gdop_selection.hpp"
 #include "insnav/gnss/spp_solver.hpp"
 
 namespace insnav::py_bind {
@@ -165,6 +169,52 @@ py::tuple transmit_states_glonass(const DArray& glo, const IArray& idx, const DA
   return out.result();
 }
 
+py::tuple select_best_gdop(const DArray& u, int n_select, std::int64_t max_combinations) {
+  if (u.ndim() != 2 || u.shape(1) != 3) throw py::value_error("select_best_gdop: u must be (k, 3)");
+  const py::ssize_t k = u.shape(0);
+  if (n_select < 4) throw py::value_error("select_best_gdop: n_select must be >= 4 (3 position + clock)");
+  if (k > gnss::kGdopMaxSats)
+    throw py::value_error("select_best_gdop: more than " + std::to_string(gnss::kGdopMaxSats) + " satellites");
+  int sel[gnss::kGdopMaxSats];
+  double g = 0.0;
+  int m = 0;
+  {
+    py::gil_scoped_release release;
+    m = gnss::select_best_gdop(u.data(), static_cast<int>(k), n_select, max_combinations, sel, &g);
+  }
+  py::array_t<std::int64_t> idx(m);
+  std::int64_t* p = idx.mutable_data();
+  for (int j = 0; j < m; ++j) p[j] = sel[j];
+  return py::make_tuple(idx, g);
+}
+
+py::array_t<bool> best_gdop_keep(const DArray& u, const IArray& epoch_start, int n_select,
+                                 std::int64_t max_combinations) {
+  if (u.ndim() != 2 || u.shape(1) != 3) throw py::value_error("best_gdop_keep: u must be (M, 3)");
+  if (epoch_start.ndim() != 1 || epoch_start.shape(0) < 1)
+    throw py::value_error("best_gdop_keep: epoch_start must be 1-D with E+1 entries");
+  if (n_select < 4) throw py::value_error("best_gdop_keep: n_select must be >= 4 (3 position + clock)");
+  const py::ssize_t M = u.shape(0), E = epoch_start.shape(0) - 1;
+  const std::int64_t* es = epoch_start.data();
+  if (es[0] != 0 || es[E] != M) throw py::value_error("best_gdop_keep: epoch_start must run from 0 to M");
+  for (py::ssize_t e = 0; e < E; ++e)
+    if (es[e + 1] < es[e]) throw py::value_error("best_gdop_keep: epoch_start must not decrease");
+  py::array_t<bool> keep(M);
+  bool* kp = keep.mutable_data();
+  std::fill(kp, kp + M, true);
+  Status s;
+  {
+    py::gil_scoped_release release;
+    static_assert(sizeof(bool) == sizeof(std::uint8_t), "bool is one byte");
+    s = gnss::select_best_gdop_batch(u.data(), es, E, n_select, max_combinations,
+                                     reinterpret_cast<std::uint8_t*>(kp));
+  }
+  if (s != Status::kOk)
+    throw py::value_error("best_gdop_keep: an epoch has more than " + std::to_string(gnss::kGdopMaxSats) +
+                          " satellites");
+  return keep;
+}
+
 }  // namespace
 
 void bind_spp(py::module_& m) {
@@ -178,6 +228,14 @@ void bind_spp(py::module_& m) {
         py::arg("max_iter"), "GLONASS satellites at transmission (insnav/gnss/broadcast_orbit.hpp), as "
         "transmit_states_kepler.");
   m.attr("SPP_MAX_ROWS") = gnss::kSppMaxRows;
+  m.attr("GDOP_MAX_SATS") = gnss::kGdopMaxSats;
+  m.def("select_best_gdop", &select_best_gdop, py::arg("u"), py::arg("n_select"), py::arg("max_combinations"),
+        "Best-GDOP subset of n_select of the (k, 3) line-of-sight unit vectors u (insnav/gnss/gdop_selection.hpp): "
+        "(sorted indices, GDOP).");
+  m.def("best_gdop_keep", &best_gdop_keep, py::arg("u"), py::arg("epoch_start"), py::arg("n_select"),
+        py::arg("max_combinations"),
+        "(M,) bool: the rows of the best-GDOP subset of n_select satellites of every epoch with more "
+        "(insnav/gnss/gdop_selection.hpp); GIL released.");
   m.def("solve_spp_batch", &solve_spp_batch, py::arg("epoch_start"), py::arg("sats"), py::arg("sigma_pr_m"),
         py::arg("sigma_prr_mps"), py::arg("system"), py::arg("r0_e"), py::arg("options"), py::arg("out"),
         "Single point positioning with RAIM FDE over every epoch (insnav/gnss/spp_solver.hpp), filling the "

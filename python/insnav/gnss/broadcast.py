@@ -44,6 +44,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import _core
+from .._median import unique
 from .ephemeris import (C_LIGHT, OMEGA_E_DOT, kepler_table, rotate_earth, sat_clock, select_ephemeris,
                         transmit_states)
 from .galbds import (
@@ -179,9 +180,9 @@ def _check_code(s, code):
 
 def _check_codes(sys_a, code_a):
     """ValueError for a code of G/R/E/C without a group delay model (other systems: no record, invalid)."""
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         if s in "GREC" and len(s) == 1:
-            for c in np.unique(code_a[sys_a == s]):
+            for c in unique(code_a[sys_a == s]):
                 _check_code(s, c)
 
 
@@ -197,7 +198,7 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
     t = np.broadcast_to(np.asarray(t_gps_s, float), sys_a.shape)
     code_a = _codes_per_row(sys_a, codes)
     idx = np.full(sys_a.shape, -1, np.int64)
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         m = sys_a == s
         if s == "G":
             if len(nav.eph):
@@ -299,7 +300,7 @@ def sat_states_multi(nav, t_gps_s, sat_ids=None, *, system=None, prn=None, codes
     out["eph_idx"] = idx
     out["t_tx_gps_s"] = t.copy()
     out["tau_s"] = np.zeros(k)
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         rows = np.flatnonzero((sys_a == s) & (idx >= 0))
         if rows.size == 0:
             continue
@@ -353,7 +354,7 @@ def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None,
     out = _empty_states(k, sys_a, prn_a)
     idx = select_multi(nav, sys_a, prn_a, t_rx, code_a)
     out["eph_idx"] = idx
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         rows = np.flatnonzero((sys_a == s) & (idx >= 0))
         if rows.size == 0:
             continue

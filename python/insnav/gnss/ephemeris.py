@@ -45,6 +45,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import _core
+from .._median import unique
 from .gpstime import wrap_week_seconds
 
 #: WGS-84 value of GM used by GPS, IS-GPS-200 Table 20-IV [m^3/s^2].
@@ -336,7 +337,7 @@ def select_ephemeris(eph: Ephemerides, prn, t_gps_s, *, healthy_only=True, check
     prn_a, t_a = np.broadcast_arrays(np.atleast_1d(np.asarray(prn, dtype=np.int64)),
                                      np.atleast_1d(np.asarray(t_gps_s, dtype=float)))
     out = np.full(prn_a.shape, -1, dtype=np.int64)
-    for p in np.unique(prn_a):
+    for p in unique(prn_a):
         rows = np.nonzero(eph.prn == p)[0]
         if healthy_only:
             rows = rows[eph.health[rows] == 0]
