@@ -285,8 +285,21 @@ def select_glonass(eph: GlonassEphemerides, prn, t_gps_s, *, healthy_only=True, 
 
     Ties go to the record that appears last (as :func:`insnav.gnss.ephemeris.select_ephemeris`).
     """
+    from .. import _core
+
     prn_a, t_a = np.broadcast_arrays(np.atleast_1d(np.asarray(prn, np.int64)),
                                      np.atleast_1d(np.asarray(t_gps_s, float)))
+    if hasattr(_core, "select_nearest_record"):  # insnav/gnss/ephemeris_selection.hpp: the loop below in C++
+        usable = np.asarray(eph.health) == 0 if healthy_only else np.ones(len(eph), bool)
+        idx = _core.select_nearest_record(np.asarray(eph.prn, np.int64), usable.astype(np.uint8),
+                                          np.asarray(eph.tb, float), np.full(len(eph), float(max_age_s)),
+                                          prn_a.reshape(-1), t_a.reshape(-1))
+        return idx.reshape(prn_a.shape)
+    return _select_glonass_numpy(eph, prn_a, t_a, healthy_only, max_age_s)
+
+
+def _select_glonass_numpy(eph, prn_a, t_a, healthy_only, max_age_s):
+    """The loop of :func:`select_glonass` in numpy (the reference of the compiled selection)."""
     out = np.full(prn_a.shape, -1, np.int64)
     for p in unique(prn_a):
         rows = np.flatnonzero(eph.prn == p)
