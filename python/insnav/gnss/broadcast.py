@@ -224,6 +224,14 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
                     sub_rows = np.flatnonzero(band_rec == b_rec)
                     if sub_rows.size == 0:
                         continue
+                    if hasattr(_core, "select_nearest_record"):  # the subset's selection, without building it
+                        e = nav.eph_e
+                        usable = (np.asarray(e.health) == 0) & (band_rec == b_rec)
+                        idx[r] = _core.select_nearest_record(
+                            np.asarray(e.prn, np.int64), usable.astype(np.uint8), np.asarray(e.toe, float),
+                            0.5 * np.asarray(e.fit_s, float) + 1e-6, np.ascontiguousarray(prn_a[r], np.int64),
+                            np.ascontiguousarray(t[r], float))
+                        continue
                     j = select_ephemeris(nav.eph_e.subset(sub_rows), prn_a[r], t[r])
                     idx[r] = np.where(j >= 0, sub_rows[np.maximum(j, 0)], -1)
     return idx

@@ -674,9 +674,9 @@ def _sat_names(system, prn) -> list[str]:
 
     if len(prn) == 0:
         return []
-    prn_txt = np.char.zfill(np.asarray(prn).astype(np.int64).astype(str), 2)
-    key = unique(np.char.add(np.asarray(system, dtype="<U1"), prn_txt))
-    return sorted(set(key.tolist()))
+    sys_code = np.asarray(system, dtype="<U1").view(np.int32).astype(np.int64)  # the letter's code point
+    key = unique(sys_code * 1_000_000 + np.asarray(prn, dtype=np.int64))  # one row per satellite
+    return sorted(set(f"{chr(int(k // 1_000_000))}{int(k % 1_000_000):02d}" for k in key.tolist()))
 
 
 def _bad_table(source, key, value):
