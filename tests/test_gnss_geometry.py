@@ -193,3 +193,21 @@ def test_klobuchar_reference_and_range():
     lo = klobuchar_delay(7200.0, 0.8, 0.0, np.deg2rad(5), 0.0, alpha, beta)
     hi = klobuchar_delay(7200.0, 0.8, 0.0, np.pi / 2, 0.0, alpha, beta)
     assert lo / hi == pytest.approx((1 + 16 * (0.53 - 5 / 180) ** 3) / (1 + 16 * 0.03**3), rel=1e-12)
+
+
+def test_unique_without_numpy_ma_equals_np_unique():
+    """insnav._median.unique (no numpy.ma import; short strings sorted as packed code points) returns what
+    np.unique returns: system letters, observation codes with blanks and shorter codes, integers."""
+    from insnav._median import unique
+
+    rng = np.random.default_rng(2)
+    cases = [("<U1", list("GRECJ")), ("<U3", ["C1C", "C2I", "C1X", "C5Q", "", "C1", "C7I", "Z", "\u00e9a"]),
+             ("<U2", ["G1", "", "R", "E5"])]
+    for dt, alphabet in cases:
+        for n in (0, 1, 5, 65, 5000):
+            a = np.array(rng.choice(alphabet, n), dtype=dt)
+            u, r = unique(a), np.unique(a)
+            assert u.dtype == r.dtype
+            np.testing.assert_array_equal(u, r)
+    a = rng.integers(-5, 40, 1000)
+    np.testing.assert_array_equal(unique(a), np.unique(a))
