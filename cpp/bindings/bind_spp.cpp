@@ -221,8 +221,9 @@ py::array_t<bool> best_gdop_keep(const DArray& u, const IArray& epoch_start, int
   return keep;
 }
 
-py::array_t<std::int64_t> select_nearest_record(const IArray& rec_prn, const py::array_t<std::uint8_t, py::array::c_style |
-                                                py::array::forcecast>& rec_ok, const DArray& rec_t,
+using U8Array = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
+
+py::array_t<std::int64_t> select_nearest_record(const IArray& rec_prn, const U8Array& rec_ok, const DArray& rec_t,
                                                 const DArray& rec_window, const IArray& row_prn, const DArray& row_t) {
   const py::ssize_t nr = rec_prn.ndim() == 1 ? rec_prn.shape(0) : -1;
   if (nr < 0 || rec_ok.ndim() != 1 || rec_ok.shape(0) != nr || rec_t.ndim() != 1 || rec_t.shape(0) != nr ||
