@@ -64,7 +64,9 @@ PARTICLE = (f"{_CPP}filter/particle_filter.hpp", f"{_CPP}filter/upf.hpp", f"{_CP
             f"{_CPP}filter/layout20.hpp", f"{_CPP}filter/random.hpp", f"{_PY}filters/particle.py")
 #: RINEX reading, broadcast orbits and the real-data tight inputs
 RINEX = (f"{_PY}gnss/rinex.py", f"{_PY}gnss/broadcast.py", f"{_PY}gnss/ephemeris.py", f"{_PY}gnss/corrections.py",
-         f"{_PY}gnss/tight_inputs.py", f"{_PY}io/rinex_dataset.py")
+         f"{_PY}gnss/tight_inputs.py", f"{_PY}io/rinex_dataset.py", f"{_PY}gnss/glonass.py", f"{_PY}gnss/geometry.py",
+         f"{_PY}_median.py", f"{_CPP}io/rinex_nav.hpp", f"{_CPP}gnss/ephemeris_selection.hpp",
+         f"{_CPP}gnss/gdop_selection.hpp")
 #: carrier-phase RTK: the C++ engine (double differences, float EKF, MLAMBDA) and its Python run
 RTK = (f"{_CPP}gnss/rtk.hpp", f"{_CPP}gnss/lambda.hpp", f"{_CPP}gnss/ambiguity_resolution.hpp",
        "cpp/bindings/bind_rtk.cpp", f"{_PY}gnss/rtk.py",

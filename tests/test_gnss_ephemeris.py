@@ -161,3 +161,44 @@ def test_constellation_nominal_any_time_no_data():
         st = nom.transmit_states(t + rng.uniform(0, 86400 * 30), r)
         el, _ = elevation_azimuth(r, st.r_e)
         assert np.sum(el > np.deg2rad(10)) >= 4
+
+
+@pytest.mark.parametrize("parts, systems", [
+    (("smartloc_berlin_potsdamer_platz", "brdc1580.16n"), "G"),
+    (("smartloc_berlin_potsdamer_platz", "brdc1580.16g"), "R"),
+    (("euref_wettzell_wtzr_wtzz", "ESBC00DNK_R_20201770000_01D_MN.rnx"), "GREC"),
+])
+def test_compiled_record_selection_equals_numpy_reference(parts, systems):
+    """insnav/gnss/ephemeris_selection.hpp against the numpy loops of select_ephemeris / select_glonass: the
+    same record for every (satellite, time), over the day and beyond its ends, at ties (times half-way between
+    two references) and with each option."""
+    from insnav.gnss import ephemeris as E
+    from insnav.gnss import glonass as G
+
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"shared data not available: {p}")
+    nav = read_rinex_nav(p, systems=systems)
+    rng = np.random.default_rng(5)
+    for tab, t_ref, kind in ((nav.eph, "toe", "kepler"), (nav.eph_e, "toe", "kepler"), (nav.eph_c, "toe", "kepler"),
+                             (nav.eph_r, "tb", "glonass")):
+        if tab is None or len(tab) == 0:
+            continue
+        ref = np.asarray(getattr(tab, t_ref), float)
+        prn = np.concatenate([rng.choice(np.append(np.unique(tab.prn), 99), 3000), tab.prn[:-1]])
+        mid = 0.5 * (ref[:-1] + ref[1:])  # half-way between records: ties where the satellite is the same
+        t = np.concatenate([rng.uniform(ref.min() - 4 * 3600, ref.max() + 4 * 3600, 3000), mid])
+        if kind == "kepler":
+            for kw in (dict(), dict(healthy_only=False), dict(check_fit=False), dict(max_age_s=7200)):
+                got = E.select_ephemeris(tab, prn, t, **kw)
+                want = E._select_ephemeris_numpy(tab, prn, t, kw.get("healthy_only", True), kw.get("check_fit", True),
+                                                 kw.get("max_age_s"))
+                np.testing.assert_array_equal(got, want)
+                assert (got >= 0).sum() > 1000
+        else:
+            for kw in (dict(), dict(healthy_only=False, max_age_s=900.0)):
+                got = G.select_glonass(tab, prn, t, **kw)
+                want = G._select_glonass_numpy(tab, prn, t, kw.get("healthy_only", True),
+                                               kw.get("max_age_s", G.MAX_AGE_GLO_S))
+                np.testing.assert_array_equal(got, want)
+                assert (got >= 0).sum() > 1000

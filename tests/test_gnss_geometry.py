@@ -8,7 +8,7 @@ from insnav import earth
 from insnav.gnss.corrections import klobuchar_delay, saastamoinen_delay
 from insnav.gnss.ephemeris import C_LIGHT
 from insnav.gnss.geometry import (
-    dop, dop_from_los_n, elevation_azimuth, elevation_mask, los_unit_n, select_best_gdop,
+    _select_best_gdop_numpy, dop, dop_from_los_n, elevation_azimuth, elevation_mask, los_unit_n, select_best_gdop,
 )
 
 
@@ -87,6 +87,67 @@ def test_best_gdop_equals_brute_force():
         assert bg - 1e-9 <= gg <= 1.5 * bg
 
 
+@pytest.mark.parametrize("k, n, max_comb", [(8, 5, 5000), (12, 4, 5000), (20, 16, 5000), (22, 16, 5000),
+                                            (30, 16, 5000), (10, 6, 0), (6, 4, 5000)])
+def test_best_gdop_compiled_equals_numpy_reference(k, n, max_comb):
+    """insnav/gnss/gdop_selection.hpp against the numpy reference: the same subset, the same GDOP to rounding,
+    in the exhaustive search (chosen or left-out sums) and in the greedy elimination."""
+    from insnav import _core
+
+    rng = np.random.default_rng(11 + k + n)
+    for _ in range(10):
+        u = _u_n(np.arcsin(rng.uniform(0.05, 1.0, k)), rng.uniform(0, 2 * np.pi, k))
+        idx_c, g_c = _core.select_best_gdop(u, n, max_comb)
+        idx_p, g_p = _select_best_gdop_numpy(u, n, max_comb)
+        np.testing.assert_array_equal(idx_c, idx_p)
+        assert g_c == pytest.approx(g_p, rel=1e-12)
+    # a degenerate subset (four on one cone) is never chosen; all singular: the reference's first subset
+    u = _u_n([0.5] * 5 + [1.2], [0, 1, 2, 3, 4, 0.5])
+    np.testing.assert_array_equal(_core.select_best_gdop(u, 5, 5000)[0], _select_best_gdop_numpy(u, 5)[0])
+    cone = _u_n([0.5] * 6, [0, 1, 2, 3, 4, 5])
+    for mc in (5000, 0):
+        idx_c, g_c = _core.select_best_gdop(cone, 4, mc)
+        idx_p, g_p = _select_best_gdop_numpy(cone, 4, mc)
+        np.testing.assert_array_equal(idx_c, idx_p)
+        assert np.isinf(g_c) and np.isinf(g_p)
+
+
+def test_limit_sats_batch_equals_epoch_loop():
+    """tight_inputs.limit_sats in one compiled call keeps the rows of the per-epoch numpy selection."""
+    from insnav import _core
+    from insnav.gnss import tight_inputs as ti
+
+    rng = np.random.default_rng(3)
+    r_rx = earth.geodetic_to_ecef(0.8, 0.2, 100.0)
+    C = earth.C_en(0.8, 0.2)
+    t, prn, sats, el = [], [], [], []
+    for e in range(40):
+        k = int(rng.integers(3, 24))
+        el_e = np.arcsin(rng.uniform(0.1, 1.0, k))
+        sats_e = r_rx + 2.2e7 * (C @ _u_n(el_e, rng.uniform(0, 2 * np.pi, k)).T).T
+        row = np.zeros((k, 12))
+        row[:, 2:5] = sats_e
+        t += [float(e)] * k
+        prn += list(range(1, k + 1))
+        sats.append(row)
+        el.append(np.degrees(el_e))
+    inp = ti.TightInputs.from_rows(np.array(t), np.array(prn), np.vstack(sats), np.concatenate(el),
+                                   info=dict(approx_r_e=r_rx))
+    fast = ti.limit_sats(inp, 16)
+    saved = ti._core
+    ti._core = object()  # no compiled selection: the per-epoch loop through geometry.select_best_gdop
+    import insnav.gnss.geometry as geo
+    saved_geo, geo._core = geo._core, object()
+    try:
+        ref = ti.limit_sats(inp, 16)
+    finally:
+        ti._core, geo._core = saved, saved_geo
+    assert fast.n_sats().max() == 16 and len(ref.prn) == len(fast.prn) < len(inp.prn)
+    np.testing.assert_array_equal(fast.prn, ref.prn)
+    np.testing.assert_array_equal(fast.sats, ref.sats)
+    assert _core.GDOP_MAX_SATS >= 24
+
+
 def test_saastamoinen_zenith_and_mapping():
     z0 = saastamoinen_delay(np.deg2rad(45.0), 0.0, np.pi / 2)
     assert 2.2 < z0 < 2.5  # 2.30 m hydrostatic + 0.12 m wet
@@ -132,3 +193,21 @@ def test_klobuchar_reference_and_range():
     lo = klobuchar_delay(7200.0, 0.8, 0.0, np.deg2rad(5), 0.0, alpha, beta)
     hi = klobuchar_delay(7200.0, 0.8, 0.0, np.pi / 2, 0.0, alpha, beta)
     assert lo / hi == pytest.approx((1 + 16 * (0.53 - 5 / 180) ** 3) / (1 + 16 * 0.03**3), rel=1e-12)
+
+
+def test_unique_without_numpy_ma_equals_np_unique():
+    """insnav._median.unique (no numpy.ma import; short strings sorted as packed code points) returns what
+    np.unique returns: system letters, observation codes with blanks and shorter codes, integers."""
+    from insnav._median import unique
+
+    rng = np.random.default_rng(2)
+    cases = [("<U1", list("GRECJ")), ("<U3", ["C1C", "C2I", "C1X", "C5Q", "", "C1", "C7I", "Z", "\u00e9a"]),
+             ("<U2", ["G1", "", "R", "E5"])]
+    for dt, alphabet in cases:
+        for n in (0, 1, 5, 65, 5000):
+            a = np.array(rng.choice(alphabet, n), dtype=dt)
+            u, r = unique(a), np.unique(a)
+            assert u.dtype == r.dtype
+            np.testing.assert_array_equal(u, r)
+    a = rng.integers(-5, 40, 1000)
+    np.testing.assert_array_equal(unique(a), np.unique(a))

@@ -81,6 +81,88 @@ def test_nav_malformed_record_names_line(tmp_path):
         read_rinex_nav(write(tmp_path, "badep.21n", NAV2_HEADER + "xx" + NAV2_RECORD[2:]))
 
 
+def assert_same_nav(a, b):
+    """Every table of two NavData the same to the last bit (NaN where NaN)."""
+    import dataclasses
+
+    for name in ("eph", "eph_r", "eph_e", "eph_c"):
+        x, y = getattr(a, name), getattr(b, name)
+        for f in dataclasses.fields(x):
+            u, v = getattr(x, f.name), getattr(y, f.name)
+            if isinstance(u, np.ndarray):
+                assert u.dtype == v.dtype, (name, f.name)
+                np.testing.assert_array_equal(u, v, err_msg=f"{name}.{f.name}")
+            else:
+                assert u == v, (name, f.name)
+    for name in ("version", "n_skipped", "skipped_by_system", "leap_seconds"):
+        assert getattr(a, name, None) == getattr(b, name, None), name
+    for name in ("ion_alpha", "ion_beta"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def _nav_python(path, systems):
+    """read_rinex_nav through its record loop alone (the compiled scanner switched off)."""
+    from insnav.gnss import rinex
+
+    saved = rinex._nav_records_core
+    rinex._nav_records_core = lambda *a: None
+    try:
+        return read_rinex_nav(path, systems=systems)
+    finally:
+        rinex._nav_records_core = saved
+
+
+@pytest.mark.parametrize("parts", [
+    ("smartloc_berlin_potsdamer_platz", "brdc1580.16n"),  # RINEX 2 GPS
+    ("smartloc_berlin_potsdamer_platz", "brdc1580.16g"),  # RINEX 2 GLONASS
+    ("smartloc_berlin_potsdamer_platz", "BRDC00WRD_U_20161580000_01D_MN.rnx"),
+    ("euref_wettzell_wtzr_wtzz", "ESBC00DNK_R_20201770000_01D_MN.rnx"),
+    ("rtklibexplorer_walk_0827", "rinex_derived", "gnss_1730.nav"),
+    ("matrtklib_static_septentrio", "base.nav"),
+    ("instinct_spirent_rtk_dynamic_SIMULATED", "RINEX_GN_Spirent.23N"),
+])
+def test_nav_real_files_compiled_equal_python_reference(parts):
+    """The compiled record scanner (insnav/io/rinex_nav.hpp) gives the record loop's tables to the last bit."""
+    from insnav import _core
+
+    p = need(*parts)
+    for systems in ("G", "GREC"):
+        a = read_rinex_nav(p, systems=systems)
+        assert_same_nav(a, _nav_python(p, systems))
+        assert len(a.eph) + len(a.eph_r) + len(a.eph_e) + len(a.eph_c) > 0
+    body_from = next(i for i, ln in enumerate(p.read_text().splitlines()) if "END OF HEADER" in ln) + 1
+    body = "\n".join(p.read_text().splitlines()[body_from:])
+    assert _core.scan_rinex_nav_body(body, a.version >= 3, "16g" in p.name, "GREC") is not None  # no fallback
+
+
+def test_nav_compiled_scanner_leaves_odd_records_to_the_python_loop(tmp_path):
+    """Blank fields, a blank line, lower-case and D exponents: read by the scanner, the same tables; a bad
+    number, a truncated record, sqrt(A) <= 0: the scanner gives up and the loop names the line."""
+    from insnav import _core
+
+    lines = NAV2_RECORD.splitlines(keepends=True)
+    odd = lines[:]
+    odd[3] = odd[3].replace("0.167638063431D-07", "                  ")  # blank field
+    odd[4] = odd[4].replace("0.983895632254D+00", "0.983895632254d+00").replace("0.158375000000D+03",
+                                                                                "0.158375000000E+03")
+    text = NAV2_HEADER + "".join(odd) + "\n" + NAV2_RECORD.replace(" 6 21", "12 21", 1)
+    p = write(tmp_path, "odd.21n", text)
+    assert _core.scan_rinex_nav_body("\n".join(text.splitlines()[4:]), False, False, "G") is not None
+    a = read_rinex_nav(p)
+    assert_same_nav(a, _nav_python(p, "G"))
+    assert a.eph.prn.tolist() == [6, 12]
+    assert a.eph.cic[0] == 0.0 and a.eph.i0[0] == 0.983895632254 and a.eph.crc[0] == 158.375
+    bad = lines[:]
+    bad[2] = bad[2].replace("0.122226774692D-04", "0.12222677469?D-04")
+    body = "\n".join((NAV2_HEADER + "".join(bad)).splitlines()[4:])
+    assert _core.scan_rinex_nav_body(body, False, False, "G") is None
+    with pytest.raises(RinexError, match=r"line 7: bad number '0\.12222677469\?D-04'"):
+        read_rinex_nav(write(tmp_path, "bad.21n", NAV2_HEADER + "".join(bad)))
+    neg = NAV2_RECORD.replace("0.515375527000D+04", "-.515375527000D+04")
+    with pytest.raises(RinexError, match=r"line \d+: bad record: G06 record starting on line 5 has sqrt\(A\) <= 0"):
+        read_rinex_nav(write(tmp_path, "neg.21n", NAV2_HEADER + neg))
+
+
 def _obs2(types, sats_obs, t=(21, 4, 28, 18, 0, 0.0), flag=0, clk="  .000123456"):
     """Build a RINEX 2.11 observation file (one epoch + an event epoch)."""
     h = ["     2.11           OBSERVATION DATA    M (MIXED)           RINEX VERSION / TYPE"]

@@ -1,12 +1,22 @@
 // _core.solve_spp_batch: single point positioning with RAIM FDE over all epochs
 // (insnav/gnss/spp_solver.hpp) with the GIL released; python/insnav/gnss/spp.py
 // allocates the output arrays (NaN / 0 / no-solution) and wraps them.
+// _core.select_best_gdop / best_gdop_keep: the best-GDOP satellite subset of one
+// epoch / of every epoch (insnav/gnss/gdop_selection.hpp).
+// _core.select_nearest_record: the broadcast record of each (satellite, time)
+// (insnav/gnss/ephemeris_selection.hpp).
+// _core.scan_rinex_nav_body: the fields of a navigation file's records
+// (insnav/io/rinex_nav.hpp; python/insnav/gnss/rinex.py builds the tables).
+#include <algorithm>
 #include <cstdint>
 #include <string>
 
 #include "common.hpp"
 #include "insnav/gnss/broadcast_orbit.hpp"
+#include "insnav/gnss/ephemeris_selection.hpp"
+#include "insnav/gnss/gdop_selection.hpp"
 #include "insnav/gnss/spp_solver.hpp"
+#include "insnav/io/rinex_nav.hpp"
 
 namespace insnav::py_bind {
 
@@ -165,6 +175,105 @@ py::tuple transmit_states_glonass(const DArray& glo, const IArray& idx, const DA
   return out.result();
 }
 
+py::tuple select_best_gdop(const DArray& u, int n_select, std::int64_t max_combinations) {
+  if (u.ndim() != 2 || u.shape(1) != 3) throw py::value_error("select_best_gdop: u must be (k, 3)");
+  const py::ssize_t k = u.shape(0);
+  if (n_select < 4) throw py::value_error("select_best_gdop: n_select must be >= 4 (3 position + clock)");
+  if (k > gnss::kGdopMaxSats)
+    throw py::value_error("select_best_gdop: more than " + std::to_string(gnss::kGdopMaxSats) + " satellites");
+  int sel[gnss::kGdopMaxSats];
+  double g = 0.0;
+  int m = 0;
+  {
+    py::gil_scoped_release release;
+    m = gnss::select_best_gdop(u.data(), static_cast<int>(k), n_select, max_combinations, sel, &g);
+  }
+  py::array_t<std::int64_t> idx(m);
+  std::int64_t* p = idx.mutable_data();
+  for (int j = 0; j < m; ++j) p[j] = sel[j];
+  return py::make_tuple(idx, g);
+}
+
+py::array_t<bool> best_gdop_keep(const DArray& u, const IArray& epoch_start, int n_select,
+                                 std::int64_t max_combinations) {
+  if (u.ndim() != 2 || u.shape(1) != 3) throw py::value_error("best_gdop_keep: u must be (M, 3)");
+  if (epoch_start.ndim() != 1 || epoch_start.shape(0) < 1)
+    throw py::value_error("best_gdop_keep: epoch_start must be 1-D with E+1 entries");
+  if (n_select < 4) throw py::value_error("best_gdop_keep: n_select must be >= 4 (3 position + clock)");
+  const py::ssize_t M = u.shape(0), E = epoch_start.shape(0) - 1;
+  const std::int64_t* es = epoch_start.data();
+  if (es[0] != 0 || es[E] != M) throw py::value_error("best_gdop_keep: epoch_start must run from 0 to M");
+  for (py::ssize_t e = 0; e < E; ++e)
+    if (es[e + 1] < es[e]) throw py::value_error("best_gdop_keep: epoch_start must not decrease");
+  py::array_t<bool> keep(M);
+  bool* kp = keep.mutable_data();
+  std::fill(kp, kp + M, true);
+  Status s;
+  {
+    py::gil_scoped_release release;
+    static_assert(sizeof(bool) == sizeof(std::uint8_t), "bool is one byte");
+    s = gnss::select_best_gdop_batch(u.data(), es, E, n_select, max_combinations,
+                                     reinterpret_cast<std::uint8_t*>(kp));
+  }
+  if (s != Status::kOk)
+    throw py::value_error("best_gdop_keep: an epoch has more than " + std::to_string(gnss::kGdopMaxSats) +
+                          " satellites");
+  return keep;
+}
+
+using U8Array = py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast>;
+
+py::array_t<std::int64_t> select_nearest_record(const IArray& rec_prn, const U8Array& rec_ok, const DArray& rec_t,
+                                                const DArray& rec_window, const IArray& row_prn, const DArray& row_t) {
+  const py::ssize_t nr = rec_prn.ndim() == 1 ? rec_prn.shape(0) : -1;
+  if (nr < 0 || rec_ok.ndim() != 1 || rec_ok.shape(0) != nr || rec_t.ndim() != 1 || rec_t.shape(0) != nr ||
+      rec_window.ndim() != 1 || rec_window.shape(0) != nr)
+    throw py::value_error("select_nearest_record: rec_prn, rec_ok, rec_t, rec_window must be (n_rec,)");
+  const py::ssize_t k = row_prn.ndim() == 1 ? row_prn.shape(0) : -1;
+  if (k < 0 || row_t.ndim() != 1 || row_t.shape(0) != k)
+    throw py::value_error("select_nearest_record: row_prn, row_t must be (k,)");
+  py::array_t<std::int64_t> idx(k);
+  Status s;
+  {
+    py::gil_scoped_release release;
+    s = gnss::select_nearest_record(rec_prn.data(), rec_ok.data(), rec_t.data(), rec_window.data(), nr,
+                                    row_prn.data(), row_t.data(), k, idx.mutable_data());
+  }
+  if (s != Status::kOk) throw py::value_error("select_nearest_record: satellite numbers span more than 100000");
+  return idx;
+}
+
+py::object scan_rinex_nav_body(const std::string& body, bool rinex3, bool glonass2, const std::string& want) {
+  io::NavScan scan;
+  {
+    py::gil_scoped_release release;
+    io::scan_rinex_nav_body(body, rinex3, glonass2, want, scan);
+  }
+  if (scan.irregular) return py::none();
+  const py::ssize_t n = static_cast<py::ssize_t>(scan.prn.size());
+  py::array_t<std::uint8_t> sys(n);
+  py::array_t<std::int64_t> prn(n), ymdhm({n, py::ssize_t(5)});
+  py::array_t<double> sec(n), clk({n, py::ssize_t(3)}), orbit({n, py::ssize_t(io::kNavOrbitValues)});
+  std::copy(scan.sys.begin(), scan.sys.end(), sys.mutable_data());
+  std::copy(scan.prn.begin(), scan.prn.end(), prn.mutable_data());
+  std::copy(scan.ymdhm.begin(), scan.ymdhm.end(), ymdhm.mutable_data());
+  std::copy(scan.sec.begin(), scan.sec.end(), sec.mutable_data());
+  std::copy(scan.clk.begin(), scan.clk.end(), clk.mutable_data());
+  std::copy(scan.orbit.begin(), scan.orbit.end(), orbit.mutable_data());
+  py::dict d;
+  d["sys"] = sys;
+  d["prn"] = prn;
+  d["ymdhm"] = ymdhm;
+  d["sec"] = sec;
+  d["clk"] = clk;
+  d["orbit"] = orbit;
+  py::list counts;
+  for (std::int64_t c : scan.skipped_count) counts.append(c);
+  d["skipped_sys"] = py::str(scan.skipped_sys);
+  d["skipped_count"] = counts;
+  return d;
+}
+
 }  // namespace
 
 void bind_spp(py::module_& m) {
@@ -178,6 +287,23 @@ void bind_spp(py::module_& m) {
         py::arg("max_iter"), "GLONASS satellites at transmission (insnav/gnss/broadcast_orbit.hpp), as "
         "transmit_states_kepler.");
   m.attr("SPP_MAX_ROWS") = gnss::kSppMaxRows;
+  m.attr("GDOP_MAX_SATS") = gnss::kGdopMaxSats;
+  m.def("select_nearest_record", &select_nearest_record, py::arg("rec_prn"), py::arg("rec_ok"), py::arg("rec_t"),
+        py::arg("rec_window"), py::arg("row_prn"), py::arg("row_t"),
+        "(k,) int64: for each row the usable record (rec_ok) of its satellite whose time is nearest to the row's "
+        "within the record's window, the last of equals; -1 if none (insnav/gnss/ephemeris_selection.hpp).");
+  m.def("scan_rinex_nav_body", &scan_rinex_nav_body, py::arg("body"), py::arg("rinex3"), py::arg("glonass2"),
+        py::arg("want"),
+        "Fields of the records of a RINEX navigation body (lines joined with newlines; insnav/io/rinex_nav.hpp): "
+        "dict of sys, prn, ymdhm, sec, clk, orbit, skipped_sys, skipped_count; None where the Python reader "
+        "must read the file (an error to report, or a form it handles itself).");
+  m.def("select_best_gdop", &select_best_gdop, py::arg("u"), py::arg("n_select"), py::arg("max_combinations"),
+        "Best-GDOP subset of n_select of the (k, 3) line-of-sight unit vectors u (insnav/gnss/gdop_selection.hpp): "
+        "(sorted indices, GDOP).");
+  m.def("best_gdop_keep", &best_gdop_keep, py::arg("u"), py::arg("epoch_start"), py::arg("n_select"),
+        py::arg("max_combinations"),
+        "(M,) bool: the rows of the best-GDOP subset of n_select satellites of every epoch with more "
+        "(insnav/gnss/gdop_selection.hpp); GIL released.");
   m.def("solve_spp_batch", &solve_spp_batch, py::arg("epoch_start"), py::arg("sats"), py::arg("sigma_pr_m"),
         py::arg("sigma_prr_mps"), py::arg("system"), py::arg("r0_e"), py::arg("options"), py::arg("out"),
         "Single point positioning with RAIM FDE over every epoch (insnav/gnss/spp_solver.hpp), filling the "

@@ -1,13 +1,15 @@
-"""``np.median`` of a 1-D array without importing :mod:`numpy.ma`.
+"""``np.median`` and ``np.unique`` of a 1-D array without importing :mod:`numpy.ma`.
 
-``np.median`` checks its result for NaN through ``np.ma.isMaskedArray``,
-which imports ``numpy.ma`` (~10 ms) the first time; the command line's run
-path needs a handful of medians and nothing else from it."""
+``np.median`` checks its result for NaN through ``np.ma.isMaskedArray``, and
+``np.unique`` (without ``return_index``/``return_inverse``) asks
+``np.ma.is_masked``: either imports ``numpy.ma`` (~30 ms of CPU with the
+signatures it parses) the first time; the command line's run path needs a
+handful of medians and unique values and nothing else from it."""
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["median", "group_median"]
+__all__ = ["median", "group_median", "unique"]
 
 
 def median(x) -> float:
@@ -55,3 +57,34 @@ def group_median(x, group, n_groups: int):
     med[np.isnan(xs[s0 + c - 1])] = np.nan
     out[present] = med
     return out, present
+
+
+def unique(x) -> np.ndarray:
+    """The sorted distinct values of ``x`` (flattened), as ``np.unique(x)`` returns them (no NaN handling:
+    for integer and string arrays)."""
+    a = np.asarray(x).reshape(-1)
+    n_chars = a.dtype.itemsize // 4 if a.dtype.str.startswith("<U") else 0
+    if 1 <= n_chars <= 3 and a.size > 64:
+        # short strings (system letters, observation codes): sorted as integers, the code points packed
+        # 21 bits each (Unicode < 2^21; a shorter string's NUL padding sorts first, as numpy sorts strings)
+        codes = np.ascontiguousarray(a).view(np.uint32).reshape(-1, n_chars).astype(np.int64)
+        key = codes[:, 0]
+        for j in range(1, n_chars):
+            key = (key << 21) | codes[:, j]
+        key = _sorted_distinct(key)
+        out = np.empty((key.size, n_chars), np.uint32)
+        for j in range(n_chars - 1, -1, -1):
+            out[:, j] = key & 0x1FFFFF
+            key = key >> 21
+        return out.reshape(-1).view(a.dtype)
+    return _sorted_distinct(a)
+
+
+def _sorted_distinct(a: np.ndarray) -> np.ndarray:
+    a = np.sort(a)
+    if a.size < 2:
+        return a
+    keep = np.empty(a.size, bool)
+    keep[0] = True
+    np.not_equal(a[1:], a[:-1], out=keep[1:])
+    return a[keep]

@@ -44,6 +44,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import _core
+from .._median import unique
 from .ephemeris import (C_LIGHT, OMEGA_E_DOT, kepler_table, rotate_earth, sat_clock, select_ephemeris,
                         transmit_states)
 from .galbds import (
@@ -179,9 +180,9 @@ def _check_code(s, code):
 
 def _check_codes(sys_a, code_a):
     """ValueError for a code of G/R/E/C without a group delay model (other systems: no record, invalid)."""
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         if s in "GREC" and len(s) == 1:
-            for c in np.unique(code_a[sys_a == s]):
+            for c in unique(code_a[sys_a == s]):
                 _check_code(s, c)
 
 
@@ -197,7 +198,7 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
     t = np.broadcast_to(np.asarray(t_gps_s, float), sys_a.shape)
     code_a = _codes_per_row(sys_a, codes)
     idx = np.full(sys_a.shape, -1, np.int64)
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         m = sys_a == s
         if s == "G":
             if len(nav.eph):
@@ -222,6 +223,14 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
                         break
                     sub_rows = np.flatnonzero(band_rec == b_rec)
                     if sub_rows.size == 0:
+                        continue
+                    if hasattr(_core, "select_nearest_record"):  # the subset's selection, without building it
+                        e = nav.eph_e
+                        usable = (np.asarray(e.health) == 0) & (band_rec == b_rec)
+                        idx[r] = _core.select_nearest_record(
+                            np.asarray(e.prn, np.int64), usable.astype(np.uint8), np.asarray(e.toe, float),
+                            0.5 * np.asarray(e.fit_s, float) + 1e-6, np.ascontiguousarray(prn_a[r], np.int64),
+                            np.ascontiguousarray(t[r], float))
                         continue
                     j = select_ephemeris(nav.eph_e.subset(sub_rows), prn_a[r], t[r])
                     idx[r] = np.where(j >= 0, sub_rows[np.maximum(j, 0)], -1)
@@ -299,7 +308,7 @@ def sat_states_multi(nav, t_gps_s, sat_ids=None, *, system=None, prn=None, codes
     out["eph_idx"] = idx
     out["t_tx_gps_s"] = t.copy()
     out["tau_s"] = np.zeros(k)
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         rows = np.flatnonzero((sys_a == s) & (idx >= 0))
         if rows.size == 0:
             continue
@@ -353,7 +362,7 @@ def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None,
     out = _empty_states(k, sys_a, prn_a)
     idx = select_multi(nav, sys_a, prn_a, t_rx, code_a)
     out["eph_idx"] = idx
-    for s in np.unique(sys_a):
+    for s in unique(sys_a):
         rows = np.flatnonzero((sys_a == s) & (idx >= 0))
         if rows.size == 0:
             continue

@@ -45,6 +45,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import _core
+from .._median import unique
 from .gpstime import wrap_week_seconds
 
 #: WGS-84 value of GM used by GPS, IS-GPS-200 Table 20-IV [m^3/s^2].
@@ -335,8 +336,24 @@ def select_ephemeris(eph: Ephemerides, prn, t_gps_s, *, healthy_only=True, check
     """
     prn_a, t_a = np.broadcast_arrays(np.atleast_1d(np.asarray(prn, dtype=np.int64)),
                                      np.atleast_1d(np.asarray(t_gps_s, dtype=float)))
+    if hasattr(_core, "select_nearest_record"):  # insnav/gnss/ephemeris_selection.hpp: the loop below in C++
+        if max_age_s is not None:
+            window = np.full(len(eph), float(max_age_s))
+        elif check_fit:
+            window = 0.5 * np.asarray(eph.fit_s, float) + 1e-6
+        else:
+            window = np.full(len(eph), np.inf)
+        usable = np.asarray(eph.health) == 0 if healthy_only else np.ones(len(eph), bool)
+        idx = _core.select_nearest_record(np.asarray(eph.prn, np.int64), usable.astype(np.uint8),
+                                          np.asarray(eph.toe, float), window, prn_a.reshape(-1), t_a.reshape(-1))
+        return idx.reshape(prn_a.shape)
+    return _select_ephemeris_numpy(eph, prn_a, t_a, healthy_only, check_fit, max_age_s)
+
+
+def _select_ephemeris_numpy(eph, prn_a, t_a, healthy_only, check_fit, max_age_s):
+    """The loop of :func:`select_ephemeris` in numpy (the reference of the compiled selection)."""
     out = np.full(prn_a.shape, -1, dtype=np.int64)
-    for p in np.unique(prn_a):
+    for p in unique(prn_a):
         rows = np.nonzero(eph.prn == p)[0]
         if healthy_only:
             rows = rows[eph.health[rows] == 0]

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .. import earth
+from .. import _core, earth
 
 __all__ = ["los_unit_e", "elevation_azimuth", "elevation_mask", "los_unit_n",
            "Dop", "dop", "dop_from_los_n", "select_best_gdop"]
@@ -163,7 +163,24 @@ def select_best_gdop(u_n, n_select: int, max_combinations: int = 5000):
         Sorted indices into ``u_n``.
     gdop : float
         GDOP of the chosen subset.
+
+    Notes
+    -----
+    Computed by the compiled code (``insnav/gnss/gdop_selection.hpp``) for up
+    to ``_core.GDOP_MAX_SATS`` satellites; :func:`_select_best_gdop_numpy` is
+    its reference (the same subsets; GDOP to rounding).
     """
+    u = np.ascontiguousarray(u_n, dtype=float)
+    if n_select < 4:
+        raise ValueError("n_select must be >= 4 (3 position + clock)")
+    if hasattr(_core, "select_best_gdop") and u.ndim == 2 and u.shape[0] <= _core.GDOP_MAX_SATS:
+        idx, g = _core.select_best_gdop(u, int(n_select), int(max_combinations))
+        return idx, float(g)
+    return _select_best_gdop_numpy(u, n_select, max_combinations)
+
+
+def _select_best_gdop_numpy(u_n, n_select: int, max_combinations: int = 5000):
+    """:func:`select_best_gdop` in numpy (the reference of the compiled code)."""
     u = np.asarray(u_n, dtype=float)
     k = u.shape[0]
     if n_select < 4:

@@ -44,6 +44,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from .._median import unique
+
 __all__ = ["GM_GLO", "A_E_GLO", "J2_GLO", "OMEGA_E_GLO", "GlonassEphemerides", "g1_frequency",
            "g1_wavelength", "glonass_derivatives", "glonass_integrate", "glonass_position_velocity",
            "glonass_clock", "select_glonass", "gps_utc_leap_seconds", "MAX_AGE_GLO_S"]
@@ -167,7 +169,7 @@ class GlonassEphemerides:
         """FDMA channel of each slot ``prn`` (from its latest record); -99 if the slot has no record."""
         prn = np.atleast_1d(np.asarray(prn, np.int64))
         out = np.full(prn.shape, -99, np.int64)
-        for p in np.unique(prn):
+        for p in unique(prn):
             rows = np.flatnonzero(self.prn == p)
             if rows.size:
                 out[prn == p] = self.freq_k[rows[np.argmax(self.tb[rows])]]
@@ -283,10 +285,23 @@ def select_glonass(eph: GlonassEphemerides, prn, t_gps_s, *, healthy_only=True, 
 
     Ties go to the record that appears last (as :func:`insnav.gnss.ephemeris.select_ephemeris`).
     """
+    from .. import _core
+
     prn_a, t_a = np.broadcast_arrays(np.atleast_1d(np.asarray(prn, np.int64)),
                                      np.atleast_1d(np.asarray(t_gps_s, float)))
+    if hasattr(_core, "select_nearest_record"):  # insnav/gnss/ephemeris_selection.hpp: the loop below in C++
+        usable = np.asarray(eph.health) == 0 if healthy_only else np.ones(len(eph), bool)
+        idx = _core.select_nearest_record(np.asarray(eph.prn, np.int64), usable.astype(np.uint8),
+                                          np.asarray(eph.tb, float), np.full(len(eph), float(max_age_s)),
+                                          prn_a.reshape(-1), t_a.reshape(-1))
+        return idx.reshape(prn_a.shape)
+    return _select_glonass_numpy(eph, prn_a, t_a, healthy_only, max_age_s)
+
+
+def _select_glonass_numpy(eph, prn_a, t_a, healthy_only, max_age_s):
+    """The loop of :func:`select_glonass` in numpy (the reference of the compiled selection)."""
     out = np.full(prn_a.shape, -1, np.int64)
-    for p in np.unique(prn_a):
+    for p in unique(prn_a):
         rows = np.flatnonzero(eph.prn == p)
         if healthy_only:
             rows = rows[eph.health[rows] == 0]

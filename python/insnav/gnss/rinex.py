@@ -275,6 +275,57 @@ def _parse_systems(systems) -> str:
     return s
 
 
+def _nav_records_core(src: _Lines, rinex3: bool, glo2: bool, want: str):
+    """The record tables of :func:`read_rinex_nav` from the body after the header through the compiled
+    scanner (``insnav/io/rinex_nav.hpp``): ``(rec, krec, grec, n_skipped, skipped)`` with the values the
+    record loop gives, or None when the scanner is absent or leaves the file to that loop (an error to
+    report, a record that fails a check, a form it does not take)."""
+    from .. import _core
+    from .galbds import BDT_GPST_OFFSET_S
+
+    if not hasattr(_core, "scan_rinex_nav_body"):
+        return None
+    d = _core.scan_rinex_nav_body("\n".join(src.lines[src.i:]), rinex3, glo2, want)
+    if d is None:
+        return None
+    sys_a = d["sys"]
+    ymdhm = d["ymdhm"]
+    t_cal = np.asarray(gps_seconds_from_calendar(ymdhm[:, 0], ymdhm[:, 1], ymdhm[:, 2], ymdhm[:, 3], ymdhm[:, 4],
+                                                 d["sec"]), dtype=float).reshape(-1)
+    clk = d["clk"]
+    clk0 = np.where(np.isnan(clk), 0.0, clk)
+    orbit = d["orbit"]
+    orbit0 = np.where(np.isnan(orbit), 0.0, orbit)
+    prn = d["prn"].astype(float)
+
+    def kepler(letter, toc_offset_s, keep_nan_fit):
+        m = sys_a == ord(letter)
+        r = {"prn": prn[m], "toc": t_cal[m] if toc_offset_s is None else t_cal[m] + toc_offset_s}
+        for j, name in enumerate(("af0", "af1", "af2")):
+            r[name] = clk0[m, j]
+        for j, name in enumerate(_NAV_ORDER):
+            r[name] = orbit[m, j] if (keep_nan_fit and name == "fit_h") else orbit0[m, j]
+        return r, bool(np.all(r["sqrt_a"] > 0.0))
+
+    rec, ok_g = kepler("G", None, True)
+    rec_e, ok_e = kepler("E", 0.0, False)
+    rec_c, ok_c = kepler("C", BDT_GPST_OFFSET_S, False)
+    m = sys_a == ord("R")
+    grec = {"prn": prn[m], "toc_utc": t_cal[m]}
+    for j, name in enumerate(("clock_bias", "gamma_n", "tk")):
+        grec[name] = clk0[m, j]
+    for j, name in enumerate(("x", "vx", "ax", "health", "y", "vy", "ay", "freq_k", "z", "vz", "az", "age")):
+        grec[name] = orbit0[m, j]
+    radius = np.sqrt(grec["x"] ** 2 + grec["y"] ** 2 + grec["z"] ** 2)
+    ok_r = bool(np.all((1.0e3 < radius) & (radius < 1.0e5))
+                and np.all((-7 <= grec["freq_k"]) & (grec["freq_k"] <= 13)))
+    if not (ok_g and ok_e and ok_c and ok_r):
+        return None  # the record loop reports the record
+    counts = [int(c) for c in d["skipped_count"]]
+    skipped = dict(zip(d["skipped_sys"], counts))
+    return rec, {"E": rec_e, "C": rec_c}, grec, sum(counts), skipped
+
+
 def read_rinex_nav(path, systems="G") -> NavData:
     """Read broadcast ephemerides (and Klobuchar parameters) from a RINEX nav file.
 
@@ -366,6 +417,10 @@ def read_rinex_nav(path, systems="G") -> NavData:
     rinex3 = version >= 3.0
     width0 = 23 if rinex3 else 22  # end of the epoch field on the first line
     cont_start = 4 if rinex3 else 3
+    fast = _nav_records_core(src, rinex3, glo2, want)
+    if fast is not None:  # the compiled scanner read every record: the loop below has nothing left to read
+        rec, krec, grec, n_skipped, skipped = fast
+        src.i = len(src.lines)
     while not src.eof():
         line = src.next()
         if not line.strip():

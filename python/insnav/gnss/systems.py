@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._median import unique
+
 __all__ = ["SYSTEMS", "SYSTEM_NAMES", "system_index", "sat_id"]
 
 #: systems insnav processes, in the order of their index (GPS first: the reference clock)
@@ -28,7 +30,7 @@ def system_index(system) -> np.ndarray:
     """
     codes = np.atleast_1d(np.asarray(system, dtype="<U1"))
     out = np.empty(codes.shape, np.int64)
-    for s in np.unique(codes):
+    for s in unique(codes):
         if s not in _INDEX:
             raise ValueError(f"unknown GNSS system {s!r} (known: {', '.join(SYSTEMS)})")
         out[codes == s] = _INDEX[s]

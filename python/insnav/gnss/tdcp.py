@@ -63,7 +63,11 @@ def phase_rows(inputs, obs, nav, t0_gps_s: float, *, sigma_phase_zenith_m: float
     lam = np.asarray(obs.wavelength_m(nav), float)
     lli = np.asarray(obs.lli1 if obs.lli1 is not None else np.zeros(L1.size), np.int64)
     sys_o = np.asarray(obs.system, "<U1")
-    sysi_o = np.array([_SYS_INDEX.get(s, 5) for s in sys_o], np.int64)
+    code_to_index = np.full(128, 5, np.int64)  # _SYS_INDEX by the letter's code point, 5 for any other
+    for letter, k in _SYS_INDEX.items():
+        code_to_index[ord(letter)] = k
+    codes = np.ascontiguousarray(sys_o).view(np.int32).astype(np.int64) if sys_o.size else np.zeros(0, np.int64)
+    sysi_o = np.where(codes < 128, code_to_index[np.minimum(codes, 127)], 5)
     ep_o = np.asarray(obs.epoch, np.int64)
     # half-cycle bit changed since the satellite's previous observation epoch -> slip
     key_sat = sysi_o * 1000 + np.asarray(obs.prn, np.int64)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import earth
+from .. import _core, earth
 
 __all__ = ["TightInputs", "MAX_SATS", "pseudorange_sigma", "limit_sats", "tight_inputs_from_raw",
            "tight_inputs_from_rinex"]
@@ -118,6 +118,12 @@ def limit_sats(inp: TightInputs, max_sats: int) -> TightInputs:
     counts = inp.n_sats()
     if max_sats <= 0 or counts.max(initial=0) <= max_sats:
         return inp
+    if max_sats >= 4 and hasattr(_core, "best_gdop_keep") and counts.max() <= _core.GDOP_MAX_SATS:
+        # every epoch in one compiled call (insnav/gnss/gdop_selection.hpp): the subsets of the loop below
+        r_rx = inp.info.get("approx_r_e")
+        d = inp.sats[:, 2:5] - np.asarray(r_rx if r_rx is not None else np.zeros(3), float)
+        u = d / np.linalg.norm(d, axis=1)[:, None]
+        return inp.select(_core.best_gdop_keep(u, np.asarray(inp.epoch_start, np.int64), int(max_sats), 5000))
     keep = np.ones(len(inp.prn), bool)
     for e in np.flatnonzero(counts > max_sats):
         a, b = inp.epoch_start[e], inp.epoch_start[e + 1]

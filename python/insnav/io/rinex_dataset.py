@@ -439,16 +439,26 @@ def doppler_consistent(t, r_e, v_e, *, window_s: float = DOPPLER_CHECK_WINDOW_S,
     tt, rr = t[ok], r_e[ok]
     lo = np.searchsorted(tt, t - window_s / 2.0)
     hi = np.searchsorted(tt, t + window_s / 2.0, side="right")
-    for k in np.flatnonzero(keep):
-        a, b = lo[k], hi[k]
-        if b - a < 4:
-            continue
-        dt = tt[a:b] - t[k]
-        A = np.column_stack([np.ones_like(dt), dt, dt * dt])  # constant acceleration: turns, speed changes
-        coef, _, rank, _ = np.linalg.lstsq(A, rr[a:b], rcond=None)
-        if rank < 3:
-            continue
-        keep[k] = np.linalg.norm(coef[1] - v_e[k]) <= max_diff_mps
+    ks = np.flatnonzero(keep)
+    n = hi[ks] - lo[ks]
+    ks, n = ks[n >= 4], n[n >= 4]
+    if ks.size == 0:
+        return keep
+    # every window at once: rows a..b-1 of each, padded with zero rows (which change neither the singular
+    # values nor the least-squares solution), solved as np.linalg.lstsq(A, r, rcond=None) does: through the
+    # SVD, singular values below eps max(rows, 3) s_max dropped, rank < 3 left untested
+    j = np.arange(int(n.max()))
+    valid = j < n[:, None]
+    rows = np.where(valid, lo[ks][:, None] + j, 0)
+    dt = np.where(valid, tt[rows] - t[ks][:, None], 0.0)
+    A = np.stack([valid.astype(float), dt, dt * dt], axis=-1)  # constant acceleration: turns, speed changes
+    B = np.where(valid[..., None], rr[rows], 0.0)
+    U, sv, Vt = np.linalg.svd(A, full_matrices=False)
+    big = sv > np.finfo(float).eps * np.maximum(n, 3)[:, None] * sv[:, :1]
+    inv_s = np.where(big, 1.0 / np.where(big, sv, 1.0), 0.0)
+    coef = np.swapaxes(Vt, 1, 2) @ (inv_s[..., None] * (np.swapaxes(U, 1, 2) @ B))  # (K, 3 coefficients, 3 axes)
+    full = big.sum(axis=1) == 3
+    keep[ks[full]] = np.linalg.norm(coef[full, 1] - v_e[ks[full]], axis=1) <= max_diff_mps
     return keep
 
 
@@ -642,7 +652,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
                     np.asarray(getattr(obs, "system", np.full(len(obs.prn), "G"))) == "G"])),
                 gps_prns_with_ephemeris=sorted(int(p) for p in np.unique(nav.eph.prn)),
                 prns_used=sorted(int(p) for p in np.unique(inp_run.prn[inp_run.system == "G"])),
-                sats_used=sorted(set(f"{s}{int(p):02d}" for s, p in zip(inp_run.system, inp_run.prn))),
+                sats_used=_sat_names(inp_run.system, inp_run.prn),
                 sats_per_epoch=(int(n.min()), int(median(n)), int(n.max())) if n.size else (0, 0, 0),
                 start_rule=start_rule, start_s_after_first_epoch=t0 - t_first, approx_r_e=r0.tolist(),
                 f_level_mps2=f_mean.tolist())
@@ -656,6 +666,17 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
                     init_sigma_vel_mps=np.asarray(sig_vel, float).tolist(),
                     init_sigma_att_deg=[3.0 if moving else 1.0, 3.0 if moving else 1.0, yaw_sigma])
     return ds, cfg
+
+
+def _sat_names(system, prn) -> list[str]:
+    """Sorted distinct RINEX satellite names ``'E11'``, ``'G05'``... of (system, prn) rows."""
+    from .._median import unique
+
+    if len(prn) == 0:
+        return []
+    sys_code = np.asarray(system, dtype="<U1").view(np.int32).astype(np.int64)  # the letter's code point
+    key = unique(sys_code * 1_000_000 + np.asarray(prn, dtype=np.int64))  # one row per satellite
+    return sorted(set(f"{chr(int(k // 1_000_000))}{int(k % 1_000_000):02d}" for k in key.tolist()))
 
 
 def _bad_table(source, key, value):
