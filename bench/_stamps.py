@@ -145,7 +145,8 @@ DEPENDS: dict[str, tuple[str, ...]] = {
     "allan.md": ("bench/allan_check.py", f"{_CPP}calib/allan.hpp", "cpp/bindings/bind_calib.cpp",
                  f"{_PY}calib/allan.py", f"{_PY}data/imu_grades.py"),
     "run_all.md": ("bench/run_all.py",),
-    "tune.md": ("bench/tune_check.py", f"{_PY}calib/tune.py", f"{_PY}filters/tight.py", f"{_PY}filters/solution.py",
+    "tune.md": ("bench/tune_check.py", "bench/walk_reference_check.py", f"{_PY}gnss/spp.py",
+                f"{_PY}calib/tune.py", f"{_PY}filters/tight.py", f"{_PY}filters/solution.py",
                 f"{_PY}scenarios/seed000-car.toml", "tests/data/walk_0827.toml", "tests/data/walk_0827_loose.toml",
                 f"{_PY}io/csv_dataset.py", f"{_PY}io/imu_csv.py", f"{_PY}analysis/evaluate.py")
                + KFGINS + LOOSE_EKF + TIGHT + RINEX + SIM,

@@ -444,3 +444,124 @@ def test_report_axes_time_since_start_no_empty_panels_robust_nis(tmp_path, monke
     assert nis_ax.get_ylim()[0] > 0.1
     north = [ax for ax in axes if ax.get_ylabel() == "north" and "position error" in (ax.figure.axes[0].get_title())][0]
     assert north.get_ylim()[1] == pytest.approx(1.1 * 3.0)  # 3 sigma after the start-up, not 300 m
+
+
+# --------------------------------------------------------------------------- the Allan section
+
+_N_G, _N_A = 3e-4, 2e-3  # simulated ARW [rad/sqrt(s)] and VRW [m/s/sqrt(s)]
+
+
+@pytest.fixture(scope="module")
+def allan_dir(tmp_path_factory):
+    """`insnav allan` of a 10 min static KF-GINS log (100 Hz) with known white noise:
+    (its --out-dir, the fits computed directly from the log)."""
+    import math
+
+    import insnav.calib.allan as al
+    from insnav.cli import main
+
+    d = tmp_path_factory.mktemp("allan")
+    rng = np.random.default_rng(7)
+    n, tau0 = 60000, 0.01
+    t = 100000.0 + tau0 * np.arange(1, n + 1)
+    g = np.array([0.0, 0.0, 7.29e-5]) + _N_G / math.sqrt(tau0) * rng.standard_normal((n, 3))
+    f = np.array([0.0, 0.0, -9.80665]) + _N_A / math.sqrt(tau0) * rng.standard_normal((n, 3))
+    np.savetxt(d / "static.txt", np.column_stack([t, g * tau0, f * tau0]), fmt="%.9f" + " %.15e" * 6)
+    assert main(["allan", str(d / "static.txt"), "--out-dir", str(d / "imu-allan"), "--no-plot"]) == 0
+    curve = al.allan_deviation([g, f], tau0)
+    return d / "imu-allan", [al.fit_allan(curve, a) for a in range(6)], curve
+
+
+def _allan_rows(page: str) -> dict:
+    """axis -> the cells of the report's Allan table (HTML unescaped)."""
+    tab = re.search(r'<table id="allan">(.*?)</table>', page, re.S).group(1)
+    out = {}
+    for row in re.findall(r"<tr><td>(.*?)</td></tr>", tab):
+        cells = [html_unescape(c) for c in row.split("</td><td>")]
+        out[cells[0]] = cells[1:]
+    return out
+
+
+def test_allan_section_has_the_fit_of_the_log(run, allan_dir):
+    """The report's Allan section, rebuilt from allan.csv, carries the fit of the
+    original log (to the 4 digits of the table): N of every axis as the direct fit
+    and within 3 % of the simulated white noise, inside its interval, and a TOML
+    whose [imu] keys load to the same values; the figure is a real PNG."""
+    from insnav.calib.allan import TERMS
+    from insnav.config import load_config
+    from insnav.cli.allan import read_curve_csv
+    from insnav.units import DEG_PER_SQRT_H, MPS_PER_SQRT_H
+
+    out_dir, fits, curve = allan_dir
+    c2, source = read_curve_csv(out_dir)
+    assert c2.n == curve.n and c2.tau0_s == pytest.approx(curve.tau0_s, rel=1e-8)
+    assert np.array_equal(c2.m, curve.m) and np.allclose(c2.adev, curve.adev, rtol=1e-5, atol=0)
+    assert source.endswith("static.txt")
+    d, ds, sol, path = run
+    html_path = report(path, out_dir.parent / "with-allan", truth=d / "ds", allan=out_dir)
+    page = html_path.read_text()
+    rows = _allan_rows(page)
+    assert list(rows) == ["gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"]
+    j = list(TERMS).index("N")
+    for a, axis in enumerate(rows):
+        unit, truth = (DEG_PER_SQRT_H, _N_G) if a < 3 else (MPS_PER_SQRT_H, _N_A)
+        m = re.fullmatch(r"([0-9.e+-]+) \(([0-9.e+-]+)\.\.([0-9.e+-]+)\)", rows[axis][j])
+        assert m, rows[axis]
+        v, lo, hi = (float(x) * unit for x in m.groups())
+        assert v == pytest.approx(fits[a].coef["N"], rel=1e-3)  # the table's 4 digits
+        assert v == pytest.approx(truth, rel=0.03) and lo < v < hi and hi / lo < 1.05
+    toml = html_unescape(re.search(r'<pre id="imu_noise_toml">(.*?)</pre>', page, re.S).group(1))
+    (out_dir.parent / "from_report.toml").write_text(toml)
+    a, b = load_config(out_dir.parent / "from_report.toml").imu, load_config(out_dir / "imu_noise.toml").imu
+    assert np.allclose(a.gyro_arw, b.gyro_arw, rtol=1e-3) and np.allclose(a.acc_vrw, b.acc_vrw, rtol=1e-3)
+    assert np.allclose(a.gyro_arw, _N_G, rtol=0.03) and np.allclose(a.acc_vrw, _N_A, rtol=0.03)
+    imgs = _images(page)
+    assert len(imgs) == 7 and (html_path.parent / "allan.png").read_bytes() == imgs[-1]
+    assert _nonblank(imgs[-1]) > 0.02
+    # the solution's summary is still there, above the Allan section
+    assert "horizontal RMS / max [m]" in _table(page.split('id="allan-noise"')[0])
+
+
+def test_allan_only_report_and_its_errors(allan_dir, tmp_path):
+    """`insnav report --allan DIR` without a solution: a page of the Allan
+    section only; a file that is not an `insnav allan` curve and a missing
+    SOL without --allan are one-line errors naming the problem."""
+    out_dir, fits, curve = allan_dir
+    r = subprocess.run([sys.executable, "-m", "insnav", "report", "--allan", str(out_dir), "--out",
+                        str(tmp_path / "noise")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    page = (tmp_path / "noise" / "report.html").read_text()
+    assert len(_allan_rows(page)) == 6 and len(_images(page)) == 1 and 'id="summary"' not in page
+    assert sorted(p.name for p in (tmp_path / "noise").iterdir()) == ["allan.png", "report.html"]
+    bad = tmp_path / "allan.csv"
+    bad.write_text("tau,adev\n1,2\n")
+    for argv, words in ((["--allan", str(bad)], ["not an Allan curve", str(bad)]),
+                        ([], ["SOL", "--allan"]),
+                        (["--allan", str(out_dir), "--truth", str(out_dir)], ["need SOL"])):
+        r = subprocess.run([sys.executable, "-m", "insnav", "report", *argv, "--out", str(tmp_path / "x")],
+                           capture_output=True, text=True)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert all(w in r.stderr for w in words) and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "x").exists()
+
+
+def test_allan_page_renders_in_a_real_browser(allan_dir, tmp_path):
+    """Headless Chromium: the Allan-only page's figure decodes at its full size
+    and has content in the screenshot, the terms table below it is drawn (dark
+    pixels), and no console message."""
+    browser = _chromium()
+    out_dir, fits, curve = allan_dir
+    html_path = report(None, tmp_path / "noise", allan=out_dir)
+    lay = _browser_layout(browser, html_path)
+    (box,) = lay["images"]
+    complete, nw, nh, x, y, w, h = box
+    assert complete and nw > 600 and nh > 300 and 0 <= x and x + w <= _WIDTH and w > 600, box
+    shot = tmp_path / "shot.png"
+    console = _screenshot(browser, html_path, shot, int(lay["height"]))
+    assert not console, console
+    assert not _blank_figures(shot, [box])
+    import matplotlib.image as mpimg
+
+    a = mpimg.imread(shot)[..., :3]
+    below = a[int(y + h) + 5:]  # the terms table and the TOML
+    assert below.shape[0] > 100 and np.mean(below.min(axis=-1) < 0.5) > 0.005

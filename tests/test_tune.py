@@ -327,3 +327,48 @@ def test_tight_engine_log_det_s_and_tuning():
     res = tune(ds, RunConfig(filter="ekf", coupling="tight"), params=["gnss_pos", "gnss_vel"], max_runs=10)
     assert res.log_likelihood_tuned >= res.log_likelihood_base
     assert res.tuned.robust.screening is False and res.tuned.robust.fde_max_sats == 0
+
+
+def test_innovation_whiteness_flags_correlated_fix_errors():
+    """innovation_lag1 (Mehra 1970, Sec. III: the innovations of a right model are white): about 0
+    (within 3 / sqrt(pairs)) for seed000-sim's white fix errors; clearly positive (> 0.5) when the
+    fixes' position error is instead slowly varying (first-order Gauss-Markov, 3 m, 60 s) under
+    the same white sigmas.  Exact on a hand-made sequence: +-1 alternating, n values, gives the
+    sample autocorrelation sum d_k d_k+1 / sum d_k^2 = -(n - 1) / n."""
+    from insnav.calib.tune import innovation_lag1
+    from insnav.earth import radii
+
+    ds = insnav.simulate("seed000-sim", seed=4)
+    white = innovation_lag1(insnav.run(ds, "ekf"))
+    pairs = 3 * (np.count_nonzero(np.isfinite(ds.gnss.lat_deg)) - 1)
+    print("white", white, "pairs", pairs)
+    assert abs(white[0]) < 3.0 / math.sqrt(pairs) and abs(white[1]) < 3.0 / math.sqrt(pairs)
+    rng = np.random.default_rng(1)
+    g = ds.gnss
+    t = np.asarray(g.t_valid, float)
+    phi = np.exp(-np.diff(t, prepend=t[0]) / 60.0)
+    e = np.zeros((t.size, 3))
+    e[0] = 3.0 * rng.standard_normal(3)
+    for k in range(1, t.size):
+        e[k] = phi[k] * e[k - 1] + 3.0 * math.sqrt(1 - phi[k] ** 2) * rng.standard_normal(3)
+    # the fixes: the antenna's true track plus the slow error only (their white noise replaced by it)
+    tr = ds.truth
+    lat0, lon0 = (np.interp(t, tr.t, getattr(tr, k)) for k in ("lat_deg", "lon_deg"))
+    lat0 = lat0 + (g.lat_deg - np.interp(t, tr.t, tr.lat_deg)).mean()  # keep the lever arm's mean
+    lon0 = lon0 + (g.lon_deg - np.interp(t, tr.t, tr.lon_deg)).mean()
+    R_M, R_N = radii(np.deg2rad(lat0))
+    lat = lat0 + np.rad2deg(e[:, 0] / (R_M + g.h_m))
+    lon = lon0 + np.rad2deg(e[:, 1] / ((R_N + g.h_m) * np.cos(np.deg2rad(lat0))))
+    h = np.interp(t, tr.t, tr.h_m) + (g.h_m - np.interp(t, tr.t, tr.h_m)).mean() - e[:, 2]
+    biased = dataclasses.replace(ds, gnss=dataclasses.replace(g, lat_deg=lat, lon_deg=lon, h_m=h))
+    corr = innovation_lag1(insnav.run(biased, "ekf"))
+    print("correlated", corr)
+    assert corr[0] > 0.5
+
+    class _Sol:  # one component alternating +-1
+        gnss_t = np.arange(10.0)
+        gnss_status = np.ones(10, np.int8)
+        innovation = np.column_stack([np.tile([1.0, -1.0], 5), np.full((10, 5), np.nan)])
+
+    lag = innovation_lag1(_Sol())
+    assert lag[0] == pytest.approx(-0.9, abs=1e-12) and math.isnan(lag[1])

@@ -16,7 +16,11 @@ no network, no script) plus the PNGs beside it:
   applied and rejected updates marked; for a tight run the per-satellite
   pseudorange and rate residuals;
 * a summary table: RMS and max errors, the maxima inside and after each
-  outage, reconvergence times, consistency rms(error / sigma), NIS statistics.
+  outage, reconvergence times, consistency rms(error / sigma), NIS statistics;
+* with ``allan``, the IMU noise of a static log analysed by ``insnav allan``:
+  the Allan deviations with their intervals and the IEEE 952 fit, the fitted
+  terms with 95 % intervals, and the ``[imu]`` noise TOML (alone when there
+  is no solution).
 
 Outages are the gaps in the GNSS record times (sidecar or fixes) longer than
 2.5 GNSS periods, unless given.
@@ -40,7 +44,7 @@ __all__ = ["report", "detect_outages", "chi2_interval", "consistency_verdict", "
 
 #: every figure file a report may write
 FIGURES = ("track.png", "pos_error.png", "vel_error.png", "att_error.png", "imu_errors.png", "innovations.png",
-           "residuals.png")
+           "residuals.png", "allan.png")
 
 _Z975 = 1.959963984540054  # standard normal 97.5 % quantile
 
@@ -440,6 +444,53 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
     return rows
 
 
+def _allan_section(path) -> tuple[list[tuple[str, str, bytes]], list[str]]:
+    """The Allan section of a report from the output of ``insnav allan`` (its
+    ``--out-dir`` or ``allan.csv``): the curve refitted exactly as ``insnav
+    allan`` fits it (:func:`insnav.calib.allan.fit_allan`), so the figure, the
+    terms and the TOML are the ones that command printed (to the 6 digits of
+    allan.csv).  Returns (figures, HTML parts)."""
+    from ..calib.allan import TERMS, fit_allan, imu_noise_toml
+    from ..cli.allan import _units, allan_figure, read_curve_csv
+
+    curve, source = read_curve_csv(path)
+    fits = [fit_allan(curve, a) for a in range(6)]
+    fits_g, fits_a = fits[:3], fits[3:]
+    head = (f"{source or path}: {curve.n} samples at {1 / curve.tau0_s:.6g} Hz, {curve.n * curve.tau0_s / 3600:.3g} h; "
+            f"overlapping Allan deviation at {curve.tau_s.size} averaging times "
+            f"{curve.tau_s[0]:.3g}..{curve.tau_s[-1]:.4g} s")
+    figs = [("allan.png", "Allan deviation of the static IMU log (95 % intervals, dashed: IEEE 952 fit)",
+             allan_figure(curve, fits_g, fits_a, head, dpi=90))]
+    u = _units()
+    parts = ["<h2 id=\"allan-noise\">IMU noise (Allan variance, IEEE Std 952)</h2>",
+             f"<p>{html.escape(head)} (<code>{html.escape(str(path))}</code>).</p>",
+             "<table id=\"allan\"><tr><th>axis</th>"
+             + "".join(f"<th>{k} [{html.escape(u[k][0][0])} | {html.escape(u[k][1][0])}]</th>" for k in TERMS)
+             + "</tr>"]
+    for kind, group in ((0, fits_g), (1, fits_a)):
+        for f in group:
+            cells = []
+            for k in TERMS:
+                name, fac = u[k][kind]
+                v = f.coef[k] / fac
+                lo, hi = (c / fac for c in f.ci[k])
+                if v == 0.0:
+                    up = f.upper.get(k, math.nan) / fac
+                    cells.append(f"&lt; {up:.3g}" if math.isfinite(up) else "-")
+                elif math.isfinite(lo):
+                    cells.append(f"{v:.4g} ({lo:.3g}..{hi:.3g})")
+                else:
+                    cells.append(f"{v:.4g}")
+            parts.append(f"<tr><td>{html.escape(f.axis)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    parts.append("</table>")
+    parts.append("<p>Value (95 % interval); '&lt; x': not resolved by this log, x its upper bound; '-': zero in the "
+                 "fit; Q quantisation, N angle / velocity random walk, B bias instability, K rate random walk, R rate "
+                 "ramp.  The filter's <code>[imu]</code> noise keys (docs/algorithms.md section 24 maps the terms "
+                 "to the process noise):</p>")
+    parts.append(f"<pre id=\"imu_noise_toml\">{html.escape(imu_noise_toml(fits_g, fits_a, source=source))}</pre>")
+    return figs, parts
+
+
 def _read_solution(path):
     """The one place the report reads a saved solution (any format
     :func:`insnav.load_solution` reads, old column names included)."""
@@ -450,7 +501,7 @@ def _read_solution(path):
 
 
 def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None,
-           overwrite: bool = False) -> Path:
+           overwrite: bool = False, allan=None) -> Path:
     """Write ``report.html`` and its PNGs for a solution; returns the HTML path.
 
     The files are written into a temporary folder beside ``out_dir`` that
@@ -459,10 +510,12 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
 
     Parameters
     ----------
-    solution : path or Solution
-        A saved solution (its ``.innovations.csv`` sidecar is read when present).
+    solution : path or Solution or None
+        A saved solution (its ``.innovations.csv`` sidecar is read when present);
+        None for a page with only the Allan section (``allan`` then needed).
     out_dir : path, optional
-        Default: ``<solution>-report`` beside a saved solution.
+        Default: ``<solution>-report`` beside a saved solution (``<allan>-report``
+        beside the Allan folder without a solution).
     truth : path or Truth-like, optional
         Anything ``insnav evaluate`` reads (truth.csv, dataset folder, KF-GINS .nav, RTKLIB .pos).
     gnss : path or GnssFixes, optional
@@ -474,6 +527,10 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
         Write into an existing folder that is not an insnav report (its
         report.html and figures replaced, its other files left alone);
         without it such a folder is refused before any work.
+    allan : path, optional
+        The ``--out-dir`` of ``insnav allan`` (or its ``allan.csv``): adds the
+        section "IMU noise (Allan variance)" (figure allan.png, the IEEE 952
+        terms with 95 % intervals, the ``[imu]`` noise TOML).
     """
     try:
         import matplotlib
@@ -485,6 +542,12 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
     from ..filters.solution import innovations_path, read_innovations, read_residuals, residuals_path
     from .evaluate import _read_truth, _solution_at
 
+    if solution is None:
+        if allan is None:
+            raise ValueError("report: give a solution, or allan (an `insnav allan` output) for a noise-only page")
+        if truth is not None or gnss is not None:
+            raise ValueError("report: truth and gnss need a solution")
+        return _allan_report(Path(allan), out_dir, title, overwrite, plt)
     src, res = None, None
     if isinstance(solution, (str, Path)):
         src = Path(solution)
@@ -515,7 +578,7 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
             raise ValueError("report: out_dir is needed for a Solution object")
         out_dir = src.with_name(src.name + "-report")
     out_dir = Path(out_dir)
-    _check_report_out(out_dir, [src, truth, gnss], overwrite)
+    _check_report_out(out_dir, [src, truth, gnss, allan], overwrite)
     tr = _read_truth(truth) if isinstance(truth, (str, Path)) else truth
     fx = None
     if gnss is not None:
@@ -538,16 +601,11 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
         err = fix_err
         err_kind = "GNSS fixes (antenna; the solution is the IMU centre, no lever arm applied)"
 
+    allan_figs, allan_parts = _allan_section(allan) if allan is not None else ([], [])
     figs = _figures(sol, err, "truth" if tr is not None else "GNSS fixes", tr, fx, inn, res, outages, plt)
     rows = _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err)
     heading = title or f"insnav report: {src.name if src else 'solution'}"
-    parts = ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
-             f"<title>{html.escape(heading)}</title>",
-             "<style>body{font-family:sans-serif;max-width:1000px;margin:1em auto;color:#222}"
-             "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:3px 8px;"
-             "text-align:left;font-size:14px}th{background:#eee}figure{margin:1.5em 0}"
-             "img{max-width:100%;border:1px solid #ddd}figcaption{font-size:13px;color:#555}</style>",
-             "</head><body>", f"<h1>{html.escape(heading)}</h1>"]
+    parts = _page_head(heading)
     if src is not None:
         parts.append(f"<p>Solution: <code>{html.escape(str(src))}</code>"
                      + (f"; truth: <code>{html.escape(str(truth))}</code>" if isinstance(truth, (str, Path)) else "")
@@ -557,12 +615,43 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
     for k, v in rows:
         parts.append(f"<tr><td>{html.escape(k)}</td><td>{html.escape(v)}</td></tr>")
     parts.append("</table>")
-    for name, caption, data in figs:
-        b64 = base64.b64encode(data).decode("ascii")
-        parts.append(f"<figure id=\"{name[:-4]}\"><img alt=\"{html.escape(caption)}\" "
-                     f"src=\"data:image/png;base64,{b64}\"><figcaption>{html.escape(caption)} "
-                     f"({html.escape(name)})</figcaption></figure>")
+    parts += [_figure_html(*f) for f in figs]
+    if allan_figs:
+        parts += allan_parts[:2] + [_figure_html(*f) for f in allan_figs] + allan_parts[2:]
     parts.append("</body></html>")
+    files = [(name, data) for name, _, data in figs + allan_figs] + \
+        [("report.html", ("\n".join(parts) + "\n").encode())]
+    return _write_report(out_dir, files)
+
+
+def _page_head(heading: str) -> list[str]:
+    return ["<!DOCTYPE html>", "<html lang=\"en\"><head><meta charset=\"utf-8\">",
+            f"<title>{html.escape(heading)}</title>",
+            "<style>body{font-family:sans-serif;max-width:1000px;margin:1em auto;color:#222}"
+            "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:3px 8px;"
+            "text-align:left;font-size:14px}th{background:#eee}figure{margin:1.5em 0}"
+            "img{max-width:100%;border:1px solid #ddd}figcaption{font-size:13px;color:#555}"
+            "pre{background:#f6f6f6;padding:6px;font-size:12px;overflow-x:auto}</style>",
+            "</head><body>", f"<h1>{html.escape(heading)}</h1>"]
+
+
+def _figure_html(name: str, caption: str, data: bytes) -> str:
+    b64 = base64.b64encode(data).decode("ascii")
+    return (f"<figure id=\"{name[:-4]}\"><img alt=\"{html.escape(caption)}\" "
+            f"src=\"data:image/png;base64,{b64}\"><figcaption>{html.escape(caption)} "
+            f"({html.escape(name)})</figcaption></figure>")
+
+
+def _allan_report(allan: Path, out_dir, title, overwrite: bool, plt) -> Path:
+    """A report with only the Allan section (no solution)."""
+    if out_dir is None:
+        base = allan.parent if allan.is_file() else allan
+        out_dir = base.with_name(base.name + "-report")
+    out_dir = Path(out_dir)
+    _check_report_out(out_dir, [None, allan], overwrite)
+    figs, sec = _allan_section(allan)
+    heading = title or f"insnav report: IMU noise of {allan.name}"
+    parts = _page_head(heading) + sec[:2] + [_figure_html(*f) for f in figs] + sec[2:] + ["</body></html>"]
     files = [(name, data) for name, _, data in figs] + [("report.html", ("\n".join(parts) + "\n").encode())]
     return _write_report(out_dir, files)
 

@@ -50,8 +50,8 @@ import numpy as np
 from ..config import ConfigError, ImuNoise, RunConfig
 
 __all__ = ["PARAMETERS", "TuneResult", "innovation_log_likelihood", "solution_log_likelihood", "nelder_mead_log",
-           "scaled_config", "default_parameters", "tune", "holdout_report", "tuned_toml_dict", "split_time",
-           "LOG_SCALE_BOUND"]
+           "scaled_config", "default_parameters", "tune", "holdout_report", "innovation_lag1", "tuned_toml_dict",
+           "split_time", "LOG_SCALE_BOUND"]
 
 LOG_2PI = math.log(2.0 * math.pi)
 #: each ln s_j is kept within +-this (scale factors 1e-3 .. 1e3)
@@ -546,17 +546,76 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
 
 # --------------------------------------------------------------------------- the report
 
+def innovation_lag1(sol, t_from: float = -np.inf, t_to: float = np.inf) -> tuple[float, float]:
+    """Lag-1 autocorrelation of the innovations of the applied GNSS records in
+    [t_from, t_to): (position or pseudorange rows, velocity or pseudorange-rate
+    rows), each the mean over the sequences (loose: the N, E, D components;
+    tight: one sequence per satellite) weighted by their pairs; NaN without one.
+
+    The innovations of a filter whose model is right are white (Kailath 1968;
+    Mehra 1970, Sec. III, the basis of its adaptive tuning): about 0, within
+    +-2 / sqrt(pairs).  Clearly positive values mean measurement errors (or
+    unmodelled states) correlated from one record to the next, e.g. slowly
+    varying pseudorange errors: the innovation likelihood then sees only
+    their record-to-record part, the tuned sigmas fit that, and the filter is
+    overconfident on anything slower (docs/algorithms.md section 20).
+    """
+    from ..filters.solution import RecordStatus
+
+    t = np.asarray(getattr(sol, "gnss_t", ()), float)
+    inn = np.asarray(getattr(sol, "innovation", np.zeros((0, 6))), float)
+    if inn.ndim != 2 or not t.size:
+        return (math.nan, math.nan)
+    ap = (np.asarray(sol.gnss_status) == RecordStatus.APPLIED) & (t >= t_from) & (t < t_to)
+    seqs = ([], [])
+    inputs = getattr(sol, "inputs", None)
+    if inputs is not None and inn.shape == (len(inputs.prn), 2):  # tight: rows per satellite
+        start = np.asarray(inputs.epoch_start)
+        epoch = np.repeat(np.arange(len(start) - 1), np.diff(start))
+        ep_t = np.asarray(inputs.epoch_t, float)
+        # epochs of the applied records (gnss_t: one record per epoch)
+        ok_t = set(np.round(t[ap], 6))
+        keep = np.array([round(float(x), 6) in ok_t for x in ep_t])[epoch]
+        prn = np.asarray(inputs.prn)
+        for p in np.unique(prn):
+            m = keep & (prn == p)
+            for c in (0, 1):
+                seqs[c].append(inn[m, c])
+    elif inn.shape[0] == t.size and inn.shape[1] >= 6:
+        for c in range(6):
+            seqs[c // 3].append(inn[ap, c])
+    out = []
+    for group in seqs:
+        num = den = 0.0
+        for y in group:
+            y = y[np.isfinite(y)]
+            if y.size < 3:
+                continue
+            d = y - y.mean()
+            var = float(d @ d)
+            if var <= 0.0:
+                continue
+            num += (y.size - 1) * float(d[:-1] @ d[1:]) / var
+            den += y.size - 1
+        out.append(num / den if den else math.nan)
+    return (out[0], out[1])
+
+
 def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = np.inf, keep_t=None) -> dict:
     """Consistency and error figures of ``sol`` over [t_from, t_to).
 
     Returns a dict: ``records`` and ``nis_per_row`` (mean NIS over the mean
     rows of the applied GNSS records: 1 for a consistent filter),
-    ``log_likelihood_per_record``; with a ``reference`` (a Truth-like
+    ``log_likelihood_per_record``, ``innovation_lag1`` (:func:`innovation_lag1`:
+    0 for white innovations); with a ``reference`` (a Truth-like
     trajectory of the IMU centre in the solution's time base), ``epochs``,
     ``hor_rms_m``, ``rms_3d_m`` and ``nees`` = rms(error/sigma) per axis of
     ``pos_n_m`` (N, E, D), ``vel_n_mps``, ``att_deg`` (roll, pitch, yaw),
-    where the reference has them.  ``keep_t``: only the reference epochs in
-    this set of times (e.g. the epochs whose fixes the filter did not see).
+    where the reference has them, and ``nees_demeaned`` the same with each
+    axis's mean error over the epochs removed first (the time-varying part:
+    a constant offset of the reference, or a constant error the innovations
+    cannot see, left out).  ``keep_t``: only the reference epochs in this set
+    of times (e.g. the epochs whose fixes the filter did not see).
     """
     from ..analysis.metrics import errors
     from ..filters.solution import RecordStatus
@@ -570,6 +629,7 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
     out["nis_per_row"] = float(np.sum(nis) / np.sum(rows)) if rows.size and np.sum(rows) > 0 else math.nan
     ll, n = solution_log_likelihood(sol, t_from, t_to)
     out["log_likelihood_per_record"] = ll / n if n else math.nan
+    out["innovation_lag1"] = innovation_lag1(sol, t_from, t_to)
     if reference is None:
         return out
     tr = np.asarray(reference.t, float)
@@ -586,7 +646,7 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
     hz = np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])
     out["hor_rms_m"] = float(np.sqrt(np.mean(hz ** 2)))
     out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"] ** 2, axis=1))))
-    out["nees"] = {}
+    out["nees"], out["nees_demeaned"] = {}, {}
     for k in ("pos_n_m", "vel_n_mps", "att_deg"):
         x, s = e[k], e.get("sigma_" + k)
         if s is None:
@@ -595,6 +655,7 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
         if ok.sum() < 2:
             continue
         out["nees"][k] = np.sqrt(np.mean((x[ok] / s[ok]) ** 2, axis=0)).tolist()
+        out["nees_demeaned"][k] = np.sqrt(np.mean(((x[ok] - x[ok].mean(axis=0)) / s[ok]) ** 2, axis=0)).tolist()
     return out
 
 

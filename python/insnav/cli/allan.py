@@ -279,15 +279,63 @@ def curve_csv(curve, path_in: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_allan(path, curve, fits_g, fits_a, title: str) -> None:
-    """allan.png: gyro [deg/h] and accelerometer [mg] Allan deviations with
+def read_curve_csv(path):
+    """The Allan curve of an ``allan.csv`` written by ``insnav allan``: (AllanCurve
+    in SI rates (gyro rad/s, accelerometer m/s^2), the analysed input's name).
+
+    The number of samples is the ``clusters`` column at ``m = 1`` (``floor(n / m)``;
+    the largest ``clusters x m`` if the curve starts above ``m = 1``), the sample
+    interval ``tau_s / m``.  A file that is not an ``insnav allan`` curve is a
+    one-line :class:`~insnav.errors.UserError` naming it.
+    """
+    from ..calib.allan import AllanCurve
+    from ..units import DEG_PER_H, MG
+
+    p = Path(path)
+    if p.is_dir():
+        p = p / "allan.csv"
+    if not p.is_file():
+        raise UserError(f"{p}: no such file (give the --out-dir of `insnav allan` or its allan.csv)")
+    with open(p, encoding="utf-8", errors="replace") as f:
+        first = f.readline().rstrip("\n")
+        header = f.readline().strip()
+        body = f.read()
+    cols = ["tau_s", "m", "clusters"] + [f"adev_{a}_dph" for a in "xyz"] + [f"adev_{a}_mg" for a in "xyz"]
+    if not first.startswith(_MARK) or header != ",".join(cols):
+        raise UserError(f"{p}: not an Allan curve written by `insnav allan` (first line '{_MARK} ...', then the "
+                        f"columns {','.join(cols)})")
+    rows = []
+    for k, line in enumerate(body.splitlines(), start=3):
+        if not line.strip():
+            continue
+        try:
+            v = [float(x) for x in line.split(",")]
+        except ValueError:
+            v = []
+        if len(v) != len(cols) or not all(math.isfinite(x) for x in v[:3]) or v[0] <= 0 or v[1] < 1:
+            raise UserError(f"{p}, line {k}: expected {len(cols)} numbers (tau_s > 0, m >= 1, clusters, 6 deviations)")
+        rows.append(v)
+    if len(rows) < 2:
+        raise UserError(f"{p}: fewer than 2 averaging times")
+    a = np.array(rows)
+    m = a[:, 1].astype(np.int64)
+    n = int(a[m == 1, 2][0]) if np.any(m == 1) else int(np.max(a[:, 2] * a[:, 1]))
+    scale = np.array([DEG_PER_H] * 3 + [MG] * 3)
+    curve = AllanCurve(a[:, 0], a[:, 3:] * scale, m, n + 1 - 2 * m, float(a[0, 0] / a[0, 1]), n,
+                       ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z"))
+    return curve, first[len(_MARK):].strip()
+
+
+def allan_figure(curve, fits_g, fits_a, title: str, dpi: int = 110) -> bytes:
+    """PNG bytes of the gyro [deg/h] and accelerometer [mg] Allan deviations with
     95 % chi-square intervals (white-rate edf) and the fitted curves."""
+    import io
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .._atomic import atomic_write_with
     from ..calib.allan import chi2_ppf
     from ..units import DEG_PER_H, MG
 
@@ -313,8 +361,18 @@ def plot_allan(path, curve, fits_g, fits_a, title: str) -> None:
         ax.legend()
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    atomic_write_with(path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
     plt.close(fig)
+    return buf.getvalue()
+
+
+def plot_allan(path, curve, fits_g, fits_a, title: str) -> None:
+    """allan.png: :func:`allan_figure` written atomically."""
+    from .._atomic import atomic_write_with
+
+    data = allan_figure(curve, fits_g, fits_a, title)
+    atomic_write_with(path, lambda tmp: Path(tmp).write_bytes(data))
 
 
 def _check_out_dir(out: Path, inputs: list, overwrite: bool) -> None:
