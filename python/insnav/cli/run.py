@@ -154,10 +154,10 @@ def resolved_config_toml(cfg: RunConfig) -> str:
                 continue
             else:
                 lines.append(f"{f.name} = {toml_value(v)}")
-    from ..config import LeverArmEstimation, Robust, TimeOffset
+    from ..config import _SELFCAL_TABLES, Robust
 
-    for name, default in (("time", TimeOffset()), ("lever_arm", LeverArmEstimation())):
-        if getattr(cfg, name) != default:  # the self-calibration tables, when not the defaults
+    for name, cls in _SELFCAL_TABLES:
+        if getattr(cfg, name) != cls():  # the self-calibration tables, when not the defaults
             lines.append(_table_toml(name, getattr(cfg, name)).rstrip("\n"))
     if cfg.coupling == "tight" or cfg.robust != Robust():
         lines.append("\n[robust]")
