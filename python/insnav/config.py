@@ -683,6 +683,12 @@ class RunConfig:
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
         ``max_rate_rps``, ``max_accel_mps2``, ``min_h_m``, ``max_h_m``).
+    options : dict
+        ``[options]``: the filter family's own options (``--option KEY=VALUE``;
+        :meth:`insnav.registry.FilterSpec.setting_options`, e.g.
+        ``elevation_mask_deg`` for the tight filters, ``particles`` for the
+        seed 004 filters, ``delay_p`` for the delay filters); the keyword
+        options of :func:`insnav.run` override them.
     """
 
     filter: str = "ekf"
@@ -727,6 +733,7 @@ class RunConfig:
     init_sigma_gyro_scale: list | None = None
     time: TimeOffset = field(default_factory=TimeOffset)
     lever_arm: LeverArmEstimation = field(default_factory=LeverArmEstimation)
+    options: dict = field(default_factory=dict)
 
     @property
     def selfcal(self) -> bool:
@@ -804,11 +811,6 @@ class RunConfig:
                                                                " > 1" if k == "gap_factor" else " > 0"))
         if not isinstance(self.smooth, (bool, np.bool_)):
             bad("smooth", self.smooth, "true or false")
-        if self.smooth and self.filter not in ("ekf", "rbukf", "ukf"):
-            bad("smooth", self.smooth, f"the RTS smoother runs with the ekf, rbukf or ukf (not {self.filter!r})")
-        if self.constraints.use and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
-            bad("constraints.use", self.constraints.use,
-                f"vehicle constraints with loose ekf, rbukf or ukf only (not {self.coupling} {self.filter!r})")
         if self.constraints.odo_scale is True and self.layout != 15:
             bad("constraints.odo_scale", True, "true only with layout = 15 (the 16-state odometer layout "
                 "is the 15 states + the scale factor)")
@@ -829,6 +831,22 @@ class RunConfig:
             bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
         if self.layout not in LAYOUTS:
             bad("layout", self.layout, "15, 21")
+        facts = spec.facts(self.coupling)
+        if self.smooth and not facts.smoothable:
+            where = ", ".join(f"{n} {c}" for n, s_ in FILTERS.items() for c in s_.smoothable)
+            bad("smooth", self.smooth, f"false with filter {self.filter!r} {self.coupling} (the RTS smoother runs "
+                                       f"with: {where})")
+        if set(self.constraints.use) - set(facts.constraints):
+            where = ", ".join(f"{n} {c}" for n, s_ in FILTERS.items() for c in s_.constraints)
+            bad("constraints.use", self.constraints.use,
+                f"vehicle constraints with {where} only (not {self.coupling} {self.filter!r})")
+        if not isinstance(self.options, dict):
+            bad("options", self.options, "an [options] table of the filter family's options")
+        settable = spec.setting_options(self.coupling)
+        for k in self.options:
+            if k not in settable:
+                raise ConfigError(f"unknown key 'options.{k}' for filter {self.filter!r} {self.coupling}"
+                                  + (_suggest(k, settable) if settable else "; it takes no options"))
         if self.tdcp.enabled and (self.time.estimate_offset or self.lever_arm.estimate):
             bad("tdcp.enabled", True, "false together with time.estimate_offset or lever_arm.estimate (the TDCP "
                 "rows carry no self-calibration columns)")
@@ -956,6 +974,8 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     for table in ("rtk", "rtk_engine"):  # coupling = "rtk": read by insnav.filters.rtk_ins (the CLI passes them)
         d.pop(table, None)
     raw_tables = {key: d.pop(key) for key, _ in _OPTION_TABLES if key in d}
+    if "options" in d and not isinstance(d["options"], dict):
+        raise ConfigError(f"{source}: key 'options': bad value {d['options']!r}; allowed: an [options] table")
     tabled = {"imu"} | {key for key, _ in _OPTION_TABLES}
     names = {f.name for f in dataclasses.fields(RunConfig)} - tabled
     for k in d:

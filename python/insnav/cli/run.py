@@ -92,6 +92,10 @@ def add_run_parser(sub) -> None:
     p.add_argument("--tdcp", action="store_true",
                    help="tight ekf on RINEX data: add time-differenced carrier-phase rows (rover only, no base; "
                         "settings in the config's [tdcp] table)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="an option of the filter's family (the config's [options] table; repeatable), VALUE a "
+                        "TOML value: e.g. elevation_mask_deg=15 (tight), particles=500 (seed 004), "
+                        "delay_p=[0.7,0.3] (delay filters)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", default=None,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
@@ -131,6 +135,23 @@ def add_run_parser(sub) -> None:
     p.set_defaults(func=cmd_run)
 
 
+def cli_options(pairs) -> dict:
+    """The ``--option KEY=VALUE`` pairs as a dict (VALUE read as a TOML value, else as text)."""
+    import tomllib
+
+    out = {}
+    for pair in pairs or ():
+        key, sep, text = pair.partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise UserError(f"--option {pair}: expected KEY=VALUE (e.g. elevation_mask_deg=15)")
+        try:
+            out[key] = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key] = text.strip()
+    return out
+
+
 def resolved_config_toml(cfg: RunConfig) -> str:
     """The configuration as TOML (SI imu values under [imu_si], informational)."""
     import dataclasses
@@ -138,7 +159,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize", "time", "lever_arm") or v is None:
+        if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize", "time", "lever_arm", "options") or v is None:
             continue
         lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.sanitize:
@@ -163,6 +184,10 @@ def resolved_config_toml(cfg: RunConfig) -> str:
         lines.append("\n[robust]")
         lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)
                   if getattr(cfg.robust, f.name) is not None]  # screening unset: the default (on, or the preset's)
+    if cfg.options:
+        from .._toml import dumps_toml
+
+        lines.append("\n" + dumps_toml({"options": cfg.options}).strip("\n"))
     if cfg.tdcp.enabled:
         lines.append("\n[tdcp]")
         lines += [f"{f.name} = {toml_value(getattr(cfg.tdcp, f.name))}" for f in dataclasses.fields(cfg.tdcp)]
@@ -613,6 +638,7 @@ def cmd_run(args) -> int:
             cfg = load_config(args.config) if args.config else RunConfig()
         if args.seed is not None:
             cfg.init_seed = args.seed
+        cfg.options = {**cfg.options, **cli_options(args.option)}
         if args.smooth:
             cfg.smooth = True
         if args.tdcp:
