@@ -58,7 +58,10 @@ def add_run_parser(sub) -> None:
                        description="Run a closed-loop GNSS/INS filter.", epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", nargs="?", help="dataset directory written by `insnav simulate` (insnav format)")
-    p.add_argument("--format", choices=("insnav", "kfgins", "rinex", "csv"), default="insnav")
+    from ..io.input_formats import INPUT_FORMATS
+
+    p.add_argument("--format", choices=tuple(INPUT_FORMATS), default="insnav",
+                   help="; ".join(f"{f.name}: {f.summary}" for f in INPUT_FORMATS.values()))
     p.add_argument("--filter", default=None, metavar="NAME",
                    help="default: the config's, else ekf.  "
                         + "; ".join(f"{n} ({'/'.join(s.couplings)}, {s.paper}): {s.summary}" for n, s in FILTERS.items()))
@@ -596,46 +599,21 @@ def cmd_run(args) -> int:
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
-    rinex_opts = None
-    csv_tables = None
     try:
-        if args.format == "rinex":
-            missing = [n for n in ("obs", "nav", "imu") if not getattr(args, n)]
-            if missing:
-                raise UserError("--format rinex needs " + ", ".join(f"--{n}" for n in missing))
-            if args.dataset:
-                raise UserError("--format rinex reads --obs/--nav/--imu; do not give a dataset directory")
-            from ..io.rinex_dataset import load_rinex_run
+        from ..io.input_formats import input_format
 
-            ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=args.imu_tag)
-            rinex_opts = ds.options
-        elif args.format == "csv":
-            missing = [n for n in ("imu", "gnss", "config") if not getattr(args, n)]
-            if missing:
-                raise UserError("--format csv needs " + ", ".join(f"--{n}" for n in missing)
-                                + " (the [imu] and [gnss] tables of --config map the files)")
-            if args.dataset:
-                raise UserError("--format csv reads --imu/--gnss; do not give a dataset directory")
-            from ..io.csv_dataset import load_csv_run
-
-            ds, cfg = load_csv_run(args.imu, args.gnss, args.config, imu_tag=args.imu_tag)
+        fmt = input_format(args.format)
+        try:
+            fmt.check(args)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        loaded = fmt.load(args)
+        ds, cfg = loaded.dataset, loaded.config
+        rinex_opts, csv_tables = loaded.tables.get("rinex"), loaded.tables.get("csv")
+        if csv_tables is not None:
             print(ds.info["initial_state"])
-            csv_tables = ds.info["tables"]
-        elif args.format == "kfgins":
-            if not args.config:
-                raise UserError("--format kfgins needs --config KF-GINS.yaml")
-            from ..io.kfgins_dataset import load_kfgins
-
-            ds, cfg = load_kfgins(args.config, args.imu, args.gnss)
-            if args.run_config:
-                cfg = _overlay_run_config(cfg, args.run_config)
-        else:
-            if not args.dataset:
-                raise UserError("give a dataset directory (or --format kfgins --config FILE)")
-            if not Path(args.dataset).is_dir():
-                raise UserError(f"dataset directory not found: {args.dataset}")
-            ds = insnav.load_dataset(args.dataset)
-            cfg = load_config(args.config) if args.config else RunConfig()
+        if args.format == "kfgins" and args.run_config:
+            cfg = _overlay_run_config(cfg, args.run_config)
         if args.seed is not None:
             cfg.init_seed = args.seed
         cfg.options = {**cfg.options, **cli_options(args.option)}
