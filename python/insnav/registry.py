@@ -1,7 +1,16 @@
 """The filter registry: every filter name insnav knows, what it couples,
-which state layouts it runs on, which extra options it takes and which
-function runs it.  ``insnav.run``, the configuration check, the CLI help and
-``insnav compare`` all read this one table, so they cannot disagree.
+and per coupling its facts (:class:`CouplingFacts`: the state layouts it runs
+on, whether the RTS smoother runs after it, the vehicle constraints it takes,
+whether it reads the UT parameters, the GNSS systems it uses), its options
+and the function that runs it.  ``insnav.run``, the configuration check, the
+engine configuration, the CLI help and ``insnav compare`` all read this one
+table, so they cannot disagree; ``tests/test_registry_facts.py`` checks it
+against the runners.
+
+Every family is run as ``FilterSpec.run(coupling, dataset, cfg, options)``:
+``options`` is the family's options dataclass (:meth:`FilterSpec.options_class`),
+derived from the runner function's keyword parameters, so the registry's
+option list, the dataclass and the runner cannot drift apart.
 
 The runners are named as ``"module:function"`` strings and imported only
 when a run starts (this module sits below the run layer and imports nothing
