@@ -24,15 +24,44 @@ def _dataset(seed=2, duration_s=40.0, outages=((20.0, 26.0),)):
     return insnav.simulate(sc, seed=seed)
 
 
+def _drive(nav, ds, check, late_samples, push_upto):
+    """Push the dataset's IMU samples; before sample k, `push_upto(tc)` pushes the records whose
+    time is <= tc = t[k - late_samples] (a record `late_samples` samples after the sample covering
+    it; tc = inf at the end).  The navigator's row after each checked sample and the last."""
+    t = ds.imu.t
+    rows = {}
+    for k in range(len(t)):
+        push_upto(t[max(0, k - late_samples)])
+        nav.push_imu(t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+        done = nav.counters["samples"]
+        if done and done - 1 in check and done - 1 not in rows:
+            rows[done - 1] = nav.state()
+    push_upto(np.inf)
+    nav.flush()
+    rows[len(t) - 1] = nav.state()
+    return rows
+
+
+def _worst_row_diff(rows, batch) -> float:
+    """The largest difference of the pushed rows from the batch rows: position (m), velocity (m/s),
+    attitude (deg) and position sigma (m); the rows' times must be the batch's."""
+    worst = 0.0
+    for k, r in rows.items():
+        assert r["t"] == batch.t[k]
+        worst = max(worst, abs(r["lat_deg"] - batch.lat_deg[k]) * 1.1e5, abs(r["lon_deg"] - batch.lon_deg[k]) * 1.1e5,
+                    abs(r["h_m"] - batch.h_m[k]), np.max(np.abs(r["v_n_mps"] - batch.v_n[k])),
+                    abs(r["roll_deg"] - batch.roll_deg[k]), abs(r["pitch_deg"] - batch.pitch_deg[k]),
+                    abs(r["yaw_deg"] - batch.yaw_deg[k]), np.max(np.abs(r["sigma"][0:3] - batch.sigma_pos_n_m[k])))
+    return worst
+
+
 def _push_all(nav, ds, cfg_rows, late_samples=0):
     """Push the dataset's IMU samples and fixes in arrival order (a fix
     `late_samples` IMU samples after the sample covering it); the navigator's
     row after each integrated sample."""
-    t = ds.imu.t
     g = ds.gnss
     order = np.argsort(g.t_valid, kind="stable")
     gi = 0
-    rows = {}
 
     def push_fixes_upto(tc):
         nonlocal gi
@@ -43,16 +72,7 @@ def _push_all(nav, ds, cfg_rows, late_samples=0):
             assert st == "queued", (j, st)
             gi += 1
 
-    for k in range(len(t)):
-        push_fixes_upto(t[max(0, k - late_samples)] if late_samples else t[k])
-        nav.push_imu(t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
-        done = nav.counters["samples"]
-        if done and done - 1 in cfg_rows and done - 1 not in rows:
-            rows[done - 1] = nav.state()
-    push_fixes_upto(np.inf)
-    nav.flush()
-    rows[len(t) - 1] = nav.state()
-    return rows
+    return _drive(nav, ds, cfg_rows, late_samples, push_fixes_upto)
 
 
 @pytest.mark.parametrize("filt,late,hold", [("ekf", 0, 0), ("ekf", 30, 40), ("rbukf", 30, 40)])
@@ -127,9 +147,9 @@ def test_late_fix_refused_and_bad_calls():
 
 # --- tightly coupled push API (insnav.TightNavigator) --------------------------------------------
 
-def _multi_dataset(duration_s=60.0, seed=4):
-    """urban-multignss (GPS + Galileo + BeiDou) cut to its first motion segments, open sky."""
-    sc = copy.deepcopy(sim.load_scenario("urban-multignss").raw)
+def _cut_scenario(name, duration_s):
+    """The preset `name` cut to its first motion segments (>= duration_s)."""
+    sc = copy.deepcopy(sim.load_scenario(name).raw)
     segs, tot = [], 0.0
     for s in sc["motion"]["segments"]:
         if tot >= duration_s:
@@ -137,6 +157,12 @@ def _multi_dataset(duration_s=60.0, seed=4):
         segs.append(s)
         tot += float(s["duration_s"])
     sc["motion"]["segments"] = segs
+    return sc
+
+
+def _multi_dataset(duration_s=60.0, seed=4):
+    """urban-multignss (GPS + Galileo + BeiDou) cut to its first motion segments, open sky."""
+    sc = _cut_scenario("urban-multignss", duration_s)
     sc["gnss_raw"].pop("urban_canyon", None)
     return sim.simulate(sc, seed=seed)
 
@@ -144,24 +170,17 @@ def _multi_dataset(duration_s=60.0, seed=4):
 def _push_tight(nav, ds, check, late_samples):
     """IMU samples and the navigator's own epochs (TightNavigator.inputs) in arrival order, an
     epoch `late_samples` IMU samples after the sample covering it; rows after the checked samples."""
-    t = ds.imu.t
     ep_t = nav.inputs.epoch_t
-    e, rows = 0, {}
-    for k in range(len(t)):
-        tc = t[max(0, k - late_samples)]
+    e = 0
+
+    def push_epochs_upto(tc):
+        nonlocal e
         while e < len(ep_t) and ep_t[e] <= tc:
-            assert nav.push_epoch(e) == "queued", e
+            st = nav.push_epoch(e)
+            assert st == "queued" or tc == np.inf, (e, st)
             e += 1
-        nav.push_imu(t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
-        done = nav.counters["samples"]
-        if done and done - 1 in check and done - 1 not in rows:
-            rows[done - 1] = nav.state()
-    while e < len(ep_t):
-        nav.push_epoch(e)
-        e += 1
-    nav.flush()
-    rows[len(t) - 1] = nav.state()
-    return rows
+
+    return _drive(nav, ds, check, late_samples, push_epochs_upto)
 
 
 @pytest.mark.parametrize("filt,multi", [("ekf", False), ("rbukf", False), ("ekf", True)])
@@ -179,14 +198,10 @@ def test_tight_push_equals_batch(filt, multi):
     check = set(range(0, len(ds.imu.t), 89)) | {len(ds.imu.t) - 1}
     rows = _push_tight(nav, ds, check, late_samples=30)
     assert len(rows) >= len(check) - 1
-    worst = 0.0
+    worst = _worst_row_diff(rows, batch)
     for k, r in rows.items():
-        assert r["t"] == batch.t[k]
-        worst = max(worst, abs(r["lat_deg"] - batch.lat_deg[k]) * 1.1e5, abs(r["lon_deg"] - batch.lon_deg[k]) * 1.1e5,
-                    abs(r["h_m"] - batch.h_m[k]), np.max(np.abs(r["v_n_mps"] - batch.v_n[k])),
-                    abs(r["roll_deg"] - batch.roll_deg[k]), abs(r["yaw_deg"] - batch.yaw_deg[k]),
-                    abs(r["clock_bias_m"] - batch.clock_bias_m[k]), abs(r["clock_drift_mps"] - batch.clock_drift_mps[k]),
-                    np.max(np.abs(r["sigma"][0:3] - batch.sigma_pos_n_m[k])))
+        worst = max(worst, abs(r["clock_bias_m"] - batch.clock_bias_m[k]),
+                    abs(r["clock_drift_mps"] - batch.clock_drift_mps[k]))
         if multi:
             worst = max(worst, np.max(np.abs(r["isb_m"] - batch.isb_m[k])))
     assert worst <= 1e-12, worst
@@ -211,3 +226,61 @@ def test_tight_push_refuses_a_late_epoch_and_bad_rows():
         nav.push_pseudoranges(ds.imu.t[1000] + 0.1, bad)
     with pytest.raises(ValueError, match="smoother"):
         TightNavigator.from_dataset(ds, RunConfig(filter="ekf", smooth=True))
+
+
+# --- random-delay KF push API (insnav.DelayNavigator, seed 001) ----------------------------------
+
+def _delay_dataset(duration_s=30.0, seed=3):
+    """seed001-high (INS 100 Hz, GNSS 10 Hz, delays of 0..3 epochs with p = [0.2, 0.4, 0.2, 0.2])
+    cut to its first motion segments."""
+    return sim.simulate(_cut_scenario("seed001-high", duration_s), seed=seed)
+
+
+@pytest.mark.parametrize("late,hold", [(0, 0), (8, 12)])
+def test_delay_push_equals_batch(late, hold):
+    """Seed 001's random-delay KF pushed one receiver epoch at a time (with the records that
+    arrived by it; epochs `late` IMU samples late, `hold` held) gives the batch run's rows
+    (insnav.run(ds, "rdkf")) to 1e-9 (m, m/s, deg) and its update count."""
+    from insnav.filters.navigator import DelayNavigator
+
+    ds = _delay_dataset()
+    batch = insnav.run(ds, "rdkf", sanitize=False, checks=False)
+    nav = DelayNavigator.from_dataset(ds, imu_hold=hold)
+    np.testing.assert_array_equal(nav.delay_p, [0.2, 0.4, 0.2, 0.2])
+    ep = nav.epochs
+    check = set(range(0, len(ds.imu.t), 53)) | {len(ds.imu.t) - 1}
+    e = 0
+
+    def push_epochs_upto(tc):
+        nonlocal e
+        while e < len(ep) and ep[e] <= tc + 1e-6:  # an epoch at an IMU sample time belongs to that sample
+            st = nav.push_receiver_epoch(e)
+            assert st == ("outside_imu_span" if ep[e] <= ds.t0 + 1e-6 else "queued") or tc == np.inf, (e, st)
+            e += 1
+
+    rows = _drive(nav, ds, check, late, push_epochs_upto)
+    assert len(rows) >= len(check) - 1
+    worst = _worst_row_diff(rows, batch)
+    assert worst <= 1e-9, worst
+    c = nav.counters
+    assert c["updates"] == batch.summary["updates"] and c["updates"] > 200
+    assert c["held_samples"] == 0 and c["dropped_records"] == 0
+    P = nav.covariance()
+    assert P.shape == (15, 15) and np.allclose(np.sqrt(np.diag(P)), rows[len(ds.imu.t) - 1]["sigma"])
+
+
+def test_delay_push_refuses_and_bad_calls():
+    from insnav.filters.navigator import DelayNavigator
+
+    ds = _delay_dataset(duration_s=10.0)
+    nav = DelayNavigator.from_dataset(ds, delay_p=[0.5, 0.5], imu_hold=3)
+    nav.push_imu_array(ds.imu.t[:200], ds.imu.dtheta_b[:200], ds.imu.dv_b[:200])
+    assert nav.counters["samples"] == 197
+    assert nav.push_epoch(ds.imu.t[100]) == "too_old" and nav.counters["refused_records"] == 1
+    assert nav.push_epoch(ds.imu.t[198], nav.records[:2]) == "queued"
+    with pytest.raises(ValueError, match="at most 8"):
+        nav.push_epoch(ds.imu.t[199], nav.records[:9])
+    with pytest.raises(ValueError, match="delay_p"):
+        DelayNavigator.from_dataset(ds, delay_p=[0.5, 0.6])
+    with pytest.raises(ValueError, match="config key 'layout': bad value 21; allowed: 15"):
+        DelayNavigator.from_dataset(ds, layout=21)

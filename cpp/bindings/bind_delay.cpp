@@ -13,8 +13,7 @@
 
 namespace insnav::py_bind {
 
-namespace {
-
+/// The loose and delay parts of a delay run's config dict (also bind_delay_navigator.cpp).
 void delay_configs_from_dict(const py::dict& d, LooseConfig& c, DelayConfig& dc) {
   c = loose_config_from(d, "delay engine config", {"max_history_s", "checkpoint_interval", "time_tolerance"});
   dc.max_history_s = num(d, "max_history_s", dc.max_history_s);
@@ -23,6 +22,20 @@ void delay_configs_from_dict(const py::dict& d, LooseConfig& c, DelayConfig& dc)
   if (!(dc.max_history_s >= 0.0)) throw py::value_error("max_history_s must be >= 0");
   if (!(dc.checkpoint_interval > 0.0)) throw py::value_error("checkpoint_interval must be > 0");
 }
+
+/// The delay probabilities p_0..p_s: in [0, 1], summing to 1 (seed 001 eq. (4)).
+std::vector<double> delay_p_from(const DArray& delay_p) {
+  std::vector<double> p(delay_p.data(), delay_p.data() + delay_p.size());
+  double sum = 0.0;
+  for (double v : p) {
+    if (!(v >= 0.0 && v <= 1.0)) throw py::value_error("delay_p: probabilities must be in [0, 1]");
+    sum += v;
+  }
+  if (p.empty() || std::abs(sum - 1.0) > 1e-9) throw py::value_error("delay_p: expected probabilities p_0..p_s summing to 1");
+  return p;
+}
+
+namespace {
 
 struct Inputs {
   NavState nav;
@@ -121,14 +134,7 @@ void bind_delay(py::module_& m) {
         if (method == "rdkf") {
           if (layout != 15) throw py::value_error("rdkf: only the 15-state layout is instantiated");
           const StateCov<Layout15> P = state_cov_from<Layout15>(P0);
-          std::vector<double> p(delay_p.data(), delay_p.data() + delay_p.size());
-          double sum = 0.0;
-          for (double v : p) {
-            if (!(v >= 0.0 && v <= 1.0)) throw py::value_error("delay_p: probabilities must be in [0, 1]");
-            sum += v;
-          }
-          if (p.empty() || std::abs(sum - 1.0) > 1e-9)
-            throw py::value_error("delay_p: expected probabilities p_0..p_s summing to 1");
+          const std::vector<double> p = delay_p_from(delay_p);
           if (epochs.ndim() != 1) throw py::value_error("epochs: expected a 1-D array");
           const double* e = epochs.data();
           for (py::ssize_t i = 1; i < epochs.size(); ++i)

@@ -2,7 +2,8 @@
 // the stack shift; the time-tagged engine equals LooseEngine with zero delay
 // and, with delays, ends in the state LooseEngine reaches with all records on
 // time; records older than the history are refused and counted; no heap
-// allocation inside run().
+// allocation inside run(); the push API of the random-delay KF
+// (navigator.hpp DelayNavigator) gives the batch rows bit for bit.
 #include <cstdio>
 #include <memory>
 #include <vector>
@@ -12,6 +13,7 @@
 #include "insnav/core.hpp"
 #include "insnav/engine/delay_engine.hpp"
 #include "insnav/engine/loose_engine.hpp"
+#include "insnav/engine/navigator.hpp"
 #include "insnav/filter/ekf.hpp"
 #include "insnav/filter/random_delay_kf.hpp"
 #include "test_util.hpp"
@@ -263,6 +265,95 @@ void test_no_malloc() {
   EXPECT_TRUE(finite);
 }
 
+// --- 5. push API: the random-delay KF pushed epoch by epoch == the batch run ----
+template <int S>
+void test_rdkf_push_equals_batch(int hold, int late_samples) {
+  const Data d = make_data(12.0, {0, 1, 2, 1, 0, 3, 1});
+  const auto n = static_cast<std::int64_t>(d.t.size());
+  const auto m = static_cast<std::int64_t>(d.fixes.size());
+  const double p[4] = {0.3, 0.4, 0.2, 0.1};
+  DelayNavigatorConfig cfg;
+  cfg.imu_hold = hold;
+  cfg.loose.propagation_interval = 0.05;
+  cfg.loose.lever_arm_b = Vec3(0.3, -0.1, -0.5);
+  for (int i = 0; i <= S; ++i) cfg.delay_p[i] = p[i];
+  cfg.n_delay_p = S + 1;
+  double sum = 0.0;
+  for (int i = 0; i <= S; ++i) sum += p[i];
+  for (int i = 0; i <= S; ++i) cfg.delay_p[i] /= sum;
+  Out batch(n, m);
+  std::vector<double> bsig(15 * (n + 1));
+  batch.o.sigma = bsig.data();
+  auto eng = std::make_unique<RandomDelayEngine<Layout15, S>>(cfg.imu_model, cfg.loose, cfg.delay, cfg.delay_p.data(),
+                                                             cfg.n_delay_p);
+  eng->run(d.init, P0(), ImuCorrection{}, n, d.t.data(), d.dth.data(), d.dv.data(), m, d.fixes.data(), d.t_arr.data(),
+           static_cast<std::int64_t>(d.epochs.size()), d.epochs.data(), batch.o);
+
+  auto nav = std::make_unique<DelayNavigator<Layout15, S>>(cfg, d.init, P0());
+  const double tol = cfg.delay.time_tolerance;
+  std::int64_t g = 0;
+  size_t e = 0;
+  double worst = 0.0;
+  int compared = 0;
+  auto compare = [&](std::int64_t i) {
+    const auto r = nav->solution();
+    double w = std::abs(r.t - batch.t[i]);
+    for (int j = 0; j < 3; ++j) {
+      w = std::max(w, std::abs(r.llh[j] - batch.llh[3 * i + j]) * (j < 2 ? 6.4e6 : 1.0));
+      w = std::max(w, std::abs(r.v_n[j] - batch.v[3 * i + j]));
+    }
+    for (int j = 0; j < 15; ++j) w = std::max(w, std::abs(r.sigma[j] - bsig[15 * i + j]));
+    worst = std::max(worst, w);
+    ++compared;
+  };
+  const long before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);
+  auto push_epochs_upto = [&](double tc) {
+    for (; e < d.epochs.size() && d.epochs[e] <= tc; ++e) {
+      const std::int64_t g0 = g;
+      while (g < m && d.t_arr[g] <= d.epochs[e] + tol) ++g;
+      nav->push_epoch(d.epochs[e], d.fixes.data() + g0, static_cast<int>(g - g0));
+    }
+  };
+  for (std::int64_t k = 0; k < n; ++k) {
+    push_epochs_upto(d.t[std::max<std::int64_t>(0, k - late_samples)] + tol);
+    nav->push_imu(d.t[k], Vec3(d.dth[3 * k], d.dth[3 * k + 1], d.dth[3 * k + 2]),
+                  Vec3(d.dv[3 * k], d.dv[3 * k + 1], d.dv[3 * k + 2]));
+    const std::int64_t done = nav->samples();
+    if (done > 0 && done == k + 1 - hold) compare(done - 1);
+  }
+  push_epochs_upto(kInf);
+  nav->flush();
+  compare(n - 1);
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(g_eigen_asserts == before);  // no heap allocation while pushing
+  std::printf("rdkf S=%d push vs batch (hold %d, %d samples late): max difference %.3g over %d rows, updates %d / %d\n",
+              S, hold, late_samples, worst, compared, nav->updates(), batch.o.updates);
+  EXPECT_TRUE(worst == 0.0);
+  EXPECT_TRUE(compared >= n - hold);
+  EXPECT_TRUE(nav->updates() == batch.o.updates && batch.o.updates > 50);
+  EXPECT_TRUE(nav->refused_records() == 0 && nav->dropped_records() == 0);
+}
+
+void test_rdkf_push_refuses() {
+  const Data d = make_data(2.0, {0, 1});
+  DelayNavigatorConfig cfg;
+  cfg.imu_hold = 2;
+  cfg.delay_p[0] = 0.5;
+  cfg.delay_p[1] = 0.5;
+  cfg.n_delay_p = 2;
+  auto nav = std::make_unique<DelayNavigator<Layout15, 1>>(cfg, d.init, P0());
+  for (int k = 0; k < 50; ++k)
+    nav->push_imu(d.t[k], Vec3(d.dth[3 * k], d.dth[3 * k + 1], d.dth[3 * k + 2]),
+                  Vec3(d.dv[3 * k], d.dv[3 * k + 1], d.dv[3 * k + 2]));
+  EXPECT_TRUE(nav->push_epoch(d.init.t, d.fixes.data(), 1) == RecordStatus::kOutsideImuSpan);
+  EXPECT_TRUE(nav->push_epoch(0.2, d.fixes.data(), 1) == RecordStatus::kTooOld);  // integrated long ago
+  EXPECT_TRUE(nav->push_epoch(d.t[48], d.fixes.data(), 1) == RecordStatus::kNotUsed);  // a held sample
+  EXPECT_TRUE(nav->refused_records() == 2);
+  nav->flush();
+  EXPECT_TRUE(nav->pending_records() == 0 && nav->updates() == 1);
+}
+
 }  // namespace
 
 int main() {
@@ -273,5 +364,9 @@ int main() {
   test_exact_with_delays_ends_like_offline();
   test_exact_refuses_old_records();
   test_no_malloc();
+  test_rdkf_push_equals_batch<1>(0, 0);
+  test_rdkf_push_equals_batch<3>(0, 0);
+  test_rdkf_push_equals_batch<3>(12, 8);
+  test_rdkf_push_refuses();
   TEST_MAIN_END();
 }

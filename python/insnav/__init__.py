@@ -35,6 +35,7 @@ _LAZY = {
     "run": "insnav.filters",
     "Navigator": "insnav.filters.navigator",
     "TightNavigator": "insnav.filters.navigator",
+    "DelayNavigator": "insnav.filters.navigator",
     "Solution": "insnav.filters.solution",
     "load_solution": "insnav.filters.solution",
     "RunConfig": "insnav.config",

@@ -265,6 +265,28 @@ class TightNavigator:
     def counters(self) -> dict[str, Any]: ...
     def last_epoch(self) -> dict[str, Any]: ...  # status, nis
 
+class DelayNavigator:
+    """Real-time random-delay KF navigator (engine/navigator.hpp); use insnav.DelayNavigator."""
+    def __init__(
+        self,
+        layout: int,  # 15
+        init: npt.ArrayLike,  # (10,): t0, lat, lon, h, vN, vE, vD, roll, pitch, yaw (SI)
+        P0: npt.ArrayLike,  # (15, 15)
+        imu_correction: npt.ArrayLike,  # (12,)
+        imu_model: dict[str, Any],
+        config: dict[str, Any],  # run_delay's engine config
+        delay_p: npt.ArrayLike,  # (s + 1,) P(delay = i epochs), s = 1..4 (one value: s = 1)
+        imu_hold: int = 0,  # IMU samples held back for late epochs, 0..256
+    ) -> None: ...
+    def push_imu(self, t: float, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> bool: ...
+    def push_imu_array(self, t: npt.ArrayLike, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> int: ...
+    def push_epoch(self, t: float, records: npt.ArrayLike) -> int: ...  # (k <= 8, 14) run_delay's gnss rows; RecordStatus code
+    def flush(self) -> None: ...
+    def solution(self) -> dict[str, Any]: ...  # t, lat, lon [rad], h, v_n, rpy [rad], sigma, imu_err
+    def covariance(self) -> np.ndarray: ...
+    def counters(self) -> dict[str, Any]: ...
+    def last_record(self) -> dict[str, Any]: ...  # status, nis, innovation (6)
+
 # carrier-phase RTK (bind_rtk.cpp)
 RTK_ROW_COLS: int
 RTK_MAX_AMBIGUITIES: int

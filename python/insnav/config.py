@@ -209,6 +209,10 @@ class LeverArmEstimation(TomlTable):
         return self
 
 
+#: the self-calibration tables of a run (RunConfig fields, TOML tables of the same names)
+_SELFCAL_TABLES = (("time", TimeOffset), ("lever_arm", LeverArmEstimation))
+
+
 class _prefixed:
     """Prefix a ConfigError raised inside the block with ``source: `` (no-op for None)."""
 
@@ -679,6 +683,12 @@ class RunConfig:
         Overrides of the input repairs' limits (``[sanitize]`` in the TOML;
         ``insnav.filters.sanitize.DEFAULTS``: ``max_gap_s``, ``gap_factor``,
         ``max_rate_rps``, ``max_accel_mps2``, ``min_h_m``, ``max_h_m``).
+    options : dict
+        ``[options]``: the filter family's own options (``--option KEY=VALUE``;
+        :meth:`insnav.registry.FilterSpec.setting_options`, e.g.
+        ``elevation_mask_deg`` for the tight filters, ``particles`` for the
+        seed 004 filters, ``delay_p`` for the delay filters); the keyword
+        options of :func:`insnav.run` override them.
     """
 
     filter: str = "ekf"
@@ -723,6 +733,7 @@ class RunConfig:
     init_sigma_gyro_scale: list | None = None
     time: TimeOffset = field(default_factory=TimeOffset)
     lever_arm: LeverArmEstimation = field(default_factory=LeverArmEstimation)
+    options: dict = field(default_factory=dict)
 
     @property
     def selfcal(self) -> bool:
@@ -800,15 +811,10 @@ class RunConfig:
                                                                " > 1" if k == "gap_factor" else " > 0"))
         if not isinstance(self.smooth, (bool, np.bool_)):
             bad("smooth", self.smooth, "true or false")
-        if self.smooth and self.filter not in ("ekf", "rbukf", "ukf"):
-            bad("smooth", self.smooth, f"the RTS smoother runs with the ekf, rbukf or ukf (not {self.filter!r})")
-        if self.constraints.use and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf", "ukf")):
-            bad("constraints.use", self.constraints.use,
-                f"vehicle constraints with loose ekf, rbukf or ukf only (not {self.coupling} {self.filter!r})")
         if self.constraints.odo_scale is True and self.layout != 15:
             bad("constraints.odo_scale", True, "true only with layout = 15 (the 16-state odometer layout "
                 "is the 15 states + the scale factor)")
-        for key, cls in (("time", TimeOffset), ("lever_arm", LeverArmEstimation)):
+        for key, cls in _SELFCAL_TABLES:
             v = getattr(self, key)
             if isinstance(v, dict):
                 v = cls.from_dict(v)
@@ -825,6 +831,22 @@ class RunConfig:
             bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
         if self.layout not in LAYOUTS:
             bad("layout", self.layout, "15, 21")
+        facts = spec.facts(self.coupling)
+        if self.smooth and not facts.smoothable:
+            where = ", ".join(f"{n} {c}" for n, s_ in FILTERS.items() for c in s_.smoothable)
+            bad("smooth", self.smooth, f"false with filter {self.filter!r} {self.coupling} (the RTS smoother runs "
+                                       f"with: {where})")
+        if set(self.constraints.use) - set(facts.constraints):
+            where = ", ".join(f"{n} {c}" for n, s_ in FILTERS.items() for c in s_.constraints)
+            bad("constraints.use", self.constraints.use,
+                f"vehicle constraints with {where} only (not {self.coupling} {self.filter!r})")
+        if not isinstance(self.options, dict):
+            bad("options", self.options, "an [options] table of the filter family's options")
+        settable = spec.setting_options(self.coupling)
+        for k in self.options:
+            if k not in settable:
+                raise ConfigError(f"unknown key 'options.{k}' for filter {self.filter!r} {self.coupling}"
+                                  + (_suggest(k, settable) if settable else "; it takes no options"))
         if self.tdcp.enabled and (self.time.estimate_offset or self.lever_arm.estimate):
             bad("tdcp.enabled", True, "false together with time.estimate_offset or lever_arm.estimate (the TDCP "
                 "rows carry no self-calibration columns)")
@@ -926,52 +948,42 @@ def _suggest(key: str, known) -> str:
     return f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
 
 
+#: the option tables of a run TOML that are RunConfig fields of their own dataclass
+#: ([imu] is read apart: user units)
+_OPTION_TABLES = _SELFCAL_TABLES + (("tdcp", Tdcp), ("robust", Robust), ("constraints", Constraints))
+
+
+def _table_from_dict(key: str, value, cls, source: str):
+    """The dataclass ``cls`` from the TOML table ``[key]``: a one-line ConfigError for a
+    value that is not a table or an unknown key (with a did-you-mean)."""
+    if not isinstance(value, dict):
+        raise ConfigError(f"{source}: key '{key}': bad value {value!r}; allowed: a [{key}] table")
+    if issubclass(cls, TomlTable):
+        return cls.from_dict(value, source)
+    known = {f.name for f in dataclasses.fields(cls)}
+    for k in value:
+        if k not in known:
+            raise ConfigError(f"{source}: unknown key '{key}.{k}'{_suggest(k, known)}")
+    return cls(**value)
+
+
 def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     """Build a :class:`RunConfig` from a (TOML) dict, rejecting unknown keys."""
     d = dict(d)
     imu_d = d.pop("imu", None)
-    con_d = d.pop("constraints", None)
-    rob_d = d.pop("robust", None)
-    tdcp_d = d.pop("tdcp", None)
     for table in ("rtk", "rtk_engine"):  # coupling = "rtk": read by insnav.filters.rtk_ins (the CLI passes them)
         d.pop(table, None)
-    tables = {}
-    for key, cls in (("time", TimeOffset), ("lever_arm", LeverArmEstimation)):
-        t = d.pop(key, None)
-        if t is not None:
-            if not isinstance(t, dict):
-                raise ConfigError(f"{source}: key '{key}': bad value {t!r}; allowed: a [{key}] table")
-            tables[key] = cls.from_dict(t, source)
-    tabled = {"imu", "constraints", "robust", "tdcp", "time", "lever_arm"}
+    raw_tables = {key: d.pop(key) for key, _ in _OPTION_TABLES if key in d}
+    if "options" in d and not isinstance(d["options"], dict):
+        raise ConfigError(f"{source}: key 'options': bad value {d['options']!r}; allowed: an [options] table")
+    tabled = {"imu"} | {key for key, _ in _OPTION_TABLES}
     names = {f.name for f in dataclasses.fields(RunConfig)} - tabled
     for k in d:
         if k not in names:
             raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | tabled)}")
+    tables = {key: _table_from_dict(key, raw_tables[key], cls, source)
+              for key, cls in _OPTION_TABLES if key in raw_tables}
     cfg = RunConfig(**d, **tables)
-    if tdcp_d is not None:
-        if not isinstance(tdcp_d, dict):
-            raise ConfigError(f"{source}: key 'tdcp': bad value {tdcp_d!r}; allowed: a table")
-        known = {f.name for f in dataclasses.fields(Tdcp)}
-        for k in tdcp_d:
-            if k not in known:
-                raise ConfigError(f"{source}: unknown key 'tdcp.{k}'{_suggest(k, known)}")
-        cfg.tdcp = Tdcp(**tdcp_d)
-    if rob_d is not None:
-        if not isinstance(rob_d, dict):
-            raise ConfigError(f"{source}: key 'robust': bad value {rob_d!r}; allowed: a table")
-        known = {f.name for f in dataclasses.fields(Robust)}
-        for k in rob_d:
-            if k not in known:
-                raise ConfigError(f"{source}: unknown key 'robust.{k}'; known keys: {', '.join(sorted(known))}")
-        cfg.robust = Robust(**rob_d)
-    if con_d is not None:
-        if not isinstance(con_d, dict):
-            raise ConfigError(f"{source}: key 'constraints': bad value {con_d!r}; allowed: a table")
-        known = {f.name for f in dataclasses.fields(Constraints)}
-        for k in con_d:
-            if k not in known:
-                raise ConfigError(f"{source}: unknown key 'constraints.{k}'{_suggest(k, known)}")
-        cfg.constraints = Constraints(**con_d)
     if imu_d is not None:
         if not isinstance(imu_d, dict):
             raise ConfigError(f"{source}: key 'imu': bad value {imu_d!r}; allowed: a table of IMU noise keys")

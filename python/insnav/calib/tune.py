@@ -497,7 +497,8 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     datasets = [sanitize_dataset(d, {**cfg.sanitize} or True)[0] for d in datasets]
     noise = base_noise(datasets[0], cfg)
     segs = [_cut(d, t) for d, t in zip(datasets, splits)]
-    runner = filter_spec(cfg.filter).runner(cfg.coupling)
+    spec = filter_spec(cfg.filter)
+    options = spec.options_class(cfg.coupling)(**cfg.options)  # the config's [options], as insnav.run
     seg = segs[0]
     dt = float(np.median(np.diff(np.asarray(seg.imu.t[:1000], float)))) if len(seg.imu.t) > 2 else 1.0
     decim = max(1, int(round(1.0 / dt))) if dt > 0 else 1
@@ -511,7 +512,7 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         ll, n = 0.0, 0
         for sg, ts in zip(segs, splits):
             try:
-                sol = runner(sg, c)
+                sol = spec.run(c.coupling, sg, c, options)
             except (ValueError, FloatingPointError, RuntimeError):
                 ll, n = -math.inf, 0  # a setting the filter cannot run with (e.g. a covariance gone non-finite)
                 break

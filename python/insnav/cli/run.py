@@ -58,7 +58,10 @@ def add_run_parser(sub) -> None:
                        description="Run a closed-loop GNSS/INS filter.", epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", nargs="?", help="dataset directory written by `insnav simulate` (insnav format)")
-    p.add_argument("--format", choices=("insnav", "kfgins", "rinex", "csv"), default="insnav")
+    from ..io.input_formats import INPUT_FORMATS
+
+    p.add_argument("--format", choices=tuple(INPUT_FORMATS), default="insnav",
+                   help="; ".join(f"{f.name}: {f.summary}" for f in INPUT_FORMATS.values()))
     p.add_argument("--filter", default=None, metavar="NAME",
                    help="default: the config's, else ekf.  "
                         + "; ".join(f"{n} ({'/'.join(s.couplings)}, {s.paper}): {s.summary}" for n, s in FILTERS.items()))
@@ -92,6 +95,10 @@ def add_run_parser(sub) -> None:
     p.add_argument("--tdcp", action="store_true",
                    help="tight ekf on RINEX data: add time-differenced carrier-phase rows (rover only, no base; "
                         "settings in the config's [tdcp] table)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="an option of the filter's family (the config's [options] table; repeatable), VALUE a "
+                        "TOML value: e.g. elevation_mask_deg=15 (tight), particles=500 (seed 004), "
+                        "delay_p=[0.7,0.3] (delay filters)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", default=None,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
@@ -131,6 +138,23 @@ def add_run_parser(sub) -> None:
     p.set_defaults(func=cmd_run)
 
 
+def cli_options(pairs) -> dict:
+    """The ``--option KEY=VALUE`` pairs as a dict (VALUE read as a TOML value, else as text)."""
+    import tomllib
+
+    out = {}
+    for pair in pairs or ():
+        key, sep, text = pair.partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise UserError(f"--option {pair}: expected KEY=VALUE (e.g. elevation_mask_deg=15)")
+        try:
+            out[key] = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key] = text.strip()
+    return out
+
+
 def resolved_config_toml(cfg: RunConfig) -> str:
     """The configuration as TOML (SI imu values under [imu_si], informational)."""
     import dataclasses
@@ -138,7 +162,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
     lines = ["# insnav resolved run configuration"]
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize", "time", "lever_arm") or v is None:
+        if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize", "time", "lever_arm", "options") or v is None:
             continue
         lines.append(f"{f.name} = {toml_value(v)}")
     if cfg.sanitize:
@@ -154,15 +178,19 @@ def resolved_config_toml(cfg: RunConfig) -> str:
                 continue
             else:
                 lines.append(f"{f.name} = {toml_value(v)}")
-    from ..config import LeverArmEstimation, Robust, TimeOffset
+    from ..config import _SELFCAL_TABLES, Robust
 
-    for name, default in (("time", TimeOffset()), ("lever_arm", LeverArmEstimation())):
-        if getattr(cfg, name) != default:  # the self-calibration tables, when not the defaults
+    for name, cls in _SELFCAL_TABLES:
+        if getattr(cfg, name) != cls():  # the self-calibration tables, when not the defaults
             lines.append(_table_toml(name, getattr(cfg, name)).rstrip("\n"))
     if cfg.coupling == "tight" or cfg.robust != Robust():
         lines.append("\n[robust]")
         lines += [f"{f.name} = {toml_value(getattr(cfg.robust, f.name))}" for f in dataclasses.fields(cfg.robust)
                   if getattr(cfg.robust, f.name) is not None]  # screening unset: the default (on, or the preset's)
+    if cfg.options:
+        from .._toml import dumps_toml
+
+        lines.append("\n" + dumps_toml({"options": cfg.options}).strip("\n"))
     if cfg.tdcp.enabled:
         lines.append("\n[tdcp]")
         lines += [f"{f.name} = {toml_value(getattr(cfg.tdcp, f.name))}" for f in dataclasses.fields(cfg.tdcp)]
@@ -571,48 +599,24 @@ def cmd_run(args) -> int:
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
-    rinex_opts = None
-    csv_tables = None
     try:
-        if args.format == "rinex":
-            missing = [n for n in ("obs", "nav", "imu") if not getattr(args, n)]
-            if missing:
-                raise UserError("--format rinex needs " + ", ".join(f"--{n}" for n in missing))
-            if args.dataset:
-                raise UserError("--format rinex reads --obs/--nav/--imu; do not give a dataset directory")
-            from ..io.rinex_dataset import load_rinex_run
+        from ..io.input_formats import input_format
 
-            ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=args.imu_tag)
-            rinex_opts = ds.options
-        elif args.format == "csv":
-            missing = [n for n in ("imu", "gnss", "config") if not getattr(args, n)]
-            if missing:
-                raise UserError("--format csv needs " + ", ".join(f"--{n}" for n in missing)
-                                + " (the [imu] and [gnss] tables of --config map the files)")
-            if args.dataset:
-                raise UserError("--format csv reads --imu/--gnss; do not give a dataset directory")
-            from ..io.csv_dataset import load_csv_run
-
-            ds, cfg = load_csv_run(args.imu, args.gnss, args.config, imu_tag=args.imu_tag)
+        fmt = input_format(args.format)
+        try:
+            fmt.check(args)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+        loaded = fmt.load(args)
+        ds, cfg = loaded.dataset, loaded.config
+        rinex_opts, csv_tables = loaded.tables.get("rinex"), loaded.tables.get("csv")
+        if csv_tables is not None:
             print(ds.info["initial_state"])
-            csv_tables = ds.info["tables"]
-        elif args.format == "kfgins":
-            if not args.config:
-                raise UserError("--format kfgins needs --config KF-GINS.yaml")
-            from ..io.kfgins_dataset import load_kfgins
-
-            ds, cfg = load_kfgins(args.config, args.imu, args.gnss)
-            if args.run_config:
-                cfg = _overlay_run_config(cfg, args.run_config)
-        else:
-            if not args.dataset:
-                raise UserError("give a dataset directory (or --format kfgins --config FILE)")
-            if not Path(args.dataset).is_dir():
-                raise UserError(f"dataset directory not found: {args.dataset}")
-            ds = insnav.load_dataset(args.dataset)
-            cfg = load_config(args.config) if args.config else RunConfig()
+        if args.format == "kfgins" and args.run_config:
+            cfg = _overlay_run_config(cfg, args.run_config)
         if args.seed is not None:
             cfg.init_seed = args.seed
+        cfg.options = {**cfg.options, **cli_options(args.option)}
         if args.smooth:
             cfg.smooth = True
         if args.tdcp:

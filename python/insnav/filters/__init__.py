@@ -70,7 +70,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     **overrides
         Any :class:`RunConfig` field (``init_seed=3``), or an option of the
         filter's family (``delay_p=`` for the delay filters, ``particles=`` for
-        the seed 004 filters; :attr:`FilterSpec.options`).
+        the seed 004 filters; :meth:`FilterSpec.options_for`), over the
+        config's ``[options]``.  The family's runner receives them as one
+        options dataclass (:meth:`FilterSpec.options_class`, derived from the
+        runner's signature): every runner is called as ``(dataset, cfg, options)``.
 
     Returns
     -------
@@ -91,7 +94,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         how = " or ".join(_ADVERB[c] for c in spec.couplings)
         raise ValueError(f"filter {spec.name!r} runs {how} coupled only (coupling={spec.couplings[0]!r})")
     mine = spec.options_for(cfg.coupling)
-    options = {k: overrides.pop(k) for k in list(overrides) if k in mine}
+    options = {k: overrides.pop(k) for k in list(overrides) if k in mine}  # over the config's [options]
     for k, v in overrides.items():
         if not hasattr(cfg, k):
             owners = [f"{s.name!r} {c}" for s in FILTERS.values() for c in s.couplings if k in s.options_for(c)]
@@ -124,7 +127,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
             from .checks import check_dataset
 
             check_dataset(inner if inner is not None else dataset, max_time_offset_s=cfg.max_time_offset_s)
-        sol = spec.runner(cfg.coupling)(dataset, cfg, **options)
+        sol = spec.run(cfg.coupling, dataset, cfg, spec.options_class(cfg.coupling)(**{**cfg.options, **options}))
     if report is not None:
         sol.summary["sanitize"] = report
     if cfg.coupling != "gnss":

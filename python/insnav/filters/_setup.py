@@ -10,7 +10,7 @@ from .._validate import as_float_array, check_finite, check_increasing
 from ..config import GATE_PROB_DEFAULT, RunConfig
 from ..data.nav import NavState
 from ..earth import radii
-from ..registry import filter_spec
+from ..registry import FILTERS, filter_spec
 from ..units import DEG
 
 __all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_sigmas", "initial_imu_correction",
@@ -145,7 +145,7 @@ def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **
     out = dict(lever_arm_b=lever_arm(dataset, cfg), propagation_interval=cfg.propagation_interval_s,
                cycle_period=outage_cycle_period(cfg.filter, cycle), **gate_config(cfg, dataset),
                output_decimation=int(cfg.output_decimation))
-    if cfg.filter not in ("ekf", "kf", "rdkf", "exact"):
+    if cfg.filter not in FILTERS or FILTERS[cfg.filter].ut_params:  # the sigma-point filters' UT
         out.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
                    ut_kappa=(3.0 - layout) if cfg.ut_kappa is None else cfg.ut_kappa)
     out.update(extra)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -184,18 +185,16 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
                max_history_s=max_history_s, checkpoint_interval_s=checkpoint_interval_s, **overrides)
 
 
-def run_delay(dataset, cfg: RunConfig, *, delay_p=None, max_history_s: float = 1.0,
-              checkpoint_interval_s: float | None = None) -> Solution:
-    """The registry's runner (``insnav.run(ds, "kf" | "rdkf" | "exact")``): ``cfg.filter``
-    over the arrival stream; the options as :func:`run_delayed`'s."""
-    filter = cfg.filter
-    if filter not in DELAY_FILTERS:
-        raise ValueError(f"run_delay: filter {filter!r}; allowed: {', '.join(DELAY_FILTERS)}")
-    cfg = dataclasses.replace(cfg, coupling="loose")
-    cfg.validate()
-
-    t, dth, dv = imu_arrays(dataset)
-
+def delay_engine_args(dataset, cfg: RunConfig, delay_p=None, imu=None) -> SimpleNamespace:
+    """The compiled delay engine's arguments for ``dataset`` under ``cfg``, shared by
+    :func:`run_delay` and the push API (:class:`insnav.DelayNavigator`): the records
+    in arrival order (``rec`` (M, 14): t_valid, t_arrival, lat, lon [rad], h [m],
+    v_n [m/s], position and velocity 1-sigma) and ``order`` (record index of each
+    row), the receiver ``epochs`` [s], the initial state vector ``init``, ``P0``,
+    the IMU correction and model, the engine ``config`` dict, the delay
+    probabilities ``p`` (the scenario's when ``delay_p`` is None), and
+    ``summary`` (filter, layout, what the filter receives)."""
+    t = imu[0] if imu is not None else imu_arrays(dataset)[0]
     g = dataset.gnss
     m = len(g)
     if m:
@@ -211,7 +210,6 @@ def run_delay(dataset, cfg: RunConfig, *, delay_p=None, max_history_s: float = 1
     else:
         rec = np.zeros((0, 14))
         order = np.zeros(0, int)
-    t_valid_sorted = rec[:, 0]
 
     rng = np.random.default_rng(cfg.init_seed)
     init, sig0 = initial_state(dataset, cfg, rng)
@@ -222,26 +220,49 @@ def run_delay(dataset, cfg: RunConfig, *, delay_p=None, max_history_s: float = 1
     period = float(np.median(np.diff(tv_unique))) if len(tv_unique) > 1 else 1.0
     core_cfg = engine_config(dataset, cfg, tv_unique, n, use_position=cfg.use_position,
                              use_velocity=cfg.use_velocity)
-    init_vec = init_vector(dataset, init)
-    summary = dict(filter=filter, coupling="loose", layout=n, gnss_records=m)
+    summary = dict(filter=cfg.filter, coupling="loose", layout=n, gnss_records=m)
     epochs = receiver_epochs(rec[:, 0], rec[:, 1], scenario_gnss_period_s(dataset))
     summary.update(_arrival_counts(rec, epochs, float(dataset.t0), float(t[-1]) if t.size else float(dataset.t0)))
+    p = scenario_delay_p(dataset) if delay_p is None else np.asarray(delay_p, dtype=float)
+    return SimpleNamespace(rec=rec, order=order, epochs=epochs, init=init_vector(dataset, init), P0=P0,
+                           imu_correction=initial_imu_correction(cfg), imu_model=noise.as_core_dict(),
+                           config=core_cfg, p=p, layout=n, period_s=period, summary=summary)
+
+
+def check_rdkf(p: np.ndarray, layout: int) -> None:
+    """The random-delay KF's instantiations: 1..5 probabilities, the 15-state layout."""
+    if p.ndim != 1 or not 1 <= p.size <= MAX_DELAY_EPOCHS + 1:
+        raise ValueError(f"delay_p: expected 1..{MAX_DELAY_EPOCHS + 1} probabilities, got {p!r}")
+    if layout != 15:
+        raise ValueError("rdkf: only the 15-state layout is available")
+
+
+def run_delay(dataset, cfg: RunConfig, *, delay_p=None, max_history_s: float = 1.0,
+              checkpoint_interval_s: float | None = None) -> Solution:
+    """The registry's runner (``insnav.run(ds, "kf" | "rdkf" | "exact")``): ``cfg.filter``
+    over the arrival stream; the options as :func:`run_delayed`'s."""
+    filter = cfg.filter
+    if filter not in DELAY_FILTERS:
+        raise ValueError(f"run_delay: filter {filter!r}; allowed: {', '.join(DELAY_FILTERS)}")
+    cfg = dataclasses.replace(cfg, coupling="loose")
+    cfg.validate()
+
+    t, dth, dv = imu_arrays(dataset)
+    a = delay_engine_args(dataset, cfg, delay_p, (t, dth, dv))
+    rec, order, epochs, n, core_cfg, summary = a.rec, a.order, a.epochs, a.layout, a.config, a.summary
+    init_vec, P0, noise_d, p = a.init, a.P0, a.imu_model, a.p
+    t_valid_sorted = rec[:, 0]
     if filter == "kf":
         gnss13 = np.ascontiguousarray(np.delete(rec, 0, axis=1))  # t := t_arrival
-        out = _core.run_loose("ekf", n, t, dth, dv, gnss13, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
-                              core_cfg)
+        out = _core.run_loose("ekf", n, t, dth, dv, gnss13, init_vec, P0, a.imu_correction, noise_d, core_cfg)
     else:
-        p = scenario_delay_p(dataset) if delay_p is None else np.asarray(delay_p, dtype=float)
         if filter == "rdkf":
-            if p.ndim != 1 or not 1 <= p.size <= MAX_DELAY_EPOCHS + 1:
-                raise ValueError(f"delay_p: expected 1..{MAX_DELAY_EPOCHS + 1} probabilities, got {p!r}")
-            if n != 15:
-                raise ValueError("rdkf: only the 15-state layout is available")
+            check_rdkf(p, n)
             summary["delay_p"] = p.tolist()
         else:
             core_cfg.update(max_history_s=float(max_history_s),
-                            checkpoint_interval=float(checkpoint_interval_s or period))
-        out = _core.run_delay(filter, n, t, dth, dv, rec, epochs, init_vec, P0, initial_imu_correction(cfg), noise.as_core_dict(),
+                            checkpoint_interval=float(checkpoint_interval_s or a.period_s))
+        out = _core.run_delay(filter, n, t, dth, dv, rec, epochs, init_vec, P0, a.imu_correction, noise_d,
                               core_cfg, p if filter == "rdkf" else np.ones(1))
         for k in ("refused_too_old", "replays", "replayed_samples", "filter_updates", "history_s",
                   "max_delay_epochs"):

@@ -3,7 +3,10 @@
 :class:`Navigator` is the push API for a ROS-style node or any program that
 receives IMU samples and GNSS fixes as they happen, instead of whole files:
 ``push_imu``, ``push_gnss_fix``, ``push_constraint``, then ``state()`` /
-``covariance()`` whenever an estimate is wanted.  It drives the same compiled
+``covariance()`` whenever an estimate is wanted.  :class:`TightNavigator`
+takes epochs of pseudoranges instead of fixes, :class:`DelayNavigator` (seed
+001's random-delay KF) the receiver epochs with the fixes that arrived late by
+them.  It drives the same compiled
 engine as :func:`insnav.run` (``cpp/include/insnav/engine/navigator.hpp``):
 pushed in time order, its rows equal the batch run's bit for bit.
 
@@ -31,7 +34,7 @@ from ..data.nav import NavState
 from ..units import DEG
 from .loose import loose_engine_args
 
-__all__ = ["Navigator", "TightNavigator"]
+__all__ = ["Navigator", "TightNavigator", "DelayNavigator"]
 
 _RAD2DEG = 180.0 / np.pi  # the batch run's conversion (_core.nav_rows_to_degrees), to the bit
 
@@ -63,7 +66,38 @@ def _state_dict(s: dict) -> dict:
                 acc_bias_mps2=err[0:3], gyro_bias_rps=err[3:6], acc_scale=err[6:9], gyro_scale=err[9:12])
 
 
-class Navigator:
+class _PushApi:
+    """The calls every push navigator shares (``self._nav`` is its ``_core`` object)."""
+
+    _nav = None
+
+    def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
+        """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
+        False (ignored) when ``t`` does not increase."""
+        return bool(self._nav.push_imu(float(t), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
+
+    def push_imu_array(self, t, dtheta_b, dv_b) -> int:
+        """Many IMU increments at once (N,), (N,3), (N,3); returns how many were taken."""
+        return int(self._nav.push_imu_array(np.asarray(t, float), np.asarray(dtheta_b, float),
+                                            np.asarray(dv_b, float)))
+
+    def flush(self) -> None:
+        """Integrate the held IMU samples (at the end of a run)."""
+        self._nav.flush()
+
+    def covariance(self) -> np.ndarray:
+        """The error-state covariance (layout order, SI: m, m/s, rad, m/s^2, rad/s; clock states
+        in m and m/s; for the random-delay KF the newest block of its stack)."""
+        return self._nav.covariance()
+
+    @property
+    def counters(self) -> dict:
+        """samples integrated, held samples, pending records (epochs), updates, rejected,
+        refused records, and the family's own counts."""
+        return self._nav.counters()
+
+
+class Navigator(_PushApi):
     """Loosely coupled EKF / RB-UKF / UKF fed one sample at a time.
 
     Parameters
@@ -131,16 +165,6 @@ class Navigator:
         self._row = np.empty(13)
 
     # --- input -----------------------------------------------------------------------------
-    def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
-        """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
-        False (ignored) when ``t`` does not increase."""
-        return bool(self._nav.push_imu(float(t), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
-
-    def push_imu_array(self, t, dtheta_b, dv_b) -> int:
-        """Many IMU increments at once (N,), (N,3), (N,3); returns how many were taken."""
-        return int(self._nav.push_imu_array(np.asarray(t, float), np.asarray(dtheta_b, float),
-                                            np.asarray(dv_b, float)))
-
     def push_gnss_fix(self, t: float, lat_deg: float, lon_deg: float, h_m: float, sigma_pos_n_m,
                       v_n_mps=None, sigma_vel_n_mps=None) -> str:
         """A GNSS antenna fix valid at ``t`` [s]: position (deg, deg, ellipsoidal m)
@@ -165,10 +189,6 @@ class Navigator:
         flags = sum(CONSTRAINT_KINDS[k] for k in set(names))
         return RECORD_STATUS[self._nav.push_constraint(float(t), flags, float(speed_mps))]
 
-    def flush(self) -> None:
-        """Integrate the held IMU samples (at the end of a run)."""
-        self._nav.flush()
-
     # --- output ----------------------------------------------------------------------------
     def state(self) -> dict:
         """The current solution after the last integrated sample: ``t`` [s],
@@ -181,10 +201,6 @@ class Navigator:
             out["odo_scale"], out["sigma_odo_scale"] = s["odo_scale"]
         return out
 
-    def covariance(self) -> np.ndarray:
-        """The error-state covariance (layout order, SI: m, m/s, rad, m/s^2, rad/s)."""
-        return self._nav.covariance()
-
     def last_fix(self) -> dict:
         """The last fix applied or refused by the gate: ``status``, ``nis``,
         ``innovation`` (INS - GNSS: N, E, D [m], vN, vE, vD [m/s])."""
@@ -192,13 +208,9 @@ class Navigator:
         d["status"] = RECORD_STATUS[d["status"]]
         return d
 
-    @property
-    def counters(self) -> dict:
-        """samples integrated, held samples, pending records, updates, rejected, refused records."""
-        return self._nav.counters()
 
 
-class TightNavigator:
+class TightNavigator(_PushApi):
     """Tightly coupled EKF / RB-UKF / UKF (17 states, or 20 with the
     inter-system biases of several constellations) fed one IMU sample and one
     GNSS epoch of pseudoranges / pseudorange rates at a time.
@@ -241,16 +253,6 @@ class TightNavigator:
                                          a.imu_model, a.config, int(imu_hold))
         return self
 
-    def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
-        """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
-        False (ignored) when ``t`` does not increase."""
-        return bool(self._nav.push_imu(float(t), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
-
-    def push_imu_array(self, t, dtheta_b, dv_b) -> int:
-        """Many IMU increments at once (N,), (N,3), (N,3); returns how many were taken."""
-        return int(self._nav.push_imu_array(np.asarray(t, float), np.asarray(dtheta_b, float),
-                                            np.asarray(dv_b, float)))
-
     def push_pseudoranges(self, t: float, sats, system=None, prn=None) -> str:
         """One GNSS epoch valid at ``t`` [s]: ``sats`` (k, 12) rows of pseudorange [m],
         pseudorange rate [m/s] (NaN: absent), satellite ECEF position [m] and velocity
@@ -273,10 +275,6 @@ class TightNavigator:
         sys_ = system_index(inp.system[b:f]) if f > b else np.zeros(0, np.int64)
         return self.push_pseudoranges(inp.epoch_t[e], inp.sats[b:f], sys_, np.asarray(inp.prn[b:f], np.int64))
 
-    def flush(self) -> None:
-        """Integrate the held IMU samples (at the end of a run)."""
-        self._nav.flush()
-
     def state(self) -> dict:
         """The current solution after the last integrated sample: as
         :meth:`Navigator.state`, plus ``clock_bias_m``, ``clock_drift_mps`` and,
@@ -288,18 +286,96 @@ class TightNavigator:
             out["isb_m"] = s["isb"]
         return out
 
-    def covariance(self) -> np.ndarray:
-        """The error-state covariance (layout order, SI; clock states in m and m/s)."""
-        return self._nav.covariance()
-
     def last_epoch(self) -> dict:
         """The last epoch applied: ``status`` and ``nis``."""
         d = self._nav.last_epoch()
         d["status"] = RECORD_STATUS[d["status"]]
         return d
 
-    @property
-    def counters(self) -> dict:
-        """samples integrated, held samples, pending epochs, updates, rejected epochs and satellites,
-        refused epochs."""
-        return self._nav.counters()
+
+
+class DelayNavigator(_PushApi):
+    """Seed 001's random-delay Kalman filter (loose, 15 states) fed one IMU
+    sample and one receiver epoch at a time.
+
+    At every epoch of the receiver's schedule push the GNSS records that
+    arrived since the previous epoch (:meth:`push_epoch`), also when none
+    arrived: the filter does not know a record's time of validity, it weights
+    the ``s + 1`` possible delays with the probabilities ``delay_p`` and shifts
+    its stacked state at each epoch (Pan, Zhao, Li 2022, eqs. (4)-(21)).  The
+    same compiled engine as ``insnav.run(ds, "rdkf")``
+    (``engine/navigator.hpp`` ``DelayNavigator``): pushed in time order, its
+    rows equal the batch run's.  Timing as :class:`Navigator` (``imu_hold``
+    IMU samples held back for late epochs).  Build it with
+    :meth:`from_dataset`; :attr:`epochs` and :attr:`records` then hold the
+    batch run's receiver epochs and arrival-ordered records, and
+    :meth:`push_receiver_epoch` pushes one of them.  The naive use of late
+    fixes (``"kf"``) is :class:`Navigator` fed the arrival times; exact
+    time-tagged re-processing (``"exact"``) needs the IMU history and runs in
+    :func:`insnav.run` only.
+    """
+
+    @classmethod
+    def from_dataset(cls, dataset, config=None, *, delay_p=None, imu_hold: int = 0,
+                     **overrides) -> "DelayNavigator":
+        """A navigator set up as ``insnav.run(dataset, "rdkf", delay_p=...)`` sets up its
+        run (initial state and sigmas, IMU model, lever arm, gate, outage cycle);
+        ``delay_p`` defaults to the scenario's ``gnss.delay_p``; ``overrides`` are
+        :class:`RunConfig` fields."""
+        import dataclasses
+
+        from . import _as_config
+        from .delay import check_rdkf, delay_engine_args
+
+        cfg = dataclasses.replace(_as_config(config), filter="rdkf", coupling="loose")
+        for k, v in overrides.items():
+            if not hasattr(cfg, k):
+                raise TypeError(f"DelayNavigator.from_dataset() got an unknown option {k!r}")
+            setattr(cfg, k, v)
+        cfg.validate()
+        if cfg.smooth:
+            raise ValueError("DelayNavigator: the RTS smoother needs the whole run")
+        if not (0 <= int(imu_hold) <= 256):
+            raise ValueError(f"DelayNavigator: imu_hold must be in 0 .. 256 samples, got {imu_hold!r}")
+        a = delay_engine_args(dataset, cfg, delay_p)
+        check_rdkf(a.p, a.layout)
+        self = cls.__new__(cls)
+        self.config = cfg
+        self.layout = a.layout
+        self.delay_p = a.p
+        self.epochs = a.epochs
+        self.records = a.rec
+        # the records that arrived by each epoch (the batch engine's rule: t_arrival <= epoch + 1e-6 s)
+        tol = 1e-6
+        t0 = float(dataset.t0)
+        first = int(np.searchsorted(a.rec[:, 1], t0 + tol, side="right"))
+        self._bounds = np.maximum(np.searchsorted(a.rec[:, 1], a.epochs + tol, side="right"), first)
+        self._first = first
+        self._nav = _core.DelayNavigator(a.layout, a.init, a.P0, a.imu_correction, a.imu_model, a.config,
+                                         np.asarray(a.p, float), int(imu_hold))
+        return self
+
+    def push_epoch(self, t: float, records=None) -> str:
+        """One receiver epoch at ``t`` [s] with the records that arrived since the previous
+        epoch: ``records`` (k, 14) rows of t_valid, t_arrival [s], lat, lon [rad], h [m],
+        v_n [m/s] (NaN: none), position and velocity 1-sigma N, E, D [m, m/s] (the rows of
+        :attr:`records`; at most 8 per epoch).  Returns ``"queued"``, or why it was refused."""
+        rows = np.zeros((0, 14)) if records is None else np.ascontiguousarray(np.asarray(records, float).reshape(-1, 14))
+        return RECORD_STATUS[self._nav.push_epoch(float(t), rows)]
+
+    def push_receiver_epoch(self, e: int) -> str:
+        """Push epoch ``e`` of :attr:`epochs` with the records of :attr:`records` that arrived by it."""
+        b = self._first if e == 0 else int(self._bounds[e - 1])
+        return self.push_epoch(self.epochs[e], self.records[b:int(self._bounds[e])])
+
+    def state(self) -> dict:
+        """The current solution after the last integrated sample, as :meth:`Navigator.state`."""
+        return _state_dict(self._nav.solution())
+
+    def last_record(self) -> dict:
+        """The last record applied or refused by the gate: ``status``, ``nis``, ``innovation``
+        (the probability-weighted INS - GNSS residual: N, E, D [m], vN, vE, vD [m/s])."""
+        d = self._nav.last_record()
+        d["status"] = RECORD_STATUS[d["status"]]
+        return d
+

@@ -6,6 +6,8 @@
   ``.pos`` / NMEA, loosely coupled, initial state from the alignment
   (``load_csv_dataset``); readers in :mod:`insnav.io.imu_csv` (the one IMU
   column-mapping reader) and :mod:`insnav.io.gnss_files`.
+- :mod:`insnav.io.input_formats`: the registry of ``insnav run --format``
+  (name, command-line arguments, loader).
 - :mod:`insnav.io.rinex_dataset`: real GNSS + IMU data for the tight filter:
   RINEX obs + nav, an IMU CSV (or a str2str-tagged raw log) and an RTKLIB
   ``.pos`` reference (``load_rinex``, ``load_rinex_run``).

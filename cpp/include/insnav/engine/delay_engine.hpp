@@ -76,6 +76,9 @@ class RandomDelayEngine {
   }
 
   const Filter& filter() const { return core_.filter; }
+  ClosedLoop<Filter>& core() { return core_; }
+  const LooseConfig& config() const { return cfg_; }
+  const DelayConfig& delay_config() const { return dcfg_; }
 
   /// n IMU samples; m records sorted by t_arrival (fixes[g].t = t_valid is NOT
   /// used: the filter does not know it); n_ep GNSS epochs (the receiver's
@@ -83,9 +86,8 @@ class RandomDelayEngine {
   void run(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, std::int64_t n,
            const double* t, const double* dtheta_b, const double* dv_b, std::int64_t m, const GnssFix* fixes,
            const double* t_arrival, std::int64_t n_ep, const double* epochs, DelayOutputs& out) {
-        const double tol = dcfg_.time_tolerance;
-    core_.reset(initial, P0, corr0);
-    for (auto& r : refs_) r.valid = false;
+    const double tol = dcfg_.time_tolerance;
+    start(initial, P0, corr0);
     std::int64_t g = 0, ep = 0;
     while (g < m && !(t_arrival[g] > initial.t + tol)) out.mark(g++, RecordStatus::kOutsideImuSpan);
     while (ep < n_ep && !(epochs[ep] > initial.t + tol)) ++ep;
@@ -93,33 +95,12 @@ class RandomDelayEngine {
     for (std::int64_t k = 0; k < n; ++k) {
       if (out.stop_requested(k, n)) break;
       const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
-      double done = 0.0;
-      while (ep < n_ep && epochs[ep] <= raw.t + tol) {
-        const double a = std::min(1.0, (epochs[ep] - t_prev) / raw.dt);
-        if (a > done) {
-          core_.step(raw, done, a);
-          done = a;
-        }
-        core_.close_cycle();
-        refs_[0] = Ref{core_.ins.state(), core_.omega_ib_b(), true};
-        for (; g < m && t_arrival[g] <= epochs[ep] + tol; ++g) {
-          // After a fed-back correction block 0 of the stack is zero and refers
-          // to the corrected INS: the next record of the same epoch must be
-          // differenced against that, not against the INS stored before the
-          // correction (which would apply the correction twice).
-          if (apply(fixes[g], g, out)) refs_[0].nav = core_.ins.state();
-        }
-        core_.filter.shift();
-        core_.touch();
-        for (int i = S; i > 0; --i) refs_[i] = refs_[i - 1];
-        core_.start_cycle();
-        ++ep;
-      }
-      if (done < 1.0) core_.step(raw, done, 1.0);
-      if (core_.ins.state().t - core_.cycle_start >= cfg_.cycle_period - 1e-9) {  // outage: no shift
-        core_.close_cycle();
-        core_.start_cycle();
-      }
+      process_sample(
+          raw, t_prev, [&]() { return ep < n_ep ? epochs[ep] : kInf; },
+          [&](double te) {
+            for (; g < m && t_arrival[g] <= te + tol; ++g) receive(fixes[g], g, out);
+            ++ep;
+          });
       if ((k + 1) % cfg_.output_decimation == 0 || k + 1 == n) core_.write_output(out);
       t_prev = raw.t;
     }
@@ -127,6 +108,60 @@ class RandomDelayEngine {
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.gate_reopened = core_.gate.reopened();
     out.gate_outage_accepted = core_.gate.outage_accepted();
+  }
+
+  /// The initial state; no epoch stored yet.
+  void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
+    core_.reset(initial, P0, corr0);
+    for (auto& r : refs_) r.valid = false;
+  }
+
+  /// One raw IMU increment over (t_prev, raw.t].  At each receiver epoch te it
+  /// covers (`next_epoch()` <= raw.t + tolerance) the increment is integrated up
+  /// to te, the cycle closed and the INS solution stored as block 0 of the
+  /// stack; `on_epoch(te)` then hands the records that arrived by te to
+  /// receive() and moves next_epoch() on; the stack shifts (seed 001 eq. (6))
+  /// and a new cycle starts.  The rest of the increment is integrated and an
+  /// outage cycle (no shift) closed when due.  The batch run above and the push
+  /// API (engine/navigator.hpp DelayNavigator) both call it, so their results
+  /// are identical.
+  template <class NextEpoch, class OnEpoch>
+  void process_sample(const ImuIncrement& raw, double t_prev, NextEpoch&& next_epoch, OnEpoch&& on_epoch) {
+    const double tol = dcfg_.time_tolerance;
+    double done = 0.0;
+    for (double te = next_epoch(); te <= raw.t + tol; te = next_epoch()) {
+      const double a = std::min(1.0, (te - t_prev) / raw.dt);
+      if (a > done) {
+        core_.step(raw, done, a);
+        done = a;
+      }
+      core_.close_cycle();
+      refs_[0] = Ref{core_.ins.state(), core_.omega_ib_b(), true};
+      on_epoch(te);
+      core_.filter.shift();
+      core_.touch();
+      for (int i = S; i > 0; --i) refs_[i] = refs_[i - 1];
+      core_.start_cycle();
+    }
+    if (done < 1.0) core_.step(raw, done, 1.0);
+    if (core_.ins.state().t - core_.cycle_start >= cfg_.cycle_period - 1e-9) {  // outage: no shift
+      core_.close_cycle();
+      core_.start_cycle();
+    }
+  }
+
+  /// A record received at the current epoch (call only inside process_sample's
+  /// on_epoch): the delay hypotheses against the stored epochs, the update and
+  /// the feedback; its status, NIS and innovation go to row g of `out`.
+  /// Returns true when it was applied.
+  bool receive(const GnssFix& fix, std::int64_t g, DelayOutputs& out) {
+    // After a fed-back correction block 0 of the stack is zero and refers to
+    // the corrected INS: the next record of the same epoch must be differenced
+    // against that, not against the INS stored before the correction (which
+    // would apply the correction twice).
+    const bool applied = apply(fix, g, out);
+    if (applied) refs_[0].nav = core_.ins.state();
+    return applied;
   }
 
  private:

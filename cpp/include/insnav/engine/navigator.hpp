@@ -19,6 +19,10 @@
 // samples).  A record older than the last integrated sample is refused
 // (RecordStatus::kTooOld) and counted, never applied at a wrong time.
 //
+// Three families: LooseNavigator (GNSS fixes, vehicle constraints),
+// TightNavigator (pseudorange epochs) and DelayNavigator (seed 001's
+// random-delay KF: the records that arrived by each receiver epoch).
+//
 // Memory: fixed capacities (kMaxHold held samples, kMaxPending records), no
 // heap allocation after construction.  The object is large (the filter's
 // fixed-size matrices): allocate it once, e.g. with std::make_unique.
@@ -29,6 +33,7 @@
 #include <cstdint>
 #include <stdexcept>
 
+#include "insnav/engine/delay_engine.hpp"
 #include "insnav/engine/loose_engine.hpp"
 #include "insnav/engine/tight_engine.hpp"
 
@@ -97,6 +102,8 @@ struct NavigatorRecord {
 /// ClosedLoop::process_sample.  Derived (CRTP) provides `core()` (its
 /// ClosedLoop), `apply(const Record&)` (the engine's measurement step) and
 /// `Record::t`; `Record::order` breaks ties (lower first, then push order).
+/// A Derived whose engine steps a sample its own way (the random-delay engine)
+/// also provides `step_sample(raw, t_prev, next_t, apply_next)`.
 template <class Derived, class Record, int kMaxHold, int kMaxPending>
 class PushLoop {
  public:
@@ -156,9 +163,17 @@ class PushLoop {
     return RecordStatus::kNotUsed;
   }
 
+  double t0() const { return t0_; }  // the initial time [s]
+
   RecordStatus refuse(RecordStatus why) {
     ++refused_;
     return why;
+  }
+
+  /// The closed loop's sample step (ClosedLoop::process_sample); a Derived may hide it.
+  template <class NextT, class ApplyNext>
+  void step_sample(const ImuIncrement& raw, double t_prev, NextT&& next_t, ApplyNext&& apply_next) {
+    static_cast<Derived&>(*this).core().process_sample(raw, t_prev, cycle_period_, next_t, apply_next);
   }
 
   /// True when a pending record would still be applied (its slot of a pool is in use).
@@ -176,8 +191,8 @@ class PushLoop {
     hold_head_ = (hold_head_ + 1) % kMaxHold;
     --hold_n_;
     int done = 0;  // records applied in this sample (the queue front)
-    self.core().process_sample(
-        raw, t_done_, cycle_period_, [&]() { return pend_n_ > done ? pend_[done].t : kInf; },
+    self.step_sample(
+        raw, t_done_, [&]() { return pend_n_ > done ? pend_[done].t : kInf; },
         [&]() { self.apply(pend_[done++]); });
     if (done > 0) {
       for (int j = done; j < pend_n_; ++j) pend_[j - done] = pend_[j];
@@ -362,6 +377,111 @@ class TightNavigator
   double last_nis_ = NAN, last_clock_jump_ = 0.0;
   std::int8_t last_status_ = 0;
   std::int32_t last_rows_ = 0;
+};
+
+/// The plain configuration of a DelayNavigator (SI units, as the batch engine).
+struct DelayNavigatorConfig {
+  ImuErrorModel imu_model;
+  LooseConfig loose;   // lever arm, propagation interval, outage cycle, gate
+  DelayConfig delay;   // time_tolerance: an epoch at the IMU sample time (the others are the exact engine's)
+  int imu_hold = 0;    // IMU samples held back for late epochs [samples], 0 .. kMaxHold
+  std::array<double, 9> delay_p{{1.0}};  // P(delay = i epochs), i = 0 .. n_delay_p - 1 (seed 001 eq. (4))
+  int n_delay_p = 1;
+};
+
+/// A queued receiver epoch: the records that arrived by it sit in the pool at slot * kMaxRecords.
+struct DelayPending {
+  double t = 0.0;
+  int order = 0;
+  int slot = 0, n_records = 0;
+};
+
+/// Seed 001's random-delay KF (RandomDelayEngine, delay_engine.hpp) pushed one
+/// receiver epoch at a time.  At each epoch of the receiver's schedule the
+/// caller pushes the GNSS records that arrived since the previous epoch (their
+/// time of validity is not used: the filter does not know it; it weights the
+/// S + 1 delay hypotheses with the probabilities p), also when none arrived,
+/// so that block i of the stack always means "i epochs ago".  Timing and the
+/// IMU hold as LooseNavigator: an epoch is pushed before the IMU sample that
+/// covers it is integrated (or within imu_hold samples of it).
+template <class L, int S, int kMaxHold = 256, int kMaxPendingEpochs = 8, int kMaxRecords = 8>
+class DelayNavigator : public PushLoop<DelayNavigator<L, S, kMaxHold, kMaxPendingEpochs, kMaxRecords>, DelayPending,
+                                       kMaxHold, kMaxPendingEpochs> {
+  using Base = PushLoop<DelayNavigator, DelayPending, kMaxHold, kMaxPendingEpochs>;
+  friend Base;
+
+ public:
+  using Engine = RandomDelayEngine<L, S>;
+  using Filter = typename Engine::Filter;
+  static constexpr int kMaxRecordsPerEpoch = kMaxRecords;
+
+  DelayNavigator(const DelayNavigatorConfig& cfg, const NavState& initial, const StateCov<L>& P0,
+                 const ImuCorrection& corr0 = ImuCorrection())
+      : engine_(cfg.imu_model, cfg.loose, cfg.delay, cfg.delay_p.data(), cfg.n_delay_p),
+        tol_(cfg.delay.time_tolerance) {
+    Base::start(initial.t, cfg.imu_hold, cfg.loose.cycle_period);
+    engine_.start(initial, P0, corr0);
+    out_.innovation = last_.innovation.data();
+    out_.nis = &last_.nis;
+    out_.status = &status_;
+  }
+
+  /// One receiver epoch at t [s] with the n records that arrived since the
+  /// previous epoch (at most kMaxRecords; the rest are refused and counted).
+  /// kNotUsed: queued; kOutsideImuSpan: at or before the initial time (+ the
+  /// time tolerance); kTooOld: older than the last integrated sample, or the
+  /// queue is full.
+  RecordStatus push_epoch(double t, const GnssFix* records, int n) {
+    if (!(t > Base::t0() + tol_)) return Base::refuse(RecordStatus::kOutsideImuSpan);
+    int slot = 0;
+    while (slot < kMaxPendingEpochs && Base::any_pending([&](const DelayPending& p) { return p.slot == slot; })) ++slot;
+    if (slot == kMaxPendingEpochs) return Base::refuse(RecordStatus::kTooOld);  // every slot pending
+    DelayPending p;
+    p.t = t;
+    p.slot = slot;
+    p.n_records = std::min(std::max(n, 0), kMaxRecords);
+    const RecordStatus st = Base::enqueue(p);
+    if (st == RecordStatus::kNotUsed) {
+      for (int i = 0; i < p.n_records; ++i) pool_[slot * kMaxRecords + i] = records[i];
+      dropped_ += std::max(n, 0) - p.n_records;
+    }
+    return st;
+  }
+
+  NavigatorRow<L> solution() { return navigator_row<L>(engine_.core()); }
+  const NavState& ins_state() { return engine_.core().state(); }
+  /// The newest block of the stacked covariance (the current error state's).
+  StateCov<L> covariance() const { return engine_.filter().P(); }
+  /// The last record applied or refused by the gate (its innovation, NIS and status).
+  const NavigatorRecord& last_record() const { return last_; }
+
+  int updates() const { return out_.updates; }
+  int rejected() const { return out_.rejected; }
+  int dropped_records() const { return dropped_; }  // beyond kMaxRecords in one epoch
+  int gate_reopened() { return engine_.core().gate.reopened(); }
+
+ private:
+  ClosedLoop<Filter>& core() { return engine_.core(); }
+
+  template <class NextT, class ApplyNext>
+  void step_sample(const ImuIncrement& raw, double t_prev, NextT&& next_t, ApplyNext&& apply_next) {
+    engine_.process_sample(raw, t_prev, next_t, [&](double) { apply_next(); });
+  }
+
+  void apply(const DelayPending& p) {
+    for (int i = 0; i < p.n_records; ++i) {
+      engine_.receive(pool_[p.slot * kMaxRecords + i], 0, out_);
+      last_.status = static_cast<RecordStatus>(status_);
+    }
+  }
+
+  Engine engine_;
+  double tol_;
+  std::array<GnssFix, kMaxPendingEpochs * kMaxRecords> pool_;
+  DelayOutputs out_;
+  NavigatorRecord last_;
+  std::int8_t status_ = 0;
+  int dropped_ = 0;
 };
 
 }  // namespace insnav
