@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import fcntl
 import os
+import resource
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -58,7 +60,15 @@ def build(log=None) -> subprocess.CompletedProcess:
         r = subprocess.run(cfg, text=True, **out)
         if r.returncode != 0:
             return r
-        return subprocess.run(["cmake", "--build", str(BUILD), "-j2"], text=True, **out)
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.monotonic()
+        r = subprocess.run(["cmake", "--build", str(BUILD), "-j2"], text=True, **out)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+        if log:  # the figure scripts/test.sh's log keeps (docs/testing.md)
+            print(f"[insnav] C++ sanitizer build: {time.monotonic() - t0:.0f} s wall, {cpu:.0f} s CPU",
+                  file=log, flush=True)
+        return r
 
 
 def ctest() -> str:
