@@ -16,34 +16,49 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 args=("$@")
-if [ "${INSNAV_SKIP_BROWSER:-}" != 1 ] || [ "${INSNAV_NO_SKIP:-}" = 1 ]; then
-  if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null &&
-     ! command -v google-chrome >/dev/null && command -v apt-get >/dev/null; then
-    echo "[insnav] installing chromium (the report's browser test; INSNAV_SKIP_BROWSER=1 opts out)"
-    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-    $SUDO apt-get update -qq || true
-    $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
-  fi
-fi
-# RTKLIB's rnx2rtkp: the RTK tests run it beside insnav on the same files (the GNSS anchor)
-if ! command -v rnx2rtkp >/dev/null && command -v apt-get >/dev/null; then
-  echo "[insnav] installing rtklib (rnx2rtkp: the RTK tests compare with it)"
-  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
-  $SUDO apt-get update -qq || true
-  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq rtklib >/dev/null
-fi
 export INSNAV_EXTRAS=${INSNAV_EXTRAS:-test,plot,pandas,parquet,dask,docs}
+# the compiler, Eigen and the build backend (its own apt-get, before the one below)
+scripts/install.sh --deps-only
 if [ "${1:-}" = "--quick" ]; then
   shift
-  args=(-n 2 -p no:benchmark -m "not slow" "$@")
+  args=(-n 2 --dist loadgroup --no-loadscope-reorder -p no:benchmark -m "not slow" "$@")
 elif [ ${#args[@]} -eq 0 ]; then
   # Two builds share the 2 cores: the C++ tests (no Python needed) compile in
   # the background from here on, beside the extension and then the Python tests.
-  scripts/install.sh --deps-only
   python3 tests/_cpp_build.py --background
-  args=(-n 2 -p no:benchmark)  # pytest-benchmark, if installed, refuses xdist with a warning (an error here)
+  # (--dist loadgroup: the order and the groups of tests/conftest.py)
+  args=(-n 2 --dist loadgroup --no-loadscope-reorder -p no:benchmark)  # pytest-benchmark, if installed, refuses xdist with a warning (an error here)
+fi
+# The system packages only the tests need, installed (one apt-get update, one
+# install) in the background while the compilers run: their download and
+# unpacking cost a minute of wall time on a fresh CI machine, little CPU.
+apt_pkgs=()
+if [ "${INSNAV_SKIP_BROWSER:-}" != 1 ] || [ "${INSNAV_NO_SKIP:-}" = 1 ]; then
+  if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null &&
+     ! command -v google-chrome >/dev/null; then
+    echo "[insnav] installing chromium (the report's browser test; INSNAV_SKIP_BROWSER=1 opts out)"
+    apt_pkgs+=(chromium)
+  fi
+fi
+# RTKLIB's rnx2rtkp: the RTK tests run it beside insnav on the same files (the GNSS anchor)
+if ! command -v rnx2rtkp >/dev/null; then
+  echo "[insnav] installing rtklib (rnx2rtkp: the RTK tests compare with it)"
+  apt_pkgs+=(rtklib)
+fi
+apt_pid=""
+if [ ${#apt_pkgs[@]} -gt 0 ] && command -v apt-get >/dev/null; then
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  mkdir -p build
+  ( $SUDO apt-get update -qq || true
+    $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${apt_pkgs[@]}" ) >build/apt.log 2>&1 &
+  apt_pid=$!
 fi
 scripts/install.sh
+if [ -n "$apt_pid" ] && ! wait "$apt_pid"; then
+  echo "[insnav] apt-get install ${apt_pkgs[*]} failed:" >&2
+  tail -20 build/apt.log >&2
+  exit 1
+fi
 set +e
 python3 -m pytest -q "${args[@]}"
 rc=$?

@@ -69,11 +69,53 @@ SLOW_TESTS = (
 )
 
 
+#: Started first (scripts/test.sh runs pytest-xdist with ``--dist loadgroup
+#: --no-loadscope-reorder``, which hands the work out in collection order): the
+#: C++ sanitizer tests, whose worker waits for the background build and so
+#: leaves that build a core, and the documentation build (one ~100 s fixture);
+#: then the longest files, the other files with tests marked slow, then the
+#: rest (longest first, roughly, so that the two workers finish together).
+FIRST_TESTS = ("tests/test_cpp.py", "tests/test_docs.py",
+               # the longest files (pytest --durations, summed per file), longest first
+               "tests/test_tight_multi.py", "tests/test_spp.py", "tests/test_constraints.py",
+               "tests/test_report.py", "tests/test_tight.py")
+
+
+def _shares_a_fixture(item) -> bool:
+    """True if the test uses a module-, class- or package-scoped fixture."""
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return False
+    return any(d.scope in ("module", "class", "package")
+               for defs in info.name2fixturedefs.values() for d in defs)
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's, which reads the xdist_group marks
 def pytest_collection_modifyitems(config, items):
     for item in items:
         nodeid = item.nodeid.replace("\\", "/")
         if any(nodeid.startswith(p) for p in SLOW_TESTS):
             item.add_marker(pytest.mark.slow)
+        # With --dist loadgroup the tests of a file that share a module-scoped
+        # fixture (a real-data run, a built site) run on one worker, so that the
+        # fixture is computed once, not once per worker; the others spread.
+        if _shares_a_fixture(item):
+            item.add_marker(pytest.mark.xdist_group(nodeid.split("::")[0]))
+
+    def rank(item) -> int:
+        nodeid = item.nodeid.replace("\\", "/")
+        i = next((i for i, p in enumerate(FIRST_TESTS) if nodeid.startswith(p)), None)
+        if i is not None:
+            return i
+        return len(FIRST_TESTS) + (0 if item.get_closest_marker("slow") else 1)
+
+    # whole files move (a file's tests stay together and in order, so that a
+    # module fixture is set up once also without xdist); the sort is stable
+    file_rank: dict[str, int] = {}
+    for item in items:
+        f = item.nodeid.split("::")[0]
+        file_rank[f] = min(file_rank.get(f, 99), rank(item))
+    items.sort(key=lambda item: file_rank[item.nodeid.split("::")[0]])
 # --- optional capabilities: the suite runs everything it promises -------------
 # A capability the package promises (the browser-checked HTML report, Parquet,
 # the plot / pandas / dask extras, PyYAML for KF-GINS files) is a FAILURE when

@@ -188,9 +188,10 @@ def separate_cluster(tmp_path_factory):
             client.wait_for_workers(2, timeout=60)
         yield address, procs
     finally:
-        for p in procs:
+        # the workers first, while their scheduler still answers: a worker whose
+        # scheduler is gone retries it and outlives SIGTERM (the 30 s timeout below)
+        for p in reversed(procs):
             p.terminate()
-        for p in procs:
             try:
                 p.wait(timeout=30)
             except subprocess.TimeoutExpired:
