@@ -232,7 +232,7 @@ def test_bad_constraint_config_names_the_key(table, needle):
 
 
 def test_constraints_need_loose_ekf_rbukf_ukf_and_an_odometer(car):
-    with pytest.raises(ConfigError, match="loose ekf, rbukf or ukf"):
+    with pytest.raises(ConfigError, match="with ekf loose, rbukf loose, ukf loose only"):
         config_from_dict({"filter": "upf", "coupling": "tight", "constraints": {"use": ["nhc"]}})
     ds = insnav.simulate("seed000-sim", seed=1)  # no odometer
     with pytest.raises(ValueError, match="odometer"):
