@@ -451,7 +451,8 @@ def _allan_section(path) -> tuple[list[tuple[str, str, bytes]], list[str]]:
     terms and the TOML are the ones that command printed (to the 6 digits of
     allan.csv).  Returns (figures, HTML parts)."""
     from ..calib.allan import TERMS, fit_allan, imu_noise_toml
-    from ..cli.allan import _units, allan_figure, read_curve_csv
+    from .allan_plot import allan_figure, read_curve_csv
+    from .allan_plot import units as _units
 
     curve, source = read_curve_csv(path)
     fits = [fit_allan(curve, a) for a in range(6)]
