@@ -354,6 +354,16 @@ def ambiguity_accepts(
     a_hat: npt.ArrayLike, Q: npt.ArrayLike, a_cand: npt.ArrayLike, ratio_threshold: float, validation_prob: float
 ) -> tuple[bool, float, float]: ...
 
+GDOP_MAX_SATS: int
+
+def select_best_gdop(u: npt.ArrayLike, n_select: int, max_combinations: int) -> tuple[np.ndarray, float]: ...
+def best_gdop_keep(u: npt.ArrayLike, epoch_start: npt.ArrayLike, n_select: int,
+                   max_combinations: int) -> np.ndarray: ...  # (M,) bool
+def select_nearest_record(rec_prn: npt.ArrayLike, rec_ok: npt.ArrayLike, rec_t: npt.ArrayLike,
+                          rec_window: npt.ArrayLike, row_prn: npt.ArrayLike,
+                          row_t: npt.ArrayLike) -> np.ndarray: ...  # (k,) int64, -1 if none
+def scan_rinex_nav_body(body: str, rinex3: bool, glonass2: bool,
+                        want: str) -> dict[str, Any] | None: ...
 SPP_MAX_ROWS: int
 
 def solve_spp_batch(
