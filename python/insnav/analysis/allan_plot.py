@@ -26,6 +26,34 @@ def units():
     }
 
 
+def term_cells(fits_g, fits_a, lt: str = "<") -> list[tuple[str, list[str]]]:
+    """The fitted IEEE 952 terms as table cells in the units of :func:`units`:
+    one (axis, cells) per gyro then accelerometer axis, a cell per term of
+    :data:`insnav.calib.allan.TERMS`: "value (low..high)" with the fit's
+    interval, "{lt} x" for a term the log does not resolve (x its upper bound),
+    "-" for a term that is zero in the fit.  ``lt`` is "&lt;" for HTML."""
+    from ..calib.allan import TERMS
+
+    u = units()
+    rows = []
+    for kind, fits in ((0, fits_g), (1, fits_a)):
+        for f in fits:
+            cells = []
+            for k in TERMS:
+                fac = u[k][kind][1]
+                v = f.coef[k] / fac
+                lo, hi = (c / fac for c in f.ci[k])
+                if v == 0.0:
+                    up = f.upper.get(k, math.nan) / fac
+                    cells.append(f"{lt} {up:.3g}" if math.isfinite(up) else "-")
+                elif math.isfinite(lo):
+                    cells.append(f"{v:.4g} ({lo:.3g}..{hi:.3g})")
+                else:
+                    cells.append(f"{v:.4g}")
+            rows.append((f.axis, cells))
+    return rows
+
+
 def read_curve_csv(path):
     """The Allan curve of an ``allan.csv`` written by ``insnav allan``: (AllanCurve
     in SI rates (gyro rad/s, accelerometer m/s^2), the analysed input's name).

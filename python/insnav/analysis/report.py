@@ -451,7 +451,7 @@ def _allan_section(path) -> tuple[list[tuple[str, str, bytes]], list[str]]:
     terms and the TOML are the ones that command printed (to the 6 digits of
     allan.csv).  Returns (figures, HTML parts)."""
     from ..calib.allan import TERMS, fit_allan, imu_noise_toml
-    from .allan_plot import allan_figure, read_curve_csv
+    from .allan_plot import allan_figure, read_curve_csv, term_cells
     from .allan_plot import units as _units
 
     curve, source = read_curve_csv(path)
@@ -468,21 +468,8 @@ def _allan_section(path) -> tuple[list[tuple[str, str, bytes]], list[str]]:
              "<table id=\"allan\"><tr><th>axis</th>"
              + "".join(f"<th>{k} [{html.escape(u[k][0][0])} | {html.escape(u[k][1][0])}]</th>" for k in TERMS)
              + "</tr>"]
-    for kind, group in ((0, fits_g), (1, fits_a)):
-        for f in group:
-            cells = []
-            for k in TERMS:
-                name, fac = u[k][kind]
-                v = f.coef[k] / fac
-                lo, hi = (c / fac for c in f.ci[k])
-                if v == 0.0:
-                    up = f.upper.get(k, math.nan) / fac
-                    cells.append(f"&lt; {up:.3g}" if math.isfinite(up) else "-")
-                elif math.isfinite(lo):
-                    cells.append(f"{v:.4g} ({lo:.3g}..{hi:.3g})")
-                else:
-                    cells.append(f"{v:.4g}")
-            parts.append(f"<tr><td>{html.escape(f.axis)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    for axis, cells in term_cells(fits_g, fits_a, lt="&lt;"):
+        parts.append(f"<tr><td>{html.escape(axis)}</td>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     parts.append("</table>")
     parts.append("<p>Value (95 % interval); '&lt; x': not resolved by this log, x its upper bound; '-': zero in the "
                  "fit; Q quantisation, N angle / velocity random walk, B bias instability, K rate random walk, R rate "

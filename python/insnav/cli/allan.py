@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.allan_plot import _MARK, allan_figure, read_curve_csv
+from ..analysis.allan_plot import term_cells
 from ..analysis.allan_plot import units as _units
 from ..errors import UserError
 
@@ -230,22 +231,7 @@ def terms_table(fits_g, fits_a) -> str:
 
     u = _units()
     head = ["axis"] + [f"{k} [{u[k][0][0]} | {u[k][1][0]}]" for k in TERMS]
-    rows = []
-    for kind, fits in ((0, fits_g), (1, fits_a)):
-        for f in fits:
-            row = [f.axis]
-            for k in TERMS:
-                name, fac = u[k][kind]
-                v = f.coef[k] / fac
-                lo, hi = (c / fac for c in f.ci[k])
-                if v == 0.0:
-                    up = f.upper.get(k, math.nan) / fac
-                    row.append(f"< {up:.3g}" if math.isfinite(up) else "-")
-                elif math.isfinite(lo):
-                    row.append(f"{v:.4g} ({lo:.3g}..{hi:.3g})")
-                else:
-                    row.append(f"{v:.4g}")
-            rows.append(row)
+    rows = [[axis, *cells] for axis, cells in term_cells(fits_g, fits_a)]
     widths = [max(len(r[i]) for r in [head] + rows) for i in range(len(head))]
     out = ["  ".join(h.ljust(w) for h, w in zip(head, widths))]
     out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in rows]
