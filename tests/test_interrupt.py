@@ -23,13 +23,20 @@ def uav_dir(tmp_path_factory):
     return insnav.simulate("seed004-uav", seed=1).save(tmp_path_factory.mktemp("int") / "uav")
 
 
+def _sigint_default():
+    """The child's SIGINT at its default whatever the test runner inherited: a
+    suite started in the background of a non-interactive shell ignores SIGINT,
+    its children inherit that, and the command then rightly leaves it ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 def test_sigint_stops_a_run_fast_with_one_line_and_no_output(uav_dir, tmp_path):
     out = tmp_path / "sol.csv"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([sys.executable, "-m", "insnav", "run", str(uav_dir), "--coupling", "tight",
                              "--filter", "upf", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
+                            text=True, env=env, preexec_fn=_sigint_default)
     time.sleep(2.5)  # start-up and read ~1 s: now inside the filter's C++ loop (~6 s)
     assert proc.poll() is None, proc.communicate()
     t0 = time.perf_counter()
