@@ -198,6 +198,32 @@ int main() {
     StateVec<L> dx = StateVec<L>::Zero();
     dx.segment<3>(LA) = Vec3(0.3, -0.2, 0.1);
     EXPECT_LT((m.predicted_residual(dx) - residual(dx.segment<3>(LA))).norm(), 1e-6);
+
+    // set_lever_arm_rate: the residual keeps the rate given to set() (bit for bit), the lever-arm
+    // columns take the other rate (a low-passed rate: ClosedLoop::omega_ib_b_lever), i.e. they equal
+    // the columns of a measurement built with that rate; predicted_residual's derivative in dl agrees.
+    const Vec3 w_lever = ins.omega_ib_b + Vec3(0.02, -0.03, 0.01);
+    LooseMeasurement<L> ml, mw;
+    ml.set_lever_arm_rate(w_lever);
+    ml.set(ins.s, ins.omega_ib_b, l_b, antenna_fix(t, l_b - Vec3(0.1, 0.2, -0.3)), ins.a_n, 0.0);
+    mw.set(ins.s, w_lever, l_b, antenna_fix(t, l_b - Vec3(0.1, 0.2, -0.3)), ins.a_n, 0.0);
+    LooseMeasurement<L> m0;
+    m0.set(ins.s, ins.omega_ib_b, l_b, antenna_fix(t, l_b - Vec3(0.1, 0.2, -0.3)), ins.a_n, 0.0);
+    EXPECT_LT((ml.linear().residual - m0.linear().residual).norm(), 1e-15);
+    EXPECT_LT((ml.linear().H.block<6, 3>(0, LA) - mw.linear().H.block<6, 3>(0, LA)).norm(), 1e-12);
+    EXPECT_LT(1e-3, (ml.linear().H.block<3, 3>(3, LA) - m0.linear().H.block<3, 3>(3, LA)).norm());
+    double worst_pr = 0.0;
+    for (int j = 0; j < 3; ++j) {
+      StateVec<L> e = StateVec<L>::Zero();
+      e[LA + j] = 1e-4;
+      const Eigen::Matrix<double, 6, 1> col = (ml.predicted_residual(e) - ml.predicted_residual(-e)) / 2e-4;
+      for (int i = 0; i < 6; ++i) worst_pr = std::max(worst_pr, std::abs(ml.linear().H(i, LA + j) - col[i]));
+    }
+    std::printf("loose lever-arm columns with a separate rate: |H - d predicted_residual / d dl| %.2e\n", worst_pr);
+    EXPECT_LT(worst_pr, 1e-8);
+    // the next set() without the call takes the rate of set() again
+    ml.set(ins.s, ins.omega_ib_b, l_b, antenna_fix(t, l_b), ins.a_n, 0.0);
+    EXPECT_LT((ml.linear().H - m.linear().H).norm(), 1e-15);
   }
 
   // --- tight, time offset: pseudorange and rate rows ---
@@ -266,6 +292,18 @@ int main() {
     std::printf("tight lever-arm columns: max relative |H - numerical| %.2e\n", worst);
     EXPECT_LT(worst, 1e-5);  // central differences of 2.2e7 m ranges over 1 mm steps: ~1e-6 of round-off
     EXPECT_LT(0.5, m.linear().H.block(0, LA, m.linear().rows(), 3).norm());
+    // set_lever_arm_rate: the residual keeps the rate of set(), the lever-arm columns take the other
+    // rate (the columns of a measurement built with it, up to its g_n term, which sees the antenna
+    // velocity of the other rate: 5e-9)
+    const Vec3 w_lever = ins.omega_ib_b + Vec3(0.02, -0.03, 0.01);
+    TightMeasurement<L> ml, mw;
+    ml.set_lever_arm_rate(w_lever);
+    ml.set(ins.s, ins.omega_ib_b, l_b, 0.0, 0.0, obs.data(), static_cast<int>(obs.size()), nullptr, ins.a_n, 0.0);
+    mw.set(ins.s, w_lever, l_b, 0.0, 0.0, obs.data(), static_cast<int>(obs.size()), nullptr, ins.a_n, 0.0);
+    const int rows = m.linear().rows();
+    EXPECT_LT((ml.linear().residual - m.linear().residual).norm(), 1e-12);
+    EXPECT_LT((ml.linear().H.block(0, LA, rows, 3) - mw.linear().H.block(0, LA, rows, 3)).norm(), 1e-7);
+    EXPECT_LT(1e-3, (ml.linear().H.block(0, LA, rows, 3) - m.linear().H.block(0, LA, rows, 3)).norm());
   }
   // --- vehicle constraints, odometer lever-arm columns (NHC + odometer rows, turning) ---
   {

@@ -27,6 +27,7 @@
 // particle_filter.hpp, random_delay_kf.hpp).  No heap allocation.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <new>
@@ -211,6 +212,9 @@ struct ClosedLoop {
     rates_stale_ = false;
     omega_ib_b_.setZero();
     f_ib_b_.setZero();
+    omega_lp_b_.setZero();
+    omega_lever_b_.setZero();
+    have_lp_ = false;
     out_cache_dirty_ = true;
     start_cycle();
   }
@@ -226,6 +230,29 @@ struct ClosedLoop {
     rates();
     return f_ib_b_;
   }
+
+  /// Time constant [s] of the low-passed angular rate of the lever-arm
+  /// states' H columns (omega_ib_b_lever).
+  static constexpr double kLeverRateTau = 0.1;
+
+  /// The angular rate [rad/s] of the lever-arm states' velocity columns
+  /// (meas/gnss_loose.hpp, meas/pseudorange.hpp): the corrected rate low-passed
+  /// over kLeverRateTau (first order, alpha = dt / tau per increment) up to the
+  /// raw increment BEFORE the one being integrated.  The residual must take
+  /// the rate of the last increment (the antenna velocity C_nb (omega x l) at
+  /// that instant), and that rate carries the gyro's white noise n (ARW /
+  /// sqrt(dt): 8e-4 rad/s for 0.2 deg/sqrt(h) at 200 Hz), so the residual
+  /// holds C_nb (n x l_b^).  The same n in H makes an errors-in-variables
+  /// regression (Fuller 1987, ch. 1): where the true rate is small (roll and
+  /// pitch rates on a level road) the noise alone fits dl_b = l_b^, i.e. it
+  /// pulls the estimate towards zero, and its fake information makes the
+  /// sigma too small (the vertical lever arm of a simulated car came out 0.6-1.1
+  /// m off with a sigma of 0.23 m; docs/algorithms.md section 21).  This rate
+  /// holds no noise of the current increment (no correlation with the
+  /// residual) and the older noise falls to ARW^2 / (2 tau) in variance; its
+  /// lag, omega-dot tau, multiplies only the state error dl_b.
+  /// Layouts with the lever-arm states (zero otherwise).
+  const Vec3& omega_ib_b_lever() const { return omega_lever_b_; }
 
   /// The INS acceleration over the Earth in n [m/s^2] at the current state:
   /// a_n = C_nb f_ib_b + g_n - (2 omega_ie_n + omega_en_n) x v_n (the
@@ -256,6 +283,7 @@ struct ClosedLoop {
     imu.dtheta_b = raw.dtheta_b * f;
     imu.dv_b = raw.dv_b * f;
     corr.apply(imu);
+    if constexpr (kHasLeverArm<L>) lever_rate_step(imu, a0 == 0.0);
     ins.update(imu);
     if constexpr (kHasClock<L>) clock_bias += clock_drift * imu.dt;
     last_imu_ = imu;
@@ -559,6 +587,21 @@ struct ClosedLoop {
     rates_stale_ = false;
   }
 
+  /// omega_ib_b_lever(): freeze the low-passed rate at the start of a raw
+  /// increment, then fold the increment (or the fraction of one) into it.
+  void lever_rate_step(const ImuIncrement& imu, bool new_increment) {
+    if (!(imu.dt > 0.0)) return;
+    const Vec3 w = imu.dtheta_b / imu.dt;
+    if (!have_lp_) {  // the first increment: nothing older to take
+      omega_lp_b_ = w;
+      omega_lever_b_ = w;
+      have_lp_ = true;
+      return;
+    }
+    if (new_increment) omega_lever_b_ = omega_lp_b_;
+    omega_lp_b_ += std::min(1.0, imu.dt / kLeverRateTau) * (w - omega_lp_b_);
+  }
+
   void set_point(InsPoint& p) {
     rates();
     const NavState& s = ins.state();
@@ -619,6 +662,9 @@ struct ClosedLoop {
   ImuIncrement last_imu_;     // last corrected increment integrated
   bool rates_stale_ = false;  // omega_ib_b_, f_ib_b_ not yet taken from last_imu_
   Vec3 omega_ib_b_ = Vec3::Zero(), f_ib_b_ = Vec3::Zero();
+  Vec3 omega_lp_b_ = Vec3::Zero();     // low-passed rate up to the last increment (lever-arm layouts)
+  Vec3 omega_lever_b_ = Vec3::Zero();  // omega_ib_b_lever(): omega_lp_b_ before the current raw increment
+  bool have_lp_ = false;
   StateVec<L> sigma_ = StateVec<L>::Zero();  // output cache: sqrt(diag P)
   Eigen::Matrix<double, 12, 1> imu_err_ = Eigen::Matrix<double, 12, 1>::Zero();  // and the IMU errors
   bool out_cache_dirty_ = true;  // P, x or the corrections changed since the cache was filled

@@ -167,6 +167,7 @@ class LooseEngine {
       // shifted time (0 unless the estimate moved it into the past; meas/gnss_loose.hpp)
       const Vec3& l_b = kHasLeverArm<L> ? core_.lever_arm_b : cfg_.lever_arm_b;
       const double shift = std::max(0.0, core_.state().t - core_.record_time(fix.t));
+      if constexpr (kHasLeverArm<L>) meas_.set_lever_arm_rate(core_.omega_ib_b_lever());
       meas_.set(core_.state(), core_.omega_ib_b(), l_b, fix, core_.acceleration_n(), shift);
     } else {
       meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, fix);

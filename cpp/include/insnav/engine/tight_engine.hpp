@@ -424,6 +424,7 @@ class TightEngine {
       // INS is past the epoch's shifted time (0 unless the estimate moved it into the past)
       const Vec3& l_b = kHasLeverArm<L> ? core_.lever_arm_b : cfg_.lever_arm_b;
       const double shift = std::max(0.0, core_.state().t - core_.record_time(ep_t_));
+      if constexpr (kHasLeverArm<L>) meas_.set_lever_arm_rate(core_.omega_ib_b_lever());
       meas_.set(core_.state(), core_.omega_ib_b(), l_b, core_.clock_bias, core_.clock_drift, work_, ns,
                 core_.isb.data(), core_.acceleration_n(), shift);
     } else {

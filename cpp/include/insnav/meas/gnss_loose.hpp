@@ -12,6 +12,10 @@
 // same residual differentiated with respect to l_b,
 //   d r_ant = ... + C_nb dl_b
 //   d v_ant = ... + (C_nb [omega_ib_b x] - [omega_in_n x] C_nb) dl_b
+// where the rate in this column is a low-passed one that holds no noise of
+// the increment whose rate the residual takes (set_lever_arm_rate;
+// ClosedLoop::omega_ib_b_lever: the one rate in both is an errors-in-variables
+// bias of dl_b towards l_b^, i.e. of the estimate towards zero).
 // Time offset, dt_d = t_d^ - t_d: the fix tagged t_g holds the antenna at IMU
 // time t_g - t_d; the engine applies it at t_a = t_g - t_d^ + shift (shift =
 // 0 unless the INS had already passed that time) and the prediction is taken
@@ -69,6 +73,8 @@ class LooseMeasurement {
     C_nb_ = ins.q_nb.toRotationMatrix();
     l_b_ = lever_arm_b;
     omega_ib_b_ = omega_ib_b;
+    if (!lever_rate_set_) omega_lever_b_ = omega_ib_b;
+    lever_rate_set_ = false;
     const wgs84::Radii r = wgs84::radii(ins.lat);
     const double RMh = r.R_M + ins.h, RNh = r.R_N + ins.h;
     const Vec3 l_n = C_nb_ * l_b_;
@@ -102,8 +108,8 @@ class LooseMeasurement {
         lin_.H.template block<3, 3>(row, L::kAtt) = skew(wxl_n) - skew(omega_in_n) * skew(l_n);
         lin_.H.template block<3, 3>(row, L::kGyroBias) = -C_nb_ * skew(l_b_);
       }
-      if constexpr (kHasLeverArm<L>) {
-        lin_.H.template block<3, 3>(row, kLever) = C_nb_ * skew(omega_ib_b_) - skew(omega_in_n) * C_nb_;
+      if constexpr (kHasLeverArm<L>) {  // the rate of set_lever_arm_rate
+        lin_.H.template block<3, 3>(row, kLever) = C_nb_ * skew(omega_lever_b_) - skew(omega_in_n) * C_nb_;
         omega_in_n_ = omega_in_n;
       }
       if constexpr (kHasTimeOffset<L>) {
@@ -121,10 +127,20 @@ class LooseMeasurement {
 
   const LinearMeasurement<L>& linear() const { return lin_; }
 
+  /// The angular rate [rad/s] of the lever-arm states' velocity columns for
+  /// the next set() (layouts with them): a rate whose noise is independent of
+  /// the one given to set() (ClosedLoop::omega_ib_b_lever).  Without this
+  /// call: the rate given to set().
+  void set_lever_arm_rate(const Vec3& omega_b) {
+    omega_lever_b_ = omega_b;
+    lever_rate_set_ = true;
+  }
+
   /// Nonlinear h(dx): the residual the INS would show if its true error were dx
   /// (exact attitude dependence of the lever-arm terms; seed 000 UKF eqs. (14)-(21)).
-  /// Lever-arm states: the true lever arm l_b^ - dl_b (exact); time offset:
-  /// its linear column (header comment).
+  /// Lever-arm states: the true lever arm l_b^ - dl_b (exact), the velocity
+  /// rows' dl_b term with the rate of set_lever_arm_rate (as in H); time
+  /// offset: its linear column (header comment).
   RowVec predicted_residual(const StateVec<L>& dx) const {
     RowVec out(lin_.rows());
     const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * C_nb_;
@@ -140,8 +156,14 @@ class LooseMeasurement {
     }
     if (has_vel_) {
       const Vec3 dw = dx.template segment<3>(L::kGyroBias);
-      out.template segment<3>(row) = dx.template segment<3>(L::kVel) + C_nb_ * omega_ib_b_.cross(l_b_) -
-                                     C_true * (omega_ib_b_ - dw).cross(l_true);
+      if constexpr (kHasLeverArm<L>) {  // l_true = l_b^ - dl_b, the dl_b part with the lever-arm rate
+        const Vec3 dl = dx.template segment<3>(kLever);
+        out.template segment<3>(row) = dx.template segment<3>(L::kVel) + C_nb_ * omega_ib_b_.cross(l_b_) -
+                                       C_true * ((omega_ib_b_ - dw).cross(l_b_) - (omega_lever_b_ - dw).cross(dl));
+      } else {
+        out.template segment<3>(row) = dx.template segment<3>(L::kVel) + C_nb_ * omega_ib_b_.cross(l_b_) -
+                                       C_true * (omega_ib_b_ - dw).cross(l_true);
+      }
       if constexpr (kHasLeverArm<L>) {  // the transport term of the lever arm, exact in l
         const Vec3 d_l = C_nb_ * l_b_ - C_true * l_true;
         out.template segment<3>(row) -= omega_in_n_.cross(d_l);
@@ -158,6 +180,8 @@ class LooseMeasurement {
   Vec3 l_b_ = Vec3::Zero();
   Vec3 omega_ib_b_ = Vec3::Zero();
   Vec3 omega_in_n_ = Vec3::Zero();  // lever-arm layouts only (predicted_residual)
+  Vec3 omega_lever_b_ = Vec3::Zero();  // rate of the lever-arm velocity columns (set_lever_arm_rate)
+  bool lever_rate_set_ = false;
   bool has_pos_ = true, has_vel_ = true;
 };
 

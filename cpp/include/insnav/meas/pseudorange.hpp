@@ -105,6 +105,8 @@ class TightMeasurement {
     C_nb_ = ins.q_nb.toRotationMatrix();
     l_b_ = lever_arm_b;
     omega_ib_b_ = omega_ib_b;
+    if (!lever_rate_set_) omega_lever_b_ = omega_ib_b;
+    lever_rate_set_ = false;
     b_ = clock_bias_m;
     d_ = clock_drift_mps;
     shift_ = shift_s;
@@ -189,7 +191,7 @@ class TightMeasurement {
           H[L::kClockDrift] = 1.0;
           if constexpr (kHasLeverArm<L>)
             H.template segment<3>(kLever) =
-                -u_n.transpose() * (C_nb_ * skew(omega_ib_b_) - skew(omega_in_n_) * C_nb_) - g_n.transpose() * C_nb_;
+                -u_n.transpose() * (C_nb_ * skew(omega_lever_b_) - skew(omega_in_n_) * C_nb_) - g_n.transpose() * C_nb_;
           if constexpr (kHasTimeOffset<L>) {
             H[kTd] = u_n.dot(a_n) + g_n.dot(v_ant_n);
             rw.predicted += H[kTd] * shift_s;
@@ -204,6 +206,15 @@ class TightMeasurement {
   }
 
   const LinearMeasurement<L>& linear() const { return lin_; }
+
+  /// The angular rate [rad/s] of the lever-arm states' Doppler columns for the
+  /// next set() (layouts with them; meas/gnss_loose.hpp, set_lever_arm_rate):
+  /// a rate whose noise is independent of the one given to set()
+  /// (ClosedLoop::omega_ib_b_lever).  Without this call: the rate given to set().
+  void set_lever_arm_rate(const Vec3& omega_b) {
+    omega_lever_b_ = omega_b;
+    lever_rate_set_ = true;
+  }
 
   /// Nonlinear h(dx): the residual the INS would show if its true error were dx
   /// (noise-free), i.e. h(INS) - h(INS (-) dx) with the true state recovered
@@ -253,6 +264,8 @@ class TightMeasurement {
   NavState ins_{};
   Mat3 C_nb_ = Mat3::Identity();
   Vec3 l_b_ = Vec3::Zero(), omega_ib_b_ = Vec3::Zero(), omega_in_n_ = Vec3::Zero();
+  Vec3 omega_lever_b_ = Vec3::Zero();  // rate of the lever-arm Doppler columns (set_lever_arm_rate)
+  bool lever_rate_set_ = false;
   double b_ = 0.0, d_ = 0.0, RMh_ = 1.0, RNh_ = 1.0;
 };
 
