@@ -19,7 +19,9 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    elevation order, no confirmation over epochs), insnav GNSS-only RTK (continuous AR, as in docs/results/rtk_*) and RTKLIB
    ``rnx2rtkp`` (``bench/rtk/spirent_dynamic_l1l2_ge_cont.conf``: continuous AR).
    Per outage: epochs to the first fix after it (1 = the first epoch), the 3-D error of the
-   RTK/INS during the outage (max) and at its end (the INS just before the first epoch after it);
+   RTK/INS during the outage (max) and at its end (the INS just before the first epoch after it),
+   forward and RTS-smoothed (``smooth = true``), and the smoothed minus forward fixed antenna over the
+   fixed epochs;
    over the run: fix rate (fixed / rover epochs with data) and wrong fixes (3-D error > 5 cm).
 2. **Simulator, ``rtk-urban-car`` (GPS L1 only), N runs** (seeds 1..N) with cycle slips at 1 per
    satellite per 5 minutes (``slip_rate_per_h = 12``), none flagged by the receiver
@@ -229,24 +231,43 @@ def spirent_part(work: Path, progress, freq: int = 2):
         rows[name] = dict(fix_rate=float(fixed.sum()) / n_epochs, n_fixed=int(fixed.sum()), wrong=wrong,
                           rms_fixed_mm=float(1e3 * np.sqrt(np.nanmean(err[fixed] ** 2))) if fixed.any() else math.nan,
                           per=per, wall_s=r["wall_s"])
-    # INS errors in the outages (default run): IMU-centre solution rows (zero lever arm here)
-    sol = res["insnav RTK/INS (continuous, default)"]["sol"]
-    tt = sol.t + ds.gps_time_offset_s
-    r_ins = np.asarray(earth.geodetic_to_ecef(np.radians(sol.lat_deg), np.radians(sol.lon_deg), sol.h_m),
-                       float).reshape(-1, 3)
-    # truth at the IMU rows: the 10 Hz truth rows coincide with every 10th IMU row
-    outage_err = []
-    for (a, L), ta in zip(OUTAGES, after):
-        m = (tt >= t_first + a - 1e-6) & (tt < ta - 1e-6)
-        tr = _truth(ds, tt[m])
-        e = np.linalg.norm(r_ins[m] - tr, axis=1)
-        ok = np.isfinite(e)
-        last = np.flatnonzero(ok)
-        outage_err.append((float(np.max(e[ok])) if ok.any() else math.nan,
-                           float(e[last[-1]]) if last.size else math.nan))
+    # INS errors in the outages (default run, forward and RTS-smoothed): IMU-centre solution rows (zero
+    # lever arm here)
+    sm = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False, smooth=True), rover=rov, base=base, nav=nav,
+                     base_pos=base_e, rtk_options=dict(opts, ar_mode="continuous"))
+    fwd = res["insnav RTK/INS (continuous, default)"]["sol"]
+    fx = fwd.rtk.status == 1
+    dfix = np.linalg.norm(sm.rtk.r_smoothed_e[fx] - fwd.rtk.r_e[fx], axis=1)
+    efix_f = np.linalg.norm(fwd.rtk.r_e[fx] - _truth(ds, fwd.rtk.t_gps_s[fx]), axis=1)
+    efix_s = np.linalg.norm(sm.rtk.r_smoothed_e[fx] - _truth(ds, fwd.rtk.t_gps_s[fx]), axis=1)
+    smooth_fix = dict(rms_mm=1e3 * float(np.sqrt(np.nanmean(dfix ** 2))), max_mm=1e3 * float(np.nanmax(dfix)),
+                      rms_f_mm=1e3 * float(np.sqrt(np.nanmean(efix_f ** 2))),
+                      rms_s_mm=1e3 * float(np.sqrt(np.nanmean(efix_s ** 2))),
+                      status_same=bool(np.array_equal(sm.fix_status, fwd.fix_status)))
+
+    def outage_errors(sol):
+        tt = sol.t + ds.gps_time_offset_s
+        r_ins = np.asarray(earth.geodetic_to_ecef(np.radians(sol.lat_deg), np.radians(sol.lon_deg), sol.h_m),
+                           float).reshape(-1, 3)
+        # truth at the IMU rows: the 10 Hz truth rows coincide with every 10th IMU row
+        errs = []
+        for (a, L), ta in zip(OUTAGES, after):
+            m = (tt >= t_first + a - 1e-6) & (tt < ta - 1e-6)
+            tr = _truth(ds, tt[m])
+            e = np.linalg.norm(r_ins[m] - tr, axis=1)
+            ok = np.isfinite(e)
+            last = np.flatnonzero(ok)
+            errs.append((float(np.max(e[ok])) if ok.any() else math.nan,
+                         float(e[last[-1]]) if last.size else math.nan))
+        return errs
+
+    outage_err = outage_errors(fwd)
+    outage_err_smooth = outage_errors(sm)
+    sol = fwd
     fx = sol.rtk.status == 1
     min_ps = float(np.min(sol.rtk.success_rate[fx])) if fx.any() else math.nan
-    return dict(rows=rows, outage_err=outage_err, n_epochs=n_epochs, after=after, t_first=t_first,
+    return dict(rows=rows, outage_err=outage_err, outage_err_smooth=outage_err_smooth, smooth_fix=smooth_fix,
+                n_epochs=n_epochs, after=after, t_first=t_first,
                 lever=ds.lever_arm_b, freq=freq, min_ps=min_ps)
 
 
@@ -425,7 +446,16 @@ def report(sps, urban, cost, n_runs, wall_s, command) -> str:
               "| outage | " + " | ".join(f"{b} s at {a} s" for a, b in OUTAGES) + " |",
               "|---|" + "---|" * len(OUTAGES),
               "| max | " + " | ".join(_f(e[0], ".3f") for e in sp["outage_err"]) + " |",
-              "| at the end | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err"]) + " |"]
+              "| at the end | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err"]) + " |",
+              "| max, RTS-smoothed | " + " | ".join(_f(e[0], ".3f") for e in sp["outage_err_smooth"]) + " |",
+              "| at the end, RTS-smoothed | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err_smooth"]) + " |"]
+        sf = sp["smooth_fix"]
+        L += ["", "RTS smoother (`smooth = true`; fixed epochs conditioned on the fixed integers, "
+              "`cpp/include/insnav/engine/rtk_ins_engine.hpp` 4.): smoothed minus forward fixed antenna over the "
+              f"fixed epochs RMS {sf['rms_mm']:.1f} mm, max {sf['max_mm']:.1f} mm (target 5 mm: "
+              f"{_met(sf['max_mm'] <= 5.0)}); 3-D RMS error of the fixed epochs forward {sf['rms_f_mm']:.1f} mm, "
+              f"smoothed {sf['rms_s_mm']:.1f} mm; fix status column identical to the forward pass: "
+              f"{'yes' if sf['status_same'] else 'no'}."]
         ri = sp["rows"][names[0]]
         ok1 = all(x is not None and x <= 1 for x in ri["per"])
         L += ["", f"Targets (RTK/INS, default settings, {fq}):", "",

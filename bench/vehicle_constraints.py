@@ -322,7 +322,7 @@ def kfgins_section() -> list[str]:
             f"| forward EKF | " + " | ".join(f"{x:.3f}" for x in rows["forward"]) + f" | {tf:.2f} |",
             f"| RTS smoother | " + " | ".join(f"{x:.3f}" for x in rows["smoothed"]) + f" | {ts:.2f} |", "",
             f"Cost: the smoothed run takes {ts / tf:.2f}x the forward run (the whole insnav.run call; target <= 1.5x).  "
-            "Memory of the forward record: 3 n x n + 3 n doubles per filter epoch (11 kB for 21 states: "
+            "Memory of the forward record: 3 n x n + 4 n doubles per filter epoch (11 kB for 21 states: "
             "about 40 MB per hour at 1 Hz GNSS)."]
 
 

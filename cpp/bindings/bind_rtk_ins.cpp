@@ -10,6 +10,7 @@
 #include "convert.hpp"
 #include "insnav/engine/rtk_ins_engine.hpp"
 #include "outputs.hpp"
+#include "smoother_run.hpp"
 
 namespace insnav::py_bind {
 
@@ -23,7 +24,7 @@ using Engine = RtkInsEngine<64>;
 RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   reject_unknown(engine, {"lever_arm_b", "propagation_interval", "output_decimation", "ins_slip_k_sigma",
                           "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob",
-                          "ar_min_success_rate"},
+                          "ar_min_success_rate", "outage_cycle_s", "smooth"},
                  "rtk/ins engine config");
   RtkInsConfig c;
   c.rtk = rtk_options_from_dict(rtk);
@@ -36,6 +37,8 @@ RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   c.code_chi2_row = num(engine, "code_chi2_row", c.code_chi2_row);
   c.validation_prob = num(engine, "validation_prob", c.validation_prob);
   c.ar_min_success_rate = num(engine, "ar_min_success_rate", c.ar_min_success_rate);
+  c.outage_cycle_s = num(engine, "outage_cycle_s", c.outage_cycle_s);
+  if (!(c.outage_cycle_s > 0.0)) throw py::value_error("outage_cycle_s must be > 0 (inf: one cycle per gap)");
   if (!(c.ar_min_success_rate >= 0.0 && c.ar_min_success_rate < 1.0))
     throw py::value_error("ar_min_success_rate must be in [0, 1)");
   if (!(c.propagation_interval > 0.0)) throw py::value_error("propagation_interval must be > 0");
@@ -58,6 +61,8 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   const ImuCorrection corr = imu_correction_from(corr0);
   const ImuErrorModel mdl = imu_model_from_dict(model);
   const RtkInsConfig cfg = rtk_ins_config_from(engine_cfg, rtk_opts);
+  const bool smooth = flag(engine_cfg, "smooth", false);  // the RTS backward pass (smoother_run.hpp)
+  if (smooth && probe_epoch >= 0) throw py::value_error("rtk_ins_run: probe_epoch and smooth exclude each other");
   const Vec3 rb = vec3_from(r_base_e, "rtk_ins_run: r_base_e");
   const py::ssize_t E = t_rec.ndim() == 1 ? t_rec.shape(0) : -1;
   if (E < 0) throw py::value_error("rtk_ins_run: t_rec must be 1-D");
@@ -107,6 +112,11 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   out.r_float_e = r_float.mutable_data();
   out.P_r = P_r.mutable_data();
   out.slips = slips.mutable_data();
+  DArray nav_ep({R, py::ssize_t(9)});
+  std::fill(nav_ep.mutable_data(), nav_ep.mutable_data() + 9 * R, NAN);
+  out.nav_epoch = nav_ep.mutable_data();
+  const double span = imu.n ? imu.t[imu.n - 1] - nav.t : 0.0;
+  SmootherRun<Ekf<Layout15>> smoother(smooth, R, span, cfg.outage_cycle_s);
   py::array_t<std::uint8_t> row_slip(mr);
   std::fill(row_slip.mutable_data(), row_slip.mutable_data() + mr, 0);
   out.row_slip = row_slip.mutable_data();
@@ -123,8 +133,10 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
     py::gil_scoped_release release;
     auto eng = std::make_unique<Engine>(mdl, cfg);  // one allocation per run
     if (probe < 0) {
+      smoother.attach(eng->core());
       eng->run(nav, P, corr, imu.n, imu.t, imu.dtheta_b, imu.dv_b, R, recs.data(), rover_rows.data(), base_rows.data(),
                rb, out);
+      smoother.finish(eng->core());
     } else {
       // run up to and including the probed record, then read its AR
       eng->run(nav, P, corr, imu.n, imu.t, imu.dtheta_b, imu.dv_b, probe + 1, recs.data(), rover_rows.data(),
@@ -140,10 +152,13 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   }
   py::dict res;
   nav_buf.put(res, out);
+  smoother.put(res);
   // per rover epoch (E): records scattered back, epochs without a base: status 0
   py::array_t<std::int32_t> st_all(E), nfix_all(E), ndd_all(E), nsat_all(E), crej_all(E),
       sl_all({E, static_cast<py::ssize_t>(kRtkInsSlipKinds)});
-  DArray ratio_all(E), ps_all(E), re_all({E, py::ssize_t(3)}), rf_all({E, py::ssize_t(3)}), pr_all({E, py::ssize_t(9)});
+  DArray ratio_all(E), ps_all(E), re_all({E, py::ssize_t(3)}), rf_all({E, py::ssize_t(3)}), pr_all({E, py::ssize_t(9)}),
+      nav_all({E, py::ssize_t(9)});
+  std::fill(nav_all.mutable_data(), nav_all.mutable_data() + 9 * E, NAN);
   for (py::ssize_t e = 0; e < E; ++e) {
     st_all.mutable_data()[e] = nfix_all.mutable_data()[e] = ndd_all.mutable_data()[e] = nsat_all.mutable_data()[e] =
         crej_all.mutable_data()[e] = 0;
@@ -166,7 +181,10 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
       re_all.mutable_data()[3 * e + k] = r_e.data()[3 * i + k];
       rf_all.mutable_data()[3 * e + k] = r_float.data()[3 * i + k];
     }
-    for (int k = 0; k < 9; ++k) pr_all.mutable_data()[9 * e + k] = P_r.data()[9 * i + k];
+    for (int k = 0; k < 9; ++k) {
+      pr_all.mutable_data()[9 * e + k] = P_r.data()[9 * i + k];
+      nav_all.mutable_data()[9 * e + k] = nav_ep.data()[9 * i + k];
+    }
     for (int k = 0; k < kRtkInsSlipKinds; ++k)
       sl_all.mutable_data()[kRtkInsSlipKinds * e + k] = slips.data()[kRtkInsSlipKinds * i + k];
   }
@@ -182,6 +200,7 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   res["P_r_ned"] = pr_all;
   res["slips"] = sl_all;
   res["row_slip"] = row_slip;
+  res["nav_epoch"] = nav_all;  // (E, 9) the INS after each epoch: lat, lon [rad], h, v_n, roll, pitch, yaw [rad]
   if (probe >= 0) {
     py::dict pr;
     const py::ssize_t n = p_n;

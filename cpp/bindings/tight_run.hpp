@@ -37,8 +37,6 @@ py::dict run_tight_impl(const TightArgs& a) {
   using L = typename Filter::Layout;
   if (a.cfg.tdcp.enabled && !TightEngine<Filter>::kCanTdcp)
     throw py::value_error("tdcp: time-differenced carrier phase runs with the tight ekf only");
-  if (a.cfg.tdcp.enabled && a.smooth)
-    throw py::value_error("tdcp: the RTS smoother over TDCP rows is not implemented (smooth = false)");
   const StateCov<L> P = state_cov_from<L>(a.P0);
   NavBuffers nav_buf(output_rows(a.imu.n, a.cfg.output_decimation), L::kSize, true, kHasIsb<L>, false,
                      kHasTimeOffset<L>, kHasLeverArm<L>);

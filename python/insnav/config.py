@@ -653,9 +653,10 @@ class RunConfig:
         presets).
     smooth : bool
         Post-process with the RTS smoother (EKF; RB-UKF and UKF: the unscented
-        RTS smoother, Sarkka 2008; loose or tight): every output row and sigma,
-        and a tight run's receiver clock and inter-system biases, from all the
-        data, before and after it.
+        RTS smoother, Sarkka 2008; loose, tight with or without TDCP, and the
+        EKF's RTK/INS, whose fixed epochs keep the fixed solution): every output
+        row and sigma, and a tight run's receiver clock and inter-system biases,
+        from all the data, before and after it.
     init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None
         Initial estimate of the IMU errors (measured minus true; scale factors
         [-]); None: zero.  KF-GINS's ``initaccbias``/``initgyrbias``/
@@ -796,9 +797,9 @@ class RunConfig:
         if not isinstance(self.tdcp, Tdcp):
             bad("tdcp", self.tdcp, "a [tdcp] table")
         self.tdcp.validate()
-        if self.tdcp.enabled and (self.coupling != "tight" or self.filter != "ekf" or self.smooth):
-            bad("tdcp.enabled", True, f"true only with coupling = \"tight\", filter = \"ekf\" and smooth = false "
-                f"(not {self.coupling} {self.filter!r}{', smooth' if self.smooth else ''})")
+        if self.tdcp.enabled and (self.coupling != "tight" or self.filter != "ekf"):
+            bad("tdcp.enabled", True, f"true only with coupling = \"tight\" and filter = \"ekf\" "
+                f"(not {self.coupling} {self.filter!r})")
         if not isinstance(self.sanitize, dict):
             bad("sanitize", self.sanitize, "a [sanitize] table")
         _SAN = SANITIZE_DEFAULTS

@@ -246,7 +246,8 @@ FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
                summary="closed-loop error-state EKF, Joseph update; rtk: double-differenced carrier phase and code "
                        "against a base, ambiguity states, INS-aided AR and slip detection",
                coupling_options={"tight": TIGHT_OPTIONS, "rtk": RTK_INS_OPTIONS},
-               selfcal=("loose", "tight"), data_options=_DATA, **_KALMAN),
+               selfcal=("loose", "tight"), data_options=_DATA,
+               **{**_KALMAN, "smoothable": ("loose", "tight", "rtk")}),
     FilterSpec("rbukf", ("loose", "tight"), {"loose": (15, 21), "tight": (17, 20)},
                {"loose": _LOOSE, "tight": _TIGHT}, paper="seed 000",
                summary="UT time update through the nonlinear error model, linear KF update",

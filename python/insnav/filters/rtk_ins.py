@@ -17,6 +17,14 @@ IMU-centre navigation) with ``gnss_t``/``gnss_status`` (per rover epoch: applied
 ``solution.rtk`` (:class:`RtkInsSolution`: antenna positions
 fixed or float per epoch, ratio, fixed ambiguities, slip detections including the INS-aided
 test) and ``summary`` counts (fix rate, slips).
+
+``cfg.smooth``: the RTS smoother (:mod:`insnav.filters.smoothing`) over the 15 navigation error
+states, the ambiguities marginalised; at a fixed epoch the smoother starts from the navigation
+conditioned on the fixed integers (the fixed solution and its covariance), so the fixed epochs keep
+the fixed solution (Rauch, Tung & Striebel 1965; Groves 2013, sec. 3.4.2;
+``cpp/include/insnav/engine/rtk_ins_engine.hpp``, 4.).  The rows are smoothed; ``fix_status``,
+``ratio`` and ``solution.rtk`` stay the forward pass's (what was fixed), and
+``solution.rtk.r_smoothed_e`` is the smoothed antenna per rover epoch.
 """
 from __future__ import annotations
 
@@ -71,9 +79,11 @@ class RtkInsDataset:
 class RtkInsSolution(RtkSolution):
     """Per rover epoch, as :class:`insnav.gnss.rtk.RtkSolution` (``r_e`` the antenna, fixed where
     fixed), plus ``slips[:, 6]`` the INS-aided detections and ``code_rejected`` (DD code rows
-    screened out)."""
+    screened out); with the smoother, ``r_smoothed_e`` (E, 3) the smoothed antenna [m] (NaN where
+    the epoch has no solution)."""
 
     code_rejected: np.ndarray | None = None
+    r_smoothed_e: np.ndarray | None = None
 
     SLIP_KINDS = RtkSolution.SLIP_KINDS + ("ins",)
 
@@ -139,6 +149,10 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     eng = dict(lever_arm_b=lever_arm(imu_ds, cfg), propagation_interval=cfg.propagation_interval_s,
                output_decimation=int(cfg.output_decimation))
     eng.update(ENGINE_DEFAULTS)
+    if cfg.smooth:  # the smoother's epochs inside outages: a cycle closed after 1.5 rover periods
+        d = np.diff(t_rec)
+        period = cfg.cycle_period_s or (float(np.median(d[d > 0])) if np.any(d > 0) else 1.0)
+        eng.update(smooth=True, outage_cycle_s=1.5 * period)
     eng.update(engine or {})
     out = _core.rtk_ins_run(t, dth, dv, init_vector(imu_ds, init), np.diag(p0 ** 2), np.zeros(12),
                             noise.as_core_dict(), eng, opt.core_dict(), t_rec, roff, rrows, boff, brows, bidx,
@@ -174,5 +188,44 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     sol.rtk_row_slip = np.asarray(out["row_slip"])  # per rover row: slip bits (SLIP_KINDS order)
     if "probe" in out:
         sol.probe = {k: np.asarray(v) for k, v in out["probe"].items()}
+    if cfg.smooth:  # RTS backward pass: the rows, and the antenna per rover epoch
+        from .smoothing import smoothed_rows
+
+        smoothed_rows(sol, out, cfg.filter)
+        rs.r_smoothed_e = _smoothed_antenna(out, t_rec, status, eng["lever_arm_b"])
     raise_if_nonfinite(sol, cfg.filter)
     return sol
+
+
+def _smoothed_antenna(out: dict, t_rec, status, lever_arm_b) -> np.ndarray:
+    """The smoothed antenna per rover epoch (E, 3) ECEF [m]: the INS after each epoch
+    (``nav_epoch``) corrected as the rows are (:func:`insnav.filters.smoothing.smoothed_rows`), plus
+    the lever arm ``C_en C_nb l_b``; NaN where the epoch has no solution."""
+    nav = np.asarray(out["nav_epoch"], float)
+    te = np.asarray(out["smooth_t"], float)
+    r = np.full((len(t_rec), 3), np.nan)
+    if te.size < 2:
+        return r
+    k = np.flatnonzero((status > 0) & np.all(np.isfinite(nav), axis=1) & (t_rec <= te[-1] + 1e-9))
+    if k.size == 0:
+        return r
+    lat, lon = nav[k, 0] * RAD2DEG, nav[k, 1] * RAD2DEG
+    h, v = nav[k, 2].copy(), np.ascontiguousarray(nav[k, 3:6])
+    roll, pitch, yaw = (np.ascontiguousarray(nav[k, 6 + j] * RAD2DEG) for j in range(3))
+    cols = list(range(9))
+    d = np.ascontiguousarray(np.asarray(out["smooth_d"], float)[:, cols])
+    d_end = np.ascontiguousarray(np.asarray(out["smooth_d_end"], float)[:, cols])
+    sig = np.ascontiguousarray(np.asarray(out["smooth_sigma"], float)[:, cols])
+    sg = np.empty((k.size, 9))
+    _core.smooth_rows(np.ascontiguousarray(t_rec[k], float), lat, lon, h, v, roll, pitch, yaw, te, d, d_end, sig, sg,
+                      None)
+    # l_n = C_nb l_b (3-2-1 Euler angles), then r = r_imu + C_en l_n
+    ph, th, ps = np.radians(roll), np.radians(pitch), np.radians(yaw)
+    sr, cr, sp, cp, sy, cy = np.sin(ph), np.cos(ph), np.sin(th), np.cos(th), np.sin(ps), np.cos(ps)
+    lx, ly, lz = (float(c) for c in np.broadcast_to(np.asarray(lever_arm_b, float), (3,)))
+    y1, z1 = cr * ly - sr * lz, sr * ly + cr * lz
+    x2, z2 = cp * lx + sp * z1, -sp * lx + cp * z1
+    l_n = np.stack([cy * x2 - sy * y1, sy * x2 + cy * y1, z2], axis=-1)
+    lat_r, lon_r = np.radians(lat), np.radians(lon)
+    r[k] = earth.geodetic_to_ecef(lat_r, lon_r, h) + np.einsum("nij,nj->ni", earth.C_en(lat_r, lon_r), l_n)
+    return r

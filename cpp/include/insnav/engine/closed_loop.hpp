@@ -182,6 +182,49 @@ struct ClosedLoop {
     if constexpr (kCanRecordForSmoother) filter.track_cycle_transition(buf != nullptr);
   }
   std::int64_t recorded_epochs() const { return rec_n_; }
+  bool recording() const { return rec_ != nullptr && !rec_overflow_; }
+
+  /// An engine with its own joint update (rtk_ins_engine.hpp) fed the error
+  /// estimate x back into the INS itself: the smoother's record of this epoch
+  /// counts it (several feedbacks in one epoch add up, to first order).
+  void smoother_feedback(const StateVec<L>& x) {
+    if (!rec_pending_) return;
+    SmootherEpoch<L>& e = rec_[rec_n_ - 1];
+    e.x = e.fed_back ? StateVec<L>(e.x + x) : x;
+    e.fed_back = true;
+  }
+
+  /// The smoother's filtered estimate of this epoch conditioned on more than
+  /// the forward filter used (rts_smoother.hpp, c_k): the error of the
+  /// post-feedback nominal is estimated as dx (not fed back) with covariance
+  /// P - dP, e.g. the integer-fixed solution of an RTK/INS epoch (Teunissen
+  /// 1995, eq. (6): dx = P_xa Q_a^-1 (a_hat - a_fix), dP = P_xa Q_a^-1 P_ax).
+  /// The prediction to the next epoch is conditioned the same way there
+  /// (xp += Phi dx, Pp -= Phi dP Phi', C from P - dP).  EKF only.
+  void condition_for_smoother(const StateVec<L>& dx, const StateCov<L>& dP) {
+    if (!rec_pending_) return;
+    cond_dx_ = dx;
+    cond_dP_ = dP;
+    cond_pending_ = true;
+  }
+
+  /// A relative measurement of this epoch and the previous one applied to the
+  /// filter by stochastic cloning (meas/tdcp.hpp): the smoother's moments of the
+  /// step from the previous epoch become the clone-augmented posterior ones
+  /// (rts_smoother.hpp): the previous epoch's estimate += dx_prev, its
+  /// covariance -= dP_prev, the cross-covariance -= dC (= B S^-1 A'), and the
+  /// prediction to this epoch the filter's updated x and P.  Call right after
+  /// the update; the previous epoch must be the last one recorded before this one.
+  void clone_update_for_smoother(const StateVec<L>& dx_prev, const StateCov<L>& dP_prev, const StateCov<L>& dC) {
+    if (!rec_pending_ || rec_n_ < 2) return;
+    SmootherEpoch<L>& prev = rec_[rec_n_ - 2];
+    SmootherEpoch<L>& e = rec_[rec_n_ - 1];
+    prev.x_cond += dx_prev;
+    prev.P -= dP_prev;
+    e.C -= dC;
+    e.x_pred = filter.x();
+    e.P_pred = filter.P();
+  }
   bool recording_overflowed() const { return rec_overflow_; }
 
   void reset(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0, double clock_bias0 = 0.0,
@@ -189,6 +232,7 @@ struct ClosedLoop {
     rec_n_ = 0;
     rec_overflow_ = false;
     rec_pending_ = false;
+    cond_pending_ = cond_next_ = false;
     if (rec_) {  // epoch 0: the initial state, nothing fed back
       if (rec_cap_ < 1) {
         rec_overflow_ = true;
@@ -302,6 +346,12 @@ struct ClosedLoop {
       SmootherEpoch<L>& e = rec_[rec_n_ - 1];
       if (!e.fed_back) e.x = filter.x();
       e.P = filter.P();
+      if (cond_pending_) {  // condition_for_smoother
+        e.x_cond = cond_dx_;
+        e.P -= cond_dP_;
+        cond_pending_ = false;
+        cond_next_ = true;
+      }
       P_post_ = e.P;
       rec_pending_ = false;
     }
@@ -330,6 +380,16 @@ struct ClosedLoop {
           e.C = filter.cycle_cross_covariance();
         else  // EKF: P_k Phi'
           e.C.noalias() = P_post_ * filter.cycle_transition().transpose();
+        if constexpr (kTracksTransition) {
+          if (cond_next_) {  // the prediction from the conditioned estimate (condition_for_smoother)
+            const StateCov<L>& Phi = filter.cycle_transition();
+            e.x_pred.noalias() += Phi * cond_dx_;
+            StateCov<L> dP_PhiT;  // fixed size, on the stack
+            dP_PhiT.noalias() = cond_dP_ * Phi.transpose();
+            e.P_pred.noalias() -= Phi * dP_PhiT;
+          }
+        }
+        cond_next_ = false;
         e.fed_back = false;
         rec_pending_ = true;
       }
@@ -657,6 +717,10 @@ struct ClosedLoop {
   std::int64_t rec_cap_ = 0, rec_n_ = 0;
   bool rec_pending_ = false, rec_overflow_ = false;
   StateCov<L> P_post_ = StateCov<L>::Zero();
+  // condition_for_smoother: pending for the open epoch, then for the next prediction
+  bool cond_pending_ = false, cond_next_ = false;
+  StateVec<L> cond_dx_ = StateVec<L>::Zero();
+  StateCov<L> cond_dP_ = StateCov<L>::Zero();
   InsInterval iv_;
   bool have_mid_ = false;
   ImuIncrement last_imu_;     // last corrected increment integrated

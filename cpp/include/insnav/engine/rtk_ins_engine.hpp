@@ -32,6 +32,20 @@
 //      least ar_min_success_rate (Teunissen 1998), partial AR; the fixed INS error is
 //      dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)); fix-and-hold feeds the
 //      fixed DD back as pseudo-measurements (sigma hold_sigma_cycles) into the joint filter.
+//   4. RTS smoother (ClosedLoop::record_for_smoother; filter/rts_smoother.hpp): the backward pass
+//      runs over the 15 navigation error states with the ambiguities marginalised (their block is
+//      neither stored nor smoothed: an exact joint smoother would store (15 + kMaxAmb)^2 per epoch and
+//      follow every ambiguity reset).  The engine's own feedbacks are recorded
+//      (ClosedLoop::smoother_feedback).  Fixed epochs keep the fixed solution: with continuous AR the
+//      smoother's filtered estimate at a fixed epoch is the navigation conditioned on the fixed
+//      integers, dx_fix and P - P_xa Q_a^-1 P_ax (ClosedLoop::condition_for_smoother), and the step to
+//      the next epoch is predicted from it (through outage cycles, which have no measurement, the
+//      conditioned estimate is carried as its prediction); with fix-and-hold the held posterior
+//      already is.  The
+//      backward pass thus smooths the navigation states conditioned on the fixed ambiguities at
+//      fixed epochs (Rauch, Tung & Striebel 1965; Groves 2013, sec. 3.4.2), and a fixed epoch moves
+//      only by what the neighbouring epochs add to its centimetre-level covariance.  Outage cycles
+//      (RtkInsConfig::outage_cycle_s) give the smoother epochs inside GNSS gaps.
 //
 // No heap allocation per epoch: every matrix is bounded by kMaxAmb and lives in the engine.
 #pragma once
@@ -63,6 +77,11 @@ struct RtkInsConfig {
   double code_chi2_row = 25.0;        // code row screening (0: off)
   double validation_prob = 0.999;     // AR: best vector's squared norm <= chi2 quantile (0: off)
   double ar_min_success_rate = 0.0;   // AR: bootstrapped success rate of the fixed subset (0: off)
+  // A filter cycle without a rover epoch is closed after this long [s] (+inf: one cycle spans a
+  // whole gap).  The RTS smoother needs epochs inside GNSS outages (the bindings set it when
+  // smoothing); the EKF's propagation does not depend on where cycles end, so the forward
+  // solution is the same up to rounding.
+  double outage_cycle_s = kInf;
 };
 
 /// Slip count index of the INS-aided test (after gnss::SlipKind's).
@@ -94,6 +113,9 @@ struct RtkInsOutputs : NavOutputs {
   double* r_float_e = nullptr;  // (E, 3)
   double* P_r = nullptr;        // (E, 9) NED
   std::int32_t* slips = nullptr;  // (E, kRtkInsSlipKinds)
+  // (E, 9) the INS after the epoch's updates and feedback (the nominal the RTS smoother corrects):
+  // lat, lon [rad], h [m], v_n [m/s], roll, pitch, yaw [rad]
+  double* nav_epoch = nullptr;
   // per rover row (M rows over all epochs): slip flags of the row, bits gnss::SlipKind and kSlipIns,
   // OR over the frequencies
   std::uint8_t* row_slip = nullptr;
@@ -134,6 +156,7 @@ class RtkInsEngine {
 
   void start(const NavState& initial, const StateCov<L>& P0, const ImuCorrection& corr0) {
     core_.reset(initial, P0, corr0);
+    cond_valid_ = false;
     core_.filter.track_cycle_transition(true);
     xa_.setZero();
     Pia_.setZero();
@@ -157,9 +180,12 @@ class RtkInsEngine {
     start(initial, P0, corr0);
     std::int64_t g = 0;
     for (; g < n_epochs && !(recs[g].t > initial.t); ++g) mark(g, out);
-    core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, n_epochs, kInf, cfg_.output_decimation, out,
-                      [&](std::int64_t i) { return recs[i].t; },
-                      [&](std::int64_t i) {
+    // the core's IMU loop (ClosedLoop::run_events) with outage cycles that also carry the
+    // ambiguities' cross-covariance P_xN over the cycle (ambiguities constant: P_xN <- Phi P_xN)
+    const double period = cfg_.outage_cycle_s > 0.0 ? cfg_.outage_cycle_s : kInf;
+    const auto next_t = [&]() { return g < n_epochs ? recs[g].t : kInf; };
+    const auto apply_next = [&]() {
+                        const std::int64_t i = g++;
                         const RtkInsRecord& r = recs[i];
                         const RtkInsEpoch e = apply_epoch(
                             rover_rows + r.begin * gnss::RtkRow::kCols, static_cast<int>(r.end - r.begin),
@@ -174,7 +200,43 @@ class RtkInsEngine {
                             out.row_slip[r.begin + j] = fl;
                           }
                         }
-                      });
+                        if (out.nav_epoch) {
+                          const NavState& s = core_.state();
+                          const Vec3 rpy = euler_from_quat(s.q_nb);
+                          double* q = out.nav_epoch + 9 * i;
+                          q[0] = s.lat;
+                          q[1] = s.lon;
+                          q[2] = s.h;
+                          for (int j = 0; j < 3; ++j) {
+                            q[3 + j] = s.v_n[j];
+                            q[6 + j] = rpy[j];
+                          }
+                        }
+                      };
+    double t_prev = initial.t;
+    int until_output = cfg_.output_decimation;
+    for (std::int64_t k = 0; k < n; ++k) {
+      if (out.stop_requested(k, n)) break;
+      const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
+      core_.process_sample(raw, t_prev, kInf, next_t, apply_next);
+      if (core_.outage_due(period)) {  // an outage cycle (no record for `period`)
+        core_.close_cycle();
+        Pia_ = core_.filter.cycle_transition() * Pia_;
+        if (cond_valid_) {  // no measurement: the smoother's estimate stays the fixed one, predicted
+          const auto& Phi = core_.filter.cycle_transition();
+          cond_dx_ = Phi * cond_dx_;
+          dP_fix_.noalias() = cond_dP_ * Phi.transpose();
+          cond_dP_.noalias() = Phi * dP_fix_;
+          core_.condition_for_smoother(cond_dx_, cond_dP_);
+        }
+        core_.start_cycle();
+      }
+      if (--until_output == 0 || k + 1 == n) {
+        core_.write_output(out);
+        until_output = cfg_.output_decimation;
+      }
+      t_prev = raw.t;
+    }
     for (; g < n_epochs; ++g) mark(g, out);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
   }
@@ -187,6 +249,7 @@ class RtkInsEngine {
     const gnss::RtkOptions& o = cfg_.rtk;
     const int nf = std::clamp(o.n_freq, 1, gnss::kMaxFreq);
     const double t = core_.state().t;
+    cond_valid_ = false;
     n_r = std::min(n_r, gnss::kMaxSatKeys);
     n_b = std::min(n_b, gnss::kMaxSatKeys);
     std::array<int, gnss::kNumSlipKinds> sl{};
@@ -679,6 +742,7 @@ class RtkInsEngine {
     core_.corr.gyro_bias += x.template segment<3>(L::kGyroBias);
     core_.ins.set_state(s);
     core_.touch();
+    core_.smoother_feedback(x);  // the RTS smoother's record of the epoch (closed_loop.hpp)
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -752,8 +816,15 @@ class RtkInsEngine {
     out.r_e = a.r_e;
     QxaT_ = Qxa_.transpose();
     ar_.solve_in_place(QxaT_);
-    out.P_r = (core_.filter.P() - Qxa_ * QxaT_).template block<3, 3>(L::kPos, L::kPos);
+    dP_fix_.noalias() = Qxa_ * QxaT_;  // P_xa Q_a^-1 P_ax: the covariance the fix removes
+    out.P_r = (core_.filter.P() - dP_fix_).template block<3, 3>(L::kPos, L::kPos);
     if (o.ar_mode == gnss::ArMode::kFixAndHold) hold(nu);
+    else {  // the smoother starts from the fixed solution (carried through outage cycles)
+      core_.condition_for_smoother(dx_fix, dP_fix_);
+      cond_dx_ = dx_fix;
+      cond_dP_ = dP_fix_;
+      cond_valid_ = true;
+    }
   }
 
   // Fix-and-hold: the fixed DD as pseudo-measurements N_j - N_i = a_fix (sigma hold_sigma_cycles).
@@ -821,6 +892,11 @@ class RtkInsEngine {
   std::array<double, gnss::kMaxAmbiguities> dd_el_{}, dd_var_{};
   Eigen::Matrix<double, kN, Eigen::Dynamic, 0, kN, gnss::kMaxAmbiguities> Qxa_;
   Eigen::Matrix<double, Eigen::Dynamic, kN, 0, gnss::kMaxAmbiguities, kN> QxaT_;
+  Eigen::Matrix<double, kN, kN> dP_fix_ = Eigen::Matrix<double, kN, kN>::Zero();
+  // the last epoch's fixed conditioning of the smoother (continuous AR), predicted over outage cycles
+  bool cond_valid_ = false;
+  Eigen::Matrix<double, kN, 1> cond_dx_ = Eigen::Matrix<double, kN, 1>::Zero();
+  Eigen::Matrix<double, kN, kN> cond_dP_ = Eigen::Matrix<double, kN, kN>::Zero();
   gnss::AmbVec w_;
 };
 

@@ -34,7 +34,10 @@
 // update (which then starts from the TDCP-corrected x); one feedback closes
 // the epoch.  Screening: the loss-of-lock indicator, the INS-predicted phase
 // change (single frequency: the residual less the epoch's common clock part,
-// in cycles) and a per-row chi-square on the clone-augmented S_ii.
+// in cycles) and a per-row chi-square on the clone-augmented S_ii.  With the
+// RTS smoother recording, the clone's side of the update (the previous
+// epoch's corrected estimate, covariance and cross-covariance) goes into the
+// smoother's record (ClosedLoop::clone_update_for_smoother, rts_smoother.hpp).
 //
 // Input: E epochs (time, satellite range [begin, end) into one flat array of
 // SatObservation), sorted by time.  No heap allocation inside run().
@@ -373,7 +376,10 @@ class TightEngine {
       compact(keep, n);
       if (n == 0 || !tdcp_.covariance(core_.filter.P(), Phi_P_prev_, P_prev_)) return;
     }
+    const bool smoothing = core_.recording();
+    if (smoothing) tdcp_.clone_terms(core_.filter.x(), clone_dx_, clone_dP_, clone_dC_);
     tdcp_.apply(core_.filter.x_mutable(), core_.filter.P_mutable());
+    if (smoothing) core_.clone_update_for_smoother(clone_dx_, clone_dP_, clone_dC_);  // the RTS smoother's moments
     core_.touch();
     for (int i = 0; i < n; ++i)
       if (out.tdcp_flag) out.tdcp_flag[tdcp_src_[i]] = static_cast<std::int8_t>(TdcpFlag::kUsed);
@@ -599,6 +605,9 @@ class TightEngine {
   const PhaseObservation* phase_ = nullptr;
   TdcpUpdate<L> tdcp_;
   StateCov<L> P_prev_ = StateCov<L>::Zero(), Phi_P_prev_ = StateCov<L>::Zero();
+  // the clone's side of a TDCP update for the RTS smoother (TdcpUpdate::clone_terms)
+  StateVec<L> clone_dx_ = StateVec<L>::Zero();
+  StateCov<L> clone_dP_ = StateCov<L>::Zero(), clone_dC_ = StateCov<L>::Zero();
   TdcpAntenna ant_prev_;
   double t_prev_ = 0.0;
   bool have_prev_ = false;

@@ -22,13 +22,28 @@
 //            P_k Phi' for the EKF (Phi the transition over the cycle), the
 //            UT cross-covariance for the RB-UKF / UKF (Sarkka eq. (13))
 //
+//   c_k      a correction of the estimate of the error of m_k that the
+//            forward pass did not feed back (zero unless an engine sets it,
+//            ClosedLoop::condition_for_smoother / clone_update_for_smoother):
+//            the integer-fixed solution of an RTK/INS epoch, or the clone's
+//            side of a TDCP update at epoch k + 1; P_k is then the covariance
+//            of r_k + c_k
+//
 // Backward pass, in terms of s_k = smoothed error of the post-feedback
 // nominal m_k (the filtered output at epoch k is m_k - r_k; the smoothed one
 // is m_k - s_k):
-//   s_N  = r_N,                 Ps_N = P_N
+//   s_N  = r_N + c_N,           Ps_N = P_N
 //   A_k  = C_{k+1} Pp_{k+1}^-1                                (gain, via LLT)
-//   s_k  = r_k + A_k (s_{k+1} + fed_{k+1} x_{k+1} - xp_{k+1})
+//   s_k  = r_k + c_k + A_k (s_{k+1} + fed_{k+1} x_{k+1} - xp_{k+1})
 //   Ps_k = P_k + A_k (Ps_{k+1} - Pp_{k+1}) A_k'
+// This is the backward kernel p(x_k | x_{k+1}, data up to the step k -> k+1)
+// of the fixed-interval smoother (Rauch, Tung & Striebel 1965; Groves 2013
+// sec. 3.4.2): (r_k + c_k, P_k) the estimate of x_k and (xp_{k+1}, Pp_{k+1},
+// C_{k+1}) the joint moments with x_{k+1}, all given the same data.  For a
+// measurement of x_k alone that is the filtered estimate and the prediction;
+// a relative measurement of (x_k, x_{k+1}) (TDCP by stochastic cloning)
+// updates all five moments jointly, and the kernel stays exact because later
+// measurements depend on x_k only through x_{k+1}.
 // (s_{k+1} + fed_{k+1} x_{k+1} is the smoothed error of n_{k+1}, the point
 // the prediction xp_{k+1} refers to.)  With fed = 0 throughout and linear
 // dynamics this is the textbook RTS smoother; with feedback it is the same
@@ -36,7 +51,7 @@
 // open-loop filters are equal), which the tests check against a batch
 // least-squares solution.
 //
-// Memory: sizeof(SmootherEpoch<L>) per filter epoch (3 n x n + 3 n doubles:
+// Memory: sizeof(SmootherEpoch<L>) per filter epoch (3 n x n + 4 n doubles:
 // 10.6 kB for 21 states, 38 MB per hour at 1 Hz), allocated by the caller
 // once for the whole run; the backward pass allocates nothing.
 #pragma once
@@ -59,6 +74,7 @@ struct SmootherEpoch {
   StateVec<L> x_pred = StateVec<L>::Zero();   // predicted error of n_k
   StateCov<L> P_pred = StateCov<L>::Zero();   // its covariance
   StateCov<L> C = StateCov<L>::Zero();        // cov(error of m_{k-1}, predicted error of n_k)
+  StateVec<L> x_cond = StateVec<L>::Zero();   // c_k: correction of the error of m_k not fed back
 };
 
 /// Result per epoch: the smoothed error s_k of the post-feedback nominal
@@ -83,7 +99,10 @@ SmootherStatus rts_backward(const SmootherEpoch<L>* fwd, std::int64_t n, Smoothe
   using Vec = StateVec<L>;
   SmootherStatus st;
   if (n <= 0) return st;
-  const auto remaining = [](const SmootherEpoch<L>& e) -> Vec { return e.fed_back ? Vec::Zero() : Vec(e.x); };
+  // r_k + c_k: the estimate of the error of m_k the backward kernel starts from
+  const auto remaining = [](const SmootherEpoch<L>& e) -> Vec {
+    return e.fed_back ? Vec(e.x_cond) : Vec(e.x + e.x_cond);
+  };
   out[n - 1].s = remaining(fwd[n - 1]);
   out[n - 1].P = fwd[n - 1].P;
   Eigen::LLT<Cov> llt;

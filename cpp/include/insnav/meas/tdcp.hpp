@@ -210,6 +210,22 @@ class TdcpUpdate {
   double S(int i) const { return S_(i, i); }
   double residual(int i) const { return y_[i]; }
 
+  /// The clone's side of the update (the RTS smoother, ClosedLoop::clone_update_for_smoother):
+  /// the correction of the previous epoch's error B S^-1 v (v = y - H_k x), the reduction of
+  /// its covariance B S^-1 B^T and of cov(x_c, x_k), B S^-1 A^T.  After covariance(), before
+  /// apply() (x: the state apply() will update).  No heap allocation.
+  void clone_terms(const StateVec<L>& x, StateVec<L>& dx_c, StateCov<L>& dP_c, StateCov<L>& dC) {
+    const int m = m_;
+    Vm v = y_.head(m);
+    v.noalias() -= H_cur_.topRows(m) * x;
+    const Vm Sv = llt_.solve(v);
+    dx_c.noalias() = B_ * Sv;
+    K_T_ = llt_.solve(B_.transpose());  // S^-1 B^T (m x N); apply() refills it
+    dP_c.noalias() = B_ * K_T_;
+    dP_c = (0.5 * (dP_c + dP_c.transpose())).eval();
+    dC.noalias() = K_T_.transpose() * A_.transpose();
+  }
+
   /// x += K (y - H_k x), P -= K A^T, with the S of the last covariance()
   /// (the clone's mean is zero: fed back).  Returns the NIS.
   double apply(StateVec<L>& x, StateCov<L>& P) {
