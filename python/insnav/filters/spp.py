@@ -20,7 +20,6 @@ drift, DOPs and RAIM counts, which have no solution column, are in
 from __future__ import annotations
 
 import os
-import tomllib
 
 import numpy as np
 
@@ -104,6 +103,8 @@ def load_spp_config(config_path=None):
     d = {}
     source = "run configuration"
     if config_path is not None:
+        import tomllib  # here: a run without --config never reads TOML (~3 ms of import)
+
         source = os.fspath(config_path)
         try:
             with open(config_path, "rb") as f:
