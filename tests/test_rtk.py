@@ -142,6 +142,47 @@ def test_double_differences_equal_analytic_values():
     assert set(dd["ref_row"]) == {0}
 
 
+def test_double_differences_with_qzss_have_their_own_reference_satellite():
+    """GPS and QZSS on L1/L2 (the same frequencies): every row's reference is of its own system, the
+    highest of that system, and the values are the analytic double-differenced ambiguities."""
+    rng = np.random.default_rng(11)
+    lat, lon = np.radians(35.7), np.radians(139.8)
+    r_b = np.asarray(earth.geodetic_to_ecef(lat, lon, 40.0), float).ravel()
+    C_en = np.array([[-np.sin(lat) * np.cos(lon), -np.sin(lon), -np.cos(lat) * np.cos(lon)],
+                     [-np.sin(lat) * np.sin(lon), np.cos(lon), -np.cos(lat) * np.sin(lon)],
+                     [np.cos(lat), 0.0, -np.sin(lat)]])
+    r_r = r_b + C_en @ np.array([-350.0, 820.0, -3.0])
+    el_deg = [62, 48, 35, 27, 20, 85, 71, 40]  # five GPS, then three QZSS (the highest satellite is QZSS)
+    az_deg = [20, 110, 170, 250, 320, 200, 160, 300]
+    system = np.array([0, 0, 0, 0, 0, 4, 4, 4])
+    radius = np.where(system == 4, 42_164_000.0, 26_560_000.0)
+    sats = []
+    for el, az, rad in zip(np.radians(el_deg), np.radians(az_deg), radius):
+        u = C_en @ np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
+        b, c = 2 * r_b @ u, r_b @ r_b - rad ** 2
+        sats.append(r_b + (-b + np.sqrt(b * b - 4 * c)) / 2 * u)
+    lam = np.array([C / 1575.42e6, C / 1227.60e6])
+    N_r = rng.integers(-1_000_000, 1_000_000, size=(len(sats), 2))
+    N_b = rng.integers(-1_000_000, 1_000_000, size=(len(sats), 2))
+    dts = rng.normal(scale=3e4, size=len(sats))
+    rows_r = _synthetic_rows(r_r, sats, 4321.0, N_r, lam, dts)
+    rows_b = _synthetic_rows(r_b, sats, -55555.5, N_b, lam, dts)
+    prn = np.array([3, 8, 14, 22, 27, 2, 3, 7])  # G03 and J03 both: the key is system and number
+    for rows in (rows_r, rows_b):
+        rows[:, 0] = system * 64 + prn
+        rows[:, 1] = system
+    opt = rtk.RtkOptions(tropo_model=False, elevation_mask_deg=10.0, systems="GJ").core_dict()
+    dd = _core.rtk_double_differences(rows_r, rows_b, r_r, r_b, opt)
+    n_dd = 2 * ((5 - 1) + (3 - 1))  # per frequency, one reference per system
+    assert np.sum(dd["is_code"] == 0) == n_dd and np.sum(dd["is_code"] == 1) == n_dd
+    assert np.array_equal(system[dd["sat_row"]], system[dd["ref_row"]])
+    assert set(dd["ref_row"][system[dd["sat_row"]] == 0].tolist()) == {0}  # G03, 62 deg
+    assert set(dd["ref_row"][system[dd["sat_row"]] == 4].tolist()) == {5}  # J02, 85 deg
+    for j, i, f, code, v in zip(dd["sat_row"], dd["ref_row"], dd["freq"], dd["is_code"], dd["value_m"]):
+        expected = 0.0 if code else lam[f] * ((N_r[j, f] - N_b[j, f]) - (N_r[i, f] - N_b[i, f]))
+        assert abs(v - expected) < 1e-6, (j, i, f, code, v - expected)
+
+
 # --------------------------------------------------------------------------- cycle slips
 
 
@@ -255,6 +296,23 @@ def test_static_pair_fixes_to_the_known_baseline(shared_data):
     # consistency: the fixed solution's sigma is of the order of its error
     sig = np.sqrt(np.trace(sol.P_r[fixed][-1]))
     assert 0.1 < np.sqrt(np.mean(err ** 2)) / sig < 10.0
+
+
+def test_qzss_double_differences_join_gps_on_the_static_pair(shared_data):
+    """GPS + QZSS, L1 + L2, single-epoch AR on the real pair: the QZSS satellites add double
+    differences (one reference of their own) and the fixed positions are at the truth (single-epoch
+    3-D RMS below 1 cm, no error above 2 cm)."""
+    d = _matrtklib(shared_data)
+    rb, rt = _llh(d / "base_position.txt"), _llh(d / "rover_position.txt")
+    sols = {sy: rtk.solve_rtk(d / "rover.obs", d / "base.obs", d / "base.nav", r_base_e=rb,
+                              options=dict(ar_mode="instantaneous", frequencies=2, systems=sy)) for sy in ("G", "GJ")}
+    g, gj = sols["G"], sols["GJ"]
+    assert np.all(gj.n_sat - g.n_sat == 2)  # J03 and J07 above the 15 deg mask (J02 below the horizon)
+    assert np.all(gj.n_dd - g.n_dd == 2)  # one more double difference per frequency
+    fixed = gj.status == 1
+    assert fixed.mean() >= 0.99
+    err = np.linalg.norm(gj.r_e[fixed] - rt, axis=1)
+    assert np.sqrt(np.mean(err ** 2)) < 0.01 and err.max() < 0.02
 
 
 def test_fast_reader_matches_the_rinex_reader(shared_data):

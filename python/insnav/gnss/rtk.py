@@ -53,6 +53,8 @@ SIGNALS = {
     "R": (("1C", "1P"), ("2C", "2P"), ("3Q", "3X", "3I")),
     "E": (("1C", "1X", "1B"), ("7Q", "7X", "7I"), ("5Q", "5X", "5I")),
     "C": (("2I", "2X", "2Q", "1I"), ("7I", "7X", "7Q"), ("6I", "6X", "6Q")),
+    # QZSS: the GPS frequencies L1/L2/L5 (IS-QZSS-PNT 3.1.1); L1 C/A first, then L1C
+    "J": (("1C", "1X", "1L", "1S"), ("2L", "2X", "2S"), ("5Q", "5X", "5I")),
 }
 #: RTKLIB's Q values
 STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 4: "dgps"}
@@ -78,7 +80,8 @@ class RtkOptions(TomlTable):
         ambiguities and position re-initialised every epoch), ``"fix-and-hold"`` (the fixed
         double differences fed back as tight pseudo-measurements), ``"off"`` (float only).
     systems : str
-        Letters of ``GREC`` (GPS, GLONASS, Galileo, BeiDou).
+        Letters of ``GRECJ`` (GPS, GLONASS, Galileo, BeiDou, QZSS).  Each system has its own
+        reference satellite in the double differences, QZSS included (docs/algorithms.md).
     frequencies : int
         1 (L1/E1/G1/B1I), 2 (+ L2/E5b/G2/B2I), 3 (+ L5/E5a/G3/B3I).
     elevation_mask_deg, ar_elevation_mask_deg : float
@@ -167,7 +170,7 @@ class RtkOptions(TomlTable):
         if self.ar_mode not in _AR_MODES:
             bad("ar_mode", ", ".join(_AR_MODES))
         if not isinstance(self.systems, str) or not self.systems or any(s not in SIGNALS for s in self.systems):
-            bad("systems", "letters of GREC")
+            bad("systems", "letters of GRECJ")
         if isinstance(self.frequencies, bool) or self.frequencies not in (1, 2, 3):
             bad("frequencies", "1, 2 or 3")
         if self.partial_ar_order not in ("elevation", "variance"):
@@ -638,7 +641,7 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
     if not isinstance(base, PhaseObs):
         base = read_phase_obs(base, opt.systems)
     if not hasattr(nav, "eph"):
-        nav = read_nav_multi(nav, "".join(s for s in opt.systems if s in "GREC"))
+        nav = read_nav_multi(nav, "".join(s for s in opt.systems if s in "GRECJ"))
     if r_base_e is None:
         r_base_e = base_position_from_header(base)
         if r_base_e is None:
