@@ -331,6 +331,103 @@ def test_fast_reader_matches_the_rinex_reader(shared_data):
     assert fast.signals["G"][:2] == ["1C", "2W"] and fast.signals["E"][:2] == ["1C", "7Q"]
 
 
+#: the RINEX 2.11 types written by _rinex2_copy, per frequency slot of rtk.SIGNALS (C L D S) and system
+_V2_SLOT_TYPES = {"G": ("C1 L1 D1 S1", "P2 L2 D2 S2", "C5 L5 D5 S5"),
+                  "R": ("C1 L1 D1 S1", "P2 L2 D2 S2", None),
+                  "E": ("C1 L1 D1 S1", "C7 L7 D7 S7", "C5 L5 D5 S5")}
+
+
+def _rinex2_copy(rinex3_path, out_path, chosen, n_epochs, lli_on=None):
+    """A RINEX 2.11 file of the first epochs of a RINEX 3 file: each slot's fields (value, LLI and
+    signal strength, character for character) of the signal ``chosen[system][slot]`` under the RINEX 2
+    types of :data:`_V2_SLOT_TYPES`; GPS, GLONASS and Galileo satellites.  ``lli_on = (epoch, sat id)``
+    sets the L2 loss-of-lock digit of that satellite to 1."""
+    v2_types = ["C1", "L1", "D1", "S1", "P2", "L2", "D2", "S2", "C5", "L5", "D5", "S5", "C7", "L7", "D7", "S7"]
+    lines = rinex3_path.read_text().splitlines()
+    types3, i = {}, 0
+    while "END OF HEADER" not in lines[i]:
+        ln = lines[i]
+        if ln[60:].strip() == "SYS / # / OBS TYPES":
+            if ln[0] != " ":
+                cur = ln[0]
+                types3[cur] = []
+            types3[cur] += ln[7:60].split()
+        i += 1
+    out = ["     2.11           OBSERVATION DATA    M (MIXED)           RINEX VERSION / TYPE",
+           "  4075580.8863   931853.5784  4801567.9707                  APPROX POSITION XYZ",
+           "        0.0710        0.0000        0.0000                  ANTENNA: DELTA H/E/N",
+           f"{len(v2_types):6d}" + "".join(f"{t:>6s}" for t in v2_types[:9]).ljust(54) + "# / TYPES OF OBSERV",
+           "      " + "".join(f"{t:>6s}" for t in v2_types[9:]).ljust(54) + "# / TYPES OF OBSERV",
+           "  2020     6    25     0     0    0.0000000     GPS         TIME OF FIRST OBS",
+           " " * 60 + "END OF HEADER"]
+    i += 1
+    for e in range(n_epochs):
+        ep = lines[i]
+        nsat = int(ep[32:35])
+        recs = [ln for ln in lines[i + 1:i + 1 + nsat] if ln[0] in _V2_SLOT_TYPES]
+        i += 1 + nsat
+        y, mo, d, h, mi, sec = ep[4:6], int(ep[7:9]), int(ep[10:12]), int(ep[13:15]), int(ep[16:18]), float(ep[18:29])
+        ids = [r[:3] for r in recs]
+        head = f" {y} {mo:2d} {d:2d} {h:2d} {mi:2d}{sec:11.7f}  0{len(ids):3d}"
+        for k in range(0, len(ids), 12):  # 12 satellites per line, continuation lines indented
+            out.append((head if k == 0 else " " * 32) + "".join(ids[k:k + 12]))
+        for r in recs:
+            fields = {t: "" for t in v2_types}
+            for slot, names in enumerate(_V2_SLOT_TYPES[r[0]]):
+                sig = chosen[r[0]][slot]
+                if names is None or not sig:
+                    continue
+                for kind, name in zip("CLDS", names.split()):
+                    t3 = kind + sig
+                    if t3 in types3[r[0]]:
+                        col = types3[r[0]].index(t3)
+                        fields[name] = r[3 + 16 * col:3 + 16 * col + 16]
+            if lli_on == (e, r[:3]) and fields["L2"].strip():
+                fields["L2"] = fields["L2"][:14].ljust(14) + "1" + fields["L2"][15:16]
+            row = [fields[t].ljust(16) for t in v2_types]
+            for k in range(0, len(row), 5):
+                out.append("".join(row[k:k + 5]).rstrip())
+    out_path.write_text("\n".join(out) + "\n")
+
+
+def test_rinex2_l2_phase_reads_as_the_rinex3_of_the_same_data(shared_data, tmp_path):
+    """WTZR's RINEX 3 records rewritten as RINEX 2.11 (16 types, 4 lines per satellite, 12-satellite
+    epoch lines continued): code, phase, Doppler, C/N0 and LLI of L1, L2 and L5/E5b/E5a read the same."""
+    w = shared_data / "euref_wettzell_wtzr_wtzz"
+    if not w.is_dir():
+        pytest.skip("WTZR/WTZZ data not in ../shared/data")
+    r3 = w / "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"
+    v3 = rtk.read_phase_obs(r3, "GRE")
+    assert v3.signals["G"] == ["1C", "2W", "5Q"] and v3.signals["E"] == ["1C", "7Q", "5Q"]
+    n_ep = 6
+    keep = v3.epoch < n_ep
+    sat = np.array([f"{s}{p:02d}" for s, p in zip(v3.system[keep], v3.prn[keep])])
+    lli_sat = sat[(v3.epoch[keep] == 2) & (v3.system[keep] == "G")][0]
+    r2 = tmp_path / "wtzr_copy.20o"
+    _rinex2_copy(r3, r2, v3.signals, n_ep, lli_on=(2, lli_sat))
+    v2 = rtk.read_phase_obs(r2, "GRE")
+    np.testing.assert_array_equal(v2.epoch_t_gps_s, v3.epoch_t_gps_s[:n_ep])
+    np.testing.assert_array_equal(v2.system, v3.system[keep])
+    np.testing.assert_array_equal(v2.prn, v3.prn[keep])
+    glo = v2.system == "R"
+    for a, b in ((v2.code_m, v3.code_m), (v2.phase_cycles, v3.phase_cycles), (v2.doppler_hz, v3.doppler_hz),
+                 (v2.cn0_dbhz, v3.cn0_dbhz)):
+        np.testing.assert_array_equal(a[~glo], b[keep][~glo])
+        np.testing.assert_array_equal(a[glo, :2], b[keep][glo, :2])
+        assert np.all(np.isnan(a[glo, 2]))  # RINEX 2 has no GLONASS G3
+    assert np.isfinite(v2.phase_cycles[:, 1]).mean() > 0.9  # L2 (E5b) phase read
+    hit = (v2.epoch == 2) & (sat == lli_sat)
+    assert v2.lli[hit, 1].tolist() == [1] and v3.lli[keep][hit, 1].tolist() == [0]
+    np.testing.assert_array_equal(v2.lli[~hit], v3.lli[keep][~hit])
+    assert v2.signals["G"] == ["1C", "2W", "5X"] and v2.signals["R"][1] == "2P"
+    np.testing.assert_allclose(v2.antenna_hen_m, [0.071, 0.0, 0.0])
+    # the wavelengths follow the bands: L2 of GPS, E5b of Galileo
+    lam = rtk.wavelengths(v2)
+    g, e = v2.system == "G", v2.system == "E"
+    np.testing.assert_allclose(lam[g, 1], C / 1227.60e6)
+    np.testing.assert_allclose(lam[e, 1], C / 1207.14e6)
+
+
 # --------------------------------------------------------------------------- bad input
 
 

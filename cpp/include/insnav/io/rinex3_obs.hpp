@@ -236,7 +236,8 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
 /// Sec. 5 and Table A1): an epoch line (2-digit year, flag in column 29, satellite count and up to
 /// 12 satellites, continued on further lines), then per satellite ceil(n/5) lines of 16-character
 /// fields.  One list of types for every system: ``c.col`` of each wanted system holds columns of
-/// that list; a blank system letter means GPS.  Slot 0 only.
+/// that list for every frequency slot (e.g. C1 L1 D1 S1 on slot 0, P2 L2 D2 S2 on slot 1); a blank
+/// system letter means GPS.
 inline void read_rinex2_obs_body(const char* text, size_t size, const std::string& path, size_t offset,
                                  long lineno0, int n_types, const ObsColumns& c, RinexObsTable& out) {
   detail::LineReader L{text, size, path};
@@ -330,20 +331,23 @@ inline void read_rinex2_obs_body(const char* text, size_t size, const std::strin
       out.row_prn.push_back(static_cast<int>(prn_v));
       const size_t base = out.obs.size();
       out.obs.resize(base + W, NAN);
-      for (int q = 0; q < 4; ++q) {
-        const int cq = c.col[s][0][q];
-        if (cq < 0) continue;
-        const Line& ol = obs_lines[static_cast<size_t>(cq / 5)];
-        const size_t a = 16 * static_cast<size_t>(cq % 5);
-        if (q == 1) out.obs[base + 4] = (a + 14 < ol.len && ol.b[a + 14] >= '0' && ol.b[a + 14] <= '9') ? ol.b[a + 14] - '0' : 0.0;
-        if (a >= ol.len) continue;
-        double v;
-        if (!detail::parse_num(ol.b + a, std::min<size_t>(14, ol.len - a), v)) {
-          std::string f(ol.b + a, std::min<size_t>(14, ol.len - a));
-          L.fail_at(ol.lineno, "bad number '" + trimmed(f) + "' for observation " + c.names[s][0][q]);
+      for (int k = 0; k < kObsSlots; ++k) {
+        double* o = out.obs.data() + base + k * kObsPerSlot;
+        for (int q = 0; q < 4; ++q) {
+          const int cq = c.col[s][k][q];
+          if (cq < 0) continue;
+          const Line& ol = obs_lines[static_cast<size_t>(cq / 5)];
+          const size_t a = 16 * static_cast<size_t>(cq % 5);
+          if (q == 1) o[4] = (a + 14 < ol.len && ol.b[a + 14] >= '0' && ol.b[a + 14] <= '9') ? ol.b[a + 14] - '0' : 0.0;
+          if (a >= ol.len) continue;
+          double v;
+          if (!detail::parse_num(ol.b + a, std::min<size_t>(14, ol.len - a), v)) {
+            std::string f(ol.b + a, std::min<size_t>(14, ol.len - a));
+            L.fail_at(ol.lineno, "bad number '" + trimmed(f) + "' for observation " + c.names[s][k][q]);
+          }
+          if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;
+          o[q] = v;
         }
-        if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;
-        out.obs[base + q] = v;
       }
     }
     if (keep) {
