@@ -169,10 +169,15 @@ def signal_wavelength(system, code, freq_k=None) -> np.ndarray:
     ok2 = glo & (bands == "2") & (np.abs(k) <= 20)
     out[ok1] = C_LIGHT / (1602.0e6 + k[ok1] * 0.5625e6)
     out[ok2] = C_LIGHT / (1246.0e6 + k[ok2] * 0.4375e6)
-    for (s, b), f in FREQ_HZ.items():
-        m = (sys_a == s) & (bands == b)
-        if m.any():
-            out[m] = C_LIGHT / f
+    for s in unique(sys_a):  # the systems present only: two string comparisons per band otherwise
+        if s == "R":
+            continue
+        is_s = sys_a == s
+        for (s_f, b), f in FREQ_HZ.items():
+            if s_f == s:
+                m = is_s & (bands == b)
+                if m.any():
+                    out[m] = C_LIGHT / f
     return out
 
 
