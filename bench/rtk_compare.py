@@ -44,7 +44,7 @@ from insnav import earth  # noqa: E402
 DATA = Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data"))
 CONF_DIR = ROOT / "bench" / "rtk"
 COMMAND = "python3 bench/rtk_compare.py"
-NAVSYS = {"G": 1, "R": 4, "E": 8, "C": 32}
+NAVSYS = {"G": 1, "R": 4, "E": 8, "C": 32, "J": 16}
 FREQ = {1: "l1", 2: "l1+l2", 3: "l1+l2+l5"}
 WRONG_FIX_M = 0.05
 
@@ -84,7 +84,18 @@ def datasets():
             nav=[m / "base.nav"], base_e=rb, truth=lambda t, rt=rt: np.broadcast_to(rt, (len(t), 3)),
             settings=[dict(name="matrtklib_l1_grec_inst", systems="GREC", freq=1, armode="instantaneous", mask=15.0),
                       dict(name="matrtklib_l1l2_grec_inst", systems="GREC", freq=2, armode="instantaneous", mask=15.0),
-                      dict(name="matrtklib_l1l2_grec_cont", systems="GREC", freq=2, armode="continuous", mask=15.0)])
+                      dict(name="matrtklib_l1l2_grec_cont", systems="GREC", freq=2, armode="continuous", mask=15.0),
+                      # QZSS: the five systems of the data, and GPS alone against GPS + QZSS (weak geometry); on
+                      # L1 alone also with the ratio test only (insnav's success-rate test off), as RTKLIB validates
+                      dict(name="matrtklib_l1_grecj_inst", systems="GRECJ", freq=1, armode="instantaneous", mask=15.0),
+                      dict(name="matrtklib_l1l2_g_inst", systems="G", freq=2, armode="instantaneous", mask=15.0),
+                      dict(name="matrtklib_l1l2_gj_inst", systems="GJ", freq=2, armode="instantaneous", mask=15.0),
+                      dict(name="matrtklib_l1_g_inst", systems="G", freq=1, armode="instantaneous", mask=15.0),
+                      dict(name="matrtklib_l1_gj_inst", systems="GJ", freq=1, armode="instantaneous", mask=15.0),
+                      dict(name="matrtklib_l1_g_inst_ratio", systems="G", freq=1, armode="instantaneous", mask=15.0,
+                           insnav=dict(min_success_rate=0.0)),
+                      dict(name="matrtklib_l1_gj_inst_ratio", systems="GJ", freq=1, armode="instantaneous", mask=15.0,
+                           insnav=dict(min_success_rate=0.0))])
     s = DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
     if s.is_dir():
         v = s / "iono-Klob_tropo-Saast"
@@ -139,6 +150,7 @@ def insnav_toml(st, base_e) -> str:
         'filter = "rtk"', "", "[rtk]", 'mode = "kinematic"', f'ar_mode = "{st["armode"]}"',
         f'systems = "{st["systems"]}"', f"frequencies = {st['freq']}", f"elevation_mask_deg = {st['mask']:g}",
         "ratio_threshold = 3.0", "glonass_ar = false",
+        *(f"{k} = {v!r}" for k, v in st.get("insnav", {}).items()),
         f"base_position_ecef_m = [{base_e[0]:.4f}, {base_e[1]:.4f}, {base_e[2]:.4f}]", ""])
 
 
@@ -254,6 +266,28 @@ def verdicts(r, speed_target: bool):
     return v
 
 
+def _qzss_section(results) -> list:
+    """Each setting with QZSS (J) beside the same setting without it: what the QZSS satellites change."""
+    by = {(r["setting"]["systems"], r["setting"]["freq"], r["setting"]["armode"],
+           tuple(sorted(r["setting"].get("insnav", {}).items()))): r for r in results}
+    L = []
+    for (systems, freq, armode, extra), r in by.items():
+        if "J" not in systems or (systems.replace("J", ""), freq, armode, extra) not in by:
+            continue
+        r0 = by[(systems.replace("J", ""), freq, armode, extra)]
+        if not L:
+            L = ["", "## QZSS", "",
+                 "Each setting with QZSS beside the same setting without it (QZSS double differences against a "
+                 "QZSS reference satellite of their own).", "",
+                 "| with QZSS | without | program | fixed (without -> with) | 3-D RMS fixed [mm] (without -> with) "
+                 "| wrong fixes (without -> with) |", "|---|---|---|---|---|---|"]
+        for prog in ("insnav", "rtklib"):
+            a, b = r0[prog], r[prog]
+            L.append(f"| {r['setting']['name']} | {r0['setting']['name']} | {prog} | {a['fixed']} -> {b['fixed']} | "
+                     f"{a['rms_fixed_mm']:.2f} -> {b['rms_fixed_mm']:.2f} | {a['wrong']} -> {b['wrong']} |")
+    return L
+
+
 def write_doc(name, ds, results, path: Path):
     speed = name == "matrtklib_static_septentrio"
     L = [f"# RTK on {ds['title']}: insnav vs RTKLIB", "",
@@ -270,7 +304,8 @@ def write_doc(name, ds, results, path: Path):
          "float median [mm] | CPU [s] | wall [s] |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         st = r["setting"]
-        lab = f"{st['name']} ({FREQ[st['freq']].upper()}, {st['systems']}, {st['armode']}, mask {st['mask']:g} deg)"
+        lab = f"{st['name']} ({FREQ[st['freq']].upper()}, {st['systems']}, {st['armode']}, mask {st['mask']:g} deg" + \
+            "".join(f"; insnav {k} = {v!r}" for k, v in st.get("insnav", {}).items()) + ")"
         for prog in ("insnav", "rtklib"):
             x = r[prog]
             L.append(f"| {lab} | {prog} | {x['epochs']} | {x['fixed']} | {100 * x['fix_rate']:.1f} % | "
@@ -283,6 +318,7 @@ def write_doc(name, ds, results, path: Path):
         ratio = r["insnav"]["cpu_s"] / r["rtklib"]["cpu_s"]
         L.append(f"| {r['setting']['name']} | {v['fix_rate']} | {v['rms']} | {v['wrong']} |"
                  + (f" {v['time']} ({ratio:.2f}x) |" if speed else ""))
+    L += _qzss_section(results)
     L += ["", "## Commands", ""]
     for r in results:
         L += [f"- `{r['cmd_insnav']}`", f"- `{r['cmd_rtklib']}`"]

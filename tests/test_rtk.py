@@ -142,6 +142,47 @@ def test_double_differences_equal_analytic_values():
     assert set(dd["ref_row"]) == {0}
 
 
+def test_double_differences_with_qzss_have_their_own_reference_satellite():
+    """GPS and QZSS on L1/L2 (the same frequencies): every row's reference is of its own system, the
+    highest of that system, and the values are the analytic double-differenced ambiguities."""
+    rng = np.random.default_rng(11)
+    lat, lon = np.radians(35.7), np.radians(139.8)
+    r_b = np.asarray(earth.geodetic_to_ecef(lat, lon, 40.0), float).ravel()
+    C_en = np.array([[-np.sin(lat) * np.cos(lon), -np.sin(lon), -np.cos(lat) * np.cos(lon)],
+                     [-np.sin(lat) * np.sin(lon), np.cos(lon), -np.cos(lat) * np.sin(lon)],
+                     [np.cos(lat), 0.0, -np.sin(lat)]])
+    r_r = r_b + C_en @ np.array([-350.0, 820.0, -3.0])
+    el_deg = [62, 48, 35, 27, 20, 85, 71, 40]  # five GPS, then three QZSS (the highest satellite is QZSS)
+    az_deg = [20, 110, 170, 250, 320, 200, 160, 300]
+    system = np.array([0, 0, 0, 0, 0, 4, 4, 4])
+    radius = np.where(system == 4, 42_164_000.0, 26_560_000.0)
+    sats = []
+    for el, az, rad in zip(np.radians(el_deg), np.radians(az_deg), radius):
+        u = C_en @ np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
+        b, c = 2 * r_b @ u, r_b @ r_b - rad ** 2
+        sats.append(r_b + (-b + np.sqrt(b * b - 4 * c)) / 2 * u)
+    lam = np.array([C / 1575.42e6, C / 1227.60e6])
+    N_r = rng.integers(-1_000_000, 1_000_000, size=(len(sats), 2))
+    N_b = rng.integers(-1_000_000, 1_000_000, size=(len(sats), 2))
+    dts = rng.normal(scale=3e4, size=len(sats))
+    rows_r = _synthetic_rows(r_r, sats, 4321.0, N_r, lam, dts)
+    rows_b = _synthetic_rows(r_b, sats, -55555.5, N_b, lam, dts)
+    prn = np.array([3, 8, 14, 22, 27, 2, 3, 7])  # G03 and J03 both: the key is system and number
+    for rows in (rows_r, rows_b):
+        rows[:, 0] = system * 64 + prn
+        rows[:, 1] = system
+    opt = rtk.RtkOptions(tropo_model=False, elevation_mask_deg=10.0, systems="GJ").core_dict()
+    dd = _core.rtk_double_differences(rows_r, rows_b, r_r, r_b, opt)
+    n_dd = 2 * ((5 - 1) + (3 - 1))  # per frequency, one reference per system
+    assert np.sum(dd["is_code"] == 0) == n_dd and np.sum(dd["is_code"] == 1) == n_dd
+    assert np.array_equal(system[dd["sat_row"]], system[dd["ref_row"]])
+    assert set(dd["ref_row"][system[dd["sat_row"]] == 0].tolist()) == {0}  # G03, 62 deg
+    assert set(dd["ref_row"][system[dd["sat_row"]] == 4].tolist()) == {5}  # J02, 85 deg
+    for j, i, f, code, v in zip(dd["sat_row"], dd["ref_row"], dd["freq"], dd["is_code"], dd["value_m"]):
+        expected = 0.0 if code else lam[f] * ((N_r[j, f] - N_b[j, f]) - (N_r[i, f] - N_b[i, f]))
+        assert abs(v - expected) < 1e-6, (j, i, f, code, v - expected)
+
+
 # --------------------------------------------------------------------------- cycle slips
 
 
@@ -257,6 +298,23 @@ def test_static_pair_fixes_to_the_known_baseline(shared_data):
     assert 0.1 < np.sqrt(np.mean(err ** 2)) / sig < 10.0
 
 
+def test_qzss_double_differences_join_gps_on_the_static_pair(shared_data):
+    """GPS + QZSS, L1 + L2, single-epoch AR on the real pair: the QZSS satellites add double
+    differences (one reference of their own) and the fixed positions are at the truth (single-epoch
+    3-D RMS below 1 cm, no error above 2 cm)."""
+    d = _matrtklib(shared_data)
+    rb, rt = _llh(d / "base_position.txt"), _llh(d / "rover_position.txt")
+    sols = {sy: rtk.solve_rtk(d / "rover.obs", d / "base.obs", d / "base.nav", r_base_e=rb,
+                              options=dict(ar_mode="instantaneous", frequencies=2, systems=sy)) for sy in ("G", "GJ")}
+    g, gj = sols["G"], sols["GJ"]
+    assert np.all(gj.n_sat - g.n_sat == 2)  # J03 and J07 above the 15 deg mask (J02 below the horizon)
+    assert np.all(gj.n_dd - g.n_dd == 2)  # one more double difference per frequency
+    fixed = gj.status == 1
+    assert fixed.mean() >= 0.99
+    err = np.linalg.norm(gj.r_e[fixed] - rt, axis=1)
+    assert np.sqrt(np.mean(err ** 2)) < 0.01 and err.max() < 0.02
+
+
 def test_fast_reader_matches_the_rinex_reader(shared_data):
     from insnav.gnss.rinex import read_rinex_obs
 
@@ -271,6 +329,103 @@ def test_fast_reader_matches_the_rinex_reader(shared_data):
         np.testing.assert_array_equal(fast.phase_cycles[a, 0], np.where(ref.L1[b] == 0, np.nan, ref.L1[b]))
     np.testing.assert_array_equal(fast.epoch_t_gps_s, ref.epoch_t_gps_s)
     assert fast.signals["G"][:2] == ["1C", "2W"] and fast.signals["E"][:2] == ["1C", "7Q"]
+
+
+#: the RINEX 2.11 types written by _rinex2_copy, per frequency slot of rtk.SIGNALS (C L D S) and system
+_V2_SLOT_TYPES = {"G": ("C1 L1 D1 S1", "P2 L2 D2 S2", "C5 L5 D5 S5"),
+                  "R": ("C1 L1 D1 S1", "P2 L2 D2 S2", None),
+                  "E": ("C1 L1 D1 S1", "C7 L7 D7 S7", "C5 L5 D5 S5")}
+
+
+def _rinex2_copy(rinex3_path, out_path, chosen, n_epochs, lli_on=None):
+    """A RINEX 2.11 file of the first epochs of a RINEX 3 file: each slot's fields (value, LLI and
+    signal strength, character for character) of the signal ``chosen[system][slot]`` under the RINEX 2
+    types of :data:`_V2_SLOT_TYPES`; GPS, GLONASS and Galileo satellites.  ``lli_on = (epoch, sat id)``
+    sets the L2 loss-of-lock digit of that satellite to 1."""
+    v2_types = ["C1", "L1", "D1", "S1", "P2", "L2", "D2", "S2", "C5", "L5", "D5", "S5", "C7", "L7", "D7", "S7"]
+    lines = rinex3_path.read_text().splitlines()
+    types3, i = {}, 0
+    while "END OF HEADER" not in lines[i]:
+        ln = lines[i]
+        if ln[60:].strip() == "SYS / # / OBS TYPES":
+            if ln[0] != " ":
+                cur = ln[0]
+                types3[cur] = []
+            types3[cur] += ln[7:60].split()
+        i += 1
+    out = ["     2.11           OBSERVATION DATA    M (MIXED)           RINEX VERSION / TYPE",
+           "  4075580.8863   931853.5784  4801567.9707                  APPROX POSITION XYZ",
+           "        0.0710        0.0000        0.0000                  ANTENNA: DELTA H/E/N",
+           f"{len(v2_types):6d}" + "".join(f"{t:>6s}" for t in v2_types[:9]).ljust(54) + "# / TYPES OF OBSERV",
+           "      " + "".join(f"{t:>6s}" for t in v2_types[9:]).ljust(54) + "# / TYPES OF OBSERV",
+           "  2020     6    25     0     0    0.0000000     GPS         TIME OF FIRST OBS",
+           " " * 60 + "END OF HEADER"]
+    i += 1
+    for e in range(n_epochs):
+        ep = lines[i]
+        nsat = int(ep[32:35])
+        recs = [ln for ln in lines[i + 1:i + 1 + nsat] if ln[0] in _V2_SLOT_TYPES]
+        i += 1 + nsat
+        y, mo, d, h, mi, sec = ep[4:6], int(ep[7:9]), int(ep[10:12]), int(ep[13:15]), int(ep[16:18]), float(ep[18:29])
+        ids = [r[:3] for r in recs]
+        head = f" {y} {mo:2d} {d:2d} {h:2d} {mi:2d}{sec:11.7f}  0{len(ids):3d}"
+        for k in range(0, len(ids), 12):  # 12 satellites per line, continuation lines indented
+            out.append((head if k == 0 else " " * 32) + "".join(ids[k:k + 12]))
+        for r in recs:
+            fields = {t: "" for t in v2_types}
+            for slot, names in enumerate(_V2_SLOT_TYPES[r[0]]):
+                sig = chosen[r[0]][slot]
+                if names is None or not sig:
+                    continue
+                for kind, name in zip("CLDS", names.split()):
+                    t3 = kind + sig
+                    if t3 in types3[r[0]]:
+                        col = types3[r[0]].index(t3)
+                        fields[name] = r[3 + 16 * col:3 + 16 * col + 16]
+            if lli_on == (e, r[:3]) and fields["L2"].strip():
+                fields["L2"] = fields["L2"][:14].ljust(14) + "1" + fields["L2"][15:16]
+            row = [fields[t].ljust(16) for t in v2_types]
+            for k in range(0, len(row), 5):
+                out.append("".join(row[k:k + 5]).rstrip())
+    out_path.write_text("\n".join(out) + "\n")
+
+
+def test_rinex2_l2_phase_reads_as_the_rinex3_of_the_same_data(shared_data, tmp_path):
+    """WTZR's RINEX 3 records rewritten as RINEX 2.11 (16 types, 4 lines per satellite, 12-satellite
+    epoch lines continued): code, phase, Doppler, C/N0 and LLI of L1, L2 and L5/E5b/E5a read the same."""
+    w = shared_data / "euref_wettzell_wtzr_wtzz"
+    if not w.is_dir():
+        pytest.skip("WTZR/WTZZ data not in ../shared/data")
+    r3 = w / "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"
+    v3 = rtk.read_phase_obs(r3, "GRE")
+    assert v3.signals["G"] == ["1C", "2W", "5Q"] and v3.signals["E"] == ["1C", "7Q", "5Q"]
+    n_ep = 6
+    keep = v3.epoch < n_ep
+    sat = np.array([f"{s}{p:02d}" for s, p in zip(v3.system[keep], v3.prn[keep])])
+    lli_sat = sat[(v3.epoch[keep] == 2) & (v3.system[keep] == "G")][0]
+    r2 = tmp_path / "wtzr_copy.20o"
+    _rinex2_copy(r3, r2, v3.signals, n_ep, lli_on=(2, lli_sat))
+    v2 = rtk.read_phase_obs(r2, "GRE")
+    np.testing.assert_array_equal(v2.epoch_t_gps_s, v3.epoch_t_gps_s[:n_ep])
+    np.testing.assert_array_equal(v2.system, v3.system[keep])
+    np.testing.assert_array_equal(v2.prn, v3.prn[keep])
+    glo = v2.system == "R"
+    for a, b in ((v2.code_m, v3.code_m), (v2.phase_cycles, v3.phase_cycles), (v2.doppler_hz, v3.doppler_hz),
+                 (v2.cn0_dbhz, v3.cn0_dbhz)):
+        np.testing.assert_array_equal(a[~glo], b[keep][~glo])
+        np.testing.assert_array_equal(a[glo, :2], b[keep][glo, :2])
+        assert np.all(np.isnan(a[glo, 2]))  # RINEX 2 has no GLONASS G3
+    assert np.isfinite(v2.phase_cycles[:, 1]).mean() > 0.9  # L2 (E5b) phase read
+    hit = (v2.epoch == 2) & (sat == lli_sat)
+    assert v2.lli[hit, 1].tolist() == [1] and v3.lli[keep][hit, 1].tolist() == [0]
+    np.testing.assert_array_equal(v2.lli[~hit], v3.lli[keep][~hit])
+    assert v2.signals["G"] == ["1C", "2W", "5X"] and v2.signals["R"][1] == "2P"
+    np.testing.assert_allclose(v2.antenna_hen_m, [0.071, 0.0, 0.0])
+    # the wavelengths follow the bands: L2 of GPS, E5b of Galileo
+    lam = rtk.wavelengths(v2)
+    g, e = v2.system == "G", v2.system == "E"
+    np.testing.assert_allclose(lam[g, 1], C / 1227.60e6)
+    np.testing.assert_allclose(lam[e, 1], C / 1207.14e6)
 
 
 # --------------------------------------------------------------------------- bad input

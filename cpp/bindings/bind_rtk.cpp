@@ -58,9 +58,9 @@ py::dict read_obs(const std::string& path, const std::map<std::string, std::vect
 }
 
 // The records of a RINEX 3 observation file whose header the caller parsed: ``types`` every
-// system's header types (3-character codes), ``select`` system -> the codes read on slot 0 in
-// the order C, L, D, S ("" where not read).  Returns the columns of read_obs (and the epochs'
-// receiver clock offsets); the observations on slot 0.
+// system's header types (3-character codes), ``select`` system -> the codes read in the order
+// C, L, D, S ("" where not read) of slot 0, optionally followed by those of slots 1 and 2 (4, 8
+// or 12 codes).  Returns the columns of read_obs (and the epochs' receiver clock offsets).
 py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size_t offset, long lineno,
                        const std::map<std::string, std::vector<std::string>>& types,
                        const std::map<std::string, std::vector<std::string>>& select, bool zero_is_missing,
@@ -72,17 +72,19 @@ py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size
   for (const auto& [k, codes] : select) {
     if (k.size() != 1 || static_cast<unsigned char>(k[0]) >= 128) throw py::value_error("read_rinex3_obs_body: bad system key '" + k + "'");
     const unsigned char s = static_cast<unsigned char>(k[0]);
-    if (codes.size() != 4) throw py::value_error("read_rinex3_obs_body: select needs 4 codes (C, L, D, S) per system");
+    if (codes.size() != 4 && codes.size() != 8 && codes.size() != 12)
+      throw py::value_error("read_rinex3_obs_body: select needs 4, 8 or 12 codes (C, L, D, S per slot) per system");
     const auto it = types.find(rinex2 ? std::string("G") : k);  // RINEX 2: one list of types for all systems
     c.want[s] = it != types.end();
     if (!c.want[s]) continue;
-    for (int q = 0; q < 4; ++q) {
-      if (codes[q].empty()) continue;
+    for (std::size_t j = 0; j < codes.size(); ++j) {
+      const std::size_t slot = j / 4, q = j % 4;
+      if (codes[j].empty()) continue;
       const auto& ty = it->second;
       for (std::size_t i = 0; i < ty.size(); ++i)
-        if (ty[i] == codes[q]) { c.col[s][0][q] = static_cast<int>(i); break; }
-      if (c.col[s][0][q] < 0) throw py::value_error("read_rinex3_obs_body: code " + codes[q] + " not in the header types of " + k);
-      c.names[s][0][q] = codes[q];
+        if (ty[i] == codes[j]) { c.col[s][slot][q] = static_cast<int>(i); break; }
+      if (c.col[s][slot][q] < 0) throw py::value_error("read_rinex3_obs_body: code " + codes[j] + " not in the header types of " + k);
+      c.names[s][slot][q] = codes[j];
     }
   }
   const auto g = types.find("G");
@@ -351,7 +353,7 @@ void bind_rtk(py::module_& m) {
         "Fast RINEX 3 observation reader: up to 3 frequency slots per system (C, L, D, S, LLI).");
   m.def("read_rinex3_obs_body", &read_obs_body, py::arg("text"), py::arg("path"), py::arg("offset"), py::arg("lineno"),
         py::arg("types"), py::arg("select"), py::arg("zero_is_missing"), py::arg("rinex2") = false,
-        "Records of a RINEX 3 (or, rinex2=True, 2.1x) observation file after a header parsed by the caller (slot 0: C, L, D, S, LLI).");
+        "Records of a RINEX 3 (or, rinex2=True, 2.1x) observation file after a header parsed by the caller (per slot: C, L, D, S, LLI).");
   m.def("lambda_search", &lambda_search, py::arg("a_hat"), py::arg("Q"),
         "MLAMBDA (Chang, Yang, Zhou 2005): best and second-best integer vectors (n, 2) and squared norms.");
   m.def("lambda_decorrelate", &lambda_decorrelate, py::arg("Q"),

@@ -106,14 +106,15 @@ def insnav_output_kind(path) -> str | None:
         return "tuned config"  # insnav tune --out
     if name.endswith(".spp.csv"):
         return "spp table" if _first_line(p).startswith("t_s,solved,n_sats,") else None
-    from .io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE
+    if name.startswith("KF_GINS_"):  # the reader's module only for its names (~2 ms of import)
+        from .io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE
 
-    if name in (KFGINS_NAV_FILE, KFGINS_IMU_ERR_FILE, KFGINS_STD_FILE):
-        # insnav's --out-format kfgins files, known by the resolved configuration insnav writes beside
-        # them; the same files without it are KF-GINS's own results: not insnav's to replace
-        want = {KFGINS_NAV_FILE: 11, KFGINS_IMU_ERR_FILE: 13, KFGINS_STD_FILE: 22}[name]
-        ours = insnav_output_kind(p.with_name(KFGINS_NAV_FILE + ".config.toml")) == "config"
-        return "KF-GINS result" if ours and _numeric_fields(p) == want else None
+        if name in (KFGINS_NAV_FILE, KFGINS_IMU_ERR_FILE, KFGINS_STD_FILE):
+            # insnav's --out-format kfgins files, known by the resolved configuration insnav writes beside
+            # them; the same files without it are KF-GINS's own results: not insnav's to replace
+            want = {KFGINS_NAV_FILE: 11, KFGINS_IMU_ERR_FILE: 13, KFGINS_STD_FILE: 22}[name]
+            ours = insnav_output_kind(p.with_name(KFGINS_NAV_FILE + ".config.toml")) == "config"
+            return "KF-GINS result" if ours and _numeric_fields(p) == want else None
     suffix = p.suffix.lower()
     if suffix == ".csv":
         return "solution" if _solution_columns(_first_line(p).split(",")) else None

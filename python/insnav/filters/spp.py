@@ -20,7 +20,6 @@ drift, DOPs and RAIM counts, which have no solution column, are in
 from __future__ import annotations
 
 import os
-import tomllib
 
 import numpy as np
 
@@ -29,7 +28,7 @@ from .._median import median
 from ..config import ConfigError
 from ..gnss.spp import (SppOptions, SppSolution, read_nav_multi, read_obs_multi, solve_spp, spp_inputs_from_rinex,
                         summary_counts)
-from ..gnss.systems import SYSTEMS
+from ..gnss.systems import SPP_SYSTEMS, SYSTEMS
 from ..gnss.weighting import Weighting
 from ..units import RAD2DEG
 from .solution import RecordStatus, Solution
@@ -104,6 +103,8 @@ def load_spp_config(config_path=None):
     d = {}
     source = "run configuration"
     if config_path is not None:
+        import tomllib  # here: a run without --config never reads TOML (~3 ms of import)
+
         source = os.fspath(config_path)
         try:
             with open(config_path, "rb") as f:
@@ -175,7 +176,7 @@ def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss
         sp = solve_spp(inp, r0, options=sopt)
     sp.info.update(inputs=inp, t_week0_gps_s=float(t_week0), approx_r_e=r0.tolist())
     sol = spp_solution(sp)
-    sol.summary.update(systems="".join(s for s in SYSTEMS if np.any(inp.system == s)), weighting=wgt.model)
+    sol.summary.update(systems="".join(s for s in SPP_SYSTEMS if np.any(inp.system == s)), weighting=wgt.model)
     sol.rinex_options, sol.weighting, sol.spp_options = ropt, wgt, sopt
     return sol
 

@@ -1,4 +1,4 @@
-"""One entry point for the broadcast states of GPS, GLONASS, Galileo and BeiDou satellites.
+"""One entry point for the broadcast states of GPS, GLONASS, Galileo, BeiDou and QZSS satellites.
 
 :func:`transmit_states_multi` (also ``NavData.transmit_states``) is the
 multi-system counterpart of :func:`insnav.gnss.ephemeris.transmit_states`,
@@ -29,7 +29,12 @@ E5a: F/NAV; E5b: I/NAV); GLONASS nearest ``t_b`` within 30 min.  Rows
 without a usable record have ``valid = False`` and NaN states.
 
 GPS rows are computed by :func:`insnav.gnss.ephemeris.transmit_states`
-itself, so GPS results are bit-identical to the GPS-only code.
+itself, so GPS results are bit-identical to the GPS-only code.  QZSS rows
+(``'J01'``...) go through the same GPS functions on the QZSS table
+``nav.eph_j``: the QZSS LNAV message, orbit and clock algorithms, constants
+(WGS-84 mu, Earth rate, F) and time (QZSST steered to GPST) are GPS's
+(IS-QZSS-PNT 4.1.2, 4.2), the geostationary QZS-3 included (unlike BeiDou
+GEO).  Its group delay is T_GD as for GPS.
 
 Observation codes (``codes``): a dict ``{system: RINEX code}`` (default
 :data:`DEFAULT_CODES`) or one code per row.  Supported: GPS C1* (``- T_GD``)
@@ -66,12 +71,13 @@ __all__ = ["DEFAULT_CODES", "MultiStates", "parse_sat_ids", "signal_wavelength",
            "sat_states_multi", "transmit_states_multi"]
 
 #: default observation code per system (single-frequency L1/E1/G1/B1I users)
-DEFAULT_CODES = {"G": "C1C", "R": "C1C", "E": "C1C", "C": "C2I"}
+DEFAULT_CODES = {"G": "C1C", "R": "C1C", "E": "C1C", "C": "C2I", "J": "C1C"}
 #: GPS L1/L2 group delay ratio gamma = (f_L1 / f_L2)^2, IS-GPS-200 20.3.3.3.3.2
 _GAMMA_GPS = (1575.42 / 1227.60) ** 2
 
 GROUP_DELAY_NOTES = """\
 GPS   C1*: -T_GD; C2*: -gamma T_GD (IS-GPS-200 20.3.3.3.3.2)
+QZSS  as GPS (IS-QZSS-PNT 4.1.2.3)
 GLO   none (clock refers to G1/G2 as broadcast; the L1/L2 delay difference of RINEX 3.05 is not used)
 GAL   C1*: -BGD(E1,E5b) with I/NAV, -BGD(E1,E5a) with F/NAV; C5*: -(f1/f5a)^2 BGD(E1,E5a); C7*: -(f1/f5b)^2 BGD(E1,E5b)
 BDS   C2*/C1I/C1Q (B1I): -T_GD1; C7* (B2I): -T_GD2; C6* (B3I): none (BDS-SIS-ICD-B1I 3.0, 5.2.4.10)
@@ -163,16 +169,21 @@ def signal_wavelength(system, code, freq_k=None) -> np.ndarray:
     ok2 = glo & (bands == "2") & (np.abs(k) <= 20)
     out[ok1] = C_LIGHT / (1602.0e6 + k[ok1] * 0.5625e6)
     out[ok2] = C_LIGHT / (1246.0e6 + k[ok2] * 0.4375e6)
-    for (s, b), f in FREQ_HZ.items():
-        m = (sys_a == s) & (bands == b)
-        if m.any():
-            out[m] = C_LIGHT / f
+    for s in unique(sys_a):  # the systems present only: two string comparisons per band otherwise
+        if s == "R":
+            continue
+        is_s = sys_a == s
+        for (s_f, b), f in FREQ_HZ.items():
+            if s_f == s:
+                m = is_s & (bands == b)
+                if m.any():
+                    out[m] = C_LIGHT / f
     return out
 
 
 def _check_code(s, code):
     b = _band(s, code)
-    ok = {"G": ("1", "2"), "R": ("1", "2"), "E": ("1", "5", "7"), "C": ("2", "7", "6")}[s]
+    ok = {"G": ("1", "2"), "R": ("1", "2"), "E": ("1", "5", "7"), "C": ("2", "7", "6"), "J": ("1", "2")}[s]
     if b not in ok:
         raise ValueError(f"observation code {code!r} of system {s}: no broadcast group delay model "
                          f"(supported bands {', '.join(ok)})")
@@ -181,7 +192,7 @@ def _check_code(s, code):
 def _check_codes(sys_a, code_a):
     """ValueError for a code of G/R/E/C without a group delay model (other systems: no record, invalid)."""
     for s in unique(sys_a):
-        if s in "GREC" and len(s) == 1:
+        if s in "GRECJ" and len(s) == 1:
             for c in unique(code_a[sys_a == s]):
                 _check_code(s, c)
 
@@ -191,7 +202,8 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
 
     Returns
     -------
-    (k,) int: index into ``nav.eph`` (G), ``nav.eph_r`` (R), ``nav.eph_e`` (E) or ``nav.eph_c`` (C).
+    (k,) int: index into ``nav.eph`` (G), ``nav.eph_r`` (R), ``nav.eph_e`` (E), ``nav.eph_c`` (C) or
+    ``nav.eph_j`` (J).
     """
     sys_a = np.atleast_1d(np.asarray(system, dtype="<U1"))
     prn_a = np.broadcast_to(np.asarray(prn, np.int64), sys_a.shape)
@@ -209,6 +221,9 @@ def select_multi(nav, system, prn, t_gps_s, codes=None):
         elif s == "C":
             if len(nav.eph_c):
                 idx[m] = select_ephemeris(nav.eph_c, prn_a[m], t[m])
+        elif s == "J":
+            if len(_eph_j(nav)):
+                idx[m] = select_ephemeris(nav.eph_j, prn_a[m], t[m])
         elif s == "E":
             if not len(nav.eph_e):
                 continue
@@ -244,6 +259,9 @@ def _group_delay(nav, s, idx, code_a):
     if s == "G":
         tgd = nav.eph.tgd[idx]
         out = np.where(bands == "2", _GAMMA_GPS * tgd, tgd)
+    elif s == "J":
+        tgd = nav.eph_j.tgd[idx]
+        out = np.where(bands == "2", _GAMMA_GPS * tgd, tgd)
     elif s == "E":
         e = nav.eph_e
         rec_band = galileo_clock_band(e.data_source[idx])
@@ -260,11 +278,12 @@ def _group_delay(nav, s, idx, code_a):
 
 def _state_at(nav, s, idx, t, relativistic=True):
     """(r_e, v_e, clock bias [s], drift [s/s]) of system ``s`` rows ``idx`` at GPS time ``t`` (ECEF at t)."""
-    if s == "G":
+    if s in "GJ":
         from .ephemeris import sat_position_velocity
 
-        pv = sat_position_velocity(nav.eph, idx, t)
-        ck = sat_clock(nav.eph, idx, t, relativistic=relativistic, E=pv.E, E_dot=pv.E_dot)
+        eph = nav.eph if s == "G" else nav.eph_j
+        pv = sat_position_velocity(eph, idx, t)
+        ck = sat_clock(eph, idx, t, relativistic=relativistic, E=pv.E, E_dot=pv.E_dot)
         return pv.r_e, pv.v_e, ck.bias_s, ck.drift_s_s
     if s == "R":
         r, v = glonass_position_velocity(nav.eph_r, idx, t)
@@ -283,6 +302,12 @@ def _empty_states(k, sys_a, prn_a):
                 clock_drift_s_s=nan.copy(), t_tx_gps_s=nan.copy(), tau_s=nan.copy(), range_m=nan.copy(),
                 valid=np.zeros(k, bool), eph_idx=np.full(k, -1, np.int64), system=sys_a, prn=prn_a,
                 wavelength_m=nan.copy(), group_delay_s=np.zeros(k))
+
+
+def _eph_j(nav):
+    """The QZSS table of ``nav`` (empty for navigation data without one)."""
+    e = getattr(nav, "eph_j", None)
+    return () if e is None else e
 
 
 def _wavelength_rows(nav, s, idx, code_a):
@@ -324,7 +349,7 @@ def sat_states_multi(nav, t_gps_s, sat_ids=None, *, system=None, prn=None, codes
 
 def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None, prn=None, codes=None,
                           group_delay=True, tol_s=1e-12, max_iter=10) -> MultiStates:
-    """Light-time and Sagnac-corrected states of GPS/GLONASS/Galileo/BeiDou satellites.
+    """Light-time and Sagnac-corrected states of GPS/GLONASS/Galileo/BeiDou/QZSS satellites.
 
     Parameters
     ----------
@@ -376,6 +401,10 @@ def transmit_states_multi(nav, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None,
             else:
                 ts = transmit_states(nav.eph, ii, t_rx[rows], r_rx[rows], tgd=False)
                 bias = ts.clock_bias_s - gd
+            r, v, drift, t_tx, tau, rng = ts.r_e, ts.v_e, ts.clock_drift_s_s, ts.t_tx_gps_s, ts.tau_s, ts.range_m
+        elif s == "J":  # the GPS algorithm on the QZSS table
+            ts = transmit_states(nav.eph_j, ii, t_rx[rows], r_rx[rows], tgd=False)
+            bias = ts.clock_bias_s - gd
             r, v, drift, t_tx, tau, rng = ts.r_e, ts.v_e, ts.clock_drift_s_s, ts.t_tx_gps_s, ts.tau_s, ts.range_m
         elif s in "EC" and hasattr(_core, "transmit_states_kepler"):
             e = nav.eph_e if s == "E" else nav.eph_c

@@ -164,15 +164,15 @@ _NAV_ORDER = (
 
 #: Broadcast orbit lines after the first line of a RINEX 3 record: (required, allowed).  GLONASS
 #: has a 4th orbit line from RINEX 3.05 on (status flags, L1/L2 group delay, URAI, health flags).
-_NAV3_LINES = {"G": (7, 7), "E": (7, 7), "C": (7, 7), "R": (3, 4)}
+_NAV3_LINES = {"G": (7, 7), "E": (7, 7), "C": (7, 7), "R": (3, 4), "J": (7, 7)}
 
 #: systems whose navigation records insnav reads
-_SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou"}
+_SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou", "J": "QZSS"}
 
 
 @dataclass
 class NavData:
-    """Contents of a navigation file (GPS, or mixed / GLONASS / Galileo / BeiDou).
+    """Contents of a navigation file (GPS, or mixed / GLONASS / Galileo / BeiDou / QZSS).
 
     Attributes
     ----------
@@ -185,13 +185,19 @@ class NavData:
         [s, s/semicircle, ...] (IS-GPS-200 20.3.3.5.1.7); None if absent.
     n_skipped : int
         Records that were skipped: systems not asked for (``systems``) and
-        systems insnav does not process (QZSS, SBAS, IRNSS...).
+        systems insnav does not process (SBAS, IRNSS...).
     eph_r : GlonassEphemerides
         GLONASS records (``t_b`` converted from UTC to GPS time), empty unless asked for.
     eph_e : KeplerEphemerides
         Galileo records (I/NAV and F/NAV, see ``data_source``), empty unless asked for.
     eph_c : KeplerEphemerides
         BeiDou D1/D2 records (``toc``/``toe`` converted from BDT to GPS time), empty unless asked for.
+    eph_j : Ephemerides
+        QZSS LNAV records (the GPS layout and algorithm, IS-QZSS-PNT 4.1.2;
+        times are GPS time), empty unless asked for.  ``health`` is the SV
+        health word without its L1C/B bit (bit 0, set by satellites that do
+        not transmit L1C/B; RTKLIB masks it too); ``fit_s`` is 2 h for the
+        fit interval flag 0 and 4 h for 1 (IS-QZSS-PNT 4.1.2.4).
     leap_seconds : float or None
         GPS - UTC from the header (``LEAP SECONDS``) [s]; None if absent
         (GLONASS epochs then use :func:`insnav.gnss.glonass.gps_utc_leap_seconds`).
@@ -210,6 +216,7 @@ class NavData:
     eph_c: "KeplerEphemerides | None" = None
     leap_seconds: float | None = None
     skipped_by_system: dict = field(default_factory=dict)
+    eph_j: "Ephemerides | None" = None
 
     def __post_init__(self):
         from .galbds import KeplerEphemerides
@@ -221,12 +228,15 @@ class NavData:
             self.eph_e = KeplerEphemerides.empty()
         if self.eph_c is None:
             self.eph_c = KeplerEphemerides.empty()
+        if self.eph_j is None:
+            self.eph_j = _gps_like_table(None)
 
     @property
     def systems(self) -> str:
         """Letters of the systems with at least one record, in :data:`insnav.gnss.systems.SYSTEMS` order."""
-        n = {"G": len(self.eph), "R": len(self.eph_r), "E": len(self.eph_e), "C": len(self.eph_c)}
-        return "".join(s for s in "GREC" if n[s] > 0)
+        n = {"G": len(self.eph), "R": len(self.eph_r), "E": len(self.eph_e), "C": len(self.eph_c),
+             "J": len(self.eph_j)}
+        return "".join(s for s in "GRECJ" if n[s] > 0)
 
     def merge(self, other: "NavData") -> "NavData":
         """Records of both files (e.g. a RINEX 2 ``.n`` GPS and ``.g`` GLONASS file of the same day)."""
@@ -239,7 +249,9 @@ class NavData:
             self.n_skipped + other.n_skipped, self.eph_r.concat(other.eph_r), self.eph_e.concat(other.eph_e),
             self.eph_c.concat(other.eph_c), self.leap_seconds if self.leap_seconds is not None else other.leap_seconds,
             {k: self.skipped_by_system.get(k, 0) + other.skipped_by_system.get(k, 0)
-             for k in set(self.skipped_by_system) | set(other.skipped_by_system)})
+             for k in set(self.skipped_by_system) | set(other.skipped_by_system)},
+            Ephemerides.from_columns({k: np.concatenate([v, getattr(other.eph_j, k)])
+                                      for k, v in self.eph_j.to_columns().items()}))
 
     def transmit_states(self, t_rx_gps_s, r_rx_e, sat_ids=None, *, system=None, prn=None, codes=None, **kw):
         """Multi-system satellite states at transmission; see :func:`insnav.gnss.broadcast.transmit_states_multi`."""
@@ -271,7 +283,8 @@ def _parse_systems(systems) -> str:
     s = "".join(dict.fromkeys(str(systems).upper().replace(",", "").replace(" ", "")))
     bad = [c for c in s if c not in _SYSTEM_NAMES]
     if bad or not s:
-        raise ValueError(f"systems={systems!r}: use letters of G (GPS), R (GLONASS), E (Galileo), C (BeiDou)")
+        raise ValueError(f"systems={systems!r}: use letters of G (GPS), R (GLONASS), E (Galileo), C (BeiDou), "
+                         "J (QZSS)")
     return s
 
 
@@ -310,6 +323,7 @@ def _nav_records_core(src: _Lines, rinex3: bool, glo2: bool, want: str):
     rec, ok_g = kepler("G", None, True)
     rec_e, ok_e = kepler("E", 0.0, False)
     rec_c, ok_c = kepler("C", BDT_GPST_OFFSET_S, False)
+    rec_j, ok_j = kepler("J", None, True)
     m = sys_a == ord("R")
     grec = {"prn": prn[m], "toc_utc": t_cal[m]}
     for j, name in enumerate(("clock_bias", "gamma_n", "tk")):
@@ -319,11 +333,11 @@ def _nav_records_core(src: _Lines, rinex3: bool, glo2: bool, want: str):
     radius = np.sqrt(grec["x"] ** 2 + grec["y"] ** 2 + grec["z"] ** 2)
     ok_r = bool(np.all((1.0e3 < radius) & (radius < 1.0e5))
                 and np.all((-7 <= grec["freq_k"]) & (grec["freq_k"] <= 13)))
-    if not (ok_g and ok_e and ok_c and ok_r):
+    if not (ok_g and ok_e and ok_c and ok_r and ok_j):
         return None  # the record loop reports the record
     counts = [int(c) for c in d["skipped_count"]]
     skipped = dict(zip(d["skipped_sys"], counts))
-    return rec, {"E": rec_e, "C": rec_c}, grec, sum(counts), skipped
+    return rec, {"E": rec_e, "C": rec_c, "J": rec_j}, grec, sum(counts), skipped
 
 
 def read_rinex_nav(path, systems="G") -> NavData:
@@ -344,14 +358,14 @@ def read_rinex_nav(path, systems="G") -> NavData:
     ----------
     path : str or PathLike
     systems : str
-        Systems to read from a RINEX 3 file, letters of ``"GREC"``.  The
+        Systems to read from a RINEX 3 file, letters of ``"GRECJ"``.  The
         default ``"G"`` reads GPS only (the behaviour before multi-GNSS).
 
     Returns
     -------
     NavData
         ``eph`` (GPS), ``eph_r`` (GLONASS), ``eph_e`` (Galileo), ``eph_c``
-        (BeiDou), all times in GPS seconds since 1980-01-06: GLONASS epochs
+        (BeiDou), ``eph_j`` (QZSS, GPS time as GPS), all times in GPS seconds since 1980-01-06: GLONASS epochs
         (UTC) plus the leap seconds, BeiDou epochs (BDT) plus 14 s, Galileo
         (GST) as is.  Galileo: ``tgd`` = BGD(E1,E5a), ``tgd2`` = BGD(E1,E5b),
         ``data_source`` the RINEX bit field; BeiDou: ``tgd`` = T_GD1,
@@ -364,7 +378,7 @@ def read_rinex_nav(path, systems="G") -> NavData:
         Malformed header, bad or truncated record or unexpected end of file
         (message gives path and 1-based line number).
     ValueError
-        ``systems`` has a letter other than G, R, E, C.
+        ``systems`` has a letter other than G, R, E, C, J.
     """
     from .galbds import BDT_GPST_OFFSET_S, BDT_WEEK_OFFSET, KeplerEphemerides
     from .glonass import GlonassEphemerides, gps_utc_leap_seconds
@@ -409,7 +423,8 @@ def read_rinex_nav(path, systems="G") -> NavData:
 
     rec = {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}
     krec = {"E": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER},
-            "C": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}}
+            "C": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER},
+            "J": {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}}
     grec = {k: [] for k in ("prn", "toc_utc", "clock_bias", "gamma_n", "tk", "x", "vx", "ax", "health",
                             "y", "vy", "ay", "freq_k", "z", "vz", "az", "age")}
     n_skipped = 0
@@ -462,7 +477,7 @@ def read_rinex_nav(path, systems="G") -> NavData:
             raise src.error(f"bad record: satellite number {prn} out of range")
         clk = _four(src, line, width0, 19, "clock parameter", n=3)
         sat = f"{sysid}{prn:02d}"
-        if sysid != "G":
+        if sysid not in "GJ":
             n_req, n_max = _NAV3_LINES[sysid] if rinex3 else (3, 3)
             vals = []
             for k in range(n_max):
@@ -502,40 +517,26 @@ def read_rinex_nav(path, systems="G") -> NavData:
             continue
         vals = []
         for k in range(7):
-            cl = src.next(f"broadcast orbit line {k + 1} of G{prn:02d} (record started on line {start_line})")
+            cl = src.next(f"broadcast orbit line {k + 1} of {sat} (record started on line {start_line})")
             if cl[:1] != " " and rinex3:
-                raise src.error(f"bad record: broadcast orbit line {k + 1} of G{prn:02d} "
+                raise src.error(f"bad record: broadcast orbit line {k + 1} of {sat} "
                                 f"(record started on line {start_line}) missing")
             vals.extend(_four(src, cl.ljust(cont_start + 76), cont_start, 19, "broadcast orbit value"))
         toc = gps_seconds_from_calendar(y, mo, d, h, mi, sec)
-        rec["prn"].append(prn)
-        rec["toc"].append(toc)
+        r = rec if sysid == "G" else krec["J"]
+        r["prn"].append(prn)
+        r["toc"].append(toc)
         for name, v in zip(("af0", "af1", "af2"), clk):
-            rec[name].append(0.0 if math.isnan(v) else v)
+            r[name].append(0.0 if math.isnan(v) else v)
         for name, v in zip(_NAV_ORDER, vals):
             if name != "fit_h" and math.isnan(v):
                 v = 0.0
-            rec[name].append(v)
-        if not (0.0 < rec["sqrt_a"][-1]):
-            raise src.error(f"bad record: G{prn:02d} record starting on line {start_line} has sqrt(A) <= 0")
+            r[name].append(v)
+        if not (0.0 < r["sqrt_a"][-1]):
+            raise src.error(f"bad record: {sat} record starting on line {start_line} has sqrt(A) <= 0")
 
-    cols = {k: np.asarray(v, dtype=float) for k, v in rec.items()}
-    n = cols["prn"].size
-    if n:
-        # Continuous toe: the record week goes with toe; guard against a week
-        # field that disagrees with toc by more than half a week.
-        toe = cols["week"] * SECONDS_PER_WEEK + cols["toe_sow"]
-        toe += SECONDS_PER_WEEK * np.round((cols["toc"] - toe) / SECONDS_PER_WEEK)
-        cols["toe"] = toe
-        fit_h = cols["fit_h"]
-        # RINEX 2/3: fit interval in hours; 0/blank -> 4 h (IS-GPS-200 20.3.4.4).
-        cols["fit_s"] = np.where(np.isfinite(fit_h) & (fit_h > 0), fit_h * 3600.0, DEFAULT_FIT_S)
-        cols["week"] = np.floor(toe / SECONDS_PER_WEEK)
-    else:
-        cols["toe"] = np.zeros(0)
-        cols["fit_s"] = np.zeros(0)
-    cols["prn"] = cols["prn"].astype(np.int64)
-    eph = Ephemerides.from_columns(cols)
+    eph = _gps_like_table(rec)
+    eph_j = _gps_like_table(krec.pop("J"), qzss=True)
 
     kep = {}
     for s, r in krec.items():
@@ -567,7 +568,38 @@ def read_rinex_nav(path, systems="G") -> NavData:
     g["prn"] = g["prn"].astype(np.int64)
     g["freq_k"] = np.round(g["freq_k"]).astype(np.int64)
     eph_r = GlonassEphemerides.from_columns(g)
-    return NavData(src.path, version, eph, ion_alpha, ion_beta, n_skipped, eph_r, kep["E"], kep["C"], leap, skipped)
+    return NavData(src.path, version, eph, ion_alpha, ion_beta, n_skipped, eph_r, kep["E"], kep["C"], leap, skipped,
+                   eph_j)
+
+
+def _gps_like_table(rec, qzss: bool = False) -> Ephemerides:
+    """The :class:`Ephemerides` of GPS (or QZSS, ``qzss``) LNAV records read by :func:`read_rinex_nav`
+    (``rec``: column name -> values in file order; None: an empty table)."""
+    if rec is None:
+        rec = {k: [] for k in ("prn", "toc", "af0", "af1", "af2") + _NAV_ORDER}
+    cols = {k: np.asarray(v, dtype=float) for k, v in rec.items()}
+    n = cols["prn"].size
+    if n:
+        # Continuous toe: the record week goes with toe; guard against a week
+        # field that disagrees with toc by more than half a week.
+        toe = cols["week"] * SECONDS_PER_WEEK + cols["toe_sow"]
+        toe += SECONDS_PER_WEEK * np.round((cols["toc"] - toe) / SECONDS_PER_WEEK)
+        cols["toe"] = toe
+        fit_h = cols["fit_h"]
+        if qzss:
+            # QZSS: the fit interval flag, 0 -> 2 h, 1 -> more than 2 h (taken as 4 h) (IS-QZSS-PNT 4.1.2.4);
+            # the health word without bit 0, the L1C/B signal's (set where it is not transmitted)
+            cols["fit_s"] = np.where(np.isfinite(fit_h) & (fit_h > 0), DEFAULT_FIT_S, 2.0 * 3600.0)
+            cols["health"] = (cols["health"].astype(np.int64) & ~1).astype(float)
+        else:
+            # RINEX 2/3: fit interval in hours; 0/blank -> 4 h (IS-GPS-200 20.3.4.4).
+            cols["fit_s"] = np.where(np.isfinite(fit_h) & (fit_h > 0), fit_h * 3600.0, DEFAULT_FIT_S)
+        cols["week"] = np.floor(toe / SECONDS_PER_WEEK)
+    else:
+        cols["toe"] = np.zeros(0)
+        cols["fit_s"] = np.zeros(0)
+    cols["prn"] = cols["prn"].astype(np.int64)
+    return Ephemerides.from_columns(cols)
 
 
 # --------------------------------------------------------------------------- obs
@@ -592,6 +624,7 @@ OBS_CODE_PREFERENCE = {
     "R": ("C1C", "C1P"),
     "E": ("C1C", "C1X", "C1B"),
     "C": ("C2I", "C1I", "C2X", "C2Q", "C6I", "C6X", "C7I"),
+    "J": ("C1C", "C1X", "C1L", "C1S"),
 }
 #: RINEX 2 code -> the RINEX 3 code it corresponds to (for group delay and wavelength)
 _RINEX2_AS_3 = {("G", "C1"): "C1C", ("G", "P1"): "C1W", ("R", "C1"): "C1C", ("R", "P1"): "C1P",
@@ -785,7 +818,7 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
     path : str or PathLike
         RINEX 2.10/2.11 or 3.02-3.05 observation file (GPS or mixed).
     systems : str
-        Systems to read, letters of ``"GREC"``; the default ``"G"`` reads GPS
+        Systems to read, letters of ``"GRECJ"``; the default ``"G"`` reads GPS
         only (the behaviour before multi-GNSS).  RINEX 2.11 mixed files carry
         G, R (and E) satellites with one list of types for all.
     codes : dict, optional
@@ -810,7 +843,7 @@ def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
         requested system), bad epoch or observation record, unexpected end of
         file; the message names the file and the 1-based line number.
     ValueError
-        ``systems`` has a letter other than G, R, E, C.
+        ``systems`` has a letter other than G, R, E, C, J.
 
     Notes
     -----

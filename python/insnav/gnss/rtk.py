@@ -12,8 +12,9 @@ the result.  Equations: docs/algorithms.md, "Carrier-phase RTK".
   slip, bit 1 half-cycle ambiguity) on up to three frequency slots per system
   (:data:`SIGNALS`: slot 0 L1/E1/G1/B1I, slot 1 L2/E5b/G2/B2I, slot 2
   L5/E5a/G3/B3I -- RTKLIB 2.4.3's numbering, so ``frequencies = 2`` means
-  the same signals as its "L1+L2").  RINEX 2 files are read with
-  :func:`insnav.gnss.rinex.read_rinex_obs` on slot 0 only (L1, with its LLI).
+  the same signals as its "L1+L2").  RINEX 2.10/2.11 files are read by the compiled RINEX 2
+  record reader on the same slots (GPS and GLONASS C1/P1 L1, P2/C2 L2, GPS C5 L5; Galileo C1 L1,
+  C7 L7, C5 L5), phase with its LLI.
   Wavelengths per system and, for GLONASS, per FDMA channel (navigation data
   first, then the ``GLONASS SLOT / FRQ #`` header).
 * Satellite states: per receiver and row at the transmission time
@@ -53,6 +54,8 @@ SIGNALS = {
     "R": (("1C", "1P"), ("2C", "2P"), ("3Q", "3X", "3I")),
     "E": (("1C", "1X", "1B"), ("7Q", "7X", "7I"), ("5Q", "5X", "5I")),
     "C": (("2I", "2X", "2Q", "1I"), ("7I", "7X", "7Q"), ("6I", "6X", "6Q")),
+    # QZSS: the GPS frequencies L1/L2/L5 (IS-QZSS-PNT 3.1.1); L1 C/A first, then L1C
+    "J": (("1C", "1X", "1L", "1S"), ("2L", "2X", "2S"), ("5Q", "5X", "5I")),
 }
 #: RTKLIB's Q values
 STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 4: "dgps"}
@@ -78,7 +81,8 @@ class RtkOptions(TomlTable):
         ambiguities and position re-initialised every epoch), ``"fix-and-hold"`` (the fixed
         double differences fed back as tight pseudo-measurements), ``"off"`` (float only).
     systems : str
-        Letters of ``GREC`` (GPS, GLONASS, Galileo, BeiDou).
+        Letters of ``GRECJ`` (GPS, GLONASS, Galileo, BeiDou, QZSS).  Each system has its own
+        reference satellite in the double differences, QZSS included (docs/algorithms.md).
     frequencies : int
         1 (L1/E1/G1/B1I), 2 (+ L2/E5b/G2/B2I), 3 (+ L5/E5a/G3/B3I).
     elevation_mask_deg, ar_elevation_mask_deg : float
@@ -167,7 +171,7 @@ class RtkOptions(TomlTable):
         if self.ar_mode not in _AR_MODES:
             bad("ar_mode", ", ".join(_AR_MODES))
         if not isinstance(self.systems, str) or not self.systems or any(s not in SIGNALS for s in self.systems):
-            bad("systems", "letters of GREC")
+            bad("systems", "letters of GRECJ")
         if isinstance(self.frequencies, bool) or self.frequencies not in (1, 2, 3):
             bad("frequencies", "1, 2 or 3")
         if self.partial_ar_order not in ("elevation", "variance"):
@@ -290,7 +294,7 @@ def read_phase_obs(path, systems: str = "GREC") -> PhaseObs:
     """Read code, phase, Doppler, C/N0 and LLI on the frequency slots of :data:`SIGNALS`.
 
     RINEX 3 through the fast C++ reader; RINEX 2 through
-    :func:`insnav.gnss.rinex.read_rinex_obs` (slot 0 only).  Raises
+    the compiled RINEX 2 record reader (every slot, :data:`_V2_TYPES`).  Raises
     :class:`insnav.gnss.rinex.RinexError` naming the file and line.
     """
     from .. import _core
@@ -327,27 +331,89 @@ def read_phase_obs(path, systems: str = "GREC") -> PhaseObs:
                     glonass_channels={int(k): int(v) for k, v in d["glonass_channels"].items()})
 
 
+#: RINEX 2.11 observation types of each system's frequency slots (Gurtner & Estey 2007, RINEX 2.11 sec. 5.1
+#: and 10.1; the slots of :data:`SIGNALS`): pseudorange types in order of preference, then the phase,
+#: Doppler and C/N0 types of the band.  RINEX 2 has one type per band, so the signal is the receiver's.
+_V2_TYPES = {
+    "G": ((("C1", "P1"), "L1", "D1", "S1"), (("P2", "C2"), "L2", "D2", "S2"), (("C5",), "L5", "D5", "S5")),
+    "R": ((("C1", "P1"), "L1", "D1", "S1"), (("P2", "C2"), "L2", "D2", "S2"), ((), "", "", "")),
+    "E": ((("C1",), "L1", "D1", "S1"), (("C7",), "L7", "D7", "S7"), (("C5",), "L5", "D5", "S5")),
+}
+#: the RINEX 3 signal each RINEX 2 pseudorange type stands for (its band gives the wavelength); a slot
+#: with phase but no pseudorange is labelled by its band
+_V2_AS_3 = {("G", "C1"): "1C", ("G", "P1"): "1W", ("G", "P2"): "2W", ("G", "C2"): "2X", ("G", "C5"): "5X",
+            ("R", "C1"): "1C", ("R", "P1"): "1P", ("R", "P2"): "2P", ("R", "C2"): "2C",
+            ("E", "C1"): "1X", ("E", "C7"): "7X", ("E", "C5"): "5X"}
+
+
 def _read_phase_obs_v2(path, systems) -> PhaseObs:
-    from .rinex import read_rinex_obs
+    """RINEX 2.10/2.11 through the compiled RINEX 2 record reader, every slot of :data:`_V2_TYPES`
+    (L1 and L2 phase with their LLI, L5/E5a/E5b where the file has them)."""
+    from .. import _core
+    from ..data.textio import read_bytes
+    from .rinex import (RinexError, _core_rinex_error, _float, _header_end, _int, _Lines, _obs_types_header,
+                        _read_header, _version_type)
 
-    o = read_rinex_obs(path, systems="".join(s for s in systems if s in "GRE"))
-    m = o.prn.size
-    nan = np.full((m, 3), np.nan)
-    code, phase, dop, cn0 = nan.copy(), nan.copy(), nan.copy(), nan.copy()
-    code[:, 0], phase[:, 0], dop[:, 0], cn0[:, 0] = o.C1, o.L1, o.D1, o.S1
-    lli = np.zeros((m, 3), np.int64)
-    if getattr(o, "lli1", None) is not None:
-        lli[:, 0] = o.lli1
-    sig = {s: [(_v2_code(s, cd.get("C1")) or "")[1:], "", ""] for s, cd in o.codes_by_system.items()}
-    return PhaseObs(path=path, epoch_t_gps_s=o.epoch_t_gps_s, epoch=o.epoch, system=o.system, prn=o.prn, code_m=code,
-                    phase_cycles=phase, doppler_hz=dop, cn0_dbhz=cn0, lli=lli, signals=sig, approx_r_e=o.approx_r_e,
-                    glonass_channels=dict(o.glonass_channels))
-
-
-def _v2_code(s, c):
-    if c is None:
-        return None
-    return {("G", "C1"): "C1C", ("G", "P1"): "C1W", ("R", "C1"): "C1C", ("R", "P1"): "C1P"}.get((s, c), "C1X")
+    try:
+        raw = read_bytes(path)
+    except OSError as exc:
+        raise RinexError(path, None, f"cannot read file ({exc.strerror})") from None
+    head = _header_end(raw)
+    if head is None:
+        raise RinexError(path, None, "malformed header: no END OF HEADER")
+    src = _Lines(path, raw[:head[0]].decode("ascii", "replace").splitlines())
+    header = _read_header(src)
+    version, ftype, _ = _version_type(src, header)
+    if ftype != "O":
+        raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
+    approx, hen, glo_k = None, np.zeros(3), {}
+    for lineno, text, label in header:
+        if label == "APPROX POSITION XYZ":
+            approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label, lineno=lineno) for k in range(3)])
+        elif label == "ANTENNA: DELTA H/E/N":
+            hen = np.array([_float(src, text[14 * k:14 * (k + 1)], label, 0.0, lineno=lineno) for k in range(3)])
+        elif label == "TIME OF FIRST OBS":
+            ts = text[48:51].strip()
+            if ts and ts != "GPS":
+                raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
+        elif label == "GLONASS SLOT / FRQ #":
+            for k in range(8):
+                sl, fr = text[4 + 7 * k:7 + 7 * k], text[8 + 7 * k:10 + 7 * k]
+                if sl[:1] == "R" and sl[1:].strip():
+                    glo_k[_int(src, sl[1:], "GLONASS slot", lineno)] = _int(src, fr, "GLONASS frequency number",
+                                                                              lineno)
+    types = _obs_types_header(src, header, version)
+    have = types.get("G", [])
+    select, signals = {}, {}
+    for s in systems:
+        if s not in _V2_TYPES:
+            continue
+        codes, sig = [], []
+        for code_types, lt, dt, st in _V2_TYPES[s]:
+            c = next((c for c in code_types if c in have), "")
+            ph = lt if lt and lt in have else ""
+            if not (c or ph):
+                codes += ["", "", "", ""]
+                sig.append("")
+                continue
+            codes += [c, ph, dt if dt in have else "", st if st in have else ""]
+            sig.append(_V2_AS_3.get((s, c), (c or ph)[1:] + "X"))
+        select[s] = codes
+        signals[s] = sig
+    try:
+        d = _core.read_rinex3_obs_body(raw, path, head[0], head[1], types, select, True, True)
+    except RuntimeError as exc:
+        raise _core_rinex_error(path, exc) from None
+    obs = np.asarray(d["obs"]).reshape(-1, 3, 5)
+    row_sys = np.asarray(d["row_sys"])
+    sys_a = row_sys.astype(np.uint8).view("S1").astype("<U1") if row_sys.size else np.zeros(0, "<U1")
+    lli = obs[:, :, 4]
+    return PhaseObs(path=path, epoch_t_gps_s=np.asarray(d["epoch_t_gps_s"], float),
+                    epoch=np.asarray(d["row_epoch"], np.int64), system=sys_a,
+                    prn=np.asarray(d["row_prn"], np.int64), code_m=obs[:, :, 0].copy(),
+                    phase_cycles=obs[:, :, 1].copy(), doppler_hz=obs[:, :, 2].copy(), cn0_dbhz=obs[:, :, 3].copy(),
+                    lli=np.where(np.isfinite(lli), lli, 0).astype(np.int64), signals=signals, approx_r_e=approx,
+                    antenna_hen_m=hen, glonass_channels=glo_k)
 
 
 def wavelengths(obs: PhaseObs, nav=None) -> np.ndarray:
@@ -638,7 +704,7 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
     if not isinstance(base, PhaseObs):
         base = read_phase_obs(base, opt.systems)
     if not hasattr(nav, "eph"):
-        nav = read_nav_multi(nav, "".join(s for s in opt.systems if s in "GREC"))
+        nav = read_nav_multi(nav, "".join(s for s in opt.systems if s in "GRECJ"))
     if r_base_e is None:
         r_base_e = base_position_from_header(base)
         if r_base_e is None:

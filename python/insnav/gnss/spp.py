@@ -18,7 +18,9 @@ reference system (GPS when present, else the first of
 :data:`insnav.gnss.systems.SYSTEMS` present) and one inter-system bias
 ``ISB_s = b_s - b`` [m] per further system present at the epoch; velocity
 ``v`` and one clock drift ``d`` [m/s] from the rates (the systems' clocks
-drift together to far below the Doppler noise).  Weighted Gauss-Newton
+drift together to far below the Doppler noise).  QZSS rows (``[gnss] systems``
+with ``"J"``) use the GPS clock, no ISB of their own
+(:data:`insnav.gnss.systems.CLOCK_SYSTEM`).  Weighted Gauss-Newton
 least squares, ``W = diag(1/sigma^2)``, covariance ``(H^T W H)^-1``.
 
 RAIM fault detection and exclusion (Baarda's data snooping, Baarda 1968; as
@@ -50,7 +52,7 @@ import numpy as np
 
 from .. import _core, earth
 from ..config import ConfigError, TomlTable
-from .systems import SYSTEMS, system_index
+from .systems import CLOCK_SYSTEM, SYSTEMS, clock_system_index
 
 __all__ = ["SppOptions", "SppSolution", "solve_spp", "chi2_quantile", "spp_inputs_from_rinex", "RAIM_STATUS",
            "summary_counts", "read_obs_multi", "read_nav_multi"]
@@ -282,7 +284,11 @@ def _clock(x, col):
 
 
 def _clock_columns(system):
-    """Reference system, column of each row (0 = reference clock, k = ISB of the k-th other) and the letters."""
+    """Reference system, column of each row (0 = reference clock, k = ISB of the k-th other) and the letters
+    (QZSS rows on the GPS clock, :data:`insnav.gnss.systems.CLOCK_SYSTEM`)."""
+    system = np.asarray(system, dtype="<U1")
+    for s, clock in CLOCK_SYSTEM.items():
+        system = np.where(system == s, clock, system)
     present = [s for s in SYSTEMS if np.any(system == s)]
     others = [s for s in present if s != present[0]]
     col = np.zeros(len(system), np.int64)
@@ -373,7 +379,7 @@ def solve_spp(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=Non
     rate_excl = np.zeros(M, np.uint8)
     out.update(ref_system=ref, row_excluded=row_excl, rate_row_excluded=rate_excl)
     batch(np.asarray(inputs.epoch_start, np.int64), inputs.sats, np.asarray(spr_all, float),
-          np.asarray(sprr_all, float), system_index(inputs.system).astype(np.int8), np.asarray(r0_e, float),
+          np.asarray(sprr_all, float), clock_system_index(inputs.system).astype(np.int8), np.asarray(r0_e, float),
           dict(raim=use_raim, raim_alpha=float(opt.raim_alpha), max_exclusions=int(opt.max_exclusions),
                min_sats=int(opt.min_sats), iterations=int(opt.iterations), velocity=bool(opt.velocity),
                warm_start=bool(warm_start)), out)

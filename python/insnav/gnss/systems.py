@@ -15,12 +15,18 @@ import numpy as np
 
 from .._median import unique
 
-__all__ = ["SYSTEMS", "SYSTEM_NAMES", "system_index", "sat_id"]
+__all__ = ["SYSTEMS", "SYSTEM_NAMES", "SPP_SYSTEMS", "CLOCK_SYSTEM", "system_index", "clock_system_index", "sat_id"]
 
-#: systems insnav processes, in the order of their index (GPS first: the reference clock)
+#: systems with a receiver clock of their own, in the order of their index (GPS first: the reference clock)
 SYSTEMS = ("G", "R", "E", "C")
-SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou"}
+SYSTEM_NAMES = {"G": "GPS", "R": "GLONASS", "E": "Galileo", "C": "BeiDou", "J": "QZSS"}
 _INDEX = {s: k for k, s in enumerate(SYSTEMS)}
+#: systems whose satellites share another system's receiver clock: QZSS uses GPS's (QZSST is steered to
+#: GPST and QZSS L1 C/A, L2C, L5 are GPS's signals on GPS's frequencies, IS-QZSS-PNT 3.1.1 and 4.2; RTKLIB's
+#: pntpos.c estimates no QZSS clock either)
+CLOCK_SYSTEM = {"J": "G"}
+#: systems single point positioning takes (the ``[gnss] systems`` letters)
+SPP_SYSTEMS = SYSTEMS + tuple(CLOCK_SYSTEM)
 
 
 def system_index(system) -> np.ndarray:
@@ -35,6 +41,14 @@ def system_index(system) -> np.ndarray:
             raise ValueError(f"unknown GNSS system {s!r} (known: {', '.join(SYSTEMS)})")
         out[codes == s] = _INDEX[s]
     return out
+
+
+def clock_system_index(system) -> np.ndarray:
+    """Index into :data:`SYSTEMS` of the receiver clock of each row's system (QZSS: GPS's, :data:`CLOCK_SYSTEM`)."""
+    codes = np.atleast_1d(np.asarray(system, dtype="<U1"))
+    for s, clock in CLOCK_SYSTEM.items():
+        codes = np.where(codes == s, clock, codes)
+    return system_index(codes)
 
 
 def sat_id(system, prn) -> np.ndarray:

@@ -40,7 +40,8 @@ below ``cn0_mask_dbhz`` (0: off; rows without C/N0 pass) are dropped.
 
 System factors ``F_sys`` (the sigma is multiplied by it): ``G`` 1, ``R`` 1.5
 (RTKLIB ``EFACT_GLO``: broadcast orbit/clock and inter-frequency biases of
-the FDMA signals are worse), ``E`` 1, ``C`` 1 (RTKLIB ``EFACT_CMP``).  The
+the FDMA signals are worse), ``E`` 1, ``C`` 1 (RTKLIB ``EFACT_CMP``), ``J`` 1
+(RTKLIB ``EFACT_QZS``).  The
 ``legacy`` model applies them too, so GPS-only results are unchanged.
 """
 from __future__ import annotations
@@ -51,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import ConfigError, TomlTable
-from .systems import SYSTEMS, system_index
+from .systems import SPP_SYSTEMS, SYSTEMS
 
 __all__ = ["MODELS", "Weighting", "sigma_rtklib", "sigma_cn0", "sigma_legacy", "DEFAULT_SYSTEM_FACTORS",
            "MIN_ELEVATION_DEG", "CN0_DEFAULT_DBHZ"]
@@ -63,7 +64,7 @@ MIN_ELEVATION_DEG = 5.0
 #: C/N0 assumed for rows without one [dB-Hz]
 CN0_DEFAULT_DBHZ = 45.0
 #: sigma multiplier per system (RTKLIB EFACT_GPS, EFACT_GLO, EFACT_GAL (=GPS), EFACT_CMP)
-DEFAULT_SYSTEM_FACTORS = {"G": 1.0, "R": 1.5, "E": 1.0, "C": 1.0}
+DEFAULT_SYSTEM_FACTORS = {"G": 1.0, "R": 1.5, "E": 1.0, "C": 1.0, "J": 1.0}
 
 
 def sigma_rtklib(el_rad, a_m: float = 0.3, b_m: float = 0.3, exponent: float = 2.0, factor=1.0):
@@ -114,7 +115,8 @@ class Weighting(TomlTable):
     cn0_mask_dbhz : float
         Rows with C/N0 below it are dropped (0: off).
     systems : list of str
-        Systems to use (letters of :data:`insnav.gnss.systems.SYSTEMS`).
+        Systems to use (letters of :data:`insnav.gnss.systems.SPP_SYSTEMS`; the default
+        :data:`insnav.gnss.systems.SYSTEMS`, QZSS ``J`` on request).
     """
 
     model: str = "legacy"
@@ -161,15 +163,15 @@ class Weighting(TomlTable):
         if not isinstance(self.system_factors, dict):
             bad("system_factors", "a table such as {R = 1.5}")
         for s, f in self.system_factors.items():
-            if s not in SYSTEMS:
-                bad("system_factors", f"system letters {', '.join(SYSTEMS)}")
+            if s not in SPP_SYSTEMS:
+                bad("system_factors", f"system letters {', '.join(SPP_SYSTEMS)}")
             if isinstance(f, bool) or not isinstance(f, (int, float)) or not (math.isfinite(f) and f > 0):
                 bad("system_factors", "factors > 0")
         sy = self.systems
         if isinstance(sy, str):
             sy = list(sy)
-        if not isinstance(sy, (list, tuple)) or not sy or any(s not in SYSTEMS for s in sy):
-            bad("systems", f"a list of {', '.join(repr(s) for s in SYSTEMS)}")
+        if not isinstance(sy, (list, tuple)) or not sy or any(s not in SPP_SYSTEMS for s in sy):
+            bad("systems", f"a list of {', '.join(repr(s) for s in SPP_SYSTEMS)}")
         self.systems = list(sy)
         return self
 
@@ -181,8 +183,13 @@ class Weighting(TomlTable):
     def factors(self, system) -> np.ndarray:
         """(M,) sigma multiplier of each row's system letter."""
         f = dict(DEFAULT_SYSTEM_FACTORS, **self.system_factors)
-        table = np.array([f[s] for s in SYSTEMS])
-        return table[system_index(system)]
+        letters = np.atleast_1d(np.asarray(system, dtype="<U1"))
+        out = np.empty(letters.shape)
+        for s in np.unique(letters).tolist():
+            if s not in f:
+                raise ValueError(f"unknown GNSS system {s!r} (known: {', '.join(SPP_SYSTEMS)})")
+            out[letters == s] = f[s]
+        return out
 
     def sigmas(self, el_rad, cn0_dbhz, system, *, sigma_pr_zenith_m: float = 3.0,
                sigma_prr_zenith_mps: float = 0.3, use_cn0: bool = True):

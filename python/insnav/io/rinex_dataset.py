@@ -49,7 +49,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -701,6 +700,8 @@ def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=N
     d = {}
     source = "run configuration"
     if config_path is not None:
+        import tomllib  # here: a run without --config never reads TOML
+
         source = os.fspath(config_path)
         try:
             with open(config_path, "rb") as f:

@@ -137,6 +137,52 @@ struct ObsColumns {
   }
 };
 
+namespace detail {
+
+/// Where header column ``cq`` of a satellite's observations is: the line holding it, the field's first
+/// character in that line and the line number (RINEX 3: one line from column 4; RINEX 2: five fields a line).
+struct ObsField {
+  const char* b;
+  size_t len;
+  size_t a;
+  long lineno;
+};
+
+inline std::string trimmed(std::string f) {
+  while (!f.empty() && f.front() == ' ') f.erase(f.begin());
+  while (!f.empty() && f.back() == ' ') f.pop_back();
+  return f;
+}
+
+/// One satellite's observations into ``o`` (kObsSlots x kObsPerSlot, NaN on entry): for every slot the
+/// C, L, D, S columns of ``c`` for system ``s`` (F14.3; a blank or absent field stays NaN), and the LLI digit
+/// after the phase (0 where blank or absent).  ``field_of(cq)`` locates column ``cq``; ``bad(field, what)``
+/// throws for a field that is not a number (``what``: the observation's name).  Shared by the RINEX 3 and
+/// RINEX 2 record loops.
+template <class FieldOf, class Bad>
+inline void read_sat_observations(const ObsColumns& c, unsigned char s, const FieldOf& field_of, const Bad& bad,
+                                  double* o) {
+  for (int k = 0; k < kObsSlots; ++k) {
+    double* slot = o + k * kObsPerSlot;
+    for (int q = 0; q < 4; ++q) {
+      const int cq = c.col[s][k][q];
+      if (cq < 0) continue;
+      const ObsField f = field_of(cq);
+      if (q == 1) slot[4] = (f.a + 14 < f.len && f.b[f.a + 14] >= '0' && f.b[f.a + 14] <= '9') ? f.b[f.a + 14] - '0' : 0.0;
+      if (f.a >= f.len) continue;
+      double v;
+      if (!parse_num(f.b + f.a, std::min<size_t>(14, f.len - f.a), v)) {
+        bad(f, trimmed(std::string(f.b + f.a, std::min<size_t>(14, f.len - f.a))), c.names[s][k][q]);  // throws
+        continue;
+      }
+      if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;  // 0.000: not observed
+      slot[q] = v;
+    }
+  }
+}
+
+}  // namespace detail
+
 /// Parse the records after END OF HEADER: text[offset, size) whose first line is line
 /// ``lineno0 + 1`` of the file.  Epochs with flag 0 or 1 are kept, events (2-5) skipped with
 /// their special records, flag 6 epochs read and dropped (as the header-driven reader does).
@@ -201,28 +247,12 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
       out.row_prn.push_back(prn);
       const size_t base = out.obs.size();
       out.obs.resize(base + W, NAN);
-      for (int k = 0; k < kObsSlots; ++k) {
-        for (int q = 0; q < 4; ++q) {
-          const int cq = c.col[s][k][q];
-          if (cq < 0) continue;
-          const size_t a = 3 + 16 * static_cast<size_t>(cq);
-          if (q == 1) out.obs[base + k * kObsPerSlot + 4] = 0.0;  // LLI: 0 where blank or beyond the line
-          if (a >= L.len) continue;
-          double v;
-          if (!detail::parse_num(L.b + a, std::min<size_t>(14, L.len - a), v)) {
-            std::string f = L.field(a, 14);
-            while (!f.empty() && f.front() == ' ') f.erase(f.begin());
-            while (!f.empty() && f.back() == ' ') f.pop_back();
-            L.fail("bad number '" + f + "' for observation " + c.names[s][k][q] + " of " + L.field(0, 3));
-          }
-          if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;  // 0.000: not observed
-          out.obs[base + k * kObsPerSlot + q] = v;
-          if (q == 1 && a + 14 < L.len) {
-            const char lli = L.b[a + 14];
-            out.obs[base + k * kObsPerSlot + 4] = (lli >= '0' && lli <= '9') ? lli - '0' : 0.0;
-          }
-        }
-      }
+      detail::read_sat_observations(
+          c, s, [&](int cq) { return detail::ObsField{L.b, L.len, 3 + 16 * static_cast<size_t>(cq), L.lineno}; },
+          [&](const detail::ObsField&, const std::string& f, const std::string& name) {
+            L.fail("bad number '" + f + "' for observation " + name + " of " + L.field(0, 3));
+          },
+          out.obs.data() + base);
     }
     if (keep) {
       out.epoch_t_gps_s.push_back(t);
@@ -236,7 +266,8 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
 /// Sec. 5 and Table A1): an epoch line (2-digit year, flag in column 29, satellite count and up to
 /// 12 satellites, continued on further lines), then per satellite ceil(n/5) lines of 16-character
 /// fields.  One list of types for every system: ``c.col`` of each wanted system holds columns of
-/// that list; a blank system letter means GPS.  Slot 0 only.
+/// that list for every frequency slot (e.g. C1 L1 D1 S1 on slot 0, P2 L2 D2 S2 on slot 1); a blank
+/// system letter means GPS.
 inline void read_rinex2_obs_body(const char* text, size_t size, const std::string& path, size_t offset,
                                  long lineno0, int n_types, const ObsColumns& c, RinexObsTable& out) {
   detail::LineReader L{text, size, path};
@@ -248,11 +279,7 @@ inline void read_rinex2_obs_body(const char* text, size_t size, const std::strin
   std::vector<Line> obs_lines(static_cast<size_t>(nlines));
   std::vector<std::array<char, 3>> sats;
   sats.reserve(64);
-  auto trimmed = [](std::string f) {
-    while (!f.empty() && f.front() == ' ') f.erase(f.begin());
-    while (!f.empty() && f.back() == ' ') f.pop_back();
-    return f;
-  };
+  using detail::trimmed;
   auto int_field = [&](size_t a, size_t n, int& v) {  // a field cut by the end of the line: what is there
     double x;
     if (a >= L.len || !detail::parse_num(L.b + a, std::min(n, L.len - a), x) || !std::isfinite(x) || x != std::floor(x))
@@ -330,21 +357,16 @@ inline void read_rinex2_obs_body(const char* text, size_t size, const std::strin
       out.row_prn.push_back(static_cast<int>(prn_v));
       const size_t base = out.obs.size();
       out.obs.resize(base + W, NAN);
-      for (int q = 0; q < 4; ++q) {
-        const int cq = c.col[s][0][q];
-        if (cq < 0) continue;
-        const Line& ol = obs_lines[static_cast<size_t>(cq / 5)];
-        const size_t a = 16 * static_cast<size_t>(cq % 5);
-        if (q == 1) out.obs[base + 4] = (a + 14 < ol.len && ol.b[a + 14] >= '0' && ol.b[a + 14] <= '9') ? ol.b[a + 14] - '0' : 0.0;
-        if (a >= ol.len) continue;
-        double v;
-        if (!detail::parse_num(ol.b + a, std::min<size_t>(14, ol.len - a), v)) {
-          std::string f(ol.b + a, std::min<size_t>(14, ol.len - a));
-          L.fail_at(ol.lineno, "bad number '" + trimmed(f) + "' for observation " + c.names[s][0][q]);
-        }
-        if (c.zero_is_missing && q <= 1 && v == 0.0) v = NAN;
-        out.obs[base + q] = v;
-      }
+      detail::read_sat_observations(
+          c, s,
+          [&](int cq) {
+            const Line& ol = obs_lines[static_cast<size_t>(cq / 5)];
+            return detail::ObsField{ol.b, ol.len, 16 * static_cast<size_t>(cq % 5), ol.lineno};
+          },
+          [&](const detail::ObsField& f, const std::string& txt, const std::string& name) {
+            L.fail_at(f.lineno, "bad number '" + txt + "' for observation " + name);
+          },
+          out.obs.data() + base);
     }
     if (keep) {
       out.epoch_t_gps_s.push_back(t);

@@ -33,7 +33,7 @@ inline constexpr int kNavOrbitValues = 28;
 /// Records of one navigation file, in file order (kept systems only).
 struct NavScan {
   bool irregular = false;           // something the Python reader reports or handles itself
-  std::vector<char> sys;            // 'G', 'R', 'E', 'C'
+  std::vector<char> sys;            // 'G', 'R', 'E', 'C', 'J'
   std::vector<std::int64_t> prn;
   std::vector<std::int64_t> ymdhm;  // year (four digits), month, day, hour, minute per record
   std::vector<double> sec;          // seconds of the epoch
@@ -153,7 +153,7 @@ inline void scan_rinex_nav_body(std::string_view body, bool rinex3, bool glonass
     if (rinex3) {
       sysid = line[0];
       if (!(sysid >= 'A' && sysid <= 'Z')) return give_up();
-      const bool known = sysid == 'G' || sysid == 'R' || sysid == 'E' || sysid == 'C';
+      const bool known = sysid == 'G' || sysid == 'R' || sysid == 'E' || sysid == 'C' || sysid == 'J';  // J: QZSS, GPS layout
       if (!known || want.find(sysid) == std::string_view::npos) {
         const std::size_t k = out.skipped_sys.find(sysid);
         if (k == std::string::npos) {

@@ -1,0 +1,71 @@
+"""What the single point positioning command loads: only the modules it runs.
+
+``insnav run --filter spp`` is compared with RTKLIB's ``rnx2rtkp`` as a whole
+process (bench/gnss_speed.py), so its start-up counts: every module imported
+on the way is paid on every run.  The command is run in a fresh interpreter
+and its ``sys.modules`` inspected afterwards (no timing: the timings are in
+bench/).
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+SMARTLOC = "smartloc_berlin_potsdamer_platz"
+
+#: third-party packages the GNSS-only path never needs (plots, data frames, optimisation)
+HEAVY_PACKAGES = ("scipy", "matplotlib", "pandas", "pyarrow", "yaml", "numba")
+#: insnav modules of other commands or file formats
+OTHER_INSNAV = ("insnav.analysis", "insnav.sim", "insnav.io.kfgins", "insnav.io.csv_dataset", "insnav.filters.tight",
+                "insnav.filters.loose", "insnav.filters.rtk", "insnav.cli.report", "insnav.cli.tune", "insnav.ins")
+
+_PROBE = """
+import json, os, sys
+from insnav.cli import main
+rc = main(sys.argv[2:])
+with open(sys.argv[1], "w") as f:
+    json.dump(dict(rc=rc, modules=sorted(sys.modules), blas=os.environ.get("OPENBLAS_NUM_THREADS")), f)
+"""
+
+
+def _loaded(tmp_path, argv) -> dict:
+    probe = tmp_path / "modules.json"
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("OPENBLAS_NUM_THREADS",
+                                                                          "GOTO_NUM_THREADS", "OMP_NUM_THREADS")}
+    r = subprocess.run([sys.executable, "-c", _PROBE, str(probe), *map(str, argv)], capture_output=True, text=True,
+                       env=env, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return json.loads(probe.read_text())
+
+
+def test_spp_command_imports_no_heavy_module(shared_data, tmp_path):
+    d = shared_data / SMARTLOC
+    if not (d / "Berlin_Potsdamer_Platz.obs").is_file():
+        pytest.skip(f"{d} not found (the smartLoc data set)")
+    out = _loaded(tmp_path, ["run", "--filter", "spp", "--format", "rinex", "--obs", d / "Berlin_Potsdamer_Platz.obs",
+                             "--nav", f"{d / 'brdc1580.16n'},{d / 'brdc1580.16g'}", "--out", tmp_path / "spp.csv"])
+    assert out["rc"] == 0
+    mods = set(out["modules"])
+    assert "insnav.filters.spp" in mods and "insnav._core" in mods  # the probe did run the command
+    heavy = sorted(m for m in mods if m.split(".")[0] in HEAVY_PACKAGES)
+    assert heavy == []
+    other = sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in OTHER_INSNAV))
+    assert other == []
+    assert "tomllib" not in mods  # no --config: no TOML to read
+    assert out["blas"] == "1"  # numpy's OpenBLAS without its busy-waiting thread pool
+
+
+def test_spp_command_with_config_reads_toml(shared_data, tmp_path):
+    """The lazy TOML import still serves --config (the same modules otherwise)."""
+    d = shared_data / SMARTLOC
+    if not (d / "Berlin_Potsdamer_Platz.obs").is_file():
+        pytest.skip(f"{d} not found (the smartLoc data set)")
+    cfg = tmp_path / "run.toml"
+    cfg.write_text('[gnss]\nsystems = "G"\n')
+    out = _loaded(tmp_path, ["run", "--filter", "spp", "--format", "rinex", "--obs", d / "Berlin_Potsdamer_Platz.obs",
+                             "--nav", d / "brdc1580.16n", "--config", cfg, "--out", tmp_path / "spp.csv"])
+    assert out["rc"] == 0 and "tomllib" in out["modules"]
+    assert 'systems = "G"' in (tmp_path / "spp.csv.config.toml").read_text()
