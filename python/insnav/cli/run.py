@@ -155,11 +155,19 @@ def cli_options(pairs) -> dict:
     return out
 
 
-def resolved_config_toml(cfg: RunConfig) -> str:
-    """The configuration as TOML (SI imu values under [imu_si], informational)."""
+def resolved_config_toml(cfg: RunConfig, tables: dict | None = None) -> str:
+    """The resolved configuration of a run as TOML (``<out>.config.toml``): the run keys
+    and tables of ``cfg``, then the family's and the input format's own ``tables``
+    (name -> a dataclass such as RinexOptions, Weighting, SppOptions, RtkOptions, or a
+    dict).  A GNSS-only run (``coupling = "gnss"``) writes its filter and coupling only,
+    then its tables: it reads nothing else."""
     import dataclasses
 
     lines = ["# insnav resolved run configuration"]
+    extra = "".join(_table_toml(name, obj) for name, obj in (tables or {}).items() if obj is not None)
+    if cfg.coupling == "gnss":
+        return "\n".join(lines + [f"filter = {toml_value(cfg.filter)}", f"coupling = {toml_value(cfg.coupling)}"]) \
+            + "\n" + extra
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
         if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize", "time", "lever_arm", "options") or v is None:
@@ -202,23 +210,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
             if key in ("acc_vrw_ug_per_sqrt_hz",):
                 continue
             lines.append(f"{key} = {toml_value(np.asarray(getattr(cfg.imu, fld)) / factor)}")
-    return "\n".join(lines) + "\n"
-
-
-def _rinex_table_toml(opt) -> str:
-    """The ``[rinex]`` table of the resolved configuration (loader options)."""
-    import dataclasses
-
-    lines = ["\n[rinex]"]
-    for f in dataclasses.fields(opt):
-        v = getattr(opt, f.name)
-        if v is None:
-            continue
-        if isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
-            lines.append(f"{f.name} = [" + ", ".join(toml_value(x) for x in v) + "]")
-        else:
-            lines.append(f"{f.name} = {toml_value(v)}")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + extra
 
 
 def _csv_tables_toml(tables: dict, has_imu_table: bool) -> str:
@@ -283,21 +275,32 @@ class _Stages:
 
 
 def _table_toml(name: str, obj) -> str:
-    """A ``[name]`` TOML table of a dataclass's fields (None left out)."""
+    """A ``[name]`` TOML table of a dataclass's fields or a dict's items (None left out)."""
     import dataclasses
 
     lines = [f"\n[{name}]"]
-    for f in dataclasses.fields(obj):
-        v = getattr(obj, f.name)
+    items = obj.items() if isinstance(obj, dict) else ((f.name, getattr(obj, f.name)) for f in dataclasses.fields(obj))
+    for key, v in items:
         if v is None:
             continue
         if isinstance(v, dict):
-            lines.append(f"{f.name} = {{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}")
+            lines.append(f"{key} = {{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}")
         elif isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
-            lines.append(f"{f.name} = [" + ", ".join(toml_value(x) for x in v) + "]")
+            lines.append(f"{key} = [" + ", ".join(toml_value(x) for x in v) + "]")
         else:
-            lines.append(f"{f.name} = {toml_value(v)}")
+            lines.append(f"{key} = {toml_value(v)}")
     return "\n".join(lines) + "\n"
+
+
+def _rtk_table(opt, base_e) -> dict:
+    """The ``[rtk]`` table of a resolved configuration: the RtkOptions a run used and the base
+    position it was given (ECEF [m]; None: the base header's, found again on a re-run)."""
+    import dataclasses
+
+    table = {f.name: getattr(opt, f.name) for f in dataclasses.fields(opt)}
+    if base_e is not None:
+        table["base_position_ecef_m"] = [float(v) for v in np.asarray(base_e, float).ravel()]
+    return table
 
 
 def _input_paths(args) -> list:
@@ -372,8 +375,9 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
 
 def cmd_run_spp(args, stages) -> int:
     """``insnav run --filter spp``: GNSS-only single point positioning over RINEX files (no IMU)."""
+    import insnav
     from ..filters.solution import FORMATS, write_innovations
-    from ..filters.spp import run_spp_rinex, write_spp_table
+    from ..filters.spp import load_spp_run, write_spp_table
 
     _check_gnss_only_args(args, "spp", ("obs", "nav"), "--obs OBS --nav NAV")
     if args.out_format != "insnav":
@@ -388,7 +392,9 @@ def cmd_run_spp(args, stages) -> int:
     check_run_outputs(args, out, kfgins_folder=False, spp=True)
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
-        sol = run_spp_rinex(args.obs, [p for p in args.nav.split(",") if p], args.config)
+        ds, opts = load_spp_run(args.obs, [p for p in args.nav.split(",") if p], args.config)
+        cfg = RunConfig(filter="spp", coupling="gnss")
+        sol = insnav.run(ds, config=cfg, **opts)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     stages.done("filter")
@@ -402,9 +408,7 @@ def cmd_run_spp(args, stages) -> int:
         sol.save(out, columns=groups, precision=args.csv_precision)
         write_innovations(sol, out)
         write_spp_table(sol.spp, out.with_suffix(out.suffix + ".spp.csv"))
-        text = (f'# insnav resolved run configuration\nfilter = "spp"\ncoupling = "gnss"\n'
-                + _table_toml("rinex", sol.rinex_options) + _table_toml("gnss", sol.weighting)
-                + _table_toml("spp", sol.spp_options))
+        text = resolved_config_toml(cfg, dict(rinex=sol.rinex_options, gnss=sol.weighting, spp=sol.spp_options))
         atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text)
     print(f"{out}: {s['solved']} of {s['epochs']} epochs solved, filter spp ({s['systems']}, weighting "
           f"{s['weighting']}, RAIM {'on' if sol.spp_options.raim else 'off'}); RAIM: {s['raim_passed']} passed, "
@@ -425,7 +429,8 @@ def cmd_run_rtk(args, stages) -> int:
     solution formats.  Beside it: ``<out>.rtk.csv`` (per epoch: status, ratio,
     fixed ambiguities, slips) and ``<out>.config.toml``.
     """
-    from ..filters.rtk import run_rtk_rinex
+    import insnav
+    from ..filters.rtk import load_rtk_run
     from ..filters.solution import FORMATS
     from ..gnss.rtk import write_rtk_table, write_rtklib_pos
 
@@ -441,8 +446,10 @@ def cmd_run_rtk(args, stages) -> int:
     if not pos and out.suffix.lower() not in FORMATS:
         raise UserError(f"--out {out}: unknown format {out.suffix!r}; use .pos or one of {', '.join(FORMATS)}")
     try:
-        sol = run_rtk_rinex(args.obs, args.base, [p for p in args.nav.split(",") if p], args.config,
-                            base_pos=args.base_pos)
+        ds, opts = load_rtk_run(args.obs, args.base, [p for p in args.nav.split(",") if p], args.config,
+                                base_pos=args.base_pos)
+        cfg = RunConfig(filter="rtk", coupling="gnss")
+        sol = insnav.run(ds, config=cfg, **opts)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     stages.done("filter")
@@ -459,8 +466,7 @@ def cmd_run_rtk(args, stages) -> int:
             groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
             written.append(sol.save(out, columns=groups, precision=args.csv_precision))
         written.append(write_rtk_table(rs, out.with_suffix(out.suffix + ".rtk.csv")))
-        text = (f'# insnav resolved run configuration\nfilter = "rtk"\ncoupling = "gnss"\n'
-                + _table_toml("rtk", sol.rtk_options))
+        text = resolved_config_toml(cfg, dict(rtk=_rtk_table(sol.rtk_options, ds.base_position_e_m)))
         written.append(atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text))
     except BaseException:
         for p in written:
@@ -627,9 +633,10 @@ def cmd_run(args) -> int:
             cfg.imu_error_sigmas = True  # KF_GINS_STD.txt
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
-        run_opts = {}
+        run_opts, base_e = {}, None
         if (args.coupling or cfg.coupling) == "rtk":
             ds, run_opts = _rtk_ins_inputs(args, ds)
+            base_e = ds.base_position_e_m
         stages.done("read")
         from .._progress import reporting
 
@@ -690,11 +697,16 @@ def cmd_run(args) -> int:
                 write_rtk_table(sol.rtk, base.with_suffix(base.suffix + ".rtk.csv"), t_solution_s=sol.gnss_t)
             cfg.filter = sol.summary.get("filter", cfg.filter)
             cfg.coupling = sol.summary.get("coupling", cfg.coupling)
-            text = resolved_config_toml(cfg)
+            cfg.layout = s.get("state_layout", cfg.layout)  # a tight run's 17 or 20, chosen from the data
+            tables = {}
             if rinex_opts is not None:
-                text += _rinex_table_toml(rinex_opts)
+                tables["rinex"] = rinex_opts
                 if weighting is not None and not weighting.is_default:
-                    text += _table_toml("gnss", weighting)
+                    tables["gnss"] = weighting
+            if cfg.coupling == "rtk":  # RTK/INS: the [rtk] options it ran with and the engine keys given
+                tables["rtk"] = _rtk_table(sol.rtk_options, base_e)
+                tables["rtk_engine"] = run_opts.get("engine") or None
+            text = resolved_config_toml(cfg, tables)
             if csv_tables is not None:
                 text += _csv_tables_toml(csv_tables, cfg.imu is not None)
             atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text)
