@@ -45,20 +45,13 @@ def _save(ds, path):
 def datasets(tmp_path_factory):
     """Small simulated dataset folders: GPS-only raw observations (tight 17, loose, particle),
     GPS + Galileo + BeiDou (tight 20) and the seed 001 delayed fixes."""
-    from conftest import short_tight_dataset
+    from conftest import first_segments, short_tight_dataset
 
     import insnav.sim as sim
 
     root = tmp_path_factory.mktemp("round_trip")
     out = {"gps": _save(short_tight_dataset(duration_s=60.0), root / "gps")}
-    sc = copy.deepcopy(sim.load_scenario("urban-multignss").raw)
-    segs, tot = [], 0.0
-    for seg in sc["motion"]["segments"]:
-        if tot >= 60.0:
-            break
-        segs.append(seg)
-        tot += float(seg["duration_s"])
-    sc["motion"]["segments"] = segs
+    sc = first_segments(copy.deepcopy(sim.load_scenario("urban-multignss").raw), 60.0)
     sc["gnss_raw"].pop("urban_canyon", None)
     out["multi"] = _save(sim.simulate(sc, seed=4), root / "multi")
     sc = copy.deepcopy(sim.load_scenario("seed001-high").raw)

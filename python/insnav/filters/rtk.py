@@ -18,13 +18,12 @@ number of fixed ambiguities, slips per epoch).
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import earth
-from ..config import ConfigError
+from ..config import ConfigError, read_toml
 from ..gnss.rtk import RtkOptions, RtkSolution, solve_rtk
 from ._assemble import gnss_solution
 from .solution import Solution
@@ -69,13 +68,7 @@ def load_rtk_config(config_path=None, overrides: dict | None = None):
     source = "rtk options"
     if config_path is not None:
         source = os.fspath(config_path)
-        try:
-            with open(config_path, "rb") as f:
-                d = tomllib.load(f)
-        except OSError as exc:
-            raise ConfigError(f"{source}: cannot read ({exc.strerror})") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+        d = read_toml(config_path)
     t = d.get("rtk", {})
     if not isinstance(t, dict):
         raise ConfigError(f"{source}: key 'rtk': bad value {t!r}; allowed: a table")

@@ -29,14 +29,13 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import tomllib
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import earth
 from .._median import median
-from ..config import ConfigError
+from ..config import ConfigError, read_toml
 from ..gnss.spp import (SppOptions, SppSolution, read_nav_multi, read_obs_multi, solve_spp, spp_inputs_from_rinex,
                         summary_counts)
 from ..gnss.systems import SYSTEMS
@@ -147,13 +146,7 @@ def load_spp_config(config_path=None):
     source = "run configuration"
     if config_path is not None:
         source = os.fspath(config_path)
-        try:
-            with open(config_path, "rb") as f:
-                d = tomllib.load(f)
-        except OSError as exc:
-            raise ConfigError(f"{source}: cannot read ({exc.strerror})") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+        d = read_toml(config_path)
     tables = {}
     for key in ("rinex", "gnss", "spp"):
         v = d.get(key, {})

@@ -35,8 +35,8 @@ from ..config import ConfigError, ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
-from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
-                     tight_inputs_for)
+from ._setup import (EngineArgs, engine_config, imu_arrays, init_vector, initial_clock, initial_state,
+                     raise_if_nonfinite, tight_inputs_for)
 from ._assemble import nav_solution
 from .loose import put_selfcal, selfcal_setup
 from .solution import Solution
@@ -176,16 +176,10 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
 
 
 @dataclass
-class TightEngineArgs:
+class TightEngineArgs(EngineArgs):
     """The tight engine's set-up (:func:`tight_engine_args`): what ``_core.run_tight``
     and ``_core.TightNavigator`` take, plus the inputs it was built from."""
 
-    layout: int
-    init: np.ndarray
-    P0: np.ndarray
-    imu_correction: np.ndarray
-    imu_model: dict
-    config: dict
     clock0: tuple
     clock_psd: tuple
     isb0: np.ndarray | None
