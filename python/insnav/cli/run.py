@@ -459,7 +459,8 @@ def cmd_run_gnss_only(args, stages) -> int:
     if not pos and out.suffix.lower() not in FORMATS:
         raise UserError(f"--out {out}: unknown format {out.suffix!r}; use {'.pos or ' if name == 'rtk' else ''}"
                         f"one of {', '.join(FORMATS)}")
-    check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
+    if name == "spp":  # (rtk: its RTKLIB-layout .pos carries no insnav header to recognise it by)
+        check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
         ds, opts, write, line = inputs(args)
