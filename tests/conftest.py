@@ -18,19 +18,23 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
-def short_tight_dataset(duration_s: float = 120.0, seed: int = 7):
-    """seed003-4sat cut to its first motion segments (>= duration_s), up to 8
-    satellites, no failure windows: a tight-coupling run of about a second."""
-    import insnav.sim as sim
-
-    sc = dict(sim.simulate("seed003-4sat", seed=0, with_truth=False).scenario)
+def first_segments(sc: dict, duration_s: float) -> dict:
+    """The scenario ``sc`` with its first motion segments only, just as many as make ``duration_s`` [s]."""
     segs, tot = [], 0.0
     for seg in sc["motion"]["segments"]:
         if tot >= duration_s:
             break
         segs.append(seg)
         tot += float(seg["duration_s"])
-    sc["motion"] = dict(sc["motion"], segments=segs)
+    return dict(sc, motion=dict(sc["motion"], segments=segs))
+
+
+def short_tight_dataset(duration_s: float = 120.0, seed: int = 7):
+    """seed003-4sat cut to its first motion segments (>= duration_s), up to 8
+    satellites, no failure windows: a tight-coupling run of about a second."""
+    import insnav.sim as sim
+
+    sc = first_segments(dict(sim.simulate("seed003-4sat", seed=0, with_truth=False).scenario), duration_s)
     sc["gnss_raw"] = dict(sc["gnss_raw"], windows=[], max_sats=8)
     return sim.simulate(sc, seed=seed)
 

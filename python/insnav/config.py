@@ -20,7 +20,8 @@ from .units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0, MG, MPS_PER_SQRT_H, UG_PE
 
 
 COUPLINGS = ("loose", "tight", "gnss", "rtk")
-LAYOUTS = (15, 21)
+#: every ``layout`` value (the registry's facts say which a filter and coupling run on)
+LAYOUTS = (15, 17, 20, 21)
 
 
 #: probability of the innovation gate when neither the run nor the dataset's
@@ -584,8 +585,14 @@ class RunConfig:
     filter : {'ekf', 'rbukf', 'ukf'}
     coupling : {'loose', 'tight', 'rtk'}
         (``rtk``: tight RTK/INS, ``insnav.filters.rtk_ins``; ``gnss``: the GNSS-only filters)
-    layout : {15, 21}
-        15 states (seed 000) or 21 with scale factors (KF-GINS-like).
+    layout : {15, 21, 17, 20}
+        The error-state layout (:attr:`insnav.registry.CouplingFacts.layouts`).
+        Loose: 15 states (seed 000) or 21 with scale factors (KF-GINS-like).
+        Tight: 17 (one receiver clock, seed 003) or 20 (+ the inter-system
+        biases of GLONASS, Galileo, BeiDou); the default 15 lets the data
+        choose: 17 when every satellite row is GPS, else 20, and the resolved
+        configuration a run writes names the one it ran (the seed 004 filters
+        run on their own 20 states).  GNSS-only filters: the default (no INS).
     init_sigma_pos_m, init_sigma_vel_mps, init_sigma_att_deg : 3 floats
         Initial 1-sigma of position (N, E, D), velocity, roll/pitch/yaw.
     init_error : bool or "auto"
@@ -830,9 +837,13 @@ class RunConfig:
         spec = FILTERS[self.filter]
         if self.coupling not in spec.couplings:
             bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
-        if self.layout not in LAYOUTS:
-            bad("layout", self.layout, "15, 21")
         facts = spec.facts(self.coupling)
+        if isinstance(self.layout, bool) or self.layout not in LAYOUTS or not (
+                self.layout in facts.layouts or (self.layout == 15 and self.coupling != "loose")):
+            allowed = ", ".join(map(str, facts.layouts)) or "absent (GNSS only: no INS states)"
+            if self.coupling == "tight":
+                allowed += " or absent (17 GPS-only, 20 with several systems: chosen from the data)"
+            bad("layout", self.layout, f"{allowed} (filter {self.filter!r} {self.coupling})")
         if self.smooth and not facts.smoothable:
             where = ", ".join(f"{n} {c}" for n, s_ in FILTERS.items() for c in s_.smoothable)
             bad("smooth", self.smooth, f"false with filter {self.filter!r} {self.coupling} (the RTS smoother runs "
@@ -873,8 +884,6 @@ class RunConfig:
                 bad(key, True, "false with the odometer scale-factor state (set constraints.odo_scale = false)")
             if self.smooth:
                 bad(key, True, "false with smooth = true (the RTS smoother does not run on these states)")
-        if self.coupling == "loose" and self.layout not in spec.layouts["loose"]:
-            bad("layout", self.layout, f"{', '.join(map(str, spec.layouts['loose']))} (filter {self.filter!r})")
         for key in ("init_sigma_pos_m", "init_sigma_vel_mps", "init_sigma_att_deg"):
             try:
                 v = np.asarray(getattr(self, key), dtype=float)
@@ -982,6 +991,14 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     for k in d:
         if k not in names:
             raise ConfigError(f"{source}: unknown key '{k}'{_suggest(k, names | tabled)}")
+    opts = d.get("options")
+    if isinstance(opts, dict) and "layout" in opts and "layout" not in d:  # the key's place before the run layer
+        import warnings
+
+        warnings.warn(f"{source}: key 'options.layout' is deprecated; write 'layout' (17 or 20) at the top level",
+                      FutureWarning, stacklevel=2)
+        d["options"] = {k: v for k, v in opts.items() if k != "layout"}
+        d["layout"] = opts["layout"] if opts["layout"] != "auto" else 15
     tables = {key: _table_from_dict(key, raw_tables[key], cls, source)
               for key, cls in _OPTION_TABLES if key in raw_tables}
     cfg = RunConfig(**d, **tables)
@@ -1002,6 +1019,20 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
             setattr(noise, fld, arr.tolist())
         cfg.imu = noise
     return _validated(cfg, source)
+
+
+def read_toml(path) -> dict:
+    """A TOML file as a dict; a one-line :class:`ConfigError` naming the file when it
+    cannot be read or is not valid TOML."""
+    import tomllib  # here: insnav run --format kfgins never reads TOML (~2 ms of import)
+
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
 def load_config(path) -> RunConfig:

@@ -212,7 +212,7 @@ _LOOSE = "insnav.filters.loose:run_loose"
 _TIGHT = "insnav.filters.tight:run_tight"
 #: options of the tightly coupled EKF / RB-UKF / UKF (``insnav.filters.tight.run_tight``)
 TIGHT_OPTIONS = ("inputs", "elevation_mask_deg", "max_sats", "clock_psd", "init_sigma_clock", "clock0",
-                 "use_pseudorange", "use_rate", "layout", "isb_psd", "init_sigma_isb", "isb0")
+                 "use_pseudorange", "use_rate", "isb_psd", "init_sigma_isb", "isb0")
 _DELAY = "insnav.filters.delay:run_delay"
 _PARTICLE = "insnav.filters.particle:run_tight_particle"
 #: options of the seed 004 filters (``insnav.filters.particle.run_tight_particle``)

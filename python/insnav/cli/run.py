@@ -155,11 +155,19 @@ def cli_options(pairs) -> dict:
     return out
 
 
-def resolved_config_toml(cfg: RunConfig) -> str:
-    """The configuration as TOML (SI imu values under [imu_si], informational)."""
+def resolved_config_toml(cfg: RunConfig, tables: dict | None = None) -> str:
+    """The resolved configuration of a run as TOML (``<out>.config.toml``): the run keys
+    and tables of ``cfg``, then the family's and the input format's own ``tables``
+    (name -> a dataclass such as RinexOptions, Weighting, SppOptions, RtkOptions, or a
+    dict).  A GNSS-only run (``coupling = "gnss"``) writes its filter and coupling only,
+    then its tables: it reads nothing else."""
     import dataclasses
 
     lines = ["# insnav resolved run configuration"]
+    extra = "".join(_table_toml(name, obj) for name, obj in (tables or {}).items() if obj is not None)
+    if cfg.coupling == "gnss":
+        return "\n".join(lines + [f"filter = {toml_value(cfg.filter)}", f"coupling = {toml_value(cfg.coupling)}"]) \
+            + "\n" + extra
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
         if f.name in ("imu", "constraints", "robust", "tdcp", "sanitize", "time", "lever_arm", "options") or v is None:
@@ -202,23 +210,7 @@ def resolved_config_toml(cfg: RunConfig) -> str:
             if key in ("acc_vrw_ug_per_sqrt_hz",):
                 continue
             lines.append(f"{key} = {toml_value(np.asarray(getattr(cfg.imu, fld)) / factor)}")
-    return "\n".join(lines) + "\n"
-
-
-def _rinex_table_toml(opt) -> str:
-    """The ``[rinex]`` table of the resolved configuration (loader options)."""
-    import dataclasses
-
-    lines = ["\n[rinex]"]
-    for f in dataclasses.fields(opt):
-        v = getattr(opt, f.name)
-        if v is None:
-            continue
-        if isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
-            lines.append(f"{f.name} = [" + ", ".join(toml_value(x) for x in v) + "]")
-        else:
-            lines.append(f"{f.name} = {toml_value(v)}")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + extra
 
 
 def _csv_tables_toml(tables: dict, has_imu_table: bool) -> str:
@@ -283,26 +275,38 @@ class _Stages:
 
 
 def _table_toml(name: str, obj) -> str:
-    """A ``[name]`` TOML table of a dataclass's fields (None left out)."""
+    """A ``[name]`` TOML table of a dataclass's fields or a dict's items (None left out)."""
     import dataclasses
 
     lines = [f"\n[{name}]"]
-    for f in dataclasses.fields(obj):
-        v = getattr(obj, f.name)
+    items = obj.items() if isinstance(obj, dict) else ((f.name, getattr(obj, f.name)) for f in dataclasses.fields(obj))
+    for key, v in items:
         if v is None:
             continue
         if isinstance(v, dict):
-            lines.append(f"{f.name} = {{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}")
+            lines.append(f"{key} = {{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}")
         elif isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
-            lines.append(f"{f.name} = [" + ", ".join(toml_value(x) for x in v) + "]")
+            lines.append(f"{key} = [" + ", ".join(toml_value(x) for x in v) + "]")
         else:
-            lines.append(f"{f.name} = {toml_value(v)}")
+            lines.append(f"{key} = {toml_value(v)}")
     return "\n".join(lines) + "\n"
+
+
+def _rtk_table(opt, base_e) -> dict:
+    """The ``[rtk]`` table of a resolved configuration: the RtkOptions a run used and the base
+    position it was given (ECEF [m]; None: the base header's, found again on a re-run)."""
+    import dataclasses
+
+    table = {f.name: getattr(opt, f.name) for f in dataclasses.fields(opt)}
+    if base_e is not None:
+        table["base_position_ecef_m"] = [float(v) for v in np.asarray(base_e, float).ravel()]
+    return table
 
 
 def _input_paths(args) -> list:
     """Every file the run reads (those given, and a KF-GINS YAML's data files)."""
-    paths = [args.dataset, args.imu, args.gnss, args.obs, args.imu_tag, args.config, args.run_config]
+    paths = [args.dataset, args.imu, args.gnss, args.obs, getattr(args, "base", None), args.imu_tag, args.config,
+             args.run_config]
     paths += [n for n in (args.nav or "").split(",") if n]
     if args.imu:
         paths += [args.imu + ".tag", str(Path(args.imu).with_suffix(".tag"))]
@@ -317,7 +321,7 @@ def _input_paths(args) -> list:
     return paths
 
 
-def _run_outputs(out: Path, kfgins_folder: bool, spp: bool = False) -> list[Path]:
+def _run_outputs(out: Path, kfgins_folder: bool, sidecars: tuple = ()) -> list[Path]:
     """Every file ``insnav run`` may write for ``--out``."""
     from ..filters.solution import innovations_path, residuals_path
 
@@ -329,18 +333,17 @@ def _run_outputs(out: Path, kfgins_folder: bool, spp: bool = False) -> list[Path
     else:
         base, files = out, [out]
     files += [innovations_path(base), residuals_path(base), base.with_suffix(base.suffix + ".config.toml")]
-    if spp:
-        files.append(out.with_suffix(out.suffix + ".spp.csv"))
+    files += [out.with_suffix(out.suffix + side) for side in sidecars]  # a GNSS-only filter's table
     return files
 
 
-def check_run_outputs(args, out: Path, kfgins_folder: bool, spp: bool = False) -> None:
+def check_run_outputs(args, out: Path, kfgins_folder: bool, sidecars: tuple = ()) -> None:
     """Before the run: no output is an input, none replaces a file insnav did
     not write (unless --overwrite), the folder is writable, and a .parquet
     output has pyarrow (one-line errors, not after minutes of filtering)."""
     from .._outputs import check_outputs, input_files
 
-    check_outputs(_run_outputs(out, kfgins_folder, spp), input_files(*_input_paths(args)),
+    check_outputs(_run_outputs(out, kfgins_folder, sidecars), input_files(*_input_paths(args)),
                   overwrite=getattr(args, "overwrite", False))
     if out.suffix.lower() == ".parquet" and not kfgins_folder:
         from ..filters.solution import _parquet
@@ -370,106 +373,115 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
         raise UserError(f"--filter {name} is GNSS only and does not use {', '.join(unused)}")
 
 
-def cmd_run_spp(args, stages) -> int:
-    """``insnav run --filter spp``: GNSS-only single point positioning over RINEX files (no IMU)."""
-    from ..filters.solution import FORMATS, write_innovations
-    from ..filters.spp import run_spp_rinex, write_spp_table
+def _spp_run(args):
+    """``--filter spp``: the inputs (RINEX observations and navigation, the TOML's [rinex],
+    [gnss], [spp] tables), the files beside --out and the summary line."""
+    from ..filters.spp import load_spp_run, write_spp_table
 
-    _check_gnss_only_args(args, "spp", ("obs", "nav"), "--obs OBS --nav NAV")
+    def write(sol, out):
+        write_spp_table(sol.spp, out.with_suffix(out.suffix + ".spp.csv"))
+        return dict(rinex=sol.rinex_options, gnss=sol.weighting, spp=sol.spp_options)
+
+    def line(sol, out):
+        s = sol.summary
+        if s["solved"] == 0:
+            raise UserError(f"{args.obs}: no epoch could be solved ({s['epochs']} epochs; too few satellites with "
+                            "ephemerides above the masks?)")
+        return (f"{out}: {s['solved']} of {s['epochs']} epochs solved, filter spp ({s['systems']}, weighting "
+                f"{s['weighting']}, RAIM {'on' if sol.spp_options.raim else 'off'}); RAIM: {s['raim_passed']} "
+                f"passed, {s['raim_excluded_epochs']} after excluding {s['rows_excluded']} rows, {s['raim_failed']} "
+                f"failed, {s['raim_untested']} untested")
+
+    ds, opts = load_spp_run(args.obs, [p for p in args.nav.split(",") if p], args.config)
+    return ds, opts, write, line
+
+
+def _rtk_run(args):
+    """``--filter rtk``: the inputs (rover, base, navigation, the TOML's [rtk] table and the
+    base position), the files beside --out (``<out>.rtk.csv``; an --out ending in .pos gets
+    RTKLIB's layout) and the summary line."""
+    from ..filters.rtk import load_rtk_run
+    from ..gnss.rtk import write_rtk_table
+
+    def write(sol, out):
+        write_rtk_table(sol.rtk, out.with_suffix(out.suffix + ".rtk.csv"))
+        return dict(rtk=_rtk_table(sol.rtk_options, ds.base_position_e_m))
+
+    def line(sol, out):
+        c, o = sol.rtk.counts(), sol.rtk_options
+        if c["epochs"] == c["n_none"]:
+            raise UserError(f"{args.obs}: no epoch could be solved ({c['epochs']} epochs; no common satellites "
+                            "above the mask with ephemerides?)")
+        slips = sum(v for k, v in c.items() if k.startswith("slips_"))
+        return (f"{out}: {c['epochs']} epochs, {c['n_fixed']} fixed ({100.0 * c['fix_rate']:.1f} %), {c['n_float']} "
+                f"float, {c['n_dgps']} dgps, {c['n_none']} none; filter rtk ({o.mode}, {o.ar_mode}, {o.systems}, "
+                f"{o.frequencies} frequencies); {slips} cycle slips detected")
+
+    ds, opts = load_rtk_run(args.obs, args.base, [p for p in args.nav.split(",") if p], args.config,
+                            base_pos=args.base_pos)
+    return ds, opts, write, line
+
+
+#: the GNSS-only filters of ``insnav run``: the arguments they need, their usage, an --out
+#: example, the file beside --out, and the function reading their inputs
+_GNSS_ONLY = {
+    "spp": (("obs", "nav"), "--obs OBS --nav NAV", "spp.csv", ".spp.csv", _spp_run,
+            "--filter spp writes --out-format insnav only"),
+    "rtk": (("obs", "base", "nav"), "--obs ROVER --base BASE --nav NAV", "rtk.pos", ".rtk.csv", _rtk_run,
+            "--filter rtk writes --out-format insnav (or RTKLIB's layout with an --out ending in .pos)"),
+}
+
+
+def cmd_run_gnss_only(args, stages) -> int:
+    """``insnav run --filter spp|rtk``: a GNSS-only filter over RINEX files (no IMU), run as
+    ``insnav.run(inputs, filter, "gnss", **options)``.
+
+    Beside --out: ``<out>.spp.csv`` (spp: clock, biases, DOPs, RAIM per epoch) or
+    ``<out>.rtk.csv`` (rtk: status, ratio, fixed ambiguities, slips per epoch), the
+    innovations (spp) and ``<out>.config.toml``, all or none.  ``rtk`` with an --out
+    ending in ``.pos`` writes RTKLIB's .pos layout.
+    """
+    import insnav
+    from .._atomic import output_set
+    from ..filters.solution import FORMATS, write_innovations
+
+    name = args.filter
+    needs, usage, example, sidecar, inputs, only_insnav = _GNSS_ONLY[name]
+    _check_gnss_only_args(args, name, needs, usage)
     if args.out_format != "insnav":
-        raise UserError("--filter spp writes --out-format insnav only")
+        raise UserError(only_insnav)
     if args.out is None:
-        raise UserError("--out is required (a solution file such as spp.csv)")
+        raise UserError(f"--out is required (a solution file such as {example})")
     out = Path(args.out)
     if out.is_dir():
-        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'spp.csv'}")
-    if out.suffix.lower() not in FORMATS:
-        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
-    check_run_outputs(args, out, kfgins_folder=False, spp=True)
+        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / example}")
+    pos = name == "rtk" and out.suffix.lower() == ".pos"
+    if not pos and out.suffix.lower() not in FORMATS:
+        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use {'.pos or ' if name == 'rtk' else ''}"
+                        f"one of {', '.join(FORMATS)}")
+    if name == "spp":  # (rtk: its RTKLIB-layout .pos carries no insnav header to recognise it by)
+        check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
-        sol = run_spp_rinex(args.obs, [p for p in args.nav.split(",") if p], args.config)
+        ds, opts, write, line = inputs(args)
+        cfg = RunConfig(filter=name, coupling="gnss")
+        sol = insnav.run(ds, config=cfg, **opts)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     stages.done("filter")
-    s = sol.summary
-    if s["solved"] == 0:
-        raise UserError(f"{args.obs}: no epoch could be solved ({s['epochs']} epochs; too few satellites with "
-                        "ephemerides above the masks?)")
-    from .._atomic import output_set
-
+    text = line(sol, out)
     with output_set():  # every file or, on an error (a full disk, Ctrl-C), none; older files untouched
-        sol.save(out, columns=groups, precision=args.csv_precision)
-        write_innovations(sol, out)
-        write_spp_table(sol.spp, out.with_suffix(out.suffix + ".spp.csv"))
-        text = (f'# insnav resolved run configuration\nfilter = "spp"\ncoupling = "gnss"\n'
-                + _table_toml("rinex", sol.rinex_options) + _table_toml("gnss", sol.weighting)
-                + _table_toml("spp", sol.spp_options))
-        atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text)
-    print(f"{out}: {s['solved']} of {s['epochs']} epochs solved, filter spp ({s['systems']}, weighting "
-          f"{s['weighting']}, RAIM {'on' if sol.spp_options.raim else 'off'}); RAIM: {s['raim_passed']} passed, "
-          f"{s['raim_excluded_epochs']} after excluding {s['rows_excluded']} rows, {s['raim_failed']} failed, "
-          f"{s['raim_untested']} untested")
-    stages.done("write")
-    if args.timings:
-        import sys
-
-        print(stages.line(), file=sys.stderr)
-    return 0
-
-
-def cmd_run_rtk(args, stages) -> int:
-    """``insnav run --filter rtk``: carrier-phase RTK of --obs against --base (no IMU).
-
-    ``--out X.pos`` writes RTKLIB's .pos layout; any other suffix the insnav
-    solution formats.  Beside it: ``<out>.rtk.csv`` (per epoch: status, ratio,
-    fixed ambiguities, slips) and ``<out>.config.toml``.
-    """
-    from ..filters.rtk import run_rtk_rinex
-    from ..filters.solution import FORMATS
-    from ..gnss.rtk import write_rtk_table, write_rtklib_pos
-
-    _check_gnss_only_args(args, "rtk", ("obs", "base", "nav"), "--obs ROVER --base BASE --nav NAV")
-    if args.out_format != "insnav":
-        raise UserError("--filter rtk writes --out-format insnav (or RTKLIB's layout with an --out ending in .pos)")
-    if args.out is None:
-        raise UserError("--out is required (a solution file such as rtk.pos or rtk.csv)")
-    out = Path(args.out)
-    if out.is_dir():
-        raise UserError(f"--out {out} is a folder: give a file name, e.g. {out / 'rtk.pos'}")
-    pos = out.suffix.lower() == ".pos"
-    if not pos and out.suffix.lower() not in FORMATS:
-        raise UserError(f"--out {out}: unknown format {out.suffix!r}; use .pos or one of {', '.join(FORMATS)}")
-    try:
-        sol = run_rtk_rinex(args.obs, args.base, [p for p in args.nav.split(",") if p], args.config,
-                            base_pos=args.base_pos)
-    except ConfigError as exc:
-        raise UserError(str(exc)) from None
-    stages.done("filter")
-    rs = sol.rtk
-    c = rs.counts()
-    if c["epochs"] == c["n_none"]:
-        raise UserError(f"{args.obs}: no epoch could be solved ({c['epochs']} epochs; no common satellites above "
-                        "the mask with ephemerides?)")
-    written: list[Path] = []
-    try:
         if pos:
-            written.append(write_rtklib_pos(rs, out))
+            from ..gnss.rtk import write_rtklib_pos
+
+            write_rtklib_pos(sol.rtk, out)
         else:
-            groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
-            written.append(sol.save(out, columns=groups, precision=args.csv_precision))
-        written.append(write_rtk_table(rs, out.with_suffix(out.suffix + ".rtk.csv")))
-        text = (f'# insnav resolved run configuration\nfilter = "rtk"\ncoupling = "gnss"\n'
-                + _table_toml("rtk", sol.rtk_options))
-        written.append(atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), text))
-    except BaseException:
-        for p in written:
-            Path(p).unlink(missing_ok=True)
-        raise
-    slips = sum(v for k, v in c.items() if k.startswith("slips_"))
-    print(f"{out}: {c['epochs']} epochs, {c['n_fixed']} fixed ({100.0 * c['fix_rate']:.1f} %), {c['n_float']} float, "
-          f"{c['n_dgps']} dgps, {c['n_none']} none; filter rtk ({sol.rtk_options.mode}, {sol.rtk_options.ar_mode}, "
-          f"{sol.rtk_options.systems}, {sol.rtk_options.frequencies} frequencies); {slips} cycle slips detected")
+            sol.save(out, columns=groups, precision=args.csv_precision)
+        if name == "spp":
+            write_innovations(sol, out)
+        tables = write(sol, out)
+        atomic_write_text(out.with_suffix(out.suffix + ".config.toml"), resolved_config_toml(cfg, tables))
+    print(text)
     stages.done("write")
     if args.timings:
         import sys
@@ -514,8 +526,6 @@ def _outside_imu_span(sol, ds) -> tuple[int, int]:
 def _rtk_ins_inputs(args, ds):
     """``--coupling rtk``: the IMU dataset with --obs/--base/--nav (an RtkInsDataset) and the run options
     (the TOML's ``[rtk]`` table over the RTK/INS defaults, ``[rtk_engine]``, the base position)."""
-    import tomllib
-
     from ..filters.rtk import parse_base_position
     from ..filters.rtk_ins import RtkInsDataset
 
@@ -525,11 +535,9 @@ def _rtk_ins_inputs(args, ds):
                         + " (rover and base RINEX observations, navigation file(s))")
     rtk, eng, base_e = {}, {}, None
     if args.config:
-        try:
-            with open(args.config, "rb") as f:
-                d = tomllib.load(f)
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise UserError(f"{args.config}: {exc}") from None
+        from ..config import read_toml
+
+        d = read_toml(args.config)
         rtk, eng = dict(d.get("rtk", {})), dict(d.get("rtk_engine", {}))
         for k in ("base_position_ecef_m", "base_position_llh"):
             if k in rtk:
@@ -554,10 +562,8 @@ def cmd_run(args) -> int:
                     args.filter = f_toml
         except (OSError, tomllib.TOMLDecodeError):
             pass  # reported by the loader
-    if args.filter == "spp":
-        return cmd_run_spp(args, stages)
-    if args.filter == "rtk":
-        return cmd_run_rtk(args, stages)
+    if args.filter in _GNSS_ONLY:
+        return cmd_run_gnss_only(args, stages)
 
     if args.run_config is not None and args.format != "kfgins":
         raise UserError("--run-config goes with --format kfgins (otherwise the insnav TOML is --config)")
@@ -627,9 +633,10 @@ def cmd_run(args) -> int:
             cfg.imu_error_sigmas = True  # KF_GINS_STD.txt
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
-        run_opts = {}
+        run_opts, base_e = {}, None
         if (args.coupling or cfg.coupling) == "rtk":
             ds, run_opts = _rtk_ins_inputs(args, ds)
+            base_e = ds.base_position_e_m
         stages.done("read")
         from .._progress import reporting
 
@@ -690,11 +697,16 @@ def cmd_run(args) -> int:
                 write_rtk_table(sol.rtk, base.with_suffix(base.suffix + ".rtk.csv"), t_solution_s=sol.gnss_t)
             cfg.filter = sol.summary.get("filter", cfg.filter)
             cfg.coupling = sol.summary.get("coupling", cfg.coupling)
-            text = resolved_config_toml(cfg)
+            cfg.layout = s.get("state_layout", cfg.layout)  # a tight run's 17 or 20, chosen from the data
+            tables = {}
             if rinex_opts is not None:
-                text += _rinex_table_toml(rinex_opts)
+                tables["rinex"] = rinex_opts
                 if weighting is not None and not weighting.is_default:
-                    text += _table_toml("gnss", weighting)
+                    tables["gnss"] = weighting
+            if cfg.coupling == "rtk":  # RTK/INS: the [rtk] options it ran with and the engine keys given
+                tables["rtk"] = _rtk_table(sol.rtk_options, base_e)
+                tables["rtk_engine"] = run_opts.get("engine") or None
+            text = resolved_config_toml(cfg, tables)
             if csv_tables is not None:
                 text += _csv_tables_toml(csv_tables, cfg.imu is not None)
             atomic_write_text(base.with_suffix(base.suffix + ".config.toml"), text)

@@ -69,21 +69,16 @@ def add_tune_parser(sub) -> None:
 
 def _load(args):
     """(dataset, RunConfig, base TOML dict) from the input options, as ``insnav run`` reads them."""
-    import tomllib
-
     import insnav
     from ..config import RunConfig, load_config
 
     def toml(path):
-        if not path:
-            return {}
+        from ..config import ConfigError, read_toml
+
         try:
-            with open(path, "rb") as f:
-                return tomllib.load(f)
-        except OSError as exc:
-            raise UserError(f"{path}: {exc.strerror}") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise UserError(f"{path}: not valid TOML: {exc}") from None
+            return read_toml(path) if path else {}
+        except ConfigError as exc:
+            raise UserError(str(exc)) from None
 
     if args.format != "insnav" and args.dataset:
         raise UserError(f"--format {args.format} reads the files given by options; do not give a dataset directory")

@@ -2,6 +2,8 @@
 perturbed, Monte Carlo style), the IMU arrays, and the outage cycle."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .._imu_scan import scan_imu
@@ -15,7 +17,23 @@ from ..units import DEG
 
 __all__ = ["initial_state", "imu_arrays", "outage_cycle_period", "loose_initial_sigmas", "initial_imu_correction",
            "init_vector", "lever_arm", "engine_config", "tight_inputs_for", "initial_clock", "antenna_at_init",
-           "raise_if_nonfinite"]
+           "raise_if_nonfinite", "EngineArgs"]
+
+
+@dataclass
+class EngineArgs:
+    """What every closed-loop engine is built from (``_core.run_*`` and the push API's
+    navigators take the same): the core error-state layout, the initial state vector
+    (:func:`init_vector`), its covariance P0 (layout order, SI), the initial IMU
+    correction (:func:`initial_imu_correction`), and the IMU-model and engine-config
+    dicts.  Each family's set-up extends it with its own inputs."""
+
+    layout: int
+    init: np.ndarray
+    P0: np.ndarray
+    imu_correction: np.ndarray
+    imu_model: dict
+    config: dict
 
 
 def initial_state(dataset, cfg: RunConfig, rng: np.random.Generator | None = None) -> tuple[NavState, np.ndarray]:

@@ -16,9 +16,8 @@ from .. import _core
 from .._validate import check_finite
 from ..config import ImuNoise, RunConfig
 from ..units import DEG
-from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
-                     loose_initial_sigmas,
-                     raise_if_nonfinite)
+from ._setup import (EngineArgs, engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
+                     loose_initial_sigmas, raise_if_nonfinite)
 from ._assemble import nav_solution
 from .solution import Solution
 
@@ -129,18 +128,12 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
 
 
 @dataclass
-class LooseEngineArgs:
+class LooseEngineArgs(EngineArgs):
     """What the loose engine is built from (``_core.run_loose`` and
     ``_core.LooseNavigator`` take the same): the core layout, initial state
     vector (:func:`init_vector`), P0, initial IMU correction, IMU model and
     engine config dicts, and the vehicle-constraint events (None without)."""
 
-    layout: int
-    init: np.ndarray
-    P0: np.ndarray
-    imu_correction: np.ndarray
-    imu_model: dict
-    config: dict
     odo_state: bool
     events: np.ndarray | None = None
     ev_counts: dict | None = None

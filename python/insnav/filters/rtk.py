@@ -1,11 +1,14 @@
 """The ``rtk`` filter: carrier-phase relative positioning of a rover against a base (no IMU).
 
-* :func:`run_rtk_rinex` (``insnav run --filter rtk --format rinex --obs ROVER --base BASE --nav NAV``):
-  RINEX files, a run TOML with an ``[rtk]`` table (:class:`insnav.gnss.rtk.RtkOptions`, plus
-  ``base_position_ecef_m`` / ``base_position_llh`` for the base antenna reference point).
-* :func:`run_rtk`, the registry runner (``insnav.run(RtkDataset(...), filter="rtk")``).
+* :func:`run_rtk`, the registry runner: ``insnav.run(RtkDataset(rover, base, nav), "rtk",
+  rtk_options=...)``; ``insnav run --filter rtk --format rinex --obs ROVER --base BASE --nav NAV``
+  calls it so, with the inputs of :func:`load_rtk_run`: a run TOML's ``[rtk]`` table
+  (:class:`insnav.gnss.rtk.RtkOptions`, plus ``base_position_ecef_m`` / ``base_position_llh``
+  for the base antenna reference point).
+* :func:`run_rtk_rinex`: the older entry (deprecated; a thin wrapper of the above).
 
-The result is a :class:`~insnav.filters.solution.Solution` with one row per
+The result is a :class:`~insnav.filters.solution.Solution` (assembled by
+:func:`insnav.filters._assemble.gnss_solution`) with one row per
 rover epoch that has a solution (antenna position, ECEF velocity rotated to
 NED, 1-sigma from the fixed or float covariance); ``gnss_status`` holds the
 fix status per epoch (RTKLIB's Q: 1 fixed, 2 float, 4 DGPS, 0 none) and
@@ -15,18 +18,18 @@ number of fixed ambiguities, slips per epoch).
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import earth
-from ..config import ConfigError
+from ..config import ConfigError, read_toml
 from ..gnss.rtk import RtkOptions, RtkSolution, solve_rtk
-from ..units import RAD2DEG
+from ._assemble import gnss_solution
 from .solution import Solution
 
-__all__ = ["RtkDataset", "run_rtk", "run_rtk_rinex", "rtk_solution", "load_rtk_config", "parse_base_position"]
+__all__ = ["RtkDataset", "run_rtk", "run_rtk_rinex", "rtk_solution", "load_rtk_config", "load_rtk_run",
+           "parse_base_position"]
 
 _BASE_KEYS = ("base_position_ecef_m", "base_position_llh")
 
@@ -65,13 +68,7 @@ def load_rtk_config(config_path=None, overrides: dict | None = None):
     source = "rtk options"
     if config_path is not None:
         source = os.fspath(config_path)
-        try:
-            with open(config_path, "rb") as f:
-                d = tomllib.load(f)
-        except OSError as exc:
-            raise ConfigError(f"{source}: cannot read ({exc.strerror})") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+        d = read_toml(config_path)
     t = d.get("rtk", {})
     if not isinstance(t, dict):
         raise ConfigError(f"{source}: key 'rtk': bad value {t!r}; allowed: a table")
@@ -91,24 +88,17 @@ def rtk_solution(rs: RtkSolution, filter_name: str = "rtk") -> Solution:
     ok = rs.status > 0
     n = int(ok.sum())
     t0 = SECONDS_PER_WEEK * np.floor(rs.t_gps_s[0] / SECONDS_PER_WEEK) if len(rs) else 0.0
-    lat, lon, h = earth.ecef_to_geodetic(rs.r_e[ok]) if n else (np.zeros(0),) * 3
+    lat, lon, _ = earth.ecef_to_geodetic(rs.r_e[ok]) if n else (np.zeros(0),) * 3
     sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
     C_ne = np.stack([np.stack([-sl * co, -sl * so, cl], -1), np.stack([-so, co, np.zeros_like(sl)], -1),
                      np.stack([-cl * co, -cl * so, -sl], -1)], 1)  # (n, 3, 3): NED <- ECEF
     v_n = np.einsum("nij,nj->ni", C_ne, rs.v_e[ok])
     P_n = np.einsum("nij,njk,nlk->nil", C_ne, rs.P_r[ok], C_ne)
     sig = np.sqrt(np.maximum(np.diagonal(P_n, axis1=1, axis2=2), 0.0))
-    nan = np.full(n, np.nan)
-    nan3 = np.full((n, 3), np.nan)
-    counts = rs.counts()
     summary = dict(filter=filter_name, coupling="gnss", updates=n, rejected=0, gnss_records=len(rs),
-                   cholesky_repairs=0, **counts)
-    sol = Solution(t=rs.t_gps_s[ok] - t0, lat_deg=lat * RAD2DEG, lon_deg=lon * RAD2DEG, h_m=h, v_n=v_n,
-                   roll_deg=nan, pitch_deg=nan.copy(), yaw_deg=nan.copy(), sigma_pos_n_m=sig,
-                   sigma_vel_n_mps=nan3, sigma_att_deg=nan3.copy(), acc_bias_mps2=nan3.copy(),
-                   gyro_bias_rps=nan3.copy(), acc_scale=nan3.copy(), gyro_scale=nan3.copy(),
-                   gnss_t=rs.t_gps_s - t0, innovation=np.full((len(rs), 6), np.nan), nis=rs.ratio.copy(),
-                   gnss_status=rs.status.astype(np.int8), summary=summary)
+                   cholesky_repairs=0, **rs.counts())
+    sol = gnss_solution(rs.t_gps_s[ok] - t0, rs.r_e[ok], v_n, sig, np.full((n, 3), np.nan), gnss_t=rs.t_gps_s - t0,
+                        nis=rs.ratio.copy(), gnss_status=rs.status.astype(np.int8), summary=summary)
     sol.rtk = rs
     sol.fix_status = rs.status[ok].copy()
     sol.ratio = rs.ratio[ok].copy()
@@ -116,8 +106,8 @@ def rtk_solution(rs: RtkSolution, filter_name: str = "rtk") -> Solution:
     return sol
 
 
-def run_rtk_rinex(obs, base, nav, config_path=None, *, base_pos=None, rtk: dict | None = None) -> Solution:
-    """RTK over RINEX files (see the module docstring).
+def load_rtk_run(obs, base, nav, config_path=None, *, base_pos=None, rtk: dict | None = None):
+    """The inputs of an RTK run from RINEX files and a run TOML.
 
     Parameters
     ----------
@@ -125,20 +115,34 @@ def run_rtk_rinex(obs, base, nav, config_path=None, *, base_pos=None, rtk: dict 
         Rover and base RINEX observation files.
     nav : path or list of paths
     config_path : path, optional
-        Run TOML with an ``[rtk]`` table.
+        Run TOML with an ``[rtk]`` table (nothing else is used).
     base_pos : str or (3,), optional
         Base antenna reference point (ECEF [m] or lat_deg, lon_deg, h_m); overrides the TOML's
         and the header's.
     rtk : dict, optional
         ``[rtk]`` entries overriding the file's.
+
+    Returns
+    -------
+    (RtkDataset, dict)
+        The dataset and the family's options (``rtk_options``) for :func:`insnav.run`.
     """
     opt, base_e = load_rtk_config(config_path, rtk)
     if base_pos is not None:
         base_e = base_pos if isinstance(base_pos, np.ndarray) else parse_base_position(base_pos)
-    rs = solve_rtk(obs, base, nav, r_base_e=base_e, options=opt)
-    sol = rtk_solution(rs)
-    sol.rtk_options = opt
-    return sol
+    return RtkDataset(obs, base, nav, base_e), dict(rtk_options=opt)
+
+
+def run_rtk_rinex(obs, base, nav, config_path=None, *, base_pos=None, rtk: dict | None = None) -> Solution:
+    """RTK over RINEX files (parameters as :func:`load_rtk_run`).
+
+    .. deprecated::
+        Use ``ds, opts = load_rtk_run(...); insnav.run(ds, "rtk", **opts)``; this wrapper does exactly that.
+    """
+    from . import run
+
+    ds, opts = load_rtk_run(obs, base, nav, config_path, base_pos=base_pos, rtk=rtk)
+    return run(ds, "rtk", "gnss", **opts)
 
 
 def run_rtk(dataset, cfg, *, rtk_options: RtkOptions | dict | None = None):

@@ -36,8 +36,8 @@ import numpy as np
 from .. import _core, earth
 from ..config import RunConfig, ImuNoise
 from ..gnss.rtk import RtkOptions, RtkSolution, prepare_rtk_rows
-from ..units import RAD2DEG
 from ._setup import imu_arrays, init_vector, initial_state, lever_arm, raise_if_nonfinite
+from ._assemble import nav_solution
 from .solution import Solution
 
 __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins", "rtk_ins_options"]
@@ -170,16 +170,11 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
                         r_float_e=np.asarray(out["r_float_e"]), P_r=P_e, slips=np.asarray(out["slips"]),
                         base_age_s=age, r_base_e=r_base_e, code_rejected=np.asarray(out["code_rejected"]),
                         info=dict(rover=rover.path, base=base.path, options=opt, engine=eng))
-    sig, err, llh, rpy = out["sigma"], out["imu_err"], out["llh"], out["rpy"] * RAD2DEG
     counts = rs.counts()
     summary = dict(filter=cfg.filter, coupling="rtk", layout=15, updates=int((status > 0).sum()), rejected=0,
                    gnss_records=int(status.size), cholesky_repairs=int(out["cholesky_repairs"]), **counts)
-    sol = Solution(t=out["t"], lat_deg=llh[:, 0] * RAD2DEG, lon_deg=llh[:, 1] * RAD2DEG, h_m=llh[:, 2],
-                   v_n=out["v_n"], roll_deg=rpy[:, 0], pitch_deg=rpy[:, 1], yaw_deg=rpy[:, 2],
-                   sigma_pos_n_m=sig[:, 0:3], sigma_vel_n_mps=sig[:, 3:6], sigma_att_deg=sig[:, 6:9] * RAD2DEG,
-                   acc_bias_mps2=err[:, 0:3], gyro_bias_rps=err[:, 3:6], acc_scale=err[:, 6:9],
-                   gyro_scale=err[:, 9:12], gnss_t=t_rec, innovation=np.full((status.size, 6), np.nan),
-                   nis=rs.ratio.copy(), gnss_status=np.where(status > 0, 1, 0).astype(np.int8), summary=summary)
+    sol, _ = nav_solution(out, gnss_t=t_rec, innovation=np.full((status.size, 6), np.nan), nis=rs.ratio.copy(),
+                          gnss_status=np.where(status > 0, 1, 0).astype(np.int8), summary=summary)
     sol.rtk = rs
     sol.rtk_options = opt
     sol.fix_status = status.copy()

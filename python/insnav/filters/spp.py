@@ -1,14 +1,22 @@
 """The ``spp`` filter: GNSS-only single point positioning as an insnav run.
 
-* :func:`run_spp`, the registry runner (``insnav.run(ds, filter="spp")``):
-  the dataset's own satellite rows (``RinexDataset.tight_inputs``, or the
-  simulator's raw observations, every satellite), no IMU used.
-* :func:`run_spp_rinex` (``insnav run --filter spp --format rinex --obs --nav``):
-  RINEX files and a run TOML with ``[rinex]`` (atmosphere, elevation mask,
-  zenith sigmas), ``[gnss]`` (:class:`insnav.gnss.weighting.Weighting`) and
-  ``[spp]`` (:class:`insnav.gnss.spp.SppOptions`) tables; no IMU needed.
+:func:`run_spp` is the registry runner: ``insnav.run(inputs, "spp", "gnss",
+spp_options=..., weighting=...)`` (``insnav run --filter spp --format rinex
+--obs --nav`` calls it so), no IMU used.  ``inputs`` is either
 
-The result is a :class:`~insnav.filters.solution.Solution` with one row per
+* a :class:`SppDataset`: RINEX observation and navigation files (or read
+  data) with the ``[rinex]`` reading options (atmosphere, elevation mask,
+  zenith sigmas); the ``[gnss]`` table is the ``weighting`` option
+  (:class:`insnav.gnss.weighting.Weighting`), the ``[spp]`` table the
+  ``spp_options`` option (:class:`insnav.gnss.spp.SppOptions`); or
+* any dataset with satellite rows: ``RinexDataset.tight_inputs``, or the
+  simulator's raw observations (every satellite).
+
+:func:`load_spp_run` reads the three tables of a run TOML into those
+inputs; :func:`run_spp_rinex` is the older entry (deprecated, a thin wrapper).
+
+The result is a :class:`~insnav.filters.solution.Solution` (assembled by
+:func:`insnav.filters._assemble.gnss_solution`) with one row per
 solved epoch: antenna position, NED velocity and their 1-sigma in the usual
 columns, attitude and IMU errors NaN; ``gnss_t``/``nis``/``gnss_status`` per
 epoch hold the RAIM test statistic (``v^T W v``) and whether a position came
@@ -19,21 +27,24 @@ drift, DOPs and RAIM counts, which have no solution column, are in
 """
 from __future__ import annotations
 
+import dataclasses
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import earth
 from .._median import median
-from ..config import ConfigError
+from ..config import ConfigError, read_toml
 from ..gnss.spp import (SppOptions, SppSolution, read_nav_multi, read_obs_multi, solve_spp, spp_inputs_from_rinex,
                         summary_counts)
 from ..gnss.systems import SPP_SYSTEMS, SYSTEMS
 from ..gnss.weighting import Weighting
-from ..units import RAD2DEG
+from ._assemble import gnss_solution
 from .solution import RecordStatus, Solution
 
-__all__ = ["run_spp", "run_spp_rinex", "spp_solution", "SPP_COLUMNS", "write_spp_table"]
+__all__ = ["run_spp", "run_spp_rinex", "spp_solution", "SPP_COLUMNS", "write_spp_table", "SppDataset",
+           "load_spp_run"]
 
 #: columns of ``<out>.spp.csv``: per epoch (solved or not)
 SPP_COLUMNS = ("t_s", "solved", "n_sats", "n_used", "n_excluded", "raim_status", "chi2", "chi2_threshold",
@@ -45,35 +56,66 @@ SPP_COLUMNS = ("t_s", "solved", "n_sats", "n_used", "n_excluded", "raim_status",
 def spp_solution(sp: SppSolution, filter_name: str = "spp") -> Solution:
     """The solved epochs of an :class:`SppSolution` as a :class:`Solution` (position of the antenna)."""
     ok = sp.solved
-    lat, lon, h = earth.ecef_to_geodetic(sp.r_e[ok])
     n = int(ok.sum())
-    nan = np.full(n, np.nan)
-    nan3 = np.full((n, 3), np.nan)
     st = np.where(ok, int(RecordStatus.APPLIED), int(RecordStatus.NOT_USED)).astype(np.int8)
     summary = dict(filter=filter_name, coupling="gnss", updates=n, rejected=0, gnss_records=len(sp),
                    cholesky_repairs=0, **summary_counts(sp))
-    sol = Solution(t=sp.t[ok].copy(), lat_deg=lat * RAD2DEG, lon_deg=lon * RAD2DEG, h_m=h,
-                   v_n=np.asarray(sp.v_n()[ok]), roll_deg=nan, pitch_deg=nan.copy(), yaw_deg=nan.copy(),
-                   sigma_pos_n_m=sp.sigma_pos_n_m[ok].copy(), sigma_vel_n_mps=sp.sigma_vel_n_mps[ok].copy(),
-                   sigma_att_deg=nan3, acc_bias_mps2=nan3.copy(), gyro_bias_rps=nan3.copy(), acc_scale=nan3.copy(),
-                   gyro_scale=nan3.copy(), gnss_t=sp.t.copy(), innovation=np.full((len(sp), 6), np.nan),
-                   nis=sp.chi2.copy(), gnss_status=st, summary=summary)
+    sol = gnss_solution(sp.t[ok].copy(), sp.r_e[ok], np.asarray(sp.v_n()[ok]), sp.sigma_pos_n_m[ok].copy(),
+                        sp.sigma_vel_n_mps[ok].copy(), gnss_t=sp.t.copy(), nis=sp.chi2.copy(), gnss_status=st,
+                        summary=summary)
     sol.spp = sp
     return sol
+
+
+@dataclass
+class SppDataset:
+    """The inputs of an SPP run over RINEX (``insnav.run(SppDataset(...), "spp")``; no IMU).
+
+    Attributes
+    ----------
+    obs : path or insnav.gnss.ObsData
+        Observations; a path is read with the ``weighting.systems``.
+    nav : path, list of paths (merged) or insnav.gnss.NavData
+    rinex : insnav.io.rinex_dataset.RinexOptions, optional
+        The ``[rinex]`` reading options (elevation mask, atmosphere, zenith sigmas, C/N0); None: the defaults.
+    approx_r_e : (3,) array, optional
+        Starting position, ECEF [m]; default the header's, else a GPS bootstrap.
+    """
+
+    obs: object
+    nav: object
+    rinex: object = None
+    approx_r_e: object = None
+    gnss_only = True  # no IMU: insnav.run skips the IMU sanitizer and checks
+
+
+def _as_options(value, cls, source: str):
+    """``value`` as a ``cls`` (an instance, a dict of its TOML keys, or None: the defaults)."""
+    return value if isinstance(value, cls) else cls.from_dict(value if value is not None else {}, source)
 
 
 def run_spp(dataset, cfg, *, spp_options: SppOptions | dict | None = None, weighting: Weighting | dict | None = None):
     """Registry runner: single point positioning over the dataset's GNSS rows (the IMU is not used).
 
-    Rows: ``dataset.tight_inputs`` (RINEX datasets; sigmas as loaded, or
+    A :class:`SppDataset` (RINEX files): the rows are computed from its
+    observations and navigation data with its ``[rinex]`` options and
+    ``weighting`` (default :class:`Weighting`'s), twice: the second pass takes
+    light time, elevations and atmosphere from the median of the first pass's
+    positions.  Time: GPS seconds of week of the first epoch's week;
+    ``solution.spp`` the full :class:`SppSolution`; ``solution.rinex_options``,
+    ``weighting``, ``spp_options`` the options used.
+
+    Other datasets: rows from ``dataset.tight_inputs`` (RINEX datasets; sigmas as loaded, or
     reweighted with ``weighting`` when the dataset kept the C/N0 -- it does
     not, so only the elevation and system enter), else every satellite of
     ``dataset.gnss_raw`` (simulator) with its own sigmas.
     """
     from ..gnss.tight_inputs import tight_inputs_from_raw
 
-    opt = spp_options if isinstance(spp_options, SppOptions) else SppOptions.from_dict(
-        spp_options if spp_options is not None else {}, "spp options")
+    if isinstance(dataset, SppDataset):
+        return _run_spp_rinex(dataset, _as_options(spp_options, SppOptions, "spp options"),
+                              _as_options(weighting, Weighting, "gnss weighting"))
+    opt = _as_options(spp_options, SppOptions, "spp options")
     if spp_options is None and getattr(dataset, "spp_options", None) is not None:
         opt = dataset.spp_options
     inp = getattr(dataset, "tight_inputs", None)
@@ -103,16 +145,8 @@ def load_spp_config(config_path=None):
     d = {}
     source = "run configuration"
     if config_path is not None:
-        import tomllib  # here: a run without --config never reads TOML (~3 ms of import)
-
         source = os.fspath(config_path)
-        try:
-            with open(config_path, "rb") as f:
-                d = tomllib.load(f)
-        except OSError as exc:
-            raise ConfigError(f"{source}: cannot read ({exc.strerror})") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+        d = read_toml(config_path)
     tables = {}
     for key in ("rinex", "gnss", "spp"):
         v = d.get(key, {})
@@ -123,30 +157,26 @@ def load_spp_config(config_path=None):
             SppOptions.from_dict(tables["spp"], source))
 
 
-def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss: dict | None = None,
-                  spp: dict | None = None, approx_r_e=None):
-    """Single point positioning over RINEX files.
+def load_spp_run(obs, nav, config_path=None, *, rinex: dict | None = None, gnss: dict | None = None,
+                 spp: dict | None = None, approx_r_e=None):
+    """The inputs of an SPP run from RINEX files and a run TOML.
 
     Parameters
     ----------
-    obs : path or insnav.gnss.ObsData
-        Read with the ``[gnss] systems`` when the reader supports several systems.
-    nav : path, list of paths (merged) or insnav.gnss.NavData
+    obs, nav : see :class:`SppDataset`
     config_path : path, optional
-        Run TOML (``[rinex]``, ``[gnss]``, ``[spp]`` tables).
+        Run TOML (its ``[rinex]``, ``[gnss]``, ``[spp]`` tables; nothing else is used).
     rinex, gnss, spp : dict, optional
         Table entries overriding the file's.
     approx_r_e : (3,), optional
-        Starting position [m]; default the header's, else a GPS bootstrap.
+        Starting position [m].
 
     Returns
     -------
-    Solution
-        Time: GPS seconds of week of the first epoch's week; ``solution.spp``
-        the full :class:`SppSolution`, ``solution.summary`` the counts and options.
+    (SppDataset, dict)
+        The dataset and the family's options (``spp_options``, ``weighting``) for :func:`insnav.run`.
     """
-    from ..gnss.gpstime import SECONDS_PER_WEEK
-    from ..io.rinex_dataset import RinexOptions, _approx_position
+    from ..io.rinex_dataset import RinexOptions
 
     ropt, wgt, sopt = load_spp_config(config_path)
     src = os.fspath(config_path) if config_path is not None else "spp options"
@@ -156,6 +186,37 @@ def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss
         wgt = Weighting.from_dict({**_fields(wgt), **gnss}, src)
     if spp:
         sopt = SppOptions.from_dict({**_fields(sopt), **spp}, src)
+    return SppDataset(obs, nav, ropt, approx_r_e), dict(spp_options=sopt, weighting=wgt)
+
+
+def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss: dict | None = None,
+                  spp: dict | None = None, approx_r_e=None):
+    """Single point positioning over RINEX files (parameters as :func:`load_spp_run`).
+
+    .. deprecated::
+        Use ``insnav.run(*load_spp_run(...))``-style:
+        ``ds, opts = load_spp_run(obs, nav, config_path); insnav.run(ds, "spp", **opts)``;
+        this wrapper does exactly that.
+
+    Returns
+    -------
+    Solution
+        Time: GPS seconds of week of the first epoch's week; ``solution.spp``
+        the full :class:`SppSolution`, ``solution.summary`` the counts and options.
+    """
+    from . import run
+
+    ds, opts = load_spp_run(obs, nav, config_path, rinex=rinex, gnss=gnss, spp=spp, approx_r_e=approx_r_e)
+    return run(ds, "spp", "gnss", **opts)
+
+
+def _run_spp_rinex(ds: SppDataset, sopt: SppOptions, wgt: Weighting) -> Solution:
+    """:func:`run_spp` over a :class:`SppDataset`."""
+    from ..gnss.gpstime import SECONDS_PER_WEEK
+    from ..io.rinex_dataset import RinexOptions, _approx_position
+
+    ropt = ds.rinex if ds.rinex is not None else RinexOptions()
+    obs, nav, approx_r_e = ds.obs, ds.nav, ds.approx_r_e
     if not hasattr(obs, "C1"):
         obs = read_obs_multi(obs, wgt.systems)
     if not hasattr(nav, "eph"):
@@ -182,8 +243,6 @@ def run_spp_rinex(obs, nav, config_path=None, *, rinex: dict | None = None, gnss
 
 
 def _fields(obj) -> dict:
-    import dataclasses
-
     return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
 
 

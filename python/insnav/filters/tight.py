@@ -3,7 +3,8 @@ filters on pseudorange and pseudorange rate; with several constellations
 (GPS + GLONASS / Galileo / BeiDou) 20 states: + one inter-system bias [m]
 per non-GPS system (``LayoutTightMulti``, ``cpp/include/insnav/filter/layout.hpp``).
 
-Layout choice (``layout="auto"``): 17 states when every satellite row is
+Layout choice (``RunConfig.layout``, the TOML's top-level ``layout``: 17 or
+20; the default chooses): 17 states when every satellite row is
 GPS (so every GPS-only result, seed 003's included, is unchanged), 20 when
 any row is of another system.  The ISB states start from the data (median
 pseudorange offset of each system against GPS at the initial position, 0
@@ -34,8 +35,8 @@ from ..config import ConfigError, ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
-from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
-                     tight_inputs_for)
+from ._setup import (EngineArgs, engine_config, imu_arrays, init_vector, initial_clock, initial_state,
+                     raise_if_nonfinite, tight_inputs_for)
 from ._assemble import nav_solution
 from .loose import put_selfcal, selfcal_setup
 from .solution import Solution
@@ -53,7 +54,8 @@ class TightSolution(Solution):
     pseudorange [m] and rate [m/s] before the update, ``sat_flag`` (M, 2).
     Per output sample: ``clock_bias_m``, ``clock_drift_mps`` (estimated
     receiver clock), ``sigma_clock`` (N, 2), and with 20 states ``isb_m``,
-    ``sigma_isb`` (N, 3).  ``summary``: ``layout``, ``systems``, and the
+    ``sigma_isb`` (N, 3).  ``summary``: ``layout`` (with the self-calibration
+    states), ``state_layout`` (17 or 20: the run's ``layout`` key), ``systems``, and the
     robust step's ``rejected_sats``, ``downweighted_sats``,
     ``flagged_epochs``, ``clock_jumps``.
     """
@@ -81,7 +83,7 @@ class TightSolution(Solution):
 def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | None = None,
               elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
               init_sigma_clock=(30.0, 1.0), clock0=None, use_pseudorange: bool = True,
-              use_rate: bool = True, layout="auto", isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
+              use_rate: bool = True, layout=None, isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
               isb0=None) -> TightSolution:
     """Closed-loop tightly coupled run over a dataset (EKF, RB-UKF or UKF, 17 or 20 states).
 
@@ -93,15 +95,18 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         loader sets it) or ``dataset.gnss_raw`` (simulator).
     cfg : RunConfig
         ``filter``, initial sigmas/perturbation, IMU noise, gate, propagation
-        step, output decimation, UT parameters.  ``layout`` is ignored (17).
+        step, output decimation, UT parameters, ``layout`` (17, 20; the
+        default 15: chosen from the data, see ``layout`` below).
     elevation_mask_deg, max_sats : satellite selection for ``gnss_raw`` input.
     clock_psd : (bias [m^2/s], drift [m^2/s^3]), optional; default :func:`clock_model`.
     init_sigma_clock : 1-sigma of the initial clock bias [m] and drift [m/s].
     clock0 : (bias, drift), optional; default from the first epoch at the initial state.
-    layout : {"auto", 17, 20}
+    layout : {None, "auto", 17, 20}
         20 (``LayoutTightMulti``): + inter-system biases of R, E, C; "auto": 20
         when any row is not GPS, else 17.  (With 17, non-GPS rows would share
-        the GPS clock: only for data whose ISBs were removed.)
+        the GPS clock: only for data whose ISBs were removed.)  None (default):
+        ``cfg.layout`` when it is 17 or 20, else "auto".  ``summary["state_layout"]``
+        is the one the run used (the ``layout`` key of the resolved configuration).
     isb_psd : float
         ISB random-walk PSD [m^2/s] (20 states).
     init_sigma_isb : float
@@ -138,7 +143,7 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     sol, _ = nav_solution(
         out, TightSolution, gnss_t=ep_t, innovation=out["sat_residual"], nis=out["nis"], gnss_status=out["status"],
         log_det_s=out["log_det_s"],
-        summary=dict(filter=cfg.filter, coupling="tight", layout=n, systems="".join(systems),
+        summary=dict(filter=cfg.filter, coupling="tight", layout=n, state_layout=n, systems="".join(systems),
                      updates=int(out["updates"]), rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
                      gate_outage_accepted=int(out["gate_outage_accepted"]),
                      cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=int(ep_t.size),
@@ -171,16 +176,10 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
 
 
 @dataclass
-class TightEngineArgs:
+class TightEngineArgs(EngineArgs):
     """The tight engine's set-up (:func:`tight_engine_args`): what ``_core.run_tight``
     and ``_core.TightNavigator`` take, plus the inputs it was built from."""
 
-    layout: int
-    init: np.ndarray
-    P0: np.ndarray
-    imu_correction: np.ndarray
-    imu_model: dict
-    config: dict
     clock0: tuple
     clock_psd: tuple
     isb0: np.ndarray | None
@@ -195,7 +194,7 @@ class TightEngineArgs:
 def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = None,
                       elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
                       init_sigma_clock=(30.0, 1.0), clock0=None, use_pseudorange: bool = True,
-                      use_rate: bool = True, layout="auto", isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
+                      use_rate: bool = True, layout=None, isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
                       isb0=None) -> TightEngineArgs:
     """The tight engine's set-up from a dataset, a run config and :func:`run_tight`'s
     options (the same meaning): the batch run and the push API
@@ -214,6 +213,8 @@ def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = N
     model["clock_bias_psd"] = float(qb)
     model["clock_drift_psd"] = float(qd)
     sys_idx = system_index(inputs.system) if len(inputs.prn) else np.zeros(0, np.int64)
+    if layout is None:
+        layout = cfg.layout if cfg.layout in (17, 20) else "auto"
     if layout == "auto":
         layout = 20 if np.any(sys_idx != 0) else 17
     if layout not in (17, 20):
