@@ -1,0 +1,599 @@
+"""The loosely coupled forward run in bounded memory: the IMU file read, filtered
+and written block by block (``insnav run`` on long recordings).
+
+The batch path (:func:`insnav.run`) holds the whole IMU file, its arrays and
+the whole solution in memory: about 200 MiB per hour of 200 Hz data.  Here the
+IMU text is read in blocks of :data:`BLOCK_LINES` lines (plain reads, never a
+memory map: a file truncated while it is read is an error naming it, never a
+SIGBUS), each block is parsed by the compiled reader
+(``cpp/include/insnav/io/text_table.hpp``), pushed through the compiled loose
+engine (``cpp/include/insnav/engine/loose_stream.hpp``: the batch engine's
+very loop, cut into blocks, the GIL released, no allocation per sample), and
+its output rows (at the ``--output-rate`` decimation) are converted and
+appended to a temporary CSV file beside the destination, renamed into place
+only when the whole run succeeded.  Memory is the GNSS records (a few per
+second), one block of IMU samples and rows, and the IMU summed to 10 Hz for
+the input checks: about 60 MiB for a day of 200 Hz data.
+
+The rows, the per-record outputs (innovations sidecar), the summary and the
+health verdict equal the batch run's, and the CSV file is byte for byte the
+batch run's (``tests/test_stream.py``).  The input checks differ in two
+documented ways: the IMU sanitizer's block scan takes the nominal interval
+from the first block (a later block whose median interval differs, an IMU gap,
+a repeated time or an implausible rate hands the run to the batch path, whose
+sanitizer repairs or names it), and the unit and time-base checks
+(:func:`insnav.data.checks.check_dataset`) see the IMU increments summed to
+10 Hz.  Whatever the stream cannot reproduce exactly (a sanitizer repair, a
+non-finite row, an unhealthy run, a failed check, a GNSS record whose cut
+changes the set-up) makes :func:`stream_loose_csv` return the reason, and
+``insnav run`` then runs the batch path, whose result and messages are the
+reference.  The RTS smoother needs the whole run and always takes the batch
+path.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import _core
+from .._imu_scan import scan_imu
+from .._median import median
+from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_rows
+from ..data.textio import FileChangedError, count_columns, parse_numeric, threads
+from ..units import DEG
+from .solution import Solution
+
+__all__ = ["BLOCK_LINES", "imu_text_blocks", "stream_loose_csv", "StreamResult", "Fallback", "stream_unsupported",
+           "StreamedSolution"]
+
+#: IMU lines per block (2^16: about 7 MB of KF-GINS text, 5 ms of filtering per 1000 lines)
+BLOCK_LINES = 1 << 16
+#: the rate of the summed IMU the input checks see [Hz]
+CHECK_RATE_HZ = 10.0
+#: bytes per IMU text line assumed when sizing a block's read (the block is cut at a line end)
+_LINE_BYTES_GUESS = 112
+
+
+class Fallback(Exception):
+    """The stream cannot reproduce the batch run exactly here: the reason (one line)."""
+
+
+@dataclass
+class ImuBlock:
+    """One block of IMU samples and the file line of its first row."""
+
+    t: np.ndarray
+    dtheta_b: np.ndarray
+    dv_b: np.ndarray
+    origin: RowOrigin
+
+
+def _opener(path: Path):
+    kind = {".xz": "lzma", ".lzma": "lzma", ".gz": "gzip", ".bz2": "bz2"}.get(path.suffix.lower())
+    if kind is None:
+        return open(path, "rb", buffering=0), False
+    import bz2
+    import gzip
+    import lzma
+
+    return {"lzma": lzma.open, "gzip": gzip.open, "bz2": bz2.open}[kind](path, "rb"), True
+
+
+def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int = BLOCK_LINES, names=None):
+    """The rows of a whitespace-separated IMU text file (``t dtheta_xyz dv_xyz``,
+    KF-GINS's layout; extra columns ignored), block by block.
+
+    Parameters
+    ----------
+    path : str or Path
+        Plain, ``.xz``, ``.gz`` or ``.bz2`` (decompressed as it is read).
+    ncols : int, optional
+        Columns per line (default: those of the first line, at least 7).
+    block_lines : int
+        Lines per block (about).
+    names : sequence of str, optional
+        Column names for the messages.
+
+    Yields
+    ------
+    ImuBlock
+        ``t`` (n,) [s], ``dtheta_b`` (n, 3) [rad], ``dv_b`` (n, 3) [m/s] and the
+        rows' file lines (``origin``), right across blocks.
+
+    Raises
+    ------
+    ValueError
+        ``"<file>:<line>: ..."`` for a malformed line (a truncated last line
+        says so), a truncated compressed stream, or a file that changed while
+        it was read (:class:`insnav.data.textio.FileChangedError`).
+    """
+    p = Path(path)
+    if not p.is_file():
+        exc = FileNotFoundError(f"{p} does not exist")
+        exc.strerror, exc.filename = "No such file or directory", str(p)
+        raise exc
+    f, compressed = _opener(p)
+    chunk = max(1, int(block_lines)) * _LINE_BYTES_GUESS
+    line = 1  # file line of the next block's first line
+    n = ncols
+    with f:
+        st0 = os.stat(p)
+        rest = b""
+        eof = False
+        while not eof:
+            try:
+                data = f.read(chunk)
+            except (EOFError, OSError, ValueError) as exc:  # lzma / gzip / bz2: a truncated or corrupt stream
+                why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise ValueError(f"{p}: truncated or corrupt {p.suffix.lstrip('.')} file ({why}); "
+                                 "decompress it again or fetch a complete copy") from None
+            eof = not data
+            buf = rest + data if rest else data
+            if not eof:
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:  # one line longer than the chunk: read on
+                    rest = buf
+                    continue
+                buf, rest = buf[:cut], buf[cut:]
+            else:
+                rest = b""
+            if not buf:
+                continue
+            if n is None:
+                if not buf.strip():
+                    line += buf.count(b"\n")
+                    continue
+                n = count_columns(buf, p)
+                if n < 7:
+                    raise ValueError(f"{p}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), found {n}")
+            parts, lines = parse_numeric(buf, n, str(p), first_line=line, comma=False, keep=7, names=names,
+                                         groups=(1, 3, 3))
+            origin = RowOrigin(str(p), line, lines)
+            line += buf.count(b"\n")
+            if len(parts[0]):
+                yield ImuBlock(parts[0], parts[1], parts[2], origin)
+        if not compressed:
+            st1 = os.stat(p)
+            if (st1.st_size, st1.st_mtime_ns) != (st0.st_size, st0.st_mtime_ns) or f.tell() != st0.st_size:
+                from ..data.textio import _changed
+
+                raise _changed(p, (st0.st_size, st0.st_mtime_ns), (st1.st_size, st1.st_mtime_ns), f.tell())
+
+
+def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> str | None:
+    """Why a run cannot take the streaming path (None: it can): the loose
+    ekf (15 or 21 states), rbukf or ukf (15) forward run written as CSV, without
+    the smoother, vehicle constraints, self-calibration states or the IMU-error
+    sigma columns."""
+    if out_format != "insnav" or out_suffix.lower() != ".csv":
+        return "the block-by-block writer writes CSV (npz, Parquet and the KF-GINS layout are written whole)"
+    if cfg.smooth:
+        return "the RTS smoother needs the whole run"
+    if cfg.coupling != "loose" or (cfg.filter, cfg.layout) not in (("ekf", 15), ("ekf", 21), ("rbukf", 15),
+                                                                   ("ukf", 15)):
+        return f"filter {cfg.filter} {cfg.coupling} {cfg.layout} states runs whole (the stream: loose ekf 15/21, " \
+               "rbukf 15, ukf 15)"
+    if cfg.constraints.use:
+        return "the vehicle constraints are derived from the whole IMU record"
+    if cfg.lever_arm.estimate or cfg.lever_arm.estimate_odometer or cfg.time.estimate_offset:
+        return "the self-calibration states run in the batch engine"
+    if cfg.imu_error_sigmas or cfg.options or cfg.tdcp.enabled:
+        return "the IMU-error sigma columns, filter options and TDCP run in the batch engine"
+    return None
+
+
+class _Coarse:
+    """The IMU summed over windows of ``k`` samples (the first sample alone),
+    for the input checks: times of each window's last sample, summed increments."""
+
+    def __init__(self, k: int):
+        self.k = max(1, int(k))
+        self.t, self.dth, self.dv = [], [], []
+        self.pend = None  # (t, dth, dv) of the samples not yet in a window
+
+    def add(self, t, dth, dv) -> None:
+        if self.pend is None:  # the first sample alone: the checks see the IMU span's start
+            self.t.append(t[:1].copy())
+            self.dth.append(dth[:1].copy())
+            self.dv.append(dv[:1].copy())
+            t, dth, dv = t[1:], dth[1:], dv[1:]
+            self.pend = (t[:0], dth[:0], dv[:0])
+        pt, pth, pv = self.pend
+        if len(pt):
+            t, dth, dv = np.concatenate([pt, t]), np.concatenate([pth, dth]), np.concatenate([pv, dv])
+        k = self.k
+        m = (len(t) // k) * k
+        if m:
+            self.t.append(t[k - 1:m:k].copy())
+            self.dth.append(dth[:m].reshape(-1, k, 3).sum(axis=1))
+            self.dv.append(dv[:m].reshape(-1, k, 3).sum(axis=1))
+        self.pend = (t[m:].copy(), dth[m:].copy(), dv[m:].copy())
+
+    def imu(self, source: str) -> ImuData:
+        pt, pth, pv = self.pend if self.pend is not None else (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        t, dth, dv = list(self.t), list(self.dth), list(self.dv)
+        if len(pt):
+            t.append(pt[-1:])
+            dth.append(pth.sum(axis=0, keepdims=True))
+            dv.append(pv.sum(axis=0, keepdims=True))
+        if not t:
+            return ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), origin=RowOrigin(source, 0))
+        return ImuData(np.concatenate(t), np.concatenate(dth), np.concatenate(dv), origin=RowOrigin(source, 0))
+
+
+class _Health:
+    """The health scan (``_core.scan_solution``) merged over blocks: the
+    largest step (a block's first row against the previous block's last) and
+    speed, and whether any row is bad (then the batch path names it)."""
+
+    def __init__(self):
+        self.bad = False
+        self.max_step_m = float("nan")
+        self.max_speed_mps = float("nan")
+        self.any_finite_step = self.any_finite_speed = False
+        self.last = None  # (lat, lon, h, v_n, sigmas) of the previous block's last row
+
+    def _merge(self, sc, rows: bool) -> None:
+        from .health import MAX_SPEED_MPS, MAX_STEP_M
+
+        if rows and (max(sc["first_bad_sigma"]) >= 0 or sc["first_nonfinite_pos"] >= 0
+                     or sc["first_height_out"] >= 0):
+            self.bad = True
+        if sc["max_step_row"] >= 0 and not (sc["max_step_m"] <= self.max_step_m):
+            self.max_step_m = float(sc["max_step_m"])
+        self.any_finite_step |= bool(sc["any_finite_step"])
+        if rows:
+            if sc["max_speed_row"] >= 0 and not (sc["max_speed_mps"] <= self.max_speed_mps):
+                self.max_speed_mps = float(sc["max_speed_mps"])
+            self.any_finite_speed |= bool(sc["any_finite_speed"])
+        if self.max_step_m > MAX_STEP_M or self.max_speed_mps > MAX_SPEED_MPS:
+            self.bad = True
+
+    def add(self, lat, lon, h, v_n, sigmas) -> None:
+        from .health import HEIGHT_RANGE_M, _R_EARTH_M
+
+        lo, hi = float(HEIGHT_RANGE_M[0]), float(HEIGHT_RANGE_M[1])
+        n = len(lat)
+        if not n:
+            return
+        if self.last is not None:  # the step across the block boundary
+            pl = self.last
+            two = [np.concatenate([a, b]) for a, b in zip(pl[:4], (lat[:1], lon[:1], h[:1], v_n[:1]))]
+            sig2 = [np.concatenate([a, b[:1]]) for a, b in zip(pl[4], sigmas)]
+            self._merge(_core.scan_solution(*two, sig2, lo, hi, _R_EARTH_M), rows=False)
+        self._merge(_core.scan_solution(lat, lon, h, v_n, sigmas, lo, hi, _R_EARTH_M), rows=True)
+        self.last = (lat[-1:].copy(), lon[-1:].copy(), h[-1:].copy(), v_n[-1:].copy(), [s[-1:].copy() for s in sigmas])
+
+    def scan(self) -> dict:
+        """A ``_core.scan_solution`` result for :func:`insnav.filters.health.assess` (no bad row)."""
+        return dict(first_bad_sigma=[-1, -1, -1], first_bad_sigma_col=[-1, -1, -1], bad_sigma_rows=[0, 0, 0],
+                    first_nonfinite_pos=-1, max_step_m=self.max_step_m, max_step_row=-1,
+                    any_finite_step=self.any_finite_step, max_speed_mps=self.max_speed_mps, max_speed_row=-1,
+                    any_finite_speed=self.any_finite_speed, first_height_out=-1)
+
+
+@dataclass
+class StreamResult:
+    """What :func:`stream_loose_csv` leaves: the solution without its rows
+    (``gnss_t``, innovations, NIS, status, summary; ``len()`` the row count),
+    the dataset the checks saw (IMU summed to 10 Hz), the run config and the
+    finished temporary CSV file (renamed by the caller)."""
+
+    solution: object
+    dataset: Dataset
+    config: object
+    csv_tmp: Path
+    rows: int
+    samples: int
+    blocks: int = 0
+    timings: dict = field(default_factory=dict)
+
+
+def _sanitize_opts(cfg) -> dict:
+    from .sanitize import DEFAULTS
+
+    return {**DEFAULTS, **(cfg.sanitize or {})}
+
+
+def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int | None, start_s: float,
+                     end_s: float | None, gnss_raw: GnssFixes, columns=None, precision: str = "resolution",
+                     output_rate_hz: float | None = None, block_lines: int = BLOCK_LINES,
+                     set_decimation=None) -> StreamResult:
+    """Run the loose forward filter over the IMU file ``imu_path`` block by
+    block, writing the solution CSV for ``out`` to a temporary file beside it.
+
+    Parameters
+    ----------
+    ds0 : Dataset
+        The dataset without its IMU (initial state, lever arm, IMU model; its
+        ``gnss`` are ignored: ``gnss_raw`` is cut to the IMU span here).
+    imu_path : path
+        The IMU text file (KF-GINS layout).
+    cfg : RunConfig
+        The run configuration (:func:`stream_unsupported` is None for it).
+    out : Path
+        The solution file the temporary file is for (same folder).
+    imu_ncols : int, optional
+        Columns per IMU line (KF-GINS ``imudatalen``).
+    start_s, end_s : float
+        KF-GINS ``starttime`` / ``endtime`` [s] (None: to the end of the file).
+    gnss_raw : GnssFixes
+        Every GNSS record of the file.
+    columns, precision
+        As :meth:`Solution.save`.
+    output_rate_hz : float, optional
+        ``--output-rate``: the decimation from the first block's median interval.
+    set_decimation : callable, optional
+        ``(t_first_block, rate_hz) -> k`` (``insnav run``'s rule and message).
+
+    Raises
+    ------
+    Fallback
+        The reason the batch path must run instead (nothing is left behind).
+    ValueError
+        A malformed IMU line, a decreasing time, non-finite values (naming file and line).
+    """
+    from . import _as_config
+    from .loose import loose_engine_args
+    from .sanitize import sanitize_gnss
+    from .solution import CSV_DECIMALS, PRECISIONS, Solution, _selected
+
+    import time as _time
+
+    clock = _time.perf_counter
+    timings = dict(read=0.0, filter=0.0, write=0.0)
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision {precision!r}: use one of {', '.join(PRECISIONS)}")
+    cfg = _as_config(cfg)
+    opts = _sanitize_opts(cfg)
+    imu_src = str(imu_path)
+    from .sanitize import _imu_report
+
+    out = Path(out)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part" + out.suffix, dir=out.parent)
+    os.close(fd)
+    tmp = Path(tmp)
+    try:
+        res = _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw, columns,
+                      precision, output_rate_hz, block_lines, set_decimation, clock, timings,
+                      loose_engine_args, sanitize_gnss, CSV_DECIMALS, Solution, _selected, _imu_report)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return res
+
+
+def _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw, columns, precision,
+            output_rate_hz, block_lines, set_decimation, clock, timings, loose_engine_args, sanitize_gnss,
+            CSV_DECIMALS, Solution, _selected, _imu_report):
+    from ..io.kfgins import IMU_COLUMNS
+    from ._assemble import nav_solution
+
+    t_mark = clock()
+    blocks = imu_text_blocks(imu_path, imu_ncols, block_lines=block_lines, names=IMU_COLUMNS)
+    t0 = None
+    t_prev = None  # the last sample's time (crop and checks across blocks)
+    line_prev = 0
+    n_kept = 0
+    stream = None
+    header_written = False
+    health = _Health()
+    coarse = None
+    dt0 = None
+    rows_total = 0
+    n_blocks = 0
+    sel = None
+    rep = _imu_report()
+    done = False
+    gnss = used_gnss = None
+    gnss_rep = None
+    for blk in blocks:
+        n_blocks += 1
+        t, dth, dv, origin = blk.t, blk.dtheta_b, blk.dv_b, blk.origin
+        # the reader's checks (read_kfgins_imu), on every line of the file
+        sc = scan_imu(t, dth, dv)
+        if sc["nonfinite_t"] >= 0 or sc["nonfinite_dtheta"] >= 0 or sc["nonfinite_dv"] >= 0:
+            check_finite_rows((t, dth, dv), origin, IMU_COLUMNS)
+        i = sc["decrease"]
+        if i >= 0:
+            raise ValueError(f"{origin.where(i)}: time {float(t[i])!r} does not increase "
+                             f"(previous record at {float(t[i - 1])!r}, line {origin.line(i - 1)})")
+        if t_prev is not None and t[0] < t_prev:
+            raise ValueError(f"{origin.where(0)}: time {float(t[0])!r} does not increase "
+                             f"(previous record at {float(t_prev)!r}, line {line_prev})")
+        # the run's span: t0 = the first sample at or after starttime, then (t0, endtime]
+        lo = 0
+        if t0 is None:
+            i0 = int(np.searchsorted(t, start_s))
+            if i0 >= len(t):
+                t_prev, line_prev = float(t[-1]), origin.line(len(t) - 1)
+                continue
+            t0 = float(t[i0])
+            lo = int(np.searchsorted(t, t0, side="right"))
+            stream, gnss, gnss_rep, dec_k, coarse = _start(ds0, cfg, opts, t0, t[lo:], end_s, gnss_raw,
+                                                           output_rate_hz, set_decimation, loose_engine_args,
+                                                           sanitize_gnss, block_lines)
+            cfg.output_decimation = dec_k
+            sel = None
+        hi = len(t) if end_s is None else int(np.searchsorted(t, end_s, side="right"))
+        if hi < len(t):
+            done = True
+        t_prev, line_prev = float(t[-1]), origin.line(len(t) - 1)
+        if hi <= lo:
+            if done:
+                break
+            continue
+        t, dth, dv = t[lo:hi], dth[lo:hi], dv[lo:hi]
+        # the sanitizer's scan: anything it would repair or refuse goes to the batch path
+        first = n_kept == 0
+        sc = scan_imu(t, dth, dv, t0=t0 if first else float(last_kept), max_rate_rps=opts["max_rate_rps"],
+                      max_accel_mps2=opts["max_accel_mps2"], gap_factor=opts["gap_factor"])
+        if sc["repeats"] or (not first and not t[0] > last_kept):
+            raise Fallback("repeated IMU times (the sanitizer drops duplicates)")
+        if dt0 is None:
+            dt0 = sc["dt0"]
+        elif len(t) > 16 and abs(sc["dt0"] - dt0) > 1e-6 * dt0:
+            raise Fallback(f"the IMU interval changes ({dt0:.6g} s -> {sc['dt0']:.6g} s)")
+        if sc["rate"] >= 0 or sc["accel"] >= 0:
+            raise Fallback("an implausible IMU rate (the sanitizer names it)")
+        if sc["gaps"] or (not first and t[0] - last_kept > opts["gap_factor"] * dt0):
+            raise Fallback("an IMU gap (the sanitizer bridges it)")
+        coarse.add(t, dth, dv)
+        n_kept += len(t)
+        last_kept = float(t[-1])
+        timings["read"] += clock() - t_mark
+        for a in range(0, len(t), block_lines):  # the engine's row buffers hold block_lines samples' rows
+            t_mark = clock()
+            n = stream.run_block(t[a:a + block_lines], dth[a:a + block_lines], dv[a:a + block_lines])
+            timings["filter"] += clock() - t_mark
+            t_mark = clock()
+            sel = _write_rows(stream, n, tmp, health, columns, precision, sel, header_written, CSV_DECIMALS,
+                              Solution, _selected, nav_solution)
+            header_written = header_written or n > 0
+            rows_total += n
+            timings["write"] += clock() - t_mark
+        t_mark = clock()
+        if done:
+            break
+    blocks.close()
+    if t0 is None or n_kept < 2:
+        raise Fallback("too few IMU records in the run's span (the batch path names the key)")
+    n = stream.finish()
+    if n:
+        _write_rows(stream, n, tmp, health, columns, precision, sel, header_written, CSV_DECIMALS, Solution,
+                    _selected, nav_solution)
+        rows_total += n
+    if health.bad:
+        raise Fallback("the health check found a bad row (the batch path names it)")
+    rec = stream.records()
+    # the GNSS records past the last IMU sample: cut as the batch loader cuts them, if that changes nothing else
+    t_last = last_kept
+    keep = np.asarray(gnss.t_valid) <= t_last
+    cut_raw = (np.asarray(gnss_raw.t_valid) > t0) & (np.asarray(gnss_raw.t_valid) <= t_last)
+    if not keep.all():
+        exact = GnssFixes(*(np.asarray(getattr(gnss_raw, f))[cut_raw] for f in
+                            ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n",
+                             "sigma_vel_n")),
+                          origin=None if gnss_raw.origin is None else gnss_raw.origin.take(cut_raw, len(cut_raw)))
+        g2, rep2 = sanitize_gnss(exact, min_h_m=opts["min_h_m"], max_h_m=opts["max_h_m"], source="gnss")
+        counts = ("gnss_records_in", "gnss_records_out")
+        same = ({k: v for k, v in rep2.items() if k not in counts} == {k: v for k, v in gnss_rep.items()
+                                                                        if k not in counts}
+                and len(g2) == int(keep.sum())
+                and all(np.array_equal(np.asarray(getattr(g2, f), float), np.asarray(getattr(gnss, f), float)[keep],
+                                       equal_nan=True)
+                        for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n"))
+                and _cycle(cfg, np.asarray(g2.t_valid)) == _cycle(cfg, np.asarray(gnss.t_valid)))
+        if not same:
+            raise Fallback("a GNSS record after the last IMU sample changes the set-up")
+        gnss, gnss_rep = g2, rep2
+        for k in ("innovation", "nis", "log_det_s", "status"):
+            rec[k] = rec[k][keep]
+    order = np.argsort(np.asarray(gnss.t_valid, float), kind="stable")
+    gnss_t = np.asarray(gnss.t_valid, float)[order]
+    rep["imu_samples_in"] = rep["imu_samples_out"] = n_kept
+    coarse_imu = coarse.imu(imu_src)
+    scenario = dict(ds0.scenario or {})
+    scenario["gnss_outside_imu_span"] = int(cut_raw.size - np.count_nonzero(cut_raw))
+    ds = dataclasses.replace(ds0, imu=coarse_imu, gnss=gnss, scenario=scenario)
+    # the unit and time-base checks on the IMU summed to 10 Hz (a failure: the batch path's message)
+    from ..data.checks import check_dataset
+
+    try:
+        check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
+    except ValueError as exc:
+        raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]}...)") from None
+    z = np.zeros((0, 3))
+    sol = StreamedSolution(
+        t=np.zeros(0), lat_deg=np.zeros(0), lon_deg=np.zeros(0), h_m=np.zeros(0), v_n=z, roll_deg=np.zeros(0),
+        pitch_deg=np.zeros(0), yaw_deg=np.zeros(0), sigma_pos_n_m=z, sigma_vel_n_mps=z, sigma_att_deg=z,
+        acc_bias_mps2=z, gyro_bias_rps=z, acc_scale=z, gyro_scale=z, gnss_t=gnss_t, innovation=rec["innovation"],
+        nis=rec["nis"], gnss_status=rec["status"], log_det_s=rec["log_det_s"],
+        summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=int(cfg.layout), updates=int(rec["updates"]),
+                     rejected=int(rec["rejected"]), gate_reopened=int(rec["gate_reopened"]),
+                     gate_outage_accepted=int(rec["gate_outage_accepted"]),
+                     cholesky_repairs=int(rec["cholesky_repairs"]), gnss_records=len(gnss_t)))
+    sol.n_rows = rows_total
+    sol.summary["sanitize"] = {**rep, **gnss_rep}
+    from .health import assess
+
+    sol.summary["health"] = assess(sol, imu_t_end=t_last, scan=health.scan(), n_rows=rows_total)
+    timings["filter"] += clock() - t_mark
+    return StreamResult(solution=sol, dataset=ds, config=cfg, csv_tmp=tmp, rows=rows_total, samples=n_kept,
+                        blocks=n_blocks, timings=timings)
+
+
+class StreamedSolution(Solution):
+    """A :class:`Solution` whose rows went to the file (``n_rows`` of them, its
+    ``len()``): the GNSS record fields and the summary, no row arrays."""
+
+    n_rows = 0
+
+    def __len__(self):
+        return int(self.n_rows)
+
+
+def _cycle(cfg, record_t) -> float:
+    d = np.diff(np.sort(np.asarray(record_t, float)))
+    d = d[d != 0]
+    return cfg.cycle_period_s if cfg.cycle_period_s is not None else (median(d) if d.size else 1.0)
+
+
+def _start(ds0, cfg, opts, t0, t_first, end_s, gnss_raw, output_rate_hz, set_decimation, loose_engine_args,
+           sanitize_gnss, block_lines):
+    """The engine at t0: the GNSS records in (t0, endtime] sanitized, the output
+    decimation from the first block, the set-up of the batch loose runner."""
+    tv = np.asarray(gnss_raw.t_valid)
+    g = (tv > t0) & (tv <= (np.inf if end_s is None else end_s))
+    gnss = GnssFixes(*(np.asarray(getattr(gnss_raw, f))[g] for f in
+                       ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")),
+                     origin=None if gnss_raw.origin is None else gnss_raw.origin.take(g, len(g)))
+    gnss, gnss_rep = sanitize_gnss(gnss, min_h_m=opts["min_h_m"], max_h_m=opts["max_h_m"], source="gnss")
+    k = 1
+    if output_rate_hz is not None:
+        k = set_decimation(t_first, output_rate_hz)
+    cfg.output_decimation = k
+    ds = dataclasses.replace(ds0, t0=float(t0), gnss=gnss)
+    rows = np.column_stack([gnss.t_valid, np.asarray(gnss.lat_deg) * DEG, np.asarray(gnss.lon_deg) * DEG, gnss.h_m,
+                            gnss.v_n, gnss.sigma_pos_n, gnss.sigma_vel_n]).astype(float) if len(gnss) else \
+        np.zeros((0, 13))
+    if len(rows):
+        order = np.argsort(rows[:, 0], kind="stable")
+        rows = np.ascontiguousarray(rows[order])
+        if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
+            rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
+            rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
+        from .._validate import check_finite
+
+        check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+    a = loose_engine_args(ds, cfg, rows[:, 0].copy())
+    stream = _core.LooseStream(cfg.filter, a.layout, rows, a.init, a.P0, a.imu_correction, a.imu_model, a.config,
+                               int(block_lines))
+    dt_first = median(np.diff(t_first)) if len(t_first) > 1 else 0.0
+    kc = max(1, int(round(1.0 / (CHECK_RATE_HZ * dt_first)))) if dt_first > 0 else 1
+    return stream, gnss, gnss_rep, k, _Coarse(kc)
+
+
+def _write_rows(stream, n, tmp, health, columns, precision, sel, header_written, CSV_DECIMALS, Solution, _selected,
+                nav_solution):
+    """The block's rows: to degrees in place, the health scan, appended to the CSV."""
+    if n == 0:
+        return sel
+    out = stream.rows()
+    e = np.zeros(0)
+    sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
+    if nonfinite:
+        raise Fallback("a non-finite row (the batch path names it)")
+    health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n), [sol.sigma_pos_n_m, sol.sigma_vel_n_mps,
+                                                                       sol.sigma_att_deg])
+    cols = _selected(sol, columns)
+    dec = [CSV_DECIMALS[nm] if precision == "resolution" else -1 for nm, _, _ in cols]
+    header = "" if header_written else ",".join(nm for nm, _, _ in cols) + "\n"
+    _core.write_table(str(tmp), header, [np.asarray(x, float) for _, x, _ in cols], [float(f) for _, _, f in cols],
+                      dec, threads=threads(), append=header_written)
+    return cols
