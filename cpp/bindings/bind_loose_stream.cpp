@@ -83,11 +83,13 @@ std::unique_ptr<StreamBase> make_stream(const std::string& filter, int layout, c
     if (layout == 21) return make<Ekf<Layout21>>(model, cfg, ut, s0, P0, c0, ps);
   } else if (filter == "rbukf") {
     if (layout == 15) return make<RbUkf<Layout15>>(model, cfg, ut, s0, P0, c0, ps);
+    if (layout == 21) return make<RbUkf<Layout21>>(model, cfg, ut, s0, P0, c0, ps);
   } else if (filter == "ukf") {
     if (layout == 15) return make<Ukf<Layout15>>(model, cfg, ut, s0, P0, c0, ps);
+    if (layout == 21) return make<Ukf<Layout21>>(model, cfg, ut, s0, P0, c0, ps);
   }
   throw py::value_error("LooseStream: unsupported filter/layout combination " + filter + "/" +
-                        std::to_string(layout) + " (ekf 15/21, rbukf 15, ukf 15)");
+                        std::to_string(layout) + " (ekf, rbukf, ukf on 15 or 21 states)");
 }
 
 }  // namespace

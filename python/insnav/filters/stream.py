@@ -84,7 +84,7 @@ def _opener(path: Path):
     return {"lzma": lzma.open, "gzip": gzip.open, "bz2": bz2.open}[kind](path, "rb"), True
 
 
-def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int = BLOCK_LINES, names=None):
+def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None = None, names=None):
     """The rows of a whitespace-separated IMU text file (``t dtheta_xyz dv_xyz``,
     KF-GINS's layout; extra columns ignored), block by block.
 
@@ -118,7 +118,7 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int = BLOCK_
         exc.strerror, exc.filename = "No such file or directory", str(p)
         raise exc
     f, compressed = _opener(p)
-    chunk = max(1, int(block_lines)) * _LINE_BYTES_GUESS
+    chunk = max(1, int(BLOCK_LINES if block_lines is None else block_lines)) * _LINE_BYTES_GUESS
     line = 1  # file line of the next block's first line
     n = ncols
     with f:
@@ -167,17 +167,16 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int = BLOCK_
 
 def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> str | None:
     """Why a run cannot take the streaming path (None: it can): the loose
-    ekf (15 or 21 states), rbukf or ukf (15) forward run written as CSV, without
+    ekf, rbukf or ukf forward run (15 or 21 states) written as CSV, without
     the smoother, vehicle constraints, self-calibration states or the IMU-error
     sigma columns."""
     if out_format != "insnav" or out_suffix.lower() != ".csv":
         return "the block-by-block writer writes CSV (npz, Parquet and the KF-GINS layout are written whole)"
     if cfg.smooth:
         return "the RTS smoother needs the whole run"
-    if cfg.coupling != "loose" or (cfg.filter, cfg.layout) not in (("ekf", 15), ("ekf", 21), ("rbukf", 15),
-                                                                   ("ukf", 15)):
-        return f"filter {cfg.filter} {cfg.coupling} {cfg.layout} states runs whole (the stream: loose ekf 15/21, " \
-               "rbukf 15, ukf 15)"
+    if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf") or cfg.layout not in (15, 21):
+        return f"filter {cfg.filter} {cfg.coupling} with {cfg.layout} states runs whole (the stream: loose ekf, " \
+               "rbukf, ukf on 15 or 21 states)"
     if cfg.constraints.use:
         return "the vehicle constraints are derived from the whole IMU record"
     if cfg.lever_arm.estimate or cfg.lever_arm.estimate_odometer or cfg.time.estimate_offset:
@@ -302,7 +301,7 @@ def _sanitize_opts(cfg) -> dict:
 
 def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int | None, start_s: float,
                      end_s: float | None, gnss_raw: GnssFixes, columns=None, precision: str = "resolution",
-                     output_rate_hz: float | None = None, block_lines: int = BLOCK_LINES,
+                     output_rate_hz: float | None = None, block_lines: int | None = None,
                      set_decimation=None) -> StreamResult:
     """Run the loose forward filter over the IMU file ``imu_path`` block by
     block, writing the solution CSV for ``out`` to a temporary file beside it.
@@ -330,6 +329,8 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
         ``--output-rate``: the decimation from the first block's median interval.
     set_decimation : callable, optional
         ``(t_first_block, rate_hz) -> k`` (``insnav run``'s rule and message).
+    block_lines : int, optional
+        IMU lines per block (default :data:`BLOCK_LINES`).
 
     Raises
     ------
@@ -350,6 +351,7 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
     if precision not in PRECISIONS:
         raise ValueError(f"precision {precision!r}: use one of {', '.join(PRECISIONS)}")
     cfg = _as_config(cfg)
+    block_lines = int(BLOCK_LINES if block_lines is None else block_lines)
     opts = _sanitize_opts(cfg)
     imu_src = str(imu_path)
     from .sanitize import _imu_report

@@ -1,0 +1,129 @@
+"""``insnav run --format kfgins`` block by block (insnav.filters.stream): the
+solution CSV, its innovations sidecar, the resolved configuration and the
+report line are byte for byte those of the whole-file run, for any block size
+and output rate; a bad or truncated line in a later block is a one-line error
+naming the file and its line; what the stream cannot reproduce exactly goes to
+the whole-file run with a one-line note."""
+from __future__ import annotations
+
+import lzma
+
+import numpy as np
+import pytest
+
+import insnav.filters.stream as stream
+from insnav.filters.stream import imu_text_blocks
+
+from test_cli import _call
+
+#: IMU lines of the trimmed KF-GINS track (the run starts 50 s in, at the YAML's starttime)
+LINES = 40_000
+
+
+@pytest.fixture(scope="module")
+def kf_short(shared_data, tmp_path_factory):
+    """The KF-GINS simulated track's first LINES IMU lines, its GNSS file (records past the
+    IMU's end included: the loader cuts them) and its YAML, in a temporary folder."""
+    sim = shared_data / "kfgins" / "sim"
+    d = tmp_path_factory.mktemp("kfshort")
+    with lzma.open(sim / "Leador-A15-sim.txt.xz", "rb") as f:
+        lines = [f.readline() for _ in range(LINES)]
+    (d / "imu.txt").write_bytes(b"".join(lines))
+    (d / "gnss.txt").write_bytes((sim / "GNSS-RTK-sim.txt").read_bytes())
+    yaml = (sim / "kf-gins-sim.yaml").read_text()
+    yaml = "\n".join('imupath: "./imu.txt"' if ln.startswith("imupath:") else
+                     'gnsspath: "./gnss.txt"' if ln.startswith("gnsspath:") else ln for ln in yaml.splitlines())
+    (d / "kf.yaml").write_text(yaml + "\n")
+    return d
+
+
+def _run(d, out, *extra):
+    rc, so, se = _call(["run", "--format", "kfgins", "--config", d / "kf.yaml", "--out", out, "--quiet", *extra])
+    return rc, so.replace(str(out), "OUT"), se.replace(str(out), "OUT")
+
+
+@pytest.mark.parametrize("extra", [(), ("--output-rate", "10"), ("--columns", "nav,sigma", "--filter", "rbukf")])
+def test_block_by_block_run_writes_the_whole_file_runs_bytes(kf_short, tmp_path, monkeypatch, extra):
+    # blocks of 4093 lines: boundaries fall inside decimation windows, GNSS intervals and the start time
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    rca, outa, erra = _run(kf_short, a, "--stream", "on", *extra)
+    rcb, outb, errb = _run(kf_short, b, "--stream", "off", *extra)
+    assert (rca, rcb) == (0, 0), (erra, errb)
+    assert "note:" not in erra  # the stream ran, not the whole-file fallback
+    assert outa == outb
+    for suffix in ("", ".innovations.csv", ".config.toml"):
+        assert (a.parent / (a.name + suffix)).read_bytes() == (b.parent / (b.name + suffix)).read_bytes(), suffix
+    rows = a.read_text().count("\n") - 1
+    dec = 20 if "--output-rate" in extra else 1
+    assert rows == -(-(LINES - 10_001) // dec)  # the samples after t0 (the first at starttime), the last row too
+    assert sorted(p.name for p in a.parent.iterdir()) == ["sol.csv", "sol.csv.config.toml",
+                                                            "sol.csv.innovations.csv"]  # no temporary file left
+
+
+def _with_line(src, dst, lineno: int, text: bytes | None, cut: bool = False):
+    lines = src.read_bytes().splitlines(keepends=True)
+    if cut:  # the file ends inside line `lineno`
+        lines = lines[:lineno - 1] + [lines[lineno - 1][:20]]
+    else:
+        lines[lineno - 1] = text
+    dst.write_bytes(b"".join(lines))
+
+
+@pytest.mark.parametrize("lineno, text, cut, message", [
+    (25_001, b"456375.000 1e-7 x 1e-7 1e-3 1e-3 -0.05\n", False, ":25001: not a number: 'x' in column 'dtheta_y'"),
+    (31_234, b"456375.000 1e-7 1e-7\n", False, ":31234: expected 7 columns, found 3"),
+    (LINES, None, True, f":{LINES}: expected 7 columns, found 2 (incomplete last line: file truncated?)"),
+    (20_000, b"456349.990 nan 0 0 0 0 -0.05\n", False, ":20000: non-finite value nan in column 'dtheta_x'"),
+    (27_000, b"456300.000 0 0 0 0 0 -0.05\n", False, ":27000: time 456300.0 does not increase")])
+def test_a_bad_line_in_a_later_block_names_file_and_line(kf_short, tmp_path, monkeypatch, lineno, text, cut,
+                                                         message):
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    d = tmp_path / "kf"
+    d.mkdir()
+    for name in ("kf.yaml", "gnss.txt"):
+        (d / name).write_bytes((kf_short / name).read_bytes())
+    _with_line(kf_short / "imu.txt", d / "imu.txt", lineno, text, cut)
+    errs = []
+    for mode in ("on", "off"):
+        out = tmp_path / mode / "sol.csv"
+        rc, _, err = _run(d, out, "--stream", mode)
+        assert rc != 0 and not out.parent.exists()  # nothing written, not even the folder
+        errs.append(err.strip())
+    assert len(errs[0].splitlines()) == 1 and f"imu.txt{message}" in errs[0], errs[0]
+    assert errs[0] == errs[1]  # the whole-file reader's message, line for line
+
+
+def test_line_numbers_stay_right_across_blocks(tmp_path):
+    rows = [f"{i * 0.01:.2f} {i} 0 0 0 0 {-i}\n" for i in range(1, 11)]
+    rows.insert(4, "\n")  # a blank line: the rows after it are one line further down
+    rows.insert(8, "  \n")
+    p = tmp_path / "imu.txt"
+    p.write_text("".join(rows))
+    got = [(float(t), blk.origin.line(i)) for blk in imu_text_blocks(p, block_lines=1)
+           for i, t in enumerate(blk.t)]
+    want_lines = [1, 2, 3, 4, 6, 7, 8, 10, 11, 12]
+    assert [ln for _, ln in got] == want_lines
+    assert np.allclose([t for t, _ in got], np.arange(1, 11) * 0.01)
+
+
+def test_what_the_stream_cannot_do_runs_whole_with_a_note(kf_short, tmp_path, monkeypatch):
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    # a repeated IMU record in a later block: the sanitizer drops it, so the whole-file run takes over
+    d = tmp_path / "kf"
+    d.mkdir()
+    for name in ("kf.yaml", "gnss.txt"):
+        (d / name).write_bytes((kf_short / name).read_bytes())
+    lines = (kf_short / "imu.txt").read_bytes().splitlines(keepends=True)
+    (d / "imu.txt").write_bytes(b"".join(lines[:22_222] + [lines[22_221]] + lines[22_222:]))
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    rca, outa, erra = _run(d, a)
+    rcb, outb, errb = _run(d, b, "--stream", "off")
+    assert rca == rcb == 0
+    assert erra.strip() == "note: the IMU file is read whole, not block by block: repeated IMU times (the " \
+                           "sanitizer drops duplicates)"
+    assert a.read_bytes() == b.read_bytes() and outa.replace("a.csv", "") == outb.replace("b.csv", "")
+    # the RTS smoother needs the whole run
+    rc, _, err = _run(kf_short, tmp_path / "s.csv", "--smooth", "--output-rate", "10")
+    assert rc == 0 and err.strip() == "note: the IMU file is read whole, not block by block: the RTS smoother " \
+                                      "needs the whole run"
