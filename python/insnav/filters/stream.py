@@ -123,46 +123,116 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None =
     n = ncols
     with f:
         st0 = os.stat(p)
-        rest = b""
+        buf = bytearray(chunk)  # one buffer for every block: the unfinished line moved to its start
+        have = 0  # bytes of the unfinished line at buf's start
+        pos = 0  # bytes read from the file
         eof = False
         while not eof:
+            if have == len(buf):  # one line longer than the buffer: grow it
+                buf.extend(bytes(len(buf)))
+            total = have
             try:
-                data = f.read(chunk)
+                with memoryview(buf) as mv:
+                    while total < len(buf):  # fill the buffer (a decompressor returns a little at a time)
+                        k = f.readinto(mv[total:])
+                        if not k:
+                            eof = True
+                            break
+                        total += k
             except (EOFError, OSError, ValueError) as exc:  # lzma / gzip / bz2: a truncated or corrupt stream
                 why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
                 raise ValueError(f"{p}: truncated or corrupt {p.suffix.lstrip('.')} file ({why}); "
                                  "decompress it again or fetch a complete copy") from None
-            eof = not data
-            buf = rest + data if rest else data
-            if not eof:
-                cut = buf.rfind(b"\n") + 1
-                if cut == 0:  # one line longer than the chunk: read on
-                    rest = buf
-                    continue
-                buf, rest = buf[:cut], buf[cut:]
-            else:
-                rest = b""
-            if not buf:
+            pos += total - have
+            cut = total if eof else buf.rfind(b"\n", 0, total) + 1
+            if cut == 0:  # no line end yet: read on
+                have = total
                 continue
-            if n is None:
-                if not buf.strip():
-                    line += buf.count(b"\n")
-                    continue
-                n = count_columns(buf, p)
-                if n < 7:
-                    raise ValueError(f"{p}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), found {n}")
-            parts, lines = parse_numeric(buf, n, str(p), first_line=line, comma=False, keep=7, names=names,
-                                         groups=(1, 3, 3))
+            with memoryview(buf) as mv:
+                data = mv[:cut]
+                if n is None and bytes(data).strip():
+                    n = count_columns(bytes(data), p)
+                    if n < 7:
+                        raise ValueError(f"{p}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
+                                         f"found {n}")
+                parsed = n is not None and cut > 0
+                if parsed:
+                    parts, lines = parse_numeric(data, n, str(p), first_line=line, comma=False, keep=7, names=names,
+                                                 groups=(1, 3, 3))
+                else:
+                    parts, lines = (np.zeros(0),), None
+                del data
+            rows = len(parts[0])
             origin = RowOrigin(str(p), line, lines)
-            line += buf.count(b"\n")
-            if len(parts[0]):
+            # the lines of this block: its rows when none was blank (the parser counted them), else counted
+            line += rows if (parsed and lines is None and not eof) else buf.count(b"\n", 0, cut)
+            if rows:
                 yield ImuBlock(parts[0], parts[1], parts[2], origin)
+            buf[:total - cut] = buf[cut:total]
+            have = total - cut
         if not compressed:
             st1 = os.stat(p)
-            if (st1.st_size, st1.st_mtime_ns) != (st0.st_size, st0.st_mtime_ns) or f.tell() != st0.st_size:
+            if (st1.st_size, st1.st_mtime_ns) != (st0.st_size, st0.st_mtime_ns) or pos != st0.st_size:
                 from ..data.textio import _changed
 
-                raise _changed(p, (st0.st_size, st0.st_mtime_ns), (st1.st_size, st1.st_mtime_ns), f.tell())
+                raise _changed(p, (st0.st_size, st0.st_mtime_ns), (st1.st_size, st1.st_mtime_ns), pos)
+
+
+class _Prefetch:
+    """The blocks of a generator read one ahead on a background thread, so
+    that reading and parsing the next block (the GIL released in the file
+    read and the parser) overlap the filtering of this one (the GIL released
+    in the engine) on a second core.  An exception of the reader is raised
+    where its block would have been; :meth:`close` stops the thread."""
+
+    _END = object()
+
+    def __init__(self, gen, depth: int = 1):
+        import queue
+        import threading
+
+        self._gen = gen
+        self._q = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, name="insnav-imu-reader", daemon=True)
+        self._t.start()
+
+    def _put(self, item) -> bool:
+        import queue
+
+        while not self._stop.is_set():
+            try:
+                self._q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self) -> None:
+        try:
+            for item in self._gen:
+                if not self._put(item):
+                    return
+            self._put(self._END)
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer
+            self._put(exc)
+        finally:
+            self._gen.close()
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        item = self._q.get()
+        if item is self._END:
+            raise StopIteration
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+    def close(self) -> None:
+        self._stop.set()
+        self._t.join()
 
 
 def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> str | None:
@@ -203,9 +273,16 @@ class _Coarse:
             t, dth, dv = t[1:], dth[1:], dv[1:]
             self.pend = (t[:0], dth[:0], dv[:0])
         pt, pth, pv = self.pend
-        if len(pt):
-            t, dth, dv = np.concatenate([pt, t]), np.concatenate([pth, dth]), np.concatenate([pv, dv])
         k = self.k
+        if len(pt):  # the window begun in the previous block
+            need = k - len(pt)
+            if len(t) < need:
+                self.pend = (np.concatenate([pt, t]), np.concatenate([pth, dth]), np.concatenate([pv, dv]))
+                return
+            self.t.append(t[need - 1:need].copy())
+            self.dth.append((pth.sum(axis=0) + dth[:need].sum(axis=0)).reshape(1, 3))
+            self.dv.append((pv.sum(axis=0) + dv[:need].sum(axis=0)).reshape(1, 3))
+            t, dth, dv = t[need:], dth[need:], dv[need:]
         m = (len(t) // k) * k
         if m:
             self.t.append(t[k - 1:m:k].copy())
@@ -377,7 +454,19 @@ def _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, g
     from ._assemble import nav_solution
 
     t_mark = clock()
-    blocks = imu_text_blocks(imu_path, imu_ncols, block_lines=block_lines, names=IMU_COLUMNS)
+    blocks = _Prefetch(imu_text_blocks(imu_path, imu_ncols, block_lines=block_lines, names=IMU_COLUMNS))
+    try:
+        return _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw,
+                              columns, precision, output_rate_hz, block_lines, set_decimation, clock, timings,
+                              loose_engine_args, sanitize_gnss, CSV_DECIMALS, Solution, _selected, _imu_report,
+                              nav_solution, IMU_COLUMNS, t_mark)
+    finally:
+        blocks.close()
+
+
+def _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw, columns,
+                   precision, output_rate_hz, block_lines, set_decimation, clock, timings, loose_engine_args,
+                   sanitize_gnss, CSV_DECIMALS, Solution, _selected, _imu_report, nav_solution, IMU_COLUMNS, t_mark):
     t0 = None
     t_prev = None  # the last sample's time (crop and checks across blocks)
     line_prev = 0
@@ -397,8 +486,12 @@ def _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, g
     for blk in blocks:
         n_blocks += 1
         t, dth, dv, origin = blk.t, blk.dtheta_b, blk.dv_b, blk.origin
-        # the reader's checks (read_kfgins_imu), on every line of the file
-        sc = scan_imu(t, dth, dv)
+        # the reader's checks (read_kfgins_imu), on every line of the file; inside the run's span the
+        # same scan gives the sanitizer's (one pass)
+        inside = t0 is not None and n_kept > 0 and (end_s is None or t[-1] <= end_s)
+        sc = scan_imu(t, dth, dv, t0=float(last_kept), max_rate_rps=opts["max_rate_rps"],
+                      max_accel_mps2=opts["max_accel_mps2"], gap_factor=opts["gap_factor"]) if inside else \
+            scan_imu(t, dth, dv)
         if sc["nonfinite_t"] >= 0 or sc["nonfinite_dtheta"] >= 0 or sc["nonfinite_dv"] >= 0:
             check_finite_rows((t, dth, dv), origin, IMU_COLUMNS)
         i = sc["decrease"]
@@ -430,11 +523,13 @@ def _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, g
             if done:
                 break
             continue
+        whole = lo == 0 and hi == len(t)  # the block is inside the span: the scan above is the sanitizer's
         t, dth, dv = t[lo:hi], dth[lo:hi], dv[lo:hi]
         # the sanitizer's scan: anything it would repair or refuse goes to the batch path
         first = n_kept == 0
-        sc = scan_imu(t, dth, dv, t0=t0 if first else float(last_kept), max_rate_rps=opts["max_rate_rps"],
-                      max_accel_mps2=opts["max_accel_mps2"], gap_factor=opts["gap_factor"])
+        if not (inside and whole):
+            sc = scan_imu(t, dth, dv, t0=t0 if first else float(last_kept), max_rate_rps=opts["max_rate_rps"],
+                          max_accel_mps2=opts["max_accel_mps2"], gap_factor=opts["gap_factor"])
         if sc["repeats"] or (not first and not t[0] > last_kept):
             raise Fallback("repeated IMU times (the sanitizer drops duplicates)")
         if dt0 is None:
@@ -462,7 +557,6 @@ def _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, g
         t_mark = clock()
         if done:
             break
-    blocks.close()
     if t0 is None or n_kept < 2:
         raise Fallback("too few IMU records in the run's span (the batch path names the key)")
     n = stream.finish()
