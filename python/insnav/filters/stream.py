@@ -467,18 +467,28 @@ def _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, g
 def _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw, columns,
                    precision, output_rate_hz, block_lines, set_decimation, clock, timings, loose_engine_args,
                    sanitize_gnss, CSV_DECIMALS, Solution, _selected, _imu_report, nav_solution, IMU_COLUMNS, t_mark):
+    health = _Health()
+    writer = _Writer(tmp, columns, precision, health, CSV_DECIMALS, _selected, nav_solution)
+    try:
+        return _stream_run(blocks, writer, health, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s,
+                           gnss_raw, columns, precision, output_rate_hz, block_lines, set_decimation, clock, timings,
+                           loose_engine_args, sanitize_gnss, _imu_report, IMU_COLUMNS, t_mark)
+    finally:
+        writer._pool.shutdown(wait=True)  # no write may outlive the run (the caller removes the file)
+
+
+def _stream_run(blocks, writer, health, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw,
+                columns, precision, output_rate_hz, block_lines, set_decimation, clock, timings, loose_engine_args,
+                sanitize_gnss, _imu_report, IMU_COLUMNS, t_mark):
     t0 = None
     t_prev = None  # the last sample's time (crop and checks across blocks)
     line_prev = 0
     n_kept = 0
     stream = None
-    header_written = False
-    health = _Health()
     coarse = None
     dt0 = None
     rows_total = 0
     n_blocks = 0
-    sel = None
     rep = _imu_report()
     done = False
     gnss = used_gnss = None
@@ -514,7 +524,6 @@ def _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, st
                                                            output_rate_hz, set_decimation, loose_engine_args,
                                                            sanitize_gnss, block_lines)
             cfg.output_decimation = dec_k
-            sel = None
         hi = len(t) if end_s is None else int(np.searchsorted(t, end_s, side="right"))
         if hi < len(t):
             done = True
@@ -549,9 +558,7 @@ def _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, st
             n = stream.run_block(t[a:a + block_lines], dth[a:a + block_lines], dv[a:a + block_lines])
             timings["filter"] += clock() - t_mark
             t_mark = clock()
-            sel = _write_rows(stream, n, tmp, health, columns, precision, sel, header_written, CSV_DECIMALS,
-                              Solution, _selected, nav_solution)
-            header_written = header_written or n > 0
+            writer.add(stream, n, clock)
             rows_total += n
             timings["write"] += clock() - t_mark
         t_mark = clock()
@@ -560,10 +567,12 @@ def _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, st
     if t0 is None or n_kept < 2:
         raise Fallback("too few IMU records in the run's span (the batch path names the key)")
     n = stream.finish()
-    if n:
-        _write_rows(stream, n, tmp, health, columns, precision, sel, header_written, CSV_DECIMALS, Solution,
-                    _selected, nav_solution)
-        rows_total += n
+    t_mark = clock()
+    writer.add(stream, n, clock)
+    rows_total += n
+    writer.close(clock)
+    timings["write"] += clock() - t_mark
+    t_mark = clock()
     if health.bad:
         raise Fallback("the health check found a bad row (the batch path names it)")
     rec = stream.records()
@@ -675,21 +684,55 @@ def _start(ds0, cfg, opts, t0, t_first, end_s, gnss_raw, output_rate_hz, set_dec
     return stream, gnss, gnss_rep, k, _Coarse(kc)
 
 
-def _write_rows(stream, n, tmp, health, columns, precision, sel, header_written, CSV_DECIMALS, Solution, _selected,
-                nav_solution):
-    """The block's rows: to degrees in place, the health scan, appended to the CSV."""
-    if n == 0:
-        return sel
-    out = stream.rows()
-    e = np.zeros(0)
-    sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
-    if nonfinite:
-        raise Fallback("a non-finite row (the batch path names it)")
-    health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n), [sol.sigma_pos_n_m, sol.sigma_vel_n_mps,
-                                                                       sol.sigma_att_deg])
-    cols = _selected(sol, columns)
-    dec = [CSV_DECIMALS[nm] if precision == "resolution" else -1 for nm, _, _ in cols]
-    header = "" if header_written else ",".join(nm for nm, _, _ in cols) + "\n"
-    _core.write_table(str(tmp), header, [np.asarray(x, float) for _, x, _ in cols], [float(f) for _, _, f in cols],
-                      dec, threads=threads(), append=header_written)
-    return cols
+class _Writer:
+    """The CSV rows appended on a writer thread, one block behind the filter
+    (``_core.write_table`` releases the GIL), so that formatting block i
+    overlaps filtering block i + 1; at most one block waits (bounded memory).
+    :meth:`close` waits for the last write (and raises its error)."""
+
+    def __init__(self, tmp, columns, precision, health, CSV_DECIMALS, _selected, nav_solution):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.tmp, self.columns, self.precision, self.health = str(tmp), columns, precision, health
+        self._dec, self._selected, self._nav_solution = CSV_DECIMALS, _selected, nav_solution
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="insnav-csv-writer")
+        self._pending = None
+        self._header_done = False
+        self.wait_s = 0.0
+
+    def add(self, stream, n: int, clock) -> None:
+        """The last run_block's n rows: copied out of the engine's buffers, to degrees, the health scan, queued."""
+        if n == 0:
+            return
+        out = {k: np.array(v) for k, v in stream.rows().items()}  # the engine reuses its buffers
+        e = np.zeros(0)
+        sol, nonfinite = self._nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
+        if nonfinite:
+            raise Fallback("a non-finite row (the batch path names it)")
+        self.health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n),
+                        [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
+        cols = self._selected(sol, self.columns)
+        dec = [self._dec[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
+        header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
+        t = clock()
+        self._wait()
+        self.wait_s += clock() - t
+        self._pending = self._pool.submit(_core.write_table, self.tmp, header, [np.asarray(x, float) for _, x, _ in cols],
+                                          [float(f) for _, _, f in cols], dec, threads=threads(),
+                                          append=self._header_done)
+        self._header_done = True
+
+    def _wait(self) -> None:
+        if self._pending is not None:
+            p, self._pending = self._pending, None
+            p.result()
+
+    def close(self, clock=None) -> None:
+        """Wait for the last block (its error raised); the thread ends."""
+        t = clock() if clock else 0.0
+        try:
+            self._wait()
+        finally:
+            self._pool.shutdown(wait=True)
+            if clock:
+                self.wait_s += clock() - t
