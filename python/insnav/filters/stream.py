@@ -297,9 +297,14 @@ class _Coarse:
             t.append(pt[-1:])
             dth.append(pth.sum(axis=0, keepdims=True))
             dv.append(pv.sum(axis=0, keepdims=True))
+        self.t, self.dth, self.dv, self.pend = [], [], [], None  # the pieces go as the arrays are made
         if not t:
             return ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), origin=RowOrigin(source, 0))
-        return ImuData(np.concatenate(t), np.concatenate(dth), np.concatenate(dv), origin=RowOrigin(source, 0))
+        out = []
+        for parts in (t, dth, dv):
+            out.append(np.concatenate(parts))
+            parts.clear()
+        return ImuData(*out, origin=RowOrigin(source, 0))
 
 
 class _Health:
@@ -370,12 +375,6 @@ class StreamResult:
     timings: dict = field(default_factory=dict)
 
 
-def _sanitize_opts(cfg) -> dict:
-    from .sanitize import DEFAULTS
-
-    return {**DEFAULTS, **(cfg.sanitize or {})}
-
-
 def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int | None, start_s: float,
                      end_s: float | None, gnss_raw: GnssFixes, columns=None, precision: str = "resolution",
                      output_rate_hz: float | None = None, block_lines: int | None = None,
@@ -403,11 +402,16 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
     columns, precision
         As :meth:`Solution.save`.
     output_rate_hz : float, optional
-        ``--output-rate``: the decimation from the first block's median interval.
-    set_decimation : callable, optional
-        ``(t_first_block, rate_hz) -> k`` (``insnav run``'s rule and message).
+        ``--output-rate`` [Hz]: the decimation from the first block's median interval.
     block_lines : int, optional
         IMU lines per block (default :data:`BLOCK_LINES`).
+    set_decimation : callable, optional
+        ``(t_first_block, rate_hz) -> k`` (``insnav run``'s rule and message).
+
+    Returns
+    -------
+    StreamResult
+        Its ``csv_tmp`` is complete; the caller renames it into place.
 
     Raises
     ------
@@ -417,220 +421,30 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
         A malformed IMU line, a decreasing time, non-finite values (naming file and line).
     """
     from . import _as_config
-    from .loose import loose_engine_args
-    from .sanitize import sanitize_gnss
-    from .solution import CSV_DECIMALS, PRECISIONS, Solution, _selected
+    from .solution import PRECISIONS
 
-    import time as _time
-
-    clock = _time.perf_counter
-    timings = dict(read=0.0, filter=0.0, write=0.0)
     if precision not in PRECISIONS:
         raise ValueError(f"precision {precision!r}: use one of {', '.join(PRECISIONS)}")
-    cfg = _as_config(cfg)
-    block_lines = int(BLOCK_LINES if block_lines is None else block_lines)
-    opts = _sanitize_opts(cfg)
-    imu_src = str(imu_path)
-    from .sanitize import _imu_report
-
     out = Path(out)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part" + out.suffix, dir=out.parent)
     os.close(fd)
     tmp = Path(tmp)
+    run = _BlockRun(ds0, _as_config(cfg), tmp, start_s=start_s, end_s=end_s, gnss_raw=gnss_raw,
+                    output_rate_hz=output_rate_hz, set_decimation=set_decimation,
+                    block_lines=int(BLOCK_LINES if block_lines is None else block_lines))
     try:
-        res = _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw, columns,
-                      precision, output_rate_hz, block_lines, set_decimation, clock, timings,
-                      loose_engine_args, sanitize_gnss, CSV_DECIMALS, Solution, _selected, _imu_report)
+        from ..io.kfgins import IMU_COLUMNS
+
+        blocks = _Prefetch(imu_text_blocks(imu_path, imu_ncols, block_lines=run.block_lines, names=IMU_COLUMNS))
+        writer = _Writer(tmp, columns, precision, run.health)
+        try:
+            return run.run(blocks, writer, str(imu_path))
+        finally:
+            blocks.close()
+            writer.shutdown()  # no write may outlive the run (the file is removed below on an error)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    return res
-
-
-def _stream(ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw, columns, precision,
-            output_rate_hz, block_lines, set_decimation, clock, timings, loose_engine_args, sanitize_gnss,
-            CSV_DECIMALS, Solution, _selected, _imu_report):
-    from ..io.kfgins import IMU_COLUMNS
-    from ._assemble import nav_solution
-
-    t_mark = clock()
-    blocks = _Prefetch(imu_text_blocks(imu_path, imu_ncols, block_lines=block_lines, names=IMU_COLUMNS))
-    try:
-        return _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw,
-                              columns, precision, output_rate_hz, block_lines, set_decimation, clock, timings,
-                              loose_engine_args, sanitize_gnss, CSV_DECIMALS, Solution, _selected, _imu_report,
-                              nav_solution, IMU_COLUMNS, t_mark)
-    finally:
-        blocks.close()
-
-
-def _stream_blocks(blocks, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw, columns,
-                   precision, output_rate_hz, block_lines, set_decimation, clock, timings, loose_engine_args,
-                   sanitize_gnss, CSV_DECIMALS, Solution, _selected, _imu_report, nav_solution, IMU_COLUMNS, t_mark):
-    health = _Health()
-    writer = _Writer(tmp, columns, precision, health, CSV_DECIMALS, _selected, nav_solution)
-    try:
-        return _stream_run(blocks, writer, health, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s,
-                           gnss_raw, columns, precision, output_rate_hz, block_lines, set_decimation, clock, timings,
-                           loose_engine_args, sanitize_gnss, _imu_report, IMU_COLUMNS, t_mark)
-    finally:
-        writer._pool.shutdown(wait=True)  # no write may outlive the run (the caller removes the file)
-
-
-def _stream_run(blocks, writer, health, ds0, imu_path, imu_src, cfg, opts, tmp, imu_ncols, start_s, end_s, gnss_raw,
-                columns, precision, output_rate_hz, block_lines, set_decimation, clock, timings, loose_engine_args,
-                sanitize_gnss, _imu_report, IMU_COLUMNS, t_mark):
-    t0 = None
-    t_prev = None  # the last sample's time (crop and checks across blocks)
-    line_prev = 0
-    n_kept = 0
-    stream = None
-    coarse = None
-    dt0 = None
-    rows_total = 0
-    n_blocks = 0
-    rep = _imu_report()
-    done = False
-    gnss = used_gnss = None
-    gnss_rep = None
-    for blk in blocks:
-        n_blocks += 1
-        t, dth, dv, origin = blk.t, blk.dtheta_b, blk.dv_b, blk.origin
-        # the reader's checks (read_kfgins_imu), on every line of the file; inside the run's span the
-        # same scan gives the sanitizer's (one pass)
-        inside = t0 is not None and n_kept > 0 and (end_s is None or t[-1] <= end_s)
-        sc = scan_imu(t, dth, dv, t0=float(last_kept), max_rate_rps=opts["max_rate_rps"],
-                      max_accel_mps2=opts["max_accel_mps2"], gap_factor=opts["gap_factor"]) if inside else \
-            scan_imu(t, dth, dv)
-        if sc["nonfinite_t"] >= 0 or sc["nonfinite_dtheta"] >= 0 or sc["nonfinite_dv"] >= 0:
-            check_finite_rows((t, dth, dv), origin, IMU_COLUMNS)
-        i = sc["decrease"]
-        if i >= 0:
-            raise ValueError(f"{origin.where(i)}: time {float(t[i])!r} does not increase "
-                             f"(previous record at {float(t[i - 1])!r}, line {origin.line(i - 1)})")
-        if t_prev is not None and t[0] < t_prev:
-            raise ValueError(f"{origin.where(0)}: time {float(t[0])!r} does not increase "
-                             f"(previous record at {float(t_prev)!r}, line {line_prev})")
-        # the run's span: t0 = the first sample at or after starttime, then (t0, endtime]
-        lo = 0
-        if t0 is None:
-            i0 = int(np.searchsorted(t, start_s))
-            if i0 >= len(t):
-                t_prev, line_prev = float(t[-1]), origin.line(len(t) - 1)
-                continue
-            t0 = float(t[i0])
-            lo = int(np.searchsorted(t, t0, side="right"))
-            stream, gnss, gnss_rep, dec_k, coarse = _start(ds0, cfg, opts, t0, t[lo:], end_s, gnss_raw,
-                                                           output_rate_hz, set_decimation, loose_engine_args,
-                                                           sanitize_gnss, block_lines)
-            cfg.output_decimation = dec_k
-        hi = len(t) if end_s is None else int(np.searchsorted(t, end_s, side="right"))
-        if hi < len(t):
-            done = True
-        t_prev, line_prev = float(t[-1]), origin.line(len(t) - 1)
-        if hi <= lo:
-            if done:
-                break
-            continue
-        whole = lo == 0 and hi == len(t)  # the block is inside the span: the scan above is the sanitizer's
-        t, dth, dv = t[lo:hi], dth[lo:hi], dv[lo:hi]
-        # the sanitizer's scan: anything it would repair or refuse goes to the batch path
-        first = n_kept == 0
-        if not (inside and whole):
-            sc = scan_imu(t, dth, dv, t0=t0 if first else float(last_kept), max_rate_rps=opts["max_rate_rps"],
-                          max_accel_mps2=opts["max_accel_mps2"], gap_factor=opts["gap_factor"])
-        if sc["repeats"] or (not first and not t[0] > last_kept):
-            raise Fallback("repeated IMU times (the sanitizer drops duplicates)")
-        if dt0 is None:
-            dt0 = sc["dt0"]
-        elif len(t) > 16 and abs(sc["dt0"] - dt0) > 1e-6 * dt0:
-            raise Fallback(f"the IMU interval changes ({dt0:.6g} s -> {sc['dt0']:.6g} s)")
-        if sc["rate"] >= 0 or sc["accel"] >= 0:
-            raise Fallback("an implausible IMU rate (the sanitizer names it)")
-        if sc["gaps"] or (not first and t[0] - last_kept > opts["gap_factor"] * dt0):
-            raise Fallback("an IMU gap (the sanitizer bridges it)")
-        coarse.add(t, dth, dv)
-        n_kept += len(t)
-        last_kept = float(t[-1])
-        timings["read"] += clock() - t_mark
-        for a in range(0, len(t), block_lines):  # the engine's row buffers hold block_lines samples' rows
-            t_mark = clock()
-            n = stream.run_block(t[a:a + block_lines], dth[a:a + block_lines], dv[a:a + block_lines])
-            timings["filter"] += clock() - t_mark
-            t_mark = clock()
-            writer.add(stream, n, clock)
-            rows_total += n
-            timings["write"] += clock() - t_mark
-        t_mark = clock()
-        if done:
-            break
-    if t0 is None or n_kept < 2:
-        raise Fallback("too few IMU records in the run's span (the batch path names the key)")
-    n = stream.finish()
-    t_mark = clock()
-    writer.add(stream, n, clock)
-    rows_total += n
-    writer.close(clock)
-    timings["write"] += clock() - t_mark
-    t_mark = clock()
-    if health.bad:
-        raise Fallback("the health check found a bad row (the batch path names it)")
-    rec = stream.records()
-    # the GNSS records past the last IMU sample: cut as the batch loader cuts them, if that changes nothing else
-    t_last = last_kept
-    keep = np.asarray(gnss.t_valid) <= t_last
-    cut_raw = (np.asarray(gnss_raw.t_valid) > t0) & (np.asarray(gnss_raw.t_valid) <= t_last)
-    if not keep.all():
-        exact = GnssFixes(*(np.asarray(getattr(gnss_raw, f))[cut_raw] for f in
-                            ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n",
-                             "sigma_vel_n")),
-                          origin=None if gnss_raw.origin is None else gnss_raw.origin.take(cut_raw, len(cut_raw)))
-        g2, rep2 = sanitize_gnss(exact, min_h_m=opts["min_h_m"], max_h_m=opts["max_h_m"], source="gnss")
-        counts = ("gnss_records_in", "gnss_records_out")
-        same = ({k: v for k, v in rep2.items() if k not in counts} == {k: v for k, v in gnss_rep.items()
-                                                                        if k not in counts}
-                and len(g2) == int(keep.sum())
-                and all(np.array_equal(np.asarray(getattr(g2, f), float), np.asarray(getattr(gnss, f), float)[keep],
-                                       equal_nan=True)
-                        for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n"))
-                and _cycle(cfg, np.asarray(g2.t_valid)) == _cycle(cfg, np.asarray(gnss.t_valid)))
-        if not same:
-            raise Fallback("a GNSS record after the last IMU sample changes the set-up")
-        gnss, gnss_rep = g2, rep2
-        for k in ("innovation", "nis", "log_det_s", "status"):
-            rec[k] = rec[k][keep]
-    order = np.argsort(np.asarray(gnss.t_valid, float), kind="stable")
-    gnss_t = np.asarray(gnss.t_valid, float)[order]
-    rep["imu_samples_in"] = rep["imu_samples_out"] = n_kept
-    coarse_imu = coarse.imu(imu_src)
-    scenario = dict(ds0.scenario or {})
-    scenario["gnss_outside_imu_span"] = int(cut_raw.size - np.count_nonzero(cut_raw))
-    ds = dataclasses.replace(ds0, imu=coarse_imu, gnss=gnss, scenario=scenario)
-    # the unit and time-base checks on the IMU summed to 10 Hz (a failure: the batch path's message)
-    from ..data.checks import check_dataset
-
-    try:
-        check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
-    except ValueError as exc:
-        raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]}...)") from None
-    z = np.zeros((0, 3))
-    sol = StreamedSolution(
-        t=np.zeros(0), lat_deg=np.zeros(0), lon_deg=np.zeros(0), h_m=np.zeros(0), v_n=z, roll_deg=np.zeros(0),
-        pitch_deg=np.zeros(0), yaw_deg=np.zeros(0), sigma_pos_n_m=z, sigma_vel_n_mps=z, sigma_att_deg=z,
-        acc_bias_mps2=z, gyro_bias_rps=z, acc_scale=z, gyro_scale=z, gnss_t=gnss_t, innovation=rec["innovation"],
-        nis=rec["nis"], gnss_status=rec["status"], log_det_s=rec["log_det_s"],
-        summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=int(cfg.layout), updates=int(rec["updates"]),
-                     rejected=int(rec["rejected"]), gate_reopened=int(rec["gate_reopened"]),
-                     gate_outage_accepted=int(rec["gate_outage_accepted"]),
-                     cholesky_repairs=int(rec["cholesky_repairs"]), gnss_records=len(gnss_t)))
-    sol.n_rows = rows_total
-    sol.summary["sanitize"] = {**rep, **gnss_rep}
-    from .health import assess
-
-    sol.summary["health"] = assess(sol, imu_t_end=t_last, scan=health.scan(), n_rows=rows_total)
-    timings["filter"] += clock() - t_mark
-    return StreamResult(solution=sol, dataset=ds, config=cfg, csv_tmp=tmp, rows=rows_total, samples=n_kept,
-                        blocks=n_blocks, timings=timings)
 
 
 class StreamedSolution(Solution):
@@ -643,45 +457,237 @@ class StreamedSolution(Solution):
         return int(self.n_rows)
 
 
-def _cycle(cfg, record_t) -> float:
+def _median_spacing(cfg, record_t) -> float:
+    """The outage cycle's GNSS period as :func:`insnav.filters._setup.engine_config` takes it [s]."""
     d = np.diff(np.sort(np.asarray(record_t, float)))
     d = d[d != 0]
     return cfg.cycle_period_s if cfg.cycle_period_s is not None else (median(d) if d.size else 1.0)
 
 
-def _start(ds0, cfg, opts, t0, t_first, end_s, gnss_raw, output_rate_hz, set_decimation, loose_engine_args,
-           sanitize_gnss, block_lines):
-    """The engine at t0: the GNSS records in (t0, endtime] sanitized, the output
-    decimation from the first block, the set-up of the batch loose runner."""
-    tv = np.asarray(gnss_raw.t_valid)
-    g = (tv > t0) & (tv <= (np.inf if end_s is None else end_s))
-    gnss = GnssFixes(*(np.asarray(getattr(gnss_raw, f))[g] for f in
-                       ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")),
-                     origin=None if gnss_raw.origin is None else gnss_raw.origin.take(g, len(g)))
-    gnss, gnss_rep = sanitize_gnss(gnss, min_h_m=opts["min_h_m"], max_h_m=opts["max_h_m"], source="gnss")
-    k = 1
-    if output_rate_hz is not None:
-        k = set_decimation(t_first, output_rate_hz)
-    cfg.output_decimation = k
-    ds = dataclasses.replace(ds0, t0=float(t0), gnss=gnss)
-    rows = np.column_stack([gnss.t_valid, np.asarray(gnss.lat_deg) * DEG, np.asarray(gnss.lon_deg) * DEG, gnss.h_m,
-                            gnss.v_n, gnss.sigma_pos_n, gnss.sigma_vel_n]).astype(float) if len(gnss) else \
-        np.zeros((0, 13))
-    if len(rows):
-        order = np.argsort(rows[:, 0], kind="stable")
-        rows = np.ascontiguousarray(rows[order])
-        if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
-            rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
-            rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
-        from .._validate import check_finite
+_GNSS_FIELDS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")
 
-        check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
-    a = loose_engine_args(ds, cfg, rows[:, 0].copy())
-    stream = _core.LooseStream(cfg.filter, a.layout, rows, a.init, a.P0, a.imu_correction, a.imu_model, a.config,
-                               int(block_lines))
-    dt_first = median(np.diff(t_first)) if len(t_first) > 1 else 0.0
-    kc = max(1, int(round(1.0 / (CHECK_RATE_HZ * dt_first)))) if dt_first > 0 else 1
-    return stream, gnss, gnss_rep, k, _Coarse(kc)
+
+def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
+    return GnssFixes(*(np.asarray(getattr(g, f))[keep] for f in _GNSS_FIELDS),
+                     origin=None if g.origin is None else g.origin.take(keep, len(keep)))
+
+
+class _BlockRun:
+    """One block-by-block run: the reader's and the sanitizer's checks per
+    block, the span (t0, endtime], the engine, the output rows, and at the end
+    the per-record outputs, the input checks and the summary of the batch run."""
+
+    def __init__(self, ds0, cfg, tmp: Path, *, start_s, end_s, gnss_raw, output_rate_hz, set_decimation,
+                 block_lines: int):
+        from .sanitize import DEFAULTS, _imu_report
+
+        self.ds0, self.cfg, self.tmp = ds0, cfg, tmp
+        self.start_s, self.end_s, self.gnss_raw = start_s, end_s, gnss_raw
+        self.output_rate_hz, self.set_decimation = output_rate_hz, set_decimation
+        self.block_lines = block_lines
+        self.opts = {**DEFAULTS, **(cfg.sanitize or {})}
+        self.imu_report = _imu_report()
+        self.health = _Health()
+        self.timings = dict(read=0.0, filter=0.0, write=0.0)
+        import time
+
+        self.clock = time.perf_counter
+        self.t0 = None  # the initial state's time: the first sample at or after starttime [s]
+        self.t_prev = None  # the last sample read, and its line (the reader's checks across blocks)
+        self.line_prev = 0
+        self.n_kept = 0  # samples in the run's span so far
+        self.last_kept = None  # the last of them [s]
+        self.dt0 = None  # the nominal interval (the first block's median) [s]
+        self.stream = self.gnss = self.gnss_rep = self.coarse = None
+        self.rows = 0
+
+    # --- per block ---------------------------------------------------------------------------
+    def _scan(self, t, dth, dv, t0):
+        o = self.opts
+        return scan_imu(t, dth, dv, t0=t0, max_rate_rps=o["max_rate_rps"], max_accel_mps2=o["max_accel_mps2"],
+                        gap_factor=o["gap_factor"])
+
+    def _reader_checks(self, blk: ImuBlock, sc: dict) -> None:
+        """read_kfgins_imu's checks on every line: non-finite values, decreasing time (across blocks too)."""
+        from ..io.kfgins import IMU_COLUMNS
+
+        t, origin = blk.t, blk.origin
+        if sc["nonfinite_t"] >= 0 or sc["nonfinite_dtheta"] >= 0 or sc["nonfinite_dv"] >= 0:
+            check_finite_rows((t, blk.dtheta_b, blk.dv_b), origin, IMU_COLUMNS)
+        i = sc["decrease"]
+        if i >= 0:
+            raise ValueError(f"{origin.where(i)}: time {float(t[i])!r} does not increase "
+                             f"(previous record at {float(t[i - 1])!r}, line {origin.line(i - 1)})")
+        if self.t_prev is not None and t[0] < self.t_prev:
+            raise ValueError(f"{origin.where(0)}: time {float(t[0])!r} does not increase "
+                             f"(previous record at {self.t_prev!r}, line {self.line_prev})")
+        self.t_prev, self.line_prev = float(t[-1]), origin.line(len(t) - 1)
+
+    def _sanitizer_checks(self, t, sc: dict) -> None:
+        """What the sanitizer (filters/sanitize.py) would repair or refuse: a Fallback."""
+        first = self.n_kept == 0
+        if sc["repeats"] or (not first and not t[0] > self.last_kept):
+            raise Fallback("repeated IMU times (the sanitizer drops duplicates)")
+        if self.dt0 is None:
+            self.dt0 = sc["dt0"]
+        elif len(t) > 16 and abs(sc["dt0"] - self.dt0) > 1e-6 * self.dt0:
+            raise Fallback(f"the IMU interval changes ({self.dt0:.6g} s -> {sc['dt0']:.6g} s)")
+        if sc["rate"] >= 0 or sc["accel"] >= 0:
+            raise Fallback("an implausible IMU rate (the sanitizer names it)")
+        if sc["gaps"] or (not first and t[0] - self.last_kept > self.opts["gap_factor"] * self.dt0):
+            raise Fallback("an IMU gap (the sanitizer bridges it)")
+
+    def run(self, blocks, writer, imu_source: str) -> StreamResult:
+        clock, tm = self.clock, self.timings
+        t_mark = clock()
+        n_blocks = 0
+        for blk in blocks:
+            n_blocks += 1
+            t, dth, dv = blk.t, blk.dtheta_b, blk.dv_b
+            # inside the run's span one scan with the sanitizer's limits gives the reader's checks too
+            inside = self.n_kept > 0 and (self.end_s is None or t[-1] <= self.end_s)
+            sc = self._scan(t, dth, dv, self.last_kept) if inside else scan_imu(t, dth, dv)
+            self._reader_checks(blk, sc)
+            lo = 0
+            if self.t0 is None:  # the initial state: the first sample at or after starttime
+                i0 = int(np.searchsorted(t, self.start_s))
+                if i0 == len(t):
+                    continue
+                self.t0 = float(t[i0])
+                lo = int(np.searchsorted(t, self.t0, side="right"))
+                self._start(t[lo:])
+            hi = len(t) if self.end_s is None else int(np.searchsorted(t, self.end_s, side="right"))
+            last = hi < len(t)  # endtime reached: the rest of the file is not read
+            if hi > lo:
+                if not (inside and lo == 0 and hi == len(t)):
+                    t, dth, dv = t[lo:hi], dth[lo:hi], dv[lo:hi]
+                    sc = self._scan(t, dth, dv, self.t0 if self.n_kept == 0 else self.last_kept)
+                self._sanitizer_checks(t, sc)
+                self.coarse.add(t, dth, dv)
+                self.n_kept += len(t)
+                self.last_kept = float(t[-1])
+                tm["read"] += clock() - t_mark
+                for a in range(0, len(t), self.block_lines):  # the engine's buffers hold block_lines rows
+                    t_mark = clock()
+                    n = self.stream.run_block(t[a:a + self.block_lines], dth[a:a + self.block_lines],
+                                              dv[a:a + self.block_lines])
+                    tm["filter"] += clock() - t_mark
+                    t_mark = clock()
+                    writer.add(self.stream, n)
+                    self.rows += n
+                    tm["write"] += clock() - t_mark
+                t_mark = clock()
+            if last:
+                break
+        tm["read"] += clock() - t_mark
+        if self.t0 is None or self.n_kept < 2:
+            raise Fallback("too few IMU records in the run's span (the batch path names the key)")
+        t_mark = clock()
+        n = self.stream.finish()
+        writer.add(self.stream, n)
+        self.rows += n
+        writer.close()
+        tm["write"] += clock() - t_mark
+        t_mark = clock()
+        if self.health.bad:
+            raise Fallback("the health check found a bad row (the batch path names it)")
+        res = self._result(imu_source, n_blocks)
+        tm["filter"] += clock() - t_mark
+        return res
+
+    # --- start and end -----------------------------------------------------------------------
+    def _start(self, t_first) -> None:
+        """The engine at t0: the GNSS records in (t0, endtime] sanitized (the batch loader's cut and
+        sanitize_gnss), the output decimation from the first block, the batch loose runner's set-up."""
+        from .loose import loose_engine_args
+        from .sanitize import sanitize_gnss
+
+        cfg, o = self.cfg, self.opts
+        tv = np.asarray(self.gnss_raw.t_valid)
+        g = (tv > self.t0) & (tv <= (np.inf if self.end_s is None else self.end_s))
+        self.gnss, self.gnss_rep = sanitize_gnss(_gnss_take(self.gnss_raw, g), min_h_m=o["min_h_m"],
+                                                 max_h_m=o["max_h_m"], source="gnss")
+        cfg.output_decimation = 1
+        if self.output_rate_hz is not None:
+            cfg.output_decimation = self.set_decimation(t_first, self.output_rate_hz)
+        gn = self.gnss
+        rows = np.column_stack([gn.t_valid, np.asarray(gn.lat_deg) * DEG, np.asarray(gn.lon_deg) * DEG, gn.h_m,
+                                gn.v_n, gn.sigma_pos_n, gn.sigma_vel_n]).astype(float) if len(gn) else \
+            np.zeros((0, 13))
+        if len(rows):  # as run_loose
+            rows = np.ascontiguousarray(rows[np.argsort(rows[:, 0], kind="stable")])
+            if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
+                rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
+                rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
+            from .._validate import check_finite
+
+            check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+        a = loose_engine_args(dataclasses.replace(self.ds0, t0=self.t0, gnss=gn), cfg, rows[:, 0].copy())
+        self.stream = _core.LooseStream(cfg.filter, a.layout, rows, a.init, a.P0, a.imu_correction, a.imu_model,
+                                        a.config, self.block_lines)
+        dt = median(np.diff(t_first)) if len(t_first) > 1 else 0.0
+        self.coarse = _Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1)
+
+    def _exact_gnss_cut(self, rec: dict) -> None:
+        """The GNSS records after the last IMU sample: the batch loader cuts them before the run.  They
+        changed nothing when the sanitizer treats the rest alike and the GNSS period is the same; their
+        outputs are then dropped, else the batch path runs."""
+        from .sanitize import sanitize_gnss
+
+        keep = np.asarray(self.gnss.t_valid) <= self.last_kept
+        if keep.all():
+            return
+        tv = np.asarray(self.gnss_raw.t_valid)
+        g2, rep2 = sanitize_gnss(_gnss_take(self.gnss_raw, (tv > self.t0) & (tv <= self.last_kept)),
+                                 min_h_m=self.opts["min_h_m"], max_h_m=self.opts["max_h_m"], source="gnss")
+        counts = ("gnss_records_in", "gnss_records_out")
+        same = ({k: v for k, v in rep2.items() if k not in counts}
+                == {k: v for k, v in self.gnss_rep.items() if k not in counts}
+                and len(g2) == int(keep.sum())
+                and all(np.array_equal(np.asarray(getattr(g2, f), float),
+                                       np.asarray(getattr(self.gnss, f), float)[keep], equal_nan=True)
+                        for f in _GNSS_FIELDS if f != "t_arrival")
+                and _median_spacing(self.cfg, g2.t_valid) == _median_spacing(self.cfg, self.gnss.t_valid))
+        if not same:
+            raise Fallback("a GNSS record after the last IMU sample changes the set-up")
+        self.gnss, self.gnss_rep = g2, rep2
+        cut = int(keep.sum())  # the engine's records are in time order: the cut ones are the last
+        for k in ("innovation", "nis", "log_det_s", "status"):
+            rec[k] = rec[k][:cut]
+
+    def _result(self, imu_source: str, n_blocks: int) -> StreamResult:
+        from ..data.checks import check_dataset
+        from .health import assess
+
+        cfg = self.cfg
+        rec = self.stream.records()
+        self._exact_gnss_cut(rec)
+        gnss_t = np.sort(np.asarray(self.gnss.t_valid, float), kind="stable")
+        tv = np.asarray(self.gnss_raw.t_valid)
+        n_in = int(np.count_nonzero((tv > self.t0) & (tv <= self.last_kept)))
+        scenario = {**(self.ds0.scenario or {}), "gnss_outside_imu_span": int(tv.size - n_in)}
+        ds = dataclasses.replace(self.ds0, t0=self.t0, imu=self.coarse.imu(imu_source), gnss=self.gnss,
+                                 scenario=scenario)
+        try:  # the unit and time-base checks on the IMU summed to 10 Hz (a failure: the batch path's message)
+            check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
+        except ValueError as exc:
+            raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]})") from None
+        z, e = np.zeros((0, 3)), np.zeros(0)
+        sol = StreamedSolution(
+            t=e, lat_deg=e, lon_deg=e, h_m=e, v_n=z, roll_deg=e, pitch_deg=e, yaw_deg=e, sigma_pos_n_m=z,
+            sigma_vel_n_mps=z, sigma_att_deg=z, acc_bias_mps2=z, gyro_bias_rps=z, acc_scale=z, gyro_scale=z,
+            gnss_t=gnss_t, innovation=rec["innovation"], nis=rec["nis"], gnss_status=rec["status"],
+            log_det_s=rec["log_det_s"],
+            summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=int(cfg.layout),
+                         updates=int(rec["updates"]), rejected=int(rec["rejected"]),
+                         gate_reopened=int(rec["gate_reopened"]), gate_outage_accepted=int(rec["gate_outage_accepted"]),
+                         cholesky_repairs=int(rec["cholesky_repairs"]), gnss_records=len(gnss_t)))
+        sol.n_rows = self.rows
+        rep = dict(self.imu_report, imu_samples_in=self.n_kept, imu_samples_out=self.n_kept)
+        sol.summary["sanitize"] = {**rep, **self.gnss_rep}
+        sol.summary["health"] = assess(sol, imu_t_end=self.last_kept, scan=self.health.scan(), n_rows=self.rows)
+        return StreamResult(solution=sol, dataset=ds, config=cfg, csv_tmp=self.tmp, rows=self.rows,
+                            samples=self.n_kept, blocks=n_blocks, timings=self.timings)
 
 
 class _Writer:
@@ -690,34 +696,34 @@ class _Writer:
     overlaps filtering block i + 1; at most one block waits (bounded memory).
     :meth:`close` waits for the last write (and raises its error)."""
 
-    def __init__(self, tmp, columns, precision, health, CSV_DECIMALS, _selected, nav_solution):
+    def __init__(self, tmp, columns, precision, health):
         from concurrent.futures import ThreadPoolExecutor
 
         self.tmp, self.columns, self.precision, self.health = str(tmp), columns, precision, health
-        self._dec, self._selected, self._nav_solution = CSV_DECIMALS, _selected, nav_solution
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="insnav-csv-writer")
         self._pending = None
         self._header_done = False
-        self.wait_s = 0.0
 
-    def add(self, stream, n: int, clock) -> None:
+    def add(self, stream, n: int) -> None:
         """The last run_block's n rows: copied out of the engine's buffers, to degrees, the health scan, queued."""
+        from ._assemble import nav_solution
+        from .solution import CSV_DECIMALS, _selected
+
         if n == 0:
             return
         out = {k: np.array(v) for k, v in stream.rows().items()}  # the engine reuses its buffers
         e = np.zeros(0)
-        sol, nonfinite = self._nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
+        sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
         if nonfinite:
             raise Fallback("a non-finite row (the batch path names it)")
         self.health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n),
                         [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
-        cols = self._selected(sol, self.columns)
-        dec = [self._dec[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
+        cols = _selected(sol, self.columns)
+        dec = [CSV_DECIMALS[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
         header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
-        t = clock()
         self._wait()
-        self.wait_s += clock() - t
-        self._pending = self._pool.submit(_core.write_table, self.tmp, header, [np.asarray(x, float) for _, x, _ in cols],
+        self._pending = self._pool.submit(_core.write_table, self.tmp, header,
+                                          [np.asarray(x, float) for _, x, _ in cols],
                                           [float(f) for _, _, f in cols], dec, threads=threads(),
                                           append=self._header_done)
         self._header_done = True
@@ -727,12 +733,10 @@ class _Writer:
             p, self._pending = self._pending, None
             p.result()
 
-    def close(self, clock=None) -> None:
-        """Wait for the last block (its error raised); the thread ends."""
-        t = clock() if clock else 0.0
-        try:
-            self._wait()
-        finally:
-            self._pool.shutdown(wait=True)
-            if clock:
-                self.wait_s += clock() - t
+    def close(self) -> None:
+        """Wait for the last block (its error raised)."""
+        self._wait()
+
+    def shutdown(self) -> None:
+        """End the thread once its write is done (errors not raised: the run already failed or closed)."""
+        self._pool.shutdown(wait=True)
