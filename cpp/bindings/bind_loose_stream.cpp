@@ -1,9 +1,11 @@
 // _core.LooseStream: the loosely coupled run fed one block of IMU samples at a
 // time (engine/loose_stream.hpp), for `insnav run` in bounded memory
-// (python/insnav/filters/stream.py).  The row buffers of one block are
-// allocated once, at construction (capacity: the largest block); each
-// run_block fills them with the GIL released and returns the row count; the
-// arrays of rows() are views of those buffers, valid until the next call.
+// (python/insnav/filters/stream.py).  Two row buffers of one block each are
+// allocated once, at construction (capacity: the largest block), and used in
+// turn: each run_block fills the next one with the GIL released and returns
+// the row count; the arrays of rows() are views of the buffer just filled,
+// valid until the next-but-one call (a writer thread may format block i
+// while block i + 1 is filtered, without a copy).
 #include <memory>
 #include <string>
 #include <vector>
@@ -46,24 +48,30 @@ struct PyLooseStream {
   std::vector<GnssFix> fixes;
   LooseRecordBuffers rec;
   LooseOutputs rec_out;
-  NavBuffers rows;
+  NavBuffers rows[2];  // used in turn
+  int cur = 1;         // the buffer of the last call
   NavOutputs rows_out;
   py::ssize_t capacity;
   std::unique_ptr<StreamBase> impl;
   bool finished = false;
 
-  PyLooseStream(py::ssize_t m, py::ssize_t cap, int sigma_cols) : fixes(m), rec(m), rows(cap + 1, sigma_cols, false),
-                                                                  capacity(cap) {}
+  PyLooseStream(py::ssize_t m, py::ssize_t cap, int sigma_cols)
+      : fixes(m), rec(m), rows{NavBuffers(cap + 1, sigma_cols, false), NavBuffers(cap + 1, sigma_cols, false)},
+        capacity(cap) {}
 
-  void attach_rows() {
+  /// The next row buffer, empty.
+  NavOutputs& next_rows() {
+    cur ^= 1;
+    NavBuffers& b = rows[cur];
     rows_out = NavOutputs();
-    rows_out.t = rows.t.mutable_data();
-    rows_out.llh = rows.llh.mutable_data();
-    rows_out.v_n = rows.v_n.mutable_data();
-    rows_out.rpy = rows.rpy.mutable_data();
-    rows_out.sigma = rows.sigma.mutable_data();
-    rows_out.sigma_cols = static_cast<int>(rows.sigma.shape(1));
-    rows_out.imu_err = rows.imu_err.mutable_data();
+    rows_out.t = b.t.mutable_data();
+    rows_out.llh = b.llh.mutable_data();
+    rows_out.v_n = b.v_n.mutable_data();
+    rows_out.rpy = b.rpy.mutable_data();
+    rows_out.sigma = b.sigma.mutable_data();
+    rows_out.sigma_cols = static_cast<int>(b.sigma.shape(1));
+    rows_out.imu_err = b.imu_err.mutable_data();
+    return rows_out;
   }
 };
 
@@ -116,7 +124,6 @@ void bind_loose_stream(py::module_& m) {
           for (py::ssize_t i = 0; i < m; ++i)
             ps->fixes[i] = gnss_fix_from(gnss.data()[13 * i], gnss.data() + 13 * i + 1);
           ps->rec.attach(ps->rec_out, m);
-          ps->attach_rows();
           ps->impl = make_stream(filter, layout, mdl, cfg, ut, nav_state_from(init), P0, imu_correction_from(corr0),
                                  *ps);
           return ps;
@@ -131,21 +138,21 @@ void bind_loose_stream(py::module_& m) {
         if (imu.n > ps.capacity)
           throw py::value_error("LooseStream.run_block: " + std::to_string(imu.n) + " samples exceed block_samples " +
                                 std::to_string(ps.capacity));
-        ps.rows_out.n_out = 0;
+        NavOutputs& rows = ps.next_rows();
         {
           py::gil_scoped_release release;
-          ps.impl->run_block(imu.n, imu.t, imu.dtheta_b, imu.dv_b, ps.rows_out);
+          ps.impl->run_block(imu.n, imu.t, imu.dtheta_b, imu.dv_b, rows);
         }
-        return ps.rows_out.n_out;
+        return rows.n_out;
       },
       py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"),
       "Run the next samples; returns the rows written (rows() until the next call).");
   c.def("finish",
         [](PyLooseStream& ps) {
-          ps.rows_out.n_out = 0;
-          ps.impl->finish(ps.rows_out);
+          NavOutputs& rows = ps.next_rows();
+          ps.impl->finish(rows);
           ps.finished = true;
-          return ps.rows_out.n_out;
+          return rows.n_out;
         },
         "End of the IMU stream: the last sample's row when not yet written (0 or 1 rows).");
   c.def(
@@ -153,15 +160,17 @@ void bind_loose_stream(py::module_& m) {
       [](PyLooseStream& ps) {
         py::dict d;
         const py::slice r(0, ps.rows_out.n_out, 1);
-        d["t"] = ps.rows.t[r];
-        d["llh"] = ps.rows.llh[r];
-        d["v_n"] = ps.rows.v_n[r];
-        d["rpy"] = ps.rows.rpy[r];
-        d["sigma"] = ps.rows.sigma[r];
-        d["imu_err"] = ps.rows.imu_err[r];
+        NavBuffers& b = ps.rows[ps.cur];
+        d["t"] = b.t[r];
+        d["llh"] = b.llh[r];
+        d["v_n"] = b.v_n[r];
+        d["rpy"] = b.rpy[r];
+        d["sigma"] = b.sigma[r];
+        d["imu_err"] = b.imu_err[r];
         return d;
       },
-      "The rows of the last run_block / finish: views of the block buffers (radians, SI).");
+      "The rows of the last run_block / finish (radians, SI): views of its row buffer, valid until the "
+      "next-but-one call.");
   c.def("records",
         [](PyLooseStream& ps) {
           py::dict d;

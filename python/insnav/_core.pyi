@@ -235,7 +235,7 @@ class LooseStream:
     ) -> None: ...
     def run_block(self, t: npt.ArrayLike, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> int: ...  # rows written
     def finish(self) -> int: ...  # 0 or 1 rows: the last sample's
-    def rows(self) -> dict[str, np.ndarray]: ...  # t, llh, v_n, rpy, sigma, imu_err of the last call (views)
+    def rows(self) -> dict[str, np.ndarray]: ...  # t, llh, v_n, rpy, sigma, imu_err of the last call (views; two buffers in turn)
     def records(self) -> dict[str, Any]: ...  # innovation, nis, log_det_s, status per fix; counters
     @property
     def samples(self) -> int: ...

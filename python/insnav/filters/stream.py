@@ -705,13 +705,15 @@ class _Writer:
         self._header_done = False
 
     def add(self, stream, n: int) -> None:
-        """The last run_block's n rows: copied out of the engine's buffers, to degrees, the health scan, queued."""
+        """The last run_block's n rows: to degrees in place, the health scan, queued for the writer thread."""
         from ._assemble import nav_solution
         from .solution import CSV_DECIMALS, _selected
 
         if n == 0:
             return
-        out = {k: np.array(v) for k, v in stream.rows().items()}  # the engine reuses its buffers
+        # views of the engine's row buffer: it has two, used in turn, and the write of this block ends
+        # (the _wait below, at the next block) before the engine fills this buffer again
+        out = stream.rows()
         e = np.zeros(0)
         sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
         if nonfinite:
