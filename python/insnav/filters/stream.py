@@ -1,9 +1,9 @@
 """The loosely coupled forward run in bounded memory: the IMU file read, filtered
 and written block by block (``insnav run`` on long recordings).
 
-The batch path (:func:`insnav.run`) holds the whole IMU file, its arrays and
-the whole solution in memory: about 200 MiB per hour of 200 Hz data.  Here the
-IMU text is read in blocks of :data:`BLOCK_LINES` lines (plain reads, never a
+The batch path (:func:`insnav.run`) holds the whole IMU text, its arrays and
+the whole solution in memory, so its memory grows with the recording.  Here
+the IMU text is read in blocks of :data:`BLOCK_LINES` lines (plain reads, never a
 memory map: a file truncated while it is read is an error naming it, never a
 SIGBUS), each block is parsed by the compiled reader
 (``cpp/include/insnav/io/text_table.hpp``), pushed through the compiled loose
@@ -11,9 +11,12 @@ engine (``cpp/include/insnav/engine/loose_stream.hpp``: the batch engine's
 very loop, cut into blocks, the GIL released, no allocation per sample), and
 its output rows (at the ``--output-rate`` decimation) are converted and
 appended to a temporary CSV file beside the destination, renamed into place
-only when the whole run succeeded.  Memory is the GNSS records (a few per
-second), one block of IMU samples and rows, and the IMU summed to 10 Hz for
-the input checks: about 60 MiB for a day of 200 Hz data.
+only when the whole run succeeded.  The next block is read and parsed on a
+reader thread while this one is filtered, and the rows are formatted on a
+writer thread while the next block is filtered (the engine's two row buffers
+are used in turn).  Memory is the GNSS records (a few per second), a few
+blocks of IMU samples and rows, and the IMU summed to 10 Hz for the input
+checks (``bench/cli_end_to_end.py`` measures a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV file is byte for byte the
@@ -25,8 +28,8 @@ sanitizer repairs or names it), and the unit and time-base checks
 (:func:`insnav.data.checks.check_dataset`) see the IMU increments summed to
 10 Hz.  Whatever the stream cannot reproduce exactly (a sanitizer repair, a
 non-finite row, an unhealthy run, a failed check, a GNSS record whose cut
-changes the set-up) makes :func:`stream_loose_csv` return the reason, and
-``insnav run`` then runs the batch path, whose result and messages are the
+changes the set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
+with the reason, and ``insnav run`` then runs the batch path, whose result and messages are the
 reference.  The RTS smoother needs the whole run and always takes the batch
 path.
 """
@@ -44,14 +47,14 @@ from .. import _core
 from .._imu_scan import scan_imu
 from .._median import median
 from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_rows
-from ..data.textio import FileChangedError, count_columns, parse_numeric, threads
+from ..data.textio import count_columns, parse_numeric, threads
 from ..units import DEG
 from .solution import Solution
 
 __all__ = ["BLOCK_LINES", "imu_text_blocks", "stream_loose_csv", "StreamResult", "Fallback", "stream_unsupported",
            "StreamedSolution"]
 
-#: IMU lines per block (2^16: about 7 MB of KF-GINS text, 5 ms of filtering per 1000 lines)
+#: IMU lines per block (2^16: about 7 MB of KF-GINS text)
 BLOCK_LINES = 1 << 16
 #: the rate of the summed IMU the input checks see [Hz]
 CHECK_RATE_HZ = 10.0
