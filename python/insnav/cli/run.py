@@ -694,6 +694,11 @@ def cmd_run(args) -> int:
     streamed = None
     if args.format == "kfgins" and getattr(args, "stream", "auto") != "off":
         streamed = _try_stream(args, out, groups)
+    elif getattr(args, "stream", "auto") == "on":
+        import sys
+
+        print(f"note: the IMU file is read whole, not block by block: --format {args.format} (block by block: "
+              "--format kfgins)", file=sys.stderr)
     try:
         if streamed is not None:
             return _finish_run(args, out, groups, stages, streamed)
