@@ -169,3 +169,29 @@ def test_engine_fed_in_blocks_equals_the_batch_engine_bit_for_bit(kf_short, deci
     for key in ("updates", "rejected", "gate_reopened", "gate_outage_accepted", "cholesky_repairs"):
         assert rec[key] == batch[key], key
     assert rec["updates"] > 50 and (rec["status"] == 4).sum() > 0  # fixes applied, and some after the IMU's end
+
+
+def test_a_slow_writer_never_sees_its_rows_overwritten(kf_short, tmp_path, monkeypatch):
+    # the writer thread formats block i while the engine fills its other row buffer; calls that write no row
+    # (1 Hz rows from blocks of ~100 samples) must still wait for it, or the engine refills the buffer the
+    # writer is reading: a writer slowed down here would then write later blocks' rows
+    import time
+
+    real = stream._core
+
+    class SlowCore:
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        @staticmethod
+        def write_table(*a, **kw):
+            time.sleep(0.01)
+            return real.write_table(*a, **kw)
+
+    monkeypatch.setattr(stream, "BLOCK_LINES", 97)
+    monkeypatch.setattr(stream, "_core", SlowCore())
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert _run(kf_short, a, "--output-rate", "1", "--stream", "on")[0] == 0
+    monkeypatch.setattr(stream, "_core", real)
+    assert _run(kf_short, b, "--output-rate", "1", "--stream", "off")[0] == 0
+    assert a.read_bytes() == b.read_bytes()

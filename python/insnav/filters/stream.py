@@ -712,11 +712,12 @@ class _Writer:
         from ._assemble import nav_solution
         from .solution import CSV_DECIMALS, _selected
 
+        # the engine has two row buffers and fills them in turn, one per call (rows or not): the write
+        # queued at call i (buffer i % 2) must end before call i + 2, so every call waits for the last one
         if n == 0:
+            self._wait()
             return
-        # views of the engine's row buffer: it has two, used in turn, and the write of this block ends
-        # (the _wait below, at the next block) before the engine fills this buffer again
-        out = stream.rows()
+        out = stream.rows()  # views of this call's row buffer
         e = np.zeros(0)
         sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
         if nonfinite:
