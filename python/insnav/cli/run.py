@@ -611,18 +611,26 @@ def _try_stream(args, out: Path, groups):
     made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the run fails
     first.mkdir(parents=True, exist_ok=True)
     y = inp["yaml"]
+    from .._progress import Progress
+
+    bar = Progress(f"insnav run {cfg.filter}", unit="B") if not args.quiet else None
     try:
         res = stream_loose_csv(inp["dataset"], inp["imu_path"], cfg, out, imu_ncols=y["imudatalen"],
                                start_s=y["starttime_s"], end_s=y["endtime_s"], gnss_raw=inp["gnss"], columns=groups,
                                precision=args.csv_precision, output_rate_hz=args.output_rate,
-                               set_decimation=output_decimation)
+                               set_decimation=output_decimation, progress=bar)
     except Fallback as exc:
+        if bar is not None:
+            bar.close()
         _remove_empty(made)
         note(str(exc))
         return None
     except BaseException:
         _remove_empty(made)
         raise
+    finally:
+        if bar is not None:
+            bar.close()
     s = res.solution.summary
     used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
     if not args.allow_free_inertial and (used == 0 or rejected > MAX_REJECTED_SHARE * (used + rejected)):

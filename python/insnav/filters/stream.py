@@ -68,23 +68,32 @@ class Fallback(Exception):
 
 @dataclass
 class ImuBlock:
-    """One block of IMU samples and the file line of its first row."""
+    """One block of IMU samples, the file line of its first row, and how far
+    into the file (its bytes on disk, compressed or not) the block ends."""
 
     t: np.ndarray
     dtheta_b: np.ndarray
     dv_b: np.ndarray
     origin: RowOrigin
+    file_bytes_done: int = 0
+    file_bytes: int = 0
 
 
 def _opener(path: Path):
+    """(the text stream, the file on disk: its position is the progress; compressed or not)."""
+    raw = open(path, "rb", buffering=0)
     kind = {".xz": "lzma", ".lzma": "lzma", ".gz": "gzip", ".bz2": "bz2"}.get(path.suffix.lower())
     if kind is None:
-        return open(path, "rb", buffering=0), False
+        return raw, raw, False
     import bz2
     import gzip
     import lzma
 
-    return {"lzma": lzma.open, "gzip": gzip.open, "bz2": bz2.open}[kind](path, "rb"), True
+    try:
+        return {"lzma": lzma.open, "gzip": gzip.open, "bz2": bz2.open}[kind](raw, "rb"), raw, True
+    except BaseException:
+        raw.close()
+        raise
 
 
 def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None = None, names=None):
@@ -120,11 +129,11 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None =
         exc = FileNotFoundError(f"{p} does not exist")
         exc.strerror, exc.filename = "No such file or directory", str(p)
         raise exc
-    f, compressed = _opener(p)
+    f, raw, compressed = _opener(p)
     chunk = max(1, int(BLOCK_LINES if block_lines is None else block_lines)) * _LINE_BYTES_GUESS
     line = 1  # file line of the next block's first line
     n = ncols
-    with f:
+    with raw, f:
         st0 = os.stat(p)
         buf = bytearray(chunk)  # one buffer for every block: the unfinished line moved to its start
         have = 0  # bytes of the unfinished line at buf's start
@@ -170,7 +179,7 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None =
             # the lines of this block: its rows when none was blank (the parser counted them), else counted
             line += rows if (parsed and lines is None and not eof) else buf.count(b"\n", 0, cut)
             if rows:
-                yield ImuBlock(parts[0], parts[1], parts[2], origin)
+                yield ImuBlock(parts[0], parts[1], parts[2], origin, raw.tell(), st0.st_size)
             buf[:total - cut] = buf[cut:total]
             have = total - cut
         if not compressed:
@@ -381,7 +390,7 @@ class StreamResult:
 def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int | None, start_s: float,
                      end_s: float | None, gnss_raw: GnssFixes, columns=None, precision: str = "resolution",
                      output_rate_hz: float | None = None, block_lines: int | None = None,
-                     set_decimation=None) -> StreamResult:
+                     set_decimation=None, progress=None) -> StreamResult:
     """Run the loose forward filter over the IMU file ``imu_path`` block by
     block, writing the solution CSV for ``out`` to a temporary file beside it.
 
@@ -410,6 +419,9 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
         IMU lines per block (default :data:`BLOCK_LINES`).
     set_decimation : callable, optional
         ``(t_first_block, rate_hz) -> k`` (``insnav run``'s rule and message).
+    progress : callable, optional
+        ``(bytes_done, bytes_total)`` of the IMU file after each block
+        (:class:`insnav._progress.Progress`).
 
     Returns
     -------
@@ -434,7 +446,7 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
     tmp = Path(tmp)
     run = _BlockRun(ds0, _as_config(cfg), tmp, start_s=start_s, end_s=end_s, gnss_raw=gnss_raw,
                     output_rate_hz=output_rate_hz, set_decimation=set_decimation,
-                    block_lines=int(BLOCK_LINES if block_lines is None else block_lines))
+                    block_lines=int(BLOCK_LINES if block_lines is None else block_lines), progress=progress)
     try:
         from ..io.kfgins import IMU_COLUMNS
 
@@ -481,13 +493,14 @@ class _BlockRun:
     the per-record outputs, the input checks and the summary of the batch run."""
 
     def __init__(self, ds0, cfg, tmp: Path, *, start_s, end_s, gnss_raw, output_rate_hz, set_decimation,
-                 block_lines: int):
+                 block_lines: int, progress=None):
         from .sanitize import DEFAULTS, _imu_report
 
         self.ds0, self.cfg, self.tmp = ds0, cfg, tmp
         self.start_s, self.end_s, self.gnss_raw = start_s, end_s, gnss_raw
         self.output_rate_hz, self.set_decimation = output_rate_hz, set_decimation
         self.block_lines = block_lines
+        self.progress = progress
         self.opts = {**DEFAULTS, **(cfg.sanitize or {})}
         self.imu_report = _imu_report()
         self.health = _Health()
@@ -580,6 +593,8 @@ class _BlockRun:
                     self.rows += n
                     tm["write"] += clock() - t_mark
                 t_mark = clock()
+            if self.progress is not None:
+                self.progress(blk.file_bytes_done, blk.file_bytes)
             if last:
                 break
         tm["read"] += clock() - t_mark
