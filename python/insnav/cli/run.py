@@ -116,8 +116,8 @@ def add_run_parser(sub) -> None:
                    help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
                         "200 Hz); the filter still runs at every sample.  Default: every sample")
     p.add_argument("--stream", choices=("auto", "on", "off"), default="auto",
-                   help="--format kfgins with a .csv --out: read, filter and write the IMU file block by block in "
-                        "bounded memory (the loose ekf/rbukf/ukf forward run; the same file as the whole-file "
+                   help="--format kfgins with a .csv --out: read, filter and write the IMU file block by block, "
+                        "without holding the file or the solution in memory (the loose ekf/rbukf/ukf forward run; the same file as the whole-file "
                         "run, byte for byte).  auto (default): whenever the run allows it (not --smooth, "
                         "--constraints, self-calibration states or npz/Parquet/KF-GINS output), on: the same, with "
                         "a note when it cannot, off: read the IMU file whole")
@@ -575,7 +575,7 @@ def _remove_empty(dirs) -> None:
 
 def _try_stream(args, out: Path, groups):
     """``--format kfgins`` with CSV output: the loose forward run block by block
-    (:mod:`insnav.filters.stream`, bounded memory).  Returns (StreamResult,
+    (:mod:`insnav.filters.stream`: neither the IMU file nor the solution held in memory).  Returns (StreamResult,
     folders made), or None when the run takes the batch path (a one-line note
     on stderr says why, unless the run simply is not one the stream does and
     ``--stream on`` was not asked)."""

@@ -1,5 +1,5 @@
-"""The loosely coupled forward run in bounded memory: the IMU file read, filtered
-and written block by block (``insnav run`` on long recordings).
+"""The loosely coupled forward run without the recording in memory: the IMU file
+read, filtered and written block by block (``insnav run`` on long recordings).
 
 The batch path (:func:`insnav.run`) holds the whole IMU text, its arrays and
 the whole solution in memory, so its memory grows with the recording.  Here
@@ -16,7 +16,8 @@ reader thread while this one is filtered, and the rows are formatted on a
 writer thread while the next block is filtered (the engine's two row buffers
 are used in turn).  Memory is the GNSS records (a few per second), a few
 blocks of IMU samples and rows, and the IMU summed to 10 Hz for the input
-checks (``bench/cli_end_to_end.py`` measures a synthesised day).
+checks: what still grows with the recording (``bench/cli_end_to_end.py``
+measures a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV file is byte for byte the
