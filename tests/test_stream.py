@@ -195,3 +195,24 @@ def test_a_slow_writer_never_sees_its_rows_overwritten(kf_short, tmp_path, monke
     monkeypatch.setattr(stream, "_core", real)
     assert _run(kf_short, b, "--output-rate", "1", "--stream", "off")[0] == 0
     assert a.read_bytes() == b.read_bytes()
+
+
+def test_the_checks_imu_is_the_sum_of_the_samples_in_each_window():
+    # _Coarse: fed in blocks of any size, the first sample alone, then every window of k samples summed
+    # (the time its last sample's), the incomplete last window too; the same as summing the whole arrays
+    rng = np.random.default_rng(2)
+    n, k = 1003, 20
+    t = np.arange(1, n + 1) * 0.005
+    dth, dv = rng.standard_normal((n, 3)), rng.standard_normal((n, 3))
+    c = stream._Coarse(k, expected_samples=100)  # too small: the arrays grow
+    i = 0
+    while i < n:
+        m = int(rng.integers(0, 50))
+        c.add(t[i:i + m], dth[i:i + m], dv[i:i + m]) if m else None
+        i += m
+    got = c.imu("imu")
+    edges = [0, 1] + list(range(1 + k, n, k)) + [n]
+    assert np.array_equal(got.t, t[np.array(edges[1:]) - 1])
+    for a, b in ((got.dtheta_b, dth), (got.dv_b, dv)):
+        want = np.array([b[lo:hi].sum(axis=0) for lo, hi in zip(edges[:-1], edges[1:])])
+        assert np.allclose(a, want, rtol=0, atol=1e-12)

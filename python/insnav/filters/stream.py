@@ -271,53 +271,68 @@ def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> s
 
 class _Coarse:
     """The IMU summed over windows of ``k`` samples (the first sample alone),
-    for the input checks: times of each window's last sample, summed increments."""
+    for the input checks: the time of each window's last sample and its
+    summed increments, in arrays sized once from the expected sample count
+    (grown by half when it was too small)."""
 
-    def __init__(self, k: int):
+    def __init__(self, k: int, expected_samples: int = 0):
         self.k = max(1, int(k))
-        self.t, self.dth, self.dv = [], [], []
-        self.pend = None  # (t, dth, dv) of the samples not yet in a window
+        cap = max(64, int(1.02 * expected_samples / self.k) + 64)
+        self.t, self.dth, self.dv = np.empty(cap), np.empty((cap, 3)), np.empty((cap, 3))
+        self.n = 0
+        self.started = False
+        self.pend_n = 0  # samples in the window not yet complete, their time and sums
+        self.pend_t = 0.0
+        self.pend_dth, self.pend_dv = np.zeros(3), np.zeros(3)
+
+    def _push(self, t, dth, dv) -> None:
+        m = len(t)
+        if self.n + m > len(self.t):
+            cap = max(self.n + m, int(1.5 * len(self.t)))
+            for name in ("t", "dth", "dv"):
+                old = getattr(self, name)
+                new = np.empty((cap,) + old.shape[1:])
+                new[:self.n] = old[:self.n]
+                setattr(self, name, new)
+        self.t[self.n:self.n + m] = t
+        self.dth[self.n:self.n + m] = dth
+        self.dv[self.n:self.n + m] = dv
+        self.n += m
 
     def add(self, t, dth, dv) -> None:
-        if self.pend is None:  # the first sample alone: the checks see the IMU span's start
-            self.t.append(t[:1].copy())
-            self.dth.append(dth[:1].copy())
-            self.dv.append(dv[:1].copy())
+        if not self.started:  # the first sample alone: the checks see the IMU span's start
+            self.started = True
+            self._push(t[:1], dth[:1], dv[:1])
             t, dth, dv = t[1:], dth[1:], dv[1:]
-            self.pend = (t[:0], dth[:0], dv[:0])
-        pt, pth, pv = self.pend
         k = self.k
-        if len(pt):  # the window begun in the previous block
-            need = k - len(pt)
-            if len(t) < need:
-                self.pend = (np.concatenate([pt, t]), np.concatenate([pth, dth]), np.concatenate([pv, dv]))
+        if self.pend_n:  # the window begun in an earlier block
+            take = min(k - self.pend_n, len(t))
+            if take:
+                self.pend_n += take
+                self.pend_t = float(t[take - 1])
+                self.pend_dth += dth[:take].sum(axis=0)
+                self.pend_dv += dv[:take].sum(axis=0)
+                t, dth, dv = t[take:], dth[take:], dv[take:]
+            if self.pend_n < k:
                 return
-            self.t.append(t[need - 1:need].copy())
-            self.dth.append((pth.sum(axis=0) + dth[:need].sum(axis=0)).reshape(1, 3))
-            self.dv.append((pv.sum(axis=0) + dv[:need].sum(axis=0)).reshape(1, 3))
-            t, dth, dv = t[need:], dth[need:], dv[need:]
+            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
+            self.pend_n = 0
         m = (len(t) // k) * k
         if m:
-            self.t.append(t[k - 1:m:k].copy())
-            self.dth.append(dth[:m].reshape(-1, k, 3).sum(axis=1))
-            self.dv.append(dv[:m].reshape(-1, k, 3).sum(axis=1))
-        self.pend = (t[m:].copy(), dth[m:].copy(), dv[m:].copy())
+            self._push(t[k - 1:m:k], dth[:m].reshape(-1, k, 3).sum(axis=1), dv[:m].reshape(-1, k, 3).sum(axis=1))
+        if m < len(t):
+            self.pend_n = len(t) - m
+            self.pend_t = float(t[-1])
+            self.pend_dth = dth[m:].sum(axis=0)
+            self.pend_dv = dv[m:].sum(axis=0)
 
     def imu(self, source: str) -> ImuData:
-        pt, pth, pv = self.pend if self.pend is not None else (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
-        t, dth, dv = list(self.t), list(self.dth), list(self.dv)
-        if len(pt):
-            t.append(pt[-1:])
-            dth.append(pth.sum(axis=0, keepdims=True))
-            dv.append(pv.sum(axis=0, keepdims=True))
-        self.t, self.dth, self.dv, self.pend = [], [], [], None  # the pieces go as the arrays are made
-        if not t:
-            return ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), origin=RowOrigin(source, 0))
-        out = []
-        for parts in (t, dth, dv):
-            out.append(np.concatenate(parts))
-            parts.clear()
-        return ImuData(*out, origin=RowOrigin(source, 0))
+        """The summed IMU (the last, incomplete window too): views of the arrays."""
+        if self.pend_n:
+            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
+            self.pend_n = 0
+        n = self.n
+        return ImuData(self.t[:n], self.dth[:n], self.dv[:n], origin=RowOrigin(source, 0))
 
 
 class _Health:
@@ -572,7 +587,10 @@ class _BlockRun:
                     continue
                 self.t0 = float(t[i0])
                 lo = int(np.searchsorted(t, self.t0, side="right"))
-                self._start(t[lo:])
+                # the samples to expect: the file's size over the bytes per line so far
+                lines = blk.origin.line(len(t) - 1)
+                expected = int(blk.file_bytes * lines / blk.file_bytes_done) if blk.file_bytes_done else 0
+                self._start(t[lo:], expected)
             hi = len(t) if self.end_s is None else int(np.searchsorted(t, self.end_s, side="right"))
             last = hi < len(t)  # endtime reached: the rest of the file is not read
             if hi > lo:
@@ -615,7 +633,7 @@ class _BlockRun:
         return res
 
     # --- start and end -----------------------------------------------------------------------
-    def _start(self, t_first) -> None:
+    def _start(self, t_first, expected_samples: int = 0) -> None:
         """The engine at t0: the GNSS records in (t0, endtime] sanitized (the batch loader's cut and
         sanitize_gnss), the output decimation from the first block, the batch loose runner's set-up."""
         from .loose import loose_engine_args
@@ -645,7 +663,7 @@ class _BlockRun:
         self.stream = _core.LooseStream(cfg.filter, a.layout, rows, a.init, a.P0, a.imu_correction, a.imu_model,
                                         a.config, self.block_lines)
         dt = median(np.diff(t_first)) if len(t_first) > 1 else 0.0
-        self.coarse = _Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1)
+        self.coarse = _Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1, expected_samples)
 
     def _exact_gnss_cut(self, rec: dict) -> None:
         """The GNSS records after the last IMU sample: the batch loader cuts them before the run.  They
