@@ -7,10 +7,17 @@ rusage).  The filter-only figures are in-process calls of ``insnav.run`` on
 the already-read dataset (sanitize, checks, C++ loop, output arrays) and of
 the compiled loop alone (``_core.run_loose``, timed through a thin wrapper).
 The variants and the filter-only calls are interleaved, round by round, so
-they see the same machine load; medians over --repeat rounds.  Writes
+they see the same machine load; medians over --repeat rounds.  The
+variants with ``--stream off`` read the IMU file whole (the path before the
+block-by-block run; the others stream, insnav.filters.stream), for the A/B
+of the two.  Then, once each, the bounded-memory rows: a synthesised
+recording of ``--day-hours`` (default 24 h at 200 Hz, about 2 GB of text
+under the temporary folder, deleted at the end; the 5.5 GB all-columns CSV
+too) run block by block at 10 Hz and 200 Hz output.  Writes
 docs/results/cli_end_to_end.md.
 
-    python bench/cli_end_to_end.py [--repeat 5]
+    python bench/cli_end_to_end.py [--repeat 5] [--day-hours 24]
+    python bench/cli_end_to_end.py --repeat 1 --day-hours 0.1 --out /tmp/e2e.md   # a quick check
 """
 from __future__ import annotations
 
@@ -42,15 +49,24 @@ VARIANTS = [
     ("EKF, KF-GINS layout (.nav + IMU_ERR), 200 Hz", ["--out-format", "kfgins"], "kfgins_out"),
     ("EKF, CSV, 200 Hz, IMU read from the .xz", ["--imu", str(IMU_XZ)], "solxz.csv"),
     ("RB-UKF, CSV, 200 Hz", ["--filter", "rbukf"], "rbukf.csv"),
+    ("EKF, CSV, 200 Hz, IMU file read whole (--stream off)", ["--stream", "off"], "whole.csv"),
+    ("EKF, CSV, 10 Hz, IMU file read whole (--stream off)", ["--output-rate", "10", "--stream", "off"],
+     "whole10.csv"),
+]
+#: the long-recording rows: (label, extra arguments, output name), run once each on a synthesised day
+DAY_VARIANTS = [
+    ("EKF, CSV, 10 Hz (block by block)", ["--output-rate", "10"], "day10.csv"),
+    ("EKF, CSV, 200 Hz, nav columns (block by block)", ["--columns", "nav"], "day200.csv"),
+    ("EKF, CSV, 200 Hz, all columns (block by block)", [], "day200all.csv"),
 ]
 TIMINGS = re.compile(r"timings \[s\]: read ([\d.]+), filter ([\d.]+), write ([\d.]+)")
 
 
-def run_cli(work: Path, extra, out_name) -> dict:
+def run_cli(work: Path, extra, out_name, yaml: str = "kf-gins-sim.yaml", keep: bool = True) -> dict:
     out = work / "out" / out_name
     if out.exists():
         shutil.rmtree(out) if out.is_dir() else out.unlink()
-    args = [sys.executable, "-m", "insnav", "run", "--format", "kfgins", "--config", str(work / "kf-gins-sim.yaml"),
+    args = [sys.executable, "-m", "insnav", "run", "--format", "kfgins", "--config", str(work / yaml),
             "--quiet", "--timings", "--out", str(out)]
     if "--filter" not in extra:
         args += ["--filter", "ekf"]
@@ -66,6 +82,8 @@ def run_cli(work: Path, extra, out_name) -> dict:
         raise RuntimeError(f"{' '.join(args + list(extra))}: {stderr.decode()}")
     m = TIMINGS.search(stderr.decode())
     size = sum(f.stat().st_size for f in ([out] if out.is_file() else out.iterdir()) if f.is_file())
+    if not keep:
+        out.unlink()
     return dict(wall=wall, read=float(m[1]), filter=float(m[2]), write=float(m[3]), size=size, rss=ru,
                 cpu=ru.ru_utime + ru.ru_stime)
 
@@ -103,6 +121,60 @@ def api_child(work: Path) -> None:
     print(json.dumps(out))
 
 
+def write_day(work: Path, hours: float) -> tuple[int, float]:
+    """A long KF-GINS-format recording under ``work`` (never in the repository):
+    ``hours`` of a vehicle standing at the KF-GINS track's start point with its
+    initial attitude, 200 Hz increments of gravity and the Earth rate plus the
+    YAML's white noise (ARW, VRW), and 1 Hz GNSS fixes of that point with the
+    KF-GINS file's sigmas plus their noise.  The filter's cost per sample does
+    not depend on the motion.  Written by a child process (its memory is not
+    this one's, which the runs would inherit).  Returns (IMU samples, MB)."""
+    code = r"""
+import sys, numpy as np
+from pathlib import Path
+from insnav import _core
+from insnav.io.kfgins import read_kfgins_config
+from insnav.earth import gravity, omega_ie_n
+from insnav.sim.trajectory import rotate_n_to_b
+work, hours = Path(sys.argv[1]), float(sys.argv[2])
+c = read_kfgins_config(work / "kf-gins-sim.yaml")
+lat, lon, h = c["initpos"]
+att = np.asarray(c["initatt_rad"], float).reshape(1, 3)
+f_b = rotate_n_to_b(att, np.array([[0.0, 0.0, -float(gravity(lat, h))]]))[0]  # specific force at rest
+w_b = rotate_n_to_b(att, omega_ie_n(lat).reshape(1, 3))[0]
+dt, t0 = 0.005, 456250.004412029
+n = int(round(hours * 3600 / dt))
+arw, vrw = c["imunoise"]["arw_rad_per_sqrts"], c["imunoise"]["vrw_mps_per_sqrts"]
+rng = np.random.default_rng(1)
+p = work / "day-imu.txt"
+p.write_bytes(b"")
+chunk = 1 << 20
+for a in range(0, n, chunk):
+    k = min(chunk, n - a)
+    t = t0 + dt * np.arange(a, a + k)
+    dth = w_b * dt + rng.standard_normal((k, 3)) * arw * np.sqrt(dt)
+    dv = f_b * dt + rng.standard_normal((k, 3)) * vrw * np.sqrt(dt)
+    cols = [t] + [np.ascontiguousarray(dth[:, j]) for j in range(3)] + [np.ascontiguousarray(dv[:, j]) for j in range(3)]
+    _core.write_table(str(p), "", cols, [1.0] * 7, [9] + [12] * 6, sep=" ", trim_zeros=False, append=True)
+m = int(hours * 3600)
+sig = np.array([0.009, 0.009, 0.016])
+gt = np.floor(t0) + 1.0 + np.arange(m)
+d = rng.standard_normal((m, 3)) * sig
+R = 6378137.0
+rows = np.column_stack([gt, (lat + d[:, 0] / R) * 180 / np.pi, (lon + d[:, 1] / (R * np.cos(lat))) * 180 / np.pi,
+                        h - d[:, 2], np.tile(sig, (m, 1))])
+np.savetxt(work / "day-gnss.txt", rows, fmt="%.3f %.10f %.10f %.4f %.3f %.3f %.3f")
+print(n)
+"""
+    out = subprocess.run([sys.executable, "-c", code, str(work), str(hours)], capture_output=True, text=True,
+                         check=True)
+    text = (work / "kf-gins-sim.yaml").read_text().splitlines()
+    text = ['imupath: "./day-imu.txt"' if ln.startswith("imupath:") else
+            'gnsspath: "./day-gnss.txt"' if ln.startswith("gnsspath:") else ln for ln in text]
+    (work / "day.yaml").write_text("\n".join(text) + "\n")
+    return int(out.stdout.strip().splitlines()[-1]), (work / "day-imu.txt").stat().st_size / 1e6
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=5)
@@ -110,6 +182,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-compile", action="store_true",
                     help="do not compile the package's bytecode first (each run then compiles what it imports "
                          "when PYTHONDONTWRITEBYTECODE is set)")
+    ap.add_argument("--day-hours", type=float, default=24.0,
+                    help="length of the synthesised long recording of the bounded-memory rows [h] (0: none); "
+                         "written under the temporary folder, deleted afterwards")
     ap.add_argument("--api-child", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.api_child:
@@ -163,6 +238,15 @@ def main(argv=None) -> int:
             load.append(os.getloadavg()[0])
             print(f"round {r + 1}/{a.repeat}: " + ", ".join(f"{res[v[0]][-1]['wall']:.2f}" for v in variants),
                   file=sys.stderr)
+        day = {}
+        if a.day_hours > 0:
+            (work / "Leador-A15-sim.txt").unlink()  # room for the day's file
+            day_n, day_mb = write_day(work, a.day_hours)
+            for label, extra, out_name in DAY_VARIANTS:
+                day[label] = run_cli(work, extra, out_name, yaml="day.yaml", keep=False)
+                load.append(os.getloadavg()[0])
+                print(f"{a.day_hours:g} h: {label}: {day[label]['wall']:.1f} s, "
+                      f"{day[label]['rss'].ru_maxrss / 1024:.0f} MB", file=sys.stderr)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -199,6 +283,21 @@ def main(argv=None) -> int:
                      f"{med(x['read'] for x in rs):.3f} | "
                      f"{med(x['filter'] for x in rs):.3f} | {med(x['write'] for x in rs):.3f} | {rss:.0f} | "
                      f"{rs[-1]['size'] / 1e6:.1f} |")
+    if day:
+        lines += [
+            "",
+            f"Bounded memory: a synthesised {a.day_hours:g} h recording ({day_n:,} IMU samples at 200 Hz, "
+            f"{day_mb:.0f} MB of KF-GINS text, 1 Hz GNSS fixes; a vehicle standing at the track's start point: "
+            "gravity, Earth rate and the YAML's white noise, `write_day` in this script), each run once, the IMU "
+            "file read, filtered and written block by block (`--stream auto`, insnav.filters.stream):",
+            "",
+            "| variant | wall [s] | CPU [s] | read [s] | filter [s] | write [s] | peak RSS [MB] | output [MB] |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for label, _, _ in DAY_VARIANTS:
+            x = day[label]
+            lines.append(f"| {label} | {x['wall']:.1f} | {x['cpu']:.1f} | {x['read']:.2f} | {x['filter']:.2f} | "
+                         f"{x['write']:.2f} | {x['rss'].ru_maxrss / 1024.0:.0f} | {x['size'] / 1e6:.0f} |")
     lines += [
         "",
         "Filter only: in-process calls in a separate process per round, on the dataset already read:",

@@ -66,7 +66,7 @@ int cut_to(std::FILE* f, std::int64_t bytes) {
 
 py::int_ write_table(const std::string& path, const std::string& header, const py::list& columns,
                      const std::vector<double>& scales, const std::vector<int>& decimals, const std::string& sep,
-                     int width, bool trim_zeros, bool trailing_sep, int threads) {
+                     int width, bool trim_zeros, bool trailing_sep, int threads, bool append) {
   const std::size_t nc = columns.size();
   if (nc == 0 || scales.size() != nc || decimals.size() != nc)
     throw py::value_error("write_table: columns, scales and decimals must have the same (non-zero) length");
@@ -86,7 +86,8 @@ py::int_ write_table(const std::string& path, const std::string& header, const p
                scales[j], decimals[j]};
     keep.push_back(a);
   }
-  std::unique_ptr<std::FILE, FileCloser> f(open_for_overwrite(path));
+  // append: the rows go after the file's end (a solution written block by block, filters/stream.py)
+  std::unique_ptr<std::FILE, FileCloser> f(append ? std::fopen(path.c_str(), "ab") : open_for_overwrite(path));
   if (!f) {
     PyErr_SetFromErrnoWithFilename(PyExc_OSError, path.c_str());
     throw py::error_already_set();
@@ -115,7 +116,7 @@ py::int_ write_table(const std::string& path, const std::string& header, const p
         res.status = textio::WriteStatus::kIoError;
         res.error = errno;
       }
-      if (res.status == textio::WriteStatus::kOk) {
+      if (res.status == textio::WriteStatus::kOk && !append) {
         if (const int e = cut_to(f.get(), res.bytes); e != 0) {
           res.status = textio::WriteStatus::kIoError;
           res.error = e;
@@ -212,10 +213,11 @@ void bind_textio(py::module_& m) {
       "check); None: no callback.  An exception from it stops the run.");
   m.def("write_table", &write_table, py::arg("path"), py::arg("header"), py::arg("columns"), py::arg("scales"),
         py::arg("decimals"), py::arg("sep") = ",", py::arg("width") = 0, py::arg("trim_zeros") = true,
-        py::arg("trailing_sep") = false, py::arg("threads") = 2,
+        py::arg("trailing_sep") = false, py::arg("threads") = 2, py::arg("append") = false,
         "Write 1-D float64 columns (any stride) times their scales as a text table to path: decimals[j] >= 0 "
         "fixed (trailing zeros trimmed when trim_zeros), < 0 shortest round-trip; blocks formatted on `threads` "
-        "threads, GIL released, Ctrl-C checked after each block.  Returns the bytes written.");
+        "threads, GIL released, Ctrl-C checked after each block; append: after the file's end.  Returns the "
+        "bytes written.");
   m.def("parse_text", &parse_text, py::arg("data"), py::arg("ncols"), py::arg("keep"), py::arg("allow_extra") = false,
         py::arg("comma") = false, py::arg("first_line") = 1, py::arg("threads") = 2, py::arg("groups") = py::none(),
         "Parse whitespace (and with comma=True comma) separated numbers, ncols a row (more if allow_extra), "

@@ -8,7 +8,8 @@ namespace py = pybind11;
 
 namespace insnav::py_bind {
 void bind_rtk_ins(py::module_& m);  // bind_rtk_ins.cpp (declared here: common.hpp is in every binder's TU)
-void bind_calib(py::module_& m);  // bind_calib.cpp (declared here: common.hpp unchanged keeps the other units' builds cached)
+void bind_calib(py::module_& m);
+void bind_loose_stream(py::module_& m);  // bind_loose_stream.cpp  // bind_calib.cpp (declared here: common.hpp unchanged keeps the other units' builds cached)
 }  // namespace insnav::py_bind
 
 namespace {
@@ -36,5 +37,6 @@ PYBIND11_MODULE(_core, m) {
   insnav::py_bind::bind_spp(m);
   insnav::py_bind::bind_rtk_ins(m);
   insnav::py_bind::bind_calib(m);
+  insnav::py_bind::bind_loose_stream(m);
   // one call per cpp/bindings/bind_*.cpp (declared in common.hpp)
 }

@@ -216,7 +216,31 @@ def write_table(
     trim_zeros: bool = True,
     trailing_sep: bool = False,
     threads: int = 2,
+    append: bool = False,  # after the file's end (no header rewrite, no truncation)
 ) -> int: ...  # bytes written
+
+class LooseStream:
+    """The loose run fed block by block (engine/loose_stream.hpp); used by insnav.filters.stream."""
+    def __init__(
+        self,
+        filter: str,  # "ekf" | "rbukf" | "ukf"
+        layout: int,  # 15 | 21
+        gnss: npt.ArrayLike,  # (m, 13) run_loose's gnss rows, sorted by time
+        init: npt.ArrayLike,  # (10,): t0, lat, lon, h, vN, vE, vD, roll, pitch, yaw (SI)
+        P0: npt.ArrayLike,  # (layout, layout)
+        imu_correction: npt.ArrayLike,  # (12,)
+        imu_model: dict[str, Any],
+        config: dict[str, Any],  # run_loose's engine config (no smooth, no self-calibration)
+        block_samples: int,  # the most samples one run_block takes
+    ) -> None: ...
+    def run_block(self, t: npt.ArrayLike, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> int: ...  # rows written
+    def finish(self) -> int: ...  # 0 or 1 rows: the last sample's
+    def rows(self) -> dict[str, np.ndarray]: ...  # t, llh, v_n, rpy, sigma, imu_err of the last call (views; two buffers in turn)
+    def records(self) -> dict[str, Any]: ...  # innovation, nis, log_det_s, status per fix; counters
+    @property
+    def samples(self) -> int: ...
+    @property
+    def t_last(self) -> float: ...
 
 class LooseNavigator:
     """Real-time loose navigator (engine/navigator.hpp); use insnav.Navigator."""

@@ -115,6 +115,12 @@ def add_run_parser(sub) -> None:
     p.add_argument("--output-rate", type=float, default=None, metavar="HZ",
                    help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
                         "200 Hz); the filter still runs at every sample.  Default: every sample")
+    p.add_argument("--stream", choices=("auto", "on", "off"), default="auto",
+                   help="--format kfgins with a .csv --out: read, filter and write the IMU file block by block, "
+                        "without holding the file or the solution in memory (the loose ekf/rbukf/ukf forward run; the same file as the whole-file "
+                        "run, byte for byte).  auto (default): whenever the run allows it (not --smooth, "
+                        "--constraints, self-calibration states or npz/Parquet/KF-GINS output), on: the same, with "
+                        "a note when it cannot, off: read the IMU file whole")
     p.add_argument("--columns", default=None, metavar="GROUPS",
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
@@ -548,6 +554,100 @@ def _rtk_ins_inputs(args, ds):
     return ds, dict(rtk_options=rtk, engine=eng)
 
 
+def _cli_config(args, cfg: RunConfig) -> RunConfig:
+    """The run configuration with the command line's settings (all but --output-rate)."""
+    if args.format == "kfgins" and args.run_config:
+        cfg = _overlay_run_config(cfg, args.run_config)
+    if args.seed is not None:
+        cfg.init_seed = args.seed
+    cfg.options = {**cfg.options, **cli_options(args.option)}
+    if args.smooth:
+        cfg.smooth = True
+    if args.tdcp:
+        cfg.tdcp.enabled = True
+    if args.constraints is not None:
+        cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
+    if args.out_format == "kfgins":
+        cfg.imu_error_sigmas = True  # KF_GINS_STD.txt
+    return cfg
+
+
+def _remove_empty(dirs) -> None:
+    """Remove the folders a failed run created (deepest first), while they are empty."""
+    for d in dirs:
+        try:
+            d.rmdir()
+        except OSError:
+            break
+
+
+def _try_stream(args, out: Path, groups):
+    """``--format kfgins`` with CSV output: the loose forward run block by block
+    (:mod:`insnav.filters.stream`: neither the IMU file nor the solution held in memory).  Returns (StreamResult,
+    folders made), or None when the run takes the batch path (a one-line note
+    on stderr says why, unless the run simply is not one the stream does and
+    ``--stream on`` was not asked)."""
+    import sys
+
+    from ..filters.stream import Fallback, stream_loose_csv, stream_unsupported
+    from ..io.kfgins_dataset import kfgins_stream_inputs
+    from ..registry import FILTERS
+
+    def note(why: str) -> None:
+        print(f"note: the IMU file is read whole, not block by block: {why}", file=sys.stderr)
+
+    if not args.config:
+        return None
+    try:
+        inp = kfgins_stream_inputs(args.config, args.imu, args.gnss)
+        cfg = _cli_config(args, inp["config"])
+        if args.filter is not None:
+            cfg.filter = args.filter
+        if args.coupling is not None:
+            cfg.coupling = args.coupling
+        cfg.validate()
+    except (OSError, ValueError):
+        return None  # the batch path reports it, with its own message
+    if cfg.filter not in FILTERS or cfg.coupling not in FILTERS[cfg.filter].couplings:
+        return None
+    why = stream_unsupported(cfg, out_suffix=out.suffix, out_format=args.out_format)
+    if why is not None:
+        if args.stream == "on" or cfg.smooth:
+            note(why)
+        return None
+    first = out.parent
+    made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the run fails
+    first.mkdir(parents=True, exist_ok=True)
+    y = inp["yaml"]
+    from .._progress import Progress
+
+    bar = Progress(f"insnav run {cfg.filter}", unit="B") if not args.quiet else None
+    try:
+        res = stream_loose_csv(inp["dataset"], inp["imu_path"], cfg, out, imu_ncols=y["imudatalen"],
+                               start_s=y["starttime_s"], end_s=y["endtime_s"], gnss_raw=inp["gnss"], columns=groups,
+                               precision=args.csv_precision, output_rate_hz=args.output_rate,
+                               set_decimation=output_decimation, progress=bar)
+    except Fallback as exc:
+        if bar is not None:
+            bar.close()
+        _remove_empty(made)
+        note(str(exc))
+        return None
+    except BaseException:
+        _remove_empty(made)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    s = res.solution.summary
+    used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
+    if not args.allow_free_inertial and (used == 0 or rejected > MAX_REJECTED_SHARE * (used + rejected)):
+        res.csv_tmp.unlink(missing_ok=True)  # the batch path gives the message (and the hint from the whole IMU)
+        _remove_empty(made)
+        return None
+    return res, made
+
+
 def cmd_run(args) -> int:
     import insnav
 
@@ -605,6 +705,20 @@ def cmd_run(args) -> int:
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
+    streamed = None
+    if args.format == "kfgins" and getattr(args, "stream", "auto") != "off":
+        streamed = _try_stream(args, out, groups)
+    elif getattr(args, "stream", "auto") == "on":
+        import sys
+
+        print(f"note: the IMU file is read whole, not block by block: --format {args.format} (block by block: "
+              "--format kfgins)", file=sys.stderr)
+    try:
+        if streamed is not None:
+            return _finish_run(args, out, groups, stages, streamed)
+    finally:
+        if streamed is not None:  # renamed into place when the run succeeded; else removed here
+            streamed[0].csv_tmp.unlink(missing_ok=True)
     try:
         from ..io.input_formats import input_format
 
@@ -618,19 +732,7 @@ def cmd_run(args) -> int:
         rinex_opts, csv_tables = loaded.tables.get("rinex"), loaded.tables.get("csv")
         if csv_tables is not None:
             print(ds.info["initial_state"])
-        if args.format == "kfgins" and args.run_config:
-            cfg = _overlay_run_config(cfg, args.run_config)
-        if args.seed is not None:
-            cfg.init_seed = args.seed
-        cfg.options = {**cfg.options, **cli_options(args.option)}
-        if args.smooth:
-            cfg.smooth = True
-        if args.tdcp:
-            cfg.tdcp.enabled = True
-        if args.constraints is not None:
-            cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
-        if args.out_format == "kfgins":
-            cfg.imu_error_sigmas = True  # KF_GINS_STD.txt
+        cfg = _cli_config(args, cfg)
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
         run_opts, base_e = {}, None
@@ -644,6 +746,22 @@ def cmd_run(args) -> int:
             sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg, **run_opts)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
+    return _report_and_write(args, out, groups, stages, sol, ds, cfg, rinex_opts, csv_tables)
+
+
+def _finish_run(args, out: Path, groups, stages, streamed) -> int:
+    """The end of a run made block by block: its timings, then the checks, files and report of any run."""
+    res, made = streamed
+    stages.times.update(read=res.timings["read"], filter=res.timings["filter"])
+    stages.t_last = stages._clock()
+    stages.times["write"] = res.timings["write"]
+    return _report_and_write(args, out, groups, stages, res.solution, res.dataset, res.config, None, None,
+                             csv_tmp=res.csv_tmp, made=made)
+
+
+def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts, csv_tables, *, csv_tmp=None,
+                      made=None) -> int:
+    """The run's checks (gate, free inertial, health), its files (all or none) and its report line."""
     s = sol.summary
     used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
     records = int(s.get("gnss_records", len(getattr(ds, "gnss", ())) or 0))
@@ -676,7 +794,7 @@ def cmd_run(args) -> int:
     from .._atomic import output_set
 
     first = out if args.out_format == "kfgins" else out.parent
-    made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the writes fail
+    made = list(made or ()) + [d for d in (first, *first.parents) if not d.exists()]  # removed if the writes fail
     try:
         # every file of the run or, on an error (a full disk, Ctrl-C), none: each is written to a
         # temporary file beside its destination and all are renamed into place at the end
@@ -686,6 +804,11 @@ def cmd_run(args) -> int:
 
                 out.mkdir(parents=True, exist_ok=True)
                 base = write_kfgins_solution(out, sol)[0]
+            elif csv_tmp is not None:  # written block by block (filters/stream.py): renamed with the others
+                from .._atomic import _finish
+
+                _finish(csv_tmp, out)
+                base = out
             else:
                 sol.save(out, columns=groups, precision=args.csv_precision)
                 base = out

@@ -90,7 +90,7 @@ def _scan_rows(sol, t) -> dict:
                                _R_EARTH_M)
 
 
-def assess(sol, imu_t_end: float | None = None) -> dict:
+def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_rows: int | None = None) -> dict:
     """The health verdict of a solution (module docstring).
 
     Parameters
@@ -99,6 +99,12 @@ def assess(sol, imu_t_end: float | None = None) -> dict:
         Its rows, sigmas and GNSS record table (``gnss_t``, ``nis``, ``gnss_status``).
     imu_t_end : float, optional
         Time of the last IMU sample [s]; default the last output row.
+    scan : dict, optional
+        The ``_core.scan_solution`` result of the rows, when they are not in
+        ``sol`` (a run written block by block, :mod:`insnav.filters.stream`,
+        merges its blocks' scans; it passes only scans without a bad row).
+    n_rows : int, optional
+        The row count with ``scan`` (default ``len(sol.t)``).
 
     Returns
     -------
@@ -133,13 +139,14 @@ def assess(sol, imu_t_end: float | None = None) -> dict:
         out["warnings"].append(f"the GNSS innovations are {ratio:.3g} times their expected size (mean NIS / rows; "
                                "about 1 when consistent): the configured IMU noise or GNSS sigmas are far too small")
     # broken covariance, km-scale jumps: one compiled pass over the rows (engine/solution_scan.hpp)
-    sc = _scan_rows(sol, t)
+    sc = _scan_rows(sol, t) if scan is None else scan
+    n_all = len(t) if n_rows is None else int(n_rows)
     for b, name in enumerate(_SIGMA_BLOCKS):
         i = sc["first_bad_sigma"][b]
         if i >= 0:
             value = np.asarray(getattr(sol, name), float)[i, sc["first_bad_sigma_col"][b]]
             reasons.append(f"broken covariance: {name} is {value:.3g} at t = {t[i]:.3f} s "
-                           f"({sc['bad_sigma_rows'][b]} of {len(t)} rows)")
+                           f"({sc['bad_sigma_rows'][b]} of {n_all} rows)")
             break
     if sc["first_nonfinite_pos"] >= 0:
         reasons.append(f"position not finite from t = {t[sc['first_nonfinite_pos']]:.3f} s")

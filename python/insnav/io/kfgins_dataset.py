@@ -43,19 +43,7 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
     config : RunConfig
         ``init_error=False``: the run starts from the YAML's initial state.
     """
-    c = read_kfgins_config(config_path)
-    imu_path = imu_path or c["imupath"]
-    gnss_path = gnss_path or c["gnsspath"]
-    for p, key in ((imu_path, "imupath"), (gnss_path, "gnsspath")):
-        if p is None or not Path(p).exists():
-            alt = Path(str(p) + ".xz") if p else None
-            if alt is not None and alt.exists():
-                if key == "imupath":
-                    imu_path = alt
-                else:
-                    gnss_path = alt
-                continue
-            raise FileNotFoundError(f"{config_path}: key '{key}': file not found: {p}")
+    c, imu_path, gnss_path = _kfgins_files(config_path, imu_path, gnss_path)
     imu = read_kfgins_imu(imu_path, c["imudatalen"])
     gnss = read_kfgins_gnss(gnss_path)
     start = c["starttime_s"]
@@ -79,6 +67,35 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
     gnss = GnssFixes(*(np.asarray(getattr(gnss, f))[g] for f in
                        ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")),
                      origin=None if gnss.origin is None else gnss.origin.take(g, len(g)))
+    initial, cfg = _kfgins_run_config(c, config_path, layout)
+    # the records outside the run's IMU span are not carried; the run summary counts them
+    scenario = {"kfgins_config": str(config_path), "gnss_outside_imu_span": int(g.size - np.count_nonzero(g))}
+    ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario=scenario,
+                 lever_arm_b=np.asarray(cfg.lever_arm_b), initial=initial, t0=t0, gps_time_offset_s=0.0,
+                 imu_model={}, name=Path(config_path).stem)
+    return ds, cfg
+
+
+def _kfgins_files(config_path, imu_path=None, gnss_path=None):
+    """The YAML read, and the IMU and GNSS file paths (given, else the YAML's; ``.xz`` beside them)."""
+    c = read_kfgins_config(config_path)
+    imu_path = imu_path or c["imupath"]
+    gnss_path = gnss_path or c["gnsspath"]
+    for p, key in ((imu_path, "imupath"), (gnss_path, "gnsspath")):
+        if p is None or not Path(p).exists():
+            alt = Path(str(p) + ".xz") if p else None
+            if alt is not None and alt.exists():
+                if key == "imupath":
+                    imu_path = alt
+                else:
+                    gnss_path = alt
+                continue
+            raise FileNotFoundError(f"{config_path}: key '{key}': file not found: {p}")
+    return c, imu_path, gnss_path
+
+
+def _kfgins_run_config(c, config_path, layout: int):
+    """The initial state and the run configuration of a read KF-GINS YAML ``c``."""
     if c["initpos"] is None or c["initatt_rad"] is None:
         raise ValueError(f"{config_path}: keys 'initpos' and 'initatt' are required")
     pos, att = c["initpos"], c["initatt_rad"]
@@ -121,9 +138,20 @@ def load_kfgins(config_path, imu_path=None, gnss_path=None, *, layout: int = 21)
                     init_sigma_gyro_bias_radps=given("initbgstd_radps"),
                     init_sigma_acc_scale=given("initsastd", scale=False),
                     init_sigma_gyro_scale=given("initsgstd", scale=False))
-    # the records outside the run's IMU span are not carried; the run summary counts them
-    scenario = {"kfgins_config": str(config_path), "gnss_outside_imu_span": int(g.size - np.count_nonzero(g))}
-    ds = Dataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario=scenario,
-                 lever_arm_b=np.asarray(cfg.lever_arm_b), initial=initial, t0=t0, gps_time_offset_s=0.0,
+    return initial, cfg
+
+
+def kfgins_stream_inputs(config_path, imu_path=None, gnss_path=None, *, layout: int = 21):
+    """What a block-by-block run of KF-GINS files needs before its IMU file is
+    read (:mod:`insnav.filters.stream`): the YAML (``read_kfgins_config``), the
+    IMU file's path, every GNSS record, a dataset without IMU (initial state,
+    lever arm, scenario; ``t0`` set by the stream) and the run configuration,
+    exactly as :func:`load_kfgins` makes them."""
+    c, imu_path, gnss_path = _kfgins_files(config_path, imu_path, gnss_path)
+    gnss = read_kfgins_gnss(gnss_path)
+    initial, cfg = _kfgins_run_config(c, config_path, layout)
+    scenario = {"kfgins_config": str(config_path), "gnss_outside_imu_span": 0}
+    ds = Dataset(imu=None, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario=scenario,
+                 lever_arm_b=np.asarray(cfg.lever_arm_b), initial=initial, t0=float("nan"), gps_time_offset_s=0.0,
                  imu_model={}, name=Path(config_path).stem)
-    return ds, cfg
+    return dict(yaml=c, imu_path=imu_path, gnss=gnss, dataset=ds, config=cfg)

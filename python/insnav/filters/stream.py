@@ -1,0 +1,782 @@
+"""The loosely coupled forward run without the recording in memory: the IMU file
+read, filtered and written block by block (``insnav run`` on long recordings).
+
+The batch path (:func:`insnav.run`) holds the whole IMU text, its arrays and
+the whole solution in memory, so its memory grows with the recording.  Here
+the IMU text is read in blocks of :data:`BLOCK_LINES` lines (plain reads, never a
+memory map: a file truncated while it is read is an error naming it, never a
+SIGBUS), each block is parsed by the compiled reader
+(``cpp/include/insnav/io/text_table.hpp``), pushed through the compiled loose
+engine (``cpp/include/insnav/engine/loose_stream.hpp``: the batch engine's
+very loop, cut into blocks, the GIL released, no allocation per sample), and
+its output rows (at the ``--output-rate`` decimation) are converted and
+appended to a temporary CSV file beside the destination, renamed into place
+only when the whole run succeeded.  The next block is read and parsed on a
+reader thread while this one is filtered, and the rows are formatted on a
+writer thread while the next block is filtered (the engine's two row buffers
+are used in turn).  Memory is the GNSS records (a few per second), a few
+blocks of IMU samples and rows, and the IMU summed to 10 Hz for the input
+checks: what still grows with the recording (``bench/cli_end_to_end.py``
+measures a synthesised day).
+
+The rows, the per-record outputs (innovations sidecar), the summary and the
+health verdict equal the batch run's, and the CSV file is byte for byte the
+batch run's (``tests/test_stream.py``).  The input checks differ in two
+documented ways: the IMU sanitizer's block scan takes the nominal interval
+from the first block (a later block whose median interval differs, an IMU gap,
+a repeated time or an implausible rate hands the run to the batch path, whose
+sanitizer repairs or names it), and the unit and time-base checks
+(:func:`insnav.data.checks.check_dataset`) see the IMU increments summed to
+10 Hz.  Whatever the stream cannot reproduce exactly (a sanitizer repair, a
+non-finite row, an unhealthy run, a failed check, a GNSS record whose cut
+changes the set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
+with the reason, and ``insnav run`` then runs the batch path, whose result and messages are the
+reference.  The RTS smoother needs the whole run and always takes the batch
+path.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import _core
+from .._imu_scan import scan_imu
+from .._median import median
+from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_rows
+from ..data.textio import count_columns, parse_numeric, threads
+from ..units import DEG
+from .solution import Solution
+
+__all__ = ["BLOCK_LINES", "imu_text_blocks", "stream_loose_csv", "StreamResult", "Fallback", "stream_unsupported",
+           "StreamedSolution"]
+
+#: IMU lines per block (2^16: about 7 MB of KF-GINS text)
+BLOCK_LINES = 1 << 16
+#: the rate of the summed IMU the input checks see [Hz]
+CHECK_RATE_HZ = 10.0
+#: bytes per IMU text line assumed when sizing a block's read (the block is cut at a line end)
+_LINE_BYTES_GUESS = 112
+
+
+class Fallback(Exception):
+    """The stream cannot reproduce the batch run exactly here: the reason (one line)."""
+
+
+@dataclass
+class ImuBlock:
+    """One block of IMU samples, the file line of its first row, and how far
+    into the file (its bytes on disk, compressed or not) the block ends."""
+
+    t: np.ndarray
+    dtheta_b: np.ndarray
+    dv_b: np.ndarray
+    origin: RowOrigin
+    file_bytes_done: int = 0
+    file_bytes: int = 0
+
+
+def _opener(path: Path):
+    """(the text stream, the file on disk: its position is the progress; compressed or not)."""
+    raw = open(path, "rb", buffering=0)
+    kind = {".xz": "lzma", ".lzma": "lzma", ".gz": "gzip", ".bz2": "bz2"}.get(path.suffix.lower())
+    if kind is None:
+        return raw, raw, False
+    import bz2
+    import gzip
+    import lzma
+
+    try:
+        return {"lzma": lzma.open, "gzip": gzip.open, "bz2": bz2.open}[kind](raw, "rb"), raw, True
+    except BaseException:
+        raw.close()
+        raise
+
+
+def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None = None, names=None):
+    """The rows of a whitespace-separated IMU text file (``t dtheta_xyz dv_xyz``,
+    KF-GINS's layout; extra columns ignored), block by block.
+
+    Parameters
+    ----------
+    path : str or Path
+        Plain, ``.xz``, ``.gz`` or ``.bz2`` (decompressed as it is read).
+    ncols : int, optional
+        Columns per line (default: those of the first line, at least 7).
+    block_lines : int
+        Lines per block (about).
+    names : sequence of str, optional
+        Column names for the messages.
+
+    Yields
+    ------
+    ImuBlock
+        ``t`` (n,) [s], ``dtheta_b`` (n, 3) [rad], ``dv_b`` (n, 3) [m/s] and the
+        rows' file lines (``origin``), right across blocks.
+
+    Raises
+    ------
+    ValueError
+        ``"<file>:<line>: ..."`` for a malformed line (a truncated last line
+        says so), a truncated compressed stream, or a file that changed while
+        it was read (:class:`insnav.data.textio.FileChangedError`).
+    """
+    p = Path(path)
+    if not p.is_file():
+        exc = FileNotFoundError(f"{p} does not exist")
+        exc.strerror, exc.filename = "No such file or directory", str(p)
+        raise exc
+    f, raw, compressed = _opener(p)
+    chunk = max(1, int(BLOCK_LINES if block_lines is None else block_lines)) * _LINE_BYTES_GUESS
+    line = 1  # file line of the next block's first line
+    n = ncols
+    with raw, f:
+        st0 = os.stat(p)
+        buf = bytearray(chunk)  # one buffer for every block: the unfinished line moved to its start
+        have = 0  # bytes of the unfinished line at buf's start
+        pos = 0  # bytes read from the file
+        eof = False
+        while not eof:
+            if have == len(buf):  # one line longer than the buffer: grow it
+                buf.extend(bytes(len(buf)))
+            total = have
+            try:
+                with memoryview(buf) as mv:
+                    while total < len(buf):  # fill the buffer (a decompressor returns a little at a time)
+                        k = f.readinto(mv[total:])
+                        if not k:
+                            eof = True
+                            break
+                        total += k
+            except (EOFError, OSError, ValueError) as exc:  # lzma / gzip / bz2: a truncated or corrupt stream
+                why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise ValueError(f"{p}: truncated or corrupt {p.suffix.lstrip('.')} file ({why}); "
+                                 "decompress it again or fetch a complete copy") from None
+            pos += total - have
+            cut = total if eof else buf.rfind(b"\n", 0, total) + 1
+            if cut == 0:  # no line end yet: read on
+                have = total
+                continue
+            with memoryview(buf) as mv:
+                data = mv[:cut]
+                if n is None and bytes(data).strip():
+                    n = count_columns(bytes(data), p)
+                    if n < 7:
+                        raise ValueError(f"{p}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
+                                         f"found {n}")
+                parsed = n is not None and cut > 0
+                if parsed:
+                    parts, lines = parse_numeric(data, n, str(p), first_line=line, comma=False, keep=7, names=names,
+                                                 groups=(1, 3, 3))
+                else:
+                    parts, lines = (np.zeros(0),), None
+                del data
+            rows = len(parts[0])
+            origin = RowOrigin(str(p), line, lines)
+            # the lines of this block: its rows when none was blank (the parser counted them), else counted
+            line += rows if (parsed and lines is None and not eof) else buf.count(b"\n", 0, cut)
+            if rows:
+                yield ImuBlock(parts[0], parts[1], parts[2], origin, raw.tell(), st0.st_size)
+            buf[:total - cut] = buf[cut:total]
+            have = total - cut
+        if not compressed:
+            st1 = os.stat(p)
+            if (st1.st_size, st1.st_mtime_ns) != (st0.st_size, st0.st_mtime_ns) or pos != st0.st_size:
+                from ..data.textio import _changed
+
+                raise _changed(p, (st0.st_size, st0.st_mtime_ns), (st1.st_size, st1.st_mtime_ns), pos)
+
+
+class _Prefetch:
+    """The blocks of a generator read one ahead on a background thread, so
+    that reading and parsing the next block (the GIL released in the file
+    read and the parser) overlap the filtering of this one (the GIL released
+    in the engine) on a second core.  An exception of the reader is raised
+    where its block would have been; :meth:`close` stops the thread."""
+
+    _END = object()
+
+    def __init__(self, gen, depth: int = 1):
+        import queue
+        import threading
+
+        self._gen = gen
+        self._q = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, name="insnav-imu-reader", daemon=True)
+        self._t.start()
+
+    def _put(self, item) -> bool:
+        import queue
+
+        while not self._stop.is_set():
+            try:
+                self._q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self) -> None:
+        try:
+            for item in self._gen:
+                if not self._put(item):
+                    return
+            self._put(self._END)
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer
+            self._put(exc)
+        finally:
+            self._gen.close()
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        item = self._q.get()
+        if item is self._END:
+            raise StopIteration
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+    def close(self) -> None:
+        self._stop.set()
+        self._t.join()
+
+
+def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> str | None:
+    """Why a run cannot take the streaming path (None: it can): the loose
+    ekf, rbukf or ukf forward run (15 or 21 states) written as CSV, without
+    the smoother, vehicle constraints, self-calibration states or the IMU-error
+    sigma columns."""
+    if out_format != "insnav" or out_suffix.lower() != ".csv":
+        return "the block-by-block writer writes CSV (npz, Parquet and the KF-GINS layout are written whole)"
+    if cfg.smooth:
+        return "the RTS smoother needs the whole run"
+    if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf") or cfg.layout not in (15, 21):
+        return f"filter {cfg.filter} {cfg.coupling} with {cfg.layout} states runs whole (the stream: loose ekf, " \
+               "rbukf, ukf on 15 or 21 states)"
+    if cfg.constraints.use:
+        return "the vehicle constraints are derived from the whole IMU record"
+    if cfg.lever_arm.estimate or cfg.lever_arm.estimate_odometer or cfg.time.estimate_offset:
+        return "the self-calibration states run in the batch engine"
+    if cfg.imu_error_sigmas or cfg.options or cfg.tdcp.enabled:
+        return "the IMU-error sigma columns, filter options and TDCP run in the batch engine"
+    return None
+
+
+class _Coarse:
+    """The IMU summed over windows of ``k`` samples (the first sample alone),
+    for the input checks: the time of each window's last sample and its
+    summed increments, in arrays sized once from the expected sample count
+    (grown by half when it was too small)."""
+
+    def __init__(self, k: int, expected_samples: int = 0):
+        self.k = max(1, int(k))
+        cap = max(64, int(1.02 * expected_samples / self.k) + 64)
+        self.t, self.dth, self.dv = np.empty(cap), np.empty((cap, 3)), np.empty((cap, 3))
+        self.n = 0
+        self.started = False
+        self.pend_n = 0  # samples in the window not yet complete, their time and sums
+        self.pend_t = 0.0
+        self.pend_dth, self.pend_dv = np.zeros(3), np.zeros(3)
+
+    def _push(self, t, dth, dv) -> None:
+        m = len(t)
+        if self.n + m > len(self.t):
+            cap = max(self.n + m, int(1.5 * len(self.t)))
+            for name in ("t", "dth", "dv"):
+                old = getattr(self, name)
+                new = np.empty((cap,) + old.shape[1:])
+                new[:self.n] = old[:self.n]
+                setattr(self, name, new)
+        self.t[self.n:self.n + m] = t
+        self.dth[self.n:self.n + m] = dth
+        self.dv[self.n:self.n + m] = dv
+        self.n += m
+
+    def add(self, t, dth, dv) -> None:
+        if not self.started:  # the first sample alone: the checks see the IMU span's start
+            self.started = True
+            self._push(t[:1], dth[:1], dv[:1])
+            t, dth, dv = t[1:], dth[1:], dv[1:]
+        k = self.k
+        if self.pend_n:  # the window begun in an earlier block
+            take = min(k - self.pend_n, len(t))
+            if take:
+                self.pend_n += take
+                self.pend_t = float(t[take - 1])
+                self.pend_dth += dth[:take].sum(axis=0)
+                self.pend_dv += dv[:take].sum(axis=0)
+                t, dth, dv = t[take:], dth[take:], dv[take:]
+            if self.pend_n < k:
+                return
+            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
+            self.pend_n = 0
+        m = (len(t) // k) * k
+        if m:
+            self._push(t[k - 1:m:k], dth[:m].reshape(-1, k, 3).sum(axis=1), dv[:m].reshape(-1, k, 3).sum(axis=1))
+        if m < len(t):
+            self.pend_n = len(t) - m
+            self.pend_t = float(t[-1])
+            self.pend_dth = dth[m:].sum(axis=0)
+            self.pend_dv = dv[m:].sum(axis=0)
+
+    def imu(self, source: str) -> ImuData:
+        """The summed IMU (the last, incomplete window too): views of the arrays."""
+        if self.pend_n:
+            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
+            self.pend_n = 0
+        n = self.n
+        return ImuData(self.t[:n], self.dth[:n], self.dv[:n], origin=RowOrigin(source, 0))
+
+
+class _Health:
+    """The health scan (``_core.scan_solution``) merged over blocks: the
+    largest step (a block's first row against the previous block's last) and
+    speed, and whether any row is bad (then the batch path names it)."""
+
+    def __init__(self):
+        self.bad = False
+        self.max_step_m = float("nan")
+        self.max_speed_mps = float("nan")
+        self.any_finite_step = self.any_finite_speed = False
+        self.last = None  # (lat, lon, h, v_n, sigmas) of the previous block's last row
+
+    def _merge(self, sc, rows: bool) -> None:
+        from .health import MAX_SPEED_MPS, MAX_STEP_M
+
+        if rows and (max(sc["first_bad_sigma"]) >= 0 or sc["first_nonfinite_pos"] >= 0
+                     or sc["first_height_out"] >= 0):
+            self.bad = True
+        if sc["max_step_row"] >= 0 and not (sc["max_step_m"] <= self.max_step_m):
+            self.max_step_m = float(sc["max_step_m"])
+        self.any_finite_step |= bool(sc["any_finite_step"])
+        if rows:
+            if sc["max_speed_row"] >= 0 and not (sc["max_speed_mps"] <= self.max_speed_mps):
+                self.max_speed_mps = float(sc["max_speed_mps"])
+            self.any_finite_speed |= bool(sc["any_finite_speed"])
+        if self.max_step_m > MAX_STEP_M or self.max_speed_mps > MAX_SPEED_MPS:
+            self.bad = True
+
+    def add(self, lat, lon, h, v_n, sigmas) -> None:
+        from .health import HEIGHT_RANGE_M, _R_EARTH_M
+
+        lo, hi = float(HEIGHT_RANGE_M[0]), float(HEIGHT_RANGE_M[1])
+        n = len(lat)
+        if not n:
+            return
+        if self.last is not None:  # the step across the block boundary
+            pl = self.last
+            two = [np.concatenate([a, b]) for a, b in zip(pl[:4], (lat[:1], lon[:1], h[:1], v_n[:1]))]
+            sig2 = [np.concatenate([a, b[:1]]) for a, b in zip(pl[4], sigmas)]
+            self._merge(_core.scan_solution(*two, sig2, lo, hi, _R_EARTH_M), rows=False)
+        self._merge(_core.scan_solution(lat, lon, h, v_n, sigmas, lo, hi, _R_EARTH_M), rows=True)
+        self.last = (lat[-1:].copy(), lon[-1:].copy(), h[-1:].copy(), v_n[-1:].copy(), [s[-1:].copy() for s in sigmas])
+
+    def scan(self) -> dict:
+        """A ``_core.scan_solution`` result for :func:`insnav.filters.health.assess` (no bad row)."""
+        return dict(first_bad_sigma=[-1, -1, -1], first_bad_sigma_col=[-1, -1, -1], bad_sigma_rows=[0, 0, 0],
+                    first_nonfinite_pos=-1, max_step_m=self.max_step_m, max_step_row=-1,
+                    any_finite_step=self.any_finite_step, max_speed_mps=self.max_speed_mps, max_speed_row=-1,
+                    any_finite_speed=self.any_finite_speed, first_height_out=-1)
+
+
+@dataclass
+class StreamResult:
+    """What :func:`stream_loose_csv` leaves: the solution without its rows
+    (``gnss_t``, innovations, NIS, status, summary; ``len()`` the row count),
+    the dataset the checks saw (IMU summed to 10 Hz), the run config and the
+    finished temporary CSV file (renamed by the caller)."""
+
+    solution: object
+    dataset: Dataset
+    config: object
+    csv_tmp: Path
+    rows: int
+    samples: int
+    blocks: int = 0
+    timings: dict = field(default_factory=dict)
+
+
+def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int | None, start_s: float,
+                     end_s: float | None, gnss_raw: GnssFixes, columns=None, precision: str = "resolution",
+                     output_rate_hz: float | None = None, block_lines: int | None = None,
+                     set_decimation=None, progress=None) -> StreamResult:
+    """Run the loose forward filter over the IMU file ``imu_path`` block by
+    block, writing the solution CSV for ``out`` to a temporary file beside it.
+
+    Parameters
+    ----------
+    ds0 : Dataset
+        The dataset without its IMU (initial state, lever arm, IMU model; its
+        ``gnss`` are ignored: ``gnss_raw`` is cut to the IMU span here).
+    imu_path : path
+        The IMU text file (KF-GINS layout).
+    cfg : RunConfig
+        The run configuration (:func:`stream_unsupported` is None for it).
+    out : Path
+        The solution file the temporary file is for (same folder).
+    imu_ncols : int, optional
+        Columns per IMU line (KF-GINS ``imudatalen``).
+    start_s, end_s : float
+        KF-GINS ``starttime`` / ``endtime`` [s] (None: to the end of the file).
+    gnss_raw : GnssFixes
+        Every GNSS record of the file.
+    columns, precision
+        As :meth:`Solution.save`.
+    output_rate_hz : float, optional
+        ``--output-rate`` [Hz]: the decimation from the first block's median interval.
+    block_lines : int, optional
+        IMU lines per block (default :data:`BLOCK_LINES`).
+    set_decimation : callable, optional
+        ``(t_first_block, rate_hz) -> k`` (``insnav run``'s rule and message).
+    progress : callable, optional
+        ``(bytes_done, bytes_total)`` of the IMU file after each block
+        (:class:`insnav._progress.Progress`).
+
+    Returns
+    -------
+    StreamResult
+        Its ``csv_tmp`` is complete; the caller renames it into place.
+
+    Raises
+    ------
+    Fallback
+        The reason the batch path must run instead (nothing is left behind).
+    ValueError
+        A malformed IMU line, a decreasing time, non-finite values (naming file and line).
+    """
+    from . import _as_config
+    from .solution import PRECISIONS
+
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision {precision!r}: use one of {', '.join(PRECISIONS)}")
+    out = Path(out)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part" + out.suffix, dir=out.parent)
+    os.close(fd)
+    tmp = Path(tmp)
+    run = _BlockRun(ds0, _as_config(cfg), tmp, start_s=start_s, end_s=end_s, gnss_raw=gnss_raw,
+                    output_rate_hz=output_rate_hz, set_decimation=set_decimation,
+                    block_lines=int(BLOCK_LINES if block_lines is None else block_lines), progress=progress)
+    try:
+        from ..io.kfgins import IMU_COLUMNS
+
+        blocks = _Prefetch(imu_text_blocks(imu_path, imu_ncols, block_lines=run.block_lines, names=IMU_COLUMNS))
+        writer = _Writer(tmp, columns, precision, run.health)
+        try:
+            return run.run(blocks, writer, str(imu_path))
+        finally:
+            blocks.close()
+            writer.shutdown()  # no write may outlive the run (the file is removed below on an error)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+class StreamedSolution(Solution):
+    """A :class:`Solution` whose rows went to the file (``n_rows`` of them, its
+    ``len()``): the GNSS record fields and the summary, no row arrays."""
+
+    n_rows = 0
+
+    def __len__(self):
+        return int(self.n_rows)
+
+
+def _median_spacing(cfg, record_t) -> float:
+    """The outage cycle's GNSS period as :func:`insnav.filters._setup.engine_config` takes it [s]."""
+    d = np.diff(np.sort(np.asarray(record_t, float)))
+    d = d[d != 0]
+    return cfg.cycle_period_s if cfg.cycle_period_s is not None else (median(d) if d.size else 1.0)
+
+
+_GNSS_FIELDS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")
+
+
+def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
+    return GnssFixes(*(np.asarray(getattr(g, f))[keep] for f in _GNSS_FIELDS),
+                     origin=None if g.origin is None else g.origin.take(keep, len(keep)))
+
+
+class _BlockRun:
+    """One block-by-block run: the reader's and the sanitizer's checks per
+    block, the span (t0, endtime], the engine, the output rows, and at the end
+    the per-record outputs, the input checks and the summary of the batch run."""
+
+    def __init__(self, ds0, cfg, tmp: Path, *, start_s, end_s, gnss_raw, output_rate_hz, set_decimation,
+                 block_lines: int, progress=None):
+        from .sanitize import DEFAULTS, _imu_report
+
+        self.ds0, self.cfg, self.tmp = ds0, cfg, tmp
+        self.start_s, self.end_s, self.gnss_raw = start_s, end_s, gnss_raw
+        self.output_rate_hz, self.set_decimation = output_rate_hz, set_decimation
+        self.block_lines = block_lines
+        self.progress = progress
+        self.opts = {**DEFAULTS, **(cfg.sanitize or {})}
+        self.imu_report = _imu_report()
+        self.health = _Health()
+        self.timings = dict(read=0.0, filter=0.0, write=0.0)
+        import time
+
+        self.clock = time.perf_counter
+        self.t0 = None  # the initial state's time: the first sample at or after starttime [s]
+        self.t_prev = None  # the last sample read, and its line (the reader's checks across blocks)
+        self.line_prev = 0
+        self.n_kept = 0  # samples in the run's span so far
+        self.last_kept = None  # the last of them [s]
+        self.dt0 = None  # the nominal interval (the first block's median) [s]
+        self.stream = self.gnss = self.gnss_rep = self.coarse = None
+        self.rows = 0
+
+    # --- per block ---------------------------------------------------------------------------
+    def _scan(self, t, dth, dv, t0):
+        o = self.opts
+        return scan_imu(t, dth, dv, t0=t0, max_rate_rps=o["max_rate_rps"], max_accel_mps2=o["max_accel_mps2"],
+                        gap_factor=o["gap_factor"])
+
+    def _reader_checks(self, blk: ImuBlock, sc: dict) -> None:
+        """read_kfgins_imu's checks on every line: non-finite values, decreasing time (across blocks too)."""
+        from ..io.kfgins import IMU_COLUMNS
+
+        t, origin = blk.t, blk.origin
+        if sc["nonfinite_t"] >= 0 or sc["nonfinite_dtheta"] >= 0 or sc["nonfinite_dv"] >= 0:
+            check_finite_rows((t, blk.dtheta_b, blk.dv_b), origin, IMU_COLUMNS)
+        i = sc["decrease"]
+        if i >= 0:
+            raise ValueError(f"{origin.where(i)}: time {float(t[i])!r} does not increase "
+                             f"(previous record at {float(t[i - 1])!r}, line {origin.line(i - 1)})")
+        if self.t_prev is not None and t[0] < self.t_prev:
+            raise ValueError(f"{origin.where(0)}: time {float(t[0])!r} does not increase "
+                             f"(previous record at {self.t_prev!r}, line {self.line_prev})")
+        self.t_prev, self.line_prev = float(t[-1]), origin.line(len(t) - 1)
+
+    def _sanitizer_checks(self, t, sc: dict) -> None:
+        """What the sanitizer (filters/sanitize.py) would repair or refuse: a Fallback."""
+        first = self.n_kept == 0
+        if sc["repeats"] or (not first and not t[0] > self.last_kept):
+            raise Fallback("repeated IMU times (the sanitizer drops duplicates)")
+        if self.dt0 is None:
+            self.dt0 = sc["dt0"]
+        elif len(t) > 16 and abs(sc["dt0"] - self.dt0) > 1e-6 * self.dt0:
+            raise Fallback(f"the IMU interval changes ({self.dt0:.6g} s -> {sc['dt0']:.6g} s)")
+        if sc["rate"] >= 0 or sc["accel"] >= 0:
+            raise Fallback("an implausible IMU rate (the sanitizer names it)")
+        if sc["gaps"] or (not first and t[0] - self.last_kept > self.opts["gap_factor"] * self.dt0):
+            raise Fallback("an IMU gap (the sanitizer bridges it)")
+
+    def run(self, blocks, writer, imu_source: str) -> StreamResult:
+        clock, tm = self.clock, self.timings
+        t_mark = clock()
+        n_blocks = 0
+        for blk in blocks:
+            n_blocks += 1
+            t, dth, dv = blk.t, blk.dtheta_b, blk.dv_b
+            # inside the run's span one scan with the sanitizer's limits gives the reader's checks too
+            inside = self.n_kept > 0 and (self.end_s is None or t[-1] <= self.end_s)
+            sc = self._scan(t, dth, dv, self.last_kept) if inside else scan_imu(t, dth, dv)
+            self._reader_checks(blk, sc)
+            lo = 0
+            if self.t0 is None:  # the initial state: the first sample at or after starttime
+                i0 = int(np.searchsorted(t, self.start_s))
+                if i0 == len(t):
+                    continue
+                self.t0 = float(t[i0])
+                lo = int(np.searchsorted(t, self.t0, side="right"))
+                # the samples to expect: the file's size over the bytes per line so far
+                lines = blk.origin.line(len(t) - 1)
+                expected = int(blk.file_bytes * lines / blk.file_bytes_done) if blk.file_bytes_done else 0
+                self._start(t[lo:], expected)
+            hi = len(t) if self.end_s is None else int(np.searchsorted(t, self.end_s, side="right"))
+            last = hi < len(t)  # endtime reached: the rest of the file is not read
+            if hi > lo:
+                if not (inside and lo == 0 and hi == len(t)):
+                    t, dth, dv = t[lo:hi], dth[lo:hi], dv[lo:hi]
+                    sc = self._scan(t, dth, dv, self.t0 if self.n_kept == 0 else self.last_kept)
+                self._sanitizer_checks(t, sc)
+                self.coarse.add(t, dth, dv)
+                self.n_kept += len(t)
+                self.last_kept = float(t[-1])
+                tm["read"] += clock() - t_mark
+                for a in range(0, len(t), self.block_lines):  # the engine's buffers hold block_lines rows
+                    t_mark = clock()
+                    n = self.stream.run_block(t[a:a + self.block_lines], dth[a:a + self.block_lines],
+                                              dv[a:a + self.block_lines])
+                    tm["filter"] += clock() - t_mark
+                    t_mark = clock()
+                    writer.add(self.stream, n)
+                    self.rows += n
+                    tm["write"] += clock() - t_mark
+                t_mark = clock()
+            if self.progress is not None:
+                self.progress(blk.file_bytes_done, blk.file_bytes)
+            if last:
+                break
+        tm["read"] += clock() - t_mark
+        if self.t0 is None or self.n_kept < 2:
+            raise Fallback("too few IMU records in the run's span (the batch path names the key)")
+        t_mark = clock()
+        n = self.stream.finish()
+        writer.add(self.stream, n)
+        self.rows += n
+        writer.close()
+        tm["write"] += clock() - t_mark
+        t_mark = clock()
+        if self.health.bad:
+            raise Fallback("the health check found a bad row (the batch path names it)")
+        res = self._result(imu_source, n_blocks)
+        tm["filter"] += clock() - t_mark
+        return res
+
+    # --- start and end -----------------------------------------------------------------------
+    def _start(self, t_first, expected_samples: int = 0) -> None:
+        """The engine at t0: the GNSS records in (t0, endtime] sanitized (the batch loader's cut and
+        sanitize_gnss), the output decimation from the first block, the batch loose runner's set-up."""
+        from .loose import loose_engine_args
+        from .sanitize import sanitize_gnss
+
+        cfg, o = self.cfg, self.opts
+        tv = np.asarray(self.gnss_raw.t_valid)
+        g = (tv > self.t0) & (tv <= (np.inf if self.end_s is None else self.end_s))
+        self.gnss, self.gnss_rep = sanitize_gnss(_gnss_take(self.gnss_raw, g), min_h_m=o["min_h_m"],
+                                                 max_h_m=o["max_h_m"], source="gnss")
+        cfg.output_decimation = 1
+        if self.output_rate_hz is not None:
+            cfg.output_decimation = self.set_decimation(t_first, self.output_rate_hz)
+        gn = self.gnss
+        rows = np.column_stack([gn.t_valid, np.asarray(gn.lat_deg) * DEG, np.asarray(gn.lon_deg) * DEG, gn.h_m,
+                                gn.v_n, gn.sigma_pos_n, gn.sigma_vel_n]).astype(float) if len(gn) else \
+            np.zeros((0, 13))
+        if len(rows):  # as run_loose
+            rows = np.ascontiguousarray(rows[np.argsort(rows[:, 0], kind="stable")])
+            if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
+                rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
+                rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
+            from .._validate import check_finite
+
+            check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+        a = loose_engine_args(dataclasses.replace(self.ds0, t0=self.t0, gnss=gn), cfg, rows[:, 0].copy())
+        self.stream = _core.LooseStream(cfg.filter, a.layout, rows, a.init, a.P0, a.imu_correction, a.imu_model,
+                                        a.config, self.block_lines)
+        dt = median(np.diff(t_first)) if len(t_first) > 1 else 0.0
+        self.coarse = _Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1, expected_samples)
+
+    def _exact_gnss_cut(self, rec: dict) -> None:
+        """The GNSS records after the last IMU sample: the batch loader cuts them before the run.  They
+        changed nothing when the sanitizer treats the rest alike and the GNSS period is the same; their
+        outputs are then dropped, else the batch path runs."""
+        from .sanitize import sanitize_gnss
+
+        keep = np.asarray(self.gnss.t_valid) <= self.last_kept
+        if keep.all():
+            return
+        tv = np.asarray(self.gnss_raw.t_valid)
+        g2, rep2 = sanitize_gnss(_gnss_take(self.gnss_raw, (tv > self.t0) & (tv <= self.last_kept)),
+                                 min_h_m=self.opts["min_h_m"], max_h_m=self.opts["max_h_m"], source="gnss")
+        counts = ("gnss_records_in", "gnss_records_out")
+        same = ({k: v for k, v in rep2.items() if k not in counts}
+                == {k: v for k, v in self.gnss_rep.items() if k not in counts}
+                and len(g2) == int(keep.sum())
+                and all(np.array_equal(np.asarray(getattr(g2, f), float),
+                                       np.asarray(getattr(self.gnss, f), float)[keep], equal_nan=True)
+                        for f in _GNSS_FIELDS if f != "t_arrival")
+                and _median_spacing(self.cfg, g2.t_valid) == _median_spacing(self.cfg, self.gnss.t_valid))
+        if not same:
+            raise Fallback("a GNSS record after the last IMU sample changes the set-up")
+        self.gnss, self.gnss_rep = g2, rep2
+        cut = int(keep.sum())  # the engine's records are in time order: the cut ones are the last
+        for k in ("innovation", "nis", "log_det_s", "status"):
+            rec[k] = rec[k][:cut]
+
+    def _result(self, imu_source: str, n_blocks: int) -> StreamResult:
+        from ..data.checks import check_dataset
+        from .health import assess
+
+        cfg = self.cfg
+        rec = self.stream.records()
+        self._exact_gnss_cut(rec)
+        gnss_t = np.sort(np.asarray(self.gnss.t_valid, float), kind="stable")
+        tv = np.asarray(self.gnss_raw.t_valid)
+        n_in = int(np.count_nonzero((tv > self.t0) & (tv <= self.last_kept)))
+        scenario = {**(self.ds0.scenario or {}), "gnss_outside_imu_span": int(tv.size - n_in)}
+        ds = dataclasses.replace(self.ds0, t0=self.t0, imu=self.coarse.imu(imu_source), gnss=self.gnss,
+                                 scenario=scenario)
+        try:  # the unit and time-base checks on the IMU summed to 10 Hz (a failure: the batch path's message)
+            check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
+        except ValueError as exc:
+            raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]})") from None
+        z, e = np.zeros((0, 3)), np.zeros(0)
+        sol = StreamedSolution(
+            t=e, lat_deg=e, lon_deg=e, h_m=e, v_n=z, roll_deg=e, pitch_deg=e, yaw_deg=e, sigma_pos_n_m=z,
+            sigma_vel_n_mps=z, sigma_att_deg=z, acc_bias_mps2=z, gyro_bias_rps=z, acc_scale=z, gyro_scale=z,
+            gnss_t=gnss_t, innovation=rec["innovation"], nis=rec["nis"], gnss_status=rec["status"],
+            log_det_s=rec["log_det_s"],
+            summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=int(cfg.layout),
+                         updates=int(rec["updates"]), rejected=int(rec["rejected"]),
+                         gate_reopened=int(rec["gate_reopened"]), gate_outage_accepted=int(rec["gate_outage_accepted"]),
+                         cholesky_repairs=int(rec["cholesky_repairs"]), gnss_records=len(gnss_t)))
+        sol.n_rows = self.rows
+        rep = dict(self.imu_report, imu_samples_in=self.n_kept, imu_samples_out=self.n_kept)
+        sol.summary["sanitize"] = {**rep, **self.gnss_rep}
+        sol.summary["health"] = assess(sol, imu_t_end=self.last_kept, scan=self.health.scan(), n_rows=self.rows)
+        return StreamResult(solution=sol, dataset=ds, config=cfg, csv_tmp=self.tmp, rows=self.rows,
+                            samples=self.n_kept, blocks=n_blocks, timings=self.timings)
+
+
+class _Writer:
+    """The CSV rows appended on a writer thread, one block behind the filter
+    (``_core.write_table`` releases the GIL), so that formatting block i
+    overlaps filtering block i + 1; at most one block waits (bounded memory).
+    :meth:`close` waits for the last write (and raises its error)."""
+
+    def __init__(self, tmp, columns, precision, health):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.tmp, self.columns, self.precision, self.health = str(tmp), columns, precision, health
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="insnav-csv-writer")
+        self._pending = None
+        self._header_done = False
+
+    def add(self, stream, n: int) -> None:
+        """The last run_block's n rows: to degrees in place, the health scan, queued for the writer thread."""
+        from ._assemble import nav_solution
+        from .solution import CSV_DECIMALS, _selected
+
+        # the engine has two row buffers and fills them in turn, one per call (rows or not): the write
+        # queued at call i (buffer i % 2) must end before call i + 2, so every call waits for the last one
+        if n == 0:
+            self._wait()
+            return
+        out = stream.rows()  # views of this call's row buffer
+        e = np.zeros(0)
+        sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
+        if nonfinite:
+            raise Fallback("a non-finite row (the batch path names it)")
+        self.health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n),
+                        [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
+        cols = _selected(sol, self.columns)
+        dec = [CSV_DECIMALS[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
+        header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
+        self._wait()
+        self._pending = self._pool.submit(_core.write_table, self.tmp, header,
+                                          [np.asarray(x, float) for _, x, _ in cols],
+                                          [float(f) for _, _, f in cols], dec, threads=threads(),
+                                          append=self._header_done)
+        self._header_done = True
+
+    def _wait(self) -> None:
+        if self._pending is not None:
+            p, self._pending = self._pending, None
+            p.result()
+
+    def close(self) -> None:
+        """Wait for the last block (its error raised)."""
+        self._wait()
+
+    def shutdown(self) -> None:
+        """End the thread once its write is done (errors not raised: the run already failed or closed)."""
+        self._pool.shutdown(wait=True)
