@@ -746,7 +746,8 @@ def cmd_run(args) -> int:
             sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg, **run_opts)
     except ConfigError as exc:
         raise UserError(str(exc)) from None
-    return _report_and_write(args, out, groups, stages, sol, ds, cfg, rinex_opts, csv_tables)
+    return _report_and_write(args, out, groups, stages, sol, ds, cfg, rinex_opts, csv_tables,
+                             run_opts=run_opts, base_e=base_e)
 
 
 def _finish_run(args, out: Path, groups, stages, streamed) -> int:
@@ -760,8 +761,10 @@ def _finish_run(args, out: Path, groups, stages, streamed) -> int:
 
 
 def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts, csv_tables, *, csv_tmp=None,
-                      made=None) -> int:
-    """The run's checks (gate, free inertial, health), its files (all or none) and its report line."""
+                      made=None, run_opts=None, base_e=None) -> int:
+    """The run's checks (gate, free inertial, health), its files (all or none) and its report line;
+    ``run_opts`` / ``base_e``: an RTK/INS run's keywords and the base position it was given."""
+    run_opts = run_opts or {}
     s = sol.summary
     used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
     records = int(s.get("gnss_records", len(getattr(ds, "gnss", ())) or 0))
