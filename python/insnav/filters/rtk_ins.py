@@ -38,6 +38,7 @@ from ..config import RunConfig, ImuNoise
 from ..gnss.rtk import RtkOptions, RtkSolution, prepare_rtk_rows
 from ._setup import imu_arrays, init_vector, initial_state, lever_arm, raise_if_nonfinite
 from ._assemble import nav_solution
+from ..units import RAD2DEG
 from .solution import Solution
 
 __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins", "rtk_ins_options"]
