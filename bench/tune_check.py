@@ -192,18 +192,13 @@ def compare(title, ds, cfg, reference, lines, verdicts, *, max_runs, keep_t=None
         lines += [f"| reference epochs | {hand.get('epochs', 0)} | {tuned.get('epochs', 0)} |",
                   f"| horizontal RMS error [m] | {fmt(hand.get('hor_rms_m'), 4)} | {fmt(tuned.get('hor_rms_m'), 4)} |",
                   f"| 3-D RMS error [m] | {fmt(hand.get('rms_3d_m'), 4)} | {fmt(tuned.get('rms_3d_m'), 4)} |"]
-        for k, ax in AXES.items():
-            a, b = hand.get("nees", {}).get(k), tuned.get("nees", {}).get(k)
-            if a is None:
-                continue
-            lines.append(f"| rms(err/sigma) {', '.join(ax)} | {', '.join(f'{v:.2f}' for v in a)} | "
-                         f"{', '.join(f'{v:.2f}' for v in b)} |")
-        for k, ax in AXES.items():
-            a, b = hand.get("nees_demeaned", {}).get(k), tuned.get("nees_demeaned", {}).get(k)
-            if a is None:
-                continue
-            lines.append(f"| rms(err/sigma) {', '.join(ax)}, each axis's mean error removed | "
-                         f"{', '.join(f'{v:.2f}' for v in a)} | {', '.join(f'{v:.2f}' for v in b)} |")
+        for key, note in (("nees", ""), ("nees_demeaned", ", each axis's mean error removed")):
+            for k, ax in AXES.items():
+                a, b = hand.get(key, {}).get(k), tuned.get(key, {}).get(k)
+                if a is None:
+                    continue
+                lines.append(f"| rms(err/sigma) {', '.join(ax)}{note} | {', '.join(f'{v:.2f}' for v in a)} | "
+                             f"{', '.join(f'{v:.2f}' for v in b)} |")
     lines.append("")
     # verdicts
     if reference is not None and "hor_rms_m" in hand:
