@@ -759,6 +759,33 @@ def _choose_codes(s, stypes, rinex3, prefer=None):
     return out
 
 
+def _obs_header_fields(src, header):
+    """The station fields of an observation header: (approx, hen, glo_k).
+
+    approx: ``APPROX POSITION XYZ`` [m, ECEF] or None; hen: ``ANTENNA: DELTA H/E/N``
+    [m] (zeros when absent); glo_k: GLONASS slot -> FDMA frequency number from
+    ``GLONASS SLOT / FRQ #``.  Raises on a ``TIME OF FIRST OBS`` time system other
+    than GPS (RINEX 3.04 section 5.2, table A2).
+    """
+    approx, hen, glo_k = None, np.zeros(3), {}
+    for lineno, text, label in header:
+        if label == "APPROX POSITION XYZ":
+            approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label, lineno=lineno) for k in range(3)])
+        elif label == "ANTENNA: DELTA H/E/N":
+            hen = np.array([_float(src, text[14 * k:14 * (k + 1)], label, 0.0, lineno=lineno) for k in range(3)])
+        elif label == "TIME OF FIRST OBS":
+            ts = text[48:51].strip()
+            if ts and ts != "GPS":
+                raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
+        elif label == "GLONASS SLOT / FRQ #":
+            for k in range(8):
+                sl, fr = text[4 + 7 * k:7 + 7 * k], text[8 + 7 * k:10 + 7 * k]
+                if sl[:1] == "R" and sl[1:].strip():
+                    glo_k[_int(src, sl[1:], "GLONASS slot", lineno)] = _int(src, fr, "GLONASS frequency number",
+                                                                              lineno)
+    return approx, hen, glo_k
+
+
 def _obs_types_header(src, header, version, check=""):
     """Return {system letter: [codes]} from the header.
 
@@ -903,21 +930,7 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
     version, ftype, sysc = _version_type(src, header)
     if ftype != "O":
         raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
-    approx = None
-    glo_k = {}
-    for lineno, text, label in header:
-        if label == "APPROX POSITION XYZ":
-            approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label, lineno=lineno) for k in range(3)])
-        if label == "TIME OF FIRST OBS":
-            ts = text[48:51].strip()
-            if ts and ts != "GPS":
-                raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
-        if label == "GLONASS SLOT / FRQ #":
-            for k in range(8):
-                sl, fr = text[4 + 7 * k:7 + 7 * k], text[8 + 7 * k:10 + 7 * k]
-                if sl[:1] == "R" and sl[1:].strip():
-                    glo_k[_int(src, sl[1:], "GLONASS slot", lineno)] = _int(src, fr, "GLONASS frequency number",
-                                                                              lineno)
+    approx, _, glo_k = _obs_header_fields(src, header)
     rinex3 = version >= 3
     types = _obs_types_header(src, header, version, check=want if rinex3 else "")
     # RINEX 2: one list of types for every system

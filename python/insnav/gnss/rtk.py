@@ -351,8 +351,8 @@ def _read_phase_obs_v2(path, systems) -> PhaseObs:
     (L1 and L2 phase with their LLI, L5/E5a/E5b where the file has them)."""
     from .. import _core
     from ..data.textio import read_bytes
-    from .rinex import (RinexError, _core_rinex_error, _float, _header_end, _int, _Lines, _obs_types_header,
-                        _read_header, _version_type)
+    from .rinex import (RinexError, _core_rinex_error, _header_end, _Lines, _obs_header_fields,
+                        _obs_types_header, _read_header, _version_type)
 
     try:
         raw = read_bytes(path)
@@ -366,22 +366,7 @@ def _read_phase_obs_v2(path, systems) -> PhaseObs:
     version, ftype, _ = _version_type(src, header)
     if ftype != "O":
         raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
-    approx, hen, glo_k = None, np.zeros(3), {}
-    for lineno, text, label in header:
-        if label == "APPROX POSITION XYZ":
-            approx = np.array([_float(src, text[14 * k:14 * (k + 1)], label, lineno=lineno) for k in range(3)])
-        elif label == "ANTENNA: DELTA H/E/N":
-            hen = np.array([_float(src, text[14 * k:14 * (k + 1)], label, 0.0, lineno=lineno) for k in range(3)])
-        elif label == "TIME OF FIRST OBS":
-            ts = text[48:51].strip()
-            if ts and ts != "GPS":
-                raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
-        elif label == "GLONASS SLOT / FRQ #":
-            for k in range(8):
-                sl, fr = text[4 + 7 * k:7 + 7 * k], text[8 + 7 * k:10 + 7 * k]
-                if sl[:1] == "R" and sl[1:].strip():
-                    glo_k[_int(src, sl[1:], "GLONASS slot", lineno)] = _int(src, fr, "GLONASS frequency number",
-                                                                              lineno)
+    approx, hen, glo_k = _obs_header_fields(src, header)
     types = _obs_types_header(src, header, version)
     have = types.get("G", [])
     select, signals = {}, {}
