@@ -686,8 +686,21 @@ def load_dataset(directory) -> Dataset:
 
 # --- fast CSV --------------------------------------------------------------
 def write_csv(path, columns, data, fmt="%.17g", chunk=100_000) -> None:
-    """Write a numeric array with a one-line header of column names (fast, chunked)."""
+    """Write a numeric array with a one-line header of column names.
+
+    ``fmt="%.17g"`` (exact doubles): the shortest text that reads back to the
+    same double (``nan``, ``inf``, ``-0`` kept), formatted by the compiled
+    writer (``_core.write_table``, GIL released, about 10x the Python
+    formatter).  Any other ``fmt``: Python's %-formatting, ``chunk`` rows at a time.
+    """
     data = np.asarray(data, dtype=float).reshape(-1, len(columns))
+    if fmt == "%.17g":
+        from .. import _core
+        from .textio import threads
+
+        _core.write_table(str(path), ",".join(columns) + "\n", [data[:, j] for j in range(data.shape[1])],
+                          [1.0] * data.shape[1], [-1] * data.shape[1], threads=threads())
+        return
     row = ",".join([fmt] * len(columns)) + "\n"
     with open(path, "w", encoding="ascii", newline="\n") as f:
         f.write(",".join(columns) + "\n")
