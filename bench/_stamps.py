@@ -147,6 +147,8 @@ DEPENDS: dict[str, tuple[str, ...]] = {
     "allan.md": ("bench/allan_check.py", f"{_CPP}calib/allan.hpp", "cpp/bindings/bind_calib.cpp",
                  f"{_PY}calib/allan.py", f"{_PY}data/imu_grades.py"),
     "run_all.md": ("bench/run_all.py",),
+    "simulate_day.md": ("bench/simulate_day.py", f"{_PY}sim/__init__.py", f"{_PY}sim/cli.py",
+                        f"{_PY}data/dataset.py", "cpp/bindings/bind_textio.cpp") + SIM,
     "tune.md": ("bench/tune_check.py", "bench/walk_reference_check.py", f"{_PY}gnss/spp.py",
                 f"{_PY}calib/tune.py", f"{_PY}filters/tight.py", f"{_PY}filters/solution.py",
                 f"{_PY}scenarios/seed000-car.toml", "tests/data/walk_0827.toml", "tests/data/walk_0827_loose.toml",

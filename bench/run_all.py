@@ -75,12 +75,16 @@ GENERATORS: dict[str, tuple[tuple[str, ...], list[str], list[str]]] = {
                         "--out", "docs/results/selfcal_states.md"]),
     "allan": (("allan.md",), ["bench/allan_check.py", "--out", "docs/results/allan.md"],
               ["bench/allan_check.py", "--hours", "3", "--repeat", "1", "--skip-24h", "--out", "docs/results/allan.md"]),
+    "simulate_day": (("simulate_day.md",), ["bench/simulate_day.py", "--out", "docs/results/simulate_day.md"],
+                     ["bench/simulate_day.py", "--repeat", "1", "--hours", "3", "--out",
+                      "docs/results/simulate_day.md"]),
 }
 
 
 #: generators whose documents report wall or CPU times: they run alone, after the others
 #: (the rest only count, so ``--jobs 2`` may run two of them side by side)
-TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator", "tune", "allan")
+TIMED = ("seed004_bench", "kfgins", "cli_end_to_end", "gnss_speed", "rtk_compare", "navigator", "tune", "allan",
+         "simulate_day")
 
 
 def git_commit() -> str:

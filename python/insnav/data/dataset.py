@@ -454,7 +454,7 @@ class Dataset:
     initial_is_truth: bool = False
     rtk: object | None = None
 
-    def save(self, directory, overwrite: bool = False) -> Path:
+    def save(self, directory, overwrite: bool = False, *, write_tables=None) -> Path:
         """Write the dataset directory atomically (see module docstring).
 
         Parameters
@@ -462,6 +462,12 @@ class Dataset:
         directory : str or Path
         overwrite : bool
             Replace an existing directory; otherwise raise ``FileExistsError``.
+        write_tables : callable, optional
+            ``write_tables(folder)`` writes ``imu.csv``, ``truth.csv`` and
+            ``imu_errors.csv`` into the new folder itself (block by block,
+            :func:`insnav.sim.simulate_to`); this dataset's ``imu``,
+            ``truth`` and ``imu_errors`` rows are then not written (the
+            constants of ``imu_errors`` still go to ``dataset.json``).
 
         Returns
         -------
@@ -479,14 +485,17 @@ class Dataset:
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
         chmod_like_new(tmp, directory=True)
         try:
-            write_csv(tmp / "imu.csv", ImuData.COLUMNS, self.imu.to_array(), "%.17g")
+            if write_tables is not None:
+                write_tables(tmp)
+            else:
+                write_csv(tmp / "imu.csv", ImuData.COLUMNS, self.imu.to_array(), "%.17g")
             write_csv(tmp / "gnss.csv", GnssFixes.COLUMNS, self.gnss.to_array(), "%.17g")
-            if self.truth is not None:
+            if self.truth is not None and write_tables is None:
                 write_csv(tmp / "truth.csv", Truth.COLUMNS, self.truth.to_array(), "%.17g")
             if self.gnss_raw is not None:
                 write_csv(tmp / "gnss_raw.csv", GnssRaw.COLUMNS_MULTI if self.gnss_raw.is_multi() else GnssRaw.COLUMNS,
                           self.gnss_raw.to_array(), "%.17g")
-            if self.imu_errors is not None:
+            if self.imu_errors is not None and write_tables is None:
                 write_csv(tmp / "imu_errors.csv", ImuErrors.COLUMNS, self.imu_errors.to_array(),
                           "%.17g")
             if self.odometer is not None:
@@ -685,25 +694,28 @@ def load_dataset(directory) -> Dataset:
 
 
 # --- fast CSV --------------------------------------------------------------
-def write_csv(path, columns, data, fmt="%.17g", chunk=100_000) -> None:
+def write_csv(path, columns, data, fmt="%.17g", chunk=100_000, append: bool = False) -> None:
     """Write a numeric array with a one-line header of column names.
 
     ``fmt="%.17g"`` (exact doubles): the shortest text that reads back to the
     same double (``nan``, ``inf``, ``-0`` kept), formatted by the compiled
     writer (``_core.write_table``, GIL released, about 10x the Python
-    formatter).  Any other ``fmt``: Python's %-formatting, ``chunk`` rows at a time.
+    formatter).  Any other ``fmt``: Python's %-formatting, ``chunk`` rows at a
+    time.  ``append``: the rows go after the file's end, without the header
+    (a table written block by block).
     """
     data = np.asarray(data, dtype=float).reshape(-1, len(columns))
+    header = "" if append else ",".join(columns) + "\n"
     if fmt == "%.17g":
         from .. import _core
         from .textio import threads
 
-        _core.write_table(str(path), ",".join(columns) + "\n", [data[:, j] for j in range(data.shape[1])],
-                          [1.0] * data.shape[1], [-1] * data.shape[1], threads=threads())
+        _core.write_table(str(path), header, [data[:, j] for j in range(data.shape[1])],
+                          [1.0] * data.shape[1], [-1] * data.shape[1], threads=threads(), append=append)
         return
     row = ",".join([fmt] * len(columns)) + "\n"
-    with open(path, "w", encoding="ascii", newline="\n") as f:
-        f.write(",".join(columns) + "\n")
+    with open(path, "a" if append else "w", encoding="ascii", newline="\n") as f:
+        f.write(header)
         for s in range(0, data.shape[0], chunk):
             blk = data[s:s + chunk]
             f.write((row * blk.shape[0]) % tuple(blk.ravel().tolist()))

@@ -13,23 +13,31 @@ change the random numbers of the others.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..data.dataset import Dataset, GnssFixes, ImuData, ImuErrors, Truth
 from .scenario import Scenario, ScenarioError, list_presets, load_scenario
 from ..units import wrap_deg
 
-__all__ = ["simulate", "simulate_rtk", "load_scenario", "list_presets", "Scenario", "ScenarioError",
+__all__ = ["simulate", "simulate_to", "simulate_rtk", "load_scenario", "list_presets", "Scenario", "ScenarioError",
            "truth_from_state", "wrap_deg"]
 
 # appending keeps every earlier stream's seed (SeedSequence.spawn children are positional)
 _STREAMS = ("gyro", "accel", "gnss", "delay", "gnss_raw", "clock", "odometer", "rtk")
 
 
-def sample_times(t0: float, t_end: float, rate: float) -> np.ndarray:
-    """``t0 + k / rate`` for k = 0.. while <= t_end (1 ns tolerance)."""
-    n = int(np.floor((t_end - t0) * rate + 1e-6))
-    return t0 + np.arange(n + 1) / rate
+def sample_count(t0: float, t_end: float, rate: float) -> int:
+    """The number of sample times ``t0 + k / rate`` <= t_end (1 ns tolerance)."""
+    return int(np.floor((t_end - t0) * rate + 1e-6)) + 1
+
+
+def sample_times(t0: float, t_end: float, rate: float, k0: int = 0, k1: int | None = None) -> np.ndarray:
+    """``t0 + k / rate`` for k = k0..k1-1 (default: every k while <= t_end, 1 ns tolerance)."""
+    if k1 is None:
+        k1 = sample_count(t0, t_end, rate)
+    return t0 + np.arange(k0, k1) / rate
 
 
 def truth_from_state(st: dict) -> Truth:
@@ -68,83 +76,187 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
     Returns
     -------
     Dataset
-    """
-    from .gnss_loose import simulate_gnss_fixes
-    from .imu import apply_errors, imu_model_dict, simulate_sensor_errors
-    from .trajectory import Trajectory
 
-    sc = load_scenario(scenario, seed=seed)
-    children = np.random.SeedSequence(sc.seed).spawn(len(_STREAMS))
-    rngs = {k: np.random.default_rng(c) for k, c in zip(_STREAMS, children)}
-    traj = Trajectory(sc)
+    See Also
+    --------
+    simulate_to : the same dataset written to a folder block by block, in
+        memory bounded by the block length instead of the scenario's.
+    """
+    sim = _Simulation(scenario, seed)
     n_stages = len(SIMULATE_STAGES)
 
     def done(stage: str) -> None:
         if progress is not None:
             progress(SIMULATE_STAGES.index(stage) + 1, n_stages)
 
-    dt = 1.0 / sc.imu_rate
-    t_imu = sample_times(sc.t0, sc.t_end, sc.imu_rate)
-    dtheta, dv = traj.imu_increments(t_imu, nodes=sc.quadrature_nodes)
+    imu, imu_errors = sim.imu_block(0, sim.n_imu)
     done("IMU increments")
-    n = dtheta.shape[0]
-    g_real, g_noise = simulate_sensor_errors(sc.gyro, n + 1, dt, rngs["gyro"])
-    a_real, a_noise = simulate_sensor_errors(sc.accel, n + 1, dt, rngs["accel"])
-    # row 0 of each realisation is the state at t0; increments use rows 1..n
-    g_real_s = type(g_real)(g_real.bias[1:], g_real.scale, g_real.misalignment, g_real.turn_on_bias)
-    a_real_s = type(a_real)(a_real.bias[1:], a_real.scale, a_real.misalignment, a_real.turn_on_bias)
-    dtheta_m = apply_errors(dtheta, g_real_s, g_noise[1:], dt)
-    dv_m = apply_errors(dv, a_real_s, a_noise[1:], dt)
-    imu = ImuData(t_imu[1:].copy(), dtheta_m, dv_m)
-
-    step = max(1, int(round(sc.imu_rate / sc.errors_rate)))
-    sel = np.arange(0, n + 1, step)
-    imu_errors = ImuErrors(t_imu[sel], g_real.bias[sel], a_real.bias[sel], g_real.scale,
-                           a_real.scale, g_real.misalignment, a_real.misalignment)
     done("IMU errors")
-
-    truth = None
-    if with_truth:
-        t_truth = sample_times(sc.t0, sc.t_end, sc.truth_rate)
-        truth = truth_from_state(traj.state(t_truth))
-    st0 = traj.state(np.array([sc.t0]))
-    tr0 = truth_from_state(st0)
-    initial = tr0.state_at(0)
+    truth = sim.truth_block(0, sim.n_truth) if with_truth else None
     done("truth")
+    return sim.dataset(imu, imu_errors, truth, constellation, done)
 
-    gcfg = sc.gnss
-    if gcfg["enabled"]:
-        gnss = simulate_gnss_fixes(traj, gcfg, rngs["gnss"], rngs["delay"])
-    else:
-        z = np.empty(0)
-        gnss = GnssFixes(z, z, z, z, z, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)))
-    done("GNSS fixes")
-    gnss_raw = None
-    if sc.gnss_raw["enabled"]:
-        from .gnss_raw import simulate_gnss_raw
 
-        gnss_raw = simulate_gnss_raw(traj, sc.gnss_raw, gcfg["lever_arm_b"], sc.gps_time_offset_s,
-                                     rngs["gnss_raw"], rngs["clock"], constellation=constellation)
-    done("raw GNSS")
-    odometer = None
-    if sc.odometer is not None:
-        from .odometer import simulate_odometer
+def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool = False,
+                block_s: float = 600.0, constellation=None, progress=None) -> tuple[Dataset, int]:
+    """Simulate a scenario straight into a dataset folder, block by block.
 
-        odometer = simulate_odometer(traj, sc.odometer, rngs["odometer"])
-    done("odometer")
-    rtk = None
-    if sc.gnss_rtk is not None:
-        from .gnss_rtk import simulate_rtk_obs
+    The folder equals ``simulate(scenario, seed).save(directory)`` byte for
+    byte, but the IMU, truth and IMU-error tables are computed and appended
+    ``block_s`` seconds at a time, so memory does not grow with the
+    scenario's length: one block of rows, the trajectory's 0.05 s position
+    grid and one block of each Gauss-Markov bias recursion (``8 tau / dt``
+    samples, :class:`insnav.sim.imu.SensorErrorStream`).  The GNSS, odometer
+    and carrier-phase tables (10 Hz and slower) are computed whole.
 
-        rtk = simulate_rtk_obs(traj, sc.gnss_rtk, gcfg["lever_arm_b"], sc.gps_time_offset_s, rngs["rtk"])
-    done("carrier phase")
-    raw = dict(sc.raw)
-    raw["seed"] = int(sc.seed)
-    return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=gnss_raw, imu_errors=imu_errors,
-                   scenario=raw, lever_arm_b=np.array(gcfg["lever_arm_b"], float),
-                   initial=initial, t0=sc.t0, gps_time_offset_s=sc.gps_time_offset_s,
-                   imu_model=imu_model_dict(sc.gyro, sc.accel, sc.imu_rate), name=sc.name,
-                   seed=int(sc.seed), odometer=odometer, initial_is_truth=True, rtk=rtk)
+    Parameters
+    ----------
+    directory : str or Path
+        The dataset folder to write (atomically, as :meth:`Dataset.save`).
+    scenario, seed, constellation
+        As :func:`simulate`.
+    overwrite : bool
+        Replace an existing insnav dataset folder.
+    block_s : float
+        Length of a block [s].
+    progress : callable, optional
+        ``progress(done, total)`` after each stage and each block.
+
+    Returns
+    -------
+    dataset : Dataset
+        The dataset without its IMU, truth and IMU-error rows (empty tables;
+        the IMU-error constants are set).
+    n_imu : int
+        The number of IMU samples written.
+    """
+    from ..data.dataset import check_replaceable, write_csv
+
+    if not block_s > 0:
+        raise ValueError(f"simulate_to: block_s must be > 0 s (got {block_s!r})")
+    check_replaceable(Path(directory), overwrite)
+    sim = _Simulation(scenario, seed)
+    n_imu, n_truth = sim.n_imu, sim.n_truth
+    blk_imu = max(1, int(round(block_s * sim.sc.imu_rate)))
+    blk_truth = max(1, int(round(block_s * sim.sc.truth_rate)))
+    n_blocks = -(-n_imu // blk_imu) + -(-n_truth // blk_truth)
+    total = len(SIMULATE_STAGES) - 3 + n_blocks
+    count = [0]
+
+    def step(_stage=None) -> None:
+        count[0] += 1
+        if progress is not None:
+            progress(count[0], total)
+
+    no_imu, no_errors = sim.imu_block(0, 0)  # no rows: the IMU-error constants for dataset.json
+    ds = sim.dataset(no_imu, no_errors, None, constellation, step)
+
+    def write_tables(folder: Path) -> None:
+        for k0 in range(0, n_imu, blk_imu):
+            imu, errs = sim.imu_block(k0, min(n_imu, k0 + blk_imu))
+            write_csv(folder / "imu.csv", ImuData.COLUMNS, imu.to_array(), append=k0 > 0)
+            write_csv(folder / "imu_errors.csv", ImuErrors.COLUMNS, errs.to_array(), append=k0 > 0)
+            step()
+        for i0 in range(0, n_truth, blk_truth):
+            tr = sim.truth_block(i0, min(n_truth, i0 + blk_truth))
+            write_csv(folder / "truth.csv", Truth.COLUMNS, tr.to_array(), append=i0 > 0)
+            step()
+
+    ds.save(directory, overwrite=overwrite, write_tables=write_tables)
+    return ds, n_imu - 1
+
+
+class _Simulation:
+    """One scenario and seed: the trajectory, the random streams and the table blocks.
+
+    The IMU errors come from :class:`insnav.sim.imu.SensorErrorStream`, so
+    any split of the samples into blocks gives the same numbers.
+    """
+
+    def __init__(self, scenario, seed):
+        from .imu import SensorErrorStream
+        from .trajectory import Trajectory
+
+        sc = load_scenario(scenario, seed=seed)
+        children = np.random.SeedSequence(sc.seed).spawn(len(_STREAMS))
+        self.rngs = {k: np.random.default_rng(c) for k, c in zip(_STREAMS, children)}
+        self.sc, self.traj = sc, Trajectory(sc)
+        # sample k at t0 + k / rate, made block by block (a day at 200 Hz would hold 138 MB of times)
+        self.n_imu = sample_count(sc.t0, sc.t_end, sc.imu_rate)
+        self.n_truth = sample_count(sc.t0, sc.t_end, sc.truth_rate)
+        dt = 1.0 / sc.imu_rate
+        # row 0 of each realisation is the state at t0; the increment ending at sample k uses row k
+        self.gyro = SensorErrorStream(sc.gyro, self.n_imu, dt, self.rngs["gyro"])
+        self.accel = SensorErrorStream(sc.accel, self.n_imu, dt, self.rngs["accel"])
+        self.error_step = max(1, int(round(sc.imu_rate / sc.errors_rate)))
+
+    def imu_block(self, k0: int, k1: int) -> tuple[ImuData, ImuErrors]:
+        """The IMU increments ending at samples [max(k0, 1), k1) and the IMU-error rows in [k0, k1)."""
+        from .imu import apply_errors
+
+        sc, dt = self.sc, 1.0 / self.sc.imu_rate
+        gb, gn = self.gyro.rows(k0, k1)
+        ab, an = self.accel.rows(k0, k1)
+        j0 = min(max(k0, 1), max(k1, 1))
+        t = sample_times(sc.t0, sc.t_end, sc.imu_rate, j0 - 1, k1)  # samples j0-1 .. k1-1
+        if k1 > j0:
+            dtheta, dv = self.traj.imu_increments(t, nodes=sc.quadrature_nodes)
+        else:
+            dtheta = dv = np.empty((0, 3))
+        s = j0 - k0
+        imu = ImuData(t[1:].copy(),
+                      apply_errors(dtheta, self.gyro.realisation(gb[s:]), gn[s:], dt),
+                      apply_errors(dv, self.accel.realisation(ab[s:]), an[s:], dt))
+        sel = np.arange(-(-k0 // self.error_step) * self.error_step, k1, self.error_step)
+        errs = ImuErrors(sc.t0 + sel / sc.imu_rate, gb[sel - k0], ab[sel - k0], self.gyro.scale, self.accel.scale,
+                         self.gyro.misalignment, self.accel.misalignment)
+        return imu, errs
+
+    def truth_block(self, i0: int, i1: int) -> Truth:
+        """The truth rows [i0, i1) at ``truth.rate_hz``."""
+        sc = self.sc
+        return truth_from_state(self.traj.state(sample_times(sc.t0, sc.t_end, sc.truth_rate, i0, i1)))
+
+    def dataset(self, imu, imu_errors, truth, constellation, done) -> Dataset:
+        """The dataset around the given IMU tables: the GNSS, odometer and carrier-phase parts."""
+        from .gnss_loose import simulate_gnss_fixes
+        from .imu import imu_model_dict
+
+        sc, traj, rngs = self.sc, self.traj, self.rngs
+        initial = truth_from_state(traj.state(np.array([sc.t0]))).state_at(0)
+        gcfg = sc.gnss
+        if gcfg["enabled"]:
+            gnss = simulate_gnss_fixes(traj, gcfg, rngs["gnss"], rngs["delay"])
+        else:
+            z = np.empty(0)
+            gnss = GnssFixes(z, z, z, z, z, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)))
+        done("GNSS fixes")
+        gnss_raw = None
+        if sc.gnss_raw["enabled"]:
+            from .gnss_raw import simulate_gnss_raw
+
+            gnss_raw = simulate_gnss_raw(traj, sc.gnss_raw, gcfg["lever_arm_b"], sc.gps_time_offset_s,
+                                         rngs["gnss_raw"], rngs["clock"], constellation=constellation)
+        done("raw GNSS")
+        odometer = None
+        if sc.odometer is not None:
+            from .odometer import simulate_odometer
+
+            odometer = simulate_odometer(traj, sc.odometer, rngs["odometer"])
+        done("odometer")
+        rtk = None
+        if sc.gnss_rtk is not None:
+            from .gnss_rtk import simulate_rtk_obs
+
+            rtk = simulate_rtk_obs(traj, sc.gnss_rtk, gcfg["lever_arm_b"], sc.gps_time_offset_s, rngs["rtk"])
+        done("carrier phase")
+        raw = dict(sc.raw)
+        raw["seed"] = int(sc.seed)
+        return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=gnss_raw, imu_errors=imu_errors,
+                       scenario=raw, lever_arm_b=np.array(gcfg["lever_arm_b"], float),
+                       initial=initial, t0=sc.t0, gps_time_offset_s=sc.gps_time_offset_s,
+                       imu_model=imu_model_dict(sc.gyro, sc.accel, sc.imu_rate), name=sc.name,
+                       seed=int(sc.seed), odometer=odometer, initial_is_truth=True, rtk=rtk)
 
 
 def simulate_rtk(scenario, seed: int | None = None):

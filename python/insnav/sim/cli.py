@@ -48,7 +48,7 @@ def add_scenarios_parser(subparsers) -> None:
 
 
 def cmd_simulate(args) -> int:
-    from . import SIMULATE_STAGES, simulate
+    from . import simulate_to
 
     from ..data.dataset import check_replaceable
 
@@ -67,15 +67,13 @@ def cmd_simulate(args) -> int:
         return 0
     from .._progress import Progress
 
-    bar = Progress(f"insnav simulate {args.scenario}", unit=" stages")
+    bar = Progress(f"insnav simulate {args.scenario}", unit=" steps")
     bar.enabled = bar.enabled and not args.quiet
-    total = len(SIMULATE_STAGES) + 1  # + writing the files
     try:
         t = time.perf_counter()
-        ds = simulate(args.scenario, seed=args.seed, progress=lambda k, _n: bar(k, total))
+        # block by block: memory bounded by the block, not by the scenario's length
+        ds, n_imu = simulate_to(out, args.scenario, seed=args.seed, overwrite=args.overwrite, progress=bar)
         t_sim = time.perf_counter() - t
-        ds.save(out, overwrite=args.overwrite)
-        bar(total, total)
     finally:
         bar.close()
     raw = "" if ds.gnss_raw is None else f", {len(ds.gnss_raw)} raw GNSS observations"
@@ -83,8 +81,8 @@ def cmd_simulate(args) -> int:
         n_r, n_c = ds.rtk.common_counts()
         raw += (f", carrier phase of rover and base (RINEX 3 rover.obs, base.obs, nav.rnx; "
                 f"{n_c.min()}-{n_c.max()} common satellites)")
-    print(f"{ds.name} (seed {ds.seed}): {len(ds.imu)} IMU samples, {len(ds.gnss)} GNSS fixes{raw}; "
-          f"simulated in {t_sim:.2f} s -> {out}")
+    print(f"{ds.name} (seed {ds.seed}): {n_imu} IMU samples, {len(ds.gnss)} GNSS fixes{raw}; "
+          f"simulated and written in {t_sim:.2f} s -> {out}")
     return 0
 
 

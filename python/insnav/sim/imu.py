@@ -67,9 +67,138 @@ def _ar1(phi: float, x0: np.ndarray, e: np.ndarray) -> np.ndarray:
     return out
 
 
+_SKIP_BLOCK = 1 << 20  # normals drawn at a time while skipping a stream
+
+
+def _skip_normals(rng: np.random.Generator, count: int) -> None:
+    """Advance ``rng`` past ``count`` standard normals (drawn in blocks and dropped)."""
+    while count > 0:
+        k = min(count, _SKIP_BLOCK)
+        rng.standard_normal(k)
+        count -= k
+
+
+def _generator_at(state: dict) -> np.random.Generator:
+    """A generator of the same bit generator type, set to ``state``."""
+    bg = getattr(np.random, state["bit_generator"])()
+    bg.state = state
+    return np.random.Generator(bg)
+
+
+class SensorErrorStream:
+    """One realisation of a triad's errors, served by row ranges in increasing order.
+
+    The numbers are those of one whole-array draw, bit for bit, whatever the
+    ranges: the draw order of the seed is fixed (turn-on bias, scale,
+    misalignment, then per axis the Gauss-Markov start and its ``n - 1``
+    driving noises, then the ``n x 3`` random-walk steps, then the ``n x 3``
+    white noises).  The constructor records the generator's state at the start
+    of each of those streams and skips past it, so ``rng`` ends where the
+    whole-array draw leaves it; each stream is then drawn again from its
+    recorded state as rows are asked for.  The Gauss-Markov recursion runs in
+    the blocks of :func:`_ar1` (``8 tau / dt`` samples), one block per axis in
+    memory, so that memory is bounded by the correlation time, not by ``n``.
+
+    Parameters
+    ----------
+    err : SensorErrors
+        Error model (SI).
+    n : int
+        Number of samples.
+    dt : float
+        Sample interval [s].
+    rng : numpy.random.Generator
+        Advanced past the whole realisation.
+    """
+
+    def __init__(self, err: SensorErrors, n: int, dt: float, rng: np.random.Generator):
+        self.n, self.dt = int(n), float(dt)
+        self.turn_on = err.bias_sigma * rng.standard_normal(3)
+        self.scale = err.scale + err.scale_sigma * rng.standard_normal(3)
+        M = err.misalignment.copy()
+        M[~np.eye(3, dtype=bool)] += err.misalignment_sigma * rng.standard_normal(6)
+        self.misalignment = M
+        self._base = err.bias + self.turn_on
+        self._gm = []  # per axis: [phi, block length, driving sigma, generator, x0, block start, block values]
+        for ax in range(3):
+            sig, tau = err.gm_sigma[ax], err.gm_tau[ax]
+            if not (sig > 0 and np.isfinite(tau)):
+                self._gm.append(None)
+                continue
+            phi = np.exp(-dt / tau)
+            x0 = sig * rng.standard_normal(1)
+            lam = -np.log(phi)
+            L = max(1, self.n - 1) if lam == 0.0 else max(1, min(max(1, self.n - 1), int(8.0 / lam)))
+            gen = _generator_at(rng.bit_generator.state)
+            _skip_normals(rng, self.n - 1)
+            # the block cache: rows [start, start + len(vals)) of this axis's Gauss-Markov bias
+            self._gm.append([phi, L, sig * np.sqrt(1.0 - phi * phi), gen, x0, 0, x0.copy()])
+        self._rw = None
+        if np.any(err.bias_rw > 0):
+            self._rw = [err.bias_rw * np.sqrt(dt), _generator_at(rng.bit_generator.state), np.zeros(3), 0]
+            _skip_normals(rng, 3 * self.n)
+        self._noise = None
+        if np.any(err.noise_density > 0):
+            self._noise = [err.noise_density * np.sqrt(dt), _generator_at(rng.bit_generator.state), 0]
+            _skip_normals(rng, 3 * self.n)
+        self._next = 0  # the first row not served yet
+
+    def _gm_rows(self, ax: int, k0: int, k1: int) -> np.ndarray:
+        """Rows [k0, k1) of axis ``ax``'s Gauss-Markov bias (k0 not below the cached block's start)."""
+        phi, L, sd, gen, _, start, vals = self._gm[ax]
+        out = np.empty(k1 - k0)
+        k = k0
+        while k < k1:
+            if k >= start + len(vals):  # the next block: rows start+len .. of x_j, j >= 1 driven by e_{j-1}
+                start += len(vals)
+                m = min(L, self.n - start)
+                vals = _ar1(phi, vals[-1:], sd * gen.standard_normal((m, 1)))[:, 0]
+                self._gm[ax][5], self._gm[ax][6] = start, vals
+            j = min(k1, start + len(vals))
+            out[k - k0:j - k0] = vals[k - start:j - start]
+            k = j
+        return out
+
+    def rows(self, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray]:
+        """The bias (k1 - k0, 3) and white-noise increments (k1 - k0, 3) of rows [k0, k1).
+
+        Rows are served once, in order: ``k0`` is the end of the previous call.
+        """
+        if k0 != self._next or not (k0 <= k1 <= self.n):
+            raise ValueError(f"SensorErrorStream.rows({k0}, {k1}): expected rows from {self._next} up to {self.n}")
+        m = k1 - k0
+        bias = np.empty((m, 3))
+        bias[:] = self._base
+        for ax in range(3):
+            if self._gm[ax] is not None:
+                bias[:, ax] += self._gm_rows(ax, k0, k1)
+        if self._rw is not None:
+            q, gen, carry, _ = self._rw
+            steps = np.empty((m + 1, 3))
+            steps[0] = carry
+            steps[1:] = q * gen.standard_normal((m, 3))
+            if k0 == 0 and m > 0:
+                steps[1] = 0.0  # the walk starts at 0
+            walk = np.cumsum(steps, axis=0)[1:]  # the carry first: the whole-array sums, bit for bit
+            if m > 0:
+                self._rw[2] = walk[-1].copy()
+            bias += walk
+        if self._noise is not None:
+            nd, gen, _ = self._noise
+            noise = nd * gen.standard_normal((m, 3))
+        else:
+            noise = np.zeros((m, 3))
+        self._next = k1
+        return bias, noise
+
+    def realisation(self, bias: np.ndarray) -> SensorRealisation:
+        """The :class:`SensorRealisation` with the given bias rows and this triad's constants."""
+        return SensorRealisation(bias, self.scale, self.misalignment, self.turn_on)
+
+
 def simulate_sensor_errors(err: SensorErrors, n: int, dt: float,
                            rng: np.random.Generator) -> tuple[SensorRealisation, np.ndarray]:
-    """Draw one realisation of a triad's errors.
+    """Draw one realisation of a triad's errors (all rows of a :class:`SensorErrorStream`).
 
     Parameters
     ----------
@@ -88,34 +217,9 @@ def simulate_sensor_errors(err: SensorErrors, n: int, dt: float,
     noise : ndarray, shape (n, 3)
         White-noise increments [rad or m/s] (``N(0, N^2 dt)``).
     """
-    # draw order is fixed so that a seed always gives the same numbers
-    turn_on = err.bias_sigma * rng.standard_normal(3)
-    scale = err.scale + err.scale_sigma * rng.standard_normal(3)
-    M = err.misalignment.copy()
-    off = ~np.eye(3, dtype=bool)
-    M[off] += err.misalignment_sigma * rng.standard_normal(6)
-    bias = np.empty((n, 3))
-    bias[:] = err.bias + turn_on
-    for ax in range(3):
-        sig, tau = err.gm_sigma[ax], err.gm_tau[ax]
-        if sig > 0 and np.isfinite(tau):
-            phi = np.exp(-dt / tau)
-            x0 = sig * rng.standard_normal(1)
-            e = (sig * np.sqrt(1.0 - phi * phi)) * rng.standard_normal((n - 1, 1))
-            gm = np.empty((n, 1))
-            gm[0] = x0
-            if n > 1:
-                gm[1:] = _ar1(phi, x0, e)
-            bias[:, ax] += gm[:, 0]
-    if np.any(err.bias_rw > 0):
-        steps = err.bias_rw * np.sqrt(dt) * rng.standard_normal((n, 3))
-        steps[0] = 0.0
-        bias += np.cumsum(steps, axis=0)
-    if np.any(err.noise_density > 0):
-        noise = err.noise_density * np.sqrt(dt) * rng.standard_normal((n, 3))
-    else:
-        noise = np.zeros((n, 3))
-    return SensorRealisation(bias, scale, M, turn_on), noise
+    stream = SensorErrorStream(err, n, dt, rng)
+    bias, noise = stream.rows(0, n)
+    return stream.realisation(bias), noise
 
 
 def apply_errors(dx: np.ndarray, real: SensorRealisation, noise: np.ndarray,

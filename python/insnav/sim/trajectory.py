@@ -337,40 +337,69 @@ class Trajectory:
         return np.stack([V * cg * np.cos(psi), V * cg * np.sin(psi), -V * np.sin(gam)], axis=-1)
 
     # -- position -------------------------------------------------------------
-    def _integrate_position(self):
+    def _integrate_position(self, chunk: int = 50_000):
+        """Height, latitude and longitude on the grid by Gauss-Legendre quadrature of the velocity.
+
+        The grid intervals are integrated ``chunk`` at a time (the node arrays
+        of a whole day would take about 1 GB); every running sum carries its
+        value over from the previous chunk, so the result is that of one pass
+        over the whole grid, bit for bit.
+        """
         g = self._grid
         sc = self.sc
         xg, wg = np.polynomial.legendre.leggauss(_GL_POS_NODES)
-        h_int = np.diff(g)
-        mid = 0.5 * (g[1:] + g[:-1])
-        tn = mid[:, None] + 0.5 * h_int[:, None] * xg[None, :]  # (K, m)
-        wn = 0.5 * h_int[:, None] * wg[None, :]
-        vn = self._velocity(tn.ravel()).reshape(tn.shape + (3,))
         vg = self._velocity(g)
+        n = len(g)
+        hg, latg, long = np.empty(n), np.empty(n), np.empty(n)
+        lat_dot_g = np.empty(n)
+        # running sums from the grid's start, at the first point of the chunk: of dh, of dlat in each of
+        # the four latitude iterations (a fixed point: the radii depend on the latitude), of dlon
+        s_h, s_lat, s_lon = 0.0, [0.0] * 4, 0.0
+
+        def run_on(carry: float, steps):
+            """carry, carry + steps[0], ...: the whole grid's np.cumsum, continued over a chunk."""
+            return np.cumsum(np.concatenate([[carry], steps]))
+
+        for a in range(0, n - 1, chunk):
+            b = min(n - 1, a + chunk)  # intervals a..b-1, grid points a..b
+            pts = slice(a, b + 1)
+            h_int = g[a + 1:b + 1] - g[a:b]
+            mid = 0.5 * (g[a + 1:b + 1] + g[a:b])
+            tn = mid[:, None] + 0.5 * h_int[:, None] * xg[None, :]  # (K, m)
+            wn = 0.5 * h_int[:, None] * wg[None, :]
+            vn = self._velocity(tn.ravel()).reshape(tn.shape + (3,))
+            k, bas = self._hermite_basis(tn)
+            basis = (k - a, bas)  # interval indices local to the points a..b
+            # height: exact quadrature of -v_D
+            S = run_on(s_h, -(wn * vn[..., 2]).sum(axis=1))
+            s_h = S[-1]
+            h_c = sc.h0 + S
+            hg[pts] = h_c
+            h_nodes = self._hermite(h_c, -vg[pts, 2], tn, basis)
+            lat_c = np.full(b + 1 - a, sc.lat0)
+            for it in range(4):
+                R_M, _ = earth.radii(lat_c)
+                lat_nodes = self._hermite(lat_c, vg[pts, 0] / (R_M + h_c), tn, basis)
+                R_Mn, _ = earth.radii(lat_nodes)
+                S = run_on(s_lat[it], (wn * vn[..., 0] / (R_Mn + h_nodes)).sum(axis=1))
+                s_lat[it] = S[-1]
+                lat_c = sc.lat0 + S
+            R_M, _ = earth.radii(lat_c)
+            latg[pts] = lat_c
+            lat_dot_g[pts] = vg[pts, 0] / (R_M + h_c)
+            lat_nodes = self._hermite(lat_c, lat_dot_g[pts], tn, basis)
+            _, R_Nn = earth.radii(lat_nodes)
+            S = run_on(s_lon, (wn * vn[..., 1] / ((R_Nn + h_nodes) * np.cos(lat_nodes))).sum(axis=1))
+            s_lon = S[-1]
+            long[pts] = sc.lon0 + S
+        if n == 1:
+            hg[0], latg[0], long[0] = sc.h0, sc.lat0, sc.lon0
+            lat_dot_g[0] = vg[0, 0] / (earth.radii(latg)[0][0] + hg[0])
+        _, R_N = earth.radii(latg)
         self._vg = vg
-        # height: exact quadrature of -v_D
-        dh = -(wn * vn[..., 2]).sum(axis=1)
-        hg = sc.h0 + np.concatenate([[0.0], np.cumsum(dh)])
-        self._hg = hg
-        self._h_dot_g = -vg[:, 2]
-        basis = self._hermite_basis(tn)
-        h_nodes = self._hermite(hg, -vg[:, 2], tn, basis)
-        latg = np.full(g.shape, sc.lat0)
-        for _ in range(4):
-            R_M, _ = earth.radii(latg)
-            lat_dot_g = vg[:, 0] / (R_M + hg)
-            lat_nodes = self._hermite(latg, lat_dot_g, tn, basis)
-            R_Mn, _ = earth.radii(lat_nodes)
-            dlat = (wn * vn[..., 0] / (R_Mn + h_nodes)).sum(axis=1)
-            latg = sc.lat0 + np.concatenate([[0.0], np.cumsum(dlat)])
-        R_M, R_N = earth.radii(latg)
-        self._latg = latg
-        self._lat_dot_g = vg[:, 0] / (R_M + hg)
-        lat_nodes = self._hermite(latg, self._lat_dot_g, tn, basis)
-        _, R_Nn = earth.radii(lat_nodes)
-        dlon = (wn * vn[..., 1] / ((R_Nn + h_nodes) * np.cos(lat_nodes))).sum(axis=1)
-        self._long = sc.lon0 + np.concatenate([[0.0], np.cumsum(dlon)])
-        self._lon_dot_g = vg[:, 1] / ((R_N + hg) * np.cos(latg))
+        self._hg, self._h_dot_g = hg, -vg[:, 2]
+        self._latg, self._lat_dot_g = latg, lat_dot_g
+        self._long, self._lon_dot_g = long, vg[:, 1] / ((R_N + hg) * np.cos(latg))
 
     def _hermite_basis(self, t):
         g = self._grid
