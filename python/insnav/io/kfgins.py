@@ -29,9 +29,6 @@ from __future__ import annotations
 
 from ..errors import close_matches
 
-import bz2
-import gzip
-import lzma
 import math
 from pathlib import Path
 
@@ -248,7 +245,13 @@ def _write_std(folder: Path, sol, fmt: dict) -> Path:
 
 def _write(path, a, fmt):
     p = Path(path)
-    opener = {".xz": lzma.open, ".gz": gzip.open, ".bz2": bz2.open}.get(p.suffix.lower())
+    kind = {".xz": "lzma", ".gz": "gzip", ".bz2": "bz2"}.get(p.suffix.lower())
+    if kind:  # the decompressor imported for a compressed file only
+        import importlib
+
+        opener = importlib.import_module(kind).open
+    else:
+        opener = None
     row = fmt + "\n"
     chunk = 100_000
     f = opener(p, "wt", encoding="ascii") if opener else open(p, "w", encoding="ascii")
