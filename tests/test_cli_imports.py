@@ -73,8 +73,8 @@ def test_spp_command_with_config_reads_toml(shared_data, tmp_path):
 
 #: what no run path needs at start-up: numpy.ma (np.median / np.unique import it, ~15 ms;
 #: insnav._median replaces them), the thread pool of concurrent.futures and logging
-#: (~5 ms), the TOML reader without a TOML and the decompressors for a plain file
-START_UP_FREE = ("numpy.ma", "concurrent.futures", "logging", "tomllib", "lzma", "bz2")
+#: (~5 ms) and the TOML reader without a TOML
+START_UP_FREE = ("numpy.ma", "concurrent.futures", "logging", "tomllib")
 
 
 def _modules_after(imports: str) -> set:

@@ -29,6 +29,9 @@ from __future__ import annotations
 
 from ..errors import close_matches
 
+import bz2
+import gzip
+import lzma
 import math
 from pathlib import Path
 
@@ -245,13 +248,7 @@ def _write_std(folder: Path, sol, fmt: dict) -> Path:
 
 def _write(path, a, fmt):
     p = Path(path)
-    kind = {".xz": "lzma", ".gz": "gzip", ".bz2": "bz2"}.get(p.suffix.lower())
-    if kind:  # the decompressor imported for a compressed file only
-        import importlib
-
-        opener = importlib.import_module(kind).open
-    else:
-        opener = None
+    opener = {".xz": lzma.open, ".gz": gzip.open, ".bz2": bz2.open}.get(p.suffix.lower())
     row = fmt + "\n"
     chunk = 100_000
     f = opener(p, "wt", encoding="ascii") if opener else open(p, "w", encoding="ascii")
