@@ -93,45 +93,6 @@ inline void store_from_byte(char* p, std::uint64_t lo, std::uint64_t hi, int k) 
   std::memcpy(p + 8, &b, 8);
 }
 
-/// s rounded to the nearest integer, ties to even, for |s| < 2^51: what
-/// std::nearbyint gives in the default rounding mode (up to the sign of a
-/// zero), without its call (a library function that saves and restores the
-/// floating-point environment on x86-64 without SSE4.1): s + 1.5 * 2^52 lies
-/// in (2^52, 2^53), where the doubles are the integers, so the sum is s
-/// rounded to an integer as IEEE 754 rounds (to nearest, ties to even), and
-/// subtracting the constant again is exact.  Not folded by the compiler
-/// (this header is never compiled with -ffast-math).
-inline double round_half_even(double s) {
-  constexpr double kMagic = 6755399441055744.0;  // 1.5 * 2^52
-  return (s + kMagic) - kMagic;
-}
-
-/// The residual v * 10^d - m rounded once (d in 0..15, s = fl(v * 10^d) with
-/// |s| < 10^15, m = round_half_even(s)): std::fma(v, 10^d, -m) where the
-/// target has an FMA instruction; else the same double from Dekker's exact
-/// product (Dekker 1971, "A floating-point technique for extending the
-/// available precision", Numer. Math. 18, mul12, with Veltkamp's split:
-/// v * 10^d = s + e exactly, barring underflow of e, which only happens for
-/// |s| far below 1/2).  s - m is exact (|s - m| <= 1/2 is a multiple of
-/// ulp(s) <= 1 for |s| >= 1; Sterbenz's lemma for m = +-1), so (s - m) + e is
-/// the exact residual rounded once, as the fma rounds it.
-inline double exact_residual(double v, int d, double s, double m) {
-  static constexpr double kPow10[16] = {1e0, 1e1, 1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
-                                        1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15};
-#if defined(__FMA__) || defined(__FP_FAST_FMA)
-  (void)s;
-  return std::fma(v, kPow10[d], -m);
-#else
-  constexpr double kSplit = 134217729.0;  // 2^27 + 1: Veltkamp's split into 26 + 26 bits
-  const double b = kPow10[d];
-  const double cv = kSplit * v, cb = kSplit * b;
-  const double vh = cv - (cv - v), vl = v - vh;
-  const double bh = cb - (cb - b), bl = b - bh;
-  const double e = ((vh * bh - s) + vh * bl + vl * bh) + vl * bl;
-  return (s - m) + e;
-#endif
-}
-
 /// Fixed notation with `decimals` digits after the point (0..15), exactly as
 /// std::to_chars / printf("%.*f") round, without their cost: the value is
 /// scaled to an integer m = round(v 10^d) whose 16 digits are made in two
@@ -148,8 +109,8 @@ inline char* format_fixed_fast(char* p, double v, int decimals, bool trim) {
   const double scale = kPow10[decimals];
   const double s = v * scale;
   if (!(std::fabs(s) < 1e15)) return nullptr;  // also NaN
-  const double m = round_half_even(s);
-  const double r = exact_residual(v, decimals, s, m);
+  const double m = std::nearbyint(s);
+  const double r = std::fma(v, scale, -m);
   if (!(std::fabs(r) < 0.4999999)) return nullptr;
   const std::uint64_t u = static_cast<std::uint64_t>(std::fabs(m));  // < 10^15: 16 digits, the first one 0
   const std::uint64_t lo = ascii_8_digits(static_cast<std::uint32_t>(u / 100000000));  // digits 0..7
@@ -355,35 +316,6 @@ inline bool parse_value(const char* b, const char* e, double& v) {
   return false;
 }
 
-/// Clinger's fast path (Clinger 1990, "How to read floating point numbers
-/// accurately", PLDI '90): a plain decimal ``[-]digits[.digits]`` (no
-/// exponent) of at most 19 digits whose digits read as an integer m <= 2^53,
-/// with k <= 22 of them after the point, is m / 10^k: both exact doubles, so
-/// the one IEEE division rounds the decimal's exact value correctly, as
-/// std::from_chars does.  Returns the end of the number, or nullptr when the
-/// text is not such a number (the caller then reads it with from_chars).
-inline const char* parse_plain_decimal(const char* p, const char* le, double& v) {
-  static constexpr double kPow10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
-                                        1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
-  const char* q = p;
-  const bool neg = q < le && *q == '-';
-  q += neg;
-  std::uint64_t m = 0;  // wraps beyond 19 digits: such a number is refused below
-  const char* d0 = q;
-  while (q < le && static_cast<unsigned>(*q - '0') < 10u) m = 10 * m + static_cast<unsigned>(*q++ - '0');
-  std::ptrdiff_t digits = q - d0, frac = 0;
-  if (q < le && *q == '.') {
-    const char* f0 = ++q;
-    while (q < le && static_cast<unsigned>(*q - '0') < 10u) m = 10 * m + static_cast<unsigned>(*q++ - '0');
-    frac = q - f0;
-    digits += frac;
-  }
-  if (digits == 0 || digits > 19 || frac > 22 || m > (std::uint64_t(1) << 53)) return nullptr;
-  const double x = static_cast<double>(m) / kPow10[frac];
-  v = neg ? -x : x;
-  return q;
-}
-
 /// Where the kept value j of row r goes: data[r * stride] (a column of the
 /// caller's arrays, so that one row can be split over several of them).
 struct ColumnSink {
@@ -397,7 +329,6 @@ struct ColumnSink {
 /// end first); anything else (a '+', over/underflow, junk) goes through
 /// parse_value on the whole token, exactly as before.
 inline const char* parse_token(const char* p, const char* le, bool comma, double& v, const char*& te) {
-  if (const char* q = parse_plain_decimal(p, le, v); q && (q == le || is_space(*q, comma))) return q;
   const auto r = std::from_chars(p, le, v);
   if (r.ec == std::errc() && (r.ptr == le || is_space(*r.ptr, comma))) return r.ptr;
   te = p;
