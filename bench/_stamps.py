@@ -101,7 +101,8 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                           f"{_PY}io/imu_csv.py", f"{_PY}io/gnss_files.py", f"{_PY}filters/health.py",
                           f"{_CPP}engine/solution_scan.hpp", "cpp/bindings/bind_checks.cpp",
                           f"{_PY}filters/stream.py", f"{_CPP}engine/loose_stream.hpp",
-                          "cpp/bindings/bind_loose_stream.cpp", "cpp/bindings/bind_textio.cpp")
+                          "cpp/bindings/bind_loose_stream.cpp", "cpp/bindings/bind_textio.cpp", f"{_CPP}io/text_table.hpp",
+                          f"{_PY}_npz.py")
                          + KFGINS + LOOSE_EKF + SIGMA,
     "gnss_geometry.md": ("bench/gnss_residuals.py", f"{_PY}gnss/measurements.py", f"{_PY}gnss/glonass.py",
                          f"{_PY}gnss/gpstime.py", f"{_PY}gnss/sp3.py", f"{_PY}gnss/galbds.py") + RINEX,

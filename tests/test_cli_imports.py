@@ -69,3 +69,65 @@ def test_spp_command_with_config_reads_toml(shared_data, tmp_path):
                              "--nav", d / "brdc1580.16n", "--config", cfg, "--out", tmp_path / "spp.csv"])
     assert out["rc"] == 0 and "tomllib" in out["modules"]
     assert 'systems = "G"' in (tmp_path / "spp.csv.config.toml").read_text()
+
+
+#: what no run path needs at start-up: numpy.ma (np.median / np.unique import it, ~15 ms;
+#: insnav._median replaces them), the thread pool of concurrent.futures and logging
+#: (~5 ms) and the TOML reader without a TOML
+START_UP_FREE = ("numpy.ma", "concurrent.futures", "logging", "tomllib")
+
+
+def _modules_after(imports: str) -> set:
+    """sys.modules of a fresh interpreter after ``imports`` (Python code)."""
+    code = f"import json, sys; {imports}; print(json.dumps(sorted(sys.modules)))"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return set(json.loads(r.stdout))
+
+
+@pytest.fixture(scope="module")
+def interpreter_modules() -> set:
+    """What the interpreter itself loads at start-up (site hooks may load a decompressor)."""
+    return _modules_after("pass")
+
+
+@pytest.mark.parametrize("module", ["insnav", "insnav.cli", "insnav.cli.run"])
+def test_importing_the_package_and_the_run_command_loads_no_heavy_module(module, interpreter_modules):
+    mods = _modules_after(f"import {module}") - interpreter_modules
+    assert module in mods
+    assert sorted(m for m in mods if m.split(".")[0] in HEAVY_PACKAGES) == []
+    assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in START_UP_FREE)) == []
+    assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in OTHER_INSNAV)) == []
+
+
+@pytest.mark.parametrize("out_name", ["sol.csv", "sol.npz"])
+def test_kfgins_run_loads_only_what_it_runs(shared_data, tmp_path, out_name, interpreter_modules):
+    """``insnav run --format kfgins`` (block by block for CSV, whole for npz):
+    the KF-GINS reader and the loose filter, nothing of the other commands."""
+    import shutil
+
+    from test_stream import LINES
+
+    sim = shared_data / "kfgins" / "sim"
+    if not (sim / "Leador-A15-sim.txt.xz").is_file():
+        pytest.skip(f"{sim} not found (the KF-GINS data set)")
+    import lzma
+
+    with lzma.open(sim / "Leador-A15-sim.txt.xz", "rb") as f:
+        (tmp_path / "imu.txt").write_bytes(b"".join(f.readline() for _ in range(LINES)))
+    shutil.copy(sim / "GNSS-RTK-sim.txt", tmp_path / "gnss.txt")
+    yaml = "\n".join('imupath: "./imu.txt"' if ln.startswith("imupath:") else
+                     'gnsspath: "./gnss.txt"' if ln.startswith("gnsspath:") else ln
+                     for ln in (sim / "kf-gins-sim.yaml").read_text().splitlines())
+    (tmp_path / "kf.yaml").write_text(yaml + "\n")
+    out = _loaded(tmp_path, ["run", "--format", "kfgins", "--config", tmp_path / "kf.yaml", "--quiet",
+                             "--out", tmp_path / "out" / out_name])
+    assert out["rc"] == 0
+    mods = set(out["modules"]) - interpreter_modules
+    assert "insnav.io.kfgins" in mods and "insnav._core" in mods  # the probe did run the command
+    assert (tmp_path / "out" / out_name).is_file()
+    assert sorted(m for m in mods if m.split(".")[0] in HEAVY_PACKAGES) == []
+    assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in START_UP_FREE)) == []
+    others = ("insnav.analysis", "insnav.sim", "insnav.gnss", "insnav.filters.tight", "insnav.filters.rtk",
+              "insnav.cli.report", "insnav.cli.tune")
+    assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in others)) == []

@@ -141,3 +141,45 @@ def test_fixed_decimals_are_printf_rounding(tmp_path):
             want = f"{x:.{d}f}"
             want = (want.rstrip("0").rstrip(".") if d else want)
             assert tok == ("0" if want == "-0" else want), (d, x, tok)
+
+
+def test_fixed_decimals_next_to_decimal_ties_are_printf_rounding(tmp_path):
+    """Values one to three ulps from a decimal tie (m + 1/2) 10^-d at every
+    scaled magnitude up to 10^15, where the rounding of v 10^d decides the
+    last digit: the writer's exact residual (an fma or Dekker's exact
+    product) against printf's correctly rounded "%.{d}f"."""
+    from insnav import _core
+
+    rng = np.random.default_rng(3)
+    for d in (1, 3, 6, 9, 11, 13, 15):
+        m = np.floor(rng.uniform(0, 1, 4000) * 10.0 ** rng.uniform(0, 15 - 0.01, 4000))
+        tie = (m + 0.5) / 10.0 ** d * np.where(rng.random(4000) < 0.5, -1.0, 1.0)
+        v = np.concatenate([np.nextafter(tie, tie + s * np.inf) if s else tie for s in (-1, 0, 1)]
+                           + [tie + k * np.spacing(tie) for k in (-3, -2, 2, 3)])
+        p = tmp_path / f"t{d}.txt"
+        _core.write_table(str(p), "", [v], [1.0], [d])
+        for tok, x in zip(p.read_text().splitlines(), v):
+            want = f"{x:.{d}f}".rstrip("0").rstrip(".")
+            assert tok == ("0" if want == "-0" else want), (d, x, tok)
+
+
+def test_plain_decimals_read_as_float_reads():
+    """The reader's fast path for plain decimals (Clinger's: m / 10^k when the
+    digits m <= 2^53 and k <= 22) against Python's float() on random decimals
+    of 1..21 digits with 0..24 after the point, around 2^53 and with leading
+    zeros, signs and the forms without an integer or a fraction part: the
+    same doubles bit for bit (the longer ones go through std::from_chars)."""
+    rng = np.random.default_rng(11)
+    toks = []
+    for _ in range(20_000):
+        k = int(rng.integers(1, 22))
+        digits = "".join(map(str, rng.integers(0, 10, k)))
+        f = int(rng.integers(0, min(k, 24) + 1))
+        tok = digits[:k - f] + ("." + digits[k - f:] if f else "")
+        toks.append(("-" if rng.random() < 0.5 else "") + tok)
+    toks += [str(2 ** 53 + d) for d in range(-3, 4)] + [f"{2 ** 53 + d}.0" for d in range(-3, 4)]
+    toks += ["0.000000397799", "-0.000000084735", "456250.004412029", "-0", "-0.0", ".5", "-.25", "5.", "00012.500",
+             "9007199254740993e-3", "1" * 19, "1" * 20, "0." + "0" * 21 + "1", "0." + "0" * 22 + "1", "1e22"]
+    a, _ = parse_numeric(" ".join(toks).encode(), len(toks), "x", comma=False)
+    expect = np.array([float(t) for t in toks])
+    assert a[0].tobytes() == expect.tobytes()  # bit for bit, the sign of a zero too

@@ -146,10 +146,12 @@ def add_run_parser(sub) -> None:
 
 def cli_options(pairs) -> dict:
     """The ``--option KEY=VALUE`` pairs as a dict (VALUE read as a TOML value, else as text)."""
+    out = {}
+    if not pairs:
+        return out
     import tomllib
 
-    out = {}
-    for pair in pairs or ():
+    for pair in pairs:
         key, sep, text = pair.partition("=")
         key = key.strip()
         if not sep or not key.isidentifier():

@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._median import median
+
 __all__ = ["assess", "CONSISTENT_FACTOR", "FAR_TOO_OPTIMISTIC", "MAX_STEP_M", "MAX_SPEED_MPS", "HEIGHT_RANGE_M"]
 
 #: NIS ratio band of the verdict ``consistent``: [1/f, f]
@@ -170,7 +172,7 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
     t_end = float(imu_t_end) if imu_t_end is not None else (float(t[-1]) if len(t) else float("nan"))
     tail = t_end - float(used.max()) if used.size and np.isfinite(t_end) else 0.0
     out["gnss_tail_s"] = max(0.0, tail)
-    dt = float(np.median(np.diff(gt))) if gt.size > 1 else 1.0
+    dt = median(np.diff(gt)) if gt.size > 1 else 1.0
     if tail > max(MIN_TAIL_S, 10.0 * dt):
         out["warnings"].append(f"the GNSS updates end {tail:.1f} s before the IMU (last at t = {used.max():.3f} s): "
                                "the rest of the solution is free inertial")

@@ -727,6 +727,35 @@ class _BlockRun:
                             samples=self.n_kept, blocks=n_blocks, timings=self.timings)
 
 
+class _Background:
+    """One call on its own (non-daemon) thread: :meth:`result` waits for it and
+    raises its exception, :meth:`join` only waits (a thread per block instead
+    of a concurrent.futures pool, whose import with logging's costs a few
+    milliseconds of every run's start)."""
+
+    def __init__(self, fn, *args, **kwargs):
+        import threading
+
+        self._exc = None
+        self._thread = threading.Thread(target=self._run, args=(fn, args, kwargs), name="insnav-csv-writer")
+        self._thread.start()
+
+    def _run(self, fn, args, kwargs) -> None:
+        try:
+            fn(*args, **kwargs)
+        except BaseException as exc:  # noqa: BLE001 - raised by result() on the calling thread
+            self._exc = exc
+
+    def join(self) -> None:
+        self._thread.join()
+
+    def result(self) -> None:
+        self._thread.join()
+        if self._exc is not None:
+            exc, self._exc = self._exc, None
+            raise exc
+
+
 class _Writer:
     """The CSV rows appended on a writer thread, one block behind the filter
     (``_core.write_table`` releases the GIL), so that formatting block i
@@ -734,11 +763,8 @@ class _Writer:
     :meth:`close` waits for the last write (and raises its error)."""
 
     def __init__(self, tmp, columns, precision, health):
-        from concurrent.futures import ThreadPoolExecutor
-
         self.tmp, self.columns, self.precision, self.health = str(tmp), columns, precision, health
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="insnav-csv-writer")
-        self._pending = None
+        self._pending = None  # the _Background write of the last block
         self._header_done = False
 
     def add(self, stream, n: int) -> None:
@@ -762,10 +788,8 @@ class _Writer:
         dec = [CSV_DECIMALS[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
         header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
         self._wait()
-        self._pending = self._pool.submit(_core.write_table, self.tmp, header,
-                                          [np.asarray(x, float) for _, x, _ in cols],
-                                          [float(f) for _, _, f in cols], dec, threads=threads(),
-                                          append=self._header_done)
+        self._pending = _Background(_core.write_table, self.tmp, header, [np.asarray(x, float) for _, x, _ in cols],
+                                    [float(f) for _, _, f in cols], dec, threads=threads(), append=self._header_done)
         self._header_done = True
 
     def _wait(self) -> None:
@@ -779,4 +803,5 @@ class _Writer:
 
     def shutdown(self) -> None:
         """End the thread once its write is done (errors not raised: the run already failed or closed)."""
-        self._pool.shutdown(wait=True)
+        if self._pending is not None:
+            self._pending.join()
