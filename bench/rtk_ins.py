@@ -674,7 +674,9 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "`[gnss_rtk]`): code sigma and correlation time of the simulated code noise plus multipath, phase "
               "sigma of its white phase noise, and the phase multipath as a random walk of the single-differenced "
               "ambiguity states (`amb_psd_cycles2ps`; `insnav.sim.gnss_rtk.rtk_noise_options`).", "",
-              f"With the preset's receiver noise the float is consistent (NEES mean {_f(rxa['nees'], '.1f')}, "
+              f"With the preset's receiver noise the float NEES is "
+              f"{'at most 3 (consistent, or conservative below 3)' if rxa['nees'] <= 3.0 else 'above 3 (over-confident)'} "
+              f"(mean {_f(rxa['nees'], '.1f')}, "
               f"median {_f(rxa['nees_med'], '.1f')}, against {_f(a['nees'], '.1f')} and {_f(a['nees_med'], '.1f')} "
               f"with the defaults), and its bootstrapped success rate, now computed from an honest covariance, "
               f"shows how rarely this preset's L1-only float supports a fix: over the float epochs it is at least "
