@@ -352,3 +352,29 @@ def test_rtklib_reads_the_files_and_fixes(tmp_path):
     assert np.max(err[fixed]) < 0.05
     lat, lon, h = earth.ecef_to_geodetic(sim.rover.r_e[:1])
     assert abs(h[0] - earth.ecef_to_geodetic(sol.r_e[:1])[2][0]) < 0.1
+
+
+def test_rtk_noise_options_reproduce_the_simulated_noise_model():
+    """rtk_noise_options against the simulator's own error model: the engines' zero-difference phase variance
+    a^2 + b^2 / sin^2 el equals sigma_L^2 w(el)^2 at every elevation (exact), code_phase_ratio^2 times it
+    equals (sigma_P^2 + sigma_mp,P^2) w(el)^2, and the ambiguity walk q [cycles^2/s] matches the variance of
+    the one-epoch increments of the simulator's Gauss-Markov phase multipath (rover plus base scale)
+    to the first-order term 1 - exp(-dt / tau) ~ dt / tau (2.5 % at dt / tau = 0.05) and the sampling error."""
+    from insnav.sim.gnss_rtk import F_L1_HZ, elevation_weight, gauss_markov, rtk_noise_options
+
+    g = load_scenario("rtk-urban-car").gnss_rtk
+    o = rtk_noise_options(g)
+    el = np.radians(np.linspace(5.0, 90.0, 50))
+    w2 = elevation_weight(el) ** 2
+    var_l = o["sigma_phase_a_m"] ** 2 + o["sigma_phase_b_m"] ** 2 / np.sin(el) ** 2
+    np.testing.assert_allclose(var_l, g["sigma_phase"] ** 2 * w2, rtol=1e-12)
+    np.testing.assert_allclose(o["code_phase_ratio"] ** 2 * var_l,
+                               (g["sigma_code"] ** 2 + g["multipath_code"] ** 2) * w2, rtol=1e-12)
+    assert o["code_correlation_time_s"] == g["multipath_tau"]
+    rng = np.random.default_rng(5)
+    x = gauss_markov(4000, (200,), 1.0, g["multipath_tau"], rng)
+    sd = g["multipath_phase"] * np.sqrt(1.0 + g["base_multipath_scale"] ** 2) * x  # single difference, zenith
+    var_step = np.var(np.diff(sd, axis=0)) / (C_LIGHT / F_L1_HZ) ** 2
+    assert abs(var_step / o["amb_psd_cycles2ps"] - 1.0) < 0.05, (var_step, o["amb_psd_cycles2ps"])
+    with pytest.raises(ValueError, match="sigma_phase_m"):
+        rtk_noise_options(dict(g, sigma_phase=0.0))

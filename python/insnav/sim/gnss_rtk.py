@@ -69,6 +69,7 @@ truth tables of :class:`RtkReceiverObs` hold term by term.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -77,7 +78,7 @@ from .. import earth
 from ..gnss.ephemeris import C_LIGHT
 
 __all__ = ["RtkReceiverObs", "RtkSimulation", "rtk_navdata", "simulate_rtk_obs", "SIGNALS", "signal_frequency_hz",
-           "elevation_weight"]
+           "elevation_weight", "rtk_noise_options"]
 
 from .scenario import RTK_SIGNALS as SIGNALS  # RINEX 3 signals the simulator can write, per system
 F_L1_HZ = 1575.42e6
@@ -97,6 +98,52 @@ def elevation_weight(el):
     """``w(el) = sqrt((1 + 1/sin^2 el) / 2)``: noise and multipath scale [-] (1 at the zenith)."""
     s = np.maximum(np.sin(el), 0.05)
     return np.sqrt(0.5 * (1.0 + 1.0 / s ** 2))
+
+
+def rtk_noise_options(cfg: dict) -> dict:
+    """``[rtk]`` noise options that describe the simulated receivers (for RTK and RTK/INS runs on them).
+
+    The simulator's code and phase errors of each receiver, satellite and signal are white noise
+    ``sigma w(el)`` plus a unit first-order Gauss-Markov multipath ``sigma_mp w(el) x`` of correlation
+    time ``tau`` (the base's multipath scaled by ``s``), ``w(el)^2 = (1 + 1/sin^2 el) / 2``
+    (:func:`elevation_weight`).  The engines' zero-difference phase variance is
+    ``a^2 + b^2 / sin^2 el`` (``sigma_phase_a_m``, ``sigma_phase_b_m``), so
+
+    * ``a = b = sigma_L / sqrt(2)`` reproduces the white phase noise exactly;
+    * code: ``code_phase_ratio = sqrt(sigma_P^2 + sigma_mp,P^2) / sigma_L`` (noise and multipath),
+      correlation time ``code_correlation_time_s = tau`` (the white part counted as correlated
+      too: a conservative bound);
+    * phase multipath: not white noise on the phase rows but a slow walk of each single-differenced
+      ambiguity state, with the process noise of a first-order Gauss-Markov process of variance
+      ``(1 + s^2) sigma_mp,L^2`` (zenith) and correlation time ``tau``, ``q = 2 (1 + s^2) sigma_mp,L^2
+      / (tau lambda_1^2)`` [cycles^2/s] (``amb_psd_cycles2ps``; A. Gelb (ed.), *Applied Optimal
+      Estimation*, 1974, sec. 4.3, the PSD ``2 sigma^2 / tau`` of a first-order Gauss-Markov process).
+
+    Parameters
+    ----------
+    cfg : dict
+        A scenario's ``gnss_rtk`` block in SI units (:attr:`insnav.sim.scenario.Scenario.gnss_rtk`:
+        ``sigma_code``, ``multipath_code``, ``sigma_phase``, ``multipath_phase`` [m],
+        ``multipath_tau`` [s], ``base_multipath_scale`` [-]).
+
+    Returns
+    -------
+    dict
+        ``sigma_phase_a_m``, ``sigma_phase_b_m`` [m], ``code_phase_ratio`` [-],
+        ``code_correlation_time_s`` [s] (0 without code multipath), ``amb_psd_cycles2ps`` [cycles^2/s]
+        (an :class:`insnav.gnss.rtk.RtkOptions` dictionary).
+    """
+    sig_l = float(cfg["sigma_phase"])
+    if not sig_l > 0.0:
+        raise ValueError("rtk_noise_options: gnss_rtk sigma_phase_m must be > 0")
+    lam1 = C_LIGHT / F_L1_HZ
+    tau = float(cfg["multipath_tau"])
+    mp_l = float(cfg["multipath_phase"])
+    q = 2.0 * (1.0 + cfg["base_multipath_scale"] ** 2) * mp_l ** 2 / (tau * lam1 ** 2) if tau > 0.0 else 0.0
+    return dict(sigma_phase_a_m=sig_l / math.sqrt(2.0), sigma_phase_b_m=sig_l / math.sqrt(2.0),
+                code_phase_ratio=math.hypot(cfg["sigma_code"], cfg["multipath_code"]) / sig_l,
+                code_correlation_time_s=tau if cfg["multipath_code"] > 0.0 else 0.0,
+                amb_psd_cycles2ps=max(q, 1e-8))
 
 
 def iono_mapping(el):
