@@ -157,7 +157,8 @@ def test_success_rate_rule_rejects_weak_single_epoch_partial_fixes(tmp_path_fact
     rs, fixed, wrong, _ = _run("rtk-open-sky-car", 7, tmp_path_factory, ar_mode="instantaneous")
     assert wrong.sum() == 0
     assert fixed.sum() >= 200
-    assert np.all(rs.success_rate[fixed] >= 0.95)  # no float solution with a poor success rate is fixed
+    # no float solution with a poor success rate is fixed: P_s(Q_a) >= 0.95 or P_s(k Q_a) >= 0.98
+    assert np.all((rs.success_rate[fixed] >= 0.95) | (rs.success_rate_estimated[fixed] >= 0.98))
 
 
 def test_partial_ar_by_variance_avoids_wrong_subsets(tmp_path_factory):
