@@ -346,14 +346,16 @@ def _noise_section(ds, results) -> list:
     float: the receivers' real scatter against the configured one, and the engine's estimate."""
     from insnav.gnss.rtk import RtkOptions, solve_rtk
 
+    d = RtkOptions()
     L = ["", "## Success-rate test and the receivers' noise", "",
          "Each single-system L1 setting: the mean squared double-differenced code (and phase) residual at the "
          "true position over its configured variance (k from the truth, 1 when the receivers are as noisy as "
          "configured), the engine's code variance factor k estimated from its least-squares code residuals "
          "(last epoch; `success_variance_factor`), and the median over the epochs of the bootstrapped success "
          "rate of the float covariance as configured and scaled by k (`success_rate`, `success_rate_estimated`); "
-         "then the fixed epochs of the default (a set passes with P_s(Q) >= min_success_rate = 0.95 or "
-         "P_s(k Q) >= min_success_rate_estimated = 0.99), of the configured covariance's test alone "
+         f"then the fixed epochs of the default (a set passes with P_s(Q) >= min_success_rate = {d.min_success_rate:g} "
+         f"or P_s(k Q) >= min_success_rate_estimated = {d.min_success_rate_estimated:g}), of the configured "
+         "covariance's test alone "
          "(min_success_rate_estimated = 0) and of the ratio test alone (min_success_rate = 0), all run above.", "",
          "| setting | code k from the truth | phase k from the truth | code k estimated | median P_s(Q) | "
          "median P_s(k Q) | fixed: default | SR configured only | ratio only | RTKLIB |",
