@@ -238,7 +238,7 @@ def test_consistent_float_shows_urban_single_frequency_ambiguities_cannot_be_val
 def test_estimated_noise_route_rejects_what_a_095_threshold_would_fix_wrong(tmp_path_factory):
     # open sky, single epoch, GPS L1 + Galileo E1: the base's lower multipath makes the double differences
     # quieter than configured (k about 0.86); at 0.95 on k Q_a a run of biased epochs fixes wrong sets
-    # (their P_s(k Q_a) 0.955-0.965), the default 0.99 does not, and it fixes at least what the
+    # (their P_s(k Q_a) about 0.96), the default 0.98 does not, and it fixes at least what the
     # configured covariance's test alone fixes
     rs, fixed, wrong, _ = _run("rtk-open-sky-car", 4, tmp_path_factory, ar_mode="instantaneous",
                                min_success_rate_estimated=0.95)
@@ -249,8 +249,8 @@ def test_estimated_noise_route_rejects_what_a_095_threshold_would_fix_wrong(tmp_
     _, fixed_cfg, _, _ = _run("rtk-open-sky-car", 4, tmp_path_factory, ar_mode="instantaneous",
                               min_success_rate_estimated=0.0)
     assert np.all(fixed[fixed_cfg]) and fixed.sum() >= fixed_cfg.sum()
-    ok = fixed & ~fixed_cfg  # fixed by the second route only: P_s(k Q_a) >= 0.99
-    assert np.all(rs.success_rate_estimated[ok] >= 0.99)
+    ok = fixed & ~fixed_cfg  # fixed by the second route only: P_s(k Q_a) >= 0.98
+    assert np.all(rs.success_rate_estimated[ok] >= 0.98)
 
 
 def test_estimated_noise_follows_a_receiver_noisier_than_configured(tmp_path_factory):
