@@ -86,7 +86,9 @@ def datasets():
                       dict(name="matrtklib_l1l2_grec_inst", systems="GREC", freq=2, armode="instantaneous", mask=15.0),
                       dict(name="matrtklib_l1l2_grec_cont", systems="GREC", freq=2, armode="continuous", mask=15.0),
                       # QZSS: the five systems of the data, and GPS alone against GPS + QZSS (weak geometry); on
-                      # L1 alone also with the ratio test only (insnav's success-rate test off), as RTKLIB validates
+                      # L1 alone also with the ratio test only (insnav's success-rate test off), as RTKLIB validates,
+                      # and with the success rate of the configured covariance only (the estimated code variance
+                      # factor's route off: the default before it)
                       dict(name="matrtklib_l1_grecj_inst", systems="GRECJ", freq=1, armode="instantaneous", mask=15.0),
                       dict(name="matrtklib_l1l2_g_inst", systems="G", freq=2, armode="instantaneous", mask=15.0),
                       dict(name="matrtklib_l1l2_gj_inst", systems="GJ", freq=2, armode="instantaneous", mask=15.0),
@@ -95,7 +97,11 @@ def datasets():
                       dict(name="matrtklib_l1_g_inst_ratio", systems="G", freq=1, armode="instantaneous", mask=15.0,
                            insnav=dict(min_success_rate=0.0)),
                       dict(name="matrtklib_l1_gj_inst_ratio", systems="GJ", freq=1, armode="instantaneous", mask=15.0,
-                           insnav=dict(min_success_rate=0.0))])
+                           insnav=dict(min_success_rate=0.0)),
+                      dict(name="matrtklib_l1_g_inst_srcfg", systems="G", freq=1, armode="instantaneous", mask=15.0,
+                           insnav=dict(min_success_rate_estimated=0.0)),
+                      dict(name="matrtklib_l1_gj_inst_srcfg", systems="GJ", freq=1, armode="instantaneous", mask=15.0,
+                           insnav=dict(min_success_rate_estimated=0.0))])
     s = DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
     if s.is_dir():
         v = s / "iono-Klob_tropo-Saast"
@@ -288,6 +294,88 @@ def _qzss_section(results) -> list:
     return L
 
 
+def truth_code_variance_factor(ds, systems: str, freq: int, mask_deg: float) -> tuple:
+    """Mean of z^2 over the double-differenced code rows at the true rover position, z = residual /
+    its configured sigma (the insnav defaults: phase 3 mm, code 100 x, elevation weighting), and the
+    same of the phase rows (the fractional part of the DD phase in cycles, in metres): what the
+    receiver pair's noise is against the configured one (1: as configured).  Returns (k_code,
+    k_phase, rows)."""
+    from insnav import _core
+    from insnav.gnss.rtk import RtkOptions, prepare_rtk_rows
+
+    opt = RtkOptions.from_dict(dict(ar_mode="instantaneous", systems=systems, frequencies=freq,
+                                    elevation_mask_deg=mask_deg), "truth_code_variance_factor")
+    rover, _base, rb, bidx, roff, rrows, boff, brows = prepare_rtk_rows(ds["rover"], ds["base"], ds["nav"],
+                                                                         ds["base_e"], opt)
+    rt = ds["truth"](rover.epoch_t_gps_s)
+    cd = opt.core_dict()
+
+    def el(rows, r):
+        lat, lon, _h = earth.ecef_to_geodetic(r)
+        up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)]).ravel()
+        d = rows[:, 17:20] - r
+        return np.arcsin((d @ up) / np.linalg.norm(d, axis=1))
+
+    def var_zd(e):
+        return opt.sigma_phase_a_m ** 2 + opt.sigma_phase_b_m ** 2 / np.maximum(np.sin(e), 0.05) ** 2
+
+    zc, zp = [], []
+    for k in range(rover.epoch_t_gps_s.size):
+        j = bidx[k]
+        if j < 0 or not np.all(np.isfinite(rt[k])):
+            continue
+        R, B = rrows[roff[k]:roff[k + 1]], brows[boff[j]:boff[j + 1]]
+        d = _core.rtk_double_differences(R, B, np.ascontiguousarray(rt[k]), rb, cd)
+        el_r, el_b = el(R, rt[k]), el(B, rb)
+        row_b = {int(b[0]): i for i, b in enumerate(B)}
+        v = {}
+        for s, r, f, c, val in zip(d["sat_row"], d["ref_row"], d["freq"], d["is_code"], d["value_m"]):
+            for q in (s, r):
+                v.setdefault(q, var_zd(el_r[q]) + var_zd(el_b[row_b[int(R[q, 0])]]))
+            sig = np.sqrt(v[s] + v[r])
+            if c:
+                zc.append(val / (opt.code_phase_ratio * sig))
+            else:
+                lam = R[s, 6 + 5 * f]
+                zp.append((val / lam - np.round(val / lam)) * lam / sig)
+    return float(np.mean(np.square(zc))), float(np.mean(np.square(zp))), len(zc)
+
+
+def _noise_section(ds, results) -> list:
+    """Why the success-rate test of the configured covariance keeps the L1 single-system settings
+    float: the receivers' real scatter against the configured one, and the engine's estimate."""
+    from insnav.gnss.rtk import RtkOptions, solve_rtk
+
+    d = RtkOptions()
+    L = ["", "## Success-rate test and the receivers' noise", "",
+         "Each single-system L1 setting: the mean squared double-differenced code (and phase) residual at the "
+         "true position over its configured variance (k from the truth, 1 when the receivers are as noisy as "
+         "configured), the engine's code variance factor k estimated from its least-squares code residuals "
+         "(last epoch; `success_variance_factor`), and the median over the epochs of the bootstrapped success "
+         "rate of the float covariance as configured and scaled by k (`success_rate`, `success_rate_estimated`); "
+         f"then the fixed epochs of the default (a set passes with P_s(Q) >= min_success_rate = {d.min_success_rate:g} "
+         f"or P_s(k Q) >= min_success_rate_estimated = {d.min_success_rate_estimated:g}), of the configured "
+         "covariance's test alone "
+         "(min_success_rate_estimated = 0) and of the ratio test alone (min_success_rate = 0), all run above.", "",
+         "| setting | code k from the truth | phase k from the truth | code k estimated | median P_s(Q) | "
+         "median P_s(k Q) | fixed: default | SR configured only | ratio only | RTKLIB |",
+         "|---|---|---|---|---|---|---|---|---|---|"]
+    by = {r["setting"]["name"]: r for r in results}
+    for st in ds["settings"]:
+        if st["freq"] != 1 or st.get("insnav") or len(st["systems"].replace("J", "")) != 1:
+            continue
+        kc, kp, _n = truth_code_variance_factor(ds, st["systems"], st["freq"], st["mask"])
+        rs = solve_rtk(ds["rover"], ds["base"], ds["nav"], ds["base_e"],
+                       RtkOptions.from_dict(dict(mode="kinematic", ar_mode=st["armode"], systems=st["systems"],
+                                                 frequencies=st["freq"], elevation_mask_deg=st["mask"]), "noise"))
+        fx = {k: by[n]["insnav"]["fixed"] if n in by else "-" for k, n in
+              (("default", st["name"]), ("cfg", st["name"] + "_srcfg"), ("ratio", st["name"] + "_ratio"))}
+        L.append(f"| {st['name']} | {kc:.3f} | {kp:.3f} | {rs.success_variance_factor[-1]:.3f} | "
+                 f"{np.median(rs.success_rate):.3f} | {np.median(rs.success_rate_estimated):.4f} | {fx['default']} | "
+                 f"{fx['cfg']} | {fx['ratio']} | {by[st['name']]['rtklib']['fixed']} |")
+    return L
+
+
 def write_doc(name, ds, results, path: Path):
     speed = name == "matrtklib_static_septentrio"
     L = [f"# RTK on {ds['title']}: insnav vs RTKLIB", "",
@@ -319,6 +407,8 @@ def write_doc(name, ds, results, path: Path):
         L.append(f"| {r['setting']['name']} | {v['fix_rate']} | {v['rms']} | {v['wrong']} |"
                  + (f" {v['time']} ({ratio:.2f}x) |" if speed else ""))
     L += _qzss_section(results)
+    if speed:
+        L += _noise_section(ds, results)
     L += ["", "## Commands", ""]
     for r in results:
         L += [f"- `{r['cmd_insnav']}`", f"- `{r['cmd_rtklib']}`"]

@@ -139,7 +139,9 @@ py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
   return py::make_tuple(out, py::make_tuple(s[0], s[1]));
 }
 
-double lambda_success_rate(const DArray& Q) {
+double lambda_success_rate(const DArray& Q, double variance_factor) {
+  if (!(variance_factor > 0.0) || !std::isfinite(variance_factor))
+    throw py::value_error("lambda_success_rate: variance_factor must be > 0");
   const py::ssize_t n = Q.ndim() == 2 ? Q.shape(0) : -1;
   if (n < 1 || n > gnss::kMaxAmbiguities) throw py::value_error("lambda_success_rate: bad Q");
   require_shape(Q, n, n, "lambda_success_rate: Q");
@@ -149,7 +151,7 @@ double lambda_success_rate(const DArray& Q) {
     for (py::ssize_t j = 0; j < n; ++j) q(i, j) = Q.data()[i * n + j];
   gnss::Lambda lam;
   if (!lam.decorrelate(q, Z, L, D)) throw py::value_error("lambda_success_rate: Q is not positive definite");
-  return lam.bootstrap_success_rate();
+  return lam.bootstrap_success_rate(variance_factor);
 }
 
 py::tuple lambda_decorrelate(const DArray& Q) {
@@ -199,6 +201,9 @@ RtkOptions rtk_options_from_dict(const py::dict& d) {
     else if (k == "confirm_epochs") o.confirm_epochs = v.cast<int>();
     else if (k == "confirm_max_ambiguities") o.confirm_max_ambiguities = v.cast<int>();
     else if (k == "min_success_rate") o.min_success_rate = v.cast<double>();
+    else if (k == "min_success_rate_estimated") o.min_success_rate_estimated = v.cast<double>();
+    else if (k == "noise_window_s") o.noise_window_s = v.cast<double>();
+    else if (k == "noise_confidence") o.noise_confidence = v.cast<double>();
     else if (k == "glonass_factor") o.glonass_factor = v.cast<double>();
     else if (k == "iono_sigma_per_10km_m") o.iono_sigma_per_10km_m = v.cast<double>();
     else if (k == "tropo_model") o.tropo_model = v.cast<bool>();
@@ -243,7 +248,7 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   const Vec3 rb = vec3_from(r_base_e, "rtk_run: r_base_e");
   const RtkOptions o = options_from_dict(opts);
   py::array_t<int> status(n), n_fix(n), n_dd(n), n_sat(n);
-  py::array_t<double> ratio(n), success_rate(n), r_e({n, static_cast<py::ssize_t>(3)}), v_e({n, static_cast<py::ssize_t>(3)}),
+  py::array_t<double> ratio(n), success_rate(n), sr_factor(n), sr_est(n), r_e({n, static_cast<py::ssize_t>(3)}), v_e({n, static_cast<py::ssize_t>(3)}),
       r_float({n, static_cast<py::ssize_t>(3)}), P_r({n, static_cast<py::ssize_t>(9)});
   py::array_t<int> slips({n, static_cast<py::ssize_t>(gnss::kNumSlipKinds)});
   const std::int64_t* ro = rover_off.data();
@@ -275,6 +280,8 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
       n_sat.mutable_data()[e] = out.n_sat;
       ratio.mutable_data()[e] = out.ratio;
       success_rate.mutable_data()[e] = out.success_rate;
+      sr_factor.mutable_data()[e] = out.success_variance_factor;
+      sr_est.mutable_data()[e] = out.success_rate_estimated;
       for (int i = 0; i < 3; ++i) {
         r_e.mutable_data()[e * 3 + i] = out.r_e(i);
         v_e.mutable_data()[e * 3 + i] = out.v_e(i);
@@ -291,6 +298,8 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   d["n_sat"] = n_sat;
   d["ratio"] = ratio;
   d["success_rate"] = success_rate;
+  d["success_variance_factor"] = sr_factor;
+  d["success_rate_estimated"] = sr_est;
   d["r_e"] = r_e;
   d["v_e"] = v_e;
   d["r_float_e"] = r_float;
@@ -358,8 +367,9 @@ void bind_rtk(py::module_& m) {
         "MLAMBDA (Chang, Yang, Zhou 2005): best and second-best integer vectors (n, 2) and squared norms.");
   m.def("lambda_decorrelate", &lambda_decorrelate, py::arg("Q"),
         "MLAMBDA reduction: (Z, L, D) with Z^T Q Z = L^T diag(D) L.");
-  m.def("lambda_success_rate", &lambda_success_rate, py::arg("Q"),
-        "Bootstrapped success rate of the decorrelated ambiguities (Teunissen 1998), a lower bound of ILS's.");
+  m.def("lambda_success_rate", &lambda_success_rate, py::arg("Q"), py::arg("variance_factor") = 1.0,
+        "Bootstrapped success rate of the decorrelated ambiguities of variance_factor * Q (Teunissen 1998), "
+        "a lower bound of ILS's.");
   m.def("rtk_run", &rtk_run, py::arg("t_rover"), py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"),
         py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
         "RTK engine over every rover epoch (GIL released).");

@@ -95,8 +95,17 @@ class RtkOptions(TomlTable):
         set with fewer is fixed only when it is all the epoch's fixable ambiguities and repeats a
         validated set (docs/algorithms.md, "Integer ambiguity resolution").
     min_success_rate : float
-        Bootstrapped success rate (Teunissen 1998) a set must have (0.95; 0 off; the tight RTK/INS
-        filter's default is 0, :data:`insnav.filters.rtk_ins.RTK_INS_DEFAULTS`).
+        Bootstrapped success rate (Teunissen 1998) a set must have from the float covariance of the
+        configured sigmas (0.95; 0 off: no success-rate test; the tight RTK/INS filter's default is
+        0, :data:`insnav.filters.rtk_ins.RTK_INS_DEFAULTS`).
+    min_success_rate_estimated : float
+        ... or, failing that, from the float covariance scaled by the code variance factor k
+        estimated from the data (0.98; 0 off): the least-squares code double differences of every
+        epoch give k (the upper bound at ``success_rate_noise_confidence`` of its estimate over the
+        last ``success_rate_noise_window_s``), so a receiver quieter than configured is not held
+        to the configured sigmas' pessimistic success rate (docs/algorithms.md).
+    success_rate_noise_window_s, success_rate_noise_confidence : float
+        Forgetting time [s] (300) and confidence (0.5: the median) of that estimate.
     confirm_epochs, confirm_max_ambiguities : int
         A new set of at most ``confirm_max_ambiguities`` (6) ambiguities is reported fixed once
         its integers have passed in ``confirm_epochs`` (5) consecutive epochs.
@@ -143,6 +152,9 @@ class RtkOptions(TomlTable):
     code_correlation_time_s: float = 0.0
     adaptive_code_gain: float = 0.0
     min_success_rate: float = 0.95
+    min_success_rate_estimated: float = 0.98
+    success_rate_noise_window_s: float = 300.0
+    success_rate_noise_confidence: float = 0.5
     confirm_epochs: int = 5
     confirm_max_ambiguities: int = 6
     iono_sigma_per_10km_m: float = 0.0
@@ -183,7 +195,8 @@ class RtkOptions(TomlTable):
         for key, lo, hi in (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.0),
                             ("ratio_threshold", 1.0, 1e3), ("sigma_phase_a_m", 0.0, 1.0),
                             ("sigma_phase_b_m", 0.0, 1.0), ("code_phase_ratio", 1.0, 1e4),
-                            ("code_correlation_time_s", 0.0, 1e4), ("min_success_rate", 0.0, 1.0),
+                            ("code_correlation_time_s", 0.0, 1e4), ("min_success_rate", 0.0, 1.0), ("min_success_rate_estimated", 0.0, 1.0),
+                            ("success_rate_noise_window_s", 1.0, 1e6), ("success_rate_noise_confidence", 0.5, 0.999),
                             ("adaptive_code_gain", 0.0, 1.0),
                             ("iono_sigma_per_10km_m", 0.0, 10.0), ("accel_psd_h_m2ps3", 0.0, 1e4),
                             ("accel_psd_v_m2ps3", 0.0, 1e4), ("amb_init_sigma_cycles", 1e-3, 1e6),
@@ -217,6 +230,9 @@ class RtkOptions(TomlTable):
                     code_corr_time_s=float(self.code_correlation_time_s),
                     code_scale_gain=float(self.adaptive_code_gain),
                     min_success_rate=float(self.min_success_rate),
+                    min_success_rate_estimated=float(self.min_success_rate_estimated),
+                    noise_window_s=float(self.success_rate_noise_window_s),
+                    noise_confidence=float(self.success_rate_noise_confidence),
                     confirm_epochs=int(self.confirm_epochs),
                     confirm_max_ambiguities=int(self.confirm_max_ambiguities),
                     iono_sigma_per_10km_m=float(self.iono_sigma_per_10km_m), tropo_model=bool(self.tropo_model),
@@ -576,7 +592,10 @@ def base_position_from_header(obs: PhaseObs) -> np.ndarray | None:
 @dataclass
 class RtkSolution:
     """Per rover epoch: ``t_gps_s``, ``status`` (:data:`STATUS_NAMES`), ``ratio``, ``success_rate``
-    (bootstrapped, Teunissen 1998, of the ambiguities fixed; of all the candidates when float), ``n_fix``
+    (bootstrapped, Teunissen 1998, of the ambiguities fixed; of all the candidates when float; of
+    Q_a the float covariance of the configured sigmas), ``success_rate_estimated`` (the same of k Q_a,
+    k = ``success_variance_factor`` the code variance factor estimated from the data; see
+    ``RtkOptions.min_success_rate_estimated``), ``n_fix``
     (double-differenced ambiguities fixed), ``n_dd`` (phase double differences used),
     ``n_sat``, ``r_e`` (fixed where fixed, else float) [m], ``v_e`` [m/s], ``r_float_e``,
     ``P_r`` (3, 3) covariance of ``r_e`` [m^2], ``slips`` (n, 6) detections per epoch
@@ -598,6 +617,8 @@ class RtkSolution:
     base_age_s: np.ndarray
     r_base_e: np.ndarray
     info: dict = field(default_factory=dict)
+    success_variance_factor: np.ndarray | None = None
+    success_rate_estimated: np.ndarray | None = None
 
     SLIP_KINDS = ("lli", "geometry_free", "melbourne_wuebbena", "doppler", "gap", "outlier")
 
@@ -673,6 +694,8 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
                        n_sat=np.asarray(out["n_sat"]), r_e=np.asarray(out["r_e"]), v_e=np.asarray(out["v_e"]),
                        r_float_e=np.asarray(out["r_float_e"]), P_r=np.asarray(out["P_r"]).reshape(-1, 3, 3),
                        slips=np.asarray(out["slips"]), base_age_s=age, r_base_e=r_base_e,
+                       success_variance_factor=np.asarray(out["success_variance_factor"]),
+                       success_rate_estimated=np.asarray(out["success_rate_estimated"]),
                        info=dict(rover=rover.path, base=base.path, options=opt, rover_signals=rover.signals,
                                  base_signals=base.signals))
 

@@ -12,7 +12,8 @@
 //      INS-predicted position that constrains the float ambiguities makes this test sharp), and
 //      a minimum bootstrapped success rate of the subset (Teunissen 1998): the float precision
 //      must make a correct fix likely, which the ratio test alone does not ensure with few
-//      ambiguities;
+//      ambiguities; a set that fails it may pass a second, stricter minimum on the success rate
+//      of k Q_a, k a variance factor of the float estimated from the data by the caller;
 //   4. the caller's check of the candidate (PartialAr::resolve's check callback), e.g. the rules
 //      over epochs of FixValidator below: accept it, try a smaller subset, or stop (float epoch);
 //   5. on failure, partial AR drops the last ambiguity of the order and retries, down to
@@ -45,6 +46,10 @@ struct ArSettings {
   int max_drops = 12;         // at most this many partial-AR retries
   double validation_prob = 0.0;  // > 0: also require s_1 <= chi2_quantile(validation_prob, n)
   double min_success_rate = 0.0; // > 0: also require the bootstrapped success rate >= this
+  // > 0: a set whose success rate fails min_success_rate also passes when the success rate of
+  // k Q_a (k = success_variance_factor, e.g. an estimated variance factor of the float) is >= this
+  double min_success_rate_scaled = 0.0;
+  double success_variance_factor = 1.0;
 };
 
 /// Bootstrapped success rate of integer ambiguity resolution (Teunissen 1998, "Success probability
@@ -79,7 +84,7 @@ class PartialAr {
     n = std::min(n, kMaxAmbiguities);
     n_used_ = 0;
     ratio_ = 0.0;
-    success_ = 0.0;
+    success_ = success_scaled_ = 0.0;
     s1_ = 0.0;
     int drops = 0;
     for (int nuse = n; nuse >= std::max(s.min_fix, 1); --nuse) {
@@ -94,13 +99,17 @@ class PartialAr {
       if (lambda_.solve(a_hat_, Qa_, a_fix_, sq) != LambdaStatus::kOk) continue;
       const double ratio = sq[0] > 0.0 ? std::min(sq[1] / sq[0], 999.9) : 999.9;
       const double ps = lambda_.bootstrap_success_rate();  // of this subset's decorrelated Q_a
+      const double ps_k = s.min_success_rate_scaled > 0.0 ? lambda_.bootstrap_success_rate(s.success_variance_factor) : ps;
       if (nuse == n) {
         ratio_ = ratio;
         success_ = ps;
+        success_scaled_ = ps_k;
       }
       if (ratio < s.ratio_threshold) continue;
       if (s.validation_prob > 0.0 && sq[0] > ::insnav::chi2_quantile(s.validation_prob, nuse)) continue;
-      if (s.min_success_rate > 0.0 && ps < s.min_success_rate) continue;
+      if (s.min_success_rate > 0.0 && ps < s.min_success_rate &&
+          !(s.min_success_rate_scaled > 0.0 && ps_k >= s.min_success_rate_scaled))
+        continue;
       llt_.compute(Qa_);
       if (llt_.info() != Eigen::Success) continue;
       const ArVerdict v = check(nuse);
@@ -108,6 +117,7 @@ class PartialAr {
       if (v == ArVerdict::kStop) return false;
       ratio_ = ratio;
       success_ = ps;
+      success_scaled_ = ps_k;
       s1_ = sq[0];
       n_used_ = nuse;
       da_ = a_hat_ - a_fix_.col(0);
@@ -137,6 +147,9 @@ class PartialAr {
   double ratio() const { return ratio_; }
   /// Bootstrapped success rate of the full set (or of the accepted subset when one passes).
   double success_rate() const { return success_; }
+  /// The same of k Q_a (ArSettings::success_variance_factor; = success_rate() unless
+  /// min_success_rate_scaled > 0).
+  double success_rate_scaled() const { return success_scaled_; }
   double s1() const { return s1_; }
   const AmbVec& a_hat() const { return a_hat_; }
   auto a_fix() const { return a_fix_.col(0); }
@@ -154,7 +167,7 @@ class PartialAr {
   AmbVec a_hat_, da_;
   AmbMat Qa_;
   AmbCand a_fix_;
-  double success_ = 0.0;
+  double success_ = 0.0, success_scaled_ = 0.0;
   Eigen::LLT<AmbMat> llt_{kMaxAmbiguities};
   int n_used_ = 0;
   double ratio_ = 0.0, s1_ = 0.0;

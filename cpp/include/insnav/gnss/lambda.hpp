@@ -71,16 +71,20 @@ class Lambda {
   }
 
   /// Bootstrapped success rate of the (decorrelated) problem of the last solve() or decorrelate():
-  ///   P_s = prod_i (2 Phi(1 / (2 sqrt(D_i))) - 1),  Phi the standard normal distribution,
+  ///   P_s = prod_i (2 Phi(1 / (2 sqrt(k D_i))) - 1),  Phi the standard normal distribution,
   /// D_i the conditional variances of the decorrelated ambiguities (P. J. G. Teunissen, "Success
   /// probability of integer GPS ambiguity rounding and bootstrapping", J. Geodesy 72 (1998)
-  /// 606-612).  It is a lower bound of the integer least-squares success rate (P. J. G. Teunissen,
-  /// "An optimality property of the integer least-squares estimator", J. Geodesy 73 (1999) 587-593),
-  /// computed from the float covariance alone: it says whether the float solution is precise
-  /// enough for any integer to be trusted, which the ratio test of the data does not.
-  double bootstrap_success_rate() const {
+  /// 606-612, eq. (11)) and k a variance factor of the float covariance (k Q: 1 for Q as given; the
+  /// decorrelation Z does not depend on k, the D_i scale with it).  It is a lower bound of the
+  /// integer least-squares success rate (P. J. G. Teunissen, "An optimality property of the integer
+  /// least-squares estimator", J. Geodesy 73 (1999) 587-593), computed from the float covariance
+  /// alone: it says whether the float solution is precise enough for any integer to be trusted,
+  /// which the ratio test of the data does not.  It is only as good as that covariance: a
+  /// configured noise larger than the receiver's makes it a pessimistic bound.
+  double bootstrap_success_rate(double variance_factor = 1.0) const {
     double p = 1.0;
-    for (int i = 0; i < D_.size(); ++i) p *= std::erf(1.0 / (2.0 * std::sqrt(2.0 * D_(i))));  // 2 Phi(x) - 1 = erf(x / sqrt 2)
+    for (int i = 0; i < D_.size(); ++i)  // 2 Phi(x) - 1 = erf(x / sqrt 2)
+      p *= std::erf(1.0 / (2.0 * std::sqrt(2.0 * variance_factor * D_(i))));
     return p;
   }
 

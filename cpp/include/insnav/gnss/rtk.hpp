@@ -141,6 +141,11 @@ struct RtkOptions {
   double hold_sigma_cycles = 0.0316;
   // fix validation beyond the ratio test (ambiguity_resolution.hpp: PartialAr, FixValidator)
   double min_success_rate = 0.95;  // bootstrapped success rate of the subset fixed (0: off)
+  // ... or at least this success rate of k Q_a, k the code variance factor estimated from the data
+  // (RtkEngine::update_noise_factor; 0: off)
+  double min_success_rate_estimated = 0.98;
+  double noise_window_s = 300.0;     // forgetting time of that estimate [s]
+  double noise_confidence = 0.5;     // the factor used is its upper bound at this confidence (0.5: median)
   int confirm_epochs = 5;          // a new set of few ambiguities is reported after this many repeats
   int confirm_max_ambiguities = 6; // ... "few": at most this many (more: reported at once)
   double max_age_s = 30.0;         // (applied by the caller that matches the base epochs)
@@ -151,6 +156,8 @@ struct RtkEpoch {
   RtkStatus status = RtkStatus::kNone;
   double ratio = 0.0;
   double success_rate = 0.0;  // bootstrapped success rate of the ambiguities fixed (of all, when float)
+  double success_variance_factor = 1.0;  // k: the code variance factor estimated (update_noise_factor)
+  double success_rate_estimated = 0.0;   // the success rate of k Q_a (0 when min_success_rate_estimated is 0)
   int n_fix = 0;       // ambiguities fixed (double differences)
   int n_dd = 0;        // double-differenced phase rows used
   int n_sat = 0;       // common satellites above the mask
@@ -162,6 +169,16 @@ struct RtkEpoch {
 };
 
 namespace detail {
+
+/// erfc^-1(y), 0 < y < 2 (bisection on std::erfc to 1e-12; used once per engine).
+inline double erfc_inv(double y) {
+  double lo = -10.0, hi = 10.0;  // erfc decreasing
+  for (int i = 0; i < 100 && hi - lo > 1e-12; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (std::erfc(mid) > y ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
 
 inline double tropo_saastamoinen_m(double lat, double h, double el) {
   // Saastamoinen (1972) zenith delay of a standard atmosphere (RTKLIB manual eq. (E.5.4)),
@@ -328,7 +345,11 @@ class RtkEngine {
   using HMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxRows, kMaxStates>;
   using KMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxStates, kMaxRows>;
 
-  explicit RtkEngine(const RtkOptions& o) : opt_(o) { reset(); }
+  explicit RtkEngine(const RtkOptions& o) : opt_(o) {
+    // standard normal quantile of 1 - noise_confidence: Phi^-1(p) = -sqrt(2) erfc^-1(2 p)
+    noise_z_ = -std::sqrt(2.0) * detail::erfc_inv(2.0 * (1.0 - std::clamp(opt_.noise_confidence, 0.5, 0.999999)));
+    reset();
+  }
 
   void reset() {
     x_.setZero(kMaxStates);
@@ -339,6 +360,9 @@ class RtkEngine {
     initialized_ = false;
     t_prev_ = NAN;
     code_scale_ = 1.0;
+    noise_q_ = noise_dof_ = 0.0;
+    noise_t_ = NAN;
+    sr_factor_ = 1.0;
     rover_slip_.reset();
     base_slip_.reset();
   }
@@ -457,6 +481,7 @@ class RtkEngine {
     update_geometry();
     manage_ambiguities(nf, out);
     out.n_sat = n_used_sats_;
+    if (opt_.ar_mode != ArMode::kOff && opt_.min_success_rate_estimated > 0.0) update_noise_factor(t, nf);
     // float update: code rows, then phase rows (uncorrelated, so two updates in turn are exact up
     // to the relinearisation); phase rows are rebuilt after outlier resets, at most twice
     const int n_code = build_rows(nf, 1);
@@ -740,6 +765,7 @@ class RtkEngine {
   //
   // The factor also holds code_scale_, the adaptive variance factor of the code (update_code_scale).
   double code_var_factor(int c, int f) const {
+    if (white_code_) return 1.0;
     if (!(opt_.code_corr_time_s > 0.0) || !(dt_epoch_ > 0.0)) return code_scale_;
     const int k = amb_of_[key(rover_ + common_r_[c] * RtkRow::kCols) * kMaxFreq + f];
     if (k < 0 || amb_[k].lock == 0) return code_scale_;
@@ -769,6 +795,62 @@ class RtkEngine {
     const double mean = sum / m;
     if (!(mean > 0.0) || !std::isfinite(mean)) return;
     code_scale_ = std::clamp(code_scale_ * std::pow(mean, opt_.code_scale_gain), 1.0, 100.0);
+  }
+
+  // Variance factor k of the code double differences, estimated from the data, for the success rate
+  // of integer bootstrapping (Teunissen 1998) computed from k Q_a instead of the configured Q_a.
+  // The configured noise (RTKLIB's default: phase 3 mm, code 100 x) is a prior: a receiver quieter
+  // than it gets a pessimistic success rate (measured on a Septentrio pair, GPS L1, one epoch: 0.40
+  // with the configured covariance, above 0.99 with the one of its real scatter), a noisier one an
+  // optimistic rate.  Single-epoch float ambiguities are determined by the code, so the factor is
+  // the code's.  Least-squares variance component estimation with one component (P. J. G.
+  // Teunissen, A. R. Amiri-Simkooei, "Least-squares variance component estimation", J. Geodesy 82
+  // (2008) 65-82; with one component it is the a-posteriori variance factor of unit weight): the epoch's DD code rows y = H dr + e with the configured white
+  // covariance R (m rows, 3 position unknowns) give the weighted sum of squared residuals
+  //   q = y^T R^-1 y - b^T N^-1 b,  N = H^T R^-1 H,  b = H^T R^-1 y,  E[q] = k (m - 3).
+  // Over epochs with forgetting w = exp(-dt / noise_window_s): Q <- w Q + q, F <- w F + (m - 3), and
+  // the factor used is the upper confidence bound k = Q / chi2_{1-c}(F) (c = noise_confidence;
+  // the quantile by Wilson and Hilferty 1931), so few data give a factor above the point estimate
+  // Q / F (c = 0.5, the default: the median, about Q / (F - 2/3)); k is kept in [0.01, 100].  A set
+  // passes the success-rate test with P_s(Q_a) >= min_success_rate (the configured covariance) or
+  // P_s(k Q_a) >= min_success_rate_estimated (0.98, stricter: on the open-sky preset, single epoch,
+  // 0.95 and 0.97 let wrong sets through, docs/algorithms.md).
+  void update_noise_factor(double t, int nf) {
+    white_code_ = true;
+    const int m = build_rows(nf, 1);
+    white_code_ = false;
+    const double w = std::isfinite(noise_t_) && t > noise_t_ ? std::exp(-(t - noise_t_) / opt_.noise_window_s) : 1.0;
+    noise_t_ = t;
+    noise_q_ *= w;
+    noise_dof_ *= w;
+    if (m >= 4) {
+      Eigen::Matrix<double, Eigen::Dynamic, 3, 0, kMaxRows, 3> H(m, 3), WH(m, 3);
+      for (int r = 0; r < m; ++r) {
+        H.row(r).setZero();
+        for (int k = 0; k < nz_[r]; ++k)
+          if (hc_[r][k] < 3) H(r, hc_[r][k]) += hv_[r][k];
+      }
+      llt_.compute(R_.topLeftCorner(m, m));
+      if (llt_.info() == Eigen::Success) {
+        RowVec wy = llt_.solve(y_.head(m));
+        WH = llt_.solve(H);
+        const Mat3 N = H.transpose() * WH;
+        const Vec3 b = WH.transpose() * y_.head(m);
+        Eigen::LDLT<Mat3> ldlt(N);
+        const double q = y_.head(m).dot(wy) - b.dot(ldlt.solve(b));
+        if (ldlt.info() == Eigen::Success && std::isfinite(q) && q >= 0.0) {
+          noise_q_ += q;
+          noise_dof_ += m - 3;
+        }
+      }
+    }
+    sr_factor_ = 1.0;
+    if (noise_dof_ >= 1.0) {
+      const double f = noise_dof_, g = 2.0 / (9.0 * f);
+      const double c = 1.0 - g + noise_z_ * std::sqrt(g);  // chi2_{1-c}(F) = F c^3 (Wilson-Hilferty)
+      const double lo = f * std::max(c, 1e-3) * std::max(c, 1e-3) * std::max(c, 1e-3);
+      sr_factor_ = std::clamp(noise_q_ / lo, 0.01, 100.0);
+    }
   }
 
   double lam(int rover_row, int f) const {
@@ -925,6 +1007,9 @@ class RtkEngine {
     st.min_fix = std::max(std::min(opt_.min_fix_ambiguities, n), 1);
     st.max_drops = opt_.max_partial_drops;
     st.min_success_rate = opt_.min_success_rate;
+    st.min_success_rate_scaled = opt_.min_success_rate_estimated;
+    st.success_variance_factor = opt_.min_success_rate_estimated > 0.0 ? sr_factor_ : 1.0;
+    out.success_variance_factor = st.success_variance_factor;
     const FixRules rules{opt_.min_fix_ambiguities, opt_.confirm_epochs, opt_.confirm_max_ambiguities};
     const auto slot_j = [&](int p) { return dd_j_[order_[p]]; };
     const auto slot_i = [&](int p) { return dd_i_[order_[p]]; };
@@ -941,6 +1026,7 @@ class RtkEngine {
         st, [&](int n_fix) { return validator_(n_fix, n, slot_j, slot_i, ar_.a_fix(), rules); });
     out.ratio = ar_.ratio();
     out.success_rate = ar_.success_rate();
+    out.success_rate_estimated = opt_.min_success_rate_estimated > 0.0 ? ar_.success_rate_scaled() : 0.0;
     if (!ok) return;  // no set passed, or a new small set waits for its repeats (FixValidator rule 2)
     const int nuse = ar_.n_used();
     // fixed solution: x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
@@ -1012,6 +1098,10 @@ class RtkEngine {
   int n_common_ = 0, n_used_sats_ = 0, n_phase_rows_ = 0;
   double dt_epoch_ = 0.0;  // time since the previous epoch [s] (0 on the first)
   double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
+  // code variance factor for the success rate (update_noise_factor): sums, time, factor, quantile
+  double noise_q_ = 0.0, noise_dof_ = 0.0, noise_t_ = NAN, sr_factor_ = 1.0;
+  double noise_z_ = 0.0;  // Phi^-1(1 - noise_confidence), set by the constructor
+  bool white_code_ = false;  // code_var_factor() returns 1 (the configured white code)
   FixValidator<kMaxAmbStates> validator_;  // fix validation over epochs (ambiguity_resolution.hpp)
 
   const double* rover_ = nullptr;
