@@ -137,6 +137,8 @@ def test_auto_false_alarm_sets_the_threshold(car):
     assert test["threshold_z"] == pytest.approx(0.6744898, abs=1e-6)
     assert test["state_kept"] == (abs(test["z"]) > 0.6744898) and sol.summary["layout"] == (16 if test["state_kept"] else 15)
     assert abs(test["z"]) > 0.6744898
+    tiny = insnav.run(car, time={"estimate_offset": "auto", "auto_false_alarm": 1e-20}).summary["time_offset_test"]
+    assert tiny["threshold_z"] == pytest.approx(9.33604, abs=1e-4) and not tiny["state_kept"]  # no 1 - 5e-21 round-off
 
 
 @pytest.mark.parametrize("t_d_ms", [-150.0, 80.0])

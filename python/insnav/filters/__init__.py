@@ -154,7 +154,7 @@ def _run_offset_auto(spec, dataset, cfg, opts):
     with_cfg = dataclasses.replace(cfg, time=dataclasses.replace(cfg.time, estimate_offset=True))
     sol = spec.run(cfg.coupling, dataset, with_cfg, opts)
     alpha = float(cfg.time.auto_false_alarm)
-    threshold = NormalDist().inv_cdf(1.0 - 0.5 * alpha)
+    threshold = -NormalDist().inv_cdf(0.5 * alpha)  # the upper alpha/2 quantile, exact for tiny alpha
     est = float(sol.time_offset_s[-1]) if sol.time_offset_s is not None and len(sol.t) else float("nan")
     sig = float(sol.sigma_time_offset_s[-1]) if sol.time_offset_s is not None and len(sol.t) else float("nan")
     z = est / sig if sig > 0.0 else float("nan")
