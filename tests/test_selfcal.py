@@ -267,6 +267,9 @@ def test_tight_time_offset_short():
     print(f"tight: estimate {1e3 * est:+.2f} ms, sigma {1e3 * sig:.2f} ms, layout {sol.summary['layout']}")
     assert sol.summary["layout"] == 18
     assert abs(est - 0.1) < 3 * sig and sig < 0.03
+    auto = insnav.run(ds, coupling="tight", time={"estimate_offset": "auto", "offset_sigma_ms": 250.0})
+    assert auto.summary["time_offset_test"]["state_kept"]  # z = 0.1 / sigma > 3.3 > 2.576
+    np.testing.assert_array_equal(auto.time_offset_s, sol.time_offset_s)
 
 
 @pytest.mark.parametrize("d, key", [
