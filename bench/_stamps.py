@@ -120,7 +120,8 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                           f"{_PY}io/csv_dataset.py", f"{_PY}io/imu_csv.py", f"{_PY}scenarios/car-mems.toml",
                           f"{_PY}scenarios/seed000-car.toml", f"{_PY}filters/solution.py",
                           "cpp/bindings/bind_loose_selfcal.cpp", "cpp/bindings/bind_tight_selfcal.cpp",
-                          f"{_CPP}meas/vehicle.hpp", f"{_PY}filters/constraints.py")
+                          f"{_CPP}meas/vehicle.hpp", f"{_PY}filters/constraints.py", f"{_PY}filters/__init__.py",
+                          "bench/walk_reference_check.py", f"{_PY}gnss/spp.py", "tests/data/walk_0827.toml")
                          + RINEX + LOOSE_EKF + TIGHT + SIM_RAW,
     "walk_loose.md": ("bench/walk_loose.py", "tests/data/walk_0827_loose.toml", f"{_PY}io/csv_dataset.py",
                       f"{_PY}io/imu_csv.py") + RINEX + LOOSE_EKF,

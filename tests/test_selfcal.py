@@ -98,6 +98,49 @@ def test_zero_offset_cost_is_the_estimate_error_times_the_speed(car):
     assert np.max(np.abs(z)) < 3.0
 
 
+def test_auto_at_zero_offset_returns_the_plain_run_bit_for_bit(car):
+    """``estimate_offset = "auto"`` at a true offset of zero (docs/algorithms.md section 21): the Wald
+    statistic t_d^ / sigma of the run with the state is below the 1 % threshold (2.576), so the run
+    without the state comes back, every row identical, with the test in the summary."""
+    a = insnav.run(car)
+    b = insnav.run(car, time={"estimate_offset": "auto"})
+    _same(a, b)
+    test = b.summary["time_offset_test"]
+    print(test)
+    assert b.time_offset_s is None and b.summary["layout"] == 15
+    assert not test["state_kept"] and test["threshold_z"] == pytest.approx(2.5758293, abs=1e-6)
+    assert abs(test["z"]) < test["threshold_z"]
+    assert test["z"] == pytest.approx(test["estimate_ms"] / test["sigma_ms"], rel=1e-12)
+
+
+def test_auto_with_an_offset_keeps_the_state(car):
+    """A 100 ms offset: "auto" keeps the run with the state (bit for bit the estimate_offset = true run),
+    the estimate within 3 sigma of the truth and |z| far above the threshold."""
+    ds = _retag(car, 0.1)
+    full = insnav.run(ds, time={"estimate_offset": True}, max_time_offset_s=np.inf)
+    auto = insnav.run(ds, time={"estimate_offset": "auto"}, max_time_offset_s=np.inf)
+    _same(full, auto)
+    np.testing.assert_array_equal(auto.time_offset_s, full.time_offset_s)
+    test = auto.summary["time_offset_test"]
+    print(test)
+    assert test["state_kept"] and auto.summary["layout"] == 16
+    assert abs(test["estimate_ms"] - 100.0) < 3 * test["sigma_ms"]
+    assert abs(test["z"]) > 10 * test["threshold_z"]
+
+
+def test_auto_false_alarm_sets_the_threshold(car):
+    """auto_false_alarm = 0.5: the two-sided normal quantile 0.674 (|z| > 0.674 half of the time under
+    t_d = 0); the zero-offset drive's |z| of 1.4 then keeps the state."""
+    sol = insnav.run(car, time={"estimate_offset": "auto", "auto_false_alarm": 0.5})
+    test = sol.summary["time_offset_test"]
+    print(test)
+    assert test["threshold_z"] == pytest.approx(0.6744898, abs=1e-6)
+    assert test["state_kept"] == (abs(test["z"]) > 0.6744898) and sol.summary["layout"] == (16 if test["state_kept"] else 15)
+    assert abs(test["z"]) > 0.6744898
+    tiny = insnav.run(car, time={"estimate_offset": "auto", "auto_false_alarm": 1e-20}).summary["time_offset_test"]
+    assert tiny["threshold_z"] == pytest.approx(9.33604, abs=1e-4) and not tiny["state_kept"]  # no 1 - 5e-21 round-off
+
+
 @pytest.mark.parametrize("t_d_ms", [-150.0, 80.0])
 def test_time_offset_recovered_on_a_short_drive(t_d_ms):
     """An injected offset on 110 s of driving (one turn): the estimate within 2 ms and 3 sigma, and the
@@ -224,12 +267,18 @@ def test_tight_time_offset_short():
     print(f"tight: estimate {1e3 * est:+.2f} ms, sigma {1e3 * sig:.2f} ms, layout {sol.summary['layout']}")
     assert sol.summary["layout"] == 18
     assert abs(est - 0.1) < 3 * sig and sig < 0.03
+    auto = insnav.run(ds, coupling="tight", time={"estimate_offset": "auto", "offset_sigma_ms": 250.0})
+    assert auto.summary["time_offset_test"]["state_kept"]  # z = 0.1 / sigma > 3.3 > 2.576
+    np.testing.assert_array_equal(auto.time_offset_s, sol.time_offset_s)
 
 
 @pytest.mark.parametrize("d, key", [
     ({"time": {"estimate_ofset": True}}, "'time.estimate_ofset'"),
     ({"time": {"offset_sigma_ms": -1.0}}, "'time.offset_sigma_ms'"),
     ({"time": {"estimate_offset": "yes"}}, "'time.estimate_offset'"),
+    ({"time": {"estimate_offset": "auto", "auto_false_alarm": 0.0}}, "'time.auto_false_alarm'"),
+    ({"time": {"estimate_offset": "auto", "auto_false_alarm": 0.7}}, "'time.auto_false_alarm'"),
+    ({"time": {"estimate_offset": "auto"}, "layout": 21}, "'time.estimate_offset'"),
     ({"time": {"estimate_offset": True}, "filter": "rbukf"}, "'time.estimate_offset'"),
     ({"time": {"estimate_offset": True}, "layout": 21}, "'time.estimate_offset'"),
     ({"time": {"estimate_offset": True}, "smooth": True}, "'time.estimate_offset'"),

@@ -134,10 +134,23 @@ class TimeOffset(TomlTable):
     19 with the lever arm; tight: 18 / 21), applies every record at
     ``t - t_d^`` and reports ``Solution.time_offset_s`` and its 1-sigma.
 
+    With ``estimate_offset = "auto"`` (post-processing, :func:`insnav.run`) the
+    run is made with the state, and the estimate is tested against ``t_d = 0``
+    (Wald test, ``z = t_d^ / sigma`` at the end of the run against the
+    two-sided normal quantile of ``auto_false_alarm``): a significant estimate
+    keeps that run, else the run without the state is returned, bit for bit
+    (docs/algorithms.md section 21).  ``Solution.summary["time_offset_test"]``
+    holds the estimate, its sigma, ``z``, the threshold and the decision.
+
     Attributes
     ----------
-    estimate_offset : bool
-        Estimate ``t_d`` (default false: the layouts and results without it).
+    estimate_offset : bool or "auto"
+        Estimate ``t_d`` (default false: the layouts and results without it);
+        ``"auto"``: estimate it and keep the state only if the estimate is
+        significant.
+    auto_false_alarm : float
+        ``"auto"`` only: the probability of keeping the state when the true
+        offset is zero (default 0.01: ``|z| > 2.576``), in (0, 0.5].
     offset_sigma_ms : float
         Initial 1-sigma of ``t_d`` [ms] (default 100).
     initial_offset_ms : float
@@ -148,7 +161,8 @@ class TimeOffset(TomlTable):
     """
 
     TABLE = "time"
-    estimate_offset: bool = False
+    estimate_offset: bool | str = False
+    auto_false_alarm: float = 0.01
     offset_sigma_ms: float = 100.0
     initial_offset_ms: float = 0.0
     offset_psd_ms2_per_s: float = 0.0
@@ -156,7 +170,15 @@ class TimeOffset(TomlTable):
     def validate(self, source: str | None = None) -> "TimeOffset":
         """Check the values; a one-line ConfigError naming ``time.<key>`` (prefixed by ``source`` if given)."""
         with _prefixed(source):
-            _check_flag(self, "estimate_offset", "time")
+            if self.estimate_offset != "auto":
+                v = self.estimate_offset
+                if not isinstance(v, (bool, np.bool_)):
+                    raise ConfigError(f"config key 'time.estimate_offset': bad value {v!r}; allowed: true, false "
+                                      "or \"auto\"")
+            _check_number(self, "auto_false_alarm", "time", lo=0.0, strict=True)
+            if self.auto_false_alarm > 0.5:
+                raise ConfigError(f"config key 'time.auto_false_alarm': bad value {self.auto_false_alarm!r}; "
+                                  "allowed: a probability in (0, 0.5]")
             _check_number(self, "offset_sigma_ms", "time", lo=0.0, strict=True)
             _check_number(self, "initial_offset_ms", "time")
             _check_number(self, "offset_psd_ms2_per_s", "time", lo=0.0)

@@ -862,6 +862,13 @@ def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts,
           + (f"; TDCP: {s['tdcp_used']} rows used in {s['tdcp_updates']} epochs, {s['tdcp_rejected']} rejected by "
              f"the chi-square, slips {s['tdcp_slips_lli']} by LLI and {s['tdcp_slips_ins']} by the INS-predicted test"
              if s.get("tdcp") else ""))
+    if "time_offset_test" in s:  # [time] estimate_offset = "auto" (docs/algorithms.md section 21)
+        tt = s["time_offset_test"]
+        print(f"time offset: {tt['estimate_ms']:+.2f} +- {tt['sigma_ms']:.2f} ms, |t_d / sigma| {abs(tt['z']):.2f} "
+              f"{'>' if tt['state_kept'] else '<='} {tt['threshold_z']:.2f}: the run "
+              + ("with the state kept" if tt["state_kept"] else "without the state kept (estimate_offset = \"auto\")"))
+    elif "time_offset_ms" in s:
+        print(f"time offset: {s['time_offset_ms']:+.2f} +- {s['sigma_time_offset_ms']:.2f} ms")
     if health:
         import sys
 

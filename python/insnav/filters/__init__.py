@@ -127,7 +127,11 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
             from .checks import check_dataset
 
             check_dataset(inner if inner is not None else dataset, max_time_offset_s=cfg.max_time_offset_s)
-        sol = spec.run(cfg.coupling, dataset, cfg, spec.options_class(cfg.coupling)(**{**cfg.options, **options}))
+        opts = spec.options_class(cfg.coupling)(**{**cfg.options, **options})
+        if cfg.time.estimate_offset == "auto":
+            sol = _run_offset_auto(spec, dataset, cfg, opts)
+        else:
+            sol = spec.run(cfg.coupling, dataset, cfg, opts)
     if report is not None:
         sol.summary["sanitize"] = report
     if cfg.coupling != "gnss":
@@ -136,3 +140,30 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         imu_t = getattr(getattr(dataset, "imu", None), "t", None)
         sol.summary["health"] = assess(sol, imu_t_end=float(imu_t[-1]) if imu_t is not None and len(imu_t) else None)
     return sol
+
+
+def _run_offset_auto(spec, dataset, cfg, opts):
+    """``[time] estimate_offset = "auto"`` (docs/algorithms.md section 21): the run with the
+    time-offset state; its last estimate t_d^ and 1-sigma give the Wald statistic z = t_d^ / sigma,
+    N(0, 1) under t_d = 0 for a consistent filter (a random-constant state: the last estimate uses
+    every record).  |z| above the two-sided normal quantile of ``cfg.time.auto_false_alarm`` keeps
+    that run; otherwise the run without the state (t_d = 0) is made and returned unchanged.  The
+    test and the decision go to ``summary["time_offset_test"]``."""
+    from statistics import NormalDist
+
+    with_cfg = dataclasses.replace(cfg, time=dataclasses.replace(cfg.time, estimate_offset=True))
+    sol = spec.run(cfg.coupling, dataset, with_cfg, opts)
+    alpha = float(cfg.time.auto_false_alarm)
+    threshold = -NormalDist().inv_cdf(0.5 * alpha)  # the upper alpha/2 quantile, exact for tiny alpha
+    est = float(sol.time_offset_s[-1]) if sol.time_offset_s is not None and len(sol.t) else float("nan")
+    sig = float(sol.sigma_time_offset_s[-1]) if sol.time_offset_s is not None and len(sol.t) else float("nan")
+    z = est / sig if sig > 0.0 else float("nan")
+    keep = bool(abs(z) > threshold)  # nan (no rows): the run without the state
+    test = dict(estimate_ms=est * 1e3, sigma_ms=sig * 1e3, z=z, threshold_z=threshold, false_alarm=alpha,
+                state_kept=keep)
+    if not keep:
+        sol = spec.run(cfg.coupling, dataset, dataclasses.replace(
+            cfg, time=dataclasses.replace(cfg.time, estimate_offset=False)), opts)
+    sol.summary["time_offset_test"] = test
+    return sol
+
