@@ -1,7 +1,9 @@
 """Shared helpers of the result generators in bench/ (not part of the package)."""
 from __future__ import annotations
 
+import os
 import subprocess
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -18,3 +20,17 @@ def git_commit() -> str:
         return c + (" (with uncommitted changes)" if dirty else "")
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
+
+
+def run_child(args, cwd) -> tuple[float, float, float]:
+    """(CPU = user + system [s], wall [s], peak RSS [MB]) of one run of ``args`` as a child process
+    (``os.wait4``: the child's own resource use); raises on a non-zero exit with its stderr's end."""
+    t = time.perf_counter()
+    p = subprocess.Popen(args, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, ru = os.wait4(p.pid, 0)
+    wall = time.perf_counter() - t
+    err = p.stderr.read().decode(errors="replace")
+    p.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"{' '.join(map(str, args))} failed:\n{err[-2000:]}")
+    return ru.ru_utime + ru.ru_stime, wall, ru.ru_maxrss / 1024.0

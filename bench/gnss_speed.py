@@ -40,7 +40,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import git_commit  # noqa: E402
+from _common import git_commit, run_child  # noqa: E402
 from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/gnss_speed.py --out docs/results/gnss_speed.md"
@@ -53,15 +53,7 @@ TIGHT_TARGET = 1.3
 
 def run_once(args, cwd) -> tuple[float, float]:
     """(CPU = user + system [s], wall [s]) of one run of ``args``; raises on a non-zero exit."""
-    t = time.perf_counter()
-    p = subprocess.Popen(args, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, ru = os.wait4(p.pid, 0)
-    wall = time.perf_counter() - t
-    err = p.stderr.read().decode(errors="replace")
-    p.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"{' '.join(map(str, args))} failed:\n{err[-2000:]}")
-    return ru.ru_utime + ru.ru_stime, wall
+    return run_child(args, cwd)[:2]
 
 
 def time_commands(cmds: dict, cwd, repeats: int) -> dict:

@@ -28,7 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import git_commit  # noqa: E402
+from _common import git_commit, run_child as run_once  # noqa: E402
 from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/simulate_day.py --out docs/results/simulate_day.md"
@@ -52,19 +52,6 @@ duration_s = {cruise_s}
 
 WHOLE = ("import sys; from insnav.sim import simulate; "
          "simulate(sys.argv[1]).save(sys.argv[2], overwrite=True)")
-
-
-def run_once(args, cwd) -> tuple[float, float, float]:
-    """(CPU = user + system [s], wall [s], peak RSS [MB]) of one run of ``args``; raises on a non-zero exit."""
-    t = time.perf_counter()
-    p = subprocess.Popen(args, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, ru = os.wait4(p.pid, 0)
-    wall = time.perf_counter() - t
-    err = p.stderr.read().decode(errors="replace")
-    p.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"{' '.join(map(str, args))} failed:\n{err[-2000:]}")
-    return ru.ru_utime + ru.ru_stime, wall, ru.ru_maxrss / 1024.0
 
 
 def folder_mb(d: Path) -> float:
