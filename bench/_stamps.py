@@ -97,7 +97,7 @@ DEPENDS: dict[str, tuple[str, ...]] = {
                                f"{_PY}scenarios/car-mems.toml", f"{_PY}scenarios/car-mems-outage30.toml",
                                f"{_PY}scenarios/car-mems-outage60.toml", f"{_PY}scenarios/car-mems-outage120.toml",
                                f"{_PY}analysis/report.py") + KFGINS + LOOSE_EKF + SIM,
-    "cli_end_to_end.md": ("bench/cli_end_to_end.py", f"{_PY}cli/run.py", f"{_PY}data/textio.py",
+    "cli_end_to_end.md": ("bench/cli_end_to_end.py", "bench/_kfgins.py", f"{_PY}cli/run.py", f"{_PY}data/textio.py",
                           f"{_PY}io/imu_csv.py", f"{_PY}io/gnss_files.py", f"{_PY}filters/health.py",
                           f"{_CPP}engine/solution_scan.hpp", "cpp/bindings/bind_checks.cpp",
                           f"{_PY}filters/stream.py", f"{_CPP}engine/loose_stream.hpp",

@@ -13,7 +13,10 @@ block-by-block run; the others stream, insnav.filters.stream), for the A/B
 of the two.  Then, once each, the bounded-memory rows: a synthesised
 recording of ``--day-hours`` (default 24 h at 200 Hz, about 2 GB of text
 under the temporary folder, deleted at the end; the 5.5 GB all-columns CSV
-too) run block by block at 10 Hz and 200 Hz output.  Writes
+too) run block by block at 10 Hz and 200 Hz output.  KF-GINS itself, built
+in Release on this machine (``python bench/_kfgins.py``; ``INSNAV_KFGINS_BIN``
+for another build), runs in every round beside the variants on the same
+files, and the document divides its CPU time by each variant's.  Writes
 docs/results/cli_end_to_end.md.
 
     python bench/cli_end_to_end.py [--repeat 5] [--day-hours 24]
@@ -33,6 +36,7 @@ import time
 from pathlib import Path
 
 from _common import ROOT, git_commit
+from _kfgins import build_kfgins, built_commit, find_kfgins
 from _stamps import with_stamp  # noqa: E402
 
 SIM = Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data")) / "kfgins" / "sim"
@@ -59,6 +63,8 @@ DAY_VARIANTS = [
     ("EKF, CSV, 200 Hz, nav columns (block by block)", ["--columns", "nav"], "day200.csv"),
     ("EKF, CSV, 200 Hz, all columns (block by block)", [], "day200all.csv"),
 ]
+#: the issue's speed targets against KF-GINS, CPU time of the whole command (label: minimum KF-GINS / insnav)
+KFGINS_TARGETS = {"EKF, CSV, 200 Hz, all columns": 30.0, "EKF, npz, 200 Hz": 40.0}
 TIMINGS = re.compile(r"timings \[s\]: read ([\d.]+), filter ([\d.]+), write ([\d.]+)")
 
 
@@ -86,6 +92,23 @@ def run_cli(work: Path, extra, out_name, yaml: str = "kf-gins-sim.yaml", keep: b
         out.unlink()
     return dict(wall=wall, read=float(m[1]), filter=float(m[2]), write=float(m[3]), size=size, rss=ru,
                 cpu=ru.ru_utime + ru.ru_stime)
+
+
+def run_kfgins(binary: Path, work: Path) -> dict:
+    """One KF-GINS run on the track's files in ``work`` (its own three output files, as it writes them)."""
+    out = work / "out" / "kfgins_ref"
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+    t0 = time.perf_counter()
+    p = subprocess.Popen([str(binary), "kfgins-ref.yaml"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         cwd=work)
+    _, status, ru = os.wait4(p.pid, 0)
+    wall = time.perf_counter() - t0
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"{binary} kfgins-ref.yaml: exit {os.waitstatus_to_exitcode(status)}")
+    size = sum(f.stat().st_size for f in out.iterdir())
+    shutil.rmtree(out)
+    return dict(wall=wall, cpu=ru.ru_utime + ru.ru_stime, rss=ru, size=size)
 
 
 def api_child(work: Path) -> None:
@@ -185,6 +208,8 @@ def main(argv=None) -> int:
     ap.add_argument("--day-hours", type=float, default=24.0,
                     help="length of the synthesised long recording of the bounded-memory rows [h] (0: none); "
                          "written under the temporary folder, deleted afterwards")
+    ap.add_argument("--kfgins", choices=("auto", "off"), default="auto",
+                    help="time KF-GINS beside the variants (auto: build it with bench/_kfgins.py when missing)")
     ap.add_argument("--api-child", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.api_child:
@@ -216,6 +241,19 @@ def main(argv=None) -> int:
         subprocess.run([sys.executable, "-c", "import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), "
                         "open(sys.argv[2], 'wb'), 1 << 22)", str(IMU_XZ), str(work / "Leador-A15-sim.txt")], check=True)
         (work / "out").mkdir()
+        kfgins_bin = find_kfgins()
+        if kfgins_bin is None and a.kfgins == "auto":
+            try:  # clones KF-GINS at the pinned commit (needs the network) and builds it in Release
+                kfgins_bin = build_kfgins()
+            except (OSError, subprocess.CalledProcessError, SystemExit) as e:
+                print(f"KF-GINS not built ({e}); the document states no ratio against it", file=sys.stderr)
+        if a.kfgins == "off":
+            kfgins_bin = None
+        if kfgins_bin is not None:  # KF-GINS's own YAML with its outputs in a folder of ours
+            text = [("outputpath: \"./out/kfgins_ref\"" if ln.startswith("outputpath:") else ln)
+                    for ln in (work / "kf-gins-sim.yaml").read_text().splitlines()]
+            (work / "kfgins-ref.yaml").write_text("\n".join(text) + "\n")
+        kfg = []
         imu_mb = (work / "Leador-A15-sim.txt").stat().st_size / 1e6
 
         res = {v[0]: [] for v in variants}
@@ -227,6 +265,8 @@ def main(argv=None) -> int:
         for r in range(a.repeat):
             for label, extra, out_name in variants:
                 res[label].append(run_cli(work, extra, out_name))
+            if kfgins_bin is not None:
+                kfg.append(run_kfgins(kfgins_bin, work))
             child = subprocess.run([sys.executable, __file__, "--api-child", str(work)], capture_output=True,
                                    text=True, check=True)
             j = json.loads(child.stdout.strip().splitlines()[-1])
@@ -313,12 +353,47 @@ def main(argv=None) -> int:
         f"{2 * imu_array_mb + out_array_mb:.0f} MB (the Python interpreter with numpy and the extension "
         f"alone is about {_baseline_rss_mb():.0f} MB).",
         "",
-        "KF-GINS takes about 31 s on this track (the figure reported for KF-GINS, see kfgins.md); "
-        f"end to end the EKF with CSV output is {31.0 / med(x['wall'] for x in res[variants[0][0]]):.0f}x faster.",
     ]
+    lines += kfgins_section(kfg, res, variants, med)
     Path(a.out).write_text(with_stamp("\n".join(lines) + "\n", a.out))
     print("\n".join(lines))
     return 0
+
+
+def kfgins_section(kfg, res, variants, med) -> list[str]:
+    """KF-GINS beside the variants: its own figures, then KF-GINS CPU / insnav CPU per variant."""
+    if not kfg:
+        return ["", "KF-GINS side by side: **not measured** (no KF-GINS build; `python bench/_kfgins.py` builds it, "
+                "or set INSNAV_KFGINS_BIN), so no speed ratio against it is stated."]
+    k_cpu = med(x["cpu"] for x in kfg)
+    k_wall = med(x["wall"] for x in kfg)
+    lines = [
+        "",
+        "## Side by side with KF-GINS",
+        "",
+        f"KF-GINS (i2Nav-WHU, commit `{built_commit()[:7]}`, built on this machine in Release by "
+        "`python bench/_kfgins.py`: its own CMake project, -O3 -DNDEBUG) on the same files in every round, "
+        "writing its three output files (KF_GINS_Navresult.nav, KF_GINS_IMU_ERR.txt, KF_GINS_STD.txt at 200 Hz):",
+        "",
+        "| program | wall [s] (min-max) | CPU [s] | peak RSS [MB] | output [MB] |",
+        "|---|---|---|---|---|",
+        f"| KF-GINS | {k_wall:.2f} ({min(x['wall'] for x in kfg):.2f}-{max(x['wall'] for x in kfg):.2f}) | "
+        f"{k_cpu:.2f} | {max(x['rss'].ru_maxrss for x in kfg) / 1024.0:.0f} | {kfg[-1]['size'] / 1e6:.1f} |",
+        "",
+        "KF-GINS / insnav, medians over the rounds (how many times less time insnav takes); the issue's targets "
+        "are in CPU time:",
+        "",
+        "| insnav variant | CPU ratio | wall ratio | target (CPU) |",
+        "|---|---|---|---|",
+    ]
+    for label, _, _ in variants:
+        rs = res[label]
+        r_cpu = k_cpu / med(x["cpu"] for x in rs)
+        r_wall = k_wall / med(x["wall"] for x in rs)
+        t = KFGINS_TARGETS.get(label)
+        verdict = "-" if t is None else f">= {t:.0f}x: {'met' if r_cpu >= t else '**not met**'}"
+        lines.append(f"| {label} | {r_cpu:.1f}x | {r_wall:.1f}x | {verdict} |")
+    return lines
 
 
 class _Shim:
