@@ -62,7 +62,7 @@ from .imu_csv import gps_minus_utc_s
 __all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos",
            "read_pos_records", "shift_velocity", "estimate_velocity_lag", "velocity_lag_warning", "MAX_VELOCITY_LAG_S", "read_rtklib_pos", "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
 
-#: the largest |velocity_lag_s| accepted [s] (a receiver's velocity filter lags by tenths of a second; a
+#: the largest absolute velocity_lag_s accepted [s] (a receiver's velocity filter lags by tenths of a second; a
 #: larger value is a time-tag or unit mistake, not a lag)
 MAX_VELOCITY_LAG_S = 2.0
 
@@ -352,7 +352,7 @@ def shift_velocity(t_s, v_n, sigma_vel_n, lag_s: float, max_gap_factor: float = 
     Notes
     -----
     Linear interpolation of a smooth velocity between records dt apart errs by
-    at most dt^2 |v''| / 8 (0.6 mm/s for 4 Hz records and 0.1 m/s^3 of jerk).
+    at most ``dt^2 abs(v'') / 8`` (0.8 mm/s for 4 Hz records and 0.1 m/s^3 of jerk).
     """
     t = np.asarray(t_s, float)
     v = np.asarray(v_n, float)
