@@ -327,6 +327,39 @@ int main() {
                 m.linear().H.block(0, LO, m.linear().rows(), 3).norm());
     EXPECT_LT(worst, 1e-9);  // linear in l: central differences are exact up to round-off
     EXPECT_LT(0.1, (m.linear().H.block(0, LO, m.linear().rows(), 3).norm()));
+    // set_lever_arm_rate: the residual keeps the rate given to set() (bit for bit), the lever-arm
+    // columns take the other rate (ClosedLoop::omega_ib_b_lever), i.e. they equal the columns of a
+    // measurement built with that rate, and they are the derivative of predicted_residual at it; the
+    // other columns (dv, psi, dw_b, ds) stay the derivatives of predicted_residual
+    const Vec3 w_lever = w + Vec3(0.02, -0.03, 0.01);
+    VehicleVelocityMeasurement<L> ml, mw;
+    ml.set_lever_arm_rate(w_lever);
+    ml.set(ins.s, w, vc, true, 14.0, 0.002);
+    mw.set(ins.s, w_lever, vc, true, 14.0, 0.002);
+    const int rows = m.linear().rows();
+    EXPECT_LT((ml.linear().residual - m.linear().residual).norm(), 1e-15);
+    EXPECT_LT((ml.linear().H.block(0, LO, rows, 3) - mw.linear().H.block(0, LO, rows, 3)).norm(), 1e-12);
+    EXPECT_LT(1e-2, (ml.linear().H.block(0, LO, rows, 3) - m.linear().H.block(0, LO, rows, 3)).norm());
+    double worst_l = 0.0, worst_all = 0.0;
+    for (int j = 0; j < L::kSize; ++j) {
+      StateVec<L> dp = StateVec<L>::Zero(), dm = StateVec<L>::Zero();
+      const double h = j >= LO ? 1e-3 : 1e-6;
+      dp[j] = h;
+      dm[j] = -h;
+      const auto col = ((ml.predicted_residual(dp) - ml.predicted_residual(dm)) / (2.0 * h)).eval();
+      for (int i = 0; i < rows; ++i) {
+        const double e = std::abs(ml.linear().H(i, j) - col[i]);
+        worst_all = std::max(worst_all, e);
+        if (j >= LO) worst_l = std::max(worst_l, e);
+      }
+    }
+    std::printf("vehicle lever-arm columns with a separate rate: |H - d predicted_residual / d dl| %.2e, "
+                "all columns %.2e\n", worst_l, worst_all);
+    EXPECT_LT(worst_l, 1e-10);
+    EXPECT_LT(worst_all, 1e-6);
+    // the next set() without the call takes the rate of set() again
+    ml.set(ins.s, w, vc, true, 14.0, 0.002);
+    EXPECT_LT((ml.linear().H - m.linear().H).norm(), 1e-15);
   }
   TEST_MAIN_END();
 }

@@ -734,6 +734,10 @@ def cmd_run(args) -> int:
         rinex_opts, csv_tables = loaded.tables.get("rinex"), loaded.tables.get("csv")
         if csv_tables is not None:
             print(ds.info["initial_state"])
+            import sys
+
+            for w in ds.info.get("warnings", ()):  # e.g. velocities that lag their positions ([gnss] velocity_lag_s)
+                print(f"warning: {w}", file=sys.stderr)
         cfg = _cli_config(args, cfg)
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)

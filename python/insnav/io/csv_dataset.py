@@ -54,7 +54,7 @@ from ..data.imu_grades import IMU_GRADES, imu_model_for_grade
 from ..data.nav import NavState
 from ..gnss.gpstime import SECONDS_PER_WEEK
 from ..ins.align import Alignment, align, level
-from .gnss_files import GnssFileFormat, GnssRecords, read_gnss
+from .gnss_files import GnssFileFormat, GnssRecords, read_gnss, velocity_lag_warning
 from .imu_csv import ImuCsvFormat, ImuSamples, read_imu_csv
 
 __all__ = ["CsvDataset", "load_csv_dataset", "load_csv_run", "IMU_KEYS", "GNSS_KEYS", "INITIAL_KEYS", "ALIGN_KEYS",
@@ -397,6 +397,8 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
                     t0=float(t0), gps_time_offset_s=float(offset), imu_model=model, name=Path(samples.path).stem,
                     alignment=a, info=info)
     ds.info["initial_state"] = initial_state_line(ds)
+    lag_warning = velocity_lag_warning(rec)  # velocities that visibly lag their own positions
+    ds.info["warnings"] = [lag_warning] if lag_warning else []
     base = dict(filter="ekf", coupling="loose", init_error=False, init_sigma_pos_m=list(map(float, sig["pos_m"])),
                 init_sigma_vel_mps=list(map(float, sig["vel_mps"])), init_sigma_att_deg=list(map(float, sig["att_deg"])))
     base.update({k: v for k, v in d.items() if k not in _TABLES})

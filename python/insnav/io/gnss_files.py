@@ -32,6 +32,13 @@ Formats
   or missing one, or a malformed field, is a :class:`GnssFileError` naming
   the file and the line.  Quality 0 (no fix) records are dropped.  UTC ->
   GPS time with the leap seconds of :func:`insnav.io.imu_csv.gps_minus_utc_s`.
+
+Velocity lag (every format): ``velocity_lag_s`` = tau > 0 says the velocity
+column of the record tagged t describes the antenna at t - tau (a receiver's
+navigation filter smooths and delays its velocity); the reader takes the
+velocity of the record tagged t from the column at t + tau
+(:func:`shift_velocity`).  :func:`estimate_velocity_lag` measures tau from
+the file's own positions.
 """
 from __future__ import annotations
 
@@ -53,7 +60,11 @@ from .imu_csv import GPST_UNIX_OFFSET_S, _CHOICES as _IMU_CHOICES, _TIME_SCALE, 
 from .imu_csv import gps_minus_utc_s
 
 __all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos",
-           "read_pos_records", "read_rtklib_pos", "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
+           "read_pos_records", "shift_velocity", "estimate_velocity_lag", "velocity_lag_warning", "MAX_VELOCITY_LAG_S", "read_rtklib_pos", "read_nmea", "write_pos", "write_nmea", "nmea_checksum", "KNOT_MPS"]
+
+#: the largest absolute velocity_lag_s accepted [s] (a receiver's velocity filter lags by tenths of a second; a
+#: larger value is a time-tag or unit mistake, not a lag)
+MAX_VELOCITY_LAG_S = 2.0
 
 #: knot -> m/s (1852 m per hour)
 KNOT_MPS = 1852.0 / 3600.0
@@ -120,6 +131,12 @@ class GnssFileFormat:
     decimate : int
         Keep every k-th fix (after the quality filter): e.g. 4 turns 4 Hz into
         1 Hz, leaving the others to evaluate the INS between fixes.
+    velocity_lag_s : float
+        Lag tau [s] of the velocity column behind the positions: the velocity
+        of the record tagged t describes the antenna at t - tau (positive:
+        late).  The reader re-times the column onto the position tags
+        (:func:`shift_velocity`, on every record, before ``decimate``);
+        ``|tau| <= MAX_VELOCITY_LAG_S``.  0: as tagged.
     """
 
     format: str = "auto"
@@ -139,6 +156,7 @@ class GnssFileFormat:
     velocity: bool = True
     date: str | None = None
     decimate: int = 1
+    velocity_lag_s: float = 0.0
 
     def validate(self, source: str = "gnss format", prefix: str = "gnss.") -> "GnssFileFormat":
         """Check every option (ConfigError naming ``prefix`` + key); returns self."""
@@ -191,6 +209,10 @@ class GnssFileFormat:
                 bad(key, "a finite number")
         if self.min_sigma_pos_m < 0:
             bad("min_sigma_pos_m", ">= 0 [m]")
+        v = self.velocity_lag_s
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not abs(v) <= MAX_VELOCITY_LAG_S:
+            bad("velocity_lag_s", f"a number of seconds within +-{MAX_VELOCITY_LAG_S:g} (the lag of the velocity "
+                "column behind the positions; positive: the velocity describes the antenna that much earlier)")
         self.sigma_pos_m = _three(self.sigma_pos_m, "sigma_pos_m", source, prefix)
         self.sigma_vel_mps = _three(self.sigma_vel_mps, "sigma_vel_mps", source, prefix)
         v = self.decimate
@@ -274,6 +296,13 @@ def _finish(rec: GnssRecords, fmt: GnssFileFormat) -> GnssRecords:
         rec.v_n = np.full((len(rec), 3), np.nan)
         rec.sigma_vel_n = np.full((len(rec), 3), np.nan)
     rec.t_s = rec.t_s + float(fmt.time_offset_s)
+    if len(rec) >= 3 and np.any(np.isfinite(rec.v_n)):
+        _check_increasing(rec)
+        if fmt.velocity_lag_s != 0.0:
+            rec.v_n, rec.sigma_vel_n = shift_velocity(rec.t_s, rec.v_n, rec.sigma_vel_n, float(fmt.velocity_lag_s))
+            rec.info["velocity_lag_s"] = float(fmt.velocity_lag_s)
+        # what lag the (re-timed) velocities still show against the positions (insnav run warns)
+        rec.info["velocity_lag_check"] = estimate_velocity_lag(rec.t_s, rec.lat_deg, rec.lon_deg, rec.h_m, rec.v_n)
     if fmt.decimate > 1:
         rec = rec.take(np.arange(0, len(rec), fmt.decimate))
     if len(rec) == 0:
@@ -283,11 +312,163 @@ def _finish(rec: GnssRecords, fmt: GnssFileFormat) -> GnssRecords:
     if nosig.size:
         raise GnssFileError(rec.path, int(rec.lines[nosig[0]]), "no position sigma for this fix: give sigma "
                             "columns (or GST sentences), or a fixed [gnss] sigma_pos_m")
+    _check_increasing(rec)
+    return rec
+
+
+def _check_increasing(rec: GnssRecords) -> None:
     d = np.diff(rec.t_s)
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0)) + 1
         raise GnssFileError(rec.path, int(rec.lines[k]), f"time does not increase (line {int(rec.lines[k - 1])})")
-    return rec
+
+
+def shift_velocity(t_s, v_n, sigma_vel_n, lag_s: float, max_gap_factor: float = 1.5):
+    """Re-time a velocity column that lags its positions.
+
+    The velocity of record k (tagged ``t_s[k]``) is taken from the column at
+    ``t_s[k] + lag_s`` by linear interpolation between the two records that
+    bracket that time, each component separately; its sigma is the larger of
+    the two records' sigmas.  Where that time lies outside the file, or the
+    bracketing records are more than ``max_gap_factor`` median intervals apart
+    (a gap), or one of them has no velocity, the record's velocity (and its
+    sigma) become NaN: the record keeps its position.
+
+    Parameters
+    ----------
+    t_s : (N,) record times [s], strictly increasing
+    v_n : (N, 3) velocity column, NED [m/s] (NaN: none)
+    sigma_vel_n : (N, 3) its 1-sigma [m/s]
+    lag_s : float
+        Lag tau [s] of the column behind the positions: the value tagged t
+        describes the antenna at t - tau (``[gnss] velocity_lag_s``).
+    max_gap_factor : float
+        Largest bracket, in median record intervals, interpolated across.
+
+    Returns
+    -------
+    v_n, sigma_vel_n : (N, 3) the re-timed velocity and its sigma [m/s]
+
+    Notes
+    -----
+    Linear interpolation of a smooth velocity between records dt apart errs by
+    at most ``dt^2 abs(v'') / 8`` (0.8 mm/s for 4 Hz records and 0.1 m/s^3 of jerk).
+    """
+    t = np.asarray(t_s, float)
+    v = np.asarray(v_n, float)
+    sv = np.asarray(sigma_vel_n, float)
+    n = len(t)
+    out_v = np.full_like(v, np.nan)
+    out_s = np.full_like(sv, np.nan)
+    if n < 2:
+        return out_v, out_s
+    tq = t + float(lag_s)
+    j = np.searchsorted(t, tq, side="right") - 1  # t[j] <= tq < t[j + 1]
+    exact = (j >= 0) & (t[np.clip(j, 0, n - 1)] == tq)
+    j = np.clip(j, 0, n - 2)
+    t0, t1 = t[j], t[j + 1]
+    inside = (tq >= t[0]) & (tq <= t[-1])
+    gap = (t1 - t0) > max_gap_factor * float(np.median(np.diff(t)))
+    ok = inside & (~gap | exact)
+    w = np.where(ok, (tq - t0) / np.where(t1 > t0, t1 - t0, 1.0), 0.0)[:, None]
+    vi = (1.0 - w) * v[j] + w * v[j + 1]
+    si = np.maximum(sv[j], sv[j + 1])
+    for end, at in ((0, w[:, 0] == 0.0), (1, w[:, 0] == 1.0)):  # on a record: that record alone (its
+        vi[at] = v[j[at] + end]                                    # neighbour may have no velocity)
+        si[at] = sv[j[at] + end]
+    out_v[ok] = vi[ok]
+    out_s[ok] = si[ok]
+    return out_v, out_s
+
+
+def estimate_velocity_lag(t_s, lat_deg, lon_deg, h_m, v_n, *, max_lag_s: float = 0.5, step_s: float = 0.002,
+                          min_speed_mps: float = 0.3, min_points: int = 20, max_points: int = 20000) -> dict | None:
+    """Measure the lag of a velocity column behind its own positions.
+
+    The horizontal velocity from central differences of the positions over
+    two record intervals, ``(r[k+1] - r[k-1]) / (t[k+1] - t[k-1])`` (centred
+    on ``t[k]``: no lag of its own; its error from the curvature of the path
+    is ``dt^2 a' / 6``), is compared with the velocity column read at
+    ``t[k] + tau`` (:func:`shift_velocity` interpolation) over a grid of tau in
+    ``[-max_lag_s, max_lag_s]`` (10 ``step_s`` apart, then ``step_s`` apart
+    around the best); the tau of the least rms difference (refined by a
+    parabola through its grid neighbours) is the lag, the value to give
+    ``[gnss] velocity_lag_s``.  Only records on a regular spacing (both
+    intervals within 1 % of the median) moving faster than ``min_speed_mps``
+    take part (at most ``max_points`` of them, evenly spread).
+
+    Parameters
+    ----------
+    t_s : (N,) [s], increasing;  lat_deg, lon_deg : (N,) [deg];  h_m : (N,) [m]
+    v_n : (N, 3) NED velocity column [m/s] (NaN: none)
+
+    Returns
+    -------
+    dict or None
+        ``lag_s`` [s], ``rms_at_lag_mps`` and ``rms_as_tagged_mps`` (rms
+        horizontal difference [m/s] at tau = lag and at tau = 0),
+        ``points``; None when fewer than ``min_points`` records qualify.
+    """
+    t = np.asarray(t_s, float)
+    v = np.asarray(v_n, float)
+    if len(t) < min_points + 2 or not np.any(np.isfinite(v[:, :2])):
+        return None
+    lat = np.radians(np.asarray(lat_deg, float))
+    lon = np.radians(np.asarray(lon_deg, float))
+    h = np.asarray(h_m, float)
+    R_M, R_N = earth.radii(lat)
+    north = (lat - lat[0]) * (R_M + h)
+    east = (lon - lon[0]) * (R_N + h) * np.cos(lat)
+    dt = np.diff(t)
+    med = float(np.median(dt))
+    reg = np.abs(dt - med) <= 0.01 * med
+    ok = reg[1:] & reg[:-1]
+    dt2 = t[2:] - t[:-2]
+    v_d = np.column_stack([(north[2:] - north[:-2]) / dt2, (east[2:] - east[:-2]) / dt2])
+    ok &= np.hypot(v_d[:, 0], v_d[:, 1]) > min_speed_mps
+    ok &= np.all(np.isfinite(v[1:-1, :2]), axis=1)
+    idx = np.flatnonzero(ok) + 1  # record index of each central difference
+    v_d = v_d[ok]
+    # only the records whose column reads are inside the file for every tau of the grid
+    keep = (t[idx] - max_lag_s >= t[0]) & (t[idx] + max_lag_s <= t[-1])
+    idx, v_d = idx[keep], v_d[keep]
+    if len(idx) < min_points:
+        return None
+    if len(idx) > max_points:
+        sub = np.linspace(0, len(idx) - 1, max_points).astype(int)
+        idx, v_d = idx[sub], v_d[sub]
+
+    def rms(tau):
+        vi = np.column_stack([np.interp(t[idx] + tau, t, v[:, j]) for j in range(2)])
+        d = np.sum((vi - v_d) ** 2, axis=1)
+        d = d[np.isfinite(d)]
+        return float(np.sqrt(np.mean(d))) if d.size else np.inf
+
+    coarse = np.arange(-max_lag_s, max_lag_s + 5.0 * step_s, 10.0 * step_s)
+    best = float(coarse[int(np.argmin([rms(tau) for tau in coarse]))])
+    taus = np.arange(best - 10.0 * step_s, best + 10.5 * step_s, step_s)
+    r = np.array([rms(tau) for tau in taus])
+    k = int(np.argmin(r))
+    lag = float(taus[k])
+    if 0 < k < len(taus) - 1 and np.all(np.isfinite(r[k - 1:k + 2])):
+        den = r[k - 1] - 2.0 * r[k] + r[k + 1]
+        if den > 0:
+            lag += 0.5 * step_s * (r[k - 1] - r[k + 1]) / den
+    return dict(lag_s=float(lag), rms_at_lag_mps=rms(lag), rms_as_tagged_mps=rms(0.0), points=int(len(idx)))
+
+
+def velocity_lag_warning(rec: GnssRecords, *, min_lag_s: float = 0.05, min_ratio: float = 1.5) -> str | None:
+    """A one-line warning when the records' velocities (after ``[gnss] velocity_lag_s``) visibly lag
+    their positions: a measured lag (:func:`estimate_velocity_lag`) of at least ``min_lag_s`` that
+    shrinks the rms velocity-position difference ``min_ratio`` times or more; else None."""
+    chk = rec.info.get("velocity_lag_check")
+    if not chk or abs(chk["lag_s"]) < min_lag_s or not chk["rms_as_tagged_mps"] >= min_ratio * chk["rms_at_lag_mps"]:
+        return None
+    total = rec.info.get("velocity_lag_s", 0.0) + chk["lag_s"]
+    return (f"{rec.path}: the velocity column lags its own positions by {1e3 * chk['lag_s']:.0f} ms (rms "
+            f"horizontal velocity - position differences {chk['rms_as_tagged_mps']:.3f} m/s as read, "
+            f"{chk['rms_at_lag_mps']:.3f} m/s re-timed, {chk['points']} fixes); set [gnss] velocity_lag_s = "
+            f"{total:.3f}")
 
 
 def read_gnss(path, fmt: GnssFileFormat | None = None) -> GnssRecords:

@@ -280,7 +280,8 @@ struct ClosedLoop {
   static constexpr double kLeverRateTau = 0.1;
 
   /// The angular rate [rad/s] of the lever-arm states' velocity columns
-  /// (meas/gnss_loose.hpp, meas/pseudorange.hpp): the corrected rate low-passed
+  /// (meas/gnss_loose.hpp, meas/pseudorange.hpp; the odometer / vehicle-constraint
+  /// lever arm's columns, meas/vehicle.hpp, alike): the corrected rate low-passed
   /// over kLeverRateTau (first order, alpha = dt / tau per increment) up to the
   /// raw increment BEFORE the one being integrated.  The residual must take
   /// the rate of the last increment (the antenna velocity C_nb (omega x l) at
@@ -295,7 +296,7 @@ struct ClosedLoop {
   /// holds no noise of the current increment (no correlation with the
   /// residual) and the older noise falls to ARW^2 / (2 tau) in variance; its
   /// lag, omega-dot tau, multiplies only the state error dl_b.
-  /// Layouts with the lever-arm states (zero otherwise).
+  /// Layouts with the GNSS or odometer lever-arm states (zero otherwise).
   const Vec3& omega_ib_b_lever() const { return omega_lever_b_; }
 
   /// The INS acceleration over the Earth in n [m/s^2] at the current state:
@@ -327,7 +328,7 @@ struct ClosedLoop {
     imu.dtheta_b = raw.dtheta_b * f;
     imu.dv_b = raw.dv_b * f;
     corr.apply(imu);
-    if constexpr (kHasLeverArm<L>) lever_rate_step(imu, a0 == 0.0);
+    if constexpr (kHasLeverArm<L> || kHasOdoLever<L>) lever_rate_step(imu, a0 == 0.0);
     ins.update(imu);
     if constexpr (kHasClock<L>) clock_bias += clock_drift * imu.dt;
     last_imu_ = imu;

@@ -205,6 +205,7 @@ class LooseEngine {
       if constexpr (kHasOdoLever<L>) {  // the lever-arm estimate of the constrained point (layout.hpp)
         VehicleConstraintConfig v = cfg_.vehicle;
         v.lever_arm_b = core_.odo_lever_b;
+        vehicle_.set_lever_arm_rate(core_.omega_ib_b_lever());  // errors-in-variables (meas/vehicle.hpp)
         vehicle_.set(core_.state(), core_.omega_ib_b(), v, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);
       } else {
         vehicle_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, nhc, odo ? e.speed_mps : NAN, core_.odo_scale);

@@ -66,6 +66,12 @@
 // (omega_nb_b != 0): the lateral row sees the forward component in yaw turns,
 // the odometer row the lateral one; the vertical component needs roll/pitch
 // rates (Groves 2013, eq. (16.22) differentiated in l; docs/algorithms.md section 21).
+// The omega_ib_b in this column is a low-passed rate that holds no noise of the
+// increment whose rate the residual takes (set_lever_arm_rate;
+// ClosedLoop::omega_ib_b_lever): the one noisy rate in both the residual
+// (omega x l_o^) and the column is an errors-in-variables bias of dl_o towards
+// l_o^, i.e. of the estimate towards zero, as for the GNSS lever arm
+// (meas/gnss_loose.hpp).
 // ZUPT (standstill): v_n = 0:  d = dv.
 // ZARU (standstill): omega_ib_b = C_bn omega_ie_n, residual
 //   omega~_ib_b - C~_bn omega_ie_n,  d = dw_b - C_bn [psi x] omega_ie_n
@@ -132,6 +138,8 @@ class VehicleVelocityMeasurement {
     omega_ib_b_ = omega_ib_b;
     const wgs84::Radii r = wgs84::radii(ins.lat);
     omega_in_n_ = wgs84::omega_ie_n(ins.lat) + wgs84::omega_en_n(ins.lat, ins.h, ins.v_n, r);
+    if (!lever_rate_set_) omega_lever_b_ = omega_ib_b;
+    lever_rate_set_ = false;
     use_odo_ = odo_speed_mps == odo_speed_mps;  // not NaN
     use_nhc_ = use_nhc;
     odo_ = use_odo_ ? odo_speed_mps : 0.0;
@@ -159,8 +167,8 @@ class VehicleVelocityMeasurement {
       if constexpr (kHasOdoScale<L>) {
         if (axis == 0) lin_.H(row, OdoScaleState<L>::offset) = -k * v_v[0];
       }
-      if constexpr (kHasOdoLever<L>) {
-        const Vec3 omega_nb_b = omega_ib_b_ - C_nb_.transpose() * omega_in_n_;
+      if constexpr (kHasOdoLever<L>) {  // the rate of set_lever_arm_rate
+        const Vec3 omega_nb_b = omega_lever_b_ - C_nb_.transpose() * omega_in_n_;
         const Mat3 J_l = cfg_.C_bv.transpose() * skew(omega_nb_b);
         lin_.H.template block<1, 3>(row, OdoLeverState<L>::offset) = k * J_l.row(axis);
       }
@@ -177,6 +185,15 @@ class VehicleVelocityMeasurement {
   }
 
   const LinearMeasurement<L>& linear() const { return lin_; }
+
+  /// The angular rate omega_ib_b [rad/s] of the lever-arm state's columns
+  /// (layouts with kOdoLever) for the next set(): a rate whose noise is
+  /// independent of the one given to set() (ClosedLoop::omega_ib_b_lever;
+  /// header comment).  Without this call: the rate given to set().
+  void set_lever_arm_rate(const Vec3& omega_b) {
+    omega_lever_b_ = omega_b;
+    lever_rate_set_ = true;
+  }
 
   /// R += the covariance of the rows' attitude x velocity error product under
   /// the prior covariance P (second-order filter), scaled by scale_nhc >= 1 in
@@ -216,10 +233,15 @@ class VehicleVelocityMeasurement {
     const Mat3 C_true = dcm_from_euler(dx.template segment<3>(L::kAtt)) * C_nb_;
     const Vec3 v_true = v_n_ - dx.template segment<3>(L::kVel);
     const Vec3 w_true = omega_ib_b_ - dx.template segment<3>(L::kGyroBias);
-    VehicleConstraintConfig cfg_true = cfg_;  // the true lever arm l_o^ - dl_o (layouts with kOdoLever)
-    if constexpr (kHasOdoLever<L>) cfg_true.lever_arm_b -= dx.template segment<3>(OdoLeverState<L>::offset);
-    const Vec3 d = vehicle_detail::point_velocity_v(C_nb_, v_n_, omega_ib_b_, omega_in_n_, cfg_) -
-                   vehicle_detail::point_velocity_v(C_true, v_true, w_true, omega_in_n_, cfg_true);
+    // the true lever arm l_o^ - dl_o (layouts with kOdoLever): the l_o^ part with the rate of set(),
+    // the dl_o part with the rate of set_lever_arm_rate (as in H)
+    Vec3 d = vehicle_detail::point_velocity_v(C_nb_, v_n_, omega_ib_b_, omega_in_n_, cfg_) -
+             vehicle_detail::point_velocity_v(C_true, v_true, w_true, omega_in_n_, cfg_);
+    if constexpr (kHasOdoLever<L>) {
+      const Vec3 dl = dx.template segment<3>(OdoLeverState<L>::offset);
+      const Vec3 omega_nb_lever_b = omega_lever_b_ - dx.template segment<3>(L::kGyroBias) - C_true.transpose() * omega_in_n_;
+      d += cfg_.C_bv.transpose() * omega_nb_lever_b.cross(dl);
+    }
     RowVec out(lin_.rows());
     for (int i = 0; i < lin_.rows(); ++i) out[i] = d[rows_axis_[i]];
     if (use_odo_) {  // row 0: (1 + s^) (v~_fwd - (1 + ds) v_fwd(dx)), header comment
@@ -236,6 +258,8 @@ class VehicleVelocityMeasurement {
   VehicleConstraintConfig cfg_;
   Mat3 C_nb_ = Mat3::Identity();
   Vec3 v_n_ = Vec3::Zero(), omega_ib_b_ = Vec3::Zero(), omega_in_n_ = Vec3::Zero();
+  Vec3 omega_lever_b_ = Vec3::Zero();  // rate of the lever-arm columns (set_lever_arm_rate)
+  bool lever_rate_set_ = false;
   bool use_odo_ = false, use_nhc_ = false;
   double odo_ = 0.0;
   double odo_gain_ = 1.0;        // 1 + s^ (fed-back odometer scale factor)
