@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core, earth
-from .._median import median
+from .._median import median, unique
 from ..config import ConfigError, RunConfig, config_from_dict
 from ..data.dataset import Dataset, GnssFixes, ImuData, Truth
 from ..gnss.gpstime import SECONDS_PER_WEEK
@@ -647,10 +647,10 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     n = inp_run.n_sats()
     info = dict(obs=str(obs.path), nav=str(getattr(nav, "path", "")), imu=samples.path, week=week,
                 imu_samples=len(samples), imu_rate_hz=samples.rate_hz, imu_time=samples.info,
-                gps_prns_observed=sorted(int(p) for p in np.unique(np.asarray(obs.prn)[
+                gps_prns_observed=sorted(int(p) for p in unique(np.asarray(obs.prn)[
                     np.asarray(getattr(obs, "system", np.full(len(obs.prn), "G"))) == "G"])),
-                gps_prns_with_ephemeris=sorted(int(p) for p in np.unique(nav.eph.prn)),
-                prns_used=sorted(int(p) for p in np.unique(inp_run.prn[inp_run.system == "G"])),
+                gps_prns_with_ephemeris=sorted(int(p) for p in unique(nav.eph.prn)),
+                prns_used=sorted(int(p) for p in unique(inp_run.prn[inp_run.system == "G"])),
                 sats_used=_sat_names(inp_run.system, inp_run.prn),
                 sats_per_epoch=(int(n.min()), int(median(n)), int(n.max())) if n.size else (0, 0, 0),
                 start_rule=start_rule, start_s_after_first_epoch=t0 - t_first, approx_r_e=r0.tolist(),
