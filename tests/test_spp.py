@@ -407,6 +407,27 @@ def test_second_pass_reusing_states_equals_a_fresh_pass(shared_data, case):
     np.testing.assert_allclose(sa.v_e[sa.solved], sb.v_e[sb.solved], rtol=0, atol=1e-6)
 
 
+@pytest.mark.parametrize("systems", ["G", "GEC"])
+def test_tight_rows_from_carried_states_equal_fresh_ones(shared_data, systems):
+    """The tight filter's rows from a second start position (insnav.io.rinex_dataset.load_rinex) carry
+    the first call's satellite states: the same rows as a fresh call, satellite columns within 2e-7 m."""
+    from insnav.gnss.tight_inputs import tight_inputs_from_rinex
+
+    obs, nav, t_week0, r0 = _real_case(shared_data, "walk")
+    keep = {}
+    tight_inputs_from_rinex(obs, nav, t_week0, r0, systems=systems, _keep=keep)
+    assert set(keep) == {"rows", "tag", "final"}
+    r1 = r0 + np.array([-20.0, 11.0, 4.0])
+    a = tight_inputs_from_rinex(obs, nav, t_week0, r1, systems=systems, _prior=keep)
+    b = tight_inputs_from_rinex(obs, nav, t_week0, r1, systems=systems)
+    assert np.array_equal(a.prn, b.prn) and np.array_equal(a.system, b.system)
+    assert np.array_equal(a.epoch_start, b.epoch_start)
+    np.testing.assert_allclose(a.epoch_t, b.epoch_t, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(a.sats[:, :2], b.sats[:, :2])
+    np.testing.assert_allclose(a.sats[:, 2:8], b.sats[:, 2:8], rtol=0, atol=2e-7)
+    np.testing.assert_allclose(a.sats[:, 8:], b.sats[:, 8:], rtol=0, atol=1e-7)
+
+
 def _bench():
     import _smartloc  # tests/_smartloc.py (bench/spp_smartloc.py tabulates the same evaluation)
 

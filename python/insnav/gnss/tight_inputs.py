@@ -171,7 +171,8 @@ def tight_inputs_from_raw(raw, *, elevation_mask_deg: float = 0.0, max_sats: int
 def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_mask_deg: float = 10.0,
                             max_sats: int = MAX_SATS, iono: bool = True, tropo: bool = True,
                             sigma_pr_zenith_m: float = 3.0, sigma_prr_zenith_mps: float = 0.3,
-                            use_cn0: bool = True, t_range=None, systems: str = "G") -> TightInputs:
+                            use_cn0: bool = True, t_range=None, systems: str = "G", _prior=None,
+                            _keep=None) -> TightInputs:
     """RINEX observations + broadcast navigation -> :class:`TightInputs`.
 
     Parameters
@@ -206,6 +207,12 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     satellite by ~4 m along the line of sight), and the epoch is placed at its
     true time on the dataset time axis.  Doppler -> rate: ``-lambda_L1 D1``.
     T_GD is applied (L1 C/A user).
+
+    The satellite states are evaluated once per row, at the time tags; the
+    second clock iteration carries them (:func:`carry_transmit_states`).
+    ``_keep`` (a dict) receives this call's states; given back as ``_prior`` to a
+    call on the same files from another ``approx_r_e``, they are carried to it
+    instead of evaluated again.
     """
     from .._median import group_median
     from .ephemeris import C_LIGHT, select_ephemeris, transmit_states
@@ -219,7 +226,7 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
         return _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, elevation_mask_deg=elevation_mask_deg,
                                    max_sats=max_sats, iono=iono, tropo=tropo, sigma_pr_zenith_m=sigma_pr_zenith_m,
                                    sigma_prr_zenith_mps=sigma_prr_zenith_mps, use_cn0=use_cn0, t_range=t_range,
-                                   systems=systems)
+                                   systems=systems, _prior=_prior, _keep=_keep)
     eph = nav.eph
     r0 = np.asarray(approx_r_e, float)
     t_tag = np.asarray(obs.t_gps_s, float)
@@ -236,12 +243,16 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     n_ep = obs.epoch_t_gps_s.size
     clk = np.zeros(n_ep)
     lat, lon, h = earth.ecef_to_geodetic(r0)
+    prior = _prior if _prior is not None and np.array_equal(_prior["rows"], rows) else None
     for it in range(2):
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
+        evaluate = (lambda far: transmit_states(eph, idx[rows][far], t_rx[far], r0, tgd=True))  # noqa: E731
         if it == 0:
-            ts = transmit_states(eph, idx[rows], t_rx, r0, tgd=True)
+            ts = (transmit_states(eph, idx[rows], t_rx, r0, tgd=True) if prior is None
+                  else _carried(prior["tag"], t_rx, r0, evaluate))
+            ts_tag = ts
         else:  # the same satellites a receiver clock offset earlier: carried, not evaluated again
-            ts = _carried(ts, t_rx, r0, lambda far: transmit_states(eph, idx[rows][far], t_rx[far], r0, tgd=True))
+            ts = _carried(ts if prior is None else prior["final"], t_rx, r0, evaluate)
         raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
         med, present = group_median(raw, ep, n_ep)
         clk[present] = med[present]
@@ -267,6 +278,8 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
                                           rx_clock_tag_m=clk, iono_m=iono_m, tropo_m=tropo_m))
     # epochs of one tag share one true time only if the clock estimate is per epoch (it is)
     inp = inp.select(np.degrees(el)[np.argsort(t_ep, kind="stable")] >= elevation_mask_deg)
+    if _keep is not None:
+        _keep.update(rows=rows, tag=ts_tag, final=ts)
     return limit_sats(inp, max_sats)
 
 
@@ -366,7 +379,8 @@ def _carried(ts, t_rx, r_rx_e, evaluate, valid=None):
 
 
 def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, max_sats, iono, tropo,
-                        sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0, t_range, systems) -> TightInputs:
+                        sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0, t_range, systems, _prior=None,
+                        _keep=None) -> TightInputs:
     """Multi-system :func:`tight_inputs_from_rinex` (same steps, per-row system and signal)."""
     from .._median import group_median
     from .broadcast import select_multi, transmit_states_multi
@@ -391,13 +405,18 @@ def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, m
     n_ep = obs.epoch_t_gps_s.size
     clk = np.zeros(n_ep)
     lat, lon, h = earth.ecef_to_geodetic(r0)
+    prior = _prior if _prior is not None and np.array_equal(_prior["rows"], rows) else None
     for it in range(2):
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
+        evaluate = (lambda far: transmit_states_multi(  # noqa: E731
+            nav, t_rx[far], r0, system=sys_r[far], prn=prn_r[far], codes=code_r[far]))
         if it == 0:
-            ts = transmit_states_multi(nav, t_rx, r0, system=sys_r, prn=prn_r, codes=code_r)
+            ts = (transmit_states_multi(nav, t_rx, r0, system=sys_r, prn=prn_r, codes=code_r) if prior is None
+                  else _carried(prior["tag"], t_rx, r0, evaluate, valid=prior["tag"].valid))
+            ts_tag = ts
         else:  # the same satellites a receiver clock offset earlier: carried, not evaluated again
-            ts = _carried(ts, t_rx, r0, lambda far: transmit_states_multi(
-                nav, t_rx[far], r0, system=sys_r[far], prn=prn_r[far], codes=code_r[far]), valid=ts.valid)
+            src = ts if prior is None else prior["final"]
+            ts = _carried(src, t_rx, r0, evaluate, valid=src.valid)
         raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
         # receiver clock of the epoch (only sets the true reception time; inter-system
         # offsets of tens of ns do not matter for it)
@@ -428,4 +447,6 @@ def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, m
                                 system=sys_r)
     keep = (np.degrees(el) >= elevation_mask_deg) & good
     inp = inp.select(keep[np.argsort(t_ep, kind="stable")])
+    if _keep is not None:
+        _keep.update(rows=rows, tag=ts_tag, final=ts)
     return limit_sats(inp, max_sats)

@@ -530,12 +530,19 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     if wgt is not None and wgt.is_default:
         wgt = None
 
+    states: dict = {}  # the first call's satellite states, carried to the second call's position
+
     def inputs_at(r):
         if wgt is None:  # today's rows, unchanged
-            return tight_inputs_from_rinex(obs, nav, t_week0, r, **kw)
+            keep: dict = {}
+            inp = tight_inputs_from_rinex(obs, nav, t_week0, r, _prior=states.get("tight"), _keep=keep, **kw)
+            states["tight"] = keep
+            return inp
+        from ..gnss.spp import _spp_inputs_from_rinex
         from ..gnss.tight_inputs import MAX_SATS, limit_sats
 
-        inp_all, _ = spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt, **kw)
+        inp_all, _, states["spp"] = _spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt,
+                                                           prior=states.get("spp"), **kw)
         return limit_sats(inp_all, MAX_SATS)
 
     # the fixes of the start (course, initial position) and of the input checks: with RAIM FDE on
