@@ -131,3 +131,39 @@ def test_kfgins_run_loads_only_what_it_runs(shared_data, tmp_path, out_name, int
     others = ("insnav.analysis", "insnav.sim", "insnav.gnss", "insnav.filters.tight", "insnav.filters.rtk",
               "insnav.cli.report", "insnav.cli.tune")
     assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in others)) == []
+
+
+def test_tight_rinex_run_loads_no_numpy_ma(shared_data, tmp_path, interpreter_modules):
+    """The tight GPS + Galileo + BeiDou walk run (bench/gnss_speed.py) without numpy.ma: its medians,
+    percentiles and distinct values go through insnav._median."""
+    from pathlib import Path
+
+    w = shared_data / "rtklibexplorer_walk_0827"
+    if not (w / "rinex_derived" / "gnss_1730.obs").is_file():
+        pytest.skip(f"{w} not found (the walk data set)")
+    text = (Path(__file__).parent / "data" / "walk_0827.toml").read_text()
+    (tmp_path / "gec.toml").write_text(text.replace('systems = "G"\n', 'systems = "GEC"\n'))
+    out = _loaded(tmp_path, ["run", "--format", "rinex", "--obs", w / "rinex_derived/gnss_1730.obs", "--nav",
+                             w / "rinex_derived/gnss_1730.nav", "--imu", w / "raw/imu_1730.csv", "--coupling", "tight",
+                             "--filter", "ekf", "--config", tmp_path / "gec.toml", "--quiet", "--out",
+                             tmp_path / "walk.csv"])
+    assert out["rc"] == 0
+    mods = set(out["modules"]) - interpreter_modules
+    assert "insnav.filters.tight" in mods  # the probe did run the command
+    assert sorted(m for m in mods if m == "numpy.ma" or m.startswith("numpy.ma.")) == []
+
+
+def test_percentile_equals_numpy():
+    """insnav._median.percentile is np.percentile (method "linear") to the last bit."""
+    import numpy as np
+
+    from insnav._median import percentile
+
+    rng = np.random.default_rng(3)
+    for trial in range(3000):
+        x = rng.normal(size=int(rng.integers(1, 40))) * 10.0 ** rng.uniform(-3, 3)
+        if trial % 4 == 0:
+            x = np.round(x)  # ties
+        for q in (0.0, 5.0, 50.0, 95.0, 100.0, float(rng.uniform(0, 100))):
+            assert percentile(x, q) == float(np.percentile(x, q)), (x, q)
+    assert np.isnan(percentile([1.0, np.nan, 2.0], 95)) and np.isnan(percentile([], 50))

@@ -325,6 +325,109 @@ def test_sat_states_row_by_row(shared_data, case):
         assert v.tobytes() == full[k][keep].tobytes(), k
     assert set(system[kept]) == set(systems)
 
+def _real_case(shared_data, case):
+    from insnav.gnss.gpstime import SECONDS_PER_WEEK
+    from insnav.gnss.spp import read_nav_multi, read_obs_multi
+    from insnav.io.rinex_dataset import _approx_position
+
+    if case == "smartloc":
+        d, systems = shared_data / SMARTLOC, "GR"
+        obs_p, nav_p = d / "Berlin_Potsdamer_Platz.obs", [d / "brdc1580.16n", d / "brdc1580.16g"]
+    else:
+        d, systems = shared_data / "rtklibexplorer_walk_0827" / "rinex_derived", "GEC"
+        obs_p, nav_p = d / "gnss_1730.obs", [d / "gnss_1730.nav"]
+    if not obs_p.is_file():
+        pytest.skip(f"{obs_p} not found")
+    obs, nav = read_obs_multi(obs_p, systems), read_nav_multi(nav_p, systems)
+    t_week0 = SECONDS_PER_WEEK * int(obs.epoch_week[0])
+    return obs, nav, t_week0, _approx_position(obs, nav, t_week0)
+
+
+@pytest.mark.parametrize("case", ["smartloc", "walk"])
+def test_carried_states_equal_evaluated_ones(shared_data, case):
+    """States at transmission carried to a new reception time and receiver position (second-order
+    expansion, insnav.gnss.tight_inputs.carry_transmit_states) equal the ephemeris evaluated there.
+
+    Shifts as in use: a receiver clock estimate (up to 1 ms) and a start position moved by metres to
+    a kilometre.  Bound 2e-7 m: the evaluation itself is reproducible only to ~5e-8 m between times
+    1e-7 s apart (its iterations stop at tolerances); the clocks to 1e-17 s (3 nm).  A shift beyond
+    CARRY_MAX_S is evaluated again, to the last bit."""
+    from insnav.gnss.spp import _obs_system, _propagate_states, _sat_states
+    from insnav.gnss.tight_inputs import CARRY_MAX_S
+
+    obs, nav, _, r0 = _real_case(shared_data, case)
+    system, prn = _obs_system(obs), np.asarray(obs.prn)
+    rows = np.flatnonzero(np.isfinite(obs.C1))
+    t = np.asarray(obs.t_gps_s, float)
+    s0 = _sat_states(nav, system[rows], prn[rows], t[rows], r0, obs, rows)
+    keep = s0["valid"]
+    rows, s0 = rows[keep], {k: v[keep] for k, v in s0.items()}
+    u = np.array([0.6, -0.3, 0.74])
+    for dt_s, dr_m in [(1e-3, 0.0), (-4.6e-4, 30.0), (1e-7, 5.0), (5e-3, 1000.0)]:
+        t1, r1 = t[rows] - dt_s, r0 + dr_m * u
+        ev = _sat_states(nav, system[rows], prn[rows], t1, r1, obs, rows)
+        ca = _propagate_states(s0, t1, r1, nav, system[rows], prn[rows], obs, rows)
+        assert np.max(np.abs(ca["r_e"] - ev["r_e"])) < 2e-7
+        assert np.max(np.abs(ca["range_m"] - ev["range_m"])) < 1e-7
+        assert np.max(np.abs(ca["v_e"] - ev["v_e"])) < (2e-7 if abs(dt_s) <= 1e-3 else 1e-6)  # m/s
+        assert np.max(np.abs(ca["clock_bias_s"] - ev["clock_bias_s"])) < 1e-17
+        assert np.max(np.abs(ca["tau_s"] - ev["tau_s"])) < 1e-15
+        assert np.array_equal(ca["t_tx_gps_s"], t1 - ca["tau_s"])
+    far = t[rows] - 2.0 * CARRY_MAX_S
+    ev = _sat_states(nav, system[rows], prn[rows], far, r0, obs, rows)
+    ca = _propagate_states(s0, far, r0, nav, system[rows], prn[rows], obs, rows)
+    for k, v in ev.items():
+        assert v.tobytes() == ca[k].tobytes(), k
+
+
+@pytest.mark.parametrize("case", ["smartloc", "walk"])
+def test_second_pass_reusing_states_equals_a_fresh_pass(shared_data, case):
+    """The second SPP pass (from the first pass's median position) carries the first pass's satellite
+    states instead of evaluating the ephemerides again: the same rows, satellite columns within 2e-7 m,
+    and the same solutions to 1e-6 m with the same RAIM statuses and exclusions."""
+    from insnav.gnss.spp import _spp_inputs_from_rinex
+
+    obs, nav, t_week0, r0 = _real_case(shared_data, case)
+    systems = "GR" if case == "smartloc" else "GEC"
+    w = Weighting(systems=list(systems))
+    _, _, prior = _spp_inputs_from_rinex(obs, nav, t_week0, r0, weighting=w)
+    r1 = r0 + np.array([12.0, -7.0, 9.0])
+    a, cn0_a, _ = _spp_inputs_from_rinex(obs, nav, t_week0, r1, weighting=w, prior=prior)
+    b, cn0_b, _ = _spp_inputs_from_rinex(obs, nav, t_week0, r1, weighting=w)
+    assert np.array_equal(a.prn, b.prn) and np.array_equal(a.system, b.system)
+    assert np.array_equal(a.epoch_start, b.epoch_start) and np.array_equal(cn0_a, cn0_b)
+    np.testing.assert_allclose(a.epoch_t, b.epoch_t, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(a.sats[:, :2], b.sats[:, :2])
+    np.testing.assert_allclose(a.sats[:, 2:5], b.sats[:, 2:5], rtol=0, atol=2e-7)
+    np.testing.assert_allclose(a.sats[:, 5:8], b.sats[:, 5:8], rtol=0, atol=2e-7)
+    np.testing.assert_allclose(a.sats[:, 8:], b.sats[:, 8:], rtol=0, atol=1e-7)
+    sa, sb = solve_spp(a, r1), solve_spp(b, r1)
+    assert np.array_equal(sa.raim_status, sb.raim_status) and np.array_equal(sa.row_excluded, sb.row_excluded)
+    np.testing.assert_allclose(sa.r_e[sa.solved], sb.r_e[sb.solved], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(sa.v_e[sa.solved], sb.v_e[sb.solved], rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("systems", ["G", "GEC"])
+def test_tight_rows_from_carried_states_equal_fresh_ones(shared_data, systems):
+    """The tight filter's rows from a second start position (insnav.io.rinex_dataset.load_rinex) carry
+    the first call's satellite states: the same rows as a fresh call, satellite columns within 2e-7 m."""
+    from insnav.gnss.tight_inputs import tight_inputs_from_rinex
+
+    obs, nav, t_week0, r0 = _real_case(shared_data, "walk")
+    keep = {}
+    tight_inputs_from_rinex(obs, nav, t_week0, r0, systems=systems, _keep=keep)
+    assert set(keep) == {"rows", "tag", "final"}
+    r1 = r0 + np.array([-20.0, 11.0, 4.0])
+    a = tight_inputs_from_rinex(obs, nav, t_week0, r1, systems=systems, _prior=keep)
+    b = tight_inputs_from_rinex(obs, nav, t_week0, r1, systems=systems)
+    assert np.array_equal(a.prn, b.prn) and np.array_equal(a.system, b.system)
+    assert np.array_equal(a.epoch_start, b.epoch_start)
+    np.testing.assert_allclose(a.epoch_t, b.epoch_t, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(a.sats[:, :2], b.sats[:, :2])
+    np.testing.assert_allclose(a.sats[:, 2:8], b.sats[:, 2:8], rtol=0, atol=2e-7)
+    np.testing.assert_allclose(a.sats[:, 8:], b.sats[:, 8:], rtol=0, atol=1e-7)
+
+
 def _bench():
     import _smartloc  # tests/_smartloc.py (bench/spp_smartloc.py tabulates the same evaluation)
 

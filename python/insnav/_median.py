@@ -7,9 +7,11 @@ signatures it parses) the first time; the command line's run path needs a
 handful of medians and unique values and nothing else from it."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["median", "group_median", "unique"]
+__all__ = ["median", "percentile", "group_median", "unique"]
 
 
 def median(x) -> float:
@@ -25,6 +27,29 @@ def median(x) -> float:
     if np.isnan(p[-1]):  # NaNs sort last
         return float("nan")
     return float(p[k]) if n % 2 else float((p[k - 1] + p[k]) / 2.0)
+
+
+def percentile(x, q: float) -> float:
+    """The ``q``-th percentile of the values of ``x`` as ``np.percentile(x, q)`` computes it
+    (method "linear": the virtual index ``(n - 1) q / 100`` between its two neighbours, numpy's
+    interpolation arithmetic; NaN when a value is NaN or there is none)."""
+    a = np.asarray(x, dtype=float).reshape(-1)
+    n = a.size
+    if n == 0:
+        return float("nan")
+    vi = (n - 1) * (q / 100.0)
+    if vi >= n - 1:
+        lo = hi = n - 1
+    else:
+        lo = max(int(math.floor(vi)), 0)
+        hi = lo + 1
+    p = np.partition(a, sorted({lo, hi, n - 1}))
+    if np.isnan(p[-1]):  # NaNs sort last
+        return float("nan")
+    gamma = vi - math.floor(vi) if vi < n - 1 else 0.0
+    lo_v, hi_v = float(p[lo]), float(p[hi])
+    diff = hi_v - lo_v
+    return hi_v - diff * (1.0 - gamma) if gamma >= 0.5 else lo_v + diff * gamma
 
 
 def group_median(x, group, n_groups: int):

@@ -39,6 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._median import median
+
 from .nav import NAV_COLUMNS, NavState, NavTrajectory
 
 FORMAT_VERSION = 1
@@ -112,7 +114,7 @@ class ImuData:
     @property
     def dt(self) -> float:
         """Median sample interval [s]."""
-        return float(np.median(np.diff(self.t))) if len(self.t) > 1 else float("nan")
+        return median(np.diff(self.t)) if len(self.t) > 1 else float("nan")  # np.median without numpy.ma
 
     def to_array(self):
         return np.column_stack([self.t, self.dtheta_b, self.dv_b])

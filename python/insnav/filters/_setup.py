@@ -229,9 +229,10 @@ def initial_clock(inputs, dataset, cfg: RunConfig, init: NavState) -> tuple[floa
         d = s[:, 2:5] - r_ant
         rng = np.linalg.norm(d, axis=1)
         u = d / rng[:, None]
-        bias = np.nanmedian(s[:, 0] - (rng - s[:, 8]))
+        raw = s[:, 0] - (rng - s[:, 8])
+        bias = median(raw[~np.isnan(raw)])  # np.nanmedian without numpy.ma
         rate = s[:, 1] - (np.einsum("ij,ij->i", u, s[:, 5:8] - v_ant) - s[:, 9])
-        drift = np.nanmedian(rate) if np.any(np.isfinite(rate)) else 0.0
+        drift = median(rate[~np.isnan(rate)]) if np.any(np.isfinite(rate)) else 0.0
         return float(bias), float(drift)
     return 0.0, 0.0
 

@@ -36,7 +36,7 @@ import numpy as np
 from .. import earth
 from .._median import median
 from ..config import ConfigError, read_toml
-from ..gnss.spp import (SppOptions, SppSolution, read_nav_multi, read_obs_multi, solve_spp, spp_inputs_from_rinex,
+from ..gnss.spp import (SppOptions, SppSolution, _spp_inputs_from_rinex, read_nav_multi, read_obs_multi, solve_spp,
                         summary_counts)
 from ..gnss.systems import SPP_SYSTEMS, SYSTEMS
 from ..gnss.weighting import Weighting
@@ -228,12 +228,13 @@ def _run_spp_rinex(ds: SppDataset, sopt: SppOptions, wgt: Weighting) -> Solution
     kw = dict(weighting=wgt, elevation_mask_deg=ropt.elevation_mask_deg, iono=ropt.iono, tropo=ropt.tropo,
               sigma_pr_zenith_m=ropt.sigma_pr_zenith_m, sigma_prr_zenith_mps=ropt.sigma_prr_zenith_mps,
               use_cn0=ropt.use_cn0)
-    inp, _ = spp_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+    inp, _, states = _spp_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
     sp = solve_spp(inp, r0, options=sopt)
     good = sp.solved
     if good.any():  # light time, elevation and atmosphere again from the data's own position
         r0 = np.array([median(sp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
-        inp, _ = spp_inputs_from_rinex(obs, nav, t_week0, r0, **kw)
+        # (the first pass's satellite states carried to the new light times and clock estimates)
+        inp, _, _ = _spp_inputs_from_rinex(obs, nav, t_week0, r0, prior=states, **kw)
         sp = solve_spp(inp, r0, options=sopt)
     sp.info.update(inputs=inp, t_week0_gps_s=float(t_week0), approx_r_e=r0.tolist())
     sol = spp_solution(sp)

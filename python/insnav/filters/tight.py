@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
+from .._median import median
 from ..config import ConfigError, ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.systems import SYSTEMS, system_index
@@ -294,6 +295,6 @@ def initial_isb(inputs: TightInputs, dataset, cfg: RunConfig, init, sys_idx=None
         for j in range(1, 4):
             m = (k == j) & np.isfinite(off)
             if not done[j - 1] and m.any():
-                out[j - 1] = float(np.median(off[m]) - np.median(off[g]))
+                out[j - 1] = float(median(off[m]) - median(off[g]))  # np.median without numpy.ma
                 done[j - 1] = True
     return out

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._median import median  # np.median without numpy.ma
+
 __all__ = ["C_LIGHT_MPS", "CLOCK_ALLAN", "CLOCK_CLASSES", "TCXO_CLOCK_BIAS_PSD", "TCXO_CLOCK_DRIFT_PSD",
            "DRIFT_PSD_TAU_S", "clock_drift_psd_from_drift", "clock_model", "clock_psd_of_class"]
 
@@ -57,8 +59,8 @@ def _robust_mean_square(t: np.ndarray, d: np.ndarray, lag_s: float, tol_s: float
     diff = d[j[ok]] - d[i[ok]]
     if diff.size == 0:
         return np.nan, 0
-    med = float(np.median(diff))
-    mad = float(np.median(np.abs(diff - med)))
+    med = median(diff)
+    mad = median(np.abs(diff - med))
     keep = np.abs(diff - med) <= _OUTLIER_SIGMAS * 1.4826 * mad
     return float(np.mean(diff[keep] ** 2)), int(diff.size)
 
@@ -101,7 +103,7 @@ def clock_drift_psd_from_drift(t_s, drift_mps, tau_s: float = DRIFT_PSD_TAU_S, m
     dt = dt[dt > 0]
     if dt.size == 0:
         return np.nan
-    tau0 = float(np.median(dt))
+    tau0 = median(dt)
     if not tau_s > 2.0 * tau0:
         return np.nan
     tol = 0.25 * tau0

@@ -583,7 +583,26 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
     Satellite states come from :func:`_sat_states` (GPS LNAV through
     :mod:`insnav.gnss.ephemeris`; further systems when the navigation data
     carry them).
+
+    The satellite states are evaluated once, at the receiver's time tags; those of the
+    second clock iteration (and, with ``prior``, every state of a second pass from another
+    start position) are these states carried to the new reception time and receiver
+    position by :func:`_propagate_states` (to about 1e-8 m of a new evaluation).
     """
+    inp, cn0, _ = _spp_inputs_from_rinex(obs, nav, t0_gps_s, approx_r_e, weighting=weighting,
+                                         elevation_mask_deg=elevation_mask_deg, iono=iono, tropo=tropo,
+                                         sigma_pr_zenith_m=sigma_pr_zenith_m,
+                                         sigma_prr_zenith_mps=sigma_prr_zenith_mps, use_cn0=use_cn0)
+    return inp, cn0
+
+
+def _spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=None, elevation_mask_deg: float = 10.0,
+                           iono: bool = True, tropo: bool = True, sigma_pr_zenith_m: float = 3.0,
+                           sigma_prr_zenith_mps: float = 0.3, use_cn0: bool = True, prior=None):
+    """:func:`spp_inputs_from_rinex` returning ``(inputs, cn0, states)``; ``states`` can serve as the
+    ``prior`` of a later call on the same observations and navigation data from another start
+    position, whose satellite states are then carried over by :func:`_propagate_states`
+    instead of evaluated again."""
     from .._median import group_median
     from .corrections import klobuchar_delay, saastamoinen_delay
     from .ephemeris import C_LIGHT
@@ -597,11 +616,21 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
     system = _obs_system(obs)
     ok = np.isfinite(obs.C1) & np.isin(system, np.asarray(wgt.systems, dtype="<U1"))
     rows = np.flatnonzero(ok)
-    # the states at the receiver's time tags (clock estimate 0) decide which rows have an ephemeris and are
-    # the first of the two clock iterations (row by row: the same numbers as a call on the kept rows alone)
-    states = _sat_states(nav, system[rows], np.asarray(obs.prn)[rows], t_tag[rows], r0, obs, rows)
-    keep = states["valid"]
-    rows = rows[keep]
+    prn = np.asarray(obs.prn)
+    rows_ok = rows
+    reuse = prior is not None and np.array_equal(prior["rows_ok"], rows)
+    if reuse:
+        # another pass over the same rows: the earlier pass's states carried to the time tags and r0
+        keep = prior["keep"]
+        rows = rows[keep]
+        ts0 = _propagate_states(prior["states_tag"], t_tag[rows], r0, nav, system[rows], prn[rows], obs, rows)
+    else:
+        # the states at the receiver's time tags (clock estimate 0) decide which rows have an ephemeris and
+        # are the first of the two clock iterations (row by row: the same numbers as a call on the kept rows)
+        states = _sat_states(nav, system[rows], prn[rows], t_tag[rows], r0, obs, rows)
+        keep = states["valid"]
+        ts0 = {k: v[keep] for k, v in states.items()}
+        rows = rows[keep]
     ep = obs.epoch[rows]
     n_ep = obs.epoch_t_gps_s.size
     clk = np.zeros(n_ep)
@@ -610,9 +639,9 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
     for it in range(2):
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
         if it == 0:
-            ts = {k: v[keep] for k, v in states.items()}
-        else:
-            ts = _sat_states(nav, sys_r, np.asarray(obs.prn)[rows], t_rx, r0, obs, rows)
+            ts = ts0
+        else:  # the second clock iteration: from the nearest states evaluated or carried before
+            ts = _propagate_states(prior["states"] if reuse else ts0, t_rx, r0, nav, sys_r, prn[rows], obs, rows)
         raw = obs.C1[rows] - (ts["range_m"] - C_LIGHT * ts["clock_bias_s"])
         med, present = group_median(raw, ep, n_ep)
         clk[present] = med[present]
@@ -637,7 +666,27 @@ def spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=No
                                           rx_clock_tag_m=clk, iono_m=iono_m, tropo_m=tropo_m), system=sys_r)
     cn0 = cn0[order]
     m = wgt.mask(np.radians(inp.elevation_deg), cn0, inp.system, elevation_mask_deg=elevation_mask_deg)
-    return inp.select(m), cn0[m]
+    return inp.select(m), cn0[m], dict(rows_ok=rows_ok, keep=keep, states_tag=ts0, states=ts)
+
+
+def _propagate_states(ts: dict, t_rx_gps_s, r_rx_e, nav, system, prn, obs, rows) -> dict:
+    """:func:`_sat_states` rows carried to a new reception time and receiver position
+    (:func:`insnav.gnss.tight_inputs.carry_transmit_states`); rows whose transmit time moves by
+    more than :data:`insnav.gnss.tight_inputs.CARRY_MAX_S` are evaluated again."""
+    from .tight_inputs import carry_transmit_states
+
+    t_rx = np.asarray(t_rx_gps_s, float)
+    r_rx = np.broadcast_to(np.asarray(r_rx_e, float), (t_rx.size, 3))
+    new, far = carry_transmit_states(ts["r_e"], ts["v_e"], ts["clock_bias_s"], ts["clock_drift_s_s"],
+                                     ts["t_tx_gps_s"], ts["tau_s"], t_rx, r_rx)
+    out = {**ts, **new}
+    far = np.flatnonzero(far & ts["valid"])
+    if far.size:  # a clock estimate far off (or a start position far away): evaluated anew
+        new = _sat_states(nav, system[far], prn[far], t_rx[far], r_rx[far], obs, rows[far])
+        for k in out:
+            out[k] = out[k].copy()
+            out[k][far] = new[k]
+    return out
 
 
 def _obs_system(obs) -> np.ndarray:
@@ -660,7 +709,8 @@ def _sat_states(nav, system, prn, t_rx_gps_s, r0, obs, rows) -> dict:
     Returns a dict of (k,) / (k, 3) arrays: ``valid`` (an ephemeris was
     found), ``r_e``, ``v_e``, ``clock_bias_s`` (group delay applied),
     ``clock_drift_s_s``, ``range_m``, ``wavelength_m`` (of the Doppler),
-    ``iono_scale`` (the L1 Klobuchar delay times (f_L1/f)^2 = (lambda/lambda_L1)^2).
+    ``iono_scale`` (the L1 Klobuchar delay times (f_L1/f)^2 = (lambda/lambda_L1)^2),
+    ``tau_s`` (light time), ``t_tx_gps_s`` (transmit time).
     Rows without ephemeris get NaN states.
     """
     from .ephemeris import select_ephemeris, transmit_states
@@ -680,10 +730,12 @@ def _sat_states(nav, system, prn, t_rx_gps_s, r0, obs, rows) -> dict:
         lam = np.where(valid, ts.wavelength_m, np.nan)
         return dict(valid=valid, r_e=ts.r_e, v_e=ts.v_e, clock_bias_s=ts.clock_bias_s,
                     clock_drift_s_s=ts.clock_drift_s_s, range_m=ts.range_m, wavelength_m=lam,
-                    iono_scale=np.where(valid, (lam / L1_WAVELENGTH) ** 2, 1.0))
+                    iono_scale=np.where(valid, (lam / L1_WAVELENGTH) ** 2, 1.0), tau_s=ts.tau_s,
+                    t_tx_gps_s=ts.t_tx_gps_s)
     out = dict(valid=np.zeros(k, bool), r_e=np.full((k, 3), np.nan), v_e=np.full((k, 3), np.nan),
                clock_bias_s=np.full(k, np.nan), clock_drift_s_s=np.full(k, np.nan), range_m=np.full(k, np.nan),
-               wavelength_m=np.full(k, np.nan), iono_scale=np.ones(k))
+               wavelength_m=np.full(k, np.nan), iono_scale=np.ones(k), tau_s=np.full(k, np.nan),
+               t_tx_gps_s=np.full(k, np.nan))
     g = np.flatnonzero(system == "G")
     if g.size:
         idx = select_ephemeris(nav.eph, prn[g], t_rx_gps_s[g])
@@ -694,6 +746,7 @@ def _sat_states(nav, system, prn, t_rx_gps_s, r0, obs, rows) -> dict:
             out["r_e"][gg], out["v_e"][gg] = ts.r_e, ts.v_e
             out["clock_bias_s"][gg], out["clock_drift_s_s"][gg] = ts.clock_bias_s, ts.clock_drift_s_s
             out["range_m"][gg] = ts.range_m
+            out["tau_s"][gg], out["t_tx_gps_s"][gg] = ts.tau_s, ts.t_tx_gps_s
             out["wavelength_m"][gg] = L1_WAVELENGTH
     return out
 

@@ -171,7 +171,8 @@ def tight_inputs_from_raw(raw, *, elevation_mask_deg: float = 0.0, max_sats: int
 def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_mask_deg: float = 10.0,
                             max_sats: int = MAX_SATS, iono: bool = True, tropo: bool = True,
                             sigma_pr_zenith_m: float = 3.0, sigma_prr_zenith_mps: float = 0.3,
-                            use_cn0: bool = True, t_range=None, systems: str = "G") -> TightInputs:
+                            use_cn0: bool = True, t_range=None, systems: str = "G", _prior=None,
+                            _keep=None) -> TightInputs:
     """RINEX observations + broadcast navigation -> :class:`TightInputs`.
 
     Parameters
@@ -206,6 +207,12 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     satellite by ~4 m along the line of sight), and the epoch is placed at its
     true time on the dataset time axis.  Doppler -> rate: ``-lambda_L1 D1``.
     T_GD is applied (L1 C/A user).
+
+    The satellite states are evaluated once per row, at the time tags; the
+    second clock iteration carries them (:func:`carry_transmit_states`).
+    ``_keep`` (a dict) receives this call's states; given back as ``_prior`` to a
+    call on the same files from another ``approx_r_e``, they are carried to it
+    instead of evaluated again.
     """
     from .._median import group_median
     from .ephemeris import C_LIGHT, select_ephemeris, transmit_states
@@ -219,7 +226,7 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
         return _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, elevation_mask_deg=elevation_mask_deg,
                                    max_sats=max_sats, iono=iono, tropo=tropo, sigma_pr_zenith_m=sigma_pr_zenith_m,
                                    sigma_prr_zenith_mps=sigma_prr_zenith_mps, use_cn0=use_cn0, t_range=t_range,
-                                   systems=systems)
+                                   systems=systems, _prior=_prior, _keep=_keep)
     eph = nav.eph
     r0 = np.asarray(approx_r_e, float)
     t_tag = np.asarray(obs.t_gps_s, float)
@@ -236,9 +243,16 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     n_ep = obs.epoch_t_gps_s.size
     clk = np.zeros(n_ep)
     lat, lon, h = earth.ecef_to_geodetic(r0)
-    for _ in range(2):
+    prior = _prior if _prior is not None and np.array_equal(_prior["rows"], rows) else None
+    for it in range(2):
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
-        ts = transmit_states(eph, idx[rows], t_rx, r0, tgd=True)
+        evaluate = (lambda far: transmit_states(eph, idx[rows][far], t_rx[far], r0, tgd=True))  # noqa: E731
+        if it == 0:
+            ts = (transmit_states(eph, idx[rows], t_rx, r0, tgd=True) if prior is None
+                  else _carried(prior["tag"], t_rx, r0, evaluate))
+            ts_tag = ts
+        else:  # the same satellites a receiver clock offset earlier: carried, not evaluated again
+            ts = _carried(ts if prior is None else prior["final"], t_rx, r0, evaluate)
         raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
         med, present = group_median(raw, ep, n_ep)
         clk[present] = med[present]
@@ -264,13 +278,109 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
                                           rx_clock_tag_m=clk, iono_m=iono_m, tropo_m=tropo_m))
     # epochs of one tag share one true time only if the clock estimate is per epoch (it is)
     inp = inp.select(np.degrees(el)[np.argsort(t_ep, kind="stable")] >= elevation_mask_deg)
+    if _keep is not None:
+        _keep.update(rows=rows, tag=ts_tag, final=ts)
     return limit_sats(inp, max_sats)
 
 
 
 
+#: largest change of the transmit time [s] over which :func:`carry_transmit_states` carries a state
+#: (callers evaluate the others again): at 0.01 s the neglected terms (the non-central part of the
+#: acceleration, ~1e-4 m/s^2, and the jerk, ~1e-4 m/s^3) stay below 1e-8 m
+CARRY_MAX_S = 0.01
+
+
+def carry_transmit_states(r_e, v_e, clock_bias_s, clock_drift_s_s, t_tx_gps_s, tau_s, t_rx_gps_s, r_rx_e):
+    """Satellite states at transmission carried to a new reception time and receiver position.
+
+    The state of each row at its old transmit time ``t1`` (in the ECEF frame
+    at transmission: the Sagnac rotation ``R3(OMEGA_E_DOT tau1)`` undone) is
+    expanded to second order, ``r(t1 + d) = r + v d + a d^2 / 2``,
+    ``v(t1 + d) = v + a d``, with ``a`` the central-force acceleration in the
+    rotating ECEF frame (as the light-time iteration of
+    ``insnav/gnss/broadcast_orbit.hpp`` does); the light time
+    ``tau = |R3(OMEGA_E_DOT tau) r(t_rx - tau) - r_rx| / c`` is iterated on
+    it (Misra & Enge 2011, sec. 5.1.2; the Sagnac rotation as in
+    :func:`insnav.gnss.ephemeris.transmit_states`) and the clock carried as
+    ``dt + dt' d``.  For the shifts of a receiver clock estimate and of a
+    start position (|d| from nanoseconds to milliseconds) this equals an
+    evaluation of the ephemeris at the new time to about 1e-7 m (the
+    evaluation itself is reproducible to about 5e-8 m between times
+    1e-7 s apart: its iterations stop at tolerances, and 2.6e7 m
+    positions round at 4e-9 m).
+
+    Parameters
+    ----------
+    r_e, v_e : (k, 3) state at transmission in the ECEF frame at reception [m], [m/s]
+    clock_bias_s, clock_drift_s_s : (k,) satellite clock [s], [s/s]
+    t_tx_gps_s, tau_s : (k,) transmit time and light time of that state [s]
+    t_rx_gps_s : (k,) new reception time [s];  r_rx_e : (3,) or (k, 3) new receiver position [m]
+
+    Returns
+    -------
+    (dict, far)
+        ``r_e``, ``v_e``, ``clock_bias_s``, ``t_tx_gps_s``, ``tau_s``, ``range_m`` at the new
+        reception time (the drift unchanged); ``far`` (k,) bool: the transmit time moved by more
+        than :data:`CARRY_MAX_S` (or is not finite) -- evaluate those rows again.
+    """
+    from .ephemeris import C_LIGHT, GM_GPS, OMEGA_E_DOT
+
+    t_rx = np.asarray(t_rx_gps_s, float)
+    r_rx = np.broadcast_to(np.asarray(r_rx_e, float), (t_rx.size, 3))
+    w = OMEGA_E_DOT
+    c1, s1 = np.cos(w * tau_s), np.sin(w * tau_s)
+    (xe, ye, ze), (vxe, vye, vze) = np.asarray(r_e, float).T, np.asarray(v_e, float).T
+    x, y, z = c1 * xe - s1 * ye, s1 * xe + c1 * ye, ze  # the ECEF frame at transmission
+    vx, vy, vz = c1 * vxe - s1 * vye, s1 * vxe + c1 * vye, vze
+    k = -GM_GPS / (x * x + y * y + z * z) ** 1.5
+    ax, ay, az = k * x + w * w * x + 2.0 * w * vy, k * y + w * w * y - 2.0 * w * vx, k * z
+    xr, yr, zr = r_rx[:, 0], r_rx[:, 1], r_rx[:, 2]
+
+    def at(tau):
+        d = t_rx - tau - t_tx_gps_s
+        hd = 0.5 * d * d
+        return d, x + vx * d + ax * hd, y + vy * d + ay * hd, z + vz * d + az * hd
+
+    def dist(c, s, px, py, pz):  # |R3(theta) p - r_rx|
+        dx, dy, dz = c * px + s * py - xr, -s * px + c * py - yr, pz - zr
+        return np.sqrt(dx * dx + dy * dy + dz * dz)
+
+    tau = np.asarray(tau_s, float)
+    for _ in range(10):
+        _, px, py, pz = at(tau)
+        tau_new = dist(np.cos(w * tau), np.sin(w * tau), px, py, pz) / C_LIGHT
+        done = not np.any(np.abs(tau_new - tau) >= 1e-12)
+        tau = tau_new
+        if done:
+            break
+    d, px, py, pz = at(tau)
+    c, s = np.cos(w * tau), np.sin(w * tau)
+    qx, qy, qz = vx + ax * d, vy + ay * d, vz + az * d
+    new = dict(r_e=np.column_stack([c * px + s * py, -s * px + c * py, pz]),
+               v_e=np.column_stack([c * qx + s * qy, -s * qx + c * qy, qz]),
+               clock_bias_s=clock_bias_s + clock_drift_s_s * d, t_tx_gps_s=t_rx - tau, tau_s=tau,
+               range_m=dist(c, s, px, py, pz))
+    return new, ~(np.abs(d) <= CARRY_MAX_S)
+
+
+def _carried(ts, t_rx, r_rx_e, evaluate, valid=None):
+    """``ts`` (a ``TransmitStates``/``MultiStates``) carried to the reception times ``t_rx`` by
+    :func:`carry_transmit_states`; the rows it cannot carry are evaluated again by ``evaluate(rows)``."""
+    new, far = carry_transmit_states(ts.r_e, ts.v_e, ts.clock_bias_s, ts.clock_drift_s_s, ts.t_tx_gps_s, ts.tau_s,
+                                     t_rx, r_rx_e)
+    out = ts._replace(**new)
+    far = np.flatnonzero(far if valid is None else far & valid)
+    if far.size:
+        again = evaluate(far)
+        for k in new:
+            getattr(out, k)[far] = getattr(again, k)
+    return out
+
+
 def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, max_sats, iono, tropo,
-                        sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0, t_range, systems) -> TightInputs:
+                        sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0, t_range, systems, _prior=None,
+                        _keep=None) -> TightInputs:
     """Multi-system :func:`tight_inputs_from_rinex` (same steps, per-row system and signal)."""
     from .._median import group_median
     from .broadcast import select_multi, transmit_states_multi
@@ -295,9 +405,18 @@ def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, m
     n_ep = obs.epoch_t_gps_s.size
     clk = np.zeros(n_ep)
     lat, lon, h = earth.ecef_to_geodetic(r0)
-    for _ in range(2):
+    prior = _prior if _prior is not None and np.array_equal(_prior["rows"], rows) else None
+    for it in range(2):
         t_rx = t_tag[rows] - clk[ep] / C_LIGHT
-        ts = transmit_states_multi(nav, t_rx, r0, system=sys_r, prn=prn_r, codes=code_r)
+        evaluate = (lambda far: transmit_states_multi(  # noqa: E731
+            nav, t_rx[far], r0, system=sys_r[far], prn=prn_r[far], codes=code_r[far]))
+        if it == 0:
+            ts = (transmit_states_multi(nav, t_rx, r0, system=sys_r, prn=prn_r, codes=code_r) if prior is None
+                  else _carried(prior["tag"], t_rx, r0, evaluate, valid=prior["tag"].valid))
+            ts_tag = ts
+        else:  # the same satellites a receiver clock offset earlier: carried, not evaluated again
+            src = ts if prior is None else prior["final"]
+            ts = _carried(src, t_rx, r0, evaluate, valid=src.valid)
         raw = obs.C1[rows] - (ts.range_m - C_LIGHT * ts.clock_bias_s)
         # receiver clock of the epoch (only sets the true reception time; inter-system
         # offsets of tens of ns do not matter for it)
@@ -328,4 +447,6 @@ def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, m
                                 system=sys_r)
     keep = (np.degrees(el) >= elevation_mask_deg) & good
     inp = inp.select(keep[np.argsort(t_ep, kind="stable")])
+    if _keep is not None:
+        _keep.update(rows=rows, tag=ts_tag, final=ts)
     return limit_sats(inp, max_sats)

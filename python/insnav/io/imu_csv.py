@@ -84,6 +84,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core
+from .._median import median, percentile  # np.median/np.percentile without numpy.ma
 from ..config import ConfigError
 from ..data.dataset import ImuData, RowOrigin
 from ..data.textio import read_bytes
@@ -445,8 +446,8 @@ def tick_time_map(tick_s, arrival_gps_s, window_s: float = 2.0, max_drift_ppm: f
     icpt += float(np.min(y - (slope * x + icpt)))  # shift below every sample: a lower envelope
     t = tick_s + y0 + icpt + slope * x
     lat = (np.asarray(arrival_gps_s, float) - t) * 1e3
-    return t, dict(drift_ppm=float(slope * 1e6), latency_median_ms=float(np.median(lat)),
-                   latency_p95_ms=float(np.percentile(lat, 95)), latency_max_ms=float(lat.max()))
+    return t, dict(drift_ppm=float(slope * 1e6), latency_median_ms=median(lat),
+                   latency_p95_ms=percentile(lat, 95), latency_max_ms=float(lat.max()))
 
 
 def _time_after(tokens, ref_int: int) -> np.ndarray:

@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core, earth
-from .._median import median
+from .._median import median, unique
 from ..config import ConfigError, RunConfig, config_from_dict
 from ..data.dataset import Dataset, GnssFixes, ImuData, Truth
 from ..gnss.gpstime import SECONDS_PER_WEEK
@@ -530,12 +530,19 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     if wgt is not None and wgt.is_default:
         wgt = None
 
+    states: dict = {}  # the first call's satellite states, carried to the second call's position
+
     def inputs_at(r):
         if wgt is None:  # today's rows, unchanged
-            return tight_inputs_from_rinex(obs, nav, t_week0, r, **kw)
+            keep: dict = {}
+            inp = tight_inputs_from_rinex(obs, nav, t_week0, r, _prior=states.get("tight"), _keep=keep, **kw)
+            states["tight"] = keep
+            return inp
+        from ..gnss.spp import _spp_inputs_from_rinex
         from ..gnss.tight_inputs import MAX_SATS, limit_sats
 
-        inp_all, _ = spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt, **kw)
+        inp_all, _, states["spp"] = _spp_inputs_from_rinex(obs, nav, t_week0, r, weighting=wgt,
+                                                           prior=states.get("spp"), **kw)
         return limit_sats(inp_all, MAX_SATS)
 
     # the fixes of the start (course, initial position) and of the input checks: with RAIM FDE on
@@ -647,10 +654,10 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     n = inp_run.n_sats()
     info = dict(obs=str(obs.path), nav=str(getattr(nav, "path", "")), imu=samples.path, week=week,
                 imu_samples=len(samples), imu_rate_hz=samples.rate_hz, imu_time=samples.info,
-                gps_prns_observed=sorted(int(p) for p in np.unique(np.asarray(obs.prn)[
+                gps_prns_observed=sorted(int(p) for p in unique(np.asarray(obs.prn)[
                     np.asarray(getattr(obs, "system", np.full(len(obs.prn), "G"))) == "G"])),
-                gps_prns_with_ephemeris=sorted(int(p) for p in np.unique(nav.eph.prn)),
-                prns_used=sorted(int(p) for p in np.unique(inp_run.prn[inp_run.system == "G"])),
+                gps_prns_with_ephemeris=sorted(int(p) for p in unique(nav.eph.prn)),
+                prns_used=sorted(int(p) for p in unique(inp_run.prn[inp_run.system == "G"])),
                 sats_used=_sat_names(inp_run.system, inp_run.prn),
                 sats_per_epoch=(int(n.min()), int(median(n)), int(n.max())) if n.size else (0, 0, 0),
                 start_rule=start_rule, start_s_after_first_epoch=t0 - t_first, approx_r_e=r0.tolist(),
