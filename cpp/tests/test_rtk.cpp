@@ -4,7 +4,8 @@
 // (Eigen's malloc check on).  MLAMBDA: the fixed vector of a well-conditioned problem is the
 // rounded one.  PartialAr (gnss/ambiguity_resolution.hpp): the per-subset check callback (reject ->
 // a smaller subset, stop -> no fix) and the bootstrapped success rate of a diagonal Q_a, the
-// product formula (Teunissen 1998); FixValidator's rules over epochs.
+// product formula (Teunissen 1998); FixValidator's rules over epochs; the common-satellite matching
+// and reference choice shared by both carrier-phase engines (gnss/double_difference.hpp).
 #include <cstdio>
 #include <memory>
 #include <random>
@@ -13,6 +14,7 @@
 #include "eigen_malloc_check.hpp"  // first: before any Eigen header
 
 #include "insnav/gnss/ambiguity_resolution.hpp"
+#include "insnav/gnss/double_difference.hpp"
 #include "insnav/gnss/lambda.hpp"
 #include "insnav/gnss/rtk.hpp"
 #include "test_util.hpp"
@@ -158,6 +160,31 @@ int main() {
     v->invalidate(2);  // slot 2 re-initialised (slip): DD 1 no longer repeats
     EXPECT_TRUE(epoch(3, 3) == ArVerdict::kReject);
     EXPECT_TRUE(epoch(7, 8) == ArVerdict::kAccept);  // more than confirm_max: at once
+  }
+  // Common satellites and references (gnss/double_difference.hpp, shared by gnss/rtk.hpp and
+  // engine/rtk_ins_engine.hpp): rover order kept; a satellite the base lacks, or without an orbit
+  // on either side, is not common; the reference is the first of the highest elevation.
+  {
+    constexpr int C = RtkRow::kCols;
+    std::vector<double> rov(5 * C, 0.0), bas(4 * C, 0.0);
+    const int rk[5] = {3, 7, 64 + 2, 9, 11}, bk[4] = {11, 7, 3, 64 + 2};  // key 9: rover only
+    for (int i = 0; i < 5; ++i) rov[i * C + RtkRow::kSat] = rk[i];
+    for (int j = 0; j < 4; ++j) bas[j * C + RtkRow::kSat] = bk[j];
+    rov[4 * C + RtkRow::kSatPos] = NAN;  // key 11: no rover orbit
+    std::array<int, kMaxSatKeys> base_of{};
+    int cr[5] = {-1, -1, -1, -1, -1}, cb[5] = {-1, -1, -1, -1, -1};
+    const int n = match_common_satellites(rov.data(), 5, bas.data(), 4, base_of, cr, cb);
+    EXPECT_TRUE(n == 3);
+    EXPECT_TRUE(cr[0] == 0 && cb[0] == 2 && cr[1] == 1 && cb[1] == 1 && cr[2] == 2 && cb[2] == 3);
+    EXPECT_TRUE(base_of[11] == 0 && base_of[9] == -1);
+    bas[1 * C + RtkRow::kSatPos] = NAN;  // key 7: no base orbit
+    EXPECT_TRUE(match_common_satellites(rov.data(), 5, bas.data(), 4, base_of, cr, cb) == 2 && cr[1] == 2);
+    const double el[6] = {0.3, 0.9, 0.9, 0.2, 1.2, 0.5};
+    const auto all = [](int) { return true; };
+    const auto elev = [&](int k) { return el[k]; };
+    EXPECT_TRUE(highest_elevation_reference(6, all, elev) == 4);
+    EXPECT_TRUE(highest_elevation_reference(6, [](int k) { return k != 4; }, elev) == 1);  // first of equal
+    EXPECT_TRUE(highest_elevation_reference(6, [](int) { return false; }, elev) == -1);
   }
   std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
   TEST_MAIN_END()
