@@ -26,7 +26,7 @@ RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
                           "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob",
                           "ar_min_success_rate", "outage_cycle_s", "smooth", "robust_screening",
                           "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_huber", "robust_huber_k",
-                          "robust_max_sats"},
+                          "robust_max_sats", "robust_phase_reset_epochs"},
                  "rtk/ins engine config");
   RtkInsConfig c;
   c.rtk = rtk_options_from_dict(rtk);
@@ -51,6 +51,8 @@ RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   if (!(c.robust.igg_k0 > 0.0 && c.robust.igg_k1 > c.robust.igg_k0))
     throw py::value_error("robust_igg_k0 and robust_igg_k1 must satisfy 0 < k0 < k1");
   if (!(c.robust.huber_k > 0.0)) throw py::value_error("robust_huber_k must be > 0");
+  c.phase_reset_epochs = static_cast<int>(num(engine, "robust_phase_reset_epochs", c.phase_reset_epochs));
+  if (c.phase_reset_epochs < 0) throw py::value_error("robust_phase_reset_epochs must be >= 0");
   if (c.robust.fde_max_sats < 0) throw py::value_error("robust_max_sats must be >= 0");
   if (!(c.outage_cycle_s > 0.0)) throw py::value_error("outage_cycle_s must be > 0 (inf: one cycle per gap)");
   if (!(c.ar_min_success_rate >= 0.0 && c.ar_min_success_rate < 1.0))

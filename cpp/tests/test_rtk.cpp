@@ -5,7 +5,9 @@
 // rounded one.  PartialAr (gnss/ambiguity_resolution.hpp): the per-subset check callback (reject ->
 // a smaller subset, stop -> no fix) and the bootstrapped success rate of a diagonal Q_a, the
 // product formula (Teunissen 1998); FixValidator's rules over epochs; the common-satellite matching
-// and reference choice shared by both carrier-phase engines (gnss/double_difference.hpp).
+// and reference choice shared by both carrier-phase engines (gnss/double_difference.hpp); the RTK/INS
+// engine's robust screening of the single differences (engine/rtk_ins_engine.hpp, 2a.): outliers
+// identified per satellite, no heap allocation in a flagged epoch.
 #include <cstdio>
 #include <memory>
 #include <random>
@@ -17,6 +19,7 @@
 #include "insnav/gnss/double_difference.hpp"
 #include "insnav/gnss/lambda.hpp"
 #include "insnav/gnss/rtk.hpp"
+#include "insnav/engine/rtk_ins_engine.hpp"
 #include "test_util.hpp"
 
 using namespace insnav;
@@ -185,6 +188,52 @@ int main() {
     EXPECT_TRUE(highest_elevation_reference(6, all, elev) == 4);
     EXPECT_TRUE(highest_elevation_reference(6, [](int k) { return k != 4; }, elev) == 1);  // first of equal
     EXPECT_TRUE(highest_elevation_reference(6, [](int) { return false; }, elev) == -1);
+  }
+  // RTK/INS robust screening of the single differences (engine/rtk_ins_engine.hpp, 2a.) on the same
+  // static noise-free pair, the INS at the true rover position: a 30 m code outlier on one satellite
+  // (epochs 4-5) and a 0.3-cycle phase outlier on another (epoch 7) are each identified as that
+  // satellite alone, the solution stays fixed within 1 mm, and the flagged epochs (w-tests, rebuilds,
+  // IGG-III) allocate nothing on the heap; a clean epoch flags nothing.
+  {
+    RtkInsConfig rc;
+    rc.rtk.tropo_model = false;
+    rc.rtk.n_freq = 1;  // one frequency: the geometry-free slip test would catch the phase outlier
+    rc.rtk.min_success_rate = 0.0;
+    rc.robust.screening = true;
+    rc.code_chi2_row = 0.0;  // the screening alone
+    rc.rtk.outlier_sigma = 0.0;
+    auto ins = std::make_unique<RtkInsEngine<64>>(ImuErrorModel{}, rc);
+    const Vec3 llh = wgs84::ecef_to_geodetic(r_r);
+    NavState s0;
+    s0.t = 1000.0;
+    s0.lat = llh(0);
+    s0.lon = llh(1);
+    s0.h = llh(2);
+    StateCov<Layout15> P0 = StateCov<Layout15>::Zero();
+    P0.diagonal() << 0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10;
+    ins->start(s0, P0, ImuCorrection{});
+    int fixed_ins = 0, screened[10] = {};
+    double worst_ins = 0.0;
+    for (int e = 0; e < 10; ++e) {
+      auto rr = rows_for(r_r, sats, N1r, N2r, 1234.0 + e);
+      const auto rb = rows_for(r_b, sats, N1b, N2b, -567.0 + 2 * e);
+      if (e == 4 || e == 5) rr[3 * RtkRow::kCols + RtkRow::kFreq0] += 30.0;      // satellite 4, L1 code
+      if (e == 7) rr[5 * RtkRow::kCols + RtkRow::kFreq0 + 1] += 0.3;            // satellite 6, L1 phase
+      if (e == 2) Eigen::internal::set_is_malloc_allowed(false);
+      const RtkInsEpoch out = ins->apply_epoch(rr.data(), 8, rb.data(), 8, true, r_b);
+      screened[e] = out.screened;
+      if (out.status == RtkStatus::kFixed) {
+        ++fixed_ins;
+        worst_ins = std::max(worst_ins, (out.r_e - r_r).norm());
+      }
+    }
+    Eigen::internal::set_is_malloc_allowed(true);
+    EXPECT_TRUE(screened[4] == 1 && screened[5] == 1 && screened[7] == 1);
+    EXPECT_TRUE(screened[0] + screened[1] + screened[2] + screened[3] + screened[6] + screened[8] + screened[9] == 0);
+    EXPECT_TRUE(fixed_ins >= 8);
+    EXPECT_LT(worst_ins, 1e-3);
+    EXPECT_TRUE(g_eigen_asserts == 0);
+    std::printf("rtk/ins screening: %d fixed epochs, worst %.2e m\n", fixed_ins, worst_ins);
   }
   std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
   TEST_MAIN_END()

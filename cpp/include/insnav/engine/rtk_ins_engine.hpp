@@ -43,8 +43,9 @@
 //      coefficients: here the SD variance is divided by q before the DD covariance is formed, so
 //      the rows stay correlated through the reference as the model says), or Huber's; q = 0 leaves
 //      it out.  A phase SD left out keeps its ambiguity's state (not fixed this epoch, so a one-epoch
-//      phase outlier never reaches the float ambiguities); flagged again at the next epoch (a jump
-//      that stays, e.g. a fractional or undetected slip) its ambiguity is re-initialised instead.
+//      phase outlier never reaches the float ambiguities); flagged phase_reset_epochs (2) epochs in a
+//      row (a jump that stays, e.g. a fractional or undetected slip) its ambiguity is re-initialised
+//      instead (0: never, left out while flagged).
 //      An epoch with no w^2 beyond chi2_row is the plain one, bit for bit.
 //   3. AR (gnss/ambiguity_resolution.hpp): MLAMBDA on the DD float ambiguities with the joint
 //      covariance (so the INS-propagated position uncertainty conditions them: after a GNSS gap
@@ -109,6 +110,7 @@ struct RtkInsConfig {
   // are screening, chi2_row, igg_k0, igg_k1, huber, huber_k and fde_max_sats (identifications per
   // row kind and epoch).  Off by default (docs/algorithms.md, "Tight RTK/INS").
   RobustConfig robust = rtk_ins_robust_defaults();
+  int phase_reset_epochs = 2;  // a phase SD flagged this many epochs in a row: its ambiguity re-initialised
 
   static RobustConfig rtk_ins_robust_defaults() {
     RobustConfig r;
@@ -209,6 +211,7 @@ class RtkInsEngine {
     code_scale_ = 1.0;
     epoch_index_ = 0;
     last_phase_flag_.fill(-2);
+    phase_flag_run_.fill(0);
   }
 
   /// n IMU samples; E records over the rover rows and base rows (RtkRow layout).
@@ -703,8 +706,8 @@ class RtkInsEngine {
 
   // Leave the single difference of common satellite c, frequency f out of this epoch's rows of one
   // kind.  Phase: the satellite's ambiguity keeps its state (not fixed this epoch, its lock not
-  // counted); flagged again at the next epoch (a jump that stays: a fractional or undetected slip),
-  // the ambiguity is re-initialised instead and its row kept.
+  // counted); flagged phase_reset_epochs epochs in a row (a jump that stays: a fractional or
+  // undetected slip), the ambiguity is re-initialised instead and its row kept (0: never).
   void leave_out(int c, int f, bool code, RtkInsEpoch& out) {
     const int i = c * gnss::kMaxFreq + f;
     ++out.screened;
@@ -714,14 +717,20 @@ class RtkInsEngine {
     }
     const int sf = key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f;
     const int k = amb_of_[sf];
-    if (k >= 0 && amb_[k].lock > 0 && last_phase_flag_[sf] == epoch_index_ - 1) {
+    if (last_phase_flag_[sf] == epoch_index_) {  // flagged again in this epoch (after a reset): out
+      phase_out_[i] = true;
+      if (k >= 0) amb_[k].used = false;
+      return;
+    }
+    phase_flag_run_[sf] = last_phase_flag_[sf] == epoch_index_ - 1 ? phase_flag_run_[sf] + 1 : 1;
+    last_phase_flag_[sf] = epoch_index_;
+    if (k >= 0 && amb_[k].lock > 0 && cfg_.phase_reset_epochs > 0 && phase_flag_run_[sf] >= cfg_.phase_reset_epochs) {
       init_amb(k, c, f);
       ++out.slips[gnss::kSlipOutlier];
     } else {
       phase_out_[i] = true;
       if (k >= 0) amb_[k].used = false;
     }
-    last_phase_flag_[sf] = epoch_index_;
   }
 
   // Robust screening of the m DD rows of one kind (file comment, 2a.): while the largest |w| of the
@@ -1026,6 +1035,7 @@ class RtkInsEngine {
   std::array<bool, gnss::kMaxSatKeys * gnss::kMaxFreq> phase_out_{};
   std::array<double, gnss::kMaxSatKeys * gnss::kMaxFreq> var_factor_code_{}, var_factor_phase_{};
   std::array<std::int64_t, gnss::kMaxSatKeys * gnss::kMaxFreq> last_phase_flag_{};
+  std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> phase_flag_run_{};  // epochs flagged in a row
   std::int64_t epoch_index_ = 0;
   int n_units_ = 0;
   std::array<int, 2 * kMaxRowsE> unit_c_{}, unit_f_{};
