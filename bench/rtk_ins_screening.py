@@ -139,10 +139,11 @@ def urban(n_runs: int, work: Path):
         on = acc[n]
         d = np.array(on["per"]) - np.array(off["per"])
         dw_ = np.array(on["per_wrong"]) - np.array(off["per_wrong"])
-        print(f"\n{n}: paired per-run fix rate against off: higher in {int((d > 0).sum())}, lower in {int((d < 0).sum())} runs "
-            f"(sign test p = {B.sign_test_p(int((d > 0).sum()), int((d < 0).sum())):.3g}); wrong fixes per run: more in "
-            f"{int((dw_ > 0).sum())}, fewer in {int((dw_ < 0).sum())} runs "
-            f"(p = {B.sign_test_p(int((dw_ > 0).sum()), int((dw_ < 0).sum())):.3g})")
+        up, down = int((d > 0).sum()), int((d < 0).sum())
+        more, fewer = int((dw_ > 0).sum()), int((dw_ < 0).sum())
+        print(f"\n{n}: paired per-run fix rate against off: higher in {up}, lower in {down} runs "
+              f"(sign test p = {B.sign_test_p(up, down):.3g}); wrong fixes per run: more in {more}, fewer in "
+              f"{fewer} runs (p = {B.sign_test_p(more, fewer):.3g})")
 
 
 def main(argv=None) -> int:
