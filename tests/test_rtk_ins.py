@@ -536,3 +536,14 @@ def test_robust_screening_clean_data_no_alarm_and_bit_for_bit(drive, spirent_l1,
         assert np.array_equal(getattr(on.rtk, k), getattr(off.rtk, k), equal_nan=True), k
     for k in ("lat_deg", "lon_deg", "h_m"):  # the IMU-centre navigation per sample
         assert np.array_equal(getattr(on, k), getattr(off, k)), k
+
+
+@pytest.mark.parametrize("engine, word", [(dict(robust_igg_k0=3.0, robust_igg_k1=1.5), "robust_igg_k0"),
+                                          (dict(robust_chi2_row=0.0), "robust_chi2_row"),
+                                          (dict(robust_phase_reset_epochs=-1), "robust_phase_reset_epochs"),
+                                          (dict(robust_screen=True), "robust_screen")])
+def test_robust_screening_bad_settings_are_one_line_errors(drive, spirent_l1, engine, word):
+    rover, base, _, _ = spirent_l1
+    with pytest.raises(ValueError, match=word):
+        run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
+                    rtk_options=dict(systems="GE", frequencies=1), engine=engine)
