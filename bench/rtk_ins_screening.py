@@ -8,9 +8,15 @@ differences the screening left out / down-weighted, on:
 * the Spirent dynamic rover with its synthesised industrial IMU and the seven outages of
   ``bench/rtk_ins.py`` (GPS+Galileo, L1+L2 and L1 only, the same options);
 * the simulator's ``rtk-urban-car`` preset with the slips of ``bench/rtk_ins.py`` (GPS L1, seeds 1..N),
-  with a paired sign test of the per-run fix rates and wrong fixes.
+  with a paired sign test of the per-run fix rates and wrong fixes;
+* ``--faults``: faults injected into the Spirent rover (no outages, its tactical IMU of
+  tests/test_rtk_ins.py, GPS+Galileo L1): 30 m on one GPS satellite's pseudorange (30-60 deg) or on the
+  reference's (the highest) for 10 epochs, 0.3 cycles on the L1 phase of either from epoch 300 on, or
+  at epoch 300 only; the largest 3-D error from epoch 298 to the end, float (AR off) and with AR, for
+  the filter without any outlier test, with the per-row tests (the defaults) and with the screening
+  alone.
 
-Usage: ``python3 bench/rtk_ins_screening.py [--runs 20] [--skip-spirent] [--skip-urban]``.
+Usage: ``python3 bench/rtk_ins_screening.py [--runs 20] [--skip-spirent] [--skip-urban] [--faults]``.
 """
 from __future__ import annotations
 
@@ -146,12 +152,74 @@ def urban(n_runs: int, work: Path):
               f"{fewer} runs (p = {B.sign_test_p(more, fewer):.3g})")
 
 
+def faults():
+    from insnav import earth
+    from insnav.config import RunConfig
+    from insnav.filters.rtk_ins import run_rtk_ins
+    from insnav.gnss import rtk
+    from insnav.sim.from_truth import simulate_from_truth
+
+    e0 = 300
+    v = B.SP / B.VARIANT
+    nav = [B.SP / "RINEX_GN_Spirent.23N", B.SP / "RINEX_EN_Spirent.23L"]
+    ds = simulate_from_truth(B.SP / "Rover-dynamic_motion_Spirent.csv", "tactical", imu_rate_hz=100.0, seed=1)
+    rover = rtk.read_phase_obs(v / "Rover-dynamic_MO_Spirent.obs", "GE")
+    base = rtk.read_phase_obs(v / "Base-static_MO_Spirent.obs", "GE")
+    _, _, rb, _, roff, rrows, _, _ = rtk.prepare_rtk_rows(rover, base, nav, None, rtk.RtkOptions(systems="GE"))
+    lat, lon, _ = earth.ecef_to_geodetic(rb)
+    up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    R = rrows[roff[e0]:roff[e0 + 1]]
+    los = R[:, 17:20] - rb
+    el = np.degrees(np.arcsin(los @ up / np.linalg.norm(los, axis=1)))
+    gps = np.flatnonzero(R[:, 1] == 0)
+    ref = int(R[gps[np.argmax(el[gps])], 0])
+    mid = int(R[np.flatnonzero((R[:, 1] == 0) & (el > 30) & (el < 60))[0], 0])
+    r_t = B._truth(ds, rover.epoch_t_gps_s)
+
+    def inject(prn, n, column, value):
+        rows = np.flatnonzero((rover.system == "G") & (rover.prn == prn) & (rover.epoch >= e0) & (rover.epoch < e0 + n))
+        a = getattr(rover, column).copy()
+        a[rows, 0] += value
+        return rtk.PhaseObs(**{**rover.__dict__, column: a})
+
+    cases = (("clean", rover),
+             (f"code +30 m, 10 epochs, G{mid:02d}", inject(mid, 10, "code_m", 30.0)),
+             (f"code +30 m, 10 epochs, G{ref:02d} (reference)", inject(ref, 10, "code_m", 30.0)),
+             (f"phase +0.3 cycle from epoch {e0} on, G{mid:02d}", inject(mid, 10 ** 6, "phase_cycles", 0.3)),
+             (f"phase +0.3 cycle from epoch {e0} on, G{ref:02d} (reference)", inject(ref, 10 ** 6, "phase_cycles", 0.3)),
+             (f"phase +0.3 cycle at epoch {e0} only, G{mid:02d}", inject(mid, 1, "phase_cycles", 0.3)))
+    filters = (("no outlier test", dict(code_chi2_row=0.0), dict(outlier_sigma=0.0)),
+               ("per-row tests (default)", {}, {}),
+               ("screening alone", dict(code_chi2_row=0.0, robust_screening=True), dict(outlier_sigma=0.0)))
+    print("\nFaults injected into the Spirent rover (tactical IMU, GPS+Galileo L1, no outages); largest 3-D error from "
+          f"epoch {e0 - 2} on [cm], float (AR off) / with AR (fix rate, wrong fixes); SDs the screening left out\n")
+    print("| fault | " + " | ".join(n for n, _, _ in filters) + " |\n|---|" + "---|" * len(filters))
+    for cname, obs in cases:
+        cells = []
+        for _, eng, ro in filters:
+            res = []
+            for ar in ("off", "continuous"):
+                sol = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=obs, base=base, nav=nav, engine=eng,
+                                  rtk_options=dict(systems="GE", frequencies=1, ar_mode=ar, **ro))
+                err = np.linalg.norm(sol.rtk.r_e - r_t, axis=1)
+                res.append((sol, err))
+            (sf, ef), (sa, ea) = res
+            fx = sa.rtk.status == 1
+            cells.append(f"{100 * np.nanmax(ef[e0 - 2:]):.2f} / {100 * np.nanmax(ea[e0 - 2:]):.2f} "
+                         f"({100 * fx.mean():.1f} %, {int(np.sum(fx & (ea > B.WRONG_FIX_M)))}); {int(sa.rtk.screened.sum())}")
+        print(f"| {cname} | " + " | ".join(cells) + " |")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--skip-spirent", action="store_true")
     ap.add_argument("--skip-urban", action="store_true")
+    ap.add_argument("--faults", action="store_true", help="only the injected-fault table")
     a = ap.parse_args(argv)
+    if a.faults:
+        faults()
+        return 0
     with tempfile.TemporaryDirectory() as td:
         work = Path(td)
         if not a.skip_spirent:
