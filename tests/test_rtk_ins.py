@@ -7,7 +7,11 @@ synthesised from its 10 Hz truth (insnav.sim.from_truth).  Checks:
 * an exact reduction: exact IMU, zero IMU noise, a static receiver -> the RTK/INS float solution is
   the GNSS-only static RTK float solution (the same estimator when the INS adds no information);
 * INS-aided slip detection of a 1-cycle slip on one single-frequency satellite during motion;
-* the first epoch after a 30 s outage fixes to the true integers; a wrong set is rejected.
+* the first epoch after a 30 s outage fixes to the true integers; a wrong set is rejected;
+* the robust screening of the single differences: a 30 m code outlier (on a satellite, on the
+  reference) and a 0.3-cycle phase jump on the reference are identified as that satellite and the
+  solution stays at the clean one's centimetres; clean data: no alarm, and bit for bit the unscreened
+  solution.
 """
 import numpy as np
 import pytest
@@ -428,3 +432,118 @@ def test_urban_float_nees_consistent_with_the_presets_receiver_noise(tmp_path):
     assert n_def > 6.0 and wrong_def > 0, (n_def, wrong_def)
     assert 0.5 < n_rx <= 3.0, n_rx
     assert wrong_rx9 == 0
+
+
+# --- robust screening of the single differences (engine/rtk_ins_engine.hpp, 2a.) -----------------
+
+E0 = 300  # first epoch of the injected faults
+
+
+@pytest.fixture(scope="module")
+def spirent_l1():
+    """Rover and base of the Spirent drive, the truth per rover epoch, and two GPS satellites at E0:
+    the highest (the reference of the GPS double differences) and one between 30 and 60 deg."""
+    v = "iono-Klob_tropo-Saast"
+    rover = rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE")
+    base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
+    _, _, rb, _, roff, rrows, _, _ = rtk.prepare_rtk_rows(rover, base, NAV, None, rtk.RtkOptions(systems="GE"))
+    lat, lon, _ = earth.ecef_to_geodetic(rb)
+    up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    R = rrows[roff[E0]:roff[E0 + 1]]
+    los = R[:, 17:20] - rb
+    el = np.degrees(np.arcsin(los @ up / np.linalg.norm(los, axis=1)))
+    gps = np.flatnonzero(R[:, 1] == 0)
+    ref = int(R[gps[np.argmax(el[gps])], 0])
+    mid = int(R[np.flatnonzero((R[:, 1] == 0) & (el > 30) & (el < 60))[0], 0])
+    return rover, base, ref, mid
+
+
+def _inject(rover, prn, n_epochs, column, value):
+    """value added to rover column ('code_m' or 'phase_cycles', L1) of GPS prn over epochs [E0, E0 + n)."""
+    rows = np.flatnonzero((rover.system == "G") & (rover.prn == prn) & (rover.epoch >= E0)
+                          & (rover.epoch < E0 + n_epochs))
+    assert rows.size == min(n_epochs, rover.epoch.max() + 1 - E0)  # tracked throughout
+    a = getattr(rover, column).copy()
+    a[rows, 0] += value
+    return rtk.PhaseObs(**{**rover.__dict__, column: a})
+
+
+def _run_l1(drive, base, rover, engine, **rtk_opts):
+    sol = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
+                      rtk_options=dict(systems="GE", frequencies=1, **rtk_opts), engine=engine)
+    err = np.linalg.norm(sol.rtk.r_e - _truth_e(drive, rover.epoch_t_gps_s), axis=1)
+    return sol, err
+
+
+UNPROTECTED = dict(code_chi2_row=0.0)                 # no per-row code test, no screening
+ROBUST = dict(code_chi2_row=0.0, robust_screening=True)  # the screening alone
+
+
+def test_robust_screening_catches_a_30m_code_outlier_on_one_satellite_or_the_reference(drive, spirent_l1):
+    """30 m on one satellite's L1 pseudorange for 10 epochs, float solution (AR off, so the phase cannot
+    hide it).  Unscreened, it pulls the float position by centimetres; the w-test of the single
+    differences (Teunissen 1990, eq. (13)) leaves out exactly that satellite's code at each of the 10
+    epochs -- also when it is the reference, whose fault moves every DD row of its group (the per-row
+    test drops all of them there) -- and the float stays where the clean run is."""
+    rover, base, ref, mid = spirent_l1
+    _, err_clean = _run_l1(drive, base, rover, ROBUST, ar_mode="off", outlier_sigma=0.0)
+    win = slice(E0, E0 + 15)
+    for prn, least in ((mid, 0.05), (ref, 0.02)):
+        bad = _inject(rover, prn, 10, "code_m", 30.0)
+        _, err_off = _run_l1(drive, base, bad, UNPROTECTED, ar_mode="off", outlier_sigma=0.0)
+        sol, err_on = _run_l1(drive, base, bad, ROBUST, ar_mode="off", outlier_sigma=0.0)
+        assert np.nanmax(err_off[win]) > least, (prn, np.nanmax(err_off[win]))
+        assert np.nanmax(err_on[win]) < 0.012
+        assert np.nanmax(np.abs(err_on - err_clean)) < 1e-3
+        expect = np.zeros(len(bad.epoch_t_gps_s), int)
+        expect[E0:E0 + 10] = 1
+        assert np.array_equal(sol.rtk.screened, expect), np.flatnonzero(sol.rtk.screened)
+        # the per-row test (code_chi2_row) on the reference's fault: every row of the group dropped
+        dflt, _ = _run_l1(drive, base, bad, {}, ar_mode="off", outlier_sigma=0.0)
+        assert dflt.rtk.code_rejected[E0] >= (3 if prn == ref else 1)
+
+
+def test_robust_screening_a_0p3_cycle_phase_jump_on_the_reference(drive, spirent_l1):
+    """A 0.3-cycle step (not a whole slip; below the INS-aided slip test's 0.35 cycles) on the L1 phase of
+    the reference satellite from E0 on.  Unprotected, and with the per-row outlier test (which resets the
+    other satellites' ambiguities: the reference's fault moves every row), the float moves by decimetres;
+    the screening identifies the reference itself, leaves its phase out at E0 and re-initialises its
+    ambiguity at E0 + 1, and the solution stays within 1.5 cm of the truth throughout, with no wrong fix."""
+    rover, base, ref, _ = spirent_l1
+    bad = _inject(rover, ref, 10 ** 6, "phase_cycles", 0.3)
+    _, err_none = _run_l1(drive, base, bad, UNPROTECTED, outlier_sigma=0.0)
+    _, err_dflt = _run_l1(drive, base, bad, {})
+    sol, err_on = _run_l1(drive, base, bad, ROBUST, outlier_sigma=0.0)
+    assert np.nanmax(err_none) > 0.3 and np.nanmax(err_dflt) > 0.3
+    assert np.nanmax(err_on) < 0.015
+    assert not np.any((sol.rtk.status == 1) & (err_on > 0.05))
+    assert sol.rtk.screened[E0] == 1 and sol.rtk.screened[E0 + 1] == 1
+    assert sol.rtk.slips[E0 + 1, 5] == 1  # the reset counts as an outlier slip
+    assert sol.rtk.screened.sum() == 2
+
+
+@pytest.mark.parametrize("freqs", [1, 2])
+def test_robust_screening_clean_data_no_alarm_and_bit_for_bit(drive, spirent_l1, freqs):
+    """Clean hardware-simulated data: no single difference flagged over the drive, and the solution
+    equals the one without the screening bit for bit (an unflagged epoch is the plain update)."""
+    rover, base, _, _ = spirent_l1
+    opts = dict(systems="GE", frequencies=freqs)
+    off = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV, rtk_options=opts)
+    on = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV, rtk_options=opts,
+                     engine=dict(robust_screening=True))
+    assert on.rtk.screened.sum() == 0 and on.rtk.downweighted.sum() == 0
+    for k in ("r_e", "r_float_e", "status", "ratio", "n_fix", "P_r"):
+        assert np.array_equal(getattr(on.rtk, k), getattr(off.rtk, k), equal_nan=True), k
+    for k in ("lat_deg", "lon_deg", "h_m"):  # the IMU-centre navigation per sample
+        assert np.array_equal(getattr(on, k), getattr(off, k)), k
+
+
+@pytest.mark.parametrize("engine, word", [(dict(robust_igg_k0=3.0, robust_igg_k1=1.5), "robust_igg_k0"),
+                                          (dict(robust_chi2_row=0.0), "robust_chi2_row"),
+                                          (dict(robust_phase_reset_epochs=-1), "robust_phase_reset_epochs"),
+                                          (dict(robust_screen=True), "robust_screen")])
+def test_robust_screening_bad_settings_are_one_line_errors(drive, spirent_l1, engine, word):
+    rover, base, _, _ = spirent_l1
+    with pytest.raises(ValueError, match=word):
+        run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
+                    rtk_options=dict(systems="GE", frequencies=1), engine=engine)

@@ -24,7 +24,9 @@ using Engine = RtkInsEngine<64>;
 RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   reject_unknown(engine, {"lever_arm_b", "propagation_interval", "output_decimation", "ins_slip_k_sigma",
                           "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob",
-                          "ar_min_success_rate", "outage_cycle_s", "smooth"},
+                          "ar_min_success_rate", "outage_cycle_s", "smooth", "robust_screening",
+                          "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_huber", "robust_huber_k",
+                          "robust_max_sats", "robust_phase_reset_epochs"},
                  "rtk/ins engine config");
   RtkInsConfig c;
   c.rtk = rtk_options_from_dict(rtk);
@@ -38,6 +40,20 @@ RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   c.validation_prob = num(engine, "validation_prob", c.validation_prob);
   c.ar_min_success_rate = num(engine, "ar_min_success_rate", c.ar_min_success_rate);
   c.outage_cycle_s = num(engine, "outage_cycle_s", c.outage_cycle_s);
+  c.robust.screening = flag(engine, "robust_screening", c.robust.screening);
+  c.robust.chi2_row = num(engine, "robust_chi2_row", c.robust.chi2_row);
+  c.robust.igg_k0 = num(engine, "robust_igg_k0", c.robust.igg_k0);
+  c.robust.igg_k1 = num(engine, "robust_igg_k1", c.robust.igg_k1);
+  c.robust.huber = flag(engine, "robust_huber", c.robust.huber);
+  c.robust.huber_k = num(engine, "robust_huber_k", c.robust.huber_k);
+  c.robust.fde_max_sats = static_cast<int>(num(engine, "robust_max_sats", c.robust.fde_max_sats));
+  if (!(c.robust.chi2_row > 0.0)) throw py::value_error("robust_chi2_row must be > 0");
+  if (!(c.robust.igg_k0 > 0.0 && c.robust.igg_k1 > c.robust.igg_k0))
+    throw py::value_error("robust_igg_k0 and robust_igg_k1 must satisfy 0 < k0 < k1");
+  if (!(c.robust.huber_k > 0.0)) throw py::value_error("robust_huber_k must be > 0");
+  c.phase_reset_epochs = static_cast<int>(num(engine, "robust_phase_reset_epochs", c.phase_reset_epochs));
+  if (c.phase_reset_epochs < 0) throw py::value_error("robust_phase_reset_epochs must be >= 0");
+  if (c.robust.fde_max_sats < 0) throw py::value_error("robust_max_sats must be >= 0");
   if (!(c.outage_cycle_s > 0.0)) throw py::value_error("outage_cycle_s must be > 0 (inf: one cycle per gap)");
   if (!(c.ar_min_success_rate >= 0.0 && c.ar_min_success_rate < 1.0))
     throw py::value_error("ar_min_success_rate must be in [0, 1)");
@@ -96,7 +112,7 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   }
   const py::ssize_t R = static_cast<py::ssize_t>(recs.size());
   NavBuffers nav_buf(output_rows(imu.n, cfg.output_decimation), Layout15::kSize, false);
-  py::array_t<std::int32_t> status(R), n_fix(R), n_dd(R), n_sat(R), code_rej(R),
+  py::array_t<std::int32_t> status(R), n_fix(R), n_dd(R), n_sat(R), code_rej(R), screened(R), downweighted(R),
       slips({R, static_cast<py::ssize_t>(kRtkInsSlipKinds)});
   DArray ratio(R), success_rate(R), r_e({R, py::ssize_t(3)}), r_float({R, py::ssize_t(3)}), P_r({R, py::ssize_t(9)});
   RtkInsOutputs out;
@@ -108,6 +124,8 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   out.n_dd = n_dd.mutable_data();
   out.n_sat = n_sat.mutable_data();
   out.code_rejected = code_rej.mutable_data();
+  out.screened = screened.mutable_data();
+  out.downweighted = downweighted.mutable_data();
   out.r_e = r_e.mutable_data();
   out.r_float_e = r_float.mutable_data();
   out.P_r = P_r.mutable_data();
@@ -154,14 +172,14 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   nav_buf.put(res, out);
   smoother.put(res);
   // per rover epoch (E): records scattered back, epochs without a base: status 0
-  py::array_t<std::int32_t> st_all(E), nfix_all(E), ndd_all(E), nsat_all(E), crej_all(E),
+  py::array_t<std::int32_t> st_all(E), nfix_all(E), ndd_all(E), nsat_all(E), crej_all(E), scr_all(E), dw_all(E),
       sl_all({E, static_cast<py::ssize_t>(kRtkInsSlipKinds)});
   DArray ratio_all(E), ps_all(E), re_all({E, py::ssize_t(3)}), rf_all({E, py::ssize_t(3)}), pr_all({E, py::ssize_t(9)}),
       nav_all({E, py::ssize_t(9)});
   std::fill(nav_all.mutable_data(), nav_all.mutable_data() + 9 * E, NAN);
   for (py::ssize_t e = 0; e < E; ++e) {
     st_all.mutable_data()[e] = nfix_all.mutable_data()[e] = ndd_all.mutable_data()[e] = nsat_all.mutable_data()[e] =
-        crej_all.mutable_data()[e] = 0;
+        crej_all.mutable_data()[e] = scr_all.mutable_data()[e] = dw_all.mutable_data()[e] = 0;
     ratio_all.mutable_data()[e] = ps_all.mutable_data()[e] = 0.0;
     for (int k = 0; k < 3; ++k) re_all.mutable_data()[3 * e + k] = rf_all.mutable_data()[3 * e + k] = NAN;
     for (int k = 0; k < 9; ++k) pr_all.mutable_data()[9 * e + k] = NAN;
@@ -175,6 +193,8 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
     ndd_all.mutable_data()[e] = n_dd.data()[i];
     nsat_all.mutable_data()[e] = n_sat.data()[i];
     crej_all.mutable_data()[e] = code_rej.data()[i];
+    scr_all.mutable_data()[e] = screened.data()[i];
+    dw_all.mutable_data()[e] = downweighted.data()[i];
     ratio_all.mutable_data()[e] = ratio.data()[i];
     ps_all.mutable_data()[e] = success_rate.data()[i];
     for (int k = 0; k < 3; ++k) {
@@ -195,6 +215,8 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   res["n_dd"] = ndd_all;
   res["n_sat"] = nsat_all;
   res["code_rejected"] = crej_all;
+  res["screened"] = scr_all;
+  res["downweighted"] = dw_all;
   res["r_e"] = re_all;
   res["r_float_e"] = rf_all;
   res["P_r_ned"] = pr_all;

@@ -4,7 +4,10 @@
 // (Eigen's malloc check on).  MLAMBDA: the fixed vector of a well-conditioned problem is the
 // rounded one.  PartialAr (gnss/ambiguity_resolution.hpp): the per-subset check callback (reject ->
 // a smaller subset, stop -> no fix) and the bootstrapped success rate of a diagonal Q_a, the
-// product formula (Teunissen 1998); FixValidator's rules over epochs.
+// product formula (Teunissen 1998); FixValidator's rules over epochs; the common-satellite matching
+// and reference choice shared by both carrier-phase engines (gnss/double_difference.hpp); the RTK/INS
+// engine's robust screening of the single differences (engine/rtk_ins_engine.hpp, 2a.): outliers
+// identified per satellite, no heap allocation in a flagged epoch.
 #include <cstdio>
 #include <memory>
 #include <random>
@@ -13,8 +16,10 @@
 #include "eigen_malloc_check.hpp"  // first: before any Eigen header
 
 #include "insnav/gnss/ambiguity_resolution.hpp"
+#include "insnav/gnss/double_difference.hpp"
 #include "insnav/gnss/lambda.hpp"
 #include "insnav/gnss/rtk.hpp"
+#include "insnav/engine/rtk_ins_engine.hpp"
 #include "test_util.hpp"
 
 using namespace insnav;
@@ -158,6 +163,77 @@ int main() {
     v->invalidate(2);  // slot 2 re-initialised (slip): DD 1 no longer repeats
     EXPECT_TRUE(epoch(3, 3) == ArVerdict::kReject);
     EXPECT_TRUE(epoch(7, 8) == ArVerdict::kAccept);  // more than confirm_max: at once
+  }
+  // Common satellites and references (gnss/double_difference.hpp, shared by gnss/rtk.hpp and
+  // engine/rtk_ins_engine.hpp): rover order kept; a satellite the base lacks, or without an orbit
+  // on either side, is not common; the reference is the first of the highest elevation.
+  {
+    constexpr int C = RtkRow::kCols;
+    std::vector<double> rov(5 * C, 0.0), bas(4 * C, 0.0);
+    const int rk[5] = {3, 7, 64 + 2, 9, 11}, bk[4] = {11, 7, 3, 64 + 2};  // key 9: rover only
+    for (int i = 0; i < 5; ++i) rov[i * C + RtkRow::kSat] = rk[i];
+    for (int j = 0; j < 4; ++j) bas[j * C + RtkRow::kSat] = bk[j];
+    rov[4 * C + RtkRow::kSatPos] = NAN;  // key 11: no rover orbit
+    std::array<int, kMaxSatKeys> base_of{};
+    int cr[5] = {-1, -1, -1, -1, -1}, cb[5] = {-1, -1, -1, -1, -1};
+    const int n = match_common_satellites(rov.data(), 5, bas.data(), 4, base_of, cr, cb);
+    EXPECT_TRUE(n == 3);
+    EXPECT_TRUE(cr[0] == 0 && cb[0] == 2 && cr[1] == 1 && cb[1] == 1 && cr[2] == 2 && cb[2] == 3);
+    EXPECT_TRUE(base_of[11] == 0 && base_of[9] == -1);
+    bas[1 * C + RtkRow::kSatPos] = NAN;  // key 7: no base orbit
+    EXPECT_TRUE(match_common_satellites(rov.data(), 5, bas.data(), 4, base_of, cr, cb) == 2 && cr[1] == 2);
+    const double el[6] = {0.3, 0.9, 0.9, 0.2, 1.2, 0.5};
+    const auto all = [](int) { return true; };
+    const auto elev = [&](int k) { return el[k]; };
+    EXPECT_TRUE(highest_elevation_reference(6, all, elev) == 4);
+    EXPECT_TRUE(highest_elevation_reference(6, [](int k) { return k != 4; }, elev) == 1);  // first of equal
+    EXPECT_TRUE(highest_elevation_reference(6, [](int) { return false; }, elev) == -1);
+  }
+  // RTK/INS robust screening of the single differences (engine/rtk_ins_engine.hpp, 2a.) on the same
+  // static noise-free pair, the INS at the true rover position: a 30 m code outlier on one satellite
+  // (epochs 4-5) and a 0.3-cycle phase outlier on another (epoch 7) are each identified as that
+  // satellite alone, the solution stays fixed within 1 mm, and the flagged epochs (w-tests, rebuilds,
+  // IGG-III) allocate nothing on the heap; a clean epoch flags nothing.
+  {
+    RtkInsConfig rc;
+    rc.rtk.tropo_model = false;
+    rc.rtk.n_freq = 1;  // one frequency: the geometry-free slip test would catch the phase outlier
+    rc.rtk.min_success_rate = 0.0;
+    rc.robust.screening = true;
+    rc.code_chi2_row = 0.0;  // the screening alone
+    rc.rtk.outlier_sigma = 0.0;
+    auto ins = std::make_unique<RtkInsEngine<64>>(ImuErrorModel{}, rc);
+    const Vec3 llh = wgs84::ecef_to_geodetic(r_r);
+    NavState s0;
+    s0.t = 1000.0;
+    s0.lat = llh(0);
+    s0.lon = llh(1);
+    s0.h = llh(2);
+    StateCov<Layout15> P0 = StateCov<Layout15>::Zero();
+    P0.diagonal() << 0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10;
+    ins->start(s0, P0, ImuCorrection{});
+    int fixed_ins = 0, screened[10] = {};
+    double worst_ins = 0.0;
+    for (int e = 0; e < 10; ++e) {
+      auto rr = rows_for(r_r, sats, N1r, N2r, 1234.0 + e);
+      const auto rb = rows_for(r_b, sats, N1b, N2b, -567.0 + 2 * e);
+      if (e == 4 || e == 5) rr[3 * RtkRow::kCols + RtkRow::kFreq0] += 30.0;      // satellite 4, L1 code
+      if (e == 7) rr[5 * RtkRow::kCols + RtkRow::kFreq0 + 1] += 0.3;            // satellite 6, L1 phase
+      if (e == 2) Eigen::internal::set_is_malloc_allowed(false);
+      const RtkInsEpoch out = ins->apply_epoch(rr.data(), 8, rb.data(), 8, true, r_b);
+      screened[e] = out.screened;
+      if (out.status == RtkStatus::kFixed) {
+        ++fixed_ins;
+        worst_ins = std::max(worst_ins, (out.r_e - r_r).norm());
+      }
+    }
+    Eigen::internal::set_is_malloc_allowed(true);
+    EXPECT_TRUE(screened[4] == 1 && screened[5] == 1 && screened[7] == 1);
+    EXPECT_TRUE(screened[0] + screened[1] + screened[2] + screened[3] + screened[6] + screened[8] + screened[9] == 0);
+    EXPECT_TRUE(fixed_ins >= 8);
+    EXPECT_LT(worst_ins, 1e-3);
+    EXPECT_TRUE(g_eigen_asserts == 0);
+    std::printf("rtk/ins screening: %d fixed epochs, worst %.2e m\n", fixed_ins, worst_ins);
   }
   std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
   TEST_MAIN_END()

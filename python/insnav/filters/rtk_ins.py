@@ -80,10 +80,14 @@ class RtkInsDataset:
 class RtkInsSolution(RtkSolution):
     """Per rover epoch, as :class:`insnav.gnss.rtk.RtkSolution` (``r_e`` the antenna, fixed where
     fixed), plus ``slips[:, 6]`` the INS-aided detections and ``code_rejected`` (DD code rows
-    screened out); with the smoother, ``r_smoothed_e`` (E, 3) the smoothed antenna [m] (NaN where
+    screened out), ``screened`` and ``downweighted`` (the robust screening's single differences left
+    out or, for phase, re-initialised, and down-weighted per epoch; ``[rtk_engine] robust_screening``);
+    with the smoother, ``r_smoothed_e`` (E, 3) the smoothed antenna [m] (NaN where
     the epoch has no solution)."""
 
     code_rejected: np.ndarray | None = None
+    screened: np.ndarray | None = None
+    downweighted: np.ndarray | None = None
     r_smoothed_e: np.ndarray | None = None
 
     SLIP_KINDS = RtkSolution.SLIP_KINDS + ("ins",)
@@ -115,7 +119,11 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
         ``[rtk]`` options (weighting, masks, AR, slip detectors); :data:`RTK_INS_DEFAULTS` apply.
     engine : dict, optional
         Engine keys: ``ins_slip_k_sigma`` (5), ``ins_slip_min_cycles`` (0.35), ``ins_slip_max_dt_s``
-        (2 s), ``code_chi2_row`` (25; 0 off), ``validation_prob`` (0.999; 0 off).
+        (2 s), ``code_chi2_row`` (25; 0 off), ``validation_prob`` (0.999; 0 off), the robust
+        screening of the single differences (Teunissen's w-test per satellite and frequency, IGG-III
+        down-weighting; docs/algorithms.md, "Tight RTK/INS"): ``robust_screening`` (False),
+        ``robust_chi2_row`` (10.83), ``robust_igg_k0`` (1.5), ``robust_igg_k1`` (3.0),
+        ``robust_huber`` (False), ``robust_huber_k`` (1.5), ``robust_max_sats`` (2).
     probe_epoch : int
         Tests: stop the records after this rover epoch and return its AR in ``solution.probe``.
 
@@ -170,6 +178,7 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
                         r_e=np.asarray(out["r_e"]), v_e=np.full((status.size, 3), np.nan),
                         r_float_e=np.asarray(out["r_float_e"]), P_r=P_e, slips=np.asarray(out["slips"]),
                         base_age_s=age, r_base_e=r_base_e, code_rejected=np.asarray(out["code_rejected"]),
+                        screened=np.asarray(out["screened"]), downweighted=np.asarray(out["downweighted"]),
                         info=dict(rover=rover.path, base=base.path, options=opt, engine=eng))
     counts = rs.counts()
     summary = dict(filter=cfg.filter, coupling="rtk", layout=15, updates=int((status > 0).sum()), rejected=0,

@@ -25,6 +25,28 @@
 //      sqrt(H P H^T + R) is dropped, robust.hpp's per-row test), Kalman update of the joint state,
 //      feedback; then DD phase rows at the new linearisation point (an innovation beyond
 //      outlier_sigma re-initialises that ambiguity, as in rtk.hpp), update, feedback.
+//  2a. robust screening (RtkInsConfig::robust, off by default), before the tests of 2. on each row
+//      kind.  Double differences are correlated through the reference satellite, so the unit
+//      tested is the single difference (SD) of one satellite on one frequency, not a DD row: the
+//      w-test of the DIA procedure (P. J. G. Teunissen, "An integrity and quality control procedure
+//      for use in multi sensor integration", ION GPS 1990, eq. (13); Teunissen, "Testing theory",
+//      2000, sec. 4.4: w = d^T S^-1 y / sqrt(d^T S^-1 d)) with S = H P H^T + R the joint innovation
+//      covariance of all rows of the kind (the INS-propagated state included) and d the rows' response
+//      to a bias in that SD: -e_r for the non-reference satellite of row r, +1 on every row of its
+//      group for a reference satellite, so a faulty reference is identified as itself rather than
+//      as every row of its group.  w ~ N(0, 1) without a fault.  While the largest w^2 exceeds
+//      chi2_row (robust.hpp's per-row quantile, 10.83), that SD is left out and the rows rebuilt and
+//      tested again (at most fde_max_sats times per kind and epoch; a faulty reference is replaced
+//      by the next highest satellite).  In such a flagged epoch the SDs left get the IGG-III
+//      equivalent weight q(w) of robust.hpp (Yang, Song & Xu 2002, J. Geodesy 76:353-358, whose
+//      bifactor weights for correlated observations scale a variance and keep the correlation
+//      coefficients: here the SD variance is divided by q before the DD covariance is formed, so
+//      the rows stay correlated through the reference as the model says), or Huber's; q = 0 leaves
+//      it out.  A phase SD left out keeps its ambiguity's state (not fixed this epoch, so a one-epoch
+//      phase outlier never reaches the float ambiguities); flagged phase_reset_epochs (2) epochs in a
+//      row (a jump that stays, e.g. a fractional or undetected slip) its ambiguity is re-initialised
+//      instead (0: never, left out while flagged).
+//      An epoch with no w^2 beyond chi2_row is the plain one, bit for bit.
 //   3. AR (gnss/ambiguity_resolution.hpp): MLAMBDA on the DD float ambiguities with the joint
 //      covariance (so the INS-propagated position uncertainty conditions them: after a GNSS gap
 //      the INS-predicted position constrains the search), ratio test, validation of the best
@@ -61,8 +83,10 @@
 #include "insnav/filter/ekf.hpp"
 #include "insnav/filter/layout.hpp"
 #include "insnav/gnss/ambiguity_resolution.hpp"
+#include "insnav/gnss/double_difference.hpp"
 #include "insnav/gnss/rtk.hpp"
 #include "insnav/meas/dd_phase.hpp"
+#include "insnav/meas/robust.hpp"
 
 namespace insnav {
 
@@ -82,6 +106,17 @@ struct RtkInsConfig {
   // smoothing); the EKF's propagation does not depend on where cycles end, so the forward
   // solution is the same up to rounding.
   double outage_cycle_s = kInf;
+  // Robust screening of the DD rows per satellite (file comment, 2a.): robust.hpp's settings; read
+  // are screening, chi2_row, igg_k0, igg_k1, huber, huber_k and fde_max_sats (identifications per
+  // row kind and epoch).  Off by default (docs/algorithms.md, "Tight RTK/INS").
+  RobustConfig robust = rtk_ins_robust_defaults();
+  int phase_reset_epochs = 2;  // a phase SD flagged this many epochs in a row: its ambiguity re-initialised
+
+  static RobustConfig rtk_ins_robust_defaults() {
+    RobustConfig r;
+    r.screening = false;
+    return r;
+  }
 };
 
 /// Slip count index of the INS-aided test (after gnss::SlipKind's).
@@ -94,6 +129,8 @@ struct RtkInsEpoch {
   double ratio = 0.0;
   double success_rate = 0.0;  // bootstrapped success rate of the ambiguities fixed (of all, when float)
   int n_fix = 0, n_dd = 0, n_sat = 0, code_rejected = 0;
+  int screened = 0;      // robust screening: single differences left out (code) or left out / reset (phase)
+  int downweighted = 0;  // robust screening: single differences IGG-III (Huber) down-weighted
   Vec3 r_e = Vec3::Zero();        // antenna, fixed if fixed, else float [m]
   Vec3 r_float_e = Vec3::Zero();  // antenna, float [m]
   Mat3 P_r = Mat3::Zero();        // covariance of r_e, NED [m^2]
@@ -109,6 +146,8 @@ struct RtkInsOutputs : NavOutputs {
   std::int32_t* n_dd = nullptr;
   std::int32_t* n_sat = nullptr;
   std::int32_t* code_rejected = nullptr;
+  std::int32_t* screened = nullptr;      // RtkInsEpoch::screened
+  std::int32_t* downweighted = nullptr;  // RtkInsEpoch::downweighted
   double* r_e = nullptr;        // (E, 3)
   double* r_float_e = nullptr;  // (E, 3)
   double* P_r = nullptr;        // (E, 9) NED
@@ -170,6 +209,9 @@ class RtkInsEngine {
     t_last_ = NAN;
     dt_epoch_ = 0.0;
     code_scale_ = 1.0;
+    epoch_index_ = 0;
+    last_phase_flag_.fill(-2);
+    phase_flag_run_.fill(0);
   }
 
   /// n IMU samples; E records over the rover rows and base rows (RtkRow layout).
@@ -265,19 +307,8 @@ class RtkInsEngine {
       for (int k = 0; k < kMaxAmb; ++k)
         if (amb_[k].sat >= 0) Paa_(k, k) += o.amb_psd * dt;
     t_last_ = t;
-    // common satellites
-    std::fill(base_of_.begin(), base_of_.end(), -1);
-    for (int j = 0; j < n_b; ++j) base_of_[key(base + j * RtkRow::kCols)] = j;
-    n_common_ = 0;
-    for (int i = 0; i < n_r; ++i) {
-      const double* rr = rover + i * RtkRow::kCols;
-      const int j = base_of_[key(rr)];
-      if (j < 0) continue;
-      if (!std::isfinite(rr[RtkRow::kSatPos]) || !std::isfinite(base[j * RtkRow::kCols + RtkRow::kSatPos])) continue;
-      common_r_[n_common_] = i;
-      common_b_[n_common_] = j;
-      ++n_common_;
-    }
+    // common satellites (gnss/double_difference.hpp, shared with gnss/rtk.hpp)
+    n_common_ = gnss::match_common_satellites(rover, n_r, base, n_b, base_of_, common_r_.data(), common_b_.data());
     rover_ = rover;
     base_ = base;
     r_base_ = r_base_e;
@@ -292,7 +323,12 @@ class RtkInsEngine {
     manage_ambiguities(nf);
     // code rows, screened
     std::fill(code_out_.begin(), code_out_.end(), false);
+    std::fill(phase_out_.begin(), phase_out_.end(), false);
+    std::fill(var_factor_code_.begin(), var_factor_code_.end(), 1.0);
+    std::fill(var_factor_phase_.begin(), var_factor_phase_.end(), 1.0);
+    ++epoch_index_;
     int m = build_rows(nf, true);
+    if (m > 0 && cfg_.robust.screening) m = screen_rows(nf, true, m, out);
     if (m > 0 && cfg_.code_chi2_row > 0.0) {
       gather();
       fill_H(m);
@@ -319,6 +355,10 @@ class RtkInsEngine {
     for (int pass = 0; pass < 3; ++pass) {
       mp = build_rows(nf, false);
       if (mp == 0) break;
+      if (pass == 0 && cfg_.robust.screening) {
+        mp = screen_rows(nf, false, mp, out);
+        if (mp == 0) break;
+      }
       gather();
       fill_H(mp);
       if (pass < 2 && o.outlier_sigma > 0.0) {
@@ -388,10 +428,7 @@ class RtkInsEngine {
     double sd = NAN;  // observed minus computed single difference at the posterior antenna [m]
   };
 
-  static int key(const double* r) {
-    const int k = static_cast<int>(r[gnss::RtkRow::kSat]);
-    return (k >= 0 && k < gnss::kMaxSatKeys) ? k : 0;
-  }
+  static int key(const double* r) { return gnss::sat_key(r); }
   static int sys_of(const double* r) { return static_cast<int>(r[gnss::RtkRow::kSys]); }
   double lam(int c, int f) const {
     return rover_[common_r_[c] * gnss::RtkRow::kCols + gnss::RtkRow::kFreq0 + gnss::RtkRow::kPerFreq * f + 4];
@@ -410,6 +447,8 @@ class RtkInsEngine {
     if (out.n_dd) out.n_dd[g] = e.n_dd;
     if (out.n_sat) out.n_sat[g] = e.n_sat;
     if (out.code_rejected) out.code_rejected[g] = e.code_rejected;
+    if (out.screened) out.screened[g] = e.screened;
+    if (out.downweighted) out.downweighted[g] = e.downweighted;
     const bool none = e.status == gnss::RtkStatus::kNone;
     for (int i = 0; i < 3; ++i) {
       if (out.r_e) out.r_e[3 * g + i] = none ? NAN : e.r_e(i);
@@ -574,7 +613,7 @@ class RtkInsEngine {
 
   bool valid(int c, int f, bool code) const {
     if (code) return std::isfinite(sd_code_[c * gnss::kMaxFreq + f]) && !code_out_[c * gnss::kMaxFreq + f];
-    return std::isfinite(sd_phase_[c * gnss::kMaxFreq + f]) &&
+    return std::isfinite(sd_phase_[c * gnss::kMaxFreq + f]) && !phase_out_[c * gnss::kMaxFreq + f] &&
            amb_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f] >= 0;
   }
 
@@ -590,14 +629,13 @@ class RtkInsEngine {
     y_.setZero(kMaxRowsE);
     for (int sys = 0; sys < gnss::kNumSystems; ++sys) {
       for (int f = 0; f < nf; ++f) {
-        int ref = -1;
-        for (int c = 0; c < n_common_; ++c) {
-          if (!use_[c] || sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols) != sys || !valid(c, f, code)) continue;
-          if (ref < 0 || el_r_[c] > el_r_[ref]) ref = c;
-        }
+        const int ref = gnss::highest_elevation_reference(
+            n_common_,
+            [&](int c) { return use_[c] && sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols) == sys && valid(c, f, code); },
+            [&](int c) { return el_r_[c]; });
         if (ref < 0) continue;
         const int m0 = m;
-        const double var_ref = var_sd_[ref] * cf * (code ? code_var_factor(ref, f) : 1.0);
+        const double var_ref = var_sd_[ref] * cf * (code ? code_var_factor(ref, f) : 1.0) * var_factor(ref, f, code);
         for (int c = 0; c < n_common_; ++c) {
           if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols) != sys) continue;
           if (!valid(c, f, code) || m >= kMaxRowsE) continue;
@@ -614,13 +652,133 @@ class RtkInsEngine {
           row_c_[m] = c;
           row_ref_[m] = ref;
           row_f_[m] = f;
-          R_(m, m) = var_sd_[c] * cf * (code ? code_var_factor(c, f) : 1.0) + var_bl + var_ref + var_bl;
+          R_(m, m) = var_sd_[c] * cf * (code ? code_var_factor(c, f) : 1.0) * var_factor(c, f, code) + var_bl + var_ref +
+                     var_bl;
           for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
           ++m;
         }
       }
     }
     return m;
+  }
+
+  // The robust variance factor 1/q of a single difference (screen_rows; 1 unless down-weighted).
+  double var_factor(int c, int f, bool code) const {
+    return (code ? var_factor_code_ : var_factor_phase_)[c * gnss::kMaxFreq + f];
+  }
+
+  // Teunissen's w-test of every single difference in the m DD rows built (file comment, 2a.), after
+  // gather() and fill_H(m): S = H P H^T + R, and for a bias in the SD of satellite c on frequency f
+  // the DD rows move by the column d (d = -e_r for the non-reference satellite of row r, d = +1 on
+  // every row of the group for its reference), w = d^T S^-1 y / sqrt(d^T S^-1 d).  Fills unit_*;
+  // false when S is not positive definite.
+  bool w_tests(int m) {
+    PHt_.noalias() = Pj_ * H_.transpose();
+    S_ = R_.topLeftCorner(m, m);
+    S_.noalias() += H_ * PHt_;
+    llt_.compute(S_);
+    if (llt_.info() != Eigen::Success) return false;
+    Sy_ = llt_.solve(y_.head(m));
+    Sinv_.setIdentity(m, m);
+    llt_.solveInPlace(Sinv_);
+    n_units_ = 0;
+    for (int r = 0; r < m; ++r) {
+      unit_c_[n_units_] = row_c_[r];
+      unit_f_[n_units_] = row_f_[r];
+      unit_w_[n_units_++] = -Sy_(r) / std::sqrt(std::max(Sinv_(r, r), 1e-300));
+    }
+    // the rows of one reference (one system and frequency) are consecutive (build_rows)
+    for (int r0 = 0; r0 < m;) {
+      int r1 = r0 + 1;
+      while (r1 < m && row_ref_[r1] == row_ref_[r0] && row_f_[r1] == row_f_[r0]) ++r1;
+      double num = 0.0, den = 0.0;
+      for (int q = r0; q < r1; ++q) {
+        num += Sy_(q);
+        for (int p = r0; p < r1; ++p) den += Sinv_(q, p);
+      }
+      unit_c_[n_units_] = row_ref_[r0];
+      unit_f_[n_units_] = row_f_[r0];
+      unit_w_[n_units_++] = num / std::sqrt(std::max(den, 1e-300));
+      r0 = r1;
+    }
+    return true;
+  }
+
+  // Leave the single difference of common satellite c, frequency f out of this epoch's rows of one
+  // kind.  Phase: the satellite's ambiguity keeps its state (not fixed this epoch, its lock not
+  // counted); flagged phase_reset_epochs epochs in a row (a jump that stays: a fractional or
+  // undetected slip), the ambiguity is re-initialised instead and its row kept (0: never).
+  void leave_out(int c, int f, bool code, RtkInsEpoch& out) {
+    const int i = c * gnss::kMaxFreq + f;
+    ++out.screened;
+    if (code) {
+      code_out_[i] = true;
+      return;
+    }
+    const int sf = key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f;
+    const int k = amb_of_[sf];
+    if (last_phase_flag_[sf] == epoch_index_) {  // flagged again in this epoch (after a reset): out
+      phase_out_[i] = true;
+      if (k >= 0) amb_[k].used = false;
+      return;
+    }
+    phase_flag_run_[sf] = last_phase_flag_[sf] == epoch_index_ - 1 ? phase_flag_run_[sf] + 1 : 1;
+    last_phase_flag_[sf] = epoch_index_;
+    if (k >= 0 && amb_[k].lock > 0 && cfg_.phase_reset_epochs > 0 && phase_flag_run_[sf] >= cfg_.phase_reset_epochs) {
+      init_amb(k, c, f);
+      ++out.slips[gnss::kSlipOutlier];
+    } else {
+      phase_out_[i] = true;
+      if (k >= 0) amb_[k].used = false;
+    }
+  }
+
+  // Robust screening of the m DD rows of one kind (file comment, 2a.): while the largest |w| of the
+  // single differences exceeds sqrt(chi2_row), leave that one out (identification and adaptation
+  // of the DIA procedure, at most fde_max_sats per kind and epoch) and test again; in a flagged
+  // epoch the remaining single differences get the IGG-III (or Huber) factor q(w) of robust.hpp on
+  // their variance (q = 0: left out).  An epoch with no |w| beyond the threshold is untouched.
+  // Returns the rows left (rebuilt).
+  int screen_rows(int nf, bool code, int m, RtkInsEpoch& out) {
+    const RobustConfig& rc = cfg_.robust;
+    bool flagged = false, current = false;  // current: unit_w_ belongs to the rows as they are
+    for (int it = 0; m > 0; ++it) {
+      gather();
+      fill_H(m);
+      current = w_tests(m);
+      if (!current) break;
+      int worst = -1;
+      double w2_max = rc.chi2_row;
+      for (int u = 0; u < n_units_; ++u)
+        if (unit_w_[u] * unit_w_[u] > w2_max) {
+          w2_max = unit_w_[u] * unit_w_[u];
+          worst = u;
+        }
+      if (worst < 0) break;
+      flagged = true;
+      if (it >= rc.fde_max_sats) break;  // the rest: q(w) below
+      leave_out(unit_c_[worst], unit_f_[worst], code, out);
+      m = build_rows(nf, code);
+      current = false;
+    }
+    if (!flagged || !current || m == 0) return m;
+    bool changed = false;
+    for (int u = 0; u < n_units_; ++u) {
+      const double w = unit_w_[u];
+      const double q = !(w * w <= rc.chi2_row) ? 0.0
+                       : rc.huber             ? huber_weight(w, rc.huber_k)
+                                              : igg3_weight(w, rc.igg_k0, rc.igg_k1);
+      const int c = unit_c_[u], f = unit_f_[u];
+      if (q <= 0.0) {
+        if (!(code ? code_out_ : phase_out_)[c * gnss::kMaxFreq + f]) leave_out(c, f, code, out);
+        changed = true;
+      } else if (q < 1.0) {
+        (code ? var_factor_code_ : var_factor_phase_)[c * gnss::kMaxFreq + f] /= q;
+        ++out.downweighted;
+        changed = true;
+      }
+    }
+    return changed ? build_rows(nf, code) : m;
   }
 
   // Time-correlated code errors and the adaptive code variance factor, as gnss/rtk.hpp's
@@ -757,9 +915,8 @@ class RtkInsEngine {
     for (int sys = 0; sys < gnss::kNumSystems; ++sys) {
       if (sys == gnss::kGlonass && !o.glonass_ar) continue;
       for (int f = 0; f < gnss::kMaxFreq; ++f) {
-        int ref = -1;
-        for (int k = 0; k < kMaxAmb; ++k)
-          if (eligible(amb_[k], sys, f) && (ref < 0 || amb_[k].el > amb_[ref].el)) ref = k;
+        const int ref = gnss::highest_elevation_reference(
+            kMaxAmb, [&](int k) { return eligible(amb_[k], sys, f); }, [&](int k) { return amb_[k].el; });
         if (ref < 0) continue;
         for (int k = 0; k < kMaxAmb; ++k) {
           if (k == ref || !eligible(amb_[k], sys, f) || n >= gnss::kMaxAmbiguities) continue;
@@ -873,6 +1030,18 @@ class RtkInsEngine {
   std::array<Vec3, gnss::kMaxSatKeys> u_{};
   std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> amb_row_{};
   std::array<bool, gnss::kMaxSatKeys * gnss::kMaxFreq> code_out_{};
+  // robust screening (screen_rows): per common satellite and frequency, phase left out this epoch
+  // and the variance factors 1/q; per satellite key and frequency, the epoch of the last phase flag
+  std::array<bool, gnss::kMaxSatKeys * gnss::kMaxFreq> phase_out_{};
+  std::array<double, gnss::kMaxSatKeys * gnss::kMaxFreq> var_factor_code_{}, var_factor_phase_{};
+  std::array<std::int64_t, gnss::kMaxSatKeys * gnss::kMaxFreq> last_phase_flag_{};
+  std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> phase_flag_run_{};  // epochs flagged in a row
+  std::int64_t epoch_index_ = 0;
+  int n_units_ = 0;
+  std::array<int, 2 * kMaxRowsE> unit_c_{}, unit_f_{};
+  std::array<double, 2 * kMaxRowsE> unit_w_{};
+  RMat Sinv_;
+  RVec Sy_;
   std::array<double, gnss::kMaxSatKeys * gnss::kMaxFreq> sd_phase_{}, sd_code_{}, d_{}, med_{};
   // rows and the compact update
   std::array<int, kMaxRowsE> row_c_{}, row_ref_{}, row_f_{}, row_amb_{}, row_amb_ref_{};

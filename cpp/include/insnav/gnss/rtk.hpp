@@ -61,6 +61,7 @@
 
 #include "insnav/earth/wgs84.hpp"
 #include "insnav/gnss/ambiguity_resolution.hpp"
+#include "insnav/gnss/double_difference.hpp"
 #include "insnav/gnss/lambda.hpp"
 
 namespace insnav::gnss {
@@ -68,26 +69,9 @@ namespace insnav::gnss {
 inline constexpr double kCLight = 299792458.0;     // [m/s]
 inline constexpr double kOmegaE = 7.2921151467e-5;  // IS-GPS Earth rate [rad/s] (Sagnac term)
 
-/// Systems of the RTK engine (index order of the per-row ``system`` column).
-enum RtkSystem : int { kGps = 0, kGlonass = 1, kGalileo = 2, kBeidou = 3, kQzss = 4, kNumSystems = 5 };
-
-inline constexpr int kMaxFreq = 3;        // frequency slots per system
-inline constexpr int kMaxPrn = 64;        // satellite numbers per system
-inline constexpr int kMaxSatKeys = kNumSystems * kMaxPrn;
 inline constexpr int kMaxAmbStates = 120; // tracked single-differenced ambiguities
 inline constexpr int kMaxStates = 6 + kMaxAmbStates;
 inline constexpr int kMaxRows = kMaxAmbStates;  // DD rows of one kind (phase and code are updated in turn)
-
-/// Column layout of one observation row (one satellite of one receiver epoch).
-struct RtkRow {
-  static constexpr int kSat = 0;     // key = system * 64 + prn
-  static constexpr int kSys = 1;     // RtkSystem
-  static constexpr int kFreq0 = 2;   // per frequency slot f: kFreq0 + 5 f + {0 P [m], 1 L [cyc], 2 D [Hz], 3 LLI, 4 lambda [m]}
-  static constexpr int kPerFreq = 5;
-  static constexpr int kSatPos = kFreq0 + kPerFreq * kMaxFreq;  // r^s at transmission, ECEF of that instant [m]
-  static constexpr int kSatClock = kSatPos + 3;                 // c dt^s [m]
-  static constexpr int kCols = kSatClock + 1;
-};
 
 /// State layout: position, velocity (kinematic), then single-differenced ambiguities.
 struct RtkLayout {
@@ -326,10 +310,7 @@ class SlipDetector {
     double mw_mean = 0.0, mw_m2 = 0.0, mw_t = NAN;
     int mw_n = 0;
   };
-  static int key(const double* r) {
-    const int k = static_cast<int>(r[RtkRow::kSat]);
-    return (k >= 0 && k < kMaxSatKeys) ? k : 0;
-  }
+  static int key(const double* r) { return sat_key(r); }
   std::array<SatTrack, kMaxSatKeys> sat_{};
   std::array<double, kMaxSatKeys * kMaxFreq> dop_res_{};
   std::array<double, kMaxSatKeys * kMaxFreq> med_{};
@@ -381,16 +362,7 @@ class RtkEngine {
     std::array<int, kNumSlipKinds> slips{};
     rover_slip_.detect(0.0, rover, n_r, nf, opt_, flags_r_.data(), slips);
     std::fill(flags_b_.begin(), flags_b_.end(), 0);
-    std::fill(base_of_.begin(), base_of_.end(), -1);
-    for (int j = 0; j < n_b; ++j) base_of_[key(base + j * RtkRow::kCols)] = j;
-    n_common_ = 0;
-    for (int i = 0; i < n_r; ++i) {
-      const int j = base_of_[key(rover + i * RtkRow::kCols)];
-      if (j < 0) continue;
-      common_r_[n_common_] = i;
-      common_b_[n_common_] = j;
-      ++n_common_;
-    }
+    n_common_ = match_common_satellites(rover, n_r, base, n_b, base_of_, common_r_.data(), common_b_.data());
     rover_ = rover;
     base_ = base;
     r_base_ = r_base_e;
@@ -429,19 +401,8 @@ class RtkEngine {
     rover_slip_.detect(t, rover, n_r, nf, opt_, flags_r_.data(), out.slips);
     if (base_new) base_slip_.detect(t, base, n_b, nf, opt_, flags_b_.data(), out.slips);
     else std::fill(flags_b_.begin(), flags_b_.end(), 0);
-    // common satellites
-    std::fill(base_of_.begin(), base_of_.end(), -1);
-    for (int j = 0; j < n_b; ++j) base_of_[key(base + j * RtkRow::kCols)] = j;
-    n_common_ = 0;
-    for (int i = 0; i < n_r; ++i) {
-      const double* rr = rover + i * RtkRow::kCols;
-      const int j = base_of_[key(rr)];
-      if (j < 0) continue;
-      if (!std::isfinite(rr[RtkRow::kSatPos]) || !std::isfinite(base[j * RtkRow::kCols + RtkRow::kSatPos])) continue;
-      common_r_[n_common_] = i;
-      common_b_[n_common_] = j;
-      ++n_common_;
-    }
+    // common satellites (gnss/double_difference.hpp)
+    n_common_ = match_common_satellites(rover, n_r, base, n_b, base_of_, common_r_.data(), common_b_.data());
     rover_ = rover;
     base_ = base;
     r_base_ = r_base_e;
@@ -530,10 +491,7 @@ class RtkEngine {
     double el = 0.0;
   };
 
-  static int key(const double* r) {
-    const int k = static_cast<int>(r[RtkRow::kSat]);
-    return (k >= 0 && k < kMaxSatKeys) ? k : 0;
-  }
+  static int key(const double* r) { return sat_key(r); }
   static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
 
   // Geometry of a receiver at r to the satellite of row: range with Sagnac term, unit vector, elevation.
@@ -707,12 +665,10 @@ class RtkEngine {
       for (int sys = 0; sys < kNumSystems; ++sys) {
         for (int f = 0; f < nf; ++f) {
           // reference: highest rover elevation with a valid observation (and ambiguity for phase)
-          int ref = -1;
-          for (int c = 0; c < n_common_; ++c) {
-            if (!use_[c] || sys_of(rover_ + common_r_[c] * RtkRow::kCols) != sys) continue;
-            if (!valid(c, f, code)) continue;
-            if (ref < 0 || el_r_[c] > el_r_[ref]) ref = c;
-          }
+          const int ref = highest_elevation_reference(
+              n_common_,
+              [&](int c) { return use_[c] && sys_of(rover_ + common_r_[c] * RtkRow::kCols) == sys && valid(c, f, code); },
+              [&](int c) { return el_r_[c]; });
           if (ref < 0) continue;
           const int m0 = m;
           const double var_ref =
@@ -974,12 +930,8 @@ class RtkEngine {
     for (int sys = 0; sys < kNumSystems; ++sys) {
       if (sys == kGlonass && !opt_.glonass_ar) continue;
       for (int f = 0; f < kMaxFreq; ++f) {
-        int ref = -1;
-        for (int k = 0; k < kMaxAmbStates; ++k) {
-          const AmbSlot& a = amb_[k];
-          if (!eligible(a, sys, f)) continue;
-          if (ref < 0 || a.el > amb_[ref].el) ref = k;
-        }
+        const int ref = highest_elevation_reference(
+            kMaxAmbStates, [&](int k) { return eligible(amb_[k], sys, f); }, [&](int k) { return amb_[k].el; });
         if (ref < 0) continue;
         for (int k = 0; k < kMaxAmbStates; ++k) {
           if (k == ref || !eligible(amb_[k], sys, f) || n >= kMaxAmbiguities) continue;
