@@ -64,7 +64,7 @@ def medium():
 
 def test_estimated_sd_ionosphere_follows_the_simulated_one(medium, tmp_path):
     sim = medium
-    g = sim.cfg
+    g = sim.config
     noise = rtk_noise_options(g)
     sol = _run(sim, tmp_path, record_iono=True, iono="estimate", iono_sigma_per_10km_m=g["iono_ppm"] * 0.01,
                iono_tau_s=g["iono_tau"], **noise)

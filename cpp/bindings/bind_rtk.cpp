@@ -259,8 +259,8 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   py::array_t<int> slips({n, static_cast<py::ssize_t>(gnss::kNumSlipKinds)});
   // per epoch and satellite key: the single-differenced ionosphere estimate and sigma [m] (NaN: no state)
   const py::ssize_t ni = record_iono ? n : 0;
-  py::array_t<double> iono_m({ni, static_cast<py::ssize_t>(gnss::kMaxSatKeys)}),
-      iono_sigma_m({ni, static_cast<py::ssize_t>(gnss::kMaxSatKeys)});
+  const py::ssize_t nk = gnss::kMaxSatKeys;
+  py::array_t<double> iono_m({ni, nk}), iono_sigma_m({ni, nk}), iono_dd_m({ni, nk}), iono_dd_sigma_m({ni, nk});
   const std::int64_t* ro = rover_off.data();
   const std::int64_t* bo = base_off.data();
   const std::int64_t* bi = base_index.data();
@@ -305,6 +305,9 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
           if (!eng->iono_estimate(s, v, sg)) v = sg = NAN;
           iono_m.mutable_data()[e * gnss::kMaxSatKeys + s] = v;
           iono_sigma_m.mutable_data()[e * gnss::kMaxSatKeys + s] = sg;
+          if (!eng->iono_dd_estimate(s, v, sg)) v = sg = NAN;
+          iono_dd_m.mutable_data()[e * gnss::kMaxSatKeys + s] = v;
+          iono_dd_sigma_m.mutable_data()[e * gnss::kMaxSatKeys + s] = sg;
         }
     }
   }
@@ -325,6 +328,8 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   if (record_iono) {
     d["iono_m"] = iono_m;
     d["iono_sigma_m"] = iono_sigma_m;
+    d["iono_dd_m"] = iono_dd_m;
+    d["iono_dd_sigma_m"] = iono_dd_sigma_m;
   }
   return d;
 }
@@ -395,7 +400,8 @@ void bind_rtk(py::module_& m) {
         py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
         py::arg("record_iono") = false,
         "RTK engine over every rover epoch (GIL released); record_iono: also the (n, 320) single-differenced "
-        "ionosphere estimates iono_m and iono_sigma_m [m] per satellite key (NaN: no state).");
+        "ionosphere estimates iono_m and iono_sigma_m [m] per satellite key (NaN: no state), and iono_dd_m, "
+        "iono_dd_sigma_m: the double differences against the reference of each system (NaN for it).");
   m.def("slip_detect", &slip_detect, py::arg("t"), py::arg("off"), py::arg("rows"), py::arg("options"),
         "Cycle-slip flags (m, 3) of one receiver's rows (bits: LLI, GF, MW, Doppler, gap).");
   m.def("rtk_double_differences", &rtk_double_differences, py::arg("rover_rows"), py::arg("base_rows"),

@@ -710,7 +710,10 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
     record_iono : bool
         Also return, in ``info["iono_m"]`` and ``info["iono_sigma_m"]`` (n, 320), the float
         single-differenced (rover - base) slant ionosphere at 1575.42 MHz and its sigma [m] per
-        epoch and satellite key ``system * 64 + prn`` (NaN where no state; ``iono = "estimate"``).
+        epoch and satellite key ``system * 64 + prn`` (NaN where no state; ``iono = "estimate"``);
+        ``info["iono_dd_m"]``, ``info["iono_dd_sigma_m"]`` the double differences against the highest
+        satellite of each system with a state (NaN for it): only these are observable, the common
+        part of a system's single differences is the prior's.
 
     Returns
     -------
@@ -733,8 +736,8 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
                        success_rate_estimated=np.asarray(out["success_rate_estimated"]),
                        info=dict(rover=rover.path, base=base.path, options=opt, rover_signals=rover.signals,
                                  base_signals=base.signals,
-                                 **({"iono_m": np.asarray(out["iono_m"]), "iono_sigma_m": np.asarray(out["iono_sigma_m"])}
-                                    if record_iono else {})))
+                                 **({k: np.asarray(out[k]) for k in ("iono_m", "iono_sigma_m", "iono_dd_m",
+                                                                     "iono_dd_sigma_m")} if record_iono else {})))
 
 
 def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):

@@ -436,6 +436,25 @@ class RtkEngine {
     return (sat >= 0 && sat < kMaxSatKeys && iono_of_[sat] >= 0) ? RtkLayout::kIono + iono_of_[sat] : -1;
   }
 
+  /// The double-differenced ionosphere of satellite key sat against the reference of its system (the
+  /// highest satellite with an ionosphere state in use): I^sat - I^ref and its sigma [m] at
+  /// kIonoRefFreqHz.  Only double differences are observable: the common part of a system's
+  /// single differences is the prior's.  False for the reference itself and without a state.
+  bool iono_dd_estimate(int sat, double& value_m, double& sigma_m) const {
+    if (sat < 0 || sat >= kMaxSatKeys || iono_of_[sat] < 0) return false;
+    const int sys = sat / kMaxPrn;
+    int ref = -1;
+    for (int k = 0; k < kMaxIonoStates; ++k)
+      if (iono_[k].sat >= 0 && iono_[k].used && iono_[k].sat / kMaxPrn == sys && (ref < 0 || iono_[k].el > iono_[ref].el))
+        ref = k;
+    const int k = iono_of_[sat];
+    if (ref < 0 || ref == k || !iono_[k].used) return false;
+    const int s = RtkLayout::kIono + k, r = RtkLayout::kIono + ref;
+    value_m = x_(s) - x_(r);
+    sigma_m = std::sqrt(std::max(P_(s, s) + P_(r, r) - 2.0 * P_(s, r), 0.0));
+    return true;
+  }
+
   /// The single-differenced (rover - base) slant ionosphere of satellite key sat (system * 64 + prn)
   /// at kIonoRefFreqHz: value and sigma [m].  False when no state is tracked (iono_mode != kEstimate).
   bool iono_estimate(int sat, double& value_m, double& sigma_m) const {
