@@ -53,8 +53,9 @@ def score(t, r_e, q, t_truth, r_truth) -> dict:
     err = np.where(ok, np.linalg.norm(r_e - r_truth[i], axis=1), np.nan)
     fx = (q == 1) & ok
     e = err[fx]
+    fl = (q == 2) & ok
     return dict(n=int(t_truth.size), fixed=int(fx.sum()), wrong=int(np.sum(e > WRONG_FIX_M)),
-                sq=float(np.sum(e ** 2)))
+                sq=float(np.sum(e ** 2)), float_err=err[fl])
 
 
 def insnav_solve(files, nf, extra, systems="GE", mask=10.0, record_iono=False):
@@ -83,14 +84,17 @@ def _add(acc, s):
     for k in ("n", "fixed", "wrong", "sq"):
         acc[k] = acc.get(k, 0) + s[k]
     acc.setdefault("runs", []).append(s)
+    acc.setdefault("float_err", []).append(s["float_err"])
 
 
 def _row(name, a) -> str:
     fr = a["fixed"] / max(a["n"], 1)
     rms = 100 * math.sqrt(a["sq"] / a["fixed"]) if a["fixed"] else float("nan")
     per = " ".join(f"{r['fixed']}/{r['wrong']}" for r in a["runs"])
+    fe = np.concatenate(a["float_err"])
+    fl = f"{100 * np.median(fe):.1f} cm" if fe.size else "-"
     return (f"| {name} | {100 * fr:.1f} % ({a['fixed']} / {a['n']}) | {100 * a['wrong'] / max(a['fixed'], 1):.2f} % "
-            f"({a['wrong']}) | {rms:.2f} cm | {per} |")
+            f"({a['wrong']}) | {rms:.2f} cm | {fl} | {per} |")
 
 
 def simulation(seeds, base_km, iono_ppm, nfs=(2, 1), rtklib=True):
@@ -121,7 +125,8 @@ def simulation(seeds, base_km, iono_ppm, nfs=(2, 1), rtklib=True):
         lines += [f"\nSimulation: base {base_km:g} km S and W of the start (baseline {bl.min() / 1e3:.1f}-"
                   f"{bl.max() / 1e3:.1f} km), iono_ppm {iono_ppm:g}, seeds {list(seeds)}, "
                   f"frequencies {nf}, GPS+Galileo, continuous AR", "",
-                  "| engine | fix rate | wrong / fixed | fixed 3-D RMS | per seed fixed/wrong |", "|---|---|---|---|---|"]
+                  "| engine | fix rate | wrong / fixed | fixed 3-D RMS | float median 3-D error | per seed fixed/wrong |",
+                  "|---|---|---|---|---|---|"]
         lines += [_row(k, a) for k, a in acc.items()]
     return lines
 

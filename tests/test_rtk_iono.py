@@ -150,3 +150,8 @@ def test_iono_options_are_checked():
     assert RtkOptions.from_dict({"iono": "estimate"}).core_dict()["iono_sigma_per_10km_m"] == 0.03
     assert RtkOptions.from_dict({}).core_dict()["iono_sigma_per_10km_m"] == 0.0
     assert RtkOptions.from_dict({}).core_dict()["iono_mode"] == 1
+    from insnav.filters.rtk_ins import rtk_ins_options
+
+    with pytest.raises(ConfigError, match="tight RTK/INS"):
+        rtk_ins_options({"iono": "estimate"})
+    assert rtk_ins_options({"iono": "off"}).core_dict()["iono_mode"] == 0
