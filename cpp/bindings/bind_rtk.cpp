@@ -206,6 +206,11 @@ RtkOptions rtk_options_from_dict(const py::dict& d) {
     else if (k == "noise_confidence") o.noise_confidence = v.cast<double>();
     else if (k == "glonass_factor") o.glonass_factor = v.cast<double>();
     else if (k == "iono_sigma_per_10km_m") o.iono_sigma_per_10km_m = v.cast<double>();
+    else if (k == "iono_mode") {
+      const int im = v.cast<int>();
+      if (im < 0 || im > 2) throw py::value_error("rtk options: iono_mode must be 0 (off), 1 (variance) or 2 (estimate)");
+      o.iono_mode = static_cast<gnss::IonoMode>(im);
+    } else if (k == "iono_tau_s") o.iono_tau_s = v.cast<double>();
     else if (k == "tropo_model") o.tropo_model = v.cast<bool>();
     else if (k == "accel_psd_h") o.accel_psd_h = v.cast<double>();
     else if (k == "accel_psd_v") o.accel_psd_v = v.cast<double>();
@@ -238,7 +243,8 @@ void check_rows(const DArray& rows, const char* name) {
 }
 
 py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& rover_rows, const IArray& base_off,
-                 const DArray& base_rows, const IArray& base_index, const DArray& r_base_e, const py::dict& opts) {
+                 const DArray& base_rows, const IArray& base_index, const DArray& r_base_e, const py::dict& opts,
+                 bool record_iono) {
   const py::ssize_t n = t_rover.ndim() == 1 ? t_rover.shape(0) : -1;
   if (n < 0) throw py::value_error("rtk_run: t_rover must be 1-D");
   check_rows(rover_rows, "rtk_run: rover_rows");
@@ -251,6 +257,10 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   py::array_t<double> ratio(n), success_rate(n), sr_factor(n), sr_est(n), r_e({n, static_cast<py::ssize_t>(3)}), v_e({n, static_cast<py::ssize_t>(3)}),
       r_float({n, static_cast<py::ssize_t>(3)}), P_r({n, static_cast<py::ssize_t>(9)});
   py::array_t<int> slips({n, static_cast<py::ssize_t>(gnss::kNumSlipKinds)});
+  // per epoch and satellite key: the single-differenced ionosphere estimate and sigma [m] (NaN: no state)
+  const py::ssize_t ni = record_iono ? n : 0;
+  const py::ssize_t nk = gnss::kMaxSatKeys;
+  py::array_t<double> iono_m({ni, nk}), iono_sigma_m({ni, nk}), iono_dd_m({ni, nk}), iono_dd_sigma_m({ni, nk});
   const std::int64_t* ro = rover_off.data();
   const std::int64_t* bo = base_off.data();
   const std::int64_t* bi = base_index.data();
@@ -289,6 +299,16 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
         for (int j = 0; j < 3; ++j) P_r.mutable_data()[e * 9 + i * 3 + j] = out.P_r(i, j);
       }
       for (int k = 0; k < gnss::kNumSlipKinds; ++k) slips.mutable_data()[e * gnss::kNumSlipKinds + k] = out.slips[k];
+      if (record_iono)
+        for (int s = 0; s < gnss::kMaxSatKeys; ++s) {
+          double v = NAN, sg = NAN;
+          if (!eng->iono_estimate(s, v, sg)) v = sg = NAN;
+          iono_m.mutable_data()[e * gnss::kMaxSatKeys + s] = v;
+          iono_sigma_m.mutable_data()[e * gnss::kMaxSatKeys + s] = sg;
+          if (!eng->iono_dd_estimate(s, v, sg)) v = sg = NAN;
+          iono_dd_m.mutable_data()[e * gnss::kMaxSatKeys + s] = v;
+          iono_dd_sigma_m.mutable_data()[e * gnss::kMaxSatKeys + s] = sg;
+        }
     }
   }
   py::dict d;
@@ -305,6 +325,12 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   d["r_float_e"] = r_float;
   d["P_r"] = P_r;
   d["slips"] = slips;
+  if (record_iono) {
+    d["iono_m"] = iono_m;
+    d["iono_sigma_m"] = iono_sigma_m;
+    d["iono_dd_m"] = iono_dd_m;
+    d["iono_dd_sigma_m"] = iono_dd_sigma_m;
+  }
   return d;
 }
 
@@ -372,7 +398,10 @@ void bind_rtk(py::module_& m) {
         "a lower bound of ILS's.");
   m.def("rtk_run", &rtk_run, py::arg("t_rover"), py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"),
         py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
-        "RTK engine over every rover epoch (GIL released).");
+        py::arg("record_iono") = false,
+        "RTK engine over every rover epoch (GIL released); record_iono: also the (n, 320) single-differenced "
+        "ionosphere estimates iono_m and iono_sigma_m [m] per satellite key (NaN: no state), and iono_dd_m, "
+        "iono_dd_sigma_m: the double differences against the reference of each system (NaN for it).");
   m.def("slip_detect", &slip_detect, py::arg("t"), py::arg("off"), py::arg("rows"), py::arg("options"),
         "Cycle-slip flags (m, 3) of one receiver's rows (bits: LLI, GF, MW, Doppler, gap).");
   m.def("rtk_double_differences", &rtk_double_differences, py::arg("rover_rows"), py::arg("base_rows"),

@@ -7,7 +7,10 @@
 // product formula (Teunissen 1998); FixValidator's rules over epochs; the common-satellite matching
 // and reference choice shared by both carrier-phase engines (gnss/double_difference.hpp); the RTK/INS
 // engine's robust screening of the single differences (engine/rtk_ins_engine.hpp, 2a.): outliers
-// identified per satellite, no heap allocation in a flagged epoch.
+// identified per satellite, no heap allocation in a flagged epoch.  Estimated ionosphere
+// (iono_mode kEstimate) on a 20 km baseline with a known single-differenced ionosphere: the
+// ionosphere and position columns of H against numerical derivatives of the innovations, the
+// analytic factors -/+ (f_1 / f_k)^2 on phase / code, and the estimates converging to the truth.
 #include <cstdio>
 #include <memory>
 #include <random>
@@ -34,7 +37,7 @@ double range_sagnac(const Vec3& rs, const Vec3& r) {
 }
 
 std::vector<double> rows_for(const Vec3& r, const std::vector<Vec3>& sats, const std::vector<double>& N1,
-                             const std::vector<double>& N2, double clk_m) {
+                             const std::vector<double>& N2, double clk_m, const std::vector<double>* iono_l1_m = nullptr) {
   std::vector<double> rows(sats.size() * RtkRow::kCols, NAN);
   for (size_t k = 0; k < sats.size(); ++k) {
     double* w = rows.data() + k * RtkRow::kCols;
@@ -45,8 +48,9 @@ std::vector<double> rows_for(const Vec3& r, const std::vector<Vec3>& sats, const
     const double N[2] = {N1[k], N2[k]};
     for (int f = 0; f < 2; ++f) {
       double* q = w + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
-      q[0] = rho;
-      q[1] = rho / lam[f] + N[f];
+      const double I = iono_l1_m ? (*iono_l1_m)[k] * (lam[f] / kL1) * (lam[f] / kL1) : 0.0;  // (f_1 / f)^2 I
+      q[0] = rho + I;
+      q[1] = (rho - I) / lam[f] + N[f];
       q[2] = 0.0;
       q[3] = 0.0;
       q[4] = lam[f];
@@ -234,6 +238,112 @@ int main() {
     EXPECT_LT(worst_ins, 1e-3);
     EXPECT_TRUE(g_eigen_asserts == 0);
     std::printf("rtk/ins screening: %d fixed epochs, worst %.2e m\n", fixed_ins, worst_ins);
+  }
+  // Estimated ionosphere, 20 km baseline: rover rows carry the single-differenced ionosphere I_k
+  {
+    const Vec3 r_r2 = r_b + C * Vec3(14000.0, -14000.0, 20.0);
+    std::vector<double> iono(8);
+    for (int k = 0; k < 8; ++k) iono[k] = 0.04 * (k - 3.5) / 3.5;  // -4 .. +4 cm on L1
+    RtkOptions oi = o;
+    oi.iono_mode = IonoMode::kEstimate;
+    oi.iono_sigma_per_10km_m = 0.03;
+    oi.ar_mode = ArMode::kFixAndHold;  // the held integers make the float double-differenced ionosphere exact
+    auto ei = std::make_unique<RtkEngine>(oi);
+    const auto rr = rows_for(r_r2, sats, N1r, N2r, 1234.0, &iono);
+    const auto rb = rows_for(r_b, sats, N1b, N2b, -567.0);
+    ei->process(2000.0, rr.data(), 8, rb.data(), 8, true, r_b);
+    constexpr int kM = 16;
+    std::vector<double> y0(kM), y1(kM), H(kM * kMaxStates), H1(kM * kMaxStates);
+    const double mu2 = (kL2 / kL1) * (kL2 / kL1);
+    double worst_h = 0.0, worst_mu = 0.0, worst_pos = 0.0;
+    int n_iono_cols = 0;
+    for (int code = 0; code < 2; ++code) {
+      const int m = ei->linearised_rows(code, y0.data(), H.data(), kM);
+      EXPECT_TRUE(m == 14);  // 7 double differences on each of two frequencies
+      for (int k = 0; k < 8; ++k) {
+        const int j = ei->iono_index(k + 1);
+        EXPECT_TRUE(j >= RtkLayout::kIono);
+        if (j < 0) continue;
+        ++n_iono_cols;
+        const double eps = 1e-3, x0 = ei->state(j);
+        ei->state(j) = x0 + eps;
+        ei->linearised_rows(code, y1.data(), H1.data(), kM);
+        ei->state(j) = x0;
+        for (int r = 0; r < m; ++r) {
+          // y = z - h(x): dh/dx_j = -(y(x + eps) - y(x)) / eps, exact (h is linear in I)
+          worst_h = std::max(worst_h, std::abs(-(y1[r] - y0[r]) / eps - H[r * kMaxStates + j]));
+          const double h = H[r * kMaxStates + j];
+          if (h != 0.0) worst_mu = std::max(worst_mu, std::abs(std::abs(h) - (r < 7 ? 1.0 : mu2)));  // slot 0 rows first
+        }
+      }
+      // position columns: a 1 mm step; H omits the derivative of the Sagnac term, omega_e |r^s| / c ~ 6e-6
+      // per satellite (RTKLIB's H omits it too), and the nonlinearity is ~ 1 mm / 20000 km
+      for (int i = 0; i < 3; ++i) {
+        const double eps = 1e-3, x0 = ei->state(RtkLayout::kPos + i);
+        ei->state(RtkLayout::kPos + i) = x0 + eps;
+        ei->linearised_rows(code, y1.data(), H1.data(), kM);
+        ei->state(RtkLayout::kPos + i) = x0;
+        for (int r = 0; r < m; ++r)
+          worst_pos = std::max(worst_pos, std::abs(-(y1[r] - y0[r]) / eps - H[r * kMaxStates + RtkLayout::kPos + i]));
+      }
+    }
+    EXPECT_TRUE(n_iono_cols == 16);
+    EXPECT_LT(worst_h, 1e-9);
+    EXPECT_LT(worst_mu, 1e-12);
+    EXPECT_LT(worst_pos, 3e-5);
+    // signs: satellite 1 (80 deg) is the reference of every row: its column +mu on phase, -mu on code;
+    // every other satellite's column -mu on phase, +mu on code
+    {
+      int sign_ok = 0, rows = 0;
+      for (int code = 0; code < 2; ++code) {
+        const int m = ei->linearised_rows(code, y0.data(), H.data(), kM);
+        const double sgn = code ? 1.0 : -1.0;
+        for (int r = 0; r < m; ++r, ++rows) {
+          int pos = 0, neg = 0;
+          for (int k = 0; k < 8; ++k) {
+            const double h = sgn * H[r * kMaxStates + ei->iono_index(k + 1)];
+            if (h > 0.0) ++pos;
+            if (h < 0.0) ++neg;
+            if (k == 0 && h < 0.0) ++sign_ok;
+          }
+          EXPECT_TRUE(pos == 1 && neg == 1);
+        }
+      }
+      EXPECT_TRUE(rows == 28 && sign_ok == 28);
+    }
+    // noise-free epochs: fixed at the true position (to the few mm of the compromise between the
+    // phase sigma and the prior's pull towards I = 0), the double-differenced ionosphere (the
+    // observable part: against satellite 1, the reference) to 1 mm once the integers are held
+    int fixed_i = 0;
+    double worst_r = 0.0, worst_i = 0.0;
+    for (int e = 1; e < 30; ++e) {
+      const auto r2 = rows_for(r_r2, sats, N1r, N2r, 1234.0 + e, &iono);
+      const auto b2 = rows_for(r_b, sats, N1b, N2b, -567.0 + 2 * e);
+      if (e == 3) Eigen::internal::set_is_malloc_allowed(false);
+      const RtkEpoch out = ei->process(2000.0 + e, r2.data(), 8, b2.data(), 8, true, r_b);
+      if (e >= 20 && out.status == RtkStatus::kFixed) {
+        ++fixed_i;
+        worst_r = std::max(worst_r, (out.r_e - r_r2).norm());
+      }
+    }
+    Eigen::internal::set_is_malloc_allowed(true);
+    for (int k = 1; k < 8; ++k) {
+      double v = 0.0, sg = 0.0, v0 = 0.0, sg0 = 0.0;
+      EXPECT_TRUE(ei->iono_estimate(k + 1, v, sg) && ei->iono_estimate(1, v0, sg0));
+      EXPECT_TRUE(ei->iono_dd_estimate(k + 1, v, sg));
+      worst_i = std::max(worst_i, std::abs(v - (iono[k] - iono[0])));
+      EXPECT_LT(sg, 0.01);
+    }
+    {
+      double v = 0.0, sg = 0.0;
+      EXPECT_TRUE(!ei->iono_dd_estimate(1, v, sg));  // the reference
+    }
+    EXPECT_TRUE(fixed_i == 10);
+    EXPECT_LT(worst_r, 2e-3);
+    EXPECT_LT(worst_i, 1e-3);
+    EXPECT_TRUE(g_eigen_asserts == 0);
+    std::printf("rtk iono: dH %.1e, dmu %.1e, dpos %.1e; fixed %d, worst %.2e m, iono worst %.2e m\n", worst_h,
+                worst_mu, worst_pos, fixed_i, worst_r, worst_i);
   }
   std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
   TEST_MAIN_END()

@@ -330,6 +330,7 @@ def rtk_run(
     base_index: npt.ArrayLike,
     r_base_e: npt.ArrayLike,
     options: dict[str, Any],
+    record_iono: bool = False,
 ) -> dict[str, np.ndarray]: ...
 def slip_detect(t: npt.ArrayLike, off: npt.ArrayLike, rows: npt.ArrayLike, options: dict[str, Any]) -> np.ndarray: ...
 def rtk_double_differences(

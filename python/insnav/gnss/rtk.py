@@ -61,6 +61,9 @@ SIGNALS = {
 STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 4: "dgps"}
 _MODES = {"static": 0, "kinematic": 1}
 _AR_MODES = {"off": 0, "continuous": 1, "instantaneous": 2, "fix-and-hold": 3}
+_IONO_MODES = {"off": 0, "variance": 1, "estimate": 2}
+#: default iono_sigma_per_10km_m per mode [m]: no DD variance; RTKLIB's stats-stdiono for the states
+_IONO_SIGMA_DEFAULT = {"off": 0.0, "variance": 0.0, "estimate": 0.03}
 C_LIGHT = 299792458.0
 
 
@@ -123,8 +126,21 @@ class RtkOptions(TomlTable):
         Gain of the adaptive code variance factor estimated from post-fit code residuals (0: off).
     amb_psd_cycles2ps : float
         Random walk of the single-differenced ambiguities [cycles^2/s].
-    iono_sigma_per_10km_m : float
-        Double-difference ionosphere sigma per 10 km of baseline [m] (medium baselines).
+    iono : str
+        Between-receiver ionosphere (docs/algorithms.md, "Ionosphere of medium baselines"):
+        ``"variance"`` (default) adds ``(iono_sigma_per_10km_m bl / 10 km)^2`` to the variance of
+        every double difference (with the default sigma 0: nothing, right for short baselines);
+        ``"estimate"`` estimates one single-differenced slant ionosphere per satellite (L1 delay
+        [m], x (f_L1 / f_k)^2, minus on phase, plus on code; RTKLIB's ``pos1-ionoopt=est-stec``),
+        ionosphere-weighted: prior and stationary sigma ``iono_sigma_per_10km_m bl / 10 km M(el)``,
+        first-order Gauss-Markov with ``iono_tau_s``; ``"off"``: no ionosphere term.
+    iono_sigma_per_10km_m : float or None
+        Ionosphere sigma per 10 km of baseline [m]: of a double difference (``iono = "variance"``,
+        default 0) or of the zenith single difference (``iono = "estimate"``, default 0.03: RTKLIB's
+        ``stats-stdiono``, 3 ppm).
+    iono_tau_s : float
+        Correlation time of the estimated ionosphere [s] (1800: with 0.03 m per 10 km, the PSD
+        2 sigma^2 / tau = 1e-6 m^2/s per (10 km)^2 of RTKLIB's ``stats-prniono`` 1e-3 m/sqrt(s)).
     accel_psd_h_m2ps3, accel_psd_v_m2ps3 : float
         White acceleration PSD, kinematic mode [m^2/s^3].
     max_age_s : float
@@ -157,7 +173,9 @@ class RtkOptions(TomlTable):
     success_rate_noise_confidence: float = 0.5
     confirm_epochs: int = 5
     confirm_max_ambiguities: int = 6
-    iono_sigma_per_10km_m: float = 0.0
+    iono: str = "variance"
+    iono_sigma_per_10km_m: float | None = None
+    iono_tau_s: float = 1800.0
     tropo_model: bool = True
     accel_psd_h_m2ps3: float = 9.0
     accel_psd_v_m2ps3: float = 1.0
@@ -190,6 +208,13 @@ class RtkOptions(TomlTable):
             bad("partial_ar_order", "elevation or variance")
         if not isinstance(self.glonass_ar, bool):
             bad("glonass_ar", "true or false")
+        if self.iono not in _IONO_MODES:
+            bad("iono", ", ".join(_IONO_MODES))
+        if self.iono_sigma_per_10km_m is None:
+            self.iono_sigma_per_10km_m = _IONO_SIGMA_DEFAULT[self.iono]
+        if self.iono == "estimate" and not (isinstance(self.iono_sigma_per_10km_m, (int, float))
+                                            and self.iono_sigma_per_10km_m > 0.0):
+            bad("iono_sigma_per_10km_m", "a number > 0 with iono = 'estimate'")
         if not isinstance(self.tropo_model, bool):
             bad("tropo_model", "true or false")
         for key, lo, hi in (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.0),
@@ -198,7 +223,8 @@ class RtkOptions(TomlTable):
                             ("code_correlation_time_s", 0.0, 1e4), ("min_success_rate", 0.0, 1.0), ("min_success_rate_estimated", 0.0, 1.0),
                             ("success_rate_noise_window_s", 1.0, 1e6), ("success_rate_noise_confidence", 0.5, 0.999),
                             ("adaptive_code_gain", 0.0, 1.0),
-                            ("iono_sigma_per_10km_m", 0.0, 10.0), ("accel_psd_h_m2ps3", 0.0, 1e4),
+                            ("iono_sigma_per_10km_m", 0.0, 10.0), ("iono_tau_s", 1e-3, 1e7),
+                            ("accel_psd_h_m2ps3", 0.0, 1e4),
                             ("accel_psd_v_m2ps3", 0.0, 1e4), ("amb_init_sigma_cycles", 1e-3, 1e6),
                             ("amb_psd_cycles2ps", 0.0, 1.0),
                             ("gf_threshold_m", 1e-4, 10.0), ("mw_threshold_cycles", 0.1, 100.0),
@@ -235,7 +261,10 @@ class RtkOptions(TomlTable):
                     noise_confidence=float(self.success_rate_noise_confidence),
                     confirm_epochs=int(self.confirm_epochs),
                     confirm_max_ambiguities=int(self.confirm_max_ambiguities),
-                    iono_sigma_per_10km_m=float(self.iono_sigma_per_10km_m), tropo_model=bool(self.tropo_model),
+                    iono_mode=_IONO_MODES[self.iono],
+                    iono_sigma_per_10km_m=float(_IONO_SIGMA_DEFAULT[self.iono] if self.iono_sigma_per_10km_m is None
+                                                else self.iono_sigma_per_10km_m),
+                    iono_tau_s=float(self.iono_tau_s), tropo_model=bool(self.tropo_model),
                     accel_psd_h=float(self.accel_psd_h_m2ps3), accel_psd_v=float(self.accel_psd_v_m2ps3),
                     amb_init_sigma_cycles=float(self.amb_init_sigma_cycles),
                     amb_psd=float(self.amb_psd_cycles2ps),
@@ -666,7 +695,8 @@ def _sig_text(obs, nf):
     return ", ".join(f"{s}:{'/'.join(x or '-' for x in sig[:nf])}" for s, sig in obs.signals.items()) or "none"
 
 
-def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None = None) -> RtkSolution:
+def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None = None, *,
+              record_iono: bool = False) -> RtkSolution:
     """RTK of ``rover`` against ``base``.
 
     Parameters
@@ -677,6 +707,13 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
         Base antenna reference point, ECEF [m]; default the base header's (see
         :func:`base_position_from_header`).  Raises :class:`RtkInputError` when neither exists.
     options : RtkOptions or dict
+    record_iono : bool
+        Also return, in ``info["iono_m"]`` and ``info["iono_sigma_m"]`` (n, 320), the float
+        single-differenced (rover - base) slant ionosphere at 1575.42 MHz and its sigma [m] per
+        epoch and satellite key ``system * 64 + prn`` (NaN where no state; ``iono = "estimate"``);
+        ``info["iono_dd_m"]``, ``info["iono_dd_sigma_m"]`` the double differences against the highest
+        satellite of each system with a state (NaN for it): only these are observable, the common
+        part of a system's single differences is the prior's.
 
     Returns
     -------
@@ -686,7 +723,8 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
 
     opt = options if isinstance(options, RtkOptions) else RtkOptions.from_dict(options or {}, "rtk options")
     rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, r_base_e, opt)
-    out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
+    out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict(),
+                        record_iono=bool(record_iono))
     age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
     return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
                        ratio=np.asarray(out["ratio"]), success_rate=np.asarray(out["success_rate"]),
@@ -697,7 +735,9 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
                        success_variance_factor=np.asarray(out["success_variance_factor"]),
                        success_rate_estimated=np.asarray(out["success_rate_estimated"]),
                        info=dict(rover=rover.path, base=base.path, options=opt, rover_signals=rover.signals,
-                                 base_signals=base.signals))
+                                 base_signals=base.signals,
+                                 **({k: np.asarray(out[k]) for k in ("iono_m", "iono_sigma_m", "iono_dd_m",
+                                                                     "iono_dd_sigma_m")} if record_iono else {})))
 
 
 def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):

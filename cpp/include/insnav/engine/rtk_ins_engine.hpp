@@ -622,7 +622,10 @@ class RtkInsEngine {
   int build_rows(int nf, bool code) {
     const gnss::RtkOptions& o = cfg_.rtk;
     const double bl = (ant_.r_e - r_base_).norm();
-    const double var_bl = std::pow(o.iono_sigma_per_10km_m * bl / 1e4, 2);
+    // the DD ionosphere as a variance (iono_mode kVariance); kEstimate is refused by the Python
+    // front end (rtk_ins_options): this engine has no ionosphere states
+    const double var_bl =
+        o.iono_mode == gnss::IonoMode::kVariance ? std::pow(o.iono_sigma_per_10km_m * bl / 1e4, 2) : 0.0;
     const double cf = code ? o.code_phase_ratio * o.code_phase_ratio : 1.0;  // x code_var_factor per satellite
     int m = 0;
     R_.setZero(kMaxRowsE, kMaxRowsE);

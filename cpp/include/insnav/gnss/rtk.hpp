@@ -25,9 +25,23 @@
 //                     sigma = code_phase_ratio x phase sigma; rows that share a reference are
 //                     correlated by sigma_sd^2(i).
 //   troposphere       Saastamoinen zenith delay of a standard atmosphere with a 1/sin(el) mapping at
-//                     each receiver (cancels to the height difference on short baselines); the
-//                     residual ionosphere of a medium baseline enters as a variance
-//                     (iono_sigma_per_10km_m x baseline / 10 km)^2 per double difference.
+//                     each receiver (cancels to the height difference on short baselines).
+//   ionosphere        (iono_mode) kOff: none; kVariance: the residual ionosphere of a medium baseline
+//                     enters as a variance (iono_sigma_per_10km_m x baseline / 10 km)^2 per double
+//                     difference; kEstimate: one single-differenced slant ionosphere state per satellite,
+//                     I_rb^s [m] = the rover-minus-base delay at the reference frequency f_0 = 1575.42 MHz,
+//                     entering frequency k as -mu_k I (phase) and +mu_k I (code), mu_k = (f_0 / f_k)^2
+//                     (Springer Handbook of GNSS eq. (26.9); RTKLIB manual eq. (E.7.20), option
+//                     pos1-ionoopt=est-stec).  The ionosphere-weighted model (D. Odijk, "Fast precise GPS
+//                     positioning in the presence of ionospheric delays", PhD thesis, TU Delft 2002,
+//                     sec. 4.2; P. J. G. Teunissen, "The ionosphere-weighted GPS baseline precision in
+//                     canonical form", J. Geodesy 72 (1998) 107-117): the pseudo-observation I = 0 with
+//                     sigma_I(bl, el) = iono_sigma_per_10km_m x bl / 10 km x M(el), M the single-layer
+//                     mapping 1 / sqrt(1 - (R cos el / (R + 350 km))^2), is the prior of a new state and
+//                     the stationary variance of its first-order Gauss-Markov process,
+//                         I_k = phi I_{k-1} + w,  phi = exp(-dt / iono_tau_s),  var w = sigma_I^2 (1 - phi^2)
+//                     (PSD 2 sigma_I^2 / tau, growing with bl^2), so that single-frequency data stay
+//                     solvable (the code-minus-phase divergence 2 mu I separates I from N over time).
 //
 // Ambiguity resolution: MLAMBDA (insnav/gnss/lambda.hpp; Chang, Yang and Zhou 2005) on the
 // double-differenced ambiguities D x_N, Q_a = D P_NN D^T; ratio test s2/s1 >= threshold
@@ -48,9 +62,13 @@
 // satellites) beyond doppler_threshold_cycles when dt <= doppler_max_dt_s.
 //
 // No heap allocation per epoch: every matrix is bounded (kMaxStates, kMaxRows) and lives in the
-// engine, which is allocated once.
+// engine, which is allocated once (on the heap: its covariance exceeds Eigen's default 128 KiB
+// limit of fixed-capacity objects, raised by the insnav_core CMake target or below).
 #pragma once
 
+#ifndef EIGEN_STACK_ALLOCATION_LIMIT
+#define EIGEN_STACK_ALLOCATION_LIMIT 1048576
+#endif
 #include <Eigen/Dense>
 
 #include <algorithm>
@@ -70,17 +88,27 @@ inline constexpr double kCLight = 299792458.0;     // [m/s]
 inline constexpr double kOmegaE = 7.2921151467e-5;  // IS-GPS Earth rate [rad/s] (Sagnac term)
 
 inline constexpr int kMaxAmbStates = 120; // tracked single-differenced ambiguities
-inline constexpr int kMaxStates = 6 + kMaxAmbStates;
+inline constexpr int kMaxIonoStates = 64;  // tracked single-differenced ionosphere states (iono_mode kEstimate)
+inline constexpr int kMaxStates = 6 + kMaxAmbStates + kMaxIonoStates;
+static_assert(EIGEN_STACK_ALLOCATION_LIMIT == 0 || EIGEN_STACK_ALLOCATION_LIMIT >= kMaxStates * kMaxStates * 8,
+              "insnav/gnss/rtk.hpp: define EIGEN_STACK_ALLOCATION_LIMIT >= 1048576 before including Eigen "
+              "(the insnav_core CMake target does)");
+inline constexpr double kIonoRefFreqHz = 1575.42e6;  // f_0 of the ionosphere states (GPS L1)
+inline constexpr double kIonoShellHeightM = 350e3;   // single-layer height of the mapping function
 inline constexpr int kMaxRows = kMaxAmbStates;  // DD rows of one kind (phase and code are updated in turn)
 
-/// State layout: position, velocity (kinematic), then single-differenced ambiguities.
+/// State layout: position, velocity (kinematic), single-differenced ambiguities [cycles], then
+/// single-differenced slant ionosphere delays at kIonoRefFreqHz [m] (iono_mode kEstimate).
 struct RtkLayout {
   static constexpr int kPos = 0;
   static constexpr int kVel = 3;
   static constexpr int kAmb = 6;
+  static constexpr int kIono = kAmb + kMaxAmbStates;
 };
 
 enum class RtkMode : int { kStatic = 0, kKinematic = 1 };
+/// Between-receiver ionosphere: none, a variance per double difference, or estimated states.
+enum class IonoMode : int { kOff = 0, kVariance = 1, kEstimate = 2 };
 enum class ArMode : int { kOff = 0, kContinuous = 1, kInstantaneous = 2, kFixAndHold = 3 };
 /// Solution status, RTKLIB's Q values: 1 fixed, 2 float, 4 DGPS (code only); 0 none.
 enum class RtkStatus : int { kNone = 0, kFixed = 1, kFloat = 2, kDgps = 4 };
@@ -106,7 +134,9 @@ struct RtkOptions {
   double code_corr_time_s = 0.0;   // correlation time of the code errors (multipath) [s]; 0: white
   double code_scale_gain = 0.0;    // adaptive code variance factor: gain of its update per epoch (0: off)
   double glonass_factor = 1.5;
-  double iono_sigma_per_10km_m = 0.0;
+  IonoMode iono_mode = IonoMode::kVariance;
+  double iono_sigma_per_10km_m = 0.0;  // kVariance: DD sigma; kEstimate: zenith SD prior sigma (per 10 km) [m]
+  double iono_tau_s = 1800.0;          // kEstimate: correlation time of the Gauss-Markov states [s]
   bool tropo_model = true;
   double accel_psd_h = 9.0;        // white acceleration [m^2/s^3], horizontal
   double accel_psd_v = 1.0;        // vertical
@@ -195,6 +225,18 @@ inline double phase_variance_zd(double el, int sys, const RtkOptions& o) {
   const double s = std::max(std::sin(el), 0.05);
   const double f = sys == kGlonass ? o.glonass_factor : 1.0;
   return f * f * (o.sigma_phase_a_m * o.sigma_phase_a_m + o.sigma_phase_b_m * o.sigma_phase_b_m / (s * s));
+}
+
+/// Single-layer ionospheric mapping function M(el) = 1 / sqrt(1 - (R cos el / (R + H))^2), H = 350 km.
+inline double iono_mapping(double el) {
+  const double x = wgs84::kA * std::cos(el) / (wgs84::kA + kIonoShellHeightM);
+  return 1.0 / std::sqrt(1.0 - x * x);
+}
+
+/// Ionospheric factor mu = (f_0 / f)^2 = (lambda / lambda_0)^2 of a wavelength lambda [m] (1 if unknown).
+inline double iono_factor(double lambda_m) {
+  const double l0 = kCLight / kIonoRefFreqHz;
+  return lambda_m > 0.0 ? (lambda_m / l0) * (lambda_m / l0) : 1.0;
 }
 
 /// Per-receiver cycle-slip detector (LLI, geometry-free, Melbourne-Wuebbena, Doppler).
@@ -337,6 +379,8 @@ class RtkEngine {
     P_.setZero(kMaxStates, kMaxStates);
     amb_of_.fill(-1);
     for (auto& a : amb_) a = AmbSlot{};
+    iono_of_.fill(-1);
+    for (auto& a : iono_) a = IonoSlot{};
     validator_.reset();
     initialized_ = false;
     t_prev_ = NAN;
@@ -349,6 +393,58 @@ class RtkEngine {
   }
 
   const RtkOptions& options() const { return opt_; }
+
+  /// The linearised double-difference rows of the last processed epoch at the current state (tests
+  /// and diagnostics; the epoch's observation arrays must still be alive): code = 1 code rows, 0 phase
+  /// rows; y[r] the innovation (observed minus computed) [m], H_full[r * kMaxStates + j] its
+  /// derivative with respect to state j (d(computed)/dx_j; states in RtkLayout).  Returns the rows.
+  int linearised_rows(int code, double* y, double* H_full, int max_rows) {
+    const int nf = std::clamp(opt_.n_freq, 1, kMaxFreq);
+    const int m = std::min(build_rows(nf, code), max_rows);
+    for (int r = 0; r < m; ++r) {
+      y[r] = y_(r);
+      std::fill(H_full + r * kMaxStates, H_full + (r + 1) * kMaxStates, 0.0);
+      for (int k = 0; k < nz_[r]; ++k) H_full[r * kMaxStates + act_[hc_[r][k]]] += hv_[r][k];
+    }
+    return m;
+  }
+
+  /// State element i (RtkLayout), writable (tests: numerical Jacobians).
+  double& state(int i) { return x_(i); }
+
+  /// State slot of the ionosphere of satellite key sat (RtkLayout::kIono + slot), or -1.
+  int iono_index(int sat) const {
+    return (sat >= 0 && sat < kMaxSatKeys && iono_of_[sat] >= 0) ? RtkLayout::kIono + iono_of_[sat] : -1;
+  }
+
+  /// The double-differenced ionosphere of satellite key sat against the reference of its system (the
+  /// highest satellite with an ionosphere state in use): I^sat - I^ref and its sigma [m] at
+  /// kIonoRefFreqHz.  Only double differences are observable: the common part of a system's
+  /// single differences is the prior's.  False for the reference itself and without a state.
+  bool iono_dd_estimate(int sat, double& value_m, double& sigma_m) const {
+    if (sat < 0 || sat >= kMaxSatKeys || iono_of_[sat] < 0) return false;
+    const int sys = sat / kMaxPrn;
+    int ref = -1;
+    for (int k = 0; k < kMaxIonoStates; ++k)
+      if (iono_[k].sat >= 0 && iono_[k].used && iono_[k].sat / kMaxPrn == sys && (ref < 0 || iono_[k].el > iono_[ref].el))
+        ref = k;
+    const int k = iono_of_[sat];
+    if (ref < 0 || ref == k || !iono_[k].used) return false;
+    const int s = RtkLayout::kIono + k, r = RtkLayout::kIono + ref;
+    value_m = x_(s) - x_(r);
+    sigma_m = std::sqrt(std::max(P_(s, s) + P_(r, r) - 2.0 * P_(s, r), 0.0));
+    return true;
+  }
+
+  /// The single-differenced (rover - base) slant ionosphere of satellite key sat (system * 64 + prn)
+  /// at kIonoRefFreqHz: value and sigma [m].  False when no state is tracked (iono_mode != kEstimate).
+  bool iono_estimate(int sat, double& value_m, double& sigma_m) const {
+    if (sat < 0 || sat >= kMaxSatKeys || iono_of_[sat] < 0) return false;
+    const int s = RtkLayout::kIono + iono_of_[sat];
+    value_m = x_(s);
+    sigma_m = std::sqrt(std::max(P_(s, s), 0.0));
+    return true;
+  }
 
   /// Double differences "observed minus computed" at a given rover position, without the
   /// ambiguity term (for tests against analytic values): per row the rover row index of the
@@ -424,6 +520,8 @@ class RtkEngine {
       P_.setZero(kMaxStates, kMaxStates);
       amb_of_.fill(-1);
       for (auto& a : amb_) a = AmbSlot{};
+      iono_of_.fill(-1);
+      for (auto& a : iono_) a = IonoSlot{};
       validator_.reset();
       x_.segment<3>(RtkLayout::kPos) = r0;
       P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos) = Mat3::Identity() * opt_.pos_init_sigma_m * opt_.pos_init_sigma_m;
@@ -490,6 +588,12 @@ class RtkEngine {
     bool half = false;      // half-cycle ambiguity flagged
     double el = 0.0;
   };
+  struct IonoSlot {
+    int sat = -1;
+    int outage = 0;
+    bool used = false;
+    double el = 0.0;  // rover elevation of the last epoch [rad]
+  };
 
   static int key(const double* r) { return sat_key(r); }
   static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
@@ -543,6 +647,81 @@ class RtkEngine {
     }
     for (int k = 0; k < kMaxAmbStates; ++k)
       if (amb_[k].sat >= 0) P_(RtkLayout::kAmb + k, RtkLayout::kAmb + k) += opt_.amb_psd * dt;
+    if (opt_.iono_mode == IonoMode::kEstimate) {
+      // first-order Gauss-Markov: x <- phi x, P <- Phi P Phi^T + sigma_I^2 (1 - phi^2) on the diagonal
+      const double phi = opt_.iono_tau_s > 0.0 ? std::exp(-dt / opt_.iono_tau_s) : 0.0;
+      const double bl = (Vec3(x_.segment<3>(RtkLayout::kPos)) - r_base_).norm();
+      for (int k = 0; k < kMaxIonoStates; ++k) {
+        if (iono_[k].sat < 0) continue;
+        const int s = RtkLayout::kIono + k;
+        x_(s) *= phi;
+        P_.row(s) *= phi;
+        P_.col(s) *= phi;
+        P_(s, s) += iono_prior_var(bl, iono_[k].el) * (1.0 - phi * phi);
+      }
+    }
+  }
+
+  // sigma_I^2(bl, el) = (iono_sigma_per_10km_m bl / 10 km M(el))^2: the ionosphere-weighted prior [m^2]
+  double iono_prior_var(double bl, double el) const {
+    const double s = opt_.iono_sigma_per_10km_m * bl / 1e4 * iono_mapping(el);
+    return s * s;
+  }
+
+  // Ionosphere states of the satellites in use: a new satellite starts at I = 0 with the prior
+  // sigma_I^2 (the ionosphere-weighted pseudo-observation); one unseen for max_outage_epochs is removed.
+  void manage_iono() {
+    for (auto& a : iono_) a.used = false;
+    if (opt_.iono_mode != IonoMode::kEstimate) return;
+    const double bl = (Vec3(x_.segment<3>(RtkLayout::kPos)) - r_base_).norm();
+    for (int c = 0; c < n_common_; ++c) {
+      if (!use_[c]) continue;
+      const int sat = key(rover_ + common_r_[c] * RtkRow::kCols);
+      int k = iono_of_[sat];
+      if (k < 0) {
+        for (int q = 0; q < kMaxIonoStates; ++q)
+          if (iono_[q].sat < 0) { k = q; break; }
+        if (k < 0) continue;  // table full: no ionosphere state (rows of this satellite carry none)
+        const int s = RtkLayout::kIono + k;
+        iono_[k].sat = sat;
+        iono_of_[sat] = k;
+        x_(s) = 0.0;
+        P_.row(s).setZero();
+        P_.col(s).setZero();
+        P_(s, s) = iono_prior_var(bl, el_r_[c]);
+      }
+      iono_[k].used = true;
+      iono_[k].outage = 0;
+      iono_[k].el = el_r_[c];
+    }
+    for (int k = 0; k < kMaxIonoStates; ++k) {
+      if (iono_[k].sat < 0 || iono_[k].used || ++iono_[k].outage <= opt_.max_outage_epochs) continue;
+      const int s = RtkLayout::kIono + k;
+      iono_of_[iono_[k].sat] = -1;
+      iono_[k] = IonoSlot{};
+      x_(s) = 0.0;
+      P_.row(s).setZero();
+      P_.col(s).setZero();
+    }
+  }
+
+  // Active states of the compact update: position, velocity (kinematic), tracked ambiguities and
+  // ionosphere states; col_of_ / iono_col_ map a slot to its column (-1: inactive).
+  void build_active(bool kin) {
+    na_ = 0;
+    for (int i = 0; i < (kin ? 6 : 3); ++i) act_[na_++] = i;
+    std::fill(col_of_.begin(), col_of_.end(), -1);
+    std::fill(iono_col_.begin(), iono_col_.end(), -1);
+    for (int k = 0; k < kMaxAmbStates; ++k)
+      if (amb_[k].sat >= 0) {
+        col_of_[k] = na_;
+        act_[na_++] = RtkLayout::kAmb + k;
+      }
+    for (int k = 0; k < kMaxIonoStates; ++k)
+      if (iono_[k].sat >= 0) {
+        iono_col_[k] = na_;
+        act_[na_++] = RtkLayout::kIono + k;
+      }
   }
 
   void remove_amb(int k) {
@@ -613,24 +792,19 @@ class RtkEngine {
     }
     for (int k = 0; k < kMaxAmbStates; ++k)
       if (amb_[k].sat >= 0 && !amb_[k].used && ++amb_[k].outage > opt_.max_outage_epochs) remove_amb(k);
+    manage_iono();
     (void)out;
   }
 
   // Build the double-difference rows at the current state (y, H over the compact state, R).
   int build_rows(int nf, int code) {
-    // active states: position, velocity (kinematic), tracked ambiguities
-    na_ = 0;
-    const bool kin = opt_.mode == RtkMode::kKinematic && opt_.ar_mode != ArMode::kInstantaneous;
-    for (int i = 0; i < (kin ? 6 : 3); ++i) act_[na_++] = i;
-    std::fill(col_of_.begin(), col_of_.end(), -1);
-    for (int k = 0; k < kMaxAmbStates; ++k)
-      if (amb_[k].sat >= 0) {
-        col_of_[k] = na_;
-        act_[na_++] = RtkLayout::kAmb + k;
-      }
+    // active states: position, velocity (kinematic), tracked ambiguities and ionosphere states
+    build_active(opt_.mode == RtkMode::kKinematic && opt_.ar_mode != ArMode::kInstantaneous);
     const Vec3 rr = x_.segment<3>(RtkLayout::kPos);
     const double bl = (rr - r_base_).norm();
-    const double var_bl = std::pow(opt_.iono_sigma_per_10km_m * bl / 1e4, 2);
+    const double var_bl =
+        opt_.iono_mode == IonoMode::kVariance ? std::pow(opt_.iono_sigma_per_10km_m * bl / 1e4, 2) : 0.0;
+    const bool est_iono = opt_.iono_mode == IonoMode::kEstimate;
     // zero-difference residuals
     for (int c = 0; c < n_common_; ++c) {
       if (!use_[c]) continue;
@@ -691,6 +865,22 @@ class RtkEngine {
             } else {
               y_(m) = sd_code_[c * kMaxFreq + f] - sd_code_[ref * kMaxFreq + f];
               row_amb_[m] = -1;
+            }
+            if (est_iono) {
+              // DD ionosphere: -/+ (mu_j I_j - mu_i I_i) on phase / code (mu = (f_0 / f)^2)
+              const double sgn = code ? 1.0 : -1.0;
+              const int sj = iono_of_[key(rover_ + common_r_[c] * RtkRow::kCols)];
+              const int si = iono_of_[key(rover_ + common_r_[ref] * RtkRow::kCols)];
+              if (sj >= 0) {
+                const double mu = sgn * iono_factor(lam(common_r_[c], f));
+                y_(m) -= mu * x_(RtkLayout::kIono + sj);
+                set_h(m, iono_col_[sj], mu);
+              }
+              if (si >= 0) {
+                const double mu = sgn * iono_factor(lam(common_r_[ref], f));
+                y_(m) += mu * x_(RtkLayout::kIono + si);
+                set_h(m, iono_col_[si], -mu);
+              }
             }
             row_code_[m] = code;
             row_c_[m] = c;
@@ -1008,15 +1198,7 @@ class RtkEngine {
 
   // Fix-and-hold: the fixed double differences as tight pseudo-measurements of the float filter.
   void hold(int nuse) {
-    na_ = 0;
-    std::fill(col_of_.begin(), col_of_.end(), -1);
-    const bool kin = opt_.mode == RtkMode::kKinematic;
-    for (int i = 0; i < (kin ? 6 : 3); ++i) act_[na_++] = i;
-    for (int k = 0; k < kMaxAmbStates; ++k)
-      if (amb_[k].sat >= 0) {
-        col_of_[k] = na_;
-        act_[na_++] = RtkLayout::kAmb + k;
-      }
+    build_active(opt_.mode == RtkMode::kKinematic);
     const int m = std::min(nuse, kMaxRows);
     R_.setZero(kMaxRows, kMaxRows);
     for (int p = 0; p < m; ++p) {
@@ -1037,6 +1219,8 @@ class RtkEngine {
   StateMat P_;
   std::array<int, kMaxSatKeys * kMaxFreq> amb_of_{};
   std::array<AmbSlot, kMaxAmbStates> amb_{};
+  std::array<int, kMaxSatKeys> iono_of_{};           // satellite key -> ionosphere slot (-1: none)
+  std::array<IonoSlot, kMaxIonoStates> iono_{};
   bool initialized_ = false;
   double t_prev_ = NAN;
   SlipDetector rover_slip_, base_slip_;
@@ -1064,9 +1248,11 @@ class RtkEngine {
   int na_ = 0;
   std::array<int, kMaxStates> act_{};
   std::array<int, kMaxAmbStates> col_of_{};
+  std::array<int, kMaxIonoStates> iono_col_{};
   std::array<int, kMaxRows> row_amb_{}, row_code_{}, row_c_{}, row_ref_{}, row_f_{}, nz_{};
-  std::array<std::array<int, 5>, kMaxRows> hc_{};     // non-zero columns of each row of H
-  std::array<std::array<double, 5>, kMaxRows> hv_{};  // and their values
+  // non-zero columns of each row of H (3 position, 2 ambiguities, 2 ionosphere states) and their values
+  std::array<std::array<int, 7>, kMaxRows> hc_{};
+  std::array<std::array<double, 7>, kMaxRows> hv_{};
   void set_h(int r, int col, double v) {
     for (int k = 0; k < nz_[r]; ++k)
       if (hc_[r][k] == col) { hv_[r][k] += v; return; }
