@@ -63,7 +63,7 @@ DAY_VARIANTS = [
     ("EKF, CSV, 200 Hz, nav columns (block by block)", ["--columns", "nav"], "day200.csv"),
     ("EKF, CSV, 200 Hz, all columns (block by block)", [], "day200all.csv"),
 ]
-#: the issue's speed targets against KF-GINS, CPU time of the whole command (label: minimum KF-GINS / insnav)
+#: the speed targets against KF-GINS, CPU time of the whole command (label: minimum KF-GINS / insnav)
 KFGINS_TARGETS = {"EKF, CSV, 200 Hz, all columns": 30.0, "EKF, npz, 200 Hz": 40.0}
 TIMINGS = re.compile(r"timings \[s\]: read ([\d.]+), filter ([\d.]+), write ([\d.]+)")
 
@@ -380,7 +380,7 @@ def kfgins_section(kfg, res, variants, med) -> list[str]:
         f"| KF-GINS | {k_wall:.2f} ({min(x['wall'] for x in kfg):.2f}-{max(x['wall'] for x in kfg):.2f}) | "
         f"{k_cpu:.2f} | {max(x['rss'].ru_maxrss for x in kfg) / 1024.0:.0f} | {kfg[-1]['size'] / 1e6:.1f} |",
         "",
-        "KF-GINS / insnav, medians over the rounds (how many times less time insnav takes); the issue's targets "
+        "KF-GINS / insnav, medians over the rounds (how many times less time insnav takes); the targets "
         "are in CPU time:",
         "",
         "| insnav variant | CPU ratio | wall ratio | target (CPU) |",
