@@ -333,6 +333,20 @@ def _urban_scenario(seed, sim_over=None):
     return load_scenario(raw, seed=seed)
 
 
+def urban_inputs(seed: int, work: Path):
+    """(scenario, dataset, folder, RINEX files, RTK options) of urban run ``seed``: the simulated drive
+    written under ``work/urban<seed>``, GPS L1, the base's elevation mask, ratio threshold 3."""
+    from insnav.sim import simulate
+
+    sc = _urban_scenario(seed)
+    ds = simulate(sc, seed=seed)
+    wd = work / f"urban{seed}"
+    wd.mkdir(parents=True, exist_ok=True)
+    files = ds.rtk.write(wd)
+    mask = math.degrees(sc.gnss_rtk["base_elevation_mask"])
+    return sc, ds, wd, files, dict(systems="G", frequencies=1, elevation_mask_deg=mask, ratio_threshold=3.0)
+
+
 def receiver_noise_options(g: dict) -> dict:
     """The preset's receiver noise as ``[rtk]`` keys (:func:`insnav.sim.gnss_rtk.rtk_noise_options`)."""
     from insnav.sim.gnss_rtk import rtk_noise_options
@@ -368,18 +382,11 @@ def urban_part(n_runs, work: Path, progress):
     from insnav.config import RunConfig
     from insnav.filters.rtk_ins import run_rtk_ins
     from insnav.gnss.rtk import solve_rtk
-    from insnav.sim import simulate
 
     runs = []
     cost = None
     for k in range(1, n_runs + 1):
-        sc = _urban_scenario(k)
-        ds = simulate(sc, seed=k)
-        wd = work / f"urban{k}"
-        wd.mkdir(parents=True, exist_ok=True)
-        files = ds.rtk.write(wd)
-        mask = math.degrees(sc.gnss_rtk["base_elevation_mask"])
-        opts = dict(systems="G", frequencies=1, elevation_mask_deg=mask, ratio_threshold=3.0)
+        sc, ds, wd, files, opts = urban_inputs(k, work)
         t0 = time.perf_counter()
         sol = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
                           rtk_options=opts)

@@ -100,17 +100,10 @@ def spirent(work: Path, freq: int):
 def urban(n_runs: int, work: Path):
     from insnav.config import RunConfig
     from insnav.filters.rtk_ins import run_rtk_ins
-    from insnav.sim import simulate
 
     acc = {name: dict(n=0, fixed=0, wrong=0, err=[], q=[], scr=0, dw=0, per=[], per_wrong=[]) for name, _ in VARIANTS}
     for k in range(1, n_runs + 1):
-        sc = B._urban_scenario(k)
-        ds = simulate(sc, seed=k)
-        wd = work / f"urban{k}"
-        wd.mkdir(parents=True, exist_ok=True)
-        files = ds.rtk.write(wd)
-        mask = math.degrees(sc.gnss_rtk["base_elevation_mask"])
-        opts = dict(systems="G", frequencies=1, elevation_mask_deg=mask, ratio_threshold=3.0)
+        _, ds, _, files, opts = B.urban_inputs(k, work)
         truth_t, truth_r = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
         for name, eng in VARIANTS:
             sol = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
