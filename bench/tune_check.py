@@ -166,13 +166,15 @@ def simulation(seeds, max_runs, lines, verdicts):
 
 # --------------------------------------------------------------------------- 2. real data
 
-def compare(title, ds, cfg, reference, lines, verdicts, *, max_runs, keep_t=None, note="", timing=False):
-    """Tune on the first 70 %, report hand vs tuned on the last 30 %."""
+def compare(title, ds, cfg, reference, lines, verdicts, *, max_runs, keep_t=None, note="", timing=False,
+            hand_cfg=None):
+    """Tune on the first 70 %, report hand vs tuned on the last 30 % (``hand_cfg``: the hand settings when
+    they are not the tuner's starting point, e.g. without the Gauss-Markov pseudorange states)."""
     load0 = os.getloadavg()[0]
     res = tune(ds, cfg, holdout=HOLDOUT, max_runs=max_runs)
     load1 = os.getloadavg()[0]
     reps = []
-    for c in (res.base, res.tuned):
+    for c in (res.base if hand_cfg is None else hand_cfg, res.tuned):
         sol = insnav.run(ds, config=dataclasses.replace(c))
         reps.append(holdout_report(sol, reference, t_from=res.t_split, keep_t=keep_t))
     hand, tuned = reps

@@ -169,6 +169,8 @@ void bind_particle(py::module_& m) {
          const py::dict& particle) {
         const ImuErrorModel mdl = imu_model_from_dict(model);
         const TightConfig cfg = tight_config_from(config);
+        if (cfg.pr_gm.enabled())
+          throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states run with the tight ekf only");
         if (flag(config, "smooth", false))
           throw py::value_error("smooth: the RTS smoother runs with the EKF, RB-UKF and UKF (not " + filter + ")");
         const ParticleSetup ps = particle_setup(particle);

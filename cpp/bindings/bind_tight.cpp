@@ -95,6 +95,79 @@ void bind_tight(py::module_& m) {
       "The TDCP row of meas/tdcp.hpp (Layout17): INS-predicted phase change [m] between the navigation states "
       "prev and cur (10 values: t, lat, lon [rad], h [m], v_n [m/s], roll, pitch, yaw [rad]) and its "
       "Jacobians H_cur, H_prev (17,) with respect to the error states of the two epochs.");
+
+  m.def(
+      "pseudorange_gm_fold_check",
+      [](const DArray& Pxx, const DArray& Pxb, const DArray& Pbb, const DArray& Hx, const DArray& R, const DArray& y,
+         const py::array_t<std::int32_t, py::array::c_style | py::array::forcecast>& row_slot) {
+        using L = Layout17;
+        constexpr int n = L::kSize;
+        using Block = PseudorangeGmBlock<n>;
+        const py::ssize_t m = y.size();
+        const py::ssize_t nb = Pbb.ndim() == 2 ? Pbb.shape(0) : 0;
+        require_shape(Pxx, n, n, "Pxx");
+        require_shape(Pxb, n, nb, "Pxb");
+        require_shape(Pbb, nb, nb, "Pbb");
+        require_shape(Hx, m, n, "Hx");
+        require_shape(R, m, m, "R");
+        if (m > kMaxMeasRows || nb > 32 || row_slot.size() != m)
+          throw py::value_error("pseudorange_gm_fold_check: at most 32 rows and 32 states, row_slot (m,)");
+        Block blk;
+        PseudorangeGmConfig c;
+        c.sigma_m = 1.0;
+        blk.reset(c);
+        Eigen::Matrix<double, n, 32> xb = Eigen::Matrix<double, n, 32>::Zero();
+        Eigen::Matrix<double, 32, 32> bb = Eigen::Matrix<double, 32, 32>::Zero();
+        for (int k = 0; k < nb; ++k) {
+          blk.observe(k, 0.0);  // satellites 0..nb-1 take slots 0..nb-1
+          for (int i = 0; i < n; ++i) xb(i, k) = Pxb.data()[i * nb + k];
+          for (int j = 0; j < nb; ++j) bb(k, j) = Pbb.data()[k * nb + j];
+        }
+        blk.set_covariance(xb, bb);
+        StateCov<L> P;
+        for (int i = 0; i < n; ++i)
+          for (int j = 0; j < n; ++j) P(i, j) = Pxx.data()[i * n + j];
+        LinearMeasurement<L> lin;
+        lin.residual.resize(m);
+        lin.H.setZero(m, n);
+        lin.R.setZero(m, m);
+        for (int r = 0; r < m; ++r) {
+          lin.residual[r] = y.data()[r];
+          for (int j = 0; j < n; ++j) lin.H(r, j) = Hx.data()[r * n + j];
+          for (int j = 0; j < m; ++j) lin.R(r, j) = R.data()[r * m + j];
+        }
+        if (!blk.fold(P, lin.H, lin.R, row_slot.data(), static_cast<int>(m)))
+          throw py::value_error("pseudorange_gm_fold_check: Pxx not positive definite");
+        const StateCov<L> P_prior = P;
+        StateVec<L> x = StateVec<L>::Zero();
+        const UpdateResult res = kalman_update<L>(x, P, lin, 0.0);
+        if (!res.applied || !blk.joint_posterior(P_prior, lin.H, lin.R, lin.residual, x, P))
+          throw py::value_error("pseudorange_gm_fold_check: S not positive definite");
+        py::dict d;
+        d["nis"] = res.nis;
+        DArray xo({py::ssize_t(n)}), xbo({nb}), Pxo({py::ssize_t(n), py::ssize_t(n)}), Pxbo({py::ssize_t(n), nb}),
+            Pbbo({nb, nb});
+        for (int i = 0; i < n; ++i) {
+          xo.mutable_data()[i] = x[i];
+          for (int j = 0; j < n; ++j) Pxo.mutable_data()[i * n + j] = P(i, j);
+          for (int k = 0; k < nb; ++k) Pxbo.mutable_data()[i * nb + k] = blk.Pxb()(i, k);
+        }
+        for (int k = 0; k < nb; ++k) {
+          xbo.mutable_data()[k] = -blk.estimate(k);  // b^ started at 0 and was fed back: b^ = -x_b+
+          for (int j = 0; j < nb; ++j) Pbbo.mutable_data()[k * nb + j] = blk.Pbb()(k, j);
+        }
+        d["x"] = xo;
+        d["xb"] = xbo;
+        d["Pxx"] = Pxo;
+        d["Pxb"] = Pxbo;
+        d["Pbb"] = Pbbo;
+        return d;
+      },
+      py::arg("Pxx"), py::arg("Pxb"), py::arg("Pbb"), py::arg("Hx"), py::arg("R"), py::arg("y"), py::arg("row_slot"),
+      "Test hook of meas/pseudorange_gm.hpp (Layout17): the prior (Pxx, Pxb, Pbb) of the navigation errors and nb "
+      "Gauss-Markov pseudorange states, m rows (Hx, R, residual y; row_slot[r] = the b state of a pseudorange row, "
+      "-1 for a Doppler row) folded into the EKF update, then the block's joint posterior: nis, x (17,), "
+      "xb (nb,), Pxx, Pxb, Pbb.");
 }
 
 }  // namespace insnav::py_bind

@@ -86,6 +86,8 @@ void bind_tight_navigator(py::module_& m) {
           TightNavigatorConfig cfg;
           cfg.imu_model = imu_model_from_dict(model);
           cfg.tight = tight_config_from(config);
+          if (cfg.tight.pr_gm.enabled())
+            throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states run in the batch tight run only");
           cfg.ut = ut_from(config);
           cfg.imu_hold = imu_hold_from(imu_hold);
           cfg.clock_bias0_m = clock0_bias(clock0);

@@ -115,7 +115,7 @@ inline TightConfig tight_config_from(const py::dict& d) {
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows", "robust_huber", "robust_huber_k",
                   "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
                    "robust_cusum_hold_s", "robust_cusum_min_pseudoranges", "tdcp", "tdcp_slip_threshold_cycles",
-                   "tdcp_chi2_row", INSNAV_SELFCAL_KEYS});
+                   "tdcp_chi2_row", "pr_gm_sigma_m", "pr_gm_tau_s", "pr_gm_max_gap_s", INSNAV_SELFCAL_KEYS});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
@@ -152,6 +152,12 @@ inline TightConfig tight_config_from(const py::dict& d) {
   td.chi2_row = num(d, "tdcp_chi2_row", td.chi2_row);
   if (!(td.slip_threshold_cycles > 0.0) || !(td.chi2_row > 0.0))
     throw py::value_error("tdcp_slip_threshold_cycles and tdcp_chi2_row must be > 0");
+  PseudorangeGmConfig& gm = c.pr_gm;  // Gauss-Markov pseudorange errors (meas/pseudorange_gm.hpp)
+  gm.sigma_m = num(d, "pr_gm_sigma_m", gm.sigma_m);
+  gm.tau_s = num(d, "pr_gm_tau_s", gm.tau_s);
+  gm.max_gap_s = num(d, "pr_gm_max_gap_s", gm.max_gap_s);
+  if (!(gm.sigma_m >= 0.0) || !std::isfinite(gm.sigma_m)) throw py::value_error("pr_gm_sigma_m must be >= 0 and finite");
+  if (!(gm.tau_s > 0.0) || !(gm.max_gap_s > 0.0)) throw py::value_error("pr_gm_tau_s and pr_gm_max_gap_s must be > 0");
   return c;
 }
 

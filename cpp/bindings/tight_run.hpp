@@ -37,6 +37,12 @@ py::dict run_tight_impl(const TightArgs& a) {
   using L = typename Filter::Layout;
   if (a.cfg.tdcp.enabled && !TightEngine<Filter>::kCanTdcp)
     throw py::value_error("tdcp: time-differenced carrier phase runs with the tight ekf only");
+  if (a.cfg.pr_gm.enabled()) {
+    if (!TightEngine<Filter>::kCanGm)
+      throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states run with the tight ekf only");
+    if (a.cfg.tdcp.enabled) throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states do not run with tdcp");
+    if (a.smooth) throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states do not run with smooth");
+  }
   const StateCov<L> P = state_cov_from<L>(a.P0);
   NavBuffers nav_buf(output_rows(a.imu.n, a.cfg.output_decimation), L::kSize, true, kHasIsb<L>, false,
                      kHasTimeOffset<L>, kHasLeverArm<L>);

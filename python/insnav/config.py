@@ -664,6 +664,16 @@ class RunConfig:
         runs, the pseudorange and the pseudorange-rate sigmas of each
         satellite row.  ``insnav tune`` estimates them
         (:mod:`insnav.calib.tune`).
+    pr_gm_sigma_m, pr_gm_tau_s, pr_gm_max_gap_s : float
+        Tight EKF: time-correlated pseudorange errors (multipath, ionosphere
+        and troposphere residuals) as one first-order Gauss-Markov state per
+        satellite (``cpp/include/insnav/meas/pseudorange_gm.hpp``, Gelb 1974;
+        docs/algorithms.md "Gauss-Markov pseudorange errors"): stationary
+        1-sigma [m] (default 0: no such states, the filter as without them),
+        correlation time [s] (60) and the time after which the state of a
+        satellite no longer seen is dropped [s] (10; a later re-acquisition
+        starts a new state).  The row's own sigma stays its white part.
+        Not with ``smooth`` or ``[tdcp]``.
     propagation_interval_s : float
         Error-state propagation step inside a filter cycle (default 0.1 s:
         on the KF-GINS track 0.02 s to 0.5 s give the same accuracy to 0.1 mm).
@@ -740,6 +750,9 @@ class RunConfig:
     use_velocity: bool = True
     gnss_pos_sigma_scale: float = 1.0
     gnss_vel_sigma_scale: float = 1.0
+    pr_gm_sigma_m: float = 0.0
+    pr_gm_tau_s: float = 60.0
+    pr_gm_max_gap_s: float = 10.0
     propagation_interval_s: float = 0.1
     cycle_period_s: float | None = None
     output_decimation: int = 1
@@ -792,6 +805,18 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not (math.isfinite(v) and v > 0):
                 bad(key, v, "a finite number > 0 (factor on the data's GNSS sigmas)")
+        for key, low in (("pr_gm_sigma_m", 0.0), ("pr_gm_tau_s", None), ("pr_gm_max_gap_s", None)):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not math.isfinite(v) or not (v >= 0.0 if low is not None else v > 0.0):
+                bad(key, v, "a finite number >= 0 [m] (0: no Gauss-Markov pseudorange states)" if low is not None
+                    else "a finite number > 0 [s]")
+        if self.pr_gm_sigma_m > 0.0:
+            if self.coupling != "tight" or self.filter != "ekf":
+                bad("pr_gm_sigma_m", self.pr_gm_sigma_m, "0 unless coupling = \"tight\" and filter = \"ekf\" "
+                    "(the Gauss-Markov pseudorange states are tight EKF states)")
+            if self.smooth or getattr(self.tdcp, "enabled", False):
+                bad("pr_gm_sigma_m", self.pr_gm_sigma_m, "0 with smooth or [tdcp] enabled")
         v = self.max_time_offset_s
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not v > 0:
             bad("max_time_offset_s", v, "a number > 0 [s] (inf: no check)")

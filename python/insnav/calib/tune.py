@@ -71,6 +71,8 @@ PARAMETERS = {
     "nhc": "non-holonomic constraint sigma ([constraints] sigma_nhc_mps)",
     "odo": "odometer speed sigma ([constraints] sigma_odo_mps)",
     "zupt": "zero-velocity and zero-angular-rate sigmas ([constraints] sigma_zupt_mps, sigma_zaru_dph)",
+    "pr_gm_sigma": "tight EKF: stationary sigma of the Gauss-Markov pseudorange errors (pr_gm_sigma_m; the block on)",
+    "pr_gm_tau": "tight EKF: correlation time of the Gauss-Markov pseudorange errors (pr_gm_tau_s; the block on)",
 }
 
 #: filters whose engines return ln det S (the linear-update filters)
@@ -293,11 +295,14 @@ def base_noise(dataset, cfg: RunConfig) -> ImuNoise:
 def default_parameters(dataset, cfg: RunConfig) -> list[str]:
     """The factors tuned by default: the four IMU terms, the GNSS position (pseudorange)
     sigma, the velocity (rate) sigma when the data have it, and the sigmas of
-    the constraints in use."""
+    the constraints in use, and for a tight run with Gauss-Markov pseudorange
+    states (``pr_gm_sigma_m > 0``) their sigma and correlation time."""
     names = ["gyro_arw", "acc_vrw", "gyro_bias", "acc_bias", "gnss_pos"]
     if cfg.use_velocity and _has_velocity(dataset, cfg):
         names.append("gnss_vel")
     names += [c for c in ("nhc", "odo", "zupt") if c in cfg.constraints.use]
+    if cfg.coupling == "tight" and cfg.pr_gm_sigma_m > 0:
+        names += ["pr_gm_sigma", "pr_gm_tau"]
     return names
 
 
@@ -343,6 +348,10 @@ def scaled_config(cfg: RunConfig, noise: ImuNoise, scales: dict) -> RunConfig:
     if "zupt" in scales:
         k.sigma_zupt_mps = float(cfg.constraints.sigma_zupt_mps * s("zupt"))
         k.sigma_zaru_dph = float(cfg.constraints.sigma_zaru_dph * s("zupt"))
+    if "pr_gm_sigma" in scales:
+        c.pr_gm_sigma_m = float(cfg.pr_gm_sigma_m * s("pr_gm_sigma"))
+    if "pr_gm_tau" in scales:
+        c.pr_gm_tau_s = float(cfg.pr_gm_tau_s * s("pr_gm_tau"))
     return c
 
 
@@ -487,6 +496,10 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         if c in names and c not in cfg.constraints.use:
             raise ConfigError(f"tuning parameter {c!r} needs the {c} constraint in use (--constraints / "
                               "[constraints] use)")
+    for c in ("pr_gm_sigma", "pr_gm_tau"):
+        if c in names and not (cfg.coupling == "tight" and cfg.pr_gm_sigma_m > 0):
+            raise ConfigError(f"tuning parameter {c!r} needs the tight EKF's Gauss-Markov pseudorange states on "
+                              "(pr_gm_sigma_m > 0)")
     if isinstance(max_runs, bool) or not isinstance(max_runs, (int, np.integer)) or max_runs < 2 * len(names) + 2:
         raise ConfigError(f"max_runs {max_runs!r}: at least {2 * len(names) + 2} for {len(names)} factors")
     start = dict(start or {})
@@ -688,6 +701,9 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     d["filter"], d["coupling"] = cfg.filter, cfg.coupling
     d["gnss_pos_sigma_scale"] = float(cfg.gnss_pos_sigma_scale)
     d["gnss_vel_sigma_scale"] = float(cfg.gnss_vel_sigma_scale)
+    if cfg.pr_gm_sigma_m > 0:  # the Gauss-Markov pseudorange states (tuned or as given)
+        d["pr_gm_sigma_m"], d["pr_gm_tau_s"] = float(cfg.pr_gm_sigma_m), float(cfg.pr_gm_tau_s)
+        d["pr_gm_max_gap_s"] = float(cfg.pr_gm_max_gap_s)
     imu = {k: v for k, v in d.get("imu", {}).items() if k not in _USER_UNITS}
     imu.update(_user_noise(cfg.imu))
     d["imu"] = imu

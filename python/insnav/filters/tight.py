@@ -246,6 +246,9 @@ def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = N
     robust = cfg.robust.as_core_dict(dataset)
     core_cfg = engine_config(dataset, cfg, ep_t, n + len(sc_sigmas), use_pseudorange=bool(use_pseudorange),
                              use_rate=bool(use_rate), **robust, **sc_cfg)
+    if cfg.pr_gm_sigma_m > 0.0:  # Gauss-Markov pseudorange error states (meas/pseudorange_gm.hpp)
+        core_cfg.update(pr_gm_sigma_m=float(cfg.pr_gm_sigma_m), pr_gm_tau_s=float(cfg.pr_gm_tau_s),
+                        pr_gm_max_gap_s=float(cfg.pr_gm_max_gap_s))
     return TightEngineArgs(layout=n, init=init_vector(dataset, init), P0=P0, imu_correction=np.zeros(12),
                            imu_model=model, config=core_cfg, clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
                            isb0=None if isb0 is None else np.asarray(isb0, float), inputs=inputs, epoch_t=ep_t,

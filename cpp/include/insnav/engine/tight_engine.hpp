@@ -39,6 +39,15 @@
 // epoch's corrected estimate, covariance and cross-covariance) goes into the
 // smoother's record (ClosedLoop::clone_update_for_smoother, rts_smoother.hpp).
 //
+// Gauss-Markov pseudorange errors (TightConfig::pr_gm, meas/pseudorange_gm.hpp;
+// off by default, and then nothing below changes; EKF only, batch run(), not
+// with TDCP or the smoother): a per-satellite first-order Gauss-Markov state
+// b_s [m] in a fixed-capacity block beside the core's states (the RTK/INS
+// engine's ambiguity bookkeeping); its estimate is added to the INS-predicted
+// pseudorange and the block is folded into the core's update exactly
+// (PseudorangeGmBlock::fold / joint_posterior), so the gate, the robust step
+// and the NIS see the joint innovation covariance.
+//
 // Input: E epochs (time, satellite range [begin, end) into one flat array of
 // SatObservation), sorted by time.  No heap allocation inside run().
 #pragma once
@@ -50,6 +59,7 @@
 
 #include "insnav/engine/closed_loop.hpp"
 #include "insnav/meas/pseudorange.hpp"
+#include "insnav/meas/pseudorange_gm.hpp"
 #include "insnav/meas/robust.hpp"
 #include "insnav/meas/tdcp.hpp"
 
@@ -65,6 +75,7 @@ struct TightConfig {
   int output_decimation = 1;
   RobustConfig robust;                 // clock-jump check, screening and IGG-III (robust.hpp)
   TdcpConfig tdcp;                     // time-differenced carrier phase (tdcp.hpp; off by default, EKF only)
+  PseudorangeGmConfig pr_gm;           // Gauss-Markov pseudorange errors (pseudorange_gm.hpp; off by default, EKF only)
 };
 
 /// What the robust step did to one satellite row kind (TightOutputs::sat_flag).
@@ -155,6 +166,9 @@ class TightEngine {
 
   /// The filters that take TDCP rows (an EKF: x and P writable, the cycle transition tracked).
   static constexpr bool kCanTdcp = TdcpCapable<Filter>::value;
+  /// The filters that carry the Gauss-Markov pseudorange block (the cycle transition tracked: the EKF).
+  static constexpr bool kCanGm = TdcpCapable<Filter>::value;
+  bool gm_on() const { return kCanGm && cfg_.pr_gm.enabled(); }
 
   /// Carrier phase of the satellite rows (parallel to `sats` of run(); null: no TDCP rows).
   void set_phase(const PhaseObservation* phase) { phase_ = phase; }
@@ -172,9 +186,34 @@ class TightEngine {
     // an epoch applies at core_.record_time(t_g): t_g - t_d^ with the time-offset state, else t_g
     for (; g < n_epochs && !(core_.record_time(epochs[g].t) > initial.t); ++g)
       out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
-    core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, n_epochs, cfg_.cycle_period, cfg_.output_decimation, out,
-                      [&](std::int64_t i) { return core_.record_time(epochs[i].t); },
-                      [&](std::int64_t i) { apply_epoch(epochs[i], i, out); });
+    if (gm_on()) {  // the core's loop, with the block's cross-covariance carried over outage cycles
+      const auto next_t = [&]() { return g < n_epochs ? core_.record_time(epochs[g].t) : kInf; };
+      const auto apply_next = [&]() {
+        const std::int64_t i = g++;
+        apply_epoch(epochs[i], i, out);
+      };
+      double t_prev = initial.t;
+      int until_output = cfg_.output_decimation;
+      for (std::int64_t k = 0; k < n; ++k) {
+        if (out.stop_requested(k, n)) break;
+        const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
+        core_.process_sample(raw, t_prev, kInf, next_t, apply_next);
+        if (core_.outage_due(cfg_.cycle_period)) {
+          core_.close_cycle();
+          if constexpr (kCanGm) gm_.carry_cycle(core_.filter.cycle_transition());
+          core_.start_cycle();
+        }
+        if (--until_output == 0 || k + 1 == n) {
+          core_.write_output(out);
+          until_output = cfg_.output_decimation;
+        }
+        t_prev = raw.t;
+      }
+    } else {
+      core_.run_samples(initial.t, n, t, dtheta_b, dv_b, g, n_epochs, cfg_.cycle_period, cfg_.output_decimation, out,
+                        [&](std::int64_t i) { return core_.record_time(epochs[i].t); },
+                        [&](std::int64_t i) { apply_epoch(epochs[i], i, out); });
+    }
     for (; g < n_epochs; ++g) out.mark(epochs[g], g, RecordStatus::kOutsideImuSpan);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
     out.gate_reopened = core_.gate.reopened();
@@ -200,6 +239,10 @@ class TightEngine {
       for (int i = 0; i < kTdcpKeys; ++i) prev_epoch_[i] = -1;
       if (cfg_.tdcp.enabled) core_.filter.track_cycle_transition(true);
     }
+    if constexpr (kCanGm) {
+      gm_.reset(cfg_.pr_gm);
+      if (gm_on()) core_.filter.track_cycle_transition(true);
+    }
   }
 
   /// The measurement step of epoch g over sats[ep.begin, ep.end), applied now
@@ -221,6 +264,8 @@ class TightEngine {
       work_[ns] = s;
       src_[ns++] = j;
     }
+    if constexpr (kCanGm)
+      if (gm_on()) gm_begin_epoch(ns);
     const RobustConfig& rc = cfg_.robust;
     const double t_ep = core_.state().t;
     const bool outage = core_.gate.outage_aware(t_ep);
@@ -293,7 +338,14 @@ class TightEngine {
       if constexpr (kCanTdcp) tdcp_close(ep);
       return;
     }
+    if constexpr (kCanGm)
+      if (gm_on()) {
+        gm_Pxx_prior_ = core_.filter.P();
+        gm_reopened_ = core_.gate.reopened();
+      }
     const UpdateResult res = core_.update_gated(meas_);
+    if constexpr (kCanGm)
+      if (gm_on() && res.applied) gm_end_update();
     if (out.nis) out.nis[g] = res.nis;
     if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
@@ -424,6 +476,45 @@ class TightEngine {
     ++epoch_count_;
   }
 
+  // ---------------------------------------------------------------- Gauss-Markov pseudorange errors
+  /// The block to this epoch (carried over the cycle just closed, propagated,
+  /// expired, new satellites added) and its estimates b^ applied to the
+  /// pseudoranges (predicted - measured gains + b^: measured - b^).
+  void gm_begin_epoch(int ns) {
+    const double t_ep = core_.state().t;
+    gm_.carry_cycle(core_.filter.cycle_transition());
+    gm_.propagate_to(t_ep);
+    gm_.expire(t_ep);
+    for (int i = 0; i < ns; ++i) {
+      gm_slot_[i] = -1;
+      SatObservation& s = work_[i];
+      if (s.prn <= 0 || !std::isfinite(s.pseudorange_m)) continue;
+      gm_slot_[i] = gm_.observe(decltype(gm_)::key(s.system, s.prn), t_ep);
+      if (gm_slot_[i] >= 0) s.pseudorange_m -= gm_.estimate(gm_slot_[i]);
+    }
+    gm_ns_ = ns;
+  }
+
+  /// Fold the block into the measurement just built (PseudorangeGmBlock::fold).
+  void gm_fold() {
+    auto& lin = meas_.linear_mutable();
+    const int m = lin.rows();
+    int row = 0;
+    for (int i = 0; i < gm_ns_ && row < m; ++i)
+      for (int kind = 0; kind < 2 && row < m; ++kind)
+        if (std::isfinite(kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps))
+          gm_row_slot_[row++] = kind == 0 ? gm_slot_[i] : -1;
+    gm_folded_ = gm_.fold(core_.filter.P(), lin.H, lin.R, gm_row_slot_, m);
+  }
+
+  /// The block's joint posterior after an applied update (before the core's feedback).
+  void gm_end_update() {
+    const auto& lin = meas_.linear();
+    if (!gm_folded_ || core_.gate.reopened() != gm_reopened_ ||
+        !gm_.joint_posterior(gm_Pxx_prior_, lin.H, lin.R, lin.residual, core_.filter.x(), core_.filter.P()))
+      gm_.reinitialise();  // the core's covariance was inflated (lock-out recovery) or not factorable
+  }
+
   void set_measurement(int ns) {
     if constexpr (kHasTimeOffset<L> || kHasLeverArm<L>) {
       // self-calibration (layout.hpp; meas/pseudorange.hpp): the lever-arm estimate, and how far the
@@ -437,6 +528,8 @@ class TightEngine {
       meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, core_.clock_bias, core_.clock_drift, work_, ns,
                 core_.isb.data());
     }
+    if constexpr (kCanGm)
+      if (gm_on()) gm_fold();
   }
 
   /// y_i = residual_i - H_i x and sqrt(S_ii) = sqrt(alpha H_i P H_i^T + R_ii) of every row (robust.hpp;
@@ -618,6 +711,14 @@ class TightEngine {
   std::int64_t tdcp_src_[kMaxMeasRows] = {};
   double tdcp_lambda_[kMaxMeasRows] = {};
   double ep_t_ = 0.0;  // the time tag of the epoch being applied [s]
+  // Gauss-Markov pseudorange errors (pseudorange_gm.hpp): the block, the slot of each satellite row
+  // of the epoch, of each measurement row, and the prior P_xx of the update
+  PseudorangeGmBlock<L::kSize> gm_;
+  int gm_slot_[kMaxMeasRows] = {}, gm_row_slot_[kMaxMeasRows] = {};
+  int gm_ns_ = 0;
+  bool gm_folded_ = false;
+  int gm_reopened_ = 0;
+  StateCov<L> gm_Pxx_prior_ = StateCov<L>::Zero();
 };
 
 }  // namespace insnav

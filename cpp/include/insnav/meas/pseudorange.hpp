@@ -206,6 +206,8 @@ class TightMeasurement {
   }
 
   const LinearMeasurement<L>& linear() const { return lin_; }
+  /// For an engine that folds extra states into the rows (meas/pseudorange_gm.hpp; the EKF's update).
+  LinearMeasurement<L>& linear_mutable() { return lin_; }
 
   /// The angular rate [rad/s] of the lever-arm states' Doppler columns for the
   /// next set() (layouts with them; meas/gnss_loose.hpp, set_lever_arm_rate):
