@@ -158,3 +158,23 @@ def test_config_errors():
         RunConfig(coupling="tight", filter="ekf", pr_gm_sigma_m=2.0, pr_gm_tau_s=0.0).validate()
     with pytest.raises(ConfigError, match="pr_gm_sigma_m"):
         RunConfig(coupling="tight", filter="ekf", pr_gm_sigma_m=2.0, smooth=True).validate()
+
+
+def test_tuner_factors(sc):
+    """insnav tune: the Gauss-Markov sigma and tau are factors of a tight run with the block on (and only
+    then), scaled in log space like the others and written to the tuned TOML."""
+    from insnav.calib.tune import TuneResult, default_parameters, scaled_config, tune, tuned_toml_dict
+    from insnav.config import ImuNoise
+
+    ds = sim.simulate(sc, seed=5)
+    on = RunConfig(coupling="tight", filter="ekf", pr_gm_sigma_m=2.0, pr_gm_tau_s=40.0)
+    assert default_parameters(ds, on)[-2:] == ["pr_gm_sigma", "pr_gm_tau"]
+    assert "pr_gm_sigma" not in default_parameters(ds, RunConfig(coupling="tight", filter="ekf"))
+    c = scaled_config(on, ImuNoise.from_dataset_model(ds.imu_model), {"pr_gm_sigma": 1.5, "pr_gm_tau": 0.5})
+    assert (c.pr_gm_sigma_m, c.pr_gm_tau_s) == (3.0, 20.0)
+    d = tuned_toml_dict({}, TuneResult(names=["pr_gm_sigma"], scales={}, base=on, tuned=c, log_likelihood_base=0.0,
+                                       log_likelihood_tuned=0.0, records=1, runs=1, seconds=0.0, t_split=0.0,
+                                       holdout=0.3))
+    assert (d["pr_gm_sigma_m"], d["pr_gm_tau_s"]) == (3.0, 20.0)
+    with pytest.raises(ConfigError, match="pr_gm_sigma"):
+        tune(ds, RunConfig(coupling="tight", filter="ekf"), params=["gnss_pos", "pr_gm_sigma"], max_runs=10)

@@ -141,7 +141,9 @@ static void test_h_numerical() {
 
 // Stationary IMU at lat, level, facing north: exact increments at rate 100 Hz.
 template <class Filter>
-static void run_stationary(int n_sats, const char* name) {
+// gm_sigma_m > 0: with the Gauss-Markov pseudorange states (meas/pseudorange_gm.hpp) on, under the
+// same malloc check (fixed-capacity block, no heap per epoch)
+static void run_stationary(int n_sats, const char* name, double gm_sigma_m = 0.0) {
   std::mt19937 rng(5);
   const double lat = 0.8, lon = 0.2, h = 300.0, dt = 0.01, T = 120.0;
   const int n = static_cast<int>(T / dt);
@@ -168,6 +170,7 @@ static void run_stationary(int n_sats, const char* name) {
     const int use = (e > 20) ? n_sats : 4;  // 4 satellites for 20 s, then n_sats
     for (int i = 0; i < use; ++i) {
       SatObservation s = geom[i];
+      if (gm_sigma_m > 0.0) s.prn = i + 1;  // the Gauss-Markov states key on the satellite
       const Vec3 d = s.r_e - r_e;
       s.pseudorange_m = d.norm() + b0 + d0 * e - s.clock_bias_m + 3.0 * nd(rng);
       s.pseudorange_rate_mps = d.normalized().dot(s.v_e) + d0 - s.clock_drift_mps + 0.1 * nd(rng);
@@ -193,6 +196,7 @@ static void run_stationary(int n_sats, const char* name) {
   const StateCov<L> P0 = p0.cwiseAbs2().asDiagonal();
   TightConfig cfg;
   cfg.propagation_interval = 0.1;  // insnav.run's default (the C++ default 0.02 s: 5x the UT propagations)
+  cfg.pr_gm.sigma_m = gm_sigma_m;
   auto engine = std::make_unique<TightEngine<Filter>>(model, cfg);
   std::vector<double> o_t(n + 1), o_llh(3 * (n + 1)), o_clk(2 * (n + 1)), o_sig(17 * (n + 1)), o_res(2 * obs.size()),
       o_nis(ep.size());
@@ -337,6 +341,7 @@ int main() {
     run_stationary<RbUkf<L>>(ns, "RB-UKF");
     run_stationary<Ukf<L>>(ns, "UKF");
   }
+  run_stationary<Ekf<L>>(4, "EKF + Gauss-Markov pseudorange states", 2.0);
   EXPECT_TRUE(g_eigen_asserts == 0);
   TEST_MAIN_END()
 }
