@@ -114,6 +114,15 @@ def tdcp_row(
     clock_bias_prev_m: float,
     clock_bias_cur_m: float,
 ) -> dict[str, Any]: ...
+def pseudorange_gm_fold_check(
+    Pxx: npt.ArrayLike,  # (17, 17) navigation error covariance
+    Pxb: npt.ArrayLike,  # (17, nb) cross-covariance with nb Gauss-Markov pseudorange states [m]
+    Pbb: npt.ArrayLike,  # (nb, nb) [m^2]
+    Hx: npt.ArrayLike,  # (m, 17)
+    R: npt.ArrayLike,  # (m, m)
+    y: npt.ArrayLike,  # (m,) residual (INS-predicted minus measured)
+    row_slot: npt.ArrayLike,  # (m,) int32: the state of each pseudorange row, -1 for a Doppler row
+) -> dict[str, Any]: ...
 def run_delay(
     method: str,  # "rdkf" | "exact"
     layout: int,
