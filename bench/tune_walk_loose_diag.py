@@ -14,9 +14,10 @@ prints the figures that tell the candidate causes apart (nothing here changes th
    lever arm left in), its velocity column is the receiver's, 0.132 s behind its positions
    (``[gnss] velocity_lag_s``), and it has the noise of the fixes the filter saw (the same
    receiver and solution).  A consistent filter compared with a reference e_ref = b + w
-   (b: the lever arm C_nb l_b, w: white noise of variance R) has
+   (b: the lever arm C_nb l_b, w: white noise of variance R, independent of the filter's error) has
    E[(e/sigma)^2] = 1 + (b^2 + R) / sigma^2 per axis; that expectation, with R the tuned
-   measurement variance of the same data, is printed beside the measured figure;
+   measurement variance of the same data (the median data sigma times the tuned factors), is
+   printed beside the measured figure;
 4. the reference's own noise: the ``.pos`` at the standstill (std and autocorrelation at
    0.25-1 s: the unseen epochs share the error of the neighbouring seen fixes when it is
    correlated) and its velocity column against the central differences of its positions.
@@ -86,7 +87,8 @@ def innovations(sol, ds, c, mask):
     r_p = np.asarray(ds.gnss.sigma_pos_n, float)[o][ap] * c.gnss_pos_sigma_scale
     r_p[:, 2] *= getattr(c, "gnss_pos_v_sigma_scale", 1.0)
     r_v = np.asarray(ds.gnss.sigma_vel_n, float)[o][ap] * c.gnss_vel_sigma_scale
-    s = np.column_stack([np.asarray(sol.sigma_pos_n_m)[k] ** 2 + r_p ** 2, np.asarray(sol.sigma_vel_n_mps)[k] ** 2 + r_v ** 2])
+    s = np.column_stack([np.asarray(sol.sigma_pos_n_m)[k] ** 2 + r_p ** 2,
+                         np.asarray(sol.sigma_vel_n_mps)[k] ** 2 + r_v ** 2])
     nis = np.nanmean(inn ** 2 / s, axis=0)
     return int(ap.sum()), nis, np.array([lag1(inn[:, i]) for i in range(6)]), np.sqrt(np.nanmean(inn ** 2, axis=0))
 
@@ -126,9 +128,77 @@ def comparison(sol, ref, ref_retimed, m, lever_b, seen, r_pos, r_vel):
     for q in sorted(set(dt.tolist())):
         mm = dt == q
         if mm.sum() >= 5:
-            out["by_dt"].append((q, int(mm.sum()), z((e["pos_n_m"] + lever_n)[mm], sp[mm]), z(er["vel_n_mps"][mm], sv[mm]),
+            out["by_dt"].append((q, int(mm.sum()), z((e["pos_n_m"] + lever_n)[mm], sp[mm]),
+                                 z(er["vel_n_mps"][mm], sv[mm]),
                                  np.sqrt(np.mean(er["vel_n_mps"][mm] ** 2, axis=0)), np.mean(sv[mm], axis=0)))
     return out
+
+
+def retimed(ref, lag_s):
+    """The reference with its velocity column read ``lag_s`` later (as the filter's inputs)."""
+    tr = np.asarray(ref.t, float)
+    out = copy.copy(ref)
+    out.v_n = np.column_stack([np.interp(tr + lag_s, tr, np.asarray(ref.v_n)[:, i]) for i in range(3)])
+    return out
+
+
+def standstill_start(ref, t_from):
+    """The time after ``t_from`` from which the reference stands still to its end [s] (inf: never)."""
+    tr = np.asarray(ref.t, float)
+    speed = np.hypot(np.asarray(ref.v_n)[:, 0], np.asarray(ref.v_n)[:, 1])
+    moving = tr[(tr >= t_from) & (speed > STILL_MPS)]
+    return float(moving[-1]) + 0.5 if moving.size else float(t_from)
+
+
+def expectation(sol, ds, cfg, run_cfg, ref, lag_s, t_from, t_to=np.inf):
+    """For tune_check: rms(error/sigma) per axis over [t_from, t_to) at the unseen epochs as measured (the
+    metric), with the solution's antenna point and the re-timed reference velocity, and as expected for a
+    consistent filter against this reference (section 3 of the module docstring), with ``run_cfg``'s
+    GNSS sigmas (the data's times its factors) as the reference's noise."""
+    tr = np.asarray(ref.t, float)
+    seen = np.sort(np.asarray(ds.gnss.t_valid, float))
+    unseen = np.setdiff1d(np.round(tr, 3), np.round(seen, 3))
+    m = np.isin(np.round(tr, 3), unseen) & (tr >= max(t_from, sol.t[0])) & (tr < min(t_to, sol.t[-1]))
+    sig_p = np.nanmedian(np.asarray(ds.gnss.sigma_pos_n, float), axis=0) * run_cfg.gnss_pos_sigma_scale
+    sig_p[2] *= run_cfg.gnss_pos_v_sigma_scale
+    sig_v = np.nanmedian(np.asarray(ds.gnss.sigma_vel_n, float), axis=0) * run_cfg.gnss_vel_sigma_scale
+    return comparison(sol, ref, retimed(ref, lag_s), m, np.asarray(cfg.lever_arm_b, float), seen, sig_p, sig_v)
+
+
+def expectation_lines(ds, cfg, ref, res, lag_s) -> list:
+    """Markdown for bench/tune_check.py's walk section: the tuned run's held-out rms(error/sigma) beside
+    what a consistent filter would show against this reference, and the innovations while walking and
+    standing in the held-out part."""
+    from insnav.calib.tune import holdout_report as report
+
+    sol = insnav.run(ds, config=dataclasses.replace(res.tuned))
+    x = expectation(sol, ds, cfg, res.tuned, ref, lag_s, res.t_split)
+    t_still = standstill_start(ref, res.t_split)
+    walk, still = report(sol, None, res.t_split, t_still), report(sol, None, t_still)
+    tr = np.asarray(ref.t, float)
+    tr0 = float(tr[0])
+    speed = np.hypot(np.asarray(ref.v_n)[:, 0], np.asarray(ref.v_n)[:, 1])
+    tuning = (tr >= float(np.asarray(ds.imu.t)[0])) & (tr < res.t_split)
+    still_s = float(np.sum(speed[tuning] < STILL_MPS) * np.median(np.diff(tr)))
+    j = lambda v: ", ".join(f"{a:.2f}" for a in v)  # noqa: E731
+    return [f"Against this reference a consistent filter does not give rms(err/sigma) = 1 "
+            f"(`bench/tune_walk_loose_diag.py`): the reference is the antenna, the solution the IMU centre (the "
+            f"lever arm C_nb l_b = b left in), and the reference has the noise of the fixes themselves (the same "
+            f"receiver solution; variance R = the tuned measurement sigmas), so E[(e/sigma)^2] = 1 + (b^2 + R) / "
+            f"sigma^2 per axis; its velocity column also lags its positions by velocity_lag_s = {lag_s:g} s.  The "
+            f"tuned run on the held-out part:", "",
+            "| rms(err/sigma) of the tuned run, held out | N, E, D | vN, vE, vD |", "|---|---|---|",
+            f"| measured (the metric above) | {j(x['pos'])} | {j(x['vel'])} |",
+            f"| a consistent filter against this reference, expected | {j(x['pos_expected'])} | - |",
+            f"| measured, solution's antenna point / reference velocity read {lag_s:g} s later | "
+            f"{j(x['pos_antenna'])} | {j(x['vel_retimed'])} |",
+            f"| a consistent filter, expected, same | {j(x['pos_expected_antenna'])} | "
+            f"{j(x['vel_expected_retimed'])} |", "",
+            f"The held-out part ends standing still (from {t_still - tr0:.1f} s after the first `.pos` epoch; the "
+            f"tuning part has {still_s:.1f} s of {res.t_split - float(np.asarray(ds.imu.t)[0]):.1f} s below "
+            f"{STILL_MPS:g} m/s): mean NIS per row of the tuned run {walk['nis_per_row']:.2f} over its "
+            f"{walk['records']} walking records, {still['nis_per_row']:.2f} over its {still['records']} standing "
+            f"ones.", ""]
 
 
 def reference_noise(ref, lag_s):
@@ -173,17 +243,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     ds, cfg, ref, lag_s = load()
     tr = np.asarray(ref.t, float)
-    ref_retimed = copy.copy(ref)
-    ref_retimed.v_n = np.column_stack([np.interp(tr + lag_s, tr, np.asarray(ref.v_n)[:, i]) for i in range(3)])
+    ref_retimed = retimed(ref, lag_s)
     seen = np.sort(np.asarray(ds.gnss.t_valid, float))
     unseen = np.setdiff1d(np.round(tr, 3), np.round(seen, 3))
     lever_b = np.asarray(cfg.lever_arm_b, float)
     res = tune(ds, cfg, holdout=HOLDOUT, max_runs=args.max_runs,
                params=args.params.split(",") if args.params else None)
     split = res.t_split
-    speed = np.hypot(np.asarray(ref.v_n)[:, 0], np.asarray(ref.v_n)[:, 1])
-    moving_after = tr[(tr >= split) & (speed > STILL_MPS)]
-    t_still = float(moving_after[-1]) + 0.5 if moving_after.size else np.inf
+    t_still = standstill_start(ref, split)
     t0 = float(tr[0])
     print(f"Tuned on t < {split - t0:.1f} s (reference time from the first .pos epoch; IMU from "
           f"{ds.imu.t[0] - t0:.1f} to {ds.imu.t[-1] - t0:.1f} s); the held-out part is walking until "
@@ -207,15 +274,18 @@ def main(argv=None) -> int:
           "tune_check: 'as is'), and the same with the solution's antenna point (+ C_nb l_b) and with the "
           "reference velocity read velocity_lag_s later (as the filter's own inputs); 'expected': a consistent "
           "filter against this reference (lever arm and the tuned measurement noise R of the data)")
-    r_pos = 0.05 * res.tuned.gnss_pos_sigma_scale * np.array([1.0, 1.0, getattr(res.tuned, "gnss_pos_v_sigma_scale", 1.0)])
-    r_vel = 0.1 * res.tuned.gnss_vel_sigma_scale
+    r_pos = np.nanmedian(np.asarray(ds.gnss.sigma_pos_n, float), axis=0) * res.tuned.gnss_pos_sigma_scale
+    r_pos[2] *= res.tuned.gnss_pos_v_sigma_scale
+    r_vel = np.nanmedian(np.asarray(ds.gnss.sigma_vel_n, float), axis=0) * res.tuned.gnss_vel_sigma_scale
     for name, (c, sol) in runs.items():
         for seg, a, b in segs:
             m = np.isin(np.round(tr, 3), unseen) & (tr >= max(a, sol.t[0])) & (tr < min(b, sol.t[-1]))
             x = comparison(sol, ref, ref_retimed, m, lever_b, seen, r_pos, r_vel)
             print(f"   {name:5s} {seg:10s} epochs {int(m.sum()):3d}  hor RMS {x['hor_rms']:.4f} m (antenna point "
-                  f"{x['hor_rms_antenna']:.4f})  sigma pos {f2(x['sigma_pos'] * 100)} cm  vel {f2(x['sigma_vel'] * 100)} cm/s")
-            print(f"        pos as is {f2(x['pos'])}  expected {f2(x['pos_expected'])} | antenna point {f2(x['pos_antenna'])}"
+                  f"{x['hor_rms_antenna']:.4f})  sigma pos {f2(x['sigma_pos'] * 100)} cm  "
+                  f"vel {f2(x['sigma_vel'] * 100)} cm/s")
+            print(f"        pos as is {f2(x['pos'])}  expected {f2(x['pos_expected'])} | "
+                  f"antenna point {f2(x['pos_antenna'])}"
                   f"  expected {f2(x['pos_expected_antenna'])}")
             print(f"        vel as is {f2(x['vel'])} | re-timed {f2(x['vel_retimed'])}  expected "
                   f"{f2(x['vel_expected_retimed'])}")

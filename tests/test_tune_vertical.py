@@ -67,7 +67,8 @@ def test_vertical_factor_is_the_data_sigma_times_f_bit_for_bit():
     assert not np.array_equal(a.sigma_pos_n_m, d.sigma_pos_n_m)
     # the tuner's factor composes with the config's; 1 leaves the config alone
     noise = ImuNoise()
-    assert scaled_config(RunConfig(gnss_pos_v_sigma_scale=2.0), noise, {"gnss_pos_v": 1.5}).gnss_pos_v_sigma_scale == 3.0
+    c = scaled_config(RunConfig(gnss_pos_v_sigma_scale=2.0), noise, {"gnss_pos_v": 1.5})
+    assert c.gnss_pos_v_sigma_scale == 3.0 and c.gnss_pos_sigma_scale == 1.0
     assert scaled_config(RunConfig(), noise, {"gnss_pos_v": 1.0}) == scaled_config(RunConfig(), noise, {})
 
 
