@@ -105,3 +105,35 @@ def test_vertical_factor_is_loose_only():
         RunConfig(gnss_pos_v_sigma_scale=0.0).validate()
     assert "gnss_pos_v" not in default_parameters(insnav.simulate("seed000-sim", seed=1),
                                                   RunConfig(filter="ekf", coupling="tight"))
+
+
+def test_stream_applies_the_vertical_factor_as_the_batch_run(shared_data, tmp_path, monkeypatch):
+    """``insnav run --format kfgins`` block by block (insnav.filters.stream) with the factor in --run-config:
+    the solution and innovations files byte for byte those of the whole-file run, and not those without it."""
+    import lzma
+
+    import insnav.filters.stream as stream
+    from test_cli import _call
+
+    sim = shared_data / "kfgins" / "sim"
+    with lzma.open(sim / "Leador-A15-sim.txt.xz", "rb") as f:
+        lines = [f.readline() for _ in range(20_000)]  # the run starts at the YAML's starttime, 10 000 lines in
+    (tmp_path / "imu.txt").write_bytes(b"".join(lines))
+    (tmp_path / "gnss.txt").write_bytes((sim / "GNSS-RTK-sim.txt").read_bytes())
+    yaml = "\n".join('imupath: "./imu.txt"' if ln.startswith("imupath:") else
+                     'gnsspath: "./gnss.txt"' if ln.startswith("gnsspath:") else ln
+                     for ln in (sim / "kf-gins-sim.yaml").read_text().splitlines())
+    (tmp_path / "kf.yaml").write_text(yaml + "\n")
+    (tmp_path / "v.toml").write_text("gnss_pos_v_sigma_scale = 3.0\n")
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    out = {}
+    for name, extra in (("on", ["--stream", "on", "--run-config", tmp_path / "v.toml"]),
+                        ("off", ["--stream", "off", "--run-config", tmp_path / "v.toml"]), ("plain", [])):
+        sol = tmp_path / name / "sol.csv"
+        rc, _, err = _call(["run", "--format", "kfgins", "--config", tmp_path / "kf.yaml", "--out", sol, "--quiet",
+                            *extra])
+        assert rc == 0, err
+        assert "note:" not in err  # with --stream on: the stream ran, not the whole-file fallback
+        out[name] = (sol.read_bytes(), (sol.parent / "sol.csv.innovations.csv").read_bytes())
+    assert out["on"] == out["off"]
+    assert out["on"][0] != out["plain"][0]
