@@ -25,7 +25,12 @@ docs/algorithms.md section 21), on simulation and on the real walk.
    where the vertical one is weakly observable), rms(error / sigma) per
    component; a truth-independence check of the vertical estimate.
    3a. The same on the drive with roll and pitch excitation (ROCKING): all
-   three components within 3 cm.
+   three components within 3 cm.  3b. The vehicle constraints' lever arm.
+   3c. A calibration drive (bench/tune_check.py's town drive: a 90 deg turn
+   every 16 s), level and with body roll in the turns: the horizontal and the
+   all-three 3 cm verdicts.  3d. What sets section 3's horizontal sigma: the
+   information turn by turn against the velocity rows' bound, and one thing
+   changed at a time (fixes, rows, IMU errors, bias model, prior, yaw rate).
 4. Tight EKF (simulated pseudorange and Doppler, the same car): the time
    offset at -100 / +100 ms (reported, no target in the task).
 5. Real walk (rtklibexplorer walk_0827): loose on the ``.pos``
