@@ -282,7 +282,8 @@ def lever_runs(n: int, l_true=(1.0, 0.5, -1.0), rocking: bool = False, seed0: in
                          err_cw=cw.lever_arm_b_m[-1] - l_true,
                          est=sol.lever_arm_b_m[-1], sigma=sol.sigma_lever_arm_b_m[-1],
                          err=sol.lever_arm_b_m[-1] - l_true, rms=horizontal_rms(ds, sol),
-                         rms_zero=horizontal_rms(ds, fixed_wrong), rms_true=horizontal_rms(ds, fixed_right)))
+                         rms_zero=horizontal_rms(ds, fixed_wrong), rms_true=horizontal_rms(ds, fixed_right),
+                         exc=drive_excitation(ds)))
     return l_true, rows
 
 
@@ -328,14 +329,17 @@ def town_motion(roll_gradient_deg_per_g: float = 0.0, n_turns: int | None = None
     return mo
 
 
-def drive_excitation(ds) -> dict:
+def drive_excitation(ds, skip_end_s: float = 20.0) -> dict:
     """Peak |roll| [deg], |roll rate| [deg/s], |yaw rate| [deg/s] and horizontal acceleration [g] of a
-    simulated drive (truth)."""
+    simulated drive (truth), its last ``skip_end_s`` left out (the scenario's last segment ends without
+    a smoothing transition: a turn ending the drive turns faster); ``t``: the drive's length [s]."""
     tr = ds.truth
     a = np.gradient(tr.v_n, tr.t, axis=0)
-    return dict(roll=float(np.max(np.abs(tr.roll_deg))), roll_rate=float(np.max(np.abs(tr.omega_ib_b[:, 0]))) / DEG,
-                yaw_rate=float(np.max(np.abs(tr.omega_ib_b[:, 2]))) / DEG,
-                a_h=float(np.max(np.hypot(a[:, 0], a[:, 1]))) / 9.80665, t=float(tr.t[-1] - tr.t[0]))
+    m = tr.t <= tr.t[-1] - skip_end_s
+    return dict(roll=float(np.max(np.abs(tr.roll_deg[m]))),
+                roll_rate=float(np.max(np.abs(tr.omega_ib_b[m, 0]))) / DEG,
+                yaw_rate=float(np.max(np.abs(tr.omega_ib_b[m, 2]))) / DEG,
+                a_h=float(np.max(np.hypot(a[m, 0], a[m, 1]))) / 9.80665, t=float(tr.t[-1] - tr.t[0]))
 
 
 def lever_sigma_drivers(seed: int = 300, l_true=(1.0, 0.5, -1.0)):
@@ -547,6 +551,10 @@ def walk_tight(data_root: Path):
         sol = insnav.run(ds, config=dataclasses.replace(cfg, time=dataclasses.replace(cfg.time, estimate_offset=on)))
         out[label] = _walk_row(sol, ref)
     return out, x["shift_neu"]
+
+
+def seeds_txt(seed0: int, n: int) -> str:
+    return f"{seed0}" if n == 1 else f"{seed0}-{seed0 + n - 1}"
 
 
 def n_turns_txt(n: int) -> str:
@@ -829,14 +837,15 @@ def main(argv=None) -> int:
     # 3c. the calibration drive: many turns, with and without body roll
     print("calibration drive runs ...", file=sys.stderr, flush=True)
     drives = [("level body", 0.0)] + [(f"turn roll {k:g} deg/g", k) for k in ROLL_GRADIENTS_DEG_PER_G]
-    exc = {lab: drive_excitation(car(800, motion=town_motion(k))) for lab, k in drives}
+    town = {lab: lever_runs(args.lever_runs, seed0=800, motion=town_motion(k))[1] for lab, k in drives}
+    exc = {lab: town[lab][0]["exc"] for lab, _ in drives}
     lines += ["### 3c. A calibration drive: a town drive with a 90 deg turn every 16 s", "",
               "What a user would drive to calibrate the lever arm: `bench/tune_check.py`'s town drive (its `SIM` "
               "scenario's motion, `town_motion` here: from a stop to 12 m/s, then 56 times an 8 s straight and a "
-              f"90 deg turn in 8 s, alternately left and right; {exc['level body']['t']:.0f} s, peak yaw rate "
+              f"90 deg turn in 8 s, alternately left and right; {exc['level body']['t']:.0f} s, yaw rate "
               f"{exc['level body']['yaw_rate']:.1f} deg/s, peak horizontal acceleration "
               f"{exc['level body']['a_h']:.2f} g), with section 3's IMU (car-mems), fixes (5 Hz, 2 cm / 2 cm/s) "
-              f"and filter settings (from zero, sigma 1 m), seeds 800-{799 + args.lever_runs}, the same true "
+              f"and filter settings (from zero, sigma 1 m), seeds {seeds_txt(800, args.lever_runs)}, the same true "
               "lever arm.  Three bodies: level (the simulator's car keeps its body on the track's attitude: no "
               "roll in turns), and a body that rolls in the turns by a roll gradient of "
               + " and ".join(f"{k:g} deg/g (peak roll {exc[lab]['roll']:.2f} deg, roll rate "
@@ -851,7 +860,7 @@ def main(argv=None) -> int:
               "horizontal within 3 cm | all three within 3 cm |", "|---|---|---|---|---|---|---|"]
     town_tabs, town_ok = [], {}
     for lab, k in drives:
-        l_true, tr_ = lever_runs(args.lever_runs, seed0=800, motion=town_motion(k))
+        tr_ = town[lab]
         tab, errs, rz = lever_table(tr_, 800)
         worst_c = np.max(np.abs(errs), axis=0)
         sig_c = np.mean([r["sigma"] for r in tr_], axis=0)
@@ -868,8 +877,8 @@ def main(argv=None) -> int:
                   "as on any level drive.  With turn roll: "
                   + "; ".join(f"{lab}, vertical sigma {100 * town_ok[lab][2][2]:.2f} cm, all three within 3 cm: "
                               f"{verdict(town_ok[lab][1])}" for lab, _ in drives[1:])
-                  + ".  Section 3 (the car-mems drive: five turns) stays the weakly excited case; 3a (rocking) and "
-                  "this drive are the ones that calibrate.", ""] + town_tabs
+                  + ".  Section 3's drive (car-mems: four 90 deg turns and a U-turn in 900 s) is kept as the weakly "
+                  "excited case.", ""] + town_tabs
 
     # 3d. what sets the horizontal sigma of section 3
     print("lever-arm sigma drivers ...", file=sys.stderr, flush=True)
@@ -889,9 +898,10 @@ def main(argv=None) -> int:
                      f"{r['gain'] / r['r'] ** 2:.0f} | {r['bound']:.0f} | {r['bound'] / r['gain']:.1f} |")
     big = [r for r in ti if abs(r["dpsi"]) >= 90.0]
     c = float(np.median([r["gain"] / r["r"] ** 2 for r in big]))
-    r_town = exc["level body"]["yaw_rate"] * DEG
-    n_town = sum(1 for sg in town_motion()["segments"] if "heading_change_deg" in sg)
-    pred = 1.0 / np.sqrt(n_town * c * r_town ** 2)
+    r_i = np.array([abs(float(sg["heading_change_deg"])) / float(sg["duration_s"]) * DEG
+                    for sg in town_motion()["segments"] if "heading_change_deg" in sg])
+    n_town, r_town = len(r_i), float(np.median(r_i))
+    pred = 1.0 / np.sqrt(c * np.sum(r_i ** 2))
     r1 = big[0]["r"]
     lines += ["", "Every turn of 90 deg or more gains about the same information per squared yaw rate (gained / r^2 "
                   f"from {min(r['gain'] / r['r'] ** 2 for r in big):.0f} to "
@@ -909,7 +919,7 @@ def main(argv=None) -> int:
                   f"duration or number of fixes: in section 3's first turn r^2 |l_h| = "
                   f"{r1 ** 2 * l_h / 9.80665e-3:.2f} mg, against the simulated accelerometer's total bias sigma "
                   f"{acc_b / 9.80665e-3:.1f} mg.  The calibration drive's {n_turns_txt(n_town)} at "
-                  f"{r_town / DEG:.2f} deg/s predict, at the median ratio {c:.0f}, a horizontal sigma of "
+                  f"{r_town / DEG:.2f} deg/s (heading change / duration) predict, at the median ratio {c:.0f}, a horizontal sigma of "
                   f"{100 * pred:.2f} cm; the filter gives {100 * float(np.mean(lev[2][:2])):.2f} cm (3c).", "",
               "One thing changed at a time on section 3's drive (seed 300; the drive's own sigma in the first row; "
               "`bench/selfcal_states.py` lever_sigma_drivers):", "",
@@ -922,13 +932,16 @@ def main(argv=None) -> int:
                      f"{float(np.mean(r['sigma'][:2])) / s0:.2f} | "
                      f"{', '.join(f'{100 * v:+.2f}' for v in r['err'][:2])} |")
     q = {r["label"].split(" (")[0]: float(np.mean(r["sigma"][:2])) / s0 for r in drv_l}
+    both = q["gyro and accelerometer errors / 10"]
     lines += ["", "Read with the kinematics above: the turns' yaw rate sets the horizontal sigma (x "
                   f"{q['turns twice as fast']:.2f} with the turns twice as fast, x {q['turns twice as slow']:.2f} "
                   "twice as slow: sigma ~ 1 / r), then the accelerometer's biases, which the steady turn "
                   f"confuses with the lever arm (x {q['accelerometer biases / 10']:.2f} with them / 10, x "
                   f"{q['filter bias model: constant + random walk']:.2f} with the filter's bias model closer to "
-                  "the simulated one); the gyro's errors do nothing (x "
-                  f"{q['gyro errors / 10']:.2f}).  The fixes matter less than 1 / sqrt(number): x "
+                  "the simulated one); the gyro's errors alone do "
+                  + ("nothing" if q["gyro errors / 10"] > 0.95 else "little")
+                  + f" (x {q['gyro errors / 10']:.2f}), with the accelerometer's / 10 too they count (x {both:.2f} "
+                  f"against x {q['accelerometer errors / 10']:.2f}).  The fixes matter less than 1 / sqrt(number): x "
                   f"{q['fixes at 20 Hz']:.2f} at four times the rate, x {q['position sigma / 2']:.2f} and x "
                   f"{q['velocity sigma / 2']:.2f} with the position or velocity sigma halved; either row kind "
                   f"alone still gives x {q['velocity rows off']:.2f} (position rows) and x "
