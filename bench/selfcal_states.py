@@ -792,7 +792,9 @@ def main(argv=None) -> int:
                   f"{100 * np.mean([r['sigma'][2] for r in lr]):.0f} cm at the end): it moves the antenna's "
                   "height exactly as the INS height does, and is told apart only through the small pitch changes "
                   "of the grades (C_nb l in the position rows) and the roll and pitch rates (omega x l in the "
-                  "velocity rows), which a car hardly has (docs/algorithms.md section 21, observability).", "",
+                  "velocity rows), which a car hardly has (docs/algorithms.md section 21, observability).  "
+                  "This drive has few turns: what sets its horizontal sigma is in section 3d, a calibration drive "
+                  "with many turns in 3c.", "",
               cw_line(lr), ""]
 
     lz, est, kept = lever_shrink_check()
