@@ -52,7 +52,7 @@ def test_horizontal_lever_arm_within_3_cm_after_12_turns(runs):
 
 def test_turn_roll_makes_the_vertical_component_observable(runs):
     """Level body: the vertical sigma stays above 50 cm (loose coupling: l_z moves the antenna's height
-    as the INS height does).  With 10 deg/g of roll in the turns (about 2.6 deg): below 5 cm, every
+    as the INS height does).  With 10 deg/g of roll in the turns (2.4 deg at 0.24 g): below 5 cm, every
     vertical error within 3 sigma and 8 cm."""
     lvl = np.array([runs[0.0, s_][1][2] for s_ in (11, 12, 13)])
     e = np.array([runs[10.0, s_][0][2] for s_ in (11, 12, 13)])
