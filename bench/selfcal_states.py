@@ -921,7 +921,8 @@ def main(argv=None) -> int:
                   f"duration or number of fixes: in section 3's first turn r^2 |l_h| = "
                   f"{r1 ** 2 * l_h / 9.80665e-3:.2f} mg, against the simulated accelerometer's total bias sigma "
                   f"{acc_b / 9.80665e-3:.1f} mg.  The calibration drive's {n_turns_txt(n_town)} at "
-                  f"{r_town / DEG:.2f} deg/s (heading change / duration) predict, at the median ratio {c:.0f}, a horizontal sigma of "
+                  f"{r_town / DEG:.2f} deg/s (heading change / duration) predict, at the median ratio {c:.0f}, "
+                  "a horizontal sigma of "
                   f"{100 * pred:.2f} cm; the filter gives {100 * float(np.mean(lev[2][:2])):.2f} cm (3c).", "",
               "One thing changed at a time on section 3's drive (seed 300; the drive's own sigma in the first row; "
               "`bench/selfcal_states.py` lever_sigma_drivers):", "",
