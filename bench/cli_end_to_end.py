@@ -35,7 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import ROOT, git_commit
+from _common import ROOT, compile_package, git_commit
 from _kfgins import build_kfgins, built_commit, find_kfgins
 from _stamps import with_stamp  # noqa: E402
 
@@ -226,13 +226,7 @@ def main(argv=None) -> int:
     except ImportError:
         variants = [v for v in VARIANTS if "Parquet" not in v[0]]
     if not a.no_compile:
-        # the package's bytecode compiled first, as pip does on install (a process that finds no .pyc
-        # compiles every module it imports, ~0.1 s here: this machine sets PYTHONDONTWRITEBYTECODE);
-        # found without importing it (this process stays small: its children's peak RSS counts it)
-        import importlib.util
-
-        pkg = importlib.util.find_spec("insnav").submodule_search_locations[0]
-        subprocess.run([sys.executable, "-m", "compileall", "-q", pkg], check=True, stdout=subprocess.DEVNULL)
+        compile_package()
     work = Path(tempfile.mkdtemp(prefix="insnav-e2e-"))
     try:
         for f in ("GNSS-RTK-sim.txt", "kf-gins-sim.yaml"):

@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -40,7 +39,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import git_commit, run_child  # noqa: E402
+from _common import compile_package, git_commit, run_child  # noqa: E402
 from _stamps import with_stamp  # noqa: E402
 
 COMMAND = "python3 bench/gnss_speed.py --out docs/results/gnss_speed.md"
@@ -160,12 +159,7 @@ def main(argv=None) -> int:
         return 2
     t_start = time.time()
     load_start = os.getloadavg()[0]  # 1-minute load average: the timings depend on the other processes
-    # the package's bytecode compiled first, as pip does on install (a process that finds no .pyc compiles
-    # every module it imports: this machine sets PYTHONDONTWRITEBYTECODE)
-    import importlib.util
-
-    pkg = importlib.util.find_spec("insnav").submodule_search_locations[0]
-    subprocess.run([sys.executable, "-m", "compileall", "-q", pkg], check=True, stdout=subprocess.DEVNULL)
+    compile_package()
     s, w = data / SMARTLOC, data / WALK
     obs_s, nav_n, nav_g = s / "Berlin_Potsdamer_Platz.obs", s / "brdc1580.16n", s / "brdc1580.16g"
     obs_w, nav_w = w / "rinex_derived/gnss_1730.obs", w / "rinex_derived/gnss_1730.nav"

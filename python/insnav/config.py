@@ -664,6 +664,14 @@ class RunConfig:
         runs, the pseudorange and the pseudorange-rate sigmas of each
         satellite row.  ``insnav tune`` estimates them
         (:mod:`insnav.calib.tune`).
+    gnss_pos_v_sigma_scale : float
+        Loose runs: a further factor on the down (vertical) position sigma of
+        each fix, on top of ``gnss_pos_sigma_scale`` (default 1: the data's
+        ratio of vertical to horizontal sigma).  A receiver's or a sigma
+        floor's vertical-to-horizontal ratio is often not the error's (the
+        vertical error is larger: no satellite below the horizon, VDOP >
+        HDOP; Misra & Enge 2006, *Global Positioning System*, on DOP);
+        ``insnav tune`` estimates it (``gnss_pos_v``).  Tight runs: must be 1.
     pr_gm_sigma_m, pr_gm_tau_s, pr_gm_max_gap_s : float
         Tight EKF: time-correlated pseudorange errors (multipath, ionosphere
         and troposphere residuals) as one first-order Gauss-Markov state per
@@ -750,6 +758,7 @@ class RunConfig:
     use_velocity: bool = True
     gnss_pos_sigma_scale: float = 1.0
     gnss_vel_sigma_scale: float = 1.0
+    gnss_pos_v_sigma_scale: float = 1.0
     pr_gm_sigma_m: float = 0.0
     pr_gm_tau_s: float = 60.0
     pr_gm_max_gap_s: float = 10.0
@@ -800,7 +809,7 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not math.isfinite(v):
                 bad(key, v, "a finite number")
-        for key in ("gnss_pos_sigma_scale", "gnss_vel_sigma_scale"):
+        for key in ("gnss_pos_sigma_scale", "gnss_vel_sigma_scale", "gnss_pos_v_sigma_scale"):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not (math.isfinite(v) and v > 0):
@@ -884,6 +893,9 @@ class RunConfig:
         spec = FILTERS[self.filter]
         if self.coupling not in spec.couplings:
             bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
+        if self.coupling != "loose" and self.gnss_pos_v_sigma_scale != 1.0:
+            bad("gnss_pos_v_sigma_scale", self.gnss_pos_v_sigma_scale, f"1 with {self.coupling} coupling (it scales "
+                "the vertical sigma of loose position fixes)")
         facts = spec.facts(self.coupling)
         if isinstance(self.layout, bool) or self.layout not in LAYOUTS or not (
                 self.layout in facts.layouts or (self.layout == 15 and self.coupling != "loose")):

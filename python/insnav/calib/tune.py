@@ -2,7 +2,7 @@
 
 The filter's noise settings are multiplied by scale factors ``s_j``
 (:data:`PARAMETERS`: IMU noise densities, bias instabilities, the GNSS
-sigmas, the vehicle-constraint sigmas), and the factors that maximise the
+sigmas (loose: the vertical position sigma apart too), the vehicle-constraint sigmas), and the factors that maximise the
 innovation log-likelihood of the data are searched for:
 
     ln L(s) = sum_k -1/2 (nu_k' S_k^-1 nu_k + ln det S_k + m_k ln 2 pi)
@@ -68,6 +68,7 @@ PARAMETERS = {
     "acc_bias": "accelerometer bias instability, all axes ([imu] acc_bias_sigma_mg)",
     "gnss_pos": "GNSS sigmas of the data: loose position, tight pseudorange (gnss_pos_sigma_scale)",
     "gnss_vel": "GNSS sigmas of the data: loose velocity, tight pseudorange rate (gnss_vel_sigma_scale)",
+    "gnss_pos_v": "loose only: the vertical position sigma, on top of gnss_pos (gnss_pos_v_sigma_scale)",
     "nhc": "non-holonomic constraint sigma ([constraints] sigma_nhc_mps)",
     "odo": "odometer speed sigma ([constraints] sigma_odo_mps)",
     "zupt": "zero-velocity and zero-angular-rate sigmas ([constraints] sigma_zupt_mps, sigma_zaru_dph)",
@@ -237,7 +238,8 @@ def nelder_mead_log(fun, x0, step=math.log(3.0), *, max_evals: int = 120, xtol: 
 
 
 #: the groups of the coarse first stage of the search (one common factor each)
-GROUPS = (("gyro_arw", "acc_vrw", "gyro_bias", "acc_bias"), ("gnss_pos", "gnss_vel"), ("nhc", "odo", "zupt"))
+GROUPS = (("gyro_arw", "acc_vrw", "gyro_bias", "acc_bias"), ("gnss_pos", "gnss_vel", "gnss_pos_v"),
+          ("nhc", "odo", "zupt"))
 
 
 def _search(objective, names, x0, step, budget, xtol, used):
@@ -294,12 +296,15 @@ def base_noise(dataset, cfg: RunConfig) -> ImuNoise:
 
 def default_parameters(dataset, cfg: RunConfig) -> list[str]:
     """The factors tuned by default: the four IMU terms, the GNSS position (pseudorange)
-    sigma, the velocity (rate) sigma when the data have it, and the sigmas of
-    the constraints in use, and for a tight run with Gauss-Markov pseudorange
+    sigma, the velocity (rate) sigma when the data have it, loose with position
+    rows the vertical position sigma (``gnss_pos_v``), the sigmas of the
+    constraints in use, and for a tight run with Gauss-Markov pseudorange
     states (``pr_gm_sigma_m > 0``) their sigma and correlation time."""
     names = ["gyro_arw", "acc_vrw", "gyro_bias", "acc_bias", "gnss_pos"]
     if cfg.use_velocity and _has_velocity(dataset, cfg):
         names.append("gnss_vel")
+    if cfg.coupling == "loose" and cfg.use_position:
+        names.append("gnss_pos_v")
     names += [c for c in ("nhc", "odo", "zupt") if c in cfg.constraints.use]
     if cfg.coupling == "tight" and cfg.pr_gm_sigma_m > 0:
         names += ["pr_gm_sigma", "pr_gm_tau"]
@@ -340,6 +345,8 @@ def scaled_config(cfg: RunConfig, noise: ImuNoise, scales: dict) -> RunConfig:
         c.gnss_pos_sigma_scale = float(cfg.gnss_pos_sigma_scale * s("gnss_pos"))
     if "gnss_vel" in scales:
         c.gnss_vel_sigma_scale = float(cfg.gnss_vel_sigma_scale * s("gnss_vel"))
+    if "gnss_pos_v" in scales:
+        c.gnss_pos_v_sigma_scale = float(cfg.gnss_pos_v_sigma_scale * s("gnss_pos_v"))
     k = c.constraints
     if "nhc" in scales:
         k.sigma_nhc_mps = float(cfg.constraints.sigma_nhc_mps * s("nhc"))
@@ -492,6 +499,9 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         raise ConfigError(f"unknown tuning parameter {bad[0]!r}; known: {', '.join(PARAMETERS)}")
     if not names:
         raise ConfigError("no parameter to tune")
+    if "gnss_pos_v" in names and cfg.coupling != "loose":
+        raise ConfigError(f"tuning parameter 'gnss_pos_v' scales the vertical sigma of loose position fixes; "
+                          f"not with {cfg.coupling} coupling")
     for c in ("nhc", "odo", "zupt"):
         if c in names and c not in cfg.constraints.use:
             raise ConfigError(f"tuning parameter {c!r} needs the {c} constraint in use (--constraints / "
@@ -688,7 +698,7 @@ def _user_noise(noise: ImuNoise) -> dict:
 def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     """The base TOML (as a dict; its other keys and tables kept) with the
     tuned settings written in: every ``[imu]`` noise key, the GNSS sigma
-    scales, ``filter`` and ``coupling``, and the constraint sigmas that were
+    scales (loose: the vertical one too), ``filter`` and ``coupling``, and the constraint sigmas that were
     tuned, and for tight coupling the ``[robust]`` keys it was tuned with
     (screening, fault exclusion and CUSUM off).  ``insnav run --config``
     (``--run-config`` with ``--format kfgins``) then runs with it.  (The bias
@@ -701,6 +711,8 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     d["filter"], d["coupling"] = cfg.filter, cfg.coupling
     d["gnss_pos_sigma_scale"] = float(cfg.gnss_pos_sigma_scale)
     d["gnss_vel_sigma_scale"] = float(cfg.gnss_vel_sigma_scale)
+    if cfg.coupling == "loose":
+        d["gnss_pos_v_sigma_scale"] = float(cfg.gnss_pos_v_sigma_scale)
     if cfg.pr_gm_sigma_m > 0:  # the Gauss-Markov pseudorange states (tuned or as given)
         d["pr_gm_sigma_m"], d["pr_gm_tau_s"] = float(cfg.pr_gm_sigma_m), float(cfg.pr_gm_tau_s)
         d["pr_gm_max_gap_s"] = float(cfg.pr_gm_max_gap_s)

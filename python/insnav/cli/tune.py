@@ -19,9 +19,10 @@ EXAMPLES = """examples:
 
 The noise settings of the base configuration (--config; the dataset's IMU model without one) are
 multiplied by scale factors: gyro_arw, acc_vrw, gyro_bias, acc_bias (all axes of each), gnss_pos and
-gnss_vel (the data's GNSS sigmas: loose position / velocity, tight pseudorange / rate), with
-constraints, nhc, odo, zupt, and for a tight EKF with Gauss-Markov pseudorange states
-(pr_gm_sigma_m > 0 in the base configuration) pr_gm_sigma and pr_gm_tau.  The factors that maximise the innovation log-likelihood
+gnss_vel (the data's GNSS sigmas: loose position / velocity, tight pseudorange / rate), loose
+gnss_pos_v (the vertical position sigma, on top of gnss_pos), with constraints, nhc, odo, zupt,
+and for a tight EKF with Gauss-Markov pseudorange states (pr_gm_sigma_m > 0 in the base
+configuration) pr_gm_sigma and pr_gm_tau.  The factors that maximise the innovation log-likelihood
 sum_k -(nu_k' S_k^-1 nu_k + ln det S_k)/2 over the first 1 - HOLDOUT of the data are found by
 Nelder-Mead in log space (docs/algorithms.md, "Noise tuning"), one C++ run per evaluation.
 
@@ -29,8 +30,8 @@ The table compares the base and the tuned settings on the held-out end of the da
 measurement row of the applied GNSS records (1 when consistent) and, with a reference
 (--reference, or the simulator's truth), the horizontal RMS error and rms(error/sigma) per axis.
 --out gets the base TOML with the tuned [imu] noise keys, gnss_pos_sigma_scale,
-gnss_vel_sigma_scale, filter, coupling (and the tuned [constraints] sigmas, pr_gm_sigma_m,
-pr_gm_tau_s): `insnav run --config`
+gnss_vel_sigma_scale (loose: gnss_pos_v_sigma_scale), filter, coupling (and the tuned [constraints] sigmas,
+pr_gm_sigma_m, pr_gm_tau_s): `insnav run --config`
 (`--run-config` with --format kfgins) runs with it."""
 
 

@@ -80,6 +80,8 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:  # insnav tune's R scale factors
             gnss[:, 7:10] *= cfg.gnss_pos_sigma_scale
             gnss[:, 10:13] *= cfg.gnss_vel_sigma_scale
+        if cfg.gnss_pos_v_sigma_scale != 1.0:  # ... and the vertical one (the D column)
+            gnss[:, 9] *= cfg.gnss_pos_v_sigma_scale
         check_finite(gnss[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
     gnss_t = gnss[:, 0].copy()
 

@@ -656,6 +656,8 @@ class _BlockRun:
             if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
                 rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
                 rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
+            if cfg.gnss_pos_v_sigma_scale != 1.0:
+                rows[:, 9] *= cfg.gnss_pos_v_sigma_scale
             from .._validate import check_finite
 
             check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._median import unique  # np.unique would import numpy.ma (numpy 2.4: ~30 ms per command)
 from ..config import ConfigError, TomlTable
 
 __all__ = ["RtkOptions", "PhaseObs", "RtkSolution", "SIGNALS", "STATUS_NAMES", "read_phase_obs", "receiver_rows",
@@ -456,8 +457,9 @@ def wavelengths(obs: PhaseObs, nav=None) -> np.ndarray:
     glo = obs.system == "R"
     k = np.full(m, np.nan)
     if glo.any():
-        ch = np.array([obs.glonass_channels.get(int(p), -99) for p in np.unique(obs.prn[glo])], dtype=float)
-        table = dict(zip(np.unique(obs.prn[glo]).tolist(), ch.tolist()))
+        glo_prns = unique(obs.prn[glo])
+        ch = np.array([obs.glonass_channels.get(int(p), -99) for p in glo_prns], dtype=float)
+        table = dict(zip(glo_prns.tolist(), ch.tolist()))
         if nav is not None and getattr(nav, "eph_r", None) is not None and len(nav.eph_r):
             prns = np.array(sorted(table), dtype=np.int64)
             from_nav = nav.eph_r.channel(prns).astype(float)
@@ -495,7 +497,7 @@ def _orbit_states(nav, system, prn, t_gps_s):
     v = np.full((k, 3), np.nan)
     b = np.full(k, np.nan)
     d = np.full(k, np.nan)
-    for s in np.unique(system):
+    for s in unique(system):
         rows = np.flatnonzero(system == s)
         idx = select_multi(nav, np.full(rows.size, s), prn[rows], t_gps_s[rows],
                            np.full(rows.size, "C2I" if s == "C" else "C1C"))
