@@ -204,3 +204,12 @@ def test_outage_cycles_carry_the_block(sc):
     assert np.max(np.abs(e[0] - e[1])) < 1e-6
     assert np.max(np.abs(runs[0].sigma_pos_n_m - runs[1].sigma_pos_n_m)) < 1e-6
     assert np.max(np.abs(e[0])) > 1.0  # (the comparison is not of zeros)
+
+
+def test_push_api_refuses_the_block(sc):
+    """The Gauss-Markov states run in the batch run only: the push API says so in one line."""
+    from insnav.filters.navigator import TightNavigator
+
+    ds = sim.simulate(sc, seed=5)
+    with pytest.raises(ValueError, match="pr_gm_sigma_m: .*batch tight run only"):
+        TightNavigator.from_dataset(ds, RunConfig(coupling="tight", filter="ekf", pr_gm_sigma_m=2.0))
