@@ -584,30 +584,43 @@ def _remove_empty(dirs) -> None:
 
 
 def _try_stream(args, out: Path, groups):
-    """``--format kfgins`` with CSV output: the loose forward run block by block
+    """``--format kfgins`` or ``--format csv`` with CSV output: the loose forward run block by block
     (:mod:`insnav.filters.stream`: neither the IMU file nor the solution held in memory).  Returns (StreamResult,
     folders made), or None when the run takes the batch path (a one-line note
     on stderr says why, unless the run simply is not one the stream does and
     ``--stream on`` was not asked)."""
     import sys
 
-    from ..filters.stream import Fallback, stream_loose_csv, stream_unsupported
-    from ..io.kfgins_dataset import kfgins_stream_inputs
+    from ..filters.stream import Fallback, stream_csv_loose, stream_loose_csv, stream_unsupported
     from ..registry import FILTERS
 
     def note(why: str) -> None:
         print(f"note: the IMU file is read whole, not block by block: {why}", file=sys.stderr)
 
-    if not args.config:
-        return None
-    try:
-        inp = kfgins_stream_inputs(args.config, args.imu, args.gnss)
-        cfg = _cli_config(args, inp["config"])
+    def configure(cfg):
+        cfg = _cli_config(args, cfg)
         if args.filter is not None:
             cfg.filter = args.filter
         if args.coupling is not None:
             cfg.coupling = args.coupling
         cfg.validate()
+        return cfg
+
+    if not args.config:
+        return None
+    try:
+        if args.format == "csv":
+            from ..io.csv_dataset import csv_inputs, csv_run_config
+            from ..io.input_formats import input_format
+
+            input_format("csv").check(args)
+            inp = csv_inputs(args.imu, args.gnss, args.config, imu_tag=getattr(args, "imu_tag", None))
+            cfg = configure(csv_run_config(inp))  # the filter before the alignment (its sigmas come later)
+        else:
+            from ..io.kfgins_dataset import kfgins_stream_inputs
+
+            inp = kfgins_stream_inputs(args.config, args.imu, args.gnss)
+            cfg = configure(inp["config"])
     except (OSError, ValueError):
         return None  # the batch path reports it, with its own message
     if cfg.filter not in FILTERS or cfg.coupling not in FILTERS[cfg.filter].couplings:
@@ -620,15 +633,20 @@ def _try_stream(args, out: Path, groups):
     first = out.parent
     made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the run fails
     first.mkdir(parents=True, exist_ok=True)
-    y = inp["yaml"]
     from .._progress import Progress
 
     bar = Progress(f"insnav run {cfg.filter}", unit="B") if not args.quiet else None
     try:
-        res = stream_loose_csv(inp["dataset"], inp["imu_path"], cfg, out, imu_ncols=y["imudatalen"],
-                               start_s=y["starttime_s"], end_s=y["endtime_s"], gnss_raw=inp["gnss"], columns=groups,
-                               precision=args.csv_precision, output_rate_hz=args.output_rate,
-                               set_decimation=output_decimation, progress=bar)
+        if args.format == "csv":
+            res = stream_csv_loose(inp, args.imu, out, configure=configure, columns=groups,
+                                   precision=args.csv_precision, output_rate_hz=args.output_rate,
+                                   set_decimation=output_decimation, progress=bar)
+        else:
+            y = inp["yaml"]
+            res = stream_loose_csv(inp["dataset"], inp["imu_path"], cfg, out, imu_ncols=y["imudatalen"],
+                                   start_s=y["starttime_s"], end_s=y["endtime_s"], gnss_raw=inp["gnss"],
+                                   columns=groups, precision=args.csv_precision, output_rate_hz=args.output_rate,
+                                   set_decimation=output_decimation, progress=bar)
     except Fallback as exc:
         if bar is not None:
             bar.close()
@@ -708,13 +726,13 @@ def cmd_run(args) -> int:
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
     streamed = None
-    if args.format == "kfgins" and getattr(args, "stream", "auto") != "off":
+    if args.format in ("kfgins", "csv") and getattr(args, "stream", "auto") != "off":
         streamed = _try_stream(args, out, groups)
     elif getattr(args, "stream", "auto") == "on":
         import sys
 
         print(f"note: the IMU file is read whole, not block by block: --format {args.format} (block by block: "
-              "--format kfgins)", file=sys.stderr)
+              "--format kfgins and --format csv)", file=sys.stderr)
     try:
         if streamed is not None:
             return _finish_run(args, out, groups, stages, streamed)
@@ -762,7 +780,16 @@ def _finish_run(args, out: Path, groups, stages, streamed) -> int:
     stages.times.update(read=res.timings["read"], filter=res.timings["filter"])
     stages.t_last = stages._clock()
     stages.times["write"] = res.timings["write"]
-    return _report_and_write(args, out, groups, stages, res.solution, res.dataset, res.config, None, None,
+    csv_tables = None
+    info = getattr(res.dataset, "info", None)
+    if args.format == "csv" and info is not None:  # as the batch path prints them (before its run)
+        import sys
+
+        print(info["initial_state"])
+        for w in info.get("warnings", ()):
+            print(f"warning: {w}", file=sys.stderr)
+        csv_tables = info["tables"]
+    return _report_and_write(args, out, groups, stages, res.solution, res.dataset, res.config, None, csv_tables,
                              csv_tmp=res.csv_tmp, made=made)
 
 

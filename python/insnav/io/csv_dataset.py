@@ -460,12 +460,20 @@ def csv_run_dataset(inp: CsvInputs, imu_path: str, t0: float, initial, sig: dict
     ds.info["initial_state"] = initial_state_line(ds)
     lag_warning = velocity_lag_warning(rec)  # velocities that visibly lag their own positions
     ds.info["warnings"] = [lag_warning] if lag_warning else []
-    base = dict(filter="ekf", coupling="loose", init_error=False, init_sigma_pos_m=list(map(float, sig["pos_m"])),
-                init_sigma_vel_mps=list(map(float, sig["vel_mps"])), init_sigma_att_deg=list(map(float, sig["att_deg"])))
-    base.update({k: v for k, v in d.items() if k not in _TABLES})
+    return ds, csv_run_config(inp, sig)
+
+
+def csv_run_config(inp: CsvInputs, sig: dict | None = None) -> RunConfig:
+    """The run configuration: loose EKF, no initial error, the initial sigmas ``sig`` (the
+    alignment's; None: the defaults), the TOML's run keys over them, the noise model."""
+    base = dict(filter="ekf", coupling="loose", init_error=False)
+    if sig is not None:
+        base.update(init_sigma_pos_m=list(map(float, sig["pos_m"])), init_sigma_vel_mps=list(map(float, sig["vel_mps"])),
+                    init_sigma_att_deg=list(map(float, sig["att_deg"])))
+    base.update({k: v for k, v in inp.d.items() if k not in _TABLES})
     cfg = config_from_dict(base, source=inp.source)
     cfg.imu = inp.noise
-    return ds, cfg
+    return cfg
 
 
 def load_csv_run(imu, gnss, config_path=None, *, imu_tag=None):
