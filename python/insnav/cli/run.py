@@ -651,7 +651,8 @@ def _try_stream(args, out: Path, groups):
         if bar is not None:
             bar.close()
         _remove_empty(made)
-        note(str(exc))
+        if args.stream == "on" or not exc.batch_names_it:  # else the batch path's error is the one line
+            note(str(exc))
         return None
     except BaseException:
         _remove_empty(made)

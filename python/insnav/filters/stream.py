@@ -64,7 +64,15 @@ _LINE_BYTES_GUESS = 112
 
 
 class Fallback(Exception):
-    """The stream cannot reproduce the batch run exactly here: the reason (one line)."""
+    """The stream cannot reproduce the batch run exactly here: the reason (one line).
+
+    ``batch_names_it``: the batch path will most likely stop with its own
+    one-line error (a failed input check, a malformed set-up), so ``insnav run
+    --stream auto`` adds no note to it."""
+
+    def __init__(self, why: str, *, batch_names_it: bool = False):
+        super().__init__(why)
+        self.batch_names_it = batch_names_it
 
 
 @dataclass
@@ -281,7 +289,7 @@ def imu_csv_blocks(path, fmt, *, week: int | None = None, t_offset_s: float = 0.
         if first:
             wrong = conv.rate_mismatch(t_s)
             if wrong:
-                raise Fallback(f"the first block's interval contradicts rate_hz ({wrong[:60]}...)")
+                raise Fallback(f"the first block's interval contradicts rate_hz ({wrong[:60]}...)", batch_names_it=True)
         st["k"] += m
         st["raw"], st["line"] = float(t_raw[-1]), int(lines[-1])
         t_s = t_s + float(fmt.time_offset_s)
@@ -757,7 +765,7 @@ class _BlockRun:
                 break
         tm["read"] += clock() - t_mark
         if self.t0 is None or self.n_kept < 2:
-            raise Fallback("too few IMU records in the run's span (the batch path names the key)")
+            raise Fallback("too few IMU records in the run's span (the batch path names the key)", batch_names_it=True)
         t_mark = clock()
         n = self.stream.finish()
         writer.add(self.stream, n)
@@ -766,7 +774,7 @@ class _BlockRun:
         tm["write"] += clock() - t_mark
         t_mark = clock()
         if self.health.bad:
-            raise Fallback("the health check found a bad row (the batch path names it)")
+            raise Fallback("the health check found a bad row (the batch path names it)", batch_names_it=True)
         res = self._result(imu_source, n_blocks)
         tm["filter"] += clock() - t_mark
         return res
@@ -851,7 +859,7 @@ class _BlockRun:
                 self.extra_checks()
             check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
         except ValueError as exc:
-            raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]})") from None
+            raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
         z, e = np.zeros((0, 3)), np.zeros(0)
         sol = StreamedSolution(
             t=e, lat_deg=e, lon_deg=e, h_m=e, v_n=z, roll_deg=e, pitch_deg=e, yaw_deg=e, sigma_pos_n_m=z,
@@ -924,7 +932,7 @@ class _Writer:
         e = np.zeros(0)
         sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
         if nonfinite:
-            raise Fallback("a non-finite row (the batch path names it)")
+            raise Fallback("a non-finite row (the batch path names it)", batch_names_it=True)
         self.health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n),
                         [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
         cols = _selected(sol, self.columns)
@@ -999,18 +1007,19 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
     StreamResult
         ``dataset`` a :class:`~insnav.io.csv_dataset.CsvDataset` (IMU summed to 10 Hz).
     """
-    from ..io.csv_dataset import check_time_base, csv_run_dataset, gnss_checks, initial_state, input_checks
+    from ..io.csv_dataset import (check_time_base, csv_run_dataset, gnss_checks, imu_unit_checks, initial_state,
+                                  input_checks)
 
     fmt = inp.fmt
     if fmt.uses_tick:
         raise Fallback("a str2str tick_ms log: its tick -> GPS time map is fitted over the whole record")
     if fmt.time == "gps_sow" and fmt.gps_week is None and inp.week is None:
-        raise Fallback("[imu] time = 'gps_sow' without a GPS week (the whole-file reader names it)")
+        raise Fallback("[imu] time = 'gps_sow' without a GPS week (the whole-file reader names it)", batch_names_it=True)
     try:
         check_time_base(inp, "relative" if fmt.time == "relative" else "gps")
         gnss_checks(inp)
     except ValueError as exc:
-        raise Fallback(f"an input check failed ({str(exc).splitlines()[0][:80]})") from None
+        raise Fallback(f"an input check failed ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
     imu_path = os.fspath(imu_path)
     block_lines = int(BLOCK_LINES if block_lines is None else block_lines)
     whole = []  # the record's IMU summed to 10 Hz, for the loader's checks (made with the first block)
@@ -1035,26 +1044,30 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
                 except StopIteration:
                     done = True
             if not head:
-                raise Fallback("no IMU samples (the whole-file reader names it)")
+                raise Fallback("no IMU samples (the whole-file reader names it)", batch_names_it=True)
             imu_head = _concat_blocks(head)
             try:
                 t0, initial, sig, a = initial_state(inp, imu_head, imu_path)
                 enough = a is None or (a.heading_source != "given" and a.samples_used < len(imu_head.t))
             except ValueError as exc:
                 if done:
-                    raise Fallback(f"the alignment failed ({str(exc).splitlines()[0][:80]})") from None
+                    raise Fallback(f"the alignment failed ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
                 enough = False
             if enough or done:
                 break
             if len(imu_head.t) >= ALIGN_MAX_SAMPLES:
                 raise Fallback(f"the alignment needs more than the first {len(imu_head.t)} IMU samples")
             want = 2 * len(head)
+        try:  # the unit checks on the first blocks at full rate: wrong units fail here, not after the run
+            imu_unit_checks(inp, imu_head, imu_path)
+        except ValueError as exc:
+            raise Fallback(f"an input check failed ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
         del imu_head
         ds0, cfg = csv_run_dataset(inp, imu_path, t0, initial, sig, a, imu=None, gnss=inp.gnss_all)
         try:
             cfg = configure(cfg)
         except ValueError as exc:
-            raise Fallback(f"the configuration ({str(exc).splitlines()[0][:80]})") from None
+            raise Fallback(f"the configuration ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
         why = stream_unsupported(cfg, out_suffix=Path(out).suffix)
         if why is not None:
             raise Fallback(why)

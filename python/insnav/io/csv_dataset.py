@@ -385,13 +385,19 @@ def gnss_checks(inp: CsvInputs) -> None:
     check_gnss_velocity(inp.gnss_all, source=rec.path)
 
 
+def imu_unit_checks(inp: CsvInputs, imu: ImuData, imu_path: str) -> None:
+    """The IMU's own unit and rate checks (:func:`insnav.data.checks.check_imu`), naming the mapped columns."""
+    acc_label, gyro_label = _labels(inp.fmt, imu_path)
+    check_imu(imu.t, imu.dtheta_b, imu.dv_b, source=imu_path, acc_label=acc_label, gyro_label=gyro_label,
+              fixes=_fixes(inp.fmt))
+
+
 def input_checks(inp: CsvInputs, imu_all: ImuData, imu_path: str) -> None:
     """The unit, axis, sign and time-base checks of the IMU against the GNSS (before the alignment)."""
     fmt, rec, gnss_al = inp.fmt, inp.rec, inp.gnss_al
     acc_label, gyro_label = _labels(fmt, imu_path)
     fixes = _fixes(fmt)
-    check_imu(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, source=imu_path, acc_label=acc_label,
-              gyro_label=gyro_label, fixes=fixes)
+    imu_unit_checks(inp, imu_all, imu_path)
     check_time_overlap(imu_all.t, inp.gnss_all.t_valid, imu_source=f"{imu_path} [imu] time = {fmt.time!r}",
                        gnss_source=f"{rec.path} ({rec.format})")
     gnss_checks(inp)
