@@ -116,11 +116,12 @@ def add_run_parser(sub) -> None:
                    help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
                         "200 Hz); the filter still runs at every sample.  Default: every sample")
     p.add_argument("--stream", choices=("auto", "on", "off"), default="auto",
-                   help="--format kfgins with a .csv --out: read, filter and write the IMU file block by block, "
-                        "without holding the file or the solution in memory (the loose ekf/rbukf/ukf forward run; the same file as the whole-file "
-                        "run, byte for byte).  auto (default): whenever the run allows it (not --smooth, "
-                        "--constraints, self-calibration states or npz/Parquet/KF-GINS output), on: the same, with "
-                        "a note when it cannot, off: read the IMU file whole")
+                   help="--format kfgins or csv with a .csv --out: read, filter and write the IMU file block by "
+                        "block, without holding the file or the solution in memory (the loose ekf/rbukf/ukf forward "
+                        "run; the same file as the whole-file run, byte for byte).  auto (default): whenever the run "
+                        "allows it (not --smooth, --constraints, self-calibration states, npz/Parquet/KF-GINS output "
+                        "or a str2str tick_ms IMU log), on: the same, with a note when it cannot, off: read the IMU "
+                        "file whole")
     p.add_argument("--columns", default=None, metavar="GROUPS",
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")

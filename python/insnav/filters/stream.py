@@ -33,6 +33,21 @@ changes the set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
 with the reason, and ``insnav run`` then runs the batch path, whose result and messages are the
 reference.  The RTS smoother needs the whole run and always takes the batch
 path.
+
+``insnav run --format csv`` streams the same way (:func:`stream_csv_loose`):
+the generic IMU CSV is read in the same blocks, each mapped by the ``[imu]``
+table (columns or header names, units, axes and mounting, time base; the very
+parser and conversion of :func:`insnav.io.imu_csv.read_imu_csv`) and
+integrated to increments (:func:`imu_csv_blocks`: the trapezoid's interval
+over a block boundary from the block before), so the samples equal the
+whole-file reader's bit for bit.  Two more documented differences: the
+alignment (:func:`insnav.ins.align.align`) runs on the record's first blocks,
+as many as it reads, with their median interval, and the loader's unit,
+axis, sign and time-base checks see the whole record summed to 10 Hz (the
+unit checks also see the first blocks at full rate).  A ``tick_ms`` log with
+its str2str tag (the tick map is fitted over the whole record) and an
+alignment that needs more than :data:`ALIGN_MAX_SAMPLES` samples take the
+batch path.
 """
 from __future__ import annotations
 
@@ -52,7 +67,8 @@ from ..data.textio import count_columns, parse_numeric, threads
 from ..units import DEG
 from .solution import Solution
 
-__all__ = ["BLOCK_LINES", "imu_text_blocks", "imu_csv_blocks", "stream_loose_csv", "stream_csv_loose", "StreamResult", "Fallback", "stream_unsupported",
+__all__ = ["BLOCK_LINES", "imu_text_blocks", "imu_csv_blocks", "stream_loose_csv", "stream_csv_loose", "StreamResult",
+           "Fallback", "stream_unsupported",
            "StreamedSolution"]
 
 #: IMU lines per block (2^16: about 7 MB of KF-GINS text)
@@ -1014,7 +1030,8 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
     if fmt.uses_tick:
         raise Fallback("a str2str tick_ms log: its tick -> GPS time map is fitted over the whole record")
     if fmt.time == "gps_sow" and fmt.gps_week is None and inp.week is None:
-        raise Fallback("[imu] time = 'gps_sow' without a GPS week (the whole-file reader names it)", batch_names_it=True)
+        raise Fallback("[imu] time = 'gps_sow' without a GPS week (the whole-file reader names it)",
+                       batch_names_it=True)
     try:
         check_time_base(inp, "relative" if fmt.time == "relative" else "gps")
         gnss_checks(inp)
@@ -1051,7 +1068,8 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
                 enough = a is None or (a.heading_source != "given" and a.samples_used < len(imu_head.t))
             except ValueError as exc:
                 if done:
-                    raise Fallback(f"the alignment failed ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
+                    raise Fallback(f"the alignment failed ({str(exc).splitlines()[0][:80]})",
+                                   batch_names_it=True) from None
                 enough = False
             if enough or done:
                 break

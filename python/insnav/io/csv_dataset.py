@@ -474,7 +474,8 @@ def csv_run_config(inp: CsvInputs, sig: dict | None = None) -> RunConfig:
     alignment's; None: the defaults), the TOML's run keys over them, the noise model."""
     base = dict(filter="ekf", coupling="loose", init_error=False)
     if sig is not None:
-        base.update(init_sigma_pos_m=list(map(float, sig["pos_m"])), init_sigma_vel_mps=list(map(float, sig["vel_mps"])),
+        base.update(init_sigma_pos_m=list(map(float, sig["pos_m"])),
+                    init_sigma_vel_mps=list(map(float, sig["vel_mps"])),
                     init_sigma_att_deg=list(map(float, sig["att_deg"])))
     base.update({k: v for k, v in inp.d.items() if k not in _TABLES})
     cfg = config_from_dict(base, source=inp.source)
