@@ -174,3 +174,28 @@ def test_a_garbled_line_in_a_later_block_names_file_and_line(car_files, tmp_path
     assert len(errs[0].splitlines()) == 1 and f"imu.csv{message}" in errs[0], errs[0]
     assert errs[0] == errs[1]  # the whole-file reader's message
     assert sorted(p.name for p in d.iterdir()) == ["gnss.csv", "imu.csv", "run.toml"]  # no temporary file
+
+
+def test_the_alignment_on_the_samples_it_read_equals_the_whole_records(car_files):
+    """``Alignment.samples_used``: the alignment of the record cut one sample after them is the
+    whole record's (levelling on the standstill, then the GNSS course), field for field."""
+    import dataclasses
+
+    from insnav.data.dataset import ImuData
+    from insnav.io.csv_dataset import csv_inputs, initial_state
+    from insnav.io.imu_csv import read_imu_csv
+
+    d = car_files[1]
+    inp = csv_inputs(d / "imu.csv", d / "gnss.csv", d / "run.toml")
+    imu = read_imu_csv(d / "imu.csv", inp.fmt, week=inp.week).to_increments(inp.offset)
+    a = initial_state(inp, imu, "imu.csv")[3]
+    assert a.heading_source == "gnss_velocity" and 3000 < a.samples_used < len(imu.t) // 2
+    k = a.samples_used + 1
+    b = initial_state(inp, ImuData(imu.t[:k], imu.dtheta_b[:k], imu.dv_b[:k]), "imu.csv")[3]
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        assert np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y, f.name
+    # one sample fewer than it read: the alignment may differ, and says it read them all
+    k = a.samples_used
+    c = initial_state(inp, ImuData(imu.t[:k], imu.dtheta_b[:k], imu.dv_b[:k]), "imu.csv")[3]
+    assert c.samples_used == k
