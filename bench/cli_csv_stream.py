@@ -7,15 +7,22 @@ file and its YAML's initial state, lever arm and IMU noise in a run TOML;
 the same run on the track's first quarter shows what grows with the length.
 Each variant is a fresh ``python -m insnav run --format csv ... --quiet
 --timings`` process; its CPU time (user + system, all threads) and peak RSS
-come from ``os.wait4`` (the child's own rusage).  Median CPU and wall over
+come from ``os.wait4`` (the child's own rusage; this process never holds a
+file whole, since a child's peak RSS starts from its parent's).  Median CPU and wall over
 ``--repeat`` rounds, the largest peak RSS; the streamed and whole-file
-solution files are compared byte for byte.  Prints the figures (no document).
+solution files are compared byte for byte.  ``--day-hours H``: then, once
+each, the streamed runs on a synthesised recording of H hours
+(``cli_end_to_end.write_day``: a vehicle standing at the track's start point,
+200 Hz, written under the temporary folder) read as the same generic CSV.
+Prints the figures (no document).
 
-    python bench/cli_csv_stream.py [--repeat 3]
+    python bench/cli_csv_stream.py [--repeat 3] [--day-hours 4]
 """
 from __future__ import annotations
 
 import argparse
+import filecmp
+import itertools
 import os
 import shutil
 import statistics
@@ -26,6 +33,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 SIM = Path(os.environ.get("INSNAV_SHARED_DATA", ROOT.parent / "shared" / "data")) / "kfgins" / "sim"
 IMU_XZ = SIM / "Leador-A15-sim.txt.xz"
 WEEK = 2000  # any week: the files hold seconds of week
@@ -98,6 +106,8 @@ def run_cli(work: Path, imu: str, extra, out: Path) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--day-hours", type=float, default=0.0,
+                    help="length of a synthesised recording run block by block afterwards [h] (0: none)")
     a = ap.parse_args(argv)
     if not IMU_XZ.is_file():
         print(f"KF-GINS data not found at {SIM}", file=sys.stderr)
@@ -108,11 +118,11 @@ def main(argv=None) -> int:
         (work / "run.toml").write_text(run_toml(SIM / "kf-gins-sim.yaml"))
         subprocess.run([sys.executable, "-c", "import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), "
                         "open(sys.argv[2], 'wb'), 1 << 22)", str(IMU_XZ), str(work / "imu.txt")], check=True)
+        # line by line, never the whole file: this process's peak RSS is its children's starting point
+        with open(work / "imu.txt", "rb") as f:
+            n_lines = sum(1 for _ in f)
         with open(work / "imu.txt", "rb") as f, open(work / "imu_quarter.txt", "wb") as g:
-            lines = f.readlines()
-            g.writelines(lines[:len(lines) // 4])
-            n_lines = len(lines)
-            del lines
+            g.writelines(itertools.islice(f, n_lines // 4))
         (work / "out").mkdir()
         res = {}
         load = [os.getloadavg()[0]]
@@ -124,10 +134,24 @@ def main(argv=None) -> int:
                     res.setdefault((minutes, label), []).append(run_cli(work, imu, extra, out))
                 load.append(os.getloadavg()[0])
             for rate in ("200 Hz", "10 Hz"):  # the streamed file is the whole-file run's, byte for byte
-                same = (work / "out" / f"{rate}-on.csv").read_bytes() == (work / "out" / f"{rate}-off.csv").read_bytes()
+                same = filecmp.cmp(work / "out" / f"{rate}-on.csv", work / "out" / f"{rate}-off.csv", shallow=False)
                 print(f"{minutes:.0f} min, {rate}: streamed file == whole-file run's: {same}")
                 if not same:
                     return 1
+        if a.day_hours > 0:
+            from cli_end_to_end import write_day
+
+            for f in ("imu.txt", "imu_quarter.txt"):
+                (work / f).unlink()
+            shutil.copy(SIM / "kf-gins-sim.yaml", work / "kf-gins-sim.yaml")
+            write_day(work, a.day_hours)
+            shutil.copy(work / "day-gnss.txt", work / "GNSS-RTK-sim.txt")
+            minutes = a.day_hours * 60.0
+            for label, extra in VARIANTS[::2]:  # block by block only (read whole: about 650 MB an hour)
+                out = work / "out" / "day.csv"
+                res[(minutes, label + " (synthesised, once)")] = [run_cli(work, "day-imu.txt", extra, out)]
+                out.unlink()
+                load.append(os.getloadavg()[0])
     finally:
         shutil.rmtree(work, ignore_errors=True)
     med = statistics.median
