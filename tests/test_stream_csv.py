@@ -199,3 +199,22 @@ def test_the_alignment_on_the_samples_it_read_equals_the_whole_records(car_files
     k = a.samples_used
     c = initial_state(inp, ImuData(imu.t[:k], imu.dtheta_b[:k], imu.dv_b[:k]), "imu.csv")[3]
     assert c.samples_used == k
+
+
+def test_a_tick_log_is_read_whole_quietly_unless_asked(shared_data, tmp_path):
+    """The rtklibexplorer walk (a str2str tick_ms log): --stream auto reads it whole without a
+    note, --stream on says why; the files are the same."""
+    d = shared_data / "rtklibexplorer_walk_0827" / "raw"
+    from pathlib import Path
+
+    toml = Path(__file__).parent / "data" / "walk_0827_loose.toml"
+    errs = []
+    for mode in ("auto", "on"):
+        out = tmp_path / mode / "sol.csv"
+        rc, _, err = _call(["run", "--format", "csv", "--imu", d / "imu_1730.csv", "--gnss", d / "gnss_1730_sf.pos",
+                            "--config", toml, "--out", out, "--quiet", "--stream", mode])
+        assert rc == 0, err
+        errs.append([ln for ln in err.splitlines() if ln.startswith("note:")])
+    assert errs == [[], ["note: the IMU file is read whole, not block by block: a str2str tick_ms log: its tick -> "
+                         "GPS time map is fitted over the whole record"]]
+    assert (tmp_path / "auto" / "sol.csv").read_bytes() == (tmp_path / "on" / "sol.csv").read_bytes()

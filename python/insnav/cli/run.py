@@ -627,6 +627,10 @@ def _try_stream(args, out: Path, groups):
     if cfg.filter not in FILTERS or cfg.coupling not in FILTERS[cfg.filter].couplings:
         return None
     why = stream_unsupported(cfg, out_suffix=out.suffix, out_format=args.out_format)
+    if why is None and args.format == "csv":
+        from ..filters.stream import csv_stream_unsupported
+
+        why = csv_stream_unsupported(inp)
     if why is not None:
         if args.stream == "on" or cfg.smooth:
             note(why)

@@ -68,7 +68,7 @@ from ..units import DEG
 from .solution import Solution
 
 __all__ = ["BLOCK_LINES", "imu_text_blocks", "imu_csv_blocks", "stream_loose_csv", "stream_csv_loose", "StreamResult",
-           "Fallback", "stream_unsupported",
+           "Fallback", "stream_unsupported", "csv_stream_unsupported",
            "StreamedSolution"]
 
 #: IMU lines per block (2^16: about 7 MB of KF-GINS text)
@@ -986,6 +986,14 @@ def _concat_blocks(blocks) -> ImuData:
                    origin=RowOrigin(blocks[0].origin.source, lines=lines))
 
 
+def csv_stream_unsupported(inp) -> str | None:
+    """Why the IMU CSV of ``inp`` (:class:`insnav.io.csv_dataset.CsvInputs`) cannot be read block by
+    block (None: it can): a str2str ``tick_ms`` log, whose time map is fitted over the whole record."""
+    if inp.fmt.uses_tick:
+        return "a str2str tick_ms log: its tick -> GPS time map is fitted over the whole record"
+    return None
+
+
 def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, precision: str = "resolution",
                      output_rate_hz: float | None = None, block_lines: int | None = None, set_decimation=None,
                      progress=None) -> StreamResult:
@@ -1027,8 +1035,9 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
                                   input_checks)
 
     fmt = inp.fmt
-    if fmt.uses_tick:
-        raise Fallback("a str2str tick_ms log: its tick -> GPS time map is fitted over the whole record")
+    why = csv_stream_unsupported(inp)
+    if why is not None:
+        raise Fallback(why)
     if fmt.time == "gps_sow" and fmt.gps_week is None and inp.week is None:
         raise Fallback("[imu] time = 'gps_sow' without a GPS week (the whole-file reader names it)",
                        batch_names_it=True)
