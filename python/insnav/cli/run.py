@@ -116,11 +116,12 @@ def add_run_parser(sub) -> None:
                    help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
                         "200 Hz); the filter still runs at every sample.  Default: every sample")
     p.add_argument("--stream", choices=("auto", "on", "off"), default="auto",
-                   help="--format kfgins with a .csv --out: read, filter and write the IMU file block by block, "
-                        "without holding the file or the solution in memory (the loose ekf/rbukf/ukf forward run; the same file as the whole-file "
-                        "run, byte for byte).  auto (default): whenever the run allows it (not --smooth, "
-                        "--constraints, self-calibration states or npz/Parquet/KF-GINS output), on: the same, with "
-                        "a note when it cannot, off: read the IMU file whole")
+                   help="--format kfgins or csv with a .csv --out: read, filter and write the IMU file block by "
+                        "block, without holding the file or the solution in memory (the loose ekf/rbukf/ukf forward "
+                        "run; the same file as the whole-file run, byte for byte).  auto (default): whenever the run "
+                        "allows it (not --smooth, --constraints, self-calibration states, npz/Parquet/KF-GINS output "
+                        "or a str2str tick_ms IMU log), on: the same, with a note when it cannot, off: read the IMU "
+                        "file whole")
     p.add_argument("--columns", default=None, metavar="GROUPS",
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
@@ -584,35 +585,52 @@ def _remove_empty(dirs) -> None:
 
 
 def _try_stream(args, out: Path, groups):
-    """``--format kfgins`` with CSV output: the loose forward run block by block
+    """``--format kfgins`` or ``--format csv`` with CSV output: the loose forward run block by block
     (:mod:`insnav.filters.stream`: neither the IMU file nor the solution held in memory).  Returns (StreamResult,
     folders made), or None when the run takes the batch path (a one-line note
     on stderr says why, unless the run simply is not one the stream does and
     ``--stream on`` was not asked)."""
     import sys
 
-    from ..filters.stream import Fallback, stream_loose_csv, stream_unsupported
-    from ..io.kfgins_dataset import kfgins_stream_inputs
+    from ..filters.stream import Fallback, stream_csv_loose, stream_loose_csv, stream_unsupported
     from ..registry import FILTERS
 
     def note(why: str) -> None:
         print(f"note: the IMU file is read whole, not block by block: {why}", file=sys.stderr)
 
-    if not args.config:
-        return None
-    try:
-        inp = kfgins_stream_inputs(args.config, args.imu, args.gnss)
-        cfg = _cli_config(args, inp["config"])
+    def configure(cfg):
+        cfg = _cli_config(args, cfg)
         if args.filter is not None:
             cfg.filter = args.filter
         if args.coupling is not None:
             cfg.coupling = args.coupling
         cfg.validate()
+        return cfg
+
+    if not args.config:
+        return None
+    try:
+        if args.format == "csv":
+            from ..io.csv_dataset import csv_inputs, csv_run_config
+            from ..io.input_formats import input_format
+
+            input_format("csv").check(args)
+            inp = csv_inputs(args.imu, args.gnss, args.config, imu_tag=getattr(args, "imu_tag", None))
+            cfg = configure(csv_run_config(inp))  # the filter before the alignment (its sigmas come later)
+        else:
+            from ..io.kfgins_dataset import kfgins_stream_inputs
+
+            inp = kfgins_stream_inputs(args.config, args.imu, args.gnss)
+            cfg = configure(inp["config"])
     except (OSError, ValueError):
         return None  # the batch path reports it, with its own message
     if cfg.filter not in FILTERS or cfg.coupling not in FILTERS[cfg.filter].couplings:
         return None
     why = stream_unsupported(cfg, out_suffix=out.suffix, out_format=args.out_format)
+    if why is None and args.format == "csv":
+        from ..filters.stream import csv_stream_unsupported
+
+        why = csv_stream_unsupported(inp)
     if why is not None:
         if args.stream == "on" or cfg.smooth:
             note(why)
@@ -620,20 +638,26 @@ def _try_stream(args, out: Path, groups):
     first = out.parent
     made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the run fails
     first.mkdir(parents=True, exist_ok=True)
-    y = inp["yaml"]
     from .._progress import Progress
 
     bar = Progress(f"insnav run {cfg.filter}", unit="B") if not args.quiet else None
     try:
-        res = stream_loose_csv(inp["dataset"], inp["imu_path"], cfg, out, imu_ncols=y["imudatalen"],
-                               start_s=y["starttime_s"], end_s=y["endtime_s"], gnss_raw=inp["gnss"], columns=groups,
-                               precision=args.csv_precision, output_rate_hz=args.output_rate,
-                               set_decimation=output_decimation, progress=bar)
+        if args.format == "csv":
+            res = stream_csv_loose(inp, args.imu, out, configure=configure, columns=groups,
+                                   precision=args.csv_precision, output_rate_hz=args.output_rate,
+                                   set_decimation=output_decimation, progress=bar)
+        else:
+            y = inp["yaml"]
+            res = stream_loose_csv(inp["dataset"], inp["imu_path"], cfg, out, imu_ncols=y["imudatalen"],
+                                   start_s=y["starttime_s"], end_s=y["endtime_s"], gnss_raw=inp["gnss"],
+                                   columns=groups, precision=args.csv_precision, output_rate_hz=args.output_rate,
+                                   set_decimation=output_decimation, progress=bar)
     except Fallback as exc:
         if bar is not None:
             bar.close()
         _remove_empty(made)
-        note(str(exc))
+        if args.stream == "on" or not exc.batch_names_it:  # else the batch path's error is the one line
+            note(str(exc))
         return None
     except BaseException:
         _remove_empty(made)
@@ -708,13 +732,13 @@ def cmd_run(args) -> int:
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
     check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
     streamed = None
-    if args.format == "kfgins" and getattr(args, "stream", "auto") != "off":
+    if args.format in ("kfgins", "csv") and getattr(args, "stream", "auto") != "off":
         streamed = _try_stream(args, out, groups)
     elif getattr(args, "stream", "auto") == "on":
         import sys
 
         print(f"note: the IMU file is read whole, not block by block: --format {args.format} (block by block: "
-              "--format kfgins)", file=sys.stderr)
+              "--format kfgins and --format csv)", file=sys.stderr)
     try:
         if streamed is not None:
             return _finish_run(args, out, groups, stages, streamed)
@@ -762,7 +786,16 @@ def _finish_run(args, out: Path, groups, stages, streamed) -> int:
     stages.times.update(read=res.timings["read"], filter=res.timings["filter"])
     stages.t_last = stages._clock()
     stages.times["write"] = res.timings["write"]
-    return _report_and_write(args, out, groups, stages, res.solution, res.dataset, res.config, None, None,
+    csv_tables = None
+    info = getattr(res.dataset, "info", None)
+    if args.format == "csv" and info is not None:  # as the batch path prints them (before its run)
+        import sys
+
+        print(info["initial_state"])
+        for w in info.get("warnings", ()):
+            print(f"warning: {w}", file=sys.stderr)
+        csv_tables = info["tables"]
+    return _report_and_write(args, out, groups, stages, res.solution, res.dataset, res.config, None, csv_tables,
                              csv_tmp=res.csv_tmp, made=made)
 
 

@@ -33,6 +33,21 @@ changes the set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
 with the reason, and ``insnav run`` then runs the batch path, whose result and messages are the
 reference.  The RTS smoother needs the whole run and always takes the batch
 path.
+
+``insnav run --format csv`` streams the same way (:func:`stream_csv_loose`):
+the generic IMU CSV is read in the same blocks, each mapped by the ``[imu]``
+table (columns or header names, units, axes and mounting, time base; the very
+parser and conversion of :func:`insnav.io.imu_csv.read_imu_csv`) and
+integrated to increments (:func:`imu_csv_blocks`: the trapezoid's interval
+over a block boundary from the block before), so the samples equal the
+whole-file reader's bit for bit.  Two more documented differences: the
+alignment (:func:`insnav.ins.align.align`) runs on the record's first blocks,
+as many as it reads, with their median interval, and the loader's unit,
+axis, sign and time-base checks see the whole record summed to 10 Hz (the
+unit checks also see the first blocks at full rate).  A ``tick_ms`` log with
+its str2str tag (the tick map is fitted over the whole record) and an
+alignment that needs more than :data:`ALIGN_MAX_SAMPLES` samples take the
+batch path.
 """
 from __future__ import annotations
 
@@ -52,7 +67,8 @@ from ..data.textio import count_columns, parse_numeric, threads
 from ..units import DEG
 from .solution import Solution
 
-__all__ = ["BLOCK_LINES", "imu_text_blocks", "stream_loose_csv", "StreamResult", "Fallback", "stream_unsupported",
+__all__ = ["BLOCK_LINES", "imu_text_blocks", "imu_csv_blocks", "stream_loose_csv", "stream_csv_loose", "StreamResult",
+           "Fallback", "stream_unsupported", "csv_stream_unsupported",
            "StreamedSolution"]
 
 #: IMU lines per block (2^16: about 7 MB of KF-GINS text)
@@ -64,7 +80,15 @@ _LINE_BYTES_GUESS = 112
 
 
 class Fallback(Exception):
-    """The stream cannot reproduce the batch run exactly here: the reason (one line)."""
+    """The stream cannot reproduce the batch run exactly here: the reason (one line).
+
+    ``batch_names_it``: the batch path will most likely stop with its own
+    one-line error (a failed input check, a malformed set-up), so ``insnav run
+    --stream auto`` adds no note to it."""
+
+    def __init__(self, why: str, *, batch_names_it: bool = False):
+        super().__init__(why)
+        self.batch_names_it = batch_names_it
 
 
 @dataclass
@@ -97,33 +121,19 @@ def _opener(path: Path):
         raise
 
 
-def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None = None, names=None):
-    """The rows of a whitespace-separated IMU text file (``t dtheta_xyz dv_xyz``,
-    KF-GINS's layout; extra columns ignored), block by block.
-
-    Parameters
-    ----------
-    path : str or Path
-        Plain, ``.xz``, ``.gz`` or ``.bz2`` (decompressed as it is read).
-    ncols : int, optional
-        Columns per line (default: those of the first line, at least 7).
-    block_lines : int
-        Lines per block (about).
-    names : sequence of str, optional
-        Column names for the messages.
-
-    Yields
-    ------
-    ImuBlock
-        ``t`` (n,) [s], ``dtheta_b`` (n, 3) [rad], ``dv_b`` (n, 3) [m/s] and the
-        rows' file lines (``origin``), right across blocks.
+def _text_blocks(path, block_lines, parse):
+    """The blocks of a text file: about ``block_lines`` lines each, cut at a
+    line end (the file read with plain reads into one buffer, decompressed as
+    it is read), each handed to ``parse(data, first_line, eof) -> (block or
+    None, lines or None)`` (``data`` a memoryview valid during the call, its
+    first line ``first_line``; ``lines``: how many lines it held, None: counted
+    here); the blocks parse returns are yielded with their progress set.
 
     Raises
     ------
     ValueError
-        ``"<file>:<line>: ..."`` for a malformed line (a truncated last line
-        says so), a truncated compressed stream, or a file that changed while
-        it was read (:class:`insnav.data.textio.FileChangedError`).
+        A truncated compressed stream, or a file that changed while it was
+        read (:class:`insnav.data.textio.FileChangedError`); parse's own errors.
     """
     p = Path(path)
     if not p.is_file():
@@ -133,7 +143,6 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None =
     f, raw, compressed = _opener(p)
     chunk = max(1, int(BLOCK_LINES if block_lines is None else block_lines)) * _LINE_BYTES_GUESS
     line = 1  # file line of the next block's first line
-    n = ncols
     with raw, f:
         st0 = os.stat(p)
         buf = bytearray(chunk)  # one buffer for every block: the unfinished line moved to its start
@@ -163,24 +172,12 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None =
                 continue
             with memoryview(buf) as mv:
                 data = mv[:cut]
-                if n is None and bytes(data).strip():
-                    n = count_columns(bytes(data), p)
-                    if n < 7:
-                        raise ValueError(f"{p}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), "
-                                         f"found {n}")
-                parsed = n is not None and cut > 0
-                if parsed:
-                    parts, lines = parse_numeric(data, n, str(p), first_line=line, comma=False, keep=7, names=names,
-                                                 groups=(1, 3, 3))
-                else:
-                    parts, lines = (np.zeros(0),), None
+                blk, lines = parse(data, line, eof)
                 del data
-            rows = len(parts[0])
-            origin = RowOrigin(str(p), line, lines)
-            # the lines of this block: its rows when none was blank (the parser counted them), else counted
-            line += rows if (parsed and lines is None and not eof) else buf.count(b"\n", 0, cut)
-            if rows:
-                yield ImuBlock(parts[0], parts[1], parts[2], origin, raw.tell(), st0.st_size)
+            line += lines if lines is not None else buf.count(b"\n", 0, cut)
+            if blk is not None:
+                blk.file_bytes_done, blk.file_bytes = raw.tell(), st0.st_size
+                yield blk
             buf[:total - cut] = buf[cut:total]
             have = total - cut
         if not compressed:
@@ -189,6 +186,151 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None =
                 from ..data.textio import _changed
 
                 raise _changed(p, (st0.st_size, st0.st_mtime_ns), (st1.st_size, st1.st_mtime_ns), pos)
+
+
+def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None = None, names=None):
+    """The rows of a whitespace-separated IMU text file (``t dtheta_xyz dv_xyz``,
+    KF-GINS's layout; extra columns ignored), block by block.
+
+    Parameters
+    ----------
+    path : str or Path
+        Plain, ``.xz``, ``.gz`` or ``.bz2`` (decompressed as it is read).
+    ncols : int, optional
+        Columns per line (default: those of the first line, at least 7).
+    block_lines : int
+        Lines per block (about).
+    names : sequence of str, optional
+        Column names for the messages.
+
+    Yields
+    ------
+    ImuBlock
+        ``t`` (n,) [s], ``dtheta_b`` (n, 3) [rad], ``dv_b`` (n, 3) [m/s] and the
+        rows' file lines (``origin``), right across blocks.
+
+    Raises
+    ------
+    ValueError
+        ``"<file>:<line>: ..."`` for a malformed line (a truncated last line
+        says so), a truncated compressed stream, or a file that changed while
+        it was read (:class:`insnav.data.textio.FileChangedError`).
+    """
+    p = Path(path)
+    n = ncols
+
+    def parse(data, line, eof):
+        nonlocal n
+        if n is None and bytes(data).strip():
+            n = count_columns(bytes(data), p)
+            if n < 7:
+                raise ValueError(f"{p}:1: expected at least 7 columns (sow, dtheta xyz, dvel xyz), found {n}")
+        if n is None:
+            return None, None
+        parts, lines = parse_numeric(data, n, str(p), first_line=line, comma=False, keep=7, names=names,
+                                     groups=(1, 3, 3))
+        rows = len(parts[0])
+        # the lines of this block: its rows when none was blank (the parser counted them), else counted
+        blk = ImuBlock(parts[0], parts[1], parts[2], RowOrigin(str(p), line, lines)) if rows else None
+        return blk, (rows if lines is None and not eof else None)
+
+    return _text_blocks(path, block_lines, parse)
+
+
+def imu_csv_blocks(path, fmt, *, week: int | None = None, t_offset_s: float = 0.0, block_lines: int | None = None):
+    """The samples of a generic IMU CSV (:mod:`insnav.io.imu_csv`: the
+    ``[imu]`` table's columns, units, axes and time base) as increments, block
+    by block: the very parser, time base and integration of
+    :func:`insnav.io.imu_csv.read_imu_csv` and ``ImuSamples.to_increments``
+    (the time reference from the first time field, the trapezoid over a block
+    boundary from the last sample of the block before), so the values equal
+    the whole-file reader's bit for bit.
+
+    Parameters
+    ----------
+    path : str or Path
+        Plain, ``.xz``, ``.gz`` or ``.bz2``.
+    fmt : insnav.io.imu_csv.ImuCsvFormat
+        The mapping (validated); not a ``tick_ms`` log (its time map needs the whole record).
+    week : int, optional
+        GPS week for ``time = "gps_sow"`` when ``fmt.gps_week`` is None.
+    t_offset_s : float
+        Subtracted from the GPS times (``604800 week``: seconds of week) [s].
+    block_lines : int
+        Lines per block (about).
+
+    Yields
+    ------
+    ImuBlock
+        Times [s], ``dtheta_b`` [rad], ``dv_b`` [m/s] in the body frame and the rows' file lines.
+
+    Raises
+    ------
+    insnav.io.imu_csv.ImuFileError
+        A malformed line or a time that does not increase (file and line).
+    Fallback
+        The first block's median interval contradicts ``rate_hz`` (the whole-file reader decides).
+    """
+    from ..io.imu_csv import CsvLineParser, ImuFileError, SampleConverter
+
+    path = os.fspath(path)
+    if fmt.uses_tick:
+        raise ValueError("imu_csv_blocks: a tick_ms log needs the whole record (read_imu_csv)")
+    week = fmt.gps_week if fmt.gps_week is not None else week
+    parser = CsvLineParser(path, fmt)
+    conv = SampleConverter(path, fmt, week)
+    st = dict(k=0, raw=None, line=0, prev=None)  # samples so far; the last raw time, its line; the last sample
+
+    def parse(data, line, eof):
+        text = bytes(data)
+        parts = text.split(b"\n")
+        if text.endswith(b"\n"):
+            parts = parts[:-1]
+        nlines = text.count(b"\n")
+        a, lines, t_tok, _ = parser.feed(parts, line)
+        m = len(a)
+        if not m:
+            return None, nlines
+        if t_tok is None:  # no time column: the sample counter
+            a = np.column_stack([np.arange(st["k"], st["k"] + m, dtype=float), a])
+        t_raw = a[:, 0]
+        bad = np.flatnonzero(np.diff(t_raw) <= 0)
+        if st["raw"] is not None and not t_raw[0] > st["raw"]:
+            raise ImuFileError(path, int(lines[0]), parser.not_increasing(t_raw[0], st["line"], st["raw"]))
+        if bad.size:
+            k = int(bad[0]) + 1
+            raise ImuFileError(path, int(lines[k]), parser.not_increasing(t_raw[k], lines[k - 1], t_raw[k - 1]))
+        first = st["k"] == 0
+        t_s = conv.times(t_tok, t_raw)
+        if first:
+            wrong = conv.rate_mismatch(t_s)
+            if wrong:
+                raise Fallback(f"the first block's interval contradicts rate_hz ({wrong[:60]}...)", batch_names_it=True)
+        st["k"] += m
+        st["raw"], st["line"] = float(t_raw[-1]), int(lines[-1])
+        t_s = t_s + float(fmt.time_offset_s)
+        acc_b, gyro_b = conv.body(a)
+        t = (conv.t_ref - t_offset_s) + t_s  # as ImuSamples.to_increments
+        if fmt.samples == "increment":
+            blk = ImuBlock(t, gyro_b, acc_b, RowOrigin(path, lines=lines))
+        else:  # the interval (t_prev, t] of each sample, the last of the block before included
+            prev, st["prev"] = st["prev"], (t_s[-1:], acc_b[-1:], gyro_b[-1:])
+            if prev is not None:
+                t_s, acc_b, gyro_b = (np.concatenate([p, x]) for p, x in zip(prev, (t_s, acc_b, gyro_b)))
+            else:
+                t, lines = t[1:], lines[1:]
+            dt = np.diff(t_s)[:, None]
+            if fmt.samples == "mean_rate":
+                dth, dv = gyro_b[1:] * dt, acc_b[1:] * dt
+            else:
+                dth = 0.5 * (gyro_b[1:] + gyro_b[:-1]) * dt
+                dv = 0.5 * (acc_b[1:] + acc_b[:-1]) * dt
+            if not len(t):
+                return None, nlines
+            blk = ImuBlock(np.ascontiguousarray(t), dth, dv, RowOrigin(path, lines=lines))
+        return blk, nlines
+
+    return _text_blocks(path, block_lines, parse)
 
 
 class _Prefetch:
@@ -452,6 +594,24 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
         A malformed IMU line, a decreasing time, non-finite values (naming file and line).
     """
     from . import _as_config
+    from ..io.kfgins import IMU_COLUMNS
+
+    block_lines = int(BLOCK_LINES if block_lines is None else block_lines)
+
+    def prepare(tmp, blocks):
+        run = _BlockRun(ds0, _as_config(cfg), tmp, start_s=start_s, end_s=end_s, gnss_raw=gnss_raw,
+                        output_rate_hz=output_rate_hz, set_decimation=set_decimation, block_lines=block_lines,
+                        progress=progress)
+        return run, blocks
+
+    return _stream_to_file(out, lambda: imu_text_blocks(imu_path, imu_ncols, block_lines=block_lines,
+                                                        names=IMU_COLUMNS), prepare, columns, precision, str(imu_path))
+
+
+def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: str) -> StreamResult:
+    """The temporary CSV beside ``out``, the IMU blocks read ahead on the reader thread
+    (``make_blocks()``), ``prepare(tmp, blocks) -> (_BlockRun, the blocks it runs)``, the writer
+    thread; on any error nothing is left behind."""
     from .solution import PRECISIONS
 
     if precision not in PRECISIONS:
@@ -460,19 +620,17 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part" + out.suffix, dir=out.parent)
     os.close(fd)
     tmp = Path(tmp)
-    run = _BlockRun(ds0, _as_config(cfg), tmp, start_s=start_s, end_s=end_s, gnss_raw=gnss_raw,
-                    output_rate_hz=output_rate_hz, set_decimation=set_decimation,
-                    block_lines=int(BLOCK_LINES if block_lines is None else block_lines), progress=progress)
     try:
-        from ..io.kfgins import IMU_COLUMNS
-
-        blocks = _Prefetch(imu_text_blocks(imu_path, imu_ncols, block_lines=run.block_lines, names=IMU_COLUMNS))
-        writer = _Writer(tmp, columns, precision, run.health)
+        blocks = _Prefetch(make_blocks())
+        writer = None
         try:
-            return run.run(blocks, writer, str(imu_path))
+            run, todo = prepare(tmp, blocks)
+            writer = _Writer(tmp, columns, precision, run.health)
+            return run.run(todo, writer, imu_source)
         finally:
             blocks.close()
-            writer.shutdown()  # no write may outlive the run (the file is removed below on an error)
+            if writer is not None:
+                writer.shutdown()  # no write may outlive the run (the file is removed below on an error)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -509,11 +667,16 @@ class _BlockRun:
     the per-record outputs, the input checks and the summary of the batch run."""
 
     def __init__(self, ds0, cfg, tmp: Path, *, start_s, end_s, gnss_raw, output_rate_hz, set_decimation,
-                 block_lines: int, progress=None):
+                 block_lines: int, progress=None, t0_exact: bool = False, count_cut_gnss: bool = True,
+                 extra_checks=None):
         from .sanitize import DEFAULTS, _imu_report
 
         self.ds0, self.cfg, self.tmp = ds0, cfg, tmp
         self.start_s, self.end_s, self.gnss_raw = start_s, end_s, gnss_raw
+        # t0_exact: the initial state is at start_s itself (the CSV loader's), not at the first sample at or
+        # after it (KF-GINS starttime); count_cut_gnss: the records outside (t0, last sample] are reported
+        # (KF-GINS's loader counts them, the CSV loader's do not); extra_checks(): the loader's own checks
+        self.t0_exact, self.count_cut_gnss, self.extra_checks = t0_exact, count_cut_gnss, extra_checks
         self.output_rate_hz, self.set_decimation = output_rate_hz, set_decimation
         self.block_lines = block_lines
         self.progress = progress
@@ -582,10 +745,10 @@ class _BlockRun:
             self._reader_checks(blk, sc)
             lo = 0
             if self.t0 is None:  # the initial state: the first sample at or after starttime
-                i0 = int(np.searchsorted(t, self.start_s))
+                i0 = int(np.searchsorted(t, self.start_s, side="right" if self.t0_exact else "left"))
                 if i0 == len(t):
                     continue
-                self.t0 = float(t[i0])
+                self.t0 = float(self.start_s if self.t0_exact else t[i0])
                 lo = int(np.searchsorted(t, self.t0, side="right"))
                 # the samples to expect: the file's size over the bytes per line so far
                 lines = blk.origin.line(len(t) - 1)
@@ -618,7 +781,7 @@ class _BlockRun:
                 break
         tm["read"] += clock() - t_mark
         if self.t0 is None or self.n_kept < 2:
-            raise Fallback("too few IMU records in the run's span (the batch path names the key)")
+            raise Fallback("too few IMU records in the run's span (the batch path names the key)", batch_names_it=True)
         t_mark = clock()
         n = self.stream.finish()
         writer.add(self.stream, n)
@@ -627,7 +790,7 @@ class _BlockRun:
         tm["write"] += clock() - t_mark
         t_mark = clock()
         if self.health.bad:
-            raise Fallback("the health check found a bad row (the batch path names it)")
+            raise Fallback("the health check found a bad row (the batch path names it)", batch_names_it=True)
         res = self._result(imu_source, n_blocks)
         tm["filter"] += clock() - t_mark
         return res
@@ -704,13 +867,17 @@ class _BlockRun:
         gnss_t = np.sort(np.asarray(self.gnss.t_valid, float), kind="stable")
         tv = np.asarray(self.gnss_raw.t_valid)
         n_in = int(np.count_nonzero((tv > self.t0) & (tv <= self.last_kept)))
-        scenario = {**(self.ds0.scenario or {}), "gnss_outside_imu_span": int(tv.size - n_in)}
+        scenario = dict(self.ds0.scenario or {})
+        if self.count_cut_gnss:
+            scenario["gnss_outside_imu_span"] = int(tv.size - n_in)
         ds = dataclasses.replace(self.ds0, t0=self.t0, imu=self.coarse.imu(imu_source), gnss=self.gnss,
                                  scenario=scenario)
         try:  # the unit and time-base checks on the IMU summed to 10 Hz (a failure: the batch path's message)
+            if self.extra_checks is not None:
+                self.extra_checks()
             check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
         except ValueError as exc:
-            raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]})") from None
+            raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
         z, e = np.zeros((0, 3)), np.zeros(0)
         sol = StreamedSolution(
             t=e, lat_deg=e, lon_deg=e, h_m=e, v_n=z, roll_deg=e, pitch_deg=e, yaw_deg=e, sigma_pos_n_m=z,
@@ -783,7 +950,7 @@ class _Writer:
         e = np.zeros(0)
         sol, nonfinite = nav_solution(out, gnss_t=e, innovation=e, nis=e, gnss_status=e)
         if nonfinite:
-            raise Fallback("a non-finite row (the batch path names it)")
+            raise Fallback("a non-finite row (the batch path names it)", batch_names_it=True)
         self.health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n),
                         [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
         cols = _selected(sol, self.columns)
@@ -807,3 +974,143 @@ class _Writer:
         """End the thread once its write is done (errors not raised: the run already failed or closed)."""
         if self._pending is not None:
             self._pending.join()
+
+
+#: the most IMU samples the alignment of a block-by-block ``--format csv`` run may need (about 87 min at
+#: 200 Hz, 50 MB): a later alignment makes the run take the whole-file path
+ALIGN_MAX_SAMPLES = 1 << 20
+
+
+def _concat_blocks(blocks) -> ImuData:
+    t = np.concatenate([b.t for b in blocks])
+    lines = np.concatenate([b.origin.all_lines(len(b.t)) for b in blocks])
+    return ImuData(t, np.concatenate([b.dtheta_b for b in blocks]), np.concatenate([b.dv_b for b in blocks]),
+                   origin=RowOrigin(blocks[0].origin.source, lines=lines))
+
+
+def csv_stream_unsupported(inp) -> str | None:
+    """Why the IMU CSV of ``inp`` (:class:`insnav.io.csv_dataset.CsvInputs`) cannot be read block by
+    block (None: it can): a str2str ``tick_ms`` log, whose time map is fitted over the whole record."""
+    if inp.fmt.uses_tick:
+        return "a str2str tick_ms log: its tick -> GPS time map is fitted over the whole record"
+    return None
+
+
+def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, precision: str = "resolution",
+                     output_rate_hz: float | None = None, block_lines: int | None = None, set_decimation=None,
+                     progress=None) -> StreamResult:
+    """``insnav run --format csv`` block by block: the IMU CSV read, mapped
+    (:func:`imu_csv_blocks`), filtered and written as :func:`stream_loose_csv`
+    does for KF-GINS files, with the set-up of
+    :func:`insnav.io.csv_dataset.load_csv_dataset`.
+
+    What needs the whole record is taken from what the stream sees: the
+    alignment (:func:`insnav.ins.align.align`) runs on the record's first
+    blocks, as many as it reads (``Alignment.samples_used``; at most
+    :data:`ALIGN_MAX_SAMPLES`), with their median interval; the loader's unit,
+    axis, sign and time-base checks (``input_checks``) run at the end on the
+    whole record's IMU summed to 10 Hz.  Whatever the stream cannot reproduce
+    raises :class:`Fallback`: a ``tick_ms`` log (its time map is fitted over
+    the whole record), a first block whose interval contradicts ``rate_hz``, a
+    GNSS or IMU check that fails, an alignment that needs more of the record,
+    and everything :func:`stream_loose_csv` hands to the batch path.
+
+    Parameters
+    ----------
+    inp : insnav.io.csv_dataset.CsvInputs
+        The TOML's tables and the GNSS fixes (:func:`insnav.io.csv_dataset.csv_inputs`).
+    imu_path : path
+        The IMU CSV.
+    out : Path
+        The solution CSV the temporary file is for.
+    configure : callable
+        ``RunConfig -> RunConfig``: the command line's settings over the loader's configuration.
+    columns, precision, output_rate_hz, block_lines, set_decimation, progress
+        As :func:`stream_loose_csv`.
+
+    Returns
+    -------
+    StreamResult
+        ``dataset`` a :class:`~insnav.io.csv_dataset.CsvDataset` (IMU summed to 10 Hz).
+    """
+    from ..io.csv_dataset import (check_time_base, csv_run_dataset, gnss_checks, imu_unit_checks, initial_state,
+                                  input_checks)
+
+    fmt = inp.fmt
+    why = csv_stream_unsupported(inp)
+    if why is not None:
+        raise Fallback(why)
+    if fmt.time == "gps_sow" and fmt.gps_week is None and inp.week is None:
+        raise Fallback("[imu] time = 'gps_sow' without a GPS week (the whole-file reader names it)",
+                       batch_names_it=True)
+    try:
+        check_time_base(inp, "relative" if fmt.time == "relative" else "gps")
+        gnss_checks(inp)
+    except ValueError as exc:
+        raise Fallback(f"an input check failed ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
+    imu_path = os.fspath(imu_path)
+    block_lines = int(BLOCK_LINES if block_lines is None else block_lines)
+    whole = []  # the record's IMU summed to 10 Hz, for the loader's checks (made with the first block)
+
+    def tee(blocks):
+        for b in blocks:
+            if not whole:
+                dt = median(np.diff(b.t)) if len(b.t) > 1 else 0.0
+                whole.append(_Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1))
+            whole[0].add(b.t, b.dtheta_b, b.dv_b)
+            yield b
+
+    def checks():
+        input_checks(inp, whole[0].imu(imu_path), imu_path)
+
+    def prepare(tmp, blocks):
+        head, done, want = [], False, 1
+        while True:  # the alignment on the first blocks: as many as it reads
+            while len(head) < want and not done:
+                try:
+                    head.append(next(blocks))
+                except StopIteration:
+                    done = True
+            if not head:
+                raise Fallback("no IMU samples (the whole-file reader names it)", batch_names_it=True)
+            imu_head = _concat_blocks(head)
+            try:
+                t0, initial, sig, a = initial_state(inp, imu_head, imu_path)
+                enough = a is None or (a.heading_source != "given" and a.samples_used < len(imu_head.t))
+            except ValueError as exc:
+                if done:
+                    raise Fallback(f"the alignment failed ({str(exc).splitlines()[0][:80]})",
+                                   batch_names_it=True) from None
+                enough = False
+            if enough or done:
+                break
+            if len(imu_head.t) >= ALIGN_MAX_SAMPLES:
+                raise Fallback(f"the alignment needs more than the first {len(imu_head.t)} IMU samples")
+            want = 2 * len(head)
+        try:  # the unit checks on the first blocks at full rate: wrong units fail here, not after the run
+            imu_unit_checks(inp, imu_head, imu_path)
+        except ValueError as exc:
+            raise Fallback(f"an input check failed ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
+        del imu_head
+        ds0, cfg = csv_run_dataset(inp, imu_path, t0, initial, sig, a, imu=None, gnss=inp.gnss_all)
+        try:
+            cfg = configure(cfg)
+        except ValueError as exc:
+            raise Fallback(f"the configuration ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
+        why = stream_unsupported(cfg, out_suffix=Path(out).suffix)
+        if why is not None:
+            raise Fallback(why)
+        run = _BlockRun(ds0, cfg, tmp, start_s=t0, end_s=None, gnss_raw=inp.gnss_all, output_rate_hz=output_rate_hz,
+                        set_decimation=set_decimation, block_lines=block_lines, progress=progress, t0_exact=True,
+                        count_cut_gnss=False, extra_checks=checks)
+
+        def replay():
+            while head:
+                yield head.pop(0)
+            yield from blocks
+
+        return run, tee(replay())
+
+    return _stream_to_file(out, lambda: imu_csv_blocks(imu_path, fmt, week=inp.week, t_offset_s=inp.offset,
+                                                       block_lines=block_lines),
+                           prepare, columns, precision, imu_path)

@@ -79,12 +79,21 @@ def static_interval(t: np.ndarray, dtheta_b: np.ndarray, dv_b: np.ndarray, *, wi
     ``t_moving`` (e.g. the first GNSS fix faster than its noise) ends the
     interval too.  Returns ``(0, k)``, ``k = 0`` if the data start moving.
     """
+    return 0, _static_interval(t, dtheta_b, dv_b, window_s=window_s, sigma_f_mps2=sigma_f_mps2,
+                               sigma_w_radps=sigma_w_radps, gamma=gamma, max_f_change_mps2=max_f_change_mps2,
+                               t_moving=t_moving)[0]
+
+
+def _static_interval(t, dtheta_b, dv_b, *, window_s: float = 0.5, sigma_f_mps2: float = 0.05,
+                     sigma_w_radps: float = 5e-3, gamma: float = 18.0, max_f_change_mps2: float = 0.03,
+                     t_moving: float = np.inf) -> tuple[int, int]:
+    """:func:`static_interval`'s ``k`` and how many leading samples it read (``len(t)``: it ran out)."""
     dt = np.diff(np.concatenate([[t[0] - (t[1] - t[0])], t]))
     f = dv_b / dt[:, None]
     w = dtheta_b / dt[:, None]
     n = max(2, int(round(window_s / np.median(dt))))
     if len(t) < n:
-        return 0, 0
+        return 0, len(t)
     f_ref = f[:n].mean(axis=0)
     g = np.linalg.norm(f_ref)
     k = 0
@@ -97,7 +106,7 @@ def static_interval(t: np.ndarray, dtheta_b: np.ndarray, dv_b: np.ndarray, *, wi
             break
         k += n
     # the last stationary window may already hold the onset of motion: drop it
-    return 0, max(0, k - n)
+    return max(0, k - n), min(k + n, len(t))
 
 
 @dataclass
@@ -120,6 +129,11 @@ class Alignment:
         ``"gyrocompass"`` or ``"gnss_velocity"``.
     static_s : float
         Length of the stationary interval used for levelling [s].
+    samples_used : int
+        How many leading IMU samples the alignment read: any longer record
+        with the same first samples and the same median interval aligns the
+        same (``len(t)``: it may have needed more; the block-by-block run,
+        :mod:`insnav.filters.stream`, aligns on the record's first blocks).
     """
 
     t_s: float
@@ -137,6 +151,7 @@ class Alignment:
     heading_source: str
     static_s: float
     notes: list[str] = field(default_factory=list)
+    samples_used: int = 0
 
 
 def _rot(phi: np.ndarray) -> np.ndarray:
@@ -218,7 +233,7 @@ def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, a
                   sigma_w_radps=max(5e-3, 1.5 * float(np.hypot(gyro_arw * np.sqrt(rate), gyro_bias_sigma))),
                   # the mean of a 0.5 s window wanders by ~VRW sqrt(2 / 0.5 s) per axis
                   max_f_change_mps2=max(0.03, 5.0 * accel_vrw * np.sqrt(2.0 / 0.5)))
-    _, k_static = static_interval(t, dtheta_b, dv_b, t_moving=t_moving, **kw)
+    k_static, used = _static_interval(t, dtheta_b, dv_b, t_moving=t_moving, **kw)
     dt = np.diff(np.concatenate([[2 * t[0] - t[1]], t]))
     notes: list[str] = []
     static_s = float(t[k_static - 1] - t[0] + dt[0]) if k_static > 0 else 0.0
@@ -238,6 +253,7 @@ def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, a
         n1 = max(2, int(round(1.0 / np.median(dt))))
         roll, pitch = level(dv_b[:n1].sum(axis=0) / dt[:n1].sum())
         sig_level = 2 * DEG
+        used = max(used, min(n1, len(t)))
     if k_static > 0 and yaw_sig < max_gyrocompass_sigma_deg * DEG:
         yaw = gyrocompass(w_mean, roll, pitch)
         idx = k_static - 1
@@ -261,6 +277,7 @@ def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, a
                              f"and no GNSS fix reaches {min_speed_mps} m/s")
         g = int(moving[0])
         idx = int(np.clip(np.searchsorted(t, gnss.t_valid[g]), 0, len(t) - 1))
+        used = len(t) if t[-1] < gnss.t_valid[g] else max(used, idx + 1)
         # carry the levelled attitude through the gyro increments to t[idx], keeping its yaw
         C = _c_level(roll, pitch)
         k_from = max(k_static, 0)
@@ -317,7 +334,7 @@ def align(t, dtheta_b, dv_b, gnss, *, gyro_bias_sigma: float, gyro_arw: float, a
                      h_m=float(h_i), v_n_mps=v, roll_deg=float(np.degrees(roll)), pitch_deg=float(np.degrees(pitch)),
                      yaw_deg=float(np.degrees(yaw)), sigma_pos_n_m=np.array(gnss.sigma_pos_n[g], float),
                      sigma_vel_n_mps=v_sig, sigma_att_deg=np.degrees(att_sig), heading_source=heading_source,
-                     static_s=static_s, notes=notes)
+                     static_s=static_s, notes=notes, samples_used=int(used))
 
 
 def _euler_to_dcm(roll: float, pitch: float, yaw: float) -> np.ndarray:

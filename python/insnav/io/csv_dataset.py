@@ -231,7 +231,8 @@ def _fallback_attitude(imu: ImuData, gnss: GnssFixes, ini: dict, exc: Exception,
                      pitch_deg=float(np.degrees(pitch)), yaw_deg=float(ini["yaw_deg"]),
                      sigma_pos_n_m=np.asarray(gnss.sigma_pos_n[g], float), sigma_vel_n_mps=np.full(3, 0.5),
                      sigma_att_deg=np.array([sig_level, sig_level, 5.0]), heading_source="given", static_s=0.0,
-                     notes=[f"alignment failed ({exc}); levelled over the first second, yaw from [initial]"])
+                     notes=[f"alignment failed ({exc}); levelled over the first second, yaw from [initial]"],
+                     samples_used=n1)
 
 
 def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDataset, RunConfig]:
@@ -270,6 +271,52 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
     ValueError
         No alignment possible (no static start and no motion, no fixes).
     """
+    inp = csv_inputs(imu, gnss, config, imu_tag=imu_tag)
+    samples: ImuSamples = read_imu_csv(imu, inp.fmt, tag=inp.tag, week=inp.week)
+    check_time_base(inp, samples.info.get("time_base", "gps"))
+    imu_all = samples.to_increments(inp.offset)
+    # -- checks before the alignment (wrong units make a wrong initial state, not a clear error)
+    input_checks(inp, imu_all, samples.path)
+    t0, initial, sig, a = initial_state(inp, imu_all, samples.path)
+    sel = imu_all.t > t0
+    if sel.sum() < 2:
+        raise ValueError(f"{samples.path}: no IMU data after the initial time {t0:.3f} s")
+    imu_run = ImuData(imu_all.t[sel], imu_all.dtheta_b[sel], imu_all.dv_b[sel],
+                      origin=imu_all.origin.take(sel, len(imu_all.t)))
+    gnss_all = inp.gnss_all
+    gsel = (gnss_all.t_valid > t0) & (gnss_all.t_valid <= imu_run.t[-1])
+    gnss_run = GnssFixes(*(np.asarray(getattr(gnss_all, f.name))[gsel] for f in dataclasses.fields(GnssFixes)
+                           if f.name != "origin"), origin=gnss_all.origin.take(gsel, len(gnss_all)))
+    ds, cfg = csv_run_dataset(inp, samples.path, t0, initial, sig, a, imu=imu_run, gnss=gnss_run)
+    ds.info.update(imu_samples=len(samples), imu_rate_hz=samples.rate_hz, imu_time=samples.info)
+    return ds, cfg
+
+
+@dataclass
+class CsvInputs:
+    """What ``--format csv`` knows before its IMU file is read (:func:`csv_inputs`): the
+    TOML's tables, the noise model, the IMU mapping and every GNSS fix."""
+
+    source: str
+    d: dict
+    imu_d: dict
+    gnss_d: dict
+    ini: dict
+    align_d: dict
+    noise: ImuNoise
+    model: dict
+    fmt: ImuCsvFormat
+    gfmt: GnssFileFormat
+    tag: object
+    rec: GnssRecords
+    week: int | None
+    offset: float
+    gnss_all: GnssFixes
+    gnss_al: GnssFixes
+
+
+def csv_inputs(imu, gnss, config=None, *, imu_tag=None) -> CsvInputs:
+    """The run TOML parsed and checked, and the GNSS file read (:func:`load_csv_dataset`'s first step)."""
     source = "run configuration"
     base_dir = None
     if config is None:
@@ -313,42 +360,63 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
     week = None
     if rec.time_base == "gps":
         week = int(math.floor((rec.t_ref_s + rec.t_s[0]) / SECONDS_PER_WEEK))
-    samples: ImuSamples = read_imu_csv(imu, fmt, tag=tag, week=week)
-    if samples.info.get("time_base", "gps") != rec.time_base:
-        raise ConfigError(f"{source}: [imu] time = {fmt.time!r} ({samples.info.get('time_base')}) but the GNSS "
-                          f"file {rec.path} is in {'GPS time' if rec.time_base == 'gps' else 'relative time'}: both "
-                          "need the same clock")
     offset = SECONDS_PER_WEEK * week if week is not None else 0.0
-    imu_all = samples.to_increments(offset)
     t_g = (rec.t_ref_s - offset) + rec.t_s
     gnss_all = GnssFixes(t_g, t_g.copy(), rec.lat_deg, rec.lon_deg, rec.h_m, rec.v_n, rec.sigma_pos_n,
                          rec.sigma_vel_n, origin=RowOrigin(rec.path, lines=rec.lines))
+    return CsvInputs(source, d, imu_d, gnss_d, ini, align_d, noise, model, fmt, gfmt, tag, rec, week, float(offset),
+                     gnss_all, _with_velocity(gnss_all))
 
-    # -- checks before the alignment (wrong units make a wrong initial state, not a clear error)
-    acc_label, gyro_label = _labels(fmt, samples.path)
-    fixes = _fixes(fmt)
-    check_imu(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, source=samples.path, acc_label=acc_label,
-              gyro_label=gyro_label, fixes=fixes)
-    check_time_overlap(imu_all.t, gnss_all.t_valid, imu_source=f"{samples.path} [imu] time = {fmt.time!r}",
-                       gnss_source=f"{rec.path} ({rec.format})")
-    if rec.format == "csv" and gfmt.angle_unit is None:
+
+def check_time_base(inp: CsvInputs, imu_time_base: str) -> None:
+    """Both files on the same clock (GPS time or the same relative clock)."""
+    if imu_time_base != inp.rec.time_base:
+        raise ConfigError(f"{inp.source}: [imu] time = {inp.fmt.time!r} ({imu_time_base}) but the GNSS "
+                          f"file {inp.rec.path} is in {'GPS time' if inp.rec.time_base == 'gps' else 'relative time'}: "
+                          "both need the same clock")
+
+
+def gnss_checks(inp: CsvInputs) -> None:
+    """The checks of the GNSS fixes alone (units, signs, velocities)."""
+    rec = inp.rec
+    if rec.format == "csv" and inp.gfmt.angle_unit is None:
         check_latlon_radians(rec.lat_deg, rec.lon_deg, source=rec.path)
-    check_gnss(gnss_all, source=rec.path)
-    check_gnss_velocity(gnss_all, source=rec.path)
-    gnss_al = _with_velocity(gnss_all)
-    mto = d.get("max_time_offset_s", MAX_TIME_OFFSET_S)  # a bad value: the run configuration's error below
+    check_gnss(inp.gnss_all, source=rec.path)
+    check_gnss_velocity(inp.gnss_all, source=rec.path)
+
+
+def imu_unit_checks(inp: CsvInputs, imu: ImuData, imu_path: str) -> None:
+    """The IMU's own unit and rate checks (:func:`insnav.data.checks.check_imu`), naming the mapped columns."""
+    acc_label, gyro_label = _labels(inp.fmt, imu_path)
+    check_imu(imu.t, imu.dtheta_b, imu.dv_b, source=imu_path, acc_label=acc_label, gyro_label=gyro_label,
+              fixes=_fixes(inp.fmt))
+
+
+def input_checks(inp: CsvInputs, imu_all: ImuData, imu_path: str) -> None:
+    """The unit, axis, sign and time-base checks of the IMU against the GNSS (before the alignment)."""
+    fmt, rec, gnss_al = inp.fmt, inp.rec, inp.gnss_al
+    acc_label, gyro_label = _labels(fmt, imu_path)
+    fixes = _fixes(fmt)
+    imu_unit_checks(inp, imu_all, imu_path)
+    check_time_overlap(imu_all.t, inp.gnss_all.t_valid, imu_source=f"{imu_path} [imu] time = {fmt.time!r}",
+                       gnss_source=f"{rec.path} ({rec.format})")
+    gnss_checks(inp)
+    mto = inp.d.get("max_time_offset_s", MAX_TIME_OFFSET_S)  # a bad value: the run configuration's error below
     if isinstance(mto, (int, float)) and not isinstance(mto, bool) and mto > 0:
         check_time_offset(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, max_offset_s=float(mto),
-                          source=samples.path, gnss_source=rec.path, fix="[imu] time_offset_s")
-    check_gyro_against_gnss(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=samples.path,
+                          source=imu_path, gnss_source=rec.path, fix="[imu] time_offset_s")
+    check_gyro_against_gnss(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=imu_path,
                             gyro_label=gyro_label, fixes=dict(fixes, inverted="or the lat/lon signs are flipped; "
                                                               "check [imu] axes and the GNSS signs"))
-
-    if "yaw_deg" not in ini:  # the heading will come from the GNSS course: body x must be forward
-        check_heading_axes(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=samples.path,
+    if "yaw_deg" not in inp.ini:  # the heading will come from the GNSS course: body x must be forward
+        check_heading_axes(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, source=imu_path,
                            fix="map the axes so that x is forward: [imu] axes (e.g. \"RFU\") or mount_rpy_deg")
 
-    # -- initial state
+
+def initial_state(inp: CsvInputs, imu_all: ImuData, imu_path: str):
+    """(t0 [s], the initial NavState, its 1-sigma dict, the Alignment or None): ``[initial]``
+    when it gives the whole state, else :func:`insnav.ins.align.align` (``[initial]`` keys win)."""
+    ini, noise, d = inp.ini, inp.noise, inp.d
     lever = np.asarray(d.get("lever_arm_b", (0.0, 0.0, 0.0)), float)
     full = all(k in ini for k in INITIAL_KEYS[1:])
     a = None
@@ -360,15 +428,15 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
         sig = dict(pos_m=[2.0, 2.0, 3.0], vel_mps=[0.1, 0.1, 0.1], att_deg=[1.0, 1.0, 5.0])
     else:
         if "t_s" in ini:
-            raise ConfigError(f"{source}: key 'initial.t_s' needs the whole initial state "
+            raise ConfigError(f"{inp.source}: key 'initial.t_s' needs the whole initial state "
                               f"({', '.join(INITIAL_KEYS[1:])}); without it the alignment chooses the time")
         gyro_bias = float(np.max(noise.gyro_bias_sigma))
         try:
-            a = align(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, gnss_al, gyro_bias_sigma=gyro_bias,
+            a = align(imu_all.t, imu_all.dtheta_b, imu_all.dv_b, inp.gnss_al, gyro_bias_sigma=gyro_bias,
                       gyro_arw=float(np.max(noise.gyro_arw)), accel_bias_sigma=float(np.max(noise.acc_bias_sigma)),
-                      lever_arm_b=lever, source=samples.path, accel_vrw=float(np.max(noise.acc_vrw)), **align_d)
+                      lever_arm_b=lever, source=imu_path, accel_vrw=float(np.max(noise.acc_vrw)), **inp.align_d)
         except ValueError as exc:
-            a = _fallback_attitude(imu_all, gnss_al, ini, exc, float(np.max(noise.acc_bias_sigma)))
+            a = _fallback_attitude(imu_all, inp.gnss_al, ini, exc, float(np.max(noise.acc_bias_sigma)))
         t0 = a.t_s
         vals = dict(lat_deg=a.lat_deg, lon_deg=a.lon_deg, h_m=a.h_m, v_n_mps=np.asarray(a.v_n_mps, float),
                     roll_deg=a.roll_deg, pitch_deg=a.pitch_deg, yaw_deg=a.yaw_deg)
@@ -378,33 +446,41 @@ def load_csv_dataset(imu, gnss, config=None, *, imu_tag=None) -> tuple[CsvDatase
         sig = dict(pos_m=np.maximum(a.sigma_pos_n_m, 0.01).tolist(),
                    vel_mps=np.maximum(np.nan_to_num(a.sigma_vel_n_mps, nan=1.0), 0.01).tolist(),
                    att_deg=np.maximum(a.sigma_att_deg, 0.05).tolist())
-    sel = imu_all.t > t0
-    if sel.sum() < 2:
-        raise ValueError(f"{samples.path}: no IMU data after the initial time {t0:.3f} s")
-    imu_run = ImuData(imu_all.t[sel], imu_all.dtheta_b[sel], imu_all.dv_b[sel],
-                      origin=imu_all.origin.take(sel, len(imu_all.t)))
-    gsel = (gnss_all.t_valid > t0) & (gnss_all.t_valid <= imu_run.t[-1])
-    gnss_run = GnssFixes(*(np.asarray(getattr(gnss_all, f.name))[gsel] for f in dataclasses.fields(GnssFixes)
-                           if f.name != "origin"), origin=gnss_all.origin.take(gsel, len(gnss_all)))
-    info = dict(imu=samples.path, gnss=rec.path, gnss_format=rec.format, imu_samples=len(samples),
-                imu_rate_hz=samples.rate_hz, gnss_fixes=len(rec), time_base=rec.time_base, week=week,
-                gnss_info=rec.info, imu_time=samples.info, initial_given=sorted(ini), initial_sigma=sig,
-                noise_grade=imu_d.get("grade"),
-                tables=dict(imu={k: v for k, v in imu_d.items() if k in IMU_FORMAT_KEYS or k == "tag"},
-                            gnss=gnss_d, initial=ini, align=align_d))
-    ds = CsvDataset(imu=imu_run, gnss=gnss_run, truth=None, gnss_raw=None, imu_errors=None,
-                    scenario={"csv": dict(imu=samples.path, gnss=rec.path)}, lever_arm_b=lever, initial=initial,
-                    t0=float(t0), gps_time_offset_s=float(offset), imu_model=model, name=Path(samples.path).stem,
+    return t0, initial, sig, a
+
+
+def csv_run_dataset(inp: CsvInputs, imu_path: str, t0: float, initial, sig: dict, a, *, imu, gnss):
+    """The CsvDataset (``imu`` / ``gnss`` the run's; None for a block-by-block run) and the run configuration."""
+    d, ini = inp.d, inp.ini
+    rec = inp.rec
+    lever = np.asarray(d.get("lever_arm_b", (0.0, 0.0, 0.0)), float)
+    info = dict(imu=imu_path, gnss=rec.path, gnss_format=rec.format, gnss_fixes=len(rec), time_base=rec.time_base,
+                week=inp.week, gnss_info=rec.info, initial_given=sorted(ini), initial_sigma=sig,
+                noise_grade=inp.imu_d.get("grade"),
+                tables=dict(imu={k: v for k, v in inp.imu_d.items() if k in IMU_FORMAT_KEYS or k == "tag"},
+                            gnss=inp.gnss_d, initial=ini, align=inp.align_d))
+    ds = CsvDataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None,
+                    scenario={"csv": dict(imu=imu_path, gnss=rec.path)}, lever_arm_b=lever, initial=initial,
+                    t0=float(t0), gps_time_offset_s=float(inp.offset), imu_model=inp.model, name=Path(imu_path).stem,
                     alignment=a, info=info)
     ds.info["initial_state"] = initial_state_line(ds)
     lag_warning = velocity_lag_warning(rec)  # velocities that visibly lag their own positions
     ds.info["warnings"] = [lag_warning] if lag_warning else []
-    base = dict(filter="ekf", coupling="loose", init_error=False, init_sigma_pos_m=list(map(float, sig["pos_m"])),
-                init_sigma_vel_mps=list(map(float, sig["vel_mps"])), init_sigma_att_deg=list(map(float, sig["att_deg"])))
-    base.update({k: v for k, v in d.items() if k not in _TABLES})
-    cfg = config_from_dict(base, source=source)
-    cfg.imu = noise
-    return ds, cfg
+    return ds, csv_run_config(inp, sig)
+
+
+def csv_run_config(inp: CsvInputs, sig: dict | None = None) -> RunConfig:
+    """The run configuration: loose EKF, no initial error, the initial sigmas ``sig`` (the
+    alignment's; None: the defaults), the TOML's run keys over them, the noise model."""
+    base = dict(filter="ekf", coupling="loose", init_error=False)
+    if sig is not None:
+        base.update(init_sigma_pos_m=list(map(float, sig["pos_m"])),
+                    init_sigma_vel_mps=list(map(float, sig["vel_mps"])),
+                    init_sigma_att_deg=list(map(float, sig["att_deg"])))
+    base.update({k: v for k, v in inp.d.items() if k not in _TABLES})
+    cfg = config_from_dict(base, source=inp.source)
+    cfg.imu = inp.noise
+    return cfg
 
 
 def load_csv_run(imu, gnss, config_path=None, *, imu_tag=None):

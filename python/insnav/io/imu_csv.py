@@ -92,7 +92,8 @@ from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
 from ..units import DEG, G0
 
 __all__ = ["ImuFileError", "ImuCsvFormat", "ImuSamples", "Str2strTag", "read_str2str_tag", "tick_time_map",
-           "read_imu_csv", "axes_matrix", "gps_minus_utc_s", "GPST_UNIX_OFFSET_S", "canonical_choice"]
+           "read_imu_csv", "axes_matrix", "gps_minus_utc_s", "GPST_UNIX_OFFSET_S", "canonical_choice", "CsvLineParser",
+           "SampleConverter"]
 
 #: GPS seconds since 1980-01-06 of 1970-01-01 in GPS time: ``t_gps = t_gtime - 315964800`` [s]
 GPST_UNIX_OFFSET_S = int(round(-gps_seconds_from_calendar(1970, 1, 1)))
@@ -533,75 +534,21 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     complete_last = raw.endswith(b"\n")
     if complete_last:
         parts = parts[:-1]
-    by_header = isinstance(fmt.columns, dict)
-    cols = None if by_header else tuple(fmt.columns)
-    rows, lines, ends, t_tok = [], [], [], []
-    dropped = []
-    pos = 0
-    header_allowed = True
-    delim = fmt.delimiter
-    for i, b in enumerate(parts):
-        lineno = i + 1
-        pos += len(b) + 1
-        if tagged and (i == 0 or (i == len(parts) - 1 and not complete_last)):
-            dropped.append(lineno)  # a str2str log starts and may end mid-line
-            continue
-        try:
-            s = b.decode("ascii").strip()
-        except UnicodeDecodeError:
-            raise ImuFileError(path, lineno, "not ASCII text (binary data in a CSV?)") from None
-        if not s or s.startswith("#"):
-            continue
-        tok = s.split(delim)
-        if header_allowed:
-            header_allowed = False
-            if by_header:
-                if _is_number(tok[0].strip()):
-                    raise ImuFileError(path, lineno, "no header line, but the columns are mapped by header name")
-                cols = _header_columns(path, lineno, tok, fmt.columns, delim)
-                continue
-            if not _is_number(tok[0].strip()):
-                continue
-        if cols is None:
-            raise ImuFileError(path, lineno, "no header line before the data")
-        if len(rows) == 0:
-            ncol = len(cols)
-            idx = {c: cols.index(c) for c in cols if c != "_"}
-            tcol = idx["tick_ms"] if tagged else idx.get("t")
-            want = ([] if tcol is None else [tcol]) + [idx[c] for c in ("ax", "ay", "az", "gx", "gy", "gz")]
-            names = ([] if tcol is None else ["tick_ms" if tagged else "t"]) + ["ax", "ay", "az", "gx", "gy", "gz"]
-        if len(tok) != ncol:
-            raise ImuFileError(path, lineno, f"expected {ncol} {delim!r}-separated fields "
-                               f"({', '.join(cols)}), found {len(tok)}")
-        vals = []
-        for j, name in zip(want, names):
-            try:
-                v = float(tok[j])
-            except ValueError:
-                raise ImuFileError(path, lineno, f"bad number {tok[j].strip()!r} in field {j + 1} ({name})") from None
-            if not math.isfinite(v):
-                raise ImuFileError(path, lineno, f"non-finite value {tok[j].strip()!r} in field {j + 1} ({name})")
-            vals.append(v)
-        rows.append(vals)
-        if tcol is not None:
-            t_tok.append(tok[tcol])
-        lines.append(lineno)
-        ends.append(pos)
-    if len(rows) < 2:
-        raise ImuFileError(path, None, f"fewer than 2 IMU samples ({len(rows)})")
-    a = np.asarray(rows, dtype=float)
-    lines = np.asarray(lines, dtype=np.int64)
-    if tcol is None:  # no time column: t_k = k / rate_hz
+    parser = CsvLineParser(path, fmt)
+    # a str2str log starts and may end mid-line: its first and (unfinished) last lines are dropped
+    drop = (0, len(parts) - 1 if not complete_last else -1) if tagged else ()
+    a, lines, t_tok, ends = parser.feed(parts, 1, drop=drop, ends=tagged)
+    if len(a) < 2:
+        raise ImuFileError(path, None, f"fewer than 2 IMU samples ({len(a)})")
+    if t_tok is None:  # no time column: t_k = k / rate_hz
         a = np.column_stack([np.arange(len(a), dtype=float), a])
-        t_tok = None
     t = a[:, 0]
     d = np.diff(t)
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0)) + 1
-        what = "tick" if tagged else "time"
-        raise ImuFileError(path, int(lines[k]), f"{what} {float(t[k])!r} does not increase (line "
-                           f"{int(lines[k - 1])}: {float(t[k - 1])!r})")
-    info = dict(lines_dropped=dropped, time_base="gps")
+        raise ImuFileError(path, int(lines[k]), parser.not_increasing(t[k], lines[k - 1], t[k - 1]))
+    info = dict(lines_dropped=[i + 1 for i in dict.fromkeys(drop) if i >= 0], time_base="gps")
+    conv = SampleConverter(path, fmt, week)
     if tagged:
         if not isinstance(tag, Str2strTag):
             tag = read_str2str_tag(tag if tag is not None else path + ".tag")
@@ -623,32 +570,167 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
         except ValueError as exc:
             raise ImuFileError(tag.path, None, f"{exc} ({path})") from None
         info.update(fit, tag=tag.path, crlf_converted=bool(crlf_added), t_start_gps_s=tag.t_start_gps_s)
-        t_ref = tag.t_start_gps_s
+        conv.t_ref = tag.t_start_gps_s
     else:
-        if t_tok is None:
-            ref_s, t = 0, t / float(fmt.rate_hz)
-        else:
-            ref_s, t = _split_time(t_tok, _TIME_SCALE[fmt.time_unit])
-            if fmt.rate_hz is not None and len(t) > 2:
-                med = float(np.median(np.diff(t)))
-                if abs(med * fmt.rate_hz - 1.0) > 0.1:
-                    raise ImuFileError(path, None, f"median sample interval {med:.6g} s ({1 / med:.6g} Hz) with "
-                                       f"time_unit = {fmt.time_unit!r}, but rate_hz = {fmt.rate_hz:g}: wrong "
-                                       "time_unit or rate_hz")
-        t_ref = float(ref_s)
-        if fmt.time == "gpst_unix_s":
-            t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
-        elif fmt.time == "unix_utc_s":
-            t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
-            t_ref += float(gps_minus_utc_s(t_ref + t[0]))
-        elif fmt.time == "gps_sow":
-            t_ref = float(ref_s + SECONDS_PER_WEEK * int(week))
-        elif fmt.time == "relative":
-            info["time_base"] = "relative"
+        t = conv.times(t_tok, t)
+        wrong_rate = conv.rate_mismatch(t)
+        if wrong_rate:
+            raise ImuFileError(path, None, wrong_rate)
+        info["time_base"] = conv.time_base
     t = t + float(fmt.time_offset_s)
-    k_acc = G0 if fmt.acc_unit == "g" else 1.0
-    k_gyr = DEG if fmt.gyro_unit == "dps" else 1.0
-    C = fmt.C_b_imu()
-    acc_b = (a[:, 1:4] * k_acc) @ C.T
-    gyro_b = (a[:, 4:7] * k_gyr) @ C.T
-    return ImuSamples(t_ref, t, acc_b, gyro_b, fmt.samples, lines, path, info)
+    acc_b, gyro_b = conv.body(a)
+    return ImuSamples(conv.t_ref, t, acc_b, gyro_b, fmt.samples, lines, path, info)
+
+
+class CsvLineParser:
+    """The line-by-line part of :func:`read_imu_csv` (blank and ``#`` lines,
+    the header, the field count, the numbers), fed the file's lines in one
+    piece (:func:`read_imu_csv`) or block by block
+    (:func:`insnav.filters.stream.imu_csv_blocks`): the header and the column
+    mapping found in the first block hold for the next ones."""
+
+    def __init__(self, path: str, fmt: ImuCsvFormat):
+        self.path, self.fmt = path, fmt
+        self.tagged = fmt.uses_tick
+        self.by_header = isinstance(fmt.columns, dict)
+        self.cols = None if self.by_header else tuple(fmt.columns)
+        self.header_allowed = True
+        self.want = None  # the fields of the time (if any) and ax..gz, their names
+
+    def _layout(self) -> None:
+        cols = self.cols
+        idx = {c: cols.index(c) for c in cols if c != "_"}
+        self.tcol = idx["tick_ms"] if self.tagged else idx.get("t")
+        self.want = ([] if self.tcol is None else [self.tcol]) + [idx[c] for c in ("ax", "ay", "az", "gx", "gy", "gz")]
+        self.names = ([] if self.tcol is None else ["tick_ms" if self.tagged else "t"]) + \
+            ["ax", "ay", "az", "gx", "gy", "gz"]
+        self.ncol = len(cols)
+
+    def not_increasing(self, t_k, line_prev, t_prev) -> str:
+        what = "tick" if self.tagged else "time"
+        return f"{what} {float(t_k)!r} does not increase (line {int(line_prev)}: {float(t_prev)!r})"
+
+    def feed(self, parts, first_line: int, *, drop=(), ends: bool = False, pos: int = 0):
+        """Parse ``parts`` (the lines as bytes, without their newline; the first
+        is file line ``first_line``; the indices in ``drop`` skipped).
+
+        Returns
+        -------
+        values : (n, 6 or 7) ndarray
+            The time (when a column has it) and ax ay az gx gy gz as written.
+        lines : (n,) int64
+            Their 1-based file lines.
+        t_tok : list of str or None
+            The time fields as written (None: no time column).
+        ends : list of int or None
+            With ``ends``: the byte after each row's newline (``pos`` bytes before ``parts``).
+        """
+        path, delim = self.path, self.fmt.delimiter
+        rows, lines, t_tok, end_pos = [], [], [], []
+        for i, b in enumerate(parts):
+            lineno = first_line + i
+            pos += len(b) + 1
+            if i in drop:
+                continue
+            try:
+                s = b.decode("ascii").strip()
+            except UnicodeDecodeError:
+                raise ImuFileError(path, lineno, "not ASCII text (binary data in a CSV?)") from None
+            if not s or s.startswith("#"):
+                continue
+            tok = s.split(delim)
+            if self.header_allowed:
+                self.header_allowed = False
+                if self.by_header:
+                    if _is_number(tok[0].strip()):
+                        raise ImuFileError(path, lineno, "no header line, but the columns are mapped by header name")
+                    self.cols = _header_columns(path, lineno, tok, self.fmt.columns, delim)
+                    continue
+                if not _is_number(tok[0].strip()):
+                    continue
+            if self.cols is None:
+                raise ImuFileError(path, lineno, "no header line before the data")
+            if self.want is None:
+                self._layout()
+            if len(tok) != self.ncol:
+                raise ImuFileError(path, lineno, f"expected {self.ncol} {delim!r}-separated fields "
+                                   f"({', '.join(self.cols)}), found {len(tok)}")
+            vals = []
+            for j, name in zip(self.want, self.names):
+                try:
+                    v = float(tok[j])
+                except ValueError:
+                    raise ImuFileError(path, lineno, f"bad number {tok[j].strip()!r} in field {j + 1} ({name})") \
+                        from None
+                if not math.isfinite(v):
+                    raise ImuFileError(path, lineno, f"non-finite value {tok[j].strip()!r} in field {j + 1} "
+                                       f"({name})")
+                vals.append(v)
+            rows.append(vals)
+            if self.tcol is not None:
+                t_tok.append(tok[self.tcol])
+            lines.append(lineno)
+            end_pos.append(pos)
+        width = 6 if (self.want is not None and self.tcol is None) else 7
+        a = np.asarray(rows, dtype=float) if rows else np.zeros((0, width))
+        timed = self.want is None or self.tcol is not None
+        return a, np.asarray(lines, dtype=np.int64), (t_tok if timed else None), (end_pos if ends else None)
+
+
+class SampleConverter:
+    """The time base, units and axes of :class:`ImuCsvFormat` applied to parsed
+    values (:class:`CsvLineParser`), the whole file at once or block by block:
+    the time reference (the first time field's whole second, so that sample
+    intervals keep full precision) is fixed by the first call of :meth:`times`."""
+
+    def __init__(self, path: str, fmt: ImuCsvFormat, week: int | None):
+        self.path, self.fmt, self.week = path, fmt, week
+        self.t_ref = None  # GPS (or relative) time the sample times count from [s]
+        self._ref = None  # (whole time units subtracted from the fields, remainder, whole seconds)
+        self.time_base = "relative" if fmt.time == "relative" else "gps"
+        self.k_acc = G0 if fmt.acc_unit == "g" else 1.0
+        self.k_gyr = DEG if fmt.gyro_unit == "dps" else 1.0
+        self.C = fmt.C_b_imu()
+
+    def times(self, t_tok, t_counter) -> np.ndarray:
+        """Sample times after :attr:`t_ref` [s] (before ``time_offset_s``): from the time fields
+        ``t_tok``, or with no time column from the sample counter ``t_counter`` and ``rate_hz``."""
+        fmt = self.fmt
+        if t_tok is None:
+            ref_s, t = 0, t_counter / float(fmt.rate_hz)
+        else:
+            scale = _TIME_SCALE[fmt.time_unit]
+            if self._ref is None:
+                ref_int = int(math.floor(float(t_tok[0])))
+                self._ref = (ref_int,) + divmod(ref_int, scale)
+            ref_int, ref_s, rem = self._ref
+            t = (_time_after(t_tok, ref_int) + rem) / scale  # as _split_time
+        if self.t_ref is None:
+            t_ref = float(ref_s)
+            if fmt.time == "gpst_unix_s":
+                t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
+            elif fmt.time == "unix_utc_s":
+                t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
+                t_ref += float(gps_minus_utc_s(t_ref + t[0]))
+            elif fmt.time == "gps_sow":
+                t_ref = float(ref_s + SECONDS_PER_WEEK * int(self.week))
+            self.t_ref = t_ref
+        return t
+
+    def rate_mismatch(self, t) -> str | None:
+        """The message when the median interval of ``t`` contradicts ``rate_hz`` (None: it agrees)."""
+        fmt = self.fmt
+        if fmt.rate_hz is None or len(t) <= 2 or self._ref is None:
+            return None
+        med = float(np.median(np.diff(t)))
+        if abs(med * fmt.rate_hz - 1.0) > 0.1:
+            return (f"median sample interval {med:.6g} s ({1 / med:.6g} Hz) with time_unit = {fmt.time_unit!r}, "
+                    f"but rate_hz = {fmt.rate_hz:g}: wrong time_unit or rate_hz")
+        return None
+
+    def body(self, a) -> tuple[np.ndarray, np.ndarray]:
+        """(specific force or velocity increments, angular rates or angle increments) in the body
+        frame, SI, from the values' last six columns (ax ay az gx gy gz as written)."""
+        acc_b = (a[:, -6:-3] * self.k_acc) @ self.C.T
+        gyro_b = (a[:, -3:] * self.k_gyr) @ self.C.T
+        return acc_b, gyro_b
