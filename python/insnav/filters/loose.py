@@ -66,23 +66,33 @@ def put_selfcal(sol, out: dict, cfg: RunConfig) -> None:
             sol.summary["sigma_lever_arm_b_m"] = [float(v) for v in sol.sigma_lever_arm_b_m[-1]]
 
 
+def loose_gnss_rows(g, cfg: RunConfig) -> np.ndarray:
+    """The loose engine's GNSS table from fixes ``g``: one row per fix sorted by
+    time (stable), ``[t, lat, lon (rad), h (m), v_n (3, m/s), sigma_pos_n (3, m),
+    sigma_vel_n (3, m/s)]``, the sigmas multiplied by ``insnav tune``'s factors
+    (``gnss_pos_sigma_scale``, ``gnss_vel_sigma_scale`` and, on the down axis,
+    ``gnss_pos_v_sigma_scale``).  Shared by the batch run and the block-by-block
+    stream (:mod:`insnav.filters.stream`), whose rows must be the same."""
+    if not len(g):
+        return np.zeros((0, 13))
+    rows = np.column_stack([g.t_valid, np.asarray(g.lat_deg) * DEG, np.asarray(g.lon_deg) * DEG, g.h_m, g.v_n,
+                            g.sigma_pos_n, g.sigma_vel_n]).astype(float)
+    rows = np.ascontiguousarray(rows[np.argsort(rows[:, 0], kind="stable")])
+    if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
+        rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
+        rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
+    if cfg.gnss_pos_v_sigma_scale != 1.0:
+        rows[:, 9] *= cfg.gnss_pos_v_sigma_scale
+    check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+    return rows
+
+
 def run_loose(dataset, cfg: RunConfig) -> Solution:
     """Closed-loop loosely coupled run (``cfg.filter`` in ekf, rbukf, ukf;
     ``cfg.layout`` 15 or 21); :func:`insnav.run` is the public entry."""
     t, dth, dv = imu_arrays(dataset)
 
-    g = dataset.gnss
-    gnss = np.column_stack([g.t_valid, g.lat_deg * DEG, g.lon_deg * DEG, g.h_m, g.v_n,
-                            g.sigma_pos_n, g.sigma_vel_n]).astype(float) if len(g) else np.zeros((0, 13))
-    if len(gnss):
-        order = np.argsort(gnss[:, 0], kind="stable")
-        gnss = np.ascontiguousarray(gnss[order])
-        if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:  # insnav tune's R scale factors
-            gnss[:, 7:10] *= cfg.gnss_pos_sigma_scale
-            gnss[:, 10:13] *= cfg.gnss_vel_sigma_scale
-        if cfg.gnss_pos_v_sigma_scale != 1.0:  # ... and the vertical one (the D column)
-            gnss[:, 9] *= cfg.gnss_pos_v_sigma_scale
-        check_finite(gnss[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+    gnss = loose_gnss_rows(dataset.gnss, cfg)
     gnss_t = gnss[:, 0].copy()
 
     a = loose_engine_args(dataset, cfg, gnss_t, (t, dth, dv))

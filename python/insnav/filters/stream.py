@@ -64,7 +64,6 @@ from .._imu_scan import scan_imu
 from .._median import median
 from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_rows
 from ..data.textio import count_columns, parse_numeric, threads
-from ..units import DEG
 from .solution import Solution
 
 __all__ = ["BLOCK_LINES", "imu_text_blocks", "imu_csv_blocks", "stream_loose_csv", "stream_csv_loose", "StreamResult",
@@ -799,7 +798,7 @@ class _BlockRun:
     def _start(self, t_first, expected_samples: int = 0) -> None:
         """The engine at t0: the GNSS records in (t0, endtime] sanitized (the batch loader's cut and
         sanitize_gnss), the output decimation from the first block, the batch loose runner's set-up."""
-        from .loose import loose_engine_args
+        from .loose import loose_engine_args, loose_gnss_rows
         from .sanitize import sanitize_gnss
 
         cfg, o = self.cfg, self.opts
@@ -811,19 +810,7 @@ class _BlockRun:
         if self.output_rate_hz is not None:
             cfg.output_decimation = self.set_decimation(t_first, self.output_rate_hz)
         gn = self.gnss
-        rows = np.column_stack([gn.t_valid, np.asarray(gn.lat_deg) * DEG, np.asarray(gn.lon_deg) * DEG, gn.h_m,
-                                gn.v_n, gn.sigma_pos_n, gn.sigma_vel_n]).astype(float) if len(gn) else \
-            np.zeros((0, 13))
-        if len(rows):  # as run_loose
-            rows = np.ascontiguousarray(rows[np.argsort(rows[:, 0], kind="stable")])
-            if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
-                rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
-                rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
-            if cfg.gnss_pos_v_sigma_scale != 1.0:
-                rows[:, 9] *= cfg.gnss_pos_v_sigma_scale
-            from .._validate import check_finite
-
-            check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+        rows = loose_gnss_rows(gn, cfg)
         a = loose_engine_args(dataclasses.replace(self.ds0, t0=self.t0, gnss=gn), cfg, rows[:, 0].copy())
         self.stream = _core.LooseStream(cfg.filter, a.layout, rows, a.init, a.P0, a.imu_correction, a.imu_model,
                                         a.config, self.block_lines)
