@@ -11,7 +11,10 @@ engine (``cpp/include/insnav/engine/loose_stream.hpp``: the batch engine's
 very loop, cut into blocks, the GIL released, no allocation per sample), and
 its output rows (at the ``--output-rate`` decimation) are converted and
 appended to a temporary CSV file beside the destination, renamed into place
-only when the whole run succeeded.  The next block is read and parsed on a
+only when the whole run succeeded.  An ``.npz`` destination gets each column
+appended to its own scratch file (:class:`insnav._npz.NpzColumns`, in a
+folder beside it), the members assembled into the temporary file at the end
+and the scratch files removed, whatever happened.  The next block is read and parsed on a
 reader thread while this one is filtered, and the rows are formatted on a
 writer thread while the next block is filtered (the engine's two row buffers
 are used in turn).  Memory is the GNSS records (a few per second), a few
@@ -21,7 +24,8 @@ measures a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV file is byte for byte the
-batch run's (``tests/test_stream.py``).  The input checks differ in two
+batch run's; an ``.npz`` holds the batch run's members, dtypes and values
+bit for bit (``tests/test_stream.py``, ``tests/test_stream_npz.py``).  The input checks differ in two
 documented ways: the IMU sanitizer's block scan takes the nominal interval
 from the first block (a later block whose median interval differs, an IMU gap,
 a repeated time or an implausible rate hands the run to the batch path, whose
@@ -66,7 +70,7 @@ from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_
 from ..data.textio import count_columns, parse_numeric, threads
 from .solution import Solution
 
-__all__ = ["BLOCK_LINES", "imu_text_blocks", "imu_csv_blocks", "stream_loose_csv", "stream_csv_loose", "StreamResult",
+__all__ = ["BLOCK_LINES", "STREAM_SUFFIXES", "imu_text_blocks", "imu_csv_blocks", "stream_loose_csv", "stream_csv_loose", "StreamResult",
            "Fallback", "stream_unsupported", "csv_stream_unsupported",
            "StreamedSolution"]
 
@@ -389,13 +393,17 @@ class _Prefetch:
         self._t.join()
 
 
+#: the solution formats written block by block (Parquet and the KF-GINS layout are written whole)
+STREAM_SUFFIXES = (".csv", ".npz")
+
+
 def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> str | None:
     """Why a run cannot take the streaming path (None: it can): the loose
-    ekf, rbukf or ukf forward run (15 or 21 states) written as CSV, without
-    the smoother, vehicle constraints, self-calibration states or the IMU-error
-    sigma columns."""
-    if out_format != "insnav" or out_suffix.lower() != ".csv":
-        return "the block-by-block writer writes CSV (npz, Parquet and the KF-GINS layout are written whole)"
+    ekf, rbukf or ukf forward run (15 or 21 states) written as CSV or npz,
+    without the smoother, vehicle constraints, self-calibration states or the
+    IMU-error sigma columns."""
+    if out_format != "insnav" or out_suffix.lower() not in STREAM_SUFFIXES:
+        return "the block-by-block writer writes CSV and npz (Parquet and the KF-GINS layout are written whole)"
     if cfg.smooth:
         return "the RTS smoother needs the whole run"
     if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf") or cfg.layout not in (15, 21):
@@ -532,7 +540,8 @@ class StreamResult:
     """What :func:`stream_loose_csv` leaves: the solution without its rows
     (``gnss_t``, innovations, NIS, status, summary; ``len()`` the row count),
     the dataset the checks saw (IMU summed to 10 Hz), the run config and the
-    finished temporary CSV file (renamed by the caller)."""
+    finished temporary solution file, CSV or npz as the destination
+    (``csv_tmp``, renamed by the caller)."""
 
     solution: object
     dataset: Dataset
@@ -549,7 +558,8 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
                      output_rate_hz: float | None = None, block_lines: int | None = None,
                      set_decimation=None, progress=None) -> StreamResult:
     """Run the loose forward filter over the IMU file ``imu_path`` block by
-    block, writing the solution CSV for ``out`` to a temporary file beside it.
+    block, writing the solution (CSV or npz, by the suffix of ``out``) to a
+    temporary file beside it.
 
     Parameters
     ----------
@@ -608,8 +618,8 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
 
 
 def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: str) -> StreamResult:
-    """The temporary CSV beside ``out``, the IMU blocks read ahead on the reader thread
-    (``make_blocks()``), ``prepare(tmp, blocks) -> (_BlockRun, the blocks it runs)``, the writer
+    """The temporary solution file (CSV or npz) beside ``out``, the IMU blocks read ahead on the reader
+    thread (``make_blocks()``), ``prepare(tmp, blocks) -> (_BlockRun, the blocks it runs)``, the writer
     thread; on any error nothing is left behind."""
     from .solution import PRECISIONS
 
@@ -624,7 +634,7 @@ def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: s
         writer = None
         try:
             run, todo = prepare(tmp, blocks)
-            writer = _Writer(tmp, columns, precision, run.health)
+            writer = (_NpzWriter if out.suffix.lower() == ".npz" else _Writer)(tmp, columns, precision, run.health)
             return run.run(todo, writer, imu_source)
         finally:
             blocks.close()
@@ -926,7 +936,7 @@ class _Writer:
     def add(self, stream, n: int) -> None:
         """The last run_block's n rows: to degrees in place, the health scan, queued for the writer thread."""
         from ._assemble import nav_solution
-        from .solution import CSV_DECIMALS, _selected
+        from .solution import _selected
 
         # the engine has two row buffers and fills them in turn, one per call (rows or not): the write
         # queued at call i (buffer i % 2) must end before call i + 2, so every call waits for the last one
@@ -941,12 +951,19 @@ class _Writer:
         self.health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n),
                         [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
         cols = _selected(sol, self.columns)
+        self._wait()
+        self._pending = self._submit(cols)
+
+    def _submit(self, cols) -> _Background:
+        """The block's columns (name, view of the row buffer, factor) written on the writer thread."""
+        from .solution import CSV_DECIMALS
+
         dec = [CSV_DECIMALS[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
         header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
-        self._wait()
-        self._pending = _Background(_core.write_table, self.tmp, header, [np.asarray(x, float) for _, x, _ in cols],
-                                    [float(f) for _, _, f in cols], dec, threads=threads(), append=self._header_done)
+        job = _Background(_core.write_table, self.tmp, header, [np.asarray(x, float) for _, x, _ in cols],
+                          [float(f) for _, _, f in cols], dec, threads=threads(), append=self._header_done)
         self._header_done = True
+        return job
 
     def _wait(self) -> None:
         if self._pending is not None:
@@ -961,6 +978,45 @@ class _Writer:
         """End the thread once its write is done (errors not raised: the run already failed or closed)."""
         if self._pending is not None:
             self._pending.join()
+
+
+class _NpzWriter(_Writer):
+    """:class:`_Writer` for an ``.npz``: each block's columns appended to their
+    scratch files (:class:`insnav._npz.NpzColumns`, in a folder beside the
+    destination) on the writer thread; :meth:`close` assembles the ``.npz``
+    into the temporary file (the members, names, dtypes and values of the
+    whole-run ``Solution.save``), :meth:`shutdown` removes the scratch files
+    (whatever happened)."""
+
+    def __init__(self, tmp, columns, precision, health):
+        super().__init__(tmp, columns, precision, health)
+        self.npz = None
+
+    def _submit(self, cols) -> _Background:
+        from .._npz import NpzColumns
+
+        if self.npz is None:
+            p = Path(self.tmp)
+            scratch = tempfile.mkdtemp(prefix=p.name + ".", suffix=".columns", dir=p.parent)
+            try:
+                self.npz = NpzColumns(scratch, [nm for nm, _, _ in cols])
+            except BaseException:
+                os.rmdir(scratch)
+                raise
+        return _Background(self.npz.append, [(x, float(f)) for _, x, f in cols])
+
+    def close(self) -> None:
+        """Wait for the last block, then write the ``.npz`` to the temporary file."""
+        self._wait()
+        if self.npz is None:
+            raise Fallback("no output row (the batch path names it)", batch_names_it=True)
+        self.npz.finish(self.tmp)
+        self.npz.discard()
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        if self.npz is not None:
+            self.npz.discard()
 
 
 #: the most IMU samples the alignment of a block-by-block ``--format csv`` run may need (about 87 min at
@@ -1009,7 +1065,7 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
     imu_path : path
         The IMU CSV.
     out : Path
-        The solution CSV the temporary file is for.
+        The solution file (CSV or npz) the temporary file is for.
     configure : callable
         ``RunConfig -> RunConfig``: the command line's settings over the loader's configuration.
     columns, precision, output_rate_hz, block_lines, set_decimation, progress
