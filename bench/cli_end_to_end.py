@@ -54,6 +54,7 @@ VARIANTS = [
     ("EKF, CSV, 200 Hz, IMU read from the .xz", ["--imu", str(IMU_XZ)], "solxz.csv"),
     ("RB-UKF, CSV, 200 Hz", ["--filter", "rbukf"], "rbukf.csv"),
     ("EKF, CSV, 200 Hz, IMU file read whole (--stream off)", ["--stream", "off"], "whole.csv"),
+    ("EKF, npz, 200 Hz, IMU file read whole (--stream off)", ["--stream", "off"], "whole.npz"),
     ("EKF, CSV, 10 Hz, IMU file read whole (--stream off)", ["--output-rate", "10", "--stream", "off"],
      "whole10.csv"),
 ]

@@ -102,7 +102,7 @@ def test_importing_the_package_and_the_run_command_loads_no_heavy_module(module,
 
 @pytest.mark.parametrize("out_name", ["sol.csv", "sol.npz"])
 def test_kfgins_run_loads_only_what_it_runs(shared_data, tmp_path, out_name, interpreter_modules):
-    """``insnav run --format kfgins`` (block by block for CSV, whole for npz):
+    """``insnav run --format kfgins`` (block by block, for CSV and npz alike):
     the KF-GINS reader and the loose filter, nothing of the other commands."""
     import shutil
 

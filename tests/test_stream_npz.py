@@ -153,3 +153,24 @@ def test_crc_combine_equals_the_checksum_of_the_concatenation(la, lb):
     rng = np.random.default_rng(la + lb)
     a, b = rng.bytes(la), rng.bytes(lb)
     assert _gf2_times(_crc_shift(lb), zlib.crc32(a)) ^ zlib.crc32(b) == zlib.crc32(a + b)
+
+
+def test_a_zip64_sized_npz_goes_through_zipfile_with_the_same_arrays(tmp_path, monkeypatch):
+    # 4 GiB and more (a day at 200 Hz, all columns): write_npz and NpzColumns both take zipfile's ZIP64 path;
+    # the limit lowered here so that a small file takes it
+    from insnav import _npz
+
+    monkeypatch.setattr(_npz, "_MAX_OFFSET", 1000)
+    rng = np.random.default_rng(3)
+    cols = [("t_s", rng.normal(size=500), 1.0), ("yaw_deg", rng.normal(size=500), 57.29577951308232)]
+    _npz.write_npz(tmp_path / "whole.npz", cols)
+    (tmp_path / "s").mkdir()
+    w = _npz.NpzColumns(tmp_path / "s", ["t_s", "yaw_deg"])
+    for a in range(0, 500, 123):
+        w.append([(x[a:a + 123], f) for _, x, f in cols])
+    w.finish(tmp_path / "streamed.npz")
+    w.discard()
+    assert not (tmp_path / "s").exists()
+    with zipfile.ZipFile(tmp_path / "streamed.npz") as z:
+        assert z.testzip() is None and [i.file_size for i in z.infolist()] == [128 + 8 * 500] * 2
+    _same_npz(tmp_path / "streamed.npz", tmp_path / "whole.npz")

@@ -116,12 +116,12 @@ def add_run_parser(sub) -> None:
                    help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
                         "200 Hz); the filter still runs at every sample.  Default: every sample")
     p.add_argument("--stream", choices=("auto", "on", "off"), default="auto",
-                   help="--format kfgins or csv with a .csv --out: read, filter and write the IMU file block by "
-                        "block, without holding the file or the solution in memory (the loose ekf/rbukf/ukf forward "
-                        "run; the same file as the whole-file run, byte for byte).  auto (default): whenever the run "
-                        "allows it (not --smooth, --constraints, self-calibration states, npz/Parquet/KF-GINS output "
-                        "or a str2str tick_ms IMU log), on: the same, with a note when it cannot, off: read the IMU "
-                        "file whole")
+                   help="--format kfgins or csv with a .csv or .npz --out: read, filter and write the IMU file "
+                        "block by block, without holding the file or the solution in memory (the loose "
+                        "ekf/rbukf/ukf forward run; the same CSV as the whole-file run byte for byte, the same npz "
+                        "arrays bit for bit).  auto (default): whenever the run allows it (not --smooth, "
+                        "--constraints, self-calibration states, Parquet/KF-GINS output or a str2str tick_ms IMU "
+                        "log), on: the same, with a note when it cannot, off: read the IMU file whole")
     p.add_argument("--columns", default=None, metavar="GROUPS",
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
@@ -585,7 +585,7 @@ def _remove_empty(dirs) -> None:
 
 
 def _try_stream(args, out: Path, groups):
-    """``--format kfgins`` or ``--format csv`` with CSV output: the loose forward run block by block
+    """``--format kfgins`` or ``--format csv`` with CSV or npz output: the loose forward run block by block
     (:mod:`insnav.filters.stream`: neither the IMU file nor the solution held in memory).  Returns (StreamResult,
     folders made), or None when the run takes the batch path (a one-line note
     on stderr says why, unless the run simply is not one the stream does and
@@ -846,7 +846,7 @@ def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts,
 
                 out.mkdir(parents=True, exist_ok=True)
                 base = write_kfgins_solution(out, sol)[0]
-            elif csv_tmp is not None:  # written block by block (filters/stream.py): renamed with the others
+            elif csv_tmp is not None:  # CSV or npz written block by block (filters/stream.py): renamed with them
                 from .._atomic import _finish
 
                 _finish(csv_tmp, out)
