@@ -118,26 +118,23 @@ def test_a_failed_write_leaves_no_npz_and_no_scratch(kf_short, tmp_path, monkeyp
     assert list(out.parent.iterdir()) == []
 
 
-def test_npz_columns_equal_write_npz_byte_for_byte(tmp_path):
+def test_npz_columns_equal_write_npz_byte_for_byte(tmp_path, monkeypatch):
     # the members assembled from scratch files (checksums combined, not recomputed) against the whole-array writer
     from insnav import _npz
 
     rng = np.random.default_rng(7)
     x, y = rng.normal(size=(1001, 3)), rng.normal(size=1001)
     cols = [("t_s", y, 1.0), ("a", x[:, 0], 1.0), ("b_deg", x[:, 1], 57.29577951308232), ("c", x[:, 2], 1e6)]
-    monkey_time = _npz._dos_time()
-    _npz._dos_time = lambda: monkey_time  # the same time stamp in both files
-    try:
-        _npz.write_npz(tmp_path / "whole.npz", cols)
-        (tmp_path / "s").mkdir()
-        w = _npz.NpzColumns(tmp_path / "s", [nm for nm, _, _ in cols])
-        cuts = [0, 0, 1, 334, 700, 1001, 1001]  # empty blocks, a one-row block, uneven blocks
-        for a, b in zip(cuts[:-1], cuts[1:]):
-            w.append([(v[a:b], f) for _, v, f in cols])
-        w.finish(tmp_path / "streamed.npz")
-        w.discard()
-    finally:
-        del _npz._dos_time
+    stamp = _npz._dos_time()
+    monkeypatch.setattr(_npz, "_dos_time", lambda: stamp)  # the same time stamp in both files
+    _npz.write_npz(tmp_path / "whole.npz", cols)
+    (tmp_path / "s").mkdir()
+    w = _npz.NpzColumns(tmp_path / "s", [nm for nm, _, _ in cols])
+    cuts = [0, 0, 1, 334, 700, 1001, 1001]  # empty blocks, a one-row block, uneven blocks
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        w.append([(v[a:b], f) for _, v, f in cols])
+    w.finish(tmp_path / "streamed.npz")
+    w.discard()
     assert not (tmp_path / "s").exists()
     assert (tmp_path / "streamed.npz").read_bytes() == (tmp_path / "whole.npz").read_bytes()
     with np.load(tmp_path / "streamed.npz") as z:
@@ -174,3 +171,29 @@ def test_a_zip64_sized_npz_goes_through_zipfile_with_the_same_arrays(tmp_path, m
     with zipfile.ZipFile(tmp_path / "streamed.npz") as z:
         assert z.testzip() is None and [i.file_size for i in z.infolist()] == [128 + 8 * 500] * 2
     _same_npz(tmp_path / "streamed.npz", tmp_path / "whole.npz")
+
+
+@pytest.mark.parametrize("errno_name", ["EXDEV", "ENOSYS"])
+def test_without_copy_file_range_the_members_are_copied_by_reads(tmp_path, monkeypatch, errno_name):
+    # another file system (EXDEV) or an old kernel (ENOSYS): the plain read / write copy gives the same file
+    import errno
+    import os
+
+    from insnav import _npz
+
+    def refuse(*a, **kw):
+        raise OSError(getattr(errno, errno_name), "refused")
+
+    rng = np.random.default_rng(5)
+    cols = [("t_s", rng.normal(size=300), 1.0), ("h_m", rng.normal(size=300), 1.0)]
+    stamp = _npz._dos_time()
+    monkeypatch.setattr(_npz, "_dos_time", lambda: stamp)
+    _npz.write_npz(tmp_path / "whole.npz", cols)
+    monkeypatch.setattr(os, "copy_file_range", refuse)
+    (tmp_path / "s").mkdir()
+    w = _npz.NpzColumns(tmp_path / "s", ["t_s", "h_m"])
+    w.append([(x[:100], f) for _, x, f in cols])
+    w.append([(x[100:], f) for _, x, f in cols])
+    w.finish(tmp_path / "streamed.npz")
+    w.discard()
+    assert (tmp_path / "streamed.npz").read_bytes() == (tmp_path / "whole.npz").read_bytes()
