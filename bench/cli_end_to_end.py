@@ -61,6 +61,7 @@ VARIANTS = [
 #: the long-recording rows: (label, extra arguments, output name), run once each on a synthesised day
 DAY_VARIANTS = [
     ("EKF, CSV, 10 Hz (block by block)", ["--output-rate", "10"], "day10.csv"),
+    ("EKF, npz, 10 Hz (block by block)", ["--output-rate", "10"], "day10.npz"),
     ("EKF, CSV, 200 Hz, nav columns (block by block)", ["--columns", "nav"], "day200.csv"),
     ("EKF, CSV, 200 Hz, all columns (block by block)", [], "day200all.csv"),
 ]

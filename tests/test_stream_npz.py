@@ -110,12 +110,19 @@ def test_a_failed_write_leaves_no_npz_and_no_scratch(kf_short, tmp_path, monkeyp
             raise OSError(28, "No space left on device")
         return real(self, columns)
 
-    monkeypatch.setattr(_npz.NpzColumns, "append", append)
     out = tmp_path / "run" / "sol.npz"
     out.parent.mkdir()
+    assert _run_kfgins(kf_short, out, "--stream", "on", "--output-rate", "1")[0] == 0  # an earlier run's files
+    before = {p.name: p.read_bytes() for p in out.parent.iterdir()}
+    assert sorted(before) == ["sol.npz", "sol.npz.config.toml", "sol.npz.innovations.csv"]
+    monkeypatch.setattr(_npz.NpzColumns, "append", append)
     rc, _, err = _run_kfgins(kf_short, out, "--stream", "on")
     assert rc != 0 and "No space left on device" in err
-    assert list(out.parent.iterdir()) == []
+    assert {p.name: p.read_bytes() for p in out.parent.iterdir()} == before  # as they were, nothing added
+    calls.clear()
+    fresh = tmp_path / "fresh" / "sol.npz"
+    rc, _, err = _run_kfgins(kf_short, fresh, "--stream", "on")
+    assert rc != 0 and "No space left on device" in err and not fresh.parent.exists()  # not even the folder
 
 
 def test_npz_columns_equal_write_npz_byte_for_byte(tmp_path, monkeypatch):
