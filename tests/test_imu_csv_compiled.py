@@ -210,3 +210,26 @@ def test_read_imu_csv_same_with_and_without_compiled_reader(tmp_path, monkeypatc
     for name in ("t_s", "acc_b", "gyro_b"):
         np.testing.assert_array_equal(_bits(getattr(got, name)), _bits(getattr(ref, name)))
     np.testing.assert_array_equal(got.lines, ref.lines)
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_tick_log_drop_and_byte_ends_same(closed):
+    """A str2str tick log's way (the first and an unfinished last line dropped, the byte after each row's
+    newline): the same rows, lines and byte ends, given as one text or as lines."""
+    fmt = ImuCsvFormat(("ax", "ay", "az", "gx", "gy", "gz", "tick_ms"), acc_unit="g").validate()
+    rng = random.Random(7)
+    body = [",".join(_number(rng) for _ in range(6)) + f",{500000 + 7 * k}" for k in range(200)]
+    body[50] = ""
+    body[90] = "\r"
+    text = ("-1.0,0.1,0.0,0.0,999\n" + "\n".join(body) + ("\n" if closed else "\n0.01,0.0,-1")).encode()
+    n = text.count(b"\n") + (0 if closed else 1)
+    drop = (0, -1 if closed else n - 1)
+    got = [CsvLineParser(PATH, fmt, compiled=c).feed(x, 1, drop=drop, ends=True)
+           for c in (True, False) for x in (text, text.split(b"\n")[:n])]
+    for a, lines, t, ends in got[1:]:
+        np.testing.assert_array_equal(_bits(a), _bits(got[0][0]))
+        np.testing.assert_array_equal(lines, got[0][1])
+        assert ends == got[0][3]
+    assert len(got[0][0]) == 198 and got[0][1][0] == 2
+    ref_ends = np.cumsum([len(x) + 1 for x in text.split(b"\n")])
+    assert got[0][3] == [int(ref_ends[k - 1]) for k in got[0][1]]

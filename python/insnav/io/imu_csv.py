@@ -530,14 +530,12 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     week = fmt.gps_week if fmt.gps_week is not None else week  # the mapping's own week wins
     if fmt.time == "gps_sow" and not tagged and week is None:
         raise ValueError(f"{path}: imu time 'gps_sow' needs the GPS week (gps_week, or the observation file's)")
-    parts = raw.split(b"\n")
     complete_last = raw.endswith(b"\n")
-    if complete_last:
-        parts = parts[:-1]
+    n_lines = raw.count(b"\n") + (0 if complete_last or not raw else 1)
     parser = CsvLineParser(path, fmt)
     # a str2str log starts and may end mid-line: its first and (unfinished) last lines are dropped
-    drop = (0, len(parts) - 1 if not complete_last else -1) if tagged else ()
-    a, lines, t_tok, ends = parser.feed(parts, 1, drop=drop, ends=tagged)
+    drop = (0, n_lines - 1 if not complete_last else -1) if tagged else ()
+    a, lines, t_tok, ends = parser.feed(raw, 1, drop=drop, ends=tagged)
     if len(a) < 2:
         raise ImuFileError(path, None, f"fewer than 2 IMU samples ({len(a)})")
     if t_tok is None:  # no time column: t_k = k / rate_hz
@@ -738,8 +736,10 @@ class CsvLineParser:
         return vals, (tok[self.tcol] if self.tcol is not None else None)
 
     def feed(self, parts, first_line: int, *, drop=(), ends: bool = False, pos: int = 0):
-        """Parse ``parts`` (the lines as bytes, without their newline; the first
-        is file line ``first_line``; the indices in ``drop`` skipped).
+        """Parse ``parts``: the lines as a list of bytes without their newline,
+        or as one bytes-like text (its lines; a last ``\\n`` ends the last line
+        and starts none); the first is file line ``first_line``; the line
+        indices in ``drop`` are skipped.
 
         Returns
         -------
@@ -752,9 +752,20 @@ class CsvLineParser:
         ends : list of int or None
             With ``ends``: the byte after each row's newline (``pos`` bytes before ``parts``).
         """
-        n = len(parts)
+        if isinstance(parts, (list, tuple)):
+            buf = b"\n".join(parts) + b"\n" if parts else b""
+        else:
+            buf = parts if isinstance(parts, (bytes, bytearray)) else bytes(parts)
+        size = len(buf)
+        closed = size > 0 and buf[size - 1:] == b"\n"  # the last line has its newline
+        n = buf.count(b"\n") + (0 if closed or not size else 1)
         drop = sorted({i for i in drop if 0 <= i < n})
-        segs = []  # (values, line indices into parts, TimeFields or None), in file order
+        nl = None  # the byte after each line (its newline, or the end)
+        if drop or ends:
+            nl = np.flatnonzero(np.frombuffer(buf, np.uint8) == 10)
+            if not closed and size:
+                nl = np.append(nl, size)
+        segs = []  # (values, line indices, TimeFields or None), in file order
         rows, idx, toks = [], [], []  # rows read here, not yet in segs
 
         def flush():
@@ -763,37 +774,35 @@ class CsvLineParser:
                 segs.append((np.asarray(rows, dtype=float), np.asarray(idx, dtype=np.int64), t))
                 rows.clear(), idx.clear(), toks.clear()
 
-        buf, off, i, nd = None, 0, 0, 0  # the joined lines; the byte of line i in buf
+        off, i, nd = 0, 0, 0  # the byte of line i
         while i < n:
             while nd < len(drop) and drop[nd] < i:
                 nd += 1
-            if nd < len(drop) and drop[nd] == i:
-                off += len(parts[i]) + 1
-                i += 1
-                continue
-            if self._parse_csv is not None and not self.header_allowed and self.cols is not None:
+            if self._parse_csv is not None and not self.header_allowed and self.cols is not None \
+                    and not (nd < len(drop) and drop[nd] == i):
                 if self.want is None:
                     self._layout()
-                if buf is None:
-                    buf = b"\n".join(parts)
                 stop = drop[nd] if nd < len(drop) else n  # the compiled run ends before a dropped line
-                view = buf if stop == n else memoryview(buf)[:off + sum(len(parts[k]) + 1 for k in range(i, stop)) - 1]
+                view = buf if stop == n else memoryview(buf)[:int(nl[stop - 1]) + 1]
                 flush()
                 vals, li, split, taken, stop_pos = self._parse_csv(view, off, self.fmt.delimiter, self.ncol, self.want,
                                                                    0 if self.tcol is not None else -1)
                 if len(vals):
                     t = TimeFields(vals[:, 0], *split) if split is not None else None
                     segs.append((vals, li + i, t))
-                if stop_pos is None:  # all taken (a last empty line is not counted: it is blank anyway)
-                    i, off = stop, len(view) + 1
+                if stop_pos is None:
+                    i, off = stop, len(view)
                     continue
                 i, off = i + taken, stop_pos
-            got = self._line(parts[i], first_line + i)  # raises the error, or reads what the compiled reader did not
-            if got is not None:
-                rows.append(got[0])
-                idx.append(i)
-                toks.append(got[1])
-            off += len(parts[i]) + 1
+            e = buf.find(b"\n", off)
+            e = size if e < 0 else e
+            if not (nd < len(drop) and drop[nd] == i):
+                got = self._line(bytes(buf[off:e]), first_line + i)  # raises the error, or reads what the
+                if got is not None:                                  # compiled reader did not
+                    rows.append(got[0])
+                    idx.append(i)
+                    toks.append(got[1])
+            off = e + 1
             i += 1
         flush()
         width = 6 if (self.want is not None and self.tcol is None) else 7
@@ -805,10 +814,7 @@ class CsvLineParser:
         else:
             a, li = np.zeros((0, width)), np.zeros(0, np.int64)
             t_tok = TimeFields.from_tokens([]) if timed else None
-        end_pos = None
-        if ends:
-            starts = np.cumsum(np.fromiter((len(b) + 1 for b in parts), dtype=np.int64, count=n))
-            end_pos = (pos + starts[li]).tolist()
+        end_pos = (pos + nl[li] + 1).tolist() if ends else None
         return a, li + first_line, t_tok, end_pos
 
 
