@@ -651,8 +651,9 @@ class TimeFields:
 
 
 def _compiled_delimiter(delim: str) -> bool:
-    """The compiled reader takes printable ASCII and tab delimiters."""
-    return delim == "\t" or " " <= delim <= "~"
+    """The compiled reader takes tab and printable ASCII delimiters that are no character of a number
+    (it parses a field's number in place, up to the delimiter)."""
+    return delim == "\t" or (" " <= delim <= "~" and not delim.isalnum() and delim not in ".+-")
 
 
 class CsvLineParser:

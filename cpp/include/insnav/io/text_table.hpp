@@ -545,20 +545,6 @@ struct CsvParsed {
 /// Python str.strip() / float() whitespace among the bytes this parser takes.
 inline bool is_csv_space(unsigned char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
-/// One field [b, e) as float() reads it (surrounding whitespace allowed): a
-/// finite value parsed to its end; false for anything else (the caller
-/// stops: the Python reader words the error or reads a form this one does not).
-inline bool parse_csv_number(const char* b, const char* e, double& v) {
-  while (b < e && is_csv_space(static_cast<unsigned char>(*b))) ++b;
-  while (e > b && is_csv_space(static_cast<unsigned char>(e[-1]))) --e;
-  if (b < e && *b == '+') {
-    ++b;
-    if (b == e || *b == '+' || *b == '-') return false;
-  }
-  const auto r = std::from_chars(b, e, v);
-  return r.ec == std::errc() && r.ptr == e && std::isfinite(v);
-}
-
 /// The time field [b, e) split as the imu reader's exact time arithmetic
 /// needs it (imu_csv._time_after): kind 1 for ``digits[.digits]`` with at most
 /// 27 integer digits, else kind 0 (the value as read is used).
@@ -591,8 +577,23 @@ inline bool split_time_field(const char* b, const char* e, std::int64_t& hi, std
   return true;
 }
 
+/// Bytes the Python reader takes as they are in a field it does not read: printable ASCII and the
+/// whitespace above (not ASCII is its error; str.strip()'s \x1c..\x1f it strips, this parser does not).
+inline bool plain_ascii(const char* b, const char* e) {
+  unsigned bad = 0;
+  for (; b < e; ++b) {
+    const unsigned char c = static_cast<unsigned char>(*b);
+    bad |= static_cast<unsigned>(c >= 0x7f) | static_cast<unsigned>(c < 0x20 && !is_csv_space(c));
+  }
+  return !bad;
+}
+
 /// Parse the lines of [b, e) (line index 0 at b) into sinks (room for one
-/// row per line) up to the first line this parser does not take.
+/// row per line) up to the first line this parser does not take.  A read
+/// field is parsed in place (std::from_chars up to the delimiter, which must
+/// not be a character of a number: the caller checks), so that its bytes are
+/// checked by the number grammar; an unread field's bytes and a comment are
+/// checked by plain_ascii.
 inline CsvParsed parse_csv_fields(const char* base, std::size_t b, std::size_t e, const CsvFieldOptions& opt,
                                   const CsvSinks& out) {
   CsvParsed res;
@@ -604,38 +605,56 @@ inline CsvParsed parse_csv_fields(const char* base, std::size_t b, std::size_t e
   const char* s = base + b;
   const char* end = base + e;
   const char delim = opt.delim;
+  // whitespace inside a field (a whitespace delimiter is none)
+  auto field_space = [delim](char c) { return c != delim && is_csv_space(static_cast<unsigned char>(c)); };
   while (s < end) {
     const char* nl = static_cast<const char*>(std::memchr(s, '\n', static_cast<std::size_t>(end - s)));
     const char* le = nl ? nl : end;
     bool ok = true;
-    for (const char* q = s; q < le; ++q) {  // printable ASCII and the whitespace above only: anything
-      const unsigned char c = static_cast<unsigned char>(*q);  // else (not ASCII, str.strip()'s \x1c..\x1f)
-      if (c >= 0x7f || (c < 0x20 && !is_csv_space(c))) ok = false;  // is the Python reader's
-    }
     const char* p = s;
     const char* q = le;
     while (p < q && is_csv_space(static_cast<unsigned char>(*p))) ++p;
     while (q > p && is_csv_space(static_cast<unsigned char>(q[-1]))) --q;
-    if (ok && p < q && *p != '#') {
+    if (p < q && *p == '#') {
+      ok = plain_ascii(s, le);
+    } else if (p < q) {
       const std::int64_t r = res.rows;
       int f = 0;
       const char* fb = p;
-      while (ok) {
-        const char* fe = static_cast<const char*>(std::memchr(fb, delim, static_cast<std::size_t>(q - fb)));
-        if (!fe) fe = q;
+      while (true) {
         if (f >= opt.nfields) {
           ok = false;
           break;
         }
         const int k = slot[static_cast<std::size_t>(f)];
+        const char* fe;
         if (k >= 0) {
+          const char* nb = fb;
+          while (nb < q && field_space(*nb)) ++nb;
+          if (nb < q && *nb == '+') {  // float() takes one '+' before the number
+            ++nb;
+            if (nb == q || *nb == '+' || *nb == '-') {
+              ok = false;
+              break;
+            }
+          }
           double v;
-          if (!parse_csv_number(fb, fe, v)) {
+          const auto rc = std::from_chars(nb, q, v);
+          fe = rc.ptr;
+          while (fe < q && field_space(*fe)) ++fe;
+          if (rc.ec != std::errc() || !std::isfinite(v) || (fe < q && *fe != delim)) {
             ok = false;
             break;
           }
           out.values[r * nwant + k] = v;
           if (f == tfield && !split_time_field(fb, fe, out.t_hi[r], out.t_lo[r], out.t_frac[r], out.t_kind[r])) {
+            ok = false;
+            break;
+          }
+        } else {
+          fe = static_cast<const char*>(std::memchr(fb, delim, static_cast<std::size_t>(q - fb)));
+          if (!fe) fe = q;
+          if (!plain_ascii(fb, fe)) {
             ok = false;
             break;
           }
