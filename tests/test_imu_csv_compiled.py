@@ -233,3 +233,19 @@ def test_tick_log_drop_and_byte_ends_same(closed):
     assert len(got[0][0]) == 198 and got[0][1][0] == 2
     ref_ends = np.cumsum([len(x) + 1 for x in text.split(b"\n")])
     assert got[0][3] == [int(ref_ends[k - 1]) for k in got[0][1]]
+
+
+@pytest.mark.parametrize("bad, what", [
+    (b"5 q 1  2 3 4 5 6", "expected 8 ' '-separated fields (t, _, ax, ay, az, gx, gy, gz), found 9"),
+    (b"5 q 1 2 3 4 5", "expected 8 ' '-separated fields (t, _, ax, ay, az, gx, gy, gz), found 7"),
+    (b"5 q 1 2 3\t4 5 6 7", "bad number '3\\t4' in field 5 (az)"),
+])
+def test_space_delimiter_same_error(bad, what):
+    """A space delimiter: two spaces make an empty field, a tab is no delimiter."""
+    parts = [b"t j ax ay az gx gy gz", b"4 q 0 0 0 0 0 0\t", b" ", bad]
+    msgs = []
+    for compiled in (True, False):
+        with pytest.raises(ImuFileError) as exc:
+            _feed(_fmt(" ", False), parts, compiled)
+        msgs.append(str(exc.value))
+    assert msgs[0] == msgs[1] == f"{PATH}, line 4: {what}"
