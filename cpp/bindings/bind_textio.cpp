@@ -197,6 +197,46 @@ py::tuple parse_text(const py::buffer& data, int ncols, int keep, bool allow_ext
   return py::make_tuple(arrays, lines_out, err);
 }
 
+
+py::tuple parse_csv(const py::buffer& data, std::size_t begin, char delim, int nfields, const std::vector<int>& want,
+                    int time_want) {
+  const py::buffer_info info = data.request();
+  if (info.ndim != 1 || info.itemsize != 1) throw py::value_error("parse_csv: expected a bytes-like buffer");
+  const std::size_t size = static_cast<std::size_t>(info.size);
+  if (begin > size) throw py::value_error("parse_csv: begin past the end of the buffer");
+  if (want.empty() || nfields <= 0 || time_want >= static_cast<int>(want.size()))
+    throw py::value_error("parse_csv: bad field layout");
+  for (int f : want)
+    if (f < 0 || f >= nfields) throw py::value_error("parse_csv: a wanted field out of range");
+  textio::CsvFieldOptions opt;
+  opt.delim = delim;
+  opt.nfields = nfields;
+  opt.want = want;
+  opt.time_want = time_want;
+  const char* p = static_cast<const char*>(info.ptr);
+  std::int64_t nlines = 0;
+  {
+    py::gil_scoped_release release;
+    nlines = textio::count_lines(p + begin, p + size);
+  }
+  const auto n = static_cast<py::ssize_t>(nlines);  // one row a line at most; pages untouched until parsed
+  DArray values({n, static_cast<py::ssize_t>(want.size())});
+  py::array_t<std::int64_t> line(n), t_hi(time_want >= 0 ? n : 0), t_lo(time_want >= 0 ? n : 0);
+  DArray t_frac({time_want >= 0 ? n : 0});
+  py::array_t<std::uint8_t> t_kind(time_want >= 0 ? n : 0);
+  textio::CsvSinks sinks{values.mutable_data(), line.mutable_data(), t_hi.mutable_data(), t_lo.mutable_data(),
+                         t_frac.mutable_data(), t_kind.mutable_data()};
+  textio::CsvParsed res;
+  {
+    py::gil_scoped_release release;
+    res = textio::parse_csv_fields(p, begin, size, opt, sinks);
+  }
+  const py::slice rows(0, static_cast<py::ssize_t>(res.rows), 1);
+  py::object split = py::none();
+  if (time_want >= 0) split = py::make_tuple(t_hi[rows], t_lo[rows], t_frac[rows], t_kind[rows]);
+  return py::make_tuple(values[rows], line[rows], split, res.lines, res.stopped ? py::object(py::int_(res.stop_pos))
+                                                                                 : py::object(py::none()));
+}
 }  // namespace
 
 void bind_textio(py::module_& m) {
@@ -218,6 +258,13 @@ void bind_textio(py::module_& m) {
         "fixed (trailing zeros trimmed when trim_zeros), < 0 shortest round-trip; blocks formatted on `threads` "
         "threads, GIL released, Ctrl-C checked after each block; append: after the file's end.  Returns the "
         "bytes written.");
+  m.def("parse_csv", &parse_csv, py::arg("data"), py::arg("begin"), py::arg("delim"), py::arg("nfields"),
+        py::arg("want"), py::arg("time_want"),
+        "The generic IMU CSV's numeric lines from byte `begin` (text_table.hpp parse_csv_fields): nfields "
+        "`delim`-separated fields a line, the fields `want` read as Python's float() does; blank and '#' lines "
+        "skipped; up to the first line it does not take (time_want < 0: no time field).  Returns "
+        "(values (rows, len(want)), line index of each row from `begin`'s line, None or (t_hi, t_lo, t_frac, "
+        "t_kind) of want[time_want], lines taken, None or the byte where the line not taken starts).");
   m.def("parse_text", &parse_text, py::arg("data"), py::arg("ncols"), py::arg("keep"), py::arg("allow_extra") = false,
         py::arg("comma") = false, py::arg("first_line") = 1, py::arg("threads") = 2, py::arg("groups") = py::none(),
         "Parse whitespace (and with comma=True comma) separated numbers, ncols a row (more if allow_extra), "

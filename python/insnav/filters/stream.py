@@ -286,11 +286,8 @@ def imu_csv_blocks(path, fmt, *, week: int | None = None, t_offset_s: float = 0.
 
     def parse(data, line, eof):
         text = bytes(data)
-        parts = text.split(b"\n")
-        if text.endswith(b"\n"):
-            parts = parts[:-1]
         nlines = text.count(b"\n")
-        a, lines, t_tok, _ = parser.feed(parts, line)
+        a, lines, t_tok, _ = parser.feed(text, line)  # the block's lines as one text
         m = len(a)
         if not m:
             return None, nlines

@@ -93,7 +93,7 @@ from ..units import DEG, G0
 
 __all__ = ["ImuFileError", "ImuCsvFormat", "ImuSamples", "Str2strTag", "read_str2str_tag", "tick_time_map",
            "read_imu_csv", "axes_matrix", "gps_minus_utc_s", "GPST_UNIX_OFFSET_S", "canonical_choice", "CsvLineParser",
-           "SampleConverter"]
+           "SampleConverter", "TimeFields"]
 
 #: GPS seconds since 1980-01-06 of 1970-01-01 in GPS time: ``t_gps = t_gtime - 315964800`` [s]
 GPST_UNIX_OFFSET_S = int(round(-gps_seconds_from_calendar(1970, 1, 1)))
@@ -530,14 +530,12 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     week = fmt.gps_week if fmt.gps_week is not None else week  # the mapping's own week wins
     if fmt.time == "gps_sow" and not tagged and week is None:
         raise ValueError(f"{path}: imu time 'gps_sow' needs the GPS week (gps_week, or the observation file's)")
-    parts = raw.split(b"\n")
     complete_last = raw.endswith(b"\n")
-    if complete_last:
-        parts = parts[:-1]
+    n_lines = raw.count(b"\n") + (0 if complete_last or not raw else 1)
     parser = CsvLineParser(path, fmt)
     # a str2str log starts and may end mid-line: its first and (unfinished) last lines are dropped
-    drop = (0, len(parts) - 1 if not complete_last else -1) if tagged else ()
-    a, lines, t_tok, ends = parser.feed(parts, 1, drop=drop, ends=tagged)
+    drop = (0, n_lines - 1 if not complete_last else -1) if tagged else ()
+    a, lines, t_tok, ends = parser.feed(raw, 1, drop=drop, ends=tagged)
     if len(a) < 2:
         raise ImuFileError(path, None, f"fewer than 2 IMU samples ({len(a)})")
     if t_tok is None:  # no time column: t_k = k / rate_hz
@@ -582,20 +580,108 @@ def read_imu_csv(path, fmt: ImuCsvFormat | None = None, *, tag=None, week: int |
     return ImuSamples(conv.t_ref, t, acc_b, gyro_b, fmt.samples, lines, path, info)
 
 
+#: 10^9: the time fields' integer part is kept as two int64 halves (hi 10^9 + lo) below 10^27
+_E9 = 1_000_000_000
+
+
+class TimeFields:
+    """The time fields of parsed rows, held as :func:`_time_after` reads them
+    (so that no text is kept): ``value`` the field as ``float()`` reads it;
+    for a plain decimal ``digits[.digits]`` (``kind`` 1) the integer part
+    ``hi 10^9 + lo`` and the fraction ``frac`` (``float("0.digits")``);
+    ``kind`` 2 (more than 27 integer digits) the text itself (``tokens``:
+    row -> text); ``kind`` 0 anything else (``value`` is used)."""
+
+    def __init__(self, value, hi, lo, frac, kind, tokens=None):
+        self.value, self.hi, self.lo, self.frac, self.kind = value, hi, lo, frac, kind
+        self.tokens = tokens or {}
+
+    def __len__(self) -> int:
+        return len(self.value)
+
+    @classmethod
+    def from_tokens(cls, tokens, value=None) -> "TimeFields":
+        """From the fields' text (``value``: their ``float()``, computed when None)."""
+        n = len(tokens)
+        hi, lo = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        frac, kind = np.zeros(n), np.zeros(n, np.uint8)
+        extra = {}
+        for i, tok in enumerate(tokens):
+            whole, _, fr = tok.strip().partition(".")
+            if whole.isdigit() and (not fr or fr.isdigit()):  # as _time_after
+                if len(whole) <= 27:
+                    hi[i], lo[i] = divmod(int(whole), _E9)
+                    frac[i] = float("0." + fr) if fr else 0.0
+                    kind[i] = 1
+                else:
+                    extra[i], kind[i] = tok, 2
+        value = np.array([float(t) for t in tokens]) if value is None else np.asarray(value, float)
+        return cls(value, hi, lo, frac, kind, extra)
+
+    @classmethod
+    def concat(cls, parts) -> "TimeFields":
+        tokens, k = {}, 0
+        for p in parts:
+            tokens.update({k + i: t for i, t in p.tokens.items()})
+            k += len(p)
+        return cls(*(np.concatenate([getattr(p, a) for p in parts]) for a in ("value", "hi", "lo", "frac", "kind")),
+                   tokens)
+
+    def after(self, ref_int: int) -> np.ndarray:
+        """The times minus the integer ``ref_int``, equal bit for bit to
+        :func:`_time_after` of the fields' text."""
+        out = self.value - float(ref_int)  # kind 0: float(tok) - ref_int
+        plain = np.flatnonzero(self.kind == 1)
+        if plain.size:
+            ref_hi, ref_lo = divmod(int(ref_int), _E9)
+            dh = None
+            if abs(ref_hi) < 2 ** 62:
+                dh = self.hi[plain] - np.int64(ref_hi)  # |hi| < 10^18: no overflow
+                if np.abs(dh).max() > 9 * _E9:
+                    dh = None
+            if dh is not None:  # the exact integer difference in int64, then one rounding (as int + float)
+                d = dh * _E9 + (self.lo[plain] - np.int64(ref_lo))
+                out[plain] = d.astype(float) + self.frac[plain]
+            else:
+                for i in plain:
+                    out[i] = (int(self.hi[i]) * _E9 + int(self.lo[i]) - ref_int) + float(self.frac[i])
+        for i, tok in self.tokens.items():
+            out[i] = _time_after([tok], ref_int)[0]
+        return out
+
+
+def _compiled_delimiter(delim: str) -> bool:
+    """The compiled reader takes tab and printable ASCII delimiters that are no character of a number
+    (it parses a field's number in place, up to the delimiter)."""
+    return delim == "\t" or (" " <= delim <= "~" and not delim.isalnum() and delim not in ".+-")
+
+
 class CsvLineParser:
     """The line-by-line part of :func:`read_imu_csv` (blank and ``#`` lines,
     the header, the field count, the numbers), fed the file's lines in one
     piece (:func:`read_imu_csv`) or block by block
     (:func:`insnav.filters.stream.imu_csv_blocks`): the header and the column
-    mapping found in the first block hold for the next ones."""
+    mapping found in the first block hold for the next ones.
 
-    def __init__(self, path: str, fmt: ImuCsvFormat):
+    The lines after the header are read by the compiled reader
+    (``_core.parse_csv``, ``cpp/include/insnav/io/text_table.hpp``
+    ``parse_csv_fields``: ``std::from_chars``, correctly rounded like
+    ``float()``) up to any line it does not take exactly as this reader does
+    (a bad or non-finite number, a wrong field count, non-ASCII bytes, rare
+    whitespace, a form such as ``1_000`` or an over/underflow); that line is
+    read here (which raises the error naming the file and line, or takes it),
+    and the compiled reader goes on after it.  The values are the same bit for
+    bit; ``compiled = False`` reads every line here."""
+
+    def __init__(self, path: str, fmt: ImuCsvFormat, compiled: bool = True):
         self.path, self.fmt = path, fmt
         self.tagged = fmt.uses_tick
         self.by_header = isinstance(fmt.columns, dict)
         self.cols = None if self.by_header else tuple(fmt.columns)
         self.header_allowed = True
         self.want = None  # the fields of the time (if any) and ax..gz, their names
+        self._parse_csv = getattr(_core, "parse_csv", None) if compiled and _compiled_delimiter(fmt.delimiter) \
+            else None
 
     def _layout(self) -> None:
         cols = self.cols
@@ -610,9 +696,51 @@ class CsvLineParser:
         what = "tick" if self.tagged else "time"
         return f"{what} {float(t_k)!r} does not increase (line {int(line_prev)}: {float(t_prev)!r})"
 
+    def _line(self, b, lineno: int):
+        """One line read here: None (skipped: blank, ``#``, the header) or
+        (values, the time field's text or None)."""
+        path, delim = self.path, self.fmt.delimiter
+        try:
+            s = b.decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise ImuFileError(path, lineno, "not ASCII text (binary data in a CSV?)") from None
+        if not s or s.startswith("#"):
+            return None
+        tok = s.split(delim)
+        if self.header_allowed:
+            self.header_allowed = False
+            if self.by_header:
+                if _is_number(tok[0].strip()):
+                    raise ImuFileError(path, lineno, "no header line, but the columns are mapped by header name")
+                self.cols = _header_columns(path, lineno, tok, self.fmt.columns, delim)
+                return None
+            if not _is_number(tok[0].strip()):
+                return None
+        if self.cols is None:
+            raise ImuFileError(path, lineno, "no header line before the data")
+        if self.want is None:
+            self._layout()
+        if len(tok) != self.ncol:
+            raise ImuFileError(path, lineno, f"expected {self.ncol} {delim!r}-separated fields "
+                               f"({', '.join(self.cols)}), found {len(tok)}")
+        vals = []
+        for j, name in zip(self.want, self.names):
+            try:
+                v = float(tok[j])
+            except ValueError:
+                raise ImuFileError(path, lineno, f"bad number {tok[j].strip()!r} in field {j + 1} ({name})") \
+                    from None
+            if not math.isfinite(v):
+                raise ImuFileError(path, lineno, f"non-finite value {tok[j].strip()!r} in field {j + 1} "
+                                   f"({name})")
+            vals.append(v)
+        return vals, (tok[self.tcol] if self.tcol is not None else None)
+
     def feed(self, parts, first_line: int, *, drop=(), ends: bool = False, pos: int = 0):
-        """Parse ``parts`` (the lines as bytes, without their newline; the first
-        is file line ``first_line``; the indices in ``drop`` skipped).
+        """Parse ``parts``: the lines as a list of bytes without their newline,
+        or as one bytes-like text (its lines; a last ``\\n`` ends the last line
+        and starts none); the first is file line ``first_line``; the line
+        indices in ``drop`` are skipped.
 
         Returns
         -------
@@ -620,61 +748,75 @@ class CsvLineParser:
             The time (when a column has it) and ax ay az gx gy gz as written.
         lines : (n,) int64
             Their 1-based file lines.
-        t_tok : list of str or None
-            The time fields as written (None: no time column).
+        t_tok : TimeFields or None
+            The time fields (None: no time column).
         ends : list of int or None
             With ``ends``: the byte after each row's newline (``pos`` bytes before ``parts``).
         """
-        path, delim = self.path, self.fmt.delimiter
-        rows, lines, t_tok, end_pos = [], [], [], []
-        for i, b in enumerate(parts):
-            lineno = first_line + i
-            pos += len(b) + 1
-            if i in drop:
-                continue
-            try:
-                s = b.decode("ascii").strip()
-            except UnicodeDecodeError:
-                raise ImuFileError(path, lineno, "not ASCII text (binary data in a CSV?)") from None
-            if not s or s.startswith("#"):
-                continue
-            tok = s.split(delim)
-            if self.header_allowed:
-                self.header_allowed = False
-                if self.by_header:
-                    if _is_number(tok[0].strip()):
-                        raise ImuFileError(path, lineno, "no header line, but the columns are mapped by header name")
-                    self.cols = _header_columns(path, lineno, tok, self.fmt.columns, delim)
+        if isinstance(parts, (list, tuple)):
+            buf = b"\n".join(parts) + b"\n" if parts else b""
+        else:
+            buf = parts if isinstance(parts, (bytes, bytearray)) else bytes(parts)
+        size = len(buf)
+        closed = size > 0 and buf[size - 1:] == b"\n"  # the last line has its newline
+        n = buf.count(b"\n") + (0 if closed or not size else 1)
+        drop = sorted({i for i in drop if 0 <= i < n})
+        nl = None  # the byte after each line (its newline, or the end)
+        if drop or ends:
+            nl = np.flatnonzero(np.frombuffer(buf, np.uint8) == 10)
+            if not closed and size:
+                nl = np.append(nl, size)
+        segs = []  # (values, line indices, TimeFields or None), in file order
+        rows, idx, toks = [], [], []  # rows read here, not yet in segs
+
+        def flush():
+            if rows:
+                t = TimeFields.from_tokens(toks, [r[0] for r in rows]) if self.tcol is not None else None
+                segs.append((np.asarray(rows, dtype=float), np.asarray(idx, dtype=np.int64), t))
+                rows.clear(), idx.clear(), toks.clear()
+
+        off, i, nd = 0, 0, 0  # the byte of line i
+        while i < n:
+            while nd < len(drop) and drop[nd] < i:
+                nd += 1
+            if self._parse_csv is not None and not self.header_allowed and self.cols is not None \
+                    and not (nd < len(drop) and drop[nd] == i):
+                if self.want is None:
+                    self._layout()
+                stop = drop[nd] if nd < len(drop) else n  # the compiled run ends before a dropped line
+                view = buf if stop == n else memoryview(buf)[:int(nl[stop - 1]) + 1]
+                flush()
+                vals, li, split, taken, stop_pos = self._parse_csv(view, off, self.fmt.delimiter, self.ncol, self.want,
+                                                                   0 if self.tcol is not None else -1)
+                if len(vals):
+                    t = TimeFields(vals[:, 0], *split) if split is not None else None
+                    segs.append((vals, li + i, t))
+                if stop_pos is None:
+                    i, off = stop, len(view)
                     continue
-                if not _is_number(tok[0].strip()):
-                    continue
-            if self.cols is None:
-                raise ImuFileError(path, lineno, "no header line before the data")
-            if self.want is None:
-                self._layout()
-            if len(tok) != self.ncol:
-                raise ImuFileError(path, lineno, f"expected {self.ncol} {delim!r}-separated fields "
-                                   f"({', '.join(self.cols)}), found {len(tok)}")
-            vals = []
-            for j, name in zip(self.want, self.names):
-                try:
-                    v = float(tok[j])
-                except ValueError:
-                    raise ImuFileError(path, lineno, f"bad number {tok[j].strip()!r} in field {j + 1} ({name})") \
-                        from None
-                if not math.isfinite(v):
-                    raise ImuFileError(path, lineno, f"non-finite value {tok[j].strip()!r} in field {j + 1} "
-                                       f"({name})")
-                vals.append(v)
-            rows.append(vals)
-            if self.tcol is not None:
-                t_tok.append(tok[self.tcol])
-            lines.append(lineno)
-            end_pos.append(pos)
+                i, off = i + taken, stop_pos
+            e = buf.find(b"\n", off)
+            e = size if e < 0 else e
+            if not (nd < len(drop) and drop[nd] == i):
+                got = self._line(bytes(buf[off:e]), first_line + i)  # raises the error, or reads what the
+                if got is not None:                                  # compiled reader did not
+                    rows.append(got[0])
+                    idx.append(i)
+                    toks.append(got[1])
+            off = e + 1
+            i += 1
+        flush()
         width = 6 if (self.want is not None and self.tcol is None) else 7
-        a = np.asarray(rows, dtype=float) if rows else np.zeros((0, width))
         timed = self.want is None or self.tcol is not None
-        return a, np.asarray(lines, dtype=np.int64), (t_tok if timed else None), (end_pos if ends else None)
+        if segs:
+            a = segs[0][0] if len(segs) == 1 else np.concatenate([s[0] for s in segs])
+            li = segs[0][1] if len(segs) == 1 else np.concatenate([s[1] for s in segs])
+            t_tok = TimeFields.concat([s[2] for s in segs]) if self.tcol is not None else None
+        else:
+            a, li = np.zeros((0, width)), np.zeros(0, np.int64)
+            t_tok = TimeFields.from_tokens([]) if timed else None
+        end_pos = (pos + nl[li] + 1).tolist() if ends else None
+        return a, li + first_line, t_tok, end_pos
 
 
 class SampleConverter:
@@ -700,11 +842,13 @@ class SampleConverter:
             ref_s, t = 0, t_counter / float(fmt.rate_hz)
         else:
             scale = _TIME_SCALE[fmt.time_unit]
+            if not isinstance(t_tok, TimeFields):
+                t_tok = TimeFields.from_tokens(list(t_tok))
             if self._ref is None:
-                ref_int = int(math.floor(float(t_tok[0])))
+                ref_int = int(math.floor(float(t_tok.value[0])))
                 self._ref = (ref_int,) + divmod(ref_int, scale)
             ref_int, ref_s, rem = self._ref
-            t = (_time_after(t_tok, ref_int) + rem) / scale  # as _split_time
+            t = (t_tok.after(ref_int) + rem) / scale  # as _split_time
         if self.t_ref is None:
             t_ref = float(ref_s)
             if fmt.time == "gpst_unix_s":

@@ -505,4 +505,180 @@ inline ParseResult parse_buffer(const char* data, std::size_t size, const ParseO
   return parse_planned(data, plan, opt, first_line, sinks.data(), line_of);
 }
 
+// ----------------------------------------------------------------- delimited fields (generic IMU CSV)
+
+/// The generic IMU CSV's line grammar (python/insnav/io/imu_csv.py,
+/// CsvLineParser): a line stripped of whitespace, then split at every
+/// `delim` into exactly `nfields` fields, of which the fields `want` are
+/// numbers as Python's float() reads them.  The parser takes only the lines
+/// it reads exactly as the Python reader does and stops at any other (the
+/// caller reads that one line with the Python reader, which also words every
+/// error): blank and '#' lines (ASCII) are skipped.
+struct CsvFieldOptions {
+  char delim = ',';
+  int nfields = 0;
+  std::vector<int> want;  // field indices stored per row, in order (each < nfields)
+  int time_want = -1;     // index into `want` of the time field also stored split (-1: none)
+};
+
+/// Where rows go: values[r * want.size() + k]; line[r] the line index (from
+/// the call's first line); the time field (time_want >= 0): t_kind[r] = 1
+/// when it is a plain decimal ``digits[.digits]`` whose integer part is
+/// t_hi[r] * 10^9 + t_lo[r] and whose fraction ".digits" reads as t_frac[r]
+/// (the digits the imu reader keeps exactly), else 0.
+struct CsvSinks {
+  double* values = nullptr;
+  std::int64_t* line = nullptr;
+  std::int64_t* t_hi = nullptr;
+  std::int64_t* t_lo = nullptr;
+  double* t_frac = nullptr;
+  std::uint8_t* t_kind = nullptr;
+};
+
+struct CsvParsed {
+  std::int64_t rows = 0;
+  std::int64_t lines = 0;    // lines taken (the stop line is the next one)
+  bool stopped = false;      // a line the parser does not take (at line index `lines`)
+  std::size_t stop_pos = 0;  // its first byte (the buffer's end when not stopped)
+};
+
+/// Python str.strip() / float() whitespace among the bytes this parser takes.
+inline bool is_csv_space(unsigned char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+/// The time field [b, e) split as the imu reader's exact time arithmetic
+/// needs it (imu_csv._time_after): kind 1 for ``digits[.digits]`` with at most
+/// 27 integer digits, else kind 0 (the value as read is used).
+inline bool split_time_field(const char* b, const char* e, std::int64_t& hi, std::int64_t& lo, double& frac,
+                             std::uint8_t& kind) {
+  while (b < e && is_csv_space(static_cast<unsigned char>(*b))) ++b;
+  while (e > b && is_csv_space(static_cast<unsigned char>(e[-1]))) --e;
+  kind = 0;
+  const char* dot = b;
+  while (dot < e && *dot >= '0' && *dot <= '9') ++dot;
+  if (dot == b) return true;  // no integer digits: not plain
+  if (dot < e) {
+    if (*dot != '.') return true;
+    for (const char* q = dot + 1; q < e; ++q)
+      if (*q < '0' || *q > '9') return true;
+  }
+  if (dot - b > 27) return false;  // the Python reader's exact integers (the caller stops)
+  std::int64_t h = 0, l = 0;
+  const char* split = dot - b > 9 ? dot - 9 : b;
+  for (const char* q = b; q < split; ++q) h = h * 10 + (*q - '0');
+  for (const char* q = split; q < dot; ++q) l = l * 10 + (*q - '0');
+  frac = 0.0;
+  if (dot + 1 < e) {
+    const auto r = std::from_chars(dot, e, frac);  // ".digits": as float("0.digits")
+    if (r.ec != std::errc() || r.ptr != e) return false;
+  }
+  hi = h;
+  lo = l;
+  kind = 1;
+  return true;
+}
+
+/// Bytes the Python reader takes as they are in a field it does not read: printable ASCII and the
+/// whitespace above (not ASCII is its error; str.strip()'s \x1c..\x1f it strips, this parser does not).
+inline bool plain_ascii(const char* b, const char* e) {
+  unsigned bad = 0;
+  for (; b < e; ++b) {
+    const unsigned char c = static_cast<unsigned char>(*b);
+    bad |= static_cast<unsigned>(c >= 0x7f) | static_cast<unsigned>(c < 0x20 && !is_csv_space(c));
+  }
+  return !bad;
+}
+
+/// Parse the lines of [b, e) (line index 0 at b) into sinks (room for one
+/// row per line) up to the first line this parser does not take.  A read
+/// field is parsed in place (std::from_chars up to the delimiter, which must
+/// not be a character of a number: the caller checks), so that its bytes are
+/// checked by the number grammar; an unread field's bytes and a comment are
+/// checked by plain_ascii.
+inline CsvParsed parse_csv_fields(const char* base, std::size_t b, std::size_t e, const CsvFieldOptions& opt,
+                                  const CsvSinks& out) {
+  CsvParsed res;
+  const int nwant = static_cast<int>(opt.want.size());
+  // field -> position in want (-1: not stored)
+  std::vector<int> slot(static_cast<std::size_t>(std::max(opt.nfields, 0)), -1);
+  for (int k = 0; k < nwant; ++k) slot[static_cast<std::size_t>(opt.want[k])] = k;
+  const int tfield = opt.time_want >= 0 ? opt.want[opt.time_want] : -1;
+  const char* s = base + b;
+  const char* end = base + e;
+  const char delim = opt.delim;
+  // whitespace inside a field (a whitespace delimiter is none)
+  auto field_space = [delim](char c) { return c != delim && is_csv_space(static_cast<unsigned char>(c)); };
+  while (s < end) {
+    const char* nl = static_cast<const char*>(std::memchr(s, '\n', static_cast<std::size_t>(end - s)));
+    const char* le = nl ? nl : end;
+    bool ok = true;
+    const char* p = s;
+    const char* q = le;
+    while (p < q && is_csv_space(static_cast<unsigned char>(*p))) ++p;
+    while (q > p && is_csv_space(static_cast<unsigned char>(q[-1]))) --q;
+    if (p < q && *p == '#') {
+      ok = plain_ascii(s, le);
+    } else if (p < q) {
+      const std::int64_t r = res.rows;
+      int f = 0;
+      const char* fb = p;
+      while (true) {
+        if (f >= opt.nfields) {
+          ok = false;
+          break;
+        }
+        const int k = slot[static_cast<std::size_t>(f)];
+        const char* fe;
+        if (k >= 0) {
+          const char* nb = fb;
+          while (nb < q && field_space(*nb)) ++nb;
+          if (nb < q && *nb == '+') {  // float() takes one '+' before the number
+            ++nb;
+            if (nb == q || *nb == '+' || *nb == '-') {
+              ok = false;
+              break;
+            }
+          }
+          double v;
+          const auto rc = std::from_chars(nb, q, v);
+          fe = rc.ptr;
+          while (fe < q && field_space(*fe)) ++fe;
+          if (rc.ec != std::errc() || !std::isfinite(v) || (fe < q && *fe != delim)) {
+            ok = false;
+            break;
+          }
+          out.values[r * nwant + k] = v;
+          if (f == tfield && !split_time_field(fb, fe, out.t_hi[r], out.t_lo[r], out.t_frac[r], out.t_kind[r])) {
+            ok = false;
+            break;
+          }
+        } else {
+          fe = static_cast<const char*>(std::memchr(fb, delim, static_cast<std::size_t>(q - fb)));
+          if (!fe) fe = q;
+          if (!plain_ascii(fb, fe)) {
+            ok = false;
+            break;
+          }
+        }
+        ++f;
+        if (fe == q) break;
+        fb = fe + 1;
+      }
+      if (ok && f != opt.nfields) ok = false;
+      if (ok) {
+        out.line[r] = res.lines;
+        ++res.rows;
+      }
+    }
+    if (!ok) {
+      res.stopped = true;
+      res.stop_pos = static_cast<std::size_t>(s - base);
+      return res;
+    }
+    ++res.lines;
+    s = nl ? nl + 1 : end;
+  }
+  res.stop_pos = e;
+  return res;
+}
+
 }  // namespace insnav::textio
