@@ -187,6 +187,14 @@ def nav_rows_to_degrees(
     att_col: int,
     v_n: npt.NDArray[np.float64],
 ) -> tuple[int, bool]: ...  # (first row with a non-finite latitude or velocity or -1, any non-finite)
+def parse_csv(
+    data: bytes | memoryview,
+    begin: int,  # the byte the parse starts at (a line start)
+    delim: str,  # one character
+    nfields: int,
+    want: Sequence[int],  # the fields read, in this order
+    time_want: int,  # index into want of the time field, < 0: none
+) -> tuple[Any, Any, Any, int, int | None]: ...  # (values (rows, len(want)), line index of each row, None or (t_hi, t_lo, t_frac, t_kind), lines taken, None or the byte of the line not taken)
 def parse_text(
     data: bytes | memoryview,
     ncols: int,
