@@ -70,6 +70,12 @@ SLOW_TESTS = (
     "tests/test_interrupt.py::test_sigint_stops_a_run_fast_with_one_line_and_no_output",
     "tests/test_tight_walk_faults.py::test_walk_fault_campaign_meets_its_targets",
     "tests/test_gate_outages.py::test_kfgins_track_default_gate_never_worse_than_gate_off",
+    # the longest of the quick subset (pytest --durations: 4-8 s each)
+    "tests/test_sim_stream.py::test_simulate_to_writes_the_saved_whole_dataset_byte_for_byte",
+    "tests/test_report_files.py::test_report_replaces_an_earlier_report_and_refuses_other_folders",
+    "tests/test_report_files.py::test_a_failed_report_leaves_no_figure_and_the_earlier_report",
+    "tests/test_selfcal_lever_turns.py",
+    "tests/test_pseudorange_gm.py::test_gauss_markov_errors_need_the_block",
 )
 
 
