@@ -56,7 +56,7 @@ from ..config import ConfigError
 from ..data.textio import read_bytes
 from ..gnss.gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar
 from ..units import DEG, RAD2DEG
-from .imu_csv import GPST_UNIX_OFFSET_S, _CHOICES as _IMU_CHOICES, _TIME_SCALE, _split_time, canonical_choice
+from .imu_csv import _CHOICES as _IMU_CHOICES, _TIME_SCALE, _split_time, canonical_choice, time_base_ref_s
 from .imu_csv import gps_minus_utc_s
 
 __all__ = ["GnssFileError", "GnssFileFormat", "GnssRecords", "read_gnss", "read_gnss_csv", "read_pos",
@@ -560,17 +560,10 @@ def read_gnss_csv(path, fmt: GnssFileFormat | None = None) -> GnssRecords:
     n = len(a)
     ref_s, t = _split_time(t_tok, _TIME_SCALE[fmt.time_unit])
     time_base = "gps"
-    t_ref = float(ref_s)
-    if fmt.time == "gpst_unix_s":
-        t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
-    elif fmt.time == "unix_utc_s":
-        t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
-        t_ref += float(gps_minus_utc_s(t_ref + t[0]))
-    elif fmt.time == "gps_sow":
-        if fmt.gps_week is None:
-            raise ConfigError(f"{path}: gnss.time = 'gps_sow' needs gnss.gps_week (the full GPS week)")
-        t_ref = float(ref_s + SECONDS_PER_WEEK * fmt.gps_week)
-    elif fmt.time == "relative":
+    if fmt.time == "gps_sow" and fmt.gps_week is None:
+        raise ConfigError(f"{path}: gnss.time = 'gps_sow' needs gnss.gps_week (the full GPS week)")
+    t_ref = time_base_ref_s(fmt.time, ref_s, float(t[0]), fmt.gps_week)
+    if fmt.time == "relative":
         time_base = "relative"
     lat, lon = col["lat"], col["lon"]
     if fmt.angle_unit == "rad":

@@ -471,6 +471,23 @@ def _is_number(tok: str) -> bool:
         return False
 
 
+def time_base_ref_s(time: str, ref_s: int, t_first_s: float, week: int | None = None) -> float:
+    """GPS time [s] of the whole-second reference ``ref_s`` of a file's times
+    (:func:`_split_time`) in the time base ``time``: ``gpst_unix_s`` (GPS
+    seconds counted from 1970), ``unix_utc_s`` (UTC: the leap seconds of
+    :func:`gps_minus_utc_s` at the first sample, ``ref_s + t_first_s``, added),
+    ``gps_sow`` (seconds of GPS week ``week``) or ``gps_s`` / ``relative`` (as
+    they are).  Shared by the IMU and the GNSS CSV readers."""
+    if time == "gpst_unix_s":
+        return float(ref_s - GPST_UNIX_OFFSET_S)
+    if time == "unix_utc_s":
+        t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
+        return t_ref + float(gps_minus_utc_s(t_ref + t_first_s))
+    if time == "gps_sow":
+        return float(ref_s + SECONDS_PER_WEEK * int(week))
+    return float(ref_s)
+
+
 def _split_time(tokens, scale: int) -> tuple[int, np.ndarray]:
     """(ref [whole s], times after ref [s]) of decimal time strings in units of 1/scale s,
     keeping every digit (a 1e9-sized float would lose them)."""
@@ -850,15 +867,7 @@ class SampleConverter:
             ref_int, ref_s, rem = self._ref
             t = (t_tok.after(ref_int) + rem) / scale  # as _split_time
         if self.t_ref is None:
-            t_ref = float(ref_s)
-            if fmt.time == "gpst_unix_s":
-                t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
-            elif fmt.time == "unix_utc_s":
-                t_ref = float(ref_s - GPST_UNIX_OFFSET_S)
-                t_ref += float(gps_minus_utc_s(t_ref + t[0]))
-            elif fmt.time == "gps_sow":
-                t_ref = float(ref_s + SECONDS_PER_WEEK * int(self.week))
-            self.t_ref = t_ref
+            self.t_ref = time_base_ref_s(fmt.time, ref_s, float(t[0]), self.week)
         return t
 
     def rate_mismatch(self, t) -> str | None:
