@@ -24,20 +24,14 @@ from insnav.analysis import errors, rms
 from insnav.config import ConfigError, RunConfig
 from insnav.filters._setup import tight_inputs_for
 from insnav.filters.tight import run_tight
+from conftest import first_segments
 
 GM_SIGMA_M, GM_TAU_S, WHITE_SIGMA_M = 4.0, 45.0, 1.0
 
 
 def _scenario(duration=240.0):
     base = sim.simulate("seed003-4sat", seed=0, with_truth=False).scenario
-    sc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}
-    segs, tot = [], 0.0
-    for s in sc["motion"]["segments"]:
-        if tot >= duration:
-            break
-        segs.append(s)
-        tot += float(s["duration_s"])
-    sc["motion"] = dict(sc["motion"], segments=segs)
+    sc = first_segments({k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}, duration)
     sc["gnss_raw"] = dict(sc["gnss_raw"], windows=[], max_sats=8, sigma_pr_m=WHITE_SIGMA_M, sigma_prr_mps=0.05)
     return sc
 

@@ -13,19 +13,12 @@ from insnav.analysis import errors, rms
 from insnav.config import RunConfig
 from insnav.filters.tight import run_tight
 from insnav.gnss.tight_inputs import TightInputs, pseudorange_sigma, tight_inputs_from_raw
+from conftest import first_segments
 
 
 def _short(preset="seed003-4sat", duration=300.0, **raw_over):
     base = sim.simulate(preset, seed=0, with_truth=False).scenario
-    sc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}
-    # keep the first segments up to `duration`
-    segs, tot = [], 0.0
-    for s in sc["motion"]["segments"]:
-        if tot >= duration:
-            break
-        segs.append(s)
-        tot += float(s["duration_s"])
-    sc["motion"] = dict(sc["motion"], segments=segs)
+    sc = first_segments({k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}, duration)
     sc["gnss_raw"] = dict(sc["gnss_raw"], windows=[], **raw_over)
     return sc
 

@@ -15,6 +15,7 @@ from insnav.analysis import errors
 from insnav.config import ConfigError, Robust, RunConfig, config_from_dict
 from insnav.filters.tight import run_tight
 from insnav.gnss.walker import walker_constellation
+from conftest import first_segments
 
 C_MS_M = 299792.458  # c * 1 ms [m]
 
@@ -23,13 +24,7 @@ def _scenario(preset="urban-multignss", duration=None, canyon=True, **raw_over):
     sc = sim.load_scenario(preset).raw
     sc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in sc.items()}
     if duration is not None:
-        segs, tot = [], 0.0
-        for s in sc["motion"]["segments"]:
-            if tot >= duration:
-                break
-            segs.append(s)
-            tot += float(s["duration_s"])
-        sc["motion"] = dict(sc["motion"], segments=segs)
+        sc = first_segments(sc, duration)
     gr = dict(sc["gnss_raw"], **raw_over)
     if not canyon:
         gr.pop("urban_canyon", None)
