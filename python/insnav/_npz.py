@@ -51,6 +51,21 @@ def _npy_header(n: int) -> bytes:
     return buf.getvalue()
 
 
+def _layout(names: list[bytes], n: int) -> tuple[bytes, int, list[int], int]:
+    """The members of an uncompressed npz of float64 columns of ``n`` rows: the
+    ``.npy`` header, each member's data size (header + 8 n bytes), each local
+    header's offset (30 bytes + the name before its data), and the end of the
+    last member (where the central directory starts).  Shared by the whole-file
+    writer and the block-by-block one, whose files must be the same."""
+    head = _npy_header(n)
+    size = len(head) + 8 * n
+    offsets, off = [], 0
+    for nm in names:
+        offsets.append(off)
+        off += 30 + len(nm) + size
+    return head, size, offsets, off
+
+
 def _dos_time() -> tuple[int, int]:
     y, mo, d, h, mi, s = time.localtime(time.time())[:6]
     return (h << 11) | (mi << 5) | (s // 2), ((max(y, 1980) - 1980) << 9) | (mo << 5) | d
@@ -71,12 +86,7 @@ def write_npz(path, columns) -> None:
     cols = [(name, np.asarray(x), float(f)) for name, x, f in columns]
     n = len(cols[0][1]) if cols else 0
     names = [(name + ".npy").encode("ascii") for name, _, _ in cols]
-    head = _npy_header(n)
-    size = len(head) + 8 * n
-    offsets, off = [], 0
-    for nm in names:
-        offsets.append(off)
-        off += 30 + len(nm) + size
+    head, size, offsets, off = _layout(names, n)
     if off > _MAX_OFFSET or len(cols) > _MAX_MEMBERS or any(len(x) != n or x.ndim != 1 for _, x, _ in cols):
         return _write_npz_zipfile(path, cols)
     dos_t, dos_d = _dos_time()
@@ -255,12 +265,7 @@ class NpzColumns:
     def finish(self, path) -> None:
         """Write the ``.npz`` to ``path`` (created, or overwritten)."""
         n, names = self.n, [(nm + ".npy").encode("ascii") for nm in self.names]
-        head = _npy_header(n)
-        size = len(head) + 8 * n
-        offsets, off = [], 0
-        for nm in names:
-            offsets.append(off)
-            off += 30 + len(nm) + size
+        head, size, offsets, off = _layout(names, n)
         if off > _MAX_OFFSET or len(names) > _MAX_MEMBERS:
             return self._finish_zipfile(path)
         shift = _crc_shift(8 * n)
