@@ -34,7 +34,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 import insnav  # noqa: E402
 from _common import git_commit  # noqa: E402
 from _stamps import with_stamp  # noqa: E402
-from insnav.calib.tune import _cut, holdout_report, scaled_config, solution_log_likelihood, tune  # noqa: E402
+from insnav.calib.tune import (ReferenceModel, _cut, holdout_report, scaled_config, solution_log_likelihood,  # noqa: E402
+                               tune)
 from insnav.filters.loose import run_loose  # noqa: E402
 from insnav.config import ImuNoise, RunConfig  # noqa: E402
 
@@ -166,7 +167,56 @@ def simulation(seeds, max_runs, lines, verdicts):
 
 # --------------------------------------------------------------------------- 2. real data
 
-def compare(title, ds, cfg, reference, lines, verdicts, *, max_runs, keep_t=None, note="", timing=False):
+def total_rows(hand, tuned, cols=None) -> list:
+    """The rows of the consistency against the reference's point and its own noise (``nees_total``)."""
+    out = []
+    for k, ax in AXES.items():
+        if k not in tuned.get("nees_total", {}):
+            continue
+        vals = [", ".join(f"{v:.2f}" for v in r["nees_total"][k]) for r in (cols or (hand, tuned))]
+        out.append(f"| rms(err/sqrt(sigma^2 + sigma_ref^2)) {', '.join(ax)}, the reference's point | "
+                   + " | ".join(vals) + " |")
+    return out
+
+
+def consistency_figures(rep) -> list:
+    """(name, value) of the figures the verdicts judge: NIS/row, rms(e/sqrt(sigma^2 + sigma_ref^2)) of the
+    position and velocity (expectation 1 for a consistent filter against this reference, see
+    ``reference_note``), rms(err/sigma) of the attitude (an exact reference where it has one)."""
+    cons = [("NIS/row", rep["nis_per_row"])]
+    for k, ax in AXES.items():
+        src = rep.get("nees_total", {}) if k in ("pos_n_m", "vel_n_mps") else rep.get("nees", {})
+        if k in src:
+            name = "rms(err/sigma_total)" if k in ("pos_n_m", "vel_n_mps") else "rms(err/sigma)"
+            cons += [(f"{name} {n}", v) for n, v in zip(ax, src[k])]
+    return cons
+
+
+def reference_note(model, rep) -> str:
+    """The sentence that states the consistency figure's reference model, with the figures it used."""
+    l_b = np.asarray(model.lever_arm_b, float)
+    sp, sv = rep.get("reference_sigma_pos_m"), rep.get("reference_sigma_vel_mps")
+    return ("Consistency against this reference (`ReferenceModel`, docs/algorithms.md section 20): the reference "
+            "is r = x_a + w, x_a the true point it describes (here "
+            + (f"the antenna, lever arm l_b = [{', '.join(f'{v:g}' for v in l_b)}] m from the IMU centre"
+               if np.any(l_b != 0) else "the IMU centre")
+            + ") and w its own error of variance sigma_ref^2 (" + model.source + "; rms over the held-out epochs "
+            f"N, E, D {', '.join(f'{100 * v:.1f}' for v in sp)} cm, vN, vE, vD "
+            f"{', '.join('-' if not np.isfinite(v) else f'{100 * v:.1f}' for v in sv)} cm/s), independent of the "
+            "filter's error; the solution's point x_hat + C_nb l_b (velocity v_hat + C_nb (omega_ib_b x l_b)"
+            + (f", taken velocity_lag_s = {model.velocity_lag_s:g} s before the reference epoch, whose velocity "
+               "column describes that time" if model.velocity_lag_s else "")
+            + ") then has the error e = (x_hat - x) - w, and a consistent filter gives E[e^2] = sigma^2 + "
+            "sigma_ref^2 per axis, so E[(e / sqrt(sigma^2 + sigma_ref^2))^2] = 1: the rows "
+            "rms(err/sqrt(sigma^2 + sigma_ref^2)), which the verdicts use (the attitude share of C_nb l_b is left "
+            f"out: at most |l_b| times the attitude sigma, {1000 * rep.get('lever_sigma_max_m', 0.0):.1f} mm here).  "
+            "The rows rms(err/sigma) are the IMU centre against the reference as it is, with the filter's sigma "
+            "alone: their expectation for a consistent filter is sqrt(1 + (b^2 + sigma_ref^2) / sigma^2) (b the "
+            "lever arm in NED), not 1.")
+
+
+def compare(title, ds, cfg, reference, lines, verdicts, *, max_runs, keep_t=None, note="", timing=False,
+            reference_model=None):
     """Tune on the first 70 %, report hand vs tuned on the last 30 %."""
     load0 = os.getloadavg()[0]
     res = tune(ds, cfg, holdout=HOLDOUT, max_runs=max_runs)
@@ -174,7 +224,8 @@ def compare(title, ds, cfg, reference, lines, verdicts, *, max_runs, keep_t=None
     reps = []
     for c in (res.base, res.tuned):
         sol = insnav.run(ds, config=dataclasses.replace(c))
-        reps.append(holdout_report(sol, reference, t_from=res.t_split, keep_t=keep_t))
+        reps.append(holdout_report(sol, reference, t_from=res.t_split, keep_t=keep_t,
+                                   reference_model=reference_model))
     hand, tuned = reps
     lines += [f"### {title}", "", note, "",
               f"Tuned ({res.tuned.filter}, {res.tuned.coupling}) on t < {res.t_split:.1f} s: {res.runs} runs, "
@@ -199,17 +250,16 @@ def compare(title, ds, cfg, reference, lines, verdicts, *, max_runs, keep_t=None
                     continue
                 lines.append(f"| rms(err/sigma) {', '.join(ax)}{note} | {', '.join(f'{v:.2f}' for v in a)} | "
                              f"{', '.join(f'{v:.2f}' for v in b)} |")
+        lines += total_rows(hand, tuned)
     lines.append("")
+    if reference is not None and reference_model is not None:
+        lines += [reference_note(reference_model, tuned), ""]
     # verdicts
     if reference is not None and "hor_rms_m" in hand:
         r = tuned["hor_rms_m"] / hand["hor_rms_m"]
         verdicts.append((f"{title}: held-out horizontal error, tuned / hand = {r:.3f} (target <= 1)",
                          "met" if r <= 1.0 else "NOT met"))
-    cons = [("NIS/row", hand["nis_per_row"], tuned["nis_per_row"])]
-    for k, ax in AXES.items():
-        a, b = hand.get("nees", {}).get(k), tuned.get("nees", {}).get(k)
-        if a is not None:
-            cons += [(f"rms(err/sigma) {n}", x, y) for n, x, y in zip(ax, a, b)]
+    cons = [(n, x, y) for (n, x), (_, y) in zip(consistency_figures(hand), consistency_figures(tuned))]
     outside = [(n, x, y) for n, x, y in cons if not 0.7 <= x <= 1.3]
     fixed = [(n, x, y) for n, x, y in outside if 0.7 <= y <= 1.3]
     worse = [(n, x, y) for n, x, y in cons if 0.7 <= x <= 1.3 and not 0.7 <= y <= 1.3]
@@ -240,9 +290,25 @@ def kfgins(lines, verdicts, max_runs):
     ds, cfg = load_kfgins(d / "kf-gins-sim.yaml", d / "Leador-A15-sim.txt.xz", d / "GNSS-RTK-sim.txt", layout=21)
     truth = read_kfgins_nav(d / "truth-sim.nav.xz")
     compare("KF-GINS track (loose EKF-21)", ds, cfg, truth, lines, verdicts, max_runs=max_runs, timing=True,
+            reference_model=ReferenceModel(source="the truth file of the IMU centre, taken as exact: sigma_ref = 0"),
             note="`../shared/data/kfgins/sim`: the real KF-GINS RTK track (1 Hz) with a synthesised 200 Hz "
                  "navigation-grade IMU, 56 min; hand settings = KF-GINS's YAML (`insnav run --format kfgins`); "
                  "reference = its truth file (every IMU epoch after the split).")
+
+
+def pos_reference_model(pos, ds, cfg, lag_s) -> ReferenceModel:
+    """The RTK ``.pos`` as a reference of the antenna: its own sigmas from its sdn/sde/sdu and sdvn/sdve/sdvu
+    columns, its velocity column lagging by ``lag_s``, the angular rate from the IMU's angle increments."""
+    from insnav.io.gnss_files import read_pos_records
+
+    rec = read_pos_records(pos)
+    t = rec.t_ref_s + np.asarray(rec.t_s, float) - ds.gps_time_offset_s
+    w_t, w_b = ReferenceModel.omega_from_imu(ds.imu)
+    return ReferenceModel(lever_arm_b=np.asarray(ds.lever_arm_b, float), t=t,
+                          sigma_pos_n_m=np.asarray(rec.sigma_pos_n, float),
+                          sigma_vel_n_mps=np.asarray(rec.sigma_vel_n, float), velocity_lag_s=lag_s,
+                          omega_t=w_t, omega_ib_b_radps=w_b,
+                          source="the `.pos` file's own sdn, sde, sdu and sdvn, sdve, sdvu columns at each epoch")
 
 
 def walk_loose(lines, verdicts, max_runs):
@@ -260,13 +326,42 @@ def walk_loose(lines, verdicts, max_runs):
     unseen = np.setdiff1d(np.round(np.asarray(ref.t), 3), np.round(seen, 3))
     res, _, _ = compare("rtklibexplorer walk, loose on the RTK .pos (EKF)", ds, cfg, ref, lines, verdicts,
                         max_runs=max_runs, keep_t=unseen,
+                        reference_model=pos_reference_model(pos, ds, cfg, float(d["gnss"]["velocity_lag_s"])),
                         note="`tests/data/walk_0827_loose.toml` (consumer grade, `[gnss] decimate = 4`: 1 fix in 4 "
                              "to the filter, position sigma floor 5 cm, velocity sigma 0.1 m/s) as the hand settings; "
-                             "reference = the RTK `.pos` at the epochs the filter did not see (antenna position; the "
-                             "5 cm lever arm is left in).")
+                             "reference = the RTK `.pos` at the epochs the filter did not see (the antenna).")
     from tune_walk_loose_diag import expectation_lines
 
     lines += expectation_lines(ds, cfg, ref, res, float(d["gnss"]["velocity_lag_s"]))
+
+
+def pvt_reference_model(x, ds, cfg, w) -> ReferenceModel:
+    """The shifted NAV-PVT track as a reference of the antenna: its own error is the error of the shift (1-sigma:
+    the sample standard deviation of the GPS, Galileo and BeiDou single-point offsets from NAV-PVT, per axis) and
+    NAV-PVT's own accuracy (hAcc / sqrt(2) per horizontal axis, vAcc); velocity: the receiver's, whose sigma is
+    the `.pos` file's sdvn, sdve, sdvu (the same receiver velocities) and whose lag is the walk's velocity_lag_s."""
+    from insnav.io.gnss_files import read_pos_records
+
+    comp = x["comp"]
+    offs = np.array([comp[k]["mean_neu"] for k in comp if k.endswith("- NAV-PVT") and k.startswith("insnav SPP ")
+                     and "+" not in k])
+    s_neu = offs.std(axis=0, ddof=1)
+    pvt = x["pvt"]
+    week_s = x["week"] * 604800.0
+    t_pvt = week_s + np.asarray(pvt["tow_s"], float) - ds.gps_time_offset_s
+    h = np.asarray(pvt["h_acc_m"], float) / np.sqrt(2.0)
+    sig_p = np.sqrt(np.column_stack([h, h, np.asarray(pvt["v_acc_m"], float)]) ** 2 + s_neu ** 2)
+    rec = read_pos_records(w / "raw" / "gnss_1730_sf.pos")
+    t_pos = rec.t_ref_s + np.asarray(rec.t_s, float) - ds.gps_time_offset_s
+    sig_v = np.column_stack([np.interp(t_pvt, t_pos, np.asarray(rec.sigma_vel_n, float)[:, i]) for i in range(3)])
+    lag = float(tomllib.loads((ROOT / "tests" / "data" / "walk_0827_loose.toml").read_text())["gnss"]["velocity_lag_s"])
+    w_t, w_b = ReferenceModel.omega_from_imu(ds.imu)
+    return ReferenceModel(lever_arm_b=np.asarray(ds.lever_arm_b, float), t=t_pvt, sigma_pos_n_m=sig_p,
+                          sigma_vel_n_mps=sig_v, velocity_lag_s=lag, omega_t=w_t, omega_ib_b_radps=w_b,
+                          source=f"the shift's uncertainty, the sample standard deviation of the {len(offs)} "
+                                 f"single-system offsets N, E, U {', '.join(f'{v:.2f}' for v in s_neu)} m, with "
+                                 "NAV-PVT's hAcc / sqrt(2) and vAcc; velocity: the `.pos` file's sdvn, sdve, sdvu "
+                                 "of the same receiver velocities")
 
 
 def walk_tight(lines, verdicts, max_runs):
@@ -287,7 +382,9 @@ def walk_tight(lines, verdicts, max_runs):
     x = reference_experiment(DATA)
     ref = rtklib_truth(x["pvt_shifted"], ds.gps_time_offset_s)
     sh = x["shift_neu"]
+    model = pvt_reference_model(x, ds, cfg, w)
     res = compare("rtklibexplorer walk, tight on the RINEX (EKF)", ds, cfg, ref, lines, verdicts, max_runs=max_runs,
+                  reference_model=model,
                   note="`tests/data/walk_0827.toml` (GPS L1 pseudorange and Doppler, the loader's consumer MEMS model "
                        "and pseudorange weighting) as the hand settings.  Reference: the RTK `.pos` sits about 8 m "
                        "from every single-point solution because of its base (docs/results/tight_multignss.md), so "
@@ -314,14 +411,14 @@ def walk_tight(lines, verdicts, max_runs):
               + ("" if white or (over <= 1.3 and over_var <= 1.3) else
                  "  Consistency there needs time-correlated (Gauss-Markov) pseudorange error states: the next "
                  "section tunes them."), ""]
-    walk_tight_gm(ds, cfg, ref, lines, verdicts, max(200, max_runs), res, tuned)
+    walk_tight_gm(ds, cfg, ref, lines, verdicts, max(200, max_runs), res, tuned, model)
 
 
 #: starting point of the Gauss-Markov pseudorange states on the walk (the tuner scales both)
 GM_START_SIGMA_M, GM_START_TAU_S = 3.0, 60.0
 
 
-def walk_tight_gm(ds, cfg, ref, lines, verdicts, max_runs, white, white_report):
+def walk_tight_gm(ds, cfg, ref, lines, verdicts, max_runs, white, white_report, model):
     """The tight walk tuned with per-satellite Gauss-Markov pseudorange error states (docs/algorithms.md,
     "Gauss-Markov pseudorange errors"), the search started from the white-noise tuning's factors
     (``white``); the hand settings stay today's (no such states)."""
@@ -329,8 +426,8 @@ def walk_tight_gm(ds, cfg, ref, lines, verdicts, max_runs, white, white_report):
     title = "rtklibexplorer walk, tight on the RINEX (EKF), Gauss-Markov pseudorange states"
     load0 = os.getloadavg()[0]
     res = tune(ds, cfg_gm, holdout=HOLDOUT, max_runs=max_runs, start=dict(white.scales))
-    reps = [holdout_report(insnav.run(ds, config=dataclasses.replace(c)), ref, t_from=res.t_split)
-            for c in (cfg, res.tuned)]
+    reps = [holdout_report(insnav.run(ds, config=dataclasses.replace(c)), ref, t_from=res.t_split,
+                           reference_model=model) for c in (cfg, res.tuned)]
     hand, tuned = reps
     t = res.tuned
     lines += [f"### {title}", "",
@@ -353,15 +450,14 @@ def walk_tight_gm(ds, cfg, ref, lines, verdicts, max_runs, white, white_report):
     rows += [(f"rms(err/sigma) {', '.join(ax)}", lambda r, k=k: ", ".join(f"{v:.2f}" for v in r["nees"][k]))
              for k, ax in AXES.items() if k in tuned.get("nees", {})]
     lines += [f"| {name} | {f(hand)} | {f(white_report)} | {f(tuned)} |" for name, f in rows]
+    lines += total_rows(hand, tuned, (hand, white_report, tuned))
     lines.append("")
-    cons = [("NIS/row", tuned["nis_per_row"])] + [
-        (f"rms(err/sigma) {n}", v) for k, ax in AXES.items() if k in ("pos_n_m", "vel_n_mps")
-        for n, v in zip(ax, tuned["nees"][k])]
+    cons = [(n, v) for n, v in consistency_figures(tuned) if not n.startswith("rms(err/sigma) ")]
     inside = [n for n, v in cons if 0.7 <= v <= 1.3]
     r = tuned["hor_rms_m"] / hand["hor_rms_m"]
     verdicts.append((f"{title}: held-out horizontal error, tuned / hand = {r:.3f} (target <= 1)",
                      "met" if r <= 1.0 else "NOT met"))
-    verdicts.append((f"{title}: NIS/row and position and velocity rms(err/sigma) within 0.7-1.3: {len(inside)} of "
+    verdicts.append((f"{title}: NIS/row and position and velocity rms(err/sigma_total) within 0.7-1.3: {len(inside)} of "
                      f"{len(cons)} (" + "; ".join(f"{n} {v:.2f}" for n, v in cons) + ")",
                      "met" if len(inside) == len(cons) else "NOT met"))
 
