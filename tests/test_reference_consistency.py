@@ -113,3 +113,17 @@ def test_raw_statistic_is_not_one_and_matches_its_expectation():
                                                         velocity_lag_s=LAG_S))
     tot = np.hypot(no_lever["sigma_filter_pos"], no_lever["sigma_ref_pos"])
     assert max(_rms_ratio(no_lever["pos_n_m"], tot)) > 2.0
+
+
+def test_default_model_reduces_to_the_plain_errors():
+    """An exact reference of the IMU centre (ReferenceModel()): the errors are insnav.analysis.metrics.errors's,
+    so nees_total equals the raw rms(error/sigma) (holdout_report's nees)."""
+    from insnav.analysis.evaluate import _solution_at
+    from insnav.analysis.metrics import errors
+
+    sol, ref, model, eul, sig_p = _case()
+    r = reference_errors(sol, ref, ReferenceModel())
+    e = errors(_solution_at(sol, r["t"]), ref)
+    np.testing.assert_array_equal(r["pos_n_m"], e["pos_n_m"])
+    np.testing.assert_array_equal(r["vel_n_mps"], e["vel_n_mps"])
+    assert not np.any(r["sigma_ref_pos"]) and not np.any(r["sigma_ref_vel"]) and r["lever_sigma_max_m"] == 0.0

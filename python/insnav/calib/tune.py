@@ -779,8 +779,10 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
     ``sqrt(1 + (b^2 + sigma_ref^2) / sigma^2)``.  Without a ``reference_model``
     (an exact reference of the IMU centre) the two are equal.
     ``reference_sigma_pos_m``, ``reference_sigma_vel_mps``: rms of the
-    reference's sigmas per axis over the epochs; ``lever_sigma_max_m``: the
-    neglected attitude share (:func:`reference_errors`).
+    reference's sigmas per axis over the epochs; ``reference_variance_share_pos``:
+    the mean of sigma_ref^2 / (sigma_filter^2 + sigma_ref^2) per position axis
+    (near 1: the figure tests the reference more than the filter);
+    ``lever_sigma_max_m``: the neglected attitude share (:func:`reference_errors`).
     """
     from ..analysis.metrics import errors
     from ..filters.solution import RecordStatus
@@ -831,6 +833,8 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
     out["reference_sigma_pos_m"] = np.sqrt(np.mean(r["sigma_ref_pos"] ** 2, axis=0)).tolist()
     out["reference_sigma_vel_mps"] = np.sqrt(np.nanmean(r["sigma_ref_vel"] ** 2, axis=0)).tolist()
     out["lever_sigma_max_m"] = r["lever_sigma_max_m"]
+    sp2 = r["sigma_ref_pos"] ** 2
+    out["reference_variance_share_pos"] = np.mean(sp2 / (r["sigma_filter_pos"] ** 2 + sp2), axis=0).tolist()
     return out
 
 
