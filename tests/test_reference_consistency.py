@@ -15,7 +15,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from insnav.calib.tune import ReferenceModel, _rms_ratio, reference_errors
+from insnav.calib.tune import ReferenceModel, _rms_ratio, holdout_report, reference_errors
 from insnav.data.dataset import Truth
 from insnav.earth import radii
 from insnav.sim.trajectory import rotate_b_to_n
@@ -127,3 +127,18 @@ def test_default_model_reduces_to_the_plain_errors():
     np.testing.assert_array_equal(r["pos_n_m"], e["pos_n_m"])
     np.testing.assert_array_equal(r["vel_n_mps"], e["vel_n_mps"])
     assert not np.any(r["sigma_ref_pos"]) and not np.any(r["sigma_ref_vel"]) and r["lever_sigma_max_m"] == 0.0
+
+
+def test_holdout_report_uses_the_reference_model():
+    """holdout_report: nees_total is the statistic above (1 within TOL for the consistent filter), nees the raw
+    IMU-centre one; the reference's share of the predicted variance is sigma_ref^2 / (sigma^2 + sigma_ref^2)."""
+    sol, ref, model, eul, sig_p = _case()
+    sol.gnss_t, sol.gnss_status, sol.nis = np.zeros(0), np.zeros(0, int), np.zeros(0)
+    sol.log_det_s, sol.innovation = np.zeros(0), np.zeros((0, 6))
+    rep = holdout_report(sol, ref, t_from=0.0, reference_model=model)
+    assert np.all(np.abs(np.array(rep["nees_total"]["pos_n_m"]) - 1.0) < TOL), rep["nees_total"]
+    assert np.all(np.abs(np.array(rep["nees_total"]["vel_n_mps"]) - 1.0) < TOL), rep["nees_total"]
+    assert min(rep["nees"]["pos_n_m"]) > 1.3
+    share = np.mean(SIG_REF_POS ** 2 / (sig_p ** 2 + SIG_REF_POS ** 2), axis=0)
+    np.testing.assert_allclose(rep["reference_variance_share_pos"], share, rtol=1e-3)
+    np.testing.assert_allclose(rep["reference_sigma_pos_m"], SIG_REF_POS, rtol=1e-12)
