@@ -384,7 +384,8 @@ def walking_standing(ds, ref, res, unseen, model, pos) -> list:
     n_in = lambda r: sum(0.7 <= v <= 1.3 for v in figs(r))  # noqa: E731
     out += ["", f"Walking, the tuned run has {n_in(tw)} of 7 figures within 0.7-1.3; standing, {n_in(ts)} of 7 "
             f"(largest {max(figs(ts)):.2f}): there it is underconfident against this reference.  While the walker "
-            f"stands (speed below {STILL_MPS:g} m/s), the `.pos` positions scatter by N, E, D {j(100 * sd_p)} cm and its "
+            f"stands (speed below {STILL_MPS:g} m/s), the `.pos` positions scatter by N, E, D {j(100 * sd_p)} cm and "
+            "its "
             f"velocities by {j(100 * sd_v)} cm/s (standard deviation over the {int(m.sum())} epochs), against its "
             f"stated sigmas {j(100 * st_p)} cm and {j(100 * st_v)} cm/s, which sigma_ref uses; the filter's position "
             "rows have the 5 cm floor times the tuned factor, and its process noise was tuned on walking only (the "
@@ -503,7 +504,8 @@ def fixed_tau_lines(ds, cfg, ref, model, white, hand) -> list:
                            reference_model=model)
         figs = [r["nis_per_row"]] + r["nees_total"]["pos_n_m"] + r["nees_total"]["vel_n_mps"]
         rows.append(f"| {tau:g} | {res.tuned.pr_gm_sigma_m:.2f} | {res.log_likelihood_tuned:.1f} | "
-                    f"{r['innovation_lag1'][0]:.2f} | {r['hor_rms_m']:.4f} ({r['hor_rms_m'] / hand['hor_rms_m']:.3f}) | "
+                    f"{r['innovation_lag1'][0]:.2f} | {r['hor_rms_m']:.4f} "
+                    f"({r['hor_rms_m'] / hand['hor_rms_m']:.3f}) | "
                     f"{r['nis_per_row']:.2f} | {', '.join(f'{v:.2f}' for v in r['nees_total']['pos_n_m'])} | "
                     f"{', '.join(f'{v:.2f}' for v in r['nees_total']['vel_n_mps'])} | "
                     f"{', '.join(f'{v:.2f}' for v in r['nees_demeaned']['pos_n_m'])} | "
@@ -560,7 +562,8 @@ def walk_tight_gm(ds, cfg, ref, lines, verdicts, max_runs, white, white_report, 
     verdicts.append((f"{title}: held-out horizontal error, tuned / hand = {r:.3f} (target <= 1)",
                      "met" if r <= 1.0 else "NOT met"))
     lines += fixed_tau_lines(ds, cfg, ref, model, white, hand)
-    verdicts.append((f"{title}: NIS/row and position and velocity rms(err/sigma_total) within 0.7-1.3: {len(inside)} of "
+    verdicts.append((f"{title}: NIS/row and position and velocity rms(err/sigma_total) within 0.7-1.3: "
+                     f"{len(inside)} of "
                      f"{len(cons)} (" + "; ".join(f"{n} {v:.2f}" for n, v in cons) + ")",
                      "met" if len(inside) == len(cons) else "NOT met"))
 

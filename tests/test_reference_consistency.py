@@ -106,7 +106,8 @@ def test_raw_statistic_is_not_one_and_matches_its_expectation():
     expected = np.sqrt(np.mean(1.0 + (b ** 2 + SIG_REF_POS ** 2) / sig_p ** 2, axis=0))
     assert np.all(np.abs(pos / expected - 1.0) < TOL), (pos, expected)
     # each correction alone is not enough: without the reference's noise, or without the lever arm
-    no_noise = reference_errors(sol, ref, ReferenceModel(lever_arm_b=LEVER_B, velocity_lag_s=LAG_S, omega_t=model.omega_t,
+    no_noise = reference_errors(sol, ref, ReferenceModel(lever_arm_b=LEVER_B, velocity_lag_s=LAG_S,
+                                                        omega_t=model.omega_t,
                                                         omega_ib_b_radps=model.omega_ib_b_radps))
     assert np.all(np.array(_rms_ratio(no_noise["pos_n_m"], no_noise["sigma_filter_pos"])) > 1.05)
     no_lever = reference_errors(sol, ref, ReferenceModel(sigma_pos_n_m=SIG_REF_POS, sigma_vel_n_mps=SIG_REF_VEL,
