@@ -831,7 +831,10 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
         total = np.sqrt(r["sigma_filter_" + kind] ** 2 + r["sigma_ref_" + kind] ** 2)
         out["nees_total"][k] = _rms_ratio(r[k], total)
     out["reference_sigma_pos_m"] = np.sqrt(np.mean(r["sigma_ref_pos"] ** 2, axis=0)).tolist()
-    out["reference_sigma_vel_mps"] = np.sqrt(np.nanmean(r["sigma_ref_vel"] ** 2, axis=0)).tolist()
+    sv = r["sigma_ref_vel"]
+    fin = np.isfinite(sv)
+    out["reference_sigma_vel_mps"] = [float(np.sqrt(np.mean(sv[fin[:, i], i] ** 2))) if fin[:, i].any() else math.nan
+                                      for i in range(3)]
     out["lever_sigma_max_m"] = r["lever_sigma_max_m"]
     sp2 = r["sigma_ref_pos"] ** 2
     out["reference_variance_share_pos"] = np.mean(sp2 / (r["sigma_filter_pos"] ** 2 + sp2), axis=0).tolist()
