@@ -51,7 +51,7 @@ from ..config import ConfigError, ImuNoise, RunConfig
 
 __all__ = ["PARAMETERS", "TuneResult", "innovation_log_likelihood", "solution_log_likelihood", "nelder_mead_log",
            "scaled_config", "default_parameters", "tune", "holdout_report", "innovation_lag1", "tuned_toml_dict",
-           "split_time", "LOG_SCALE_BOUND"]
+           "split_time", "LOG_SCALE_BOUND", "ReferenceModel", "reference_errors"]
 
 LOG_2PI = math.log(2.0 * math.pi)
 #: each ln s_j is kept within +-this (scale factors 1e-3 .. 1e3)
@@ -625,7 +625,136 @@ def innovation_lag1(sol, t_from: float = -np.inf, t_to: float = np.inf) -> tuple
     return (out[0], out[1])
 
 
-def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = np.inf, keep_t=None) -> dict:
+@dataclass
+class ReferenceModel:
+    """What a reference trajectory describes, and how well (:func:`reference_errors`).
+
+    Attributes
+    ----------
+    lever_arm_b : (3,) [m]
+        IMU centre -> the point the reference describes, body FRD (zeros: the
+        IMU centre; a GNSS solution: the antenna, ``lever_arm_b`` of the run).
+    t : (M,) [s] or None
+        Times of the sigma arrays below (the solution's time base); None: they
+        are constant (shape (3,)).
+    sigma_pos_n_m : (M, 3) or (3,) [m]
+        1-sigma of the reference's own position error, N, E, D (e.g. an RTKLIB
+        ``.pos`` file's ``sdn sde sdu`` columns); zeros: an exact reference.
+    sigma_vel_n_mps : (M, 3) or (3,) [m/s]
+        The same for its velocity (``.pos``: ``sdvn sdve sdvu``).
+    velocity_lag_s : float [s]
+        The reference's velocity at time t describes the point at t - lag (a
+        receiver's smoothed velocity, ``[gnss] velocity_lag_s``): its velocity
+        column is read ``lag`` later.
+    omega_t : (K,) [s] and omega_ib_b_radps : (K, 3) [rad/s], or None
+        Angular rate (body FRD) for the lever arm's velocity term
+        ``C_nb (omega_ib_b x l_b)``; None: left out.
+    source : str
+        Where the sigmas come from (for the reports).
+    """
+
+    lever_arm_b: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    t: np.ndarray | None = None
+    sigma_pos_n_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    sigma_vel_n_mps: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    velocity_lag_s: float = 0.0
+    omega_t: np.ndarray | None = None
+    omega_ib_b_radps: np.ndarray | None = None
+    source: str = ""
+
+    @staticmethod
+    def omega_from_imu(imu) -> tuple[np.ndarray, np.ndarray]:
+        """(t, omega_ib_b) [s, rad/s] from an :class:`~insnav.data.dataset.ImuData`'s
+        angle increments (each over its interval, taken at the interval's middle)."""
+        t = np.asarray(imu.t, float)
+        dt = np.diff(t, prepend=t[0] - np.median(np.diff(t)))
+        return t - 0.5 * dt, np.asarray(imu.dtheta_b, float) / dt[:, None]
+
+    def _at(self, x, t) -> np.ndarray:
+        x = np.asarray(x, float)
+        if self.t is None or x.ndim == 1:
+            return np.broadcast_to(x, (len(t), 3)).copy()
+        return np.column_stack([np.interp(t, np.asarray(self.t, float), x[:, i]) for i in range(3)])
+
+
+def reference_errors(sol, reference, model: ReferenceModel | None = None, t=None) -> dict:
+    """Errors of a solution against a reference that describes another point
+    and has its own noise, and the variance a consistent filter predicts for them.
+
+    ``sol``: a solution (``t``, ``lat_deg``, ..., ``sigma_pos_n_m``,
+    ``sigma_vel_n_mps``, interpolated linearly in time); ``reference``: a
+    Truth-like trajectory; ``model``: :class:`ReferenceModel`; ``t``: the
+    reference epochs to use [s] (default all; those outside the solution's
+    span are dropped).
+
+    With the reference ``r = x_a + w`` (``x_a``: the true position of the point
+    it describes, ``x_a = x + C_nb l_b``; ``w``: its own error, of variance
+    ``sigma_ref^2``, independent of the filter's), the solution's point
+    ``x_hat_a = x_hat + C_nb_hat l_b`` has the error
+    ``e = x_hat_a - r = (x_hat - x) - w`` (the attitude error's share
+    ``d(C_nb) l_b = -(C_nb l_b) x psi`` left out: at most ``|l_b|`` times the
+    attitude sigma, returned as ``lever_sigma_max_m``), so for a consistent
+    filter ``E[e^2] = sigma_filter^2 + sigma_ref^2`` per axis and
+    ``E[(e / sqrt(sigma_filter^2 + sigma_ref^2))^2] = 1``.  The velocity
+    likewise: the solution's ``v_hat + C_nb_hat (omega_ib_b x l_b)`` at
+    ``t - velocity_lag_s`` against the reference's velocity column at its epoch
+    ``t`` (the solution is moved, not the reference: interpolating the
+    reference between its epochs would average its noise and change
+    ``sigma_ref``).
+
+    Returns a dict: ``t``; ``pos_n_m``, ``vel_n_mps`` (N, 3) the errors of the
+    solution's point (velocity NaN where ``t - velocity_lag_s`` is before the
+    solution); ``sigma_filter_pos``, ``sigma_filter_vel``, ``sigma_ref_pos``,
+    ``sigma_ref_vel`` (N, 3); ``lever_sigma_max_m``.
+    """
+    from ..analysis.evaluate import _solution_at
+    from ..analysis.metrics import errors
+    from ..sim.trajectory import rotate_b_to_n
+
+    model = model or ReferenceModel()
+    tr = np.asarray(reference.t, float)
+    t = tr if t is None else np.asarray(t, float)
+    t = t[(t >= sol.t[0]) & (t <= sol.t[-1]) & (t >= tr[0]) & (t <= tr[-1])]
+    at = _solution_at(sol, t)
+    e = errors(at, reference)
+    n = len(t)
+    l_b = np.asarray(model.lever_arm_b, float).reshape(3)
+
+    def euler(a):
+        return np.radians(np.column_stack([a.roll_deg, a.pitch_deg, a.yaw_deg]))
+
+    l_n = rotate_b_to_n(euler(at), np.tile(l_b, (n, 1)))
+    # velocity: the solution at t - lag against the reference's column at t
+    lag = float(model.velocity_lag_s)
+    tv = t - lag
+    okv = tv >= sol.t[0]
+    vel = np.full((n, 3), np.nan)
+    sig_fv = np.full((n, 3), np.nan)
+    if okv.any():
+        atv = _solution_at(sol, tv[okv])
+        v_ant = np.asarray(atv.v_n, float)
+        if model.omega_t is not None and np.any(l_b != 0.0):
+            w_b = np.column_stack([np.interp(tv[okv], model.omega_t, model.omega_ib_b_radps[:, i])
+                                   for i in range(3)])
+            v_ant = v_ant + rotate_b_to_n(euler(atv), np.cross(w_b, l_b))
+        v_ref = np.column_stack([np.interp(t[okv], tr, np.asarray(reference.v_n, float)[:, i]) for i in range(3)])
+        vel[okv] = v_ant - v_ref
+        sig_fv[okv] = np.asarray(atv.sigma_vel_n_mps, float)
+    sig_att = np.asarray(getattr(at, "sigma_att_deg", np.zeros((n, 3))), float)
+    return dict(
+        t=t, pos_n_m=e["pos_n_m"] + l_n, vel_n_mps=vel,
+        sigma_filter_pos=np.asarray(e["sigma_pos_n_m"], float), sigma_filter_vel=sig_fv,
+        sigma_ref_pos=model._at(model.sigma_pos_n_m, t), sigma_ref_vel=model._at(model.sigma_vel_n_mps, t),
+        lever_sigma_max_m=float(np.linalg.norm(l_b) * np.max(np.radians(sig_att), initial=0.0)))
+
+
+def _rms_ratio(x, s) -> list:
+    ok = np.all(np.isfinite(x), axis=1) & np.all(s > 0, axis=1)
+    return np.sqrt(np.mean((x[ok] / s[ok]) ** 2, axis=0)).tolist() if ok.sum() >= 2 else [math.nan] * 3
+
+
+def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = np.inf, keep_t=None,
+                   reference_model: ReferenceModel | None = None) -> dict:
     """Consistency and error figures of ``sol`` over [t_from, t_to).
 
     Returns a dict: ``records`` and ``nis_per_row`` (mean NIS over the mean
@@ -640,6 +769,20 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
     a constant offset of the reference, or a constant error the innovations
     cannot see, left out).  ``keep_t``: only the reference epochs in this set
     of times (e.g. the epochs whose fixes the filter did not see).
+
+    ``nees_total``: rms(e / sqrt(sigma_filter^2 + sigma_ref^2)) per axis of
+    ``pos_n_m`` and ``vel_n_mps``, with e the error of the solution's point
+    that the reference describes (:func:`reference_errors` with
+    ``reference_model``: lever arm, the reference's velocity lag and its own
+    sigmas): 1 for a consistent filter whatever the reference's noise, where
+    ``nees`` (IMU centre, the filter's sigma alone) is
+    ``sqrt(1 + (b^2 + sigma_ref^2) / sigma^2)``.  Without a ``reference_model``
+    (an exact reference of the IMU centre) the two are equal.
+    ``reference_sigma_pos_m``, ``reference_sigma_vel_mps``: rms of the
+    reference's sigmas per axis over the epochs; ``reference_variance_share_pos``:
+    the mean of sigma_ref^2 / (sigma_filter^2 + sigma_ref^2) per position axis
+    (near 1: the figure tests the reference more than the filter);
+    ``lever_sigma_max_m``: the neglected attitude share (:func:`reference_errors`).
     """
     from ..analysis.metrics import errors
     from ..filters.solution import RecordStatus
@@ -680,6 +823,21 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
             continue
         out["nees"][k] = np.sqrt(np.mean((x[ok] / s[ok]) ** 2, axis=0)).tolist()
         out["nees_demeaned"][k] = np.sqrt(np.mean(((x[ok] - x[ok].mean(axis=0)) / s[ok]) ** 2, axis=0)).tolist()
+    r = reference_errors(sol, reference, reference_model, tr[m])
+    out["nees_total"] = {}
+    for k, kind in (("pos_n_m", "pos"), ("vel_n_mps", "vel")):
+        if k not in out["nees"]:
+            continue
+        total = np.sqrt(r["sigma_filter_" + kind] ** 2 + r["sigma_ref_" + kind] ** 2)
+        out["nees_total"][k] = _rms_ratio(r[k], total)
+    out["reference_sigma_pos_m"] = np.sqrt(np.mean(r["sigma_ref_pos"] ** 2, axis=0)).tolist()
+    sv = r["sigma_ref_vel"]
+    fin = np.isfinite(sv)
+    out["reference_sigma_vel_mps"] = [float(np.sqrt(np.mean(sv[fin[:, i], i] ** 2))) if fin[:, i].any() else math.nan
+                                      for i in range(3)]
+    out["lever_sigma_max_m"] = r["lever_sigma_max_m"]
+    sp2 = r["sigma_ref_pos"] ** 2
+    out["reference_variance_share_pos"] = np.mean(sp2 / (r["sigma_filter_pos"] ** 2 + sp2), axis=0).tolist()
     return out
 
 
