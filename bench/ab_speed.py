@@ -4,7 +4,8 @@ Each build is a Python interpreter with insnav installed (a venv).  The two
 are run alternately, ROUNDS times, each run timing in one process: the C++
 loop of the loose EKF-21 and RB-UKF-21 on the KF-GINS track
 (../shared/data/kfgins/sim, 56 min of 200 Hz; the inputs are read once per
-process) and free-inertial mechanization of the same IMU data.  Reported:
+process), the tight EKF and RB-UKF on the simulated urban multi-GNSS drive
+(the whole insnav.run call) and free-inertial mechanization of the KF-GINS IMU data.  Reported:
 the median per build and the ratio B / A (1.00 = same speed).  The machine is
 shared and noisy: only the ratio of medians measured in one run means much.
 
@@ -42,6 +43,14 @@ res = {}
 for f in ("ekf", "rbukf"):
     insnav.run(ds, config=cfg, filter=f)
     res[f] = calls["last"]
+# the tight family (its own unity group in the build): seed 003's 4-satellite drive,
+# the whole insnav.run call (sanitising and output arrays included)
+import insnav.sim as sim
+ds_t = sim.simulate("urban-multignss", seed=0)
+for f in ("ekf", "rbukf"):
+    t0 = time.perf_counter()
+    insnav.run(ds_t, filter=f, coupling="tight")
+    res[f"tight_{f}"] = time.perf_counter() - t0
 t0 = time.perf_counter()
 insnav.mechanize(ds.imu.t, ds.imu.dtheta_b, ds.imu.dv_b, ds.initial, ds.t0)
 res["mechanize"] = time.perf_counter() - t0
