@@ -72,7 +72,7 @@ NavState start_state(double lat, double lon, double h, double t) {
 template <class F>
 Cov15 cycle_phi(const Cov15& P0) {
   RtkInsConfig rc;
-  auto eng = std::make_unique<RtkInsEngine<16, F>>(ImuErrorModel{}, rc);
+  auto eng = std::make_unique<RtkInsEngine<64, F>>(ImuErrorModel{}, rc);
   NavState s0 = start_state(0.6, 0.3, 100.0, 0.0);
   s0.v_n = Vec3(15.0, 5.0, 0.0);
   eng->start(s0, P0, ImuCorrection{});
@@ -193,7 +193,7 @@ int main() {
   // (2) a cycle without propagation: Phi = I exactly
   {
     RtkInsConfig rc;
-    auto eng = std::make_unique<RtkInsEngine<16, RbUkf<Layout15>>>(ImuErrorModel{}, rc);
+    auto eng = std::make_unique<RtkInsEngine<64, RbUkf<Layout15>>>(ImuErrorModel{}, rc);
     eng->start(start_state(0.6, 0.3, 100.0, 0.0), P0, ImuCorrection{});
     eng->core().close_cycle();
     EXPECT_TRUE(eng->cycle_phi() == Cov15::Identity());
