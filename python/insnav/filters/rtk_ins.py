@@ -1,7 +1,7 @@
 """Tightly coupled RTK/INS (``--filter ekf|rbukf|ukf --coupling rtk --base BASE``).
 
-The closed-loop EKF, RB-UKF or UKF (15 INS error states) with double-differenced carrier-phase and code rows
-of a rover against a base, single-differenced ambiguity states in a fixed-capacity block,
+The closed-loop EKF, RB-UKF or UKF (15 INS error states) with double-differenced carrier-phase and
+code rows of a rover against a base, single-differenced ambiguity states in a fixed-capacity block,
 INS-aided ambiguity resolution (MLAMBDA, ratio and validation tests, partial AR,
 fix-and-hold) and INS-aided cycle-slip detection.  The engine is C++
 (``cpp/include/insnav/engine/rtk_ins_engine.hpp``, ``insnav._core.rtk_ins_run``, GIL released);
@@ -25,11 +25,11 @@ IMU-centre navigation) with ``gnss_t``/``gnss_status`` (per rover epoch: applied
 fixed or float per epoch, ratio, fixed ambiguities, slip detections including the INS-aided
 test) and ``summary`` counts (fix rate, slips).
 
-``cfg.smooth`` (filter ``"ekf"`` only; the registry refuses it with the others): the RTS smoother (:mod:`insnav.filters.smoothing`) over the 15 navigation error
-states, the ambiguities marginalised; at a fixed epoch the smoother starts from the navigation
-conditioned on the fixed integers (the fixed solution and its covariance), so the fixed epochs keep
-the fixed solution (Rauch, Tung & Striebel 1965; Groves 2013, sec. 3.4.2;
-``cpp/include/insnav/engine/rtk_ins_engine.hpp``, 4.).  The rows are smoothed; ``fix_status``,
+``cfg.smooth`` (filter ``"ekf"`` only; the registry refuses it with the others): the RTS smoother
+(:mod:`insnav.filters.smoothing`) over the 15 navigation error states, the ambiguities marginalised;
+at a fixed epoch the smoother starts from the navigation conditioned on the fixed integers (the fixed
+solution and its covariance), so the fixed epochs keep the fixed solution (Rauch, Tung & Striebel
+1965; Groves 2013, sec. 3.4.2; ``cpp/include/insnav/engine/rtk_ins_engine.hpp``, 4.).  The rows are smoothed; ``fix_status``,
 ``ratio`` and ``solution.rtk`` stay the forward pass's (what was fixed), and
 ``solution.rtk.r_smoothed_e`` is the smoothed antenna per rover epoch.
 """
@@ -63,8 +63,6 @@ __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins",
 #: simulator preset the float position's NEES was 10-40x its dimension and most fixes wrong; with the
 #: correlated model the wrong fixes fall, docs/results/rtk_ins.md).
 RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.0, code_correlation_time_s=10.0)
-#: the filters of the RTK/INS engine (``insnav._core.rtk_ins_run``'s table)
-RTK_INS_FILTERS = ("ekf", "rbukf", "ukf")
 #: engine ([rtk_engine]) defaults applied under the caller's (empty: the C++ RtkInsConfig defaults)
 ENGINE_DEFAULTS: dict = {}
 
@@ -145,12 +143,8 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     -------
     Solution
     """
-    from ..config import ConfigError
-
     cfg = dataclasses.replace(cfg or RunConfig(), coupling="rtk")
-    cfg.validate()
-    if cfg.filter not in RTK_INS_FILTERS:
-        raise ConfigError(f"filter {cfg.filter!r} with coupling 'rtk': use one of {', '.join(RTK_INS_FILTERS)}")
+    cfg.validate()  # the filters of coupling 'rtk' and their facts: insnav.registry
     imu_ds = getattr(dataset, "imu_dataset", dataset)
     rover = rover if rover is not None else getattr(dataset, "rover", None)
     base = base if base is not None else getattr(dataset, "base", None)
