@@ -16,14 +16,18 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    insnav RTK/INS (continuous AR, its default; also fix-and-hold, a minimum bootstrapped success
    rate of 0.999 ([rtk_engine]) or of 0.95 (``[rtk] min_success_rate``, the GNSS-only engine's default)
    and the AR without the GNSS-only engine's fix validation: partial AR down to 3 ambiguities in
-   elevation order, no confirmation over epochs), insnav GNSS-only RTK (continuous AR, as in docs/results/rtk_*) and RTKLIB
+   elevation order, no confirmation over epochs; and with the RB-UKF and UKF time update,
+   ``filter = "rbukf"`` / ``"ukf"``: the unscented propagation of seed 000 through the nonlinear error
+   model, the ambiguities' cross-covariance by the UT's statistically linearised cycle transition),
+   insnav GNSS-only RTK (continuous AR, as in docs/results/rtk_*) and RTKLIB
    ``rnx2rtkp`` (``bench/rtk/spirent_dynamic_l1l2_ge_cont.conf``: continuous AR).
    Per outage: epochs to the first fix after it (1 = the first epoch), the 3-D error of the
    RTK/INS during the outage (max) and at its end (the INS just before the first epoch after it),
    forward and RTS-smoothed (``smooth = true``), and the smoothed minus forward fixed antenna over the
    fixed epochs (where they differ: within 5 s after an outage or later, the along-track part against a
    time misalignment, and again with a phase sigma of 0.5 mm, nearer the data's);
-   over the run: fix rate (fixed / rover epochs with data) and wrong fixes (3-D error > 5 cm).
+   over the run: fix rate (fixed / rover epochs with data), wrong fixes (3-D error > 5 cm), wall and
+   CPU time of the run (the Python call; RTKLIB: its process).  ``--runs 0`` runs this part alone.
 2. **Simulator, ``rtk-urban-car`` (GPS L1 only), N runs** (seeds 1..N) with cycle slips at 1 per
    satellite per 5 minutes (``slip_rate_per_h = 12``), none flagged by the receiver
    (``slip_lli_prob = 0``): fix rate, wrong-fix rate, horizontal 95th percentile of RTK/INS and of
@@ -76,6 +80,8 @@ OUTAGES = ((90, 10), (150, 30), (240, 10), (300, 30), (390, 10), (450, 30), (530
 IMU_GRADE = "industrial"
 #: RTK/INS with the GNSS-only engine's success-rate test ([rtk] min_success_rate, off in RTK_INS_DEFAULTS)
 SR_OPTS = {"min_success_rate": 0.95}
+RBUKF_ROW = "insnav RTK/INS, RB-UKF time update (continuous, default)"
+UKF_ROW = "insnav RTK/INS, UKF time update (continuous, default)"
 SR_ROW = "insnav RTK/INS (continuous, bootstrapped success rate >= 0.95 as GNSS-only RTK)"
 #: RTK/INS without the fix validation of the GNSS-only engine (partial AR to 3 ambiguities in elevation
 #: order, no confirmation over epochs, no success rate)
@@ -173,12 +179,13 @@ def _rtklib(rover, base, nav, work: Path, freq: int = 2):
     text = (ROOT / "bench" / "rtk" / "spirent_dynamic_l1l2_ge_cont.conf").read_text()
     conf.write_text(text.replace("pos1-frequency     =l1+l2", f"pos1-frequency     ={'l1+l2' if freq == 2 else 'l1'}"))
     pos = work / f"rtklib_f{freq}.pos"
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), os.times()
     subprocess.run(["rnx2rtkp", "-k", str(conf), "-o", str(pos), str(rover), str(base)] + [str(n) for n in nav],
                    check=True, capture_output=True)
-    dt = time.perf_counter() - t0
+    dt, c1 = time.perf_counter() - t0, os.times()
     t, r, q = read_pos(pos)
-    return dict(t=t, r=r, q=q, wall_s=dt)
+    return dict(t=t, r=r, q=q, wall_s=dt, cpu_s=(c1.children_user + c1.children_system) -
+                (c0.children_user + c0.children_system))
 
 
 def _truth(ds, t_gps):
@@ -216,20 +223,24 @@ def spirent_part(work: Path, progress, freq: int = 2):
     base_e = base_position_from_header(read_phase_obs(base, "GE"))
     opts = dict(systems="GE", frequencies=freq, elevation_mask_deg=15.0, ratio_threshold=3.0)
     res = {}
-    for name, ar, eng, extra in (("insnav RTK/INS (continuous, default)", "continuous", {}, {}),
-                                 ("insnav RTK/INS (fix-and-hold)", "fix-and-hold", {}, {}),
-                                 ("insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)", "continuous",
-                                  {"ar_min_success_rate": 0.999}, {}),
-                                 (SR_ROW, "continuous", {}, SR_OPTS),
-                                 (NO_VALIDATION_ROW, "continuous", {}, NO_VALIDATION_OPTS)):
-        t0 = time.perf_counter()
-        sol = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False), rover=rov, base=base, nav=nav,
+    for name, filt, ar, eng, extra in (("insnav RTK/INS (continuous, default)", "ekf", "continuous", {}, {}),
+                                       ("insnav RTK/INS (fix-and-hold)", "ekf", "fix-and-hold", {}, {}),
+                                       ("insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)", "ekf",
+                                        "continuous", {"ar_min_success_rate": 0.999}, {}),
+                                       (SR_ROW, "ekf", "continuous", {}, SR_OPTS),
+                                       (NO_VALIDATION_ROW, "ekf", "continuous", {}, NO_VALIDATION_OPTS),
+                                       (RBUKF_ROW, "rbukf", "continuous", {}, {}),
+                                       (UKF_ROW, "ukf", "continuous", {}, {})):
+        t0, c0 = time.perf_counter(), time.process_time()
+        sol = run_rtk_ins(ds, RunConfig(filter=filt, init_error=False), rover=rov, base=base, nav=nav,
                           base_pos=base_e, rtk_options=dict(opts, ar_mode=ar, **extra), engine=eng)
-        res[name] = dict(t=sol.rtk.t_gps_s, r=sol.rtk.r_e, q=sol.rtk.status, wall_s=time.perf_counter() - t0, sol=sol)
+        res[name] = dict(t=sol.rtk.t_gps_s, r=sol.rtk.r_e, q=sol.rtk.status, wall_s=time.perf_counter() - t0,
+                         cpu_s=time.process_time() - c0, sol=sol)
         progress(f"spirent L{freq} {name}: {np.mean(sol.rtk.status == 1) * 100:.1f} % fixed")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     g = solve_rtk(rov, base, nav, r_base_e=base_e, options=dict(opts, ar_mode="continuous"))
-    res["insnav GNSS-only RTK (continuous)"] = dict(t=g.t_gps_s, r=g.r_e, q=g.status, wall_s=time.perf_counter() - t0)
+    res["insnav GNSS-only RTK (continuous)"] = dict(t=g.t_gps_s, r=g.r_e, q=g.status, wall_s=time.perf_counter() - t0,
+                                                    cpu_s=time.process_time() - c0)
     if shutil.which("rnx2rtkp"):
         res["RTKLIB rnx2rtkp (continuous)"] = _rtklib(rov, base, nav, work, freq)
     n_epochs = int(read_phase_obs(rov, "GE").epoch_t_gps_s.size)
@@ -244,7 +255,7 @@ def spirent_part(work: Path, progress, freq: int = 2):
             per.append(_epochs_to_fix(r["t"], r["q"], ta, t_next))
         rows[name] = dict(fix_rate=float(fixed.sum()) / n_epochs, n_fixed=int(fixed.sum()), wrong=wrong,
                           rms_fixed_mm=float(1e3 * np.sqrt(np.nanmean(err[fixed] ** 2))) if fixed.any() else math.nan,
-                          per=per, wall_s=r["wall_s"])
+                          per=per, wall_s=r["wall_s"], cpu_s=r.get("cpu_s", math.nan))
     # INS errors in the outages (default run, forward and RTS-smoothed): IMU-centre solution rows (zero
     # lever arm here)
     sm = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False, smooth=True), rover=rov, base=base, nav=nav,
@@ -310,12 +321,22 @@ def spirent_part(work: Path, progress, freq: int = 2):
                          float(e[last[-1]]) if last.size else math.nan))
         return errs
 
+    # the unscented time update against the EKF's: where both are fixed, and RB-UKF against UKF
+    s_e, s_rb, s_u = (res[k]["sol"] for k in ("insnav RTK/INS (continuous, default)", RBUKF_ROW, UKF_ROW))
+    both = (s_e.rtk.status == 1) & (s_rb.rtk.status == 1)
+    d_rb = np.linalg.norm(s_rb.rtk.r_e[both] - s_e.rtk.r_e[both], axis=1)
+    ukf_cmp = dict(n_both=int(both.sum()), rms_mm=1e3 * float(np.sqrt(np.mean(d_rb ** 2))) if both.any() else math.nan,
+                   max_mm=1e3 * float(np.max(d_rb)) if both.any() else math.nan,
+                   same=bool(np.array_equal(s_rb.rtk.r_e, s_u.rtk.r_e, equal_nan=True)
+                             and np.array_equal(s_rb.rtk.status, s_u.rtk.status)))
     outage_err = outage_errors(fwd)
     outage_err_smooth = outage_errors(sm)
+    outage_err_rbukf = outage_errors(s_rb)
     sol = fwd
     fx = sol.rtk.status == 1
     min_ps = float(np.min(sol.rtk.success_rate[fx])) if fx.any() else math.nan
     return dict(rows=rows, outage_err=outage_err, outage_err_smooth=outage_err_smooth, smooth_fix=smooth_fix,
+                ukf_cmp=ukf_cmp, outage_err_rbukf=outage_err_rbukf,
                 n_epochs=n_epochs, after=after, t_first=t_first,
                 lever=ds.lever_arm_b, freq=freq, min_ps=min_ps)
 
@@ -571,13 +592,19 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "Epochs to the first fix after each outage (1 = the first epoch after it; - = none before the next "
               "outage):", "",
               "| engine | " + " | ".join(f"{b} s at {a} s" for a, b in OUTAGES) + " | fix rate | wrong fixes | "
-              "3-D RMS fixed [mm] | wall [s] |",
-              "|---|" + "---|" * (len(OUTAGES) + 4)]
+              "3-D RMS fixed [mm] | wall [s] | CPU [s] |",
+              "|---|" + "---|" * (len(OUTAGES) + 5)]
         for n in names:
             r = sp["rows"][n]
             L.append(f"| {n} | " + " | ".join(_f(x, "d") for x in r["per"]) +
                      f" | {r['fix_rate'] * 100:.1f} % ({r['n_fixed']}/{sp['n_epochs']}) | {r['wrong']} | "
-                     f"{_f(r['rms_fixed_mm'], '.1f')} | {r['wall_s']:.2f} |")
+                     f"{_f(r['rms_fixed_mm'], '.1f')} | {r['wall_s']:.2f} | {_f(r['cpu_s'], '.2f')} |")
+        uc = sp["ukf_cmp"]
+        L += ["", f"RB-UKF and UKF time update (seed 000's unscented propagation through the nonlinear error model; "
+              f"the same DD rows, joint update and AR): the two give the same solution: "
+              f"{'yes' if uc['same'] else 'no'} (the DD rows are linear, so the UKF's update is the RB-UKF's); "
+              f"the RB-UKF's fixed antenna minus the EKF's where both are fixed ({uc['n_both']} epochs): RMS "
+              f"{_f(uc['rms_mm'], '.2f')} mm, max {_f(uc['max_mm'], '.2f')} mm."]
         L += ["", "RTK/INS (default) 3-D error of the IMU-centre solution inside each outage "
               "(zero lever arm: the antenna) [m], maximum and at its end:", "",
               "| outage | " + " | ".join(f"{b} s at {a} s" for a, b in OUTAGES) + " |",
@@ -585,7 +612,10 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "| max | " + " | ".join(_f(e[0], ".3f") for e in sp["outage_err"]) + " |",
               "| at the end | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err"]) + " |",
               "| max, RTS-smoothed | " + " | ".join(_f(e[0], ".3f") for e in sp["outage_err_smooth"]) + " |",
-              "| at the end, RTS-smoothed | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err_smooth"]) + " |"]
+              "| at the end, RTS-smoothed | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err_smooth"]) + " |",
+              "| max, RB-UKF time update | " + " | ".join(_f(e[0], ".3f") for e in sp["outage_err_rbukf"]) + " |",
+              "| at the end, RB-UKF time update | " + " | ".join(_f(e[1], ".3f") for e in sp["outage_err_rbukf"])
+              + " |"]
         sf = sp["smooth_fix"]
         L += ["", "RTS smoother (`smooth = true`; fixed epochs conditioned on the fixed integers, "
               "`cpp/include/insnav/engine/rtk_ins_engine.hpp` 4.): smoothed minus forward fixed antenna over the "

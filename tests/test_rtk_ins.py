@@ -4,6 +4,11 @@ Data: the Spirent SimGEN drive (hardware-simulated GNSS, base and rovers, ../sha
 synthesised from its 10 Hz truth (insnav.sim.from_truth).  Checks:
 
 * a DD phase row with a lever arm against a numerical Jacobian (meas/dd_phase.hpp);
+* the unscented variants (RB-UKF, UKF: the UT time update of seed 000, the ambiguities' cross-covariance
+  by the UT's statistically linearised cycle transition): on the first 120 s of the drive their float
+  solution is the EKF's to 2 mm, and RB-UKF and UKF give the same solution (the DD rows are linear,
+  so the joint update is the same); the smoother is refused with them; the static and outage checks
+  below run with every filter;
 * an exact reduction: exact IMU, zero IMU noise, a static receiver -> the RTK/INS float solution is
   the GNSS-only static RTK float solution (the same estimator when the INS adds no information);
 * INS-aided slip detection of a 1-cycle slip on one single-frequency satellite during motion;
@@ -145,10 +150,11 @@ class _Static:
         self.imu = ImuData(t, dth, dv)
 
 
+@pytest.mark.parametrize("filt", ["ekf", "rbukf", "ukf"])
 @pytest.mark.parametrize("code_model", [dict(code_correlation_time_s=0.0),
                                         dict(code_correlation_time_s=10.0, adaptive_code_gain=0.2)],
                          ids=["white-code", "correlated-adaptive-code"])
-def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model):
+def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model, filt):
     """Also with the time-correlated code model (variance x (1 + rho) / (1 - rho) once an ambiguity is
     tracked) and the adaptive code variance factor: both engines must weigh the code identically."""
     v = "iono-Klob_tropo-Saast"
@@ -168,10 +174,15 @@ def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model):
     r0 = rtk.base_position_from_header(rover)
     off = rover.epoch_t_gps_s[0] - 0.01
     ds = _Static(r0, r0, rover.epoch_t_gps_s[-1] - off + 0.5, off)
-    zero = ImuNoise(gyro_arw=[0.0] * 3, acc_vrw=[0.0] * 3, gyro_bias_sigma=[0.0] * 3, acc_bias_sigma=[0.0] * 3,
+    # the unscented filters draw their sigma points from a Cholesky factor of P, which needs P positive
+    # definite: a zero bias variance would be repaired to 1e-12 of the largest eigenvalue (covariance.hpp),
+    # 1e-4 in every unit at the 1e4 m prior, i.e. a 0.6 deg attitude uncertainty; a bias sigma of 1e-12
+    # (m/s^2, rad/s) adds no information either
+    b0 = 0.0 if filt == "ekf" else 1e-12
+    zero = ImuNoise(gyro_arw=[0.0] * 3, acc_vrw=[0.0] * 3, gyro_bias_sigma=[b0] * 3, acc_bias_sigma=[b0] * 3,
                     gyro_bias_tau=[3600.0] * 3, acc_bias_tau=[3600.0] * 3, gyro_scale_sigma=[0.0] * 3,
                     acc_scale_sigma=[0.0] * 3)
-    cfg = RunConfig(filter="ekf", imu=zero, init_error=False, init_sigma_pos_m=[SIG0] * 3,
+    cfg = RunConfig(filter=filt, imu=zero, init_error=False, init_sigma_pos_m=[SIG0] * 3,
                     init_sigma_vel_mps=[1e-9] * 3, init_sigma_att_deg=[1e-9] * 3)
     sol = run_rtk_ins(ds, cfg, rover=rover, base=base, nav=NAV, base_pos=rb, rtk_options=common,
                       engine=dict(code_chi2_row=0.0))
@@ -190,6 +201,48 @@ def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model):
     assert d[:2].max() < 1e-6, d[:2]
     assert d[:10].max() < (3e-5 if code_model["code_correlation_time_s"] == 0.0 else 1e-4) and d.max() < 2e-3, d
     assert np.linalg.norm(ri[ok][-1] - r0) < 0.05  # and it is the right place
+
+
+def _first_epochs(obs, n):
+    """The first n epochs of a PhaseObs."""
+    keep = obs.epoch < n
+    return rtk.PhaseObs(**{**obs.__dict__, "epoch_t_gps_s": obs.epoch_t_gps_s[:n],
+                           **{k: getattr(obs, k)[keep] for k in ("epoch", "system", "prn", "code_m", "phase_cycles",
+                                                                 "doppler_hz", "cn0_dbhz", "lli")}})
+
+
+def test_unscented_float_equals_ekf_to_mm_and_rbukf_equals_ukf(drive):
+    """The first 120 s of the drive, dual frequency, AR off: the tactical IMU's navigation errors stay at
+    centimetres, where the nonlinear error model is linear over a 1 s cycle and the UT's statistically
+    linearised transition is the EKF's (cpp/tests/test_rtk_ins_unscented.cpp): the unscented float
+    solutions are the EKF's to 2 mm (measured 0.4 mm).  The DD rows are linear, so the RB-UKF and UKF
+    updates are the same joint Kalman update: the same solution, bit for bit."""
+    v = "iono-Klob_tropo-Saast"
+    rover = _first_epochs(rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE"), 120)
+    base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
+    opts = dict(systems="GE", frequencies=2, ar_mode="off")
+    sols = {f: run_rtk_ins(drive, RunConfig(filter=f), rover=rover, base=base, nav=NAV, rtk_options=opts)
+            for f in ("ekf", "rbukf", "ukf")}
+    ok = np.all([s.rtk.status == 2 for s in sols.values()], axis=0)
+    assert ok.sum() >= 115
+    d = np.linalg.norm(sols["rbukf"].rtk.r_float_e[ok] - sols["ekf"].rtk.r_float_e[ok], axis=1)
+    assert d.max() < 2e-3, d.max()
+    assert d.max() > 0.0  # a different time update, not the EKF under another name
+    assert np.array_equal(sols["rbukf"].rtk.r_float_e, sols["ukf"].rtk.r_float_e, equal_nan=True)
+    assert np.array_equal(sols["rbukf"].lat_deg, sols["ukf"].lat_deg)
+    err = np.linalg.norm(sols["rbukf"].rtk.r_float_e[ok] - _truth_e(drive, rover.epoch_t_gps_s)[ok], axis=1)
+    assert np.sqrt(np.mean(err ** 2)) < 0.1
+
+
+@pytest.mark.parametrize("filt", ["rbukf", "ukf"])
+def test_unscented_rtk_ins_refuses_the_smoother(drive, filt):
+    from insnav.config import ConfigError
+
+    v = "iono-Klob_tropo-Saast"
+    rover = _first_epochs(rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE"), 5)
+    base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
+    with pytest.raises(ConfigError, match=f"'smooth'.*filter '{filt}' rtk"):
+        run_rtk_ins(drive, RunConfig(filter=filt, smooth=True), rover=rover, base=base, nav=NAV)
 
 
 def _remove(obs, t0, t1):
@@ -231,14 +284,15 @@ def _true_dd_integers(ds, rover, base, rb, probe, v):
     return out
 
 
-def test_first_epoch_after_30s_outage_fixes_true_integers(drive):
+@pytest.mark.parametrize("filt", ["ekf", "rbukf", "ukf"])
+def test_first_epoch_after_30s_outage_fixes_true_integers(drive, filt):
     v = "iono-Klob_tropo-Saast"
     rover = rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE")
     base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
     t_a = rover.epoch_t_gps_s[0] + 400.0
     rov2, first = _remove(rover, t_a, t_a + 30.0)
     rb = _base_e(v)
-    sol = run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rov2, base=base, nav=NAV,
+    sol = run_rtk_ins(drive, RunConfig(filter=filt), rover=rov2, base=base, nav=NAV,
                       rtk_options=dict(systems="GE", frequencies=2), probe_epoch=first)
     assert sol.rtk.status[first] == 1, (sol.rtk.status[first - 3:first + 1], sol.rtk.ratio[first])
     err = np.linalg.norm(sol.rtk.r_e[first] - _truth_e(drive, rov2.epoch_t_gps_s[first:first + 1])[0])
@@ -253,6 +307,16 @@ def test_first_epoch_after_30s_outage_fixes_true_integers(drive):
     assert not acc and ratio < 1.0
     acc, s, ratio = _core.ambiguity_accepts(pr["a_hat"], pr["Q_a"], pr["a_fix"], 3.0, 0.999)
     assert acc and ratio >= 3.0
+    if filt != "ekf":
+        # the outage in 1.5 s cycles: the recursive UT of seed 000 eqs. (26)-(29) (points redrawn from the
+        # multi-step prediction, no feedback) and the ambiguities' cross-covariance carried by the product of
+        # the cycles' statistically linearised transitions; the same first fix, the float within 0.1 mm
+        # (measured 0.03 mm)
+        sc = run_rtk_ins(drive, RunConfig(filter=filt), rover=rov2, base=base, nav=NAV,
+                         rtk_options=dict(systems="GE", frequencies=2), probe_epoch=first,
+                         engine=dict(outage_cycle_s=1.5))
+        assert sc.rtk.status[first] == 1 and np.array_equal(sc.probe["a_fix"], pr["a_fix"])
+        assert np.linalg.norm(sc.rtk.r_float_e[first] - sol.rtk.r_float_e[first]) < 1e-4
 
 
 def test_single_frequency_first_fix_after_outage_and_the_success_rate_test(drive):

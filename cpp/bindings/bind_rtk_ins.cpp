@@ -1,14 +1,17 @@
-// Tight RTK/INS (insnav/engine/rtk_ins_engine.hpp): the batch run with the GIL released, one DD row
-// and its Jacobian (meas/dd_phase.hpp), and the AR tests applied to a given integer vector.
+// Tight RTK/INS (insnav/engine/rtk_ins_engine.hpp): the batch run with the GIL released (EKF, RB-UKF or
+// UKF time update, one table below), one DD row and its Jacobian (meas/dd_phase.hpp), and the AR tests
+// applied to a given integer vector.
 #include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 #include <algorithm>
+#include <type_traits>
 
 #include "common.hpp"
 #include "convert.hpp"
 #include "insnav/engine/rtk_ins_engine.hpp"
+#include "insnav/filter/ukf.hpp"
 #include "outputs.hpp"
 #include "smoother_run.hpp"
 
@@ -19,18 +22,18 @@ gnss::RtkOptions rtk_options_from_dict(const py::dict& d);  // bind_rtk.cpp
 namespace {
 
 using IArray = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;
-using Engine = RtkInsEngine<64>;
 
 RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   reject_unknown(engine, {"lever_arm_b", "propagation_interval", "output_decimation", "ins_slip_k_sigma",
                           "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob",
                           "ar_min_success_rate", "outage_cycle_s", "smooth", "robust_screening",
                           "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_huber", "robust_huber_k",
-                          "robust_max_sats", "robust_phase_reset_epochs"},
+                          "robust_max_sats", "robust_phase_reset_epochs", INSNAV_UT_KEYS},
                  "rtk/ins engine config");
   RtkInsConfig c;
   c.rtk = rtk_options_from_dict(rtk);
   c.lever_arm_b = vec3_or_scalar(engine, "lever_arm_b", c.lever_arm_b);
+  c.ut = ut_from(engine);
   c.propagation_interval = num(engine, "propagation_interval", c.propagation_interval);
   c.output_decimation = static_cast<int>(num(engine, "output_decimation", c.output_decimation));
   c.ins_slip_k_sigma = num(engine, "ins_slip_k_sigma", c.ins_slip_k_sigma);
@@ -66,7 +69,8 @@ RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   return c;
 }
 
-py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, const DArray& init, const DArray& P0,
+template <class Filter>
+py::dict rtk_ins_run_with(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, const DArray& init, const DArray& P0,
                      const DArray& corr0, const py::dict& model, const py::dict& engine_cfg, const py::dict& rtk_opts,
                      const DArray& t_rec, const IArray& rover_off, const DArray& rover_rows, const IArray& base_off,
                      const DArray& base_rows, const IArray& base_index, const DArray& r_base_e,
@@ -78,6 +82,10 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   const ImuErrorModel mdl = imu_model_from_dict(model);
   const RtkInsConfig cfg = rtk_ins_config_from(engine_cfg, rtk_opts);
   const bool smooth = flag(engine_cfg, "smooth", false);  // the RTS backward pass (smoother_run.hpp)
+  if (smooth && !std::is_same_v<Filter, Ekf<Layout15>>)
+    throw py::value_error("rtk_ins_run: smooth runs with filter 'ekf' only (the RTS smoother over RTK/INS "
+                          "conditions the fixed epochs through the EKF's cycle transition)");
+  using Engine = RtkInsEngine<64, Filter>;
   if (smooth && probe_epoch >= 0) throw py::value_error("rtk_ins_run: probe_epoch and smooth exclude each other");
   const Vec3 rb = vec3_from(r_base_e, "rtk_ins_run: r_base_e");
   const py::ssize_t E = t_rec.ndim() == 1 ? t_rec.shape(0) : -1;
@@ -134,7 +142,7 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   std::fill(nav_ep.mutable_data(), nav_ep.mutable_data() + 9 * R, NAN);
   out.nav_epoch = nav_ep.mutable_data();
   const double span = imu.n ? imu.t[imu.n - 1] - nav.t : 0.0;
-  SmootherRun<Ekf<Layout15>> smoother(smooth, R, span, cfg.outage_cycle_s);
+  SmootherRun<Filter> smoother(smooth, R, span, cfg.outage_cycle_s);
   py::array_t<std::uint8_t> row_slip(mr);
   std::fill(row_slip.mutable_data(), row_slip.mutable_data() + mr, 0);
   out.row_slip = row_slip.mutable_data();
@@ -247,6 +255,36 @@ py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b
   return res;
 }
 
+using RtkInsRunFn = py::dict (*)(const DArray&, const DArray&, const DArray&, const DArray&, const DArray&,
+                                  const DArray&, const py::dict&, const py::dict&, const py::dict&, const DArray&,
+                                  const IArray&, const DArray&, const IArray&, const DArray&, const IArray&,
+                                  const DArray&, std::int64_t);
+struct RtkInsFilter {
+  const char* name;
+  RtkInsRunFn run;
+};
+/// The filters of the tight RTK/INS engine (engine/rtk_ins_engine.hpp, template parameter Filter).
+const RtkInsFilter kRtkInsFilters[] = {
+    {"ekf", &rtk_ins_run_with<Ekf<Layout15>>},
+    {"rbukf", &rtk_ins_run_with<RbUkf<Layout15>>},
+    {"ukf", &rtk_ins_run_with<Ukf<Layout15>>},
+};
+
+py::dict rtk_ins_run(const DArray& t, const DArray& dtheta_b, const DArray& dv_b, const DArray& init, const DArray& P0,
+                     const DArray& corr0, const py::dict& model, const py::dict& engine_cfg, const py::dict& rtk_opts,
+                     const DArray& t_rec, const IArray& rover_off, const DArray& rover_rows, const IArray& base_off,
+                     const DArray& base_rows, const IArray& base_index, const DArray& r_base_e,
+                     std::int64_t probe_epoch, const std::string& filter) {
+  std::string known;
+  for (const RtkInsFilter& f : kRtkInsFilters) {
+    if (filter == f.name)
+      return f.run(t, dtheta_b, dv_b, init, P0, corr0, model, engine_cfg, rtk_opts, t_rec, rover_off, rover_rows,
+                   base_off, base_rows, base_index, r_base_e, probe_epoch);
+    known += known.empty() ? f.name : std::string(", ") + f.name;
+  }
+  throw py::value_error("rtk_ins_run: filter '" + filter + "' unknown (" + known + ")");
+}
+
 py::tuple dd_phase_row(const DArray& init, const DArray& lever_arm_b, const DArray& r_base_e, const DArray& rover_s,
                        const DArray& rover_i, const DArray& base_s, const DArray& base_i, int freq, bool code,
                        bool tropo) {
@@ -290,8 +328,8 @@ void bind_rtk_ins(py::module_& m) {
   m.def("rtk_ins_run", &rtk_ins_run, py::arg("t"), py::arg("dtheta_b"), py::arg("dv_b"), py::arg("init"), py::arg("P0"),
         py::arg("imu_correction"), py::arg("imu_model"), py::arg("config"), py::arg("rtk_options"), py::arg("t_rec"),
         py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"), py::arg("base_rows"),
-        py::arg("base_index"), py::arg("r_base_e"), py::arg("probe_epoch") = -1,
-        "Tight RTK/INS run (Layout15 + ambiguity block) with the GIL released.");
+        py::arg("base_index"), py::arg("r_base_e"), py::arg("probe_epoch") = -1, py::arg("filter") = "ekf",
+        "Tight RTK/INS run (Layout15 + ambiguity block; filter ekf, rbukf or ukf) with the GIL released.");
   m.def("dd_phase_row", &dd_phase_row, py::arg("init"), py::arg("lever_arm_b"), py::arg("r_base_e"),
         py::arg("rover_s"), py::arg("rover_i"), py::arg("base_s"), py::arg("base_i"), py::arg("freq"),
         py::arg("code"), py::arg("tropo") = true,

@@ -379,6 +379,7 @@ def rtk_ins_run(
     base_index: npt.ArrayLike,
     r_base_e: npt.ArrayLike,
     probe_epoch: int = -1,
+    filter: str = "ekf",
 ) -> dict[str, Any]: ...
 def dd_phase_row(
     init: npt.ArrayLike,

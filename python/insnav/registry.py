@@ -228,7 +228,7 @@ _RTK = "insnav.filters.rtk:run_rtk"
 #: options of the carrier-phase RTK (``insnav.filters.rtk.run_rtk``)
 RTK_OPTIONS = ("rtk_options",)
 _RTK_INS = "insnav.filters.rtk_ins:run_rtk_ins"
-#: options of the tight RTK/INS EKF (``insnav.filters.rtk_ins.run_rtk_ins``)
+#: options of the tight RTK/INS EKF / RB-UKF / UKF (``insnav.filters.rtk_ins.run_rtk_ins``)
 RTK_INS_OPTIONS = ("rover", "base", "nav", "base_pos", "rtk_options", "engine", "probe_epoch")
 #: options of the delay filters (``insnav.filters.delay.run_delayed``)
 DELAY_OPTIONS = ("delay_p", "max_history_s", "checkpoint_interval_s")
@@ -248,14 +248,18 @@ FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
                coupling_options={"tight": TIGHT_OPTIONS, "rtk": RTK_INS_OPTIONS},
                selfcal=("loose", "tight"), data_options=_DATA,
                **{**_KALMAN, "smoothable": ("loose", "tight", "rtk")}),
-    FilterSpec("rbukf", ("loose", "tight"), {"loose": (15, 21), "tight": (17, 20)},
-               {"loose": _LOOSE, "tight": _TIGHT}, paper="seed 000",
-               summary="UT time update through the nonlinear error model, linear KF update",
-               coupling_options={"tight": TIGHT_OPTIONS}, ut_params=True, data_options=_DATA, **_KALMAN),
-    FilterSpec("ukf", ("loose", "tight"), {"loose": (15, 21), "tight": (17, 20)},
-               {"loose": _LOOSE, "tight": _TIGHT}, paper="seed 000 baseline",
-               summary="UT time update + augmented unscented measurement update",
-               coupling_options={"tight": TIGHT_OPTIONS}, ut_params=True, data_options=_DATA, **_KALMAN),
+    FilterSpec("rbukf", ("loose", "tight", "rtk"), {"loose": (15, 21), "tight": (17, 20), "rtk": (15,)},
+               {"loose": _LOOSE, "tight": _TIGHT, "rtk": _RTK_INS}, paper="seed 000; rtk: + Sarkka 2008 eq. (13)",
+               summary="UT time update through the nonlinear error model, linear KF update; rtk: the EKF's DD rows "
+                       "and AR, ambiguity cross-covariance by the UT's statistically linearised cycle transition",
+               coupling_options={"tight": TIGHT_OPTIONS, "rtk": RTK_INS_OPTIONS}, ut_params=True,
+               data_options=_DATA, **_KALMAN),
+    FilterSpec("ukf", ("loose", "tight", "rtk"), {"loose": (15, 21), "tight": (17, 20), "rtk": (15,)},
+               {"loose": _LOOSE, "tight": _TIGHT, "rtk": _RTK_INS}, paper="seed 000 baseline; rtk: + Sarkka 2008",
+               summary="UT time update + augmented unscented measurement update; rtk: the DD rows are linear, so "
+                       "the update is the RB-UKF's (the same solution)",
+               coupling_options={"tight": TIGHT_OPTIONS, "rtk": RTK_INS_OPTIONS}, ut_params=True,
+               data_options=_DATA, **_KALMAN),
     FilterSpec("kf", ("loose",), {"loose": (15,)}, {"loose": _DELAY}, DELAY_OPTIONS, 1.5, "seed 001",
                summary="late GNSS used as if current"),
     FilterSpec("rdkf", ("loose",), {"loose": (15,)}, {"loose": _DELAY}, DELAY_OPTIONS, 1.5, "seed 001",

@@ -1,11 +1,18 @@
-"""Tightly coupled RTK/INS (``--filter ekf --coupling rtk --base BASE``).
+"""Tightly coupled RTK/INS (``--filter ekf|rbukf|ukf --coupling rtk --base BASE``).
 
-The closed-loop EKF (15 INS error states) with double-differenced carrier-phase and code rows
-of a rover against a base, single-differenced ambiguity states in a fixed-capacity block,
+The closed-loop EKF, RB-UKF or UKF (15 INS error states) with double-differenced carrier-phase and
+code rows of a rover against a base, single-differenced ambiguity states in a fixed-capacity block,
 INS-aided ambiguity resolution (MLAMBDA, ratio and validation tests, partial AR,
 fix-and-hold) and INS-aided cycle-slip detection.  The engine is C++
 (``cpp/include/insnav/engine/rtk_ins_engine.hpp``, ``insnav._core.rtk_ins_run``, GIL released);
 the equations are in docs/algorithms.md, "Tight RTK/INS".
+
+``cfg.filter``: ``"ekf"`` propagates the navigation errors with the linear error model; ``"rbukf"``
+and ``"ukf"`` with the unscented time update through the nonlinear Euler-angle error model (seed 000),
+the ambiguities' cross-covariance by the statistically linearised transition of each cycle
+(Sarkka 2008, eq. (13)).  The DD rows are linear in the ambiguities and, at RTK position
+uncertainty, in the position, so both use the same joint Kalman update and give the same solution
+(the UKF's augmented update reduces to it for a linear measurement).
 
 Inputs: an IMU dataset (:class:`insnav.Dataset`: IMU increments, initial state, lever arm, IMU
 model; its time ``t`` relates to GPS time by ``t_gps = t + gps_time_offset_s``), rover and base
@@ -18,11 +25,11 @@ IMU-centre navigation) with ``gnss_t``/``gnss_status`` (per rover epoch: applied
 fixed or float per epoch, ratio, fixed ambiguities, slip detections including the INS-aided
 test) and ``summary`` counts (fix rate, slips).
 
-``cfg.smooth``: the RTS smoother (:mod:`insnav.filters.smoothing`) over the 15 navigation error
-states, the ambiguities marginalised; at a fixed epoch the smoother starts from the navigation
-conditioned on the fixed integers (the fixed solution and its covariance), so the fixed epochs keep
-the fixed solution (Rauch, Tung & Striebel 1965; Groves 2013, sec. 3.4.2;
-``cpp/include/insnav/engine/rtk_ins_engine.hpp``, 4.).  The rows are smoothed; ``fix_status``,
+``cfg.smooth`` (filter ``"ekf"`` only; the registry refuses it with the others): the RTS smoother
+(:mod:`insnav.filters.smoothing`) over the 15 navigation error states, the ambiguities marginalised;
+at a fixed epoch the smoother starts from the navigation conditioned on the fixed integers (the fixed
+solution and its covariance), so the fixed epochs keep the fixed solution (Rauch, Tung & Striebel
+1965; Groves 2013, sec. 3.4.2; ``cpp/include/insnav/engine/rtk_ins_engine.hpp``, 4.).  The rows are smoothed; ``fix_status``,
 ``ratio`` and ``solution.rtk`` stay the forward pass's (what was fixed), and
 ``solution.rtk.r_smoothed_e`` is the smoothed antenna per rover epoch.
 """
@@ -137,7 +144,7 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     Solution
     """
     cfg = dataclasses.replace(cfg or RunConfig(), coupling="rtk")
-    cfg.validate()
+    cfg.validate()  # the filters of coupling 'rtk' and their facts: insnav.registry
     imu_ds = getattr(dataset, "imu_dataset", dataset)
     rover = rover if rover is not None else getattr(dataset, "rover", None)
     base = base if base is not None else getattr(dataset, "base", None)
@@ -162,6 +169,9 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     p0[12:15] = noise.gyro_bias_sigma
     eng = dict(lever_arm_b=lever_arm(imu_ds, cfg), propagation_interval=cfg.propagation_interval_s,
                output_decimation=int(cfg.output_decimation))
+    if cfg.filter != "ekf":  # the unscented time update's UT scaling (seed 000 defaults: kappa = 3 - n)
+        eng.update(ut_alpha=cfg.ut_alpha, ut_beta=cfg.ut_beta,
+                   ut_kappa=(3.0 - 15) if cfg.ut_kappa is None else cfg.ut_kappa)
     eng.update(ENGINE_DEFAULTS)
     if cfg.smooth:  # the smoother's epochs inside outages: a cycle closed after 1.5 rover periods
         d = np.diff(t_rec)
@@ -170,7 +180,7 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     eng.update(engine or {})
     out = _core.rtk_ins_run(t, dth, dv, init_vector(imu_ds, init), np.diag(p0 ** 2), np.zeros(12),
                             noise.as_core_dict(), eng, opt.core_dict(), t_rec, roff, rrows, boff, brows, bidx,
-                            r_base_e, int(probe_epoch))
+                            r_base_e, int(probe_epoch), cfg.filter)
     age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
     status = np.asarray(out["status_epoch"])
     P_ned = np.asarray(out["P_r_ned"]).reshape(-1, 3, 3)

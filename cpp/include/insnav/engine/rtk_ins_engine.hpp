@@ -1,6 +1,7 @@
 // insnav/engine/rtk_ins_engine.hpp -- tightly coupled RTK/INS: double-differenced carrier-phase
-// and code rows (meas/dd_phase.hpp) in the closed-loop EKF (Layout15) with single-differenced
-// ambiguity states, INS-aided integer ambiguity resolution and INS-aided cycle-slip detection.
+// and code rows (meas/dd_phase.hpp) in the closed-loop EKF, RB-UKF or UKF (Layout15; see "Filters"
+// below) with single-differenced ambiguity states, INS-aided integer ambiguity resolution and
+// INS-aided cycle-slip detection.
 //
 // State: the 15 INS error states of the closed-loop core (engine/closed_loop.hpp, filter/ekf.hpp:
 // propagation, feedback, timing are the core's) and a fixed-capacity block of kMaxAmb
@@ -69,6 +70,30 @@
 //      only by what the neighbouring epochs add to its centimetre-level covariance.  Outage cycles
 //      (RtkInsConfig::outage_cycle_s) give the smoother epochs inside GNSS gaps.
 //
+// Filters (the template parameter Filter, one of Ekf / RbUkf / Ukf of Layout15):
+//   Ekf     the linear error model; P_xN <- Phi_cycle P_xN with the product of the intervals' Phi
+//           (Ekf::cycle_transition).
+//   RbUkf,  the unscented time update of seed 000 (filter/rbukf.hpp, UnscentedPropagation): the 2n+1
+//   Ukf     sigma points of the navigation errors through the nonlinear Euler-angle error model
+//           (seed 000 eqs. (1)-(7), (9)-(13)).  The ambiguities are constants, so only their
+//           cross-covariance with the navigation errors needs a transition: the statistically
+//           linearised transition of the cycle, Phi = C^T P_0^-1 with C = cov(error at the cycle
+//           start, predicted error at its end) of the sigma points (Sarkka 2008, "Unscented
+//           Rauch-Tung-Striebel smoother", IEEE TAC 53(3), eq. (13); the statistical linear
+//           regression of the UT: Lefebvre, Bruyninckx & De Schutter 2002, IEEE TAC 47(8), eq. (7))
+//           and P_0 the covariance the points were drawn from; exact (= the EKF's Phi_cycle) for
+//           linear dynamics; Phi = I for a cycle without propagation.  The DD rows are linear in the
+//           ambiguities and, at the centimetre-to-metre position uncertainty of an RTK epoch, in the
+//           position (to rounding), so the joint Kalman update over [navigation; ambiguities] below is
+//           the unscented update of a linear h (filter/ukf.hpp: Ukf = RbUkf = the Kalman update for a
+//           linear h): RB-UKF and UKF RTK/INS are the same filter here.  The unscented predicted
+//           mean x is not zero (the nonlinear model moves it, and it accumulates over the outage
+//           cycles without feedback, seed 000 eqs. (26)-(29)): it is fed back into the INS before
+//           the epoch's tests and rows (the closed loop of seed 000 eq. (25)), so the rows are
+//           linearised at the predicted mean and the joint update starts from x = 0; the posterior
+//           (x = 0, P) is where the next cycle draws its points.  The RTS smoother runs with the
+//           EKF only (the bindings refuse smooth with the unscented filters).
+//
 // No heap allocation per epoch: every matrix is bounded by kMaxAmb and lives in the engine.
 #pragma once
 
@@ -78,10 +103,13 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 #include "insnav/engine/closed_loop.hpp"
 #include "insnav/filter/ekf.hpp"
 #include "insnav/filter/layout.hpp"
+#include "insnav/filter/rbukf.hpp"
+#include "insnav/filter/sigma_points.hpp"
 #include "insnav/gnss/ambiguity_resolution.hpp"
 #include "insnav/gnss/double_difference.hpp"
 #include "insnav/gnss/rtk.hpp"
@@ -111,6 +139,7 @@ struct RtkInsConfig {
   // row kind and epoch).  Off by default (docs/algorithms.md, "Tight RTK/INS").
   RobustConfig robust = rtk_ins_robust_defaults();
   int phase_reset_epochs = 2;  // a phase SD flagged this many epochs in a row: its ambiguity re-initialised
+  UtParams ut{};               // the unscented filters' UT scaling (filter/sigma_points.hpp; the EKF ignores it)
 
   static RobustConfig rtk_ins_robust_defaults() {
     RobustConfig r;
@@ -168,11 +197,15 @@ struct RtkInsRecord {
   bool base_new = true;
 };
 
-template <int kMaxAmb = 64>
+template <int kMaxAmb = 64, class FilterT = Ekf<Layout15>>
 class RtkInsEngine {
  public:
-  using L = Layout15;
-  using Filter = Ekf<L>;
+  using Filter = FilterT;
+  using L = typename Filter::Layout;
+  static_assert(std::is_same_v<L, Layout15>, "RtkInsEngine: the 15 navigation error states (Layout15)");
+  /// The unscented time update (RbUkf, Ukf): the statistically linearised cycle transition.
+  static constexpr bool kUnscented = std::is_base_of_v<UnscentedPropagation<L>, Filter>;
+  using Mat15 = StateCov<L>;
   static constexpr int kN = L::kSize;
   static constexpr int kMaxJ = kN + kMaxAmb;
   static constexpr int kMaxRowsE = kMaxAmb;  // DD rows of one kind
@@ -184,7 +217,7 @@ class RtkInsEngine {
   using KMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxJ, kMaxRowsE>;
 
   RtkInsEngine(const ImuErrorModel& model, const RtkInsConfig& cfg)
-      : core_(Filter(model), cfg.propagation_interval), cfg_(cfg) {
+      : core_(make_filter<Filter>(model, cfg.ut), cfg.propagation_interval), cfg_(cfg) {
     core_.gate = NisGate(GateConfig{});
     core_.filter.track_cycle_transition(true);
   }
@@ -197,6 +230,10 @@ class RtkInsEngine {
     core_.reset(initial, P0, corr0);
     cond_valid_ = false;
     core_.filter.track_cycle_transition(true);
+    if constexpr (kUnscented) {
+      P_start_ = core_.filter.P();
+      p_start_t_ = core_.cycle_start;
+    }
     xa_.setZero();
     Pia_.setZero();
     Paa_.setZero();
@@ -261,17 +298,27 @@ class RtkInsEngine {
       if (out.stop_requested(k, n)) break;
       const ImuIncrement raw = raw_imu_sample(k, t_prev, t, dtheta_b, dv_b);
       core_.process_sample(raw, t_prev, kInf, next_t, apply_next);
+      if constexpr (kUnscented) {
+        if (core_.cycle_start != p_start_t_) {  // a cycle began in this sample: the P its points came from
+          P_start_ = core_.filter.P();
+          p_start_t_ = core_.cycle_start;
+        }
+      }
       if (core_.outage_due(period)) {  // an outage cycle (no record for `period`)
         core_.close_cycle();
-        Pia_ = core_.filter.cycle_transition() * Pia_;
+        const auto& Phi = cycle_phi();
+        Pia_ = Phi * Pia_;
         if (cond_valid_) {  // no measurement: the smoother's estimate stays the fixed one, predicted
-          const auto& Phi = core_.filter.cycle_transition();
           cond_dx_ = Phi * cond_dx_;
           dP_fix_.noalias() = cond_dP_ * Phi.transpose();
           cond_dP_.noalias() = Phi * dP_fix_;
           core_.condition_for_smoother(cond_dx_, cond_dP_);
         }
         core_.start_cycle();
+        if constexpr (kUnscented) {  // the points of the next cycle were drawn from it
+          P_start_ = core_.filter.P();
+          p_start_t_ = core_.cycle_start;
+        }
       }
       if (--until_output == 0 || k + 1 == n) {
         core_.write_output(out);
@@ -292,6 +339,16 @@ class RtkInsEngine {
     const int nf = std::clamp(o.n_freq, 1, gnss::kMaxFreq);
     const double t = core_.state().t;
     cond_valid_ = false;
+    const Mat15& Phi = cycle_phi();  // before the prior mean's feedback below (which moves nothing of the cycle)
+    if constexpr (kUnscented) {
+      // the unscented prior mean (not zero: nonlinear model, outage cycles) into the INS, so the
+      // slip test, the rows and the joint update start from the predicted mean with x = 0
+      const StateVec<L> x = core_.filter.x();
+      if (!x.isZero(0.0)) {
+        feedback_ins(x);
+        core_.filter.reset_state();
+      }
+    }
     n_r = std::min(n_r, gnss::kMaxSatKeys);
     n_b = std::min(n_b, gnss::kMaxSatKeys);
     std::array<int, gnss::kNumSlipKinds> sl{};
@@ -302,7 +359,7 @@ class RtkInsEngine {
     // ambiguity covariance to this epoch: P_xN <- Phi P_xN, P_NN += q dt
     const double dt = std::isfinite(t_last_) ? t - t_last_ : 0.0;
     dt_epoch_ = dt;
-    Pia_ = core_.filter.cycle_transition() * Pia_;
+    Pia_ = Phi * Pia_;
     if (dt > 0.0)
       for (int k = 0; k < kMaxAmb; ++k)
         if (amb_[k].sat >= 0) Paa_(k, k) += o.amb_psd * dt;
@@ -401,6 +458,8 @@ class RtkInsEngine {
     // single differences at the final antenna position: the reference of the next INS-aided slip test
     single_differences(nf);
     store_prev(nf, t);
+    // the next cycle draws its sigma points from this posterior (ClosedLoop::start_cycle)
+    if constexpr (kUnscented) P_start_ = core_.filter.P();
     return out;
   }
 
@@ -414,6 +473,34 @@ class RtkInsEngine {
       freq[p] = amb_[dd_j_[order_[p]]].freq;
     }
     return n;
+  }
+
+ /// The transition of the last closed cycle, for the ambiguities' cross-covariance P_xN <- Phi P_xN:
+  /// the EKF's product of the intervals' Phi, or for the unscented filters the statistically
+  /// linearised Phi = C^T P_0^-1 (file comment; Sarkka 2008 eq. (13)), solved with a pivoting LDL^T
+  /// of the Jacobi-scaled P_0 (D^-1 P_0 D^-1, D = sqrt(diag P_0): the navigation errors' variances
+  /// span many decades), never an explicit inverse; a zero pivot (a state with no variance, whose
+  /// P_xN row is zero too) contributes nothing.  Call once per closed cycle.
+  const Mat15& cycle_phi() {
+    if constexpr (!kUnscented) {
+      return core_.filter.cycle_transition();
+    } else {
+      if (!(core_.state().t > core_.cycle_start)) {  // nothing propagated in the cycle
+        Phi_ut_.setIdentity();
+        return Phi_ut_;
+      }
+      const Mat15& C = core_.filter.cycle_cross_covariance();
+      Eigen::Matrix<double, kN, 1> d = P_start_.diagonal();
+      for (int i = 0; i < kN; ++i) d[i] = d[i] > 0.0 ? 1.0 / std::sqrt(d[i]) : 1.0;
+      Ps_ = d.asDiagonal() * P_start_ * d.asDiagonal();
+      ldlt_.compute(Ps_);
+      W_ = d.asDiagonal() * C;            // D^-1 C
+      PhiT_ = ldlt_.solve(W_);            // (D^-1 P_0 D^-1)^-1 D^-1 C
+      PhiT_ = d.asDiagonal() * PhiT_;     // P_0^-1 C = Phi^T
+      Phi_ut_ = PhiT_.transpose();
+      if (!Phi_ut_.allFinite()) Phi_ut_.setIdentity();
+      return Phi_ut_;
+    }
   }
 
  private:
@@ -1070,6 +1157,13 @@ class RtkInsEngine {
   Eigen::Matrix<double, kN, 1> cond_dx_ = Eigen::Matrix<double, kN, 1>::Zero();
   Eigen::Matrix<double, kN, kN> cond_dP_ = Eigen::Matrix<double, kN, kN>::Zero();
   gnss::AmbVec w_;
+  // the unscented filters' cycle transition (cycle_phi): the covariance the cycle's points were drawn from
+  // (ClosedLoop::start_cycle -> begin_cycle draws them from P, repairing P in place if it is not
+  // positive definite; P then stays unchanged until end_cycle, so it is read once a cycle has begun)
+  Mat15 P_start_ = Mat15::Zero(), Ps_ = Mat15::Zero(), W_ = Mat15::Zero(), PhiT_ = Mat15::Zero(),
+        Phi_ut_ = Mat15::Identity();
+  double p_start_t_ = NAN;  // cycle_start of the cycle P_start_ belongs to
+  Eigen::LDLT<Mat15> ldlt_{};
 };
 
 }  // namespace insnav

@@ -1,0 +1,249 @@
+// The unscented variants of the tight RTK/INS engine (engine/rtk_ins_engine.hpp, RtkInsEngine<kMaxAmb,
+// RbUkf<Layout15>> and <..., Ukf<Layout15>>):
+//  * reduction: with a navigation error covariance small enough that the nonlinear error model
+//    (seed 000 eqs. (1)-(7)) is linear over the cycle, the statistically linearised transition of
+//    a 1 s cycle, Phi = C^T P_0^-1 (Sarkka 2008 eq. (13)), equals the EKF's product of the
+//    intervals' transitions (Ekf::cycle_transition) during a turn with acceleration, to the two
+//    discretisations (3.2e-4 of a sigma, independent of the covariance's size); with a 20 deg
+//    attitude uncertainty it does not (the nonlinearity is what the UT sees);
+//  * a cycle without propagation has Phi = I exactly;
+//  * a static receiver with an exact IMU and noise-free dual-frequency rows: the three filters fix at
+//    the true position within 1 mm, RB-UKF and UKF give the same solution (the joint update is the
+//    engine's linear one), and the whole run() after construction allocates nothing on the heap
+//    (Eigen's malloc check on).
+#include <cstdio>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "eigen_malloc_check.hpp"  // first: before any Eigen header
+
+#include "insnav/engine/rtk_ins_engine.hpp"
+#include "insnav/filter/ukf.hpp"
+#include "test_util.hpp"
+
+using namespace insnav;
+using namespace insnav::gnss;
+
+namespace {
+
+using Cov15 = StateCov<Layout15>;
+constexpr double kL1 = kCLight / 1575.42e6, kL2 = kCLight / 1227.60e6;
+
+double range_sagnac(const Vec3& rs, const Vec3& r) {
+  return (rs - r).norm() + kOmegaE * (rs.x() * r.y() - rs.y() * r.x()) / kCLight;
+}
+
+// noise-free dual-frequency GPS rows (RtkRow layout) of a receiver at r with clock offset clk_m
+std::vector<double> rows_for(const Vec3& r, const std::vector<Vec3>& sats, const std::vector<double>& N1,
+                             const std::vector<double>& N2, double clk_m) {
+  std::vector<double> rows(sats.size() * RtkRow::kCols, NAN);
+  for (size_t k = 0; k < sats.size(); ++k) {
+    double* w = rows.data() + k * RtkRow::kCols;
+    const double rho = range_sagnac(sats[k], r) + clk_m;
+    w[RtkRow::kSat] = static_cast<double>(k + 1);
+    w[RtkRow::kSys] = kGps;
+    const double lam[2] = {kL1, kL2};
+    const double N[2] = {N1[k], N2[k]};
+    for (int f = 0; f < 2; ++f) {
+      double* q = w + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
+      q[0] = rho;
+      q[1] = rho / lam[f] + N[f];
+      q[2] = 0.0;
+      q[3] = 0.0;
+      q[4] = lam[f];
+    }
+    for (int i = 0; i < 3; ++i) w[RtkRow::kSatPos + i] = sats[k](i);
+    w[RtkRow::kSatClock] = 0.0;
+  }
+  return rows;
+}
+
+NavState start_state(double lat, double lon, double h, double t) {
+  NavState s;
+  s.t = t;
+  s.lat = lat;
+  s.lon = lon;
+  s.h = h;
+  return s;
+}
+
+// The transition of one 1 s cycle of a turning, accelerating IMU (100 Hz) from P0.
+template <class F>
+Cov15 cycle_phi(const Cov15& P0) {
+  RtkInsConfig rc;
+  auto eng = std::make_unique<RtkInsEngine<64, F>>(ImuErrorModel{}, rc);
+  NavState s0 = start_state(0.6, 0.3, 100.0, 0.0);
+  s0.v_n = Vec3(15.0, 5.0, 0.0);
+  eng->start(s0, P0, ImuCorrection{});
+  auto& core = eng->core();
+  const double dt = 0.01, g = wgs84::gravity(s0.lat, s0.h);
+  double t_prev = 0.0;
+  for (int k = 1; k <= 100; ++k) {
+    ImuIncrement raw;
+    raw.t = k * dt;
+    raw.dt = dt;
+    raw.dtheta_b = Vec3(0.02, -0.01, 0.15) * dt;  // yaw rate 0.15 rad/s, some roll and pitch rate
+    raw.dv_b = Vec3(1.5, 0.8, -g) * dt;           // forward and lateral acceleration
+    core.process_sample(raw, t_prev, kInf, []() { return kInf; }, []() {});
+    t_prev = raw.t;
+  }
+  core.close_cycle();
+  return eng->cycle_phi();
+}
+
+// max over entries of |Phi_a - Phi_b| scaled to sigmas: the contribution of each initial state's
+// 1-sigma to each final state's 1-sigma (of the EKF's Phi P0 Phi^T)
+double scaled_difference(const Cov15& Pa, const Cov15& Pb, const Cov15& P0) {
+  const Cov15 P1 = Pb * P0 * Pb.transpose();
+  double worst = 0.0;
+  for (int i = 0; i < 15; ++i)
+    for (int j = 0; j < 15; ++j)
+      worst = std::max(worst, std::abs(Pa(i, j) - Pb(i, j)) * std::sqrt(P0(j, j) / P1(i, i)));
+  return worst;
+}
+
+struct StaticRun {
+  std::vector<std::int32_t> status;
+  std::vector<double> r_e, r_float_e;
+  int asserts = 0;
+};
+
+template <class F>
+StaticRun run_static(const Vec3& r_r, const Vec3& r_b, const std::vector<Vec3>& sats, const std::vector<double>& N1r,
+                     const std::vector<double>& N2r, const std::vector<double>& N1b, const std::vector<double>& N2b) {
+  constexpr int E = 10;
+  RtkInsConfig rc;
+  rc.rtk.tropo_model = false;
+  rc.rtk.min_success_rate = 0.0;
+  auto eng = std::make_unique<RtkInsEngine<64, F>>(ImuErrorModel{}, rc);
+  const Vec3 llh = wgs84::ecef_to_geodetic(r_r);
+  const NavState s0 = start_state(llh(0), llh(1), llh(2), 1000.0);
+  Cov15 P0 = Cov15::Zero();
+  P0.diagonal() << 1.0, 1.0, 1.0, 1e-2, 1e-2, 1e-2, 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10;
+  // exact increments of a level, north-facing IMU at rest: omega_ie_n and the gravity reaction
+  const int n = 1020;
+  const double dt = 0.01, g = wgs84::gravity(llh(0), llh(2));
+  std::vector<double> t(n), dth(3 * n), dv(3 * n);
+  const Vec3 w = wgs84::omega_ie_n(llh(0));
+  for (int k = 0; k < n; ++k) {
+    t[k] = 1000.0 + (k + 1) * dt;
+    for (int i = 0; i < 3; ++i) {
+      dth[3 * k + i] = w(i) * dt;
+      dv[3 * k + i] = i == 2 ? -g * dt : 0.0;
+    }
+  }
+  std::vector<double> rover, base;
+  std::vector<RtkInsRecord> recs(E);
+  for (int e = 0; e < E; ++e) {
+    const auto rr = rows_for(r_r, sats, N1r, N2r, 1234.0 + e);
+    const auto rb = rows_for(r_b, sats, N1b, N2b, -567.0 + 2 * e);
+    recs[e].t = 1000.505 + e;
+    recs[e].begin = 8 * e;
+    recs[e].end = 8 * (e + 1);
+    recs[e].base_begin = 8 * e;
+    recs[e].base_end = 8 * (e + 1);
+    rover.insert(rover.end(), rr.begin(), rr.end());
+    base.insert(base.end(), rb.begin(), rb.end());
+  }
+  StaticRun res;
+  res.status.assign(E, -1);
+  res.r_e.assign(3 * E, NAN);
+  res.r_float_e.assign(3 * E, NAN);
+  RtkInsOutputs out;
+  out.status = res.status.data();
+  out.r_e = res.r_e.data();
+  out.r_float_e = res.r_float_e.data();
+  const int before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);
+  eng->run(s0, P0, ImuCorrection{}, n, t.data(), dth.data(), dv.data(), E, recs.data(), rover.data(), base.data(),
+           r_b, out);
+  Eigen::internal::set_is_malloc_allowed(true);
+  res.asserts = g_eigen_asserts - before;
+  return res;
+}
+
+}  // namespace
+
+int main() {
+  // (1) reduction of the statistically linearised cycle transition to the EKF's
+  Cov15 P0 = Cov15::Zero();
+  P0.diagonal() << 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10, 1e-8, 1e-8, 1e-8, 1e-12, 1e-12, 1e-12;
+  const Cov15 phi_ekf = cycle_phi<Ekf<Layout15>>(P0);
+  const Cov15 phi_rb = cycle_phi<RbUkf<Layout15>>(P0);
+  const Cov15 phi_ukf = cycle_phi<Ukf<Layout15>>(P0);
+  const double d_lin = scaled_difference(phi_rb, phi_ekf, P0);
+  // what is left is the two discretisations (the EKF's Phi = I + F dt + (F dt)^2 / 2 at the middle of each
+  // 20 ms interval, the UT's RK4 of the nonlinear model with the INS at the start, middle and end):
+  // 3.2e-4 sigma, the same for a covariance 1e4 times smaller (no nonlinearity left in it)
+  EXPECT_LT(d_lin, 1e-3);
+  const Cov15 P_small = P0 * 1e-4;
+  const double d_small = scaled_difference(cycle_phi<RbUkf<Layout15>>(P_small), cycle_phi<Ekf<Layout15>>(P_small), P_small);
+  EXPECT_LT(std::abs(d_small - d_lin), 0.01 * d_lin);
+  EXPECT_TRUE((phi_rb - phi_ukf).cwiseAbs().maxCoeff() == 0.0);  // the same time update
+  EXPECT_LT(0.5, (phi_ekf - Cov15::Identity()).cwiseAbs().maxCoeff());  // a non-trivial transition
+  // the same with a 20 deg attitude uncertainty: the error model is no longer linear over the cycle
+  Cov15 P_big = P0;
+  P_big.diagonal().segment<3>(6).setConstant(std::pow(20.0 * M_PI / 180.0, 2));
+  const double d_big = scaled_difference(cycle_phi<RbUkf<Layout15>>(P_big), cycle_phi<Ekf<Layout15>>(P_big), P_big);
+  EXPECT_LT(100.0 * d_lin, d_big);
+  std::printf("cycle Phi, UT vs EKF (sigma-scaled): %.2e linear regime (%.2e with P / 1e4), %.2e at 20 deg attitude "
+              "sigma\n", d_lin, d_small, d_big);
+
+  // (2) a cycle without propagation: Phi = I exactly
+  {
+    RtkInsConfig rc;
+    auto eng = std::make_unique<RtkInsEngine<64, RbUkf<Layout15>>>(ImuErrorModel{}, rc);
+    eng->start(start_state(0.6, 0.3, 100.0, 0.0), P0, ImuCorrection{});
+    eng->core().close_cycle();
+    EXPECT_TRUE(eng->cycle_phi() == Cov15::Identity());
+  }
+
+  // (3) static receiver, exact IMU, noise-free rows: fixed at the truth, RB-UKF = UKF, no heap per epoch
+  const double lat = 0.84, lon = 0.20;
+  const Vec3 r_b = wgs84::geodetic_to_ecef(lat, lon, 300.0);
+  const Mat3 C = wgs84::C_en(lat, lon);
+  const Vec3 r_r = r_b + C * Vec3(40.0, -25.0, 3.0);
+  std::vector<Vec3> sats;
+  const double els[8] = {80, 60, 45, 35, 28, 50, 40, 65}, azs[8] = {0, 50, 100, 150, 200, 250, 300, 330};
+  for (int k = 0; k < 8; ++k) {
+    const double el = els[k] * M_PI / 180.0, az = azs[k] * M_PI / 180.0;
+    const Vec3 u = C * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), -std::sin(el));
+    const double b = 2.0 * r_b.dot(u), c = r_b.squaredNorm() - 26560e3 * 26560e3;
+    sats.push_back(r_b + u * ((-b + std::sqrt(b * b - 4.0 * c)) / 2.0));
+  }
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> ui(-100000, 100000);
+  std::vector<double> N1r(8), N2r(8), N1b(8), N2b(8);
+  for (int k = 0; k < 8; ++k) { N1r[k] = ui(rng); N2r[k] = ui(rng); N1b[k] = ui(rng); N2b[k] = ui(rng); }
+  const StaticRun ekf = run_static<Ekf<Layout15>>(r_r, r_b, sats, N1r, N2r, N1b, N2b);
+  const StaticRun rb = run_static<RbUkf<Layout15>>(r_r, r_b, sats, N1r, N2r, N1b, N2b);
+  const StaticRun ukf = run_static<Ukf<Layout15>>(r_r, r_b, sats, N1r, N2r, N1b, N2b);
+  double worst[3] = {0.0, 0.0, 0.0}, rb_ukf = 0.0, rb_ekf = 0.0;
+  int fixed[3] = {0, 0, 0};
+  const StaticRun* runs[3] = {&ekf, &rb, &ukf};
+  for (int e = 0; e < 10; ++e) {
+    for (int f = 0; f < 3; ++f) {
+      const StaticRun& r = *runs[f];
+      if (r.status[e] == static_cast<int>(RtkStatus::kFixed)) {
+        ++fixed[f];
+        worst[f] = std::max(worst[f], (Vec3(r.r_e[3 * e], r.r_e[3 * e + 1], r.r_e[3 * e + 2]) - r_r).norm());
+      }
+    }
+    for (int i = 0; i < 3; ++i) {
+      rb_ukf = std::max(rb_ukf, std::abs(rb.r_float_e[3 * e + i] - ukf.r_float_e[3 * e + i]));
+      rb_ekf = std::max(rb_ekf, std::abs(rb.r_float_e[3 * e + i] - ekf.r_float_e[3 * e + i]));
+    }
+  }
+  for (int f = 0; f < 3; ++f) {
+    EXPECT_TRUE(fixed[f] >= 9);
+    EXPECT_LT(worst[f], 1e-3);
+    EXPECT_TRUE(runs[f]->asserts == 0);  // no heap allocation in run() (and no other Eigen assertion)
+  }
+  EXPECT_TRUE(rb_ukf == 0.0);  // the same filter: unscented time update, the engine's linear joint update
+  EXPECT_LT(rb_ekf, 1e-3);
+  std::printf("static exact IMU: fixed %d/%d/%d of 10 (EKF/RB-UKF/UKF), worst %.1e/%.1e/%.1e m; float RB-UKF - EKF "
+              "%.1e m\n",
+              fixed[0], fixed[1], fixed[2], worst[0], worst[1], worst[2], rb_ekf);
+  TEST_MAIN_END()
+}
