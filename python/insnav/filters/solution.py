@@ -211,6 +211,10 @@ CSV_DECIMALS = dict(zip(Solution.COLUMNS, [9, 11, 11] + [6] * 4 + [8] * 3 + [6] 
 CSV_DECIMALS.update(odo_scale_ppm=4, sigma_odo_scale_ppm=4, time_offset_ms=6, sigma_time_offset_ms=6)
 CSV_DECIMALS.update({n: 6 for n in Solution.LEVER_ARM_COLUMNS})
 FORMATS = (".csv", ".npz", ".parquet")
+#: rows per Parquet row group (about 20 MB of float64 with every column): the whole-file writer and the
+#: block-by-block one (``insnav.filters.stream``, which buffers one row group) cut the same groups, so their
+#: files are the same byte for byte
+PARQUET_ROW_GROUP_ROWS = 1 << 16
 PRECISIONS = ("resolution", "exact")
 
 
@@ -274,7 +278,7 @@ def save_solution(sol: Solution, path, *, columns=None, precision: str = "resolu
 
     pa = _parquet()
     return _atomic_binary(path, lambda tmp: pa.parquet.write_table(
-        pa.table({k: pa.array(v) for k, v in arrays()}), tmp))
+        pa.table({k: pa.array(v) for k, v in arrays()}), tmp, row_group_size=PARQUET_ROW_GROUP_ROWS))
 
 
 def is_kfgins_nav(path) -> bool:
