@@ -1113,11 +1113,10 @@ class _ParquetWriter(_Writer):
                 self._flush()
 
     def _flush(self) -> None:
-        from .solution import PARQUET_ROW_GROUP_ROWS, _parquet
+        from .solution import PARQUET_ROW_GROUP_ROWS, _parquet, parquet_table
 
         if self.fill:
-            pa = _parquet()
-            table = pa.table([pa.array(self.buf[j, :self.fill]) for j in range(len(self.buf))], schema=self.schema)
+            table = parquet_table(_parquet(), self.schema.names, [row[:self.fill] for row in self.buf])
             self.pq.write_table(table, row_group_size=PARQUET_ROW_GROUP_ROWS)
             self.fill = 0
 
