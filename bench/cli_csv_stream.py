@@ -18,11 +18,10 @@ hours (``cli_end_to_end.write_day``: a vehicle standing at the track's start
 point, 200 Hz, written under the temporary folder) read as the same generic
 CSV, every output at both rates, with ``--stream on`` (``--day-stream auto``:
 whatever path the installed insnav takes, e.g. an older one that writes
-Parquet and the KF-GINS layout whole).  ``--only`` runs the variants whose
-label contains one of its comma-separated words; ``--no-track`` skips the
-KF-GINS track.  Prints the figures (no document).
+Parquet and the KF-GINS layout whole).  ``--only TEXT`` (repeatable) runs the variants whose
+label contains one of the texts; ``--no-track`` skips the KF-GINS track.  Prints the figures (no document).
 
-    python bench/cli_csv_stream.py [--repeat 3] [--day-hours 24] [--only Parquet,KF-GINS] [--no-track]
+    python bench/cli_csv_stream.py [--repeat 3] [--day-hours 24] [--only Parquet --only KF-GINS] [--no-track]
 """
 from __future__ import annotations
 
@@ -155,14 +154,14 @@ def main(argv=None) -> int:
                     help="length of a synthesised recording run block by block afterwards [h] (0: none)")
     ap.add_argument("--day-stream", choices=("on", "auto"), default="on",
                     help="--stream of the day's runs (auto: measure whatever path the installed insnav takes)")
-    ap.add_argument("--only", default="", help="comma-separated words: the variants whose label contains one")
+    ap.add_argument("--only", action="append", default=[],
+                    help="run only the variants whose label contains this text (repeatable)")
     ap.add_argument("--no-track", action="store_true", help="skip the KF-GINS track (only the day)")
     ap.add_argument("--compare", nargs=2, type=Path, help=argparse.SUPPRESS)  # same_output's child
     a = ap.parse_args(argv)
     if a.compare:
         return 0 if _same(*a.compare) else 1
-    words = [w.strip() for w in a.only.split(",") if w.strip()]
-    variants = [v for v in VARIANTS if not words or any(w in v[0] for w in words)]
+    variants = [v for v in VARIANTS if not a.only or any(w in v[0] for w in a.only)]
     if not IMU_XZ.is_file():
         print(f"KF-GINS data not found at {SIM}", file=sys.stderr)
         return 1
