@@ -14,7 +14,10 @@ appended to a temporary CSV file beside the destination, renamed into place
 only when the whole run succeeded.  An ``.npz`` destination gets each column
 appended to its own scratch file (:class:`insnav._npz.NpzColumns`, in a
 folder beside it), the members assembled into the temporary file at the end
-and the scratch files removed, whatever happened.  The next block is read and parsed on a
+and the scratch files removed, whatever happened.  A ``.parquet`` destination
+gets one row group per :data:`~insnav.filters.solution.PARQUET_ROW_GROUP_ROWS`
+rows (a buffer of one row group, allocated once), ``--out-format kfgins`` the
+rows appended to the temporary KF-GINS files in the folder.  The next block is read and parsed on a
 reader thread while this one is filtered, and the rows are formatted on a
 writer thread while the next block is filtered (the engine's two row buffers
 are used in turn).  Memory is the GNSS records (a few per second), a few
@@ -23,9 +26,10 @@ checks: what still grows with the recording (``bench/cli_end_to_end.py``
 measures a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
-health verdict equal the batch run's, and the CSV file is byte for byte the
-batch run's; an ``.npz`` holds the batch run's members, dtypes and values
-bit for bit (``tests/test_stream.py``, ``tests/test_stream_npz.py``).  The input checks differ in two
+health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
+are byte for byte the batch run's; an ``.npz`` holds the batch run's members,
+dtypes and values bit for bit (``tests/test_stream.py``,
+``tests/test_stream_npz.py``, ``tests/test_stream_outputs.py``).  The input checks differ in two
 documented ways: the IMU sanitizer's block scan takes the nominal interval
 from the first block (a later block whose median interval differs, an IMU gap,
 a repeated time or an implausible rate hands the run to the batch path, whose
