@@ -1084,7 +1084,7 @@ class _ParquetWriter(_Writer):
     and compresses with the GIL released); :meth:`close` writes the last,
     shorter group and the footer.  The whole-file writer cuts the same row
     groups with the same schema (float64 columns, their names, no metadata of
-    ours), so the file is ``Solution.save``'s byte for byte."""
+    ours) and options, so the file is ``Solution.save``'s byte for byte."""
 
     pq = None
 
@@ -1093,7 +1093,7 @@ class _ParquetWriter(_Writer):
 
     def _append(self, cols) -> None:
         """(writer thread) The block's rows into the row-group buffer, each full buffer written."""
-        from .solution import PARQUET_ROW_GROUP_ROWS, _parquet
+        from .solution import PARQUET_DICTIONARY_PAGE_BYTES, PARQUET_ROW_GROUP_ROWS, _parquet
 
         rows = PARQUET_ROW_GROUP_ROWS
         if self.pq is None:
@@ -1101,7 +1101,8 @@ class _ParquetWriter(_Writer):
             self.schema = pa.schema([pa.field(nm, pa.float64()) for nm, _, _ in cols])
             self.buf = np.empty((len(cols), rows))
             self.fill = 0
-            self.pq = pa.parquet.ParquetWriter(str(self.tmp), self.schema)
+            self.pq = pa.parquet.ParquetWriter(str(self.tmp), self.schema,
+                                               dictionary_pagesize_limit=PARQUET_DICTIONARY_PAGE_BYTES)
         n, a = len(cols[0][1]), 0
         while a < n:
             k = min(n - a, rows - self.fill)
