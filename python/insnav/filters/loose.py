@@ -87,17 +87,6 @@ def loose_gnss_rows(g, cfg: RunConfig) -> np.ndarray:
     return rows
 
 
-def imu_error_sigmas(sigma: np.ndarray, layout: int) -> np.ndarray:
-    """``Solution.sigma_imu_err`` (N, 12) from the engine's sigma rows (N, >= layout):
-    the 1-sigma of the IMU-error states in the layout's order [df_b (m/s^2),
-    dw_b (rad/s), s_a, s_g], which is the ``imu_err`` column order; the scale
-    factors 0 for a 15-state layout (it does not estimate them).  Shared by
-    the batch run and the block-by-block stream (:mod:`insnav.filters.stream`)."""
-    out = np.zeros((len(sigma), 12))
-    out[:, :layout - 9] = sigma[:, 9:layout]
-    return out
-
-
 def run_loose(dataset, cfg: RunConfig) -> Solution:
     """Closed-loop loosely coupled run (``cfg.filter`` in ekf, rbukf, ukf;
     ``cfg.layout`` 15 or 21); :func:`insnav.run` is the public entry."""
@@ -123,8 +112,9 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
                      rejected=int(out["rejected"]), gate_reopened=int(out["gate_reopened"]),
                      gate_outage_accepted=int(out["gate_outage_accepted"]),
                      cholesky_repairs=int(out["cholesky_repairs"]), gnss_records=len(gnss_t)))
-    if cfg.imu_error_sigmas:
-        sol.sigma_imu_err = imu_error_sigmas(sig, n)
+    if cfg.imu_error_sigmas:  # layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
+        sol.sigma_imu_err = np.zeros((len(sol.t), 12))
+        sol.sigma_imu_err[:, :n - 9] = sig[:, 9:n]
     if events is not None:
         sol.summary["constraints"] = dict(use=list(cfg.constraints.use), events=len(events), **ev_counts,
                                           updates=int(out["constraint_updates"]),

@@ -1165,10 +1165,11 @@ class _KfginsWriter(_Writer):
 
     def _columns(self, sol, out):
         from ..io.kfgins import kfgins_tables
-        from .loose import imu_error_sigmas
 
-        if self.layout:
-            sol.sigma_imu_err = imu_error_sigmas(out["sigma"], self.layout)
+        if self.layout:  # as run_loose fills it: layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
+            sig = out["sigma"]
+            sol.sigma_imu_err = np.zeros((len(sig), 12))
+            sol.sigma_imu_err[:, :self.layout - 9] = sig[:, 9:self.layout]
         return [cols for _, cols in kfgins_tables(sol)]
 
     def _submit(self, tables) -> _Background:
