@@ -116,12 +116,12 @@ def add_run_parser(sub) -> None:
                    help="write a row every k-th IMU sample, k = IMU rate / HZ (an integer; e.g. 10 or 1 [Hz] at "
                         "200 Hz); the filter still runs at every sample.  Default: every sample")
     p.add_argument("--stream", choices=("auto", "on", "off"), default="auto",
-                   help="--format kfgins or csv with a .csv or .npz --out: read, filter and write the IMU file "
-                        "block by block, without holding the file or the solution in memory (the loose "
-                        "ekf/rbukf/ukf forward run; the same CSV as the whole-file run byte for byte, the same npz "
-                        "arrays bit for bit).  auto (default): whenever the run allows it (not --smooth, "
-                        "--constraints, self-calibration states, Parquet/KF-GINS output or a str2str tick_ms IMU "
-                        "log), on: the same, with a note when it cannot, off: read the IMU file whole")
+                   help="--format kfgins or csv: read, filter and write the IMU file block by block, without "
+                        "holding the file or the solution in memory (the loose ekf/rbukf/ukf forward run; the same "
+                        "CSV, Parquet and KF-GINS files as the whole-file run byte for byte, the same npz arrays "
+                        "bit for bit).  auto (default): whenever the run allows it (not --smooth, --constraints, "
+                        "self-calibration states, --option, TDCP or a str2str tick_ms IMU log), on: the same, "
+                        "with a note when it cannot, off: read the IMU file whole")
     p.add_argument("--columns", default=None, metavar="GROUPS",
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")
@@ -585,7 +585,8 @@ def _remove_empty(dirs) -> None:
 
 
 def _try_stream(args, out: Path, groups):
-    """``--format kfgins`` or ``--format csv`` with CSV or npz output: the loose forward run block by block
+    """``--format kfgins`` or ``--format csv`` with CSV, npz, Parquet or KF-GINS-layout output: the loose forward
+    run block by block
     (:mod:`insnav.filters.stream`: neither the IMU file nor the solution held in memory).  Returns (StreamResult,
     folders made), or None when the run takes the batch path (a one-line note
     on stderr says why, unless the run simply is not one the stream does and
@@ -635,7 +636,7 @@ def _try_stream(args, out: Path, groups):
         if args.stream == "on" or cfg.smooth:
             note(why)
         return None
-    first = out.parent
+    first = out if args.out_format == "kfgins" else out.parent  # the folder the temporary files go to
     made = [d for d in (first, *first.parents) if not d.exists()]  # removed again if the run fails
     first.mkdir(parents=True, exist_ok=True)
     from .._progress import Progress
@@ -645,13 +646,13 @@ def _try_stream(args, out: Path, groups):
         if args.format == "csv":
             res = stream_csv_loose(inp, args.imu, out, configure=configure, columns=groups,
                                    precision=args.csv_precision, output_rate_hz=args.output_rate,
-                                   set_decimation=output_decimation, progress=bar)
+                                   set_decimation=output_decimation, progress=bar, out_format=args.out_format)
         else:
             y = inp["yaml"]
             res = stream_loose_csv(inp["dataset"], inp["imu_path"], cfg, out, imu_ncols=y["imudatalen"],
                                    start_s=y["starttime_s"], end_s=y["endtime_s"], gnss_raw=inp["gnss"],
                                    columns=groups, precision=args.csv_precision, output_rate_hz=args.output_rate,
-                                   set_decimation=output_decimation, progress=bar)
+                                   set_decimation=output_decimation, progress=bar, out_format=args.out_format)
     except Fallback as exc:
         if bar is not None:
             bar.close()
@@ -668,7 +669,7 @@ def _try_stream(args, out: Path, groups):
     s = res.solution.summary
     used, rejected = int(s.get("updates", 0)), int(s.get("rejected", 0))
     if not args.allow_free_inertial and (used == 0 or rejected > MAX_REJECTED_SHARE * (used + rejected)):
-        res.csv_tmp.unlink(missing_ok=True)  # the batch path gives the message (and the hint from the whole IMU)
+        res.discard()  # the batch path gives the message (and the hint from the whole IMU)
         _remove_empty(made)
         return None
     return res, made
@@ -744,7 +745,7 @@ def cmd_run(args) -> int:
             return _finish_run(args, out, groups, stages, streamed)
     finally:
         if streamed is not None:  # renamed into place when the run succeeded; else removed here
-            streamed[0].csv_tmp.unlink(missing_ok=True)
+            streamed[0].discard()
     try:
         from ..io.input_formats import input_format
 
@@ -796,12 +797,13 @@ def _finish_run(args, out: Path, groups, stages, streamed) -> int:
             print(f"warning: {w}", file=sys.stderr)
         csv_tables = info["tables"]
     return _report_and_write(args, out, groups, stages, res.solution, res.dataset, res.config, None, csv_tables,
-                             csv_tmp=res.csv_tmp, made=made)
+                             streamed_files=res.files, made=made)
 
 
-def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts, csv_tables, *, csv_tmp=None,
+def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts, csv_tables, *, streamed_files=None,
                       made=None, run_opts=None, base_e=None) -> int:
     """The run's checks (gate, free inertial, health), its files (all or none) and its report line;
+    ``streamed_files``: the (temporary file, destination) pairs of a run written block by block;
     ``run_opts`` / ``base_e``: an RTK/INS run's keywords and the base position it was given."""
     run_opts = run_opts or {}
     s = sol.summary
@@ -841,16 +843,17 @@ def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts,
         # every file of the run or, on an error (a full disk, Ctrl-C), none: each is written to a
         # temporary file beside its destination and all are renamed into place at the end
         with output_set():
-            if args.out_format == "kfgins":
+            if streamed_files is not None:  # written block by block (filters/stream.py): renamed with the rest
+                from .._atomic import _finish
+
+                for tmp, dest in streamed_files:
+                    _finish(tmp, dest)
+                base = streamed_files[0][1]  # the solution file, or the KF-GINS .nav
+            elif args.out_format == "kfgins":
                 from ..io.kfgins import write_kfgins_solution
 
                 out.mkdir(parents=True, exist_ok=True)
                 base = write_kfgins_solution(out, sol)[0]
-            elif csv_tmp is not None:  # CSV or npz written block by block (filters/stream.py): renamed with them
-                from .._atomic import _finish
-
-                _finish(csv_tmp, out)
-                base = out
             else:
                 sol.save(out, columns=groups, precision=args.csv_precision)
                 base = out

@@ -211,6 +211,15 @@ CSV_DECIMALS = dict(zip(Solution.COLUMNS, [9, 11, 11] + [6] * 4 + [8] * 3 + [6] 
 CSV_DECIMALS.update(odo_scale_ppm=4, sigma_odo_scale_ppm=4, time_offset_ms=6, sigma_time_offset_ms=6)
 CSV_DECIMALS.update({n: 6 for n in Solution.LEVER_ARM_COLUMNS})
 FORMATS = (".csv", ".npz", ".parquet")
+#: rows per Parquet row group (about 20 MB of float64 with every column): the whole-file writer and the
+#: block-by-block one (``insnav.filters.stream``, which buffers one row group) cut the same groups, so their
+#: files are the same byte for byte
+PARQUET_ROW_GROUP_ROWS = 1 << 16
+#: bytes of a Parquet column chunk's dictionary before the writer gives it up for plain values: the float
+#: columns go plain at once (a full dictionary of 2^16 distinct doubles is larger than the values), the
+#: constant ones (a 15-state run's scale factors) stay dictionary-encoded; the files are smaller than with
+#: pyarrow's defaults (1 MiB, row groups of 2^20 rows) at 200 Hz and at 10 Hz
+PARQUET_DICTIONARY_PAGE_BYTES = 1 << 14
 PRECISIONS = ("resolution", "exact")
 
 
@@ -268,13 +277,26 @@ def save_solution(sol: Solution, path, *, columns=None, precision: str = "resolu
         cols = _selected(sol, columns)  # views: each column is gathered (and scaled) as it is written
         return _atomic_binary(path, lambda tmp: write_npz(tmp, cols))
 
-    def arrays():  # one column at a time: never the whole table twice
-        for name, x, f in _selected(sol, columns):
-            yield name, (np.ascontiguousarray(x, float) if f == 1.0 else np.multiply(x, f))
-
     pa = _parquet()
-    return _atomic_binary(path, lambda tmp: pa.parquet.write_table(
-        pa.table({k: pa.array(v) for k, v in arrays()}), tmp))
+
+    def write(tmp):
+        cols = [(name, np.ascontiguousarray(x, float) if f == 1.0 else np.multiply(x, f))
+                for name, x, f in _selected(sol, columns)]
+        pa.parquet.write_table(parquet_table(pa, [n for n, _ in cols], [x for _, x in cols]), tmp,
+                               row_group_size=PARQUET_ROW_GROUP_ROWS,
+                               dictionary_pagesize_limit=PARQUET_DICTIONARY_PAGE_BYTES)
+
+    return _atomic_binary(path, write)
+
+
+def parquet_table(pa, names, arrays):
+    """A ``pyarrow.Table`` of float64 columns ``names`` on the memory of the 1-D
+    contiguous float64 ``arrays`` (no copy; no nulls, a NaN stays a value).
+    Made with ``pa.Array.from_buffers``, not ``pa.array``, whose numpy path
+    imports pandas (about 50 MB of memory).  The schema: the names, float64,
+    no metadata.  Shared by ``Solution.save`` and the block-by-block writer."""
+    cols = [pa.Array.from_buffers(pa.float64(), len(x), [None, pa.py_buffer(x)]) for x in arrays]
+    return pa.Table.from_arrays(cols, schema=pa.schema([pa.field(n, pa.float64()) for n in names]))
 
 
 def is_kfgins_nav(path) -> bool:

@@ -14,7 +14,10 @@ appended to a temporary CSV file beside the destination, renamed into place
 only when the whole run succeeded.  An ``.npz`` destination gets each column
 appended to its own scratch file (:class:`insnav._npz.NpzColumns`, in a
 folder beside it), the members assembled into the temporary file at the end
-and the scratch files removed, whatever happened.  The next block is read and parsed on a
+and the scratch files removed, whatever happened.  A ``.parquet`` destination
+gets one row group per :data:`~insnav.filters.solution.PARQUET_ROW_GROUP_ROWS`
+rows (a buffer of one row group, allocated once), ``--out-format kfgins`` the
+rows appended to the temporary KF-GINS files in the folder.  The next block is read and parsed on a
 reader thread while this one is filtered, and the rows are formatted on a
 writer thread while the next block is filtered (the engine's two row buffers
 are used in turn).  Memory is the GNSS records (a few per second), a few
@@ -23,9 +26,10 @@ checks: what still grows with the recording (``bench/cli_end_to_end.py``
 measures a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
-health verdict equal the batch run's, and the CSV file is byte for byte the
-batch run's; an ``.npz`` holds the batch run's members, dtypes and values
-bit for bit (``tests/test_stream.py``, ``tests/test_stream_npz.py``).  The input checks differ in two
+health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
+are byte for byte the batch run's; an ``.npz`` holds the batch run's members,
+dtypes and values bit for bit (``tests/test_stream.py``,
+``tests/test_stream_npz.py``, ``tests/test_stream_outputs.py``).  The input checks differ in two
 documented ways: the IMU sanitizer's block scan takes the nominal interval
 from the first block (a later block whose median interval differs, an IMU gap,
 a repeated time or an implausible rate hands the run to the batch path, whose
@@ -390,17 +394,21 @@ class _Prefetch:
         self._t.join()
 
 
-#: the solution formats written block by block (Parquet and the KF-GINS layout are written whole)
-STREAM_SUFFIXES = (".csv", ".npz")
+#: the solution formats written block by block (and ``--out-format kfgins``: the KF-GINS layout)
+STREAM_SUFFIXES = (".csv", ".npz", ".parquet")
+#: the output layouts: insnav's solution file (by its suffix) or KF-GINS's folder of text files
+OUT_FORMATS = ("insnav", "kfgins")
 
 
 def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> str | None:
     """Why a run cannot take the streaming path (None: it can): the loose
-    ekf, rbukf or ukf forward run (15 or 21 states) written as CSV or npz,
-    without the smoother, vehicle constraints, self-calibration states or the
-    IMU-error sigma columns."""
-    if out_format != "insnav" or out_suffix.lower() not in STREAM_SUFFIXES:
-        return "the block-by-block writer writes CSV and npz (Parquet and the KF-GINS layout are written whole)"
+    ekf, rbukf or ukf forward run (15 or 21 states) written as CSV, npz,
+    Parquet or the KF-GINS layout, without the smoother, vehicle constraints,
+    self-calibration states, filter options or TDCP."""
+    if out_format not in OUT_FORMATS:
+        return f"the block-by-block writer writes {' and '.join(OUT_FORMATS)} output, not {out_format!r}"
+    if out_format == "insnav" and out_suffix.lower() not in STREAM_SUFFIXES:
+        return f"the block-by-block writer writes {', '.join(STREAM_SUFFIXES)} files and the KF-GINS layout"
     if cfg.smooth:
         return "the RTS smoother needs the whole run"
     if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf") or cfg.layout not in (15, 21):
@@ -410,8 +418,8 @@ def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> s
         return "the vehicle constraints are derived from the whole IMU record"
     if cfg.lever_arm.estimate or cfg.lever_arm.estimate_odometer or cfg.time.estimate_offset:
         return "the self-calibration states run in the batch engine"
-    if cfg.imu_error_sigmas or cfg.options or cfg.tdcp.enabled:
-        return "the IMU-error sigma columns, filter options and TDCP run in the batch engine"
+    if cfg.options or cfg.tdcp.enabled:
+        return "the filter options and TDCP run in the batch engine"
     return None
 
 
@@ -537,26 +545,33 @@ class StreamResult:
     """What :func:`stream_loose_csv` leaves: the solution without its rows
     (``gnss_t``, innovations, NIS, status, summary; ``len()`` the row count),
     the dataset the checks saw (IMU summed to 10 Hz), the run config and the
-    finished temporary solution file, CSV or npz as the destination
-    (``csv_tmp``, renamed by the caller)."""
+    finished temporary solution files (``files``: (temporary file,
+    destination) pairs; one file, or the KF-GINS layout's two or three),
+    renamed into place by the caller (:meth:`discard`: removed)."""
 
     solution: object
     dataset: Dataset
     config: object
-    csv_tmp: Path
     rows: int
     samples: int
     blocks: int = 0
     timings: dict = field(default_factory=dict)
+    files: list = field(default_factory=list)
+
+    def discard(self) -> None:
+        """Remove the temporary files (the run is not kept; the destinations are not touched)."""
+        for tmp, _ in self.files:
+            Path(tmp).unlink(missing_ok=True)
 
 
 def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int | None, start_s: float,
                      end_s: float | None, gnss_raw: GnssFixes, columns=None, precision: str = "resolution",
                      output_rate_hz: float | None = None, block_lines: int | None = None,
-                     set_decimation=None, progress=None) -> StreamResult:
+                     set_decimation=None, progress=None, out_format: str = "insnav") -> StreamResult:
     """Run the loose forward filter over the IMU file ``imu_path`` block by
-    block, writing the solution (CSV or npz, by the suffix of ``out``) to a
-    temporary file beside it.
+    block, writing the solution (CSV, npz or Parquet, by the suffix of
+    ``out``; or the KF-GINS layout into the folder ``out``) to temporary
+    files beside the destinations.
 
     Parameters
     ----------
@@ -568,7 +583,8 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
     cfg : RunConfig
         The run configuration (:func:`stream_unsupported` is None for it).
     out : Path
-        The solution file the temporary file is for (same folder).
+        The solution file the temporary file is for (same folder); with
+        ``out_format`` kfgins the folder (it must exist) of the KF-GINS files.
     imu_ncols : int, optional
         Columns per IMU line (KF-GINS ``imudatalen``).
     start_s, end_s : float
@@ -586,11 +602,15 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
     progress : callable, optional
         ``(bytes_done, bytes_total)`` of the IMU file after each block
         (:class:`insnav._progress.Progress`).
+    out_format : {'insnav', 'kfgins'}
+        ``insnav run --out-format``: kfgins writes ``KF_GINS_Navresult.nav``,
+        ``KF_GINS_IMU_ERR.txt`` and, with ``cfg.imu_error_sigmas``,
+        ``KF_GINS_STD.txt`` (:func:`insnav.io.kfgins.write_kfgins_solution`'s files).
 
     Returns
     -------
     StreamResult
-        Its ``csv_tmp`` is complete; the caller renames it into place.
+        Its ``files`` are complete; the caller renames them into place.
 
     Raises
     ------
@@ -604,41 +624,46 @@ def stream_loose_csv(ds0: Dataset, imu_path, cfg, out: Path, *, imu_ncols: int |
 
     block_lines = int(BLOCK_LINES if block_lines is None else block_lines)
 
-    def prepare(tmp, blocks):
-        run = _BlockRun(ds0, _as_config(cfg), tmp, start_s=start_s, end_s=end_s, gnss_raw=gnss_raw,
+    def prepare(blocks):
+        run = _BlockRun(ds0, _as_config(cfg), start_s=start_s, end_s=end_s, gnss_raw=gnss_raw,
                         output_rate_hz=output_rate_hz, set_decimation=set_decimation, block_lines=block_lines,
                         progress=progress)
         return run, blocks
 
     return _stream_to_file(out, lambda: imu_text_blocks(imu_path, imu_ncols, block_lines=block_lines,
-                                                        names=IMU_COLUMNS), prepare, columns, precision, str(imu_path))
+                                                        names=IMU_COLUMNS), prepare, columns, precision, str(imu_path),
+                           out_format)
 
 
-def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: str) -> StreamResult:
-    """The temporary solution file (CSV or npz) beside ``out``, the IMU blocks read ahead on the reader
-    thread (``make_blocks()``), ``prepare(tmp, blocks) -> (_BlockRun, the blocks it runs)``, the writer
-    thread; on any error nothing is left behind."""
+def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: str,
+                    out_format: str = "insnav") -> StreamResult:
+    """The IMU blocks read ahead on the reader thread (``make_blocks()``), ``prepare(blocks) ->
+    (_BlockRun, the blocks it runs)``, the writer thread writing the temporary solution file(s) beside
+    ``out`` (CSV, npz or Parquet by its suffix; ``out_format`` kfgins: the KF-GINS files in the folder
+    ``out``); on any error (Ctrl-C included) the writer thread is joined and nothing is left behind."""
     from .solution import PRECISIONS
 
     if precision not in PRECISIONS:
         raise ValueError(f"precision {precision!r}: use one of {', '.join(PRECISIONS)}")
+    if out_format not in OUT_FORMATS:
+        raise ValueError(f"out_format {out_format!r}: use one of {', '.join(OUT_FORMATS)}")
     out = Path(out)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part" + out.suffix, dir=out.parent)
-    os.close(fd)
-    tmp = Path(tmp)
+    blocks = _Prefetch(make_blocks())
+    writer = None
     try:
-        blocks = _Prefetch(make_blocks())
-        writer = None
         try:
-            run, todo = prepare(tmp, blocks)
-            writer = (_NpzWriter if out.suffix.lower() == ".npz" else _Writer)(tmp, columns, precision, run.health)
-            return run.run(todo, writer, imu_source)
+            run, todo = prepare(blocks)
+            writer = _writer_class(out, out_format)(out, columns, precision, run.health, run.cfg)
+            res = run.run(todo, writer, imu_source)
+            res.files = list(writer.files)
+            return res
         finally:
             blocks.close()
             if writer is not None:
-                writer.shutdown()  # no write may outlive the run (the file is removed below on an error)
+                writer.shutdown()  # no write may outlive the run (the files are removed below on an error)
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        if writer is not None:
+            writer.discard()
         raise
 
 
@@ -672,12 +697,12 @@ class _BlockRun:
     block, the span (t0, endtime], the engine, the output rows, and at the end
     the per-record outputs, the input checks and the summary of the batch run."""
 
-    def __init__(self, ds0, cfg, tmp: Path, *, start_s, end_s, gnss_raw, output_rate_hz, set_decimation,
+    def __init__(self, ds0, cfg, *, start_s, end_s, gnss_raw, output_rate_hz, set_decimation,
                  block_lines: int, progress=None, t0_exact: bool = False, count_cut_gnss: bool = True,
                  extra_checks=None):
         from .sanitize import DEFAULTS, _imu_report
 
-        self.ds0, self.cfg, self.tmp = ds0, cfg, tmp
+        self.ds0, self.cfg = ds0, cfg
         self.start_s, self.end_s, self.gnss_raw = start_s, end_s, gnss_raw
         # t0_exact: the initial state is at start_s itself (the CSV loader's), not at the first sample at or
         # after it (KF-GINS starttime); count_cut_gnss: the records outside (t0, last sample] are reported
@@ -886,7 +911,7 @@ class _BlockRun:
         rep = dict(self.imu_report, imu_samples_in=self.n_kept, imu_samples_out=self.n_kept)
         sol.summary["sanitize"] = {**rep, **self.gnss_rep}
         sol.summary["health"] = assess(sol, imu_t_end=self.last_kept, scan=self.health.scan(), n_rows=self.rows)
-        return StreamResult(solution=sol, dataset=ds, config=cfg, csv_tmp=self.tmp, rows=self.rows,
+        return StreamResult(solution=sol, dataset=ds, config=cfg, rows=self.rows,
                             samples=self.n_kept, blocks=n_blocks, timings=self.timings)
 
 
@@ -919,21 +944,45 @@ class _Background:
             raise exc
 
 
+def _temp_beside(dest: Path) -> Path:
+    """An empty temporary file beside ``dest``, named as :mod:`insnav._atomic` names them
+    (``.NAME.XXXXXXXX.part.SUFFIX``)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".part" + dest.suffix, dir=dest.parent)
+    os.close(fd)
+    return Path(tmp)
+
+
 class _Writer:
     """The CSV rows appended on a writer thread, one block behind the filter
     (``_core.write_table`` releases the GIL), so that formatting block i
     overlaps filtering block i + 1; at most one block waits (bounded memory).
-    :meth:`close` waits for the last write (and raises its error)."""
+    :meth:`close` waits for the last write (and raises its error).
 
-    def __init__(self, tmp, columns, precision, health):
-        self.tmp, self.columns, self.precision, self.health = str(tmp), columns, precision, health
+    ``files``: (temporary file, destination) of each file written, made at
+    construction; :meth:`discard` removes them (a failed run)."""
+
+    def __init__(self, out: Path, columns, precision, health, cfg=None):
+        self.out, self.columns, self.precision, self.health = Path(out), columns, precision, health
+        self.files: list[tuple[Path, Path]] = []
         self._pending = None  # the _Background write of the last block
         self._header_done = False
+        try:
+            self._make_files()
+        except BaseException:
+            self.discard()
+            raise
+
+    def _make_files(self) -> None:
+        self.tmp = self._temp(self.out)
+
+    def _temp(self, dest: Path) -> Path:
+        tmp = _temp_beside(dest)
+        self.files.append((tmp, dest))
+        return tmp
 
     def add(self, stream, n: int) -> None:
         """The last run_block's n rows: to degrees in place, the health scan, queued for the writer thread."""
         from ._assemble import nav_solution
-        from .solution import _selected
 
         # the engine has two row buffers and fills them in turn, one per call (rows or not): the write
         # queued at call i (buffer i % 2) must end before call i + 2, so every call waits for the last one
@@ -947,9 +996,15 @@ class _Writer:
             raise Fallback("a non-finite row (the batch path names it)", batch_names_it=True)
         self.health.add(sol.lat_deg, sol.lon_deg, sol.h_m, np.asarray(sol.v_n),
                         [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
-        cols = _selected(sol, self.columns)
+        cols = self._columns(sol, out)
         self._wait()
         self._pending = self._submit(cols)
+
+    def _columns(self, sol, out):
+        """What :meth:`_submit` writes of a block's rows: the selected columns (name, view, factor)."""
+        from .solution import _selected
+
+        return _selected(sol, self.columns)
 
     def _submit(self, cols) -> _Background:
         """The block's columns (name, view of the row buffer, factor) written on the writer thread."""
@@ -957,7 +1012,7 @@ class _Writer:
 
         dec = [CSV_DECIMALS[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
         header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
-        job = _Background(_core.write_table, self.tmp, header, [np.asarray(x, float) for _, x, _ in cols],
+        job = _Background(_core.write_table, str(self.tmp), header, [np.asarray(x, float) for _, x, _ in cols],
                           [float(f) for _, _, f in cols], dec, threads=threads(), append=self._header_done)
         self._header_done = True
         return job
@@ -976,6 +1031,11 @@ class _Writer:
         if self._pending is not None:
             self._pending.join()
 
+    def discard(self) -> None:
+        """Remove the temporary files (after :meth:`shutdown`; the destinations are not touched)."""
+        for tmp, _ in self.files:
+            tmp.unlink(missing_ok=True)
+
 
 class _NpzWriter(_Writer):
     """:class:`_Writer` for an ``.npz``: each block's columns appended to their
@@ -985,9 +1045,7 @@ class _NpzWriter(_Writer):
     whole-run ``Solution.save``), :meth:`shutdown` removes the scratch files
     (whatever happened)."""
 
-    def __init__(self, tmp, columns, precision, health):
-        super().__init__(tmp, columns, precision, health)
-        self.npz = None
+    npz = None
 
     def _submit(self, cols) -> _Background:
         from .._npz import NpzColumns
@@ -1016,6 +1074,124 @@ class _NpzWriter(_Writer):
             self.npz.discard()
 
 
+class _ParquetWriter(_Writer):
+    """:class:`_Writer` for a ``.parquet``: on the writer thread, each block's
+    columns are copied (times their unit factor, as ``Solution.save`` scales
+    them) into one row group's buffer of
+    :data:`~insnav.filters.solution.PARQUET_ROW_GROUP_ROWS` rows per column
+    (allocated once: about 20 MB with every column), and each full buffer is
+    written as one row group (``pyarrow.parquet.ParquetWriter``, which encodes
+    and compresses with the GIL released); :meth:`close` writes the last,
+    shorter group and the footer.  The whole-file writer cuts the same row
+    groups with the same schema (float64 columns, their names, no metadata of
+    ours) and options, so the file is ``Solution.save``'s byte for byte."""
+
+    pq = None
+
+    def _submit(self, cols) -> _Background:
+        return _Background(self._append, [(nm, x, float(f)) for nm, x, f in cols])
+
+    def _append(self, cols) -> None:
+        """(writer thread) The block's rows into the row-group buffer, each full buffer written."""
+        from .solution import PARQUET_DICTIONARY_PAGE_BYTES, PARQUET_ROW_GROUP_ROWS, _parquet
+
+        rows = PARQUET_ROW_GROUP_ROWS
+        if self.pq is None:
+            pa = _parquet()
+            self.schema = pa.schema([pa.field(nm, pa.float64()) for nm, _, _ in cols])
+            self.buf = np.empty((len(cols), rows))
+            self.fill = 0
+            self.pq = pa.parquet.ParquetWriter(str(self.tmp), self.schema,
+                                               dictionary_pagesize_limit=PARQUET_DICTIONARY_PAGE_BYTES)
+        n, a = len(cols[0][1]), 0
+        while a < n:
+            k = min(n - a, rows - self.fill)
+            for j, (_, x, f) in enumerate(cols):
+                dst = self.buf[j, self.fill:self.fill + k]
+                if f == 1.0:
+                    dst[:] = x[a:a + k]
+                else:  # the product Solution.save writes (np.multiply), bit for bit
+                    np.multiply(x[a:a + k], f, out=dst)
+            self.fill += k
+            a += k
+            if self.fill == rows:
+                self._flush()
+
+    def _flush(self) -> None:
+        from .solution import PARQUET_ROW_GROUP_ROWS, _parquet, parquet_table
+
+        if self.fill:
+            table = parquet_table(_parquet(), self.schema.names, [row[:self.fill] for row in self.buf])
+            self.pq.write_table(table, row_group_size=PARQUET_ROW_GROUP_ROWS)
+            self.fill = 0
+
+    def close(self) -> None:
+        """Wait for the last block, then write the last row group and the footer."""
+        self._wait()
+        if self.pq is None:
+            raise Fallback("no output row (the batch path names it)", batch_names_it=True)
+        self._flush()
+        self.pq.close()
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        if self.pq is not None and self.pq.is_open:  # a failed run: the file is removed, its handle closed
+            try:
+                self.pq.close()
+            except Exception:  # noqa: BLE001 - the run already failed; its error is the one reported
+                pass
+        self.buf = None
+
+
+class _KfginsWriter(_Writer):
+    """:class:`_Writer` for ``--out-format kfgins``: ``out`` is the folder, and
+    each block's rows are appended on the writer thread to the temporary
+    ``KF_GINS_Navresult.nav``, ``KF_GINS_IMU_ERR.txt`` and (with the run's
+    ``imu_error_sigmas``) ``KF_GINS_STD.txt`` beside their destinations, in
+    the columns, units and ``"%-15.9lf "`` text of the whole-file writer
+    (:func:`insnav.io.kfgins.kfgins_tables`, ``_core.write_table`` with the GIL
+    released), so the files are its files byte for byte."""
+
+    def __init__(self, out: Path, columns, precision, health, cfg=None):
+        self.layout = int(cfg.layout) if cfg is not None and cfg.imu_error_sigmas else None
+        super().__init__(out, columns, precision, health, cfg)
+
+    def _make_files(self) -> None:
+        from ..io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE
+
+        names = [KFGINS_NAV_FILE, KFGINS_IMU_ERR_FILE] + ([KFGINS_STD_FILE] if self.layout else [])
+        for name in names:
+            self._temp(self.out / name)
+
+    def _columns(self, sol, out):
+        from ..io.kfgins import kfgins_tables
+
+        if self.layout:  # as run_loose fills it: layout order [.. df_b dw_b (s_a s_g)] is the imu_err column order
+            sig = out["sigma"]
+            sol.sigma_imu_err = np.zeros((len(sig), 12))
+            sol.sigma_imu_err[:, :self.layout - 9] = sig[:, 9:self.layout]
+        return [cols for _, cols in kfgins_tables(sol)]
+
+    def _submit(self, tables) -> _Background:
+        job = _Background(self._write, tables, self._header_done)
+        self._header_done = True
+        return job
+
+    def _write(self, tables, append: bool) -> None:
+        """(writer thread) One block's rows appended to each file."""
+        from ..io.kfgins import KFGINS_DECIMALS, KFGINS_TEXT_FORMAT
+
+        for (tmp, _), cols in zip(self.files, tables):
+            _core.write_table(str(tmp), "", [np.asarray(x, float) for _, x, _ in cols], [float(f) for _, _, f in cols],
+                              [KFGINS_DECIMALS] * len(cols), threads=threads(), append=append, **KFGINS_TEXT_FORMAT)
+
+
+def _writer_class(out: Path, out_format: str):
+    if out_format == "kfgins":
+        return _KfginsWriter
+    return {".npz": _NpzWriter, ".parquet": _ParquetWriter}.get(Path(out).suffix.lower(), _Writer)
+
+
 #: the most IMU samples the alignment of a block-by-block ``--format csv`` run may need (about 87 min at
 #: 200 Hz, 50 MB): a later alignment makes the run take the whole-file path
 ALIGN_MAX_SAMPLES = 1 << 20
@@ -1038,7 +1214,7 @@ def csv_stream_unsupported(inp) -> str | None:
 
 def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, precision: str = "resolution",
                      output_rate_hz: float | None = None, block_lines: int | None = None, set_decimation=None,
-                     progress=None) -> StreamResult:
+                     progress=None, out_format: str = "insnav") -> StreamResult:
     """``insnav run --format csv`` block by block: the IMU CSV read, mapped
     (:func:`imu_csv_blocks`), filtered and written as :func:`stream_loose_csv`
     does for KF-GINS files, with the set-up of
@@ -1062,10 +1238,11 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
     imu_path : path
         The IMU CSV.
     out : Path
-        The solution file (CSV or npz) the temporary file is for.
+        The solution file (CSV, npz or Parquet) the temporary file is for, or
+        the KF-GINS layout's folder (``out_format`` kfgins).
     configure : callable
         ``RunConfig -> RunConfig``: the command line's settings over the loader's configuration.
-    columns, precision, output_rate_hz, block_lines, set_decimation, progress
+    columns, precision, output_rate_hz, block_lines, set_decimation, progress, out_format
         As :func:`stream_loose_csv`.
 
     Returns
@@ -1103,7 +1280,7 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
     def checks():
         input_checks(inp, whole[0].imu(imu_path), imu_path)
 
-    def prepare(tmp, blocks):
+    def prepare(blocks):
         head, done, want = [], False, 1
         while True:  # the alignment on the first blocks: as many as it reads
             while len(head) < want and not done:
@@ -1137,10 +1314,10 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
             cfg = configure(cfg)
         except ValueError as exc:
             raise Fallback(f"the configuration ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
-        why = stream_unsupported(cfg, out_suffix=Path(out).suffix)
+        why = stream_unsupported(cfg, out_suffix=Path(out).suffix, out_format=out_format)
         if why is not None:
             raise Fallback(why)
-        run = _BlockRun(ds0, cfg, tmp, start_s=t0, end_s=None, gnss_raw=inp.gnss_all, output_rate_hz=output_rate_hz,
+        run = _BlockRun(ds0, cfg, start_s=t0, end_s=None, gnss_raw=inp.gnss_all, output_rate_hz=output_rate_hz,
                         set_decimation=set_decimation, block_lines=block_lines, progress=progress, t0_exact=True,
                         count_cut_gnss=False, extra_checks=checks)
 
@@ -1153,4 +1330,4 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
 
     return _stream_to_file(out, lambda: imu_csv_blocks(imu_path, fmt, week=inp.week, t_offset_s=inp.offset,
                                                        block_lines=block_lines),
-                           prepare, columns, precision, imu_path)
+                           prepare, columns, precision, imu_path, out_format)

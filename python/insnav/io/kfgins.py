@@ -206,36 +206,42 @@ def write_kfgins_solution(folder, sol, week: int = 0) -> tuple[Path, ...]:
         The ``.nav`` and the IMU-error file (and the STD file when written).
     """
     from ..data.textio import write_text_columns
-    from ..units import RAD2DEG
+    from .._atomic import output_set
 
     folder = Path(folder)
+    with output_set():  # all or none of the files (older ones untouched on an error)
+        return tuple(write_text_columns(folder / name, "", cols, [KFGINS_DECIMALS] * len(cols), **KFGINS_TEXT_FORMAT)
+                     for name, cols in kfgins_tables(sol, week))
+
+
+#: KF-GINS's ``FileSaver`` text: ``"%-15.9lf "`` (src/fileio/filesaver.cc), as ``_core.write_table`` options
+KFGINS_TEXT_FORMAT = dict(sep=" ", width=15, trim_zeros=False, trailing_sep=True)
+KFGINS_DECIMALS = 9
+
+
+def kfgins_tables(sol, week: int = 0) -> list:
+    """The files of :func:`write_kfgins_solution` and their columns: ``[(file name,
+    [(column, array (N,), unit factor), ...]), ...]`` for ``KF_GINS_Navresult.nav``,
+    ``KF_GINS_IMU_ERR.txt`` and, when ``sol.sigma_imu_err`` is not None,
+    ``KF_GINS_STD.txt`` (the arrays are views of the solution's; the value
+    written is factor x array).  Shared by the whole-file writer and the
+    block-by-block one (:mod:`insnav.filters.stream`), whose files must be the same."""
+    from ..units import RAD2DEG
+
     n = len(sol.t)
     wk = np.full(n, float(week))
+    v_n = np.asarray(sol.v_n)
     nav = [("week", wk, 1.0), ("sow", sol.t, 1.0), ("lat", sol.lat_deg, 1.0), ("lon", sol.lon_deg, 1.0),
-           ("h", sol.h_m, 1.0)] + [(f"v{j}", np.asarray(sol.v_n)[:, j], 1.0) for j in range(3)] + \
+           ("h", sol.h_m, 1.0)] + [(f"v{j}", v_n[:, j], 1.0) for j in range(3)] + \
         [("roll", sol.roll_deg, 1.0), ("pitch", sol.pitch_deg, 1.0), ("yaw", sol.yaw_deg, 1.0)]
     gb, ab = np.asarray(sol.gyro_bias_rps), np.asarray(sol.acc_bias_mps2)
     gs, as_ = np.asarray(sol.gyro_scale), np.asarray(sol.acc_scale)
     err = [("sow", sol.t, 1.0)] + [("gb", gb[:, j], RAD2DEG * HOUR) for j in range(3)] + \
         [("ab", ab[:, j], 1.0 / MGAL) for j in range(3)] + [("gs", gs[:, j], 1.0 / PPM) for j in range(3)] + \
         [("as", as_[:, j], 1.0 / PPM) for j in range(3)]
-    fmt = dict(sep=" ", width=15, trim_zeros=False, trailing_sep=True)
-    from .._atomic import output_set
-
-    with output_set():  # all or none of the files (older ones untouched on an error)
-        p_nav = write_text_columns(folder / KFGINS_NAV_FILE, "", nav, [9] * len(nav), **fmt)
-        p_err = write_text_columns(folder / KFGINS_IMU_ERR_FILE, "", err, [9] * len(err), **fmt)
-        if getattr(sol, "sigma_imu_err", None) is None:
-            return p_nav, p_err
-        p_std = _write_std(folder, sol, fmt)
-    return p_nav, p_err, p_std
-
-
-def _write_std(folder: Path, sol, fmt: dict) -> Path:
-    """``KF_GINS_STD.txt`` of :func:`write_kfgins_solution`."""
-    from ..data.textio import write_text_columns
-    from ..units import RAD2DEG
-
+    tables = [(KFGINS_NAV_FILE, nav), (KFGINS_IMU_ERR_FILE, err)]
+    if getattr(sol, "sigma_imu_err", None) is None:
+        return tables
     se = np.asarray(sol.sigma_imu_err, float)
     sp, sv, sa = (np.asarray(x, float) for x in (sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg))
     std = [("sow", sol.t, 1.0)] + [(f"sp{j}", sp[:, j], 1.0) for j in range(3)] + \
@@ -243,7 +249,7 @@ def _write_std(folder: Path, sol, fmt: dict) -> Path:
         [(f"sgb{j}", se[:, 3 + j], RAD2DEG * HOUR) for j in range(3)] + \
         [(f"sab{j}", se[:, j], 1.0 / MGAL) for j in range(3)] + \
         [(f"sgs{j}", se[:, 9 + j], 1.0 / PPM) for j in range(3)] + [(f"sas{j}", se[:, 6 + j], 1.0 / PPM) for j in range(3)]
-    return write_text_columns(folder / KFGINS_STD_FILE, "", std, [9] * len(std), **fmt)
+    return tables + [(KFGINS_STD_FILE, std)]
 
 
 def _write(path, a, fmt):
