@@ -11,9 +11,10 @@ of CPU), so:
   the same template code at bounded dynamic sizes; the kernels run in the
   extension, i.e. in every Python filter test, in bench/, and here in
   cpp/tests/test_fixed_kernels.cpp, which switches them back on);
-* as 3 unity TUs and test_fixed_kernels.cpp alone (the tests of a group share one compilation of their common
-  Eigen and engine instantiations; cpp/tests/CMakeLists.txt has the per-TU CPU
-  measured, and what the rest goes to), one ctest entry per test_*.cpp still;
+* as 3 unity TUs and test_fixed_kernels.cpp alone (the tests of a group share
+  one compilation of their common Eigen and engine instantiations;
+  cpp/tests/CMakeLists.txt has the per-TU CPU measured, and what it goes to),
+  still one ctest entry per test_*.cpp;
 * with clang++ when present (as scripts/install.sh builds the extension);
 * scripts/test.sh starts it in the background (``python3 tests/_cpp_build.py
   --background``) before it builds the extension, so that the two builds and
