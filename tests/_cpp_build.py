@@ -11,6 +11,10 @@ of CPU), so:
   the same template code at bounded dynamic sizes; the kernels run in the
   extension, i.e. in every Python filter test, in bench/, and here in
   cpp/tests/test_fixed_kernels.cpp, which switches them back on);
+* as 3 unity TUs and test_fixed_kernels.cpp alone (the tests of a group share
+  one compilation of their common Eigen and engine instantiations;
+  cpp/tests/CMakeLists.txt has the per-TU CPU measured, and what it goes to),
+  still one ctest entry per test_*.cpp;
 * with clang++ when present (as scripts/install.sh builds the extension);
 * scripts/test.sh starts it in the background (``python3 tests/_cpp_build.py
   --background``) before it builds the extension, so that the two builds and
@@ -37,9 +41,10 @@ LOCK = REPO / "build" / "cpp-asan.lock"
 LOG = REPO / "build" / "cpp-asan.log"
 FLAGS = ("-DINSNAV_BUILD_EXAMPLES=ON", "-DINSNAV_SANITIZE=ON", "-DCMAKE_BUILD_TYPE=Release",
          "-DCMAKE_CXX_FLAGS_RELEASE=-O0 -DNDEBUG -DINSNAV_NO_FIXED_UPDATE_KERNELS",
-         # INSNAV_TEST_UNITY=1: the tests as a few unity TUs (cpp/tests/CMakeLists.txt: at least
-         # 23 % less compile CPU, up to 6.5 GB per compiler process)
-         f"-DINSNAV_TEST_UNITY={'ON' if os.environ.get('INSNAV_TEST_UNITY') == '1' else 'OFF'}")
+         # the tests as a few unity TUs (cpp/tests/CMakeLists.txt: 922 -> 791 s of
+         # compile CPU measured, up to 7 GB per compiler process);
+         # INSNAV_TEST_UNITY=0: one executable per test
+         f"-DINSNAV_TEST_UNITY={'OFF' if os.environ.get('INSNAV_TEST_UNITY') == '0' else 'ON'}")
 
 
 def compiler() -> str | None:
@@ -76,9 +81,12 @@ def build(log=None) -> subprocess.CompletedProcess:
 
 def ctest() -> str:
     """Run every C++ test (2 at a time); stdout + stderr."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     r = subprocess.run(["ctest", "--test-dir", str(BUILD), "-j2", "--output-on-failure"],
                        capture_output=True, text=True)
-    return r.stdout + r.stderr
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return r.stdout + r.stderr + f"[insnav] ctest: {cpu:.0f} s CPU\n"
 
 
 def main(argv: list[str]) -> int:
