@@ -11,10 +11,11 @@ of CPU), so:
   the same template code at bounded dynamic sizes; the kernels run in the
   extension, i.e. in every Python filter test, in bench/, and here in
   cpp/tests/test_fixed_kernels.cpp, which switches them back on);
-* as 3 unity TUs and test_fixed_kernels.cpp alone (the tests of a group share
-  one compilation of their common Eigen and engine instantiations;
-  cpp/tests/CMakeLists.txt has the per-TU CPU measured, and what it goes to),
-  still one ctest entry per test_*.cpp;
+* one executable per test by default; INSNAV_TEST_UNITY=1 builds them as 3 unity
+  TUs and test_fixed_kernels.cpp alone (the tests of a group share one
+  compilation of their common Eigen and engine instantiations: 14 % less CPU,
+  but up to 7 GB per compiler process; cpp/tests/CMakeLists.txt has the per-TU
+  CPU measured, and what it goes to), still one ctest entry per test_*.cpp;
 * with clang++ when present (as scripts/install.sh builds the extension);
 * scripts/test.sh starts it in the background (``python3 tests/_cpp_build.py
   --background``) before it builds the extension, so that the two builds and
@@ -41,10 +42,11 @@ LOCK = REPO / "build" / "cpp-asan.lock"
 LOG = REPO / "build" / "cpp-asan.log"
 FLAGS = ("-DINSNAV_BUILD_EXAMPLES=ON", "-DINSNAV_SANITIZE=ON", "-DCMAKE_BUILD_TYPE=Release",
          "-DCMAKE_CXX_FLAGS_RELEASE=-O0 -DNDEBUG -DINSNAV_NO_FIXED_UPDATE_KERNELS",
-         # the tests as a few unity TUs (cpp/tests/CMakeLists.txt: 922 -> 791 s of
-         # compile CPU measured, up to 7 GB per compiler process);
-         # INSNAV_TEST_UNITY=0: one executable per test
-         f"-DINSNAV_TEST_UNITY={'OFF' if os.environ.get('INSNAV_TEST_UNITY') == '0' else 'ON'}")
+         # INSNAV_TEST_UNITY=1: the tests as a few unity TUs (cpp/tests/CMakeLists.txt:
+         # 922 -> 791 s of compile CPU measured, but up to 7 GB per compiler process,
+         # beside the extension's unity TUs of up to 3.7 GB each in scripts/test.sh:
+         # opt-in, so that a 24 GB CI machine keeps its margin)
+         f"-DINSNAV_TEST_UNITY={'ON' if os.environ.get('INSNAV_TEST_UNITY') == '1' else 'OFF'}")
 
 
 def compiler() -> str | None:
