@@ -23,6 +23,7 @@
 #include "insnav/gnss/lambda.hpp"
 #include "insnav/gnss/rtk.hpp"
 #include "insnav/engine/rtk_ins_engine.hpp"
+#include "rtk_fixtures.hpp"
 #include "test_util.hpp"
 
 using namespace insnav;
@@ -30,56 +31,19 @@ using namespace insnav::gnss;
 
 namespace {
 
-constexpr double kL1 = kCLight / 1575.42e6, kL2 = kCLight / 1227.60e6;
-
-double range_sagnac(const Vec3& rs, const Vec3& r) {
-  return (rs - r).norm() + kOmegaE * (rs.x() * r.y() - rs.y() * r.x()) / kCLight;
-}
-
-std::vector<double> rows_for(const Vec3& r, const std::vector<Vec3>& sats, const std::vector<double>& N1,
-                             const std::vector<double>& N2, double clk_m, const std::vector<double>* iono_l1_m = nullptr) {
-  std::vector<double> rows(sats.size() * RtkRow::kCols, NAN);
-  for (size_t k = 0; k < sats.size(); ++k) {
-    double* w = rows.data() + k * RtkRow::kCols;
-    const double rho = range_sagnac(sats[k], r) + clk_m;
-    w[RtkRow::kSat] = static_cast<double>(k + 1);
-    w[RtkRow::kSys] = kGps;
-    const double lam[2] = {kL1, kL2};
-    const double N[2] = {N1[k], N2[k]};
-    for (int f = 0; f < 2; ++f) {
-      double* q = w + RtkRow::kFreq0 + RtkRow::kPerFreq * f;
-      const double I = iono_l1_m ? (*iono_l1_m)[k] * (lam[f] / kL1) * (lam[f] / kL1) : 0.0;  // (f_1 / f)^2 I
-      q[0] = rho + I;
-      q[1] = (rho - I) / lam[f] + N[f];
-      q[2] = 0.0;
-      q[3] = 0.0;
-      q[4] = lam[f];
-    }
-    for (int i = 0; i < 3; ++i) w[RtkRow::kSatPos + i] = sats[k](i);
-    w[RtkRow::kSatClock] = 0.0;
-  }
-  return rows;
-}
+using test_rtk::kL1;
+using test_rtk::kL2;
+using test_rtk::rows_for;
 
 }  // namespace
 
 int main() {
-  const double lat = 0.84, lon = 0.20;
-  const Vec3 r_b = wgs84::geodetic_to_ecef(lat, lon, 300.0);
-  const Mat3 C = wgs84::C_en(lat, lon);
-  const Vec3 r_r = r_b + C * Vec3(40.0, -25.0, 3.0);
-  std::vector<Vec3> sats;
-  const double els[8] = {80, 60, 45, 35, 28, 50, 40, 65}, azs[8] = {0, 50, 100, 150, 200, 250, 300, 330};
-  for (int k = 0; k < 8; ++k) {
-    const double el = els[k] * M_PI / 180.0, az = azs[k] * M_PI / 180.0;
-    const Vec3 u = C * Vec3(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), -std::sin(el));
-    const double b = 2.0 * r_b.dot(u), c = r_b.squaredNorm() - 26560e3 * 26560e3;
-    sats.push_back(r_b + u * ((-b + std::sqrt(b * b - 4.0 * c)) / 2.0));
-  }
-  std::mt19937 rng(5);
-  std::uniform_int_distribution<int> ui(-100000, 100000);
-  std::vector<double> N1r(8), N2r(8), N1b(8), N2b(8);
-  for (int k = 0; k < 8; ++k) { N1r[k] = ui(rng); N2r[k] = ui(rng); N1b[k] = ui(rng); N2b[k] = ui(rng); }
+  const test_rtk::StaticScene sc = test_rtk::static_scene();
+  const Mat3& C = sc.C_en;
+  const Vec3& r_b = sc.r_b;
+  const Vec3& r_r = sc.r_r;
+  const std::vector<Vec3>& sats = sc.sats;
+  const std::vector<double>&N1r = sc.N1r, &N2r = sc.N2r, &N1b = sc.N1b, &N2b = sc.N2b;
   RtkOptions o;
   o.tropo_model = false;
   o.mode = RtkMode::kKinematic;
