@@ -153,7 +153,12 @@ def test_ctrl_c_swallowed_inside_a_command_still_exits_130(monkeypatch, tmp_path
         return out
 
     monkeypatch.setattr(rep, "report", report)
-    assert cli.main(["report", str(sol)]) == 130
+    # Python's own Ctrl-C handler, whatever the runner inherited (_sigint_default)
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert cli.main(["report", str(sol)]) == 130
+    finally:
+        signal.signal(signal.SIGINT, inherited)
     assert capsys.readouterr().err.strip().splitlines() == ["insnav report: interrupted"]
 
 
@@ -177,6 +182,7 @@ def test_ctrl_c_at_startup_or_exit_of_python_m_insnav(when):
                 "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(1.0)))\n"
                 "sys.argv = ['insnav', 'scenarios']\n"
                 "runpy.run_module('insnav', run_name='__main__')\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       preexec_fn=_sigint_default)
     assert r.returncode == 130, (r.stdout, r.stderr)
     assert r.stderr.strip().splitlines()[-1] == "insnav: interrupted" and "Traceback" not in r.stderr
