@@ -42,16 +42,24 @@ def _run(d, out, *extra):
     return rc, so.replace(str(out), "OUT"), se.replace(str(out), "OUT")
 
 
+def streamed_and_whole(run, d, a, b, *extra):
+    """`run` (a command-line runner of this file or test_stream_csv) block by block to `a` and
+    whole-file to `b`: both succeed, the stream really ran (no fallback note), the same stdout;
+    their stderr texts."""
+    rca, outa, erra = run(d, a, "--stream", "on", *extra)
+    rcb, outb, errb = run(d, b, "--stream", "off", *extra)
+    assert (rca, rcb) == (0, 0), (erra, errb)
+    assert "note:" not in erra  # the stream ran, not the whole-file fallback
+    assert outa == outb
+    return erra, errb
+
+
 @pytest.mark.parametrize("extra", [(), ("--output-rate", "10"), ("--columns", "nav,sigma", "--filter", "rbukf")])
 def test_block_by_block_run_writes_the_whole_file_runs_bytes(kf_short, tmp_path, monkeypatch, extra):
     # blocks of 4093 lines: boundaries fall inside decimation windows, GNSS intervals and the start time
     monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
     a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
-    rca, outa, erra = _run(kf_short, a, "--stream", "on", *extra)
-    rcb, outb, errb = _run(kf_short, b, "--stream", "off", *extra)
-    assert (rca, rcb) == (0, 0), (erra, errb)
-    assert "note:" not in erra  # the stream ran, not the whole-file fallback
-    assert outa == outb
+    streamed_and_whole(_run, kf_short, a, b, *extra)
     for suffix in ("", ".innovations.csv", ".config.toml"):
         assert (a.parent / (a.name + suffix)).read_bytes() == (b.parent / (b.name + suffix)).read_bytes(), suffix
     rows = a.read_text().count("\n") - 1

@@ -15,6 +15,7 @@ import pytest
 import insnav.filters.stream as stream
 
 from test_stream import _run as _run_kfgins
+from test_stream import streamed_and_whole
 from test_stream import _with_line, kf_short  # noqa: F401 - the fixture
 from test_stream_csv import BLOCK, car_files  # noqa: F401 - the fixture
 from test_stream_csv import _run as _run_csv
@@ -48,11 +49,7 @@ def _same_sidecars(a, b):
 def test_streamed_npz_equals_the_whole_file_runs_npz(kf_short, tmp_path, monkeypatch, extra):  # noqa: F811
     monkeypatch.setattr(stream, "BLOCK_LINES", 4093)  # boundaries inside decimation windows and GNSS intervals
     a, b = tmp_path / "a" / "sol.npz", tmp_path / "b" / "sol.npz"
-    rca, outa, erra = _run_kfgins(kf_short, a, "--stream", "on", *extra)
-    rcb, outb, errb = _run_kfgins(kf_short, b, "--stream", "off", *extra)
-    assert (rca, rcb) == (0, 0), (erra, errb)
-    assert "note:" not in erra  # the stream ran, not the whole-file fallback
-    assert outa == outb
+    streamed_and_whole(_run_kfgins, kf_short, a, b, *extra)
     cols = _same_npz(a, b)
     _same_sidecars(a, b)
     # the samples after t0 (10 Hz: every 20th of 200 Hz; 20 Hz: every 10th), the last row too
@@ -69,11 +66,8 @@ def test_streamed_npz_of_the_generic_csv_equals_the_whole_file_runs(car_files, t
     monkeypatch.setattr(stream, "BLOCK_LINES", BLOCK)
     d = car_files[1]
     a, b = tmp_path / "a" / "sol.npz", tmp_path / "b" / "sol.npz"
-    rca, outa, erra = _run_csv(d, a, "--stream", "on", *extra)
-    rcb, outb, errb = _run_csv(d, b, "--stream", "off", *extra)
-    assert (rca, rcb) == (0, 0), (erra, errb)
-    assert "note:" not in erra
-    assert outa == outb and erra == errb
+    erra, errb = streamed_and_whole(_run_csv, d, a, b, *extra)
+    assert erra == errb
     cols = _same_npz(a, b)
     _same_sidecars(a, b)
     assert len(cols["t_s"]) > 1000 if not extra else 100 < len(cols["t_s"]) < 1000

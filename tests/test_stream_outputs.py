@@ -24,6 +24,7 @@ from insnav.io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FI
 from conftest import require_module
 from test_stream import LINES, kf_short  # noqa: F401 - the fixture
 from test_stream import _run as _run_kfgins
+from test_stream import streamed_and_whole
 from test_stream_csv import BLOCK, car_files  # noqa: F401 - the fixture
 from test_stream_csv import _run as _run_csv
 
@@ -58,11 +59,7 @@ def test_streamed_parquet_is_the_whole_file_runs_parquet(pq, kf_short, tmp_path,
     monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
     monkeypatch.setattr(solution, "PARQUET_ROW_GROUP_ROWS", group)
     a, b = tmp_path / "a" / "sol.parquet", tmp_path / "b" / "sol.parquet"
-    rca, outa, erra = _run_kfgins(kf_short, a, "--stream", "on", *extra)
-    rcb, outb, errb = _run_kfgins(kf_short, b, "--stream", "off", *extra)
-    assert (rca, rcb) == (0, 0), (erra, errb)
-    assert "note:" not in erra  # the stream ran, not the whole-file fallback
-    assert outa == outb
+    streamed_and_whole(_run_kfgins, kf_short, a, b, *extra)
     cols = _same_parquet(pq, a, b)
     for suffix in SIDECARS:
         assert (a.parent / (a.name + suffix)).read_bytes() == (b.parent / (b.name + suffix)).read_bytes(), suffix
@@ -82,10 +79,8 @@ def test_streamed_parquet_of_the_generic_csv_is_the_whole_file_runs(pq, car_file
     monkeypatch.setattr(solution, "PARQUET_ROW_GROUP_ROWS", 3000)
     d = car_files[1]
     a, b = tmp_path / "a" / "sol.parquet", tmp_path / "b" / "sol.parquet"
-    rca, outa, erra = _run_csv(d, a, "--stream", "on")
-    rcb, outb, errb = _run_csv(d, b, "--stream", "off")
-    assert (rca, rcb) == (0, 0), (erra, errb)
-    assert "note:" not in erra and (outa, erra) == (outb, errb)
+    erra, errb = streamed_and_whole(_run_csv, d, a, b)
+    assert erra == errb
     cols = _same_parquet(pq, a, b)
     assert len(cols["t_s"]) > 10_000 and pq.ParquetFile(a).metadata.num_row_groups >= 4
 
@@ -102,11 +97,7 @@ def _same_kfgins(a, b, std=True):
 def test_streamed_kfgins_layout_is_the_whole_file_writers(kf_short, tmp_path, monkeypatch, extra):  # noqa: F811
     monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
     a, b = tmp_path / "a" / "kf", tmp_path / "b" / "kf"
-    rca, outa, erra = _run_kfgins(kf_short, a, "--stream", "on", "--out-format", "kfgins", *extra)
-    rcb, outb, errb = _run_kfgins(kf_short, b, "--stream", "off", "--out-format", "kfgins", *extra)
-    assert (rca, rcb) == (0, 0), (erra, errb)
-    assert "note:" not in erra
-    assert outa == outb
+    streamed_and_whole(_run_kfgins, kf_short, a, b, "--out-format", "kfgins", *extra)
     tables = _same_kfgins(a, b)
     dec = {"10": 20, "20": 10}[extra[extra.index("--output-rate") + 1]] if "--output-rate" in extra else 1
     nav, err, std = (tables[n] for n in KFGINS_FILES)
@@ -120,10 +111,8 @@ def test_streamed_kfgins_layout_of_a_15_state_csv_run(car_files, tmp_path, monke
     monkeypatch.setattr(stream, "BLOCK_LINES", BLOCK)
     d = car_files[1]
     a, b = tmp_path / "a" / "kf", tmp_path / "b" / "kf"
-    rca, outa, erra = _run_csv(d, a, "--stream", "on", "--out-format", "kfgins", "--output-rate", "20")
-    rcb, outb, errb = _run_csv(d, b, "--stream", "off", "--out-format", "kfgins", "--output-rate", "20")
-    assert (rca, rcb) == (0, 0), (erra, errb)
-    assert "note:" not in erra and (outa, erra) == (outb, errb)
+    erra, errb = streamed_and_whole(_run_csv, d, a, b, "--out-format", "kfgins", "--output-rate", "20")
+    assert erra == errb
     std = _same_kfgins(a, b)[KFGINS_STD_FILE]
     assert len(std) > 500
     assert np.all(std[:, 10:16] > 0) and np.all(std[:, 16:] == 0)  # 15 states: no scale-factor states
