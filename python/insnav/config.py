@@ -672,6 +672,21 @@ class RunConfig:
         vertical error is larger: no satellite below the horizon, VDOP >
         HDOP; Misra & Enge 2006, *Global Positioning System*, on DOP);
         ``insnav tune`` estimates it (``gnss_pos_v``).  Tight runs: must be 1.
+    gnss_pos_sigma_per_speed_s, gnss_vel_sigma_per_speed : float
+        Loose runs: a motion-dependent term of the GNSS sigmas, added in
+        quadrature to the data's (scaled) sigma of every axis of each fix,
+        ``sigma^2 = (scale sigma_data)^2 + (k |v_h|)^2`` with ``|v_h|`` the
+        fix's own horizontal speed [m/s] (``k`` in s for the position rows,
+        dimensionless for the velocity rows; default 0: none).  A hand-held or
+        body-worn receiver's fixes are as good as its own sigmas say while it
+        stands, and worse while it moves (gait and hand motion the receiver's
+        solution smooths and the INS-to-fix time alignment turns into errors
+        proportional to the motion; Groves 2013, *Principles of GNSS, Inertial,
+        and Multisensor Integrated Navigation Systems*, 2nd ed., sec. 14.3.2
+        on measurement-noise models that depend on the host's dynamics): a
+        constant floor describes one of the two.  ``insnav tune`` estimates
+        the factors ``gnss_pos_speed`` and ``gnss_vel_speed`` on them when
+        they are > 0.  Tight runs: must be 0.
     pr_gm_sigma_m, pr_gm_tau_s, pr_gm_max_gap_s : float
         Tight EKF: time-correlated pseudorange errors (multipath, ionosphere
         and troposphere residuals) as one first-order Gauss-Markov state per
@@ -759,6 +774,8 @@ class RunConfig:
     gnss_pos_sigma_scale: float = 1.0
     gnss_vel_sigma_scale: float = 1.0
     gnss_pos_v_sigma_scale: float = 1.0
+    gnss_pos_sigma_per_speed_s: float = 0.0
+    gnss_vel_sigma_per_speed: float = 0.0
     pr_gm_sigma_m: float = 0.0
     pr_gm_tau_s: float = 60.0
     pr_gm_max_gap_s: float = 10.0
@@ -814,6 +831,14 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not (math.isfinite(v) and v > 0):
                 bad(key, v, "a finite number > 0 (factor on the data's GNSS sigmas)")
+        for key in ("gnss_pos_sigma_per_speed_s", "gnss_vel_sigma_per_speed"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not (math.isfinite(v) and v >= 0):
+                bad(key, v, "a finite number >= 0 (the GNSS sigma's term per unit of the fix's horizontal speed; "
+                    "0: none)")
+            if v != 0.0 and self.coupling != "loose":
+                bad(key, v, f"0 with {self.coupling} coupling (it adds to the sigmas of loose fixes)")
         for key, low in (("pr_gm_sigma_m", 0.0), ("pr_gm_tau_s", None), ("pr_gm_max_gap_s", None)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \

@@ -51,7 +51,8 @@ from ..config import ConfigError, ImuNoise, RunConfig
 
 __all__ = ["PARAMETERS", "TuneResult", "innovation_log_likelihood", "solution_log_likelihood", "nelder_mead_log",
            "scaled_config", "default_parameters", "tune", "holdout_report", "innovation_lag1", "tuned_toml_dict",
-           "split_time", "LOG_SCALE_BOUND", "ReferenceModel", "reference_errors"]
+           "split_time", "LOG_SCALE_BOUND", "ReferenceModel", "reference_errors", "SPLITS", "block_intervals",
+           "in_intervals"]
 
 LOG_2PI = math.log(2.0 * math.pi)
 #: each ln s_j is kept within +-this (scale factors 1e-3 .. 1e3)
@@ -69,6 +70,10 @@ PARAMETERS = {
     "gnss_pos": "GNSS sigmas of the data: loose position, tight pseudorange (gnss_pos_sigma_scale)",
     "gnss_vel": "GNSS sigmas of the data: loose velocity, tight pseudorange rate (gnss_vel_sigma_scale)",
     "gnss_pos_v": "loose only: the vertical position sigma, on top of gnss_pos (gnss_pos_v_sigma_scale)",
+    "gnss_pos_speed": "loose only: the motion-dependent term of the position sigma, per unit of the fix's speed "
+                      "(gnss_pos_sigma_per_speed_s; > 0 in the base settings)",
+    "gnss_vel_speed": "loose only: the motion-dependent term of the velocity sigma (gnss_vel_sigma_per_speed; > 0 "
+                      "in the base settings)",
     "nhc": "non-holonomic constraint sigma ([constraints] sigma_nhc_mps)",
     "odo": "odometer speed sigma ([constraints] sigma_odo_mps)",
     "zupt": "zero-velocity and zero-angular-rate sigmas ([constraints] sigma_zupt_mps, sigma_zaru_dph)",
@@ -136,10 +141,12 @@ def _caps(rows) -> np.ndarray:
     return out
 
 
-def solution_log_likelihood(sol, t_from=-np.inf, t_to=np.inf, trim: bool = True) -> tuple[float, int]:
+def solution_log_likelihood(sol, t_from=-np.inf, t_to=np.inf, trim: bool = True,
+                            intervals=None) -> tuple[float, int]:
     """(ln L, records) of a run's innovations: the GNSS records with an
     innovation covariance (applied or rejected by the gate) with time of
-    validity in [t_from, t_to), and the vehicle-constraint events likewise.
+    validity in [t_from, t_to), and the vehicle-constraint events likewise;
+    ``intervals`` ([(a, b), ...] [s], optional): only those inside one of them.
 
     ``trim``: Huber's loss beyond the chi-square 1 - 1e-4 quantile of the record's rows
     (:func:`innovation_log_likelihood`).
@@ -156,6 +163,8 @@ def solution_log_likelihood(sol, t_from=-np.inf, t_to=np.inf, trim: bool = True)
     for t, st, nis, ld, rows in streams:
         t, st = np.asarray(t, float), np.asarray(st)
         keep = (t >= t_from) & (t < t_to) & ((st == RecordStatus.APPLIED) | (st == RecordStatus.REJECTED_BY_GATE))
+        if intervals is not None:
+            keep &= in_intervals(t, intervals)
         if not keep.any():
             continue
         r = rows[keep]
@@ -238,7 +247,8 @@ def nelder_mead_log(fun, x0, step=math.log(3.0), *, max_evals: int = 120, xtol: 
 
 
 #: the groups of the coarse first stage of the search (one common factor each)
-GROUPS = (("gyro_arw", "acc_vrw", "gyro_bias", "acc_bias"), ("gnss_pos", "gnss_vel", "gnss_pos_v"),
+GROUPS = (("gyro_arw", "acc_vrw", "gyro_bias", "acc_bias"),
+          ("gnss_pos", "gnss_vel", "gnss_pos_v", "gnss_pos_speed", "gnss_vel_speed"),
           ("nhc", "odo", "zupt"))
 
 
@@ -297,7 +307,9 @@ def base_noise(dataset, cfg: RunConfig) -> ImuNoise:
 def default_parameters(dataset, cfg: RunConfig) -> list[str]:
     """The factors tuned by default: the four IMU terms, the GNSS position (pseudorange)
     sigma, the velocity (rate) sigma when the data have it, loose with position
-    rows the vertical position sigma (``gnss_pos_v``), the sigmas of the
+    rows the vertical position sigma (``gnss_pos_v``) and, where the base
+    settings have them (> 0), the motion-dependent terms of the position and
+    velocity sigmas (``gnss_pos_speed``, ``gnss_vel_speed``), the sigmas of the
     constraints in use, and for a tight run with Gauss-Markov pseudorange
     states (``pr_gm_sigma_m > 0``) their sigma and correlation time."""
     names = ["gyro_arw", "acc_vrw", "gyro_bias", "acc_bias", "gnss_pos"]
@@ -305,6 +317,10 @@ def default_parameters(dataset, cfg: RunConfig) -> list[str]:
         names.append("gnss_vel")
     if cfg.coupling == "loose" and cfg.use_position:
         names.append("gnss_pos_v")
+        if cfg.gnss_pos_sigma_per_speed_s > 0:
+            names.append("gnss_pos_speed")
+    if cfg.coupling == "loose" and "gnss_vel" in names and cfg.gnss_vel_sigma_per_speed > 0:
+        names.append("gnss_vel_speed")
     names += [c for c in ("nhc", "odo", "zupt") if c in cfg.constraints.use]
     if cfg.coupling == "tight" and cfg.pr_gm_sigma_m > 0:
         names += ["pr_gm_sigma", "pr_gm_tau"]
@@ -347,6 +363,10 @@ def scaled_config(cfg: RunConfig, noise: ImuNoise, scales: dict) -> RunConfig:
         c.gnss_vel_sigma_scale = float(cfg.gnss_vel_sigma_scale * s("gnss_vel"))
     if "gnss_pos_v" in scales:
         c.gnss_pos_v_sigma_scale = float(cfg.gnss_pos_v_sigma_scale * s("gnss_pos_v"))
+    if "gnss_pos_speed" in scales:
+        c.gnss_pos_sigma_per_speed_s = float(cfg.gnss_pos_sigma_per_speed_s * s("gnss_pos_speed"))
+    if "gnss_vel_speed" in scales:
+        c.gnss_vel_sigma_per_speed = float(cfg.gnss_vel_sigma_per_speed * s("gnss_vel_speed"))
     k = c.constraints
     if "nhc" in scales:
         k.sigma_nhc_mps = float(cfg.constraints.sigma_nhc_mps * s("nhc"))
@@ -380,6 +400,52 @@ def split_time(dataset, holdout: float) -> float:
     if t.size < 2:
         raise ConfigError("the dataset has fewer than 2 IMU samples")
     return float(t[-1]) if holdout == 0 else float(t[0] + (1.0 - holdout) * (t[-1] - t[0]))
+
+
+#: the ways the data are split into a tuning and a held-out part (:func:`tune`'s ``split``)
+SPLITS = ("tail", "blocks")
+
+
+def block_intervals(dataset, holdout: float, block_s: float) -> tuple[list, list]:
+    """Interleaved tuning and held-out intervals [s] of ``split = "blocks"``:
+    the IMU span cut into consecutive blocks of ``block_s`` seconds (the last
+    one shorter), the first ``1 - holdout`` of each block for the tuning, the
+    rest held out (blocked cross-validation of a time series: Snijders 1988,
+    in *On Model Uncertainty and its Statistical Implications*, pp. 56-69;
+    Bergmeir & Benitez 2012, Inf. Sci. 191).  Every kind of segment longer
+    than a block (a walk's standstill and its walking) then has a share in
+    both parts, which the tail split does not give when the data end with a
+    segment of a kind they did not contain before.
+
+    Returns
+    -------
+    (tuning, heldout) : lists of (t_start, t_end) [s], half-open [a, b)
+    """
+    split_time(dataset, holdout)  # the same checks of holdout
+    if isinstance(block_s, bool) or not isinstance(block_s, (int, float)) or not (math.isfinite(block_s)
+                                                                                  and block_s > 0):
+        raise ConfigError(f"block_s {block_s!r}: expected a block length > 0 [s]")
+    t = np.asarray(dataset.imu.t, float)
+    t0, t1 = float(t[0]), float(t[-1])
+    tun, held = [], []
+    a = t0
+    while a < t1:
+        b = min(a + float(block_s), t1)
+        m = a + (1.0 - holdout) * (b - a)
+        tun.append((a, m))
+        if holdout > 0:
+            held.append((m, b if b < t1 else math.inf))
+        a = b
+    return tun, held
+
+
+def in_intervals(t, intervals) -> np.ndarray:
+    """Boolean mask of the times ``t`` inside any of the half-open ``intervals`` [(a, b), ...]."""
+    t = np.asarray(t, float)
+    m = np.zeros(t.shape, bool)
+    for a, b in intervals:
+        m |= (t >= a) & (t < b)
+    return m
 
 
 def _cut(dataset, t_end: float):
@@ -434,11 +500,16 @@ class TuneResult:
     t_split: float
     holdout: float
     history: list = field(default_factory=list, repr=False)
+    #: ``split`` of :func:`tune`, and the held-out intervals [(a, b), ...] [s] of the first dataset
+    #: (tail: one, [t_split, inf)); the tuning intervals likewise
+    split: str = "tail"
+    heldout: list = field(default_factory=list)
+    tuning: list = field(default_factory=list)
 
 
 def tune(dataset, config=None, *, filter: str | None = None, coupling: str | None = None, params=None,
          holdout: float = 0.3, max_runs: int = 80, start=None, xtol: float = 0.01, step: float = math.log(3.0),
-         progress=None) -> TuneResult:
+         progress=None, split: str = "tail", block_s: float = 20.0) -> TuneResult:
     """Tune the noise scale factors of a loose or tight EKF / RB-UKF run by
     maximising the innovation log-likelihood over the first ``1 - holdout``
     of the data (module docstring).
@@ -468,6 +539,16 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         Initial simplex step in ln s (ln 3).
     progress : callable, optional
         Called with (run, scales, ln L) after every run.
+    split : {'tail', 'blocks'}
+        ``tail``: the last ``holdout`` of the IMU span is held out and the
+        tuning runs end at the split (the IMU cut there).  ``blocks``:
+        interleaved blocks (:func:`block_intervals`, ``block_s`` long, the
+        last ``holdout`` of each held out): the tuning runs go over all the
+        data, every record applied as in use, and ln L sums only the records
+        of the tuning intervals (the held-out records' innovations, and any
+        reference, stay out of the objective).
+    block_s : float
+        Block length [s] of ``split = "blocks"``.
 
     Returns
     -------
@@ -493,6 +574,9 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     if not datasets:
         raise ConfigError("no dataset to tune on")
     splits = [split_time(d, holdout) for d in datasets]
+    if split not in SPLITS:
+        raise ConfigError(f"split {split!r}: expected one of {', '.join(SPLITS)}")
+    blocks = [block_intervals(d, holdout, block_s) for d in datasets] if split == "blocks" else None
     names = list(params) if params is not None else default_parameters(datasets[0], cfg)
     bad = [p for p in names if p not in PARAMETERS]
     if bad:
@@ -502,6 +586,10 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     if "gnss_pos_v" in names and cfg.coupling != "loose":
         raise ConfigError(f"tuning parameter 'gnss_pos_v' scales the vertical sigma of loose position fixes; "
                           f"not with {cfg.coupling} coupling")
+    for c, key in (("gnss_pos_speed", "gnss_pos_sigma_per_speed_s"), ("gnss_vel_speed", "gnss_vel_sigma_per_speed")):
+        if c in names and not (cfg.coupling == "loose" and getattr(cfg, key) > 0):
+            raise ConfigError(f"tuning parameter {c!r} scales {key}: it needs loose coupling and {key} > 0 in the "
+                              "base settings (a factor on 0 stays 0)")
     for c in ("nhc", "odo", "zupt"):
         if c in names and c not in cfg.constraints.use:
             raise ConfigError(f"tuning parameter {c!r} needs the {c} constraint in use (--constraints / "
@@ -519,7 +607,7 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
 
     datasets = [sanitize_dataset(d, {**cfg.sanitize} or True)[0] for d in datasets]
     noise = base_noise(datasets[0], cfg)
-    segs = [_cut(d, t) for d, t in zip(datasets, splits)]
+    segs = [_cut(d, t) for d, t in zip(datasets, splits)] if blocks is None else datasets
     spec = filter_spec(cfg.filter)
     options = spec.options_class(cfg.coupling)(**cfg.options)  # the config's [options], as insnav.run
     seg = segs[0]
@@ -533,13 +621,16 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         if c.coupling == "tight":
             c.robust = _plain_robust(c.robust)
         ll, n = 0.0, 0
-        for sg, ts in zip(segs, splits):
+        for i, (sg, ts) in enumerate(zip(segs, splits)):
             try:
                 sol = spec.run(c.coupling, sg, c, options)
             except (ValueError, FloatingPointError, RuntimeError):
                 ll, n = -math.inf, 0  # a setting the filter cannot run with (e.g. a covariance gone non-finite)
                 break
-            lk, nk = solution_log_likelihood(sol, t_to=ts + 1e-9)
+            if blocks is None:
+                lk, nk = solution_log_likelihood(sol, t_to=ts + 1e-9)
+            else:
+                lk, nk = solution_log_likelihood(sol, intervals=blocks[i][0])
             ll, n = ll + lk, n + nk
         history.append((dict(scales), ll, n))
         if progress is not None:
@@ -557,7 +648,7 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     best_scales, ll_best, n_best = max(history, key=lambda h: h[1])
     if not math.isfinite(ll_best) or n_best == 0:
         raise ConfigError("insnav tune: no GNSS record with an innovation covariance in the tuning segment "
-                          f"(before t = {splits[0]:.3f} s)")
+                          + (f"(before t = {splits[0]:.3f} s)" if blocks is None else "(its blocks)"))
     tuned = scaled_config(cfg, noise, best_scales)
     if tuned.coupling == "tight":  # run as tuned (_plain_robust)
         tuned.robust = _plain_robust(tuned.robust)
@@ -565,16 +656,20 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     return TuneResult(names=names, scales=best_scales, base=base, tuned=tuned, log_likelihood_base=ll_base,
                       log_likelihood_tuned=ll_best, records=n_best, runs=len(history),
                       seconds=time.perf_counter() - t_start,
-                      t_split=splits[0] if len(splits) == 1 else tuple(splits), holdout=float(holdout), history=history)
+                      t_split=splits[0] if len(splits) == 1 else tuple(splits), holdout=float(holdout), history=history,
+                      split=split, heldout=[(splits[0], math.inf)] if blocks is None else blocks[0][1],
+                      tuning=[(-math.inf, splits[0])] if blocks is None else blocks[0][0])
 
 
 # --------------------------------------------------------------------------- the report
 
-def innovation_lag1(sol, t_from: float = -np.inf, t_to: float = np.inf) -> tuple[float, float]:
+def innovation_lag1(sol, t_from: float = -np.inf, t_to: float = np.inf, intervals=None) -> tuple[float, float]:
     """Lag-1 autocorrelation of the innovations of the applied GNSS records in
     [t_from, t_to): (position or pseudorange rows, velocity or pseudorange-rate
     rows), each the mean over the sequences (loose: the N, E, D components;
     tight: one sequence per satellite) weighted by their pairs; NaN without one.
+    ``intervals`` ([(a, b), ...] [s]): one sequence per interval and component
+    (no pair across two intervals).
 
     The innovations of a filter whose model is right are white (Kailath 1968;
     Mehra 1970, Sec. III, the basis of its adaptive tuning): about 0, within
@@ -590,24 +685,26 @@ def innovation_lag1(sol, t_from: float = -np.inf, t_to: float = np.inf) -> tuple
     inn = np.asarray(getattr(sol, "innovation", np.zeros((0, 6))), float)
     if inn.ndim != 2 or not t.size:
         return (math.nan, math.nan)
-    ap = (np.asarray(sol.gnss_status) == RecordStatus.APPLIED) & (t >= t_from) & (t < t_to)
+    ap_all = (np.asarray(sol.gnss_status) == RecordStatus.APPLIED) & (t >= t_from) & (t < t_to)
     seqs = ([], [])
     inputs = getattr(sol, "inputs", None)
-    if inputs is not None and inn.shape == (len(inputs.prn), 2):  # tight: rows per satellite
-        start = np.asarray(inputs.epoch_start)
-        epoch = np.repeat(np.arange(len(start) - 1), np.diff(start))
-        ep_t = np.asarray(inputs.epoch_t, float)
-        # epochs of the applied records (gnss_t: one record per epoch)
-        ok_t = set(np.round(t[ap], 6))
-        keep = np.array([round(float(x), 6) in ok_t for x in ep_t])[epoch]
-        prn = np.asarray(inputs.prn)
-        for p in np.unique(prn):
-            m = keep & (prn == p)
-            for c in (0, 1):
-                seqs[c].append(inn[m, c])
-    elif inn.shape[0] == t.size and inn.shape[1] >= 6:
-        for c in range(6):
-            seqs[c // 3].append(inn[ap, c])
+    for a, b in ([(-np.inf, np.inf)] if intervals is None else intervals):
+        ap = ap_all & (t >= a) & (t < b)
+        if inputs is not None and inn.shape == (len(inputs.prn), 2):  # tight: rows per satellite
+            start = np.asarray(inputs.epoch_start)
+            epoch = np.repeat(np.arange(len(start) - 1), np.diff(start))
+            ep_t = np.asarray(inputs.epoch_t, float)
+            # epochs of the applied records (gnss_t: one record per epoch)
+            ok_t = set(np.round(t[ap], 6))
+            keep = np.array([round(float(x), 6) in ok_t for x in ep_t])[epoch]
+            prn = np.asarray(inputs.prn)
+            for p in np.unique(prn):
+                m = keep & (prn == p)
+                for c in (0, 1):
+                    seqs[c].append(inn[m, c])
+        elif inn.shape[0] == t.size and inn.shape[1] >= 6:
+            for c in range(6):
+                seqs[c // 3].append(inn[ap, c])
     out = []
     for group in seqs:
         num = den = 0.0
@@ -754,7 +851,7 @@ def _rms_ratio(x, s) -> list:
 
 
 def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = np.inf, keep_t=None,
-                   reference_model: ReferenceModel | None = None) -> dict:
+                   reference_model: ReferenceModel | None = None, intervals=None) -> dict:
     """Consistency and error figures of ``sol`` over [t_from, t_to).
 
     Returns a dict: ``records`` and ``nis_per_row`` (mean NIS over the mean
@@ -769,6 +866,10 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
     a constant offset of the reference, or a constant error the innovations
     cannot see, left out).  ``keep_t``: only the reference epochs in this set
     of times (e.g. the epochs whose fixes the filter did not see).
+    ``intervals``: [(a, b), ...] [s], only the records and epochs inside one
+    of them as well (the held-out blocks of ``tune(split="blocks")``,
+    :attr:`TuneResult.heldout`); the innovation lag-1 pools the intervals'
+    sequences (no pair across a gap).
 
     ``nees_total``: rms(e / sqrt(sigma_filter^2 + sigma_ref^2)) per axis of
     ``pos_n_m`` and ``vel_n_mps``, with e the error of the solution's point
@@ -790,17 +891,21 @@ def holdout_report(sol, reference=None, t_from: float = -np.inf, t_to: float = n
     out = {}
     t = np.asarray(sol.gnss_t, float)
     ap = (np.asarray(sol.gnss_status) == RecordStatus.APPLIED) & (t >= t_from) & (t < t_to)
+    if intervals is not None:
+        ap &= in_intervals(t, intervals)
     rows = _gnss_rows(sol)[ap]
     nis = np.asarray(sol.nis, float)[ap]
     out["records"] = int(ap.sum())
     out["nis_per_row"] = float(np.sum(nis) / np.sum(rows)) if rows.size and np.sum(rows) > 0 else math.nan
-    ll, n = solution_log_likelihood(sol, t_from, t_to)
+    ll, n = solution_log_likelihood(sol, t_from, t_to, intervals=intervals)
     out["log_likelihood_per_record"] = ll / n if n else math.nan
-    out["innovation_lag1"] = innovation_lag1(sol, t_from, t_to)
+    out["innovation_lag1"] = innovation_lag1(sol, t_from, t_to, intervals=intervals)
     if reference is None:
         return out
     tr = np.asarray(reference.t, float)
     m = (tr >= max(t_from, sol.t[0])) & (tr < min(t_to, sol.t[-1]))
+    if intervals is not None:
+        m &= in_intervals(tr, intervals)
     if keep_t is not None:
         m &= np.isin(np.round(tr, 3), np.round(np.asarray(keep_t, float), 3))
     from ..analysis.evaluate import _solution_at
@@ -856,7 +961,8 @@ def _user_noise(noise: ImuNoise) -> dict:
 def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     """The base TOML (as a dict; its other keys and tables kept) with the
     tuned settings written in: every ``[imu]`` noise key, the GNSS sigma
-    scales (loose: the vertical one too), ``filter`` and ``coupling``, and the constraint sigmas that were
+    scales (loose: the vertical one too, and the motion-dependent terms where
+    they are on), ``filter`` and ``coupling``, and the constraint sigmas that were
     tuned, and for tight coupling the ``[robust]`` keys it was tuned with
     (screening, fault exclusion and CUSUM off).  ``insnav run --config``
     (``--run-config`` with ``--format kfgins``) then runs with it.  (The bias
@@ -871,6 +977,9 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     d["gnss_vel_sigma_scale"] = float(cfg.gnss_vel_sigma_scale)
     if cfg.coupling == "loose":
         d["gnss_pos_v_sigma_scale"] = float(cfg.gnss_pos_v_sigma_scale)
+        for key in ("gnss_pos_sigma_per_speed_s", "gnss_vel_sigma_per_speed"):
+            if getattr(cfg, key) > 0 or key in d:
+                d[key] = float(getattr(cfg, key))
     if cfg.pr_gm_sigma_m > 0:  # the Gauss-Markov pseudorange states (tuned or as given)
         d["pr_gm_sigma_m"], d["pr_gm_tau_s"] = float(cfg.pr_gm_sigma_m), float(cfg.pr_gm_tau_s)
         d["pr_gm_max_gap_s"] = float(cfg.pr_gm_max_gap_s)

@@ -66,13 +66,37 @@ def put_selfcal(sol, out: dict, cfg: RunConfig) -> None:
             sol.summary["sigma_lever_arm_b_m"] = [float(v) for v in sol.sigma_lever_arm_b_m[-1]]
 
 
+def fix_speed_mps(rows) -> np.ndarray:
+    """Horizontal speed [m/s] of each row of a loose GNSS table (``[t, lat, lon
+    (rad), h, v_n (3), ...]``, sorted by time): the fix's own velocity where it
+    has one, else the central difference of the neighbouring fixes' positions
+    (one-sided at the ends; 0 for a single fix).  Spherical-Earth metres
+    (radius 6378137 m): a speed for a noise model, not for navigation."""
+    rows = np.asarray(rows, float)
+    v = np.hypot(rows[:, 4], rows[:, 5])
+    miss = ~np.isfinite(v)
+    if miss.any():
+        if len(rows) < 2:
+            v[miss] = 0.0
+        else:
+            r, t = 6378137.0, rows[:, 0]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                vh = r * np.hypot(np.gradient(rows[:, 1], t), np.gradient(rows[:, 2], t) * np.cos(rows[:, 1]))
+            v[miss] = np.where(np.isfinite(vh[miss]), vh[miss], 0.0)
+    return v
+
+
 def loose_gnss_rows(g, cfg: RunConfig) -> np.ndarray:
     """The loose engine's GNSS table from fixes ``g``: one row per fix sorted by
     time (stable), ``[t, lat, lon (rad), h (m), v_n (3, m/s), sigma_pos_n (3, m),
     sigma_vel_n (3, m/s)]``, the sigmas multiplied by ``insnav tune``'s factors
     (``gnss_pos_sigma_scale``, ``gnss_vel_sigma_scale`` and, on the down axis,
-    ``gnss_pos_v_sigma_scale``).  Shared by the batch run and the block-by-block
-    stream (:mod:`insnav.filters.stream`), whose rows must be the same."""
+    ``gnss_pos_v_sigma_scale``), with the motion-dependent term
+    ``gnss_pos_sigma_per_speed_s`` / ``gnss_vel_sigma_per_speed`` times the
+    fix's horizontal speed added in quadrature (before the vertical factor;
+    :class:`insnav.config.RunConfig`).  Shared by the batch run and the
+    block-by-block stream (:mod:`insnav.filters.stream`), whose rows must be
+    the same."""
     if not len(g):
         return np.zeros((0, 13))
     rows = np.column_stack([g.t_valid, np.asarray(g.lat_deg) * DEG, np.asarray(g.lon_deg) * DEG, g.h_m, g.v_n,
@@ -81,6 +105,11 @@ def loose_gnss_rows(g, cfg: RunConfig) -> np.ndarray:
     if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
         rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
         rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
+    k_pos, k_vel = float(cfg.gnss_pos_sigma_per_speed_s), float(cfg.gnss_vel_sigma_per_speed)
+    if k_pos > 0.0 or k_vel > 0.0:
+        speed = fix_speed_mps(rows)
+        rows[:, 7:10] = np.hypot(rows[:, 7:10], (k_pos * speed)[:, None])
+        rows[:, 10:13] = np.hypot(rows[:, 10:13], (k_vel * speed)[:, None])  # NaN (no velocity) stays NaN
     if cfg.gnss_pos_v_sigma_scale != 1.0:
         rows[:, 9] *= cfg.gnss_pos_v_sigma_scale
     check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
