@@ -189,3 +189,24 @@ def test_blocks_split_tunes_the_speed_terms_on_both_regimes():
     # the held-out records are those of the held-out blocks only
     t = np.asarray(ds.gnss.t_valid)
     assert r["records"] <= int(in_intervals(t, res.heldout).sum()) < len(t) // 2
+
+
+@pytest.mark.slow
+def test_cli_tune_split_blocks(tmp_path, capsys):
+    """``insnav tune --split blocks``: the report says the held-out blocks, the TOML's header names the
+    tuning blocks, and the TOML runs; a bad block length is one line."""
+    from insnav.cli import main
+
+    d = tmp_path / "sim"
+    insnav.simulate("seed000-sim", seed=1).save(d)
+    out = tmp_path / "tuned.toml"
+    assert main(["tune", str(d), "--params", "gnss_pos", "--max-runs", "8", "--split", "blocks", "--block-s", "60",
+                 "--out", str(out), "-q"]) == 0
+    text = capsys.readouterr().out
+    assert "held out: the last 30% of each 60 s block" in text
+    assert "of each 60 s block" in out.read_text().splitlines()[0]
+    assert main(["run", str(d), "--config", str(out), "--out", str(tmp_path / "sol.csv"), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["tune", str(d), "--split", "blocks", "--block-s", "0", "--out", str(tmp_path / "t.toml"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "block_s" in err

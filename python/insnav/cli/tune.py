@@ -60,6 +60,13 @@ def add_tune_parser(sub) -> None:
     p.add_argument("--holdout", type=float, default=0.3,
                    help="share of the data at its end left out of the tuning and used for the report, in [0, 0.9) "
                         "(default %(default)s; 0: tune and report on all of it)")
+    p.add_argument("--split", choices=("tail", "blocks"), default="tail",
+                   help="tail: hold out the end of the data; blocks: interleaved blocks of --block-s seconds, the last "
+                        "--holdout of each held out (the tuning runs go over all the data, the likelihood sums the "
+                        "tuning blocks' records; for data whose segment kinds, e.g. walking and standing, are not "
+                        "spread over the time span; default %(default)s)")
+    p.add_argument("--block-s", type=float, default=20.0, help="block length of --split blocks [s] (default "
+                   "%(default)s)")
     p.add_argument("--max-runs", type=int, default=80, help="filter runs the search may use (default %(default)s)")
     p.add_argument("--reference", metavar="FILE",
                    help="reference trajectory for the report: insnav truth.csv or folder, KF-GINS .nav, RTKLIB .pos "
@@ -186,7 +193,7 @@ def cmd_tune(args) -> int:
                 print(f"run {k:3d}: ln L {ll:14.3f}  " + " ".join(f"{n} {v:.3g}" for n, v in scales.items()),
                       file=sys.stderr)
         res = tune(ds, cfg, filter=args.filter, coupling=args.coupling, params=params, holdout=args.holdout,
-                   max_runs=args.max_runs, progress=progress)
+                   max_runs=args.max_runs, progress=progress, split=args.split, block_s=args.block_s)
         reference = None
         if args.reference:
             from ..analysis.evaluate import _read_truth
@@ -198,20 +205,27 @@ def cmd_tune(args) -> int:
         reps = []
         for c in (res.base, res.tuned):
             sol = run(ds, config=dataclasses.replace(c))
-            reps.append(holdout_report(sol, reference, t_from=t_from))
+            reps.append(holdout_report(sol, reference, t_from=t_from) if res.split == "tail" or args.holdout == 0
+                        else holdout_report(sol, reference, intervals=res.heldout))
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     d = tuned_toml_dict(base_d, res)
+    span = (f"t < {res.t_split:.3f} s" if res.split == "tail"
+            else f"the first {1 - args.holdout:.0%} of each {args.block_s:g} s block")
     head = (f"# insnav tune: {res.tuned.filter} {res.tuned.coupling}, {len(res.names)} factors by the innovation "
-            f"likelihood over t < {res.t_split:.3f} s ({res.records} records, {res.runs} runs)\n"
+            f"likelihood over {span} ({res.records} records, {res.runs} runs)\n"
             + "".join(f"#   {n} x {v:.4g}\n" for n, v in res.scales.items()))
     atomic_write_text(out, head + dumps_toml(d))
     print(f"tuned {len(res.names)} factors in {res.runs} runs, {res.seconds:.1f} s; ln L over the tuning segment "
           f"{res.log_likelihood_base:.2f} -> {res.log_likelihood_tuned:.2f} ({res.records} records)")
     for n, v in res.scales.items():
         print(f"  {n:10s} x {v:.4g}")
-    print(f"held out: t >= {res.t_split:.3f} s ({args.holdout:.0%} of the IMU span)" if args.holdout > 0
-          else "no hold-out: the report uses all the data")
+    if args.holdout == 0:
+        print("no hold-out: the report uses all the data")
+    elif res.split == "tail":
+        print(f"held out: t >= {res.t_split:.3f} s ({args.holdout:.0%} of the IMU span)")
+    else:
+        print(f"held out: the last {args.holdout:.0%} of each {args.block_s:g} s block ({len(res.heldout)} blocks)")
     for line in report_table(*reps):
         print(line)
     print(f"{out}: written (insnav run --config {out})" if args.format != "kfgins"
