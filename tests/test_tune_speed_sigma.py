@@ -191,7 +191,6 @@ def test_blocks_split_tunes_the_speed_terms_on_both_regimes():
     assert r["records"] <= int(in_intervals(t, res.heldout).sum()) < len(t) // 2
 
 
-@pytest.mark.slow
 def test_cli_tune_split_blocks(tmp_path, capsys):
     """``insnav tune --split blocks``: the report says the held-out blocks, the TOML's header names the
     tuning blocks, and the TOML runs; a bad block length is one line."""

@@ -37,6 +37,9 @@ Hold-out: the factors are tuned on the first ``1 - holdout`` of the IMU time
 span (the IMU arrays cut there; later records are outside the run) and the
 comparison of the hand and the tuned settings (:func:`holdout_report`) uses
 the records and the reference epochs after it, from runs over all the data.
+``split="blocks"`` interleaves the two parts instead (:func:`block_intervals`):
+data whose segment kinds (a walk's walking and its final standstill) are not
+spread over the time span then have each kind in both parts.
 """
 from __future__ import annotations
 
