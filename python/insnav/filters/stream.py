@@ -37,9 +37,10 @@ from the first block (a later block whose median interval differs, an IMU gap,
 a repeated time or an implausible rate hands the run to the batch path, whose
 sanitizer repairs or names it), and the unit and time-base checks
 (:func:`insnav.data.checks.check_dataset`) see the IMU increments summed to
-10 Hz (beyond :data:`CHECK_MAX_ROWS` rows to 5 Hz, 2.5 Hz, ...).  Whatever the stream cannot reproduce exactly (a sanitizer repair, a
-non-finite row, an unhealthy run, a failed check, a GNSS record whose cut
-changes the set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
+10 Hz (beyond :data:`CHECK_MAX_ROWS` rows to 5 Hz, 2.5 Hz, ...).  Whatever
+the stream cannot reproduce exactly (a sanitizer repair, a non-finite row,
+an unhealthy run, a failed check, a GNSS record whose cut changes the
+set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
 with the reason, and ``insnav run`` then runs the batch path, whose result and messages are the
 reference.  The RTS smoother needs the whole run and always takes the batch
 path.
