@@ -224,3 +224,22 @@ def test_the_checks_imu_is_the_sum_of_the_samples_in_each_window():
     for a, b in ((got.dtheta_b, dth), (got.dv_b, dv)):
         want = np.array([b[lo:hi].sum(axis=0) for lo, hi in zip(edges[:-1], edges[1:])])
         assert np.allclose(a, want, rtol=0, atol=1e-12)
+
+
+def test_a_run_whose_checks_record_is_halved_writes_the_whole_file_runs_bytes(kf_short, tmp_path, monkeypatch):
+    # the input checks' IMU record limited to 500 rows (the run's ~1500 at 10 Hz: summed to 2.5 Hz,
+    # tests/test_stream_checks.py): the checks still pass, the stream runs (no note), the same file
+    made = []
+
+    class Recorded(stream._Coarse):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(self)
+
+    monkeypatch.setattr(stream, "CHECK_MAX_ROWS", 500)
+    monkeypatch.setattr(stream, "_Coarse", Recorded)
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    streamed_and_whole(_run, kf_short, a, b, "--output-rate", "10")
+    assert a.read_bytes() == b.read_bytes()
+    assert len(made) == 1 and made[0].merge == 4 and made[0].n <= 500 + 1

@@ -218,3 +218,36 @@ def test_a_tick_log_is_read_whole_quietly_unless_asked(shared_data, tmp_path):
     assert errs == [[], ["note: the IMU file is read whole, not block by block: a str2str tick_ms log: its tick -> "
                          "GPS time map is fitted over the whole record"]]
     assert (tmp_path / "auto" / "sol.csv").read_bytes() == (tmp_path / "on" / "sol.csv").read_bytes()
+
+
+@pytest.mark.parametrize("imu_offset_s", [0.0, -1.0])
+def test_csv_checks_on_a_halved_record(car_files, tmp_path, monkeypatch, imu_offset_s):
+    # the checks' IMU records (the whole record's and the run's, ~1100 rows at 10 Hz) limited to 200 rows,
+    # so summed to 1.25 Hz (insnav.filters.stream._Coarse): clean data still stream, byte for byte; IMU
+    # times 1 s early are still refused, and the message is the whole-file run's
+    car, d0 = car_files
+    made = []
+
+    class Recorded(stream._Coarse):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(self)
+
+    monkeypatch.setattr(stream, "BLOCK_LINES", BLOCK)
+    monkeypatch.setattr(stream, "CHECK_MAX_ROWS", 200)
+    monkeypatch.setattr(stream, "_Coarse", Recorded)
+    d = tmp_path / "in"
+    d.mkdir()
+    for name in ("imu.csv", "gnss.csv"):
+        (d / name).write_bytes((d0 / name).read_bytes())
+    (d / "run.toml").write_text(dumps_toml(config(imu=dict(time_offset_s=imu_offset_s))))
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    # (--stream auto: a failed check hands over to the whole-file run without a note, which names it)
+    rca, outa, erra = _run(d, a, "--stream", "on" if imu_offset_s == 0.0 else "auto", "--output-rate", "10")
+    rcb, outb, errb = _run(d, b, "--stream", "off", "--output-rate", "10")
+    assert len(made) == 2 and all(c.merge > 1 and c.n <= 200 for c in made)
+    if imu_offset_s == 0.0:
+        assert (rca, rcb) == (0, 0) and "note:" not in erra and outa == outb
+        _same_files(a, b)
+    else:
+        assert rca == rcb != 0 and erra == errb and "GNSS is 1.0 s behind the IMU" in erra, (erra, errb)

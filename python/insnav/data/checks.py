@@ -38,6 +38,8 @@ with two more that need to know what the user stated:
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 
 import numpy as np
@@ -166,11 +168,28 @@ def _down_b(scan) -> np.ndarray:
 
 #: grid step of the gyro heading shared by the course checks [s]
 _HEADING_GRID_S = 0.1
+#: the grid step in use [s]: _HEADING_GRID_S, or wider for an IMU record summed over wider windows
+#: (:func:`heading_grid_step`)
+_GRID_STEP = contextvars.ContextVar("insnav_heading_grid_s", default=_HEADING_GRID_S)
+
+
+@contextlib.contextmanager
+def heading_grid_step(step_s: float):
+    """The course checks' heading grid at ``step_s`` [s] instead of
+    ``_HEADING_GRID_S`` inside the block: the block-by-block run's checks on
+    an IMU record summed to 5 Hz, 2.5 Hz, ... (``insnav.filters.stream``) keep
+    one grid point per row, so the grid, like the record, does not grow with
+    the recording's length."""
+    token = _GRID_STEP.set(float(step_s))
+    try:
+        yield
+    finally:
+        _GRID_STEP.reset(token)
 
 
 def _heading_grid(t, dtheta_b, scan):
     """The rotation about the body's mean-down axis [rad] on a uniform
-    ``_HEADING_GRID_S`` grid from ``t[0]``: ``(x0, h, g)``, or None when not
+    ``_HEADING_GRID_S`` grid from ``t[0]`` (:func:`heading_grid_step`: wider): ``(x0, h, g)``, or None when not
     finite.  One compiled pass over the samples (``_core.rotation_about_at``),
     memoised with the IMU scan inside :func:`insnav.run`
     (:func:`insnav._imu_scan.scan_memo`): the slope check, the time-offset
@@ -178,11 +197,11 @@ def _heading_grid(t, dtheta_b, scan):
     from .. import _core
     from .._imu_scan import _MEMO, _key
 
+    h = _GRID_STEP.get()
     memo = _MEMO.get()
-    key = ("heading_grid", _key(t), _key(dtheta_b)) if memo is not None else None
+    key = ("heading_grid", _key(t), _key(dtheta_b), h) if memo is not None else None
     if key is not None and key in memo:
         return memo[key][1]
-    h = _HEADING_GRID_S
     x0 = float(t[0])
     grid = x0 + h * np.arange(int((t[-1] - x0) / h) + 1)
     g = _core.rotation_about_at(t, dtheta_b, _down_b(scan), grid)

@@ -22,8 +22,10 @@ reader thread while this one is filtered, and the rows are formatted on a
 writer thread while the next block is filtered (the engine's two row buffers
 are used in turn).  Memory is the GNSS records (a few per second), a few
 blocks of IMU samples and rows, and the IMU summed to 10 Hz for the input
-checks: what still grows with the recording (``bench/cli_end_to_end.py``
-measures a synthesised day).
+checks, at most :data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer
+recording's is summed further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), so
+nothing grows with the recording's length (``bench/cli_end_to_end.py`` and
+``bench/cli_csv_stream.py`` measure a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
@@ -35,9 +37,10 @@ from the first block (a later block whose median interval differs, an IMU gap,
 a repeated time or an implausible rate hands the run to the batch path, whose
 sanitizer repairs or names it), and the unit and time-base checks
 (:func:`insnav.data.checks.check_dataset`) see the IMU increments summed to
-10 Hz.  Whatever the stream cannot reproduce exactly (a sanitizer repair, a
-non-finite row, an unhealthy run, a failed check, a GNSS record whose cut
-changes the set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
+10 Hz (beyond :data:`CHECK_MAX_ROWS` rows to 5 Hz, 2.5 Hz, ...).  Whatever
+the stream cannot reproduce exactly (a sanitizer repair, a non-finite row,
+an unhealthy run, a failed check, a GNSS record whose cut changes the
+set-up) makes :func:`stream_loose_csv` raise :class:`Fallback`
 with the reason, and ``insnav run`` then runs the batch path, whose result and messages are the
 reference.  The RTS smoother needs the whole run and always takes the batch
 path.
@@ -51,7 +54,8 @@ over a block boundary from the block before), so the samples equal the
 whole-file reader's bit for bit.  Two more documented differences: the
 alignment (:func:`insnav.ins.align.align`) runs on the record's first blocks,
 as many as it reads, with their median interval, and the loader's unit,
-axis, sign and time-base checks see the whole record summed to 10 Hz (the
+axis, sign and time-base checks see the whole record summed to 10 Hz (as
+:func:`stream_loose_csv`'s, further beyond :data:`CHECK_MAX_ROWS` rows; the
 unit checks also see the first blocks at full rate).  A ``tick_ms`` log with
 its str2str tag (the tick map is fitted over the whole record) and an
 alignment that needs more than :data:`ALIGN_MAX_SAMPLES` samples take the
@@ -82,6 +86,9 @@ __all__ = ["BLOCK_LINES", "STREAM_SUFFIXES", "imu_text_blocks", "imu_csv_blocks"
 BLOCK_LINES = 1 << 16
 #: the rate of the summed IMU the input checks see [Hz]
 CHECK_RATE_HZ = 10.0
+#: the most rows of the summed IMU the input checks keep (about 7.3 h at 10 Hz, 15 MB): a longer
+#: recording's record is halved to 5 Hz, then 2.5 Hz, ... (:class:`_Coarse`)
+CHECK_MAX_ROWS = 1 << 18
 #: bytes per IMU text line assumed when sizing a block's read (the block is cut at a line end)
 _LINE_BYTES_GUESS = 112
 
@@ -424,39 +431,113 @@ def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> s
 
 
 class _Coarse:
-    """The IMU summed over windows of ``k`` samples (the first sample alone),
-    for the input checks: the time of each window's last sample and its
-    summed increments, in arrays sized once from the expected sample count
-    (grown by half when it was too small)."""
+    """The IMU summed over windows for the input checks, in memory bounded by
+    ``max_rows`` whatever the recording's length: the first sample alone,
+    then windows of ``k`` samples (``k * merge`` once the record was
+    halved), each row the time of its window's last sample and its summed
+    increments.
 
-    def __init__(self, k: int, expected_samples: int = 0):
+    Up to ``max_rows`` rows it is the IMU summed to :data:`CHECK_RATE_HZ`
+    exactly (the sums of each window's samples in their order).  A record
+    that would hold more is halved in place: the rows after the first one
+    are summed in pairs (an odd last row waits for its partner), and from
+    then on every row sums twice as many samples (5 Hz, then 2.5 Hz, ...), so
+    the checks see at most ``max_rows`` rows (about 15 MB at the default
+    :data:`CHECK_MAX_ROWS`).  The arrays are sized once from the expected
+    sample count (grown by half when that was too small), never beyond
+    ``max_rows`` + 2 rows."""
+
+    def __init__(self, k: int, expected_samples: int = 0, max_rows: int | None = None):
         self.k = max(1, int(k))
-        cap = max(64, int(1.02 * expected_samples / self.k) + 64)
+        self.max_rows = max(8, int(CHECK_MAX_ROWS if max_rows is None else max_rows))
+        cap = min(max(64, int(1.02 * expected_samples / self.k) + 64), self.max_rows + 2)
         self.t, self.dth, self.dv = np.empty(cap), np.empty((cap, 3)), np.empty((cap, 3))
         self.n = 0
+        self.merge = 1  # windows of k samples per row (after the first): doubled at each halving
         self.started = False
-        self.pend_n = 0  # samples in the window not yet complete, their time and sums
+        self.pend_n = 0  # samples in the window of k not yet complete, their time and sums
         self.pend_t = 0.0
         self.pend_dth, self.pend_dv = np.zeros(3), np.zeros(3)
+        self.rows_n = 0  # windows of k in the row not yet complete (merge > 1), their time and sums
+        self.rows_t = 0.0
+        self.rows_dth, self.rows_dv = np.zeros(3), np.zeros(3)
 
-    def _push(self, t, dth, dv) -> None:
+    @property
+    def nbytes(self) -> int:
+        """The bytes of the record's arrays (what grows with the length, up to ``max_rows``)."""
+        return self.t.nbytes + self.dth.nbytes + self.dv.nbytes
+
+    def _grow(self, cap: int) -> None:
+        for name in ("t", "dth", "dv"):
+            old = getattr(self, name)
+            new = np.empty((cap,) + old.shape[1:])
+            new[:self.n] = old[:self.n]
+            setattr(self, name, new)
+
+    def _store(self, t, dth, dv) -> None:
+        """Rows appended as they are (the arrays grown by half, at most to ``max_rows`` + 2 rows)."""
         m = len(t)
         if self.n + m > len(self.t):
-            cap = max(self.n + m, int(1.5 * len(self.t)))
-            for name in ("t", "dth", "dv"):
-                old = getattr(self, name)
-                new = np.empty((cap,) + old.shape[1:])
-                new[:self.n] = old[:self.n]
-                setattr(self, name, new)
+            self._grow(min(max(self.n + m, int(1.5 * len(self.t))), self.max_rows + 2))
         self.t[self.n:self.n + m] = t
         self.dth[self.n:self.n + m] = dth
         self.dv[self.n:self.n + m] = dv
         self.n += m
 
+    def _halve(self) -> None:
+        """Rows 1, 2, ... summed in pairs in place (an odd last one: the row begun), the windows doubled."""
+        if len(self.t) < self.max_rows + 2:  # from now on the arrays are full size: their final size
+            self._grow(self.max_rows + 2)
+        m = (self.n - 1) // 2
+        if (self.n - 1) % 2:  # the odd last row waits for its partner
+            r = self.n - 1
+            self.rows_n, self.rows_t = self.merge, float(self.t[r])
+            self.rows_dth, self.rows_dv = self.dth[r].copy(), self.dv[r].copy()
+        for x in (self.dth, self.dv):
+            x[1:1 + m] = x[1:1 + 2 * m:2] + x[2:2 + 2 * m:2]
+        self.t[1:1 + m] = self.t[2:2 + 2 * m:2]
+        self.n = 1 + m
+        self.merge *= 2
+
+    def _stored(self, t, dth, dv) -> None:
+        """Complete rows appended; a record then over ``max_rows`` rows halved."""
+        self._store(t, dth, dv)
+        if self.n > self.max_rows:
+            self._halve()
+
+    def _push(self, t, dth, dv) -> None:
+        """Complete windows of k samples: stored as they are, or (after a halving) summed ``merge`` at a time."""
+        t, dth, dv = np.asarray(t, float), np.asarray(dth, float), np.asarray(dv, float)
+        while len(t):
+            f = self.merge
+            if self.rows_n:  # the row begun earlier (merge > 1)
+                take = min(f - self.rows_n, len(t))
+                self.rows_n += take
+                self.rows_t = float(t[take - 1])
+                self.rows_dth = self.rows_dth + dth[:take].sum(axis=0)
+                self.rows_dv = self.rows_dv + dv[:take].sum(axis=0)
+                t, dth, dv = t[take:], dth[take:], dv[take:]
+                if self.rows_n < f:
+                    return
+                self.rows_n = 0
+                self._stored([self.rows_t], self.rows_dth[None, :], self.rows_dv[None, :])
+                continue
+            m = min(len(t) // f, self.max_rows + 1 - self.n)  # rows (n <= max_rows here: room for one)
+            if m == 0:  # fewer than f windows: a row begun
+                self.rows_n, self.rows_t = len(t), float(t[-1])
+                self.rows_dth, self.rows_dv = dth.sum(axis=0), dv.sum(axis=0)
+                return
+            if f == 1:
+                self._stored(t[:m], dth[:m], dv[:m])
+            else:
+                self._stored(t[f - 1:m * f:f], dth[:m * f].reshape(-1, f, 3).sum(axis=1),
+                             dv[:m * f].reshape(-1, f, 3).sum(axis=1))
+            t, dth, dv = t[m * f:], dth[m * f:], dv[m * f:]
+
     def add(self, t, dth, dv) -> None:
         if not self.started:  # the first sample alone: the checks see the IMU span's start
             self.started = True
-            self._push(t[:1], dth[:1], dv[:1])
+            self._store(t[:1], dth[:1], dv[:1])
             t, dth, dv = t[1:], dth[1:], dv[1:]
         k = self.k
         if self.pend_n:  # the window begun in an earlier block
@@ -469,8 +550,8 @@ class _Coarse:
                 t, dth, dv = t[take:], dth[take:], dv[take:]
             if self.pend_n < k:
                 return
-            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
             self.pend_n = 0
+            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
         m = (len(t) // k) * k
         if m:
             self._push(t[k - 1:m:k], dth[:m].reshape(-1, k, 3).sum(axis=1), dv[:m].reshape(-1, k, 3).sum(axis=1))
@@ -480,11 +561,21 @@ class _Coarse:
             self.pend_dth = dth[m:].sum(axis=0)
             self.pend_dv = dv[m:].sum(axis=0)
 
+    def grid_step(self) -> float:
+        """The course checks' heading grid step for this record [s]: one point per row
+        (:func:`insnav.data.checks.heading_grid_step`; 0.1 s, the whole-file checks', until halved)."""
+        from ..data.checks import _HEADING_GRID_S
+
+        return _HEADING_GRID_S * self.merge
+
     def imu(self, source: str) -> ImuData:
         """The summed IMU (the last, incomplete window too): views of the arrays."""
         if self.pend_n:
-            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
             self.pend_n = 0
+            self._push([self.pend_t], self.pend_dth[None, :], self.pend_dv[None, :])
+        if self.rows_n:  # the last, incomplete row (the arrays keep 2 spare rows)
+            self.rows_n = 0
+            self._store([self.rows_t], self.rows_dth[None, :], self.rows_dv[None, :])
         n = self.n
         return ImuData(self.t[:n], self.dth[:n], self.dv[:n], origin=RowOrigin(source, 0))
 
@@ -877,7 +968,7 @@ class _BlockRun:
             rec[k] = rec[k][:cut]
 
     def _result(self, imu_source: str, n_blocks: int) -> StreamResult:
-        from ..data.checks import check_dataset
+        from ..data.checks import check_dataset, heading_grid_step
         from .health import assess
 
         cfg = self.cfg
@@ -894,7 +985,8 @@ class _BlockRun:
         try:  # the unit and time-base checks on the IMU summed to 10 Hz (a failure: the batch path's message)
             if self.extra_checks is not None:
                 self.extra_checks()
-            check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
+            with heading_grid_step(self.coarse.grid_step()):
+                check_dataset(ds, max_time_offset_s=cfg.max_time_offset_s)
         except ValueError as exc:
             raise Fallback(f"an input check failed on the summed IMU ({str(exc).splitlines()[0][:80]})", batch_names_it=True) from None
         z, e = np.zeros((0, 3)), np.zeros(0)
@@ -1273,12 +1365,18 @@ def stream_csv_loose(inp, imu_path, out: Path, *, configure, columns=None, preci
         for b in blocks:
             if not whole:
                 dt = median(np.diff(b.t)) if len(b.t) > 1 else 0.0
-                whole.append(_Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1))
+                # the samples to expect: the file's size over the bytes per line so far (as _BlockRun sizes its own)
+                lines = b.origin.line(len(b.t) - 1) if len(b.t) else 0
+                expected = int(b.file_bytes * lines / b.file_bytes_done) if b.file_bytes_done else 0
+                whole.append(_Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1, expected))
             whole[0].add(b.t, b.dtheta_b, b.dv_b)
             yield b
 
     def checks():
-        input_checks(inp, whole[0].imu(imu_path), imu_path)
+        from ..data.checks import heading_grid_step
+
+        with heading_grid_step(whole[0].grid_step()):
+            input_checks(inp, whole[0].imu(imu_path), imu_path)
 
     def prepare(blocks):
         head, done, want = [], False, 1
