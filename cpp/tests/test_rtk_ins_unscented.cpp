@@ -147,11 +147,14 @@ StaticRun run_static(const Vec3& r_r, const Vec3& r_b, const std::vector<Vec3>& 
 template <class F>
 void conditioned_without_propagation(const Cov15& P0, const StateVec<Layout15>& dx1, const Cov15& dP1,
                                      const StateVec<Layout15>& dx2, const Cov15& dP2,
-                                     SmootherEpoch<Layout15>* rec, SmoothedEpoch<Layout15>* out, std::int64_t& n) {
+                                     SmootherEpoch<Layout15>* rec, SmoothedEpoch<Layout15>* out, std::int64_t& n,
+                                     int& asserts) {
   RtkInsConfig rc;
   auto eng = std::make_unique<RtkInsEngine<64, F>>(ImuErrorModel{}, rc);
   auto& core = eng->core();
   core.record_for_smoother(rec, 4);
+  const int before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);  // the recording, the conditioning and the backward pass
   eng->start(start_state(0.6, 0.3, 100.0, 0.0), P0, ImuCorrection{});
   core.close_cycle();
   core.condition_prediction_for_smoother(eng->cycle_phi());  // nothing conditioned before: no-op
@@ -163,6 +166,8 @@ void conditioned_without_propagation(const Cov15& P0, const StateVec<Layout15>& 
   core.start_cycle();
   n = core.recorded_epochs();
   rts_backward<Layout15>(rec, n, out);
+  Eigen::internal::set_is_malloc_allowed(true);
+  asserts = g_eigen_asserts - before;
 }
 
 }  // namespace
@@ -222,12 +227,14 @@ int main() {
     SmootherEpoch<Layout15> rec[3][4];
     SmoothedEpoch<Layout15> out[3][4];
     std::int64_t n[3] = {0, 0, 0};
-    conditioned_without_propagation<Ekf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[0], out[0], n[0]);
-    conditioned_without_propagation<RbUkf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[1], out[1], n[1]);
-    conditioned_without_propagation<Ukf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[2], out[2], n[2]);
+    int asserts[3] = {0, 0, 0};
+    conditioned_without_propagation<Ekf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[0], out[0], n[0], asserts[0]);
+    conditioned_without_propagation<RbUkf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[1], out[1], n[1], asserts[1]);
+    conditioned_without_propagation<Ukf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[2], out[2], n[2], asserts[2]);
     double d_rec = 0.0, d_s = 0.0, d_P = 0.0;
     for (int f = 0; f < 3; ++f) {
       EXPECT_TRUE(n[f] == 3);
+      EXPECT_TRUE(asserts[f] == 0);  // no heap allocation (and no other Eigen assertion)
       const SmootherEpoch<Layout15>& e2 = rec[f][2];
       const SmootherEpoch<Layout15>& k2 = rec[0][2];
       // the prediction from the conditioned epoch 1 (xp = dx1, Pp = P0 - dP1, C = P0 - dP1): the EKF's
