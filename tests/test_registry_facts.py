@@ -170,7 +170,7 @@ def test_facts_are_what_the_config_check_and_the_runners_act_on(name, coupling):
             RunConfig(**base, smooth=True).validate()
     src = inspect.getsource(importlib.import_module(spec.runners[coupling].split(":")[0]))
     # a smoothable family's runner applies the smoother; a runner that does is smoothable for one of the
-    # filters it serves on this coupling (insnav.filters.rtk_ins: ekf smooths, rbukf / ukf refuse smooth)
+    # filters it serves on this coupling
     shared = any(s.runners.get(coupling) == spec.runners[coupling] and s.facts(coupling).smoothable
                  for s in FILTERS.values() if coupling in s.couplings)
     assert ("smoothed_rows(" in src) == (f.smoothable or shared), (name, coupling)

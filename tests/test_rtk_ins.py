@@ -7,8 +7,8 @@ synthesised from its 10 Hz truth (insnav.sim.from_truth).  Checks:
 * the unscented variants (RB-UKF, UKF: the UT time update of seed 000, the ambiguities' cross-covariance
   by the UT's statistically linearised cycle transition): on the first 120 s of the drive their float
   solution is the EKF's to 2 mm, and RB-UKF and UKF give the same solution (the DD rows are linear,
-  so the joint update is the same); the smoother is refused with them; the static and outage checks
-  below run with every filter;
+  so the joint update is the same); the smoother runs with them (tests/test_carrier_smoother.py) and
+  is refused with probe_epoch, as with the EKF; the static and outage checks below run with every filter;
 * an exact reduction: exact IMU, zero IMU noise, a static receiver -> the RTK/INS float solution is
   the GNSS-only static RTK float solution (the same estimator when the INS adds no information);
 * INS-aided slip detection of a 1-cycle slip on one single-frequency satellite during motion;
@@ -234,15 +234,21 @@ def test_unscented_float_equals_ekf_to_mm_and_rbukf_equals_ukf(drive):
     assert np.sqrt(np.mean(err ** 2)) < 0.1
 
 
-@pytest.mark.parametrize("filt", ["rbukf", "ukf"])
-def test_unscented_rtk_ins_refuses_the_smoother(drive, filt):
-    from insnav.config import ConfigError
-
+@pytest.mark.parametrize("filt", ["ekf", "rbukf", "ukf"])
+def test_rtk_ins_smoother_runs_with_every_filter_and_refuses_probe_epoch(drive, filt):
+    """smooth = true is accepted with the three filters (the unscented RTS smoother with rbukf / ukf) and
+    gives a smoothed antenna at every solved epoch; with probe_epoch (the AR of one record, which stops
+    the run there) it is refused with a message that says why."""
     v = "iono-Klob_tropo-Saast"
     rover = _first_epochs(rtk.read_phase_obs(need(SP / v / "Rover-dynamic_MO_Spirent.obs"), "GE"), 5)
     base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
-    with pytest.raises(ConfigError, match=f"'smooth'.*filter '{filt}' rtk"):
-        run_rtk_ins(drive, RunConfig(filter=filt, smooth=True), rover=rover, base=base, nav=NAV)
+    RunConfig(filter=filt, coupling="rtk", smooth=True).validate()
+    sol = run_rtk_ins(drive, RunConfig(filter=filt, smooth=True), rover=rover, base=base, nav=NAV)
+    ok = sol.rtk.status > 0
+    assert ok.sum() >= 4 and np.isfinite(sol.rtk.r_smoothed_e[ok]).all()
+    assert sol.summary["smoother"]["gain_failures"] == 0
+    with pytest.raises(ValueError, match="probe_epoch and smooth exclude each other"):
+        run_rtk_ins(drive, RunConfig(filter=filt, smooth=True), rover=rover, base=base, nav=NAV, probe_epoch=2)
 
 
 def _remove(obs, t0, t1):

@@ -130,6 +130,6 @@ def test_unscented_and_ekf_smoothers_agree(case):
 
 @pytest.mark.parametrize("filt", ["upf", "pf", "fukf"])
 def test_particle_filters_refuse_smooth(filt):
-    with pytest.raises(ConfigError, match="config key 'smooth'.*smoother runs with: .*rbukf tight, ukf loose, ukf tight"):
+    with pytest.raises(ConfigError, match="config key 'smooth'.*smoother runs with: .*rbukf tight, rbukf rtk, ukf loose, ukf tight, ukf rtk"):
         RunConfig(filter=filt, coupling="tight", smooth=True).validate()
     RunConfig(filter="ukf", coupling="tight", smooth=True).validate()

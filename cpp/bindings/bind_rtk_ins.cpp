@@ -82,9 +82,9 @@ py::dict rtk_ins_run_with(const DArray& t, const DArray& dtheta_b, const DArray&
   const ImuErrorModel mdl = imu_model_from_dict(model);
   const RtkInsConfig cfg = rtk_ins_config_from(engine_cfg, rtk_opts);
   const bool smooth = flag(engine_cfg, "smooth", false);  // the RTS backward pass (smoother_run.hpp)
-  if (smooth && !std::is_same_v<Filter, Ekf<Layout15>>)
-    throw py::value_error("rtk_ins_run: smooth runs with filter 'ekf' only (the RTS smoother over RTK/INS "
-                          "conditions the fixed epochs through the EKF's cycle transition)");
+  // EKF: the cycle transition; RB-UKF / UKF: the UT cross-covariance and the statistically linearised
+  // transition (rtk_ins_engine.hpp, "Filters")
+  static_assert(SmootherRun<Filter>::kSupported, "rtk_ins_run: a filter the RTS smoother runs with");
   using Engine = RtkInsEngine<64, Filter>;
   if (smooth && probe_epoch >= 0) throw py::value_error("rtk_ins_run: probe_epoch and smooth exclude each other");
   const Vec3 rb = vec3_from(r_base_e, "rtk_ins_run: r_base_e");

@@ -10,7 +10,13 @@
 //  * a static receiver with an exact IMU and noise-free dual-frequency rows: the three filters fix at
 //    the true position within 1 mm, RB-UKF and UKF give the same solution (the joint update is the
 //    engine's linear one), and the whole run() after construction allocates nothing on the heap
-//    (Eigen's malloc check on).
+//    (Eigen's malloc check on);
+//  * the unscented RTS smoother's conditioning on a fixed epoch (ClosedLoop::condition_for_smoother,
+//    condition_prediction_for_smoother with the engine's Phi): two epochs with no propagation between
+//    them (Phi = I) record the EKF's moments, so the gain C Pp^-1 is I and the smoothed estimate of the
+//    earlier epoch is exactly the later one's, as for the EKF (Sarkka 2008 eqs. (13)-(15); Rauch, Tung
+//    & Striebel 1965).
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <random>
@@ -135,6 +141,35 @@ StaticRun run_static(const Vec3& r_r, const Vec3& r_b, const std::vector<Vec3>& 
   return res;
 }
 
+// Epoch 0 the start (P0); epoch 1 closed without propagation and conditioned (dx1, dP1: a fixed
+// solution); epoch 2 closed without propagation, its prediction from the conditioned epoch 1, and
+// conditioned itself (dx2, dP2); then the backward pass.
+template <class F>
+void conditioned_without_propagation(const Cov15& P0, const StateVec<Layout15>& dx1, const Cov15& dP1,
+                                     const StateVec<Layout15>& dx2, const Cov15& dP2,
+                                     SmootherEpoch<Layout15>* rec, SmoothedEpoch<Layout15>* out, std::int64_t& n,
+                                     int& asserts) {
+  RtkInsConfig rc;
+  auto eng = std::make_unique<RtkInsEngine<64, F>>(ImuErrorModel{}, rc);
+  auto& core = eng->core();
+  core.record_for_smoother(rec, 4);
+  const int before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);  // the recording, the conditioning and the backward pass
+  eng->start(start_state(0.6, 0.3, 100.0, 0.0), P0, ImuCorrection{});
+  core.close_cycle();
+  core.condition_prediction_for_smoother(eng->cycle_phi());  // nothing conditioned before: no-op
+  core.condition_for_smoother(dx1, dP1);
+  core.start_cycle();
+  core.close_cycle();
+  core.condition_prediction_for_smoother(eng->cycle_phi());  // the unscented filters' (the EKF's in close_cycle)
+  core.condition_for_smoother(dx2, dP2);
+  core.start_cycle();
+  n = core.recorded_epochs();
+  rts_backward<Layout15>(rec, n, out);
+  Eigen::internal::set_is_malloc_allowed(true);
+  asserts = g_eigen_asserts - before;
+}
+
 }  // namespace
 
 int main() {
@@ -169,6 +204,57 @@ int main() {
     eng->start(start_state(0.6, 0.3, 100.0, 0.0), P0, ImuCorrection{});
     eng->core().close_cycle();
     EXPECT_TRUE(eng->cycle_phi() == Cov15::Identity());
+  }
+
+  // (2a) the smoother over fixed epochs without propagation between them: the EKF's records, gain I
+  {
+    std::mt19937 rng(7);
+    std::normal_distribution<double> nd;
+    Cov15 B1, B2;
+    StateVec<Layout15> dx1, dx2;
+    for (int i = 0; i < 15; ++i) {
+      dx1[i] = 0.01 * nd(rng) * std::sqrt(P0(i, i));
+      dx2[i] = 0.01 * nd(rng) * std::sqrt(P0(i, i));
+      for (int j = 0; j < 15; ++j) {
+        B1(i, j) = 0.05 * nd(rng);
+        B2(i, j) = 0.05 * nd(rng);
+      }
+    }
+    // dP = S B B' S (S = sqrt(diag P0)): positive semi-definite, well below P0 (P0 - dP stays positive definite)
+    const Cov15 S = P0.diagonal().cwiseSqrt().asDiagonal();
+    const Cov15 dP1 = S * B1 * B1.transpose() * S;
+    const Cov15 dP2 = dP1 + S * B2 * B2.transpose() * S;
+    SmootherEpoch<Layout15> rec[3][4];
+    SmoothedEpoch<Layout15> out[3][4];
+    std::int64_t n[3] = {0, 0, 0};
+    int asserts[3] = {0, 0, 0};
+    conditioned_without_propagation<Ekf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[0], out[0], n[0], asserts[0]);
+    conditioned_without_propagation<RbUkf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[1], out[1], n[1], asserts[1]);
+    conditioned_without_propagation<Ukf<Layout15>>(P0, dx1, dP1, dx2, dP2, rec[2], out[2], n[2], asserts[2]);
+    double d_rec = 0.0, d_s = 0.0, d_P = 0.0;
+    for (int f = 0; f < 3; ++f) {
+      EXPECT_TRUE(n[f] == 3);
+      EXPECT_TRUE(asserts[f] == 0);  // no heap allocation (and no other Eigen assertion)
+      const SmootherEpoch<Layout15>& e2 = rec[f][2];
+      const SmootherEpoch<Layout15>& k2 = rec[0][2];
+      // the prediction from the conditioned epoch 1 (xp = dx1, Pp = P0 - dP1, C = P0 - dP1): the EKF's
+      d_rec = std::max({d_rec, (e2.x_pred - k2.x_pred).cwiseAbs().maxCoeff(), (e2.P_pred - k2.P_pred).cwiseAbs().maxCoeff(),
+                        (e2.C - k2.C).cwiseAbs().maxCoeff(), (e2.x_pred - dx1).cwiseAbs().maxCoeff(),
+                        (e2.C - (P0 - dP1)).cwiseAbs().maxCoeff(), (e2.P_pred - (P0 - dP1)).cwiseAbs().maxCoeff()});
+      // gain I: epoch 1 smoothed = epoch 2's estimate (dx2, P0 - dP2); relative to P0's scale
+      for (int i = 0; i < 15; ++i) {
+        d_s = std::max(d_s, std::abs(out[f][1].s[i] - dx2[i]) / std::sqrt(P0(i, i)));
+        for (int j = 0; j < 15; ++j)
+          d_P = std::max(d_P, std::abs(out[f][1].P(i, j) - (P0 - dP2)(i, j)) / std::sqrt(P0(i, i) * P0(j, j)));
+      }
+    }
+    EXPECT_TRUE(d_rec == 0.0);  // the same arithmetic: P0 - dP1 (Phi = I exactly)
+    EXPECT_LT(d_s, 1e-12);
+    EXPECT_LT(d_P, 1e-12);
+    // not trivially met: without the conditioned prediction s_1 would be dx1 + dx2, dx1 / sigma ~ 0.01
+    EXPECT_LT(1e-3, (dx1.array() / P0.diagonal().array().sqrt()).abs().maxCoeff());
+    std::printf("smoother over fixed epochs without propagation: records vs EKF %.1e, s_1 - s_2 %.1e sigma, "
+                "Ps_1 - Ps_2 %.1e\n", d_rec, d_s, d_P);
   }
 
   // (3) static receiver, exact IMU, noise-free rows: fixed at the truth, RB-UKF = UKF, no heap per epoch

@@ -715,8 +715,8 @@ class RunConfig:
         presets).
     smooth : bool
         Post-process with the RTS smoother (EKF; RB-UKF and UKF: the unscented
-        RTS smoother, Sarkka 2008; loose, tight with or without TDCP, and the
-        EKF's RTK/INS, whose fixed epochs keep the fixed solution): every output
+        RTS smoother, Sarkka 2008; loose, tight with or without TDCP, and
+        RTK/INS, whose fixed epochs keep the fixed solution): every output
         row and sigma, and a tight run's receiver clock and inter-system biases,
         from all the data, before and after it.
     init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None

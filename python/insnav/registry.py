@@ -233,9 +233,10 @@ RTK_INS_OPTIONS = ("rover", "base", "nav", "base_pos", "rtk_options", "engine", 
 #: options of the delay filters (``insnav.filters.delay.run_delayed``)
 DELAY_OPTIONS = ("delay_p", "max_history_s", "checkpoint_interval_s")
 
-#: the facts every closed-loop EKF / RB-UKF / UKF shares: the RTS smoother after loose and
-#: tight runs, the vehicle constraints in loose runs
-_KALMAN = dict(smoothable=("loose", "tight"), constraints={"loose": ("nhc", "odo", "zupt")})
+#: the facts every closed-loop EKF / RB-UKF / UKF shares: the RTS smoother after loose, tight and
+#: RTK/INS runs (the RB-UKF / UKF: the unscented RTS smoother, Sarkka 2008), the vehicle constraints in
+#: loose runs
+_KALMAN = dict(smoothable=("loose", "tight", "rtk"), constraints={"loose": ("nhc", "odo", "zupt")})
 #: options that carry data, not settings (given to insnav.run only; the CLI reads them from files)
 _DATA = ("inputs", "rover", "base", "nav", "base_pos", "engine", "probe_epoch")
 
@@ -246,8 +247,7 @@ FILTERS: dict[str, FilterSpec] = {s.name: s for s in (
                summary="closed-loop error-state EKF, Joseph update; rtk: double-differenced carrier phase and code "
                        "against a base, ambiguity states, INS-aided AR and slip detection",
                coupling_options={"tight": TIGHT_OPTIONS, "rtk": RTK_INS_OPTIONS},
-               selfcal=("loose", "tight"), data_options=_DATA,
-               **{**_KALMAN, "smoothable": ("loose", "tight", "rtk")}),
+               selfcal=("loose", "tight"), data_options=_DATA, **_KALMAN),
     FilterSpec("rbukf", ("loose", "tight", "rtk"), {"loose": (15, 21), "tight": (17, 20), "rtk": (15,)},
                {"loose": _LOOSE, "tight": _TIGHT, "rtk": _RTK_INS}, paper="seed 000; rtk: + Sarkka 2008 eq. (13)",
                summary="UT time update through the nonlinear error model, linear KF update; rtk: the EKF's DD rows "

@@ -25,11 +25,16 @@ IMU-centre navigation) with ``gnss_t``/``gnss_status`` (per rover epoch: applied
 fixed or float per epoch, ratio, fixed ambiguities, slip detections including the INS-aided
 test) and ``summary`` counts (fix rate, slips).
 
-``cfg.smooth`` (filter ``"ekf"`` only; the registry refuses it with the others): the RTS smoother
-(:mod:`insnav.filters.smoothing`) over the 15 navigation error states, the ambiguities marginalised;
-at a fixed epoch the smoother starts from the navigation conditioned on the fixed integers (the fixed
-solution and its covariance), so the fixed epochs keep the fixed solution (Rauch, Tung & Striebel
-1965; Groves 2013, sec. 3.4.2; ``cpp/include/insnav/engine/rtk_ins_engine.hpp``, 4.).  The rows are smoothed; ``fix_status``,
+``cfg.smooth`` (every filter here): the RTS smoother (:mod:`insnav.filters.smoothing`) over the 15
+navigation error states, the ambiguities marginalised; at a fixed epoch the smoother starts from the
+navigation conditioned on the fixed integers (the fixed solution and its covariance), so the fixed
+epochs keep the fixed solution (Rauch, Tung & Striebel 1965; Groves 2013, sec. 3.4.2;
+``cpp/include/insnav/engine/rtk_ins_engine.hpp``, 4.).  With ``"rbukf"`` / ``"ukf"`` it is the
+unscented RTS smoother (Sarkka 2008, "Unscented Rauch-Tung-Striebel smoother", IEEE TAC 53(3),
+eqs. (13)-(15)): the gain from the UT cross-covariance of each cycle, and the fixed solution carried
+into the next prediction by the cycle's statistically linearised transition (the one that carries
+the ambiguities' cross-covariance); the two give the same smoothed solution, as they give the same
+forward one.  Not with ``probe_epoch``.  The rows are smoothed; ``fix_status``,
 ``ratio`` and ``solution.rtk`` stay the forward pass's (what was fixed), and
 ``solution.rtk.r_smoothed_e`` is the smoothed antenna per rover epoch.
 """

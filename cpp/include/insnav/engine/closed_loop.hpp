@@ -200,12 +200,40 @@ struct ClosedLoop {
   /// P - dP, e.g. the integer-fixed solution of an RTK/INS epoch (Teunissen
   /// 1995, eq. (6): dx = P_xa Q_a^-1 (a_hat - a_fix), dP = P_xa Q_a^-1 P_ax).
   /// The prediction to the next epoch is conditioned the same way there
-  /// (xp += Phi dx, Pp -= Phi dP Phi', C from P - dP).  EKF only.
+  /// (xp += Phi dx, Pp -= Phi dP Phi', C from P - dP): by the EKF's cycle
+  /// transition in close_cycle; the unscented filters have none, and their
+  /// engine gives its statistically linearised one through
+  /// condition_prediction_for_smoother.
   void condition_for_smoother(const StateVec<L>& dx, const StateCov<L>& dP) {
     if (!rec_pending_) return;
+    cond_pred_pending_ = false;  // (condition_prediction_for_smoother comes first)
     cond_dx_ = dx;
     cond_dP_ = dP;
     cond_pending_ = true;
+  }
+
+  /// The unscented filters (RB-UKF, UKF): the prediction of the epoch just
+  /// recorded (close_cycle) from the previous epoch's conditioned estimate
+  /// (condition_for_smoother), through the cycle's statistically linearised
+  /// transition Phi = C^T P_0^-1 (Sarkka 2008, "Unscented Rauch-Tung-Striebel
+  /// smoother", IEEE TAC 53(3), eq. (13); the engine computes it, e.g.
+  /// RtkInsEngine::cycle_phi): xp += Phi dx, Pp -= Phi dP Phi', and the UT
+  /// cross-covariance C = P_0 Phi' of the points drawn from P_0 becomes that of
+  /// the conditioned estimate, (P_0 - dP) Phi' = C - dP Phi' -- the EKF's
+  /// conditioning (close_cycle) with the statistical linearisation in place of
+  /// its Jacobian product, so the smoother gain C Pp^-1 is the EKF's when Phi
+  /// is.  Call once after close_cycle and before the next condition_for_smoother
+  /// (which replaces dx, dP); a no-op when the previous epoch was not
+  /// conditioned or the filter has its own transition.
+  void condition_prediction_for_smoother(const StateCov<L>& Phi) {
+    if (!cond_pred_pending_ || !rec_pending_) return;
+    cond_pred_pending_ = false;
+    SmootherEpoch<L>& e = rec_[rec_n_ - 1];
+    e.x_pred.noalias() += Phi * cond_dx_;
+    StateCov<L> dP_PhiT;  // fixed size, on the stack
+    dP_PhiT.noalias() = cond_dP_ * Phi.transpose();
+    e.P_pred.noalias() -= Phi * dP_PhiT;
+    e.C -= dP_PhiT;
   }
 
   /// A relative measurement of this epoch and the previous one applied to the
@@ -232,7 +260,7 @@ struct ClosedLoop {
     rec_n_ = 0;
     rec_overflow_ = false;
     rec_pending_ = false;
-    cond_pending_ = cond_next_ = false;
+    cond_pending_ = cond_next_ = cond_pred_pending_ = false;
     if (rec_) {  // epoch 0: the initial state, nothing fed back
       if (rec_cap_ < 1) {
         rec_overflow_ = true;
@@ -343,6 +371,7 @@ struct ClosedLoop {
   }
 
   void start_cycle() {
+    cond_pred_pending_ = false;  // the closed cycle's prediction is conditioned by now, or never
     if (rec_pending_) {  // close the epoch: its posterior (x was saved by feedback() if fed back)
       SmootherEpoch<L>& e = rec_[rec_n_ - 1];
       if (!e.fed_back) e.x = filter.x();
@@ -390,6 +419,8 @@ struct ClosedLoop {
             e.P_pred.noalias() -= Phi * dP_PhiT;
           }
         }
+        // the unscented filters: conditioned by the engine's transition (condition_prediction_for_smoother)
+        cond_pred_pending_ = kTracksCross && !kTracksTransition && cond_next_;
         cond_next_ = false;
         e.fed_back = false;
         rec_pending_ = true;
@@ -720,6 +751,7 @@ struct ClosedLoop {
   StateCov<L> P_post_ = StateCov<L>::Zero();
   // condition_for_smoother: pending for the open epoch, then for the next prediction
   bool cond_pending_ = false, cond_next_ = false;
+  bool cond_pred_pending_ = false;  // the unscented filters' prediction to condition (condition_prediction_for_smoother)
   StateVec<L> cond_dx_ = StateVec<L>::Zero();
   StateCov<L> cond_dP_ = StateCov<L>::Zero();
   InsInterval iv_;

@@ -55,7 +55,8 @@
 //      least ar_min_success_rate (Teunissen 1998), partial AR; the fixed INS error is
 //      dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)); fix-and-hold feeds the
 //      fixed DD back as pseudo-measurements (sigma hold_sigma_cycles) into the joint filter.
-//   4. RTS smoother (ClosedLoop::record_for_smoother; filter/rts_smoother.hpp): the backward pass
+//   4. RTS smoother (EKF, RB-UKF and UKF: "Filters" below; ClosedLoop::record_for_smoother;
+//      filter/rts_smoother.hpp): the backward pass
 //      runs over the 15 navigation error states with the ambiguities marginalised (their block is
 //      neither stored nor smoothed: an exact joint smoother would store (15 + kMaxAmb)^2 per epoch and
 //      follow every ambiguity reset).  The engine's own feedbacks are recorded
@@ -91,8 +92,14 @@
 //           cycles without feedback, seed 000 eqs. (26)-(29)): it is fed back into the INS before
 //           the epoch's tests and rows (the closed loop of seed 000 eq. (25)), so the rows are
 //           linearised at the predicted mean and the joint update starts from x = 0; the posterior
-//           (x = 0, P) is where the next cycle draws its points.  The RTS smoother runs with the
-//           EKF only (the bindings refuse smooth with the unscented filters).
+//           (x = 0, P) is where the next cycle draws its points.
+//           The RTS smoother (4.) is the unscented RTS smoother (Sarkka 2008, eqs. (13)-(15)): the
+//           core records the UT cross-covariance C of each cycle (ClosedLoop::close_cycle), the gain
+//           is D = C Pp^-1 (filter/rts_smoother.hpp), and the conditioning on the fixed integers is
+//           carried to the next epoch's prediction through the same statistically linearised Phi as
+//           P_xN (ClosedLoop::condition_prediction_for_smoother: xp += Phi dx_fix,
+//           Pp -= Phi dP Phi', C -= dP Phi'), where the EKF uses its Phi_cycle.  With Phi = the
+//           EKF's (linear dynamics; Phi = I for a cycle without propagation) the smoother is the EKF's.
 //
 // No heap allocation per epoch: every matrix is bounded by kMaxAmb and lives in the engine.
 #pragma once
@@ -307,6 +314,7 @@ class RtkInsEngine {
       if (core_.outage_due(period)) {  // an outage cycle (no record for `period`)
         core_.close_cycle();
         const auto& Phi = cycle_phi();
+        if constexpr (kUnscented) core_.condition_prediction_for_smoother(Phi);  // before the next conditioning
         Pia_ = Phi * Pia_;
         if (cond_valid_) {  // no measurement: the smoother's estimate stays the fixed one, predicted
           cond_dx_ = Phi * cond_dx_;
@@ -340,6 +348,8 @@ class RtkInsEngine {
     const double t = core_.state().t;
     cond_valid_ = false;
     const Mat15& Phi = cycle_phi();  // before the prior mean's feedback below (which moves nothing of the cycle)
+    // the smoother's prediction from the previous epoch's fixed solution (4.), before resolve() conditions this one
+    if constexpr (kUnscented) core_.condition_prediction_for_smoother(Phi);
     if constexpr (kUnscented) {
       // the unscented prior mean (not zero: nonlinear model, outage cycles) into the INS, so the
       // slip test, the rows and the joint update start from the predicted mean with x = 0
