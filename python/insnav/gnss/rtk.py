@@ -747,7 +747,7 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
     ``(rover, base, r_base_e, base_index, rover_off, rover_rows, base_off, base_rows)`` with the
     observations read (paths -> :class:`PhaseObs`), the base position (header default), the base
     epoch of each rover epoch (:func:`match_base`) and the satellite states of each receiver."""
-    from .spp import read_nav_multi
+    from .rinex import read_nav_multi
 
     if not isinstance(rover, PhaseObs):
         rover = read_phase_obs(rover, opt.systems)
