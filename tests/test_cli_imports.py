@@ -1,9 +1,9 @@
 """What the single point positioning and RTK commands load: only the modules they run.
 
 ``insnav run --filter spp`` and ``--filter rtk`` are compared with RTKLIB's ``rnx2rtkp``
-as whole processes (bench/gnss_speed.py, bench/rtk_compare.py), so their start-up counts: every module imported
-on the way is paid on every run.  The command is run in a fresh interpreter
-and its ``sys.modules`` inspected afterwards (no timing: the timings are in
+as whole processes (bench/gnss_speed.py, bench/rtk_compare.py), so their start-up
+counts: every module imported on the way is paid on every run.  The command is run
+in a fresh interpreter and its ``sys.modules`` inspected afterwards (no timing: the timings are in
 bench/).
 """
 from __future__ import annotations
