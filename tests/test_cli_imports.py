@@ -1,9 +1,9 @@
-"""What the single point positioning command loads: only the modules it runs.
+"""What the single point positioning and RTK commands load: only the modules they run.
 
-``insnav run --filter spp`` is compared with RTKLIB's ``rnx2rtkp`` as a whole
-process (bench/gnss_speed.py), so its start-up counts: every module imported
-on the way is paid on every run.  The command is run in a fresh interpreter
-and its ``sys.modules`` inspected afterwards (no timing: the timings are in
+``insnav run --filter spp`` and ``--filter rtk`` are compared with RTKLIB's ``rnx2rtkp``
+as whole processes (bench/gnss_speed.py, bench/rtk_compare.py), so their start-up
+counts: every module imported on the way is paid on every run.  The command is run
+in a fresh interpreter and its ``sys.modules`` inspected afterwards (no timing: the timings are in
 bench/).
 """
 from __future__ import annotations
@@ -70,6 +70,33 @@ def test_spp_command_with_config_reads_toml(shared_data, tmp_path):
     assert out["rc"] == 0 and "tomllib" in out["modules"]
     assert 'systems = "G"' in (tmp_path / "spp.csv.config.toml").read_text()
 
+
+
+def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_modules):
+    """``insnav run --filter rtk`` (bench/rtk_compare.py times it as a whole process against
+    rnx2rtkp): the RINEX readers, the orbits and the RTK engine; not the dataset folder format
+    (insnav.data.dataset: the solution layer imports insnav.data.nav only), not the SPP solver
+    (the navigation files are read through gnss.rinex), no other filter or command."""
+    d = shared_data / "matrtklib_static_septentrio"
+    if not (d / "rover.obs").is_file():
+        pytest.skip(f"{d} not found (the MatRTKLIB static data set)")
+    (tmp_path / "rtk.toml").write_text('filter = "rtk"\n\n[rtk]\nar_mode = "instantaneous"\nsystems = "G"\n'
+                                       'frequencies = 1\n')
+    out = _loaded(tmp_path, ["run", "--filter", "rtk", "--format", "rinex", "--obs", d / "rover.obs", "--base",
+                             d / "base.obs", "--nav", d / "base.nav", "--config", tmp_path / "rtk.toml", "--quiet",
+                             "--out", tmp_path / "rtk.pos"])
+    assert out["rc"] == 0
+    mods = set(out["modules"]) - interpreter_modules
+    assert {"insnav.filters.rtk", "insnav.gnss.rtk", "insnav._core"} <= mods  # the probe did run the command
+    assert (tmp_path / "rtk.pos").is_file() and (tmp_path / "rtk.pos.rtk.csv").is_file()
+    assert sorted(m for m in mods if m.split(".")[0] in HEAVY_PACKAGES) == []
+    free = tuple(p for p in START_UP_FREE if p != "tomllib")  # (--config is a TOML)
+    assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in free)) == []
+    others = tuple(p for p in OTHER_INSNAV if p != "insnav.filters.rtk") + (
+        "insnav.data.dataset", "insnav.gnss.spp", "insnav.filters.spp", "insnav.filters.rtk_ins",
+        "insnav.io.rinex_dataset")
+    assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in others)) == []
+    assert out["blas"] == "1"
 
 #: what no run path needs at start-up: numpy.ma (np.median / np.unique import it, ~15 ms;
 #: insnav._median replaces them), the thread pool of concurrent.futures and logging

@@ -592,3 +592,61 @@ def test_matches_or_beats_rnx2rtkp_on_matrtklib(tmp_path, shared_data):
     assert a["fix_rate"] >= b["fix_rate"]
     assert a["rms_fixed_mm"] <= 1.2 * b["rms_fixed_mm"]
     assert a["wrong"] == 0
+
+
+def test_gpst_texts_equal_the_calendar_of_datetime():
+    """RTKLIB's time form of whole arrays (integer milliseconds split into days and time of day)
+    equals datetime's calendar for each time, half-millisecond ties rounded to even as round() does."""
+    import datetime
+
+    def one(t):
+        ms = int(round(t * 1000.0))
+        d = datetime.datetime(1980, 1, 6) + datetime.timedelta(milliseconds=ms)
+        return d.strftime("%Y/%m/%d %H:%M:%S") + f".{ms % 1000:03d}"
+
+    rng = np.random.default_rng(7)
+    t = np.concatenate([rng.uniform(0.0, 2.0e9, 3000),  # 1980 .. 2043
+                        np.round(rng.uniform(1.0e9, 1.5e9, 500)) + 0.0005,  # ties
+                        1.0e9 + 86400.0 * np.arange(-3, 4) - 0.0004,  # just before midnight
+                        [0.0, 86399.9995, 604800.0 * 2000]])
+    assert rtk._gpst_texts(t) == [one(x) for x in t]
+
+
+def test_rtklib_pos_rows_equal_the_per_epoch_enu_rotation(tmp_path):
+    """write_rtklib_pos rotates every epoch's ECEF covariance to ENU at once; each row must equal the
+    row of the per-epoch product Q = C P C^T (C: ENU <- ECEF at the epoch's latitude and longitude),
+    with sdn, sde, sdu the square roots of Q's diagonal and sdne, sdeu, sdun sign(q) sqrt(|q|)."""
+    import math
+
+    rng = np.random.default_rng(11)
+    n = 40
+    lat = rng.uniform(-1.4, 1.4, n)
+    lon = rng.uniform(-3.1, 3.1, n)
+    r_e = np.stack([np.asarray(earth.geodetic_to_ecef(a, b, h), float).ravel()
+                    for a, b, h in zip(lat, lon, rng.uniform(-50.0, 3000.0, n))])
+    A = rng.normal(scale=0.02, size=(n, 3, 3))
+    P_r = A @ A.transpose(0, 2, 1)
+    status = rng.choice([0, 1, 2, 4], n)
+    age = np.where(rng.random(n) < 0.2, np.nan, rng.uniform(0.0, 3.0, n))
+    t = 1.4e9 + np.arange(n) * 0.5
+    sol = rtk.RtkSolution(t_gps_s=t, status=status, ratio=rng.uniform(0.0, 50.0, n), success_rate=np.ones(n),
+                          n_fix=np.zeros(n, int), n_dd=np.zeros(n, int), n_sat=rng.integers(4, 30, n), r_e=r_e,
+                          v_e=np.zeros((n, 3)), r_float_e=r_e.copy(), P_r=P_r, slips=np.zeros((n, 6), int),
+                          base_age_s=age, r_base_e=r_e[0], info=dict(rover="r.obs", base="b.obs"))
+    lines = [ln for ln in rtk.write_rtklib_pos(sol, tmp_path / "x.pos").read_text().splitlines()
+             if not ln.startswith("%")]
+    ok = np.flatnonzero(status > 0)
+    assert len(lines) == ok.size > 0
+    la, lo, h = earth.ecef_to_geodetic(r_e[ok])
+    for i, (k, line) in enumerate(zip(ok, lines)):
+        sl, cl, so, co = np.sin(la[i]), np.cos(la[i]), np.sin(lo[i]), np.cos(lo[i])
+        C = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+        Q = C @ P_r[k] @ C.T
+        sd = np.sqrt(np.maximum(np.diag(Q), 0.0))
+        f = line.split()
+        assert f[1] == rtk._gpst_texts([t[k]])[0].split()[1]
+        assert [float(x) for x in f[2:5]] == pytest.approx([np.degrees(la[i]), np.degrees(lo[i]), h[i]], abs=1e-4)
+        assert (int(f[5]), int(f[6])) == (status[k], sol.n_sat[k])
+        assert f[7:13] == [f"{v:.4f}" for v in (sd[1], sd[0], sd[2], *(math.copysign(math.sqrt(abs(q)), q) for q in
+                                                                       (Q[1, 0], Q[0, 2], Q[2, 1])))]
+        assert f[13] == f"{age[k] if np.isfinite(age[k]) else 0.0:.2f}"

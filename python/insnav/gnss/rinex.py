@@ -41,7 +41,7 @@ if TYPE_CHECKING:  # annotations only (the readers import these modules where th
     from .glonass import GlonassEphemerides
 from .gpstime import SECONDS_PER_WEEK, gps_seconds_from_calendar, week_tow
 
-__all__ = ["RinexError", "NavData", "ObsData", "read_rinex_nav", "read_rinex_obs"]
+__all__ = ["RinexError", "NavData", "ObsData", "read_rinex_nav", "read_rinex_obs", "read_nav_multi", "read_obs_multi"]
 
 
 class RinexError(ValueError):
@@ -1112,3 +1112,33 @@ def _obs_from_core(path, version, raw, head, types, want, codes_by_sys, gcodes, 
         system=system, codes_by_system=codes_by_sys, glonass_channels=glo_k,
         lli1=np.where(np.isfinite(lli), lli, 0).astype(np.int64),
     )
+
+
+# The multi-file entry points of the GNSS-only filters (SPP, RTK) live beside the readers they call, so
+# that RTK does not import the SPP module for them.
+
+def _reads_systems() -> bool:
+    import inspect
+
+    return "systems" in inspect.signature(read_rinex_obs).parameters
+
+
+def read_obs_multi(path, systems="GREC"):
+    """ObsData of the ``systems`` (a GPS-only reader: GPS)."""
+    return read_rinex_obs(path, systems="".join(systems)) if _reads_systems() else read_rinex_obs(path)
+
+
+def read_nav_multi(paths, systems="GREC"):
+    """NavData of one or more navigation files (merged; e.g. a RINEX 2 ``.n`` and ``.g`` pair)."""
+    if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
+        paths = [paths]
+    nav = None
+    for p in paths:
+        n = read_rinex_nav(p, systems="".join(systems)) if _reads_systems() else read_rinex_nav(p)
+        if nav is None:
+            nav = n
+        elif hasattr(nav, "merge"):
+            nav = nav.merge(n)
+        else:
+            raise ValueError(f"{p}: this navigation reader cannot merge files; give one navigation file")
+    return nav

@@ -747,7 +747,7 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
     ``(rover, base, r_base_e, base_index, rover_off, rover_rows, base_off, base_rows)`` with the
     observations read (paths -> :class:`PhaseObs`), the base position (header default), the base
     epoch of each rover epoch (:func:`match_base`) and the satellite states of each receiver."""
-    from .spp import read_nav_multi
+    from .rinex import read_nav_multi
 
     if not isinstance(rover, PhaseObs):
         rover = read_phase_obs(rover, opt.systems)
@@ -772,19 +772,33 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
     return rover, base, r_base_e, bidx, roff, rrows, boff, brows
 
 
-def _gpst_text(t_gps_s: float) -> str:
-    """``YYYY/MM/DD HH:MM:SS.SSS`` of GPS seconds since 1980-01-06 (RTKLIB's default time form)."""
+def _gpst_texts(t_gps_s) -> list:
+    """``YYYY/MM/DD HH:MM:SS.SSS`` (RTKLIB's default time form) of each GPS time ``t_gps_s`` [s since
+    1980-01-06]: the milliseconds rounded half to even (as ``round``), split into days and the time
+    of day by integer arithmetic, so a file of epochs costs one calendar conversion per day, not a
+    ``datetime`` per epoch."""
     import datetime
 
-    ms = int(round(t_gps_s * 1000.0))
-    d = datetime.datetime(1980, 1, 6) + datetime.timedelta(milliseconds=ms)
-    return d.strftime("%Y/%m/%d %H:%M:%S") + f".{ms % 1000:03d}"
+    ms = np.rint(np.asarray(t_gps_s, float) * 1000.0).astype(np.int64)
+    day, ms_of_day = np.divmod(ms, 86_400_000)
+    hh, rem = np.divmod(ms_of_day, 3_600_000)
+    mi, rem = np.divmod(rem, 60_000)
+    ss, mss = np.divmod(rem, 1000)
+    ord0 = datetime.date(1980, 1, 6).toordinal()
+    dates = {d: datetime.date.fromordinal(ord0 + d).strftime("%Y/%m/%d") for d in set(day.tolist())}
+    return [f"{dates[d]} {h:02d}:{m:02d}:{s:02d}.{f:03d}"
+            for d, h, m, s, f in zip(day.tolist(), hh.tolist(), mi.tolist(), ss.tolist(), mss.tolist())]
 
 
 def write_rtklib_pos(sol: RtkSolution, path, *, program: str = "insnav") -> "os.PathLike":
     """Write ``path`` in RTKLIB's ``.pos`` layout (GPST date and time, latitude/longitude/height
     [deg, deg, m], Q, ns, sdn/sde/sdu/sdne/sdeu/sdun [m], age [s], ratio), so RTKLIB users'
-    scripts read it unchanged."""
+    scripts read it unchanged.
+
+    The covariance is rotated to ENU, ``Q = C P C^T`` with ``C`` the ENU <- ECEF rotation at the
+    solution's latitude and longitude, for all epochs at once (numpy's stacked product gives each
+    epoch the bits of its own 3 x 3 product); the off-diagonal terms are written as RTKLIB does,
+    ``sign(q) sqrt(|q|)``."""
     from .. import earth
     from .._atomic import atomic_write_text
 
@@ -797,20 +811,26 @@ def write_rtklib_pos(sol: RtkSolution, path, *, program: str = "insnav") -> "os.
              "%  GPST                   latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  "
              "sdne(m)  sdeu(m)  sdun(m) age(s)  ratio"]
     if ok.any():
+        k = np.flatnonzero(ok)
         lat, lon, h = earth.ecef_to_geodetic(sol.r_e[ok])
-        for i, k in enumerate(np.flatnonzero(ok)):
-            sl, cl, so, co = np.sin(lat[i]), np.cos(lat[i]), np.sin(lon[i]), np.cos(lon[i])
-            C = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])  # ENU <- ECEF
-            Q = C @ sol.P_r[k] @ C.T
-            sd = np.sqrt(np.maximum(np.diag(Q), 0.0))
+        lat, lon, h = (np.asarray(a, float).reshape(-1) for a in (lat, lon, h))
+        sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+        C = np.stack([np.stack([-so, co, np.zeros_like(so)], -1), np.stack([-sl * co, -sl * so, cl], -1),
+                      np.stack([cl * co, cl * so, sl], -1)], 1)  # (n, 3, 3): ENU <- ECEF
+        Q = C @ sol.P_r[k] @ C.transpose(0, 2, 1)
+        sd = np.sqrt(np.maximum(np.diagonal(Q, axis1=1, axis2=2), 0.0))
 
-            def ss(v):
-                return math.copysign(math.sqrt(abs(v)), v)
+        def ss(v):
+            return np.copysign(np.sqrt(np.abs(v)), v)
 
-            age = sol.base_age_s[k] if np.isfinite(sol.base_age_s[k]) else 0.0
-            lines.append(f"{_gpst_text(sol.t_gps_s[k])} {np.degrees(lat[i]):14.9f} {np.degrees(lon[i]):14.9f} {h[i]:10.4f} "
-                         f"{int(sol.status[k]):3d} {int(sol.n_sat[k]):3d} {sd[1]:8.4f} {sd[0]:8.4f} {sd[2]:8.4f} "
-                         f"{ss(Q[1, 0]):8.4f} {ss(Q[0, 2]):8.4f} {ss(Q[2, 1]):8.4f} {age:6.2f} {sol.ratio[k]:6.1f}")
+        age = sol.base_age_s[k]
+        age = np.where(np.isfinite(age), age, 0.0)
+        cols = (np.degrees(lat), np.degrees(lon), h, sol.status[k].astype(np.int64), sol.n_sat[k].astype(np.int64),
+                sd[:, 1], sd[:, 0], sd[:, 2], ss(Q[:, 1, 0]), ss(Q[:, 0, 2]), ss(Q[:, 2, 1]), age, sol.ratio[k])
+        for t, (la, lo, hh, q, ns, sn, se, su, sne, seu, sun, ag, ra) in zip(
+                _gpst_texts(sol.t_gps_s[k]), zip(*(np.asarray(c).tolist() for c in cols))):
+            lines.append(f"{t} {la:14.9f} {lo:14.9f} {hh:10.4f} {q:3d} {ns:3d} {sn:8.4f} {se:8.4f} {su:8.4f} "
+                         f"{sne:8.4f} {seu:8.4f} {sun:8.4f} {ag:6.2f} {ra:6.1f}")
     return atomic_write_text(path, "\n".join(lines) + "\n")
 
 
@@ -829,10 +849,14 @@ def write_rtk_table(sol: RtkSolution, path, *, t_solution_s=None) -> "os.PathLik
     if t_solution_s is not None:
         cols += ("t_s",)
     lines = [",".join(cols)]
-    for i in range(len(sol)):
-        age = f"{sol.base_age_s[i]:.3f}" if np.isfinite(sol.base_age_s[i]) else "nan"
-        xyz = ",".join(f"{v:.4f}" for v in sol.r_e[i]) if sol.status[i] > 0 else "nan,nan,nan"
-        lines.append(f"{sol.t_gps_s[i]:.3f},{int(sol.status[i])},{sol.ratio[i]:.2f},{int(sol.n_fix[i])},"
-                     f"{int(sol.n_dd[i])},{int(sol.n_sat[i])},{age},{xyz}," + ",".join(str(int(v)) for v in sol.slips[i])
-                     + (f",{t_solution_s[i]:.6f}" if t_solution_s is not None else ""))
+    # Python numbers (tolist) format as the numpy scalars did, without a numpy call per field
+    age = [f"{a:.3f}" if math.isfinite(a) else "nan" for a in sol.base_age_s.tolist()]
+    xyz = [f"{x:.4f},{y:.4f},{z:.4f}" if q > 0 else "nan,nan,nan"
+           for (x, y, z), q in zip(sol.r_e.tolist(), sol.status.tolist())]
+    slips = [",".join(str(int(v)) for v in row) for row in sol.slips.tolist()]
+    t_sol = [""] * len(sol) if t_solution_s is None else [f",{t:.6f}" for t in np.asarray(t_solution_s).tolist()]
+    for t, q, ra, nf, nd, ns, ag, r, sl, ts in zip(sol.t_gps_s.tolist(), sol.status.tolist(), sol.ratio.tolist(),
+                                                    sol.n_fix.tolist(), sol.n_dd.tolist(), sol.n_sat.tolist(), age,
+                                                    xyz, slips, t_sol):
+        lines.append(f"{t:.3f},{int(q)},{ra:.2f},{int(nf)},{int(nd)},{int(ns)},{ag},{r},{sl}{ts}")
     return atomic_write_text(path, "\n".join(lines) + "\n")

@@ -52,6 +52,7 @@ import numpy as np
 
 from .. import _core, earth
 from ..config import ConfigError, TomlTable
+from .rinex import read_nav_multi, read_obs_multi  # noqa: F401 (their home before; __all__ keeps them here)
 from .systems import CLOCK_SYSTEM, SYSTEMS, clock_system_index
 
 __all__ = ["SppOptions", "SppSolution", "solve_spp", "chi2_quantile", "spp_inputs_from_rinex", "RAIM_STATUS",
@@ -749,36 +750,3 @@ def _sat_states(nav, system, prn, t_rx_gps_s, r0, obs, rows) -> dict:
             out["tau_s"][gg], out["t_tx_gps_s"][gg] = ts.tau_s, ts.t_tx_gps_s
             out["wavelength_m"][gg] = L1_WAVELENGTH
     return out
-
-
-def _reads_systems() -> bool:
-    import inspect
-
-    from .rinex import read_rinex_obs
-
-    return "systems" in inspect.signature(read_rinex_obs).parameters
-
-
-def read_obs_multi(path, systems="GREC"):
-    """ObsData of the ``systems`` (a GPS-only reader: GPS)."""
-    from .rinex import read_rinex_obs
-
-    return read_rinex_obs(path, systems="".join(systems)) if _reads_systems() else read_rinex_obs(path)
-
-
-def read_nav_multi(paths, systems="GREC"):
-    """NavData of one or more navigation files (merged; e.g. a RINEX 2 ``.n`` and ``.g`` pair)."""
-    from .rinex import read_rinex_nav
-
-    if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
-        paths = [paths]
-    nav = None
-    for p in paths:
-        n = read_rinex_nav(p, systems="".join(systems)) if _reads_systems() else read_rinex_nav(p)
-        if nav is None:
-            nav = n
-        elif hasattr(nav, "merge"):
-            nav = nav.merge(n)
-        else:
-            raise ValueError(f"{p}: this navigation reader cannot merge files; give one navigation file")
-    return nav
