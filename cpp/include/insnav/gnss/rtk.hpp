@@ -833,7 +833,7 @@ class RtkEngine {
     }
     int m = 0;
     n_phase_rows_ = 0;
-    R_.setZero(kMaxRows, kMaxRows);
+    R_.resize(kMaxRows, kMaxRows);  // each row m zeroes its own entries left of m below (no full memset)
     y_.setZero(kMaxRows);
     {
       for (int sys = 0; sys < kNumSystems; ++sys) {
@@ -888,6 +888,8 @@ class RtkEngine {
             row_f_[m] = f;
             const double var_j =
                 var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(c, f) : 1.0);
+            R_.row(m).head(m0).setZero();  // rows of another system or frequency: uncorrelated
+            R_.col(m).head(m0).setZero();
             R_(m, m) = var_j + var_bl;
             for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
             R_(m, m) += var_ref + var_bl;
@@ -1200,7 +1202,8 @@ class RtkEngine {
   void hold(int nuse) {
     build_active(opt_.mode == RtkMode::kKinematic);
     const int m = std::min(nuse, kMaxRows);
-    R_.setZero(kMaxRows, kMaxRows);
+    R_.resize(kMaxRows, kMaxRows);
+    R_.topLeftCorner(m, m).setZero();
     for (int p = 0; p < m; ++p) {
       const int kj = dd_j_[order_[p]], ki = dd_i_[order_[p]];
       nz_[p] = 0;
