@@ -41,7 +41,7 @@ INS = (f"{_CPP}ins/mechanization.hpp", f"{_CPP}ins/nav_state.hpp", f"{_CPP}earth
 LOOSE_EKF = INS + (f"{_CPP}engine/closed_loop.hpp", f"{_CPP}engine/loose_engine.hpp", f"{_CPP}filter/ekf.hpp",
                    f"{_CPP}filter/error_model_linear.hpp", f"{_CPP}filter/kalman_update.hpp",
                    f"{_CPP}filter/layout.hpp", f"{_CPP}filter/nis_gate.hpp", f"{_CPP}meas/gnss_loose.hpp",
-                   f"{_PY}filters/loose.py", f"{_PY}filters/_setup.py", f"{_PY}filters/sanitize.py",
+                   f"{_CPP}filter/adaptive_noise.hpp", f"{_PY}filters/loose.py", f"{_PY}filters/_setup.py", f"{_PY}filters/sanitize.py",
                    f"{_PY}config.py")
 #: the seed 000 sigma-point filters
 SIGMA = (f"{_CPP}filter/rbukf.hpp", f"{_CPP}filter/ukf.hpp", f"{_CPP}filter/augmented_ut.hpp",

@@ -53,7 +53,8 @@ LooseConfig loose_run_config_from(const py::dict& config) {
   LooseConfig cfg = loose_config_from(config, "engine config",
                                       {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
                                        "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
-                                       "constraint_gate_chi2", "second_order_corr_s", "smooth", INSNAV_SELFCAL_KEYS});
+                                       "constraint_gate_chi2", "second_order_corr_s", "smooth", "adaptive_r_window",
+                                       "adaptive_r_min_fraction", INSNAV_SELFCAL_KEYS});
   VehicleConstraintConfig& v = cfg.vehicle;
   v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
   if (config.contains("vehicle_C_bv")) {
@@ -70,6 +71,14 @@ LooseConfig loose_run_config_from(const py::dict& config) {
   cfg.constraint_gate_chi2 = num(config, "constraint_gate_chi2", 0.0);
   for (double sgm : {v.sigma_nhc_mps, v.sigma_odo_mps, v.sigma_zupt_mps, v.sigma_zaru_radps})
     if (!(sgm > 0.0)) throw py::value_error("vehicle constraint sigmas must be > 0");
+  // adaptive measurement noise of the fixes (filter/adaptive_noise.hpp)
+  const double w = num(config, "adaptive_r_window", 0.0);
+  if (!(w >= 0.0 && w <= kMaxAdaptiveWindow && w == std::floor(w)))
+    throw py::value_error("adaptive_r_window must be an integer in 0.." + std::to_string(kMaxAdaptiveWindow));
+  cfg.adaptive_r.window = static_cast<int>(w);
+  cfg.adaptive_r.min_fraction = num(config, "adaptive_r_min_fraction", cfg.adaptive_r.min_fraction);
+  if (!(cfg.adaptive_r.min_fraction > 0.0 && cfg.adaptive_r.min_fraction <= 1.0))
+    throw py::value_error("adaptive_r_min_fraction must be in (0, 1]");
   return cfg;
 }
 

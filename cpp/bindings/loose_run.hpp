@@ -65,6 +65,8 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   using L = typename Filter::Layout;
   constexpr int ns = L::kSize;
   const LooseConfig& cfg = a.cfg;
+  if (cfg.adaptive_r.window > 0 && !kJacobianUpdate<Filter>)
+    throw py::value_error("adaptive_r_window > 0: the EKF and the RB-UKF only (it needs the update's H P H^T)");
   const ImuArrays imu = imu_arrays(a.t, a.dtheta_b, a.dv_b);
   const py::ssize_t m = a.gnss.ndim() == 2 ? a.gnss.shape(0) : 0;
   if (m > 0) require_shape(a.gnss, m, 13, "gnss");

@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 
 #include "common.hpp"
 #include "insnav/engine/closed_loop.hpp"
@@ -120,12 +122,20 @@ struct NavBuffers {
 };
 
 /// Per loose record (m rows): innovation (m, 6), nis, status.
+/// Outputs with a meas_sigma buffer (LooseOutputs; the delay engines' have none).
+template <class Out, class = void>
+struct HasMeasSigma : std::false_type {};
+template <class Out>
+struct HasMeasSigma<Out, std::void_t<decltype(std::declval<Out&>().meas_sigma)>> : std::true_type {};
+
 struct LooseRecordBuffers {
-  DArray innovation, nis, log_det_s;
+  DArray innovation, nis, log_det_s, meas_sigma;
   py::array_t<std::int8_t> status;
 
-  explicit LooseRecordBuffers(py::ssize_t m) : innovation({m, py::ssize_t(6)}), nis({m}), log_det_s({m}), status({m}) {
+  explicit LooseRecordBuffers(py::ssize_t m)
+      : innovation({m, py::ssize_t(6)}), nis({m}), log_det_s({m}), meas_sigma({m, py::ssize_t(6)}), status({m}) {
     std::fill_n(log_det_s.mutable_data(), m, NAN);  // engines that do not write it (delay filters)
+    std::fill_n(meas_sigma.mutable_data(), 6 * m, NAN);
   }
 
   template <class Out>
@@ -133,6 +143,7 @@ struct LooseRecordBuffers {
     out.innovation = m ? innovation.mutable_data() : nullptr;
     out.nis = m ? nis.mutable_data() : nullptr;
     out.log_det_s = m ? log_det_s.mutable_data() : nullptr;
+    if constexpr (HasMeasSigma<Out>::value) out.meas_sigma = m ? meas_sigma.mutable_data() : nullptr;
     out.status = m ? status.mutable_data() : nullptr;
   }
 
@@ -140,6 +151,7 @@ struct LooseRecordBuffers {
     res["innovation"] = innovation;
     res["nis"] = nis;
     res["log_det_s"] = log_det_s;
+    res["meas_sigma"] = meas_sigma;
     res["status"] = status;
   }
 };

@@ -2,8 +2,8 @@
 // the layout contract of kDiagonalAuxDynamics (F and Qc block structure),
 // block_transition / block_propagate_covariance vs I + F dt + (F dt)^2/2 and
 // Phi P Phi^T + Q_d, the structured Joseph update vs the dense one, no heap in
-// propagate/update, and the loose engine's output options (sigma_cols,
-// output_decimation).
+// propagate/update, the loose engine's output options (sigma_cols,
+// output_decimation) and its adaptive measurement noise.
 
 // Count Eigen assertions (also in Release) so that EIGEN_RUNTIME_NO_MALLOC is live.
 #include "eigen_malloc_check.hpp"  // first: before any Eigen header
@@ -345,6 +345,109 @@ void test_odo_scale_engine() {
   EXPECT_LT(std::abs(eng->core().odo_scale - est), 1e-9);  // fed back: the filter's remainder is zero
 }
 
+// --- adaptive measurement noise (filter/adaptive_noise.hpp) ------------------------
+// The window arithmetic: lambda = sum(y^2 - hph) / sum(r0) over the last N
+// records, clamped to [f, 1]; 1 until the window is full.
+void test_adaptive_noise_window() {
+  AdaptiveMeasurementNoise<2> a(AdaptiveNoiseConfig{3, 0.1});
+  EXPECT_TRUE(a.factor(0) == 1.0);
+  a.push(0, 1.0, 0.5, 2.0);  // d = 0.5
+  a.push(0, 2.0, 1.0, 2.0);  // d = 3
+  EXPECT_TRUE(a.factor(0) == 1.0);  // not full
+  a.push(0, 1.0, 0.0, 2.0);  // d = 1: (0.5 + 3 + 1) / 6 = 0.75
+  EXPECT_LT(std::abs(a.factor(0) - 0.75), 1e-15);
+  a.push(0, 0.0, 1.0, 2.0);  // the first leaves: (3 + 1 - 1) / 6 = 0.5
+  EXPECT_LT(std::abs(a.factor(0) - 0.5), 1e-15);
+  a.push(0, 0.0, 2.0, 2.0);
+  a.push(0, 0.0, 2.0, 2.0);  // (-1 - 2 - 2) / 6 < 0: the lower clamp
+  EXPECT_TRUE(a.factor(0) == 0.1);
+  for (int k = 0; k < 3; ++k) a.push(0, 10.0, 0.0, 2.0);  // large innovations: the upper clamp
+  EXPECT_TRUE(a.factor(0) == 1.0);
+  EXPECT_TRUE(a.factor(1) == 1.0);  // the other channel has no records
+  a.reset();
+  EXPECT_TRUE(a.factor(0) == 1.0);
+}
+
+// A drive whose truth is the mechanization of the IMU data (no INS error of its
+// own), fixes at 1 Hz with white noise 4x smaller (sigma) than configured: with
+// a window of 30 the variances the updates use come to the simulated ones
+// (mean over the last 120 fixes within 0.7-1.4 of it per block of rows: some 4
+// independent windows x 3 rows, each with a standard deviation of about
+// sqrt(2/30) (1 + H P- H'/R) R = 0.3 R here), never above the configured, and
+// the run does not touch the heap.
+void test_adaptive_noise_engine() {
+  using L = Layout15;
+  constexpr double imu_dt = 0.01, kSigP = 0.05, kSigV = 0.02;
+  const int n = 20000;  // 200 s at 100 Hz
+  std::vector<double> t(n), dth(3 * n), dv(3 * n);
+  NavState s0;
+  s0.lat = 0.5;
+  s0.h = 50.0;
+  s0.v_n = Vec3(5.0, 0.0, 0.0);
+  Strapdown truth(s0);
+  std::vector<GnssFix> fixes;
+  std::mt19937 rng(11);
+  std::normal_distribution<double> gauss;
+  for (int k = 0; k < n; ++k) {
+    t[k] = imu_dt * (k + 1);
+    ImuIncrement imu;
+    imu.t = t[k];
+    imu.dt = imu_dt;
+    imu.dtheta_b = Vec3(0.0, 0.0, 0.05 * std::sin(0.05 * t[k])) * imu_dt;
+    imu.dv_b = Vec3(0.02 * std::cos(0.1 * t[k]), 0.0, -9.80665) * imu_dt;
+    for (int j = 0; j < 3; ++j) dth[3 * k + j] = imu.dtheta_b[j], dv[3 * k + j] = imu.dv_b[j];
+    truth.update(imu);
+    const NavState& s = truth.state();
+    if ((k + 1) % 100 == 0) {
+      const wgs84::Radii r = wgs84::radii(s.lat);
+      GnssFix f;
+      f.t = t[k];
+      f.lat = s.lat + kSigP * gauss(rng) / (r.R_M + s.h);
+      f.lon = s.lon + kSigP * gauss(rng) / ((r.R_N + s.h) * std::cos(s.lat));
+      f.h = s.h + kSigP * gauss(rng);
+      for (int j = 0; j < 3; ++j) f.v_n[j] = s.v_n[j] + kSigV * gauss(rng);
+      f.sigma_pos_n = Vec3::Constant(4.0 * kSigP);
+      f.sigma_vel_n = Vec3::Constant(4.0 * kSigV);
+      fixes.push_back(f);
+    }
+  }
+  StateVec<L> sd = StateVec<L>::Constant(1e-4);
+  sd.head<9>() << 0.2, 0.2, 0.2, 0.05, 0.05, 0.05, 1e-3, 1e-3, 3e-3;
+  const StateCov<L> P0 = sd.cwiseAbs2().asDiagonal();
+  LooseConfig cfg;
+  cfg.adaptive_r.window = 30;
+  cfg.gate.prob = 0.0;  // every fix in the window (the gate's own tests: test_nis_gate.cpp)
+  ImuErrorModel model;  // defaults: a small process noise
+  auto eng = std::make_unique<LooseEngine<Ekf<L>>>(model, cfg);
+  const int m = static_cast<int>(fixes.size());
+  std::vector<double> ms(6 * m), nis(m);
+  LooseOutputs out;
+  out.meas_sigma = ms.data();
+  out.nis = nis.data();
+  const int before = g_eigen_asserts;
+  Eigen::internal::set_is_malloc_allowed(false);
+  eng->run(s0, P0, ImuCorrection{}, n, t.data(), dth.data(), dv.data(), m, fixes.data(), out);
+  Eigen::internal::set_is_malloc_allowed(true);
+  EXPECT_TRUE(g_eigen_asserts == before);
+  EXPECT_TRUE(out.updates == m);
+  double vp = 0.0, vv = 0.0, nis_mean = 0.0;
+  bool below = true;
+  for (int g = m - 120; g < m; ++g) {
+    for (int j = 0; j < 3; ++j) {
+      vp += ms[6 * g + j] * ms[6 * g + j] / 360.0;
+      vv += ms[6 * g + 3 + j] * ms[6 * g + 3 + j] / 360.0;
+      below = below && ms[6 * g + j] <= 4.0 * kSigP && ms[6 * g + 3 + j] <= 4.0 * kSigV;
+    }
+    nis_mean += nis[g] / 120.0 / 6.0;
+  }
+  std::printf("adaptive R: variance / simulated, position %.3f, velocity %.3f; NIS per row %.3f\n",
+              vp / (kSigP * kSigP), vv / (kSigV * kSigV), nis_mean);
+  EXPECT_TRUE(below);
+  EXPECT_LT(std::abs(std::log(vp / (kSigP * kSigP))), std::log(1.4));
+  EXPECT_LT(std::abs(std::log(vv / (kSigV * kSigV))), std::log(1.4));
+  EXPECT_LT(std::abs(nis_mean - 1.0), 0.25);
+}
+
 }  // namespace
 
 int main() {
@@ -362,5 +465,7 @@ int main() {
   test_no_malloc<Layout16Odo>();
   test_engine_outputs();
   test_odo_scale_engine();
+  test_adaptive_noise_window();
+  test_adaptive_noise_engine();
   TEST_MAIN_END()
 }

@@ -687,6 +687,22 @@ class RunConfig:
         constant floor describes one of the two.  ``insnav tune`` estimates
         the factors ``gnss_pos_speed`` and ``gnss_vel_speed`` on them when
         they are > 0.  Tight runs: must be 0.
+    adaptive_r_window : int
+        Loose EKF and RB-UKF: innovation-based adaptive measurement noise of
+        the GNSS rows (``cpp/include/insnav/filter/adaptive_noise.hpp``;
+        Mohamed & Schwarz 1999, *Adaptive Kalman filtering for INS/GPS*, J.
+        Geodesy 73: R = C_v - H P- H', C_v the innovation covariance over a
+        window).  Each row's configured variance (the data's sigma with the
+        factors and terms above) is multiplied by
+        ``clamp(sum(nu^2 - H P- H') / sum(R), adaptive_r_min_fraction, 1)``
+        over the last ``adaptive_r_window`` applied fixes with that row (not
+        the current one); the configured R until the window is full.  R never
+        exceeds the configured value: measurement noise larger than
+        configured is not followed.  0 (default): off, the configured R.
+        At most 256.
+    adaptive_r_min_fraction : float
+        Lower clamp of that factor (variance; default 0.01: sigma 0.1x the
+        configured), in (0, 1].
     pr_gm_sigma_m, pr_gm_tau_s, pr_gm_max_gap_s : float
         Tight EKF: time-correlated pseudorange errors (multipath, ionosphere
         and troposphere residuals) as one first-order Gauss-Markov state per
@@ -776,6 +792,8 @@ class RunConfig:
     gnss_pos_v_sigma_scale: float = 1.0
     gnss_pos_sigma_per_speed_s: float = 0.0
     gnss_vel_sigma_per_speed: float = 0.0
+    adaptive_r_window: int = 0
+    adaptive_r_min_fraction: float = 0.01
     pr_gm_sigma_m: float = 0.0
     pr_gm_tau_s: float = 60.0
     pr_gm_max_gap_s: float = 10.0
@@ -839,6 +857,18 @@ class RunConfig:
                     "0: none)")
             if v != 0.0 and self.coupling != "loose":
                 bad(key, v, f"0 with {self.coupling} coupling (it adds to the sigmas of loose fixes)")
+        v = self.adaptive_r_window
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= v <= 256:
+            bad("adaptive_r_window", v, "an integer in 0..256 (GNSS records in the window; 0: off)")
+        self.adaptive_r_window = int(v)
+        v = self.adaptive_r_min_fraction
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(v) and 0 < v <= 1):
+            bad("adaptive_r_min_fraction", v, "a number in (0, 1] (lower clamp of the adaptive R, fraction of "
+                "the configured variance)")
+        if self.adaptive_r_window and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf")):
+            bad("adaptive_r_window", self.adaptive_r_window, f"0 with {self.coupling} {self.filter!r} (the adaptive "
+                "measurement noise is the loose EKF's and RB-UKF's)")
         for key, low in (("pr_gm_sigma_m", 0.0), ("pr_gm_tau_s", None), ("pr_gm_max_gap_s", None)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \

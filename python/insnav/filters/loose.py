@@ -151,6 +151,7 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         sol.constraint_t, sol.constraint_kinds = events[:, 0], events[:, 1].astype(np.int8)
         sol.constraint_nis, sol.constraint_status = out["constraint_nis"], out["constraint_status"]
         sol.constraint_log_det_s = out["constraint_log_det_s"]
+    sol.gnss_sigma = out["meas_sigma"]
     put_selfcal(sol, out, cfg)
     if a.P0.shape[0] != n_core:  # the self-calibration states extend the core layout
         sol.summary["layout"] = int(a.P0.shape[0])
@@ -206,6 +207,9 @@ def loose_engine_args(dataset, cfg: RunConfig, record_t: np.ndarray, imu=None) -
                              use_velocity=cfg.use_velocity,
                              # Solution keeps the position, velocity and attitude sigmas, and the IMU errors' if asked
                              sigma_columns=n_core if cfg.imu_error_sigmas else 9, **sc_cfg)
+    if cfg.adaptive_r_window:  # adaptive measurement noise of the fixes (filter/adaptive_noise.hpp)
+        core_cfg.update(adaptive_r_window=int(cfg.adaptive_r_window),
+                        adaptive_r_min_fraction=float(cfg.adaptive_r_min_fraction))
     events, ev_counts = None, None
     if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
         from .constraints import constraint_events, engine_keys

@@ -82,6 +82,11 @@ class Solution(NavTrajectory):
         EKF and RB-UKF runs (NaN from the other filters)
     constraint_log_det_s : (K,) or None
         The same per vehicle-constraint event (runs with ``[constraints]``)
+    gnss_sigma : (M, 6) or None
+        Loose runs: the 1-sigma of each GNSS record's rows as its update used
+        them (N, E, D position [m], velocity [m/s]; sqrt of R's diagonal, after
+        the adaptive scaling of ``adaptive_r_window``; NaN where the record has
+        no such row or was not used)
     summary : dict
         filter, coupling, counts of updates / rejections / covariance repairs.
     """
@@ -103,6 +108,7 @@ class Solution(NavTrajectory):
     sigma_odo_scale: np.ndarray | None = None
     log_det_s: np.ndarray | None = None
     constraint_log_det_s: np.ndarray | None = None
+    gnss_sigma: np.ndarray | None = None
     time_offset_s: np.ndarray | None = None
     sigma_time_offset_s: np.ndarray | None = None
     lever_arm_b_m: np.ndarray | None = None

@@ -964,7 +964,7 @@ class _BlockRun:
             raise Fallback("a GNSS record after the last IMU sample changes the set-up")
         self.gnss, self.gnss_rep = g2, rep2
         cut = int(keep.sum())  # the engine's records are in time order: the cut ones are the last
-        for k in ("innovation", "nis", "log_det_s", "status"):
+        for k in ("innovation", "nis", "log_det_s", "meas_sigma", "status"):
             rec[k] = rec[k][:cut]
 
     def _result(self, imu_source: str, n_blocks: int) -> StreamResult:
@@ -994,7 +994,7 @@ class _BlockRun:
             t=e, lat_deg=e, lon_deg=e, h_m=e, v_n=z, roll_deg=e, pitch_deg=e, yaw_deg=e, sigma_pos_n_m=z,
             sigma_vel_n_mps=z, sigma_att_deg=z, acc_bias_mps2=z, gyro_bias_rps=z, acc_scale=z, gyro_scale=z,
             gnss_t=gnss_t, innovation=rec["innovation"], nis=rec["nis"], gnss_status=rec["status"],
-            log_det_s=rec["log_det_s"],
+            log_det_s=rec["log_det_s"], gnss_sigma=rec["meas_sigma"],
             summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=int(cfg.layout),
                          updates=int(rec["updates"]), rejected=int(rec["rejected"]),
                          gate_reopened=int(rec["gate_reopened"]), gate_outage_accepted=int(rec["gate_outage_accepted"]),

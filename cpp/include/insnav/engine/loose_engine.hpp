@@ -13,14 +13,21 @@
 // that estimates the odometer scale factor (Layout16Odo) the odometer row also
 // carries that state, and the closed-loop core keeps its fed-back estimate.
 //
+// Adaptive measurement noise of the fixes (filter/adaptive_noise.hpp; EKF and
+// RB-UKF, off by default): LooseConfig::adaptive_r.window > 0 scales each
+// row's configured variance by the windowed innovation statistics of the past
+// applied fixes, clamped to [min_fraction, 1] of it.
+//
 // No heap allocation inside run(); outputs go to caller-owned buffers.
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 
 #include "insnav/engine/closed_loop.hpp"
+#include "insnav/filter/adaptive_noise.hpp"
 #include "insnav/meas/gnss_loose.hpp"
 #include "insnav/meas/vehicle.hpp"
 
@@ -36,6 +43,7 @@ struct LooseConfig {
   int output_decimation = 1;         // write every k-th IMU sample
   VehicleConstraintConfig vehicle;   // mounting, rear-axle lever arm and noise of the constraint events
   double constraint_gate_chi2 = 0.0; // NIS gate of the constraint events (<= 0: off)
+  AdaptiveNoiseConfig adaptive_r;    // adaptive R of the fixes (filter/adaptive_noise.hpp; window 0: off)
 };
 
 /// What a vehicle-constraint event asks for (bit flags).
@@ -55,6 +63,8 @@ struct LooseOutputs : NavOutputs {
   double* innovation = nullptr;  // (.,6) INS - GNSS residual before the update (NaN if absent)
   double* nis = nullptr;         // (.)
   double* log_det_s = nullptr;   // (.) log det S of the update (NaN if none; insnav.calib.tune's likelihood)
+  double* meas_sigma = nullptr;  // (.,6) sqrt of R's diagonal as the update used it (after the adaptive
+                                 // scaling; NaN where the fix has no such row or is not used)
   std::int8_t* status = nullptr; // RecordStatus
   // per constraint event (k rows)
   double* constraint_nis = nullptr;
@@ -69,6 +79,8 @@ struct LooseOutputs : NavOutputs {
     if (log_det_s) log_det_s[g] = NAN;
     if (innovation)
       for (int i = 0; i < 6; ++i) innovation[6 * g + i] = NAN;
+    if (meas_sigma)
+      for (int i = 0; i < 6; ++i) meas_sigma[6 * g + i] = NAN;
   }
 
   /// The residual rows of a fix (position and/or velocity) into its innovation row.
@@ -78,6 +90,15 @@ struct LooseOutputs : NavOutputs {
     for (int i = 0; i < 6; ++i) innovation[6 * g + i] = NAN;
     const int off = fix.has_pos ? 0 : 3;
     for (int i = 0; i < r.size(); ++i) innovation[6 * g + off + i] = r[i];
+  }
+
+  /// The sigmas of the rows of a fix (sqrt of R's diagonal) into its meas_sigma row.
+  template <class RMat>
+  void write_meas_sigma(std::int64_t g, const GnssFix& fix, const RMat& R) {
+    if (!meas_sigma) return;
+    for (int i = 0; i < 6; ++i) meas_sigma[6 * g + i] = NAN;
+    const int off = fix.has_pos ? 0 : 3;
+    for (int i = 0; i < R.rows(); ++i) meas_sigma[6 * g + off + i] = std::sqrt(R(i, i));
   }
 };
 
@@ -96,7 +117,7 @@ class LooseEngine {
 
   /// ut is used by the sigma-point filters (RB-UKF, UKF) and ignored by the EKF.
   LooseEngine(const ImuErrorModel& model, const LooseConfig& cfg, const UtParams& ut = {})
-      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {
+      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg), adaptive_(cfg.adaptive_r) {
     core_.gate = NisGate(cfg.gate);
     core_.odo_scale_tau = model.odo_scale_tau;
   }
@@ -151,6 +172,7 @@ class LooseEngine {
     core_.lever_arm_b0 = cfg_.lever_arm_b;
     core_.odo_lever_b0 = cfg_.vehicle.lever_arm_b;
     core_.reset(initial, P0, corr0);
+    adaptive_.reset();
     last_nhc_t_ = last_odo_t_ = -kInf;
   }
 
@@ -173,7 +195,16 @@ class LooseEngine {
       meas_.set(core_.state(), core_.omega_ib_b(), cfg_.lever_arm_b, fix);
     }
     out.write_innovation(g, fix, meas_.linear().residual);
+    const int ch0 = fix.has_pos ? 0 : 3;  // adaptive-noise channel of the first row
+    if constexpr (kJacobianUpdate<Filter>) {
+      if (adaptive_.enabled()) adapt_noise(ch0);
+    }
+    out.write_meas_sigma(g, fix, meas_.linear().R);
     const UpdateResult res = core_.update_gated(meas_);
+    if constexpr (kJacobianUpdate<Filter>) {
+      if (adaptive_.enabled() && res.applied)
+        for (int i = 0; i < meas_.linear().rows(); ++i) adaptive_.push(ch0 + i, ad_y_[i], ad_hph_[i], ad_r0_[i]);
+    }
     if (out.nis) out.nis[g] = res.nis;
     if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
@@ -237,8 +268,27 @@ class LooseEngine {
   }
 
  private:
+  /// The innovation, (H P- H^T)_ii and configured variance of each row of the
+  /// fix in meas_ (kept for the window after the update), and R's diagonal
+  /// scaled by the window of the past fixes (filter/adaptive_noise.hpp).
+  void adapt_noise(int ch0) {
+    const auto& lin = meas_.linear();
+    const auto hph = hph_diagonal(lin, core_.filter.P());
+    const auto& x = core_.filter.x();  // zero after the feedback of the last update (closed loop)
+    for (int i = 0; i < lin.rows(); ++i) {
+      double hx = 0.0;
+      for (int a = 0; a < lin.n_cols; ++a) hx += lin.H(i, a) * x[a];
+      ad_y_[i] = lin.residual[i] - hx;
+      ad_hph_[i] = hph[i];
+      ad_r0_[i] = lin.R(i, i);
+      meas_.scale_noise_row(i, adaptive_.factor(ch0 + i));
+    }
+  }
+
   ClosedLoop<Filter> core_;
   LooseConfig cfg_;
+  AdaptiveMeasurementNoise<6> adaptive_;
+  std::array<double, 6> ad_y_{}, ad_hph_{}, ad_r0_{};  // the current fix's rows (adapt_noise)
   LooseMeasurement<L> meas_;
   VehicleVelocityMeasurement<L> vehicle_;
   StandstillMeasurement<L> standstill_;

@@ -127,6 +127,10 @@ class LooseMeasurement {
 
   const LinearMeasurement<L>& linear() const { return lin_; }
 
+  /// Multiply the variance of row i of R by factor (the adaptive measurement
+  /// noise, filter/adaptive_noise.hpp; R is diagonal).
+  void scale_noise_row(int i, double factor) { lin_.R(i, i) *= factor; }
+
   /// The angular rate [rad/s] of the lever-arm states' velocity columns for
   /// the next set() (layouts with them): a rate whose noise is independent of
   /// the one given to set() (ClosedLoop::omega_ib_b_lever).  Without this

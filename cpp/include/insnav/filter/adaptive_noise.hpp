@@ -1,0 +1,130 @@
+// insnav/filter/adaptive_noise.hpp -- innovation-based adaptive measurement
+// noise of the loose GNSS rows (covariance matching; Mohamed & Schwarz 1999,
+// "Adaptive Kalman filtering for INS/GPS", J. Geodesy 73:193-203: the
+// innovation-based adaptive estimation of R, R^ = C_v - H P- H^T with C_v the
+// innovation covariance over a window of the last N updates).
+//
+// Form used here, per row i of a fix (position N, E, D, velocity N, E, D; the
+// diagonal of R only), over the last N applied updates j that had that row:
+//
+//   d_j   = y_j,i^2 - (H P-_j H^T)_ii     (each record's own H P- H^T)
+//   lambda_i = sum_j d_j / sum_j R0_j,ii  (R0: the configured R of record j)
+//   R_k,ii   = clamp(lambda_i, f, 1) R0_k,ii
+//
+// For a consistent filter E[y_j,i^2] = (H P-_j H^T)_ii + R_j,ii, so with a
+// constant configured R the ratio times R0 is the paper's windowed estimate,
+// except that each record's H P- H^T is subtracted instead of the current
+// one's (unbiased when P- changes within the window, e.g. a walker stopping);
+// the ratio to the configured R carries the estimate over to records whose
+// data sigmas differ (receiver sigmas, motion-dependent sigmas).
+//   * Only past records enter R_k (not y_k itself): R_k is then independent
+//     of y_k, so the NIS and the innovation likelihood of record k keep their
+//     chi-square / Gaussian meaning (the paper's window includes y_k).
+//   * Lower clamp f R0 (f = min_fraction > 0): the windowed difference is
+//     negative whenever H P- H^T overestimates the innovations (a small
+//     window, or a process noise set too large); R never reaches zero.
+//   * Upper clamp R0: a window of large innovations (a fault, a filter that
+//     has not converged, a process noise set too small: all put the excess
+//     into C_v) never inflates R beyond the configured value, so the adaptive
+//     filter is never less confident in the fixes than the configured one
+//     and the innovation gate keeps its meaning.  Measurement noise larger
+//     than configured is then not followed: R stays R0 (documented limit).
+//   * Until a row has N records, R = R0.
+//   * Records the gate rejected do not enter the window.
+//
+//
+// Why the innovation form and not the paper's residual form R = C_r + H P+ H^T
+// (its eq. (28), which gnss/rtk.hpp uses for the code rows): the post-fit
+// residuals and P+ both depend on the R being estimated (a fixed point that
+// moves slowly when H P- H^T is comparable to R, the case of the loose walk),
+// whereas y_j and P-_j depend only on the past; the residual form's advantage,
+// an estimate that stays positive, is had here from the lower clamp.
+//
+// Fixed-size ring buffers (capacity kMaxAdaptiveWindow per row), no heap.
+#pragma once
+
+#include <algorithm>
+#include <array>
+
+#include "insnav/filter/types.hpp"
+
+namespace insnav {
+
+/// Largest window of the adaptive measurement noise [records].
+inline constexpr int kMaxAdaptiveWindow = 256;
+
+struct AdaptiveNoiseConfig {
+  int window = 0;              // N: records per row in the window (0: off, the configured R)
+  double min_fraction = 0.01;  // f: lower clamp of R as a fraction of the configured R (variance)
+};
+
+/// The windowed innovation statistics of `kRows` measurement channels (loose
+/// GNSS: 6, position N, E, D and velocity N, E, D) and the R they give.
+template <int kRows = 6>
+class AdaptiveMeasurementNoise {
+ public:
+  AdaptiveMeasurementNoise() = default;
+  explicit AdaptiveMeasurementNoise(const AdaptiveNoiseConfig& cfg) : cfg_(cfg) {
+    cfg_.window = std::clamp(cfg_.window, 0, kMaxAdaptiveWindow);
+  }
+
+  bool enabled() const { return cfg_.window > 0; }
+  const AdaptiveNoiseConfig& config() const { return cfg_; }
+
+  /// Forget every record (the start of a run).
+  void reset() {
+    for (Channel& c : ch_) c.count = c.head = 0;
+  }
+
+  /// The factor on the configured variance of channel ch: clamp(lambda, f, 1)
+  /// once the window is full, else 1.
+  double factor(int ch) const {
+    const Channel& c = ch_[ch];
+    if (!enabled() || c.count < cfg_.window) return 1.0;
+    double sd = 0.0, sr = 0.0;
+    for (int j = 0; j < c.count; ++j) {
+      sd += c.d[j];
+      sr += c.r0[j];
+    }
+    if (!(sr > 0.0)) return 1.0;
+    return std::clamp(sd / sr, cfg_.min_fraction, 1.0);
+  }
+
+  /// Add a record of channel ch: innovation y, (H P- H^T)_ii = hph, configured variance r0.
+  void push(int ch, double y, double hph, double r0) {
+    Channel& c = ch_[ch];
+    c.d[c.head] = y * y - hph;
+    c.r0[c.head] = r0;
+    c.head = (c.head + 1) % cfg_.window;
+    if (c.count < cfg_.window) ++c.count;
+  }
+
+ private:
+  struct Channel {
+    std::array<double, kMaxAdaptiveWindow> d{}, r0{};
+    int count = 0, head = 0;
+  };
+  AdaptiveNoiseConfig cfg_;
+  std::array<Channel, kRows> ch_{};
+};
+
+/// The diagonal of H P H^T of a linear measurement (its first n_cols columns).
+template <class L>
+typename LinearMeasurement<L>::RowVec hph_diagonal(const LinearMeasurement<L>& lin, const StateCov<L>& P) {
+  typename LinearMeasurement<L>::RowVec out(lin.rows());
+  const int c = lin.n_cols;
+  for (int i = 0; i < lin.rows(); ++i) {  // plain loops: no temporaries of dynamic size
+    double s = 0.0;
+    for (int a = 0; a < c; ++a) {
+      const double ha = lin.H(i, a);
+      if (ha == 0.0) continue;
+      double row = 0.0;
+      for (int b = 0; b < c; ++b) row += P(a, b) * lin.H(i, b);
+      s += ha * row;
+    }
+    out[i] = s;
+  }
+  return out;
+}
+
+}  // namespace insnav
