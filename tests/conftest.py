@@ -100,6 +100,26 @@ SLOW_TESTS = (
     "tests/test_align.py::test_mems_heading_from_gnss_velocity[1]",
     "tests/test_align.py::test_mems_heading_from_gnss_velocity[2]",
     "tests/test_align.py::test_mems_heading_from_gnss_velocity[3]",
+    # the quick subset's longest calls at 1090 tests (pytest --durations, 1.4-3.3 s each)
+    "tests/test_report.py::test_allan_only_report_and_its_errors",
+    "tests/test_report.py::test_allan_section_has_the_fit_of_the_log",
+    "tests/test_loose.py::test_rbukf_beats_ekf_large_initial_attitude_error",
+    "tests/test_report.py::test_cli_report_and_its_errors",
+    "tests/test_constraints.py::test_cli_constraints_flag_and_config_round_trip",
+    "tests/test_report.py::test_summary_matches_evaluate_and_figures_are_real",
+    "tests/test_stream.py::test_a_slow_writer_never_sees_its_rows_overwritten",
+    "tests/test_changing_inputs.py::test_truncation_race_never_kills_the_reader_nor_passes_a_short_read",
+    "tests/test_report_files.py::test_kfgins_nav_results_are_solutions",
+    "tests/test_cli_imports.py::test_percentile_equals_numpy",
+    "tests/test_sim_from_truth.py::test_cli_simulate_from_truth",
+    "tests/test_rtk_validation.py::test_estimated_noise_follows_a_receiver_noisier_than_configured",
+    "tests/test_rtk_iono.py::test_medium_baseline_float_is_consistent_where_the_variance_model_is_not",
+    "tests/test_spp.py::test_compiled_solver_equals_numpy_reference_on_real_data",
+    "tests/test_sim_truth.py::test_attitude_matches_integrated_angular_rate",
+    "tests/test_report.py::test_without_truth_the_gnss_fixes_are_the_reference",
+    "tests/test_sim_gnss.py::test_outage_windows_produce_no_fixes",
+    "tests/test_report.py::test_known_offset_gives_known_numbers",
+    "tests/test_rtk_iono.py::test_zero_ionosphere_estimate_stays_at_zero_and_matches_no_iono_states",
 )
 
 
