@@ -30,6 +30,22 @@ def test_bootstrap_success_rate_of_a_diagonal_covariance_is_the_product_formula(
     assert _core.lambda_success_rate(np.diag(sig ** 2)) == pytest.approx(expected, rel=1e-12)
 
 
+def test_bootstrap_success_rate_of_a_correlated_2d_covariance_is_the_conditional_product():
+    """A correlated 2-D Q that LAMBDA leaves as it is (|q12 / q22| < 1/2: no integer Gauss transform;
+    D_1 + (q12 / q22)^2 D_2 = q11 > q22: no swap): Q = L^T diag(D) L from the last row up gives
+    D_2 = q22, D_1 = q11 - q12^2 / q22, and P_s = erf(1 / (2 sqrt(2 D_1))) erf(1 / (2 sqrt(2 D_2)))
+    (Teunissen 1998, the product of 2 Phi(1 / (2 sigma_i|I)) - 1); with k Q each D_i scales by k."""
+    q11, q12, q22 = 0.09, 0.004, 0.01
+    Q = np.array([[q11, q12], [q12, q22]])
+    d1, d2 = q11 - q12 ** 2 / q22, q22
+    for k in (1.0, 0.3, 2.0):
+        expected = erf(1.0 / (2.0 * sqrt(2.0 * k * d1))) * erf(1.0 / (2.0 * sqrt(2.0 * k * d2)))
+        assert _core.lambda_success_rate(Q, k) == pytest.approx(expected, rel=1e-12)
+    Z, _L, D = _core.lambda_decorrelate(Q)
+    assert np.array_equal(np.abs(Z), np.eye(2))  # left as it is
+    assert np.sort(D) == pytest.approx(np.sort([d1, d2]), rel=1e-12)
+
+
 def _bootstrap(z_hat, L):
     """Integer bootstrapping in the decorrelated space: sequential conditional rounding from the last
     component (Q_z = L^T D L, the order of MLAMBDA's search)."""

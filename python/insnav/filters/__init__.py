@@ -105,11 +105,16 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         setattr(cfg, k, v)
     cfg.validate()
     report = None
-    from .._imu_scan import scan_memo
+    if getattr(dataset, "gnss_only", False):  # GNSS-only inputs (rtk): no IMU to sanitize, check or scan
+        import contextlib
 
-    if getattr(dataset, "gnss_only", False):  # GNSS-only inputs (rtk): no IMU to sanitize or check
         sanitize = checks = False
-    with scan_memo():  # the sanitizer, the checks and the runner share one pass over the IMU arrays
+        memo = contextlib.nullcontext()
+    else:
+        from .._imu_scan import scan_memo
+
+        memo = scan_memo()
+    with memo:  # the sanitizer, the checks and the runner share one pass over the IMU arrays
         inner = getattr(dataset, "imu_dataset", None)  # RTK/INS: the IMU side of an RtkInsDataset
         if sanitize:
             from .sanitize import sanitize_dataset

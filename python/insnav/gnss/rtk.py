@@ -853,7 +853,7 @@ def write_rtk_table(sol: RtkSolution, path, *, t_solution_s=None) -> "os.PathLik
     age = [f"{a:.3f}" if math.isfinite(a) else "nan" for a in sol.base_age_s.tolist()]
     xyz = [f"{x:.4f},{y:.4f},{z:.4f}" if q > 0 else "nan,nan,nan"
            for (x, y, z), q in zip(sol.r_e.tolist(), sol.status.tolist())]
-    slips = [",".join(str(int(v)) for v in row) for row in sol.slips.tolist()]
+    slips = [",".join(map(str, row)) for row in np.asarray(sol.slips).astype(np.int64).tolist()]  # str(int(v))
     t_sol = [""] * len(sol) if t_solution_s is None else [f",{t:.6f}" for t in np.asarray(t_solution_s).tolist()]
     for t, q, ra, nf, nd, ns, ag, r, sl, ts in zip(sol.t_gps_s.tolist(), sol.status.tolist(), sol.ratio.tolist(),
                                                     sol.n_fix.tolist(), sol.n_dd.tolist(), sol.n_sat.tolist(), age,

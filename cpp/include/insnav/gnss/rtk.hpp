@@ -377,6 +377,7 @@ class RtkEngine {
   void reset() {
     x_.setZero(kMaxStates);
     P_.setZero(kMaxStates, kMaxStates);
+    p_dim_ = RtkLayout::kAmb;
     amb_of_.fill(-1);
     for (auto& a : amb_) a = AmbSlot{};
     iono_of_.fill(-1);
@@ -517,7 +518,7 @@ class RtkEngine {
         return out;  // no solution this epoch
       }
       x_.setZero(kMaxStates);
-      P_.setZero(kMaxStates, kMaxStates);
+      zero_covariance();
       amb_of_.fill(-1);
       for (auto& a : amb_) a = AmbSlot{};
       iono_of_.fill(-1);
@@ -628,7 +629,7 @@ class RtkEngine {
     if (kin) {
       // x_pos += v dt; white acceleration in ENU (q_h, q_h, q_v)
       x_.segment<3>(RtkLayout::kPos) += x_.segment<3>(RtkLayout::kVel) * dt;
-      const int n = kMaxStates;
+      const int n = p_dim_;  // P_ is zero beyond its first p_dim_ rows and columns
       // P <- F P F^T with F = [I I dt; 0 I] on the first six states
       for (int j = 0; j < n; ++j)
         for (int i = 0; i < 3; ++i) P_(i, j) += dt * P_(3 + i, j);
@@ -685,6 +686,7 @@ class RtkEngine {
         const int s = RtkLayout::kIono + k;
         iono_[k].sat = sat;
         iono_of_[sat] = k;
+        p_dim_ = std::max(p_dim_, s + 1);
         x_(s) = 0.0;
         P_.row(s).setZero();
         P_.col(s).setZero();
@@ -749,6 +751,7 @@ class RtkEngine {
       n0 -= (rho_r - rho_b) / lam;
     }
     x_(s) = n0;
+    p_dim_ = std::max(p_dim_, s + 1);
     P_.row(s).setZero();
     P_.col(s).setZero();
     P_(s, s) = opt_.amb_init_sigma_cycles * opt_.amb_init_sigma_cycles;
@@ -1220,6 +1223,16 @@ class RtkEngine {
   RtkOptions opt_;
   StateVec x_;
   StateMat P_;
+  // P_ (always kMaxStates x kMaxStates) is zero outside its top-left p_dim_ x p_dim_ corner: p_dim_ is
+  // one past the highest state slot given a variance since the last zeroing (init_amb, manage_iono)
+  int p_dim_ = kMaxStates;
+
+  // Zero P_ where it can be non-zero: instantaneous AR re-initialises every epoch, and the full
+  // 190 x 190 matrix (282 KiB) would be written for the few slots in use.
+  void zero_covariance() {
+    P_.topLeftCorner(p_dim_, p_dim_).setZero();
+    p_dim_ = RtkLayout::kAmb;
+  }
   std::array<int, kMaxSatKeys * kMaxFreq> amb_of_{};
   std::array<AmbSlot, kMaxAmbStates> amb_{};
   std::array<int, kMaxSatKeys> iono_of_{};           // satellite key -> ionosphere slot (-1: none)

@@ -15,11 +15,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -92,8 +94,52 @@ inline bool blank(const char* p, size_t n) {
   return true;
 }
 
+// Fixed-point fast path of parse_num: [p, p+n) is blanks, an optional '-', digits with at most one
+// '.', blanks (RINEX F14.3, F11.7, I3 ... fields).  With at most 15 significant digits the integer
+// mantissa m < 10^15 < 2^53 and the power 10^k (k <= 15 decimals) are exact doubles, so m / 10^k is
+// one correctly rounded IEEE division: the value strtod returns (W. D. Clinger, "How to read
+// floating point numbers accurately", PLDI 1990, the fast path).  Returns false (nothing written)
+// for anything else -- blank, exponent, '+', more digits, a character inside -- left to strtod.
+inline bool parse_fixed_fast(const char* p, size_t n, double& v) {
+  static constexpr double kPow10[16] = {1e0, 1e1, 1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                        1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15};
+  size_t i = 0;
+  while (i < n && p[i] == ' ') ++i;
+  const bool neg = i < n && p[i] == '-';
+  if (neg) ++i;
+  std::uint64_t m = 0;
+  int n_digits = 0, significant = 0, decimals = -1;  // decimals: -1 before the '.'
+  for (; i < n; ++i) {
+    const char ch = p[i];
+    if (ch >= '0' && ch <= '9') {
+      ++n_digits;
+      if (m != 0 || ch != '0') ++significant;  // leading zeros are free
+      m = m * 10 + static_cast<std::uint64_t>(ch - '0');
+      if (decimals >= 0) ++decimals;
+      if (significant > 15 || decimals > 15) return false;
+    } else if (ch == '.' && decimals < 0) {
+      decimals = 0;
+    } else {
+      break;
+    }
+  }
+  if (n_digits == 0) return false;
+  while (i < n && p[i] == ' ') ++i;
+  if (i != n) return false;  // an exponent, a second sign, a character inside: strtod decides
+  double x = static_cast<double>(m);
+  if (decimals > 0) x /= kPow10[decimals];
+  v = neg ? -x : x;
+  return true;
+}
+
 // Parse [p, p+n) as a number; NaN if blank; false if not a number.
 inline bool parse_num(const char* p, size_t n, double& v) {
+  n = std::min<size_t>(n, 39);  // the longest text the strtod route below reads
+  if (parse_fixed_fast(p, n, v)) return true;
+  if (blank(p, n)) {
+    v = NAN;
+    return true;
+  }
   char buf[40];
   n = std::min<size_t>(n, sizeof(buf) - 1);
   std::memcpy(buf, p, n);
@@ -380,20 +426,24 @@ inline void read_rinex2_obs_body(const char* text, size_t size, const std::strin
 /// skipped.  Throws std::runtime_error naming the file and line on malformed input.
 inline RinexObsTable read_rinex3_obs(const std::string& path,
                                      const std::map<char, std::vector<std::vector<std::string>>>& prefs) {
-  std::string text;
+  std::unique_ptr<char[]> buf;
+  std::size_t n_text = 0;
   {
-    // sized once and read in one call (a stringstream copy touches about three times the file)
+    // sized once and read in one call (a stringstream copy touches about three times the file), into
+    // an uninitialised buffer (std::string::resize would first zero the few megabytes)
     std::ifstream f(path, std::ios::binary | std::ios::ate);
     if (!f) throw std::runtime_error(path + ": cannot read file");
     const std::streamoff size = f.tellg();
     if (size < 0) throw std::runtime_error(path + ": cannot read file");
-    text.resize(static_cast<std::size_t>(size));
+    n_text = static_cast<std::size_t>(size);
+    buf.reset(new char[n_text + 1]);
     f.seekg(0);
-    if (size > 0 && !f.read(text.data(), size)) throw std::runtime_error(path + ": cannot read file");
+    if (size > 0 && !f.read(buf.get(), size)) throw std::runtime_error(path + ": cannot read file");
   }
+  const char* text = buf.get();
   RinexObsTable out;
   out.path = path;
-  detail::LineReader L{text.data(), text.size(), path};
+  detail::LineReader L{text, n_text, path};
   if (!L.next() || L.len < 61 || L.field(60, 20).find("RINEX VERSION / TYPE") == std::string::npos)
     L.fail("malformed header: first line is not 'RINEX VERSION / TYPE'");
   {
@@ -487,7 +537,7 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
       }
     }
   }
-  read_rinex3_obs_body(text.data(), text.size(), path, L.pos, L.lineno, c, out);
+  read_rinex3_obs_body(text, n_text, path, L.pos, L.lineno, c, out);
   return out;
 }
 
