@@ -1119,6 +1119,7 @@ class RtkInsEngine {
   // when their float no longer supports them: (a_hat - a_fix)' Q_a^-1 (a_hat - a_fix) beyond the
   // chi2 quantile of the fix validation (validation_prob, else 0.999), or Q_a not positive definite.
   void hold_for_smoother() {
+    if (!core_.recording()) return;  // no smoother: nothing to condition (the forward pass is not changed)
     int n = 0;
     for (int p = 0; p < held_n_; ++p) {
       const int j = held_j_[p], i = held_i_[p];
