@@ -64,8 +64,12 @@
 //      smoother's filtered estimate at a fixed epoch is the navigation conditioned on the fixed
 //      integers, dx_fix and P - P_xa Q_a^-1 P_ax (ClosedLoop::condition_for_smoother), and the step to
 //      the next epoch is predicted from it (through outage cycles, which have no measurement, the
-//      conditioned estimate is carried as its prediction); with fix-and-hold the held posterior
-//      already is.  The
+//      conditioned estimate is carried as its prediction).  The backward kernel is exact only when
+//      the next epoch's estimate holds the same integers (one model, "the integers known"), so the
+//      integers last fixed are held in the smoother's estimate of every epoch without a
+//      continuous-AR fix of its own (float, code only, fix-and-hold) while their ambiguities are
+//      the ones fixed and the float supports them (RtkInsEngine::hold_for_smoother); otherwise a
+//      fixed epoch followed by a float one is smoothed towards the float solution.  The
 //      backward pass thus smooths the navigation states conditioned on the fixed ambiguities at
 //      fixed epochs (Rauch, Tung & Striebel 1965; Groves 2013, sec. 3.4.2), and a fixed epoch moves
 //      only by what the neighbouring epochs add to its centimetre-level covariance.  Outage cycles
@@ -254,6 +258,8 @@ class RtkInsEngine {
     dt_epoch_ = 0.0;
     code_scale_ = 1.0;
     epoch_index_ = 0;
+    amb_gen_.fill(0);
+    held_n_ = 0;
     last_phase_flag_.fill(-2);
     phase_flag_run_.fill(0);
   }
@@ -465,6 +471,9 @@ class RtkInsEngine {
         validator_.end_epoch();
       }
     }
+    // the smoother's estimate of an epoch without its own continuous-AR fix (float, code only, or
+    // fix-and-hold): conditioned on the integers last fixed while their ambiguities persist (4.)
+    if (!cond_valid_) hold_for_smoother();
     // single differences at the final antenna position: the reference of the next INS-aided slip test
     single_differences(nf);
     store_prev(nf, t);
@@ -644,6 +653,7 @@ class RtkInsEngine {
   void remove_amb(int k) {
     if (amb_[k].sat >= 0) amb_of_[amb_[k].sat * gnss::kMaxFreq + amb_[k].freq] = -1;
     amb_[k] = AmbSlot{};
+    ++amb_gen_[k];  // a held integer of this slot no longer applies (hold_for_smoother)
     validator_.invalidate(k);
     xa_(k) = 0.0;
     Pia_.col(k).setZero();
@@ -668,6 +678,7 @@ class RtkInsEngine {
     amb_[k].lock = 0;
     amb_[k].outage = 0;
     validator_.invalidate(k);
+    ++amb_gen_[k];  // a new ambiguity: a held integer of this slot no longer applies (hold_for_smoother)
   }
 
   void manage_ambiguities(int nf) {
@@ -1075,6 +1086,15 @@ class RtkInsEngine {
     ar_.solve_in_place(QxaT_);
     dP_fix_.noalias() = Qxa_ * QxaT_;  // P_xa Q_a^-1 P_ax: the covariance the fix removes
     out.P_r = (core_.filter.P() - dP_fix_).template block<3, 3>(L::kPos, L::kPos);
+    // the integers the smoother holds from now on (hold_for_smoother): this fix's DDs as slot pairs
+    held_n_ = nu;
+    for (int p = 0; p < nu; ++p) {
+      held_j_[p] = dd_j_[order_[p]];
+      held_i_[p] = dd_i_[order_[p]];
+      held_gen_j_[p] = amb_gen_[held_j_[p]];
+      held_gen_i_[p] = amb_gen_[held_i_[p]];
+      held_z_[p] = ar_.a_fix()(p);
+    }
     if (o.ar_mode == gnss::ArMode::kFixAndHold) hold(nu);
     else {  // the smoother starts from the fixed solution (carried through outage cycles)
       core_.condition_for_smoother(dx_fix, dP_fix_);
@@ -1082,6 +1102,65 @@ class RtkInsEngine {
       cond_dP_ = dP_fix_;
       cond_valid_ = true;
     }
+  }
+
+  // The smoother's filtered estimate of an epoch that has no continuous-AR fix of its own, conditioned
+  // on the integers last fixed (held_*) whose two single-differenced ambiguities are still the ones
+  // fixed (not re-initialised or removed since): dx = P_xa Q_a^-1 (a_hat - a_fix), dP = P_xa Q_a^-1 P_ax
+  // from this epoch's joint float state (Teunissen 1995, eq. (6)), given to the smoother as a fixed
+  // epoch's (ClosedLoop::condition_for_smoother) and carried through outage cycles.  The RTS backward
+  // kernel p(x_k | x_k+1, data to k) at a fixed epoch k is only exact when the filtered estimate at
+  // k + 1 holds the same integers (Rauch, Tung & Striebel 1965: the estimates must be those of one
+  // model, here "the integers known"): without this, a fixed epoch followed by a float or code-only one
+  // is smoothed towards the float solution, which has forgotten the integers.  With fix-and-hold the
+  // fixed epoch itself is conditioned here (on the post-hold state: conditioning on a after the hold's
+  // noisy pseudo-measurement of a is the conditioning of the pre-hold state, the forward fixed
+  // solution).  The forward solution and its status are not changed.  The held integers are dropped
+  // when their float no longer supports them: (a_hat - a_fix)' Q_a^-1 (a_hat - a_fix) beyond the
+  // chi2 quantile of the fix validation (validation_prob, else 0.999), or Q_a not positive definite.
+  void hold_for_smoother() {
+    if (!core_.recording()) return;  // no smoother: nothing to condition (the forward pass is not changed)
+    int n = 0;
+    for (int p = 0; p < held_n_; ++p) {
+      const int j = held_j_[p], i = held_i_[p];
+      if (amb_[j].sat < 0 || amb_[i].sat < 0 || amb_gen_[j] != held_gen_j_[p] || amb_gen_[i] != held_gen_i_[p]) continue;
+      held_j_[n] = j;
+      held_i_[n] = i;
+      held_gen_j_[n] = held_gen_j_[p];
+      held_gen_i_[n] = held_gen_i_[p];
+      held_z_[n] = held_z_[p];
+      ++n;
+    }
+    held_n_ = n;
+    if (n == 0) return;
+    Qh_.resize(n, n);
+    rh_.resize(n);
+    Qxa_.resize(kN, n);
+    for (int p = 0; p < n; ++p) {
+      const int sj = held_j_[p], si = held_i_[p];
+      rh_(p) = (xa_(sj) - xa_(si)) - held_z_[p];
+      Qxa_.col(p) = Pia_.col(sj) - Pia_.col(si);
+      for (int q = 0; q < n; ++q) {
+        const int tj = held_j_[q], ti = held_i_[q];
+        Qh_(p, q) = Paa_(sj, tj) - Paa_(sj, ti) - Paa_(si, tj) + Paa_(si, ti);
+      }
+    }
+    llt_h_.compute(Qh_);
+    if (llt_h_.info() != Eigen::Success) {
+      held_n_ = 0;
+      return;
+    }
+    w_ = llt_h_.solve(rh_);
+    const double prob = cfg_.validation_prob > 0.0 ? cfg_.validation_prob : 0.999;
+    if (!(rh_.dot(w_) <= chi2_quantile(prob, n))) {
+      held_n_ = 0;
+      return;
+    }
+    cond_dx_ = Qxa_ * w_;
+    QxaT_ = llt_h_.solve(Qxa_.transpose());
+    cond_dP_.noalias() = Qxa_ * QxaT_;
+    core_.condition_for_smoother(cond_dx_, cond_dP_);
+    cond_valid_ = true;
   }
 
   // Fix-and-hold: the fixed DD as pseudo-measurements N_j - N_i = a_fix (sigma hold_sigma_cycles).
@@ -1166,6 +1245,17 @@ class RtkInsEngine {
   bool cond_valid_ = false;
   Eigen::Matrix<double, kN, 1> cond_dx_ = Eigen::Matrix<double, kN, 1>::Zero();
   Eigen::Matrix<double, kN, kN> cond_dP_ = Eigen::Matrix<double, kN, kN>::Zero();
+  // the integers the smoother holds (hold_for_smoother): the last fix's DDs N_j - N_i = z as slot
+  // pairs, with the slots' generations at the fix (amb_gen_: bumped when a slot is re-initialised or freed)
+  std::array<std::uint32_t, kMaxAmb> amb_gen_{};
+  int held_n_ = 0;
+  std::array<int, gnss::kMaxAmbiguities> held_j_{}, held_i_{};
+  std::array<std::uint32_t, gnss::kMaxAmbiguities> held_gen_j_{}, held_gen_i_{};
+  std::array<double, gnss::kMaxAmbiguities> held_z_{};
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, gnss::kMaxAmbiguities, gnss::kMaxAmbiguities> Qh_;
+  gnss::AmbVec rh_;
+  Eigen::LLT<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, gnss::kMaxAmbiguities, gnss::kMaxAmbiguities>>
+      llt_h_{gnss::kMaxAmbiguities};
   gnss::AmbVec w_;
   // the unscented filters' cycle transition (cycle_phi): the covariance the cycle's points were drawn from
   // (ClosedLoop::start_cycle -> begin_cycle draws them from P, repairing P in place if it is not
