@@ -4,6 +4,7 @@
 // Ctrl-C after each of its blocks (taking the GIL only for that check).
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #if defined(__unix__) || defined(__APPLE__)
@@ -30,50 +31,16 @@ struct FileCloser {
   }
 };
 
-// Opened for writing without truncating it: on ext4 (auto_da_alloc) a file
-// truncated to zero length (fopen "wb") is flushed to disk by its fclose(),
-// ~0.1 s for 200 MB here.  An older, longer file is cut to the new length
-// after the write (cut_to), which does not trigger that flush.
-std::FILE* open_for_overwrite(const std::string& path) {
-#ifdef INSNAV_POSIX_IO
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0666);
-  if (fd < 0) return nullptr;
-  std::FILE* f = ::fdopen(fd, "wb");
-  if (!f) {
-    const int e = errno;
-    ::close(fd);
-    errno = e;
-  }
-  return f;
-#else
-  return std::fopen(path.c_str(), "wb");
-#endif
-}
-
-// 0, or the errno of a failed truncation of the file (flushed) to ``bytes``.
-int cut_to(std::FILE* f, std::int64_t bytes) {
-#ifdef INSNAV_POSIX_IO
-  struct stat st {};
-  const int fd = ::fileno(f);
-  if (::fstat(fd, &st) != 0) return errno;
-  if (st.st_size > bytes && ::ftruncate(fd, static_cast<off_t>(bytes)) != 0) return errno;
-#else
-  (void)f;
-  (void)bytes;
-#endif
-  return 0;
-}
-
-py::int_ write_table(const std::string& path, const std::string& header, const py::list& columns,
-                     const std::vector<double>& scales, const std::vector<int>& decimals, const std::string& sep,
-                     int width, bool trim_zeros, bool trailing_sep, int threads, bool append) {
+/// The columns of a write_table call, checked (the arrays referenced in `keep` while the GIL is released).
+std::vector<textio::Column> table_columns(const py::list& columns, const std::vector<double>& scales,
+                                          const std::vector<int>& decimals, const std::string& sep,
+                                          std::vector<py::array>& keep, py::ssize_t& n) {
   const std::size_t nc = columns.size();
   if (nc == 0 || scales.size() != nc || decimals.size() != nc)
     throw py::value_error("write_table: columns, scales and decimals must have the same (non-zero) length");
   if (sep.size() != 1) throw py::value_error("write_table: the separator must be one character");
-  std::vector<py::array> keep;  // the arrays stay referenced while the GIL is released
   std::vector<textio::Column> cols(nc);
-  py::ssize_t n = -1;
+  n = -1;
   for (std::size_t j = 0; j < nc; ++j) {
     py::array a = py::reinterpret_borrow<py::array>(columns[j]);
     if (!py::isinstance<py::array>(columns[j]) || a.ndim() != 1 || !a.dtype().is(py::dtype::of<double>()))
@@ -86,57 +53,132 @@ py::int_ write_table(const std::string& path, const std::string& header, const p
                scales[j], decimals[j]};
     keep.push_back(a);
   }
-  // append: the rows go after the file's end (a solution written block by block, filters/stream.py)
-  std::unique_ptr<std::FILE, FileCloser> f(append ? std::fopen(path.c_str(), "ab") : open_for_overwrite(path));
-  if (!f) {
-    PyErr_SetFromErrnoWithFilename(PyExc_OSError, path.c_str());
-    throw py::error_already_set();
-  }
+  return cols;
+}
+
+textio::TextFormat text_format(const std::string& sep, int width, bool trim_zeros, bool trailing_sep) {
   textio::TextFormat fmt;
   fmt.sep = sep[0];
   fmt.width = width;
   fmt.trim_zeros = trim_zeros;
   fmt.trailing_sep = trailing_sep;
+  return fmt;
+}
+
+[[noreturn]] void raise_os_error(int e, const std::string& path) {
+  errno = e;
+  PyErr_SetFromErrnoWithFilename(PyExc_OSError, path.c_str());
+  throw py::error_already_set();
+}
+
+/// The header and the rows into `sink` (GIL released; Ctrl-C checked after each block).
+template <class Sink>
+textio::WriteResult write_into(Sink& sink, const std::string& header, const std::vector<textio::Column>& cols,
+                               py::ssize_t n, const textio::TextFormat& fmt, int threads, bool& interrupted,
+                               textio::TextBuffer* buffers = nullptr) {
+  textio::WriteResult res;
+  py::gil_scoped_release release;
+  if (const int e = sink(header.data(), header.size()); e != 0) {
+    res.status = textio::WriteStatus::kIoError;
+    res.error = e;
+    return res;
+  }
+  res = textio::write_rows_to(sink, cols.data(), static_cast<int>(cols.size()), n, fmt, threads, 8192, [&] {
+    py::gil_scoped_acquire gil;
+    if (PyErr_CheckSignals() != 0) interrupted = true;
+    return !interrupted;
+  }, buffers);
+  res.bytes += static_cast<std::int64_t>(header.size());
+  return res;
+}
+
+py::int_ write_table(const std::string& path, const std::string& header, const py::list& columns,
+                     const std::vector<double>& scales, const std::vector<int>& decimals, const std::string& sep,
+                     int width, bool trim_zeros, bool trailing_sep, int threads, bool append) {
+  std::vector<py::array> keep;  // the arrays stay referenced while the GIL is released
+  py::ssize_t n = 0;
+  const std::vector<textio::Column> cols = table_columns(columns, scales, decimals, sep, keep, n);
+  const textio::TextFormat fmt = text_format(sep, width, trim_zeros, trailing_sep);
   bool interrupted = false;
   textio::WriteResult res;
-  {
-    py::gil_scoped_release release;
-    bool ok = header.empty() || std::fwrite(header.data(), 1, header.size(), f.get()) == header.size();
-    if (!ok) {
-      res.status = textio::WriteStatus::kIoError;
-      res.error = errno;
-    } else {
-      res = textio::write_rows(f.get(), cols.data(), static_cast<int>(nc), n, fmt, threads, 8192, [&] {
-        py::gil_scoped_acquire gil;
-        if (PyErr_CheckSignals() != 0) interrupted = true;
-        return !interrupted;
-      });
-      res.bytes += static_cast<std::int64_t>(header.size());
-      if (res.status == textio::WriteStatus::kOk && std::fflush(f.get()) != 0) {
-        res.status = textio::WriteStatus::kIoError;
-        res.error = errno;
-      }
-      if (res.status == textio::WriteStatus::kOk && !append) {
-        if (const int e = cut_to(f.get(), res.bytes); e != 0) {
-          res.status = textio::WriteStatus::kIoError;
-          res.error = e;
-        }
-      }
-    }
+  if (!append) {  // the whole file: through an aligned buffer with O_DIRECT (direct_file.hpp)
+    textio::DirectFile f(path);
+    if (f.error() != 0) raise_os_error(f.error(), path);
+    auto put = [&f](const char* p, std::size_t k) { return f.write(p, k); };
+    res = write_into(put, header, cols, n, fmt, threads, interrupted);
+    const int e = f.close();
+    if (interrupted) throw py::error_already_set();  // KeyboardInterrupt from the signal handler
+    if (res.status == textio::WriteStatus::kOk && e != 0) raise_os_error(e, path);
+    if (res.status == textio::WriteStatus::kIoError) raise_os_error(res.error, path);
+    return py::int_(res.bytes);
   }
-  if (interrupted) throw py::error_already_set();  // KeyboardInterrupt from the signal handler
+  // append: the rows go after the file's end
+  std::unique_ptr<std::FILE, FileCloser> f(std::fopen(path.c_str(), "ab"));
+  if (!f) raise_os_error(errno, path);
+  std::FILE* fp = f.get();
+  auto put = [fp](const char* p, std::size_t k) { return std::fwrite(p, 1, k, fp) == k ? 0 : (errno ? errno : EIO); };
+  res = write_into(put, header, cols, n, fmt, threads, interrupted);
+  if (res.status == textio::WriteStatus::kOk && std::fflush(fp) != 0) {
+    res.status = textio::WriteStatus::kIoError;
+    res.error = errno;
+  }
+  if (interrupted) throw py::error_already_set();
   const int close_rc = std::fclose(f.release());
   if (res.status == textio::WriteStatus::kOk && close_rc != 0) {
     res.status = textio::WriteStatus::kIoError;
     res.error = errno;
   }
-  if (res.status == textio::WriteStatus::kIoError) {
-    errno = res.error;
-    PyErr_SetFromErrnoWithFilename(PyExc_OSError, path.c_str());
-    throw py::error_already_set();
-  }
+  if (res.status == textio::WriteStatus::kIoError) raise_os_error(res.error, path);
   return py::int_(res.bytes);
 }
+
+/// _core.TextSink: one text file written by several write_table calls (a
+/// solution written block by block, filters/stream.py), through a
+/// DirectFile kept open between them (O_DIRECT needs aligned offsets, which
+/// a file reopened for appending after each block does not have).
+struct TextSink {
+  std::string path;
+  std::unique_ptr<textio::DirectFile> file;
+  std::vector<textio::TextBuffer> buffers;  // one per formatting thread, kept across the calls
+  std::int64_t closed_bytes = -1;
+
+  TextSink(const std::string& p, bool direct) : path(p), file(std::make_unique<textio::DirectFile>(p, direct)) {
+    if (file->error() != 0) raise_os_error(file->error(), path);
+  }
+
+  py::int_ write(const std::string& header, const py::list& columns, const std::vector<double>& scales,
+                 const std::vector<int>& decimals, const std::string& sep, int width, bool trim_zeros,
+                 bool trailing_sep, int threads) {
+    if (!file) throw py::value_error("TextSink.write after close(): " + path);
+    std::vector<py::array> keep;
+    py::ssize_t n = 0;
+    const std::vector<textio::Column> cols = table_columns(columns, scales, decimals, sep, keep, n);
+    const textio::TextFormat fmt = text_format(sep, width, trim_zeros, trailing_sep);
+    bool interrupted = false;
+    textio::DirectFile& f = *file;
+    auto put = [&f](const char* p, std::size_t k) { return f.write(p, k); };
+    threads = std::max(1, threads);
+    if (buffers.size() < static_cast<std::size_t>(threads)) buffers.resize(static_cast<std::size_t>(threads));
+    const textio::WriteResult res = write_into(put, header, cols, n, fmt, threads, interrupted, buffers.data());
+    if (interrupted) throw py::error_already_set();
+    if (res.status == textio::WriteStatus::kIoError) raise_os_error(res.error, path);
+    return py::int_(res.bytes);
+  }
+
+  py::int_ close() {
+    if (file) {
+      int e = 0;
+      {
+        py::gil_scoped_release release;
+        e = file->close();
+      }
+      closed_bytes = file->bytes();
+      file.reset();
+      if (e != 0) raise_os_error(e, path);
+    }
+    return py::int_(closed_bytes < 0 ? 0 : closed_bytes);
+  }
+};
 
 py::tuple parse_text(const py::buffer& data, int ncols, int keep, bool allow_extra, bool comma,
                      std::int64_t first_line, int threads, const std::optional<std::vector<int>>& groups) {
@@ -258,6 +300,17 @@ void bind_textio(py::module_& m) {
         "fixed (trailing zeros trimmed when trim_zeros), < 0 shortest round-trip; blocks formatted on `threads` "
         "threads, GIL released, Ctrl-C checked after each block; append: after the file's end.  Returns the "
         "bytes written.");
+  py::class_<TextSink>(m, "TextSink",
+                       "A text file written by several write() calls (the write_table arguments without path and "
+                       "append), front to back through an aligned buffer with O_DIRECT where the file system allows "
+                       "it (page cache otherwise: the same bytes); close() writes the rest and returns the bytes.")
+      .def(py::init<const std::string&, bool>(), py::arg("path"), py::arg("direct") = true)
+      .def("write", &TextSink::write, py::arg("header"), py::arg("columns"), py::arg("scales"), py::arg("decimals"),
+           py::arg("sep") = ",", py::arg("width") = 0, py::arg("trim_zeros") = true, py::arg("trailing_sep") = false,
+           py::arg("threads") = 2, "Append the header (may be empty) and the rows; returns their bytes.")
+      .def("close", &TextSink::close, "Write the rest, cut an older longer file, close; returns the file's bytes.")
+      .def_property_readonly("direct", [](const TextSink& s) { return s.file && s.file->direct(); },
+                             "Whether the file is still written with O_DIRECT.");
   m.def("parse_csv", &parse_csv, py::arg("data"), py::arg("begin"), py::arg("delim"), py::arg("nfields"),
         py::arg("want"), py::arg("time_want"),
         "The generic IMU CSV's numeric lines from byte `begin` (text_table.hpp parse_csv_fields): nfields "

@@ -236,6 +236,26 @@ def write_table(
     append: bool = False,  # after the file's end (no header rewrite, no truncation)
 ) -> int: ...  # bytes written
 
+class TextSink:
+    """One text file written by several write() calls, through an aligned buffer with O_DIRECT where allowed."""
+
+    def __init__(self, path: str, direct: bool = True) -> None: ...
+    def write(
+        self,
+        header: str,
+        columns: list[npt.NDArray[np.float64]],
+        scales: list[float],
+        decimals: list[int],
+        sep: str = ",",
+        width: int = 0,
+        trim_zeros: bool = True,
+        trailing_sep: bool = False,
+        threads: int = 2,
+    ) -> int: ...
+    def close(self) -> int: ...
+    @property
+    def direct(self) -> bool: ...
+
 class LooseStream:
     """The loose run fed block by block (engine/loose_stream.hpp); used by insnav.filters.stream."""
     def __init__(

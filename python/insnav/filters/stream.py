@@ -1056,6 +1056,7 @@ class _Writer:
     def __init__(self, out: Path, columns, precision, health, cfg=None):
         self.out, self.columns, self.precision, self.health = Path(out), columns, precision, health
         self.files: list[tuple[Path, Path]] = []
+        self._sinks: dict = {}  # temporary file -> its _core.TextSink (open until close / shutdown)
         self._pending = None  # the _Background write of the last block
         self._header_done = False
         try:
@@ -1104,10 +1105,28 @@ class _Writer:
 
         dec = [CSV_DECIMALS[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
         header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
-        job = _Background(_core.write_table, str(self.tmp), header, [np.asarray(x, float) for _, x, _ in cols],
-                          [float(f) for _, _, f in cols], dec, threads=threads(), append=self._header_done)
+        job = _Background(self._sink(self.tmp).write, header, [np.asarray(x, float) for _, x, _ in cols],
+                          [float(f) for _, _, f in cols], dec, threads=threads())
         self._header_done = True
         return job
+
+    def _sink(self, tmp: Path):
+        """The open text file of ``tmp``: one ``_core.TextSink`` for every block (written front to back
+        through an aligned buffer, with O_DIRECT where the file system allows it: no copy into the page
+        cache), closed by :meth:`close`."""
+        sink = self._sinks.get(tmp)
+        if sink is None:
+            sink = self._sinks[tmp] = _core.TextSink(str(tmp))
+        return sink
+
+    def _close_sinks(self, raise_errors: bool = True) -> None:
+        sinks, self._sinks = self._sinks, {}
+        for sink in sinks.values():
+            try:
+                sink.close()
+            except OSError:
+                if raise_errors:
+                    raise
 
     def _wait(self) -> None:
         if self._pending is not None:
@@ -1115,13 +1134,16 @@ class _Writer:
             p.result()
 
     def close(self) -> None:
-        """Wait for the last block (its error raised)."""
+        """Wait for the last block (its error raised), then write the files' rest and close them."""
         self._wait()
+        self._close_sinks()
 
     def shutdown(self) -> None:
-        """End the thread once its write is done (errors not raised: the run already failed or closed)."""
+        """End the thread once its write is done, close the files (errors not raised: the run already
+        failed or closed)."""
         if self._pending is not None:
             self._pending.join()
+        self._close_sinks(raise_errors=False)
 
     def discard(self) -> None:
         """Remove the temporary files (after :meth:`shutdown`; the destinations are not touched)."""
@@ -1274,8 +1296,8 @@ class _KfginsWriter(_Writer):
         from ..io.kfgins import KFGINS_DECIMALS, KFGINS_TEXT_FORMAT
 
         for (tmp, _), cols in zip(self.files, tables):
-            _core.write_table(str(tmp), "", [np.asarray(x, float) for _, x, _ in cols], [float(f) for _, _, f in cols],
-                              [KFGINS_DECIMALS] * len(cols), threads=threads(), append=append, **KFGINS_TEXT_FORMAT)
+            self._sink(tmp).write("", [np.asarray(x, float) for _, x, _ in cols], [float(f) for _, _, f in cols],
+                                  [KFGINS_DECIMALS] * len(cols), threads=threads(), **KFGINS_TEXT_FORMAT)
 
 
 def _writer_class(out: Path, out_format: str):
