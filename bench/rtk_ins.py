@@ -202,6 +202,21 @@ def _truth(ds, t_gps):
     return r
 
 
+def _agreement(key, fwd, sm, ds):
+    """Smoothed minus forward fixed antenna over the forward fixed epochs, and each one's error against
+    the truth of ``ds``: {key}_fixed, {key}_rms_mm, {key}_max_mm, {key}_rms_f_mm, {key}_rms_s_mm."""
+    fx = fwd.rtk.status == 1
+    tr = _truth(ds, fwd.rtk.t_gps_s[fx])
+    d = np.linalg.norm(sm.rtk.r_smoothed_e[fx] - fwd.rtk.r_e[fx], axis=1)
+
+    def rms_mm(e):
+        return 1e3 * float(np.sqrt(np.nanmean(np.sum(e ** 2, axis=1))))
+
+    return {f"{key}_fixed": int(fx.sum()), f"{key}_rms_mm": 1e3 * float(np.sqrt(np.nanmean(d ** 2))),
+            f"{key}_max_mm": 1e3 * float(np.nanmax(d)), f"{key}_rms_f_mm": rms_mm(fwd.rtk.r_e[fx] - tr),
+            f"{key}_rms_s_mm": rms_mm(sm.rtk.r_smoothed_e[fx] - tr)}
+
+
 def _epochs_to_fix(t, q, t_after, t_next):
     """1-based index of the first fixed epoch at or after t_after (before t_next), else None."""
     m = (t >= t_after - 1e-3) & (t < t_next - 1e-3)
@@ -331,15 +346,8 @@ def spirent_part(work: Path, progress, freq: int = 2):
     f_x, s_x = (run_rtk_ins(ds_x, RunConfig(filter="ekf", init_error=False, smooth=sm, imu=noise), rover=rov,
                             base=base, nav=nav, base_pos=base_e, rtk_options=dict(opts, ar_mode="continuous"))
                 for sm in (False, True))
-    fxx = f_x.rtk.status == 1
-    tr_x = _truth(ds_x, f_x.rtk.t_gps_s[fxx])
-    d_x = np.linalg.norm(s_x.rtk.r_smoothed_e[fxx] - f_x.rtk.r_e[fxx], axis=1)
-    smooth_fix.update(
-        exact_fixed=int(fxx.sum()), exact_rms_mm=1e3 * float(np.sqrt(np.nanmean(d_x ** 2))),
-        exact_max_mm=1e3 * float(np.nanmax(d_x)),
-        exact_rms_f_mm=1e3 * float(np.sqrt(np.nanmean(np.sum((f_x.rtk.r_e[fxx] - tr_x) ** 2, axis=1)))),
-        exact_rms_s_mm=1e3 * float(np.sqrt(np.nanmean(np.sum((s_x.rtk.r_smoothed_e[fxx] - tr_x) ** 2, axis=1)))),
-        exact_status_same=bool(np.array_equal(s_x.fix_status, f_x.fix_status)))
+    smooth_fix.update(_agreement("exact", f_x, s_x, ds_x),
+                      exact_status_same=bool(np.array_equal(s_x.fix_status, f_x.fix_status)))
     # at the epochs where smoothed and forward differ by more than the target: which is nearer the truth
     big = dfix > 5e-3
     smooth_fix.update(big_n=int(big.sum()), big_s_nearer=int(np.sum(efix_s[big] < efix_f[big])),
@@ -352,14 +360,7 @@ def spirent_part(work: Path, progress, freq: int = 2):
                       base_pos=base_e, rtk_options=o_t)
     s_t = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False, smooth=True), rover=rov, base=base, nav=nav,
                       base_pos=base_e, rtk_options=o_t)
-    fxt = f_t.rtk.status == 1
-    tr_t = _truth(ds, f_t.rtk.t_gps_s[fxt])
-    d_t = np.linalg.norm(s_t.rtk.r_smoothed_e[fxt] - f_t.rtk.r_e[fxt], axis=1)
-    smooth_fix.update(
-        tight_fixed=int(fxt.sum()), tight_rms_mm=1e3 * float(np.sqrt(np.nanmean(d_t ** 2))),
-        tight_max_mm=1e3 * float(np.nanmax(d_t)),
-        tight_rms_f_mm=1e3 * float(np.sqrt(np.nanmean(np.sum((f_t.rtk.r_e[fxt] - tr_t) ** 2, axis=1)))),
-        tight_rms_s_mm=1e3 * float(np.sqrt(np.nanmean(np.sum((s_t.rtk.r_smoothed_e[fxt] - tr_t) ** 2, axis=1)))))
+    smooth_fix.update(_agreement("tight", f_t, s_t, ds))
 
     def outage_errors(sol):
         tt = sol.t + ds.gps_time_offset_s
