@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from insnav.gnss.rtk import RtkOptions, solve_rtk
-from insnav.gnss.rtk_noise import NOISE_FLOOR_M, NoiseEstimateError, estimate_noise, vce_epoch_matrices
+from insnav.gnss.rtk_noise import CODE_FLOOR_M, NOISE_FLOOR_M, NoiseEstimateError, estimate_noise, vce_epoch_matrices
 
 DATA = Path(os.environ.get("INSNAV_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 SP = DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
@@ -157,6 +157,12 @@ def test_floor_and_too_few_epochs():
     est = estimate_noise(rows, RtkOptions())
     assert est.floored and est.sigma_phase_a_m == pytest.approx(NOISE_FLOOR_M)
     assert abs(est.code_phase_ratio * est.sigma_phase_a_m / 0.25 - 1.0) < 0.1  # the code sigma kept
+    assert est.sigma_phase_raw_m < 3e-5 and not est.code_floored
+    quiet = _synthetic_rows(np.random.default_rng(4), 30, 0.001, 0.002)  # code 2 mm: below its 1 cm floor
+    est_q = estimate_noise(quiet, RtkOptions())
+    assert est_q.code_floored and not est_q.floored
+    assert est_q.code_phase_ratio * est_q.sigma_phase_a_m == pytest.approx(CODE_FLOOR_M, rel=1e-12)
+    assert abs(est_q.sigma_code_raw_m / 0.002 - 1.0) < 0.2
     few = {k: v[rows["epoch"] < 9] for k, v in rows.items()}
     with pytest.raises(NoiseEstimateError, match=r"^rtk noise estimate: 9 fixed epochs .* at least 10 needed"):
         estimate_noise(few, RtkOptions())

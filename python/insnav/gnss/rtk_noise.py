@@ -30,7 +30,8 @@ holds at convergence for block-diagonal components).
 The estimate is k_phi (a, b) and k_P code: ``sigma_phase_a_m = sqrt(k_phi) a``, ``sigma_phase_b_m =
 sqrt(k_phi) b`` (the configured elevation shape is kept: a and b are not separated) and
 ``code_phase_ratio = ratio sqrt(k_P / k_phi)``.  Guard rails: the phase sigma is never below
-:data:`NOISE_FLOOR_M` (0.1 mm) and at least :data:`MIN_NOISE_EPOCHS` fixed epochs are needed.
+:data:`NOISE_FLOOR_M` (0.1 mm), the code sigma never below :data:`CODE_FLOOR_M` (1 cm), and at least
+:data:`MIN_NOISE_EPOCHS` fixed epochs are needed.
 What it cannot see: errors correlated over the epochs (multipath) enter a single-epoch residual only
 as far as they differ between satellites and are not absorbed by the position; a wrong fix inflates
 ``k_phi``.
@@ -45,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["NoiseEstimate", "NoiseEstimateError", "estimate_noise", "vce_epoch_matrices", "NOISE_FLOOR_M",
-           "MIN_NOISE_EPOCHS", "noise_options"]
+           "MIN_NOISE_EPOCHS", "CODE_FLOOR_M", "noise_options"]
 
 #: Floor of the estimated zero-difference phase sigma max(a, b) [m].  0.1 mm is 1/2000 of the GPS L1
 #: cycle, below the thermal noise of any carrier loop at realistic C/N0 (about 0.2-1 mm at 45 dB-Hz,
@@ -54,6 +55,11 @@ __all__ = ["NoiseEstimate", "NoiseEstimateError", "estimate_noise", "vce_epoch_m
 #: smaller sigma would let the filters trust the phase beyond what the model describes.  A hardware
 #: simulator without carrier noise estimates below it and is held at it.
 NOISE_FLOOR_M = 1e-4
+#: Floor of the estimated zero-difference code sigma max(a, b) x code_phase_ratio [m].  1 cm is below the
+#: thermal noise of any code loop (decimetres for a 1 Hz C/A-code loop at 45 dB-Hz, a few centimetres
+#: for the modernised signals' wide-band codes) and ten times the RINEX code resolution (1 mm); a
+#: simulator without code noise (the Spirent drive: 0.2 mm) is held there.
+CODE_FLOOR_M = 1e-2
 #: Fewest fixed epochs (with at least 4 rows) the estimate is computed from.
 MIN_NOISE_EPOCHS = 10
 
@@ -81,8 +87,10 @@ class NoiseEstimate:
     redundancy_phase, redundancy_code : float
         Sums of the redundancy numbers of the phase and code rows (degrees of freedom).
     n_epochs, n_phase_rows, n_code_rows, iterations : int
-    floored : bool
-        The phase sigma was raised to :data:`NOISE_FLOOR_M`.
+    floored, code_floored : bool
+        The phase sigma was raised to :data:`NOISE_FLOOR_M`; the code sigma to :data:`CODE_FLOOR_M`.
+    sigma_phase_raw_m, sigma_code_raw_m : float
+        The estimates before the floors: max(a, b) of the phase and of the code [m].
     configured : dict
         The configured ``sigma_phase_a_m``, ``sigma_phase_b_m``, ``code_phase_ratio``.
     """
@@ -103,6 +111,9 @@ class NoiseEstimate:
     iterations: int
     floored: bool
     configured: dict
+    code_floored: bool = False
+    sigma_phase_raw_m: float = float("nan")
+    sigma_code_raw_m: float = float("nan")
 
     @property
     def sigma_code_a_m(self) -> float:
@@ -117,11 +128,14 @@ class NoiseEstimate:
 
     def text(self) -> str:
         """One line: the estimate with its sigma."""
+        floor = (f" (held at the floor {1e3 * NOISE_FLOOR_M:.1f} mm; estimated max(a, b) "
+                 f"{1e3 * self.sigma_phase_raw_m:.4f} mm)") if self.floored else ""
+        cfloor = (f" (code held at the floor {1e2 * CODE_FLOOR_M:.0f} cm; estimated {1e3 * self.sigma_code_raw_m:.2f} "
+                  "mm)") if self.code_floored else ""
         return (f"phase a {1e3 * self.sigma_phase_a_m:.3f} +- {1e3 * self.sigma_phase_a_sd_m:.3f} mm, "
-                f"b {1e3 * self.sigma_phase_b_m:.3f} +- {1e3 * self.sigma_phase_b_sd_m:.3f} mm"
-                f"{' (floor)' if self.floored else ''}, code ratio {self.code_phase_ratio:.0f} +- "
-                f"{self.code_phase_ratio_sd:.0f} ({self.n_epochs} fixed epochs, redundancy "
-                f"{self.redundancy_phase:.0f} phase / {self.redundancy_code:.0f} code)")
+                f"b {1e3 * self.sigma_phase_b_m:.3f} +- {1e3 * self.sigma_phase_b_sd_m:.3f} mm{floor}, code ratio "
+                f"{self.code_phase_ratio:.0f} +- {self.code_phase_ratio_sd:.0f}{cfloor} ({self.n_epochs} fixed "
+                f"epochs, redundancy {self.redundancy_phase:.0f} phase / {self.redundancy_code:.0f} code)")
 
 
 def _epoch_blocks(rows: dict, sel: np.ndarray):
@@ -181,7 +195,8 @@ def vce_epoch_matrices(A, y, Qs, k):
 
 
 def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOCHS, floor_m: float = NOISE_FLOOR_M,
-                   max_iter: int = 50, tol: float = 1e-12, return_redundancy: bool = False):
+                   code_floor_m: float = CODE_FLOOR_M, max_iter: int = 50, tol: float = 1e-12,
+                   return_redundancy: bool = False):
     """Phase and code variance factors of the fixed epochs' double differences (LS-VCE).
 
     Parameters
@@ -195,6 +210,8 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
         Fewest usable fixed epochs; fewer raise :class:`NoiseEstimateError`.
     floor_m : float
         Floor of the estimated phase sigma max(a, b) [m].
+    code_floor_m : float
+        Floor of the estimated code sigma max(a, b) x ratio [m].
     max_iter, tol : int, float
         Iterations of Q_y at the estimate and their relative tolerance on k.
     return_redundancy : bool
@@ -258,16 +275,25 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
     r_phase = float(np.nansum(np.where(code_rows, np.nan, red)))
     r_code = float(np.nansum(np.where(code_rows, red, np.nan)))
     a0, b0, ratio0 = opt.sigma_phase_a_m, opt.sigma_phase_b_m, opt.code_phase_ratio
+    m0 = max(a0, b0)
     s_phi = math.sqrt(k[0])
     sd_s = math.sqrt(max(cov[0, 0], 0.0)) / (2.0 * s_phi)  # d sqrt(k) = dk / (2 sqrt(k))
-    floored = max(a0, b0) * s_phi < floor_m
+    raw_phase = m0 * s_phi
+    floored = raw_phase < floor_m
     if floored:
-        s_phi = floor_m / max(a0, b0)
+        s_phi = floor_m / m0
+    code_floored = False
+    raw_code = float("nan")
     if c == 2:
         s_P = math.sqrt(k[1])
+        raw_code = m0 * ratio0 * s_P
+        code_floored = raw_code < code_floor_m
+        if code_floored:
+            s_P = code_floor_m / (m0 * ratio0)
         ratio = ratio0 * s_P / s_phi
-        # ratio = ratio0 sqrt(k_P / k_phi): gradient (-ratio / (2 k_phi), ratio / (2 k_P)); floored: k_phi fixed
-        g = np.array([0.0 if floored else -ratio / (2.0 * k[0]), ratio / (2.0 * k[1])])
+        # ratio = ratio0 sqrt(k_P / k_phi): gradient (-ratio / (2 k_phi), ratio / (2 k_P)); a floored factor
+        # is a constant
+        g = np.array([0.0 if floored else -ratio / (2.0 * k[0]), 0.0 if code_floored else ratio / (2.0 * k[1])])
         ratio_sd = math.sqrt(max(float(g @ cov @ g), 0.0))
     else:
         ratio, ratio_sd = ratio0, float("nan")
@@ -277,7 +303,8 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
         sigma_phase_a_sd_m=a0 * sd_s, sigma_phase_b_sd_m=b0 * sd_s, code_phase_ratio_sd=ratio_sd,
         factor=k if c == 2 else np.array([k[0], np.nan]), factor_cov=cov, redundancy_phase=r_phase,
         redundancy_code=r_code, n_epochs=n_epochs, n_phase_rows=n_phase, n_code_rows=n_code, iterations=it,
-        floored=bool(floored), configured=dict(sigma_phase_a_m=a0, sigma_phase_b_m=b0, code_phase_ratio=ratio0))
+        floored=bool(floored), configured=dict(sigma_phase_a_m=a0, sigma_phase_b_m=b0, code_phase_ratio=ratio0),
+        code_floored=bool(code_floored), sigma_phase_raw_m=raw_phase, sigma_code_raw_m=raw_code)
     return (return_est, red) if return_redundancy else return_est
 
 
