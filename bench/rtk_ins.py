@@ -382,7 +382,10 @@ def spirent_part(work: Path, progress, freq: int = 2):
                       est_a_mm=1e3 * f_e.rtk_options.sigma_phase_a_m, est_ratio=f_e.rtk_options.code_phase_ratio,
                       est_a_sd_mm=1e3 * est.sigma_phase_a_sd_m if est else math.nan,
                       est_ratio_sd=est.code_phase_ratio_sd if est else math.nan,
-                      est_same=bool(s_e.rtk_options.sigma_phase_a_m == f_e.rtk_options.sigma_phase_a_m))
+                      est_same=bool(s_e.rtk_options.sigma_phase_a_m == f_e.rtk_options.sigma_phase_a_m),
+                      est_floored=bool(est and est.floored), est_code_floored=bool(est and est.code_floored),
+                      est_raw_mm=1e3 * est.sigma_phase_raw_m if est else math.nan,
+                      est_code_raw_mm=1e3 * est.sigma_code_raw_m if est else math.nan)
 
     def outage_errors(sol):
         tt = sol.t + ds.gps_time_offset_s
@@ -815,8 +818,12 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "|---|---|---|---|---|---|---|---|",
               f"| default | 3.000 | 100 | {sp['rows'][names[0]]['n_fixed']} | {sf['rms_mm']:.2f} | "
               f"{sf['max_mm']:.2f} | {_met(sf['max_mm'] <= 5.0)} | {sf['rms_f_mm']:.2f} / {sf['rms_s_mm']:.2f} |",
-              f"| noise estimated from the data | {sf['est_a_mm']:.3f} +- {_f(sf['est_a_sd_mm'], '.3f')} | "
-              f"{sf['est_ratio']:.0f} +- {_f(sf['est_ratio_sd'], '.0f')} | {sf['est_fixed']} | {sf['est_rms_mm']:.2f} | "
+              f"| noise estimated from the data | "
+              + (f"{sf['est_a_mm']:.3f} (the floor; estimated {sf['est_raw_mm']:.4f} +- {sf['est_a_sd_mm']:.4f})"
+                 if sf["est_floored"] else f"{sf['est_a_mm']:.3f} +- {_f(sf['est_a_sd_mm'], '.3f')}") + " | "
+              + (f"{sf['est_ratio']:.0f} (code at its 1 cm floor; estimated {sf['est_code_raw_mm']:.2f} mm)"
+                 if sf["est_code_floored"] else f"{sf['est_ratio']:.0f} +- {_f(sf['est_ratio_sd'], '.0f')}")
+              + f" | {sf['est_fixed']} | {sf['est_rms_mm']:.2f} | "
               f"{sf['est_max_mm']:.2f} | {_met(sf['est_max_mm'] <= 5.0)} | {sf['est_rms_f_mm']:.2f} / "
               f"{sf['est_rms_s_mm']:.2f} |",
               f"| control: hand-set {TIGHT_PHASE_M * 1e3:.1f} mm | {TIGHT_PHASE_M * 1e3:.3f} | 100 | {sf['tight_fixed']} | "
