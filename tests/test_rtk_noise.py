@@ -128,6 +128,24 @@ def test_estimator_redundancy_and_helmert_form_at_the_estimate():
     np.testing.assert_allclose(num / [est.redundancy_phase, est.redundancy_code], est.factor, rtol=1e-8)
 
 
+def test_one_component_is_the_a_posteriori_variance_factor_of_unit_weight():
+    # one component (here the phase rows alone): LS-VCE is sum q / sum (m - 3), q = y^T R^-1 y - b^T N^-1 b,
+    # the factor RtkEngine::update_noise_factor accumulates for the code rows (without its forgetting)
+    rows = _synthetic_rows(np.random.default_rng(8), 25, 0.0011, 0.3)
+    ph = {k: v[rows["code"] == 0] for k, v in rows.items()}
+    est = estimate_noise(ph, RtkOptions())
+    q_sum = dof = 0.0
+    for e in range(25):
+        sel = ph["epoch"] == e
+        R = np.full((sel.sum(), sel.sum()), 0.0) + ph["var_ref"][sel][:, None] + np.diag(ph["var_own"][sel])
+        H, y = ph["h"][sel], ph["y"][sel]
+        N, b = H.T @ np.linalg.solve(R, H), H.T @ np.linalg.solve(R, y)
+        q_sum += y @ np.linalg.solve(R, y) - b @ np.linalg.solve(N, b)
+        dof += sel.sum() - 3
+    assert est.factor[0] == pytest.approx(q_sum / dof, rel=1e-9)
+    assert np.isnan(est.factor[1]) and est.code_phase_ratio == 100.0  # no code rows: the ratio stays
+
+
 def test_estimator_recovers_synthetic_sigmas_and_is_scale_equivariant():
     rng = np.random.default_rng(11)
     rows = _synthetic_rows(rng, 200, 0.0008, 0.25)

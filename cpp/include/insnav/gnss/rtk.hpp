@@ -990,7 +990,9 @@ class RtkEngine {
   // Q / F (c = 0.5, the default: the median, about Q / (F - 2/3)); k is kept in [0.01, 100].  A set
   // passes the success-rate test with P_s(Q_a) >= min_success_rate (the configured covariance) or
   // P_s(k Q_a) >= min_success_rate_estimated (0.98, stricter: on the open-sky preset, single epoch,
-  // 0.95 and 0.97 let wrong sets through, docs/algorithms.md).
+  // 0.95 and 0.97 let wrong sets through, docs/algorithms.md).  Its two-component extension over the
+  // fixed epochs (phase and code factors, iterated; record_fixed_rows() and insnav.gnss.rtk_noise) gives
+  // the sigmas of [rtk] noise = "estimate".
   void update_noise_factor(double t, int nf) {
     white_code_ = true;
     const int m = build_rows(nf, 1);
