@@ -31,7 +31,11 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    the control that separates the smoother's conditioning from what the IMU errors let the backward
    predictions move);
    over the run: fix rate (fixed / rover epochs with data), wrong fixes (3-D error > 5 cm), wall and
-   CPU time of the run (the Python call; RTKLIB: its process).  ``--runs 0`` runs this part alone.
+   CPU time of the run (the Python call; RTKLIB: its process).  Also RTK/INS with the phase and code
+   noise estimated from the data (``[rtk] noise = "estimate"``, opt-in: a GNSS-only pre-pass, least-squares
+   variance component estimation of its fixed epochs, ``insnav.gnss.rtk_noise``): the estimate with its
+   sigma and the smoother agreement beside the default row (which stays at the default 3 mm) and the
+   hand-set 0.5 mm and error-free-IMU controls.  ``--runs 0`` runs this part alone.
 2. **Simulator, ``rtk-urban-car`` (GPS L1 only), N runs** (seeds 1..N) with cycle slips at 1 per
    satellite per 5 minutes (``slip_rate_per_h = 12``), none flagged by the receiver
    (``slip_lli_prob = 0``): fix rate, wrong-fix rate, horizontal 95th percentile of RTK/INS and of
@@ -49,6 +53,8 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    default float over-confident: the float NEES, fix rate and wrong fixes of both engines with one
    error source switched off in the simulator (code multipath, phase multipath, residual
    ionosphere/troposphere, slips) or the filter given the preset's true noise of one source.
+   The noise estimate of GNSS-only RTK's fixed epochs on the presets (``rtk-open-sky-car`` as simulated and
+   with white noise only, ``rtk-urban-car``; seeds 1-3) against the simulated white noise and multipath.
 3. **Cost**: the RTK/INS run against the multi-GNSS tight EKF (``coupling = "tight"``, the
    preset's pseudoranges and Doppler) on the same simulated drive, each the whole Python call,
    best of 3.
@@ -108,6 +114,10 @@ RX_GNSS_ROW = "insnav GNSS-only RTK (the preset's receiver noise)"
 COMMAND = "python3 bench/rtk_ins.py"
 #: phase sigma [m] (a = b) of the smoother-agreement check on the Spirent drive, nearer the data's phase noise
 TIGHT_PHASE_M = 0.0005
+#: RTK/INS with the phase and code noise estimated from the data by a GNSS-only pre-pass (least-squares
+#: variance component estimation, insnav.gnss.rtk_noise; opt-in, the default stays at 3 mm)
+EST_OPTS = {"noise": "estimate"}
+EST_ROW = "insnav RTK/INS (continuous, phase and code noise estimated from the data: noise = \"estimate\")"
 
 
 # --------------------------------------------------------------------------- outages in a RINEX 3 file
@@ -249,7 +259,8 @@ def spirent_part(work: Path, progress, freq: int = 2):
                                        (SR_ROW, "ekf", "continuous", {}, SR_OPTS),
                                        (NO_VALIDATION_ROW, "ekf", "continuous", {}, NO_VALIDATION_OPTS),
                                        (RBUKF_ROW, "rbukf", "continuous", {}, {}),
-                                       (UKF_ROW, "ukf", "continuous", {}, {})):
+                                       (UKF_ROW, "ukf", "continuous", {}, {}),
+                                       (EST_ROW, "ekf", "continuous", {}, EST_OPTS)):
         t0, c0 = time.perf_counter(), time.process_time()
         sol = run_rtk_ins(ds, RunConfig(filter=filt, init_error=False), rover=rov, base=base, nav=nav,
                           base_pos=base_e, rtk_options=dict(opts, ar_mode=ar, **extra), engine=eng)
@@ -361,6 +372,20 @@ def spirent_part(work: Path, progress, freq: int = 2):
     s_t = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False, smooth=True), rover=rov, base=base, nav=nav,
                       base_pos=base_e, rtk_options=o_t)
     smooth_fix.update(_agreement("tight", f_t, s_t, ds))
+    # the noise estimated from the data (opt-in): its forward run is the table's EST_ROW, the smoothed
+    # run estimates again (the same GNSS-only pre-pass, so the same sigmas)
+    f_e = res[EST_ROW]["sol"]
+    s_e = run_rtk_ins(ds, RunConfig(filter="ekf", init_error=False, smooth=True), rover=rov, base=base, nav=nav,
+                      base_pos=base_e, rtk_options=dict(opts, ar_mode="continuous", **EST_OPTS))
+    est = f_e.rtk.info["noise_estimate"]
+    smooth_fix.update(_agreement("est", f_e, s_e, ds), est_text=est.text() if est else "too few fixed epochs",
+                      est_a_mm=1e3 * f_e.rtk_options.sigma_phase_a_m, est_ratio=f_e.rtk_options.code_phase_ratio,
+                      est_a_sd_mm=1e3 * est.sigma_phase_a_sd_m if est else math.nan,
+                      est_ratio_sd=est.code_phase_ratio_sd if est else math.nan,
+                      est_same=bool(s_e.rtk_options.sigma_phase_a_m == f_e.rtk_options.sigma_phase_a_m),
+                      est_floored=bool(est and est.floored), est_code_floored=bool(est and est.code_floored),
+                      est_raw_mm=1e3 * est.sigma_phase_raw_m if est else math.nan,
+                      est_code_raw_mm=1e3 * est.sigma_code_raw_m if est else math.nan)
 
     def outage_errors(sol):
         tt = sol.t + ds.gps_time_offset_s
@@ -515,6 +540,67 @@ def urban_part(n_runs, work: Path, progress):
     return runs, cost
 
 
+#: presets of the noise-estimate check: (label, preset, frequencies, [gnss_rtk] overrides)
+NOISE_PRESETS = (("rtk-open-sky-car as simulated", "rtk-open-sky-car", 2, {}),
+                 ("rtk-open-sky-car, white noise only (no multipath, residual atmosphere, slips)", "rtk-open-sky-car",
+                  2, {"multipath_code_m": 0.0, "multipath_phase_m": 0.0, "iono_ppm": 0.0, "tropo_ppm": 0.0,
+                      "slip_rate_per_h": 0.0}),
+                 ("rtk-urban-car as simulated", "rtk-urban-car", 1, {}))
+
+
+def _with_multipath(sigma, mp, g):
+    """The engine's zero-difference a (= b) of white noise ``sigma`` plus multipath ``mp`` (the base's scaled
+    by ``base_multipath_scale`` s): SD variance w^2 (2 sigma^2 + (1 + s^2) mp^2) = 4 a^2 w^2."""
+    s = g["base_multipath_scale"]
+    return math.sqrt((2.0 * sigma ** 2 + (1.0 + s ** 2) * mp ** 2) / 4.0)
+
+
+def noise_preset_part(work: Path, progress, seeds=(1, 2, 3)):
+    """The noise estimated from GNSS-only RTK's fixed epochs (insnav.gnss.rtk_noise) on the simulator presets,
+    against the simulated white noise sigma w(el) (a = b = sigma / sqrt(2) in the engine's weighting) and
+    white noise plus multipath."""
+    from insnav.gnss.rtk import solve_rtk
+    from insnav.gnss.rtk_noise import NoiseEstimateError
+    from insnav.sim import simulate_rtk
+    from insnav.sim.scenario import load_scenario, resolve_raw
+
+    out = []
+    for label, preset, nf, over in NOISE_PRESETS:
+        ests = []
+        for seed in seeds:
+            raw, _ = resolve_raw(preset)
+            raw = dict(raw)
+            raw["gnss_rtk"] = {**raw["gnss_rtk"], **over}
+            sc = load_scenario(raw, seed=seed)
+            sim = simulate_rtk(sc, seed=seed)
+            wd = work / f"noise_{preset}_{seed}"
+            wd.mkdir(parents=True, exist_ok=True)
+            files = sim.write(wd)
+            g = sc.gnss_rtk
+            systems = "".join(sim.signals)
+            rs = solve_rtk(files["rover"], files["base"], files["nav"],
+                           options=dict(systems=systems, frequencies=nf, ratio_threshold=3.0,
+                                        elevation_mask_deg=math.degrees(g["base_elevation_mask"])),
+                           record_fixed_rows=True)
+            try:
+                e = rs.noise_estimate()
+                ests.append((e.sigma_phase_a_m, e.sigma_phase_a_sd_m, e.code_phase_ratio * e.sigma_phase_a_m,
+                             e.n_epochs))
+            except NoiseEstimateError:
+                ests.append((math.nan, math.nan, math.nan, 0))
+            shutil.rmtree(wd, ignore_errors=True)
+        e = np.array(ests, float)
+        out.append(dict(label=label, seeds=len(seeds), a_mm=1e3 * e[:, 0], a_sd_mm=1e3 * e[:, 1], code_m=e[:, 2],
+                        n=e[:, 3].astype(int),
+                        white_a_mm=1e3 * g["sigma_phase"] / math.sqrt(2.0),
+                        all_a_mm=1e3 * _with_multipath(g["sigma_phase"], g["multipath_phase"], g),
+                        white_code_m=g["sigma_code"] / math.sqrt(2.0),
+                        all_code_m=_with_multipath(g["sigma_code"], g["multipath_code"], g),
+                        atmo=(g["iono_ppm"], g["tropo_ppm"])))
+        progress(f"noise estimate {label}: phase a {np.nanmedian(out[-1]['a_mm']):.3f} mm")
+    return out
+
+
 #: float-consistency breakdown: (label, simulator [gnss_rtk] overrides, filter [rtk] overrides; "rx" = the
 #: preset's receiver noise of receiver_noise_options, "rx-code" its code keys alone, "rx-phase" its
 #: phase-multipath ambiguity walk alone)
@@ -634,7 +720,7 @@ def sign_test_p(wins, losses):
     return min(1.0, 2.0 * sum(math.comb(n, j) for j in range(k + 1)) / 2.0 ** n)
 
 
-def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdown=0) -> str:
+def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdown=0, noise=None) -> str:
     load = os.getloadavg()[0]
     L = ["# Tight RTK/INS: re-fixing after outages, fix rate, slips, cost (GNSS-only RTK and RTKLIB side by side)", "",
          f"Written by `{command}` at commit {git_commit()} in {wall_s:.0f} s (load average {load:.1f} on "
@@ -723,6 +809,31 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               f"{sf['tight_rms_mm']:.2f} mm, max {sf['tight_max_mm']:.2f} mm (target 5 mm: "
               f"{_met(sf['tight_max_mm'] <= 5.0)}); 3-D RMS error of the fixed epochs forward "
               f"{sf['tight_rms_f_mm']:.2f} mm, smoothed {sf['tight_rms_s_mm']:.2f} mm."]
+        L += ["", "Smoother agreement by phase weighting (EKF RTK/INS, continuous AR; the default row stays at the "
+              "default phase sigma 3 mm, the estimated row is opt-in: `[rtk] noise = \"estimate\"`, a GNSS-only "
+              "pre-pass estimates the phase sigma and the code ratio from its fixed epochs by least-squares "
+              "variance component estimation, docs/algorithms.md):", "",
+              "| RTK/INS run | phase sigma a = b [mm] | code ratio | fixed epochs | smoothed - forward RMS [mm] | "
+              "max [mm] | target 5 mm (max) | 3-D RMS error forward / smoothed [mm] |",
+              "|---|---|---|---|---|---|---|---|",
+              f"| default | 3.000 | 100 | {sp['rows'][names[0]]['n_fixed']} | {sf['rms_mm']:.2f} | "
+              f"{sf['max_mm']:.2f} | {_met(sf['max_mm'] <= 5.0)} | {sf['rms_f_mm']:.2f} / {sf['rms_s_mm']:.2f} |",
+              f"| noise estimated from the data | "
+              + (f"{sf['est_a_mm']:.3f} (the floor; estimated {sf['est_raw_mm']:.4f} +- {sf['est_a_sd_mm']:.4f})"
+                 if sf["est_floored"] else f"{sf['est_a_mm']:.3f} +- {_f(sf['est_a_sd_mm'], '.3f')}") + " | "
+              + (f"{sf['est_ratio']:.0f} (code at its 1 cm floor; estimated {sf['est_code_raw_mm']:.2f} mm)"
+                 if sf["est_code_floored"] else f"{sf['est_ratio']:.0f} +- {_f(sf['est_ratio_sd'], '.0f')}")
+              + f" | {sf['est_fixed']} | {sf['est_rms_mm']:.2f} | "
+              f"{sf['est_max_mm']:.2f} | {_met(sf['est_max_mm'] <= 5.0)} | {sf['est_rms_f_mm']:.2f} / "
+              f"{sf['est_rms_s_mm']:.2f} |",
+              f"| control: hand-set {TIGHT_PHASE_M * 1e3:.1f} mm | {TIGHT_PHASE_M * 1e3:.3f} | 100 | {sf['tight_fixed']} | "
+              f"{sf['tight_rms_mm']:.2f} | {sf['tight_max_mm']:.2f} | {_met(sf['tight_max_mm'] <= 5.0)} | "
+              f"{sf['tight_rms_f_mm']:.2f} / {sf['tight_rms_s_mm']:.2f} |",
+              f"| control: IMU without errors, default sigmas | 3.000 | 100 | {sf['exact_fixed']} | "
+              f"{sf['exact_rms_mm']:.2f} | {sf['exact_max_mm']:.2f} | {_met(sf['exact_max_mm'] <= 5.0)} | "
+              f"{sf['exact_rms_f_mm']:.2f} / {sf['exact_rms_s_mm']:.2f} |", "",
+              f"The estimate: {sf['est_text']}; the smoothed run's pre-pass gives the same sigmas: "
+              f"{'yes' if sf['est_same'] else 'no'}."]
         ri = sp["rows"][names[0]]
         ok1 = all(x is not None and x <= 1 for x in ri["per"])
         L += ["", f"Targets (RTK/INS, default settings, {fq}):", "",
@@ -865,6 +976,38 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "in the model: the phase rows are white and the ambiguities constants), code sigma 100x the phase "
               "(true code noise plus multipath 0.67 m w(el), 1.6x the default's 0.42 m at the zenith) with "
               "correlation time 10 s (true 20 s).", ""]
+    if noise:
+        L += ["## Noise estimated from the data on the simulator presets", "",
+              "GNSS-only RTK (continuous AR, defaults; the preset's systems, L1+L2 open sky, L1 urban) records its "
+              "fixed epochs' double differences, and least-squares variance component estimation "
+              "(`insnav.gnss.rtk_noise`, docs/algorithms.md) gives the zero-difference phase sigma a (= b) and the "
+              "code sigma a (ratio x phase).  The simulator's noise is sigma w(el), w^2 = (1 + 1/sin^2 el) / 2 at "
+              "each receiver, i.e. a = b = sigma / sqrt(2) in the engine's weighting; its multipath is correlated "
+              "(the preset's `multipath_tau`), which a single-epoch residual sees only in part.  Seeds "
+              f"1..{noise[0]['seeds']}.", "",
+              "| preset | fixed epochs per seed | phase a estimated [mm] (+- sigma, per seed) | simulated white a "
+              "[mm] | white + multipath a [mm] | code a estimated [m] | simulated white / + multipath [m] | "
+              "residual ionosphere / troposphere [ppm] |",
+              "|---|---|---|---|---|---|---|---|"]
+        for r in noise:
+            L.append(f"| {r['label']} | {', '.join(str(v) for v in r['n'])} | "
+                     + ", ".join(f"{_f(a, '.3f')} +- {_f(b, '.3f')}" for a, b in zip(r["a_mm"], r["a_sd_mm"]))
+                     + f" | {r['white_a_mm']:.3f} | {r['all_a_mm']:.3f} | "
+                     + ", ".join(_f(c, ".3f") for c in r["code_m"])
+                     + f" | {r['white_code_m']:.3f} / {r['all_code_m']:.3f} | {r['atmo'][0]:g} / {r['atmo'][1]:g} |")
+        wo = noise[1]
+        dev = float(np.nanmax(np.abs(wo["a_mm"] / wo["white_a_mm"] - 1.0)))
+        devc = float(np.nanmax(np.abs(wo["code_m"] / wo["white_code_m"] - 1.0)))
+        L += ["", f"White noise only: the phase estimate is within {100 * dev:.1f} % and the code within "
+              f"{100 * devc:.1f} % of the simulated sigma over the seeds (target 10 %: {_met(max(dev, devc) <= 0.1)}).  "
+              "As simulated, the single-epoch residuals hold every unmodelled error of the double differences: "
+              "the correlated multipath (as far as it differs between satellites and is not absorbed by the "
+              "position) and the residual ionosphere and troposphere of the baseline (open sky 2.5-8 km); so the "
+              "estimate is the white model's equivalent of them all, not the white noise alone: "
+              + "; ".join(f"{r['label']}: median {_f(float(np.nanmedian(r['a_mm'])), '.2f')} mm against white "
+                          f"{r['white_a_mm']:.2f} mm and white + multipath {r['all_a_mm']:.2f} mm"
+                          for r in (noise[0], noise[2]))
+              + ".  '-': fewer than 10 fixed epochs (the L1-only urban drive rarely fixes), no estimate.", ""]
     if cost:
         L += ["## Cost", "",
               "Run 1 of the urban drive (600 s, IMU 100 Hz): the whole Python call, best of 3, on a shared machine "
@@ -892,10 +1035,11 @@ def main(argv=None) -> int:
         sp = None if args.skip_spirent or not SP.is_dir() else [spirent_part(work, progress, f) for f in (2, 1)]
         urban = urban_part(args.runs, work, progress) if args.runs > 0 else None
         bd = breakdown_part(args.breakdown_runs, work, progress) if args.runs > 0 and args.breakdown_runs > 0 else None
+        noise = noise_preset_part(work, progress) if args.runs > 0 else None
     cost = urban[1] if urban else None
     argv = sys.argv[1:] if argv is None else list(argv)
     text = report(sp, urban, cost, args.runs, time.perf_counter() - t,
-                  shlex.join(["python3", "bench/rtk_ins.py"] + argv), bd, args.breakdown_runs)
+                  shlex.join(["python3", "bench/rtk_ins.py"] + argv), bd, args.breakdown_runs, noise)
     Path(args.out).write_text(with_stamp(text, args.out), encoding="utf-8")
     print(f"wrote {args.out}")
     return 0

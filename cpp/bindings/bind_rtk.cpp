@@ -244,7 +244,7 @@ void check_rows(const DArray& rows, const char* name) {
 
 py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& rover_rows, const IArray& base_off,
                  const DArray& base_rows, const IArray& base_index, const DArray& r_base_e, const py::dict& opts,
-                 bool record_iono) {
+                 bool record_iono, bool record_fixed_rows) {
   const py::ssize_t n = t_rover.ndim() == 1 ? t_rover.shape(0) : -1;
   if (n < 0) throw py::value_error("rtk_run: t_rover must be 1-D");
   check_rows(rover_rows, "rtk_run: rover_rows");
@@ -271,9 +271,14 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   }
   for (py::ssize_t e = 0; e < nb; ++e)
     if (bo[e] < 0 || bo[e + 1] < bo[e] || bo[e + 1] > mb) throw py::value_error("rtk_run: bad base offsets");
+  // the fixed epochs' double differences (RtkEngine::set_record_fixed_rows), one entry per row
+  std::vector<std::int64_t> fr_epoch;
+  std::vector<int> fr_code, fr_group;
+  std::vector<double> fr_y, fr_h, fr_var_own, fr_var_ref;
   {
     py::gil_scoped_release release;
     auto eng = std::make_unique<gnss::RtkEngine>(o);
+    eng->set_record_fixed_rows(record_fixed_rows);
     std::int64_t last_b = -1;
     for (py::ssize_t e = 0; e < n; ++e) {
       gnss::RtkEpoch out;
@@ -299,6 +304,16 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
         for (int j = 0; j < 3; ++j) P_r.mutable_data()[e * 9 + i * 3 + j] = out.P_r(i, j);
       }
       for (int k = 0; k < gnss::kNumSlipKinds; ++k) slips.mutable_data()[e * gnss::kNumSlipKinds + k] = out.slips[k];
+      for (int i = 0; i < eng->fixed_rows(); ++i) {
+        const gnss::FixedDdRow& fr = eng->fixed_row(i);
+        fr_epoch.push_back(e);
+        fr_code.push_back(fr.code);
+        fr_group.push_back(fr.group);
+        fr_y.push_back(fr.y);
+        fr_h.insert(fr_h.end(), fr.h, fr.h + 3);
+        fr_var_own.push_back(fr.var_own);
+        fr_var_ref.push_back(fr.var_ref);
+      }
       if (record_iono)
         for (int s = 0; s < gnss::kMaxSatKeys; ++s) {
           double v = NAN, sg = NAN;
@@ -325,6 +340,18 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   d["r_float_e"] = r_float;
   d["P_r"] = P_r;
   d["slips"] = slips;
+  if (record_fixed_rows) {
+    const auto nr = static_cast<py::ssize_t>(fr_y.size());
+    py::dict f;
+    f["epoch"] = py::array_t<std::int64_t>(nr, fr_epoch.data());
+    f["code"] = py::array_t<int>(nr, fr_code.data());
+    f["group"] = py::array_t<int>(nr, fr_group.data());
+    f["y"] = py::array_t<double>(nr, fr_y.data());
+    f["h"] = py::array_t<double>({nr, static_cast<py::ssize_t>(3)}, fr_h.data());
+    f["var_own"] = py::array_t<double>(nr, fr_var_own.data());
+    f["var_ref"] = py::array_t<double>(nr, fr_var_ref.data());
+    d["fixed_rows"] = f;
+  }
   if (record_iono) {
     d["iono_m"] = iono_m;
     d["iono_sigma_m"] = iono_sigma_m;
@@ -398,10 +425,12 @@ void bind_rtk(py::module_& m) {
         "a lower bound of ILS's.");
   m.def("rtk_run", &rtk_run, py::arg("t_rover"), py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"),
         py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
-        py::arg("record_iono") = false,
+        py::arg("record_iono") = false, py::arg("record_fixed_rows") = false,
         "RTK engine over every rover epoch (GIL released); record_iono: also the (n, 320) single-differenced "
         "ionosphere estimates iono_m and iono_sigma_m [m] per satellite key (NaN: no state), and iono_dd_m, "
-        "iono_dd_sigma_m: the double differences against the reference of each system (NaN for it).");
+        "iono_dd_sigma_m: the double differences against the reference of each system (NaN for it); "
+        "record_fixed_rows: also fixed_rows, the double-differenced rows of every fixed epoch (epoch, code, "
+        "group, y [m], h (k, 3), var_own, var_ref [m^2]) for the variance component estimation.");
   m.def("slip_detect", &slip_detect, py::arg("t"), py::arg("off"), py::arg("rows"), py::arg("options"),
         "Cycle-slip flags (m, 3) of one receiver's rows (bits: LLI, GF, MW, Doppler, gap).");
   m.def("rtk_double_differences", &rtk_double_differences, py::arg("rover_rows"), py::arg("base_rows"),

@@ -368,7 +368,8 @@ def rtk_run(
     r_base_e: npt.ArrayLike,
     options: dict[str, Any],
     record_iono: bool = False,
-) -> dict[str, np.ndarray]: ...
+    record_fixed_rows: bool = False,
+) -> dict[str, Any]: ...
 def slip_detect(t: npt.ArrayLike, off: npt.ArrayLike, rows: npt.ArrayLike, options: dict[str, Any]) -> np.ndarray: ...
 def rtk_double_differences(
     rover_rows: npt.ArrayLike,

@@ -47,7 +47,7 @@ import numpy as np
 
 from .. import _core, earth
 from ..config import RunConfig, ImuNoise
-from ..gnss.rtk import RtkOptions, RtkSolution, prepare_rtk_rows
+from ..gnss.rtk import RtkOptions, RtkSolution, estimate_noise_prepass, prepare_rtk_rows
 from ._setup import imu_arrays, init_vector, initial_state, lever_arm, raise_if_nonfinite
 from ._assemble import nav_solution
 from ..units import RAD2DEG
@@ -162,6 +162,13 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
                              "(insnav run --coupling rtk --obs ROVER --base BASE --nav NAV)")
     opt = rtk_ins_options(rtk_options)
     rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, base_pos, opt)
+    noise_est = None
+    if opt.noise == "estimate":
+        # the GNSS-only pre-pass (with the GNSS-only engine's success-rate test, so that the epochs the
+        # noise is estimated from are validated fixes) estimates the sigmas this run then uses
+        pre = dataclasses.replace(opt, min_success_rate=RtkOptions.min_success_rate)
+        opt, noise_est = estimate_noise_prepass(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt,
+                                                validation=pre)
     t, dth, dv = imu_arrays(imu_ds)
     off = float(imu_ds.gps_time_offset_s)
     t_rec = rover.epoch_t_gps_s - off
@@ -199,7 +206,8 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
                         r_float_e=np.asarray(out["r_float_e"]), P_r=P_e, slips=np.asarray(out["slips"]),
                         base_age_s=age, r_base_e=r_base_e, code_rejected=np.asarray(out["code_rejected"]),
                         screened=np.asarray(out["screened"]), downweighted=np.asarray(out["downweighted"]),
-                        info=dict(rover=rover.path, base=base.path, options=opt, engine=eng))
+                        info=dict(rover=rover.path, base=base.path, options=opt, engine=eng,
+                                  noise_estimate=noise_est))
     counts = rs.counts()
     summary = dict(filter=cfg.filter, coupling="rtk", layout=15, updates=int((status > 0).sum()), rejected=0,
                    gnss_records=int(status.size), cholesky_repairs=int(out["cholesky_repairs"]), **counts)

@@ -45,7 +45,7 @@ from ..config import ConfigError, TomlTable
 
 __all__ = ["RtkOptions", "PhaseObs", "RtkSolution", "SIGNALS", "STATUS_NAMES", "read_phase_obs", "receiver_rows",
            "match_base", "solve_rtk", "prepare_rtk_rows", "base_position_from_header", "write_rtklib_pos", "write_rtk_table",
-           "RTK_COLUMNS", "RtkInputError"]
+           "RTK_COLUMNS", "RtkInputError", "estimate_noise", "estimate_noise_prepass"]
 
 #: engine index of each system (``RtkSystem`` in rtk.hpp)
 SYSTEM_INDEX = {"G": 0, "R": 1, "E": 2, "C": 3, "J": 4}
@@ -149,6 +149,13 @@ class RtkOptions(TomlTable):
     gf_threshold_m, mw_threshold_cycles, doppler_threshold_cycles : float
         Cycle-slip thresholds (geometry-free jump, Melbourne-Wuebbena wide-lane departure from
         its mean, Doppler-predicted phase; <= 0 switches the Doppler test off).
+    noise : str
+        ``"configured"`` (default): the sigmas above.  ``"estimate"``: a first GNSS-only pass estimates
+        the phase sigma (a and b scaled together) and the code ratio from its fixed epochs
+        (least-squares variance component estimation, :func:`insnav.gnss.rtk_noise.estimate_noise`,
+        docs/algorithms.md), and the run then uses them (RTK/INS: the GNSS-only pre-pass feeds the
+        RTK/INS filter); the phase sigma is floored at 0.1 mm, and with fewer than 10 fixed epochs a
+        warning says so and the configured sigmas stay.
     """
 
     mode: str = "kinematic"
@@ -189,6 +196,7 @@ class RtkOptions(TomlTable):
     outlier_sigma: float = 5.0
     hold_sigma_cycles: float = 0.0316
     max_age_s: float = 30.0
+    noise: str = "configured"
 
     TABLE = "rtk"
 
@@ -218,6 +226,8 @@ class RtkOptions(TomlTable):
             bad("iono_sigma_per_10km_m", "a number > 0 with iono = 'estimate'")
         if not isinstance(self.tropo_model, bool):
             bad("tropo_model", "true or false")
+        if self.noise not in ("configured", "estimate"):
+            bad("noise", "configured or estimate")
         for key, lo, hi in (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.0),
                             ("ratio_threshold", 1.0, 1e3), ("sigma_phase_a_m", 0.0, 1.0),
                             ("sigma_phase_b_m", 0.0, 1.0), ("code_phase_ratio", 1.0, 1e4),
@@ -650,11 +660,22 @@ class RtkSolution:
     info: dict = field(default_factory=dict)
     success_variance_factor: np.ndarray | None = None
     success_rate_estimated: np.ndarray | None = None
+    fixed_rows: dict | None = None
 
     SLIP_KINDS = ("lli", "geometry_free", "melbourne_wuebbena", "doppler", "gap", "outlier")
 
     def __len__(self):
         return int(self.t_gps_s.size)
+
+    def noise_estimate(self, **kwargs):
+        """Phase and code noise estimated from this run's fixed epochs
+        (:func:`insnav.gnss.rtk_noise.estimate_noise`; the run needs ``record_fixed_rows=True``)."""
+        from .rtk_noise import estimate_noise
+
+        if self.fixed_rows is None:
+            raise ValueError("RtkSolution.noise_estimate: the fixed epochs' rows were not recorded; "
+                             "run solve_rtk(..., record_fixed_rows=True)")
+        return estimate_noise(self.fixed_rows, self.info.get("options"), **kwargs)
 
     def counts(self) -> dict:
         """Epochs per status and slip detections per kind."""
@@ -698,7 +719,7 @@ def _sig_text(obs, nf):
 
 
 def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None = None, *,
-              record_iono: bool = False) -> RtkSolution:
+              record_iono: bool = False, record_fixed_rows: bool = False) -> RtkSolution:
     """RTK of ``rover`` against ``base``.
 
     Parameters
@@ -716,6 +737,11 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
         ``info["iono_dd_m"]``, ``info["iono_dd_sigma_m"]`` the double differences against the highest
         satellite of each system with a state (NaN for it): only these are observable, the common
         part of a system's single differences is the prior's.
+    record_fixed_rows : bool
+        Also return, in ``fixed_rows``, the double differences of every fixed epoch for
+        :meth:`RtkSolution.noise_estimate`.  With ``options.noise = "estimate"`` a first pass records
+        them, and the run uses the sigmas estimated (``info["noise_estimate"]``, None when too few
+        fixed epochs; ``info["options"]`` the options used).
 
     Returns
     -------
@@ -725,8 +751,11 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
 
     opt = options if isinstance(options, RtkOptions) else RtkOptions.from_dict(options or {}, "rtk options")
     rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, r_base_e, opt)
+    noise_est = None
+    if opt.noise == "estimate":  # a first pass estimates the noise from its fixed epochs
+        opt, noise_est = estimate_noise_prepass(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt)
     out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict(),
-                        record_iono=bool(record_iono))
+                        record_iono=bool(record_iono), record_fixed_rows=bool(record_fixed_rows))
     age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
     return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
                        ratio=np.asarray(out["ratio"]), success_rate=np.asarray(out["success_rate"]),
@@ -736,10 +765,41 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
                        slips=np.asarray(out["slips"]), base_age_s=age, r_base_e=r_base_e,
                        success_variance_factor=np.asarray(out["success_variance_factor"]),
                        success_rate_estimated=np.asarray(out["success_rate_estimated"]),
-                       info=dict(rover=rover.path, base=base.path, options=opt, rover_signals=rover.signals,
+                       fixed_rows=({k: np.asarray(v) for k, v in out["fixed_rows"].items()}
+                                   if record_fixed_rows else None),
+                       info=dict(rover=rover.path, base=base.path, options=opt, noise_estimate=noise_est,
+                                 rover_signals=rover.signals,
                                  base_signals=base.signals,
                                  **({k: np.asarray(out[k]) for k in ("iono_m", "iono_sigma_m", "iono_dd_m",
                                                                      "iono_dd_sigma_m")} if record_iono else {})))
+
+
+def estimate_noise(rows: dict, options: RtkOptions | dict | None = None, **kwargs):
+    """Phase and code noise from the fixed epochs' double differences (least-squares variance component
+    estimation): :func:`insnav.gnss.rtk_noise.estimate_noise`."""
+    from .rtk_noise import estimate_noise as _estimate
+
+    return _estimate(rows, options, **kwargs)
+
+
+def estimate_noise_prepass(t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt: RtkOptions, *,
+                           validation: RtkOptions | None = None):
+    """The GNSS-only first pass of ``noise = "estimate"``: the engine over the prepared rows (with the
+    options ``validation``, default ``opt``) records its fixed epochs, and the noise estimated from them
+    (:func:`insnav.gnss.rtk_noise.noise_options`) replaces ``opt``'s sigmas.
+
+    Returns
+    -------
+    (RtkOptions, NoiseEstimate or None)
+        The options to run with (``noise = "configured"``) and the estimate (None: too few fixed
+        epochs, a warning said so and ``opt``'s sigmas stay).
+    """
+    from .. import _core
+    from .rtk_noise import noise_options
+
+    pre = validation if validation is not None else opt
+    out = _core.rtk_run(t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, pre.core_dict(), record_fixed_rows=True)
+    return noise_options(opt, out["fixed_rows"])
 
 
 def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):

@@ -165,6 +165,22 @@ struct RtkOptions {
   double max_age_s = 30.0;         // (applied by the caller that matches the base epochs)
 };
 
+/// One double-differenced row of a fixed epoch, recorded for the variance component estimation
+/// (RtkEngine::set_record_fixed_rows; insnav.gnss.rtk.estimate_noise): the phase rows with their
+/// integer ambiguities removed and the code rows, both at the float position after the epoch's update.
+/// The row's configured covariance is Cov(y_a, y_b) = [a == b] var_own + [same group] var_ref (the
+/// white single-difference variances of the satellite and of the group's reference satellite,
+/// sigma_phase_a_m / sigma_phase_b_m and, for code, x code_phase_ratio^2; without the ionosphere
+/// variance of iono_mode kVariance).
+struct FixedDdRow {
+  int code = 0;        // 1 code, 0 phase
+  int group = 0;       // system * kMaxFreq + frequency slot (rows of one group share the reference)
+  double y = 0.0;      // observed minus computed [m] (phase: integer ambiguities removed)
+  double h[3] = {0.0, 0.0, 0.0};  // d(computed)/d(r_e) [-]
+  double var_own = 0.0;  // configured single-difference variance of the satellite [m^2]
+  double var_ref = 0.0;  // ... of the reference satellite [m^2]
+};
+
 /// One epoch of the solution.
 struct RtkEpoch {
   RtkStatus status = RtkStatus::kNone;
@@ -395,6 +411,14 @@ class RtkEngine {
 
   const RtkOptions& options() const { return opt_; }
 
+  /// Record, at every fixed epoch, its double-differenced rows (FixedDdRow) for the variance
+  /// component estimation of the phase and code noise (off by default: two more row builds per
+  /// fixed epoch).  Read them after process() with fixed_rows() / fixed_row(i).
+  void set_record_fixed_rows(bool on) { record_fixed_ = on; }
+  /// Rows recorded at the last processed epoch (0 unless it was fixed and recording is on).
+  int fixed_rows() const { return n_fixed_rows_; }
+  const FixedDdRow& fixed_row(int i) const { return fixed_rows_[i]; }
+
   /// The linearised double-difference rows of the last processed epoch at the current state (tests
   /// and diagnostics; the epoch's observation arrays must still be alive): code = 1 code rows, 0 phase
   /// rows; y[r] the innovation (observed minus computed) [m], H_full[r * kMaxStates + j] its
@@ -492,6 +516,7 @@ class RtkEngine {
   RtkEpoch process(double t, const double* rover, int n_r, const double* base, int n_b, bool base_new,
                    const Vec3& r_base_e) {
     RtkEpoch out;
+    n_fixed_rows_ = 0;
     const int nf = std::clamp(opt_.n_freq, 1, kMaxFreq);
     n_r = std::min(n_r, kMaxSatKeys);
     n_b = std::min(n_b, kMaxSatKeys);
@@ -965,7 +990,9 @@ class RtkEngine {
   // Q / F (c = 0.5, the default: the median, about Q / (F - 2/3)); k is kept in [0.01, 100].  A set
   // passes the success-rate test with P_s(Q_a) >= min_success_rate (the configured covariance) or
   // P_s(k Q_a) >= min_success_rate_estimated (0.98, stricter: on the open-sky preset, single epoch,
-  // 0.95 and 0.97 let wrong sets through, docs/algorithms.md).
+  // 0.95 and 0.97 let wrong sets through, docs/algorithms.md).  Its two-component extension over the
+  // fixed epochs (phase and code factors, iterated; record_fixed_rows() and insnav.gnss.rtk_noise) gives
+  // the sigmas of [rtk] noise = "estimate".
   void update_noise_factor(double t, int nf) {
     white_code_ = true;
     const int m = build_rows(nf, 1);
@@ -1193,7 +1220,49 @@ class RtkEngine {
     out.r_e = xb.head<3>();
     if (kv) out.v_e = xb.tail<3>();
     out.P_r = Pb.topLeftCorner<3, 3>();
+    if (record_fixed_) record_fixed_rows(nuse);
     if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
+  }
+
+  // The fixed epoch's double differences for the variance component estimation (FixedDdRow).  The
+  // fixed set gives N_j - N_i for the ambiguity slots j fixed against the reference slot i of their
+  // system and frequency (resolve()); a phase row of build_rows() (satellite c against its reference
+  // r, both fixed) then has the integer DD ambiguity (N_c - N_i) - (N_r - N_i), which replaces the
+  // float one.  Rows with an unfixed ambiguity or two wavelengths (GLONASS FDMA) are left out; the
+  // code rows are taken with their white configured variance (no correlation or adaptive factor).
+  void record_fixed_rows(int nuse) {
+    fix_val_.fill(NAN);
+    for (int p = 0; p < nuse; ++p) {
+      fix_val_[dd_i_[order_[p]]] = 0.0;
+      fix_val_[dd_j_[order_[p]]] = ar_.a_fix()(p);
+    }
+    const int nf = std::clamp(opt_.n_freq, 1, kMaxFreq);
+    const double code_var = opt_.code_phase_ratio * opt_.code_phase_ratio;
+    n_fixed_rows_ = 0;
+    for (int code = 0; code < 2; ++code) {
+      white_code_ = true;
+      const int m = build_rows(nf, code);
+      white_code_ = false;
+      for (int r = 0; r < m && n_fixed_rows_ < 2 * kMaxRows; ++r) {
+        const int c = row_c_[r], ref = row_ref_[r], f = row_f_[r];
+        double y = y_(r);
+        if (!code) {
+          const int kj = row_amb_[r], ki = amb_row_[ref * kMaxFreq + f];
+          const double lj = lam(common_r_[c], f), li = lam(common_r_[ref], f);
+          if (!std::isfinite(fix_val_[kj]) || !std::isfinite(fix_val_[ki]) || lj != li) continue;
+          y += lj * ((x_(RtkLayout::kAmb + kj) - x_(RtkLayout::kAmb + ki)) - (fix_val_[kj] - fix_val_[ki]));
+        }
+        FixedDdRow& o = fixed_rows_[n_fixed_rows_++];
+        o.code = code;
+        o.group = sys_of(rover_ + common_r_[c] * RtkRow::kCols) * kMaxFreq + f;
+        o.y = y;
+        o.h[0] = o.h[1] = o.h[2] = 0.0;
+        for (int k = 0; k < nz_[r]; ++k)
+          if (hc_[r][k] < 3) o.h[hc_[r][k]] += hv_[r][k];
+        o.var_own = var_sd_[c] * (code ? code_var : 1.0);
+        o.var_ref = var_sd_[ref] * (code ? code_var : 1.0);
+      }
+    }
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -1254,6 +1323,10 @@ class RtkEngine {
   double noise_q_ = 0.0, noise_dof_ = 0.0, noise_t_ = NAN, sr_factor_ = 1.0;
   double noise_z_ = 0.0;  // Phi^-1(1 - noise_confidence), set by the constructor
   bool white_code_ = false;  // code_var_factor() returns 1 (the configured white code)
+  bool record_fixed_ = false;  // record_fixed_rows() at every fixed epoch
+  int n_fixed_rows_ = 0;
+  std::array<FixedDdRow, 2 * kMaxRows> fixed_rows_{};
+  std::array<double, kMaxAmbStates> fix_val_{};  // fixed DD ambiguity of a slot against its reference [cycles]
   FixValidator<kMaxAmbStates> validator_;  // fix validation over epochs (ambiguity_resolution.hpp)
 
   const double* rover_ = nullptr;
