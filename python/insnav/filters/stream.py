@@ -1130,22 +1130,22 @@ class _Innovations:
 
 
 def _fsum_add(partials: list, values) -> None:
-    """``values`` added to the exact sum held as non-overlapping ``partials`` (Shewchuk, "Adaptive
-    precision floating-point arithmetic", Discrete Comput. Geom. 18, 1997, the GROW-EXPANSION step; the
-    partials :func:`math.fsum` keeps): ``math.fsum(partials)`` is the sum of every value added, exactly
-    rounded, whatever the blocks were."""
-    for x in np.asarray(values, float).tolist():
-        i = 0
-        for y in partials:
-            if abs(x) < abs(y):
-                x, y = y, x
-            hi = x + y
-            lo = y - (hi - x)
-            if lo:
-                partials[i] = lo
-                i += 1
-            x = hi
-        partials[i:] = [x]
+    """``values`` added to the exact sum held in ``partials`` (non-overlapping float64 terms, largest
+    first): ``math.fsum(partials)`` is the sum of every value added, exactly rounded, whatever the blocks
+    were.  The new terms are the exactly rounded sum (:func:`math.fsum`: Shewchuk, "Adaptive precision
+    floating-point arithmetic", Discrete Comput. Geom. 18, 1997) and the exactly rounded residuals
+    after it, until a residual is zero (two or three terms in practice)."""
+    import math
+
+    terms = list(partials) + np.asarray(values, float).tolist()
+    partials.clear()
+    while True:
+        r = math.fsum(terms + [-x for x in partials])
+        if r == 0.0 or not math.isfinite(r):
+            if not math.isfinite(r):
+                partials[:] = [r]
+            return
+        partials.append(r)
 
 
 class _Background:
