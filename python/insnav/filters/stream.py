@@ -20,18 +20,29 @@ rows (a buffer of one row group, allocated once), ``--out-format kfgins`` the
 rows appended to the temporary KF-GINS files in the folder.  The next block is read and parsed on a
 reader thread while this one is filtered, and the rows are formatted on a
 writer thread while the next block is filtered (the engine's two row buffers
-are used in turn).  Memory is the GNSS records (a few per second), a few
-blocks of IMU samples and rows, and the IMU summed to 10 Hz for the input
-checks, at most :data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer
-recording's is summed further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), so
-nothing grows with the recording's length (``bench/cli_end_to_end.py`` and
-``bench/cli_csv_stream.py`` measure a synthesised day).
+are used in turn).  The GNSS fixes are given to the engine a block at a
+time (``_core.LooseStream.push_gnss``: those up to the block's last sample)
+and their per-record outputs taken after each block, appended to the
+temporary innovations sidecar and reduced to the running statistics the
+summary and the health verdict need (:class:`_Innovations`), so the engine
+holds the fixes of about one block.  Memory is a few blocks of IMU samples,
+rows and records, the IMU summed to 10 Hz for the input checks, at most
+:data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer recording's is summed
+further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes,
+read whole with their sanitized copy for the loader's cut, the sanitizer and
+the input checks (about 0.3 kB per fix: the one part that still grows with
+the recording; ``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py``
+measure a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
 are byte for byte the batch run's; an ``.npz`` holds the batch run's members,
 dtypes and values bit for bit (``tests/test_stream.py``,
-``tests/test_stream_npz.py``, ``tests/test_stream_outputs.py``).  The input checks differ in two
+``tests/test_stream_npz.py``, ``tests/test_stream_outputs.py``,
+``tests/test_stream_gnss_push.py``); the health verdict's mean NIS ratio
+sums the NIS exactly (:func:`_fsum_add`) where the batch run sums them
+pairwise (numpy): the two agree to about 1e-15 relative, and the report
+prints 3 digits.  The input checks differ in two
 documented ways: the IMU sanitizer's block scan takes the nominal interval
 from the first block (a later block whose median interval differs, an IMU gap,
 a repeated time or an implausible rate hands the run to the batch path, whose
