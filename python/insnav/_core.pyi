@@ -274,7 +274,9 @@ class LooseStream:
     def run_block(self, t: npt.ArrayLike, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> int: ...  # rows written
     def finish(self) -> int: ...  # 0 or 1 rows: the last sample's
     def rows(self) -> dict[str, np.ndarray]: ...  # t, llh, v_n, rpy, sigma, imu_err of the last call (views; two buffers in turn)
-    def take_records(self) -> dict[str, Any]: ...  # first; innovation, nis, log_det_s, meas_sigma, status of the fixes consumed since the last take
+    # first (the run's index of the first record); innovation, nis, log_det_s, meas_sigma, status of the fixes
+    # consumed since the last take
+    def take_records(self) -> dict[str, Any]: ...
     def records(self) -> dict[str, Any]: ...  # take_records() and the counters
     @property
     def max_window(self) -> int: ...  # the most fixes held at once

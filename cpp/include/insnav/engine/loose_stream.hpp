@@ -60,7 +60,8 @@ class LooseStream {
     fixes_ = fixes;
     if (samples_ > 0) return;
     ClosedLoop<Filter>& core = engine_.core();
-    while (g_ < end_ && !(core.record_time(fix(g_).t) > t_prev_)) rec_.mark(g_++ - base_, RecordStatus::kOutsideImuSpan);
+    while (g_ < end_ && !(core.record_time(fix(g_).t) > t_prev_))
+      rec_.mark(g_++ - base_, RecordStatus::kOutsideImuSpan);
   }
 
   /// The next n samples (t (n,), dtheta_b (n,3), dv_b (n,3), row-major): their
