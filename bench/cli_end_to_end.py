@@ -67,6 +67,13 @@ DAY_VARIANTS = [
     ("EKF, CSV, 200 Hz, nav columns (block by block)", ["--columns", "nav"], "day200.csv"),
     ("EKF, CSV, 200 Hz, all columns (block by block)", [], "day200all.csv"),
 ]
+#: the long-recording rows also run on a short synthesised recording (--growth-hours), for the peak RSS
+#: growth per hour of recording
+GROWTH_VARIANTS = ("EKF, CSV, 10 Hz (block by block)", "EKF, CSV, 200 Hz, nav columns (block by block)")
+#: peak RSS growth per hour of recording below which the run's memory counts as bounded [MB/h] (a day of
+#: 1 Hz GNSS records held in memory would add about 1 MB/h; the summed IMU of the input checks fills its
+#: fixed-size buffer during the first 7.3 h)
+BOUNDED_MB_PER_H = 0.5
 #: the speed targets against KF-GINS, CPU time of the whole command (label: minimum KF-GINS / insnav)
 KFGINS_TARGETS = {"EKF, CSV, 200 Hz, all columns": 30.0, "EKF, npz, 200 Hz": 40.0}
 TIMINGS = re.compile(r"timings \[s\]: read ([\d.]+), filter ([\d.]+), write ([\d.]+)")
@@ -219,6 +226,9 @@ def main(argv=None) -> int:
     ap.add_argument("--day-hours", type=float, default=24.0,
                     help="length of the synthesised long recording of the bounded-memory rows [h] (0: none); "
                          "written under the temporary folder, deleted afterwards")
+    ap.add_argument("--growth-hours", type=float, default=1.0,
+                    help="length of the short synthesised recording whose peak RSS the day's is compared with "
+                         "[h] (0: none)")
     ap.add_argument("--kfgins", choices=("auto", "off"), default="auto",
                     help="time KF-GINS beside the variants (auto: build it with bench/_kfgins.py when missing)")
     ap.add_argument("--api-child", help=argparse.SUPPRESS)
@@ -287,9 +297,18 @@ def main(argv=None) -> int:
             load.append(os.getloadavg()[0])
             print(f"round {r + 1}/{a.repeat}: " + ", ".join(f"{res[v[0]][-1]['wall']:.2f}" for v in variants),
                   file=sys.stderr)
-        day = {}
+        day, short = {}, {}
         if a.day_hours > 0:
             (work / "Leador-A15-sim.txt").unlink()  # room for the day's file
+            if 0 < a.growth_hours < a.day_hours:  # the same rows on a short recording: the growth per hour
+                sw = work / "short"
+                (sw / "out").mkdir(parents=True)
+                for f in ("GNSS-RTK-sim.txt", "kf-gins-sim.yaml"):
+                    shutil.copy(work / f, sw / f)
+                write_day(sw, a.growth_hours)
+                for label, extra, out_name in [v for v in DAY_VARIANTS if v[0] in GROWTH_VARIANTS]:
+                    short[label] = run_cli(sw, extra, out_name, yaml="day.yaml", keep=False)
+                shutil.rmtree(sw)
             day_n, day_mb = write_day(work, a.day_hours)
             for label, extra, out_name in [v for v in DAY_VARIANTS if variants is VARIANTS or "Parquet" not in v[0]]:
                 day[label] = run_cli(work, extra, out_name, yaml="day.yaml", keep=False)
@@ -347,6 +366,15 @@ def main(argv=None) -> int:
             x = day[label]
             lines.append(f"| {label} | {x['wall']:.1f} | {x['cpu']:.1f} | {x['read']:.2f} | {x['filter']:.2f} | "
                          f"{x['write']:.2f} | {x['rss'].ru_maxrss / 1024.0:.0f} | {x['size'] / 1e6:.0f} |")
+        if short:
+            lines.append("")
+        for label, x in short.items():
+            r1, r2 = x["rss"].ru_maxrss / 1024.0, day[label]["rss"].ru_maxrss / 1024.0
+            per_h = (r2 - r1) / (a.day_hours - a.growth_hours)
+            verdict = ("**bounded**" if per_h < BOUNDED_MB_PER_H else
+                       f"**grows with the recording** (bounded: below {BOUNDED_MB_PER_H:g} MB per hour)")
+            lines.append(f"- {label}: peak RSS {r1:.0f} MB at {a.growth_hours:g} h, {r2:.0f} MB at "
+                         f"{a.day_hours:g} h: {per_h:+.2f} MB per hour of recording, {verdict}.")
     lines += [
         "",
         "Filter only: in-process calls in a separate process per round, on the dataset already read:",

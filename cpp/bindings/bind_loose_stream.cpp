@@ -5,7 +5,13 @@
 // turn: each run_block fills the next one with the GIL released and returns
 // the row count; the arrays of rows() are views of the buffer just filled,
 // valid until the next-but-one call (a writer thread may format block i
-// while block i + 1 is filtered, without a copy).
+// while block i + 1 is filtered, without a copy).  The GNSS fixes are pushed
+// as the run goes (push_gnss) and the per-fix records of the fixes consumed
+// taken after each block (take_records): the stream holds a window of the
+// fixes not yet consumed and their record rows, which grows only with the
+// fixes of one block (max_window, for the tests), never with the run.
+#include <algorithm>
+#include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
@@ -27,6 +33,8 @@ struct StreamBase {
   virtual bool finish(NavOutputs& rows) = 0;
   virtual std::int64_t samples() const = 0;
   virtual double t_last() const = 0;
+  virtual std::int64_t consumed() const = 0;
+  virtual void set_fixes(std::int64_t base, std::int64_t m, const GnssFix* fixes) = 0;
 };
 
 template <class Filter>
@@ -40,13 +48,19 @@ struct StreamImpl final : StreamBase {
   bool finish(NavOutputs& rows) override { return s.finish(rows); }
   std::int64_t samples() const override { return s.samples(); }
   double t_last() const override { return s.t_last(); }
+  std::int64_t consumed() const override { return s.consumed(); }
+  void set_fixes(std::int64_t base, std::int64_t m, const GnssFix* fixes) override { s.set_fixes(base, m, fixes); }
 };
 
-/// The stream object Python holds: the engine, the fixes, the per-fix outputs
-/// and the row buffers of one block.
+/// The stream object Python holds: the engine, the window of fixes (those
+/// not yet consumed: fixes[i] is the run's fix base + i), their per-fix
+/// output rows and the row buffers of one block.
 struct PyLooseStream {
   std::vector<GnssFix> fixes;
-  LooseRecordBuffers rec;
+  std::int64_t base = 0;        // the run's index of fixes[0]
+  std::int64_t max_window = 0;  // the most fixes the window held (bounded by the fixes of a block)
+  LooseRecordBuffers rec;       // rows 0 .. capacity - 1: the records of fixes[0 ..]
+  py::ssize_t rec_capacity;
   LooseOutputs rec_out;
   NavBuffers rows[2];  // used in turn
   int cur = 1;         // the buffer of the last call
@@ -56,8 +70,62 @@ struct PyLooseStream {
   bool finished = false;
 
   PyLooseStream(py::ssize_t m, py::ssize_t cap, int sigma_cols)
-      : fixes(m), rec(m), rows{NavBuffers(cap + 1, sigma_cols, false), NavBuffers(cap + 1, sigma_cols, false)},
-        capacity(cap) {}
+      : fixes(m), max_window(m), rec(m), rec_capacity(m),
+        rows{NavBuffers(cap + 1, sigma_cols, false), NavBuffers(cap + 1, sigma_cols, false)}, capacity(cap) {}
+
+  /// Fixes (n, 13) appended to the window (the record rows grown when they are too few: the rows
+  /// already written kept).
+  void push(const DArray& gnss) {
+    const py::ssize_t n = gnss.ndim() == 2 ? gnss.shape(0) : 0;
+    if (n > 0) require_shape(gnss, n, 13, "gnss");
+    const std::size_t m0 = fixes.size();
+    fixes.resize(m0 + static_cast<std::size_t>(n));
+    for (py::ssize_t i = 0; i < n; ++i) fixes[m0 + i] = gnss_fix_from(gnss.data()[13 * i], gnss.data() + 13 * i + 1);
+    const auto m = static_cast<py::ssize_t>(fixes.size());
+    max_window = std::max<std::int64_t>(max_window, m);
+    if (m > rec_capacity) {
+      const py::ssize_t cap = std::max(m, 2 * rec_capacity);
+      LooseRecordBuffers grown(cap);
+      const py::ssize_t k = impl ? static_cast<py::ssize_t>(impl->consumed() - base) : 0;  // rows written
+      std::copy_n(rec.innovation.data(), 6 * k, grown.innovation.mutable_data());
+      std::copy_n(rec.nis.data(), k, grown.nis.mutable_data());
+      std::copy_n(rec.log_det_s.data(), k, grown.log_det_s.mutable_data());
+      std::copy_n(rec.meas_sigma.data(), 6 * k, grown.meas_sigma.mutable_data());
+      std::copy_n(rec.status.data(), k, grown.status.mutable_data());
+      rec = std::move(grown);
+      rec_capacity = cap;
+      rec.attach(rec_out, cap);
+    }
+    if (impl) impl->set_fixes(base, m, fixes.data());
+  }
+
+  /// The records of the fixes consumed since the last call (copies, in time order) and `first`, the
+  /// run's index of the first of them; the window then starts at the first fix not consumed.
+  py::dict take() {
+    const auto k = static_cast<py::ssize_t>(impl->consumed() - base);
+    DArray innovation({k, py::ssize_t(6)}), nis({k}), log_det_s({k}), meas_sigma({k, py::ssize_t(6)});
+    py::array_t<std::int8_t> status({k});
+    std::copy_n(rec.innovation.data(), 6 * k, innovation.mutable_data());
+    std::copy_n(rec.nis.data(), k, nis.mutable_data());
+    std::copy_n(rec.log_det_s.data(), k, log_det_s.mutable_data());
+    std::copy_n(rec.meas_sigma.data(), 6 * k, meas_sigma.mutable_data());
+    std::copy_n(rec.status.data(), k, status.mutable_data());
+    py::dict d;
+    d["first"] = base;
+    d["innovation"] = innovation;
+    d["nis"] = nis;
+    d["log_det_s"] = log_det_s;
+    d["meas_sigma"] = meas_sigma;
+    d["status"] = status;
+    // the rows of the fixes left move to the front (none is written yet: a fix's record is written when
+    // it is consumed); the rows reused start as fresh ones (log_det_s and meas_sigma NaN)
+    std::fill_n(rec.log_det_s.mutable_data(), rec_capacity, NAN);
+    std::fill_n(rec.meas_sigma.mutable_data(), 6 * rec_capacity, NAN);
+    fixes.erase(fixes.begin(), fixes.begin() + k);
+    base += k;
+    impl->set_fixes(base, static_cast<std::int64_t>(fixes.size()), fixes.data());
+    return d;
+  }
 
   /// The next row buffer, empty.
   NavOutputs& next_rows() {
@@ -173,10 +241,18 @@ void bind_loose_stream(py::module_& m) {
       },
       "The rows of the last run_block / finish (radians, SI): views of its row buffer, valid until the "
       "next-but-one call.");
+  c.def(
+      "push_gnss", [](PyLooseStream& ps, const DArray& gnss) { ps.push(gnss); }, py::arg("gnss"),
+      "Append fixes (n, 13; the same rows as the constructor's gnss, in time order, after those given) "
+      "to the window: it must hold every fix up to the last sample of the next run_block.");
+  c.def("take_records", [](PyLooseStream& ps) { return ps.take(); },
+        "The per-fix records (innovation (k,6), nis, log_det_s, meas_sigma (k,6), status) of the fixes "
+        "consumed since the last call, and 'first': the run's index of the first of them.");
+  c.def_property_readonly("max_window", [](const PyLooseStream& ps) { return ps.max_window; },
+                          "The most fixes the window held (its record rows: at least as many).");
   c.def("records",
         [](PyLooseStream& ps) {
-          py::dict d;
-          ps.rec.put(d);
+          py::dict d = ps.take();
           d["updates"] = ps.rec_out.updates;
           d["rejected"] = ps.rec_out.rejected;
           d["gate_reopened"] = ps.rec_out.gate_reopened;
@@ -184,7 +260,8 @@ void bind_loose_stream(py::module_& m) {
           d["cholesky_repairs"] = ps.rec_out.cholesky_repairs;
           return d;
         },
-        "Per GNSS fix: innovation (m,6), nis, log_det_s, status; and the counters (after finish()).");
+        "The records of the fixes not yet taken (take_records) and the counters (after finish()): the whole "
+        "table when none was taken.");
   c.def_property_readonly("samples", [](const PyLooseStream& ps) { return ps.impl->samples(); });
   c.def_property_readonly("t_last", [](const PyLooseStream& ps) { return ps.impl->t_last(); });
 }

@@ -262,7 +262,7 @@ class LooseStream:
         self,
         filter: str,  # "ekf" | "rbukf" | "ukf"
         layout: int,  # 15 | 21
-        gnss: npt.ArrayLike,  # (m, 13) run_loose's gnss rows, sorted by time
+        gnss: npt.ArrayLike,  # (m, 13) run_loose's gnss rows, sorted by time (the first fixes; more: push_gnss)
         init: npt.ArrayLike,  # (10,): t0, lat, lon, h, vN, vE, vD, roll, pitch, yaw (SI)
         P0: npt.ArrayLike,  # (layout, layout)
         imu_correction: npt.ArrayLike,  # (12,)
@@ -270,10 +270,16 @@ class LooseStream:
         config: dict[str, Any],  # run_loose's engine config (no smooth, no self-calibration)
         block_samples: int,  # the most samples one run_block takes
     ) -> None: ...
+    def push_gnss(self, gnss: npt.ArrayLike) -> None: ...  # (n, 13) the next fixes in time order
     def run_block(self, t: npt.ArrayLike, dtheta_b: npt.ArrayLike, dv_b: npt.ArrayLike) -> int: ...  # rows written
     def finish(self) -> int: ...  # 0 or 1 rows: the last sample's
     def rows(self) -> dict[str, np.ndarray]: ...  # t, llh, v_n, rpy, sigma, imu_err of the last call (views; two buffers in turn)
-    def records(self) -> dict[str, Any]: ...  # innovation, nis, log_det_s, status per fix; counters
+    # first (the run's index of the first record); innovation, nis, log_det_s, meas_sigma, status of the fixes
+    # consumed since the last take
+    def take_records(self) -> dict[str, Any]: ...
+    def records(self) -> dict[str, Any]: ...  # take_records() and the counters
+    @property
+    def max_window(self) -> int: ...  # the most fixes held at once
     @property
     def samples(self) -> int: ...
     @property

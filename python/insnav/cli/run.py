@@ -526,7 +526,11 @@ def _outside_imu_span(sol, ds) -> tuple[int, int]:
     from ..filters.solution import RecordStatus
 
     status = getattr(sol, "gnss_status", None)
-    n = int(np.count_nonzero(np.asarray(status) == RecordStatus.OUTSIDE_IMU_SPAN)) if status is not None else 0
+    records = getattr(sol, "records", None)  # a run written block by block: its records' running counts
+    if records is not None:
+        n = int(records["outside"])
+    else:
+        n = int(np.count_nonzero(np.asarray(status) == RecordStatus.OUTSIDE_IMU_SPAN)) if status is not None else 0
     scenario = getattr(ds, "scenario", None)
     cut = int(scenario.get("gnss_outside_imu_span", 0)) if isinstance(scenario, dict) else 0
     return n + cut, cut
@@ -857,7 +861,8 @@ def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts,
             else:
                 sol.save(out, columns=groups, precision=args.csv_precision)
                 base = out
-            write_innovations(sol, base)
+            if streamed_files is None:  # a run written block by block wrote its sidecar as it went
+                write_innovations(sol, base)
             if getattr(sol, "rtk", None) is not None and s.get("coupling") == "rtk":  # RTK/INS: per rover epoch
                 from ..gnss.rtk import write_rtk_table, write_rtklib_pos
 

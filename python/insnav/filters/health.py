@@ -92,7 +92,8 @@ def _scan_rows(sol, t) -> dict:
                                _R_EARTH_M)
 
 
-def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_rows: int | None = None) -> dict:
+def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_rows: int | None = None,
+           records: dict | None = None) -> dict:
     """The health verdict of a solution (module docstring).
 
     Parameters
@@ -107,6 +108,12 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
         merges its blocks' scans; it passes only scans without a bad row).
     n_rows : int, optional
         The row count with ``scan`` (default ``len(sol.t)``).
+    records : dict, optional
+        The GNSS records' statistics, when their arrays are not in ``sol``
+        (a run written block by block writes them as it goes): ``nis_sum``
+        and ``rows_sum`` of the applied records with a finite NIS and rows,
+        ``applied`` (count) and ``applied_t_max`` [s]; ``sol.gnss_t`` still
+        holds every record's time.
 
     Returns
     -------
@@ -120,11 +127,14 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
     out: dict = dict(healthy=True, reason="", warnings=[])
     reasons: list[str] = []
     t = np.asarray(sol.t, float)
-    status = np.asarray(sol.gnss_status)
-    nis = np.asarray(sol.nis, float)
-    rows = _record_rows(sol)
-    ok = (status == _APPLIED) & np.isfinite(nis) & np.isfinite(rows) & (rows > 0)
-    ratio = float(nis[ok].sum() / rows[ok].sum()) if ok.any() else float("nan")
+    if records is None:
+        status = np.asarray(sol.gnss_status)
+        nis = np.asarray(sol.nis, float)
+        rows = _record_rows(sol)
+        ok = (status == _APPLIED) & np.isfinite(nis) & np.isfinite(rows) & (rows > 0)
+        ratio = float(nis[ok].sum() / rows[ok].sum()) if ok.any() else float("nan")
+    else:
+        ratio = float(records["nis_sum"] / records["rows_sum"]) if records["rows_sum"] > 0 else float("nan")
     out["nis_ratio"] = ratio
     if not np.isfinite(ratio):
         word = "untested"
@@ -168,13 +178,17 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
                        f"(outside {lo:g} .. {hi:g} m)")
     # GNSS span
     gt = np.asarray(sol.gnss_t, float)
-    used = gt[status == _APPLIED] if status.shape == gt.shape else gt
+    if records is None:
+        used = gt[status == _APPLIED] if status.shape == gt.shape else gt
+        used_any, used_max = bool(used.size), (float(used.max()) if used.size else float("nan"))
+    else:
+        used_any, used_max = records["applied"] > 0, float(records["applied_t_max"])
     t_end = float(imu_t_end) if imu_t_end is not None else (float(t[-1]) if len(t) else float("nan"))
-    tail = t_end - float(used.max()) if used.size and np.isfinite(t_end) else 0.0
+    tail = t_end - used_max if used_any and np.isfinite(t_end) else 0.0
     out["gnss_tail_s"] = max(0.0, tail)
     dt = median(np.diff(gt)) if gt.size > 1 else 1.0
     if tail > max(MIN_TAIL_S, 10.0 * dt):
-        out["warnings"].append(f"the GNSS updates end {tail:.1f} s before the IMU (last at t = {used.max():.3f} s): "
+        out["warnings"].append(f"the GNSS updates end {tail:.1f} s before the IMU (last at t = {used_max:.3f} s): "
                                "the rest of the solution is free inertial")
     if reasons:
         out["healthy"] = False

@@ -20,18 +20,29 @@ rows (a buffer of one row group, allocated once), ``--out-format kfgins`` the
 rows appended to the temporary KF-GINS files in the folder.  The next block is read and parsed on a
 reader thread while this one is filtered, and the rows are formatted on a
 writer thread while the next block is filtered (the engine's two row buffers
-are used in turn).  Memory is the GNSS records (a few per second), a few
-blocks of IMU samples and rows, and the IMU summed to 10 Hz for the input
-checks, at most :data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer
-recording's is summed further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), so
-nothing grows with the recording's length (``bench/cli_end_to_end.py`` and
-``bench/cli_csv_stream.py`` measure a synthesised day).
+are used in turn).  The GNSS fixes are given to the engine a block at a
+time (``_core.LooseStream.push_gnss``: those up to the block's last sample)
+and their per-record outputs taken after each block, appended to the
+temporary innovations sidecar and reduced to the running statistics the
+summary and the health verdict need (:class:`_Innovations`), so the engine
+holds the fixes of about one block.  Memory is a few blocks of IMU samples,
+rows and records, the IMU summed to 10 Hz for the input checks, at most
+:data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer recording's is summed
+further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes,
+read whole with their sanitized copy for the loader's cut, the sanitizer and
+the input checks (about 0.3 kB per fix: the one part that still grows with
+the recording; ``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py``
+measure a synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
 are byte for byte the batch run's; an ``.npz`` holds the batch run's members,
 dtypes and values bit for bit (``tests/test_stream.py``,
-``tests/test_stream_npz.py``, ``tests/test_stream_outputs.py``).  The input checks differ in two
+``tests/test_stream_npz.py``, ``tests/test_stream_outputs.py``,
+``tests/test_stream_gnss_push.py``); the health verdict's mean NIS ratio
+sums the NIS exactly (:func:`_fsum_add`) where the batch run sums them
+pairwise (numpy): the two agree to about 1e-15 relative, and the report
+prints 3 digits.  The input checks differ in two
 documented ways: the IMU sanitizer's block scan takes the nominal interval
 from the first block (a later block whose median interval differs, an IMU gap,
 a repeated time or an implausible rate hands the run to the batch path, whose
@@ -89,6 +100,9 @@ CHECK_RATE_HZ = 10.0
 #: the most rows of the summed IMU the input checks keep (about 7.3 h at 10 Hz, 15 MB): a longer
 #: recording's record is halved to 5 Hz, then 2.5 Hz, ... (:class:`_Coarse`)
 CHECK_MAX_ROWS = 1 << 18
+#: the most GNSS fixes converted to the engine's rows at a time (a block's fixes are given to the engine
+#: before it runs, its records taken after it: the engine holds the fixes of about one block)
+GNSS_PUSH_MAX = 1 << 12
 #: bytes per IMU text line assumed when sizing a block's read (the block is cut at a line end)
 _LINE_BYTES_GUESS = 112
 
@@ -760,9 +774,13 @@ def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: s
 
 class StreamedSolution(Solution):
     """A :class:`Solution` whose rows went to the file (``n_rows`` of them, its
-    ``len()``): the GNSS record fields and the summary, no row arrays."""
+    ``len()``) and whose per-record outputs went to the innovations sidecar as
+    the run went: the records' times (``gnss_t``), their running statistics
+    (``records``: :meth:`_Innovations.stats`) and the summary; no row or
+    per-record arrays."""
 
     n_rows = 0
+    records: dict | None = None
 
     def __len__(self):
         return int(self.n_rows)
@@ -781,6 +799,17 @@ _GNSS_FIELDS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sig
 def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
     return GnssFixes(*(np.asarray(getattr(g, f))[keep] for f in _GNSS_FIELDS),
                      origin=None if g.origin is None else g.origin.take(keep, len(keep)))
+
+
+class _FixSlice:
+    """Fixes ``idx`` (a slice or indices) of ``g``: the fields :func:`insnav.filters.loose.loose_gnss_rows` reads."""
+
+    def __init__(self, g: GnssFixes, idx):
+        for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n"):
+            setattr(self, f, np.asarray(getattr(g, f))[idx])
+
+    def __len__(self):
+        return len(self.t_valid)
 
 
 class _BlockRun:
@@ -889,10 +918,12 @@ class _BlockRun:
                 tm["read"] += clock() - t_mark
                 for a in range(0, len(t), self.block_lines):  # the engine's buffers hold block_lines rows
                     t_mark = clock()
-                    n = self.stream.run_block(t[a:a + self.block_lines], dth[a:a + self.block_lines],
-                                              dv[a:a + self.block_lines])
+                    tb = t[a:a + self.block_lines]
+                    self._push_gnss(float(tb[-1]))
+                    n = self.stream.run_block(tb, dth[a:a + self.block_lines], dv[a:a + self.block_lines])
                     tm["filter"] += clock() - t_mark
                     t_mark = clock()
+                    writer.records(self.stream.take_records(), self.gnss_t)
                     writer.add(self.stream, n)
                     self.rows += n
                     tm["write"] += clock() - t_mark
@@ -906,6 +937,7 @@ class _BlockRun:
             raise Fallback("too few IMU records in the run's span (the batch path names the key)", batch_names_it=True)
         t_mark = clock()
         n = self.stream.finish()
+        writer.records(self.stream.take_records(), self.gnss_t)  # none: every fix given was consumed
         writer.add(self.stream, n)
         self.rows += n
         writer.close()
@@ -913,7 +945,7 @@ class _BlockRun:
         t_mark = clock()
         if self.health.bad:
             raise Fallback("the health check found a bad row (the batch path names it)", batch_names_it=True)
-        res = self._result(imu_source, n_blocks)
+        res = self._result(imu_source, n_blocks, writer.innovations)
         tm["filter"] += clock() - t_mark
         return res
 
@@ -921,7 +953,7 @@ class _BlockRun:
     def _start(self, t_first, expected_samples: int = 0) -> None:
         """The engine at t0: the GNSS records in (t0, endtime] sanitized (the batch loader's cut and
         sanitize_gnss), the output decimation from the first block, the batch loose runner's set-up."""
-        from .loose import loose_engine_args, loose_gnss_rows
+        from .loose import loose_engine_args
         from .sanitize import sanitize_gnss
 
         cfg, o = self.cfg, self.opts
@@ -933,21 +965,51 @@ class _BlockRun:
         if self.output_rate_hz is not None:
             cfg.output_decimation = self.set_decimation(t_first, self.output_rate_hz)
         gn = self.gnss
-        rows = loose_gnss_rows(gn, cfg)
-        a = loose_engine_args(dataclasses.replace(self.ds0, t0=self.t0, gnss=gn), cfg, rows[:, 0].copy())
-        self.stream = _core.LooseStream(cfg.filter, a.layout, rows, a.init, a.P0, a.imu_correction, a.imu_model,
-                                        a.config, self.block_lines)
+        t_all = np.asarray(gn.t_valid, float)
+        # the loose table's order (loose_gnss_rows: by time, stable), its rows made a block's fixes at a time
+        self.order = None if bool(np.all(t_all[1:] >= t_all[:-1])) else np.argsort(t_all, kind="stable")
+        self.gnss_t = t_all if self.order is None else t_all[self.order]
+        for a in range(0, len(t_all), GNSS_PUSH_MAX):  # the table's checks on every fix before the run
+            self._gnss_rows(a, min(a + GNSS_PUSH_MAX, len(t_all)))
+        a = loose_engine_args(dataclasses.replace(self.ds0, t0=self.t0, gnss=gn), cfg, self.gnss_t.copy())
+        self.stream = _core.LooseStream(cfg.filter, a.layout, np.zeros((0, 13)), a.init, a.P0, a.imu_correction,
+                                        a.imu_model, a.config, self.block_lines)
+        self.pushed = 0  # the fixes given to the engine so far (the first of self.gnss_t's order)
         dt = median(np.diff(t_first)) if len(t_first) > 1 else 0.0
         self.coarse = _Coarse(max(1, int(round(1.0 / (CHECK_RATE_HZ * dt)))) if dt > 0 else 1, expected_samples)
 
-    def _exact_gnss_cut(self, rec: dict) -> None:
+    def _gnss_rows(self, a: int, b: int) -> np.ndarray:
+        """The loose engine's GNSS rows of the fixes a .. b - 1 in time order (:func:`loose_gnss_rows` of
+        those fixes: its rows of the whole table; a table that fails its checks: the whole table's error)."""
+        from .loose import loose_gnss_rows
+
+        idx = slice(a, b) if self.order is None else self.order[a:b]
+        try:
+            return loose_gnss_rows(_FixSlice(self.gnss, idx), self.cfg)
+        except ValueError:
+            loose_gnss_rows(self.gnss, self.cfg)  # the whole table's message (which fix)
+            raise
+
+    def _push_gnss(self, t_end: float) -> None:
+        """The fixes up to ``t_end`` (the next block's last sample) given to the engine, at most
+        :data:`GNSS_PUSH_MAX` at a time (each block's records are taken after it runs)."""
+        j = int(np.searchsorted(self.gnss_t, t_end, side="right"))
+        while self.pushed < j:
+            b = min(j, self.pushed + GNSS_PUSH_MAX)
+            self.stream.push_gnss(self._gnss_rows(self.pushed, b))
+            self.pushed = b
+
+    def _exact_gnss_cut(self, records: int) -> None:
         """The GNSS records after the last IMU sample: the batch loader cuts them before the run.  They
-        changed nothing when the sanitizer treats the rest alike and the GNSS period is the same; their
-        outputs are then dropped, else the batch path runs."""
+        changed nothing when the sanitizer treats the rest alike and the GNSS period is the same; they were
+        never given to the engine (:meth:`_push_gnss`), so no output of theirs was written; else the batch
+        path runs.  ``records``: the per-fix records written."""
         from .sanitize import sanitize_gnss
 
         keep = np.asarray(self.gnss.t_valid) <= self.last_kept
         if keep.all():
+            if records != len(keep):  # pragma: no cover - every fix up to the last sample is consumed
+                raise RuntimeError(f"{records} GNSS records written for {len(keep)} fixes")
             return
         tv = np.asarray(self.gnss_raw.t_valid)
         g2, rep2 = sanitize_gnss(_gnss_take(self.gnss_raw, (tv > self.t0) & (tv <= self.last_kept)),
@@ -962,19 +1024,19 @@ class _BlockRun:
                 and _median_spacing(self.cfg, g2.t_valid) == _median_spacing(self.cfg, self.gnss.t_valid))
         if not same:
             raise Fallback("a GNSS record after the last IMU sample changes the set-up")
+        if records != len(g2):  # pragma: no cover - the cut fixes are the last in time order, never consumed
+            raise RuntimeError(f"{records} GNSS records written for {len(g2)} fixes")
         self.gnss, self.gnss_rep = g2, rep2
-        cut = int(keep.sum())  # the engine's records are in time order: the cut ones are the last
-        for k in ("innovation", "nis", "log_det_s", "meas_sigma", "status"):
-            rec[k] = rec[k][:cut]
+        self.gnss_t = self.gnss_t[:records]
 
-    def _result(self, imu_source: str, n_blocks: int) -> StreamResult:
+    def _result(self, imu_source: str, n_blocks: int, innovations: "_Innovations") -> StreamResult:
         from ..data.checks import check_dataset, heading_grid_step
         from .health import assess
 
         cfg = self.cfg
-        rec = self.stream.records()
-        self._exact_gnss_cut(rec)
-        gnss_t = np.sort(np.asarray(self.gnss.t_valid, float), kind="stable")
+        rec = self.stream.records()  # the counters (every record was taken block by block)
+        self._exact_gnss_cut(innovations.n)
+        gnss_t = self.gnss_t  # the fixes' times in the records' order (sorted, stable)
         tv = np.asarray(self.gnss_raw.t_valid)
         n_in = int(np.count_nonzero((tv > self.t0) & (tv <= self.last_kept)))
         scenario = dict(self.ds0.scenario or {})
@@ -993,18 +1055,108 @@ class _BlockRun:
         sol = StreamedSolution(
             t=e, lat_deg=e, lon_deg=e, h_m=e, v_n=z, roll_deg=e, pitch_deg=e, yaw_deg=e, sigma_pos_n_m=z,
             sigma_vel_n_mps=z, sigma_att_deg=z, acc_bias_mps2=z, gyro_bias_rps=z, acc_scale=z, gyro_scale=z,
-            gnss_t=gnss_t, innovation=rec["innovation"], nis=rec["nis"], gnss_status=rec["status"],
-            log_det_s=rec["log_det_s"], gnss_sigma=rec["meas_sigma"],
+            gnss_t=gnss_t, innovation=z, nis=e, gnss_status=np.zeros(0, np.int8), log_det_s=e, gnss_sigma=z,
             summary=dict(filter=cfg.filter, coupling=cfg.coupling, layout=int(cfg.layout),
                          updates=int(rec["updates"]), rejected=int(rec["rejected"]),
                          gate_reopened=int(rec["gate_reopened"]), gate_outage_accepted=int(rec["gate_outage_accepted"]),
                          cholesky_repairs=int(rec["cholesky_repairs"]), gnss_records=len(gnss_t)))
         sol.n_rows = self.rows
+        sol.records = innovations.stats()
         rep = dict(self.imu_report, imu_samples_in=self.n_kept, imu_samples_out=self.n_kept)
         sol.summary["sanitize"] = {**rep, **self.gnss_rep}
-        sol.summary["health"] = assess(sol, imu_t_end=self.last_kept, scan=self.health.scan(), n_rows=self.rows)
+        sol.summary["health"] = assess(sol, imu_t_end=self.last_kept, scan=self.health.scan(), n_rows=self.rows,
+                                       records=sol.records)
         return StreamResult(solution=sol, dataset=ds, config=cfg, rows=self.rows,
                             samples=self.n_kept, blocks=n_blocks, timings=self.timings)
+
+
+class _Innovations:
+    """The per-record outputs of a run written as it goes: each block's records
+    (``_core.LooseStream.take_records``) appended to the temporary
+    ``<solution>.innovations.csv`` in the text of
+    :func:`insnav.filters.solution.write_innovations` (the same lines: the
+    file is the whole-run writer's byte for byte), and reduced to what the
+    summary and the health verdict need (:meth:`stats`): the count of records
+    outside the IMU span, the applied records' NIS sum (exactly rounded,
+    :func:`math.fsum`'s partials) and measurement rows, and the last applied
+    record's time.  Memory: one block's records."""
+
+    def __init__(self, tmp: Path):
+        self.tmp = tmp
+        self.f = open(tmp, "w")
+        self.n = 0
+        self.outside = 0
+        self.nis_partials: list[float] = []
+        self.rows_sum = 0
+        self.applied = 0
+        self.applied_t_max = float("-inf")
+        self.header = True
+
+    def add(self, rec: dict, gnss_t: np.ndarray) -> None:
+        from .solution import INNOVATION_COLUMNS, RecordStatus, _csv_text, _status_names
+
+        st = np.asarray(rec["status"], int)
+        k = len(st)
+        if not k and not self.header:
+            return
+        first = int(rec["first"])
+        if first != self.n:  # pragma: no cover - the engine hands over every record once, in order
+            raise RuntimeError(f"GNSS record {first} taken after {self.n}")
+        t = gnss_t[first:first + k]
+        inn, nis = rec["innovation"], rec["nis"]
+        rows = np.isfinite(inn).sum(axis=1)
+        applied = st == RecordStatus.APPLIED
+        body = np.column_stack([t, st, applied, nis, rows, inn])
+        text = _csv_text(body, INNOVATION_COLUMNS, ["%.6f", "%d", "%d", "%.6g", "%d"] + ["%.6g"] * 6,
+                         _status_names(st))
+        if not self.header:
+            text = text[text.index("\n") + 1:]
+        self.f.write(text)
+        self.header = False
+        self.n += k
+        self.outside += int(np.count_nonzero(st == RecordStatus.OUTSIDE_IMU_SPAN))
+        ok = applied & np.isfinite(nis) & (rows > 0)
+        _fsum_add(self.nis_partials, nis[ok])
+        self.rows_sum += int(rows[ok].sum())
+        if applied.any():
+            self.applied += int(applied.sum())
+            self.applied_t_max = max(self.applied_t_max, float(t[applied].max()))
+
+    def stats(self) -> dict:
+        """What :func:`insnav.filters.health.assess` (``records=``) and the report line need."""
+        import math
+
+        return dict(n=self.n, outside=self.outside, nis_sum=math.fsum(self.nis_partials), rows_sum=self.rows_sum,
+                    applied=self.applied, applied_t_max=self.applied_t_max)
+
+    def close(self) -> None:
+        if self.header:  # no record: the header alone
+            self.add(dict(first=0, status=np.zeros(0, int), innovation=np.zeros((0, 6)), nis=np.zeros(0)),
+                     np.zeros(0))
+        self.f.close()
+
+    def shutdown(self) -> None:
+        if not self.f.closed:
+            self.f.close()
+
+
+def _fsum_add(partials: list, values) -> None:
+    """``values`` added to the exact sum held in ``partials`` (non-overlapping float64 terms, largest
+    first): ``math.fsum(partials)`` is the sum of every value added, exactly rounded, whatever the blocks
+    were.  The new terms are the exactly rounded sum (:func:`math.fsum`: Shewchuk, "Adaptive precision
+    floating-point arithmetic", Discrete Comput. Geom. 18, 1997) and the exactly rounded residuals
+    after it, until a residual is zero (two or three terms in practice)."""
+    import math
+
+    terms = list(partials) + np.asarray(values, float).tolist()
+    partials.clear()
+    while True:
+        r = math.fsum(terms + [-x for x in partials])
+        if r == 0.0 or not math.isfinite(r):
+            if not math.isfinite(r):
+                partials[:] = [r]
+            return
+        partials.append(r)
 
 
 class _Background:
@@ -1059,11 +1211,20 @@ class _Writer:
         self._sinks: dict = {}  # temporary file -> its _core.TextSink (open until close / shutdown)
         self._pending = None  # the _Background write of the last block
         self._header_done = False
+        self.innovations = None
         try:
             self._make_files()
+            from .solution import innovations_path
+
+            # the per-record sidecar of the solution file (the KF-GINS layout: of its .nav), written as the run goes
+            self.innovations = _Innovations(self._temp(innovations_path(self.files[0][1])))
         except BaseException:
             self.discard()
             raise
+
+    def records(self, rec: dict, gnss_t: np.ndarray) -> None:
+        """A block's per-record outputs (``_core.LooseStream.take_records``) to the sidecar."""
+        self.innovations.add(rec, gnss_t)
 
     def _make_files(self) -> None:
         self.tmp = self._temp(self.out)
@@ -1137,6 +1298,7 @@ class _Writer:
         """Wait for the last block (its error raised), then write the files' rest and close them."""
         self._wait()
         self._close_sinks()
+        self.innovations.close()
 
     def shutdown(self) -> None:
         """End the thread once its write is done, close the files (errors not raised: the run already
@@ -1144,6 +1306,8 @@ class _Writer:
         if self._pending is not None:
             self._pending.join()
         self._close_sinks(raise_errors=False)
+        if self.innovations is not None:
+            self.innovations.shutdown()
 
     def discard(self) -> None:
         """Remove the temporary files (after :meth:`shutdown`; the destinations are not touched)."""
@@ -1181,6 +1345,7 @@ class _NpzWriter(_Writer):
             raise Fallback("no output row (the batch path names it)", batch_names_it=True)
         self.npz.finish(self.tmp)
         self.npz.discard()
+        self.innovations.close()
 
     def shutdown(self) -> None:
         super().shutdown()
@@ -1246,6 +1411,7 @@ class _ParquetWriter(_Writer):
             raise Fallback("no output row (the batch path names it)", batch_names_it=True)
         self._flush()
         self.pq.close()
+        self.innovations.close()
 
     def shutdown(self) -> None:
         super().shutdown()

@@ -1,0 +1,194 @@
+"""The GNSS fixes and their per-record outputs of a block-by-block run
+(insnav.filters.stream, engine/loose_stream.hpp's push API): the fixes given
+to the engine a block at a time and the records taken after each block equal
+the batch engine's table bit for bit, for any cut (blocks without a fix,
+fixes before the first IMU sample and after the last); the engine holds the
+fixes of about one block, as many for 20 blocks as for 2; the innovations
+sidecar written as the run goes and the health verdict from running
+statistics are the whole-file run's."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import insnav.filters.stream as stream
+
+from test_stream import LINES, kf_short  # noqa: F401 - the fixture
+from test_stream import _run, streamed_and_whole
+
+
+def _engine_inputs(kf_short, decimation=1):  # noqa: F811
+    from insnav.filters._setup import imu_arrays
+    from insnav.filters.loose import loose_engine_args
+    from insnav.io.kfgins import read_kfgins_gnss
+    from insnav.io.kfgins_dataset import load_kfgins
+    from insnav.units import DEG
+
+    ds, cfg = load_kfgins(kf_short / "kf.yaml")
+    cfg.output_decimation = decimation
+    t, dth, dv = imu_arrays(ds)
+    g = read_kfgins_gnss(kf_short / "gnss.txt")  # every fix, those before t0 and after the IMU's end too
+    gnss = np.column_stack([g.t_valid, g.lat_deg * DEG, g.lon_deg * DEG, g.h_m, g.v_n, g.sigma_pos_n, g.sigma_vel_n])
+    gnss = np.ascontiguousarray(gnss)
+    a = loose_engine_args(ds, cfg, gnss[gnss[:, 0] > ds.t0, 0].copy())
+    return cfg, (t, dth, dv), gnss, a
+
+
+def _pushed_run(core, cfg, a, imu, gnss, cuts):
+    """The stream fed the IMU in blocks ending at `cuts`, each block's fixes (time <= its last sample)
+    pushed before it, its records taken after it; the rest of the fixes pushed before finish().  Returns
+    the stream, the rows, the records and the most fixes it held before that last push."""
+    t, dth, dv = imu
+    s = core.LooseStream(cfg.filter, a.layout, np.zeros((0, 13)), a.init, a.P0, a.imu_correction, a.imu_model,
+                         a.config, int(np.diff(np.r_[0, cuts]).max()))
+    rows, recs, pushed, i = [], [], 0, 0
+    for j in cuts:
+        k = int(np.searchsorted(gnss[:, 0], t[j - 1], side="right"))
+        if k > pushed:
+            s.push_gnss(gnss[pushed:k])
+            pushed = k
+        if s.run_block(t[i:j], dth[i:j], dv[i:j]):
+            rows.append({key: v.copy() for key, v in s.rows().items()})
+        recs.append(s.take_records())
+        i = j
+    window = s.max_window
+    s.push_gnss(gnss[pushed:])
+    if s.finish():
+        rows.append({key: v.copy() for key, v in s.rows().items()})
+    recs.append(s.records())
+    return s, rows, recs, window
+
+
+@pytest.mark.parametrize("decimation", [1, 7])
+def test_fixes_pushed_block_by_block_give_the_batch_engines_records(kf_short, decimation):  # noqa: F811
+    from insnav import _core
+
+    cfg, imu, gnss, a = _engine_inputs(kf_short, decimation)
+    t = imu[0]
+    batch = _core.run_loose(cfg.filter, a.layout, *imu, gnss, a.init, a.P0, a.imu_correction, a.imu_model, a.config)
+    rng = np.random.default_rng(11)
+    # odd block sizes: from 1 sample (no fix in most blocks) to 3000 (several fixes, cut inside intervals)
+    cuts = np.cumsum(rng.choice([1, 37, 199, 1013, 2999], size=400))
+    cuts = np.r_[cuts[cuts < len(t)], len(t)]
+    s, rows, recs, window = _pushed_run(_core, cfg, a, imu, gnss, cuts)
+    for key in ("t", "llh", "v_n", "rpy", "sigma", "imu_err"):
+        assert np.array_equal(np.concatenate([r[key] for r in rows]), batch[key]), key
+    assert [r["first"] for r in recs] == list(np.cumsum([0] + [len(r["nis"]) for r in recs[:-1]]))
+    for key in ("innovation", "nis", "log_det_s", "status"):
+        assert np.array_equal(np.concatenate([r[key] for r in recs]), batch[key], equal_nan=True), key
+    for key in ("updates", "rejected", "gate_reopened", "gate_outage_accepted", "cholesky_repairs"):
+        assert recs[-1][key] == batch[key], key
+    st = batch["status"]
+    n_before = int(np.count_nonzero(gnss[:, 0] <= t[0]))
+    assert n_before > 0 and np.all(st[:n_before] == 4)  # fixes before the first IMU sample: outside the span
+    assert (st[n_before:] == 1).sum() > 50 and st[-1] == 4  # updates, and fixes after the last sample
+    assert window <= n_before + 2999 / 200 + 2  # the fixes before t0 (the first push) or of one block
+
+
+def test_the_engine_holds_as_many_fixes_for_20_blocks_as_for_2(kf_short):  # noqa: F811
+    from insnav import _core
+
+    cfg, imu, gnss, a = _engine_inputs(kf_short)
+    t = imu[0]
+    g_run = gnss[gnss[:, 0] > t[0]]  # the fixes after the first IMU sample (1 Hz)
+    i0 = int(np.searchsorted(t, g_run[0, 0]))  # the first block ends before the first fix: it holds none
+    block = 1400  # 7 s of 200 Hz samples: 7 or 8 fixes at 1 Hz
+    windows = {}
+    for n_blocks in (2, 20):
+        j = i0 + n_blocks * block
+        g = g_run[g_run[:, 0] <= t[j - 1]]  # no fix after the IMU's end: the window is the blocks' fixes
+        cuts = np.arange(i0 + block, j + 1, block)
+        s, _, recs, window = _pushed_run(_core, cfg, a, tuple(x[:j] for x in imu), g,
+                                         np.r_[i0, cuts] if i0 > 0 else cuts)
+        assert sum(len(r["nis"]) for r in recs) == len(g) and window == s.max_window
+        assert (np.concatenate([r["status"] for r in recs]) == 1).sum() > 0.9 * len(g)
+        windows[n_blocks] = s.max_window
+    assert windows[20] == windows[2]
+    assert windows[2] <= 8  # 7 or 8 fixes per block, whatever the run's length
+
+
+def test_the_exact_sum_does_not_depend_on_the_blocks():
+    rng = np.random.default_rng(5)
+    x = rng.lognormal(0.0, 3.0, 5000) * rng.choice([1.0, 1e-8, 1e8], 5000)
+    whole = math.fsum(x)
+    for cuts in ([1000, 2500], list(range(7, 5000, 97))):
+        partials: list = []
+        for part in np.split(x, cuts):
+            stream._fsum_add(partials, part)
+        assert math.fsum(partials) == whole
+
+
+def test_health_from_running_statistics_equals_the_whole_tables(tmp_path):
+    from insnav.filters.health import assess
+    from insnav.filters.solution import Solution, write_innovations
+
+    rng = np.random.default_rng(8)
+    m, n = 700, 900
+    gnss_t = np.sort(rng.uniform(0.0, 800.0, m))
+    status = rng.choice([0, 1, 1, 1, 2, 4], m).astype(np.int8)
+    nis = np.where(status == 1, rng.chisquare(3, m) * 40.0, np.nan)  # far too optimistic: a warning text
+    inn = rng.standard_normal((m, 6))
+    inn[rng.random((m, 6)) < 0.3] = np.nan
+    inn[status != 1] = np.nan
+    t = np.linspace(0.0, 1000.0, n)  # the IMU goes on after the last record: the tail warning
+    z3 = np.zeros((n, 3))
+    sol = Solution(t=t, lat_deg=np.full(n, 30.0), lon_deg=np.full(n, 114.0), h_m=np.full(n, 20.0), v_n=z3,
+                   roll_deg=np.zeros(n), pitch_deg=np.zeros(n), yaw_deg=np.zeros(n), sigma_pos_n_m=z3 + 1.0,
+                   sigma_vel_n_mps=z3 + 0.1, sigma_att_deg=z3 + 0.1, acc_bias_mps2=z3, gyro_bias_rps=z3,
+                   acc_scale=z3, gyro_scale=z3, gnss_t=gnss_t, innovation=inn, nis=nis, gnss_status=status,
+                   log_det_s=np.zeros(m), gnss_sigma=np.zeros((m, 6)))
+    whole = assess(sol)
+    (tmp_path / "w").mkdir()
+    write_innovations(sol, tmp_path / "w" / "sol.csv")
+    inv = stream._Innovations(tmp_path / "s.csv")
+    for a, b in zip([0, 1, 1, 350, 351], [1, 1, 350, 351, m]):  # an empty block, a one-record block
+        inv.add(dict(first=a, status=status[a:b], innovation=inn[a:b], nis=nis[a:b]), gnss_t)
+    inv.close()
+    assert (tmp_path / "s.csv").read_bytes() == (tmp_path / "w" / "sol.csv.innovations.csv").read_bytes()
+    e = np.zeros(0)
+    bare = Solution(t=t, lat_deg=sol.lat_deg, lon_deg=sol.lon_deg, h_m=sol.h_m, v_n=z3, roll_deg=sol.roll_deg,
+                    pitch_deg=sol.pitch_deg, yaw_deg=sol.yaw_deg, sigma_pos_n_m=sol.sigma_pos_n_m,
+                    sigma_vel_n_mps=sol.sigma_vel_n_mps, sigma_att_deg=sol.sigma_att_deg, acc_bias_mps2=z3,
+                    gyro_bias_rps=z3, acc_scale=z3, gyro_scale=z3, gnss_t=gnss_t, innovation=np.zeros((0, 6)),
+                    nis=e, gnss_status=np.zeros(0, np.int8), log_det_s=e, gnss_sigma=np.zeros((0, 6)))
+    got = assess(bare, records=inv.stats())
+    assert inv.stats()["outside"] == int((status == 4).sum()) and inv.stats()["n"] == m
+    assert got["nis_ratio"] == pytest.approx(whole["nis_ratio"], rel=1e-14)
+    assert whole["consistency"] == "far too optimistic" and len(whole["warnings"]) == 2
+    assert {k: v for k, v in got.items() if k not in ("nis_ratio", "warnings")} == \
+        {k: v for k, v in whole.items() if k not in ("nis_ratio", "warnings")}
+    assert got["warnings"][1] == whole["warnings"][1]  # the tail: the last applied record's time
+    assert f"{got['nis_ratio']:.3g}" == f"{whole['nis_ratio']:.3g}"
+
+
+@pytest.mark.parametrize("block, extra", [(97, ()), (1013, ("--output-rate", "10")),
+                                          (2999, ("--out-format", "kfgins"))])
+def test_streamed_sidecar_and_report_are_the_whole_runs(kf_short, tmp_path, monkeypatch, block, extra):  # noqa: F811
+    # blocks of 97 lines (0.485 s: most hold no fix), 1013 and 2999 (cut inside GNSS intervals); the
+    # fixes before starttime and after the IMU's end are in the GNSS file (kf_short)
+    from insnav import _core
+
+    made = []
+    real = _core.LooseStream
+
+    def spy(*args):
+        s = real(*args)
+        made.append(s)
+        return s
+
+    monkeypatch.setattr(stream, "BLOCK_LINES", block)
+    monkeypatch.setattr(stream._core, "LooseStream", spy)
+    kf = "--out-format" in extra
+    a = tmp_path / "a" / ("kf" if kf else "sol.csv")
+    b = tmp_path / "b" / ("kf" if kf else "sol.csv")
+    streamed_and_whole(_run, kf_short, a, b, *extra)
+    base = "KF_GINS_Navresult.nav" if kf else "sol.csv"
+    da, db = (a, b) if kf else (a.parent, b.parent)
+    for suffix in ("", ".innovations.csv", ".config.toml"):
+        assert (da / (base + suffix)).read_bytes() == (db / (base + suffix)).read_bytes(), suffix
+    assert not [p for p in da.iterdir() if ".part" in p.name]
+    fixes = (db / (base + ".innovations.csv")).read_text().count("\n") - 1
+    assert len(made) == 1 and fixes > 100
+    assert made[0].max_window <= block / 200 + 2  # 1 Hz fixes: those of one block, never the run's
