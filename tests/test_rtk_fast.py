@@ -49,7 +49,8 @@ def _run(args, cwd: Path, fast: bool):
     lines = p.stdout.splitlines()
     probe = [ln for ln in lines if ln.startswith("NUMPY ")]
     numpy_loaded = probe[-1].split()[1] == "True" if probe else None
-    return p.returncode, [ln for ln in lines if not ln.startswith("NUMPY ")], p.stderr, numpy_loaded
+    rc = int(probe[-1].split()[2]) if probe else p.returncode  # main's status (the probe itself exits 0)
+    return rc, [ln for ln in lines if not ln.startswith("NUMPY ")], p.stderr, numpy_loaded
 
 
 def _rtk_args(rover, base, nav, toml, out="sol.pos"):
@@ -104,9 +105,8 @@ def _bad_input_cases(tmp_path, rover, base, nav, toml):
     bad_range.write_text(good.replace("ratio_threshold = 3.0", "ratio_threshold = 0.5"))
     corrupt = tmp_path / "rover_corrupt.obs"
     lines = rover.read_text().splitlines(keepends=True)
-    body = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln) + 1
-    k = next(i for i in range(body + 1, len(lines)) if not lines[i].startswith(">"))
-    lines[k] = lines[k][:3] + "    12x.4.5 garbage" + lines[k][22:]
+    k = [i for i, ln in enumerate(lines) if ln.startswith(">")][2]  # the third epoch line: a letter in its year
+    lines[k] = lines[k][:2] + "2O24" + lines[k][6:]
     corrupt.write_text("".join(lines))
     return {
         "bad_key": _rtk_args(rover, base, nav, bad_key),
