@@ -133,6 +133,7 @@ def test_bad_input_gives_the_usual_message_and_status(tmp_path):
         assert got[True][2] == got[False][2], name
         assert len(got[True][2].strip().splitlines()) == 1 and got[True][2].startswith("insnav run: error: "), \
             (name, got[True][2])
+    assert ", line " in got[True][2] and "2O24" in got[True][2]  # the last case: the reader names the line
 
 
 def test_other_options_take_the_usual_path(tmp_path):
