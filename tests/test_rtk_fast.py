@@ -164,3 +164,32 @@ def test_a_copied_nav_file_with_cr_line_ends_is_left_to_the_usual_path(tmp_path)
         for suffix in ("", ".rtk.csv", ".config.toml"):
             assert (tmp_path / "fast" / f"sol.pos{suffix}").read_bytes() == \
                 (tmp_path / "usual" / f"sol.pos{suffix}").read_bytes()
+
+
+def test_ctrl_c_while_writing_leaves_no_file(tmp_path, monkeypatch, capsys):
+    import insnav._atomic as atomic
+    from insnav.cli import main
+
+    toml = ROOT / "bench" / "rtk" / "matrtklib_l1_g_inst.toml"
+    rover, base, nav = _files(toml.stem)
+    real, calls = atomic.atomic_write_text, []
+
+    def interrupted_on_the_second_file(path, text):
+        calls.append(Path(path).name)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(path, text)
+
+    monkeypatch.setattr(atomic, "atomic_write_text", interrupted_on_the_second_file)
+    from insnav import _core
+
+    real_run, runs = _core.rtk_rinex_files, []
+    monkeypatch.setattr(_core, "rtk_rinex_files", lambda *a: runs.append(1) or real_run(*a))
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", "1")
+    out = tmp_path / "run" / "sol.pos"
+    rc = main([str(a) for a in _rtk_args(rover, base, nav, toml, out)])
+    assert rc == 130
+    assert capsys.readouterr().err == "insnav run: interrupted\n"
+    assert runs == [1]  # the fast path ran
+    assert calls == ["sol.pos", "sol.pos.rtk.csv"]
+    assert os.listdir(out.parent) == []  # neither the first file nor a temporary one is left
