@@ -82,6 +82,7 @@ def test_fast_path_writes_the_files_of_the_usual_path(toml, tmp_path):
         runs[fast] = _run(_rtk_args(rover, base, nav, toml), d, fast)
         assert runs[fast][0] == 0, runs[fast][2]
     assert runs[True][1] == runs[False][1]  # the summary line
+    assert runs[True][2] == runs[False][2]  # stderr (nothing)
     assert runs[True][1][0].startswith("sol.pos: ")
     for suffix in ("", ".rtk.csv", ".config.toml"):
         a = (tmp_path / "fast" / f"sol.pos{suffix}").read_bytes()
