@@ -116,6 +116,8 @@ def _inputs(opts: dict):
             return None
     if any(k not in RTK_DEFAULTS for k in t):
         return None
+    if t.get("noise", "configured") != "configured":  # an estimated noise needs the Python pre-pass
+        return None
     values = {**RTK_DEFAULTS, **t}
     if rtk_value_error(values, "rtk options") is not None:
         return None
