@@ -376,6 +376,16 @@ def _noise_section(ds, results) -> list:
     return L
 
 
+def _path_text(results) -> str:
+    """Which settings insnav's numpy-free path covers (insnav.cli.rtk_fast: RINEX 3, GPS and QZSS;
+    tests/test_rtk_fast.py checks that it runs on exactly these and writes the Python path's files)."""
+    fast = [r["setting"]["name"] for r in results if set(r["setting"]["systems"]) <= set("GJ")]
+    if not fast:
+        return "insnav runs its Python path (numpy) on every setting here."
+    return (f"insnav runs without numpy (one call into its compiled core, `insnav.cli.rtk_fast`; the same files as "
+            f"its Python path) on {', '.join(fast)}; on the others its Python path (numpy).")
+
+
 def write_doc(name, ds, results, path: Path):
     speed = name == "matrtklib_static_septentrio"
     L = [f"# RTK on {ds['title']}: insnav vs RTKLIB", "",
@@ -387,7 +397,8 @@ def write_doc(name, ds, results, path: Path):
          f"A wrong fix is a fixed epoch more than {100 * WRONG_FIX_M:.0f} cm from the truth.  Time: the whole process "
          "(Python start, reading, satellite orbits, filter, writing), best of the repeats, both programs run "
          "alternately on the same machine; CPU is user + system time of the process, the comparable figure on a "
-         "shared machine (wall time is also given; it grows with the machine's load).", "",
+         "shared machine (wall time is also given; it grows with the machine's load).  "
+         + _path_text(results), "",
          "| setting | program | epochs | fixed | fix rate | 3-D RMS fixed [mm] | max fixed [mm] | wrong fixes | "
          "float median [mm] | CPU [s] | wall [s] |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:

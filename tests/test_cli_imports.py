@@ -31,10 +31,11 @@ with open(sys.argv[1], "w") as f:
 """
 
 
-def _loaded(tmp_path, argv) -> dict:
+def _loaded(tmp_path, argv, env_extra=None) -> dict:
     probe = tmp_path / "modules.json"
     env = {k: v for k, v in __import__("os").environ.items() if k not in ("OPENBLAS_NUM_THREADS",
                                                                           "GOTO_NUM_THREADS", "OMP_NUM_THREADS")}
+    env.update(env_extra or {})
     r = subprocess.run([sys.executable, "-c", _PROBE, str(probe), *map(str, argv)], capture_output=True, text=True,
                        env=env, timeout=120)
     assert r.returncode == 0, r.stderr
@@ -73,10 +74,12 @@ def test_spp_command_with_config_reads_toml(shared_data, tmp_path):
 
 
 def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_modules):
-    """``insnav run --filter rtk`` (bench/rtk_compare.py times it as a whole process against
-    rnx2rtkp): the RINEX readers, the orbits and the RTK engine; not the dataset folder format
-    (insnav.data.dataset: the solution layer imports insnav.data.nav only), not the SPP solver
-    (the navigation files are read through gnss.rinex), no other filter or command."""
+    """``insnav run --filter rtk`` on its usual path (``INSNAV_RTK_FASTPATH=0``; bench/rtk_compare.py
+    times the command as a whole process against rnx2rtkp, and the runs the numpy-free path of
+    insnav.cli.rtk_fast does not cover take this one): the RINEX readers, the orbits and the RTK
+    engine; not the dataset folder format (insnav.data.dataset: the solution layer imports
+    insnav.data.nav only), not the SPP solver (the navigation files are read through gnss.rinex),
+    no other filter or command."""
     d = shared_data / "matrtklib_static_septentrio"
     if not (d / "rover.obs").is_file():
         pytest.skip(f"{d} not found (the MatRTKLIB static data set)")
@@ -84,7 +87,7 @@ def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_
                                        'frequencies = 1\n')
     out = _loaded(tmp_path, ["run", "--filter", "rtk", "--format", "rinex", "--obs", d / "rover.obs", "--base",
                              d / "base.obs", "--nav", d / "base.nav", "--config", tmp_path / "rtk.toml", "--quiet",
-                             "--out", tmp_path / "rtk.pos"])
+                             "--out", tmp_path / "rtk.pos"], {"INSNAV_RTK_FASTPATH": "0"})
     assert out["rc"] == 0
     mods = set(out["modules"]) - interpreter_modules
     assert {"insnav.filters.rtk", "insnav.gnss.rtk", "insnav._core"} <= mods  # the probe did run the command
@@ -98,6 +101,26 @@ def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_
         "insnav.gnss.constellation")  # the simulator's constellation (insnav.gnss loads its names lazily)
     assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in others)) == []
     assert out["blas"] == "1"
+
+
+def test_rtk_command_without_numpy_loads_neither_numpy_nor_argparse(shared_data, tmp_path, interpreter_modules):
+    """The same command on the path of insnav.cli.rtk_fast (GPS, RINEX 3, .pos): one call into the
+    compiled core, no numpy, no argparse, none of the Python RTK modules."""
+    d = shared_data / "matrtklib_static_septentrio"
+    if not (d / "rover.obs").is_file():
+        pytest.skip(f"{d} not found (the MatRTKLIB static data set)")
+    (tmp_path / "rtk.toml").write_text('filter = "rtk"\n\n[rtk]\nar_mode = "instantaneous"\nsystems = "G"\n'
+                                       'frequencies = 1\n')
+    out = _loaded(tmp_path, ["run", "--filter", "rtk", "--format", "rinex", "--obs", d / "rover.obs", "--base",
+                             d / "base.obs", "--nav", d / "base.nav", "--config", tmp_path / "rtk.toml", "--quiet",
+                             "--out", tmp_path / "rtk.pos"], {"INSNAV_RTK_FASTPATH": "1"})
+    assert out["rc"] == 0
+    mods = set(out["modules"]) - interpreter_modules
+    assert {"insnav.cli.rtk_fast", "insnav._core", "insnav.gnss._rtk_keys"} <= mods
+    assert (tmp_path / "rtk.pos").is_file() and (tmp_path / "rtk.pos.rtk.csv").is_file()
+    banned = ("numpy", "argparse", "insnav.gnss.rtk", "insnav.filters", "insnav.config", "insnav.gnss.rinex")
+    assert sorted(m for m in mods if any(m == p or m.startswith(p + ".") for p in banned)) == []
+
 
 #: what no run path needs at start-up: numpy.ma (np.median / np.unique import it, ~15 ms;
 #: insnav._median replaces them), the thread pool of concurrent.futures and logging

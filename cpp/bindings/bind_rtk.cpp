@@ -10,6 +10,7 @@
 #include "common.hpp"
 #include "insnav/gnss/lambda.hpp"
 #include "insnav/gnss/rtk.hpp"
+#include "insnav/gnss/rtk_rinex.hpp"
 #include "insnav/io/rinex3_obs.hpp"
 
 namespace insnav::py_bind {
@@ -408,6 +409,46 @@ py::dict rtk_double_differences(const DArray& rover_rows, const DArray& base_row
   return d;
 }
 
+// RTK from RINEX files in one call (insnav/gnss/rtk_rinex.hpp), for `insnav run --filter rtk` without
+// numpy: no array crosses the boundary.  Returns a dict (the .pos and .rtk.csv texts, the counts of
+// the summary line) or a str: why the files are left to the Python path.
+py::object rtk_rinex_files(const std::string& rover, const std::string& base, const std::vector<std::string>& nav,
+                           const std::string& systems, const py::dict& opts, const py::object& base_position_e_m,
+                           const std::map<std::string, std::vector<std::vector<std::string>>>& prefs) {
+  gnss::RtkRinexInputs in;
+  in.rover_path = rover;
+  in.base_path = base;
+  in.nav_paths = nav;
+  in.systems = systems;
+  for (const auto& [k, v] : prefs)
+    if (!k.empty()) in.signal_prefs[k[0]] = v;
+  const RtkOptions o = options_from_dict(opts);
+  in.n_freq = o.n_freq;
+  in.max_age_s = o.max_age_s;
+  if (!base_position_e_m.is_none()) {
+    const auto v = base_position_e_m.cast<std::vector<double>>();
+    if (v.size() != 3) throw py::value_error("rtk_rinex_files: base_position_e_m needs 3 values");
+    in.has_base_position = true;
+    for (int i = 0; i < 3; ++i) in.base_position_e_m[i] = v[static_cast<std::size_t>(i)];
+  }
+  gnss::RtkRinexResult r;
+  {
+    py::gil_scoped_release release;
+    r = gnss::rtk_rinex_run(in, o);
+  }
+  if (!r.ok) return py::str(r.why);
+  py::dict d;
+  d["pos_text"] = py::str(r.pos_text);
+  d["table_text"] = py::str(r.table_text);
+  d["epochs"] = r.epochs;
+  d["n_fixed"] = r.n_fixed;
+  d["n_float"] = r.n_float;
+  d["n_dgps"] = r.n_dgps;
+  d["n_none"] = r.n_none;
+  d["slips"] = r.slips_total;
+  return d;
+}
+
 }  // namespace
 
 void bind_rtk(py::module_& m) {
@@ -436,6 +477,10 @@ void bind_rtk(py::module_& m) {
   m.def("rtk_double_differences", &rtk_double_differences, py::arg("rover_rows"), py::arg("base_rows"),
         py::arg("r_rover_e"), py::arg("r_base_e"), py::arg("options"),
         "Double differences observed minus computed (no ambiguity term) at a given rover position.");
+  m.def("rtk_rinex_files", &rtk_rinex_files, py::arg("rover"), py::arg("base"), py::arg("nav"), py::arg("systems"),
+        py::arg("options"), py::arg("base_position_e_m"), py::arg("signal_prefs"),
+        "RTK from RINEX 3 files (systems G and J) in one call, no arrays: {pos_text, table_text, epochs, n_fixed, "
+        "n_float, n_dgps, n_none, slips}, or a str saying why the files are left to the Python path.");
   m.attr("RTK_ROW_COLS") = gnss::RtkRow::kCols;
   m.attr("RTK_MAX_AMBIGUITIES") = gnss::kMaxAmbiguities;
 }

@@ -377,6 +377,9 @@ def rtk_run(
     record_fixed_rows: bool = False,
 ) -> dict[str, Any]: ...
 def slip_detect(t: npt.ArrayLike, off: npt.ArrayLike, rows: npt.ArrayLike, options: dict[str, Any]) -> np.ndarray: ...
+def rtk_rinex_files(rover: str, base: str, nav: list[str], systems: str, options: dict[str, Any],
+                    base_position_e_m: list[float] | None,
+                    signal_prefs: dict[str, list[list[str]]]) -> dict[str, Any] | str: ...
 def rtk_double_differences(
     rover_rows: npt.ArrayLike,
     base_rows: npt.ArrayLike,

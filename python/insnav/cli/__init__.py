@@ -7,7 +7,6 @@ one-line message naming the problem, without a traceback.  Set
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
@@ -18,6 +17,8 @@ from ..errors import UserError
 
 
 def _add_demo_parser(sub) -> None:
+    import argparse
+
     p = sub.add_parser(
         "demo",
         help="run the built-in demonstration (the README's main job)",
@@ -57,10 +58,12 @@ def _command_of(argv) -> str | None:
     return None
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> "argparse.ArgumentParser":  # noqa: F821
     """The ``insnav`` parser; with a known ``command``, only that area's
     sub-command is registered (its module alone is imported: ``insnav run``
     does not load the simulator or the analysis), else all of them."""
+    import argparse  # here: the RTK run of insnav.cli.rtk_fast reads its few options itself
+
     parser = argparse.ArgumentParser(
         prog="insnav",
         description="insnav: GNSS/INS integrated navigation (EKF, RB-UKF, UKF, random-delay and particle filters).\n"
@@ -142,6 +145,15 @@ def main(argv=None) -> int:
     args = None
     with _SigintWatch() as sigint:
         try:
+            if command == "run" and os.environ.get("INSNAV_RTK_FASTPATH", "1") != "0":
+                from .rtk_fast import run_fast  # an RTK run from RINEX files without numpy, else None
+
+                rc = run_fast(sys.argv[1:] if argv is None else argv)
+                if rc is not None:
+                    sys.stdout.flush()
+                    if sigint.seen:
+                        raise KeyboardInterrupt
+                    return int(rc)
             _single_threaded_blas()
             parser = build_parser(command)  # imports the command's modules: Ctrl-C here is one line too
             args = parser.parse_args(argv)

@@ -9,7 +9,7 @@ import numpy as np
 from .._atomic import atomic_write_text
 from .._median import median
 from ..errors import UserError
-from .._toml import toml_value
+from .._toml import table_toml, toml_value
 from ..config import ConfigError, RunConfig, load_config
 from ..registry import FILTERS
 
@@ -283,22 +283,7 @@ class _Stages:
         return "timings [s]: " + ", ".join(f"{k} {v:.3f}" for k, v in self.times.items())
 
 
-def _table_toml(name: str, obj) -> str:
-    """A ``[name]`` TOML table of a dataclass's fields or a dict's items (None left out)."""
-    import dataclasses
-
-    lines = [f"\n[{name}]"]
-    items = obj.items() if isinstance(obj, dict) else ((f.name, getattr(obj, f.name)) for f in dataclasses.fields(obj))
-    for key, v in items:
-        if v is None:
-            continue
-        if isinstance(v, dict):
-            lines.append(f"{key} = {{" + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + "}")
-        elif isinstance(v, (list, tuple)) and v and isinstance(v[0], str):
-            lines.append(f"{key} = [" + ", ".join(toml_value(x) for x in v) + "]")
-        else:
-            lines.append(f"{key} = {toml_value(v)}")
-    return "\n".join(lines) + "\n"
+_table_toml = table_toml  # insnav._toml (the RTK command line writes its table without numpy too)
 
 
 def _rtk_table(opt, base_e) -> dict:

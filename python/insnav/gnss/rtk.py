@@ -47,24 +47,14 @@ __all__ = ["RtkOptions", "PhaseObs", "RtkSolution", "SIGNALS", "STATUS_NAMES", "
            "match_base", "solve_rtk", "prepare_rtk_rows", "base_position_from_header", "write_rtklib_pos", "write_rtk_table",
            "RTK_COLUMNS", "RtkInputError", "estimate_noise", "estimate_noise_prepass"]
 
-#: engine index of each system (``RtkSystem`` in rtk.hpp)
-SYSTEM_INDEX = {"G": 0, "R": 1, "E": 2, "C": 3, "J": 4}
-#: signals per system and frequency slot, in order of preference (RINEX 3 band + attribute)
-SIGNALS = {
-    "G": (("1C", "1W", "1X", "1P", "1S", "1L"), ("2W", "2L", "2S", "2X", "2P", "2C", "2D"), ("5Q", "5X", "5I")),
-    "R": (("1C", "1P"), ("2C", "2P"), ("3Q", "3X", "3I")),
-    "E": (("1C", "1X", "1B"), ("7Q", "7X", "7I"), ("5Q", "5X", "5I")),
-    "C": (("2I", "2X", "2Q", "1I"), ("7I", "7X", "7Q"), ("6I", "6X", "6Q")),
-    # QZSS: the GPS frequencies L1/L2/L5 (IS-QZSS-PNT 3.1.1); L1 C/A first, then L1C
-    "J": (("1C", "1X", "1L", "1S"), ("2L", "2X", "2S"), ("5Q", "5X", "5I")),
-}
+from ._rtk_keys import AR_MODES as _AR_MODES  # noqa: E402 - the table's keys and checks, shared without numpy
+from ._rtk_keys import IONO_MODES as _IONO_MODES  # noqa: E402,F401
+from ._rtk_keys import IONO_SIGMA_DEFAULT as _IONO_SIGMA_DEFAULT  # noqa: E402,F401
+from ._rtk_keys import MODES as _MODES  # noqa: E402,F401
+from ._rtk_keys import SIGNALS, SYSTEM_INDEX, rtk_core_dict, rtk_value_error  # noqa: E402
+
 #: RTKLIB's Q values
 STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 4: "dgps"}
-_MODES = {"static": 0, "kinematic": 1}
-_AR_MODES = {"off": 0, "continuous": 1, "instantaneous": 2, "fix-and-hold": 3}
-_IONO_MODES = {"off": 0, "variance": 1, "estimate": 2}
-#: default iono_sigma_per_10km_m per mode [m]: no DD variance; RTKLIB's stats-stdiono for the states
-_IONO_SIGMA_DEFAULT = {"off": 0.0, "variance": 0.0, "estimate": 0.03}
 C_LIGHT = 299792458.0
 
 
@@ -201,88 +191,20 @@ class RtkOptions(TomlTable):
     TABLE = "rtk"
 
     def validate(self, source: str = "rtk options") -> "RtkOptions":
-        def bad(key, allowed):
-            raise ConfigError(f"{source}: key '{self.TABLE}.{key}': bad value {getattr(self, key)!r}; "
-                              f"allowed: {allowed}")
+        import dataclasses
 
-        if self.mode not in _MODES:
-            bad("mode", " or ".join(_MODES))
-        if self.ar_mode not in _AR_MODES:
-            bad("ar_mode", ", ".join(_AR_MODES))
-        if not isinstance(self.systems, str) or not self.systems or any(s not in SIGNALS for s in self.systems):
-            bad("systems", "letters of GRECJ")
-        if isinstance(self.frequencies, bool) or self.frequencies not in (1, 2, 3):
-            bad("frequencies", "1, 2 or 3")
-        if self.partial_ar_order not in ("elevation", "variance"):
-            bad("partial_ar_order", "elevation or variance")
-        if not isinstance(self.glonass_ar, bool):
-            bad("glonass_ar", "true or false")
-        if self.iono not in _IONO_MODES:
-            bad("iono", ", ".join(_IONO_MODES))
-        if self.iono_sigma_per_10km_m is None:
-            self.iono_sigma_per_10km_m = _IONO_SIGMA_DEFAULT[self.iono]
-        if self.iono == "estimate" and not (isinstance(self.iono_sigma_per_10km_m, (int, float))
-                                            and self.iono_sigma_per_10km_m > 0.0):
-            bad("iono_sigma_per_10km_m", "a number > 0 with iono = 'estimate'")
-        if not isinstance(self.tropo_model, bool):
-            bad("tropo_model", "true or false")
-        if self.noise not in ("configured", "estimate"):
-            bad("noise", "configured or estimate")
-        for key, lo, hi in (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.0),
-                            ("ratio_threshold", 1.0, 1e3), ("sigma_phase_a_m", 0.0, 1.0),
-                            ("sigma_phase_b_m", 0.0, 1.0), ("code_phase_ratio", 1.0, 1e4),
-                            ("code_correlation_time_s", 0.0, 1e4), ("min_success_rate", 0.0, 1.0), ("min_success_rate_estimated", 0.0, 1.0),
-                            ("success_rate_noise_window_s", 1.0, 1e6), ("success_rate_noise_confidence", 0.5, 0.999),
-                            ("adaptive_code_gain", 0.0, 1.0),
-                            ("iono_sigma_per_10km_m", 0.0, 10.0), ("iono_tau_s", 1e-3, 1e7),
-                            ("accel_psd_h_m2ps3", 0.0, 1e4),
-                            ("accel_psd_v_m2ps3", 0.0, 1e4), ("amb_init_sigma_cycles", 1e-3, 1e6),
-                            ("amb_psd_cycles2ps", 0.0, 1.0),
-                            ("gf_threshold_m", 1e-4, 10.0), ("mw_threshold_cycles", 0.1, 100.0),
-                            ("doppler_threshold_cycles", -1.0, 1e3), ("outlier_sigma", 0.0, 1e3),
-                            ("hold_sigma_cycles", 1e-6, 10.0), ("max_age_s", 0.0, 86400.0)):
-            v = getattr(self, key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi):
-                bad(key, f"a number in [{lo}, {hi}]")
-        if self.sigma_phase_a_m == 0.0 and self.sigma_phase_b_m == 0.0:
-            bad("sigma_phase_a_m", "a and b not both 0")
-        for key, lo in (("min_fix_ambiguities", 1), ("max_partial_drops", 0), ("min_lock_epochs", 0),
-                        ("confirm_epochs", 1), ("confirm_max_ambiguities", 0),
-                        ("max_outage_epochs", 0)):
-            v = getattr(self, key)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                bad(key, f"an integer >= {lo}")
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        msg = rtk_value_error(values, source, self.TABLE)  # insnav.gnss._rtk_keys: the checks, in order
+        self.iono_sigma_per_10km_m = values["iono_sigma_per_10km_m"]
+        if msg is not None:
+            raise ConfigError(msg)
         return self
 
     def core_dict(self) -> dict:
         """Options of the C++ engine (``RtkOptions`` in rtk.hpp; SI units)."""
-        return dict(mode=_MODES[self.mode], ar_mode=_AR_MODES[self.ar_mode], n_freq=int(self.frequencies),
-                    elevation_mask_rad=math.radians(self.elevation_mask_deg),
-                    ar_elevation_mask_rad=math.radians(self.ar_elevation_mask_deg),
-                    ratio_threshold=float(self.ratio_threshold), min_fix_ambiguities=int(self.min_fix_ambiguities),
-                    max_partial_drops=int(self.max_partial_drops),
-                    partial_by_variance=self.partial_ar_order == "variance", min_lock_epochs=int(self.min_lock_epochs),
-                    glonass_ar=bool(self.glonass_ar), sigma_phase_a_m=float(self.sigma_phase_a_m),
-                    sigma_phase_b_m=float(self.sigma_phase_b_m), code_phase_ratio=float(self.code_phase_ratio),
-                    code_corr_time_s=float(self.code_correlation_time_s),
-                    code_scale_gain=float(self.adaptive_code_gain),
-                    min_success_rate=float(self.min_success_rate),
-                    min_success_rate_estimated=float(self.min_success_rate_estimated),
-                    noise_window_s=float(self.success_rate_noise_window_s),
-                    noise_confidence=float(self.success_rate_noise_confidence),
-                    confirm_epochs=int(self.confirm_epochs),
-                    confirm_max_ambiguities=int(self.confirm_max_ambiguities),
-                    iono_mode=_IONO_MODES[self.iono],
-                    iono_sigma_per_10km_m=float(_IONO_SIGMA_DEFAULT[self.iono] if self.iono_sigma_per_10km_m is None
-                                                else self.iono_sigma_per_10km_m),
-                    iono_tau_s=float(self.iono_tau_s), tropo_model=bool(self.tropo_model),
-                    accel_psd_h=float(self.accel_psd_h_m2ps3), accel_psd_v=float(self.accel_psd_v_m2ps3),
-                    amb_init_sigma_cycles=float(self.amb_init_sigma_cycles),
-                    amb_psd=float(self.amb_psd_cycles2ps),
-                    gf_threshold_m=float(self.gf_threshold_m), mw_threshold_cycles=float(self.mw_threshold_cycles),
-                    doppler_threshold_cycles=float(self.doppler_threshold_cycles),
-                    max_outage_epochs=int(self.max_outage_epochs), outlier_sigma=float(self.outlier_sigma),
-                    hold_sigma_cycles=float(self.hold_sigma_cycles), max_age_s=float(self.max_age_s))
+        import dataclasses
+
+        return rtk_core_dict({f.name: getattr(self, f.name) for f in dataclasses.fields(self)})
 
 
 @dataclass
