@@ -701,6 +701,8 @@ def estimate_noise(rows: dict, options: RtkOptions | dict | None = None, **kwarg
     estimation): :func:`insnav.gnss.rtk_noise.estimate_noise`."""
     from .rtk_noise import estimate_noise as _estimate
 
+    if not isinstance(options, RtkOptions):
+        options = RtkOptions.from_dict(options or {}, "rtk options")
     return _estimate(rows, options, **kwargs)
 
 

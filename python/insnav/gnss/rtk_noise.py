@@ -45,6 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._rtk_keys import RTK_DEFAULTS
+
 __all__ = ["NoiseEstimate", "NoiseEstimateError", "estimate_noise", "vce_epoch_matrices", "NOISE_FLOOR_M",
            "MIN_NOISE_EPOCHS", "CODE_FLOOR_M", "noise_options"]
 
@@ -204,8 +206,9 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
     rows : dict
         The fixed epochs' rows (``RtkSolution.fixed_rows``: ``epoch``, ``code``, ``group``, ``y`` [m],
         ``h`` (k, 3), ``var_own``, ``var_ref`` [m^2]).
-    options : RtkOptions or dict, optional
-        The configuration the rows were recorded with (its sigmas are scaled); default RtkOptions().
+    options : RtkOptions, optional
+        The configuration the rows were recorded with (its sigmas are scaled); default: the ``[rtk]``
+        defaults.  :func:`insnav.gnss.rtk.estimate_noise` also takes a ``[rtk]`` table (dict).
     min_epochs : int
         Fewest usable fixed epochs; fewer raise :class:`NoiseEstimateError`.
     floor_m : float
@@ -221,9 +224,10 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
     -------
     NoiseEstimate (and the (k,) redundancy numbers)
     """
-    from .rtk import RtkOptions
-
-    opt = options if isinstance(options, RtkOptions) else RtkOptions.from_dict(options or {}, "rtk options")
+    # the three settings the rows were weighted with (no import of insnav.gnss.rtk, which imports this module)
+    a0, b0, ratio0 = ((options.sigma_phase_a_m, options.sigma_phase_b_m, options.code_phase_ratio)
+                      if options is not None else
+                      tuple(RTK_DEFAULTS[k] for k in ("sigma_phase_a_m", "sigma_phase_b_m", "code_phase_ratio")))
     rows = {key: np.asarray(rows[key]) for key in ("epoch", "code", "group", "y", "h", "var_own", "var_ref")}
     epoch = rows["epoch"]
     order = np.argsort(epoch, kind="stable")
@@ -274,7 +278,6 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
     code_rows = np.asarray(rows["code"]).astype(bool)
     r_phase = float(np.nansum(np.where(code_rows, np.nan, red)))
     r_code = float(np.nansum(np.where(code_rows, red, np.nan)))
-    a0, b0, ratio0 = opt.sigma_phase_a_m, opt.sigma_phase_b_m, opt.code_phase_ratio
     m0 = max(a0, b0)
     s_phi = math.sqrt(k[0])
     sd_s = math.sqrt(max(cov[0, 0], 0.0)) / (2.0 * s_phi)  # d sqrt(k) = dk / (2 sqrt(k))
