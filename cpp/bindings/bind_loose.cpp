@@ -54,7 +54,8 @@ LooseConfig loose_run_config_from(const py::dict& config) {
                                       {INSNAV_UT_KEYS, "sigma_columns", "vehicle_lever_arm_b", "vehicle_C_bv",
                                        "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
                                        "constraint_gate_chi2", "second_order_corr_s", "smooth", "adaptive_r_window",
-                                       "adaptive_r_min_fraction", INSNAV_SELFCAL_KEYS});
+                                       "adaptive_r_min_fraction", "adaptive_q_window", "adaptive_q_min", "adaptive_q_max",
+                                       INSNAV_SELFCAL_KEYS});
   VehicleConstraintConfig& v = cfg.vehicle;
   v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
   if (config.contains("vehicle_C_bv")) {
@@ -79,6 +80,16 @@ LooseConfig loose_run_config_from(const py::dict& config) {
   cfg.adaptive_r.min_fraction = num(config, "adaptive_r_min_fraction", cfg.adaptive_r.min_fraction);
   if (!(cfg.adaptive_r.min_fraction > 0.0 && cfg.adaptive_r.min_fraction <= 1.0))
     throw py::value_error("adaptive_r_min_fraction must be in (0, 1]");
+  // adaptive process noise (filter/adaptive_noise.hpp, engine/loose_engine.hpp)
+  const double wq = num(config, "adaptive_q_window", 0.0);
+  if (!(wq >= 0.0 && wq <= kMaxAdaptiveWindow && wq == std::floor(wq)))
+    throw py::value_error("adaptive_q_window must be an integer in 0.." + std::to_string(kMaxAdaptiveWindow));
+  cfg.adaptive_q.window = static_cast<int>(wq);
+  cfg.adaptive_q.min_fraction = num(config, "adaptive_q_min", cfg.adaptive_q.min_fraction);
+  cfg.adaptive_q.max_factor = num(config, "adaptive_q_max", cfg.adaptive_q.max_factor);
+  if (!(cfg.adaptive_q.min_fraction > 0.0 && cfg.adaptive_q.min_fraction <= 1.0 && cfg.adaptive_q.max_factor >= 1.0 &&
+        std::isfinite(cfg.adaptive_q.max_factor)))
+    throw py::value_error("adaptive_q_min must be in (0, 1] and adaptive_q_max finite and >= 1");
   return cfg;
 }
 

@@ -148,6 +148,8 @@ std::unique_ptr<StreamBase> make(const ImuErrorModel& model, const LooseConfig& 
                                  const NavState& s0, const DArray& P0, const ImuCorrection& c0, PyLooseStream& ps) {
   if (cfg.adaptive_r.window > 0 && !kJacobianUpdate<Filter>)
     throw py::value_error("adaptive_r_window > 0: the EKF and the RB-UKF only (it needs the update's H P H^T)");
+  if (cfg.adaptive_q.window > 0 && !kScalableQ<Filter>)
+    throw py::value_error("adaptive_q_window > 0: the EKF only (it scales the EKF's process noise)");
   return std::make_unique<StreamImpl<Filter>>(model, cfg, ut, s0, state_cov_from<typename Filter::Layout>(P0), c0,
                                               static_cast<std::int64_t>(ps.fixes.size()), ps.fixes.data(),
                                               ps.rec_out);

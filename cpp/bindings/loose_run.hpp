@@ -67,6 +67,8 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   const LooseConfig& cfg = a.cfg;
   if (cfg.adaptive_r.window > 0 && !kJacobianUpdate<Filter>)
     throw py::value_error("adaptive_r_window > 0: the EKF and the RB-UKF only (it needs the update's H P H^T)");
+  if (cfg.adaptive_q.window > 0 && !kScalableQ<Filter>)
+    throw py::value_error("adaptive_q_window > 0: the EKF only (it scales the EKF's process noise)");
   const ImuArrays imu = imu_arrays(a.t, a.dtheta_b, a.dv_b);
   const py::ssize_t m = a.gnss.ndim() == 2 ? a.gnss.shape(0) : 0;
   if (m > 0) require_shape(a.gnss, m, 13, "gnss");
@@ -109,6 +111,7 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
   out.constraint_status = k ? o_cst.mutable_data() : nullptr;
   const double span = imu.n ? imu.t[imu.n - 1] - nav.t : 0.0;
   SmootherRun<Filter> smoother(a.smooth, m + k, span, cfg.cycle_period);
+  std::array<double, 2> q_scale{1.0, 1.0};
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<LooseEngine<Filter>>(a.model, cfg, a.ut);  // one allocation per run, not per sample
@@ -116,8 +119,10 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
     smoother.attach(engine->core());
     engine->run(nav, P, corr, imu.n, imu.t, imu.dtheta_b, imu.dv_b, m, fixes.data(), k, events.data(), out);
     smoother.finish(engine->core());
+    q_scale = engine->process_noise_scale();
   }
   py::dict res;
+  res["process_noise_scale"] = py::make_tuple(q_scale[0], q_scale[1]);
   nav_buf.put(res, out);
   rec_buf.put(res);
   res["constraint_nis"] = o_cnis;

@@ -703,6 +703,20 @@ class RunConfig:
     adaptive_r_min_fraction : float
         Lower clamp of that factor (variance; default 0.01: sigma 0.1x the
         configured), in (0, 1].
+    adaptive_q_window : int
+        Loose EKF: adaptive process noise (``cpp/include/insnav/filter/
+        adaptive_noise.hpp``; Mohamed & Schwarz 1999, Q^ = K C_v K' over a
+        window of updates).  The configured velocity and angle random walk
+        variances (``acc_vrw``, ``gyro_arw``) are each multiplied by
+        ``clamp(sum a_j |dx_b|^2 / sum tr(P- - P+)_bb, adaptive_q_min,
+        adaptive_q_max)`` over the last ``adaptive_q_window`` applied fixes
+        (dx the update's state correction, a_j the factor it ran with); the
+        configured Q until the window is full.  0 (default): off.  At most
+        256.
+    adaptive_q_min, adaptive_q_max : float
+        Bounds of those factors (variance; defaults 0.05 and 20): the
+        estimate feeds back through the gain, the lower bound keeps the
+        filter from collapsing.  0 < min <= 1 <= max.
     pr_gm_sigma_m, pr_gm_tau_s, pr_gm_max_gap_s : float
         Tight EKF: time-correlated pseudorange errors (multipath, ionosphere
         and troposphere residuals) as one first-order Gauss-Markov state per
@@ -794,6 +808,9 @@ class RunConfig:
     gnss_vel_sigma_per_speed: float = 0.0
     adaptive_r_window: int = 0
     adaptive_r_min_fraction: float = 0.01
+    adaptive_q_window: int = 0
+    adaptive_q_min: float = 0.05
+    adaptive_q_max: float = 20.0
     pr_gm_sigma_m: float = 0.0
     pr_gm_tau_s: float = 60.0
     pr_gm_max_gap_s: float = 10.0
@@ -869,6 +886,19 @@ class RunConfig:
         if self.adaptive_r_window and (self.coupling != "loose" or self.filter not in ("ekf", "rbukf")):
             bad("adaptive_r_window", self.adaptive_r_window, f"0 with {self.coupling} {self.filter!r} (the adaptive "
                 "measurement noise is the loose EKF's and RB-UKF's)")
+        v = self.adaptive_q_window
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= v <= 256:
+            bad("adaptive_q_window", v, "an integer in 0..256 (GNSS updates in the window; 0: off)")
+        self.adaptive_q_window = int(v)
+        for key, ok, what in (("adaptive_q_min", lambda x: 0 < x <= 1, "a number in (0, 1]"),
+                              ("adaptive_q_max", lambda x: x >= 1, "a finite number >= 1")):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not (math.isfinite(v) and ok(v)):
+                bad(key, v, what + " (bound of the adaptive process-noise factor, variance)")
+        if self.adaptive_q_window and (self.coupling != "loose" or self.filter != "ekf"):
+            bad("adaptive_q_window", self.adaptive_q_window, f"0 with {self.coupling} {self.filter!r} (the adaptive "
+                "process noise is the loose EKF's)")
         for key, low in (("pr_gm_sigma_m", 0.0), ("pr_gm_tau_s", None), ("pr_gm_max_gap_s", None)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \

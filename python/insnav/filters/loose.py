@@ -152,6 +152,8 @@ def run_loose(dataset, cfg: RunConfig) -> Solution:
         sol.constraint_nis, sol.constraint_status = out["constraint_nis"], out["constraint_status"]
         sol.constraint_log_det_s = out["constraint_log_det_s"]
     sol.gnss_sigma = out["meas_sigma"]
+    if cfg.adaptive_q_window:  # the adaptive process-noise factors at the end (velocity, angle random walk)
+        sol.summary["process_noise_scale"] = [float(x) for x in out["process_noise_scale"]]
     put_selfcal(sol, out, cfg)
     if a.P0.shape[0] != n_core:  # the self-calibration states extend the core layout
         sol.summary["layout"] = int(a.P0.shape[0])
@@ -210,6 +212,9 @@ def loose_engine_args(dataset, cfg: RunConfig, record_t: np.ndarray, imu=None) -
     if cfg.adaptive_r_window:  # adaptive measurement noise of the fixes (filter/adaptive_noise.hpp)
         core_cfg.update(adaptive_r_window=int(cfg.adaptive_r_window),
                         adaptive_r_min_fraction=float(cfg.adaptive_r_min_fraction))
+    if cfg.adaptive_q_window:  # adaptive process noise (filter/adaptive_noise.hpp, engine/loose_engine.hpp)
+        core_cfg.update(adaptive_q_window=int(cfg.adaptive_q_window), adaptive_q_min=float(cfg.adaptive_q_min),
+                        adaptive_q_max=float(cfg.adaptive_q_max))
     events, ev_counts = None, None
     if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
         from .constraints import constraint_events, engine_keys

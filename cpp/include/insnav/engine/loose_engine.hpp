@@ -18,6 +18,13 @@
 // row's configured variance by the windowed innovation statistics of the past
 // applied fixes, clamped to [min_fraction, 1] of it.
 //
+// Adaptive process noise (filter/adaptive_noise.hpp; EKF only, off by
+// default): LooseConfig::adaptive_q.window > 0 scales the configured velocity
+// and angle random walk variances by the windowed state corrections of the
+// past applied fixes against their predicted covariance (Mohamed & Schwarz
+// 1999, K C_v K^T against K S K^T), clamped to
+// [adaptive_q.min_fraction, adaptive_q.max_factor].
+//
 // No heap allocation inside run(); outputs go to caller-owned buffers.
 #pragma once
 
@@ -25,6 +32,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 
 #include "insnav/engine/closed_loop.hpp"
 #include "insnav/filter/adaptive_noise.hpp"
@@ -44,7 +53,15 @@ struct LooseConfig {
   VehicleConstraintConfig vehicle;   // mounting, rear-axle lever arm and noise of the constraint events
   double constraint_gate_chi2 = 0.0; // NIS gate of the constraint events (<= 0: off)
   AdaptiveNoiseConfig adaptive_r;    // adaptive R of the fixes (filter/adaptive_noise.hpp; window 0: off)
+  AdaptiveNoiseConfig adaptive_q{0, 0.05, 20.0};  // adaptive Q scale (velocity, attitude random walks; EKF; 0: off)
 };
+
+/// The filter takes a process-noise scale (Ekf::set_process_noise_scale).
+template <class F, class = void>
+inline constexpr bool kScalableQ = false;
+template <class F>
+inline constexpr bool kScalableQ<F, std::void_t<decltype(std::declval<F&>().set_process_noise_scale(1.0, 1.0))>> =
+    true;
 
 /// What a vehicle-constraint event asks for (bit flags).
 enum ConstraintKind : std::uint8_t { kNhc = 1, kOdometer = 2, kZupt = 4, kZaru = 8 };
@@ -117,7 +134,7 @@ class LooseEngine {
 
   /// ut is used by the sigma-point filters (RB-UKF, UKF) and ignored by the EKF.
   LooseEngine(const ImuErrorModel& model, const LooseConfig& cfg, const UtParams& ut = {})
-      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg), adaptive_(cfg.adaptive_r) {
+      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg), adaptive_(cfg.adaptive_r), adaptive_q_(cfg.adaptive_q) {
     core_.gate = NisGate(cfg.gate);
     core_.odo_scale_tau = model.odo_scale_tau;
   }
@@ -173,6 +190,11 @@ class LooseEngine {
     core_.odo_lever_b0 = cfg_.vehicle.lever_arm_b;
     core_.reset(initial, P0, corr0);
     adaptive_.reset();
+    adaptive_q_.reset();
+    if constexpr (kScalableQ<Filter>) {
+      if (adaptive_q_.enabled()) core_.filter.set_process_noise_scale(1.0, 1.0);
+    }
+    q_scale_ = {1.0, 1.0};
     last_nhc_t_ = last_odo_t_ = -kInf;
   }
 
@@ -200,10 +222,18 @@ class LooseEngine {
       if (adaptive_.enabled()) adapt_noise(ch0);
     }
     out.write_meas_sigma(g, fix, meas_.linear().R);
+    if constexpr (kScalableQ<Filter>) {
+      if (adaptive_q_.enabled())
+        q_tr_prior_ = {core_.filter.P().template block<3, 3>(L::kVel, L::kVel).trace(),
+                       core_.filter.P().template block<3, 3>(L::kAtt, L::kAtt).trace()};
+    }
     const UpdateResult res = core_.update_gated(meas_);
     if constexpr (kJacobianUpdate<Filter>) {
       if (adaptive_.enabled() && res.applied)
         for (int i = 0; i < meas_.linear().rows(); ++i) adaptive_.push(ch0 + i, ad_y_[i], ad_hph_[i], ad_r0_[i]);
+    }
+    if constexpr (kScalableQ<Filter>) {
+      if (adaptive_q_.enabled() && res.applied) adapt_process_noise();
     }
     if (out.nis) out.nis[g] = res.nis;
     if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
@@ -215,6 +245,9 @@ class LooseEngine {
       ++out.rejected;
     }
   }
+
+  /// The current adaptive process-noise factors (velocity, attitude random walk variances; 1, 1 when off).
+  const std::array<double, 2>& process_noise_scale() const { return q_scale_; }
 
   static void mark_constraint(LooseOutputs& out, std::int64_t c, RecordStatus st) {
     out.set_status(out.constraint_status, c, st);
@@ -285,9 +318,28 @@ class LooseEngine {
     }
   }
 
+  /// The state correction of the update just applied (x before the
+  /// feedback) into the window against the correction covariance the update
+  /// predicted, K S K^T = P- - P+ (traces of the velocity and attitude
+  /// blocks); the filter's Q scaled by the windowed ratio
+  /// (filter/adaptive_noise.hpp).
+  void adapt_process_noise() {
+    const auto& x = core_.filter.x();
+    const auto& P = core_.filter.P();
+    const double ksk_v = q_tr_prior_[0] - P.template block<3, 3>(L::kVel, L::kVel).trace();
+    const double ksk_a = q_tr_prior_[1] - P.template block<3, 3>(L::kAtt, L::kAtt).trace();
+    if (ksk_v > 0.0) adaptive_q_.push_ratio(0, q_scale_[0] * x.template segment<3>(L::kVel).squaredNorm(), ksk_v);
+    if (ksk_a > 0.0) adaptive_q_.push_ratio(1, q_scale_[1] * x.template segment<3>(L::kAtt).squaredNorm(), ksk_a);
+    q_scale_ = {adaptive_q_.factor(0), adaptive_q_.factor(1)};
+    core_.filter.set_process_noise_scale(q_scale_[0], q_scale_[1]);
+  }
+
   ClosedLoop<Filter> core_;
   LooseConfig cfg_;
   AdaptiveMeasurementNoise<6> adaptive_;
+  AdaptiveMeasurementNoise<2> adaptive_q_;  // channels: velocity, attitude random walk
+  std::array<double, 2> q_scale_{1.0, 1.0};
+  std::array<double, 2> q_tr_prior_{};  // tr P- of the velocity and attitude blocks before the update
   std::array<double, 6> ad_y_{}, ad_hph_{}, ad_r0_{};  // the current fix's rows (adapt_noise)
   LooseMeasurement<L> meas_;
   VehicleVelocityMeasurement<L> vehicle_;

@@ -40,6 +40,27 @@
 // whereas y_j and P-_j depend only on the past; the residual form's advantage,
 // an estimate that stays positive, is had here from the lower clamp.
 //
+// The same windowed ratio serves the adaptive process noise of the loose EKF
+// (engine/loose_engine.hpp, LooseConfig::adaptive_q): Mohamed & Schwarz 1999
+// estimate Q from the state corrections dx = K y of the last N updates (their
+// innovation-based adaptive Q, Q^ = K C_v K^T, C_v the windowed innovation
+// covariance).  Used here as one scale per block of the configured Q
+// (velocity random walk, angle random walk), matched against the correction
+// covariance the filter predicts, K S K^T = P- - P+:
+//
+//   alpha_b = sum_j alpha_b,j |dx_j,b|^2 / sum_j tr(P-_j - P+_j)_bb,   clamp(alpha_b, q_min, q_max)
+//
+// (alpha_b,j the factor record j ran with).  A consistent filter has
+// E[dx dx^T] = K S K^T whatever its transition, so the ratio is 1 there and
+// the factor stays; corrections smaller than predicted (P- too large, e.g. a
+// process noise tuned on walking while the walker stands) lower it.  The
+// paper's direct form, Q^ = mean dx dx^T against Q dt, holds only for states
+// that are a random walk observed directly; in the INS the velocity
+// corrections also carry the attitude and bias growth (on a simulated
+// tactical-grade mover it gave 20-100x the true velocity random walk).  The
+// estimate feeds back through the gain, so both bounds are needed: q_min
+// keeps the filter from collapsing when R alone exceeds the innovations.
+//
 // Fixed-size ring buffers (capacity kMaxAdaptiveWindow per row), no heap.
 #pragma once
 
@@ -56,6 +77,7 @@ inline constexpr int kMaxAdaptiveWindow = 256;
 struct AdaptiveNoiseConfig {
   int window = 0;              // N: records per row in the window (0: off, the configured R)
   double min_fraction = 0.01;  // f: lower clamp of R as a fraction of the configured R (variance)
+  double max_factor = 1.0;     // upper clamp of the factor (R: 1, the configured R; Q: q_max)
 };
 
 /// The windowed innovation statistics of `kRows` measurement channels (loose
@@ -76,8 +98,8 @@ class AdaptiveMeasurementNoise {
     for (Channel& c : ch_) c.count = c.head = 0;
   }
 
-  /// The factor on the configured variance of channel ch: clamp(lambda, f, 1)
-  /// once the window is full, else 1.
+  /// The factor on the configured variance of channel ch: clamp(lambda, f,
+  /// max_factor) once the window is full, else 1.
   double factor(int ch) const {
     const Channel& c = ch_[ch];
     if (!enabled() || c.count < cfg_.window) return 1.0;
@@ -87,14 +109,17 @@ class AdaptiveMeasurementNoise {
       sr += c.r0[j];
     }
     if (!(sr > 0.0)) return 1.0;
-    return std::clamp(sd / sr, cfg_.min_fraction, 1.0);
+    return std::clamp(sd / sr, cfg_.min_fraction, cfg_.max_factor);
   }
 
   /// Add a record of channel ch: innovation y, (H P- H^T)_ii = hph, configured variance r0.
-  void push(int ch, double y, double hph, double r0) {
+  void push(int ch, double y, double hph, double r0) { push_ratio(ch, y * y - hph, r0); }
+
+  /// Add a record of channel ch to the windowed ratio sum(num) / sum(den).
+  void push_ratio(int ch, double num, double den) {
     Channel& c = ch_[ch];
-    c.d[c.head] = y * y - hph;
-    c.r0[c.head] = r0;
+    c.d[c.head] = num;
+    c.r0[c.head] = den;
     c.head = (c.head + 1) % cfg_.window;
     if (c.count < cfg_.window) ++c.count;
   }

@@ -11,6 +11,8 @@
 // initialize / begin_cycle / propagate / end_cycle / update / reset_state.
 #pragma once
 
+#include <cmath>
+
 #include "insnav/filter/covariance.hpp"
 #include "insnav/filter/error_model_linear.hpp"
 #include "insnav/filter/kalman_update.hpp"
@@ -26,7 +28,19 @@ class Ekf {
   /// The update is linear in the measurement's H (kJacobianUpdate, types.hpp).
   static constexpr bool kJacobianUpdate = true;
 
-  explicit Ekf(const ImuErrorModel& model) : model_(model) {}
+  explicit Ekf(const ImuErrorModel& model)
+      : model_(model), acc_vrw0_(model.acc_vrw), gyro_arw0_(model.gyro_arw) {}
+
+  /// Scale the configured velocity and angle random walk PSDs (variances) by
+  /// s_vel and s_att from the next propagation on (the adaptive process noise,
+  /// filter/adaptive_noise.hpp); 1, 1 is the configured model exactly.
+  void set_process_noise_scale(double s_vel, double s_att) {
+    model_.acc_vrw = acc_vrw0_ * std::sqrt(s_vel);
+    model_.gyro_arw = gyro_arw0_ * std::sqrt(s_att);
+  }
+  /// The configured (unscaled) model.
+  const Vec3& acc_vrw0() const { return acc_vrw0_; }
+  const Vec3& gyro_arw0() const { return gyro_arw0_; }
 
   void initialize(const Cov& P0) {
     x_.setZero();
@@ -104,6 +118,7 @@ class Ekf {
 
  private:
   ImuErrorModel model_;
+  Vec3 acc_vrw0_, gyro_arw0_;  // the configured random walks (set_process_noise_scale)
   Vec x_ = Vec::Zero();
   Cov P_ = Cov::Identity();
   Cov F_ = Cov::Zero(), Qc_ = Cov::Zero();  // propagation workspace
