@@ -134,7 +134,10 @@ class LooseEngine {
 
   /// ut is used by the sigma-point filters (RB-UKF, UKF) and ignored by the EKF.
   LooseEngine(const ImuErrorModel& model, const LooseConfig& cfg, const UtParams& ut = {})
-      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg), adaptive_(cfg.adaptive_r), adaptive_q_(cfg.adaptive_q) {
+      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval),
+        cfg_(cfg),
+        adaptive_(cfg.adaptive_r),
+        adaptive_q_(cfg.adaptive_q) {
     core_.gate = NisGate(cfg.gate);
     core_.odo_scale_tau = model.odo_scale_tau;
   }
