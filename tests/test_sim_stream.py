@@ -95,14 +95,14 @@ def test_simulate_to_writes_the_saved_whole_dataset_byte_for_byte(tmp_path):
     """Blocks of 37.3 s (not a multiple of any rate) against simulate(...).save(...)."""
     whole = simulate("car-mems", seed=3)
     whole.save(tmp_path / "whole")
-    ds, n_imu = simulate_to(tmp_path / "blocks", "car-mems", seed=3, block_s=37.3)
+    ds, n_imu, n_gnss = simulate_to(tmp_path / "blocks", "car-mems", seed=3, block_s=37.3)
     assert n_imu == len(whole.imu) == 180_000
     files = sorted(p.name for p in (tmp_path / "whole").iterdir())
     assert files == sorted(p.name for p in (tmp_path / "blocks").iterdir())
     assert "imu.csv" in files and "truth.csv" in files and "imu_errors.csv" in files
     for f in files:
         assert filecmp.cmp(tmp_path / "whole" / f, tmp_path / "blocks" / f, shallow=False), f
-    assert len(ds.imu) == 0 and len(ds.gnss) == len(whole.gnss)
+    assert len(ds.imu) == 0 and len(ds.gnss) == 0 and n_gnss == len(whole.gnss) == 9000
 
 
 def test_simulate_to_refuses_a_foreign_folder_before_simulating(tmp_path):
