@@ -34,7 +34,10 @@ It is integrated on a 0.05 s grid that contains every transition breakpoint
 Gauss-Legendre quadrature (local error ~ h^7 f^(6) / 2e6 < 1e-12 m); the weak dependence of the radii on latitude is resolved by a
 fixed-point iteration, latitude inside an interval by cubic Hermite
 interpolation.  The position error is below 1e-9 m over an hour (see
-``tests/test_sim_truth.py``).
+``tests/test_sim_truth.py``).  The grid is built and integrated in chunks
+of 600 s on demand, carrying each running sum into the next chunk, and only
+a few chunks are kept: memory does not grow with the scenario's length, and
+the numbers are those of one pass over the whole grid, bit for bit.
 
 Specific force and angular rate (Groves 2013, eqs. (5.44), (5.19)):
 
