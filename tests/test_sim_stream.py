@@ -197,8 +197,9 @@ def test_simulate_to_in_odd_blocks_writes_the_saved_whole_dataset(tmp_path, bloc
 
 @pytest.mark.slow
 def test_simulate_to_holds_one_block_whatever_the_length(tmp_path, monkeypatch):
-    """A drive of 2 blocks and one of 20 blocks (10 s each, and a last one of 0.5 s): the largest table block written and the
-    position-grid chunks held are the same size (the blocks do not grow with the drive's length)."""
+    """A drive of 2 blocks and one of 20 blocks (10 s each, and a last one of 0.5 s): the largest table
+    block written and the position-grid chunks held are the same size (the blocks do not grow with the
+    drive's length)."""
     import insnav.data.dataset as dataset_mod
     import insnav.sim.trajectory as trajectory_mod
 
