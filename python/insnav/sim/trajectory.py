@@ -507,13 +507,20 @@ class Trajectory:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if np.any(t < self.t0 - 1e-9) or np.any(t > self.t_end + 1e-9):
             raise ValueError(f"times outside the trajectory [{self.t0}, {self.t_end}]")
+        if t.size == 0:
+            return self._position_in_chunk(t, 0, exact)
         c = self._chunk_of(t)
-        if t.size == 0 or c[0] == c[-1] and np.all(c == c[0]):
-            return self._position_in_chunk(t, int(c[0]) if t.size else 0, exact)
+        if c[0] == c[-1] and np.all(c == c[0]):
+            return self._position_in_chunk(t, int(c[0]), exact)
         out = np.empty((3,) + t.shape)
-        for cc in np.unique(c):  # in time order: each chunk integrated once per pass
-            sel = c == cc
-            out[:, sel] = self._position_in_chunk(t[sel], int(cc), exact)
+        if np.all(c[1:] >= c[:-1]):  # times in order (the usual case): a slice per chunk
+            cuts = np.flatnonzero(np.diff(c)) + 1
+            for i0, i1 in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [t.size]])):
+                out[:, i0:i1] = self._position_in_chunk(t[i0:i1], int(c[i0]), exact)
+        else:
+            for cc in np.unique(c):  # each chunk integrated once per call
+                sel = c == cc
+                out[:, sel] = self._position_in_chunk(t[sel], int(cc), exact)
         return out[0], out[1], out[2]
 
     def _position_in_chunk(self, t, c: int, exact: bool):
