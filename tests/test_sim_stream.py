@@ -77,32 +77,174 @@ def test_sensor_error_stream_serves_rows_once_in_order():
         stream.rows(10, 101)
 
 
-def test_position_grid_integrated_in_chunks_equals_one_pass():
-    """The trajectory's grid integration in chunks of 777 intervals equals the default chunking, bit for bit
-    (car-mems: turns, grades, wheel slip and bounce)."""
-    traj = Trajectory(load_scenario("car-mems"))
-    grids = (traj._hg, traj._latg, traj._long, traj._lat_dot_g, traj._lon_dot_g)
-    ref = [g.copy() for g in grids]
-    traj._integrate_position(chunk=len(traj._grid))  # one chunk: the whole grid
-    assert all(np.array_equal(a, b) for a, b in zip(ref, (traj._hg, traj._latg, traj._long, traj._lat_dot_g,
-                                                          traj._lon_dot_g)))
-    traj._integrate_position(chunk=777)
-    assert all(np.array_equal(a, b) for a, b in zip(ref, (traj._hg, traj._latg, traj._long, traj._lat_dot_g,
-                                                          traj._lon_dot_g)))
+def _short_drive(tmp_path, name="short", cruise_s=10.0, delay_p="[0.6, 0.3, 0.1]"):
+    """car-mems (slip, bounce, odometer) shortened: 3 s still, 4 s speeding up, then cruising; GNSS at
+    10 Hz, each fix delayed by 0, 1 or 2 epochs on its own."""
+    f = tmp_path / f"{name}.toml"
+    f.write_text(f"""extends = "car-mems"
+name = "{name}"
+[gnss]
+delay_p = {delay_p}
+delay_model = "independent"
+[motion]
+transition_s = 1.0
+[[motion.segments]]
+duration_s = 3.0
+[[motion.segments]]
+duration_s = 4.0
+target_speed_mps = 8.0
+[[motion.segments]]
+duration_s = {cruise_s}
+turn_rate_dps = 3.0
+""")
+    return f
+
+
+def _grid_written_out(traj, grid_step=0.05):
+    """The grid as one array: np.linspace, every breakpoint, sorted, points within 1 us merged, t_end last."""
+    sc = traj.sc
+    n = max(1, int(np.ceil((sc.t_end - sc.t0) / grid_step - 1e-9)))
+    g = np.unique(np.concatenate([np.linspace(sc.t0, sc.t_end, n + 1), traj._bps]))
+    g = g[np.concatenate([[True], np.diff(g) > 1e-6])]
+    g[-1] = sc.t_end
+    return g
+
+
+@pytest.mark.slow
+def test_position_grid_in_chunks_equals_one_pass_and_holds_a_few_chunks(tmp_path):
+    """Chunks of 77 and of 10 grid steps against one chunk (the whole grid, one pass): the same grid as the
+    whole-array construction and the same positions (quadrature from the grid and Hermite interpolation),
+    bit for bit (car-mems shortened: a turn, wheel slip and bounce); forward queries keep at most three
+    chunks, and asking again for an evicted early chunk recomputes the same numbers."""
+    sc = load_scenario(_short_drive(tmp_path, cruise_s=60.0))
+    whole = Trajectory(sc, chunk_steps=10**9)
+    assert whole._n_chunks == 1
+    t = np.sort(np.random.default_rng(5).uniform(sc.t0, sc.t_end, 3001))
+    t[0], t[-1] = sc.t0, sc.t_end
+    ref = [np.array(whole.position(t)), np.array(whole.position(t, exact=False))]
+    assert np.array_equal(whole.grid(), _grid_written_out(whole))
+    for k in (77, 10):
+        traj = Trajectory(sc, chunk_steps=k)
+        assert traj._n_chunks == -(-1340 // k)
+        assert np.array_equal(traj.grid(), whole.grid())
+        for i0 in range(0, t.size, 250):  # forward, in blocks, as insnav simulate asks
+            sl = slice(i0, i0 + 250)
+            assert np.array_equal(np.array(traj.position(t[sl])), ref[0][:, sl])
+            assert len(traj._cache) <= 3 and max(len(v[0]) for v in traj._cache.values()) <= k + 2
+        assert np.array_equal(np.array(traj.position(t[::-1], exact=False)), ref[1][:, ::-1])
+        assert np.array_equal(np.array(traj.position(t[:40])), ref[0][:, :40])
+
+
+def _whole_draw_fixes(traj, cfg, rng_noise, rng_delay):
+    """The GNSS fixes drawn whole (the documented order: all position noise, then all velocity noise, then
+    one delay per fix), written out directly."""
+    from insnav.sim.gnss_loose import antenna_state, gnss_epochs, in_windows
+
+    t = gnss_epochs(traj.sc.t0, traj.sc.t_end, cfg["first_epoch"], cfg["rate"])
+    t = t[~in_windows(t, cfg["outages"])]
+    lat, lon, h, v_n, _, _ = antenna_state(traj, t, cfg["lever_arm_b"])
+    sig_pos = np.array([cfg["sigma_h"], cfg["sigma_h"], cfg["sigma_v"]])
+    e_pos = sig_pos * rng_noise.standard_normal((t.size, 3))
+    e_vel = cfg["sigma_vel"] * rng_noise.standard_normal((t.size, 3))
+    from insnav import earth
+
+    R_M, R_N = earth.radii(lat)
+    delay = rng_delay.choice(cfg["delay_p"].size, size=t.size, p=cfg["delay_p"])
+    return (t, np.round(t + delay / cfg["rate"], 9), np.degrees(lat + e_pos[:, 0] / (R_M + h)),
+            np.degrees(lon + e_pos[:, 1] / ((R_N + h) * np.cos(lat))), h - e_pos[:, 2], v_n + e_vel)
+
+
+def test_gnss_fix_stream_equals_the_whole_draw_in_odd_blocks(tmp_path):
+    """Epoch blocks of 0 to 36 epochs (empty ones too) across an outage: the same fixes, noise and delays
+    as the whole draw, bit for bit, and an out-of-order block is refused."""
+    from insnav.sim.gnss_loose import GnssFixStream
+
+    sc = load_scenario(_short_drive(tmp_path, cruise_s=30.0), seed=4)
+    cfg = dict(sc.gnss, outages=[(5.0, 7.25)])
+    traj = Trajectory(sc)
+    ref = _whole_draw_fixes(traj, cfg, np.random.default_rng(1), np.random.default_rng(2))
+    stream = GnssFixStream(traj, cfg, np.random.default_rng(1), np.random.default_rng(2))
+    assert stream.k_hi - stream.k_lo == 370 and stream.n_received == ref[0].size == 370 - 22  # 0.1 .. 37 s
+    blocks, a, cut = [], stream.k_lo, np.random.default_rng(3)
+    while a < stream.k_hi:
+        b = min(stream.k_hi, a + int(cut.integers(0, 37)))
+        blocks.append(stream.block(a, b))
+        a = b
+    got = [np.concatenate([getattr(x, f) for x in blocks]) for f in ("t_valid", "t_arrival", "lat_deg", "lon_deg",
+                                                                      "h_m", "v_n")]
+    assert all(np.array_equal(g, r) for g, r in zip(got, ref))
+    assert np.any(got[1] > got[0])  # delays were drawn
+    with pytest.raises(ValueError, match="expected epochs from"):
+        stream.block(stream.k_lo, stream.k_hi)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("block_s", [0.07, 0.25, 1.37])
+def test_simulate_to_in_odd_blocks_writes_the_saved_whole_dataset(tmp_path, block_s):
+    """Blocks shorter than the GNSS period (0.07 s: most hold no epoch), splitting the epochs (0.25 s) and
+    not a multiple of any rate (1.37 s), with delayed fixes and the odometer: every file equals
+    simulate(...).save(...) byte for byte."""
+    f = _short_drive(tmp_path)
+    whole = simulate(f, seed=3)
+    whole.save(tmp_path / "whole")
+    ds, n_imu, n_gnss = simulate_to(tmp_path / "blocks", f, seed=3, block_s=block_s)
+    assert n_imu == len(whole.imu) == 3400 and n_gnss == len(whole.gnss) == 170
+    files = sorted(p.name for p in (tmp_path / "whole").iterdir())
+    assert files == sorted(p.name for p in (tmp_path / "blocks").iterdir()) and "gnss.csv" in files
+    for name in files:
+        assert filecmp.cmp(tmp_path / "whole" / name, tmp_path / "blocks" / name, shallow=False), name
+
+
+@pytest.mark.slow
+def test_simulate_to_holds_one_block_whatever_the_length(tmp_path, monkeypatch):
+    """A drive of 2 blocks and one of 20 blocks (10 s each, and a last one of 0.5 s): the largest table
+    block written and the position-grid chunks held are the same size (the blocks do not grow with the
+    drive's length)."""
+    import insnav.data.dataset as dataset_mod
+    import insnav.sim.trajectory as trajectory_mod
+
+    written = {}
+    real_write = dataset_mod.write_csv
+
+    def spy(path, columns, data, *args, **kw):
+        written.setdefault(path.name, []).append(np.asarray(data).shape[0])
+        return real_write(path, columns, data, *args, **kw)
+
+    held = []
+    real_chunk = trajectory_mod.Trajectory._chunk
+
+    def chunk_spy(self, c):
+        out = real_chunk(self, c)
+        held.append(sum(v[0].size for v in self._cache.values()))
+        return out
+
+    monkeypatch.setattr(dataset_mod, "write_csv", spy)
+    monkeypatch.setattr(trajectory_mod.Trajectory, "_chunk", chunk_spy)
+    biggest = {}
+    for n_blocks in (2, 20):
+        written.clear()
+        held.clear()
+        f = _short_drive(tmp_path, f"d{n_blocks}", cruise_s=10.0 * n_blocks - 6.5)  # 20.5 s, 200.5 s
+        simulate_to(tmp_path / f"out{n_blocks}", f, seed=1, block_s=10.0)
+        assert len(written["imu.csv"]) == n_blocks + 1 and len(written["gnss.csv"]) == n_blocks + 1
+        streamed = ("imu.csv", "imu_errors.csv", "truth.csv", "gnss.csv")  # (the odometer's is written whole)
+        biggest[n_blocks] = ({k: max(written[k]) for k in streamed}, max(held))
+    assert biggest[2][0] == biggest[20][0] and biggest[2][0]["imu.csv"] == 2000 and biggest[2][0]["gnss.csv"] == 100
+    assert biggest[20][1] <= 3 * 12_002  # three 600 s chunks of the grid at most
 
 
 def test_simulate_to_writes_the_saved_whole_dataset_byte_for_byte(tmp_path):
     """Blocks of 37.3 s (not a multiple of any rate) against simulate(...).save(...)."""
     whole = simulate("car-mems", seed=3)
     whole.save(tmp_path / "whole")
-    ds, n_imu = simulate_to(tmp_path / "blocks", "car-mems", seed=3, block_s=37.3)
+    ds, n_imu, n_gnss = simulate_to(tmp_path / "blocks", "car-mems", seed=3, block_s=37.3)
     assert n_imu == len(whole.imu) == 180_000
     files = sorted(p.name for p in (tmp_path / "whole").iterdir())
     assert files == sorted(p.name for p in (tmp_path / "blocks").iterdir())
     assert "imu.csv" in files and "truth.csv" in files and "imu_errors.csv" in files
     for f in files:
         assert filecmp.cmp(tmp_path / "whole" / f, tmp_path / "blocks" / f, shallow=False), f
-    assert len(ds.imu) == 0 and len(ds.gnss) == len(whole.gnss)
+    assert len(ds.imu) == 0 and len(ds.gnss) == 0 and n_gnss == len(whole.gnss) == 9000
 
 
 def test_simulate_to_refuses_a_foreign_folder_before_simulating(tmp_path):

@@ -465,11 +465,12 @@ class Dataset:
         overwrite : bool
             Replace an existing directory; otherwise raise ``FileExistsError``.
         write_tables : callable, optional
-            ``write_tables(folder)`` writes ``imu.csv``, ``truth.csv`` and
-            ``imu_errors.csv`` into the new folder itself (block by block,
-            :func:`insnav.sim.simulate_to`); this dataset's ``imu``,
-            ``truth`` and ``imu_errors`` rows are then not written (the
-            constants of ``imu_errors`` still go to ``dataset.json``).
+            ``write_tables(folder)`` writes ``imu.csv``, ``truth.csv``,
+            ``imu_errors.csv`` and ``gnss.csv`` into the new folder itself
+            (block by block, :func:`insnav.sim.simulate_to`); this dataset's
+            ``imu``, ``truth``, ``imu_errors`` and ``gnss`` rows are then not
+            written (the constants of ``imu_errors`` still go to
+            ``dataset.json``).
 
         Returns
         -------
@@ -491,7 +492,8 @@ class Dataset:
                 write_tables(tmp)
             else:
                 write_csv(tmp / "imu.csv", ImuData.COLUMNS, self.imu.to_array(), "%.17g")
-            write_csv(tmp / "gnss.csv", GnssFixes.COLUMNS, self.gnss.to_array(), "%.17g")
+            if write_tables is None:
+                write_csv(tmp / "gnss.csv", GnssFixes.COLUMNS, self.gnss.to_array(), "%.17g")
             if self.truth is not None and write_tables is None:
                 write_csv(tmp / "truth.csv", Truth.COLUMNS, self.truth.to_array(), "%.17g")
             if self.gnss_raw is not None:

@@ -102,12 +102,15 @@ def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool
     """Simulate a scenario straight into a dataset folder, block by block.
 
     The folder equals ``simulate(scenario, seed).save(directory)`` byte for
-    byte, but the IMU, truth and IMU-error tables are computed and appended
-    ``block_s`` seconds at a time, so memory does not grow with the
-    scenario's length: one block of rows, the trajectory's 0.05 s position
-    grid and one block of each Gauss-Markov bias recursion (``8 tau / dt``
-    samples, :class:`insnav.sim.imu.SensorErrorStream`).  The GNSS, odometer
-    and carrier-phase tables (10 Hz and slower) are computed whole.
+    byte, but the IMU, truth, IMU-error and GNSS-fix tables are computed and
+    appended ``block_s`` seconds at a time, so memory does not grow with the
+    scenario's length: one block of rows, a few 600 s chunks of the
+    trajectory's 0.05 s position grid (:class:`insnav.sim.trajectory.Trajectory`)
+    and one block of each Gauss-Markov bias recursion (``8 tau / dt``
+    samples, :class:`insnav.sim.imu.SensorErrorStream`).  Still computed
+    whole: the raw GNSS, odometer and carrier-phase tables, and the GNSS
+    fixes of the ``"one_per_epoch"`` delay model
+    (:class:`insnav.sim.gnss_loose.GnssFixStream`).
 
     Parameters
     ----------
@@ -125,10 +128,12 @@ def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool
     Returns
     -------
     dataset : Dataset
-        The dataset without its IMU, truth and IMU-error rows (empty tables;
-        the IMU-error constants are set).
+        The dataset without its IMU, truth, IMU-error and GNSS-fix rows
+        (empty tables; the IMU-error constants are set).
     n_imu : int
         The number of IMU samples written.
+    n_gnss : int
+        The number of GNSS-fix records written.
     """
     from ..data.dataset import check_replaceable, write_csv
 
@@ -149,21 +154,36 @@ def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool
             progress(count[0], total)
 
     no_imu, no_errors = sim.imu_block(0, 0)  # no rows: the IMU-error constants for dataset.json
-    ds = sim.dataset(no_imu, no_errors, None, constellation, step)
+    fixes = sim.gnss_stream()
+    ds = sim.dataset(no_imu, no_errors, None, constellation, step, with_gnss=False)
+    n_gnss = [0]
 
     def write_tables(folder: Path) -> None:
-        for k0 in range(0, n_imu, blk_imu):
-            imu, errs = sim.imu_block(k0, min(n_imu, k0 + blk_imu))
-            write_csv(folder / "imu.csv", ImuData.COLUMNS, imu.to_array(), append=k0 > 0)
-            write_csv(folder / "imu_errors.csv", ImuErrors.COLUMNS, errs.to_array(), append=k0 > 0)
-            step()
-        for i0 in range(0, n_truth, blk_truth):
-            tr = sim.truth_block(i0, min(n_truth, i0 + blk_truth))
-            write_csv(folder / "truth.csv", Truth.COLUMNS, tr.to_array(), append=i0 > 0)
-            step()
+        # the tables side by side, block i of each covering about the same time: the trajectory's position
+        # grid is then integrated once, forward (it keeps a few chunks, insnav.sim.trajectory)
+        n_blk = max(-(-n_imu // blk_imu), -(-n_truth // blk_truth), 1)
+        e0 = fixes.k_lo
+        for i in range(n_blk):
+            k0 = i * blk_imu
+            if k0 < n_imu:
+                imu, errs = sim.imu_block(k0, min(n_imu, k0 + blk_imu))
+                write_csv(folder / "imu.csv", ImuData.COLUMNS, imu.to_array(), append=k0 > 0)
+                write_csv(folder / "imu_errors.csv", ImuErrors.COLUMNS, errs.to_array(), append=k0 > 0)
+                step()
+            i0 = i * blk_truth
+            if i0 < n_truth:
+                tr = sim.truth_block(i0, min(n_truth, i0 + blk_truth))
+                write_csv(folder / "truth.csv", Truth.COLUMNS, tr.to_array(), append=i0 > 0)
+                step()
+            e1 = fixes.k_hi if i == n_blk - 1 else fixes.epoch_index(sim.sc.t0 + (i + 1) * block_s)
+            gnss = fixes.block(e0, e1)
+            write_csv(folder / "gnss.csv", GnssFixes.COLUMNS, gnss.to_array(), append=i > 0)
+            n_gnss[0] += len(gnss)
+            e0 = e1
+        step("GNSS fixes")
 
     ds.save(directory, overwrite=overwrite, write_tables=write_tables)
-    return ds, n_imu - 1
+    return ds, n_imu - 1, n_gnss[0]
 
 
 class _Simulation:
@@ -217,20 +237,29 @@ class _Simulation:
         sc = self.sc
         return truth_from_state(self.traj.state(sample_times(sc.t0, sc.t_end, sc.truth_rate, i0, i1)))
 
-    def dataset(self, imu, imu_errors, truth, constellation, done) -> Dataset:
-        """The dataset around the given IMU tables: the GNSS, odometer and carrier-phase parts."""
-        from .gnss_loose import simulate_gnss_fixes
+    def gnss_stream(self):
+        """The GNSS fixes, epoch block by epoch block (:class:`insnav.sim.gnss_loose.GnssFixStream`)."""
+        from .gnss_loose import GnssFixStream
+
+        return GnssFixStream(self.traj, self.sc.gnss, self.rngs["gnss"], self.rngs["delay"])
+
+    def dataset(self, imu, imu_errors, truth, constellation, done, with_gnss: bool = True) -> Dataset:
+        """The dataset around the given IMU tables: the GNSS, odometer and carrier-phase parts.
+
+        ``with_gnss=False``: no GNSS fixes (an empty table; :func:`simulate_to` writes them block by block)."""
+        from .gnss_loose import _no_fixes
         from .imu import imu_model_dict
 
         sc, traj, rngs = self.sc, self.traj, self.rngs
         initial = truth_from_state(traj.state(np.array([sc.t0]))).state_at(0)
         gcfg = sc.gnss
-        if gcfg["enabled"]:
-            gnss = simulate_gnss_fixes(traj, gcfg, rngs["gnss"], rngs["delay"])
+        if gcfg["enabled"] and with_gnss:
+            fixes = self.gnss_stream()
+            gnss = fixes.block(fixes.k_lo, fixes.k_hi)
         else:
-            z = np.empty(0)
-            gnss = GnssFixes(z, z, z, z, z, np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)))
-        done("GNSS fixes")
+            gnss = _no_fixes()
+        if with_gnss:
+            done("GNSS fixes")
         gnss_raw = None
         if sc.gnss_raw["enabled"]:
             from .gnss_raw import simulate_gnss_raw

@@ -72,7 +72,7 @@ def cmd_simulate(args) -> int:
     try:
         t = time.perf_counter()
         # block by block: memory bounded by the block, not by the scenario's length
-        ds, n_imu = simulate_to(out, args.scenario, seed=args.seed, overwrite=args.overwrite, progress=bar)
+        ds, n_imu, n_gnss = simulate_to(out, args.scenario, seed=args.seed, overwrite=args.overwrite, progress=bar)
         t_sim = time.perf_counter() - t
     finally:
         bar.close()
@@ -81,7 +81,7 @@ def cmd_simulate(args) -> int:
         n_r, n_c = ds.rtk.common_counts()
         raw += (f", carrier phase of rover and base (RINEX 3 rover.obs, base.obs, nav.rnx; "
                 f"{n_c.min()}-{n_c.max()} common satellites)")
-    print(f"{ds.name} (seed {ds.seed}): {n_imu} IMU samples, {len(ds.gnss)} GNSS fixes{raw}; "
+    print(f"{ds.name} (seed {ds.seed}): {n_imu} IMU samples, {n_gnss} GNSS fixes{raw}; "
           f"simulated and written in {t_sim:.2f} s -> {out}")
     return 0
 

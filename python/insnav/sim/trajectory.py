@@ -34,7 +34,10 @@ It is integrated on a 0.05 s grid that contains every transition breakpoint
 Gauss-Legendre quadrature (local error ~ h^7 f^(6) / 2e6 < 1e-12 m); the weak dependence of the radii on latitude is resolved by a
 fixed-point iteration, latitude inside an interval by cubic Hermite
 interpolation.  The position error is below 1e-9 m over an hour (see
-``tests/test_sim_truth.py``).
+``tests/test_sim_truth.py``).  The grid is built and integrated in chunks
+of 600 s on demand, carrying each running sum into the next chunk, and only
+a few chunks are kept: memory does not grow with the scenario's length, and
+the numbers are those of one pass over the whole grid, bit for bit.
 
 Specific force and angular rate (Groves 2013, eqs. (5.44), (5.19)):
 
@@ -224,9 +227,13 @@ class Trajectory:
     grid_step : float, optional
         Nominal step of the position integration grid [s]; every transition
         breakpoint is added to the grid.
+    chunk_steps : int, optional
+        Grid steps integrated at a time, on demand (600 s at 0.05 s): memory
+        holds a few chunks, not the scenario's grid; any value gives the same
+        numbers, bit for bit.
     """
 
-    def __init__(self, scenario: Scenario, grid_step: float = 0.05):
+    def __init__(self, scenario: Scenario, grid_step: float = 0.05, chunk_steps: int = 12_000):
         sc = scenario
         self.sc = sc
         self.t0, self.t_end = sc.t0, sc.t_end
@@ -242,15 +249,82 @@ class Trajectory:
         bps = [self._acc.breakpoints, self._turn.breakpoints, self._climb.breakpoints]
         for o in osc:
             bps.append(np.array([o.start, o.start + w, o.end - w, o.end]))
-        n_uniform = max(1, int(np.ceil((self.t_end - self.t0) / grid_step - 1e-9)))
-        grid = np.concatenate([np.linspace(self.t0, self.t_end, n_uniform + 1)] + bps)
-        grid = np.unique(grid[(grid >= self.t0) & (grid <= self.t_end)])
-        # merge points closer than 1 us (from rounding of breakpoints)
-        keep = np.concatenate([[True], np.diff(grid) > 1e-6])
-        self._grid = grid[keep]
-        self._grid[-1] = self.t_end
         self._vehicle = _VehicleMotion(sc) if (sc.lateral_slip > 0 or sc.vertical_bounce > 0) else None
-        self._integrate_position()
+        # The grid: np.linspace(t0, t_end, n_uniform + 1) and every breakpoint in [t0, t_end], sorted, points
+        # closer than 1 us to the previous one merged (rounding of breakpoints), the last one set to t_end.
+        # It is made and integrated chunk by chunk, on demand (a day's grid and its values would take
+        # ~160 MB); chunk c holds the uniform points cK .. (c+1)K - 1 and the breakpoints between them.
+        self._n_uniform = max(1, int(np.ceil((self.t_end - self.t0) / grid_step - 1e-9)))
+        bps = np.unique(np.concatenate(bps))
+        self._bps = bps[(bps >= self.t0) & (bps <= self.t_end)]
+        self._chunk_k = int(chunk_steps)
+        self._n_chunks = max(1, -(-self._n_uniform // self._chunk_k))
+        self._chunk_first = np.array([self._grid_chunk(c)[0] for c in range(self._n_chunks)])
+        # carried sums at the start of each chunk (height, the four latitude iterations, longitude), filled
+        # as the chunks are first integrated; a few integrated chunks are kept (most recently used)
+        self._carry = {0: (0.0, (0.0,) * 4, 0.0)}
+        self._cache: dict[int, tuple] = {}
+        self._cache_size = 3
+
+    # -- the position grid, chunk by chunk -------------------------------------
+    def _uniform(self, k0: int, k1: int) -> np.ndarray:
+        """Points k0..k1-1 of ``np.linspace(t0, t_end, n_uniform + 1)``, bit for bit (its arithmetic)."""
+        n, t0, t_end = self._n_uniform, self.t0, self.t_end
+        k = np.arange(k0, k1, dtype=float)
+        step = (t_end - t0) / n
+        y = (k / n) * (t_end - t0) if step == 0 else k * step
+        y += t0
+        if k1 > n:
+            y[-1] = t_end
+        return y
+
+    def _grid_chunk(self, c: int) -> np.ndarray:
+        """The grid points of chunk ``c`` (half open: without the next chunk's first point)."""
+        K, n = self._chunk_k, self._n_uniform
+        last = c == self._n_chunks - 1
+        k0, k1 = c * K, (n + 1 if last else (c + 1) * K)
+        u = self._uniform(k0, k1)
+        lo = u[0]
+        bps = self._bps[(self._bps >= lo) & (self._bps <= self.t_end)] if last else \
+            self._bps[(self._bps >= lo) & (self._bps < self._uniform(k1, k1 + 1)[0])]
+        cand = np.unique(np.concatenate([u, bps]))
+        if c == 0:
+            prev = -np.inf
+        else:  # the last candidate of the chunk before: its last uniform point or a breakpoint after it
+            prev = self._uniform(k0 - 1, k0)[0]
+            before = self._bps[self._bps < lo]
+            if before.size:
+                prev = max(prev, before[-1])
+        g = cand[np.diff(np.concatenate([[prev], cand])) > 1e-6]
+        if last:
+            g[-1] = self.t_end
+        return g
+
+    def _chunk(self, c: int) -> tuple:
+        """Chunk ``c`` of the grid, closed by the next chunk's first point, and its integrated values:
+        ``(g, h, h_dot, lat, lat_dot, lon, lon_dot)``."""
+        hit = self._cache.pop(c, None)
+        if hit is None:
+            for j in range(max(k for k in self._carry if k <= c), c):  # the carried sums up to chunk c
+                self._chunk(j)
+            g = self._grid_chunk(c)
+            if c + 1 < self._n_chunks:
+                g = np.concatenate([g, [self._chunk_first[c + 1]]])
+            hit, carry = self._integrate_position(g, self._carry[c])
+            if c + 1 < self._n_chunks:
+                self._carry[c + 1] = carry
+            if len(self._cache) >= self._cache_size:
+                self._cache.pop(next(iter(self._cache)))
+        self._cache[c] = hit
+        return hit
+
+    def _chunk_of(self, t) -> np.ndarray:
+        """The chunk holding the grid interval of each time ``t``."""
+        return np.clip(np.searchsorted(self._chunk_first, t, side="right") - 1, 0, self._n_chunks - 1)
+
+    def grid(self) -> np.ndarray:
+        """The whole position-integration grid [s] (built chunk by chunk; for tests and plots)."""
+        return np.concatenate([self._grid_chunk(c) for c in range(self._n_chunks)])
 
     # -- kinematics ---------------------------------------------------------
     def kinematics(self, t, sorted_t: bool = False) -> Kinematics:
@@ -337,72 +411,68 @@ class Trajectory:
         return np.stack([V * cg * np.cos(psi), V * cg * np.sin(psi), -V * np.sin(gam)], axis=-1)
 
     # -- position -------------------------------------------------------------
-    def _integrate_position(self, chunk: int = 50_000):
-        """Height, latitude and longitude on the grid by Gauss-Legendre quadrature of the velocity.
+    def _integrate_position(self, g: np.ndarray, carry: tuple) -> tuple:
+        """Height, latitude and longitude on the grid points ``g`` by Gauss-Legendre quadrature of the velocity.
 
-        The grid intervals are integrated ``chunk`` at a time (the node arrays
-        of a whole day would take about 1 GB); every running sum carries its
-        value over from the previous chunk, so the result is that of one pass
-        over the whole grid, bit for bit.
+        ``carry``: the running sums from the grid's start at ``g[0]`` (of dh, of dlat in each of the four
+        latitude iterations -- a fixed point: the radii depend on the latitude --, of dlon); the sums at
+        ``g[-1]`` are returned with the values, so chunks integrated in turn give one pass over the whole
+        grid, bit for bit (``np.cumsum`` continued from the carried value).
+
+        Returns
+        -------
+        values : tuple
+            ``(g, h, h_dot, lat, lat_dot, lon, lon_dot)`` at the points [s, m, m/s, rad, rad/s, rad, rad/s].
+        carry : tuple
+            The running sums at ``g[-1]``.
         """
-        g = self._grid
         sc = self.sc
+        s_h, s_lat, s_lon = carry[0], list(carry[1]), carry[2]
         xg, wg = np.polynomial.legendre.leggauss(_GL_POS_NODES)
         vg = self._velocity(g)
         n = len(g)
-        hg, latg, long = np.empty(n), np.empty(n), np.empty(n)
-        lat_dot_g = np.empty(n)
-        # running sums from the grid's start, at the first point of the chunk: of dh, of dlat in each of
-        # the four latitude iterations (a fixed point: the radii depend on the latitude), of dlon
-        s_h, s_lat, s_lon = 0.0, [0.0] * 4, 0.0
 
         def run_on(carry: float, steps):
             """carry, carry + steps[0], ...: the whole grid's np.cumsum, continued over a chunk."""
             return np.cumsum(np.concatenate([[carry], steps]))
 
-        for a in range(0, n - 1, chunk):
-            b = min(n - 1, a + chunk)  # intervals a..b-1, grid points a..b
-            pts = slice(a, b + 1)
-            h_int = g[a + 1:b + 1] - g[a:b]
-            mid = 0.5 * (g[a + 1:b + 1] + g[a:b])
+        if n == 1:
+            hg, latg, long = np.array([sc.h0]), np.array([sc.lat0]), np.array([sc.lon0])
+            lat_dot_g = vg[:, 0] / (earth.radii(latg)[0] + hg)
+        else:
+            h_int = g[1:] - g[:-1]
+            mid = 0.5 * (g[1:] + g[:-1])
             tn = mid[:, None] + 0.5 * h_int[:, None] * xg[None, :]  # (K, m)
             wn = 0.5 * h_int[:, None] * wg[None, :]
             vn = self._velocity(tn.ravel()).reshape(tn.shape + (3,))
-            k, bas = self._hermite_basis(tn)
-            basis = (k - a, bas)  # interval indices local to the points a..b
+            basis = self._hermite_basis(tn, g)
             # height: exact quadrature of -v_D
             S = run_on(s_h, -(wn * vn[..., 2]).sum(axis=1))
             s_h = S[-1]
-            h_c = sc.h0 + S
-            hg[pts] = h_c
-            h_nodes = self._hermite(h_c, -vg[pts, 2], tn, basis)
-            lat_c = np.full(b + 1 - a, sc.lat0)
+            hg = sc.h0 + S
+            h_nodes = self._hermite(hg, -vg[:, 2], tn, basis)
+            lat_c = np.full(n, sc.lat0)
             for it in range(4):
                 R_M, _ = earth.radii(lat_c)
-                lat_nodes = self._hermite(lat_c, vg[pts, 0] / (R_M + h_c), tn, basis)
+                lat_nodes = self._hermite(lat_c, vg[:, 0] / (R_M + hg), tn, basis)
                 R_Mn, _ = earth.radii(lat_nodes)
                 S = run_on(s_lat[it], (wn * vn[..., 0] / (R_Mn + h_nodes)).sum(axis=1))
                 s_lat[it] = S[-1]
                 lat_c = sc.lat0 + S
             R_M, _ = earth.radii(lat_c)
-            latg[pts] = lat_c
-            lat_dot_g[pts] = vg[pts, 0] / (R_M + h_c)
-            lat_nodes = self._hermite(lat_c, lat_dot_g[pts], tn, basis)
+            latg = lat_c
+            lat_dot_g = vg[:, 0] / (R_M + hg)
+            lat_nodes = self._hermite(latg, lat_dot_g, tn, basis)
             _, R_Nn = earth.radii(lat_nodes)
             S = run_on(s_lon, (wn * vn[..., 1] / ((R_Nn + h_nodes) * np.cos(lat_nodes))).sum(axis=1))
             s_lon = S[-1]
-            long[pts] = sc.lon0 + S
-        if n == 1:
-            hg[0], latg[0], long[0] = sc.h0, sc.lat0, sc.lon0
-            lat_dot_g[0] = vg[0, 0] / (earth.radii(latg)[0][0] + hg[0])
+            long = sc.lon0 + S
         _, R_N = earth.radii(latg)
-        self._vg = vg
-        self._hg, self._h_dot_g = hg, -vg[:, 2]
-        self._latg, self._lat_dot_g = latg, lat_dot_g
-        self._long, self._lon_dot_g = long, vg[:, 1] / ((R_N + hg) * np.cos(latg))
+        values = (g, hg, -vg[:, 2], latg, lat_dot_g, long, vg[:, 1] / ((R_N + hg) * np.cos(latg)))
+        return values, (s_h, tuple(s_lat), s_lon)
 
-    def _hermite_basis(self, t):
-        g = self._grid
+    @staticmethod
+    def _hermite_basis(t, g):
         k = np.clip(np.searchsorted(g, t, side="right") - 1, 0, len(g) - 2)
         hk = g[k + 1] - g[k]
         s = (t - g[k]) / hk
@@ -410,9 +480,10 @@ class Trajectory:
         s3 = s2 * s
         return k, (2 * s3 - 3 * s2 + 1, (s3 - 2 * s2 + s) * hk, 3 * s2 - 2 * s3, (s3 - s2) * hk)
 
-    def _hermite(self, yg, dyg, t, basis=None):
+    @staticmethod
+    def _hermite(yg, dyg, t, basis):
         """Cubic Hermite interpolation of grid values ``yg`` with slopes ``dyg`` at ``t``."""
-        k, (b0, b1, b2, b3) = self._hermite_basis(t) if basis is None else basis
+        k, (b0, b1, b2, b3) = basis
         return b0 * yg[k] + b1 * dyg[k] + b2 * yg[k + 1] + b3 * dyg[k + 1]
 
     def position(self, t, exact: bool = True):
@@ -436,25 +507,41 @@ class Trajectory:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if np.any(t < self.t0 - 1e-9) or np.any(t > self.t_end + 1e-9):
             raise ValueError(f"times outside the trajectory [{self.t0}, {self.t_end}]")
+        if t.size == 0:
+            return self._position_in_chunk(t, 0, exact)
+        c = self._chunk_of(t)
+        if c[0] == c[-1] and np.all(c == c[0]):
+            return self._position_in_chunk(t, int(c[0]), exact)
+        out = np.empty((3,) + t.shape)
+        if np.all(c[1:] >= c[:-1]):  # times in order (the usual case): a slice per chunk
+            cuts = np.flatnonzero(np.diff(c)) + 1
+            for i0, i1 in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [t.size]])):
+                out[:, i0:i1] = self._position_in_chunk(t[i0:i1], int(c[i0]), exact)
+        else:
+            for cc in np.unique(c):  # each chunk integrated once per call
+                sel = c == cc
+                out[:, sel] = self._position_in_chunk(t[sel], int(cc), exact)
+        return out[0], out[1], out[2]
+
+    def _position_in_chunk(self, t, c: int, exact: bool):
+        g, hg, h_dot_g, latg, lat_dot_g, long, lon_dot_g = self._chunk(c)
         if not exact:
-            basis = self._hermite_basis(t)
-            return (self._hermite(self._latg, self._lat_dot_g, t, basis),
-                    self._hermite(self._long, self._lon_dot_g, t, basis),
-                    self._hermite(self._hg, self._h_dot_g, t, basis))
-        g = self._grid
-        k = np.clip(np.searchsorted(g, t, side="right") - 1, 0, len(g) - 2)
+            basis = self._hermite_basis(t, g)
+            return (self._hermite(latg, lat_dot_g, t, basis), self._hermite(long, lon_dot_g, t, basis),
+                    self._hermite(hg, h_dot_g, t, basis))
+        k = np.clip(np.searchsorted(g, t, side="right") - 1, 0, len(g) - 2) if len(g) > 1 else np.zeros(t.shape, int)
         dt = t - g[k]
         xg, wg = np.polynomial.legendre.leggauss(_GL_POS_NODES)
         tn = g[k][:, None] + 0.5 * dt[:, None] * (xg[None, :] + 1.0)
         wn = 0.5 * dt[:, None] * wg[None, :]
         vn = self._velocity(tn.ravel()).reshape(tn.shape + (3,))
-        basis = self._hermite_basis(tn)
-        lat_n = self._hermite(self._latg, self._lat_dot_g, tn, basis)
-        h_n = self._hermite(self._hg, self._h_dot_g, tn, basis)
+        basis = self._hermite_basis(tn, g)
+        lat_n = self._hermite(latg, lat_dot_g, tn, basis)
+        h_n = self._hermite(hg, h_dot_g, tn, basis)
         R_M, R_N = earth.radii(lat_n)
-        h = self._hg[k] - (wn * vn[..., 2]).sum(axis=1)
-        lat = self._latg[k] + (wn * vn[..., 0] / (R_M + h_n)).sum(axis=1)
-        lon = self._long[k] + (wn * vn[..., 1] / ((R_N + h_n) * np.cos(lat_n))).sum(axis=1)
+        h = hg[k] - (wn * vn[..., 2]).sum(axis=1)
+        lat = latg[k] + (wn * vn[..., 0] / (R_M + h_n)).sum(axis=1)
+        lon = long[k] + (wn * vn[..., 1] / ((R_N + h_n) * np.cos(lat_n))).sum(axis=1)
         return lat, lon, h
 
     # -- full state -----------------------------------------------------------
