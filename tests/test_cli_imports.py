@@ -73,7 +73,7 @@ def test_spp_command_with_config_reads_toml(shared_data, tmp_path):
 
 
 def _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath):
-    """The insnav modules loaded by ``insnav run --filter rtk`` (GPS L1, instantaneous AR) on the MatRTKLIB
+    """The probe's record and the modules loaded by ``insnav run --filter rtk`` (GPS L1, instantaneous AR) on the MatRTKLIB
     static pair with ``INSNAV_RTK_FASTPATH=fastpath``; the run must succeed."""
     d = shared_data / "matrtklib_static_septentrio"
     if not (d / "rover.obs").is_file():
@@ -84,7 +84,7 @@ def _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath):
                              d / "base.obs", "--nav", d / "base.nav", "--config", tmp_path / "rtk.toml", "--quiet",
                              "--out", tmp_path / "rtk.pos"], {"INSNAV_RTK_FASTPATH": fastpath})
     assert out["rc"] == 0
-    return set(out["modules"]) - interpreter_modules
+    return out, set(out["modules"]) - interpreter_modules
 
 
 def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_modules):
@@ -94,7 +94,7 @@ def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_
     engine; not the dataset folder format (insnav.data.dataset: the solution layer imports
     insnav.data.nav only), not the SPP solver (the navigation files are read through gnss.rinex),
     no other filter or command."""
-    mods = _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath="0")
+    out, mods = _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath="0")
     assert {"insnav.filters.rtk", "insnav.gnss.rtk", "insnav._core"} <= mods  # the probe did run the command
     assert (tmp_path / "rtk.pos").is_file() and (tmp_path / "rtk.pos.rtk.csv").is_file()
     assert sorted(m for m in mods if m.split(".")[0] in HEAVY_PACKAGES) == []
@@ -111,7 +111,7 @@ def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_
 def test_rtk_command_without_numpy_loads_neither_numpy_nor_argparse(shared_data, tmp_path, interpreter_modules):
     """The same command on the path of insnav.cli.rtk_fast (GPS, RINEX 3, .pos): one call into the
     compiled core, no numpy, no argparse, none of the Python RTK modules."""
-    mods = _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath="1")
+    out, mods = _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath="1")
     assert {"insnav.cli.rtk_fast", "insnav._core", "insnav.gnss._rtk_keys"} <= mods
     assert (tmp_path / "rtk.pos").is_file() and (tmp_path / "rtk.pos.rtk.csv").is_file()
     banned = ("numpy", "argparse", "insnav.gnss.rtk", "insnav.filters", "insnav.config", "insnav.gnss.rinex")
