@@ -72,6 +72,20 @@ def test_spp_command_with_config_reads_toml(shared_data, tmp_path):
     assert 'systems = "G"' in (tmp_path / "spp.csv.config.toml").read_text()
 
 
+def _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath):
+    """The probe's record and the modules loaded by ``insnav run --filter rtk`` (GPS L1, instantaneous AR) on the MatRTKLIB
+    static pair with ``INSNAV_RTK_FASTPATH=fastpath``; the run must succeed."""
+    d = shared_data / "matrtklib_static_septentrio"
+    if not (d / "rover.obs").is_file():
+        pytest.skip(f"{d} not found (the MatRTKLIB static data set)")
+    (tmp_path / "rtk.toml").write_text('filter = "rtk"\n\n[rtk]\nar_mode = "instantaneous"\nsystems = "G"\n'
+                                       'frequencies = 1\n')
+    out = _loaded(tmp_path, ["run", "--filter", "rtk", "--format", "rinex", "--obs", d / "rover.obs", "--base",
+                             d / "base.obs", "--nav", d / "base.nav", "--config", tmp_path / "rtk.toml", "--quiet",
+                             "--out", tmp_path / "rtk.pos"], {"INSNAV_RTK_FASTPATH": fastpath})
+    assert out["rc"] == 0
+    return out, set(out["modules"]) - interpreter_modules
+
 
 def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_modules):
     """``insnav run --filter rtk`` on its usual path (``INSNAV_RTK_FASTPATH=0``; bench/rtk_compare.py
@@ -80,16 +94,7 @@ def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_
     engine; not the dataset folder format (insnav.data.dataset: the solution layer imports
     insnav.data.nav only), not the SPP solver (the navigation files are read through gnss.rinex),
     no other filter or command."""
-    d = shared_data / "matrtklib_static_septentrio"
-    if not (d / "rover.obs").is_file():
-        pytest.skip(f"{d} not found (the MatRTKLIB static data set)")
-    (tmp_path / "rtk.toml").write_text('filter = "rtk"\n\n[rtk]\nar_mode = "instantaneous"\nsystems = "G"\n'
-                                       'frequencies = 1\n')
-    out = _loaded(tmp_path, ["run", "--filter", "rtk", "--format", "rinex", "--obs", d / "rover.obs", "--base",
-                             d / "base.obs", "--nav", d / "base.nav", "--config", tmp_path / "rtk.toml", "--quiet",
-                             "--out", tmp_path / "rtk.pos"], {"INSNAV_RTK_FASTPATH": "0"})
-    assert out["rc"] == 0
-    mods = set(out["modules"]) - interpreter_modules
+    out, mods = _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath="0")
     assert {"insnav.filters.rtk", "insnav.gnss.rtk", "insnav._core"} <= mods  # the probe did run the command
     assert (tmp_path / "rtk.pos").is_file() and (tmp_path / "rtk.pos.rtk.csv").is_file()
     assert sorted(m for m in mods if m.split(".")[0] in HEAVY_PACKAGES) == []
@@ -106,16 +111,7 @@ def test_rtk_command_loads_only_what_it_runs(shared_data, tmp_path, interpreter_
 def test_rtk_command_without_numpy_loads_neither_numpy_nor_argparse(shared_data, tmp_path, interpreter_modules):
     """The same command on the path of insnav.cli.rtk_fast (GPS, RINEX 3, .pos): one call into the
     compiled core, no numpy, no argparse, none of the Python RTK modules."""
-    d = shared_data / "matrtklib_static_septentrio"
-    if not (d / "rover.obs").is_file():
-        pytest.skip(f"{d} not found (the MatRTKLIB static data set)")
-    (tmp_path / "rtk.toml").write_text('filter = "rtk"\n\n[rtk]\nar_mode = "instantaneous"\nsystems = "G"\n'
-                                       'frequencies = 1\n')
-    out = _loaded(tmp_path, ["run", "--filter", "rtk", "--format", "rinex", "--obs", d / "rover.obs", "--base",
-                             d / "base.obs", "--nav", d / "base.nav", "--config", tmp_path / "rtk.toml", "--quiet",
-                             "--out", tmp_path / "rtk.pos"], {"INSNAV_RTK_FASTPATH": "1"})
-    assert out["rc"] == 0
-    mods = set(out["modules"]) - interpreter_modules
+    out, mods = _rtk_run_modules(shared_data, tmp_path, interpreter_modules, fastpath="1")
     assert {"insnav.cli.rtk_fast", "insnav._core", "insnav.gnss._rtk_keys"} <= mods
     assert (tmp_path / "rtk.pos").is_file() and (tmp_path / "rtk.pos.rtk.csv").is_file()
     banned = ("numpy", "argparse", "insnav.gnss.rtk", "insnav.filters", "insnav.config", "insnav.gnss.rinex")

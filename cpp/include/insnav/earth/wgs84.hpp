@@ -76,8 +76,11 @@ inline Vec3 geodetic_to_ecef(double lat, double lon, double h) {
 
 /// ECEF [m] -> (lat, lon, h).  Fixed-point iteration on latitude, with the
 /// height computed as p cos(lat) + z sin(lat) - a^2/N, well conditioned at the
-/// poles; < 1e-9 m for -1e4 m < h < 1e7 m.
-inline Vec3 ecef_to_geodetic(const Vec3& r_e) {
+/// poles; < 1e-9 m for -1e4 m < h < 1e7 m.  The iteration stops when latitude
+/// changes by less than lat_tol_rad, after 8 steps at the most; lat_tol_rad = 0
+/// always takes the 8 steps, the operations of earth.py ecef_to_geodetic (whose
+/// last bit differs from the early stop for about 1 point in 2000).
+inline Vec3 ecef_to_geodetic(const Vec3& r_e, double lat_tol_rad = 1e-15) {
   const double p = std::hypot(r_e.x(), r_e.y());
   const double z = r_e.z();
   const double lon = std::atan2(r_e.y(), r_e.x());
@@ -88,7 +91,7 @@ inline Vec3 ecef_to_geodetic(const Vec3& r_e) {
     const double N = kA / std::sqrt(1.0 - kE2 * s * s);
     h = p * c + z * s - kA * kA / N;
     const double lat_new = std::atan2(z, p * (1.0 - kE2 * N / (N + h)));
-    if (std::abs(lat_new - lat) < 1e-15) { lat = lat_new; break; }
+    if (std::abs(lat_new - lat) < lat_tol_rad) { lat = lat_new; break; }
     lat = lat_new;
   }
   const double s = std::sin(lat), c = std::cos(lat);

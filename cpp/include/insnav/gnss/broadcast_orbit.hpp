@@ -36,6 +36,10 @@ namespace insnav::gnss {
 inline constexpr double kOmegaEDotGps = 7.2921151467e-5;
 /// Speed of light, IS-GPS-200 20.3.4.3 [m/s].
 inline constexpr double kCLight = 299792458.0;
+/// GPS value of the Earth's gravitational constant, IS-GPS-200 Table 20-IV [m^3/s^2] (ephemeris.py GM_GPS).
+inline constexpr double kGmGps = 3.986005e14;
+/// Relativistic clock constant F = -2 sqrt(GM) / c^2, IS-GPS-200 20.3.3.3.3.1 [s/sqrt(m)] (ephemeris.py F_REL).
+inline constexpr double kFRelGps = -4.442807633e-10;
 
 /// Columns of a Kepler element table (GPS LNAV, Galileo, BeiDou D1/D2).
 struct KeplerCols {
@@ -76,22 +80,46 @@ struct OrbitState {
 
 namespace detail {
 
-/// Position / velocity from Kepler elements at GPS time t (IS-GPS-200 Table 20-IV and its analytic
-/// time derivative; the operations of ephemeris.sat_position_velocity).
-inline void kepler_state(const double* k, double t, double gm, double omega_e, OrbitState& out) {
+/// Mean anomaly M = M_0 + (sqrt(GM / A^3) + Delta n) t_k [rad] of Kepler elements k at GPS time t [s]
+/// (IS-GPS-200 Table 20-IV).
+inline double kepler_mean_anomaly(const double* k, double t, double gm) {
   using C = KeplerCols;
   const double A = k[C::kSqrtA] * k[C::kSqrtA];
   const double n0 = std::sqrt(gm / std::pow(A, 3.0));
   const double tk = t - k[C::kToe];
   const double n = n0 + k[C::kDeltaN];
-  const double M = k[C::kM0] + n * tk;
-  const double e = k[C::kE];
+  return k[C::kM0] + n * tk;
+}
+
+/// One Newton step on Kepler's equation E - e sin E = M (IS-GPS-200 Table 20-IV): the correction dE [rad],
+/// to be subtracted from E.
+inline double kepler_newton_step(double E, double e, double M) {
+  return (E - e * std::sin(E) - M) / (1.0 - e * std::cos(E));
+}
+
+/// Eccentric anomaly E [rad] of mean anomaly M [rad] and eccentricity e: Newton's method from E = M, at
+/// most 10 steps, until the step is below 1e-14 rad.
+inline double kepler_eccentric_anomaly(double M, double e) {
   double E = M;
   for (int i = 0; i < 10; ++i) {
-    const double dE = (E - e * std::sin(E) - M) / (1.0 - e * std::cos(E));
+    const double dE = kepler_newton_step(E, e, M);
     E = E - dE;
     if (std::abs(dE) < 1e-14) break;
   }
+  return E;
+}
+
+/// Position / velocity from Kepler elements k at GPS time t [s] with the eccentric anomaly E [rad] already
+/// solved (IS-GPS-200 Table 20-IV and its analytic time derivative; the operations of
+/// ephemeris.sat_position_velocity after its Kepler loop).  For callers that solve Kepler's equation for a
+/// whole batch at once (rtk_rinex.hpp); kepler_state solves it row by row.
+inline void kepler_state_at_E(const double* k, double t, double gm, double omega_e, double E, OrbitState& out) {
+  using C = KeplerCols;
+  const double A = k[C::kSqrtA] * k[C::kSqrtA];
+  const double n0 = std::sqrt(gm / std::pow(A, 3.0));
+  const double tk = t - k[C::kToe];
+  const double n = n0 + k[C::kDeltaN];
+  const double e = k[C::kE];
   const double sE = std::sin(E), cE = std::cos(E);
   const double one_m_ecE = 1.0 - e * cE;
   const double sq = std::sqrt(1.0 - e * e);
@@ -128,6 +156,26 @@ inline void kepler_state(const double* k, double t, double gm, double omega_e, O
   out.v[2] = yp_dot * si + yp * ci * i_dot;
   out.E = E;
   out.E_dot = E_dot;
+}
+
+/// Position / velocity from Kepler elements k at GPS time t [s] (IS-GPS-200 Table 20-IV; the operations of
+/// ephemeris.sat_position_velocity, Kepler's equation solved for this row alone).
+inline void kepler_state(const double* k, double t, double gm, double omega_e, OrbitState& out) {
+  const double E = kepler_eccentric_anomaly(kepler_mean_anomaly(k, t, gm), k[KeplerCols::kE]);
+  kepler_state_at_E(k, t, gm, omega_e, E, out);
+}
+
+/// Clock of Kepler elements el at GPS time t [s] from the state st of that time: the polynomial plus the
+/// relativistic term F e sqrt(A) sin E (IS-GPS-200 20.3.3.3.3.1), no group delay: bias [s], drift [s/s].
+inline void kepler_clock(const double* el, double t, const OrbitState& st, double f_rel, double& bias,
+                         double& drift) {
+  using C = KeplerCols;
+  const double dt = t - el[C::kToc];
+  bias = el[C::kAf0] + el[C::kAf1] * dt + el[C::kAf2] * dt * dt;
+  drift = el[C::kAf1] + 2.0 * el[C::kAf2] * dt;
+  const double kr = f_rel * el[C::kE] * el[C::kSqrtA];
+  bias = bias + kr * std::sin(st.E);
+  drift = drift + kr * std::cos(st.E) * st.E_dot;
 }
 
 /// BeiDou GEO (BDS-SIS-ICD-B1I 3.0 Table 5-11): the orbit in the GK frame (node without
@@ -289,15 +337,7 @@ inline void transmit_states_kepler(const double* elem, const std::int64_t* idx, 
     const double theta = kOmegaEDotGps * tau;
     detail::rotate_z(st.r, theta, out.r_e + 3 * i);
     detail::rotate_z(st.v, theta, out.v_e + 3 * i);
-    // clock polynomial plus the relativistic term F e sqrt(A) sin E (IS-GPS-200 20.3.3.3.3.1)
-    const double dt = t_tx - el[C::kToc];
-    double bias = el[C::kAf0] + el[C::kAf1] * dt + el[C::kAf2] * dt * dt;
-    double drift = el[C::kAf1] + 2.0 * el[C::kAf2] * dt;
-    const double kr = c.f_rel * el[C::kE] * el[C::kSqrtA];
-    bias = bias + kr * std::sin(st.E);
-    drift = drift + kr * std::cos(st.E) * st.E_dot;
-    out.clock_bias_s[i] = bias;
-    out.clock_drift_s_s[i] = drift;
+    detail::kepler_clock(el, t_tx, st, c.f_rel, out.clock_bias_s[i], out.clock_drift_s_s[i]);
     out.t_tx_gps_s[i] = t_tx;
     out.range_m[i] = detail::range_to(out.r_e + 3 * i, r_rx + r_rx_stride * i);
   }

@@ -79,13 +79,14 @@
 
 #include "insnav/earth/wgs84.hpp"
 #include "insnav/gnss/ambiguity_resolution.hpp"
+#include "insnav/gnss/broadcast_orbit.hpp"
 #include "insnav/gnss/double_difference.hpp"
 #include "insnav/gnss/lambda.hpp"
 
 namespace insnav::gnss {
 
-inline constexpr double kCLight = 299792458.0;     // [m/s]
-inline constexpr double kOmegaE = 7.2921151467e-5;  // IS-GPS Earth rate [rad/s] (Sagnac term)
+// kCLight: broadcast_orbit.hpp
+inline constexpr double kOmegaE = kOmegaEDotGps;  // IS-GPS Earth rate [rad/s] (Sagnac term)
 
 inline constexpr int kMaxAmbStates = 120; // tracked single-differenced ambiguities
 inline constexpr int kMaxIonoStates = 64;  // tracked single-differenced ionosphere states (iono_mode kEstimate)

@@ -24,6 +24,8 @@
 #include <string>
 #include <vector>
 
+#include "insnav/earth/wgs84.hpp"
+#include "insnav/gnss/broadcast_orbit.hpp"
 #include "insnav/gnss/ephemeris_selection.hpp"
 #include "insnav/gnss/rtk.hpp"
 #include "insnav/io/rinex3_obs.hpp"
@@ -55,16 +57,8 @@ struct RtkRinexResult {
 
 namespace rtk_rinex_detail {
 
-inline constexpr double kC = 299792458.0;
-inline constexpr double kGmGps = 3.986005e14;          // ephemeris.py GM_GPS
-inline constexpr double kOmegaE = 7.2921151467e-5;     // ephemeris.py OMEGA_E_DOT
-inline constexpr double kFRel = -4.442807633e-10;      // ephemeris.py F_REL
 inline constexpr double kDefaultFitS = 4.0 * 3600.0;
 inline constexpr double kWeekS = 604800.0;
-inline constexpr double kGm = 3.986004418e14;          // rtk.py transmit_states' Taylor step
-inline constexpr double kA = 6378137.0;                // WGS-84 (earth.py)
-inline constexpr double kF = 1.0 / 298.257223563;
-inline constexpr double kE2 = kF * (2.0 - kF);
 inline constexpr long kGpsEpochDays = 3657;            // 1980-01-06 from 1970-01-01
 
 /// Python's float formatting of ``f"{v:{width}.{dec}f}"`` (NaN as "nan", no "-nan").
@@ -204,91 +198,68 @@ inline bool read_nav(const std::string& path, const std::string& want, KeplerTab
   return true;
 }
 
+/// The record r of t as a row of KeplerCols (broadcast_orbit.hpp); t_k from the full GPS time of toe.
+inline void kepler_elements(const KeplerTable& t, std::size_t r, double* k) {
+  using C = KeplerCols;
+  const auto& o = t.orbit[r];
+  k[C::kSqrtA] = o[kSqrtA];
+  k[C::kToe] = t.toe[r];
+  k[C::kDeltaN] = o[kDeltaN];
+  k[C::kM0] = o[kM0];
+  k[C::kE] = o[kE];
+  k[C::kOmega] = o[kOmega];
+  k[C::kCus] = o[kCus];
+  k[C::kCuc] = o[kCuc];
+  k[C::kCrs] = o[kCrs];
+  k[C::kCrc] = o[kCrc];
+  k[C::kCis] = o[kCis];
+  k[C::kCic] = o[kCic];
+  k[C::kI0] = o[kI0];
+  k[C::kIdot] = o[kIdot];
+  k[C::kOmega0] = o[kOmega0];
+  k[C::kOmegaDot] = o[kOmegaDot];
+  k[C::kToeSow] = o[kToeSow];
+  k[C::kToc] = t.toc[r];
+  k[C::kAf0] = t.af0[r];
+  k[C::kAf1] = t.af1[r];
+  k[C::kAf2] = t.af2[r];
+  k[C::kGeo] = 0.0;
+}
+
 /// Satellite state of ephemeris.py sat_position_velocity + sat_clock (relativistic) for a batch of
-/// one system: Kepler's equation by Newton iteration until every row's step is below 1e-14 (the
-/// vectorised loop of ephemeris.py _kepler, at most 10 steps for the whole batch).
+/// one system: out[i] = (r_e [m], v_e [m/s], clock bias [s], drift [s/s]) at GPS time tt[i].  The
+/// orbit and clock are broadcast_orbit.hpp's; only Kepler's equation is solved here, for the whole
+/// batch at once as the vectorised loop of ephemeris.py _kepler does: every row takes another Newton
+/// step until every row's step is below 1e-14 rad (at most 10).  kepler_state stops each row at its
+/// own convergence instead; the extra steps change the last bit of E for about 2 % of rows (GPS /
+/// QZSS eccentricities), which the byte-identical .pos / .rtk.csv of tests/test_rtk_fast.py cannot take.
 inline void kepler_batch(const KeplerTable& t, const std::vector<std::int64_t>& idx, const std::vector<double>& tt,
                          std::vector<std::array<double, 8>>& out) {
   const std::size_t k = idx.size();
   out.assign(k, {});
-  std::vector<double> M(k), E(k), e(k), A(k), n(k), tk(k);
+  std::vector<std::array<double, KeplerCols::kCols>> el(k);
+  std::vector<double> M(k), E(k);
   for (std::size_t i = 0; i < k; ++i) {
-    const auto& o = t.orbit[static_cast<std::size_t>(idx[i])];
-    A[i] = o[kSqrtA] * o[kSqrtA];
-    const double n0 = std::sqrt(kGmGps / std::pow(A[i], 3.0));
-    tk[i] = tt[i] - t.toe[static_cast<std::size_t>(idx[i])];
-    n[i] = n0 + o[kDeltaN];
-    M[i] = o[kM0] + n[i] * tk[i];
-    e[i] = o[kE];
+    kepler_elements(t, static_cast<std::size_t>(idx[i]), el[i].data());
+    M[i] = detail::kepler_mean_anomaly(el[i].data(), tt[i], kGmGps);
     E[i] = M[i];
   }
   for (int it = 0; it < 10; ++it) {
     bool all = true;
     for (std::size_t i = 0; i < k; ++i) {
-      const double dE = (E[i] - e[i] * std::sin(E[i]) - M[i]) / (1.0 - e[i] * std::cos(E[i]));
+      const double dE = detail::kepler_newton_step(E[i], el[i][KeplerCols::kE], M[i]);
       E[i] = E[i] - dE;
       if (!(std::abs(dE) < 1e-14)) all = false;
     }
     if (all) break;
   }
+  OrbitState st;
   for (std::size_t i = 0; i < k; ++i) {
-    const std::size_t r = static_cast<std::size_t>(idx[i]);
-    const auto& o = t.orbit[r];
-    const double sE = std::sin(E[i]), cE = std::cos(E[i]);
-    const double one_m_ecE = 1.0 - e[i] * cE;
-    const double sq = std::sqrt(1.0 - e[i] * e[i]);
-    const double nu = std::atan2(sq * sE, cE - e[i]);
-    const double phi = nu + o[kOmega];
-    const double s2 = std::sin(2.0 * phi), c2 = std::cos(2.0 * phi);
-    const double du = o[kCus] * s2 + o[kCuc] * c2;
-    const double dr = o[kCrs] * s2 + o[kCrc] * c2;
-    const double di = o[kCis] * s2 + o[kCic] * c2;
-    const double u = phi + du;
-    const double rr = A[i] * one_m_ecE + dr;
-    const double inc = o[kI0] + di + o[kIdot] * tk[i];
-    const double xp = rr * std::cos(u), yp = rr * std::sin(u);
-    const double Om = o[kOmega0] + (o[kOmegaDot] - kOmegaE) * tk[i] - kOmegaE * o[kToeSow];
-    const double cO = std::cos(Om), sO = std::sin(Om), ci = std::cos(inc), si = std::sin(inc);
-    const double x = xp * cO - yp * ci * sO;
-    const double y = xp * sO + yp * ci * cO;
-    const double z = yp * si;
-    const double E_dot = n[i] / one_m_ecE;
-    const double nu_dot = E_dot * sq / one_m_ecE;
-    const double phi_dot = nu_dot;
-    const double u_dot = phi_dot * (1.0 + 2.0 * (o[kCus] * c2 - o[kCuc] * s2));
-    const double r_dot = A[i] * e[i] * sE * E_dot + 2.0 * phi_dot * (o[kCrs] * c2 - o[kCrc] * s2);
-    const double i_dot = o[kIdot] + 2.0 * phi_dot * (o[kCis] * c2 - o[kCic] * s2);
-    const double Om_dot = o[kOmegaDot] - kOmegaE;
-    const double xp_dot = r_dot * std::cos(u) - yp * u_dot;
-    const double yp_dot = r_dot * std::sin(u) + xp * u_dot;
-    const double vx = xp_dot * cO - yp_dot * ci * sO + yp * si * i_dot * sO - y * Om_dot;
-    const double vy = xp_dot * sO + yp_dot * ci * cO - yp * si * i_dot * cO + x * Om_dot;
-    const double vz = yp_dot * si + yp * ci * i_dot;
-    // clock (sat_clock, relativistic, no group delay)
-    const double dt = tt[i] - t.toc[r];
-    double bias = t.af0[r] + t.af1[r] * dt + t.af2[r] * dt * dt;
-    double drift = t.af1[r] + 2.0 * t.af2[r] * dt;
-    const double kr = kFRel * e[i] * o[kSqrtA];
-    bias = bias + kr * std::sin(E[i]);
-    drift = drift + kr * std::cos(E[i]) * E_dot;
-    out[i] = {x, y, z, vx, vy, vz, bias, drift};
+    detail::kepler_state_at_E(el[i].data(), tt[i], kGmGps, kOmegaEDotGps, E[i], st);
+    double bias, drift;
+    detail::kepler_clock(el[i].data(), tt[i], st, kFRelGps, bias, drift);
+    out[i] = {st.r[0], st.r[1], st.r[2], st.v[0], st.v[1], st.v[2], bias, drift};
   }
-}
-
-inline void ecef_to_geodetic(const double* r, double& lat, double& lon, double& h) {
-  const double x = r[0], y = r[1], z = r[2];
-  const double p = std::hypot(x, y);
-  lon = std::atan2(y, x);
-  lat = std::atan2(z, p * (1.0 - kE2));
-  for (int it = 0; it < 8; ++it) {
-    const double s = std::sin(lat), c = std::cos(lat);
-    const double N = kA / std::sqrt(1.0 - kE2 * s * s);
-    h = p * c + z * s - kA * kA / N;
-    lat = std::atan2(z, p * (1.0 - kE2 * N / (N + h)));
-  }
-  const double s = std::sin(lat), c = std::cos(lat);
-  const double N = kA / std::sqrt(1.0 - kE2 * s * s);
-  h = p * c + z * s - kA * kA / N;
 }
 
 inline double band_hz(char sys, char band) {
@@ -390,8 +361,9 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
     if (!B.has_approx || !std::isfinite(a[0]) || !std::isfinite(a[1]) || !std::isfinite(a[2]) ||
         (a[0] == 0.0 && a[1] == 0.0 && a[2] == 0.0))
       return fail("no base position");
-    double lat, lon, hh;
-    ecef_to_geodetic(a, lat, lon, hh);
+    // all 8 latitude steps, as earth.py (wgs84.hpp's early stop moves the last bit of about 1 point in 2000)
+    const Vec3 llh_b = wgs84::ecef_to_geodetic(Vec3(a[0], a[1], a[2]), 0.0);
+    const double lat = llh_b(0), lon = llh_b(1);
     const double h = B.antenna_hen_m[0], e = B.antenna_hen_m[1], n = B.antenna_hen_m[2];
     const double sl = std::sin(lat), cl = std::cos(lat), so = std::sin(lon), co = std::cos(lon);
     const double up[3] = {cl * co, cl * so, sl}, east[3] = {-so, co, 0.0}, north[3] = {-sl * co, -sl * so, cl};
@@ -473,7 +445,7 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
     }
     const std::size_t nu = u_rows.size();
     std::vector<double> t_ref(nu);
-    for (std::size_t u = 0; u < nu; ++u) t_ref[u] = t_tag[u_rows[u]] - code[u_rows[u]] / kC;
+    for (std::size_t u = 0; u < nu; ++u) t_ref[u] = t_tag[u_rows[u]] - code[u_rows[u]] / kCLight;
     std::vector<std::array<double, 8>> st(nu);
     std::vector<std::uint8_t> valid(nu, 0);
     for (int s = 0; s < 2; ++s) {  // unique(system): G, then J
@@ -509,7 +481,7 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
         valid[ok_u[q]] = std::isfinite(out[q][0]) && std::isfinite(out[q][1]) && std::isfinite(out[q][2]);
       }
     }
-    const double w = 7.2921151467e-5;
+    const double w = kOmegaEDotGps;
     std::vector<std::array<double, 3>> a0(nu);
     for (std::size_t u = 0; u < nu; ++u) {
       const auto& S = st[u];
@@ -519,16 +491,16 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
       const double wv[3] = {0.0 * S[5] - w * S[4], w * S[3] - 0.0 * S[5], 0.0 * S[4] - 0.0 * S[3]};
       const double wr[3] = {0.0 * S[2] - w * S[1], w * S[0] - 0.0 * S[2], 0.0 * S[1] - 0.0 * S[0]};
       const double wwr[3] = {0.0 * wr[2] - w * wr[1], w * wr[0] - 0.0 * wr[2], 0.0 * wr[1] - 0.0 * wr[0]};
-      for (int c = 0; c < 3; ++c) a0[u][c] = -kGm * S[c] / rn3 - 2.0 * wv[c] - wwr[c];
+      for (int c = 0; c < 3; ++c) a0[u][c] = -wgs84::kGM * S[c] / rn3 - 2.0 * wv[c] - wwr[c];
     }
     for (std::size_t i = 0; i < m; ++i) {
       const std::size_t j = inv[i];
       if (j == SIZE_MAX || !valid[j]) continue;
       const auto& S = st[j];
-      const double dt = (t_tag[i] - code[i] / kC - S[6]) - t_ref[j];
+      const double dt = (t_tag[i] - code[i] / kCLight - S[6]) - t_ref[j];
       if (!(std::abs(dt) < 0.05)) continue;
       for (int c = 0; c < 3; ++c) sat_state[i][c] = S[c] + S[3 + c] * dt + 0.5 * a0[j][c] * (dt * dt);
-      sat_state[i][3] = kC * (S[6] + S[7] * dt);
+      sat_state[i][3] = kCLight * (S[6] + S[7] * dt);
     }
   }
   // engine rows (rtk.py receiver_rows)
@@ -546,7 +518,7 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
       const auto ch = T.chosen.find(s);
       for (int f = 0; f < std::min(nf, 3); ++f) {
         double lam = NAN;
-        if (ch != T.chosen.end() && !ch->second[f].empty()) lam = kC / band_hz(s, ch->second[f][0]);
+        if (ch != T.chosen.end() && !ch->second[f].empty()) lam = kCLight / band_hz(s, ch->second[f][0]);
         const double* o = &T.obs[i * 15 + f * 5];
         row[2 + 5 * f] = o[0];
         row[3 + 5 * f] = std::isfinite(lam) ? o[1] : NAN;
@@ -622,9 +594,8 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
     tab_t += '\n';
     if (q <= 0) continue;
     // .pos (rtk.py write_rtklib_pos): ENU covariance Q = C P C^T
-    const double r3[3] = {out.r_e(0), out.r_e(1), out.r_e(2)};
-    double lat, lon, h;
-    ecef_to_geodetic(r3, lat, lon, h);
+    const Vec3 llh = wgs84::ecef_to_geodetic(out.r_e, 0.0);  // all 8 steps, as earth.py
+    const double lat = llh(0), lon = llh(1), h = llh(2);
     const double sl = std::sin(lat), cl = std::cos(lat), so = std::sin(lon), co = std::cos(lon);
     const double C[3][3] = {{-so, co, 0.0}, {-sl * co, -sl * so, cl}, {cl * co, cl * so, sl}};
     double CP[3][3], Q[3][3];
