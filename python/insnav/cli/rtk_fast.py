@@ -144,6 +144,10 @@ def run_fast(argv) -> int | None:
     out = Path(opts["out"])
     if out.suffix.lower() != ".pos" or out.is_dir():
         return None
+    writes = [out, out.with_suffix(out.suffix + ".rtk.csv"), out.with_suffix(out.suffix + ".config.toml")]
+    reads = [opts["obs"], opts["base"], *nav] + ([opts["config"]] if opts.get("config") else [])
+    if {os.path.realpath(p) for p in writes} & {os.path.realpath(p) for p in reads}:
+        return None  # an output names an input: the usual path refuses it with one line
     from .. import _core
 
     if not hasattr(_core, "rtk_rinex_files"):

@@ -453,8 +453,13 @@ def cmd_run_gnss_only(args, stages) -> int:
     if not pos and out.suffix.lower() not in FORMATS:
         raise UserError(f"--out {out}: unknown format {out.suffix!r}; use {'.pos or ' if name == 'rtk' else ''}"
                         f"one of {', '.join(FORMATS)}")
-    if name == "spp":  # (rtk: its RTKLIB-layout .pos carries no insnav header to recognise it by)
+    if name == "spp":
         check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
+    else:  # rtk: an RTKLIB-layout .pos carries no insnav header to recognise it by, so an older one is
+        # replaced; an input of the run never is
+        from .._outputs import check_outputs, input_files
+
+        check_outputs(_run_outputs(out, False, (sidecar,)), input_files(*_input_paths(args)), overwrite=True)
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
         ds, opts, write, line = inputs(args)
