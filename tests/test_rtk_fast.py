@@ -149,6 +149,25 @@ def test_other_options_take_the_usual_path(tmp_path):
         assert (tmp_path / out).stat().st_size > 0
 
 
+def test_an_output_naming_an_input_is_refused_and_the_input_kept(tmp_path):
+    toml = ROOT / "bench" / "rtk" / "matrtklib_l1_g_inst.toml"
+    rover, base, nav = _files(toml.stem)
+    for fast in (True, False):
+        d = tmp_path / ("fast" if fast else "usual")
+        d.mkdir()
+        nav_pos = d / "nav.pos"  # a navigation file whose name ends in .pos, given as --out too
+        nav_pos.write_bytes(nav[0].read_bytes())
+        rc, lines, err, _ = _run(_rtk_args(rover, base, [nav_pos], toml, out=nav_pos), d, fast)
+        assert rc == 2 and err.startswith("insnav run: error: --out ") and "is an input of this run" in err, err
+        assert nav_pos.read_bytes() == nav[0].read_bytes()
+        assert sorted(os.listdir(d)) == ["nav.pos"]
+        # an older solution (no insnav header in the RTKLIB layout) is replaced, as before
+        (d / "old.pos").write_text("% an older solution\n")
+        rc, lines, err, _ = _run(_rtk_args(rover, base, [nav_pos], toml, out="old.pos"), d, fast)
+        assert rc == 0, err
+        assert (d / "old.pos").read_text().count("\n") > 300
+
+
 def test_a_copied_nav_file_with_cr_line_ends_is_left_to_the_usual_path(tmp_path):
     toml = ROOT / "bench" / "rtk" / "matrtklib_l1_g_inst.toml"
     rover, base, nav = _files(toml.stem)
