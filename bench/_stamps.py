@@ -69,7 +69,7 @@ RINEX = (f"{_PY}gnss/rinex.py", f"{_PY}gnss/broadcast.py", f"{_PY}gnss/ephemeris
          f"{_CPP}gnss/gdop_selection.hpp")
 #: carrier-phase RTK: the C++ engine (double differences, float EKF, MLAMBDA) and its Python run
 RTK = (f"{_CPP}gnss/rtk.hpp", f"{_CPP}gnss/lambda.hpp", f"{_CPP}gnss/ambiguity_resolution.hpp",
-       f"{_CPP}gnss/double_difference.hpp",
+       f"{_CPP}gnss/double_difference.hpp", f"{_CPP}gnss/noise_vce.hpp",
        "cpp/bindings/bind_rtk.cpp", f"{_PY}gnss/rtk.py", f"{_PY}gnss/rtk_noise.py", f"{_PY}gnss/_rtk_keys.py",
        f"{_PY}filters/rtk.py", f"{_CPP}gnss/rtk_rinex.hpp", f"{_PY}cli/rtk_fast.py",
        f"{_PY}gnss/rinex.py", f"{_PY}gnss/broadcast.py", f"{_PY}gnss/ephemeris.py")

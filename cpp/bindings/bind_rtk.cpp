@@ -2,13 +2,17 @@
 // loop (insnav/gnss/rtk.hpp) with the GIL released.
 #include <pybind11/stl.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <memory>
 #include <map>
 #include <string>
 #include <vector>
 
 #include "common.hpp"
 #include "insnav/gnss/lambda.hpp"
+#include "insnav/gnss/noise_vce.hpp"
 #include "insnav/gnss/rtk.hpp"
 #include "insnav/gnss/rtk_rinex.hpp"
 #include "insnav/io/rinex3_obs.hpp"
@@ -243,6 +247,63 @@ void check_rows(const DArray& rows, const char* name) {
     throw py::value_error(std::string(name) + ": expected shape (m, " + std::to_string(gnss::RtkRow::kCols) + ")");
 }
 
+static_assert(gnss::kMaxVceRows >= gnss::kMaxRows, "the VCE blocks hold an engine epoch's rows of one kind");
+
+// The LS-VCE sums of the fixed epochs' rows (insnav/gnss/noise_vce.hpp) at the variance factors k.
+py::dict rtk_vce_sums(const IArray& epoch, const py::array_t<int, py::array::c_style | py::array::forcecast>& code,
+                      const py::array_t<int, py::array::c_style | py::array::forcecast>& group, const DArray& y,
+                      const DArray& h, const DArray& var_own, const DArray& var_ref, const DArray& k,
+                      bool redundancy) {
+  const py::ssize_t n = y.ndim() == 1 ? y.shape(0) : -1;
+  if (n < 0) throw py::value_error("rtk_vce_sums: y must be 1-D");
+  if (epoch.size() != n || code.size() != n || group.size() != n || var_own.size() != n || var_ref.size() != n)
+    throw py::value_error("rtk_vce_sums: epoch, code, group, y, var_own, var_ref must have one entry per row");
+  if (h.ndim() != 2 || h.shape(0) != n || h.shape(1) != 3) throw py::value_error("rtk_vce_sums: h must be (n, 3)");
+  if (k.size() != 2) throw py::value_error("rtk_vce_sums: k must hold 2 variance factors");
+  gnss::VceRows rows;
+  rows.n = n;
+  rows.epoch = epoch.data();
+  rows.code = code.data();
+  rows.group = group.data();
+  rows.y = y.data();
+  rows.h = h.data();
+  rows.var_own = var_own.data();
+  rows.var_ref = var_ref.data();
+  const Eigen::Vector2d kv(k.data()[0], k.data()[1]);
+  py::array_t<double> red(redundancy ? n : 0);
+  double* rp = redundancy ? red.mutable_data() : nullptr;
+  for (py::ssize_t i = 0; redundancy && i < n; ++i) rp[i] = NAN;
+  gnss::VceSums s;
+  {
+    py::gil_scoped_release release;
+    std::vector<std::int64_t> order(static_cast<std::size_t>(n));
+    for (py::ssize_t i = 0; i < n; ++i) order[static_cast<std::size_t>(i)] = i;
+    const std::int64_t* ep = rows.epoch;
+    std::stable_sort(order.begin(), order.end(), [ep](std::int64_t a, std::int64_t b) { return ep[a] < ep[b]; });
+    auto acc = std::make_unique<gnss::VceAccumulator>();
+    s = acc->accumulate(rows, order.data(), kv, rp);
+  }
+  if (s.status == gnss::VceStatus::kTooManyRows)
+    throw py::value_error("rtk_vce_sums: epoch " + std::to_string(s.bad_epoch) + " has more than " +
+                          std::to_string(gnss::kMaxVceRows) + " rows of one kind");
+  if (s.status == gnss::VceStatus::kNotPositiveDefinite)
+    throw py::value_error("rtk_vce_sums: epoch " + std::to_string(s.bad_epoch) +
+                          ": covariance of the double differences (or A^T W A) not positive definite");
+  py::array_t<double> N({static_cast<py::ssize_t>(2), static_cast<py::ssize_t>(2)}), l(2);
+  for (int i = 0; i < 2; ++i) {
+    l.mutable_data()[i] = s.l(i);
+    for (int j = 0; j < 2; ++j) N.mutable_data()[2 * i + j] = s.N(i, j);
+  }
+  py::dict d;
+  d["N"] = N;
+  d["l"] = l;
+  d["n_epochs"] = s.n_epochs;
+  d["n_phase_rows"] = s.n_phase_rows;
+  d["n_code_rows"] = s.n_code_rows;
+  if (redundancy) d["redundancy"] = red;
+  return d;
+}
+
 py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& rover_rows, const IArray& base_off,
                  const DArray& base_rows, const IArray& base_index, const DArray& r_base_e, const py::dict& opts,
                  bool record_iono, bool record_fixed_rows) {
@@ -464,6 +525,12 @@ void bind_rtk(py::module_& m) {
   m.def("lambda_success_rate", &lambda_success_rate, py::arg("Q"), py::arg("variance_factor") = 1.0,
         "Bootstrapped success rate of the decorrelated ambiguities of variance_factor * Q (Teunissen 1998), "
         "a lower bound of ILS's.");
+  m.def("rtk_vce_sums", &rtk_vce_sums, py::arg("epoch"), py::arg("code"), py::arg("group"), py::arg("y"), py::arg("h"),
+        py::arg("var_own"), py::arg("var_ref"), py::arg("k"), py::arg("redundancy") = false,
+        "LS-VCE sums of the RTK fixed epochs' double differences at the variance factors k = (k_phi, k_P) "
+        "(Teunissen & Amiri-Simkooei 2008, sec. 3; insnav/gnss/noise_vce.hpp): dict with N (2, 2), l (2,), "
+        "n_epochs, n_phase_rows, n_code_rows of the usable epochs and, with redundancy=True, the redundancy number "
+        "of every row (NaN in unusable epochs).");
   m.def("rtk_run", &rtk_run, py::arg("t_rover"), py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"),
         py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
         py::arg("record_iono") = false, py::arg("record_fixed_rows") = false,

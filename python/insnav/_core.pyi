@@ -376,6 +376,17 @@ def rtk_run(
     record_iono: bool = False,
     record_fixed_rows: bool = False,
 ) -> dict[str, Any]: ...
+def rtk_vce_sums(
+    epoch: npt.ArrayLike,
+    code: npt.ArrayLike,
+    group: npt.ArrayLike,
+    y: npt.ArrayLike,
+    h: npt.ArrayLike,
+    var_own: npt.ArrayLike,
+    var_ref: npt.ArrayLike,
+    k: npt.ArrayLike,
+    redundancy: bool = False,
+) -> dict[str, Any]: ...
 def slip_detect(t: npt.ArrayLike, off: npt.ArrayLike, rows: npt.ArrayLike, options: dict[str, Any]) -> np.ndarray: ...
 def rtk_rinex_files(rover: str, base: str, nav: list[str], systems: str, options: dict[str, Any],
                     base_position_e_m: list[float] | None,

@@ -196,39 +196,26 @@ def vce_epoch_matrices(A, y, Qs, k):
     return N, l, Pperp_diag
 
 
-def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOCHS, floor_m: float = NOISE_FLOOR_M,
-                   code_floor_m: float = CODE_FLOOR_M, max_iter: int = 50, tol: float = 1e-12,
-                   return_redundancy: bool = False):
-    """Phase and code variance factors of the fixed epochs' double differences (LS-VCE).
+def _check_epochs(n_epochs: int, min_epochs: int):
+    if n_epochs < min_epochs:
+        raise NoiseEstimateError(f"rtk noise estimate: {n_epochs} fixed epochs with double differences, at least "
+                                 f"{min_epochs} needed; the configured sigmas stay")
 
-    Parameters
-    ----------
-    rows : dict
-        The fixed epochs' rows (``RtkSolution.fixed_rows``: ``epoch``, ``code``, ``group``, ``y`` [m],
-        ``h`` (k, 3), ``var_own``, ``var_ref`` [m^2]).
-    options : RtkOptions, optional
-        The configuration the rows were recorded with (its sigmas are scaled); default: the ``[rtk]``
-        defaults.  :func:`insnav.gnss.rtk.estimate_noise` also takes a ``[rtk]`` table (dict).
-    min_epochs : int
-        Fewest usable fixed epochs; fewer raise :class:`NoiseEstimateError`.
-    floor_m : float
-        Floor of the estimated phase sigma max(a, b) [m].
-    code_floor_m : float
-        Floor of the estimated code sigma max(a, b) x ratio [m].
-    max_iter, tol : int, float
-        Iterations of Q_y at the estimate and their relative tolerance on k.
-    return_redundancy : bool
-        Also return the redundancy number of every row (NaN for rows of unusable epochs).
+
+def _vce_factors_numpy(rows: dict, min_epochs: int, max_iter: int, tol: float):
+    """The LS-VCE iteration with the per-epoch sums in numpy (:func:`vce_epoch_matrices`, stacked by
+    epoch size): the reference of :func:`_vce_factors_core`.
 
     Returns
     -------
-    NoiseEstimate (and the (k,) redundancy numbers)
+    k : (c,) ndarray
+        Variance factors (k_phi[, k_P]); c = 1 without code rows.
+    cov : (c, c) ndarray
+        N^{-1} at k.
+    red : (n,) ndarray
+        Redundancy numbers of the rows at k (NaN in unusable epochs).
+    n_epochs, n_phase, n_code, iterations : int
     """
-    # the three settings the rows were weighted with (no import of insnav.gnss.rtk, which imports this module)
-    a0, b0, ratio0 = ((options.sigma_phase_a_m, options.sigma_phase_b_m, options.code_phase_ratio)
-                      if options is not None else
-                      tuple(RTK_DEFAULTS[k] for k in ("sigma_phase_a_m", "sigma_phase_b_m", "code_phase_ratio")))
-    rows = {key: np.asarray(rows[key]) for key in ("epoch", "code", "group", "y", "h", "var_own", "var_ref")}
     epoch = rows["epoch"]
     order = np.argsort(epoch, kind="stable")
     ep_sorted = epoch[order]
@@ -244,9 +231,7 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
             continue
         n_epochs += 1
         buckets.setdefault(sel.size, []).append((sel, A, y, Qphi, QP, code))
-    if n_epochs < min_epochs:
-        raise NoiseEstimateError(f"rtk noise estimate: {n_epochs} fixed epochs with double differences, at least "
-                                 f"{min_epochs} needed; the configured sigmas stay")
+    _check_epochs(n_epochs, min_epochs)
     stacks = [(np.stack([b[1] for b in v]), np.stack([b[2] for b in v]), np.stack([b[3] for b in v]),
                np.stack([b[4] for b in v]), v) for v in buckets.values()]
     n_code = sum(int(b[5].sum()) for v in buckets.values() for b in v)
@@ -274,7 +259,78 @@ def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOC
         N += Nb.sum(0)
         for j, b in enumerate(v):
             red[b[0]] = rb[j]
-    cov = np.linalg.inv(N)
+    return k, np.linalg.inv(N), red, n_epochs, n_phase, n_code, it
+
+
+def _vce_factors_core(rows: dict, min_epochs: int, max_iter: int, tol: float):
+    """The LS-VCE iteration with the per-epoch sums in C++ (``_core.rtk_vce_sums``,
+    ``cpp/include/insnav/gnss/noise_vce.hpp``: the whitened 3 x 3 form of the same N and l); returns as
+    :func:`_vce_factors_numpy`."""
+    from .. import _core
+
+    args = (np.ascontiguousarray(rows["epoch"], np.int64), np.ascontiguousarray(rows["code"], np.int32),
+            np.ascontiguousarray(rows["group"], np.int32), np.ascontiguousarray(rows["y"], float),
+            np.ascontiguousarray(np.reshape(rows["h"], (-1, 3)), float),
+            np.ascontiguousarray(rows["var_own"], float), np.ascontiguousarray(rows["var_ref"], float))
+    # the first iteration at k = 1 also counts the usable epochs and rows (an absent code block adds 0)
+    s = _core.rtk_vce_sums(*args, np.ones(2))
+    n_epochs, n_phase, n_code = int(s["n_epochs"]), int(s["n_phase_rows"]), int(s["n_code_rows"])
+    _check_epochs(n_epochs, min_epochs)
+    c = 2 if n_code > 0 else 1
+    k = np.ones(c)
+    for it in range(1, max_iter + 1):
+        if it > 1:
+            s = _core.rtk_vce_sums(*args, np.r_[k, np.ones(2 - c)])
+        k_new = np.linalg.solve(s["N"][:c, :c], s["l"][:c])
+        k_new = np.maximum(k_new, 1e-12)  # a variance factor stays positive (sigma >= 1e-6 x configured)
+        done = np.all(np.abs(k_new - k) <= tol * np.abs(k_new))
+        k = k_new
+        if done:
+            break
+    # precision and redundancy at the estimate
+    s = _core.rtk_vce_sums(*args, np.r_[k, np.ones(2 - c)], redundancy=True)
+    return k, np.linalg.inv(s["N"][:c, :c]), s["redundancy"], n_epochs, n_phase, n_code, it
+
+
+def estimate_noise(rows: dict, options=None, *, min_epochs: int = MIN_NOISE_EPOCHS, floor_m: float = NOISE_FLOOR_M,
+                   code_floor_m: float = CODE_FLOOR_M, max_iter: int = 50, tol: float = 1e-12,
+                   return_redundancy: bool = False, _accumulate: str = "core"):
+    """Phase and code variance factors of the fixed epochs' double differences (LS-VCE).
+
+    Parameters
+    ----------
+    rows : dict
+        The fixed epochs' rows (``RtkSolution.fixed_rows``: ``epoch``, ``code``, ``group``, ``y`` [m],
+        ``h`` (k, 3), ``var_own``, ``var_ref`` [m^2]).
+    options : RtkOptions, optional
+        The configuration the rows were recorded with (its sigmas are scaled); default: the ``[rtk]``
+        defaults.  :func:`insnav.gnss.rtk.estimate_noise` also takes a ``[rtk]`` table (dict).
+    min_epochs : int
+        Fewest usable fixed epochs; fewer raise :class:`NoiseEstimateError`.
+    floor_m : float
+        Floor of the estimated phase sigma max(a, b) [m].
+    code_floor_m : float
+        Floor of the estimated code sigma max(a, b) x ratio [m].
+    max_iter, tol : int, float
+        Iterations of Q_y at the estimate and their relative tolerance on k.
+    return_redundancy : bool
+        Also return the redundancy number of every row (NaN for rows of unusable epochs).
+    _accumulate : {"core", "numpy"}
+        Where the per-epoch sums are computed: C++ (``_core.rtk_vce_sums``) or the numpy reference
+        (:func:`vce_epoch_matrices`; private, for the tests).
+
+    Returns
+    -------
+    NoiseEstimate (and the (k,) redundancy numbers)
+    """
+    # the three settings the rows were weighted with (no import of insnav.gnss.rtk, which imports this module)
+    a0, b0, ratio0 = ((options.sigma_phase_a_m, options.sigma_phase_b_m, options.code_phase_ratio)
+                      if options is not None else
+                      tuple(RTK_DEFAULTS[k] for k in ("sigma_phase_a_m", "sigma_phase_b_m", "code_phase_ratio")))
+    rows = {key: np.asarray(rows[key]) for key in ("epoch", "code", "group", "y", "h", "var_own", "var_ref")}
+    factors = _vce_factors_numpy if _accumulate == "numpy" else _vce_factors_core
+    k, cov, red, n_epochs, n_phase, n_code, it = factors(rows, min_epochs, max_iter, tol)
+    c = k.size
     code_rows = np.asarray(rows["code"]).astype(bool)
     r_phase = float(np.nansum(np.where(code_rows, np.nan, red)))
     r_code = float(np.nansum(np.where(code_rows, red, np.nan)))
