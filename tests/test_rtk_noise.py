@@ -5,6 +5,11 @@ least-squares variance component estimation, Teunissen & Amiri-Simkooei 2008, J.
   right-hand side and redundancy numbers against a brute-force computation with an explicit
   least-squares projector (1e-9); Helmert's form k_c = v_c^T Q_c^-1 v_c / r_c at the estimate; scale
   equivariance (all observations x s -> sigmas x s);
+* the C++ sums (``_core.rtk_vce_sums``, ``cpp/include/insnav/gnss/noise_vce.hpp``: the whitened 3 x 3
+  form) against the numpy reference (:func:`vce_epoch_matrices`) per k to 1e-9 relative, and the whole
+  estimate (factors, their covariance, the redundancy numbers, the iterations) through either on synthetic
+  rows of several groups, on the simulated baseline below and on the Spirent drive (shared data); the floors
+  through either;
 * the engine's recorded fixed rows on a noiseless simulated baseline: the integer ambiguities are
   removed (post-fit phase residuals below 2 mm, a cycle is 0.19 m);
 * the simulated ``rtk-open-sky-car`` baseline with white noise only (no multipath, residual
@@ -24,7 +29,8 @@ import numpy as np
 import pytest
 
 from insnav.gnss.rtk import RtkOptions, solve_rtk
-from insnav.gnss.rtk_noise import CODE_FLOOR_M, NOISE_FLOOR_M, NoiseEstimateError, estimate_noise, vce_epoch_matrices
+from insnav.gnss.rtk_noise import (CODE_FLOOR_M, NOISE_FLOOR_M, NoiseEstimateError, _epoch_blocks, estimate_noise,
+                                   vce_epoch_matrices)
 
 DATA = Path(os.environ.get("INSNAV_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 SP = DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
@@ -169,21 +175,116 @@ def test_estimator_recovers_synthetic_sigmas_and_is_scale_equivariant():
     np.testing.assert_allclose(est_c.factor, est.factor / s ** 2, rtol=1e-7)
 
 
-def test_floor_and_too_few_epochs():
+@pytest.mark.parametrize("accumulate", ["core", "numpy"])
+def test_floor_and_too_few_epochs(accumulate):
     rng = np.random.default_rng(2)
     rows = _synthetic_rows(rng, 30, 1e-5, 0.25)  # 0.01 mm phase: below the floor
-    est = estimate_noise(rows, RtkOptions())
+    est = estimate_noise(rows, RtkOptions(), _accumulate=accumulate)
     assert est.floored and est.sigma_phase_a_m == pytest.approx(NOISE_FLOOR_M)
     assert abs(est.code_phase_ratio * est.sigma_phase_a_m / 0.25 - 1.0) < 0.1  # the code sigma kept
     assert est.sigma_phase_raw_m < 3e-5 and not est.code_floored
     quiet = _synthetic_rows(np.random.default_rng(4), 30, 0.001, 0.002)  # code 2 mm: below its 1 cm floor
-    est_q = estimate_noise(quiet, RtkOptions())
+    est_q = estimate_noise(quiet, RtkOptions(), _accumulate=accumulate)
     assert est_q.code_floored and not est_q.floored
     assert est_q.code_phase_ratio * est_q.sigma_phase_a_m == pytest.approx(CODE_FLOOR_M, rel=1e-12)
     assert abs(est_q.sigma_code_raw_m / 0.002 - 1.0) < 0.2
     few = {k: v[rows["epoch"] < 9] for k, v in rows.items()}
     with pytest.raises(NoiseEstimateError, match=r"^rtk noise estimate: 9 fixed epochs .* at least 10 needed"):
-        estimate_noise(few, RtkOptions())
+        estimate_noise(few, RtkOptions(), _accumulate=accumulate)
+
+
+# --------------------------------------------------------------------------- C++ sums against the numpy reference
+
+
+def _two_group_rows(rng, n_epochs):
+    """Rows of two groups per kind (as two systems or frequencies: each its own reference), with a
+    phase-only epoch, a rank-deficient one and a 3-row one among them (skipped alike by both)."""
+    parts = []
+    for g in range(2):
+        r = _synthetic_rows(rng, n_epochs, 0.001 * (1 + g), 0.3, n_sat=6 + g)
+        r["group"] = np.full(r["y"].size, g)
+        parts.append(r)
+    rows = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    keep = ~((rows["epoch"] == 2) & (rows["code"] == 1))  # epoch 2: phase only
+    rows = {k: v[keep] for k, v in rows.items()}
+    rows["h"] = rows["h"].copy()
+    rows["h"][rows["epoch"] == 4, 2] = 0.0  # epoch 4: rank(A) = 2
+    keep = ~((rows["epoch"] == 6) & ((rows["code"] == 1) | (rows["group"] == 1)))
+    keep[np.flatnonzero((rows["epoch"] == 6) & keep)[3:]] = False  # epoch 6: 3 rows
+    rows = {k: v[keep] for k, v in rows.items()}
+    perm = rng.permutation(rows["y"].size)  # the epochs' rows interleaved
+    return {k: v[perm] for k, v in rows.items()}
+
+
+def _core_sums(rows, k, redundancy=False):
+    from insnav import _core
+
+    return _core.rtk_vce_sums(rows["epoch"], rows["code"], rows["group"], rows["y"], rows["h"], rows["var_own"],
+                              rows["var_ref"], np.asarray(k, float), redundancy=redundancy)
+
+
+def test_core_sums_equal_the_numpy_epoch_matrices():
+    rows = _two_group_rows(np.random.default_rng(21), 12)
+    k = np.array([0.37, 4.1])
+    s = _core_sums(rows, k, redundancy=True)
+    N = np.zeros((2, 2))
+    l = np.zeros(2)
+    red = np.full(rows["y"].size, np.nan)
+    n_ep = 0
+    for e in np.unique(rows["epoch"]):
+        sel = np.flatnonzero(rows["epoch"] == e)
+        A, y, Qphi, QP, code = _epoch_blocks(rows, sel)
+        if sel.size < 4 or code.all() or np.linalg.matrix_rank(A) < 3:
+            continue
+        n_ep += 1
+        Nb, lb, rb = vce_epoch_matrices(A, y, [Qphi, QP], k)
+        N += Nb
+        l += lb
+        red[sel] = rb
+    assert s["n_epochs"] == n_ep == 9  # epochs 4 (rank 2) and 6 (3 rows) skipped, 2 (phase only) kept
+    np.testing.assert_allclose(s["N"], N, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(s["l"], l, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(s["redundancy"], red, rtol=0, atol=1e-9)  # NaN alike in the skipped epochs
+    assert np.array_equal(np.isnan(s["redundancy"]), np.isin(rows["epoch"], [4, 6]))
+
+
+def _assert_same_estimate(rows, opt):
+    a, ra = estimate_noise(rows, opt, return_redundancy=True)
+    b, rb = estimate_noise(rows, opt, return_redundancy=True, _accumulate="numpy")
+    assert (a.n_epochs, a.n_phase_rows, a.n_code_rows, a.iterations) == (b.n_epochs, b.n_phase_rows, b.n_code_rows,
+                                                                         b.iterations)
+    np.testing.assert_allclose(a.factor, b.factor, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(a.factor_cov, b.factor_cov, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(ra, rb, rtol=0, atol=1e-9)
+    for f in ("sigma_phase_a_m", "sigma_phase_b_m", "code_phase_ratio", "sigma_phase_a_sd_m", "code_phase_ratio_sd",
+              "redundancy_phase", "redundancy_code"):
+        assert getattr(a, f) == pytest.approx(getattr(b, f), rel=1e-9), f
+    return a
+
+
+def test_core_estimate_equals_the_numpy_reference_on_synthetic_rows():
+    rows = _two_group_rows(np.random.default_rng(22), 40)
+    _assert_same_estimate(rows, RtkOptions())
+    ph = {k: v[rows["code"] == 0] for k, v in rows.items()}  # one component
+    est = _assert_same_estimate(ph, RtkOptions())
+    assert np.isnan(est.factor[1])
+
+
+def test_core_estimate_equals_the_numpy_reference_on_the_spirent_drive():
+    if not (SP / "iono-Klob_tropo-Saast" / "Rover-dynamic_MO_Spirent.obs").exists():
+        pytest.skip(f"shared data absent: {SP} (set INSNAV_SHARED_DATA)")
+    from insnav.gnss.rtk import base_position_from_header, read_phase_obs
+
+    v = SP / "iono-Klob_tropo-Saast"
+    base = read_phase_obs(v / "Base-static_MO_Spirent.obs", "GE")
+    rs = solve_rtk(v / "Rover-dynamic_MO_Spirent.obs", base, [SP / "RINEX_GN_Spirent.23N", SP / "RINEX_EN_Spirent.23L"],
+                   r_base_e=base_position_from_header(base),
+                   options=dict(systems="GE", frequencies=2, elevation_mask_deg=15.0, ratio_threshold=3.0),
+                   record_fixed_rows=True)
+    fr = rs.fixed_rows
+    rows = {k: np.asarray(val)[np.asarray(fr["epoch"]) < 200] for k, val in fr.items()}  # the numpy side: 1 s
+    est = _assert_same_estimate(rows, rs.info["options"])
+    assert est.n_epochs >= 150 and est.n_phase_rows >= 20 * est.n_epochs
 
 
 # --------------------------------------------------------------------------- the engine on a simulated baseline
@@ -245,6 +346,8 @@ def test_engine_estimate_recovers_the_simulated_white_noise(white_sim):
     assert abs(est.sigma_phase_a_m / a_true - 1.0) < 0.10, est.text()
     assert abs(est.sigma_phase_b_m / a_true - 1.0) < 0.10, est.text()
     assert abs(est.code_phase_ratio / (0.3 / 0.002) - 1.0) < 0.10, est.text()
+    # the C++ sums and the numpy reference give the same estimate on these rows
+    _assert_same_estimate(rs.fixed_rows, rs.info["options"])
     # the opt-in run uses the estimate
     rs2 = solve_rtk(f["rover"], f["base"], f["nav"], options=dict(systems="GE", frequencies=2,
                                                                   elevation_mask_deg=10.0, noise="estimate"))
