@@ -64,7 +64,7 @@ def main(argv=None) -> int:
             d, e = run(ds, st, "configured"), run(ds, st, "estimate")
             lines.append(f"| {st['name']} | {100 * d['fix_rate']:.1f} % / {100 * e['fix_rate']:.1f} % "
                          f"({d['fixed']} / {e['fixed']} of {d['n']}) | {d['wrong']} / {e['wrong']} | "
-                         f"{d['rms_mm']:.1f} / {e['rms_mm']:.1f} | {e['a_mm']:.3f} / {e['ratio']:.0f} | "
+                         f"{d['rms_mm']:.2f} / {e['rms_mm']:.2f} | {e['a_mm']:.3f} / {e['ratio']:.0f} | "
                          f"{d['cpu_s']:.2f} / {e['cpu_s']:.2f} | {e['est']} |")
             print(lines[-1], flush=True)
     text = "\n".join(lines) + "\n"
