@@ -50,7 +50,8 @@ SIGMA = (f"{_CPP}filter/rbukf.hpp", f"{_CPP}filter/ukf.hpp", f"{_CPP}filter/augm
 TIGHT = INS + (f"{_CPP}engine/closed_loop.hpp", f"{_CPP}engine/tight_engine.hpp", f"{_CPP}filter/ekf.hpp",
                f"{_CPP}filter/error_model_linear.hpp", f"{_CPP}filter/kalman_update.hpp",
                f"{_CPP}filter/nis_gate.hpp", f"{_CPP}meas/pseudorange.hpp", f"{_CPP}meas/robust.hpp",
-               f"{_PY}filters/tight.py", f"{_PY}filters/_setup.py", f"{_PY}config.py", f"{_PY}gnss/clock.py")
+               f"{_CPP}filter/adaptive_noise.hpp", f"{_PY}filters/tight.py", f"{_PY}filters/_setup.py", f"{_PY}config.py",
+               f"{_PY}gnss/clock.py")
 #: the simulator (trajectory, IMU errors, loose fixes)
 SIM = (f"{_PY}sim/scenario.py", f"{_PY}sim/trajectory.py", f"{_PY}sim/imu.py", f"{_PY}sim/gnss_loose.py")
 #: simulated raw GNSS (pseudorange, range rate, constellation)

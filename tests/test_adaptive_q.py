@@ -9,7 +9,7 @@ random walk, angle random walk).
   Q is far off.
 * Estimate: on a simulated mover (the filter's IMU model family equals the simulated one), the
   velocity random walk factor is compared against the true scale of a wrongly configured Q.
-* The keys: TOML, validation (loose EKF only, window 0..256, 0 < min <= 1 <= max), the tuner runs with
+* The keys: TOML, validation (loose and tight EKF only, window 0..256, 0 < min <= 1 <= max), the tuner runs with
   the window on.
 """
 from __future__ import annotations
@@ -88,6 +88,6 @@ def test_keys_and_validation(tmp_path):
     for bad in (dict(adaptive_q_window=-1), dict(adaptive_q_window=257), dict(adaptive_q_window=2.5),
                 dict(adaptive_q_window=True), dict(adaptive_q_min=0.0), dict(adaptive_q_min=1.5),
                 dict(adaptive_q_max=0.5), dict(adaptive_q_max=float("inf")),
-                dict(adaptive_q_window=10, filter="rbukf"), dict(adaptive_q_window=10, coupling="tight")):
+                dict(adaptive_q_window=10, filter="rbukf"), dict(adaptive_q_window=10, coupling="tight", filter="ukf")):
         with pytest.raises(ConfigError, match="adaptive_q"):
             RunConfig(**bad).validate()

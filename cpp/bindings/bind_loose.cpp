@@ -81,15 +81,7 @@ LooseConfig loose_run_config_from(const py::dict& config) {
   if (!(cfg.adaptive_r.min_fraction > 0.0 && cfg.adaptive_r.min_fraction <= 1.0))
     throw py::value_error("adaptive_r_min_fraction must be in (0, 1]");
   // adaptive process noise (filter/adaptive_noise.hpp, engine/loose_engine.hpp)
-  const double wq = num(config, "adaptive_q_window", 0.0);
-  if (!(wq >= 0.0 && wq <= kMaxAdaptiveWindow && wq == std::floor(wq)))
-    throw py::value_error("adaptive_q_window must be an integer in 0.." + std::to_string(kMaxAdaptiveWindow));
-  cfg.adaptive_q.window = static_cast<int>(wq);
-  cfg.adaptive_q.min_fraction = num(config, "adaptive_q_min", cfg.adaptive_q.min_fraction);
-  cfg.adaptive_q.max_factor = num(config, "adaptive_q_max", cfg.adaptive_q.max_factor);
-  if (!(cfg.adaptive_q.min_fraction > 0.0 && cfg.adaptive_q.min_fraction <= 1.0 && cfg.adaptive_q.max_factor >= 1.0 &&
-        std::isfinite(cfg.adaptive_q.max_factor)))
-    throw py::value_error("adaptive_q_min must be in (0, 1] and adaptive_q_max finite and >= 1");
+  cfg.adaptive_q = adaptive_q_from(config, cfg.adaptive_q);
   return cfg;
 }
 

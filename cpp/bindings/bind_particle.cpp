@@ -171,6 +171,8 @@ void bind_particle(py::module_& m) {
         const TightConfig cfg = tight_config_from(config);
         if (cfg.pr_gm.enabled())
           throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states run with the tight ekf only");
+        if (cfg.adaptive_q.window > 0)
+          throw py::value_error("adaptive_q_window > 0: the EKF only (it scales the EKF's process noise), not " + filter);
         if (flag(config, "smooth", false))
           throw py::value_error("smooth: the RTS smoother runs with the EKF, RB-UKF and UKF (not " + filter + ")");
         const ParticleSetup ps = particle_setup(particle);

@@ -109,13 +109,28 @@ inline LooseConfig loose_config_from(const py::dict& d, const char* what, std::i
   return c;
 }
 
+/// The adaptive process-noise keys adaptive_q_window, adaptive_q_min, adaptive_q_max
+/// (filter/adaptive_noise.hpp; loose and tight runs), validated; q holds the defaults.
+inline AdaptiveNoiseConfig adaptive_q_from(const py::dict& d, AdaptiveNoiseConfig q) {
+  const double wq = num(d, "adaptive_q_window", 0.0);
+  if (!(wq >= 0.0 && wq <= kMaxAdaptiveWindow && wq == std::floor(wq)))
+    throw py::value_error("adaptive_q_window must be an integer in 0.." + std::to_string(kMaxAdaptiveWindow));
+  q.window = static_cast<int>(wq);
+  q.min_fraction = num(d, "adaptive_q_min", q.min_fraction);
+  q.max_factor = num(d, "adaptive_q_max", q.max_factor);
+  if (!(q.min_fraction > 0.0 && q.min_fraction <= 1.0 && q.max_factor >= 1.0 && std::isfinite(q.max_factor)))
+    throw py::value_error("adaptive_q_min must be in (0, 1] and adaptive_q_max finite and >= 1");
+  return q;
+}
+
 inline TightConfig tight_config_from(const py::dict& d) {
   reject_unknown(d, {INSNAV_TIMING_KEYS, "use_pseudorange", "use_rate", INSNAV_UT_KEYS, "smooth"}, "tight engine config",
                  {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows", "robust_huber", "robust_huber_k",
                   "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
                    "robust_cusum_hold_s", "robust_cusum_min_pseudoranges", "tdcp", "tdcp_slip_threshold_cycles",
-                   "tdcp_chi2_row", "pr_gm_sigma_m", "pr_gm_tau_s", "pr_gm_max_gap_s", INSNAV_SELFCAL_KEYS});
+                   "tdcp_chi2_row", "pr_gm_sigma_m", "pr_gm_tau_s", "pr_gm_max_gap_s", "adaptive_q_window",
+                   "adaptive_q_min", "adaptive_q_max", INSNAV_SELFCAL_KEYS});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
@@ -158,6 +173,7 @@ inline TightConfig tight_config_from(const py::dict& d) {
   gm.max_gap_s = num(d, "pr_gm_max_gap_s", gm.max_gap_s);
   if (!(gm.sigma_m >= 0.0) || !std::isfinite(gm.sigma_m)) throw py::value_error("pr_gm_sigma_m must be >= 0 and finite");
   if (!(gm.tau_s > 0.0) || !(gm.max_gap_s > 0.0)) throw py::value_error("pr_gm_tau_s and pr_gm_max_gap_s must be > 0");
+  c.adaptive_q = adaptive_q_from(d, c.adaptive_q);  // adaptive process noise (filter/adaptive_noise.hpp)
   return c;
 }
 

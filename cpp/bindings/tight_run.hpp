@@ -4,6 +4,7 @@
 // parallel.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 
@@ -43,6 +44,8 @@ py::dict run_tight_impl(const TightArgs& a) {
     if (a.cfg.tdcp.enabled) throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states do not run with tdcp");
     if (a.smooth) throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states do not run with smooth");
   }
+  if (a.cfg.adaptive_q.window > 0 && !kScalableQ<Filter>)
+    throw py::value_error("adaptive_q_window > 0: the EKF only (it scales the EKF's process noise)");
   const StateCov<L> P = state_cov_from<L>(a.P0);
   NavBuffers nav_buf(output_rows(a.imu.n, a.cfg.output_decimation), L::kSize, true, kHasIsb<L>, false,
                      kHasTimeOffset<L>, kHasLeverArm<L>);
@@ -52,6 +55,7 @@ py::dict run_tight_impl(const TightArgs& a) {
   rec_buf.attach(out);
   const double span = a.imu.n ? a.imu.t[a.imu.n - 1] - a.nav.t : 0.0;
   SmootherRun<Filter> smoother(a.smooth, a.in.E, span, a.cfg.cycle_period);
+  std::array<double, 2> q_scale{1.0, 1.0};
   {
     py::gil_scoped_release release;
     auto engine = std::make_unique<TightEngine<Filter>>(a.model, a.cfg, a.ut);  // one allocation per run
@@ -62,8 +66,10 @@ py::dict run_tight_impl(const TightArgs& a) {
     engine->run(a.nav, P, a.corr, a.clock_bias0, a.clock_drift0, a.imu.n, a.imu.t, a.imu.dtheta_b, a.imu.dv_b, a.in.E,
                 a.in.epochs.data(), a.in.sats.data(), out);
     smoother.finish(engine->core());
+    q_scale = engine->process_noise_scale();
   }
   py::dict res;
+  res["process_noise_scale"] = py::make_tuple(q_scale[0], q_scale[1]);
   nav_buf.put(res, out);
   rec_buf.put(res, out);
   smoother.put(res);

@@ -704,15 +704,15 @@ class RunConfig:
         Lower clamp of that factor (variance; default 0.01: sigma 0.1x the
         configured), in (0, 1].
     adaptive_q_window : int
-        Loose EKF: adaptive process noise (``cpp/include/insnav/filter/
-        adaptive_noise.hpp``; Mohamed & Schwarz 1999, Q^ = K C_v K' over a
-        window of updates).  The configured velocity and angle random walk
-        variances (``acc_vrw``, ``gyro_arw``) are each multiplied by
-        ``clamp(sum a_j |dx_b|^2 / sum tr(P- - P+)_bb, adaptive_q_min,
-        adaptive_q_max)`` over the last ``adaptive_q_window`` applied fixes
-        (dx the update's state correction, a_j the factor it ran with); the
-        configured Q until the window is full.  0 (default): off.  At most
-        256.
+        Loose and tight EKF (batch runs): adaptive process noise
+        (``cpp/include/insnav/filter/adaptive_noise.hpp``; Mohamed & Schwarz
+        1999, Q^ = K C_v K' over a window of updates).  The configured
+        velocity and angle random walk variances (``acc_vrw``, ``gyro_arw``)
+        are each multiplied by ``clamp(sum a_j |dx_b|^2 / sum tr(P- - P+)_bb,
+        adaptive_q_min, adaptive_q_max)`` over the last ``adaptive_q_window``
+        applied fixes (tight: epochs; dx the update's state correction, a_j
+        the factor it ran with); the configured Q until the window is full.
+        0 (default): off.  At most 256.
     adaptive_q_min, adaptive_q_max : float
         Bounds of those factors (variance; defaults 0.05 and 20): the
         estimate feeds back through the gain, the lower bound keeps the
@@ -896,9 +896,9 @@ class RunConfig:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
                     or not (math.isfinite(v) and ok(v)):
                 bad(key, v, what + " (bound of the adaptive process-noise factor, variance)")
-        if self.adaptive_q_window and (self.coupling != "loose" or self.filter != "ekf"):
+        if self.adaptive_q_window and (self.coupling not in ("loose", "tight") or self.filter != "ekf"):
             bad("adaptive_q_window", self.adaptive_q_window, f"0 with {self.coupling} {self.filter!r} (the adaptive "
-                "process noise is the loose EKF's)")
+                "process noise is the loose and tight EKF's: it scales the EKF's process noise)")
         for key, low in (("pr_gm_sigma_m", 0.0), ("pr_gm_tau_s", None), ("pr_gm_max_gap_s", None)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \

@@ -161,6 +161,8 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         sol.summary.update(tdcp=True, tdcp_used=int(out["tdcp_used"]), tdcp_rejected=int(out["tdcp_rejected"]),
                            tdcp_slips_lli=int(out["tdcp_slips_lli"]), tdcp_slips_ins=int(out["tdcp_slips_ins"]),
                            tdcp_updates=int(out["tdcp_updates"]))
+    if cfg.adaptive_q_window:  # the adaptive process-noise factors at the end (velocity, angle random walk)
+        sol.summary["process_noise_scale"] = [float(x) for x in out["process_noise_scale"]]
     put_selfcal(sol, out, cfg)
     if a.P0.shape[0] != n:  # the self-calibration states extend the core layout
         sol.summary["layout"] = int(a.P0.shape[0])
@@ -249,6 +251,9 @@ def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = N
     if cfg.pr_gm_sigma_m > 0.0:  # Gauss-Markov pseudorange error states (meas/pseudorange_gm.hpp)
         core_cfg.update(pr_gm_sigma_m=float(cfg.pr_gm_sigma_m), pr_gm_tau_s=float(cfg.pr_gm_tau_s),
                         pr_gm_max_gap_s=float(cfg.pr_gm_max_gap_s))
+    if cfg.adaptive_q_window:  # adaptive process noise (filter/adaptive_noise.hpp, engine/tight_engine.hpp)
+        core_cfg.update(adaptive_q_window=int(cfg.adaptive_q_window), adaptive_q_min=float(cfg.adaptive_q_min),
+                        adaptive_q_max=float(cfg.adaptive_q_max))
     return TightEngineArgs(layout=n, init=init_vector(dataset, init), P0=P0, imu_correction=np.zeros(12),
                            imu_model=model, config=core_cfg, clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
                            isb0=None if isb0 is None else np.asarray(isb0, float), inputs=inputs, epoch_t=ep_t,

@@ -56,13 +56,6 @@ struct LooseConfig {
   AdaptiveNoiseConfig adaptive_q{0, 0.05, 20.0};  // adaptive Q scale (velocity, attitude random walks; EKF; 0: off)
 };
 
-/// The filter takes a process-noise scale (Ekf::set_process_noise_scale).
-template <class F, class = void>
-inline constexpr bool kScalableQ = false;
-template <class F>
-inline constexpr bool kScalableQ<F, std::void_t<decltype(std::declval<F&>().set_process_noise_scale(1.0, 1.0))>> =
-    true;
-
 /// What a vehicle-constraint event asks for (bit flags).
 enum ConstraintKind : std::uint8_t { kNhc = 1, kOdometer = 2, kZupt = 4, kZaru = 8 };
 
@@ -193,11 +186,7 @@ class LooseEngine {
     core_.odo_lever_b0 = cfg_.vehicle.lever_arm_b;
     core_.reset(initial, P0, corr0);
     adaptive_.reset();
-    adaptive_q_.reset();
-    if constexpr (kScalableQ<Filter>) {
-      if (adaptive_q_.enabled()) core_.filter.set_process_noise_scale(1.0, 1.0);
-    }
-    q_scale_ = {1.0, 1.0};
+    adaptive_q_.start(core_.filter);
     last_nhc_t_ = last_odo_t_ = -kInf;
   }
 
@@ -225,19 +214,13 @@ class LooseEngine {
       if (adaptive_.enabled()) adapt_noise(ch0);
     }
     out.write_meas_sigma(g, fix, meas_.linear().R);
-    if constexpr (kScalableQ<Filter>) {
-      if (adaptive_q_.enabled())
-        q_tr_prior_ = {core_.filter.P().template block<3, 3>(L::kVel, L::kVel).trace(),
-                       core_.filter.P().template block<3, 3>(L::kAtt, L::kAtt).trace()};
-    }
+    adaptive_q_.before_update(core_.filter);
     const UpdateResult res = core_.update_gated(meas_);
     if constexpr (kJacobianUpdate<Filter>) {
       if (adaptive_.enabled() && res.applied)
         for (int i = 0; i < meas_.linear().rows(); ++i) adaptive_.push(ch0 + i, ad_y_[i], ad_hph_[i], ad_r0_[i]);
     }
-    if constexpr (kScalableQ<Filter>) {
-      if (adaptive_q_.enabled() && res.applied) adapt_process_noise();
-    }
+    if (res.applied) adaptive_q_.after_update(core_.filter);
     if (out.nis) out.nis[g] = res.nis;
     if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
@@ -250,7 +233,7 @@ class LooseEngine {
   }
 
   /// The current adaptive process-noise factors (velocity, attitude random walk variances; 1, 1 when off).
-  const std::array<double, 2>& process_noise_scale() const { return q_scale_; }
+  const std::array<double, 2>& process_noise_scale() const { return adaptive_q_.scale(); }
 
   static void mark_constraint(LooseOutputs& out, std::int64_t c, RecordStatus st) {
     out.set_status(out.constraint_status, c, st);
@@ -321,28 +304,10 @@ class LooseEngine {
     }
   }
 
-  /// The state correction of the update just applied (x before the
-  /// feedback) into the window against the correction covariance the update
-  /// predicted, K S K^T = P- - P+ (traces of the velocity and attitude
-  /// blocks); the filter's Q scaled by the windowed ratio
-  /// (filter/adaptive_noise.hpp).
-  void adapt_process_noise() {
-    const auto& x = core_.filter.x();
-    const auto& P = core_.filter.P();
-    const double ksk_v = q_tr_prior_[0] - P.template block<3, 3>(L::kVel, L::kVel).trace();
-    const double ksk_a = q_tr_prior_[1] - P.template block<3, 3>(L::kAtt, L::kAtt).trace();
-    if (ksk_v > 0.0) adaptive_q_.push_ratio(0, q_scale_[0] * x.template segment<3>(L::kVel).squaredNorm(), ksk_v);
-    if (ksk_a > 0.0) adaptive_q_.push_ratio(1, q_scale_[1] * x.template segment<3>(L::kAtt).squaredNorm(), ksk_a);
-    q_scale_ = {adaptive_q_.factor(0), adaptive_q_.factor(1)};
-    core_.filter.set_process_noise_scale(q_scale_[0], q_scale_[1]);
-  }
-
   ClosedLoop<Filter> core_;
   LooseConfig cfg_;
   AdaptiveMeasurementNoise<6> adaptive_;
-  AdaptiveMeasurementNoise<2> adaptive_q_;  // channels: velocity, attitude random walk
-  std::array<double, 2> q_scale_{1.0, 1.0};
-  std::array<double, 2> q_tr_prior_{};  // tr P- of the velocity and attitude blocks before the update
+  AdaptiveProcessNoise adaptive_q_;  // adaptive Q factors (velocity, attitude random walk)
   std::array<double, 6> ad_y_{}, ad_hph_{}, ad_r0_{};  // the current fix's rows (adapt_noise)
   LooseMeasurement<L> meas_;
   VehicleVelocityMeasurement<L> vehicle_;

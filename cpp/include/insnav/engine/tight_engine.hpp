@@ -48,16 +48,27 @@
 // (PseudorangeGmBlock::fold / joint_posterior), so the gate, the robust step
 // and the NIS see the joint innovation covariance.
 //
+// Adaptive process noise (TightConfig::adaptive_q, filter/adaptive_noise.hpp;
+// EKF only, off by default, and then nothing below changes): the configured
+// velocity and angle random walk variances scaled by the windowed state
+// corrections of the past applied epochs against their predicted covariance
+// (Mohamed & Schwarz 1999, K C_v K^T against K S K^T), the loose engine's
+// AdaptiveProcessNoise.  An epoch's correction is the whole of it before the
+// one feedback (TDCP rows and the pseudorange / rate update; with pr_gm the
+// joint posterior), against tr(P- - P+) over the same span.
+//
 // Input: E epochs (time, satellite range [begin, end) into one flat array of
 // SatObservation), sorted by time.  No heap allocation inside run().
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <type_traits>
 #include <utility>
 
 #include "insnav/engine/closed_loop.hpp"
+#include "insnav/filter/adaptive_noise.hpp"
 #include "insnav/meas/pseudorange.hpp"
 #include "insnav/meas/pseudorange_gm.hpp"
 #include "insnav/meas/robust.hpp"
@@ -76,6 +87,7 @@ struct TightConfig {
   RobustConfig robust;                 // clock-jump check, screening and IGG-III (robust.hpp)
   TdcpConfig tdcp;                     // time-differenced carrier phase (tdcp.hpp; off by default, EKF only)
   PseudorangeGmConfig pr_gm;           // Gauss-Markov pseudorange errors (pseudorange_gm.hpp; off by default, EKF only)
+  AdaptiveNoiseConfig adaptive_q{0, 0.05, 20.0};  // adaptive Q scale (velocity, attitude random walks; EKF; 0: off)
 };
 
 /// What the robust step did to one satellite row kind (TightOutputs::sat_flag).
@@ -157,7 +169,7 @@ class TightEngine {
   static_assert(kHasClock<L>, "TightEngine needs a layout with clock states");
 
   TightEngine(const ImuErrorModel& model, const TightConfig& cfg, const UtParams& ut = {})
-      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg) {
+      : core_(make_filter<Filter>(model, ut), cfg.propagation_interval), cfg_(cfg), adaptive_q_(cfg.adaptive_q) {
     core_.gate = NisGate(cfg.gate);
   }
 
@@ -169,6 +181,9 @@ class TightEngine {
   /// The filters that carry the Gauss-Markov pseudorange block (the cycle transition tracked: the EKF).
   static constexpr bool kCanGm = TdcpCapable<Filter>::value;
   bool gm_on() const { return kCanGm && cfg_.pr_gm.enabled(); }
+
+  /// The current adaptive process-noise factors (velocity, attitude random walk variances; 1, 1 when off).
+  const std::array<double, 2>& process_noise_scale() const { return adaptive_q_.scale(); }
 
   /// Carrier phase of the satellite rows (parallel to `sats` of run(); null: no TDCP rows).
   void set_phase(const PhaseObservation* phase) { phase_ = phase; }
@@ -229,6 +244,7 @@ class TightEngine {
              double clock_drift0) {
     core_.lever_arm_b0 = cfg_.lever_arm_b;
     core_.reset(initial, P0, corr0, clock_bias0, clock_drift0, isb0_);
+    adaptive_q_.start(core_.filter);
     for (int i = 0; i < kSatKeys; ++i) {  // the per-satellite CUSUM of the robust step (robust.hpp, 4.)
       cusum_pos_[i] = cusum_neg_[i] = 0.0;
       excluded_until_[i] = -kInf;
@@ -293,6 +309,7 @@ class TightEngine {
       }
     }
     if (out.clock_jump) out.clock_jump[g] = -jump;
+    adaptive_q_.before_update(core_.filter);  // P- of the epoch (before its TDCP rows, if any)
     if constexpr (kCanTdcp) tdcp_step(ep, g, out);
     const int m0 = meas_.linear().rows();
     for (int i = 0; i < ns; ++i)
@@ -346,6 +363,7 @@ class TightEngine {
     const UpdateResult res = core_.update_gated(meas_);
     if constexpr (kCanGm)
       if (gm_on() && res.applied) gm_end_update();
+    if (res.applied) adaptive_q_.after_update(core_.filter);
     if (out.nis) out.nis[g] = res.nis;
     if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
@@ -679,6 +697,7 @@ class TightEngine {
 
   ClosedLoop<Filter> core_;
   TightConfig cfg_;
+  AdaptiveProcessNoise adaptive_q_;  // adaptive Q factors (velocity, attitude random walk)
   TightMeasurement<L> meas_;
   SatObservation work_[kMaxMeasRows];
   std::int64_t src_[kMaxMeasRows] = {};

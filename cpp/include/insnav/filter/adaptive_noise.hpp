@@ -40,8 +40,9 @@
 // whereas y_j and P-_j depend only on the past; the residual form's advantage,
 // an estimate that stays positive, is had here from the lower clamp.
 //
-// The same windowed ratio serves the adaptive process noise of the loose EKF
-// (engine/loose_engine.hpp, LooseConfig::adaptive_q): Mohamed & Schwarz 1999
+// The same windowed ratio serves the adaptive process noise of the EKF
+// (AdaptiveProcessNoise below; engine/loose_engine.hpp, LooseConfig::adaptive_q,
+// and engine/tight_engine.hpp, TightConfig::adaptive_q): Mohamed & Schwarz 1999
 // estimate Q from the state corrections dx = K y of the last N updates (their
 // innovation-based adaptive Q, Q^ = K C_v K^T, C_v the windowed innovation
 // covariance).  Used here as one scale per block of the configured Q
@@ -66,6 +67,8 @@
 
 #include <algorithm>
 #include <array>
+#include <type_traits>
+#include <utility>
 
 #include "insnav/filter/types.hpp"
 
@@ -131,6 +134,78 @@ class AdaptiveMeasurementNoise {
   };
   AdaptiveNoiseConfig cfg_;
   std::array<Channel, kRows> ch_{};
+};
+
+/// The filter takes a process-noise scale (Ekf::set_process_noise_scale).
+template <class F, class = void>
+inline constexpr bool kScalableQ = false;
+template <class F>
+inline constexpr bool kScalableQ<F, std::void_t<decltype(std::declval<F&>().set_process_noise_scale(1.0, 1.0))>> =
+    true;
+
+/// The adaptive process noise of an EKF (Mohamed & Schwarz 1999, K C_v K^T
+/// against K S K^T; the form in the header comment): one factor on the
+/// configured velocity random walk and one on the angle random walk, each the
+/// windowed ratio of the squared state corrections of the past applied
+/// updates to the traces of P- - P+ of the velocity / attitude blocks.  The
+/// engines (loose and tight) call, per update:
+///   before_update(f)            P- traces (after any R adaptation or screening)
+///   after_update(f)             if the update was applied, before the feedback
+/// and start(f) at the start of a run.  Fixed size, no heap.
+class AdaptiveProcessNoise {
+ public:
+  AdaptiveProcessNoise() = default;
+  explicit AdaptiveProcessNoise(const AdaptiveNoiseConfig& cfg) : window_(cfg) {}
+
+  bool enabled() const { return window_.enabled(); }
+
+  /// Forget every record; the filter back on the configured Q (factors 1, 1).
+  template <class Filter>
+  void start(Filter& f) {
+    window_.reset();
+    if constexpr (kScalableQ<Filter>) {
+      if (enabled()) f.set_process_noise_scale(1.0, 1.0);
+    }
+    scale_ = {1.0, 1.0};
+  }
+
+  /// Keep tr P- of the velocity and attitude blocks (call just before the update).
+  template <class Filter>
+  void before_update(const Filter& f) {
+    using L = typename Filter::Layout;
+    if constexpr (kScalableQ<Filter>) {
+      if (enabled())
+        tr_prior_ = {f.P().template block<3, 3>(L::kVel, L::kVel).trace(),
+                     f.P().template block<3, 3>(L::kAtt, L::kAtt).trace()};
+    }
+  }
+
+  /// The state correction of the update just applied (x before the feedback)
+  /// into the window against the correction covariance the update predicted,
+  /// K S K^T = P- - P+; the filter's Q scaled by the windowed ratio.
+  template <class Filter>
+  void after_update(Filter& f) {
+    using L = typename Filter::Layout;
+    if constexpr (kScalableQ<Filter>) {
+      if (!enabled()) return;
+      const auto& x = f.x();
+      const auto& P = f.P();
+      const double ksk_v = tr_prior_[0] - P.template block<3, 3>(L::kVel, L::kVel).trace();
+      const double ksk_a = tr_prior_[1] - P.template block<3, 3>(L::kAtt, L::kAtt).trace();
+      if (ksk_v > 0.0) window_.push_ratio(0, scale_[0] * x.template segment<3>(L::kVel).squaredNorm(), ksk_v);
+      if (ksk_a > 0.0) window_.push_ratio(1, scale_[1] * x.template segment<3>(L::kAtt).squaredNorm(), ksk_a);
+      scale_ = {window_.factor(0), window_.factor(1)};
+      f.set_process_noise_scale(scale_[0], scale_[1]);
+    }
+  }
+
+  /// The current factors (velocity, attitude random walk variances; 1, 1 when off).
+  const std::array<double, 2>& scale() const { return scale_; }
+
+ private:
+  AdaptiveMeasurementNoise<2> window_;  // channels: velocity, attitude random walk
+  std::array<double, 2> scale_{1.0, 1.0};
+  std::array<double, 2> tr_prior_{};  // tr P- of the velocity and attitude blocks before the update
 };
 
 /// The diagonal of H P H^T of a linear measurement (its first n_cols columns).
