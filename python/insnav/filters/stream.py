@@ -797,6 +797,19 @@ _GNSS_FIELDS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sig
 
 
 def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
+    """The fixes where ``keep`` (a boolean mask) is true.  When they are one run of consecutive rows (a file
+    in time order cut to (t0, endtime]): views of ``g``'s arrays, so a day of fixes is held once, not once
+    per cut; else copies."""
+    idx = np.flatnonzero(keep)
+    if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
+        a, b = int(idx[0]), int(idx[-1]) + 1
+        if g.origin is None:
+            origin = None
+        elif g.origin.lines is None:
+            origin = RowOrigin(g.origin.source, g.origin.first_line + a)
+        else:
+            origin = RowOrigin(g.origin.source, g.origin.first_line, np.asarray(g.origin.lines)[a:b])
+        return GnssFixes(*(np.asarray(getattr(g, f))[a:b] for f in _GNSS_FIELDS), origin=origin)
     return GnssFixes(*(np.asarray(getattr(g, f))[keep] for f in _GNSS_FIELDS),
                      origin=None if g.origin is None else g.origin.take(keep, len(keep)))
 
