@@ -257,3 +257,41 @@ def test_compact_gnss_reader_holds_the_same_fixes(kf_short):  # noqa: F811
     cut = stream._gnss_take(compact, (compact.t_valid > 456300.0) & (compact.t_valid <= 456400.0))
     assert len(cut) == 100 and np.shares_memory(cut.lat_deg, compact.lat_deg)
     assert cut.origin.line(0) == 52 and cut.origin.where(99) == f"{kf_short / 'gnss.txt'}:151"
+
+
+@pytest.mark.parametrize("block_lines", [1, 7, 4096])
+def test_gnss_file_read_in_blocks_equals_the_whole_file_reader(kf_short, tmp_path, block_lines):  # noqa: F811
+    """read_gnss_text_blocks (two passes, ``block_lines`` lines parsed at a time) against the whole-file
+    reader: the same fixes and file lines (blank lines inside, no final line end, 13 columns), and the
+    same one-line error naming the file and line for a malformed line in the last block, a non-finite
+    time before it (the malformed line's message first, as whole), a short row and a bad first line."""
+    from insnav.io.kfgins import read_kfgins_gnss
+
+    src = (kf_short / "gnss.txt").read_text().splitlines(keepends=True)
+    bad = list(src)
+    bad[3000] = bad[3000].replace("114.", "11x4.", 1)
+    nan_and_bad = list(bad)
+    nan_and_bad[20] = "nan" + src[20][10:]
+    short = list(src)
+    short[1500] = " ".join(short[1500].split()[:6]) + "\n"
+    cases = {"blank": src[:50] + ["\n", "   \n"] + src[50:] + ["\n"], "no_end": src[:-1] + [src[-1].rstrip("\n")],
+             "v13": [ln.rstrip("\n") + " 0.1 0.2 0.3 0.01 0.01 0.02\n" for ln in src[:300]],
+             "bad": bad, "nan_and_bad": nan_and_bad, "short": short, "cols5": ["1 2 3 4 5\n"] + src, "empty": []}
+    errors = {}
+    for name, lines in cases.items():
+        f = tmp_path / f"{name}.txt"
+        f.write_text("".join(lines))
+        try:
+            whole = read_kfgins_gnss(f, compact=True)
+        except ValueError as exc:
+            with pytest.raises(ValueError) as got:
+                stream.read_gnss_text_blocks(f, block_lines=block_lines)
+            assert str(got.value) == str(exc)
+            errors[name] = str(exc).split(": ")[0].rsplit(":", 1)[1]  # the line named
+            continue
+        blocks = stream.read_gnss_text_blocks(f, block_lines=block_lines)
+        for fld in stream._GNSS_FIELDS:
+            assert np.array_equal(getattr(blocks, fld), getattr(whole, fld), equal_nan=True), (name, fld)
+        assert [blocks.origin.line(i) for i in range(len(whole))] == \
+            [whole.origin.line(i) for i in range(len(whole))]
+    assert errors == {"bad": "3001", "nan_and_bad": "3001", "short": "1501", "cols5": "1", "empty": "1"}
