@@ -28,11 +28,13 @@ summary and the health verdict need (:class:`_Innovations`), so the engine
 holds the fixes of about one block.  Memory is a few blocks of IMU samples,
 rows and records, the IMU summed to 10 Hz for the input checks, at most
 :data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer recording's is summed
-further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes,
-read whole with their sanitized copy for the loader's cut, the sanitizer and
-the input checks (about 0.3 kB per fix: the one part that still grows with
-the recording; ``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py``
-measure a synthesised day).
+further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes
+(KF-GINS files: read in two passes, a block of lines at a time,
+:func:`read_gnss_text_blocks`, 7 float64 per fix; the loader's cut and the
+sanitizer take views of them when the file is in time order: the one part
+that still grows with the recording, 56 bytes per fix;
+``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py`` measure a
+synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files

@@ -152,8 +152,9 @@ class SensorErrorStream:
     of each of those streams and skips past it, so ``rng`` ends where the
     whole-array draw leaves it; each stream is then drawn again from its
     recorded state as rows are asked for.  The Gauss-Markov recursion runs in
-    the blocks of :func:`_ar1` (``8 tau / dt`` samples), one block per axis in
-    memory, so that memory is bounded by the correlation time, not by ``n``.
+    the blocks of :func:`_ar1` (``8 tau / dt`` samples), each computed
+    :data:`GM_CHUNK` rows at a time (:class:`_GmChunks`), one chunk per axis in
+    memory, so that memory is bounded by neither the correlation time nor ``n``.
 
     Parameters
     ----------
