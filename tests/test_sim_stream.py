@@ -68,6 +68,27 @@ def test_sensor_error_stream_equals_the_whole_draw_in_any_blocks(gm_tau, n):
     assert np.array_equal(real.bias, bias) and np.array_equal(noise2, noise)
 
 
+@pytest.mark.parametrize("chunk", [1, 37, 500])
+def test_gauss_markov_rows_in_chunks_hold_one_chunk_and_equal_the_whole_draw(chunk, monkeypatch):
+    """A correlation time whose recursion block (8 tau / dt = 8e6 samples) is longer than the record: the
+    rows are computed ``GM_CHUNK`` at a time (the running sum of the block carried over), bit for bit the
+    whole draw, and the rows held never exceed one chunk (they did grow with the record: 9 MB a day)."""
+    import insnav.sim.imu as imu_mod
+
+    monkeypatch.setattr(imu_mod, "GM_CHUNK", chunk)
+    n, dt = 3001, 0.01
+    err = _errors([1e4, 10.0, np.inf], [0.0] * 3, [1e-3] * 3)
+    bias, noise, _, _ = _reference_draw(err, n, dt, np.random.default_rng(3))
+    stream = SensorErrorStream(err, n, dt, np.random.default_rng(3))
+    rows, k, held = [], 0, 0
+    for k1 in (1, 2, 700, 701, 2999, n):
+        rows.append(stream.rows(k, k1)[0])
+        held = max(held, max(len(g.vals) for g in stream._gm if g is not None))
+        k = k1
+    assert np.array_equal(np.concatenate(rows), bias)
+    assert held <= chunk
+
+
 def test_sensor_error_stream_serves_rows_once_in_order():
     stream = SensorErrorStream(_errors([1.0] * 3, [0.0] * 3, [1e-3] * 3), 100, 0.01, np.random.default_rng(0))
     stream.rows(0, 10)

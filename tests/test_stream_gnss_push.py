@@ -192,3 +192,106 @@ def test_streamed_sidecar_and_report_are_the_whole_runs(kf_short, tmp_path, monk
     fixes = (db / (base + ".innovations.csv")).read_text().count("\n") - 1
     assert len(made) == 1 and fixes > 100
     assert made[0].max_window <= block / 200 + 2  # 1 Hz fixes: those of one block, never the run's
+
+
+def _kf_copy(kf_short, d, edit):  # noqa: F811
+    """kf_short's files in folder ``d``, the GNSS file's lines (1-based list index + 1) changed by ``edit``."""
+    d.mkdir()
+    for f in ("imu.txt", "kf.yaml"):
+        (d / f).write_bytes((kf_short / f).read_bytes())
+    lines = (kf_short / "gnss.txt").read_text().splitlines(keepends=True)
+    (d / "gnss.txt").write_text("".join(edit(lines)))
+    return d
+
+
+def test_streamed_run_of_an_unordered_gnss_file_writes_the_whole_runs_bytes(kf_short, tmp_path, monkeypatch):  # noqa: F811
+    # blocks of 4093 lines (20.465 s): the fixes of lines 103 and 104 (456352 s, 456353 s) on either side of
+    # the boundary at 456352.3 s swapped, and a fix before starttime (line 10) moved after line 150: the
+    # sanitizer reorders them (copies of the fixes, not views of the file's)
+    def edit(lines):
+        lines = list(lines)
+        lines[102], lines[103] = lines[103], lines[102]
+        early = lines.pop(9)
+        return lines[:149] + [early] + lines[149:]
+
+    d = _kf_copy(kf_short, tmp_path / "kf", edit)
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    erra, errb = streamed_and_whole(_run, d, a, b)
+    for suffix in ("", ".innovations.csv", ".config.toml"):
+        assert (a.parent / (a.name + suffix)).read_bytes() == (b.parent / (b.name + suffix)).read_bytes(), suffix
+    assert erra == errb
+    fixes = (a.parent / (a.name + ".innovations.csv")).read_text().splitlines()[1:]
+    t = np.array([float(ln.split(",")[0]) for ln in fixes])
+    assert len(t) == 149 and t[0] == 456301.0 and np.all(np.diff(t) == 1.0)  # 456301 .. 456449 s, in order
+
+
+def test_a_bad_gnss_line_in_a_late_block_gives_the_whole_file_runs_error(kf_short, tmp_path, monkeypatch):  # noqa: F811
+    def edit(lines):  # line 190 (456439 s, in the last of ten 4093-line blocks): a longitude that is no number
+        lines = list(lines)
+        f = lines[189].split(" ")
+        lines[189] = " ".join(f[:2] + ["114.47x"] + f[3:])
+        return lines
+
+    d = _kf_copy(kf_short, tmp_path / "kf", edit)
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    rca, _, erra = _run(d, tmp_path / "a" / "sol.csv", "--stream", "on")
+    rcb, _, errb = _run(d, tmp_path / "b" / "sol.csv", "--stream", "off")
+    assert rca == rcb != 0
+    assert erra == errb and len(erra.strip().splitlines()) == 1
+    assert "gnss.txt:190" in erra
+    assert not (tmp_path / "a" / "sol.csv").exists()
+
+
+def test_compact_gnss_reader_holds_the_same_fixes(kf_short):  # noqa: F811
+    from insnav.io.kfgins import read_kfgins_gnss
+
+    full = read_kfgins_gnss(kf_short / "gnss.txt")
+    compact = read_kfgins_gnss(kf_short / "gnss.txt", compact=True)
+    for f in stream._GNSS_FIELDS:
+        assert np.array_equal(getattr(full, f), getattr(compact, f), equal_nan=True), f
+    assert compact.t_arrival is compact.t_valid and not compact.v_n.flags.writeable
+    held = sum(np.asarray(getattr(compact, f)).base is None and getattr(compact, f).nbytes or 0
+               for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "sigma_pos_n"))
+    assert held == 7 * 8 * len(full)  # 7 float64 per fix (the NaN velocity columns: one row)
+    cut = stream._gnss_take(compact, (compact.t_valid > 456300.0) & (compact.t_valid <= 456400.0))
+    assert len(cut) == 100 and np.shares_memory(cut.lat_deg, compact.lat_deg)
+    assert cut.origin.line(0) == 52 and cut.origin.where(99) == f"{kf_short / 'gnss.txt'}:151"
+
+
+@pytest.mark.parametrize("block_lines", [1, 7, 4096])
+def test_gnss_file_read_in_blocks_equals_the_whole_file_reader(kf_short, tmp_path, block_lines):  # noqa: F811
+    """read_gnss_text_blocks (two passes, ``block_lines`` lines parsed at a time) against the whole-file
+    reader: the same fixes and file lines (blank lines inside, no final line end, 13 columns), and the
+    same one-line error naming the file and line for a malformed line in the last block, a non-finite
+    time before it (the malformed line's message first, as whole), a short row and a bad first line."""
+    from insnav.io.kfgins import read_kfgins_gnss
+
+    src = (kf_short / "gnss.txt").read_text().splitlines(keepends=True)
+    bad = list(src)
+    bad[3000] = bad[3000].replace("114.", "11x4.", 1)
+    nan_and_bad = list(bad)
+    nan_and_bad[20] = "nan" + src[20][10:]
+    short = list(src)
+    short[1500] = " ".join(short[1500].split()[:6]) + "\n"
+    cases = {"blank": src[:50] + ["\n", "   \n"] + src[50:] + ["\n"], "no_end": src[:-1] + [src[-1].rstrip("\n")],
+             "v13": [ln.rstrip("\n") + " 0.1 0.2 0.3 0.01 0.01 0.02\n" for ln in src[:300]],
+             "bad": bad, "nan_and_bad": nan_and_bad, "short": short, "cols5": ["1 2 3 4 5\n"] + src, "empty": []}
+    errors = {}
+    for name, lines in cases.items():
+        f = tmp_path / f"{name}.txt"
+        f.write_text("".join(lines))
+        try:
+            whole = read_kfgins_gnss(f, compact=True)
+        except ValueError as exc:
+            with pytest.raises(ValueError) as got:
+                stream.read_gnss_text_blocks(f, block_lines=block_lines)
+            assert str(got.value) == str(exc)
+            errors[name] = str(exc).split(": ")[0].rsplit(":", 1)[1]  # the line named
+            continue
+        blocks = stream.read_gnss_text_blocks(f, block_lines=block_lines)
+        for fld in stream._GNSS_FIELDS:
+            assert np.array_equal(getattr(blocks, fld), getattr(whole, fld), equal_nan=True), (name, fld)
+        assert [blocks.origin.line(i) for i in range(len(whole))] == \
+            [whole.origin.line(i) for i in range(len(whole))]
+    assert errors == {"bad": "3001", "nan_and_bad": "3001", "short": "1501", "cols5": "1", "empty": "1"}

@@ -28,11 +28,13 @@ summary and the health verdict need (:class:`_Innovations`), so the engine
 holds the fixes of about one block.  Memory is a few blocks of IMU samples,
 rows and records, the IMU summed to 10 Hz for the input checks, at most
 :data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer recording's is summed
-further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes,
-read whole with their sanitized copy for the loader's cut, the sanitizer and
-the input checks (about 0.3 kB per fix: the one part that still grows with
-the recording; ``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py``
-measure a synthesised day).
+further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes
+(KF-GINS files: read in two passes, a block of lines at a time,
+:func:`read_gnss_text_blocks`, 7 float64 per fix; the loader's cut and the
+sanitizer take views of them when the file is in time order: the one part
+that still grows with the recording, 56 bytes per fix;
+``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py`` measure a
+synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
@@ -263,6 +265,89 @@ def imu_text_blocks(path, ncols: int | None = None, *, block_lines: int | None =
         return blk, (rows if lines is None and not eof else None)
 
     return _text_blocks(path, block_lines, parse)
+
+
+#: GNSS text lines parsed at a time by :func:`read_gnss_text_blocks`
+GNSS_BLOCK_LINES = 1 << 12
+
+
+def _count_lines(path: Path) -> int:
+    """Line ends in the file (plain or compressed), read 1 MiB at a time: an upper bound of its rows - 1."""
+    f, raw, _ = _opener(path)
+    n = 0
+    with raw, f:
+        while True:
+            b = f.read(1 << 20)
+            if not b:
+                return n
+            n += b.count(b"\n")
+
+
+def read_gnss_text_blocks(path, *, block_lines: int | None = None) -> GnssFixes:
+    """A KF-GINS GNSS file (7 columns, or 13 with velocity) read in two passes
+    without the whole text or a whole parsed table in memory: the first pass
+    counts the lines (an upper bound of the rows), the second parses
+    ``block_lines`` lines at a time straight into the fixes' arrays (the
+    layout of :func:`insnav.io.kfgins.read_kfgins_gnss` with ``compact=True``:
+    7 float64 per fix; ``t_arrival`` is ``t_valid``).  The checks are the
+    whole-file reader's, with its one-line messages naming the file and line:
+    the column count of the first line, every line's parse (a block's first
+    line numbered in the file), then the times' finiteness over all rows (the
+    whole-file order of the messages: a malformed line before a non-finite
+    time anywhere).  An empty file is left to the whole-file reader (its own
+    message).
+
+    Returns
+    -------
+    GnssFixes
+        Equal to ``read_kfgins_gnss(path, compact=True)``.
+    """
+    from ..io.kfgins import read_kfgins_gnss
+
+    p = Path(path)
+    cap = _count_lines(p) + 1
+    cols: dict = {}
+    n = None
+    rows = 0
+    file_lines = np.empty(cap, np.int64)
+
+    def parse(data, line, eof):
+        nonlocal n, rows
+        if n is None and bytes(data).strip():
+            n = count_columns(bytes(data), p)
+            if n not in (7, 13):
+                raise ValueError(f"{p}:1: expected 7 or 13 columns (sow lat lon h std_N std_E std_D"
+                                 f" [vN vE vD std_vN std_vE std_vD]), found {n}")
+            cols.update(t=np.empty(cap), lat=np.empty(cap), lon=np.empty(cap), h=np.empty(cap),
+                        sp=np.empty((cap, 3)))
+            if n == 13:
+                cols.update(v=np.empty((cap, 3)), sv=np.empty((cap, 3)))
+        if n is None:
+            return None, None
+        a, lines = parse_numeric(data, n, str(p), first_line=line, comma=False)
+        k = a.shape[0]
+        r = slice(rows, rows + k)
+        cols["t"][r], cols["lat"][r], cols["lon"][r], cols["h"][r] = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
+        cols["sp"][r] = a[:, 4:7]
+        if n == 13:
+            cols["v"][r], cols["sv"][r] = a[:, 7:10], a[:, 10:13]
+        file_lines[r] = line + np.arange(k) if lines is None else lines
+        rows += k
+        return None, (k if lines is None and not eof else None)
+
+    for _ in _text_blocks(p, GNSS_BLOCK_LINES if block_lines is None else block_lines, parse):
+        pass  # parse keeps no block
+    if n is None:
+        return read_kfgins_gnss(p, compact=True)
+    k = rows
+    lines = file_lines[:k]
+    origin = RowOrigin(str(p), 1, None if np.array_equal(lines, np.arange(1, k + 1)) else lines.copy())
+    del file_lines, lines
+    t = cols["t"][:k]
+    check_finite_rows(t[:, None], origin, ("sow",))
+    nan3 = np.broadcast_to(np.full(3, np.nan), (k, 3))
+    v, sv = (cols["v"][:k], cols["sv"][:k]) if n == 13 else (nan3, nan3)
+    return GnssFixes(t, t, cols["lat"][:k], cols["lon"][:k], cols["h"][:k], v, cols["sp"][:k], sv, origin=origin)
 
 
 def imu_csv_blocks(path, fmt, *, week: int | None = None, t_offset_s: float = 0.0, block_lines: int | None = None):
@@ -797,6 +882,19 @@ _GNSS_FIELDS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sig
 
 
 def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
+    """The fixes where ``keep`` (a boolean mask) is true.  When they are one run of consecutive rows (a file
+    in time order cut to (t0, endtime]): views of ``g``'s arrays, so a day of fixes is held once, not once
+    per cut; else copies."""
+    idx = np.flatnonzero(keep)
+    if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
+        a, b = int(idx[0]), int(idx[-1]) + 1
+        if g.origin is None:
+            origin = None
+        elif g.origin.lines is None:
+            origin = RowOrigin(g.origin.source, g.origin.first_line + a)
+        else:
+            origin = RowOrigin(g.origin.source, g.origin.first_line, np.asarray(g.origin.lines)[a:b])
+        return GnssFixes(*(np.asarray(getattr(g, f))[a:b] for f in _GNSS_FIELDS), origin=origin)
     return GnssFixes(*(np.asarray(getattr(g, f))[keep] for f in _GNSS_FIELDS),
                      origin=None if g.origin is None else g.origin.take(keep, len(keep)))
 

@@ -106,8 +106,8 @@ def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool
     appended ``block_s`` seconds at a time, so memory does not grow with the
     scenario's length: one block of rows, a few 600 s chunks of the
     trajectory's 0.05 s position grid (:class:`insnav.sim.trajectory.Trajectory`)
-    and one block of each Gauss-Markov bias recursion (``8 tau / dt``
-    samples, :class:`insnav.sim.imu.SensorErrorStream`).  Still computed
+    and one chunk of each Gauss-Markov bias recursion (``GM_CHUNK`` rows,
+    :class:`insnav.sim.imu.SensorErrorStream`).  Still computed
     whole: the raw GNSS, odometer and carrier-phase tables, and the GNSS
     fixes of the ``"one_per_epoch"`` delay model
     (:class:`insnav.sim.gnss_loose.GnssFixStream`).

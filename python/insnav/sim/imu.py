@@ -68,6 +68,62 @@ def _ar1(phi: float, x0: np.ndarray, e: np.ndarray) -> np.ndarray:
 
 
 _SKIP_BLOCK = 1 << 20  # normals drawn at a time while skipping a stream
+#: rows of a Gauss-Markov bias computed at a time by :class:`SensorErrorStream` (its memory: a few MB, not
+#: ``8 tau / dt`` rows, which for tau = 1 h at 200 Hz would be 46 MB per axis)
+GM_CHUNK = 1 << 16
+
+
+class _GmChunks:
+    """Rows of one axis's Gauss-Markov bias, ``GM_CHUNK`` at a time, equal bit
+    for bit to :func:`_ar1` over the whole record: its blocks of ``L`` rows
+    (``x_j = phi^j (x_0 + sum_{i<=j} phi^-i e_i)``) are cut into chunks, the
+    running sum carried from one chunk to the next (``np.cumsum`` adds in
+    order, so the carried sum is the one the whole block's cumsum reaches).
+
+    Parameters
+    ----------
+    phi : float
+        AR(1) coefficient ``exp(-dt / tau)`` (> 0).
+    L : int
+        Rows per :func:`_ar1` block.
+    sd : float
+        Driving-noise sigma [the bias' unit].
+    gen : numpy.random.Generator
+        At the start of this axis's driving noise.
+    x0 : ndarray (1,)
+        Row 0 of the bias.
+    n : int
+        Rows of the record.
+    """
+
+    def __init__(self, phi: float, L: int, sd: float, gen, x0: np.ndarray, n: int):
+        self.phi, self.L, self.sd, self.gen, self.n = phi, int(L), sd, gen, int(n)
+        self.lam = -np.log(phi)
+        self.start, self.vals = 0, x0.copy()  # the cached rows [start, start + len(vals))
+        self.block_len = self.p = 0  # the current _ar1 block's rows and those computed (p == block_len: next)
+        self.state = x0.copy()  # the block's x_0 (the row before it)
+        self.carry = np.zeros(1)  # the block's running sum up to row p
+
+    def next_chunk(self) -> None:
+        """The rows after the cached ones (at most ``GM_CHUNK``, within one :func:`_ar1` block)."""
+        first = self.start + len(self.vals)
+        if self.p == self.block_len:  # a new block of rows first .. (x_j, j >= 1, driven by e_{j-1})
+            self.state = self.vals[-1:].copy()
+            self.block_len, self.p = min(self.L, self.n - first), 0
+        c = min(GM_CHUNK, self.block_len - self.p)
+        e = self.sd * self.gen.standard_normal((c, 1))
+        if self.phi <= 0.0:  # no memory (as _ar1): the driving noise itself
+            self.vals, self.start, self.p = e[:, 0].copy(), first, self.p + c
+            return
+        j = np.arange(self.p + 1, self.p + c + 1, dtype=float)
+        terms = e * np.exp(self.lam * j)[:, None]  # phi^-j e_j
+        if self.p:
+            terms[0] = self.carry + terms[0]
+        acc = np.cumsum(terms, axis=0)
+        self.carry = acc[-1].copy()
+        self.vals = (np.exp(-self.lam * j)[:, None] * (self.state[None, :] + acc))[:, 0]
+        self.start, self.p = first, self.p + c
+
 
 
 def _skip_normals(rng: np.random.Generator, count: int) -> None:
@@ -96,8 +152,9 @@ class SensorErrorStream:
     of each of those streams and skips past it, so ``rng`` ends where the
     whole-array draw leaves it; each stream is then drawn again from its
     recorded state as rows are asked for.  The Gauss-Markov recursion runs in
-    the blocks of :func:`_ar1` (``8 tau / dt`` samples), one block per axis in
-    memory, so that memory is bounded by the correlation time, not by ``n``.
+    the blocks of :func:`_ar1` (``8 tau / dt`` samples), each computed
+    :data:`GM_CHUNK` rows at a time (:class:`_GmChunks`), one chunk per axis in
+    memory, so that memory is bounded by neither the correlation time nor ``n``.
 
     Parameters
     ----------
@@ -119,7 +176,7 @@ class SensorErrorStream:
         M[~np.eye(3, dtype=bool)] += err.misalignment_sigma * rng.standard_normal(6)
         self.misalignment = M
         self._base = err.bias + self.turn_on
-        self._gm = []  # per axis: [phi, block length, driving sigma, generator, x0, block start, block values]
+        self._gm = []  # per axis: its Gauss-Markov rows (_GmChunks), or None
         for ax in range(3):
             sig, tau = err.gm_sigma[ax], err.gm_tau[ax]
             if not (sig > 0 and np.isfinite(tau)):
@@ -132,7 +189,7 @@ class SensorErrorStream:
             gen = _generator_at(rng.bit_generator.state)
             _skip_normals(rng, self.n - 1)
             # the block cache: rows [start, start + len(vals)) of this axis's Gauss-Markov bias
-            self._gm.append([phi, L, sig * np.sqrt(1.0 - phi * phi), gen, x0, 0, x0.copy()])
+            self._gm.append(_GmChunks(phi, L, sig * np.sqrt(1.0 - phi * phi), gen, x0, self.n))
         self._rw = None
         if np.any(err.bias_rw > 0):
             self._rw = [err.bias_rw * np.sqrt(dt), _generator_at(rng.bit_generator.state), np.zeros(3), 0]
@@ -144,18 +201,15 @@ class SensorErrorStream:
         self._next = 0  # the first row not served yet
 
     def _gm_rows(self, ax: int, k0: int, k1: int) -> np.ndarray:
-        """Rows [k0, k1) of axis ``ax``'s Gauss-Markov bias (k0 not below the cached block's start)."""
-        phi, L, sd, gen, _, start, vals = self._gm[ax]
+        """Rows [k0, k1) of axis ``ax``'s Gauss-Markov bias (k0 not below the cached chunk's start)."""
+        g = self._gm[ax]
         out = np.empty(k1 - k0)
         k = k0
         while k < k1:
-            if k >= start + len(vals):  # the next block: rows start+len .. of x_j, j >= 1 driven by e_{j-1}
-                start += len(vals)
-                m = min(L, self.n - start)
-                vals = _ar1(phi, vals[-1:], sd * gen.standard_normal((m, 1)))[:, 0]
-                self._gm[ax][5], self._gm[ax][6] = start, vals
-            j = min(k1, start + len(vals))
-            out[k - k0:j - k0] = vals[k - start:j - start]
+            if k >= g.start + len(g.vals):
+                g.next_chunk()
+            j = min(k1, g.start + len(g.vals))
+            out[k - k0:j - k0] = g.vals[k - g.start:j - g.start]
             k = j
         return out
 
