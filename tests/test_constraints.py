@@ -32,6 +32,13 @@ def _car_run(car, cfg: RunConfig):
     return _CAR_RUNS[key][1]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _free_car_runs():
+    """The cached full-output runs of the 900 s drive freed when the module's tests are done."""
+    yield
+    _CAR_RUNS.clear()
+
+
 @pytest.fixture(scope="module")
 def slip_free():
     """``slip_free(k)``: car-mems-outage120 with seed k and a truth that holds NHC exactly
