@@ -123,8 +123,9 @@ SLOW_TESTS = (
 )
 
 
-#: Started first (scripts/test.sh runs pytest-xdist with ``--dist loadgroup
-#: --no-loadscope-reorder``, which hands the work out in collection order): the
+#: Started first (scripts/test.sh runs pytest-xdist with ``--dist loadfile
+#: --no-loadscope-reorder``, which hands the work out in collection order, a
+#: whole file to one worker, so that a module fixture is computed once): the
 #: C++ sanitizer tests, whose worker waits for the background build and so
 #: leaves that build a core, and the documentation build (one ~100 s fixture);
 #: then the longest files, the other files with tests marked slow, then the
@@ -135,26 +136,16 @@ FIRST_TESTS = ("tests/test_cpp.py", "tests/test_docs.py",
                "tests/test_report.py", "tests/test_tight.py")
 
 
-def _shares_a_fixture(item) -> bool:
-    """True if the test uses a module-, class- or package-scoped fixture."""
-    info = getattr(item, "_fixtureinfo", None)
-    if info is None:
-        return False
-    return any(d.scope in ("module", "class", "package")
-               for defs in info.name2fixturedefs.values() for d in defs)
-
-
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's, which reads the xdist_group marks
+# (Not --dist loadgroup with xdist_group marks on the tests that share a module
+# fixture: pytest-xdist 3.8 groups them by appending "@group" to item._nodeid,
+# which pytest 9.2 no longer reads (open upstream in pytest-xdist), so every such
+# fixture ran once per worker, e.g. test_gate_outages.py's car runs, 2 x 21 s.)
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     for item in items:
         nodeid = item.nodeid.replace("\\", "/")
         if any(nodeid.startswith(p) for p in SLOW_TESTS):
             item.add_marker(pytest.mark.slow)
-        # With --dist loadgroup the tests of a file that share a module-scoped
-        # fixture (a real-data run, a built site) run on one worker, so that the
-        # fixture is computed once, not once per worker; the others spread.
-        if _shares_a_fixture(item):
-            item.add_marker(pytest.mark.xdist_group(nodeid.split("::")[0]))
 
     def rank(item) -> int:
         nodeid = item.nodeid.replace("\\", "/")

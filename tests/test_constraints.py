@@ -18,6 +18,47 @@ def car():
     return insnav.simulate("car-mems-outage120", seed=3)
 
 
+_CAR_RUNS: dict = {}
+
+
+def _car_run(car, cfg: RunConfig):
+    """insnav.run(car, config=cfg), computed once per worker and configuration: several tests
+    read the same deterministic run of the module's car (the plain EKF, the forward and smoothed
+    EKF and RB-UKF); none modifies it.  test_no_constraints_is_the_plain_run computes its two
+    runs afresh."""
+    key = (id(car), repr(cfg))
+    if key not in _CAR_RUNS:
+        _CAR_RUNS[key] = (car, insnav.run(car, config=cfg))  # (the dataset kept alive: its id stays unique)
+    return _CAR_RUNS[key][1]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _free_car_runs():
+    """The cached full-output runs of the 900 s drive freed when the module's tests are done."""
+    yield
+    _CAR_RUNS.clear()
+
+
+@pytest.fixture(scope="module")
+def slip_free():
+    """``slip_free(k)``: car-mems-outage120 with seed k and a truth that holds NHC exactly
+    (slip and bounce off), simulated once per module (the exact-NHC tests share seeds 0-3)."""
+    import dataclasses
+
+    from insnav.sim.scenario import load_scenario
+
+    cache: dict = {}
+
+    def get(k: int):
+        if k not in cache:
+            sc = dataclasses.replace(load_scenario("car-mems-outage120", seed=k), lateral_slip=0.0,
+                                     vertical_bounce=0.0)
+            cache[k] = insnav.simulate(sc, seed=k)
+        return cache[k]
+
+    return get
+
+
 def _run(ds, use, **kw):
     return insnav.run(ds, config=RunConfig(filter="ekf", init_seed=3, constraints=Constraints(use=use, **kw)))
 
@@ -62,7 +103,7 @@ def test_nhc_holds_the_lateral_velocity_in_an_outage(car):
 
 
 @pytest.mark.parametrize("filt", ["ekf", "rbukf"])
-def test_exact_nhc_keeps_the_linearised_filters_consistent_in_an_outage(filt):
+def test_exact_nhc_keeps_the_linearised_filters_consistent_in_an_outage(slip_free, filt):
     """A truth that holds NHC exactly (slip and bounce off) and an exact, frequent
     constraint (0.001 m/s at 10 Hz), 4 seeds: rms(error / sigma) of the
     horizontal position and velocity over the 120 s outage in [0.3, 1.5], and
@@ -73,14 +114,9 @@ def test_exact_nhc_keeps_the_linearised_filters_consistent_in_an_outage(filt):
     (position N / E), 2.1 / 2.0 (velocity), max-error ratio about 0.8; with it
     but as white noise at 10 Hz 0.6 / 0.55 and about 0.4; scaled by the events
     in its correlation time 0.57 / 0.47 and 0.15."""
-    import dataclasses
-
-    from insnav.sim.scenario import load_scenario
-
     ratios, worst = [], []
     for k in range(4):
-        sc = dataclasses.replace(load_scenario("car-mems-outage120", seed=k), lateral_slip=0.0, vertical_bounce=0.0)
-        ds = insnav.simulate(sc, seed=k)
+        ds = slip_free(k)
         hmax = []
         for cons in (Constraints(use=["nhc"], sigma_nhc_mps=0.001, rate_hz=10.0, nhc_rate_hz=10.0), None):
             kw = dict(constraints=cons) if cons else {}
@@ -96,18 +132,13 @@ def test_exact_nhc_keeps_the_linearised_filters_consistent_in_an_outage(filt):
     assert np.median(worst) < 0.25, worst
 
 
-def test_second_order_noise_as_white_noise_is_averaged_away():
+def test_second_order_noise_as_white_noise_is_averaged_away(slip_free):
     """``second_order_corr_s = 0`` adds the attitude x velocity product's
     covariance as white noise: ten exact-NHC events a second average it down
     and the outage drift comes back (measured on four slip-free runs: 31-75 m
     against 10-41 m with the default 1 s)."""
-    import dataclasses
-
-    from insnav.sim.scenario import load_scenario
-
     for k in (0, 2):
-        sc = dataclasses.replace(load_scenario("car-mems-outage120", seed=k), lateral_slip=0.0, vertical_bounce=0.0)
-        ds = insnav.simulate(sc, seed=k)
+        ds = slip_free(k)
         mx = []
         for corr in (0.0, 1.0):
             cons = Constraints(use=["nhc"], sigma_nhc_mps=0.001, nhc_rate_hz=10.0, second_order_corr_s=corr)
@@ -126,7 +157,8 @@ def test_odometer_bounds_the_along_track_drift(car):
         t = e["t"]
         return np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])[(t >= OUTAGE[0]) & (t <= OUTAGE[1])].max()
 
-    free, odo = max_in(_run(car, [])), max_in(_run(car, ["nhc", "odo"]))
+    # (the plain run: test_no_constraints_is_the_plain_run checks it equals an empty [constraints] table)
+    free, odo = max_in(_car_run(car, RunConfig(filter="ekf", init_seed=3))), max_in(_run(car, ["nhc", "odo"]))
     assert odo < 10.0 and odo < 0.05 * free, (odo, free)
 
 
@@ -266,8 +298,8 @@ def test_smoother_bridges_an_outage_consistently(car, filt):
     more than 10x, the smoothed sigmas are consistent with the errors
     (rms(error / sigma) in 0.6-1.4 per axis), and the last row, with no
     measurement after it, is the filtered one."""
-    fwd = insnav.run(car, config=RunConfig(filter=filt, init_seed=3))
-    sm = insnav.run(car, config=RunConfig(filter=filt, init_seed=3, smooth=True))
+    fwd = _car_run(car, RunConfig(filter=filt, init_seed=3))
+    sm = _car_run(car, RunConfig(filter=filt, init_seed=3, smooth=True))
 
     def max_in(sol):
         e = errors(sol, car.truth)
@@ -289,7 +321,7 @@ def test_unscented_and_ekf_smoothers_agree_on_a_near_linear_problem(car):
     """Same data, same start: the smoothed RB-UKF and EKF solutions differ by
     far less than either's forward error in the outage (the error dynamics are
     nearly linear for a MEMS car over 120 s)."""
-    sol = {(f, s): insnav.run(car, config=RunConfig(filter=f, init_seed=3, smooth=s))
+    sol = {(f, s): _car_run(car, RunConfig(filter=f, init_seed=3, smooth=s))
            for f in ("ekf", "rbukf") for s in (False, True)}
     t = sol[("ekf", True)].t
     inside = (t >= OUTAGE[0]) & (t <= OUTAGE[1])
