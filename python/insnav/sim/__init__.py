@@ -98,7 +98,7 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
 
 
 def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool = False,
-                block_s: float = 600.0, constellation=None, progress=None) -> tuple[Dataset, int]:
+                block_s: float = 600.0, constellation=None, progress=None) -> tuple[Dataset, int, int]:
     """Simulate a scenario straight into a dataset folder, block by block.
 
     The folder equals ``simulate(scenario, seed).save(directory)`` byte for
