@@ -148,7 +148,7 @@ def kfgins_stream_inputs(config_path, imu_path=None, gnss_path=None, *, layout: 
     lever arm, scenario; ``t0`` set by the stream) and the run configuration,
     exactly as :func:`load_kfgins` makes them."""
     c, imu_path, gnss_path = _kfgins_files(config_path, imu_path, gnss_path)
-    from ..filters.stream import read_gnss_text_blocks
+    from .text_blocks import read_gnss_text_blocks
 
     gnss = read_gnss_text_blocks(gnss_path)  # in blocks, 7 float64 per fix (read, never written)
     initial, cfg = _kfgins_run_config(c, config_path, layout)
