@@ -805,6 +805,24 @@ def walk_tight_gm(ds, cfg, ref, lines, verdicts, max_runs, white, white_report, 
 ADAPTIVE_Q_WINDOWS = (10, 20, 40)
 
 
+def best_adaptive_q(best, n_figures, n_outside, coupling, hand_name, verdicts) -> list:
+    """The best adaptive-Q variant's sentence and its verdict row (the walk, loose or tight).
+
+    ``best``: (hand's outside figures brought within, or -1 when the error ratio is above 1; figures
+    within; -ratio; N; label; figures; error ratio), the largest first three of the variants."""
+    fixed_best, n_best, _, n, label, fg, ratio = best
+    fg = ", ".join(f"{x:.2f}" for x in fg)
+    verdicts.append((f"rtklibexplorer walk, {coupling}: adaptive process noise (best of N = "
+                     f"{', '.join(map(str, ADAPTIVE_Q_WINDOWS))}): the hand settings' figures outside 0.7-1.3 "
+                     f"brought within with the held-out error <= the hand settings' ({max(fixed_best, 0)} of "
+                     f"{n_outside}; {n_best} of {n_figures} within; error ratio {ratio:.3f})",
+                     "met" if fixed_best == n_outside and ratio <= 1.0 else "NOT met"))
+    return ["", f"Best adaptive-Q variant (most of the hand settings' outside figures brought within at a held-out "
+            f"error no worse than the hand settings'): N = {n}, {label}: {n_best} of {n_figures} figures within "
+            f"0.7-1.3 ({fg}), {max(fixed_best, 0)} of the hand settings' {n_outside} outside ones, "
+            f"horizontal error {ratio:.3f} x {hand_name}.", ""]
+
+
 def walk_loose_adaptive_q(ds, ref, unseen, model, res, max_runs, verdicts) -> list:
     """The loose walk with the adaptive process noise (``adaptive_q_window``, cpp/include/insnav/filter/
     adaptive_noise.hpp; Mohamed & Schwarz 1999: the velocity and angle random walk variances times
@@ -851,17 +869,7 @@ def walk_loose_adaptive_q(ds, ref, unseen, model, res, max_runs, verdicts) -> li
             if label != "hand + adaptive Q":
                 cand = (fixed if ratio <= 1.0 else -1, n_in(fg), -ratio, n, label, fg, ratio)
                 best = cand if best is None or cand[:3] > best[:3] else best
-    fixed_best, n_best, _, n, label, fg, ratio = best
-    out += ["", f"Best adaptive-Q variant (most of the hand settings' outside figures brought within at a held-out "
-            f"error no worse than the hand settings'): N = {n}, {label}: {n_best} of 7 figures within 0.7-1.3 "
-            f"({j(fg)}), {max(fixed_best, 0)} of the hand settings' {len(outside)} outside ones, horizontal error "
-            f"{ratio:.3f} x the plain hand settings'.", ""]
-    verdicts.append((f"rtklibexplorer walk, loose: adaptive process noise (best of N = "
-                     f"{', '.join(map(str, ADAPTIVE_Q_WINDOWS))}): the hand settings' figures outside 0.7-1.3 "
-                     f"brought within with the held-out error <= the hand settings' ({max(fixed_best, 0)} of "
-                     f"{len(outside)}; {n_best} of 7 within; error ratio {ratio:.3f})",
-                     "met" if fixed_best == len(outside) and ratio <= 1.0 else "NOT met"))
-    return out
+    return out + best_adaptive_q(best, 7, len(outside), "loose", "the plain hand settings'", verdicts)
 
 
 def walk_tight_adaptive_q(ds, ref, model, res, hand, max_runs, verdicts) -> list:
@@ -902,17 +910,7 @@ def walk_tight_adaptive_q(ds, ref, model, res, hand, max_runs, verdicts) -> list
             if label != "hand + adaptive Q":
                 cand = (fixed if ratio <= 1.0 else -1, n_in, -ratio, n, label, fg, ratio)
                 best = cand if best is None or cand[:3] > best[:3] else best
-    fixed_best, n_best, _, n, label, fg, ratio = best
-    out += ["", f"Best adaptive-Q variant (most of the hand settings' outside figures brought within at a held-out "
-            f"error no worse than the hand settings'): N = {n}, {label}: {n_best} of {len(hand_c)} figures within "
-            f"0.7-1.3 ({j(fg)}), {max(fixed_best, 0)} of the hand settings' {len(outside)} outside ones, "
-            f"horizontal error {ratio:.3f} x the hand settings'.", ""]
-    verdicts.append((f"rtklibexplorer walk, tight: adaptive process noise (best of N = "
-                     f"{', '.join(map(str, ADAPTIVE_Q_WINDOWS))}): the hand settings' figures outside 0.7-1.3 "
-                     f"brought within with the held-out error <= the hand settings' ({max(fixed_best, 0)} of "
-                     f"{len(outside)}; {n_best} of {len(hand_c)} within; error ratio {ratio:.3f})",
-                     "met" if fixed_best == len(outside) and ratio <= 1.0 else "NOT met"))
-    return out
+    return out + best_adaptive_q(best, len(hand_c), len(outside), "tight", "the hand settings'", verdicts)
 
 
 def main(argv=None) -> int:
