@@ -295,3 +295,16 @@ def test_gnss_file_read_in_blocks_equals_the_whole_file_reader(kf_short, tmp_pat
         assert [blocks.origin.line(i) for i in range(len(whole))] == \
             [whole.origin.line(i) for i in range(len(whole))]
     assert errors == {"bad": "3001", "nan_and_bad": "3001", "short": "1501", "cols5": "1", "empty": "1"}
+
+
+def test_gnss_file_that_grows_between_the_two_passes_is_refused(tmp_path, monkeypatch):
+    """A GNSS file with more lines in the second pass than the first counted (it grew in between) gets
+    a one-line error naming the file and line, not a shape error or a silently cut table."""
+    import insnav.io.text_blocks as tb
+
+    f = tmp_path / "gnss.txt"
+    f.write_text("".join(f"{100.0 + i:.1f} 30.5 114.3 20.0 0.01 0.01 0.02\n" for i in range(50)))
+    assert len(tb.read_gnss_text_blocks(f, block_lines=7).t_valid) == 50
+    monkeypatch.setattr(tb, "count_lines", lambda p: 20)  # the first pass saw 20 lines
+    with pytest.raises(ValueError, match=r"gnss\.txt:\d+: the file changed while it was read .*20\)"):
+        tb.read_gnss_text_blocks(f, block_lines=7)

@@ -164,6 +164,9 @@ def read_gnss_text_blocks(path, *, block_lines: int | None = None) -> GnssFixes:
             return None, None
         a, lines = parse_numeric(data, n, str(p), first_line=line, comma=False)
         k = a.shape[0]
+        if rows + k > cap:  # more rows than the first pass counted lines: the file grew in between
+            raise ValueError(f"{p}:{line}: the file changed while it was read (more lines than its first pass "
+                             f"counted, {cap - 1}); read it again once it is complete")
         r = slice(rows, rows + k)
         cols["t"][r], cols["lat"][r], cols["lon"][r], cols["h"][r] = a[:, 0], a[:, 1], a[:, 2], a[:, 3]
         cols["sp"][r] = a[:, 4:7]
