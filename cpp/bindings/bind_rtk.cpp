@@ -159,7 +159,8 @@ py::dict lambda_search_stats(const DArray& a_hat, const DArray& Q) {
   double s[2];
   gnss::Lambda lam;
   const auto st = lam.solve(a, q, fix, s);
-  if (st == gnss::LambdaStatus::kNotPositiveDefinite) throw py::value_error("lambda_search_stats: Q is not positive definite");
+  if (st == gnss::LambdaStatus::kNotPositiveDefinite)
+    throw py::value_error("lambda_search_stats: Q is not positive definite");
   py::dict d;
   d["nodes"] = lam.nodes();
   d["permutations"] = lam.permutations();
