@@ -35,7 +35,9 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    noise estimated from the data (``[rtk] noise = "estimate"``, opt-in: a GNSS-only pre-pass, least-squares
    variance component estimation of its fixed epochs, ``insnav.gnss.rtk_noise``): the estimate with its
    sigma and the smoother agreement beside the default row (which stays at the default 3 mm) and the
-   hand-set 0.5 mm and error-free-IMU controls.  ``--runs 0`` runs this part alone.
+   hand-set 0.5 mm and error-free-IMU controls, and the work of the default and the estimated rows (the
+   run's counters, ``summary["counters"]``: MLAMBDA solves and search nodes per AR epoch, ambiguities
+   re-initialised, joint updates skipped).  ``--runs 0`` runs this part alone.
 2. **Simulator, ``rtk-urban-car`` (GPS L1 only), N runs** (seeds 1..N) with cycle slips at 1 per
    satellite per 5 minutes (``slip_rate_per_h = 12``), none flagged by the receiver
    (``slip_lli_prob = 0``): fix rate, wrong-fix rate, horizontal 95th percentile of RTK/INS and of
@@ -390,6 +392,12 @@ def spirent_part(work: Path, progress, freq: int = 2):
                                  sigma_phase_b_m=f_e.rtk_options.sigma_phase_b_m,
                                  code_phase_ratio=f_e.rtk_options.code_phase_ratio))
     smooth_fix.update(est_pass_cpu_s=c1 - c0, est_vce_cpu_s=c2 - c1, est_run_cpu_s=time.process_time() - c2)
+    # the work of the default and the estimated rows (the engine's summary counters): MLAMBDA solves and
+    # search nodes per AR epoch, ambiguity re-initialisations, joint updates skipped
+    smooth_fix.update(work={k: fwd.summary["counters"] if k == "default" else f_e.summary["counters"]
+                            for k in ("default", "est")},
+                      work_cpu={"default": res["insnav RTK/INS (continuous, default)"]["cpu_s"],
+                                "est": res[EST_ROW]["cpu_s"]})
     smooth_fix.update(_agreement("est", f_e, s_e, ds), est_text=est.text() if est else "too few fixed epochs",
                       est_a_mm=1e3 * f_e.rtk_options.sigma_phase_a_m, est_ratio=f_e.rtk_options.code_phase_ratio,
                       est_a_sd_mm=1e3 * est.sigma_phase_a_sd_m if est else math.nan,
@@ -732,6 +740,33 @@ def sign_test_p(wins, losses):
     return min(1.0, 2.0 * sum(math.comb(n, j) for j in range(k + 1)) / 2.0 ** n)
 
 
+def _work_text(sf) -> str:
+    """The AR work of the default and the estimated rows (summary["counters"] of run_rtk_ins)."""
+    w, cpu = sf["work"], sf["work_cpu"]
+
+    def per(k, key):
+        return w[k][key] / max(w[k]["ar_epochs"], 1)
+
+    return (f"The work behind it (the run's counters, `summary[\"counters\"]`), default row / estimated row: "
+            f"MLAMBDA solves per AR epoch {per('default', 'lambda_calls'):.2f} / {per('est', 'lambda_calls'):.2f} "
+            f"(partial-AR subsets included; {w['default']['ar_epochs']} / {w['est']['ar_epochs']} AR epochs), "
+            f"search nodes per solve {w['default']['search_nodes'] / max(w['default']['lambda_calls'], 1):.0f} / "
+            f"{w['est']['search_nodes'] / max(w['est']['lambda_calls'], 1):.0f} (largest "
+            f"{w['default']['max_search_nodes']} / {w['est']['max_search_nodes']}), ambiguities re-initialised "
+            f"{w['default']['amb_reset']} / {w['est']['amb_reset']} ("
+            + ("each ambiguity once after each outage, by its loss-of-lock bit: "
+               f"{len(OUTAGES)} x {w['default']['amb_added']}"
+               if all(w[k]['amb_reset'] == len(OUTAGES) * w[k]['amb_added'] for k in w) else
+               f"{len(OUTAGES)} outages, {w['default']['amb_added']} / {w['est']['amb_added']} ambiguities added")
+            + "), "
+            f"joint updates skipped {w['default']['update_failures']} / {w['est']['update_failures']}; CPU of the "
+            f"whole call {cpu['default']:.2f} / {cpu['est']:.2f} s (ratio {cpu['est'] / cpu['default']:.1f}: the "
+            f"pre-pass and the estimation included).  MLAMBDA's reduction permutes with a relative tolerance "
+            f"(gnss/lambda.hpp: the same decorrelation and search for k Q as for Q), so the float ambiguities of a "
+            f"0.1 mm phase sigma, whose conditional variances are 1e-7 to 1e-5 cycles^2, are decorrelated as the "
+            f"default's are (an absolute tolerance of 1e-6 cycles^2, RTKLIB's, leaves them correlated).")
+
+
 def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdown=0, noise=None) -> str:
     load = os.getloadavg()[0]
     L = ["# Tight RTK/INS: re-fixing after outages, fix rate, slips, cost (GNSS-only RTK and RTKLIB side by side)", "",
@@ -849,7 +884,7 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               f"each): the GNSS-only pass recording the fixed epochs {sf['est_pass_cpu_s']:.2f} s (reading "
               f"included), the least-squares variance component estimation of its rows {sf['est_vce_cpu_s']:.3f} s "
               f"(C++ sums, gnss/noise_vce.hpp), the RTK/INS run with the estimated sigmas configured "
-              f"{sf['est_run_cpu_s']:.2f} s."]
+              f"{sf['est_run_cpu_s']:.2f} s.  " + _work_text(sf)]
         ri = sp["rows"][names[0]]
         ok1 = all(x is not None and x <= 1 for x in ri["per"])
         L += ["", f"Targets (RTK/INS, default settings, {fq}):", "",

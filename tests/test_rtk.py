@@ -80,6 +80,31 @@ def test_mlambda_decorrelation_is_unimodular_and_keeps_the_determinant():
         assert np.max(np.abs(np.tril(L, -1))) <= 0.5 + 1e-9
 
 
+@pytest.mark.parametrize("n", [6, 12, 20])
+def test_mlambda_does_not_depend_on_the_scale_of_q(n):
+    """k Q has the same decorrelation Z with k D, the same two integer vectors with norms s / k, and the
+    same search, node for node (Chang, Yang & Zhou 2005: integer least squares is scale-free, and with
+    the reduction's relative permutation test, lambda.hpp, so is the algorithm).  The scales are powers
+    of 4, exact in floating point (and their square roots), so every comparison is the unscaled one.
+    A float covariance of a 0.1 mm phase sigma has conditional variances of 1e-7 cycles^2, and an
+    absolute test (del + 1e-6 < D) stopped permuting there: the same integers after 10-100x the nodes."""
+    rng = np.random.default_rng(50 + n)
+    for _ in range(5):
+        a_hat, Q = _random_problem(rng, n)
+        Z, _, D = _core.lambda_decorrelate(Q)
+        fix, s = _core.lambda_search(a_hat, Q)
+        st = _core.lambda_search_stats(a_hat, Q)
+        assert st["ok"] and st["nodes"] > 0 and st["permutations"] > 0
+        for k in (4.0 ** -8, 4.0 ** -15, 4.0 ** 5):  # 1.5e-5, 9.3e-10, 1024
+            Zk, _, Dk = _core.lambda_decorrelate(Q * k)
+            np.testing.assert_array_equal(Zk, Z)
+            np.testing.assert_array_equal(Dk, D * k)
+            fk, sk = _core.lambda_search(a_hat, Q * k)
+            np.testing.assert_array_equal(fk, fix)
+            np.testing.assert_array_equal(np.array(sk) * k, np.array(s))
+            assert _core.lambda_search_stats(a_hat, Q * k) == st
+
+
 # --------------------------------------------------------------------------- double differences
 
 

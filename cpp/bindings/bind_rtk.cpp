@@ -144,6 +144,30 @@ py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
   return py::make_tuple(out, py::make_tuple(s[0], s[1]));
 }
 
+// The work of one MLAMBDA solve: search nodes and reduction permutations (Lambda::nodes, permutations).
+py::dict lambda_search_stats(const DArray& a_hat, const DArray& Q) {
+  const py::ssize_t n = a_hat.ndim() == 1 ? a_hat.shape(0) : -1;
+  if (n < 1 || n > gnss::kMaxAmbiguities) throw py::value_error("lambda_search_stats: bad a_hat");
+  require_shape(Q, n, n, "lambda_search_stats: Q");
+  gnss::AmbVec a(n);
+  gnss::AmbMat q(n, n);
+  for (py::ssize_t i = 0; i < n; ++i) {
+    a(i) = a_hat.data()[i];
+    for (py::ssize_t j = 0; j < n; ++j) q(i, j) = Q.data()[i * n + j];
+  }
+  gnss::AmbCand fix;
+  double s[2];
+  gnss::Lambda lam;
+  const auto st = lam.solve(a, q, fix, s);
+  if (st == gnss::LambdaStatus::kNotPositiveDefinite)
+    throw py::value_error("lambda_search_stats: Q is not positive definite");
+  py::dict d;
+  d["nodes"] = lam.nodes();
+  d["permutations"] = lam.permutations();
+  d["ok"] = st == gnss::LambdaStatus::kOk;
+  return d;
+}
+
 double lambda_success_rate(const DArray& Q, double variance_factor) {
   if (!(variance_factor > 0.0) || !std::isfinite(variance_factor))
     throw py::value_error("lambda_success_rate: variance_factor must be > 0");
@@ -520,6 +544,8 @@ void bind_rtk(py::module_& m) {
         "Records of a RINEX 3 (or, rinex2=True, 2.1x) observation file after a header parsed by the caller (per slot: C, L, D, S, LLI).");
   m.def("lambda_search", &lambda_search, py::arg("a_hat"), py::arg("Q"),
         "MLAMBDA (Chang, Yang, Zhou 2005): best and second-best integer vectors (n, 2) and squared norms.");
+  m.def("lambda_search_stats", &lambda_search_stats, py::arg("a_hat"), py::arg("Q"),
+        "The work of one MLAMBDA solve: dict(nodes (search), permutations (reduction), ok).");
   m.def("lambda_decorrelate", &lambda_decorrelate, py::arg("Q"),
         "MLAMBDA reduction: (Z, L, D) with Z^T Q Z = L^T diag(D) L.");
   m.def("lambda_success_rate", &lambda_success_rate, py::arg("Q"), py::arg("variance_factor") = 1.0,

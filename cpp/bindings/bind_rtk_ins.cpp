@@ -231,6 +231,19 @@ py::dict rtk_ins_run_with(const DArray& t, const DArray& dtheta_b, const DArray&
   res["slips"] = sl_all;
   res["row_slip"] = row_slip;
   res["nav_epoch"] = nav_all;  // (E, 9) the INS after each epoch: lat, lon [rad], h, v_n, roll, pitch, yaw [rad]
+  {  // the run's work (RtkInsCounters): AR cost, ambiguity states added / re-initialised, skipped updates
+    const RtkInsCounters& c = out.counters;
+    py::dict cn;
+    cn["ar_epochs"] = c.ar.resolves;
+    cn["lambda_calls"] = c.ar.lambda_calls;
+    cn["search_nodes"] = c.ar.search_nodes;
+    cn["max_search_nodes"] = c.ar.max_search_nodes;
+    cn["lambda_failures"] = c.ar.lambda_failures;
+    cn["amb_added"] = c.amb_added;
+    cn["amb_reset"] = c.amb_reset;
+    cn["update_failures"] = c.update_failures;
+    res["counters"] = cn;
+  }
   if (probe >= 0) {
     py::dict pr;
     const py::ssize_t n = p_n;

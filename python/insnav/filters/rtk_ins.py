@@ -23,7 +23,10 @@ IMU-centre navigation) with ``gnss_t``/``gnss_status`` (per rover epoch: applied
 ``fix_status`` (per rover epoch: RTKLIB's Q, 1 fixed, 2 float, 4 code only, 0 none), ``ratio``,
 ``solution.rtk`` (:class:`RtkInsSolution`: antenna positions
 fixed or float per epoch, ratio, fixed ambiguities, slip detections including the INS-aided
-test) and ``summary`` counts (fix rate, slips).
+test) and ``summary`` counts (fix rate, slips; ``summary["counters"]``: the run's work, the AR epochs,
+MLAMBDA solves including the partial-AR subsets, their search nodes (sum and largest), failed solves,
+ambiguity states added and re-initialised, joint updates skipped for a covariance that is not
+positive definite).
 
 ``cfg.smooth`` (every filter here): the RTS smoother (:mod:`insnav.filters.smoothing`) over the 15
 navigation error states, the ambiguities marginalised; at a fixed epoch the smoother starts from the
@@ -210,7 +213,8 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
                                   noise_estimate=noise_est))
     counts = rs.counts()
     summary = dict(filter=cfg.filter, coupling="rtk", layout=15, updates=int((status > 0).sum()), rejected=0,
-                   gnss_records=int(status.size), cholesky_repairs=int(out["cholesky_repairs"]), **counts)
+                   gnss_records=int(status.size), cholesky_repairs=int(out["cholesky_repairs"]), **counts,
+                   counters={k: int(v) for k, v in out["counters"].items()})
     sol, _ = nav_solution(out, gnss_t=t_rec, innovation=np.full((status.size, 6), np.nan), nis=rs.ratio.copy(),
                           gnss_status=np.where(status > 0, 1, 0).astype(np.int8), summary=summary)
     sol.rtk = rs

@@ -177,6 +177,15 @@ struct RtkInsEpoch {
   std::array<int, kRtkInsSlipKinds> slips{};
 };
 
+/// Work counters of a run (RtkInsOutputs::counters): the cost of its AR and what re-initialised or
+/// skipped filter states, for the summary (a regression shows as a count, not only as time).
+struct RtkInsCounters {
+  gnss::ArCounts ar;         // PartialAr: AR epochs, MLAMBDA solves (partial-AR subsets) and search nodes
+  long amb_added = 0;        // ambiguity states added (a satellite/frequency appearing)
+  long amb_reset = 0;        // re-initialised: a slip flag, a phase outlier (outlier_sigma), robust screening
+  long update_failures = 0;  // joint Kalman updates skipped: H P H^T + R not positive definite (LLT)
+};
+
 /// Caller-owned per-epoch outputs (any may be null); rows for E epochs.
 struct RtkInsOutputs : NavOutputs {
   std::int32_t* status = nullptr;
@@ -198,6 +207,7 @@ struct RtkInsOutputs : NavOutputs {
   // per rover row (M rows over all epochs): slip flags of the row, bits gnss::SlipKind and kSlipIns,
   // OR over the frequencies
   std::uint8_t* row_slip = nullptr;
+  RtkInsCounters counters{};  // filled at the end of run()
 };
 
 /// One rover epoch: time of validity, rover rows [begin, end) and base rows [base_begin, base_end)
@@ -259,6 +269,8 @@ class RtkInsEngine {
     code_scale_ = 1.0;
     epoch_index_ = 0;
     amb_gen_.fill(0);
+    counters_ = RtkInsCounters{};
+    ar_.reset_counts();
     held_n_ = 0;
     last_phase_flag_.fill(-2);
     phase_flag_run_.fill(0);
@@ -342,6 +354,8 @@ class RtkInsEngine {
     }
     for (; g < n_epochs; ++g) mark(g, out);
     out.cholesky_repairs = core_.filter.cholesky_repairs();
+    out.counters = counters_;
+    out.counters.ar = ar_.counts();
   }
 
   /// The measurement step of one rover epoch at the INS's current time.
@@ -441,6 +455,7 @@ class RtkInsEngine {
           const int k = row_amb_[r];
           if (std::abs(y_(r)) > o.outlier_sigma * std::sqrt(S) && amb_[k].lock > 0) {
             init_amb(k, row_c_[r], amb_[k].freq);
+            ++counters_.amb_reset;
             ++out.slips[gnss::kSlipOutlier];
             reset_any = true;
           }
@@ -703,8 +718,10 @@ class RtkInsEngine {
           amb_[k].freq = f;
           amb_of_[sat * gnss::kMaxFreq + f] = k;
           init_amb(k, c, f);
+          ++counters_.amb_added;
         } else if (slip) {
           init_amb(k, c, f);
+          ++counters_.amb_reset;
         }
         const int lli_r = std::isfinite(fr[3]) ? static_cast<int>(fr[3]) : 0;
         const int lli_b = std::isfinite(fb[3]) ? static_cast<int>(fb[3]) : 0;
@@ -837,6 +854,7 @@ class RtkInsEngine {
     last_phase_flag_[sf] = epoch_index_;
     if (k >= 0 && amb_[k].lock > 0 && cfg_.phase_reset_epochs > 0 && phase_flag_run_[sf] >= cfg_.phase_reset_epochs) {
       init_amb(k, c, f);
+      ++counters_.amb_reset;
       ++out.slips[gnss::kSlipOutlier];
     } else {
       phase_out_[i] = true;
@@ -975,7 +993,10 @@ class RtkInsEngine {
     S_.noalias() += H_ * PHt_;
     llt_.compute(S_);
     dx_.setZero(n);
-    if (llt_.info() != Eigen::Success) return;
+    if (llt_.info() != Eigen::Success) {
+      ++counters_.update_failures;
+      return;
+    }
     KT_ = PHt_.transpose();
     llt_.solveInPlace(KT_);
     dx_.noalias() = KT_.transpose() * y_.head(m);
@@ -1192,6 +1213,7 @@ class RtkInsEngine {
   double t_last_ = NAN;
   double dt_epoch_ = 0.0;    // time since the previous rover epoch [s] (0 on the first)
   double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
+  RtkInsCounters counters_{};  // this run's work (RtkInsOutputs::counters; ar is ar_.counts())
   gnss::SlipDetector rover_slip_, base_slip_;
   std::array<std::uint8_t, gnss::kMaxSatKeys * gnss::kMaxFreq> flags_r_{}, flags_b_{};
   std::array<PrevSd, gnss::kMaxSatKeys * gnss::kMaxFreq> prev_{};

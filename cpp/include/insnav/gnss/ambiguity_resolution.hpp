@@ -65,6 +65,16 @@ inline double bootstrap_success_rate(const AmbVec& D) {
 /// What a caller's check makes of a candidate subset (PartialAr::resolve).
 enum class ArVerdict : int { kAccept = 0, kReject = 1, kStop = 2 };
 
+/// Work of PartialAr over its resolve() calls since reset_counts(): what an engine's summary reports
+/// of the cost of its AR.
+struct ArCounts {
+  long resolves = 0;          // resolve() calls (epochs with AR)
+  long lambda_calls = 0;      // MLAMBDA solves: the full set and each partial-AR subset tried
+  long search_nodes = 0;      // MLAMBDA search nodes, summed over the solves (Lambda::nodes)
+  long max_search_nodes = 0;  // the most of one solve
+  long lambda_failures = 0;   // solves without a result (Q_a not positive definite, node budget)
+};
+
 /// Partial ambiguity resolution over candidates given in priority order.
 class PartialAr {
  public:
@@ -82,6 +92,7 @@ class PartialAr {
   template <class ValueFn, class CovFn, class CheckFn>
   bool resolve(int n, ValueFn&& a, CovFn&& q, const ArSettings& s, CheckFn&& check) {
     n = std::min(n, kMaxAmbiguities);
+    ++counts_.resolves;
     n_used_ = 0;
     ratio_ = 0.0;
     success_ = success_scaled_ = 0.0;
@@ -96,7 +107,14 @@ class PartialAr {
         for (int r = 0; r <= p; ++r) Qa_(p, r) = Qa_(r, p) = q(p, r);
       }
       double sq[2];
-      if (lambda_.solve(a_hat_, Qa_, a_fix_, sq) != LambdaStatus::kOk) continue;
+      const LambdaStatus st = lambda_.solve(a_hat_, Qa_, a_fix_, sq);
+      ++counts_.lambda_calls;
+      counts_.search_nodes += lambda_.nodes();
+      counts_.max_search_nodes = std::max(counts_.max_search_nodes, lambda_.nodes());
+      if (st != LambdaStatus::kOk) {
+        ++counts_.lambda_failures;
+        continue;
+      }
       const double ratio = sq[0] > 0.0 ? std::min(sq[1] / sq[0], 999.9) : 999.9;
       const double ps = lambda_.bootstrap_success_rate();  // of this subset's decorrelated Q_a
       const double ps_k = s.min_success_rate_scaled > 0.0 ? lambda_.bootstrap_success_rate(s.success_variance_factor) : ps;
@@ -144,6 +162,9 @@ class PartialAr {
   }
 
   int n_used() const { return n_used_; }
+  /// Work since the last reset_counts() (ArCounts).
+  const ArCounts& counts() const { return counts_; }
+  void reset_counts() { counts_ = ArCounts{}; }
   double ratio() const { return ratio_; }
   /// Bootstrapped success rate of the full set (or of the accepted subset when one passes).
   double success_rate() const { return success_; }
@@ -171,6 +192,7 @@ class PartialAr {
   Eigen::LLT<AmbMat> llt_{kMaxAmbiguities};
   int n_used_ = 0;
   double ratio_ = 0.0, s1_ = 0.0;
+  ArCounts counts_{};
 };
 
 /// Rules of FixValidator (the [rtk] keys min_fix_ambiguities, confirm_epochs, confirm_max_ambiguities).

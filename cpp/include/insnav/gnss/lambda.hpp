@@ -10,7 +10,8 @@
 //   2. Reduction (Sec. 3, Algorithm REDUCTION): integer Gauss transformations
 //      (eq. (6)) and symmetric permutations (eq. (9)-(12)) give a unimodular
 //      Z with Z^T Q Z = L^T D L decorrelated and D sorted (the "decorrelation";
-//      |det Z| = 1, so det Q is kept).
+//      |det Z| = 1, so det Q is kept).  Scale-free: k Q gives the same Z and
+//      k D (the permutation test's tolerance is relative, kPermuteRelTol).
 //   3. Search (Sec. 4, Algorithm SEARCH): depth-first enumeration of the
 //      shrinking ellipsoid in the z = Z^T a space with Schnorr-Euchner
 //      zig-zag ordering of each level, keeping the m best points.
@@ -46,6 +47,8 @@ class Lambda {
     if (n > kMaxAmbiguities) return LambdaStatus::kTooLarge;
     a_fix.resize(n, 2);
     s[0] = s[1] = 0.0;
+    nodes_ = 0;
+    permutations_ = 0;
     if (n == 0) return LambdaStatus::kOk;
     if (!ldl(Q)) return LambdaStatus::kNotPositiveDefinite;
     Z_.setIdentity(n, n);
@@ -61,6 +64,8 @@ class Lambda {
 
   /// Decorrelation only (for tests and diagnostics): Z with Z^T Q Z = L^T D L (Algorithm REDUCTION).
   bool decorrelate(const AmbMat& Q, AmbMat& Z, AmbMat& L, AmbVec& D) {
+    nodes_ = 0;
+    permutations_ = 0;
     if (!ldl(Q)) return false;
     Z_.setIdentity(Q.rows(), Q.rows());
     reduction();
@@ -90,6 +95,19 @@ class Lambda {
 
   /// Search-node budget (guards pathological, badly conditioned problems).
   long max_nodes = 10000000;
+
+  /// Search nodes visited by the last solve() (its cost: one per step down, up or along a level
+  /// of Algorithm SEARCH) and permutations of its reduction (or of the last decorrelate()).
+  long nodes() const { return nodes_; }
+  int permutations() const { return permutations_; }
+
+  /// Relative tolerance of the reduction's permutation test del < (1 - tol) D(j+1): it stops rounding
+  /// from permuting back and forth, and being relative it keeps the reduction independent of the
+  /// scale of Q.  RTKLIB's absolute del + 1e-6 < D(j+1) (lambda.c) stops permuting once the
+  /// conditional variances fall below 1e-6 cycles^2, which a phase sigma of 0.1 mm gives
+  /// (D ~ 1e-7 .. 1e-5): the ambiguities stay correlated and the search visits 10-100x more nodes
+  /// for the same two integer vectors.
+  static constexpr double kPermuteRelTol = 1e-6;
 
  private:
   // Q = L^T diag(D) L, L unit lower triangular, computed from the last row up (Sec. 2).
@@ -145,7 +163,8 @@ class Lambda {
       if (j <= k)
         for (int i = j + 1; i < n; ++i) gauss(i, j);
       const double del = D_(j) + L_(j + 1, j) * L_(j + 1, j) * D_(j + 1);
-      if (del + 1e-6 < D_(j + 1)) {
+      if (del < (1.0 - kPermuteRelTol) * D_(j + 1)) {  // Sec. 3: permute when it lowers D(j+1)
+        ++permutations_;
         permute(j, del);
         k = j;
         j = n - 2;
@@ -177,7 +196,10 @@ class Lambda {
     step_(k) = sgn(y);
     long nodes = 0;
     for (;;) {
-      if (++nodes > max_nodes) return LambdaStatus::kSearchLimit;
+      if (++nodes > max_nodes) {
+        nodes_ = nodes;
+        return LambdaStatus::kSearchLimit;
+      }
       const double newdist = dist_(k) + y * y / D_(k);
       if (newdist < maxdist) {
         if (k != 0) {  // move down a level
@@ -225,9 +247,12 @@ class Lambda {
     }
     s_out[0] = s[0];
     s_out[1] = s[1];
+    nodes_ = nodes;
     return LambdaStatus::kOk;
   }
 
+  long nodes_ = 0;
+  int permutations_ = 0;
   AmbMat A_, L_, Z_, S_;
   AmbVec D_, z_hat_, dist_, zb_, z_, step_;
   AmbCand zn_;
