@@ -27,7 +27,7 @@ temporary innovations sidecar and reduced to the running statistics the
 summary and the health verdict need (:class:`_Innovations`), so the engine
 holds the fixes of about one block.  Memory is a few blocks of IMU samples,
 rows and records, the IMU summed to 10 Hz for the input checks, at most
-:data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer recording's is summed
+:data:`CHECK_MAX_ROWS` rows (about 1.8 h, 3.7 MB; a longer recording's is summed
 further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes
 (KF-GINS files: read in two passes, a block of lines at a time,
 :func:`read_gnss_text_blocks`, 7 float64 per fix; the loader's cut takes
@@ -102,9 +102,13 @@ __all__ = ["BLOCK_LINES", "STREAM_SUFFIXES", "imu_text_blocks", "imu_csv_blocks"
 BLOCK_LINES = 1 << 16
 #: the rate of the summed IMU the input checks see [Hz]
 CHECK_RATE_HZ = 10.0
-#: the most rows of the summed IMU the input checks keep (about 7.3 h at 10 Hz, 15 MB): a longer
-#: recording's record is halved to 5 Hz, then 2.5 Hz, ... (:class:`_Coarse`)
-CHECK_MAX_ROWS = 1 << 18
+#: the most rows of the summed IMU the input checks keep (about 1.8 h at 10 Hz, 3.7 MB): a longer
+#: recording's record is halved to 5 Hz, then 2.5 Hz, ... (:class:`_Coarse`; a day: rows of 1.6 s, the
+#: course checks' heading grid as wide).  2^18 rows (15 MB, full after 7.3 h) made the peak RSS of a 24 h
+#: run 13 MB above a 1 h run's; each row's rotation is exact at its time (the sums of its samples), and
+#: the time-offset and gyro-against-course checks interpolate the heading linearly between rows
+#: (:func:`insnav.data.checks.heading_grid_step`)
+CHECK_MAX_ROWS = 1 << 16
 #: the most GNSS fixes converted to the engine's rows at a time (a block's fixes are given to the engine
 #: before it runs, its records taken after it: the engine holds the fixes of about one block)
 GNSS_PUSH_MAX = 1 << 12
@@ -380,7 +384,7 @@ class _Coarse:
     that would hold more is halved in place: the rows after the first one
     are summed in pairs (an odd last row waits for its partner), and from
     then on every row sums twice as many samples (5 Hz, then 2.5 Hz, ...), so
-    the checks see at most ``max_rows`` rows (about 15 MB at the default
+    the checks see at most ``max_rows`` rows (about 3.7 MB at the default
     :data:`CHECK_MAX_ROWS`).  The arrays are sized once from the expected
     sample count (grown by half when that was too small), never beyond
     ``max_rows`` + 2 rows."""
