@@ -143,3 +143,11 @@ def test_random_records(seed):
     g = _spoil(g, edits)
     for block in (1, int(rng.integers(2, 9)), int(rng.integers(9, 200)), n):
         _same(sanitize_gnss_blocks(g, block=block), sanitize_gnss(g))
+
+
+def test_fixes_given_as_lists():
+    # columns as Python lists (a user's GnssFixes): converted once, the same result as the whole sanitizer
+    g = _spoil(_fixes(n=40, origin="none"), [("h_m", 3, np.nan), ("t_valid", 9, 1008.0)])
+    lists = GnssFixes(*(np.asarray(getattr(g, f)).tolist() for f in FIELDS))
+    _same(sanitize_gnss_blocks(lists, block=3), sanitize_gnss(lists))
+    assert sanitize_gnss(lists)[1]["gnss_records_out"] == 38

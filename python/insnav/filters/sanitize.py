@@ -358,13 +358,21 @@ GNSS_SANITIZE_BLOCK = 1 << 12
 _DROPPED_LINES_SHOWN = 20
 
 
-def _gnss_block_masks(g: GnssFixes, a: int, b: int, n: int, min_h_m: float, max_h_m: float):
+def _gnss_columns(g: GnssFixes, n: int) -> dict:
+    """The fixes' columns as float64 arrays (views of ``g``'s arrays when they are float64 already)."""
+    cols = {f: np.asarray(getattr(g, f), float) for f in _GNSS_COLUMNS}
+    for f in ("v_n", "sigma_pos_n", "sigma_vel_n"):
+        cols[f] = cols[f].reshape(n, 3)
+    return cols
+
+
+_GNSS_COLUMNS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")
+
+
+def _gnss_block_masks(cols: dict, a: int, b: int, min_h_m: float, max_h_m: float):
     """``(t, ok, bad_vel)`` of fixes a .. b - 1: :func:`sanitize_gnss`'s tests, on their rows only."""
-    t = np.asarray(g.t_valid, float)[a:b]
-    lat, lon, h = (np.asarray(x, float)[a:b] for x in (g.lat_deg, g.lon_deg, g.h_m))
-    v = np.asarray(g.v_n, float).reshape(n, 3)[a:b]
-    sp = np.asarray(g.sigma_pos_n, float).reshape(n, 3)[a:b]
-    sv = np.asarray(g.sigma_vel_n, float).reshape(n, 3)[a:b]
+    t, lat, lon, h, v, sp, sv = (cols[f][a:b] for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n",
+                                                        "sigma_pos_n", "sigma_vel_n"))
     with np.errstate(invalid="ignore"):
         ok = (np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
               & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1) & (sp <= MAX_SIGMA_M).all(axis=1)
@@ -414,13 +422,14 @@ def sanitize_gnss_blocks(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"],
     if n == 0:
         return g, rep
     block = max(1, int(GNSS_SANITIZE_BLOCK if block is None else block))
+    cols = _gnss_columns(g, n)
     keep = np.zeros(n, bool)
     bad_vel = None  # allocated at the first fix whose velocity is removed
     t_last = None  # the time of the last valid fix so far [s]
     shown: list[int] = []  # the smallest file lines (sample indices) of the dropped records
     for a in range(0, n, block):
         b = min(n, a + block)
-        t, ok, bv = _gnss_block_masks(g, a, b, n, min_h_m, max_h_m)
+        t, ok, bv = _gnss_block_masks(cols, a, b, min_h_m, max_h_m)
         ts = t[ok]
         if ts.size:
             if (t_last is not None and ts[0] < t_last) or bool((ts[1:] < ts[:-1]).any()):
@@ -460,8 +469,7 @@ def sanitize_gnss_blocks(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"],
         kb = keep[a:b]
         j = k + int(kb.sum())
         for f, dst in out.items():
-            x = np.asarray(getattr(g, f), float)
-            x = (x.reshape(n, 3) if dst.ndim == 2 else x)[a:b][kb]
+            x = cols[f][a:b][kb]
             if bad_vel is not None and f in ("v_n", "sigma_vel_n"):
                 x[bad_vel[a:b][kb]] = np.nan
             dst[k:j] = x
