@@ -122,10 +122,11 @@ def _words(msg):
     return None if msg is None else re.sub(r"[-+]?\d+(\.\d+)?(e[-+]?\d+)?", "#", msg)
 
 
-def test_the_halved_record_gives_the_10_hz_records_verdicts():
+@pytest.mark.parametrize("divisor, merge", [(3, 4), (12, 16)])
+def test_the_halved_record_gives_the_10_hz_records_verdicts(divisor, merge):
     # the crafted mistakes on the car: check_dataset on the IMU summed to 10 Hz (the stream's checks so far)
-    # and on the record halved twice (2.5 Hz, as a 24 h recording's at the default limit): the same
-    # verdict, the same words
+    # and on the record halved twice (2.5 Hz, as a 7 h recording's at the default limit of 2^16 rows) and
+    # four times (0.625 Hz, rows of 1.6 s: a 24 h recording's): the same verdict, the same words
     ds = _car()
     dt = float(np.median(np.diff(ds.imu.t)))
     k = max(1, int(round(1.0 / (stream.CHECK_RATE_HZ * dt))))
@@ -134,9 +135,9 @@ def test_the_halved_record_gives_the_10_hz_records_verdicts():
     for name, d in _mistakes():
         imu = d.imu
         full = _feed(stream._Coarse(k, max_rows=10 ** 9), imu.t, imu.dtheta_b, imu.dv_b, 4093)
-        halved = _feed(stream._Coarse(k, max_rows=rows10 // 3), imu.t, imu.dtheta_b, imu.dv_b, 4093)
+        halved = _feed(stream._Coarse(k, max_rows=rows10 // divisor), imu.t, imu.dtheta_b, imu.dv_b, 4093)
         v10, vh = _verdict(d, full.imu("imu")), _verdict(d, halved.imu("imu"), halved.grid_step())
-        assert halved.merge == 4 and full.merge == 1, name
+        assert halved.merge == merge and full.merge == 1, name
         assert _words(vh) == _words(v10), (name, v10, vh)
         if name == "clean":  # the heading grid: one point per row of the record, not per 0.1 s of the span
             from insnav.data.checks import _heading_grid, _scanned
@@ -145,7 +146,7 @@ def test_the_halved_record_gives_the_10_hz_records_verdicts():
             t, dtheta_b, _, scan = _scanned(r.t, r.dtheta_b, r.dv_b)
             with heading_grid_step(halved.grid_step()):
                 _, h, g = _heading_grid(t, dtheta_b, scan)
-            assert h == pytest.approx(0.4) and g.size <= len(r.t) + 1 <= rows10 // 3 + 1
+            assert h == pytest.approx(0.1 * merge) and g.size <= len(r.t) + 1 <= rows10 // divisor + 1
         raised.append((name, v10 is not None))
     assert [n for n, r in raised if not r] == ["clean", "IMU 0.3 s late (accepted)"]
 

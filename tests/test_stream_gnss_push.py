@@ -308,3 +308,36 @@ def test_gnss_file_that_grows_between_the_two_passes_is_refused(tmp_path, monkey
     monkeypatch.setattr(tb, "count_lines", lambda p: 20)  # the first pass saw 20 lines
     with pytest.raises(ValueError, match=r"gnss\.txt:\d+: the file changed while it was read .*20\)"):
         tb.read_gnss_text_blocks(f, block_lines=7)
+
+
+def test_dropped_fixes_on_the_sanitizers_block_boundaries_give_the_whole_runs_bytes(kf_short, tmp_path, monkeypatch):  # noqa: F811
+    # the GNSS sanitizer a block of 7 fixes at a time (sanitize_gnss_blocks; the fixes after starttime from line
+    # 52, so its blocks begin at lines 52, 59, 66, ...): a non-finite height on the last line of a block (58),
+    # a repeated time on the first line of the next-but-one (66 repeats 65), a latitude out of range (100): the
+    # stream's fixes, report and files are the whole-file run's
+    import insnav.filters.sanitize as sanitize
+
+    def edit(lines):
+        lines = list(lines)
+        f = lines[57].split(" ")
+        lines[57] = " ".join(f[:3] + ["nan"] + f[4:])
+        f = lines[65].split(" ")
+        lines[65] = " ".join([lines[64].split(" ")[0]] + f[1:])
+        f = lines[99].split(" ")
+        lines[99] = " ".join([f[0], "95.0"] + f[2:])
+        return lines
+
+    d = _kf_copy(kf_short, tmp_path / "kf", edit)
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    monkeypatch.setattr(sanitize, "GNSS_SANITIZE_BLOCK", 7)
+    seen = []
+    real = sanitize.sanitize_gnss_blocks
+    monkeypatch.setattr(sanitize, "sanitize_gnss_blocks", lambda g, **kw: seen.append(real(g, **kw)) or seen[-1])
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    erra, errb = streamed_and_whole(_run, d, a, b)
+    assert erra == errb
+    for suffix in ("", ".innovations.csv", ".config.toml"):
+        assert (a.parent / (a.name + suffix)).read_bytes() == (b.parent / (b.name + suffix)).read_bytes(), suffix
+    rep = seen[0][1]
+    assert rep["gnss_invalid_dropped"] == 2 and rep["gnss_duplicates_dropped"] == 1
+    assert rep["gnss_dropped_lines"] == [58, 66, 100]

@@ -87,7 +87,7 @@ from ..data.dataset import GnssFixes, ImuData, RowOrigin
 from ..config import SANITIZE_DEFAULTS
 from .._imu_scan import scan_imu
 
-__all__ = ["sanitize_imu", "sanitize_gnss", "DEFAULTS"]
+__all__ = ["sanitize_imu", "sanitize_gnss", "sanitize_gnss_blocks", "DEFAULTS"]
 
 
 #: Default limits.  ``max_rate_rps`` = 2000 deg/s and ``max_accel_mps2`` = 100 g are
@@ -350,6 +350,135 @@ def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m
     out = GnssFixes(t[order], ta[order], lat[order], lon[order], h[order], v[order], sp[order], sv[order],
                     origin=origin)
     return out, rep
+
+
+#: fixes checked at a time by :func:`sanitize_gnss_blocks`
+GNSS_SANITIZE_BLOCK = 1 << 12
+#: the most file lines (sample indices) of dropped records the report lists
+_DROPPED_LINES_SHOWN = 20
+
+
+def _gnss_columns(g: GnssFixes, n: int) -> dict:
+    """The fixes' columns as float64 arrays (views of ``g``'s arrays when they are float64 already)."""
+    cols = {f: np.asarray(getattr(g, f), float) for f in _GNSS_COLUMNS}
+    for f in ("v_n", "sigma_pos_n", "sigma_vel_n"):
+        cols[f] = cols[f].reshape(n, 3)
+    return cols
+
+
+_GNSS_COLUMNS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")
+
+
+def _gnss_block_masks(cols: dict, a: int, b: int, min_h_m: float, max_h_m: float):
+    """``(t, ok, bad_vel)`` of fixes a .. b - 1: :func:`sanitize_gnss`'s tests, on their rows only."""
+    t, lat, lon, h, v, sp, sv = (cols[f][a:b] for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n",
+                                                        "sigma_pos_n", "sigma_vel_n"))
+    with np.errstate(invalid="ignore"):
+        ok = (np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
+              & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1) & (sp <= MAX_SIGMA_M).all(axis=1)
+              & (np.abs(lat) <= 90.0) & (lon >= -180.0) & (lon <= 360.0) & (h >= min_h_m) & (h <= max_h_m))
+        vel_any = np.isfinite(v).any(axis=1) | np.isfinite(sv).any(axis=1)
+        vel_ok = (np.isfinite(v).all(axis=1) & np.isfinite(sv).all(axis=1) & (sv > 0).all(axis=1)
+                  & (sv <= MAX_SIGMA_MPS).all(axis=1) & (np.abs(v) <= MAX_SPEED_MPS).all(axis=1))
+    return t, ok, ok & vel_any & ~vel_ok
+
+
+def sanitize_gnss_blocks(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"],
+                         max_h_m: float = DEFAULTS["max_h_m"], source: str = "gnss",
+                         block: int | None = None) -> tuple[GnssFixes, dict]:
+    """:func:`sanitize_gnss` (on-time filters: ``arrivals=False``) a block of
+    ``block`` fixes at a time, for the block-by-block run
+    (:mod:`insnav.filters.stream`) on a day of fixes: the same fixes (values,
+    dtypes, file lines) and the same report, without its whole-record
+    temporaries (copies of the velocity columns, masks, sort order).
+
+    Memory beyond the input: one block's temporaries, two masks of one bool
+    per fix, and the output arrays only when a fix is dropped or a velocity
+    removed (nothing changed: the input object itself, as
+    :func:`sanitize_gnss` returns it).  The valid fixes must be in time
+    order (ties allowed: the first is kept, the rest dropped as duplicates,
+    as the stable sort of :func:`sanitize_gnss` leaves them); a valid fix
+    earlier than the one before hands the record to :func:`sanitize_gnss`
+    itself (it sorts them), so the result is its result in every case.
+
+    Parameters
+    ----------
+    g : GnssFixes
+    min_h_m, max_h_m : float
+        Plausible height range [m].
+    source : str
+        Name used in messages when ``g.origin`` is not set.
+    block : int, optional
+        Fixes per block (default :data:`GNSS_SANITIZE_BLOCK`; any size >= 1 gives the same result).
+
+    Returns
+    -------
+    GnssFixes, dict
+        As :func:`sanitize_gnss` with ``arrivals=False``.
+    """
+    n = len(g)
+    rep = dict(gnss_records_in=n, gnss_records_out=n, gnss_invalid_dropped=0, gnss_velocity_removed=0,
+               gnss_reordered=0, gnss_duplicates_dropped=0, gnss_repeat_arrivals_kept=0, gnss_dropped_lines=[])
+    if n == 0:
+        return g, rep
+    block = max(1, int(GNSS_SANITIZE_BLOCK if block is None else block))
+    cols = _gnss_columns(g, n)
+    keep = np.zeros(n, bool)
+    bad_vel = None  # allocated at the first fix whose velocity is removed
+    t_last = None  # the time of the last valid fix so far [s]
+    shown: list[int] = []  # the smallest file lines (sample indices) of the dropped records
+    for a in range(0, n, block):
+        b = min(n, a + block)
+        t, ok, bv = _gnss_block_masks(cols, a, b, min_h_m, max_h_m)
+        ts = t[ok]
+        if ts.size:
+            if (t_last is not None and ts[0] < t_last) or bool((ts[1:] < ts[:-1]).any()):
+                return sanitize_gnss(g, min_h_m=min_h_m, max_h_m=max_h_m, source=source)  # out of time order
+            dup = np.empty(ts.size, bool)
+            dup[0] = t_last is not None and ts[0] == t_last
+            np.equal(ts[1:], ts[:-1], out=dup[1:])
+            t_last = float(ts[-1])
+        else:
+            dup = np.zeros(0, bool)
+        kept = np.flatnonzero(ok)
+        keep[a + kept[~dup]] = True
+        rep["gnss_invalid_dropped"] += int(b - a - ts.size)
+        rep["gnss_duplicates_dropped"] += int(dup.sum())
+        if bv.any():
+            if bad_vel is None:
+                bad_vel = np.zeros(n, bool)
+            bad_vel[a:b] = bv
+            rep["gnss_velocity_removed"] += int(bv.sum())
+        gone = a + np.concatenate([np.flatnonzero(~ok), kept[dup]])
+        if gone.size:
+            ln = (np.asarray([g.origin.line(int(i)) for i in gone[np.argsort(gone)][:_DROPPED_LINES_SHOWN]])
+                  if g.origin is not None and g.origin.lines is None else
+                  (g.origin.all_lines(n)[gone] if g.origin is not None else gone))
+            shown = sorted(shown + [int(x) for x in ln])[:_DROPPED_LINES_SHOWN]
+    rep["gnss_dropped_lines"] = shown
+    m = int(keep.sum())
+    rep["gnss_records_out"] = m
+    if m == n and bad_vel is None:
+        return g, rep
+    out = dict(t_valid=np.empty(m), t_arrival=np.empty(m), lat_deg=np.empty(m), lon_deg=np.empty(m),
+               h_m=np.empty(m), v_n=np.empty((m, 3)), sigma_pos_n=np.empty((m, 3)), sigma_vel_n=np.empty((m, 3)))
+    lines = (np.empty(m, np.int64) if g.origin is not None else None)
+    k = 0
+    for a in range(0, n, block):
+        b = min(n, a + block)
+        kb = keep[a:b]
+        j = k + int(kb.sum())
+        for f, dst in out.items():
+            x = cols[f][a:b][kb]
+            if bad_vel is not None and f in ("v_n", "sigma_vel_n"):
+                x[bad_vel[a:b][kb]] = np.nan
+            dst[k:j] = x
+        if lines is not None:
+            lines[k:j] = g.origin.all_lines(n)[a:b][kb] if g.origin.lines is not None else \
+                g.origin.first_line + a + np.flatnonzero(kb)
+        k = j
+    origin = RowOrigin(g.origin.source, g.origin.first_line, lines) if g.origin is not None else None
+    return GnssFixes(**out, origin=origin), rep
 
 
 def sanitize_dataset(dataset, options: dict | bool | None = True, *, arrivals: bool = False):

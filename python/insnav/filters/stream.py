@@ -27,12 +27,14 @@ temporary innovations sidecar and reduced to the running statistics the
 summary and the health verdict need (:class:`_Innovations`), so the engine
 holds the fixes of about one block.  Memory is a few blocks of IMU samples,
 rows and records, the IMU summed to 10 Hz for the input checks, at most
-:data:`CHECK_MAX_ROWS` rows (about 7.3 h; a longer recording's is summed
+:data:`CHECK_MAX_ROWS` rows (about 1.8 h, 3.7 MB; a longer recording's is summed
 further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes
 (KF-GINS files: read in two passes, a block of lines at a time,
-:func:`read_gnss_text_blocks`, 7 float64 per fix; the loader's cut and the
-sanitizer take views of them when the file is in time order: the one part
-that still grows with the recording, 56 bytes per fix;
+:func:`read_gnss_text_blocks`, 7 float64 per fix; the loader's cut takes
+views of them when the file is in time order, and the sanitizer checks them
+a block at a time, :func:`insnav.filters.sanitize.sanitize_gnss_blocks`,
+returning them as they are when it drops nothing: the one part that still
+grows with the recording, 56 bytes per fix;
 ``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py`` measure a
 synthesised day).
 
@@ -100,9 +102,13 @@ __all__ = ["BLOCK_LINES", "STREAM_SUFFIXES", "imu_text_blocks", "imu_csv_blocks"
 BLOCK_LINES = 1 << 16
 #: the rate of the summed IMU the input checks see [Hz]
 CHECK_RATE_HZ = 10.0
-#: the most rows of the summed IMU the input checks keep (about 7.3 h at 10 Hz, 15 MB): a longer
-#: recording's record is halved to 5 Hz, then 2.5 Hz, ... (:class:`_Coarse`)
-CHECK_MAX_ROWS = 1 << 18
+#: the most rows of the summed IMU the input checks keep (about 1.8 h at 10 Hz, 3.7 MB): a longer
+#: recording's record is halved to 5 Hz, then 2.5 Hz, ... (:class:`_Coarse`; a day: rows of 1.6 s, the
+#: course checks' heading grid as wide).  2^18 rows (15 MB, full after 7.3 h) made the peak RSS of a 24 h
+#: run 13 MB above a 1 h run's; each row's rotation is exact at its time (the sums of its samples), and
+#: the time-offset and gyro-against-course checks interpolate the heading linearly between rows
+#: (:func:`insnav.data.checks.heading_grid_step`)
+CHECK_MAX_ROWS = 1 << 16
 #: the most GNSS fixes converted to the engine's rows at a time (a block's fixes are given to the engine
 #: before it runs, its records taken after it: the engine holds the fixes of about one block)
 GNSS_PUSH_MAX = 1 << 12
@@ -378,7 +384,7 @@ class _Coarse:
     that would hold more is halved in place: the rows after the first one
     are summed in pairs (an odd last row waits for its partner), and from
     then on every row sums twice as many samples (5 Hz, then 2.5 Hz, ...), so
-    the checks see at most ``max_rows`` rows (about 15 MB at the default
+    the checks see at most ``max_rows`` rows (about 3.7 MB at the default
     :data:`CHECK_MAX_ROWS`).  The arrays are sized once from the expected
     sample count (grown by half when that was too small), never beyond
     ``max_rows`` + 2 rows."""
@@ -736,6 +742,27 @@ def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
                      origin=None if g.origin is None else g.origin.take(keep, len(keep)))
 
 
+def _fixes_equal(a: GnssFixes, b: GnssFixes, keep, block: int = GNSS_PUSH_MAX) -> bool:
+    """Whether ``a`` holds the fixes of ``b`` where ``keep`` (NaN equal to NaN; every field but
+    ``t_arrival``), compared :data:`GNSS_PUSH_MAX` fixes at a time (no whole-record copy of ``b``'s
+    columns: the fixes in time order cut at the last IMU sample keep a leading run of them)."""
+    idx = np.flatnonzero(keep)
+    if len(a) != len(idx):
+        return False
+    n = len(keep)
+    for k in range(0, len(idx), block):
+        rows = idx[k:k + block]
+        for f in _GNSS_FIELDS:
+            if f == "t_arrival":
+                continue
+            x, y = np.asarray(getattr(a, f), float), np.asarray(getattr(b, f), float)
+            if x.ndim == 2 or y.ndim == 2:
+                x, y = x.reshape(len(a), 3), y.reshape(n, 3)
+            if not np.array_equal(x[k:k + block], y[rows], equal_nan=True):
+                return False
+    return True
+
+
 class _FixSlice:
     """Fixes ``idx`` (a slice or indices) of ``g``: the fields :func:`insnav.filters.loose.loose_gnss_rows` reads."""
 
@@ -889,13 +916,13 @@ class _BlockRun:
         """The engine at t0: the GNSS records in (t0, endtime] sanitized (the batch loader's cut and
         sanitize_gnss), the output decimation from the first block, the batch loose runner's set-up."""
         from .loose import loose_engine_args
-        from .sanitize import sanitize_gnss
+        from .sanitize import sanitize_gnss_blocks
 
         cfg, o = self.cfg, self.opts
         tv = np.asarray(self.gnss_raw.t_valid)
         g = (tv > self.t0) & (tv <= (np.inf if self.end_s is None else self.end_s))
-        self.gnss, self.gnss_rep = sanitize_gnss(_gnss_take(self.gnss_raw, g), min_h_m=o["min_h_m"],
-                                                 max_h_m=o["max_h_m"], source="gnss")
+        self.gnss, self.gnss_rep = sanitize_gnss_blocks(_gnss_take(self.gnss_raw, g), min_h_m=o["min_h_m"],
+                                                        max_h_m=o["max_h_m"], source="gnss")
         cfg.output_decimation = 1
         if self.output_rate_hz is not None:
             cfg.output_decimation = self.set_decimation(t_first, self.output_rate_hz)
@@ -939,7 +966,7 @@ class _BlockRun:
         changed nothing when the sanitizer treats the rest alike and the GNSS period is the same; they were
         never given to the engine (:meth:`_push_gnss`), so no output of theirs was written; else the batch
         path runs.  ``records``: the per-fix records written."""
-        from .sanitize import sanitize_gnss
+        from .sanitize import sanitize_gnss_blocks
 
         keep = np.asarray(self.gnss.t_valid) <= self.last_kept
         if keep.all():
@@ -947,15 +974,13 @@ class _BlockRun:
                 raise RuntimeError(f"{records} GNSS records written for {len(keep)} fixes")
             return
         tv = np.asarray(self.gnss_raw.t_valid)
-        g2, rep2 = sanitize_gnss(_gnss_take(self.gnss_raw, (tv > self.t0) & (tv <= self.last_kept)),
-                                 min_h_m=self.opts["min_h_m"], max_h_m=self.opts["max_h_m"], source="gnss")
+        g2, rep2 = sanitize_gnss_blocks(_gnss_take(self.gnss_raw, (tv > self.t0) & (tv <= self.last_kept)),
+                                        min_h_m=self.opts["min_h_m"], max_h_m=self.opts["max_h_m"], source="gnss")
         counts = ("gnss_records_in", "gnss_records_out")
         same = ({k: v for k, v in rep2.items() if k not in counts}
                 == {k: v for k, v in self.gnss_rep.items() if k not in counts}
                 and len(g2) == int(keep.sum())
-                and all(np.array_equal(np.asarray(getattr(g2, f), float),
-                                       np.asarray(getattr(self.gnss, f), float)[keep], equal_nan=True)
-                        for f in _GNSS_FIELDS if f != "t_arrival")
+                and _fixes_equal(g2, self.gnss, keep)
                 and _median_spacing(self.cfg, g2.t_valid) == _median_spacing(self.cfg, self.gnss.t_valid))
         if not same:
             raise Fallback("a GNSS record after the last IMU sample changes the set-up")
