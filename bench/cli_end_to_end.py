@@ -106,6 +106,30 @@ def run_cli(work: Path, extra, out_name, yaml: str = "kf-gins-sim.yaml", keep: b
                 cpu=ru.ru_utime + ru.ru_stime)
 
 
+#: what ``insnav run --format kfgins`` loads before it reads a line: the command line, its parser and the
+#: modules of the block-by-block run (tests/test_cli_imports.py: the run loads none of the other commands)
+STARTUP_CODE = ("import sys; from insnav.cli import build_parser; build_parser('run').parse_args(sys.argv[1:]); "
+                "import insnav.io.kfgins_dataset, insnav.filters.stream, insnav.filters.loose, "
+                "insnav.filters.health, insnav.filters.sanitize, insnav._progress, insnav._outputs; "
+                "import os; os._exit(0)")  # as python -m insnav leaves: no finalization of every module
+
+
+def startup_cpu(work: Path) -> dict:
+    """CPU time [s] (user + system) of a fresh interpreter doing nothing, and of one loading what the
+    command loads before its run (:data:`STARTUP_CODE`, numpy's OpenBLAS single-threaded as
+    insnav.cli sets it)."""
+    out = {}
+    for key, code in (("python", "pass"), ("startup", STARTUP_CODE)):
+        p = subprocess.Popen([sys.executable, "-c", code, "run", "--format", "kfgins", "--config",
+                              str(work / "kf-gins-sim.yaml"), "--quiet", "--out", str(work / "out" / "x.csv")],
+                             stdout=subprocess.DEVNULL, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"}, cwd=work)
+        _, status, ru = os.wait4(p.pid, 0)
+        if os.waitstatus_to_exitcode(status) != 0:
+            raise RuntimeError(f"start-up probe {key}: exit {os.waitstatus_to_exitcode(status)}")
+        out[key] = ru.ru_utime + ru.ru_stime
+    return out
+
+
 def run_kfgins(binary: Path, work: Path) -> dict:
     """One KF-GINS run on the track's files in ``work`` (its own three output files, as it writes them)."""
     out = work / "out" / "kfgins_ref"
@@ -282,6 +306,7 @@ def main(argv=None) -> int:
         core_cpu = {"ekf": [], "rbukf": []}
         core_sys = {"ekf": [], "rbukf": []}
         read_t = []
+        start = []
         load = [os.getloadavg()[0]]
         n_rows = n_imu = 0
         for r in range(0 if a.day_only else a.repeat):
@@ -298,6 +323,7 @@ def main(argv=None) -> int:
                 core_cpu[f].append(j[f + "_core_cpu"])
                 core_sys[f].append(j[f + "_core_sys"])
             read_t.append(j["read"])
+            start.append(startup_cpu(work))
             n_rows, n_imu = j["n_rows"], j["n_imu"]
             load.append(os.getloadavg()[0])
             print(f"round {r + 1}/{a.repeat}: " + ", ".join(f"{res[v[0]][-1]['wall']:.2f}" for v in variants),
@@ -378,6 +404,13 @@ def main(argv=None) -> int:
         f"| of which system time (the kernel zeroing the fresh pages of the whole run's output arrays) | "
         f"{med(core_sys['ekf']):.3f} | {med(core_sys['rbukf']):.3f} |",
         f"| reading the files in-process (`load_kfgins`) | {med(read_t):.3f} | |",
+        "",
+        f"Start-up: a fresh interpreter that loads what the command loads before it reads a line (insnav.cli, "
+        f"the `run` parser and its arguments, numpy, the KF-GINS reader, the stream and the loose filter) takes "
+        f"{med(x['startup'] for x in start):.3f} s CPU (median), of which the bare interpreter (`python -c pass`) "
+        f"{med(x['python'] for x in start):.3f} s; of the CSV run's {med(x['cpu'] for x in res[variants[0][0]]):.2f} s "
+        "CPU the rest is the run itself, whose reader and writer threads work beside the filter loop (so the CPU "
+        "exceeds the sum of the wall stages).",
         "",
         "The block-by-block run's `filter` stage (the table above) is the same loop at the same cost per "
         "sample, without the whole run's output arrays: `_core.run_loose` allocates all rows at once (the first "

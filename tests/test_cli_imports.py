@@ -214,3 +214,39 @@ def test_percentile_equals_numpy():
         for q in (0.0, 5.0, 50.0, 95.0, 100.0, float(rng.uniform(0, 100))):
             assert percentile(x, q) == float(np.percentile(x, q)), (x, q)
     assert np.isnan(percentile([1.0, np.nan, 2.0], 95)) and np.isnan(percentile([], 50))
+
+
+_VERSION_PROBE = """
+import contextlib, io, json, sys
+from insnav.cli import main
+buf = io.StringIO()
+with contextlib.redirect_stdout(buf):
+    try:
+        rc = main(sys.argv[1:])
+    except SystemExit as exc:  # argparse's --version and --help actions
+        rc = exc.code
+print(json.dumps(dict(rc=rc, out=buf.getvalue(), modules=sorted(sys.modules))))
+"""
+
+
+@pytest.mark.parametrize("argv, areas", [(["--version"], False), (["--debug", "--vers"], False),
+                                         (["--help", "--version"], True)])
+def test_version_loads_no_command_module(argv, areas, interpreter_modules):
+    """``insnav --version`` answers from the top-level parser alone: none of the
+    sub-commands' modules, no numpy (``--help`` before it still registers them
+    all: argparse prints the help with every command first)."""
+    import insnav
+    from insnav.cli import _AREAS
+
+    r = subprocess.run([sys.executable, "-c", _VERSION_PROBE, *argv], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["rc"] == 0
+    mods = set(out["modules"]) - interpreter_modules
+    area_modules = {m for m, _, _ in _AREAS} | {"insnav.cli.run", "insnav.config"}
+    if areas:
+        assert area_modules <= mods and "numpy" in mods and "run" in out["out"]
+    else:
+        assert out["out"] == f"insnav {insnav.__version__}\n"
+        assert sorted(m for m in mods if m.startswith("insnav")) == ["insnav", "insnav.cli", "insnav.errors"]
+        assert sorted(mods & area_modules) == [] and "numpy" not in mods and "argparse" in mods

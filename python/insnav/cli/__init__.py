@@ -58,10 +58,26 @@ def _command_of(argv) -> str | None:
     return None
 
 
-def build_parser(command: str | None = None) -> "argparse.ArgumentParser":  # noqa: F821
+def _asks_version(argv) -> bool:
+    """Whether ``argv`` (no sub-command in it) reaches ``--version`` (or an
+    abbreviation argparse accepts, ``--v``...) before any ``-h``/``--help``
+    or ``--``: argparse then prints the version and exits, whatever the
+    sub-commands, so none of their modules need to load."""
+    for tok in argv:
+        name = tok.split("=", 1)[0]
+        if tok == "--" or tok.startswith("-h") or (len(name) > 2 and "--help".startswith(name)):
+            return False
+        if len(name) > 2 and "--version".startswith(name):
+            return True
+    return False
+
+
+def build_parser(command: str | None = None, areas: bool = True) -> "argparse.ArgumentParser":  # noqa: F821
     """The ``insnav`` parser; with a known ``command``, only that area's
     sub-command is registered (its module alone is imported: ``insnav run``
-    does not load the simulator or the analysis), else all of them."""
+    does not load the simulator or the analysis), else all of them; with
+    ``areas=False`` none (``insnav --version``: no numpy, no area module;
+    the usage line is the same)."""
     import argparse  # here: the RTK run of insnav.cli.rtk_fast reads its few options itself
 
     parser = argparse.ArgumentParser(
@@ -79,6 +95,8 @@ def build_parser(command: str | None = None) -> "argparse.ArgumentParser":  # no
     parser.add_argument("--version", action="version", version=f"insnav {__version__}")
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    if not areas:
+        return parser
     known = command == "demo" or any(command in cmds for _, _, cmds in _AREAS)
     if not known or command == "demo":
         _add_demo_parser(sub)
@@ -142,6 +160,7 @@ class _SigintWatch:
 def main(argv=None) -> int:
     """Run one command; its status: 0, 2 (an error, one line on stderr) or 130 (Ctrl-C, one line)."""
     command = _command_of(sys.argv[1:] if argv is None else argv)
+    version_only = command is None and _asks_version(sys.argv[1:] if argv is None else argv)
     args = None
     with _SigintWatch() as sigint:
         try:
@@ -155,7 +174,7 @@ def main(argv=None) -> int:
                         raise KeyboardInterrupt
                     return int(rc)
             _single_threaded_blas()
-            parser = build_parser(command)  # imports the command's modules: Ctrl-C here is one line too
+            parser = build_parser(command, areas=not version_only)  # imports the command's modules: Ctrl-C here is one line too
             args = parser.parse_args(argv)
             if not getattr(args, "func", None):
                 parser.print_help()
