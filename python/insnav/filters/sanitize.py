@@ -272,6 +272,37 @@ MAX_SIGMA_MPS = 1e5
 MAX_SPEED_MPS = 1e4
 
 
+#: fixes checked at a time by :func:`sanitize_gnss_blocks`
+GNSS_SANITIZE_BLOCK = 1 << 12
+#: the most file lines (sample indices) of dropped records the report lists
+_DROPPED_LINES_SHOWN = 20
+#: the fixes' columns the sanitizers read
+_GNSS_COLUMNS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")
+
+
+def _gnss_columns(g: GnssFixes, n: int) -> dict:
+    """The fixes' columns as float64 arrays (views of ``g``'s arrays when they are float64 already)."""
+    cols = {f: np.asarray(getattr(g, f), float) for f in _GNSS_COLUMNS}
+    for f in ("v_n", "sigma_pos_n", "sigma_vel_n"):
+        cols[f] = cols[f].reshape(n, 3)
+    return cols
+
+
+def _gnss_block_masks(cols: dict, a: int, b: int, min_h_m: float, max_h_m: float):
+    """``(t, ok, bad_vel)`` of fixes a .. b - 1: the tests of a fix and of its velocity, the one copy
+    :func:`sanitize_gnss` (whole record) and :func:`sanitize_gnss_blocks` (a block at a time) share."""
+    t, lat, lon, h, v, sp, sv = (cols[f][a:b] for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n",
+                                                        "sigma_pos_n", "sigma_vel_n"))
+    with np.errstate(invalid="ignore"):
+        ok = (np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
+              & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1) & (sp <= MAX_SIGMA_M).all(axis=1)
+              & (np.abs(lat) <= 90.0) & (lon >= -180.0) & (lon <= 360.0) & (h >= min_h_m) & (h <= max_h_m))
+        vel_any = np.isfinite(v).any(axis=1) | np.isfinite(sv).any(axis=1)
+        vel_ok = (np.isfinite(v).all(axis=1) & np.isfinite(sv).all(axis=1) & (sv > 0).all(axis=1)
+                  & (sv <= MAX_SIGMA_MPS).all(axis=1) & (np.abs(v) <= MAX_SPEED_MPS).all(axis=1))
+    return t, ok, ok & vel_any & ~vel_ok
+
+
 def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m: float = DEFAULTS["max_h_m"],
                   source: str = "gnss", arrivals: bool = False) -> tuple[GnssFixes, dict]:
     """Check and repair loosely coupled GNSS fixes (policy in the module docstring).
@@ -304,22 +335,13 @@ def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m
                gnss_reordered=0, gnss_duplicates_dropped=0, gnss_repeat_arrivals_kept=0, gnss_dropped_lines=[])
     if n == 0:
         return g, rep
-    t = np.asarray(g.t_valid, float)
-    ta = np.asarray(g.t_arrival, float)
-    lat, lon, h = (np.asarray(a, float) for a in (g.lat_deg, g.lon_deg, g.h_m))
-    v = np.array(g.v_n, float).reshape(n, 3)
-    sp = np.asarray(g.sigma_pos_n, float).reshape(n, 3)
-    sv = np.array(g.sigma_vel_n, float).reshape(n, 3)
-    with np.errstate(invalid="ignore"):
-        ok = (np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
-              & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1) & (sp <= MAX_SIGMA_M).all(axis=1)
-              & (np.abs(lat) <= 90.0) & (lon >= -180.0) & (lon <= 360.0) & (h >= min_h_m) & (h <= max_h_m))
-        vel_any = np.isfinite(v).any(axis=1) | np.isfinite(sv).any(axis=1)
-        vel_ok = (np.isfinite(v).all(axis=1) & np.isfinite(sv).all(axis=1) & (sv > 0).all(axis=1)
-                  & (sv <= MAX_SIGMA_MPS).all(axis=1) & (np.abs(v) <= MAX_SPEED_MPS).all(axis=1))
-    bad_vel = ok & vel_any & ~vel_ok
+    cols = _gnss_columns(g, n)
+    t, ok, bad_vel = _gnss_block_masks(cols, 0, n, min_h_m, max_h_m)
+    ta, lat, lon, h, sp = (cols[f] for f in ("t_arrival", "lat_deg", "lon_deg", "h_m", "sigma_pos_n"))
+    v, sv = cols["v_n"], cols["sigma_vel_n"]
     changed = False
     if bad_vel.any():
+        v, sv = v.copy(), sv.copy()  # the input's own arrays stay as they are
         v[bad_vel] = np.nan
         sv[bad_vel] = np.nan
         rep["gnss_velocity_removed"] = int(bad_vel.sum())
@@ -341,7 +363,7 @@ def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m
         dup &= ~repeat
     rep["gnss_duplicates_dropped"] = int(dup.sum())
     all_dropped = np.concatenate([np.flatnonzero(dropped), order[dup]])
-    rep["gnss_dropped_lines"] = sorted(int(lines[i]) for i in all_dropped)[:20]
+    rep["gnss_dropped_lines"] = sorted(int(lines[i]) for i in all_dropped)[:_DROPPED_LINES_SHOWN]
     order = order[~dup]
     rep["gnss_records_out"] = len(order)
     if not (changed or len(order) != n or (order != np.arange(n)).any()):
@@ -350,37 +372,6 @@ def sanitize_gnss(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"], max_h_m
     out = GnssFixes(t[order], ta[order], lat[order], lon[order], h[order], v[order], sp[order], sv[order],
                     origin=origin)
     return out, rep
-
-
-#: fixes checked at a time by :func:`sanitize_gnss_blocks`
-GNSS_SANITIZE_BLOCK = 1 << 12
-#: the most file lines (sample indices) of dropped records the report lists
-_DROPPED_LINES_SHOWN = 20
-
-
-def _gnss_columns(g: GnssFixes, n: int) -> dict:
-    """The fixes' columns as float64 arrays (views of ``g``'s arrays when they are float64 already)."""
-    cols = {f: np.asarray(getattr(g, f), float) for f in _GNSS_COLUMNS}
-    for f in ("v_n", "sigma_pos_n", "sigma_vel_n"):
-        cols[f] = cols[f].reshape(n, 3)
-    return cols
-
-
-_GNSS_COLUMNS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")
-
-
-def _gnss_block_masks(cols: dict, a: int, b: int, min_h_m: float, max_h_m: float):
-    """``(t, ok, bad_vel)`` of fixes a .. b - 1: :func:`sanitize_gnss`'s tests, on their rows only."""
-    t, lat, lon, h, v, sp, sv = (cols[f][a:b] for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n",
-                                                        "sigma_pos_n", "sigma_vel_n"))
-    with np.errstate(invalid="ignore"):
-        ok = (np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon) & np.isfinite(h)
-              & np.isfinite(sp).all(axis=1) & (sp > 0).all(axis=1) & (sp <= MAX_SIGMA_M).all(axis=1)
-              & (np.abs(lat) <= 90.0) & (lon >= -180.0) & (lon <= 360.0) & (h >= min_h_m) & (h <= max_h_m))
-        vel_any = np.isfinite(v).any(axis=1) | np.isfinite(sv).any(axis=1)
-        vel_ok = (np.isfinite(v).all(axis=1) & np.isfinite(sv).all(axis=1) & (sv > 0).all(axis=1)
-                  & (sv <= MAX_SIGMA_MPS).all(axis=1) & (np.abs(v) <= MAX_SPEED_MPS).all(axis=1))
-    return t, ok, ok & vel_any & ~vel_ok
 
 
 def sanitize_gnss_blocks(g: GnssFixes, *, min_h_m: float = DEFAULTS["min_h_m"],
