@@ -98,15 +98,20 @@ def simulate(scenario, seed: int | None = None, *, constellation=None,
 
 
 def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool = False,
-                block_s: float = 600.0, constellation=None, progress=None) -> tuple[Dataset, int, int]:
+                block_s: float = 60.0, constellation=None, progress=None) -> tuple[Dataset, int, int]:
     """Simulate a scenario straight into a dataset folder, block by block.
 
     The folder equals ``simulate(scenario, seed).save(directory)`` byte for
     byte, but the IMU, truth, IMU-error and GNSS-fix tables are computed and
     appended ``block_s`` seconds at a time, so memory does not grow with the
-    scenario's length: one block of rows, a few 600 s chunks of the
-    trajectory's 0.05 s position grid (:class:`insnav.sim.trajectory.Trajectory`)
-    and one chunk of each Gauss-Markov bias recursion (``GM_CHUNK`` rows,
+    scenario's length: one block of rows (the block written is released
+    before the next is computed), the temporaries of
+    :meth:`~insnav.sim.trajectory.Trajectory.imu_increments` and
+    :meth:`~insnav.sim.trajectory.Trajectory.state`, bounded by their own
+    chunks (``IMU_CHUNK`` intervals, ``STATE_CHUNK`` times), a few 600 s
+    chunks of the trajectory's 0.05 s position grid
+    (:class:`insnav.sim.trajectory.Trajectory`) and one chunk of each
+    Gauss-Markov bias recursion (``GM_CHUNK`` rows,
     :class:`insnav.sim.imu.SensorErrorStream`).  Still computed
     whole: the raw GNSS, odometer and carrier-phase tables, and the GNSS
     fixes of the ``"one_per_epoch"`` delay model
@@ -121,7 +126,9 @@ def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool
     overwrite : bool
         Replace an existing insnav dataset folder.
     block_s : float
-        Length of a block [s].
+        Length of a block [s].  The default 60 s (12,000 rows at 200 Hz)
+        holds about 5 MB of tables; 600 s blocks held 50 MB more for the
+        same CPU time (bench/simulate_day.py).
     progress : callable, optional
         ``progress(done, total)`` after each stage and each block.
 
@@ -169,16 +176,19 @@ def simulate_to(directory, scenario, seed: int | None = None, *, overwrite: bool
                 imu, errs = sim.imu_block(k0, min(n_imu, k0 + blk_imu))
                 write_csv(folder / "imu.csv", ImuData.COLUMNS, imu.to_array(), append=k0 > 0)
                 write_csv(folder / "imu_errors.csv", ImuErrors.COLUMNS, errs.to_array(), append=k0 > 0)
+                del imu, errs  # written: not held while the next table is computed
                 step()
             i0 = i * blk_truth
             if i0 < n_truth:
                 tr = sim.truth_block(i0, min(n_truth, i0 + blk_truth))
                 write_csv(folder / "truth.csv", Truth.COLUMNS, tr.to_array(), append=i0 > 0)
+                del tr
                 step()
             e1 = fixes.k_hi if i == n_blk - 1 else fixes.epoch_index(sim.sc.t0 + (i + 1) * block_s)
             gnss = fixes.block(e0, e1)
             write_csv(folder / "gnss.csv", GnssFixes.COLUMNS, gnss.to_array(), append=i > 0)
             n_gnss[0] += len(gnss)
+            del gnss
             e0 = e1
         step("GNSS fixes")
 

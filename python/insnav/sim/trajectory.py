@@ -54,6 +54,10 @@ from .. import earth
 from .scenario import Scenario
 
 _GL_POS_NODES = 3
+#: IMU intervals integrated at a time by :meth:`Trajectory.imu_increments` (its temporaries: ~11 MB)
+IMU_CHUNK = 4096
+#: times computed at a time by :meth:`Trajectory.state` (its temporaries: a few MB)
+STATE_CHUNK = 8192
 
 
 def _S(x):
@@ -545,8 +549,22 @@ class Trajectory:
         return lat, lon, h
 
     # -- full state -----------------------------------------------------------
-    def state(self, t, exact_position: bool = True):
+    def state(self, t, exact_position: bool = True, chunk: int | None = None):
         """Full truth at ``t``: position, kinematics, ``f_ib_b`` and ``omega_ib_b``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times in ``[t0, t_end]`` [s].
+        exact_position : bool
+            As ``exact`` of :meth:`position`.
+        chunk : int, optional
+            Non-decreasing times are computed ``chunk`` at a time (default
+            :data:`STATE_CHUNK`) into the output arrays; every value depends
+            on its own time only, so the numbers do not depend on it.  The
+            temporaries, about 40 ``(chunk, 3)`` arrays, stay bounded by the
+            chunk, not by ``t`` (unsorted times: one piece, so that each
+            position-grid chunk is integrated once).
 
         Returns
         -------
@@ -557,6 +575,21 @@ class Trajectory:
             [rad/s], ``omega_nb_b`` (N, 3) [rad/s].
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
+        chunk = STATE_CHUNK if chunk is None else int(chunk)
+        if t.size <= chunk or t.ndim != 1 or not np.all(t[1:] >= t[:-1]):
+            return self._state(t, exact_position)
+        out = None
+        for s in range(0, t.size, chunk):
+            part = self._state(t[s:s + chunk], exact_position)
+            if out is None:
+                out = {k: np.empty(t.shape + v.shape[1:]) for k, v in part.items() if k != "t"}
+            for k, v in out.items():
+                v[s:s + chunk] = part[k]
+        out["t"] = t
+        return out
+
+    def _state(self, t, exact_position: bool):
+        """:meth:`state` of the times ``t`` (a float array) in one piece."""
         lat, lon, h = self.position(t, exact=exact_position)
         kin = self.kinematics(t)
         f_ib_b, omega_ib_b, omega_nb_b = self._imu_quantities(lat, h, kin)
@@ -584,7 +617,7 @@ class Trajectory:
         return (rotate_n_to_b(kin.euler, f_n, trig),
                 omega_nb_b + rotate_n_to_b(kin.euler, w_in, trig), omega_nb_b)
 
-    def imu_increments(self, t_imu, nodes: int = 3, chunk: int = 200_000):
+    def imu_increments(self, t_imu, nodes: int = 3, chunk: int | None = None):
         """Ideal IMU increments over ``(t_imu[k-1], t_imu[k]]`` by Gauss-Legendre quadrature.
 
         Parameters
@@ -594,6 +627,12 @@ class Trajectory:
         nodes : int
             Gauss-Legendre nodes per interval (exact for polynomials of degree
             ``2 nodes - 1``).
+        chunk : int, optional
+            Intervals computed at a time (default :data:`IMU_CHUNK`); each
+            interval on its own, so the numbers do not depend on it.  The
+            temporaries, about 60 arrays of ``chunk * nodes`` values, are
+            bounded by it: 150 MB for 120,000 intervals (600 s at 200 Hz) in
+            one piece, 11 MB in chunks of 4096.
 
         Returns
         -------
@@ -602,6 +641,7 @@ class Trajectory:
             interval.
         """
         xg, wg = np.polynomial.legendre.leggauss(nodes)
+        chunk = IMU_CHUNK if chunk is None else int(chunk)
         n = len(t_imu) - 1
         dtheta = np.empty((n, 3))
         dv = np.empty((n, 3))
