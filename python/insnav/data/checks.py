@@ -726,7 +726,7 @@ def _scanned(t, dtheta_b, dv_b):
 
 #: fixes a GNSS check takes at a time when the fixes are in time order (:func:`check_gnss`,
 #: :func:`check_gnss_velocity`): its temporaries are a few arrays of this many rows, whatever the record's length
-GNSS_CHECK_BLOCK = 1 << 14
+GNSS_CHECK_BLOCK = 1 << 12
 
 
 def _in_time_order(t, block: int) -> bool:
