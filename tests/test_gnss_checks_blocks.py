@@ -12,7 +12,7 @@ import pytest
 from insnav.data.checks import DataCheckError, check_gnss, check_gnss_velocity
 from insnav.data.dataset import GnssFixes, RowOrigin
 
-BLOCKS = (1, 2, 7, 64, 1000)
+BLOCKS = (1, 2, 7, 64, 1000)  # 1: every pair of fixes straddles two blocks
 WHOLE = 1 << 40  # one block: the whole-record path
 R_M = 6_371_000.0  # the checks' mean Earth radius [m]
 
@@ -121,6 +121,7 @@ def test_velocity_verdicts_and_messages(change, words):
     assert kind == "error" and words in msg and "over 2999 pairs of fixes" in msg
 
 
+@pytest.mark.slow  # block sizes 1 and 2 of 3000 fixes: about 2.5 s
 def test_velocity_too_little_motion_and_gaps():
     g = _track(3000, v_n=(0.2, 0.1, 0.0))  # standing: no pair moves faster than 1 m/s
     assert _same(check_gnss_velocity, g) == ("ok", None)
@@ -146,11 +147,12 @@ def _peak_bytes(n: int, block: int) -> int:
         tracemalloc.stop()
 
 
+@pytest.mark.slow  # tracemalloc on 10^4 and 10^5 fixes: about 3 s
 def test_temporaries_do_not_grow_with_the_fixes():
-    block = 1024
-    small, large = _peak_bytes(20_000, block), _peak_bytes(200_000, block)
+    block = 2048
+    small, large = _peak_bytes(10_000, block), _peak_bytes(100_000, block)
     # a few arrays of one block (8 bytes per value, 3 columns at most): far below one column of the record
-    assert large < 64 * block * 8 < 200_000 * 8
-    assert large <= small + 16 * 1024
+    assert large < 32 * block * 8 < 100_000 * 8
+    assert large <= small + 8 * 1024
     # the whole-record path (one block) holds sorted copies of every column
-    assert _peak_bytes(200_000, 1 << 40) > 10 * large
+    assert _peak_bytes(100_000, 1 << 40) > 10 * large
