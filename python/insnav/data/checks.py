@@ -41,6 +41,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
+import math
 
 import numpy as np
 
@@ -723,16 +724,37 @@ def _scanned(t, dtheta_b, dv_b):
     return t, dtheta_b, dv_b, scan
 
 
+#: fixes a GNSS check takes at a time when the fixes are in time order (:func:`check_gnss`,
+#: :func:`check_gnss_velocity`): its temporaries are a few arrays of this many rows, whatever the record's length
+GNSS_CHECK_BLOCK = 1 << 12
+
+
+def _in_time_order(t, block: int) -> bool:
+    """Whether ``t`` never decreases (NaN: not in order), judged ``block`` values at a time (no whole-record
+    temporary).  Then a stable sort by time is the identity and the checks take the fixes as stored."""
+    n = len(t)
+    for a in range(0, n - 1, block):
+        seg = t[a:min(n, a + block + 1)]
+        if not bool(np.all(seg[1:] >= seg[:-1])):
+            return False
+    return True
+
+
 def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float = 600.0,
-               min_jump_m: float = 10_000.0, max_start_distance_m: float = 20_000.0) -> None:
+               min_jump_m: float = 10_000.0, max_start_distance_m: float = 20_000.0,
+               block: int | None = None) -> None:
     """Ranges, the distance from the initial position, jumps and sigmas of loose fixes.
 
     ``gnss`` is a :class:`insnav.data.dataset.GnssFixes`; ``initial`` an optional
-    object with ``lat_deg``/``lon_deg`` (the stated initial state).
+    object with ``lat_deg``/``lon_deg`` (the stated initial state).  The fixes are
+    taken ``block`` (default :data:`GNSS_CHECK_BLOCK`) at a time: the verdicts and
+    messages are those of the whole record (the first bad fix in file order, the
+    counts over all fixes); fixes not in time order are sorted whole (a copy).
     """
     m = len(gnss)
     if m == 0:
         return
+    block = GNSS_CHECK_BLOCK if block is None else max(1, int(block))
     lat, lon = np.asarray(gnss.lat_deg, float), np.asarray(gnss.lon_deg, float)
 
     def where(i):
@@ -742,18 +764,30 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
         except Exception:  # noqa: BLE001 - a message helper must never fail
             return f"{source}: record {int(i)}"
 
-    bad = np.nonzero(~((np.abs(lat) <= 90.0) & (lon >= -180.0) & (lon <= 360.0)))[0]
-    if bad.size:
-        raise DataCheckError(f"{where(bad[0])}: lat_deg/lon_deg = {lat[bad[0]]!r}, {lon[bad[0]]!r} out of range")
     sig = np.asarray(gnss.sigma_pos_n, float)
-    nonpos = np.nonzero(~np.all(sig > 0, axis=1))[0]
-    if nonpos.size:
-        raise DataCheckError(f"{where(nonpos[0])}: sigma_{{n,e,d}}_m = {sig[nonpos[0]].tolist()} must be > 0 "
-                             f"({nonpos.size} of {m} fixes; a zero sigma would make the filter ignore the IMU)")
-    huge = np.nonzero(~np.all(sig <= MAX_GNSS_SIGMA_M, axis=1))[0]
-    if huge.size:
-        raise DataCheckError(f"{where(huge[0])}: sigma_{{n,e,d}}_m = {sig[huge[0]].tolist()}: over "
-                             f"{MAX_GNSS_SIGMA_M:g} m ({huge.size} of {m} fixes; no information, and the filter's "
+    nonpos0 = huge0 = None  # the first fix with a sigma <= 0 / over MAX_GNSS_SIGMA_M, and their counts
+    n_nonpos = n_huge = 0
+    for a in range(0, m, block):  # a range error anywhere comes first: the sigmas' verdicts wait for the end
+        b = min(m, a + block)
+        la, lo, sg = lat[a:b], lon[a:b], sig[a:b]
+        bad = np.flatnonzero(~((np.abs(la) <= 90.0) & (lo >= -180.0) & (lo <= 360.0)))
+        if bad.size:
+            i = a + int(bad[0])
+            raise DataCheckError(f"{where(i)}: lat_deg/lon_deg = {float(lat[i])!r}, {float(lon[i])!r} out of range")
+        nonpos = np.flatnonzero(~np.all(sg > 0, axis=1))
+        if nonpos.size and nonpos0 is None:
+            nonpos0 = a + int(nonpos[0])
+        n_nonpos += nonpos.size
+        huge = np.flatnonzero(~np.all(sg <= MAX_GNSS_SIGMA_M, axis=1))
+        if huge.size and huge0 is None:
+            huge0 = a + int(huge[0])
+        n_huge += huge.size
+    if n_nonpos:
+        raise DataCheckError(f"{where(nonpos0)}: sigma_{{n,e,d}}_m = {sig[nonpos0].tolist()} must be > 0 "
+                             f"({n_nonpos} of {m} fixes; a zero sigma would make the filter ignore the IMU)")
+    if n_huge:
+        raise DataCheckError(f"{where(huge0)}: sigma_{{n,e,d}}_m = {sig[huge0].tolist()}: over "
+                             f"{MAX_GNSS_SIGMA_M:g} m ({n_huge} of {m} fixes; no information, and the filter's "
                              "covariance would overflow)")
     if initial is not None:
         d = _distance_m(initial.lat_deg, initial.lon_deg, lat[0], lon[0])
@@ -768,23 +802,33 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
             raise DataCheckError(f"{where(0)}: the first fix ({lat[0]:.6f}, {lon[0]:.6f}) is {d / 1000:.1f} km from "
                                  f"the initial position ({initial.lat_deg:.6f}, {initial.lon_deg:.6f}){hint}")
     if m > 1:
-        # in time-of-validity order (delayed records are stored in arrival order)
-        order = np.argsort(np.asarray(gnss.t_valid, float), kind="stable")
-        t = np.asarray(gnss.t_valid, float)[order]
-        la, lo = lat[order], lon[order]
-        dt = np.diff(t)
-        dist = _distance_m(la[:-1], lo[:-1], la[1:], lo[1:])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            speed = np.where(dt > 0, dist / dt, 0.0)  # fixes of the same instant: not a motion
-        # unit and sign mistakes move fixes by hundreds of km; a single bad fix of
-        # metres to kilometres is the innovation gate's business
-        jump = np.nonzero((speed > max_speed_mps) & (dist > min_jump_m))[0]
-        if jump.size:
-            j = jump[0]
-            i = int(order[j + 1])
-            raise DataCheckError(f"{where(i)}: a jump of {dist[j] / 1000:.3f} km in {dt[j]:.3g} s from the "
-                                 f"previous fix ({speed[j]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
-                                 f"mixed units or a bad fix")
+        # in time-of-validity order (delayed records are stored in arrival order): fixes already in order are
+        # taken a block of consecutive pairs at a time (the stable sort is the identity), others sorted whole
+        tv = np.asarray(gnss.t_valid, float)
+        if _in_time_order(tv, block):
+            spans = ((a, min(m, a + block + 1)) for a in range(0, m - 1, block))
+            order = None
+        else:
+            order = np.argsort(tv, kind="stable")
+            spans = iter([(0, m)])
+        for a, b in spans:
+            if order is None:
+                t, la, lo = tv[a:b], lat[a:b], lon[a:b]
+            else:
+                t, la, lo = tv[order], lat[order], lon[order]
+            dt = np.diff(t)
+            dist = _distance_m(la[:-1], lo[:-1], la[1:], lo[1:])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                speed = np.where(dt > 0, dist / dt, 0.0)  # fixes of the same instant: not a motion
+            # unit and sign mistakes move fixes by hundreds of km; a single bad fix of
+            # metres to kilometres is the innovation gate's business
+            jump = np.nonzero((speed > max_speed_mps) & (dist > min_jump_m))[0]
+            if jump.size:
+                j = jump[0]
+                i = a + int(j) + 1 if order is None else int(order[j + 1])
+                raise DataCheckError(f"{where(i)}: a jump of {dist[j] / 1000:.3f} km in {dt[j]:.3g} s from the "
+                                     f"previous fix ({speed[j]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
+                                     f"mixed units or a bad fix")
 
 
 #: the longest IMU -> antenna lever arm accepted [m] (a large ship or aircraft stays below it; a lever
@@ -826,7 +870,7 @@ def check_latlon_radians(lat, lon, *, source: str = "gnss", column: str = "lat/l
 
 
 def check_gnss_velocity(gnss, *, source: str = "gnss", min_speed_mps: float = 1.0, max_dt_s: float = 2.0,
-                        min_pairs: int = 10) -> tuple[float, float] | None:
+                        min_pairs: int = 10, block: int | None = None) -> tuple[float, float] | None:
     """Position differences against the reported velocity of consecutive fixes.
 
     The north and east slopes of ``d(position)/dt`` regressed on the mean
@@ -836,34 +880,64 @@ def check_gnss_velocity(gnss, *, source: str = "gnss", min_speed_mps: float = 1.
     ``(north, east)`` (NaN for an axis with too little motion), or None when
     fewer than ``min_pairs`` pairs of fixes move faster than ``min_speed_mps``
     with reported velocities.
+
+    Fixes in time order are taken ``block`` pairs at a time (default
+    :data:`GNSS_CHECK_BLOCK`), the regression's sums accumulated as running
+    sums (each block's exactly rounded, :func:`math.fsum`): the slopes agree
+    with the whole record's to rounding, the verdicts and messages are the
+    same; a record of at most ``block`` fixes, or not in time order, is taken
+    whole (sorted by time).
     """
     m = len(gnss)
     if m < min_pairs + 1:
         return None
-    order = np.argsort(np.asarray(gnss.t_valid, float), kind="stable")
-    t = np.asarray(gnss.t_valid, float)[order]
-    lat = np.radians(np.asarray(gnss.lat_deg, float)[order])
-    lon = np.radians(np.asarray(gnss.lon_deg, float)[order])
-    h = np.asarray(gnss.h_m, float)[order]
-    v = np.asarray(gnss.v_n, float)[order]
-    dt = np.diff(t)
-    vm = 0.5 * (v[1:] + v[:-1])
-    R = 6_371_000.0 + np.nan_to_num(h[:-1])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        vp_n = np.diff(lat) * R / dt
-        vp_e = np.diff(lon) * R * np.cos(lat[:-1]) / dt
-    ok = ((dt > 0) & (dt <= max_dt_s) & np.all(np.isfinite(vm[:, :2]), axis=1) & np.isfinite(vp_n)
-          & np.isfinite(vp_e) & (np.hypot(vm[:, 0], vm[:, 1]) > min_speed_mps))
-    if ok.sum() < min_pairs:
+    block = GNSS_CHECK_BLOCK if block is None else max(1, int(block))
+    tv = np.asarray(gnss.t_valid, float)
+    whole = m <= block or not _in_time_order(tv, block)
+    order = np.argsort(tv, kind="stable") if whole else None
+    spans = iter([(0, m)]) if whole else ((a, min(m, a + block + 1)) for a in range(0, m - 1, block))
+    n_ok = 0
+    # the running sums of vr^2 and vp * vr per axis, each two float64 terms (the exactly rounded sum and its
+    # exactly rounded residual, math.fsum): bounded, whatever the number of blocks
+    sums = {k: [0.0, 0.0] for k in ("rr_n", "pr_n", "rr_e", "pr_e")}
+    for a, b in spans:
+        idx = order if whole else slice(a, b)
+        t = tv[idx]
+        lat = np.radians(np.asarray(gnss.lat_deg, float)[idx])
+        lon = np.radians(np.asarray(gnss.lon_deg, float)[idx])
+        h = np.asarray(gnss.h_m, float)[idx]
+        v = np.asarray(gnss.v_n, float)[idx]
+        dt = np.diff(t)
+        vm = 0.5 * (v[1:] + v[:-1])
+        R = 6_371_000.0 + np.nan_to_num(h[:-1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vp_n = np.diff(lat) * R / dt
+            vp_e = np.diff(lon) * R * np.cos(lat[:-1]) / dt
+        ok = ((dt > 0) & (dt <= max_dt_s) & np.all(np.isfinite(vm[:, :2]), axis=1) & np.isfinite(vp_n)
+              & np.isfinite(vp_e) & (np.hypot(vm[:, 0], vm[:, 1]) > min_speed_mps))
+        n_ok += int(ok.sum())
+        if whole:
+            break
+        for ax, vp, vr in (("n", vp_n[ok], vm[ok, 0]), ("e", vp_e[ok], vm[ok, 1])):
+            for key, x in (("rr_" + ax, vr * vr), ("pr_" + ax, vp * vr)):
+                terms = sums[key] + [math.fsum(x)]
+                hi = math.fsum(terms)
+                sums[key] = [hi, math.fsum(terms + [-hi]) if math.isfinite(hi) else 0.0]
+    if n_ok < min_pairs:
         return None
     slopes = []
-    for vp, vr in ((vp_n[ok], vm[ok, 0]), (vp_e[ok], vm[ok, 1])):
-        if np.sqrt(np.mean(vr ** 2)) < min_speed_mps:  # too little motion along this axis
-            slopes.append(np.nan)
-        else:
-            slopes.append(float(np.dot(vp, vr) / np.dot(vr, vr)))
+    if whole:
+        for vp, vr in ((vp_n[ok], vm[ok, 0]), (vp_e[ok], vm[ok, 1])):
+            if np.sqrt(np.mean(vr ** 2)) < min_speed_mps:  # too little motion along this axis
+                slopes.append(np.nan)
+            else:
+                slopes.append(float(np.dot(vp, vr) / np.dot(vr, vr)))
+    else:
+        for ax in ("n", "e"):
+            rr, pr = math.fsum(sums["rr_" + ax]), math.fsum(sums["pr_" + ax])
+            slopes.append(np.nan if np.sqrt(rr / n_ok) < min_speed_mps else float(pr / rr))
     sn, se = slopes
-    where = f"{source}: lat/lon against the velocity columns over {int(ok.sum())} pairs of fixes"
+    where = f"{source}: lat/lon against the velocity columns over {n_ok} pairs of fixes"
     deg = np.degrees(1.0)
     if all(np.isfinite(x) and 0.5 < x * deg < 2.0 for x in slopes):
         raise DataCheckError(f"{where}: the positions move {1 / np.nanmean(slopes):.1f}x slower than the velocities "
