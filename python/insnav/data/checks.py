@@ -41,7 +41,6 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
-import math
 
 import numpy as np
 
@@ -740,6 +739,18 @@ def _in_time_order(t, block: int) -> bool:
     return True
 
 
+def _time_order_spans(t, block: int):
+    """Index arrays that take the records in time order (stable), one at a time: ``block`` consecutive
+    pairs when ``t`` is already in order (neighbouring spans share a record, so every consecutive pair is
+    in one span), else the whole record sorted (a copy)."""
+    n = len(t)
+    if not _in_time_order(t, block):
+        yield np.argsort(t, kind="stable")
+        return
+    for a in range(0, n - 1, block):
+        yield np.arange(a, min(n, a + block + 1))
+
+
 def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float = 600.0,
                min_jump_m: float = 10_000.0, max_start_distance_m: float = 20_000.0,
                block: int | None = None) -> None:
@@ -805,17 +816,8 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
         # in time-of-validity order (delayed records are stored in arrival order): fixes already in order are
         # taken a block of consecutive pairs at a time (the stable sort is the identity), others sorted whole
         tv = np.asarray(gnss.t_valid, float)
-        if _in_time_order(tv, block):
-            spans = ((a, min(m, a + block + 1)) for a in range(0, m - 1, block))
-            order = None
-        else:
-            order = np.argsort(tv, kind="stable")
-            spans = iter([(0, m)])
-        for a, b in spans:
-            if order is None:
-                t, la, lo = tv[a:b], lat[a:b], lon[a:b]
-            else:
-                t, la, lo = tv[order], lat[order], lon[order]
+        for idx in _time_order_spans(tv, block):
+            t, la, lo = tv[idx], lat[idx], lon[idx]
             dt = np.diff(t)
             dist = _distance_m(la[:-1], lo[:-1], la[1:], lo[1:])
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -825,7 +827,7 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
             jump = np.nonzero((speed > max_speed_mps) & (dist > min_jump_m))[0]
             if jump.size:
                 j = jump[0]
-                i = a + int(j) + 1 if order is None else int(order[j + 1])
+                i = int(idx[j + 1])
                 raise DataCheckError(f"{where(i)}: a jump of {dist[j] / 1000:.3f} km in {dt[j]:.3g} s from the "
                                      f"previous fix ({speed[j]:.4g} m/s > {max_speed_mps} m/s): a sign flip, "
                                      f"mixed units or a bad fix")
@@ -882,26 +884,19 @@ def check_gnss_velocity(gnss, *, source: str = "gnss", min_speed_mps: float = 1.
     with reported velocities.
 
     Fixes in time order are taken ``block`` pairs at a time (default
-    :data:`GNSS_CHECK_BLOCK`), the regression's sums accumulated as running
-    sums (each block's exactly rounded, :func:`math.fsum`): the slopes agree
-    with the whole record's to rounding, the verdicts and messages are the
-    same; a record of at most ``block`` fixes, or not in time order, is taken
-    whole (sorted by time).
+    :data:`GNSS_CHECK_BLOCK`; records not in time order are sorted whole, a
+    copy), the regression's sums accumulated over the blocks: the slopes
+    agree with one pass over the whole record to rounding, whatever the block.
     """
     m = len(gnss)
     if m < min_pairs + 1:
         return None
     block = GNSS_CHECK_BLOCK if block is None else max(1, int(block))
     tv = np.asarray(gnss.t_valid, float)
-    whole = m <= block or not _in_time_order(tv, block)
-    order = np.argsort(tv, kind="stable") if whole else None
-    spans = iter([(0, m)]) if whole else ((a, min(m, a + block + 1)) for a in range(0, m - 1, block))
     n_ok = 0
-    # the running sums of vr^2 and vp * vr per axis, each two float64 terms (the exactly rounded sum and its
-    # exactly rounded residual, math.fsum): bounded, whatever the number of blocks
-    sums = {k: [0.0, 0.0] for k in ("rr_n", "pr_n", "rr_e", "pr_e")}
-    for a, b in spans:
-        idx = order if whole else slice(a, b)
+    rr = np.zeros(2)  # sum of vr^2 per axis (north, east) [m^2/s^2]
+    pr = np.zeros(2)  # sum of vp vr per axis
+    for idx in _time_order_spans(tv, block):
         t = tv[idx]
         lat = np.radians(np.asarray(gnss.lat_deg, float)[idx])
         lon = np.radians(np.asarray(gnss.lon_deg, float)[idx])
@@ -916,26 +911,13 @@ def check_gnss_velocity(gnss, *, source: str = "gnss", min_speed_mps: float = 1.
         ok = ((dt > 0) & (dt <= max_dt_s) & np.all(np.isfinite(vm[:, :2]), axis=1) & np.isfinite(vp_n)
               & np.isfinite(vp_e) & (np.hypot(vm[:, 0], vm[:, 1]) > min_speed_mps))
         n_ok += int(ok.sum())
-        if whole:
-            break
-        for ax, vp, vr in (("n", vp_n[ok], vm[ok, 0]), ("e", vp_e[ok], vm[ok, 1])):
-            for key, x in (("rr_" + ax, vr * vr), ("pr_" + ax, vp * vr)):
-                terms = sums[key] + [math.fsum(x)]
-                hi = math.fsum(terms)
-                sums[key] = [hi, math.fsum(terms + [-hi]) if math.isfinite(hi) else 0.0]
+        for k, (vp, vr) in enumerate(((vp_n[ok], vm[ok, 0]), (vp_e[ok], vm[ok, 1]))):
+            rr[k] += float(np.dot(vr, vr))
+            pr[k] += float(np.dot(vp, vr))
     if n_ok < min_pairs:
         return None
-    slopes = []
-    if whole:
-        for vp, vr in ((vp_n[ok], vm[ok, 0]), (vp_e[ok], vm[ok, 1])):
-            if np.sqrt(np.mean(vr ** 2)) < min_speed_mps:  # too little motion along this axis
-                slopes.append(np.nan)
-            else:
-                slopes.append(float(np.dot(vp, vr) / np.dot(vr, vr)))
-    else:
-        for ax in ("n", "e"):
-            rr, pr = math.fsum(sums["rr_" + ax]), math.fsum(sums["pr_" + ax])
-            slopes.append(np.nan if np.sqrt(rr / n_ok) < min_speed_mps else float(pr / rr))
+    # too little motion along an axis (rms of the reported velocity below min_speed_mps): NaN
+    slopes = [np.nan if np.sqrt(rr[k] / n_ok) < min_speed_mps else float(pr[k] / rr[k]) for k in range(2)]
     sn, se = slopes
     where = f"{source}: lat/lon against the velocity columns over {n_ok} pairs of fixes"
     deg = np.degrees(1.0)
