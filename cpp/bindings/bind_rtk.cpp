@@ -120,24 +120,35 @@ py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size
   return d;
 }
 
-py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
+// One MLAMBDA solve of the float ambiguities a_hat (n) with covariance Q (n x n, row-major) in lam:
+// the shape checks and the copy into the fixed-capacity types shared by the two bindings below.
+gnss::LambdaStatus solve_lambda(const DArray& a_hat, const DArray& Q, const char* name, gnss::Lambda& lam,
+                                gnss::AmbCand& fix, double s[2]) {
   const py::ssize_t n = a_hat.ndim() == 1 ? a_hat.shape(0) : -1;
-  if (n < 0) throw py::value_error("lambda_search: a_hat must be 1-D");
+  if (n < 0) throw py::value_error(std::string(name) + ": a_hat must be 1-D");
   if (n > gnss::kMaxAmbiguities)
-    throw py::value_error("lambda_search: at most " + std::to_string(gnss::kMaxAmbiguities) + " ambiguities");
-  require_shape(Q, n, n, "lambda_search: Q");
+    throw py::value_error(std::string(name) + ": at most " + std::to_string(gnss::kMaxAmbiguities) +
+                          " ambiguities");
+  require_shape(Q, n, n, (std::string(name) + ": Q").c_str());
   gnss::AmbVec a(n);
   gnss::AmbMat q(n, n);
   for (py::ssize_t i = 0; i < n; ++i) {
     a(i) = a_hat.data()[i];
     for (py::ssize_t j = 0; j < n; ++j) q(i, j) = Q.data()[i * n + j];
   }
+  const auto st = lam.solve(a, q, fix, s);
+  if (st == gnss::LambdaStatus::kNotPositiveDefinite)
+    throw py::value_error(std::string(name) + ": Q is not positive definite");
+  return st;
+}
+
+py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
   gnss::AmbCand fix;
   double s[2];
   gnss::Lambda lam;
-  const auto st = lam.solve(a, q, fix, s);
-  if (st == gnss::LambdaStatus::kNotPositiveDefinite) throw py::value_error("lambda_search: Q is not positive definite");
-  if (st != gnss::LambdaStatus::kOk) throw py::value_error("lambda_search: search failed");
+  if (solve_lambda(a_hat, Q, "lambda_search", lam, fix, s) != gnss::LambdaStatus::kOk)
+    throw py::value_error("lambda_search: search failed");
+  const py::ssize_t n = fix.rows();
   py::array_t<double> out({n, static_cast<py::ssize_t>(2)});
   for (py::ssize_t i = 0; i < n; ++i)
     for (int c = 0; c < 2; ++c) out.mutable_data()[i * 2 + c] = fix(i, c);
@@ -146,21 +157,10 @@ py::tuple lambda_search(const DArray& a_hat, const DArray& Q) {
 
 // The work of one MLAMBDA solve: search nodes and reduction permutations (Lambda::nodes, permutations).
 py::dict lambda_search_stats(const DArray& a_hat, const DArray& Q) {
-  const py::ssize_t n = a_hat.ndim() == 1 ? a_hat.shape(0) : -1;
-  if (n < 1 || n > gnss::kMaxAmbiguities) throw py::value_error("lambda_search_stats: bad a_hat");
-  require_shape(Q, n, n, "lambda_search_stats: Q");
-  gnss::AmbVec a(n);
-  gnss::AmbMat q(n, n);
-  for (py::ssize_t i = 0; i < n; ++i) {
-    a(i) = a_hat.data()[i];
-    for (py::ssize_t j = 0; j < n; ++j) q(i, j) = Q.data()[i * n + j];
-  }
   gnss::AmbCand fix;
   double s[2];
   gnss::Lambda lam;
-  const auto st = lam.solve(a, q, fix, s);
-  if (st == gnss::LambdaStatus::kNotPositiveDefinite)
-    throw py::value_error("lambda_search_stats: Q is not positive definite");
+  const auto st = solve_lambda(a_hat, Q, "lambda_search_stats", lam, fix, s);
   py::dict d;
   d["nodes"] = lam.nodes();
   d["permutations"] = lam.permutations();
