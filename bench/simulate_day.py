@@ -66,6 +66,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3, help="runs of the 1 h commands (median; default %(default)s)")
     ap.add_argument("--hours", type=float, default=24.0, help="length of the long run [h] (default %(default)s)")
+    ap.add_argument("--long-repeat", type=int, default=3,
+                    help="runs of the long command (median: one run's peak RSS varies by a few MB with the "
+                         "heap's retained memory; default %(default)s)")
     ap.add_argument("--out", help="write the markdown document here")
     args = ap.parse_args(argv)
     py = sys.executable
@@ -92,7 +95,8 @@ def main(argv=None) -> int:
         mb_hour = folder_mb(tmp / "h_stream")
         for d in ("warm", "h_whole"):
             subprocess.run(["rm", "-rf", str(tmp / d)], check=True)
-        runs["long"] = run_once(stream_cmd("long", "long"), ROOT)
+        longs = [run_once(stream_cmd("long", "long"), ROOT) for _ in range(max(1, args.long_repeat))]
+        runs["long"] = tuple(statistics.median(x[i] for x in longs) for i in range(3))
         mb_long = folder_mb(tmp / "long")
     cpu1, wall1, rss1 = runs["streamed"]
     cpuL, wallL, rssL = runs["long"]
@@ -113,7 +117,8 @@ def main(argv=None) -> int:
         "quadrature 4096 intervals and the truth 8192 epochs at a time within a block) and the "
         "trajectory's 0.05 s position grid is integrated in 600 s chunks, a few kept "
         "(`insnav.sim.simulate_to`).  CPU is user + system time of the "
-        f"process (`os.wait4`), the 1 h figures the median of {args.repeat} runs; the whole-array path is "
+        f"process (`os.wait4`), the 1 h figures the median of {args.repeat} runs, the {args.hours:g} h ones of "
+        f"{len(longs)} (their peak RSS: {', '.join(f'{x[2]:.0f}' for x in longs)} MB); the whole-array path is "
         "`simulate(...).save(...)` in a process of its own (every table in memory, then written).",
         "",
         "| run | CPU [s] | wall [s] | peak RSS [MB] | output [MB] |",
