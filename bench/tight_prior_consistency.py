@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 import insnav.sim as sim  # noqa: E402
-from insnav import earth  # noqa: E402
+from insnav import _core, earth  # noqa: E402
 from insnav.config import ImuNoise, RunConfig  # noqa: E402
 from insnav.filters.navigator import TightNavigator  # noqa: E402
 
@@ -64,11 +64,8 @@ WINDOWS = ((0, 10), (10, 100), (100, 232), (132, 232))
 
 
 def dcm_nb(roll, pitch, yaw):
-    """C_nb of 3-2-1 Euler angles [rad]."""
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    return np.array([[cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
-                     [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
-                     [-sp, sr * cp, cr * cp]])
+    """C_nb of 3-2-1 Euler angles [rad] (the core's conversion)."""
+    return np.asarray(_core.rotation.dcm_from_euler(np.array([roll, pitch, yaw], float)))
 
 
 def truth_at(ds, t):
