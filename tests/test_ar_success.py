@@ -1,0 +1,109 @@
+"""Success rates of partial ambiguity resolution (insnav.gnss.ar_success): the bootstrapped success rate
+(Teunissen 1998, eq. (11)) against a Monte Carlo of integer bootstrapping on the same float covariance,
+the monotonicity of the ordered bootstrap over nested subsets, the conditional-mean partial fix
+(Teunissen 1995, eq. (6)) and the position conditioning against a joint Gaussian."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from insnav import _core
+from insnav.gnss import ar_success as ars
+
+
+def _small_q():
+    # three double differences sharing a reference (covariance 1 + I pattern) plus a geometry term:
+    # strongly correlated, as a float DD covariance is
+    G = np.array([[1.0, 0.2, -0.5], [0.4, 1.0, 0.3], [-0.2, 0.6, 1.0]])
+    return 0.012 * (np.ones((3, 3)) + np.eye(3)) + 0.05 * G @ G.T
+
+
+def test_bootstrap_success_rate_diagonal_is_the_product_of_erfs():
+    s = np.array([0.1, 0.2, 0.3])
+    want = np.prod([math.erf(1.0 / (2.0 * math.sqrt(2.0) * x)) for x in s])
+    assert ars.bootstrap_success_rate(np.diag(s ** 2)) == pytest.approx(want, rel=1e-12)
+    assert ars.ordered_success_rate(np.diag(s ** 2))[-1] == pytest.approx(want, rel=1e-12)
+
+
+def test_bootstrap_success_rate_matches_monte_carlo_of_bootstrapping():
+    Q = _small_q()
+    ps = ars.bootstrap_success_rate(Q)
+    assert 0.3 < ps < 0.95  # a case where the rate is neither 0 nor 1
+    Z, _, _ = _core.lambda_decorrelate(Q)
+    Qz = Z.T @ Q @ Z
+    rng = np.random.default_rng(7)
+    m = 40000
+    a_true = rng.integers(-20, 21, size=3).astype(float)
+    a_hat = a_true + rng.standard_normal((m, 3)) @ np.linalg.cholesky(Q).T
+    z = ars.bootstrap_estimate(a_hat @ Z, Qz)   # z = Z^T a per row
+    ok = np.all(z == Z.T @ a_true, axis=1)
+    sd = math.sqrt(ps * (1.0 - ps) / m)
+    assert abs(ok.mean() - ps) < 4.0 * sd
+
+
+def test_bootstrap_is_a_lower_bound_of_integer_least_squares():
+    # Teunissen (1999): P(ILS correct) >= P(bootstrapping correct); ILS by MLAMBDA on the same samples
+    Q = _small_q()
+    ps = ars.bootstrap_success_rate(Q)
+    rng = np.random.default_rng(11)
+    m = 3000
+    C = np.linalg.cholesky(Q)
+    hits = 0
+    for _ in range(m):
+        a_hat = C @ rng.standard_normal(3)
+        cand, _ = _core.lambda_search(a_hat, Q)
+        hits += bool(np.all(np.asarray(cand)[:, 0] == 0.0))
+    assert hits / m >= ps - 4.0 * math.sqrt(ps * (1.0 - ps) / m)
+
+
+def test_ordered_success_rate_is_monotone_over_nested_subsets():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n = int(rng.integers(2, 8))
+        A = rng.normal(size=(n, n + 2)) * 0.3
+        G = rng.normal(size=(n, 3))
+        Q = A @ A.T / (n + 2) + 0.02 * G @ G.T
+        p = ars.ordered_success_rate(Q)
+        assert np.all(np.diff(p) <= 1e-15)  # dropping the last candidate never lowers it
+        # and each subset's value is the full computation on that subset
+        k = int(rng.integers(1, n + 1))
+        assert ars.ordered_success_rate(Q[:k, :k])[-1] == pytest.approx(p[k - 1], rel=1e-12)
+
+
+def test_best_partial_subset_is_the_largest_passing_prefix():
+    s = np.array([0.05, 0.08, 0.1, 0.4, 0.5])  # the last two drag the rate down
+    Q = np.diag(s ** 2)
+    rates = ars.partial_success_rates(Q)
+    k, ps = ars.best_partial_subset(Q, 0.99, min_fix=1)
+    assert k == 3 and ps == pytest.approx(rates[2])
+    assert rates[2] >= 0.99 > rates[3]
+    assert ars.best_partial_subset(Q, 0.99, min_fix=4) == (0, pytest.approx(math.nan, nan_ok=True))
+
+
+def test_partial_fix_and_position_conditioning_match_the_joint_gaussian():
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(7, 7))
+    P = A @ A.T + 7 * np.eye(7)  # joint covariance of (b (3), a (4))
+    x = rng.normal(size=7)
+    Qbb, Qab, Qa = P[:3, :3], P[3:, :3], P[3:, 3:]
+    # fixing the first two ambiguities: the Gaussian conditional of b on a_1, a_2
+    a_fix = np.array([1.0, -2.0])
+    b, Pb = ars.partial_fix(x[:3], Qbb, x[3:], Qa, Qab, a_fix)
+    idx = [3, 4]
+    K = P[np.ix_(range(3), idx)] @ np.linalg.inv(P[np.ix_(idx, idx)])
+    assert np.allclose(b, x[:3] + K @ (a_fix - x[idx]))
+    assert np.allclose(Pb, Qbb - K @ P[np.ix_(idx, range(3))])
+    # a position measurement y = b + e: the Kalman update of the joint (b, a)
+    R = np.diag([0.1, 0.2, 0.3])
+    y = rng.normal(size=3)
+    b2, Pbb2, a2, Qa2, Qab2 = ars.condition_on_position(x[:3], Qbb, x[3:], Qa, Qab, y, R)
+    H = np.hstack([np.eye(3), np.zeros((3, 4))])
+    Kf = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    xf = x + Kf @ (y - x[:3])
+    Pf = P - Kf @ H @ P
+    assert np.allclose(b2, xf[:3]) and np.allclose(a2, xf[3:])
+    assert np.allclose(Pbb2, Pf[:3, :3]) and np.allclose(Qa2, Pf[3:, 3:]) and np.allclose(Qab2, Pf[3:, :3])
+    # extra information never lowers the success rate
+    assert ars.bootstrap_success_rate(Qa2 * 1e-2) >= ars.bootstrap_success_rate(Qa * 1e-2) - 1e-12
