@@ -29,8 +29,8 @@ import math
 
 import numpy as np
 
-__all__ = ["bootstrap_success_rate", "bootstrap_estimate", "ordered_success_rate", "partial_success_rates", "best_partial_subset",
-           "partial_fix", "condition_on_position", "float_epochs"]
+__all__ = ["bootstrap_success_rate", "bootstrap_estimate", "ordered_success_rate", "partial_success_rates",
+           "best_partial_subset", "partial_fix", "condition_on_position", "float_epochs"]
 
 
 def bootstrap_success_rate(Q_a, variance_factor: float = 1.0) -> float:
