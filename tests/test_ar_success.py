@@ -156,3 +156,48 @@ def test_recorded_float_problem_is_the_engines(tmp_path):
         assert np.abs(d).max() > 0.3  # the float itself is metres off: the test is not trivial
         worst = max(worst, float(np.abs(res).max()))
     assert worst < 0.25  # an integer offset or a sign error would leave >= 1 cycle
+
+
+def test_true_position_change_makes_a_moving_rover_static(tmp_path):
+    """bench/rtk_urban_feasibility.static_rows (the perfect-INS oracle): the moving rover's observations moved
+    to its first position by the true ranges; the static engine then fixes at that position, and the
+    Doppler moved with the phase raises no slip."""
+    import importlib.util
+    import math as _m
+    from pathlib import Path
+
+    from insnav.gnss.rtk import RtkOptions, prepare_rtk_rows
+    from insnav.sim import load_scenario, simulate_rtk
+    from insnav.sim.gnss_rtk import rtk_noise_options
+    from insnav.sim.scenario import resolve_raw
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "rtk_urban_feasibility.py"
+    spec = importlib.util.spec_from_file_location("rtk_urban_feasibility", path)
+    feas = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(feas)
+    raw, _ = resolve_raw("rtk-open-sky-car")
+    raw["motion"]["segments"] = [{"duration_s": 20.0, "target_speed_mps": 12.0},
+                                 {"duration_s": 20.0, "heading_change_deg": 90.0}]
+    raw["gnss_rtk"].update(slip_rate_per_h=0.0)
+    sc = load_scenario(raw, seed=4)
+    sim = simulate_rtk(sc, seed=4)
+    files = sim.write(tmp_path)
+    cfg = sc.gnss_rtk
+    opt = RtkOptions.from_dict(dict(systems="".join(sim.signals), frequencies=2, ratio_threshold=3.0, mode="static",
+                                    elevation_mask_deg=_m.degrees(cfg["base_elevation_mask"]),
+                                    **rtk_noise_options(cfg)), "test")
+    rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(files["rover"], files["base"],
+                                                                             files["nav"], None, opt)
+    t = rover.epoch_t_gps_s
+    r_true, ok = feas._truth_pos(sim, t)
+    assert ok.all() and np.linalg.norm(r_true[-1] - r_true[0]) > 200.0  # the car really moves
+    r0 = r_true[0]
+    out = _core.rtk_run(t, roff, feas.static_rows(t, roff, rrows, r_true, r0), boff, brows, bidx, r_base_e,
+                        opt.core_dict())
+    st = np.asarray(out["status"])
+    assert (st == 1).mean() > 0.8
+    assert np.linalg.norm(np.asarray(out["r_e"])[st == 1] - r0, axis=1).max() < 0.05
+    assert np.asarray(out["slips"])[:, 3].sum() == 0  # Doppler test
+    # without the move the static engine cannot fix the moving rover
+    moving = _core.rtk_run(t, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict())
+    assert (np.asarray(moving["status"]) == 1).mean() < 0.5
