@@ -330,7 +330,7 @@ py::dict rtk_vce_sums(const IArray& epoch, const py::array_t<int, py::array::c_s
 
 py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& rover_rows, const IArray& base_off,
                  const DArray& base_rows, const IArray& base_index, const DArray& r_base_e, const py::dict& opts,
-                 bool record_iono, bool record_fixed_rows) {
+                 bool record_iono, bool record_fixed_rows, bool record_float) {
   const py::ssize_t n = t_rover.ndim() == 1 ? t_rover.shape(0) : -1;
   if (n < 0) throw py::value_error("rtk_run: t_rover must be 1-D");
   check_rows(rover_rows, "rtk_run: rover_rows");
@@ -361,10 +361,15 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
   std::vector<std::int64_t> fr_epoch;
   std::vector<int> fr_code, fr_group;
   std::vector<double> fr_y, fr_h, fr_var_own, fr_var_ref;
+  // the float AR problem of every epoch with AR (RtkEngine::set_record_float), concatenated
+  std::vector<std::int64_t> fp_epoch, fp_n;
+  std::vector<int> fp_sat_j, fp_sat_i, fp_freq;
+  std::vector<double> fp_a, fp_Q, fp_Qba, fp_Qbb;
   {
     py::gil_scoped_release release;
     auto eng = std::make_unique<gnss::RtkEngine>(o);
     eng->set_record_fixed_rows(record_fixed_rows);
+    eng->set_record_float(record_float);
     std::int64_t last_b = -1;
     for (py::ssize_t e = 0; e < n; ++e) {
       gnss::RtkEpoch out;
@@ -399,6 +404,21 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
         fr_h.insert(fr_h.end(), fr.h, fr.h + 3);
         fr_var_own.push_back(fr.var_own);
         fr_var_ref.push_back(fr.var_ref);
+      }
+      if (record_float && b >= 0 && eng->float_problem().n > 0) {
+        const auto& fp = eng->float_problem();
+        fp_epoch.push_back(e);
+        fp_n.push_back(fp.n);
+        for (int p = 0; p < fp.n; ++p) {
+          fp_a.push_back(fp.a_hat(p));
+          fp_sat_j.push_back(fp.sat_j[p]);
+          fp_sat_i.push_back(fp.sat_i[p]);
+          fp_freq.push_back(fp.freq[p]);
+          for (int q = 0; q < fp.n; ++q) fp_Q.push_back(fp.Qa(p, q));
+          for (int i = 0; i < 3; ++i) fp_Qba.push_back(fp.Qba(i, p));  // (n, 3) per epoch: Q_ab
+        }
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) fp_Qbb.push_back(fp.Qbb(i, j));
       }
       if (record_iono)
         for (int s = 0; s < gnss::kMaxSatKeys; ++s) {
@@ -437,6 +457,20 @@ py::dict rtk_run(const DArray& t_rover, const IArray& rover_off, const DArray& r
     f["var_own"] = py::array_t<double>(nr, fr_var_own.data());
     f["var_ref"] = py::array_t<double>(nr, fr_var_ref.data());
     d["fixed_rows"] = f;
+  }
+  if (record_float) {
+    const auto ne = static_cast<py::ssize_t>(fp_n.size()), na = static_cast<py::ssize_t>(fp_a.size());
+    py::dict f;
+    f["epoch"] = py::array_t<std::int64_t>(ne, fp_epoch.data());
+    f["n"] = py::array_t<std::int64_t>(ne, fp_n.data());
+    f["a_hat"] = py::array_t<double>(na, fp_a.data());
+    f["Q_a"] = py::array_t<double>(static_cast<py::ssize_t>(fp_Q.size()), fp_Q.data());
+    f["Q_ab"] = py::array_t<double>({na, static_cast<py::ssize_t>(3)}, fp_Qba.data());
+    f["Q_bb"] = py::array_t<double>({ne, static_cast<py::ssize_t>(3), static_cast<py::ssize_t>(3)}, fp_Qbb.data());
+    f["sat_j"] = py::array_t<int>(na, fp_sat_j.data());
+    f["sat_i"] = py::array_t<int>(na, fp_sat_i.data());
+    f["freq"] = py::array_t<int>(na, fp_freq.data());
+    d["float_ar"] = f;
   }
   if (record_iono) {
     d["iono_m"] = iono_m;
@@ -559,12 +593,15 @@ void bind_rtk(py::module_& m) {
         "of every row (NaN in unusable epochs).");
   m.def("rtk_run", &rtk_run, py::arg("t_rover"), py::arg("rover_off"), py::arg("rover_rows"), py::arg("base_off"),
         py::arg("base_rows"), py::arg("base_index"), py::arg("r_base_e"), py::arg("options"),
-        py::arg("record_iono") = false, py::arg("record_fixed_rows") = false,
+        py::arg("record_iono") = false, py::arg("record_fixed_rows") = false, py::arg("record_float") = false,
         "RTK engine over every rover epoch (GIL released); record_iono: also the (n, 320) single-differenced "
         "ionosphere estimates iono_m and iono_sigma_m [m] per satellite key (NaN: no state), and iono_dd_m, "
         "iono_dd_sigma_m: the double differences against the reference of each system (NaN for it); "
         "record_fixed_rows: also fixed_rows, the double-differenced rows of every fixed epoch (epoch, code, "
-        "group, y [m], h (k, 3), var_own, var_ref [m^2]) for the variance component estimation.");
+        "group, y [m], h (k, 3), var_own, var_ref [m^2]) for the variance component estimation; "
+        "record_float: also float_ar, the float ambiguity problem of every epoch with AR in the engine's partial-AR "
+        "order (epoch, n per epoch; concatenated a_hat [cycles], Q_a (n x n row-major per epoch) [cycles^2], Q_ab "
+        "(n, 3) [cycles m], sat_j, sat_i (satellite keys), freq; Q_bb (k, 3, 3) [m^2]).");
   m.def("slip_detect", &slip_detect, py::arg("t"), py::arg("off"), py::arg("rows"), py::arg("options"),
         "Cycle-slip flags (m, 3) of one receiver's rows (bits: LLI, GF, MW, Doppler, gap).");
   m.def("rtk_double_differences", &rtk_double_differences, py::arg("rover_rows"), py::arg("base_rows"),

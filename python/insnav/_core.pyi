@@ -376,6 +376,7 @@ def rtk_run(
     options: dict[str, Any],
     record_iono: bool = False,
     record_fixed_rows: bool = False,
+    record_float: bool = False,
 ) -> dict[str, Any]: ...
 def rtk_vce_sums(
     epoch: npt.ArrayLike,

@@ -641,7 +641,7 @@ def _sig_text(obs, nf):
 
 
 def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None = None, *,
-              record_iono: bool = False, record_fixed_rows: bool = False) -> RtkSolution:
+              record_iono: bool = False, record_fixed_rows: bool = False, record_float: bool = False) -> RtkSolution:
     """RTK of ``rover`` against ``base``.
 
     Parameters
@@ -664,6 +664,13 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
         :meth:`RtkSolution.noise_estimate`.  With ``options.noise = "estimate"`` a first pass records
         them, and the run uses the sigmas estimated (``info["noise_estimate"]``, None when too few
         fixed epochs; ``info["options"]`` the options used).
+    record_float : bool
+        Also return, in ``info["float_ar"]``, the float ambiguity problem of every epoch with AR in the
+        engine's partial-AR order (partial AR drops from the end): ``epoch`` and ``n`` per such epoch,
+        and concatenated over them ``a_hat`` [cycles], ``Q_a`` (each epoch's n x n, row-major)
+        [cycles^2], ``Q_ab`` (n, 3) [cycles m], ``sat_j``, ``sat_i`` (satellite keys
+        ``system * 64 + prn`` of each double difference's satellite and reference), ``freq``;
+        ``Q_bb`` (k, 3, 3) the float position's covariance [m^2] (:mod:`insnav.gnss.ar_success`).
 
     Returns
     -------
@@ -677,7 +684,8 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
     if opt.noise == "estimate":  # a first pass estimates the noise from its fixed epochs
         opt, noise_est = estimate_noise_prepass(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt)
     out = _core.rtk_run(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt.core_dict(),
-                        record_iono=bool(record_iono), record_fixed_rows=bool(record_fixed_rows))
+                        record_iono=bool(record_iono), record_fixed_rows=bool(record_fixed_rows),
+                        record_float=bool(record_float))
     age = np.where(bidx >= 0, rover.epoch_t_gps_s - base.epoch_t_gps_s[np.maximum(bidx, 0)], np.nan)
     return RtkSolution(t_gps_s=rover.epoch_t_gps_s.copy(), status=np.asarray(out["status"]),
                        ratio=np.asarray(out["ratio"]), success_rate=np.asarray(out["success_rate"]),
@@ -693,7 +701,9 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
                                  rover_signals=rover.signals,
                                  base_signals=base.signals,
                                  **({k: np.asarray(out[k]) for k in ("iono_m", "iono_sigma_m", "iono_dd_m",
-                                                                     "iono_dd_sigma_m")} if record_iono else {})))
+                                                                     "iono_dd_sigma_m")} if record_iono else {}),
+                                 **({"float_ar": {k: np.asarray(v) for k, v in out["float_ar"].items()}}
+                                    if record_float else {})))
 
 
 def estimate_noise(rows: dict, options: RtkOptions | dict | None = None, **kwargs):

@@ -416,6 +416,23 @@ class RtkEngine {
   /// component estimation of the phase and code noise (off by default: two more row builds per
   /// fixed epoch).  Read them after process() with fixed_rows() / fixed_row(i).
   void set_record_fixed_rows(bool on) { record_fixed_ = on; }
+  /// Record, at every epoch with AR, the float ambiguity problem that resolve() hands to partial AR
+  /// (off by default): the n candidate double differences in the engine's priority order (partial AR
+  /// drops from the end), their float values a_hat [cycles], covariance Q_a [cycles^2], the
+  /// cross-covariance Q_ba of the float position with them [m cycles], the float position's
+  /// covariance Q_bb [m^2], and the satellite keys (sat_key) of each double difference's satellite j
+  /// and reference i and its frequency slot.  For studies of what the float supports (success rates of
+  /// subsets, conditioning on extra information); read after process() with float_problem().
+  void set_record_float(bool on) { record_float_ = on; }
+  struct FloatProblem {
+    int n = 0;  // candidates (0: no AR this epoch)
+    AmbVec a_hat;
+    AmbMat Qa;
+    Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxAmbiguities> Qba;
+    Mat3 Qbb = Mat3::Zero();
+    std::array<int, kMaxAmbiguities> sat_j{}, sat_i{}, freq{};
+  };
+  const FloatProblem& float_problem() const { return float_; }
   /// Rows recorded at the last processed epoch (0 unless it was fixed and recording is on).
   int fixed_rows() const { return n_fixed_rows_; }
   const FixedDdRow& fixed_row(int i) const { return fixed_rows_[i]; }
@@ -518,6 +535,7 @@ class RtkEngine {
                    const Vec3& r_base_e) {
     RtkEpoch out;
     n_fixed_rows_ = 0;
+    float_.n = 0;
     const int nf = std::clamp(opt_.n_freq, 1, kMaxFreq);
     n_r = std::min(n_r, kMaxSatKeys);
     n_b = std::min(n_b, kMaxSatKeys);
@@ -1175,6 +1193,7 @@ class RtkEngine {
       std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_var_[a] < dd_var_[b]; });
     else
       std::sort(order_.begin(), order_.begin() + n, [&](int a, int b) { return dd_el_[a] > dd_el_[b]; });
+    if (record_float_) record_float(n);
     const bool kv = kin;
     ArSettings st;
     st.ratio_threshold = opt_.ratio_threshold;
@@ -1223,6 +1242,27 @@ class RtkEngine {
     out.P_r = Pb.topLeftCorner<3, 3>();
     if (record_fixed_) record_fixed_rows(nuse);
     if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
+  }
+
+  // The float AR problem of resolve()'s n ordered candidates (set_record_float).
+  void record_float(int n) {
+    float_.n = n;
+    float_.a_hat.resize(n);
+    float_.Qa.resize(n, n);
+    float_.Qba.resize(3, n);
+    float_.Qbb = P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos);
+    for (int p = 0; p < n; ++p) {
+      const int sj = RtkLayout::kAmb + dd_j_[order_[p]], si = RtkLayout::kAmb + dd_i_[order_[p]];
+      float_.a_hat(p) = x_(sj) - x_(si);
+      for (int q = 0; q < n; ++q) {
+        const int tj = RtkLayout::kAmb + dd_j_[order_[q]], ti = RtkLayout::kAmb + dd_i_[order_[q]];
+        float_.Qa(p, q) = P_(sj, tj) - P_(sj, ti) - P_(si, tj) + P_(si, ti);
+      }
+      for (int i = 0; i < 3; ++i) float_.Qba(i, p) = P_(RtkLayout::kPos + i, sj) - P_(RtkLayout::kPos + i, si);
+      float_.sat_j[p] = amb_[dd_j_[order_[p]]].sat;
+      float_.sat_i[p] = amb_[dd_i_[order_[p]]].sat;
+      float_.freq[p] = amb_[dd_j_[order_[p]]].freq;
+    }
   }
 
   // The fixed epoch's double differences for the variance component estimation (FixedDdRow).  The
@@ -1325,6 +1365,8 @@ class RtkEngine {
   double noise_z_ = 0.0;  // Phi^-1(1 - noise_confidence), set by the constructor
   bool white_code_ = false;  // code_var_factor() returns 1 (the configured white code)
   bool record_fixed_ = false;  // record_fixed_rows() at every fixed epoch
+  bool record_float_ = false;  // record_float() at every epoch with AR
+  FloatProblem float_;
   int n_fixed_rows_ = 0;
   std::array<FixedDdRow, 2 * kMaxRows> fixed_rows_{};
   std::array<double, kMaxAmbStates> fix_val_{};  // fixed DD ambiguity of a slot against its reference [cycles]
