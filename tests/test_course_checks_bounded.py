@@ -213,3 +213,17 @@ def test_temporaries_do_not_grow_with_the_fixes():
         for f in (ref_offset, ref_slope):  # the measure sees the whole-record temporaries
             r1, r10 = (_peak_bytes(f, t, dth, dv, g) for g in (g1, g10))
             assert r10 - r1 > 10_000_000, (f.__name__, r1, r10)
+
+
+def test_spacing_median_is_the_sorted_distinct_spacing():
+    """spacing_median: median(d[d != 0]) of d = diff(sort(t)), in order or not, blocks of 16; None without."""
+    from insnav._median import spacing_median
+
+    rng = np.random.default_rng(5)
+    t = np.round(np.cumsum(rng.choice([0.0, 0.1, 0.1, 0.2, 0.1000001], 1000)), 7)
+    for x in (t, t[::-1], rng.permutation(t), np.append(t, np.nan)):
+        d = np.diff(np.sort(x))
+        want = np.median(d[d != 0])
+        got = spacing_median(x, block=16)
+        assert got == want or (math.isnan(got) and math.isnan(want))
+    assert spacing_median(np.ones(5)) is None and spacing_median(np.zeros(0)) is None

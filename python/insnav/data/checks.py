@@ -44,7 +44,8 @@ import dataclasses
 
 import numpy as np
 
-from .._median import median
+from .._median import _diffs, median
+from .._median import stream_median as _stream_median
 from ..units import DEG, G0
 
 
@@ -263,10 +264,6 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
 #: of time order is first sorted: an index of 8 bytes per fix).  A record of at most this many fixes is
 #: taken in one block, so its figures are those of whole-record arrays bit for bit
 COURSE_CHECK_BLOCK = 1 << 14
-#: distinct values :func:`_stream_median` counts before it bisects instead
-_MEDIAN_DISTINCT_MAX = 1 << 12
-
-
 class _TimeOrdered:
     """The fixes of ``gnss`` in time order (stable: the order of ``np.argsort(t, kind="stable")``), read
     ``block`` rows at a time.  In time order already (the usual case): no copy of a whole column."""
@@ -297,76 +294,6 @@ class _TimeOrdered:
 
     def all_finite_t(self) -> bool:
         return all(bool(np.isfinite(t).all()) for _, (t,) in self.rows("t"))
-
-
-def _diffs(chunks):
-    """``np.diff`` of the concatenation of ``chunks`` (1-D arrays), a chunk at a time."""
-    prev = None
-    for x in chunks:
-        if not x.size:
-            continue
-        yield np.diff(x) if prev is None else np.diff(np.concatenate([prev, x]))
-        prev = x[-1:]
-
-
-def _sorted_counts(x):
-    """The distinct values of a sorted array and how often each occurs."""
-    if not x.size:
-        return x, np.zeros(0, np.int64)
-    first = np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1]]))
-    return x[first], np.diff(np.append(first, x.size))
-
-
-def _stream_median(chunks) -> float:
-    """``median(np.concatenate(list(chunks())))`` (:func:`insnav._median.median`: the mean of the two middle
-    values for an even count; NaN for a NaN or no value) exactly, with temporaries of one chunk.
-
-    ``chunks()`` returns a fresh iterator of 1-D float arrays.  The counts of the distinct values while
-    there are at most :data:`_MEDIAN_DISTINCT_MAX` (a receiver's intervals take a handful), else a
-    bisection on the values' order-preserving 64-bit keys (at most 64 counting passes)."""
-    n = 0
-    vals, cnt = np.zeros(0), np.zeros(0, np.int64)
-    few = True
-    for x in chunks():
-        if not x.size:
-            continue
-        if np.isnan(x).any():
-            return float("nan")
-        n += x.size
-        if few:
-            v2, c2 = _sorted_counts(np.sort(x))
-            allv = np.concatenate([vals, v2])
-            o = np.argsort(allv, kind="stable")
-            allv, allc = allv[o], np.concatenate([cnt, c2])[o]
-            first = np.flatnonzero(np.concatenate([[True], allv[1:] != allv[:-1]]))
-            vals, cnt = allv[first], np.add.reduceat(allc, first) if allc.size else allc
-            few = vals.size <= _MEDIAN_DISTINCT_MAX
-    if n == 0:
-        return float("nan")
-    if few:
-        cum = np.cumsum(cnt)
-
-        def kth(i):
-            return vals[int(np.searchsorted(cum, i, side="right"))]
-    else:
-        mask = np.int64(0x7FFFFFFFFFFFFFFF)
-
-        def keys(x):
-            b = np.ascontiguousarray(x, float).view(np.int64)
-            return b ^ ((b >> 63) & mask)
-
-        def kth(i):  # the smallest key with more than i keys at or below it
-            lo, hi = -(1 << 63), (1 << 63) - 1
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if sum(int(np.count_nonzero(keys(x) <= mid)) for x in chunks()) > i:
-                    hi = mid
-                else:
-                    lo = mid + 1
-            k = np.array([lo], np.int64)
-            return (k ^ ((k >> 63) & mask)).view(float)[0]
-    k = n // 2
-    return float(kth(k)) if n % 2 else float((kth(k - 1) + kth(k)) / 2.0)
 
 
 class _Unwrap:
