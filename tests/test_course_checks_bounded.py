@@ -227,3 +227,14 @@ def test_spacing_median_is_the_sorted_distinct_spacing():
         got = spacing_median(x, block=16)
         assert got == want or (math.isnan(got) and math.isnan(want))
     assert spacing_median(np.ones(5)) is None and spacing_median(np.zeros(0)) is None
+
+
+def test_diff_median_is_the_median_of_the_intervals():
+    from insnav._median import diff_median
+
+    rng = np.random.default_rng(6)
+    for x in (np.round(np.cumsum(rng.choice([0.1, 0.1, 0.2], 999)), 3), rng.normal(0.0, 1.0, 1000),
+              np.array([0.0, np.nan, 1.0])):
+        want, got = np.median(np.diff(x)), diff_median(x, block=16)
+        assert got == want or (math.isnan(got) and math.isnan(want))
+    assert math.isnan(diff_median(np.ones(1)))

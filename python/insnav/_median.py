@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-__all__ = ["median", "percentile", "group_median", "unique", "stream_median", "spacing_median"]
+__all__ = ["median", "percentile", "group_median", "unique", "stream_median", "spacing_median", "diff_median"]
 
 
 def median(x) -> float:
@@ -214,3 +214,10 @@ def spacing_median(t, block: int = SPACING_BLOCK) -> float | None:
     if not any(d.size for d in chunks()):
         return None
     return stream_median(chunks)
+
+
+def diff_median(x, block: int = SPACING_BLOCK) -> float:
+    """``median(np.diff(x))`` (NaN: fewer than two values), the same value, with temporaries of ``block``
+    values (the fixes' interval of a long record: no whole-record copies)."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    return stream_median(lambda: _diffs(x[a:a + block] for a in range(0, x.size, block)))
