@@ -91,6 +91,7 @@ def probe(work: Path, extra) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--hours", type=float, nargs="+", default=[1.0, 24.0])
+    ap.add_argument("--gnss-hz", type=float, default=1.0, help="GNSS fix rate of the recordings [Hz]")
     ap.add_argument("--out", help="also write the table to this file")
     a = ap.parse_args(argv)
     hours = sorted(a.hours)
@@ -102,7 +103,7 @@ def main(argv=None) -> int:
             d.mkdir()
             for f in ("GNSS-RTK-sim.txt", "kf-gins-sim.yaml"):
                 shutil.copy(SIM / f, d / f)
-            write_day(d, h)
+            write_day(d, h, a.gnss_hz)
             for label, extra in VARIANTS:
                 got[label, h] = probe(d, extra)
                 print(f"{h:g} h: {label}: peak {got[label, h]['_BlockRun.run'][1]:.1f} MB", file=sys.stderr)
@@ -111,7 +112,8 @@ def main(argv=None) -> int:
         shutil.rmtree(work, ignore_errors=True)
     lo, hi = hours[0], hours[-1]
     lines = [f"Peak RSS (VmHWM) [MB] reached by the end of each stage of a block-by-block `insnav run` "
-             f"(bench/stream_rss_stages.py; synthesised recordings of {', '.join(f'{h:g} h' for h in hours)}), "
+             f"(bench/stream_rss_stages.py; synthesised recordings of {', '.join(f'{h:g} h' for h in hours)}, "
+             f"{a.gnss_hz:g} Hz GNSS), "
              f"the peak's rise in the stage, and the difference {hi:g} h - {lo:g} h:", ""]
     for label, _ in VARIANTS:
         lines += [f"{label}:", "",

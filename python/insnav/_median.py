@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-__all__ = ["median", "percentile", "group_median", "unique"]
+__all__ = ["median", "percentile", "group_median", "unique", "stream_median", "spacing_median", "diff_median"]
 
 
 def median(x) -> float:
@@ -113,3 +113,111 @@ def _sorted_distinct(a: np.ndarray) -> np.ndarray:
     keep[0] = True
     np.not_equal(a[1:], a[:-1], out=keep[1:])
     return a[keep]
+
+
+#: distinct values :func:`stream_median` counts before it bisects instead
+_MEDIAN_DISTINCT_MAX = 1 << 12
+
+
+def _diffs(chunks):
+    """``np.diff`` of the concatenation of ``chunks`` (1-D arrays), a chunk at a time."""
+    prev = None
+    for x in chunks:
+        if not x.size:
+            continue
+        yield np.diff(x) if prev is None else np.diff(np.concatenate([prev, x]))
+        prev = x[-1:]
+
+
+def _sorted_counts(x):
+    """The distinct values of a sorted array and how often each occurs."""
+    if not x.size:
+        return x, np.zeros(0, np.int64)
+    first = np.flatnonzero(np.concatenate([[True], x[1:] != x[:-1]]))
+    return x[first], np.diff(np.append(first, x.size))
+
+
+def stream_median(chunks) -> float:
+    """``median(np.concatenate(list(chunks())))`` (:func:`insnav._median.median`: the mean of the two middle
+    values for an even count; NaN for a NaN or no value) exactly, with temporaries of one chunk.
+
+    ``chunks()`` returns a fresh iterator of 1-D float arrays.  The counts of the distinct values while
+    there are at most :data:`_MEDIAN_DISTINCT_MAX` (a receiver's intervals take a handful), else a
+    bisection on the values' order-preserving 64-bit keys (at most 64 counting passes)."""
+    n = 0
+    vals, cnt = np.zeros(0), np.zeros(0, np.int64)
+    few = True
+    for x in chunks():
+        if not x.size:
+            continue
+        if np.isnan(x).any():
+            return float("nan")
+        n += x.size
+        if few:
+            v2, c2 = _sorted_counts(np.sort(x))
+            allv = np.concatenate([vals, v2])
+            o = np.argsort(allv, kind="stable")
+            allv, allc = allv[o], np.concatenate([cnt, c2])[o]
+            first = np.flatnonzero(np.concatenate([[True], allv[1:] != allv[:-1]]))
+            vals, cnt = allv[first], np.add.reduceat(allc, first) if allc.size else allc
+            few = vals.size <= _MEDIAN_DISTINCT_MAX
+    if n == 0:
+        return float("nan")
+    if few:
+        cum = np.cumsum(cnt)
+
+        def kth(i):
+            return vals[int(np.searchsorted(cum, i, side="right"))]
+    else:
+        mask = np.int64(0x7FFFFFFFFFFFFFFF)
+
+        def keys(x):
+            b = np.ascontiguousarray(x, float).view(np.int64)
+            return b ^ ((b >> 63) & mask)
+
+        def kth(i):  # the smallest key with more than i keys at or below it
+            lo, hi = -(1 << 63), (1 << 63) - 1
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if sum(int(np.count_nonzero(keys(x) <= mid)) for x in chunks()) > i:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            k = np.array([lo], np.int64)
+            return (k ^ ((k >> 63) & mask)).view(float)[0]
+    k = n // 2
+    return float(kth(k)) if n % 2 else float((kth(k - 1) + kth(k)) / 2.0)
+
+#: values per block of :func:`spacing_median`
+SPACING_BLOCK = 1 << 14
+
+
+def spacing_median(t, block: int = SPACING_BLOCK) -> float | None:
+    """The median spacing of the distinct values of ``t``: ``median(d[d != 0])`` with ``d =
+    np.diff(np.sort(t))`` (None: no spacing), the same value, with temporaries of ``block`` values when
+    ``t`` is in order (the sort then the identity; else ``t`` sorted whole)."""
+    t = np.asarray(t, dtype=float).reshape(-1)
+    n = t.size
+    ordered = True
+    for a in range(0, n - 1, block):  # NaN: not in order
+        seg = t[a:a + block + 1]
+        if not bool(np.all(seg[1:] >= seg[:-1])):
+            ordered = False
+            break
+    if not ordered:
+        t = np.sort(t)
+
+    def chunks():
+        for d in _diffs(t[a:a + block] for a in range(0, n, block)):
+            yield d[d != 0]
+
+    if not any(d.size for d in chunks()):
+        return None
+    return stream_median(chunks)
+
+
+def diff_median(x, block: int = SPACING_BLOCK) -> float:
+    """``median(np.diff(x))`` (NaN: fewer than two values), the same value, with temporaries of ``block``
+    values (the fixes' interval of a long record: no whole-record copies)."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    return stream_median(lambda: _diffs(x[a:a + block] for a in range(0, x.size, block)))

@@ -44,7 +44,8 @@ import dataclasses
 
 import numpy as np
 
-from .._median import median
+from .._median import _diffs, median
+from .._median import stream_median as _stream_median
 from ..units import DEG, G0
 
 
@@ -258,42 +259,308 @@ def check_gyro_against_gnss(t, dtheta_b, dv_b, gnss, *, source: str = "imu", min
     return slope
 
 
-def gyro_course_slope(t, dtheta_b, dv_b, gnss, *, min_speed_mps: float = 3.0, min_turn_deg: float = 45.0):
+#: fixes the course checks (:func:`gyro_course_slope`, :func:`estimate_time_offset`) take at a time: their
+#: temporaries are a few arrays of this many rows (about 3 MB), whatever the record's length (a record out
+#: of time order is first sorted: an index of 8 bytes per fix).  A record of at most this many fixes is
+#: taken in one block, so its figures are those of whole-record arrays bit for bit
+COURSE_CHECK_BLOCK = 1 << 14
+class _TimeOrdered:
+    """The fixes of ``gnss`` in time order (stable: the order of ``np.argsort(t, kind="stable")``), read
+    ``block`` rows at a time.  In time order already (the usual case): no copy of a whole column."""
+
+    def __init__(self, gnss, block: int | None = None):
+        self.g = gnss
+        self.t = np.asarray(gnss.t_valid, float)
+        self.n = int(self.t.shape[0])
+        self.block = max(8, int(COURSE_CHECK_BLOCK if block is None else block))
+        self.order = None if _in_time_order(self.t, self.block) else np.argsort(self.t, kind="stable")
+
+    def rows(self, *fields):
+        """``(a, [rows a .. b-1 of each field])`` per block; fields ``t`` [s], ``v`` (north, east) [m/s],
+        ``lat``, ``lon`` [rad]."""
+        v_n = np.asarray(self.g.v_n, float) if "v" in fields else None
+        for a in range(0, self.n, self.block):
+            b = min(self.n, a + self.block)
+            idx = slice(a, b) if self.order is None else self.order[a:b]
+            out = []
+            for f in fields:
+                if f == "t":
+                    out.append(self.t[idx])
+                elif f == "v":
+                    out.append(v_n[idx, :2])
+                else:
+                    out.append(np.radians(np.asarray(getattr(self.g, f + "_deg"), float)[idx]))
+            yield a, out
+
+    def all_finite_t(self) -> bool:
+        return all(bool(np.isfinite(t).all()) for _, (t,) in self.rows("t"))
+
+
+class _Unwrap:
+    """``np.unwrap`` (period 2 pi) of a sequence given in consecutive chunks: the same values (its
+    corrections' running sum carried from chunk to chunk, as ``cumsum`` adds them one by one)."""
+
+    def __init__(self):
+        self.prev = None
+        self.s = None
+
+    def __call__(self, p):
+        if not p.size:
+            return p.copy()
+        dd = np.diff(p) if self.prev is None else np.diff(np.concatenate([self.prev, p]))
+        high = np.pi
+        low = -high
+        ddmod = np.mod(dd - low, 2 * np.pi) + low
+        np.copyto(ddmod, high, where=(ddmod == low) & (dd > 0))
+        ph = ddmod - dd
+        np.copyto(ph, 0, where=abs(dd) < high)
+        up = np.array(p, copy=True)
+        if self.prev is None:
+            cs = ph.cumsum()
+            up[1:] = p[1:] + cs
+        else:
+            cs = np.concatenate([self.s, ph]).cumsum()[1:]
+            up[:] = p + cs
+        self.s = cs[-1:] if cs.size else np.zeros(1)  # a first chunk of one value: no correction yet
+        self.prev = p[-1:]
+        return up
+
+
+def _course_rows(fx: _TimeOrdered, dt_med: float, from_positions: bool):
+    """:func:`_gnss_course` a block of rows at a time: ``(a, t [s], v (north, east) [m/s])`` of rows
+    a .. b-1 in time order, the velocity from the positions' central difference where it is not finite
+    (the ``j`` rows before and after a block carried over; its output lags ``j`` rows behind the reads)."""
+    n = fx.n
+    if not from_positions:
+        for a, (gt, v) in fx.rows("t", "v"):
+            yield a, gt, np.array(v)
+        return
+    j = min(max(1, int(round(1.0 / max(dt_med, 1e-3)))), (n - 1) // 2)
+    lim = 3.0 * 2 * j * dt_med
+    unwrap = _Unwrap()
+    w = None  # (first row, t, v, north, east) of the rows kept: those not yet given and the j before them
+    e0 = 0  # the next row to give
+    for a, (gt, v, lat, lon) in fx.rows("t", "v", "lat", "lon"):
+        n_m = lat * _R_EARTH_M
+        e_m = unwrap(lon) * _R_EARTH_M * np.cos(lat)
+        if w is None:
+            w = (a, gt, v, n_m, e_m)
+        else:
+            w = (w[0],) + tuple(np.concatenate([x, y]) for x, y in zip(w[1:], (gt, v, n_m, e_m)))
+        w0, wt, wv, wn, we = w
+        b = a + len(gt)
+        e1 = b if b == n else max(e0, b - j)
+        if e1 > e0:
+            ks = np.arange(e0, e1)
+            out_v = np.array(wv[e0 - w0:e1 - w0])
+            missing = ~np.all(np.isfinite(out_v), axis=1)
+            if missing.any():
+                vp = np.full_like(out_v, np.nan)
+                c = (ks >= j) & (ks < n - j)
+                ki = ks[c] - w0
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    span = wt[ki + j] - wt[ki - j]
+                    no_gap = span <= lim
+                    vp[c, 0] = np.where(no_gap, (wn[ki + j] - wn[ki - j]) / span, np.nan)
+                    vp[c, 1] = np.where(no_gap, (we[ki + j] - we[ki - j]) / span, np.nan)
+                out_v[missing] = vp[missing]
+            yield e0, wt[e0 - w0:e1 - w0], out_v
+            e0 = e1
+        k0 = max(w0, e0 - j)
+        w = (k0,) + tuple(x[k0 - w0:] for x in w[1:])
+
+
+def _slope_pairs(fx: _TimeOrdered, grid, dt_med: float, from_positions: bool, min_speed_mps: float):
+    """:func:`gyro_course_slope`'s course and gyro heading changes ``(dc, dg)`` [rad] over the fast
+    intervals between fixes ``step`` apart (~1 s), a block at a time (the last fix of a block carried)."""
+    step = max(1, int(round(1.0 / max(dt_med, 1e-3))))
+    prev = None
+    for a, gt, v in _course_rows(fx, dt_med, from_positions):
+        sel = np.arange(-(-a // step) * step, a + len(gt), step) - a  # the rows whose index is a multiple of step
+        gt, v = gt[sel], v[sel]
+        speed = np.hypot(v[:, 0], v[:, 1])
+        course = np.arctan2(v[:, 1], v[:, 0])
+        g_at = _heading_at(grid, gt)
+        if prev is not None:
+            gt, v, speed, course, g_at = (np.concatenate([x, y]) for x, y in zip(prev, (gt, v, speed, course, g_at)))
+        prev = (gt[-1:], v[-1:], speed[-1:], course[-1:], g_at[-1:])
+        if gt.size < 2:
+            continue
+        with np.errstate(invalid="ignore"):
+            fast = (speed[:-1] > min_speed_mps) & (speed[1:] > min_speed_mps) \
+                & np.all(np.isfinite(v[:, :2]), axis=1)[1:] \
+                & np.all(np.isfinite(v[:, :2]), axis=1)[:-1] & np.isfinite(g_at[:-1]) & np.isfinite(g_at[1:]) \
+                & (np.diff(gt) < 5.0 * step * 0.1 + 2.0)
+        dc = (np.diff(course) + np.pi) % (2 * np.pi) - np.pi
+        dg = np.diff(g_at)
+        yield dc[fast], dg[fast]
+
+
+def _any_missing_v(fx: _TimeOrdered) -> bool:
+    return any(not bool(np.all(np.isfinite(v))) for _, (v,) in fx.rows("v"))
+
+
+def _course_sample_blocks(fx: _TimeOrdered, interval_s: float):
+    """:func:`_course_samples` a block at a time: ``None`` (fewer than 3 samples, as it), or a callable
+    returning a fresh iterator of ``(lo, hi, course, speed)`` blocks in time order."""
+    n_v = 0
+    for _, (t, v) in fx.rows("t", "v"):
+        n_v += int(np.count_nonzero(np.all(np.isfinite(v), axis=1) & np.isfinite(t)))
+    if n_v >= 0.5 * fx.n:
+        if n_v < 3:
+            return None
+
+        def with_velocity():
+            for _, (t, v) in fx.rows("t", "v"):
+                has_v = np.all(np.isfinite(v), axis=1) & np.isfinite(t)
+                t, v = t[has_v], v[has_v]
+                if t.size:
+                    yield t, t, np.arctan2(v[:, 1], v[:, 0]), np.hypot(v[:, 0], v[:, 1])
+        return with_velocity
+
+    def ok_rows():
+        for _, (t, lat, lon) in fx.rows("t", "lat", "lon"):
+            ok = np.isfinite(t) & np.isfinite(lat) & np.isfinite(lon)
+            yield t[ok], lat[ok], lon[ok]
+
+    n_ok = sum(x[0].size for x in ok_rows())
+    if n_ok < 4:
+        return None
+    dt = _stream_median(lambda: _diffs(x[0] for x in ok_rows()))
+    j = min(max(1, int(round(interval_s / max(dt, 1e-3)))), n_ok - 1)
+
+    def chords():
+        unwrap = _Unwrap()
+        w = None  # the last j rows (t, north, east)
+        for t, lat, lon in ok_rows():
+            n_m = lat * _R_EARTH_M
+            e_m = unwrap(lon) * _R_EARTH_M * np.cos(lat)
+            w = (t, n_m, e_m) if w is None else tuple(np.concatenate([x, y]) for x, y in zip(w, (t, n_m, e_m)))
+            wt, wn, we = w
+            if wt.size > j:
+                lo, hi = wt[:-j], wt[j:]
+                dn, de = wn[j:] - wn[:-j], we[j:] - we[:-j]
+                span = hi - lo
+                keep = (span > 0) & (span <= 3.0 * j * dt)
+                if keep.any():
+                    lo, hi, dn, de, span = lo[keep], hi[keep], dn[keep], de[keep], span[keep]
+                    yield lo, hi, np.arctan2(de, dn), np.hypot(dn, de) / span
+                w = tuple(x[-j:] for x in w)
+
+    if sum(x[0].size for x in chords()) < 3:
+        return None
+    return chords
+
+
+def _offset_pairs(blocks, interval_s: float, min_speed_mps: float, max_pairs: int):
+    """:func:`estimate_time_offset`'s pairs of course samples ``(a, b)`` (``b`` the first sample at least
+    ``interval_s`` after ``a``, within ``2 interval_s``, both at speed), evenly thinned to ``max_pairs``
+    as it does, found a block at a time (the next blocks read ahead as far as ``interval_s`` needs):
+    ``(lo, hi, course, speed)`` of the samples the pairs use and ``(a, b)`` as indices into them (in
+    order, so the figures are those of the whole-record arrays), or None without a pair."""
+
+    def pairs():
+        """(first sample's index, samples of the block and those after it it needs, a, b local)."""
+        buf, base = [], 0  # the blocks read and not yet paired; the global index of the first
+        it = blocks()
+        done = False
+        while True:
+            while not done and (not buf or _tm_last(buf) < _tm_last(buf[:1]) + interval_s):
+                try:
+                    buf.append(next(it))
+                except StopIteration:
+                    done = True
+            if not buf:
+                return
+            cur = len(buf[0][0])
+            s = tuple(np.concatenate([x[f] for x in buf]) if len(buf) > 1 else buf[0][f] for f in range(4))
+            tm = 0.5 * (s[0] + s[1])
+            a = np.arange(cur)
+            b = np.searchsorted(tm, tm[:cur] + interval_s - 1e-6)
+            keep = b < tm.size
+            a, b = a[keep], b[keep]
+            keep = (tm[b] - tm[a] <= 2.0 * interval_s) & (s[3][a] > min_speed_mps) & (s[3][b] > min_speed_mps)
+            yield base, s, a[keep], b[keep]
+            base += cur
+            buf.pop(0)
+
+    total = sum(a.size for _, _, a, _ in pairs())
+    if total == 0:
+        return None
+    pick = np.linspace(0, total - 1, max_pairs).round().astype(np.int64) if total > max_pairs else None
+    ga, gb, rows, vals = [], [], [], []
+    rank = 0
+    for base, s, a, b in pairs():
+        if pick is not None:
+            sel = pick[(pick >= rank) & (pick < rank + a.size)] - rank
+            rank += a.size
+            a, b = a[sel], b[sel]
+        if a.size:
+            ga.append(base + a)
+            gb.append(base + b)
+            used = np.concatenate([a, b])
+            rows.append(base + used)
+            vals.append(np.column_stack([x[used] for x in s]))
+    ga, gb = np.concatenate(ga), np.concatenate(gb)
+    rows, vals = np.concatenate(rows), np.concatenate(vals)
+    order = np.argsort(rows, kind="stable")
+    rows, vals = rows[order], vals[order]
+    first = np.flatnonzero(np.concatenate([[True], rows[1:] != rows[:-1]]))
+    rows, vals = rows[first], vals[first]
+    return tuple(np.ascontiguousarray(vals[:, f]) for f in range(4)), np.searchsorted(rows, ga), \
+        np.searchsorted(rows, gb)
+
+
+def _tm_last(buf) -> float:
+    """The mid time of the last sample of the last block in ``buf``."""
+    lo, hi = buf[-1][0], buf[-1][1]
+    return 0.5 * (lo[-1] + hi[-1])
+
+
+def gyro_course_slope(t, dtheta_b, dv_b, gnss, *, min_speed_mps: float = 3.0, min_turn_deg: float = 45.0,
+                      block: int | None = None):
     """The regression of :func:`check_gyro_against_gnss`: ``(slope, consistent
     with 1, degrees of turns, course from positions)``, or None without
-    enough turns at speed."""
+    enough turns at speed.
+
+    The fixes are taken ``block`` (:data:`COURSE_CHECK_BLOCK`) at a time in
+    time order (:func:`_course_rows`), the regression's sums added block by
+    block (a second pass for the residuals): the temporaries do not grow with
+    the record.  A record of at most ``block`` fixes gives the figures of
+    whole-record arrays bit for bit; a longer one's sums are added in another
+    order (about 1e-16 relative)."""
     t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
-    if t.size < 3 or len(gnss) < 3 or scan is None or not np.isfinite(np.asarray(gnss.t_valid, float)).all():
+    if t.size < 3 or len(gnss) < 3 or scan is None:
         return None
-    gt, v, from_positions = _gnss_course(gnss)
-    speed = np.hypot(v[:, 0], v[:, 1])
-    course = np.arctan2(v[:, 1], v[:, 0])
-    # ~1 s intervals (the course of a 10 Hz receiver is noisy fix to fix)
-    step = max(1, int(round(1.0 / max(median(np.diff(gt)), 1e-3))))
-    sel = np.arange(0, gt.size, step)
-    gt, v, speed, course = gt[sel], v[sel], speed[sel], course[sel]
+    fx = _TimeOrdered(gnss, block)
+    if not fx.all_finite_t():
+        return None
+    dt_med = _stream_median(lambda: _diffs(x[0] for _, x in fx.rows("t")))  # the fixes' interval
+    from_positions = _any_missing_v(fx)
     # the heading the gyros integrate about the vertical, at the fixes (the shared 10 Hz grid)
     grid = _heading_grid(t, dtheta_b, scan)
     if grid is None:
         return None
-    g_at = _heading_at(grid, gt)
-    with np.errstate(invalid="ignore"):
-        fast = (speed[:-1] > min_speed_mps) & (speed[1:] > min_speed_mps) & np.all(np.isfinite(v[:, :2]), axis=1)[1:] \
-            & np.all(np.isfinite(v[:, :2]), axis=1)[:-1] & np.isfinite(g_at[:-1]) & np.isfinite(g_at[1:]) \
-            & (np.diff(gt) < 5.0 * step * 0.1 + 2.0)
-    dc = (np.diff(course) + np.pi) % (2 * np.pi) - np.pi
-    dg = np.diff(g_at)
-    dc, dg = dc[fast], dg[fast]
     # evidence: the turning the gyros saw (low noise; the course of a noisy or slow
     # receiver adds up to many degrees even on a straight line)
-    if dg.size < 5 or np.sum(np.abs(dg)) < np.radians(min_turn_deg):
+    m, abs_dg, gc, gg = 0, 0.0, 0.0, 0.0
+    for dc, dg in _slope_pairs(fx, grid, dt_med, from_positions, min_speed_mps):
+        m += dg.size
+        abs_dg += float(np.sum(np.abs(dg)))
+        gc += float(np.dot(dg, dc))
+        gg += float(np.dot(dg, dg))
+    if m < 5 or abs_dg < np.radians(min_turn_deg):
         return None
     # the course is the noisy one: regress it on the gyro, slope = 1 / (d course / d gyro)
-    inv = float(np.dot(dg, dc) / np.dot(dg, dg))
-    res = dc - inv * dg
-    se = float(np.sqrt(np.dot(res, res) / max(dg.size - 1, 1) / np.dot(dg, dg)))
+    inv = float(gc / gg)
+    rr, abs_dc = 0.0, 0.0
+    for dc, dg in _slope_pairs(fx, grid, dt_med, from_positions, min_speed_mps):
+        res = dc - inv * dg
+        rr += float(np.dot(res, res))
+        abs_dc += float(np.sum(np.abs(dc)))
+    se = float(np.sqrt(rr / max(m - 1, 1) / gg))
     slope = 1.0 / inv if inv != 0 else np.inf
-    return slope, abs(inv - 1.0) < 5.0 * se, float(np.degrees(np.sum(np.abs(dc)))), from_positions
+    return slope, abs(inv - 1.0) < 5.0 * se, float(np.degrees(abs_dc)), from_positions
 
 
 @dataclasses.dataclass(frozen=True)
@@ -412,7 +679,7 @@ def _course_samples(gnss, interval_s: float):
 
 def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, interval_s: float = 1.0,
                          min_speed_mps: float = 0.5, min_turn_deg: float = 90.0,
-                         max_pairs: int = 4000) -> TimeOffset | None:
+                         max_pairs: int = 4000, block: int | None = None) -> TimeOffset | None:
     """The lag between the gyro heading and the GNSS course, from the turns.
 
     The gyros' rotation about the vertical (the mean specific-force direction,
@@ -431,27 +698,29 @@ def estimate_time_offset(t, dtheta_b, dv_b, gnss, *, max_lag_s: float = 40.0, in
     is the reported GNSS velocity's (a tight run: the single-point fixes'
     Doppler velocity), or the chords' between the positions.
 
+    The course samples and their pairs are found ``block``
+    (:data:`COURSE_CHECK_BLOCK`) fixes at a time in time order
+    (:func:`_course_sample_blocks`, :func:`_offset_pairs`), and only the
+    samples of the at most ``max_pairs`` pairs are kept: the temporaries do
+    not grow with the record, and the figures are those of whole-record
+    arrays bit for bit.
+
     Returns None with fewer than 20 pairs at speed or less than
     ``min_turn_deg`` of turning.
     """
     t, dtheta_b, dv_b, scan = _scanned(t, dtheta_b, dv_b)
     if t.size < 3 or len(gnss) < 3 or scan is None:
         return None
-    samples = _course_samples(gnss, interval_s)
-    if samples is None:
+    blocks = _course_sample_blocks(_TimeOrdered(gnss, block), interval_s)
+    if blocks is None:
         return None
-    lo, hi, course, speed = samples
+    # pairs (a, b): b the first sample at least interval_s after a; no gaps; at most max_pairs, evenly
+    # spread (found a block at a time: the samples the pairs use, a and b indices into them)
+    got = _offset_pairs(blocks, interval_s, min_speed_mps, max_pairs)
+    if got is None:
+        return None
+    (lo, hi, course, speed), a, b = got
     tm = 0.5 * (lo + hi)
-    # pairs (a, b): b the first sample at least interval_s after a; no gaps
-    a = np.arange(tm.size)
-    b = np.searchsorted(tm, tm + interval_s - 1e-6)
-    keep = b < tm.size
-    a, b = a[keep], b[keep]
-    keep = (tm[b] - tm[a] <= 2.0 * interval_s) & (speed[a] > min_speed_mps) & (speed[b] > min_speed_mps)
-    a, b = a[keep], b[keep]
-    if a.size > max_pairs:
-        pick = np.linspace(0, a.size - 1, max_pairs).round().astype(np.int64)
-        a, b = a[pick], b[pick]
     if a.size < 20:
         return None
     dc = (course[b] - course[a] + np.pi) % (2 * np.pi) - np.pi

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._imu_scan import scan_imu
-from .._median import median
+from .._median import median, spacing_median
 from .._validate import as_float_array, check_finite, check_increasing
 from ..config import GATE_PROB_DEFAULT, RunConfig
 from ..data.nav import NavState
@@ -157,9 +157,10 @@ def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **
     decimation, and the UT parameters of the sigma-point filters."""
     cycle = cfg.cycle_period_s
     if cycle is None:
-        d = np.diff(np.sort(np.asarray(record_t, float)))
-        d = d[d != 0]  # the spacing of the distinct times (np.unique would import numpy.ma, ~10 ms)
-        cycle = median(d) if d.size else 1.0
+        # the spacing of the distinct times, a block of them at a time when in time order (a day of 10 Hz
+        # fixes: no whole-record copies)
+        cycle = spacing_median(record_t)
+        cycle = 1.0 if cycle is None else cycle
     out = dict(lever_arm_b=lever_arm(dataset, cfg), propagation_interval=cfg.propagation_interval_s,
                cycle_period=outage_cycle_period(cfg.filter, cycle), **gate_config(cfg, dataset),
                output_decimation=int(cfg.output_decimation))

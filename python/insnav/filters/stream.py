@@ -38,10 +38,13 @@ grows with the recording, 56 bytes per fix;
 ``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py`` measure a
 synthesised day).  At the end the input checks take those fixes
 (:func:`insnav.data.checks.check_dataset`): the range, sigma, jump and
-velocity checks a block of fixes at a time (about 0.6 MB of temporaries);
-the course checks (time offset, gyro against the GNSS course) still make
-whole-record temporaries, about 11 MB for a day of 1 Hz fixes, below the
-block loop's peak.
+velocity checks a block of fixes at a time (about 0.6 MB of temporaries),
+the course checks (time offset, gyro against the GNSS course) a block of
+:data:`insnav.data.checks.COURSE_CHECK_BLOCK` fixes at a time (a few MB,
+whatever the record's length), and the engine's outage cycle takes the
+fixes' median spacing a block at a time
+(:func:`insnav._median.spacing_median`): the set-up and the checks make no
+temporary of the whole record's fixes.
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
@@ -721,9 +724,12 @@ class StreamedSolution(Solution):
 
 def _median_spacing(cfg, record_t) -> float:
     """The outage cycle's GNSS period as :func:`insnav.filters._setup.engine_config` takes it [s]."""
-    d = np.diff(np.sort(np.asarray(record_t, float)))
-    d = d[d != 0]
-    return cfg.cycle_period_s if cfg.cycle_period_s is not None else (median(d) if d.size else 1.0)
+    from .._median import spacing_median
+
+    if cfg.cycle_period_s is not None:
+        return cfg.cycle_period_s
+    d = spacing_median(record_t)
+    return 1.0 if d is None else d
 
 
 _GNSS_FIELDS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n")
@@ -938,7 +944,7 @@ class _BlockRun:
         self.gnss_t = t_all if self.order is None else t_all[self.order]
         for a in range(0, len(t_all), GNSS_PUSH_MAX):  # the table's checks on every fix before the run
             self._gnss_rows(a, min(a + GNSS_PUSH_MAX, len(t_all)))
-        a = loose_engine_args(dataclasses.replace(self.ds0, t0=self.t0, gnss=gn), cfg, self.gnss_t.copy())
+        a = loose_engine_args(dataclasses.replace(self.ds0, t0=self.t0, gnss=gn), cfg, self.gnss_t)
         self.stream = _core.LooseStream(cfg.filter, a.layout, np.zeros((0, 13)), a.init, a.P0, a.imu_correction,
                                         a.imu_model, a.config, self.block_lines)
         self.pushed = 0  # the fixes given to the engine so far (the first of self.gnss_t's order)
