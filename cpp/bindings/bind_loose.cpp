@@ -55,7 +55,7 @@ LooseConfig loose_run_config_from(const py::dict& config) {
                                        "sigma_nhc_mps", "sigma_odo_mps", "sigma_zupt_mps", "sigma_zaru_radps",
                                        "constraint_gate_chi2", "second_order_corr_s", "smooth", "adaptive_r_window",
                                        "adaptive_r_min_fraction", "adaptive_q_window", "adaptive_q_min", "adaptive_q_max",
-                                       INSNAV_SELFCAL_KEYS});
+                                       "standstill_q_scale", INSNAV_SELFCAL_KEYS});
   VehicleConstraintConfig& v = cfg.vehicle;
   v.lever_arm_b = vec3_or_scalar(config, "vehicle_lever_arm_b", v.lever_arm_b);
   if (config.contains("vehicle_C_bv")) {
@@ -82,6 +82,10 @@ LooseConfig loose_run_config_from(const py::dict& config) {
     throw py::value_error("adaptive_r_min_fraction must be in (0, 1]");
   // adaptive process noise (filter/adaptive_noise.hpp, engine/loose_engine.hpp)
   cfg.adaptive_q = adaptive_q_from(config, cfg.adaptive_q);
+  // standstill level of the process noise (engine/loose_engine.hpp; kStill / kMoving events)
+  cfg.standstill_q_scale = num(config, "standstill_q_scale", cfg.standstill_q_scale);
+  if (!(cfg.standstill_q_scale > 0.0 && std::isfinite(cfg.standstill_q_scale)))
+    throw py::value_error("standstill_q_scale must be finite and > 0 (1: off)");
   return cfg;
 }
 

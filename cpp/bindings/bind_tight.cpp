@@ -18,7 +18,8 @@ void bind_tight(py::module_& m) {
       [](const std::string& filter, const DArray& t, const DArray& dtheta_b, const DArray& dv_b,
          const DArray& epoch_t, const I64Array& epoch_start, const DArray& sats, const DArray& init, const DArray& P0,
          const DArray& corr0, const DArray& clock0, const py::dict& model, const py::dict& config, int layout,
-         const py::object& system, const py::object& isb0, const py::object& prn, const py::object& phase) {
+         const py::object& system, const py::object& isb0, const py::object& prn, const py::object& phase,
+         const py::object& epoch_still) {
         TightArgs a;
         a.model = imu_model_from_dict(model);
         a.cfg = tight_config_from(config);
@@ -29,6 +30,11 @@ void bind_tight(py::module_& m) {
         a.phase = phase_rows_from(phase, a.in);
         if (a.cfg.tdcp.enabled && a.phase.empty())
           throw py::value_error("tdcp: the config asks for TDCP rows but no carrier phase was given (phase=None)");
+        if (!epoch_still.is_none()) {  // the standstill level of Q (engine/tight_engine.hpp)
+          const py::array_t<std::uint8_t, py::array::c_style | py::array::forcecast> s(epoch_still);
+          if (s.size() != epoch_t.size()) throw py::value_error("epoch_still: expected one flag per epoch");
+          a.epoch_still.assign(s.data(), s.data() + s.size());
+        }
         a.nav = nav_state_from(init);
         a.P0 = P0;
         a.corr = imu_correction_from(corr0);
@@ -60,10 +66,11 @@ void bind_tight(py::module_& m) {
       py::arg("epoch_start"), py::arg("sats"), py::arg("init"), py::arg("P0"), py::arg("imu_correction"),
       py::arg("clock0"), py::arg("imu_model"), py::arg("config"), py::arg("layout") = 17,
       py::arg("system") = py::none(), py::arg("isb0") = py::none(), py::arg("prn") = py::none(),
-      py::arg("phase") = py::none(),
+      py::arg("phase") = py::none(), py::arg("epoch_still") = py::none(),
       "Closed-loop tightly coupled run, Layout17 or (layout=20) LayoutTightMulti with inter-system biases "
       "(SI units; see python/insnav/filters/tight.py).  phase: (M, 4) carrier phase [m], wavelength [m], "
-      "zero-difference sigma [m], LLI per satellite row, for the TDCP rows (config key 'tdcp').");
+      "zero-difference sigma [m], LLI per satellite row, for the TDCP rows (config key 'tdcp').  epoch_still: "
+      "the standstill detector's state per epoch (non-zero: stationary), for config key 'standstill_q_scale'.");
 
   m.def(
       "tdcp_row",

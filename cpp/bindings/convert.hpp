@@ -130,7 +130,7 @@ inline TightConfig tight_config_from(const py::dict& d) {
                   "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
                    "robust_cusum_hold_s", "robust_cusum_min_pseudoranges", "tdcp", "tdcp_slip_threshold_cycles",
                    "tdcp_chi2_row", "pr_gm_sigma_m", "pr_gm_tau_s", "pr_gm_max_gap_s", "adaptive_q_window",
-                   "adaptive_q_min", "adaptive_q_max", INSNAV_SELFCAL_KEYS});
+                   "adaptive_q_min", "adaptive_q_max", "standstill_q_scale", INSNAV_SELFCAL_KEYS});
   TightConfig c;
   c.lever_arm_b = vec3_or_scalar(d, "lever_arm_b", c.lever_arm_b);
   timing_from(d, c.propagation_interval, c.cycle_period, c.gate, c.output_decimation);
@@ -174,6 +174,9 @@ inline TightConfig tight_config_from(const py::dict& d) {
   if (!(gm.sigma_m >= 0.0) || !std::isfinite(gm.sigma_m)) throw py::value_error("pr_gm_sigma_m must be >= 0 and finite");
   if (!(gm.tau_s > 0.0) || !(gm.max_gap_s > 0.0)) throw py::value_error("pr_gm_tau_s and pr_gm_max_gap_s must be > 0");
   c.adaptive_q = adaptive_q_from(d, c.adaptive_q);  // adaptive process noise (filter/adaptive_noise.hpp)
+  c.standstill_q_scale = num(d, "standstill_q_scale", c.standstill_q_scale);  // engine/tight_engine.hpp
+  if (!(c.standstill_q_scale > 0.0 && std::isfinite(c.standstill_q_scale)))
+    throw py::value_error("standstill_q_scale must be finite and > 0 (1: off)");
   return c;
 }
 

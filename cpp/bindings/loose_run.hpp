@@ -88,8 +88,8 @@ py::dict run_loose_impl(const LooseRunArgs& a) {
     for (py::ssize_t i = 0; i < k; ++i) {
       const double* r = pe + 3 * i;
       const double kinds = r[1];
-      if (!(kinds >= 0 && kinds <= 15 && kinds == std::floor(kinds)))
-        throw py::value_error("constraints row " + std::to_string(i) + ": kinds must be flags 0..15");
+      if (!(kinds >= 0 && kinds <= 63 && kinds == std::floor(kinds)))  // ConstraintKind, loose_engine.hpp
+        throw py::value_error("constraints row " + std::to_string(i) + ": kinds must be flags 0..63");
       if (i > 0 && !(r[0] >= pe[3 * (i - 1)]))
         throw py::value_error("constraints row " + std::to_string(i) + ": times must be non-decreasing");
       events[i] = ConstraintEvent{r[0], static_cast<std::uint8_t>(kinds), r[2]};

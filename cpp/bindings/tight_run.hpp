@@ -31,6 +31,7 @@ struct TightArgs {
   bool smooth = false;  // config key 'smooth': RTS backward pass (EKF, RB-UKF, UKF; smoother_run.hpp)
   std::vector<PhaseObservation> phase;  // carrier phase per satellite row (TDCP; empty: none)
   double time_offset0_s = 0.0;  // config key 'time_offset0_s': initial t_d (time-offset layouts) [s]
+  std::vector<std::uint8_t> epoch_still;  // the standstill detector's state per epoch (empty: none)
 };
 
 template <class Filter>
@@ -62,6 +63,7 @@ py::dict run_tight_impl(const TightArgs& a) {
     engine->set_initial_isb(a.isb0);
     if (a.cfg.tdcp.enabled && !a.phase.empty()) engine->set_phase(a.phase.data());
     engine->set_initial_time_offset(a.time_offset0_s);
+    if (!a.epoch_still.empty()) engine->set_standstill(a.epoch_still.data());
     smoother.attach(engine->core());
     engine->run(a.nav, P, a.corr, a.clock_bias0, a.clock_drift0, a.imu.n, a.imu.t, a.imu.dtheta_b, a.imu.dv_b, a.in.E,
                 a.in.epochs.data(), a.in.sats.data(), out);

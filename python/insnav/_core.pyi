@@ -104,6 +104,7 @@ def run_tight(
     isb0: npt.ArrayLike | None = None,  # (3,) initial ISBs of R, E, C [m]
     prn: npt.ArrayLike | None = None,  # (S,) satellite number per row (the robust CUSUM keys on it)
     phase: npt.ArrayLike | None = None,  # (S, 4) carrier phase [m], wavelength [m], sigma [m], LLI (TDCP)
+    epoch_still: npt.ArrayLike | None = None,  # (E,) standstill detector state per epoch (standstill_q_scale)
 ) -> dict[str, Any]: ...
 def tdcp_row(
     prev: npt.ArrayLike,  # (10,) t, lat, lon [rad], h [m], v_n [m/s], roll, pitch, yaw [rad]

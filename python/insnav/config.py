@@ -351,6 +351,16 @@ class Constraints:
         Correlation time of ``s`` [s] (first-order Gauss-Markov,
         ``s' = -s / tau + w``, e.g. for tyre wear and temperature); None
         (default): a random constant.
+    standstill_q_scale : float
+        Standstill level of the process noise: while the standstill detector
+        (the ``zupt_*`` settings above) says the IMU stands still, the
+        velocity and angle random walk PSDs are multiplied by this factor
+        (``cpp/include/insnav/engine/loose_engine.hpp``): a noise tuned on
+        motion (a walker's gait and hand swing) describes errors that are
+        absent at rest.  1 (default): off.  Loose and tight EKF (tight: the
+        detector's state at each epoch holds to the next,
+        ``engine/tight_engine.hpp``); needs no ``use`` entry (the detector
+        runs for it alone); insnav.calib.tune's factor ``standstill_q``.
     """
 
     use: list = field(default_factory=list)
@@ -371,6 +381,7 @@ class Constraints:
     odo_scale: bool | str = "auto"
     odo_scale_sigma: float = 0.01
     odo_scale_tau_s: float | None = None
+    standstill_q_scale: float = 1.0
 
     #: default NHC rate without the odometer [Hz]
     NHC_RATE_HZ_DEFAULT = 1.0
@@ -420,6 +431,9 @@ class Constraints:
         v = self.second_order_corr_s
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
             bad("second_order_corr_s", v, "a number >= 0 [s] (0 = white)")
+        v = self.standstill_q_scale
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+            bad("standstill_q_scale", v, "a number > 0 (1 = off)")
         for key in ("lever_arm_b_m", "mounting_rpy_deg"):
             if key == "lever_arm_b_m" and self.lever_arm_b_m is None:
                 continue
@@ -899,6 +913,10 @@ class RunConfig:
         if self.adaptive_q_window and (self.coupling not in ("loose", "tight") or self.filter != "ekf"):
             bad("adaptive_q_window", self.adaptive_q_window, f"0 with {self.coupling} {self.filter!r} (the adaptive "
                 "process noise is the loose and tight EKF's: it scales the EKF's process noise)")
+        if self.constraints.standstill_q_scale != 1.0 and (self.coupling not in ("loose", "tight")
+                                                           or self.filter != "ekf"):
+            bad("constraints.standstill_q_scale", self.constraints.standstill_q_scale, f"1 with {self.coupling} "
+                f"{self.filter!r} (the standstill level scales the loose and tight EKF's process noise)")
         for key, low in (("pr_gm_sigma_m", 0.0), ("pr_gm_tau_s", None), ("pr_gm_max_gap_s", None)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \

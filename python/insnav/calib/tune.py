@@ -80,6 +80,7 @@ PARAMETERS = {
     "nhc": "non-holonomic constraint sigma ([constraints] sigma_nhc_mps)",
     "odo": "odometer speed sigma ([constraints] sigma_odo_mps)",
     "zupt": "zero-velocity and zero-angular-rate sigmas ([constraints] sigma_zupt_mps, sigma_zaru_dph)",
+    "standstill_q": "standstill level of the velocity and angle random walks ([constraints] standstill_q_scale)",
     "pr_gm_sigma": "tight EKF: stationary sigma of the Gauss-Markov pseudorange errors (pr_gm_sigma_m; the block on)",
     "pr_gm_tau": "tight EKF: correlation time of the Gauss-Markov pseudorange errors (pr_gm_tau_s; the block on)",
 }
@@ -325,6 +326,8 @@ def default_parameters(dataset, cfg: RunConfig) -> list[str]:
     if cfg.coupling == "loose" and "gnss_vel" in names and cfg.gnss_vel_sigma_per_speed > 0:
         names.append("gnss_vel_speed")
     names += [c for c in ("nhc", "odo", "zupt") if c in cfg.constraints.use]
+    if cfg.constraints.standstill_q_scale != 1.0:
+        names.append("standstill_q")
     if cfg.coupling == "tight" and cfg.pr_gm_sigma_m > 0:
         names += ["pr_gm_sigma", "pr_gm_tau"]
     return names
@@ -378,6 +381,8 @@ def scaled_config(cfg: RunConfig, noise: ImuNoise, scales: dict) -> RunConfig:
     if "zupt" in scales:
         k.sigma_zupt_mps = float(cfg.constraints.sigma_zupt_mps * s("zupt"))
         k.sigma_zaru_dph = float(cfg.constraints.sigma_zaru_dph * s("zupt"))
+    if "standstill_q" in scales:
+        k.standstill_q_scale = float(cfg.constraints.standstill_q_scale * s("standstill_q"))
     if "pr_gm_sigma" in scales:
         c.pr_gm_sigma_m = float(cfg.pr_gm_sigma_m * s("pr_gm_sigma"))
     if "pr_gm_tau" in scales:
@@ -993,8 +998,8 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
         rob = dict(d.get("robust", {}))
         rob.update(screening=False, fde_max_sats=0, cusum_h=0.0)
         d["robust"] = rob
-    tuned_constraints = [p for p in ("nhc", "odo", "zupt") if p in result.names]
-    if tuned_constraints or cfg.constraints.use:
+    tuned_constraints = [p for p in ("nhc", "odo", "zupt", "standstill_q") if p in result.names]
+    if tuned_constraints or cfg.constraints.use or cfg.constraints.standstill_q_scale != 1.0:
         con = dict(d.get("constraints", {}))
         con["use"] = list(cfg.constraints.use)
         if "nhc" in result.names:
@@ -1004,5 +1009,7 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
         if "zupt" in result.names:
             con["sigma_zupt_mps"] = float(cfg.constraints.sigma_zupt_mps)
             con["sigma_zaru_dph"] = float(cfg.constraints.sigma_zaru_dph)
+        if cfg.constraints.standstill_q_scale != 1.0:
+            con["standstill_q_scale"] = float(cfg.constraints.standstill_q_scale)
         d["constraints"] = con
     return d

@@ -18,6 +18,13 @@ Events, from :class:`insnav.config.Constraints`:
   also needs its speed below ``ZUPT_ODO_SPEED_MPS``: the IMU statistic alone
   cannot tell a car cruising straight at constant speed on a smooth road from
   one standing still (both: specific force = gravity, no rotation).
+
+With ``standstill_q_scale`` != 1 the detector's state changes on the same
+grid are events too (``STILL``: stationary from here on, ``MOVING``: moving
+from here on; the first grid event carries ``STILL`` when the run starts at
+rest): the loose engine's standstill level of the process noise
+(``engine/loose_engine.hpp``) holds from each to the next.  Only the changes
+are sent, so a run that never stands still has the events it had without.
 """
 from __future__ import annotations
 
@@ -26,11 +33,30 @@ import numpy as np
 from .. import _core
 from ..units import DEG, DEG_PER_H
 
-__all__ = ["NHC", "ODO", "ZUPT", "ZARU", "constraint_events", "engine_keys", "rear_axle_lever_arm"]
+__all__ = ["NHC", "ODO", "ZUPT", "ZARU", "STILL", "MOVING", "constraint_events", "engine_keys",
+           "rear_axle_lever_arm", "standstill_at"]
 
-NHC, ODO, ZUPT, ZARU = 1, 2, 4, 8  # ConstraintKind flags of loose_engine.hpp
+NHC, ODO, ZUPT, ZARU, STILL, MOVING = 1, 2, 4, 8, 16, 32  # ConstraintKind flags of loose_engine.hpp
 #: odometer speed below which the vehicle may be standing still [m/s]
 ZUPT_ODO_SPEED_MPS = 0.05
+
+
+def standstill_statistic(dataset, c, t: np.ndarray, dth: np.ndarray, dv: np.ndarray) -> np.ndarray:
+    """The standstill detector's statistic T at every IMU sample (``ins/standstill.hpp``, the SHOE
+    statistic of Skog et al. 2010, eq. (10), over ``zupt_window_s``; +inf until the window is full)."""
+    rate = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 100.0
+    window = int(np.clip(round(c.zupt_window_s * rate), 2, 512))
+    return np.asarray(_core.standstill_statistic(t, dth, dv, float(dataset.t0), window, float(c.zupt_sigma_f_mps2),
+                                                 float(c.zupt_sigma_w_dps) * DEG))
+
+
+def standstill_at(dataset, c, t: np.ndarray, dth: np.ndarray, dv: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The detector's state (True: stationary, T < ``zupt_threshold``) at the last IMU sample at or
+    before each of ``times`` (False before the first sample); the tight engine's per-epoch flags of the
+    standstill level of the process noise (``engine/tight_engine.hpp``)."""
+    T = standstill_statistic(dataset, c, t, dth, dv)
+    idx = np.searchsorted(t, np.asarray(times, float), side="right") - 1
+    return (idx >= 0) & (T[np.maximum(idx, 0)] < c.zupt_threshold)
 
 
 def constraint_events(dataset, c, t: np.ndarray, dth: np.ndarray, dv: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -60,17 +86,20 @@ def constraint_events(dataset, c, t: np.ndarray, dth: np.ndarray, dv: np.ndarray
     if "nhc" in use:  # every k-th event of the grid: NHC at nhc_rate_hz
         kinds[::max(1, int(round(grid_hz / c.nhc_rate(grid_hz))))] |= NHC
     counts = {}
-    if "zupt" in use:
-        rate = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 100.0
-        window = int(np.clip(round(c.zupt_window_s * rate), 2, 512))
-        T = np.asarray(_core.standstill_statistic(t, dth, dv, t0, window, float(c.zupt_sigma_f_mps2),
-                                                  float(c.zupt_sigma_w_dps) * DEG))
+    level = float(c.standstill_q_scale) != 1.0  # the standstill level of the process noise
+    if "zupt" in use or level:
+        T = standstill_statistic(dataset, c, t, dth, dv)
         idx = np.searchsorted(t, times, side="right") - 1
         still = (idx >= 0) & (T[np.maximum(idx, 0)] < c.zupt_threshold)
         if "odo" in use:
             still &= np.abs(speed) < ZUPT_ODO_SPEED_MPS
-        kinds[still] = ZUPT | ZARU
-        speed[still] = np.nan
+        if "zupt" in use:
+            kinds[still] = ZUPT | ZARU
+            speed[still] = np.nan
+        if level:  # the detector's state changes (the first event: stationary or not yet known)
+            change = still != np.concatenate([[False], still[:-1]])
+            kinds[change & still] |= STILL
+            kinds[change & ~still] |= MOVING
         counts["standstill_fraction_of_samples"] = float(np.mean(T < c.zupt_threshold))
     sel = kinds != 0
     ev = np.column_stack([times[sel], kinds[sel].astype(float), speed[sel]])
@@ -97,4 +126,5 @@ def engine_keys(dataset, c, layout: int = 15) -> dict:
     return dict(vehicle_lever_arm_b=rear_axle_lever_arm(dataset, c), vehicle_C_bv=C_vb.T.ravel().copy(),
                 sigma_nhc_mps=float(c.sigma_nhc_mps), sigma_odo_mps=c.odo_sigma_mps(layout),
                 sigma_zupt_mps=float(c.sigma_zupt_mps), sigma_zaru_radps=float(c.sigma_zaru_dph) * DEG_PER_H,
-                constraint_gate_chi2=float(c.gate_chi2), second_order_corr_s=float(c.second_order_corr_s))
+                constraint_gate_chi2=float(c.gate_chi2), second_order_corr_s=float(c.second_order_corr_s),
+                **({} if c.standstill_q_scale == 1.0 else {"standstill_q_scale": float(c.standstill_q_scale)}))

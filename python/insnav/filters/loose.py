@@ -216,8 +216,8 @@ def loose_engine_args(dataset, cfg: RunConfig, record_t: np.ndarray, imu=None) -
         core_cfg.update(adaptive_q_window=int(cfg.adaptive_q_window), adaptive_q_min=float(cfg.adaptive_q_min),
                         adaptive_q_max=float(cfg.adaptive_q_max))
     events, ev_counts = None, None
-    if cfg.constraints.use:  # vehicle constraints (filters/constraints.py)
-        from .constraints import constraint_events, engine_keys
+    if cfg.constraints.use or cfg.constraints.standstill_q_scale != 1.0:  # vehicle constraints, standstill level
+        from .constraints import constraint_events, engine_keys  # of Q (filters/constraints.py)
 
         if imu is not None:
             events, ev_counts = constraint_events(dataset, cfg.constraints, *imu)

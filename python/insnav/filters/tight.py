@@ -135,10 +135,17 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
     if cfg.tdcp.enabled:  # time-differenced carrier phase (meas/tdcp.hpp)
         phase = tdcp_phase(inputs, cfg)
         core_cfg.update(cfg.tdcp.as_core_dict())
+    extra = {} if phase is None else dict(phase=phase)
+    if cfg.constraints.standstill_q_scale != 1.0:  # the standstill level of Q (engine/tight_engine.hpp)
+        from .constraints import standstill_at
+
+        still = standstill_at(dataset, cfg.constraints, t, dth, dv, ep_t)
+        extra["epoch_still"] = still.astype(np.uint8)
+        core_cfg["standstill_q_scale"] = float(cfg.constraints.standstill_q_scale)
     out = _core.run_tight(cfg.filter, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                           a.sats, a.init, a.P0, a.imu_correction, np.asarray(clock0, float), a.imu_model, core_cfg,
                           layout=n, system=sys_idx, isb0=None if n == 17 else np.asarray(isb0, float), prn=a.prn,
-                          **({} if phase is None else dict(phase=phase)))
+                          **extra)
     sig = out["sigma"]
     systems = sorted(set(np.asarray(inputs.system).tolist()), key=SYSTEMS.index)
     sol, _ = nav_solution(

@@ -25,6 +25,21 @@
 // 1999, K C_v K^T against K S K^T), clamped to
 // [adaptive_q.min_fraction, adaptive_q.max_factor].
 //
+// Standstill level of the process noise (EKF only, off by default):
+// LooseConfig::standstill_q_scale = s != 1 multiplies the velocity and angle
+// random walk PSDs (the Q of every propagation step, Ekf::
+// set_process_noise_scale) by s while the standstill detector says the IMU
+// stands still.  The caller marks the detector's state changes as constraint
+// events (kStill: stationary from this event on, kMoving: moving from this
+// event on; ins/standstill.hpp, the SHOE statistic of Skog et al. 2010, eq.
+// (10)); the level holds until the next such event.  Why: a process noise
+// tuned on a walker's gait and hand swing (or a car's driving) describes
+// motion-induced IMU errors that are absent at rest, so over a standstill it
+// makes P- grow faster than the INS actually drifts (an underconfident
+// filter); ZUPT / ZARU constrain the velocity and the rate but not that
+// growth.  With the adaptive process noise on as well, the two factors
+// multiply.  s = 1 (the default) leaves every Q as before, bit for bit.
+//
 // No heap allocation inside run(); outputs go to caller-owned buffers.
 #pragma once
 
@@ -54,10 +69,15 @@ struct LooseConfig {
   double constraint_gate_chi2 = 0.0; // NIS gate of the constraint events (<= 0: off)
   AdaptiveNoiseConfig adaptive_r;    // adaptive R of the fixes (filter/adaptive_noise.hpp; window 0: off)
   AdaptiveNoiseConfig adaptive_q{0, 0.05, 20.0};  // adaptive Q scale (velocity, attitude random walks; EKF; 0: off)
+  double standstill_q_scale = 1.0;  // factor on the velocity and angle random walk PSDs while stationary (kStill
+                                    // events; EKF; 1: off)
 };
 
-/// What a vehicle-constraint event asks for (bit flags).
-enum ConstraintKind : std::uint8_t { kNhc = 1, kOdometer = 2, kZupt = 4, kZaru = 8 };
+/// What a vehicle-constraint event asks for (bit flags).  kStill / kMoving
+/// carry the standstill detector's state from this event on (the standstill
+/// level of the process noise, LooseConfig::standstill_q_scale); an event
+/// with only those bits updates nothing (status kNotUsed).
+enum ConstraintKind : std::uint8_t { kNhc = 1, kOdometer = 2, kZupt = 4, kZaru = 8, kStill = 16, kMoving = 32 };
 
 /// One vehicle-constraint event at time t: kinds (ConstraintKind flags) and,
 /// with kOdometer, the measured forward speed of the rear-axle point [m/s].
@@ -187,6 +207,8 @@ class LooseEngine {
     core_.reset(initial, P0, corr0);
     adaptive_.reset();
     adaptive_q_.start(core_.filter);
+    still_ = false;
+    apply_process_noise_scale();
     last_nhc_t_ = last_odo_t_ = -kInf;
   }
 
@@ -220,7 +242,10 @@ class LooseEngine {
       if (adaptive_.enabled() && res.applied)
         for (int i = 0; i < meas_.linear().rows(); ++i) adaptive_.push(ch0 + i, ad_y_[i], ad_hph_[i], ad_r0_[i]);
     }
-    if (res.applied) adaptive_q_.after_update(core_.filter);
+    if (res.applied) {
+      adaptive_q_.after_update(core_.filter);
+      apply_process_noise_scale();  // the standstill level on top of the adaptive factors
+    }
     if (out.nis) out.nis[g] = res.nis;
     if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
@@ -235,6 +260,9 @@ class LooseEngine {
   /// The current adaptive process-noise factors (velocity, attitude random walk variances; 1, 1 when off).
   const std::array<double, 2>& process_noise_scale() const { return adaptive_q_.scale(); }
 
+  /// True while the last kStill / kMoving event said stationary (the standstill level of Q).
+  bool stationary() const { return still_; }
+
   static void mark_constraint(LooseOutputs& out, std::int64_t c, RecordStatus st) {
     out.set_status(out.constraint_status, c, st);
     if (out.constraint_nis) out.constraint_nis[c] = NAN;
@@ -245,6 +273,10 @@ class LooseEngine {
   void apply_constraint(const ConstraintEvent& e, std::int64_t c, LooseOutputs& out) {
     const bool zupt = e.kinds & kZupt, zaru = e.kinds & kZaru;
     const bool nhc = e.kinds & kNhc, odo = e.kinds & kOdometer;
+    if (e.kinds & (kStill | kMoving)) {  // the detector's state from here on: the process noise's level
+      still_ = (e.kinds & kStill) != 0;
+      apply_process_noise_scale();
+    }
     UpdateResult res;
     if (zupt || zaru) {
       standstill_.set(core_.state(), core_.omega_ib_b(), cfg_.vehicle, zupt, zaru);
@@ -287,6 +319,18 @@ class LooseEngine {
   }
 
  private:
+  /// The filter's Q scale: the adaptive factors (1, 1 when off) times standstill_q_scale while
+  /// stationary.  Nothing is touched when standstill_q_scale is 1 (the adaptive process noise, if on,
+  /// has set its own factors), so a run without the standstill level is the old run bit for bit.
+  void apply_process_noise_scale() {
+    if constexpr (kScalableQ<Filter>) {
+      if (cfg_.standstill_q_scale == 1.0) return;
+      const double k = still_ ? cfg_.standstill_q_scale : 1.0;
+      const std::array<double, 2>& a = adaptive_q_.scale();
+      core_.filter.set_process_noise_scale(a[0] * k, a[1] * k);
+    }
+  }
+
   /// The innovation, (H P- H^T)_ii and configured variance of each row of the
   /// fix in meas_ (kept for the window after the update), and R's diagonal
   /// scaled by the window of the past fixes (filter/adaptive_noise.hpp).
@@ -313,6 +357,7 @@ class LooseEngine {
   VehicleVelocityMeasurement<L> vehicle_;
   StandstillMeasurement<L> standstill_;
   double last_nhc_t_ = -kInf, last_odo_t_ = -kInf;  // the previous NHC / odometer event [s]
+  bool still_ = false;  // the standstill detector's state from the last kStill / kMoving event
 };
 
 }  // namespace insnav

@@ -57,6 +57,13 @@
 // one feedback (TDCP rows and the pseudorange / rate update; with pr_gm the
 // joint posterior), against tr(P- - P+) over the same span.
 //
+// Standstill level of the process noise (TightConfig::standstill_q_scale;
+// EKF only, off by default): the loose engine's (engine/loose_engine.hpp),
+// with the standstill detector's state given per epoch (set_standstill: one
+// flag per epoch, from the detector at the epoch's time): the velocity and
+// angle random walk PSDs times the factor from a stationary epoch to the
+// next epoch.  Factor 1 or no flags: every Q as before, bit for bit.
+//
 // Input: E epochs (time, satellite range [begin, end) into one flat array of
 // SatObservation), sorted by time.  No heap allocation inside run().
 #pragma once
@@ -88,6 +95,8 @@ struct TightConfig {
   TdcpConfig tdcp;                     // time-differenced carrier phase (tdcp.hpp; off by default, EKF only)
   PseudorangeGmConfig pr_gm;           // Gauss-Markov pseudorange errors (pseudorange_gm.hpp; off by default, EKF only)
   AdaptiveNoiseConfig adaptive_q{0, 0.05, 20.0};  // adaptive Q scale (velocity, attitude random walks; EKF; 0: off)
+  double standstill_q_scale = 1.0;  // factor on the velocity and angle random walk PSDs after a stationary epoch
+                                    // (set_standstill; EKF; 1: off)
 };
 
 /// What the robust step did to one satellite row kind (TightOutputs::sat_flag).
@@ -188,6 +197,10 @@ class TightEngine {
   /// Carrier phase of the satellite rows (parallel to `sats` of run(); null: no TDCP rows).
   void set_phase(const PhaseObservation* phase) { phase_ = phase; }
 
+  /// The standstill detector's state per epoch of run() (non-zero: stationary; null: none), for the
+  /// standstill level of the process noise (TightConfig::standstill_q_scale).
+  void set_standstill(const std::uint8_t* epoch_still) { epoch_still_ = epoch_still; }
+
   /// Initial inter-system bias estimates [m] of systems 1..3 (layouts with ISB states; default 0).
   void set_initial_isb(const IsbVec& isb0) { isb0_ = isb0; }
 
@@ -245,6 +258,8 @@ class TightEngine {
     core_.lever_arm_b0 = cfg_.lever_arm_b;
     core_.reset(initial, P0, corr0, clock_bias0, clock_drift0, isb0_);
     adaptive_q_.start(core_.filter);
+    still_ = false;
+    apply_process_noise_scale();
     for (int i = 0; i < kSatKeys; ++i) {  // the per-satellite CUSUM of the robust step (robust.hpp, 4.)
       cusum_pos_[i] = cusum_neg_[i] = 0.0;
       excluded_until_[i] = -kInf;
@@ -271,6 +286,10 @@ class TightEngine {
  private:
   void apply_epoch(const TightEpoch& ep, std::int64_t g, TightOutputs& out) {
     ep_t_ = ep.t;
+    if (epoch_still_) {  // the level of Q from this epoch to the next (Q enters at the propagation only)
+      still_ = epoch_still_[g] != 0;
+      apply_process_noise_scale();
+    }
     // copy the epoch's satellites, dropping the observation kinds switched off
     int ns = 0;
     for (std::int64_t j = ep.begin; j < ep.end && ns < kMaxMeasRows; ++j) {
@@ -363,7 +382,10 @@ class TightEngine {
     const UpdateResult res = core_.update_gated(meas_);
     if constexpr (kCanGm)
       if (gm_on() && res.applied) gm_end_update();
-    if (res.applied) adaptive_q_.after_update(core_.filter);
+    if (res.applied) {
+      adaptive_q_.after_update(core_.filter);
+      apply_process_noise_scale();  // the standstill level on top of the adaptive factors
+    }
     if (out.nis) out.nis[g] = res.nis;
     if (out.log_det_s) out.log_det_s[g] = res.log_det_s;
     out.set_status(out.status, g, status_of(res));
@@ -695,9 +717,22 @@ class TightEngine {
     }
   }
 
+  /// The filter's Q scale: the adaptive factors times standstill_q_scale after a stationary epoch;
+  /// nothing is touched with the factor 1 (the run is the old one bit for bit).
+  void apply_process_noise_scale() {
+    if constexpr (kScalableQ<Filter>) {
+      if (cfg_.standstill_q_scale == 1.0) return;
+      const double k = still_ ? cfg_.standstill_q_scale : 1.0;
+      const std::array<double, 2>& a = adaptive_q_.scale();
+      core_.filter.set_process_noise_scale(a[0] * k, a[1] * k);
+    }
+  }
+
   ClosedLoop<Filter> core_;
   TightConfig cfg_;
   AdaptiveProcessNoise adaptive_q_;  // adaptive Q factors (velocity, attitude random walk)
+  const std::uint8_t* epoch_still_ = nullptr;  // the standstill detector's state per epoch (set_standstill)
+  bool still_ = false;                         // the last epoch's (the level of Q until the next)
   TightMeasurement<L> meas_;
   SatObservation work_[kMaxMeasRows];
   std::int64_t src_[kMaxMeasRows] = {};
