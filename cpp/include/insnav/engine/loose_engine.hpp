@@ -319,17 +319,7 @@ class LooseEngine {
   }
 
  private:
-  /// The filter's Q scale: the adaptive factors (1, 1 when off) times standstill_q_scale while
-  /// stationary.  Nothing is touched when standstill_q_scale is 1 (the adaptive process noise, if on,
-  /// has set its own factors), so a run without the standstill level is the old run bit for bit.
-  void apply_process_noise_scale() {
-    if constexpr (kScalableQ<Filter>) {
-      if (cfg_.standstill_q_scale == 1.0) return;
-      const double k = still_ ? cfg_.standstill_q_scale : 1.0;
-      const std::array<double, 2>& a = adaptive_q_.scale();
-      core_.filter.set_process_noise_scale(a[0] * k, a[1] * k);
-    }
-  }
+  void apply_process_noise_scale() { adaptive_q_.apply_standstill(core_.filter, cfg_.standstill_q_scale, still_); }
 
   /// The innovation, (H P- H^T)_ii and configured variance of each row of the
   /// fix in meas_ (kept for the window after the update), and R's diagonal

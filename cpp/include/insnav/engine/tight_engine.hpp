@@ -717,16 +717,7 @@ class TightEngine {
     }
   }
 
-  /// The filter's Q scale: the adaptive factors times standstill_q_scale after a stationary epoch;
-  /// nothing is touched with the factor 1 (the run is the old one bit for bit).
-  void apply_process_noise_scale() {
-    if constexpr (kScalableQ<Filter>) {
-      if (cfg_.standstill_q_scale == 1.0) return;
-      const double k = still_ ? cfg_.standstill_q_scale : 1.0;
-      const std::array<double, 2>& a = adaptive_q_.scale();
-      core_.filter.set_process_noise_scale(a[0] * k, a[1] * k);
-    }
-  }
+  void apply_process_noise_scale() { adaptive_q_.apply_standstill(core_.filter, cfg_.standstill_q_scale, still_); }
 
   ClosedLoop<Filter> core_;
   TightConfig cfg_;

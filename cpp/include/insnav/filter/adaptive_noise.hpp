@@ -202,6 +202,19 @@ class AdaptiveProcessNoise {
   /// The current factors (velocity, attitude random walk variances; 1, 1 when off).
   const std::array<double, 2>& scale() const { return scale_; }
 
+  /// The filter's Q scale: these factors times `standstill_scale` while `still` (the walker's or
+  /// vehicle's standstill level of the process noise).  Nothing is touched when `standstill_scale`
+  /// is 1 (after_update, if on, has set the factors), so a run without the level is unchanged bit
+  /// for bit.
+  template <class Filter>
+  void apply_standstill(Filter& f, double standstill_scale, bool still) const {
+    if constexpr (kScalableQ<Filter>) {
+      if (standstill_scale == 1.0) return;
+      const double k = still ? standstill_scale : 1.0;
+      f.set_process_noise_scale(scale_[0] * k, scale_[1] * k);
+    }
+  }
+
  private:
   AdaptiveMeasurementNoise<2> window_;  // channels: velocity, attitude random walk
   std::array<double, 2> scale_{1.0, 1.0};
