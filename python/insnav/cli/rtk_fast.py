@@ -148,6 +148,10 @@ def run_fast(argv) -> int | None:
     reads = [opts["obs"], opts["base"], *nav] + ([opts["config"]] if opts.get("config") else [])
     if {os.path.realpath(p) for p in writes} & {os.path.realpath(p) for p in reads}:
         return None  # an output names an input: the usual path refuses it with one line
+    from .._outputs import insnav_output_kind
+
+    if any(os.path.lexists(p) and insnav_output_kind(p) is None for p in writes):
+        return None  # an existing file insnav did not write: the usual path keeps it (or --overwrite)
     from .. import _core
 
     if not hasattr(_core, "rtk_rinex_files"):

@@ -327,7 +327,7 @@ def _run_outputs(out: Path, kfgins_folder: bool, sidecars: tuple = ()) -> list[P
     else:
         base, files = out, [out]
     files += [innovations_path(base), residuals_path(base), base.with_suffix(base.suffix + ".config.toml")]
-    files += [out.with_suffix(out.suffix + side) for side in sidecars]  # a GNSS-only filter's table
+    files += [base.with_suffix(base.suffix + side) for side in sidecars]  # a GNSS-only filter's table, RTK/INS's
     return files
 
 
@@ -453,13 +453,9 @@ def cmd_run_gnss_only(args, stages) -> int:
     if not pos and out.suffix.lower() not in FORMATS:
         raise UserError(f"--out {out}: unknown format {out.suffix!r}; use {'.pos or ' if name == 'rtk' else ''}"
                         f"one of {', '.join(FORMATS)}")
-    if name == "spp":
-        check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
-    else:  # rtk: an RTKLIB-layout .pos carries no insnav header to recognise it by, so an older one is
-        # replaced; an input of the run never is
-        from .._outputs import check_outputs, input_files
-
-        check_outputs(_run_outputs(out, False, (sidecar,)), input_files(*_input_paths(args)), overwrite=True)
+    # rtk: an RTKLIB-layout .pos insnav wrote names it in its first line and is replaced; one
+    # another program wrote (RTKLIB's own result) only with --overwrite
+    check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
         ds, opts, write, line = inputs(args)
@@ -725,7 +721,9 @@ def cmd_run(args) -> int:
             raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
-    check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
+    # RTK/INS (the only coupling with a --base) also writes <out>.rtk.pos and <out>.rtk.csv
+    check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins",
+                      sidecars=(".rtk.pos", ".rtk.csv") if getattr(args, "base", None) else ())
     streamed = None
     if args.format in ("kfgins", "csv") and getattr(args, "stream", "auto") != "off":
         streamed = _try_stream(args, out, groups)
