@@ -14,7 +14,9 @@ of a short run.  For the common form of the command this module instead
   the same summary line.
 
 Whatever it does not cover -- other options, ``--timings``, another output format, RINEX 2,
-systems other than GPS and QZSS, a base position given as latitude/longitude, and every input
+systems other than GPS and QZSS, a base position given (on the command line or in the TOML) further than
+500 m from the base header's APPROX POSITION XYZ (the usual path checks it against the base's own
+pseudoranges), and every input
 the usual path would report as an error -- returns None before anything is written, and the
 command takes the usual path, which gives the same files or the same one-line message.  Set
 ``INSNAV_RTK_FASTPATH=0`` to always take the usual path.
@@ -79,6 +81,25 @@ def _base_position(value) -> list | None:
     return v
 
 
+def _near_header_position(path, base_e) -> bool:
+    """Whether the RINEX header of ``path`` has an ``APPROX POSITION XYZ`` within
+    :data:`insnav.gnss._rtk_keys.BASE_POSITION_TOLERANCE_M` of ``base_e`` (ECEF [m])."""
+    from ..gnss._rtk_keys import BASE_POSITION_TOLERANCE_M
+
+    try:
+        with open(path, encoding="ascii", errors="replace") as f:
+            for _, line in zip(range(1000), f):
+                label = line[60:].strip()
+                if label == "END OF HEADER":
+                    return False
+                if label == "APPROX POSITION XYZ":
+                    xyz = [float(v) for v in line[:60].split()[:3]]
+                    return len(xyz) == 3 and math.dist(xyz, base_e) <= BASE_POSITION_TOLERANCE_M
+    except (OSError, ValueError):
+        pass
+    return False
+
+
 def _inputs(opts: dict):
     """(rtk table values, base position or None, nav paths), or None to take the usual path."""
     if opts.get("format") != "rinex" or not all(opts.get(k) for k in ("obs", "base", "nav", "out")):
@@ -114,6 +135,10 @@ def _inputs(opts: dict):
         base = _base_position(opts["base_pos"])
         if base is None:
             return None
+    if base is not None and not _near_header_position(opts["base"], base):
+        # a typed base position far from the base file's own APPROX POSITION XYZ (or one without it):
+        # the usual path checks it against the base's pseudoranges (insnav.gnss.rtk.check_base_position)
+        return None
     if any(k not in RTK_DEFAULTS for k in t):
         return None
     if t.get("noise", "configured") != "configured":  # an estimated noise needs the Python pre-pass

@@ -532,7 +532,7 @@ def _rtk_ins_inputs(args, ds):
     if missing:
         raise UserError("--coupling rtk needs " + ", ".join(f"--{n}" for n in missing)
                         + " (rover and base RINEX observations, navigation file(s))")
-    rtk, eng, base_e = {}, {}, None
+    rtk, eng, base_e, source = {}, {}, None, None
     if args.config:
         from ..config import read_toml
 
@@ -540,10 +540,11 @@ def _rtk_ins_inputs(args, ds):
         rtk, eng = dict(d.get("rtk", {})), dict(d.get("rtk_engine", {}))
         for k in ("base_position_ecef_m", "base_position_llh"):
             if k in rtk:
-                base_e = parse_base_position(rtk.pop(k), f"{args.config}: key 'rtk.{k}'")
+                source = f"{args.config}: key 'rtk.{k}'"
+                base_e = parse_base_position(rtk.pop(k), source)
     if args.base_pos is not None:
-        base_e = parse_base_position(args.base_pos)
-    ds = RtkInsDataset(ds, args.obs, args.base, [p for p in args.nav.split(",") if p], base_e)
+        base_e, source = parse_base_position(args.base_pos), "--base-pos"
+    ds = RtkInsDataset(ds, args.obs, args.base, [p for p in args.nav.split(",") if p], base_e, source)
     return ds, dict(rtk_options=rtk, engine=eng)
 
 

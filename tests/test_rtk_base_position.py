@@ -1,0 +1,118 @@
+"""A base position far from the base receiver is refused before the RTK run.
+
+Every rover position of an RTK run is the base position plus the baseline, so a mistyped
+``--base-pos`` (or ``[rtk] base_position_*``, or another station's file) would shift the whole
+solution by as much with exit status 0; a base some hundred km off also made the engine search
+float ambiguities for minutes.  The base position is checked against the code-only
+least-squares fix of the base's own pseudoranges (RTKLIB pntpos without its atmosphere models;
+:func:`insnav.gnss.rtk.base_code_fix`), which lands within tens of metres of the known antenna."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from insnav import earth
+from insnav.cli import main
+from insnav.gnss import rtk
+from insnav.gnss.rinex import read_nav_multi
+
+
+def _matrtklib(shared_data):
+    d = shared_data / "matrtklib_static_septentrio"
+    if not d.is_dir():
+        pytest.skip("MatRTKLIB static data not in ../shared/data")
+    return d
+
+
+def _llh(p):
+    return [float(v) for v in p.read_text().split()]
+
+
+def _ecef(lat_deg, lon_deg, h_m):
+    return np.asarray(earth.geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), h_m), float).ravel()
+
+
+def _north_of(llh, metres):
+    """The geodetic point ``metres`` north of ``llh`` (lat, lon [deg], h [m]) on the ellipsoid."""
+    r_e = _ecef(*llh)
+    lat, lon = np.radians(llh[0]), np.radians(llh[1])
+    north_e = np.array([-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)])
+    return r_e + metres * north_e
+
+
+def test_code_fix_of_the_base_lands_near_its_known_antenna_and_the_check_follows_the_tolerance(shared_data):
+    d = _matrtklib(shared_data)
+    base = rtk.read_phase_obs(d / "base.obs", "GREC")
+    nav = read_nav_multi([d / "base.nav"], "GREC")
+    rs, clk = rtk.transmit_states(nav, base.epoch_t_gps_s[base.epoch], base.system, base.prn, rtk._first_code(base))
+    rb = _ecef(*_llh(d / "base_position.txt"))
+    start = _north_of(_llh(d / "base_position.txt"), 1.0e6)  # Gauss-Newton from 1000 km away
+    fix, n = rtk.base_code_fix(base, rs, clk, start)
+    assert n == 10
+    dist = np.linalg.norm(fix - rb)
+    assert dist < 100.0, dist  # no ionosphere or troposphere model: tens of metres
+    tol = rtk.BASE_POSITION_TOLERANCE_M
+    # within the tolerance less the fix's own error: accepted; beyond it plus that error: refused
+    rtk.check_base_position(base, _north_of(_llh(d / "base_position.txt"), tol - dist - 1.0), rs, clk, "test")
+    with pytest.raises(rtk.RtkInputError, match=r"base\.obs: the base position \(test: .* is \d+ m from where"):
+        rtk.check_base_position(base, _north_of(_llh(d / "base_position.txt"), tol + dist + 1.0), rs, clk, "test")
+
+
+def _rtk_argv(d, out, *extra):
+    return ["run", "--filter", "rtk", "--format", "rinex", "--obs", str(d / "rover.obs"), "--base",
+            str(d / "base.obs"), "--nav", str(d / "base.nav"), "--out", str(out), *map(str, extra)]
+
+
+@pytest.mark.parametrize("where", ["--base-pos", "toml", "toml-gps"])
+@pytest.mark.parametrize("off_m", [1.0e4, 1.0e6])
+def test_a_base_position_far_off_is_refused_with_one_line_and_no_file(shared_data, tmp_path, capsys, where, off_m,
+                                                                       monkeypatch):
+    """10 km and 1000 km north of the known base: status 2, one line naming the base file, where the
+    position came from and the distance; no file written (before: exit 0 with every epoch 10 km off,
+    or a run of several minutes at 1000 km).  ``toml-gps``: GPS only, the command line's numpy-free
+    path, which leaves a typed base position to the checked path."""
+    d = _matrtklib(shared_data)
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", "1")
+    lat, lon, h = (float(v) for v in earth.ecef_to_geodetic(_north_of(_llh(d / "base_position.txt"), off_m)))
+    llh = f"{np.degrees(lat):.9f},{np.degrees(lon):.9f},{h:.4f}"
+    out = tmp_path / "out" / "sol.pos"
+    toml = tmp_path / "run.toml"
+    if where == "--base-pos":
+        extra, source = ("--base-pos", llh), "--base-pos"
+    else:
+        toml.write_text(("[rtk]\n" + ('systems = "G"\n' if where == "toml-gps" else "")
+                         + f"base_position_llh = [{llh}]\n"))
+        extra, source = ("--config", toml), f"{toml}: key 'rtk.base_position_llh'"
+    rc = main(_rtk_argv(d, out, *extra))
+    err = capsys.readouterr().err
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert err.startswith(f"insnav run: error: {d / 'base.obs'}: the base position ({source}: "), err
+    m = re.search(r" is ([0-9.]+) (m|km) from where the base's own pseudoranges put the receiver", err)
+    assert m, err
+    dist = float(m.group(1)) * (1e3 if m.group(2) == "km" else 1.0)
+    assert abs(dist - off_m) < 100.0, err  # the code fix's own error: tens of metres
+    assert not out.parent.exists() or list(out.parent.iterdir()) == []
+
+
+def test_rtk_ins_refuses_a_base_position_far_off_before_the_run(shared_data, tmp_path, capsys):
+    """``--coupling rtk`` shares the check (:func:`insnav.gnss.rtk.prepare_rtk_rows`)."""
+    import insnav
+    from insnav.sim.scenario import resolve_raw
+
+    d = _matrtklib(shared_data)
+    raw, _ = resolve_raw("seed000-sim")
+    raw["motion"]["segments"] = [{"duration_s": 5.0}]
+    raw["motion"].pop("oscillations", None)
+    raw["gnss"]["outages"] = []
+    ds = insnav.simulate(raw, seed=1).save(tmp_path / "ds")
+    lat, lon, h = (float(v) for v in earth.ecef_to_geodetic(_north_of(_llh(d / "base_position.txt"), 1.0e6)))
+    out = tmp_path / "sol.csv"
+    rc = main(["run", str(ds), "--coupling", "rtk", "--obs", str(d / "rover.obs"), "--base", str(d / "base.obs"),
+               "--nav", str(d / "base.nav"), "--base-pos", f"{np.degrees(lat)},{np.degrees(lon)},{h}",
+               "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert "the base position (--base-pos: " in err and " is 1000.0 km from where" in err, err
+    assert not list(tmp_path.glob("sol.csv*"))
