@@ -113,6 +113,9 @@ def _inputs(opts: dict):
                 d = tomllib.load(f)
         except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
             return None
+    tdcp = d.get("tdcp")
+    if d.get("smooth", False) is not False or (isinstance(tdcp, dict) and tdcp.get("enabled", False) is not False):
+        return None  # the usual path refuses them with one line
     name = opts.get("filter")
     if name is None:
         name = d.get("filter") if opts.get("config") else None

@@ -365,6 +365,17 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
         unused.append(f"--coupling {args.coupling}")
     if unused:
         raise UserError(f"--filter {name} is GNSS only and does not use {', '.join(unused)}")
+    if args.config:  # the TOML's requests of the same things: refused as the options are, not ignored
+        from ..config import read_toml
+
+        d = read_toml(args.config)
+        tdcp = d.get("tdcp")
+        for key, on in (("smooth", d.get("smooth", False)),
+                        ("tdcp.enabled", tdcp.get("enabled", False) if isinstance(tdcp, dict) else False)):
+            if on is not False:
+                raise UserError(f"{args.config}: key '{key}': --filter {name} is GNSS only and has no "
+                                f"{'smoother' if key == 'smooth' else 'TDCP update'} (an IMU run's key): "
+                                "remove it or set it to false")
 
 
 def _spp_run(args):

@@ -1,11 +1,14 @@
-"""A base position far from the base receiver is refused before the RTK run.
+"""Inputs of ``insnav run --filter rtk`` / ``--coupling rtk`` refused before the run, with one line.
 
-Every rover position of an RTK run is the base position plus the baseline, so a mistyped
-``--base-pos`` (or ``[rtk] base_position_*``, or another station's file) would shift the whole
-solution by as much with exit status 0; a base some hundred km off also made the engine search
-float ambiguities for minutes.  The base position is checked against the code-only
-least-squares fix of the base's own pseudoranges (RTKLIB pntpos without its atmosphere models;
-:func:`insnav.gnss.rtk.base_code_fix`), which lands within tens of metres of the known antenna."""
+* A base position far from the base receiver.  Every rover position of an RTK run is the base
+  position plus the baseline, so a mistyped ``--base-pos`` (or ``[rtk] base_position_*``, or
+  another station's file) would shift the whole solution by as much with exit status 0; a base
+  some hundred km off also made the engine search float ambiguities for minutes.  The base position
+  is checked against the code-only least-squares fix of the base's own pseudoranges (RTKLIB pntpos
+  without its atmosphere models; :func:`insnav.gnss.rtk.base_code_fix`), which lands within tens of
+  metres of the known antenna.
+* A GNSS-only run's TOML asking for a smoother or TDCP (which the command-line options of the same
+  meaning are refused for)."""
 from __future__ import annotations
 
 import re
@@ -116,3 +119,26 @@ def test_rtk_ins_refuses_a_base_position_far_off_before_the_run(shared_data, tmp
     assert rc == 2 and len(err.splitlines()) == 1, err
     assert "the base position (--base-pos: " in err and " is 1000.0 km from where" in err, err
     assert not list(tmp_path.glob("sol.csv*"))
+
+
+@pytest.mark.parametrize("fast", ["1", "0"])
+@pytest.mark.parametrize("key, text", [("smooth", "smooth = true\n"), ("tdcp.enabled", "[tdcp]\nenabled = true\n")])
+def test_gnss_only_rtk_refuses_the_tomls_smoother_and_tdcp_as_it_refuses_the_options(shared_data, tmp_path, capsys,
+                                                                                    monkeypatch, fast, key, text):
+    """``--smooth`` and ``--tdcp`` are refused for a GNSS-only filter; ``smooth = true`` or ``[tdcp]
+    enabled = true`` in its TOML were silently ignored (status 0, a filtered solution where a smoothed
+    one was asked for).  Now one line naming the file and the key on either command-line path, no file;
+    ``smooth = false`` runs."""
+    d = _matrtklib(shared_data)
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", fast)
+    toml = tmp_path / "run.toml"
+    toml.write_text(text + '[rtk]\nsystems = "G"\nfrequencies = 1\nar_mode = "instantaneous"\n')
+    before = toml.read_bytes()
+    out = tmp_path / "out" / "sol.pos"
+    assert main(_rtk_argv(d, out, "--config", toml)) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"insnav run: error: {toml}: key '{key}': --filter rtk is GNSS only and has no "), err
+    assert len(err.splitlines()) == 1 and toml.read_bytes() == before and not out.parent.exists()
+    toml.write_text(text.replace("true", "false") + '[rtk]\nsystems = "G"\nfrequencies = 1\nar_mode = "instantaneous"\n')
+    assert main(_rtk_argv(d, out, "--config", toml)) == 0, capsys.readouterr().err
+    assert out.read_bytes().startswith(b"% program   : insnav rtk\n")
