@@ -132,13 +132,66 @@ def test_gnss_only_rtk_refuses_the_tomls_smoother_and_tdcp_as_it_refuses_the_opt
     d = _matrtklib(shared_data)
     monkeypatch.setenv("INSNAV_RTK_FASTPATH", fast)
     toml = tmp_path / "run.toml"
-    toml.write_text(text + '[rtk]\nsystems = "G"\nfrequencies = 1\nar_mode = "instantaneous"\n')
+    rtk_table = '[rtk]\nsystems = "G"\nfrequencies = 1\nar_mode = "instantaneous"\n'
+    toml.write_text(text + rtk_table)
     before = toml.read_bytes()
     out = tmp_path / "out" / "sol.pos"
     assert main(_rtk_argv(d, out, "--config", toml)) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"insnav run: error: {toml}: key '{key}': --filter rtk is GNSS only and has no "), err
     assert len(err.splitlines()) == 1 and toml.read_bytes() == before and not out.parent.exists()
-    toml.write_text(text.replace("true", "false") + '[rtk]\nsystems = "G"\nfrequencies = 1\nar_mode = "instantaneous"\n')
+    toml.write_text(text.replace("true", "false") + rtk_table)
     assert main(_rtk_argv(d, out, "--config", toml)) == 0, capsys.readouterr().err
     assert out.read_bytes().startswith(b"% program   : insnav rtk\n")
+
+
+def _binary(tmp_path):
+    """A file that is not UTF-8 text (a compiled module, a zipped folder given by mistake)."""
+    p = tmp_path / "run.toml"
+    p.write_bytes(b"\x7fELF\x02\x01\x01" + bytes(range(128, 256)) + b"\n[rtk]\n")
+    return p
+
+
+@pytest.mark.parametrize("fast", ["1", "0"])
+def test_a_binary_config_is_one_line_naming_the_file(shared_data, tmp_path, capsys, monkeypatch, fast):
+    """tomllib raises UnicodeDecodeError, not TOMLDecodeError, for bytes that are not UTF-8: the
+    readers printed "'utf-8' codec can't decode byte 0x80 in position 7" without the file's name.
+    Every TOML reader now goes through :func:`insnav.config.read_toml`."""
+    from insnav.config import ConfigError, load_config, read_toml
+
+    d = _matrtklib(shared_data)
+    toml = _binary(tmp_path)
+    msg = f"{toml}: not valid TOML: not UTF-8 text (byte 0x80 at offset 7)"
+    for read in (read_toml, load_config):
+        with pytest.raises(ConfigError) as e:
+            read(toml)
+        assert str(e.value) == msg
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", fast)
+    out = tmp_path / "out" / "sol.pos"
+    argvs = [_rtk_argv(d, out, "--config", toml),
+             ["run", "--filter", "spp", "--format", "rinex", "--obs", d / "rover.obs", "--nav", d / "base.nav",
+              "--config", toml, "--out", tmp_path / "out" / "spp.csv"],
+             ["run", "--format", "rinex", "--imu", d / "base_position.txt", "--obs", d / "rover.obs", "--nav",
+              d / "base.nav", "--config", toml, "--out", tmp_path / "out" / "sol.csv"],
+             ["allan", d / "base_position.txt", "--format", "csv", "--config", toml, "--out-dir", tmp_path / "out"]]
+    for argv in argvs:
+        rc = main([str(a) for a in argv])
+        err = capsys.readouterr().err
+        assert rc == 2 and err == f"insnav {argv[0]}: error: {msg}\n", (argv, err)
+    assert not out.parent.exists()
+
+
+def test_a_folder_given_as_a_rinex_file_is_named_a_folder(shared_data, tmp_path, capsys):
+    """``--nav FOLDER`` said "cannot read file (No such file or directory)" of a folder that exists."""
+    from insnav.data.textio import read_bytes
+
+    d = _matrtklib(shared_data)
+    with pytest.raises(IsADirectoryError) as e:
+        read_bytes(tmp_path)
+    assert e.value.strerror == "Is a directory" and e.value.filename == str(tmp_path)
+    for i, role in enumerate(("--nav", "--base")):
+        argv = _rtk_argv(d, tmp_path / "sol.pos")
+        argv[argv.index(role) + 1] = str(tmp_path)
+        assert main(argv) == 2
+        assert capsys.readouterr().err == f"insnav run: error: {tmp_path}: cannot read file (Is a directory)\n"
+    assert list(tmp_path.iterdir()) == []

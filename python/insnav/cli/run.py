@@ -501,15 +501,15 @@ def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
     import dataclasses
     import tomllib
 
-    from ..config import config_from_dict
+    from ..config import config_from_dict, read_toml
 
     try:
         with open(path, "rb") as f:
             d = tomllib.load(f)
     except OSError as exc:
         raise UserError(f"--run-config {path}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+        read_toml(path)  # its one-line message naming the file
     given = config_from_dict(d, source=str(path))  # unknown keys / bad values: one line naming the file
     for key in d:
         setattr(cfg, key, getattr(given, key))
@@ -689,7 +689,7 @@ def cmd_run(args) -> int:
                 f_toml = tomllib.load(f).get("filter")
                 if f_toml in ("spp", "rtk"):
                     args.filter = f_toml
-        except (OSError, tomllib.TOMLDecodeError):
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
             pass  # reported by the loader
     if args.filter in _GNSS_ONLY:
         return cmd_run_gnss_only(args, stages)
