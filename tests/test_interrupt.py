@@ -53,6 +53,63 @@ def test_sigint_stops_a_run_fast_with_one_line_and_no_output(uav_dir, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no solution, no sidecar, no temp file
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_sigterm_stops_a_run_with_one_line_and_keeps_the_earlier_output(uav_dir, tmp_path):
+    """SIGTERM (``kill``, a batch system's time limit) inside the filter's C++ loop: status 143 within a
+    second, the one line ``insnav run: terminated``, no traceback, the earlier solution under --out byte
+    for byte as it was and no temporary file beside it (before: killed by the signal with no word)."""
+    out = tmp_path / "sol.csv"
+    earlier = b"t_s,lat_deg,lon_deg,h_m\n0.0,48.0,11.0,500.0\n"  # an insnav solution's columns: replaceable
+    out.write_bytes(earlier)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "insnav", "run", str(uav_dir), "--coupling", "tight",
+                             "--filter", "upf", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env, preexec_fn=_sigint_default)
+    time.sleep(2.5)  # start-up and read ~1 s: now inside the filter's C++ loop (~6 s)
+    assert proc.poll() is None, proc.communicate()
+    t0 = time.perf_counter()
+    proc.send_signal(signal.SIGTERM)
+    try:
+        stdout, stderr = proc.communicate(timeout=10)
+    finally:
+        proc.kill()
+    dt = time.perf_counter() - t0
+    assert proc.returncode == 143, (stdout, stderr)
+    assert dt < 1.0, f"took {dt:.2f} s to stop"
+    assert stderr.strip().splitlines() == ["insnav run: terminated"], stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sol.csv"]
+    assert out.read_bytes() == earlier
+
+
+def test_sigterm_swallowed_inside_a_command_still_exits_143(monkeypatch, tmp_path, capsys):
+    """A SIGTERM whose exception a library swallows: one line and status 143, not 0."""
+    import insnav.analysis.report as rep
+    import insnav.cli as cli
+
+    sol = tmp_path / "sol.csv"
+    sol.write_text("x\n")
+
+    def report(*a, **k):
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.5)
+        except BaseException:  # noqa: BLE001 - what swallowed it
+            pass
+        out = tmp_path / "r" / "report.html"
+        out.parent.mkdir()
+        out.write_text("")
+        return out
+
+    monkeypatch.setattr(rep, "report", report)
+    inherited = signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        assert cli.main(["report", str(sol)]) == 143
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # the handler is the command's only
+    finally:
+        signal.signal(signal.SIGTERM, inherited)
+    assert capsys.readouterr().err.strip().splitlines() == ["insnav report: terminated"]
+
+
 def test_interrupt_inside_the_loop_raises_keyboardinterrupt_and_leaves_no_state(uav_dir):
     """A progress callback raising (as the signal handler does) stops the C++
     loop at its next check; the next run is unaffected."""

@@ -79,6 +79,24 @@ def test_run_refuses_to_replace_a_users_file_unless_overwrite(tmp_path, ds_dir, 
     assert rc == 0 and notes.read_text().startswith("t_s,lat_deg,"), err
 
 
+@pytest.mark.parametrize("side", [".rtk.pos", ".rtk.csv"])
+def test_rtk_ins_refuses_to_replace_a_users_file_under_its_sidecars_name(tmp_path, ds_dir, capsys, monkeypatch,
+                                                                        side):
+    """``--coupling rtk`` also writes ``<out>.rtk.pos`` and ``<out>.rtk.csv``: a user's file (or
+    RTKLIB's own .pos) under either name is refused before the run, its bytes unchanged."""
+    ran = []
+    monkeypatch.setattr(insnav, "run", lambda *a, **kw: ran.append(1))
+    theirs = tmp_path / f"sol.csv{side}"
+    theirs.write_bytes(b"% program   : RTKPOST ver.2.4.3 b34\n" if side == ".rtk.pos" else b"my,notes\n")
+    before = _snapshot(tmp_path)
+    obs = tmp_path / "rover.obs"  # not read: the outputs are checked first
+    rc, _, err = _run(capsys, "run", ds_dir, "--coupling", "rtk", "--obs", obs, "--base", obs, "--nav", obs,
+                      "--out", tmp_path / "sol.csv")
+    assert rc == 2 and err == (f"insnav run: error: {theirs} exists and is not a file insnav wrote: not replaced "
+                               "(choose another --out, or --overwrite to replace it)\n"), err
+    assert _snapshot(tmp_path) == before and not ran
+
+
 def test_unwritable_folder_fails_before_the_run(tmp_path, ds_dir, capsys, monkeypatch):
     import insnav.filters as filters_pkg
 

@@ -161,11 +161,29 @@ def test_an_output_naming_an_input_is_refused_and_the_input_kept(tmp_path):
         assert rc == 2 and err.startswith("insnav run: error: --out ") and "is an input of this run" in err, err
         assert nav_pos.read_bytes() == nav[0].read_bytes()
         assert sorted(os.listdir(d)) == ["nav.pos"]
-        # an older solution (no insnav header in the RTKLIB layout) is replaced, as before
-        (d / "old.pos").write_text("% an older solution\n")
+        # a .pos another program wrote (RTKLIB's own result) is kept: one line, the bytes unchanged,
+        # no file beside it; with --overwrite it is replaced
+        theirs = b"% program   : RTKPOST ver.2.4.3 b34\n% an older solution\n"
+        (d / "old.pos").write_bytes(theirs)
+        rc, lines, err, _ = _run(_rtk_args(rover, base, [nav_pos], toml, out="old.pos"), d, fast)
+        assert rc == 2 and err == (f"insnav run: error: old.pos exists and is not a file insnav wrote: not "
+                                   "replaced (choose another --out, or --overwrite to replace it)\n"), err
+        assert (d / "old.pos").read_bytes() == theirs
+        assert sorted(os.listdir(d)) == ["nav.pos", "old.pos"]
+        rc, lines, err, _ = _run(_rtk_args(rover, base, [nav_pos], toml, out="old.pos") + ["--overwrite"], d, fast)
+        assert rc == 0, err
+        first = (d / "old.pos").read_bytes()
+        assert first.startswith(b"% program   : insnav rtk\n") and first.count(b"\n") > 300
+        # the .pos insnav wrote (and its sidecars) is replaced without --overwrite
+        (d / "old.pos").write_bytes(first.replace(b"% inp file", b"% older file", 1))
         rc, lines, err, _ = _run(_rtk_args(rover, base, [nav_pos], toml, out="old.pos"), d, fast)
         assert rc == 0, err
-        assert (d / "old.pos").read_text().count("\n") > 300
+        assert (d / "old.pos").read_bytes() == first
+        # a user's file under a sidecar's name is kept too
+        (d / "new.pos.rtk.csv").write_bytes(b"my,notes\n")
+        rc, lines, err, _ = _run(_rtk_args(rover, base, [nav_pos], toml, out="new.pos"), d, fast)
+        assert rc == 2 and "new.pos.rtk.csv exists and is not a file insnav wrote" in err, err
+        assert (d / "new.pos.rtk.csv").read_bytes() == b"my,notes\n" and not (d / "new.pos").exists()
 
 
 def test_a_copied_nav_file_with_cr_line_ends_is_left_to_the_usual_path(tmp_path):

@@ -95,6 +95,29 @@ def test_bad_truth_file_names_the_line(tmp_path):
         read_spirent_motion(q)
 
 
+@pytest.mark.parametrize("column, value", [("Pos_Y", "nan"), ("Time_ms", "inf"), ("Heading", "-inf")])
+def test_a_non_finite_truth_value_is_refused_naming_line_and_column(tmp_path, capsys, column, value):
+    """float() reads 'nan' and 'inf': before, a NaN position ran through the synthesis into imu.csv and
+    truth.csv and `insnav simulate --from-truth` ended with status 0.  Now one line naming the line and
+    the column, status 2, no dataset folder."""
+    from insnav.cli import main
+
+    lines = need(MOTION).read_text().splitlines()[:40]
+    names = lines[1].split(",")
+    fields = lines[20].split(",")
+    fields[names.index(column)] = value
+    lines[20] = ",".join(fields)
+    p = tmp_path / "m.csv"
+    p.write_text("\n".join(lines) + "\n")
+    before = p.read_bytes()
+    out = tmp_path / "ds"
+    assert main(["simulate", "--from-truth", str(p), "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"insnav simulate: error: {p}, line 21: non-finite value {float(value)!r} in column "
+                   f"'{column}'\n"), err
+    assert not out.exists() and p.read_bytes() == before
+
+
 def test_cli_simulate_from_truth(tmp_path):
     out = tmp_path / "ds"
     r = subprocess.run([sys.executable, "-m", "insnav", "simulate", "--from-truth", str(need(MOTION)),

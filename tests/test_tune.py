@@ -372,3 +372,24 @@ def test_innovation_whiteness_flags_correlated_fix_errors():
 
     lag = innovation_lag1(_Sol())
     assert lag[0] == pytest.approx(-0.9, abs=1e-12) and math.isnan(lag[1])
+
+
+def test_tune_without_gnss_records_is_one_line_with_one_prefix(tmp_path, capsys):
+    """A dataset without GNSS records (``simulate --from-truth`` writes an IMU-only dataset): before,
+    ``insnav tune: error: insnav tune: no GNSS record ...``."""
+    import insnav
+    from insnav.sim.scenario import resolve_raw
+
+    raw, _ = resolve_raw("seed000-sim")
+    raw["motion"]["segments"] = [{"duration_s": 20.0}]
+    raw["motion"].pop("oscillations", None)
+    raw["gnss"]["outages"] = [[0.0, 30.0]]
+    ds = insnav.simulate(raw, seed=1).save(tmp_path / "ds")
+    out = tmp_path / "tuned.toml"
+    from insnav.cli import main
+
+    assert main(["tune", str(ds), "--max-runs", "16", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("insnav tune: error: no GNSS record with an innovation covariance in the tuning "
+                          "segment"), err
+    assert len(err.splitlines()) == 1 and not out.exists()

@@ -85,15 +85,19 @@ def _numeric_fields(path) -> int:
     return len(f)
 
 
+#: the first line of an RTKLIB-layout ``.pos`` insnav writes (``% program   : insnav rtk``,
+#: ``insnav rtk/ins rtk``), blanks removed as :func:`_first_line` removes them
+RTK_POS_FIRST_LINE = "%program:insnav"
+
 #: the first bytes of the TOML ``insnav tune`` writes
 TUNED_FIRST_LINE = "# insnav tune:"
 
 
 def insnav_output_kind(path) -> str | None:
     """What insnav file ``path`` is (``solution``, ``innovations``,
-    ``residuals``, ``config``, ``tuned config``, ``spp table``, ``KF-GINS result``,
-    ``evaluation``), from its name and its first bytes; None for anything else
-    (an empty file included)."""
+    ``residuals``, ``config``, ``tuned config``, ``spp table``, ``rtk table``, ``rtk pos``,
+    ``KF-GINS result``, ``evaluation``), from its name and its first bytes; None for anything
+    else (an empty file included; an RTKLIB ``.pos`` another program wrote)."""
     p = Path(path)
     name = p.name
     if name.endswith(".innovations.csv"):
@@ -106,6 +110,10 @@ def insnav_output_kind(path) -> str | None:
         return "tuned config"  # insnav tune --out
     if name.endswith(".spp.csv"):
         return "spp table" if _first_line(p).startswith("t_s,solved,n_sats,") else None
+    if name.endswith(".rtk.csv"):
+        return "rtk table" if _first_line(p).startswith("t_gps_s,status,ratio,") else None
+    if p.suffix.lower() == ".pos":  # RTKLIB's layout; insnav's names itself in the first header line
+        return "rtk pos" if _first_line(p).startswith(RTK_POS_FIRST_LINE) else None
     if name.startswith("KF_GINS_"):  # the reader's module only for its names (~2 ms of import)
         from .io.kfgins import KFGINS_IMU_ERR_FILE, KFGINS_NAV_FILE, KFGINS_STD_FILE
 

@@ -1195,6 +1195,9 @@ def read_toml(path) -> dict:
         raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:  # a binary file: tomllib decodes the bytes before it parses
+        raise ConfigError(f"{path}: not valid TOML: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at "
+                          f"offset {exc.start})") from None
 
 
 def load_config(path) -> RunConfig:
@@ -1202,11 +1205,7 @@ def load_config(path) -> RunConfig:
     import tomllib  # here: insnav run --format kfgins never reads TOML (~2 ms of import)
 
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            d = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    d = read_toml(path)  # its one-line errors: unreadable, not TOML, not UTF-8
     return config_from_dict(d, source=str(path))
 
 

@@ -574,7 +574,7 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
         cfg.coupling = coupling
     cfg.validate()
     if cfg.filter not in FILTERS or cfg.coupling not in ("loose", "tight"):
-        raise ConfigError(f"insnav tune: filter {cfg.filter!r} with {cfg.coupling} coupling; the tuner needs the "
+        raise ConfigError(f"filter {cfg.filter!r} with {cfg.coupling} coupling cannot be tuned: the tuner needs the "
                           f"innovation covariance, which the loose and tight {' and '.join(FILTERS)} return")
     if cfg.smooth:
         cfg.smooth = False  # the smoother does not change the forward innovations
@@ -655,7 +655,7 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     # the search's evaluations are in history (the base run too); pick the best of all
     best_scales, ll_best, n_best = max(history, key=lambda h: h[1])
     if not math.isfinite(ll_best) or n_best == 0:
-        raise ConfigError("insnav tune: no GNSS record with an innovation covariance in the tuning segment "
+        raise ConfigError("no GNSS record with an innovation covariance in the tuning segment "
                           + (f"(before t = {splits[0]:.3f} s)" if blocks is None else "(its blocks)"))
     tuned = scaled_config(cfg, noise, best_scales)
     if tuned.coupling == "tight":  # run as tuned (_plain_robust)

@@ -126,39 +126,53 @@ def _single_threaded_blas() -> None:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a batch system's time limit) during a command: raised like Ctrl-C's
+    KeyboardInterrupt, so the same paths stop the C++ loops and discard the unfinished
+    outputs (:func:`insnav._atomic.output_set`); :func:`main` ends with one line and 143."""
+
+
 class _SigintWatch:
     """SIGINT raises KeyboardInterrupt as Python's default handler does, and
-    also remembers it: an interrupt that lands where an exception is ignored
-    (a finalizer, a library's broad ``except``) still ends the command with
-    status 130 instead of being swallowed (:func:`main`)."""
+    SIGTERM raises :class:`Terminated` instead of killing the process with no
+    word (the default action); each is also remembered: an interrupt that
+    lands where an exception is ignored (a finalizer, a library's broad
+    ``except``) still ends the command with status 130 (143) instead of being
+    swallowed (:func:`main`)."""
 
     def __init__(self):
-        self.seen = False
-        self.previous = None
+        self.seen = None  # the exception class of the signal received
+        self.previous = {}
 
     def _handler(self, signum, frame):
-        self.seen = True
-        raise KeyboardInterrupt
+        import signal
+
+        self.seen = Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+        raise self.seen
 
     def __enter__(self):
         import signal
         import threading
 
-        if threading.current_thread() is threading.main_thread() and \
-                signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when the parent ignores it
-            self.previous = signal.signal(signal.SIGINT, self._handler)
+        if threading.current_thread() is threading.main_thread():
+            # not when the parent ignores them (nohup, a background job of a non-interactive shell)
+            if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+                self.previous[signal.SIGINT] = signal.signal(signal.SIGINT, self._handler)
+            if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+                self.previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, self._handler)
         return self
 
     def __exit__(self, *exc):
-        if self.previous is not None:
-            import signal
+        import signal
 
-            signal.signal(signal.SIGINT, self.previous)
+        for signum, previous in self.previous.items():
+            signal.signal(signum, previous)
         return False
 
 
 def main(argv=None) -> int:
-    """Run one command; its status: 0, 2 (an error, one line on stderr) or 130 (Ctrl-C, one line)."""
+    """Run one command; its status: 0, 2 (an error, one line on stderr), 130 (Ctrl-C, one line)
+    or 143 (SIGTERM, one line)."""
     command = _command_of(sys.argv[1:] if argv is None else argv)
     version_only = command is None and _asks_version(sys.argv[1:] if argv is None else argv)
     args = None
@@ -171,7 +185,7 @@ def main(argv=None) -> int:
                 if rc is not None:
                     sys.stdout.flush()
                     if sigint.seen:
-                        raise KeyboardInterrupt
+                        raise sigint.seen
                     return int(rc)
             _single_threaded_blas()
             parser = build_parser(command, areas=not version_only)  # imports the command's modules: Ctrl-C here is one line too
@@ -182,15 +196,16 @@ def main(argv=None) -> int:
             rc = args.func(args)
             sys.stdout.flush()
             if sigint.seen:  # interrupted where the exception was swallowed
-                raise KeyboardInterrupt
+                raise sigint.seen
         except BrokenPipeError:  # `insnav ... | head`: the reader left; nothing to report
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
             return 0
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             name = getattr(args, "command", None) or command
-            print(f"insnav{' ' + name if name else ''}: interrupted", file=sys.stderr)
-            return 130
+            term = isinstance(exc, Terminated) or sigint.seen is Terminated
+            print(f"insnav{' ' + name if name else ''}: {'terminated' if term else 'interrupted'}", file=sys.stderr)
+            return 143 if term else 130
         except Exception as exc:  # noqa: BLE001 - every error is one line; --debug for the traceback
             if getattr(args, "debug", False) or os.environ.get("INSNAV_DEBUG"):
                 raise

@@ -136,19 +136,13 @@ def read_rates(path, fmt: str = "auto", config=None, imu_tag=None) -> dict:
 
 def _read_mapped(p: Path, fmt: str, config, imu_tag):
     """--format csv|rinex: the IMU CSV mapped by the config's [imu] or [rinex] table."""
-    import tomllib
-
-    from ..config import ConfigError
+    from ..config import ConfigError, read_toml
     from ..io.imu_csv import ImuCsvFormat, read_imu_csv
 
     if not config:
         raise UserError(f"--format {fmt} needs --config (a TOML whose "
                         f"{'[imu]' if fmt == 'csv' else '[rinex]'} table maps the IMU columns and units)")
-    try:
-        with open(config, "rb") as f:
-            d = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{config}: not valid TOML: {exc}") from None
+    d = read_toml(config)  # one line naming the file: unreadable, not TOML, not UTF-8
     base = os.path.dirname(os.path.abspath(config))
     if fmt == "csv":
         from ..io.csv_dataset import IMU_FORMAT_KEYS, IMU_KEYS, _table

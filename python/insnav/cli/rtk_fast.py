@@ -14,7 +14,9 @@ of a short run.  For the common form of the command this module instead
   the same summary line.
 
 Whatever it does not cover -- other options, ``--timings``, another output format, RINEX 2,
-systems other than GPS and QZSS, a base position given as latitude/longitude, and every input
+systems other than GPS and QZSS, a base position given (on the command line or in the TOML) further than
+500 m from the base header's APPROX POSITION XYZ (the usual path checks it against the base's own
+pseudoranges), and every input
 the usual path would report as an error -- returns None before anything is written, and the
 command takes the usual path, which gives the same files or the same one-line message.  Set
 ``INSNAV_RTK_FASTPATH=0`` to always take the usual path.
@@ -79,6 +81,25 @@ def _base_position(value) -> list | None:
     return v
 
 
+def _near_header_position(path, base_e) -> bool:
+    """Whether the RINEX header of ``path`` has an ``APPROX POSITION XYZ`` within
+    :data:`insnav.gnss._rtk_keys.BASE_POSITION_TOLERANCE_M` of ``base_e`` (ECEF [m])."""
+    from ..gnss._rtk_keys import BASE_POSITION_TOLERANCE_M
+
+    try:
+        with open(path, encoding="ascii", errors="replace") as f:
+            for _, line in zip(range(1000), f):
+                label = line[60:].strip()
+                if label == "END OF HEADER":
+                    return False
+                if label == "APPROX POSITION XYZ":
+                    xyz = [float(v) for v in line[:60].split()[:3]]
+                    return len(xyz) == 3 and math.dist(xyz, base_e) <= BASE_POSITION_TOLERANCE_M
+    except (OSError, ValueError):
+        pass
+    return False
+
+
 def _inputs(opts: dict):
     """(rtk table values, base position or None, nav paths), or None to take the usual path."""
     if opts.get("format") != "rinex" or not all(opts.get(k) for k in ("obs", "base", "nav", "out")):
@@ -92,6 +113,9 @@ def _inputs(opts: dict):
                 d = tomllib.load(f)
         except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
             return None
+    tdcp = d.get("tdcp")
+    if d.get("smooth", False) is not False or (isinstance(tdcp, dict) and tdcp.get("enabled", False) is not False):
+        return None  # the usual path refuses them with one line
     name = opts.get("filter")
     if name is None:
         name = d.get("filter") if opts.get("config") else None
@@ -114,6 +138,10 @@ def _inputs(opts: dict):
         base = _base_position(opts["base_pos"])
         if base is None:
             return None
+    if base is not None and not _near_header_position(opts["base"], base):
+        # a typed base position far from the base file's own APPROX POSITION XYZ (or one without it):
+        # the usual path checks it against the base's pseudoranges (insnav.gnss.rtk.check_base_position)
+        return None
     if any(k not in RTK_DEFAULTS for k in t):
         return None
     if t.get("noise", "configured") != "configured":  # an estimated noise needs the Python pre-pass
@@ -148,6 +176,10 @@ def run_fast(argv) -> int | None:
     reads = [opts["obs"], opts["base"], *nav] + ([opts["config"]] if opts.get("config") else [])
     if {os.path.realpath(p) for p in writes} & {os.path.realpath(p) for p in reads}:
         return None  # an output names an input: the usual path refuses it with one line
+    from .._outputs import insnav_output_kind
+
+    if any(os.path.lexists(p) and insnav_output_kind(p) is None for p in writes):
+        return None  # an existing file insnav did not write: the usual path keeps it (or --overwrite)
     from .. import _core
 
     if not hasattr(_core, "rtk_rinex_files"):

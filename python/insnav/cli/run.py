@@ -327,7 +327,7 @@ def _run_outputs(out: Path, kfgins_folder: bool, sidecars: tuple = ()) -> list[P
     else:
         base, files = out, [out]
     files += [innovations_path(base), residuals_path(base), base.with_suffix(base.suffix + ".config.toml")]
-    files += [out.with_suffix(out.suffix + side) for side in sidecars]  # a GNSS-only filter's table
+    files += [base.with_suffix(base.suffix + side) for side in sidecars]  # a GNSS-only filter's table, RTK/INS's
     return files
 
 
@@ -365,6 +365,17 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
         unused.append(f"--coupling {args.coupling}")
     if unused:
         raise UserError(f"--filter {name} is GNSS only and does not use {', '.join(unused)}")
+    if args.config:  # the TOML's requests of the same things: refused as the options are, not ignored
+        from ..config import read_toml
+
+        d = read_toml(args.config)
+        tdcp = d.get("tdcp")
+        for key, on in (("smooth", d.get("smooth", False)),
+                        ("tdcp.enabled", tdcp.get("enabled", False) if isinstance(tdcp, dict) else False)):
+            if on is not False:
+                raise UserError(f"{args.config}: key '{key}': --filter {name} is GNSS only and has no "
+                                f"{'smoother' if key == 'smooth' else 'TDCP update'} (an IMU run's key): "
+                                "remove it or set it to false")
 
 
 def _spp_run(args):
@@ -453,13 +464,9 @@ def cmd_run_gnss_only(args, stages) -> int:
     if not pos and out.suffix.lower() not in FORMATS:
         raise UserError(f"--out {out}: unknown format {out.suffix!r}; use {'.pos or ' if name == 'rtk' else ''}"
                         f"one of {', '.join(FORMATS)}")
-    if name == "spp":
-        check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
-    else:  # rtk: an RTKLIB-layout .pos carries no insnav header to recognise it by, so an older one is
-        # replaced; an input of the run never is
-        from .._outputs import check_outputs, input_files
-
-        check_outputs(_run_outputs(out, False, (sidecar,)), input_files(*_input_paths(args)), overwrite=True)
+    # rtk: an RTKLIB-layout .pos insnav wrote names it in its first line and is replaced; one
+    # another program wrote (RTKLIB's own result) only with --overwrite
+    check_run_outputs(args, out, kfgins_folder=False, sidecars=(sidecar,))
     groups = None if args.columns is None else [g.strip() for g in args.columns.split(",") if g.strip()]
     try:
         ds, opts, write, line = inputs(args)
@@ -494,15 +501,15 @@ def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
     import dataclasses
     import tomllib
 
-    from ..config import config_from_dict
+    from ..config import config_from_dict, read_toml
 
     try:
         with open(path, "rb") as f:
             d = tomllib.load(f)
     except OSError as exc:
         raise UserError(f"--run-config {path}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+        read_toml(path)  # its one-line message naming the file
     given = config_from_dict(d, source=str(path))  # unknown keys / bad values: one line naming the file
     for key in d:
         setattr(cfg, key, getattr(given, key))
@@ -536,7 +543,7 @@ def _rtk_ins_inputs(args, ds):
     if missing:
         raise UserError("--coupling rtk needs " + ", ".join(f"--{n}" for n in missing)
                         + " (rover and base RINEX observations, navigation file(s))")
-    rtk, eng, base_e = {}, {}, None
+    rtk, eng, base_e, source = {}, {}, None, None
     if args.config:
         from ..config import read_toml
 
@@ -544,10 +551,11 @@ def _rtk_ins_inputs(args, ds):
         rtk, eng = dict(d.get("rtk", {})), dict(d.get("rtk_engine", {}))
         for k in ("base_position_ecef_m", "base_position_llh"):
             if k in rtk:
-                base_e = parse_base_position(rtk.pop(k), f"{args.config}: key 'rtk.{k}'")
+                source = f"{args.config}: key 'rtk.{k}'"
+                base_e = parse_base_position(rtk.pop(k), source)
     if args.base_pos is not None:
-        base_e = parse_base_position(args.base_pos)
-    ds = RtkInsDataset(ds, args.obs, args.base, [p for p in args.nav.split(",") if p], base_e)
+        base_e, source = parse_base_position(args.base_pos), "--base-pos"
+    ds = RtkInsDataset(ds, args.obs, args.base, [p for p in args.nav.split(",") if p], base_e, source)
     return ds, dict(rtk_options=rtk, engine=eng)
 
 
@@ -681,7 +689,7 @@ def cmd_run(args) -> int:
                 f_toml = tomllib.load(f).get("filter")
                 if f_toml in ("spp", "rtk"):
                     args.filter = f_toml
-        except (OSError, tomllib.TOMLDecodeError):
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
             pass  # reported by the loader
     if args.filter in _GNSS_ONLY:
         return cmd_run_gnss_only(args, stages)
@@ -725,7 +733,9 @@ def cmd_run(args) -> int:
             raise UserError(f"--out {out}: unknown format {out.suffix!r}; use one of {', '.join(FORMATS)}")
     if args.output_rate is not None and not (args.output_rate > 0 and np.isfinite(args.output_rate)):
         raise UserError(f"--output-rate {args.output_rate}: expected a rate > 0 [Hz]")
-    check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins")
+    # RTK/INS (the only coupling with a --base) also writes <out>.rtk.pos and <out>.rtk.csv
+    check_run_outputs(args, out, kfgins_folder=args.out_format == "kfgins",
+                      sidecars=(".rtk.pos", ".rtk.csv") if getattr(args, "base", None) else ())
     streamed = None
     if args.format in ("kfgins", "csv") and getattr(args, "stream", "auto") != "off":
         streamed = _try_stream(args, out, groups)

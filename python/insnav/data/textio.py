@@ -126,8 +126,16 @@ def read_bytes(path) -> bytes:
     """
     p = Path(path)
     if not p.is_file():
-        exc = FileNotFoundError(f"{p} does not exist")
-        exc.strerror, exc.filename = "No such file or directory", str(p)
+        if p.is_dir():  # said as such: "No such file" misleads when the path is a folder
+            exc = IsADirectoryError(f"{p} is a folder, not a file")
+            exc.strerror = "Is a directory"
+        elif p.exists():  # a FIFO or a device: never read (a FIFO would wait for a writer)
+            exc = OSError(f"{p} is not a regular file")
+            exc.strerror = "not a regular file"
+        else:
+            exc = FileNotFoundError(f"{p} does not exist")
+            exc.strerror = "No such file or directory"
+        exc.filename = str(p)
         raise exc
     kind = _OPENERS.get(p.suffix.lower())
     raw = _read_whole(p)

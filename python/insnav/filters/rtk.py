@@ -43,6 +43,8 @@ class RtkDataset:
     base: object
     nav: object
     base_position_e_m: object = None
+    #: where ``base_position_e_m`` came from, for the messages (``--base-pos``, the TOML's key)
+    base_position_source: str | None = None
     gnss_only = True  # no IMU: insnav.run skips the IMU sanitizer and checks
 
 
@@ -128,9 +130,15 @@ def load_rtk_run(obs, base, nav, config_path=None, *, base_pos=None, rtk: dict |
         The dataset and the family's options (``rtk_options``) for :func:`insnav.run`.
     """
     opt, base_e = load_rtk_config(config_path, rtk)
+    source = None
     if base_pos is not None:
         base_e = base_pos if isinstance(base_pos, np.ndarray) else parse_base_position(base_pos)
-    return RtkDataset(obs, base, nav, base_e), dict(rtk_options=opt)
+        source = "--base-pos"
+    elif base_e is not None:
+        table = {**(read_toml(config_path).get("rtk", {}) if config_path is not None else {}), **(rtk or {})}
+        key = next((k for k in reversed(_BASE_KEYS) if k in table), _BASE_KEYS[0])  # the one load_rtk_config kept
+        source = f"{config_path}: key 'rtk.{key}'" if config_path is not None else f"key 'rtk.{key}'"
+    return RtkDataset(obs, base, nav, base_e, source), dict(rtk_options=opt)
 
 
 def run_rtk_rinex(obs, base, nav, config_path=None, *, base_pos=None, rtk: dict | None = None) -> Solution:
@@ -153,7 +161,7 @@ def run_rtk(dataset, cfg, *, rtk_options: RtkOptions | dict | None = None):
                              f"missing {k!r}")
     opt = rtk_options if isinstance(rtk_options, RtkOptions) else RtkOptions.from_dict(rtk_options or {}, "rtk options")
     rs = solve_rtk(dataset.rover, dataset.base, dataset.nav, r_base_e=getattr(dataset, "base_position_e_m", None),
-                   options=opt)
+                   options=opt, base_source=getattr(dataset, "base_position_source", None))
     sol = rtk_solution(rs)
     sol.rtk_options = opt
     return sol

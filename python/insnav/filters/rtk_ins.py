@@ -84,9 +84,11 @@ class RtkInsDataset:
     base: object
     nav: object
     base_position_e_m: object = None
+    #: where ``base_position_e_m`` came from, for the messages (``--base-pos``, the TOML's key)
+    base_position_source: str | None = None
 
     def __getattr__(self, name):  # the IMU side (imu, initial, t0, lever_arm_b, imu_model, ...)
-        if name in ("imu_dataset", "rover", "base", "nav", "base_position_e_m"):
+        if name in ("imu_dataset", "rover", "base", "nav", "base_position_e_m", "base_position_source"):
             raise AttributeError(name)
         return getattr(self.imu_dataset, name)
 
@@ -157,14 +159,17 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     rover = rover if rover is not None else getattr(dataset, "rover", None)
     base = base if base is not None else getattr(dataset, "base", None)
     nav = nav if nav is not None else getattr(dataset, "nav", None)
+    base_source = None
     if base_pos is None:
         base_pos = getattr(dataset, "base_position_e_m", None)
+        base_source = getattr(dataset, "base_position_source", None)
     for k, v in (("rover", rover), ("base", base), ("nav", nav)):
         if v is None:
             raise ValueError(f"coupling 'rtk' needs rover, base and nav observations; missing {k!r} "
                              "(insnav run --coupling rtk --obs ROVER --base BASE --nav NAV)")
     opt = rtk_ins_options(rtk_options)
-    rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, base_pos, opt)
+    rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, base_pos, opt,
+                                                                             base_source=base_source)
     noise_est = None
     if opt.noise == "estimate":
         # the GNSS-only pre-pass (with the GNSS-only engine's success-rate test, so that the epochs the

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["SIGNALS", "SYSTEM_INDEX", "RTK_DEFAULTS", "rtk_value_error", "rtk_core_dict"]
+__all__ = ["SIGNALS", "SYSTEM_INDEX", "RTK_DEFAULTS", "BASE_POSITION_TOLERANCE_M", "rtk_value_error",
+           "rtk_core_dict"]
 
 #: engine index of each system (``RtkSystem`` in rtk.hpp)
 SYSTEM_INDEX = {"G": 0, "R": 1, "E": 2, "C": 3, "J": 4}
@@ -26,6 +27,13 @@ AR_MODES = {"off": 0, "continuous": 1, "instantaneous": 2, "fix-and-hold": 3}
 IONO_MODES = {"off": 0, "variance": 1, "estimate": 2}
 #: default iono_sigma_per_10km_m per mode [m]: no DD variance; RTKLIB's stats-stdiono for the states
 IONO_SIGMA_DEFAULT = {"off": 0.0, "variance": 0.0, "estimate": 0.03}
+
+#: largest distance [m] between the base position a run is given and the code-only fix of the base's own
+#: pseudoranges (no ionosphere or troposphere model; :func:`insnav.gnss.rtk.check_base_position`): that fix
+#: lands 20-60 m from the known antenna on the shared data sets (matrtklib 56 m, Wettzell 21 m, Spirent
+#: 24 m), so a position further off is a wrong one (a mistyped coordinate, another station's file) that
+#: would shift every rover epoch by as much
+BASE_POSITION_TOLERANCE_M = 500.0
 
 #: every key of the table and its default, in the order of the dataclass (tests/test_rtk_fast.py checks it)
 RTK_DEFAULTS = {

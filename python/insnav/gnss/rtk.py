@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._median import unique  # np.unique would import numpy.ma (numpy 2.4: ~30 ms per command)
+from .._median import median, unique  # np.unique would import numpy.ma (numpy 2.4: ~30 ms per command)
 from ..config import ConfigError, TomlTable
 
 __all__ = ["RtkOptions", "PhaseObs", "RtkSolution", "SIGNALS", "STATUS_NAMES", "read_phase_obs", "receiver_rows",
@@ -52,6 +52,7 @@ from ._rtk_keys import IONO_MODES as _IONO_MODES  # noqa: E402,F401
 from ._rtk_keys import IONO_SIGMA_DEFAULT as _IONO_SIGMA_DEFAULT  # noqa: E402,F401
 from ._rtk_keys import MODES as _MODES  # noqa: E402,F401
 from ._rtk_keys import SIGNALS, SYSTEM_INDEX, rtk_core_dict, rtk_value_error  # noqa: E402
+from ._rtk_keys import BASE_POSITION_TOLERANCE_M  # noqa: E402,F401
 
 #: RTKLIB's Q values
 STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 4: "dgps"}
@@ -641,7 +642,8 @@ def _sig_text(obs, nf):
 
 
 def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None = None, *,
-              record_iono: bool = False, record_fixed_rows: bool = False, record_float: bool = False) -> RtkSolution:
+              record_iono: bool = False, record_fixed_rows: bool = False, record_float: bool = False,
+              base_source: str | None = None) -> RtkSolution:
     """RTK of ``rover`` against ``base``.
 
     Parameters
@@ -671,6 +673,9 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
         [cycles^2], ``Q_ab`` (n, 3) [cycles m], ``sat_j``, ``sat_i`` (satellite keys
         ``system * 64 + prn`` of each double difference's satellite and reference), ``freq``;
         ``Q_bb`` (k, 3, 3) the float position's covariance [m^2] (:mod:`insnav.gnss.ar_success`).
+    base_source : str, optional
+        Where a given ``r_base_e`` came from (``--base-pos``, a TOML key), named in the message of a
+        base position far from the base's own code fix (:func:`check_base_position`).
 
     Returns
     -------
@@ -679,7 +684,8 @@ def solve_rtk(rover, base, nav, r_base_e=None, options: RtkOptions | dict | None
     from .. import _core
 
     opt = options if isinstance(options, RtkOptions) else RtkOptions.from_dict(options or {}, "rtk options")
-    rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, r_base_e, opt)
+    rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, r_base_e, opt,
+                                                                             base_source=base_source)
     noise_est = None
     if opt.noise == "estimate":  # a first pass estimates the noise from its fixed epochs
         opt, noise_est = estimate_noise_prepass(rover.epoch_t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, opt)
@@ -736,11 +742,14 @@ def estimate_noise_prepass(t_gps_s, roff, rrows, boff, brows, bidx, r_base_e, op
     return noise_options(opt, out["fixed_rows"])
 
 
-def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
+def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions, *, base_source: str | None = None):
     """The engine inputs of an RTK run (shared by :func:`solve_rtk` and the tight RTK/INS filter):
     ``(rover, base, r_base_e, base_index, rover_off, rover_rows, base_off, base_rows)`` with the
     observations read (paths -> :class:`PhaseObs`), the base position (header default), the base
-    epoch of each rover epoch (:func:`match_base`) and the satellite states of each receiver."""
+    epoch of each rover epoch (:func:`match_base`) and the satellite states of each receiver.
+
+    The base position is checked against the base's own pseudoranges (:func:`check_base_position`;
+    ``base_source`` names where a given one came from in the message)."""
     from .rinex import read_nav_multi
 
     if not isinstance(rover, PhaseObs):
@@ -750,6 +759,7 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
     if not hasattr(nav, "eph"):
         nav = read_nav_multi(nav, "".join(s for s in opt.systems if s in "GRECJ"))
     if r_base_e is None:
+        base_source = "the header's APPROX POSITION XYZ"
         r_base_e = base_position_from_header(base)
         if r_base_e is None:
             raise RtkInputError(f"{base.path}: base position missing: the header has no APPROX POSITION XYZ; "
@@ -761,9 +771,76 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions):
     rs, clk = transmit_states(nav, np.concatenate([rover.epoch_t_gps_s[rover.epoch], base.epoch_t_gps_s[base.epoch]]),
                               np.concatenate([rover.system, base.system]), np.concatenate([rover.prn, base.prn]),
                               np.concatenate([_first_code(rover), _first_code(base)]))
+    check_base_position(base, r_base_e, rs[nr:], clk[nr:], base_source or "given")
     roff, rrows = receiver_rows(rover, nav, opt.frequencies, (rs[:nr], clk[:nr]))
     boff, brows = receiver_rows(base, nav, opt.frequencies, (rs[nr:], clk[nr:]))
     return rover, base, r_base_e, bidx, roff, rrows, boff, brows
+
+
+def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
+    """Code-only position of the base receiver [m] (ECEF), the median over up to ``n_epochs``
+    epochs spread over the file of the per-epoch Gauss-Newton least-squares fixes (position and
+    one receiver clock per system, Sagnac term in the range; RTKLIB pntpos without its
+    atmosphere models), started from ``r0_e``; ``(r_e, epochs used)``, or ``(None, 0)`` when no
+    epoch has enough satellites.
+
+    ``rs``, ``clk``: the satellite positions [m] and clocks [m] of the base's rows
+    (:func:`transmit_states`)."""
+    from ..earth import OMEGA_IE
+
+    code = _first_code(base)
+    ne = base.epoch_t_gps_s.size
+    good = np.isfinite(code) & np.all(np.isfinite(rs), axis=1) & np.isfinite(clk)
+    fixes = []
+    for e in unique(np.linspace(0, ne - 1, min(n_epochs, ne)).astype(np.int64)) if ne else ():
+        m = good & (base.epoch == e)
+        systems = sorted(set(base.system[m].tolist()))
+        if m.sum() < 4 + len(systems):  # one redundant row at least
+            continue
+        y = code[m] + clk[m]
+        s_e = rs[m]
+        H_clk = (base.system[m][:, None] == np.array(systems)[None, :]).astype(float)
+        x = np.concatenate([np.asarray(r0_e, float), np.zeros(len(systems))])
+        for _ in range(10):
+            d = s_e - x[:3]
+            rho = np.linalg.norm(d, axis=1)
+            rho_sagnac = rho + OMEGA_IE / C_LIGHT * (s_e[:, 0] * x[1] - s_e[:, 1] * x[0])
+            H = np.hstack([-d / rho[:, None], H_clk])
+            dx = np.linalg.lstsq(H, y - rho_sagnac - H_clk @ x[3:], rcond=None)[0]
+            x += dx
+            if np.linalg.norm(dx[:3]) < 1e-2:
+                break
+        else:
+            continue  # not converged: no evidence either way
+        fixes.append(x[:3].copy())
+    if not fixes:
+        return None, 0
+    fixes = np.asarray(fixes)
+    return np.array([median(fixes[:, k]) for k in range(3)]), len(fixes)
+
+
+def check_base_position(base: PhaseObs, r_base_e, rs, clk, source: str) -> None:
+    """:class:`RtkInputError` (one line naming the file and where the position came from) when
+    ``r_base_e`` is more than :data:`BASE_POSITION_TOLERANCE_M` from the base's own code fix
+    (:func:`base_code_fix`): every rover position would be off by as much, and an engine given a
+    base some hundred km off searches ambiguities of float solutions that cannot fix."""
+    from .. import earth
+
+    fix_e, n = base_code_fix(base, rs, clk, r_base_e)
+    if fix_e is None:
+        return
+    dist = float(np.linalg.norm(fix_e - np.asarray(r_base_e, float)))
+    if dist <= BASE_POSITION_TOLERANCE_M:
+        return
+
+    def llh(r):
+        lat, lon, h = (float(np.ravel(v)[0]) for v in earth.ecef_to_geodetic(np.asarray(r, float)))
+        return f"{math.degrees(lat):.6f}, {math.degrees(lon):.6f} deg, {h:.1f} m"
+
+    far = f"{dist / 1e3:.1f} km" if dist >= 1e4 else f"{dist:.0f} m"
+    raise RtkInputError(f"{base.path}: the base position ({source}: {llh(r_base_e)}) is {far} from where the "
+                        f"base's own pseudoranges put the receiver ({llh(fix_e)}, median of {n} epochs; more than "
+                        f"{BASE_POSITION_TOLERANCE_M:.0f} m): a wrong base position or another station's file")
 
 
 def _gpst_texts(t_gps_s) -> list:

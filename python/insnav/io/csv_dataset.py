@@ -39,13 +39,12 @@ from ..errors import close_matches
 import dataclasses
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..config import _USER_UNITS, ConfigError, ImuNoise, RunConfig, config_from_dict
+from ..config import _USER_UNITS, ConfigError, ImuNoise, RunConfig, config_from_dict, read_toml
 from ..data.checks import (MAX_TIME_OFFSET_S, check_gnss, check_gnss_velocity, check_gyro_against_gnss,
                            check_heading_axes, check_imu, check_latlon_radians, check_time_offset,
                            check_time_overlap)
@@ -326,11 +325,7 @@ def csv_inputs(imu, gnss, config=None, *, imu_tag=None) -> CsvInputs:
     else:
         source = os.fspath(config)
         base_dir = os.path.dirname(os.path.abspath(source))
-        try:
-            with open(config, "rb") as f:
-                d = tomllib.load(f)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+        d = read_toml(config)  # one line naming the file: unreadable, not TOML, not UTF-8
     run_keys = {f.name for f in dataclasses.fields(RunConfig)}
     for k in d:
         if k not in run_keys and k not in _TABLES:

@@ -707,14 +707,10 @@ def load_rinex_run(obs, nav, imu, config_path=None, *, imu_tag=None, reference=N
     d = {}
     source = "run configuration"
     if config_path is not None:
-        import tomllib  # here: a run without --config never reads TOML
+        from ..config import read_toml
 
         source = os.fspath(config_path)
-        try:
-            with open(config_path, "rb") as f:
-                d = tomllib.load(f)
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+        d = read_toml(config_path)  # one line naming the file: unreadable, not TOML, not UTF-8
     rin = d.pop("rinex", {})
     if not isinstance(rin, dict):
         raise ConfigError(f"{source}: key 'rinex': bad value {rin!r}; allowed: a table")

@@ -77,7 +77,8 @@ def read_spirent_motion(path) -> TruthFile:
     Raises
     ------
     TruthFileError
-        Missing columns, non-numeric values, times not strictly increasing (naming the line).
+        Missing columns, non-numeric or non-finite values (in the columns read), times not strictly
+        increasing (naming the line).
     """
     path = Path(path)
     try:
@@ -99,10 +100,11 @@ def read_spirent_motion(path) -> TruthFile:
             offset = float(lines[0].split(",")[-1])
         except ValueError:
             offset = math.nan
-    rows = []
+    rows, line_no = [], []
     for j, ln in enumerate(lines[hdr_i + 1:], start=hdr_i + 2):
         if not ln.strip():
             continue
+        line_no.append(j)
         try:
             rows.append([float(v) for v in ln.split(",")])
         except ValueError:
@@ -112,6 +114,12 @@ def read_spirent_motion(path) -> TruthFile:
     if len(rows) < 4:
         raise TruthFileError(f"{path}: fewer than 4 truth epochs")
     d = np.asarray(rows)
+    used = [names.index(n) for n in need + ("Ant1_Pos_X", "Ant1_Pos_Y", "Ant1_Pos_Z") if n in names]
+    bad = np.argwhere(~np.isfinite(d[:, used]))
+    if bad.size:  # float() reads 'nan' and 'inf': a NaN would run through the synthesis into every IMU sample
+        i, k = bad[0]
+        raise TruthFileError(f"{path}, line {line_no[i]}: non-finite value {float(d[i, used[k]])!r} in column "
+                             f"'{names[used[k]]}'")
     col = {n: d[:, names.index(n)] for n in names}
     t = col["Time_ms"] / 1e3
     bad = np.flatnonzero(np.diff(t) <= 0)
