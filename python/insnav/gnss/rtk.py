@@ -779,40 +779,38 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions, *, base_source
 
 def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
     """Code-only position of the base receiver [m] (ECEF), the median over up to ``n_epochs``
-    epochs spread over the file of the per-epoch Gauss-Newton least-squares fixes (position and
-    one receiver clock per system, Sagnac term in the range; RTKLIB pntpos without its
-    atmosphere models), started from ``r0_e``; ``(r_e, epochs used)``, or ``(None, 0)`` when no
-    epoch has enough satellites.
+    epochs spread over the file of the per-epoch least-squares fixes of the SPP solver
+    (:func:`insnav.gnss.spp._position_fit`: position and one receiver clock per system, unit
+    weights, no atmosphere models), started from ``r0_e``; the satellite positions rotated by the
+    Earth's rate over the signal's travel time from ``r0_e`` (Sagnac; a start 1000 km off moves it
+    by a few metres); ``(r_e, epochs used)``, or ``(None, 0)`` when no epoch has enough satellites.
 
     ``rs``, ``clk``: the satellite positions [m] and clocks [m] of the base's rows
     (:func:`transmit_states`)."""
     from ..earth import OMEGA_IE
+    from .spp import _position_fit
 
     code = _first_code(base)
     ne = base.epoch_t_gps_s.size
+    r0_e = np.asarray(r0_e, float)
     good = np.isfinite(code) & np.all(np.isfinite(rs), axis=1) & np.isfinite(clk)
     fixes = []
     for e in unique(np.linspace(0, ne - 1, min(n_epochs, ne)).astype(np.int64)) if ne else ():
         m = good & (base.epoch == e)
-        systems = sorted(set(base.system[m].tolist()))
-        if m.sum() < 4 + len(systems):  # one redundant row at least
+        system = base.system[m]
+        if m.sum() < 4 + len(unique(system)):  # one redundant row at least
             continue
-        y = code[m] + clk[m]
-        s_e = rs[m]
-        H_clk = (base.system[m][:, None] == np.array(systems)[None, :]).astype(float)
-        x = np.concatenate([np.asarray(r0_e, float), np.zeros(len(systems))])
-        for _ in range(10):
-            d = s_e - x[:3]
-            rho = np.linalg.norm(d, axis=1)
-            rho_sagnac = rho + OMEGA_IE / C_LIGHT * (s_e[:, 0] * x[1] - s_e[:, 1] * x[0])
-            H = np.hstack([-d / rho[:, None], H_clk])
-            dx = np.linalg.lstsq(H, y - rho_sagnac - H_clk @ x[3:], rcond=None)[0]
-            x += dx
-            if np.linalg.norm(dx[:3]) < 1e-2:
-                break
-        else:
-            continue  # not converged: no evidence either way
-        fixes.append(x[:3].copy())
+        theta = OMEGA_IE * np.linalg.norm(rs[m] - r0_e, axis=1) / C_LIGHT  # Earth rotation during the travel
+        sats = np.zeros((int(m.sum()), 9))
+        sats[:, 0] = code[m]
+        sats[:, 2] = np.cos(theta) * rs[m, 0] + np.sin(theta) * rs[m, 1]
+        sats[:, 3] = -np.sin(theta) * rs[m, 0] + np.cos(theta) * rs[m, 1]
+        sats[:, 4] = rs[m, 2]
+        sats[:, 8] = clk[m]
+        fit = _position_fit(sats, system, np.ones(len(system)), np.append(r0_e, 0.0), 10)
+        if fit is None or not fit[4]:
+            continue  # singular or not converged: no evidence either way
+        fixes.append(fit[0][:3])
     if not fixes:
         return None, 0
     fixes = np.asarray(fixes)
