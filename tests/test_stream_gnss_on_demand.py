@@ -205,7 +205,7 @@ def test_a_gnss_file_changed_between_the_passes_stops_the_run(kf_short, tmp_path
     assert {k: v for k, v in after.items() if k != "gnss.txt"} == {k: v for k, v in inputs.items() if k != "gnss.txt"}
 
 
-@pytest.mark.parametrize("block_lines", [1, 7, 4096])
+@pytest.mark.parametrize("block_lines", [3, 7, 4096])
 def test_fixes_read_on_demand_equal_the_whole_file_readers(kf_short, tmp_path, block_lines):  # noqa: F811
     """Blank lines inside and at the end, no final line end, 13 columns: every column read on demand (whole,
     by slices across blocks, by index arrays, a row with a column key) and every row's file line equal the
