@@ -114,15 +114,15 @@ def _gnss_file(path, n):
 
 
 def test_what_is_held_of_the_fixes_besides_their_times_does_not_grow_with_them(tmp_path):
-    """The fixes of 6 and of 20 times GNSS_BLOCK_LINES lines read on demand, then taken whole by the sanitizer, the
+    """The fixes of 6 and of 40 times GNSS_BLOCK_LINES lines read on demand, then taken whole by the sanitizer, the
     engine's rows and the input checks a block at a time: the index holds 40 bytes per block of
-    GNSS_BLOCK_LINES lines and at most two parsed blocks, the same bytes for both lengths but for the 40
+    GNSS_BLOCK_LINES lines and at most CACHED parsed blocks, the same bytes for both lengths but for the 40
     per block; the times are the only column held (8 bytes per fix; read whole: 56)."""
     from insnav.data.checks import check_gnss, check_gnss_velocity
     from insnav.filters.sanitize import sanitize_gnss_blocks
 
     held = {}
-    for n in (6 * tb.GNSS_BLOCK_LINES, 20 * tb.GNSS_BLOCK_LINES):
+    for n in (6 * tb.GNSS_BLOCK_LINES, 40 * tb.GNSS_BLOCK_LINES):
         f = _gnss_file(tmp_path / f"g{n}.txt", n)
         g = tb.read_gnss_text_blocks(f, on_demand=True)
         idx = g.lat_deg.index
@@ -139,11 +139,12 @@ def test_what_is_held_of_the_fixes_besides_their_times_does_not_grow_with_them(t
         assert len(idx.cache) <= tb._GnssTextIndex.CACHED and blocks >= 3
         assert idx.held_bytes() - 40 * blocks == sum(a.nbytes for a in idx.cache.values())
         held[n] = (idx.held_bytes() - 40 * blocks, int(idx.rows_of.max()), g.t_valid.nbytes)
-    short, long = held[6 * tb.GNSS_BLOCK_LINES], held[20 * tb.GNSS_BLOCK_LINES]
+    short, long = held[6 * tb.GNSS_BLOCK_LINES], held[40 * tb.GNSS_BLOCK_LINES]
     assert short[1] == long[1]  # the same lines per block (lines of one width)
-    assert short[0] <= 2 * short[1] * 7 * 8 and long[0] <= 2 * long[1] * 7 * 8  # at most two parsed blocks
-    assert long[0] < 0.15 * 48 * 20 * tb.GNSS_BLOCK_LINES  # not the 48 bytes per fix of the columns read whole
-    assert long[2] == 8 * 20 * tb.GNSS_BLOCK_LINES  # the times: 8 bytes per fix
+    cached = tb._GnssTextIndex.CACHED
+    assert short[0] <= cached * short[1] * 7 * 8 and long[0] <= cached * long[1] * 7 * 8  # at most CACHED blocks
+    assert long[0] < 0.2 * 48 * 40 * tb.GNSS_BLOCK_LINES  # not the 48 bytes per fix of the columns read whole
+    assert long[2] == 8 * 40 * tb.GNSS_BLOCK_LINES  # the times: 8 bytes per fix
 
 
 def test_compressed_gnss_file_is_held_whole(kf_short, tmp_path):  # noqa: F811

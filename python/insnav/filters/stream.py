@@ -35,7 +35,7 @@ times (8 bytes per fix, the one part that still grows with the recording)
 and where each block of lines lies (its byte offset, first line and rows,
 and the file's size and modification time); the other columns are
 :class:`insnav.io.text_blocks.FileColumn` objects whose rows are read back
-from the file, at most two parsed blocks kept, as their consumers index
+from the file, at most four parsed blocks kept, as their consumers index
 them: the loader's cut (views, nothing read), the sanitizer
 (:func:`insnav.filters.sanitize.sanitize_gnss_blocks`, a block at a time;
 when it drops a fix, the kept fixes are copied and held), the engine's
