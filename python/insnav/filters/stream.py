@@ -688,7 +688,11 @@ def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: s
     """The IMU blocks read ahead on the reader thread (``make_blocks()``), ``prepare(blocks) ->
     (_BlockRun, the blocks it runs)``, the writer thread writing the temporary solution file(s) beside
     ``out`` (CSV, npz or Parquet by its suffix; ``out_format`` kfgins: the KF-GINS files in the folder
-    ``out``); on any error (Ctrl-C included) the writer thread is joined and nothing is left behind."""
+    ``out``); on any error (Ctrl-C included) the writer thread is joined and nothing is left behind.
+    On glibc the allocator's mmap threshold is fixed first, for the rest of the process
+    (:func:`insnav._malloc.fix_mmap_threshold`: blocks of a few MB allocated and freed at every block
+    otherwise come from the heap and leave it growing with holes, about 0.5 MB per hour of recording)."""
+    from .._malloc import fix_mmap_threshold
     from .solution import PRECISIONS
 
     if precision not in PRECISIONS:
@@ -696,6 +700,7 @@ def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: s
     if out_format not in OUT_FORMATS:
         raise ValueError(f"out_format {out_format!r}: use one of {', '.join(OUT_FORMATS)}")
     out = Path(out)
+    fix_mmap_threshold()
     blocks = _Prefetch(make_blocks())
     writer = None
     try:
