@@ -71,10 +71,11 @@ DAY_VARIANTS = [
 #: the long-recording rows also run on a short synthesised recording (--growth-hours), for the peak RSS
 #: growth per hour of recording
 GROWTH_VARIANTS = ("EKF, CSV, 10 Hz (block by block)", "EKF, CSV, 200 Hz, nav columns (block by block)")
-#: peak RSS growth per hour of recording below which the run's memory counts as bounded [MB/h] (a day of
-#: 1 Hz GNSS fixes held whole in memory, 56 bytes each, adds about 0.2 MB/h, 10 Hz fixes 2 MB/h: the checks
-#: and the set-up take them a block at a time, the fixes themselves are still held whole; the summed IMU of the input checks
-#: fills its fixed-size 3.7 MB buffer during the first 1.8 h: about 1.7 MB of a 24 h run's growth over 1 h)
+#: peak RSS growth per hour of recording below which the run's memory counts as bounded [MB/h] (the GNSS
+#: fixes' times held, 8 bytes each: about 0.03 MB/h at 1 Hz, 0.3 MB/h at 10 Hz; their other columns are read
+#: back from the plain GNSS file a block at a time; the summed IMU of the input checks fills its fixed-size
+#: 3.7 MB buffer during the first 1.8 h: about 1.7 MB of a 24 h run's growth over 1 h; the stream fixes glibc's
+#: mmap threshold, insnav._malloc: the per-block buffers freed no longer leave the heap growing with holes)
 BOUNDED_MB_PER_H = 0.5
 #: the speed targets against KF-GINS, CPU time of the whole command (label: minimum KF-GINS / insnav)
 KFGINS_TARGETS = {"EKF, CSV, 200 Hz, all columns": 30.0, "EKF, npz, 200 Hz": 40.0}
@@ -455,9 +456,13 @@ def day_section(a, day, short, day_rss, day_n, day_mb) -> list[str]:
         "growth rows below: their peak RSS the median of repeated runs), the IMU "
         "file read, filtered and written block by block (`--stream auto`, insnav.filters.stream).  What is "
         "held: a few blocks of IMU samples, rows and GNSS records, the IMU summed for the input checks (at most "
-        "3.7 MB), and the GNSS file's fixes whole (7 float64, 56 bytes per fix: "
-        f"{56 * a.day_hours * 3600 * a.gnss_hz / 1e6:.1f} MB here); the set-up and the input checks (the course "
-        "checks too) take the fixes a block at a time, with no whole-record temporary:",
+        "3.7 MB), and the GNSS fixes' times (8 bytes per fix: "
+        f"{8 * a.day_hours * 3600 * a.gnss_hz / 1e6:.1f} MB here; held whole, 7 float64 per fix, they would be "
+        f"{56 * a.day_hours * 3600 * a.gnss_hz / 1e6:.1f} MB): the fixes' other columns are read back from the "
+        "plain GNSS file a block of lines at a time as the set-up, the filter and the input checks (the course "
+        "checks too) take them, with no whole-record temporary.  On glibc the run fixes the allocator's mmap "
+        "threshold at 128 KiB (insnav._malloc), so the buffers of a few MB freed at each block are unmapped "
+        "rather than left as holes in a heap that grows with the recording:",
         "",
         "| variant | wall [s] | CPU [s] | read [s] | filter [s] | write [s] | peak RSS [MB] | output [MB] |",
         "|---|---|---|---|---|---|---|---|",

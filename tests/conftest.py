@@ -108,6 +108,8 @@ SLOW_TESTS = (
     "tests/test_constraints.py::test_cli_constraints_flag_and_config_round_trip",
     "tests/test_report.py::test_summary_matches_evaluate_and_figures_are_real",
     "tests/test_stream.py::test_a_slow_writer_never_sees_its_rows_overwritten",
+    "tests/test_stream_gnss_on_demand.py::test_fixes_read_on_demand_give_the_whole_runs_files[1]",
+    "tests/test_stream_gnss_on_demand.py::test_10hz_fixes_read_on_demand_give_the_whole_runs_files",
     "tests/test_changing_inputs.py::test_truncation_race_never_kills_the_reader_nor_passes_a_short_read",
     "tests/test_report_files.py::test_kfgins_nav_results_are_solutions",
     "tests/test_cli_imports.py::test_percentile_equals_numpy",

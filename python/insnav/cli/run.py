@@ -121,7 +121,9 @@ def add_run_parser(sub) -> None:
                         "CSV, Parquet and KF-GINS files as the whole-file run byte for byte, the same npz arrays "
                         "bit for bit).  auto (default): whenever the run allows it (not --smooth, --constraints, "
                         "self-calibration states, --option, TDCP or a str2str tick_ms IMU log), on: the same, "
-                        "with a note when it cannot, off: read the IMU file whole")
+                        "with a note when it cannot, off: read the IMU file whole.  A plain KF-GINS GNSS file's fixes are "
+                        "read back from it a block at a time (their times held; the file must not change "
+                        "during the run), a compressed one's and --format csv's are held whole")
     p.add_argument("--columns", default=None, metavar="GROUPS",
                    help="column groups to write, comma separated: nav (t_s, position, velocity, attitude), "
                         "sigma (their 1-sigma), bias (IMU biases and scale factors).  Default: all")

@@ -45,6 +45,7 @@ import dataclasses
 import numpy as np
 
 from .._median import _diffs, median
+from .dataset import column
 from .._median import stream_median as _stream_median
 from ..units import DEG, G0
 
@@ -278,7 +279,7 @@ class _TimeOrdered:
     def rows(self, *fields):
         """``(a, [rows a .. b-1 of each field])`` per block; fields ``t`` [s], ``v`` (north, east) [m/s],
         ``lat``, ``lon`` [rad]."""
-        v_n = np.asarray(self.g.v_n, float) if "v" in fields else None
+        v_n = column(self.g.v_n) if "v" in fields else None
         for a in range(0, self.n, self.block):
             b = min(self.n, a + self.block)
             idx = slice(a, b) if self.order is None else self.order[a:b]
@@ -289,7 +290,7 @@ class _TimeOrdered:
                 elif f == "v":
                     out.append(v_n[idx, :2])
                 else:
-                    out.append(np.radians(np.asarray(getattr(self.g, f + "_deg"), float)[idx]))
+                    out.append(np.radians(column(getattr(self.g, f + "_deg"))[idx]))
             yield a, out
 
     def all_finite_t(self) -> bool:
@@ -1035,7 +1036,7 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
     if m == 0:
         return
     block = GNSS_CHECK_BLOCK if block is None else max(1, int(block))
-    lat, lon = np.asarray(gnss.lat_deg, float), np.asarray(gnss.lon_deg, float)
+    lat, lon = column(gnss.lat_deg), column(gnss.lon_deg)  # a column read on demand: a block at a time
 
     def where(i):
         o = getattr(gnss, "origin", None)
@@ -1044,7 +1045,7 @@ def check_gnss(gnss, *, initial=None, source: str = "gnss", max_speed_mps: float
         except Exception:  # noqa: BLE001 - a message helper must never fail
             return f"{source}: record {int(i)}"
 
-    sig = np.asarray(gnss.sigma_pos_n, float)
+    sig = column(gnss.sigma_pos_n)
     nonpos0 = huge0 = None  # the first fix with a sigma <= 0 / over MAX_GNSS_SIGMA_M, and their counts
     n_nonpos = n_huge = 0
     for a in range(0, m, block):  # a range error anywhere comes first: the sigmas' verdicts wait for the end
@@ -1167,10 +1168,10 @@ def check_gnss_velocity(gnss, *, source: str = "gnss", min_speed_mps: float = 1.
     pr = np.zeros(2)  # sum of vp vr per axis
     for idx in _time_order_spans(tv, block):
         t = tv[idx]
-        lat = np.radians(np.asarray(gnss.lat_deg, float)[idx])
-        lon = np.radians(np.asarray(gnss.lon_deg, float)[idx])
-        h = np.asarray(gnss.h_m, float)[idx]
-        v = np.asarray(gnss.v_n, float)[idx]
+        lat = np.radians(column(gnss.lat_deg)[idx])
+        lon = np.radians(column(gnss.lon_deg)[idx])
+        h = column(gnss.h_m)[idx]
+        v = column(gnss.v_n)[idx]
         dt = np.diff(t)
         vm = 0.5 * (v[1:] + v[:-1])
         R = 6_371_000.0 + np.nan_to_num(h[:-1])

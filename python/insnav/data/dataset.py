@@ -124,6 +124,12 @@ class ImuData:
         return cls(a[:, 0].copy(), a[:, 1:4].copy(), a[:, 4:7].copy())
 
 
+def column(x):
+    """A column of fixes as a float64 array, or as it is when it is read on demand from its file
+    (:class:`insnav.io.text_blocks.FileColumn`: the consumer indexes the rows it needs, never the whole)."""
+    return x if getattr(x, "on_demand", False) else np.asarray(x, float)
+
+
 @dataclass
 class GnssFixes:
     """Loosely coupled GNSS fixes of the antenna.

@@ -83,7 +83,7 @@ import dataclasses
 
 import numpy as np
 
-from ..data.dataset import GnssFixes, ImuData, RowOrigin
+from ..data.dataset import GnssFixes, ImuData, RowOrigin, column
 from ..config import SANITIZE_DEFAULTS
 from .._imu_scan import scan_imu
 
@@ -282,7 +282,7 @@ _GNSS_COLUMNS = ("t_valid", "t_arrival", "lat_deg", "lon_deg", "h_m", "v_n", "si
 
 def _gnss_columns(g: GnssFixes, n: int) -> dict:
     """The fixes' columns as float64 arrays (views of ``g``'s arrays when they are float64 already)."""
-    cols = {f: np.asarray(getattr(g, f), float) for f in _GNSS_COLUMNS}
+    cols = {f: column(getattr(g, f)) for f in _GNSS_COLUMNS}  # a column read on demand: a block at a time
     for f in ("v_n", "sigma_pos_n", "sigma_vel_n"):
         cols[f] = cols[f].reshape(n, 3)
     return cols

@@ -28,23 +28,30 @@ summary and the health verdict need (:class:`_Innovations`), so the engine
 holds the fixes of about one block.  Memory is a few blocks of IMU samples,
 rows and records, the IMU summed to 10 Hz for the input checks, at most
 :data:`CHECK_MAX_ROWS` rows (about 1.8 h, 3.7 MB; a longer recording's is summed
-further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS file's fixes
-(KF-GINS files: read in two passes, a block of lines at a time,
-:func:`read_gnss_text_blocks`, 7 float64 per fix; the loader's cut takes
-views of them when the file is in time order, and the sanitizer checks them
-a block at a time, :func:`insnav.filters.sanitize.sanitize_gnss_blocks`,
-returning them as they are when it drops nothing: the one part that still
-grows with the recording, 56 bytes per fix;
-``bench/cli_end_to_end.py`` and ``bench/cli_csv_stream.py`` measure a
-synthesised day).  At the end the input checks take those fixes
-(:func:`insnav.data.checks.check_dataset`): the range, sigma, jump and
-velocity checks a block of fixes at a time (about 0.6 MB of temporaries),
-the course checks (time offset, gyro against the GNSS course) a block of
-:data:`insnav.data.checks.COURSE_CHECK_BLOCK` fixes at a time (a few MB,
-whatever the record's length), and the engine's outage cycle takes the
-fixes' median spacing a block at a time
-(:func:`insnav._median.spacing_median`): the set-up and the checks make no
-temporary of the whole record's fixes.
+further, to 5 Hz, 2.5 Hz, ...: :class:`_Coarse`), and the GNSS fixes' times.
+A plain KF-GINS GNSS file is read in two passes, a block of lines at a time
+(:func:`read_gnss_text_blocks` with ``on_demand``): the passes keep the
+times (8 bytes per fix, the one part that still grows with the recording)
+and where each block of lines lies (its byte offset, first line and rows,
+and the file's size and modification time); the other columns are
+:class:`insnav.io.text_blocks.FileColumn` objects whose rows are read back
+from the file, at most four parsed blocks kept, as their consumers index
+them: the loader's cut (views, nothing read), the sanitizer
+(:func:`insnav.filters.sanitize.sanitize_gnss_blocks`, a block at a time;
+when it drops a fix, the kept fixes are copied and held), the engine's
+rows (:data:`GNSS_PUSH_MAX` fixes at a time as the IMU blocks advance), and
+at the end the input checks (:func:`insnav.data.checks.check_dataset`: the
+range, sigma, jump and velocity checks a block of fixes at a time, the
+course checks a block of :data:`insnav.data.checks.COURSE_CHECK_BLOCK`
+fixes), the engine's outage cycle taking the median spacing a block at a
+time (:func:`insnav._median.spacing_median`).  A GNSS file whose size or
+modification time changed since its first pass stops the run with a
+one-line error naming it (the temporary output removed, an earlier output
+left as it was).  A compressed GNSS file (``.xz``, ``.gz``, ``.bz2``: no
+offsets to seek to) is held whole, 7 float64 per fix, and so are the
+fixes of a ``--format csv`` run (its GNSS reader's table)
+(``bench/cli_end_to_end.py`` and ``bench/stream_rss_stages.py`` measure a
+synthesised day).
 
 The rows, the per-record outputs (innovations sidecar), the summary and the
 health verdict equal the batch run's, and the CSV, Parquet and KF-GINS files
@@ -97,7 +104,7 @@ import numpy as np
 from .. import _core
 from .._imu_scan import scan_imu
 from .._median import median
-from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_rows
+from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_rows, column
 from ..data.textio import count_columns, parse_numeric, threads
 from ..io.text_blocks import GNSS_BLOCK_LINES, LINE_BYTES_GUESS, read_gnss_text_blocks, text_blocks  # noqa: F401 (re-exported)
 from .solution import Solution
@@ -681,7 +688,11 @@ def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: s
     """The IMU blocks read ahead on the reader thread (``make_blocks()``), ``prepare(blocks) ->
     (_BlockRun, the blocks it runs)``, the writer thread writing the temporary solution file(s) beside
     ``out`` (CSV, npz or Parquet by its suffix; ``out_format`` kfgins: the KF-GINS files in the folder
-    ``out``); on any error (Ctrl-C included) the writer thread is joined and nothing is left behind."""
+    ``out``); on any error (Ctrl-C included) the writer thread is joined and nothing is left behind.
+    On glibc the allocator's mmap threshold is fixed first, for the rest of the process
+    (:func:`insnav._malloc.fix_mmap_threshold`: blocks of a few MB allocated and freed at every block
+    otherwise come from the heap and leave it growing with holes, about 0.5 MB per hour of recording)."""
+    from .._malloc import fix_mmap_threshold
     from .solution import PRECISIONS
 
     if precision not in PRECISIONS:
@@ -689,6 +700,7 @@ def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: s
     if out_format not in OUT_FORMATS:
         raise ValueError(f"out_format {out_format!r}: use one of {', '.join(OUT_FORMATS)}")
     out = Path(out)
+    fix_mmap_threshold()
     blocks = _Prefetch(make_blocks())
     writer = None
     try:
@@ -748,25 +760,72 @@ def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
             origin = RowOrigin(g.origin.source, g.origin.first_line + a)
         else:
             origin = RowOrigin(g.origin.source, g.origin.first_line, np.asarray(g.origin.lines)[a:b])
-        return GnssFixes(*(np.asarray(getattr(g, f))[a:b] for f in _GNSS_FIELDS), origin=origin)
-    return GnssFixes(*(np.asarray(getattr(g, f))[keep] for f in _GNSS_FIELDS),
+        return GnssFixes(*(_rows_view(getattr(g, f), a, b) for f in _GNSS_FIELDS), origin=origin)
+    return GnssFixes(*(column(getattr(g, f))[keep] for f in _GNSS_FIELDS),
                      origin=None if g.origin is None else g.origin.take(keep, len(keep)))
+
+
+#: times compared at a time by :func:`_window` (no whole-record temporary)
+_ORDER_BLOCK = 1 << 16
+
+
+def _window(t: np.ndarray, lo: float, hi: float) -> tuple[int, int] | None:
+    """The rows ``a .. b - 1`` of ``t`` in (``lo``, ``hi``] when ``t`` never decreases (judged
+    :data:`_ORDER_BLOCK` values at a time; NaN: not in order), else None (a mask's business)."""
+    from ..data.checks import _in_time_order
+
+    t = np.asarray(t, float)
+    if not _in_time_order(t, _ORDER_BLOCK):
+        return None
+    return int(np.searchsorted(t, lo, side="right")), int(np.searchsorted(t, hi, side="right"))
+
+
+def _gnss_window(g: GnssFixes, lo: float, hi: float) -> GnssFixes:
+    """The fixes in (``lo``, ``hi``] [s]: views of ``g``'s columns when they are in time order (found by
+    bisection, no mask of the whole record), else :func:`_gnss_take` of the mask."""
+    w = _window(g.t_valid, lo, hi)
+    if w is None:
+        tv = np.asarray(g.t_valid)
+        return _gnss_take(g, (tv > lo) & (tv <= hi))
+    a, b = w
+    if g.origin is None:
+        origin = None
+    elif g.origin.lines is None:
+        origin = RowOrigin(g.origin.source, g.origin.first_line + a)
+    else:
+        origin = RowOrigin(g.origin.source, g.origin.first_line, np.asarray(g.origin.lines)[a:b])
+    return GnssFixes(*(_rows_view(getattr(g, f), a, b) for f in _GNSS_FIELDS), origin=origin)
+
+
+def _count_window(t, lo: float, hi: float) -> int:
+    """How many of the times ``t`` lie in (``lo``, ``hi``]."""
+    w = _window(t, lo, hi)
+    if w is not None:
+        return w[1] - w[0]
+    t = np.asarray(t, float)
+    return int(np.count_nonzero((t > lo) & (t <= hi)))
+
+
+def _rows_view(x, a: int, b: int):
+    """Rows ``a .. b - 1`` of a column: a view (of an array, or of a column read on demand, nothing read)."""
+    return x.view(a, b) if getattr(x, "on_demand", False) else np.asarray(x)[a:b]
 
 
 def _fixes_equal(a: GnssFixes, b: GnssFixes, keep, block: int = GNSS_PUSH_MAX) -> bool:
     """Whether ``a`` holds the fixes of ``b`` where ``keep`` (NaN equal to NaN; every field but
     ``t_arrival``), compared :data:`GNSS_PUSH_MAX` fixes at a time (no whole-record copy of ``b``'s
     columns: the fixes in time order cut at the last IMU sample keep a leading run of them)."""
-    idx = np.flatnonzero(keep)
+    n = len(b)
+    idx = range(n)[keep] if isinstance(keep, slice) else np.flatnonzero(keep)  # a slice: no index array
     if len(a) != len(idx):
         return False
-    n = len(keep)
     for k in range(0, len(idx), block):
         rows = idx[k:k + block]
+        rows = slice(rows.start, rows.stop) if isinstance(rows, range) else rows
         for f in _GNSS_FIELDS:
             if f == "t_arrival":
                 continue
-            x, y = np.asarray(getattr(a, f), float), np.asarray(getattr(b, f), float)
+            x, y = column(getattr(a, f)), column(getattr(b, f))
             if x.ndim == 2 or y.ndim == 2:
                 x, y = x.reshape(len(a), 3), y.reshape(n, 3)
             if not np.array_equal(x[k:k + block], y[rows], equal_nan=True):
@@ -779,7 +838,7 @@ class _FixSlice:
 
     def __init__(self, g: GnssFixes, idx):
         for f in ("t_valid", "lat_deg", "lon_deg", "h_m", "v_n", "sigma_pos_n", "sigma_vel_n"):
-            setattr(self, f, np.asarray(getattr(g, f))[idx])
+            setattr(self, f, column(getattr(g, f))[idx])
 
     def __len__(self):
         return len(self.t_valid)
@@ -930,17 +989,17 @@ class _BlockRun:
         from .sanitize import sanitize_gnss_blocks
 
         cfg, o = self.cfg, self.opts
-        tv = np.asarray(self.gnss_raw.t_valid)
-        g = (tv > self.t0) & (tv <= (np.inf if self.end_s is None else self.end_s))
-        self.gnss, self.gnss_rep = sanitize_gnss_blocks(_gnss_take(self.gnss_raw, g), min_h_m=o["min_h_m"],
-                                                        max_h_m=o["max_h_m"], source="gnss")
+        cut = _gnss_window(self.gnss_raw, self.t0, np.inf if self.end_s is None else self.end_s)
+        self.gnss, self.gnss_rep = sanitize_gnss_blocks(cut, min_h_m=o["min_h_m"], max_h_m=o["max_h_m"],
+                                                        source="gnss")
+        del cut
         cfg.output_decimation = 1
         if self.output_rate_hz is not None:
             cfg.output_decimation = self.set_decimation(t_first, self.output_rate_hz)
         gn = self.gnss
         t_all = np.asarray(gn.t_valid, float)
         # the loose table's order (loose_gnss_rows: by time, stable), its rows made a block's fixes at a time
-        self.order = None if bool(np.all(t_all[1:] >= t_all[:-1])) else np.argsort(t_all, kind="stable")
+        self.order = None if _window(t_all, -np.inf, np.inf) is not None else np.argsort(t_all, kind="stable")
         self.gnss_t = t_all if self.order is None else t_all[self.order]
         for a in range(0, len(t_all), GNSS_PUSH_MAX):  # the table's checks on every fix before the run
             self._gnss_rows(a, min(a + GNSS_PUSH_MAX, len(t_all)))
@@ -979,18 +1038,19 @@ class _BlockRun:
         path runs.  ``records``: the per-fix records written."""
         from .sanitize import sanitize_gnss_blocks
 
-        keep = np.asarray(self.gnss.t_valid) <= self.last_kept
-        if keep.all():
-            if records != len(keep):  # pragma: no cover - every fix up to the last sample is consumed
-                raise RuntimeError(f"{records} GNSS records written for {len(keep)} fixes")
+        n_keep = _count_window(self.gnss.t_valid, -np.inf, self.last_kept)
+        if n_keep == len(self.gnss):
+            if records != n_keep:  # pragma: no cover - every fix up to the last sample is consumed
+                raise RuntimeError(f"{records} GNSS records written for {n_keep} fixes")
             return
-        tv = np.asarray(self.gnss_raw.t_valid)
-        g2, rep2 = sanitize_gnss_blocks(_gnss_take(self.gnss_raw, (tv > self.t0) & (tv <= self.last_kept)),
+        # the kept fixes: the first n_keep when in time order (the engine's order), else a mask
+        keep = slice(0, n_keep) if self.order is None else np.asarray(self.gnss.t_valid) <= self.last_kept
+        g2, rep2 = sanitize_gnss_blocks(_gnss_window(self.gnss_raw, self.t0, self.last_kept),
                                         min_h_m=self.opts["min_h_m"], max_h_m=self.opts["max_h_m"], source="gnss")
         counts = ("gnss_records_in", "gnss_records_out")
         same = ({k: v for k, v in rep2.items() if k not in counts}
                 == {k: v for k, v in self.gnss_rep.items() if k not in counts}
-                and len(g2) == int(keep.sum())
+                and len(g2) == n_keep
                 and _fixes_equal(g2, self.gnss, keep)
                 and _median_spacing(self.cfg, g2.t_valid) == _median_spacing(self.cfg, self.gnss.t_valid))
         if not same:
@@ -1008,11 +1068,11 @@ class _BlockRun:
         rec = self.stream.records()  # the counters (every record was taken block by block)
         self._exact_gnss_cut(innovations.n)
         gnss_t = self.gnss_t  # the fixes' times in the records' order (sorted, stable)
-        tv = np.asarray(self.gnss_raw.t_valid)
-        n_in = int(np.count_nonzero((tv > self.t0) & (tv <= self.last_kept)))
+        n_all = len(self.gnss_raw)
         scenario = dict(self.ds0.scenario or {})
         if self.count_cut_gnss:
-            scenario["gnss_outside_imu_span"] = int(tv.size - n_in)
+            scenario["gnss_outside_imu_span"] = int(n_all - _count_window(self.gnss_raw.t_valid, self.t0,
+                                                                          self.last_kept))
         ds = dataclasses.replace(self.ds0, t0=self.t0, imu=self.coarse.imu(imu_source), gnss=self.gnss,
                                  scenario=scenario)
         try:  # the unit and time-base checks on the IMU summed to 10 Hz (a failure: the batch path's message)

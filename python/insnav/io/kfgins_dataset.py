@@ -150,7 +150,8 @@ def kfgins_stream_inputs(config_path, imu_path=None, gnss_path=None, *, layout: 
     c, imu_path, gnss_path = _kfgins_files(config_path, imu_path, gnss_path)
     from .text_blocks import read_gnss_text_blocks
 
-    gnss = read_gnss_text_blocks(gnss_path)  # in blocks, 7 float64 per fix (read, never written)
+    # in blocks; a plain file's fixes read back on demand (the times held, 8 bytes per fix), a compressed one's held
+    gnss = read_gnss_text_blocks(gnss_path, on_demand=True)
     initial, cfg = _kfgins_run_config(c, config_path, layout)
     scenario = {"kfgins_config": str(config_path), "gnss_outside_imu_span": 0}
     ds = Dataset(imu=None, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None, scenario=scenario,
