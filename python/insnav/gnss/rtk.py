@@ -780,7 +780,7 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions, *, base_source
 def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
     """Code-only position of the base receiver [m] (ECEF), the median over up to ``n_epochs``
     epochs spread over the file of the per-epoch least-squares fixes of the SPP solver
-    (:func:`insnav.gnss.spp._position_fit`: position and one receiver clock per system, unit
+    (:func:`insnav.gnss.code_fix._position_fit`: position and one receiver clock per system, unit
     weights, no atmosphere models), started from ``r0_e``; the satellite positions rotated by the
     Earth's rate over the signal's travel time from ``r0_e`` (Sagnac; a start 1000 km off moves it
     by a few metres); ``(r_e, epochs used)``, or ``(None, 0)`` when no epoch has enough satellites.
@@ -788,7 +788,7 @@ def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
     ``rs``, ``clk``: the satellite positions [m] and clocks [m] of the base's rows
     (:func:`transmit_states`)."""
     from ..earth import OMEGA_IE
-    from .spp import _position_fit
+    from .code_fix import _position_fit
 
     code = _first_code(base)
     ne = base.epoch_t_gps_s.size
