@@ -766,11 +766,13 @@ class RunConfig:
     init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None
         Initial estimate of the IMU errors (measured minus true; scale factors
         [-]); None: zero.  KF-GINS's ``initaccbias``/``initgyrbias``/
-        ``initaccscale``/``initgyrscale``.  Loose runs.
+        ``initaccscale``/``initgyrscale``.  Loose runs; the bias keys also
+        tight runs.
     init_sigma_acc_bias_mps2, init_sigma_gyro_bias_radps, init_sigma_acc_scale, init_sigma_gyro_scale : 3 floats or None
         Initial 1-sigma of those states; None: the IMU noise model's bias and
         scale-factor sigmas.  KF-GINS's ``initbastd``/``initbgstd``/
-        ``initsastd``/``initsgstd``.  Loose runs.
+        ``initsastd``/``initsgstd``.  Loose runs; the bias keys also tight
+        runs.
     imu_error_sigmas : bool
         Also keep the 1-sigma of the IMU-error states (biases, scale factors)
         for every output row (``Solution.sigma_imu_err``; loose runs).
@@ -1082,8 +1084,9 @@ class RunConfig:
             sigma = key.startswith("init_sigma")
             if a.shape != (3,) or not np.all(np.isfinite(a)) or (sigma and np.any(a < 0)):
                 bad(key, v, "3 finite values" + (" >= 0" if sigma else ""))
-            if self.coupling != "loose":
-                bad(key, v, "absent: the initial IMU-error estimate and sigmas apply to loose runs")
+            if self.coupling != "loose" and not (self.coupling == "tight" and "bias" in key):
+                bad(key, v, "absent: the initial IMU-error estimate and sigmas apply to loose runs (the bias "
+                    "keys also to tight runs)")
             if "scale" in key and self.layout != 21:
                 bad(key, v, "absent: scale factors are states of layout = 21 only")
         return self
