@@ -578,6 +578,9 @@ class Tdcp:
         (stochastic cloning of the previous epoch's error state, Roumeliotis
         & Burdick 2002); needs carrier phase in the tight inputs (RINEX data:
         ``insnav run --format rinex``), the tight ``ekf``, and no ``smooth``.
+        With ``[time] estimate_offset`` or ``[lever_arm] estimate`` the rows
+        carry the time-offset and lever-arm columns (each the difference of
+        the two epochs' range columns, meas/tdcp.hpp).
     sigma_phase_m : float
         Zero-difference carrier-phase 1-sigma at zenith [m], divided by
         sin(elevation) (floor 5 deg); a TDCP row's variance is the sum of its
@@ -1023,9 +1026,6 @@ class RunConfig:
             if k not in settable:
                 raise ConfigError(f"unknown key 'options.{k}' for filter {self.filter!r} {self.coupling}"
                                   + (_suggest(k, settable) if settable else "; it takes no options"))
-        if self.tdcp.enabled and (self.time.estimate_offset or self.lever_arm.estimate):
-            bad("tdcp.enabled", True, "false together with time.estimate_offset or lever_arm.estimate (the TDCP "
-                "rows carry no self-calibration columns)")
         if self.lever_arm.estimate_odometer:
             if not (set(self.constraints.use) & {"nhc", "odo"}):
                 bad("lever_arm.estimate_odometer", True, "false without nhc or odo in constraints.use "
