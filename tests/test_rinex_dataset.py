@@ -347,3 +347,60 @@ def test_tick_time_map_recovers_a_known_clock(tmp_path):
     assert np.allclose(s.acc_b[0], [0.0, -0.01 * G0, G0], atol=1e-9)
     with pytest.raises(ValueError, match="drift apart by"):
         tick_time_map(np.arange(1000) * 0.01, np.arange(1000) * 0.012)  # 20 % apart over 10 s
+
+
+# --------------------------------------------------------------------------- gyro bias from the standstill
+
+
+def _static_then_moving(bias_rps, sigma_w=2e-3, rate=150.0, t_still=4.0, t_move=3.0, seed=5):
+    """IMU increments (body FRD): t_still s standing level with a constant gyro bias and white noise,
+    then t_move s rotating at 1 rad/s with 2 m/s^2 of horizontal acceleration."""
+    from insnav.data.dataset import ImuData
+
+    rng = np.random.default_rng(seed)
+    dt = 1.0 / rate
+    n_s, n_m = int(t_still * rate), int(t_move * rate)
+    t = 100.0 + dt * np.arange(1, n_s + n_m + 1)
+    w = np.asarray(bias_rps) + sigma_w * rng.standard_normal((t.size, 3))
+    f = np.tile([0.0, 0.0, -9.81], (t.size, 1)) + 1e-3 * rng.standard_normal((t.size, 3))
+    w[n_s:, 2] += 1.0
+    f[n_s:, 0] += 2.0
+    return ImuData(t, w * dt, f * dt), t[n_s - 1], t[-1], sigma_w, n_s
+
+
+def test_static_gyro_bias_is_the_mean_rate_of_the_standstill():
+    """init_gyro_bias = "static": the mean rate of the stationary samples before the start, within its
+    own sigma of the true bias (the moving samples after the standstill and after the start left out),
+    the sigma the standard error and the Earth rate in quadrature."""
+    from insnav.earth import OMEGA_IE
+    from insnav.io.rinex_dataset import static_gyro_bias
+
+    b = np.radians([0.15, -0.09, -0.19])
+    imu, t_still_end, t_end, sigma_w, n_s = _static_then_moving(b)
+    bias, sigma, n = static_gyro_bias(imu, t_end)  # the start after the motion: motion samples excluded
+    assert 0.8 * n_s <= n <= n_s  # the detector's window fills first; no moving sample
+    sem = sigma_w / math.sqrt(n)
+    assert np.all(np.abs(np.asarray(bias) - b) < 4 * sem)
+    np.testing.assert_allclose(sigma, np.hypot(sem, OMEGA_IE), rtol=0.1)
+    # a start before any standstill: a one-line error naming the key
+    with pytest.raises(ValueError, match='init_gyro_bias = "static": 0.00 s of standstill'):
+        static_gyro_bias(imu, imu.t[20])
+    assert RinexOptions.from_dict({"init_gyro_bias": "static"}).init_gyro_bias == "static"
+    with pytest.raises(ConfigError, match=r"'rinex.init_gyro_bias': bad value 'mean'"):
+        RinexOptions.from_dict({"init_gyro_bias": "mean"})
+
+
+def test_walk_static_gyro_bias_reaches_the_tight_filter(walk_files):
+    """The walk stands still for ~3 s before it starts: the static gyro bias (0.15-0.19 deg/s per axis,
+    far above the consumer gyro's 0.005 deg/s sigma of that mean) is the tight filter's first estimate."""
+    ds, cfg = load_rinex(walk_files["obs"], walk_files["nav"], walk_files["imu"],
+                         dict(WALK_OPTIONS, end_s=30.0, init_gyro_bias="static"))
+    b = np.asarray(cfg.init_gyro_bias_radps)
+    s = np.asarray(cfg.init_sigma_gyro_bias_radps)
+    assert ds.info["gyro_bias_static"]["samples"] > 150  # > 1 s at ~167 Hz
+    assert np.all(np.abs(np.degrees(b)) > 0.05) and np.all(np.degrees(s) < 0.01)
+    sol = run_tight(ds, cfg)
+    np.testing.assert_allclose(sol.gyro_bias_rps[0], b, atol=float(3 * s.max()))
+    zero = run_tight(ds, load_rinex(walk_files["obs"], walk_files["nav"], walk_files["imu"],
+                                    dict(WALK_OPTIONS, end_s=30.0))[1])
+    assert np.abs(zero.gyro_bias_rps[0]).max() < np.radians(0.05)

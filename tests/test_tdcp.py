@@ -1,7 +1,9 @@
 """Time-differenced carrier phase in the tight EKF (cpp/include/insnav/meas/tdcp.hpp).
 
 * The TDCP row with a lever arm against a numerical Jacobian of its own prediction
-  (both epochs' error states, error = computed - true as fed back).
+  (both epochs' error states, error = computed - true as fed back); the lever-arm and
+  time-offset columns of the self-calibration layout against numerical derivatives, and
+  the shifted prediction against the exact range change of a constant-velocity receiver.
 * A stationary receiver whose body yaws (the antenna on a lever arm turns about the
   IMU), exact IMU increments and exact carrier phases of moving satellites: the
   INS-predicted phase change equals the measured one to 1e-6 m.
@@ -74,6 +76,80 @@ def test_tdcp_row_with_lever_arm_matches_numerical_jacobian():
         np.testing.assert_allclose(H, num, atol=2e-5, rtol=1e-4)
         assert np.abs(H[6:9]).max() > 0.1  # the lever arm term is there (0.8 m arm)
 
+
+
+def test_tdcp_row_selfcal_columns_match_numerical_jacobian():
+    """LayoutTightTdLever (21 states): the lever-arm and time-offset columns of a TDCP row are the
+    differences of the two epochs' range columns (meas/tdcp.hpp); the time-offset column of each epoch
+    against the derivative of the prediction with respect to that epoch's shift (the true antenna is the
+    INS at t - shift + dt_d), the lever-arm columns against a common lever-arm perturbation."""
+    prev = np.array([0.0, 31.2 * DEG, 121.5 * DEG, 20.0, 1.2, -0.7, 0.1, 3 * DEG, -2 * DEG, 40 * DEG])
+    cur = np.array([0.25, 31.2 * DEG + 2e-7, 121.5 * DEG + 1e-7, 20.1, 0.4, 0.9, -0.2, 4 * DEG, -1 * DEG, 55 * DEG])
+    lever = np.array([0.4, -0.3, 0.6])
+    w_p, w_c = np.array([0.2, -0.1, 0.5]), np.array([-0.3, 0.4, 0.1])  # [rad/s]
+    r0 = earth.geodetic_to_ecef(prev[1], prev[2], prev[3])
+    los = r0 / np.linalg.norm(r0) + np.array([0.3, -0.5, 0.2])
+    sat_p = np.r_[r0 + 2.2e7 * los / np.linalg.norm(los), 1234.5]
+    sat_c = sat_p + np.r_[3000.0 * 0.25, -1500.0 * 0.25, 800.0 * 0.25, 0.07]
+    b_p, b_c = 1000.0, 1000.3
+
+    def row(lev=lever, s_p=0.02, s_c=0.05, layout=21):
+        return _core.tdcp_row(prev, cur, lev, sat_p, sat_c, b_p, b_c, omega_ib_b_prev=w_p, omega_ib_b_cur=w_c,
+                              shift_prev_s=s_p, shift_cur_s=s_c, layout=layout)
+
+    r21, r17 = row(), row(layout=17)
+    H_c, H_p = np.asarray(r21["H_cur"]), np.asarray(r21["H_prev"])
+    assert H_c.shape == (21,)
+    assert r21["predicted"] == r17["predicted"]
+    np.testing.assert_array_equal(H_c[:17], r17["H_cur"])  # the 17 navigation/clock columns unchanged
+    np.testing.assert_array_equal(H_p[:17], r17["H_prev"])
+    eps = 1e-3  # [s]: central differences of ranges of 2e7 m in doubles
+    num_c = (row(s_c=0.05 + eps)["predicted"] - row(s_c=0.05 - eps)["predicted"]) / (2 * eps)
+    num_p = (row(s_p=0.02 + eps)["predicted"] - row(s_p=0.02 - eps)["predicted"]) / (2 * eps)
+    np.testing.assert_allclose([H_c[20], H_p[20]], [num_c, num_p], rtol=1e-4, atol=2e-5)
+    assert abs(H_c[20]) > 0.1 and abs(H_p[20]) > 0.1  # the velocities make a column of order 1 m/s
+    # the lever-arm columns (unshifted: the shift's own lever-arm term, shift x omega x dl, is second order
+    # and left out as in pseudorange.hpp): the sum against a common perturbation dl_b = l_b^ - l_b ...
+    r0 = row(s_p=0.0, s_c=0.0)
+    H_c, H_p = np.asarray(r0["H_cur"]), np.asarray(r0["H_prev"])
+    num_l = np.zeros(3)
+    for j in range(3):
+        dl = np.zeros(3)
+        dl[j] = 1e-2
+        num_l[j] = (row(lever + dl, 0.0, 0.0)["predicted"] - row(lever - dl, 0.0, 0.0)["predicted"]) / 2e-2
+    np.testing.assert_allclose(H_c[17:20] + H_p[17:20], num_l, atol=2e-5, rtol=1e-4)
+    assert np.abs(H_c[17:20] + H_p[17:20]).max() > 0.05  # the 15 deg turn between the epochs
+    # ... and each epoch's column is its position column (-u^T, +u^T) rotated by that epoch's C_nb
+    for H, x in ((H_c, cur), (H_p, prev)):
+        C_nb = np.asarray(_core.rotation.dcm_from_euler(np.asarray(x[7:10], float)))
+        np.testing.assert_allclose(H[17:20], H[0:3] @ C_nb, atol=1e-12)
+
+
+def test_tdcp_row_shift_analytic_constant_velocity():
+    """A receiver moving at a constant ECEF velocity; each INS state is taken shift_j after its epoch's
+    time (the time-offset estimate moved it).  The shifted prediction equals the exact range and clock
+    difference at the epochs' true positions (the first-order move is exact on a straight line; the
+    range's curvature over the 0.5 m shift is 1e-8 m)."""
+    lat0, lon0, h0 = 45.0 * DEG, 7.0 * DEG, 300.0
+    r0 = earth.geodetic_to_ecef(lat0, lon0, h0)
+    v_e = earth.ned_to_ecef_vector(lat0, lon0, np.array([8.0, -6.0, 0.5]))
+    sats = [r0 + 2.2e7 * u / np.linalg.norm(u) for u in (r0 / np.linalg.norm(r0) + np.array([0.2, 0.1, -0.3]),
+                                                          r0 / np.linalg.norm(r0) + np.array([-0.4, 0.3, 0.1]))]
+    t_p, t_c, s_p, s_c = 0.0, 0.25, 0.03, -0.04
+
+    def state(t):
+        r = r0 + v_e * t
+        lat, lon, h = earth.ecef_to_geodetic(r)
+        return np.r_[t, lat, lon, h, earth.ecef_to_ned_vector(lat, lon, v_e), 0.0, 0.0, 0.0]
+
+    for rs in sats:
+        exact = np.linalg.norm(rs - (r0 + v_e * t_c)) - np.linalg.norm(rs - (r0 + v_e * t_p))
+        out = _core.tdcp_row(state(t_p + s_p), state(t_c + s_c), np.zeros(3), np.r_[rs, 0.0], np.r_[rs, 0.0],
+                             0.0, 0.0, shift_prev_s=s_p, shift_cur_s=s_c, layout=21)
+        assert abs(out["predicted"] - exact) < 1e-6
+        unshifted = _core.tdcp_row(state(t_p + s_p), state(t_c + s_c), np.zeros(3), np.r_[rs, 0.0],
+                                   np.r_[rs, 0.0], 0.0, 0.0, layout=21)
+        assert abs(unshifted["predicted"] - exact) > 1e-3  # the shift matters: u.v (s_c - s_p), mm to cm
 
 # ------------------------------------------------------------------ engine cases
 LAT, LON, H0 = 30.5 * DEG, 114.3 * DEG, 25.0
@@ -268,11 +344,11 @@ def test_walk_tdcp_from_the_command_line(tmp_path, shared_data):
     assert spread["tdcp"] < 0.7 * spread["code"]
 
 
-def test_tdcp_refuses_self_calibration_states():
-    """TDCP rows have no time-offset or lever-arm columns: the combination is refused by key."""
-    from insnav.config import ConfigError, RunConfig, Tdcp
+def test_tdcp_accepts_self_calibration_states():
+    """TDCP rows carry the time-offset and lever-arm columns (meas/tdcp.hpp): the combination validates."""
+    from insnav.config import RunConfig, Tdcp
 
     for extra in (dict(time={"estimate_offset": True}), dict(lever_arm={"estimate": True})):
-        cfg = RunConfig(filter="ekf", coupling="tight", tdcp=Tdcp(enabled=True), **extra)
-        with pytest.raises(ConfigError, match="tdcp.enabled"):
-            cfg.validate()
+        cfg = config_from_dict(dict(filter="ekf", coupling="tight", tdcp={"enabled": True}, **extra)).validate()
+        assert cfg.tdcp.enabled and cfg.selfcal
+    assert RunConfig(filter="ekf", coupling="tight", tdcp=Tdcp(enabled=True)).validate().selfcal is False

@@ -75,33 +75,52 @@ void bind_tight(py::module_& m) {
   m.def(
       "tdcp_row",
       [](const DArray& prev, const DArray& cur, const DArray& lever_arm_b, const DArray& sat_prev, const DArray& sat_cur,
-         double clock_bias_prev_m, double clock_bias_cur_m) {
+         double clock_bias_prev_m, double clock_bias_cur_m, const py::object& omega_ib_b_prev,
+         const py::object& omega_ib_b_cur, double shift_prev_s, double shift_cur_s, int layout) {
         auto sat = [](const DArray& s, const char* name) {
           if (s.size() != 4) throw py::value_error(std::string(name) + ": expected 4 values (x, y, z [m], c dt_sv [m])");
           return TdcpSatEpoch{Vec3(s.data()[0], s.data()[1], s.data()[2]), s.data()[3]};
         };
+        auto vec3 = [](const py::object& o, const char* name) {
+          if (o.is_none()) return Vec3(Vec3::Zero());
+          const DArray a = py::cast<DArray>(o);
+          if (a.size() != 3) throw py::value_error(std::string(name) + ": expected 3 values [rad/s]");
+          return Vec3(a.data()[0], a.data()[1], a.data()[2]);
+        };
         if (lever_arm_b.size() != 3) throw py::value_error("lever_arm_b: expected 3 values [m]");
         const Vec3 l(lever_arm_b.data()[0], lever_arm_b.data()[1], lever_arm_b.data()[2]);
-        const TdcpRow<Layout17> r =
-            tdcp_row<Layout17>(tdcp_antenna(nav_state_from(prev), l, clock_bias_prev_m),
-                               tdcp_antenna(nav_state_from(cur), l, clock_bias_cur_m), sat(sat_prev, "sat_prev"),
-                               sat(sat_cur, "sat_cur"));
-        py::dict d;
-        d["predicted"] = r.predicted;
-        DArray hc({py::ssize_t(Layout17::kSize)}), hp({py::ssize_t(Layout17::kSize)});
-        for (int i = 0; i < Layout17::kSize; ++i) {
-          hc.mutable_data()[i] = r.H_cur[i];
-          hp.mutable_data()[i] = r.H_prev[i];
-        }
-        d["H_cur"] = hc;
-        d["H_prev"] = hp;
-        return d;
+        const TdcpAntenna a_prev = tdcp_antenna(nav_state_from(prev), l, clock_bias_prev_m,
+                                                vec3(omega_ib_b_prev, "omega_ib_b_prev"), shift_prev_s);
+        const TdcpAntenna a_cur =
+            tdcp_antenna(nav_state_from(cur), l, clock_bias_cur_m, vec3(omega_ib_b_cur, "omega_ib_b_cur"), shift_cur_s);
+        auto rows = [&](auto tag) {
+          using Lr = decltype(tag);
+          const TdcpRow<Lr> r = tdcp_row<Lr>(a_prev, a_cur, sat(sat_prev, "sat_prev"), sat(sat_cur, "sat_cur"));
+          py::dict d;
+          d["predicted"] = r.predicted;
+          DArray hc({py::ssize_t(Lr::kSize)}), hp({py::ssize_t(Lr::kSize)});
+          for (int i = 0; i < Lr::kSize; ++i) {
+            hc.mutable_data()[i] = r.H_cur[i];
+            hp.mutable_data()[i] = r.H_prev[i];
+          }
+          d["H_cur"] = hc;
+          d["H_prev"] = hp;
+          return d;
+        };
+        if (layout == 17) return rows(Layout17{});
+        if (layout == 21) return rows(LayoutTightTdLever{});
+        throw py::value_error("tdcp_row: layout must be 17 or 21 (LayoutTightTdLever)");
       },
       py::arg("prev"), py::arg("cur"), py::arg("lever_arm_b"), py::arg("sat_prev"), py::arg("sat_cur"),
-      py::arg("clock_bias_prev_m"), py::arg("clock_bias_cur_m"),
-      "The TDCP row of meas/tdcp.hpp (Layout17): INS-predicted phase change [m] between the navigation states "
+      py::arg("clock_bias_prev_m"), py::arg("clock_bias_cur_m"), py::arg("omega_ib_b_prev") = py::none(),
+      py::arg("omega_ib_b_cur") = py::none(), py::arg("shift_prev_s") = 0.0, py::arg("shift_cur_s") = 0.0,
+      py::arg("layout") = 17,
+      "The TDCP row of meas/tdcp.hpp: INS-predicted phase change [m] between the navigation states "
       "prev and cur (10 values: t, lat, lon [rad], h [m], v_n [m/s], roll, pitch, yaw [rad]) and its "
-      "Jacobians H_cur, H_prev (17,) with respect to the error states of the two epochs.");
+      "Jacobians H_cur, H_prev with respect to the error states of the two epochs: (17,) for layout=17, (21,) "
+      "for layout=21 (LayoutTightTdLever: + lever arm at 17-19, time offset at 20).  omega_ib_b_*: the "
+      "corrected angular rate [rad/s] (the lever arm's velocity); shift_*_s: how far each state is past its "
+      "epoch's applied time [s] (the antenna is moved back along its velocity).");
 
   m.def(
       "pseudorange_gm_fold_check",

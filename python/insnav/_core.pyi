@@ -114,6 +114,11 @@ def tdcp_row(
     sat_cur: npt.ArrayLike,
     clock_bias_prev_m: float,
     clock_bias_cur_m: float,
+    omega_ib_b_prev: npt.ArrayLike | None = None,  # (3,) corrected angular rate [rad/s] (lever-arm velocity)
+    omega_ib_b_cur: npt.ArrayLike | None = None,
+    shift_prev_s: float = 0.0,  # how far the state is past its epoch's applied time [s]
+    shift_cur_s: float = 0.0,
+    layout: int = 17,  # 17, or 21 (LayoutTightTdLever: lever arm 17-19, time offset 20)
 ) -> dict[str, Any]: ...
 def pseudorange_gm_fold_check(
     Pxx: npt.ArrayLike,  # (17, 17) navigation error covariance

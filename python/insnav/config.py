@@ -578,6 +578,9 @@ class Tdcp:
         (stochastic cloning of the previous epoch's error state, Roumeliotis
         & Burdick 2002); needs carrier phase in the tight inputs (RINEX data:
         ``insnav run --format rinex``), the tight ``ekf``, and no ``smooth``.
+        With ``[time] estimate_offset`` or ``[lever_arm] estimate`` the rows
+        carry the time-offset and lever-arm columns (each the difference of
+        the two epochs' range columns, meas/tdcp.hpp).
     sigma_phase_m : float
         Zero-difference carrier-phase 1-sigma at zenith [m], divided by
         sin(elevation) (floor 5 deg); a TDCP row's variance is the sum of its
@@ -766,11 +769,13 @@ class RunConfig:
     init_acc_bias_mps2, init_gyro_bias_radps, init_acc_scale, init_gyro_scale : 3 floats or None
         Initial estimate of the IMU errors (measured minus true; scale factors
         [-]); None: zero.  KF-GINS's ``initaccbias``/``initgyrbias``/
-        ``initaccscale``/``initgyrscale``.  Loose runs.
+        ``initaccscale``/``initgyrscale``.  Loose runs; the bias keys also
+        tight runs.
     init_sigma_acc_bias_mps2, init_sigma_gyro_bias_radps, init_sigma_acc_scale, init_sigma_gyro_scale : 3 floats or None
         Initial 1-sigma of those states; None: the IMU noise model's bias and
         scale-factor sigmas.  KF-GINS's ``initbastd``/``initbgstd``/
-        ``initsastd``/``initsgstd``.  Loose runs.
+        ``initsastd``/``initsgstd``.  Loose runs; the bias keys also tight
+        runs.
     imu_error_sigmas : bool
         Also keep the 1-sigma of the IMU-error states (biases, scale factors)
         for every output row (``Solution.sigma_imu_err``; loose runs).
@@ -1021,9 +1026,6 @@ class RunConfig:
             if k not in settable:
                 raise ConfigError(f"unknown key 'options.{k}' for filter {self.filter!r} {self.coupling}"
                                   + (_suggest(k, settable) if settable else "; it takes no options"))
-        if self.tdcp.enabled and (self.time.estimate_offset or self.lever_arm.estimate):
-            bad("tdcp.enabled", True, "false together with time.estimate_offset or lever_arm.estimate (the TDCP "
-                "rows carry no self-calibration columns)")
         if self.lever_arm.estimate_odometer:
             if not (set(self.constraints.use) & {"nhc", "odo"}):
                 bad("lever_arm.estimate_odometer", True, "false without nhc or odo in constraints.use "
@@ -1082,8 +1084,9 @@ class RunConfig:
             sigma = key.startswith("init_sigma")
             if a.shape != (3,) or not np.all(np.isfinite(a)) or (sigma and np.any(a < 0)):
                 bad(key, v, "3 finite values" + (" >= 0" if sigma else ""))
-            if self.coupling != "loose":
-                bad(key, v, "absent: the initial IMU-error estimate and sigmas apply to loose runs")
+            if self.coupling != "loose" and not (self.coupling == "tight" and "bias" in key):
+                bad(key, v, "absent: the initial IMU-error estimate and sigmas apply to loose runs (the bias "
+                    "keys also to tight runs)")
             if "scale" in key and self.layout != 21:
                 bad(key, v, "absent: scale factors are states of layout = 21 only")
         return self

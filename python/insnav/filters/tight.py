@@ -36,8 +36,8 @@ from ..config import ConfigError, ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
-from ._setup import (EngineArgs, engine_config, imu_arrays, init_vector, initial_clock, initial_state,
-                     raise_if_nonfinite, tight_inputs_for)
+from ._setup import (EngineArgs, engine_config, imu_arrays, init_vector, initial_clock, initial_imu_correction,
+                     initial_state, raise_if_nonfinite, tight_inputs_for)
 from ._assemble import nav_solution
 from .loose import put_selfcal, selfcal_setup
 from .solution import Solution
@@ -232,8 +232,10 @@ def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = N
     n = int(layout)
     p0 = np.zeros(n)
     p0[:9] = sig0
-    p0[9:12] = noise.acc_bias_sigma
-    p0[12:15] = noise.gyro_bias_sigma
+    # the initial IMU-bias estimate and sigmas of the run config (e.g. the RINEX loader's gyro bias from the
+    # standstill before the start, insnav.io.rinex_dataset); the noise model's bias sigmas otherwise
+    p0[9:12] = noise.acc_bias_sigma if cfg.init_sigma_acc_bias_mps2 is None else cfg.init_sigma_acc_bias_mps2
+    p0[12:15] = noise.gyro_bias_sigma if cfg.init_sigma_gyro_bias_radps is None else cfg.init_sigma_gyro_bias_radps
     p0[15:17] = init_sigma_clock
     if n == 20:
         model["isb_psd"] = float(isb_psd)
@@ -261,7 +263,8 @@ def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = N
     if cfg.adaptive_q_window:  # adaptive process noise (filter/adaptive_noise.hpp, engine/tight_engine.hpp)
         core_cfg.update(adaptive_q_window=int(cfg.adaptive_q_window), adaptive_q_min=float(cfg.adaptive_q_min),
                         adaptive_q_max=float(cfg.adaptive_q_max))
-    return TightEngineArgs(layout=n, init=init_vector(dataset, init), P0=P0, imu_correction=np.zeros(12),
+    return TightEngineArgs(layout=n, init=init_vector(dataset, init), P0=P0,
+                           imu_correction=initial_imu_correction(cfg),
                            imu_model=model, config=core_cfg, clock0=tuple(clock0), clock_psd=(float(qb), float(qd)),
                            isb0=None if isb0 is None else np.asarray(isb0, float), inputs=inputs, epoch_t=ep_t,
                            system=sys_idx, sats=np.ascontiguousarray(inputs.sats, float).reshape(-1, 12),

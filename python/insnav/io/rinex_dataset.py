@@ -187,6 +187,16 @@ class RinexOptions:
     init_yaw_sigma_deg : float or None (None: 20 with "course", 10 given)
     course_min_speed_mps, course_window_s : the "course" start rule
     level_window_s : accelerometer levelling window before the start [s]
+    init_gyro_bias : "zero" or "static"
+        "static": the initial gyro-bias estimate of the run config
+        (``init_gyro_bias_radps``) is the mean angular rate of the IMU samples
+        before the start that the standstill detector marks stationary
+        (``ins/standstill.hpp``, the SHOE statistic of Skog et al. 2010 with
+        the ``[constraints]`` zupt defaults and gravity as the accelerometer
+        measures it, the median ``|f|``; at least 1 s of them), its
+        1-sigma (``init_sigma_gyro_bias_radps``) the standard error of that
+        mean and the Earth rate (left in: the heading is not known there) in
+        quadrature.  "zero" (default): zero, with the noise model's sigma.
     reference : str or None
         RTKLIB ``.pos`` reference (becomes ``dataset.truth``).
     """
@@ -221,6 +231,7 @@ class RinexOptions:
     course_min_speed_mps: float = 0.8
     course_window_s: float = 1.0
     level_window_s: float = 1.0
+    init_gyro_bias: str = "zero"
     reference: str | None = None
 
     def imu_format(self) -> ImuCsvFormat:
@@ -292,6 +303,8 @@ class RinexOptions:
                     a = np.zeros(0)
                 if a.shape != (n,) or not np.all(np.isfinite(a)):
                     bad(key, " or ".join(f'"{w}"' for w in words) + f" or {n} numbers")
+        if self.init_gyro_bias not in ("zero", "static"):
+            bad("init_gyro_bias", '"zero" or "static"')
         v = self.init_yaw_deg
         if isinstance(v, str) and v != "course" or (not isinstance(v, str) and (
                 isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v))):
@@ -613,6 +626,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     dt_imu = np.diff(imu.t, prepend=imu.t[0] - imu.dt)
     f_mean = imu.dv_b[lw].sum(axis=0) / dt_imu[lw].sum()
     roll0, pitch0 = _level(f_mean)
+    gyro_bias = static_gyro_bias(imu, t0, samples.path) if opt.init_gyro_bias == "static" else None
 
     lever = np.asarray(opt.lever_arm_b, float)
     if isinstance(opt.init_position, str):
@@ -671,7 +685,63 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
                     init_sigma_pos_m=np.asarray(sig_pos, float).tolist(),
                     init_sigma_vel_mps=np.asarray(sig_vel, float).tolist(),
                     init_sigma_att_deg=[3.0 if moving else 1.0, 3.0 if moving else 1.0, yaw_sigma])
+    if gyro_bias is not None:
+        cfg.init_gyro_bias_radps, cfg.init_sigma_gyro_bias_radps, n_still = gyro_bias
+        info["gyro_bias_static"] = dict(bias_radps=cfg.init_gyro_bias_radps,
+                                        sigma_radps=cfg.init_sigma_gyro_bias_radps, samples=n_still)
     return ds, cfg
+
+
+#: [constraints] zupt defaults of the standstill detector (insnav.config.Constraints)
+_STILL_WINDOW_S, _STILL_THRESHOLD, _STILL_SIGMA_F_MPS2, _STILL_SIGMA_W_DPS = 0.2, 18.0, 0.02, 0.115
+#: least standstill before the start for init_gyro_bias = "static" [s]
+STATIC_GYRO_BIAS_MIN_S = 1.0
+
+
+def static_gyro_bias(imu: ImuData, t0: float, where: str = "IMU log") -> tuple[list, list, int]:
+    """The gyro bias from the standstill before the start (``init_gyro_bias = "static"``).
+
+    Parameters
+    ----------
+    imu : ImuData
+        The increments, body axes, including the samples before ``t0``.
+    t0 : float
+        Start of the run [s]; only samples at or before it are used.
+    where : str
+        The file named in the error.
+
+    Returns
+    -------
+    bias_radps, sigma_radps : list of 3 floats
+        Mean angular rate of the samples the standstill detector (SHOE, Skog
+        et al. 2010, eq. (10)) marks stationary [rad/s], and its 1-sigma: the
+        standard error of the mean and the Earth rate (7.3e-5 rad/s, not
+        removed: no heading before the start) in quadrature [rad/s].
+    n : int
+        Number of stationary samples.
+    """
+    before = imu.t <= t0
+    t, dth, dv = imu.t[before], imu.dtheta_b[before], imu.dv_b[before]
+    dt = np.diff(t, prepend=t[0] - imu.dt) if t.size else t
+    rate = 1.0 / float(np.median(dt)) if t.size > 1 else 100.0
+    window = int(np.clip(round(_STILL_WINDOW_S * rate), 2, 512))
+    still = np.zeros(t.size, bool)
+    if t.size > window:
+        # gravity as this accelerometer measures it (median |f|: a consumer part's scale error of 1 % alone
+        # would put 0.1 m/s^2 = 5 sigma_f into every sample of the statistic)
+        g_meas = float(np.median(np.linalg.norm(dv, axis=1) / dt))
+        T = np.asarray(_core.standstill_statistic(np.ascontiguousarray(t), np.ascontiguousarray(dth),
+                                                  np.ascontiguousarray(dv), float(t[0]), window, _STILL_SIGMA_F_MPS2,
+                                                  _STILL_SIGMA_W_DPS * DEG, g_meas))
+        still = T < _STILL_THRESHOLD
+    if dt[still].sum() < STATIC_GYRO_BIAS_MIN_S:
+        raise ValueError(f"{where}: init_gyro_bias = \"static\": {dt[still].sum():.2f} s of standstill before the "
+                         f"start (at least {STATIC_GYRO_BIAS_MIN_S:g} s needed); set init_gyro_bias = \"zero\"")
+    w = dth[still] / dt[still, None]
+    n = int(still.sum())
+    sem = w.std(axis=0, ddof=1) / math.sqrt(n)
+    sigma = np.hypot(sem, earth.OMEGA_IE)
+    return w.mean(axis=0).tolist(), sigma.tolist(), n
 
 
 def _sat_names(system, prn) -> list[str]:

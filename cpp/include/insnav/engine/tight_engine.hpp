@@ -411,7 +411,8 @@ class TightEngine {
     if (!cfg_.tdcp.enabled || !phase_) return;
     // chained: the filter cycle began at the previous epoch (no outage cycle closed between)
     if (!have_prev_ || core_.cycle_start != t_prev_) return;
-    const TdcpAntenna cur = tdcp_antenna(core_.state(), cfg_.lever_arm_b, core_.clock_bias);
+    // the INS is max(0, state time - applied time) past the epoch, as for the code rows (set_measurement)
+    const TdcpAntenna cur = tdcp_antenna_now(std::max(0.0, core_.state().t - core_.record_time(ep_t_)));
     tdcp_.clear();
     int n = 0;
     for (std::int64_t j = ep.begin; j < ep.end && !tdcp_.full(); ++j) {
@@ -480,6 +481,14 @@ class TightEngine {
     if (out.tdcp_rows) out.tdcp_rows[g] = n;
   }
 
+  /// The antenna of the current INS state for a TDCP row (tdcp.hpp): the lever-arm estimate with the
+  /// lever-arm states, and shift_s [s] past the epoch's applied time with the time-offset state.
+  TdcpAntenna tdcp_antenna_now(double shift_s) {
+    const Vec3& l_b = kHasLeverArm<L> ? core_.lever_arm_b : cfg_.lever_arm_b;
+    return tdcp_antenna(core_.state(), l_b, core_.clock_bias, core_.omega_ib_b(),
+                        kHasTimeOffset<L> ? shift_s : 0.0);
+  }
+
   /// Keep the TDCP rows with keep[i] (and their source indices / wavelengths).
   void compact(const bool* keep, int& n) {
     tdcp_.select(keep);
@@ -499,7 +508,8 @@ class TightEngine {
     if (!cfg_.tdcp.enabled || !phase_) return;
     if (!core_.filter.x().isZero(0.0)) core_.feedback();
     P_prev_ = core_.filter.P();
-    ant_prev_ = tdcp_antenna(core_.state(), cfg_.lever_arm_b, core_.clock_bias);
+    // after the feedback the time-offset estimate may have moved the epoch's applied time: the signed shift
+    ant_prev_ = tdcp_antenna_now(core_.state().t - core_.record_time(ep.t));
     t_prev_ = core_.state().t;
     have_prev_ = true;
     for (std::int64_t j = ep.begin; j < ep.end; ++j) {

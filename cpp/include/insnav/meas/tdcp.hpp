@@ -31,6 +31,22 @@
 // with u_j the unit line of sight (antenna -> satellite) in the NED frame of
 // epoch j (each epoch's position error is in its own NED frame).
 //
+// Self-calibration columns (layout.hpp; the conventions of pseudorange.hpp).
+// A TDCP row is the difference of two epochs' ranges, so each of its
+// self-calibration columns is the difference of the two epochs' columns of
+// the range.  Lever arm, dl_b = l_b^ - l_b:
+//   H_k += -u_k^T C_nb,k,   H_{k-1} += +u_{k-1}^T C_nb,k-1
+// Time offset, dt_d = t_d^ - t_d (the true antenna of epoch j is the INS at
+// t_j - shift_j + dt_d, d r_ant = -v_ant dt_d; pseudorange.hpp):
+//   H_k += +u_k^T v_ant,k,  H_{k-1} += -u_{k-1}^T v_ant,k-1
+// i.e. minus the change of the receiver's range rate over the epoch interval
+// (the receiver's range acceleration times the interval): on a walk, whose
+// steps change the velocity by ~0.5 m/s within 0.25 s, a 50 ms offset makes
+// ~2.5 cm of TDCP residual.  The clone carries its own dt_d (a random walk of
+// the current one).  An antenna evaluated shift_j [s] after the epoch's
+// applied time (the engines: the INS state's time less record_time) is moved
+// back along v_ant (first order, as pseudorange.hpp's shifted prediction).
+//
 // Stochastic cloning: after the update of epoch k-1 and its feedback the
 // whole error state is cloned, x_c = x_{k-1} (mean 0, covariance P_{k-1}).
 // The clone does not move, so over the filter cycle to epoch k its cross-
@@ -90,17 +106,28 @@ enum class TdcpFlag : std::int8_t {
 
 /// The antenna of one epoch as the TDCP row needs it.
 struct TdcpAntenna {
-  Vec3 r_e = Vec3::Zero();      ///< antenna ECEF position [m]
+  Vec3 r_e = Vec3::Zero();      ///< antenna ECEF position at the epoch's applied time [m]
   Mat3 C_en = Mat3::Identity(); ///< NED -> ECEF at the INS position
+  Mat3 C_nb = Mat3::Identity(); ///< body -> NED (the lever-arm columns)
   Vec3 l_n = Vec3::Zero();      ///< lever arm C_nb l_b in NED [m]
+  Vec3 v_ant_n = Vec3::Zero();  ///< antenna velocity in NED [m/s] (the time-offset column)
   double clock_bias_m = 0.0;    ///< receiver clock bias estimate [m]
 };
 
-inline TdcpAntenna tdcp_antenna(const NavState& s, const Vec3& lever_arm_b, double clock_bias_m) {
+/// The antenna of the INS state s with lever arm l_b [m], clock bias [m],
+/// corrected angular rate omega_ib_b [rad/s] (the lever arm's velocity), and
+/// shift_s [s]: how far the state's time is past the epoch's applied time
+/// (the antenna is moved back by v_ant shift_s; header).
+inline TdcpAntenna tdcp_antenna(const NavState& s, const Vec3& lever_arm_b, double clock_bias_m,
+                                const Vec3& omega_ib_b = Vec3::Zero(), double shift_s = 0.0) {
   TdcpAntenna a;
   a.C_en = wgs84::C_en(s.lat, s.lon);
-  a.l_n = s.q_nb.toRotationMatrix() * lever_arm_b;
-  a.r_e = wgs84::geodetic_to_ecef(s.lat, s.lon, s.h) + a.C_en * a.l_n;
+  a.C_nb = s.q_nb.toRotationMatrix();
+  a.l_n = a.C_nb * lever_arm_b;
+  const wgs84::Radii r = wgs84::radii(s.lat);
+  const Vec3 omega_in_n = wgs84::omega_ie_n(s.lat) + wgs84::omega_en_n(s.lat, s.h, s.v_n, r);
+  a.v_ant_n = s.v_n + a.C_nb * omega_ib_b.cross(lever_arm_b) - omega_in_n.cross(a.l_n);
+  a.r_e = wgs84::geodetic_to_ecef(s.lat, s.lon, s.h) + a.C_en * (a.l_n - a.v_ant_n * shift_s);
   a.clock_bias_m = clock_bias_m;
   return a;
 }
@@ -139,6 +166,16 @@ TdcpRow<L> tdcp_row(const TdcpAntenna& prev, const TdcpAntenna& cur, const TdcpS
   r.H_prev.template segment<3>(L::kAtt) = u_prev.transpose() * skew(prev.l_n);
   r.H_cur[L::kClockBias] = 1.0;
   r.H_prev[L::kClockBias] = -1.0;
+  if constexpr (kHasLeverArm<L>) {
+    constexpr int kLever = LeverArmState<L>::offset;
+    r.H_cur.template segment<3>(kLever) = -u_cur.transpose() * cur.C_nb;
+    r.H_prev.template segment<3>(kLever) = u_prev.transpose() * prev.C_nb;
+  }
+  if constexpr (kHasTimeOffset<L>) {
+    constexpr int kTd = TimeOffsetState<L>::offset;
+    r.H_cur[kTd] = u_cur.dot(cur.v_ant_n);
+    r.H_prev[kTd] = -u_prev.dot(prev.v_ant_n);
+  }
   r.sin_el = -u_cur.z();
   return r;
 }
