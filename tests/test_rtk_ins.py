@@ -649,3 +649,38 @@ def test_robust_screening_bad_settings_are_one_line_errors(drive, spirent_l1, en
     with pytest.raises(ValueError, match=word):
         run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
                     rtk_options=dict(systems="GE", frequencies=1), engine=engine)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="open-sky preset: the float RTK/INS covariance is over-confident "
+                   "(float position NEES median 114 against 3, measured) and the fix validation rejects the "
+                   "correct fixes; 10 of 599 epochs fixed (measured); cause not yet fixed")
+def test_open_sky_preset_defaults_fix_rate_and_no_wrong_fix(tmp_path):
+    """Open-sky simulator preset at its defaults (GPS+Galileo L1/L2, 19-20 satellites, code/phase multipath
+    0.3 m / 3 mm correlated over 30 s, iono 1 ppm and tropo 0.3 ppm on a 2.5-8 km baseline, a 20 s
+    standstill, MEMS IMU, 1.5 m lever arm), seed 1, 599 epochs.  GNSS-only RTK fixes 599/599 on these
+    files; with the fix validation off the RTK/INS fixes 100 % with 3-D errors RMS 13-16 mm (seeds 1-3,
+    measured), so the integers are resolvable and at least 90 % fixed epochs and no fixed epoch more
+    than 5 cm from the truth is the target.  Measured on main: 10 fixed (1.7 %), float position NEES
+    (r - r_true)^T P_r^-1 (r - r_true) median 114 (3 for a consistent covariance), float error median
+    325 mm.  Diagnosis (float epochs' NEES median, seeds 1/2/3: 114/60/86): the phase multipath (3 mm,
+    30 s) is modelled as white phase noise; as a random walk of the ambiguity states
+    (``amb_psd_cycles2ps`` of insnav.sim.gnss_rtk.rtk_noise_options, 1.8e-5 cycles^2/s) the NEES is 2.0
+    (seed 1) and 1.4 (seed 3), but only 31-32 % are fixed and seed 3 has 32 fixes > 5 cm (measured), so
+    that default alone is not the fix; code_correlation_time_s 30 s instead of 10 s changes nothing, the
+    iono variance 1 cm per 10 km moves the NEES from 114 to 85 (seed 1)."""
+    from insnav.sim import simulate
+    from insnav.sim.scenario import load_scenario, resolve_raw
+
+    raw, _ = resolve_raw("rtk-open-sky-car")
+    sc = load_scenario(dict(raw), seed=1)
+    ds = simulate(sc, seed=1)
+    files = ds.rtk.write(tmp_path)
+    rs = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"]).rtk
+    t_true, r_true = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
+    i = np.searchsorted(t_true, rs.t_gps_s - 0.5e-3)
+    assert np.all(np.abs(t_true[i] - rs.t_gps_s) < 1e-3)
+    fx = rs.status == 1
+    err = np.linalg.norm(rs.r_e[fx] - r_true[i[fx]], axis=1)
+    assert int((err > 0.05).sum()) == 0, err.max()
+    assert fx.mean() >= 0.9, fx.mean()
