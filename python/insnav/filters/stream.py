@@ -753,14 +753,7 @@ def _gnss_take(g: GnssFixes, keep) -> GnssFixes:
     per cut; else copies."""
     idx = np.flatnonzero(keep)
     if len(idx) and idx[-1] - idx[0] + 1 == len(idx):
-        a, b = int(idx[0]), int(idx[-1]) + 1
-        if g.origin is None:
-            origin = None
-        elif g.origin.lines is None:
-            origin = RowOrigin(g.origin.source, g.origin.first_line + a)
-        else:
-            origin = RowOrigin(g.origin.source, g.origin.first_line, np.asarray(g.origin.lines)[a:b])
-        return GnssFixes(*(_rows_view(getattr(g, f), a, b) for f in _GNSS_FIELDS), origin=origin)
+        return _gnss_slice(g, int(idx[0]), int(idx[-1]) + 1)
     return GnssFixes(*(column(getattr(g, f))[keep] for f in _GNSS_FIELDS),
                      origin=None if g.origin is None else g.origin.take(keep, len(keep)))
 
@@ -787,7 +780,11 @@ def _gnss_window(g: GnssFixes, lo: float, hi: float) -> GnssFixes:
     if w is None:
         tv = np.asarray(g.t_valid)
         return _gnss_take(g, (tv > lo) & (tv <= hi))
-    a, b = w
+    return _gnss_slice(g, *w)
+
+
+def _gnss_slice(g: GnssFixes, a: int, b: int) -> GnssFixes:
+    """Rows ``a .. b - 1`` of the fixes: views of ``g``'s columns (nothing read or copied) and their origin."""
     if g.origin is None:
         origin = None
     elif g.origin.lines is None:
