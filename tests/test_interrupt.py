@@ -81,8 +81,16 @@ def test_sigterm_stops_a_run_with_one_line_and_keeps_the_earlier_output(uav_dir,
     assert out.read_bytes() == earlier
 
 
-def test_sigterm_swallowed_inside_a_command_still_exits_143(monkeypatch, tmp_path, capsys):
-    """A SIGTERM whose exception a library swallows: one line and status 143, not 0."""
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("sig, handler, status, word", [
+    (signal.SIGTERM, signal.SIG_DFL, 143, "terminated"),
+    (signal.SIGINT, signal.default_int_handler, 130, "interrupted"),  # Python's own Ctrl-C handler
+])
+def test_a_signal_swallowed_inside_a_command_still_ends_it(monkeypatch, tmp_path, capsys, sig, handler, status,
+                                                           word):
+    """A SIGTERM or SIGINT whose exception a library swallows (a finalizer, a broad except) late in
+    `insnav report`: the command still ends with one line and status 143 / 130, not 0; the
+    handler it installed is gone afterwards."""
     import insnav.analysis.report as rep
     import insnav.cli as cli
 
@@ -91,7 +99,7 @@ def test_sigterm_swallowed_inside_a_command_still_exits_143(monkeypatch, tmp_pat
 
     def report(*a, **k):
         try:
-            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), sig)
             time.sleep(0.5)
         except BaseException:  # noqa: BLE001 - what swallowed it
             pass
@@ -101,13 +109,13 @@ def test_sigterm_swallowed_inside_a_command_still_exits_143(monkeypatch, tmp_pat
         return out
 
     monkeypatch.setattr(rep, "report", report)
-    inherited = signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    inherited = signal.signal(sig, handler)
     try:
-        assert cli.main(["report", str(sol)]) == 143
-        assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # the handler is the command's only
+        assert cli.main(["report", str(sol)]) == status
+        assert signal.getsignal(sig) == handler  # the command's handler is gone
     finally:
-        signal.signal(signal.SIGTERM, inherited)
-    assert capsys.readouterr().err.strip().splitlines() == ["insnav report: terminated"]
+        signal.signal(sig, inherited)
+    assert capsys.readouterr().err.strip().splitlines() == [f"insnav report: {word}"]
 
 
 def test_interrupt_inside_the_loop_raises_keyboardinterrupt_and_leaves_no_state(uav_dir):
@@ -186,37 +194,6 @@ def test_ctrl_c_while_the_command_modules_load_is_one_line(monkeypatch, capsys):
     monkeypatch.setattr(importlib, "import_module", interrupted)
     assert cli.main(["run", "x", "--out", "y.csv"]) == 130
     assert capsys.readouterr().err.strip().splitlines() == ["insnav run: interrupted"]
-
-
-@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
-def test_ctrl_c_swallowed_inside_a_command_still_exits_130(monkeypatch, tmp_path, capsys):
-    """A SIGINT whose KeyboardInterrupt is swallowed (a finalizer, a library's broad except) late in
-    `insnav report`: the command still ends with one line and status 130, not 0."""
-    import insnav.analysis.report as rep
-    import insnav.cli as cli
-
-    sol = tmp_path / "sol.csv"
-    sol.write_text("x\n")
-
-    def report(*a, **k):
-        try:
-            os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(0.5)
-        except BaseException:  # noqa: BLE001 - what swallowed it
-            pass
-        out = tmp_path / "r" / "report.html"
-        out.parent.mkdir()
-        out.write_text("")
-        return out
-
-    monkeypatch.setattr(rep, "report", report)
-    # Python's own Ctrl-C handler, whatever the runner inherited (_sigint_default)
-    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        assert cli.main(["report", str(sol)]) == 130
-    finally:
-        signal.signal(signal.SIGINT, inherited)
-    assert capsys.readouterr().err.strip().splitlines() == ["insnav report: interrupted"]
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
