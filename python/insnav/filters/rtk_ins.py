@@ -141,7 +141,9 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
         ``[rtk]`` options (weighting, masks, AR, slip detectors); :data:`RTK_INS_DEFAULTS` apply.
     engine : dict, optional
         Engine keys: ``ins_slip_k_sigma`` (5), ``ins_slip_min_cycles`` (0.35), ``ins_slip_max_dt_s``
-        (2 s), ``code_chi2_row`` (25; 0 off), ``validation_prob`` (0.999; 0 off), the robust
+        (2 s), ``code_chi2_row`` (25; 0 off), ``validation_prob`` (0.999; 0 off),
+        ``phase_correlation_time_s`` (0: white phase; > 0: a tracked ambiguity's phase variance
+        x (1 + rho) / (1 - rho), rho = exp(-dt / tau) [s]; docs/algorithms.md), the robust
         screening of the single differences (Teunissen's w-test per satellite and frequency, IGG-III
         down-weighting; docs/algorithms.md, "Tight RTK/INS"): ``robust_screening`` (False),
         ``robust_chi2_row`` (10.83), ``robust_igg_k0`` (1.5), ``robust_igg_k1`` (3.0),

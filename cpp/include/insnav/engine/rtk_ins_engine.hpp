@@ -139,6 +139,8 @@ struct RtkInsConfig {
   double ins_slip_max_dt_s = 2.0;     // the test needs the previous epoch of the satellite within this
   double code_chi2_row = 25.0;        // code row screening (0: off)
   double validation_prob = 0.999;     // AR: best vector's squared norm <= chi2 quantile (0: off)
+  // Correlation time of the phase errors (carrier multipath) [s]; 0: white (phase_var_factor)
+  double phase_corr_time_s = 0.0;
   double ar_min_success_rate = 0.0;   // AR: bootstrapped success rate of the fixed subset (0: off)
   // A filter cycle without a rover epoch is closed after this long [s] (+inf: one cycle spans a
   // whole gap).  The RTS smoother needs epochs inside GNSS outages (the bindings set it when
@@ -763,7 +765,8 @@ class RtkInsEngine {
             [&](int c) { return el_r_[c]; });
         if (ref < 0) continue;
         const int m0 = m;
-        const double var_ref = var_sd_[ref] * cf * (code ? code_var_factor(ref, f) : 1.0) * var_factor(ref, f, code);
+        const double var_ref = var_sd_[ref] * cf * (code ? code_var_factor(ref, f) : phase_var_factor(ref, f)) *
+                           var_factor(ref, f, code);
         for (int c = 0; c < n_common_; ++c) {
           if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols) != sys) continue;
           if (!valid(c, f, code) || m >= kMaxRowsE) continue;
@@ -780,8 +783,8 @@ class RtkInsEngine {
           row_c_[m] = c;
           row_ref_[m] = ref;
           row_f_[m] = f;
-          R_(m, m) = var_sd_[c] * cf * (code ? code_var_factor(c, f) : 1.0) * var_factor(c, f, code) + var_bl + var_ref +
-                     var_bl;
+          R_(m, m) = var_sd_[c] * cf * (code ? code_var_factor(c, f) : phase_var_factor(c, f)) * var_factor(c, f, code) +
+                     var_bl + var_ref + var_bl;
           for (int q = m0; q < m; ++q) R_(m, q) = R_(q, m) = var_ref + var_bl;
           ++m;
         }
@@ -927,6 +930,21 @@ class RtkInsEngine {
     if (k < 0 || amb_[k].lock == 0) return code_scale_;
     const double rho = std::exp(-dt_epoch_ / o.code_corr_time_s);
     return code_scale_ * (1.0 + rho) / std::max(1.0 - rho, 1e-6);
+  }
+
+  // Time-correlated phase errors (RtkInsConfig::phase_corr_time_s), the same first-order Gauss-Markov
+  // model as code_var_factor: carrier multipath of a few mm correlated over tens of seconds is, with
+  // the INS holding the position between epochs, averaged into the float position and ambiguities as
+  // if it were white, so their covariance is over-confident and the fix validation (the best
+  // vector's squared norm against a chi2 quantile) rejects the correct integers.  The phase of a
+  // tracked ambiguity (lock > 0) enters with its variance x (1 + rho) / (1 - rho), rho =
+  // exp(-dt / tau); the first epoch of an ambiguity keeps the white variance.
+  double phase_var_factor(int c, int f) const {
+    if (!(cfg_.phase_corr_time_s > 0.0) || !(dt_epoch_ > 0.0)) return 1.0;
+    const int k = amb_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f];
+    if (k < 0 || amb_[k].lock == 0) return 1.0;
+    const double rho = std::exp(-dt_epoch_ / cfg_.phase_corr_time_s);
+    return (1.0 + rho) / std::max(1.0 - rho, 1e-6);
   }
 
   // Adaptive variance factor of the code rows (Mohamed & Schwarz 1999, J. Geodesy 73, eq. (28),
