@@ -16,8 +16,9 @@ of a short run.  For the common form of the command this module instead
 Whatever it does not cover -- other options, ``--timings``, another output format, RINEX 2,
 systems other than GPS and QZSS, a base position given (on the command line or in the TOML) further than
 500 m from the base header's APPROX POSITION XYZ (the usual path checks it against the base's own
-pseudoranges), and every input
-the usual path would report as an error -- returns None before anything is written, and the
+pseudoranges), a receiver whose pseudoranges do not fit one position and clock
+(``rtk_rinex.hpp`` code_fit_rms, as :func:`insnav.gnss.rtk.check_code_fit`: time tags shifted against
+the observations), and every input the usual path would report as an error -- returns None before anything is written, and the
 command takes the usual path, which gives the same files or the same one-line message.  Set
 ``INSNAV_RTK_FASTPATH=0`` to always take the usual path.
 """

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["SIGNALS", "SYSTEM_INDEX", "RTK_DEFAULTS", "BASE_POSITION_TOLERANCE_M", "rtk_value_error",
+__all__ = ["SIGNALS", "SYSTEM_INDEX", "RTK_DEFAULTS", "BASE_POSITION_TOLERANCE_M", "CODE_FIT_TOLERANCE_M", "rtk_value_error",
            "rtk_core_dict"]
 
 #: engine index of each system (``RtkSystem`` in rtk.hpp)
@@ -34,6 +34,12 @@ IONO_SIGMA_DEFAULT = {"off": 0.0, "variance": 0.0, "estimate": 0.03}
 #: 24 m), so a position further off is a wrong one (a mistyped coordinate, another station's file) that
 #: would shift every rover epoch by as much
 BASE_POSITION_TOLERANCE_M = 500.0
+#: largest median residual RMS [m] of a receiver's one-epoch code fits (unit weights, no atmosphere
+#: models; insnav.gnss.rtk.check_code_fit) that an RTK run accepts.  Measured on the repository's data:
+#: 5.7-10.3 m on the real EUREF and MatRTKLIB files, 1.4-2.9 m on the Spirent files, 0.2-1.4 m on the
+#: simulator's presets; the MatRTKLIB rover with its epoch time tags moved by 0.5 s: 172 m (the
+#: satellites computed half a second away from where the pseudoranges saw them)
+CODE_FIT_TOLERANCE_M = 50.0
 
 #: every key of the table and its default, in the order of the dataclass (tests/test_rtk_fast.py checks it)
 RTK_DEFAULTS = {

@@ -52,7 +52,7 @@ from ._rtk_keys import IONO_MODES as _IONO_MODES  # noqa: E402,F401
 from ._rtk_keys import IONO_SIGMA_DEFAULT as _IONO_SIGMA_DEFAULT  # noqa: E402,F401
 from ._rtk_keys import MODES as _MODES  # noqa: E402,F401
 from ._rtk_keys import SIGNALS, SYSTEM_INDEX, rtk_core_dict, rtk_value_error  # noqa: E402
-from ._rtk_keys import BASE_POSITION_TOLERANCE_M  # noqa: E402,F401
+from ._rtk_keys import BASE_POSITION_TOLERANCE_M, CODE_FIT_TOLERANCE_M  # noqa: E402,F401
 
 #: RTKLIB's Q values
 STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 4: "dgps"}
@@ -772,20 +772,22 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions, *, base_source
                               np.concatenate([rover.system, base.system]), np.concatenate([rover.prn, base.prn]),
                               np.concatenate([_first_code(rover), _first_code(base)]))
     check_base_position(base, r_base_e, rs[nr:], clk[nr:], base_source or "given")
+    check_code_fit(rover, rs[:nr], clk[:nr], r_base_e, "rover")
     roff, rrows = receiver_rows(rover, nav, opt.frequencies, (rs[:nr], clk[:nr]))
     boff, brows = receiver_rows(base, nav, opt.frequencies, (rs[nr:], clk[nr:]))
     return rover, base, r_base_e, bidx, roff, rrows, boff, brows
 
 
-def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
-    """Code-only position of the base receiver [m] (ECEF), the median over up to ``n_epochs``
+def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10, *, with_residual: bool = False):
+    """Code-only position of a receiver [m] (ECEF), the median over up to ``n_epochs``
     epochs spread over the file of the per-epoch least-squares fixes of the SPP solver
     (:func:`insnav.gnss.code_fix._position_fit`: position and one receiver clock per system, unit
     weights, no atmosphere models), started from ``r0_e``; the satellite positions rotated by the
     Earth's rate over the signal's travel time from ``r0_e`` (Sagnac; a start 1000 km off moves it
     by a few metres); ``(r_e, epochs used)``, or ``(None, 0)`` when no epoch has enough satellites.
+    With ``with_residual`` also the median over those epochs of the fit's residual RMS [m].
 
-    ``rs``, ``clk``: the satellite positions [m] and clocks [m] of the base's rows
+    ``rs``, ``clk``: the satellite positions [m] and clocks [m] of the receiver's rows
     (:func:`transmit_states`)."""
     from ..earth import OMEGA_IE
     from .code_fix import _position_fit
@@ -794,7 +796,7 @@ def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
     ne = base.epoch_t_gps_s.size
     r0_e = np.asarray(r0_e, float)
     good = np.isfinite(code) & np.all(np.isfinite(rs), axis=1) & np.isfinite(clk)
-    fixes = []
+    fixes, rms = [], []
     for e in unique(np.linspace(0, ne - 1, min(n_epochs, ne)).astype(np.int64)) if ne else ():
         m = good & (base.epoch == e)
         system = base.system[m]
@@ -811,10 +813,31 @@ def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
         if fit is None or not fit[4]:
             continue  # singular or not converged: no evidence either way
         fixes.append(fit[0][:3])
+        rms.append(float(np.sqrt(np.mean(fit[3] ** 2))))
     if not fixes:
-        return None, 0
+        return (None, 0, None) if with_residual else (None, 0)
     fixes = np.asarray(fixes)
-    return np.array([median(fixes[:, k]) for k in range(3)]), len(fixes)
+    r_e = np.array([median(fixes[:, k]) for k in range(3)])
+    return (r_e, len(fixes), median(rms)) if with_residual else (r_e, len(fixes))
+
+
+def check_code_fit(obs: PhaseObs, rs, clk, r0_e, role: str):
+    """:class:`RtkInputError` (one line naming the file) when the receiver's pseudoranges do not fit
+    one position and clock per epoch: the median residual RMS of its one-epoch code fits
+    (:func:`base_code_fix`) above :data:`CODE_FIT_TOLERANCE_M`.  Epoch time tags moved against the
+    observations (the satellites are then computed where they were not when the pseudoranges were
+    measured) or a navigation file of other satellites give hundreds of metres, and an RTK run on
+    them a float solution as far off with exit status 0.  Returns ``(code fix [m] or None, epochs)``.
+
+    ``role``: "rover" or "base", for the message; ``rs``, ``clk``: the satellite states of the
+    receiver's rows (:func:`transmit_states`); ``r0_e``: where the fits start [m] (ECEF)."""
+    fix_e, n, rms = base_code_fix(obs, rs, clk, r0_e, with_residual=True)
+    if fix_e is not None and rms > CODE_FIT_TOLERANCE_M:
+        raise RtkInputError(f"{obs.path}: the {role}'s pseudoranges do not fit one receiver position and clock "
+                            f"(median residual RMS {rms:.0f} m over {n} epochs; at most "
+                            f"{CODE_FIT_TOLERANCE_M:.0f} m accepted, a few metres usual): epoch time tags shifted "
+                            "against the observations, or a navigation file of other satellites")
+    return fix_e, n
 
 
 def check_base_position(base: PhaseObs, r_base_e, rs, clk, source: str) -> None:
@@ -824,7 +847,7 @@ def check_base_position(base: PhaseObs, r_base_e, rs, clk, source: str) -> None:
     base some hundred km off searches ambiguities of float solutions that cannot fix."""
     from .. import earth
 
-    fix_e, n = base_code_fix(base, rs, clk, r_base_e)
+    fix_e, n = check_code_fit(base, rs, clk, r_base_e, "base")
     if fix_e is None:
         return
     dist = float(np.linalg.norm(fix_e - np.asarray(r_base_e, float)))

@@ -301,6 +301,87 @@ struct Receiver {
   std::vector<std::int64_t> off;  // epoch offsets (n+1)
 };
 
+/// Largest median residual RMS [m] of a receiver's one-epoch code fits this path accepts; the same
+/// value as insnav.gnss._rtk_keys.CODE_FIT_TOLERANCE_M, whose Python check words the error.
+inline constexpr double kCodeFitToleranceM = 50.0;
+
+/// Median over up to 10 epochs spread over the file of the residual RMS [m] of one-epoch code-only
+/// least-squares fits (position and one clock per system, unit weights, no atmosphere models,
+/// Gauss-Newton from r0 with the satellites rotated by the Earth's rate over the travel time from
+/// r0), as insnav.gnss.rtk.base_code_fix; NaN when no epoch has a redundant converged fit.  Time tags
+/// shifted against the observations give hundreds of metres, good files a few.
+/// ``sat``: per row (from ``row0``) the satellite position [m] and clock [m]; ``code``: pseudorange [m].
+inline double code_fit_rms(const Receiver& rx, std::size_t row0, const std::vector<std::array<double, 4>>& sat,
+                           const std::vector<double>& code, const double* r0) {
+  using MatH = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 64, 5>;
+  using VecY = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 64, 1>;
+  const auto& T = rx.t;
+  const std::size_t ne = T.epoch_t_gps_s.size();
+  const std::size_t n_ep = std::min<std::size_t>(10, ne);
+  std::vector<double> rms;
+  std::int64_t last = -1;
+  for (std::size_t q = 0; q < n_ep; ++q) {
+    const auto e = static_cast<std::int64_t>(n_ep == 1 ? 0.0 : double(ne - 1) * double(q) / double(n_ep - 1));
+    if (e == last) continue;
+    last = e;
+    double sp[64][4];
+    int col[64], n = 0;
+    bool has_sys[2] = {false, false};
+    for (auto r = rx.off[static_cast<std::size_t>(e)]; r < rx.off[static_cast<std::size_t>(e) + 1] && n < 64; ++r) {
+      const std::size_t i = row0 + static_cast<std::size_t>(r);
+      const auto& S = sat[i];
+      if (!(std::isfinite(code[i]) && std::isfinite(S[0]) && std::isfinite(S[1]) && std::isfinite(S[2]) &&
+            std::isfinite(S[3])))
+        continue;
+      const double d[3] = {S[0] - r0[0], S[1] - r0[1], S[2] - r0[2]};
+      const double th = wgs84::kOmegaIe * std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / kCLight;
+      sp[n][0] = std::cos(th) * S[0] + std::sin(th) * S[1];
+      sp[n][1] = -std::sin(th) * S[0] + std::cos(th) * S[1];
+      sp[n][2] = S[2];
+      sp[n][3] = code[i] + S[3];  // pseudorange plus the satellite clock: range + receiver clock
+      col[n] = T.row_sys[static_cast<std::size_t>(r)] == 'J' ? 1 : 0;
+      has_sys[col[n]] = true;
+      ++n;
+    }
+    const int n_clk = int(has_sys[0]) + int(has_sys[1]);
+    if (n < 4 + n_clk) continue;  // one redundant row at least
+    for (int k = 0; k < n; ++k) col[k] = (has_sys[0] && col[k] == 1) ? 1 : 0;
+    double x[5] = {r0[0], r0[1], r0[2], 0.0, 0.0};
+    MatH H(n, 3 + n_clk);
+    VecY y(n);
+    bool ok = false;
+    auto residuals = [&]() {
+      for (int k = 0; k < n; ++k) {
+        const double dx = sp[k][0] - x[0], dy = sp[k][1] - x[1], dz = sp[k][2] - x[2];
+        const double rho = std::sqrt(dx * dx + dy * dy + dz * dz);
+        H.row(k).setZero();
+        H(k, 0) = -dx / rho;
+        H(k, 1) = -dy / rho;
+        H(k, 2) = -dz / rho;
+        H(k, 3 + col[k]) = 1.0;
+        y(k) = sp[k][3] - (rho + x[3 + col[k]]);
+      }
+    };
+    for (int it = 0; it < 10; ++it) {
+      residuals();
+      const VecY dxv = H.colPivHouseholderQr().solve(y);
+      for (int c = 0; c < 3 + n_clk; ++c) x[c] += dxv(c);
+      if (!(std::isfinite(x[0]) && std::isfinite(x[1]) && std::isfinite(x[2]))) break;
+      if (dxv.head<3>().norm() < 1e-4) {
+        ok = true;
+        break;
+      }
+    }
+    if (!ok) continue;
+    residuals();
+    rms.push_back(std::sqrt(y.squaredNorm() / n));
+  }
+  if (rms.empty()) return NAN;
+  std::sort(rms.begin(), rms.end());
+  const std::size_t h = rms.size() / 2;
+  return rms.size() % 2 ? rms[h] : 0.5 * (rms[h - 1] + rms[h]);
+}
+
 }  // namespace rtk_rinex_detail
 
 /// RTK of RINEX 3 rover and base files against GPS/QZSS broadcast ephemerides, with the texts of
@@ -503,6 +584,10 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
       sat_state[i][3] = kCLight * (S[6] + S[7] * dt);
     }
   }
+  // each receiver's pseudoranges must fit one position and clock (rtk.py check_code_fit): a file that
+  // does not is left to the usual path, which refuses it with one line naming it
+  for (int k = 0; k < 2; ++k)
+    if (code_fit_rms(rx[k], k == 0 ? 0 : mr, sat_state, code, rb) > kCodeFitToleranceM) return fail("code fit");
   // engine rows (rtk.py receiver_rows)
   std::vector<double> rows[2];
   for (int k = 0; k < 2; ++k) {
