@@ -170,6 +170,44 @@ class _SigintWatch:
         return False
 
 
+#: options whose value is written, not read (``--out /dev/null`` is a valid way to discard a solution)
+_OUTPUT_OPTIONS = ("--out", "--out-dir")
+
+
+def _refuse_special_inputs(argv) -> None:
+    """:class:`UserError` for a command-line input that names a named pipe, socket or device.
+
+    Every input insnav reads is opened as a file, read whole and some of them twice (the RINEX
+    readers, the stream's GNSS pass), so a FIFO given as ``--obs`` would block until a writer appears
+    and then be read once.  Every token (and every ``--opt=value``'s value, and each path of a
+    comma-separated list) that names an existing such file is refused with one line naming it, except
+    the values of :data:`_OUTPUT_OPTIONS`."""
+    import stat
+
+    skip = False
+    for tok in argv:
+        tok = str(tok)
+        if skip:
+            skip = False
+            continue
+        if tok in _OUTPUT_OPTIONS:
+            skip = True
+            continue
+        opt, eq, val = tok.partition("=")
+        if eq and opt.startswith("--"):
+            if opt in _OUTPUT_OPTIONS:
+                continue
+            tok = val
+        for path in tok.split(",") if "," in tok else (tok,):
+            try:
+                mode = os.stat(path).st_mode
+            except (OSError, ValueError):
+                continue
+            if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+                raise UserError(f"{path}: not a regular file (a named pipe, socket or device): insnav reads its "
+                                "inputs as files, whole and some twice; copy it to a file first")
+
+
 def main(argv=None) -> int:
     """Run one command; its status: 0, 2 (an error, one line on stderr), 130 (Ctrl-C, one line)
     or 143 (SIGTERM, one line)."""
@@ -178,6 +216,7 @@ def main(argv=None) -> int:
     args = None
     with _SigintWatch() as sigint:
         try:
+            _refuse_special_inputs(sys.argv[1:] if argv is None else argv)
             if command == "run" and os.environ.get("INSNAV_RTK_FASTPATH", "1") != "0":
                 from .rtk_fast import run_fast  # an RTK run from RINEX files without numpy, else None
 

@@ -1,0 +1,47 @@
+"""Inputs that are not regular files (a named pipe, a device): one line naming them, before anything
+opens them (a FIFO given as ``--obs`` blocked until a writer appeared); output options may name a
+device (``--out /dev/null``)."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from insnav.cli import _refuse_special_inputs, main
+from insnav.errors import UserError
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes on this platform")
+
+
+@pytest.fixture
+def fifo(tmp_path):
+    p = tmp_path / "rover.obs"
+    os.mkfifo(p)
+    return p
+
+
+def test_a_fifo_as_the_rover_is_one_line_and_nothing_blocks(fifo, tmp_path, capsys):
+    rc = main(["run", "--filter", "rtk", "--format", "rinex", "--obs", str(fifo), "--base", str(tmp_path / "b.obs"),
+               "--nav", str(tmp_path / "n.nav"), "--out", str(tmp_path / "sol.pos")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert err == [f"insnav run: error: {fifo}: not a regular file (a named pipe, socket or device): insnav reads "
+                   "its inputs as files, whole and some twice; copy it to a file first"]
+    assert not list(tmp_path.glob("sol.pos*"))
+
+
+@pytest.mark.parametrize("argv", [["evaluate", "{fifo}", "ref.pos"], ["run", "--nav={here},{fifo}"],
+                                  ["run", "--imu", "/dev/zero"], ["report", "/dev/stdin"]])
+def test_every_input_form_is_checked(fifo, argv):
+    argv = [a.format(fifo=fifo, here=__file__) for a in argv]
+    if "/dev/stdin" in argv and not os.path.exists("/dev/stdin"):
+        pytest.skip("no /dev/stdin")
+    with pytest.raises(UserError, match="not a regular file"):
+        _refuse_special_inputs(argv)
+
+
+@pytest.mark.parametrize("argv", [["run", "--out", "/dev/null", "--imu", __file__], ["run", "--out=/dev/null"],
+                                  ["simulate", "--out-dir", "/dev/null"], ["run", "--base-pos", "35.1,136.9,104.8"],
+                                  ["run", "--obs", os.path.dirname(__file__)]])
+def test_outputs_regular_files_folders_and_numbers_pass(argv):
+    _refuse_special_inputs(argv)
