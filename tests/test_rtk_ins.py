@@ -675,7 +675,10 @@ def test_open_sky_preset_defaults_fix_rate_and_no_wrong_fix(tmp_path):
     atmosphere (iono_ppm = tropo_ppm = 0) 19/599, without both 599/599; with the atmosphere off the phase
     correlation model at the preset's 30 s (engine key phase_correlation_time_s) fixes 599/599 on seeds
     1-3, but as a default it costs the Spirent drive its fixed accuracy (RMS 2.5 -> 27 mm at 60 s, no
-    multipath there); the atmosphere needs its own states."""
+    multipath there); the atmosphere needs its own states.  The chi2 validation of the best vector
+    (validation_prob) is what rejects the fixes: off, seeds 1-5 fix 2986/2998 (5 partial fixes 5-7 cm
+    off), but a 0.3-cycle phase step on the reference then gives a 5.3 cm fix
+    (test_robust_screening_a_0p3_cycle_phase_jump_on_the_reference), so it stays on."""
     from insnav.sim import simulate
     from insnav.sim.scenario import load_scenario, resolve_raw
 
