@@ -93,7 +93,7 @@ def test_the_unmoved_files_run_on_both_paths(tmp_path, capsys):
 
 
 def test_spp_refuses_moved_time_tags_and_keeps_real_files(tmp_path, capsys):
-    """The same check in ``insnav run --filter spp`` (insnav.filters.spp._check_code_fit, on the
+    """The same check in ``insnav run --filter spp`` (insnav.gnss.code_check.check_inputs_code_fit, on the
     corrected pseudoranges of the run's own inputs): the rover moved by 0.5 s gave a solution 264 m off
     with exit 0 (RAIM excluded rows in every epoch); now status 2 and one line (measured 163 m).  The
     unmoved file's fits: 1.3 m (measured)."""
@@ -107,15 +107,15 @@ def test_spp_refuses_moved_time_tags_and_keeps_real_files(tmp_path, capsys):
     assert err[0].startswith(f"insnav run: error: {moved}: the pseudoranges do not fit one receiver position")
     assert not list(tmp_path.glob("spp.csv*"))
     got = []
-    real = spp._check_code_fit
+    real = spp.check_inputs_code_fit
 
     def record(*a, **k):
         got.append(real(*a, **k))
         return got[-1]
 
-    spp._check_code_fit = record
+    spp.check_inputs_code_fit = record
     try:
         spp.run_spp_rinex(M / "rover.obs", M / "base.nav")
     finally:
-        spp._check_code_fit = real
+        spp.check_inputs_code_fit = real
     assert got and 0.3 < got[0] < 5.0, got

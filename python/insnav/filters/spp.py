@@ -38,6 +38,7 @@ from .._median import median
 from ..config import ConfigError, read_toml
 from ..gnss.spp import (SppOptions, SppSolution, _spp_inputs_from_rinex, read_nav_multi, read_obs_multi, solve_spp,
                         summary_counts)
+from ..gnss.code_check import check_inputs_code_fit
 from ..gnss.systems import SPP_SYSTEMS, SYSTEMS
 from ..gnss.weighting import Weighting
 from ._assemble import gnss_solution
@@ -236,47 +237,12 @@ def _run_spp_rinex(ds: SppDataset, sopt: SppOptions, wgt: Weighting) -> Solution
         # (the first pass's satellite states carried to the new light times and clock estimates)
         inp, _, _ = _spp_inputs_from_rinex(obs, nav, t_week0, r0, prior=states, **kw)
         sp = solve_spp(inp, r0, options=sopt)
-    _check_code_fit(inp, r0, obs.path)
+    check_inputs_code_fit(inp, r0, obs.path)
     sp.info.update(inputs=inp, t_week0_gps_s=float(t_week0), approx_r_e=r0.tolist())
     sol = spp_solution(sp)
     sol.summary.update(systems="".join(s for s in SPP_SYSTEMS if np.any(inp.system == s)), weighting=wgt.model)
     sol.rinex_options, sol.weighting, sol.spp_options = ropt, wgt, sopt
     return sol
-
-
-def _check_code_fit(inp, r0_e, path, n_epochs: int = 10) -> float | None:
-    """:class:`UserError` (one line naming ``path``) when the pseudoranges do not fit one receiver
-    position and clock per epoch: the median, over up to ``n_epochs`` epochs spread over the run, of the
-    residual RMS of a unit-weight one-epoch fit (:func:`insnav.gnss.code_fix._position_fit`, started
-    from ``r0_e``) above :data:`insnav.gnss._rtk_keys.CODE_FIT_TOLERANCE_M`, the RTK inputs' bound
-    (:func:`insnav.gnss.rtk.check_code_fit`).  Epoch time tags moved by 0.5 s against the observations
-    gave a solution 264 m off with exit status 0 (RAIM excluded rows in every epoch); the urban smartLoc
-    file fits within 15 m.  Returns the median residual RMS [m] (None: no epoch with a redundant fit)."""
-    from ..errors import UserError
-    from ..gnss._rtk_keys import CODE_FIT_TOLERANCE_M
-    from ..gnss.code_fix import _position_fit
-
-    ne = inp.epoch_t.size
-    rms = []
-    for e in np.unique(np.linspace(0, ne - 1, min(n_epochs, ne)).astype(np.int64)) if ne else ():
-        a, b = int(inp.epoch_start[e]), int(inp.epoch_start[e + 1])
-        sats, system = inp.sats[a:b], inp.system[a:b]
-        m = np.isfinite(sats[:, 0]) & np.all(np.isfinite(sats[:, 2:5]), axis=1) & np.isfinite(sats[:, 8])
-        if m.sum() < 4 + len(np.unique(system[m])):  # one redundant row at least
-            continue
-        fit = _position_fit(sats[m], system[m], np.ones(int(m.sum())), np.append(np.asarray(r0_e, float), 0.0), 10)
-        if fit is None or not fit[4]:
-            continue
-        rms.append(float(np.sqrt(np.mean(fit[3] ** 2))))
-    if not rms:
-        return None
-    value = median(rms)
-    if value > CODE_FIT_TOLERANCE_M:
-        raise UserError(f"{path}: the pseudoranges do not fit one receiver position and clock (median residual "
-                        f"RMS {value:.0f} m over {len(rms)} epochs; at most {CODE_FIT_TOLERANCE_M:.0f} m accepted, "
-                        "a few metres usual): epoch time tags shifted against the observations, or a navigation "
-                        "file of other satellites")
-    return value
 
 
 def _fields(obj) -> dict:
