@@ -16,6 +16,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 args=("$@")
+# Bytecode caches on (__pycache__/, ignored by git) even where the environment
+# switches them off: each pytest worker then compiles and assertion-rewrites a
+# test module once, and each `python -m insnav` child process reuses the
+# package's compiled modules.  Measured on 2 cores: collection 9.5 -> 2.7 s per
+# worker, the quick subset 123 -> 116 s.
+unset PYTHONDONTWRITEBYTECODE
 export INSNAV_EXTRAS=${INSNAV_EXTRAS:-test,plot,pandas,parquet,dask,docs}
 # the compiler, Eigen and the build backend (its own apt-get, before the one below)
 scripts/install.sh --deps-only
