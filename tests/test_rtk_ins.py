@@ -752,3 +752,22 @@ def test_phase_correlation_time_must_not_be_negative(drive, spirent_l1):
     with pytest.raises(ValueError, match="phase_correlation_time_s"):
         run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
                     rtk_options=dict(systems="GE", frequencies=1), engine=dict(phase_correlation_time_s=-1.0))
+
+
+def test_a_rover_with_moved_time_tags_is_refused_before_the_filter_runs(drive, tmp_path):
+    """The RTK inputs' code-fit check (insnav.gnss.rtk.check_code_fit) applies to RTK/INS too: the
+    Spirent rover's epoch lines moved by 0.5 s, the observations unchanged, give one error naming the
+    file (the same inputs as GNSS-only RTK: insnav.gnss.rtk.prepare_rtk_rows)."""
+    src = need(SP / "iono-Klob_tropo-Saast" / "Rover-dynamic_MO_Spirent.obs")
+    moved = tmp_path / "rover_moved.obs"
+    header = True
+    with open(src) as f, open(moved, "w") as g:
+        for line in f:
+            if not header and line.startswith(">"):
+                line = line[:19] + f"{float(line[19:29]) + 0.5:10.7f}" + line[29:]
+            header = header and "END OF HEADER" not in line
+            g.write(line)
+    base = SP / "iono-Klob_tropo-Saast" / "Base-static_MO_Spirent.obs"
+    with pytest.raises(rtk.RtkInputError, match=r"rover_moved\.obs: the rover's pseudoranges do not fit"):
+        run_rtk_ins(drive, RunConfig(filter="ekf"), rover=moved, base=base, nav=NAV,
+                    rtk_options=dict(systems="GE", frequencies=1))
