@@ -79,8 +79,9 @@ def test_time_tags_moved_half_a_second_are_refused_naming_the_file(tmp_path, cap
         assert res == "code fit"
 
 
-def test_the_unmoved_files_run_on_both_paths(tmp_path, capsys):
-    """The same command on the files as recorded: every epoch fixed (GPS only: the numpy-free path)."""
+def test_the_unmoved_files_pass_the_numpy_free_paths_check(tmp_path, capsys):
+    """The same command on the files as recorded, GPS only (the numpy-free path, whose code_fit_rms must
+    pass them): every epoch fixed.  The numpy path's pass on them: the real-receiver test above."""
     cfg = tmp_path / "rtk.toml"
     cfg.write_text('[rtk]\nsystems = "G"\n')
     out = tmp_path / "sol.pos"

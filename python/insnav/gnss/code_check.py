@@ -12,12 +12,30 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._median import median
+from .._median import median, unique  # np.unique would import numpy.ma (insnav.gnss.rtk: the RTK command's start-up)
 from ..errors import UserError
 from ._rtk_keys import CODE_FIT_TOLERANCE_M
 from .code_fix import _position_fit
 
-__all__ = ["check_inputs_code_fit"]
+__all__ = ["check_inputs_code_fit", "spread_epochs", "unit_weight_fit"]
+
+
+def spread_epochs(n_total: int, n: int) -> np.ndarray:
+    """Up to ``n`` epoch indices spread evenly over ``0 .. n_total - 1`` (first and last included)."""
+    return unique(np.linspace(0, n_total - 1, min(n, n_total)).astype(np.int64)) if n_total else np.zeros(0, np.int64)
+
+
+def unit_weight_fit(sats, system, r0_e):
+    """One-epoch code-only fit with unit weights (:func:`insnav.gnss.code_fix._position_fit`: position
+    and one clock per system, Gauss-Newton from ``r0_e``): ``(r_e [m], residual RMS [m])``, or None
+    without a redundant row or a converged fit.  ``sats``: rows in the column layout of
+    :class:`insnav.gnss.tight_inputs.TightInputs` (pseudorange, satellite position, clock)."""
+    if len(system) < 4 + len(unique(system)):  # one redundant row at least
+        return None
+    fit = _position_fit(sats, system, np.ones(len(system)), np.append(np.asarray(r0_e, float), 0.0), 10)
+    if fit is None or not fit[4]:
+        return None
+    return fit[0][:3], float(np.sqrt(np.mean(fit[3] ** 2)))
 
 
 def check_inputs_code_fit(inp, r0_e, path, n_epochs: int = 10) -> float | None:
@@ -29,18 +47,14 @@ def check_inputs_code_fit(inp, r0_e, path, n_epochs: int = 10) -> float | None:
     gave a solution 264 m off with exit status 0 (RAIM excluded rows in every epoch); the urban smartLoc
     file fits within 15 m.  Returns the median residual RMS [m] (None: no epoch with a redundant
     fit)."""
-    ne = inp.epoch_t.size
     rms = []
-    for e in np.unique(np.linspace(0, ne - 1, min(n_epochs, ne)).astype(np.int64)) if ne else ():
+    for e in spread_epochs(inp.epoch_t.size, n_epochs):
         a, b = int(inp.epoch_start[e]), int(inp.epoch_start[e + 1])
         sats, system = inp.sats[a:b], inp.system[a:b]
         m = np.isfinite(sats[:, 0]) & np.all(np.isfinite(sats[:, 2:5]), axis=1) & np.isfinite(sats[:, 8])
-        if m.sum() < 4 + len(np.unique(system[m])):  # one redundant row at least
-            continue
-        fit = _position_fit(sats[m], system[m], np.ones(int(m.sum())), np.append(np.asarray(r0_e, float), 0.0), 10)
-        if fit is None or not fit[4]:
-            continue
-        rms.append(float(np.sqrt(np.mean(fit[3] ** 2))))
+        fit = unit_weight_fit(sats[m], system[m], r0_e)
+        if fit is not None:
+            rms.append(fit[1])
     if not rms:
         return None
     value = median(rms)

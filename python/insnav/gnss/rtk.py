@@ -790,18 +790,14 @@ def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10, *, with_res
     ``rs``, ``clk``: the satellite positions [m] and clocks [m] of the receiver's rows
     (:func:`transmit_states`)."""
     from ..earth import OMEGA_IE
-    from .code_fix import _position_fit
+    from .code_check import spread_epochs, unit_weight_fit
 
     code = _first_code(base)
-    ne = base.epoch_t_gps_s.size
     r0_e = np.asarray(r0_e, float)
     good = np.isfinite(code) & np.all(np.isfinite(rs), axis=1) & np.isfinite(clk)
     fixes, rms = [], []
-    for e in unique(np.linspace(0, ne - 1, min(n_epochs, ne)).astype(np.int64)) if ne else ():
+    for e in spread_epochs(base.epoch_t_gps_s.size, n_epochs):
         m = good & (base.epoch == e)
-        system = base.system[m]
-        if m.sum() < 4 + len(unique(system)):  # one redundant row at least
-            continue
         theta = OMEGA_IE * np.linalg.norm(rs[m] - r0_e, axis=1) / C_LIGHT  # Earth rotation during the travel
         sats = np.zeros((int(m.sum()), 9))
         sats[:, 0] = code[m]
@@ -809,11 +805,11 @@ def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10, *, with_res
         sats[:, 3] = -np.sin(theta) * rs[m, 0] + np.cos(theta) * rs[m, 1]
         sats[:, 4] = rs[m, 2]
         sats[:, 8] = clk[m]
-        fit = _position_fit(sats, system, np.ones(len(system)), np.append(r0_e, 0.0), 10)
-        if fit is None or not fit[4]:
-            continue  # singular or not converged: no evidence either way
-        fixes.append(fit[0][:3])
-        rms.append(float(np.sqrt(np.mean(fit[3] ** 2))))
+        fit = unit_weight_fit(sats, base.system[m], r0_e)
+        if fit is None:
+            continue  # too few rows, singular or not converged: no evidence either way
+        fixes.append(fit[0])
+        rms.append(fit[1])
     if not fixes:
         return (None, 0, None) if with_residual else (None, 0)
     fixes = np.asarray(fixes)
