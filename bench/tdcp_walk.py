@@ -56,6 +56,16 @@ SIGMA_WIDE = 0.03  # [m]: a TDCP phase sigma 3x the default, for the consistency
 END_STILL_S = 30.0  # the walker stands still again in the log's last seconds: its standstill is searched here [s]
 
 
+def run_with_inputs(ds, config, inputs):
+    """``insnav.run(ds, config=config)`` with ``ds.tight_inputs`` replaced by ``inputs`` for the call."""
+    inp0 = ds.tight_inputs
+    ds.tight_inputs = inputs
+    try:
+        return insnav.run(ds, config=config)
+    finally:
+        ds.tight_inputs = inp0
+
+
 def with_outage(inputs, t_lo, t_hi):
     """The inputs with every row of the epochs t_lo < t <= t_hi removed (empty epochs: prediction only)."""
     if t_hi <= t_lo:
@@ -126,11 +136,7 @@ def main(argv=None) -> int:
     t_run0, t_run1 = float(ds.t0), float(ds.imu.t[-1])
 
     def run(c, inputs):
-        ds.tight_inputs = inputs
-        try:
-            return insnav.run(ds, config=c)
-        finally:
-            ds.tight_inputs = inp0
+        return run_with_inputs(ds, c, inputs)
 
     # ---------------------------------------------------------------- no outage
     full = {}
@@ -484,11 +490,7 @@ def outage_ratios(ds, ref_t, ref_r_e, c_code, c_tdcp):
     t0, t1 = float(ds.t0), float(ds.imu.t[-1])
 
     def run(c, inputs):
-        ds.tight_inputs = inputs
-        try:
-            return insnav.run(ds, config=c)
-        finally:
-            ds.tight_inputs = inp0
+        return run_with_inputs(ds, c, inputs)
 
     full = {}
     for name, c in (("code", c_code), ("tdcp", c_tdcp)):
