@@ -112,14 +112,8 @@ class RtkInsSolution(RtkSolution):
 
 def rtk_ins_options(options=None) -> RtkOptions:
     """:class:`RtkOptions` of an RTK/INS run: :data:`RTK_INS_DEFAULTS` under the given ones."""
-    from ..config import ConfigError
-
-    opt = options if isinstance(options, RtkOptions) else \
+    return options if isinstance(options, RtkOptions) else \
         RtkOptions.from_dict({**RTK_INS_DEFAULTS, **(options or {})}, "rtk options")
-    if opt.iono == "estimate":
-        raise ConfigError("rtk options: key 'rtk.iono': 'estimate' is not available in the tight RTK/INS filter "
-                          "(no ionosphere states); use 'variance' with iono_sigma_per_10km_m, or 'off'")
-    return opt
 
 
 def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None, nav=None, base_pos=None,

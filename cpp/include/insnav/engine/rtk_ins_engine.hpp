@@ -7,11 +7,18 @@
 // propagation, feedback, timing are the core's) and a fixed-capacity block of kMaxAmb
 // single-differenced ambiguities N_rb^s_f [cycles] with an active mask (gnss/rtk.hpp's
 // bookkeeping: a state is added when a satellite/frequency appears, re-initialised on a slip and
-// removed after max_outage_epochs unobserved epochs).  No receiver clock or inter-system bias
-// states: double differences remove them.  The ambiguities are constants (plus amb_psd), so
+// removed after max_outage_epochs unobserved epochs).  With iono_mode kEstimate, a second
+// fixed-capacity block of single-differenced (rover - base) slant ionosphere delays I_rb^s at
+// gnss::kIonoRefFreqHz [m], one per satellite, the ionosphere-weighted model of gnss/rtk.hpp (Odijk
+// 2002, sec. 4.2): a first-order Gauss-Markov process (iono_tau_s) whose stationary sigma is
+// sigma_I(bl, el) = iono_sigma_per_10km_m x bl / 10 km x M(el); a DD row of frequency f carries
+// mu_f (I^j - I^i), mu_f = (f_0 / f)^2, on code and -mu_f (I^j - I^i) on phase.  No receiver clock
+// or inter-system bias states: double differences remove them.  The ambiguities are constants (plus amb_psd), so
 // between two epochs their cross-covariance with the INS errors evolves by the INS transition
 // alone, P_xN <- Phi_cycle P_xN (Phi_cycle: the EKF's product of the interval transitions), and
-// the core propagates P_xx as in every other engine.
+// the core propagates P_xx as in every other engine.  The ionosphere states decay by
+// phi = exp(-dt / iono_tau_s) between epochs: P_xI <- Phi_cycle P_xI phi, P_NI <- P_NI phi,
+// P_II <- phi P_II phi + sigma_I^2 (1 - phi^2).
 //
 // Epoch (an RTK record applied at its time of validity):
 //   1. slips: the receiver detectors of gnss/rtk.hpp (LLI, geometry-free, Melbourne-Wuebbena,
@@ -57,7 +64,7 @@
 //      fixed DD back as pseudo-measurements (sigma hold_sigma_cycles) into the joint filter.
 //   4. RTS smoother (EKF, RB-UKF and UKF: "Filters" below; ClosedLoop::record_for_smoother;
 //      filter/rts_smoother.hpp): the backward pass
-//      runs over the 15 navigation error states with the ambiguities marginalised (their block is
+//      runs over the 15 navigation error states with the ambiguities (and ionosphere states) marginalised (their block is
 //      neither stored nor smoothed: an exact joint smoother would store (15 + kMaxAmb)^2 per epoch and
 //      follow every ambiguity reset).  The engine's own feedbacks are recorded
 //      (ClosedLoop::smoother_feedback).  Fixed epochs keep the fixed solution: with continuous AR the
@@ -230,7 +237,8 @@ class RtkInsEngine {
   static constexpr bool kUnscented = std::is_base_of_v<UnscentedPropagation<L>, Filter>;
   using Mat15 = StateCov<L>;
   static constexpr int kN = L::kSize;
-  static constexpr int kMaxJ = kN + kMaxAmb;
+  static constexpr int kMaxIono = kMaxAmb;  // ionosphere states (one per satellite; iono_mode kEstimate)
+  static constexpr int kMaxJ = kN + kMaxAmb + kMaxIono;
   static constexpr int kMaxRowsE = kMaxAmb;  // DD rows of one kind
   using JVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxJ, 1>;
   using JMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxJ, kMaxJ>;
@@ -260,6 +268,12 @@ class RtkInsEngine {
     xa_.setZero();
     Pia_.setZero();
     Paa_.setZero();
+    xi_.setZero();
+    Pxi_.setZero();
+    Pai_.setZero();
+    Pii_.setZero();
+    iono_of_.fill(-1);
+    for (auto& a : iono_) a = IonoSlot{};
     amb_of_.fill(-1);
     for (auto& a : amb_) a = AmbSlot{};
     validator_.reset();
@@ -336,6 +350,7 @@ class RtkInsEngine {
         const auto& Phi = cycle_phi();
         if constexpr (kUnscented) core_.condition_prediction_for_smoother(Phi);  // before the next conditioning
         Pia_ = Phi * Pia_;
+        if (iono_active()) Pxi_ = Phi * Pxi_;
         if (cond_valid_) {  // no measurement: the smoother's estimate stays the fixed one, predicted
           cond_dx_ = Phi * cond_dx_;
           dP_fix_.noalias() = cond_dP_ * Phi.transpose();
@@ -395,6 +410,7 @@ class RtkInsEngine {
     if (dt > 0.0)
       for (int k = 0; k < kMaxAmb; ++k)
         if (amb_[k].sat >= 0) Paa_(k, k) += o.amb_psd * dt;
+    if (iono_active()) predict_iono(Phi, dt);
     t_last_ = t;
     // common satellites (gnss/double_difference.hpp, shared with gnss/rtk.hpp)
     n_common_ = gnss::match_common_satellites(rover, n_r, base, n_b, base_of_, common_r_.data(), common_b_.data());
@@ -410,6 +426,7 @@ class RtkInsEngine {
     out.n_sat = n_used_sats_;
     ins_slip_test(nf, dt, out);
     manage_ambiguities(nf);
+    manage_iono();
     // code rows, screened
     std::fill(code_out_.begin(), code_out_.end(), false);
     std::fill(phase_out_.begin(), phase_out_.end(), false);
@@ -546,6 +563,12 @@ class RtkInsEngine {
     bool used = false, half = false;
     double el = 0.0;
   };
+  struct IonoSlot {
+    int sat = -1;
+    int outage = 0;
+    bool used = false;
+    double el = 0.0;  // rover elevation of the last epoch [rad]
+  };
   struct PrevSd {
     double t = NAN;
     double sd = NAN;  // observed minus computed single difference at the posterior antenna [m]
@@ -676,6 +699,7 @@ class RtkInsEngine {
     Pia_.col(k).setZero();
     Paa_.row(k).setZero();
     Paa_.col(k).setZero();
+    Pai_.row(k).setZero();
   }
 
   // (Re-)initialise ambiguity k of common satellite c, frequency f from SD(phase - code / lambda)
@@ -691,6 +715,7 @@ class RtkInsEngine {
     Pia_.col(k).setZero();
     Paa_.row(k).setZero();
     Paa_.col(k).setZero();
+    Pai_.row(k).setZero();
     Paa_(k, k) = cfg_.rtk.amb_init_sigma_cycles * cfg_.rtk.amb_init_sigma_cycles;
     amb_[k].lock = 0;
     amb_[k].outage = 0;
@@ -749,8 +774,8 @@ class RtkInsEngine {
   int build_rows(int nf, bool code) {
     const gnss::RtkOptions& o = cfg_.rtk;
     const double bl = (ant_.r_e - r_base_).norm();
-    // the DD ionosphere as a variance (iono_mode kVariance); kEstimate is refused by the Python
-    // front end (rtk_ins_options): this engine has no ionosphere states
+    // the DD ionosphere as a variance (iono_mode kVariance); kEstimate: the states' mu_f (I^j - I^i)
+    // enters the computed value (iono_dd) and H (fill_H)
     const double var_bl =
         o.iono_mode == gnss::IonoMode::kVariance ? std::pow(o.iono_sigma_per_10km_m * bl / 1e4, 2) : 0.0;
     const double cf = code ? o.code_phase_ratio * o.code_phase_ratio : 1.0;  // x code_var_factor per satellite
@@ -772,11 +797,11 @@ class RtkInsEngine {
           if (!valid(c, f, code) || m >= kMaxRowsE) continue;
           const int i = c * gnss::kMaxFreq + f, ir = ref * gnss::kMaxFreq + f;
           if (code) {
-            y_(m) = -(sd_code_[i] - sd_code_[ir]);
+            y_(m) = -(sd_code_[i] - sd_code_[ir]) + iono_dd(c, ref, f);
             row_amb_[m] = row_amb_ref_[m] = -1;
           } else {
             const int kj = amb_row_[i], ki = amb_row_[ir];
-            y_(m) = -(sd_phase_[i] - sd_phase_[ir]) + lam(c, f) * xa_(kj) - lam(ref, f) * xa_(ki);
+            y_(m) = -(sd_phase_[i] - sd_phase_[ir]) + lam(c, f) * xa_(kj) - lam(ref, f) * xa_(ki) - iono_dd(c, ref, f);
             row_amb_[m] = kj;
             row_amb_ref_[m] = ki;
           }
@@ -967,7 +992,7 @@ class RtkInsEngine {
     code_scale_ = std::clamp(code_scale_ * std::pow(mean, o.code_scale_gain), 1.0, 100.0);
   }
 
-  // Compact joint state: the 15 INS errors and the tracked ambiguities.
+  // Compact joint state: the 15 INS errors, the tracked ambiguities and the ionosphere states.
   void gather() {
     na_ = 0;
     std::fill(col_of_.begin(), col_of_.end(), -1);
@@ -976,7 +1001,14 @@ class RtkInsEngine {
         col_of_[k] = kN + na_;
         act_[na_++] = k;
       }
-    const int n = kN + na_;
+    ni_ = 0;
+    std::fill(icol_of_.begin(), icol_of_.end(), -1);
+    for (int k = 0; k < kMaxIono; ++k)
+      if (iono_[k].sat >= 0) {
+        icol_of_[k] = kN + na_ + ni_;
+        act_i_[ni_++] = k;
+      }
+    const int n = kN + na_ + ni_;
     Pj_.resize(n, n);
     Pj_.template topLeftCorner<kN, kN>() = core_.filter.P();
     for (int a = 0; a < na_; ++a) {
@@ -984,10 +1016,17 @@ class RtkInsEngine {
       Pj_.row(kN + a).template head<kN>() = Pia_.col(act_[a]).transpose();
       for (int b = 0; b < na_; ++b) Pj_(kN + a, kN + b) = Paa_(act_[a], act_[b]);
     }
+    for (int i = 0; i < ni_; ++i) {
+      const int ci = kN + na_ + i, ki = act_i_[i];
+      Pj_.col(ci).template head<kN>() = Pxi_.col(ki);
+      Pj_.row(ci).template head<kN>() = Pxi_.col(ki).transpose();
+      for (int a = 0; a < na_; ++a) Pj_(kN + a, ci) = Pj_(ci, kN + a) = Pai_(act_[a], ki);
+      for (int b = 0; b < ni_; ++b) Pj_(ci, kN + na_ + b) = Pii_(ki, act_i_[b]);
+    }
   }
 
   void fill_H(int m) {
-    const int n = kN + na_;
+    const int n = kN + na_ + ni_;
     H_.setZero(m, n);
     for (int r = 0; r < m; ++r) {
       double hp[3], ha[3];
@@ -1000,12 +1039,19 @@ class RtkInsEngine {
         H_(r, col_of_[row_amb_[r]]) += lam(row_c_[r], row_f_[r]);
         H_(r, col_of_[row_amb_ref_[r]]) -= lam(row_ref_[r], row_f_[r]);
       }
+      // ionosphere: +mu_f (I^j - I^i) on code, -mu_f (I^j - I^i) on phase (iono_dd)
+      const int kj = iono_slot(row_c_[r]), ki = iono_slot(row_ref_[r]);
+      if (kj >= 0 && ki >= 0) {
+        const double mu = gnss::iono_factor(lam(row_c_[r], row_f_[r])) * (row_amb_[r] >= 0 ? -1.0 : 1.0);
+        H_(r, icol_of_[kj]) += mu;
+        H_(r, icol_of_[ki]) -= mu;
+      }
     }
   }
 
   // x = K y, P = P - K H P over the compact joint state (y = computed - measured = H dx + v).
   void kalman_update(int m) {
-    const int n = kN + na_;
+    const int n = kN + na_ + ni_;
     PHt_.noalias() = Pj_ * H_.transpose();
     S_ = R_.topLeftCorner(m, m);
     S_.noalias() += H_ * PHt_;
@@ -1032,6 +1078,13 @@ class RtkInsEngine {
       for (int b = 0; b < na_; ++b) Paa_(k, act_[b]) = Pj_(kN + a, kN + b);
       xa_(k) -= dx_(kN + a);
     }
+    for (int i = 0; i < ni_; ++i) {
+      const int ci = kN + na_ + i, ki = act_i_[i];
+      Pxi_.col(ki) = Pj_.col(ci).template head<kN>();
+      for (int a = 0; a < na_; ++a) Pai_(act_[a], ki) = Pj_(kN + a, ci);
+      for (int b = 0; b < ni_; ++b) Pii_(ki, act_i_[b]) = Pj_(ci, kN + na_ + b);
+      xi_(ki) -= dx_(ci);
+    }
     feedback_ins(dx_.template head<kN>());
   }
 
@@ -1051,6 +1104,85 @@ class RtkInsEngine {
     core_.ins.set_state(s);
     core_.touch();
     core_.smoother_feedback(x);  // the RTS smoother's record of the epoch (closed_loop.hpp)
+  }
+
+  // ---- ionosphere states (iono_mode kEstimate; gnss/rtk.hpp's model) ----
+  bool iono_active() const { return cfg_.rtk.iono_mode == gnss::IonoMode::kEstimate; }
+
+  // The ionosphere slot of common satellite c, or -1.
+  int iono_slot(int c) const {
+    if (!iono_active()) return -1;
+    return iono_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols)];
+  }
+
+  // The estimated DD ionosphere of a row on frequency f: mu_f (I^c - I^ref) [m] (0 without states).
+  double iono_dd(int c, int ref, int f) const {
+    const int kj = iono_slot(c), ki = iono_slot(ref);
+    if (kj < 0 || ki < 0) return 0.0;
+    return gnss::iono_factor(lam(c, f)) * (xi_(kj) - xi_(ki));
+  }
+
+  // sigma_I^2(bl, el) = (iono_sigma_per_10km_m bl / 10 km M(el))^2: the stationary variance [m^2]
+  double iono_prior_var(double bl, double el) const {
+    const double s = cfg_.rtk.iono_sigma_per_10km_m * bl / 1e4 * gnss::iono_mapping(el);
+    return s * s;
+  }
+
+  // The Gauss-Markov step of the ionosphere states over dt (file comment) and their cross-covariance
+  // with the INS errors over the cycle: P_xI <- Phi P_xI phi, P_NI <- P_NI phi, P_II <- phi P_II phi + q.
+  void predict_iono(const Mat15& Phi, double dt) {
+    Pxi_ = Phi * Pxi_;
+    if (!(dt > 0.0)) return;
+    const double phi = cfg_.rtk.iono_tau_s > 0.0 ? std::exp(-dt / cfg_.rtk.iono_tau_s) : 0.0;
+    const double bl = (ant_.r_e - r_base_).norm();
+    for (int k = 0; k < kMaxIono; ++k) {
+      if (iono_[k].sat < 0) continue;
+      xi_(k) *= phi;
+      Pxi_.col(k) *= phi;
+      Pai_.col(k) *= phi;
+      Pii_.row(k) *= phi;
+      Pii_.col(k) *= phi;
+      Pii_(k, k) += iono_prior_var(bl, iono_[k].el) * (1.0 - phi * phi);
+    }
+  }
+
+  // Ionosphere states of the satellites in use: a new one starts at I = 0 with the stationary
+  // sigma_I^2 (the ionosphere-weighted pseudo-observation), one unseen for max_outage_epochs is removed.
+  void manage_iono() {
+    if (!iono_active()) return;
+    for (auto& a : iono_) a.used = false;
+    const double bl = (ant_.r_e - r_base_).norm();
+    for (int c = 0; c < n_common_; ++c) {
+      if (!use_[c]) continue;
+      const int sat = key(rover_ + common_r_[c] * gnss::RtkRow::kCols);
+      int k = iono_of_[sat];
+      if (k < 0) {
+        for (int q = 0; q < kMaxIono; ++q)
+          if (iono_[q].sat < 0) { k = q; break; }
+        if (k < 0) continue;  // table full: the satellite's rows carry no ionosphere
+        iono_[k].sat = sat;
+        iono_of_[sat] = k;
+        clear_iono(k);
+        Pii_(k, k) = iono_prior_var(bl, el_r_[c]);
+      }
+      iono_[k].used = true;
+      iono_[k].outage = 0;
+      iono_[k].el = el_r_[c];
+    }
+    for (int k = 0; k < kMaxIono; ++k) {
+      if (iono_[k].sat < 0 || iono_[k].used || ++iono_[k].outage <= cfg_.rtk.max_outage_epochs) continue;
+      iono_of_[iono_[k].sat] = -1;
+      iono_[k] = IonoSlot{};
+      clear_iono(k);
+    }
+  }
+
+  void clear_iono(int k) {
+    xi_(k) = 0.0;
+    Pxi_.col(k).setZero();
+    Pai_.col(k).setZero();
+    Pii_.row(k).setZero();
+    Pii_.col(k).setZero();
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -1205,7 +1337,7 @@ class RtkInsEngine {
   // Fix-and-hold: the fixed DD as pseudo-measurements N_j - N_i = a_fix (sigma hold_sigma_cycles).
   void hold(int nu) {
     gather();
-    const int n = kN + na_;
+    const int n = kN + na_ + ni_;
     const int m = std::min(nu, kMaxRowsE);
     H_.setZero(m, n);
     R_.setZero(kMaxRowsE, kMaxRowsE);
@@ -1228,6 +1360,13 @@ class RtkInsEngine {
   Eigen::Matrix<double, kMaxAmb, kMaxAmb> Paa_ = Eigen::Matrix<double, kMaxAmb, kMaxAmb>::Zero();
   std::array<AmbSlot, kMaxAmb> amb_{};
   std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> amb_of_{};
+  // ionosphere block (iono_mode kEstimate; fixed capacity, active mask = iono_[k].sat >= 0)
+  Eigen::Matrix<double, kMaxIono, 1> xi_ = Eigen::Matrix<double, kMaxIono, 1>::Zero();
+  Eigen::Matrix<double, kN, kMaxIono> Pxi_ = Eigen::Matrix<double, kN, kMaxIono>::Zero();
+  Eigen::Matrix<double, kMaxAmb, kMaxIono> Pai_ = Eigen::Matrix<double, kMaxAmb, kMaxIono>::Zero();
+  Eigen::Matrix<double, kMaxIono, kMaxIono> Pii_ = Eigen::Matrix<double, kMaxIono, kMaxIono>::Zero();
+  std::array<IonoSlot, kMaxIono> iono_{};
+  std::array<int, gnss::kMaxSatKeys> iono_of_{};
   double t_last_ = NAN;
   double dt_epoch_ = 0.0;    // time since the previous rover epoch [s] (0 on the first)
   double code_scale_ = 1.0;  // adaptive variance factor of the code rows (update_code_scale)
@@ -1264,8 +1403,9 @@ class RtkInsEngine {
   std::array<double, gnss::kMaxSatKeys * gnss::kMaxFreq> sd_phase_{}, sd_code_{}, d_{}, med_{};
   // rows and the compact update
   std::array<int, kMaxRowsE> row_c_{}, row_ref_{}, row_f_{}, row_amb_{}, row_amb_ref_{};
-  int na_ = 0;
+  int na_ = 0, ni_ = 0;
   std::array<int, kMaxAmb> act_{}, col_of_{};
+  std::array<int, kMaxIono> act_i_{}, icol_of_{};
   JMat Pj_, Pn_;
   JVec dx_;
   HMat H_, KT_;
