@@ -151,12 +151,16 @@ class _Static:
 
 
 @pytest.mark.parametrize("filt", ["ekf", "rbukf", "ukf"])
-@pytest.mark.parametrize("code_model", [dict(code_correlation_time_s=0.0),
-                                        dict(code_correlation_time_s=10.0, adaptive_code_gain=0.2)],
-                         ids=["white-code", "correlated-adaptive-code"])
+@pytest.mark.parametrize("code_model", [dict(code_correlation_time_s=0.0, iono="variance"),
+                                        dict(code_correlation_time_s=10.0, adaptive_code_gain=0.2, iono="variance"),
+                                        dict(code_correlation_time_s=0.0, iono="estimate")],
+                         ids=["white-code", "correlated-adaptive-code", "iono-states"])
 def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model, filt):
     """Also with the time-correlated code model (variance x (1 + rho) / (1 - rho) once an ambiguity is
-    tracked) and the adaptive code variance factor: both engines must weigh the code identically."""
+    tracked) and the adaptive code variance factor: both engines must weigh the code identically; and
+    with the ionosphere states of both (the ionosphere-weighted Gauss-Markov model, ``iono =
+    "estimate"``).  White phase in both (``phase_correlation_time_s = 0``: the GNSS-only engine has no
+    correlated phase error states)."""
     v = "iono-Klob_tropo-Saast"
     rover = rtk.read_phase_obs(need(SP / v / "Rover-static-2km-east_MO_Spirent.obs"), "GE")
     base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
@@ -185,7 +189,7 @@ def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model, filt):
     cfg = RunConfig(filter=filt, imu=zero, init_error=False, init_sigma_pos_m=[SIG0] * 3,
                     init_sigma_vel_mps=[1e-9] * 3, init_sigma_att_deg=[1e-9] * 3)
     sol = run_rtk_ins(ds, cfg, rover=rover, base=base, nav=NAV, base_pos=rb, rtk_options=common,
-                      engine=dict(code_chi2_row=0.0))
+                      engine=dict(code_chi2_row=0.0, phase_correlation_time_s=0.0))
     ri = sol.rtk.r_float_e
     rg = np.asarray(g["r_float_e"])
     ok = (np.asarray(g["status"]) == 2) & (sol.rtk.status == 2)
@@ -457,8 +461,10 @@ def test_urban_float_covariance_consistent_with_correlated_code(tmp_path):
     """Urban simulator preset (GPS L1, 5-6 satellites, code multipath correlated over 20 s), seed 1: the NEES
     of the float antenna position against the truth, (r - r_true)^T P_r^-1 (r - r_true), 3 for a consistent
     covariance.  With white code errors the INS-held float averages correlated multipath as if it were
-    white: NEES 31 (measured), no fix.  With the default correlated-code model (code_correlation_time_s
-    10 s): NEES 3.7 (measured) and correct fixes only."""
+    white: NEES 31 (measured), 35 fixes, all wrong.  With the default correlated-code model
+    (code_correlation_time_s 10 s): NEES 2.0 and no fix (measured; with white phase and no ionosphere
+    states, the defaults before the correlated phase error and ionosphere states: NEES 3.7, 22 correct
+    fixes)."""
     import math
 
     from insnav.sim import simulate
@@ -473,9 +479,9 @@ def test_urban_float_covariance_consistent_with_correlated_code(tmp_path):
     opts = dict(systems="G", frequencies=1, elevation_mask_deg=math.degrees(sc.gnss_rtk["base_elevation_mask"]))
     t_true, r_true = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
 
-    def nees_fixed_wrong(extra):
+    def nees_fixed_wrong(extra, engine=None):
         rs = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                         rtk_options=dict(opts, **extra)).rtk
+                         rtk_options=dict(opts, **extra), engine=engine).rtk
         i = np.searchsorted(t_true, rs.t_gps_s - 0.5e-3)
         assert np.all(np.abs(t_true[i] - rs.t_gps_s) < 1e-3)
         fl = rs.status == 2
@@ -489,17 +495,20 @@ def test_urban_float_covariance_consistent_with_correlated_code(tmp_path):
     n_white, _, _ = nees_fixed_wrong(dict(code_correlation_time_s=0.0))
     assert n_def < 6.0, n_def
     assert n_white > 3.0 * n_def, (n_white, n_def)
-    assert fixed_def >= 10 and wrong_def == 0, (fixed_def, wrong_def)
+    assert wrong_def == 0, (fixed_def, wrong_def)
 
 
 @pytest.mark.slow
 def test_urban_float_nees_consistent_with_the_presets_receiver_noise(tmp_path):
-    """Urban simulator preset, seed 3: the float NEES, 3 for a consistent covariance.  The default filter
-    leaves the phase multipath (4 mm w(el), 20 s) unmodelled and under-states the code multipath: its float
-    is over-confident (NEES 13.9, measured) and its ratio test passes a wrong set (4 fixes, all wrong, 3 m
-    vertically).  With the preset's receiver noise (insnav.sim.gnss_rtk.rtk_noise_options: the phase
-    multipath as a random walk of the ambiguity states, Gelb 1974 sec. 4.3) the NEES is at most 3 (2.4,
-    measured), and with the success-rate test computed from that covariance (>= 0.999) no wrong fix."""
+    """Urban simulator preset, seed 3: the float NEES, 3 for a consistent covariance.  White phase
+    without ionosphere states (the defaults before the correlated phase error and ionosphere states)
+    leaves the phase multipath (4 mm w(el), 20 s) unmodelled and under-states the code multipath: its
+    float is over-confident (NEES 13.9, measured) and its ratio test passes a wrong set (4 fixes, all
+    wrong, 3 m vertically).  The defaults (correlated phase errors 3 mm over 30 s as states, ionosphere
+    states): NEES 8.3 and no fix (measured).  With the preset's receiver noise
+    (insnav.sim.gnss_rtk.rtk_noise_options: the phase multipath as a random walk of the ambiguity
+    states, Gelb 1974 sec. 4.3) the NEES is at most 3 (2.4, measured), and with the success-rate test
+    computed from that covariance (>= 0.999) no wrong fix."""
     import math
 
     from insnav.sim import simulate
@@ -516,9 +525,9 @@ def test_urban_float_nees_consistent_with_the_presets_receiver_noise(tmp_path):
     rx = rtk_noise_options(sc.gnss_rtk)
     t_true, r_true = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
 
-    def nees_fixed_wrong(extra):
+    def nees_fixed_wrong(extra, engine=None):
         rs = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                         rtk_options=dict(opts, **extra)).rtk
+                         rtk_options=dict(opts, **extra), engine=engine).rtk
         i = np.searchsorted(t_true, rs.t_gps_s - 0.5e-3)
         assert np.all(np.abs(t_true[i] - rs.t_gps_s) < 1e-3)
         fl = rs.status == 2
@@ -528,10 +537,12 @@ def test_urban_float_nees_consistent_with_the_presets_receiver_noise(tmp_path):
         err = np.linalg.norm(rs.r_e[fx] - r_true[i[fx]], axis=1)
         return float(nees.mean()), int(fx.sum()), int((err > 0.05).sum())
 
+    n_white, _, wrong_white = nees_fixed_wrong(dict(iono="variance"), dict(phase_correlation_time_s=0.0))
     n_def, _, wrong_def = nees_fixed_wrong({})
     n_rx, _, _ = nees_fixed_wrong(rx)
     _, _, wrong_rx9 = nees_fixed_wrong(dict(rx, min_success_rate=0.999))
-    assert n_def > 6.0 and wrong_def > 0, (n_def, wrong_def)
+    assert n_white > 6.0 and wrong_white > 0, (n_white, wrong_white)
+    assert n_def < n_white and wrong_def == 0, (n_def, wrong_def)
     assert 0.5 < n_rx <= 3.0, n_rx
     assert wrong_rx9 == 0
 
@@ -651,41 +662,18 @@ def test_robust_screening_bad_settings_are_one_line_errors(drive, spirent_l1, en
                     rtk_options=dict(systems="GE", frequencies=1), engine=engine)
 
 
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="open-sky preset: the float RTK/INS covariance is over-confident "
-                   "(float position NEES median 114 against 3, measured) and the fix validation rejects the "
-                   "correct fixes; 10 of 599 epochs fixed (measured).  Two causes, each enough alone: the "
-                   "between-receiver atmosphere (no ionosphere or troposphere states in this filter) and the "
-                   "phase multipath taken as white (test_phase_correlation_model_fixes_the_multipath_part)")
-def test_open_sky_preset_defaults_fix_rate_and_no_wrong_fix(tmp_path):
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_open_sky_preset_defaults_fix_rate_and_no_wrong_fix(tmp_path, seed):
     """Open-sky simulator preset at its defaults (GPS+Galileo L1/L2, 19-20 satellites, code/phase multipath
     0.3 m / 3 mm correlated over 30 s, iono 1 ppm and tropo 0.3 ppm on a 2.5-8 km baseline, a 20 s
-    standstill, MEMS IMU, 1.5 m lever arm), seed 1, 599 epochs.  GNSS-only RTK fixes 599/599 on these
-    files; with the fix validation off the RTK/INS fixes 100 % with 3-D errors RMS 13-16 mm (seeds 1-3,
-    measured), so the integers are resolvable and at least 90 % fixed epochs and no fixed epoch more
-    than 5 cm from the truth is the target.  Measured on main: 10 fixed (1.7 %), float position NEES
-    (r - r_true)^T P_r^-1 (r - r_true) median 114 (3 for a consistent covariance), float error median
-    325 mm.  Diagnosis (float epochs' NEES median, seeds 1/2/3: 114/60/86): the phase multipath (3 mm,
-    30 s) is modelled as white phase noise; as a random walk of the ambiguity states
-    (``amb_psd_cycles2ps`` of insnav.sim.gnss_rtk.rtk_noise_options, 1.8e-5 cycles^2/s) the NEES is 2.0
-    (seed 1) and 1.4 (seed 3), but only 31-32 % are fixed and seed 3 has 32 fixes > 5 cm (measured), so
-    that default alone is not the fix; code_correlation_time_s 30 s instead of 10 s changes nothing, the
-    iono variance 1 cm per 10 km moves the NEES from 114 to 85 (seed 1).  Attribution (seed 1, the
-    preset with one error source switched off, measured): without multipath 115/599 fixed, without the
-    atmosphere (iono_ppm = tropo_ppm = 0) 19/599, without both 599/599; with the atmosphere off the phase
-    correlation model at the preset's 30 s (engine key phase_correlation_time_s) fixes 599/599 on seeds
-    1-3, but as a default it costs the Spirent drive its fixed accuracy (RMS 2.5 -> 27 mm at 60 s, no
-    multipath there); the atmosphere needs its own states.  The chi2 validation of the best vector
-    (validation_prob) is what rejects the fixes: off, seeds 1-5 fix 2986/2998 (5 partial fixes 5-7 cm
-    off), but a 0.3-cycle phase step on the reference then gives a 5.3 cm fix
-    (test_robust_screening_a_0p3_cycle_phase_jump_on_the_reference), so it stays on."""
-    from insnav.sim import simulate
-    from insnav.sim.scenario import load_scenario, resolve_raw
-
-    raw, _ = resolve_raw("rtk-open-sky-car")
-    sc = load_scenario(dict(raw), seed=1)
-    ds = simulate(sc, seed=1)
-    files = ds.rtk.write(tmp_path)
+    standstill, MEMS IMU, 1.5 m lever arm), seeds 1-3, 599-600 epochs each.  GNSS-only RTK fixes all of
+    them, so the integers are resolvable: at least 90 % fixed and no fixed epoch more than 5 cm from the
+    truth.  Measured at the defaults (the correlated phase errors as states, 3 mm over 30 s, and the
+    ionosphere states): 599/599, 600/600 and 599/599 fixed, largest fixed errors 32, 25 and 22 mm.  With
+    white phase and no ionosphere states (the defaults before them) 10, 9 and 8 epochs were fixed: the
+    float was over-confident (position NEES median 114, 60 and 86 against 3) and the fix validation
+    (validation_prob 0.999) rejected the correct integers.  Attribution: test_open_sky_each_error_model_alone_falls_short."""
+    ds, files = _open_sky_files(tmp_path, seed)
     rs = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"]).rtk
     t_true, r_true = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
     i = np.searchsorted(t_true, rs.t_gps_s - 0.5e-3)
@@ -724,27 +712,32 @@ def _fixed_and_float_nees(ds, sol):
 
 @pytest.mark.slow
 def test_phase_correlation_model_fixes_the_multipath_part(tmp_path):
-    """The open-sky preset with its between-receiver atmosphere switched off (iono_ppm = tropo_ppm = 0),
-    so that the phase multipath (3 mm at the zenith, first-order Gauss-Markov over 30 s) is the error the
-    white phase model gets wrong, seed 1.  White phase (the default): measured 19/599 fixed, float NEES
-    median 10.3.  The engine's phase correlation model at the preset's 30 s (a tracked ambiguity's phase
-    variance x (1 + rho) / (1 - rho), rho = exp(-dt / tau); Gelb 1974, sec. 3.8): measured 599/599 fixed,
-    largest fixed error 22 mm.  A correlation time far below the epoch interval is the white model
-    exactly (rho = 0)."""
+    """The open-sky preset with its between-receiver atmosphere switched off (iono_ppm = tropo_ppm = 0,
+    the filter without ionosphere term), so that the phase multipath (3 mm at the zenith, first-order
+    Gauss-Markov over 30 s) is the error the white phase model gets wrong, seed 1.  White phase
+    (phase_correlation_time_s = 0): measured 19/599 fixed, float NEES median 10.3.  The default, one
+    Gauss-Markov phase error state per ambiguity (3 mm at each receiver's zenith, 30 s): measured
+    599/599 fixed.  The variance-factor approximation (phase_error_sigma_m = 0: a tracked ambiguity's
+    phase variance x (1 + rho) / (1 - rho), rho = exp(-dt / tau); Gelb 1974, sec. 3.8): 599/599.  Exact
+    reductions to white phase: states with a vanishing sigma (1e-9 m), and the variance factor with a
+    correlation time far below the epoch interval (rho = 0)."""
     ds, files = _open_sky_files(tmp_path, 1, iono_ppm=0.0, tropo_ppm=0.0)
 
     def run(**engine):
         return run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"],
-                           nav=files["nav"], engine=engine)
+                           nav=files["nav"], rtk_options=dict(iono="off"), engine=engine)
 
-    white = run()
+    white = run(phase_correlation_time_s=0.0)
     rate_w, _, nees_w = _fixed_and_float_nees(ds, white)
     assert rate_w < 0.2 and nees_w > 5.0, (rate_w, nees_w)
-    rate_c, err_c, _ = _fixed_and_float_nees(ds, run(phase_correlation_time_s=30.0))
+    rate_s, err_s, _ = _fixed_and_float_nees(ds, run())
+    assert rate_s >= 0.99 and err_s <= 0.05, (rate_s, err_s)
+    rate_c, err_c, _ = _fixed_and_float_nees(ds, run(phase_error_sigma_m=0.0))
     assert rate_c >= 0.99 and err_c <= 0.05, (rate_c, err_c)
-    tiny = run(phase_correlation_time_s=1e-9)
-    assert np.array_equal(tiny.rtk.status, white.rtk.status)
-    assert np.array_equal(tiny.rtk.r_e, white.rtk.r_e, equal_nan=True)
+    for tiny in (run(phase_correlation_time_s=1e-9, phase_error_sigma_m=0.0), run(phase_error_sigma_m=1e-9)):
+        assert np.array_equal(tiny.rtk.status, white.rtk.status)
+        ok = np.isfinite(white.rtk.r_e).all(axis=1)
+        assert np.max(np.abs(tiny.rtk.r_e[ok] - white.rtk.r_e[ok])) < 1e-6
 
 
 def test_ionosphere_states_with_a_vanishing_prior_are_the_model_without_ionosphere(drive, spirent_l1):
@@ -774,24 +767,28 @@ def test_ionosphere_states_with_a_vanishing_prior_are_the_model_without_ionosphe
     assert np.sqrt(np.nanmean(e_est ** 2)) <= 1.1 * np.sqrt(np.nanmean(e_off ** 2)) + 1e-4
 
 
-def test_ionosphere_states_and_phase_correlation_fix_the_open_sky_preset(tmp_path):
+@pytest.mark.slow
+def test_open_sky_each_error_model_alone_falls_short(tmp_path):
     """The open-sky preset at its simulated errors (between-receiver ionosphere 1 ppm and troposphere
-    0.3 ppm on a 2.5-8 km baseline, phase multipath 3 mm correlated over 30 s), seed 1, with the
-    filter's model matching them: ionosphere states (``[rtk] iono = "estimate"``) and the phase
-    correlation model at the preset's 30 s.  Measured: 599/599 fixed, largest fixed error 39 mm (seeds
-    2 and 3: 600/600 and 599/599, 28 and 33 mm).  Each part alone falls short (seed 1, measured): phase
-    correlation with the ionosphere as a variance fixes 469/599, ionosphere states with white phase
-    fix 256/599 of which 18 more than 5 cm off."""
+    0.3 ppm on a 2.5-8 km baseline, phase multipath 3 mm correlated over 30 s), seed 1: the defaults
+    model both (ionosphere states, correlated phase error states: 599/599 fixed, measured).  Each part
+    alone falls short (measured): the phase error states with the ionosphere as a variance fix
+    307/599 (seed 3: 263, 17 of them more than 5 cm off); the ionosphere states with white phase fix
+    256/599, 18 of them more than 5 cm off (21 cm at most); neither fixes 10/599."""
     ds, files = _open_sky_files(tmp_path, 1)
 
     def run(rtk_opt, **engine):
         return run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"],
                            nav=files["nav"], rtk_options=rtk_opt, engine=engine)
 
-    rate, err, _ = _fixed_and_float_nees(ds, run(dict(iono="estimate"), phase_correlation_time_s=30.0))
+    rate, err, _ = _fixed_and_float_nees(ds, run({}))
     assert rate >= 0.99 and err <= 0.05, (rate, err)
-    rate_v, _, _ = _fixed_and_float_nees(ds, run({}, phase_correlation_time_s=30.0))
-    assert rate_v < 0.9, rate_v
+    rate_p, _, _ = _fixed_and_float_nees(ds, run(dict(iono="variance")))
+    assert rate_p < 0.9, rate_p
+    rate_i, err_i, _ = _fixed_and_float_nees(ds, run({}, phase_correlation_time_s=0.0))
+    assert rate_i < 0.9 and err_i > 0.05, (rate_i, err_i)
+    rate_n, _, _ = _fixed_and_float_nees(ds, run(dict(iono="variance"), phase_correlation_time_s=0.0))
+    assert rate_n < 0.1, rate_n
 
 
 def test_phase_correlation_time_must_not_be_negative(drive, spirent_l1):
@@ -799,6 +796,9 @@ def test_phase_correlation_time_must_not_be_negative(drive, spirent_l1):
     with pytest.raises(ValueError, match="phase_correlation_time_s"):
         run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
                     rtk_options=dict(systems="GE", frequencies=1), engine=dict(phase_correlation_time_s=-1.0))
+    with pytest.raises(ValueError, match="phase_error_sigma_m"):
+        run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
+                    rtk_options=dict(systems="GE", frequencies=1), engine=dict(phase_error_sigma_m=-0.001))
 
 
 def test_a_rover_with_moved_time_tags_is_refused_before_the_filter_runs(drive, tmp_path):

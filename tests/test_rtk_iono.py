@@ -152,6 +152,9 @@ def test_iono_options_are_checked():
     assert RtkOptions.from_dict({}).core_dict()["iono_mode"] == 1
     from insnav.filters.rtk_ins import rtk_ins_options
 
-    with pytest.raises(ConfigError, match="tight RTK/INS"):
-        rtk_ins_options({"iono": "estimate"})
+    # RTK/INS: the ionosphere states by default (filters/rtk_ins.py RTK_INS_DEFAULTS), the same checks
+    assert rtk_ins_options({}).core_dict()["iono_mode"] == 2
+    assert rtk_ins_options({}).core_dict()["iono_sigma_per_10km_m"] == 0.03
+    with pytest.raises(ConfigError, match="iono_sigma_per_10km_m"):
+        rtk_ins_options({"iono_sigma_per_10km_m": 0.0})
     assert rtk_ins_options({"iono": "off"}).core_dict()["iono_mode"] == 0

@@ -12,13 +12,20 @@
 // gnss::kIonoRefFreqHz [m], one per satellite, the ionosphere-weighted model of gnss/rtk.hpp (Odijk
 // 2002, sec. 4.2): a first-order Gauss-Markov process (iono_tau_s) whose stationary sigma is
 // sigma_I(bl, el) = iono_sigma_per_10km_m x bl / 10 km x M(el); a DD row of frequency f carries
-// mu_f (I^j - I^i), mu_f = (f_0 / f)^2, on code and -mu_f (I^j - I^i) on phase.  No receiver clock
-// or inter-system bias states: double differences remove them.  The ambiguities are constants (plus amb_psd), so
+// mu_f (I^j - I^i), mu_f = (f_0 / f)^2, on code and -mu_f (I^j - I^i) on phase.  Correlated phase
+// errors (phase_corr_time_s > 0 and phase_error_sigma_m > 0, the defaults 30 s and 3 mm): a third block,
+// one first-order Gauss-Markov state b [m] per ambiguity slot (carrier multipath and what the
+// atmosphere models leave; state augmentation, A. Gelb (ed.), Applied Optimal Estimation, 1974,
+// sec. 4.5), + (b^j - b^i) on a DD phase row, stationary variance phase_error_sigma_m^2 (w^2(el_r) +
+// w^2(el_b)) with w^2 the phase weighting's elevation model normalised at the zenith, started at 0
+// when its ambiguity is (re)initialised.  The three blocks are one "extra state" vector E (xe_, P_xE,
+// P_EE; fixed capacity 3 x kMaxAmb, an active mask).  No receiver clock or inter-system bias states:
+// double differences remove them.  The ambiguities are constants (plus amb_psd), so
 // between two epochs their cross-covariance with the INS errors evolves by the INS transition
 // alone, P_xN <- Phi_cycle P_xN (Phi_cycle: the EKF's product of the interval transitions), and
-// the core propagates P_xx as in every other engine.  The ionosphere states decay by
-// phi = exp(-dt / iono_tau_s) between epochs: P_xI <- Phi_cycle P_xI phi, P_NI <- P_NI phi,
-// P_II <- phi P_II phi + sigma_I^2 (1 - phi^2).
+// the core propagates P_xx as in every other engine.  The Gauss-Markov states (ionosphere,
+// correlated phase errors) decay by phi = exp(-dt / tau) between epochs: e <- phi e,
+// P_xE <- Phi_cycle P_xE phi, P_EE <- phi P_EE phi + sigma^2 (1 - phi^2).
 //
 // Epoch (an RTK record applied at its time of validity):
 //   1. slips: the receiver detectors of gnss/rtk.hpp (LLI, geometry-free, Melbourne-Wuebbena,
@@ -146,8 +153,12 @@ struct RtkInsConfig {
   double ins_slip_max_dt_s = 2.0;     // the test needs the previous epoch of the satellite within this
   double code_chi2_row = 25.0;        // code row screening (0: off)
   double validation_prob = 0.999;     // AR: best vector's squared norm <= chi2 quantile (0: off)
-  // Correlation time of the phase errors (carrier multipath) [s]; 0: white (phase_var_factor)
-  double phase_corr_time_s = 0.0;
+  // Time-correlated phase errors (carrier multipath, the residual atmosphere a model leaves): correlation
+  // time [s] (0: white phase) and each receiver's zenith sigma [m] of a first-order Gauss-Markov error,
+  // one state per ambiguity (file comment, "Correlated phase errors"); sigma 0 with a correlation time:
+  // the variance-factor approximation instead (phase_var_factor)
+  double phase_corr_time_s = 30.0;
+  double phase_error_sigma_m = 0.003;
   double ar_min_success_rate = 0.0;   // AR: bootstrapped success rate of the fixed subset (0: off)
   // A filter cycle without a rover epoch is closed after this long [s] (+inf: one cycle spans a
   // whole gap).  The RTS smoother needs epochs inside GNSS outages (the bindings set it when
@@ -238,7 +249,11 @@ class RtkInsEngine {
   using Mat15 = StateCov<L>;
   static constexpr int kN = L::kSize;
   static constexpr int kMaxIono = kMaxAmb;  // ionosphere states (one per satellite; iono_mode kEstimate)
-  static constexpr int kMaxJ = kN + kMaxAmb + kMaxIono;
+  static constexpr int kIono0 = kMaxAmb;             // extra-state index of the first ionosphere slot
+  static constexpr int kPhaseErr0 = kMaxAmb + kMaxIono;  // ... of the first correlated phase error (one per ambiguity)
+  static constexpr int kMaxExtra = kPhaseErr0 + kMaxAmb;
+  static constexpr int kMaxJ = kN + kMaxExtra;
+  static constexpr double kHalfPi = 1.5707963267948966;
   static constexpr int kMaxRowsE = kMaxAmb;  // DD rows of one kind
   using JVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxJ, 1>;
   using JMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxJ, kMaxJ>;
@@ -265,13 +280,9 @@ class RtkInsEngine {
       P_start_ = core_.filter.P();
       p_start_t_ = core_.cycle_start;
     }
-    xa_.setZero();
-    Pia_.setZero();
-    Paa_.setZero();
-    xi_.setZero();
-    Pxi_.setZero();
-    Pai_.setZero();
-    Pii_.setZero();
+    xe_.setZero();
+    Pxe_.setZero();
+    Pee_.setZero();
     iono_of_.fill(-1);
     for (auto& a : iono_) a = IonoSlot{};
     amb_of_.fill(-1);
@@ -349,8 +360,7 @@ class RtkInsEngine {
         core_.close_cycle();
         const auto& Phi = cycle_phi();
         if constexpr (kUnscented) core_.condition_prediction_for_smoother(Phi);  // before the next conditioning
-        Pia_ = Phi * Pia_;
-        if (iono_active()) Pxi_ = Phi * Pxi_;
+        Pxe_ = Phi * Pxe_;
         if (cond_valid_) {  // no measurement: the smoother's estimate stays the fixed one, predicted
           cond_dx_ = Phi * cond_dx_;
           dP_fix_.noalias() = cond_dP_ * Phi.transpose();
@@ -406,11 +416,8 @@ class RtkInsEngine {
     // ambiguity covariance to this epoch: P_xN <- Phi P_xN, P_NN += q dt
     const double dt = std::isfinite(t_last_) ? t - t_last_ : 0.0;
     dt_epoch_ = dt;
-    Pia_ = Phi * Pia_;
-    if (dt > 0.0)
-      for (int k = 0; k < kMaxAmb; ++k)
-        if (amb_[k].sat >= 0) Paa_(k, k) += o.amb_psd * dt;
-    if (iono_active()) predict_iono(Phi, dt);
+    Pxe_ = Phi * Pxe_;
+    predict_extra(dt);
     t_last_ = t;
     // common satellites (gnss/double_difference.hpp, shared with gnss/rtk.hpp)
     n_common_ = gnss::match_common_satellites(rover, n_r, base, n_b, base_of_, common_r_.data(), common_b_.data());
@@ -562,6 +569,7 @@ class RtkInsEngine {
     int lock = 0, outage = 0;
     bool used = false, half = false;
     double el = 0.0;
+    double phase_error_var = 0.0;  // stationary variance of its correlated phase error at el [m^2] (phase_error_var)
   };
   struct IonoSlot {
     int sat = -1;
@@ -695,11 +703,11 @@ class RtkInsEngine {
     amb_[k] = AmbSlot{};
     ++amb_gen_[k];  // a held integer of this slot no longer applies (hold_for_smoother)
     validator_.invalidate(k);
-    xa_(k) = 0.0;
-    Pia_.col(k).setZero();
-    Paa_.row(k).setZero();
-    Paa_.col(k).setZero();
-    Pai_.row(k).setZero();
+    xe_(k) = 0.0;
+    Pxe_.col(k).setZero();
+    Pee_.row(k).setZero();
+    Pee_.col(k).setZero();
+    clear_extra(kPhaseErr0 + k);
   }
 
   // (Re-)initialise ambiguity k of common satellite c, frequency f from SD(phase - code / lambda)
@@ -711,12 +719,15 @@ class RtkInsEngine {
     double n0 = fr[1] - fb[1];
     if (std::isfinite(fr[0]) && std::isfinite(fb[0])) n0 -= (fr[0] - fb[0]) / lam;
     else n0 = sd_phase_[c * gnss::kMaxFreq + f] / lam;  // no code: from the INS-predicted geometry
-    xa_(k) = n0;
-    Pia_.col(k).setZero();
-    Paa_.row(k).setZero();
-    Paa_.col(k).setZero();
-    Pai_.row(k).setZero();
-    Paa_(k, k) = cfg_.rtk.amb_init_sigma_cycles * cfg_.rtk.amb_init_sigma_cycles;
+    xe_(k) = n0;
+    Pxe_.col(k).setZero();
+    Pee_.row(k).setZero();
+    Pee_.col(k).setZero();
+    Pee_(k, k) = cfg_.rtk.amb_init_sigma_cycles * cfg_.rtk.amb_init_sigma_cycles;
+    // its correlated phase error (phase_error_sigma_m): 0 with the stationary variance
+    clear_extra(kPhaseErr0 + k);
+    amb_[k].phase_error_var = phase_errors_active() ? phase_error_var(c) : 0.0;
+    Pee_(kPhaseErr0 + k, kPhaseErr0 + k) = amb_[k].phase_error_var;
     amb_[k].lock = 0;
     amb_[k].outage = 0;
     validator_.invalidate(k);
@@ -756,6 +767,7 @@ class RtkInsEngine {
         amb_[k].used = true;
         amb_[k].outage = 0;
         amb_[k].el = el_r_[c];
+        if (phase_errors_active()) amb_[k].phase_error_var = phase_error_var(c);
         amb_row_[c * gnss::kMaxFreq + f] = k;
       }
     }
@@ -801,7 +813,8 @@ class RtkInsEngine {
             row_amb_[m] = row_amb_ref_[m] = -1;
           } else {
             const int kj = amb_row_[i], ki = amb_row_[ir];
-            y_(m) = -(sd_phase_[i] - sd_phase_[ir]) + lam(c, f) * xa_(kj) - lam(ref, f) * xa_(ki) - iono_dd(c, ref, f);
+            y_(m) = -(sd_phase_[i] - sd_phase_[ir]) + lam(c, f) * xe_(kj) - lam(ref, f) * xe_(ki) - iono_dd(c, ref, f) +
+                    (phase_errors_active() ? xe_(kPhaseErr0 + kj) - xe_(kPhaseErr0 + ki) : 0.0);
             row_amb_[m] = kj;
             row_amb_ref_[m] = ki;
           }
@@ -957,15 +970,16 @@ class RtkInsEngine {
     return code_scale_ * (1.0 + rho) / std::max(1.0 - rho, 1e-6);
   }
 
-  // Time-correlated phase errors (RtkInsConfig::phase_corr_time_s), the same first-order Gauss-Markov
-  // model as code_var_factor: carrier multipath of a few mm correlated over tens of seconds is, with
+  // Time-correlated phase errors as a variance factor (RtkInsConfig::phase_corr_time_s with
+  // phase_error_sigma_m = 0; the default carries them as states, phase_errors_active), the same first-order
+  // Gauss-Markov model as code_var_factor: carrier multipath of a few mm correlated over tens of seconds is, with
   // the INS holding the position between epochs, averaged into the float position and ambiguities as
   // if it were white, so their covariance is over-confident and the fix validation (the best
   // vector's squared norm against a chi2 quantile) rejects the correct integers.  The phase of a
   // tracked ambiguity (lock > 0) enters with its variance x (1 + rho) / (1 - rho), rho =
   // exp(-dt / tau); the first epoch of an ambiguity keeps the white variance.
   double phase_var_factor(int c, int f) const {
-    if (!(cfg_.phase_corr_time_s > 0.0) || !(dt_epoch_ > 0.0)) return 1.0;
+    if (!(cfg_.phase_corr_time_s > 0.0) || !(dt_epoch_ > 0.0) || phase_errors_active()) return 1.0;
     const int k = amb_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f];
     if (k < 0 || amb_[k].lock == 0) return 1.0;
     const double rho = std::exp(-dt_epoch_ / cfg_.phase_corr_time_s);
@@ -992,41 +1006,28 @@ class RtkInsEngine {
     code_scale_ = std::clamp(code_scale_ * std::pow(mean, o.code_scale_gain), 1.0, 100.0);
   }
 
-  // Compact joint state: the 15 INS errors, the tracked ambiguities and the ionosphere states.
+  // Compact joint state: the 15 INS errors and the active extra states (ambiguities, ionosphere,
+  // correlated phase errors).
   void gather() {
-    na_ = 0;
-    std::fill(col_of_.begin(), col_of_.end(), -1);
-    for (int k = 0; k < kMaxAmb; ++k)
-      if (amb_[k].sat >= 0) {
-        col_of_[k] = kN + na_;
-        act_[na_++] = k;
+    ne_ = 0;
+    std::fill(ecol_.begin(), ecol_.end(), -1);
+    for (int e = 0; e < kMaxExtra; ++e)
+      if (extra_in_use(e)) {
+        ecol_[e] = kN + ne_;
+        act_e_[ne_++] = e;
       }
-    ni_ = 0;
-    std::fill(icol_of_.begin(), icol_of_.end(), -1);
-    for (int k = 0; k < kMaxIono; ++k)
-      if (iono_[k].sat >= 0) {
-        icol_of_[k] = kN + na_ + ni_;
-        act_i_[ni_++] = k;
-      }
-    const int n = kN + na_ + ni_;
+    const int n = kN + ne_;
     Pj_.resize(n, n);
     Pj_.template topLeftCorner<kN, kN>() = core_.filter.P();
-    for (int a = 0; a < na_; ++a) {
-      Pj_.col(kN + a).template head<kN>() = Pia_.col(act_[a]);
-      Pj_.row(kN + a).template head<kN>() = Pia_.col(act_[a]).transpose();
-      for (int b = 0; b < na_; ++b) Pj_(kN + a, kN + b) = Paa_(act_[a], act_[b]);
-    }
-    for (int i = 0; i < ni_; ++i) {
-      const int ci = kN + na_ + i, ki = act_i_[i];
-      Pj_.col(ci).template head<kN>() = Pxi_.col(ki);
-      Pj_.row(ci).template head<kN>() = Pxi_.col(ki).transpose();
-      for (int a = 0; a < na_; ++a) Pj_(kN + a, ci) = Pj_(ci, kN + a) = Pai_(act_[a], ki);
-      for (int b = 0; b < ni_; ++b) Pj_(ci, kN + na_ + b) = Pii_(ki, act_i_[b]);
+    for (int a = 0; a < ne_; ++a) {
+      Pj_.col(kN + a).template head<kN>() = Pxe_.col(act_e_[a]);
+      Pj_.row(kN + a).template head<kN>() = Pxe_.col(act_e_[a]).transpose();
+      for (int b = 0; b < ne_; ++b) Pj_(kN + a, kN + b) = Pee_(act_e_[a], act_e_[b]);
     }
   }
 
   void fill_H(int m) {
-    const int n = kN + na_ + ni_;
+    const int n = kN + ne_;
     H_.setZero(m, n);
     for (int r = 0; r < m; ++r) {
       double hp[3], ha[3];
@@ -1036,22 +1037,26 @@ class RtkInsEngine {
         H_(r, L::kAtt + k) = ha[k];
       }
       if (row_amb_[r] >= 0) {
-        H_(r, col_of_[row_amb_[r]]) += lam(row_c_[r], row_f_[r]);
-        H_(r, col_of_[row_amb_ref_[r]]) -= lam(row_ref_[r], row_f_[r]);
+        H_(r, ecol_[row_amb_[r]]) += lam(row_c_[r], row_f_[r]);
+        H_(r, ecol_[row_amb_ref_[r]]) -= lam(row_ref_[r], row_f_[r]);
+        if (phase_errors_active()) {  // correlated phase errors: + (b_j - b_i)
+          H_(r, ecol_[kPhaseErr0 + row_amb_[r]]) += 1.0;
+          H_(r, ecol_[kPhaseErr0 + row_amb_ref_[r]]) -= 1.0;
+        }
       }
       // ionosphere: +mu_f (I^j - I^i) on code, -mu_f (I^j - I^i) on phase (iono_dd)
       const int kj = iono_slot(row_c_[r]), ki = iono_slot(row_ref_[r]);
       if (kj >= 0 && ki >= 0) {
         const double mu = gnss::iono_factor(lam(row_c_[r], row_f_[r])) * (row_amb_[r] >= 0 ? -1.0 : 1.0);
-        H_(r, icol_of_[kj]) += mu;
-        H_(r, icol_of_[ki]) -= mu;
+        H_(r, ecol_[kIono0 + kj]) += mu;
+        H_(r, ecol_[kIono0 + ki]) -= mu;
       }
     }
   }
 
   // x = K y, P = P - K H P over the compact joint state (y = computed - measured = H dx + v).
   void kalman_update(int m) {
-    const int n = kN + na_ + ni_;
+    const int n = kN + ne_;
     PHt_.noalias() = Pj_ * H_.transpose();
     S_ = R_.topLeftCorner(m, m);
     S_.noalias() += H_ * PHt_;
@@ -1069,21 +1074,14 @@ class RtkInsEngine {
     Pj_ = Pn_;
   }
 
-  // Write the compact joint state back, feed the INS errors back and correct the ambiguities.
+  // Write the compact joint state back, feed the INS errors back and correct the extra states.
   void scatter_and_feedback() {
     core_.filter.P_mutable() = Pj_.template topLeftCorner<kN, kN>();
-    for (int a = 0; a < na_; ++a) {
-      const int k = act_[a];
-      Pia_.col(k) = Pj_.col(kN + a).template head<kN>();
-      for (int b = 0; b < na_; ++b) Paa_(k, act_[b]) = Pj_(kN + a, kN + b);
-      xa_(k) -= dx_(kN + a);
-    }
-    for (int i = 0; i < ni_; ++i) {
-      const int ci = kN + na_ + i, ki = act_i_[i];
-      Pxi_.col(ki) = Pj_.col(ci).template head<kN>();
-      for (int a = 0; a < na_; ++a) Pai_(act_[a], ki) = Pj_(kN + a, ci);
-      for (int b = 0; b < ni_; ++b) Pii_(ki, act_i_[b]) = Pj_(ci, kN + na_ + b);
-      xi_(ki) -= dx_(ci);
+    for (int a = 0; a < ne_; ++a) {
+      const int e = act_e_[a];
+      Pxe_.col(e) = Pj_.col(kN + a).template head<kN>();
+      for (int b = 0; b < ne_; ++b) Pee_(e, act_e_[b]) = Pj_(kN + a, kN + b);
+      xe_(e) -= dx_(kN + a);
     }
     feedback_ins(dx_.template head<kN>());
   }
@@ -1119,7 +1117,7 @@ class RtkInsEngine {
   double iono_dd(int c, int ref, int f) const {
     const int kj = iono_slot(c), ki = iono_slot(ref);
     if (kj < 0 || ki < 0) return 0.0;
-    return gnss::iono_factor(lam(c, f)) * (xi_(kj) - xi_(ki));
+    return gnss::iono_factor(lam(c, f)) * (xe_(kIono0 + kj) - xe_(kIono0 + ki));
   }
 
   // sigma_I^2(bl, el) = (iono_sigma_per_10km_m bl / 10 km M(el))^2: the stationary variance [m^2]
@@ -1128,21 +1126,59 @@ class RtkInsEngine {
     return s * s;
   }
 
-  // The Gauss-Markov step of the ionosphere states over dt (file comment) and their cross-covariance
-  // with the INS errors over the cycle: P_xI <- Phi P_xI phi, P_NI <- P_NI phi, P_II <- phi P_II phi + q.
-  void predict_iono(const Mat15& Phi, double dt) {
-    Pxi_ = Phi * Pxi_;
+  // The correlated phase errors (phase_error_sigma_m > 0 with phase_corr_time_s > 0: states instead of
+  // phase_var_factor's inflation).
+  bool phase_errors_active() const { return cfg_.phase_error_sigma_m > 0.0 && cfg_.phase_corr_time_s > 0.0; }
+
+  // Stationary variance of the single-differenced correlated phase error of common satellite c [m^2]:
+  // phase_error_sigma_m at the zenith of each receiver, the elevation model of the phase weighting
+  // (gnss::phase_variance_zd, normalised to its zenith value).
+  double phase_error_var(int c) const {
+    const int sys = sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols);
+    const double z = gnss::phase_variance_zd(kHalfPi, sys, cfg_.rtk);
+    if (!(z > 0.0)) return 0.0;
+    return cfg_.phase_error_sigma_m * cfg_.phase_error_sigma_m *
+           (gnss::phase_variance_zd(el_r_[c], sys, cfg_.rtk) + gnss::phase_variance_zd(el_b_[c], sys, cfg_.rtk)) / z;
+  }
+
+  // Is extra state e (ambiguity, ionosphere or correlated phase error slot) in the filter?
+  bool extra_in_use(int e) const {
+    if (e < kIono0) return amb_[e].sat >= 0;
+    if (e < kPhaseErr0) return iono_[e - kIono0].sat >= 0;
+    return phase_errors_active() && amb_[e - kPhaseErr0].sat >= 0;
+  }
+
+  void clear_extra(int e) {
+    xe_(e) = 0.0;
+    Pxe_.col(e).setZero();
+    Pee_.row(e).setZero();
+    Pee_.col(e).setZero();
+  }
+
+  // The step of the extra states over dt (file comment): ambiguities + amb_psd dt; ionosphere and
+  // correlated phase errors first-order Gauss-Markov, x <- phi x, P_xE, P_EE scaled by phi,
+  // + sigma^2 (1 - phi^2) on the diagonal (sigma at the last epoch's elevation).
+  void predict_extra(double dt) {
     if (!(dt > 0.0)) return;
-    const double phi = cfg_.rtk.iono_tau_s > 0.0 ? std::exp(-dt / cfg_.rtk.iono_tau_s) : 0.0;
-    const double bl = (ant_.r_e - r_base_).norm();
-    for (int k = 0; k < kMaxIono; ++k) {
-      if (iono_[k].sat < 0) continue;
-      xi_(k) *= phi;
-      Pxi_.col(k) *= phi;
-      Pai_.col(k) *= phi;
-      Pii_.row(k) *= phi;
-      Pii_.col(k) *= phi;
-      Pii_(k, k) += iono_prior_var(bl, iono_[k].el) * (1.0 - phi * phi);
+    for (int k = 0; k < kMaxAmb; ++k)
+      if (amb_[k].sat >= 0) Pee_(k, k) += cfg_.rtk.amb_psd * dt;
+    const auto gm = [&](int e, double phi, double var) {
+      xe_(e) *= phi;
+      Pxe_.col(e) *= phi;
+      Pee_.row(e) *= phi;
+      Pee_.col(e) *= phi;
+      Pee_(e, e) += var * (1.0 - phi * phi);
+    };
+    if (iono_active()) {
+      const double phi = cfg_.rtk.iono_tau_s > 0.0 ? std::exp(-dt / cfg_.rtk.iono_tau_s) : 0.0;
+      const double bl = (ant_.r_e - r_base_).norm();
+      for (int k = 0; k < kMaxIono; ++k)
+        if (iono_[k].sat >= 0) gm(kIono0 + k, phi, iono_prior_var(bl, iono_[k].el));
+    }
+    if (phase_errors_active()) {
+      const double phi = std::exp(-dt / cfg_.phase_corr_time_s);
+      for (int k = 0; k < kMaxAmb; ++k)
+        if (amb_[k].sat >= 0) gm(kPhaseErr0 + k, phi, amb_[k].phase_error_var);
     }
   }
 
@@ -1162,8 +1198,8 @@ class RtkInsEngine {
         if (k < 0) continue;  // table full: the satellite's rows carry no ionosphere
         iono_[k].sat = sat;
         iono_of_[sat] = k;
-        clear_iono(k);
-        Pii_(k, k) = iono_prior_var(bl, el_r_[c]);
+        clear_extra(kIono0 + k);
+        Pee_(kIono0 + k, kIono0 + k) = iono_prior_var(bl, el_r_[c]);
       }
       iono_[k].used = true;
       iono_[k].outage = 0;
@@ -1173,16 +1209,8 @@ class RtkInsEngine {
       if (iono_[k].sat < 0 || iono_[k].used || ++iono_[k].outage <= cfg_.rtk.max_outage_epochs) continue;
       iono_of_[iono_[k].sat] = -1;
       iono_[k] = IonoSlot{};
-      clear_iono(k);
+      clear_extra(kIono0 + k);
     }
-  }
-
-  void clear_iono(int k) {
-    xi_(k) = 0.0;
-    Pxi_.col(k).setZero();
-    Pai_.col(k).setZero();
-    Pii_.row(k).setZero();
-    Pii_.col(k).setZero();
   }
 
   bool eligible(const AmbSlot& a, int sys, int f) const {
@@ -1205,7 +1233,7 @@ class RtkInsEngine {
           dd_j_[n] = k;
           dd_i_[n] = ref;
           dd_el_[n] = amb_[k].el;
-          dd_var_[n] = Paa_(k, k) - 2.0 * Paa_(k, ref) + Paa_(ref, ref);
+          dd_var_[n] = Pee_(k, k) - 2.0 * Pee_(k, ref) + Pee_(ref, ref);
           ++n;
         }
       }
@@ -1226,10 +1254,10 @@ class RtkInsEngine {
     const auto slot_j = [&](int p) { return dd_j_[order_[p]]; };
     const auto slot_i = [&](int p) { return dd_i_[order_[p]]; };
     const bool ok = ar_.resolve(
-        n, [&](int p) { return xa_(dd_j_[order_[p]]) - xa_(dd_i_[order_[p]]); },
+        n, [&](int p) { return xe_(dd_j_[order_[p]]) - xe_(dd_i_[order_[p]]); },
         [&](int p, int q) {
           const int sj = dd_j_[order_[p]], si = dd_i_[order_[p]], tj = dd_j_[order_[q]], ti = dd_i_[order_[q]];
-          return Paa_(sj, tj) - Paa_(sj, ti) - Paa_(si, tj) + Paa_(si, ti);
+          return Pee_(sj, tj) - Pee_(sj, ti) - Pee_(si, tj) + Pee_(si, ti);
         },
         s, [&](int n_fix) { return validator_(n_fix, n, slot_j, slot_i, ar_.a_fix(), rules); });
     out.ratio = ar_.ratio();
@@ -1238,7 +1266,7 @@ class RtkInsEngine {
     const int nu = ar_.n_used();
     // dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix); the antenna follows the INS error
     Qxa_.resize(kN, nu);
-    for (int p = 0; p < nu; ++p) Qxa_.col(p) = Pia_.col(dd_j_[order_[p]]) - Pia_.col(dd_i_[order_[p]]);
+    for (int p = 0; p < nu; ++p) Qxa_.col(p) = Pxe_.col(dd_j_[order_[p]]) - Pxe_.col(dd_i_[order_[p]]);
     w_ = ar_.residual();
     ar_.solve_in_place(w_);
     const Eigen::Matrix<double, kN, 1> dx_fix = Qxa_ * w_;
@@ -1309,11 +1337,11 @@ class RtkInsEngine {
     Qxa_.resize(kN, n);
     for (int p = 0; p < n; ++p) {
       const int sj = held_j_[p], si = held_i_[p];
-      rh_(p) = (xa_(sj) - xa_(si)) - held_z_[p];
-      Qxa_.col(p) = Pia_.col(sj) - Pia_.col(si);
+      rh_(p) = (xe_(sj) - xe_(si)) - held_z_[p];
+      Qxa_.col(p) = Pxe_.col(sj) - Pxe_.col(si);
       for (int q = 0; q < n; ++q) {
         const int tj = held_j_[q], ti = held_i_[q];
-        Qh_(p, q) = Paa_(sj, tj) - Paa_(sj, ti) - Paa_(si, tj) + Paa_(si, ti);
+        Qh_(p, q) = Pee_(sj, tj) - Pee_(sj, ti) - Pee_(si, tj) + Pee_(si, ti);
       }
     }
     llt_h_.compute(Qh_);
@@ -1337,15 +1365,15 @@ class RtkInsEngine {
   // Fix-and-hold: the fixed DD as pseudo-measurements N_j - N_i = a_fix (sigma hold_sigma_cycles).
   void hold(int nu) {
     gather();
-    const int n = kN + na_ + ni_;
+    const int n = kN + ne_;
     const int m = std::min(nu, kMaxRowsE);
     H_.setZero(m, n);
     R_.setZero(kMaxRowsE, kMaxRowsE);
     for (int p = 0; p < m; ++p) {
       const int kj = dd_j_[order_[p]], ki = dd_i_[order_[p]];
-      H_(p, col_of_[kj]) = 1.0;
-      H_(p, col_of_[ki]) = -1.0;
-      y_(p) = (xa_(kj) - xa_(ki)) - ar_.a_fix()(p);  // computed - "measured"
+      H_(p, ecol_[kj]) = 1.0;
+      H_(p, ecol_[ki]) = -1.0;
+      y_(p) = (xe_(kj) - xe_(ki)) - ar_.a_fix()(p);  // computed - "measured"
       R_(p, p) = cfg_.rtk.hold_sigma_cycles * cfg_.rtk.hold_sigma_cycles;
     }
     kalman_update(m);
@@ -1355,16 +1383,14 @@ class RtkInsEngine {
   ClosedLoop<Filter> core_;
   RtkInsConfig cfg_;
   // ambiguity block (fixed capacity, active mask = amb_[k].sat >= 0)
-  Eigen::Matrix<double, kMaxAmb, 1> xa_ = Eigen::Matrix<double, kMaxAmb, 1>::Zero();
-  Eigen::Matrix<double, kN, kMaxAmb> Pia_ = Eigen::Matrix<double, kN, kMaxAmb>::Zero();
-  Eigen::Matrix<double, kMaxAmb, kMaxAmb> Paa_ = Eigen::Matrix<double, kMaxAmb, kMaxAmb>::Zero();
+  // extra states E (ambiguities [cycles] at [0, kIono0), ionosphere [m] at [kIono0, kPhaseErr0), correlated
+  // phase errors [m] at [kPhaseErr0, kMaxExtra)): mean, cross-covariance with the INS errors, covariance
+  Eigen::Matrix<double, kMaxExtra, 1> xe_ = Eigen::Matrix<double, kMaxExtra, 1>::Zero();
+  Eigen::Matrix<double, kN, kMaxExtra> Pxe_ = Eigen::Matrix<double, kN, kMaxExtra>::Zero();
+  Eigen::Matrix<double, kMaxExtra, kMaxExtra> Pee_ = Eigen::Matrix<double, kMaxExtra, kMaxExtra>::Zero();
   std::array<AmbSlot, kMaxAmb> amb_{};
   std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> amb_of_{};
-  // ionosphere block (iono_mode kEstimate; fixed capacity, active mask = iono_[k].sat >= 0)
-  Eigen::Matrix<double, kMaxIono, 1> xi_ = Eigen::Matrix<double, kMaxIono, 1>::Zero();
-  Eigen::Matrix<double, kN, kMaxIono> Pxi_ = Eigen::Matrix<double, kN, kMaxIono>::Zero();
-  Eigen::Matrix<double, kMaxAmb, kMaxIono> Pai_ = Eigen::Matrix<double, kMaxAmb, kMaxIono>::Zero();
-  Eigen::Matrix<double, kMaxIono, kMaxIono> Pii_ = Eigen::Matrix<double, kMaxIono, kMaxIono>::Zero();
+  // ionosphere slots (iono_mode kEstimate; active mask = iono_[k].sat >= 0)
   std::array<IonoSlot, kMaxIono> iono_{};
   std::array<int, gnss::kMaxSatKeys> iono_of_{};
   double t_last_ = NAN;
@@ -1403,9 +1429,8 @@ class RtkInsEngine {
   std::array<double, gnss::kMaxSatKeys * gnss::kMaxFreq> sd_phase_{}, sd_code_{}, d_{}, med_{};
   // rows and the compact update
   std::array<int, kMaxRowsE> row_c_{}, row_ref_{}, row_f_{}, row_amb_{}, row_amb_ref_{};
-  int na_ = 0, ni_ = 0;
-  std::array<int, kMaxAmb> act_{}, col_of_{};
-  std::array<int, kMaxIono> act_i_{}, icol_of_{};
+  int ne_ = 0;                                  // active extra states (gather)
+  std::array<int, kMaxExtra> act_e_{}, ecol_{};  // their slots; a slot's column in the compact state or -1
   JMat Pj_, Pn_;
   JVec dx_;
   HMat H_, KT_;
