@@ -13,7 +13,8 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    Complete GNSS outages of 10 s and 30 s are made by removing the rover epochs from the RINEX
    file; the first epoch after each has the loss-of-lock bit set on every phase (a receiver
    re-acquires after a blockage, so every engine starts new ambiguities).  The same file goes to
-   insnav RTK/INS (continuous AR, its default; also fix-and-hold, a minimum bootstrapped success
+   insnav RTK/INS (continuous AR, its default; also with the earlier defaults (white phase, the
+   ionosphere as a variance), fix-and-hold, a minimum bootstrapped success
    rate of 0.999 ([rtk_engine]) or of 0.95 (``[rtk] min_success_rate``, the GNSS-only engine's default)
    and the AR without the GNSS-only engine's fix validation: partial AR down to 3 ambiguities in
    elevation order, no confirmation over epochs; and with the RB-UKF and UKF time update,
@@ -42,7 +43,8 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    satellite per 5 minutes (``slip_rate_per_h = 12``), none flagged by the receiver
    (``slip_lli_prob = 0``): fix rate, wrong-fix rate, horizontal 95th percentile of RTK/INS and of
    GNSS-only RTK on the same files (RTK/INS also with the success-rate test and without the fix
-   validation, as in 1., with white code errors (``code_correlation_time_s = 0``, its default before the
+   validation, as in 1., with the earlier defaults (white phase, the ionosphere as a variance), with
+   white code errors (``code_correlation_time_s = 0``, its default before the
    correlated-code model) and with a success rate of at least 0.999; GNSS-only RTK also with the
    RTK/INS default's ``code_correlation_time_s``); the float covariance consistency of each: the NEES of
    the float antenna position against the truth over the float epochs; slips detected (any detector,
@@ -110,6 +112,14 @@ SR999_ROW = "insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)"
 #: GNSS-only RTK with the RTK/INS default's time-correlated code model
 GNSS_CORR_OPTS = {"code_correlation_time_s": 10.0}
 GNSS_CORR_ROW = "insnav GNSS-only RTK (code_correlation_time_s = 10 s as RTK/INS)"
+#: RTK/INS with white phase and the ionosphere as a DD variance: the defaults before the correlated phase
+#: error and ionosphere states (docs/algorithms.md section 22)
+EARLIER_RTK = {"iono": "variance"}
+EARLIER_ENGINE = {"phase_correlation_time_s": 0.0}
+EARLIER_ROW = "insnav RTK/INS (continuous, white phase, ionosphere as a variance: the earlier defaults)"
+#: the preset's receiver noise replaces the default phase model: white phase plus the multipath as an
+#: ambiguity random walk (rtk_noise_options), so the correlated phase error states are off in those runs
+RX_ENGINE = {"phase_correlation_time_s": 0.0}
 RX_ROW = "insnav RTK/INS (continuous, the preset's receiver noise)"
 RX999_ROW = "insnav RTK/INS (continuous, the preset's receiver noise, success rate >= 0.999)"
 RX_GNSS_ROW = "insnav GNSS-only RTK (the preset's receiver noise)"
@@ -255,6 +265,7 @@ def spirent_part(work: Path, progress, freq: int = 2):
     opts = dict(systems="GE", frequencies=freq, elevation_mask_deg=15.0, ratio_threshold=3.0)
     res = {}
     for name, filt, ar, eng, extra in (("insnav RTK/INS (continuous, default)", "ekf", "continuous", {}, {}),
+                                       (EARLIER_ROW, "ekf", "continuous", EARLIER_ENGINE, EARLIER_RTK),
                                        ("insnav RTK/INS (fix-and-hold)", "ekf", "fix-and-hold", {}, {}),
                                        ("insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)", "ekf",
                                         "continuous", {"ar_min_success_rate": 0.999}, {}),
@@ -526,9 +537,11 @@ def urban_part(n_runs, work: Path, progress):
                            rtk_options=dict(opts, **SR999_OPTS))
         rx = receiver_noise_options(sc.gnss_rtk)
         solr = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                           rtk_options=dict(opts, **rx))
+                           rtk_options=dict(opts, **rx), engine=RX_ENGINE)
         solr9 = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                            rtk_options=dict(opts, **rx, **SR999_OPTS))
+                            rtk_options=dict(opts, **rx, **SR999_OPTS), engine=RX_ENGINE)
+        sole = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
+                           rtk_options=dict(opts, **EARLIER_RTK), engine=EARLIER_ENGINE)
         gr = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous", **rx))
         g = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous"))
         gc = solve_rtk(files["rover"], files["base"], files["nav"],
@@ -538,6 +551,7 @@ def urban_part(n_runs, work: Path, progress):
                          ("RTK/INS no validation", soln.rtk), ("RTK/INS white code", solw.rtk),
                          ("RTK/INS success rate 0.999", sol9.rtk), ("GNSS-only", g), ("GNSS-only correlated code", gc),
                          ("RTK/INS receiver noise", solr.rtk), ("RTK/INS receiver noise 0.999", solr9.rtk),
+                         ("RTK/INS earlier defaults", sole.rtk),
                          ("GNSS-only receiver noise", gr)):
             one[name] = _metrics(ds, rs)
         # slips: injected on the rover (L1) vs flagged rows
@@ -662,7 +676,7 @@ def breakdown_part(n_runs, work: Path, progress):
             opts = dict(systems="G", frequencies=1, elevation_mask_deg=math.degrees(sc.gnss_rtk["base_elevation_mask"]),
                         ratio_threshold=3.0, **over)
             sol = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                              rtk_options=opts)
+                              rtk_options=opts, engine=None if which is None else RX_ENGINE)
             g = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous"))
             acc["RTK/INS"].append(_metrics(ds, sol.rtk))
             acc["GNSS-only"].append(_metrics(ds, g))
@@ -915,6 +929,7 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
         d, e = pooled("RTK/INS success rate"), pooled("RTK/INS no validation")
         w, s9, gcr = pooled("RTK/INS white code"), pooled("RTK/INS success rate 0.999"), pooled("GNSS-only correlated code")
         rxa, rx9, rxg = pooled("RTK/INS receiver noise"), pooled("RTK/INS receiver noise 0.999"), pooled("GNSS-only receiver noise")
+        ea = pooled("RTK/INS earlier defaults")
         ps_rx = np.concatenate([r["RTK/INS receiver noise"]["ps_float"] for r in runs])
         ps_def = np.concatenate([r["RTK/INS"]["ps_float"] for r in runs])
         rx_wins = sum(x > y for x, y in zip(rxa["per"], rxg["per"]))
@@ -940,6 +955,7 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "| engine | fix rate | wrong fixes / fixed | horizontal p95 [m] | float NEES mean | float NEES median |",
               "|---|---|---|---|---|---|",
               urow("insnav RTK/INS (continuous, default)", a),
+              urow(EARLIER_ROW, ea),
               urow(WHITE_ROW, w),
               urow("insnav RTK/INS (fix-and-hold)", c),
               urow(SR_ROW, d),
@@ -953,7 +969,13 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "Receiver noise of the preset (`receiver_noise_options` in `bench/rtk_ins.py`, from the scenario's "
               "`[gnss_rtk]`): code sigma and correlation time of the simulated code noise plus multipath, phase "
               "sigma of its white phase noise, and the phase multipath as a random walk of the single-differenced "
-              "ambiguity states (`amb_psd_cycles2ps`; `insnav.sim.gnss_rtk.rtk_noise_options`).", "",
+              "ambiguity states (`amb_psd_cycles2ps`; `insnav.sim.gnss_rtk.rtk_noise_options`), white phase "
+              "otherwise (`[rtk_engine] phase_correlation_time_s = 0`: no correlated phase error states).", "",
+              f"The defaults (correlated phase errors as states, 3 mm over 30 s; ionosphere states) against the "
+              f"earlier ones (white phase, ionosphere as a variance): fixed {a['fixed']} against {ea['fixed']}, "
+              f"wrong {a['wrong']} against {ea['wrong']} ({_f(100.0 * a['wrong'] / a['n'], '.2f')} % against "
+              f"{_f(100.0 * ea['wrong'] / ea['n'], '.2f')} % of the epochs), float NEES mean {_f(a['nees'], '.1f')} "
+              f"against {_f(ea['nees'], '.1f')}.", "",
               f"With the preset's receiver noise the float NEES is "
               f"{'at most 3 (consistent, or conservative below 3)' if rxa['nees'] <= 3.0 else 'above 3 (over-confident)'} "
               f"(mean {_f(rxa['nees'], '.1f')}, "
@@ -1023,8 +1045,10 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               f"unmodelled against a phase sigma of its white noise alone), phase multipath "
               f"{_f(by[BREAKDOWN[7][0]]['nees'], '.1f')}, both {_f(by[BREAKDOWN[8][0]]['nees'], '.1f')}.  "
               "The default filter against the preset's true noise: phase sigma a = b = 3 mm (the true white phase "
-              "noise 2 mm w(el) is a = b = 1.41 mm; the phase multipath 4 mm w(el) with 20 s correlation is not "
-              "in the model: the phase rows are white and the ambiguities constants), code sigma 100x the phase "
+              "noise 2 mm w(el) is a = b = 1.41 mm; the phase multipath 4 mm w(el) with 20 s correlation is in the "
+              "model as one Gauss-Markov state per ambiguity, 3 mm at each receiver's zenith over 30 s; the "
+              "'filter:' rows replace it by white phase and, for the phase multipath, an ambiguity random "
+              "walk), code sigma 100x the phase "
               "(true code noise plus multipath 0.67 m w(el), 1.6x the default's 0.42 m at the zenith) with "
               "correlation time 10 s (true 20 s).", ""]
     if noise:
