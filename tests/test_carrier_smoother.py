@@ -4,7 +4,7 @@ ClosedLoop::condition_for_smoother / clone_update_for_smoother).
 * RTK/INS (the Spirent drive with a synthesised IMU, one 30 s outage): the smoothed antenna at the
   fixed epochs agrees with the forward fixed antenna (RMS <= 5 mm, every epoch within 1.2 cm: the
   backward pass marginalises the correlated phase error states, which stay random once the integers
-  are known; measured 3.9 mm RMS and 10.9 mm at most, 3.4 and 9.7 mm with white phase) and is at
+  are known; measured 3.7 mm RMS and 10.3 mm at most, 3.4 and 9.7 mm with white phase) and is at
   least as close to the truth; the fix status and ratio are the forward pass's; the smoothed error
   in the outage is a fraction of the forward one.
 * The same with the RB-UKF (the unscented RTS smoother, Sarkka 2008 eqs. (13)-(15), the fixed solution

@@ -141,9 +141,9 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     engine : dict, optional
         Engine keys: ``ins_slip_k_sigma`` (5), ``ins_slip_min_cycles`` (0.35), ``ins_slip_max_dt_s``
         (2 s), ``code_chi2_row`` (25; 0 off), ``validation_prob`` (0.999; 0 off),
-        ``phase_correlation_time_s`` (30 s; 0: white phase) and ``phase_error_sigma_m`` (0.003 m): the
-        time-correlated phase errors as one first-order Gauss-Markov state per ambiguity, that sigma at
-        each receiver's zenith (0: a tracked ambiguity's phase variance x (1 + rho) / (1 - rho),
+        ``phase_correlation_time_s`` (30 s; 0: white phase) and ``phase_error_ratio`` (0.5): the
+        time-correlated phase errors as one first-order Gauss-Markov state per ambiguity, its sigma that
+        multiple of the white phase sigma (0: a tracked ambiguity's phase variance x (1 + rho) / (1 - rho),
         rho = exp(-dt / tau), instead; docs/algorithms.md, "Tight RTK/INS"), the robust
         screening of the single differences (Teunissen's w-test per satellite and frequency, IGG-III
         down-weighting; docs/algorithms.md, "Tight RTK/INS"): ``robust_screening`` (False),

@@ -13,12 +13,12 @@
 // 2002, sec. 4.2): a first-order Gauss-Markov process (iono_tau_s) whose stationary sigma is
 // sigma_I(bl, el) = iono_sigma_per_10km_m x bl / 10 km x M(el); a DD row of frequency f carries
 // mu_f (I^j - I^i), mu_f = (f_0 / f)^2, on code and -mu_f (I^j - I^i) on phase.  Correlated phase
-// errors (phase_corr_time_s > 0 and phase_error_sigma_m > 0, the defaults 30 s and 3 mm): a third block,
+// errors (phase_corr_time_s > 0 and phase_error_ratio > 0, the defaults 30 s and 0.5): a third block,
 // one first-order Gauss-Markov state b [m] per ambiguity slot (carrier multipath and what the
 // atmosphere models leave; state augmentation, A. Gelb (ed.), Applied Optimal Estimation, 1974,
-// sec. 4.5), + (b^j - b^i) on a DD phase row, stationary variance phase_error_sigma_m^2 (w^2(el_r) +
-// w^2(el_b)) with w^2 the phase weighting's elevation model normalised at the zenith, started at 0
-// when its ambiguity is (re)initialised.  The three blocks are one "extra state" vector E (xe_, P_xE,
+// sec. 4.5), + (b^j - b^i) on a DD phase row, stationary variance phase_error_ratio^2 times the white
+// single difference's (the phase weighting of both receivers, gnss::phase_variance_zd; by default the
+// correlated part has half the white part's sigma), started at 0 when its ambiguity is (re)initialised.  The three blocks are one "extra state" vector E (xe_, P_xE,
 // P_EE; fixed capacity 3 x kMaxAmb, an active mask).  No receiver clock or inter-system bias states:
 // double differences remove them.  The ambiguities are constants (plus amb_psd), so
 // between two epochs their cross-covariance with the INS errors evolves by the INS transition
@@ -154,11 +154,11 @@ struct RtkInsConfig {
   double code_chi2_row = 25.0;        // code row screening (0: off)
   double validation_prob = 0.999;     // AR: best vector's squared norm <= chi2 quantile (0: off)
   // Time-correlated phase errors (carrier multipath, the residual atmosphere a model leaves): correlation
-  // time [s] (0: white phase) and each receiver's zenith sigma [m] of a first-order Gauss-Markov error,
-  // one state per ambiguity (file comment, "Correlated phase errors"); sigma 0 with a correlation time:
-  // the variance-factor approximation instead (phase_var_factor)
+  // time [s] (0: white phase) and the sigma of a first-order Gauss-Markov error relative to the white
+  // phase sigma of the weighting, one state per ambiguity (file comment); ratio 0 with a correlation
+  // time: the variance-factor approximation instead (phase_var_factor)
   double phase_corr_time_s = 30.0;
-  double phase_error_sigma_m = 0.003;
+  double phase_error_ratio = 0.5;
   double ar_min_success_rate = 0.0;   // AR: bootstrapped success rate of the fixed subset (0: off)
   // A filter cycle without a rover epoch is closed after this long [s] (+inf: one cycle spans a
   // whole gap).  The RTS smoother needs epochs inside GNSS outages (the bindings set it when
@@ -253,7 +253,6 @@ class RtkInsEngine {
   static constexpr int kPhaseErr0 = kMaxAmb + kMaxIono;  // ... of the first correlated phase error (one per ambiguity)
   static constexpr int kMaxExtra = kPhaseErr0 + kMaxAmb;
   static constexpr int kMaxJ = kN + kMaxExtra;
-  static constexpr double kHalfPi = 1.5707963267948966;
   static constexpr int kMaxRowsE = kMaxAmb;  // DD rows of one kind
   using JVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxJ, 1>;
   using JMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxJ, kMaxJ>;
@@ -724,7 +723,7 @@ class RtkInsEngine {
     Pee_.row(k).setZero();
     Pee_.col(k).setZero();
     Pee_(k, k) = cfg_.rtk.amb_init_sigma_cycles * cfg_.rtk.amb_init_sigma_cycles;
-    // its correlated phase error (phase_error_sigma_m): 0 with the stationary variance
+    // its correlated phase error (phase_error_ratio): 0 with the stationary variance
     clear_extra(kPhaseErr0 + k);
     amb_[k].phase_error_var = phase_errors_active() ? phase_error_var(c) : 0.0;
     Pee_(kPhaseErr0 + k, kPhaseErr0 + k) = amb_[k].phase_error_var;
@@ -971,7 +970,7 @@ class RtkInsEngine {
   }
 
   // Time-correlated phase errors as a variance factor (RtkInsConfig::phase_corr_time_s with
-  // phase_error_sigma_m = 0; the default carries them as states, phase_errors_active), the same first-order
+  // phase_error_ratio = 0; the default carries them as states, phase_errors_active), the same first-order
   // Gauss-Markov model as code_var_factor: carrier multipath of a few mm correlated over tens of seconds is, with
   // the INS holding the position between epochs, averaged into the float position and ambiguities as
   // if it were white, so their covariance is over-confident and the fix validation (the best
@@ -1126,20 +1125,14 @@ class RtkInsEngine {
     return s * s;
   }
 
-  // The correlated phase errors (phase_error_sigma_m > 0 with phase_corr_time_s > 0: states instead of
+  // The correlated phase errors (phase_error_ratio > 0 with phase_corr_time_s > 0: states instead of
   // phase_var_factor's inflation).
-  bool phase_errors_active() const { return cfg_.phase_error_sigma_m > 0.0 && cfg_.phase_corr_time_s > 0.0; }
+  bool phase_errors_active() const { return cfg_.phase_error_ratio > 0.0 && cfg_.phase_corr_time_s > 0.0; }
 
   // Stationary variance of the single-differenced correlated phase error of common satellite c [m^2]:
-  // phase_error_sigma_m at the zenith of each receiver, the elevation model of the phase weighting
-  // (gnss::phase_variance_zd, normalised to its zenith value).
-  double phase_error_var(int c) const {
-    const int sys = sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols);
-    const double z = gnss::phase_variance_zd(kHalfPi, sys, cfg_.rtk);
-    if (!(z > 0.0)) return 0.0;
-    return cfg_.phase_error_sigma_m * cfg_.phase_error_sigma_m *
-           (gnss::phase_variance_zd(el_r_[c], sys, cfg_.rtk) + gnss::phase_variance_zd(el_b_[c], sys, cfg_.rtk)) / z;
-  }
+  // phase_error_ratio^2 times the white single difference's (var_sd_: the phase weighting of both
+  // receivers at their elevations).
+  double phase_error_var(int c) const { return cfg_.phase_error_ratio * cfg_.phase_error_ratio * var_sd_[c]; }
 
   // Is extra state e (ambiguity, ionosphere or correlated phase error slot) in the filter?
   bool extra_in_use(int e) const {
