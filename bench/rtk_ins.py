@@ -971,7 +971,7 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "sigma of its white phase noise, and the phase multipath as a random walk of the single-differenced "
               "ambiguity states (`amb_psd_cycles2ps`; `insnav.sim.gnss_rtk.rtk_noise_options`), white phase "
               "otherwise (`[rtk_engine] phase_correlation_time_s = 0`: no correlated phase error states).", "",
-              f"The defaults (correlated phase errors as states, 3 mm over 30 s; ionosphere states) against the "
+              f"The defaults (correlated phase errors as states over 30 s, half the white phase sigma; ionosphere states) against the "
               f"earlier ones (white phase, ionosphere as a variance): fixed {a['fixed']} against {ea['fixed']}, "
               f"wrong {a['wrong']} against {ea['wrong']} ({_f(100.0 * a['wrong'] / a['n'], '.2f')} % against "
               f"{_f(100.0 * ea['wrong'] / ea['n'], '.2f')} % of the epochs), float NEES mean {_f(a['nees'], '.1f')} "
@@ -1046,7 +1046,8 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               f"{_f(by[BREAKDOWN[7][0]]['nees'], '.1f')}, both {_f(by[BREAKDOWN[8][0]]['nees'], '.1f')}.  "
               "The default filter against the preset's true noise: phase sigma a = b = 3 mm (the true white phase "
               "noise 2 mm w(el) is a = b = 1.41 mm; the phase multipath 4 mm w(el) with 20 s correlation is in the "
-              "model as one Gauss-Markov state per ambiguity, 3 mm at each receiver's zenith over 30 s; the "
+              "model as one Gauss-Markov state per ambiguity over 30 s, half the white phase sigma (2.1 mm at "
+              "each receiver's zenith); the "
               "'filter:' rows replace it by white phase and, for the phase multipath, an ambiguity random "
               "walk), code sigma 100x the phase "
               "(true code noise plus multipath 0.67 m w(el), 1.6x the default's 0.42 m at the zenith) with "
