@@ -119,7 +119,8 @@
 //           Pp -= Phi dP Phi', C -= dP Phi'), where the EKF uses its Phi_cycle.  With Phi = the
 //           EKF's (linear dynamics; Phi = I for a cycle without propagation) the smoother is the EKF's.
 //
-// No heap allocation per epoch: every matrix is bounded by kMaxAmb and lives in the engine.
+// No heap allocation per epoch: every matrix is bounded by kMaxAmb and lives in the engine
+// (sizeof 2.4 MB for kMaxAmb = 64, measured: allocate the engine on the heap, as the bindings do).
 #pragma once
 
 #include <Eigen/Dense>
