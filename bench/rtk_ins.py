@@ -930,6 +930,12 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
         w, s9, gcr = pooled("RTK/INS white code"), pooled("RTK/INS success rate 0.999"), pooled("GNSS-only correlated code")
         rxa, rx9, rxg = pooled("RTK/INS receiver noise"), pooled("RTK/INS receiver noise 0.999"), pooled("GNSS-only receiver noise")
         ea = pooled("RTK/INS earlier defaults")
+        # paired per run: the defaults against the earlier ones (wrong fixes; correct = fixed - wrong)
+        ew = [(r["RTK/INS"]["wrong"], r["RTK/INS earlier defaults"]["wrong"]) for r in runs]
+        ec = [(r["RTK/INS"]["fixed"] - r["RTK/INS"]["wrong"],
+               r["RTK/INS earlier defaults"]["fixed"] - r["RTK/INS earlier defaults"]["wrong"]) for r in runs]
+        ew_fewer, ew_more = sum(x < y for x, y in ew), sum(x > y for x, y in ew)
+        ec_more, ec_fewer = sum(x > y for x, y in ec), sum(x < y for x, y in ec)
         ps_rx = np.concatenate([r["RTK/INS receiver noise"]["ps_float"] for r in runs])
         ps_def = np.concatenate([r["RTK/INS"]["ps_float"] for r in runs])
         rx_wins = sum(x > y for x, y in zip(rxa["per"], rxg["per"]))
@@ -975,7 +981,9 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               f"earlier ones (white phase, ionosphere as a variance): fixed {a['fixed']} against {ea['fixed']}, "
               f"wrong {a['wrong']} against {ea['wrong']} ({_f(100.0 * a['wrong'] / a['n'], '.2f')} % against "
               f"{_f(100.0 * ea['wrong'] / ea['n'], '.2f')} % of the epochs), float NEES mean {_f(a['nees'], '.1f')} "
-              f"against {_f(ea['nees'], '.1f')}.", "",
+              f"against {_f(ea['nees'], '.1f')}.  Paired per run: wrong fixes fewer in {ew_fewer} runs, more in "
+              f"{ew_more} (sign test p = {sign_test_p(ew_fewer, ew_more):.2g}); correct fixes more in {ec_more}, "
+              f"fewer in {ec_fewer} (p = {sign_test_p(ec_more, ec_fewer):.2g}).", "",
               f"With the preset's receiver noise the float NEES is "
               f"{'at most 3 (consistent, or conservative below 3)' if rxa['nees'] <= 3.0 else 'above 3 (over-confident)'} "
               f"(mean {_f(rxa['nees'], '.1f')}, "
