@@ -309,6 +309,54 @@ int main() {
     std::printf("rtk iono: dH %.1e, dmu %.1e, dpos %.1e; fixed %d, worst %.2e m, iono worst %.2e m\n", worst_h,
                 worst_mu, worst_pos, fixed_i, worst_r, worst_i);
   }
+  // RTK/INS on the same 20 km scene with the between-receiver ionosphere on the rover rows (-4 .. +4 cm
+  // on L1), the INS static at the true rover (engine/rtk_ins_engine.hpp: the ionosphere states of
+  // iono_mode kEstimate and the default correlated phase error states, one extra-state block): the
+  // ionosphere states fix at the true position to a few mm, and the epochs allocate nothing on the
+  // heap; without an ionosphere term the same epochs fix with the ionosphere in the position or not at all.
+  {
+    const Vec3 r_r2 = r_b + C * Vec3(14000.0, -14000.0, 20.0);
+    std::vector<double> iono(8);
+    for (int k = 0; k < 8; ++k) iono[k] = 0.04 * (k - 3.5) / 3.5;
+    const Vec3 llh = wgs84::ecef_to_geodetic(r_r2);
+    NavState s0;
+    s0.t = 1000.0;
+    s0.lat = llh(0);
+    s0.lon = llh(1);
+    s0.h = llh(2);
+    StateCov<Layout15> P0 = StateCov<Layout15>::Zero();
+    P0.diagonal() << 0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10;
+    double worst_est = 0.0, worst_off = 0.0;
+    int fixed_est = 0, fixed_off = 0;
+    for (const IonoMode mode : {IonoMode::kEstimate, IonoMode::kOff}) {
+      RtkInsConfig rc;
+      rc.rtk.tropo_model = false;
+      rc.rtk.min_success_rate = 0.0;
+      rc.rtk.iono_mode = mode;
+      rc.rtk.iono_sigma_per_10km_m = 0.03;
+      EXPECT_TRUE(rc.phase_corr_time_s > 0.0 && rc.phase_error_ratio > 0.0);  // the defaults: phase error states
+      auto ins = std::make_unique<RtkInsEngine<64>>(ImuErrorModel{}, rc);
+      ins->start(s0, P0, ImuCorrection{});
+      for (int e = 0; e < 20; ++e) {
+        const auto rr = rows_for(r_r2, sats, N1r, N2r, 1234.0 + e, &iono);
+        const auto rb = rows_for(r_b, sats, N1b, N2b, -567.0 + 2 * e);
+        if (e == 2) Eigen::internal::set_is_malloc_allowed(false);
+        const RtkInsEpoch out = ins->apply_epoch(rr.data(), 8, rb.data(), 8, true, r_b);
+        if (e >= 10 && out.status == RtkStatus::kFixed) {
+          (mode == IonoMode::kEstimate ? fixed_est : fixed_off) += 1;
+          double& w = mode == IonoMode::kEstimate ? worst_est : worst_off;
+          w = std::max(w, (out.r_e - r_r2).norm());
+        }
+      }
+      Eigen::internal::set_is_malloc_allowed(true);
+    }
+    EXPECT_TRUE(fixed_est == 10);
+    EXPECT_LT(worst_est, 5e-3);
+    EXPECT_TRUE(fixed_off < 10 || worst_off > 1e-2);
+    EXPECT_TRUE(g_eigen_asserts == 0);
+    std::printf("rtk/ins iono: states fixed %d, worst %.2e m; none fixed %d, worst %.2e m\n", fixed_est, worst_est,
+                fixed_off, worst_off);
+  }
   std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
   TEST_MAIN_END()
 }
