@@ -12,7 +12,8 @@
 // gnss::kIonoRefFreqHz [m], one per satellite, the ionosphere-weighted model of gnss/rtk.hpp (Odijk
 // 2002, sec. 4.2): a first-order Gauss-Markov process (iono_tau_s) whose stationary sigma is
 // sigma_I(bl, el) = iono_sigma_per_10km_m x bl / 10 km x M(el); a DD row of frequency f carries
-// mu_f (I^j - I^i), mu_f = (f_0 / f)^2, on code and -mu_f (I^j - I^i) on phase.  Correlated phase
+// mu^j I^j - mu^i I^i, mu = (f_0 / f)^2 of each satellite's frequency f, on code and its negative on
+// phase.  Correlated phase
 // errors (phase_corr_time_s > 0 and phase_error_ratio > 0, the defaults 30 s and 0.5): a third block,
 // one first-order Gauss-Markov state b [m] per ambiguity slot (carrier multipath and what the
 // atmosphere models leave; state augmentation, A. Gelb (ed.), Applied Optimal Estimation, 1974,
@@ -786,7 +787,7 @@ class RtkInsEngine {
   int build_rows(int nf, bool code) {
     const gnss::RtkOptions& o = cfg_.rtk;
     const double bl = (ant_.r_e - r_base_).norm();
-    // the DD ionosphere as a variance (iono_mode kVariance); kEstimate: the states' mu_f (I^j - I^i)
+    // the DD ionosphere as a variance (iono_mode kVariance); kEstimate: the states' mu^j I^j - mu^i I^i
     // enters the computed value (iono_dd) and H (fill_H)
     const double var_bl =
         o.iono_mode == gnss::IonoMode::kVariance ? std::pow(o.iono_sigma_per_10km_m * bl / 1e4, 2) : 0.0;
@@ -1044,12 +1045,12 @@ class RtkInsEngine {
           H_(r, ecol_[kPhaseErr0 + row_amb_ref_[r]]) -= 1.0;
         }
       }
-      // ionosphere: +mu_f (I^j - I^i) on code, -mu_f (I^j - I^i) on phase (iono_dd)
+      // ionosphere: +(mu^j I^j - mu^i I^i) on code, -(mu^j I^j - mu^i I^i) on phase (iono_dd)
       const int kj = iono_slot(row_c_[r]), ki = iono_slot(row_ref_[r]);
       if (kj >= 0 && ki >= 0) {
-        const double mu = gnss::iono_factor(lam(row_c_[r], row_f_[r])) * (row_amb_[r] >= 0 ? -1.0 : 1.0);
-        H_(r, ecol_[kIono0 + kj]) += mu;
-        H_(r, ecol_[kIono0 + ki]) -= mu;
+        const double sgn = row_amb_[r] >= 0 ? -1.0 : 1.0;
+        H_(r, ecol_[kIono0 + kj]) += sgn * gnss::iono_factor(lam(row_c_[r], row_f_[r]));
+        H_(r, ecol_[kIono0 + ki]) -= sgn * gnss::iono_factor(lam(row_ref_[r], row_f_[r]));
       }
     }
   }
@@ -1113,11 +1114,12 @@ class RtkInsEngine {
     return iono_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols)];
   }
 
-  // The estimated DD ionosphere of a row on frequency f: mu_f (I^c - I^ref) [m] (0 without states).
+  // The estimated DD ionosphere of a row on frequency f: mu^c I^c - mu^ref I^ref [m] (0 without states;
+  // mu of each satellite's own wavelength: the GLONASS FDMA channels differ).
   double iono_dd(int c, int ref, int f) const {
     const int kj = iono_slot(c), ki = iono_slot(ref);
     if (kj < 0 || ki < 0) return 0.0;
-    return gnss::iono_factor(lam(c, f)) * (xe_(kIono0 + kj) - xe_(kIono0 + ki));
+    return gnss::iono_factor(lam(c, f)) * xe_(kIono0 + kj) - gnss::iono_factor(lam(ref, f)) * xe_(kIono0 + ki);
   }
 
   // sigma_I^2(bl, el) = (iono_sigma_per_10km_m bl / 10 km M(el))^2: the stationary variance [m^2]
