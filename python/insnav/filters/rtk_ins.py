@@ -61,10 +61,13 @@ __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins",
 #: [rtk] defaults of the RTK/INS filter that differ from the GNSS-only engine's.  AR continuous, as the
 #: GNSS-only engine (fix-and-hold holds a wrong fix in the joint filter, which on the urban simulator
 #: preset costs more than it gains).  The GNSS-only engine's fix validation applies (at least 5
-#: ambiguities, partial AR by float variance, confirmation of small sets over 5 epochs) except its
-#: bootstrapped success-rate test: after a 30 s outage the INS-constrained L1-only float of the Spirent
-#: drive has a success rate of 0.85 at the first epoch and fixes the true integers, and the test delays
-#: that fix to the second epoch (docs/results/rtk_ins.md).  Code errors time-correlated over 10 s
+#: ambiguities, partial AR by float variance, confirmation of small sets over 5 epochs) with a lower
+#: floor on the bootstrapped success rate, 0.4 instead of 0.95: after a 30 s outage the INS-constrained
+#: L1-only float of the Spirent drive has a success rate of 0.77-0.85 at the first epoch and fixes the
+#: true integers (0.95 delays that fix to the second epoch, docs/results/rtk_ins.md), while the wrong
+#: fixes on the simulator presets have 0.07-0.29 (open sky, GPS L1: 49 of 1037 fixes wrong, up to
+#: 0.8 m; urban, GPS L1: 7 of 159; measured with the floor at 0) and the floor removes every one of
+#: them (docs/algorithms.md section 22).  Code errors time-correlated over 10 s
 #: (``code_correlation_time_s``: multipath of a moving antenna; the first epoch of an ambiguity keeps the
 #: white variance): the INS holds the position between epochs, so a white-code model averages correlated
 #: multipath as if it were white noise and its float ambiguities are over-confident (on the urban
@@ -75,7 +78,7 @@ __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins",
 #: simulator preset (2.5-8 km baseline, 1 ppm ionosphere, 3 mm phase multipath over 30 s) the float with
 #: neither was over-confident and 10 of 599 epochs fixed; with both all are fixed, and the Spirent drive
 #: (under 2 km, no multipath) keeps its fixes and accuracy (docs/algorithms.md section 22).
-RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.0, code_correlation_time_s=10.0, iono="estimate")
+RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.4, code_correlation_time_s=10.0, iono="estimate")
 #: engine ([rtk_engine]) defaults applied under the caller's (empty: the C++ RtkInsConfig defaults)
 ENGINE_DEFAULTS: dict = {}
 
