@@ -14,7 +14,7 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    file; the first epoch after each has the loss-of-lock bit set on every phase (a receiver
    re-acquires after a blockage, so every engine starts new ambiguities).  The same file goes to
    insnav RTK/INS (continuous AR, its default; also with the earlier defaults (white phase, the
-   ionosphere as a variance), fix-and-hold, a minimum bootstrapped success
+   ionosphere as a variance, no success-rate floor), fix-and-hold, a minimum bootstrapped success
    rate of 0.999 ([rtk_engine]) or of 0.95 (``[rtk] min_success_rate``, the GNSS-only engine's default)
    and the AR without the GNSS-only engine's fix validation: partial AR down to 3 ambiguities in
    elevation order, no confirmation over epochs; and with the RB-UKF and UKF time update,
@@ -43,7 +43,8 @@ Reproduce (from the repository root, with ../shared/data beside the repo and Deb
    satellite per 5 minutes (``slip_rate_per_h = 12``), none flagged by the receiver
    (``slip_lli_prob = 0``): fix rate, wrong-fix rate, horizontal 95th percentile of RTK/INS and of
    GNSS-only RTK on the same files (RTK/INS also with the success-rate test and without the fix
-   validation, as in 1., with the earlier defaults (white phase, the ionosphere as a variance), with
+   validation, as in 1., with the earlier defaults (white phase, the ionosphere as a variance, no
+   success-rate floor), with
    white code errors (``code_correlation_time_s = 0``, its default before the
    correlated-code model) and with a success rate of at least 0.999; GNSS-only RTK also with the
    RTK/INS default's ``code_correlation_time_s``); the float covariance consistency of each: the NEES of
@@ -112,11 +113,12 @@ SR999_ROW = "insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)"
 #: GNSS-only RTK with the RTK/INS default's time-correlated code model
 GNSS_CORR_OPTS = {"code_correlation_time_s": 10.0}
 GNSS_CORR_ROW = "insnav GNSS-only RTK (code_correlation_time_s = 10 s as RTK/INS)"
-#: RTK/INS with white phase and the ionosphere as a DD variance: the defaults before the correlated phase
-#: error and ionosphere states (docs/algorithms.md section 22)
-EARLIER_RTK = {"iono": "variance"}
+#: RTK/INS with white phase, the ionosphere as a DD variance and no success-rate floor: the defaults before
+#: the correlated phase error and ionosphere states (docs/algorithms.md section 22)
+EARLIER_RTK = {"iono": "variance", "min_success_rate": 0.0}
 EARLIER_ENGINE = {"phase_correlation_time_s": 0.0}
-EARLIER_ROW = "insnav RTK/INS (continuous, white phase, ionosphere as a variance: the earlier defaults)"
+EARLIER_ROW = ("insnav RTK/INS (continuous, white phase, ionosphere as a variance, no success-rate floor: the "
+               "earlier defaults)")
 #: the preset's receiver noise replaces the default phase model: white phase plus the multipath as an
 #: ambiguity random walk (rtk_noise_options), so the correlated phase error states are off in those runs
 RX_ENGINE = {"phase_correlation_time_s": 0.0}
@@ -977,8 +979,8 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "sigma of its white phase noise, and the phase multipath as a random walk of the single-differenced "
               "ambiguity states (`amb_psd_cycles2ps`; `insnav.sim.gnss_rtk.rtk_noise_options`), white phase "
               "otherwise (`[rtk_engine] phase_correlation_time_s = 0`: no correlated phase error states).", "",
-              f"The defaults (correlated phase errors as states over 30 s, half the white phase sigma; ionosphere states) against the "
-              f"earlier ones (white phase, ionosphere as a variance): fixed {a['fixed']} against {ea['fixed']}, "
+              f"The defaults (correlated phase errors as states over 30 s, half the white phase sigma; ionosphere states; "
+              f"success-rate floor 0.4) against the earlier ones (white phase, ionosphere as a variance, no floor): fixed {a['fixed']} against {ea['fixed']}, "
               f"wrong {a['wrong']} against {ea['wrong']} ({_f(100.0 * a['wrong'] / a['n'], '.2f')} % against "
               f"{_f(100.0 * ea['wrong'] / ea['n'], '.2f')} % of the epochs), float NEES mean {_f(a['nees'], '.1f')} "
               f"against {_f(ea['nees'], '.1f')}.  Paired per run: wrong fixes fewer in {ew_fewer} runs, more in "
