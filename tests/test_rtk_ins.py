@@ -793,8 +793,9 @@ def test_open_sky_each_error_model_alone_falls_short(tmp_path):
 
 
 def test_success_rate_floor_removes_the_single_frequency_wrong_fixes(tmp_path):
-    """The open-sky preset with GPS L1 only (the GPS half of its 19-20 satellites, a 2.5-8 km baseline with 1 ppm ionosphere:
-    single frequency separates the ionosphere from the ambiguities only through its prior), seed 1.  The
+    """The open-sky preset with GPS L1 only (the GPS half of its 19-20 satellites, a 2.5-8 km baseline
+    with 1 ppm ionosphere: single frequency separates the ionosphere from the ambiguities only through
+    its prior), seed 1.  The
     defaults' bootstrapped success-rate floor (``[rtk] min_success_rate = 0.4``): no fixed epoch more
     than 5 cm off, and a fair part of the epochs fixed (measured 141/599; seeds 1-3: 965 of 1798, none
     wrong).  Without the floor the ratio and validation
