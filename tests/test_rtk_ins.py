@@ -673,7 +673,8 @@ def test_open_sky_preset_defaults_fix_rate_and_no_wrong_fix(tmp_path, seed):
     and 24 mm.  With
     white phase and no ionosphere states (the defaults before them) 10, 9 and 8 epochs were fixed: the
     float was over-confident (position NEES median 114, 60 and 86 against 3) and the fix validation
-    (validation_prob 0.999) rejected the correct integers.  Attribution: test_open_sky_each_error_model_alone_falls_short."""
+    (validation_prob 0.999) rejected the correct integers.  Attribution:
+    test_open_sky_each_error_model_alone_falls_short."""
     ds, files = _open_sky_files(tmp_path, seed)
     rs = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"]).rtk
     t_true, r_true = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
@@ -717,11 +718,12 @@ def test_phase_correlation_model_fixes_the_multipath_part(tmp_path):
     the filter without ionosphere term), so that the phase multipath (3 mm at the zenith, first-order
     Gauss-Markov over 30 s) is the error the white phase model gets wrong, seed 1.  White phase
     (phase_correlation_time_s = 0): measured 19/599 fixed, float NEES median 10.3.  The default, one
-    Gauss-Markov phase error state per ambiguity (half the white phase sigma, 30 s): measured
-    599/599 fixed, largest fixed error 13 mm.  The variance-factor approximation (phase_error_ratio = 0: a tracked ambiguity's
-    phase variance x (1 + rho) / (1 - rho), rho = exp(-dt / tau); Gelb 1974, sec. 3.8): 599/599.  Exact
-    reductions to white phase: states with a vanishing sigma (phase_error_ratio 1e-9), and the variance factor with a
-    correlation time far below the epoch interval (rho = 0).  (The variance factor: 599/599, 22 mm.)"""
+    Gauss-Markov phase error state per ambiguity (half the white phase sigma, 30 s): measured 599/599
+    fixed, largest fixed error 13 mm.  The variance-factor approximation (phase_error_ratio = 0: a
+    tracked ambiguity's phase variance x (1 + rho) / (1 - rho), rho = exp(-dt / tau); Gelb 1974,
+    sec. 3.8): 599/599, 22 mm.  Exact reductions to white phase: states with a vanishing sigma
+    (phase_error_ratio 1e-9), and the variance factor with a correlation time far below the epoch
+    interval (rho = 0)."""
     ds, files = _open_sky_files(tmp_path, 1, iono_ppm=0.0, tropo_ppm=0.0)
 
     def run(**engine):

@@ -13,20 +13,20 @@
 // 2002, sec. 4.2): a first-order Gauss-Markov process (iono_tau_s) whose stationary sigma is
 // sigma_I(bl, el) = iono_sigma_per_10km_m x bl / 10 km x M(el); a DD row of frequency f carries
 // mu^j I^j - mu^i I^i, mu = (f_0 / f)^2 of each satellite's frequency f, on code and its negative on
-// phase.  Correlated phase
-// errors (phase_corr_time_s > 0 and phase_error_ratio > 0, the defaults 30 s and 0.5): a third block,
-// one first-order Gauss-Markov state b [m] per ambiguity slot (carrier multipath and what the
-// atmosphere models leave; state augmentation, A. Gelb (ed.), Applied Optimal Estimation, 1974,
-// sec. 4.5), + (b^j - b^i) on a DD phase row, stationary variance phase_error_ratio^2 times the white
-// single difference's (the phase weighting of both receivers, gnss::phase_variance_zd; by default the
-// correlated part has half the white part's sigma), started at 0 when its ambiguity is (re)initialised.  The three blocks are one "extra state" vector E (xe_, P_xE,
-// P_EE; fixed capacity 3 x kMaxAmb, an active mask).  No receiver clock or inter-system bias states:
-// double differences remove them.  The ambiguities are constants (plus amb_psd), so
-// between two epochs their cross-covariance with the INS errors evolves by the INS transition
-// alone, P_xN <- Phi_cycle P_xN (Phi_cycle: the EKF's product of the interval transitions), and
-// the core propagates P_xx as in every other engine.  The Gauss-Markov states (ionosphere,
-// correlated phase errors) decay by phi = exp(-dt / tau) between epochs: e <- phi e,
-// P_xE <- Phi_cycle P_xE phi, P_EE <- phi P_EE phi + sigma^2 (1 - phi^2).
+// phase.  Correlated phase errors (phase_corr_time_s > 0 and phase_error_ratio > 0, the defaults 30 s
+// and 0.5): a third block, one first-order Gauss-Markov state b [m] per ambiguity slot (carrier
+// multipath and what the atmosphere models leave; state augmentation, A. Gelb (ed.), Applied Optimal
+// Estimation, 1974, sec. 4.5), + (b^j - b^i) on a DD phase row, stationary variance
+// phase_error_ratio^2 times the white single difference's (the phase weighting of both receivers,
+// gnss::phase_variance_zd; by default the correlated part has half the white part's sigma), started at
+// 0 when its ambiguity is (re)initialised.  The three blocks are one "extra state" vector E (xe_,
+// P_xE, P_EE; fixed capacity 3 x kMaxAmb, an active mask).  No receiver clock or inter-system bias
+// states: double differences remove them.  The ambiguities are constants (plus amb_psd), so between
+// two epochs their cross-covariance with the INS errors evolves by the INS transition alone,
+// P_xN <- Phi_cycle P_xN (Phi_cycle: the EKF's product of the interval transitions), and the core
+// propagates P_xx as in every other engine.  The Gauss-Markov states (ionosphere, correlated phase
+// errors) decay by phi = exp(-dt / tau) between epochs: e <- phi e, P_xE <- Phi_cycle P_xE phi,
+// P_EE <- phi P_EE phi + sigma^2 (1 - phi^2).
 //
 // Epoch (an RTK record applied at its time of validity):
 //   1. slips: the receiver detectors of gnss/rtk.hpp (LLI, geometry-free, Melbourne-Wuebbena,
