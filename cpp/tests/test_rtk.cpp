@@ -35,6 +35,21 @@ using test_rtk::kL1;
 using test_rtk::kL2;
 using test_rtk::rows_for;
 
+// An INS at rest at r_e (level, north-facing) started in an RTK/INS engine: position sigma 10 cm, the
+// rest nearly known.
+template <class Engine>
+void start_static_ins(Engine& ins, const Vec3& r_e) {
+  const Vec3 llh = wgs84::ecef_to_geodetic(r_e);
+  NavState s0;
+  s0.t = 1000.0;
+  s0.lat = llh(0);
+  s0.lon = llh(1);
+  s0.h = llh(2);
+  StateCov<Layout15> P0 = StateCov<Layout15>::Zero();
+  P0.diagonal() << 0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10;
+  ins.start(s0, P0, ImuCorrection{});
+}
+
 }  // namespace
 
 int main() {
@@ -171,15 +186,7 @@ int main() {
     rc.code_chi2_row = 0.0;  // the screening alone
     rc.rtk.outlier_sigma = 0.0;
     auto ins = std::make_unique<RtkInsEngine<64>>(ImuErrorModel{}, rc);
-    const Vec3 llh = wgs84::ecef_to_geodetic(r_r);
-    NavState s0;
-    s0.t = 1000.0;
-    s0.lat = llh(0);
-    s0.lon = llh(1);
-    s0.h = llh(2);
-    StateCov<Layout15> P0 = StateCov<Layout15>::Zero();
-    P0.diagonal() << 0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10;
-    ins->start(s0, P0, ImuCorrection{});
+    start_static_ins(*ins, r_r);
     int fixed_ins = 0, screened[10] = {};
     double worst_ins = 0.0;
     for (int e = 0; e < 10; ++e) {
@@ -318,14 +325,6 @@ int main() {
     const Vec3 r_r2 = r_b + C * Vec3(14000.0, -14000.0, 20.0);
     std::vector<double> iono(8);
     for (int k = 0; k < 8; ++k) iono[k] = 0.04 * (k - 3.5) / 3.5;
-    const Vec3 llh = wgs84::ecef_to_geodetic(r_r2);
-    NavState s0;
-    s0.t = 1000.0;
-    s0.lat = llh(0);
-    s0.lon = llh(1);
-    s0.h = llh(2);
-    StateCov<Layout15> P0 = StateCov<Layout15>::Zero();
-    P0.diagonal() << 0.01, 0.01, 0.01, 1e-4, 1e-4, 1e-4, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-10, 1e-10, 1e-10;
     double worst_est = 0.0, worst_off = 0.0;
     int fixed_est = 0, fixed_off = 0;
     for (const IonoMode mode : {IonoMode::kEstimate, IonoMode::kOff}) {
@@ -336,7 +335,7 @@ int main() {
       rc.rtk.iono_sigma_per_10km_m = 0.03;
       EXPECT_TRUE(rc.phase_corr_time_s > 0.0 && rc.phase_error_ratio > 0.0);  // the defaults: phase error states
       auto ins = std::make_unique<RtkInsEngine<64>>(ImuErrorModel{}, rc);
-      ins->start(s0, P0, ImuCorrection{});
+      start_static_ins(*ins, r_r2);
       for (int e = 0; e < 20; ++e) {
         const auto rr = rows_for(r_r2, sats, N1r, N2r, 1234.0 + e, &iono);
         const auto rb = rows_for(r_b, sats, N1b, N2b, -567.0 + 2 * e);
