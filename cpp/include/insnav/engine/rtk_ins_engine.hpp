@@ -285,7 +285,7 @@ class RtkInsEngine {
     Pxe_.setZero();
     Pee_.setZero();
     iono_of_.fill(-1);
-    for (auto& a : iono_) a = IonoSlot{};
+    for (auto& a : iono_) a = gnss::IonoSlot{};
     amb_of_.fill(-1);
     for (auto& a : amb_) a = AmbSlot{};
     validator_.reset();
@@ -571,12 +571,6 @@ class RtkInsEngine {
     bool used = false, half = false;
     double el = 0.0;
     double phase_error_var = 0.0;  // stationary variance of its correlated phase error at el [m^2] (phase_error_var)
-  };
-  struct IonoSlot {
-    int sat = -1;
-    int outage = 0;
-    bool used = false;
-    double el = 0.0;  // rover elevation of the last epoch [rad]
   };
   struct PrevSd {
     double t = NAN;
@@ -1122,12 +1116,6 @@ class RtkInsEngine {
     return gnss::iono_factor(lam(c, f)) * xe_(kIono0 + kj) - gnss::iono_factor(lam(ref, f)) * xe_(kIono0 + ki);
   }
 
-  // sigma_I^2(bl, el) = (iono_sigma_per_10km_m bl / 10 km M(el))^2: the stationary variance [m^2]
-  double iono_prior_var(double bl, double el) const {
-    const double s = cfg_.rtk.iono_sigma_per_10km_m * bl / 1e4 * gnss::iono_mapping(el);
-    return s * s;
-  }
-
   // The correlated phase errors (phase_error_ratio > 0 with phase_corr_time_s > 0: states instead of
   // phase_var_factor's inflation).
   bool phase_errors_active() const { return cfg_.phase_error_ratio > 0.0 && cfg_.phase_corr_time_s > 0.0; }
@@ -1169,7 +1157,7 @@ class RtkInsEngine {
       const double phi = cfg_.rtk.iono_tau_s > 0.0 ? std::exp(-dt / cfg_.rtk.iono_tau_s) : 0.0;
       const double bl = (ant_.r_e - r_base_).norm();
       for (int k = 0; k < kMaxIono; ++k)
-        if (iono_[k].sat >= 0) gm(kIono0 + k, phi, iono_prior_var(bl, iono_[k].el));
+        if (iono_[k].sat >= 0) gm(kIono0 + k, phi, gnss::iono_prior_var(cfg_.rtk, bl, iono_[k].el));
     }
     if (phase_errors_active()) {
       const double phi = std::exp(-dt / cfg_.phase_corr_time_s);
@@ -1195,7 +1183,7 @@ class RtkInsEngine {
         iono_[k].sat = sat;
         iono_of_[sat] = k;
         clear_extra(kIono0 + k);
-        Pee_(kIono0 + k, kIono0 + k) = iono_prior_var(bl, el_r_[c]);
+        Pee_(kIono0 + k, kIono0 + k) = gnss::iono_prior_var(cfg_.rtk, bl, el_r_[c]);
       }
       iono_[k].used = true;
       iono_[k].outage = 0;
@@ -1204,7 +1192,7 @@ class RtkInsEngine {
     for (int k = 0; k < kMaxIono; ++k) {
       if (iono_[k].sat < 0 || iono_[k].used || ++iono_[k].outage <= cfg_.rtk.max_outage_epochs) continue;
       iono_of_[iono_[k].sat] = -1;
-      iono_[k] = IonoSlot{};
+      iono_[k] = gnss::IonoSlot{};
       clear_extra(kIono0 + k);
     }
   }
@@ -1387,7 +1375,7 @@ class RtkInsEngine {
   std::array<AmbSlot, kMaxAmb> amb_{};
   std::array<int, gnss::kMaxSatKeys * gnss::kMaxFreq> amb_of_{};
   // ionosphere slots (iono_mode kEstimate; active mask = iono_[k].sat >= 0)
-  std::array<IonoSlot, kMaxIono> iono_{};
+  std::array<gnss::IonoSlot, kMaxIono> iono_{};
   std::array<int, gnss::kMaxSatKeys> iono_of_{};
   double t_last_ = NAN;
   double dt_epoch_ = 0.0;    // time since the previous rover epoch [s] (0 on the first)

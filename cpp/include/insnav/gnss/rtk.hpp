@@ -256,6 +256,23 @@ inline double iono_factor(double lambda_m) {
   return lambda_m > 0.0 ? (lambda_m / l0) * (lambda_m / l0) : 1.0;
 }
 
+/// The ionosphere-weighted prior of a single-differenced slant ionosphere state (iono_mode kEstimate):
+/// sigma_I^2(bl, el) = (iono_sigma_per_10km_m bl / 10 km M(el))^2 [m^2], bl the baseline [m], el the
+/// rover elevation [rad]; the stationary variance of its Gauss-Markov process.
+inline double iono_prior_var(const RtkOptions& o, double bl, double el) {
+  const double s = o.iono_sigma_per_10km_m * bl / 1e4 * iono_mapping(el);
+  return s * s;
+}
+
+/// A tracked single-differenced ionosphere state (iono_mode kEstimate), one per satellite; the slot
+/// table of RtkEngine and RtkInsEngine.
+struct IonoSlot {
+  int sat = -1;      // satellite key (system * 64 + prn), -1: free
+  int outage = 0;    // epochs unseen
+  bool used = false; // seen this epoch
+  double el = 0.0;   // rover elevation of the last epoch [rad]
+};
+
 /// Per-receiver cycle-slip detector (LLI, geometry-free, Melbourne-Wuebbena, Doppler).
 class SlipDetector {
  public:
@@ -633,13 +650,6 @@ class RtkEngine {
     bool half = false;      // half-cycle ambiguity flagged
     double el = 0.0;
   };
-  struct IonoSlot {
-    int sat = -1;
-    int outage = 0;
-    bool used = false;
-    double el = 0.0;  // rover elevation of the last epoch [rad]
-  };
-
   static int key(const double* r) { return sat_key(r); }
   static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
 
@@ -702,15 +712,9 @@ class RtkEngine {
         x_(s) *= phi;
         P_.row(s) *= phi;
         P_.col(s) *= phi;
-        P_(s, s) += iono_prior_var(bl, iono_[k].el) * (1.0 - phi * phi);
+        P_(s, s) += iono_prior_var(opt_, bl, iono_[k].el) * (1.0 - phi * phi);
       }
     }
-  }
-
-  // sigma_I^2(bl, el) = (iono_sigma_per_10km_m bl / 10 km M(el))^2: the ionosphere-weighted prior [m^2]
-  double iono_prior_var(double bl, double el) const {
-    const double s = opt_.iono_sigma_per_10km_m * bl / 1e4 * iono_mapping(el);
-    return s * s;
   }
 
   // Ionosphere states of the satellites in use: a new satellite starts at I = 0 with the prior
@@ -734,7 +738,7 @@ class RtkEngine {
         x_(s) = 0.0;
         P_.row(s).setZero();
         P_.col(s).setZero();
-        P_(s, s) = iono_prior_var(bl, el_r_[c]);
+        P_(s, s) = iono_prior_var(opt_, bl, el_r_[c]);
       }
       iono_[k].used = true;
       iono_[k].outage = 0;
