@@ -5,7 +5,7 @@
   another station's file) would shift the whole solution by as much with exit status 0; a base
   some hundred km off also made the engine search float ambiguities for minutes.  The base position
   is checked against the code-only least-squares fix of the base's own pseudoranges (RTKLIB pntpos
-  without its atmosphere models; :func:`insnav.gnss.rtk.base_code_fix`), which lands within tens of
+  without its atmosphere models; :func:`insnav.gnss.rtk.receiver_code_fix`), which lands within tens of
   metres of the known antenna.
 * A GNSS-only run's TOML asking for a smoother or TDCP (which the command-line options of the same
   meaning are refused for)."""
@@ -52,7 +52,7 @@ def test_code_fix_of_the_base_lands_near_its_known_antenna_and_the_check_follows
     rs, clk = rtk.transmit_states(nav, base.epoch_t_gps_s[base.epoch], base.system, base.prn, rtk._first_code(base))
     rb = _ecef(*_llh(d / "base_position.txt"))
     start = _north_of(_llh(d / "base_position.txt"), 1.0e6)  # Gauss-Newton from 1000 km away
-    fix, n = rtk.base_code_fix(base, rs, clk, start)
+    fix, n, _ = rtk.receiver_code_fix(base, rs, clk, start)
     assert n == 10
     dist = np.linalg.norm(fix - rb)
     assert dist < 100.0, dist  # no ionosphere or troposphere model: tens of metres

@@ -11,7 +11,7 @@ import pytest
 from insnav.cli import main
 from insnav.gnss._rtk_keys import CODE_FIT_TOLERANCE_M
 from insnav.gnss.rinex import read_nav_multi
-from insnav.gnss.rtk import _first_code, base_code_fix, base_position_from_header, read_phase_obs, transmit_states
+from insnav.gnss.rtk import _first_code, base_position_from_header, receiver_code_fix, read_phase_obs, transmit_states
 
 from conftest import SHARED_DATA
 
@@ -37,7 +37,7 @@ def _residual_rms(obs_path, nav_paths, systems="GREC"):
     obs = read_phase_obs(obs_path, systems)
     nav = read_nav_multi([str(p) for p in nav_paths], systems)
     rs, clk = transmit_states(nav, obs.epoch_t_gps_s[obs.epoch], obs.system, obs.prn, _first_code(obs))
-    return base_code_fix(obs, rs, clk, base_position_from_header(obs), with_residual=True)[2]
+    return receiver_code_fix(obs, rs, clk, base_position_from_header(obs))[2]
 
 
 @pytest.mark.parametrize("files", [(M / "rover.obs", [M / "base.nav"]), (M / "base.obs", [M / "base.nav"]),

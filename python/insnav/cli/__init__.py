@@ -198,7 +198,7 @@ def _refuse_special_inputs(argv) -> None:
             if opt in _OUTPUT_OPTIONS:
                 continue
             tok = val
-        for path in tok.split(",") if "," in tok else (tok,):
+        for path in tok.split(","):
             try:
                 mode = os.stat(path).st_mode
             except (OSError, ValueError):

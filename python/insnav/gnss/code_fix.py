@@ -1,5 +1,5 @@
 """The code-only least-squares position fit of one epoch, the kernel of the SPP solver
-(:mod:`insnav.gnss.spp`) and of the RTK base-position check (:func:`insnav.gnss.rtk.base_code_fix`).
+(:mod:`insnav.gnss.spp`) and of the RTK base-position check (:func:`insnav.gnss.rtk.receiver_code_fix`).
 
 Rows ``sats`` in the SPP input layout (:func:`insnav.gnss.spp.spp_inputs_from_rinex`): column 0 the
 pseudorange [m], 2:5 the satellite position at transmission in the ECEF frame at reception [m],

@@ -778,26 +778,26 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions, *, base_source
     return rover, base, r_base_e, bidx, roff, rrows, boff, brows
 
 
-def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10, *, with_residual: bool = False):
+def receiver_code_fix(obs: PhaseObs, rs, clk, r0_e, n_epochs: int = 10):
     """Code-only position of a receiver [m] (ECEF), the median over up to ``n_epochs``
     epochs spread over the file of the per-epoch least-squares fixes of the SPP solver
     (:func:`insnav.gnss.code_fix._position_fit`: position and one receiver clock per system, unit
     weights, no atmosphere models), started from ``r0_e``; the satellite positions rotated by the
     Earth's rate over the signal's travel time from ``r0_e`` (Sagnac; a start 1000 km off moves it
-    by a few metres); ``(r_e, epochs used)``, or ``(None, 0)`` when no epoch has enough satellites.
-    With ``with_residual`` also the median over those epochs of the fit's residual RMS [m].
+    by a few metres).  Returns ``(r_e, epochs used, median residual RMS of those fits [m])``, or
+    ``(None, 0, None)`` when no epoch has enough satellites.
 
     ``rs``, ``clk``: the satellite positions [m] and clocks [m] of the receiver's rows
     (:func:`transmit_states`)."""
     from ..earth import OMEGA_IE
     from .code_check import spread_epochs, unit_weight_fit
 
-    code = _first_code(base)
+    code = _first_code(obs)
     r0_e = np.asarray(r0_e, float)
     good = np.isfinite(code) & np.all(np.isfinite(rs), axis=1) & np.isfinite(clk)
     fixes, rms = [], []
-    for e in spread_epochs(base.epoch_t_gps_s.size, n_epochs):
-        m = good & (base.epoch == e)
+    for e in spread_epochs(obs.epoch_t_gps_s.size, n_epochs):
+        m = good & (obs.epoch == e)
         theta = OMEGA_IE * np.linalg.norm(rs[m] - r0_e, axis=1) / C_LIGHT  # Earth rotation during the travel
         sats = np.zeros((int(m.sum()), 9))
         sats[:, 0] = code[m]
@@ -805,29 +805,28 @@ def base_code_fix(base: PhaseObs, rs, clk, r0_e, n_epochs: int = 10, *, with_res
         sats[:, 3] = -np.sin(theta) * rs[m, 0] + np.cos(theta) * rs[m, 1]
         sats[:, 4] = rs[m, 2]
         sats[:, 8] = clk[m]
-        fit = unit_weight_fit(sats, base.system[m], r0_e)
+        fit = unit_weight_fit(sats, obs.system[m], r0_e)
         if fit is None:
             continue  # too few rows, singular or not converged: no evidence either way
         fixes.append(fit[0])
         rms.append(fit[1])
     if not fixes:
-        return (None, 0, None) if with_residual else (None, 0)
+        return None, 0, None
     fixes = np.asarray(fixes)
-    r_e = np.array([median(fixes[:, k]) for k in range(3)])
-    return (r_e, len(fixes), median(rms)) if with_residual else (r_e, len(fixes))
+    return np.array([median(fixes[:, k]) for k in range(3)]), len(fixes), median(rms)
 
 
 def check_code_fit(obs: PhaseObs, rs, clk, r0_e, role: str):
     """:class:`RtkInputError` (one line naming the file) when the receiver's pseudoranges do not fit
     one position and clock per epoch: the median residual RMS of its one-epoch code fits
-    (:func:`base_code_fix`) above :data:`CODE_FIT_TOLERANCE_M`.  Epoch time tags moved against the
+    (:func:`receiver_code_fix`) above :data:`CODE_FIT_TOLERANCE_M`.  Epoch time tags moved against the
     observations (the satellites are then computed where they were not when the pseudoranges were
     measured) or a navigation file of other satellites give hundreds of metres, and an RTK run on
     them a float solution as far off with exit status 0.  Returns ``(code fix [m] or None, epochs)``.
 
     ``role``: "rover" or "base", for the message; ``rs``, ``clk``: the satellite states of the
     receiver's rows (:func:`transmit_states`); ``r0_e``: where the fits start [m] (ECEF)."""
-    fix_e, n, rms = base_code_fix(obs, rs, clk, r0_e, with_residual=True)
+    fix_e, n, rms = receiver_code_fix(obs, rs, clk, r0_e)
     if fix_e is not None and rms > CODE_FIT_TOLERANCE_M:
         raise RtkInputError(f"{obs.path}: the {role}'s pseudoranges do not fit one receiver position and clock "
                             f"(median residual RMS {rms:.0f} m over {n} epochs; at most "
@@ -839,7 +838,7 @@ def check_code_fit(obs: PhaseObs, rs, clk, r0_e, role: str):
 def check_base_position(base: PhaseObs, r_base_e, rs, clk, source: str) -> None:
     """:class:`RtkInputError` (one line naming the file and where the position came from) when
     ``r_base_e`` is more than :data:`BASE_POSITION_TOLERANCE_M` from the base's own code fix
-    (:func:`base_code_fix`): every rover position would be off by as much, and an engine given a
+    (:func:`receiver_code_fix`): every rover position would be off by as much, and an engine given a
     base some hundred km off searches ambiguities of float solutions that cannot fix."""
     from .. import earth
 

@@ -308,7 +308,7 @@ inline constexpr double kCodeFitToleranceM = 50.0;
 /// Median over up to 10 epochs spread over the file of the residual RMS [m] of one-epoch code-only
 /// least-squares fits (position and one clock per system, unit weights, no atmosphere models,
 /// Gauss-Newton from r0 with the satellites rotated by the Earth's rate over the travel time from
-/// r0), as insnav.gnss.rtk.base_code_fix; NaN when no epoch has a redundant converged fit.  Time tags
+/// r0), as insnav.gnss.rtk.receiver_code_fix; NaN when no epoch has a redundant converged fit.  Time tags
 /// shifted against the observations give hundreds of metres, good files a few.
 /// ``sat``: per row (from ``row0``) the satellite position [m] and clock [m]; ``code``: pseudorange [m].
 inline double code_fit_rms(const Receiver& rx, std::size_t row0, const std::vector<std::array<double, 4>>& sat,
