@@ -115,13 +115,12 @@ GNSS_CORR_OPTS = {"code_correlation_time_s": 10.0}
 GNSS_CORR_ROW = "insnav GNSS-only RTK (code_correlation_time_s = 10 s as RTK/INS)"
 #: RTK/INS with white phase, the ionosphere as a DD variance and no success-rate floor: the defaults before
 #: the correlated phase error and ionosphere states (docs/algorithms.md section 22)
-EARLIER_RTK = {"iono": "variance", "min_success_rate": 0.0}
-EARLIER_ENGINE = {"phase_correlation_time_s": 0.0}
+EARLIER_RTK = {"iono": "variance", "min_success_rate": 0.0, "phase_correlation_time_s": 0.0}
 EARLIER_ROW = ("insnav RTK/INS (continuous, white phase, ionosphere as a variance, no success-rate floor: the "
                "earlier defaults)")
 #: the preset's receiver noise replaces the default phase model: white phase plus the multipath as an
 #: ambiguity random walk (rtk_noise_options), so the correlated phase error states are off in those runs
-RX_ENGINE = {"phase_correlation_time_s": 0.0}
+RX_PHASE = {"phase_correlation_time_s": 0.0}
 RX_ROW = "insnav RTK/INS (continuous, the preset's receiver noise)"
 RX999_ROW = "insnav RTK/INS (continuous, the preset's receiver noise, success rate >= 0.999)"
 RX_GNSS_ROW = "insnav GNSS-only RTK (the preset's receiver noise)"
@@ -267,7 +266,7 @@ def spirent_part(work: Path, progress, freq: int = 2):
     opts = dict(systems="GE", frequencies=freq, elevation_mask_deg=15.0, ratio_threshold=3.0)
     res = {}
     for name, filt, ar, eng, extra in (("insnav RTK/INS (continuous, default)", "ekf", "continuous", {}, {}),
-                                       (EARLIER_ROW, "ekf", "continuous", EARLIER_ENGINE, EARLIER_RTK),
+                                       (EARLIER_ROW, "ekf", "continuous", {}, EARLIER_RTK),
                                        ("insnav RTK/INS (fix-and-hold)", "ekf", "fix-and-hold", {}, {}),
                                        ("insnav RTK/INS (continuous, bootstrapped success rate >= 0.999)", "ekf",
                                         "continuous", {"ar_min_success_rate": 0.999}, {}),
@@ -539,11 +538,11 @@ def urban_part(n_runs, work: Path, progress):
                            rtk_options=dict(opts, **SR999_OPTS))
         rx = receiver_noise_options(sc.gnss_rtk)
         solr = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                           rtk_options=dict(opts, **rx), engine=RX_ENGINE)
+                           rtk_options=dict(opts, **rx, **RX_PHASE))
         solr9 = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                            rtk_options=dict(opts, **rx, **SR999_OPTS), engine=RX_ENGINE)
+                            rtk_options=dict(opts, **rx, **SR999_OPTS, **RX_PHASE))
         sole = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                           rtk_options=dict(opts, **EARLIER_RTK), engine=EARLIER_ENGINE)
+                           rtk_options=dict(opts, **EARLIER_RTK))
         gr = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous", **rx))
         g = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous"))
         gc = solve_rtk(files["rover"], files["base"], files["nav"],
@@ -678,7 +677,7 @@ def breakdown_part(n_runs, work: Path, progress):
             opts = dict(systems="G", frequencies=1, elevation_mask_deg=math.degrees(sc.gnss_rtk["base_elevation_mask"]),
                         ratio_threshold=3.0, **over)
             sol = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                              rtk_options=opts, engine=None if which is None else RX_ENGINE)
+                              rtk_options=opts if which is None else dict(opts, **RX_PHASE))
             g = solve_rtk(files["rover"], files["base"], files["nav"], options=dict(opts, ar_mode="continuous"))
             acc["RTK/INS"].append(_metrics(ds, sol.rtk))
             acc["GNSS-only"].append(_metrics(ds, g))
@@ -978,7 +977,7 @@ def report(sps, urban, cost, n_runs, wall_s, command, breakdown=None, n_breakdow
               "`[gnss_rtk]`): code sigma and correlation time of the simulated code noise plus multipath, phase "
               "sigma of its white phase noise, and the phase multipath as a random walk of the single-differenced "
               "ambiguity states (`amb_psd_cycles2ps`; `insnav.sim.gnss_rtk.rtk_noise_options`), white phase "
-              "otherwise (`[rtk_engine] phase_correlation_time_s = 0`: no correlated phase error states).", "",
+              "otherwise (`[rtk] phase_correlation_time_s = 0`: no correlated phase error states).", "",
               f"The defaults (correlated phase errors as states over 30 s, half the white phase sigma; ionosphere states; "
               f"success-rate floor 0.4) against the earlier ones (white phase, ionosphere as a variance, no floor): fixed {a['fixed']} against {ea['fixed']}, "
               f"wrong {a['wrong']} against {ea['wrong']} ({_f(100.0 * a['wrong'] / a['n'], '.2f')} % against "

@@ -207,6 +207,9 @@ def insnav_consistent_float(files, setting, workdir):
 SR_CONFIGURED = ("min_success_rate_estimated = 0.0",)
 #: a receiver twice as noisy as configured: the configured sigmas halved (the simulation unchanged)
 HALF_SIGMAS = ("sigma_phase_a_m = 0.0015", "sigma_phase_b_m = 0.0015")
+#: the time-correlated phase errors as states (one Gauss-Markov error per ambiguity over 30 s, half the
+#: white phase sigma: the RTK/INS defaults; off by default in GNSS-only RTK)
+PHASE_STATES = ("phase_correlation_time_s = 30.0", "phase_error_ratio = 0.5")
 
 
 def _variant(ar_mode, extra, tag, doc):
@@ -223,6 +226,7 @@ ENGINES = {"insnav continuous": insnav_continuous, "insnav instantaneous": insna
            "RTKLIB continuous": rtklib_continuous, "RTKLIB instantaneous": rtklib_instantaneous}
 for _mode, _label, _extra, _tag in (
         ("continuous", "SR configured only", SR_CONFIGURED, "_srcfg"),
+        ("continuous", "correlated phase error states", PHASE_STATES, "_phase"),
         ("instantaneous", "SR configured only", SR_CONFIGURED, "_srcfg"),
         ("instantaneous", "sigmas / 2", HALF_SIGMAS, "_half"),
         ("instantaneous", "sigmas / 2; SR configured only", HALF_SIGMAS + SR_CONFIGURED, "_half_srcfg")):

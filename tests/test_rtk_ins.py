@@ -153,14 +153,17 @@ class _Static:
 @pytest.mark.parametrize("filt", ["ekf", "rbukf", "ukf"])
 @pytest.mark.parametrize("code_model", [dict(code_correlation_time_s=0.0, iono="variance"),
                                         dict(code_correlation_time_s=10.0, adaptive_code_gain=0.2, iono="variance"),
-                                        dict(code_correlation_time_s=0.0, iono="estimate")],
-                         ids=["white-code", "correlated-adaptive-code", "iono-states"])
+                                        dict(code_correlation_time_s=0.0, iono="estimate"),
+                                        dict(code_correlation_time_s=0.0, iono="variance", phase_correlation_time_s=30.0,
+                                             phase_error_ratio=0.5)],
+                         ids=["white-code", "correlated-adaptive-code", "iono-states", "phase-error-states"])
 def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model, filt):
     """Also with the time-correlated code model (variance x (1 + rho) / (1 - rho) once an ambiguity is
     tracked) and the adaptive code variance factor: both engines must weigh the code identically; and
     with the ionosphere states of both (the ionosphere-weighted Gauss-Markov model, ``iono =
-    "estimate"``).  White phase in both (``phase_correlation_time_s = 0``: the GNSS-only engine has no
-    correlated phase error states)."""
+    "estimate"``); and with the correlated phase error states of both (one Gauss-Markov error per
+    ambiguity, ``phase_correlation_time_s`` and ``phase_error_ratio``).  White phase in both otherwise
+    (``phase_correlation_time_s = 0``, the GNSS-only engine's default)."""
     v = "iono-Klob_tropo-Saast"
     rover = rtk.read_phase_obs(need(SP / v / "Rover-static-2km-east_MO_Spirent.obs"), "GE")
     base = rtk.read_phase_obs(SP / v / "Base-static_MO_Spirent.obs", "GE")
@@ -188,8 +191,8 @@ def test_static_exact_imu_float_equals_gnss_only_static_rtk(code_model, filt):
                     acc_scale_sigma=[0.0] * 3)
     cfg = RunConfig(filter=filt, imu=zero, init_error=False, init_sigma_pos_m=[SIG0] * 3,
                     init_sigma_vel_mps=[1e-9] * 3, init_sigma_att_deg=[1e-9] * 3)
-    sol = run_rtk_ins(ds, cfg, rover=rover, base=base, nav=NAV, base_pos=rb, rtk_options=common,
-                      engine=dict(code_chi2_row=0.0, phase_correlation_time_s=0.0))
+    sol = run_rtk_ins(ds, cfg, rover=rover, base=base, nav=NAV, base_pos=rb, rtk_options={"phase_correlation_time_s": 0.0, **common},
+                      engine=dict(code_chi2_row=0.0))
     ri = sol.rtk.r_float_e
     rg = np.asarray(g["r_float_e"])
     ok = (np.asarray(g["status"]) == 2) & (sol.rtk.status == 2)
@@ -479,9 +482,9 @@ def test_urban_float_covariance_consistent_with_correlated_code(tmp_path):
     opts = dict(systems="G", frequencies=1, elevation_mask_deg=math.degrees(sc.gnss_rtk["base_elevation_mask"]))
     t_true, r_true = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
 
-    def nees_fixed_wrong(extra, engine=None):
+    def nees_fixed_wrong(extra):
         rs = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                         rtk_options=dict(opts, **extra), engine=engine).rtk
+                         rtk_options=dict(opts, **extra)).rtk
         i = np.searchsorted(t_true, rs.t_gps_s - 0.5e-3)
         assert np.all(np.abs(t_true[i] - rs.t_gps_s) < 1e-3)
         fl = rs.status == 2
@@ -525,9 +528,9 @@ def test_urban_float_nees_consistent_with_the_presets_receiver_noise(tmp_path):
     rx = rtk_noise_options(sc.gnss_rtk)
     t_true, r_true = ds.rtk.rover.t_tag_gps_s, ds.rtk.rover.r_e
 
-    def nees_fixed_wrong(extra, engine=None):
+    def nees_fixed_wrong(extra):
         rs = run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"], nav=files["nav"],
-                         rtk_options=dict(opts, **extra), engine=engine).rtk
+                         rtk_options=dict(opts, **extra)).rtk
         i = np.searchsorted(t_true, rs.t_gps_s - 0.5e-3)
         assert np.all(np.abs(t_true[i] - rs.t_gps_s) < 1e-3)
         fl = rs.status == 2
@@ -537,10 +540,10 @@ def test_urban_float_nees_consistent_with_the_presets_receiver_noise(tmp_path):
         err = np.linalg.norm(rs.r_e[fx] - r_true[i[fx]], axis=1)
         return float(nees.mean()), int(fx.sum()), int((err > 0.05).sum())
 
-    n_white, _, wrong_white = nees_fixed_wrong(dict(iono="variance"), dict(phase_correlation_time_s=0.0))
+    n_white, _, wrong_white = nees_fixed_wrong(dict(iono="variance", phase_correlation_time_s=0.0))
     n_def, _, wrong_def = nees_fixed_wrong({})
-    n_rx, _, _ = nees_fixed_wrong(rx, dict(phase_correlation_time_s=0.0))
-    _, _, wrong_rx9 = nees_fixed_wrong(dict(rx, min_success_rate=0.999), dict(phase_correlation_time_s=0.0))
+    n_rx, _, _ = nees_fixed_wrong(dict(rx, phase_correlation_time_s=0.0))
+    _, _, wrong_rx9 = nees_fixed_wrong(dict(rx, min_success_rate=0.999, phase_correlation_time_s=0.0))
     assert n_white > 6.0 and wrong_white > 0, (n_white, wrong_white)
     assert n_def < n_white and wrong_def == 0, (n_def, wrong_def)
     assert 0.5 < n_rx <= 3.0, n_rx
@@ -726,9 +729,9 @@ def test_phase_correlation_model_fixes_the_multipath_part(tmp_path):
     interval (rho = 0)."""
     ds, files = _open_sky_files(tmp_path, 1, iono_ppm=0.0, tropo_ppm=0.0)
 
-    def run(**engine):
+    def run(**phase):
         return run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"],
-                           nav=files["nav"], rtk_options=dict(iono="off"), engine=engine)
+                           nav=files["nav"], rtk_options=dict(iono="off", **phase))
 
     white = run(phase_correlation_time_s=0.0)
     rate_w, _, nees_w = _fixed_and_float_nees(ds, white)
@@ -780,9 +783,9 @@ def test_open_sky_each_error_model_alone_falls_short(tmp_path):
     256/599, 18 of them more than 5 cm off (21 cm at most); neither fixes 10/599."""
     ds, files = _open_sky_files(tmp_path, 1)
 
-    def run(rtk_opt, **engine):
+    def run(rtk_opt, **phase):
         return run_rtk_ins(ds, RunConfig(filter="ekf"), rover=files["rover"], base=files["base"],
-                           nav=files["nav"], rtk_options=rtk_opt, engine=engine)
+                           nav=files["nav"], rtk_options=dict(rtk_opt, **phase))
 
     rate, err, _ = _fixed_and_float_nees(ds, run({}))
     assert rate >= 0.99 and err <= 0.05, (rate, err)
@@ -823,12 +826,28 @@ def test_success_rate_floor_removes_the_single_frequency_wrong_fixes(tmp_path):
 
 def test_phase_correlation_time_must_not_be_negative(drive, spirent_l1):
     rover, base, _, _ = spirent_l1
-    with pytest.raises(ValueError, match="phase_correlation_time_s"):
+    with pytest.raises(ValueError, match=r"'rtk\.phase_correlation_time_s': bad value -1\.0"):
         run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
-                    rtk_options=dict(systems="GE", frequencies=1), engine=dict(phase_correlation_time_s=-1.0))
-    with pytest.raises(ValueError, match="phase_error_ratio"):
+                    rtk_options=dict(systems="GE", frequencies=1, phase_correlation_time_s=-1.0))
+    with pytest.raises(ValueError, match=r"'rtk\.phase_error_ratio': bad value -0\.1"):
         run_rtk_ins(drive, RunConfig(filter="ekf"), rover=rover, base=base, nav=NAV,
-                    rtk_options=dict(systems="GE", frequencies=1), engine=dict(phase_error_ratio=-0.1))
+                    rtk_options=dict(systems="GE", frequencies=1, phase_error_ratio=-0.1))
+
+
+def test_phase_keys_in_the_engine_table_still_load_with_a_deprecation_note(drive, spirent_l1):
+    """The phase noise keys moved from [rtk_engine] to [rtk] (shared with the GNSS-only engine): the old
+    place gives the same run, with a FutureWarning naming the key and its new table."""
+    rover, base, _, _ = spirent_l1
+    common = dict(filter="ekf", init_error=False)
+    opts = dict(systems="GE", frequencies=1)
+    new = run_rtk_ins(drive, RunConfig(**common), rover=rover, base=base, nav=NAV,
+                      rtk_options=dict(opts, phase_error_ratio=0.3))
+    with pytest.warns(FutureWarning, match=r"'\[rtk_engine\] phase_error_ratio' is deprecated; write it in \[rtk\]"):
+        old = run_rtk_ins(drive, RunConfig(**common), rover=rover, base=base, nav=NAV, rtk_options=opts,
+                          engine=dict(phase_error_ratio=0.3))
+    assert np.array_equal(new.rtk.status, old.rtk.status)
+    ok = np.isfinite(new.rtk.r_e).all(axis=1)
+    assert ok.sum() > 100 and np.array_equal(new.rtk.r_e[ok], old.rtk.r_e[ok])
 
 
 def test_a_rover_with_moved_time_tags_is_refused_before_the_filter_runs(drive, tmp_path):

@@ -78,7 +78,7 @@ def _runs(open_sky, filt, ar_mode):
     ds, files, opts, _ = open_sky
     o = dict(opts, ar_mode=ar_mode)
     return [run_rtk_ins(ds, RunConfig(filter=filt, smooth=sm), rover=files["rover"], base=files["base"],
-                        nav=files["nav"], rtk_options=o, engine=dict(phase_correlation_time_s=0.0))
+                        nav=files["nav"], rtk_options=dict(o, phase_correlation_time_s=0.0))
             for sm in (False, True)]
 
 

@@ -154,9 +154,8 @@ def _sim(preset, seed, tmp_path_factory):
 
 def _run(preset, seed, tmp_path_factory, **opts):
     sim, files = _sim(preset, seed, tmp_path_factory)
-    systems = "".join(sim.signals)
-    o = RtkOptions.from_dict(dict(mode="kinematic", systems=systems, frequencies=1, elevation_mask_deg=10.0, **opts),
-                             "test")
+    o = RtkOptions.from_dict({"mode": "kinematic", "systems": "".join(sim.signals), "frequencies": 1,
+                              "elevation_mask_deg": 10.0, **opts}, "test")
     rs = solve_rtk(files["rover"], files["base"], files["nav"], options=o)
     i = np.searchsorted(sim.rover.t_tag_gps_s, rs.t_gps_s - 1e-3)
     r_true = sim.rover.r_e[i]
@@ -211,6 +210,36 @@ def test_float_model_terms_make_the_float_covariance_consistent(tmp_path_factory
 
     assert nees() > 15.0
     assert 1.0 < nees(code_correlation_time_s=20.0, adaptive_code_gain=0.1, amb_psd_cycles2ps=1e-4) < 6.0
+
+
+PHASE_STATES = dict(phase_correlation_time_s=30.0, phase_error_ratio=0.5)
+
+
+def test_correlated_phase_error_states_fix_more_and_wrong_less_on_open_sky_gps_l1(tmp_path_factory):
+    # open sky, GPS L1 only, continuous AR: the preset's 3 mm phase multipath is correlated over 30 s, so
+    # white phase averages it as if it were noise; the float is over-confident, and passes wrong sets
+    # (seed 6: 121 of 592 fixes wrong, measured) or fails the right ones (seed 5: 321 of 600 fixed).
+    # One Gauss-Markov error per ambiguity (30 s, half the white sigma; Gelb 1974 sec. 4.5) removes
+    # both: measured 0 of 462 wrong, and 597 of 600 fixed
+    _, fixed_w, wrong_w, _ = _run("rtk-open-sky-car", 6, tmp_path_factory, systems="G")
+    _, fixed_s, wrong_s, _ = _run("rtk-open-sky-car", 6, tmp_path_factory, systems="G", **PHASE_STATES)
+    assert wrong_w.sum() >= 50 and wrong_s.sum() == 0 and fixed_s.mean() > 0.7, (wrong_w.sum(), wrong_s.sum())
+    _, fixed_w, wrong_w, _ = _run("rtk-open-sky-car", 5, tmp_path_factory, systems="G")
+    _, fixed_s, wrong_s, _ = _run("rtk-open-sky-car", 5, tmp_path_factory, systems="G", **PHASE_STATES)
+    assert fixed_w.mean() < 0.6 and fixed_s.mean() > 0.95 and wrong_s.sum() == 0, (fixed_w.mean(), fixed_s.mean())
+
+
+def test_vanishing_correlated_phase_errors_are_white_phase(tmp_path_factory):
+    # both forms of the correlated phase model reduce to white phase: a vanishing state sigma, and the
+    # variance factor (1 + rho) / (1 - rho) with a correlation time far below the epoch interval (rho = 0)
+    rs_w, fixed_w, _, _ = _run("rtk-open-sky-car", 2, tmp_path_factory, systems="G")
+    assert fixed_w.sum() > 100
+    for tiny in (dict(phase_correlation_time_s=30.0, phase_error_ratio=1e-9),
+                 dict(phase_correlation_time_s=1e-9, phase_error_ratio=0.0)):
+        rs, fixed, _, _ = _run("rtk-open-sky-car", 2, tmp_path_factory, systems="G", **tiny)
+        assert np.array_equal(fixed, fixed_w)
+        ok = np.isfinite(rs_w.r_e).all(axis=1)
+        assert np.max(np.abs(rs.r_e[ok] - rs_w.r_e[ok])) < 1e-6
 
 
 def test_confirmation_over_consecutive_epochs_rejects_transient_wrong_sets(tmp_path_factory):

@@ -227,6 +227,8 @@ RtkOptions rtk_options_from_dict(const py::dict& d) {
     else if (k == "code_phase_ratio") o.code_phase_ratio = v.cast<double>();
     else if (k == "code_corr_time_s") o.code_corr_time_s = v.cast<double>();
     else if (k == "code_scale_gain") o.code_scale_gain = v.cast<double>();
+    else if (k == "phase_corr_time_s") o.phase_corr_time_s = v.cast<double>();
+    else if (k == "phase_error_ratio") o.phase_error_ratio = v.cast<double>();
     else if (k == "confirm_epochs") o.confirm_epochs = v.cast<int>();
     else if (k == "confirm_max_ambiguities") o.confirm_max_ambiguities = v.cast<int>();
     else if (k == "min_success_rate") o.min_success_rate = v.cast<double>();

@@ -25,8 +25,7 @@ using IArray = py::array_t<std::int64_t, py::array::c_style | py::array::forceca
 
 RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   reject_unknown(engine, {"lever_arm_b", "propagation_interval", "output_decimation", "ins_slip_k_sigma",
-                          "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob", "phase_correlation_time_s",
-                          "phase_error_ratio",
+                          "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row", "validation_prob",
                           "ar_min_success_rate", "outage_cycle_s", "smooth", "robust_screening",
                           "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_huber", "robust_huber_k",
                           "robust_max_sats", "robust_phase_reset_epochs", INSNAV_UT_KEYS},
@@ -42,11 +41,6 @@ RtkInsConfig rtk_ins_config_from(const py::dict& engine, const py::dict& rtk) {
   c.ins_slip_max_dt_s = num(engine, "ins_slip_max_dt_s", c.ins_slip_max_dt_s);
   c.code_chi2_row = num(engine, "code_chi2_row", c.code_chi2_row);
   c.validation_prob = num(engine, "validation_prob", c.validation_prob);
-  c.phase_corr_time_s = num(engine, "phase_correlation_time_s", c.phase_corr_time_s);
-  if (!(c.phase_corr_time_s >= 0.0)) throw py::value_error("phase_correlation_time_s must be >= 0 (0: white phase)");
-  c.phase_error_ratio = num(engine, "phase_error_ratio", c.phase_error_ratio);
-  if (!(c.phase_error_ratio >= 0.0))
-    throw py::value_error("phase_error_ratio must be >= 0 (0: the correlation as a variance factor)");
   c.ar_min_success_rate = num(engine, "ar_min_success_rate", c.ar_min_success_rate);
   c.outage_cycle_s = num(engine, "outage_cycle_s", c.outage_cycle_s);
   c.robust.screening = flag(engine, "robust_screening", c.robust.screening);

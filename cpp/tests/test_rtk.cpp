@@ -333,7 +333,7 @@ int main() {
       rc.rtk.min_success_rate = 0.0;
       rc.rtk.iono_mode = mode;
       rc.rtk.iono_sigma_per_10km_m = 0.03;
-      EXPECT_TRUE(rc.phase_corr_time_s > 0.0 && rc.phase_error_ratio > 0.0);  // the defaults: phase error states
+      EXPECT_TRUE(rc.rtk.phase_corr_time_s > 0.0 && rc.rtk.phase_error_ratio > 0.0);  // the defaults: phase error states
       auto ins = std::make_unique<RtkInsEngine<64>>(ImuErrorModel{}, rc);
       start_static_ins(*ins, r_r2);
       for (int e = 0; e < 20; ++e) {

@@ -73,12 +73,17 @@ __all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins",
 #: multipath as if it were white noise and its float ambiguities are over-confident (on the urban
 #: simulator preset the float position's NEES was 10-40x its dimension and most fixes wrong; with the
 #: correlated model the wrong fixes fall, docs/results/rtk_ins.md).  The between-receiver ionosphere as
-#: states (``iono = "estimate"``, the GNSS-only engine's ionosphere-weighted Gauss-Markov model), with the
-#: engine's correlated phase error states (``[rtk_engine] phase_correlation_time_s``): on the open-sky
+#: states (``iono = "estimate"``, the GNSS-only engine's ionosphere-weighted Gauss-Markov model), with
+#: correlated phase error states (``phase_correlation_time_s = 30``, ``phase_error_ratio = 0.5``: one
+#: Gauss-Markov error per ambiguity, half the white phase sigma; the GNSS-only engine has them off): on the open-sky
 #: simulator preset (2.5-8 km baseline, 1 ppm ionosphere, 3 mm phase multipath over 30 s) the float with
 #: neither was over-confident and 10 of 599 epochs fixed; with both all are fixed, and the Spirent drive
 #: (under 2 km, no multipath) keeps its fixes and accuracy (docs/algorithms.md section 22).
-RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.4, code_correlation_time_s=10.0, iono="estimate")
+RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.4, code_correlation_time_s=10.0, iono="estimate",
+                              phase_correlation_time_s=30.0, phase_error_ratio=0.5)
+#: keys that were engine ([rtk_engine]) keys and are now [rtk] keys (the phase noise model, shared
+#: with the GNSS-only engine): still read there, with a deprecation note
+MOVED_TO_RTK = ("phase_correlation_time_s", "phase_error_ratio")
 #: engine ([rtk_engine]) defaults applied under the caller's (empty: the C++ RtkInsConfig defaults)
 ENGINE_DEFAULTS: dict = {}
 
@@ -140,14 +145,14 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     base_pos : (3,) ECEF [m], optional
         Base antenna reference point; default the base header's.
     rtk_options : RtkOptions or dict
-        ``[rtk]`` options (weighting, masks, AR, slip detectors); :data:`RTK_INS_DEFAULTS` apply.
+        ``[rtk]`` options (weighting, masks, AR, slip detectors); :data:`RTK_INS_DEFAULTS` apply,
+        among them ``phase_correlation_time_s`` (30 s; 0: white phase) and ``phase_error_ratio`` (0.5):
+        the time-correlated phase errors as one first-order Gauss-Markov state per ambiguity, its sigma
+        that multiple of the white phase sigma (0: a tracked ambiguity's phase variance
+        x (1 + rho) / (1 - rho), rho = exp(-dt / tau), instead; docs/algorithms.md, "Tight RTK/INS").
     engine : dict, optional
         Engine keys: ``ins_slip_k_sigma`` (5), ``ins_slip_min_cycles`` (0.35), ``ins_slip_max_dt_s``
-        (2 s), ``code_chi2_row`` (25; 0 off), ``validation_prob`` (0.999; 0 off),
-        ``phase_correlation_time_s`` (30 s; 0: white phase) and ``phase_error_ratio`` (0.5): the
-        time-correlated phase errors as one first-order Gauss-Markov state per ambiguity, its sigma that
-        multiple of the white phase sigma (0: a tracked ambiguity's phase variance x (1 + rho) / (1 - rho),
-        rho = exp(-dt / tau), instead; docs/algorithms.md, "Tight RTK/INS"), the robust
+        (2 s), ``code_chi2_row`` (25; 0 off), ``validation_prob`` (0.999; 0 off), the robust
         screening of the single differences (Teunissen's w-test per satellite and frequency, IGG-III
         down-weighting; docs/algorithms.md, "Tight RTK/INS"): ``robust_screening`` (False),
         ``robust_chi2_row`` (10.83), ``robust_igg_k0`` (1.5), ``robust_igg_k1`` (3.0),
@@ -173,6 +178,15 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
         if v is None:
             raise ValueError(f"coupling 'rtk' needs rover, base and nav observations; missing {k!r} "
                              "(insnav run --coupling rtk --obs ROVER --base BASE --nav NAV)")
+    engine = dict(engine or {})
+    moved = {k: engine.pop(k) for k in MOVED_TO_RTK if k in engine}
+    if moved:
+        import warnings
+
+        warnings.warn(f"key '[rtk_engine] {next(iter(moved))}' is deprecated; write it in [rtk] "
+                      "(the phase noise model, shared with the GNSS-only engine)", FutureWarning, stacklevel=2)
+        rtk_options = dataclasses.replace(rtk_options, **moved).validate() if isinstance(rtk_options, RtkOptions) \
+            else {**(rtk_options or {}), **moved}
     opt = rtk_ins_options(rtk_options)
     rover, base, r_base_e, bidx, roff, rrows, boff, brows = prepare_rtk_rows(rover, base, nav, base_pos, opt,
                                                                              base_source=base_source)
@@ -203,7 +217,7 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
         d = np.diff(t_rec)
         period = cfg.cycle_period_s or (float(np.median(d[d > 0])) if np.any(d > 0) else 1.0)
         eng.update(smooth=True, outage_cycle_s=1.5 * period)
-    eng.update(engine or {})
+    eng.update(engine)
     out = _core.rtk_ins_run(t, dth, dv, init_vector(imu_ds, init), np.diag(p0 ** 2), np.zeros(12),
                             noise.as_core_dict(), eng, opt.core_dict(), t_rec, roff, rrows, boff, brows, bidx,
                             r_base_e, int(probe_epoch), cfg.filter)

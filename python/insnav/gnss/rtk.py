@@ -114,6 +114,12 @@ class RtkOptions(TomlTable):
     code_correlation_time_s : float
         Correlation time of the code errors (multipath) [s]: the code of a tracked satellite enters
         with its variance x (1 + rho) / (1 - rho), rho = exp(-dt / tau) (0: white).
+    phase_correlation_time_s, phase_error_ratio : float
+        Time-correlated phase errors (carrier multipath, what the atmosphere models leave): their
+        correlation time [s] (0: white phase) and their sigma as a multiple of the white phase sigma
+        above.  Both > 0: one first-order Gauss-Markov state per ambiguity (docs/algorithms.md, "Correlated
+        phase errors").  Ratio 0 with a correlation time: a tracked ambiguity's phase variance
+        x (1 + rho) / (1 - rho), rho = exp(-dt / tau), instead.
     adaptive_code_gain : float
         Gain of the adaptive code variance factor estimated from post-fit code residuals (0: off).
     amb_psd_cycles2ps : float
@@ -165,6 +171,8 @@ class RtkOptions(TomlTable):
     sigma_phase_b_m: float = 0.003
     code_phase_ratio: float = 100.0
     code_correlation_time_s: float = 0.0
+    phase_correlation_time_s: float = 0.0
+    phase_error_ratio: float = 0.0
     adaptive_code_gain: float = 0.0
     min_success_rate: float = 0.95
     min_success_rate_estimated: float = 0.98

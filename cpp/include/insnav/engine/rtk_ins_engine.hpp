@@ -146,7 +146,15 @@
 namespace insnav {
 
 struct RtkInsConfig {
-  gnss::RtkOptions rtk;               // weighting, masks, AR, receiver slip detectors (gnss/rtk.hpp)
+  // weighting, masks, AR, receiver slip detectors (gnss/rtk.hpp), with the correlated phase errors
+  // as states by default here (phase_corr_time_s 30 s, phase_error_ratio 0.5; file comment)
+  gnss::RtkOptions rtk = default_rtk_options();
+  static gnss::RtkOptions default_rtk_options() {
+    gnss::RtkOptions o;
+    o.phase_corr_time_s = 30.0;
+    o.phase_error_ratio = 0.5;
+    return o;
+  }
   Vec3 lever_arm_b = Vec3::Zero();    // IMU centre -> GNSS antenna, FRD [m]
   double propagation_interval = 0.02; // error-state propagation step [s]
   int output_decimation = 1;
@@ -155,12 +163,6 @@ struct RtkInsConfig {
   double ins_slip_max_dt_s = 2.0;     // the test needs the previous epoch of the satellite within this
   double code_chi2_row = 25.0;        // code row screening (0: off)
   double validation_prob = 0.999;     // AR: best vector's squared norm <= chi2 quantile (0: off)
-  // Time-correlated phase errors (carrier multipath, the residual atmosphere a model leaves): correlation
-  // time [s] (0: white phase) and the sigma of a first-order Gauss-Markov error relative to the white
-  // phase sigma of the weighting, one state per ambiguity (file comment); ratio 0 with a correlation
-  // time: the variance-factor approximation instead (phase_var_factor)
-  double phase_corr_time_s = 30.0;
-  double phase_error_ratio = 0.5;
   double ar_min_success_rate = 0.0;   // AR: bootstrapped success rate of the fixed subset (0: off)
   // A filter cycle without a rover epoch is closed after this long [s] (+inf: one cycle spans a
   // whole gap).  The RTS smoother needs epochs inside GNSS outages (the bindings set it when
@@ -965,7 +967,7 @@ class RtkInsEngine {
     return code_scale_ * (1.0 + rho) / std::max(1.0 - rho, 1e-6);
   }
 
-  // Time-correlated phase errors as a variance factor (RtkInsConfig::phase_corr_time_s with
+  // Time-correlated phase errors as a variance factor (RtkOptions::phase_corr_time_s with
   // phase_error_ratio = 0; the default carries them as states, phase_errors_active), the same first-order
   // Gauss-Markov model as code_var_factor: carrier multipath of a few mm correlated over tens of seconds is, with
   // the INS holding the position between epochs, averaged into the float position and ambiguities as
@@ -974,11 +976,8 @@ class RtkInsEngine {
   // tracked ambiguity (lock > 0) enters with its variance x (1 + rho) / (1 - rho), rho =
   // exp(-dt / tau); the first epoch of an ambiguity keeps the white variance.
   double phase_var_factor(int c, int f) const {
-    if (!(cfg_.phase_corr_time_s > 0.0) || !(dt_epoch_ > 0.0) || phase_errors_active()) return 1.0;
     const int k = amb_of_[key(rover_ + common_r_[c] * gnss::RtkRow::kCols) * gnss::kMaxFreq + f];
-    if (k < 0 || amb_[k].lock == 0) return 1.0;
-    const double rho = std::exp(-dt_epoch_ / cfg_.phase_corr_time_s);
-    return (1.0 + rho) / std::max(1.0 - rho, 1e-6);
+    return gnss::phase_var_factor(cfg_.rtk, dt_epoch_, k < 0 ? 0 : amb_[k].lock);
   }
 
   // Adaptive variance factor of the code rows (Mohamed & Schwarz 1999, J. Geodesy 73, eq. (28),
@@ -1118,12 +1117,12 @@ class RtkInsEngine {
 
   // The correlated phase errors (phase_error_ratio > 0 with phase_corr_time_s > 0: states instead of
   // phase_var_factor's inflation).
-  bool phase_errors_active() const { return cfg_.phase_error_ratio > 0.0 && cfg_.phase_corr_time_s > 0.0; }
+  bool phase_errors_active() const { return gnss::phase_error_states(cfg_.rtk); }
 
   // Stationary variance of the single-differenced correlated phase error of common satellite c [m^2]:
   // phase_error_ratio^2 times the white single difference's (var_sd_: the phase weighting of both
   // receivers at their elevations).
-  double phase_error_var(int c) const { return cfg_.phase_error_ratio * cfg_.phase_error_ratio * var_sd_[c]; }
+  double phase_error_var(int c) const { return cfg_.rtk.phase_error_ratio * cfg_.rtk.phase_error_ratio * var_sd_[c]; }
 
   // Is extra state e (ambiguity, ionosphere or correlated phase error slot) in the filter?
   bool extra_in_use(int e) const {
@@ -1160,7 +1159,7 @@ class RtkInsEngine {
         if (iono_[k].sat >= 0) gm(kIono0 + k, phi, gnss::iono_prior_var(cfg_.rtk, bl, iono_[k].el));
     }
     if (phase_errors_active()) {
-      const double phi = std::exp(-dt / cfg_.phase_corr_time_s);
+      const double phi = std::exp(-dt / cfg_.rtk.phase_corr_time_s);
       for (int k = 0; k < kMaxAmb; ++k)
         if (amb_[k].sat >= 0) gm(kPhaseErr0 + k, phi, amb_[k].phase_error_var);
     }

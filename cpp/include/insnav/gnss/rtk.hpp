@@ -90,7 +90,7 @@ inline constexpr double kOmegaE = kOmegaEDotGps;  // IS-GPS Earth rate [rad/s] (
 
 inline constexpr int kMaxAmbStates = 120; // tracked single-differenced ambiguities
 inline constexpr int kMaxIonoStates = 64;  // tracked single-differenced ionosphere states (iono_mode kEstimate)
-inline constexpr int kMaxStates = 6 + kMaxAmbStates + kMaxIonoStates;
+inline constexpr int kMaxStates = 6 + 2 * kMaxAmbStates + kMaxIonoStates;
 static_assert(EIGEN_STACK_ALLOCATION_LIMIT == 0 || EIGEN_STACK_ALLOCATION_LIMIT >= kMaxStates * kMaxStates * 8,
               "insnav/gnss/rtk.hpp: define EIGEN_STACK_ALLOCATION_LIMIT >= 1048576 before including Eigen "
               "(the insnav_core CMake target does)");
@@ -98,13 +98,15 @@ inline constexpr double kIonoRefFreqHz = 1575.42e6;  // f_0 of the ionosphere st
 inline constexpr double kIonoShellHeightM = 350e3;   // single-layer height of the mapping function
 inline constexpr int kMaxRows = kMaxAmbStates;  // DD rows of one kind (phase and code are updated in turn)
 
-/// State layout: position, velocity (kinematic), single-differenced ambiguities [cycles], then
-/// single-differenced slant ionosphere delays at kIonoRefFreqHz [m] (iono_mode kEstimate).
+/// State layout: position, velocity (kinematic), single-differenced ambiguities [cycles],
+/// single-differenced slant ionosphere delays at kIonoRefFreqHz [m] (iono_mode kEstimate), then one
+/// correlated phase error [m] per ambiguity slot (phase_error_states()).
 struct RtkLayout {
   static constexpr int kPos = 0;
   static constexpr int kVel = 3;
   static constexpr int kAmb = 6;
   static constexpr int kIono = kAmb + kMaxAmbStates;
+  static constexpr int kPhaseErr = kIono + kMaxIonoStates;
 };
 
 enum class RtkMode : int { kStatic = 0, kKinematic = 1 };
@@ -133,6 +135,12 @@ struct RtkOptions {
   double sigma_phase_b_m = 0.003;
   double code_phase_ratio = 100.0;
   double code_corr_time_s = 0.0;   // correlation time of the code errors (multipath) [s]; 0: white
+  // Time-correlated phase errors (carrier multipath, the residual atmosphere a model leaves): their
+  // correlation time [s] (0: white phase) and the sigma of a first-order Gauss-Markov error per
+  // ambiguity relative to the white phase sigma of the weighting (phase_error_states()); ratio 0 with a
+  // correlation time: a tracked ambiguity's phase variance x (1 + rho) / (1 - rho) instead
+  double phase_corr_time_s = 0.0;
+  double phase_error_ratio = 0.0;
   double code_scale_gain = 0.0;    // adaptive code variance factor: gain of its update per epoch (0: off)
   double glonass_factor = 1.5;
   IonoMode iono_mode = IonoMode::kVariance;
@@ -242,6 +250,20 @@ inline double phase_variance_zd(double el, int sys, const RtkOptions& o) {
   const double s = std::max(std::sin(el), 0.05);
   const double f = sys == kGlonass ? o.glonass_factor : 1.0;
   return f * f * (o.sigma_phase_a_m * o.sigma_phase_a_m + o.sigma_phase_b_m * o.sigma_phase_b_m / (s * s));
+}
+
+/// Are the correlated phase errors carried as states (one first-order Gauss-Markov error per
+/// ambiguity, A. Gelb (ed.), Applied Optimal Estimation, 1974, sec. 4.5: state augmentation)?
+inline bool phase_error_states(const RtkOptions& o) { return o.phase_error_ratio > 0.0 && o.phase_corr_time_s > 0.0; }
+
+/// The correlated phase errors as a variance factor instead (phase_error_ratio = 0 with a correlation
+/// time): a tracked ambiguity's (lock > 0) phase row enters with its white variance x (1 + rho) /
+/// (1 - rho), rho = exp(-dt / tau), the generalised least-squares information of an AR(1) error per
+/// further sample (Gelb 1974, sec. 3.8; as the code's code_corr_time_s).  1 otherwise.
+inline double phase_var_factor(const RtkOptions& o, double dt, int lock) {
+  if (!(o.phase_corr_time_s > 0.0) || !(dt > 0.0) || phase_error_states(o) || lock == 0) return 1.0;
+  const double rho = std::exp(-dt / o.phase_corr_time_s);
+  return (1.0 + rho) / std::max(1.0 - rho, 1e-6);
 }
 
 /// Single-layer ionospheric mapping function M(el) = 1 / sqrt(1 - (R cos el / (R + H))^2), H = 350 km.
@@ -649,6 +671,7 @@ class RtkEngine {
     bool used = false;      // a phase row this epoch
     bool half = false;      // half-cycle ambiguity flagged
     double el = 0.0;
+    double phase_error_var = 0.0;  // stationary variance of its correlated phase error [m^2]
   };
   static int key(const double* r) { return sat_key(r); }
   static int sys_of(const double* r) { return static_cast<int>(r[RtkRow::kSys]); }
@@ -715,6 +738,25 @@ class RtkEngine {
         P_(s, s) += iono_prior_var(opt_, bl, iono_[k].el) * (1.0 - phi * phi);
       }
     }
+    if (phase_error_states(opt_)) {  // the same first-order Gauss-Markov step
+      const double phi = std::exp(-dt / opt_.phase_corr_time_s);
+      for (int k = 0; k < kMaxAmbStates; ++k) {
+        if (amb_[k].sat < 0) continue;
+        const int s = RtkLayout::kPhaseErr + k;
+        x_(s) *= phi;
+        P_.row(s) *= phi;
+        P_.col(s) *= phi;
+        P_(s, s) += amb_[k].phase_error_var * (1.0 - phi * phi);
+      }
+    }
+  }
+
+  // Stationary variance of the single-differenced correlated phase error of common satellite c [m^2]:
+  // phase_error_ratio^2 times the white single difference's (the phase weighting of both receivers at
+  // their elevations).
+  double phase_error_var(int c) const {
+    const int sys = sys_of(rover_ + common_r_[c] * RtkRow::kCols);
+    return opt_.phase_error_ratio * opt_.phase_error_ratio * (var_zd(el_r_[c], sys) + var_zd(el_b_[c], sys));
   }
 
   // Ionosphere states of the satellites in use: a new satellite starts at I = 0 with the prior
@@ -755,8 +797,9 @@ class RtkEngine {
     }
   }
 
-  // Active states of the compact update: position, velocity (kinematic), tracked ambiguities and
-  // ionosphere states; col_of_ / iono_col_ map a slot to its column (-1: inactive).
+  // Active states of the compact update: position, velocity (kinematic), tracked ambiguities,
+  // ionosphere states and correlated phase errors; col_of_ / iono_col_ / perr_col_ map a slot to its
+  // column (-1: inactive).
   void build_active(bool kin) {
     na_ = 0;
     for (int i = 0; i < (kin ? 6 : 3); ++i) act_[na_++] = i;
@@ -772,6 +815,20 @@ class RtkEngine {
         iono_col_[k] = na_;
         act_[na_++] = RtkLayout::kIono + k;
       }
+    std::fill(perr_col_.begin(), perr_col_.end(), -1);
+    if (phase_error_states(opt_))
+      for (int k = 0; k < kMaxAmbStates; ++k)
+        if (amb_[k].sat >= 0) {
+          perr_col_[k] = na_;
+          act_[na_++] = RtkLayout::kPhaseErr + k;
+        }
+  }
+
+  // Zero state s and its covariance row and column.
+  void clear_state(int s) {
+    x_(s) = 0.0;
+    P_.row(s).setZero();
+    P_.col(s).setZero();
   }
 
   void remove_amb(int k) {
@@ -779,9 +836,8 @@ class RtkEngine {
     if (amb_[k].sat >= 0) amb_of_[amb_[k].sat * kMaxFreq + amb_[k].freq] = -1;
     amb_[k] = AmbSlot{};
     validator_.invalidate(k);
-    x_(s) = 0.0;
-    P_.row(s).setZero();
-    P_.col(s).setZero();
+    clear_state(s);
+    clear_state(RtkLayout::kPhaseErr + k);
   }
 
   // Initialise (or re-initialise) the ambiguity of common satellite c, frequency f from SD(phase - code).
@@ -798,11 +854,18 @@ class RtkEngine {
       const double rho_b = range(base_ + common_b_[c] * RtkRow::kCols, r_base_, e);
       n0 -= (rho_r - rho_b) / lam;
     }
+    clear_state(s);
     x_(s) = n0;
     p_dim_ = std::max(p_dim_, s + 1);
-    P_.row(s).setZero();
-    P_.col(s).setZero();
     P_(s, s) = opt_.amb_init_sigma_cycles * opt_.amb_init_sigma_cycles;
+    // its correlated phase error starts at 0 with the stationary variance
+    const int e = RtkLayout::kPhaseErr + k;
+    clear_state(e);
+    amb_[k].phase_error_var = phase_error_states(opt_) ? phase_error_var(c) : 0.0;
+    if (phase_error_states(opt_)) {
+      p_dim_ = std::max(p_dim_, e + 1);
+      P_(e, e) = amb_[k].phase_error_var;
+    }
     amb_[k].lock = 0;
     amb_[k].outage = 0;
     validator_.invalidate(k);
@@ -838,6 +901,7 @@ class RtkEngine {
         amb_[k].used = true;
         amb_[k].outage = 0;
         amb_[k].el = el_r_[c];
+        if (phase_error_states(opt_)) amb_[k].phase_error_var = phase_error_var(c);
         amb_row_[c * kMaxFreq + f] = k;
       }
     }
@@ -897,7 +961,8 @@ class RtkEngine {
           if (ref < 0) continue;
           const int m0 = m;
           const double var_ref =
-              var_sd_[ref] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(ref, f) : 1.0);
+              var_sd_[ref] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(ref, f)
+                                   : phase_factor(ref, f));
           for (int c = 0; c < n_common_; ++c) {
             if (c == ref || !use_[c] || sys_of(rover_ + common_r_[c] * RtkRow::kCols) != sys) continue;
             if (!valid(c, f, code) || m >= kMaxRows) continue;
@@ -911,6 +976,11 @@ class RtkEngine {
                       (lj * x_(RtkLayout::kAmb + kj) - li * x_(RtkLayout::kAmb + ki));
               set_h(m, col_of_[kj], lj);
               set_h(m, col_of_[ki], -li);
+              if (perr_col_[kj] >= 0 && perr_col_[ki] >= 0) {  // correlated phase errors: + (b_j - b_i)
+                y_(m) -= x_(RtkLayout::kPhaseErr + kj) - x_(RtkLayout::kPhaseErr + ki);
+                set_h(m, perr_col_[kj], 1.0);
+                set_h(m, perr_col_[ki], -1.0);
+              }
               row_amb_[m] = kj;
               ++n_phase_rows_;
             } else {
@@ -938,7 +1008,8 @@ class RtkEngine {
             row_ref_[m] = ref;
             row_f_[m] = f;
             const double var_j =
-                var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(c, f) : 1.0);
+                var_sd_[c] * (code ? opt_.code_phase_ratio * opt_.code_phase_ratio * code_var_factor(c, f)
+                                   : phase_factor(c, f));
             R_.row(m).head(m0).setZero();  // rows of another system or frequency: uncorrelated
             R_.col(m).head(m0).setZero();
             R_(m, m) = var_j + var_bl;
@@ -970,6 +1041,14 @@ class RtkEngine {
     if (k < 0 || amb_[k].lock == 0) return code_scale_;
     const double rho = std::exp(-dt_epoch_ / opt_.code_corr_time_s);
     return code_scale_ * (1.0 + rho) / std::max(1.0 - rho, 1e-6);
+  }
+
+  // The phase variance factor of common satellite c, frequency f (phase_var_factor; 1 where the
+  // correlated phase errors are states or white, or with white_code_ set for the recorded rows).
+  double phase_factor(int c, int f) const {
+    if (white_code_) return 1.0;
+    const int k = amb_of_[key(rover_ + common_r_[c] * RtkRow::kCols) * kMaxFreq + f];
+    return phase_var_factor(opt_, dt_epoch_, k < 0 ? 0 : amb_[k].lock);
   }
 
   // Adaptive variance factor of the code rows from their post-fit residuals (residual-based adaptive
@@ -1385,10 +1464,12 @@ class RtkEngine {
   std::array<int, kMaxStates> act_{};
   std::array<int, kMaxAmbStates> col_of_{};
   std::array<int, kMaxIonoStates> iono_col_{};
+  std::array<int, kMaxAmbStates> perr_col_{};
   std::array<int, kMaxRows> row_amb_{}, row_code_{}, row_c_{}, row_ref_{}, row_f_{}, nz_{};
-  // non-zero columns of each row of H (3 position, 2 ambiguities, 2 ionosphere states) and their values
-  std::array<std::array<int, 7>, kMaxRows> hc_{};
-  std::array<std::array<double, 7>, kMaxRows> hv_{};
+  // non-zero columns of each row of H (3 position, 2 ambiguities, 2 ionosphere states, 2 phase errors)
+  // and their values
+  std::array<std::array<int, 9>, kMaxRows> hc_{};
+  std::array<std::array<double, 9>, kMaxRows> hv_{};
   void set_h(int r, int col, double v) {
     for (int k = 0; k < nz_[r]; ++k)
       if (hc_[r][k] == col) { hv_[r][k] += v; return; }
