@@ -60,6 +60,10 @@ def _llh_file(p):
     return np.asarray(earth.geodetic_to_ecef(np.radians(lat), np.radians(lon), h), float).ravel()
 
 
+#: the correlated phase error states of RTK/INS's defaults, an option of GNSS-only RTK (off by default)
+PHASE_STATES = dict(phase_correlation_time_s=30.0, phase_error_ratio=0.5)
+
+
 def datasets():
     """name -> dict(rover, base, nav list, base_e, truth(t_gps_s) -> (n, 3), title, settings)."""
     out = {}
@@ -75,7 +79,9 @@ def datasets():
             base_e=rb, truth=lambda t, rt=rt: np.broadcast_to(rt, (len(t), 3)),
             settings=[dict(name="wtzr_wtzz_l1_gec_inst", systems="GEC", freq=1, armode="instantaneous", mask=15.0),
                       dict(name="wtzr_wtzz_l1l2_gec_inst", systems="GEC", freq=2, armode="instantaneous", mask=15.0),
-                      dict(name="wtzr_wtzz_l1l2_gec_cont", systems="GEC", freq=2, armode="continuous", mask=15.0)])
+                      dict(name="wtzr_wtzz_l1l2_gec_cont", systems="GEC", freq=2, armode="continuous", mask=15.0),
+                      dict(name="wtzr_wtzz_l1l2_gec_cont_phase", systems="GEC", freq=2, armode="continuous", mask=15.0,
+                           insnav=PHASE_STATES)])
     m = DATA / "matrtklib_static_septentrio"
     if m.is_dir():
         rb, rt = _llh_file(m / "base_position.txt"), _llh_file(m / "rover_position.txt")
@@ -101,7 +107,12 @@ def datasets():
                       dict(name="matrtklib_l1_g_inst_srcfg", systems="G", freq=1, armode="instantaneous", mask=15.0,
                            insnav=dict(min_success_rate_estimated=0.0)),
                       dict(name="matrtklib_l1_gj_inst_srcfg", systems="GJ", freq=1, armode="instantaneous", mask=15.0,
-                           insnav=dict(min_success_rate_estimated=0.0))])
+                           insnav=dict(min_success_rate_estimated=0.0)),
+                      # the correlated phase error states (off by default in GNSS-only RTK) on real data
+                      dict(name="matrtklib_l1l2_grec_cont_phase", systems="GREC", freq=2, armode="continuous",
+                           mask=15.0, insnav=PHASE_STATES),
+                      dict(name="matrtklib_l1_g_inst_phase", systems="G", freq=1, armode="instantaneous", mask=15.0,
+                           insnav=PHASE_STATES)])
     s = DATA / "instinct_spirent_rtk_dynamic_SIMULATED"
     if s.is_dir():
         v = s / "iono-Klob_tropo-Saast"
@@ -122,7 +133,9 @@ def datasets():
             title="Spirent dynamic rover (hardware-simulated, Klobuchar + Saastamoinen, 1 Hz, 10 min)",
             rover=v / "Rover-dynamic_MO_Spirent.obs", base=v / "Base-static_MO_Spirent.obs",
             nav=[s / "RINEX_GN_Spirent.23N", s / "RINEX_EN_Spirent.23L"], base_e=rb, truth=truth,
-            settings=[dict(name="spirent_dynamic_l1l2_ge_cont", systems="GE", freq=2, armode="continuous", mask=15.0)])
+            settings=[dict(name="spirent_dynamic_l1l2_ge_cont", systems="GE", freq=2, armode="continuous", mask=15.0),
+                      dict(name="spirent_dynamic_l1l2_ge_cont_phase", systems="GE", freq=2, armode="continuous",
+                           mask=15.0, insnav=PHASE_STATES)])
     return out
 
 

@@ -130,12 +130,23 @@ def test_rtk_ins(shared_data, tmp_path):
                tmp_path / "ds")
     cfg = tmp_path / "ri.toml"
     cfg.write_text('coupling = "rtk"\noutput_decimation = 20\n[rtk]\nelevation_mask_deg = 12.0\n'
-                   "[rtk_engine]\nins_slip_k_sigma = 6.0\n")
+                   "phase_error_ratio = 0.4\n[rtk_engine]\nins_slip_k_sigma = 6.0\n")
     nav = f"{sp / 'RINEX_GN_Spirent.23N'},{sp / 'RINEX_EN_Spirent.23L'}"
-    text = _round_trip(tmp_path, [ds, "--config", str(cfg), "--obs", str(v / "Rover-dynamic_MO_Spirent.obs"),
-                                  "--base", str(v / "Base-static_MO_Spirent.obs"), "--nav", nav], "rtk_ins")
+    files = ["--obs", str(v / "Rover-dynamic_MO_Spirent.obs"), "--base", str(v / "Base-static_MO_Spirent.obs"),
+             "--nav", nav]
+    text = _round_trip(tmp_path, [ds, "--config", str(cfg), *files], "rtk_ins")
     assert "elevation_mask_deg = 12.0" in text and "ins_slip_k_sigma = 6.0" in text
     assert "code_correlation_time_s = 10.0" in text  # the RTK/INS default it ran with
+    assert "phase_error_ratio = 0.4" in text and "phase_correlation_time_s = 30.0" in text
+    # the phase keys' old place ([rtk_engine]): the same run, with a deprecation note, and the resolved
+    # configuration writes them in [rtk] only
+    old = tmp_path / "old.toml"
+    old.write_text('coupling = "rtk"\noutput_decimation = 20\n[rtk]\nelevation_mask_deg = 12.0\n'
+                   "[rtk_engine]\nins_slip_k_sigma = 6.0\nphase_error_ratio = 0.4\n")
+    with pytest.warns(FutureWarning, match=r"'\[rtk_engine\] phase_error_ratio' is deprecated"):
+        assert main(["run", ds, "--config", str(old), *files, "-q", "--out", str(tmp_path / "old.csv")]) == 0
+    assert (tmp_path / "old.csv").read_bytes() == (tmp_path / "rtk_ins.csv").read_bytes()
+    assert (tmp_path / "old.csv.config.toml").read_text() == text
 
 
 # --- the layout key ------------------------------------------------------------------------------

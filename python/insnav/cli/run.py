@@ -880,7 +880,10 @@ def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts,
                     tables["gnss"] = weighting
             if cfg.coupling == "rtk":  # RTK/INS: the [rtk] options it ran with and the engine keys given
                 tables["rtk"] = _rtk_table(sol.rtk_options, base_e)
-                tables["rtk_engine"] = run_opts.get("engine") or None
+                from ..filters.rtk_ins import MOVED_TO_RTK  # in [rtk] now (the resolved options above)
+
+                tables["rtk_engine"] = {k: v for k, v in (run_opts.get("engine") or {}).items()
+                                        if k not in MOVED_TO_RTK} or None
             text = resolved_config_toml(cfg, tables)
             if csv_tables is not None:
                 text += _csv_tables_toml(csv_tables, cfg.imu is not None)

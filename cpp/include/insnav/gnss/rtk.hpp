@@ -725,29 +725,24 @@ class RtkEngine {
     }
     for (int k = 0; k < kMaxAmbStates; ++k)
       if (amb_[k].sat >= 0) P_(RtkLayout::kAmb + k, RtkLayout::kAmb + k) += opt_.amb_psd * dt;
+    // ionosphere and correlated phase errors, first-order Gauss-Markov: x <- phi x,
+    // P <- Phi P Phi^T + sigma^2 (1 - phi^2) on the diagonal (sigma: the state's stationary sigma)
+    const auto gm = [&](int s, double phi, double var) {
+      x_(s) *= phi;
+      P_.row(s) *= phi;
+      P_.col(s) *= phi;
+      P_(s, s) += var * (1.0 - phi * phi);
+    };
     if (opt_.iono_mode == IonoMode::kEstimate) {
-      // first-order Gauss-Markov: x <- phi x, P <- Phi P Phi^T + sigma_I^2 (1 - phi^2) on the diagonal
       const double phi = opt_.iono_tau_s > 0.0 ? std::exp(-dt / opt_.iono_tau_s) : 0.0;
       const double bl = (Vec3(x_.segment<3>(RtkLayout::kPos)) - r_base_).norm();
-      for (int k = 0; k < kMaxIonoStates; ++k) {
-        if (iono_[k].sat < 0) continue;
-        const int s = RtkLayout::kIono + k;
-        x_(s) *= phi;
-        P_.row(s) *= phi;
-        P_.col(s) *= phi;
-        P_(s, s) += iono_prior_var(opt_, bl, iono_[k].el) * (1.0 - phi * phi);
-      }
+      for (int k = 0; k < kMaxIonoStates; ++k)
+        if (iono_[k].sat >= 0) gm(RtkLayout::kIono + k, phi, iono_prior_var(opt_, bl, iono_[k].el));
     }
-    if (phase_error_states(opt_)) {  // the same first-order Gauss-Markov step
+    if (phase_error_states(opt_)) {
       const double phi = std::exp(-dt / opt_.phase_corr_time_s);
-      for (int k = 0; k < kMaxAmbStates; ++k) {
-        if (amb_[k].sat < 0) continue;
-        const int s = RtkLayout::kPhaseErr + k;
-        x_(s) *= phi;
-        P_.row(s) *= phi;
-        P_.col(s) *= phi;
-        P_(s, s) += amb_[k].phase_error_var * (1.0 - phi * phi);
-      }
+      for (int k = 0; k < kMaxAmbStates; ++k)
+        if (amb_[k].sat >= 0) gm(RtkLayout::kPhaseErr + k, phi, amb_[k].phase_error_var);
     }
   }
 
@@ -777,9 +772,7 @@ class RtkEngine {
         iono_[k].sat = sat;
         iono_of_[sat] = k;
         p_dim_ = std::max(p_dim_, s + 1);
-        x_(s) = 0.0;
-        P_.row(s).setZero();
-        P_.col(s).setZero();
+        clear_state(s);
         P_(s, s) = iono_prior_var(opt_, bl, el_r_[c]);
       }
       iono_[k].used = true;
@@ -788,12 +781,9 @@ class RtkEngine {
     }
     for (int k = 0; k < kMaxIonoStates; ++k) {
       if (iono_[k].sat < 0 || iono_[k].used || ++iono_[k].outage <= opt_.max_outage_epochs) continue;
-      const int s = RtkLayout::kIono + k;
       iono_of_[iono_[k].sat] = -1;
       iono_[k] = IonoSlot{};
-      x_(s) = 0.0;
-      P_.row(s).setZero();
-      P_.col(s).setZero();
+      clear_state(RtkLayout::kIono + k);
     }
   }
 
