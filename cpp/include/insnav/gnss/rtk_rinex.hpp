@@ -28,6 +28,7 @@
 #include "insnav/gnss/broadcast_orbit.hpp"
 #include "insnav/gnss/ephemeris_selection.hpp"
 #include "insnav/gnss/rtk.hpp"
+#include "insnav/gnss/code_position_fit.hpp"
 #include "insnav/io/rinex3_obs.hpp"
 #include "insnav/io/rinex_nav.hpp"
 
@@ -306,28 +307,31 @@ struct Receiver {
 inline constexpr double kCodeFitToleranceM = 50.0;
 
 /// Median over up to 10 epochs spread over the file of the residual RMS [m] of one-epoch code-only
-/// least-squares fits (position and one clock per system, unit weights, no atmosphere models,
-/// Gauss-Newton from r0 with the satellites rotated by the Earth's rate over the travel time from
-/// r0), as insnav.gnss.rtk.receiver_code_fix; NaN when no epoch has a redundant converged fit.  Time tags
-/// shifted against the observations give hundreds of metres, good files a few.
+/// least-squares fits (position, a reference clock and a GPS-QZSS bias, unit weights, no atmosphere
+/// models; gnss/code_position_fit.hpp's Gauss-Newton fit from r0 with the satellites rotated by the Earth's rate over
+/// the travel time from r0), as insnav.gnss.rtk.receiver_code_fix; NaN when no epoch has a redundant
+/// converged fit.  Time tags shifted against the observations give hundreds of metres, good files a few.
 /// ``sat``: per row (from ``row0``) the satellite position [m] and clock [m]; ``code``: pseudorange [m].
 inline double code_fit_rms(const Receiver& rx, std::size_t row0, const std::vector<std::array<double, 4>>& sat,
                            const std::vector<double>& code, const double* r0) {
-  using MatH = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 64, 5>;
-  using VecY = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 64, 1>;
   const auto& T = rx.t;
   const std::size_t ne = T.epoch_t_gps_s.size();
   const std::size_t n_ep = std::min<std::size_t>(10, ne);
   std::vector<double> rms;
   std::int64_t last = -1;
+  std::array<CodeFitRow, kSppMaxRows> rows;
+  SppRowsMat H;
+  SppRowsBy3 u;
+  SppRowsVec rng, y;
+  SppParVec x;
   for (std::size_t q = 0; q < n_ep; ++q) {
     const auto e = static_cast<std::int64_t>(n_ep == 1 ? 0.0 : double(ne - 1) * double(q) / double(n_ep - 1));
     if (e == last) continue;
     last = e;
-    double sp[64][4];
-    int col[64], n = 0;
+    int col[kSppMaxRows], n = 0;
     bool has_sys[2] = {false, false};
-    for (auto r = rx.off[static_cast<std::size_t>(e)]; r < rx.off[static_cast<std::size_t>(e) + 1] && n < 64; ++r) {
+    for (auto r = rx.off[static_cast<std::size_t>(e)]; r < rx.off[static_cast<std::size_t>(e) + 1] && n < kSppMaxRows;
+         ++r) {
       const std::size_t i = row0 + static_cast<std::size_t>(r);
       const auto& S = sat[i];
       if (!(std::isfinite(code[i]) && std::isfinite(S[0]) && std::isfinite(S[1]) && std::isfinite(S[2]) &&
@@ -335,45 +339,19 @@ inline double code_fit_rms(const Receiver& rx, std::size_t row0, const std::vect
         continue;
       const double d[3] = {S[0] - r0[0], S[1] - r0[1], S[2] - r0[2]};
       const double th = wgs84::kOmegaIe * std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / kCLight;
-      sp[n][0] = std::cos(th) * S[0] + std::sin(th) * S[1];
-      sp[n][1] = -std::sin(th) * S[0] + std::cos(th) * S[1];
-      sp[n][2] = S[2];
-      sp[n][3] = code[i] + S[3];  // pseudorange plus the satellite clock: range + receiver clock
+      rows[n] = {Vec3(std::cos(th) * S[0] + std::sin(th) * S[1], -std::sin(th) * S[0] + std::cos(th) * S[1], S[2]),
+                 code[i], S[3]};
       col[n] = T.row_sys[static_cast<std::size_t>(r)] == 'J' ? 1 : 0;
       has_sys[col[n]] = true;
       ++n;
     }
     const int n_clk = int(has_sys[0]) + int(has_sys[1]);
     if (n < 4 + n_clk) continue;  // one redundant row at least
-    for (int k = 0; k < n; ++k) col[k] = (has_sys[0] && col[k] == 1) ? 1 : 0;
-    double x[5] = {r0[0], r0[1], r0[2], 0.0, 0.0};
-    MatH H(n, 3 + n_clk);
-    VecY y(n);
-    bool ok = false;
-    auto residuals = [&]() {
-      for (int k = 0; k < n; ++k) {
-        const double dx = sp[k][0] - x[0], dy = sp[k][1] - x[1], dz = sp[k][2] - x[2];
-        const double rho = std::sqrt(dx * dx + dy * dy + dz * dz);
-        H.row(k).setZero();
-        H(k, 0) = -dx / rho;
-        H(k, 1) = -dy / rho;
-        H(k, 2) = -dz / rho;
-        H(k, 3 + col[k]) = 1.0;
-        y(k) = sp[k][3] - (rho + x[3 + col[k]]);
-      }
-    };
-    for (int it = 0; it < 10; ++it) {
-      residuals();
-      const VecY dxv = H.colPivHouseholderQr().solve(y);
-      for (int c = 0; c < 3 + n_clk; ++c) x[c] += dxv(c);
-      if (!(std::isfinite(x[0]) && std::isfinite(x[1]) && std::isfinite(x[2]))) break;
-      if (dxv.head<3>().norm() < 1e-4) {
-        ok = true;
-        break;
-      }
-    }
-    if (!ok) continue;
-    residuals();
+    for (int k = 0; k < n; ++k) col[k] = (has_sys[0] && col[k] == 1) ? 1 : 0;  // QZSS alone: its clock the reference
+    x.setZero(3 + n_clk);
+    x.head<3>() = Vec3(r0[0], r0[1], r0[2]);
+    const SppRowsVec w = SppRowsVec::Ones(n);
+    if (!code_position_fit(n, 3 + n_clk, [&](int k) { return rows[k]; }, col, w, 10, x, H, u, rng, y)) continue;
     rms.push_back(std::sqrt(y.squaredNorm() / n));
   }
   if (rms.empty()) return NAN;

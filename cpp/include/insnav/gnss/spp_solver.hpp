@@ -29,15 +29,12 @@
 
 #include "insnav/check.hpp"
 #include "insnav/earth/wgs84.hpp"
+#include "insnav/gnss/code_position_fit.hpp"
 
 namespace insnav::gnss {
 
 /// Systems in the order of their index (GPS first: the reference clock when present).
-inline constexpr int kNumSystems = 4;
-/// Most rows (satellites) of one epoch.
-inline constexpr int kSppMaxRows = 64;
-/// Most position-fix unknowns: 3 position, the reference clock, 3 inter-system biases.
-inline constexpr int kSppMaxParams = 3 + kNumSystems;
+inline constexpr int kNumSystems = kSppNumSystems;
 
 /// Columns of a row of the flat satellite table (TightInputs.sats, python/insnav/gnss/tight_inputs.py).
 struct SppRowLayout {
@@ -117,11 +114,7 @@ inline double chi2_quantile(double p, int dof) {
 
 // ----------------------------------------------------------------- fixed-capacity types
 
-using SppRowsMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kSppMaxRows, kSppMaxParams>;
-using SppRowsVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kSppMaxRows, 1>;
 using SppParMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kSppMaxParams, kSppMaxParams>;
-using SppParVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kSppMaxParams, 1>;
-using SppRowsBy3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::ColMajor, kSppMaxRows, 3>;
 using SppRowsBy4 = Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::ColMajor, kSppMaxRows, 4>;
 using SppParByRows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kSppMaxParams, kSppMaxRows>;
 
@@ -213,6 +206,7 @@ inline int argmax(const SppRowsVec& a) {
   return k;
 }
 
+
 }  // namespace detail
 
 /// Solve every epoch of a batch (see the file comment).  Returns kBadInput when an epoch has
@@ -239,7 +233,7 @@ inline Status solve_spp_batch(const SppBatchInput& in, const SppOptions& opt, Sp
   SppRowsMat H;
   SppRowsBy3 u;
   SppRowsVec rng, w, y, v, wt;
-  SppParVec x, dx;
+  SppParVec x;
 
   for (std::int64_t e = 0; e < E; ++e) {
     const std::int64_t a = in.epoch_start[e], b = in.epoch_start[e + 1];
@@ -283,45 +277,15 @@ inline Status solve_spp_batch(const SppBatchInput& in, const SppOptions& opt, Sp
       // Gauss-Newton from x0: position and reference clock, inter-system biases from 0
       x.setZero(np);
       x.head<4>() = x0;
-      H.resize(n, np);
-      u.resize(n, 3);
-      rng.resize(n);
-      y.resize(n);
-      auto design = [&]() {
-        H.setZero();
-        for (int k = 0; k < n; ++k) {
-          const double* s = row(a + rows[k]);
-          const Vec3 d = Vec3(s[L::kSatPos], s[L::kSatPos + 1], s[L::kSatPos + 2]) - x.head<3>();
-          rng[k] = d.norm();
-          u.row(k) = (d / rng[k]).transpose();
-          H.block<1, 3>(k, 0) = -u.row(k);
-          H(k, 3) = 1.0;
-          if (col[k] > 0) H(k, 3 + col[k]) = 1.0;
-          const double clk = x[3] + (col[k] > 0 ? x[3 + col[k]] : 0.0);
-          y[k] = s[L::kPseudorange] - (rng[k] - s[L::kSatClock] + clk);
-        }
+      const auto fit_row = [&](int k) {
+        const double* s = row(a + rows[k]);
+        return CodeFitRow{Vec3(s[L::kSatPos], s[L::kSatPos + 1], s[L::kSatPos + 2]), s[L::kPseudorange],
+                                  s[L::kSatClock]};
       };
-      bool converged = false, finite = true;
-      for (int it = 0; it < opt.iterations; ++it) {
-        design();
-        const SppRowsMat Hw = w.asDiagonal() * H;
-        const SppRowsVec yw = y.cwiseProduct(w);
-        dx = Eigen::CompleteOrthogonalDecomposition<SppRowsMat>(Hw).solve(yw);
-        x += dx;
-        if (!x.allFinite()) {
-          finite = false;
-          break;
-        }
-        if (dx.head<3>().norm() < 1e-4) {
-          converged = true;
-          break;
-        }
-      }
-      if (!finite || !converged) {
+      if (!code_position_fit(n, np, fit_row, col, w, opt.iterations, x, H, u, rng, y)) {
         fit = Fit::kFailed;
         break;
       }
-      design();
       v = y;  // residuals at the solution
       fit = Fit::kOk;
       const int dof = n - np;
