@@ -51,8 +51,13 @@
 // bootstrapped success rate in PartialAr; number fixed and confirmation over epochs in
 // FixValidator); the fixed baseline is x_b = x_b - Q_ba Q_a^{-1} (a_hat - a_fix)
 // (Teunissen 1995, eq. (6)).  Optional float-model terms for receivers noisier than configured:
-// time-correlated code (code_corr_time_s), an adaptive code variance factor (code_scale_gain) and
-// the ambiguity random walk (amb_psd).
+// time-correlated code (code_corr_time_s), an adaptive code variance factor (code_scale_gain), the
+// ambiguity random walk (amb_psd) and time-correlated phase errors (phase_corr_time_s with
+// phase_error_ratio > 0: one first-order Gauss-Markov state b [m] per ambiguity slot, + (b^s - b^i) on
+// a DD phase row, stationary variance phase_error_ratio^2 sigma_sd^2(s), started at 0 with it when its
+// ambiguity is (re)initialised; state augmentation, A. Gelb (ed.), Applied Optimal Estimation, 1974,
+// sec. 4.5; the RTK/INS engine's model, engine/rtk_ins_engine.hpp; ratio 0: the variance factor
+// phase_var_factor instead).
 //
 // Cycle slips (per receiver, before differencing): loss-of-lock indicator; the geometry-free
 // combination lambda_1 phi_1 - lambda_2 phi_2 jumping by more than gf_threshold_m between
