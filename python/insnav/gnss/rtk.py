@@ -91,8 +91,10 @@ class RtkOptions(TomlTable):
         validated set (docs/algorithms.md, "Integer ambiguity resolution").
     min_success_rate : float
         Bootstrapped success rate (Teunissen 1998) a set must have from the float covariance of the
-        configured sigmas (0.95; 0 off: no success-rate test; the tight RTK/INS filter's default is
-        0, :data:`insnav.filters.rtk_ins.RTK_INS_DEFAULTS`).
+        configured sigmas, scaled by the code variance factor k below where k > 1 (the data say the
+        float is noisier than configured; with ``min_success_rate_estimated`` on) (0.95; 0 off: no
+        success-rate test; the tight RTK/INS filter's default is 0.4,
+        :data:`insnav.filters.rtk_ins.RTK_INS_DEFAULTS`).
     min_success_rate_estimated : float
         ... or, failing that, from the float covariance scaled by the code variance factor k
         estimated from the data (0.98; 0 off): the least-squares code double differences of every

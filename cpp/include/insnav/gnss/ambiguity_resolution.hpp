@@ -47,7 +47,8 @@ struct ArSettings {
   double validation_prob = 0.0;  // > 0: also require s_1 <= chi2_quantile(validation_prob, n)
   double min_success_rate = 0.0; // > 0: also require the bootstrapped success rate >= this
   // > 0: a set whose success rate fails min_success_rate also passes when the success rate of
-  // k Q_a (k = success_variance_factor, e.g. an estimated variance factor of the float) is >= this
+  // k Q_a (k = success_variance_factor, e.g. an estimated variance factor of the float) is >= this;
+  // and with k > 1 min_success_rate applies to k Q_a (the configured Q_a is then optimistic)
   double min_success_rate_scaled = 0.0;
   double success_variance_factor = 1.0;
 };
@@ -125,7 +126,10 @@ class PartialAr {
       }
       if (ratio < s.ratio_threshold) continue;
       if (s.validation_prob > 0.0 && sq[0] > ::insnav::chi2_quantile(s.validation_prob, nuse)) continue;
-      if (s.min_success_rate > 0.0 && ps < s.min_success_rate &&
+      // the configured covariance's route, with Q_a scaled up where the data say the float is noisier
+      // than configured (k > 1): its success rate is then that of k Q_a
+      const double ps_cfg = s.min_success_rate_scaled > 0.0 && s.success_variance_factor > 1.0 ? ps_k : ps;
+      if (s.min_success_rate > 0.0 && ps_cfg < s.min_success_rate &&
           !(s.min_success_rate_scaled > 0.0 && ps_k >= s.min_success_rate_scaled))
         continue;
       llt_.compute(Qa_);
