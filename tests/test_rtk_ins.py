@@ -778,9 +778,9 @@ def test_open_sky_each_error_model_alone_falls_short(tmp_path):
     """The open-sky preset at its simulated errors (between-receiver ionosphere 1 ppm and troposphere
     0.3 ppm on a 2.5-8 km baseline, phase multipath 3 mm correlated over 30 s), seed 1: the defaults
     model both (ionosphere states, correlated phase error states: 599/599 fixed, measured).  Each part
-    alone falls short (measured): the phase error states with the ionosphere as a variance fix
-    219/599 (seed 3: 110, 4 of them more than 5 cm off); the ionosphere states with white phase fix
-    256/599, 18 of them more than 5 cm off (21 cm at most); neither fixes 10/599."""
+    alone falls short (measured, partial AR dropping at most 4 ambiguities): the phase error states with
+    the ionosphere as a variance fix 200/599; the ionosphere states with white phase fix 237/599 (with
+    up to 12 drops 256, 18 of them more than 5 cm off); neither fixes 6/599."""
     ds, files = _open_sky_files(tmp_path, 1)
 
     def run(rtk_opt, **phase):
@@ -791,8 +791,8 @@ def test_open_sky_each_error_model_alone_falls_short(tmp_path):
     assert rate >= 0.99 and err <= 0.05, (rate, err)
     rate_p, _, _ = _fixed_and_float_nees(ds, run(dict(iono="variance")))
     assert rate_p < 0.9, rate_p
-    rate_i, err_i, _ = _fixed_and_float_nees(ds, run({}, phase_correlation_time_s=0.0))
-    assert rate_i < 0.9 and err_i > 0.05, (rate_i, err_i)
+    rate_i, _, _ = _fixed_and_float_nees(ds, run({}, phase_correlation_time_s=0.0))
+    assert rate_i < 0.9, rate_i
     rate_n, _, _ = _fixed_and_float_nees(ds, run(dict(iono="variance"), phase_correlation_time_s=0.0))
     assert rate_n < 0.1, rate_n
 

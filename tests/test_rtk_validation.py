@@ -4,7 +4,9 @@
   diagonal covariance, equal to a Monte Carlo of integer bootstrapping, below the integer
   least-squares success rate.
 * Engine rules on the simulated presets (insnav.sim.simulate_rtk, written as RINEX and read back):
-  each run once with the rule switched off (wrong fixes appear) and once with the defaults (none).
+  each run once with the rule switched off (wrong fixes appear) and once with it on (none), with
+  partial AR down to the minimum set (DEEP) where the default limit of 4 drops would hide the case;
+  the drop limit itself against deep partial AR.
 * The optional float-model terms for receivers noisier than configured (correlated code, adaptive
   code variance, ambiguity random walk) make the float covariance consistent: NEES ~ 3.
 """
@@ -164,12 +166,30 @@ def _run(preset, seed, tmp_path_factory, **opts):
     return rs, fixed, fixed & (err > WRONG_FIX_M), r_true
 
 
+#: partial AR down to min_fix_ambiguities (12 drops): the engine before its default limit of 4, where each
+#: rule below was needed; the tests switch one rule off against it
+DEEP = dict(max_partial_drops=12)
+
+
+def test_partial_ar_drop_limit_keeps_subsets_off_a_biased_float(tmp_path_factory):
+    # open sky, continuous: a float biased by phase multipath correlated over 30 s (white phase model)
+    # loses its validated set; dropping deep, a small subset passes with P_s = 1 and its position keeps
+    # the float's bias (seed 6, GPS L1 only: 121 of 592 fixes more than 5 cm off; seed 20, GPS + Galileo
+    # L1: 7 of 589); at most 4 drops: none (measured 471 and 559 fixed)
+    for seed, systems, n_wrong_deep, n_fixed in ((6, "G", 100, 450), (20, "GE", 5, 540)):
+        _, _, wrong, _ = _run("rtk-open-sky-car", seed, tmp_path_factory, systems=systems, **DEEP)
+        assert wrong.sum() >= n_wrong_deep, (seed, wrong.sum())
+        _, fixed, wrong, _ = _run("rtk-open-sky-car", seed, tmp_path_factory, systems=systems)
+        assert wrong.sum() == 0 and fixed.sum() >= n_fixed, (seed, wrong.sum(), fixed.sum())
+
+
 def test_success_rate_rule_rejects_weak_single_epoch_partial_fixes(tmp_path_factory):
     # open sky, instantaneous AR, L1: single-epoch float ambiguities are weak, partial AR finds subsets
     # that pass the ratio test with the wrong integers; their success rate says so
-    _, fixed, wrong, _ = _run("rtk-open-sky-car", 7, tmp_path_factory, ar_mode="instantaneous", min_success_rate=0.0)
+    _, fixed, wrong, _ = _run("rtk-open-sky-car", 7, tmp_path_factory, ar_mode="instantaneous", min_success_rate=0.0,
+                              **DEEP)
     assert wrong.sum() >= 20
-    rs, fixed, wrong, _ = _run("rtk-open-sky-car", 7, tmp_path_factory, ar_mode="instantaneous")
+    rs, fixed, wrong, _ = _run("rtk-open-sky-car", 7, tmp_path_factory, ar_mode="instantaneous", **DEEP)
     assert wrong.sum() == 0
     assert fixed.sum() >= 200
     # no float solution with a poor success rate is fixed: P_s(Q_a) >= 0.95 or P_s(k Q_a) >= 0.98
@@ -179,7 +199,7 @@ def test_success_rate_rule_rejects_weak_single_epoch_partial_fixes(tmp_path_fact
 def test_partial_ar_by_variance_avoids_wrong_subsets(tmp_path_factory):
     # open sky, continuous AR: dropping the lowest satellites first keeps a badly determined (recently
     # re-initialised) ambiguity in the subset; dropping the largest variance first does not
-    old = dict(min_fix_ambiguities=3, min_success_rate=0.0, confirm_epochs=1)  # the other rules off
+    old = dict(min_fix_ambiguities=3, min_success_rate=0.0, confirm_epochs=1, **DEEP)  # the other rules off
     _, fixed, wrong, _ = _run("rtk-open-sky-car", 8, tmp_path_factory, partial_ar_order="elevation", **old)
     assert wrong.sum() >= 3
     _, fixed, wrong, _ = _run("rtk-open-sky-car", 8, tmp_path_factory, partial_ar_order="variance", **old)
@@ -221,11 +241,11 @@ def test_correlated_phase_error_states_fix_more_and_wrong_less_on_open_sky_gps_l
     # (seed 6: 121 of 592 fixes wrong, measured) or fails the right ones (seed 5: 321 of 600 fixed).
     # One Gauss-Markov error per ambiguity (30 s, half the white sigma; Gelb 1974 sec. 4.5) removes
     # both: measured 0 of 462 wrong, and 597 of 600 fixed
-    _, fixed_w, wrong_w, _ = _run("rtk-open-sky-car", 6, tmp_path_factory, systems="G")
-    _, fixed_s, wrong_s, _ = _run("rtk-open-sky-car", 6, tmp_path_factory, systems="G", **PHASE_STATES)
+    _, fixed_w, wrong_w, _ = _run("rtk-open-sky-car", 6, tmp_path_factory, systems="G", **DEEP)
+    _, fixed_s, wrong_s, _ = _run("rtk-open-sky-car", 6, tmp_path_factory, systems="G", **PHASE_STATES, **DEEP)
     assert wrong_w.sum() >= 50 and wrong_s.sum() == 0 and fixed_s.mean() > 0.7, (wrong_w.sum(), wrong_s.sum())
-    _, fixed_w, wrong_w, _ = _run("rtk-open-sky-car", 5, tmp_path_factory, systems="G")
-    _, fixed_s, wrong_s, _ = _run("rtk-open-sky-car", 5, tmp_path_factory, systems="G", **PHASE_STATES)
+    _, fixed_w, wrong_w, _ = _run("rtk-open-sky-car", 5, tmp_path_factory, systems="G", **DEEP)
+    _, fixed_s, wrong_s, _ = _run("rtk-open-sky-car", 5, tmp_path_factory, systems="G", **PHASE_STATES, **DEEP)
     assert fixed_w.mean() < 0.6 and fixed_s.mean() > 0.95 and wrong_s.sum() == 0, (fixed_w.mean(), fixed_s.mean())
 
 
@@ -286,13 +306,13 @@ def test_estimated_noise_route_rejects_what_a_095_threshold_would_fix_wrong(tmp_
     # (their P_s(k Q_a) about 0.96), the default 0.98 does not, and it fixes at least what the
     # configured covariance's test alone fixes
     rs, fixed, wrong, _ = _run("rtk-open-sky-car", 4, tmp_path_factory, ar_mode="instantaneous",
-                               min_success_rate_estimated=0.95)
+                               min_success_rate_estimated=0.95, **DEEP)
     assert wrong.sum() >= 3
     assert 0.7 < np.median(rs.success_variance_factor) < 1.0
-    rs, fixed, wrong, _ = _run("rtk-open-sky-car", 4, tmp_path_factory, ar_mode="instantaneous")
+    rs, fixed, wrong, _ = _run("rtk-open-sky-car", 4, tmp_path_factory, ar_mode="instantaneous", **DEEP)
     assert wrong.sum() == 0
     _, fixed_cfg, _, _ = _run("rtk-open-sky-car", 4, tmp_path_factory, ar_mode="instantaneous",
-                              min_success_rate_estimated=0.0)
+                              min_success_rate_estimated=0.0, **DEEP)
     assert np.all(fixed[fixed_cfg]) and fixed.sum() >= fixed_cfg.sum()
     ok = fixed & ~fixed_cfg  # fixed by the second route only: P_s(k Q_a) >= 0.98
     assert np.all(rs.success_rate_estimated[ok] >= 0.98)
@@ -303,7 +323,7 @@ def test_estimated_noise_follows_a_receiver_noisier_than_configured(tmp_path_fac
     # (about 4 x 0.86), and where k > 1 the configured covariance's route tests k Q_a too, so its
     # optimistic single-epoch success rates no longer pass wrong sets (seed 9, measured: 85 of 287 fixes
     # wrong with the configured covariance's test alone, 0 of 202 with the estimated factor)
-    half = dict(sigma_phase_a_m=0.0015, sigma_phase_b_m=0.0015, ar_mode="instantaneous")
+    half = dict(sigma_phase_a_m=0.0015, sigma_phase_b_m=0.0015, ar_mode="instantaneous", **DEEP)
     rs, fixed, wrong, _ = _run("rtk-open-sky-car", 9, tmp_path_factory, **half)
     k = rs.success_variance_factor
     assert 2.5 < np.median(k) < 4.5

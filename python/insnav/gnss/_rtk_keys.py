@@ -44,7 +44,7 @@ CODE_FIT_TOLERANCE_M = 50.0
 #: every key of the table and its default, in the order of the dataclass (tests/test_rtk_fast.py checks it)
 RTK_DEFAULTS = {
     "mode": "kinematic", "ar_mode": "continuous", "systems": "GREC", "frequencies": 2, "elevation_mask_deg": 15.0,
-    "ar_elevation_mask_deg": 0.0, "ratio_threshold": 3.0, "min_fix_ambiguities": 5, "max_partial_drops": 12,
+    "ar_elevation_mask_deg": 0.0, "ratio_threshold": 3.0, "min_fix_ambiguities": 5, "max_partial_drops": 4,
     "partial_ar_order": "variance", "min_lock_epochs": 0, "glonass_ar": False, "sigma_phase_a_m": 0.003,
     "sigma_phase_b_m": 0.003, "code_phase_ratio": 100.0, "code_correlation_time_s": 0.0,
     "phase_correlation_time_s": 0.0, "phase_error_ratio": 0.0, "adaptive_code_gain": 0.0,

@@ -86,7 +86,7 @@ class RtkOptions(TomlTable):
         Ratio test s2/s1 of MLAMBDA's two best candidates (3).
     min_fix_ambiguities : int
         Fewest double-differenced ambiguities a new integer set may have (5): partial AR drops one
-        ambiguity at a time until the ratio test passes (at most ``max_partial_drops`` times), and a
+        ambiguity at a time until the ratio test passes (at most ``max_partial_drops`` times, 4), and a
         set with fewer is fixed only when it is all the epoch's fixable ambiguities and repeats a
         validated set (docs/algorithms.md, "Integer ambiguity resolution").
     min_success_rate : float
@@ -165,7 +165,7 @@ class RtkOptions(TomlTable):
     ar_elevation_mask_deg: float = 0.0
     ratio_threshold: float = 3.0
     min_fix_ambiguities: int = 5
-    max_partial_drops: int = 12
+    max_partial_drops: int = 4
     partial_ar_order: str = "variance"
     min_lock_epochs: int = 0
     glonass_ar: bool = False

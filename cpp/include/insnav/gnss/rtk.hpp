@@ -132,7 +132,7 @@ struct RtkOptions {
   double ar_elevation_mask_rad = 0.0;
   double ratio_threshold = 3.0;
   int min_fix_ambiguities = 5;     // fewest ambiguities fixed (partial AR stops there; FixValidator rule 1)
-  int max_partial_drops = 12;
+  int max_partial_drops = 4;         // partial AR: at most this many ambiguities dropped (docs/algorithms.md)
   bool partial_by_variance = true;   // partial AR drops the largest-variance ambiguity first (else the lowest)
   int min_lock_epochs = 0;         // epochs an ambiguity is tracked before it is fixed
   bool glonass_ar = false;
