@@ -81,6 +81,8 @@ int main() {
     EXPECT_TRUE(fixed == 10);
     EXPECT_LT(worst, 1e-3);
     EXPECT_TRUE(g_eigen_asserts == 0);
+    std::printf("rtk (phase error states %s): %d fixed epochs, worst %.2e m\n",
+                gnss::phase_error_states(opt) ? "on" : "off", fixed, worst);
   };
   static_scene_fixes(o);
   // with the correlated phase error states (one Gauss-Markov state per ambiguity, the state block
@@ -366,6 +368,5 @@ int main() {
     std::printf("rtk/ins iono: states fixed %d, worst %.2e m; none fixed %d, worst %.2e m\n", fixed_est, worst_est,
                 fixed_off, worst_off);
   }
-  std::printf("rtk: %d fixed epochs, worst %.2e m\n", fixed, worst);
   TEST_MAIN_END()
 }
