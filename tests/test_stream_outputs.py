@@ -13,6 +13,7 @@ from __future__ import annotations
 import errno
 import os
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -122,7 +123,11 @@ def _interrupt(kind: str):
     """What happens in the writer thread's fourth write: the disk fills up, or Ctrl-C arrives."""
     if kind == "full disk":
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    # the main thread has filtered the next block by now and waits for this write: the Ctrl-C interrupts
+    # that wait, and this write goes on after it (the run's clean-up must wait for it, not close its file)
+    time.sleep(0.3)
     os.kill(os.getpid(), signal.SIGINT)  # handled on the main thread, in the middle of the run
+    time.sleep(0.3)
 
 
 @pytest.mark.parametrize("kind", ["full disk", "SIGINT"])
@@ -144,17 +149,21 @@ def test_a_failed_or_interrupted_streamed_write_leaves_the_earlier_files(kf_shor
         before = {p.name: p.read_bytes() for p in folder.iterdir()}
         assert len(before) == (5 if fmt == "kfgins" else 3)
         cls = stream._KfginsWriter if fmt == "kfgins" else stream._ParquetWriter
-        real, calls = getattr(cls, name), []
+        real, calls, files_open = getattr(cls, name), [], []
 
         def failing(self, *a):
             calls.append(1)
             if len(calls) == 4:  # three blocks are in the temporary files
                 _interrupt(kind)
+            if len(calls) >= 4:  # the write after the interrupt: its files still open (not closed by the clean-up)
+                files_open.append(self.pq.is_open if fmt == "parquet" else bool(self._sinks))
             return real(self, *a)
 
         monkeypatch.setattr(cls, name, failing)
         rc, _, err = _run_kfgins(kf_short, out, "--stream", "on", *args)
         assert len(calls) >= 4
+        # the write interrupted by Ctrl-C ended, its files open, before the run returned: the clean-up waited
+        assert files_open == ([True] if kind == "SIGINT" else [])
         if kind == "SIGINT":
             assert rc == 130 and err.strip().splitlines()[-1] == "insnav run: interrupted"
         else:

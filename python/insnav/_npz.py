@@ -29,6 +29,8 @@ import zlib
 
 import numpy as np
 
+from ._threads import Job
+
 __all__ = ["write_npz", "NpzColumns"]
 
 #: the classic zip format's limits: 32-bit sizes and offsets, 16-bit member count
@@ -136,15 +138,14 @@ def write_npz(path, columns) -> None:
 
     half = (len(cols) + 1) // 2  # the first half on this thread, the second on a helper
     try:
-        helper = threading.Thread(target=worker, args=(half, len(cols)), daemon=True)
-        helper.start()
+        helper = Job(worker, half, len(cols), name="insnav-npz-writer").start()
         try:
             worker(0, half)  # on this thread: Ctrl-C lands between two chunks
-            helper.join()
-        except BaseException:  # Ctrl-C while waiting: the helper stops after its chunk
+        except BaseException:  # Ctrl-C: the helper stops after its chunk, before the file is closed
             stop.set()
             helper.join()
             raise
+        helper.join(on_interrupt=stop.set)  # a Ctrl-C meanwhile: raised once the helper's writes have ended
         if errors:
             raise errors[0]
         _write_central(fd, names, crcs, size, offsets, off, dos_t, dos_d)

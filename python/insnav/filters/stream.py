@@ -104,6 +104,7 @@ import numpy as np
 from .. import _core
 from .._imu_scan import scan_imu
 from .._median import median
+from .._threads import Job
 from ..data.dataset import Dataset, GnssFixes, ImuData, RowOrigin, check_finite_rows, column
 from ..data.textio import count_columns, parse_numeric, threads
 from ..io.text_blocks import GNSS_BLOCK_LINES, LINE_BYTES_GUESS, read_gnss_text_blocks, text_blocks  # noqa: F401 (re-exported)
@@ -1187,33 +1188,11 @@ def _fsum_add(partials: list, values) -> None:
         partials.append(r)
 
 
-class _Background:
-    """One call on its own (non-daemon) thread: :meth:`result` waits for it and
-    raises its exception, :meth:`join` only waits (a thread per block instead
-    of a concurrent.futures pool, whose import with logging's costs a few
-    milliseconds of every run's start)."""
-
-    def __init__(self, fn, *args, **kwargs):
-        import threading
-
-        self._exc = None
-        self._thread = threading.Thread(target=self._run, args=(fn, args, kwargs), name="insnav-csv-writer")
-        self._thread.start()
-
-    def _run(self, fn, args, kwargs) -> None:
-        try:
-            fn(*args, **kwargs)
-        except BaseException as exc:  # noqa: BLE001 - raised by result() on the calling thread
-            self._exc = exc
-
-    def join(self) -> None:
-        self._thread.join()
-
-    def result(self) -> None:
-        self._thread.join()
-        if self._exc is not None:
-            exc, self._exc = self._exc, None
-            raise exc
+def _writer_job(fn, *args, **kwargs) -> Job:
+    """A write on the writer thread (:class:`insnav._threads.Job`, started by :meth:`_Writer.add`): a
+    thread per block instead of a concurrent.futures pool, whose import with logging's costs a few
+    milliseconds of every run's start."""
+    return Job(fn, *args, name="insnav-csv-writer", **kwargs)
 
 
 def _temp_beside(dest: Path) -> Path:
@@ -1237,7 +1216,7 @@ class _Writer:
         self.out, self.columns, self.precision, self.health = Path(out), columns, precision, health
         self.files: list[tuple[Path, Path]] = []
         self._sinks: dict = {}  # temporary file -> its _core.TextSink (open until close / shutdown)
-        self._pending = None  # the _Background write of the last block
+        self._pending = None  # the Job writing of the last block
         self._header_done = False
         self.innovations = None
         try:
@@ -1280,7 +1259,8 @@ class _Writer:
                         [sol.sigma_pos_n_m, sol.sigma_vel_n_mps, sol.sigma_att_deg])
         cols = self._columns(sol, out)
         self._wait()
-        self._pending = self._submit(cols)
+        self._pending = job = self._submit(cols)  # pending before its thread starts: shutdown() joins it
+        job.start()
 
     def _columns(self, sol, out):
         """What :meth:`_submit` writes of a block's rows: the selected columns (name, view, factor)."""
@@ -1288,13 +1268,13 @@ class _Writer:
 
         return _selected(sol, self.columns)
 
-    def _submit(self, cols) -> _Background:
+    def _submit(self, cols) -> Job:
         """The block's columns (name, view of the row buffer, factor) written on the writer thread."""
         from .solution import CSV_DECIMALS
 
         dec = [CSV_DECIMALS[nm] if self.precision == "resolution" else -1 for nm, _, _ in cols]
         header = "" if self._header_done else ",".join(nm for nm, _, _ in cols) + "\n"
-        job = _Background(self._sink(self.tmp).write, header, [np.asarray(x, float) for _, x, _ in cols],
+        job = _writer_job(self._sink(self.tmp).write, header, [np.asarray(x, float) for _, x, _ in cols],
                           [float(f) for _, _, f in cols], dec, threads=threads())
         self._header_done = True
         return job
@@ -1319,8 +1299,8 @@ class _Writer:
 
     def _wait(self) -> None:
         if self._pending is not None:
-            p, self._pending = self._pending, None
-            p.result()
+            self._pending.result()  # interrupted (Ctrl-C), the job stays pending for shutdown() to join
+            self._pending = None
 
     def close(self) -> None:
         """Wait for the last block (its error raised), then write the files' rest and close them."""
@@ -1353,7 +1333,7 @@ class _NpzWriter(_Writer):
 
     npz = None
 
-    def _submit(self, cols) -> _Background:
+    def _submit(self, cols) -> Job:
         from .._npz import NpzColumns
 
         if self.npz is None:
@@ -1364,7 +1344,7 @@ class _NpzWriter(_Writer):
             except BaseException:
                 os.rmdir(scratch)
                 raise
-        return _Background(self.npz.append, [(x, float(f)) for _, x, f in cols])
+        return _writer_job(self.npz.append, [(x, float(f)) for _, x, f in cols])
 
     def close(self) -> None:
         """Wait for the last block, then write the ``.npz`` to the temporary file."""
@@ -1395,8 +1375,8 @@ class _ParquetWriter(_Writer):
 
     pq = None
 
-    def _submit(self, cols) -> _Background:
-        return _Background(self._append, [(nm, x, float(f)) for nm, x, f in cols])
+    def _submit(self, cols) -> Job:
+        return _writer_job(self._append, [(nm, x, float(f)) for nm, x, f in cols])
 
     def _append(self, cols) -> None:
         """(writer thread) The block's rows into the row-group buffer, each full buffer written."""
@@ -1480,8 +1460,8 @@ class _KfginsWriter(_Writer):
             sol.sigma_imu_err[:, :self.layout - 9] = sig[:, 9:self.layout]
         return [cols for _, cols in kfgins_tables(sol)]
 
-    def _submit(self, tables) -> _Background:
-        job = _Background(self._write, tables, self._header_done)
+    def _submit(self, tables) -> Job:
+        job = _writer_job(self._write, tables, self._header_done)
         self._header_done = True
         return job
 
