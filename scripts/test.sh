@@ -27,13 +27,15 @@ export INSNAV_EXTRAS=${INSNAV_EXTRAS:-test,plot,pandas,parquet,dask,docs}
 scripts/install.sh --deps-only
 if [ "${1:-}" = "--quick" ]; then
   shift
-  args=(-n 2 --dist loadfile --no-loadscope-reorder -p no:benchmark -m "not slow" "$@")
+  args=(-n 2 --dist loadfile --no-loadscope-reorder --max-worker-restart 0 -p no:benchmark -m "not slow" "$@")
 elif [ ${#args[@]} -eq 0 ]; then
   # Two builds share the 2 cores: the C++ tests (no Python needed) compile in
   # the background from here on, beside the extension and then the Python tests.
   python3 tests/_cpp_build.py --background
-  # (--dist loadfile: the order of tests/conftest.py; a file on one worker, so its module fixtures run once)
-  args=(-n 2 --dist loadfile --no-loadscope-reorder -p no:benchmark)  # pytest-benchmark, if installed, refuses xdist with a warning (an error here)
+  # (--dist loadfile: the order of tests/conftest.py; a file on one worker, so its module fixtures run once;
+  # --max-worker-restart 0: a worker that crashes ends the run with the test named, where xdist's
+  # loadfile scheduler can wait forever for a replacement worker, pytest-dev/pytest-xdist#784)
+  args=(-n 2 --dist loadfile --no-loadscope-reorder --max-worker-restart 0 -p no:benchmark)  # pytest-benchmark, if installed, refuses xdist with a warning (an error here)
 fi
 # The system packages only the tests need, installed (one apt-get update, one
 # install) in the background while the compilers run: their download and
