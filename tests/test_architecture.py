@@ -3,7 +3,7 @@ python/insnav (at module level or inside a function) goes to the same layer
 or a lower one, and no two modules import each other, directly or around a
 circle.  A new module must be given a layer here.
 
-    0  units errors _validate _atomic _npz _imu_scan _median _progress _malloc _toml earth registry _core scenarios (data files), the package root
+    0  units errors _validate _atomic _threads _npz _imu_scan _median _progress _malloc _toml earth registry _core scenarios (data files), the package root
        (its public names are loaded lazily, by strings)
     1  config data
     2  gnss ins
@@ -26,7 +26,7 @@ LAYERS = [
     ("insnav.__main__", 7), ("insnav.sim.cli", 7), ("insnav.cli", 7),
     ("insnav.analysis", 6), ("insnav.calib", 6), ("insnav._outputs", 5), ("insnav.filters", 5), ("insnav.io", 4), ("insnav.sim", 3),
     ("insnav.gnss", 2), ("insnav.ins", 2), ("insnav.config", 1), ("insnav.data", 1), ("insnav.scenarios", 0),
-    ("insnav.units", 0), ("insnav.errors", 0), ("insnav._validate", 0), ("insnav._atomic", 0), ("insnav._npz", 0), ("insnav._imu_scan", 0), ("insnav._median", 0), ("insnav._progress", 0), ("insnav._malloc", 0),
+    ("insnav.units", 0), ("insnav.errors", 0), ("insnav._validate", 0), ("insnav._atomic", 0), ("insnav._threads", 0), ("insnav._npz", 0), ("insnav._imu_scan", 0), ("insnav._median", 0), ("insnav._progress", 0), ("insnav._malloc", 0),
     ("insnav._toml", 0), ("insnav.earth", 0), ("insnav.registry", 0), ("insnav._core", 0),
 ]
 
