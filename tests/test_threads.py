@@ -27,24 +27,21 @@ def default_sigint():
 
 def test_join_waits_for_the_call_through_a_ctrl_c_then_raises_it(default_sigint):
     ended, asked = threading.Event(), []
-    job = Job(lambda: (time.sleep(0.6), ended.set()), name="test-writer").start()
+    job = Job(lambda: (time.sleep(1.5), ended.set()), name="test-writer").start()
     _sigint_after(0.1)
-    t0 = time.perf_counter()
     with pytest.raises(KeyboardInterrupt):
-        job.join(on_interrupt=lambda: asked.append(time.perf_counter() - t0))
+        job.join(on_interrupt=lambda: asked.append(ended.is_set()))
     assert ended.is_set()  # the call had ended when the interrupt was raised
-    assert time.perf_counter() - t0 >= 0.5
-    assert len(asked) == 1 and 0.05 < asked[0] < 0.4  # asked to stop when the interrupt came
+    assert asked == [False]  # asked to stop once, when the interrupt came (the call still running)
 
 
 def test_result_is_interruptible_and_leaves_the_job_to_join(default_sigint):
     ended = threading.Event()
-    job = Job(lambda: (time.sleep(0.6), ended.set())).start()
+    job = Job(lambda: (time.sleep(1.5), ended.set())).start()
     _sigint_after(0.1)
-    t0 = time.perf_counter()
     with pytest.raises(KeyboardInterrupt):
         job.result()
-    assert time.perf_counter() - t0 < 0.45 and not ended.is_set()  # raised at once, the call still running
+    assert not ended.is_set()  # raised at once, the call still running
     job.join()
     assert ended.is_set()
 
