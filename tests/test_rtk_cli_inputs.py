@@ -145,6 +145,31 @@ def test_gnss_only_rtk_refuses_the_tomls_smoother_and_tdcp_as_it_refuses_the_opt
     assert out.read_bytes().startswith(b"% program   : insnav rtk\n")
 
 
+@pytest.mark.parametrize("fast", ["1", "0"])
+@pytest.mark.parametrize("text, key, hint", [
+    ("elevation_mask_deg = 40.0\n", "elevation_mask_deg", "; did you mean 'rtk.elevation_mask_deg' (a key of the [rtk] table)?"),
+    ("[rtkk]\nsystems = \"G\"\n", "rtkk", "; did you mean 'rtk'?"),
+    ("bogus_top = 1\n", "bogus_top", "; known keys: coupling, filter, rtk, smooth, tdcp")])
+def test_a_key_gnss_only_rtk_does_not_read_is_one_line_naming_it(shared_data, tmp_path, capsys, monkeypatch, fast,
+                                                                  text, key, hint):
+    """A top-level ``elevation_mask_deg`` (the INS filters' key; RTK's is ``[rtk] elevation_mask_deg``),
+    a misspelt table or an unknown key in a TOML saying ``filter = "rtk"`` ran with exit status 0 and
+    the key ignored (the 40 deg mask dropped, the resolved config saying 15).  Now one line naming the
+    file and the key, on either command-line path, and no file; a TOML naming another filter (an
+    RTK/INS run's) is still read for its ``[rtk]`` table alone."""
+    d = _matrtklib(shared_data)
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", fast)
+    toml = tmp_path / "run.toml"
+    toml.write_text('filter = "rtk"\n' + text)
+    out = tmp_path / "out" / "sol.pos"
+    assert main(_rtk_argv(d, out, "--config", toml)) == 2
+    assert capsys.readouterr().err == (f"insnav run: error: {toml}: key '{key}' is not read by filter 'rtk' "
+                                       f"(GNSS-only RTK reads the [rtk] table){hint}\n")
+    assert not out.parent.exists()
+    toml.write_text('filter = "ekf"\ncoupling = "rtk"\n' + text + '[imu]\n[rtk]\nsystems = "G"\nfrequencies = 1\n')
+    assert main(_rtk_argv(d, out, "--config", toml)) == 0, capsys.readouterr().err
+
+
 def _binary(tmp_path):
     """A file that is not UTF-8 text (a compiled module, a zipped folder given by mistake)."""
     p = tmp_path / "run.toml"
@@ -195,3 +220,37 @@ def test_a_folder_given_as_a_rinex_file_is_named_a_folder(shared_data, tmp_path,
         assert main(argv) == 2
         assert capsys.readouterr().err == f"insnav run: error: {tmp_path}: cannot read file (Is a directory)\n"
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("fast", ["1", "0"])
+def test_a_nav_file_of_a_system_left_out_is_skipped_beside_one_of_the_systems_used(shared_data, tmp_path, capsys,
+                                                                                   monkeypatch, fast):
+    """``--nav GPS.23N,GAL.23L`` with ``systems = "G"`` (or ``"E"``) stopped with "malformed header" of the
+    valid file of the other system; now that file is skipped, and the run is the one given the used
+    system's file alone, byte for byte.  With no file of a system used, one line names the first file."""
+    d = shared_data / "instinct_spirent_rtk_dynamic_SIMULATED"
+    if not d.is_dir():
+        pytest.skip("Spirent RTK data not in ../shared/data")
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", fast)
+    gps, gal = d / "RINEX_GN_Spirent.23N", d / "RINEX_EN_Spirent.23L"
+    nav = read_nav_multi([gps, gal], "G")
+    assert len(nav.eph) > 0 and len(nav.eph_e) == 0
+    for systems, own in (("G", gps), ("E", gal)):
+        toml = tmp_path / f"{systems}.toml"
+        toml.write_text(f'[rtk]\nsystems = "{systems}"\n')
+        outs = []
+        for navs in (f"{gps},{gal}", str(own)):
+            out = tmp_path / f"{systems}-{len(outs)}" / "sol.pos"
+            argv = ["run", "--filter", "rtk", "--format", "rinex",
+                    "--obs", d / "iono-Klob_tropo-Saast" / "Rover-dynamic_MO_Spirent.obs",
+                    "--base", d / "iono-Klob_tropo-Saast" / "Base-static_MO_Spirent.obs",
+                    "--nav", navs, "--config", toml, "--out", out, "--quiet"]
+            assert main([str(a) for a in argv]) == 0, capsys.readouterr().err
+            outs.append(out.read_bytes())
+        assert outs[0] == outs[1] and outs[0].count(b"\n") > 600
+    toml = tmp_path / "C.toml"
+    toml.write_text('[rtk]\nsystems = "C"\n')
+    argv[argv.index("--nav") + 1], argv[argv.index("--config") + 1] = f"{gps},{gal}", toml
+    assert main([str(a) for a in argv]) == 2
+    assert capsys.readouterr().err == (f"insnav run: error: {gps}, line 1: a navigation file of system 'G' only, "
+                                       "and the run uses the systems 'C': give a navigation file of one of them\n")

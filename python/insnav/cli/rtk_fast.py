@@ -114,6 +114,8 @@ def _inputs(opts: dict):
                 d = tomllib.load(f)
         except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
             return None
+    if any(k not in ("filter", "coupling", "rtk", "smooth", "tdcp") for k in d):
+        return None  # a key GNSS-only RTK does not read: the usual path names it (filters.rtk.check_rtk_toml_keys)
     tdcp = d.get("tdcp")
     if d.get("smooth", False) is not False or (isinstance(tdcp, dict) and tdcp.get("enabled", False) is not False):
         return None  # the usual path refuses them with one line

@@ -62,6 +62,11 @@ class RinexError(ValueError):
         super().__init__(f"{where}: {what}")
 
 
+class _NavOfOtherSystems(RinexError):
+    """A single-system RINEX 3 navigation file of none of the systems asked for: an error when it is
+    the only one, skipped by :func:`read_nav_multi` beside files of the systems asked for."""
+
+
 class _Lines:
     """Line source that remembers the 1-based line number (for error messages)."""
 
@@ -391,10 +396,8 @@ def read_rinex_nav(path, systems="G") -> NavData:
     if ftype != "N" and not glo2:
         raise src.error(f"malformed header: not a navigation file (type {ftype!r})", header[0][0])
     if version >= 3 and sysc != "M" and sysc not in want:
-        if want == "G":
-            raise src.error(f"malformed header: navigation file of system {sysc!r} has no GPS records", header[0][0])
-        raise src.error(f"malformed header: navigation file of system {sysc!r} has none of the systems {want!r}",
-                        header[0][0])
+        raise _NavOfOtherSystems(src.path, header[0][0], f"a navigation file of system {sysc!r} only, and the "
+                                 f"run uses the systems {want!r}: give a navigation file of one of them")
     ion_alpha = ion_beta = None
     leap = None
     for lineno, text, label in header:
@@ -1129,16 +1132,25 @@ def read_obs_multi(path, systems="GREC"):
 
 
 def read_nav_multi(paths, systems="GREC"):
-    """NavData of one or more navigation files (merged; e.g. a RINEX 2 ``.n`` and ``.g`` pair)."""
+    """NavData of one or more navigation files (merged; e.g. a RINEX 2 ``.n`` and ``.g`` pair).
+
+    A single-system RINEX 3 file of none of ``systems`` is skipped (the Galileo file of a GPS +
+    Galileo pair in a GPS-only run); it is an error only when no file has the systems asked for."""
     if isinstance(paths, (str, bytes)) or not hasattr(paths, "__iter__"):
         paths = [paths]
-    nav = None
+    nav, other = None, None
     for p in paths:
-        n = read_rinex_nav(p, systems="".join(systems)) if _reads_systems() else read_rinex_nav(p)
+        try:
+            n = read_rinex_nav(p, systems="".join(systems)) if _reads_systems() else read_rinex_nav(p)
+        except _NavOfOtherSystems as exc:  # e.g. the Galileo file of a GPS + Galileo pair in a GPS-only run
+            other = other or exc
+            continue
         if nav is None:
             nav = n
         elif hasattr(nav, "merge"):
             nav = nav.merge(n)
         else:
             raise ValueError(f"{p}: this navigation reader cannot merge files; give one navigation file")
+    if nav is None and other is not None:
+        raise other  # no file of the systems asked for
     return nav

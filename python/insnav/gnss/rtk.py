@@ -773,7 +773,7 @@ def prepare_rtk_rows(rover, base, nav, r_base_e, opt: RtkOptions, *, base_source
         r_base_e = base_position_from_header(base)
         if r_base_e is None:
             raise RtkInputError(f"{base.path}: base position missing: the header has no APPROX POSITION XYZ; "
-                                f"give --base-pos or [rtk_base] position in the TOML")
+                                f"give --base-pos, or [rtk] base_position_ecef_m or base_position_llh in the TOML")
     r_base_e = np.asarray(r_base_e, float)
     bidx = match_base(rover.epoch_t_gps_s, base.epoch_t_gps_s, opt.max_age_s)
     _check_inputs(rover, base, opt, bidx)

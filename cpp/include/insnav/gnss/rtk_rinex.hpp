@@ -113,9 +113,12 @@ inline bool four_floats(std::string_view line, std::size_t start, std::size_t wi
   return true;
 }
 
-/// One RINEX 3 navigation file's G/J records appended to g and j; false: leave it to Python.
+/// One RINEX 3 navigation file's G/J records appended to g and j; false: leave it to Python.  A
+/// single-system file of a system not in want is skipped (other_system set), as
+/// insnav.gnss.rinex.read_nav_multi skips it beside a file of the systems used.
 inline bool read_nav(const std::string& path, const std::string& want, KeplerTable& g, KeplerTable& j,
-                     std::string& why) {
+                     std::string& why, bool& other_system) {
+  other_system = false;
   std::string text;
   if (!read_text(path, text)) return why = path + ": cannot read", false;
   std::size_t p = 0, body = std::string::npos;
@@ -134,8 +137,8 @@ inline bool read_nav(const std::string& path, const std::string& want, KeplerTab
         return why = "navigation file not RINEX 3", false;
       const char ftype = line.size() > 20 ? line[20] : ' ';
       const char sysc = line.size() > 40 ? line[40] : ' ';
-      if (ftype != 'N' || !(sysc == 'M' || want.find(sysc) != std::string::npos))
-        return why = "navigation file type", false;
+      if (ftype != 'N') return why = "navigation file type", false;
+      if (sysc != 'M' && want.find(sysc) == std::string::npos) return other_system = true, true;
     } else if (has("END OF HEADER")) {
       body = q + 1;
       break;
@@ -407,10 +410,14 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
   const auto& B = rx[1].t;
   // navigation
   KeplerTable tab[2];  // G, J
+  std::size_t n_nav_read = 0;
   for (const auto& p : in.nav_paths) {
     std::string why;
-    if (!read_nav(p, in.systems, tab[0], tab[1], why)) return fail(why);
+    bool other_system = false;
+    if (!read_nav(p, in.systems, tab[0], tab[1], why, other_system)) return fail(why);
+    if (!other_system) ++n_nav_read;
   }
+  if (n_nav_read == 0) return fail("no navigation file of the systems used");  // Python words the error
   // base position
   double rb[3];
   if (in.has_base_position) {
