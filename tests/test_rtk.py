@@ -2,7 +2,9 @@
 cycle-slip detection on injected slips, a static real pair fixed to the known baseline, bad input."""
 from __future__ import annotations
 
+
 import itertools
+import json
 import subprocess
 import sys
 
@@ -572,6 +574,14 @@ def test_cli_run_writes_rtklib_pos_and_evaluate_reports_the_fix_rate(tmp_path, s
                        capture_output=True, text=True)
     assert e.returncode == 0, e.stderr
     assert "fix rate 100.0 %; fixed 301" in e.stdout
+    # against RTKLIB's own .pos of the same pair (a .pos against a .pos: the solution taken at the reference's
+    # epochs raised AttributeError: no sigmas in a .pos); both fixed at the antenna to millimetres
+    e = subprocess.run([sys.executable, "-m", "insnav", "evaluate", str(out), str(d / "rover_rtk.pos"), "--json"],
+                       capture_output=True, text=True)
+    assert e.returncode == 0, e.stderr
+    res = json.loads(e.stdout)
+    assert res["samples"] == 301 and res["fix_rate"] == 1.0 and res["by_status"]["fixed"]["epochs"] == 301
+    assert res["rms_3d_m"] < 0.005 and "pos_n_m" not in res["consistency"]  # no covariance in a .pos
 
 
 def test_fast_reader_errors_name_file_and_line(tmp_path):

@@ -89,6 +89,8 @@ def _pos_solution(path):
     n = len(out.t)
     out.v_n = np.full((n, 3), np.nan)
     out.roll_deg = out.pitch_deg = out.yaw_deg = np.full(n, np.nan)
+    # no covariance read from the .pos: no consistency figure (NaN sigmas)
+    out.sigma_pos_n_m, out.sigma_vel_n_mps, out.sigma_att_deg = (np.full((n, 3), np.nan) for _ in range(3))
     out.fix_status = np.asarray(ref.q, int)
     return out
 
@@ -285,6 +287,14 @@ def _solution_at(sol, t):
               "sigma_att_deg"):
         setattr(out, k, at(getattr(sol, k)))
     out.yaw_deg = (at(np.rad2deg(np.unwrap(np.deg2rad(sol.yaw_deg)))) + 180.0) % 360.0 - 180.0
+    fs = getattr(sol, "fix_status", None)
+    if fs is not None:  # the status of the solution epoch at (or else just after) each time, as evaluate() looks it up
+        fs = np.asarray(fs)
+        out.fix_status = fs[np.clip(np.searchsorted(sol.t, t - 1e-9), 0, fs.size - 1)]
+        out.epoch_fix_status = getattr(sol, "epoch_fix_status", fs)  # the fix rate stays over the solution's epochs
+    for k in ("slip_counts",):
+        if hasattr(sol, k):
+            setattr(out, k, getattr(sol, k))
     return out
 
 
