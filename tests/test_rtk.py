@@ -2,7 +2,6 @@
 cycle-slip detection on injected slips, a static real pair fixed to the known baseline, bad input."""
 from __future__ import annotations
 
-
 import itertools
 import json
 import subprocess
