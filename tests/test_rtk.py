@@ -551,6 +551,19 @@ def test_transmit_states_equal_the_iterated_light_time(shared_data):
     assert np.max(np.abs(clk[ok] - C * st.clock_bias_s[ok])) < 1e-6
 
 
+def test_kinematic_velocity_is_nan_where_no_epoch_has_observed_it(shared_data):
+    """The velocity state starts at its prior, zero: the first epoch of a kinematic run (every epoch
+    with instantaneous AR) printed 0 m/s for a moving rover.  Now NaN there; from the second epoch on
+    the static pair's kinematic velocity is within 2 cm/s of zero; static mode is zero by definition."""
+    d = _matrtklib(shared_data)
+    files = (d / "rover.obs", d / "base.obs", [d / "base.nav"])
+    kw = dict(systems="G", frequencies=1)
+    v = rtk.solve_rtk(*files, options=dict(kw, mode="kinematic")).v_e
+    assert np.all(np.isnan(v[0])) and np.isfinite(v[1:]).all() and np.abs(v[1:]).max() < 0.02
+    assert np.isnan(rtk.solve_rtk(*files, options=dict(kw, mode="kinematic", ar_mode="instantaneous")).v_e).all()
+    assert np.all(rtk.solve_rtk(*files, options=dict(kw, mode="static")).v_e == 0.0)
+
+
 def test_cli_run_writes_rtklib_pos_and_evaluate_reports_the_fix_rate(tmp_path, shared_data):
     d = _matrtklib(shared_data)
     cfg = tmp_path / "rtk.toml"

@@ -194,10 +194,11 @@ def evaluate(solution, truth, outages=()) -> dict:
     hz = np.hypot(e["pos_n_m"][:, 0], e["pos_n_m"][:, 1])
     out = {"samples": int(len(e["t"])), "rms": {}, "max": {}, "consistency": {}}
     for k in ("pos_n_m", "vel_n_mps", "att_deg"):
-        if not np.isfinite(e[k]).any():
+        fin = np.isfinite(e[k]).all(axis=1)  # rows where both have it (no velocity at an RTK start epoch)
+        if not fin.any():
             continue  # the truth lacks it (e.g. no attitude in an RTKLIB reference)
-        out["rms"][k] = rms(e[k]).tolist()
-        out["max"][k] = np.abs(e[k]).max(axis=0).tolist()
+        out["rms"][k] = rms(e[k][fin]).tolist()
+        out["max"][k] = np.abs(e[k][fin]).max(axis=0).tolist()
         sk = "sigma_" + k
         if sk in e and np.all(e[sk] > 0):
             out["consistency"][k] = rms(e[k] / e[sk]).tolist()

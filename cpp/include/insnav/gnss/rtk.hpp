@@ -206,7 +206,8 @@ struct RtkEpoch {
   int n_dd = 0;        // double-differenced phase rows used
   int n_sat = 0;       // common satellites above the mask
   Vec3 r_e = Vec3::Zero();       // fixed if fixed, else float [m]
-  Vec3 v_e = Vec3::Zero();
+  Vec3 v_e = Vec3::Zero();        // [m/s]; NaN in kinematic mode where nothing estimates it yet (the
+                                  // first epoch after an initialisation, every epoch of instantaneous AR)
   Vec3 r_float_e = Vec3::Zero();
   Mat3 P_r = Mat3::Zero();        // covariance of r_e [m^2]
   std::array<int, kNumSlipKinds> slips{};
@@ -658,7 +659,7 @@ class RtkEngine {
       if (amb_[k].used) ++amb_[k].lock;
     out.r_float_e = x_.segment<3>(RtkLayout::kPos);
     out.r_e = out.r_float_e;
-    out.v_e = kin ? Vec3(x_.segment<3>(RtkLayout::kVel)) : Vec3::Zero();
+    out.v_e = !kin ? Vec3::Zero() : dt > 0.0 ? Vec3(x_.segment<3>(RtkLayout::kVel)) : Vec3::Constant(NAN);
     out.P_r = P_.block<3, 3>(RtkLayout::kPos, RtkLayout::kPos);
     out.status = RtkStatus::kFloat;
     if (opt_.ar_mode != ArMode::kOff) {
@@ -1316,7 +1317,7 @@ class RtkEngine {
     out.status = RtkStatus::kFixed;
     out.n_fix = nuse;
     out.r_e = xb.head<3>();
-    if (kv) out.v_e = xb.tail<3>();
+    if (kv && dt_epoch_ > 0.0) out.v_e = xb.tail<3>();  // else as the float (NaN: no epoch has observed it)
     out.P_r = Pb.topLeftCorner<3, 3>();
     if (record_fixed_) record_fixed_rows(nuse);
     if (opt_.ar_mode == ArMode::kFixAndHold) hold(nuse);
