@@ -43,3 +43,20 @@ def test_every_input_form_is_checked(fifo, argv):
                                   ["run", "--obs", os.path.dirname(__file__)]])
 def test_outputs_regular_files_folders_and_numbers_pass(argv):
     _refuse_special_inputs(argv)
+
+
+@pytest.mark.parametrize("name", ["sol.csv", "sol.npz", "sol.pos", "eval.json", "sol.csv.innovations.csv"])
+def test_an_output_that_is_a_named_pipe_is_refused_without_blocking(tmp_path, name):
+    """An existing named pipe given as an output: the check of whether insnav wrote it read its first
+    bytes, which blocked until a writer appeared (``insnav run --out fifo.csv`` hung).  Now it is
+    "a file insnav did not write", refused before any work, and the pipe is left as it was."""
+    import stat
+
+    from insnav._outputs import check_outputs, insnav_output_kind
+
+    p = tmp_path / name
+    os.mkfifo(p)
+    assert insnav_output_kind(p) is None
+    with pytest.raises(UserError, match="exists and is not a file insnav wrote: not replaced"):
+        check_outputs([p], {})
+    assert stat.S_ISFIFO(os.stat(p).st_mode)

@@ -64,7 +64,11 @@ def head(path, n: int = 4096) -> bytes:
 
 
 def _head(path, n: int = 4096) -> bytes:
+    """Empty for anything but a regular file: reading a named pipe given as an output would block
+    until a writer appears (so a FIFO is "a file insnav did not write" and refused)."""
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return b""
         with open(path, "rb") as f:
             return f.read(n)
     except OSError:
@@ -147,6 +151,8 @@ def insnav_output_kind(path) -> str | None:
         import json
 
         try:
+            if not stat.S_ISREG(p.stat().st_mode):  # a named pipe would block the read
+                return None
             d = json.loads(p.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return None
