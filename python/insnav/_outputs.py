@@ -103,6 +103,11 @@ def insnav_output_kind(path) -> str | None:
     ``KF-GINS result``, ``evaluation``), from its name and its first bytes; None for anything
     else (an empty file included; an RTKLIB ``.pos`` another program wrote)."""
     p = Path(path)
+    try:
+        if not stat.S_ISREG(p.stat().st_mode):  # a named pipe, device or folder: reading a pipe would block
+            return None
+    except OSError:
+        return None
     name = p.name
     if name.endswith(".innovations.csv"):
         return "innovations" if _first_line(p).startswith("t_s,status,applied,nis,rows,") else None
@@ -151,8 +156,6 @@ def insnav_output_kind(path) -> str | None:
         import json
 
         try:
-            if not stat.S_ISREG(p.stat().st_mode):  # a named pipe would block the read
-                return None
             d = json.loads(p.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return None
