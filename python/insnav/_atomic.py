@@ -56,6 +56,16 @@ class OutputSet:
 
     def __init__(self):
         self._pending: dict[Path, Path] = {}  # destination -> its temporary file
+        self._written: set[Path] = set()
+        self._stale: list[tuple[Path, object]] = []  # (a file this command may leave out, "is it ours?")
+
+    def replaces(self, paths, is_ours) -> None:
+        """The files a command may write (every sidecar of its ``--out``), of which this run may leave
+        some out: at :meth:`commit` each one not written now and holding an earlier output
+        (``is_ours(path)`` true: :func:`insnav._outputs.insnav_output_kind`) is removed with the
+        renames, so what lies beside ``--out`` is this run's set, not a mix (the residuals of an
+        earlier tight run beside a loose run's solution, reported as its)."""
+        self._stale += [(Path(p), is_ours) for p in paths]
 
     def add(self, tmp, path) -> None:
         """Rename ``tmp`` to ``path`` at :meth:`commit` (a later file for the same ``path`` wins)."""
@@ -80,6 +90,10 @@ class OutputSet:
                     path, tmp = next(iter(self._pending.items()))
                     os.replace(tmp, path)
                     del self._pending[path]
+                    self._written.add(path)
+                for path, is_ours in self._stale:
+                    if path not in self._written and os.path.lexists(path) and is_ours(path):
+                        _unlink(path)
         finally:
             self.abort()  # a rename that failed: the rest stay as they were
 

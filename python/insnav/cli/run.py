@@ -478,7 +478,10 @@ def cmd_run_gnss_only(args, stages) -> int:
         raise UserError(str(exc)) from None
     stages.done("filter")
     text = line(sol, out)
-    with output_set():  # every file or, on an error (a full disk, Ctrl-C), none; older files untouched
+    from .._outputs import insnav_output_kind
+
+    with output_set() as files:  # every file or, on an error (a full disk, Ctrl-C), none; older files untouched
+        files.replaces(_run_outputs(out, False, (sidecar,)), insnav_output_kind)  # an earlier run's other sidecars
         if pos:
             from ..gnss.rtk import write_rtklib_pos
 
@@ -842,13 +845,16 @@ def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts,
     from ..filters.solution import write_innovations
 
     from .._atomic import output_set
+    from .._outputs import insnav_output_kind
 
     first = out if args.out_format == "kfgins" else out.parent
     made = list(made or ()) + [d for d in (first, *first.parents) if not d.exists()]  # removed if the writes fail
     try:
         # every file of the run or, on an error (a full disk, Ctrl-C), none: each is written to a
         # temporary file beside its destination and all are renamed into place at the end
-        with output_set():
+        with output_set() as files:
+            files.replaces(_run_outputs(out, args.out_format == "kfgins", (".rtk.pos", ".rtk.csv")),
+                           insnav_output_kind)  # an earlier run's sidecars this run does not write: removed
             if streamed_files is not None:  # written block by block (filters/stream.py): renamed with the rest
                 from .._atomic import _finish
 
