@@ -51,3 +51,19 @@ def test_cli_prints_one_warning_line_per_flagged_quantity(run, tmp_path):
                           str(tmp_path / "ds")], capture_output=True, text=True, check=True).stdout
     warn = [ln for ln in out.splitlines() if ln.startswith("WARNING: position")]
     assert len(warn) == 1 and warn[0].count("overconfident") == 3, out  # N, E and D, on one line
+
+
+@pytest.mark.parametrize("text, msg", [
+    ("34.25,108.95,nan", "bad position [34.25, 108.95, nan]; give three finite numbers"),
+    ("400,108.95,400", "position [400.0, 108.95, 400.0] is neither ECEF (|r| near 6371 km) nor lat,lon,h")])
+def test_a_point_truth_that_is_no_place_on_earth_is_refused(text, msg):
+    """``insnav evaluate SOL 34.25,108.95,nan`` printed "3-D RMS nan m" with exit status 0, and a latitude
+    of 400 deg read as ECEF a 6.38e6 m error; the point is checked as ``--base-pos`` is."""
+    from insnav.analysis.evaluate import static_truth
+    from insnav.config import ConfigError
+
+    with pytest.raises(ConfigError) as e:
+        static_truth(text, np.arange(3.0))
+    assert str(e.value) == f"truth {text!r}: {msg}"
+    t = static_truth("34.25,108.95,400", np.arange(3.0))
+    assert t.lat_deg[0] == 34.25 and t.h_m[2] == 400.0

@@ -514,6 +514,28 @@ def test_cli_spp_bad_key_and_missing_nav_are_one_line_errors(tmp_path):
     assert r.returncode != 0 and len(err) == 1 and "--nav" in err[0]
 
 
+@pytest.mark.parametrize("text, msg", [
+    ('filtr = "spp"\n', "key 'filtr' is not read by filter 'spp' (it reads [rinex], [gnss] and [spp]); did you "
+                         "mean 'filter'?"),
+    ("elevation_mask_deg = 30.0\n", "key 'elevation_mask_deg' is not read by filter 'spp' (it reads [rinex], "
+                                    "[gnss] and [spp]); did you mean 'rinex.elevation_mask_deg' (a key of the "
+                                    "[rinex] table)?")])
+def test_cli_spp_a_key_it_does_not_read_is_one_line(tmp_path, capsys, text, msg):
+    """A misspelt top-level key or a table key at the top level ran with exit status 0 and the key
+    ignored; the TOML of another filter (an INS run's) is still read for the spp tables alone."""
+    from insnav.cli import main
+
+    cfg = tmp_path / "run.toml"
+    cfg.write_text('filter = "spp"\n' * ("filtr" not in text) + text)
+    argv = ["run", "--filter", "spp", "--format", "rinex", "--obs", "x.obs", "--nav", "x.nav", "--config", str(cfg),
+            "--out", str(tmp_path / "o.csv")]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == f"insnav run: error: {cfg}: {msg}\n"
+    cfg.write_text('filter = "ekf"\n' + text.replace("filtr", "x_unused"))
+    assert main(argv) == 2
+    assert "x.obs" in capsys.readouterr().err  # past the TOML: the missing observation file is the error
+
+
 def test_gnss_table_reaches_the_tight_inputs(shared_data, tmp_path):
     """[gnss] in a --format rinex run TOML changes the rows' sigmas (and only then)."""
     d = shared_data / "rtklibexplorer_walk_0827"

@@ -100,16 +100,19 @@ def static_truth(text: str, t):
     from .. import earth
     from ..data.dataset import Truth
 
+    from ..filters.rtk import parse_base_position
+
     try:
         v = [float(x) for x in text.split(",")]
     except ValueError:
         v = []
     if len(v) != 3:
         raise ValueError(f"truth {text!r}: not a file, nor x,y,z [m] / lat_deg,lon_deg,h_m")
+    r_e = parse_base_position(v, f"truth {text!r}")  # finite, and lat,lon,h or ECEF near the Earth's surface
     if abs(v[0]) <= 90.0 and abs(v[1]) <= 360.0 and abs(v[2]) < 1e5:
         lat, lon, h = v
     else:
-        la, lo, h = earth.ecef_to_geodetic(np.asarray(v, float))
+        la, lo, h = earth.ecef_to_geodetic(r_e)
         lat, lon = float(np.degrees(la)), float(np.degrees(lo))
     t = np.asarray(t, float)
     n = t.size

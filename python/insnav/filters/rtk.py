@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import earth
-from ..config import ConfigError, _suggest, read_toml
+from ..config import ConfigError, check_gnss_only_toml_keys, read_toml
 from ..gnss.rtk import RtkOptions, RtkSolution, solve_rtk
 from ._assemble import gnss_solution
 from .solution import Solution
@@ -33,26 +33,6 @@ __all__ = ["RtkDataset", "run_rtk", "run_rtk_rinex", "rtk_solution", "load_rtk_c
            "parse_base_position"]
 
 _BASE_KEYS = ("base_position_ecef_m", "base_position_llh")
-#: the top-level keys of a GNSS-only RTK run TOML (``smooth`` and ``tdcp`` are refused by the command
-#: line with a line of their own)
-RTK_TOML_KEYS = ("filter", "coupling", "rtk", "smooth", "tdcp")
-
-
-def check_rtk_toml_keys(d: dict, source: str) -> None:
-    """ConfigError (one line naming the file and key) for a top-level key a GNSS-only RTK run would
-    not read, in a TOML that names no other filter: every RTK option is a key of ``[rtk]``, so an
-    ``elevation_mask_deg`` at the top level (a key of the INS filters) or an ``[rtkk]`` table would
-    otherwise be ignored without a word.  A TOML of another filter (an RTK/INS run's, with its
-    ``[imu]`` and ``[rtk_engine]``) is read for its ``[rtk]`` table only."""
-    if d.get("filter", "rtk") != "rtk":
-        return
-    fields = {f.name for f in dataclasses.fields(RtkOptions)} | set(_BASE_KEYS)
-    for k in d:
-        if k not in RTK_TOML_KEYS:
-            hint = f"; did you mean 'rtk.{k}' (a key of the [rtk] table)?" if k in fields else \
-                _suggest(k, RTK_TOML_KEYS)
-            raise ConfigError(f"{source}: key '{k}' is not read by filter 'rtk' (GNSS-only RTK reads the [rtk] "
-                              f"table){hint}")
 
 
 @dataclass
@@ -74,14 +54,14 @@ def parse_base_position(value, source: str = "--base-pos") -> np.ndarray:
     try:
         v = [float(x) for x in (value.split(",") if isinstance(value, str) else value)]
     except (TypeError, ValueError):
-        raise ConfigError(f"{source}: bad base position {value!r}; give x,y,z [m] (ECEF) or lat_deg,lon_deg,h_m") \
+        raise ConfigError(f"{source}: bad position {value!r}; give x,y,z [m] (ECEF) or lat_deg,lon_deg,h_m") \
             from None
     if len(v) != 3 or not np.all(np.isfinite(v)):
-        raise ConfigError(f"{source}: bad base position {value!r}; give three numbers")
+        raise ConfigError(f"{source}: bad position {value!r}; give three finite numbers")
     if abs(v[0]) <= 90.0 and abs(v[1]) <= 360.0 and abs(v[2]) < 1.0e5:  # geodetic
         return np.asarray(earth.geodetic_to_ecef(np.radians(v[0]), np.radians(v[1]), v[2]), float).ravel()
     if not (6.0e6 < np.linalg.norm(v) < 7.0e6):
-        raise ConfigError(f"{source}: base position {value!r} is neither ECEF (|r| near 6371 km) nor lat,lon,h")
+        raise ConfigError(f"{source}: position {value!r} is neither ECEF (|r| near 6371 km) nor lat,lon,h")
     return np.asarray(v, float)
 
 
@@ -92,7 +72,8 @@ def load_rtk_config(config_path=None, overrides: dict | None = None):
     if config_path is not None:
         source = os.fspath(config_path)
         d = read_toml(config_path)
-        check_rtk_toml_keys(d, source)
+        check_gnss_only_toml_keys(d, source, "rtk", {"rtk": {f.name for f in dataclasses.fields(RtkOptions)}
+                                                         | set(_BASE_KEYS)})
     t = d.get("rtk", {})
     if not isinstance(t, dict):
         raise ConfigError(f"{source}: key 'rtk': bad value {t!r}; allowed: a table")

@@ -35,7 +35,7 @@ import numpy as np
 
 from .. import earth
 from .._median import median
-from ..config import ConfigError, read_toml
+from ..config import ConfigError, check_gnss_only_toml_keys, read_toml
 from ..gnss.spp import (SppOptions, SppSolution, _spp_inputs_from_rinex, read_nav_multi, read_obs_multi, solve_spp,
                         summary_counts)
 from ..gnss.code_check import check_inputs_code_fit
@@ -148,6 +148,8 @@ def load_spp_config(config_path=None):
     if config_path is not None:
         source = os.fspath(config_path)
         d = read_toml(config_path)
+        check_gnss_only_toml_keys(d, source, "spp", {key: {f.name for f in dataclasses.fields(cls)} for key, cls in
+                                                     (("rinex", RinexOptions), ("gnss", Weighting), ("spp", SppOptions))})
     tables = {}
     for key in ("rinex", "gnss", "spp"):
         v = d.get(key, {})
