@@ -67,3 +67,22 @@ def test_a_point_truth_that_is_no_place_on_earth_is_refused(text, msg):
     assert str(e.value) == f"truth {text!r}: {msg}"
     t = static_truth("34.25,108.95,400", np.arange(3.0))
     assert t.lat_deg[0] == 34.25 and t.h_m[2] == 400.0
+
+
+def test_a_solution_or_truth_with_no_rows_is_one_line_naming_it(tmp_path, capsys):
+    """A CSV with its header line only: evaluate and report stopped with "IndexError: index 0 is out of
+    bounds" (the first epoch of an empty array), naming no file."""
+    from insnav.cli import main
+    from insnav.data.dataset import Truth
+
+    sol = tmp_path / "sol.csv"
+    sol.write_text("t_s,lat_deg,lon_deg,h_m,vn_mps,ve_mps,vd_mps,roll_deg,pitch_deg,yaw_deg\n")
+    truth = tmp_path / "truth.csv"
+    truth.write_text(",".join(Truth.COLUMNS) + "\n")
+    for argv, name in ((["evaluate", sol, "34.25,108.95,400"], sol), (["report", sol, "--out", tmp_path / "r"], sol)):
+        assert main([str(a) for a in argv]) == 2
+        assert capsys.readouterr().err == f"insnav {argv[0]}: error: {name}: no rows\n"
+    sol.write_text(sol.read_text() + "0,34.25,108.95,400,0,0,0,0,0,0\n1,34.25,108.95,400,0,0,0,0,0,0\n")
+    assert main(["evaluate", str(sol), str(truth)]) == 2
+    assert capsys.readouterr().err == f"insnav evaluate: error: {truth}: no rows\n"
+    assert not (tmp_path / "r").exists()

@@ -36,6 +36,14 @@ class _Sol:
     pass
 
 
+def has_rows(obj, path):
+    """``obj`` (a solution or truth read from ``path``), or ValueError "PATH: no rows" when it has none
+    (a file with its header line only: the comparison would index its first epoch)."""
+    if len(np.atleast_1d(obj.t)) == 0:
+        raise ValueError(f"{path}: no rows")
+    return obj
+
+
 def _read_solution(path):
     """A solution file; an RTKLIB ``.pos`` (insnav rtk or RTKLIB) keeps its Q as ``fix_status``, and an
     insnav rtk solution gets it from ``<path>.rtk.csv``."""
@@ -44,7 +52,7 @@ def _read_solution(path):
     p = Path(path)
     if p.suffix == ".pos":
         return _pos_solution(p)
-    return attach_fix_status(load_solution(path), p)
+    return attach_fix_status(has_rows(load_solution(path), p), p)
 
 
 def attach_fix_status(sol, path):
@@ -144,14 +152,14 @@ def _read_truth(path, quality=None):
         t = load_dataset(p).truth
         if t is None:
             raise ValueError(f"{p}: the dataset has no truth.csv")
-        return t
+        return has_rows(t, p / "truth.csv")
     if ".nav" in p.name:
         from ..io.kfgins import read_kfgins_nav
 
-        return read_kfgins_nav(p)
+        return has_rows(read_kfgins_nav(p), p)
     from ..data.dataset import Truth, read_csv
 
-    return Truth.from_array(read_csv(p, Truth.COLUMNS))
+    return has_rows(Truth.from_array(read_csv(p, Truth.COLUMNS)), p)
 
 
 #: rms(error/sigma) per axis outside these bounds flags the solution's sigmas as

@@ -483,9 +483,9 @@ def _read_solution(path):
     """The one place the report reads a saved solution (any format
     :func:`insnav.load_solution` reads, old column names included)."""
     from ..filters.solution import load_solution
-    from .evaluate import attach_fix_status
+    from .evaluate import attach_fix_status, has_rows
 
-    return attach_fix_status(load_solution(path), path)
+    return attach_fix_status(has_rows(load_solution(path), path), path)
 
 
 def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None,
