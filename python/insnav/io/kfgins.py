@@ -296,6 +296,17 @@ def _num(cfg, key, default, path):
     return float(v)
 
 
+def _corrtime_s(noise, path) -> float:
+    """``imunoise.corrtime`` [h] in seconds (NaN when absent): the Gauss-Markov correlation time of the
+    biases and scale factors, > 0 (KF-GINS divides by it)."""
+    if "corrtime" not in noise:
+        return float("nan")
+    v = _num(noise, "corrtime", float("nan"), path)
+    if not v > 0:
+        raise ValueError(f"{path}: key 'imunoise.corrtime': {v:g} h; expected a correlation time > 0 [h]")
+    return v * HOUR
+
+
 #: every key of KF-GINS's configuration file (KF-GINS dataset/kf-gins.yaml and
 #: src/kf_gins.cpp loadConfig); ``imunoise`` is a table of :data:`KFGINS_NOISE_KEYS`
 KFGINS_KEYS = ("imupath", "gnsspath", "outputpath", "imudatalen", "imudatarate", "starttime", "endtime",
@@ -397,8 +408,7 @@ def read_kfgins_config(path) -> dict:
             _vec(noise, "abstd", p) * MGAL,
             "gsstd": None if _vec(noise, "gsstd", p) is None else _vec(noise, "gsstd", p) * PPM,
             "asstd": None if _vec(noise, "asstd", p) is None else _vec(noise, "asstd", p) * PPM,
-            "corrtime_s": _num(noise, "corrtime", float("nan"), p) * HOUR if "corrtime" in noise
-            else float("nan"),
+            "corrtime_s": _corrtime_s(noise, p),
         },
         "antlever_b_m": _vec(cfg, "antlever", p),
         "raw": cfg,
