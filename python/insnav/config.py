@@ -1123,26 +1123,6 @@ def _suggest(key: str, known) -> str:
     return f"; did you mean '{close[0]}'?" if close else f"; known keys: {', '.join(known)}"
 
 
-def check_gnss_only_toml_keys(d: dict, source: str, filter_name: str, tables: dict) -> None:
-    """ConfigError (one line naming the file and key) for a top-level key a GNSS-only run
-    (``filter_name``: spp, rtk) would not read, in a TOML that names no other filter.  ``tables``:
-    the tables it reads, each with the keys of its dataclass (for the hint where a key of one of
-    them was written at the top level).  ``smooth`` and ``tdcp`` pass: the command line refuses
-    them with a line of their own.  A TOML of another filter (an INS run's, with its ``[imu]``) is
-    read for the run's tables only."""
-    if d.get("filter", filter_name) != filter_name:
-        return
-    allowed = ("filter", "coupling", *tables, "smooth", "tdcp")
-    names = [f"[{t}]" for t in tables]
-    where = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-    for k in d:
-        if k in allowed:
-            continue
-        home = next((t for t, keys in tables.items() if k in keys), None)
-        hint = f"; did you mean '{home}.{k}' (a key of the [{home}] table)?" if home else _suggest(k, allowed)
-        raise ConfigError(f"{source}: key '{k}' is not read by filter '{filter_name}' (it reads {where}){hint}")
-
-
 #: the option tables of a run TOML that are RunConfig fields of their own dataclass
 #: ([imu] is read apart: user units)
 _OPTION_TABLES = _SELFCAL_TABLES + (("tdcp", Tdcp), ("robust", Robust), ("constraints", Constraints))
@@ -1199,11 +1179,7 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
                 arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor
             except (TypeError, ValueError):
                 arr = np.full(3, np.nan)
-            if k.endswith("_tau_s"):  # a Gauss-Markov correlation time: F = -1/tau, so 0 is no model
-                if not (np.all(arr > 0) and np.all(np.isfinite(arr))):
-                    raise ConfigError(f"{source}: key 'imu.{k}': bad value {v!r}; allowed: values > 0 "
-                                      "(a correlation time [s])")
-            elif not (np.all(arr >= 0) and np.all(np.isfinite(arr))):
+            if not (np.all(arr >= 0) and np.all(np.isfinite(arr))):
                 raise ConfigError(f"{source}: key 'imu.{k}': bad value {v!r}; allowed: values >= 0")
             setattr(noise, fld, arr.tolist())
         cfg.imu = noise

@@ -17,15 +17,16 @@ number of fixed ambiguities, slips per epoch).
 """
 from __future__ import annotations
 
-import os
 import dataclasses
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from .. import earth
-from ..config import ConfigError, check_gnss_only_toml_keys, read_toml
+from ..config import ConfigError, read_toml
 from ..gnss.rtk import RtkOptions, RtkSolution, solve_rtk
+from ._gnss_only_toml import check_gnss_only_toml_keys
 from ._assemble import gnss_solution
 from .solution import Solution
 

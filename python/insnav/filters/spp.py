@@ -35,12 +35,13 @@ import numpy as np
 
 from .. import earth
 from .._median import median
-from ..config import ConfigError, check_gnss_only_toml_keys, read_toml
+from ..config import ConfigError, read_toml
 from ..gnss.spp import (SppOptions, SppSolution, _spp_inputs_from_rinex, read_nav_multi, read_obs_multi, solve_spp,
                         summary_counts)
 from ..gnss.code_check import check_inputs_code_fit
 from ..gnss.systems import SPP_SYSTEMS, SYSTEMS
 from ..gnss.weighting import Weighting
+from ._gnss_only_toml import check_gnss_only_toml_keys
 from ._assemble import gnss_solution
 from .solution import RecordStatus, Solution
 
