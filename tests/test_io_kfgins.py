@@ -133,3 +133,21 @@ def test_a_correlation_time_that_is_no_time_is_one_line_naming_the_key(tmp_path,
     with pytest.raises(ValueError) as e:
         kfgins.read_kfgins_config(bad)
     assert str(e.value) == f"{bad}: key 'imunoise.corrtime': {value} h; expected a correlation time > 0 [h]"
+
+
+@needs_data
+@pytest.mark.parametrize("key, value, msg", [
+    ("imudatalen", "3", "key 'imudatalen': 3; expected an integer >= 7"),
+    ("imudatalen", "7.5", "key 'imudatalen': 7.5; expected an integer >= 7"),
+    ("initpos", "[300.44, 114.47, 21.0]", "key 'initpos': [300.44, 114.47, 21.0]; expected latitude [deg] within +-90")])
+def test_a_yaml_value_no_kfgins_run_can_have_is_one_line_naming_the_key(tmp_path, key, value, msg):
+    """``imudatalen: 3`` stopped in the text parser ("need 0 < keep <= ncols", naming no key), 7.5 ran;
+    a latitude of 300 deg was refused by the navigation state, naming neither the YAML nor the key."""
+    text = (DATA / "real" / "kf-gins.yaml").read_text()
+    lines = [f"{key}: {value}" if ln.startswith(f"{key}:") else ln for ln in text.splitlines()]
+    assert any(ln.startswith(f"{key}: {value}") for ln in lines)
+    bad = tmp_path / "kf.yaml"
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError) as e:
+        kfgins.read_kfgins_config(bad)
+    assert str(e.value).startswith(f"{bad}: {msg}")

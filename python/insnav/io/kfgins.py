@@ -296,6 +296,27 @@ def _num(cfg, key, default, path):
     return float(v)
 
 
+def _imudatalen(cfg, path) -> int:
+    """``imudatalen``: the columns per IMU line, an integer >= 7 (time, 3 angle and 3 velocity
+    increments; KF-GINS ignores the columns after them)."""
+    v = _num(cfg, "imudatalen", 7, path)
+    if v != int(v) or v < 7:
+        raise ValueError(f"{path}: key 'imudatalen': {v:g}; expected an integer >= 7 (time, 3 angle and 3 "
+                         "velocity increments per IMU line)")
+    return int(v)
+
+
+def _initpos(cfg, path):
+    """``initpos`` [lat deg, lon deg, h m] in [rad, rad, m] (None when absent), within the Earth's ranges."""
+    v = _vec(cfg, "initpos", path)
+    if v is None:
+        return None
+    if not (abs(v[0]) <= 90.0 and -180.0 <= v[1] <= 360.0 and -1.0e4 < v[2] < 1.0e7):
+        raise ValueError(f"{path}: key 'initpos': {list(map(float, v))}; expected latitude [deg] within +-90, "
+                         "longitude [deg] and height [m]")
+    return v * np.array([DEG, DEG, 1.0])
+
+
 def _corrtime_s(noise, path) -> float:
     """``imunoise.corrtime`` [h] in seconds (NaN when absent): the Gauss-Markov correlation time of the
     biases and scale factors, > 0 (KF-GINS divides by it)."""
@@ -378,12 +399,11 @@ def read_kfgins_config(path) -> dict:
     out = {
         "imupath": path_of("imupath"), "gnsspath": path_of("gnsspath"),
         "outputpath": path_of("outputpath"),
-        "imudatalen": int(_num(cfg, "imudatalen", 7, p)),
+        "imudatalen": _imudatalen(cfg, p),
         "imudatarate_hz": _num(cfg, "imudatarate", 200, p),
         "starttime_s": _num(cfg, "starttime", 0.0, p),
         "endtime_s": None if _num(cfg, "endtime", -1, p) < 0 else _num(cfg, "endtime", -1, p),
-        "initpos": None if _vec(cfg, "initpos", p) is None else
-        _vec(cfg, "initpos", p) * np.array([DEG, DEG, 1.0]),
+        "initpos": _initpos(cfg, p),
         "initvel_n_mps": _vec(cfg, "initvel", p),
         "initatt_rad": scaled("initatt", DEG),
         "initgyrbias_radps": scaled("initgyrbias", DEG / HOUR),
