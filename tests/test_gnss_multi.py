@@ -118,7 +118,7 @@ def test_rinex3_nav_bad_input(tmp_path):
         read_rinex_nav(write(tmp_path, "n.rnx", NAV3_HEADER + bad_n), systems="R")
     # a GLONASS-only file asked for GPS
     hdr_r = NAV3_HEADER.replace("M: MIXED ", "R: GLONASS")
-    with pytest.raises(RinexError, match=r"line 1: malformed header: navigation file of system 'R' has no GPS"):
+    with pytest.raises(RinexError, match=r"line 1: a navigation file of system 'R' only, and the run uses the systems 'G'"):
         read_rinex_nav(write(tmp_path, "r.rnx", hdr_r + "".join(r01)))
     # Galileo week given as a GST week (GPS week - 1024) or BeiDou week as GPS week: same toe (resolved by toc)
     gst = "".join(e01).replace("2.253000000000e+03", "1.229000000000e+03")
