@@ -220,3 +220,85 @@ def test_ctrl_c_at_startup_or_exit_of_python_m_insnav(when):
                        preexec_fn=_sigint_default)
     assert r.returncode == 130, (r.stdout, r.stderr)
     assert r.stderr.strip().splitlines()[-1] == "insnav: interrupted" and "Traceback" not in r.stderr
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("sig, handler, status, word", [
+    (signal.SIGTERM, signal.SIG_DFL, 143, "terminated"),
+    (signal.SIGINT, signal.default_int_handler, 130, "interrupted"),
+])
+def test_a_signal_a_library_turns_into_its_own_error_still_ends_the_command(monkeypatch, tmp_path, capsys, sig,
+                                                                           handler, status, word):
+    """numpy's import turns a Ctrl-C into "ImportError: ... initialization failed": the command printed
+    that as its error with status 2.  The signal was seen: one line and 130 / 143."""
+    import insnav.analysis.report as rep
+    import insnav.cli as cli
+
+    sol = tmp_path / "sol.csv"
+    sol.write_text("x\n")
+
+    def report(*a, **k):
+        try:
+            os.kill(os.getpid(), sig)
+            time.sleep(0.5)
+        except BaseException:  # noqa: BLE001 - what a C extension's import does with it
+            raise ImportError("initialization failed") from None
+
+    monkeypatch.setattr(rep, "report", report)
+    inherited = signal.signal(sig, handler)
+    try:
+        assert cli.main(["report", str(sol)]) == status
+    finally:
+        signal.signal(sig, inherited)
+    assert capsys.readouterr().err.strip().splitlines() == [f"insnav report: {word}"]
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_interrupts_deferred_delivers_the_signal_after_the_block():
+    from insnav._atomic import interrupts_deferred
+
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    done = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with interrupts_deferred():
+                os.kill(os.getpid(), signal.SIGINT)
+                os.kill(os.getpid(), signal.SIGINT)  # a second Ctrl-C: still one interrupt, after the block
+                time.sleep(0.05)
+                done.append(1)
+        assert done == [1] and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, inherited)
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_ctrl_c_while_simulate_swaps_the_dataset_keeps_one_whole_dataset(tmp_path, monkeypatch):
+    """``insnav simulate --overwrite``: a Ctrl-C between renaming the old dataset away and the new one
+    in left no dataset at the path (the old one only as a hidden ``.NAME.old-PID``).  The swap now
+    ends before the interrupt is raised: the new dataset in place, no hidden folder."""
+    import insnav.data.dataset as dsmod
+    from insnav.data.dataset import load_dataset
+    from conftest import short_tight_dataset
+
+    ds = short_tight_dataset(20.0)
+    out = tmp_path / "ds"
+    ds.save(out)
+    real_rename, calls = os.rename, []
+
+    def rename(a, b):
+        calls.append(1)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGINT)  # between the two renames
+            time.sleep(0.05)
+        real_rename(a, b)
+
+    monkeypatch.setattr(dsmod.os, "rename", rename)
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            ds.save(out, overwrite=True)
+    finally:
+        signal.signal(signal.SIGINT, inherited)
+    assert len(calls) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+    assert len(load_dataset(out).imu.t) == len(ds.imu.t)

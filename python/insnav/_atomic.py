@@ -120,6 +120,36 @@ def signals_held():
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
+@contextlib.contextmanager
+def interrupts_deferred():
+    """SIGINT and SIGTERM that arrive during the ``with`` block are delivered at its end (their Python
+    handler then raises as it would have: KeyboardInterrupt, the command line's Terminated), so a
+    clean-up or a swap of an old output for a new one runs to its end.  Unlike
+    :func:`signals_held` it works whichever thread the kernel hands the signal to (a writer or reader
+    thread still running): Python runs every handler on the main thread.  Off the main thread, or for a
+    signal without a Python handler, nothing changes."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+    previous = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(signum)
+        if callable(handler):
+            previous[signum] = handler
+            signal.signal(signum, lambda n, frame: got.append(n))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        if got:
+            previous[got[0]](got[0], None)
+
+
 _ACTIVE: contextvars.ContextVar = contextvars.ContextVar("insnav_output_set", default=None)
 
 
@@ -176,13 +206,16 @@ def atomic_write_with(path, write) -> Path:
     file is removed and ``path`` left as it was."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=path.parent)
-    os.close(fd)
+    tmp = None
     try:
+        with interrupts_deferred():  # a Ctrl-C inside mkstemp, after its open, would leave the file
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part" + path.suffix, dir=path.parent)
+            os.close(fd)
         write(tmp)
         _finish(tmp, path)
     except BaseException:
-        _unlink(tmp)
+        if tmp is not None:
+            _unlink(tmp)
         raise
     return path
 
@@ -191,12 +224,16 @@ def atomic_write_text(path, text: str) -> Path:
     """:func:`atomic_write_with` of a text file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    tmp = None
     try:
-        with os.fdopen(fd, "w") as f:
+        with interrupts_deferred():  # a Ctrl-C inside mkstemp, after its open, would leave the file
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+            f = os.fdopen(fd, "w")
+        with f:
             f.write(text)
         _finish(tmp, path)
     except BaseException:
-        _unlink(tmp)
+        if tmp is not None:
+            _unlink(tmp)
         raise
     return path

@@ -162,6 +162,16 @@ class _SigintWatch:
                 self.previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, self._handler)
         return self
 
+    def quiet(self) -> None:
+        """From here on (the command is ending with its one line) a further SIGINT or SIGTERM is only
+        remembered: a second Ctrl-C no longer raises in the middle of the report (a traceback)."""
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            for signum in self.previous:
+                signal.signal(signum, lambda n, frame: None)
+
     def __exit__(self, *exc):
         import signal
 
@@ -208,6 +218,12 @@ def _refuse_special_inputs(argv) -> None:
                                 "inputs as files, whole and some twice; copy it to a file first")
 
 
+def _ended_by_signal(name, term: bool) -> int:
+    """The one line of a command ended by Ctrl-C (130) or SIGTERM (143), and its status."""
+    print(f"insnav{' ' + name if name else ''}: {'terminated' if term else 'interrupted'}", file=sys.stderr)
+    return 143 if term else 130
+
+
 def main(argv=None) -> int:
     """Run one command; its status: 0, 2 (an error, one line on stderr), 130 (Ctrl-C, one line)
     or 143 (SIGTERM, one line)."""
@@ -241,11 +257,13 @@ def main(argv=None) -> int:
             os.dup2(devnull, sys.stdout.fileno())
             return 0
         except KeyboardInterrupt as exc:
-            name = getattr(args, "command", None) or command
-            term = isinstance(exc, Terminated) or sigint.seen is Terminated
-            print(f"insnav{' ' + name if name else ''}: {'terminated' if term else 'interrupted'}", file=sys.stderr)
-            return 143 if term else 130
+            sigint.quiet()
+            return _ended_by_signal(getattr(args, "command", None) or command,
+                                    isinstance(exc, Terminated) or sigint.seen is Terminated)
         except Exception as exc:  # noqa: BLE001 - every error is one line; --debug for the traceback
+            sigint.quiet()
+            if sigint.seen:  # a library turned the interrupt into its own error (numpy's import: ImportError)
+                return _ended_by_signal(getattr(args, "command", None) or command, sigint.seen is Terminated)
             if getattr(args, "debug", False) or os.environ.get("INSNAV_DEBUG"):
                 raise
             msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc

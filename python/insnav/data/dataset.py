@@ -534,13 +534,16 @@ class Dataset:
             # JSON has no Infinity: an infinite correlation time (no Gauss-Markov part) is null
             (tmp / "dataset.json").write_text(json.dumps(json_safe(meta), indent=1, allow_nan=False) + "\n",
                                               encoding="utf-8")
-            old = None
-            if out.exists():
-                old = out.parent / f".{out.name}.old-{os.getpid()}"
-                os.rename(out, old)
-            os.rename(tmp, out)
-            if old is not None:
-                shutil.rmtree(old, ignore_errors=True)
+            from .._atomic import interrupts_deferred
+
+            with interrupts_deferred():  # a Ctrl-C between the renames would leave no dataset at `out`
+                old = None
+                if out.exists():
+                    old = out.parent / f".{out.name}.old-{os.getpid()}"
+                    os.rename(out, old)
+                os.rename(tmp, out)
+                if old is not None:
+                    shutil.rmtree(old, ignore_errors=True)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise

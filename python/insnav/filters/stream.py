@@ -102,6 +102,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core
+from .._atomic import interrupts_deferred
 from .._imu_scan import scan_imu
 from .._median import median
 from .._threads import Job
@@ -712,12 +713,14 @@ def _stream_to_file(out, make_blocks, prepare, columns, precision, imu_source: s
             res.files = list(writer.files)
             return res
         finally:
-            blocks.close()
-            if writer is not None:
-                writer.shutdown()  # no write may outlive the run (the files are removed below on an error)
+            with interrupts_deferred():  # a second Ctrl-C waits for the clean-up (it aborted in the reader)
+                blocks.close()
+                if writer is not None:
+                    writer.shutdown()  # no write may outlive the run (the files are removed below on an error)
     except BaseException:
         if writer is not None:
-            writer.discard()
+            with interrupts_deferred():
+                writer.discard()
         raise
 
 
@@ -1237,8 +1240,9 @@ class _Writer:
         self.tmp = self._temp(self.out)
 
     def _temp(self, dest: Path) -> Path:
-        tmp = _temp_beside(dest)
-        self.files.append((tmp, dest))
+        with interrupts_deferred():  # made and listed for discard() together: a Ctrl-C between would leave it
+            tmp = _temp_beside(dest)
+            self.files.append((tmp, dest))
         return tmp
 
     def add(self, stream, n: int) -> None:
@@ -1338,12 +1342,13 @@ class _NpzWriter(_Writer):
 
         if self.npz is None:
             p = Path(self.tmp)
-            scratch = tempfile.mkdtemp(prefix=p.name + ".", suffix=".columns", dir=p.parent)
-            try:
-                self.npz = NpzColumns(scratch, [nm for nm, _, _ in cols])
-            except BaseException:
-                os.rmdir(scratch)
-                raise
+            with interrupts_deferred():  # the scratch folder made and owned together (shutdown removes it)
+                scratch = tempfile.mkdtemp(prefix=p.name + ".", suffix=".columns", dir=p.parent)
+                try:
+                    self.npz = NpzColumns(scratch, [nm for nm, _, _ in cols])
+                except BaseException:
+                    os.rmdir(scratch)
+                    raise
         return _writer_job(self.npz.append, [(x, float(f)) for _, x, f in cols])
 
     def close(self) -> None:
