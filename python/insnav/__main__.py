@@ -49,4 +49,12 @@ def _leave(rc: int) -> None:
     os._exit(rc)
 
 
-_leave(main())
+try:
+    _leave(main())
+except KeyboardInterrupt:  # a Ctrl-C in the moment after main() restored Python's handler: 130, one line in all
+    from . import cli as _cli
+
+    if not _cli.signal_reported:
+        sys.stderr.write("insnav: interrupted\n")
+    sys.stderr.flush()
+    os._exit(130)

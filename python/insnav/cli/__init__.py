@@ -218,8 +218,15 @@ def _refuse_special_inputs(argv) -> None:
                                 "inputs as files, whole and some twice; copy it to a file first")
 
 
+#: set once a command has printed its "interrupted" / "terminated" line (``python -m insnav`` prints no
+#: second one for a Ctrl-C that lands after :func:`main` restored Python's handler)
+signal_reported = False
+
+
 def _ended_by_signal(name, term: bool) -> int:
     """The one line of a command ended by Ctrl-C (130) or SIGTERM (143), and its status."""
+    global signal_reported
+    signal_reported = True
     print(f"insnav{' ' + name if name else ''}: {'terminated' if term else 'interrupted'}", file=sys.stderr)
     return 143 if term else 130
 
