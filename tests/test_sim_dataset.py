@@ -61,3 +61,31 @@ def test_cli_simulate_and_scenarios(tmp_path, capsys):
     assert main(["simulate", "nope", "--out", str(tmp_path / "y")]) == 2
     err = capsys.readouterr().err
     assert "unknown preset 'nope'" in err and "seed001-high" in err
+
+
+@pytest.mark.parametrize("edit, msg", [
+    (lambda m: m["imu_model"].update(gyro_arw=[-1.0, 0.0, 0.0]),
+     "key 'imu_model.gyro_arw': bad value [-1.0, 0.0, 0.0]; allowed: finite numbers >= 0"),
+    (lambda m: m["imu_model"].update(gyro_gm_tau=[0.0, None, None]),
+     "key 'imu_model.gyro_gm_tau': bad value [0.0, None, None]; allowed: numbers > 0 or null (infinite)"),
+    (lambda m: m.update(gps_time_offset_s=None), "key 'gps_time_offset_s': expected a finite number, got None")])
+def test_a_dataset_json_value_no_imu_or_clock_can_have_is_one_line_naming_the_key(tmp_path, edit, msg):
+    """A negative ``gyro_arw`` in dataset.json ran with exit status 0 (and another NIS); a null
+    ``gps_time_offset_s`` gave "TypeError: float() argument ..." naming neither file nor key.  Signed
+    entries (the constant biases) stay signed."""
+    import json
+
+    from conftest import short_tight_dataset
+    from insnav.data.dataset import load_dataset
+
+    d = tmp_path / "ds"
+    short_tight_dataset(20.0).save(d)
+    meta = json.loads((d / "dataset.json").read_text())
+    meta["imu_model"]["gyro_bias"] = [1e-5, -1e-5, 0.0]  # a constant bias: either sign
+    (d / "dataset.json").write_text(json.dumps(meta))
+    assert load_dataset(d).imu_model["gyro_bias"] == [1e-5, -1e-5, 0.0]
+    edit(meta)
+    (d / "dataset.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError) as e:
+        load_dataset(d)
+    assert str(e.value) == f"{d / 'dataset.json'}: {msg}"

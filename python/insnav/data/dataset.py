@@ -599,6 +599,42 @@ def _check_meta_keys(meta: dict, meta_path: Path) -> None:
                 raise ValueError(f"{meta_path}: unknown key '{where}{k}'{hint}")
 
 
+def _finite_number(meta: dict, key: str, default: float, meta_path: Path) -> float:
+    """``meta[key]`` as a finite float (``default`` when absent); else a ValueError naming the key."""
+    v = meta.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise ValueError(f"{meta_path}: key '{key}': expected a finite number, got {v!r}")
+    return float(v)
+
+
+def _imu_model_from_meta(meta: dict, meta_path: Path) -> dict:
+    """``imu_model`` of a dataset.json, its numbers checked: the correlation times (``*_tau``) > 0
+    (null: infinite, no Gauss-Markov part), the noise densities and sigmas (``*_arw``, ``*_vrw``,
+    ``*_sigma``, ``*_rw``) and ``rate_hz`` >= 0, the constant biases and scale factors finite of
+    either sign; else a ValueError naming the key (a negative ``gyro_arw`` ran with exit status 0)."""
+    model = meta.get("imu_model", {})
+    if not isinstance(model, dict):
+        raise ValueError(f"{meta_path}: key 'imu_model': expected an object of IMU noise values")
+    out = {}
+    for k, v in model.items():
+        tau = k.endswith("_tau")
+        vals = v if isinstance(v, list) else [v]
+        vals = [np.inf if (x is None and tau) else x for x in vals]
+        if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in vals):
+            out[k] = v  # not a numeric entry: kept as written
+            continue
+        if tau:
+            ok, allowed = all(x > 0 for x in vals), "numbers > 0 or null (infinite)"
+        elif k == "rate_hz" or k.endswith(("_arw", "_vrw", "_sigma", "_rw")):
+            ok, allowed = all(0 <= x < np.inf for x in vals), "finite numbers >= 0"
+        else:
+            ok, allowed = all(np.isfinite(x) for x in vals), "finite numbers"
+        if not ok:
+            raise ValueError(f"{meta_path}: key 'imu_model.{k}': bad value {v!r}; allowed: {allowed}")
+        out[k] = vals if isinstance(v, list) else vals[0]
+    return out
+
+
 def _initial_from_meta(meta: dict, meta_path: Path):
     """The initial state, its time t0 [s] and the lever arm [m] of a
     dataset.json, each checked: a missing key or a bad value is a ValueError
@@ -682,9 +718,7 @@ def load_dataset(directory) -> Dataset:
     scen = {}
     if (d / "scenario.toml").is_file():
         scen = tomllib.loads(read_text(d / "scenario.toml", errors="strict"))
-    imu_model = {k: ([np.inf if x is None else x for x in v] if k.endswith("_tau") and isinstance(v, list)
-                     else (np.inf if v is None and k.endswith("_tau") else v))
-                 for k, v in meta.get("imu_model", {}).items()}  # null = infinite correlation time
+    imu_model = _imu_model_from_meta(meta, meta_path)
     if "imu_grade" in meta:
         if imu_model:
             raise ValueError(f"{d / 'dataset.json'}: give 'imu_model' or 'imu_grade', not both")
@@ -701,7 +735,7 @@ def load_dataset(directory) -> Dataset:
         raise ValueError(f"{meta_path}: initial_is_truth must be true or false, got {iit!r}")
     return Dataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=raw, imu_errors=errs, scenario=scen,
                    lever_arm_b=lever_arm_b, initial=initial, t0=t0,
-                   gps_time_offset_s=float(meta.get("gps_time_offset_s", 0.0)),
+                   gps_time_offset_s=_finite_number(meta, "gps_time_offset_s", 0.0, meta_path),
                    imu_model=imu_model, name=meta.get("name", ""),
                    seed=meta.get("seed"), odometer=odo, initial_is_truth=iit)
 
