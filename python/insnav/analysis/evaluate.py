@@ -304,9 +304,8 @@ def _solution_at(sol, t):
         fs = np.asarray(fs)
         out.fix_status = fs[np.clip(np.searchsorted(sol.t, t - 1e-9), 0, fs.size - 1)]
         out.epoch_fix_status = getattr(sol, "epoch_fix_status", fs)  # the fix rate stays over the solution's epochs
-    for k in ("slip_counts",):
-        if hasattr(sol, k):
-            setattr(out, k, getattr(sol, k))
+    if hasattr(sol, "slip_counts"):
+        out.slip_counts = sol.slip_counts
     return out
 
 

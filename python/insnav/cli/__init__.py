@@ -163,8 +163,8 @@ class _SigintWatch:
         return self
 
     def quiet(self) -> None:
-        """From here on (the command is ending with its one line) a further SIGINT or SIGTERM is only
-        remembered: a second Ctrl-C no longer raises in the middle of the report (a traceback)."""
+        """From here on (the command is ending with its one line) a further SIGINT or SIGTERM is
+        ignored: a second Ctrl-C no longer raises in the middle of the report (a traceback)."""
         import signal
         import threading
 
