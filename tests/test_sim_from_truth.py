@@ -118,6 +118,33 @@ def test_a_non_finite_truth_value_is_refused_naming_line_and_column(tmp_path, ca
     assert not out.exists() and p.read_bytes() == before
 
 
+@pytest.mark.parametrize("column, change, message", [
+    ("Pos_X", lambda v: 1e30, r"line 21: position 1e\+30 m from the Earth's centre"),
+    ("Pos_Y", lambda v: v + 50.0, r"line 21: the position step from the line before differs by 50 m from"),
+    ("Vel_Z", lambda v: v + 1e3, r"line 21: the position step from the line before differs by 50 m"),
+    ("Acc_X", lambda v: v + 1e3, r"line 21: the position step .* by 0\.833\d m.*"
+                                 r"|line 21: the velocity step from the line before differs by 50 m/s"),
+    ("Elevation", lambda v: 1e5, r"line 21: Elevation 100000 rad beyond \+-pi/2"),
+    ("Heading", lambda v: v + 3.0, r"line 21: Heading changes at 29\.9\d rad/s from the line before \(more than 20\)"),
+])
+def test_an_impossible_truth_row_is_refused_naming_the_line(tmp_path, column, change, message):
+    """A finite but corrupted row (one wrong field) gave IMU increments of 1e45 m/s or 1e4 rad with
+    status 0.  The row is checked against its neighbours: the position step against the quintic
+    Hermite's relation to the recorded velocity and acceleration, the velocity step against the
+    acceleration, pitch within +-90 deg, the attitude rate (insnav.sim.from_truth._check_plausible)."""
+    lines = need(MOTION).read_text().splitlines()[:40]
+    names = lines[1].split(",")
+    fields = lines[20].split(",")
+    i = names.index(column)
+    fields[i] = repr(change(float(fields[i])))
+    lines[20] = ",".join(fields)
+    p = tmp_path / "m.csv"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(TruthFileError, match=message) as exc:
+        read_spirent_motion(p)
+    assert str(exc.value).startswith(f"{p}, line 21: ") and str(exc.value).endswith(": a corrupted row?")
+
+
 def test_cli_simulate_from_truth(tmp_path):
     out = tmp_path / "ds"
     r = subprocess.run([sys.executable, "-m", "insnav", "simulate", "--from-truth", str(need(MOTION)),

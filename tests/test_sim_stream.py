@@ -364,3 +364,30 @@ def test_simulate_to_releases_each_block_and_holds_no_more_as_blocks_go_by(tmp_p
     assert max(alive) == 0
     block_steps = np.array(held[3:-1])  # after each IMU and truth block
     assert block_steps[-1] - block_steps[4] < 48_000
+
+
+def test_a_scenario_larger_than_the_free_disk_is_refused_before_writing(tmp_path, capsys, monkeypatch):
+    """A misplaced exponent (duration_s = 1e12) ran for ever, filling the disk block by block: the
+    estimate (at least 100 + 150 + 80 bytes per IMU, truth and IMU-error row) is compared with the
+    free space of --out's disk before anything is written."""
+    import collections
+    import shutil
+
+    from insnav.cli import main
+
+    toml = tmp_path / "long.toml"
+    toml.write_text('extends = "seed000-sim"\n[[motion.segments]]\nduration_s = 1e12\n')
+    out = tmp_path / "out"
+    assert main(["simulate", str(toml), "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"insnav simulate: error: {toml}: 1e+12 s at 200 Hz would write at least 5.08e+07 GB, more "
+                          f"than the ") and err.endswith(f"GB free in {tmp_path} (check [[motion.segments]] "
+                                                         "duration_s and [imu] rate_hz)"), err
+    assert "\n" not in err and sorted(p.name for p in tmp_path.iterdir()) == ["long.toml"]
+    # the bound: 150 s at 200 Hz needs at least 150 * (200 * 100 + 200 * 150 + 10 * 80) = 7.62 MB
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(1, 1, 7_600_000))
+    assert main(["simulate", "seed000-sim", "--out", str(out), "-q"]) == 2
+    assert "would write at least 0.00762 GB, more than the 0.0076 GB free" in capsys.readouterr().err
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(1, 1, 7_700_000))
+    assert main(["simulate", "seed000-sim", "--out", str(out), "-q"]) == 0 and (out / "imu.csv").exists()

@@ -1179,7 +1179,10 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
                 arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor
             except (TypeError, ValueError):
                 arr = np.full(3, np.nan)
-            if not (np.all(arr >= 0) and np.all(np.isfinite(arr))):
+            if k.endswith("_tau_s"):  # a Gauss-Markov correlation time: exp(-dt/tau) needs tau > 0
+                if not (np.all(arr > 0) and np.all(np.isfinite(arr))):
+                    raise ConfigError(f"{source}: key 'imu.{k}': bad value {v!r}; allowed: finite values > 0 [s]")
+            elif not (np.all(arr >= 0) and np.all(np.isfinite(arr))):
                 raise ConfigError(f"{source}: key 'imu.{k}': bad value {v!r}; allowed: values >= 0")
             setattr(noise, fld, arr.tolist())
         cfg.imu = noise

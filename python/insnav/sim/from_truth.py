@@ -124,16 +124,69 @@ def read_spirent_motion(path) -> TruthFile:
     t = col["Time_ms"] / 1e3
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
-        raise TruthFileError(f"{path}, line {hdr_i + 3 + bad[0]}: time not strictly increasing")
+        raise TruthFileError(f"{path}, line {line_no[bad[0] + 1]}: time not strictly increasing")
     xyz = lambda p: np.column_stack([col[p + "_X"], col[p + "_Y"], col[p + "_Z"]])  # noqa: E731
     euler = np.column_stack([col["Bank"], col["Elevation"], np.unwrap(col["Heading"])])
     r_e = xyz("Pos")
+    _check_plausible(path, r_e, xyz("Vel"), xyz("Acc"), euler, t, line_no)
     lever = np.zeros(3)
     if "Ant1_Pos_X" in col:
         d_e = xyz("Ant1_Pos") - r_e
         lat, lon, _ = earth.ecef_to_geodetic(r_e[0])
         lever = rotate_n_to_b(euler[:1], (earth.C_en(lat, lon).T @ d_e[0])[None, :])[0]
     return TruthFile(str(path), t, r_e, xyz("Vel"), xyz("Acc"), euler, lever, offset)
+
+
+#: radius of a truth position [m]: below the deepest ocean floor to beyond geostationary orbit
+_RADIUS_M = (6.3e6, 1e8)
+#: the position step of an interval must match the recorded velocity and acceleration
+#: (the quintic Hermite's own relation, below) within this, plus 1 % of the step [m]
+_STEP_TOL_M = 1.0
+#: ... and the velocity step the recorded acceleration (trapezoid) within this plus 1 % [m/s]
+_VEL_TOL_MPS = 1.0
+#: largest attitude rate between two epochs [rad/s] (1146 deg/s: above any vehicle's)
+_MAX_EULER_RATE = 20.0
+
+
+def _check_plausible(path, r_e, v_e, a_e, euler, t, line_no) -> None:
+    """Refuse a truth file the synthesis would turn into absurd IMU increments, naming the line.
+
+    A corrupted row is finite yet impossible: a position off the Earth, a position or velocity
+    step the recorded velocity and acceleration cannot produce, a pitch (Elevation) beyond
+    +-90 deg, an attitude that jumps.  Over an interval h the quintic Hermite through
+    (r, v, a) at both ends satisfies r1 - r0 = h (v0 + v1) / 2 + h^2 (a0 - a1) / 12 exactly when
+    the motion's jerk is constant; a real file matches to a fraction of a millimetre (0.27 mm on
+    the Spirent dynamic rover).
+    """
+    def fail(i, what):
+        raise TruthFileError(f"{path}, line {line_no[i]}: {what}: a corrupted row?")
+
+    radius = np.linalg.norm(r_e, axis=1)
+    bad = np.flatnonzero((radius < _RADIUS_M[0]) | (radius > _RADIUS_M[1]))
+    if bad.size:
+        fail(bad[0], f"position {radius[bad[0]]:.6g} m from the Earth's centre (Pos_X, Pos_Y, Pos_Z)")
+    h = np.diff(t)[:, None]
+    dr = np.diff(r_e, axis=0)
+    res = np.linalg.norm(dr - h * (v_e[:-1] + v_e[1:]) / 2 - h ** 2 * (a_e[:-1] - a_e[1:]) / 12, axis=1)
+    bad = np.flatnonzero(res > _STEP_TOL_M + 0.01 * np.linalg.norm(dr, axis=1))
+    if bad.size:
+        fail(bad[0] + 1, f"the position step from the line before differs by {res[bad[0]]:.4g} m from the one "
+                         "its velocity and acceleration give")
+    dv = np.diff(v_e, axis=0)
+    res = np.linalg.norm(dv - h * (a_e[:-1] + a_e[1:]) / 2, axis=1)
+    bad = np.flatnonzero(res > _VEL_TOL_MPS + 0.01 * np.linalg.norm(dv, axis=1))
+    if bad.size:
+        fail(bad[0] + 1, f"the velocity step from the line before differs by {res[bad[0]]:.4g} m/s from the "
+                         "one its acceleration gives")
+    bad = np.flatnonzero(np.abs(euler[:, 1]) > np.pi / 2 + 1e-9)
+    if bad.size:
+        fail(bad[0], f"Elevation {euler[bad[0], 1]:.6g} rad beyond +-pi/2")
+    rate = np.abs((np.diff(euler, axis=0) + np.pi) % (2 * np.pi) - np.pi) / h  # a bank through +-pi is no jump
+    bad = np.flatnonzero(rate.max(axis=1) > _MAX_EULER_RATE)
+    if bad.size:
+        k = int(np.argmax(rate[bad[0]]))
+        fail(bad[0] + 1, f"{('Bank', 'Elevation', 'Heading')[k]} changes at {rate[bad[0], k]:.4g} rad/s from the "
+                         f"line before (more than {_MAX_EULER_RATE:g})")
 
 
 class TruthInterpolant:
