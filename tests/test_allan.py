@@ -12,6 +12,7 @@ through the run-configuration loader with the fitted values.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -210,3 +211,73 @@ def test_cli_outputs_and_toml_snippet_round_trip(tmp_path, capsys):
     (out / "allan.csv").write_text("mine\n")
     rc, _, err = _run(capsys, ["allan", str(p), "--out-dir", str(out), "--no-plot"])
     assert rc == 2 and "not replaced" in err and (out / "allan.csv").read_text() == "mine\n"
+    # each output is checked by its own first bytes: a user's file beside an earlier allan.csv is kept
+    rc, _, err = _run(capsys, ["allan", str(p), "--out-dir", str(out), "--overwrite"])
+    assert rc == 0, err
+    assert b"tEXtSoftware\x00insnav allan" in (out / "allan.png").read_bytes()[:200]
+    rc, _, err = _run(capsys, ["allan", str(p), "--out-dir", str(out)])
+    assert rc == 0, err  # its own four files, the plot included, are replaced
+    for name in ("allan_terms.txt", "imu_noise.toml", "allan.png"):
+        (out / name).write_text("my notes\n")
+        rc, _, err = _run(capsys, ["allan", str(p), "--out-dir", str(out), "--no-plot"])
+        assert rc == 2 and err == (f"insnav allan: error: {out / name} exists and was not written by insnav "
+                                   "allan: not replaced (another --out-dir, or --overwrite)\n"), err
+        assert (out / name).read_text() == "my notes\n"
+        (out / name).unlink()
+
+
+def test_repeated_time_tags_are_one_line_naming_the_file(tmp_path, capsys):
+    """Every time tag written twice: the median interval is 0 (before: 'ZeroDivisionError: float
+    division by zero' after two RuntimeWarnings, with --allow-gaps)."""
+    t, g, f = _static_log(60.0)
+    t = np.repeat(t[::2], 2)
+    p = tmp_path / "dup.txt"
+    _write_kfgins(p, t, g, f)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc, out, err = _run(capsys, ["allan", str(p), "--out-dir", str(tmp_path / "o"), "--no-plot", "--allow-gaps"])
+    assert rc == 2 and err == (f"insnav allan: error: {p}: median sample interval 0 s: the time tags repeat (or "
+                               "decrease) at most samples; the Allan variance needs the IMU's own sampling times\n")
+
+
+def test_a_header_that_contradicts_the_columns_mapping_is_refused(tmp_path, capsys):
+    """An insnav imu.csv (t_s, dtheta_*, dv_*) read with --format csv and a TOML without a columns mapping
+    was read as t, ax..az, gx..gz rates: gyro N 0.0287 deg/sqrt(h) for 0.3, status 0."""
+    t, g, f = _static_log(60.0)
+    dt = 0.01
+    p = tmp_path / "imu.csv"
+    np.savetxt(p, np.column_stack([t, g * dt, f * dt]), delimiter=",", fmt="%.12g",
+               header="t_s,dtheta_x_rad,dtheta_y_rad,dtheta_z_rad,dv_x_mps,dv_y_mps,dv_z_mps", comments="")
+    cfg = tmp_path / "noise.toml"
+    cfg.write_text("[imu]\ngyro_arw_deg_per_sqrt_h = 0.3\n")
+    rc, out, err = _run(capsys, ["allan", str(p), "--format", "csv", "--config", str(cfg), "--out-dir",
+                                 str(tmp_path / "o"), "--no-plot"])
+    assert rc == 2 and err == (f"insnav allan: error: {p}, line 1: the header names field 2 'dtheta_x_rad', a gyro "
+                               "column, but the columns mapping ['t', 'ax', 'ay', 'az', 'gx', 'gy', 'gz'] reads it "
+                               "as 'ax': set the [imu] columns (an insnav dataset's imu.csv: --format insnav)\n"), err
+    # mapped right, the same file gives the simulated noise
+    cfg.write_text('[imu]\ncolumns = ["t", "gx", "gy", "gz", "ax", "ay", "az"]\nsamples = "increment"\n')
+    rc, out, err = _run(capsys, ["allan", str(p), "--format", "csv", "--config", str(cfg), "--out-dir",
+                                 str(tmp_path / "o"), "--no-plot", "--allow-motion"])
+    assert rc == 0, err
+    from insnav.config import load_config
+
+    assert np.allclose(load_config(tmp_path / "o" / "imu_noise.toml").imu.gyro_arw, 3e-4, rtol=0.05)
+
+
+def test_an_increment_that_overflows_as_a_rate_names_its_line(tmp_path, capsys):
+    """dv_x = 1e308 divided by the 0.01 s interval is inf: before, two RuntimeWarnings and 'non-finite rate
+    sample at row 499 (axes from 3)', naming neither the file nor the line."""
+    t, g, f = _static_log(60.0)
+    p = tmp_path / "huge.txt"
+    _write_kfgins(p, t, g, f)
+    lines = p.read_text().splitlines()
+    fields = lines[500].split()
+    fields[4] = "1e308"
+    lines[500] = " ".join(fields)
+    p.write_text("\n".join(lines) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc, out, err = _run(capsys, ["allan", str(p), "--out-dir", str(tmp_path / "o"), "--no-plot", "--allow-motion"])
+    assert rc == 2 and err.startswith(f"insnav allan: error: {p}, line 501: the accelerometer sample is not a finite "
+                                      "number as a rate (inf, ") and err.endswith("): a corrupted record?\n"), err

@@ -393,3 +393,26 @@ def test_tune_without_gnss_records_is_one_line_with_one_prefix(tmp_path, capsys)
     assert err.startswith("insnav tune: error: no GNSS record with an innovation covariance in the tuning "
                           "segment"), err
     assert len(err.splitlines()) == 1 and not out.exists()
+
+
+@pytest.mark.parametrize("fixes, message", [
+    (2, r"^insnav tune: error: 2 GNSS or constraint records with an innovation in the tuning segment \(before t = "
+        r"[0-9.]+ s\): too few to tune 7 factors \(at least 5 per factor, 35\)"),
+    (60, r"^insnav tune: error: .*: no GNSS record in the held-out segment \(30% of the data\)"),
+])
+def test_tune_refuses_too_few_records_before_writing(tmp_path, capsys, fixes, message):
+    """One or two GNSS fixes were "tuned" (scales of 20x, held-out rms(error/sigma) 39) and written with
+    status 0; a held-out part without a record wrote a TOML nothing had checked.  Both are one line, no
+    file (calib.tune.MIN_RECORDS_PER_FACTOR)."""
+    import re
+
+    import insnav
+    from insnav.cli import main
+
+    ds = insnav.simulate("seed000-sim", seed=1).save(tmp_path / "ds")
+    lines = (ds / "gnss.csv").read_text().splitlines()
+    (ds / "gnss.csv").write_text("\n".join(lines[:1 + fixes]) + "\n")  # the first fixes only
+    out = tmp_path / "tuned.toml"
+    assert main(["tune", str(ds), "--max-runs", "16", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert re.match(message, err) and len(err.splitlines()) == 1 and not out.exists(), err

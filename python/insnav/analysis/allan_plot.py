@@ -12,6 +12,7 @@ import numpy as np
 from ..errors import UserError
 
 _MARK = "# insnav allan"  # first line of an allan.csv
+PNG_SOFTWARE = "insnav allan"  # the allan.png's Software text chunk
 
 def units():
     """term -> ((gyro unit, factor to SI), (accel unit, factor to SI)) of the table."""
@@ -137,6 +138,6 @@ def allan_figure(curve, fits_g, fits_a, title: str, dpi: int = 110) -> bytes:
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": PNG_SOFTWARE})  # marks it as ours
     plt.close(fig)
     return buf.getvalue()

@@ -63,6 +63,12 @@ LOG_SCALE_BOUND = math.log(1e3)
 #: records above this chi-square quantile of their rows enter the likelihood clipped at it
 TRIM_PROB = 1.0 - 1e-4
 
+#: fewest innovation records (GNSS and constraint epochs) per tuned factor in the tuning segment.  A
+#: variance from n independent rows has a relative standard error sqrt(2 / n); 5 loose records (30 rows)
+#: give 26 % per factor.  Below it the likelihood's maximum is wherever a record or two put it (one fix
+#: gave "tuned" scales of 20x and a held-out rms(error/sigma) of 39)
+MIN_RECORDS_PER_FACTOR = 5
+
 #: tunable scale factors: name -> what they multiply
 PARAMETERS = {
     "gyro_arw": "gyro angle random walk, all axes ([imu] gyro_arw_deg_per_sqrt_h)",
@@ -650,13 +656,20 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
 
     base_scales = {k: 1.0 for k in names}
     ll_base = loglik(base_scales)
+    n_base, n_need = history[0][2], MIN_RECORDS_PER_FACTOR * len(names)
+    where = f"before t = {splits[0]:.3f} s" if blocks is None else "in its blocks"
+    if n_base == 0:
+        raise ConfigError(f"no GNSS record with an innovation covariance in the tuning segment ({where})")
+    if n_base < n_need:
+        raise ConfigError(f"{n_base} GNSS or constraint records with an innovation in the tuning segment ({where}): "
+                          f"too few to tune {len(names)} factors (at least {MIN_RECORDS_PER_FACTOR} per factor, "
+                          f"{n_need}); give a longer recording, fewer --params or a smaller --holdout")
     x0 = np.array([math.log(start.get(k, 1.0)) for k in names])
     _search(objective, names, x0, step, max_runs - 1, xtol, lambda: len(history))
     # the search's evaluations are in history (the base run too); pick the best of all
     best_scales, ll_best, n_best = max(history, key=lambda h: h[1])
     if not math.isfinite(ll_best) or n_best == 0:
-        raise ConfigError("no GNSS record with an innovation covariance in the tuning segment "
-                          + (f"(before t = {splits[0]:.3f} s)" if blocks is None else "(its blocks)"))
+        raise ConfigError(f"no GNSS record with an innovation covariance in the tuning segment ({where})")
     tuned = scaled_config(cfg, noise, best_scales)
     if tuned.coupling == "tight":  # run as tuned (_plain_robust)
         tuned.robust = _plain_robust(tuned.robust)

@@ -102,9 +102,10 @@ def read_rates(path, fmt: str = "auto", config=None, imu_tag=None) -> dict:
             samples = _read_mapped(p, fmt, config, imu_tag)
             t = samples.t_s
             if samples.samples == "increment":
-                tau0 = float(np.median(np.diff(t))) if t.size > 1 else math.nan
-                return dict(t_s=t, gyro_radps=samples.gyro_b / tau0, acc_mps2=samples.acc_b / tau0,
-                            lines=samples.lines, path=str(p))
+                tau0 = _median_interval(t, str(p))
+                with np.errstate(over="ignore"):  # an overflow is named by check_log
+                    return dict(t_s=t, gyro_radps=samples.gyro_b / tau0, acc_mps2=samples.acc_b / tau0,
+                                lines=samples.lines, path=str(p))
             return dict(t_s=t, gyro_radps=samples.gyro_b, acc_mps2=samples.acc_b, lines=samples.lines, path=str(p))
         if fmt == "insnav":
             from ..data.dataset import ImuData, check_finite_rows, read_csv
@@ -129,9 +130,26 @@ def read_rates(path, fmt: str = "auto", config=None, imu_tag=None) -> dict:
             raise
         raise UserError(str(exc).splitlines()[0]) from None
     t = np.asarray(imu.t, float)
-    tau0 = float(np.median(np.diff(t))) if t.size > 1 else math.nan
+    tau0 = _median_interval(t, path_s)
     lines = imu.origin.all_lines(len(t)) if imu.origin is not None else None
-    return dict(t_s=t, gyro_radps=imu.dtheta_b / tau0, acc_mps2=imu.dv_b / tau0, lines=lines, path=path_s)
+    with np.errstate(over="ignore"):  # an overflow is named by check_log
+        return dict(t_s=t, gyro_radps=imu.dtheta_b / tau0, acc_mps2=imu.dv_b / tau0, lines=lines, path=path_s)
+
+
+def _interval_error(path: str, tau0: float) -> UserError:
+    return UserError(f"{path}: median sample interval {tau0:.6g} s: the time tags repeat (or decrease) at most "
+                     "samples; the Allan variance needs the IMU's own sampling times")
+
+
+def _median_interval(t, path: str) -> float:
+    """The median sample interval [s] of increments (NaN for fewer than 2 samples: check_log names that);
+    a one-line error naming the file when it is not positive (every time tag repeated)."""
+    if t.size < 2:
+        return math.nan
+    tau0 = float(np.median(np.diff(t)))
+    if not tau0 > 0:
+        raise _interval_error(path, tau0)
+    return tau0
 
 
 def _read_mapped(p: Path, fmt: str, config, imu_tag):
@@ -182,8 +200,17 @@ def check_log(d: dict, *, allow_gaps: bool = False, allow_motion: bool = False) 
     n = t.size
     if n < 4:
         raise UserError(f"{path}: {n} IMU samples: an Allan analysis needs a long static log")
+    for what, a in (("gyro", d["gyro_radps"]), ("accelerometer", d["acc_mps2"])):
+        bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+        if bad.size:  # e.g. an increment of 1e308 divided by the interval
+            i = int(bad[0])
+            at = f", line {int(d['lines'][i])}" if d.get("lines") is not None else f", sample {i + 1}"
+            raise UserError(f"{path}{at}: the {what} sample is not a finite number as a rate "
+                            f"({', '.join(f'{v:.6g}' for v in a[i])}): a corrupted record?")
     s = check_sampling(t)
     tau0 = s["tau0_s"]
+    if not tau0 > 0:  # rate samples (read_rates did not need the interval)
+        raise _interval_error(path, tau0)
     notes = []
     if not s["uniform"]:
         if s["gaps"].size:
@@ -256,11 +283,34 @@ def plot_allan(path, curve, fits_g, fits_a, title: str) -> None:
     atomic_write_with(path, lambda tmp: Path(tmp).write_bytes(data))
 
 
+def _written_by_allan(f: Path) -> bool:
+    """Whether ``f`` (one of :data:`OUT_FILES`) holds an earlier ``insnav allan`` output, by its own first
+    bytes: each file is checked, so a hand-edited imu_noise.toml beside an allan.csv is not replaced."""
+    import re
+    import stat
+
+    from ..analysis.allan_plot import PNG_SOFTWARE
+
+    try:
+        if not stat.S_ISREG(os.stat(f).st_mode):  # a FIFO would block the read
+            return False
+        with open(f, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    if f.name == "allan.csv":
+        return head.startswith(_MARK.encode())
+    if f.name == "imu_noise.toml":
+        return head.startswith(b"# IMU noise identified by insnav allan")
+    if f.name == "allan_terms.txt":
+        return re.match(rb"[^\n]*: \d+ samples at [^\n]* Hz, [^\n]*; overlapping Allan deviation at ", head) is not None
+    return head.startswith(b"\x89PNG") and PNG_SOFTWARE.encode() in head
+
+
 def _check_out_dir(out: Path, inputs: list, overwrite: bool) -> None:
     from .._outputs import check_writable, input_files
 
     ins = input_files(*inputs)
-    earlier = (out / "allan.csv").is_file() and (out / "allan.csv").read_bytes()[:len(_MARK)] == _MARK.encode()
     for name in OUT_FILES:
         f = out / name
         if not f.exists():
@@ -271,7 +321,7 @@ def _check_out_dir(out: Path, inputs: list, overwrite: bool) -> None:
             raise UserError(f"--out-dir {out}: {f} is an input of this analysis: choose another --out-dir")
         if f.is_dir():
             raise UserError(f"--out-dir {out}: {f} is a folder")
-        if not earlier and not overwrite:
+        if not overwrite and not _written_by_allan(f):
             raise UserError(f"{f} exists and was not written by insnav allan: not replaced (another --out-dir, or "
                             "--overwrite)")
     if out.exists() and not out.is_dir():

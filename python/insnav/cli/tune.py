@@ -209,6 +209,10 @@ def cmd_tune(args) -> int:
                         else holdout_report(sol, reference, intervals=res.heldout))
     except ConfigError as exc:
         raise UserError(str(exc)) from None
+    if args.holdout > 0 and reps[0]["records"] == 0:
+        src = next(a for a in (args.dataset, args.config, args.obs, args.gnss, "tune") if a)
+        raise UserError(f"{src}: no GNSS record in the held-out segment ({args.holdout:.0%} of the data): "
+                        "nothing to check the tuned settings on; give a longer recording or --holdout 0")
     d = tuned_toml_dict(base_d, res)
     span = (f"t < {res.t_split:.3f} s" if res.split == "tail"
             else f"the first {1 - args.holdout:.0%} of each {args.block_s:g} s block")

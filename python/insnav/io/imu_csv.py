@@ -463,6 +463,36 @@ def _time_after(tokens, ref_int: int) -> np.ndarray:
     return out
 
 
+_GYRO_WORDS = ("gyro", "dtheta", "omega", "angvel", "ang_vel", "angular", "rad_s", "radps", "dps", "deg_s")
+_ACC_WORDS = ("acc", "dv_", "dvel", "specific", "mps2", "m_s2", "m/s^2")
+
+
+def _sensor_of(name: str) -> str | None:
+    """'gyro', 'acc' or None (not recognised, or both) for a header name."""
+    n = name.strip().lower()
+    g, a = any(w in n for w in _GYRO_WORDS), any(w in n for w in _ACC_WORDS)
+    return "gyro" if g and not a else "acc" if a and not g else None
+
+
+def _header_contradiction(tok, cols, samples: str) -> str | None:
+    """What a header line skipped by a positional ``columns`` mapping says against it: a column mapped
+    as an accelerometer axis whose name is a gyro's (or the reverse), or increments (``dtheta_*``,
+    ``dv_*``, insnav's own imu.csv) read as rates.  None when the names do not contradict it."""
+    if cols is None or len(tok) != len(cols):
+        return None
+    for j, (role, name) in enumerate(zip(cols, tok)):
+        want = "acc" if role in ("ax", "ay", "az") else "gyro" if role in ("gx", "gy", "gz") else None
+        got = _sensor_of(name)
+        if want and got and got != want:
+            return (f"the header names field {j + 1} {name.strip()!r}, a {'gyro' if got == 'gyro' else 'n accelerometer'} "
+                    f"column, but the columns mapping {list(cols)} reads it as {role!r}: set the [imu] columns "
+                    "(an insnav dataset's imu.csv: --format insnav)")
+        if want and samples == "rate" and name.strip().lower().startswith(("dtheta", "dv_")):
+            return (f"the header names field {j + 1} {name.strip()!r}, an increment, but samples = 'rate': set "
+                    "samples = \"increment\" (an insnav dataset's imu.csv: --format insnav)")
+    return None
+
+
 def _is_number(tok: str) -> bool:
     try:
         float(tok)
@@ -732,6 +762,9 @@ class CsvLineParser:
                 self.cols = _header_columns(path, lineno, tok, self.fmt.columns, delim)
                 return None
             if not _is_number(tok[0].strip()):
+                what = _header_contradiction(tok, self.cols, self.fmt.samples)
+                if what:
+                    raise ImuFileError(path, lineno, what)
                 return None
         if self.cols is None:
             raise ImuFileError(path, lineno, "no header line before the data")
