@@ -235,6 +235,8 @@ def test_kfgins_reader_faults(ds, tmp_path):
     ("cycle_period_s = -1.0\n", r"config key 'cycle_period_s'"),
     ("output_decimation = 2.5\n", r"config key 'output_decimation'"),
     ("[imu]\ngyro_arw_deg_per_sqrt_h = 'x'\n", r"key 'imu.gyro_arw_deg_per_sqrt_h'"),
+    ("[imu]\nacc_bias_rw_mg_per_sqrt_h = \"0.2\"\n", r"key 'imu.acc_bias_rw_mg_per_sqrt_h': bad value '0.2'"),
+    ("[imu]\ngyro_arw_deg_per_sqrt_h = [0.1, true, 0.1]\n", r"key 'imu.gyro_arw_deg_per_sqrt_h': bad value"),
     ("[imu]\ngyro_bias_tau_s = 0\n", r"key 'imu.gyro_bias_tau_s': bad value 0; allowed: finite values > 0 \[s\]$"),
     ("[imu]\nacc_scale_tau_s = [100, -1, 100]\n", r"key 'imu.acc_scale_tau_s': bad value \[100, -1, 100\]"),
     ("filter = \n", r"run\.toml: not valid TOML"),

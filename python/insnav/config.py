@@ -11,6 +11,7 @@ from .errors import close_matches
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -1175,7 +1176,10 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
             if k not in _USER_UNITS:
                 raise ConfigError(f"{source}: unknown key 'imu.{k}'{_suggest(k, _USER_UNITS)}")
             fld, factor = _USER_UNITS[k]
-            try:
+            try:  # numbers only: float() would read a quoted "0.2" and a true
+                if not all(isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+                           for x in np.ravel(np.asarray(v, dtype=object))):
+                    raise TypeError
                 arr = np.broadcast_to(np.asarray(v, dtype=float), (3,)) * factor
             except (TypeError, ValueError):
                 arr = np.full(3, np.nan)
