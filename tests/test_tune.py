@@ -416,3 +416,19 @@ def test_tune_refuses_too_few_records_before_writing(tmp_path, capsys, fixes, me
     assert main(["tune", str(ds), "--max-runs", "16", "--out", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert re.match(message, err) and len(err.splitlines()) == 1 and not out.exists(), err
+
+
+def test_tune_cli_refuses_a_repeated_param_and_tight_without_pseudoranges(tmp_path, capsys):
+    """'--params gyro_arw,gyro_arw' reported 2 factors for one; --coupling tight on a dataset of loose fixes
+    only ran every search step into 'no GNSS record with an innovation covariance'."""
+    import insnav
+    from insnav.cli import main
+
+    ds = insnav.simulate("seed000-sim", seed=1).save(tmp_path / "ds")
+    out = tmp_path / "tuned.toml"
+    assert main(["tune", str(ds), "--params", "gyro_arw,gyro_arw", "--out", str(out), "--quiet"]) == 2
+    assert capsys.readouterr().err == ("insnav tune: error: --params gyro_arw,gyro_arw: 'gyro_arw' given twice\n")
+    assert main(["tune", str(ds), "--coupling", "tight", "--out", str(out), "--quiet"]) == 2
+    assert capsys.readouterr().err == (f"insnav tune: error: {ds}: no raw GNSS data (gnss_raw.csv, or RINEX with "
+                                       "--format rinex): tight coupling tunes on pseudorange innovations\n")
+    assert not out.exists()

@@ -179,6 +179,9 @@ def cmd_tune(args) -> int:
     if not (0.0 <= args.holdout < 0.9):
         raise UserError(f"--holdout {args.holdout:g}: expected a fraction of the data in [0, 0.9) (0: no hold-out)")
     params = None if args.params is None else [p.strip() for p in args.params.split(",") if p.strip()]
+    if params is not None and len(set(params)) < len(params):
+        twice = next(p for p in params if params.count(p) > 1)
+        raise UserError(f"--params {args.params}: {twice!r} given twice")
     ins = [args.dataset, args.config, args.run_config, args.imu, args.gnss, args.obs, args.nav, args.imu_tag,
            args.reference]
     check_outputs([out], input_files(*ins), overwrite=args.overwrite, command="tune")
@@ -187,6 +190,11 @@ def cmd_tune(args) -> int:
         if args.constraints is not None:
             cfg.constraints.use = [c.strip() for c in args.constraints.split(",") if c.strip()]
         split_time(ds, args.holdout)  # a bad --holdout before any work
+        if (args.coupling or cfg.coupling) == "tight" and getattr(ds, "tight_inputs", None) is None \
+                and getattr(ds, "gnss_raw", None) is None:
+            src = next(a for a in (args.dataset, args.config, args.obs, args.gnss, "tune") if a)
+            raise UserError(f"{src}: no raw GNSS data (gnss_raw.csv, or RINEX with --format rinex): tight coupling "
+                            "tunes on pseudorange innovations")
         progress = None
         if not args.quiet:
             def progress(k, scales, ll):
