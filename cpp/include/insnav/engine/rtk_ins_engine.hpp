@@ -715,7 +715,18 @@ class RtkInsEngine {
     const double lam = fr[4];
     double n0 = fr[1] - fb[1];
     if (std::isfinite(fr[0]) && std::isfinite(fb[0])) n0 -= (fr[0] - fb[0]) / lam;
-    else n0 = sd_phase_[c * gnss::kMaxFreq + f] / lam;  // no code: from the INS-predicted geometry
+    else {  // no code: from the INS-predicted geometry, less the single-differenced receiver clock that
+            // the code-initialised ambiguities carry (the median SD code residual of the system's
+            // satellites; as gnss/rtk.hpp)
+      const int sys = sys_of(rover_ + common_r_[c] * gnss::RtkRow::kCols);
+      int n = 0;
+      for (int k = 0; k < n_common_; ++k) {
+        const double v = sd_code_[k * gnss::kMaxFreq + f];
+        if (k != c && std::isfinite(v) && sys_of(rover_ + common_r_[k] * gnss::RtkRow::kCols) == sys) clock_buf_[n++] = v;
+      }
+      const double clk = gnss::median_in_place(clock_buf_.data(), n);
+      n0 = (sd_phase_[c * gnss::kMaxFreq + f] - (std::isfinite(clk) ? clk : 0.0)) / lam;
+    }
     xe_(k) = n0;
     Pxe_.col(k).setZero();
     Pee_.row(k).setZero();
@@ -1392,6 +1403,7 @@ class RtkInsEngine {
   RtkAntenna ant_;
   int n_common_ = 0, n_used_sats_ = 0;
   std::array<int, gnss::kMaxSatKeys> base_of_{}, common_r_{}, common_b_{};
+  std::array<double, gnss::kMaxSatKeys> clock_buf_{};  // init_amb's single-differenced code residuals
   std::array<double, gnss::kMaxSatKeys> el_r_{}, el_b_{}, var_sd_{};
   std::array<bool, gnss::kMaxSatKeys> use_{};
   std::array<Vec3, gnss::kMaxSatKeys> u_{};

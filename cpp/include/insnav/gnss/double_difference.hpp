@@ -14,6 +14,7 @@
 // No heap allocation: the caller owns the fixed-size index arrays.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
@@ -36,6 +37,17 @@ struct RtkRow {
   static constexpr int kSatClock = kSatPos + 3;                 // c dt^s [m]
   static constexpr int kCols = kSatClock + 1;
 };
+
+/// The median of buf[0..n) (reordered in place; NaN for n = 0).  Used for the single-differenced
+/// receiver clock (rover - base) [m] of an ambiguity initialised without code (gnss/rtk.hpp and
+/// engine/rtk_ins_engine.hpp init_amb): the median over the system's satellites of
+/// SD(code) - SD(geometry).
+inline double median_in_place(double* buf, int n) {
+  if (n <= 0) return NAN;
+  std::nth_element(buf, buf + n / 2, buf + n);
+  const double hi = buf[n / 2];
+  return n % 2 ? hi : 0.5 * (hi + *std::max_element(buf, buf + n / 2));
+}
 
 /// The satellite key (system * 64 + prn) of an RtkRow, clamped into [0, kMaxSatKeys).
 inline int sat_key(const double* row) {

@@ -844,11 +844,25 @@ class RtkEngine {
     const double lam = fr[4];
     double n0 = fr[1] - fb[1];
     if (std::isfinite(fr[0]) && std::isfinite(fb[0])) n0 -= (fr[0] - fb[0]) / lam;
-    else {  // no code: from the geometry of the current estimate
+    else {  // no code: from the geometry of the current estimate, plus the single-differenced receiver
+            // clock that the code-initialised ambiguities carry (else a satellite without code, once
+            // the reference, puts that clock, up to 300 km, into every double difference)
+      const Vec3 rr = x_.segment<3>(RtkLayout::kPos);
       Vec3 e;
-      const double rho_r = range(rover_ + common_r_[c] * RtkRow::kCols, x_.segment<3>(RtkLayout::kPos), e);
-      const double rho_b = range(base_ + common_b_[c] * RtkRow::kCols, r_base_, e);
-      n0 -= (rho_r - rho_b) / lam;
+      const auto sd_range = [&](int k) {
+        return range(rover_ + common_r_[k] * RtkRow::kCols, rr, e) - range(base_ + common_b_[k] * RtkRow::kCols, r_base_, e);
+      };
+      const int sys = sys_of(rover_ + common_r_[c] * RtkRow::kCols);
+      int n = 0;
+      for (int k = 0; k < n_common_; ++k) {
+        const double* gr = rover_ + common_r_[k] * RtkRow::kCols;
+        const double* gb = base_ + common_b_[k] * RtkRow::kCols;
+        if (k == c || sys_of(gr) != sys) continue;
+        const double Pr = gr[RtkRow::kFreq0 + RtkRow::kPerFreq * f], Pb = gb[RtkRow::kFreq0 + RtkRow::kPerFreq * f];
+        if (std::isfinite(Pr) && std::isfinite(Pb)) clock_buf_[n++] = (Pr - Pb) - sd_range(k);
+      }
+      const double clk = median_in_place(clock_buf_.data(), n);
+      n0 -= (sd_range(c) + (std::isfinite(clk) ? clk : 0.0)) / lam;
     }
     clear_state(s);
     x_(s) = n0;
@@ -1431,6 +1445,7 @@ class RtkEngine {
   SlipDetector rover_slip_, base_slip_;
   std::array<std::uint8_t, kMaxSatKeys * kMaxFreq> flags_r_{}, flags_b_{};
   std::array<int, kMaxSatKeys> base_of_{}, common_r_{}, common_b_{};
+  std::array<double, kMaxSatKeys> clock_buf_{};  // init_amb's single-differenced code residuals
   std::array<double, kMaxSatKeys> el_r_{}, el_b_{}, var_sd_{};
   std::array<bool, kMaxSatKeys> use_{};
   std::array<Vec3, kMaxSatKeys> e_{};

@@ -1,0 +1,55 @@
+"""A satellite with carrier phase but without its code on a frequency (a blank ``C1C`` field, RINEX's
+"missing"): its ambiguity is initialised from the geometry, which must carry the single-differenced
+receiver clock that the code-initialised ambiguities carry (gnss/rtk.hpp and engine/rtk_ins_engine.hpp
+``init_amb``).  Without it, once that satellite was the reference, every double difference held the
+clock (up to 300 km): on WTZZ - WTZR with G05's C1C blanked, 0 of 120 epochs fixed, errors up to
+290 m and 3160 "outlier" resets, exit 0, where RTKLIB fixes 118 of 120."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from insnav.cli import main
+
+from conftest import SHARED_DATA
+
+W = SHARED_DATA / "euref_wettzell_wtzr_wtzz"
+ROVER = W / "WTZZ00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"
+BASE = W / "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"
+NAV = W / "ESBC00DNK_R_20201770000_01D_MN.rnx"
+BASE_POS = "4075580.3564,931854.0647,4801568.3345"  # WTZR antenna point (ECEF [m])
+
+pytestmark = pytest.mark.skipif(not W.is_dir(), reason=f"shared data not found: {W}")
+
+
+def _blank_code(src, dst, sat: str, obs_type: str):
+    """``src`` with the ``obs_type`` field of every ``sat`` line blanked (16 spaces)."""
+    lines = src.read_text().splitlines()
+    types = next(ln for ln in lines if ln.startswith(sat[0]) and "SYS / # / OBS TYPES" in ln).split()[2:]
+    k = types.index(obs_type)
+    out = [ln[:3 + 16 * k] + " " * 16 + ln[3 + 16 * (k + 1):] if ln.startswith(sat) else ln for ln in lines]
+    dst.write_text("\n".join(out) + "\n")
+    return dst
+
+
+def _run(tmp_path, capsys, rover, name):
+    out = tmp_path / f"{name}.pos"
+    assert main(["run", "--filter", "rtk", "--format", "rinex", "--obs", str(rover), "--base", str(BASE),
+                 "--nav", str(NAV), "--base-pos", BASE_POS, "--out", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    a = np.loadtxt(out, comments="%", usecols=(2, 3, 4, 5))
+    return a[:, :3], a[:, 3].astype(int)
+
+
+@pytest.mark.parametrize("fastpath", ["1", "0"])
+def test_a_satellite_without_l1_code_leaves_the_solution_as_it_was(tmp_path, capsys, monkeypatch, fastpath):
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", fastpath)
+    rover = _blank_code(ROVER, tmp_path / "rover.rnx", "G05", "C1C")
+    assert "G05" in rover.read_text() and rover.read_text() != ROVER.read_text()
+    pos, q = _run(tmp_path, capsys, rover, "blank")
+    pos0, q0 = _run(tmp_path, capsys, ROVER, "as_recorded")
+    assert np.all(q0 == 1) and np.all(q == 1) and q.size == 120
+    # lat, lon [deg] and h [m]: within 1 mm of the run on the file as recorded
+    dn = np.radians(pos[:, 0] - pos0[:, 0]) * 6.37e6
+    de = np.radians(pos[:, 1] - pos0[:, 1]) * 6.37e6 * np.cos(np.radians(pos0[:, 0]))
+    assert np.abs(dn).max() < 1e-3 and np.abs(de).max() < 1e-3 and np.abs(pos[:, 2] - pos0[:, 2]).max() < 1e-3
