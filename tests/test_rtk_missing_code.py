@@ -53,3 +53,25 @@ def test_a_satellite_without_l1_code_leaves_the_solution_as_it_was(tmp_path, cap
     dn = np.radians(pos[:, 0] - pos0[:, 0]) * 6.37e6
     de = np.radians(pos[:, 1] - pos0[:, 1]) * 6.37e6 * np.cos(np.radians(pos0[:, 0]))
     assert np.abs(dn).max() < 1e-3 and np.abs(de).max() < 1e-3 and np.abs(pos[:, 2] - pos0[:, 2]).max() < 1e-3
+
+
+def test_a_zero_pseudorange_is_a_missing_one_for_spp(tmp_path, capsys):
+    """G05's C1C written as 0.000 (as some writers mark a missing observation): before, SPP stopped with
+    "no epoch could be solved" (every epoch held G05's 0 m as a measurement).  Now the run equals the one
+    on the file with the field blank, and every epoch is solved."""
+    zero = tmp_path / "zero.rnx"
+    lines = _blank_code(ROVER, tmp_path / "blank.rnx", "G05", "C1C").read_text().splitlines()
+    types = next(ln for ln in lines if ln.startswith("G") and "SYS / # / OBS TYPES" in ln).split()[2:]
+    k = types.index("C1C")
+    zero.write_text("\n".join(ln[:3 + 16 * k] + f"{0.0:14.3f}  " + ln[3 + 16 * (k + 1):] if ln.startswith("G05")
+                              else ln for ln in lines) + "\n")
+    assert "         0.000  " in zero.read_text()
+    out = {}
+    for name, f in (("blank", tmp_path / "blank.rnx"), ("zero", zero)):
+        out[name] = tmp_path / f"{name}.csv"
+        assert main(["run", "--filter", "spp", "--format", "rinex", "--obs", str(f), "--nav", str(NAV), "--out",
+                     str(out[name])]) == 0
+        assert "120 of 120 epochs solved" in capsys.readouterr().out
+    a, b = (np.genfromtxt(out[n], delimiter=",", names=True) for n in ("blank", "zero"))
+    for col in ("lat_deg", "lon_deg", "h_m"):
+        np.testing.assert_array_equal(a[col], b[col])

@@ -661,7 +661,8 @@ class ObsData:
     prn : (m,) int
     C1, L1, D1, S1 : (m,) float
         Pseudorange [m], carrier phase [cycles], Doppler [Hz], C/N0 [dB-Hz]
-        of the system's chosen signal (``codes_by_system``); NaN where missing.
+        of the system's chosen signal (``codes_by_system``); NaN where missing (a pseudorange
+        written as 0.0 too).
     approx_r_e : (3,) float or None
         ``APPROX POSITION XYZ`` from the header [m].
     system : (m,) str
@@ -702,6 +703,11 @@ class ObsData:
     def __post_init__(self):
         if self.system is None:
             self.system = np.full(np.shape(self.prn), "G", dtype="<U1")
+        # a pseudorange written as 0.0 is a missing one (RINEX writers use 0.0 or a blank field): taken
+        # as a measurement, one satellite's 0 stopped every epoch it was in from solving
+        C1 = np.asarray(self.C1, dtype=float)
+        if np.any(C1 == 0.0):
+            self.C1 = np.where(C1 == 0.0, np.nan, C1)
         if not self.codes_by_system:
             self.codes_by_system = {"G": dict(self.codes)}
 
