@@ -87,8 +87,8 @@ def build_parser(command: str | None = None, areas: bool = True) -> "argparse.Ar
         epilog="examples:\n"
         "  insnav demo --quick                                  # the main job in a few seconds\n"
         "  insnav simulate seed000-sim --out run1               # 150 s at 200 Hz -> run1/*.csv\n"
-        "  insnav run run1 --filter rbukf --out run1/sol.csv\n"
-        "  insnav evaluate run1/sol.csv run1 --outages 50:90    # errors in m, m/s, deg; times in s\n"
+        "  insnav run run1 --filter rbukf --out run1-sol.csv     # beside the dataset, not inside it\n"
+        "  insnav evaluate run1-sol.csv run1 --outages 50:90    # errors in m, m/s, deg; times in s\n"
         "Each command has its own --help with examples.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
