@@ -185,6 +185,7 @@ def cmd_tune(args) -> int:
     ins = [args.dataset, args.config, args.run_config, args.imu, args.gnss, args.obs, args.nav, args.imu_tag,
            args.reference]
     check_outputs([out], input_files(*ins), overwrite=args.overwrite, command="tune")
+    src = next((a for a in (args.dataset, args.config, args.obs, args.gnss) if a), "tune")  # named in its messages
     try:
         ds, cfg, base_d = _load(args)
         if args.constraints is not None:
@@ -192,7 +193,6 @@ def cmd_tune(args) -> int:
         split_time(ds, args.holdout)  # a bad --holdout before any work
         if (args.coupling or cfg.coupling) == "tight" and getattr(ds, "tight_inputs", None) is None \
                 and getattr(ds, "gnss_raw", None) is None:
-            src = next(a for a in (args.dataset, args.config, args.obs, args.gnss, "tune") if a)
             raise UserError(f"{src}: no raw GNSS data (gnss_raw.csv, or RINEX with --format rinex): tight coupling "
                             "tunes on pseudorange innovations")
         progress = None
@@ -218,7 +218,6 @@ def cmd_tune(args) -> int:
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     if args.holdout > 0 and reps[0]["records"] == 0:
-        src = next(a for a in (args.dataset, args.config, args.obs, args.gnss, "tune") if a)
         raise UserError(f"{src}: no GNSS record in the held-out segment ({args.holdout:.0%} of the data): "
                         "nothing to check the tuned settings on; give a longer recording or --holdout 0")
     d = tuned_toml_dict(base_d, res)

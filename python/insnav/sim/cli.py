@@ -67,13 +67,13 @@ def cmd_simulate(args) -> int:
         return 0
     from .._progress import Progress
 
-    _check_disk_space(args.scenario, out)
+    scenario = _check_disk_space(args.scenario, args.seed, out)  # parsed once, here
     bar = Progress(f"insnav simulate {args.scenario}", unit=" steps")
     bar.enabled = bar.enabled and not args.quiet
     try:
         t = time.perf_counter()
         # block by block: memory bounded by the block, not by the scenario's length
-        ds, n_imu, n_gnss = simulate_to(out, args.scenario, seed=args.seed, overwrite=args.overwrite, progress=bar)
+        ds, n_imu, n_gnss = simulate_to(out, scenario, overwrite=args.overwrite, progress=bar)
         t_sim = time.perf_counter() - t
     finally:
         bar.close()
@@ -92,14 +92,15 @@ def cmd_simulate(args) -> int:
 _ROW_BYTES = {"imu": 100, "truth": 150, "imu_errors": 80}
 
 
-def _check_disk_space(scenario, out: Path) -> None:
-    """Refuse, before anything is written, a scenario whose tables cannot fit on the disk of
-    ``out`` (a misplaced exponent in ``duration_s`` would otherwise run for years, filling it)."""
+def _check_disk_space(scenario, seed, out: Path):
+    """The parsed scenario (its ``seed`` overridden by ``seed`` when given); refused, before anything
+    is written, when its tables cannot fit on the disk of ``out`` (a misplaced exponent in
+    ``duration_s`` would otherwise run for years, filling it)."""
     import shutil
 
     from .scenario import ScenarioError, load_scenario
 
-    sc = load_scenario(scenario)
+    sc = load_scenario(scenario, seed=seed)
     need = sc.duration * (sc.imu_rate * _ROW_BYTES["imu"] + sc.truth_rate * _ROW_BYTES["truth"]
                           + sc.errors_rate * _ROW_BYTES["imu_errors"])
     where = out.resolve().parent
@@ -110,6 +111,7 @@ def _check_disk_space(scenario, out: Path) -> None:
         raise ScenarioError(f"{scenario}: {sc.duration:.6g} s at {sc.imu_rate:g} Hz would write "
                          f"at least {need / 1e9:.3g} GB, more than the {free / 1e9:.3g} GB free in {where} "
                          "(check [[motion.segments]] duration_s and [imu] rate_hz)")
+    return sc
 
 
 def cmd_scenarios(args) -> int:
