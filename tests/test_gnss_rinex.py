@@ -346,6 +346,43 @@ def test_obs2_compiled_records_equal_python_reference(tmp_path):
         assert bad.splitlines()[ei.value.line - 1].find("1e8x00") >= 0
 
 
+def test_obs_events_blank_date_and_redeclared_types(tmp_path):
+    """Epoch flag 4 is followed by header lines (RINEX 3.05 Sec. 5.2.1, RINEX 2.11 Sec. 7.7).  An event
+    with a blank date (RINEX 3.05 Table A13) is skipped; a repeat of the header's types is accepted; a
+    different list (the columns after it would be misread) is refused by both parsers, naming the line."""
+    from insnav.gnss import rinex
+
+    event = "> 2021 04 28 18 00  1.0000000  4  1\nEVENT COMMENT" + " " * 47 + "COMMENT\n"
+    blank_date = OBS3.replace(event, ">" + " " * 30 + "4  1\nEVENT COMMENT" + " " * 47 + "COMMENT\n")
+    assert blank_date != OBS3
+    same_types = OBS3.replace(event, "> 2021 04 28 18 00  1.0000000  4  1\n"
+                              "E    4 C1X L1X D1X S1X                                      SYS / # / OBS TYPES\n")
+    head, tail = same_types.split("END OF HEADER", 1)
+    changed = head + "END OF HEADER" + tail.replace("E    4 C1X L1X D1X S1X", "E    4 L1X C1X D1X S1X")
+    ref = rinex._read_obs(write(tmp_path, "ref.rnx", OBS3), "GE", compiled=False)
+    for compiled in (True, False):
+        for name, text in (("blank.rnx", blank_date), ("same.rnx", same_types)):
+            o = rinex._read_obs(write(tmp_path, name, text), "GE", compiled=compiled)
+            assert_same_obs(o, ref)
+            assert o.epoch_t_gps_s.size == 2 and o.C1[-1] == 20576400.0
+        with pytest.raises(RinexError, match=r"changed\.rnx, line 11: the event on line 10 re-declares the "
+                                             r"observation types of E .*split the file before line 10"):
+            rinex._read_obs(write(tmp_path, "changed.rnx", changed), "GE", compiled=compiled)
+    # RINEX 2.11: the one list of types swapped by an event (C1 L1 -> L1 C1)
+    types = ["C1", "L1", "D1", "S1"]
+    text = _obs2(types, {"G05": [2.0e7, 1.0e8, -100.0, 40.0]})
+    swap = text.replace(" 21  4 28 18  0  1.0000000  4  1\n" + "THIS IS A COMMENT".ljust(60) + "COMMENT",
+                        " 21  4 28 18  0  1.0000000  4  1\n" + "     4    L1    C1    D1    S1".ljust(60)
+                        + "# / TYPES OF OBSERV")
+    assert swap != text
+    ev_line = swap.splitlines().index(" 21  4 28 18  0  1.0000000  4  1") + 1
+    for compiled in (True, False):
+        assert rinex._read_obs(write(tmp_path, "o.21o", text), "G", compiled=compiled).C1.tolist() == [2.0e7]
+        with pytest.raises(RinexError, match=rf"line {ev_line + 1}: the event on line {ev_line} re-declares the "
+                                             r"observation types of G"):
+            rinex._read_obs(write(tmp_path, "swap.21o", swap), "G", compiled=compiled)
+
+
 @pytest.mark.parametrize("parts", [
     ("rtklibexplorer_walk_0827", "rinex_derived", "gnss_1730.obs"),
     ("euref_wettzell_wtzr_wtzz", "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"),

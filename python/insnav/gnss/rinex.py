@@ -846,6 +846,31 @@ def _obs_types_header(src, header, version, check=""):
     return types
 
 
+def _check_event_types(src, records, version, types, ep_line):
+    """Refuse an event whose special records re-declare different observation types.
+
+    Epoch flag 4 is followed by header lines (RINEX 3.05 Sec. 5.2.1, RINEX 2.11 Sec. 7.7). The
+    records after it are read with the header's columns, so a changed list would misread every
+    field; a repeat of the header's own list is accepted.
+    """
+    label = "SYS / # / OBS TYPES" if version >= 3 else "# / TYPES OF OBSERV"
+    declared = [r for r in records if r[2] == label]
+    if not declared:
+        return
+    try:
+        new = _obs_types_header(src, declared, version)
+    except RinexError:
+        new = None
+    if not new:
+        raise src.error(f"the event on line {ep_line} re-declares the observation types without a system or count",
+                        declared[0][0])
+    for s, v in new.items():
+        if types.get(s) != v:
+            raise src.error(f"the event on line {ep_line} re-declares the observation types of {s} (not supported: "
+                            f"the records after it would be misread); split the file before line {ep_line}",
+                            declared[0][0])
+
+
 def read_rinex_obs(path, systems="G", codes=None) -> ObsData:
     """Read one signal's observations (pseudorange, phase, Doppler, C/N0) per system from RINEX 2.x / 3.x.
 
@@ -992,9 +1017,12 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
             if line[0] != ">":
                 raise src.error("bad record: expected an epoch line starting with '>'")
             try:
-                y = int(line[2:6]); mo = int(line[7:9]); d = int(line[10:12])
-                h = int(line[13:15]); mi = int(line[16:18]); sec = float(line[18:29])
                 flag = int(line[31:32]); nsat = int(line[32:35])
+                if flag in (2, 3, 4, 5):  # RINEX 3.05 Table A13: an event's date may be blank
+                    y = mo = d = 1; h = mi = 0; sec = 0.0
+                else:
+                    y = int(line[2:6]); mo = int(line[7:9]); d = int(line[10:12])
+                    h = int(line[13:15]); mi = int(line[16:18]); sec = float(line[18:29])
             except ValueError:
                 raise src.error(f"bad record: cannot parse epoch line {line[:35]!r}") from None
             clk = _float(src, line[41:56], "receiver clock offset")
@@ -1018,8 +1046,11 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
             raise src.error(f"bad record: epoch flag {flag} / count {nsat} out of range")
         if flag in (2, 3, 4, 5):
             # Event: nsat special records (header lines) follow.
+            records = []
             for _ in range(nsat):
-                src.next(f"the special records of the event on line {ep_line}")
+                rec = src.next(f"the special records of the event on line {ep_line}")
+                records.append((src.lineno, rec[:60].ljust(60), rec[60:].strip()))
+            _check_event_types(src, records, version, types, ep_line)
             continue
         if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and 0 <= sec < 61):
             raise src.error("bad record: impossible epoch date/time")

@@ -175,6 +175,9 @@ struct ObsColumns {
   /// RINEX 3.05 Sec. 5.1: a missing observation may be written as 0.0; true turns a 0.0 code or
   /// phase into NaN, false keeps the number as written.
   bool zero_is_missing = true;
+  /// Each system's header types joined by one blank ("C1C L1C D1C S1C"; RINEX 2: the one list,
+  /// under 'G'): an event that re-declares a different list is refused (EventTypes).
+  std::array<std::string, 128> type_list;
   ObsColumns() {
     n_types.fill(-1);
     for (auto& a : col)
@@ -226,6 +229,47 @@ inline void read_sat_observations(const ObsColumns& c, unsigned char s, const Fi
   }
 }
 
+/// The observation types re-declared by the special records of one event (RINEX 3.05 Sec. 5.2.1,
+/// RINEX 2.11 Sec. 7.7: epoch flag 4 is followed by header lines).  The records keep being read
+/// with the header's columns, so a list that differs from the header's would misread every field
+/// after it: refused, naming the event.  A repeat of the header's own list is accepted.
+struct EventTypes {
+  std::map<char, std::string> lists;  // system -> codes joined by one blank
+  char cur = 0;
+  long line = 0;  // the first record that declares types
+  void add(const LineReader& L, bool rinex2) {
+    const std::string label = L.len > 60 ? trimmed(L.field(60, 20)) : std::string();
+    if (label != (rinex2 ? "# / TYPES OF OBSERV" : "SYS / # / OBS TYPES")) return;
+    if (!line) line = L.lineno;
+    const bool first = rinex2 ? !blank(L.b, std::min<size_t>(6, L.len)) : L.len > 0 && L.b[0] != ' ';
+    if (first) {
+      cur = rinex2 ? 'G' : L.b[0];
+      lists[cur].clear();
+    }
+    if (!cur) return;  // a continuation without its first line: still a change
+    std::string& out = lists[cur];
+    const size_t a0 = rinex2 ? 10 : 7, step = rinex2 ? 6 : 4, n = rinex2 ? 2 : 3;
+    for (size_t k = 0; k < (rinex2 ? 9u : 13u); ++k) {
+      const std::string code = trimmed(L.field(a0 + step * k, n));
+      if (code.empty()) continue;
+      if (!out.empty()) out += ' ';
+      out += code;
+    }
+  }
+  void check(const LineReader& L, const ObsColumns& c, long ep_line) const {
+    if (!line) return;
+    for (const auto& [s, list] : lists)
+      if (static_cast<unsigned char>(s) >= 128 || list != c.type_list[static_cast<unsigned char>(s)])
+        L.fail_at(line, std::string("the event on line ") + std::to_string(ep_line) + " re-declares the observation types" +
+                            (s ? std::string(" of ") + s : std::string()) +
+                            " (not supported: the records after it would be misread); split the file before line " +
+                            std::to_string(ep_line));
+    if (lists.empty() || !cur)
+      L.fail_at(line, "the event on line " + std::to_string(ep_line) +
+                          " re-declares the observation types without a system or count");
+  }
+};
+
 }  // namespace detail
 
 /// Parse the records after END OF HEADER: text[offset, size) whose first line is line
@@ -246,12 +290,16 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
         L.fail("bad record: cannot parse epoch line '" + L.field(0, 35) + "'");
       return static_cast<int>(v);
     };
-    const int y = epoch_int(2, 4), mo = epoch_int(7, 2), d = epoch_int(10, 2), h = epoch_int(13, 2);
-    const int mi = epoch_int(16, 2);
-    double sec;
-    if (L.len < 29 || !detail::parse_num(L.b + 18, 11, sec) || !std::isfinite(sec))
-      L.fail("bad record: cannot parse epoch line '" + L.field(0, 35) + "'");
     const int flag = epoch_int(31, 1), nsat = epoch_int(32, 3);
+    // RINEX 3.05 Table A13: the date of an event (flags 2-5) may be blank
+    const bool event = flag >= 2 && flag <= 5;
+    int y = 1980, mo = 1, d = 6, h = 0, mi = 0;
+    double sec = 0.0;
+    if (!event) {
+      y = epoch_int(2, 4), mo = epoch_int(7, 2), d = epoch_int(10, 2), h = epoch_int(13, 2), mi = epoch_int(16, 2);
+      if (L.len < 29 || !detail::parse_num(L.b + 18, 11, sec) || !std::isfinite(sec))
+        L.fail("bad record: cannot parse epoch line '" + L.field(0, 35) + "'");
+    }
     double clk = NAN;
     if (L.len > 41 && !detail::parse_num(L.b + 41, std::min<size_t>(15, L.len - 41), clk)) {
       std::string f = L.field(41, 15);
@@ -262,11 +310,15 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
     if (flag > 6 || nsat < 0)
       L.fail("bad record: epoch flag " + std::to_string(flag) + " / count " + std::to_string(nsat) + " out of range");
     const long ep_line = L.lineno;
-    if (flag >= 2 && flag <= 5) {  // event: nsat header lines follow
-      for (int i = 0; i < nsat; ++i)
+    if (event) {  // nsat header lines follow
+      detail::EventTypes types;
+      for (int i = 0; i < nsat; ++i) {
         if (!L.next())
           L.fail_at(L.lineno + 1, "unexpected end of file while reading the special records of the event on line " +
                                       std::to_string(ep_line));
+        types.add(L, false);
+      }
+      types.check(L, c, ep_line);
       continue;
     }
     if (!(mo >= 1 && mo <= 12 && d >= 1 && d <= 31 && h >= 0 && h <= 23 && mi >= 0 && mi <= 59 && sec >= 0 && sec < 61))
@@ -352,11 +404,15 @@ inline void read_rinex2_obs_body(const char* text, size_t size, const std::strin
       L.fail("bad number '" + trimmed(L.field(68, 12)) + "' for receiver clock offset");
     if (flag > 6 || nsat < 0)
       L.fail("bad record: epoch flag " + std::to_string(flag) + " / count " + std::to_string(nsat) + " out of range");
-    if (flag >= 2 && flag <= 5) {
-      for (int i = 0; i < nsat; ++i)
+    if (flag >= 2 && flag <= 5) {  // nsat header lines follow
+      detail::EventTypes types;
+      for (int i = 0; i < nsat; ++i) {
         if (!L.next())
           L.fail_at(L.lineno + 1, "unexpected end of file while reading the special records of the event on line " +
                                       std::to_string(ep_line));
+        types.add(L, true);
+      }
+      types.check(L, c, ep_line);
       continue;
     }
     if (!(mo >= 1 && mo <= 12 && d >= 1 && d <= 31 && h >= 0 && h <= 23 && mi >= 0 && mi <= 59 && sec >= 0 && sec < 61))
@@ -510,7 +566,10 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
              " types, lists " + std::to_string(types[s].size()));
   ObsColumns c;
   for (const auto& [s, ty] : types)
-    if (static_cast<unsigned char>(s) < 128) c.n_types[s] = static_cast<int>(ty.size());
+    if (static_cast<unsigned char>(s) < 128) {
+      c.n_types[s] = static_cast<int>(ty.size());
+      for (const auto& t : ty) c.type_list[s] += (c.type_list[s].empty() ? "" : " ") + t;
+    }
   for (const auto& [s, slots] : prefs) {
     if (static_cast<unsigned char>(s) >= 128) continue;
     c.want[s] = types.count(s) > 0;
