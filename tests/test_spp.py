@@ -159,6 +159,27 @@ def test_raim_detects_and_excludes_a_50m_fault(n_sats):
     assert np.mean(sp0.raim_status != 0) < 0.01
 
 
+def test_a_pseudorange_thousands_of_km_off_is_left_out_not_the_epoch():
+    """A pseudorange written as 100 m (20 000 km off) keeps Gauss-Newton from converging on the full set;
+    the row whose omission fits best is left out (RTKLIB raim_fde) and RAIM judges the rest: every epoch
+    solved, the faulty row the one excluded, the same solution from the C++ solver and the numpy loop."""
+    from insnav.gnss.spp import _solve_spp_python
+
+    inp, faulty = _epochs(np.random.default_rng(3), 60, 9, fault=-2.0e7)
+    n_off = solve_spp(inp, R0, raim=False).solved.sum()
+    assert n_off < 6  # the full fit diverges
+    sp = solve_spp(inp, R0)
+    assert_same_solution(sp, _solve_spp_python(inp, R0))
+    start = inp.epoch_start[:-1]
+    assert all(sp.row_excluded[start[e] + faulty[e]] for e in range(len(faulty)))
+    assert sp.solved.all() and (sp.n_excluded == 1).all() and (sp.raim_status == 1).all()
+    clean, _ = _epochs(np.random.default_rng(3), 60, 9)  # the same draws without the fault
+    err = np.linalg.norm(sp.r_e - R_RX, axis=1)
+    assert np.median(err) < 2.0 * np.median(np.linalg.norm(solve_spp(clean, R0).r_e - R_RX, axis=1))
+    # with RAIM off, or no exclusion allowed, nothing is left out: the same epochs as without RAIM
+    assert solve_spp(inp, R0, options=SppOptions(max_exclusions=0)).solved.sum() == n_off
+
+
 def test_rate_fde_excludes_a_doppler_fault():
     inp, faulty = _epochs(np.random.default_rng(30), 300, 10, rate_fault=5.0)  # 5 m/s; sigmas 0.1-0.4 m/s
     sp = solve_spp(inp, R0)

@@ -349,6 +349,24 @@ def _empty_outputs(E: int, M: int) -> dict:
                 n_rate_excluded=np.zeros(E, np.int64), raim_status=np.full(E, 4, np.int8))
 
 
+def _leave_one_out(sats, system, w, x0, iterations):
+    """The row whose omission gives the smallest weighted residual sum among the fits that converge, or
+    None (the fault exclusion of RTKLIB ``raim_fde`` for an epoch whose full fit does not converge:
+    one pseudorange off by thousands of kilometres).  The C++ twin is ``detail::leave_one_out``."""
+    best, best_chi2 = None, np.inf
+    keep = np.ones(len(sats), bool)
+    for k in range(len(sats)):
+        keep[k] = False
+        fit = _position_fit(sats[keep], system[keep], w[keep], x0, iterations)
+        keep[k] = True
+        if fit is None or not fit[4]:
+            continue
+        chi2 = float(np.sum((fit[3] * w[np.arange(len(sats)) != k]) ** 2))
+        if chi2 < best_chi2:
+            best, best_chi2 = k, chi2
+    return best
+
+
 def _solve_spp_python(inputs, r0_e, *, options: SppOptions | None = None, sigma_pr_m=None, sigma_prr_mps=None,
                       raim: bool | None = None, warm_start: bool = True) -> SppSolution:
     """:func:`solve_spp` epoch by epoch in numpy (the reference of the compiled solver)."""
@@ -395,6 +413,13 @@ def _solve_spp_python(inputs, r0_e, *, options: SppOptions | None = None, sigma_
                 fit = False  # too few rows: keep the previous epoch's start
                 break
             fit = _position_fit(s, sysr, w, x0, opt.iterations)
+            if (fit is None or not fit[4]) and use_raim and rows.size - 1 - p >= 1 and not (
+                    0 <= opt.max_exclusions <= len(excluded)):
+                k = _leave_one_out(s, sysr, w, x0, opt.iterations)
+                if k is not None:  # a gross row kept Gauss-Newton from converging: leave it out and refit
+                    excluded.append(int(rows[k]))
+                    rows = np.delete(rows, k)
+                    continue
             if fit is None or not fit[4]:
                 fit = None
                 break

@@ -207,6 +207,36 @@ inline int argmax(const SppRowsVec& a) {
 }
 
 
+/// The row whose omission gives the smallest weighted residual sum among the fits that converge, or
+/// -1 (the fault exclusion of RTKLIB raim_fde for an epoch whose full fit does not converge).  Rows
+/// as code_position_fit's; H, u, rng, y are scratch.  The Python twin is spp._leave_one_out.
+template <class Row>
+inline int leave_one_out(int n, int np, const Row& row, const int* col, const SppRowsVec& w, const Eigen::Vector4d& x0,
+                         int iterations, SppRowsMat& H, SppRowsBy3& u, SppRowsVec& rng, SppRowsVec& y) {
+  int best = -1;
+  double best_chi2 = std::numeric_limits<double>::infinity();
+  int col_k[kSppMaxRows];
+  SppRowsVec w_k(n - 1);
+  SppParVec x(np);
+  for (int k = 0; k < n; ++k) {
+    for (int j = 0, m = 0; j < n; ++j)
+      if (j != k) {
+        col_k[m] = col[j];
+        w_k[m++] = w[j];
+      }
+    const auto row_k = [&](int j) { return row(j < k ? j : j + 1); };
+    x.setZero();
+    x.head<4>() = x0;
+    if (!code_position_fit(n - 1, np, row_k, col_k, w_k, iterations, x, H, u, rng, y)) continue;
+    const double chi2 = y.cwiseProduct(w_k).squaredNorm();
+    if (chi2 < best_chi2) {
+      best = k;
+      best_chi2 = chi2;
+    }
+  }
+  return best;
+}
+
 }  // namespace detail
 
 /// Solve every epoch of a batch (see the file comment).  Returns kBadInput when an epoch has
@@ -283,6 +313,16 @@ inline Status solve_spp_batch(const SppBatchInput& in, const SppOptions& opt, Sp
                                   s[L::kSatClock]};
       };
       if (!code_position_fit(n, np, fit_row, col, w, opt.iterations, x, H, u, rng, y)) {
+        // a gross row can keep Gauss-Newton from converging: leave out the row whose omission fits
+        // best (RTKLIB raim_fde) and start again; the RAIM tests then judge the rest
+        const bool may_exclude = opt.raim && n - 1 - np >= 1 && !(opt.max_exclusions >= 0 && opt.max_exclusions <= n_excl);
+        const int k = may_exclude ? detail::leave_one_out(n, np, fit_row, col, w, x0, opt.iterations, H, u, rng, y) : -1;
+        if (k >= 0) {
+          excluded[n_excl++] = rows[k];
+          for (int j = k; j < n - 1; ++j) rows[j] = rows[j + 1];
+          --n;
+          continue;
+        }
         fit = Fit::kFailed;
         break;
       }
