@@ -520,6 +520,32 @@ def test_cli_spp_on_smartloc(smartloc, tmp_path):
     assert np.array_equal(load_solution(out2).lat_deg, sol.lat_deg)
 
 
+def test_cli_nav_without_klobuchar_is_one_warning_line(smartloc, tmp_path):
+    """The smartLoc run with the coefficients cut from its navigation file: one line
+    ``warning: <file>: no Klobuchar coefficients ...`` (not Python's warning form), exit 0, and the solution
+    of the defaults -- not that of no ionosphere (1.5-30 m a row)."""
+    nav = tmp_path / "noion.16n"
+    nav.write_text("".join(ln for ln in (smartloc / "brdc1580.16n").read_text().splitlines(True)
+                           if "ION ALPHA" not in ln and "ION BETA" not in ln))
+    outs = {}
+    for name, nav_p in (("bare", nav), ("broadcast", smartloc / "brdc1580.16n")):
+        out = tmp_path / f"{name}.csv"
+        r = subprocess.run([sys.executable, "-m", "insnav", "run", "--filter", "spp", "--format", "rinex", "--obs",
+                            str(smartloc / "Berlin_Potsdamer_Platz.obs"), "--nav", str(nav_p), "--out", str(out)],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        warn = [ln for ln in r.stderr.splitlines() if "Klobuchar" in ln]
+        if name == "bare":
+            assert warn == [f"warning: {nav}: no Klobuchar coefficients (IONOSPHERIC CORR GPSA/GPSB or ION ALPHA/BETA); "
+                            "the ionosphere is modelled with the defaults of RTKLIB (the broadcast of 2004-01-01)"]
+        else:
+            assert warn == []
+        assert "Warning" not in r.stderr
+        outs[name] = np.loadtxt(out, delimiter=",", skiprows=1, usecols=(1, 2, 3))
+    dh = outs["bare"][:, 2] - outs["broadcast"][:, 2]
+    assert outs["bare"].shape == outs["broadcast"].shape and 0.0 < np.median(np.abs(dh)) < 10.0
+
+
 def test_cli_spp_bad_key_and_missing_nav_are_one_line_errors(tmp_path):
     cfg = tmp_path / "bad.toml"
     cfg.write_text('[gnss]\nweighting = "rtklib"\n')

@@ -1,11 +1,16 @@
 """Exceptions that name what the user has to fix."""
 from __future__ import annotations
 
-__all__ = ["UserError", "close_matches"]
+__all__ = ["InsnavWarning", "UserError", "close_matches"]
 
 
 class UserError(Exception):
     """An error in the user's input: the CLI prints it as one line and exits with status 2."""
+
+
+class InsnavWarning(UserWarning):
+    """A result the user should know how it was made (e.g. a model's default coefficients in place of
+    missing broadcast ones): the CLI prints it as one line, ``warning: ...``."""
 
 
 def close_matches(name, known) -> list[str]:

@@ -231,9 +231,32 @@ def _ended_by_signal(name, term: bool) -> int:
     return 143 if term else 130
 
 
+def _one_line_warnings() -> None:
+    """Print each :class:`insnav.errors.InsnavWarning` once, as ``warning: <text>`` on stderr (not Python's
+    ``file:line: category`` form with the source line); other warnings keep Python's own printing."""
+    import warnings
+
+    from ..errors import InsnavWarning
+
+    python_show = warnings.showwarning
+    shown: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, InsnavWarning):
+            return python_show(message, category, filename, lineno, file, line)
+        text = str(message)
+        if text not in shown:
+            shown.add(text)
+            print(f"warning: {text}", file=sys.stderr)
+
+    warnings.showwarning = show
+    warnings.filterwarnings("always", category=InsnavWarning)
+
+
 def main(argv=None) -> int:
     """Run one command; its status: 0, 2 (an error, one line on stderr), 130 (Ctrl-C, one line)
     or 143 (SIGTERM, one line)."""
+    _one_line_warnings()
     command = _command_of(sys.argv[1:] if argv is None else argv)
     version_only = command is None and _asks_version(sys.argv[1:] if argv is None else argv)
     args = None

@@ -9,7 +9,40 @@ import numpy as np
 
 from .ephemeris import C_LIGHT
 
-__all__ = ["klobuchar_delay", "saastamoinen_delay", "standard_atmosphere"]
+__all__ = ["KLOBUCHAR_DEFAULT_ALPHA", "KLOBUCHAR_DEFAULT_BETA", "klobuchar_coefficients", "klobuchar_delay",
+           "saastamoinen_delay", "standard_atmosphere"]
+
+#: Klobuchar coefficients used when a navigation file broadcasts none: the GPS broadcast of 2004-01-01,
+#: RTKLIB's ``ion_default`` (rtkcmn.c ``ionmodel``), alpha_n [s/semicircle^n], beta_n [s/semicircle^n].
+KLOBUCHAR_DEFAULT_ALPHA = np.array([0.1118e-07, -0.7451e-08, -0.5961e-07, 0.1192e-06])
+KLOBUCHAR_DEFAULT_BETA = np.array([0.1167e+06, -0.2294e+06, -0.1311e+06, 0.1049e+07])
+
+
+def klobuchar_coefficients(nav):
+    """The Klobuchar coefficients of ``nav`` (``ion_alpha``, ``ion_beta``), or the defaults.
+
+    A navigation file without ``IONOSPHERIC CORR GPSA/GPSB`` (RINEX 3) or ``ION ALPHA/BETA`` (RINEX 2), or
+    with all eight zero, gets :data:`KLOBUCHAR_DEFAULT_ALPHA` / :data:`KLOBUCHAR_DEFAULT_BETA` (as RTKLIB
+    does) and an :class:`insnav.errors.InsnavWarning` naming the file: leaving the ionosphere out would bias
+    every pseudorange by its 2-30 m delay.
+
+    Returns
+    -------
+    alpha, beta : ndarray (4,)
+    default : bool
+        True when the defaults stand in.
+    """
+    alpha, beta = getattr(nav, "ion_alpha", None), getattr(nav, "ion_beta", None)
+    if alpha is not None and beta is not None and (np.any(np.asarray(alpha) != 0) or np.any(np.asarray(beta) != 0)):
+        return np.asarray(alpha, float), np.asarray(beta, float), False
+    import warnings
+
+    from ..errors import InsnavWarning
+
+    warnings.warn(f"{getattr(nav, 'path', 'the navigation data')}: no Klobuchar coefficients (IONOSPHERIC CORR "
+                  "GPSA/GPSB or ION ALPHA/BETA); the ionosphere is modelled with the defaults of RTKLIB "
+                  "(the broadcast of 2004-01-01)", InsnavWarning, stacklevel=3)
+    return KLOBUCHAR_DEFAULT_ALPHA.copy(), KLOBUCHAR_DEFAULT_BETA.copy(), True
 
 
 def klobuchar_delay(t_gps_s, lat, lon, el, az, alpha, beta):

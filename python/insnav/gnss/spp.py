@@ -575,7 +575,7 @@ def _spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=N
     position, whose satellite states are then carried over by :func:`_propagate_states`
     instead of evaluated again."""
     from .._median import group_median
-    from .corrections import klobuchar_delay, saastamoinen_delay
+    from .corrections import klobuchar_coefficients, klobuchar_delay, saastamoinen_delay
     from .ephemeris import C_LIGHT
     from .geometry import elevation_azimuth
     from .tight_inputs import TightInputs
@@ -619,9 +619,10 @@ def _spp_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, weighting=N
     el, az = elevation_azimuth(r0, ts["r_e"])
     iono_m = np.zeros(rows.size)
     tropo_m = np.zeros(rows.size)
-    if iono and getattr(nav, "ion_alpha", None) is not None and getattr(nav, "ion_beta", None) is not None:
+    if iono:
+        alpha, beta, _ = klobuchar_coefficients(nav)
         iono_m = klobuchar_delay(t_rx, np.full(rows.size, lat), np.full(rows.size, lon), el, az,
-                                 nav.ion_alpha, nav.ion_beta) * ts["iono_scale"]
+                                 alpha, beta) * ts["iono_scale"]
     if tropo:
         tropo_m = saastamoinen_delay(np.full(rows.size, lat), np.full(rows.size, h), el)
     prr = -ts["wavelength_m"] * np.asarray(obs.D1, float)[rows]

@@ -194,7 +194,8 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
         GPS time of dataset time 0 [s]; ``epoch_t = t_gps - t0_gps_s``.
     approx_r_e : (3,) approximate receiver ECEF position [m] (for light time,
         elevation and the atmosphere; a few hundred metres do not matter).
-    iono, tropo : Klobuchar (needs ``nav.ion_alpha/ion_beta``) and Saastamoinen.
+    iono, tropo : Klobuchar (``nav.ion_alpha/ion_beta``; RTKLIB's defaults without them,
+        :func:`insnav.gnss.corrections.klobuchar_coefficients`) and Saastamoinen.
     sigma_pr_zenith_m, sigma_prr_zenith_mps, use_cn0 : see :func:`pseudorange_sigma`.
     t_range : (t_min, t_max) in dataset time, optional.
 
@@ -216,7 +217,7 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     """
     from .._median import group_median
     from .ephemeris import C_LIGHT, select_ephemeris, transmit_states
-    from .corrections import klobuchar_delay, saastamoinen_delay
+    from .corrections import klobuchar_coefficients, klobuchar_delay, saastamoinen_delay
     from .geometry import elevation_azimuth
     from .measurements import L1_WAVELENGTH
     from .rinex import _parse_systems
@@ -259,9 +260,9 @@ def tight_inputs_from_rinex(obs, nav, t0_gps_s: float, approx_r_e, *, elevation_
     el, az = elevation_azimuth(r0, ts.r_e)
     iono_m = np.zeros(rows.size)
     tropo_m = np.zeros(rows.size)
-    if iono and nav.ion_alpha is not None and nav.ion_beta is not None:
-        iono_m = klobuchar_delay(t_rx, np.full(rows.size, lat), np.full(rows.size, lon), el, az,
-                                 nav.ion_alpha, nav.ion_beta)
+    if iono:
+        alpha, beta, _ = klobuchar_coefficients(nav)
+        iono_m = klobuchar_delay(t_rx, np.full(rows.size, lat), np.full(rows.size, lon), el, az, alpha, beta)
     if tropo:
         tropo_m = saastamoinen_delay(np.full(rows.size, lat), np.full(rows.size, h), el)
     prr = -L1_WAVELENGTH * np.asarray(obs.D1, float)[rows]
@@ -384,7 +385,7 @@ def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, m
     """Multi-system :func:`tight_inputs_from_rinex` (same steps, per-row system and signal)."""
     from .._median import group_median
     from .broadcast import select_multi, transmit_states_multi
-    from .corrections import klobuchar_delay, saastamoinen_delay
+    from .corrections import klobuchar_coefficients, klobuchar_delay, saastamoinen_delay
     from .ephemeris import C_LIGHT
     from .geometry import elevation_azimuth
     from .measurements import L1_WAVELENGTH
@@ -428,10 +429,11 @@ def _tight_inputs_multi(obs, nav, t0_gps_s, approx_r_e, *, elevation_mask_deg, m
     el, az = elevation_azimuth(r0, np.where(good[:, None], ts.r_e, r0 + 1.0))
     iono_m = np.zeros(rows.size)
     tropo_m = np.zeros(rows.size)
-    if iono and nav.ion_alpha is not None and nav.ion_beta is not None:
+    if iono:
+        alpha, beta, _ = klobuchar_coefficients(nav)
         scale = (ts.wavelength_m / L1_WAVELENGTH) ** 2  # Klobuchar is the L1 delay; 1/f^2 to the signal
         iono_m = scale * klobuchar_delay(t_rx, np.full(rows.size, lat), np.full(rows.size, lon), el, az,
-                                         nav.ion_alpha, nav.ion_beta)
+                                         alpha, beta)
     if tropo:
         tropo_m = saastamoinen_delay(np.full(rows.size, lat), np.full(rows.size, h), el)
     prr = -ts.wavelength_m * np.asarray(obs.D1, float)[rows]
