@@ -142,7 +142,15 @@ def test_rinex_obs_round_trip(tmp_path):
     from insnav.gnss.rinex import read_rinex_obs
 
     sim = simulate_rtk(_scenario("rtk-open-sky-car", 40.0, slip_rate_per_h=600.0), seed=5)
-    files = sim.write(tmp_path)
+    files = sim.write(tmp_path / "new" / "dir")  # made with its parents
+    assert sorted(p.name for p in (tmp_path / "new" / "dir").iterdir()) == [
+        "base.obs", "nav.rnx", "rover.obs", "rtk_truth.csv"]
+    before = files["rover"].read_bytes()
+    with pytest.raises(FileExistsError, match=r"rover\.obs: exists \(overwrite_ok=False\)"):
+        sim.write(tmp_path / "new" / "dir", overwrite_ok=False)
+    assert files["rover"].read_bytes() == before
+    with pytest.raises(NotADirectoryError, match="not a directory"):
+        sim.write(files["nav"])
     r = sim.rover
     for codes, k in ((None, 0), ({"G": ("C2W",), "E": ("C5Q",)}, 1)):
         obs = read_rinex_obs(files["rover"], systems="GE", codes=codes)

@@ -227,6 +227,14 @@ class RtkSimulation:
         antenna ECEF position at the reception time (``t_gps_s, x_e_m,
         y_e_m, z_e_m, lat_deg, lon_deg, h_m, n_sats_rover, n_sats_common``).
 
+        Parameters
+        ----------
+        directory : path
+            Made (with its parents) when missing.
+        overwrite_ok : bool
+            False: refuse (FileExistsError naming it) when one of the four files exists; nothing is
+            written then.
+
         Returns
         -------
         dict
@@ -237,6 +245,13 @@ class RtkSimulation:
         from ..gnss.rinex_write import write_rinex_nav, write_rinex_obs
 
         d = Path(directory)
+        if d.exists() and not d.is_dir():
+            raise NotADirectoryError(f"{d}: not a directory (simulate_rtk writes four files into a directory)")
+        if not overwrite_ok:
+            for name in ("rover.obs", "base.obs", "nav.rnx", "rtk_truth.csv"):
+                if (d / name).exists():
+                    raise FileExistsError(f"{d / name}: exists (overwrite_ok=False)")
+        d.mkdir(parents=True, exist_ok=True)
         out = {}
         types = self.obs_types()
         for rx, name in ((self.rover, "rover"), (self.base, "base")):
