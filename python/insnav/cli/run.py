@@ -39,7 +39,8 @@ RAIM fault detection and exclusion; [gnss] (weighting model legacy|rtklib|cn0, m
 factors, systems) and [spp] (raim, raim_alpha, ...) tables of --config.  Beside --out:
 <out>.spp.csv (clock, inter-system biases, drift, DOPs, RAIM status per epoch).
 
---format rinex: real GPS L1 C/A data (RINEX 2/3 obs + nav, LNAV ephemerides) and an IMU CSV;
+--format rinex: real GNSS data (RINEX 2/3 obs + nav: GPS, and GLONASS, Galileo, BeiDou with
+[rinex] systems or [gnss] systems; the start uses GPS) and an IMU CSV;
 the [rinex] table of --config says how to read the IMU file (columns, units g|mps2 and
 dps|rps, rates or increments, time gps_s|gps_sow|gpst_unix_s or an IMU tick counter with an
 RTKLIB str2str .tag file), the mounting rotation and lever arm and the initial heading
