@@ -75,3 +75,28 @@ def test_a_zero_pseudorange_is_a_missing_one_for_spp(tmp_path, capsys):
     a, b = (np.genfromtxt(out[n], delimiter=",", names=True) for n in ("blank", "zero"))
     for col in ("lat_deg", "lon_deg", "h_m"):
         np.testing.assert_array_equal(a[col], b[col])
+
+
+@pytest.mark.parametrize("system", ["E", "C"])
+def test_a_zero_approx_position_without_gps_is_bootstrapped_from_the_other_systems(tmp_path, capsys, system):
+    """APPROX POSITION XYZ written as zeros (unknown) and a Galileo-only or BeiDou-only run: the start
+    position was bootstrapped from GPS satellites only, so the run stopped with "no observation has a GPS
+    ephemeris".  Now it starts from the centroid of the run's own satellites: every epoch solved, each
+    within 1 mm of the run on the file with the header's position."""
+    lines = ROVER.read_text().splitlines()
+    zero = tmp_path / "zero.rnx"
+    zero.write_text("\n".join(f"{0.0:14.4f}{0.0:14.4f}{0.0:14.4f}".ljust(60) + "APPROX POSITION XYZ"
+                              if ln[60:].startswith("APPROX POSITION XYZ") else ln for ln in lines) + "\n")
+    assert zero.read_text() != ROVER.read_text()
+    cfg = tmp_path / "sys.toml"
+    cfg.write_text(f'[gnss]\nsystems = ["{system}"]\n')
+    out = {}
+    for name, f in (("header", ROVER), ("zero", zero)):
+        out[name] = tmp_path / f"{name}.csv"
+        assert main(["run", "--filter", "spp", "--format", "rinex", "--obs", str(f), "--nav", str(NAV), "--config",
+                     str(cfg), "--out", str(out[name])]) == 0
+        assert f"120 of 120 epochs solved, filter spp ({system}," in capsys.readouterr().out
+    a, b = (np.genfromtxt(out[n], delimiter=",", names=True) for n in ("header", "zero"))
+    assert np.abs(a["h_m"] - b["h_m"]).max() < 1e-3
+    assert np.abs(a["lat_deg"] - b["lat_deg"]).max() * 1.11e5 < 1e-3
+    assert np.abs(a["lon_deg"] - b["lon_deg"]).max() * 0.73e5 < 1e-3

@@ -371,12 +371,21 @@ def _approx_position(obs, nav, t_week0):
         return np.asarray(r, float)
     from ..gnss.ephemeris import sat_position_velocity, select_ephemeris
 
-    gps = np.asarray(getattr(obs, "system", np.full(np.shape(obs.prn), "G"))) == "G"  # multi-system obs
+    system = np.asarray(getattr(obs, "system", np.full(np.shape(obs.prn), "G")))  # multi-system obs
+    gps = system == "G"
     idx = select_ephemeris(nav.eph, obs.prn[gps], obs.t_gps_s[gps])
     ok = idx >= 0
-    if not ok.any():
-        raise ValueError(f"{obs.path}: no observation has a GPS ephemeris in {getattr(nav, 'path', 'the nav file')}")
-    rs = sat_position_velocity(nav.eph, idx[ok], obs.t_gps_s[gps][ok]).r_e
+    systems = "G"
+    if ok.any():
+        rs = sat_position_velocity(nav.eph, idx[ok], obs.t_gps_s[gps][ok]).r_e
+    else:  # no GPS: the other systems' satellites (states of tight_inputs_from_rinex, from any start)
+        systems = "".join(s for s in "REC" if np.any(system == s))
+        rows = tight_inputs_from_rinex(obs, nav, t_week0, np.array([earth.A, 0.0, 0.0]), elevation_mask_deg=-90.0,
+                                       iono=False, tropo=False, systems=systems).sats if systems else np.zeros((0, 12))
+        rs = rows[np.isfinite(rows[:, 2]), 2:5]
+        if rs.size == 0:
+            raise ValueError(f"{obs.path}: no observation has an ephemeris in {getattr(nav, 'path', 'the nav file')}"
+                             " (and the header has no APPROX POSITION XYZ)")
     c = rs.mean(axis=0)
     r_start = c / np.linalg.norm(c) * earth.A
     # Every caller solves again from this position and then from the median of that solution, and a
@@ -388,7 +397,8 @@ def _approx_position(obs, nav, t_week0):
                 else (obs,)):
         r0 = r_start
         for _ in range(2):  # rough inputs -> single point -> again
-            inp = tight_inputs_from_rinex(sub, nav, t_week0, r0, elevation_mask_deg=-90.0, iono=False, tropo=False)
+            inp = tight_inputs_from_rinex(sub, nav, t_week0, r0, elevation_mask_deg=-90.0, iono=False, tropo=False,
+                                          systems=systems)
             spp = single_point_solution(inp, r0)
             good = np.isfinite(spp.r_e[:, 0])
             if not good.any():
@@ -396,7 +406,8 @@ def _approx_position(obs, nav, t_week0):
             r0 = np.array([median(spp.r_e[good, k]) for k in range(3)])  # np.median(axis=0), without numpy.ma
         if good.any():
             return r0
-    raise ValueError(f"{obs.path}: no epoch with 4 GPS satellites for a first position fix")
+    raise ValueError(f"{obs.path}: no epoch with 4 {'GPS ' if systems == 'G' else ''}satellites for a first "
+                     "position fix")
 
 
 #: epochs (about) of the start-position bootstrap of :func:`_approx_position`
