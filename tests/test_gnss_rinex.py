@@ -383,6 +383,35 @@ def test_obs_events_blank_date_and_redeclared_types(tmp_path):
             rinex._read_obs(write(tmp_path, "swap.21o", swap), "G", compiled=compiled)
 
 
+def test_obs_repeated_epoch_is_skipped_with_one_warning(tmp_path):
+    """An epoch at the time of the one before it (overlapping files merged): both parsers keep the first and
+    skip the repeat whole -- the file reads as without it -- and warn once, naming the repeat's line."""
+    from insnav.errors import InsnavWarning
+    from insnav.gnss import rinex
+
+    last = "> 2021 04 28 18 00  2.0000000  0  1\nG05  20576400.000                                          50.000\n"
+    assert OBS3.endswith(last)
+    twice = OBS3 + last.replace("20576400.000", "20576499.000")
+    ref = rinex._read_obs(write(tmp_path, "ref.rnx", OBS3), "GE", compiled=False)
+    n_lines = len(OBS3.splitlines())
+    for compiled in (True, False):
+        with pytest.warns(InsnavWarning, match=rf"twice\.rnx, line {n_lines + 1}: this epoch repeats the time of the "
+                                               r"one before it; the first is kept, the repeats skipped"):
+            o = rinex._read_obs(write(tmp_path, "twice.rnx", twice), "GE", compiled=compiled)
+        assert_same_obs(o, ref)
+        assert o.C1[-1] == 20576400.0
+    # RINEX 2.11: the same epoch written three times -> one warning counting the two repeats
+    text = _obs2(["C1", "L1", "D1", "S1"], {"G05": [2.0e7, 1.0e8, -100.0, 40.0]})
+    lines = text.splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith(" 21  4 28 18  0  0.0000000"))
+    epoch = lines[k:k + 2]
+    thrice = "\n".join(lines[:k + 2] + epoch + epoch + lines[k + 2:]) + "\n"
+    for compiled in (True, False):
+        with pytest.warns(InsnavWarning, match=rf"line {k + 3}: .* \(and 1 more epochs do\)"):
+            o = rinex._read_obs(write(tmp_path, "thrice.21o", thrice), "G", compiled=compiled)
+        assert o.epoch_t_gps_s.size == 1 and o.C1.tolist() == [2.0e7]
+
+
 @pytest.mark.parametrize("parts", [
     ("rtklibexplorer_walk_0827", "rinex_derived", "gnss_1730.obs"),
     ("euref_wettzell_wtzr_wtzz", "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"),

@@ -100,3 +100,24 @@ def test_a_zero_approx_position_without_gps_is_bootstrapped_from_the_other_syste
     assert np.abs(a["h_m"] - b["h_m"]).max() < 1e-3
     assert np.abs(a["lat_deg"] - b["lat_deg"]).max() * 1.11e5 < 1e-3
     assert np.abs(a["lon_deg"] - b["lon_deg"]).max() * 0.73e5 < 1e-3
+
+
+@pytest.mark.parametrize("fastpath", ["1", "0"])
+def test_a_repeated_rover_epoch_gives_no_repeated_row(tmp_path, capsys, monkeypatch, fastpath):
+    """An epoch written twice in the rover file: before, the solution had 121 rows with one time twice.
+    Now one warning line names the repeat, and the solution equals the one on the file as recorded."""
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", fastpath)
+    lines = ROVER.read_text().splitlines()
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("> ")]
+    a, b = starts[3], starts[4]
+    twice = tmp_path / "twice.rnx"
+    twice.write_text("\n".join(lines[:b] + lines[a:b] + lines[b:]) + "\n")
+    pos0, q0 = _run(tmp_path, capsys, ROVER, "as_recorded")
+    out = tmp_path / "twice.pos"
+    assert main(["run", "--filter", "rtk", "--format", "rinex", "--obs", str(twice), "--base", str(BASE),
+                 "--nav", str(NAV), "--base-pos", BASE_POS, "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {twice}, line {b + 1}: this epoch repeats the time of the one before it" in err
+    pos = np.loadtxt(out, comments="%", usecols=(2, 3, 4))
+    assert pos.shape == pos0.shape == (120, 3)
+    np.testing.assert_array_equal(pos, pos0)

@@ -52,6 +52,8 @@ py::dict read_obs(const std::string& path, const std::map<std::string, std::vect
   d["chosen"] = chosen;
   d["epoch_t_gps_s"] = to_array(t.epoch_t_gps_s);
   d["epoch_flag"] = to_array(t.epoch_flag);
+  d["n_repeated_epochs"] = t.n_repeated_epochs;
+  d["first_repeated_line"] = t.first_repeated_line;
   d["row_epoch"] = to_array(t.row_epoch);
   d["row_sys"] = to_array(t.row_sys);
   d["row_prn"] = to_array(t.row_prn);
@@ -114,6 +116,8 @@ py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size
   d["epoch_t_gps_s"] = to_array(t.epoch_t_gps_s);
   d["epoch_flag"] = to_array(t.epoch_flag);
   d["epoch_clock_s"] = to_array(t.epoch_clock_s);
+  d["n_repeated_epochs"] = t.n_repeated_epochs;
+  d["first_repeated_line"] = t.first_repeated_line;
   d["row_epoch"] = to_array(t.row_epoch);
   d["row_sys"] = to_array(t.row_sys);
   d["row_prn"] = to_array(t.row_prn);

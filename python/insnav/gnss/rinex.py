@@ -846,6 +846,20 @@ def _obs_types_header(src, header, version, check=""):
     return types
 
 
+def warn_repeated_epochs(path, n: int, first_line: int) -> None:
+    """One :class:`insnav.errors.InsnavWarning` when ``n`` epochs of ``path`` repeated the time of the epoch
+    before them (a merge of overlapping files, a logger writing an epoch twice): the readers keep the first
+    and skip the repeats whole, as RTKLIB's ``sortobs`` keeps one observation per satellite and time."""
+    if n:
+        import warnings
+
+        from ..errors import InsnavWarning
+
+        warnings.warn(f"{path}, line {first_line}: this epoch repeats the time of the one before it"
+                      f"{f' (and {n - 1} more epochs do)' if n > 1 else ''}; the first is kept, the repeats skipped",
+                      InsnavWarning, stacklevel=3)
+
+
 def _check_event_types(src, records, version, types, ep_line):
     """Refuse an event whose special records re-declare different observation types.
 
@@ -984,6 +998,7 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
                               approx, glo_k)
 
     ep_t, ep_flag, ep_clk = [], [], []
+    repeated = [0, 0]  # epochs at the time of the one kept before them, the line of the first
     r_ep, r_prn, r_sys = [], [], []
     r_val = {k: [] for k in keys}
     r_lli = []
@@ -1056,6 +1071,10 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
             raise src.error("bad record: impossible epoch date/time")
         t = gps_seconds_from_calendar(y, mo, d, h, mi, sec)
         keep = flag in (0, 1)
+        if keep and ep_t and t == ep_t[-1]:  # the time of the epoch kept before it: skipped (warn_repeated_epochs)
+            keep = False
+            repeated[0] += 1
+            repeated[1] = repeated[1] or ep_line
         e_idx = len(ep_t)
         if rinex3:
             for _ in range(nsat):
@@ -1109,6 +1128,7 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
             ep_flag.append(flag)
             ep_clk.append(clk)
 
+    warn_repeated_epochs(src.path, *repeated)
     ep_t = np.asarray(ep_t, dtype=float)
     e = np.asarray(r_ep, dtype=np.int64)
     wk, tw = week_tow(ep_t)
@@ -1134,6 +1154,7 @@ def _obs_from_core(path, version, raw, head, types, want, codes_by_sys, gcodes, 
         d = _core.read_rinex3_obs_body(raw, path, head[0], head[1], types, select, False, version < 3)
     except RuntimeError as exc:
         raise _core_rinex_error(path, exc) from None
+    warn_repeated_epochs(path, d["n_repeated_epochs"], d["first_repeated_line"])
     ep_t = np.asarray(d["epoch_t_gps_s"], dtype=float)
     e = np.asarray(d["row_epoch"], dtype=np.int64)
     obs = np.asarray(d["obs"])

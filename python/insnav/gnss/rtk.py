@@ -306,6 +306,9 @@ def read_phase_obs(path, systems: str = "GREC") -> PhaseObs:
                 line = None
         what = msg.split(": ", 1)[1] if ": " in msg else msg
         raise RinexError(path, line, what) from None
+    from .rinex import warn_repeated_epochs
+
+    warn_repeated_epochs(path, d["n_repeated_epochs"], d["first_repeated_line"])
     obs = np.asarray(d["obs"]).reshape(-1, 3, 5)
     sys_a = np.asarray(d["row_sys"], dtype=np.uint8).view("S1").astype("<U1") if len(d["row_sys"]) else \
         np.zeros(0, "<U1")
@@ -378,6 +381,9 @@ def _read_phase_obs_v2(path, systems) -> PhaseObs:
         d = _core.read_rinex3_obs_body(raw, path, head[0], head[1], types, select, True, True)
     except RuntimeError as exc:
         raise _core_rinex_error(path, exc) from None
+    from .rinex import warn_repeated_epochs
+
+    warn_repeated_epochs(path, d["n_repeated_epochs"], d["first_repeated_line"])
     obs = np.asarray(d["obs"]).reshape(-1, 3, 5)
     row_sys = np.asarray(d["row_sys"])
     sys_a = row_sys.astype(np.uint8).view("S1").astype("<U1") if row_sys.size else np.zeros(0, "<U1")

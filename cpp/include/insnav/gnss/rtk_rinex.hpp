@@ -395,6 +395,7 @@ inline RtkRinexResult rtk_rinex_run(const RtkRinexInputs& in, const RtkOptions& 
       return fail(e.what());
     }
     const auto& t = rx[k].t;
+    if (t.n_repeated_epochs > 0) return fail("repeated epochs");  // the usual path warns about them
     const std::size_t ne = t.epoch_t_gps_s.size(), m = t.row_epoch.size();
     rx[k].off.assign(ne + 1, 0);
     for (std::size_t i = 0; i < m; ++i) {

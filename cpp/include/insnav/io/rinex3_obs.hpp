@@ -46,6 +46,10 @@ struct RinexObsTable {
   std::vector<double> epoch_clock_s;          // receiver clock offset of the epoch line [s], NaN if blank
   std::vector<int> row_epoch, row_sys, row_prn;
   std::vector<double> obs;                    // n_rows x (kObsSlots * kObsPerSlot), NaN where missing
+  /// Epochs (flag 0/1) at the very time of the epoch kept before them -- a merge or a logger writing one
+  /// twice -- skipped whole (RTKLIB's sortobs keeps the first too), and the line of the first one.
+  long n_repeated_epochs = 0;
+  long first_repeated_line = 0;
 };
 
 namespace detail {
@@ -274,7 +278,8 @@ struct EventTypes {
 
 /// Parse the records after END OF HEADER: text[offset, size) whose first line is line
 /// ``lineno0 + 1`` of the file.  Epochs with flag 0 or 1 are kept, events (2-5) skipped with
-/// their special records, flag 6 epochs read and dropped (as the header-driven reader does).
+/// their special records, flag 6 epochs read and dropped (as the header-driven reader does), and an
+/// epoch at the time of the one kept before it skipped (RinexObsTable::n_repeated_epochs).
 inline void read_rinex3_obs_body(const char* text, size_t size, const std::string& path, size_t offset,
                                  long lineno0, const ObsColumns& c, RinexObsTable& out) {
   detail::LineReader L{text, size, path};
@@ -325,7 +330,11 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
       L.fail("bad record: impossible epoch date/time");
     const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
                      h * 3600.0 + mi * 60.0 + sec;
-    const bool keep = flag == 0 || flag == 1;
+    bool keep = flag == 0 || flag == 1;
+    if (keep && !out.epoch_t_gps_s.empty() && t == out.epoch_t_gps_s.back()) {
+      keep = false;
+      if (out.n_repeated_epochs++ == 0) out.first_repeated_line = ep_line;
+    }
     const int e = static_cast<int>(out.epoch_t_gps_s.size());
     for (int i = 0; i < nsat; ++i) {
       if (!L.next())
@@ -419,7 +428,11 @@ inline void read_rinex2_obs_body(const char* text, size_t size, const std::strin
       L.fail("bad record: impossible epoch date/time");
     const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
                      h * 3600.0 + mi * 60.0 + sec;
-    const bool keep = flag == 0 || flag == 1;
+    bool keep = flag == 0 || flag == 1;
+    if (keep && !out.epoch_t_gps_s.empty() && t == out.epoch_t_gps_s.back()) {
+      keep = false;
+      if (out.n_repeated_epochs++ == 0) out.first_repeated_line = ep_line;
+    }
     const int e = static_cast<int>(out.epoch_t_gps_s.size());
     sats.clear();
     while (true) {  // the satellite list: columns 33-68 of the epoch line and of its continuation lines
