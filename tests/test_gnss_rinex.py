@@ -412,6 +412,33 @@ def test_obs_repeated_epoch_is_skipped_with_one_warning(tmp_path):
         assert o.epoch_t_gps_s.size == 1 and o.C1.tolist() == [2.0e7]
 
 
+@pytest.mark.parametrize("file_sys, ts, refused", [
+    ("M", "GPS", None), ("M", "GAL", None), ("E", "   ", None), ("G", "   ", None), ("J", "   ", None),
+    ("M", "GLO", "'GLO': the epochs"), ("R", "   ", "'GLO' \\(the default of a RINEX file of system 'R'"),
+    ("C", "   ", "'BDT' \\(the default"), ("M", "BDT", "'BDT': the epochs")])
+def test_obs_time_system_default_of_the_file_system(tmp_path, file_sys, ts, refused):
+    """RINEX 3.05 Table A2: a blank TIME OF FIRST OBS time system is the default of the file's system
+    (GLO for GLONASS: UTC, 18 s from GPS time in 2020; BDT: 14 s).  The epochs are read as GPS time, so
+    GPS, GAL and QZS (steered to it) are read; any other is refused naming the line, by the observation
+    reader (compiled and Python) and by the carrier-phase reader of RTK."""
+    from insnav.gnss import rinex
+    from insnav.gnss.rtk import read_phase_obs
+
+    head = OBS3.splitlines(True)
+    head[0] = head[0][:40] + file_sys + head[0][41:]
+    first = f"  2021     4    28    18     0    0.0000000     {ts}".ljust(60) + "TIME OF FIRST OBS\n"
+    text = "".join(head[:4] + [first] + head[4:])
+    p = write(tmp_path, "t.rnx", text)
+    readers = [lambda: rinex._read_obs(p, "GE", compiled=True), lambda: rinex._read_obs(p, "GE", compiled=False),
+               lambda: read_phase_obs(p, "GE")]
+    for read in readers:
+        if refused is None:
+            assert read().epoch_t_gps_s.size == 2
+        else:
+            with pytest.raises(RinexError, match=rf"t\.rnx, line 5: unsupported time system {refused}"):
+                read()
+
+
 @pytest.mark.parametrize("parts", [
     ("rtklibexplorer_walk_0827", "rinex_derived", "gnss_1730.obs"),
     ("euref_wettzell_wtzr_wtzz", "WTZR00DEU_R_20201770000_01D_30S_MO_120epoch.rnx"),

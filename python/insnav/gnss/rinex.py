@@ -17,7 +17,7 @@ Times are returned as GPS seconds since 1980-01-06 (``t_gps_s``, see
 :mod:`insnav.gnss.gpstime`) and as (GPS week, seconds of week).  GPS and
 Galileo record epochs are GPS time (GST is steered to it), BeiDou epochs
 (BDT) get +14 s, GLONASS epochs (UTC) get the leap seconds.  Observation
-epochs must be GPS time (the only time system supported; others raise).
+epochs must be GPS time (or GST / QZSST, steered to it; other time systems raise).
 
 References
 ----------
@@ -768,13 +768,31 @@ def _choose_codes(s, stypes, rinex3, prefer=None):
     return out
 
 
-def _obs_header_fields(src, header):
+#: The time system of a blank ``TIME OF FIRST OBS`` field by the file's satellite system (RINEX 3.05
+#: Table A2, RINEX 2.11 Table A1: compulsory in mixed files; the default of a single-system file is that
+#: system's time; GLO is UTC).
+DEFAULT_TIME_SYSTEM = {"G": "GPS", " ": "GPS", "M": "GPS", "R": "GLO", "E": "GAL", "C": "BDT", "J": "QZS",
+                       "I": "IRN", "S": "GPS"}
+#: Time systems read as GPS time: GST and QZSST are steered to GPS time (offsets of nanoseconds).
+GPS_ALIGNED_TIME_SYSTEMS = ("GPS", "GAL", "QZS")
+
+
+def _time_system_error(ts: str, written: bool, sysc: str) -> str:
+    """The message refusing time system ``ts`` (``written``: in the header; else the file type's default)."""
+    why = "" if written else (f" (the default of a RINEX file of system {sysc!r} whose TIME OF FIRST OBS leaves "
+                              "the time system blank)")
+    return (f"unsupported time system {ts!r}{why}: the epochs are read as GPS time (GPS, GAL or QZS); "
+            "convert the file to GPS time")
+
+
+def _obs_header_fields(src, header, sysc=" "):
     """The station fields of an observation header: (approx, hen, glo_k).
 
     approx: ``APPROX POSITION XYZ`` [m, ECEF] or None; hen: ``ANTENNA: DELTA H/E/N``
     [m] (zeros when absent); glo_k: GLONASS slot -> FDMA frequency number from
-    ``GLONASS SLOT / FRQ #``.  Raises on a ``TIME OF FIRST OBS`` time system other
-    than GPS (RINEX 3.04 section 5.2, table A2).
+    ``GLONASS SLOT / FRQ #``.  Raises on a ``TIME OF FIRST OBS`` time system not in
+    :data:`GPS_ALIGNED_TIME_SYSTEMS`, a blank one standing for the default of the file's
+    system ``sysc`` (:data:`DEFAULT_TIME_SYSTEM`; RINEX 3.04 section 5.2, table A2).
     """
     approx, hen, glo_k = None, np.zeros(3), {}
     for lineno, text, label in header:
@@ -784,8 +802,9 @@ def _obs_header_fields(src, header):
             hen = np.array([_float(src, text[14 * k:14 * (k + 1)], label, 0.0, lineno=lineno) for k in range(3)])
         elif label == "TIME OF FIRST OBS":
             ts = text[48:51].strip()
-            if ts and ts != "GPS":
-                raise src.error(f"unsupported time system {ts!r} (only GPS)", lineno)
+            eff = ts or DEFAULT_TIME_SYSTEM.get(sysc, "GPS")
+            if eff not in GPS_ALIGNED_TIME_SYSTEMS:
+                raise src.error(_time_system_error(eff, bool(ts), sysc), lineno)
         elif label == "GLONASS SLOT / FRQ #":
             for k in range(8):
                 sl, fr = text[4 + 7 * k:7 + 7 * k], text[8 + 7 * k:10 + 7 * k]
@@ -978,7 +997,7 @@ def _read_obs(path, systems="G", codes=None, compiled=True) -> ObsData:
     version, ftype, sysc = _version_type(src, header)
     if ftype != "O":
         raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
-    approx, _, glo_k = _obs_header_fields(src, header)
+    approx, _, glo_k = _obs_header_fields(src, header, sysc)
     rinex3 = version >= 3
     types = _obs_types_header(src, header, version, check=want if rinex3 else "")
     # RINEX 2: one list of types for every system

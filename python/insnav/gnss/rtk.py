@@ -355,10 +355,10 @@ def _read_phase_obs_v2(path, systems) -> PhaseObs:
         raise RinexError(path, None, "malformed header: no END OF HEADER")
     src = _Lines(path, raw[:head[0]].decode("ascii", "replace").splitlines())
     header = _read_header(src)
-    version, ftype, _ = _version_type(src, header)
+    version, ftype, sysc = _version_type(src, header)
     if ftype != "O":
         raise src.error(f"malformed header: not an observation file (type {ftype!r})", header[0][0])
-    approx, hen, glo_k = _obs_header_fields(src, header)
+    approx, hen, glo_k = _obs_header_fields(src, header, sysc)
     types = _obs_types_header(src, header, version)
     have = types.get("G", [])
     select, signals = {}, {}

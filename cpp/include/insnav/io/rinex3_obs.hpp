@@ -13,6 +13,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cctype>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -512,6 +513,7 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
   const char* text = buf.get();
   RinexObsTable out;
   out.path = path;
+  char file_system = ' ';  // RINEX VERSION / TYPE column 41: G, R, E, C, J, I, S or M (mixed)
   detail::LineReader L{text, n_text, path};
   if (!L.next() || L.len < 61 || L.field(60, 20).find("RINEX VERSION / TYPE") == std::string::npos)
     L.fail("malformed header: first line is not 'RINEX VERSION / TYPE'");
@@ -521,6 +523,8 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
     out.version = v;
     if (v < 3.0 || v >= 4.0) L.fail("unsupported RINEX version " + L.field(0, 9) + " (this reader: 3.02-3.05)");
     if (L.field(20, 1) != "O") L.fail("malformed header: not an observation file (type '" + L.field(20, 1) + "')");
+    const std::string k = L.field(40, 1);
+    file_system = k.empty() ? ' ' : static_cast<char>(std::toupper(static_cast<unsigned char>(k[0])));
   }
   std::map<char, std::vector<std::string>> types;  // system -> list of 3-char obs types
   std::map<char, int> announced;
@@ -559,9 +563,20 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
       out.marker_name = L.field(0, 60);
       while (!out.marker_name.empty() && out.marker_name.back() == ' ') out.marker_name.pop_back();
     } else if (has("TIME OF FIRST OBS")) {
-      std::string ts = L.field(48, 3);
-      if (ts != "GPS" && ts != "   " && !ts.empty() && ts != "GAL")
-        L.fail("unsupported time system '" + ts + "' (GPS only)");
+      // RINEX 3.05 Table A2: blank is the default of the file's system (GLO: UTC, BDT: GPS - 14 s);
+      // GST and QZSST are steered to GPS time (python: gnss.rinex.DEFAULT_TIME_SYSTEM)
+      const std::string ts = detail::trimmed(L.field(48, 3));
+      std::string eff = ts;
+      if (eff.empty()) {
+        const char k = file_system;
+        eff = k == 'R' ? "GLO" : k == 'E' ? "GAL" : k == 'C' ? "BDT" : k == 'J' ? "QZS" : k == 'I' ? "IRN" : "GPS";
+      }
+      if (eff != "GPS" && eff != "GAL" && eff != "QZS")
+        L.fail("unsupported time system '" + eff + "'" +
+               (ts.empty() ? " (the default of a RINEX file of system '" + std::string(1, file_system) +
+                                 "' whose TIME OF FIRST OBS leaves the time system blank)"
+                           : std::string()) +
+               ": the epochs are read as GPS time (GPS, GAL or QZS); convert the file to GPS time");
     } else if (has("GLONASS SLOT / FRQ #")) {
       for (int k = 0; k < 8; ++k) {
         const size_t a = 4 + 7 * k;
