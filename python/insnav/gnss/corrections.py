@@ -14,8 +14,8 @@ __all__ = ["KLOBUCHAR_DEFAULT_ALPHA", "KLOBUCHAR_DEFAULT_BETA", "klobuchar_coeff
 
 #: Klobuchar coefficients used when a navigation file broadcasts none: the GPS broadcast of 2004-01-01,
 #: RTKLIB's ``ion_default`` (rtkcmn.c ``ionmodel``), alpha_n [s/semicircle^n], beta_n [s/semicircle^n].
-KLOBUCHAR_DEFAULT_ALPHA = np.array([0.1118e-07, -0.7451e-08, -0.5961e-07, 0.1192e-06])
-KLOBUCHAR_DEFAULT_BETA = np.array([0.1167e+06, -0.2294e+06, -0.1311e+06, 0.1049e+07])
+KLOBUCHAR_DEFAULT_ALPHA = (0.1118e-07, -0.7451e-08, -0.5961e-07, 0.1192e-06)
+KLOBUCHAR_DEFAULT_BETA = (0.1167e+06, -0.2294e+06, -0.1311e+06, 0.1049e+07)
 
 
 def klobuchar_coefficients(nav):
@@ -42,7 +42,7 @@ def klobuchar_coefficients(nav):
     warnings.warn(f"{getattr(nav, 'path', 'the navigation data')}: no Klobuchar coefficients (IONOSPHERIC CORR "
                   "GPSA/GPSB or ION ALPHA/BETA); the ionosphere is modelled with the defaults of RTKLIB "
                   "(the broadcast of 2004-01-01)", InsnavWarning, stacklevel=3)
-    return KLOBUCHAR_DEFAULT_ALPHA.copy(), KLOBUCHAR_DEFAULT_BETA.copy(), True
+    return np.array(KLOBUCHAR_DEFAULT_ALPHA), np.array(KLOBUCHAR_DEFAULT_BETA), True
 
 
 def klobuchar_delay(t_gps_s, lat, lon, el, az, alpha, beta):
