@@ -405,6 +405,7 @@ struct ClosedLoop {
         SmootherEpoch<L>& e = *new (&rec_[rec_n_++]) SmootherEpoch<L>;
         e.t = ins.state().t;
         e.x_pred = filter.x();
+        e.x_rows = e.x_pred;  // what the rows carry; x_pred may be conditioned below
         e.P_pred = filter.P();
         if constexpr (kTracksCross)  // the unscented filters' UT cross-covariance
           e.C = filter.cycle_cross_covariance();

@@ -9,6 +9,10 @@
 // that row corrected by the difference (rts_smoother.hpp's symbols):
 //   d_k     = s_k - r_k                          just after epoch k
 //   d_end_k = s_k + fed_k x_k - xp_k             just before epoch k
+// where xp_k is the filter's own prediction, the estimate the rows carried
+// (SmootherEpoch::x_rows), not the smoother's: a fix not fed back
+// (continuous ambiguity resolution) or a TDCP clone update changes the latter
+// only (closed_loop.hpp condition_for_smoother, clone_update_for_smoother).
 // interpolated linearly in time in between (the error dynamics are slow
 // against the 0.1-1 s between epochs; for the EKF r and xp are zero), and
 // applied as the feedback is (ins/nav_error.hpp: position, velocity,
@@ -41,7 +45,7 @@ void smoothed_row_errors(const SmootherEpoch<L>& f, const SmoothedEpoch<L>& b, b
                          double* d_end) {
   for (int j = 0; j < L::kSize; ++j) {
     d[j] = f.fed_back ? b.s[j] : b.s[j] - f.x[j];
-    d_end[j] = (f.fed_back ? b.s[j] + f.x[j] : b.s[j]) - (has_prediction ? f.x_pred[j] : 0.0);
+    d_end[j] = (f.fed_back ? b.s[j] + f.x[j] : b.s[j]) - (has_prediction ? f.x_rows[j] : 0.0);
   }
 }
 

@@ -51,8 +51,8 @@
 // open-loop filters are equal), which the tests check against a batch
 // least-squares solution.
 //
-// Memory: sizeof(SmootherEpoch<L>) per filter epoch (3 n x n + 4 n doubles:
-// 10.6 kB for 21 states, 38 MB per hour at 1 Hz), allocated by the caller
+// Memory: sizeof(SmootherEpoch<L>) per filter epoch (3 n x n + 5 n doubles:
+// 11.4 kB for 21 states, 41 MB per hour at 1 Hz), allocated by the caller
 // once for the whole run; the backward pass allocates nothing.
 #pragma once
 
@@ -75,6 +75,10 @@ struct SmootherEpoch {
   StateCov<L> P_pred = StateCov<L>::Zero();   // its covariance
   StateCov<L> C = StateCov<L>::Zero();        // cov(error of m_{k-1}, predicted error of n_k)
   StateVec<L> x_cond = StateVec<L>::Zero();   // c_k: correction of the error of m_k not fed back
+  // the filter's own predicted mean, the running estimate the output rows carried just before epoch k:
+  // x_pred before the smoother's conditioning (a fix not fed back) or clone update (TDCP) changed it
+  // (engine/smoothed_rows.hpp d_end)
+  StateVec<L> x_rows = StateVec<L>::Zero();
 };
 
 /// Result per epoch: the smoothed error s_k of the post-feedback nominal
