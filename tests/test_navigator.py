@@ -135,7 +135,7 @@ def test_late_fix_refused_and_bad_calls():
     assert nav.push_gnss_fix(ds.imu.t[398], g.lat_deg[1], g.lon_deg[1], g.h_m[1], g.sigma_pos_n[1]) == "queued"
     assert nav.counters["refused_records"] == 1
     assert nav.push_imu(ds.imu.t[399], ds.imu.dtheta_b[0], ds.imu.dv_b[0]) is False  # time not increasing
-    with pytest.raises(ValueError, match="sigma_pos_n_m must be > 0"):
+    with pytest.raises(ValueError, match="sigma_pos_n_m must be finite and > 0"):
         nav.push_gnss_fix(ds.imu.t[399], 0.0, 0.0, 0.0, [0.0, 1.0, 1.0])
     with pytest.raises(ValueError, match="unknown kind 'nhcc'"):
         nav.push_constraint(ds.imu.t[399], "nhcc")
@@ -146,6 +146,46 @@ def test_late_fix_refused_and_bad_calls():
 
 
 # --- tightly coupled push API (insnav.TightNavigator) --------------------------------------------
+
+def test_non_finite_inputs_and_the_largest_hold():
+    """A time of +inf was taken as a sample and then read past the queue's end (a segfault); a NaN
+    increment stayed in the state for good; a non-finite sigma was "applied" and left P non-finite; and
+    at imu_hold = 256, the largest allowed, the newest sample overwrote the oldest before it was
+    integrated (velocity 13.9 m/s against 6.9).  Now: refused (False), one-line errors naming the
+    argument, and the flushed state of hold 256 equals hold 0 bit for bit."""
+    ds = _dataset(duration_s=10.0, outages=())
+    states = {}
+    for hold in (0, 255, 256):
+        nav = Navigator(ds.initial, ds.t0, "consumer", imu_hold=hold)
+        for k in range(600):
+            assert nav.push_imu(ds.imu.t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+        nav.flush()
+        states[hold] = nav.state()
+    for hold in (255, 256):
+        for key in ("lat_deg", "lon_deg", "h_m", "v_n_mps", "yaw_deg"):
+            np.testing.assert_array_equal(states[hold][key], states[0][key])
+    nav = Navigator(ds.initial, ds.t0, "consumer", imu_hold=3)
+    for k in range(100):
+        nav.push_imu(ds.imu.t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+    bad = ds.imu.dtheta_b[100].copy()
+    bad[0] = np.nan
+    assert nav.push_imu(np.inf, ds.imu.dtheta_b[100], ds.imu.dv_b[100]) is False
+    assert nav.push_imu(ds.imu.t[100], bad, ds.imu.dv_b[100]) is False
+    assert nav.push_imu(ds.imu.t[100], ds.imu.dtheta_b[100], np.full(3, np.inf)) is False
+    assert nav.counters["samples"] + nav.counters["held_samples"] == 100
+    g = ds.gnss
+    assert nav.push_gnss_fix(np.inf, g.lat_deg[0], g.lon_deg[0], g.h_m[0], g.sigma_pos_n[0]) == "outside_imu_span"
+    with pytest.raises(ValueError, match="sigma_pos_n_m must be finite and > 0"):
+        nav.push_gnss_fix(ds.imu.t[101], g.lat_deg[0], g.lon_deg[0], g.h_m[0], [np.inf, 1.0, 1.0])
+    with pytest.raises(ValueError, match="sigma_vel_n_mps must be finite and > 0 where v_n_mps is given"):
+        nav.push_gnss_fix(ds.imu.t[101], g.lat_deg[0], g.lon_deg[0], g.h_m[0], g.sigma_pos_n[0], [1.0, 0.0, 0.0],
+                          [np.nan, 0.1, 0.1])
+    for k in range(100, 200):
+        assert nav.push_imu(ds.imu.t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+    nav.flush()
+    s = nav.state()
+    assert np.isfinite(s["lat_deg"]) and np.all(np.isfinite(s["v_n_mps"])) and np.all(np.isfinite(s["sigma"]))
+
 
 def _cut_scenario(name, duration_s):
     """The preset `name` cut to its first motion segments (>= duration_s)."""
@@ -222,7 +262,7 @@ def test_tight_push_refuses_a_late_epoch_and_bad_rows():
     assert nav.push_epoch(0) == "too_old" and nav.counters["refused_records"] == 1
     bad = np.array(nav.inputs.sats[:4], float)
     bad[0, 10] = 0.0  # sigma_pr
-    with pytest.raises(ValueError, match="sigma_pr must be > 0 at row 0"):
+    with pytest.raises(ValueError, match="sigma_pr must be finite and > 0 at row 0"):
         nav.push_pseudoranges(ds.imu.t[1000] + 0.1, bad)
     with pytest.raises(ValueError, match="smoother"):
         TightNavigator.from_dataset(ds, RunConfig(filter="ekf", smooth=True))

@@ -108,7 +108,7 @@ def test_inputs_validation(ds6):
     inp = tight_inputs_from_raw(ds6.gnss_raw)
     bad = TightInputs(inp.epoch_t, inp.epoch_start, inp.sats.copy(), inp.prn, inp.elevation_deg)
     bad.sats[5, 10] = 0.0  # sigma_pr = 0
-    with pytest.raises(ValueError, match="sigma_pr must be > 0 at row 5"):
+    with pytest.raises(ValueError, match="sigma_pr must be finite and > 0 at row 5"):
         run_tight(ds6, RunConfig(), inputs=bad)
     bad = TightInputs(inp.epoch_t[::-1].copy(), inp.epoch_start, inp.sats, inp.prn, inp.elevation_deg)
     with pytest.raises(ValueError, match="epoch_t"):

@@ -277,10 +277,10 @@ inline SatObservation sat_observation_from(const double* r, std::int64_t system,
   if (any && !(o.r_e.allFinite() && o.v_e.allFinite() && std::isfinite(o.clock_bias_m) &&
                std::isfinite(o.clock_drift_mps)))
     throw py::value_error("sats: non-finite satellite state at row " + std::to_string(row));
-  if (std::isfinite(o.pseudorange_m) && !(o.sigma_pr_m > 0.0))
-    throw py::value_error("sats: sigma_pr must be > 0 at row " + std::to_string(row));
-  if (std::isfinite(o.pseudorange_rate_mps) && !(o.sigma_prr_mps > 0.0))
-    throw py::value_error("sats: sigma_prr must be > 0 at row " + std::to_string(row));
+  if (std::isfinite(o.pseudorange_m) && !(o.sigma_pr_m > 0.0 && std::isfinite(o.sigma_pr_m)))
+    throw py::value_error("sats: sigma_pr must be finite and > 0 at row " + std::to_string(row));
+  if (std::isfinite(o.pseudorange_rate_mps) && !(o.sigma_prr_mps > 0.0 && std::isfinite(o.sigma_prr_mps)))
+    throw py::value_error("sats: sigma_prr must be finite and > 0 at row " + std::to_string(row));
   return o;
 }
 

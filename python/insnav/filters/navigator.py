@@ -175,8 +175,11 @@ class Navigator(_PushApi):
         r[4:7] = np.nan if v_n_mps is None else np.asarray(v_n_mps, float)
         r[7:10] = sigma_pos_n_m
         r[10:13] = np.nan if sigma_vel_n_mps is None else np.asarray(sigma_vel_n_mps, float)
-        if not np.all(np.asarray(r[7:10]) > 0):
-            raise ValueError(f"push_gnss_fix at t={t}: sigma_pos_n_m must be > 0, got {r[7:10]}")
+        if not np.all((np.asarray(r[7:10]) > 0) & np.isfinite(r[7:10])):
+            raise ValueError(f"push_gnss_fix at t={t}: sigma_pos_n_m must be finite and > 0, got {r[7:10]}")
+        if np.any(np.isfinite(r[4:7]) & ~((r[10:13] > 0) & np.isfinite(r[10:13]))):
+            raise ValueError(f"push_gnss_fix at t={t}: sigma_vel_n_mps must be finite and > 0 where v_n_mps is "
+                             f"given, got {r[10:13]}")
         return RECORD_STATUS[self._nav.push_gnss_fix(r)]
 
     def push_constraint(self, t: float, kinds, speed_mps: float = float("nan")) -> str:

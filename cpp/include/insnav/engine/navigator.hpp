@@ -30,6 +30,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <stdexcept>
 
@@ -110,9 +111,11 @@ class PushLoop {
   static_assert(kMaxHold >= 1 && kMaxPending >= 1, "capacities must be positive");
 
   /// One IMU increment over (t_prev, t]: dtheta_b [rad], dv_b [m/s] (FRD).
-  /// Returns false (nothing done) when t does not increase.
+  /// Returns false (nothing done) when t does not increase or is not finite, or an
+  /// increment is not finite (a NaN would stay in the state for good).
   bool push_imu(double t, const Vec3& dtheta_b, const Vec3& dv_b) {
-    if (!(t > t_pushed_)) return false;
+    if (!std::isfinite(t) || !(t > t_pushed_) || !dtheta_b.allFinite() || !dv_b.allFinite()) return false;
+    if (hold_n_ == kMaxHold) integrate_oldest();  // the ring is full (hold = kMaxHold): make room first
     ImuIncrement& raw = ring_[(hold_head_ + hold_n_) % kMaxHold];
     raw.t = t;
     raw.dt = t - t_pushed_;
@@ -145,7 +148,7 @@ class PushLoop {
 
   /// Queue a record (sorted by t, then by order, then in push order).
   RecordStatus enqueue(const Record& r) {
-    if (!(r.t > t0_)) {
+    if (!std::isfinite(r.t) || !(r.t > t0_)) {
       ++refused_;
       return RecordStatus::kOutsideImuSpan;
     }
