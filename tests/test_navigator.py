@@ -187,6 +187,21 @@ def test_non_finite_inputs_and_the_largest_hold():
     assert np.isfinite(s["lat_deg"]) and np.all(np.isfinite(s["v_n_mps"])) and np.all(np.isfinite(s["sigma"]))
 
 
+def test_delay_push_refuses_bad_sigmas_and_shapes():
+    """DelayNavigator.push_epoch took sigmas of 0, negative, inf and NaN (the state went NaN) and reshaped a
+    (14, 2) array into scrambled records.  Now one line naming the record and the sigma, or the shape."""
+    ds = _delay_dataset(duration_s=10.0)
+    nav = insnav.DelayNavigator.from_dataset(ds, RunConfig(filter="exact"))
+    rec = nav.records[:1].copy()
+    for bad in (0.0, -1.0, np.inf, np.nan):
+        r = rec.copy()
+        r[0, 9] = bad
+        with pytest.raises(ValueError, match=r"record 0: the position 1-sigma must be finite and > 0"):
+            nav.push_epoch(nav.epochs[0], r)
+    with pytest.raises(ValueError, match=r"records must be \(k, 14\) rows, got shape \(14, 1\)"):
+        nav.push_epoch(nav.epochs[0], rec.T)
+
+
 def _cut_scenario(name, duration_s):
     """The preset `name` cut to its first motion segments (>= duration_s)."""
     sc = copy.deepcopy(sim.load_scenario(name).raw)

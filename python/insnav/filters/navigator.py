@@ -363,7 +363,18 @@ class DelayNavigator(_PushApi):
         epoch: ``records`` (k, 14) rows of t_valid, t_arrival [s], lat, lon [rad], h [m],
         v_n [m/s] (NaN: none), position and velocity 1-sigma N, E, D [m, m/s] (the rows of
         :attr:`records`; at most 8 per epoch).  Returns ``"queued"``, or why it was refused."""
-        rows = np.zeros((0, 14)) if records is None else np.ascontiguousarray(np.asarray(records, float).reshape(-1, 14))
+        rows = np.zeros((0, 14)) if records is None else np.ascontiguousarray(np.asarray(records, float))
+        if rows.size == 0:
+            rows = np.zeros((0, 14))
+        if rows.ndim != 2 or rows.shape[1] != 14:
+            raise ValueError(f"push_epoch at t={t}: records must be (k, 14) rows, got shape {rows.shape}")
+        for cols, sig, what in ((slice(2, 5), slice(8, 11), "position"), (slice(5, 8), slice(11, 14), "velocity")):
+            given = np.isfinite(rows[:, cols]).any(axis=1)
+            ok = np.all(np.isfinite(rows[:, sig]) & (rows[:, sig] > 0), axis=1)
+            if np.any(given & ~ok):
+                k = int(np.flatnonzero(given & ~ok)[0])
+                raise ValueError(f"push_epoch at t={t}: record {k}: the {what} 1-sigma must be finite and > 0, "
+                                 f"got {rows[k, sig]}")
         return RECORD_STATUS[self._nav.push_epoch(float(t), rows)]
 
     def push_receiver_epoch(self, e: int) -> str:
