@@ -75,11 +75,7 @@ py::dict read_obs_body(const py::bytes& text, const std::string& path, std::size
   io::ObsColumns c;
   c.zero_is_missing = zero_is_missing;
   for (const auto& [k, ty] : types)
-    if (k.size() == 1 && static_cast<unsigned char>(k[0]) < 128) {
-      const unsigned char s = static_cast<unsigned char>(k[0]);
-      c.n_types[s] = static_cast<int>(ty.size());
-      for (const auto& t : ty) c.type_list[s] += (c.type_list[s].empty() ? "" : " ") + t;
-    }
+    if (k.size() == 1 && static_cast<unsigned char>(k[0]) < 128) c.set_types(static_cast<unsigned char>(k[0]), ty);
   for (const auto& [k, codes] : select) {
     if (k.size() != 1 || static_cast<unsigned char>(k[0]) >= 128) throw py::value_error("read_rinex3_obs_body: bad system key '" + k + "'");
     const unsigned char s = static_cast<unsigned char>(k[0]);

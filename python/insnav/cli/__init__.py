@@ -256,7 +256,14 @@ def _one_line_warnings() -> None:
 def main(argv=None) -> int:
     """Run one command; its status: 0, 2 (an error, one line on stderr), 130 (Ctrl-C, one line)
     or 143 (SIGTERM, one line)."""
-    _one_line_warnings()
+    import warnings
+
+    with warnings.catch_warnings():  # the one-line printing for this command only (main may run in-process)
+        _one_line_warnings()
+        return _main(argv)
+
+
+def _main(argv) -> int:
     command = _command_of(sys.argv[1:] if argv is None else argv)
     version_only = command is None and _asks_version(sys.argv[1:] if argv is None else argv)
     args = None

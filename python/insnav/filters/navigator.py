@@ -73,7 +73,7 @@ class _PushApi:
 
     def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
         """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
-        False (ignored) when ``t`` does not increase."""
+        False (ignored) when ``t`` does not increase, or ``t`` or an increment is not finite."""
         return bool(self._nav.push_imu(float(t), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
 
     def push_imu_array(self, t, dtheta_b, dv_b) -> int:

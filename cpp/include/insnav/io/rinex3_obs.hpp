@@ -13,8 +13,8 @@
 #pragma once
 
 #include <algorithm>
-#include <cctype>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -183,6 +183,12 @@ struct ObsColumns {
   /// Each system's header types joined by one blank ("C1C L1C D1C S1C"; RINEX 2: the one list,
   /// under 'G'): an event that re-declares a different list is refused (EventTypes).
   std::array<std::string, 128> type_list;
+  /// System ``s``'s header types: their count and type_list.
+  void set_types(unsigned char s, const std::vector<std::string>& types) {
+    n_types[s] = static_cast<int>(types.size());
+    type_list[s].clear();
+    for (const auto& t : types) type_list[s] += (type_list[s].empty() ? "" : " ") + t;
+  }
   ObsColumns() {
     n_types.fill(-1);
     for (auto& a : col)
@@ -232,6 +238,14 @@ inline void read_sat_observations(const ObsColumns& c, unsigned char s, const Fi
       slot[q] = v;
     }
   }
+}
+
+/// Whether an epoch at ``t`` (line ``line``) repeats the time of the last epoch kept; counts it in
+/// RinexObsTable::n_repeated_epochs (the repeat is skipped whole).
+inline bool repeats_last_epoch(RinexObsTable& out, double t, long line) {
+  if (out.epoch_t_gps_s.empty() || t != out.epoch_t_gps_s.back()) return false;
+  if (out.n_repeated_epochs++ == 0) out.first_repeated_line = line;
+  return true;
 }
 
 /// The observation types re-declared by the special records of one event (RINEX 3.05 Sec. 5.2.1,
@@ -331,11 +345,7 @@ inline void read_rinex3_obs_body(const char* text, size_t size, const std::strin
       L.fail("bad record: impossible epoch date/time");
     const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
                      h * 3600.0 + mi * 60.0 + sec;
-    bool keep = flag == 0 || flag == 1;
-    if (keep && !out.epoch_t_gps_s.empty() && t == out.epoch_t_gps_s.back()) {
-      keep = false;
-      if (out.n_repeated_epochs++ == 0) out.first_repeated_line = ep_line;
-    }
+    const bool keep = (flag == 0 || flag == 1) && !detail::repeats_last_epoch(out, t, ep_line);
     const int e = static_cast<int>(out.epoch_t_gps_s.size());
     for (int i = 0; i < nsat; ++i) {
       if (!L.next())
@@ -429,11 +439,7 @@ inline void read_rinex2_obs_body(const char* text, size_t size, const std::strin
       L.fail("bad record: impossible epoch date/time");
     const double t = (detail::days_from_civil(y, mo, d) - detail::days_from_civil(1980, 1, 6)) * 86400.0 +
                      h * 3600.0 + mi * 60.0 + sec;
-    bool keep = flag == 0 || flag == 1;
-    if (keep && !out.epoch_t_gps_s.empty() && t == out.epoch_t_gps_s.back()) {
-      keep = false;
-      if (out.n_repeated_epochs++ == 0) out.first_repeated_line = ep_line;
-    }
+    const bool keep = (flag == 0 || flag == 1) && !detail::repeats_last_epoch(out, t, ep_line);
     const int e = static_cast<int>(out.epoch_t_gps_s.size());
     sats.clear();
     while (true) {  // the satellite list: columns 33-68 of the epoch line and of its continuation lines
@@ -594,10 +600,7 @@ inline RinexObsTable read_rinex3_obs(const std::string& path,
              " types, lists " + std::to_string(types[s].size()));
   ObsColumns c;
   for (const auto& [s, ty] : types)
-    if (static_cast<unsigned char>(s) < 128) {
-      c.n_types[s] = static_cast<int>(ty.size());
-      for (const auto& t : ty) c.type_list[s] += (c.type_list[s].empty() ? "" : " ") + t;
-    }
+    if (static_cast<unsigned char>(s) < 128) c.set_types(static_cast<unsigned char>(s), ty);
   for (const auto& [s, slots] : prefs) {
     if (static_cast<unsigned char>(s) >= 128) continue;
     c.want[s] = types.count(s) > 0;
