@@ -1002,6 +1002,22 @@ class RunConfig:
         spec = FILTERS[self.filter]
         if self.coupling not in spec.couplings:
             bad("coupling", self.coupling, f"{' or '.join(spec.couplings)} (filter {self.filter!r})")
+        if self.coupling == "rtk":  # RTK/INS reads carrier phase and code, no fixes, and screens them itself
+            for key, default, label, why in (
+                    ("gate_chi2", None, "absent", "the DD code rows are screened by [rtk_engine] code_chi2_row"),
+                    ("gate_prob", None, "absent", "the DD code rows are screened by [rtk_engine] code_chi2_row"),
+                    ("use_position", True, "true", "it reads no position fixes"),
+                    ("use_velocity", True, "true", "it reads no velocity fixes"),
+                    ("gnss_pos_sigma_scale", 1.0, "1", "it reads no position fixes: the [rtk] sigmas weight its rows"),
+                    ("gnss_vel_sigma_scale", 1.0, "1", "it reads no velocity fixes")):
+                v = getattr(self, key)
+                if v is not default and v != default:
+                    bad(key, v, f"{label} with rtk coupling ({why})")
+            changed = next((f.name for f in dataclasses.fields(Robust) if getattr(self.robust, f.name) != f.default),
+                           None)
+            if changed is not None:
+                bad(f"robust.{changed}", getattr(self.robust, changed), "absent with rtk coupling ([robust] is the "
+                    "tight filter's; RTK/INS screens with [rtk_engine] robust_screening, robust_chi2_row, ...)")
         if self.coupling != "loose" and self.gnss_pos_v_sigma_scale != 1.0:
             bad("gnss_pos_v_sigma_scale", self.gnss_pos_v_sigma_scale, f"1 with {self.coupling} coupling (it scales "
                 "the vertical sigma of loose position fixes)")
@@ -1148,7 +1164,9 @@ def config_from_dict(d: dict, source: str = "config") -> RunConfig:
     d = dict(d)
     imu_d = d.pop("imu", None)
     for table in ("rtk", "rtk_engine"):  # coupling = "rtk": read by insnav.filters.rtk_ins (the CLI passes them)
-        d.pop(table, None)
+        value = d.pop(table, {})
+        if not isinstance(value, dict):
+            raise ConfigError(f"{source}: key '{table}': bad value {value!r}; allowed: an [{table}] table")
     raw_tables = {key: d.pop(key) for key, _ in _OPTION_TABLES if key in d}
     if "options" in d and not isinstance(d["options"], dict):
         raise ConfigError(f"{source}: key 'options': bad value {d['options']!r}; allowed: an [options] table")

@@ -71,7 +71,14 @@ def attach_fix_status(sol, path):
             i = np.searchsorted(t, np.asarray(sol.t) + 1e-6, side="right") - 1
             dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
             ok = (i >= 0) & (np.asarray(sol.t) - t[np.maximum(i, 0)] <= 1.5 * dt)
-            sol.fix_status = np.where(ok, status[np.maximum(i, 0)], 0).astype(int)
+            row_status = np.where(ok, status[np.maximum(i, 0)], 0).astype(int)
+            if _rtk_ins_ar_mode(p) != "fix-and-hold":
+                # continuous AR: the fix gives the antenna of its epoch (<out>.rtk.pos) and goes no further;
+                # the navigation rows are the float filter's (the same rows as with AR off), so a fixed
+                # epoch's rows count as float
+                row_status = np.where(row_status == 1, 2, row_status)
+                sol.rows_float_filter = True
+            sol.fix_status = row_status
             sol.epoch_fix_status = status  # fix rate over the rover epochs, not the rows
             return sol
         t = np.atleast_1d(a["t_gps_s"])
@@ -79,6 +86,21 @@ def attach_fix_status(sol, path):
         i = np.clip(np.searchsorted(t, np.asarray(sol.t) - 1e-6), 0, len(t) - 1)
         sol.fix_status = np.where(np.abs(t[i] - sol.t) < 1e-3, status[i], 0).astype(int)
     return sol
+
+
+def _rtk_ins_ar_mode(path: Path) -> str:
+    """The ``[rtk] ar_mode`` an RTK/INS run wrote to ``<path>.config.toml`` (the RTK/INS default when
+    the file or key is absent)."""
+    from ..gnss.rtk import RtkOptions
+
+    cfg = path.with_suffix(path.suffix + ".config.toml")
+    try:
+        from ..config import read_toml
+
+        mode = read_toml(cfg).get("rtk", {}).get("ar_mode") if cfg.exists() else None
+    except ValueError:  # an unreadable resolved configuration: the default
+        mode = None
+    return mode if isinstance(mode, str) else RtkOptions.ar_mode
 
 
 def _pos_solution(path):
@@ -99,6 +121,11 @@ def _pos_solution(path):
     out.roll_deg = out.pitch_deg = out.yaw_deg = np.full(n, np.nan)
     # no covariance read from the .pos: no consistency figure (NaN sigmas)
     out.sigma_pos_n_m, out.sigma_vel_n_mps, out.sigma_att_deg = (np.full((n, 3), np.nan) for _ in range(3))
+    # no IMU states and no GNSS records of a filter (insnav report draws what is there)
+    out.acc_bias_mps2, out.gyro_bias_rps, out.acc_scale, out.gyro_scale = (np.full((n, 3), np.nan) for _ in range(4))
+    out.gnss_t, out.nis, out.gnss_status = np.zeros(0), np.zeros(0), np.zeros(0, np.int8)
+    out.innovation = np.zeros((0, 6))
+    out.summary = dict(filter="RTKLIB .pos", coupling="gnss")
     out.fix_status = np.asarray(ref.q, int)
     return out
 
@@ -129,8 +156,27 @@ def static_truth(text: str, t):
                  v_n=np.full((n, 3), np.nan), roll_deg=z + np.nan, pitch_deg=z + np.nan, yaw_deg=z + np.nan)
 
 
-def _read_truth(path, quality=None):
+#: the header of a simulated carrier-phase dataset's antenna truth (``rtk_truth.csv``, GPS time)
+RTK_TRUTH_HEADER = "t_gps_s,x_e_m,y_e_m,z_e_m"
+
+
+def _read_truth(path, quality=None, solution=None):
+    """The reference of ``insnav evaluate`` / ``report``: an RTKLIB ``.pos``, a dataset folder (its
+    ``truth.csv``; for an RTKLIB-layout ``solution`` (``.pos``: the antenna in GPS time) its
+    ``rtk_truth.csv``, the antenna in GPS time), a simulated ``rtk_truth.csv``, a KF-GINS ``.nav`` or
+    a truth CSV."""
     p = Path(path)
+    if p.is_dir() and solution is not None and Path(solution).suffix == ".pos":
+        if not (p / "rtk_truth.csv").is_file():
+            raise ValueError(f"{solution} is an antenna in GPS time and {p} has no rtk_truth.csv (the antenna "
+                             "truth); its truth.csv is the IMU centre in dataset time: give an antenna reference "
+                             "(.pos, rtk_truth.csv or x,y,z)")
+        p = p / "rtk_truth.csv"
+    if p.is_file() and p.suffix == ".csv":
+        with open(p, encoding="utf-8", errors="replace") as f:
+            head = f.readline()
+        if head.startswith(RTK_TRUTH_HEADER):
+            return _rtk_truth(p)
     if p.suffix == ".pos":
         from ..gnss.gpstime import SECONDS_PER_WEEK
         from ..io.gnss_files import read_rtklib_pos
@@ -160,6 +206,28 @@ def _read_truth(path, quality=None):
     from ..data.dataset import Truth, read_csv
 
     return has_rows(Truth.from_array(read_csv(p, Truth.COLUMNS)), p)
+
+
+def _rtk_truth(p: Path):
+    """A simulated ``rtk_truth.csv`` (the rover antenna, ECEF, GPS time) as a Truth in GPS seconds of
+    the week of its first epoch (an RTKLIB ``.pos``'s time base); position only, compared at its epochs."""
+    from .. import earth
+    from ..data.dataset import Truth
+    from ..gnss.gpstime import SECONDS_PER_WEEK
+
+    a = np.genfromtxt(p, delimiter=",", names=True)
+    if a.size == 0:
+        raise ValueError(f"{p}: no rows")
+    a = np.atleast_1d(a)
+    r_e = np.column_stack([a["x_e_m"], a["y_e_m"], a["z_e_m"]])
+    if not np.all(np.isfinite(r_e)) or not np.all(np.isfinite(a["t_gps_s"])):
+        raise ValueError(f"{p}: a row with a missing or non-finite value")
+    t = a["t_gps_s"] - SECONDS_PER_WEEK * np.floor(a["t_gps_s"][0] / SECONDS_PER_WEEK)
+    lat, lon, h = earth.ecef_to_geodetic(r_e)
+    nan = np.full(t.size, np.nan)
+    tr = Truth(t, np.degrees(lat), np.degrees(lon), h, np.full((t.size, 3), np.nan), nan, nan.copy(), nan.copy())
+    tr.quality = np.ones(t.size, int)  # exact: compared at its epochs
+    return tr
 
 
 #: rms(error/sigma) per axis outside these bounds flags the solution's sigmas as
@@ -228,6 +296,8 @@ def evaluate(solution, truth, outages=()) -> dict:
         ep = getattr(solution, "epoch_fix_status", None)  # RTK/INS: over the rover epochs
         ep = st if ep is None else np.asarray(ep)
         out["fix_rate"] = float(np.mean(ep == 1)) if ep.size else 0.0
+        if getattr(solution, "rows_float_filter", False):
+            out["rows_float_filter"] = True
         out["by_status"] = {}
         for q, name in STATUS_NAMES.items():
             m = st_e == q
@@ -304,6 +374,7 @@ def _solution_at(sol, t):
         fs = np.asarray(fs)
         out.fix_status = fs[np.clip(np.searchsorted(sol.t, t - 1e-9), 0, fs.size - 1)]
         out.epoch_fix_status = getattr(sol, "epoch_fix_status", fs)  # the fix rate stays over the solution's epochs
+        out.rows_float_filter = getattr(sol, "rows_float_filter", False)
     if hasattr(sol, "slip_counts"):
         out.slip_counts = sol.slip_counts
     return out
@@ -322,7 +393,8 @@ def cmd_evaluate(args) -> int:
                                                residuals_path(args.solution), args.truth),
                       overwrite=getattr(args, "overwrite", False), command="evaluation")
     sol = _read_solution(args.solution)
-    truth = _read_truth(args.truth, args.quality) if Path(args.truth).exists() else static_truth(args.truth, sol.t)
+    truth = _read_truth(args.truth, args.quality, solution=args.solution) if Path(args.truth).exists() \
+        else static_truth(args.truth, sol.t)
     if hasattr(truth, "quality"):  # a 4 Hz reference, possibly with gaps: compare at its epochs
         sol = _solution_at(sol, truth.t)
     res = evaluate(sol, truth, _parse_outages(args.outages))
@@ -350,6 +422,9 @@ def cmd_evaluate(args) -> int:
         parts = [f"{name} {d['epochs']} (3-D RMS {d['rms_3d_m']:.4g} m, max {d['max_3d_m']:.4g} m)"
                  for name, d in res["by_status"].items()]
         print(f"fix rate {100.0 * res['fix_rate']:.1f} %; " + "; ".join(parts))
+        if res.get("rows_float_filter"):
+            print("note: continuous AR: the fix rate is over the rover epochs; the rows are the float filter's "
+                  "(counted float above), the fixed antenna per epoch is in <solution>.rtk.pos")
     lo, hi = CONSISTENCY_BOUNDS
     for k, bad in res["consistency_flags"].items():
         n, _, ax = names[k]

@@ -479,15 +479,6 @@ def _allan_section(path) -> tuple[list[tuple[str, str, bytes]], list[str]]:
     return figs, parts
 
 
-def _read_solution(path):
-    """The one place the report reads a saved solution (any format
-    :func:`insnav.load_solution` reads, old column names included)."""
-    from ..filters.solution import load_solution
-    from .evaluate import attach_fix_status, has_rows
-
-    return attach_fix_status(has_rows(load_solution(path), path), path)
-
-
 def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title: str | None = None,
            overwrite: bool = False, allan=None) -> Path:
     """Write ``report.html`` and its PNGs for a solution; returns the HTML path.
@@ -528,7 +519,7 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
     except ImportError:
         raise ImportError("insnav report needs matplotlib: pip install 'insnav[plot]'") from None
     from ..filters.solution import innovations_path, read_innovations, read_residuals, residuals_path
-    from .evaluate import _read_truth, _solution_at
+    from .evaluate import _read_solution, _read_truth, _solution_at, static_truth
 
     if solution is None:
         if allan is None:
@@ -567,7 +558,10 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
         out_dir = src.with_name(src.name + "-report")
     out_dir = Path(out_dir)
     _check_report_out(out_dir, [src, truth, gnss, allan], overwrite)
-    tr = _read_truth(truth) if isinstance(truth, (str, Path)) else truth
+    if isinstance(truth, str) and "," in truth and not Path(truth).exists():  # a static antenna: x,y,z or lat,lon,h
+        tr = static_truth(truth, sol.t)
+    else:
+        tr = _read_truth(truth, solution=src) if isinstance(truth, (str, Path)) else truth
     fx = None
     if gnss is not None:
         fx = _read_fixes(gnss) if isinstance(gnss, (str, Path)) else _Fixes(gnss)

@@ -11,8 +11,9 @@ EXAMPLES = """examples:
   insnav allan static.txt --out-dir imu-allan && insnav report run3-rbukf.csv --allan imu-allan
   insnav report --allan imu-allan                                  # the IMU noise alone -> imu-allan-report/
 
-SOL: a solution written by `insnav run` (.csv, .npz or .parquet, or a KF-GINS .nav; its
-.innovations.csv sidecar is read when present).  TRUTH: anything `insnav evaluate` reads.
+SOL: a solution written by `insnav run` (.csv, .npz or .parquet, a KF-GINS .nav, or an RTKLIB .pos;
+its .innovations.csv sidecar is read when present).  TRUTH: anything `insnav evaluate` reads (a
+static antenna as x,y,z ECEF [m] or lat_deg,lon_deg,h_m among them).
 GNSS: gnss.csv or a dataset folder, or the RTKLIB .pos / NMEA file given to `insnav run
 --format csv` (fixes on the track; the position reference when there is no truth).
 ALLAN: the --out-dir of `insnav allan` (or its allan.csv): a section with the Allan deviations
@@ -54,7 +55,7 @@ def cmd_report(args) -> int:
             raise UserError("--truth, --gnss and --outages need SOL (a saved solution)")
     for name in ("solution", "truth", "gnss", "allan"):
         v = getattr(args, name)
-        if v is not None and not Path(v).exists():
+        if v is not None and not Path(v).exists() and not (name == "truth" and "," in v):  # or a static x,y,z
             raise FileNotFoundError(f"{'SOL' if name == 'solution' else '--' + name}: not found: {v}")
     outages = _parse_outages(args.outages) if args.outages else None
     path = report(args.solution, args.out, truth=args.truth, gnss=args.gnss, outages=outages,

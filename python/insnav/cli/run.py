@@ -400,8 +400,24 @@ def _spp_run(args):
                 f"passed, {s['raim_excluded_epochs']} after excluding {s['rows_excluded']} rows, {s['raim_failed']} "
                 f"failed, {s['raim_untested']} untested")
 
-    ds, opts = load_spp_run(args.obs, [p for p in args.nav.split(",") if p], args.config)
+    given = _gnss_only_options(args, "spp", ("spp_options", "weighting"))
+    ds, opts = load_spp_run(args.obs, [p for p in args.nav.split(",") if p], args.config,
+                            spp=given.get("spp_options"), gnss=given.get("weighting"))
     return ds, opts, write, line
+
+
+def _gnss_only_options(args, name: str, keys: tuple) -> dict:
+    """``--option KEY={...}`` of a GNSS-only filter: tables of keys over the TOML's own
+    (spp: ``spp_options`` over ``[spp]``, ``weighting`` over ``[gnss]``; rtk: ``rtk_options`` over
+    ``[rtk]``); any other key, or a value that is not a table, is a one-line error."""
+    given = cli_options(args.option)
+    for k, v in given.items():
+        if k not in keys:
+            raise UserError(f"--option {k}: --filter {name} reads {' and '.join(keys)} only (tables of keys, "
+                            f"e.g. --option '{keys[0]}={{...}}')")
+        if not isinstance(v, dict):
+            raise UserError(f"--option {k}: bad value {v!r}; allowed: a table of keys, e.g. --option '{k}={{...}}'")
+    return given
 
 
 def _rtk_run(args):
@@ -425,8 +441,9 @@ def _rtk_run(args):
                 f"float, {c['n_dgps']} dgps, {c['n_none']} none; filter rtk ({o.mode}, {o.ar_mode}, {o.systems}, "
                 f"{o.frequencies} frequencies); {slips} cycle slips detected")
 
+    given = _gnss_only_options(args, "rtk", ("rtk_options",))
     ds, opts = load_rtk_run(args.obs, args.base, [p for p in args.nav.split(",") if p], args.config,
-                            base_pos=args.base_pos)
+                            base_pos=args.base_pos, rtk=given.get("rtk_options"))
     return ds, opts, write, line
 
 
@@ -539,26 +556,43 @@ def _outside_imu_span(sol, ds) -> tuple[int, int]:
     return n + cut, cut
 
 
-def _rtk_ins_inputs(args, ds):
-    """``--coupling rtk``: the IMU dataset with --obs/--base/--nav (an RtkInsDataset) and the run options
-    (the TOML's ``[rtk]`` table over the RTK/INS defaults, ``[rtk_engine]``, the base position)."""
+def _rtk_ins_inputs(args, ds, cfg: RunConfig):
+    """``--coupling rtk``: the IMU dataset with --obs/--base/--nav (an RtkInsDataset) and the run options:
+    the TOML's ``[rtk]`` table over the RTK/INS defaults, then ``[options] rtk_options`` and
+    ``--option rtk_options={...}`` over the table (taken out of ``cfg.options``); ``[rtk_engine]``;
+    the base position.  Each is checked here, a bad key named with its file or option."""
     from ..filters.rtk import parse_base_position
-    from ..filters.rtk_ins import RtkInsDataset
+    from ..filters.rtk_ins import RtkInsDataset, check_engine, rtk_ins_options
 
     missing = [n for n in ("obs", "base", "nav") if not getattr(args, n)]
     if missing:
         raise UserError("--coupling rtk needs " + ", ".join(f"--{n}" for n in missing)
                         + " (rover and base RINEX observations, navigation file(s))")
     rtk, eng, base_e, source = {}, {}, None, None
+    base_keys = ("base_position_ecef_m", "base_position_llh")
     if args.config:
         from ..config import read_toml
 
         d = read_toml(args.config)
-        rtk, eng = dict(d.get("rtk", {})), dict(d.get("rtk_engine", {}))
-        for k in ("base_position_ecef_m", "base_position_llh"):
+        rtk, eng = d.get("rtk", {}), check_engine(d.get("rtk_engine", {}), str(args.config))
+        if not isinstance(rtk, dict):
+            raise UserError(f"{args.config}: key 'rtk': bad value {rtk!r}; allowed: an [rtk] table")
+        rtk = dict(rtk)
+        for k in base_keys:
             if k in rtk:
                 source = f"{args.config}: key 'rtk.{k}'"
                 base_e = parse_base_position(rtk.pop(k), source)
+        rtk_ins_options(rtk, str(args.config))  # a bad key named with its file
+    given = cfg.options.pop("rtk_options", None)
+    if given is not None:
+        where = "[options] / --option rtk_options"
+        if not isinstance(given, dict):
+            raise UserError(f"{where}: bad value {given!r}; allowed: a table of [rtk] keys, "
+                            "e.g. --option 'rtk_options={ar_mode=\"off\"}'")
+        if set(given) & set(base_keys):
+            raise UserError(f"{where}: give the base position with --base-pos or the [rtk] table")
+        rtk = {**rtk, **given}
+        rtk_ins_options(rtk, where)
     if args.base_pos is not None:
         base_e, source = parse_base_position(args.base_pos), "--base-pos"
     ds = RtkInsDataset(ds, args.obs, args.base, [p for p in args.nav.split(",") if p], base_e, source)
@@ -778,7 +812,7 @@ def cmd_run(args) -> int:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
         run_opts, base_e = {}, None
         if (args.coupling or cfg.coupling) == "rtk":
-            ds, run_opts = _rtk_ins_inputs(args, ds)
+            ds, run_opts = _rtk_ins_inputs(args, ds, cfg)
             base_e = ds.base_position_e_m
         stages.done("read")
         from .._progress import reporting

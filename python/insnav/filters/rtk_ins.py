@@ -49,14 +49,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core, earth
-from ..config import RunConfig, ImuNoise
+from ..config import ConfigError, RunConfig, ImuNoise
 from ..gnss.rtk import RtkOptions, RtkSolution, estimate_noise_prepass, prepare_rtk_rows
 from ._setup import imu_arrays, init_vector, initial_state, lever_arm, raise_if_nonfinite
 from ._assemble import nav_solution
 from ..units import RAD2DEG
 from .solution import Solution
 
-__all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "run_rtk_ins", "rtk_ins_options"]
+__all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "check_engine", "run_rtk_ins", "rtk_ins_options"]
 
 #: [rtk] defaults of the RTK/INS filter that differ from the GNSS-only engine's.  AR continuous, as the
 #: GNSS-only engine (fix-and-hold holds a wrong fix in the joint filter, which on the urban simulator
@@ -86,6 +86,46 @@ RTK_INS_DEFAULTS: dict = dict(min_success_rate=0.4, code_correlation_time_s=10.0
 MOVED_TO_RTK = ("phase_correlation_time_s", "phase_error_ratio")
 #: engine ([rtk_engine]) defaults applied under the caller's (empty: the C++ RtkInsConfig defaults)
 ENGINE_DEFAULTS: dict = {}
+#: [rtk_engine] keys (``RtkInsConfig``, ``cpp/bindings/bind_rtk_ins.cpp``) that take a number; the
+#: range checks are the engine's.  ``outage_cycle_s``: the outage cycle of the unscented time update
+#: (default: one cycle per gap; a smoothed run closes them after 1.5 rover periods).
+ENGINE_NUMBERS = ("ins_slip_k_sigma", "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row",
+                  "validation_prob", "ar_min_success_rate", "outage_cycle_s", "robust_chi2_row", "robust_igg_k0",
+                  "robust_igg_k1", "robust_huber_k", "robust_max_sats", "robust_phase_reset_epochs")
+#: [rtk_engine] keys that take true or false
+ENGINE_FLAGS = ("robust_screening", "robust_huber")
+#: engine keys the run sets from its own keys (RunConfig): refused in the engine table, naming the run key
+ENGINE_RUN_KEYS = {"lever_arm_b": "lever_arm_b", "propagation_interval": "propagation_interval_s",
+                   "output_decimation": "output_decimation", "smooth": "smooth", "ut_alpha": "ut_alpha",
+                   "ut_beta": "ut_beta", "ut_kappa": "ut_kappa"}
+
+
+def check_engine(engine, source: str | None = None) -> dict:
+    """The ``[rtk_engine]`` table (``engine=`` of :func:`run_rtk_ins`) checked: a table of the keys
+    :data:`ENGINE_NUMBERS` (numbers), :data:`ENGINE_FLAGS` (booleans) and the deprecated
+    :data:`MOVED_TO_RTK`.  A key the run sets (:data:`ENGINE_RUN_KEYS`), an unknown key or a value
+    of the wrong type is a one-line ConfigError (a ValueError) naming ``source`` (the TOML file) and the key."""
+    from ..config import _suggest
+
+    where = (lambda k: f"{source}: key 'rtk_engine.{k}'") if source else (lambda k: f"engine key {k!r}")
+    if engine is None:
+        return {}
+    if not isinstance(engine, dict):
+        raise ConfigError(f"{source}: key 'rtk_engine': bad value {engine!r}; allowed: an [rtk_engine] table"
+                         if source else f"engine: expected a dict of engine keys, got {type(engine).__name__}")
+    known = ENGINE_NUMBERS + ENGINE_FLAGS + MOVED_TO_RTK
+    for k, v in engine.items():
+        if k in ENGINE_RUN_KEYS:
+            raise ConfigError(f"{where(k)}: the run sets it; write the run key '{ENGINE_RUN_KEYS[k]}' instead")
+        if k not in known:
+            raise ConfigError(f"{where(k)}: unknown{_suggest(k, known)}")
+        if k in ENGINE_FLAGS:
+            if not isinstance(v, (bool, np.bool_)):
+                raise ConfigError(f"{where(k)}: bad value {v!r}; allowed: true or false")
+        elif isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or np.isnan(v):
+            raise ConfigError(f"{where(k)}: bad value {v!r}; allowed: a number")
+    return dict(engine)
 
 
 @dataclass
@@ -123,10 +163,14 @@ class RtkInsSolution(RtkSolution):
     SLIP_KINDS = RtkSolution.SLIP_KINDS + ("ins",)
 
 
-def rtk_ins_options(options=None) -> RtkOptions:
-    """:class:`RtkOptions` of an RTK/INS run: :data:`RTK_INS_DEFAULTS` under the given ones."""
-    return options if isinstance(options, RtkOptions) else \
-        RtkOptions.from_dict({**RTK_INS_DEFAULTS, **(options or {})}, "rtk options")
+def rtk_ins_options(options=None, source: str = "rtk options") -> RtkOptions:
+    """:class:`RtkOptions` of an RTK/INS run: :data:`RTK_INS_DEFAULTS` under the given ones (a bad
+    key's one-line ConfigError names ``source``)."""
+    if isinstance(options, RtkOptions):
+        return options
+    if options is not None and not isinstance(options, dict):
+        raise ConfigError(f"{source}: bad value {options!r}; allowed: a table of [rtk] keys")
+    return RtkOptions.from_dict({**RTK_INS_DEFAULTS, **(options or {})}, source)
 
 
 def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None, nav=None, base_pos=None,
@@ -156,7 +200,11 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
         screening of the single differences (Teunissen's w-test per satellite and frequency, IGG-III
         down-weighting; docs/algorithms.md, "Tight RTK/INS"): ``robust_screening`` (False),
         ``robust_chi2_row`` (10.83), ``robust_igg_k0`` (1.5), ``robust_igg_k1`` (3.0),
-        ``robust_huber`` (False), ``robust_huber_k`` (1.5), ``robust_max_sats`` (2).
+        ``robust_huber`` (False), ``robust_huber_k`` (1.5), ``robust_max_sats`` (2),
+        ``robust_phase_reset_epochs`` (2), ``ar_min_success_rate`` (0), ``outage_cycle_s`` (the unscented
+        time update's outage cycle [s]; default one per gap, 1.5 rover periods in a smoothed run).  The
+        run's own keys (lever arm, propagation interval, output decimation, smoother, UT scaling) come
+        from ``cfg``; :func:`check_engine` refuses them here.
     probe_epoch : int
         Tests: stop the records after this rover epoch and return its AR in ``solution.probe``.
 
@@ -178,7 +226,7 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
         if v is None:
             raise ValueError(f"coupling 'rtk' needs rover, base and nav observations; missing {k!r} "
                              "(insnav run --coupling rtk --obs ROVER --base BASE --nav NAV)")
-    engine = dict(engine or {})
+    engine = check_engine(engine)
     moved = {k: engine.pop(k) for k in MOVED_TO_RTK if k in engine}
     if moved:
         import warnings
@@ -240,8 +288,10 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
     summary = dict(filter=cfg.filter, coupling="rtk", layout=15, updates=int((status > 0).sum()), rejected=0,
                    gnss_records=int(status.size), cholesky_repairs=int(out["cholesky_repairs"]), **counts,
                    counters={k: int(v) for k, v in out["counters"].items()})
-    sol, _ = nav_solution(out, gnss_t=t_rec, innovation=np.full((status.size, 6), np.nan), nis=rs.ratio.copy(),
+    # <out>.innovations.csv: no NIS (the DD rows' test is the AR ratio, in <out>.rtk.csv), the DD rows per epoch
+    sol, _ = nav_solution(out, gnss_t=t_rec, innovation=np.full((status.size, 6), np.nan), nis=np.full(status.size, np.nan),
                           gnss_status=np.where(status > 0, 1, 0).astype(np.int8), summary=summary)
+    sol.rows = rs.n_dd.astype(int)
     sol.rtk = rs
     sol.rtk_options = opt
     sol.fix_status = status.copy()

@@ -1,0 +1,208 @@
+"""The configuration of a carrier-phase run, and what ``evaluate`` / ``report`` make of its files.
+
+Each test pins a way the run could quietly do something other than asked:
+
+* ``[options] rtk_options`` and ``--option rtk_options={...}`` were accepted and ignored (the
+  ``[rtk]`` table replaced them in the merge); a GNSS-only run ignored ``--option`` altogether.
+* ``[rtk_engine]`` read keys the run sets from its own keys (lever arm, propagation interval,
+  output decimation, smoother) and overrode them silently; a wrong type or a table that is not a
+  table gave a Python or pybind11 error naming no file.
+* Run keys that RTK/INS does not read (the innovation gate, the fix flags and sigma scales,
+  ``[robust]``) were accepted and did nothing.
+* ``evaluate`` counted the navigation rows of a continuous-AR run as fixed, although they are the
+  float filter's (the same rows as with AR off); ``innovations.csv`` carried the AR ratio as NIS.
+* An RTKLIB-layout ``.pos`` against its simulated dataset was compared in the wrong time base with
+  the IMU-centre truth; ``report`` could not read a ``.pos`` or a static ``--truth x,y,z``.
+
+Data: the ``rtk-open-sky-car`` simulator preset (600 s, 1 Hz rover and base RINEX, 100 Hz IMU, the
+antenna truth in ``rtk_truth.csv``), simulated in about a second."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from insnav.analysis.evaluate import _read_solution, _read_truth, _solution_at, evaluate
+from insnav.cli import main
+from insnav.config import ConfigError, RunConfig
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    d = tmp_path_factory.mktemp("rtk_cfg") / "sim"
+    assert main(["simulate", "rtk-open-sky-car", "--out", str(d), "-q"]) == 0
+    return d
+
+
+def _files(d):
+    return ["--obs", str(d / "rover.obs"), "--base", str(d / "base.obs"), "--nav", str(d / "nav.rnx")]
+
+
+def _rtk_ins(d, out, *extra):
+    return ["run", str(d), "--filter", "ekf", "--coupling", "rtk", *_files(d), "--out", str(out), "-q", *extra]
+
+
+def _status(out):
+    a = np.genfromtxt(f"{out}.rtk.csv", delimiter=",", names=True)
+    return a["status"].astype(int)
+
+
+def test_rtk_options_in_options_and_on_the_command_line_reach_the_run(sim, tmp_path, capsys):
+    """``ar_mode = "off"`` given in ``[options] rtk_options`` or ``--option rtk_options=...``: no epoch
+    fixed (the default fixes every one on this open-sky drive), the resolved TOML says so and re-runs
+    the same rows; the option is written over the ``[rtk]`` table's key."""
+    base = tmp_path / "default.csv"
+    assert main(_rtk_ins(sim, base)) == 0
+    assert np.all(_status(base) == 1)
+    toml = tmp_path / "opts.toml"
+    toml.write_text('coupling = "rtk"\n[options]\nrtk_options = {ar_mode = "off"}\n')
+    a = tmp_path / "a.csv"
+    assert main(_rtk_ins(sim, a, "--config", str(toml))) == 0
+    assert np.all(_status(a) == 2)
+    table = tmp_path / "table.toml"
+    table.write_text('coupling = "rtk"\n[rtk]\nar_mode = "fix-and-hold"\n')
+    b = tmp_path / "b.csv"
+    assert main(_rtk_ins(sim, b, "--config", str(table), "--option", 'rtk_options={ar_mode="off"}')) == 0
+    assert np.all(_status(b) == 2)
+    resolved = (tmp_path / "b.csv.config.toml").read_text()
+    assert 'ar_mode = "off"' in resolved and "rtk_options" not in resolved
+    c = tmp_path / "c.csv"
+    assert main(_rtk_ins(sim, c, "--config", str(tmp_path / "b.csv.config.toml"))) == 0
+    assert c.read_bytes() == b.read_bytes()
+    capsys.readouterr()
+    for value, message in (('{ar_mod="off"}', "unknown key 'rtk.ar_mod' (did you mean 'rtk.ar_mode'?)"),
+                           ("3", "bad value 3; allowed: a table of [rtk] keys")):
+        out = tmp_path / "bad" / "x.csv"
+        assert main(_rtk_ins(sim, out, "--option", f"rtk_options={value}")) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("insnav run: error: [options] / --option rtk_options: ") and message in err, err
+        assert len(err.splitlines()) == 1 and not out.parent.exists()
+
+
+def test_gnss_only_filters_read_their_option_tables(sim, tmp_path, capsys):
+    """``--filter rtk --option rtk_options={ar_mode="off"}``: every epoch float (0 fixed of 600, against
+    600 of 600 without); ``--filter spp --option spp_options={raim=false}``: RAIM off; any other key
+    is one line naming it."""
+    out = tmp_path / "rtk.pos"
+    argv = ["run", "--filter", "rtk", "--format", "rinex", *_files(sim), "--out", str(out), "-q"]
+    assert main(argv) == 0
+    assert "600 fixed (100.0 %)" in capsys.readouterr().out
+    assert main(argv + ["--option", 'rtk_options={ar_mode="off"}']) == 0
+    assert "0 fixed (0.0 %), 600 float" in capsys.readouterr().out
+    assert main(argv + ["--option", "x=1"]) == 2
+    assert capsys.readouterr().err == ("insnav run: error: --option x: --filter rtk reads rtk_options only (tables "
+                                       "of keys, e.g. --option 'rtk_options={...}')\n")
+    spp = ["run", "--filter", "spp", "--format", "rinex", "--obs", str(sim / "rover.obs"), "--nav",
+           str(sim / "nav.rnx"), "--out", str(tmp_path / "spp.csv"), "-q"]
+    assert main(spp) == 0
+    assert "RAIM on" in capsys.readouterr().out
+    assert main(spp + ["--option", "spp_options={raim=false}"]) == 0
+    assert "RAIM off" in capsys.readouterr().out
+    assert main(spp + ["--option", "weighting=3"]) == 2
+    assert "--option weighting: bad value 3; allowed: a table of keys" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[rtk_engine]\nlever_arm_b = [0.0, 0.0, 1.5]\n",
+     "key 'rtk_engine.lever_arm_b': the run sets it; write the run key 'lever_arm_b' instead"),
+    ("[rtk_engine]\noutput_decimation = 10\n",
+     "key 'rtk_engine.output_decimation': the run sets it; write the run key 'output_decimation' instead"),
+    ("[rtk_engine]\npropagation_interval = 5.0\n",
+     "key 'rtk_engine.propagation_interval': the run sets it; write the run key 'propagation_interval_s' instead"),
+    ("[rtk_engine]\nsmooth = true\n", "key 'rtk_engine.smooth': the run sets it; write the run key 'smooth' instead"),
+    ("[rtk_engine]\nins_slip_k_sigma = \"x\"\n", "key 'rtk_engine.ins_slip_k_sigma': bad value 'x'; allowed: a number"),
+    ("[rtk_engine]\nrobust_screening = 1\n", "key 'rtk_engine.robust_screening': bad value 1; allowed: true or false"),
+    ("[rtk_engine]\nins_slip_k_sigm = 4.0\n", "key 'rtk_engine.ins_slip_k_sigm': unknown; did you mean 'ins_slip_k_sigma'?"),
+    ("rtk_engine = 3\n", "key 'rtk_engine': bad value 3; allowed: an [rtk_engine] table"),
+    ("rtk = 3\n", "key 'rtk': bad value 3; allowed: an [rtk] table"),
+])
+def test_an_engine_key_the_run_sets_or_a_bad_value_is_one_line_naming_the_file(sim, tmp_path, capsys, text, message):
+    """Before, the first four overrode the run's own keys silently (a 1.5 m lever arm the run did not
+    report, a tenth of the rows), and the others stopped with a TypeError or a pybind11 cast error
+    naming no file."""
+    toml = tmp_path / "run.toml"
+    toml.write_text('coupling = "rtk"\n' + text)
+    out = tmp_path / "out" / "sol.csv"
+    assert main(_rtk_ins(sim, out, "--config", str(toml))) == 2
+    err = capsys.readouterr().err
+    assert err == f"insnav run: error: {toml}: {message}\n", err
+    assert not out.parent.exists()
+
+
+@pytest.mark.parametrize("key, value", [("gate_chi2", 9.0), ("gate_prob", 0.99), ("use_position", False),
+                                        ("use_velocity", False), ("gnss_pos_sigma_scale", 2.0),
+                                        ("gnss_vel_sigma_scale", 2.0)])
+def test_run_keys_rtk_ins_does_not_read_are_refused(key, value):
+    """RTK/INS reads carrier phase and code, screens its rows itself ([rtk_engine] code_chi2_row,
+    robust_screening) and reads no fixes: these keys did nothing.  Their defaults pass."""
+    RunConfig(coupling="rtk").validate()
+    with pytest.raises(ConfigError, match=rf"config key '{key}': bad value .*; allowed: .* with rtk coupling"):
+        RunConfig(coupling="rtk", **{key: value}).validate()
+    RunConfig(coupling="tight", **{key: value}).validate()  # the tight filter reads them
+
+
+def test_a_robust_key_under_rtk_coupling_names_the_engine_keys():
+    cfg = RunConfig(coupling="rtk")
+    cfg.robust.chi2_row = 5.0
+    with pytest.raises(ConfigError, match=r"'robust.chi2_row'.*\[rtk_engine\] robust_screening"):
+        cfg.validate()
+
+
+def test_evaluate_counts_continuous_ar_rows_as_float_and_fix_and_hold_rows_as_fixed(sim, tmp_path, capsys):
+    """Continuous AR gives the fixed antenna per epoch (``<out>.rtk.pos``) and feeds nothing back: its
+    navigation rows are those of the run with AR off, bit for bit, and are now counted float (the
+    fix rate stays over the rover epochs, 100 %).  Fix-and-hold feeds the fix into the filter: its
+    rows are counted fixed, and are several times more accurate.  ``innovations.csv``: no NIS (NaN,
+    the AR ratio is in ``rtk.csv``), the DD rows per epoch."""
+    runs = {}
+    for mode in ("continuous", "off", "fix-and-hold"):
+        out = tmp_path / f"{mode}.csv"
+        assert main(_rtk_ins(sim, out, "--option", f'rtk_options={{ar_mode="{mode}"}}')) == 0
+        runs[mode] = evaluate(_read_solution(out), _read_truth(sim))
+    assert (tmp_path / "continuous.csv").read_bytes() == (tmp_path / "off.csv").read_bytes()
+    cont, off, hold = runs["continuous"], runs["off"], runs["fix-and-hold"]
+    assert cont["fix_rate"] == 1.0 and off["fix_rate"] == 0.0 and hold["fix_rate"] == 1.0
+    assert "fixed" not in cont["by_status"] and cont["by_status"]["float"] == off["by_status"]["float"]
+    assert cont.get("rows_float_filter") and not hold.get("rows_float_filter")
+    assert hold["by_status"]["fixed"]["epochs"] == cont["by_status"]["float"]["epochs"]
+    assert hold["by_status"]["fixed"]["rms_3d_m"] < cont["by_status"]["float"]["rms_3d_m"] / 3
+    inn = np.genfromtxt(tmp_path / "continuous.csv.innovations.csv", delimiter=",", names=True)
+    rtk = np.genfromtxt(tmp_path / "continuous.csv.rtk.csv", delimiter=",", names=True)
+    assert np.all(np.isnan(inn["nis"])) and np.array_equal(inn["rows"], rtk["n_dd"]) and rtk["n_dd"].min() >= 10
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "continuous.csv"), str(sim)]) == 0
+    text = capsys.readouterr().out
+    assert "fix rate 100.0 %" in text and "; fixed " not in text and "note: continuous AR:" in text
+
+
+def test_evaluate_and_report_compare_a_pos_with_the_antenna_truth(sim, tmp_path, capsys):
+    """An RTKLIB-layout ``.pos`` (the antenna, GPS seconds of week) against its dataset folder: the
+    dataset's ``rtk_truth.csv`` (the antenna, GPS time) is the reference, as when it is given itself;
+    before, the IMU-centre truth in dataset time did not overlap.  The fixed open-sky epochs are
+    within centimetres.  A dataset without ``rtk_truth.csv`` is one line; ``report`` reads the
+    ``.pos`` and a static ``--truth lat,lon,h``."""
+    pos = tmp_path / "rtk.pos"
+    assert main(["run", "--filter", "rtk", "--format", "rinex", *_files(sim), "--out", str(pos), "-q"]) == 0
+    sol = _read_solution(pos)
+    by_dir = evaluate(_solution_at(sol, (tr := _read_truth(sim, solution=pos)).t), tr)
+    tr2 = _read_truth(sim / "rtk_truth.csv")
+    by_file = evaluate(_solution_at(sol, tr2.t), tr2)
+    assert by_dir["samples"] == by_file["samples"] == 600
+    assert by_dir["rms_3d_m"] == by_file["rms_3d_m"] < 0.05
+    assert by_dir["by_status"]["fixed"]["epochs"] == 600
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    (bare / "truth.csv").write_bytes((sim / "truth.csv").read_bytes())
+    with pytest.raises(ValueError, match=r"has no rtk_truth.csv \(the antenna truth\)"):
+        _read_truth(bare, solution=pos)
+    capsys.readouterr()
+    assert main(["report", str(pos), "--truth", str(sim), "--out", str(tmp_path / "rep")]) == 0
+    html = (tmp_path / "rep" / "report.html").read_text()
+    assert f"{by_dir['rms_3d_m']:.3f}" in html
+    # a static antenna given as lat,lon,h: the report and evaluate agree
+    assert main(["report", str(pos), "--truth", "48.15,11.55,521.5", "--out", str(tmp_path / "rep2")]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(pos), "48.15,11.55,521.5", "--json"]) == 0
+    import json
+
+    rms3 = json.loads(capsys.readouterr().out)["rms_3d_m"]
+    assert f"{rms3:.3f}" in (tmp_path / "rep2" / "report.html").read_text()
