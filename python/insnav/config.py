@@ -578,7 +578,8 @@ class Tdcp:
         Add a TDCP row per satellite tracked at two consecutive epochs
         (stochastic cloning of the previous epoch's error state, Roumeliotis
         & Burdick 2002); needs carrier phase in the tight inputs (RINEX data:
-        ``insnav run --format rinex``), the tight ``ekf``, and no ``smooth``.
+        ``insnav run --format rinex``) and the tight ``ekf``; with ``smooth``
+        the RTS smoother runs over the cloned epochs.
         With ``[time] estimate_offset`` or ``[lever_arm] estimate`` the rows
         carry the time-offset and lever-arm columns (each the difference of
         the two epochs' range columns, meas/tdcp.hpp).

@@ -91,8 +91,8 @@ def add_run_parser(sub) -> None:
                         "(odometer speed, the dataset's odometer.csv), zupt (zero velocity and angular rate while "
                         "standing still); settings in the config's [constraints] table; loose ekf/rbukf/ukf")
     p.add_argument("--smooth", action="store_true",
-                   help="post-process with the RTS smoother (ekf, rbukf, ukf; loose or tight, "
-                        "also with --tdcp; ekf --coupling rtk, fixed epochs kept fixed): every row from all the data")
+                   help="post-process with the RTS smoother (ekf, rbukf, ukf; loose, tight or --coupling rtk; "
+                        "also with --tdcp; rtk: fixed epochs kept fixed): every row from all the data")
     p.add_argument("--tdcp", action="store_true",
                    help="tight ekf on RINEX data: add time-differenced carrier-phase rows (rover only, no base; "
                         "settings in the config's [tdcp] table)")
