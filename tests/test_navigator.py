@@ -339,3 +339,86 @@ def test_delay_push_refuses_and_bad_calls():
         DelayNavigator.from_dataset(ds, delay_p=[0.5, 0.6])
     with pytest.raises(ValueError, match="config key 'layout': bad value 21; allowed: 15"):
         DelayNavigator.from_dataset(ds, layout=21)
+
+
+def test_push_calls_name_wrong_arguments_and_statuses_say_what_happened():
+    """Before: ``t=None`` was queued as a NaN time and refused as "outside_imu_span", ``t0=nan``
+    built a navigator that refused every sample, a (12, k) satellite array was reshaped into
+    scrambled rows, the self-calibration options of TightNavigator stopped on "P0: expected shape",
+    a full queue said "too_old" and ``last_*()`` said "queued" for a record processed and not used.
+    Now: TypeError / ValueError naming the call and argument, "queue_full", "not_used"."""
+    from conftest import short_tight_dataset
+
+    from insnav.filters.navigator import TightNavigator
+
+    ds = _dataset(duration_s=10.0, outages=())
+    g = ds.gnss
+    with pytest.raises(ValueError, match=r"Navigator: t0 must be a finite time \[s\], got nan"):
+        Navigator(ds.initial, float("nan"), "consumer")
+    with pytest.raises(TypeError, match="Navigator: t must be a time in seconds"):
+        Navigator(ds.initial, None, "consumer")
+    nav = Navigator(ds.initial, ds.t0, "consumer", imu_hold=256)
+    assert nav.last_fix()["status"] == "not_used"  # nothing processed yet
+    for k in range(300):
+        assert nav.push_imu(ds.imu.t[k], ds.imu.dtheta_b[k], ds.imu.dv_b[k])
+    with pytest.raises(TypeError, match="push_gnss_fix: t must be a time in seconds .*NoneType None"):
+        nav.push_gnss_fix(None, g.lat_deg[0], g.lon_deg[0], g.h_m[0], g.sigma_pos_n[0])
+    with pytest.raises(TypeError, match="push_imu: t must be a time in seconds .*str '1.0'"):
+        nav.push_imu("1.0", ds.imu.dtheta_b[0], ds.imu.dv_b[0])
+    # 64 pending fixes fill the queue (engine/navigator.hpp): the 65th is refused as queue_full, an old
+    # one still as too_old
+    t_ok = ds.imu.t[250:299]
+    states = [nav.push_gnss_fix(t, g.lat_deg[1], g.lon_deg[1], g.h_m[1], g.sigma_pos_n[1])
+              for t in np.linspace(t_ok[0], t_ok[-1], 65)]
+    assert states[:64] == ["queued"] * 64 and states[64] == "queue_full", states[60:]
+    c = nav.counters
+    assert c["pending_records"] == 64 and c["refused_records"] == 1
+    nav.flush()
+    assert nav.counters["pending_records"] == 0 and nav.last_fix()["status"] in ("applied", "rejected_by_gate")
+    assert nav.push_gnss_fix(ds.imu.t[10], g.lat_deg[1], g.lon_deg[1], g.h_m[1], g.sigma_pos_n[1]) == "too_old"
+
+    tds = short_tight_dataset(20.0)
+    tnav = TightNavigator.from_dataset(tds, RunConfig(filter="ekf"))
+    inp = tnav.inputs
+    b, f = int(inp.epoch_start[1]), int(inp.epoch_start[2])
+    assert f - b != 12
+    with pytest.raises(ValueError, match=rf"sats must be \(k, 12\) rows, got shape \(12, {f - b}\)"):
+        tnav.push_pseudoranges(inp.epoch_t[1], inp.sats[b:f].T)
+    with pytest.raises(ValueError, match=r"sats must be \(k, 12\) rows, got shape \(\d+,\)"):
+        tnav.push_pseudoranges(inp.epoch_t[1], inp.sats[b:f].ravel())
+    # an epoch with every pseudorange absent is processed and not used: "not_used", not "queued"
+    k1 = int(np.searchsorted(tds.imu.t, inp.epoch_t[1]))
+    tnav.push_imu_array(tds.imu.t[:k1 - 2], tds.imu.dtheta_b[:k1 - 2], tds.imu.dv_b[:k1 - 2])
+    empty = np.array(inp.sats[b:f], float)
+    empty[:, 0] = empty[:, 1] = np.nan
+    assert tnav.push_pseudoranges(inp.epoch_t[1], empty) == "queued"
+    tnav.push_imu_array(tds.imu.t[k1 - 2:k1 + 5], tds.imu.dtheta_b[k1 - 2:k1 + 5], tds.imu.dv_b[k1 - 2:k1 + 5])
+    assert tnav.counters["pending_records"] == 0 and tnav.last_epoch()["status"] == "not_used"
+    for opt in ({"time": {"estimate_offset": True}}, {"lever_arm": {"estimate": True}}):
+        with pytest.raises(ValueError, match=r"TightNavigator: \[time\] estimate_offset / \[lever_arm\] estimate "
+                                             "unsupported"):
+            TightNavigator.from_dataset(tds, dict(filter="ekf", **opt))
+
+
+def test_the_compiled_push_calls_check_the_sigmas_themselves():
+    """The Python wrappers check a fix's sigmas; the compiled objects (``insnav._core``, what a C++-minded
+    caller or a subclass reaches) trusted them: a zero position sigma in a delay record was applied and
+    the state went NaN.  Now the binding refuses it too, naming the record."""
+    from insnav.filters.navigator import DelayNavigator
+
+    dds = _delay_dataset(duration_s=10.0)
+    dnav = DelayNavigator.from_dataset(dds, delay_p=[0.5, 0.5])
+    rec = np.array(dnav.records[:1], float)
+    rec[0, 8] = 0.0
+    with pytest.raises(ValueError, match="push_epoch: record 0: the position 1-sigma must be finite and > 0"):
+        dnav._nav.push_epoch(float(dnav.epochs[3]), np.ascontiguousarray(rec))
+    rec = np.array(dnav.records[:1], float)
+    rec[0, 5:8] = 1.0  # a velocity given with a NaN sigma
+    rec[0, 11:14] = np.nan
+    with pytest.raises(ValueError, match="push_epoch: record 0: the velocity 1-sigma must be finite and > 0"):
+        dnav._nav.push_epoch(float(dnav.epochs[3]), np.ascontiguousarray(rec))
+    ds = _dataset(duration_s=10.0, outages=())
+    nav = Navigator(ds.initial, ds.t0, "consumer")
+    row = np.array([ds.imu.t[5], 0.7, 0.2, 100.0, np.nan, np.nan, np.nan, 1.0, -1.0, 1.0, np.nan, np.nan, np.nan])
+    with pytest.raises(ValueError, match="push_gnss_fix: the position 1-sigma must be finite and > 0"):
+        nav._nav.push_gnss_fix(row)

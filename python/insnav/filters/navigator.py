@@ -38,9 +38,19 @@ __all__ = ["Navigator", "TightNavigator", "DelayNavigator"]
 
 _RAD2DEG = 180.0 / np.pi  # the batch run's conversion (_core.nav_rows_to_degrees), to the bit
 
-#: engine record status codes (closed_loop.hpp RecordStatus) as returned by the push calls
-RECORD_STATUS = {0: "queued", 1: "applied", 2: "rejected_by_gate", 3: "not_positive_definite",
-                 4: "outside_imu_span", 5: "too_old"}
+#: what a push call returns (closed_loop.hpp RecordStatus): queued, or why the record was refused
+PUSH_STATUS = {0: "queued", 4: "outside_imu_span", 5: "too_old", 6: "queue_full"}
+#: what became of the last record processed (``last_fix()``, ``last_epoch()``, ``last_record()``):
+#: ``not_used`` when it had nothing to use (every satellite masked out), or none was processed yet
+RECORD_STATUS = {0: "not_used", 1: "applied", 2: "rejected_by_gate", 3: "not_positive_definite",
+                 4: "outside_imu_span", 5: "too_old", 6: "queue_full"}
+
+
+def _time(t, call: str) -> float:
+    """``t`` as a float [s]; a TypeError naming the call for anything that is not a real number."""
+    if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{call}: t must be a time in seconds (a real number), got {type(t).__name__} {t!r}")
+    return float(t)
 
 #: constraint kinds (loose_engine.hpp ConstraintKind)
 CONSTRAINT_KINDS = {"nhc": 1, "odo": 2, "zupt": 4, "zaru": 8}
@@ -74,7 +84,7 @@ class _PushApi:
     def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
         """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
         False (ignored) when ``t`` does not increase, or ``t`` or an increment is not finite."""
-        return bool(self._nav.push_imu(float(t), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
+        return bool(self._nav.push_imu(_time(t, "push_imu"), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
 
     def push_imu_array(self, t, dtheta_b, dv_b) -> int:
         """Many IMU increments at once (N,), (N,3), (N,3); returns how many were taken."""
@@ -133,7 +143,10 @@ class Navigator(_PushApi):
                              "the loose ekf, rbukf and ukf")
         if not (np.isfinite(gnss_period_s) and gnss_period_s > 0):
             raise ValueError(f"Navigator: gnss_period_s must be > 0 s, got {gnss_period_s!r}")
-        ds = SimpleNamespace(initial=initial, t0=float(t0), lever_arm_b=np.asarray(lever_arm_b, float),
+        t0 = _time(t0, "Navigator")
+        if not np.isfinite(t0):
+            raise ValueError(f"Navigator: t0 must be a finite time [s], got {t0}")
+        ds = SimpleNamespace(initial=initial, t0=t0, lever_arm_b=np.asarray(lever_arm_b, float),
                              imu_model=_imu_model(imu_model), scenario=None, initial_is_truth=False)
         self._setup(ds, cfg, np.array([0.0, float(gnss_period_s)]), imu_hold)
 
@@ -169,9 +182,10 @@ class Navigator(_PushApi):
                       v_n_mps=None, sigma_vel_n_mps=None) -> str:
         """A GNSS antenna fix valid at ``t`` [s]: position (deg, deg, ellipsoidal m)
         with N/E/D 1-sigma [m], optionally NED velocity [m/s] with its 1-sigma.
-        Returns ``"queued"``, or why it was refused (``"too_old"``, ``"outside_imu_span"``)."""
+        Returns ``"queued"``, or why it was refused (``"too_old"``, ``"outside_imu_span"``,
+        ``"queue_full"``)."""
         r = self._row
-        r[0], r[1], r[2], r[3] = t, lat_deg * DEG, lon_deg * DEG, h_m
+        r[0], r[1], r[2], r[3] = _time(t, "push_gnss_fix"), lat_deg * DEG, lon_deg * DEG, h_m
         r[4:7] = np.nan if v_n_mps is None else np.asarray(v_n_mps, float)
         r[7:10] = sigma_pos_n_m
         r[10:13] = np.nan if sigma_vel_n_mps is None else np.asarray(sigma_vel_n_mps, float)
@@ -180,7 +194,7 @@ class Navigator(_PushApi):
         if np.any(np.isfinite(r[4:7]) & ~((r[10:13] > 0) & np.isfinite(r[10:13]))):
             raise ValueError(f"push_gnss_fix at t={t}: sigma_vel_n_mps must be finite and > 0 where v_n_mps is "
                              f"given, got {r[10:13]}")
-        return RECORD_STATUS[self._nav.push_gnss_fix(r)]
+        return PUSH_STATUS[self._nav.push_gnss_fix(r)]
 
     def push_constraint(self, t: float, kinds, speed_mps: float = float("nan")) -> str:
         """A vehicle-constraint event at ``t`` [s]: ``kinds`` a name or names of
@@ -190,7 +204,7 @@ class Navigator(_PushApi):
         if bad:
             raise ValueError(f"push_constraint: unknown kind {bad[0]!r} (one of {', '.join(CONSTRAINT_KINDS)})")
         flags = sum(CONSTRAINT_KINDS[k] for k in set(names))
-        return RECORD_STATUS[self._nav.push_constraint(float(t), flags, float(speed_mps))]
+        return PUSH_STATUS[self._nav.push_constraint(_time(t, "push_constraint"), flags, float(speed_mps))]
 
     # --- output ----------------------------------------------------------------------------
     def state(self) -> dict:
@@ -244,6 +258,9 @@ class TightNavigator(_PushApi):
             raise ValueError(f"TightNavigator: filter {cfg.filter!r}: the push API runs the tight ekf, rbukf and ukf")
         if cfg.smooth:
             raise ValueError("TightNavigator: the RTS smoother needs the whole run (insnav.run(..., smooth=True))")
+        if cfg.time.estimate_offset or cfg.lever_arm.estimate:
+            raise ValueError("TightNavigator: [time] estimate_offset / [lever_arm] estimate unsupported (the "
+                             "self-calibration states run in the batch engines, insnav.run)")
         if not (0 <= int(imu_hold) <= 256):
             raise ValueError(f"TightNavigator: imu_hold must be in 0 .. 256 samples, got {imu_hold!r}")
         a = tight_engine_args(dataset, cfg, **options)
@@ -263,11 +280,16 @@ class TightNavigator(_PushApi):
         pseudorange [m] and rate [m/s] (``TightInputs.sats``'s columns);
         ``system`` (k,) indices 0 G, 1 R, 2 E, 3 C (default GPS), ``prn`` (k,).
         Returns ``"queued"``, or why the epoch was refused."""
-        rows = np.ascontiguousarray(np.asarray(sats, float).reshape(-1, 12))
+        t = _time(t, "push_pseudoranges")
+        rows = np.ascontiguousarray(np.asarray(sats, float))
+        if rows.size == 0:
+            rows = np.zeros((0, 12))
+        if rows.ndim != 2 or rows.shape[1] != 12:
+            raise ValueError(f"push_pseudoranges at t={t}: sats must be (k, 12) rows, got shape {rows.shape}")
         k = rows.shape[0]
         sys_ = np.zeros(k, np.int64) if system is None else np.asarray(system, np.int64)
         prn_ = np.zeros(k, np.int64) if prn is None else np.asarray(prn, np.int64)
-        return RECORD_STATUS[self._nav.push_pseudoranges(float(t), rows, sys_, prn_)]
+        return PUSH_STATUS[self._nav.push_pseudoranges(t, rows, sys_, prn_)]
 
     def push_epoch(self, e: int) -> str:
         """Push epoch ``e`` of :attr:`inputs` (the batch run's satellite rows)."""
@@ -363,6 +385,7 @@ class DelayNavigator(_PushApi):
         epoch: ``records`` (k, 14) rows of t_valid, t_arrival [s], lat, lon [rad], h [m],
         v_n [m/s] (NaN: none), position and velocity 1-sigma N, E, D [m, m/s] (the rows of
         :attr:`records`; at most 8 per epoch).  Returns ``"queued"``, or why it was refused."""
+        t = _time(t, "push_epoch")
         rows = np.zeros((0, 14)) if records is None else np.ascontiguousarray(np.asarray(records, float))
         if rows.size == 0:
             rows = np.zeros((0, 14))
@@ -375,7 +398,7 @@ class DelayNavigator(_PushApi):
                 k = int(np.flatnonzero(given & ~ok)[0])
                 raise ValueError(f"push_epoch at t={t}: record {k}: the {what} 1-sigma must be finite and > 0, "
                                  f"got {rows[k, sig]}")
-        return RECORD_STATUS[self._nav.push_epoch(float(t), rows)]
+        return PUSH_STATUS[self._nav.push_epoch(t, rows)]
 
     def push_receiver_epoch(self, e: int) -> str:
         """Push epoch ``e`` of :attr:`epochs` with the records of :attr:`records` that arrived by it."""

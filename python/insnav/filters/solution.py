@@ -26,13 +26,15 @@ class RecordStatus(enum.IntEnum):
     NOT_POSITIVE_DEFINITE = 3  #: innovation covariance not positive definite
     OUTSIDE_IMU_SPAN = 4      #: valid before the first or after the last IMU sample
     TOO_OLD = 5               #: exact delay filter: older than the history it keeps
+    QUEUE_FULL = 6            #: push API: no room in the pending-record queue
 
 
 #: GNSS record status codes of :attr:`Solution.gnss_status`
 GNSS_STATUS = {RecordStatus.NOT_USED: "not used", RecordStatus.APPLIED: "applied",
                RecordStatus.REJECTED_BY_GATE: "rejected by gate", RecordStatus.NOT_POSITIVE_DEFINITE: "S not positive definite",
                RecordStatus.OUTSIDE_IMU_SPAN: "outside the IMU time span",
-               RecordStatus.TOO_OLD: "refused: older than the history"}
+               RecordStatus.TOO_OLD: "refused: older than the history",
+               RecordStatus.QUEUE_FULL: "refused: the pending queue is full"}
 
 
 @dataclass

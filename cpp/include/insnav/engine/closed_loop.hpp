@@ -52,6 +52,7 @@ enum class RecordStatus : std::int8_t {
   kNotPositiveDefinite = 3,  ///< innovation covariance not positive definite
   kOutsideImuSpan = 4,       ///< valid before the first or after the last IMU sample
   kTooOld = 5,               ///< exact delay engine: older than the history it keeps
+  kQueueFull = 6,            ///< push API: every slot of the pending-record queue taken
 };
 
 inline RecordStatus status_of(const UpdateResult& r) {

@@ -17,7 +17,8 @@
 // may arrive up to k samples late and still be applied at its own time (the
 // state then lags the newest sample by k samples; flush() integrates the held
 // samples).  A record older than the last integrated sample is refused
-// (RecordStatus::kTooOld) and counted, never applied at a wrong time.
+// (RecordStatus::kTooOld) and counted, never applied at a wrong time; one that
+// finds the pending queue full is refused as kQueueFull.
 //
 // Three families: LooseNavigator (GNSS fixes, vehicle constraints),
 // TightNavigator (pseudorange epochs) and DelayNavigator (seed 001's
@@ -146,16 +147,25 @@ class PushLoop {
     t_pushed_ = t_done_ = t0_ = t0;
   }
 
+  /// Why a record valid at t cannot be queued for its time (kNotUsed: it can): at or
+  /// before the initial time, or not finite (kOutsideImuSpan); not after the last
+  /// integrated sample (kTooOld).
+  RecordStatus timing_of(double t) const {
+    if (!std::isfinite(t) || !(t > t0_)) return RecordStatus::kOutsideImuSpan;
+    if (!(t > t_done_)) return RecordStatus::kTooOld;
+    return RecordStatus::kNotUsed;
+  }
+
+  /// A record with no room in the queue: refused for its time if that refuses it, else kQueueFull.
+  RecordStatus refuse_full(double t) {
+    const RecordStatus why = timing_of(t);
+    return refuse(why == RecordStatus::kNotUsed ? RecordStatus::kQueueFull : why);
+  }
+
   /// Queue a record (sorted by t, then by order, then in push order).
   RecordStatus enqueue(const Record& r) {
-    if (!std::isfinite(r.t) || !(r.t > t0_)) {
-      ++refused_;
-      return RecordStatus::kOutsideImuSpan;
-    }
-    if (!(r.t > t_done_) || pend_n_ == kMaxPending) {
-      ++refused_;
-      return RecordStatus::kTooOld;
-    }
+    if (const RecordStatus why = timing_of(r.t); why != RecordStatus::kNotUsed) return refuse(why);
+    if (pend_n_ == kMaxPending) return refuse(RecordStatus::kQueueFull);
     int i = pend_n_;
     while (i > 0 && (pend_[i - 1].t > r.t || (pend_[i - 1].t == r.t && pend_[i - 1].order > r.order))) {
       pend_[i] = pend_[i - 1];
@@ -247,7 +257,7 @@ class LooseNavigator : public PushLoop<LooseNavigator<Filter, kMaxHold, kMaxPend
   /// A GNSS position (and/or velocity) fix valid at fix.t, queued until the
   /// IMU sample that covers it is integrated.  kNotUsed: queued;
   /// kOutsideImuSpan: at or before the initial time; kTooOld: older than the
-  /// last integrated sample (or the queue is full).
+  /// last integrated sample; kQueueFull: no room in the pending queue.
   RecordStatus push_gnss_fix(const GnssFix& fix) {
     LoosePending p;
     p.t = fix.t;
@@ -344,7 +354,7 @@ class TightNavigator
   RecordStatus push_pseudoranges(double t, const SatObservation* sats, int n) {
     int slot = 0;
     while (slot < kMaxPendingEpochs && Base::any_pending([&](const TightPending& p) { return p.slot == slot; })) ++slot;
-    if (slot == kMaxPendingEpochs) return Base::refuse(RecordStatus::kTooOld);  // every slot pending
+    if (slot == kMaxPendingEpochs) return Base::refuse_full(t);  // every slot pending
     TightPending p;
     p.t = t;
     p.slot = slot;
@@ -432,13 +442,13 @@ class DelayNavigator : public PushLoop<DelayNavigator<L, S, kMaxHold, kMaxPendin
   /// One receiver epoch at t [s] with the n records that arrived since the
   /// previous epoch (at most kMaxRecords; the rest are refused and counted).
   /// kNotUsed: queued; kOutsideImuSpan: at or before the initial time (+ the
-  /// time tolerance); kTooOld: older than the last integrated sample, or the
-  /// queue is full.
+  /// time tolerance); kTooOld: older than the last integrated sample;
+  /// kQueueFull: every pending slot taken.
   RecordStatus push_epoch(double t, const GnssFix* records, int n) {
     if (!(t > Base::t0() + tol_)) return Base::refuse(RecordStatus::kOutsideImuSpan);
     int slot = 0;
     while (slot < kMaxPendingEpochs && Base::any_pending([&](const DelayPending& p) { return p.slot == slot; })) ++slot;
-    if (slot == kMaxPendingEpochs) return Base::refuse(RecordStatus::kTooOld);  // every slot pending
+    if (slot == kMaxPendingEpochs) return Base::refuse_full(t);  // every slot pending
     DelayPending p;
     p.t = t;
     p.slot = slot;
