@@ -71,14 +71,9 @@ def attach_fix_status(sol, path):
             i = np.searchsorted(t, np.asarray(sol.t) + 1e-6, side="right") - 1
             dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
             ok = (i >= 0) & (np.asarray(sol.t) - t[np.maximum(i, 0)] <= 1.5 * dt)
-            row_status = np.where(ok, status[np.maximum(i, 0)], 0).astype(int)
-            if _rtk_ins_ar_mode(p) != "fix-and-hold":
-                # continuous AR: the fix gives the antenna of its epoch (<out>.rtk.pos) and goes no further;
-                # the navigation rows are the float filter's (the same rows as with AR off), so a fixed
-                # epoch's rows count as float
-                row_status = np.where(row_status == 1, 2, row_status)
-                sol.rows_float_filter = True
-            sol.fix_status = row_status
+            # continuous AR: the rows after a fixed epoch hold its fixed solution (the engine's output
+            # shadow, engine/rtk_ins_engine.hpp) until the next epoch, as fix-and-hold's rows hold theirs
+            sol.fix_status = np.where(ok, status[np.maximum(i, 0)], 0).astype(int)
             sol.epoch_fix_status = status  # fix rate over the rover epochs, not the rows
             return sol
         t = np.atleast_1d(a["t_gps_s"])
@@ -86,21 +81,6 @@ def attach_fix_status(sol, path):
         i = np.clip(np.searchsorted(t, np.asarray(sol.t) - 1e-6), 0, len(t) - 1)
         sol.fix_status = np.where(np.abs(t[i] - sol.t) < 1e-3, status[i], 0).astype(int)
     return sol
-
-
-def _rtk_ins_ar_mode(path: Path) -> str:
-    """The ``[rtk] ar_mode`` an RTK/INS run wrote to ``<path>.config.toml`` (the RTK/INS default when
-    the file or key is absent)."""
-    from ..gnss.rtk import RtkOptions
-
-    cfg = path.with_suffix(path.suffix + ".config.toml")
-    try:
-        from ..config import read_toml
-
-        mode = read_toml(cfg).get("rtk", {}).get("ar_mode") if cfg.exists() else None
-    except ValueError:  # an unreadable resolved configuration: the default
-        mode = None
-    return mode if isinstance(mode, str) else RtkOptions.ar_mode
 
 
 def _pos_solution(path):
@@ -296,8 +276,6 @@ def evaluate(solution, truth, outages=()) -> dict:
         ep = getattr(solution, "epoch_fix_status", None)  # RTK/INS: over the rover epochs
         ep = st if ep is None else np.asarray(ep)
         out["fix_rate"] = float(np.mean(ep == 1)) if ep.size else 0.0
-        if getattr(solution, "rows_float_filter", False):
-            out["rows_float_filter"] = True
         out["by_status"] = {}
         for q, name in STATUS_NAMES.items():
             m = st_e == q
@@ -374,7 +352,6 @@ def _solution_at(sol, t):
         fs = np.asarray(fs)
         out.fix_status = fs[np.clip(np.searchsorted(sol.t, t - 1e-9), 0, fs.size - 1)]
         out.epoch_fix_status = getattr(sol, "epoch_fix_status", fs)  # the fix rate stays over the solution's epochs
-        out.rows_float_filter = getattr(sol, "rows_float_filter", False)
     if hasattr(sol, "slip_counts"):
         out.slip_counts = sol.slip_counts
     return out
@@ -422,9 +399,6 @@ def cmd_evaluate(args) -> int:
         parts = [f"{name} {d['epochs']} (3-D RMS {d['rms_3d_m']:.4g} m, max {d['max_3d_m']:.4g} m)"
                  for name, d in res["by_status"].items()]
         print(f"fix rate {100.0 * res['fix_rate']:.1f} %; " + "; ".join(parts))
-        if res.get("rows_float_filter"):
-            print("note: continuous AR: the fix rate is over the rover epochs; the rows are the float filter's "
-                  "(counted float above), the fixed antenna per epoch is in <solution>.rtk.pos")
     lo, hi = CONSISTENCY_BOUNDS
     for k, bad in res["consistency_flags"].items():
         n, _, ax = names[k]

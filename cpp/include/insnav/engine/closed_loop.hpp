@@ -356,6 +356,11 @@ struct ClosedLoop {
     imu.t = raw.t - raw.dt * (1.0 - a1);
     imu.dtheta_b = raw.dtheta_b * f;
     imu.dv_b = raw.dv_b * f;
+    if (shadow_on_) {  // the output shadow: the same increment, its own corrections
+      ImuIncrement si = imu;
+      shadow_corr_.apply(si);
+      shadow_ins_.update(si);
+    }
     corr.apply(imu);
     if constexpr (kHasLeverArm<L> || kHasOdoLever<L>) lever_rate_step(imu, a0 == 0.0);
     ins.update(imu);
@@ -533,14 +538,36 @@ struct ClosedLoop {
     out_cache_dirty_ = true;
   }
 
+  /// Output shadow (continuous ambiguity resolution, engine/rtk_ins_engine.hpp): from now on the
+  /// rows are written from `s`, the INS conditioned on a fix that the filter does not take,
+  /// mechanised with the same IMU increments and its own IMU corrections `c`, with the sigmas
+  /// sqrt(diag(P) - dvar) (dvar: the variance the fix removed), until end_output_shadow().  The
+  /// filter, its INS and its feedback are not changed: the rows RTKLIB's continuous mode would
+  /// output (the fixed solution), carried between epochs by the INS.
+  void start_output_shadow(const NavState& s, const ImuCorrection& c, const StateVec<L>& dvar) {
+    shadow_ins_ = ins;  // the mechanization's own history (previous increment, Earth terms)
+    shadow_ins_.set_state(s);
+    shadow_corr_ = c;
+    shadow_dvar_ = dvar;
+    shadow_on_ = true;
+    out_cache_dirty_ = true;
+  }
+  void end_output_shadow() {
+    if (!shadow_on_) return;
+    shadow_on_ = false;
+    out_cache_dirty_ = true;
+  }
+  bool output_shadow() const { return shadow_on_; }
+
   /// One output row: the INS corrected by the filter's current x (zero after
-  /// every feedback; non-zero during an outage for a sigma-point filter).
+  /// every feedback; non-zero during an outage for a sigma-point filter), or
+  /// the output shadow while one is on.
   void write_output(NavOutputs& out) {
     const std::int64_t i = out.n_out++;
-    const NavState& s = ins.state();
+    const NavState& s = shadow_on_ ? shadow_ins_.state() : ins.state();
     if (out.t) out.t[i] = s.t;
     const StateVec<L>& x = filter.x();
-    const bool corrected = !x.template head<9>().isZero(0.0);
+    const bool corrected = !shadow_on_ && !x.template head<9>().isZero(0.0);
     NavState c = s;  // the INS corrected by the estimate not yet fed back (feedback's formula)
     if (corrected)
       apply_nav_error(c, x.template segment<3>(L::kPos), x.template segment<3>(L::kVel),
@@ -560,12 +587,22 @@ struct ClosedLoop {
       for (int j = 0; j < 3; ++j) out.rpy[3 * i + j] = e[j];
     }
     if (out_cache_dirty_) {  // P, x and the corrections change only at propagate/update/feedback
-      sigma_ = filter.P().diagonal().cwiseMax(0.0).cwiseSqrt();
-      for (int j = 0; j < 3; ++j) {
-        imu_err_[j] = corr.acc_bias[j] + x[L::kAccBias + j];
-        imu_err_[3 + j] = corr.gyro_bias[j] + x[L::kGyroBias + j];
-        imu_err_[6 + j] = corr.acc_scale[j] + (kHasScale<L> ? x[L::kAccScale >= 0 ? L::kAccScale + j : 0] : 0.0);
-        imu_err_[9 + j] = corr.gyro_scale[j] + (kHasScale<L> ? x[L::kGyroScale >= 0 ? L::kGyroScale + j : 0] : 0.0);
+      if (shadow_on_) {
+        sigma_ = (filter.P().diagonal() - shadow_dvar_).cwiseMax(0.0).cwiseSqrt();
+        for (int j = 0; j < 3; ++j) {
+          imu_err_[j] = shadow_corr_.acc_bias[j];
+          imu_err_[3 + j] = shadow_corr_.gyro_bias[j];
+          imu_err_[6 + j] = shadow_corr_.acc_scale[j];
+          imu_err_[9 + j] = shadow_corr_.gyro_scale[j];
+        }
+      } else {
+        sigma_ = filter.P().diagonal().cwiseMax(0.0).cwiseSqrt();
+        for (int j = 0; j < 3; ++j) {
+          imu_err_[j] = corr.acc_bias[j] + x[L::kAccBias + j];
+          imu_err_[3 + j] = corr.gyro_bias[j] + x[L::kGyroBias + j];
+          imu_err_[6 + j] = corr.acc_scale[j] + (kHasScale<L> ? x[L::kAccScale >= 0 ? L::kAccScale + j : 0] : 0.0);
+          imu_err_[9 + j] = corr.gyro_scale[j] + (kHasScale<L> ? x[L::kGyroScale >= 0 ? L::kGyroScale + j : 0] : 0.0);
+        }
       }
       out_cache_dirty_ = false;
     }
@@ -767,6 +804,11 @@ struct ClosedLoop {
   StateVec<L> sigma_ = StateVec<L>::Zero();  // output cache: sqrt(diag P)
   Eigen::Matrix<double, 12, 1> imu_err_ = Eigen::Matrix<double, 12, 1>::Zero();  // and the IMU errors
   bool out_cache_dirty_ = true;  // P, x or the corrections changed since the cache was filled
+  // start_output_shadow(): the rows' own INS while a fix the filter does not take is held
+  Strapdown shadow_ins_;
+  ImuCorrection shadow_corr_;
+  StateVec<L> shadow_dvar_ = StateVec<L>::Zero();
+  bool shadow_on_ = false;
 };
 
 }  // namespace insnav

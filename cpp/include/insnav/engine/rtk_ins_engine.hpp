@@ -70,6 +70,11 @@
 //      least ar_min_success_rate (Teunissen 1998), partial AR; the fixed INS error is
 //      dx_fix = P_xN D^T Q_a^{-1} (a_hat - a_fix) (Teunissen 1995, eq. (6)); fix-and-hold feeds the
 //      fixed DD back as pseudo-measurements (sigma hold_sigma_cycles) into the joint filter.
+//      Continuous AR leaves the filter float (RTKLIB's continuous mode): the antenna of the epoch is
+//      the fixed one, and, without the smoother, the navigation rows until the next epoch are the INS
+//      conditioned on the integers (dx_fix fed into a copy of the INS and its IMU corrections, with
+//      sigmas sqrt(diag(P - P_xa Q_a^-1 P_ax))), mechanised beside the float INS with the same
+//      increments (ClosedLoop::start_output_shadow).
 //   4. RTS smoother (EKF, RB-UKF and UKF: "Filters" below; ClosedLoop::record_for_smoother;
 //      filter/rts_smoother.hpp): the backward pass
 //      runs over the 15 navigation error states with the ambiguities (and ionosphere states) marginalised (their block is
@@ -397,6 +402,7 @@ class RtkInsEngine {
     const int nf = std::clamp(o.n_freq, 1, gnss::kMaxFreq);
     const double t = core_.state().t;
     cond_valid_ = false;
+    core_.end_output_shadow();  // the previous epoch's fix is carried no further (resolve() may start one)
     const Mat15& Phi = cycle_phi();  // before the prior mean's feedback below (which moves nothing of the cycle)
     // the smoother's prediction from the previous epoch's fixed solution (4.), before resolve() conditions this one
     if constexpr (kUnscented) core_.condition_prediction_for_smoother(Phi);
@@ -1294,6 +1300,18 @@ class RtkInsEngine {
       cond_dx_ = dx_fix;
       cond_dP_ = dP_fix_;
       cond_valid_ = true;
+      if (!core_.recording()) {
+        // no smoother: the rows hold the fixed solution (the INS conditioned on the integers, with the
+        // feedback's formula) until the next epoch, mechanised beside the float filter, which does not
+        // take the fix (ClosedLoop::start_output_shadow); the smoother's rows are conditioned above
+        NavState s_out = core_.state();
+        apply_nav_error(s_out, dx_fix.template segment<3>(L::kPos), dx_fix.template segment<3>(L::kVel),
+                        dx_fix.template segment<3>(L::kAtt));
+        ImuCorrection c = core_.corr;
+        c.acc_bias += dx_fix.template segment<3>(L::kAccBias);
+        c.gyro_bias += dx_fix.template segment<3>(L::kGyroBias);
+        core_.start_output_shadow(s_out, c, dP_fix_.diagonal());
+      }
     }
   }
 
