@@ -592,7 +592,7 @@ def test_cli_run_writes_rtklib_pos_and_evaluate_reports_the_fix_rate(tmp_path, s
                        capture_output=True, text=True)
     assert e.returncode == 0, e.stderr
     res = json.loads(e.stdout)
-    assert res["samples"] == 301 and res["fix_rate"] == 1.0 and res["by_status"]["fixed"]["epochs"] == 301
+    assert res["samples"] == 301 and res["fix_rate"] == 1.0 and res["by_status"]["fixed"]["samples"] == 301
     assert res["rms_3d_m"] < 0.005 and "pos_n_m" not in res["consistency"]  # no covariance in a .pos
 
 

@@ -163,7 +163,7 @@ def test_continuous_ar_rows_hold_the_fix_and_evaluate_counts_them_fixed(sim, tmp
     cont, off, hold = runs["continuous"], runs["off"], runs["fix-and-hold"]
     assert cont["fix_rate"] == 1.0 and off["fix_rate"] == 0.0 and hold["fix_rate"] == 1.0
     fixed, flt = cont["by_status"]["fixed"], off["by_status"]["float"]
-    assert fixed["epochs"] == flt["epochs"] == hold["by_status"]["fixed"]["epochs"]
+    assert fixed["samples"] == flt["samples"] == hold["by_status"]["fixed"]["samples"]
     assert fixed["rms_3d_m"] < 0.05 and fixed["rms_3d_m"] < flt["rms_3d_m"] / 4, (fixed, flt)
     assert fixed["rms_3d_m"] < 2.0 * hold["by_status"]["fixed"]["rms_3d_m"], (fixed, hold)
     a = {m: np.genfromtxt(tmp_path / f"{m}.csv.rtk.csv", delimiter=",", names=True) for m in ("continuous", "off")}
@@ -197,7 +197,7 @@ def test_evaluate_and_report_compare_a_pos_with_the_antenna_truth(sim, tmp_path,
     by_file = evaluate(_solution_at(sol, tr2.t), tr2)
     assert by_dir["samples"] == by_file["samples"] == 600
     assert by_dir["rms_3d_m"] == by_file["rms_3d_m"] < 0.05
-    assert by_dir["by_status"]["fixed"]["epochs"] == 600
+    assert by_dir["by_status"]["fixed"]["samples"] == 600
     bare = tmp_path / "bare"
     bare.mkdir()
     (bare / "truth.csv").write_bytes((sim / "truth.csv").read_bytes())

@@ -198,7 +198,7 @@ def check_writable(folder) -> None:
 
 
 def check_outputs(outputs, inputs: dict, *, overwrite: bool = False, option: str = "--out",
-                  command: str = "run") -> None:
+                  command: str = "run", replaces: tuple | None = None) -> None:
     """Refuse, with one line naming the file, an output that is one of the
     ``inputs`` (:func:`input_files`), an existing folder, or an existing file
     that is not an insnav output (unless ``overwrite``); and check that every
@@ -216,6 +216,9 @@ def check_outputs(outputs, inputs: dict, *, overwrite: bool = False, option: str
         Named in the messages (``--out``).
     command : str
         What the inputs are inputs of, for the messages (``run``, ``evaluation``).
+    replaces : tuple of str, optional
+        The kinds of insnav file (:func:`insnav_output_kind`) the command may replace without
+        ``overwrite`` (default: any; ``insnav evaluate --out``: an earlier evaluation only).
     """
     folders = []
     for out in outputs:
@@ -228,9 +231,13 @@ def check_outputs(outputs, inputs: dict, *, overwrite: bool = False, option: str
                 raise UserError(f"{option} {out} is an input of this {command}{same}: choose another output name")
             if stat.S_ISDIR(os.stat(out).st_mode):
                 raise UserError(f"{option} {out} is a folder: give a file name")
-            if not overwrite and insnav_output_kind(out) is None:
+            kind = None if overwrite else insnav_output_kind(out)
+            if not overwrite and kind is None:
                 raise UserError(f"{out} exists and is not a file insnav wrote: not replaced (choose another "
                                 f"{option}, or --overwrite to replace it)")
+            if not overwrite and replaces is not None and kind not in replaces:
+                raise UserError(f"{out} exists and is an insnav {kind}, not an {' or '.join(replaces)}: not replaced "
+                                f"(choose another {option}, or --overwrite to replace it)")
         if out.parent not in folders:
             folders.append(out.parent)
     for f in folders:

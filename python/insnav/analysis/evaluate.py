@@ -62,7 +62,7 @@ def attach_fix_status(sol, path):
     if side.exists():
         from ..gnss.gpstime import SECONDS_PER_WEEK
 
-        a = np.genfromtxt(side, delimiter=",", names=True)
+        a = _read_rtk_sidecar(side)
         status = np.atleast_1d(a["status"]).astype(int)
         sol.slip_counts = {k[len("slips_"):]: int(np.nansum(np.atleast_1d(a[k]))) for k in a.dtype.names
                            if k.startswith("slips_")}
@@ -81,6 +81,34 @@ def attach_fix_status(sol, path):
         i = np.clip(np.searchsorted(t, np.asarray(sol.t) - 1e-6), 0, len(t) - 1)
         sol.fix_status = np.where(np.abs(t[i] - sol.t) < 1e-3, status[i], 0).astype(int)
     return sol
+
+
+def _read_rtk_sidecar(side: Path) -> np.ndarray:
+    """``<sol>.rtk.csv`` (status, slips and times per rover epoch) as a structured array; a one-line
+    ValueError naming the file when it is empty, has no rows or is not such a table."""
+    import warnings
+
+    from ..data.dataset import parse_numeric_origin
+    from ..data.textio import read_bytes
+
+    data = read_bytes(side)
+    nl = data.find(b"\n")
+    header = (data if nl < 0 else data[:nl]).decode("ascii", "replace").strip()
+    names = [h.strip() for h in header.split(",")]
+    need = {"status", "t_gps_s"}
+    if not header or not need <= set(names):
+        raise ValueError(f"{side}:1: not an insnav rtk table (its header needs {', '.join(sorted(need))}; "
+                         f"got {header[:80]!r})")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a, _ = parse_numeric_origin(b"" if nl < 0 else memoryview(data)[nl + 1:], len(names), str(side),
+                                    first_line=2, names=tuple(names))
+    if a.shape[0] == 0:
+        raise ValueError(f"{side}: no rows (the header only)")
+    out = np.empty(a.shape[0], dtype=[(n, float) for n in names])
+    for j, n in enumerate(names):
+        out[n] = a[:, j]
+    return out
 
 
 def _pos_solution(path):
@@ -146,7 +174,7 @@ def _read_truth(path, quality=None, solution=None):
     ``rtk_truth.csv``, the antenna in GPS time), a simulated ``rtk_truth.csv``, a KF-GINS ``.nav`` or
     a truth CSV."""
     p = Path(path)
-    if p.is_dir() and solution is not None and Path(solution).suffix == ".pos":
+    if p.is_dir() and solution is not None and _antenna_in_gps_time(Path(solution)):
         if not (p / "rtk_truth.csv").is_file():
             raise ValueError(f"{solution} is an antenna in GPS time and {p} has no rtk_truth.csv (the antenna "
                              "truth); its truth.csv is the IMU centre in dataset time: give an antenna reference "
@@ -173,19 +201,49 @@ def _read_truth(path, quality=None, solution=None):
     if quality is not None:
         raise ValueError("--quality applies to an RTKLIB .pos truth only")
     if p.is_dir():
-        from ..data.dataset import load_dataset
-
-        t = load_dataset(p).truth
-        if t is None:
+        if not (p / "truth.csv").is_file():
             raise ValueError(f"{p}: the dataset has no truth.csv")
-        return has_rows(t, p / "truth.csv")
+        p = p / "truth.csv"
     if ".nav" in p.name:
         from ..io.kfgins import read_kfgins_nav
 
         return has_rows(read_kfgins_nav(p), p)
     from ..data.dataset import Truth, read_csv
 
-    return has_rows(Truth.from_array(read_csv(p, Truth.COLUMNS)), p)
+    a, origin = read_csv(p, Truth.COLUMNS, return_origin=True)
+    _check_truth_rows(a, origin)
+    return has_rows(Truth.from_array(a), p)
+
+
+def _check_truth_rows(a: np.ndarray, origin) -> None:
+    """A truth table's rows: time and position finite, time strictly increasing (the comparison
+    interpolates the truth in time); a ValueError naming the file and line of the first bad row."""
+    a = np.asarray(a, float)
+    if a.ndim != 2 or a.shape[0] == 0:
+        return
+    bad = ~np.all(np.isfinite(a[:, :4]), axis=1)  # t_s, lat_deg, lon_deg, h_m
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{origin.where(i)}: a truth row without a finite time and position "
+                         f"({int(bad.sum())} such rows): remove them")
+    back = np.flatnonzero(np.diff(a[:, 0]) <= 0.0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise ValueError(f"{origin.where(i)}: the truth's time does not increase ({a[i, 0]:.6f} s after "
+                         f"{a[i - 1, 0]:.6f} s): sort the rows by time and remove repeated ones")
+
+
+def _antenna_in_gps_time(sol_path: Path) -> bool:
+    """A solution of the antenna in GPS seconds of week: an RTKLIB-layout ``.pos``, or a GNSS-only
+    ``--filter rtk`` run's table (its ``<sol>.rtk.csv`` has no IMU-time column ``t_s``)."""
+    if sol_path.suffix == ".pos":
+        return True
+    side = sol_path.with_suffix(sol_path.suffix + ".rtk.csv")
+    if not side.is_file():
+        return False
+    with open(side, encoding="utf-8", errors="replace") as f:
+        head = f.readline().strip().split(",")
+    return "t_gps_s" in head and "t_s" not in head
 
 
 def _rtk_truth(p: Path):
@@ -259,8 +317,8 @@ def evaluate(solution, truth, outages=()) -> dict:
         out["rms"][k] = rms(e[k][fin]).tolist()
         out["max"][k] = np.abs(e[k][fin]).max(axis=0).tolist()
         sk = "sigma_" + k
-        if sk in e and np.all(e[sk] > 0):
-            out["consistency"][k] = rms(e[k] / e[sk]).tolist()
+        if sk in e and np.all(e[sk][fin] > 0):
+            out["consistency"][k] = rms(e[k][fin] / e[sk][fin]).tolist()
     out["consistency_flags"] = consistency_flags(out["consistency"])
     out["horizontal_rms_m"] = float(rms(hz))
     out["horizontal_max_m"] = float(hz.max())
@@ -280,7 +338,7 @@ def evaluate(solution, truth, outages=()) -> dict:
         for q, name in STATUS_NAMES.items():
             m = st_e == q
             if m.any():
-                out["by_status"][name] = dict(epochs=int(m.sum()), rms_3d_m=float(np.sqrt(np.mean(err3[m] ** 2))),
+                out["by_status"][name] = dict(samples=int(m.sum()), rms_3d_m=float(np.sqrt(np.mean(err3[m] ** 2))),
                                               max_3d_m=float(err3[m].max()))
     out["outages"] = []
     t = e["t"]
@@ -329,9 +387,18 @@ def _parse_outages(text: str):
 
 
 def _solution_at(sol, t):
-    """The solution interpolated linearly to the times ``t`` inside its span (yaw unwrapped)."""
+    """The solution interpolated linearly to the times ``t`` inside its span (yaw unwrapped), leaving
+    out the times inside a gap of the solution (two consecutive rows more than 1.5 of its median
+    spacing apart, e.g. epochs without a solution in an RTKLIB .pos): nothing is drawn across one."""
     t = np.asarray(t, float)
-    t = t[(t >= sol.t[0]) & (t <= sol.t[-1])]
+    st = np.asarray(sol.t, float)
+    t = t[(t >= st[0]) & (t <= st[-1])]
+    if st.size > 1 and t.size:
+        d = np.diff(st)
+        step = float(np.median(d[d > 0])) if np.any(d > 0) else 0.0
+        i = np.clip(np.searchsorted(st, t, side="right") - 1, 0, st.size - 2)
+        on_row = np.isclose(t, st[i], rtol=0.0, atol=1e-6) | np.isclose(t, st[i + 1], rtol=0.0, atol=1e-6)
+        t = t[on_row | (st[i + 1] - st[i] <= 1.5 * step)]
     if t.size == 0:
         raise ValueError(f"no truth epoch inside the solution's time span {sol.t[0]:.3f}..{sol.t[-1]:.3f} s "
                          "(a .pos reference needs solution times in GPS seconds of week)")
@@ -366,9 +433,12 @@ def cmd_evaluate(args) -> int:
         from .._outputs import check_outputs, input_files
         from ..filters.solution import innovations_path, residuals_path
 
+        sol_p = Path(args.solution)
         check_outputs([Path(out)], input_files(args.solution, innovations_path(args.solution),
-                                               residuals_path(args.solution), args.truth),
-                      overwrite=getattr(args, "overwrite", False), command="evaluation")
+                                               residuals_path(args.solution), args.truth,
+                                               sol_p.with_suffix(sol_p.suffix + ".rtk.csv"),
+                                               sol_p.with_suffix(sol_p.suffix + ".config.toml")),
+                      overwrite=getattr(args, "overwrite", False), command="evaluation", replaces=("evaluation",))
     sol = _read_solution(args.solution)
     truth = _read_truth(args.truth, args.quality, solution=args.solution) if Path(args.truth).exists() \
         else static_truth(args.truth, sol.t)
@@ -396,7 +466,7 @@ def cmd_evaluate(args) -> int:
     print(f"horizontal RMS {res['horizontal_rms_m']:.4g} m, max {res['horizontal_max_m']:.4g} m; "
           f"3-D RMS {res['rms_3d_m']:.4g} m")
     if "fix_rate" in res:
-        parts = [f"{name} {d['epochs']} (3-D RMS {d['rms_3d_m']:.4g} m, max {d['max_3d_m']:.4g} m)"
+        parts = [f"{name} {d['samples']} samples (3-D RMS {d['rms_3d_m']:.4g} m, max {d['max_3d_m']:.4g} m)"
                  for name, d in res["by_status"].items()]
         print(f"fix rate {100.0 * res['fix_rate']:.1f} %; " + "; ".join(parts))
     lo, hi = CONSISTENCY_BOUNDS

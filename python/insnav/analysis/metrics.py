@@ -39,7 +39,11 @@ def errors(sol, truth) -> dict:
     lat, lon, h = np.asarray(sol.lat_deg)[keep] * DEG, np.asarray(sol.lon_deg)[keep] * DEG, np.asarray(sol.h_m)[keep]
     pos = np.column_stack([(lat - lat_t) * (R_M + h_t), (lon - lon_t) * (R_N + h_t) * np.cos(lat_t), -(h - h_t)])
     vel = np.asarray(sol.v_n)[keep] - at(truth.v_n)
-    yaw_t = np.unwrap(np.asarray(truth.yaw_deg) * DEG) / DEG
+    yaw_t = np.asarray(truth.yaw_deg, float) * DEG
+    fin = np.isfinite(yaw_t)  # unwrapped over the rows that have a yaw (a NaN would end the unwrapping there)
+    yaw_t = yaw_t.copy()
+    yaw_t[fin] = np.unwrap(yaw_t[fin])
+    yaw_t /= DEG
     att = np.column_stack([wrap_deg(np.asarray(sol.roll_deg)[keep] - at(truth.roll_deg)),
                            wrap_deg(np.asarray(sol.pitch_deg)[keep] - at(truth.pitch_deg)),
                            wrap_deg(np.asarray(sol.yaw_deg)[keep] - np.interp(t, tt, yaw_t))])

@@ -414,10 +414,14 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
     filters = tuple(filters)
     if not filters:
         raise ValueError("montecarlo: no filters given")
-    from ..registry import filter_spec
+    from ..registry import FILTERS, filter_spec
 
     for f in filters:
-        filter_spec(f)  # a ValueError naming the known filters
+        spec = filter_spec(f)  # a ValueError naming the known filters
+        if "gnss" in spec.couplings and len(spec.couplings) == 1:
+            raise ValueError(f"montecarlo: filter {f!r} is GNSS only (it reads RINEX files: insnav run --filter "
+                             f"{f} --format rinex); the campaign runs the INS filters: "
+                             f"{', '.join(n for n, s_ in FILTERS.items() if s_.couplings != ('gnss',))}")
     if runs < 1:
         raise ValueError(f"montecarlo: runs must be >= 1, got {runs}")
     if backend not in _BACKENDS:
@@ -527,7 +531,8 @@ def add_compare_parser(sub) -> None:
     from ..registry import FILTERS
 
     p.add_argument("--filters", default="kf,rdkf,exact",
-                   help=f"comma-separated, from {', '.join(FILTERS)} (default: %(default)s)")
+                   help=f"comma-separated, from {', '.join(n for n, s in FILTERS.items() if s.couplings != ('gnss',))} "
+                        "(default: %(default)s)")
     p.add_argument("--runs", type=int, default=100, help="Monte Carlo runs (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--workers", type=int, default=None,

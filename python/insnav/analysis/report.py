@@ -404,8 +404,8 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
             rows.append(("cycle slips detected", ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sc.items())))
         if ev is not None and "by_status" in ev:
             for name, d in ev["by_status"].items():
-                rows.append((f"3-D error of {name} epochs, RMS / max [m]",
-                             f"{_fmt(d['rms_3d_m'])} / {_fmt(d['max_3d_m'])} ({d['epochs']} epochs)"))
+                rows.append((f"3-D error while {name}, RMS / max [m]",
+                             f"{_fmt(d['rms_3d_m'])} / {_fmt(d['max_3d_m'])} ({d['samples']} samples compared)"))
     if outages:
         rows.append(("GNSS outages [s]", ", ".join(f"{a:.1f}-{b:.1f}" for a, b in outages)))
     if ev is not None:

@@ -1,0 +1,131 @@
+"""What ``insnav evaluate`` / ``report`` / ``compare`` do with inputs that used to give wrong figures
+with exit status 0, or cost a file.
+
+* A gap in the solution (epochs without a solution, as RTKLIB leaves out of a ``.pos``) was filled
+  with a straight line and scored: the comparison now leaves out the times inside a gap.
+* A truth with rows without a time or position, or whose time does not increase, was interpolated
+  anyway (attitude figures over the first rows only, NaN totals; 130 m errors from swapped blocks):
+  one line naming the file and line now.
+* ``evaluate --out`` replaced any insnav file (another solution, the solution's own ``.rtk.csv``
+  and ``.config.toml``, which it reads): it replaces an earlier evaluation only.
+* A malformed ``<sol>.rtk.csv`` gave an IndexError or numpy's list of lines.
+* A GNSS-only RTK solution written as ``.csv`` was compared with the IMU-centre truth ("do not
+  overlap") where the same run as ``.pos`` used the antenna truth.
+* ``compare --filters rtk`` was offered and could not run.
+
+Data: the ``rtk-open-sky-car`` simulator preset (600 s), simulated in about a second."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from insnav.cli import main
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    d = tmp_path_factory.mktemp("eval_inputs") / "sim"
+    assert main(["simulate", "rtk-open-sky-car", "--out", str(d), "-q"]) == 0
+    return d
+
+
+def _gnss_rtk(d, out):
+    return main(["run", "--filter", "rtk", "--format", "rinex", "--obs", str(d / "rover.obs"), "--base",
+                 str(d / "base.obs"), "--nav", str(d / "nav.rnx"), "--out", str(out), "-q"])
+
+
+def _json(capsys, *argv):
+    capsys.readouterr()
+    assert main(["evaluate", *map(str, argv), "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_a_gap_in_the_solution_is_not_scored(sim, tmp_path, capsys):
+    """60 epochs removed from a 600-epoch .pos: 540 compared (was 600, the gap drawn as a line), and
+    the figures are those of the full solution at the same epochs."""
+    full = tmp_path / "full.pos"
+    assert _gnss_rtk(sim, full) == 0
+    lines = full.read_text().splitlines(keepends=True)
+    head = [ln for ln in lines if ln.startswith("%")]
+    body = [ln for ln in lines if not ln.startswith("%")]
+    assert len(body) == 600
+    gap = tmp_path / "gap.pos"
+    gap.write_text("".join(head + body[:300] + body[360:]))
+    r_gap, r_full = _json(capsys, gap, sim), _json(capsys, full, sim)
+    assert r_full["samples"] == 600 and r_gap["samples"] == 540
+    assert r_gap["by_status"]["fixed"]["samples"] == 540
+    # the kept epochs are compared exactly as in the full run: the same largest error or a smaller one
+    assert r_gap["by_status"]["fixed"]["max_3d_m"] <= r_full["by_status"]["fixed"]["max_3d_m"] + 1e-12
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda a: a.__setitem__(slice(5000, 5010), np.nan), "truth.csv:5002: a truth row without a finite time and "
+                                                          "position (10 such rows)"),
+    (lambda a: a.__setitem__(slice(100, 200), a[200:300].copy()), "truth.csv:202: the truth's time does not increase"),
+])
+def test_a_truth_with_bad_rows_is_refused_naming_the_line(sim, tmp_path, capsys, edit, message):
+    sol = tmp_path / "sol.csv"
+    assert main(["run", str(sim), "--filter", "ekf", "--out", str(sol), "-q"]) == 0
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    text = (sim / "truth.csv").read_text().splitlines()
+    a = np.array([[float(x) for x in ln.split(",")] for ln in text[1:]])
+    edit(a)
+    np.savetxt(bad / "truth.csv", a, delimiter=",", header=text[0], comments="", fmt="%.12g")
+    capsys.readouterr()
+    for truth in (bad, bad / "truth.csv"):
+        assert main(["evaluate", str(sol), str(truth)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"insnav evaluate: error: {bad / 'truth.csv'}:") and message in err, err
+        assert len(err.splitlines()) == 1
+
+
+def test_evaluate_out_replaces_an_earlier_evaluation_only(sim, tmp_path, capsys):
+    sol = tmp_path / "s.csv"
+    other = tmp_path / "other.csv"
+    for out in (sol, other):
+        assert main(["run", str(sim), "--filter", "ekf", "--coupling", "rtk", "--obs", str(sim / "rover.obs"),
+                     "--base", str(sim / "base.obs"), "--nav", str(sim / "nav.rnx"), "--out", str(out), "-q"]) == 0
+    capsys.readouterr()
+    for target, why in ((other, "is an insnav solution, not an evaluation"),
+                        (tmp_path / "s.csv.rtk.csv", "is an input of this evaluation"),
+                        (tmp_path / "s.csv.config.toml", "is an input of this evaluation")):
+        before = target.read_bytes()
+        assert main(["evaluate", str(sol), str(sim), "--out", str(target)]) == 2
+        assert why in capsys.readouterr().err
+        assert target.read_bytes() == before
+    ev = tmp_path / "ev.json"
+    assert main(["evaluate", str(sol), str(sim), "--out", str(ev)]) == 0
+    assert main(["evaluate", str(sol), str(sim), "--out", str(ev)]) == 0  # an earlier evaluation: replaced
+    assert json.loads(ev.read_text())["fix_rate"] == 1.0
+
+
+@pytest.mark.parametrize("text, message", [
+    ("", ":1: not an insnav rtk table"),
+    ("t_gps_s,status,ratio,n_fix\n", ": no rows (the header only)"),
+    ('{"a": 1}\n{"b": 2}\n', ":1: not an insnav rtk table"),
+])
+def test_a_malformed_rtk_sidecar_is_one_line_naming_it(sim, tmp_path, capsys, text, message):
+    sol = tmp_path / "e.csv"
+    assert main(["run", str(sim), "--filter", "ekf", "--out", str(sol), "-q"]) == 0
+    side = tmp_path / "e.csv.rtk.csv"
+    side.write_text(text)
+    capsys.readouterr()
+    assert main(["evaluate", str(sol), str(sim)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"insnav evaluate: error: {side}") and message in err and len(err.splitlines()) == 1, err
+
+
+def test_a_gnss_only_rtk_csv_uses_the_antenna_truth_as_its_pos_does(sim, tmp_path, capsys):
+    pos, csv = tmp_path / "g.pos", tmp_path / "g.csv"
+    assert _gnss_rtk(sim, pos) == 0 and _gnss_rtk(sim, csv) == 0
+    r_pos, r_csv = _json(capsys, pos, sim), _json(capsys, csv, sim)
+    assert r_csv["samples"] == r_pos["samples"] == 600
+    assert abs(r_csv["rms_3d_m"] - r_pos["rms_3d_m"]) < 1e-3 and r_csv["rms_3d_m"] < 0.05
+
+
+def test_compare_refuses_a_gnss_only_filter(capsys):
+    assert main(["compare", "rtk-open-sky-car", "--filters", "rtk", "--runs", "1"]) == 2
+    assert "filter 'rtk' is GNSS only" in capsys.readouterr().err
