@@ -280,4 +280,83 @@ def test_an_increment_that_overflows_as_a_rate_names_its_line(tmp_path, capsys):
         warnings.simplefilter("error")
         rc, out, err = _run(capsys, ["allan", str(p), "--out-dir", str(tmp_path / "o"), "--no-plot", "--allow-motion"])
     assert rc == 2 and err.startswith(f"insnav allan: error: {p}, line 501: the accelerometer sample is not a finite "
-                                      "number as a rate (inf, ") and err.endswith("): a corrupted record?\n"), err
+                                      "number below 10000 m/s^2 as a rate (inf, ") and err.endswith("): a corrupted "
+                                                                                       "record?\n"), err
+
+
+def test_an_absurd_finite_rate_names_its_line_before_the_sums_overflow(tmp_path, capsys):
+    """A rate of 1e308 (finite) leaked numpy's overflow warning and was reported as 'not static ... inf
+    m/s^2' (with --allow-motion: "fewer than 2 usable averaging times", naming nothing).  A KF-GINS folder
+    given to --format kfgins said "[Errno None] Is a directory"."""
+    t, g, f = _static_log(60.0)
+    f[700, 1] = 1e308 * 0.01  # an increment that is 1e306 m/s: 1e308 m/s^2 as a rate
+    p = tmp_path / "big.txt"
+    _write_kfgins(p, t, g, f)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rc, out, err = _run(capsys, ["allan", str(p), "--out-dir", str(tmp_path / "o"), "--no-plot", "--allow-motion"])
+    assert rc == 2 and err.startswith(f"insnav allan: error: {p}, line 701: the accelerometer sample is not a finite "
+                                      "number below 10000 m/s^2 as a rate"), err
+    rc, out, err = _run(capsys, ["allan", str(tmp_path), "--format", "kfgins", "--out-dir", str(tmp_path / "o2"),
+                                 "--no-plot"])
+    assert rc == 2 and err == f"insnav allan: error: {tmp_path}: a folder; --format kfgins reads a KF-GINS IMU text file\n"
+
+
+def test_gauss_markov_time_is_left_out_when_the_curve_has_no_minimum_inside_the_log():
+    """White rate noise and flicker only (no rate random walk): the fitted Allan deviation still falls at
+    the longest averaging time, so tau_min is the log's length (1 h gave T = 866 s, 2 h 1731 s for the
+    same process).  The Gauss-Markov keys are now left out with a note.  With a rate random walk the
+    minimum is inside the log and T = tau_min / 1.89 is written."""
+    from insnav.units import DEG_PER_H, DEG_PER_SQRT_H
+
+    tau0 = 0.1
+    n = int(3600 / tau0)
+    y = al.simulate_ieee952(n, tau0, N=0.05 * DEG_PER_SQRT_H, B=1.0 * DEG_PER_H, axes=3, rng=3)
+    fits = [al.fit_allan(al.allan_deviation(y, tau0), i) for i in range(3)]
+    assert all(f.coef["B"] > 0 and not f.tau_min_inside for f in fits)
+    assert all(al.gauss_markov_from_fit(f) == (0.0, math.inf) for f in fits)
+    toml = al.imu_noise_toml(fits, fits)
+    assert "gyro_bias_tau_s =" not in toml and "acc_bias_tau_s =" not in toml
+    assert "no Allan-deviation minimum inside it" in toml
+    y = al.simulate_ieee952(n, tau0, N=0.05 * DEG_PER_SQRT_H, B=1.0 * DEG_PER_H, K=20.0 * DEG_PER_H / 60.0, axes=1,
+                            rng=4)
+    f = al.fit_allan(al.allan_deviation(y, tau0), 0)
+    assert f.tau_min_inside and f.tau_min_s < 0.5 * f.tau_s[-1]
+    sigma, T = al.gauss_markov_from_fit(f)
+    assert sigma > 0 and T == pytest.approx(f.tau_min_s / al.GM_PEAK[0])
+
+
+def test_an_unresolved_white_noise_is_written_as_its_upper_bound_not_zero():
+    """A very short log of white noise: the fit can put it all in quantisation and leave N at 0, which
+    the TOML wrote as gyro_arw = 0 (no white process noise on that axis; insnav run took it).  Now the
+    axis gets N's upper bound, with a comment."""
+    tau0 = 1.0
+    for seed in range(50):
+        y = al.simulate_ieee952(12, tau0, N=1e-3, axes=3, rng=seed)
+        fits = [al.fit_allan(al.allan_deviation(y, tau0), i) for i in range(3)]
+        if any(not f.coef["N"] > 0 for f in fits):
+            break
+    else:
+        pytest.fail("no fit left N unresolved")
+    toml = al.imu_noise_toml(fits, fits)
+    line = next(ln for ln in toml.splitlines() if ln.startswith("gyro_arw_deg_per_sqrt_h"))
+    vals = [float(v) for v in line.split("=")[1].strip(" []").split(",")]
+    assert all(v > 0 for v in vals), line
+    assert "white noise not resolved by the fit: its upper bound written" in toml
+
+
+def test_report_of_the_allan_folder_given_as_dot(tmp_path, capsys, monkeypatch):
+    """``insnav report --allan .`` (or ``allan.csv`` from inside the folder) stopped on "PosixPath('.')
+    has an empty name"; the report goes beside the folder, named after it."""
+    require_module("matplotlib", "plot")
+    t, g, f = _static_log(60.0)
+    p = tmp_path / "static.txt"
+    _write_kfgins(p, t, g, f)
+    out = tmp_path / "noise"
+    rc, _, err = _run(capsys, ["allan", str(p), "--out-dir", str(out), "--no-plot"])
+    assert rc == 0, err
+    monkeypatch.chdir(out)
+    for arg, name in ((".", "noise"), ("allan.csv", "allan.csv")):
+        rc, stdout, err = _run(capsys, ["report", "--allan", arg])
+        assert rc == 0, err
+        assert f"IMU noise of {name}<" in (tmp_path / "noise-report" / "report.html").read_text()

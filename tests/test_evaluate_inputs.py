@@ -129,3 +129,22 @@ def test_a_gnss_only_rtk_csv_uses_the_antenna_truth_as_its_pos_does(sim, tmp_pat
 def test_compare_refuses_a_gnss_only_filter(capsys):
     assert main(["compare", "rtk-open-sky-car", "--filters", "rtk", "--runs", "1"]) == 2
     assert "filter 'rtk' is GNSS only" in capsys.readouterr().err
+
+
+def test_tune_reads_its_reference_before_the_search(sim, tmp_path, capsys):
+    """A missing or unreadable ``--reference`` stopped ``insnav tune`` only after its whole search (80
+    filter runs), as "cannot read the GNSS file"; it is now one line naming the option, at once."""
+    import time
+
+    capsys.readouterr()
+    t0 = time.perf_counter()
+    assert main(["tune", str(sim), "--reference", str(tmp_path / "none.pos"), "--out", str(tmp_path / "t.toml"),
+                 "-q"]) == 2
+    assert capsys.readouterr().err == f"insnav tune: error: --reference {tmp_path / 'none.pos'}: not found\n"
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,y\n1,2\n")
+    assert main(["tune", str(sim), "--reference", str(bad), "--out", str(tmp_path / "t.toml"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"insnav tune: error: --reference {bad}: {bad}:1: unexpected header"), err
+    assert time.perf_counter() - t0 < 20.0  # no search ran (it takes minutes on this drive)
+    assert not (tmp_path / "t.toml").exists()

@@ -306,3 +306,55 @@ def test_python_api_checks_the_same(car):
         insnav.run(car, filter="ukf", time={"estimate_offset": True})
     with pytest.raises(ConfigError, match="'time.estimate_offset'"):
         RunConfig(filter="exact", time=TimeOffset(estimate_offset=True)).validate()
+
+
+def test_a_run_config_asking_for_the_self_calibration_states_over_a_kfgins_yaml(tmp_path):
+    """``--format kfgins`` loads the YAML as the 21-state model with its initial scale factors.  A
+    ``--run-config`` with ``[time] estimate_offset = "auto"`` said "bad value True; allowed: false with
+    layout = 21" (the value it echoed was not the one given, no file named); with ``layout = 15`` added,
+    "config key 'init_acc_scale': bad value [0.0, 0.0, 0.0]; allowed: absent", a key the user never
+    wrote.  Now the first names the file, the value and the remedy, and the second runs: the YAML's zero
+    initial scale factors do not apply to the 15-state layout.  A non-zero one is refused, naming it."""
+    from insnav.cli.run import _overlay_run_config
+    from insnav.errors import UserError
+
+    def kfgins_cfg(scale=0.0):
+        return RunConfig(layout=21, init_acc_scale=[scale] * 3, init_gyro_scale=[0.0] * 3,
+                         init_sigma_acc_scale=[1e-3] * 3, init_sigma_gyro_scale=[1e-3] * 3)
+
+    a = tmp_path / "a.toml"
+    a.write_text('[time]\nestimate_offset = "auto"\n')
+    with pytest.raises(UserError, match=rf"--run-config {a}: config key 'time.estimate_offset': bad value 'auto'; "
+                                        r"allowed: false with layout = 21 .*set layout = 15"):
+        _overlay_run_config(kfgins_cfg(), a)
+    b = tmp_path / "b.toml"
+    b.write_text('layout = 15\n[time]\nestimate_offset = "auto"\n')
+    cfg = _overlay_run_config(kfgins_cfg(), b)
+    assert cfg.layout == 15 and cfg.time.estimate_offset == "auto"
+    assert cfg.init_acc_scale is None and cfg.init_sigma_gyro_scale is None
+    with pytest.raises(UserError, match=r"layout = 15 has no scale-factor states, but the KF-GINS YAML gives "
+                                        r"initaccscale = \[0.001, 0.001, 0.001\]"):
+        _overlay_run_config(kfgins_cfg(1e-3), b)
+
+
+def test_the_command_line_prints_the_estimated_lever_arms(car, tmp_path, capsys):
+    """``[lever_arm] estimate_odometer``: the run computed the odometer lever arm and the command line
+    lost it (no column, no line).  It now prints the last estimate and its 1-sigma, as the API's
+    summary holds them."""
+    from insnav.cli import main
+
+    d = car.save(tmp_path / "car")
+    toml = tmp_path / "odo.toml"
+    toml.write_text('[constraints]\nuse = ["nhc"]\nlever_arm_b_m = [-1.3, 0.0, 0.4]\n'
+                    '[lever_arm]\nestimate_odometer = true\nodometer_sigma_m = 1.0\n')
+    capsys.readouterr()
+    assert main(["run", str(d), "--config", str(toml), "--out", str(tmp_path / "s.csv"), "-q"]) == 0
+    out = capsys.readouterr().out
+    from insnav.config import Constraints
+
+    sol = insnav.run(car, constraints=Constraints(use=["nhc"], lever_arm_b_m=[-1.3, 0.0, 0.4]),
+                     lever_arm={"estimate_odometer": True, "odometer_sigma_m": 1.0})
+    est, sig = sol.summary["odo_lever_arm_b_m"], sol.summary["sigma_odo_lever_arm_b_m"]
+    want = (f"odometer lever arm (body x, y, z): {', '.join(f'{v:+.3f}' for v in est)} +- "
+            f"{', '.join(f'{v:.3f}' for v in sig)} m")
+    assert want in out, out

@@ -1058,14 +1058,15 @@ class RunConfig:
                 continue
             if self.coupling not in spec.selfcal:
                 where = ", ".join(f"{n} {c}" for n, s_ in FILTERS.items() for c in s_.selfcal)
-                bad(key, True, f"false with filter {self.filter!r} {self.coupling} (the self-calibration states "
-                               f"run with: {where})")
+                bad(key, on, f"false with filter {self.filter!r} {self.coupling} (the self-calibration states "
+                             f"run with: {where})")
             if self.coupling == "loose" and self.layout != 15:
-                bad(key, True, "false with layout = 21 (the self-calibration states extend the 15-state layout)")
+                bad(key, on, f"false with layout = {self.layout} (the self-calibration states extend the 15-state "
+                             "layout: set layout = 15)")
             if self.constraints.use and self.constraints.odo_scale_state(self.layout):
-                bad(key, True, "false with the odometer scale-factor state (set constraints.odo_scale = false)")
+                bad(key, on, "false with the odometer scale-factor state (set constraints.odo_scale = false)")
             if self.smooth:
-                bad(key, True, "false with smooth = true (the RTS smoother does not run on these states)")
+                bad(key, on, "false with smooth = true (the RTS smoother does not run on these states)")
         for key in ("init_sigma_pos_m", "init_sigma_vel_mps", "init_sigma_att_deg"):
             try:
                 v = np.asarray(getattr(self, key), dtype=float)

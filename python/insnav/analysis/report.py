@@ -627,12 +627,12 @@ def _figure_html(name: str, caption: str, data: bytes) -> str:
 def _allan_report(allan: Path, out_dir, title, overwrite: bool, plt) -> Path:
     """A report with only the Allan section (no solution)."""
     if out_dir is None:
-        base = allan.parent if allan.is_file() else allan
+        base = (allan.parent if allan.is_file() else allan).resolve()  # "." or "allan.csv" inside the folder
         out_dir = base.with_name(base.name + "-report")
     out_dir = Path(out_dir)
     _check_report_out(out_dir, [None, allan], overwrite)
     figs, sec = _allan_section(allan)
-    heading = title or f"insnav report: IMU noise of {allan.name}"
+    heading = title or f"insnav report: IMU noise of {allan.resolve().name}"
     parts = _page_head(heading) + sec[:2] + [_figure_html(*f) for f in figs] + sec[2:] + ["</body></html>"]
     files = [(name, data) for name, _, data in figs] + [("report.html", ("\n".join(parts) + "\n").encode())]
     return _write_report(out_dir, files)

@@ -290,6 +290,9 @@ class AllanFit:
     axis: str = ""
     #: name -> one-sided upper bound [SI] of a term removed as not resolved
     upper: dict = field(default_factory=dict)
+    #: the fitted Allan deviation has its minimum inside the log's averaging times (not at the
+    #: longest one: there the curve still falls, and tau_min is the log's length, not the data's)
+    tau_min_inside: bool = True
 
     def adev_model(self, tau_s) -> np.ndarray:
         """The fitted Allan deviation at ``tau_s`` [rate unit]."""
@@ -427,7 +430,9 @@ def fit_allan(curve: AllanCurve, axis: int = 0, *, terms=tuple(TERMS), confidenc
     fit = AllanFit(coef, ci, nu, tau, fitted, math.nan, confidence,
                    curve.axes[axis] if axis < len(curve.axes) else str(axis), upper)
     fine = np.geomspace(curve.tau_s[0], curve.tau_s[-1], 400)
-    fit.tau_min_s = float(fine[int(np.argmin(fit.adev_model(fine)))])
+    i_min = int(np.argmin(fit.adev_model(fine)))
+    fit.tau_min_s = float(fine[i_min])
+    fit.tau_min_inside = 0 < i_min < fine.size - 1
     return fit
 
 
@@ -456,10 +461,12 @@ def gauss_markov_from_fit(fit: AllanFit) -> tuple[float, float]:
     """First-order Gauss-Markov (sigma_GM [SI rate], T [s]) standing for the
     bias instability in the filter: the process whose Allan-deviation peak
     (0.618 sigma_GM at tau = 1.89 T) equals the flicker floor 0.664 B at the
-    bias-instability point tau_min of the fit.  (0, inf) when B is not resolved.
+    bias-instability point tau_min of the fit.  (0, inf) when B is not resolved, or when the
+    fitted curve has no minimum inside the log (still falling at the longest averaging time:
+    tau_min, and so T, would be set by the log's length, not by the data).
     """
     B = fit.coef["B"]
-    if not B > 0:
+    if not B > 0 or not fit.tau_min_inside:
         return 0.0, math.inf
     x_peak, peak = GM_PEAK
     return math.sqrt(TERMS["B"][1]) * B / peak, fit.tau_min_s / x_peak
@@ -492,16 +499,33 @@ def imu_noise_toml(gyro: list[AllanFit], accel: list[AllanFit], source: str = ""
              "[imu]"]
     gm_g = [gauss_markov_from_fit(f) for f in gyro]
     gm_a = [gauss_markov_from_fit(f) for f in accel]
-    lines.append(f"gyro_arw_deg_per_sqrt_h = {fmt([f.coef['N'] / DEG_PER_SQRT_H for f in gyro])}")
-    lines.append(f"acc_vrw_m_per_s_per_sqrt_h = {fmt([f.coef['N'] / MPS_PER_SQRT_H for f in accel])}")
+    for name, fits, key, unit in (("gyro", gyro, "gyro_arw_deg_per_sqrt_h", DEG_PER_SQRT_H),
+                                  ("accel", accel, "acc_vrw_m_per_s_per_sqrt_h", MPS_PER_SQRT_H)):
+        # an unresolved white noise (the fit put the short-tau noise in quantisation, or the log is a few
+        # samples long) is not written as 0, which would give the filter no white process noise on that
+        # axis: its upper bound is, else the Allan deviation of the shortest tau times sqrt(tau) (all of
+        # the noise there taken as white, also an upper bound)
+        vals, bounded = [], []
+        for f in fits:
+            v = f.coef["N"]
+            if not v > 0:
+                v = f.upper.get("N", math.nan)
+                if not (math.isfinite(v) and v > 0):
+                    v = float(np.sqrt(f.avar_fit[0] * f.tau_s[0]))
+                bounded.append(f.axis)
+            vals.append(v)
+        lines.append(f"{key} = {fmt([v / unit for v in vals])}")
+        if bounded:
+            lines.append(f"# {name} {', '.join(bounded)}: white noise not resolved by the fit: its upper bound written")
     for name, gm, key_s, unit, key_t in (("gyro", gm_g, "gyro_bias_sigma_deg_per_h", DEG_PER_H, "gyro_bias_tau_s"),
                                          ("accel", gm_a, "acc_bias_sigma_mg", MG, "acc_bias_tau_s")):
         if all(s > 0 for s, _ in gm):
             lines.append(f"{key_s} = {fmt([s / unit for s, _ in gm])}")
             lines.append(f"{key_t} = {fmt([t for _, t in gm])}")
         else:
-            lines.append(f"# {name}: bias instability not resolved on every axis (log too short or masked by the "
-                         f"random walks): {key_s} / {key_t} left to the defaults")
+            lines.append(f"# {name}: bias instability not resolved on every axis (log too short: no Allan-deviation "
+                         f"minimum inside it, or masked by the random walks): {key_s} / {key_t} left to the "
+                         "defaults (--format csv has none: give them from the data sheet)")
     lines.append(f"gyro_bias_rw_deg_per_h_per_sqrt_h = {fmt([f.coef['K'] / (DEG_PER_H / 60.0) for f in gyro])}")
     lines.append(f"acc_bias_rw_mg_per_sqrt_h = {fmt([f.coef['K'] / (MG / 60.0) for f in accel])}")
     q_g = [f.coef["Q"] for f in gyro]

@@ -121,6 +121,8 @@ def read_rates(path, fmt: str = "auto", config=None, imu_tag=None) -> dict:
         elif fmt == "kfgins":
             from ..io.kfgins import read_kfgins_imu
 
+            if p.is_dir():
+                raise UserError(f"{p}: a folder; --format kfgins reads a KF-GINS IMU text file")
             imu = read_kfgins_imu(p)
             path_s = str(p)
         else:
@@ -190,6 +192,12 @@ def _read_mapped(p: Path, fmt: str, config, imu_tag):
 
 # --------------------------------------------------------------------------- checks
 
+#: rates beyond any IMU's range (a tactical gyro's is a few thousand deg/s, a MEMS accelerometer's
+#: a few hundred g): such a sample is a corrupted record, refused before the Allan sums overflow
+MAX_RATE_RADPS = 1.0e3
+MAX_SPECIFIC_FORCE_MPS2 = 1.0e4
+
+
 def check_log(d: dict, *, allow_gaps: bool = False, allow_motion: bool = False) -> tuple[float, list[str]]:
     """Sampling, length and rest checks of :func:`read_rates` output: the sample
     interval tau0 [s] and notes to print; a one-line UserError naming the file
@@ -200,12 +208,14 @@ def check_log(d: dict, *, allow_gaps: bool = False, allow_motion: bool = False) 
     n = t.size
     if n < 4:
         raise UserError(f"{path}: {n} IMU samples: an Allan analysis needs a long static log")
-    for what, a in (("gyro", d["gyro_radps"]), ("accelerometer", d["acc_mps2"])):
-        bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
-        if bad.size:  # e.g. an increment of 1e308 divided by the interval
+    for what, a, limit, unit in (("gyro", d["gyro_radps"], MAX_RATE_RADPS, "rad/s"),
+                                 ("accelerometer", d["acc_mps2"], MAX_SPECIFIC_FORCE_MPS2, "m/s^2")):
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1) | np.any(np.abs(a) > limit, axis=1))
+        if bad.size:  # e.g. an increment of 1e308 divided by the interval, or a rate of 1e308
             i = int(bad[0])
             at = f", line {int(d['lines'][i])}" if d.get("lines") is not None else f", sample {i + 1}"
-            raise UserError(f"{path}{at}: the {what} sample is not a finite number as a rate "
+            raise UserError(f"{path}{at}: the {what} sample is not a finite number below {limit:g} {unit} as a rate "
                             f"({', '.join(f'{v:.6g}' for v in a[i])}): a corrupted record?")
     s = check_sampling(t)
     tau0 = s["tau0_s"]

@@ -536,7 +536,24 @@ def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
     given = config_from_dict(d, source=str(path))  # unknown keys / bad values: one line naming the file
     for key in d:
         setattr(cfg, key, getattr(given, key))
-    return dataclasses.replace(cfg).validate()
+    if cfg.layout == 15:
+        # the 15-state layout has no scale-factor states: the KF-GINS YAML's initial scale factors and
+        # their sigmas (initaccscale, initgyrscale, initsastd, initsgstd) do not apply; zero ones are
+        # dropped, a non-zero initial scale factor is refused (it would be silently left out)
+        for key, yaml_key in (("init_acc_scale", "initaccscale"), ("init_gyro_scale", "initgyrscale")):
+            v = getattr(cfg, key)
+            if key not in d and v is not None:
+                if np.any(np.asarray(v, float) != 0.0):
+                    raise UserError(f"--run-config {path}: layout = 15 has no scale-factor states, but the KF-GINS "
+                                    f"YAML gives {yaml_key} = {[float(x) for x in np.asarray(v, float)]}: use layout = 21")
+                setattr(cfg, key, None)
+        for key in ("init_sigma_acc_scale", "init_sigma_gyro_scale"):
+            if key not in d:
+                setattr(cfg, key, None)
+    try:
+        return dataclasses.replace(cfg).validate()
+    except ConfigError as exc:
+        raise UserError(f"--run-config {path}: {exc}") from None
 
 
 def _outside_imu_span(sol, ds) -> tuple[int, int]:
@@ -960,6 +977,10 @@ def _report_and_write(args, out: Path, groups, stages, sol, ds, cfg, rinex_opts,
               + ("with the state kept" if tt["state_kept"] else "without the state kept (estimate_offset = \"auto\")"))
     elif "time_offset_ms" in s:
         print(f"time offset: {s['time_offset_ms']:+.2f} +- {s['sigma_time_offset_ms']:.2f} ms")
+    for key, what in (("lever_arm_b_m", "GNSS lever arm"), ("odo_lever_arm_b_m", "odometer lever arm")):
+        if key in s:  # [lever_arm] estimate / estimate_odometer: the last estimate (body FRD)
+            print(f"{what} (body x, y, z): {', '.join(f'{v:+.3f}' for v in s[key])} +- "
+                  f"{', '.join(f'{v:.3f}' for v in s['sigma_' + key])} m")
     if health:
         import sys
 

@@ -200,15 +200,20 @@ def cmd_tune(args) -> int:
             def progress(k, scales, ll):
                 print(f"run {k:3d}: ln L {ll:14.3f}  " + " ".join(f"{n} {v:.3g}" for n, v in scales.items()),
                       file=sys.stderr)
-        res = tune(ds, cfg, filter=args.filter, coupling=args.coupling, params=params, holdout=args.holdout,
-                   max_runs=args.max_runs, progress=progress, split=args.split, block_s=args.block_s)
         reference = None
-        if args.reference:
+        if args.reference:  # read before the search: a missing or bad reference is one line, not after it
             from ..analysis.evaluate import _read_truth
 
-            reference = _read_truth(args.reference)
+            if not Path(args.reference).exists():
+                raise UserError(f"--reference {args.reference}: not found")
+            try:
+                reference = _read_truth(args.reference)
+            except (OSError, ValueError) as exc:
+                raise UserError(f"--reference {args.reference}: {exc}") from None
         elif getattr(ds, "truth", None) is not None:
             reference = ds.truth
+        res = tune(ds, cfg, filter=args.filter, coupling=args.coupling, params=params, holdout=args.holdout,
+                   max_runs=args.max_runs, progress=progress, split=args.split, block_s=args.block_s)
         t_from = res.t_split if args.holdout > 0 else -math.inf
         reps = []
         for c in (res.base, res.tuned):
