@@ -89,9 +89,10 @@ void bind_delay_navigator(py::module_& m) {
             throw py::value_error("push_epoch: " + std::to_string(k) + " records at one epoch, at most " +
                                   std::to_string(n.max_records_per_epoch()));
           std::array<GnssFix, 16> fixes;
-          for (py::ssize_t i = 0; i < k; ++i)
-            fixes[i] = checked_gnss_fix_from(rows.data()[14 * i], rows.data() + 14 * i + 2,
-                                             "push_epoch: record " + std::to_string(i));
+          for (py::ssize_t i = 0; i < k; ++i) {  // checked by push_epoch (a finite velocity needs its sigmas)
+            fixes[i] = gnss_fix_from(rows.data()[14 * i], rows.data() + 14 * i + 2);
+            fixes[i].has_vel = fixes[i].v_n.allFinite();
+          }
           return static_cast<int>(n.push_epoch(t, fixes.data(), static_cast<int>(k)));
         },
         py::arg("t"), py::arg("records"))

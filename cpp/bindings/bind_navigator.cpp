@@ -92,7 +92,9 @@ void bind_navigator(py::module_& m) {
   c.def("push_gnss_fix",
         [](NavigatorBase& n, const DArray& row) {
           if (row.size() != 13) throw py::value_error("gnss fix: expected 13 values (t, lat, lon, h, v_n, sigmas)");
-          return static_cast<int>(n.push_fix(checked_gnss_fix_from(row.data()[0], row.data() + 1, "push_gnss_fix")));
+          GnssFix f = gnss_fix_from(row.data()[0], row.data() + 1);
+          f.has_vel = f.v_n.allFinite();  // checked by push_gnss_fix: a finite velocity needs its sigmas
+          return static_cast<int>(n.push_fix(f));
         },
         py::arg("row"))
       .def("push_constraint",

@@ -74,7 +74,7 @@ void solve_spp_batch(const py::array_t<std::int64_t, py::array::c_style | py::ar
             a_ns = arr("n_sats"), a_nu = arr("n_used"), a_nx = arr("n_excluded"), a_nr = arr("n_rate_used"),
             a_nrx = arr("n_rate_excluded"), a_st = arr("raim_status"), a_ref = arr("ref_system"),
             a_rx = arr("row_excluded"), a_rrx = arr("rate_row_excluded");
-  const py::ssize_t S = gnss::kNumSystems;
+  const py::ssize_t S = gnss::kSppNumSystems;
   gnss::SppBatchOutput o{};
   o.r_e = mutable_data<double>(a_r, 3 * E, "r_e");
   o.clock_bias_m = mutable_data<double>(a_b, E, "clock_bias_m");
@@ -112,7 +112,7 @@ void solve_spp_batch(const py::array_t<std::int64_t, py::array::c_style | py::ar
   }
   if (s != Status::kOk)
     throw py::value_error("solve_spp_batch: an epoch has more than " + std::to_string(gnss::kSppMaxRows) +
-                          " rows or a system index outside 0.." + std::to_string(gnss::kNumSystems - 1));
+                          " rows or a system index outside 0.." + std::to_string(gnss::kSppNumSystems - 1));
 }
 
 using IArray = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>;

@@ -245,19 +245,6 @@ inline GnssFix gnss_fix_from(double t_valid, const double* r) {
   return f;
 }
 
-/// A loose fix from a caller's row (push API), its sigmas checked: finite and > 0 for the
-/// position when it is given, for the velocity where it is given (a NaN or zero sigma would
-/// put NaN or infinity in the state for good).  `what` names the call and row.
-inline GnssFix checked_gnss_fix_from(double t_valid, const double* r, const std::string& what) {
-  const GnssFix f = gnss_fix_from(t_valid, r);
-  auto bad = [](const Vec3& s) { return !(s.allFinite() && (s.array() > 0.0).all()); };
-  if (f.has_pos && bad(f.sigma_pos_n))
-    throw py::value_error(what + ": the position 1-sigma must be finite and > 0");
-  if (f.v_n.allFinite() && bad(f.sigma_vel_n))
-    throw py::value_error(what + ": the velocity 1-sigma must be finite and > 0 where the velocity is given");
-  return f;
-}
-
 /// Tight epochs and their satellites, validated: epoch_t (E,), epoch_start
 /// (E+1,) into sats (M, 12) = pr, prr, x, y, z, vx, vy, vz, clock_bias_m,
 /// clock_drift_mps, sigma_pr, sigma_prr.

@@ -161,7 +161,7 @@ int main(int argc, char** argv) {
   cfg.loose.lever_arm_b = vec3(kv, "antlever", ypath);
   cfg.loose.use_velocity = false;  // KF-GINS: position fixes only
   cfg.imu_hold = latency + 1;
-  if (cfg.imu_hold > 256) fail("--latency-samples must be <= 255");
+  if (latency < 0 || cfg.imu_hold > 256) fail("--latency-samples must be in 0 .. 255");
 
   NavState s0;
   const Vec3 pos = vec3(kv, "initpos", ypath), att = vec3(kv, "initatt", ypath);

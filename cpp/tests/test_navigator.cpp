@@ -9,6 +9,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <stdexcept>
 #include <vector>
 
 #include "insnav/engine/navigator.hpp"
@@ -178,6 +179,73 @@ void test_late_record_refused() {
 }
 
 
+/// What the push calls refuse: a fix with a non-finite position or a sigma that is not finite and
+/// > 0 throws std::invalid_argument (before, it was queued: with the gate off the first one made the
+/// state NaN for good, with the gate on the sixth, let in by the gate's reopening); a NaN velocity is
+/// no velocity (the GnssFix comment), the state stays finite; an IMU step or increment beyond any
+/// real sample (1e300) is refused (false) instead of overflowing the mechanization.
+void test_hostile_push_inputs() {
+  const Drive d = make_drive();
+  NavigatorConfig cfg;
+  cfg.loose.gate.prob = 0.0;  // no gate: a bad fix would be applied at once
+  const StateCov<Layout15> P0 = StateCov<Layout15>::Identity();
+  auto nav = std::make_unique<LooseNavigator<Ekf<Layout15>>>(cfg, d.s0, P0);
+  for (int k = 0; k < 100; ++k)
+    nav->push_imu(d.t[k], Vec3(d.dth[3 * k], d.dth[3 * k + 1], d.dth[3 * k + 2]),
+                  Vec3(d.dv[3 * k], d.dv[3 * k + 1], d.dv[3 * k + 2]));
+  const auto refused = [&](GnssFix f) {
+    f.t = d.t[100] - 0.001;
+    try {
+      nav->push_gnss_fix(f);
+    } catch (const std::invalid_argument&) {
+      return true;
+    }
+    return false;
+  };
+  GnssFix f = d.fixes[0];
+  f.has_vel = false;
+  GnssFix g = f;
+  g.lat = NAN;
+  EXPECT_TRUE(refused(g));
+  g = f;
+  g.sigma_pos_n[1] = NAN;
+  EXPECT_TRUE(refused(g));
+  g.sigma_pos_n[1] = INFINITY;
+  EXPECT_TRUE(refused(g));
+  g.sigma_pos_n[1] = 0.0;
+  EXPECT_TRUE(refused(g));
+  g.sigma_pos_n[1] = -1.0;
+  EXPECT_TRUE(refused(g));
+  g = f;
+  g.has_vel = true;
+  g.v_n = Vec3(1.0, 0.0, 0.0);
+  g.sigma_vel_n = Vec3(NAN, 0.1, 0.1);
+  EXPECT_TRUE(refused(g));
+  EXPECT_TRUE(nav->pending_records() == 0);
+  // a position-only receiver's fix with a NaN velocity (has_vel left true): the velocity is absent
+  g = f;
+  g.t = d.fixes[1].t;
+  g.has_vel = true;
+  g.v_n = Vec3(NAN, NAN, NAN);
+  g.sigma_vel_n = Vec3(NAN, NAN, NAN);
+  g.lat = d.fixes[1].lat;
+  g.lon = d.fixes[1].lon;
+  g.h = d.fixes[1].h;
+  EXPECT_TRUE(nav->push_gnss_fix(g) == RecordStatus::kNotUsed);
+  // absurd samples: refused, nothing integrated
+  const std::int64_t n0 = nav->samples();
+  EXPECT_TRUE(!nav->push_imu(d.t[100] + 1e300, Vec3::Zero(), Vec3::Zero()));
+  EXPECT_TRUE(!nav->push_imu(d.t[100], Vec3::Constant(1e300), Vec3::Zero()));
+  EXPECT_TRUE(!nav->push_imu(d.t[100], Vec3::Zero(), Vec3::Constant(1e300)));
+  for (int k = 100; k < 300; ++k)
+    EXPECT_TRUE(nav->push_imu(d.t[k], Vec3(d.dth[3 * k], d.dth[3 * k + 1], d.dth[3 * k + 2]),
+                              Vec3(d.dv[3 * k], d.dv[3 * k + 1], d.dv[3 * k + 2])));
+  nav->flush();
+  EXPECT_TRUE(nav->samples() == n0 + 200 && nav->updates() >= 1);
+  const NavigatorRow<Layout15> r = nav->solution();
+  EXPECT_TRUE(r.llh.allFinite() && r.v_n.allFinite() && nav->covariance().allFinite());
+}
+
 /// Tight: a stationary receiver, 6 satellites, epochs 5 ms after an IMU
 /// sample, a clock bias and drift; the batch TightEngine against the pushed
 /// TightNavigator (epochs 20 samples late, 25 held back).
@@ -280,6 +348,7 @@ void test_tight_push_equals_batch() {
 int main() {
   test_push_equals_batch();
   test_late_record_refused();
+  test_hostile_push_inputs();
   test_tight_push_equals_batch<Ekf<Layout17>>();
   TEST_MAIN_END();
 }

@@ -34,6 +34,7 @@
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
+#include <string>
 
 #include "insnav/engine/delay_engine.hpp"
 #include "insnav/engine/loose_engine.hpp"
@@ -99,6 +100,45 @@ struct NavigatorRecord {
   std::array<double, 6> innovation{};  // INS - GNSS before the update: N, E, D [m], vN, vE, vD [m/s] (NaN: absent)
 };
 
+/// Why a fix pushed by a caller cannot be used (nullptr: it can).  A position needs finite lat, lon,
+/// h and position 1-sigmas finite and > 0; a velocity (has_vel and a finite v_n: a NaN velocity means
+/// none, GnssFix in meas/gnss_loose.hpp) needs velocity 1-sigmas finite and > 0.  A NaN or an
+/// infinite sigma would put NaN into the state for good; a zero one, an infinite weight.
+inline const char* push_fix_problem(const GnssFix& f) {
+  const auto bad_sigma = [](const Vec3& s) { return !(s.allFinite() && (s.array() > 0.0).all()); };
+  if (f.has_pos && !(std::isfinite(f.lat) && std::isfinite(f.lon) && std::isfinite(f.h)))
+    return "the position must be finite";
+  if (f.has_pos && bad_sigma(f.sigma_pos_n)) return "the position 1-sigma must be finite and > 0";
+  if (f.has_vel && f.v_n.allFinite() && bad_sigma(f.sigma_vel_n))
+    return "the velocity 1-sigma must be finite and > 0 where the velocity is given";
+  return nullptr;
+}
+
+/// A pushed fix as the engines take it: a NaN velocity is no velocity (has_vel false).  Throws
+/// std::invalid_argument, naming `what`, for a fix push_fix_problem() refuses.
+inline GnssFix checked_push_fix(GnssFix f, const char* what, int index = -1) {
+  if (f.has_vel && !f.v_n.allFinite()) f.has_vel = false;
+  if (const char* why = push_fix_problem(f))  // the message only on the error path: no allocation otherwise
+    throw std::invalid_argument(std::string(what) + (index >= 0 ? ": record " + std::to_string(index) : "") + ": " +
+                                why);
+  return f;
+}
+
+/// Why a satellite row pushed by a caller cannot be used (nullptr: it can): the 1-sigma of a
+/// pseudorange or rate that is given must be finite and > 0 (an infinite one put NaN into the
+/// state through the gain).
+inline const char* push_sat_problem(const SatObservation& o) {
+  if (std::isfinite(o.pseudorange_m) && !(std::isfinite(o.sigma_pr_m) && o.sigma_pr_m > 0.0))
+    return "sigma_pr must be finite and > 0";
+  if (std::isfinite(o.pseudorange_rate_mps) && !(std::isfinite(o.sigma_prr_mps) && o.sigma_prr_mps > 0.0))
+    return "sigma_prr must be finite and > 0";
+  return nullptr;
+}
+
+/// Largest IMU step and increments push_imu takes (beyond any real sample: a corrupted one would
+/// overflow the mechanization and put NaN into the state for good): a year, 1e3 rad, 1e6 m/s.
+inline constexpr double kMaxPushDt = 3.2e7, kMaxPushDtheta = 1.0e3, kMaxPushDv = 1.0e6;
+
 /// The part every navigator shares: the IMU hold ring, the queue of pending
 /// records sorted by time of validity, and the per-sample step through
 /// ClosedLoop::process_sample.  Derived (CRTP) provides `core()` (its
@@ -113,9 +153,14 @@ class PushLoop {
 
   /// One IMU increment over (t_prev, t]: dtheta_b [rad], dv_b [m/s] (FRD).
   /// Returns false (nothing done) when t does not increase or is not finite, or an
-  /// increment is not finite (a NaN would stay in the state for good).
+  /// increment is not finite (a NaN would stay in the state for good), or the step or an
+  /// increment is beyond any real sample (kMaxPushDt, kMaxPushDtheta, kMaxPushDv: it would
+  /// overflow the mechanization).
   bool push_imu(double t, const Vec3& dtheta_b, const Vec3& dv_b) {
     if (!std::isfinite(t) || !(t > t_pushed_) || !dtheta_b.allFinite() || !dv_b.allFinite()) return false;
+    if (!(t - t_pushed_ <= kMaxPushDt) || !(dtheta_b.cwiseAbs().maxCoeff() <= kMaxPushDtheta) ||
+        !(dv_b.cwiseAbs().maxCoeff() <= kMaxPushDv))
+      return false;
     if (hold_n_ == kMaxHold) integrate_oldest();  // the ring is full (hold = kMaxHold): make room first
     ImuIncrement& raw = ring_[(hold_head_ + hold_n_) % kMaxHold];
     raw.t = t;
@@ -257,12 +302,13 @@ class LooseNavigator : public PushLoop<LooseNavigator<Filter, kMaxHold, kMaxPend
   /// A GNSS position (and/or velocity) fix valid at fix.t, queued until the
   /// IMU sample that covers it is integrated.  kNotUsed: queued;
   /// kOutsideImuSpan: at or before the initial time; kTooOld: older than the
-  /// last integrated sample; kQueueFull: no room in the pending queue.
+  /// last integrated sample; kQueueFull: no room in the pending queue.  A fix
+  /// push_fix_problem() refuses throws std::invalid_argument (nothing queued).
   RecordStatus push_gnss_fix(const GnssFix& fix) {
     LoosePending p;
     p.t = fix.t;
     p.order = 0;
-    p.fix = fix;
+    p.fix = checked_push_fix(fix, "push_gnss_fix");
     return Base::enqueue(p);
   }
 
@@ -351,7 +397,11 @@ class TightNavigator
 
   /// One GNSS epoch valid at t: n satellites (at most kMaxMeasRows; the rest
   /// are dropped as the batch engine drops them).  kNotUsed: queued; else why refused.
+  /// A satellite push_sat_problem() refuses throws std::invalid_argument (nothing queued).
   RecordStatus push_pseudoranges(double t, const SatObservation* sats, int n) {
+    for (int i = 0; i < std::min(std::max(n, 0), kMaxMeasRows); ++i)
+      if (const char* why = push_sat_problem(sats[i]))
+        throw std::invalid_argument("push_pseudoranges: satellite row " + std::to_string(i) + ": " + why);
     int slot = 0;
     while (slot < kMaxPendingEpochs && Base::any_pending([&](const TightPending& p) { return p.slot == slot; })) ++slot;
     if (slot == kMaxPendingEpochs) return Base::refuse_full(t);  // every slot pending
@@ -443,8 +493,10 @@ class DelayNavigator : public PushLoop<DelayNavigator<L, S, kMaxHold, kMaxPendin
   /// previous epoch (at most kMaxRecords; the rest are refused and counted).
   /// kNotUsed: queued; kOutsideImuSpan: at or before the initial time (+ the
   /// time tolerance); kTooOld: older than the last integrated sample;
-  /// kQueueFull: every pending slot taken.
+  /// kQueueFull: every pending slot taken.  A record push_fix_problem() refuses throws
+  /// std::invalid_argument naming it (nothing queued).
   RecordStatus push_epoch(double t, const GnssFix* records, int n) {
+    for (int i = 0; i < std::min(std::max(n, 0), kMaxRecords); ++i) checked_push_fix(records[i], "push_epoch", i);
     if (!(t > Base::t0() + tol_)) return Base::refuse(RecordStatus::kOutsideImuSpan);
     int slot = 0;
     while (slot < kMaxPendingEpochs && Base::any_pending([&](const DelayPending& p) { return p.slot == slot; })) ++slot;
@@ -455,7 +507,7 @@ class DelayNavigator : public PushLoop<DelayNavigator<L, S, kMaxHold, kMaxPendin
     p.n_records = std::min(std::max(n, 0), kMaxRecords);
     const RecordStatus st = Base::enqueue(p);
     if (st == RecordStatus::kNotUsed) {
-      for (int i = 0; i < p.n_records; ++i) pool_[slot * kMaxRecords + i] = records[i];
+      for (int i = 0; i < p.n_records; ++i) pool_[slot * kMaxRecords + i] = checked_push_fix(records[i], "push_epoch", i);
       dropped_ += std::max(n, 0) - p.n_records;
     }
     return st;

@@ -129,6 +129,10 @@
 // (sizeof 2.4 MB for kMaxAmb = 64, measured: allocate the engine on the heap, as the bindings do).
 #pragma once
 
+#ifndef EIGEN_STACK_ALLOCATION_LIMIT  // before the first Eigen include (gnss/rtk.hpp's fixed-capacity matrices)
+#define EIGEN_STACK_ALLOCATION_LIMIT 1048576
+#endif
+
 #include <Eigen/Dense>
 
 #include <algorithm>

@@ -12,6 +12,10 @@
 // reason: the caller then takes the Python path, which gives the error message or the result.
 #pragma once
 
+#ifndef EIGEN_STACK_ALLOCATION_LIMIT  // before the first Eigen include (gnss/rtk.hpp's fixed-capacity matrices)
+#define EIGEN_STACK_ALLOCATION_LIMIT 1048576
+#endif
+
 #include <algorithm>
 #include <array>
 #include <cmath>

@@ -33,8 +33,9 @@
 
 namespace insnav::gnss {
 
-/// Systems in the order of their index (GPS first: the reference clock when present).
-inline constexpr int kNumSystems = kSppNumSystems;
+// Systems in the order of their index (GPS first: the reference clock when present): kSppNumSystems
+// (code_position_fit.hpp).  Not named kSppNumSystems: gnss/double_difference.hpp's RtkSystem has that
+// name for its five systems (QZSS apart), and a program may include both.
 
 /// Columns of a row of the flat satellite table (TightInputs.sats, python/insnav/gnss/tight_inputs.py).
 struct SppRowLayout {
@@ -125,7 +126,7 @@ struct SppBatchInput {
   const double* sats = nullptr;               // (M, SppRowLayout::kCols)
   const double* sigma_pr_m = nullptr;         // (M,) 1-sigma pseudorange [m]
   const double* sigma_prr_mps = nullptr;      // (M,) 1-sigma rate [m/s]
-  const std::int8_t* system = nullptr;        // (M,) index 0..kNumSystems-1
+  const std::int8_t* system = nullptr;        // (M,) index 0..kSppNumSystems-1
   Vec3 r0_e = Vec3::Zero();                   // start [m] (first epoch, after an epoch without solution)
 };
 
@@ -137,8 +138,8 @@ struct SppBatchOutput {
   double* clock_drift_mps;  // (E,)
   double* sigma_pos_n_m;    // (E, 3)
   double* sigma_vel_n_mps;  // (E, 3)
-  double* isb_m;            // (E, kNumSystems)
-  double* sigma_isb_m;      // (E, kNumSystems)
+  double* isb_m;            // (E, kSppNumSystems)
+  double* sigma_isb_m;      // (E, kSppNumSystems)
   double* cov_r_e;          // (E, 3, 3)
   double* cov_v_e;          // (E, 3, 3)
   double* sigma_clock_m;    // (E,)
@@ -248,7 +249,7 @@ inline Status solve_spp_batch(const SppBatchInput& in, const SppOptions& opt, Sp
   for (std::int64_t e = 0; e < E; ++e) {
     if (in.epoch_start[e + 1] - in.epoch_start[e] > kSppMaxRows) return Status::kBadInput;
     for (std::int64_t i = in.epoch_start[e]; i < in.epoch_start[e + 1]; ++i)
-      if (in.system[i] < 0 || in.system[i] >= kNumSystems) return Status::kBadInput;
+      if (in.system[i] < 0 || in.system[i] >= kSppNumSystems) return Status::kBadInput;
   }
   detail::Chi2Table chi2_q(1.0 - opt.raim_alpha);
   auto row = [&](std::int64_t i) { return in.sats + i * L::kCols; };
@@ -283,14 +284,14 @@ inline Status solve_spp_batch(const SppBatchInput& in, const SppOptions& opt, Sp
     double chi2 = kNaN, thr = kNaN;
     int col[kSppMaxRows];
     int n_clk = 0;
-    int letters[kNumSystems];  // system index of clock column k (0: reference)
+    int letters[kSppNumSystems];  // system index of clock column k (0: reference)
     while (true) {
       // clock columns: the reference is the first system present (in index order), then the others
-      bool present[kNumSystems] = {false, false, false, false};
+      bool present[kSppNumSystems] = {false, false, false, false};
       for (int k = 0; k < n; ++k) present[in.system[a + rows[k]]] = true;
       n_clk = 0;
-      int col_of_sys[kNumSystems] = {0, 0, 0, 0};
-      for (int s = 0; s < kNumSystems; ++s)
+      int col_of_sys[kSppNumSystems] = {0, 0, 0, 0};
+      for (int s = 0; s < kSppNumSystems; ++s)
         if (present[s]) {
           col_of_sys[s] = n_clk;
           letters[n_clk++] = s;
@@ -384,11 +385,11 @@ inline Status solve_spp_batch(const SppBatchInput& in, const SppOptions& opt, Sp
     const Mat3 Qn = C_ne * Qr * C_ne.transpose();
     for (int i = 0; i < 3; ++i) out.sigma_pos_n_m[3 * e + i] = std::sqrt(Qn(i, i));
     out.sigma_clock_m[e] = std::sqrt(Q(3, 3));
-    out.isb_m[kNumSystems * e + letters[0]] = 0.0;
-    out.sigma_isb_m[kNumSystems * e + letters[0]] = 0.0;
+    out.isb_m[kSppNumSystems * e + letters[0]] = 0.0;
+    out.sigma_isb_m[kSppNumSystems * e + letters[0]] = 0.0;
     for (int k = 1; k < n_clk; ++k) {
-      out.isb_m[kNumSystems * e + letters[k]] = x[3 + k];
-      out.sigma_isb_m[kNumSystems * e + letters[k]] = std::sqrt(Q(3 + k, 3 + k));
+      out.isb_m[kSppNumSystems * e + letters[k]] = x[3 + k];
+      out.sigma_isb_m[kSppNumSystems * e + letters[k]] = std::sqrt(Q(3 + k, 3 + k));
     }
     // DOPs from the unweighted geometry in NED
     {

@@ -17,6 +17,10 @@
 // A code row is the same without the ambiguity terms.
 #pragma once
 
+#ifndef EIGEN_STACK_ALLOCATION_LIMIT  // before the first Eigen include (gnss/rtk.hpp's fixed-capacity matrices)
+#define EIGEN_STACK_ALLOCATION_LIMIT 1048576
+#endif
+
 #include <cmath>
 
 #include "insnav/earth/wgs84.hpp"
