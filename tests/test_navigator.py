@@ -135,7 +135,7 @@ def test_late_fix_refused_and_bad_calls():
     assert nav.push_gnss_fix(ds.imu.t[398], g.lat_deg[1], g.lon_deg[1], g.h_m[1], g.sigma_pos_n[1]) == "queued"
     assert nav.counters["refused_records"] == 1
     assert nav.push_imu(ds.imu.t[399], ds.imu.dtheta_b[0], ds.imu.dv_b[0]) is False  # time not increasing
-    with pytest.raises(ValueError, match="sigma_pos_n_m must be finite and > 0"):
+    with pytest.raises(ValueError, match="push_gnss_fix: the position 1-sigma must be finite and > 0"):
         nav.push_gnss_fix(ds.imu.t[399], 0.0, 0.0, 0.0, [0.0, 1.0, 1.0])
     with pytest.raises(ValueError, match="unknown kind 'nhcc'"):
         nav.push_constraint(ds.imu.t[399], "nhcc")
@@ -175,9 +175,10 @@ def test_non_finite_inputs_and_the_largest_hold():
     assert nav.counters["samples"] + nav.counters["held_samples"] == 100
     g = ds.gnss
     assert nav.push_gnss_fix(np.inf, g.lat_deg[0], g.lon_deg[0], g.h_m[0], g.sigma_pos_n[0]) == "outside_imu_span"
-    with pytest.raises(ValueError, match="sigma_pos_n_m must be finite and > 0"):
+    with pytest.raises(ValueError, match="push_gnss_fix: the position 1-sigma must be finite and > 0"):
         nav.push_gnss_fix(ds.imu.t[101], g.lat_deg[0], g.lon_deg[0], g.h_m[0], [np.inf, 1.0, 1.0])
-    with pytest.raises(ValueError, match="sigma_vel_n_mps must be finite and > 0 where v_n_mps is given"):
+    with pytest.raises(ValueError, match="push_gnss_fix: the velocity 1-sigma must be finite and > 0 where the "
+                                         "velocity is given"):
         nav.push_gnss_fix(ds.imu.t[101], g.lat_deg[0], g.lon_deg[0], g.h_m[0], g.sigma_pos_n[0], [1.0, 0.0, 0.0],
                           [np.nan, 0.1, 0.1])
     for k in range(100, 200):
@@ -196,7 +197,7 @@ def test_delay_push_refuses_bad_sigmas_and_shapes():
     for bad in (0.0, -1.0, np.inf, np.nan):
         r = rec.copy()
         r[0, 9] = bad
-        with pytest.raises(ValueError, match=r"record 0: the position 1-sigma must be finite and > 0"):
+        with pytest.raises(ValueError, match=r"push_epoch: record 0: the position 1-sigma must be finite and > 0"):
             nav.push_epoch(nav.epochs[0], r)
     with pytest.raises(ValueError, match=r"records must be \(k, 14\) rows, got shape \(14, 1\)"):
         nav.push_epoch(nav.epochs[0], rec.T)

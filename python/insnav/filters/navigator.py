@@ -189,11 +189,8 @@ class Navigator(_PushApi):
         r[4:7] = np.nan if v_n_mps is None else np.asarray(v_n_mps, float)
         r[7:10] = sigma_pos_n_m
         r[10:13] = np.nan if sigma_vel_n_mps is None else np.asarray(sigma_vel_n_mps, float)
-        if not np.all((np.asarray(r[7:10]) > 0) & np.isfinite(r[7:10])):
-            raise ValueError(f"push_gnss_fix at t={t}: sigma_pos_n_m must be finite and > 0, got {r[7:10]}")
-        if np.any(np.isfinite(r[4:7]) & ~((r[10:13] > 0) & np.isfinite(r[10:13]))):
-            raise ValueError(f"push_gnss_fix at t={t}: sigma_vel_n_mps must be finite and > 0 where v_n_mps is "
-                             f"given, got {r[10:13]}")
+        # a non-finite position or a sigma not finite and > 0: ValueError from the engine's check
+        # (engine/navigator.hpp push_fix_problem), nothing queued
         return PUSH_STATUS[self._nav.push_gnss_fix(r)]
 
     def push_constraint(self, t: float, kinds, speed_mps: float = float("nan")) -> str:
@@ -391,13 +388,8 @@ class DelayNavigator(_PushApi):
             rows = np.zeros((0, 14))
         if rows.ndim != 2 or rows.shape[1] != 14:
             raise ValueError(f"push_epoch at t={t}: records must be (k, 14) rows, got shape {rows.shape}")
-        for cols, sig, what in ((slice(2, 5), slice(8, 11), "position"), (slice(5, 8), slice(11, 14), "velocity")):
-            given = np.isfinite(rows[:, cols]).any(axis=1)
-            ok = np.all(np.isfinite(rows[:, sig]) & (rows[:, sig] > 0), axis=1)
-            if np.any(given & ~ok):
-                k = int(np.flatnonzero(given & ~ok)[0])
-                raise ValueError(f"push_epoch at t={t}: record {k}: the {what} 1-sigma must be finite and > 0, "
-                                 f"got {rows[k, sig]}")
+        # a record with a sigma not finite and > 0: ValueError naming it from the engine's check
+        # (engine/navigator.hpp push_fix_problem), nothing queued
         return PUSH_STATUS[self._nav.push_epoch(t, rows)]
 
     def push_receiver_epoch(self, e: int) -> str:

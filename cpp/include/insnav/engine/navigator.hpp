@@ -114,10 +114,16 @@ inline const char* push_fix_problem(const GnssFix& f) {
   return nullptr;
 }
 
-/// A pushed fix as the engines take it: a NaN velocity is no velocity (has_vel false).  Throws
-/// std::invalid_argument, naming `what`, for a fix push_fix_problem() refuses.
-inline GnssFix checked_push_fix(GnssFix f, const char* what, int index = -1) {
+/// A pushed fix as the engines take it: a NaN velocity is no velocity (has_vel false).
+inline GnssFix normalized_push_fix(GnssFix f) {
   if (f.has_vel && !f.v_n.allFinite()) f.has_vel = false;
+  return f;
+}
+
+/// normalized_push_fix(f), or std::invalid_argument naming `what` (and the record `index` when >= 0)
+/// for a fix push_fix_problem() refuses.
+inline GnssFix checked_push_fix(const GnssFix& fix, const char* what, int index = -1) {
+  const GnssFix f = normalized_push_fix(fix);
   if (const char* why = push_fix_problem(f))  // the message only on the error path: no allocation otherwise
     throw std::invalid_argument(std::string(what) + (index >= 0 ? ": record " + std::to_string(index) : "") + ": " +
                                 why);
@@ -507,7 +513,7 @@ class DelayNavigator : public PushLoop<DelayNavigator<L, S, kMaxHold, kMaxPendin
     p.n_records = std::min(std::max(n, 0), kMaxRecords);
     const RecordStatus st = Base::enqueue(p);
     if (st == RecordStatus::kNotUsed) {
-      for (int i = 0; i < p.n_records; ++i) pool_[slot * kMaxRecords + i] = checked_push_fix(records[i], "push_epoch", i);
+      for (int i = 0; i < p.n_records; ++i) pool_[slot * kMaxRecords + i] = normalized_push_fix(records[i]);  // checked above
       dropped_ += std::max(n, 0) - p.n_records;
     }
     return st;
