@@ -84,7 +84,8 @@ class _PushApi:
     def push_imu(self, t: float, dtheta_b, dv_b) -> bool:
         """One IMU increment over (t_prev, t]: ``dtheta_b`` [rad], ``dv_b`` [m/s], FRD.
         False (ignored) when ``t`` does not increase, or ``t`` or an increment is not finite."""
-        return bool(self._nav.push_imu(_time(t, "push_imu"), np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
+        t = t if isinstance(t, float) else _time(t, "push_imu")  # float and numpy.float64 at once: the per-sample path
+        return bool(self._nav.push_imu(t, np.asarray(dtheta_b, float), np.asarray(dv_b, float)))
 
     def push_imu_array(self, t, dtheta_b, dv_b) -> int:
         """Many IMU increments at once (N,), (N,3), (N,3); returns how many were taken."""
