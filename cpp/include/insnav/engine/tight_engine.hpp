@@ -436,7 +436,7 @@ class TightEngine {
     }
     if (n == 0) return;
     // INS-predicted phase change test (single frequency): residual less the common (clock) part
-    bool keep[kMaxMeasRows];
+    bool keep[kMaxMeasRows] = {};
     double common = 0.0;
     if (n >= 3) {
       double tmp[kMaxMeasRows];
