@@ -387,6 +387,11 @@ def test_push_calls_name_wrong_arguments_and_statuses_say_what_happened():
         tnav.push_pseudoranges(inp.epoch_t[1], inp.sats[b:f].T)
     with pytest.raises(ValueError, match=r"sats must be \(k, 12\) rows, got shape \(\d+,\)"):
         tnav.push_pseudoranges(inp.epoch_t[1], inp.sats[b:f].ravel())
+    # a system index 1.6 would truncate to GLONASS: refused, as is a length other than the rows'
+    with pytest.raises(ValueError, match=r"system must be whole numbers, got \[1.6"):
+        tnav.push_pseudoranges(inp.epoch_t[1], inp.sats[b:f], np.full(f - b, 1.6))
+    with pytest.raises(ValueError, match=rf"prn must have one entry per row of sats \({f - b}\), got shape \(1,\)"):
+        tnav.push_pseudoranges(inp.epoch_t[1], inp.sats[b:f], None, [3])
     # an epoch with every pseudorange absent is processed and not used: "not_used", not "queued"
     k1 = int(np.searchsorted(tds.imu.t, inp.epoch_t[1]))
     tnav.push_imu_array(tds.imu.t[:k1 - 2], tds.imu.dtheta_b[:k1 - 2], tds.imu.dv_b[:k1 - 2])

@@ -225,6 +225,23 @@ class Navigator(_PushApi):
 
 
 
+def _satellite_ids(values, k: int, name: str, t: float) -> np.ndarray:
+    """``system`` / ``prn`` of :meth:`TightNavigator.push_pseudoranges` as (k,)
+    int64: zeros when None; a float that is not a whole number (2.7 would
+    truncate to another system) or a wrong length is refused, naming it."""
+    if values is None:
+        return np.zeros(k, np.int64)
+    a = np.asarray(values)
+    if a.shape != (k,):
+        raise ValueError(f"push_pseudoranges at t={t}: {name} must have one entry per row of sats ({k}), "
+                         f"got shape {a.shape}")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a) & (a == np.round(a))):
+        raise ValueError(f"push_pseudoranges at t={t}: {name} must be whole numbers, got {a.tolist()}")
+    if a.dtype.kind not in "iuf":
+        raise ValueError(f"push_pseudoranges at t={t}: {name} must be integers, got {a.dtype}")
+    return a.astype(np.int64)
+
+
 class TightNavigator(_PushApi):
     """Tightly coupled EKF / RB-UKF / UKF (17 states, or 20 with the
     inter-system biases of several constellations) fed one IMU sample and one
@@ -285,8 +302,8 @@ class TightNavigator(_PushApi):
         if rows.ndim != 2 or rows.shape[1] != 12:
             raise ValueError(f"push_pseudoranges at t={t}: sats must be (k, 12) rows, got shape {rows.shape}")
         k = rows.shape[0]
-        sys_ = np.zeros(k, np.int64) if system is None else np.asarray(system, np.int64)
-        prn_ = np.zeros(k, np.int64) if prn is None else np.asarray(prn, np.int64)
+        sys_ = _satellite_ids(system, k, "system", t)
+        prn_ = _satellite_ids(prn, k, "prn", t)
         return PUSH_STATUS[self._nav.push_pseudoranges(t, rows, sys_, prn_)]
 
     def push_epoch(self, e: int) -> str:
