@@ -246,3 +246,35 @@ def test_an_epoch_without_arrival_still_shifts_the_stack():
     assert rd.summary["epoch_arrivals"][0] > 2.5 * rd.summary["epoch_arrivals"][1]
     assert north_rmse(rd) < 0.03
     assert north_rmse(rd) == pytest.approx(north_rmse(ex), rel=0.05)
+
+
+@pytest.mark.parametrize("flt", ["kf", "rdkf", "exact"])
+def test_delay_filters_weight_the_fixes_with_the_tuned_sigma_factors(high, flt):
+    """``gnss_pos_sigma_scale`` / ``gnss_vel_sigma_scale`` / ``gnss_pos_v_sigma_scale`` weight the
+    fixes of the delay filters as the loose EKF's: the run equals the default run on fixes whose
+    sigmas were multiplied by the factors (exact reduction), and differs from the unscaled run."""
+    d = copy.copy(high)
+    d.gnss = copy.copy(high.gnss)
+    d.gnss.sigma_pos_n = np.asarray(high.gnss.sigma_pos_n, float) * [4.0, 4.0, 4.0 * 3.0]
+    d.gnss.sigma_vel_n = np.asarray(high.gnss.sigma_vel_n, float) * 2.0
+    kw = dict(output_decimation=50)
+    scaled = insnav.run(high, flt, gnss_pos_sigma_scale=4.0, gnss_vel_sigma_scale=2.0, gnss_pos_v_sigma_scale=3.0,
+                        **kw)
+    ref = insnav.run(d, flt, **kw)
+    plain = insnav.run(high, flt, **kw)
+    assert _max_pos_diff_m(scaled, ref) < 1e-9
+    np.testing.assert_allclose(scaled.sigma_pos_n_m, ref.sigma_pos_n_m, rtol=1e-12, atol=0)
+    assert np.max(np.abs(scaled.sigma_pos_n_m[-1] - plain.sigma_pos_n_m[-1])) > 1e-3  # the factors act
+
+
+@pytest.mark.parametrize("flt, opt, match", [
+    ("rdkf", {"delay_p": "x"}, r"option 'delay_p' = 'x': allowed: 1..5 probabilities"),
+    ("rdkf", {"delay_p": [0.5, 0.9]}, r"option 'delay_p' = \[0.5, 0.9\]: allowed: .* summing to 1"),
+    ("rdkf", {"delay_p": [1.2, -0.2]}, r"each in \[0, 1\]"),
+    ("exact", {"checkpoint_interval_s": 0}, r"option 'checkpoint_interval_s' = 0: allowed: a number > 0"),
+])
+def test_bad_delay_options_are_one_line_naming_the_option(high, flt, opt, match):
+    from insnav.config import ConfigError
+
+    with pytest.raises(ConfigError, match=match):
+        insnav.run(high, flt, **opt)

@@ -43,12 +43,13 @@ import numpy as np
 
 from .. import _core
 from .._validate import check_finite
-from ..config import ImuNoise, RunConfig
+from ..config import ConfigError, ImuNoise, RunConfig
 from ..registry import filter_names
 from ..units import DEG
 from ._setup import (engine_config, imu_arrays, init_vector, initial_imu_correction, initial_state,
                      loose_initial_sigmas, raise_if_nonfinite)
 from ._assemble import nav_solution
+from .loose import loose_gnss_rows
 from .solution import GNSS_STATUS, Solution
 
 DELAY_FILTERS = tuple(n for n in filter_names("loose") if n in ("kf", "rdkf", "exact"))
@@ -198,8 +199,11 @@ def delay_engine_args(dataset, cfg: RunConfig, delay_p=None, imu=None) -> Simple
     g = dataset.gnss
     m = len(g)
     if m:
+        # the sigmas with insnav tune's factors, as the loose filters weight them (loose_gnss_rows: by time)
+        sigmas = np.empty((m, 6))
+        sigmas[np.argsort(np.asarray(g.t_valid, float), kind="stable")] = loose_gnss_rows(g, cfg)[:, 7:13]
         rec = np.column_stack([g.t_valid, g.t_arrival, g.lat_deg * DEG, g.lon_deg * DEG, g.h_m, g.v_n,
-                               g.sigma_pos_n, g.sigma_vel_n]).astype(float)
+                               sigmas]).astype(float)
         check_finite(rec[:, [0, 1, 8, 9, 10]], "gnss (times/position sigma)")
         if np.any(rec[:, 1] < rec[:, 0] - 1e-9):
             raise ValueError("gnss: a record arrives before its time of validity (t_arrival < t_valid)")
@@ -223,10 +227,24 @@ def delay_engine_args(dataset, cfg: RunConfig, delay_p=None, imu=None) -> Simple
     summary = dict(filter=cfg.filter, coupling="loose", layout=n, gnss_records=m)
     epochs = receiver_epochs(rec[:, 0], rec[:, 1], scenario_gnss_period_s(dataset))
     summary.update(_arrival_counts(rec, epochs, float(dataset.t0), float(t[-1]) if t.size else float(dataset.t0)))
-    p = scenario_delay_p(dataset) if delay_p is None else np.asarray(delay_p, dtype=float)
+    p = scenario_delay_p(dataset) if delay_p is None else delay_probabilities(delay_p)
     return SimpleNamespace(rec=rec, order=order, epochs=epochs, init=init_vector(dataset, init), P0=P0,
                            imu_correction=initial_imu_correction(cfg), imu_model=noise.as_core_dict(),
                            config=core_cfg, p=p, layout=n, period_s=period, summary=summary)
+
+
+def delay_probabilities(delay_p) -> np.ndarray:
+    """The option ``delay_p`` as an array: 1..5 probabilities p_0..p_s of a delay of
+    0..s epochs, each in [0, 1], summing to 1 (seed 001 eq. (4)); else a one-line ConfigError."""
+    try:
+        p = np.asarray(delay_p, dtype=float)
+    except (TypeError, ValueError):
+        p = np.full(0, np.nan)
+    if isinstance(delay_p, (str, bytes)) or p.ndim != 1 or not 1 <= p.size <= MAX_DELAY_EPOCHS + 1 \
+            or not np.all((p >= 0.0) & (p <= 1.0)) or abs(float(p.sum()) - 1.0) > 1e-9:
+        raise ConfigError(f"option 'delay_p' = {delay_p!r}: allowed: 1..{MAX_DELAY_EPOCHS + 1} probabilities "
+                          "p_0..p_s of a delay of 0..s epochs, each in [0, 1], summing to 1 (seed 001 eq. (4))")
+    return p
 
 
 def check_rdkf(p: np.ndarray, layout: int) -> None:
@@ -260,6 +278,10 @@ def run_delay(dataset, cfg: RunConfig, *, delay_p=None, max_history_s: float = 1
             check_rdkf(p, n)
             summary["delay_p"] = p.tolist()
         else:
+            if checkpoint_interval_s is not None and not (isinstance(checkpoint_interval_s, (int, float))
+                                                          and 0.0 < checkpoint_interval_s < float("inf")):
+                raise ConfigError(f"option 'checkpoint_interval_s' = {checkpoint_interval_s!r}: allowed: a number "
+                                  "> 0 [s] (absent: the GNSS period)")
             core_cfg.update(max_history_s=float(max_history_s),
                             checkpoint_interval=float(checkpoint_interval_s or a.period_s))
         out = _core.run_delay(filter, n, t, dth, dv, rec, epochs, init_vec, P0, a.imu_correction, noise_d,
