@@ -253,3 +253,46 @@ def test_fading_memory_after_outage(ds_full):
     assert np.all(nis.fading_c[nxt] < 1.0), nis.fading_c[nxt]
     with pytest.raises(ValueError, match="fading_memory"):
         run_tight_particle(d, cfg, fading_memory="window")
+
+
+def test_particle_filters_read_the_initial_bias_keys_and_sigma_factors(ds):
+    """The seed 004 filters take the run config's initial IMU biases (the first row, before any
+    update, holds them exactly) and insnav tune's pseudorange / rate sigma factors (the run equals
+    the default run on rows whose sigma columns were multiplied by them: exact reduction)."""
+    short = _truncate(ds, 60.0)
+    kw = dict(filter="fukf", coupling="tight", init_seed=1, output_decimation=20)
+    plain = insnav.run(short, **kw)
+    biased = insnav.run(short, **kw, init_acc_bias_mps2=[0.05, -0.05, 0.05],
+                        init_gyro_bias_radps=[1e-3, 1e-3, -1e-3], init_sigma_acc_bias_mps2=[0.2] * 3)
+    np.testing.assert_allclose(plain.acc_bias_mps2[0], 0.0, atol=0)
+    np.testing.assert_allclose(biased.acc_bias_mps2[0], [0.05, -0.05, 0.05], rtol=1e-12)
+    np.testing.assert_allclose(biased.gyro_bias_rps[0], [1e-3, 1e-3, -1e-3], rtol=1e-12)
+    assert np.max(np.abs(biased.lat_deg - plain.lat_deg)) > 1e-7
+    from insnav.filters._setup import tight_inputs_for
+
+    inp = tight_inputs_for(short, elevation_mask_deg=10.0, max_sats=12)
+    sats = np.array(inp.sats)
+    sats[:, 10] *= 3.0
+    sats[:, 11] *= 2.0
+    scaled = insnav.run(short, **kw, gnss_pos_sigma_scale=3.0, gnss_vel_sigma_scale=2.0)
+    ref = insnav.run(short, **kw, inputs=dataclasses.replace(inp, sats=sats))
+    np.testing.assert_allclose(scaled.lat_deg, ref.lat_deg, rtol=0, atol=1e-13)
+    assert np.max(np.abs(scaled.lat_deg - plain.lat_deg)) > 1e-6
+    # the rows exist already: an elevation mask or satellite limit of their own would be ignored, refused
+    with pytest.raises(ConfigError, match="option 'elevation_mask_deg' = 15.0 builds the rows of a simulated"):
+        insnav.run(short, **kw, inputs=inp, elevation_mask_deg=15.0)
+
+
+@pytest.mark.parametrize("opt, match", [
+    ({"particles": 2.7}, r"option 'particles' = 2.7: allowed: a whole number >= 0 \(default 100\)"),
+    ({"seed": -1}, r"option 'seed' = -1: allowed: a whole number >= 0"),
+    ({"init_sigma_clock": [-30.0, 1.0]}, r"option 'init_sigma_clock' = \[-30.0, 1.0\]: allowed: 2 finite numbers >= 0"),
+    ({"init_sigma_clock": [30.0]}, r"option 'init_sigma_clock' = \[30.0\]: allowed: 2 finite numbers"),
+    ({"reseed": 1}, r"option 'reseed' = 1: allowed: true or false"),
+    ({"rho": float("nan")}, r"option 'rho' = nan: allowed: a finite number"),
+])
+def test_options_of_another_kind_than_the_default_are_refused(ds, opt, match):
+    """particles = 2.7 would run 2 particles and write 2.7 into the resolved config: refused, as is a
+    negative sigma (squared into a positive one) or a tuple of the wrong length."""
+    with pytest.raises(ConfigError, match=match):
+        insnav.run(ds, filter="upf", coupling="tight", **opt)

@@ -9,7 +9,7 @@ import numpy as np
 from .._imu_scan import scan_imu
 from .._median import median, spacing_median
 from .._validate import as_float_array, check_finite, check_increasing
-from ..config import GATE_PROB_DEFAULT, RunConfig
+from ..config import GATE_PROB_DEFAULT, ConfigError, RunConfig
 from ..data.nav import NavState
 from ..earth import radii
 from ..registry import FILTERS, filter_spec
@@ -171,12 +171,24 @@ def engine_config(dataset, cfg: RunConfig, record_t: np.ndarray, layout: int, **
     return out
 
 
+#: the tight filters' default elevation mask [deg] of rows built from a simulated dataset's raw observations
+TIGHT_ELEVATION_MASK_DEG = 10.0
+
+
 def tight_inputs_for(dataset, inputs=None, *, elevation_mask_deg: float, max_sats: int):
     """The tight filters' GNSS input: ``inputs``, or the dataset's, or built
     from its raw observations; at most MAX_SATS per epoch (best GDOP)."""
     from ..earth import geodetic_to_ecef
     from ..gnss.tight_inputs import MAX_SATS, limit_sats, tight_inputs_from_raw
 
+    built = inputs is not None or getattr(dataset, "tight_inputs", None) is not None
+    if built and (elevation_mask_deg != TIGHT_ELEVATION_MASK_DEG or max_sats != MAX_SATS):
+        # the rows exist already (RINEX: built by the loader with [rinex] / [gnss]): the options would be ignored
+        key, value = (("elevation_mask_deg", elevation_mask_deg) if elevation_mask_deg != TIGHT_ELEVATION_MASK_DEG
+                      else ("max_sats", max_sats))
+        raise ConfigError(f"option '{key}' = {value!r} builds the rows of a simulated dataset's raw observations; "
+                          f"these rows are built already (RINEX: set [rinex] elevation_mask_deg or the [gnss] "
+                          f"table's masks instead)")
     if inputs is None:
         inputs = getattr(dataset, "tight_inputs", None)
     if inputs is None:

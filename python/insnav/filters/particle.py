@@ -43,10 +43,10 @@ from ..gnss.clock import clock_model
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
 from ..registry import FILTERS, PARTICLE_OPTIONS
 from ..units import DEG, DEG_PER_H
-from ._setup import (engine_config, imu_arrays, init_vector, initial_clock, initial_state, raise_if_nonfinite,
-                     tight_inputs_for)
+from ._setup import (TIGHT_ELEVATION_MASK_DEG, engine_config, imu_arrays, init_vector, initial_clock,
+                     initial_imu_correction, initial_state, raise_if_nonfinite, tight_inputs_for)
 from ._assemble import nav_solution
-from .tight import TightSolution
+from .tight import TightSolution, scaled_sigmas
 
 __all__ = ["DEFAULT_ALPHA", "PARTICLE_FILTERS", "PARTICLE_OPTIONS", "ParticleSolution", "run_tight_particle", "layout20_model"]
 
@@ -106,7 +106,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                        noise_floor: float | None = None, reseed: bool = True, marginalize: bool = True,
                        gyro_markov_sigma_dph: float = 1.0, gyro_markov_tau_s: float = 3600.0,
                        acc_markov_tau_s: float = 3600.0, inputs: TightInputs | None = None,
-                       elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
+                       elevation_mask_deg: float = TIGHT_ELEVATION_MASK_DEG, max_sats: int = MAX_SATS, clock_psd=None,
                        init_sigma_clock=(30.0, 1.0), clock0=None) -> ParticleSolution:
     """Closed-loop tightly coupled run with a seed 004 filter (Layout20).
 
@@ -181,7 +181,8 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     if noise_floor is None:
         noise_floor = 0.0 if marginalize else 3.0
     t, dth, dv = imu_arrays(dataset)
-    inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
+    inputs = scaled_sigmas(tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg,
+                                            max_sats=max_sats), cfg)
     if np.any(np.asarray(inputs.system) != "G"):
         others = sorted(set(np.asarray(inputs.system).tolist()) - {"G"})
         raise ValueError(f"{filt}: the seed 004 particle filters are GPS-only (Layout20 has no inter-system bias "
@@ -195,6 +196,12 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)
     model["clock_bias_psd"] = float(qb)
     model["clock_drift_psd"] = float(qd)
+    # the run config's initial bias sigmas where given (as the tight EKF): the accelerometer's Markov
+    # block and the gyro's random constant
+    if cfg.init_sigma_acc_bias_mps2 is not None:
+        sig_sensor[0:3] = cfg.init_sigma_acc_bias_mps2
+    if cfg.init_sigma_gyro_bias_radps is not None:
+        sig_sensor[3:6] = cfg.init_sigma_gyro_bias_radps
     p0 = np.concatenate([sig0, sig_sensor, np.asarray(init_sigma_clock, float)])
     P0 = np.diag(p0 ** 2)
     if clock0 is None:
@@ -212,7 +219,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
                 marginalize=bool(marginalize))
     out = _core.run_tight_particle(filt, t, dth, dv, ep_t, inputs.epoch_start.astype(np.int64),
                                    np.ascontiguousarray(inputs.sats, float).reshape(-1, 12), init_vec, P0,
-                                   np.zeros(12), np.asarray(clock0, float), model, core_cfg, pcfg)
+                                   initial_imu_correction(cfg), np.asarray(clock0, float), model, core_cfg, pcfg)
     sig = out["sigma"]
     # per-update traces -> per-epoch arrays (entries belong to the applied epochs in order)
     applied = np.flatnonzero(out["status"] == 1)

@@ -36,8 +36,8 @@ from ..config import ConfigError, ImuNoise, RunConfig
 from ..gnss.clock import clock_model
 from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
-from ._setup import (EngineArgs, engine_config, imu_arrays, init_vector, initial_clock, initial_imu_correction,
-                     initial_state, raise_if_nonfinite, tight_inputs_for)
+from ._setup import (TIGHT_ELEVATION_MASK_DEG, EngineArgs, engine_config, imu_arrays, init_vector, initial_clock,
+                     initial_imu_correction, initial_state, raise_if_nonfinite, tight_inputs_for)
 from ._assemble import nav_solution
 from .loose import put_selfcal, selfcal_setup
 from .solution import Solution
@@ -82,7 +82,7 @@ class TightSolution(Solution):
 
 
 def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | None = None,
-              elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
+              elevation_mask_deg: float = TIGHT_ELEVATION_MASK_DEG, max_sats: int = MAX_SATS, clock_psd=None,
               init_sigma_clock=(30.0, 1.0), clock0=None, use_pseudorange: bool = True,
               use_rate: bool = True, layout=None, isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
               isb0=None) -> TightSolution:
@@ -201,21 +201,27 @@ class TightEngineArgs(EngineArgs):
     robust: dict
 
 
+def scaled_sigmas(inputs: TightInputs, cfg: RunConfig) -> TightInputs:
+    """``inputs`` with the pseudorange and rate sigmas multiplied by insnav tune's
+    factors ``gnss_pos_sigma_scale`` / ``gnss_vel_sigma_scale`` (itself when both are 1)."""
+    if cfg.gnss_pos_sigma_scale == 1.0 and cfg.gnss_vel_sigma_scale == 1.0:
+        return inputs
+    sats = np.array(inputs.sats, float)
+    sats[:, 10] *= cfg.gnss_pos_sigma_scale
+    sats[:, 11] *= cfg.gnss_vel_sigma_scale
+    return dataclasses.replace(inputs, sats=sats)
+
+
 def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = None,
-                      elevation_mask_deg: float = 10.0, max_sats: int = MAX_SATS, clock_psd=None,
+                      elevation_mask_deg: float = TIGHT_ELEVATION_MASK_DEG, max_sats: int = MAX_SATS, clock_psd=None,
                       init_sigma_clock=(30.0, 1.0), clock0=None, use_pseudorange: bool = True,
                       use_rate: bool = True, layout=None, isb_psd: float = 1e-4, init_sigma_isb: float = 100.0,
                       isb0=None) -> TightEngineArgs:
     """The tight engine's set-up from a dataset, a run config and :func:`run_tight`'s
     options (the same meaning): the batch run and the push API
     (:class:`insnav.filters.navigator.TightNavigator`) start from it alike."""
-    inputs = tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg, max_sats=max_sats)
-    if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:  # insnav tune's R scale factors
-        sats = np.array(inputs.sats, float)
-        sats[:, 10] *= cfg.gnss_pos_sigma_scale
-        sats[:, 11] *= cfg.gnss_vel_sigma_scale
-        inputs = dataclasses.replace(inputs, sats=sats)
-
+    inputs = scaled_sigmas(tight_inputs_for(dataset, inputs, elevation_mask_deg=elevation_mask_deg,
+                                            max_sats=max_sats), cfg)
     init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     model = noise.as_core_dict()
