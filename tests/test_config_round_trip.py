@@ -180,6 +180,11 @@ def test_layout_20_on_gps_only_data_runs_the_20_state_filter():
     ({"filter": "rdkf", "layout": 21}, "config key 'layout': bad value 21; allowed: 15 "),
     ({"filter": "spp", "coupling": "gnss", "layout": 17}, "config key 'layout'.*absent"),
     ({"coupling": "tight", "layout": "auto"}, "config key 'layout': bad value 'auto'"),
+    # the tight filters read no fixes: the keys that switch fixes off would be ignored
+    ({"coupling": "tight", "use_position": False}, r"'use_position': bad value False; allowed: true with tight "
+                                                    r"coupling \(it reads no fixes; the option is "
+                                                    r"options.use_pseudorange\)"),
+    ({"filter": "upf", "coupling": "tight", "use_velocity": False}, r"'use_velocity'.*\(it reads no fixes\)$"),
 ])
 def test_invalid_layout_for_the_coupling_is_one_line_naming_the_key(d, match):
     from insnav.config import ConfigError, config_from_dict
@@ -195,3 +200,18 @@ def test_old_options_layout_still_loads_with_a_note():
     with pytest.warns(FutureWarning, match="'options.layout' is deprecated; write 'layout'"):
         cfg = config_from_dict({"coupling": "tight", "options": {"layout": 20, "max_sats": 9}})
     assert cfg.layout == 20 and cfg.options == {"max_sats": 9}
+
+
+def test_option_tables_given_as_dicts_are_read_as_the_toml_tables():
+    """insnav.run(..., constraints={...}) as the TOML's [constraints]: the same config, and an unknown
+    key or a table that is not one is a one-line ConfigError, not an AttributeError."""
+    from insnav.config import ConfigError, Constraints, RunConfig, config_from_dict
+
+    cfg = RunConfig(constraints={"use": ["nhc"], "sigma_nhc_mps": 0.2}, robust={"screening": False}).validate()
+    toml = config_from_dict({"constraints": {"use": ["nhc"], "sigma_nhc_mps": 0.2}, "robust": {"screening": False}})
+    assert isinstance(cfg.constraints, Constraints) and cfg.constraints == toml.constraints
+    assert cfg.robust == toml.robust and cfg.robust.screening is False
+    with pytest.raises(ConfigError, match=r"unknown key 'constraints.usee'; did you mean 'use'\?"):
+        RunConfig(constraints={"usee": ["nhc"]}).validate()
+    with pytest.raises(ConfigError, match=r"config key 'tdcp': bad value 3; allowed: a \[tdcp\] table"):
+        RunConfig(tdcp=3).validate()

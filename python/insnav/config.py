@@ -869,7 +869,14 @@ class RunConfig:
         def bad(key, value, allowed):
             raise ConfigError(f"config key '{key}': bad value {value!r}; allowed: {allowed}")
 
-        # types first (TOML gives any type): names str, numbers finite and not bool, flags bool
+        # types first (TOML gives any type): names str, numbers finite and not bool, flags bool;
+        # an option table given as a dict (insnav.run(..., constraints={...})) is read as the TOML's
+        for key, cls in _OPTION_TABLES:
+            v = getattr(self, key)
+            if isinstance(v, dict):
+                setattr(self, key, _table_from_dict(key, v, cls, "run configuration"))
+            elif not isinstance(v, cls):
+                bad(key, v, f"a [{key}] table")
         for key, allowed in (("filter", FILTERS), ("coupling", COUPLINGS)):
             if not isinstance(getattr(self, key), str):
                 bad(key, getattr(self, key), ", ".join(allowed))
@@ -1019,6 +1026,12 @@ class RunConfig:
             if changed is not None:
                 bad(f"robust.{changed}", getattr(self.robust, changed), "absent with rtk coupling ([robust] is the "
                     "tight filter's; RTK/INS screens with [rtk_engine] robust_screening, robust_chi2_row, ...)")
+        if self.coupling == "tight":  # pseudoranges and their rates, no fixes
+            for key, option in (("use_position", "use_pseudorange"), ("use_velocity", "use_rate")):
+                if getattr(self, key) is not True:
+                    instead = (f"; the option is options.{option}"
+                               if option in spec.setting_options(self.coupling) else "")
+                    bad(key, getattr(self, key), f"true with tight coupling (it reads no fixes{instead})")
         if self.coupling != "loose" and self.gnss_pos_v_sigma_scale != 1.0:
             bad("gnss_pos_v_sigma_scale", self.gnss_pos_v_sigma_scale, f"1 with {self.coupling} coupling (it scales "
                 "the vertical sigma of loose position fixes)")
@@ -1109,6 +1122,46 @@ class RunConfig:
             if "scale" in key and self.layout != 21:
                 bad(key, v, "absent: scale factors are states of layout = 21 only")
         return self
+
+
+def check_option_values(options) -> None:
+    """A one-line ConfigError for an option value of another kind than the runner's
+    default: a whole number (>= 0 unless the default is negative) where the default is an
+    int (``particles = 2.7`` would be truncated), a finite number where it is a float,
+    true/false where it is a bool, as many finite numbers where it is a tuple; and >= 0
+    for a ``*sigma*`` option (a negative sigma would be squared into a positive one).
+    Options whose default is None are the runner's to check."""
+    import numbers
+
+    def bad(name, value, allowed):
+        raise ConfigError(f"option '{name}' = {value!r}: allowed: {allowed}")
+
+    for f in dataclasses.fields(options):
+        value, default = getattr(options, f.name), f.default
+        if default is dataclasses.MISSING or default is None or value is default:
+            continue
+        positive = "sigma" in f.name
+        if isinstance(default, bool):
+            if not isinstance(value, (bool, np.bool_)):
+                bad(f.name, value, "true or false")
+        elif isinstance(default, numbers.Integral):  # negative only where the default is (-1: off)
+            low = min(0, default)
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
+                    or not math.isfinite(value) or value != int(value) or value < low:
+                bad(f.name, value, f"a whole number >= {low} (default {default})")
+        elif isinstance(default, numbers.Real):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
+                    or not math.isfinite(value) or (positive and value < 0):
+                bad(f.name, value, f"a finite number{' >= 0' if positive else ''} (default {default})")
+        elif isinstance(default, tuple) and all(isinstance(x, numbers.Real) for x in default):
+            try:
+                v = np.asarray(value, float)
+            except (TypeError, ValueError):
+                v = np.full(0, np.nan)
+            if isinstance(value, (str, bool)) or v.shape != (len(default),) or not np.all(np.isfinite(v)) \
+                    or (positive and np.any(v < 0)):
+                bad(f.name, value, f"{len(default)} finite numbers{' >= 0' if positive else ''} "
+                                   f"(default {list(default)})")
 
 
 #: RunConfig keys of the initial IMU-error estimate and its sigmas, in the imu_correction order

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..config import RunConfig
+from ..config import RunConfig, check_option_values
 from ..registry import FILTERS, filter_spec
 from .solution import GNSS_STATUS, RecordStatus, Solution
 
@@ -104,6 +104,8 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
             raise TypeError(f"run() got an unknown option {k!r}")
         setattr(cfg, k, v)
     cfg.validate()
+    run_options = spec.options_class(cfg.coupling)(**{**cfg.options, **options})
+    check_option_values(run_options)  # before the input checks: a bad option fails at once
     report = None
     if getattr(dataset, "gnss_only", False):  # GNSS-only inputs (rtk): no IMU to sanitize, check or scan
         import contextlib
@@ -132,11 +134,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
             from .checks import check_dataset
 
             check_dataset(inner if inner is not None else dataset, max_time_offset_s=cfg.max_time_offset_s)
-        opts = spec.options_class(cfg.coupling)(**{**cfg.options, **options})
         if cfg.time.estimate_offset == "auto":
-            sol = _run_offset_auto(spec, dataset, cfg, opts)
+            sol = _run_offset_auto(spec, dataset, cfg, run_options)
         else:
-            sol = spec.run(cfg.coupling, dataset, cfg, opts)
+            sol = spec.run(cfg.coupling, dataset, cfg, run_options)
     if report is not None:
         sol.summary["sanitize"] = report
     if cfg.coupling != "gnss":
