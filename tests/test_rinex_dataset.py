@@ -22,6 +22,7 @@ from insnav.gnss.gpstime import SECONDS_PER_WEEK
 from insnav.io.rinex_dataset import (GPST_UNIX_OFFSET_S, ImuCsvFormat, ImuFileError, RinexOptions, load_rinex,
                                      read_imu_csv, read_str2str_tag, rtklib_truth, tick_time_map)
 from insnav.filters.tight import run_tight
+from insnav.gnss.weighting import Weighting
 
 G0 = 9.80665
 WALK = "rtklibexplorer_walk_0827"
@@ -404,3 +405,46 @@ def test_walk_static_gyro_bias_reaches_the_tight_filter(walk_files):
     zero = run_tight(ds, load_rinex(walk_files["obs"], walk_files["nav"], walk_files["imu"],
                                     dict(WALK_OPTIONS, end_s=30.0))[1])
     assert np.abs(zero.gyro_bias_rps[0]).max() < np.radians(0.05)
+
+
+def test_systems_of_the_gnss_and_rinex_tables(tmp_path, shared_data):
+    """[gnss] systems selects among the systems [rinex] systems reads: one asking for a system that
+    is not read is refused (it would be left out without a word); a [gnss] table that restates the
+    documented defaults is the default weighting; spp reads an INS run's [rinex] systems."""
+    from insnav.filters.spp import load_spp_config
+
+    with pytest.raises(ConfigError, match=r"\[gnss\] systems = \['G', 'E'\] asks for E, which \[rinex\] systems = "
+                                          r"\"G\" does not read: add E to \[rinex\] systems"):
+        load_rinex("no.obs", "no.nav", "no.csv", dict(WALK_OPTIONS), weighting={"systems": ["G", "E"]})
+    assert Weighting.from_dict({"system_factors": {"R": 1.5}}, "t").is_default
+    assert not Weighting.from_dict({"system_factors": {"R": 2.0}}, "t").is_default
+    toml = tmp_path / "run.toml"
+    toml.write_text('[rinex]\nsystems = "GE"\n', encoding="utf-8")
+    assert load_spp_config(toml)[1].systems == ["G", "E"]
+    toml.write_text('[rinex]\nsystems = "GE"\n[gnss]\nsystems = ["G", "C"]\n', encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"run.toml: \[gnss\] systems = \['G', 'C'\] and \[rinex\] systems = \"GE\" "
+                                          r"differ"):
+        load_spp_config(toml)
+
+
+def test_a_system_without_ephemerides_is_named(shared_data):
+    """RINEX 2 keeps GLONASS in a .g file of its own: [rinex] systems = "GR" with the .n file alone
+    warns that no GLONASS satellite is used; with both files merged (--nav a.n,a.g) it does not."""
+    import warnings
+
+    from insnav.errors import InsnavWarning
+    from insnav.gnss.rinex import read_nav_multi
+    from insnav.io.rinex_dataset import _warn_systems_without_ephemerides
+
+    folder = shared_data / "smartloc_berlin_potsdamer_platz"
+    if not folder.is_dir():
+        pytest.skip(f"smartLoc data not found at {folder}")
+    n, g = folder / "brdc1580.16n", folder / "brdc1580.16g"
+    with pytest.warns(InsnavWarning, match=r"brdc1580.16n: no GLONASS ephemeris, so \[rinex\] systems = \"GR\" uses "
+                                           "no GLONASS satellite"):
+        _warn_systems_without_ephemerides(read_nav_multi([n], "GR"), "GR")
+    both = read_nav_multi([n, g], "GR")
+    assert len(both.eph_r.prn) > 20
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InsnavWarning)
+        _warn_systems_without_ephemerides(both, "GR")

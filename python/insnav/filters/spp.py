@@ -157,8 +157,14 @@ def load_spp_config(config_path=None):
         if not isinstance(v, dict):
             raise ConfigError(f"{source}: key '{key}': bad value {v!r}; allowed: a table")
         tables[key] = v
-    return (RinexOptions.from_dict(tables["rinex"], source), Weighting.from_dict(tables["gnss"], source),
-            SppOptions.from_dict(tables["spp"], source))
+    ropt, wgt = RinexOptions.from_dict(tables["rinex"], source), Weighting.from_dict(tables["gnss"], source)
+    if "systems" in tables["rinex"]:  # an INS run's [rinex] systems: the same satellites here
+        if "systems" not in tables["gnss"]:
+            wgt.systems = list(ropt.systems)
+        elif ropt.systems != "G" and set(wgt.systems) - set(ropt.systems):  # "G": a resolved config's default
+            raise ConfigError(f"{source}: [gnss] systems = {wgt.systems} and [rinex] systems = \"{ropt.systems}\" "
+                              "differ: give one of them (spp reads the systems of [gnss] systems)")
+    return ropt, wgt, SppOptions.from_dict(tables["spp"], source)
 
 
 def load_spp_run(obs, nav, config_path=None, *, rinex: dict | None = None, gnss: dict | None = None,

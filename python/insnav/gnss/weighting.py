@@ -46,6 +46,8 @@ the FDMA signals are worse), ``E`` 1, ``C`` 1 (RTKLIB ``EFACT_CMP``), ``J`` 1
 """
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from dataclasses import dataclass, field
 
@@ -179,7 +181,10 @@ class Weighting(TomlTable):
     @property
     def is_default(self) -> bool:
         """True when the rows are weighted exactly as without a ``[gnss]`` table."""
-        return self == Weighting().validate()
+        default = Weighting().validate()
+        factors = dict(DEFAULT_SYSTEM_FACTORS, **self.system_factors)  # {R = 1.5} restates the default
+        return (factors == dict(DEFAULT_SYSTEM_FACTORS, **default.system_factors)
+                and dataclasses.replace(self, system_factors=default.system_factors) == default)
 
     def factors(self, system) -> np.ndarray:
         """(M,) sigma multiplier of each row's system letter."""

@@ -79,7 +79,9 @@ def _load_insnav(args) -> Loaded:
 def _load_rinex(args) -> Loaded:
     from .rinex_dataset import load_rinex_run
 
-    ds, cfg = load_rinex_run(args.obs, args.nav, args.imu, args.config, imu_tag=getattr(args, "imu_tag", None))
+    nav = [p for p in args.nav.split(",") if p]  # several files merged (a RINEX 2 .n and .g pair)
+    ds, cfg = load_rinex_run(args.obs, nav if len(nav) > 1 else args.nav, args.imu, args.config,
+                             imu_tag=getattr(args, "imu_tag", None))
     return Loaded(ds, cfg, {"rinex": ds.options})
 
 

@@ -60,6 +60,7 @@ from ..config import ConfigError, RunConfig, config_from_dict
 from ..data.dataset import Dataset, GnssFixes, ImuData, Truth
 from ..gnss.gpstime import SECONDS_PER_WEEK
 from ..gnss.spp import SppOptions, SppSolution, solve_spp, spp_inputs_from_rinex
+from ..gnss.systems import SYSTEMS
 from ..gnss.weighting import Weighting
 from ..data.nav import NavState
 from ..units import DEG, G0, RAD2DEG
@@ -485,6 +486,25 @@ def doppler_consistent(t, r_e, v_e, *, window_s: float = DOPPLER_CHECK_WINDOW_S,
     return keep
 
 
+def _warn_systems_without_ephemerides(nav, systems: str) -> None:
+    """A RuntimeWarning for each system of ``systems`` (``[rinex] systems``) that
+    ``nav`` holds no ephemeris of: its satellites would be left out without a word
+    (RINEX 2 keeps GLONASS in a ``.g`` file of its own)."""
+    import warnings
+
+    from ..errors import InsnavWarning
+
+    names = {"R": ("eph_r", "GLONASS"), "E": ("eph_e", "Galileo"), "C": ("eph_c", "BeiDou")}
+    for letter in systems:
+        if letter not in names:
+            continue
+        eph = getattr(nav, names[letter][0], None)
+        if eph is None or len(eph.prn) == 0:
+            warnings.warn(f"{getattr(nav, 'path', 'the navigation data')}: no {names[letter][1]} ephemeris, so "
+                          f"[rinex] systems = \"{systems}\" uses no {names[letter][1]} satellite (give a navigation "
+                          f"file with them: a mixed RINEX 3 file)", InsnavWarning, stacklevel=3)
+
+
 def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu_tag=None,
                reference=None, weighting=None) -> tuple[RinexDataset, RunConfig]:
     """Build a dataset and a run configuration from RINEX + IMU (+ reference) files.
@@ -521,7 +541,8 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     ValueError
         No usable start epoch, no IMU data over the GNSS span.
     """
-    from ..gnss import read_rinex_nav, read_rinex_obs
+    from ..gnss import read_rinex_obs
+    from ..gnss.rinex import read_nav_multi
     from ..gnss.tight_inputs import tight_inputs_from_rinex
 
     if options is None:
@@ -534,12 +555,24 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
         opt.imu_tag = os.path.abspath(imu_tag)
     if reference is not None:
         opt.reference = os.path.abspath(reference)
+    wgt = None if weighting is None else (Weighting.from_dict(weighting, "[gnss]") if isinstance(weighting, dict)
+                                          else weighting.validate())
+    if wgt is not None and wgt.is_default:
+        wgt = None
+    if wgt is not None and wgt.systems != list(SYSTEMS):  # [gnss] systems selects among the systems read
+        unread = [s for s in wgt.systems if s not in opt.systems]
+        if unread:
+            raise ConfigError(f"[gnss] systems = {wgt.systems} asks for {', '.join(unread)}, which [rinex] systems = "
+                              f"\"{opt.systems}\" does not read: add {''.join(unread)} to [rinex] systems (the "
+                              f"systems read from the files; [gnss] systems selects among them)")
+
     if not hasattr(obs, "C1"):
         obs = read_rinex_obs(obs, systems=opt.systems)
-    if not hasattr(nav, "eph"):
-        nav = read_rinex_nav(nav, systems=opt.systems)
+    if not hasattr(nav, "eph"):  # one path, or several merged (a RINEX 2 .n and .g pair)
+        nav = read_nav_multi(nav, opt.systems)
     if obs.epoch_t_gps_s.size == 0:
         raise ValueError(f"{obs.path}: no observation epochs")
+    _warn_systems_without_ephemerides(nav, opt.systems)
     week = int(obs.epoch_week[0])
     t_week0 = SECONDS_PER_WEEK * week
     fmt = opt.imu_format().validate()
@@ -549,11 +582,6 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
     kw = dict(elevation_mask_deg=opt.elevation_mask_deg, iono=opt.iono, tropo=opt.tropo,
               sigma_pr_zenith_m=opt.sigma_pr_zenith_m, sigma_prr_zenith_mps=opt.sigma_prr_zenith_mps,
               use_cn0=opt.use_cn0)
-    wgt = None if weighting is None else (Weighting.from_dict(weighting, "[gnss]") if isinstance(weighting, dict)
-                                          else weighting.validate())
-    if wgt is not None and wgt.is_default:
-        wgt = None
-
     states: dict = {}  # the first call's satellite states, carried to the second call's position
 
     def inputs_at(r):
