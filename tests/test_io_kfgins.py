@@ -139,7 +139,10 @@ def test_a_correlation_time_that_is_no_time_is_one_line_naming_the_key(tmp_path,
 @pytest.mark.parametrize("key, value, msg", [
     ("imudatalen", "3", "key 'imudatalen': 3; expected an integer >= 7"),
     ("imudatalen", "7.5", "key 'imudatalen': 7.5; expected an integer >= 7"),
-    ("initpos", "[300.44, 114.47, 21.0]", "key 'initpos': [300.44, 114.47, 21.0]; expected latitude [deg] within +-90")])
+    ("initpos", "[300.44, 114.47, 21.0]", "key 'initpos': [300.44, 114.47, 21.0]; expected latitude [deg] within +-90"),
+    # a negative sigma was squared into a positive one; a NaN failed the run late, naming no key
+    ("initposstd", "[-0.005, 0.004, 0.008]", "key 'initposstd': a standard deviation or noise density must be >= 0"),
+    ("initvel", "[.nan, 0.0, 0.0]", "key 'initvel': expected 3 finite numbers")])
 def test_a_yaml_value_no_kfgins_run_can_have_is_one_line_naming_the_key(tmp_path, key, value, msg):
     """``imudatalen: 3`` stopped in the text parser ("need 0 < keep <= ncols", naming no key), 7.5 ran;
     a latitude of 300 deg was refused by the navigation state, naming neither the YAML nor the key."""
@@ -151,3 +154,24 @@ def test_a_yaml_value_no_kfgins_run_can_have_is_one_line_naming_the_key(tmp_path
     with pytest.raises(ValueError) as e:
         kfgins.read_kfgins_config(bad)
     assert str(e.value).startswith(f"{bad}: {msg}")
+
+
+@needs_data
+def test_imunoise_keys_are_checked_and_read_as_kfgins_reads_them(tmp_path):
+    """imunoise: a negative density is refused naming 'imunoise.arw'; 3e-3 (a string to PyYAML's
+    YAML 1.1, a number to yaml-cpp and so to KF-GINS) is the number 0.003."""
+    text = (DATA / "real" / "kf-gins.yaml").read_text()
+    import re
+
+    arw = re.search(r"^( +arw: *)\[([^\]]*)\]", text, re.M)
+    assert arw is not None
+    good = kfgins.read_kfgins_config(DATA / "real" / "kf-gins.yaml")["imunoise"]["arw_rad_per_sqrts"]
+    values = [float(x) for x in arw.group(2).split(",")]
+    sci = tmp_path / "sci.yaml"
+    sci.write_text(text.replace(arw.group(0), arw.group(1) + "[" + ", ".join(f"{v:e}" for v in values) + "]"))
+    np.testing.assert_allclose(kfgins.read_kfgins_config(sci)["imunoise"]["arw_rad_per_sqrts"], good, rtol=1e-12)
+    neg = tmp_path / "neg.yaml"
+    neg.write_text(text.replace(arw.group(0), arw.group(1) + "[" + ", ".join(str(-v) for v in values) + "]"))
+    with pytest.raises(ValueError, match=r"neg.yaml: key 'imunoise.arw': a standard deviation or noise density "
+                                         r"must be >= 0"):
+        kfgins.read_kfgins_config(neg)

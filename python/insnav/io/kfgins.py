@@ -279,18 +279,40 @@ def _write(path, a, fmt):
             f.write((row * blk.shape[0]) % tuple(blk.ravel().tolist()))
 
 
-def _vec(cfg, key, path, n=3):
+def _vec(cfg, key, path, n=3, table=""):
+    """The YAML list ``key`` (in the mapping ``table``, e.g. ``imunoise.``) as n finite
+    floats; a standard deviation or a noise density (``*std``, the ``imunoise`` keys)
+    must be >= 0 (KF-GINS squares it: a sign error would pass unseen)."""
     v = cfg.get(key)
     if v is None:
         return None
+    if isinstance(v, list):  # 3e-3 is a string to PyYAML (YAML 1.1) but a number to yaml-cpp, so to KF-GINS
+        v = [_yaml_cpp_number(x) for x in v]
     if not (isinstance(v, list) and len(v) == n
             and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):  # YAML true is not 1
-        raise ValueError(f"{path}: key '{key}': expected a list of {n} numbers, got {v!r}")
-    return np.array(v, dtype=float)
+        raise ValueError(f"{path}: key '{table}{key}': expected a list of {n} numbers, got {v!r}")
+    a = np.array(v, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{path}: key '{table}{key}': expected {n} finite numbers, got {v!r}")
+    if (key.endswith("std") or table == "imunoise.") and np.any(a < 0):
+        raise ValueError(f"{path}: key '{table}{key}': a standard deviation or noise density must be >= 0, "
+                         f"got {v!r}")
+    return a
+
+
+def _yaml_cpp_number(x):
+    """``x``, or the float of a string yaml-cpp reads as a number (``3e-3``, which PyYAML's
+    YAML 1.1 resolver leaves a string); any other string stays one."""
+    if isinstance(x, str):
+        import re
+
+        if re.fullmatch(r"[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?", x.strip()):
+            return float(x)
+    return x
 
 
 def _num(cfg, key, default, path):
-    v = cfg.get(key, default)
+    v = _yaml_cpp_number(cfg.get(key, default))
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ValueError(f"{path}: key '{key}': expected a finite number, got {v!r}")
     return float(v)
@@ -418,16 +440,16 @@ def read_kfgins_config(path) -> dict:
         "initsgstd": scaled("initsgstd", PPM),
         "initsastd": scaled("initsastd", PPM),
         "imunoise": {
-            "arw_rad_per_sqrts": None if _vec(noise, "arw", p) is None else
-            _vec(noise, "arw", p) * DEG / math.sqrt(HOUR),
-            "vrw_mps_per_sqrts": None if _vec(noise, "vrw", p) is None else
-            _vec(noise, "vrw", p) / math.sqrt(HOUR),
-            "gbstd_radps": None if _vec(noise, "gbstd", p) is None else
-            _vec(noise, "gbstd", p) * DEG / HOUR,
-            "abstd_mps2": None if _vec(noise, "abstd", p) is None else
-            _vec(noise, "abstd", p) * MGAL,
-            "gsstd": None if _vec(noise, "gsstd", p) is None else _vec(noise, "gsstd", p) * PPM,
-            "asstd": None if _vec(noise, "asstd", p) is None else _vec(noise, "asstd", p) * PPM,
+            "arw_rad_per_sqrts": None if _vec(noise, "arw", p, table="imunoise.") is None else
+            _vec(noise, "arw", p, table="imunoise.") * DEG / math.sqrt(HOUR),
+            "vrw_mps_per_sqrts": None if _vec(noise, "vrw", p, table="imunoise.") is None else
+            _vec(noise, "vrw", p, table="imunoise.") / math.sqrt(HOUR),
+            "gbstd_radps": None if _vec(noise, "gbstd", p, table="imunoise.") is None else
+            _vec(noise, "gbstd", p, table="imunoise.") * DEG / HOUR,
+            "abstd_mps2": None if _vec(noise, "abstd", p, table="imunoise.") is None else
+            _vec(noise, "abstd", p, table="imunoise.") * MGAL,
+            "gsstd": None if _vec(noise, "gsstd", p, table="imunoise.") is None else _vec(noise, "gsstd", p, table="imunoise.") * PPM,
+            "asstd": None if _vec(noise, "asstd", p, table="imunoise.") is None else _vec(noise, "asstd", p, table="imunoise.") * PPM,
             "corrtime_s": _corrtime_s(noise, p),
         },
         "antlever_b_m": _vec(cfg, "antlever", p),
