@@ -98,8 +98,8 @@ def add_run_parser(sub) -> None:
                         "settings in the config's [tdcp] table)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an option of the filter's family (the config's [options] table; repeatable), VALUE a "
-                        "TOML value: e.g. elevation_mask_deg=15 (tight), particles=500 (seed 004), "
-                        "delay_p=[0.7,0.3] (delay filters)")
+                        "TOML value: e.g. elevation_mask_deg=15 (tight on a simulated dataset; RINEX: [rinex] "
+                        "elevation_mask_deg), particles=500 (seed 004), delay_p=[0.7,0.3] (delay filters)")
     p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", default=None,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
@@ -837,7 +837,10 @@ def cmd_run(args) -> int:
         with reporting(f"insnav run {args.filter or cfg.filter}", enabled=not args.quiet):
             sol = insnav.run(ds, filter=args.filter, coupling=args.coupling, config=cfg, **run_opts)
     except ConfigError as exc:
-        raise UserError(str(exc)) from None
+        msg = str(exc)
+        if args.config and str(args.config) not in msg:  # a key of the file, or one the flags made wrong
+            msg += f" (set in {args.config} or on the command line)"
+        raise UserError(msg) from None
     return _report_and_write(args, out, groups, stages, sol, ds, cfg, rinex_opts, csv_tables,
                              run_opts=run_opts, base_e=base_e)
 
