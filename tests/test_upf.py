@@ -290,6 +290,7 @@ def test_particle_filters_read_the_initial_bias_keys_and_sigma_factors(ds):
     ({"init_sigma_clock": [30.0]}, r"option 'init_sigma_clock' = \[30.0\]: allowed: 2 finite numbers"),
     ({"reseed": 1}, r"option 'reseed' = 1: allowed: true or false"),
     ({"rho": float("nan")}, r"option 'rho' = nan: allowed: a finite number"),
+    ({"clock_psd": [1.0]}, r"option 'clock_psd' = \[1.0\]: allowed: 2 numbers >= 0, the clock bias and drift"),
 ])
 def test_options_of_another_kind_than_the_default_are_refused(ds, opt, match):
     """particles = 2.7 would run 2 particles and write 2.7 into the resolved config: refused, as is a

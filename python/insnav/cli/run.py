@@ -828,6 +828,12 @@ def cmd_run(args) -> int:
         if args.output_rate is not None:
             cfg.output_decimation = output_decimation(ds.imu.t, args.output_rate)
         run_opts, base_e = {}, None
+        fix_systems = ds.info.get("fix_systems", "G") if rinex_opts is not None else None
+        if fix_systems is not None and fix_systems != rinex_opts.systems and (args.coupling or cfg.coupling) == "loose":
+            import sys
+
+            print(f"note: the loose filter reads single-point fixes of {fix_systems} (the start's); [rinex] systems = "
+                  f"\"{rinex_opts.systems}\" gives the tight filter its other rows", file=sys.stderr)
         if (args.coupling or cfg.coupling) == "rtk":
             ds, run_opts = _rtk_ins_inputs(args, ds, cfg)
             base_e = ds.base_position_e_m

@@ -39,7 +39,7 @@ import numpy as np
 
 from .. import _core
 from ..config import ImuNoise, RunConfig
-from ..gnss.clock import clock_model
+from ..gnss.clock import clock_psd_option
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
 from ..registry import FILTERS, PARTICLE_OPTIONS
 from ..units import DEG, DEG_PER_H
@@ -193,7 +193,7 @@ def run_tight_particle(dataset, cfg: RunConfig | None = None, *, filter: str | N
     init, sig0 = initial_state(dataset, cfg, rng)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     model, sig_sensor = layout20_model(noise, gyro_markov_sigma_dph, gyro_markov_tau_s, acc_markov_tau_s)
-    qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)
+    qb, qd = clock_psd_option(clock_psd, dataset)
     model["clock_bias_psd"] = float(qb)
     model["clock_drift_psd"] = float(qd)
     # the run config's initial bias sigmas where given (as the tight EKF): the accelerometer's Markov

@@ -33,7 +33,7 @@ import numpy as np
 from .. import _core
 from .._median import median
 from ..config import ConfigError, ImuNoise, RunConfig
-from ..gnss.clock import clock_model
+from ..gnss.clock import clock_psd_option
 from ..gnss.systems import SYSTEMS, system_index
 from ..gnss.tight_inputs import MAX_SATS, TightInputs
 from ._setup import (TIGHT_ELEVATION_MASK_DEG, EngineArgs, engine_config, imu_arrays, init_vector, initial_clock,
@@ -99,7 +99,7 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
         step, output decimation, UT parameters, ``layout`` (17, 20; the
         default 15: chosen from the data, see ``layout`` below).
     elevation_mask_deg, max_sats : satellite selection for ``gnss_raw`` input.
-    clock_psd : (bias [m^2/s], drift [m^2/s^3]), optional; default :func:`clock_model`.
+    clock_psd : (bias [m^2/s], drift [m^2/s^3]), optional; default :func:`insnav.gnss.clock.clock_model`.
     init_sigma_clock : 1-sigma of the initial clock bias [m] and drift [m/s].
     clock0 : (bias, drift), optional; default from the first epoch at the initial state.
     layout : {None, "auto", 17, 20}
@@ -225,7 +225,7 @@ def tight_engine_args(dataset, cfg: RunConfig, *, inputs: TightInputs | None = N
     init, sig0 = initial_state(dataset, cfg)  # the draw (if any) from default_rng(cfg.init_seed)
     noise = cfg.imu or ImuNoise.from_dataset_model(dataset.imu_model)
     model = noise.as_core_dict()
-    qb, qd = clock_psd if clock_psd is not None else clock_model(dataset)
+    qb, qd = clock_psd_option(clock_psd, dataset)
     model["clock_bias_psd"] = float(qb)
     model["clock_drift_psd"] = float(qd)
     sys_idx = system_index(inputs.system) if len(inputs.prn) else np.zeros(0, np.int64)

@@ -114,6 +114,23 @@ def clock_drift_psd_from_drift(t_s, drift_mps, tau_s: float = DRIFT_PSD_TAU_S, m
     return max(0.0, (v - v0) / (tau_s - tau0))
 
 
+def clock_psd_option(clock_psd, dataset) -> tuple[float, float]:
+    """The tight filters' option ``clock_psd``: (bias [m^2/s], drift [m^2/s^3]) spectral
+    densities, two finite numbers >= 0; None: :func:`clock_model` of the dataset."""
+    if clock_psd is None:
+        return clock_model(dataset)
+    try:
+        v = np.asarray(clock_psd, float)
+    except (TypeError, ValueError):
+        v = np.full(0, np.nan)
+    if isinstance(clock_psd, (str, bytes)) or v.shape != (2,) or not np.all(np.isfinite(v) & (v >= 0.0)):
+        from ..config import ConfigError
+
+        raise ConfigError(f"option 'clock_psd' = {clock_psd!r}: allowed: 2 numbers >= 0, the clock bias and drift "
+                          "spectral densities [m^2/s, m^2/s^3] (absent: the dataset's clock model)")
+    return float(v[0]), float(v[1])
+
+
 def clock_model(dataset) -> tuple[float, float]:
     """(clock_bias_psd [m^2/s], clock_drift_psd [m^2/s^3]) for a dataset.
 

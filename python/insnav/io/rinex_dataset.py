@@ -714,6 +714,7 @@ def load_rinex(obs, nav, imu, options: RinexOptions | dict | None = None, *, imu
                 sats_used=_sat_names(inp_run.system, inp_run.prn),
                 sats_per_epoch=(int(n.min()), int(median(n)), int(n.max())) if n.size else (0, 0, 0),
                 start_rule=start_rule, start_s_after_first_epoch=t0 - t_first, approx_r_e=r0.tolist(),
+                fix_systems="G" if wgt is None else "".join(x for x in wgt.systems if x in opt.systems),
                 f_level_mps2=f_mean.tolist())
     ds = RinexDataset(imu=imu, gnss=gnss, truth=truth, gnss_raw=None, imu_errors=None,
                       scenario={"rinex": dict(obs=str(obs.path), imu=samples.path)}, lever_arm_b=lever,
