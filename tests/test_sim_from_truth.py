@@ -159,3 +159,29 @@ def test_cli_simulate_from_truth(tmp_path):
     r = subprocess.run([sys.executable, "-m", "insnav", "simulate", "car-mems", "--from-truth", str(MOTION),
                         "--out", str(tmp_path / "x")], capture_output=True, text=True)
     assert r.returncode != 0 and "not both" in r.stderr
+    # the --from-truth options on a scenario were ignored (its own grade and rate ran); a rate of
+    # 0.001 Hz wrote no IMU sample, one of 1e6 Hz ran out of memory
+    for args, message in ((["car-mems", "--imu-grade", "consumer"], "--imu-grade is an option of --from-truth"),
+                          (["--from-truth", str(MOTION), "--imu-rate-hz", "0.001"],
+                           "imu_rate_hz (--imu-rate-hz): 0.001; allowed: 1 to 10000 [Hz]")):
+        r = subprocess.run([sys.executable, "-m", "insnav", "simulate", *args, "--out", str(tmp_path / "y")],
+                           capture_output=True, text=True)
+        assert r.returncode != 0 and message in r.stderr and not (tmp_path / "y").exists(), r.stderr
+
+
+def test_a_bank_through_pi_is_a_steady_roll(tmp_path):
+    """A vehicle standing still and rolling at 0.5 rad/s: the Bank column wraps at +-pi every
+    12.6 s.  The exact IMU's roll rate is 0.5 rad/s throughout (it reached -73 rad/s at each
+    wrap when Bank was splined wrapped) and the truth roll stays within +-180 deg."""
+    r = _ecef(48.78, 9.17, 320.0)[0]
+    t = np.arange(0.0, 20.0001, 0.1)
+    bank = (0.5 * t + np.pi) % (2 * np.pi) - np.pi
+    f = tmp_path / "roll.csv"
+    rows = [f"{int(round(ti * 1000))},{r[0]:.4f},{r[1]:.4f},{r[2]:.4f},0,0,0,0,0,0,0.0,0.0,{b:.9f}"
+            for ti, b in zip(t, bank)]
+    f.write_text("3,2,100,1,GDOP, 1357207200.0\nTime_ms,Pos_X,Pos_Y,Pos_Z,Vel_X,Vel_Y,Vel_Z,Acc_X,Acc_Y,Acc_Z,"
+                 "Heading,Elevation,Bank\n" + "\n".join(rows) + "\n")
+    ds = simulate_from_truth(f, "exact", imu_rate_hz=100.0)
+    rate = ds.imu.dtheta_b[:, 0] / np.diff(ds.imu.t, prepend=ds.imu.t[0] - 0.01)
+    np.testing.assert_allclose(rate, 0.5, atol=2e-3)  # Earth rate on the other axes' projection: < 1e-4
+    assert np.all(np.abs(ds.truth.roll_deg) <= 180.0) and np.ptp(ds.truth.roll_deg) > 350.0

@@ -6,6 +6,8 @@ import sys
 import time
 from pathlib import Path
 
+from ..errors import seed_arg
+
 
 def add_simulate_parser(subparsers) -> None:
     p = subparsers.add_parser(
@@ -24,11 +26,12 @@ def add_simulate_parser(subparsers) -> None:
                    help="instead of a scenario: synthesise IMU increments from a sampled truth trajectory file\n"
                    "(Spirent SimGEN motion CSV: quintic Hermite position, cubic-spline attitude; see\n"
                    "docs/algorithms.md) and write imu.csv, truth.csv, imu_errors.csv, dataset.json")
-    p.add_argument("--imu-grade", default="industrial",
+    p.add_argument("--imu-grade", default=None,
                    help="with --from-truth: IMU grade of the injected errors (navigation, tactical, industrial,\n"
                    "consumer) or 'exact' (no error); default industrial")
-    p.add_argument("--imu-rate-hz", type=float, default=100.0, help="with --from-truth: IMU rate [Hz] (default 100)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: the scenario's)")
+    p.add_argument("--imu-rate-hz", type=float, default=None,
+                   help="with --from-truth: IMU rate [Hz], 1 to 10000 (default 100)")
+    p.add_argument("--seed", type=seed_arg, default=None, help="random seed (default: the scenario's)")
     p.add_argument("--out", required=True, help="dataset directory to write")
     p.add_argument("--overwrite", action="store_true", help="replace an existing insnav dataset folder (never a folder holding other files)")
     p.add_argument("--quiet", "-q", action="store_true",
@@ -55,15 +58,20 @@ def cmd_simulate(args) -> int:
     out = Path(args.out)
     if (args.scenario is None) == (args.from_truth is None):
         raise SystemExit("insnav simulate: give either a scenario or --from-truth FILE (not both)")
+    if args.from_truth is None and (args.imu_grade is not None or args.imu_rate_hz is not None):
+        given = "--imu-grade" if args.imu_grade is not None else "--imu-rate-hz"
+        raise SystemExit(f"insnav simulate: {given} is an option of --from-truth; a scenario sets its IMU in its "
+                         "[imu] table (grade, rate_hz)")
     check_replaceable(out, args.overwrite)  # before the simulation: fail fast, never touch a user's folder
     if args.from_truth is not None:
         from .from_truth import simulate_from_truth
 
-        ds = simulate_from_truth(args.from_truth, args.imu_grade, imu_rate_hz=args.imu_rate_hz,
-                                 seed=0 if args.seed is None else args.seed)
+        grade = "industrial" if args.imu_grade is None else args.imu_grade
+        rate = 100.0 if args.imu_rate_hz is None else args.imu_rate_hz
+        ds = simulate_from_truth(args.from_truth, grade, imu_rate_hz=rate, seed=0 if args.seed is None else args.seed)
         ds.save(out, overwrite=args.overwrite)
-        print(f"{ds.name} (IMU grade {args.imu_grade}, seed {ds.seed}): {len(ds.imu)} IMU samples at "
-              f"{args.imu_rate_hz:g} Hz, {len(ds.truth)} truth epochs -> {out}")
+        print(f"{ds.name} (IMU grade {grade}, seed {ds.seed}): {len(ds.imu)} IMU samples at "
+              f"{rate:g} Hz, {len(ds.truth)} truth epochs -> {out}")
         return 0
     from .._progress import Progress
 

@@ -14,8 +14,9 @@ Interpolation (between two truth epochs ``t_k``, ``t_k+1 = t_k + h``):
   knots; the recorded positions are reproduced exactly).  Its derivatives give
   the velocity and the kinematic acceleration ``r_e''``.
 * **Attitude**: a C2 cubic spline ("not-a-knot") through the recorded 3-2-1
-  Euler angles (roll = bank, pitch = elevation, yaw = heading, the yaw
-  unwrapped); the Euler rates are its derivative.
+  Euler angles (roll = bank, pitch = elevation, yaw = heading, roll and yaw
+  unwrapped: a bank through +-pi is a turn, not a jump); the Euler rates are its
+  derivative.
 
 Sensor outputs (Groves 2013, eqs. (5.44) and (5.19); gravity = the normal
 gravity of the mechanization, ``insnav.earth.gravity``):
@@ -57,7 +58,7 @@ class TruthFileError(ValueError):
 @dataclass
 class TruthFile:
     """A sampled truth trajectory (SI): ``t_s`` (N,) [s], ``r_e``, ``v_e``, ``a_e`` (N, 3) ECEF
-    [m, m/s, m/s^2], ``euler_rad`` (N, 3) roll, pitch, yaw [rad] (yaw unwrapped), ``lever_arm_b``
+    [m, m/s, m/s^2], ``euler_rad`` (N, 3) roll, pitch, yaw [rad] (roll and yaw unwrapped), ``lever_arm_b``
     (3,) antenna relative to the motion point, body FRD [m]; ``gps_time_offset_s``: GPS time of
     ``t = 0`` [s since 1980-01-06] (NaN when the file does not say)."""
 
@@ -126,7 +127,7 @@ def read_spirent_motion(path) -> TruthFile:
     if bad.size:
         raise TruthFileError(f"{path}, line {line_no[bad[0] + 1]}: time not strictly increasing")
     xyz = lambda p: np.column_stack([col[p + "_X"], col[p + "_Y"], col[p + "_Z"]])  # noqa: E731
-    euler = np.column_stack([col["Bank"], col["Elevation"], np.unwrap(col["Heading"])])
+    euler = np.column_stack([np.unwrap(col["Bank"]), col["Elevation"], np.unwrap(col["Heading"])])
     r_e = xyz("Pos")
     _check_plausible(path, r_e, xyz("Vel"), xyz("Acc"), euler, t, line_no)
     lever = np.zeros(3)
@@ -332,12 +333,13 @@ def simulate_from_truth(path, imu_grade: str = "industrial", *, imu_rate_hz: flo
     from .imu import apply_errors, imu_model_dict, simulate_sensor_errors
     from . import sample_times
 
-    if not (imu_rate_hz > 0 and math.isfinite(imu_rate_hz)):
-        raise ValueError(f"imu_rate_hz must be positive, got {imu_rate_hz}")
+    if not 1.0 <= imu_rate_hz <= 10000.0:  # the scenarios' [imu] rate_hz range
+        raise ValueError(f"imu_rate_hz (--imu-rate-hz): {imu_rate_hz!r}; allowed: 1 to 10000 [Hz]")
     tf = read_spirent_motion(path)
     off = tf.gps_time_offset_s if gps_time_offset_s is None else float(gps_time_offset_s)
     if not math.isfinite(off):
-        raise TruthFileError(f"{tf.path}: the file gives no GPS time of t = 0; pass gps_time_offset_s")
+        raise TruthFileError(f"{tf.path}: the file gives no GPS time of t = 0 (its first line's last field); "
+                             "insnav.sim.from_truth.simulate_from_truth(..., gps_time_offset_s=...) takes it")
     interp = TruthInterpolant(tf)
     t0, t_end = float(tf.t_s[0]), float(tf.t_s[-1])
     t_imu = sample_times(t0, t_end, imu_rate_hz)
@@ -353,6 +355,7 @@ def simulate_from_truth(path, imu_grade: str = "industrial", *, imu_rate_hz: flo
     imu = ImuData(t_imu[1:].copy(), apply_errors(dth, g_s, g_noise[1:], dt), apply_errors(dv, a_s, a_noise[1:], dt))
     st = interp.state(tf.t_s)
     eul = np.degrees(st["euler"])
+    eul[:, 0] = np.where(np.abs(eul[:, 0]) > 180.0, wrap_deg(eul[:, 0]), eul[:, 0])  # the unwrapped roll
     truth = Truth(t=st["t"], lat_deg=np.degrees(st["lat"]), lon_deg=np.degrees(st["lon"]), h_m=st["h"],
                   v_n=st["v_n"], roll_deg=eul[:, 0], pitch_deg=eul[:, 1], yaw_deg=wrap_deg(eul[:, 2]),
                   f_ib_b=st["f_ib_b"], omega_ib_b=st["omega_ib_b"])
