@@ -89,3 +89,29 @@ def test_a_dataset_json_value_no_imu_or_clock_can_have_is_one_line_naming_the_ke
     with pytest.raises(ValueError) as e:
         load_dataset(d)
     assert str(e.value) == f"{d / 'dataset.json'}: {msg}"
+
+
+def test_scenario_paths_seeds_and_preset_names(tmp_path, monkeypatch):
+    """A child's relative [gnss_raw] constellation is the child's folder's (it was read from the
+    parent's), and made absolute so that the dataset's scenario.toml repeats; a seed above 2**53
+    is exact (it was rounded through a float, two seeds gave one dataset); a folder named like a
+    preset does not hide the preset, and a folder given as the scenario is named as one."""
+    from insnav.sim.scenario import ScenarioError, load_scenario, resolve_raw
+
+    (tmp_path / "base").mkdir()
+    (tmp_path / "proj").mkdir()
+    (tmp_path / "base" / "parent.toml").write_text('name = "parent"\n[gnss_raw]\nconstellation = "p.21n"\n')
+    (tmp_path / "proj" / "child.toml").write_text('extends = "../base/parent.toml"\n[gnss_raw]\n'
+                                                  'constellation = "c.21n"\n')
+    raw, _ = resolve_raw(tmp_path / "proj" / "child.toml")
+    assert raw["gnss_raw"]["constellation"] == str((tmp_path / "proj" / "c.21n").resolve())
+    raw, _ = resolve_raw(tmp_path / "base" / "parent.toml")
+    assert raw["gnss_raw"]["constellation"] == str((tmp_path / "base" / "p.21n").resolve())
+    big = 2 ** 53 + 1
+    assert load_scenario("seed000-sim", seed=big).seed == big
+    assert load_scenario({"extends": "seed000-sim", "seed": big}).seed == big
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "seed000-sim").mkdir()
+    assert load_scenario("seed000-sim").name == "seed000-sim"
+    with pytest.raises(ScenarioError, match="scenario file 'proj' is a directory"):
+        load_scenario("proj")

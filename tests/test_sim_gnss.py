@@ -145,3 +145,19 @@ def test_receiver_clock_random_walk():
     # b_{k+1} - b_k - d_k dt = integrated drift noise, variance q_d^2 dt^3 / 3
     assert np.std(np.diff(b) - d[:-1]) == pytest.approx(0.1 / np.sqrt(3.0), rel=0.03)
     assert b[0] == pytest.approx(20.0, abs=0.5)
+
+
+def test_a_navigation_file_that_does_not_cover_the_scenario_is_refused(shared_data):
+    """A [gnss_raw] constellation file whose ephemerides are hours away from the scenario's start
+    gave a dataset with 0 raw observations and exit 0; refused now, naming the file and times."""
+    from insnav.sim.gnss_raw import make_constellation
+
+    nav = shared_data / "ephemeris_sp3_2021-118" / "brdc1180.21n"
+    if not nav.is_file():
+        pytest.skip(f"broadcast ephemeris not found at {nav}")
+    week = 2155 * 604800.0
+    toe = np.asarray(make_constellation(str(nav), week + 330000.0).eph.toe, float)
+    assert np.min(np.abs(toe - (week + 330000.0))) <= 4 * 3600.0
+    with pytest.raises(ValueError, match=r"brdc1180.21n: no GPS ephemeris within 4 h of the scenario's start "
+                                         r"\(GPS week 2155, 300000 s of week"):
+        make_constellation(str(nav), week + 300000.0)

@@ -92,7 +92,15 @@ def make_constellation(spec: str, t_start_gps: float):
 
     if spec == "nominal":
         return Constellation.nominal(t0_gps_s=t_start_gps)
-    return Constellation.from_rinex_nav(spec)
+    cons = Constellation.from_rinex_nav(spec)
+    toe = np.asarray(cons.eph.toe, float)  # GPS seconds since 1980-01-06
+    if toe.size and not np.any(np.abs(toe - t_start_gps) <= 4 * 3600.0):  # a broadcast fit interval (4 h)
+        week = int(t_start_gps // 604800.0)
+        raise ValueError(f"{spec}: no GPS ephemeris within 4 h of the scenario's start (GPS week {week}, "
+                         f"{t_start_gps - week * 604800.0:.0f} s of week; the file's reference times span week "
+                         f"{int(toe.min() // 604800)} {toe.min() % 604800:.0f} s to {toe.max() % 604800:.0f} s): set "
+                         "[time] gps_week / gps_tow_s inside it")
+    return cons
 
 
 def simulate_gnss_raw(traj: Trajectory, cfg: dict, lever_arm_b, gps_time_offset_s: float,

@@ -221,6 +221,10 @@ def _num(ctx, table, prefix, key, default=None, *, required=False, lo=None, hi=N
         ctx.fail(name, f"expected a number, got {v!r}")
     if integer and (not float(v).is_integer()):
         ctx.fail(name, f"expected an integer, got {v!r}")
+    if integer and isinstance(v, int):  # exact: a seed above 2**53 is not rounded through a float
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            ctx.fail(name, f"value {v!r} out of range: must be >= {lo}" + (f" and <= {hi}" if hi is not None else ""))
+        return v
     v = float(v)
     if not math.isfinite(v):
         ctx.fail(name, f"expected a finite number, got {v!r}")
@@ -418,11 +422,16 @@ def resolve_raw(scenario, _depth: int = 0) -> tuple[dict, str]:
     else:
         s = str(scenario)
         p = Path(s)
-        if s.endswith(".toml") or p.exists():
-            if not p.is_file():
-                raise ScenarioError(f"scenario file {s!r} does not exist")
-            raw, source = _read_toml(p.read_text(encoding="utf-8"), f"'{p}'"), f"'{p}'"
+        if p.is_file():
+            try:
+                text = p.read_text(encoding="utf-8")
+            except UnicodeDecodeError as exc:
+                raise ScenarioError(f"scenario file '{p}': not UTF-8 text (byte {exc.start})") from None
+            raw, source = _read_toml(text, f"'{p}'"), f"'{p}'"
             base_dir = p.parent
+            _own_paths_absolute(raw, base_dir)
+        elif s.endswith(".toml") or (p.exists() and s not in list_presets()):  # a folder named like a preset
+            raise ScenarioError(f"scenario file {s!r} {'is a directory' if p.is_dir() else 'does not exist'}")
         else:
             pp = preset_path(s)
             raw, source = _read_toml(pp.read_text(encoding="utf-8"), f"preset '{s}'"), f"preset '{s}'"
@@ -434,13 +443,26 @@ def resolve_raw(scenario, _depth: int = 0) -> tuple[dict, str]:
             raise ScenarioError(f"scenario {source}: key 'extends': expected a preset name or path")
         if base_dir is not None and parent.endswith(".toml") and not Path(parent).is_absolute():
             parent = str(base_dir / parent)
-        base, _ = resolve_raw(parent, _depth + 1)
+        try:
+            base, _ = resolve_raw(parent, _depth + 1)
+        except ScenarioError as exc:
+            raise ScenarioError(f"scenario {source}: key 'extends': {exc}") from None
         base.pop("name", None)
         base.pop("description", None)
         raw = _deep_merge(base, raw)
     if base_dir is not None:
         raw.setdefault("_base_dir", str(base_dir))
     return raw, source
+
+
+def _own_paths_absolute(raw: dict, base_dir: Path) -> None:
+    """The file's own relative paths (``[gnss_raw] constellation``, a RINEX navigation
+    file) made absolute against its folder before an ``extends`` merge: a child's path
+    is the child's, a parent's the parent's, and the dataset's scenario.toml repeats."""
+    gr = raw.get("gnss_raw")
+    cons = gr.get("constellation") if isinstance(gr, dict) else None
+    if isinstance(cons, str) and cons != "nominal" and not Path(cons).is_absolute():
+        gr["constellation"] = str((base_dir / cons).resolve())
 
 
 def load_scenario(scenario, *, seed: int | None = None) -> Scenario:
@@ -621,7 +643,10 @@ def _parse(raw: dict, ctx: _Ctx, base_dir) -> Scenario:
     _check_keys(ctx, imu, "imu", {"rate_hz", "quadrature_nodes", "errors_rate_hz", "gyro", "accel"})
     imu_rate = _num(ctx, imu, "imu", "rate_hz", 100.0, lo=1.0, hi=10000.0)
     nodes = _num(ctx, imu, "imu", "quadrature_nodes", 3, integer=True, lo=1, hi=8)
-    errors_rate = _num(ctx, imu, "imu", "errors_rate_hz", min(10.0, imu_rate), lo=0.0, lo_open=True)
+    errors_rate = _num(ctx, imu, "imu", "errors_rate_hz", min(10.0, imu_rate), lo=0.0, lo_open=True, hi=imu_rate)
+    if "errors_rate_hz" in imu and abs(imu_rate / errors_rate - round(imu_rate / errors_rate)) > 1e-9 * imu_rate:
+        ctx.fail("imu.errors_rate_hz", f"{errors_rate:g} does not divide the IMU rate {imu_rate:g} Hz (imu_errors.csv "
+                                       "holds every n-th IMU sample's errors)")
     gyro = _sensor(ctx, _table(ctx, imu, "imu", "gyro"), "imu.gyro", _GYRO_KEYS, imu_rate)
     accel = _sensor(ctx, _table(ctx, imu, "imu", "accel"), "imu.accel", _ACCEL_KEYS, imu_rate)
 
