@@ -307,6 +307,15 @@ def test_demo_quick_writes_the_report(work):
     page = out_dir / "seed000-rbukf-report" / "report.html"
     assert page.is_file() and f"({page.parent.name}/report.html)" in report
     assert page.read_text().count("data:image/png;base64,") == 6
+    # the README's command run again replaces its own folder; a user's folder of the same file names
+    # is refused, its files untouched
+    assert _call(["demo", "--quick", "--out", out_dir])[0] == 0
+    mine = work / "mine"
+    mine.mkdir()
+    (mine / "report.md").write_text("my notes\n")
+    rc, _, err = _call(["demo", "--quick", "--out", mine])
+    assert rc == 2 and "holds no report.md of an earlier insnav demo" in err, err
+    assert [p.name for p in mine.iterdir()] == ["report.md"] and (mine / "report.md").read_text() == "my notes\n"
 
 
 def test_demo_without_matplotlib_is_one_line(work, monkeypatch):

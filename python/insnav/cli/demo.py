@@ -176,6 +176,31 @@ def _tight_section(args, out: Path, lines: list, n_seeds: int = 5) -> None:
     lines += [f"![{p.stem}]({p.name})" for p in pngs] + [""]
 
 
+#: the first line of report.md: how a folder the demo wrote is told from a user's
+REPORT_TITLE = "# insnav demo report"
+
+
+def _check_demo_folder(out: Path) -> None:
+    """``--out`` must be new, empty, or a folder an earlier demo wrote (its report.md
+    starts with :data:`REPORT_TITLE`): the demo replaces report.md and its figures there,
+    and must not replace a user's files of the same names."""
+    from ..errors import UserError
+
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise UserError(f"--out {out}: exists and is not a folder")
+    report = out / "report.md"
+    try:
+        with open(report, encoding="utf-8", errors="replace") as f:
+            ours = f.readline().rstrip("\n") == REPORT_TITLE
+    except OSError:
+        ours = False
+    if not ours and any(out.iterdir()):
+        raise UserError(f"--out {out}: a folder that is not empty and holds no report.md of an earlier "
+                        "insnav demo: the demo would replace its files; give a new or empty folder")
+
+
 def main(args) -> int:
     from .._atomic import atomic_write_text
 
@@ -186,9 +211,10 @@ def main(args) -> int:
 
         raise UserError("insnav demo draws its figures with matplotlib: pip install 'insnav[plot]'") from None
     out = Path(args.out)
+    _check_demo_folder(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    lines = ["# insnav demo report", "",
+    lines = [REPORT_TITLE, "",
              "Frames: NED navigation, FRD body, 3-2-1 Euler angles; errors are solution minus truth.", ""]
     _seed000_section(args, out, lines)
     if not args.quick:
