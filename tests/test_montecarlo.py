@@ -72,3 +72,13 @@ def test_compare_cli_json(capsys):
     rc = main(["compare", "seed001-low", "--filters", "kf", "--runs", "1", "--workers", "1"])
     assert rc == 0
     assert "| kf |" in capsys.readouterr().out
+
+
+def test_a_comparison_of_nothing_is_refused():
+    """--skip-s at or past the scenario's end left no error sample (a numpy reduction error naming
+    nothing); a scenario without GNSS compared free-inertial runs as if they were filtered."""
+    with pytest.raises(ValueError, match=r"skip_s \(--skip-s\) 1000.0; allowed: 0 <= skip_s < the scenario's"):
+        insnav.montecarlo("seed001-low", ("kf",), runs=1, skip_s=1000.0, backend="serial")
+    no_gnss = {"extends": "seed001-low", "gnss": {"enabled": False}}
+    with pytest.raises(ValueError, match=r"filter 'kf' used no GNSS update in run 0"):
+        insnav.montecarlo(no_gnss, ("kf",), runs=1, skip_s=5.0, backend="serial")

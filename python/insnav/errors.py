@@ -19,3 +19,17 @@ def close_matches(name, known) -> list[str]:
     import difflib
 
     return difflib.get_close_matches(str(name), [str(k) for k in known], n=1, cutoff=0.6)
+
+
+def seed_arg(text: str) -> int:
+    """argparse ``type`` of a ``--seed`` option: an integer >= 0 (numpy's generators take
+    no negative seed), else argparse's one-line error naming the option."""
+    import argparse
+
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
+    return v

@@ -60,6 +60,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import seed_arg
+
 METRICS = ("pos_n_rmse_m", "pos_e_rmse_m", "vel_n_rmse_mps", "vel_e_rmse_mps",
            "pos_n_max_m", "pos_e_max_m", "vel_n_max_mps", "vel_e_max_mps")
 TABLE_METRICS = METRICS[:4]
@@ -117,6 +119,10 @@ def run_one(task: Task) -> dict:
             sol = run(ds, f, init_seed=task.init_seed, **kw)
         m = _metrics(sol, ds.truth, task.skip_s)
         m["updates"] = int(sol.summary.get("updates", 0))
+        if m["updates"] == 0:  # insnav run refuses a free-inertial run; a comparison of them compares nothing
+            raise ValueError(f"montecarlo: filter {f!r} used no GNSS update in run {task.index} (seed "
+                             f"{task.sim_seed}): the scenario gives it no usable GNSS ([gnss] / [gnss_raw] "
+                             "enabled, the coupling's measurements)")
         m["refused_too_old"] = int(sol.summary.get("refused_too_old", 0))
         res[f] = m
     return dict(index=task.index, sim_seed=task.sim_seed, init_seed=task.init_seed, metrics=res,
@@ -439,7 +445,10 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
         raise ValueError(f"montecarlo: workers must be >= 1, got {workers}")
     from ..sim.scenario import load_scenario, resolve_raw
 
-    load_scenario(scenario)  # a bad scenario fails here, once, not in every worker
+    sc = load_scenario(scenario)  # a bad scenario fails here, once, not in every worker
+    if not (isinstance(skip_s, (int, float)) and 0.0 <= skip_s < sc.duration):
+        raise ValueError(f"montecarlo: skip_s (--skip-s) {skip_s!r}; allowed: 0 <= skip_s < the scenario's "
+                         f"{sc.duration:g} s (the errors are taken after it)")
     sent = scenario
     if backend == "dask" and isinstance(scenario, (str, os.PathLike)) and (
             str(scenario).endswith(".toml") or os.path.isfile(scenario)):
@@ -534,7 +543,7 @@ def add_compare_parser(sub) -> None:
                    help=f"comma-separated, from {', '.join(n for n, s in FILTERS.items() if s.couplings != ('gnss',))} "
                         "(default: %(default)s)")
     p.add_argument("--runs", type=int, default=100, help="Monte Carlo runs (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="master seed (default: %(default)s)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="master seed (default: %(default)s)")
     p.add_argument("--workers", type=int, default=None,
                    help="local processes, or the size of the local Dask cluster (default: all CPUs)")
     p.add_argument("--backend", default=None,

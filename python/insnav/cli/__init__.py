@@ -11,7 +11,7 @@ import os
 import sys
 
 from .. import __version__
-from ..errors import UserError
+from ..errors import UserError, seed_arg
 
 
 
@@ -33,7 +33,7 @@ def _add_demo_parser(sub) -> None:
     )
     p.add_argument("--out", default="insnav-demo", help="report folder (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="a shorter run (used by the tests)")
-    p.add_argument("--seed", type=int, default=1, help="random seed (default: %(default)s)")
+    p.add_argument("--seed", type=seed_arg, default=1, help="random seed (default: %(default)s)")
     p.set_defaults(func=lambda args: __import__("insnav.cli.demo", fromlist=["main"]).main(args))
 
 

@@ -24,6 +24,8 @@ import time
 
 import numpy as np
 
+from ..errors import seed_arg
+
 LOOSE_FILTERS = ("ekf", "rbukf", "ukf")
 IMU_RATE_HZ = 200.0
 DEFAULTS = dict(mech_duration_s=3600.0, scenario="seed000-car", repeats=5)
@@ -57,7 +59,7 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--mech-duration-s", dest="mech_duration_s", type=float, default=None,
                    help=f"mechanization data length at {IMU_RATE_HZ:g} Hz [s] "
                    f"(default: {DEFAULTS['mech_duration_s']:g}, --quick {QUICK['mech_duration_s']:g})")
-    p.add_argument("--seed", type=int, default=1, help="simulation seed (default: %(default)s)")
+    p.add_argument("--seed", type=seed_arg, default=1, help="simulation seed (default: %(default)s)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.set_defaults(func=cmd_bench)
 

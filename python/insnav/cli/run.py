@@ -8,7 +8,7 @@ import numpy as np
 
 from .._atomic import atomic_write_text
 from .._median import median
-from ..errors import UserError
+from ..errors import UserError, seed_arg
 from .._toml import table_toml, toml_value
 from ..config import ConfigError, RunConfig, load_config
 from ..registry import FILTERS
@@ -100,7 +100,7 @@ def add_run_parser(sub) -> None:
                    help="an option of the filter's family (the config's [options] table; repeatable), VALUE a "
                         "TOML value: e.g. elevation_mask_deg=15 (tight on a simulated dataset; RINEX: [rinex] "
                         "elevation_mask_deg), particles=500 (seed 004), delay_p=[0.7,0.3] (delay filters)")
-    p.add_argument("--seed", type=int, default=None, help="seed of the initial-error draw (init_seed)")
+    p.add_argument("--seed", type=seed_arg, default=None, help="seed of the initial-error draw (init_seed)")
     p.add_argument("--out", default=None,
                    help="solution file; the suffix chooses the format: .csv (text), .npz (numpy), .parquet "
                         "(needs pyarrow).  Beside it: <out>.innovations.csv (per GNSS record: status, NIS, rows, "
