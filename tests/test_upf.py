@@ -297,3 +297,14 @@ def test_options_of_another_kind_than_the_default_are_refused(ds, opt, match):
     negative sigma (squared into a positive one) or a tuple of the wrong length."""
     with pytest.raises(ConfigError, match=match):
         insnav.run(ds, filter="upf", coupling="tight", **opt)
+
+
+@pytest.mark.parametrize("filt, coupling, n", [("ukf", "loose", 15), ("fukf", "tight", 20)])
+def test_a_ut_without_positive_spread_is_refused(ds, filt, coupling, n):
+    """alpha^2 (n + kappa) <= 0 has no square root of (n + lambda) P: the run failed at its first
+    step as a non-finite solution; the UT's weights refuse it, naming the parameters and n."""
+    data = ds if coupling == "tight" else insnav.simulate("seed000-sim", seed=1)
+    with pytest.raises(ValueError, match=rf"ut_kappa = -{n + 5}\.0+, ut_alpha = 1\.0+: the unscented transform "
+                                         rf"needs alpha\^2 \(n \+ kappa\) > 0 \(n = {n} sigma-point"):
+        insnav.run(data, filt, coupling, ut_kappa=-(n + 5.0))
+    assert insnav.run(_truncate(ds, 20.0), "fukf", "tight", ut_kappa=1.0 - 20.0).summary["updates"] > 0

@@ -15,6 +15,8 @@
 
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 #include "insnav/filter/covariance.hpp"
 
@@ -44,6 +46,10 @@ struct UtWeights {
     const double kappa = std::isnan(p.kappa) ? 3.0 - N : p.kappa;
     lambda = alpha * alpha * (N + kappa) - N;
     n_plus_lambda = N + lambda;
+    if (!(n_plus_lambda > 0.0))  // sqrt((n + lambda) P) and the weights 1 / (2 (n + lambda)) need it
+      throw std::invalid_argument("ut_kappa = " + std::to_string(kappa) + ", ut_alpha = " + std::to_string(alpha) +
+                                  ": the unscented transform needs alpha^2 (n + kappa) > 0 (n = " +
+                                  std::to_string(N) + " sigma-point dimensions)");
     w0m = lambda / n_plus_lambda;
     w0c = w0m + 1.0 - alpha * alpha + beta;
     wi = 1.0 / (2.0 * n_plus_lambda);
