@@ -52,3 +52,45 @@ def test_paired_effects_and_verdicts():
     assert paired(b, a).verdict() == "opposite"
     assert paired(a, b, lower_is_better=False).verdict() == "opposite"
     assert paired(b[:4] * 0.5, b[:4]).verdict() == "not significant"  # 4 runs cannot reach p < 0.05
+
+
+def test_verdict_direction_is_the_signed_rank_side_not_the_median():
+    # A better in 10 runs, never worse, tied in 11: significant, median difference exactly 0
+    a = np.r_[np.full(10, 1.0), np.full(11, 2.0)]
+    b = np.r_[np.full(10, 2.0), np.full(11, 2.0)]
+    r = paired(a, b)
+    assert r.median_diff == 0.0 and r.p_wilcoxon == pytest.approx(2 / 2 ** 10)
+    assert r.a_better_by_ranks == 1 and r.verdict() == "reproduced"
+    # A slightly lower in 16 runs, much higher in 14: the ranks favour B, the median A
+    a = np.r_[np.full(16, 10.0), np.full(14, 15.0)]
+    b = np.r_[np.full(16, 10.01), np.full(14, 10.0)]
+    r = paired(a, b)
+    assert r.median_diff < 0 and r.p_wilcoxon < 0.05
+    assert r.a_better_by_ranks == -1 and r.verdict() == "opposite"
+
+
+def test_large_n_does_not_overflow():
+    # n = 1100: 2**n overflows a float; the sign test is exact in integers, the Wilcoxon DP is normalised
+    assert sign_test_p(600, 500) == pytest.approx(
+        2 * sum(math.comb(1100, i) for i in range(501)) / (1 << 1100), rel=1e-12)
+    assert 0.002 < sign_test_p(600, 500) < 0.004  # normal approximation: z = 2.98, p = 0.0029
+    rng = np.random.default_rng(3)
+    d = rng.standard_normal(1100) + 0.07
+    p = wilcoxon_p(d)
+    # normal approximation of the signed-rank sum (no ties): z = (T+ - m) / s
+    n = d.size
+    r = np.argsort(np.argsort(np.abs(d))) + 1.0
+    z = (r[d > 0].sum() - n * (n + 1) / 4) / math.sqrt(n * (n + 1) * (2 * n + 1) / 24)
+    p_normal = math.erfc(abs(z) / math.sqrt(2))
+    assert p < 0.05 and p == pytest.approx(p_normal, rel=0.05)
+    r = paired(d + 1.0, np.ones(1100), lower_is_better=False)
+    assert r.verdict() == "reproduced"
+
+
+def test_nan_pairs_are_counted_and_named():
+    a = np.r_[np.arange(12.0), np.nan]
+    b = np.r_[np.arange(12.0) + 1, 3.0]
+    r = paired(a, b)
+    assert r.n == 12 and r.dropped == 1
+    assert "1 run(s) without a value for A or B left out" in r.evidence()
+    assert "left out" not in paired(a[:12], b[:12]).evidence()

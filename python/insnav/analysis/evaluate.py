@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..units import wrap_deg
 from .metrics import errors, reconvergence_time, rms
 
 EXAMPLES = """examples:
@@ -153,7 +154,7 @@ def static_truth(text: str, t):
         raise ValueError(f"truth {text!r}: not a file, nor x,y,z [m] / lat_deg,lon_deg,h_m")
     r_e = parse_base_position(v, f"truth {text!r}")  # finite, and lat,lon,h or ECEF near the Earth's surface
     if abs(v[0]) <= 90.0 and abs(v[1]) <= 360.0 and abs(v[2]) < 1e5:
-        lat, lon, h = v
+        lat, lon, h = v[0], float(wrap_deg(v[1])), v[2]  # 242.5 -> -117.5
     else:
         la, lo, h = earth.ecef_to_geodetic(r_e)
         lat, lon = float(np.degrees(la)), float(np.degrees(lo))
@@ -320,9 +321,10 @@ def evaluate(solution, truth, outages=()) -> dict:
         if sk in e and np.all(e[sk][fin] > 0):
             out["consistency"][k] = rms(e[k][fin] / e[sk][fin]).tolist()
     out["consistency_flags"] = consistency_flags(out["consistency"])
-    out["horizontal_rms_m"] = float(rms(hz))
-    out["horizontal_max_m"] = float(hz.max())
-    out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"] ** 2, axis=1))))
+    pos_ok = np.isfinite(e["pos_n_m"]).all(axis=1)  # the rows the per-axis figures use
+    out["horizontal_rms_m"] = float(rms(hz[pos_ok]))
+    out["horizontal_max_m"] = float(hz[pos_ok].max()) if pos_ok.any() else float("nan")
+    out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"][pos_ok] ** 2, axis=1))))
     fs = getattr(solution, "fix_status", None)
     if fs is not None:  # carrier-phase solutions: fix rate and the error per status
         from ..gnss.rtk import STATUS_NAMES
@@ -331,17 +333,18 @@ def evaluate(solution, truth, outages=()) -> dict:
         i = np.clip(np.searchsorted(np.asarray(solution.t), e["t"] - 1e-9), 0, len(st) - 1)
         st_e = st[i]
         err3 = np.linalg.norm(e["pos_n_m"], axis=1)
+        err3[~pos_ok] = np.nan
         ep = getattr(solution, "epoch_fix_status", None)  # RTK/INS: over the rover epochs
         ep = st if ep is None else np.asarray(ep)
         out["fix_rate"] = float(np.mean(ep == 1)) if ep.size else 0.0
         out["by_status"] = {}
         for q, name in STATUS_NAMES.items():
-            m = st_e == q
+            m = (st_e == q) & pos_ok
             if m.any():
                 out["by_status"][name] = dict(samples=int(m.sum()), rms_3d_m=float(np.sqrt(np.mean(err3[m] ** 2))),
                                               max_3d_m=float(err3[m].max()))
     out["outages"] = []
-    t = e["t"]
+    t, hz = e["t"][pos_ok], hz[pos_ok]
     for (a, b) in outages:
         inside = (t >= a) & (t <= b)
         after = (t > b) & (t <= b + 60.0)
@@ -413,11 +416,16 @@ def _solution_at(sol, t):
     for k in ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "sigma_pos_n_m", "sigma_vel_n_mps",
               "sigma_att_deg"):
         setattr(out, k, at(getattr(sol, k)))
-    out.yaw_deg = (at(np.rad2deg(np.unwrap(np.deg2rad(sol.yaw_deg)))) + 180.0) % 360.0 - 180.0
+    out.yaw_deg = wrap_deg(at(np.unwrap(np.asarray(sol.yaw_deg, float), period=360.0)))
+    out.lon_deg = wrap_deg(at(np.unwrap(np.asarray(sol.lon_deg, float), period=360.0)))  # across +-180 deg
     fs = getattr(sol, "fix_status", None)
-    if fs is not None:  # the status of the solution epoch at (or else just after) each time, as evaluate() looks it up
-        fs = np.asarray(fs)
-        out.fix_status = fs[np.clip(np.searchsorted(sol.t, t - 1e-9), 0, fs.size - 1)]
+    if fs is not None:  # a time on a solution epoch: its status; between two: the worse (higher Q) of the two,
+        fs = np.asarray(fs)  # as the position there is interpolated from both (a float epoch makes it float)
+        j = np.clip(np.searchsorted(st, t, side="right") - 1, 0, fs.size - 1)
+        k = np.minimum(j + 1, fs.size - 1)
+        on_j = np.isclose(t, st[j], rtol=0.0, atol=1e-6)
+        on_k = np.isclose(t, st[k], rtol=0.0, atol=1e-6)
+        out.fix_status = np.where(on_j, fs[j], np.where(on_k, fs[k], np.maximum(fs[j], fs[k])))
         out.epoch_fix_status = getattr(sol, "epoch_fix_status", fs)  # the fix rate stays over the solution's epochs
     if hasattr(sol, "slip_counts"):
         out.slip_counts = sol.slip_counts

@@ -34,16 +34,19 @@ def errors(sol, truth) -> dict:
             return np.interp(t, tt, x)
         return np.column_stack([np.interp(t, tt, x[:, i]) for i in range(x.shape[1])])
 
-    lat_t, lon_t, h_t = at(truth.lat_deg) * DEG, at(truth.lon_deg) * DEG, at(truth.h_m)
+    def unwrapped_deg(x):  # an angle interpolated across +-180 deg (a NaN would end the unwrapping: skipped)
+        x = np.asarray(x, float).copy()
+        fin = np.isfinite(x)
+        x[fin] = np.unwrap(x[fin], period=360.0)
+        return x
+
+    lat_t, h_t = at(truth.lat_deg) * DEG, at(truth.h_m)
     R_M, R_N = radii(lat_t)
-    lat, lon, h = np.asarray(sol.lat_deg)[keep] * DEG, np.asarray(sol.lon_deg)[keep] * DEG, np.asarray(sol.h_m)[keep]
-    pos = np.column_stack([(lat - lat_t) * (R_M + h_t), (lon - lon_t) * (R_N + h_t) * np.cos(lat_t), -(h - h_t)])
+    lat, h = np.asarray(sol.lat_deg)[keep] * DEG, np.asarray(sol.h_m)[keep]
+    dlon = wrap_deg(np.asarray(sol.lon_deg, float)[keep] - at(unwrapped_deg(truth.lon_deg))) * DEG  # 242.5 = -117.5
+    pos = np.column_stack([(lat - lat_t) * (R_M + h_t), dlon * (R_N + h_t) * np.cos(lat_t), -(h - h_t)])
     vel = np.asarray(sol.v_n)[keep] - at(truth.v_n)
-    yaw_t = np.asarray(truth.yaw_deg, float) * DEG
-    fin = np.isfinite(yaw_t)  # unwrapped over the rows that have a yaw (a NaN would end the unwrapping there)
-    yaw_t = yaw_t.copy()
-    yaw_t[fin] = np.unwrap(yaw_t[fin])
-    yaw_t /= DEG
+    yaw_t = unwrapped_deg(truth.yaw_deg)
     att = np.column_stack([wrap_deg(np.asarray(sol.roll_deg)[keep] - at(truth.roll_deg)),
                            wrap_deg(np.asarray(sol.pitch_deg)[keep] - at(truth.pitch_deg)),
                            wrap_deg(np.asarray(sol.yaw_deg)[keep] - np.interp(t, tt, yaw_t))])
@@ -63,7 +66,9 @@ def reconvergence_time(t, err, t_recover, threshold, hold_s=5.0):
 
     Definition used in the results: the first time t >= t_recover from which
     ``|err| <= threshold`` holds for at least ``hold_s`` seconds, minus t_recover.
-    Returns NaN if it never reconverges.
+    Returns NaN if it never reconverges, and when the only run within the band
+    reaches the end of the data before ``hold_s`` has passed (censored: the
+    data do not show it holding).
     """
     t = np.asarray(t)
     e = np.abs(np.asarray(err))
@@ -78,7 +83,7 @@ def reconvergence_time(t, err, t_recover, threshold, hold_s=5.0):
         if not ok[i]:
             continue
         nxt = bad_idx[bad_idx > i]
-        end_t = ts[nxt[0]] if len(nxt) else ts[-1] + hold_s
+        end_t = ts[nxt[0]] if len(nxt) else ts[-1]
         if end_t - ts[i] >= hold_s:
             return float(ts[i] - t_recover)
     return float("nan")

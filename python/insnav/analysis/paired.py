@@ -17,7 +17,10 @@ the test is on the per-run differences ``d_i = a_i - b_i``:
 Verdict (:func:`verdict`), at the stated threshold ``alpha`` (default 0.05) on
 the Wilcoxon p-value: **reproduced** when significant in the claimed
 direction, **opposite** when significant the other way, **not significant**
-otherwise.  No dependency beyond numpy.
+otherwise.  The direction is the test's own: the signed-rank sum of the runs
+where A is better against that of the runs where B is (not the median
+difference, which can be 0 or of the other sign when the test is
+significant).  No dependency beyond numpy.
 """
 from __future__ import annotations
 
@@ -40,7 +43,7 @@ def sign_test_p(wins: int, losses: int) -> float:
     if n == 0:
         return 1.0
     k = min(wins, losses)
-    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0 ** n
+    tail = sum(math.comb(n, i) for i in range(k + 1)) / (1 << n)  # integer division: no overflow for n >= 1024
     return float(min(1.0, 2.0 * tail))
 
 
@@ -72,17 +75,27 @@ def wilcoxon_p(d) -> float:
         return 1.0
     r2 = np.rint(2 * _midranks(np.abs(d))).astype(int)  # doubled midranks: integers
     total = int(r2.sum())
-    counts = np.zeros(total + 1)
-    counts[0] = 1.0
-    for r in r2:  # number of sign patterns giving each positive-rank sum (r >= 2)
-        shifted = counts[:-r].copy()
-        counts[r:] += shifted
-    dist = counts / counts.sum()
+    dist = np.zeros(total + 1)
+    dist[0] = 1.0
+    for r in r2:  # probability of each positive-rank sum over the first ranks' random signs (r >= 2)
+        shifted = dist[:-r].copy()  # halved at each rank: the counts 2**n would overflow for n >= 1024
+        dist *= 0.5
+        dist[r:] += 0.5 * shifted
     t_plus = int(r2[d > 0].sum())
     mean = total / 2.0
     dev = abs(t_plus - mean)
     s = np.arange(total + 1)
     return float(min(1.0, dist[np.abs(s - mean) >= dev - 1e-9].sum()))
+
+
+def _signed_rank_direction(d) -> int:
+    """Sign of the Wilcoxon statistic ``T+ - T-`` (midranks of ``|d|``, zeros dropped): +1, -1 or 0."""
+    d = np.asarray(d, float)
+    d = d[d != 0]
+    if d.size == 0:
+        return 0
+    r = _midranks(np.abs(d))
+    return int(np.sign(r[d > 0].sum() - r[d < 0].sum()))
 
 
 def _median_ci(d: np.ndarray, level: float) -> tuple[float, float]:
@@ -95,7 +108,7 @@ def _median_ci(d: np.ndarray, level: float) -> tuple[float, float]:
     cdf = 0.0
     k = 0
     for i in range(n + 1):  # largest k with P(B <= k - 1) <= a, B ~ Bin(n, 1/2)
-        cdf_next = cdf + math.comb(n, i) / 2.0 ** n
+        cdf_next = cdf + math.comb(n, i) / (1 << n)
         if cdf_next > a:
             k = i
             break
@@ -128,6 +141,12 @@ class PairedResult:
     level : float
         Confidence level of both intervals.
     lower_is_better : bool
+    a_better_by_ranks : int
+        +1 when the signed ranks favour A (the Wilcoxon statistic's side), -1
+        when they favour B, 0 when balanced: the verdict's direction.
+    dropped : int
+        Pairs left out because a or b is NaN (a run without the metric, e.g.
+        one that never reconverged): named in :meth:`evidence`.
     """
 
     n: int
@@ -142,6 +161,8 @@ class PairedResult:
     ratio_ci: tuple
     level: float
     lower_is_better: bool
+    a_better_by_ranks: int = 0
+    dropped: int = 0
 
     def verdict(self, alpha: float = ALPHA) -> str:
         """reproduced / opposite / not significant (module docstring)."""
@@ -155,7 +176,8 @@ class PairedResult:
         return (f"A better in {self.wins}/{self.n} runs; sign test p = {self.p_sign:.2g}, Wilcoxon p = "
                 f"{self.p_wilcoxon:.2g}; median A - B = {self.median_diff:{fmt}}{u} "
                 f"({self.level:.0%} CI {lo:{fmt}} .. {hi:{fmt}}); mean B / mean A = {self.ratio:.3g} "
-                f"(CI {rlo:.3g} .. {rhi:.3g})")
+                f"(CI {rlo:.3g} .. {rhi:.3g})"
+                + (f"; {self.dropped} run(s) without a value for A or B left out" if self.dropped else ""))
 
 
 def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: int = 2000,
@@ -165,7 +187,9 @@ def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: i
     Parameters
     ----------
     a, b : array_like (n,)
-        The metric of A and of B in the same runs (NaN pairs are dropped).
+        The metric of A and of B in the same runs (pairs with a NaN are left
+        out and counted in ``dropped``: map a censored value, e.g. "never
+        reconverged", to a number first if it should count).
     lower_is_better : bool
         The metric's sense (errors, times: True).
     level : float
@@ -184,6 +208,7 @@ def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: i
     if a.shape != b.shape:
         raise ValueError(f"paired: a and b differ in length ({a.size} vs {b.size})")
     ok = np.isfinite(a) & np.isfinite(b)
+    dropped = int(a.size - ok.sum())
     a, b = a[ok], b[ok]
     d = a - b
     better = d < 0 if lower_is_better else d > 0
@@ -203,12 +228,12 @@ def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: i
                         p_sign=sign_test_p(wins, losses), p_wilcoxon=wilcoxon_p(d),
                         median_diff=float(np.median(d)) if d.size else math.nan,
                         median_diff_ci=_median_ci(d, level), ratio=ratio, ratio_ci=ratio_ci, level=level,
-                        lower_is_better=lower_is_better)
+                        lower_is_better=lower_is_better,
+                        a_better_by_ranks=_signed_rank_direction(-d if lower_is_better else d), dropped=dropped)
 
 
 def verdict(res: PairedResult, alpha: float = ALPHA) -> str:
     """The verdict word for the claim "A better than B" (module docstring)."""
-    if not res.p_wilcoxon < alpha:
+    if not res.p_wilcoxon < alpha or res.a_better_by_ranks == 0:
         return "not significant"
-    better = res.median_diff < 0 if res.lower_is_better else res.median_diff > 0
-    return "reproduced" if better else "opposite"
+    return "reproduced" if res.a_better_by_ranks > 0 else "opposite"
