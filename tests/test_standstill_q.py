@@ -166,3 +166,34 @@ def test_tight_flags_moving_is_the_plain_run_and_standing_flags_lower_the_sigmas
     for k in ("sigma_vel_n_mps", "sigma_att_deg"):
         r = getattr(det, k)[last] / getattr(plain, k)[last]
         assert np.median(r) < 0.98 and r.max() < 1.0, (k, np.median(r), r.max())
+
+
+def test_the_level_alone_is_saved_streamed_whole_and_refused_by_the_push_api(tmp_path, mover):
+    """``standstill_q_scale`` without a ``use`` entry: the resolved config keeps it (re-running it is
+    the same filter), the block-by-block stream falls back to the whole run (its events come from the
+    whole IMU record), and the push API, which has no detector, refuses it."""
+    from insnav.cli.run import resolved_config_toml
+    from insnav.filters.navigator import Navigator, TightNavigator
+    from insnav.filters.stream import stream_unsupported
+
+    ds, noise = mover
+    cfg = RunConfig(filter="ekf", imu=noise, constraints=Constraints(standstill_q_scale=0.05))
+    cfg.validate()
+    p = tmp_path / "saved.toml"
+    p.write_text(resolved_config_toml(cfg))
+    again = load_config(p)
+    assert again.constraints.standstill_q_scale == 0.05 and again.constraints.use == []
+    a, b = insnav.run(ds, config=cfg), insnav.run(ds, config=again)
+    plain = insnav.run(ds, config=RunConfig(filter="ekf", imu=noise))
+    assert np.array_equal(a.sigma_vel_n_mps, b.sigma_vel_n_mps)
+    assert np.nanmax(np.abs(a.sigma_vel_n_mps - plain.sigma_vel_n_mps)) > 1e-6  # the level did something
+    assert "standstill" in stream_unsupported(cfg, out_suffix=".csv")
+    assert stream_unsupported(RunConfig(filter="ekf", imu=noise), out_suffix=".csv") is None
+    with pytest.raises(ValueError, match="standstill_q_scale"):
+        Navigator.from_dataset(ds, cfg)
+    with pytest.raises(ValueError, match="standstill_q_scale"):
+        TightNavigator.from_dataset(ds, dataclasses.replace(cfg, coupling="tight"))
+    from insnav.config import Tdcp
+
+    with pytest.raises(ValueError, match=r"\[tdcp\]"):  # TDCP rows: built by the batch run only
+        TightNavigator.from_dataset(ds, RunConfig(filter="ekf", coupling="tight", tdcp=Tdcp(enabled=True)))

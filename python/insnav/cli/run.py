@@ -188,7 +188,7 @@ def resolved_config_toml(cfg: RunConfig, tables: dict | None = None) -> str:
     if cfg.sanitize:
         lines.append("\n[sanitize]")
         lines += [f"{k} = {toml_value(v)}" for k, v in cfg.sanitize.items()]
-    if cfg.constraints.use:
+    if cfg.constraints.use or cfg.constraints.standstill_q_scale != 1.0:  # the standstill level needs no `use`
         lines.append("\n[constraints]")
         for f in dataclasses.fields(cfg.constraints):
             v = getattr(cfg.constraints, f.name)

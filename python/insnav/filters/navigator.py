@@ -52,6 +52,18 @@ def _time(t, call: str) -> float:
         raise TypeError(f"{call}: t must be a time in seconds (a real number), got {type(t).__name__} {t!r}")
     return float(t)
 
+def _refuse_batch_only(cfg: RunConfig, who: str) -> None:
+    """A ValueError for the settings only the batch run derives (from the whole IMU record or the
+    carrier phase of every epoch), which a push engine would otherwise run without."""
+    if cfg.constraints.standstill_q_scale != 1.0:
+        raise ValueError(f"{who}: [constraints] standstill_q_scale = {cfg.constraints.standstill_q_scale:g} "
+                         "unsupported (the standstill detector runs over the whole IMU record in insnav.run); "
+                         "leave it at 1")
+    if cfg.tdcp.enabled:
+        raise ValueError(f"{who}: [tdcp] unsupported (the time-differenced carrier phase rows are built by "
+                         "insnav.run from the whole RINEX record)")
+
+
 #: constraint kinds (loose_engine.hpp ConstraintKind)
 CONSTRAINT_KINDS = {"nhc": 1, "odo": 2, "zupt": 4, "zaru": 8}
 
@@ -171,6 +183,7 @@ class Navigator(_PushApi):
     def _setup(self, dataset, cfg: RunConfig, record_t: np.ndarray, imu_hold: int) -> None:
         if cfg.smooth:
             raise ValueError("Navigator: the RTS smoother needs the whole run (insnav.run(..., smooth=True))")
+        _refuse_batch_only(cfg, "Navigator")
         a = loose_engine_args(dataset, cfg, record_t)
         self.config = cfg
         self.layout = a.layout
@@ -276,6 +289,7 @@ class TightNavigator(_PushApi):
         if cfg.time.estimate_offset or cfg.lever_arm.estimate:
             raise ValueError("TightNavigator: [time] estimate_offset / [lever_arm] estimate unsupported (the "
                              "self-calibration states run in the batch engines, insnav.run)")
+        _refuse_batch_only(cfg, "TightNavigator")
         if not (0 <= int(imu_hold) <= 256):
             raise ValueError(f"TightNavigator: imu_hold must be in 0 .. 256 samples, got {imu_hold!r}")
         a = tight_engine_args(dataset, cfg, **options)

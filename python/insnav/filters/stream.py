@@ -380,8 +380,8 @@ def stream_unsupported(cfg, *, out_suffix: str, out_format: str = "insnav") -> s
     if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf") or cfg.layout not in (15, 21):
         return f"filter {cfg.filter} {cfg.coupling} with {cfg.layout} states runs whole (the stream: loose ekf, " \
                "rbukf, ukf on 15 or 21 states)"
-    if cfg.constraints.use:
-        return "the vehicle constraints are derived from the whole IMU record"
+    if cfg.constraints.use or cfg.constraints.standstill_q_scale != 1.0:
+        return "the vehicle constraints and the standstill level are derived from the whole IMU record"
     if cfg.lever_arm.estimate or cfg.lever_arm.estimate_odometer or cfg.time.estimate_offset:
         return "the self-calibration states run in the batch engine"
     if cfg.options or cfg.tdcp.enabled:
