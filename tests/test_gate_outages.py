@@ -286,3 +286,14 @@ def test_kfgins_track_default_gate_never_worse_than_gate_off(shared_data):
     assert int(np.sum(sol.gnss_status == 2)) == 0 and sol.summary["gate_reopened"] == 0
     for a, b in zip(default, off):
         assert a <= 1.05 * b + 0.05, (default, off)
+
+
+@pytest.mark.parametrize("value", [1e30, 2 ** 31, -1, 2.5])
+def test_gate_reopen_after_outside_the_engines_int_is_refused_naming_the_key(value):
+    from insnav.config import ConfigError, RunConfig
+
+    with pytest.raises(ConfigError, match="gate_reopen_after"):
+        RunConfig(gate_reopen_after=value).validate()
+    cfg = RunConfig(gate_reopen_after=2 ** 31 - 1)
+    cfg.validate()
+    assert cfg.gate_reopen_after == 2147483647

@@ -1093,8 +1093,8 @@ class RunConfig:
             bad("gate_chi2", self.gate_chi2, ">= 0 (0 = off) or absent (the gate_prob quantile)")
         if self.gate_prob is not None and not 0 <= self.gate_prob < 1:
             bad("gate_prob", self.gate_prob, "0 <= p < 1 (0 = off)")
-        if int(self.gate_reopen_after) != self.gate_reopen_after or self.gate_reopen_after < 0:
-            bad("gate_reopen_after", self.gate_reopen_after, "an integer >= 0 (0 = never)")
+        if (int(self.gate_reopen_after) != self.gate_reopen_after or not 0 <= self.gate_reopen_after < 2 ** 31):
+            bad("gate_reopen_after", self.gate_reopen_after, "an integer 0 .. 2147483647 (0 = never)")
         self.gate_reopen_after = int(self.gate_reopen_after)
         for key in ("gate_mismatch", "gate_outage_s"):
             if getattr(self, key) < 0:
