@@ -69,6 +69,19 @@ def test_block_by_block_run_writes_the_whole_file_runs_bytes(kf_short, tmp_path,
                                                             "sol.csv.innovations.csv"]  # no temporary file left
 
 
+def test_the_configs_output_decimation_is_kept_block_by_block(kf_short, tmp_path, monkeypatch):
+    """``output_decimation`` from a config (a saved ``<out>.config.toml`` of an ``--output-rate`` run):
+    the stream writes every 20th row as the whole-file run does, and saves the key unchanged."""
+    monkeypatch.setattr(stream, "BLOCK_LINES", 4093)
+    rc = tmp_path / "rc.toml"
+    rc.write_text("output_decimation = 20\n")
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    streamed_and_whole(_run, kf_short, a, b, "--run-config", rc)
+    assert a.read_bytes() == b.read_bytes()
+    assert a.read_text().count("\n") - 1 == -(-(LINES - 10_001) // 20)
+    assert "output_decimation = 20" in (a.parent / "sol.csv.config.toml").read_text()
+
+
 def _with_line(src, dst, lineno: int, text: bytes | None, cut: bool = False):
     lines = src.read_bytes().splitlines(keepends=True)
     if cut:  # the file ends inside line `lineno`

@@ -994,7 +994,6 @@ class _BlockRun:
         self.gnss, self.gnss_rep = sanitize_gnss_blocks(cut, min_h_m=o["min_h_m"], max_h_m=o["max_h_m"],
                                                         source="gnss")
         del cut
-        cfg.output_decimation = 1
         if self.output_rate_hz is not None:
             cfg.output_decimation = self.set_decimation(t_first, self.output_rate_hz)
         gn = self.gnss
