@@ -530,3 +530,29 @@ def test_walk_loose_from_pos_no_typed_initial_state(shared_data):
     assert held.sum() > 300
     rms = float(np.sqrt(np.mean(hor[held] ** 2)))
     assert rms < WALK_HOLDOUT_RMS_M and hor[held].max() < WALK_HOLDOUT_MAX_M, (rms, hor[held].max())
+
+
+def test_a_relative_tag_in_the_toml_is_saved_resolved_and_the_saved_config_reruns(shared_data, tmp_path):
+    """``[imu] tag`` relative to the TOML's folder: the resolved config written beside ``--out`` (another
+    folder) names the file absolutely, so re-running it reads the same tag and gives the same rows."""
+    import shutil
+    import tomllib
+    from pathlib import Path
+
+    (tmp_path / "cfg").mkdir()
+    (tmp_path / "results").mkdir()
+    shutil.copy(_walk(shared_data, "raw", "imu_1730.csv.tag"), tmp_path / "cfg" / "walk_imu.tag")
+    imu = tmp_path / "imu.csv"  # no imu.csv.tag beside it: the TOML's tag is the one read
+    shutil.copy(_walk(shared_data, "raw", "imu_1730.csv"), imu)
+    pos = _walk(shared_data, "raw", "gnss_1730_sf.pos")
+    text = (Path(__file__).resolve().parent / "data" / "walk_0827_loose.toml").read_text()
+    (tmp_path / "cfg" / "walk.toml").write_text(text.replace('grade = "consumer"',
+                                                             'grade = "consumer"\ntag = "walk_imu.tag"', 1))
+    a, b = tmp_path / "results" / "a.csv", tmp_path / "results" / "b.csv"
+    run = ["run", "--format", "csv", "--imu", str(imu), "--gnss", str(pos), "--quiet"]
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(run + ["--config", str(tmp_path / "cfg" / "walk.toml"), "--out", str(a)]) == 0
+        saved = tomllib.loads((tmp_path / "results" / "a.csv.config.toml").read_text())
+        assert saved["imu"]["tag"] == str((tmp_path / "cfg" / "walk_imu.tag").resolve())
+        assert main(run + ["--config", str(tmp_path / "results" / "a.csv.config.toml"), "--out", str(b)]) == 0
+    assert a.read_bytes() == b.read_bytes()

@@ -452,7 +452,9 @@ def csv_run_dataset(inp: CsvInputs, imu_path: str, t0: float, initial, sig: dict
     info = dict(imu=imu_path, gnss=rec.path, gnss_format=rec.format, gnss_fixes=len(rec), time_base=rec.time_base,
                 week=inp.week, gnss_info=rec.info, initial_given=sorted(ini), initial_sigma=sig,
                 noise_grade=inp.imu_d.get("grade"),
-                tables=dict(imu={k: v for k, v in inp.imu_d.items() if k in IMU_FORMAT_KEYS or k == "tag"},
+                tables=dict(imu={k: v for k, v in inp.imu_d.items() if k in IMU_FORMAT_KEYS}
+                            | ({"tag": os.path.abspath(inp.tag)} if isinstance(inp.tag, str) and "tag" in inp.imu_d
+                               else {}),  # resolved against the TOML's folder: the saved config re-runs anywhere
                             gnss=inp.gnss_d, initial=ini, align=inp.align_d))
     ds = CsvDataset(imu=imu, gnss=gnss, truth=None, gnss_raw=None, imu_errors=None,
                     scenario={"csv": dict(imu=imu_path, gnss=rec.path)}, lever_arm_b=lever, initial=initial,
