@@ -3,6 +3,8 @@ with a suggestion), every key is used (the initial IMU errors and their
 sigmas, outputpath), and insnav options reach a KF-GINS run (--run-config)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -111,3 +113,24 @@ def test_outputpath_gets_kfgins_files_and_run_config_overrides(sim, kf_dir):
     _user_error(["run", "--format", "kfgins", "--config", p, "--run-config", toml, "--out", kf_dir / "x.csv"],
                 "gate_chi2s")
     _user_error(["run", kf_dir, "--run-config", toml, "--out", kf_dir / "y.csv"], "--run-config")
+    toml.write_text("[rtk]\nratio = 3\n")  # an RTK table: one line naming it, not an AttributeError
+    _user_error(["run", "--format", "kfgins", "--config", p, "--run-config", toml, "--out", kf_dir / "z.csv"],
+                "[rtk] is read by RTK runs")
+
+
+def test_a_partial_imu_table_overrides_only_its_keys_of_the_yaml_noise(sim, kf_dir):
+    """``--run-config`` with ``[imu]`` restating one YAML noise key leaves the YAML's other noise
+    values (VRW, bias and scale-factor sigmas and time constants) as they were."""
+    from insnav.cli.run import _overlay_run_config
+
+    p = kf_dir / "plain.yaml"
+    p.write_text(_yaml(sim))
+    _, cfg = load_kfgins(p)
+    toml = kf_dir / "arw.toml"
+    toml.write_text("[imu]\ngyro_arw_deg_per_sqrt_h = 0.5\n")
+    over = _overlay_run_config(dataclasses.replace(cfg, imu=dataclasses.replace(cfg.imu)), toml)
+    arw = np.deg2rad(0.5) / 60.0  # deg/sqrt(h) -> rad/sqrt(s)
+    np.testing.assert_allclose(over.imu.gyro_arw, [arw] * 3, rtol=1e-12)
+    for f in dataclasses.fields(cfg.imu):
+        if f.name != "gyro_arw":
+            assert getattr(over.imu, f.name) == getattr(cfg.imu, f.name), f.name

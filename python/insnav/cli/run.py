@@ -533,9 +533,22 @@ def _overlay_run_config(cfg: RunConfig, path) -> RunConfig:
         raise UserError(f"--run-config {path}: {exc.strerror}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError):
         read_toml(path)  # its one-line message naming the file
+    for key in ("rtk", "rtk_engine"):
+        if key in d:
+            raise UserError(f"--run-config {path}: [{key}] is read by RTK runs (--format rinex --coupling rtk), "
+                            "not by a KF-GINS run")
     given = config_from_dict(d, source=str(path))  # unknown keys / bad values: one line naming the file
     for key in d:
-        setattr(cfg, key, getattr(given, key))
+        if key == "imu" and cfg.imu is not None:  # the keys given override the YAML's noise, the others stay
+            from ..config import _USER_UNITS
+
+            noise = dataclasses.replace(cfg.imu)
+            for k in d["imu"]:
+                fld = _USER_UNITS[k][0]
+                setattr(noise, fld, getattr(given.imu, fld))
+            cfg.imu = noise
+        else:
+            setattr(cfg, key, getattr(given, key))
     if cfg.layout == 15:
         # the 15-state layout has no scale-factor states: the KF-GINS YAML's initial scale factors and
         # their sigmas (initaccscale, initgyrscale, initsastd, initsgstd) do not apply; zero ones are
