@@ -215,3 +215,18 @@ def test_option_tables_given_as_dicts_are_read_as_the_toml_tables():
         RunConfig(constraints={"usee": ["nhc"]}).validate()
     with pytest.raises(ConfigError, match=r"config key 'tdcp': bad value 3; allowed: a \[tdcp\] table"):
         RunConfig(tdcp=3).validate()
+
+
+def test_a_toml_without_filter_is_checked_against_the_command_lines_filter(tmp_path):
+    """``insnav run DIR --coupling tight --config l20.toml`` with ``layout = 20`` alone in the file: its
+    keys are checked against the tight filter the command line asks for, not the default loose EKF."""
+    from insnav.config import ConfigError, load_config
+
+    p = tmp_path / "l20.toml"
+    p.write_text("layout = 20\n")
+    with pytest.raises(ConfigError, match="layout"):
+        load_config(p)  # alone: the default ekf loose has 15 or 21 states
+    cfg = load_config(p, {"filter": "ekf", "coupling": "tight"})
+    assert (cfg.filter, cfg.coupling, cfg.layout) == ("ekf", "tight", 20)
+    p.write_text("[options]\nelevation_mask_deg = 15.0\n")
+    assert load_config(p, {"coupling": "tight", "filter": None}).options == {"elevation_mask_deg": 15.0}

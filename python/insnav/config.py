@@ -1283,12 +1283,13 @@ def read_toml(path) -> dict:
                           f"offset {exc.start})") from None
 
 
-def load_config(path) -> RunConfig:
-    """Read an insnav TOML run configuration."""
-    import tomllib  # here: insnav run --format kfgins never reads TOML (~2 ms of import)
-
+def load_config(path, overrides: dict | None = None) -> RunConfig:
+    """Read an insnav TOML run configuration; ``overrides`` (e.g. the command line's ``filter`` and
+    ``coupling``) replace the file's keys before it is checked, so its other keys are checked
+    against the filter that will run."""
     path = Path(path)
     d = read_toml(path)  # its one-line errors: unreadable, not TOML, not UTF-8
+    d.update({k: v for k, v in (overrides or {}).items() if v is not None})
     return config_from_dict(d, source=str(path))
 
 

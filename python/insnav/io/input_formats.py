@@ -73,7 +73,8 @@ def _load_insnav(args) -> Loaded:
     from ..config import RunConfig, load_config
 
     ds = insnav.load_dataset(args.dataset)
-    return Loaded(ds, load_config(args.config) if args.config else RunConfig(), {})
+    cli = dict(filter=getattr(args, "filter", None), coupling=getattr(args, "coupling", None))
+    return Loaded(ds, load_config(args.config, cli) if args.config else RunConfig(), {})
 
 
 def _load_rinex(args) -> Loaded:
