@@ -508,6 +508,12 @@ def test_cli_spp_on_smartloc(smartloc, tmp_path):
     assert abs(np.nanmedian(sol.lat_deg) - 52.51) < 0.02
     head = (tmp_path / "spp.csv.spp.csv").read_text().splitlines()[0].split(",")
     assert "isb_R_m" in head and "raim_status" in head
+    # the epochs' fit sizes in the innovations file, the clock to 0.1 mm in the table
+    table = np.genfromtxt(tmp_path / "spp.csv.spp.csv", delimiter=",", names=True)
+    inn = np.genfromtxt(tmp_path / "spp.csv.innovations.csv", delimiter=",", names=True, usecols=(0, 3, 4))
+    assert np.array_equal(inn["rows"], table["n_used"]) and table["n_used"].max() > 4
+    clk = (tmp_path / "spp.csv.spp.csv").read_text().splitlines()[1].split(",")[head.index("clock_bias_m")]
+    assert len(clk.split(".")[1]) == 4, clk
     text = (tmp_path / "spp.csv.config.toml").read_text()
     assert 'model = "cn0"' in text and "[spp]" in text
     # the resolved configuration runs again to the same result

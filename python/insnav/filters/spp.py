@@ -66,6 +66,7 @@ def spp_solution(sp: SppSolution, filter_name: str = "spp") -> Solution:
                         sp.sigma_vel_n_mps[ok].copy(), gnss_t=sp.t.copy(), nis=sp.chi2.copy(), gnss_status=st,
                         summary=summary)
     sol.spp = sp
+    sol.rows = np.asarray(sp.n_used, int).copy()  # the pseudoranges of each epoch's fit: the innovations file's rows
     return sol
 
 
@@ -266,7 +267,9 @@ def write_spp_table(sp: SppSolution, path) -> "os.PathLike":
             sp.chi2_threshold, sp.clock_bias_m, sp.sigma_clock_m, sp.clock_drift_mps, sp.sigma_drift_mps,
             *sp.isb_m.T, *sp.sigma_isb_m.T, sp.gdop, sp.pdop, sp.hdop, sp.vdop, sp.tdop, sp.n_rate_used,
             sp.n_rate_excluded]
-    fmt = ["%.6f"] + ["%d"] * 5 + ["%.6g"] * (len(cols) - 8) + ["%d", "%d"]
+    k = sp.isb_m.shape[1]  # clock and ISBs to 0.1 mm / 1 um/s (%.6g rounded a 462559 m clock to the metre)
+    fmt = (["%.6f"] + ["%d"] * 5 + ["%.6g"] * 2 + ["%.4f", "%.6g", "%.6f", "%.6g"] + ["%.4f"] * k
+           + ["%.6g"] * (len(cols) - 14 - k) + ["%d", "%d"])
     text_cols = []
     for f, c in zip(fmt, cols):  # column by column: one isfinite per column, not per value
         c = np.asarray(c)
