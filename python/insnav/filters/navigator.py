@@ -52,6 +52,7 @@ def _time(t, call: str) -> float:
         raise TypeError(f"{call}: t must be a time in seconds (a real number), got {type(t).__name__} {t!r}")
     return float(t)
 
+
 def _refuse_batch_only(cfg: RunConfig, who: str) -> None:
     """A ValueError for the settings only the batch run derives (from the whole IMU record or the
     carrier phase of every epoch), which a push engine would otherwise run without."""
