@@ -119,7 +119,44 @@ def test_push_matches_truth_and_sigma():
     assert np.all(np.abs(last["v_n_mps"] - tr.v_n[k]) < 4 * last["sigma"][3:6] + 1e-3)
     P = nav.covariance()
     assert P.shape == (15, 15) and np.allclose(P, P.T) and np.all(np.linalg.eigvalsh(P) > 0)
-    assert np.allclose(np.sqrt(np.diag(P)), last["sigma"])
+    att = slice(6, 9)
+    keep = np.r_[0:6, 9:15]
+    assert np.allclose(np.sqrt(np.diag(P))[keep], last["sigma"][keep])
+    # the attitude entries: the 1-sigmas of roll, pitch, yaw, psi's covariance carried through the
+    # numerical Jacobian of the Euler angles of C~ = (I - [psi x]) C (layout.hpp), not psi's own
+    e = np.radians([last["roll_deg"], last["pitch_deg"], last["yaw_deg"]])
+    assert abs(np.sin(e[2])) > 0.3  # a heading where the two differ
+    J = euler_jacobian_of_psi(e)
+    sig_e = np.sqrt(np.diag(J @ P[att, att] @ J.T))
+    np.testing.assert_allclose(last["sigma"][att], sig_e, rtol=1e-6)
+    assert np.max(np.abs(last["sigma"][att] / np.sqrt(np.diag(P[att, att])) - 1)) > 0.05
+
+
+def euler_jacobian_of_psi(e, eps=1e-6):
+    """d(roll, pitch, yaw) / d psi by central differences: the computed frame
+    ``expm(-[psi x]) C_nb(e)`` (psi about N, E, D), its 3-2-1 Euler angles by their definition."""
+    def dcm(r, p, y):
+        cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+        Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+        Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+        Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+        return Rz @ Ry @ Rx
+
+    def euler(C):
+        return np.array([np.arctan2(C[2, 1], C[2, 2]), -np.arcsin(C[2, 0]), np.arctan2(C[1, 0], C[0, 0])])
+
+    def rot(v):  # Rodrigues: expm([v x])
+        a = np.linalg.norm(v)
+        K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / a
+        return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+
+    C = dcm(*e)
+    J = np.empty((3, 3))
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = eps
+        J[:, i] = (euler(rot(-d) @ C) - euler(rot(d) @ C)) / (2 * eps)
+    return J
 
 
 def test_late_fix_refused_and_bad_calls():
@@ -322,7 +359,11 @@ def test_delay_push_equals_batch(late, hold):
     assert c["updates"] == batch.summary["updates"] and c["updates"] > 200
     assert c["held_samples"] == 0 and c["dropped_records"] == 0
     P = nav.covariance()
-    assert P.shape == (15, 15) and np.allclose(np.sqrt(np.diag(P)), rows[len(ds.imu.t) - 1]["sigma"])
+    last = rows[len(ds.imu.t) - 1]
+    keep = np.r_[0:6, 9:15]  # the attitude entries are the Euler angles' (test_push_matches_truth_and_sigma)
+    assert P.shape == (15, 15) and np.allclose(np.sqrt(np.diag(P))[keep], last["sigma"][keep])
+    J = euler_jacobian_of_psi(np.radians([last["roll_deg"], last["pitch_deg"], last["yaw_deg"]]))
+    np.testing.assert_allclose(last["sigma"][6:9], np.sqrt(np.diag(J @ P[6:9, 6:9] @ J.T)), rtol=1e-6)
 
 
 def test_delay_push_refuses_and_bad_calls():
@@ -428,3 +469,18 @@ def test_the_compiled_push_calls_check_the_sigmas_themselves():
     row = np.array([ds.imu.t[5], 0.7, 0.2, 100.0, np.nan, np.nan, np.nan, 1.0, -1.0, 1.0, np.nan, np.nan, np.nan])
     with pytest.raises(ValueError, match="push_gnss_fix: the position 1-sigma must be finite and > 0"):
         nav._nav.push_gnss_fix(row)
+
+
+def test_the_smoothers_euler_sigmas_are_the_numerical_jacobians():
+    """``filters.smoothing.euler_sigmas_from_psi`` (the smoothed rows' attitude sigmas, the numpy form
+    of ins/nav_error.hpp's) against the numerical Jacobian, at headings all round and pitch to 80 deg."""
+    from insnav.filters.smoothing import euler_sigmas_from_psi
+
+    rng = np.random.default_rng(4)
+    e = np.column_stack([rng.uniform(-np.pi, np.pi, 40), rng.uniform(-1.4, 1.4, 40), rng.uniform(-np.pi, np.pi, 40)])
+    L = rng.standard_normal((40, 3, 3)) * 0.01
+    P = L @ np.swapaxes(L, 1, 2) + 1e-6 * np.eye(3)
+    got = euler_sigmas_from_psi(P, e[:, 1], e[:, 2])
+    for k in range(40):
+        J = euler_jacobian_of_psi(e[k])
+        np.testing.assert_allclose(got[k], np.sqrt(np.diag(J @ P[k] @ J.T)), rtol=1e-6)

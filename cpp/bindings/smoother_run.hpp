@@ -85,16 +85,17 @@ class SmootherRun {
   }
 
   /// The result arrays (GIL held), per epoch k (E rows; n columns: the layout's states):
-  ///   smooth_t (E,), smooth_fed (E,) x_k fed back, smooth_s (E, n) s_k, smooth_sigma (E, n) sqrt(diag Ps_k);
+  ///   smooth_t (E,), smooth_fed (E,) x_k fed back, smooth_s (E, n) s_k, smooth_sigma (E, n) sqrt(diag Ps_k),
+  ///   smooth_P_att (E, 3, 3) Ps_k's attitude (psi) block, for the rows' Euler-angle sigmas;
   ///   the corrections of the output rows (engine/smoothed_rows.hpp smoothed_row_errors): smooth_d (E, n)
   ///   for the rows from epoch k on, smooth_d_end (E, n) for the rows just before it; smooth_gain_failures.
   void put(py::dict& res) const {
     if (!on_) return;
     const py::ssize_t E = n_, n = kN;
-    DArray o_et({E}), o_s({E, n}), o_d({E, n}), o_de({E, n}), o_ss({E, n});
+    DArray o_et({E}), o_s({E, n}), o_d({E, n}), o_de({E, n}), o_ss({E, n}), o_pa({E, py::ssize_t(3), py::ssize_t(3)});
     py::array_t<std::int8_t> o_fed({E});
     double *et = o_et.mutable_data(), *s = o_s.mutable_data(), *d = o_d.mutable_data(), *de = o_de.mutable_data(),
-           *ss = o_ss.mutable_data();
+           *ss = o_ss.mutable_data(), *pa = o_pa.mutable_data();
     std::int8_t* fed = o_fed.mutable_data();
     for (std::int64_t i = 0; i < n_; ++i) {
       const SmootherEpoch<L>& f = fwd_[i];
@@ -107,6 +108,8 @@ class SmootherRun {
         s[ij] = b.s[j];
         ss[ij] = std::sqrt(std::max(b.P(j, j), 0.0));
       }
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) pa[9 * i + 3 * r + c] = b.P(L::kAtt + r, L::kAtt + c);
     }
     res["smooth_t"] = o_et;
     res["smooth_fed"] = o_fed;
@@ -114,6 +117,7 @@ class SmootherRun {
     res["smooth_d"] = o_d;
     res["smooth_d_end"] = o_de;
     res["smooth_sigma"] = o_ss;
+    res["smooth_P_att"] = o_pa;
     res["smooth_gain_failures"] = status_.gain_failures;
   }
 

@@ -222,7 +222,8 @@ class Navigator(_PushApi):
     def state(self) -> dict:
         """The current solution after the last integrated sample: ``t`` [s],
         ``lat_deg``, ``lon_deg``, ``h_m``, ``v_n_mps`` (3), ``roll_deg``,
-        ``pitch_deg``, ``yaw_deg``, ``sigma`` (sqrt(diag P), layout order, SI),
+        ``pitch_deg``, ``yaw_deg``, ``sigma`` (sqrt(diag P), layout order, SI; entries 6-8 the 1-sigmas
+        of roll, pitch, yaw [rad], psi's covariance mapped to the Euler angles: ins/nav_error.hpp),
         ``acc_bias_mps2``, ``gyro_bias_rps`` (and scale factors)."""
         s = self._nav.solution()
         out = _state_dict(s)

@@ -24,13 +24,27 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _core
-from ..units import RAD2DEG
+from ..units import DEG, RAD2DEG
 
 __all__ = ["smoothed_rows"]
 
 #: state columns of the clock (Layout17 / LayoutTightMulti: 15 bias [m], 16 drift [m/s]) and ISBs (17-19 [m])
 _CLOCK, _ISB = [15, 16], [17, 18, 19]
 _ROWS = ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "yaw_deg")
+
+
+def euler_sigmas_from_psi(P_psi, pitch, yaw):
+    """1-sigmas [rad] (n, 3) of roll, pitch, yaw from the covariance (n, 3, 3) [rad^2] of the attitude
+    error angles psi about N, E, D, at ``pitch``, ``yaw`` (n,) [rad]: ``A^-1 P A^-T`` with
+    ``A^-1 = [[cy/cp, sy/cp, 0], [-sy, cy, 0], [cy tp, sy tp, 1]]``, the numpy form of
+    ``euler_sigmas_from_psi`` in ``cpp/include/insnav/ins/nav_error.hpp`` (the derivation there)."""
+    sp, cp, sy, cy = np.sin(pitch), np.cos(pitch), np.sin(yaw), np.cos(yaw)
+    cp = np.where(np.abs(cp) < 1e-9, np.copysign(1e-9, cp), cp)
+    z, o = np.zeros_like(cp), np.ones_like(cp)
+    A_inv = np.stack([np.stack([cy / cp, sy / cp, z], -1), np.stack([-sy, cy, z], -1),
+                      np.stack([cy * sp / cp, sy * sp / cp, o], -1)], -2)
+    P_e = A_inv @ np.asarray(P_psi, float) @ np.swapaxes(A_inv, -1, -2)
+    return np.sqrt(np.maximum(np.diagonal(P_e, axis1=-2, axis2=-1), 0.0))
 
 
 def smoothed_rows(sol, out: dict, filter_name: str = "ekf", sigma=None) -> None:
@@ -62,12 +76,16 @@ def smoothed_rows(sol, out: dict, filter_name: str = "ekf", sigma=None) -> None:
     d = np.ascontiguousarray(np.asarray(out["smooth_d"], float)[:, cols])  # position, velocity, attitude (clock, ISB)
     d_end = np.ascontiguousarray(np.asarray(out["smooth_d_end"], float)[:, cols])  # before the epoch's feedback
     sig = np.ascontiguousarray(np.asarray(out["smooth_sigma"], float)[:, cols])
-    sig[:, 6:9] *= RAD2DEG  # the rows' attitude sigma unit
     # corrected in place (any strides, e.g. the columns of the engine's llh): no copy of float64 rows
     rows = [np.require(getattr(sol, k), float, ["W"]) for k in _ROWS]
+    t = np.asarray(sol.t, float)
+    if "smooth_P_att" in out:  # the rows' attitude sigmas are of their Euler angles: psi's covariance mapped
+        yaw = np.unwrap(np.asarray(rows[6], float), period=360.0)  # at each epoch's (filtered) attitude
+        sig[:, 6:9] = euler_sigmas_from_psi(np.asarray(out["smooth_P_att"], float),
+                                            np.interp(te, t, rows[5]) * DEG, np.interp(te, t, yaw) * DEG)
+    sig[:, 6:9] *= RAD2DEG  # the rows' attitude sigma unit
     ex = np.column_stack(extra).astype(float) if extra else None
     # rows after the last epoch: no data after them, the smoothed rows and sigmas are the filtered ones
-    t = np.asarray(sol.t, float)
     n_in = int(np.searchsorted(t, te[-1] + 1e-9, side="right"))
     in_place = sigma is not None and ex is None
     if in_place:  # the views sol.sigma_* see the smoothed sigmas; rows from n_in on keep the filtered ones

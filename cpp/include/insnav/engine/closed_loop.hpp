@@ -80,7 +80,8 @@ struct NavOutputs {
   double* llh = nullptr;      // (.,3) lat, lon [rad], h [m]
   double* v_n = nullptr;      // (.,3) [m/s]
   double* rpy = nullptr;      // (.,3) [rad]
-  double* sigma = nullptr;    // (.,sigma_cols) sqrt(diag P) of the first sigma_cols states
+  double* sigma = nullptr;    // (.,sigma_cols) sqrt(diag P) of the first sigma_cols states; columns kAtt..kAtt+2
+                              // the 1-sigmas of the row's roll, pitch, yaw (euler_sigmas_from_psi), not of psi
   int sigma_cols = 0;         // <= 0 or >= n_state: all n_state
   double* imu_err = nullptr;  // (.,12) acc bias, gyro bias, acc scale, gyro scale (SI)
   double* clock = nullptr;    // (.,2) receiver clock bias [m], drift [m/s] (layouts with clock states)
@@ -582,13 +583,14 @@ struct ClosedLoop {
     }
     if (out.v_n)
       for (int j = 0; j < 3; ++j) out.v_n[3 * i + j] = v[j];
-    if (out.rpy) {
-      const Vec3 e = euler_from_quat(q);
+    const Vec3 e = (out.rpy || out.sigma) ? euler_from_quat(q) : Vec3::Zero();
+    if (out.rpy)
       for (int j = 0; j < 3; ++j) out.rpy[3 * i + j] = e[j];
-    }
     if (out_cache_dirty_) {  // P, x and the corrections change only at propagate/update/feedback
       if (shadow_on_) {
         sigma_ = (filter.P().diagonal() - shadow_dvar_).cwiseMax(0.0).cwiseSqrt();
+        P_psi_ = filter.P().template block<3, 3>(L::kAtt, L::kAtt);
+        P_psi_.diagonal() -= shadow_dvar_.template segment<3>(L::kAtt);
         for (int j = 0; j < 3; ++j) {
           imu_err_[j] = shadow_corr_.acc_bias[j];
           imu_err_[3 + j] = shadow_corr_.gyro_bias[j];
@@ -597,6 +599,7 @@ struct ClosedLoop {
         }
       } else {
         sigma_ = filter.P().diagonal().cwiseMax(0.0).cwiseSqrt();
+        P_psi_ = filter.P().template block<3, 3>(L::kAtt, L::kAtt);
         for (int j = 0; j < 3; ++j) {
           imu_err_[j] = corr.acc_bias[j] + x[L::kAccBias + j];
           imu_err_[3 + j] = corr.gyro_bias[j] + x[L::kGyroBias + j];
@@ -606,9 +609,13 @@ struct ClosedLoop {
       }
       out_cache_dirty_ = false;
     }
-    if (out.sigma) {
+    if (out.sigma) {  // sqrt(diag P), the attitude's as sigmas of the row's Euler angles (not of psi)
       const int nc = (out.sigma_cols > 0 && out.sigma_cols < L::kSize) ? out.sigma_cols : L::kSize;
       for (int j = 0; j < nc; ++j) out.sigma[nc * i + j] = sigma_[j];
+      if (nc >= L::kAtt + 3) {
+        const Vec3 sig_e = euler_sigmas_from_psi(P_psi_, e[1], e[2]);
+        for (int j = 0; j < 3; ++j) out.sigma[nc * i + L::kAtt + j] = sig_e[j];
+      }
     }
     if (out.imu_err)
       for (int j = 0; j < 12; ++j) out.imu_err[12 * i + j] = imu_err_[j];
@@ -802,6 +809,7 @@ struct ClosedLoop {
   Vec3 omega_lever_b_ = Vec3::Zero();  // omega_ib_b_lever(): omega_lp_b_ before the current raw increment
   bool have_lp_ = false;
   StateVec<L> sigma_ = StateVec<L>::Zero();  // output cache: sqrt(diag P)
+  Mat3 P_psi_ = Mat3::Zero();                // and P's attitude block (the rows' Euler-angle sigmas)
   Eigen::Matrix<double, 12, 1> imu_err_ = Eigen::Matrix<double, 12, 1>::Zero();  // and the IMU errors
   bool out_cache_dirty_ = true;  // P, x or the corrections changed since the cache was filled
   // start_output_shadow(): the rows' own INS while a fix the filter does not take is held

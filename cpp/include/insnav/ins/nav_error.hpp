@@ -10,7 +10,8 @@
 //
 // One place for the formula: ClosedLoop::feedback (the INS reset), its
 // output rows (ClosedLoop::write_output, the INS corrected by a filter estimate
-// not yet fed back) and the RTS smoother's rows (engine/smoothed_rows.hpp).
+// not yet fed back) and the RTS smoother's rows (engine/smoothed_rows.hpp); and
+// for the output's Euler-angle sigmas from psi's covariance (euler_sigmas_from_psi).
 #pragma once
 
 #include <cmath>
@@ -61,6 +62,30 @@ inline void apply_nav_error(NavState& s, const Vec3& dr_n, const Vec3& dv_n, con
   s.h += dr_n.z();
   s.v_n -= dv_n;
   s.q_nb = corrected_attitude(psi, s.q_nb);
+}
+
+/// 1-sigmas [rad] of the 3-2-1 Euler angles (roll, pitch, yaw) at `pitch`, `yaw` [rad] whose
+/// attitude error angles psi (the file comment; about N, E, D) have the covariance P_psi [rad^2].
+/// A change d = d(roll, pitch, yaw) turns the frame by omega_n = A d about the NED axes,
+///     A = [[cy cp, -sy, 0], [sy cp, cy, 0], [-sp, 0, 1]]
+/// (roll about the body x axis Rz(yaw) Ry(pitch) e1, pitch about Rz(yaw) e2, yaw about e3), and
+/// the computed frame differs from the true one by omega_n = -psi, so the Euler-angle error is
+/// -A^-1 psi with
+///     A^-1 = [[cy/cp, sy/cp, 0], [-sy, cy, 0], [cy tp, sy tp, 1]],
+/// and its covariance A^-1 P_psi A^-T.  psi's own sigmas equal these only at yaw 0 (level or not:
+/// heading east, psi_N is the pitch error).  cos(pitch) is held at >= 1e-9 at +-90 deg, where roll
+/// and yaw are not separable.
+inline Vec3 euler_sigmas_from_psi(const Mat3& P_psi, double pitch, double yaw) {
+  double sp, cp, sy, cy;
+  sin_cos(pitch, sp, cp);
+  sin_cos(yaw, sy, cy);
+  if (std::abs(cp) < 1e-9) cp = cp < 0.0 ? -1e-9 : 1e-9;
+  Mat3 A_inv;
+  A_inv << cy / cp, sy / cp, 0.0,
+           -sy, cy, 0.0,
+           cy * sp / cp, sy * sp / cp, 1.0;
+  const Mat3 P_e = A_inv * P_psi * A_inv.transpose();
+  return P_e.diagonal().cwiseMax(0.0).cwiseSqrt();
 }
 
 }  // namespace insnav
