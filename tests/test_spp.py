@@ -508,10 +508,16 @@ def test_cli_spp_on_smartloc(smartloc, tmp_path):
     assert abs(np.nanmedian(sol.lat_deg) - 52.51) < 0.02
     head = (tmp_path / "spp.csv.spp.csv").read_text().splitlines()[0].split(",")
     assert "isb_R_m" in head and "raim_status" in head
-    # the epochs' fit sizes in the innovations file, the clock to 0.1 mm in the table
+    # the innovations file's rows: the degrees of freedom of the RAIM chi-square (its threshold's), the
+    # clock to 0.1 mm in the table
+    from insnav.gnss.spp import chi2_quantile
+
     table = np.genfromtxt(tmp_path / "spp.csv.spp.csv", delimiter=",", names=True)
     inn = np.genfromtxt(tmp_path / "spp.csv.innovations.csv", delimiter=",", names=True, usecols=(0, 3, 4))
-    assert np.array_equal(inn["rows"], table["n_used"]) and table["n_used"].max() > 4
+    ok = np.isfinite(table["chi2_threshold"])
+    assert ok.sum() > 1300 and inn["rows"].max() > 4
+    thr = np.array([chi2_quantile(0.999, int(d)) for d in inn["rows"][ok]])
+    np.testing.assert_allclose(thr, table["chi2_threshold"][ok], rtol=1e-5)  # %.6g in the file
     clk = (tmp_path / "spp.csv.spp.csv").read_text().splitlines()[1].split(",")[head.index("clock_bias_m")]
     assert len(clk.split(".")[1]) == 4, clk
     text = (tmp_path / "spp.csv.config.toml").read_text()

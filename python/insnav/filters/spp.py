@@ -66,7 +66,10 @@ def spp_solution(sp: SppSolution, filter_name: str = "spp") -> Solution:
                         sp.sigma_vel_n_mps[ok].copy(), gnss_t=sp.t.copy(), nis=sp.chi2.copy(), gnss_status=st,
                         summary=summary)
     sol.spp = sp
-    sol.rows = np.asarray(sp.n_used, int).copy()  # the pseudoranges of each epoch's fit: the innovations file's rows
+    # the innovations file's rows: the degrees of freedom of each epoch's post-fit chi-square (its nis, the RAIM
+    # statistic): pseudoranges used - 3 position - 1 clock - the inter-system biases estimated (sigma > 0)
+    n_isb = np.sum(np.nan_to_num(np.asarray(sp.sigma_isb_m, float)) > 0, axis=1)
+    sol.rows = np.maximum(np.asarray(sp.n_used, int) - 4 - n_isb, 0)
     return sol
 
 
