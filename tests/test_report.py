@@ -565,3 +565,36 @@ def test_allan_page_renders_in_a_real_browser(allan_dir, tmp_path):
     a = mpimg.imread(shot)[..., :3]
     below = a[int(y + h) + 5:]  # the terms table and the TOML
     assert below.shape[0] > 100 and np.mean(below.min(axis=-1) < 0.5) > 0.005
+
+
+def test_residuals_by_system_and_prn_robust_rows_out_of_the_rms_and_every_pos_status(monkeypatch):
+    """The per-satellite residual figure keys a satellite by system and PRN (G10 and E10 are two
+    series, labelled with their letters); rows the robust step rejected (flag 2) stay out of the
+    summary's residual RMS; every RTKLIB Q of a .pos is counted; mm values keep 3 digits."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.axes import Axes
+
+    from insnav.analysis import report as rep
+
+    labels = []
+    real_plot = Axes.plot
+    monkeypatch.setattr(Axes, "plot", lambda self, *a, **k: (labels.append(k.get("label")), real_plot(self, *a, **k))[1])
+    t = np.repeat(np.arange(5.0), 3)
+    res = dict(t_s=t, prn=np.tile([10, 10, 20], 5), system=np.tile([0, 2, 2], 5),
+               pseudorange_residual_m=np.tile([1.0, -1.0, 100.0], 5), rate_residual_mps=np.tile([0.1, -0.1, 0.1], 5),
+               pseudorange_flag=np.tile([0, 0, 2], 5), rate_flag=np.zeros(15, int))
+    inn = dict(t_s=np.arange(5.0), status=np.ones(5, int), nis=np.full(5, 2.0), rows=np.full(5, 4),
+               innovation=np.full((5, 6), np.nan))
+    sol = insnav.run(short_tight_dataset(), filter="ekf", coupling="tight", init_seed=0, output_decimation=50)
+    rep._figures(sol, None, None, None, None, inn, res, [], plt)
+    assert {"G10", "E10", "E20"} <= set(labels) and "row rejected (robust)" in labels
+    rows = dict(rep._summary_rows(sol, None, None, inn, res, [], None))
+    assert rows["residual RMS of applied epochs: pseudorange [m] / rate [m/s]"].startswith("1.000 / 0.100 (10 / 15")
+    pos = type("Pos", (), {})()  # an RTKLIB .pos read as a solution: 3 fixed, 2 single epochs
+    pos.t, pos.fix_status = np.arange(5.0), np.r_[np.ones(3, int), np.full(2, 5)]
+    rows = dict(rep._summary_rows(pos, None, None, None, None, [], None))
+    assert rows["carrier-phase fix rate"] == "60.0 % (3 fixed, 2 single)"
+    assert (rep._fmt(0.00053), rep._fmt(2.0), rep._fmt(0.0), rep._fmt(10.986)) == ("0.000530", "2.000", "0.000", "10.986")

@@ -165,6 +165,9 @@ def static_truth(text: str, t):
                  v_n=np.full((n, 3), np.nan), roll_deg=z + np.nan, pitch_deg=z + np.nan, yaw_deg=z + np.nan)
 
 
+#: solution status by RTKLIB's Q (insnav writes 0, 1, 2, 4; a .pos from RTKLIB may hold the others)
+POS_STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 3: "sbas", 4: "dgps", 5: "single", 6: "ppp"}
+
 #: the header of a simulated carrier-phase dataset's antenna truth (``rtk_truth.csv``, GPS time)
 RTK_TRUTH_HEADER = "t_gps_s,x_e_m,y_e_m,z_e_m"
 
@@ -327,8 +330,6 @@ def evaluate(solution, truth, outages=()) -> dict:
     out["rms_3d_m"] = float(np.sqrt(np.mean(np.sum(e["pos_n_m"][pos_ok] ** 2, axis=1))))
     fs = getattr(solution, "fix_status", None)
     if fs is not None:  # carrier-phase solutions: fix rate and the error per status
-        from ..gnss.rtk import STATUS_NAMES
-
         st = np.asarray(fs)
         i = np.clip(np.searchsorted(np.asarray(solution.t), e["t"] - 1e-9), 0, len(st) - 1)
         st_e = st[i]
@@ -338,7 +339,7 @@ def evaluate(solution, truth, outages=()) -> dict:
         ep = st if ep is None else np.asarray(ep)
         out["fix_rate"] = float(np.mean(ep == 1)) if ep.size else 0.0
         out["by_status"] = {}
-        for q, name in STATUS_NAMES.items():
+        for q, name in POS_STATUS_NAMES.items():
             m = (st_e == q) & pos_ok
             if m.any():
                 out["by_status"][name] = dict(samples=int(m.sum()), rms_3d_m=float(np.sqrt(np.mean(err3[m] ** 2))),

@@ -201,7 +201,7 @@ def nis_limits(nis, rows=None):
 
 def _png(fig) -> bytes:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")  # no label cut off at the edge
     return buf.getvalue()
 
 
@@ -292,7 +292,8 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
         out.append(("imu_errors.png", cap, _png(fig)))
         plt.close(fig)
     # --- innovations and NIS
-    if inn is not None and len(inn["t_s"]):
+    if inn is not None and len(inn["t_s"]) and (np.isfinite(inn["nis"]).any()
+                                                 or np.isfinite(inn["innovation"]).any()):
         t, st, nis, rows = inn["t_s"] - t_ref, inn["status"], inn["nis"], inn["rows"]
         applied = st == 1
         rejected = st == 2
@@ -330,7 +331,8 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
         ax.set_ylabel("NIS")
         ax.set_xlabel(t_label)
         ax.legend(fontsize=7, loc="upper right")
-        axs[0].set_title("innovations (INS minus GNSS, before the update) and NIS")
+        axs[0].set_title("innovations (INS minus GNSS, before the update) and NIS" if has_inn else
+                         "NIS (INS runs: before the update; single point: the post-fit RAIM chi-square)")
         out.append(("innovations.png", "Innovations and NIS", _png(fig)))
         plt.close(fig)
     # --- tight: per-satellite residuals
@@ -339,18 +341,24 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
         rej = np.isin(np.round(res["t_s"], 6), list(rejected_t))
         tr_s = res["t_s"] - t_ref
         fig, axs = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-        prns = np.unique(res["prn"])
+        system = np.asarray(res.get("system", np.zeros(len(res["prn"]), int)), int)  # 0 G, 1 R, 2 E, 3 C
+        sats = sorted(set(zip(system.tolist(), np.asarray(res["prn"], int).tolist())))
         cmap = plt.get_cmap("tab20")
         for ax, key, label in ((axs[0], "pseudorange_residual_m", "pseudorange residual [m]"),
                                (axs[1], "rate_residual_mps", "pseudorange-rate residual [m/s]")):
             _shade(ax, outages_rel)
-            for j, prn in enumerate(prns):
-                m = (res["prn"] == prn) & ~rej
-                ax.plot(tr_s[m], res[key][m], ".", ms=2.5, color=cmap(j % 20), label=f"G{prn:02d}")
+            flag = res.get("pseudorange_flag" if key.startswith("pseudo") else "rate_flag")
+            dropped = np.zeros(len(rej), bool) if flag is None else np.asarray(flag) == 2  # the robust step's
+            for j, (sy, prn) in enumerate(sats):
+                m = (system == sy) & (res["prn"] == prn) & ~rej & ~dropped
+                ax.plot(tr_s[m], res[key][m], ".", ms=2.5, color=cmap(j % 20), label=f"{'GREC'[sy]}{prn:02d}")
             if rej.any():
                 ax.plot(tr_s[rej], res[key][rej], "x", ms=5, color="k", label="epoch rejected")
+            if (dropped & ~rej).any():
+                ax.plot(tr_s[dropped & ~rej], res[key][dropped & ~rej], "+", ms=5, color="tab:red",
+                        label="row rejected (robust)")
             ax.set_ylabel(label, fontsize=8)
-        axs[0].legend(fontsize=6, loc="upper right", ncol=min(8, len(prns) + 1))
+        axs[0].legend(fontsize=6, loc="upper right", ncol=min(8, len(sats) + 1))
         axs[0].set_title("per-satellite residuals (INS-predicted minus measured, before the update)")
         axs[-1].set_xlabel(t_label)
         out.append(("residuals.png", "Per-satellite pseudorange and rate residuals", _png(fig)))
@@ -359,8 +367,11 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
 
 
 def _fmt(x, nd=3):
+    """``nd`` decimals, more below 0.1 for 3 significant digits (0.000530, not 0.001: mm-level RTK)."""
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "n/a"
+    if x != 0:
+        nd = max(nd, 2 - math.floor(math.log10(abs(x))))
     return f"{x:.{nd}f}"
 
 
@@ -386,7 +397,11 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
         if inn is not None:
             applied_t = np.round(inn["t_s"][inn["status"] == 1], 6)
             ok = np.isin(np.round(res["t_s"], 6), applied_t)
-        pr, rr = res["pseudorange_residual_m"][ok], res["rate_residual_mps"][ok]
+        ok_pr, ok_rr = ok.copy(), ok.copy()
+        if "pseudorange_flag" in res:  # rows the robust step rejected (flag 2) were not applied
+            ok_pr &= np.asarray(res["pseudorange_flag"]) != 2
+            ok_rr &= np.asarray(res["rate_flag"]) != 2
+        pr, rr = res["pseudorange_residual_m"][ok_pr], res["rate_residual_mps"][ok_rr]
         pr, rr = pr[np.isfinite(pr)], rr[np.isfinite(rr)]
         rows.append(("residual RMS of applied epochs: pseudorange [m] / rate [m/s]",
                      f"{_fmt(float(rms(pr)) if pr.size else None)} / {_fmt(float(rms(rr)) if rr.size else None)} "
@@ -395,9 +410,9 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
     if getattr(sol, "epoch_fix_status", None) is not None:  # RTK/INS: per rover epoch, not per IMU row
         fs = np.asarray(sol.epoch_fix_status)
     if fs is not None and len(fs):
-        from ..gnss.rtk import STATUS_NAMES
+        from .evaluate import POS_STATUS_NAMES
 
-        counts = ", ".join(f"{int(np.sum(fs == q))} {n}" for q, n in STATUS_NAMES.items() if np.any(fs == q))
+        counts = ", ".join(f"{int(np.sum(fs == q))} {n}" for q, n in POS_STATUS_NAMES.items() if np.any(fs == q))
         rows.append(("carrier-phase fix rate", f"{100.0 * np.mean(fs == 1):.1f} % ({counts})"))
         sc = getattr(sol, "slip_counts", None)
         if sc:
@@ -544,6 +559,9 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
             ep = np.repeat(np.asarray(inputs.epoch_t, float), np.diff(inputs.epoch_start))
             res = dict(t_s=ep, prn=np.asarray(inputs.prn, int), pseudorange_residual_m=i2[:, 0],
                        rate_residual_mps=i2[:, 1])
+            sys_ = getattr(inputs, "system", None)
+            if sys_ is not None:  # letters G R E C -> the residuals file's system index
+                res["system"] = np.array(["GREC".index(str(x)) for x in np.asarray(sys_)], int)
         if len(getattr(sol, "gnss_t", ())) and np.asarray(sol.innovation).ndim == 2:
             m = len(sol.gnss_t)
             i6 = np.asarray(sol.innovation, float)
