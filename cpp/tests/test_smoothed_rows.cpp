@@ -8,6 +8,7 @@
 //    apply_nav_error corrects a NavState (the same formula, to rounding);
 //  * linear interpolation in time, the d / d_end choice at an epoch, additive
 //    columns subtracted, sigmas interpolated;
+//  * the rows' Euler-angle sigmas from psi's covariance against a numerical Jacobian;
 //  * rows in degrees and in radians give the same result; two threads give
 //    the same bits as one; no Eigen heap allocation in the row loop.
 #include <cmath>
@@ -57,6 +58,30 @@ void test_apply_nav_error_matches_its_definition() {
   for (const Vec3& a : {Vec3(1e-3, -5e-3, 1.9e-2), Vec3(0.3, -0.2, 1.0)}) {
     const Quat qs = quat_from_small_euler(a), qe = quat_from_euler(a);
     EXPECT_LT((qs.coeffs() - qe.coeffs()).norm(), 1e-16);
+  }
+}
+
+/// euler_sigmas_from_psi against the numerical Jacobian of the Euler angles of the computed frame:
+/// the true frame is dcm_from_euler(psi) C (apply_nav_error), so the computed one at error psi is
+/// dcm_from_euler(psi)^T C_true; at several headings and pitches.
+void test_euler_sigmas_are_the_mapped_psi_covariance() {
+  Mat3 L;
+  L << 2e-3, 0.0, 0.0, 5e-4, 1e-3, 0.0, -7e-4, 3e-4, 4e-3;
+  const Mat3 P = L * L.transpose();
+  for (const Vec3& e : {Vec3(0.1, -0.2, 2.5), Vec3(-0.3, 0.7, -1.2), Vec3(0.0, 0.0, 1.5707963), Vec3(0.2, 1.3, 0.4)}) {
+    const Mat3 C_true = dcm_from_euler(e);
+    Mat3 J;
+    const double h = 1e-6;
+    for (int i = 0; i < 3; ++i) {
+      Vec3 d = Vec3::Zero();
+      d[i] = h;
+      const Vec3 ep = euler_from_dcm(dcm_from_euler(d).transpose() * C_true);
+      const Vec3 em = euler_from_dcm(dcm_from_euler(-d).transpose() * C_true);
+      for (int j = 0; j < 3; ++j) J(j, i) = angle_diff(ep[j], em[j]) / (2.0 * h);
+    }
+    const Vec3 want = (J * P * J.transpose()).diagonal().cwiseSqrt();
+    const Vec3 got = euler_sigmas_from_psi(P, e[1], e[2]);
+    EXPECT_LT(((got - want).array() / want.array()).abs().maxCoeff(), 1e-6);
   }
 }
 
@@ -191,6 +216,7 @@ void test_rows_equal_the_feedback_formula_and_interpolate() {
 
 int main() {
   test_apply_nav_error_matches_its_definition();
+  test_euler_sigmas_are_the_mapped_psi_covariance();
   test_rows_equal_the_feedback_formula_and_interpolate();
   EXPECT_TRUE(g_eigen_asserts == 0);
   TEST_MAIN_END();

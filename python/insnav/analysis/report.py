@@ -449,8 +449,9 @@ def _summary_rows(sol, err_kind, ev, inn, res, outages, fix_err) -> list[tuple[s
         c = rms(p / fix_err["sigma_pos_n_m"])
         rows.append(("position minus GNSS fixes, rms(difference / sigma) N/E/D",
                      " / ".join(_fmt(x, 2) for x in c) + f" ({consistency_verdict(c)})"))
-        if "vel_n_mps" in fix_err:
-            v, ok = fix_err["vel_n_mps"], np.isfinite(fix_err["vel_n_mps"]).all(axis=1)
+        v = fix_err.get("vel_n_mps")
+        ok = np.zeros(0, bool) if v is None else np.isfinite(v).all(axis=1)
+        if ok.any():  # a solution without velocity (an RTKLIB .pos): no velocity rows
             rows.append(("velocity minus GNSS fixes, RMS [m/s] N/E/D", " / ".join(_fmt(x) for x in rms(v[ok]))))
             c = rms(v[ok] / fix_err["sigma_vel_n_mps"][ok])
             rows.append(("velocity minus GNSS fixes, rms(difference / sigma) N/E/D",
