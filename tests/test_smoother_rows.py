@@ -127,6 +127,14 @@ def test_smoothed_run_matches_the_plain_formula(monkeypatch):
     names = ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "yaw_deg")
     before = [np.asarray(getattr(fwd, k))[:n_in] for k in names]
     sig_e = kept["smooth_sigma"][:, :9].copy()
+    # the attitude sigmas: of roll, pitch, yaw, Ps's psi block mapped at each epoch's (forward) attitude
+    from insnav.filters.smoothing import euler_sigmas_from_psi
+
+    t_f = np.asarray(fwd.t)
+    yaw = np.unwrap(np.asarray(fwd.yaw_deg, float), period=360.0)
+    sig_e[:, 6:9] = euler_sigmas_from_psi(kept["smooth_P_att"], np.interp(te, t_f, fwd.pitch_deg) * DEG,
+                                          np.interp(te, t_f, yaw) * DEG)
+    assert np.max(np.abs(sig_e[:, 6:8] / kept["smooth_sigma"][:, 6:8] - 1.0)) > 0.05  # the mapping matters here
     ref, ref_sig = reference_rows(np.asarray(fwd.t)[:n_in], before, te, kept["smooth_d"][:, :9],
                                   kept["smooth_d_end"][:, :9], sig_e)
     for k, r, b in zip(names, ref, before):
