@@ -230,3 +230,17 @@ def test_a_toml_without_filter_is_checked_against_the_command_lines_filter(tmp_p
     assert (cfg.filter, cfg.coupling, cfg.layout) == ("ekf", "tight", 20)
     p.write_text("[options]\nelevation_mask_deg = 15.0\n")
     assert load_config(p, {"coupling": "tight", "filter": None}).options == {"elevation_mask_deg": 15.0}
+
+
+def test_insnav_run_checks_a_toml_against_its_filter_and_coupling_arguments(tmp_path):
+    """``insnav.run(ds, "ekf", "tight", config=F)`` with ``layout = 20`` in F (refused as "ekf loose"
+    before)."""
+    from insnav.config import ConfigError
+    from insnav.filters import _as_config
+
+    p = tmp_path / "l20.toml"
+    p.write_text("layout = 20\n")
+    assert _as_config(str(p), "ekf", "tight").layout == 20
+    assert _as_config({"layout": 20}, "ekf", "tight").layout == 20
+    with pytest.raises(ConfigError, match="layout"):
+        _as_config(str(p))  # alone: checked as the default ekf loose

@@ -71,3 +71,24 @@ def test_a_nan_row_is_left_out_of_every_position_figure():
     assert r["horizontal_max_m"] == pytest.approx(0.3, abs=1e-6)
     assert r["rms_3d_m"] == pytest.approx(0.3, abs=1e-6)
     assert r["outages"][0]["max_horizontal_inside_m"] == pytest.approx(0.3, abs=1e-6)
+
+
+def test_a_nan_row_does_not_take_the_later_longitudes_with_it():
+    st = np.arange(11.0)
+    lon = 10.0 + 1e-4 * st
+    lat = np.full(11, 45.0)
+    lat[3] = lon[3] = np.nan
+    sol = _track(st, lat, lon)
+    for k in ("sigma_pos_n_m", "sigma_vel_n_mps", "sigma_att_deg"):
+        setattr(sol, k, np.ones((11, 3)))
+    out = _solution_at(sol, st)
+    fin = np.isfinite(out.lon_deg)
+    assert fin.sum() == 10 and not fin[3]  # np.unwrap alone carried the NaN to every later row
+    np.testing.assert_allclose(out.lon_deg[fin], lon[np.isfinite(lon)], rtol=0, atol=1e-12)
+
+
+def test_report_fmt_takes_numpy_non_finite_values():
+    from insnav.analysis.report import _fmt
+
+    assert _fmt(np.float32("nan")) == _fmt(np.float32(np.inf)) == _fmt(None) == "n/a"
+    assert _fmt(np.float32(0.25)) == "0.250"

@@ -174,6 +174,9 @@ def test_continuous_ar_rows_hold_the_fix_and_evaluate_counts_them_fixed(sim, tmp
     sol_c, sol_o = _read_solution(tmp_path / "continuous.csv"), _read_solution(tmp_path / "off.csv")
     k = slice(1000, None)
     assert np.median(sol_c.sigma_pos_n_m[k, 0]) < 0.5 * np.median(sol_o.sigma_pos_n_m[k, 0])
+    # the attitude's: of the whole attitude block the fix removed (the float filter's P minus a PSD
+    # block, so never above the float run's, never zero)
+    assert np.all(sol_c.sigma_att_deg[k] <= sol_o.sigma_att_deg[k] * (1 + 1e-3)) and np.all(sol_c.sigma_att_deg[k] > 0)
     assert a["continuous"]["n_dd"].tolist() == a["off"]["n_dd"].tolist()
     inn = np.genfromtxt(tmp_path / "continuous.csv.innovations.csv", delimiter=",", names=True)
     assert np.all(np.isnan(inn["nis"])) and np.array_equal(inn["rows"], a["continuous"]["n_dd"])

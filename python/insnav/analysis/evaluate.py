@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..units import wrap_deg
-from .metrics import errors, reconvergence_time, rms
+from .metrics import errors, reconvergence_time, rms, unwrapped_deg
 
 EXAMPLES = """examples:
   insnav evaluate run3-rbukf.csv run3/truth.csv --outages 50:90
@@ -417,8 +417,8 @@ def _solution_at(sol, t):
     for k in ("lat_deg", "lon_deg", "h_m", "v_n", "roll_deg", "pitch_deg", "sigma_pos_n_m", "sigma_vel_n_mps",
               "sigma_att_deg"):
         setattr(out, k, at(getattr(sol, k)))
-    out.yaw_deg = wrap_deg(at(np.unwrap(np.asarray(sol.yaw_deg, float), period=360.0)))
-    out.lon_deg = wrap_deg(at(np.unwrap(np.asarray(sol.lon_deg, float), period=360.0)))  # across +-180 deg
+    out.yaw_deg = wrap_deg(at(unwrapped_deg(sol.yaw_deg)))
+    out.lon_deg = wrap_deg(at(unwrapped_deg(sol.lon_deg)))  # across +-180 deg
     fs = getattr(sol, "fix_status", None)
     if fs is not None:  # a time on a solution epoch: its status; between two: the worse (higher Q) of the two,
         fs = np.asarray(fs)  # as the position there is interpolated from both (a float epoch makes it float)

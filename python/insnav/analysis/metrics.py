@@ -7,7 +7,13 @@ from ..earth import radii
 from ..units import DEG, wrap_deg
 
 
-
+def unwrapped_deg(x) -> np.ndarray:
+    """Angles [deg] unwrapped for interpolation across +-180 deg over the finite values (a NaN
+    left in place, not carried forward as ``np.unwrap`` would)."""
+    x = np.asarray(x, float).copy()
+    fin = np.isfinite(x)
+    x[fin] = np.unwrap(x[fin], period=360.0)
+    return x
 
 
 def errors(sol, truth) -> dict:
@@ -33,12 +39,6 @@ def errors(sol, truth) -> dict:
         if x.ndim == 1:
             return np.interp(t, tt, x)
         return np.column_stack([np.interp(t, tt, x[:, i]) for i in range(x.shape[1])])
-
-    def unwrapped_deg(x):  # an angle interpolated across +-180 deg (a NaN would end the unwrapping: skipped)
-        x = np.asarray(x, float).copy()
-        fin = np.isfinite(x)
-        x[fin] = np.unwrap(x[fin], period=360.0)
-        return x
 
     lat_t, h_t = at(truth.lat_deg) * DEG, at(truth.h_m)
     R_M, R_N = radii(lat_t)

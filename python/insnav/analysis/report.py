@@ -368,7 +368,7 @@ def _figures(sol, err, err_kind, truth, fx, inn, res, outages, plt) -> list[tupl
 
 def _fmt(x, nd=3):
     """``nd`` decimals, more below 0.1 for 3 significant digits (0.000530, not 0.001: mm-level RTK)."""
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+    if x is None or not math.isfinite(float(x)):  # numpy float32 NaN / inf too
         return "n/a"
     if x != 0:
         nd = max(nd, 2 - math.floor(math.log10(abs(x))))

@@ -126,7 +126,7 @@ def _load(args):
     if not Path(args.dataset).is_dir():
         raise UserError(f"dataset directory not found: {args.dataset}")
     ds = insnav.load_dataset(args.dataset)
-    cfg = load_config(args.config) if args.config else RunConfig()
+    cfg = load_config(args.config, dict(filter=args.filter, coupling=args.coupling)) if args.config else RunConfig()
     return ds, cfg, toml(args.config)
 
 

@@ -29,17 +29,19 @@ _ADVERB = {"loose": "loosely", "tight": "tightly", "gnss": "GNSS-only (no IMU),"
            "rtk": "RTK/INS (carrier phase against a base),"}
 
 
-def _as_config(config) -> RunConfig:
-    """A copy of ``config``: a RunConfig, a dict of TOML keys, or a TOML file path."""
+def _as_config(config, filter: str | None = None, coupling: str | None = None) -> RunConfig:
+    """A copy of ``config``: a RunConfig, a dict of TOML keys, or a TOML file path; a dict or file is
+    checked against ``filter`` / ``coupling`` when given (they replace its own, as run() does)."""
     if config is None:
         return RunConfig()
     if isinstance(config, RunConfig):
         return dataclasses.replace(config)
     from ..config import config_from_dict, load_config
 
+    given = {k: v for k, v in (("filter", filter), ("coupling", coupling)) if v is not None}
     if isinstance(config, dict):
-        return config_from_dict(config)
-    return load_config(config)
+        return config_from_dict({**config, **given})
+    return load_config(config, given)
 
 
 def run(dataset, filter: str | None = None, coupling: str | None = None, config=None,
@@ -80,11 +82,11 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     Solution
         (its subclasses ``TightSolution`` / ``ParticleSolution`` for the tight families)
     """
-    cfg = _as_config(config)
+    if filter is not None and coupling is None and filter in FILTERS and FILTERS[filter].couplings == ("gnss",):
+        coupling = "gnss"  # spp and rtk have no other way to run
+    cfg = _as_config(config, filter, coupling)
     if filter is not None:
         cfg.filter = filter
-        if coupling is None and cfg.filter in FILTERS and FILTERS[cfg.filter].couplings == ("gnss",):
-            coupling = "gnss"  # spp and rtk have no other way to run
     if coupling is not None:
         cfg.coupling = coupling
     if cfg.filter not in FILTERS or cfg.coupling not in _ADVERB:

@@ -542,14 +542,17 @@ struct ClosedLoop {
   /// Output shadow (continuous ambiguity resolution, engine/rtk_ins_engine.hpp): from now on the
   /// rows are written from `s`, the INS conditioned on a fix that the filter does not take,
   /// mechanised with the same IMU increments and its own IMU corrections `c`, with the sigmas
-  /// sqrt(diag(P) - dvar) (dvar: the variance the fix removed), until end_output_shadow().  The
+  /// sqrt(diag(P) - dvar) (dvar: the variance the fix removed; dP_att: the whole attitude block it
+  /// removed, for the rows' Euler-angle sigmas), until end_output_shadow().  The
   /// filter, its INS and its feedback are not changed: the rows RTKLIB's continuous mode would
   /// output (the fixed solution), carried between epochs by the INS.
-  void start_output_shadow(const NavState& s, const ImuCorrection& c, const StateVec<L>& dvar) {
+  void start_output_shadow(const NavState& s, const ImuCorrection& c, const StateVec<L>& dvar,
+                           const Mat3& dP_att) {
     shadow_ins_ = ins;  // the mechanization's own history (previous increment, Earth terms)
     shadow_ins_.set_state(s);
     shadow_corr_ = c;
     shadow_dvar_ = dvar;
+    shadow_dP_att_ = dP_att;
     shadow_on_ = true;
     out_cache_dirty_ = true;
   }
@@ -589,8 +592,7 @@ struct ClosedLoop {
     if (out_cache_dirty_) {  // P, x and the corrections change only at propagate/update/feedback
       if (shadow_on_) {
         sigma_ = (filter.P().diagonal() - shadow_dvar_).cwiseMax(0.0).cwiseSqrt();
-        P_psi_ = filter.P().template block<3, 3>(L::kAtt, L::kAtt);
-        P_psi_.diagonal() -= shadow_dvar_.template segment<3>(L::kAtt);
+        P_psi_ = filter.P().template block<3, 3>(L::kAtt, L::kAtt) - shadow_dP_att_;
         for (int j = 0; j < 3; ++j) {
           imu_err_[j] = shadow_corr_.acc_bias[j];
           imu_err_[3 + j] = shadow_corr_.gyro_bias[j];
@@ -816,6 +818,7 @@ struct ClosedLoop {
   Strapdown shadow_ins_;
   ImuCorrection shadow_corr_;
   StateVec<L> shadow_dvar_ = StateVec<L>::Zero();
+  Mat3 shadow_dP_att_ = Mat3::Zero();
   bool shadow_on_ = false;
 };
 

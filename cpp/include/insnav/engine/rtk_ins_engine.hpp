@@ -1314,7 +1314,8 @@ class RtkInsEngine {
         ImuCorrection c = core_.corr;
         c.acc_bias += dx_fix.template segment<3>(L::kAccBias);
         c.gyro_bias += dx_fix.template segment<3>(L::kGyroBias);
-        core_.start_output_shadow(s_out, c, dP_fix_.diagonal());
+        core_.start_output_shadow(s_out, c, dP_fix_.diagonal(),
+                                  dP_fix_.template block<3, 3>(L::kAtt, L::kAtt));
       }
     }
   }
