@@ -57,7 +57,8 @@ struct NavigatorRow {
   Vec3 llh = Vec3::Zero();                      // lat, lon [rad], h [m]
   Vec3 v_n = Vec3::Zero();                      // [m/s]
   Vec3 rpy = Vec3::Zero();                      // roll, pitch, yaw [rad]
-  StateVec<L> sigma = StateVec<L>::Zero();      // sqrt(diag P), layout order
+  StateVec<L> sigma = StateVec<L>::Zero();      // sqrt(diag P), layout order; kAtt..kAtt+2 the 1-sigmas
+                                                // of roll, pitch, yaw (ins/nav_error.hpp euler_sigmas_from_psi)
   Eigen::Matrix<double, 12, 1> imu_err;         // acc bias, gyro bias, acc scale, gyro scale (SI)
   Eigen::Matrix<double, 2, 1> odo_scale;        // odometer scale factor and its sigma (Layout16Odo)
   Eigen::Matrix<double, 2, 1> clock = Eigen::Matrix<double, 2, 1>::Constant(NAN);  // receiver clock bias [m], drift [m/s] (tight)
