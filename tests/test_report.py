@@ -598,3 +598,17 @@ def test_residuals_by_system_and_prn_robust_rows_out_of_the_rms_and_every_pos_st
     rows = dict(rep._summary_rows(pos, None, None, None, None, [], None))
     assert rows["carrier-phase fix rate"] == "60.0 % (3 fixed, 2 single)"
     assert (rep._fmt(0.00053), rep._fmt(2.0), rep._fmt(0.0), rep._fmt(10.986)) == ("0.000530", "2.000", "0.000", "10.986")
+
+
+def test_a_gnss_only_solution_against_fixes_is_called_an_antenna(tmp_path):
+    """An RTKLIB .pos (no attitude: GNSS only) reported against GNSS fixes: "errors against" says the
+    solution is an antenna position, not the IMU centre; the position difference to itself is zero."""
+    pos = tmp_path / "a.pos"
+    hdr = ("%  GPST                  latitude(deg) longitude(deg)  height(m)   Q  ns   sdn(m)   sde(m)   sdu(m)  "
+           "sdne(m)  sdeu(m)  sdun(m) age(s)  ratio\n")
+    pos.write_text(hdr + "".join(f"2024/06/24 08:20:{s:06.3f}   35.134699000  136.977575000   104.8600   1  12   "
+                                 "0.0024   0.0024   0.0069   0.0008  -0.0013  -0.0024   0.00   12.0\n" for s in range(20)))
+    page = report(pos, tmp_path / "r", gnss=pos).read_text()
+    tab = _table(page)
+    assert "antenna position too" in tab["errors against"]
+    assert max(_floats(tab["position minus GNSS fixes, RMS [m] N/E/D"])) < 1e-6

@@ -600,7 +600,9 @@ def report(solution, out_dir=None, *, truth=None, gnss=None, outages=None, title
     elif fx is not None:
         fix_err = _errors_vs_fixes(sol, fx)
         err = fix_err
-        err_kind = "GNSS fixes (antenna; the solution is the IMU centre, no lever arm applied)"
+        gnss_only = not np.isfinite(np.asarray(getattr(sol, "roll_deg", [np.nan]), float)).any()
+        err_kind = ("GNSS fixes (antenna; the solution, GNSS only, is an antenna position too)" if gnss_only else
+                    "GNSS fixes (antenna; the solution is the IMU centre, no lever arm applied)")
 
     allan_figs, allan_parts = _allan_section(allan) if allan is not None else ([], [])
     figs = _figures(sol, err, "truth" if tr is not None else "GNSS fixes", tr, fx, inn, res, outages, plt)
