@@ -82,7 +82,27 @@ void test_euler_sigmas_are_the_mapped_psi_covariance() {
     const Vec3 want = (J * P * J.transpose()).diagonal().cwiseSqrt();
     const Vec3 got = euler_sigmas_from_psi(P, e[1], e[2]);
     EXPECT_LT(((got - want).array() / want.array()).abs().maxCoeff(), 1e-6);
+    // the output rows' trig-free form at the same attitude's DCM
+    const Vec3 got_dcm = euler_sigmas_from_psi_dcm(P, C_true);
+    EXPECT_LT(((got_dcm - want).array() / want.array()).abs().maxCoeff(), 1e-6);
+    EXPECT_LT(((got_dcm - got).array() / got.array()).abs().maxCoeff(), 1e-12);
   }
+  // the trig-free form equals the trig form at random attitudes (pitch up to 89 deg, every quadrant
+  // of yaw) and random covariances, and falls back to it at gimbal lock
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int k = 0; k < 200; ++k) {
+    const Vec3 e(3.1 * u(rng), 1.553 * u(rng), 3.14 * u(rng));
+    Mat3 Lr;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) Lr(i, j) = j <= i ? 1e-3 * u(rng) : 0.0;
+    const Mat3 Pr = Lr * Lr.transpose() + 1e-10 * Mat3::Identity();
+    const Vec3 a = euler_sigmas_from_psi(Pr, e[1], e[2]), b = euler_sigmas_from_psi_dcm(Pr, dcm_from_euler(e));
+    EXPECT_LT(((a - b).array() / a.array()).abs().maxCoeff(), 1e-9);
+  }
+  const Mat3 C_lock = dcm_from_euler(Vec3(0.0, 1.5707963267948966, 0.3));
+  const Vec3 e_lock = euler_from_dcm(C_lock);
+  EXPECT_LT((euler_sigmas_from_psi_dcm(P, C_lock) - euler_sigmas_from_psi(P, e_lock[1], e_lock[2])).norm(), 1e-300);
 }
 
 struct Rows {

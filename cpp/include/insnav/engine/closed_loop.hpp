@@ -586,7 +586,9 @@ struct ClosedLoop {
     }
     if (out.v_n)
       for (int j = 0; j < 3; ++j) out.v_n[3 * i + j] = v[j];
-    const Vec3 e = (out.rpy || out.sigma) ? euler_from_quat(q) : Vec3::Zero();
+    const bool need_C = out.rpy || out.sigma;
+    const Mat3 C_nb = need_C ? Mat3(q.toRotationMatrix()) : Mat3::Identity();
+    const Vec3 e = out.rpy ? euler_from_dcm(C_nb) : Vec3::Zero();
     if (out.rpy)
       for (int j = 0; j < 3; ++j) out.rpy[3 * i + j] = e[j];
     if (out_cache_dirty_) {  // P, x and the corrections change only at propagate/update/feedback
@@ -615,7 +617,7 @@ struct ClosedLoop {
       const int nc = (out.sigma_cols > 0 && out.sigma_cols < L::kSize) ? out.sigma_cols : L::kSize;
       for (int j = 0; j < nc; ++j) out.sigma[nc * i + j] = sigma_[j];
       if (nc >= L::kAtt + 3) {
-        const Vec3 sig_e = euler_sigmas_from_psi(P_psi_, e[1], e[2]);
+        const Vec3 sig_e = euler_sigmas_from_psi_dcm(P_psi_, C_nb);
         for (int j = 0; j < 3; ++j) out.sigma[nc * i + L::kAtt + j] = sig_e[j];
       }
     }

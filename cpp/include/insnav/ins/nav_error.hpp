@@ -14,6 +14,7 @@
 // for the output's Euler-angle sigmas from psi's covariance (euler_sigmas_from_psi).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 
 #include "insnav/earth/wgs84.hpp"
@@ -86,6 +87,31 @@ inline Vec3 euler_sigmas_from_psi(const Mat3& P_psi, double pitch, double yaw) {
            cy * sp / cp, sy * sp / cp, 1.0;
   const Mat3 P_e = A_inv * P_psi * A_inv.transpose();
   return P_e.diagonal().cwiseMax(0.0).cwiseSqrt();
+}
+
+/// euler_sigmas_from_psi at the attitude C_nb, without trigonometry (the output rows' hot path).
+/// C_nb's first column is (a, b, c) = (cy cp, sy cp, -sp), so with cp^2 = a^2 + b^2 and
+/// H = a^2 P00 + 2 a b P01 + b^2 P11 the diagonal of A^-1 P_psi A^-T is
+///     var_roll  = H / cp^4,
+///     var_pitch = (b^2 P00 - 2 a b P01 + a^2 P11) / cp^2,
+///     var_yaw   = c^2 H / cp^4 - 2 c (a P02 + b P12) / cp^2 + P22
+/// (one division, no square root but the three sigmas').  At gimbal lock (cp < 1e-9) it falls
+/// back to euler_sigmas_from_psi at C_nb's Euler angles.
+inline Vec3 euler_sigmas_from_psi_dcm(const Mat3& P_psi, const Mat3& C_nb) {
+  const double a = C_nb(0, 0), b = C_nb(1, 0), c = C_nb(2, 0);
+  const double cp2 = a * a + b * b;
+  if (!(cp2 >= 1e-18)) {
+    const Vec3 e = euler_from_dcm(C_nb);
+    return euler_sigmas_from_psi(P_psi, e[1], e[2]);
+  }
+  const double inv_cp2 = 1.0 / cp2;
+  const double ab2P01 = a * b * (P_psi(0, 1) + P_psi(1, 0));
+  const double H = a * a * P_psi(0, 0) + ab2P01 + b * b * P_psi(1, 1);
+  const double cross = a * (P_psi(0, 2) + P_psi(2, 0)) + b * (P_psi(1, 2) + P_psi(2, 1));
+  const double roll_var = H * inv_cp2 * inv_cp2;
+  const Eigen::Array3d var(roll_var, (b * b * P_psi(0, 0) - ab2P01 + a * a * P_psi(1, 1)) * inv_cp2,
+                           c * c * roll_var - c * cross * inv_cp2 + P_psi(2, 2));
+  return var.max(0.0).sqrt().matrix();
 }
 
 }  // namespace insnav
