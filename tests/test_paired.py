@@ -94,3 +94,44 @@ def test_nan_pairs_are_counted_and_named():
     assert r.n == 12 and r.dropped == 1
     assert "1 run(s) without a value for A or B left out" in r.evidence()
     assert "left out" not in paired(a[:12], b[:12]).evidence()
+
+
+def test_nan_is_worst_reduces_to_the_plain_test_without_nan():
+    rng = np.random.default_rng(5)
+    a, b = rng.gamma(2.0, size=30), rng.gamma(2.2, size=30)
+    plain, cens = paired(a, b), paired(a, b, nan_is_worst=True)
+    for k in ("n", "wins", "losses", "p_sign", "p_wilcoxon", "median_diff", "median_diff_ci", "ratio", "ratio_ci"):
+        assert getattr(cens, k) == getattr(plain, k), k
+    assert cens.censored == 0 and "never reached" not in cens.evidence()
+
+
+def test_nan_is_worst_by_hand_and_as_a_large_substitute():
+    # A never reached it in run 3: B wins that run with the top rank; ranks 1, 2 for A, 3 for B
+    r = paired([1.0, 2.0, np.nan], [2.0, 4.0, 3.0], nan_is_worst=True)
+    assert (r.n, r.wins, r.losses, r.ties, r.censored) == (3, 2, 1, 0, 1)
+    assert r.a_better_by_ranks == 0 and r.p_wilcoxon == 1.0
+    assert r.median_diff == -1.0 and r.ratio == pytest.approx(3.0 / 1.5)
+    # both censored: a tie; and with one censored pair the test equals substituting a value above all
+    r2 = paired([1.0, np.nan, 5.0, np.nan], [3.0, np.nan, 2.0, 1.0], nan_is_worst=True)
+    assert (r2.wins, r2.losses, r2.ties, r2.censored) == (1, 2, 1, 2)
+    rng = np.random.default_rng(9)
+    a, b = rng.normal(5, 1, 25), rng.normal(5.8, 1, 25)
+    a[7] = np.nan
+    sub = a.copy()
+    sub[7] = 1e9
+    r, s = paired(a, b, nan_is_worst=True), paired(sub, b)
+    assert (r.wins, r.losses, r.p_sign) == (s.wins, s.losses, s.p_sign)
+    assert r.p_wilcoxon == pytest.approx(s.p_wilcoxon, rel=1e-12)
+    assert "1 run(s) where A or B never reached it counted as the worse" in r.evidence()
+
+
+def test_nan_is_worst_changes_the_verdict_where_dropping_hid_the_losses():
+    # B never reconverges in 8 runs; in the 6 others A is slightly worse: dropping the NaNs reads
+    # "B better" (opposite), counting them as censored reads A better (reproduced)
+    a = np.r_[np.full(8, 10.0), 5.1, 5.2, 5.3, 5.4, 5.5, 5.6]
+    b = np.r_[np.full(8, np.nan), 5.0, 5.0, 5.0, 5.0, 5.0, 5.0]
+    assert paired(a, b).verdict() == "opposite"
+    r = paired(a, b, nan_is_worst=True)
+    assert r.verdict() == "reproduced" and r.wins == 8 and r.median_diff == -math.inf
+    with pytest.raises(ValueError, match="infinity"):
+        paired([np.inf, 1.0], [1.0, 2.0], nan_is_worst=True)

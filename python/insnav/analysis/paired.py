@@ -147,6 +147,10 @@ class PairedResult:
     dropped : int
         Pairs left out because a or b is NaN (a run without the metric, e.g.
         one that never reconverged): named in :meth:`evidence`.
+    censored : int
+        With ``nan_is_worst``: pairs where a or b is NaN, counted as the worse
+        side (a tie when both are NaN) instead of left out: named in
+        :meth:`evidence`.
     """
 
     n: int
@@ -163,6 +167,7 @@ class PairedResult:
     lower_is_better: bool
     a_better_by_ranks: int = 0
     dropped: int = 0
+    censored: int = 0
 
     def verdict(self, alpha: float = ALPHA) -> str:
         """reproduced / opposite / not significant (module docstring)."""
@@ -177,11 +182,13 @@ class PairedResult:
                 f"{self.p_wilcoxon:.2g}; median A - B = {self.median_diff:{fmt}}{u} "
                 f"({self.level:.0%} CI {lo:{fmt}} .. {hi:{fmt}}); mean B / mean A = {self.ratio:.3g} "
                 f"(CI {rlo:.3g} .. {rhi:.3g})"
-                + (f"; {self.dropped} run(s) without a value for A or B left out" if self.dropped else ""))
+                + (f"; {self.dropped} run(s) without a value for A or B left out" if self.dropped else "")
+                + (f"; {self.censored} run(s) where A or B never reached it counted as the worse (ratio of "
+                   "means over the other runs)" if self.censored else ""))
 
 
 def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: int = 2000,
-           seed: int = 0) -> PairedResult:
+           seed: int = 0, nan_is_worst: bool = False) -> PairedResult:
     """Compare method A with method B on paired per-run values.
 
     Parameters
@@ -198,6 +205,14 @@ def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: i
         Bootstrap resamples of the ratio of means.
     seed : int
         Bootstrap seed.
+    nan_is_worst : bool
+        Read NaN as a right-censored value worse than every observed one (a run
+        that never reconverged inside a window shared by all runs, whose
+        observed times all lie below the censoring point).  A pair with one NaN
+        is a win for the other side, its difference tied at the largest rank
+        (its size is unknown); a pair of NaNs is a tie.  The median difference
+        and its interval take such a difference as infinite; the ratio of means
+        is over the pairs without a NaN.
 
     Returns
     -------
@@ -208,28 +223,60 @@ def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: i
     if a.shape != b.shape:
         raise ValueError(f"paired: a and b differ in length ({a.size} vs {b.size})")
     ok = np.isfinite(a) & np.isfinite(b)
+    if nan_is_worst:
+        if np.isinf(a).any() or np.isinf(b).any():
+            raise ValueError("paired: nan_is_worst reads NaN as censored; a or b holds an infinity")
+        return _paired_censored(a, b, ok, lower_is_better, level, n_boot, seed)
     dropped = int(a.size - ok.sum())
     a, b = a[ok], b[ok]
     d = a - b
     better = d < 0 if lower_is_better else d > 0
     worse = d > 0 if lower_is_better else d < 0
     wins, losses = int(better.sum()), int(worse.sum())
-    ratio = float(b.mean() / a.mean()) if a.size and a.mean() != 0 else math.nan
-    if a.size:
-        rng = np.random.default_rng(seed)
-        idx = rng.integers(0, a.size, size=(n_boot, a.size))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rb = b[idx].mean(axis=1) / a[idx].mean(axis=1)
-        q = (1 - level) / 2
-        ratio_ci = (float(np.nanquantile(rb, q)), float(np.nanquantile(rb, 1 - q)))
-    else:
-        ratio_ci = (math.nan, math.nan)
+    ratio, ratio_ci = _ratio_of_means(a, b, level, n_boot, seed)
     return PairedResult(n=int(a.size), wins=wins, losses=losses, ties=int(a.size - wins - losses),
                         p_sign=sign_test_p(wins, losses), p_wilcoxon=wilcoxon_p(d),
                         median_diff=float(np.median(d)) if d.size else math.nan,
                         median_diff_ci=_median_ci(d, level), ratio=ratio, ratio_ci=ratio_ci, level=level,
                         lower_is_better=lower_is_better,
                         a_better_by_ranks=_signed_rank_direction(-d if lower_is_better else d), dropped=dropped)
+
+
+def _ratio_of_means(a, b, level, n_boot, seed):
+    """mean(b) / mean(a) and its percentile bootstrap interval."""
+    ratio = float(b.mean() / a.mean()) if a.size and a.mean() != 0 else math.nan
+    if not a.size:
+        return ratio, (math.nan, math.nan)
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, a.size, size=(n_boot, a.size))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rb = b[idx].mean(axis=1) / a[idx].mean(axis=1)
+    q = (1 - level) / 2
+    return ratio, (float(np.nanquantile(rb, q)), float(np.nanquantile(rb, 1 - q)))
+
+
+def _paired_censored(a, b, ok, lower_is_better, level, n_boot, seed) -> PairedResult:
+    """:func:`paired` with NaN read as worse than every value (its ``nan_is_worst``)."""
+    worst = math.inf if lower_is_better else -math.inf
+    na, nb = np.isnan(a), np.isnan(b)
+    a_c, b_c = np.where(na, worst, a), np.where(nb, worst, b)
+    with np.errstate(invalid="ignore"):
+        d = a_c - b_c
+    d[na & nb] = 0.0  # both censored: a tie
+    better = d < 0 if lower_is_better else d > 0
+    worse = d > 0 if lower_is_better else d < 0
+    wins, losses = int(better.sum()), int(worse.sum())
+    fin = np.isfinite(d)
+    top = (np.abs(d[fin]).max() if fin.any() else 0.0) + 1.0
+    d_rank = np.where(fin, d, np.sign(d) * top)  # one side censored: tied above every observed |d|
+    ratio, ratio_ci = _ratio_of_means(a[ok], b[ok], level, n_boot, seed)
+    return PairedResult(n=int(a.size), wins=wins, losses=losses, ties=int(a.size - wins - losses),
+                        p_sign=sign_test_p(wins, losses), p_wilcoxon=wilcoxon_p(d_rank),
+                        median_diff=float(np.median(d)) if d.size else math.nan,
+                        median_diff_ci=_median_ci(d, level), ratio=ratio, ratio_ci=ratio_ci, level=level,
+                        lower_is_better=lower_is_better,
+                        a_better_by_ranks=_signed_rank_direction(-d_rank if lower_is_better else d_rank),
+                        censored=int((na | nb).sum()))
 
 
 def verdict(res: PairedResult, alpha: float = ALPHA) -> str:
