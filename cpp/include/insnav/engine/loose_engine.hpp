@@ -132,11 +132,14 @@ struct LooseOutputs : NavOutputs {
   }
 };
 
-/// The fix with the observation kinds switched off by the config removed.
+/// The fix with the observation kinds switched off by the config removed, and a position or a
+/// velocity that is not finite (with its sigmas) taken as absent, as the bindings read a NaN column:
+/// a C++ caller's NaN velocity with has_vel left true would otherwise put NaN into the state.
 inline GnssFix masked_fix(const GnssFix& in, const LooseConfig& cfg) {
   GnssFix f = in;
-  f.has_pos = f.has_pos && cfg.use_position;
-  f.has_vel = f.has_vel && cfg.use_velocity;
+  f.has_pos = f.has_pos && cfg.use_position && std::isfinite(f.lat) && std::isfinite(f.lon) && std::isfinite(f.h) &&
+              f.sigma_pos_n.allFinite();
+  f.has_vel = f.has_vel && cfg.use_velocity && f.v_n.allFinite() && f.sigma_vel_n.allFinite();
   return f;
 }
 

@@ -44,8 +44,8 @@ struct GnssFix {
   Vec3 v_n = Vec3::Zero();                 // antenna velocity [m/s]
   Vec3 sigma_pos_n = Vec3::Constant(1.0);  // 1-sigma N, E, D [m]
   Vec3 sigma_vel_n = Vec3::Constant(0.1);  // [m/s]
-  bool has_pos = true;
-  bool has_vel = true;
+  bool has_pos = true;   // the engines take a non-finite position (or sigma) as absent (masked_fix)
+  bool has_vel = true;   // and a non-finite velocity (or sigma) as absent
 };
 
 template <class L>
