@@ -358,3 +358,23 @@ def test_the_command_line_prints_the_estimated_lever_arms(car, tmp_path, capsys)
     want = (f"odometer lever arm (body x, y, z): {', '.join(f'{v:+.3f}' for v in est)} +- "
             f"{', '.join(f'{v:.3f}' for v in sig)} m")
     assert want in out, out
+
+
+def test_tune_settles_auto_once_and_writes_it(car):
+    """``[time] estimate_offset = "auto"`` under ``tune``: settled by the test before the search (on the
+    base settings), so the tuning runs, the report runs and the written file carry one model; the file
+    says true or false, and the base likelihood is that of the settled model."""
+    from insnav.calib.tune import tune, tuned_toml_dict
+    from insnav.config import RunConfig, TimeOffset
+
+    for ds, kept in ((car, False), (_retag(car, 0.1), True)):
+        cfg = RunConfig(time=TimeOffset(estimate_offset="auto"), max_time_offset_s=np.inf)
+        res = tune(ds, cfg, params=["gnss_pos", "gnss_vel"], max_runs=8, holdout=0.3)
+        assert res.time_offset_test is not None and res.time_offset_test["state_kept"] is kept
+        assert res.tuned.time.estimate_offset is kept and res.base.time.estimate_offset is kept
+        assert tuned_toml_dict({"time": {"estimate_offset": "auto"}}, res)["time"]["estimate_offset"] is kept
+        settled = dataclasses.replace(cfg, time=TimeOffset(estimate_offset=kept))
+        ref = tune(ds, settled, params=["gnss_pos", "gnss_vel"], max_runs=8, holdout=0.3)
+        assert ref.time_offset_test is None
+        assert res.log_likelihood_base == ref.log_likelihood_base
+        assert res.scales == ref.scales

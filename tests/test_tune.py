@@ -432,3 +432,28 @@ def test_tune_cli_refuses_a_repeated_param_and_tight_without_pseudoranges(tmp_pa
     assert capsys.readouterr().err == (f"insnav tune: error: {ds}: no raw GNSS data (gnss_raw.csv, or RINEX with "
                                        "--format rinex): tight coupling tunes on pseudorange innovations\n")
     assert not out.exists()
+
+
+def test_tune_keeps_the_users_smoothing_for_the_report_and_the_file(sim_dir, tmp_path, capsys):
+    """smooth = true: the likelihood is the forward filter's (the same factors as without it), but the
+    base and tuned settings keep smoothing, so the printed held-out figures are the smoothed run's, the
+    run the written file makes."""
+    ds = insnav.load_dataset(sim_dir)
+    kw = dict(params=["gyro_arw", "gnss_pos"], max_runs=8, holdout=0.3)
+    fwd, smo = tune(ds, RunConfig(), **kw), tune(ds, RunConfig(smooth=True), **kw)
+    assert smo.scales == fwd.scales and smo.log_likelihood_tuned == fwd.log_likelihood_tuned
+    assert smo.tuned.smooth and smo.base.smooth and not fwd.tuned.smooth
+    base = tmp_path / "base.toml"
+    base.write_text("smooth = true\n")
+    out = tmp_path / "tuned.toml"
+    assert main(["tune", str(sim_dir), "--config", str(base), "--params", "gyro_arw,gnss_pos", "--max-runs", "8",
+                 "--out", str(out), "-q"]) == 0
+    printed = capsys.readouterr().out
+    assert "the held-out figures are of the smoothed solution" in printed
+    row = next(ln for ln in printed.splitlines() if ln.startswith("horizontal RMS error"))
+    reported = float(row.split()[-1])
+    sol = insnav.run(ds, config=str(out))
+    from insnav.calib.tune import holdout_report
+
+    assert "smoother" in sol.summary  # the file runs the smoother
+    assert holdout_report(sol, ds.truth, t_from=smo.t_split)["hor_rms_m"] == pytest.approx(reported, abs=6e-5)

@@ -519,6 +519,10 @@ class TuneResult:
     split: str = "tail"
     heldout: list = field(default_factory=list)
     tuning: list = field(default_factory=list)
+    #: ``[time] estimate_offset = "auto"``: the test that settled it before the search (the base
+    #: settings with the state, on the first dataset; insnav.filters._run_offset_auto), after which
+    #: every run and the written file carry true or false; None otherwise
+    time_offset_test: dict | None = None
 
 
 def tune(dataset, config=None, *, filter: str | None = None, coupling: str | None = None, params=None,
@@ -582,8 +586,8 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     if cfg.filter not in FILTERS or cfg.coupling not in ("loose", "tight"):
         raise ConfigError(f"filter {cfg.filter!r} with {cfg.coupling} coupling cannot be tuned: the tuner needs the "
                           f"innovation covariance, which the loose and tight {' and '.join(FILTERS)} return")
-    if cfg.smooth:
-        cfg.smooth = False  # the smoother does not change the forward innovations
+    smooth = cfg.smooth  # the user's: back in base and tuned, so the report runs as the written file does
+    cfg.smooth = False  # the smoother does not change the forward innovations
     datasets = list(dataset) if isinstance(dataset, (list, tuple)) else [dataset]
     if not datasets:
         raise ConfigError("no dataset to tune on")
@@ -624,6 +628,13 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     segs = [_cut(d, t) for d, t in zip(datasets, splits)] if blocks is None else datasets
     spec = filter_spec(cfg.filter)
     options = spec.options_class(cfg.coupling)(**cfg.options)  # the config's [options], as insnav.run
+    offset_test = None
+    if cfg.time.estimate_offset == "auto":  # settled once, so every run (tuning, report, the file) is one model
+        from ..filters import _run_offset_auto
+
+        probe = dataclasses.replace(cfg, imu=noise)
+        offset_test = _run_offset_auto(spec, datasets[0], probe, options).summary["time_offset_test"]
+        cfg.time = dataclasses.replace(cfg.time, estimate_offset=bool(offset_test["state_kept"]))
     seg = segs[0]
     dt = float(np.median(np.diff(np.asarray(seg.imu.t[:1000], float)))) if len(seg.imu.t) > 2 else 1.0
     decim = max(1, int(round(1.0 / dt))) if dt > 0 else 1
@@ -673,13 +684,15 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     tuned = scaled_config(cfg, noise, best_scales)
     if tuned.coupling == "tight":  # run as tuned (_plain_robust)
         tuned.robust = _plain_robust(tuned.robust)
-    base = dataclasses.replace(cfg, imu=noise)
+    tuned.smooth = smooth
+    base = dataclasses.replace(cfg, imu=noise, smooth=smooth)
     return TuneResult(names=names, scales=best_scales, base=base, tuned=tuned, log_likelihood_base=ll_base,
                       log_likelihood_tuned=ll_best, records=n_best, runs=len(history),
                       seconds=time.perf_counter() - t_start,
                       t_split=splits[0] if len(splits) == 1 else tuple(splits), holdout=float(holdout), history=history,
                       split=split, heldout=[(splits[0], math.inf)] if blocks is None else blocks[0][1],
-                      tuning=[(-math.inf, splits[0])] if blocks is None else blocks[0][0])
+                      tuning=[(-math.inf, splits[0])] if blocks is None else blocks[0][0],
+                      time_offset_test=offset_test)
 
 
 # --------------------------------------------------------------------------- the report
@@ -986,9 +999,9 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     they are on), ``filter`` and ``coupling``, and the constraint sigmas that were
     tuned, and for tight coupling the ``[robust]`` keys it was tuned with
     (screening, fault exclusion and CUSUM off).  ``insnav run --config``
-    (``--run-config`` with ``--format kfgins``) then runs with it.  (The bias
-    random-walk fields of ``ImuNoise`` have no TOML key: a base model with them
-    non-zero loses them in the file.)"""
+    (``--run-config`` with ``--format kfgins``) then runs with it.  ``[time]
+    estimate_offset = "auto"`` is written as the value the tuning settled it to
+    (``result.time_offset_test``), so the file runs the tuned model."""
     from ..config import _USER_UNITS
 
     d = {k: (dict(v) if isinstance(v, dict) else v) for k, v in (base or {}).items()}
@@ -1004,6 +1017,8 @@ def tuned_toml_dict(base: dict | None, result: TuneResult) -> dict:
     if cfg.pr_gm_sigma_m > 0:  # the Gauss-Markov pseudorange states (tuned or as given)
         d["pr_gm_sigma_m"], d["pr_gm_tau_s"] = float(cfg.pr_gm_sigma_m), float(cfg.pr_gm_tau_s)
         d["pr_gm_max_gap_s"] = float(cfg.pr_gm_max_gap_s)
+    if result.time_offset_test is not None:
+        d["time"] = {**d.get("time", {}), "estimate_offset": bool(cfg.time.estimate_offset)}
     imu = {k: v for k, v in d.get("imu", {}).items() if k not in _USER_UNITS}
     imu.update(_user_noise(cfg.imu))
     d["imu"] = imu

@@ -241,7 +241,17 @@ def cmd_tune(args) -> int:
     elif res.split == "tail":
         print(f"held out: t >= {res.t_split:.3f} s ({args.holdout:.0%} of the IMU span)")
     else:
-        print(f"held out: the last {args.holdout:.0%} of each {args.block_s:g} s block ({len(res.heldout)} blocks)")
+        print(f"held out: the last {args.holdout:.0%} of each {args.block_s:g} s block ({len(res.heldout)} blocks); "
+              "the tuning runs applied the held-out blocks' records too (only the likelihood leaves them out), so "
+              "the held-out figures are not independent of the tuning")
+    if res.time_offset_test is not None:
+        z = res.time_offset_test
+        print(f'[time] estimate_offset = "auto" settled before tuning: {str(z["state_kept"]).lower()} '
+              f'(estimate {z["estimate_ms"]:.2f} ms, sigma {z["sigma_ms"]:.2f} ms, |z| {abs(z["z"]):.2f} against '
+              f'{z["threshold_z"]:.2f}); written as that')
+    if res.tuned.smooth:
+        print("the held-out figures are of the smoothed solution (smooth = true); the likelihood is the forward "
+              "filter's")
     for line in report_table(*reps):
         print(line)
     print(f"{out}: written (insnav run --config {out})" if args.format != "kfgins"
