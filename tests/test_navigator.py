@@ -12,7 +12,7 @@ import pytest
 import insnav
 from insnav import sim
 from insnav.config import RunConfig
-from insnav.filters.navigator import Navigator
+from insnav.filters.navigator import Navigator, TightNavigator
 
 
 def _dataset(seed=2, duration_s=40.0, outages=((20.0, 26.0),)):
@@ -484,3 +484,38 @@ def test_the_smoothers_euler_sigmas_are_the_numerical_jacobians():
     for k in range(40):
         J = euler_jacobian_of_psi(e[k])
         np.testing.assert_allclose(got[k], np.sqrt(np.diag(J @ P[k] @ J.T)), rtol=1e-6)
+
+
+@pytest.mark.parametrize("factors", [dict(gnss_pos_sigma_scale=2.0, gnss_vel_sigma_scale=3.0),
+                                     dict(gnss_pos_v_sigma_scale=2.0),
+                                     dict(gnss_pos_sigma_per_speed_s=0.5, gnss_vel_sigma_per_speed=0.05)])
+def test_push_applies_the_gnss_sigma_factors_as_the_batch(factors):
+    """The config's GNSS sigma factors (insnav tune's) weight the pushed fixes as the batch run
+    weights its own (loose_gnss_rows): push equals batch, and differs from the run without them."""
+    ds = _dataset(duration_s=30.0)
+    check = set(range(0, len(ds.imu.t), 211)) | {len(ds.imu.t) - 1}
+    batch = insnav.run(ds, config=RunConfig(**factors), sanitize=False, checks=False)
+    rows = _push_all(Navigator.from_dataset(ds, RunConfig(**factors)), ds, check)
+    assert _worst_row_diff(rows, batch) < 1e-9
+    plain = insnav.run(ds, sanitize=False, checks=False)
+    assert _worst_row_diff(rows, plain) > 1e-3
+
+
+def test_push_refuses_what_it_cannot_run_as_the_batch():
+    ds = _dataset(duration_s=10.0)
+    # RTK/INS and tight configs: not the loose push engine, and TightNavigator says RTK/INS has no push API
+    with pytest.raises(ValueError, match="coupling 'rtk'"):
+        Navigator.from_dataset(ds, RunConfig(coupling="rtk"))
+    with pytest.raises(ValueError, match="coupling 'tight'"):
+        Navigator.from_dataset(ds, RunConfig(coupling="tight"))
+    with pytest.raises(ValueError, match="RTK/INS .*has no push API"):
+        TightNavigator.from_dataset(ds, RunConfig(coupling="rtk"))
+    # a non-finite lever arm keyword: refused at construction, not a NaN state later
+    with pytest.raises(ValueError, match=r"lever_arm_b must be 3 finite numbers"):
+        Navigator(ds.initial, ds.t0, ds.imu_model, lever_arm_b=[np.nan, 0.0, 0.0])
+    # the per-speed sigma terms need the pushed fix's own velocity
+    nav = Navigator.from_dataset(ds, RunConfig(gnss_pos_sigma_per_speed_s=0.5))
+    g = ds.gnss
+    with pytest.raises(ValueError, match="need the fix's velocity"):
+        nav.push_gnss_fix(g.t_valid[0], g.lat_deg[0], g.lon_deg[0], g.h_m[0], g.sigma_pos_n[0])
+    assert nav.counters["pending_records"] == 0

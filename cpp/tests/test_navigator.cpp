@@ -357,6 +357,19 @@ void test_tight_push_equals_batch() {
   auto batch = std::make_unique<TightEngine<Filter>>(cfg.imu_model, cfg.tight, cfg.ut);
   batch->run(init, P0, ImuCorrection{}, cfg.clock_bias0_m, 0.0, n, t.data(), dth.data(), dv.data(),
              static_cast<std::int64_t>(ep.size()), ep.data(), obs.data(), out);
+  // the batch-only settings are refused by the push engine, not run differently
+  for (int which = 0; which < 2; ++which) {
+    TightNavigatorConfig bad = cfg;
+    if (which == 0) bad.tight.pr_gm.sigma_m = 2.0;
+    else bad.tight.tdcp.enabled = true;
+    bool threw = false;
+    try {
+      TightNavigator<Filter> refused(bad, init, P0);
+    } catch (const std::invalid_argument&) {
+      threw = true;
+    }
+    EXPECT_TRUE(threw);
+  }
   auto nav = std::make_unique<TightNavigator<Filter>>(cfg, init, P0);
   const long before = g_eigen_asserts;
   Eigen::internal::set_is_malloc_allowed(false);

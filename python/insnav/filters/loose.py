@@ -102,18 +102,35 @@ def loose_gnss_rows(g, cfg: RunConfig) -> np.ndarray:
     rows = np.column_stack([g.t_valid, np.asarray(g.lat_deg) * DEG, np.asarray(g.lon_deg) * DEG, g.h_m, g.v_n,
                             g.sigma_pos_n, g.sigma_vel_n]).astype(float)
     rows = np.ascontiguousarray(rows[np.argsort(rows[:, 0], kind="stable")])
+    if has_speed_terms(cfg):
+        apply_sigma_factors(rows, cfg, fix_speed_mps(rows))
+    else:
+        apply_sigma_factors(rows, cfg)
+    check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
+    return rows
+
+
+def has_speed_terms(cfg: RunConfig) -> bool:
+    """Whether the fixes' sigmas grow with speed (``gnss_pos_sigma_per_speed_s`` or
+    ``gnss_vel_sigma_per_speed`` > 0)."""
+    return cfg.gnss_pos_sigma_per_speed_s > 0.0 or cfg.gnss_vel_sigma_per_speed > 0.0
+
+
+def apply_sigma_factors(rows: np.ndarray, cfg: RunConfig, speed_mps=None) -> None:
+    """The config's GNSS sigma factors on loose GNSS table rows, in place (:func:`loose_gnss_rows`;
+    the push API's fixes, :class:`insnav.Navigator`, one row at a time): the scales, the
+    motion-dependent terms times ``speed_mps`` (each row's horizontal speed [m/s]; needed when
+    :func:`has_speed_terms`) in quadrature, then the vertical factor."""
     if cfg.gnss_pos_sigma_scale != 1.0 or cfg.gnss_vel_sigma_scale != 1.0:
         rows[:, 7:10] *= cfg.gnss_pos_sigma_scale
         rows[:, 10:13] *= cfg.gnss_vel_sigma_scale
     k_pos, k_vel = float(cfg.gnss_pos_sigma_per_speed_s), float(cfg.gnss_vel_sigma_per_speed)
     if k_pos > 0.0 or k_vel > 0.0:
-        speed = fix_speed_mps(rows)
+        speed = np.asarray(speed_mps, float)
         rows[:, 7:10] = np.hypot(rows[:, 7:10], (k_pos * speed)[:, None])
         rows[:, 10:13] = np.hypot(rows[:, 10:13], (k_vel * speed)[:, None])  # NaN (no velocity) stays NaN
     if cfg.gnss_pos_v_sigma_scale != 1.0:
         rows[:, 9] *= cfg.gnss_pos_v_sigma_scale
-    check_finite(rows[:, [0, 7, 8, 9]], "gnss (time/position sigma)")
-    return rows
 
 
 def run_loose(dataset, cfg: RunConfig) -> Solution:

@@ -32,7 +32,7 @@ from .. import _core
 from ..config import RunConfig
 from ..data.nav import NavState
 from ..units import DEG
-from .loose import loose_engine_args
+from .loose import apply_sigma_factors, has_speed_terms, loose_engine_args
 
 __all__ = ["Navigator", "TightNavigator", "DelayNavigator"]
 
@@ -152,9 +152,6 @@ class Navigator(_PushApi):
 
         cfg = _as_config(config)
         cfg.validate()
-        if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf"):
-            raise ValueError(f"Navigator: filter {cfg.filter!r} / coupling {cfg.coupling!r}: the push API runs "
-                             "the loose ekf, rbukf and ukf")
         if not (np.isfinite(gnss_period_s) and gnss_period_s > 0):
             raise ValueError(f"Navigator: gnss_period_s must be > 0 s, got {gnss_period_s!r}")
         t0 = _time(t0, "Navigator")
@@ -182,11 +179,21 @@ class Navigator(_PushApi):
         return self
 
     def _setup(self, dataset, cfg: RunConfig, record_t: np.ndarray, imu_hold: int) -> None:
+        if cfg.coupling != "loose" or cfg.filter not in ("ekf", "rbukf", "ukf"):
+            raise ValueError(f"Navigator: filter {cfg.filter!r} / coupling {cfg.coupling!r}: the push API runs "
+                             "the loose ekf, rbukf and ukf (tight: TightNavigator; RTK/INS has no push API: "
+                             "insnav.run)")
         if cfg.smooth:
             raise ValueError("Navigator: the RTS smoother needs the whole run (insnav.run(..., smooth=True))")
         _refuse_batch_only(cfg, "Navigator")
+        lever = np.asarray(dataset.lever_arm_b, float)
+        if lever.shape != (3,) or not np.all(np.isfinite(lever)):
+            raise ValueError(f"Navigator: lever_arm_b must be 3 finite numbers [m], got {lever.tolist()}")
         a = loose_engine_args(dataset, cfg, record_t)
         self.config = cfg
+        self._speed_terms = has_speed_terms(cfg)
+        self._factors = self._speed_terms or any(
+            x != 1.0 for x in (cfg.gnss_pos_sigma_scale, cfg.gnss_vel_sigma_scale, cfg.gnss_pos_v_sigma_scale))
         self.layout = a.layout
         self._nav = _core.LooseNavigator(cfg.filter, a.layout, a.init, a.P0, a.imu_correction, a.imu_model,
                                          a.config, int(imu_hold))
@@ -196,7 +203,10 @@ class Navigator(_PushApi):
     def push_gnss_fix(self, t: float, lat_deg: float, lon_deg: float, h_m: float, sigma_pos_n_m,
                       v_n_mps=None, sigma_vel_n_mps=None) -> str:
         """A GNSS antenna fix valid at ``t`` [s]: position (deg, deg, ellipsoidal m)
-        with N/E/D 1-sigma [m], optionally NED velocity [m/s] with its 1-sigma.
+        with N/E/D 1-sigma [m], optionally NED velocity [m/s] with its 1-sigma.  The
+        config's GNSS sigma factors apply as in the batch run (``gnss_pos_sigma_scale``,
+        ``gnss_vel_sigma_scale``, ``gnss_pos_v_sigma_scale``; the per-speed terms with the
+        fix's own velocity, which they then need).
         Returns ``"queued"``, or why it was refused (``"too_old"``, ``"outside_imu_span"``,
         ``"queue_full"``)."""
         r = self._row
@@ -204,6 +214,16 @@ class Navigator(_PushApi):
         r[4:7] = np.nan if v_n_mps is None else np.asarray(v_n_mps, float)
         r[7:10] = sigma_pos_n_m
         r[10:13] = np.nan if sigma_vel_n_mps is None else np.asarray(sigma_vel_n_mps, float)
+        if self._factors:  # the config's GNSS sigma factors, as the batch run weights its fixes
+            speed = None
+            if self._speed_terms:
+                speed = np.hypot(r[4], r[5])
+                if not np.isfinite(speed):
+                    raise ValueError(f"push_gnss_fix at t={r[0]}: gnss_pos_sigma_per_speed_s / "
+                                     "gnss_vel_sigma_per_speed need the fix's velocity (the batch run takes "
+                                     "the neighbouring fixes' positions, which a push does not have)")
+                speed = np.array([speed])
+            apply_sigma_factors(r.reshape(1, 13), self.config, speed)
         # a non-finite position or a sigma not finite and > 0: ValueError from the engine's check
         # (engine/navigator.hpp push_fix_problem), nothing queued
         return PUSH_STATUS[self._nav.push_gnss_fix(r)]
@@ -282,7 +302,11 @@ class TightNavigator(_PushApi):
         from . import _as_config
         from .tight import tight_engine_args
 
-        cfg = dataclasses.replace(_as_config(config), coupling="tight")
+        cfg = _as_config(config)
+        if cfg.coupling == "rtk":
+            raise ValueError("TightNavigator: coupling 'rtk': RTK/INS (carrier phase, a base station) has no push "
+                             "API; run it with insnav.run")
+        cfg = dataclasses.replace(cfg, coupling="tight")
         cfg.validate()
         if cfg.filter not in ("ekf", "rbukf", "ukf"):
             raise ValueError(f"TightNavigator: filter {cfg.filter!r}: the push API runs the tight ekf, rbukf and ukf")
@@ -415,7 +439,9 @@ class DelayNavigator(_PushApi):
         """One receiver epoch at ``t`` [s] with the records that arrived since the previous
         epoch: ``records`` (k, 14) rows of t_valid, t_arrival [s], lat, lon [rad], h [m],
         v_n [m/s] (NaN: none), position and velocity 1-sigma N, E, D [m, m/s] (the rows of
-        :attr:`records`; at most 8 per epoch).  Returns ``"queued"``, or why it was refused."""
+        :attr:`records`; at most 8 per epoch).  The sigmas are used as given: the rows of
+        :attr:`records` already carry the config's GNSS sigma factors (``gnss_pos_sigma_scale``, ...).
+        Returns ``"queued"``, or why it was refused."""
         t = _time(t, "push_epoch")
         rows = np.zeros((0, 14)) if records is None else np.ascontiguousarray(np.asarray(records, float))
         if rows.size == 0:

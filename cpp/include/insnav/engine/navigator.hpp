@@ -390,9 +390,11 @@ class TightNavigator
  public:
   using L = typename Filter::Layout;
 
+  /// Throws std::invalid_argument for the settings only the batch run (TightEngine::run) has: the
+  /// Gauss-Markov pseudorange states (carried over each outage cycle there) and TDCP (no phase is pushed).
   TightNavigator(const TightNavigatorConfig& cfg, const NavState& initial, const StateCov<L>& P0,
                  const ImuCorrection& corr0 = ImuCorrection())
-      : engine_(cfg.imu_model, cfg.tight, cfg.ut) {
+      : engine_(checked(cfg).imu_model, cfg.tight, cfg.ut) {
     Base::start(initial.t, cfg.imu_hold, cfg.tight.cycle_period);
     engine_.set_initial_isb(cfg.isb0);
     engine_.start(initial, P0, corr0, cfg.clock_bias0_m, cfg.clock_drift0_mps);
@@ -436,6 +438,15 @@ class TightNavigator
   int gate_reopened() { return engine_.core().gate.reopened(); }
 
  private:
+  static const TightNavigatorConfig& checked(const TightNavigatorConfig& cfg) {
+    if (cfg.tight.pr_gm.enabled())
+      throw std::invalid_argument("TightNavigator: pr_gm (Gauss-Markov pseudorange states) runs in the batch "
+                                  "tight run only (TightEngine::run)");
+    if (cfg.tight.tdcp.enabled)
+      throw std::invalid_argument("TightNavigator: tdcp needs carrier phase, which the push API does not take");
+    return cfg;
+  }
+
   ClosedLoop<Filter>& core() { return engine_.core(); }
   void apply(const TightPending& p) {
     engine_.apply_epoch(pool_.data() + p.slot * kMaxMeasRows, TightEpoch{p.t, 0, p.n_sats}, 0, out_);
