@@ -148,3 +148,25 @@ def test_tune_reads_its_reference_before_the_search(sim, tmp_path, capsys):
     assert err.startswith(f"insnav tune: error: --reference {bad}: {bad}:1: unexpected header"), err
     assert time.perf_counter() - t0 < 20.0  # no search ran (it takes minutes on this drive)
     assert not (tmp_path / "t.toml").exists()
+
+
+def test_an_rtk_pos_gets_the_slip_counts_of_its_sidecar(tmp_path):
+    """An insnav rtk ``.pos`` keeps its Q as the fix status and takes the slip counts of its
+    ``<pos>.rtk.csv`` (the report's "cycle slips detected" row): the column sums."""
+    from insnav.analysis.evaluate import _read_solution
+    from insnav.gnss.rtk import RTK_COLUMNS
+
+    pos = tmp_path / "rtk.pos"
+    pos.write_text("%  GPST latitude(deg) longitude(deg) height(m) Q ns sdn(m) sde(m) sdu(m) sdne(m) sdeu(m) sdun(m) "
+                   "age(s) ratio\n"
+                   "2023/01/08 10:00:00.000 48.780736061 9.173352757 319.8347 2 7 0.01 0.01 0.02 0 0 0 0.00 0.0\n"
+                   "2023/01/08 10:00:01.000 48.780783021 9.173350630 319.9041 1 7 0.01 0.01 0.02 0 0 0 0.00 5.1\n")
+    slips = [[1, 0, 2, 0, 0, 0], [0, 3, 0, 1, 0, 4]]
+    rows = [f"{t},{q},1.0,5,6,7,0.000,4.0,5.0,6.0," + ",".join(map(str, s)) for t, q, s in
+            ((100.0, 2, slips[0]), (101.0, 1, slips[1]))]
+    (tmp_path / "rtk.pos.rtk.csv").write_text(",".join(RTK_COLUMNS) + "\n" + "\n".join(rows) + "\n")
+    sol = _read_solution(pos)
+    assert list(sol.fix_status) == [2, 1]
+    assert sol.slip_counts == dict(lli=1, geometry_free=3, melbourne_wuebbena=2, doppler=1, gap=0, outlier=4)
+    (tmp_path / "rtk.pos.rtk.csv").unlink()
+    assert getattr(_read_solution(pos), "slip_counts", None) is None

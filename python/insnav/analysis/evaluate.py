@@ -52,7 +52,13 @@ def _read_solution(path):
 
     p = Path(path)
     if p.suffix == ".pos":
-        return _pos_solution(p)
+        sol = _pos_solution(p)
+        side = p.with_suffix(p.suffix + ".rtk.csv")
+        if side.exists():  # an insnav rtk .pos: the slip counts of its sidecar (Q stays the .pos's)
+            a = _read_rtk_sidecar(side)
+            sol.slip_counts = {k[len("slips_"):]: int(np.nansum(np.atleast_1d(a[k]))) for k in a.dtype.names
+                               if k.startswith("slips_")}
+        return sol
     return attach_fix_status(has_rows(load_solution(path), p), p)
 
 
