@@ -264,6 +264,7 @@ def test_tune_api_round_trip_exact(sim_dir):
     (["--params", "nhc"], "tuning parameter 'nhc' needs the nhc constraint"),
     (["--max-runs", "3"], "max_runs 3: at least"),
     (["--out", "x.csv"], "the tuned configuration is a TOML file"),
+    (["--block-s", "10"], "--block-s 10: the block length of --split blocks"),
 ])
 def test_cli_bad_input_one_line(sim_dir, tmp_path, capsys, argv, msg):
     args = ["tune", str(sim_dir), "--out", str(tmp_path / "t.toml"), "-q"] + argv

@@ -65,8 +65,7 @@ def add_tune_parser(sub) -> None:
                         "--holdout of each held out (the tuning runs go over all the data, the likelihood sums the "
                         "tuning blocks' records; for data whose segment kinds, e.g. walking and standing, are not "
                         "spread over the time span; default %(default)s)")
-    p.add_argument("--block-s", type=float, default=20.0, help="block length of --split blocks [s] (default "
-                   "%(default)s)")
+    p.add_argument("--block-s", type=float, default=None, help="block length of --split blocks [s] (default 20)")
     p.add_argument("--max-runs", type=int, default=80, help="filter runs the search may use (default %(default)s)")
     p.add_argument("--reference", metavar="FILE",
                    help="reference trajectory for the report: insnav truth.csv or folder, KF-GINS .nav, RTKLIB .pos "
@@ -178,6 +177,11 @@ def cmd_tune(args) -> int:
         raise UserError(f"--out {out}: the tuned configuration is a TOML file (e.g. tuned.toml)")
     if not (0.0 <= args.holdout < 0.9):
         raise UserError(f"--holdout {args.holdout:g}: expected a fraction of the data in [0, 0.9) (0: no hold-out)")
+    if args.block_s is not None and args.split != "blocks":
+        raise UserError(f"--block-s {args.block_s:g}: the block length of --split blocks; add --split blocks or "
+                        "leave it out")
+    if args.block_s is None:
+        args.block_s = 20.0
     params = None if args.params is None else [p.strip() for p in args.params.split(",") if p.strip()]
     if params is not None and len(set(params)) < len(params):
         twice = next(p for p in params if params.count(p) > 1)
