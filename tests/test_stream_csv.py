@@ -251,3 +251,40 @@ def test_csv_checks_on_a_halved_record(car_files, tmp_path, monkeypatch, imu_off
         _same_files(a, b)
     else:
         assert rca == rcb != 0 and erra == errb and "GNSS is 1.0 s behind the IMU" in erra, (erra, errb)
+
+
+def test_per_speed_sigmas_of_fixes_without_velocity_stream_as_the_whole_table(car_files, tmp_path, monkeypatch):
+    """gnss_pos_sigma_per_speed_s on fixes without velocity: each fix's speed comes from its
+    neighbours (fix_speed_mps), so a pushed slice of fixes carries one fix of overlap on each side;
+    the streamed run writes the whole-file run's bytes (it differed at every slice end)."""
+    monkeypatch.setattr(stream, "BLOCK_LINES", BLOCK)
+    monkeypatch.setattr(stream, "GNSS_PUSH_MAX", 7)  # many slices of fixes
+    _, d0 = car_files
+    d = tmp_path / "nov"
+    d.mkdir()
+    (d / "imu.csv").write_bytes((d0 / "imu.csv").read_bytes())
+    lines = (d0 / "gnss.csv").read_text().splitlines()
+    cols = ["t", "lat", "lon", "h", "sigma_n", "sigma_e", "sigma_d"]
+    (d / "gnss.csv").write_text("\n".join([",".join(cols)] + [",".join(ln.split(",")[:4] + ln.split(",")[7:10])
+                                                               for ln in lines[1:]]) + "\n")
+    (d / "run.toml").write_text(dumps_toml(config(gnss=dict(columns=cols), gnss_pos_sigma_per_speed_s=0.5)))
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    rca, outa, erra = _run(d, a, "--stream", "on")
+    rcb, outb, errb = _run(d, b, "--stream", "off")
+    assert (rca, rcb) == (0, 0), (erra, errb)
+    assert "note:" not in erra  # streamed: the car's fixes end inside the IMU record
+    _same_files(a, b)
+
+
+@pytest.mark.parametrize("block", [115, 119, 169])
+def test_output_rate_when_the_run_starts_at_a_blocks_end(car_files, tmp_path, monkeypatch, block):
+    """The IMU interval of --output-rate comes from at least two intervals: the run's first sample may
+    be the last (or last but one) of a read block, which gave decimation 1 (every row) before."""
+    monkeypatch.setattr(stream, "BLOCK_LINES", block)
+    d = car_files[1]
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    rca, _, erra = _run(d, a, "--stream", "on", "--output-rate", "10")
+    rcb, _, errb = _run(d, b, "--stream", "off", "--output-rate", "10")
+    assert (rca, rcb) == (0, 0), (erra, errb)
+    _same_files(a, b)
+    assert "output_decimation = 20" in (a.parent / "sol.csv.config.toml").read_text()

@@ -937,7 +937,9 @@ class _BlockRun:
                 # the samples to expect: the file's size over the bytes per line so far
                 lines = blk.origin.line(len(t) - 1)
                 expected = int(blk.file_bytes * lines / blk.file_bytes_done) if blk.file_bytes_done else 0
-                self._start(t[lo:], expected)
+                # the IMU interval (output decimation, the checks' window) from at least two intervals:
+                # t0 may be the block's last sample or last but one (the stream runs on a constant interval)
+                self._start(t[min(lo, max(0, len(t) - 3)):], expected)
             hi = len(t) if self.end_s is None else int(np.searchsorted(t, self.end_s, side="right"))
             last = hi < len(t)  # endtime reached: the rest of the file is not read
             if hi > lo:
@@ -1013,11 +1015,16 @@ class _BlockRun:
     def _gnss_rows(self, a: int, b: int) -> np.ndarray:
         """The loose engine's GNSS rows of the fixes a .. b - 1 in time order (:func:`loose_gnss_rows` of
         those fixes: its rows of the whole table; a table that fails its checks: the whole table's error)."""
-        from .loose import loose_gnss_rows
+        from .loose import has_speed_terms, loose_gnss_rows
 
-        idx = slice(a, b) if self.order is None else self.order[a:b]
+        # the per-speed sigma terms take a fix without velocity's speed from its neighbours (fix_speed_mps):
+        # one fix of overlap on each side gives each fix of the slice the whole table's neighbours
+        pad = has_speed_terms(self.cfg)
+        a0, b0 = (max(a - 1, 0), min(b + 1, len(self.gnss_t))) if pad else (a, b)
+        idx = slice(a0, b0) if self.order is None else self.order[a0:b0]
         try:
-            return loose_gnss_rows(_FixSlice(self.gnss, idx), self.cfg)
+            rows = loose_gnss_rows(_FixSlice(self.gnss, idx), self.cfg)
+            return rows[a - a0:len(rows) - (b0 - b)] if pad else rows
         except ValueError:
             loose_gnss_rows(self.gnss, self.cfg)  # the whole table's message (which fix)
             raise
@@ -1036,6 +1043,7 @@ class _BlockRun:
         changed nothing when the sanitizer treats the rest alike and the GNSS period is the same; they were
         never given to the engine (:meth:`_push_gnss`), so no output of theirs was written; else the batch
         path runs.  ``records``: the per-fix records written."""
+        from .loose import has_speed_terms, loose_gnss_rows
         from .sanitize import sanitize_gnss_blocks
 
         n_keep = _count_window(self.gnss.t_valid, -np.inf, self.last_kept)
@@ -1053,6 +1061,10 @@ class _BlockRun:
                 and len(g2) == n_keep
                 and _fixes_equal(g2, self.gnss, keep)
                 and _median_spacing(self.cfg, g2.t_valid) == _median_spacing(self.cfg, self.gnss.t_valid))
+        if same and n_keep >= 1 and has_speed_terms(self.cfg):  # the last kept fix's speed: the batch table ends with it
+            o2 = np.argsort(np.asarray(g2.t_valid, float), kind="stable")
+            batch_last = loose_gnss_rows(_FixSlice(g2, o2[-2:]), self.cfg)[-1]
+            same = np.array_equal(batch_last, self._gnss_rows(n_keep - 1, n_keep)[-1], equal_nan=True)
         if not same:
             raise Fallback("a GNSS record after the last IMU sample changes the set-up")
         if records != len(g2):  # pragma: no cover - the cut fixes are the last in time order, never consumed
