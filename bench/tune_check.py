@@ -323,18 +323,10 @@ def kfgins(lines, verdicts, max_runs):
 
 
 def pos_reference_model(pos, ds, cfg, lag_s) -> ReferenceModel:
-    """The RTK ``.pos`` as a reference of the antenna: its own sigmas from its sdn/sde/sdu and sdvn/sdve/sdvu
-    columns, its velocity column lagging by ``lag_s``, the angular rate from the IMU's angle increments."""
-    from insnav.io.gnss_files import read_pos_records
+    """The RTK ``.pos`` as a reference of the antenna (insnav.calib.tune.pos_reference_model)."""
+    from insnav.calib.tune import pos_reference_model as model
 
-    rec = read_pos_records(pos)
-    t = rec.t_ref_s + np.asarray(rec.t_s, float) - ds.gps_time_offset_s
-    w_t, w_b = ReferenceModel.omega_from_imu(ds.imu)
-    return ReferenceModel(lever_arm_b=np.asarray(ds.lever_arm_b, float), t=t,
-                          sigma_pos_n_m=np.asarray(rec.sigma_pos_n, float),
-                          sigma_vel_n_mps=np.asarray(rec.sigma_vel_n, float), velocity_lag_s=lag_s,
-                          omega_t=w_t, omega_ib_b_radps=w_b,
-                          source="the `.pos` file's own sdn, sde, sdu and sdvn, sdve, sdvu columns at each epoch")
+    return model(pos, ds, lag_s)
 
 
 def walk_loose(lines, verdicts, max_runs, only_still=False):

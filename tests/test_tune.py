@@ -15,6 +15,9 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import tomllib
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -458,3 +461,31 @@ def test_tune_keeps_the_users_smoothing_for_the_report_and_the_file(sim_dir, tmp
 
     assert "smoother" in sol.summary  # the file runs the smoother
     assert holdout_report(sol, ds.truth, t_from=smo.t_split)["hor_rms_m"] == pytest.approx(reported, abs=6e-5)
+
+
+@pytest.mark.slow
+def test_cli_reference_that_is_the_fixes_is_checked_where_the_filter_did_not_see_it(shared_data, tmp_path, capsys):
+    """--reference = the .pos the loose filter reads (one fix in four, `[gnss] decimate = 4`): the held-out
+    reference epochs are those that were not fixes of the run, and the .pos's own sigmas and the lever arm
+    give the "antenna, sigma_ref" rows (insnav.calib.tune.pos_reference_model)."""
+    from insnav.calib.tune import unseen_reference_epochs
+    from insnav.analysis.evaluate import _read_truth
+
+    w = shared_data / "rtklibexplorer_walk_0827" / "raw"
+    pos = w / "gnss_1730_sf.pos"
+    cfg_path = Path(__file__).resolve().parent / "data" / "walk_0827_loose.toml"
+    out = tmp_path / "t.toml"
+    assert main(["tune", "--format", "csv", "--imu", str(w / "imu_1730.csv"), "--gnss", str(pos), "--config",
+                 str(cfg_path), "--reference", str(pos), "--params", "gnss_pos,gnss_vel", "--max-runs", "8",
+                 "--out", str(out), "-q"]) == 0
+    printed = capsys.readouterr().out
+    ds, _ = insnav.load_csv_dataset(w / "imu_1730.csv", pos, tomllib.loads(cfg_path.read_text()))
+    ref = _read_truth(str(pos))
+    unseen = unseen_reference_epochs(ref, ds.gnss.t_valid)
+    assert unseen is not None and 0 < len(unseen) < len(ref.t)
+    assert f"left out ({len(ref.t) - len(unseen)} of {len(ref.t)})" in printed
+    t_split = float(printed.split("held out: t >= ")[1].split(" s")[0])
+    want = int(np.sum((unseen >= t_split) & (unseen < ds.imu.t[-1])))
+    row = next(ln for ln in printed.splitlines() if ln.startswith("reference epochs  "))  # the table row
+    assert int(row.split()[-1]) == want
+    assert "rms(err/sigma) position N,E,D, antenna, sigma_ref" in printed

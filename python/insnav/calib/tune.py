@@ -808,6 +808,32 @@ class ReferenceModel:
         return np.column_stack([np.interp(t, np.asarray(self.t, float), x[:, i]) for i in range(3)])
 
 
+def pos_reference_model(pos, ds, velocity_lag_s: float = 0.0) -> ReferenceModel:
+    """An RTKLIB ``.pos`` as a reference of the antenna of ``ds`` (lever arm ``ds.lever_arm_b``): its own
+    sigmas from its sdn/sde/sdu and sdvn/sdve/sdvu columns at each epoch, its velocity column lagging by
+    ``velocity_lag_s`` [s], the angular rate of the lever arm's velocity term from the IMU's angle
+    increments (times in the dataset's time base: GPS time minus ``ds.gps_time_offset_s``)."""
+    from ..io.gnss_files import read_pos_records
+
+    rec = read_pos_records(pos)
+    t = rec.t_ref_s + np.asarray(rec.t_s, float) - float(ds.gps_time_offset_s)
+    w_t, w_b = ReferenceModel.omega_from_imu(ds.imu)
+    return ReferenceModel(lever_arm_b=np.asarray(ds.lever_arm_b, float), t=t,
+                          sigma_pos_n_m=np.asarray(rec.sigma_pos_n, float),
+                          sigma_vel_n_mps=np.asarray(rec.sigma_vel_n, float), velocity_lag_s=float(velocity_lag_s),
+                          omega_t=w_t, omega_ib_b_radps=w_b,
+                          source="the `.pos` file's own sdn, sde, sdu and sdvn, sdve, sdvu columns at each epoch")
+
+
+def unseen_reference_epochs(reference, gnss_t) -> np.ndarray | None:
+    """The reference epochs [s] that are not GNSS fix times of the run (1 ms), or None when no epoch is
+    (a reference independent of the fixes): a reference made of the same solution as the fixes, e.g. the
+    ``.pos`` the loose filter reads with ``[gnss] decimate``, is checked at the epochs the filter did not see."""
+    t_ref = np.round(np.asarray(reference.t, float), 3)
+    seen = np.isin(t_ref, np.round(np.asarray(gnss_t, float), 3))
+    return np.setdiff1d(t_ref, t_ref[seen]) if seen.any() else None
+
+
 def reference_errors(sol, reference, model: ReferenceModel | None = None, t=None) -> dict:
     """Errors of a solution against a reference that describes another point
     and has its own noise, and the variance a consistent filter predicts for them.

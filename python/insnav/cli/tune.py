@@ -133,27 +133,31 @@ def _fmt(x, nd=3):
     return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.{nd}f}"
 
 
-def report_table(rep_base: dict, rep_tuned: dict) -> list[str]:
-    """The before/after table (plain text) of two :func:`insnav.calib.tune.holdout_report` dicts."""
+def report_table(rep_base: dict, rep_tuned: dict, reference_model: bool = False) -> list[str]:
+    """The before/after table (plain text) of two :func:`insnav.calib.tune.holdout_report` dicts;
+    ``reference_model``: they were made with one (a ``.pos`` reference: the antenna, its own sigmas),
+    whose rms(error / sqrt(sigma^2 + sigma_ref^2)) rows are added."""
     rows = [("held-out GNSS records applied", "records", 0), ("mean NIS per row (expect 1)", "nis_per_row", 3),
             ("ln L per record", "log_likelihood_per_record", 3), ("reference epochs", "epochs", 0),
             ("horizontal RMS error [m]", "hor_rms_m", 4), ("3-D RMS error [m]", "rms_3d_m", 4)]
-    out = [f"{'':38s} {'base':>22s} {'tuned':>22s}"]
+    out = [f"{'':52s} {'base':>22s} {'tuned':>22s}"]
     for label, key, nd in rows:
         if key not in rep_base and key not in rep_tuned:
             continue
-        out.append(f"{label:38s} {_fmt(rep_base.get(key), nd):>22s} {_fmt(rep_tuned.get(key), nd):>22s}")
+        out.append(f"{label:52s} {_fmt(rep_base.get(key), nd):>22s} {_fmt(rep_tuned.get(key), nd):>22s}")
     f = (lambda v: "-" if v is None else ", ".join(f"{x:.2f}" for x in v))
     a, b = rep_base.get("innovation_lag1"), rep_tuned.get("innovation_lag1")
     if a is not None or b is not None:
-        out.append(f"{'innovation lag-1 autocorr. (0: white)':38s} {f(a):>22s} {f(b):>22s}")
+        out.append(f"{'innovation lag-1 autocorr. (0: white)':52s} {f(a):>22s} {f(b):>22s}")
     names = {"pos_n_m": "position N,E,D", "vel_n_mps": "velocity N,E,D", "att_deg": "attitude r,p,y"}
-    for key, suffix in (("nees", ""), ("nees_demeaned", ", mean out")):
+    for key, suffix in (("nees", ""), ("nees_demeaned", ", mean out"), ("nees_total", ", antenna, sigma_ref")):
+        if key == "nees_total" and not reference_model:
+            continue  # an exact reference of the IMU centre: the same figures as the first rows
         for k, label in names.items():
             a, b = rep_base.get(key, {}).get(k), rep_tuned.get(key, {}).get(k)
             if a is None and b is None:
                 continue
-            out.append(f"{'rms(err/sigma) ' + label + suffix:38s} {f(a):>22s} {f(b):>22s}")
+            out.append(f"{'rms(err/sigma) ' + label + suffix:52s} {f(a):>22s} {f(b):>22s}")
     lag = rep_tuned.get("innovation_lag1")
     if lag is not None and math.isfinite(lag[0]) and lag[0] > 0.3:
         out.append(f"note: the tuned run's innovations are correlated from record to record (lag-1 {lag[0]:.2f}): "
@@ -216,14 +220,33 @@ def cmd_tune(args) -> int:
                 raise UserError(f"--reference {args.reference}: {exc}") from None
         elif getattr(ds, "truth", None) is not None:
             reference = ds.truth
+        ref_kw, ref_note = {}, None
+        if args.reference and reference is not None:
+            # a GNSS solution (.pos) describes the antenna, with its own sigmas; its epochs that were also
+            # the filter's fixes are left out (the filter saw them)
+            from ..calib.tune import pos_reference_model, unseen_reference_epochs
+
+            unseen = unseen_reference_epochs(reference, ds.gnss.t_valid) if getattr(ds, "gnss", None) else None
+            if unseen is not None:
+                ref_kw["keep_t"] = unseen
+                ref_note = (f"reference epochs that were also GNSS fixes of the run left out ({len(reference.t) - len(unseen)} "
+                            f"of {len(reference.t)})")
+            if Path(args.reference).suffix.lower() == ".pos" and getattr(ds, "gps_time_offset_s", None) is not None:
+                same = args.gnss is not None and Path(args.gnss).resolve() == Path(args.reference).resolve()
+                lag = float(base_d.get("gnss", {}).get("velocity_lag_s", 0.0)) if same else 0.0
+                try:
+                    ref_kw["reference_model"] = pos_reference_model(args.reference, ds, lag)
+                except (OSError, ValueError) as exc:
+                    raise UserError(f"--reference {args.reference}: {exc}") from None
         res = tune(ds, cfg, filter=args.filter, coupling=args.coupling, params=params, holdout=args.holdout,
                    max_runs=args.max_runs, progress=progress, split=args.split, block_s=args.block_s)
         t_from = res.t_split if args.holdout > 0 else -math.inf
         reps = []
         for c in (res.base, res.tuned):
             sol = run(ds, config=dataclasses.replace(c))
-            reps.append(holdout_report(sol, reference, t_from=t_from) if res.split == "tail" or args.holdout == 0
-                        else holdout_report(sol, reference, intervals=res.heldout))
+            reps.append(holdout_report(sol, reference, t_from=t_from, **ref_kw)
+                        if res.split == "tail" or args.holdout == 0
+                        else holdout_report(sol, reference, intervals=res.heldout, **ref_kw))
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     if args.holdout > 0 and reps[0]["records"] == 0:
@@ -256,7 +279,9 @@ def cmd_tune(args) -> int:
     if res.tuned.smooth:
         print("the held-out figures are of the smoothed solution (smooth = true); the likelihood is the forward "
               "filter's")
-    for line in report_table(*reps):
+    if ref_note:
+        print(ref_note)
+    for line in report_table(*reps, reference_model="reference_model" in ref_kw):
         print(line)
     print(f"{out}: written (insnav run --config {out})" if args.format != "kfgins"
           else f"{out}: written (insnav run --format kfgins --config {args.config} --run-config {out})")
