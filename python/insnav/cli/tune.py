@@ -28,7 +28,9 @@ Nelder-Mead in log space (docs/algorithms.md, "Noise tuning"), one C++ run per e
 
 The table compares the base and the tuned settings on the held-out end of the data: mean NIS per
 measurement row of the applied GNSS records (1 when consistent) and, with a reference
-(--reference, or the simulator's truth), the horizontal RMS error and rms(error/sigma) per axis.
+(--reference, or the simulator's truth), the horizontal RMS error and rms(error/sigma) per axis.  A
+reference epoch that was also a GNSS fix of the run is left out; a .pos reference describes the
+antenna, with its own sdn/sde/sdu sigmas: rows of rms(error / sqrt(sigma^2 + sigma_ref^2)) are added.
 --out gets the base TOML with the tuned [imu] noise keys, gnss_pos_sigma_scale,
 gnss_vel_sigma_scale (loose: gnss_pos_v_sigma_scale), filter, coupling (and the tuned [constraints] sigmas,
 pr_gm_sigma_m, pr_gm_tau_s): `insnav run --config`
