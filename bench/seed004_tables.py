@@ -15,8 +15,9 @@ velocity components are our E/N/-D):
     at or below 5 m (the paper's position bound) for at least 10 s
     (insnav.analysis.reconvergence_time with hold_s = 10); the same for the
     velocity error norm with 0.2 m/s; a run that never does is right-censored
-    (the window is the same for every run): the paired test counts it as slower
-    than every observed time.
+    (the window is the same for every run, the time at least 990 s): the paired
+    test counts it as the slower of its pair, with the larger Wilcoxon p of it
+    ranked above every observed difference and set to that bound.
 Tables give the median over runs and the 90th percentile where it matters.
 
 Also an unknown-heading campaign (the non-Gaussian start where a particle
@@ -261,7 +262,9 @@ def main(argv=None):
                 np.array([f(results[k][nb][key]) for k in ks], float))
 
     def vrow(claim, a_, b_, unit, lower=True, censored=False):
-        r = paired_test(a_, b_, lower_is_better=lower, nan_is_worst=censored)
+        # a run that never reconverged: at least the run's end less the 10 s hold after 800 s
+        r = paired_test(a_, b_, lower_is_better=lower, nan_is_worst=censored,
+                        censor_bound=(GRID[-1] + 1.0 - T_ON - 10.0) if censored else None)
         w(f"| {claim} | **{r.verdict()}** | {r.evidence(unit)} |")
         return r
 

@@ -113,7 +113,8 @@ def test_nan_is_worst_by_hand_and_as_a_large_substitute():
     assert r.median_diff == -1.0 and r.ratio == pytest.approx(3.0 / 1.5)
     # both censored: a tie; and with one censored pair the test equals substituting a value above all
     r2 = paired([1.0, np.nan, 5.0, np.nan], [3.0, np.nan, 2.0, 1.0], nan_is_worst=True)
-    assert (r2.wins, r2.losses, r2.ties, r2.censored) == (1, 2, 1, 2)
+    assert (r2.wins, r2.losses, r2.ties, r2.censored, r2.censored_ties) == (1, 2, 1, 1, 1)
+    assert "1 run(s) where neither reached it counted as ties" in r2.evidence()
     rng = np.random.default_rng(9)
     a, b = rng.normal(5, 1, 25), rng.normal(5.8, 1, 25)
     a[7] = np.nan
@@ -122,7 +123,7 @@ def test_nan_is_worst_by_hand_and_as_a_large_substitute():
     r, s = paired(a, b, nan_is_worst=True), paired(sub, b)
     assert (r.wins, r.losses, r.p_sign) == (s.wins, s.losses, s.p_sign)
     assert r.p_wilcoxon == pytest.approx(s.p_wilcoxon, rel=1e-12)
-    assert "1 run(s) where A or B never reached it counted as the worse" in r.evidence()
+    assert "1 run(s) where one of A, B never reached it counted as its loss" in r.evidence()
 
 
 def test_nan_is_worst_changes_the_verdict_where_dropping_hid_the_losses():
@@ -135,3 +136,28 @@ def test_nan_is_worst_changes_the_verdict_where_dropping_hid_the_losses():
     assert r.verdict() == "reproduced" and r.wins == 8 and r.median_diff == -math.inf
     with pytest.raises(ValueError, match="infinity"):
         paired([np.inf, 1.0], [1.0, 2.0], nan_is_worst=True)
+
+
+def test_censored_ranks_at_the_top_and_at_the_bound_keep_the_larger_p():
+    """The size of a censored difference is unknown: with censor_bound the test is also made with each
+    censored value at its bound (the smallest it can be), and the verdict keeps the larger p."""
+    # B (the EKF, say) never reached it in 12 runs, just past the observed values (bound 10); A is
+    # slightly worse in 8 observed runs: ranked at the top the censored runs make it "reproduced"
+    # (p 0.005), at the bound they are small differences and A's losses dominate
+    a = np.r_[np.full(12, 9.5), np.linspace(5.0, 9.0, 8)]
+    b = np.r_[np.full(12, np.nan), np.linspace(5.0, 9.0, 8) - 0.6]
+    top = paired(a, b, nan_is_worst=True)
+    both = paired(a, b, nan_is_worst=True, censor_bound=10.0)
+    sub = np.where(np.isnan(b), 10.0, b)
+    assert both.p_wilcoxon_bounds == (top.p_wilcoxon, wilcoxon_p(a - sub))
+    assert both.p_wilcoxon == max(top.p_wilcoxon, wilcoxon_p(a - sub))
+    assert top.verdict() == "reproduced" and top.p_wilcoxon < 0.01
+    assert both.a_better_by_ranks == 0 and both.verdict() == "not significant"  # the two readings disagree
+    assert "ranked at the top" in both.evidence()
+    # censored both ways: the median of -inf and +inf is undefined, without a warning
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = paired([np.nan, 1.0], [1.0, np.nan], nan_is_worst=True)
+    assert math.isnan(r.median_diff)

@@ -253,12 +253,16 @@ def test_csv_checks_on_a_halved_record(car_files, tmp_path, monkeypatch, imu_off
         assert rca == rcb != 0 and erra == errb and "GNSS is 1.0 s behind the IMU" in erra, (erra, errb)
 
 
-def test_per_speed_sigmas_of_fixes_without_velocity_stream_as_the_whole_table(car_files, tmp_path, monkeypatch):
+@pytest.mark.parametrize("push_max,block", [(7, BLOCK), (1, BLOCK), (2, 21), (4096, 21)])
+def test_per_speed_sigmas_of_fixes_without_velocity_stream_as_the_whole_table(car_files, tmp_path, monkeypatch,
+                                                                              push_max, block):
     """gnss_pos_sigma_per_speed_s on fixes without velocity: each fix's speed comes from its
-    neighbours (fix_speed_mps), so a pushed slice of fixes carries one fix of overlap on each side;
-    the streamed run writes the whole-file run's bytes (it differed at every slice end)."""
-    monkeypatch.setattr(stream, "BLOCK_LINES", BLOCK)
-    monkeypatch.setattr(stream, "GNSS_PUSH_MAX", 7)  # many slices of fixes
+    neighbours (fix_speed_mps), so a pushed slice of fixes carries one fix of overlap on each side,
+    and the central difference has one formula whatever the slice's spacing (numpy.gradient takes
+    another for equal spacings: 1e-9 apart); the streamed run writes the whole-file run's bytes (it
+    differed at every slice end)."""
+    monkeypatch.setattr(stream, "BLOCK_LINES", block)
+    monkeypatch.setattr(stream, "GNSS_PUSH_MAX", push_max)  # slices of 1, 2, 7 fixes, or as the blocks give
     _, d0 = car_files
     d = tmp_path / "nov"
     d.mkdir()
@@ -288,3 +292,31 @@ def test_output_rate_when_the_run_starts_at_a_blocks_end(car_files, tmp_path, mo
     assert (rca, rcb) == (0, 0), (erra, errb)
     _same_files(a, b)
     assert "output_decimation = 20" in (a.parent / "sol.csv.config.toml").read_text()
+
+
+def test_fixes_at_1_hz_whose_alignment_reads_the_whole_imu_file_do_not_hang(car_files, tmp_path, monkeypatch):
+    """1 Hz fixes: the course-over-ground start reads the whole IMU record in the alignment, and the
+    run then asked the reader thread for a block after its end, waiting for ever; it ends, with the
+    whole-file run's bytes."""
+    import faulthandler
+    import sys
+
+    monkeypatch.setattr(stream, "BLOCK_LINES", BLOCK)
+    _, d0 = car_files
+    d = tmp_path / "onehz"
+    d.mkdir()
+    (d / "imu.csv").write_bytes((d0 / "imu.csv").read_bytes())
+    lines = (d0 / "gnss.csv").read_text().splitlines()
+    cols = ["t", "lat", "lon", "h", "sigma_n", "sigma_e", "sigma_d"]
+    (d / "gnss.csv").write_text("\n".join([",".join(cols)] + [",".join(ln.split(",")[:4] + ln.split(",")[7:10])
+                                                               for ln in lines[1:]][::10]) + "\n")
+    (d / "run.toml").write_text(dumps_toml(config(gnss=dict(columns=cols))))
+    a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
+    faulthandler.dump_traceback_later(60, exit=True, file=sys.__stderr__)  # a hang fails, not blocks the suite
+    try:
+        rca, _, erra = _run(d, a, "--stream", "on")
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+    rcb, _, errb = _run(d, b, "--stream", "off")
+    assert (rca, rcb) == (0, 0), (erra, errb)
+    _same_files(a, b)

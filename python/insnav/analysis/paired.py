@@ -148,9 +148,14 @@ class PairedResult:
         Pairs left out because a or b is NaN (a run without the metric, e.g.
         one that never reconverged): named in :meth:`evidence`.
     censored : int
-        With ``nan_is_worst``: pairs where a or b is NaN, counted as the worse
-        side (a tie when both are NaN) instead of left out: named in
-        :meth:`evidence`.
+        With ``nan_is_worst``: pairs where exactly one of a, b is NaN, counted
+        as a loss of that side instead of left out: named in :meth:`evidence`.
+    censored_ties : int
+        With ``nan_is_worst``: pairs where both are NaN (ties).
+    p_wilcoxon_bounds : tuple or None
+        With ``nan_is_worst`` and ``censor_bound``: the Wilcoxon p with each
+        censored value ranked at the top and with it set to its bound;
+        ``p_wilcoxon`` is the larger.
     """
 
     n: int
@@ -168,6 +173,8 @@ class PairedResult:
     a_better_by_ranks: int = 0
     dropped: int = 0
     censored: int = 0
+    censored_ties: int = 0
+    p_wilcoxon_bounds: tuple | None = None
 
     def verdict(self, alpha: float = ALPHA) -> str:
         """reproduced / opposite / not significant (module docstring)."""
@@ -183,12 +190,17 @@ class PairedResult:
                 f"({self.level:.0%} CI {lo:{fmt}} .. {hi:{fmt}}); mean B / mean A = {self.ratio:.3g} "
                 f"(CI {rlo:.3g} .. {rhi:.3g})"
                 + (f"; {self.dropped} run(s) without a value for A or B left out" if self.dropped else "")
-                + (f"; {self.censored} run(s) where A or B never reached it counted as the worse (ratio of "
-                   "means over the other runs)" if self.censored else ""))
+                + (f"; {self.censored} run(s) where one of A, B never reached it counted as its loss"
+                   + ("" if self.p_wilcoxon_bounds is None else
+                      f" (Wilcoxon p {self.p_wilcoxon_bounds[0]:.2g} with it ranked at the top, "
+                      f"{self.p_wilcoxon_bounds[1]:.2g} at its bound: the larger kept)")
+                   + ", ratio of means over the runs with both" if self.censored else "")
+                + (f"; {self.censored_ties} run(s) where neither reached it counted as ties"
+                   if self.censored_ties else ""))
 
 
 def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: int = 2000,
-           seed: int = 0, nan_is_worst: bool = False) -> PairedResult:
+           seed: int = 0, nan_is_worst: bool = False, censor_bound=None) -> PairedResult:
     """Compare method A with method B on paired per-run values.
 
     Parameters
@@ -209,10 +221,17 @@ def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: i
         Read NaN as a right-censored value worse than every observed one (a run
         that never reconverged inside a window shared by all runs, whose
         observed times all lie below the censoring point).  A pair with one NaN
-        is a win for the other side, its difference tied at the largest rank
-        (its size is unknown); a pair of NaNs is a tie.  The median difference
-        and its interval take such a difference as infinite; the ratio of means
-        is over the pairs without a NaN.
+        is a win for the other side; a pair of NaNs is a tie.  The size of such
+        a difference is unknown: the Wilcoxon ranks take it as larger than
+        every observed one (an assumption), and with ``censor_bound`` also as
+        the smallest it can be (the censored value at its bound), the verdict
+        then resting on the larger p and on both giving the same direction.
+        The median difference and its interval take such a difference as
+        infinite (undefined, NaN, when the two middle ones are -inf and +inf);
+        the ratio of means is over the pairs without a NaN.
+    censor_bound : float or array_like (n,), optional
+        With ``nan_is_worst``: the least value a censored run can have (e.g. the
+        window's end less the hold time), per run or for all.
 
     Returns
     -------
@@ -226,7 +245,7 @@ def paired(a, b, *, lower_is_better: bool = True, level: float = 0.95, n_boot: i
     if nan_is_worst:
         if np.isinf(a).any() or np.isinf(b).any():
             raise ValueError("paired: nan_is_worst reads NaN as censored; a or b holds an infinity")
-        return _paired_censored(a, b, ok, lower_is_better, level, n_boot, seed)
+        return _paired_censored(a, b, ok, lower_is_better, level, n_boot, seed, censor_bound)
     dropped = int(a.size - ok.sum())
     a, b = a[ok], b[ok]
     d = a - b
@@ -255,7 +274,21 @@ def _ratio_of_means(a, b, level, n_boot, seed):
     return ratio, (float(np.nanquantile(rb, q)), float(np.nanquantile(rb, 1 - q)))
 
 
-def _paired_censored(a, b, ok, lower_is_better, level, n_boot, seed) -> PairedResult:
+def _median(d: np.ndarray) -> float:
+    """Median of d (may hold +-inf): NaN, without a warning, when the two middle values are -inf and +inf."""
+    if not d.size:
+        return math.nan
+    ds = np.sort(d)
+    n = ds.size
+    if n % 2:
+        return float(ds[n // 2])
+    lo, hi = ds[n // 2 - 1], ds[n // 2]
+    if np.isinf(lo) and np.isinf(hi) and lo != hi:
+        return math.nan
+    return float(lo) if lo == hi else float(0.5 * (lo + hi))
+
+
+def _paired_censored(a, b, ok, lower_is_better, level, n_boot, seed, censor_bound=None) -> PairedResult:
     """:func:`paired` with NaN read as worse than every value (its ``nan_is_worst``)."""
     worst = math.inf if lower_is_better else -math.inf
     na, nb = np.isnan(a), np.isnan(b)
@@ -269,14 +302,25 @@ def _paired_censored(a, b, ok, lower_is_better, level, n_boot, seed) -> PairedRe
     fin = np.isfinite(d)
     top = (np.abs(d[fin]).max() if fin.any() else 0.0) + 1.0
     d_rank = np.where(fin, d, np.sign(d) * top)  # one side censored: tied above every observed |d|
+    p_w = wilcoxon_p(d_rank)
+    direction = _signed_rank_direction(-d_rank if lower_is_better else d_rank)
+    bounds = None
+    if censor_bound is not None and (na ^ nb).any():
+        c = np.broadcast_to(np.asarray(censor_bound, float), a.shape)
+        d_b = np.where(na, c, a) - np.where(nb, c, b)
+        d_b[na & nb] = 0.0
+        p_b = wilcoxon_p(d_b)
+        bounds = (p_w, p_b)
+        dir_b = _signed_rank_direction(-d_b if lower_is_better else d_b)
+        p_w = max(p_w, p_b)
+        direction = direction if direction == dir_b else 0
     ratio, ratio_ci = _ratio_of_means(a[ok], b[ok], level, n_boot, seed)
     return PairedResult(n=int(a.size), wins=wins, losses=losses, ties=int(a.size - wins - losses),
-                        p_sign=sign_test_p(wins, losses), p_wilcoxon=wilcoxon_p(d_rank),
-                        median_diff=float(np.median(d)) if d.size else math.nan,
-                        median_diff_ci=_median_ci(d, level), ratio=ratio, ratio_ci=ratio_ci, level=level,
-                        lower_is_better=lower_is_better,
-                        a_better_by_ranks=_signed_rank_direction(-d_rank if lower_is_better else d_rank),
-                        censored=int((na | nb).sum()))
+                        p_sign=sign_test_p(wins, losses), p_wilcoxon=p_w,
+                        median_diff=_median(d), median_diff_ci=_median_ci(d, level), ratio=ratio,
+                        ratio_ci=ratio_ci, level=level, lower_is_better=lower_is_better,
+                        a_better_by_ranks=direction, censored=int((na ^ nb).sum()),
+                        censored_ties=int((na & nb).sum()), p_wilcoxon_bounds=bounds)
 
 
 def verdict(res: PairedResult, alpha: float = ALPHA) -> str:

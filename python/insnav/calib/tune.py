@@ -520,7 +520,8 @@ class TuneResult:
     heldout: list = field(default_factory=list)
     tuning: list = field(default_factory=list)
     #: ``[time] estimate_offset = "auto"``: the test that settled it before the search (the base
-    #: settings with the state, on the first dataset; insnav.filters._run_offset_auto), after which
+    #: settings with the state, on the first dataset's tuning segment, the whole of it with the blocks
+    #: split; insnav.filters._run_offset_auto), after which
     #: every run and the written file carry true or false; None otherwise
     time_offset_test: dict | None = None
 
@@ -632,8 +633,8 @@ def tune(dataset, config=None, *, filter: str | None = None, coupling: str | Non
     if cfg.time.estimate_offset == "auto":  # settled once, so every run (tuning, report, the file) is one model
         from ..filters import _run_offset_auto
 
-        probe = dataclasses.replace(cfg, imu=noise)
-        offset_test = _run_offset_auto(spec, datasets[0], probe, options).summary["time_offset_test"]
+        probe = dataclasses.replace(cfg, imu=noise)  # on the tuning segment (tail split): not the held-out data
+        offset_test = _run_offset_auto(spec, segs[0], probe, options).summary["time_offset_test"]
         cfg.time = dataclasses.replace(cfg.time, estimate_offset=bool(offset_test["state_kept"]))
     seg = segs[0]
     dt = float(np.median(np.diff(np.asarray(seg.imu.t[:1000], float)))) if len(seg.imu.t) > 2 else 1.0

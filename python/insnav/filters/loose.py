@@ -81,9 +81,24 @@ def fix_speed_mps(rows) -> np.ndarray:
         else:
             r, t = 6378137.0, rows[:, 0]
             with np.errstate(invalid="ignore", divide="ignore"):
-                vh = r * np.hypot(np.gradient(rows[:, 1], t), np.gradient(rows[:, 2], t) * np.cos(rows[:, 1]))
+                vh = r * np.hypot(_gradient(rows[:, 1], t), _gradient(rows[:, 2], t) * np.cos(rows[:, 1]))
             v[miss] = np.where(np.isfinite(vh[miss]), vh[miss], 0.0)
     return v
+
+
+def _gradient(f: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """df/dt: the second-order central difference of unequal spacing at interior points (numpy.gradient's
+    formula; used always, where numpy.gradient takes another when every spacing of its input is equal,
+    so that each value depends on its neighbours alone and the block-by-block run's slices give the
+    whole table's values), first-order one-sided at the ends.  At least 2 points."""
+    g = np.empty_like(f)
+    h = np.diff(t)
+    g[0] = (f[1] - f[0]) / h[0]
+    g[-1] = (f[-1] - f[-2]) / h[-1]
+    if f.size > 2:
+        h0, h1 = h[:-1], h[1:]
+        g[1:-1] = (h0 ** 2 * f[2:] - h1 ** 2 * f[:-2] + (h1 ** 2 - h0 ** 2) * f[1:-1]) / (h0 * h1 * (h0 + h1))
+    return g
 
 
 def loose_gnss_rows(g, cfg: RunConfig) -> np.ndarray:

@@ -32,6 +32,7 @@ from .. import _core
 from ..config import RunConfig
 from ..data.nav import NavState
 from ..units import DEG
+from ._setup import lever_arm
 from .loose import apply_sigma_factors, has_speed_terms, loose_engine_args
 
 __all__ = ["Navigator", "TightNavigator", "DelayNavigator"]
@@ -186,7 +187,7 @@ class Navigator(_PushApi):
         if cfg.smooth:
             raise ValueError("Navigator: the RTS smoother needs the whole run (insnav.run(..., smooth=True))")
         _refuse_batch_only(cfg, "Navigator")
-        lever = np.asarray(dataset.lever_arm_b, float)
+        lever = lever_arm(dataset, cfg)  # the config's wins (validated with it)
         if lever.shape != (3,) or not np.all(np.isfinite(lever)):
             raise ValueError(f"Navigator: lever_arm_b must be 3 finite numbers [m], got {lever.tolist()}")
         a = loose_engine_args(dataset, cfg, record_t)

@@ -317,6 +317,7 @@ class _Prefetch:
         import threading
 
         self._gen = gen
+        self._done = False
         self._q = queue.Queue(maxsize=depth)
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._run, name="insnav-imu-reader", daemon=True)
@@ -348,8 +349,11 @@ class _Prefetch:
         return self
 
     def __next__(self):
+        if self._done:  # the end was taken already: a later call must not wait on the empty queue
+            raise StopIteration
         item = self._q.get()
         if item is self._END:
+            self._done = True
             raise StopIteration
         if isinstance(item, BaseException):
             raise item
