@@ -253,6 +253,19 @@ def test_csv_checks_on_a_halved_record(car_files, tmp_path, monkeypatch, imu_off
         assert rca == rcb != 0 and erra == errb and "GNSS is 1.0 s behind the IMU" in erra, (erra, errb)
 
 
+def _without_velocity(d0, d, every: int = 1, **run_keys):
+    """The car's files in ``d`` with every ``every``-th fix and no velocity columns (position and its
+    sigmas only); ``run_keys`` added to its run TOML."""
+    d.mkdir()
+    (d / "imu.csv").write_bytes((d0 / "imu.csv").read_bytes())
+    lines = (d0 / "gnss.csv").read_text().splitlines()
+    cols = ["t", "lat", "lon", "h", "sigma_n", "sigma_e", "sigma_d"]
+    rows = [",".join(ln.split(",")[:4] + ln.split(",")[7:10]) for ln in lines[1:]][::every]
+    (d / "gnss.csv").write_text("\n".join([",".join(cols)] + rows) + "\n")
+    (d / "run.toml").write_text(dumps_toml(config(gnss=dict(columns=cols), **run_keys)))
+    return d
+
+
 @pytest.mark.parametrize("push_max,block", [(7, BLOCK), (1, BLOCK), (2, 21), (4096, 21)])
 def test_per_speed_sigmas_of_fixes_without_velocity_stream_as_the_whole_table(car_files, tmp_path, monkeypatch,
                                                                               push_max, block):
@@ -263,15 +276,7 @@ def test_per_speed_sigmas_of_fixes_without_velocity_stream_as_the_whole_table(ca
     differed at every slice end)."""
     monkeypatch.setattr(stream, "BLOCK_LINES", block)
     monkeypatch.setattr(stream, "GNSS_PUSH_MAX", push_max)  # slices of 1, 2, 7 fixes, or as the blocks give
-    _, d0 = car_files
-    d = tmp_path / "nov"
-    d.mkdir()
-    (d / "imu.csv").write_bytes((d0 / "imu.csv").read_bytes())
-    lines = (d0 / "gnss.csv").read_text().splitlines()
-    cols = ["t", "lat", "lon", "h", "sigma_n", "sigma_e", "sigma_d"]
-    (d / "gnss.csv").write_text("\n".join([",".join(cols)] + [",".join(ln.split(",")[:4] + ln.split(",")[7:10])
-                                                               for ln in lines[1:]]) + "\n")
-    (d / "run.toml").write_text(dumps_toml(config(gnss=dict(columns=cols), gnss_pos_sigma_per_speed_s=0.5)))
+    d = _without_velocity(car_files[1], tmp_path / "nov", gnss_pos_sigma_per_speed_s=0.5)
     a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
     rca, outa, erra = _run(d, a, "--stream", "on")
     rcb, outb, errb = _run(d, b, "--stream", "off")
@@ -302,15 +307,7 @@ def test_fixes_at_1_hz_whose_alignment_reads_the_whole_imu_file_do_not_hang(car_
     import sys
 
     monkeypatch.setattr(stream, "BLOCK_LINES", BLOCK)
-    _, d0 = car_files
-    d = tmp_path / "onehz"
-    d.mkdir()
-    (d / "imu.csv").write_bytes((d0 / "imu.csv").read_bytes())
-    lines = (d0 / "gnss.csv").read_text().splitlines()
-    cols = ["t", "lat", "lon", "h", "sigma_n", "sigma_e", "sigma_d"]
-    (d / "gnss.csv").write_text("\n".join([",".join(cols)] + [",".join(ln.split(",")[:4] + ln.split(",")[7:10])
-                                                               for ln in lines[1:]][::10]) + "\n")
-    (d / "run.toml").write_text(dumps_toml(config(gnss=dict(columns=cols))))
+    d = _without_velocity(car_files[1], tmp_path / "onehz", every=10)
     a, b = tmp_path / "a" / "sol.csv", tmp_path / "b" / "sol.csv"
     faulthandler.dump_traceback_later(60, exit=True, file=sys.__stderr__)  # a hang fails, not blocks the suite
     try:
