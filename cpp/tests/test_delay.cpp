@@ -152,6 +152,44 @@ void test_rdkf_reduces_to_kf() {
   }
 }
 
+// --- 1b. p = [1] through the gate's lock-out recovery and its outage-aware test ----
+/// A lasting 3 m position step after 8 s (the gate locks out and reopens with the covariance
+/// scaled, ClosedLoop::update_gated) and a 3 s gap (the outage-aware test): the RDKF with
+/// p = [1] takes the loose engine's steps, row for row.
+template <int S>
+void test_rdkf_gate_reopen_reduces_to_kf(double gap_end, double step_m, bool want_bridge) {
+  Data d = make_data(20.0, {0});
+  const wgs84::Radii r = wgs84::radii(kLat);
+  std::vector<GnssFix> kept;
+  std::vector<double> arr;
+  for (size_t i = 0; i < d.fixes.size(); ++i) {
+    GnssFix f = d.fixes[i];
+    if (f.t > 4.0 && f.t < gap_end) continue;  // the gap
+    if (f.t > gap_end - 1e-9) f.lat += step_m / (r.R_M + kH);  // the step, from the first fix after the gap
+    kept.push_back(f);
+    arr.push_back(d.t_arr[i]);
+  }
+  d.fixes = kept;
+  d.t_arr = arr;
+  const auto n = static_cast<std::int64_t>(d.t.size());
+  const auto m = static_cast<std::int64_t>(d.fixes.size());
+  Out ref(n, m), rd(n, m);
+  run_loose(d, false, ref);
+  const double p[1] = {1.0};
+  auto eng = std::make_unique<RandomDelayEngine<Layout15, S>>(ImuErrorModel{}, LooseConfig{}, DelayConfig{}, p, 1);
+  eng->run(d.init, P0(), ImuCorrection{}, n, d.t.data(), d.dth.data(), d.dv.data(), m, d.fixes.data(),
+           d.t_arr.data(), static_cast<std::int64_t>(d.epochs.size()), d.epochs.data(), rd.o);
+  std::printf("S=%d gate: EKF updates %d reopened %d outage-accepted %d; RDKF %d / %d / %d\n", S, ref.o.updates,
+              ref.o.gate_reopened, ref.o.gate_outage_accepted, rd.o.updates, rd.o.gate_reopened,
+              rd.o.gate_outage_accepted);
+  EXPECT_TRUE(want_bridge ? ref.o.gate_outage_accepted >= 1 : ref.o.gate_reopened >= 1);  // the case is exercised
+  EXPECT_TRUE(rd.o.updates == ref.o.updates && rd.o.gate_reopened == ref.o.gate_reopened);
+  EXPECT_TRUE(rd.o.gate_outage_accepted == ref.o.gate_outage_accepted);
+  const double diff = max_pos_diff_m(rd, ref);
+  std::printf("  max position difference %.3g m\n", diff);
+  EXPECT_LT(diff, 1e-6);  // rounding of the two update forms, carried by the covariance scaling (metres without it)
+}
+
 // --- 2. shift: new(i, j) = old(max(i-1,0), max(j-1,0)) -----------------------
 void test_shift() {
   RandomDelayKf<Layout15, 2> f(ImuErrorModel{});
@@ -357,6 +395,10 @@ void test_rdkf_push_refuses() {
 }  // namespace
 
 int main() {
+  test_rdkf_gate_reopen_reduces_to_kf<0>(7.0, 3.0, false);
+  test_rdkf_gate_reopen_reduces_to_kf<3>(7.0, 3.0, false);
+  test_rdkf_gate_reopen_reduces_to_kf<3>(12.0, 0.5, true);  // the outage-aware test passes it
+  test_rdkf_gate_reopen_reduces_to_kf<3>(16.0, 1.0, true);  // and with a reopening after it
   test_rdkf_reduces_to_kf<1>();
   test_rdkf_reduces_to_kf<4>();
   test_shift();

@@ -191,16 +191,30 @@ class RandomDelayEngine {
       meas_[i].set(refs_[i].nav, refs_[i].omega_ib_b, cfg_.lever_arm_b, fix);
       hyp[i] = &meas_[i].linear();
     }
-    // the gate of the record stream; when it reopens (gate_reopen_after) the
-    // record is applied ungated, without the covariance scaling of
-    // ClosedLoop::update_gated (the stacked random-delay covariance has no
-    // single P to scale)
-    const bool forced = core_.gate.reopening();  // threshold() is 0 then: applied ungated
+    // the gate of the record stream, as ClosedLoop::update_gated applies it (nis_gate.hpp): the
+    // outage-aware test, then on a lock-out the whole stacked covariance scaled by lambda = NIS / m
+    // and the record applied ungated; with delay_p = [1] the loose engine's steps exactly
     int rows = 0;  // every hypothesis has the fix's rows
     for (const auto* h : hyp)
       if (h && rows == 0) rows = h->rows();
-    const UpdateResult res = core_.filter.update_delayed(hyp, core_.gate.threshold(rows));
-    core_.gate.record(res, forced);
+    const double t = core_.ins.state().t;
+    double threshold = core_.gate.nominal_threshold(rows);
+    bool bridged = false;
+    if (threshold > 0.0 && core_.gate.outage_aware(t) &&
+        core_.filter.mismatch_nis(hyp, core_.gate.config().mismatch) <= threshold) {
+      bridged = true;
+      threshold = 0.0;
+    }
+    UpdateResult res = core_.filter.update_delayed(hyp, threshold);
+    if (bridged && res.applied && !(res.nis > core_.gate.nominal_threshold(rows))) bridged = false;
+    bool forced = false;
+    if (res.rejected_by_gate && core_.gate.reopening()) {
+      const double lambda = res.nis / rows;
+      if (lambda > 1.0 && std::isfinite(lambda)) core_.filter.inflate_covariance(lambda);
+      res = core_.filter.update_delayed(hyp, 0.0);
+      forced = res.applied;
+    }
+    core_.gate.record(res, forced, t, bridged);
     core_.touch();
     if (res.rows > 0) out.write_innovation(g, fix, core_.filter.last_mean_residual());
     if (out.nis) out.nis[g] = res.rows > 0 ? res.nis : NAN;

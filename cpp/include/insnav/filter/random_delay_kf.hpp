@@ -38,6 +38,7 @@
 
 #include <Eigen/Cholesky>
 #include <array>
+#include <limits>
 
 #include "insnav/check.hpp"
 #include "insnav/filter/error_model_linear.hpp"
@@ -135,6 +136,50 @@ class RandomDelayKf {
   /// the epoch of block i (residual = INS at that epoch - record).
   UpdateResult update_delayed(const Hypotheses& hyp, double gate_chi2) {
     UpdateResult res;
+    const int m = innovation(hyp, 1.0);
+    if (m == 0) return res;  // no filled slot has a non-zero probability
+    res.rows = m;
+    Eigen::LLT<MMat> llt(Smat_);
+    if (llt.info() != Eigen::Success) {
+      res.cholesky_repairs = 1;
+      ++repairs_;
+      return res;
+    }
+    res.nis = nubar_.dot(llt.solve(nubar_));
+    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
+      res.rejected_by_gate = true;
+      return res;
+    }
+    M_ = llt.solve(ap_).transpose();  // Pbar Abar' S^-1 (eq. (17))
+    xbar_.noalias() += M_ * nubar_;
+    MAP_.noalias() = M_ * ap_;
+    Pbar_ -= MAP_;
+    Pbar_ -= MAP_.transpose();
+    Pbar_.noalias() += M_ * Smat_ * M_.transpose();
+    Pbar_ = 0.5 * (Pbar_ + Pbar_.transpose()).eval();
+    res.applied = true;
+    return res;
+  }
+
+  /// The record's NIS under S_a = alpha Abar Pbar Abar' + R + spread: the outage-aware test of the
+  /// record stream's gate (nis_gate.hpp; ClosedLoop::mismatch_nis for one hypothesis, which it equals
+  /// with delay_p = [1]); +inf when S_a is not positive definite, 0 without a usable hypothesis.
+  double mismatch_nis(const Hypotheses& hyp, double alpha) {
+    if (innovation(hyp, alpha) == 0) return 0.0;
+    Eigen::LLT<MMat> llt(Smat_);
+    if (llt.info() != Eigen::Success) return std::numeric_limits<double>::infinity();
+    return nubar_.dot(llt.solve(nubar_));
+  }
+
+  /// The whole stacked covariance times lambda (the gate's lock-out recovery, nis_gate.hpp: the
+  /// covariance under which the innovation is ordinary; ClosedLoop::update_gated).  Scaling every
+  /// block keeps the cross blocks waiting for end_cycle() consistent (the cycle transition is linear).
+  void inflate_covariance(double lambda) { Pbar_ *= lambda; }
+
+ private:
+  /// The probability-weighted innovation of a record (seed 001 eq. (17)) into nubar_, rbar_, ap_ and
+  /// Smat_ = alpha Abar Pbar Abar' + R + spread; its rows (0: no hypothesis with p > 0).
+  int innovation(const Hypotheses& hyp, double alpha) {
     double wsum = 0.0;
     int first = -1;
     for (int i = 0; i < kBlocks; ++i)
@@ -142,10 +187,9 @@ class RandomDelayKf {
         wsum += p_[i];
         if (first < 0) first = i;
       }
-    if (first < 0) return res;  // no filled slot has a non-zero probability
+    if (first < 0) return 0;
     const int m = hyp[first]->rows();
     INSNAV_CHECK(m >= 1 && m <= kMaxRows, "random-delay update: 1..6 measurement rows");
-    res.rows = m;
     Eigen::Matrix<double, kBlocks, 1> w = Eigen::Matrix<double, kBlocks, 1>::Zero();
     std::array<MVec, kBlocks> nu;
     nubar_.setZero(m);
@@ -168,37 +212,20 @@ class RandomDelayKf {
       const int c = h.n_cols;
       ap_.noalias() += w[i] * h.H.leftCols(c) * Pbar_.middleRows(i * kN, c);
     }
-    MMat Smat = hyp[first]->R;
+    Smat_ = hyp[first]->R;
     for (int i = 0; i < kBlocks; ++i) {
       if (w[i] == 0.0) continue;
       const LinearMeasurement<L>& h = *hyp[i];
       const int c = h.n_cols;
-      Smat.noalias() += w[i] * ap_.middleCols(i * kN, c) * h.H.leftCols(c).transpose();
+      Smat_.noalias() += (alpha * w[i]) * ap_.middleCols(i * kN, c) * h.H.leftCols(c).transpose();
       const MVec d = nu[i] - nubar_;
-      Smat.noalias() += w[i] * d * d.transpose();  // spread term of eq. (17)
+      Smat_.noalias() += w[i] * d * d.transpose();  // spread term of eq. (17)
     }
-    Smat = 0.5 * (Smat + Smat.transpose()).eval();
-    Eigen::LLT<MMat> llt(Smat);
-    if (llt.info() != Eigen::Success) {
-      res.cholesky_repairs = 1;
-      ++repairs_;
-      return res;
-    }
-    res.nis = nubar_.dot(llt.solve(nubar_));
-    if (gate_chi2 > 0.0 && !(res.nis <= gate_chi2)) {
-      res.rejected_by_gate = true;
-      return res;
-    }
-    M_ = llt.solve(ap_).transpose();  // Pbar Abar' S^-1 (eq. (17))
-    xbar_.noalias() += M_ * nubar_;
-    MAP_.noalias() = M_ * ap_;
-    Pbar_ -= MAP_;
-    Pbar_ -= MAP_.transpose();
-    Pbar_.noalias() += M_ * Smat * M_.transpose();
-    Pbar_ = 0.5 * (Pbar_ + Pbar_.transpose()).eval();
-    res.applied = true;
-    return res;
+    Smat_ = 0.5 * (Smat_ + Smat_.transpose()).eval();
+    return m;
   }
+
+ public:
 
   /// Newest block (eq. (11)): what the engine feeds back and outputs.
   Vec x() const { return xbar_.template head<kN>(); }
@@ -223,6 +250,7 @@ class RandomDelayKf {
   Gain M_;
   StackedCov MAP_;
   MVec nubar_, rbar_;
+  MMat Smat_;
   int repairs_ = 0;
 };
 
