@@ -82,3 +82,53 @@ def test_a_comparison_of_nothing_is_refused():
     no_gnss = {"extends": "seed001-low", "gnss": {"enabled": False}}
     with pytest.raises(ValueError, match=r"filter 'kf' used no GNSS update in run 0"):
         insnav.montecarlo(no_gnss, ("kf",), runs=1, skip_s=5.0, backend="serial")
+
+
+def test_a_filter_with_one_coupling_runs_it_without_being_told():
+    """fukf, upf and pf run tightly coupled only: run() and the campaign take that coupling when none is
+    given (as spp and rtk take their GNSS-only one); the same numbers as with coupling="tight"."""
+    ds = insnav.simulate("seed004-uav", seed=1)
+    a = insnav.run(ds, "fukf", output_decimation=50)
+    b = insnav.run(ds, "fukf", "tight", output_decimation=50)
+    assert a.summary["coupling"] == "tight"
+    np.testing.assert_array_equal(a.lat_deg, b.lat_deg)
+    with pytest.raises(ValueError, match="runs tightly coupled only"):
+        insnav.run(ds, "fukf", "loose")
+
+
+montecarlo = insnav.montecarlo
+
+
+def test_campaign_arguments_refused_before_any_run():
+    with pytest.raises(ValueError, match="'init_seed' is set per run by the campaign"):
+        montecarlo("seed001-high", ("kf",), runs=2, init_seed=3)
+    for bad in (True, 2.0, 0):
+        with pytest.raises(ValueError, match="runs must be a whole number >= 1"):
+            montecarlo("seed001-high", ("kf",), runs=bad)
+    with pytest.raises(ValueError, match="skip_s"):
+        montecarlo("seed001-high", ("kf",), runs=1, skip_s=True)
+    # a skip inside the scenario's duration but past the solution's last row: named, not a numpy error
+    with pytest.raises(ValueError, match="leaves no solution row"):
+        montecarlo("seed001-high", ("kf",), runs=1, skip_s=174.995, backend="serial")
+
+
+def test_a_dict_scenario_is_named_by_its_name():
+    from insnav.sim.scenario import resolve_raw
+
+    raw, _ = resolve_raw("seed001-high")
+    r = montecarlo(raw, ("kf",), runs=1, backend="serial")
+    assert r.scenario == "seed001-high"
+
+
+def test_a_failing_campaign_stops_without_running_the_queued_runs():
+    """The local backend cancels the queued runs when one fails (it waited for all of them)."""
+    import time
+
+    took = {}
+    for runs in (2, 200):
+        t0 = time.perf_counter()
+        with pytest.raises(Exception, match="delay_p"):
+            montecarlo("seed001-high", ("rdkf",), runs=runs, workers=2, delay_p=[5.0])
+        took[runs] = time.perf_counter() - t0
+    # each failing run costs its simulation (about 35 ms): 200 of them waited for took about 7 s
+    assert took[200] < took[2] + 2.0, took

@@ -94,6 +94,9 @@ def _metrics(sol, truth, skip_s: float) -> dict:
 
     e = errors(sol, truth)
     keep = e["t"] >= e["t"][0] + skip_s
+    if not keep.any():
+        raise ValueError(f"montecarlo: skip_s (--skip-s) {skip_s:g} s leaves no solution row to compare (the "
+                         f"rows span {e['t'][-1] - e['t'][0]:g} s)")
     pos, vel = e["pos_n_m"][keep], e["vel_n_mps"][keep]
     rms = lambda x: float(np.sqrt(np.mean(np.square(x))))  # noqa: E731
     return dict(pos_n_rmse_m=rms(pos[:, 0]), pos_e_rmse_m=rms(pos[:, 1]), vel_n_rmse_mps=rms(vel[:, 0]),
@@ -142,10 +145,13 @@ def _map_local(fn, tasks, workers):
         return
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers) as ex:
+    ex = ProcessPoolExecutor(max_workers=workers)
+    try:
         futs = {ex.submit(fn, t): t.index for t in tasks}
         for f in as_completed(futs):
             yield futs[f], f.result()
+    finally:  # a failed run (or a closed generator) cancels the queued ones instead of waiting for them
+        ex.shutdown(wait=True, cancel_futures=True)
 
 
 class BackendError(RuntimeError):
@@ -428,8 +434,12 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
             raise ValueError(f"montecarlo: filter {f!r} is GNSS only (it reads RINEX files: insnav run --filter "
                              f"{f} --format rinex); the campaign runs the INS filters: "
                              f"{', '.join(n for n, s_ in FILTERS.items() if s_.couplings != ('gnss',))}")
-    if runs < 1:
-        raise ValueError(f"montecarlo: runs must be >= 1, got {runs}")
+    if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
+        raise ValueError(f"montecarlo: runs must be a whole number >= 1, got {runs!r}")
+    reserved = sorted(k for k in run_kwargs if k in ("init_seed", "filter"))
+    if reserved:
+        raise ValueError(f"montecarlo: option {reserved[0]!r} is set per run by the campaign (init_seed from the "
+                         "master seed, the filters from `filters`); leave it out")
     if backend not in _BACKENDS:
         raise ValueError(f"montecarlo: unknown backend {backend!r}; available: {', '.join(sorted(_BACKENDS))}")
     mapper = _BACKENDS[backend]
@@ -446,7 +456,7 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
     from ..sim.scenario import load_scenario, resolve_raw
 
     sc = load_scenario(scenario)  # a bad scenario fails here, once, not in every worker
-    if not (isinstance(skip_s, (int, float)) and 0.0 <= skip_s < sc.duration):
+    if isinstance(skip_s, bool) or not (isinstance(skip_s, (int, float)) and 0.0 <= skip_s < sc.duration):
         raise ValueError(f"montecarlo: skip_s (--skip-s) {skip_s!r}; allowed: 0 <= skip_s < the scenario's "
                          f"{sc.duration:g} s (the errors are taken after it)")
     sent = scenario
@@ -456,7 +466,8 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
     tasks = [Task(i, sent, filters, s, q, float(skip_s), tuple(sorted(run_kwargs.items())))
              for i, (s, q) in enumerate(run_seeds(seed, runs))]
     results = [None] * runs
-    bar = _Progress(runs, progress, f"{scenario} x {','.join(filters)}")
+    name = scenario if isinstance(scenario, str) else str(getattr(sc, "name", None) or getattr(scenario, "name", scenario))
+    bar = _Progress(runs, progress, f"{name} x {','.join(filters)}")
     t0 = time.perf_counter()
     stream = mapper(run_one, tasks, workers, **options)
     try:
@@ -470,7 +481,6 @@ def montecarlo(scenario, filters=("kf", "rdkf", "exact"), runs: int = 100, seed:
     if any(r is None for r in results):
         missing = [i for i, r in enumerate(results) if r is None]
         raise BackendError(f"montecarlo: backend {backend!r} returned no result for runs {missing[:10]}")
-    name = scenario if isinstance(scenario, str) else str(getattr(scenario, "name", scenario))
     info = options.get("info", {})
     return MonteCarloResult(scenario=str(name), filters=filters, runs=runs, seed=seed, per_run=results,
                             summary=_summarise(results, filters), elapsed_s=time.perf_counter() - t0,

@@ -82,8 +82,8 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     Solution
         (its subclasses ``TightSolution`` / ``ParticleSolution`` for the tight families)
     """
-    if filter is not None and coupling is None and filter in FILTERS and FILTERS[filter].couplings == ("gnss",):
-        coupling = "gnss"  # spp and rtk have no other way to run
+    if filter is not None and coupling is None and filter in FILTERS and len(FILTERS[filter].couplings) == 1:
+        coupling = FILTERS[filter].couplings[0]  # a filter with one coupling (spp, rtk, fukf, upf, pf) runs it
     cfg = _as_config(config, filter, coupling)
     if filter is not None:
         cfg.filter = filter
