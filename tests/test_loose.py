@@ -465,7 +465,9 @@ def test_bad_input(short):
     with pytest.raises(ConfigError, match=r"'coupling': bad value 'lose'"):
         insnav.run(ds, coupling="lose")
     with pytest.raises(ValueError, match=r"'upf' runs tightly coupled only"):
-        insnav.run(ds, filter="upf")
+        insnav.run(ds, filter="upf", coupling="loose")
+    with pytest.raises(ValueError, match=r"has no raw GNSS data \(gnss_raw\); tight coupling needs pseudoranges"):
+        insnav.run(ds, filter="upf")  # its only coupling, on a dataset without pseudoranges
     # an unknown keyword of run() is a TypeError (like any unknown keyword
     # argument); an unknown key in a configuration file is a ConfigError
     with pytest.raises(TypeError, match=r"unknown option 'gate'"):
