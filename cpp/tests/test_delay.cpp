@@ -124,6 +124,19 @@ void run_loose(const Data& d, bool by_arrival, Out& out) {
            d.dv.data(), static_cast<std::int64_t>(f.size()), f.data(), out.o);
 }
 
+/// The loose engine (by time of validity) into `ref` and the random-delay engine with p = [1] into `rd`.
+template <int S>
+std::unique_ptr<RandomDelayEngine<Layout15, S>> run_p1_and_loose(const Data& d, Out& ref, Out& rd) {
+  const auto n = static_cast<std::int64_t>(d.t.size());
+  const auto m = static_cast<std::int64_t>(d.fixes.size());
+  run_loose(d, false, ref);
+  const double p[1] = {1.0};
+  auto eng = std::make_unique<RandomDelayEngine<Layout15, S>>(ImuErrorModel{}, LooseConfig{}, DelayConfig{}, p, 1);
+  eng->run(d.init, P0(), ImuCorrection{}, n, d.t.data(), d.dth.data(), d.dv.data(), m, d.fixes.data(),
+           d.t_arr.data(), static_cast<std::int64_t>(d.epochs.size()), d.epochs.data(), rd.o);
+  return eng;
+}
+
 // --- 1. p = [1]: the random-delay KF is the ordinary KF ----------------------
 template <int S>
 void test_rdkf_reduces_to_kf() {
@@ -131,11 +144,7 @@ void test_rdkf_reduces_to_kf() {
   const auto n = static_cast<std::int64_t>(d.t.size());
   const auto m = static_cast<std::int64_t>(d.fixes.size());
   Out ref(n, m), rd(n, m);
-  run_loose(d, false, ref);
-  const double p[1] = {1.0};
-  auto eng = std::make_unique<RandomDelayEngine<Layout15, S>>(ImuErrorModel{}, LooseConfig{}, DelayConfig{}, p, 1);
-  eng->run(d.init, P0(), ImuCorrection{}, n, d.t.data(), d.dth.data(), d.dv.data(), m, d.fixes.data(),
-           d.t_arr.data(), static_cast<std::int64_t>(d.epochs.size()), d.epochs.data(), rd.o);
+  auto eng = run_p1_and_loose<S>(d, ref, rd);
   EXPECT_TRUE(rd.o.n_out == ref.o.n_out);
   EXPECT_TRUE(rd.o.updates == ref.o.updates && rd.o.updates == m);
   const double diff = max_pos_diff_m(rd, ref);
@@ -174,11 +183,7 @@ void test_rdkf_gate_reopen_reduces_to_kf(double gap_end, double step_m, bool wan
   const auto n = static_cast<std::int64_t>(d.t.size());
   const auto m = static_cast<std::int64_t>(d.fixes.size());
   Out ref(n, m), rd(n, m);
-  run_loose(d, false, ref);
-  const double p[1] = {1.0};
-  auto eng = std::make_unique<RandomDelayEngine<Layout15, S>>(ImuErrorModel{}, LooseConfig{}, DelayConfig{}, p, 1);
-  eng->run(d.init, P0(), ImuCorrection{}, n, d.t.data(), d.dth.data(), d.dv.data(), m, d.fixes.data(),
-           d.t_arr.data(), static_cast<std::int64_t>(d.epochs.size()), d.epochs.data(), rd.o);
+  auto eng = run_p1_and_loose<S>(d, ref, rd);
   std::printf("S=%d gate: EKF updates %d reopened %d outage-accepted %d; RDKF %d / %d / %d\n", S, ref.o.updates,
               ref.o.gate_reopened, ref.o.gate_outage_accepted, rd.o.updates, rd.o.gate_reopened,
               rd.o.gate_outage_accepted);
