@@ -57,8 +57,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     filter : str, optional
         A registered filter (:data:`insnav.registry.FILTERS`: ekf, rbukf, ukf,
         kf, rdkf, exact, fukf, upf, pf); overrides ``config.filter``.
-    coupling : {'loose', 'tight'}, optional
+    coupling : {'loose', 'tight', 'rtk', 'gnss'}, optional
         Overrides ``config.coupling``; a filter that cannot run that way is an error.
+        Not given with a ``filter`` that has one coupling (fukf, upf, pf: tight; spp,
+        rtk: gnss), that one.
     config : RunConfig, dict or path, optional
         A :class:`~insnav.config.RunConfig`, a dict of its TOML keys, or a TOML file.
     sanitize : bool or dict
