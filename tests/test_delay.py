@@ -47,6 +47,27 @@ def test_delay_statistics(high):
     assert np.all(np.abs(counts - n * p) < 4 * sd), (counts, n * p)
 
 
+def test_rdkf_without_a_scenario_p_takes_the_records_own_delays(high):
+    """No delay_p given and none in the scenario: the random-delay KF's p is the
+    distribution of the records' delays in receiver epochs (not [1], which would model
+    every late record as on time), and the run equals the one given that p."""
+    d = copy.copy(high)
+    d.scenario = copy.deepcopy(high.scenario)
+    del d.scenario["gnss"]["delay_p"]
+    k = np.round(high.gnss.delay_epochs * 10.0).astype(int)  # 10 Hz epochs, whole by construction
+    want = np.bincount(k) / k.size
+    rd = insnav.run(d, "rdkf")
+    assert rd.summary["delay_p_source"] == "arrival times"
+    np.testing.assert_allclose(rd.summary["delay_p"], want, rtol=0, atol=1e-15)
+    assert np.all(np.abs(want - [0.2, 0.4, 0.2, 0.2]) < 0.05)  # the scenario's, to sampling error
+    given = insnav.run(d, "rdkf", delay_p=want)
+    assert given.summary["delay_p_source"] == "option"
+    np.testing.assert_array_equal(rd.lat_deg, given.lat_deg)
+    assert insnav.run(high, "rdkf").summary["delay_p_source"] == "scenario"
+    on_time = insnav.run(_no_delay(d), "rdkf")
+    assert on_time.summary["delay_p"] == [1.0] and on_time.summary["delay_p_source"] == "arrival times"
+
+
 def test_rdkf_with_p1_is_the_kf():
     """p = [1]: the random-delay KF, the exact engine and the arrival-order KF
     are the ordinary EKF (no delays in the data)."""

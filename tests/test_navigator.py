@@ -276,17 +276,19 @@ def _push_tight(nav, ds, check, late_samples):
     return _drive(nav, ds, check, late_samples, push_epochs_upto)
 
 
-@pytest.mark.parametrize("filt,multi", [("ekf", False), ("rbukf", False), ("ekf", True)])
-def test_tight_push_equals_batch(filt, multi):
+@pytest.mark.parametrize("filt,multi,extra", [("ekf", False, {}), ("rbukf", False, {}), ("ekf", True, {}),
+                                              ("ekf", False, {"adaptive_q_window": 10})])
+def test_tight_push_equals_batch(filt, multi, extra):
     """The tight push API from the same inputs (epochs 30 IMU samples late, 40 held) gives the batch
-    run's rows to 1e-12 (m, m/s, deg), its receiver clock and (20 states) ISBs, and its counts."""
+    run's rows to 1e-12 (m, m/s, deg), its receiver clock and (20 states) ISBs, and its counts; the
+    adaptive process noise (the engine's per-epoch step, filter/adaptive_noise.hpp) too."""
     from conftest import short_tight_dataset
 
     from insnav.filters.navigator import TightNavigator
 
     ds = _multi_dataset() if multi else short_tight_dataset(60.0)
-    batch = insnav.run(ds, filt, "tight", sanitize=False, checks=False)
-    nav = TightNavigator.from_dataset(ds, RunConfig(filter=filt), imu_hold=40)
+    batch = insnav.run(ds, filt, "tight", sanitize=False, checks=False, **extra)
+    nav = TightNavigator.from_dataset(ds, RunConfig(filter=filt, **extra), imu_hold=40)
     assert nav.layout == (20 if multi else 17) == batch.summary["layout"]
     check = set(range(0, len(ds.imu.t), 89)) | {len(ds.imu.t) - 1}
     rows = _push_tight(nav, ds, check, late_samples=30)

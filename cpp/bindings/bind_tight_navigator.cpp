@@ -88,8 +88,6 @@ void bind_tight_navigator(py::module_& m) {
           cfg.tight = tight_config_from(config);
           if (cfg.tight.pr_gm.enabled())
             throw py::value_error("pr_gm_sigma_m: the Gauss-Markov pseudorange states run in the batch tight run only");
-          if (cfg.tight.adaptive_q.window > 0)
-            throw py::value_error("adaptive_q_window > 0: the adaptive process noise runs in the batch tight run only");
           cfg.ut = ut_from(config);
           cfg.imu_hold = imu_hold_from(imu_hold);
           cfg.clock_bias0_m = clock0_bias(clock0);

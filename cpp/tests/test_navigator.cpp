@@ -371,6 +371,22 @@ void test_tight_push_equals_batch() {
     EXPECT_TRUE(threw);
   }
   auto nav = std::make_unique<TightNavigator<Filter>>(cfg, init, P0);
+  // a non-finite satellite state or an unknown system throws before anything is queued
+  // (it would put NaN into the state through the row, or index past the ISB block)
+  for (int which = 0; which < 3; ++which) {
+    SatObservation bad = obs[0];
+    if (which == 0) bad.r_e[1] = NAN;
+    else if (which == 1) bad.clock_drift_mps = INFINITY;
+    else bad.system = kNumSystems;
+    bool threw = false;
+    try {
+      nav->push_pseudoranges(ep[0].t, &bad, 1);
+    } catch (const std::invalid_argument&) {
+      threw = true;
+    }
+    EXPECT_TRUE(threw);
+  }
+  EXPECT_TRUE(nav->pending_records() == 0);
   const long before = g_eigen_asserts;
   Eigen::internal::set_is_malloc_allowed(false);
   size_t g = 0;

@@ -60,9 +60,32 @@ MAX_DELAY_EPOCHS = 4  # RandomDelayKf<Layout15, S> is instantiated for S = 1..4
 
 def scenario_delay_p(dataset) -> np.ndarray:
     """The delay distribution ``p`` of the dataset's scenario (``[1.0]`` if none)."""
+    p = _scenario_delay_p(dataset)
+    return np.ones(1) if p is None else p
+
+
+def _scenario_delay_p(dataset) -> np.ndarray | None:
     sc = getattr(dataset, "scenario", None) or {}
-    p = (sc.get("gnss") or {}).get("delay_p", [1.0])
-    return np.asarray(p, dtype=float)
+    p = (sc.get("gnss") or {}).get("delay_p")
+    return None if p is None else np.asarray(p, dtype=float)
+
+
+def arrival_delay_p(t_valid, t_arrival, epochs) -> np.ndarray:
+    """``P(delay = i epochs)`` estimated from the records' own times: the
+    fraction of records that arrive ``i`` receiver epochs (``epochs``, from
+    :func:`receiver_epochs`, which holds every record time) after the epoch of
+    their time of validity, i = 0..s with s the largest delay seen, at most
+    ``MAX_DELAY_EPOCHS`` (a record later than that counts as s: the random-delay
+    KF's longest modelled delay).  ``[1.0]`` without records: no delay."""
+    tv, ta = np.asarray(t_valid, float), np.asarray(t_arrival, float)
+    e = np.round(np.asarray(epochs, float), 9)
+    if tv.size == 0 or e.size == 0:
+        return np.ones(1)
+    iv = np.searchsorted(e, np.round(tv, 9))
+    ia = np.searchsorted(e, np.round(ta, 9))
+    d = np.clip(ia - iv, 0, MAX_DELAY_EPOCHS)
+    counts = np.bincount(d, minlength=1)[: d.max() + 1].astype(float)
+    return counts / counts.sum()
 
 
 def receiver_epochs(t_valid, t_arrival, period_s: float | None = None) -> np.ndarray:
@@ -153,7 +176,8 @@ def run_delayed(dataset, filter: str = "rdkf", *, delay_p=None, config: RunConfi
         See the module docstring.
     delay_p : sequence of float, optional
         ``P(delay = i epochs)``, i = 0..s, s <= 4 (rdkf only).  Default: the
-        scenario's ``gnss.delay_p``.
+        scenario's ``gnss.delay_p``; without one, the distribution of the
+        records' own delays (:func:`arrival_delay_p`; ``summary["delay_p_source"]``).
     config : RunConfig, optional
         Initial state/sigmas, IMU noise, lever arm, gating, output rate (its
         ``filter``/``coupling`` fields are ignored: the EKF, loose).
@@ -193,8 +217,10 @@ def delay_engine_args(dataset, cfg: RunConfig, delay_p=None, imu=None) -> Simple
     v_n [m/s], position and velocity 1-sigma) and ``order`` (record index of each
     row), the receiver ``epochs`` [s], the initial state vector ``init``, ``P0``,
     the IMU correction and model, the engine ``config`` dict, the delay
-    probabilities ``p`` (the scenario's when ``delay_p`` is None), and
-    ``summary`` (filter, layout, what the filter receives)."""
+    probabilities ``p`` (``delay_p``; else the scenario's ``gnss.delay_p``; else
+    :func:`arrival_delay_p` of the records' own times), and ``summary`` (filter,
+    layout, what the filter receives), ``p_source`` ("option", "scenario" or
+    "arrival times")."""
     t = imu[0] if imu is not None else imu_arrays(dataset)[0]
     g = dataset.gnss
     m = len(g)
@@ -227,10 +253,15 @@ def delay_engine_args(dataset, cfg: RunConfig, delay_p=None, imu=None) -> Simple
     summary = dict(filter=cfg.filter, coupling="loose", layout=n, gnss_records=m)
     epochs = receiver_epochs(rec[:, 0], rec[:, 1], scenario_gnss_period_s(dataset))
     summary.update(_arrival_counts(rec, epochs, float(dataset.t0), float(t[-1]) if t.size else float(dataset.t0)))
-    p = scenario_delay_p(dataset) if delay_p is None else delay_probabilities(delay_p)
+    if delay_p is not None:
+        p, p_source = delay_probabilities(delay_p), "option"
+    elif (p := _scenario_delay_p(dataset)) is not None:
+        p_source = "scenario"
+    else:  # measured, not assumed: p = [1] would model delayed records as on time
+        p, p_source = arrival_delay_p(rec[:, 0], rec[:, 1], epochs), "arrival times"
     return SimpleNamespace(rec=rec, order=order, epochs=epochs, init=init_vector(dataset, init), P0=P0,
                            imu_correction=initial_imu_correction(cfg), imu_model=noise.as_core_dict(),
-                           config=core_cfg, p=p, layout=n, period_s=period, summary=summary)
+                           config=core_cfg, p=p, p_source=p_source, layout=n, period_s=period, summary=summary)
 
 
 def delay_probabilities(delay_p) -> np.ndarray:
@@ -277,6 +308,7 @@ def run_delay(dataset, cfg: RunConfig, *, delay_p=None, max_history_s: float = 1
         if filter == "rdkf":
             check_rdkf(p, n)
             summary["delay_p"] = p.tolist()
+            summary["delay_p_source"] = a.p_source
         else:
             if checkpoint_interval_s is not None and not (isinstance(checkpoint_interval_s, (int, float))
                                                           and 0.0 < checkpoint_interval_s < float("inf")):

@@ -401,8 +401,8 @@ class DelayNavigator(_PushApi):
                      **overrides) -> "DelayNavigator":
         """A navigator set up as ``insnav.run(dataset, "rdkf", delay_p=...)`` sets up its
         run (initial state and sigmas, IMU model, lever arm, gate, outage cycle);
-        ``delay_p`` defaults to the scenario's ``gnss.delay_p``; ``overrides`` are
-        :class:`RunConfig` fields."""
+        ``delay_p`` defaults as the batch run's (the scenario's ``gnss.delay_p``, else
+        the records' own delays); ``overrides`` are :class:`RunConfig` fields."""
         import dataclasses
 
         from . import _as_config

@@ -131,10 +131,16 @@ inline GnssFix checked_push_fix(const GnssFix& fix, const char* what, int index 
   return f;
 }
 
-/// Why a satellite row pushed by a caller cannot be used (nullptr: it can): the 1-sigma of a
-/// pseudorange or rate that is given must be finite and > 0 (an infinite one put NaN into the
-/// state through the gain).
+/// Why a satellite row pushed by a caller cannot be used (nullptr: it can): the system must be
+/// one of kNumSystems; a row with a pseudorange or rate needs a finite satellite state (position,
+/// velocity, clock bias and drift); the 1-sigma of a pseudorange or rate that is given must be
+/// finite and > 0 (an infinite one put NaN into the state through the gain).
 inline const char* push_sat_problem(const SatObservation& o) {
+  if (o.system < 0 || o.system >= kNumSystems) return "system must be 0 G, 1 R, 2 E or 3 C";
+  const bool any = std::isfinite(o.pseudorange_m) || std::isfinite(o.pseudorange_rate_mps);
+  if (any && !(o.r_e.allFinite() && o.v_e.allFinite() && std::isfinite(o.clock_bias_m) &&
+               std::isfinite(o.clock_drift_mps)))
+    return "non-finite satellite state (r_e, v_e, clock bias or drift)";
   if (std::isfinite(o.pseudorange_m) && !(std::isfinite(o.sigma_pr_m) && o.sigma_pr_m > 0.0))
     return "sigma_pr must be finite and > 0";
   if (std::isfinite(o.pseudorange_rate_mps) && !(std::isfinite(o.sigma_prr_mps) && o.sigma_prr_mps > 0.0))
