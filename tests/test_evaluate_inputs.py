@@ -5,7 +5,8 @@ with exit status 0, or cost a file.
   with a straight line and scored: the comparison now leaves out the times inside a gap.
 * A truth with rows without a time or position, or whose time does not increase, was interpolated
   anyway (attitude figures over the first rows only, NaN totals; 130 m errors from swapped blocks):
-  one line naming the file and line now.
+  one line naming the file and line now, for every kind of truth (truth.csv, rtk_truth.csv, RTKLIB
+  .pos, KF-GINS .nav).
 * ``evaluate --out`` replaced any insnav file (another solution, the solution's own ``.rtk.csv``
   and ``.config.toml``, which it reads): it replaces an earlier evaluation only.
 * A malformed ``<sol>.rtk.csv`` gave an IndexError or numpy's list of lines.
@@ -80,6 +81,58 @@ def test_a_truth_with_bad_rows_is_refused_naming_the_line(sim, tmp_path, capsys,
         err = capsys.readouterr().err
         assert err.startswith(f"insnav evaluate: error: {bad / 'truth.csv'}:") and message in err, err
         assert len(err.splitlines()) == 1
+
+
+@pytest.fixture(scope="module")
+def rtk_pos(sim, tmp_path_factory):
+    pos = tmp_path_factory.mktemp("eval_rtk") / "rtk.pos"
+    assert _gnss_rtk(sim, pos) == 0
+    return pos
+
+
+def _truth_files(sim, d):
+    """The sim's antenna truth as an rtk_truth.csv, an RTKLIB .pos and a KF-GINS .nav, each with its
+    rows 100..199 and 200..299 swapped, and the line of the first row out of order."""
+    from insnav.analysis.evaluate import _rtk_truth
+    from insnav.io.gnss_files import write_pos
+    from insnav.io.kfgins import write_kfgins_nav
+
+    text = (sim / "rtk_truth.csv").read_text().splitlines(keepends=True)
+    swap = np.r_[0:100, 200:300, 100:200, 300:len(text) - 1]
+    (d / "rtk_truth.csv").write_text(text[0] + "".join(text[1 + k] for k in swap))
+    tr = _rtk_truth(sim / "rtk_truth.csv")
+    t_gps = np.array([float(ln.split(",")[0]) for ln in text[1:]])
+    write_pos(d / "t.pos", t_gps[swap], tr.lat_deg[swap], tr.lon_deg[swap], tr.h_m[swap])
+    tr.t, tr.lat_deg, tr.lon_deg, tr.h_m = tr.t[swap], tr.lat_deg[swap], tr.lon_deg[swap], tr.h_m[swap]
+    write_kfgins_nav(d / "t.nav", tr, week=int(t_gps[0] // 604800))
+    # line of row 200 (its time earlier than row 199's): 1 header line in the csv, 3 in the .pos, 0 in the .nav
+    return {d / "rtk_truth.csv": 202, d / "t.pos": 204, d / "t.nav": 201}
+
+
+def test_every_kind_of_truth_out_of_time_order_is_refused_naming_the_line(sim, rtk_pos, tmp_path, capsys):
+    """An rtk_truth.csv, RTKLIB .pos or KF-GINS .nav truth whose rows are out of time order was
+    interpolated as it was (np.interp assumes increasing times: 2358 m instead of 0.015 m, exit 0); only
+    an insnav truth.csv was checked.  Every kind now gets the truth.csv's one line."""
+    capsys.readouterr()
+    for truth, line in _truth_files(sim, tmp_path).items():
+        assert main(["evaluate", str(rtk_pos), str(truth)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"insnav evaluate: error: {truth}:{line}: the truth's time does not increase ("), err
+        assert "sort the rows by time" in err and len(err.splitlines()) == 1, err
+
+
+def test_a_non_finite_rtk_truth_row_names_its_line(sim, rtk_pos, tmp_path, capsys):
+    text = (sim / "rtk_truth.csv").read_text().splitlines(keepends=True)
+    cells = text[101].split(",")
+    cells[2] = "nan"
+    text[101] = ",".join(cells)
+    bad = tmp_path / "rtk_truth.csv"
+    bad.write_text("".join(text))
+    capsys.readouterr()
+    assert main(["evaluate", str(rtk_pos), str(bad)]) == 2
+    assert capsys.readouterr().err == (f"insnav evaluate: error: {bad}:102: a truth row without a finite time and "
+                                       "position (1 such rows): remove them\n")
+    assert _json(capsys, rtk_pos, sim / "rtk_truth.csv")["rms_3d_m"] < 0.05  # the file as simulated: accepted
 
 
 def test_evaluate_out_replaces_an_earlier_evaluation_only(sim, tmp_path, capsys):

@@ -200,10 +200,13 @@ def _read_truth(path, quality=None, solution=None):
         from ..io.gnss_files import read_rtklib_pos
         from ..io.rinex_dataset import rtklib_truth
 
+        from ..data.dataset import RowOrigin
+
         ref = read_rtklib_pos(p)
         if len(ref.t_gps_s) == 0:
             raise ValueError(f"{p}: no solution records")
         week0 = SECONDS_PER_WEEK * np.floor(ref.t_gps_s[0] / SECONDS_PER_WEEK)
+        _check_truth_rows(np.column_stack([ref.t_gps_s - week0, ref.r_e]), RowOrigin(str(p), 1, ref.lines))
         t = rtklib_truth(ref, week0, quality)
         if len(t.t) == 0:
             raise ValueError(f"{p}: no records with Q <= {quality}")
@@ -217,7 +220,9 @@ def _read_truth(path, quality=None, solution=None):
     if ".nav" in p.name:
         from ..io.kfgins import read_kfgins_nav
 
-        return has_rows(read_kfgins_nav(p), p)
+        tr = read_kfgins_nav(p)
+        _check_truth_rows(np.column_stack([tr.t, tr.lat_deg, tr.lon_deg, tr.h_m]), tr.origin)
+        return has_rows(tr, p)
     from ..data.dataset import Truth, read_csv
 
     a, origin = read_csv(p, Truth.COLUMNS, return_origin=True)
@@ -226,8 +231,9 @@ def _read_truth(path, quality=None, solution=None):
 
 
 def _check_truth_rows(a: np.ndarray, origin) -> None:
-    """A truth table's rows: time and position finite, time strictly increasing (the comparison
-    interpolates the truth in time); a ValueError naming the file and line of the first bad row."""
+    """A truth table's rows (columns: time, then three of position): time and position finite, time
+    strictly increasing (the comparison interpolates the truth in time); a ValueError naming the file
+    and line of the first bad row.  Every kind of truth (CSV, .pos, .nav, rtk_truth.csv) goes through it."""
     a = np.asarray(a, float)
     if a.ndim != 2 or a.shape[0] == 0:
         return
@@ -239,8 +245,10 @@ def _check_truth_rows(a: np.ndarray, origin) -> None:
     back = np.flatnonzero(np.diff(a[:, 0]) <= 0.0)
     if back.size:
         i = int(back[0]) + 1
+        fix = ("a GPS week rollover? give the time as seconds continuing across the week"
+               if a[i - 1, 0] - a[i, 0] > 302400.0 else "sort the rows by time and remove repeated ones")
         raise ValueError(f"{origin.where(i)}: the truth's time does not increase ({a[i, 0]:.6f} s after "
-                         f"{a[i - 1, 0]:.6f} s): sort the rows by time and remove repeated ones")
+                         f"{a[i - 1, 0]:.6f} s): {fix}")
 
 
 def _antenna_in_gps_time(sol_path: Path) -> bool:
@@ -263,14 +271,20 @@ def _rtk_truth(p: Path):
     from ..data.dataset import Truth
     from ..gnss.gpstime import SECONDS_PER_WEEK
 
-    a = np.genfromtxt(p, delimiter=",", names=True)
-    if a.size == 0:
+    from ..data.dataset import parse_numeric_origin
+    from ..data.textio import read_bytes
+
+    data = read_bytes(p)
+    nl = data.find(b"\n")
+    names = tuple(h.strip() for h in (data if nl < 0 else data[:nl]).decode("ascii", "replace").split(","))
+    a, origin = parse_numeric_origin(b"" if nl < 0 else memoryview(data)[nl + 1:], len(names), str(p),
+                                     first_line=2, names=names)
+    if a.shape[0] == 0:
         raise ValueError(f"{p}: no rows")
-    a = np.atleast_1d(a)
-    r_e = np.column_stack([a["x_e_m"], a["y_e_m"], a["z_e_m"]])
-    if not np.all(np.isfinite(r_e)) or not np.all(np.isfinite(a["t_gps_s"])):
-        raise ValueError(f"{p}: a row with a missing or non-finite value")
-    t = a["t_gps_s"] - SECONDS_PER_WEEK * np.floor(a["t_gps_s"][0] / SECONDS_PER_WEEK)
+    a = a[:, :4]  # t_gps_s, x_e_m, y_e_m, z_e_m (RTK_TRUTH_HEADER)
+    t = a[:, 0] - SECONDS_PER_WEEK * np.floor(a[0, 0] / SECONDS_PER_WEEK) if np.isfinite(a[0, 0]) else a[:, 0]
+    _check_truth_rows(np.column_stack([t, a[:, 1:4]]), origin)
+    r_e = a[:, 1:4]
     lat, lon, h = earth.ecef_to_geodetic(r_e)
     nan = np.full(t.size, np.nan)
     tr = Truth(t, np.degrees(lat), np.degrees(lon), h, np.full((t.size, 3), np.nan), nan, nan.copy(), nan.copy())

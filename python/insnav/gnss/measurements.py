@@ -179,3 +179,4 @@ class RtklibPos(NamedTuple):
     r_e: np.ndarray  #: (n, 3) ECEF [m]
     v_e: np.ndarray  #: (n, 3) ECEF [m/s] (NaN if the file has no velocity columns)
     q: np.ndarray  #: (n,) quality flag (1 fix, 2 float, 5 single)
+    lines: np.ndarray | None = None  #: (n,) 1-based file line of each record (None: not read from a file)

@@ -782,7 +782,7 @@ def read_rtklib_pos(path, geoid_undulation_m: float | None = None):
     Returns
     -------
     insnav.gnss.measurements.RtklibPos
-        ``t_gps_s``, ``r_e``, ``v_e``, ``q``.
+        ``t_gps_s``, ``r_e``, ``v_e``, ``q`` and ``lines`` (the file line of each record).
 
     Raises
     ------
@@ -797,7 +797,7 @@ def read_rtklib_pos(path, geoid_undulation_m: float | None = None):
     lat, lon = np.deg2rad(rec.lat_deg), np.deg2rad(rec.lon_deg)
     r_e = earth.geodetic_to_ecef(lat, lon, rec.h_m)
     v_e = earth.ned_to_ecef_vector(lat, lon, rec.v_n)
-    return RtklibPos(rec.t_ref_s + rec.t_s, r_e, v_e, np.asarray(rec.quality))
+    return RtklibPos(rec.t_ref_s + rec.t_s, r_e, v_e, np.asarray(rec.quality), np.asarray(rec.lines))
 
 
 def write_pos(path, t_gps_s, lat_deg, lon_deg, h_m, sigma_pos_n=None, v_n=None, sigma_vel_n=None, q=None,

@@ -175,12 +175,13 @@ def read_kfgins_nav(path, return_week: bool = False):
     Returns
     -------
     Truth
-        ``t`` = sow; ``f_ib_b``/``omega_ib_b`` are None.
+        ``t`` = sow; ``f_ib_b``/``omega_ib_b`` are None; ``origin`` the file line of each row.
     week : ndarray (N,), only with ``return_week=True``
     """
-    a = _read_table(path, 11)
+    a, origin, _ = _read_rows(path, 11)
     tr = Truth(a[:, 1].copy(), a[:, 2].copy(), a[:, 3].copy(), a[:, 4].copy(), a[:, 5:8].copy(),
                a[:, 8].copy(), a[:, 9].copy(), a[:, 10].copy())
+    tr.origin = origin
     return (tr, a[:, 0].astype(np.int64)) if return_week else tr
 
 
