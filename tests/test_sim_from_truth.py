@@ -185,3 +185,28 @@ def test_a_bank_through_pi_is_a_steady_roll(tmp_path):
     rate = ds.imu.dtheta_b[:, 0] / np.diff(ds.imu.t, prepend=ds.imu.t[0] - 0.01)
     np.testing.assert_allclose(rate, 0.5, atol=2e-3)  # Earth rate on the other axes' projection: < 1e-4
     assert np.all(np.abs(ds.truth.roll_deg) <= 180.0) and np.ptp(ds.truth.roll_deg) > 350.0
+
+
+def test_a_truth_shorter_than_two_imu_samples_is_refused_and_run_refuses_such_a_dataset(tmp_path, capsys):
+    """A truth spanning less than one IMU interval wrote a dataset with 0 IMU samples (status 0), and
+    `insnav run` on 0 or 1 IMU samples wrote a 0- or 1-row solution reported "health: ok"."""
+    from insnav.cli import main
+
+    p = tmp_path / "four.csv"
+    p.write_text("\n".join(need(MOTION).read_text().splitlines()[:6]) + "\n")  # 4 epochs, 0.3 s
+    out = tmp_path / "ds"
+    capsys.readouterr()
+    assert main(["simulate", "--from-truth", str(p), "--imu-rate-hz", "1", "--out", str(out), "-q"]) == 2
+    assert capsys.readouterr().err == (f"insnav simulate: error: {p}: the truth spans 0.3 s, too short for 2 IMU "
+                                       "samples at 1 Hz (it needs 2 s or more)\n")
+    assert not out.exists()
+    assert main(["simulate", "--from-truth", str(p), "--imu-rate-hz", "10", "--out", str(out), "-q"]) == 0
+    imu = (out / "imu.csv").read_text().splitlines(keepends=True)
+    assert len(imu) == 1 + 3
+    for n in (0, 1):
+        (out / "imu.csv").write_text("".join(imu[:1 + n]))
+        capsys.readouterr()
+        assert main(["run", str(out), "--allow-free-inertial", "--out", str(tmp_path / "s.csv"), "-q"]) == 2
+        assert capsys.readouterr().err == (f"insnav run: error: {out / 'imu.csv'}: {n} IMU sample{'s' * (n == 0)}: "
+                                           "a navigation run needs 2 or more (one sample interval)\n")
+        assert not (tmp_path / "s.csv").exists()

@@ -134,6 +134,8 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
                 dataset = dataclasses.replace(dataset, imu_dataset=inner)
             else:
                 dataset, report = sanitize_dataset(dataset, opts or True, arrivals=arrivals)
+        if not getattr(dataset, "gnss_only", False):  # checks or not: no empty solution reported as healthy
+            _check_imu_count(inner if inner is not None else dataset)
         if checks:
             from .checks import check_dataset
 
@@ -150,6 +152,20 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         imu_t = getattr(getattr(dataset, "imu", None), "t", None)
         sol.summary["health"] = assess(sol, imu_t_end=float(imu_t[-1]) if imu_t is not None and len(imu_t) else None)
     return sol
+
+
+def _check_imu_count(dataset) -> None:
+    """A navigation run needs two IMU samples (one interval); fewer gave a 0- or 1-row solution with
+    "health: ok".  A DataCheckError naming the IMU file."""
+    from ..data.checks import DataCheckError, _source
+
+    imu = getattr(dataset, "imu", None)
+    if imu is None:
+        return
+    n = len(imu.t)
+    if n < 2:
+        raise DataCheckError(f"{_source(imu, 'imu')}: {n} IMU sample{'' if n == 1 else 's'}: a navigation run "
+                             "needs 2 or more (one sample interval)")
 
 
 def _run_offset_auto(spec, dataset, cfg, opts):

@@ -343,6 +343,9 @@ def simulate_from_truth(path, imu_grade: str = "industrial", *, imu_rate_hz: flo
     interp = TruthInterpolant(tf)
     t0, t_end = float(tf.t_s[0]), float(tf.t_s[-1])
     t_imu = sample_times(t0, t_end, imu_rate_hz)
+    if t_imu.size < 3:  # two increments: the fewest a navigation run takes
+        raise TruthFileError(f"{tf.path}: the truth spans {t_end - t0:g} s, too short for 2 IMU samples at "
+                             f"{imu_rate_hz:g} Hz (it needs {2.0 / imu_rate_hz:g} s or more)")
     dth, dv = interp.imu_increments(t_imu)
     gyro, accel = sensor_errors_for_grade(imu_grade, imu_rate_hz)
     rng_g, rng_a = (np.random.default_rng(c) for c in np.random.SeedSequence(seed).spawn(2))
