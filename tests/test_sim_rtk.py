@@ -386,3 +386,13 @@ def test_rtk_noise_options_reproduce_the_simulated_noise_model():
     assert abs(var_step / o["amb_psd_cycles2ps"] - 1.0) < 0.05, (var_step, o["amb_psd_cycles2ps"])
     with pytest.raises(ValueError, match="sigma_phase_m"):
         rtk_noise_options(dict(g, sigma_phase=0.0))
+
+
+@pytest.mark.parametrize("gps_week, leap", [(1600, 15), (2200, 18)])
+def test_the_nav_header_gives_the_leap_seconds_of_the_scenario_date(tmp_path, gps_week, leap):
+    """nav.rnx said 18 LEAP SECONDS whatever the date; GPS - UTC was 15 s in 2010 (week 1600)."""
+    raw = _scenario("rtk-open-sky-car", 4.0)
+    raw.setdefault("time", {}).update(gps_week=gps_week, gps_tow_s=345600.0)
+    simulate_rtk(raw, seed=1).write(tmp_path)
+    head = (tmp_path / "nav.rnx").read_text().split("END OF HEADER")[0].splitlines()
+    assert [ln[:6] for ln in head if ln[60:].strip() == "LEAP SECONDS"] == [f"{leap:6d}"]

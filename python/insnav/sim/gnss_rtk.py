@@ -242,6 +242,7 @@ class RtkSimulation:
         """
         from pathlib import Path
 
+        from ..gnss.glonass import gps_utc_leap_seconds
         from ..gnss.rinex_write import write_rinex_nav, write_rinex_obs
 
         d = Path(directory)
@@ -273,9 +274,11 @@ class RtkSimulation:
                                         approx_r_e=approx, interval_s=1.0 / self.rate_hz,
                                         comment=f"insnav simulation: {name} (truth in rtk_truth.csv)")
         nav = self.nav
+        t_first = float(np.concatenate([self.rover.t_tag_gps_s, self.base.t_tag_gps_s, [np.nan]])[0])
         out["nav"] = write_rinex_nav(d / "nav.rnx", nav.eph if len(nav.eph) else None,
                                      nav.eph_e if len(nav.eph_e) else None, ion_alpha=nav.ion_alpha,
-                                     ion_beta=nav.ion_beta, comment="insnav simulation: nominal constellations")
+                                     ion_beta=nav.ion_beta, leap_seconds=int(gps_utc_leap_seconds(t_first)),
+                                     comment="insnav simulation: nominal constellations")
         out["truth"] = self.write_truth(d / "rtk_truth.csv")
         return out
 
