@@ -223,3 +223,13 @@ def test_an_rtk_pos_gets_the_slip_counts_of_its_sidecar(tmp_path):
     assert sol.slip_counts == dict(lli=1, geometry_free=3, melbourne_wuebbena=2, doppler=1, gap=0, outlier=4)
     (tmp_path / "rtk.pos.rtk.csv").unlink()
     assert getattr(_read_solution(pos), "slip_counts", None) is None
+
+
+def test_quality_with_a_truth_that_has_none_is_refused(sim, rtk_pos, capsys):
+    """--quality was accepted and ignored with an rtk_truth.csv or x,y,z truth (refused for a dataset folder)."""
+    r_e = ",".join((sim / "rtk_truth.csv").read_text().splitlines()[1].split(",")[1:4])
+    capsys.readouterr()
+    for truth in (sim / "rtk_truth.csv", sim, r_e):
+        assert main(["evaluate", str(rtk_pos), str(truth), "--quality", "1"]) == 2
+        assert capsys.readouterr().err == "insnav evaluate: error: --quality applies to an RTKLIB .pos truth only\n"
+    assert _json(capsys, rtk_pos, rtk_pos, "--quality", "1")["samples"] == 600  # a .pos truth takes it

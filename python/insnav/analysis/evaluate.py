@@ -178,6 +178,9 @@ POS_STATUS_NAMES = {0: "none", 1: "fixed", 2: "float", 3: "sbas", 4: "dgps", 5: 
 RTK_TRUTH_HEADER = "t_gps_s,x_e_m,y_e_m,z_e_m"
 
 
+_QUALITY_POS_ONLY = "--quality applies to an RTKLIB .pos truth only"
+
+
 def _read_truth(path, quality=None, solution=None):
     """The reference of ``insnav evaluate`` / ``report``: an RTKLIB ``.pos``, a dataset folder (its
     ``truth.csv``; for an RTKLIB-layout ``solution`` (``.pos``: the antenna in GPS time) its
@@ -190,6 +193,8 @@ def _read_truth(path, quality=None, solution=None):
                              "truth); its truth.csv is the IMU centre in dataset time: give an antenna reference "
                              "(.pos, rtk_truth.csv or x,y,z)")
         p = p / "rtk_truth.csv"
+    if quality is not None and p.suffix != ".pos":  # before any return: never accepted and ignored
+        raise ValueError(_QUALITY_POS_ONLY)
     if p.is_file() and p.suffix == ".csv":
         with open(p, encoding="utf-8", errors="replace") as f:
             head = f.readline()
@@ -211,8 +216,6 @@ def _read_truth(path, quality=None, solution=None):
         if len(t.t) == 0:
             raise ValueError(f"{p}: no records with Q <= {quality}")
         return t
-    if quality is not None:
-        raise ValueError("--quality applies to an RTKLIB .pos truth only")
     if p.is_dir():
         if not (p / "truth.csv").is_file():
             raise ValueError(f"{p}: the dataset has no truth.csv")
@@ -468,6 +471,8 @@ def cmd_evaluate(args) -> int:
                                                sol_p.with_suffix(sol_p.suffix + ".rtk.csv"),
                                                sol_p.with_suffix(sol_p.suffix + ".config.toml")),
                       overwrite=getattr(args, "overwrite", False), command="evaluation", replaces=("evaluation",))
+    if args.quality is not None and not Path(args.truth).exists():  # a static x,y,z truth
+        raise ValueError(_QUALITY_POS_ONLY)
     sol = _read_solution(args.solution)
     truth = _read_truth(args.truth, args.quality, solution=args.solution) if Path(args.truth).exists() \
         else static_truth(args.truth, sol.t)
