@@ -115,3 +115,20 @@ def test_scenario_paths_seeds_and_preset_names(tmp_path, monkeypatch):
     assert load_scenario("seed000-sim").name == "seed000-sim"
     with pytest.raises(ScenarioError, match="scenario file 'proj' is a directory"):
         load_scenario("proj")
+
+
+def test_overwrite_through_a_symlink_and_from_inside_the_dataset(tmp_path, monkeypatch):
+    """--out a symlink to a dataset with --overwrite left a hidden ``.lnk.old-PID`` link (rmtree cannot
+    remove a symlink); --out . inside the dataset gave the raw "[Errno 16] Device or resource busy"."""
+    ds = sim.simulate("seed003-1sat", seed=4)
+    target = ds.save(tmp_path / "tgt")
+    link = tmp_path / "lnk"
+    link.symlink_to(target, target_is_directory=True)
+    ds.save(link, overwrite=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lnk", "tgt"]  # the link replaced, its target kept
+    assert not link.is_symlink() and load_dataset(link).name == load_dataset(target).name == "seed003-1sat"
+    monkeypatch.chdir(target)
+    with pytest.raises(FileExistsError, match=r"^\. is the current folder: not replaced from inside; run from "
+                                              r"outside it or choose another --out$"):
+        ds.save(".", overwrite=True)
+    assert sorted(os.listdir(tmp_path)) == ["lnk", "tgt"] and (target / "imu.csv").is_file()

@@ -542,8 +542,8 @@ class Dataset:
                     old = out.parent / f".{out.name}.old-{os.getpid()}"
                     os.rename(out, old)
                 os.rename(tmp, out)
-                if old is not None:
-                    shutil.rmtree(old, ignore_errors=True)
+                if old is not None:  # a symlink to a dataset (--out link): the link goes, its target stays
+                    old.unlink() if old.is_symlink() else shutil.rmtree(old, ignore_errors=True)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -579,6 +579,11 @@ def check_replaceable(out: Path, overwrite: bool) -> None:
     if foreign:
         raise FileExistsError(f"{out} holds {len(foreign)} file(s) insnav did not write ({', '.join(foreign[:3])}"
                               f"{', ...' if len(foreign) > 3 else ''}): not replaced; move them or choose another --out")
+    if not out.is_symlink():
+        here, there = Path.cwd().resolve(), out.resolve()
+        if there == here or there in here.parents:
+            raise FileExistsError(f"{out} is the current folder{'' if there == here else ' or holds it'}: not "
+                                  "replaced from inside; run from outside it or choose another --out")
 
 
 _INITIAL_KEYS = ("lat_deg", "lon_deg", "h_m", "v_n_mps", "roll_deg", "pitch_deg", "yaw_deg")
