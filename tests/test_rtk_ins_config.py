@@ -114,6 +114,34 @@ def test_gnss_only_filters_read_their_option_tables(sim, tmp_path, capsys):
     ("[rtk_engine]\nins_slip_k_sigm = 4.0\n", "key 'rtk_engine.ins_slip_k_sigm': unknown; did you mean 'ins_slip_k_sigma'?"),
     ("rtk_engine = 3\n", "key 'rtk_engine': bad value 3; allowed: an [rtk_engine] table"),
     ("rtk = 3\n", "key 'rtk': bad value 3; allowed: an [rtk] table"),
+    # integer engine keys: a float was truncated (2.5 ran as 2), 1e12 gave a pybind11 cast error
+    ("[rtk_engine]\nrobust_max_sats = 2.5\n",
+     "key 'rtk_engine.robust_max_sats': bad value 2.5; allowed: an integer in [0, 100]"),
+    ("[rtk_engine]\nrobust_max_sats = 1e12\n",
+     "key 'rtk_engine.robust_max_sats': bad value 1000000000000.0; allowed: an integer in [0, 100]"),
+    ("[rtk_engine]\nrobust_phase_reset_epochs = -1\n",
+     "key 'rtk_engine.robust_phase_reset_epochs': bad value -1; allowed: an integer in [0, 1000000]"),
+    # the engine's own range checks named neither the table nor the file
+    ("[rtk_engine]\ncode_chi2_row = -1.0\n", "key 'rtk_engine.code_chi2_row': bad value -1.0; allowed: a number >= 0"),
+    ("[rtk_engine]\nvalidation_prob = 1.0\n",
+     "key 'rtk_engine.validation_prob': bad value 1.0; allowed: a number in [0, 1)"),
+    ("[rtk_engine]\nrobust_igg_k0 = 4.0\n", "key 'rtk_engine.robust_igg_k0': bad value 4.0 with robust_igg_k1 = 3.0; "
+     "allowed: 0 < robust_igg_k0 < robust_igg_k1"),
+    # the deprecated engine key: its range named [rtk]; given in both tables the engine's silently won
+    ("[rtk_engine]\nphase_error_ratio = 50.0\n",
+     "key 'rtk_engine.phase_error_ratio': bad value 50.0; allowed: a number in [0.0, 10.0]"),
+    ("[rtk]\nphase_error_ratio = 0.2\n[rtk_engine]\nphase_error_ratio = 0.8\n",
+     "keys 'rtk.phase_error_ratio' and 'rtk_engine.phase_error_ratio' both given; keep 'rtk.phase_error_ratio' "
+     "(the [rtk_engine] key is deprecated)"),
+    # above the RTK/INS engine's 64 ambiguity states: every epoch float without a word; 2**40: a cast error
+    ("[rtk]\nmin_fix_ambiguities = 99\n", "key 'rtk.min_fix_ambiguities': bad value 99; allowed: an integer in "
+     "[1, 64] with RTK/INS (the ambiguity states its engine holds)"),
+    ("[rtk]\nmin_fix_ambiguities = 1099511627776\n",
+     "key 'rtk.min_fix_ambiguities': bad value 1099511627776; allowed: an integer in [1, 120]"),
+    # both base keys: the latitude/longitude silently won
+    ("[rtk]\nbase_position_ecef_m = [4157177.0, 671230.0, 4774767.0]\nbase_position_llh = [48.78, 9.17, 350.0]\n",
+     "keys 'rtk.base_position_ecef_m' and 'rtk.base_position_llh' both given; keep one (the base antenna reference "
+     "point)"),
 ])
 def test_an_engine_key_the_run_sets_or_a_bad_value_is_one_line_naming_the_file(sim, tmp_path, capsys, text, message):
     """Before, the first four overrode the run's own keys silently (a 1.5 m lever arm the run did not
@@ -126,6 +154,27 @@ def test_an_engine_key_the_run_sets_or_a_bad_value_is_one_line_naming_the_file(s
     err = capsys.readouterr().err
     assert err == f"insnav run: error: {toml}: {message}\n", err
     assert not out.parent.exists()
+
+
+def test_engine_and_rtk_key_checks_from_python_name_the_key():
+    """The same checks for ``insnav.run(..., engine=..., rtk_options=...)``: one line naming the key."""
+    from insnav.filters.rtk_ins import check_engine, run_rtk_ins, rtk_ins_options
+    from insnav.gnss.rtk import RtkOptions
+
+    with pytest.raises(ConfigError, match=r"^key 'rtk_engine\.robust_max_sats': bad value 2\.5; allowed: an integer"):
+        check_engine({"robust_max_sats": 2.5})
+    assert check_engine({"robust_max_sats": 3, "outage_cycle_s": float("inf")}) == {"robust_max_sats": 3,
+                                                                                   "outage_cycle_s": float("inf")}
+    with pytest.raises(ConfigError, match=r"'rtk\.max_outage_epochs': bad value 1000000000000; allowed: an integer "
+                                          r"in \[0, 1000000\]$"):
+        RtkOptions.from_dict({"max_outage_epochs": 10 ** 12})
+    assert RtkOptions.from_dict({"min_fix_ambiguities": 120}).min_fix_ambiguities == 120  # the GNSS-only capacity
+    with pytest.raises(ConfigError, match=r"'rtk\.min_fix_ambiguities': bad value 65; allowed: an integer in \[1, 64\]"):
+        rtk_ins_options(RtkOptions(min_fix_ambiguities=65))
+    assert rtk_ins_options({"min_fix_ambiguities": 64}).min_fix_ambiguities == 64
+    with pytest.raises(ConfigError, match=r"^keys 'rtk\.phase_error_ratio' and 'rtk_engine\.phase_error_ratio' both"):
+        run_rtk_ins(object(), RunConfig(filter="ekf"), rover="r.obs", base="b.obs", nav="n.nav",
+                    rtk_options={"phase_error_ratio": 0.2}, engine={"phase_error_ratio": 0.8})
 
 
 @pytest.mark.parametrize("key, value", [("gate_chi2", 9.0), ("gate_prob", 0.99), ("use_position", False),

@@ -591,8 +591,8 @@ def _rtk_ins_inputs(args, ds, cfg: RunConfig):
     the TOML's ``[rtk]`` table over the RTK/INS defaults, then ``[options] rtk_options`` and
     ``--option rtk_options={...}`` over the table (taken out of ``cfg.options``); ``[rtk_engine]``;
     the base position.  Each is checked here, a bad key named with its file or option."""
-    from ..filters.rtk import parse_base_position
-    from ..filters.rtk_ins import RtkInsDataset, check_engine, rtk_ins_options
+    from ..filters.rtk import parse_base_position, pop_base_position
+    from ..filters.rtk_ins import MOVED_TO_RTK, RtkInsDataset, check_engine, deprecated_conflict, rtk_ins_options
 
     missing = [n for n in ("obs", "base", "nav") if not getattr(args, n)]
     if missing:
@@ -608,10 +608,10 @@ def _rtk_ins_inputs(args, ds, cfg: RunConfig):
         if not isinstance(rtk, dict):
             raise UserError(f"{args.config}: key 'rtk': bad value {rtk!r}; allowed: an [rtk] table")
         rtk = dict(rtk)
-        for k in base_keys:
-            if k in rtk:
-                source = f"{args.config}: key 'rtk.{k}'"
-                base_e = parse_base_position(rtk.pop(k), source)
+        base_e, source = pop_base_position(rtk, str(args.config))
+        for k in MOVED_TO_RTK:
+            if k in rtk and k in eng:
+                raise UserError(deprecated_conflict(k, str(args.config)))
         rtk_ins_options(rtk, str(args.config))  # a bad key named with its file
     given = cfg.options.pop("rtk_options", None)
     if given is not None:

@@ -31,7 +31,7 @@ from ._assemble import gnss_solution
 from .solution import Solution
 
 __all__ = ["RtkDataset", "run_rtk", "run_rtk_rinex", "rtk_solution", "load_rtk_config", "load_rtk_run",
-           "parse_base_position"]
+           "parse_base_position", "pop_base_position"]
 
 _BASE_KEYS = ("base_position_ecef_m", "base_position_llh")
 
@@ -79,12 +79,22 @@ def load_rtk_config(config_path=None, overrides: dict | None = None):
     if not isinstance(t, dict):
         raise ConfigError(f"{source}: key 'rtk': bad value {t!r}; allowed: a table")
     t = {**t, **(overrides or {})}
-    base = None
-    for k in _BASE_KEYS:
-        if k in t:
-            v = t.pop(k)
-            base = parse_base_position(v, f"{source}: key 'rtk.{k}'")
+    base, _ = pop_base_position(t, source)
     return RtkOptions.from_dict(t, source), base
+
+
+def pop_base_position(t: dict, source: str | None) -> tuple:
+    """(ECEF [m] or None, where it came from or None): the base position key of the ``[rtk]`` table
+    ``t`` (a dict, the key removed); both keys given is a one-line ConfigError naming them."""
+    given = [k for k in _BASE_KEYS if k in t]
+    where = f"{source}: " if source else ""
+    if len(given) > 1:  # the latitude/longitude silently won before
+        raise ConfigError(f"{where}keys 'rtk.{given[0]}' and 'rtk.{given[1]}' both given; keep one "
+                          "(the base antenna reference point)")
+    if not given:
+        return None, None
+    key = f"{where}key 'rtk.{given[0]}'"
+    return parse_base_position(t.pop(given[0]), key), key
 
 
 def rtk_solution(rs: RtkSolution, filter_name: str = "rtk") -> Solution:
