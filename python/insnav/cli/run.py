@@ -373,6 +373,13 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
 
         d = read_toml(args.config)
         tdcp = d.get("tdcp")
+        if tdcp is not None and not isinstance(tdcp, dict):
+            raise UserError(f"{args.config}: key 'tdcp': bad value {tdcp!r}; allowed: a [tdcp] table (and --filter "
+                            f"{name} is GNSS only: it has no TDCP update)")
+        settings = [k for k in (tdcp or {}) if k != "enabled"]
+        if settings and tdcp.get("enabled", False) is False:
+            raise UserError(f"{args.config}: key 'tdcp.{settings[0]}': --filter {name} is GNSS only and has no "
+                            "TDCP update (an IMU run's key): remove the [tdcp] table")
         for key, on in (("smooth", d.get("smooth", False)),
                         ("tdcp.enabled", tdcp.get("enabled", False) if isinstance(tdcp, dict) else False)):
             if on is not False:
