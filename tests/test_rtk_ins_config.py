@@ -268,3 +268,51 @@ def test_evaluate_and_report_compare_a_pos_with_the_antenna_truth(sim, tmp_path,
 
     rms3 = json.loads(capsys.readouterr().out)["rms_3d_m"]
     assert f"{rms3:.3f}" in (tmp_path / "rep2" / "report.html").read_text()
+
+
+@pytest.mark.parametrize("extra, text, message", [
+    # the RTK tables and the base in a run that is not RTK/INS: accepted (unknown keys too) and ignored
+    (["--coupling", "tight"], "[rtk]\nratio_threshold = 0.1\nbogus = 7\n",
+     "{toml}: [rtk] is read by RTK runs only (--filter rtk, or --coupling rtk); this run's coupling is 'tight': "
+     "remove the table"),
+    (["--coupling", "loose"], "[rtk_engine]\nbogus = 1\n",
+     "{toml}: [rtk_engine] is read by RTK runs only (--filter rtk, or --coupling rtk); this run's coupling is "
+     "'loose': remove the table"),
+    (["--coupling", "tight", "--base", "base.obs", "--base-pos", "1,2,3"], "",
+     "--base and --base-pos: read by RTK runs only (--filter rtk, or --coupling rtk with --obs/--base/--nav); "
+     "this run's coupling is 'tight'"),
+    ([], 'coupling = "loose"\n', None),  # --base alone, the coupling from the TOML
+    # [tdcp] settings without enabled / --tdcp: dropped from the run and the resolved configuration
+    (["--coupling", "tight"], "[tdcp]\nsigma_phase_m = 0.5\nchi2_row = 1.0\n",
+     "{toml}: key 'tdcp.sigma_phase_m': TDCP is off (neither --tdcp nor [tdcp] enabled = true), so the setting "
+     "would be ignored: enable TDCP or remove it"),
+])
+def test_what_a_run_would_ignore_is_one_line_before_it_reads_anything(sim, tmp_path, capsys, extra, text, message):
+    toml = tmp_path / "run.toml"
+    toml.write_text(text)
+    out = tmp_path / "out" / "sol.csv"
+    argv = ["run", str(sim), "--config", str(toml), "--out", str(out), "-q", *extra]
+    if message is None:
+        argv += ["--base", "base.obs"]
+        message = "--base: read by RTK runs only (--filter rtk, or --coupling rtk with --obs/--base/--nav); this run's " \
+                  "coupling is 'loose'"
+    assert main(argv) == 2
+    assert capsys.readouterr().err == f"insnav run: error: {message.format(toml=toml)}\n"
+    assert not out.parent.exists()
+
+
+def test_spp_refuses_a_base_and_rtk_ins_refuses_rinex_systems(sim, tmp_path, capsys):
+    """``--filter spp --base``: ignored before; ``[rinex] systems`` under ``--coupling rtk``: ignored
+    (RTK/INS reads ``[rtk] systems``; the resolved configuration still wrote the [rinex] value)."""
+    out = tmp_path / "out" / "x.csv"
+    assert main(["run", "--filter", "spp", "--format", "rinex", "--obs", str(sim / "rover.obs"), "--nav",
+                 str(sim / "nav.rnx"), "--base", str(sim / "base.obs"), "--out", str(out), "-q"]) == 2
+    assert capsys.readouterr().err == "insnav run: error: --filter spp is GNSS only and does not use --base\n"
+    toml = tmp_path / "run.toml"
+    toml.write_text('coupling = "rtk"\n[rinex]\nsystems = "G"\n')
+    assert main(["run", "--format", "rinex", "--imu", "imu.csv", *_files(sim), "--config", str(toml), "--out",
+                 str(out), "-q"]) == 2
+    assert capsys.readouterr().err == (f"insnav run: error: {toml}: key 'rinex.systems' is not read by RTK/INS "
+                                       "(--coupling rtk): its satellites are [rtk] systems (default \"GREC\"); write "
+                                       "systems in the [rtk] table\n")
+    assert not out.parent.exists()

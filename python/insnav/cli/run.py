@@ -362,6 +362,8 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
     unused = [f"--{n.replace('_', '-')}" for n in ("imu", "imu_tag", "gnss", "constraints", "output_rate",
                                                    "run_config")
               if getattr(args, n, None)] + (["--smooth"] if args.smooth else []) + (["--tdcp"] if args.tdcp else [])
+    if "base" not in needs:  # spp: no base receiver
+        unused += [flag for flag, v in (("--base", args.base), ("--base-pos", args.base_pos)) if v is not None]
     if args.dataset:
         unused.append("a dataset directory")
     if args.coupling not in (None, "gnss"):
@@ -386,6 +388,43 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
                 raise UserError(f"{args.config}: key '{key}': --filter {name} is GNSS only and has no "
                                 f"{'smoother' if key == 'smooth' else 'TDCP update'} (an IMU run's key): "
                                 "remove it or set it to false")
+
+
+def _check_ins_run_tables(args) -> None:
+    """Before an INS run: what it would ignore without a word is a one-line UserError.  ``--base`` /
+    ``--base-pos`` and the TOML's ``[rtk]`` / ``[rtk_engine]`` tables without RTK/INS (``--coupling
+    rtk``); ``[rinex] systems`` with it (RTK/INS reads ``[rtk] systems``); ``[tdcp]`` settings with
+    TDCP off (neither ``--tdcp`` nor ``[tdcp] enabled = true``)."""
+    toml = args.run_config if args.format == "kfgins" else args.config
+    d = {}
+    if toml:
+        from ..config import read_toml
+
+        try:
+            d = read_toml(toml)
+        except ConfigError:
+            d = {}  # reported by the loader, with its own message
+    coupling = args.coupling or d.get("coupling")
+    rin = d.get("rinex")
+    if coupling == "rtk" and args.format == "rinex" and isinstance(rin, dict) and "systems" in rin:  # ignored before
+        raise UserError(f"{toml}: key 'rinex.systems' is not read by RTK/INS (--coupling rtk): its satellites are "
+                        "[rtk] systems (default \"GREC\"); write systems in the [rtk] table")
+    if coupling != "rtk":
+        given = [f for f, v in (("--base", args.base), ("--base-pos", args.base_pos)) if v is not None]
+        this = f"this run's coupling is '{coupling}'" if coupling else "this run has no coupling = \"rtk\""
+        if given:
+            raise UserError(f"{' and '.join(given)}: read by RTK runs only (--filter rtk, or --coupling rtk with "
+                            f"--obs/--base/--nav); {this}")
+        for table in ("rtk", "rtk_engine"):
+            if table in d and args.format != "kfgins":  # --run-config refuses them itself
+                raise UserError(f"{toml}: [{table}] is read by RTK runs only (--filter rtk, or --coupling rtk); "
+                                f"{this}: remove the table")
+    tdcp = d.get("tdcp")
+    if isinstance(tdcp, dict) and not args.tdcp and tdcp.get("enabled", False) is False:
+        settings = [k for k in tdcp if k != "enabled"]
+        if settings:  # dropped from the run and from <out>.config.toml before
+            raise UserError(f"{toml}: key 'tdcp.{settings[0]}': TDCP is off (neither --tdcp nor [tdcp] enabled = "
+                            "true), so the setting would be ignored: enable TDCP or remove it")
 
 
 def _spp_run(args):
@@ -773,6 +812,7 @@ def cmd_run(args) -> int:
 
     if args.run_config is not None and args.format != "kfgins":
         raise UserError("--run-config goes with --format kfgins (otherwise the insnav TOML is --config)")
+    _check_ins_run_tables(args)
     if args.out is None:
         if args.format != "kfgins":
             raise UserError("--out is required (a solution file such as sol.csv)")
