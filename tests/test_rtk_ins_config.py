@@ -316,3 +316,48 @@ def test_spp_refuses_a_base_and_rtk_ins_refuses_rinex_systems(sim, tmp_path, cap
                                        "(--coupling rtk): its satellites are [rtk] systems (default \"GREC\"); write "
                                        "systems in the [rtk] table\n")
     assert not out.parent.exists()
+
+
+def test_run_applies_the_rtk_tables_of_a_config_dict_or_file(sim, tmp_path):
+    """``insnav.run(..., config=<dict or TOML>)`` dropped ``[rtk]`` and ``[rtk_engine]`` without a word
+    (the default fixed every epoch of this drive with ``ar_mode = "off"`` asked for); now they apply as
+    on the command line: ``[rtk]`` under ``rtk_options=``, its base position key as the dataset's, and
+    a bad or unknown key, or the tables in a run that is not RTK, is one line naming the source."""
+    import insnav
+    from insnav.filters.rtk import RtkDataset
+    from insnav.filters.rtk_ins import RtkInsDataset
+
+    files = (sim / "rover.obs", sim / "base.obs", sim / "nav.rnx")
+    g = insnav.run(RtkDataset(*files), "rtk")
+    assert g.rtk.counts()["n_fixed"] == 600
+    g = insnav.run(RtkDataset(*files), "rtk", config={"rtk": {"ar_mode": "off"}})
+    assert g.rtk_options.ar_mode == "off" and g.rtk.counts()["n_fixed"] == 0 and g.rtk.counts()["n_float"] == 600
+    g = insnav.run(RtkDataset(*files), "rtk", config={"rtk": {"ar_mode": "off"}},
+                   rtk_options={"ar_mode": "instantaneous"})  # the keyword over the table
+    assert g.rtk_options.ar_mode == "instantaneous" and g.rtk.counts()["n_fixed"] == 304
+    toml = tmp_path / "run.toml"
+    toml.write_text('[rtk]\nar_mode = "off"\n[rtk_engine]\nins_slip_k_sigma = 6.0\n')
+    imu = insnav.load_dataset(sim)
+    s = insnav.run(RtkInsDataset(imu, *files), "ekf", "rtk", config=toml)
+    assert s.rtk_options.ar_mode == "off" and np.all(s.fix_status == 2)
+    assert s.rtk.info["engine"]["ins_slip_k_sigma"] == 6.0
+    from insnav.gnss.rtk import read_phase_obs
+
+    r_b = read_phase_obs(files[1], "G").approx_r_e  # the base position key reaches the run: 10 km off is refused
+    with pytest.raises(ValueError, match=r"config: key 'rtk\.base_position_ecef_m'"):
+        insnav.run(RtkDataset(*files), "rtk", config={"rtk": {"base_position_ecef_m": list(r_b + [1e4, 0, 0])}})
+    for config, message in (
+            ({"rtk": {"ar_mod": "off"}}, r"^config: unknown key 'rtk\.ar_mod' \(did you mean 'rtk\.ar_mode'\?\)"),
+            ({"rtk_engine": {"bogus": 1}}, r"^config: key 'rtk_engine\.bogus': unknown"),
+            ({"rtk": {"phase_error_ratio": 0.2}, "rtk_engine": {"phase_error_ratio": 0.8}},
+             r"^config: keys 'rtk\.phase_error_ratio' and 'rtk_engine\.phase_error_ratio' both given")):
+        with pytest.raises(ConfigError, match=message):
+            insnav.run(RtkInsDataset(imu, *files), "ekf", "rtk", config=config)
+    with pytest.raises(ConfigError, match=r"^config: \[rtk_engine\] is read by RTK/INS only \(coupling 'rtk'\); this "
+                                          r"run is filter 'rtk', coupling 'gnss': remove the table$"):
+        insnav.run(RtkDataset(*files), "rtk", config={"rtk_engine": {"ins_slip_k_sigma": 6.0}})
+    with pytest.raises(ConfigError, match=rf"^{toml}: \[rtk\] is read by RTK runs only \(filter 'rtk', or coupling "
+                                          r"'rtk'\); this run is filter 'ekf', coupling 'loose': remove the table$"):
+        insnav.run(imu, "ekf", "loose", config=toml)
+    with pytest.raises(ConfigError, match=r"^config: key 'tdcp\.chi2_row': TDCP is off"):
+        insnav.run(imu, "ekf", "loose", config={"tdcp": {"chi2_row": 5.0}})
