@@ -171,6 +171,39 @@ def test_a_key_gnss_only_rtk_does_not_read_is_one_line_naming_it(shared_data, tm
     assert main(_rtk_argv(d, out, "--config", toml)) == 0, capsys.readouterr().err
 
 
+@pytest.mark.parametrize("fast", ["1", "0"])
+@pytest.mark.parametrize("text, message", [
+    # a TOML integer past the engine's int: a raw pybind11 cast error; past the 120 ambiguity states: all float
+    ("[rtk]\nmax_outage_epochs = 1000000000000\n",
+     "key 'rtk.max_outage_epochs': bad value 1000000000000; allowed: an integer in [0, 1000000]"),
+    ("[rtk]\nmin_fix_ambiguities = 500\n",
+     "key 'rtk.min_fix_ambiguities': bad value 500; allowed: an integer in [1, 120]"),
+    # both base keys: the latitude/longitude silently won over the ECEF position
+    ("[rtk]\nbase_position_ecef_m = [-3962108.7, 3381309.5, 3668678.6]\nbase_position_llh = [35.13, 136.97, 104.8]\n",
+     "keys 'rtk.base_position_ecef_m' and 'rtk.base_position_llh' both given; keep one (the base antenna reference "
+     "point)"),
+    # a coupling other than gnss was read by no one (written back as "gnss")
+    ('coupling = "banana"\n', "key 'coupling': bad value 'banana'; allowed: \"gnss\" (filter 'rtk' is GNSS only)"),
+    ('filter = "rtk"\ncoupling = "rtk"\n', "key 'coupling': bad value 'rtk'; allowed: \"gnss\" (filter 'rtk' is GNSS "
+     "only); RTK/INS (the IMU with carrier phase) is --filter ekf --coupling rtk"),
+    # [tdcp] that is not a table, or its settings: accepted and ignored
+    ("tdcp = 5\n", "key 'tdcp': bad value 5; allowed: a [tdcp] table (and --filter rtk is GNSS only: it has no TDCP "
+     "update)"),
+    ("[tdcp]\nsigma_phase_m = 0.5\n", "key 'tdcp.sigma_phase_m': --filter rtk is GNSS only and has no TDCP update "
+     "(an IMU run's key): remove the [tdcp] table"),
+])
+def test_gnss_only_rtk_refuses_what_it_would_misread_with_one_line(shared_data, tmp_path, capsys, monkeypatch, fast,
+                                                                   text, message):
+    d = _matrtklib(shared_data)
+    monkeypatch.setenv("INSNAV_RTK_FASTPATH", fast)
+    toml = tmp_path / "run.toml"
+    toml.write_text(text)
+    out = tmp_path / "out" / "sol.pos"
+    assert main(_rtk_argv(d, out, "--config", toml)) == 2
+    assert capsys.readouterr().err == f"insnav run: error: {toml}: {message}\n"
+    assert not out.parent.exists()
+
+
 def _binary(tmp_path):
     """A file that is not UTF-8 text (a compiled module, a zipped folder given by mistake)."""
     p = tmp_path / "run.toml"

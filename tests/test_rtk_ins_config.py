@@ -114,6 +114,34 @@ def test_gnss_only_filters_read_their_option_tables(sim, tmp_path, capsys):
     ("[rtk_engine]\nins_slip_k_sigm = 4.0\n", "key 'rtk_engine.ins_slip_k_sigm': unknown; did you mean 'ins_slip_k_sigma'?"),
     ("rtk_engine = 3\n", "key 'rtk_engine': bad value 3; allowed: an [rtk_engine] table"),
     ("rtk = 3\n", "key 'rtk': bad value 3; allowed: an [rtk] table"),
+    # integer engine keys: a float was truncated (2.5 ran as 2), 1e12 gave a pybind11 cast error
+    ("[rtk_engine]\nrobust_max_sats = 2.5\n",
+     "key 'rtk_engine.robust_max_sats': bad value 2.5; allowed: an integer in [0, 100]"),
+    ("[rtk_engine]\nrobust_max_sats = 1e12\n",
+     "key 'rtk_engine.robust_max_sats': bad value 1000000000000.0; allowed: an integer in [0, 100]"),
+    ("[rtk_engine]\nrobust_phase_reset_epochs = -1\n",
+     "key 'rtk_engine.robust_phase_reset_epochs': bad value -1; allowed: an integer in [0, 1000000]"),
+    # the engine's own range checks named neither the table nor the file
+    ("[rtk_engine]\ncode_chi2_row = -1.0\n", "key 'rtk_engine.code_chi2_row': bad value -1.0; allowed: a number >= 0"),
+    ("[rtk_engine]\nvalidation_prob = 1.0\n",
+     "key 'rtk_engine.validation_prob': bad value 1.0; allowed: a number in [0, 1)"),
+    ("[rtk_engine]\nrobust_igg_k0 = 4.0\n", "key 'rtk_engine.robust_igg_k0': bad value 4.0 with robust_igg_k1 = 3.0; "
+     "allowed: 0 < robust_igg_k0 < robust_igg_k1"),
+    # the deprecated engine key: its range named [rtk]; given in both tables the engine's silently won
+    ("[rtk_engine]\nphase_error_ratio = 50.0\n",
+     "key 'rtk_engine.phase_error_ratio': bad value 50.0; allowed: a number in [0.0, 10.0]"),
+    ("[rtk]\nphase_error_ratio = 0.2\n[rtk_engine]\nphase_error_ratio = 0.8\n",
+     "keys 'rtk.phase_error_ratio' and 'rtk_engine.phase_error_ratio' both given; keep 'rtk.phase_error_ratio' "
+     "(the [rtk_engine] key is deprecated)"),
+    # above the RTK/INS engine's 64 ambiguity states: every epoch float without a word; 2**40: a cast error
+    ("[rtk]\nmin_fix_ambiguities = 99\n", "key 'rtk.min_fix_ambiguities': bad value 99; allowed: an integer in "
+     "[1, 64] with RTK/INS (the ambiguity states its engine holds)"),
+    ("[rtk]\nmin_fix_ambiguities = 1099511627776\n",
+     "key 'rtk.min_fix_ambiguities': bad value 1099511627776; allowed: an integer in [1, 120]"),
+    # both base keys: the latitude/longitude silently won
+    ("[rtk]\nbase_position_ecef_m = [4157177.0, 671230.0, 4774767.0]\nbase_position_llh = [48.78, 9.17, 350.0]\n",
+     "keys 'rtk.base_position_ecef_m' and 'rtk.base_position_llh' both given; keep one (the base antenna reference "
+     "point)"),
 ])
 def test_an_engine_key_the_run_sets_or_a_bad_value_is_one_line_naming_the_file(sim, tmp_path, capsys, text, message):
     """Before, the first four overrode the run's own keys silently (a 1.5 m lever arm the run did not
@@ -126,6 +154,27 @@ def test_an_engine_key_the_run_sets_or_a_bad_value_is_one_line_naming_the_file(s
     err = capsys.readouterr().err
     assert err == f"insnav run: error: {toml}: {message}\n", err
     assert not out.parent.exists()
+
+
+def test_engine_and_rtk_key_checks_from_python_name_the_key():
+    """The same checks for ``insnav.run(..., engine=..., rtk_options=...)``: one line naming the key."""
+    from insnav.filters.rtk_ins import check_engine, run_rtk_ins, rtk_ins_options
+    from insnav.gnss.rtk import RtkOptions
+
+    with pytest.raises(ConfigError, match=r"^key 'rtk_engine\.robust_max_sats': bad value 2\.5; allowed: an integer"):
+        check_engine({"robust_max_sats": 2.5})
+    assert check_engine({"robust_max_sats": 3, "outage_cycle_s": float("inf")}) == {"robust_max_sats": 3,
+                                                                                   "outage_cycle_s": float("inf")}
+    with pytest.raises(ConfigError, match=r"'rtk\.max_outage_epochs': bad value 1000000000000; allowed: an integer "
+                                          r"in \[0, 1000000\]$"):
+        RtkOptions.from_dict({"max_outage_epochs": 10 ** 12})
+    assert RtkOptions.from_dict({"min_fix_ambiguities": 120}).min_fix_ambiguities == 120  # the GNSS-only capacity
+    with pytest.raises(ConfigError, match=r"'rtk\.min_fix_ambiguities': bad value 65; allowed: an integer in \[1, 64\]"):
+        rtk_ins_options(RtkOptions(min_fix_ambiguities=65))
+    assert rtk_ins_options({"min_fix_ambiguities": 64}).min_fix_ambiguities == 64
+    with pytest.raises(ConfigError, match=r"^keys 'rtk\.phase_error_ratio' and 'rtk_engine\.phase_error_ratio' both"):
+        run_rtk_ins(object(), RunConfig(filter="ekf"), rover="r.obs", base="b.obs", nav="n.nav",
+                    rtk_options={"phase_error_ratio": 0.2}, engine={"phase_error_ratio": 0.8})
 
 
 @pytest.mark.parametrize("key, value", [("gate_chi2", 9.0), ("gate_prob", 0.99), ("use_position", False),
@@ -219,3 +268,96 @@ def test_evaluate_and_report_compare_a_pos_with_the_antenna_truth(sim, tmp_path,
 
     rms3 = json.loads(capsys.readouterr().out)["rms_3d_m"]
     assert f"{rms3:.3f}" in (tmp_path / "rep2" / "report.html").read_text()
+
+
+@pytest.mark.parametrize("extra, text, message", [
+    # the RTK tables and the base in a run that is not RTK/INS: accepted (unknown keys too) and ignored
+    (["--coupling", "tight"], "[rtk]\nratio_threshold = 0.1\nbogus = 7\n",
+     "{toml}: [rtk] is read by RTK runs only (--filter rtk, or --coupling rtk); this run's coupling is 'tight': "
+     "remove the table"),
+    (["--coupling", "loose"], "[rtk_engine]\nbogus = 1\n",
+     "{toml}: [rtk_engine] is read by RTK runs only (--filter rtk, or --coupling rtk); this run's coupling is "
+     "'loose': remove the table"),
+    (["--coupling", "tight", "--base", "base.obs", "--base-pos", "1,2,3"], "",
+     "--base and --base-pos: read by RTK runs only (--filter rtk, or --coupling rtk with --obs/--base/--nav); "
+     "this run's coupling is 'tight'"),
+    ([], 'coupling = "loose"\n', None),  # --base alone, the coupling from the TOML
+    # [tdcp] settings without enabled / --tdcp: dropped from the run and the resolved configuration
+    (["--coupling", "tight"], "[tdcp]\nsigma_phase_m = 0.5\nchi2_row = 1.0\n",
+     "{toml}: key 'tdcp.sigma_phase_m': TDCP is off (neither --tdcp nor [tdcp] enabled = true), so the setting "
+     "would be ignored: enable TDCP or remove it"),
+])
+def test_what_a_run_would_ignore_is_one_line_before_it_reads_anything(sim, tmp_path, capsys, extra, text, message):
+    toml = tmp_path / "run.toml"
+    toml.write_text(text)
+    out = tmp_path / "out" / "sol.csv"
+    argv = ["run", str(sim), "--config", str(toml), "--out", str(out), "-q", *extra]
+    if message is None:
+        argv += ["--base", "base.obs"]
+        message = "--base: read by RTK runs only (--filter rtk, or --coupling rtk with --obs/--base/--nav); this run's " \
+                  "coupling is 'loose'"
+    assert main(argv) == 2
+    assert capsys.readouterr().err == f"insnav run: error: {message.format(toml=toml)}\n"
+    assert not out.parent.exists()
+
+
+def test_spp_refuses_a_base_and_rtk_ins_refuses_rinex_systems(sim, tmp_path, capsys):
+    """``--filter spp --base``: ignored before; ``[rinex] systems`` under ``--coupling rtk``: ignored
+    (RTK/INS reads ``[rtk] systems``; the resolved configuration still wrote the [rinex] value)."""
+    out = tmp_path / "out" / "x.csv"
+    assert main(["run", "--filter", "spp", "--format", "rinex", "--obs", str(sim / "rover.obs"), "--nav",
+                 str(sim / "nav.rnx"), "--base", str(sim / "base.obs"), "--out", str(out), "-q"]) == 2
+    assert capsys.readouterr().err == "insnav run: error: --filter spp is GNSS only and does not use --base\n"
+    toml = tmp_path / "run.toml"
+    toml.write_text('coupling = "rtk"\n[rinex]\nsystems = "G"\n')
+    assert main(["run", "--format", "rinex", "--imu", "imu.csv", *_files(sim), "--config", str(toml), "--out",
+                 str(out), "-q"]) == 2
+    assert capsys.readouterr().err == (f"insnav run: error: {toml}: key 'rinex.systems' is not read by RTK/INS "
+                                       "(--coupling rtk): its satellites are [rtk] systems (default \"GREC\"); write "
+                                       "systems in the [rtk] table\n")
+    assert not out.parent.exists()
+
+
+def test_run_applies_the_rtk_tables_of_a_config_dict_or_file(sim, tmp_path):
+    """``insnav.run(..., config=<dict or TOML>)`` dropped ``[rtk]`` and ``[rtk_engine]`` without a word
+    (the default fixed every epoch of this drive with ``ar_mode = "off"`` asked for); now they apply as
+    on the command line: ``[rtk]`` under ``rtk_options=``, its base position key as the dataset's, and
+    a bad or unknown key, or the tables in a run that is not RTK, is one line naming the source."""
+    import insnav
+    from insnav.filters.rtk import RtkDataset
+    from insnav.filters.rtk_ins import RtkInsDataset
+
+    files = (sim / "rover.obs", sim / "base.obs", sim / "nav.rnx")
+    g = insnav.run(RtkDataset(*files), "rtk")
+    assert g.rtk.counts()["n_fixed"] == 600
+    g = insnav.run(RtkDataset(*files), "rtk", config={"rtk": {"ar_mode": "off"}})
+    assert g.rtk_options.ar_mode == "off" and g.rtk.counts()["n_fixed"] == 0 and g.rtk.counts()["n_float"] == 600
+    g = insnav.run(RtkDataset(*files), "rtk", config={"rtk": {"ar_mode": "off"}},
+                   rtk_options={"ar_mode": "instantaneous"})  # the keyword over the table
+    assert g.rtk_options.ar_mode == "instantaneous" and g.rtk.counts()["n_fixed"] == 304
+    toml = tmp_path / "run.toml"
+    toml.write_text('[rtk]\nar_mode = "off"\n[rtk_engine]\nins_slip_k_sigma = 6.0\n')
+    imu = insnav.load_dataset(sim)
+    s = insnav.run(RtkInsDataset(imu, *files), "ekf", "rtk", config=toml)
+    assert s.rtk_options.ar_mode == "off" and np.all(s.fix_status == 2)
+    assert s.rtk.info["engine"]["ins_slip_k_sigma"] == 6.0
+    from insnav.gnss.rtk import read_phase_obs
+
+    r_b = read_phase_obs(files[1], "G").approx_r_e  # the base position key reaches the run: 10 km off is refused
+    with pytest.raises(ValueError, match=r"config: key 'rtk\.base_position_ecef_m'"):
+        insnav.run(RtkDataset(*files), "rtk", config={"rtk": {"base_position_ecef_m": list(r_b + [1e4, 0, 0])}})
+    for config, message in (
+            ({"rtk": {"ar_mod": "off"}}, r"^config: unknown key 'rtk\.ar_mod' \(did you mean 'rtk\.ar_mode'\?\)"),
+            ({"rtk_engine": {"bogus": 1}}, r"^config: key 'rtk_engine\.bogus': unknown"),
+            ({"rtk": {"phase_error_ratio": 0.2}, "rtk_engine": {"phase_error_ratio": 0.8}},
+             r"^config: keys 'rtk\.phase_error_ratio' and 'rtk_engine\.phase_error_ratio' both given")):
+        with pytest.raises(ConfigError, match=message):
+            insnav.run(RtkInsDataset(imu, *files), "ekf", "rtk", config=config)
+    with pytest.raises(ConfigError, match=r"^config: \[rtk_engine\] is read by RTK/INS only \(coupling 'rtk'\); this "
+                                          r"run is filter 'rtk', coupling 'gnss': remove the table$"):
+        insnav.run(RtkDataset(*files), "rtk", config={"rtk_engine": {"ins_slip_k_sigma": 6.0}})
+    with pytest.raises(ConfigError, match=rf"^{toml}: \[rtk\] is read by RTK runs only \(filter 'rtk', or coupling "
+                                          r"'rtk'\); this run is filter 'ekf', coupling 'loose': remove the table$"):
+        insnav.run(imu, "ekf", "loose", config=toml)
+    with pytest.raises(ConfigError, match=r"^config: key 'tdcp\.chi2_row': TDCP is off"):
+        insnav.run(imu, "ekf", "loose", config={"tdcp": {"chi2_row": 5.0}})

@@ -117,8 +117,11 @@ def _inputs(opts: dict):
     if any(k not in ("filter", "coupling", "rtk", "smooth", "tdcp") for k in d):
         return None  # a key GNSS-only RTK does not read: the usual path names it (filters.rtk.check_rtk_toml_keys)
     tdcp = d.get("tdcp")
-    if d.get("smooth", False) is not False or (isinstance(tdcp, dict) and tdcp.get("enabled", False) is not False):
+    if d.get("smooth", False) is not False or (tdcp is not None and not (isinstance(tdcp, dict) and
+                                                                         tdcp in ({}, {"enabled": False}))):
         return None  # the usual path refuses them with one line
+    if d.get("coupling", "gnss") != "gnss":
+        return None  # the usual path refuses it, or reads an INS run's TOML for its [rtk] table
     name = opts.get("filter")
     if name is None:
         name = d.get("filter") if opts.get("config") else None

@@ -362,6 +362,8 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
     unused = [f"--{n.replace('_', '-')}" for n in ("imu", "imu_tag", "gnss", "constraints", "output_rate",
                                                    "run_config")
               if getattr(args, n, None)] + (["--smooth"] if args.smooth else []) + (["--tdcp"] if args.tdcp else [])
+    if "base" not in needs:  # spp: no base receiver
+        unused += [flag for flag, v in (("--base", args.base), ("--base-pos", args.base_pos)) if v is not None]
     if args.dataset:
         unused.append("a dataset directory")
     if args.coupling not in (None, "gnss"):
@@ -373,12 +375,56 @@ def _check_gnss_only_args(args, name: str, needs: tuple, usage: str) -> None:
 
         d = read_toml(args.config)
         tdcp = d.get("tdcp")
+        if tdcp is not None and not isinstance(tdcp, dict):
+            raise UserError(f"{args.config}: key 'tdcp': bad value {tdcp!r}; allowed: a [tdcp] table (and --filter "
+                            f"{name} is GNSS only: it has no TDCP update)")
+        settings = [k for k in (tdcp or {}) if k != "enabled"]
+        if settings and tdcp.get("enabled", False) is False:
+            raise UserError(f"{args.config}: key 'tdcp.{settings[0]}': --filter {name} is GNSS only and has no "
+                            "TDCP update (an IMU run's key): remove the [tdcp] table")
         for key, on in (("smooth", d.get("smooth", False)),
                         ("tdcp.enabled", tdcp.get("enabled", False) if isinstance(tdcp, dict) else False)):
             if on is not False:
                 raise UserError(f"{args.config}: key '{key}': --filter {name} is GNSS only and has no "
                                 f"{'smoother' if key == 'smooth' else 'TDCP update'} (an IMU run's key): "
                                 "remove it or set it to false")
+
+
+def _check_ins_run_tables(args) -> None:
+    """Before an INS run: what it would ignore without a word is a one-line UserError.  ``--base`` /
+    ``--base-pos`` and the TOML's ``[rtk]`` / ``[rtk_engine]`` tables without RTK/INS (``--coupling
+    rtk``); ``[rinex] systems`` with it (RTK/INS reads ``[rtk] systems``); ``[tdcp]`` settings with
+    TDCP off (neither ``--tdcp`` nor ``[tdcp] enabled = true``)."""
+    toml = args.run_config if args.format == "kfgins" else args.config
+    d = {}
+    if toml:
+        from ..config import read_toml
+
+        try:
+            d = read_toml(toml)
+        except ConfigError:
+            d = {}  # reported by the loader, with its own message
+    coupling = args.coupling or d.get("coupling")
+    rin = d.get("rinex")
+    if coupling == "rtk" and args.format == "rinex" and isinstance(rin, dict) and "systems" in rin:  # ignored before
+        raise UserError(f"{toml}: key 'rinex.systems' is not read by RTK/INS (--coupling rtk): its satellites are "
+                        "[rtk] systems (default \"GREC\"); write systems in the [rtk] table")
+    if coupling != "rtk":
+        given = [f for f, v in (("--base", args.base), ("--base-pos", args.base_pos)) if v is not None]
+        this = f"this run's coupling is '{coupling}'" if coupling else "this run has no coupling = \"rtk\""
+        if given:
+            raise UserError(f"{' and '.join(given)}: read by RTK runs only (--filter rtk, or --coupling rtk with "
+                            f"--obs/--base/--nav); {this}")
+        for table in ("rtk", "rtk_engine"):
+            if table in d and args.format != "kfgins":  # --run-config refuses them itself
+                raise UserError(f"{toml}: [{table}] is read by RTK runs only (--filter rtk, or --coupling rtk); "
+                                f"{this}: remove the table")
+    tdcp = d.get("tdcp")
+    if isinstance(tdcp, dict) and not args.tdcp and tdcp.get("enabled", False) is False:
+        settings = [k for k in tdcp if k != "enabled"]
+        if settings:  # dropped from the run and from <out>.config.toml before
+            raise UserError(f"{toml}: key 'tdcp.{settings[0]}': TDCP is off (neither --tdcp nor [tdcp] enabled = "
+                            "true), so the setting would be ignored: enable TDCP or remove it")
 
 
 def _spp_run(args):
@@ -591,8 +637,8 @@ def _rtk_ins_inputs(args, ds, cfg: RunConfig):
     the TOML's ``[rtk]`` table over the RTK/INS defaults, then ``[options] rtk_options`` and
     ``--option rtk_options={...}`` over the table (taken out of ``cfg.options``); ``[rtk_engine]``;
     the base position.  Each is checked here, a bad key named with its file or option."""
-    from ..filters.rtk import parse_base_position
-    from ..filters.rtk_ins import RtkInsDataset, check_engine, rtk_ins_options
+    from ..filters.rtk import parse_base_position, pop_base_position
+    from ..filters.rtk_ins import MOVED_TO_RTK, RtkInsDataset, check_engine, deprecated_conflict, rtk_ins_options
 
     missing = [n for n in ("obs", "base", "nav") if not getattr(args, n)]
     if missing:
@@ -608,10 +654,10 @@ def _rtk_ins_inputs(args, ds, cfg: RunConfig):
         if not isinstance(rtk, dict):
             raise UserError(f"{args.config}: key 'rtk': bad value {rtk!r}; allowed: an [rtk] table")
         rtk = dict(rtk)
-        for k in base_keys:
-            if k in rtk:
-                source = f"{args.config}: key 'rtk.{k}'"
-                base_e = parse_base_position(rtk.pop(k), source)
+        base_e, source = pop_base_position(rtk, str(args.config))
+        for k in MOVED_TO_RTK:
+            if k in rtk and k in eng:
+                raise UserError(deprecated_conflict(k, str(args.config)))
         rtk_ins_options(rtk, str(args.config))  # a bad key named with its file
     given = cfg.options.pop("rtk_options", None)
     if given is not None:
@@ -766,6 +812,7 @@ def cmd_run(args) -> int:
 
     if args.run_config is not None and args.format != "kfgins":
         raise UserError("--run-config goes with --format kfgins (otherwise the insnav TOML is --config)")
+    _check_ins_run_tables(args)
     if args.out is None:
         if args.format != "kfgins":
             raise UserError("--out is required (a solution file such as sol.csv)")

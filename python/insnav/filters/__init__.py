@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..config import RunConfig, check_option_values
+from ..config import ConfigError, RunConfig, check_option_values
 from ..registry import FILTERS, filter_spec
 from .solution import GNSS_STATUS, RecordStatus, Solution
 
@@ -30,18 +30,100 @@ _ADVERB = {"loose": "loosely", "tight": "tightly", "gnss": "GNSS-only (no IMU),"
 
 
 def _as_config(config, filter: str | None = None, coupling: str | None = None) -> RunConfig:
+    """A copy of ``config`` (a RunConfig, a dict of TOML keys, or a TOML file path) for a caller that runs
+    no RTK (the navigators, the streamed run, the tuner): ``[rtk]`` / ``[rtk_engine]`` tables are refused
+    with one line, as :func:`run` refuses them outside an RTK run."""
+    cfg, extra = _config_and_tables(config, filter, coupling)
+    for t in ("rtk", "rtk_engine"):
+        if t in extra:
+            raise ConfigError(f"{extra['source']}: [{t}] is read by RTK runs only (insnav.run with filter 'rtk' "
+                              "or coupling 'rtk'): remove the table")
+    return cfg
+
+
+def _config_and_tables(config, filter: str | None = None, coupling: str | None = None) -> tuple[RunConfig, dict]:
     """A copy of ``config``: a RunConfig, a dict of TOML keys, or a TOML file path; a dict or file is
-    checked against ``filter`` / ``coupling`` when given (they replace its own, as run() does)."""
+    checked against ``filter`` / ``coupling`` when given (they replace its own, as run() does).  With
+    it, what a dict or file holds beyond the RunConfig: its ``[rtk]`` / ``[rtk_engine]`` tables
+    (``"rtk"``, ``"rtk_engine"``), the ``[tdcp]`` settings given without ``enabled = true``
+    (``"tdcp_settings"``) and the name of the source for the messages (``"source"``)."""
     if config is None:
-        return RunConfig()
+        return RunConfig(), {}
     if isinstance(config, RunConfig):
-        return dataclasses.replace(config)
-    from ..config import config_from_dict, load_config
+        return dataclasses.replace(config), {}
+    import os
+
+    from ..config import config_from_dict, read_toml
 
     given = {k: v for k, v in (("filter", filter), ("coupling", coupling)) if v is not None}
     if isinstance(config, dict):
-        return config_from_dict({**config, **given})
-    return load_config(config, given)
+        d, source = dict(config), "config"
+    else:
+        d, source = read_toml(config), os.fspath(config)  # its one-line errors: unreadable, not TOML, not UTF-8
+    d.update(given)
+    extra = {t: d.pop(t) for t in ("rtk", "rtk_engine") if t in d}
+    for t, v in extra.items():
+        if not isinstance(v, dict):
+            raise ConfigError(f"{source}: key '{t}': bad value {v!r}; allowed: an [{t}] table")
+    tdcp = d.get("tdcp")
+    if isinstance(tdcp, dict) and tdcp.get("enabled", False) is False:
+        extra["tdcp_settings"] = [k for k in tdcp if k != "enabled"]
+    return config_from_dict(d, source=source), dict(extra, source=source)
+
+
+def _apply_rtk_tables(dataset, cfg: RunConfig, extra: dict, spec, options: dict):
+    """The ``[rtk]`` / ``[rtk_engine]`` tables of a config dict or file applied as the command line
+    applies them (:func:`insnav.cli.run._rtk_ins_inputs`): ``[rtk]`` under the ``rtk_options`` given
+    (``run(rtk_options=...)``, else ``[options] rtk_options``), ``[rtk_engine]`` under ``engine``, its
+    base position key as the dataset's base position when the dataset has none (an explicit one wins,
+    as ``--base-pos`` over the TOML's).  Refused, with one line naming the table and the source, in a run
+    that is not RTK (the filter ``rtk``, or the coupling ``rtk``).  Returns the dataset."""
+    from ..gnss.rtk import RtkOptions
+    from ._base_position import pop_base_position
+
+    source = extra.get("source", "config")
+    tables = [t for t in ("rtk", "rtk_engine") if t in extra]
+    if not tables:
+        return dataset
+    rtk_ins = cfg.coupling == "rtk"
+    for t in tables:
+        if not rtk_ins and not (t == "rtk" and cfg.filter == "rtk"):
+            reads = "RTK runs only (filter 'rtk', or coupling 'rtk')" if t == "rtk" else "RTK/INS only (coupling 'rtk')"
+            raise ConfigError(f"{source}: [{t}] is read by {reads}; this run is filter '{cfg.filter}', coupling "
+                              f"'{cfg.coupling}': remove the table")
+    table = dict(extra.get("rtk", {}))
+    base_e, where = pop_base_position(table, source)
+    eng = extra.get("rtk_engine")
+    if rtk_ins:
+        from .rtk_ins import MOVED_TO_RTK, check_engine, deprecated_conflict, rtk_ins_options
+
+        eng = check_engine(eng, source)
+        for k in MOVED_TO_RTK:
+            if k in table and k in eng:
+                raise ConfigError(deprecated_conflict(k, source))
+        rtk_ins_options(table, source)  # a bad key named with its file
+    else:
+        RtkOptions.from_dict(table, source)
+    given = options["rtk_options"] if "rtk_options" in options else cfg.options.get("rtk_options")
+    if isinstance(given, RtkOptions) and table:
+        raise ConfigError(f"{source}: an [rtk] table and rtk_options=RtkOptions(...) both given: pass rtk_options as "
+                          "a dict of keys (written over the table's), or leave one out")
+    if not isinstance(given, RtkOptions):
+        if given is not None and not isinstance(given, dict):
+            raise ConfigError(f"rtk_options: bad value {given!r}; allowed: a table of [rtk] keys")
+        options["rtk_options"] = {**table, **(given or {})}
+    if eng:
+        given = options["engine"] if "engine" in options else cfg.options.get("engine")
+        if given is not None and not isinstance(given, dict):
+            raise ConfigError(f"engine: bad value {given!r}; allowed: a dict of [rtk_engine] keys")
+        options["engine"] = {**eng, **(given or {})}
+    if base_e is not None:
+        if dataclasses.is_dataclass(dataset) and any(f.name == "base_position_e_m" for f in dataclasses.fields(dataset)):
+            if getattr(dataset, "base_position_e_m", None) is None:
+                dataset = dataclasses.replace(dataset, base_position_e_m=base_e, base_position_source=where)
+        elif rtk_ins and options.get("base_pos", cfg.options.get("base_pos")) is None:
+            options["base_pos"] = base_e
+    return dataset
 
 
 def run(dataset, filter: str | None = None, coupling: str | None = None, config=None,
@@ -62,7 +144,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
         Not given with a ``filter`` that has one coupling (fukf, upf, pf: tight; spp,
         rtk: gnss), that one.
     config : RunConfig, dict or path, optional
-        A :class:`~insnav.config.RunConfig`, a dict of its TOML keys, or a TOML file.
+        A :class:`~insnav.config.RunConfig`, a dict of its TOML keys, or a TOML file.  A dict's or
+        file's ``[rtk]`` / ``[rtk_engine]`` tables apply to an RTK run as on the command line (under
+        ``rtk_options=`` / ``engine=``, whose keys win; the ``[rtk]`` base position when the dataset has
+        none) and are refused in any other run; ``[tdcp]`` settings without ``enabled = true`` are refused.
     sanitize : bool or dict
         Check and repair the input first (:mod:`insnav.filters.sanitize`:
         duplicates dropped, short IMU gaps bridged, bad GNSS fixes dropped; a
@@ -86,7 +171,7 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
     """
     if filter is not None and coupling is None and filter in FILTERS and len(FILTERS[filter].couplings) == 1:
         coupling = FILTERS[filter].couplings[0]  # a filter with one coupling (spp, rtk, fukf, upf, pf) runs it
-    cfg = _as_config(config, filter, coupling)
+    cfg, extra = _config_and_tables(config, filter, coupling)
     if filter is not None:
         cfg.filter = filter
     if coupling is not None:
@@ -108,6 +193,10 @@ def run(dataset, filter: str | None = None, coupling: str | None = None, config=
             raise TypeError(f"run() got an unknown option {k!r}")
         setattr(cfg, k, v)
     cfg.validate()
+    if extra.get("tdcp_settings") and not cfg.tdcp.enabled:  # dropped from the run before
+        raise ConfigError(f"{extra['source']}: key 'tdcp.{extra['tdcp_settings'][0]}': TDCP is off ([tdcp] enabled "
+                          "is not true), so the setting would be ignored: enable TDCP or remove it")
+    dataset = _apply_rtk_tables(dataset, cfg, extra, spec, options)
     run_options = spec.options_class(cfg.coupling)(**{**cfg.options, **options})
     check_option_values(run_options)  # before the input checks: a bad option fails at once
     report = None

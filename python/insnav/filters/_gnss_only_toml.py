@@ -12,10 +12,16 @@ def check_gnss_only_toml_keys(d: dict, source: str, filter_name: str, tables: di
     (``filter_name``: spp, rtk) would not read, in a TOML that names no other filter.  ``tables``:
     the tables it reads, each with the keys of its dataclass (for the hint where a key of one of
     them was written at the top level).  ``smooth`` and ``tdcp`` pass: the command line refuses
-    them with a line of their own.  A TOML of another filter (an INS run's, with its ``[imu]``) is
-    read for the run's tables only."""
-    if d.get("filter", filter_name) != filter_name:
-        return
+    them with a line of their own.  ``coupling`` other than ``"gnss"`` is refused.  A TOML of another
+    filter (an INS run's, with its ``[imu]``; a ``coupling`` of an INS filter without a ``filter``
+    key) is read for the run's tables only."""
+    coupling = d.get("coupling", "gnss")
+    if d.get("filter", filter_name) != filter_name or ("filter" not in d and coupling in ("loose", "tight", "rtk")):
+        return  # another filter's TOML (an INS filter's coupling without a filter key: the default ekf)
+    if coupling != "gnss":  # read by no one before: a misspelt or an INS coupling in a GNSS-only TOML
+        hint = "; RTK/INS (the IMU with carrier phase) is --filter ekf --coupling rtk" if coupling == "rtk" else ""
+        raise ConfigError(f"{source}: key 'coupling': bad value {coupling!r}; allowed: \"gnss\" (filter "
+                          f"'{filter_name}' is GNSS only){hint}")
     allowed = ("filter", "coupling", *tables, "smooth", "tdcp")
     names = [f"[{t}]" for t in tables]
     where = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]

@@ -26,15 +26,13 @@ import numpy as np
 from .. import earth
 from ..config import ConfigError, read_toml
 from ..gnss.rtk import RtkOptions, RtkSolution, solve_rtk
+from ._base_position import _BASE_KEYS, parse_base_position, pop_base_position
 from ._gnss_only_toml import check_gnss_only_toml_keys
 from ._assemble import gnss_solution
 from .solution import Solution
 
 __all__ = ["RtkDataset", "run_rtk", "run_rtk_rinex", "rtk_solution", "load_rtk_config", "load_rtk_run",
-           "parse_base_position"]
-
-_BASE_KEYS = ("base_position_ecef_m", "base_position_llh")
-
+           "parse_base_position", "pop_base_position"]
 
 @dataclass
 class RtkDataset:
@@ -50,22 +48,6 @@ class RtkDataset:
     gnss_only = True  # no IMU: insnav.run skips the IMU sanitizer and checks
 
 
-def parse_base_position(value, source: str = "--base-pos") -> np.ndarray:
-    """ECEF [m] from ``"x,y,z"`` (ECEF metres) or ``"lat_deg,lon_deg,h_m"`` (a list or a string)."""
-    try:
-        v = [float(x) for x in (value.split(",") if isinstance(value, str) else value)]
-    except (TypeError, ValueError):
-        raise ConfigError(f"{source}: bad position {value!r}; give x,y,z [m] (ECEF) or lat_deg,lon_deg,h_m") \
-            from None
-    if len(v) != 3 or not np.all(np.isfinite(v)):
-        raise ConfigError(f"{source}: bad position {value!r}; give three finite numbers")
-    if abs(v[0]) <= 90.0 and abs(v[1]) <= 360.0 and abs(v[2]) < 1.0e5:  # geodetic
-        return np.asarray(earth.geodetic_to_ecef(np.radians(v[0]), np.radians(v[1]), v[2]), float).ravel()
-    if not (6.0e6 < np.linalg.norm(v) < 7.0e6):
-        raise ConfigError(f"{source}: position {value!r} is neither ECEF (|r| near 6371 km) nor lat,lon,h")
-    return np.asarray(v, float)
-
-
 def load_rtk_config(config_path=None, overrides: dict | None = None):
     """(RtkOptions, base position ECEF or None) from a run TOML's ``[rtk]`` table."""
     d = {}
@@ -79,11 +61,7 @@ def load_rtk_config(config_path=None, overrides: dict | None = None):
     if not isinstance(t, dict):
         raise ConfigError(f"{source}: key 'rtk': bad value {t!r}; allowed: a table")
     t = {**t, **(overrides or {})}
-    base = None
-    for k in _BASE_KEYS:
-        if k in t:
-            v = t.pop(k)
-            base = parse_base_position(v, f"{source}: key 'rtk.{k}'")
+    base, _ = pop_base_position(t, source)
     return RtkOptions.from_dict(t, source), base
 
 

@@ -44,6 +44,7 @@ forward one.  Not with ``probe_epoch``.  The rows are smoothed; ``fix_status``,
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,7 +57,8 @@ from ._assemble import nav_solution
 from ..units import RAD2DEG
 from .solution import Solution
 
-__all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "check_engine", "run_rtk_ins", "rtk_ins_options"]
+__all__ = ["RtkInsDataset", "RtkInsSolution", "RTK_INS_DEFAULTS", "check_engine", "deprecated_conflict", "run_rtk_ins",
+           "rtk_ins_options"]
 
 #: [rtk] defaults of the RTK/INS filter that differ from the GNSS-only engine's.  AR continuous, as the
 #: GNSS-only engine (fix-and-hold holds a wrong fix in the joint filter, which on the urban simulator
@@ -92,6 +94,20 @@ ENGINE_DEFAULTS: dict = {}
 ENGINE_NUMBERS = ("ins_slip_k_sigma", "ins_slip_min_cycles", "ins_slip_max_dt_s", "code_chi2_row",
                   "validation_prob", "ar_min_success_rate", "outage_cycle_s", "robust_chi2_row", "robust_igg_k0",
                   "robust_igg_k1", "robust_huber_k", "robust_max_sats", "robust_phase_reset_epochs")
+#: the integer [rtk_engine] keys (``int`` in ``RtkInsConfig``): (lowest, highest)
+ENGINE_INTS = {"robust_max_sats": (0, 100), "robust_phase_reset_epochs": (0, 1_000_000)}
+#: the engine's ranges of the real [rtk_engine] keys (bind_rtk_ins.cpp checks them, naming no table):
+#: (lowest, highest, lowest included, highest included)
+ENGINE_RANGES = {"ins_slip_k_sigma": (0.0, math.inf, False, True), "ins_slip_min_cycles": (0.0, math.inf, True, True),
+                 "ins_slip_max_dt_s": (0.0, math.inf, True, True), "code_chi2_row": (0.0, math.inf, True, True),
+                 "validation_prob": (0.0, 1.0, True, False), "ar_min_success_rate": (0.0, 1.0, True, False),
+                 "outage_cycle_s": (0.0, math.inf, False, True), "robust_chi2_row": (0.0, math.inf, False, True),
+                 "robust_igg_k0": (0.0, math.inf, False, False), "robust_igg_k1": (0.0, math.inf, False, False),
+                 "robust_huber_k": (0.0, math.inf, False, False)}
+#: the engine's IGG-III defaults (RobustConfig), for the check 0 < k0 < k1 when one of them is given
+ENGINE_IGG_DEFAULTS = {"robust_igg_k0": 1.5, "robust_igg_k1": 3.0}
+#: ambiguity states of the RTK/INS engine (``RtkInsEngine<64, ...>`` in cpp/bindings/bind_rtk_ins.cpp)
+MAX_AMBIGUITIES = 64
 #: [rtk_engine] keys that take true or false
 ENGINE_FLAGS = ("robust_screening", "robust_huber")
 #: engine keys the run sets from its own keys (RunConfig): refused in the engine table, naming the run key
@@ -107,7 +123,7 @@ def check_engine(engine, source: str | None = None) -> dict:
     of the wrong type is a one-line ConfigError (a ValueError) naming ``source`` (the TOML file) and the key."""
     from ..config import _suggest
 
-    where = (lambda k: f"{source}: key 'rtk_engine.{k}'") if source else (lambda k: f"engine key {k!r}")
+    where = lambda k: f"{source + ': ' if source else ''}key 'rtk_engine.{k}'"  # noqa: E731
     if engine is None:
         return {}
     if not isinstance(engine, dict):
@@ -122,10 +138,36 @@ def check_engine(engine, source: str | None = None) -> dict:
         if k in ENGINE_FLAGS:
             if not isinstance(v, (bool, np.bool_)):
                 raise ConfigError(f"{where(k)}: bad value {v!r}; allowed: true or false")
+        elif k in ENGINE_INTS:
+            lo, hi = ENGINE_INTS[k]
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                raise ConfigError(f"{where(k)}: bad value {v!r}; allowed: an integer in [{lo}, {hi}]")
         elif isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
                 or np.isnan(v):
             raise ConfigError(f"{where(k)}: bad value {v!r}; allowed: a number")
+        elif k in ENGINE_RANGES:
+            lo, hi, lo_in, hi_in = ENGINE_RANGES[k]
+            if not ((lo <= v if lo_in else lo < v) and (v <= hi if hi_in else v < hi)):
+                allowed = (f"a number {'>=' if lo_in else '>'} {lo:g}" if hi == math.inf else
+                           f"a number in {'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}")
+                raise ConfigError(f"{where(k)}: bad value {v!r}; allowed: {allowed}")
+        elif k in MOVED_TO_RTK:  # the [rtk] key's range, named in the table it was given in
+            from ..gnss._rtk_keys import rtk_value_error
+
+            msg = rtk_value_error({**RtkOptions().__dict__, k: v}, source or "engine", "rtk_engine")
+            if msg is not None:
+                raise ConfigError(msg if source else msg.removeprefix("engine: "))
+    k0, k1 = (engine.get(k, d) for k, d in ENGINE_IGG_DEFAULTS.items())
+    if not k0 < k1:
+        raise ConfigError(f"{where('robust_igg_k0')}: bad value {k0!r} with robust_igg_k1 = {k1!r}; allowed: "
+                          "0 < robust_igg_k0 < robust_igg_k1")
     return dict(engine)
+
+
+def deprecated_conflict(key: str, source: str | None = None) -> str:
+    """The one-line message for a :data:`MOVED_TO_RTK` key given in both ``[rtk]`` and ``[rtk_engine]``."""
+    return (f"{source + ': ' if source else ''}keys 'rtk.{key}' and 'rtk_engine.{key}' both given; keep "
+            f"'rtk.{key}' (the [rtk_engine] key is deprecated)")
 
 
 @dataclass
@@ -165,12 +207,17 @@ class RtkInsSolution(RtkSolution):
 
 def rtk_ins_options(options=None, source: str = "rtk options") -> RtkOptions:
     """:class:`RtkOptions` of an RTK/INS run: :data:`RTK_INS_DEFAULTS` under the given ones (a bad
-    key's one-line ConfigError names ``source``)."""
-    if isinstance(options, RtkOptions):
-        return options
-    if options is not None and not isinstance(options, dict):
+    key's one-line ConfigError names ``source``); ``min_fix_ambiguities`` at most the engine's
+    :data:`MAX_AMBIGUITIES`."""
+    if options is not None and not isinstance(options, (dict, RtkOptions)):
         raise ConfigError(f"{source}: bad value {options!r}; allowed: a table of [rtk] keys")
-    return RtkOptions.from_dict({**RTK_INS_DEFAULTS, **(options or {})}, source)
+    opt = options if isinstance(options, RtkOptions) else \
+        RtkOptions.from_dict({**RTK_INS_DEFAULTS, **(options or {})}, source)
+    if opt.min_fix_ambiguities > MAX_AMBIGUITIES:  # the GNSS-only engine's 120 passed RtkOptions' check
+        raise ConfigError(f"{source}: key 'rtk.min_fix_ambiguities': bad value {opt.min_fix_ambiguities!r}; "
+                          f"allowed: an integer in [1, {MAX_AMBIGUITIES}] with RTK/INS (the ambiguity states "
+                          "its engine holds)")
+    return opt
 
 
 def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None, nav=None, base_pos=None,
@@ -228,6 +275,9 @@ def run_rtk_ins(dataset, cfg: RunConfig | None = None, *, rover=None, base=None,
                              "(insnav run --coupling rtk --obs ROVER --base BASE --nav NAV)")
     engine = check_engine(engine)
     moved = {k: engine.pop(k) for k in MOVED_TO_RTK if k in engine}
+    both = [k for k in moved if isinstance(rtk_options, RtkOptions) or k in (rtk_options or {})]
+    if both:  # the deprecated place silently won before
+        raise ConfigError(deprecated_conflict(both[0]))
     if moved:
         import warnings
 

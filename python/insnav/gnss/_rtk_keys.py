@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["SIGNALS", "SYSTEM_INDEX", "RTK_DEFAULTS", "BASE_POSITION_TOLERANCE_M", "CODE_FIT_TOLERANCE_M", "rtk_value_error",
+__all__ = ["SIGNALS", "SYSTEM_INDEX", "RTK_DEFAULTS", "BASE_POSITION_TOLERANCE_M", "CODE_FIT_TOLERANCE_M", "MAX_AMBIGUITIES", "rtk_value_error",
            "rtk_core_dict"]
 
 #: engine index of each system (``RtkSystem`` in rtk.hpp)
@@ -72,9 +72,16 @@ _RANGES = (("elevation_mask_deg", 0.0, 90.0), ("ar_elevation_mask_deg", 0.0, 90.
            ("gf_threshold_m", 1e-4, 10.0), ("mw_threshold_cycles", 0.1, 100.0),
            ("doppler_threshold_cycles", -1.0, 1e3), ("outlier_sigma", 0.0, 1e3),
            ("hold_sigma_cycles", 1e-6, 10.0), ("max_age_s", 0.0, 86400.0))
-#: (key, lowest) of the integer keys
-_INT_MINIMA = (("min_fix_ambiguities", 1), ("max_partial_drops", 0), ("min_lock_epochs", 0),
-               ("confirm_epochs", 1), ("confirm_max_ambiguities", 0), ("max_outage_epochs", 0))
+#: tracked single-differenced ambiguities of the GNSS-only engine (``kMaxAmbStates`` in
+#: cpp/include/insnav/gnss/rtk.hpp): no set to fix can hold more
+MAX_AMBIGUITIES = 120
+#: largest epoch count of the integer keys: above any run's length at 1 Hz (11.6 days), and far
+#: inside the engine's 32-bit int (a larger TOML integer gave a raw pybind11 cast error)
+MAX_EPOCHS = 1_000_000
+#: (key, lowest, highest) of the integer keys
+_INT_RANGES = (("min_fix_ambiguities", 1, MAX_AMBIGUITIES), ("max_partial_drops", 0, MAX_AMBIGUITIES),
+               ("min_lock_epochs", 0, MAX_EPOCHS), ("confirm_epochs", 1, MAX_EPOCHS),
+               ("confirm_max_ambiguities", 0, MAX_AMBIGUITIES), ("max_outage_epochs", 0, MAX_EPOCHS))
 
 
 def rtk_value_error(v: dict, source: str, table: str = "rtk") -> str | None:
@@ -115,10 +122,10 @@ def rtk_value_error(v: dict, source: str, table: str = "rtk") -> str | None:
             return bad(key, f"a number in [{lo}, {hi}]")
     if v["sigma_phase_a_m"] == 0.0 and v["sigma_phase_b_m"] == 0.0:
         return bad("sigma_phase_a_m", "a and b not both 0")
-    for key, lo in _INT_MINIMA:
+    for key, lo, hi in _INT_RANGES:
         x = v[key]
-        if isinstance(x, bool) or not isinstance(x, int) or x < lo:
-            return bad(key, f"an integer >= {lo}")
+        if isinstance(x, bool) or not isinstance(x, int) or not (lo <= x <= hi):
+            return bad(key, f"an integer in [{lo}, {hi}]")
     return None
 
 
