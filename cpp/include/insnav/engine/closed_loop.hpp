@@ -468,12 +468,14 @@ struct ClosedLoop {
     bool forced = false;
     if (r.rejected_by_gate && gate.reopening()) {
       // lock-out recovery (nis_gate.hpp): the covariance under which this
-      // innovation is ordinary, then the update without the gate
+      // innovation is ordinary, inflated where the record observes it, then
+      // the update without the gate
       if constexpr (kCanInflate) {
         const double lambda = r.nis / m;
-        if (lambda > 1.0 && std::isfinite(lambda)) {
-          filter.inflate_covariance(lambda);
-          if (rec_pending_) rec_[rec_n_ - 1].P_pred *= lambda;  // the smoother sees it as process noise
+        StateCov<L> dP;  // fixed size, on the stack
+        if (lambda > 1.0 && std::isfinite(lambda) && observed_inflation(meas.linear(), lambda, dP)) {
+          filter.add_covariance(dP);
+          if (rec_pending_) rec_[rec_n_ - 1].P_pred += dP;  // the smoother sees it as process noise
         }
       }
       r = update(meas, 0.0);
@@ -481,6 +483,32 @@ struct ClosedLoop {
     }
     gate.record(r, forced, t, bridged);
     return r;
+  }
+
+  /// The lock-out recovery's covariance increment (nis_gate.hpp):
+  /// dP = (lambda - 1) P H' (H P H')^-1 H P, the covariance inflated by lambda
+  /// in the directions the record observes only (H (P + dP) H' = lambda H P H'),
+  /// so that its innovation is ordinary, while what the record does not see
+  /// (attitude, biases, as far as they are uncorrelated with it) keeps its
+  /// covariance: scaling the whole P by lambda made a run of records noisier
+  /// than their sigma (a multipath burst) inflate the attitude again at every
+  /// reopening until the linearisation failed.  False (dP untouched) when
+  /// H P H' is not positive definite.  No heap.
+  bool observed_inflation(const LinearMeasurement<L>& lin, double lambda, StateCov<L>& dP) {
+    using Dyn = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxMeasRows, kMaxMeasRows>;
+    using HP = Eigen::Matrix<double, Eigen::Dynamic, L::kSize, Eigen::RowMajor, kMaxMeasRows, L::kSize>;
+    const int m = lin.rows();
+    if (m == 0) return false;
+    HP hp(m, L::kSize);
+    hp.noalias() = lin.H * filter.P();
+    Dyn A(m, m);
+    A.noalias() = hp * lin.H.transpose();
+    Eigen::LLT<Dyn> llt(A);
+    if (llt.info() != Eigen::Success) return false;
+    llt.matrixL().solveInPlace(hp);  // L^-1 H P: dP = (lambda - 1) (L^-1 H P)' (L^-1 H P)
+    dP.noalias() = (lambda - 1.0) * (hp.transpose() * hp);
+    dP = (0.5 * (dP + dP.transpose())).eval();
+    return dP.allFinite();
   }
 
   /// The NIS of `lin` under S_a = alpha H P H' + R (the outage-aware test of
@@ -786,7 +814,8 @@ struct ClosedLoop {
   template <class F, class = void>
   struct CanInflate : std::false_type {};
   template <class F>
-  struct CanInflate<F, std::void_t<decltype(std::declval<F&>().inflate_covariance(1.0))>> : std::true_type {};
+  struct CanInflate<F, std::void_t<decltype(std::declval<F&>().add_covariance(std::declval<const StateCov<L>&>()))>>
+      : std::true_type {};
   static constexpr bool kCanInflate = CanInflate<Filter>::value;  // EKF, RB-UKF, UKF (not the particle filters)
 
  public:

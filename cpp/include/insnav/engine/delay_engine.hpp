@@ -192,8 +192,8 @@ class RandomDelayEngine {
       hyp[i] = &meas_[i].linear();
     }
     // the gate of the record stream, as ClosedLoop::update_gated applies it (nis_gate.hpp): the
-    // outage-aware test, then on a lock-out the whole stacked covariance scaled by lambda = NIS / m
-    // and the record applied ungated; with delay_p = [1] the loose engine's steps exactly
+    // outage-aware test, then on a lock-out the stacked covariance inflated by lambda = NIS / m where
+    // the record observes it and the record applied ungated; with delay_p = [1] the loose engine's steps exactly
     int rows = 0;  // every hypothesis has the fix's rows
     for (const auto* h : hyp)
       if (h && rows == 0) rows = h->rows();
@@ -210,7 +210,7 @@ class RandomDelayEngine {
     bool forced = false;
     if (res.rejected_by_gate && core_.gate.reopening()) {
       const double lambda = res.nis / rows;
-      if (lambda > 1.0 && std::isfinite(lambda)) core_.filter.inflate_covariance(lambda);
+      if (lambda > 1.0 && std::isfinite(lambda)) core_.filter.inflate_observed(hyp, lambda);
       res = core_.filter.update_delayed(hyp, 0.0);
       forced = res.applied;
     }

@@ -112,8 +112,9 @@ class Ekf {
   /// The error state for an update done outside update() (the TDCP clone update, meas/tdcp.hpp).
   Vec& x_mutable() { return x_; }
   void reset_state() { x_.setZero(); }
-  /// P <- lambda P, lambda >= 1 (the gate's lock-out recovery, nis_gate.hpp).
-  void inflate_covariance(double lambda) { P_ *= lambda; }
+  /// P <- P + dP, dP positive semi-definite (the gate's lock-out recovery,
+  /// ClosedLoop::observed_inflation).
+  void add_covariance(const Cov& dP) { P_ += dP; }
   int cholesky_repairs() const { return repairs_; }
 
  private:

@@ -171,10 +171,27 @@ class RandomDelayKf {
     return nubar_.dot(llt.solve(nubar_));
   }
 
-  /// The whole stacked covariance times lambda (the gate's lock-out recovery, nis_gate.hpp: the
-  /// covariance under which the innovation is ordinary; ClosedLoop::update_gated).  Scaling every
-  /// block keeps the cross blocks waiting for end_cycle() consistent (the cycle transition is linear).
-  void inflate_covariance(double lambda) { Pbar_ *= lambda; }
+  /// The gate's lock-out recovery (nis_gate.hpp; ClosedLoop::observed_inflation for one
+  /// hypothesis, which it equals): the stacked covariance inflated by lambda in the directions the
+  /// record's probability-weighted measurement Abar observes,
+  /// Pbar += (lambda - 1) Pbar Abar' (Abar Pbar Abar')^-1 Abar Pbar, so that its innovation is
+  /// ordinary while the rest keeps its covariance.  Formed from Abar Pbar as the update forms it (the
+  /// same blocks, the cross ones included).  False (nothing changed) when Abar Pbar Abar' is not
+  /// positive definite.  No heap.
+  bool inflate_observed(const Hypotheses& hyp, double lambda) {
+    if (innovation(hyp, 0.0) == 0) return false;
+    const MMat S0 = Smat_;  // R + spread
+    innovation(hyp, 1.0);
+    const MMat A = Smat_ - S0;  // Abar Pbar Abar'
+    Eigen::LLT<MMat> llt(A);
+    if (llt.info() != Eigen::Success) return false;
+    AP w = ap_;
+    llt.matrixL().solveInPlace(w);  // L^-1 Abar Pbar
+    MAP_.noalias() = (lambda - 1.0) * (w.transpose() * w);
+    if (!MAP_.allFinite()) return false;
+    Pbar_ += MAP_;
+    return true;
+  }
 
  private:
   /// The probability-weighted innovation of a record (seed 001 eq. (17)) into nubar_, rbar_, ap_ and

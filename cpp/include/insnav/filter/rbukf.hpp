@@ -151,11 +151,11 @@ class UnscentedPropagation {
     x_.setZero();
     points_fresh_ = false;
   }
-  /// P <- lambda P, lambda >= 1 (the fading-memory scaling of seed 004 eq. (1),
-  /// used by the innovation gate to recover from a lock-out, nis_gate.hpp); the
-  /// next update draws its sigma points from the inflated P.
-  void inflate_covariance(double lambda) {
-    P_ *= lambda;
+  /// P <- P + dP, dP positive semi-definite (the gate's lock-out recovery,
+  /// ClosedLoop::observed_inflation); the next update draws its sigma points
+  /// from the inflated P.
+  void add_covariance(const Cov& dP) {
+    P_ += dP;
     points_fresh_ = false;
   }
   int cholesky_repairs() const { return repairs_; }
