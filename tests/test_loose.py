@@ -453,7 +453,8 @@ def test_reopening_after_a_noise_burst_keeps_the_attitude(noise_burst, filt):
     (measured 1.39 deg, 1.40 deg gate off) and the horizontal error near the
     gate-off run's (measured rms 18.6 m against 12.9 m).  Scaling the whole P
     at every reopening had grown the attitude sigma to hundreds of degrees and
-    the EKF's error to thousands of km."""
+    the EKF's error to thousands of km.  The health verdict reads the
+    rejections (filters/health.py MAX_REJECTED_SHARE)."""
     ds = noise_burst
     on = insnav.run(ds, filter=filt, output_decimation=10)
     off = insnav.run(ds, filter=filt, output_decimation=10, gate_prob=0.0)
@@ -465,6 +466,10 @@ def test_reopening_after_a_noise_burst_keeps_the_attitude(noise_burst, filt):
 
     assert np.nanmax(on.sigma_att_deg) < 2.0, np.nanmax(on.sigma_att_deg)
     assert horizontal_rms(on) < 2.0 * horizontal_rms(off), (horizontal_rms(on), horizontal_rms(off))
+    # the health verdict counts the rejections: the NIS ratio of the applied fixes alone read "consistent"
+    h = on.summary["health"]
+    assert h["rejected_share"] > 0.01 and h["consistency"] == "optimistic", h
+    assert any("innovation gate rejected" in w for w in h["warnings"]), h["warnings"]
 
 
 def test_status_codes_and_summary(short):

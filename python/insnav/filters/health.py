@@ -10,7 +10,14 @@ consistency
     word: ``consistent`` for ``1/3 <= r <= 3`` (:data:`CONSISTENT_FACTOR`),
     ``optimistic`` above (the configured IMU noise or GNSS sigmas are too
     small), ``pessimistic`` below, ``far too optimistic`` above
-    :data:`FAR_TOO_OPTIMISTIC` (10): then a warning.
+    :data:`FAR_TOO_OPTIMISTIC` (10): then a warning.  The ratio sees only the
+    records the innovation gate let through, so when the gate rejected more
+    than :data:`MAX_REJECTED_SHARE` (1 %) of the records it decided on (a
+    consistent filter's gate, at the 0.9999 quantile, rejects 0.01 %), or the
+    tight runs' robust screening as large a share of the satellite rows, the
+    verdict is at least ``optimistic`` and a warning says so: fixes noisier
+    than their sigma are otherwise rejected out of the ratio and read as
+    ``consistent``.
 broken covariance
     A 1-sigma column that is not finite or not positive (a covariance that
     lost positive definiteness): unhealthy.
@@ -37,13 +44,17 @@ import numpy as np
 
 from .._median import diff_median
 
-__all__ = ["assess", "CONSISTENT_FACTOR", "FAR_TOO_OPTIMISTIC", "MAX_STEP_M", "MAX_SPEED_MPS", "HEIGHT_RANGE_M"]
+__all__ = ["assess", "CONSISTENT_FACTOR", "FAR_TOO_OPTIMISTIC", "MAX_REJECTED_SHARE", "MAX_STEP_M", "MAX_SPEED_MPS",
+           "HEIGHT_RANGE_M"]
 
 #: NIS ratio band of the verdict ``consistent``: [1/f, f]
 CONSISTENT_FACTOR = 3.0
 #: NIS ratio above which the configured noise is far too small (a warning)
 FAR_TOO_OPTIMISTIC = 10.0
 #: longest position step between two output rows [m]
+#: Share of the gate's decisions (applied + rejected records) above which the rejections
+#: themselves make the verdict at least ``optimistic`` (the gate's quantile rejects 1e-4)
+MAX_REJECTED_SHARE = 0.01
 MAX_STEP_M = 1000.0
 #: highest speed [m/s]
 MAX_SPEED_MPS = 1000.0
@@ -54,6 +65,7 @@ MIN_TAIL_S = 10.0
 
 _R_EARTH_M = 6_371_000.0
 _APPLIED = 1  # RecordStatus.APPLIED
+_REJECTED = 2  # RecordStatus.REJECTED_BY_GATE
 
 
 def _record_rows(sol) -> np.ndarray:
@@ -112,7 +124,8 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
         The GNSS records' statistics, when their arrays are not in ``sol``
         (a run written block by block writes them as it goes): ``nis_sum``
         and ``rows_sum`` of the applied records with a finite NIS and rows,
-        ``applied`` (count) and ``applied_t_max`` [s]; ``sol.gnss_t`` still
+        ``applied`` and ``rejected`` (counts: applied, rejected by the gate)
+        and ``applied_t_max`` [s]; ``sol.gnss_t`` still
         holds every record's time.
 
     Returns
@@ -120,7 +133,8 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
     dict
         ``healthy`` (bool), ``reason`` (one line, "" when healthy), ``warnings``
         (list of one-line strings), ``nis_ratio`` (mean NIS over its
-        expectation, NaN without applied records), ``consistency`` (verdict
+        expectation, NaN without applied records), ``rejected_share`` (the
+        gate's rejected records over its decisions), ``consistency`` (verdict
         word), ``max_step_m``, ``max_speed_mps``, ``gnss_tail_s`` (IMU time
         after the last GNSS record [s]).
     """
@@ -133,9 +147,21 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
         rows = _record_rows(sol)
         ok = (status == _APPLIED) & np.isfinite(nis) & np.isfinite(rows) & (rows > 0)
         ratio = float(nis[ok].sum() / rows[ok].sum()) if ok.any() else float("nan")
+        n_applied, n_rejected = int(np.sum(status == _APPLIED)), int(np.sum(status == _REJECTED))
     else:
         ratio = float(records["nis_sum"] / records["rows_sum"]) if records["rows_sum"] > 0 else float("nan")
+        n_applied, n_rejected = int(records["applied"]), int(records["rejected"])
     out["nis_ratio"] = ratio
+    decided = n_applied + n_rejected
+    share = n_rejected / decided if decided else 0.0
+    out["rejected_share"] = share
+    # tight runs: the satellite rows the robust screening rejected inside the epochs (robust.hpp)
+    n_sats = int((getattr(sol, "summary", None) or {}).get("rejected_sats", 0) or 0)
+    if records is None and n_sats > 0:
+        rows_used = float(np.sum(rows[ok]))
+        out["rejected_sat_share"] = sat_share = n_sats / (n_sats + rows_used) if n_sats + rows_used > 0 else 0.0
+    else:
+        sat_share = 0.0
     if not np.isfinite(ratio):
         word = "untested"
     elif ratio > FAR_TOO_OPTIMISTIC:
@@ -146,6 +172,15 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
         word = "pessimistic"
     else:
         word = "consistent"
+    if share > MAX_REJECTED_SHARE or sat_share > MAX_REJECTED_SHARE:
+        if word not in ("optimistic", "far too optimistic"):
+            word = "optimistic"
+        what = (f"the innovation gate rejected {n_rejected} of {decided} GNSS records ({100.0 * share:.3g} %; "
+                "0.01 % when the model is consistent)" if share > MAX_REJECTED_SHARE else
+                f"the robust screening rejected {n_sats} satellite rows ({100.0 * sat_share:.3g} % of the rows "
+                "it decided on; 0.1 % when the model is consistent)")
+        out["warnings"].append(f"{what}: the GNSS sigmas or the IMU noise are too small for these data, or the "
+                               f"records hold outliers; the NIS ratio {ratio:.3g} sees only the applied ones")
     out["consistency"] = word
     if word == "far too optimistic":
         out["warnings"].append(f"the GNSS innovations are {ratio:.3g} times their expected size (mean NIS / rows; "

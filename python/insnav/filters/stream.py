@@ -1136,6 +1136,7 @@ class _Innovations:
         self.nis_partials: list[float] = []
         self.rows_sum = 0
         self.applied = 0
+        self.rejected = 0  # by the innovation gate
         self.applied_t_max = float("-inf")
         self.header = True
 
@@ -1162,6 +1163,7 @@ class _Innovations:
         self.header = False
         self.n += k
         self.outside += int(np.count_nonzero(st == RecordStatus.OUTSIDE_IMU_SPAN))
+        self.rejected += int(np.count_nonzero(st == RecordStatus.REJECTED_BY_GATE))
         ok = applied & np.isfinite(nis) & (rows > 0)
         _fsum_add(self.nis_partials, nis[ok])
         self.rows_sum += int(rows[ok].sum())
@@ -1174,7 +1176,7 @@ class _Innovations:
         import math
 
         return dict(n=self.n, outside=self.outside, nis_sum=math.fsum(self.nis_partials), rows_sum=self.rows_sum,
-                    applied=self.applied, applied_t_max=self.applied_t_max)
+                    applied=self.applied, rejected=self.rejected, applied_t_max=self.applied_t_max)
 
     def close(self) -> None:
         if self.header:  # no record: the header alone
