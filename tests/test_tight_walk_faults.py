@@ -182,14 +182,16 @@ def test_cusum_held_rows_are_flagged_rejected_and_counted(uav_all):
 
 def test_cusum_acts_only_with_enough_pseudoranges():
     """seed004-uav keeps the paper's 4 satellites: with the default cusum_min_pseudoranges = 4 the
-    CUSUM runs there (measured 2 alarms on this clean run); asking for 5 switches it off in every
-    epoch while the per-row screening still runs; the key is validated."""
+    CUSUM runs there (measured 2 alarms on this clean run with the variance factor off; with it,
+    which scales R to the innovations, none); asking for 5 switches it off in every epoch while
+    the per-row screening still runs; the key is validated."""
     from insnav.config import ConfigError
 
     ds = insnav.simulate("seed004-uav", seed=1)
     ds.scenario = {k: v for k, v in ds.scenario.items() if k != "run"}  # insnav's defaults, screening on
-    four = insnav.run(ds, coupling="tight", output_decimation=20)
-    five = insnav.run(ds, coupling="tight", output_decimation=20, robust=Robust(cusum_min_pseudoranges=5))
+    four = insnav.run(ds, coupling="tight", output_decimation=20, robust=Robust(variance_window=0))
+    five = insnav.run(ds, coupling="tight", output_decimation=20,
+                      robust=Robust(cusum_min_pseudoranges=5, variance_window=0))
     assert four.summary["robust_screening"] is True and four.summary["cusum_alarms"] >= 1
     assert five.summary["cusum_alarms"] == 0 and five.summary["cusum_excluded"] == 0
     assert five.summary["flagged_epochs"] > 0  # the screening itself still acts

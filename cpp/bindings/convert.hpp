@@ -128,7 +128,8 @@ inline TightConfig tight_config_from(const py::dict& d) {
                  {"robust_screening", "robust_chi2_row", "robust_igg_k0", "robust_igg_k1", "robust_clock_jump",
                   "robust_clock_jump_sigma", "robust_clock_jump_min_rows", "robust_huber", "robust_huber_k",
                   "robust_fde_max_sats", "robust_fde_min_rows", "robust_cusum_k", "robust_cusum_h",
-                   "robust_cusum_hold_s", "robust_cusum_min_pseudoranges", "tdcp", "tdcp_slip_threshold_cycles",
+                   "robust_cusum_hold_s", "robust_cusum_min_pseudoranges", "robust_variance_window",
+                   "robust_variance_min_rows", "tdcp", "tdcp_slip_threshold_cycles",
                    "tdcp_chi2_row", "pr_gm_sigma_m", "pr_gm_tau_s", "pr_gm_max_gap_s", "adaptive_q_window",
                    "adaptive_q_min", "adaptive_q_max", "standstill_q_scale", INSNAV_SELFCAL_KEYS});
   TightConfig c;
@@ -157,6 +158,11 @@ inline TightConfig tight_config_from(const py::dict& d) {
   r.cusum_hold_s = num(d, "robust_cusum_hold_s", r.cusum_hold_s);
   r.cusum_min_pseudoranges = static_cast<int>(num(d, "robust_cusum_min_pseudoranges", r.cusum_min_pseudoranges));
   if (r.cusum_min_pseudoranges < 0) throw py::value_error("robust_cusum_min_pseudoranges must be >= 0");
+  r.variance_window = static_cast<int>(num(d, "robust_variance_window", r.variance_window));
+  r.variance_min_rows = static_cast<int>(num(d, "robust_variance_min_rows", r.variance_min_rows));
+  if (r.variance_window < 0 || r.variance_window > kMaxVarianceWindow || r.variance_min_rows < 1)
+    throw py::value_error("robust_variance_window must be in 0 .. " + std::to_string(kMaxVarianceWindow) +
+                          " and robust_variance_min_rows >= 1");
   if (!(r.huber_k > 0.0)) throw py::value_error("robust_huber_k must be > 0");
   if (r.fde_max_sats < 0 || r.fde_min_rows < 0) throw py::value_error("robust_fde_max_sats, robust_fde_min_rows must be >= 0");
   if (!(r.cusum_k >= 0.0) || !(r.cusum_h >= 0.0) || !(r.cusum_hold_s >= 0.0))

@@ -197,6 +197,7 @@ struct TightRecordBuffers {
     res["fde_excluded"] = out.fde_excluded;
     res["cusum_alarms"] = out.cusum_alarms;
     res["cusum_excluded"] = out.cusum_excluded;
+    res["variance_inflated"] = py::make_tuple(out.variance_inflated[0], out.variance_inflated[1]);
     res["downweighted_sats"] = out.downweighted_sats;
     res["flagged_epochs"] = out.flagged_epochs;
     res["clock_jumps"] = out.clock_jumps;

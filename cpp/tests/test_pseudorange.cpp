@@ -330,7 +330,35 @@ static void run_multi_robust(const char* name) {
   EXPECT_TRUE(out.updates == 150);
 }
 
+/// The robust variance factor (meas/robust.hpp, 0.): analytic cases, the breakdown point, and a
+/// large sample of noise 3 times its sigma.
+void test_variance_factor() {
+  std::vector<double> y2(20001), a(20001, 0.0), r(20001, 1.0), scratch(20001);
+  const double c = 2.0;
+  std::fill(y2.begin(), y2.begin() + 7, c);  // y^2 / (a + f r) = c / f: f = c / median(chi2_1)
+  double f = variance_factor(y2.data(), a.data(), r.data(), 7, scratch.data());
+  EXPECT_LT(std::abs(f - c / kChi2OneMedian), 1e-5 * f);
+  std::fill(a.begin(), a.begin() + 7, 1.0);  // c / (1 + f)
+  f = variance_factor(y2.data(), a.data(), r.data(), 7, scratch.data());
+  EXPECT_LT(std::abs(f - (c / kChi2OneMedian - 1.0)), 1e-5 * f);
+  std::fill(a.begin(), a.end(), 0.0);
+  std::fill(y2.begin(), y2.begin() + 10, 0.3);  // consistent rows: no factor
+  EXPECT_TRUE(variance_factor(y2.data(), a.data(), r.data(), 10, scratch.data()) == 1.0);
+  std::fill(y2.begin() + 10, y2.begin() + 14, 1e6);  // 4 faulty of 14: below the breakdown point
+  EXPECT_TRUE(variance_factor(y2.data(), a.data(), r.data(), 14, scratch.data()) == 1.0);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> nd;
+  for (double& v : y2) v = std::pow(nd(rng), 2);  // consistent noise: 1 to the sample median's spread
+  f = variance_factor(y2.data(), a.data(), r.data(), 20001, scratch.data());
+  EXPECT_LT(f, 1.0 + 4.0 * 1.0616 / std::sqrt(20001.0) / kChi2OneMedian);
+  for (double& v : y2) v *= 9.0;  // noise 3 times its sigma
+  f = variance_factor(y2.data(), a.data(), r.data(), 20001, scratch.data());
+  std::printf("variance factor of noise 3 sigma (20001 rows): %.4f (9)\n", f);
+  EXPECT_LT(std::abs(f - 9.0), 0.05 * 9.0);
+}
+
 int main() {
+  test_variance_factor();
   run_multi_robust<Ekf<LayoutTightMulti>>("EKF");
   run_multi_robust<RbUkf<LayoutTightMulti>>("RB-UKF");
   run_multi_robust<Ukf<LayoutTightMulti>>("UKF");

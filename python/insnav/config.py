@@ -509,6 +509,15 @@ class Robust:
         The CUSUM acts only in epochs with at least this many pseudoranges
         (4: with fewer, position and clock are not pinned by the epoch and
         the filter's coasting drift shows on every satellite alike).
+    variance_window : int
+        Variance factor before the tests (meas/robust.hpp, 0.): per row kind
+        the smallest ``f >= 1`` with ``median(y^2 / (H P H^T + f R)) <= 0.4549``
+        (the median of chi-square with 1 dof) over the rows of this many
+        epochs scales ``R`` of the epoch, so that data noisier than their
+        sigma are weighted as such instead of failing the tests on good
+        satellites (10; 0 = off; at most 30).
+    variance_min_rows : int
+        ... rows of a kind the window needs (4).
     """
 
     screening: bool | None = None
@@ -526,6 +535,8 @@ class Robust:
     cusum_h: float = 8.0
     cusum_hold_s: float = 60.0
     cusum_min_pseudoranges: int = 4
+    variance_window: int = 10
+    variance_min_rows: int = 4
 
     def validate(self, prefix: str = "robust") -> "Robust":
         def bad(key, value, allowed):
@@ -549,6 +560,12 @@ class Robust:
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
                 bad(key, v, "an integer >= 0")
+        v = self.variance_window
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= v <= 30:
+            bad("variance_window", v, "an integer in 0 .. 30 (epochs; 0: off)")
+        v = self.variance_min_rows
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            bad("variance_min_rows", v, "an integer >= 1")
         for key in ("cusum_k", "cusum_h", "cusum_hold_s"):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):

@@ -159,6 +159,7 @@ def run_tight(dataset, cfg: RunConfig | None = None, *, inputs: TightInputs | No
                      robust_screening=bool(robust["robust_screening"]), rejected_sats=int(out["rejected_sats"]),
                      fde_excluded=int(out["fde_excluded"]), cusum_alarms=int(out["cusum_alarms"]),
                      cusum_excluded=int(out["cusum_excluded"]),
+                     variance_inflated_epochs=tuple(int(v) for v in out["variance_inflated"]),
                      downweighted_sats=int(out["downweighted_sats"]), flagged_epochs=int(out["flagged_epochs"]),
                      clock_jumps=int(out["clock_jumps"])),
         clock_bias_m=out["clock"][:, 0], clock_drift_mps=out["clock"][:, 1], sigma_clock=sig[:, 15:17],

@@ -134,6 +134,7 @@ struct TightOutputs : NavOutputs {
   int fde_excluded = 0;            // satellite-epochs excluded by the whole-epoch FDE
   int cusum_alarms = 0;            // CUSUM alarms (a row kind of a satellite excluded for cusum_hold_s)
   int cusum_excluded = 0;          // satellite rows left out while a CUSUM exclusion held
+  int variance_inflated[2] = {0, 0};  // epochs whose pseudorange / rate R the variance factor scaled (robust.hpp, 0.)
   // TDCP (TightConfig::tdcp): per satellite row (M) and per epoch (E), and run counters
   double* tdcp_residual = nullptr; // (M,) INS-predicted minus measured phase change [m], before the update
   std::int8_t* tdcp_flag = nullptr;  // (M,) TdcpFlag
@@ -260,6 +261,7 @@ class TightEngine {
     adaptive_q_.start(core_.filter);
     still_ = false;
     apply_process_noise_scale();
+    var_epochs_ = 0;  // the variance factor's window (robust.hpp, 0.)
     for (int i = 0; i < kSatKeys; ++i) {  // the per-satellite CUSUM of the robust step (robust.hpp, 4.)
       cusum_pos_[i] = cusum_neg_[i] = 0.0;
       excluded_until_[i] = -kInf;
@@ -328,6 +330,8 @@ class TightEngine {
       }
     }
     if (out.clock_jump) out.clock_jump[g] = -jump;
+    if (rc.screening && rc.variance_window > 0 && !outage && meas_.linear().rows() > 0)
+      apply_variance_factor(ns, out);  // robust.hpp, 0.: before the tests, which are in units of R
     adaptive_q_.before_update(core_.filter);  // P- of the epoch (before its TDCP rows, if any)
     if constexpr (kCanTdcp) tdcp_step(ep, g, out);
     const int m0 = meas_.linear().rows();
@@ -582,6 +586,53 @@ class TightEngine {
       if (gm_on()) gm_fold();
   }
 
+  /// The variance factor of robust.hpp 0.: this epoch's rows into the window, then per row kind
+  /// the factor over the window; R of that kind scaled by it for this epoch (the satellites' sigmas
+  /// times sqrt(f), the rows formed again).  No heap.
+  void apply_variance_factor(int ns, TightOutputs& out) {
+    const RobustConfig& rc = cfg_.robust;
+    standardize(1.0);
+    const auto& lin = meas_.linear();
+    const int window = std::min(rc.variance_window, kMaxVarianceWindow);
+    const int slot = var_epochs_ % window;
+    VarianceRows& e = var_rows_[slot];
+    e.n[0] = e.n[1] = 0;
+    int row = 0;
+    for (int i = 0; i < ns && row < lin.rows(); ++i)
+      for (int kind = 0; kind < 2 && row < lin.rows(); ++kind) {
+        if (!std::isfinite(kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps)) continue;
+        const double r = lin.R(row, row);
+        const int k = e.n[kind]++;
+        e.y2[kind][k] = y_[row] * y_[row];
+        e.a[kind][k] = std::max(sqrt_S_[row] * sqrt_S_[row] - r, 0.0);
+        e.r[kind][k] = r;
+        ++row;
+      }
+    ++var_epochs_;
+    const int epochs = std::min(var_epochs_, window);
+    double f[2] = {1.0, 1.0};
+    for (int kind = 0; kind < 2; ++kind) {
+      int n = 0;
+      for (int s = 0; s < epochs; ++s) {
+        const VarianceRows& v = var_rows_[s];
+        std::copy(v.y2[kind], v.y2[kind] + v.n[kind], var_y2_ + n);
+        std::copy(v.a[kind], v.a[kind] + v.n[kind], var_a_ + n);
+        std::copy(v.r[kind], v.r[kind] + v.n[kind], var_r_ + n);
+        n += v.n[kind];
+      }
+      if (n >= std::max(rc.variance_min_rows, 1)) f[kind] = variance_factor(var_y2_, var_a_, var_r_, n, var_scratch_);
+    }
+    if (f[0] > 1.0) ++out.variance_inflated[0];
+    if (f[1] > 1.0) ++out.variance_inflated[1];
+    if (!(f[0] > 1.0 || f[1] > 1.0)) return;
+    const double s_pr = std::sqrt(f[0]), s_prr = std::sqrt(f[1]);
+    for (int i = 0; i < ns; ++i) {
+      work_[i].sigma_pr_m *= s_pr;
+      work_[i].sigma_prr_mps *= s_prr;
+    }
+    set_measurement(ns);
+  }
+
   /// y_i = residual_i - H_i x and sqrt(S_ii) = sqrt(alpha H_i P H_i^T + R_ii) of every row (robust.hpp;
   /// alpha > 1: the gate's outage-aware test, nis_gate.hpp).
   void standardize(double alpha) {
@@ -740,6 +791,15 @@ class TightEngine {
   IsbVec isb0_ = IsbVec::Zero();
   // robust step workspace (per row of the measurement / per satellite and kind)
   double y_[kMaxMeasRows] = {}, sqrt_S_[kMaxMeasRows] = {};
+  /// The variance factor's window (robust.hpp, 0.): per epoch and row kind y^2, H P H^T and R.
+  struct VarianceRows {
+    int n[2] = {0, 0};
+    double y2[2][kMaxMeasRows], a[2][kMaxMeasRows], r[2][kMaxMeasRows];
+  };
+  std::array<VarianceRows, kMaxVarianceWindow> var_rows_;
+  int var_epochs_ = 0;
+  double var_y2_[kMaxVarianceWindow * kMaxMeasRows], var_a_[kMaxVarianceWindow * kMaxMeasRows],
+      var_r_[kMaxVarianceWindow * kMaxMeasRows], var_scratch_[kMaxVarianceWindow * kMaxMeasRows];
   Eigen::Matrix<double, 1, L::kSize> hP_;
   int row_sat_[kMaxMeasRows] = {}, row_kind_[kMaxMeasRows] = {};
   SatFlag flag_[2 * kMaxMeasRows] = {};
