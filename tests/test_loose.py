@@ -469,7 +469,8 @@ def test_reopening_after_a_noise_burst_keeps_the_attitude(noise_burst, filt):
     # the health verdict counts the rejections: the NIS ratio of the applied fixes alone read "consistent"
     h = on.summary["health"]
     assert h["rejected_share"] > 0.01 and h["consistency"] == "optimistic", h
-    assert any("innovation gate rejected" in w for w in h["warnings"]), h["warnings"]
+    assert any("innovation gate" in w and f"rejected {on.summary['rejected']} of" in w for w in h["warnings"]), \
+        h["warnings"]
 
 
 def test_status_codes_and_summary(short):

@@ -345,28 +345,3 @@ def test_dropped_fixes_on_the_sanitizers_block_boundaries_give_the_whole_runs_by
     assert rep["gnss_invalid_dropped"] == 2 and rep["gnss_duplicates_dropped"] == 1
     assert rep["gnss_dropped_lines"] == [58, 66, 100]
 
-
-@pytest.mark.parametrize("rejected_sats, word", [(2, "consistent"), (40, "optimistic")])
-def test_health_counts_the_satellite_rows_the_robust_screening_rejected(rejected_sats, word):
-    """A tight run whose applied epochs are consistent (NIS = rows) but whose robust screening
-    rejected satellite rows: 40 of 40 + 400 rows (9.1 %) make the verdict optimistic with a warning
-    naming the screening (seed004-uav with pseudorange noise 3 times the configured read
-    "consistent" at 310 m rms); 2 of 402 (0.5 %, under MAX_REJECTED_SHARE) leave it consistent."""
-    from insnav.filters.health import MAX_REJECTED_SHARE, assess
-    from insnav.filters.solution import Solution
-
-    m, n = 50, 200
-    z3 = np.zeros((n, 3))
-    sol = Solution(t=np.linspace(0.0, 60.0, n), lat_deg=np.full(n, 30.0), lon_deg=np.full(n, 114.0),
-                   h_m=np.full(n, 20.0), v_n=z3, roll_deg=np.zeros(n), pitch_deg=np.zeros(n), yaw_deg=np.zeros(n),
-                   sigma_pos_n_m=z3 + 1.0, sigma_vel_n_mps=z3 + 0.1, sigma_att_deg=z3 + 0.1, acc_bias_mps2=z3,
-                   gyro_bias_rps=z3, acc_scale=z3, gyro_scale=z3, gnss_t=np.linspace(0.5, 59.5, m),
-                   innovation=np.zeros((m, 6)), nis=np.full(m, 8.0), gnss_status=np.ones(m, np.int8),
-                   log_det_s=np.zeros(m), gnss_sigma=np.zeros((m, 6)))
-    sol.rows = np.full(m, 8)  # 400 rows used
-    sol.summary = dict(rejected_sats=rejected_sats)
-    h = assess(sol)
-    share = rejected_sats / (rejected_sats + 400.0)
-    assert h["rejected_sat_share"] == pytest.approx(share, rel=1e-15) and h["nis_ratio"] == 1.0
-    assert (share > MAX_REJECTED_SHARE) == (word == "optimistic") and h["consistency"] == word
-    assert any("robust screening rejected" in w for w in h["warnings"]) == (word == "optimistic")

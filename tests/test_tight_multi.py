@@ -10,6 +10,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+import insnav
 import insnav.sim as sim
 from insnav.analysis import errors
 from insnav.config import ConfigError, Robust, RunConfig, config_from_dict
@@ -230,9 +231,9 @@ def test_robust_equals_plain_on_clean_data(ds_multi):
 def test_variance_factor_keeps_noise_above_its_sigma_from_failing_the_screening(ds_multi):
     """Pseudorange and rate noise 3 times the sigma the receiver reports: the robust tests, in
     units of that sigma, rejected good satellites (measured 4871 satellite-epochs) and the
-    filter coasted, twice the plain update's error (horizontal rms 4.02 m against 2.08 m); the
-    variance factor (meas/robust.hpp, 0.) scales R by the innovations' own median first: 0.87 m,
-    18 rejected.  Its price on the clean data: 0.301 m against 0.286 m plain (measured)."""
+    filter coasted (horizontal rms 4.02 m; with the screening off the gate's reopenings, 3.80 m);
+    the variance factor (meas/robust.hpp, 0.) scales R by the innovations' own median first:
+    0.87 m, 18 rejected.  Its price on the clean data: 0.301 m against 0.286 m plain (measured)."""
     sc = _scenario(duration=300.0, canyon=False, sigma_pr_m=2.0)
     gr = sc["gnss_raw"]
     noisy = sim.simulate(dict(sc, gnss_raw=dict(gr, sigma_pr_m=3 * gr["sigma_pr_m"],
@@ -248,8 +249,8 @@ def test_variance_factor_keeps_noise_above_its_sigma_from_failing_the_screening(
     plain, _ = rms(noisy, Robust(screening=False))
     off, s_off = rms(noisy, Robust(screening=True, variance_window=0))
     on, s_on = rms(noisy, Robust(screening=True))
-    assert off > 1.5 * plain and s_off["rejected_sats"] > 1000
-    assert on < 0.6 * plain and s_on["rejected_sats"] < 100 and min(s_on["variance_inflated_epochs"]) > 300
+    assert s_off["rejected_sats"] > 1000
+    assert on < 0.4 * min(off, plain) and s_on["rejected_sats"] < 100 and min(s_on["variance_inflated_epochs"]) > 300
     clean_plain, _ = rms(ds_multi, Robust(screening=False))
     clean_on, _ = rms(ds_multi, Robust(screening=True))
     assert clean_on < 1.1 * clean_plain
@@ -352,3 +353,25 @@ def test_multi_sigma_point_filters(ds_multi, filt):
     hz, _, _ = _hz_err(sol, ds_multi)
     hz_e, _, _ = _hz_err(ekf, ds_multi)
     assert np.sqrt(np.mean(hz ** 2)) < 1.2 * np.sqrt(np.mean(hz_e ** 2)) + 0.1
+
+
+@pytest.mark.parametrize("n_sats", [4, 6])
+def test_tight_lock_out_recovery_inflates_with_more_rows_than_states(n_sats):
+    """A lasting 300 m step on every pseudorange from 120 s (a receiver clock step the clock-jump
+    check is told to leave), GPS only, n satellites with rates: the gate rejects 5 epochs and the
+    6th is applied with the covariance inflated along its rows (ClosedLoop::observed_inflation),
+    after which the filter follows.  With 6 satellites H P H' is singular (the rows observe 4
+    directions and the rates 4 more): its plain Cholesky inverse failed and the recovery inflated
+    nothing, 6 reopenings and 30 rejected epochs (measured)."""
+    ds = sim.simulate(_scenario(duration=240.0, canyon=False, systems=["G"]), seed=3)
+    gr = ds.gnss_raw
+    ep = np.searchsorted(np.unique(gr.t), gr.t)
+    keep = (np.arange(len(gr.t)) - np.searchsorted(ep, ep)) < n_sats  # the first n of each epoch
+    raw = dataclasses.replace(gr, **{f.name: getattr(gr, f.name)[keep] for f in dataclasses.fields(gr)
+                                     if getattr(gr, f.name) is not None})
+    raw.pseudorange_m[raw.t >= 120.0] += 300.0
+    s = insnav.run(dataclasses.replace(ds, gnss_raw=raw), coupling="tight", output_decimation=50,
+                   robust=Robust(screening=False, clock_jump=False), gate_mismatch=0.0)
+    assert s.summary["gate_reopened"] == 1 and s.summary["rejected"] == 5, s.summary
+    after = s.gnss_status[s.gnss_t >= 120.0]
+    assert np.all(after[:5] == 2) and np.all(after[5:] == 1)

@@ -342,12 +342,19 @@ void test_variance_factor() {
   f = variance_factor(y2.data(), a.data(), r.data(), 7, scratch.data());
   EXPECT_LT(std::abs(f - (c / kChi2OneMedian - 1.0)), 1e-5 * f);
   std::fill(a.begin(), a.end(), 0.0);
-  std::fill(y2.begin(), y2.begin() + 10, 0.3);  // consistent rows: no factor
+  std::fill(y2.begin(), y2.begin() + 10, 0.3);  // rows below the median: no factor
   EXPECT_TRUE(variance_factor(y2.data(), a.data(), r.data(), 10, scratch.data()) == 1.0);
-  std::fill(y2.begin() + 10, y2.begin() + 14, 1e6);  // 4 faulty of 14: below the breakdown point
-  EXPECT_TRUE(variance_factor(y2.data(), a.data(), r.data(), 14, scratch.data()) == 1.0);
   std::mt19937_64 rng(5);
   std::normal_distribution<double> nd;
+  {  // a faulty quarter of consistent rows: the median moves to the clean rows' 2/3 quantile
+    const int n_clean = 15000, n_bad = 5000;
+    for (int i = 0; i < n_clean; ++i) y2[i] = std::pow(nd(rng), 2);
+    for (int i = n_clean; i < n_clean + n_bad; ++i) y2[i] = 1e6;
+    f = variance_factor(y2.data(), a.data(), r.data(), n_clean + n_bad, scratch.data());
+    const double q23 = 0.93590449;  // chi2_1 quantile at 2/3
+    std::printf("variance factor, a quarter of the rows faulty: %.4f (%.4f)\n", f, q23 / kChi2OneMedian);
+    EXPECT_LT(std::abs(f - q23 / kChi2OneMedian), 0.05 * f);
+  }
   for (double& v : y2) v = std::pow(nd(rng), 2);  // consistent noise: 1 to the sample median's spread
   f = variance_factor(y2.data(), a.data(), r.data(), 20001, scratch.data());
   EXPECT_LT(f, 1.0 + 4.0 * 1.0616 / std::sqrt(20001.0) / kChi2OneMedian);

@@ -13,8 +13,8 @@ consistency
     :data:`FAR_TOO_OPTIMISTIC` (10): then a warning.  The ratio sees only the
     records the innovation gate let through, so when the gate rejected more
     than :data:`MAX_REJECTED_SHARE` (1 %) of the records it decided on (a
-    consistent filter's gate, at the 0.9999 quantile, rejects 0.01 %), or the
-    tight runs' robust screening as large a share of the satellite rows, the
+    consistent filter's gate, at the 0.9999 quantile, rejects 0.01 %; a tight
+    epoch whose rows the robust screening all removed counts as rejected) the
     verdict is at least ``optimistic`` and a warning says so: fixes noisier
     than their sigma are otherwise rejected out of the ratio and read as
     ``consistent``.
@@ -51,10 +51,10 @@ __all__ = ["assess", "CONSISTENT_FACTOR", "FAR_TOO_OPTIMISTIC", "MAX_REJECTED_SH
 CONSISTENT_FACTOR = 3.0
 #: NIS ratio above which the configured noise is far too small (a warning)
 FAR_TOO_OPTIMISTIC = 10.0
-#: longest position step between two output rows [m]
 #: Share of the gate's decisions (applied + rejected records) above which the rejections
 #: themselves make the verdict at least ``optimistic`` (the gate's quantile rejects 1e-4)
 MAX_REJECTED_SHARE = 0.01
+#: longest position step between two output rows [m]
 MAX_STEP_M = 1000.0
 #: highest speed [m/s]
 MAX_SPEED_MPS = 1000.0
@@ -155,13 +155,6 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
     decided = n_applied + n_rejected
     share = n_rejected / decided if decided else 0.0
     out["rejected_share"] = share
-    # tight runs: the satellite rows the robust screening rejected inside the epochs (robust.hpp)
-    n_sats = int((getattr(sol, "summary", None) or {}).get("rejected_sats", 0) or 0)
-    if records is None and n_sats > 0:
-        rows_used = float(np.sum(rows[ok]))
-        out["rejected_sat_share"] = sat_share = n_sats / (n_sats + rows_used) if n_sats + rows_used > 0 else 0.0
-    else:
-        sat_share = 0.0
     if not np.isfinite(ratio):
         word = "untested"
     elif ratio > FAR_TOO_OPTIMISTIC:
@@ -172,15 +165,14 @@ def assess(sol, imu_t_end: float | None = None, *, scan: dict | None = None, n_r
         word = "pessimistic"
     else:
         word = "consistent"
-    if share > MAX_REJECTED_SHARE or sat_share > MAX_REJECTED_SHARE:
+    if share > MAX_REJECTED_SHARE:
         if word not in ("optimistic", "far too optimistic"):
             word = "optimistic"
-        what = (f"the innovation gate rejected {n_rejected} of {decided} GNSS records ({100.0 * share:.3g} %; "
-                "0.01 % when the model is consistent)" if share > MAX_REJECTED_SHARE else
-                f"the robust screening rejected {n_sats} satellite rows ({100.0 * sat_share:.3g} % of the rows "
-                "it decided on; 0.1 % when the model is consistent)")
-        out["warnings"].append(f"{what}: the GNSS sigmas or the IMU noise are too small for these data, or the "
-                               f"records hold outliers; the NIS ratio {ratio:.3g} sees only the applied ones")
+        out["warnings"].append(f"the innovation gate (or a tight run's robust screening, every row of the epoch) "
+                               f"rejected {n_rejected} of {decided} GNSS records ({100.0 * share:.3g} %; 0.01 % "
+                               "when the model is consistent): the GNSS sigmas or the IMU noise are too small for "
+                               f"these data, or the records hold outliers; the NIS ratio {ratio:.3g} sees only the "
+                               "applied ones")
     out["consistency"] = word
     if word == "far too optimistic":
         out["warnings"].append(f"the GNSS innovations are {ratio:.3g} times their expected size (mean NIS / rows; "

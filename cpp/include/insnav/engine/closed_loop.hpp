@@ -492,8 +492,13 @@ struct ClosedLoop {
   /// (attitude, biases, as far as they are uncorrelated with it) keeps its
   /// covariance: scaling the whole P by lambda made a run of records noisier
   /// than their sigma (a multipath burst) inflate the attitude again at every
-  /// reopening until the linearisation failed.  False (dP untouched) when
-  /// H P H' is not positive definite.  No heap.
+  /// reopening until the linearisation failed.  H P H' is singular when the
+  /// rows outnumber the states they observe (a tight epoch of 5 or more
+  /// pseudoranges: position, clock and the lever arm's attitude terms span at
+  /// most 4 + ISB directions), so the inverse is taken of
+  /// H P H' + delta I, delta = 1e-10 max diag(H P H'): the rows of H P have no
+  /// component in its null space, so this is the pseudo-inverse to 1e-10.
+  /// False (dP untouched) when that fails (a non-finite P).  No heap.
   bool observed_inflation(const LinearMeasurement<L>& lin, double lambda, StateCov<L>& dP) {
     using Dyn = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxMeasRows, kMaxMeasRows>;
     using HP = Eigen::Matrix<double, Eigen::Dynamic, L::kSize, Eigen::RowMajor, kMaxMeasRows, L::kSize>;
@@ -503,6 +508,9 @@ struct ClosedLoop {
     hp.noalias() = lin.H * filter.P();
     Dyn A(m, m);
     A.noalias() = hp * lin.H.transpose();
+    const double delta = 1e-10 * A.diagonal().maxCoeff();
+    if (!(delta > 0.0) || !std::isfinite(delta)) return false;
+    A.diagonal().array() += delta;
     Eigen::LLT<Dyn> llt(A);
     if (llt.info() != Eigen::Success) return false;
     llt.matrixL().solveInPlace(hp);  // L^-1 H P: dP = (lambda - 1) (L^-1 H P)' (L^-1 H P)

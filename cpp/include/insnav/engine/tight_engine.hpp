@@ -601,7 +601,10 @@ class TightEngine {
     for (int i = 0; i < ns && row < lin.rows(); ++i)
       for (int kind = 0; kind < 2 && row < lin.rows(); ++kind) {
         if (!std::isfinite(kind == 0 ? work_[i].pseudorange_m : work_[i].pseudorange_rate_mps)) continue;
-        const double r = lin.R(row, row);
+        // r: the satellite's own variance, the part f scales; the rest of S (H P H^T, and the
+        // Gauss-Markov states' conditional variance that gm_fold adds to R) stays in a
+        const double sigma = kind == 0 ? work_[i].sigma_pr_m : work_[i].sigma_prr_mps;
+        const double r = sigma * sigma;
         const int k = e.n[kind]++;
         e.y2[kind][k] = y_[row] * y_[row];
         e.a[kind][k] = std::max(sqrt_S_[row] * sqrt_S_[row] - r, 0.0);
